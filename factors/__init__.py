@@ -1,0 +1,1 @@
+"""Custom GTSAM factors for the DVL (installed as gtsam_dvl.factors)."""

@@ -1,0 +1,18 @@
+"""gtsam_dvl: self-calibrating IMU + DVL navigation on GTSAM."""
+
+from gtsam_dvl.errors import GtsamDvlError
+from gtsam_dvl.types import BeamData, DvlCalibration, DvlData, ImuData, LogData, Mounting, TruthData
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "BeamData",
+    "DvlCalibration",
+    "DvlData",
+    "GtsamDvlError",
+    "ImuData",
+    "LogData",
+    "Mounting",
+    "TruthData",
+    "__version__",
+]

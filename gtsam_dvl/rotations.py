@@ -1,0 +1,56 @@
+"""Rotation conventions shared by every module.
+
+Euler angles are ZYX (R = Rz(yaw) Ry(pitch) Rx(roll)) about the axes of the frame they rotate from,
+as in CONVENTIONS.md. Quaternions are stored [x, y, z, w] (ROS order). Angles are radians unless a
+name ends in _deg.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll), radians."""
+    return Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+
+
+def rpy_deg_to_matrix(rpy_deg: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) from [roll, pitch, yaw] in degrees."""
+    r, p, y = np.radians(np.asarray(rpy_deg, dtype=float))
+    return rpy_to_matrix(float(r), float(p), float(y))
+
+
+def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
+    """[roll, pitch, yaw] in radians of R = Rz(yaw) Ry(pitch) Rx(roll); works on (...,3,3)."""
+    ypr = Rotation.from_matrix(R).as_euler("ZYX")
+    return ypr[..., ::-1].copy()
+
+
+def matrix_to_rpy_deg(R: np.ndarray) -> np.ndarray:
+    return np.degrees(matrix_to_rpy(R))
+
+
+def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
+    return Rotation.from_matrix(R).as_quat()
+
+
+def quat_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:
+    return Rotation.from_quat(q).as_matrix()
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """[v]x such that skew(a) @ b = a x b."""
+    x, y, z = v
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def so3_exp(phi: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector phi (radians)."""
+    return Rotation.from_rotvec(phi).as_matrix()
+
+
+def so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector (radians) of R."""
+    return Rotation.from_matrix(R).as_rotvec()
