@@ -1,1 +1,19 @@
-"""Custom GTSAM factors for the DVL (installed as gtsam_dvl.factors)."""
+"""Custom GTSAM factors for the DVL (installed as gtsam_dvl.factors).
+
+Both factors implement, on the keys [pose n_T_b, velocity n_v, scale k, misalignment b_R_d],
+
+    y = k * b_R_d^T * ( n_R_b^T * n_v  +  b_omega x b_l ) + noise
+
+the 3-D velocity y in dvl_link (make_dvl_velocity_factor) or one beam y_j = d_u_j . y
+(make_dvl_beam_factor). The pure error functions serve tests and other callers.
+"""
+
+from .dvl_beam import dvl_beam_error, make_dvl_beam_factor
+from .dvl_velocity import dvl_velocity_error, make_dvl_velocity_factor
+
+__all__ = [
+    "dvl_beam_error",
+    "dvl_velocity_error",
+    "make_dvl_beam_factor",
+    "make_dvl_velocity_factor",
+]

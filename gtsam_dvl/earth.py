@@ -66,11 +66,18 @@ def ecef_to_geodetic(e_p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     lat = np.arctan2(z, rho * (1.0 - WGS84_E2))
     for _ in range(8):
         _, r_e = radii_of_curvature(lat)
-        h = rho / np.cos(lat) - r_e
+        h = _height_above(rho, z, lat)
         lat = np.arctan2(z, rho * (1.0 - WGS84_E2 * r_e / (r_e + h)))
-    _, r_e = radii_of_curvature(lat)
-    h = rho / np.cos(lat) - r_e
-    return lat, lon, h
+    return lat, lon, _height_above(rho, z, lat)
+
+
+def _height_above(rho: np.ndarray, z: np.ndarray, lat: np.ndarray) -> np.ndarray:
+    """Ellipsoidal height of the point (rho, z) whose geodetic latitude is lat.
+
+    rho cos(lat) + z sin(lat) - a sqrt(1 - e^2 sin^2 lat) holds at every latitude; the textbook
+    rho / cos(lat) - R_E loses precision near the poles and divides by zero on the polar axis.
+    """
+    return rho * np.cos(lat) + z * np.sin(lat) - WGS84_A * np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
 
 
 def e_R_l(lat: np.ndarray | float, lon: np.ndarray | float) -> np.ndarray:

@@ -1,0 +1,37 @@
+"""Shared figure helpers: headless backend, segment shading, atomic PNG writes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: figures are files, never windows
+import matplotlib.pyplot as plt  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+
+SEGMENT_COLOURS = {"I": "#d8e8f8", "II": "#f8e4d0", "I+II": "#f2f2d0", "-": "#ffffff"}
+
+
+def shade_segments(ax: Any, segments: list[dict[str, Any]], label: bool = False) -> None:
+    """Shade the paper's Type-I / Type-II segments behind a time plot and mark their boundaries."""
+    for seg in segments:
+        colour = SEGMENT_COLOURS.get(str(seg.get("type", "-")), "#ffffff")
+        if colour != "#ffffff":
+            ax.axvspan(seg["start_s"], seg["end_s"], color=colour, zorder=0, lw=0)
+        ax.axvline(seg["start_s"], color="0.75", lw=0.6, zorder=1)
+        if label:
+            ax.text(seg["start_s"], 1.0, f" {seg['start_s']:.0f}", transform=ax.get_xaxis_transform(),
+                    fontsize=7, va="bottom", color="0.4")
+
+
+def save_figure(fig: Figure, path: Path) -> Path:
+    """Write a PNG atomically (temporary file then rename) and close the figure."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.png")
+    fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,91 @@
+"""The typed result every estimator returns, and how its numbers are read (calibration in user units)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.config import DEG_PER_H, UG
+from gtsam_dvl.rotations import matrix_to_rpy, so3_exp
+
+
+def misalignment_rpy_and_cov(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
+                                                                                                        np.ndarray]:
+    """[roll, pitch, yaw] (deg) of R_c = b_R_d b_R_d0^T and their covariance (deg^2), from the covariance of
+    b_R_d in GTSAM's right tangent (rad^2). R_c's perturbation in body axes is b_R_d times the right one."""
+    R_c = b_R_d @ b_R_d0.T
+    cov_body = b_R_d @ cov_right @ b_R_d.T
+    rpy = matrix_to_rpy(R_c)
+    J = np.zeros((3, 3))
+    h = 1e-7
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        J[:, j] = (matrix_to_rpy(so3_exp(e) @ R_c) - matrix_to_rpy(so3_exp(-e) @ R_c)) / (2 * h)
+    cov_rpy = J @ cov_body @ J.T
+    return np.degrees(rpy), np.degrees(np.degrees(cov_rpy))
+
+
+@dataclass
+class NavResult:
+    """Estimates of one estimator on one log. Angles in radians and SI units inside; the accessors and
+    the summary give degrees, deg/h and micro-g."""
+
+    estimator: str
+    t: np.ndarray  # (N,) s, relative to t0_ns
+    n_p: np.ndarray  # (N, 3) m
+    n_R_b: np.ndarray  # (N, 3, 3)
+    n_v: np.ndarray  # (N, 3) m/s
+    pose_cov: np.ndarray  # (N, 6, 6) GTSAM Pose3 tangent [rotation (body), translation (body)]
+    vel_cov: np.ndarray  # (N, 3, 3) m^2/s^2, map frame
+    accel_bias: np.ndarray  # (3,) m/s^2 (final; or the constant)
+    gyro_bias: np.ndarray  # (3,) rad/s
+    bias_cov: np.ndarray  # (6, 6) [accel, gyro] SI
+    scale: float
+    scale_sigma: float
+    b_R_d: np.ndarray  # (3, 3)
+    b_R_d_cov: np.ndarray  # (3, 3) rad^2, right tangent of b_R_d
+    b_R_d0: np.ndarray  # nominal mounting
+    t0_ns: int = 0
+    calib_joint_cov: np.ndarray | None = None  # (13, 13): [accel, gyro] bias, scale, b_R_d right tangent
+    timing_s: dict[str, float] = field(default_factory=dict)
+    info: dict[str, Any] = field(default_factory=dict)  # solver report, counters, alignment
+    config: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def misalignment_deg(self) -> np.ndarray:
+        return misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[0]
+
+    @property
+    def misalignment_sigma_deg(self) -> np.ndarray:
+        return np.sqrt(np.diag(misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[1]))
+
+    @property
+    def gyro_bias_deg_per_h(self) -> np.ndarray:
+        return self.gyro_bias / DEG_PER_H
+
+    @property
+    def gyro_bias_sigma_deg_per_h(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.bias_cov)[3:]) / DEG_PER_H
+
+    @property
+    def accel_bias_ug(self) -> np.ndarray:
+        return self.accel_bias / UG
+
+    @property
+    def accel_bias_sigma_ug(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.bias_cov)[:3]) / UG
+
+    @property
+    def attitude_sigma_deg(self) -> np.ndarray:
+        """(N, 3) attitude sigmas about map axes (east, north, up), deg."""
+        cov_map = self.n_R_b @ self.pose_cov[:, :3, :3] @ np.transpose(self.n_R_b, (0, 2, 1))
+        return np.degrees(np.sqrt(np.einsum("nii->ni", cov_map)))
+
+    @property
+    def position_sigma_m(self) -> np.ndarray:
+        """(N, 3) position sigmas in map axes, m (GTSAM's translation tangent is in body axes)."""
+        cov_map = self.n_R_b @ self.pose_cov[:, 3:, 3:] @ np.transpose(self.n_R_b, (0, 2, 1))
+        return np.sqrt(np.einsum("nii->ni", cov_map))
