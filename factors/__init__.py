@@ -10,8 +10,12 @@ the 3-D velocity y in dvl_link (make_dvl_velocity_factor) or one beam y_j = d_u_
 
 from .dvl_beam import dvl_beam_error, make_dvl_beam_factor
 from .dvl_velocity import dvl_velocity_error, make_dvl_velocity_factor
+from .imu_earth import EarthImuFactor, GravityModel, make_earth_imu_factor
 
 __all__ = [
+    "EarthImuFactor",
+    "GravityModel",
+    "make_earth_imu_factor",
     "dvl_beam_error",
     "dvl_velocity_error",
     "make_dvl_beam_factor",

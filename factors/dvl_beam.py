@@ -26,6 +26,7 @@ from ._common import (
 )
 
 _EMPTY = np.empty(0)  # placeholder for a Jacobian slot before predict_dvl_velocity fills it
+_EMPTY.setflags(write=False)
 
 
 def _project(

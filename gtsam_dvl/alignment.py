@@ -28,6 +28,9 @@ class Alignment:
     b_omega_mean: np.ndarray | None = None  # mean gyro on the static segment, rad/s
 
 
+STATIC_MARGIN_S = 5.0  # the static segment ends this long before motion is first detected
+
+
 def _window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Means of x over consecutive windows of window_s seconds; returns (window end times, means)."""
     idx = np.floor((t - t[0]) / window_s).astype(int)
@@ -48,11 +51,11 @@ def detect_static_end(imu: ImuData, dvl: DvlData, cfg: AlignmentConfig) -> float
     f_ref, w_ref = f_means[:n_ref].mean(axis=0), w_means[:n_ref].mean(axis=0)
     moving = (np.linalg.norm(f_means - f_ref, axis=1) > cfg.accel_threshold_m_s2) | (
         np.degrees(np.linalg.norm(w_means - w_ref, axis=1)) > cfg.gyro_threshold_deg_s)
-    t_end = float(ends[np.argmax(moving)] - 1.0) if moving.any() else float(ends[-1])
+    t_end = float(ends[np.argmax(moving)] - STATIC_MARGIN_S) if moving.any() else float(ends[-1])
     speed = np.linalg.norm(dvl.d_v, axis=1)
     fast = dvl.valid & (speed > cfg.dvl_speed_threshold_m_s)
     if fast.any():
-        t_end = min(t_end, float(dvl.t[np.argmax(fast)]) - 1.0)
+        t_end = min(t_end, float(dvl.t[np.argmax(fast)]) - STATIC_MARGIN_S)
     if cfg.max_static_s > 0:
         t_end = min(t_end, float(imu.t[0]) + cfg.max_static_s)
     return t_end if t_end > imu.t[0] else float(imu.t[0])

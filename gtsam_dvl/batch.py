@@ -34,7 +34,6 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     values, report = gauss_newton_qr(
         graph, values, ordering, max_iterations=config.solver.max_iterations,
         relative_tol=config.solver.relative_error_tol, absolute_tol=config.solver.absolute_error_tol,
-        before_iteration=builder.update_gravity,
         progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
     timing["solve"] = time.perf_counter() - t2
 

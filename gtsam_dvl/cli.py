@@ -7,7 +7,6 @@ Imports of the heavy modules (gtsam, matplotlib, the simulator) happen inside th
 from __future__ import annotations
 
 import functools
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -83,6 +82,26 @@ def info(log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 director
 
 @app.command()
 @_user_errors
+def smooth(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")] = None,
+    mode: Annotated[str, typer.Option(help="Estimator: batch.")] = "batch",
+    summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
+    tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
+    salvage: Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")] = False,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+) -> None:
+    """Estimate trajectory, IMU biases, DVL scale and misalignment from a log."""
+    from gtsam_dvl.pipeline import smooth_file
+
+    outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
+                          show_progress=not quiet, salvage=salvage)
+    typer.echo(outcome.describe())
+
+
+@app.command()
+@_user_errors
 def demo(
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for everything the demo writes.")] = Path(
         "demo-output"),
@@ -100,4 +119,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    main()

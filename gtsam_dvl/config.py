@@ -67,8 +67,8 @@ class AlignmentConfig:
     initial_attitude_deg: tuple[float, float, float] | None = None  # [roll, pitch, yaw]; skips alignment
     min_static_s: float = 30.0
     max_static_s: float = 0.0  # 0: use the whole detected static segment
-    accel_threshold_m_s2: float = 0.01  # 1 s means of the specific force within this of the first 10 s
-    gyro_threshold_deg_s: float = 0.05  # 1 s means of the gyro within this of the first 10 s
+    accel_threshold_m_s2: float = 0.002  # 1 s means of the specific force within this of the first 10 s
+    gyro_threshold_deg_s: float = 0.01  # 1 s means of the gyro within this of the first 10 s
     dvl_speed_threshold_m_s: float = 0.1
     origin_lat_deg: float | None = None  # map origin when the log has none (needed for Earth rate/gravity)
     origin_lon_deg: float | None = None
@@ -78,8 +78,8 @@ class AlignmentConfig:
 @dataclass
 class SolverConfig:
     max_iterations: int = 30
-    relative_error_tol: float = 1e-9
-    absolute_error_tol: float = 1e-9
+    relative_error_tol: float = 1e-7
+    absolute_error_tol: float = 0.01  # error = chi^2 / 2: a decrease this small moves no estimate by 0.1 sigma
     earth_model: str = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
     keyframe_interval_s: float = 0.0  # 0: a state per DVL ping; >0: only pings at least this far apart
 

@@ -139,3 +139,15 @@ class LocalFrame:
         lat, lon, h = self.map_to_geodetic(n_p)
         l_up = self.n_R_l(lat, lon)[..., :, 2]
         return -normal_gravity(lat, h)[..., None] * l_up
+
+
+def gravity_gradient(frame: LocalFrame, n_p: np.ndarray, step_m: float = 10.0) -> np.ndarray:
+    """(..., 3, 3) gradient d n_gravity / d n_p (1/s^2) at map positions, by central differences of
+    LocalFrame.n_gravity (its curvature over step_m is 1e-12 of g: the differences are exact enough)."""
+    n_p = np.asarray(n_p, dtype=float)
+    G = np.empty(n_p.shape + (3,))
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = step_m
+        G[..., :, j] = (frame.n_gravity(n_p + e) - frame.n_gravity(n_p - e)) / (2.0 * step_m)
+    return G

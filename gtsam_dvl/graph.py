@@ -6,9 +6,10 @@ consecutive states, integrated exactly to the DVL stamps; DVL velocity (or beam)
 
 Earth model in the Earth-fixed map frame (CONVENTIONS.md):
 - Earth rate through the preintegration's omegaCoriolis (constant in map).
-- Gravity per IMU factor, evaluated at the interval's mid position and updated as the estimate moves.
-  GTSAM 4.3's prediction subtracts the centrifugal term about the map origin, -w x (w x p); normal
-  gravity already contains the centrifugal acceleration at p, so the factor is given
+- Gravity per IMU factor as a function of the interval's mid position, with its gradient in the
+  Jacobian (factors/imu_earth.py), so the solver sees the true model: gravity turns by 1.6e-7 rad per
+  metre. GTSAM 4.3's prediction subtracts the centrifugal term about the map origin, -w x (w x p);
+  normal gravity already contains the centrifugal acceleration at p, so the factor is given
   n_g(p) + w x (w x p) (tests/test_graph_earth.py shows a static vehicle 20 km from the origin
   predicted exactly only with this).
 - GTSAM integrates each sample with the attitude at the sample's start; a real IMU's delta-v is
@@ -26,9 +27,9 @@ import numpy as np
 
 from gtsam_dvl.alignment import Alignment, align
 from gtsam_dvl.config import DEG_PER_H, UG, EstimatorConfig
-from gtsam_dvl.earth import LocalFrame, normal_gravity
+from gtsam_dvl.earth import LocalFrame, gravity_gradient, normal_gravity
 from gtsam_dvl.errors import GtsamDvlError
-from gtsam_dvl.factors import make_dvl_beam_factor, make_dvl_velocity_factor
+from gtsam_dvl.factors import EarthImuFactor, make_dvl_beam_factor, make_dvl_velocity_factor, make_earth_imu_factor
 from gtsam_dvl.types import LogData
 
 K_SCALE = gtsam.symbol("k", 0)
@@ -79,6 +80,7 @@ class GraphBuilder:
     epochs: list[Epoch] = field(init=False)
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
     imu_params: list[gtsam.PreintegrationParams] = field(init=False)
+    imu_factors: list[EarthImuFactor] = field(init=False)
     counters: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -89,15 +91,20 @@ class GraphBuilder:
         if len(self.epochs) < 2:
             raise GtsamDvlError(f"{self.log.source or 'log'}: fewer than two usable DVL pings")
         self._preintegrate()
+        gravity = None if cfg.solver.earth_model == "flat" else self.gravity_model
+        self.imu_factors = [
+            make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)),
+                                  self.epochs[i + 1].t - self.epochs[i].t, gravity)
+            for i, (pim, params) in enumerate(zip(self.pims, self.imu_params, strict=True))]
 
     # ----- epochs and preintegration -------------------------------------------------------------
     def _select_epochs(self) -> list[Epoch]:
         dvl, imu, cfg = self.log.dvl, self.log.imu, self.config
-        usable = dvl.valid.copy()
+        usable: np.ndarray = dvl.valid.copy()
         if cfg.dvl.use_beams and dvl.beams is not None:
-            usable = dvl.beams.valid.any(axis=1)
+            usable = np.asarray(dvl.beams.valid.any(axis=1))
         speed = np.linalg.norm(np.nan_to_num(dvl.d_v), axis=1)
-        too_fast = usable & (speed > cfg.dvl.max_speed_m_s) & ~cfg.dvl.use_beams
+        too_fast = usable & (speed > cfg.dvl.max_speed_m_s) & (not cfg.dvl.use_beams)
         self.counters["dvl_too_fast"] = int(too_fast.sum())
         usable &= ~too_fast
         usable &= (dvl.t > imu.t[0]) & (dvl.t <= imu.t[-1])
@@ -154,30 +161,25 @@ class GraphBuilder:
             self.imu_params.append(params)
 
     # ----- gravity -------------------------------------------------------------------------------
-    def update_gravity(self, values: gtsam.Values) -> None:
-        """Gravity of each IMU factor at its mid position in the current estimate (see module doc)."""
-        if self.config.solver.earth_model == "flat":
-            return
-        n = len(self.pims)
-        n_p = np.array([values.atPose3(X(i)).translation() for i in range(n + 1)])
-        self.set_gravity_from_positions(n_p)
+    def gravity_model(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Gravity for GTSAM's prediction at map position n_p and its gradient (see module doc)."""
+        w = self.frame.n_omega_ie
+        w_x2 = np.outer(w, w) - np.dot(w, w) * np.eye(3)  # d/dp of w x (w x p)
+        g = self.frame.n_gravity(n_p) + np.cross(w, np.cross(w, n_p))
+        return g, gravity_gradient(self.frame, n_p) + w_x2
 
     def set_gravity_from_positions(self, n_p: np.ndarray) -> None:
-        if self.config.solver.earth_model == "flat":
-            return
-        mid = 0.5 * (n_p[:-1] + n_p[1:])
-        w = self.frame.n_omega_ie
-        g_eff = self.frame.n_gravity(mid) + np.cross(w, np.cross(w, mid))
-        for params, g in zip(self.imu_params, g_eff, strict=True):
-            params.n_gravity = g
+        """Gravity of every IMU factor at the mid positions of states n_p (N+1, 3)."""
+        for f, a, b in zip(self.imu_factors, n_p[:-1], n_p[1:], strict=True):
+            f.set_gravity(0.5 * (a + b))
 
     # ----- factors -------------------------------------------------------------------------------
     def bias_key(self, i: int) -> int:
         return B(i) if self.config.imu.bias_model == "random_walk" else B(0)
 
-    def imu_factor(self, i: int) -> gtsam.ImuFactor:
-        """IMU factor between states i and i+1."""
-        return gtsam.ImuFactor(X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i), self.pims[i])
+    def imu_factor(self, i: int) -> gtsam.NonlinearFactor:
+        """IMU factor between states i and i+1, gravity following position."""
+        return self.imu_factors[i].factor
 
     def bias_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
         """Random-walk bias link between states i and i+1 (none for a random-constant bias)."""
@@ -202,6 +204,7 @@ class GraphBuilder:
                                          float(beams.v[j, b]), ep.b_omega, b_l)
                     for b in np.flatnonzero(beams.valid[j])]
         cov = dvl.d_cov[j]
+        noise: gtsam.noiseModel.Base
         if cfg.noise_m_s > 0:
             noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.noise_m_s)
         elif np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0):
@@ -232,7 +235,8 @@ class GraphBuilder:
         mis = np.radians(np.asarray(pri.misalignment_sigma_deg, dtype=float))
         # misalignment sigmas are about body axes (R_c on the left); b_R_d is perturbed on the right
         cov_c = b_R_d0.T @ np.diag(mis**2) @ b_R_d0
-        bias_sig = np.array([imu_cfg.accel_bias_sigma_ug * UG] * 3 + [imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H] * 3)
+        bias_sig = np.array([imu_cfg.accel_bias_sigma_ug * UG] * 3
+                            + [imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H] * 3)
         return [
             gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
             gtsam.PriorFactorVector(V(0), values.atVector(V(0)),

@@ -71,8 +71,9 @@ def describe_log(log_path: Path) -> str:
     """A few lines about a log: what a navigator wants to know before processing it."""
     log = load_log(log_path)
     imu, dvl = log.imu, log.dvl
+    imu_hz = 1.0 / np.median(np.diff(imu.t))
     lines = [f"{log_path}",
-             f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({1.0 / np.median(np.diff(imu.t)):.1f} Hz), "
+             f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({imu_hz:.1f} Hz), "
              f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)"]
     if dvl.beams is not None:
         lines.append(f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}")
@@ -83,6 +84,65 @@ def describe_log(log_path: Path) -> str:
     for warning in log.metadata.get("reader_warnings", []):
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)
+
+
+@dataclass
+class SmoothOutcome:
+    summary: dict
+    written: list[Path]
+
+    def describe(self) -> str:
+        s = self.summary
+        mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
+        lines = [
+            f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
+            f"{s['timing_s'].get('total', float('nan')):.2f} s wall",
+            f"  scale        {s['scale']['value']:.6f} +- {s['scale']['sigma']:.6f}",
+            "  misalignment roll/pitch/yaw "
+            + ", ".join(f"{v:+.3f} +- {e:.3f}" for v, e in zip(mis, mis_sig, strict=True)) + " deg",
+            "  gyro bias    " + ", ".join(f"{v:+.4f}" for v in s["gyro_bias_deg_per_h"]["value"]) + " deg/h",
+            "  accel bias   " + ", ".join(f"{v:+.1f}" for v in s["accel_bias_ug"]["value"]) + " micro-g",
+        ]
+        err = s.get("errors")
+        if err:
+            lines.append(f"  vs truth: scale {err.get('scale_ppm', float('nan')):+.0f} ppm, misalignment "
+                         + ", ".join(f"{v:+.3f}" for v in err.get("misalignment_deg", [])) + " deg, final horizontal "
+                         f"position {err['final_horizontal_position_m']:.2f} m "
+                         f"({err['final_horizontal_position_pct_distance']:.3f} % of distance)")
+        lines += [f"  wrote {p}" for p in self.written]
+        return "\n".join(lines)
+
+
+def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,
+                tum_path: Path | None = None, config_path: Path | None = None, show_progress: bool = True,
+                salvage: bool = False) -> SmoothOutcome:
+    """Run one estimator on a log and write its results (MCAP, summary JSON, TUM)."""
+    from gtsam_dvl.atomic import atomic_write_json, write_tum
+    from gtsam_dvl.batch import smooth_batch
+    from gtsam_dvl.config import EstimatorConfig
+    from gtsam_dvl.evaluation import summary
+    from gtsam_dvl.rotations import matrix_to_quat_xyzw
+
+    config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
+    t_read = time.perf_counter()
+    log = load_log(log_path, salvage=salvage)
+    read_s = time.perf_counter() - t_read
+    if mode != "batch":
+        raise GtsamDvlError(f"unknown mode '{mode}' (available: batch)")
+    with progress_bar(f"{mode} smoothing {Path(log_path).name}", enabled=show_progress) as progress:
+        result = smooth_batch(log, config, progress=progress)
+    result.timing_s["read"] = read_s
+    summ = summary(result, log)
+    written: list[Path] = []
+    if output is not None:
+        from gtsam_dvl.io.results import write_result_log
+
+        written.append(write_result_log(output, result, log, summ))
+    if summary_path is not None:
+        written.append(atomic_write_json(summary_path, summ))
+    if tum_path is not None:
+        written.append(write_tum(tum_path, log.t0_ns * 1e-9 + result.t, result.n_p, matrix_to_quat_xyzw(result.n_R_b)))
+    return SmoothOutcome(summ, written)
 
 
 def run_demo(out_dir: Path, seed: int = 7) -> None:

@@ -202,6 +202,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments"]
     )
     origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
+    r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
     rates = Rates(**r.table("rates", _defaults(Rates)))
     for key in ("imu_hz", "dvl_hz", "truth_hz"):
         r.require(getattr(rates, key) > 0, f"rates.{key}", "must be positive")
@@ -213,6 +214,13 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
                                                                    "accel_bias_values_micro_g")))
     dvl = DvlSpec(**r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
                             strings=("noise_model",)))
+    for key in ("gyro_bias_deg_per_h", "accel_bias_micro_g", "gyro_noise_deg_per_h_per_sqrt_hz",
+                "accel_noise_micro_g_per_sqrt_hz", "gyro_bias_walk_deg_per_h_per_sqrt_h",
+                "accel_bias_walk_micro_g_per_sqrt_h"):
+        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
+    for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
+        r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
+    r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
     r.require(dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'")
     r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
     r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")
@@ -221,7 +229,9 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     mounting = MountingSpec(**r.table("mounting", _defaults(MountingSpec),
                                       vectors=("dvl_rpy_deg", "dvl_lever_arm_m")))
     segments = tuple(MotionSegment(**row) for row in parse_segments(r, initial.speed_m_s))
-    t0_s = r.number("t0_s", raw.get("t0_s", DEFAULT_T0_S))
+    t0 = raw.get("t0_s", DEFAULT_T0_S)
+    r.number("t0_s", t0)
+    t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact
     return Scenario(
         name=str(raw.get("name", name)),
         description=str(raw.get("description", "")),
@@ -234,7 +244,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         segments=segments,
         raw=raw,
         source=source,
-        t0_ns=int(round(t0_s * 1e9)),
+        t0_ns=t0_ns,
     )
 
 

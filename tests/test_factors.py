@@ -21,13 +21,14 @@ from gtsam.utils.numerical_derivative import (
     numericalDerivative43,
     numericalDerivative44,
 )
+from scipy.spatial.transform import Rotation
+
 from gtsam_dvl.factors import (
     dvl_beam_error,
     dvl_velocity_error,
     make_dvl_beam_factor,
     make_dvl_velocity_factor,
 )
-from scipy.spatial.transform import Rotation
 
 KEYS = (X(0), V(0), K(0), B(0))
 KEY_DIMS = (6, 3, 1, 3)
@@ -415,9 +416,10 @@ def solve_calibration(truth: Calibration, b_R_d0: np.ndarray, beams: list[list[i
             for j in beams[i % len(beams)]:
                 graph.add(make_dvl_beam_factor(gtsam.noiseModel.Isotropic.Sigma(1, 0.02), *keys, JANUS[j],
                                                JANUS[j] @ y, b_omega, b_l))
-    # Weak priors only make the problem well posed before the data do; their pull on the optimum is about
-    # (prior information / data information) * offset = (1e-4 / 1e4 per epoch) * 1e-2 < 1e-12.
-    weak = 100.0
+    # Weak priors only make the problem well posed before the data do. Their pull on the optimum is about
+    # (prior information / data information) * offset, 1e-6 / (1e3..1e4) * 0.1 rad: ~1e-11 here, 100x
+    # inside CAL_TOL (sigma 100 would pull ~1e-9).
+    weak = 1000.0
     graph.add(gtsam.PriorFactorVector(K(0), np.array([1.0]), gtsam.noiseModel.Isotropic.Sigma(1, weak)))
     graph.add(gtsam.PriorFactorRot3(B(0), gtsam.Rot3(b_R_d0), gtsam.noiseModel.Isotropic.Sigma(3, weak)))
     initial.insert(K(0), np.array([0.8]))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -160,12 +161,12 @@ def stamps_ns(arr: np.ndarray) -> np.ndarray:
 def string_ranges(dtype: np.dtype, spec: Spec) -> list[tuple[int, int]]:
     """Byte ranges [start, end) of every string (length word included): the part of a body that
     must be equal across messages for one layout to fit them all."""
-    fields = dtype.fields or {}
-    out = []
+    fields: dict[str, Any] = dict(dtype.fields or {})
+    out: list[tuple[int, int]] = []
     for f in spec:
         if f.code == "str":
-            start = fields[f.name + "_len"][1]
-            out.append((start, fields[f.name][1] + fields[f.name][0].itemsize))
+            start = int(fields[f.name + "_len"][1])
+            out.append((start, int(fields[f.name][1]) + fields[f.name][0].itemsize))
     return out
 
 

@@ -79,7 +79,7 @@ class McapContainer:
 
     def add_schema(self, name: str, encoding: str, data: str) -> int:
         sid = len(self.schemas) + 1
-        rec = record(OP_SCHEMA, struct.pack("<H", sid) + mstr(name) + mstr(encoding) + mstr(data)[:4] + data.encode())
+        rec = record(OP_SCHEMA, struct.pack("<H", sid) + mstr(name) + mstr(encoding) + mstr(data))
         self.schemas.append(rec)
         self._write(rec)
         return sid
@@ -118,9 +118,8 @@ class McapContainer:
         """Write K messages in the given order into chunks of about ``chunk_size`` bytes. Message k's
         CDR body is ``pool[start[k] : start[k] + length[k]]`` (pool: flat uint8); publish time = log time."""
         rec_len = 31 + length.astype(np.int64)
-        ends = np.cumsum(rec_len)
-        cuts = np.searchsorted(ends, np.arange(self.chunk_size, int(ends[-1]) if len(ends) else 0, self.chunk_size))
-        bounds = np.unique(np.concatenate([[0], cuts + 1, [len(ends)]]).clip(0, len(ends)))
+        chunk_no = (np.cumsum(rec_len) - 1) // self.chunk_size  # a chunk closes once it passes chunk_size
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [len(rec_len)]])
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             if b > a:
                 self._chunk(channel[a:b], seq[a:b], log_time[a:b], pool, start[a:b], length[a:b])

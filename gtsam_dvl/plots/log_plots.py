@@ -50,7 +50,8 @@ def plot_dvl(log: LogData, path: Path) -> Path:
 def plot_imu(log: LogData, path: Path, decimate_to_hz: float = 10.0) -> Path:
     """Figure 3: gyro (deg/s) and accelerometer (m/s^2) outputs over time, segments shaded."""
     imu = log.imu
-    step = max(1, int(round(1.0 / (decimate_to_hz * float(np.median(np.diff(imu.t)))))) if len(imu) > 1 else 1
+    dt = float(np.median(np.diff(imu.t))) if len(imu) > 1 else 1.0
+    step = max(1, int(round(1.0 / (decimate_to_hz * dt))))
     t = imu.t[::step]
     segments = log.metadata.get("truth", {}).get("segments", [])
     fig, axes = plt.subplots(3, 2, figsize=(12, 6.5), sharex=True)

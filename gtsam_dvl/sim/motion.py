@@ -17,7 +17,7 @@ body x axis: the thrust-axis misalignment of the DVL is then unobservable unless
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -139,23 +139,41 @@ class MotionProfile:
     def evaluate(self, t: np.ndarray) -> MotionState:
         """Motion at times t (any shape); before 0 and after the end the end states continue."""
         t = np.asarray(t, dtype=float)
+        flat = t.ravel()
         p = self.p
-        i = np.clip(np.searchsorted(p["t_start"], t, side="right") - 1, 0, len(p["t_start"]) - 1)
-        T = p["duration"][i]
-        tau = np.clip((t - p["t_start"][i]) / T, 0.0, 1.0)
-        st, dst = step5(tau)
-        bu, dbu = bump6(tau)
-        s7, ds7 = step7(tau)
-        zeros = np.zeros_like(tau)
-        return MotionState(
-            s=p["s0"][i] + p["ds"][i] * st + p["bump"][i] * bu,
-            s_dot=(p["ds"][i] * dst + p["bump"][i] * dbu) / T,
-            w=p["w_peak"][i] * bu,
-            w_dot=p["w_peak"][i] * dbu / T,
-            yaw=p["yaw0"][i] + p["dyaw"][i] * s7,
-            yaw_dot=p["dyaw"][i] * ds7 / T,
-            pitch=p["pitch0"][i] + zeros,
-            pitch_dot=zeros,
-            roll=p["roll0"][i] + p["bank"][i] * bu,
-            roll_dot=p["bank"][i] * dbu / T,
-        )
+        n_pieces = len(p["t_start"])
+        if flat.size > 1 and np.all(flat[1:] >= flat[:-1]):
+            # sorted times (the usual case): each piece is a slice, no gathers of its parameters
+            bounds = np.concatenate([[0], np.searchsorted(flat, p["t_start"][1:], side="right"), [flat.size]])
+            out = {f: np.empty(flat.size) for f in _STATE}
+            for j in range(n_pieces):
+                sl = slice(bounds[j], bounds[j + 1])
+                if sl.start < sl.stop:
+                    _piece(out, sl, flat[sl], {k: v[j] for k, v in p.items()})
+        else:
+            i = np.clip(np.searchsorted(p["t_start"], flat, side="right") - 1, 0, n_pieces - 1)
+            out = {f: np.empty(flat.size) for f in _STATE}
+            _piece(out, slice(None), flat, {k: v[i] for k, v in p.items()})
+        return MotionState(**{f: out[f].reshape(t.shape) for f in _STATE})
+
+
+_STATE = ("s", "s_dot", "w", "w_dot", "yaw", "yaw_dot", "pitch", "pitch_dot", "roll", "roll_dot")
+
+
+def _piece(out: dict[str, np.ndarray], sl: slice, t: np.ndarray, q: dict[str, Any]) -> None:
+    """Fill out[...][sl] at times t from piece parameters q (scalars, or arrays matching t)."""
+    T = q["duration"]
+    tau = np.clip((t - q["t_start"]) / T, 0.0, 1.0)
+    st, dst = step5(tau)
+    bu, dbu = bump6(tau)
+    s7, ds7 = step7(tau)
+    out["s"][sl] = q["s0"] + q["ds"] * st + q["bump"] * bu
+    out["s_dot"][sl] = (q["ds"] * dst + q["bump"] * dbu) / T
+    out["w"][sl] = q["w_peak"] * bu
+    out["w_dot"][sl] = q["w_peak"] * dbu / T
+    out["yaw"][sl] = q["yaw0"] + q["dyaw"] * s7
+    out["yaw_dot"][sl] = q["dyaw"] * ds7 / T
+    out["pitch"][sl] = q["pitch0"]
+    out["pitch_dot"][sl] = 0.0
+    out["roll"][sl] = q["roll0"] + q["bank"] * bu
+    out["roll_dot"][sl] = q["bank"] * dbu / T

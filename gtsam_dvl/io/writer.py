@@ -1,0 +1,181 @@
+"""Write a LogData as a ROS 2 MCAP log exactly as CONVENTIONS.md ("Logs: ROS 2 MCAP") lays it out.
+
+Topics: /tf_static, /imu/data_raw, /dvl/twist, /dvl/data and, for simulated logs, /ground_truth/odometry.
+Choices the conventions leave open:
+
+* /dvl/twist carries only valid 3-D velocities (invalid pings are skipped there but kept in
+  /dvl/data). Its 6x6 covariance holds d_cov in the linear block; the DVL does not measure angular
+  velocity, so the angular block is ``UNMEASURED_VARIANCE`` on the diagonal (the ROS habit of a large
+  variance for an unmeasured axis; -1 would break consumers that take square roots). A NaN d_cov
+  (unknown) is written as zeros, ROS's "covariance unknown".
+* /dvl/data (marine_acoustic_msgs/msg/Dvl) holds 4 beams; fewer are padded with invalid beams. An invalid
+  3-D velocity is written as NaN (DvlData's contract) with its covariance kept; an unknown d_cov is
+  -1 everywhere (the message's "not known"). Per-beam validity goes in ``beam_quality`` (1 = valid,
+  0 = invalid, which the message leaves DVL-specific; recorded in the "gtsam_dvl" metadata); beam
+  velocities are float32 in that message, so they round-trip to float32 precision only. Range and beam
+  velocity variances are -1 (not known); sound speed from metadata["sensors"]["dvl"]["sound_speed"]
+  or 1500 m/s.
+* IMU covariance: diag from metadata["sensors"]["imu"]: "gyro_variance"/"accel_variance" (per-sample,
+  SI), else the white-noise density (the simulator's "gyro_noise_deg_per_h_per_sqrt_hz" and
+  "accel_noise_micro_g_per_sqrt_hz", or SI "gyro_noise_density"/"accel_noise_density") squared times the
+  sample rate; else zeros (ROS: unknown).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from gtsam_dvl import __version__
+from gtsam_dvl.errors import GtsamDvlError
+from gtsam_dvl.io import cdr
+from gtsam_dvl.io.mcap_writer import McapLogWriter
+from gtsam_dvl.types import DvlData, LogData
+
+__all__ = ["McapLogWriter", "write_log", "UNMEASURED_VARIANCE", "BEAM_QUALITY_NOTE"]
+
+UNMEASURED_VARIANCE = 1e6  # (rad/s)^2 on the angular diagonal of /dvl/twist
+BEAM_QUALITY_NOTE = "1 = beam valid, 0 = beam invalid"
+MAX_BEAMS = 4
+
+
+def json_default(o: Any) -> Any:
+    """JSON for numpy values and paths in metadata."""
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, os.PathLike):
+        return os.fspath(o)
+    raise TypeError(f"{type(o).__name__} is not JSON serializable")
+
+
+# Spellings of the IMU white-noise densities in metadata["sensors"]["imu"] -> factor to SI per sqrt(Hz):
+# the simulator's scenario units (deg/h/sqrt(Hz), micro-g/sqrt(Hz)) and plain SI.
+_NOISE_KEYS = {
+    "gyro": (("gyro_noise_deg_per_h_per_sqrt_hz", np.pi / 180.0 / 3600.0), ("gyro_noise_density", 1.0)),
+    "accel": (("accel_noise_micro_g_per_sqrt_hz", 1e-6 * 9.80665), ("accel_noise_density", 1.0)),
+}
+
+
+def _imu_variances(meta: dict[str, Any], t: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """Per-sample variances (diagonal) of gyro and accelerometer white noise: density^2 * rate."""
+    imu = (meta.get("sensors") or {}).get("imu") or {}
+    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    out: list[np.ndarray | None] = []
+    for kind, keys in _NOISE_KEYS.items():
+        var = imu.get(f"{kind}_variance")
+        for key, to_si in keys:
+            if var is None and imu.get(key) is not None:
+                var = np.square(np.asarray(imu[key], dtype=float) * to_si) * rate
+        out.append(None if var is None else np.broadcast_to(np.asarray(var, dtype=float), (3,)))
+    return out[0], out[1]
+
+
+def _scenario_name(meta: dict[str, Any]) -> str:
+    if meta.get("scenario_name"):
+        return str(meta["scenario_name"])
+    s = meta.get("scenario", "")
+    return str(s.get("name", "")) if isinstance(s, dict) else str(s)
+
+
+def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: Path) -> np.ndarray:
+    m = len(dvl)
+    arr = cdr.new_messages(cdr.DVL, {"frame_id": dvl.frame_id}, m)
+    cdr.set_stamps(arr, stamps)
+    valid = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
+    v = np.where(valid[:, None], dvl.d_v, np.nan)
+    cov = np.asarray(dvl.d_cov, dtype=float).reshape(m, 9)
+    arr["velocity_mode"], arr["dvl_type"] = 1, 0  # DVL_MODE_BOTTOM, DVL_TYPE_PISTON
+    arr["velocity"] = v
+    arr["velocity_covar"] = np.where(np.isnan(cov).all(axis=1, keepdims=True), -1.0, cov)
+    arr["course_gnd"] = np.arctan2(v[:, 1], v[:, 0])
+    arr["speed_gnd"] = np.hypot(v[:, 0], v[:, 1])
+    arr["sound_speed"] = float(((meta.get("sensors") or {}).get("dvl") or {}).get("sound_speed", 1500.0))
+    arr["range_covar"] = arr["beam_velocity_covar"] = -1.0
+    b = dvl.beams
+    if b is None:
+        arr["altitude"] = np.nan
+        return arr
+    nb = b.d_u.shape[1]
+    if nb > MAX_BEAMS:
+        raise GtsamDvlError(f"{path}: marine_acoustic_msgs/msg/Dvl holds {MAX_BEAMS} beams, the log has {nb}")
+
+    def pad(a: np.ndarray, fill: float) -> np.ndarray:
+        out = np.full((m, MAX_BEAMS, *a.shape[2:]), fill)
+        out[:, :nb] = a
+        return out.reshape(m, -1)
+
+    bvalid = np.asarray(b.valid, bool)
+    arr["beam_ranges_valid"] = arr["beam_velocities_valid"] = True
+    arr["beam_unit_vec"] = pad(b.d_u, 0.0)
+    arr["range"] = pad(b.range, 0.0)
+    arr["beam_velocity"] = pad(b.v, 0.0)
+    arr["beam_quality"] = pad(bvalid.astype(float), 0.0)
+    arr["num_good_beams"] = bvalid.sum(axis=1)
+    vertical = np.where(bvalid, b.range * np.abs(b.d_u[..., 2]), 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        arr["altitude"] = vertical.sum(axis=1) / bvalid.sum(axis=1)
+    return arr
+
+
+def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None) -> None:
+    """Write ``log`` to ``path`` as a ROS 2 MCAP per CONVENTIONS.md (atomically: temporary file, then
+    rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
+    and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config"."""
+    path = Path(path)
+    meta = dict(log.metadata)
+    try:
+        attachment = json.dumps({**meta, "config": config} if config is not None else meta, default=json_default)
+        truth_json = json.dumps(meta.get("truth", {}), default=json_default)
+        sensors_json = json.dumps(meta.get("sensors", {}), default=json_default)
+    except (TypeError, ValueError) as e:
+        raise GtsamDvlError(f"{path}: metadata cannot be written as JSON ({e})") from None
+    times = [a for a in (log.imu.t, log.dvl.t, log.truth.t if log.truth else None) if a is not None and len(a)]
+    t_first = float(min(a[0] for a in times)) if times else 0.0
+    with McapLogWriter(path, t0_ns=log.t0_ns) as w:
+        beams = log.dvl.beams
+        w.add_metadata(
+            "gtsam_dvl",
+            {
+                "scenario": _scenario_name(meta),
+                "seed": str(meta.get("seed", "")),
+                "generator": str(meta.get("generator", f"gtsam_dvl {__version__}")),
+                "truth": truth_json,
+                "sensors": sensors_json,
+                "dvl_beam_quality": BEAM_QUALITY_NOTE,
+                "dvl_beams": str(beams.d_u.shape[1] if beams is not None else 0),
+            },
+        )
+        w.add_attachment("config.json", attachment.encode(), "application/json")
+        mnt = log.mounting
+        w.add_tf_static(
+            "/tf_static",
+            t_first,
+            [
+                ("base_link", log.imu.frame_id, mnt.b_R_imu, mnt.b_p_imu),
+                ("base_link", log.dvl.frame_id, mnt.b_R_d0, mnt.b_p_dvl),
+            ],
+        )
+        gyro_var, accel_var = _imu_variances(meta, log.imu.t)
+        w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var)
+
+        dvl = log.dvl
+        ok = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
+        cov = np.zeros((int(ok.sum()), 6, 6))
+        cov[:, :3, :3] = np.nan_to_num(np.asarray(dvl.d_cov, dtype=float)[ok], nan=0.0)
+        cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
+        w.add_twist_with_covariance("/dvl/twist", dvl.t[ok], dvl.d_v[ok], None, cov, dvl.frame_id)
+        dvl_arr = _dvl_messages(dvl, meta, w.stamps_ns(dvl.t), path)
+        w.add_structured("/dvl/data", "marine_acoustic_msgs/msg/Dvl", dvl_arr)
+
+        if log.truth is not None:
+            tr = log.truth
+            b_v = Rotation.from_quat(tr.n_q_b).inv().apply(tr.n_v) if len(tr) else np.zeros((0, 3))
+            w.add_odometry("/ground_truth/odometry", tr.t, tr.n_p, tr.n_q_b, b_v, tr.b_omega,
+                           frame_id="map", child_frame_id="base_link")

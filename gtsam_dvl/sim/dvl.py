@@ -1,0 +1,109 @@
+"""DVL measurements (CONVENTIONS.md): y = k d_R_b (n_R_b^T n_v + b_omega x b_l) + noise, in dvl_link.
+
+b_R_d = R_c b_R_d0 is the true mounting (the nominal one corrected by the misalignment R_c in body axes),
+b_omega the body rate relative to the Earth, b_l the lever arm. Janus geometry: four beams at
+beam_angle from the face axis a (in dvl_link, towards the bottom) at azimuths 45/135/225/315 deg,
+d_u_j = cos(beam) a + sin(beam) (cos(az_j) e1 + sin(az_j) e2), e1 the dvl x axis made perpendicular to a
+and e2 = e1 x a. Beam j measures y_j = d_u_j . y; its slant range reaches a flat seafloor at a constant
+height. The output is instantaneous at the stamp.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gtsam_dvl.rotations import rpy_deg_to_matrix
+from gtsam_dvl.sim.local_level import imu_truth
+from gtsam_dvl.sim.motion import MotionProfile
+from gtsam_dvl.sim.position import PositionTrack
+from gtsam_dvl.types import BeamData, DvlData
+
+if TYPE_CHECKING:
+    from gtsam_dvl.scenario import DvlSpec
+
+AZIMUTHS_DEG = (45.0, 135.0, 225.0, 315.0)
+
+
+def janus_beams(beam_angle_deg: float, face_axis: np.ndarray) -> np.ndarray:
+    """Unit beam vectors (4, 3) in dvl_link."""
+    a = np.asarray(face_axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    x = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    e1 = x - a * (a @ x)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(e1, a)
+    az = np.radians(AZIMUTHS_DEG)[:, None]
+    b = np.radians(beam_angle_deg)
+    return np.cos(b) * a + np.sin(b) * (np.cos(az) * e1 + np.sin(az) * e2)
+
+
+def dvl_true(
+    spec: DvlSpec, b_R_d0: np.ndarray, b_l: np.ndarray, motion: MotionProfile, track: PositionTrack,
+    t: np.ndarray, floor_h: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Error-free y (M, 3) m/s, beam unit vectors d_u (4, 3) and slant ranges (M, 4) m (inf: no bottom)."""
+    m = motion.evaluate(t)
+    lat, _, h = track.at(t)
+    _, _, l_R_b, b_omega_eb = imu_truth(m, lat, h)
+    b_v = np.einsum("kji,kj->ki", l_R_b, m.l_v()) + np.cross(b_omega_eb, b_l)
+    b_R_d = rpy_deg_to_matrix(spec.misalignment_deg) @ b_R_d0
+    y = spec.scale * b_v @ b_R_d  # rows: (d_R_b b_v)^T = b_v^T b_R_d
+    d_u = janus_beams(spec.beam_angle_deg, np.asarray(spec.face_axis))
+    l_u = np.einsum("kij,bj->kbi", l_R_b, d_u @ b_R_d.T)  # beams in the local level
+    h_dvl = h + (l_R_b @ b_l)[:, 2]
+    down = -l_u[..., 2]
+    with np.errstate(divide="ignore"):
+        rng = np.where(down > 1e-9, (h_dvl - floor_h)[:, None] / down, np.inf)
+    rng = np.where(rng > 0, rng, np.inf)  # a DVL above its seafloor only
+    return y, d_u, rng
+
+
+def dvl_measure(
+    spec: DvlSpec, t: np.ndarray, y_true: np.ndarray, d_u: np.ndarray, ranges: np.ndarray,
+    noise_rng: np.random.Generator | None, event_rng: np.random.Generator | None,
+) -> DvlData:
+    """Add noise, dropouts and outliers (None generators: none of them) and build DvlData."""
+    M, B = ranges.shape
+    beam_ok: np.ndarray = np.asarray(ranges <= spec.max_range_m)
+    if event_rng is not None:
+        ping_lost: np.ndarray = event_rng.random((M,)) < spec.dropout_ping_prob
+        beam_lost: np.ndarray = event_rng.random((M, B)) < spec.dropout_beam_prob
+        beam_ok &= ~ping_lost[:, None] & ~beam_lost
+    sigma = spec.noise_m_s
+    if spec.noise_model == "velocity":
+        y = y_true.copy()
+        if noise_rng is not None:
+            y += noise_rng.normal(0.0, sigma, (M, 3))
+        if event_rng is not None:
+            ping_out: np.ndarray = event_rng.random((M,)) < spec.outlier_prob
+            direction = event_rng.normal(size=(M, 3))
+            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+            y[ping_out] += spec.outlier_m_s * direction[ping_out]
+        v_beam = y @ d_u.T
+        cov = np.broadcast_to(sigma**2 * np.eye(3), (M, 3, 3)).copy()
+    else:
+        v_beam = y_true @ d_u.T
+        if noise_rng is not None:
+            v_beam += noise_rng.normal(0.0, sigma, (M, B))
+        if event_rng is not None:
+            beam_out: np.ndarray = event_rng.random((M, B)) < spec.outlier_prob
+            v_beam += np.where(beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0)
+        w = beam_ok.astype(float)
+        normal = np.einsum("kb,bi,bj->kij", w, d_u, d_u)
+        rhs = np.einsum("kb,bi,kb->ki", w, d_u, np.where(beam_ok, v_beam, 0.0))
+        enough = beam_ok.sum(axis=1) >= 3
+        normal[~enough] = np.eye(3)  # placeholder, overwritten with NaN below
+        y = np.linalg.solve(normal, rhs[..., None])[..., 0]
+        cov = sigma**2 * np.linalg.inv(normal)
+    valid = beam_ok.sum(axis=1) >= 3
+    y[~valid] = np.nan
+    cov[~valid] = np.nan
+    beams = BeamData(
+        d_u=np.broadcast_to(d_u, (M, B, 3)).copy(),
+        v=np.where(beam_ok, v_beam, np.nan),
+        range=np.where(beam_ok, ranges, np.nan),  # no bottom lock, no range
+        valid=beam_ok,
+    )
+    return DvlData(t=t, d_v=y, d_cov=cov, valid=valid, beams=beams)

@@ -1,0 +1,114 @@
+"""Geodetic position of the vehicle: paper eq. 5/6 integrated on the IMU grid.
+
+    d lat/dt = v_N / (R_N + h),   d lon/dt = v_E / ((R_E + h) cos lat),   d h/dt = v_U
+
+The grid is t_g = (g - 1) / rate, g = 0..N (one point before t = 0 so that the IMU sample stamped 0,
+which covers (-dt, 0], has both ends). Each grid interval is integrated with 4-node Gauss-Legendre
+quadrature of the exact velocity. The radii depend on the latitude being integrated, so each pass uses
+the previous pass's latitude. Each pass shrinks the error by the latitude change times the rates'
+sensitivity to latitude (1/cos has tan(lat) per rad): on the 20 km run the passes differ from the converged
+track by 9 m, 6e-5 m, 1.2e-9 m, then 0, so four passes reach rounding level.
+Between grid points, positions come from cubic Hermite interpolation with the exact rates (error
+~dt^4/384 * d^4p/dt^4, below 1e-13 m for these motions).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gtsam_dvl.earth import radii_of_curvature
+from gtsam_dvl.sim.motion import MotionProfile
+
+GL_X, GL_W = np.polynomial.legendre.leggauss(4)  # nodes and weights on [-1, 1]
+GL_U = 0.5 * (GL_X + 1.0)  # node positions as fractions of an interval
+_H = np.array([2 * GL_U**3 - 3 * GL_U**2 + 1, GL_U**3 - 2 * GL_U**2 + GL_U, 3 * GL_U**2 - 2 * GL_U**3,
+               GL_U**3 - GL_U**2])  # cubic Hermite basis at the nodes
+
+
+def hermite(u: np.ndarray, y0: np.ndarray, d0: np.ndarray, y1: np.ndarray, d1: np.ndarray, dt: float) -> np.ndarray:
+    """Cubic Hermite interpolation at fraction u of an interval of length dt (values y, derivatives d)."""
+    u2, u3 = u * u, u * u * u
+    return (
+        (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * dt * d0 + (3 * u2 - 2 * u3) * y1 + (u3 - u2) * dt * d1
+    )
+
+
+def node_times(k: np.ndarray, rate: float) -> np.ndarray:
+    """Gauss-Legendre node times (len(k), 4) of the IMU samples k, each covering ((k-1)/rate, k/rate]."""
+    return ((k[:, None] - 0.5) + 0.5 * GL_X[None, :]) / rate
+
+
+class PositionTrack:
+    """lat, lon (rad) and h (m) on the grid, with their time derivatives, interpolable anywhere."""
+
+    def __init__(self, rate: float, lat: np.ndarray, lon: np.ndarray, h: np.ndarray,
+                 d_lat: np.ndarray, d_lon: np.ndarray, d_h: np.ndarray) -> None:
+        self.rate = rate
+        self.grid = (lat, lon, h)
+        self.deriv = (d_lat, d_lon, d_h)
+
+    def grid_index_of_time(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Interval index g (grid points g, g+1) and fraction u in it for times t."""
+        x = np.asarray(t, dtype=float) * self.rate + 1.0
+        g = np.clip(np.floor(x).astype(np.int64), 0, len(self.grid[0]) - 2)
+        return g, x - g
+
+    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(lat, lon, h) at arbitrary times t within the grid."""
+        g, u = self.grid_index_of_time(t)
+        return self._interp(g, u)
+
+    def at_samples(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(lat, lon, h) at the stamps k / rate of IMU samples k, exact grid values."""
+        return tuple(a[k + 1] for a in self.grid)  # type: ignore[return-value]
+
+    def at_nodes(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """(lat, h) at the Gauss-Legendre nodes (b - a, 4) of IMU samples a..b-1 (contiguous: fast slices)."""
+        dt = 1.0 / self.rate
+        out = []
+        for i in (0, 2):
+            y, d = self.grid[i], self.deriv[i]
+            y0, y1 = y[a:b, None], y[a + 1 : b + 1, None]
+            out.append(y0 * _H[0] + (dt * d[a:b, None]) * _H[1] + y1 * _H[2] + (dt * d[a + 1 : b + 1, None]) * _H[3])
+        return out[0], out[1]
+
+    def _interp(self, g: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        dt = 1.0 / self.rate
+        out = [hermite(u, y[g], d[g], y[g + 1], d[g + 1], dt) for y, d in zip(self.grid, self.deriv, strict=True)]
+        return out[0], out[1], out[2]
+
+
+def integrate_position(
+    motion: MotionProfile, lat0: float, lon0: float, h0: float, rate: float, n_samples: int, passes: int = 4
+) -> PositionTrack:
+    """Integrate the geodetic position on the grid of IMU samples 0..n_samples-1 (stamps k / rate).
+
+    The curvature factors 1/(R_N + h) and 1/((R_E + h) cos lat) change by < 1e-7 relative per second, so
+    they are interpolated linearly from the grid to the nodes (error < 1e-13 relative) while the
+    velocity at the nodes is exact.
+    """
+    t_nodes = node_times(np.arange(n_samples), rate)
+    l_v_nodes = motion.evaluate(t_nodes).l_v()  # (n, 4, 3)
+    t_grid = (np.arange(n_samples + 1) - 1.0) / rate
+    l_v_grid = motion.evaluate(t_grid).l_v()
+    half_dt = 0.5 / rate
+
+    def cumulate(rate_nodes: np.ndarray, y0: float) -> np.ndarray:
+        incr = half_dt * (rate_nodes @ GL_W)
+        y = np.concatenate([[0.0], np.cumsum(incr)])
+        return y0 + (y - y[1])  # anchored at t = 0 (grid point 1)
+
+    def at_nodes(grid_values: np.ndarray) -> np.ndarray:
+        return grid_values[:-1, None] * (1.0 - GL_U) + grid_values[1:, None] * GL_U
+
+    h = cumulate(l_v_nodes[..., 2], h0)
+    lat = np.full_like(h, lat0)
+    for _ in range(passes):
+        r_n, r_e = radii_of_curvature(lat)
+        lat_new = cumulate(l_v_nodes[..., 1] * at_nodes(1.0 / (r_n + h)), lat0)
+        lon = cumulate(l_v_nodes[..., 0] * at_nodes(1.0 / ((r_e + h) * np.cos(lat))), lon0)
+        lat = lat_new
+    r_n, r_e = radii_of_curvature(lat)
+    d_lat = l_v_grid[:, 1] / (r_n + h)
+    d_lon = l_v_grid[:, 0] / ((r_e + h) * np.cos(lat))
+    return PositionTrack(rate, lat, lon, h, d_lat, d_lon, l_v_grid[:, 2])

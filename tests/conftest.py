@@ -1,0 +1,25 @@
+"""Shared simulator fixtures (sim_ prefix): simulated once per test session and worker."""
+
+from __future__ import annotations
+
+import pytest
+
+from gtsam_dvl.scenario import Scenario, load_scenario
+from gtsam_dvl.sim import simulate
+from gtsam_dvl.types import LogData
+
+
+@pytest.fixture(scope="session")
+def sim_paper3d() -> Scenario:
+    return load_scenario("paper-3d")
+
+
+@pytest.fixture(scope="session")
+def sim_paper3d_clean(sim_paper3d: Scenario) -> LogData:
+    """paper-3d without white noise (biases, scale, misalignment kept)."""
+    return simulate(sim_paper3d, seed=7, white_noise=False)
+
+
+@pytest.fixture(scope="session")
+def sim_paper2d_clean() -> LogData:
+    return simulate(load_scenario("paper-2d"), seed=7, white_noise=False)
