@@ -65,19 +65,25 @@ def extract_result(builder: GraphBuilder, graph: gtsam.NonlinearFactorGraph, val
     n_p = np.array([p.translation() for p in poses])
     n_R_b = np.array([p.rotation().matrix() for p in poses])
     n_v = np.array([values.atVector(V(i)) for i in range(n)])
-    pose_cov = np.array([marg.covariances[X(i)] for i in range(n)])
-    vel_cov = np.array([marg.covariances[V(i)] for i in range(n)])
+    joints = [marg.joints[(X(i), V(i))] for i in range(n)]
+    pose_cov = np.array([j[:6, :6] for j in joints])
+    vel_cov = np.array([j[6:, 6:] for j in joints])
+    pose_vel_cross = np.array([j[:6, 6:] for j in joints])
     bias = values.atConstantBias(bias_last)
+    gyro_bias = np.asarray(bias.gyroscope())
+    # epochs' body rates already exclude Earth rate; remove the estimated gyro bias too
+    b_omega = np.array([e.b_omega for e in builder.epochs]) - gyro_bias
     b_R_d = values.atRot3(C_MISALIGN).matrix()
     return NavResult(
         estimator=estimator,
         t=np.array([e.t for e in builder.epochs]),
         n_p=n_p, n_R_b=n_R_b, n_v=n_v, pose_cov=pose_cov, vel_cov=vel_cov,
-        accel_bias=np.asarray(bias.accelerometer()), gyro_bias=np.asarray(bias.gyroscope()),
+        accel_bias=np.asarray(bias.accelerometer()), gyro_bias=gyro_bias,
         bias_cov=marg.covariances[bias_last],
         scale=float(values.atVector(K_SCALE)[0]), scale_sigma=float(np.sqrt(marg.covariances[K_SCALE][0, 0])),
         b_R_d=b_R_d, b_R_d_cov=marg.covariances[C_MISALIGN], b_R_d0=builder.log.mounting.b_R_d0,
-        t0_ns=builder.log.t0_ns, calib_joint_cov=marg.joints[calib_group],
+        t0_ns=builder.log.t0_ns, b_omega=b_omega, pose_vel_cross=pose_vel_cross,
+        calib_joint_cov=marg.joints[calib_group],
         info={"alignment": {"method": builder.alignment.method, "t_static_end": builder.alignment.t_static_end},
               "counters": dict(builder.counters), "epochs": n},
         config=builder.config.to_dict(),

@@ -85,6 +85,7 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
                                 "sigma": result.gyro_bias_sigma_deg_per_h.tolist()},
         "accel_bias_ug": {"value": result.accel_bias_ug.tolist(), "sigma": result.accel_bias_sigma_ug.tolist()},
         "distance_travelled_m": truth_dist,
+        "final_horizontal_position_sigma_m": float(np.hypot(*result.position_sigma_m[-1, :2])),
         "duration_s": float(result.t[-1] - result.t[0]),
         "states": len(result.t),
         "timing_s": result.timing_s,

@@ -49,7 +49,10 @@ class NavResult:
     b_R_d_cov: np.ndarray  # (3, 3) rad^2, right tangent of b_R_d
     b_R_d0: np.ndarray  # nominal mounting
     t0_ns: int = 0
+    b_omega: np.ndarray | None = None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
+    pose_vel_cross: np.ndarray | None = None  # (N, 6, 3) cross-covariance of pose tangent and n_v
     calib_joint_cov: np.ndarray | None = None  # (13, 13): [accel, gyro] bias, scale, b_R_d right tangent
+    timeline: Timeline | None = None  # filtering history (online estimators and the EKF)
     timing_s: dict[str, float] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)  # solver report, counters, alignment
     config: dict[str, Any] = field(default_factory=dict)
@@ -89,3 +92,31 @@ class NavResult:
         """(N, 3) position sigmas in map axes, m (GTSAM's translation tangent is in body axes)."""
         cov_map = self.n_R_b @ self.pose_cov[:, 3:, 3:] @ np.transpose(self.n_R_b, (0, 2, 1))
         return np.sqrt(np.einsum("nii->ni", cov_map))
+
+
+@dataclass
+class Timeline:
+    """Filtering estimates and marginal sigmas of the calibration, biases and attitude after each epoch:
+    the paper's Figures 4-9 and 12. Units as named; misalignment = [roll, pitch, yaw] of R_c in body axes;
+    attitude sigmas about map axes (east, north, up)."""
+
+    t: np.ndarray  # (N,) s
+    scale: np.ndarray  # (N,)
+    scale_sigma: np.ndarray  # (N,)
+    misalignment_deg: np.ndarray  # (N, 3)
+    misalignment_sigma_deg: np.ndarray  # (N, 3)
+    gyro_bias_deg_per_h: np.ndarray  # (N, 3)
+    gyro_bias_sigma_deg_per_h: np.ndarray  # (N, 3)
+    accel_bias_ug: np.ndarray  # (N, 3)
+    accel_bias_sigma_ug: np.ndarray  # (N, 3)
+    attitude_sigma_deg: np.ndarray  # (N, 3)
+
+    FIELDS = ("t", "scale", "scale_sigma", "misalignment_deg", "misalignment_sigma_deg", "gyro_bias_deg_per_h",
+              "gyro_bias_sigma_deg_per_h", "accel_bias_ug", "accel_bias_sigma_ug", "attitude_sigma_deg")
+
+    def as_arrays(self) -> dict[str, np.ndarray]:
+        return {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Timeline:
+        return cls(**{name: np.asarray(arrays[name]) for name in cls.FIELDS})

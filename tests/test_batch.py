@@ -59,26 +59,33 @@ def test_noise_free_recovery_paper_3d() -> None:
         "misalignment": np.max(np.abs(e["misalignment_deg"]) / np.array(noisy["misalignment_deg"]["sigma"])),
         "gyro bias": np.max(np.abs(e["gyro_bias_deg_per_h"]) / np.array(noisy["gyro_bias_deg_per_h"]["sigma"])),
         "accel bias": np.max(np.abs(e["accel_bias_ug"]) / np.array(noisy["accel_bias_ug"]["sigma"])),
-        "final position": e["final_horizontal_position_m"] / noisy["errors"]["final_horizontal_position_m"],
+        "final position": e["final_horizontal_position_m"] / noisy["final_horizontal_position_sigma_m"],
     }
     print("noise-free error / noisy sigma:", {k: f"{v:.4f}" for k, v in ratios.items()})
     for name, ratio in ratios.items():
         assert ratio < 0.01, f"{name}: noise-free error is {100 * ratio:.2f}% of the noisy 1-sigma"
 
 
+@pytest.mark.slow
 def test_noise_free_recovery_straight_20km() -> None:
-    """20 km at constant depth: proves the Earth model over distance (gravity turns by 3.2 mrad)."""
+    """Calibration manoeuvres then a 20 km straight transit: proves the Earth model over distance (gravity
+    turns by 3.1 mrad in the map frame). Same 1% criterion as paper-3d."""
     clean = _run("straight-20km", 3, white_noise=False, weak_priors=True)
     noisy = _run("straight-20km", 3)
     _print("20 km noise-free", clean)
     _print("20 km noisy", noisy)
     e = clean["errors"]
-    assert clean["distance_travelled_m"] > 19_000
-    assert abs(e["scale_ppm"]) * 1e-6 < 0.01 * noisy["scale"]["sigma"]
-    sig_ok = np.array(noisy["misalignment_deg"]["sigma"]) < 0.9 * 1.0  # axes the run determines
-    assert np.all(np.abs(np.array(e["misalignment_deg"]))[sig_ok] < 0.01 * np.array(noisy["misalignment_deg"]["sigma"])[sig_ok])
-    assert np.all(np.abs(e["accel_bias_ug"]) < 0.01 * np.array(noisy["accel_bias_ug"]["sigma"]))
-    assert e["final_horizontal_position_m"] < 0.01 * max(noisy["errors"]["final_horizontal_position_m"], 1.0)
+    assert clean["distance_travelled_m"] > 20_000
+    ratios = {
+        "scale": abs(e["scale_ppm"]) * 1e-6 / noisy["scale"]["sigma"],
+        "misalignment": np.max(np.abs(e["misalignment_deg"]) / np.array(noisy["misalignment_deg"]["sigma"])),
+        "gyro bias": np.max(np.abs(e["gyro_bias_deg_per_h"]) / np.array(noisy["gyro_bias_deg_per_h"]["sigma"])),
+        "accel bias": np.max(np.abs(e["accel_bias_ug"]) / np.array(noisy["accel_bias_ug"]["sigma"])),
+        "final position": e["final_horizontal_position_m"] / noisy["final_horizontal_position_sigma_m"],
+    }
+    print("20 km noise-free error / noisy sigma:", {k: f"{v:.4f}" for k, v in ratios.items()})
+    for name, ratio in ratios.items():
+        assert ratio < 0.01, f"{name}: noise-free error is {100 * ratio:.2f}% of the noisy 1-sigma"
 
 
 SEEDS_3D = [1, 2, 3]

@@ -54,12 +54,14 @@ def test_paper_scenarios_reproduce_table1(name: str, table: list[tuple[int, int,
     assert (sc.rates.imu_hz, sc.rates.dvl_hz, sc.origin.lat_deg) == (100.0, 1.0, 30.0)
 
 
-def test_straight_20km_has_static_start_and_type1_segments() -> None:
+def test_straight_20km_has_calibration_manoeuvres_then_a_20km_transit() -> None:
     sc = load_scenario("straight-20km")
     rows = sc.segment_table()
     assert rows[0]["kind"] == "static" and rows[0]["end_s"] == 600.0
     assert sum(r["type"] == "I" for r in rows) >= 3
-    assert all(r["kind"] in ("static", "level", "straight") for r in rows)  # no turns, no depth change
+    assert any(r["kind"] == "square" for r in rows)  # Type II before the transit
+    transit = [r for r in rows if r["kind"] == "straight"]
+    assert len(transit) == 1 and (transit[0]["end_s"] - transit[0]["start_s"]) * 2.5 >= 20_000.0
 
 
 def _write(tmp_path: Path, text: str) -> Path:

@@ -185,7 +185,7 @@ def test_strapdown_reproduces_truth_paper3d(sim_paper3d_clean: LogData, sim_pape
 
 
 def test_strapdown_reproduces_truth_far_from_origin() -> None:
-    """The straight 20 km run, 13 km out: the map-frame gravity has turned by 2 mrad there."""
+    """The 20 km transit, about 13 km out at 6000 s: the map-frame gravity has turned by 2 mrad there."""
     sc = load_scenario("straight-20km")
     log = simulate(sc, 7, white_noise=False)
     assert log.truth is not None
