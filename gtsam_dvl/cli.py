@@ -37,6 +37,16 @@ def _user_errors(func: F) -> F:
     return wrapper  # type: ignore[return-value]
 
 
+ImuTopic = Annotated[str, typer.Option("--imu-topic", help="IMU topic (sensor_msgs/msg/Imu).")]
+DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
+Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
+Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages.")]
+
+
+def _read_options(imu_topic: str, dvl_topic: str | None, salvage: bool, repair: bool) -> dict[str, Any]:
+    return {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
+
+
 @app.callback()
 def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
     _state["debug"] = debug
@@ -63,21 +73,27 @@ def simulate(
 def plot_log(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
     from gtsam_dvl.pipeline import plot_log_to_dir
 
-    for path in plot_log_to_dir(log, output):
+    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair)):
         typer.echo(str(path))
 
 
 @app.command()
 @_user_errors
-def info(log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")]) -> None:
+def info(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
+) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
     from gtsam_dvl.pipeline import describe_log
 
-    typer.echo(describe_log(log))
+    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair)))
 
 
 @app.command()
@@ -89,14 +105,15 @@ def smooth(
     summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
     tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
     config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
-    salvage: Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")] = False,
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
     quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log."""
     from gtsam_dvl.pipeline import smooth_file
 
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
-                          show_progress=not quiet, salvage=salvage)
+                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair))
     typer.echo(outcome.describe())
 
 

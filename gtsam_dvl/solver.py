@@ -31,6 +31,9 @@ class SolveReport:
     converged: bool = False
     history: list[float] = field(default_factory=list)
     timing_s: dict[str, float] = field(default_factory=dict)
+    # QR Bayes net of the last linearisation: after convergence its step changed the error by less than
+    # the tolerance, so it serves the marginals without another elimination
+    bayes_net: gtsam.GaussianBayesNet | None = None
 
 
 def gauss_newton_qr(
@@ -62,7 +65,8 @@ def gauss_newton_qr(
         linear = graph.linearize(values)
         t1 = time.perf_counter()
         try:
-            delta = linear.eliminateSequential(ordering, gtsam.EliminateQR).optimize()
+            bn = linear.eliminateSequential(ordering, gtsam.EliminateQR)
+            delta = bn.optimize()
         except RuntimeError as exc:
             raise GtsamDvlError(f"the linear system could not be solved ({exc}); check priors and data") from None
         t_lin += t1 - t0
@@ -76,6 +80,7 @@ def gauss_newton_qr(
                 break
             step *= 0.5
         report.iterations = it + 1
+        report.bayes_net = bn
         if new_values is values:  # no step decreased the error: at the minimum to numerical precision
             report.converged = not changed
             if not changed:

@@ -38,11 +38,13 @@ def _run(name: str, seed: int, white_noise: bool = True, weak_priors: bool = Fal
 
 def _print(tag: str, s: dict) -> None:
     e = s["errors"]
+
+    def pair(name: str, digits: int) -> str:
+        return f"err {np.round(e[name], digits)} sigma {np.round(s[name]['sigma'], digits)}"
+
     print(f"\n{tag}: scale {e['scale_ppm']:+.1f} ppm (sigma {s['scale']['sigma'] * 1e6:.0f} ppm); "
-          f"misalignment err {np.round(e['misalignment_deg'], 4)} sigma {np.round(s['misalignment_deg']['sigma'], 4)} deg; "
-          f"gyro bias err {np.round(e['gyro_bias_deg_per_h'], 5)} sigma {np.round(s['gyro_bias_deg_per_h']['sigma'], 5)} "
-          f"deg/h; accel bias err {np.round(e['accel_bias_ug'], 3)} sigma {np.round(s['accel_bias_ug']['sigma'], 3)} ug; "
-          f"final horizontal {e['final_horizontal_position_m']:.3f} m = "
+          f"misalignment {pair('misalignment_deg', 4)} deg; gyro bias {pair('gyro_bias_deg_per_h', 5)} deg/h; "
+          f"accel bias {pair('accel_bias_ug', 3)} ug; final horizontal {e['final_horizontal_position_m']:.3f} m = "
           f"{e['final_horizontal_position_pct_distance']:.4f} % of {s['distance_travelled_m']:.0f} m; "
           f"{s['timing_s']['total']:.2f} s")
 
