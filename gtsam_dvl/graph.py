@@ -30,7 +30,7 @@ from gtsam_dvl.config import DEG_PER_H, UG, EstimatorConfig
 from gtsam_dvl.earth import LocalFrame, gravity_gradient, normal_gravity
 from gtsam_dvl.errors import GtsamDvlError
 from gtsam_dvl.factors import EarthImuFactor, make_dvl_beam_factor, make_dvl_velocity_factor, make_earth_imu_factor
-from gtsam_dvl.types import LogData
+from gtsam_dvl.types import DvlData, ImuData, LogData, Mounting
 
 K_SCALE = gtsam.symbol("k", 0)
 C_MISALIGN = gtsam.symbol("c", 0)
@@ -91,11 +91,27 @@ class GraphBuilder:
         if len(self.epochs) < 2:
             raise GtsamDvlError(f"{self.log.source or 'log'}: fewer than two usable DVL pings")
         self._preintegrate()
-        gravity = None if cfg.solver.earth_model == "flat" else self.gravity_model
-        self.imu_factors = [
-            make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)),
-                                  self.epochs[i + 1].t - self.epochs[i].t, gravity)
-            for i, (pim, params) in enumerate(zip(self.pims, self.imu_params, strict=True))]
+        self.imu_factors = [self.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t)
+                            for i, (pim, params) in enumerate(zip(self.pims, self.imu_params, strict=True))]
+
+    @classmethod
+    def incremental(cls, config: EstimatorConfig, frame: LocalFrame, alignment: Alignment,
+                    mounting: Mounting, source: str = "") -> GraphBuilder:
+        """A builder without a log, for estimators fed message by message (gtsam_dvl/online.py): it holds
+        the configuration, map frame, alignment and mounting, and makes the factors and initial guesses of
+        each new epoch from explicit measurements (preintegrate_interval, new_imu_factor, dvl_factors_for,
+        bias_link_factors, first_state_values, prior_factors). Its epoch lists stay empty: the caller
+        keeps the epochs it still needs, so memory stays bounded on long missions."""
+        builder = cls.__new__(cls)
+        builder.log = LogData(ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))),
+                              DvlData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, dtype=bool)),
+                              mounting=mounting, source=source)
+        builder.config = config
+        builder.counters = {}
+        builder.frame = frame
+        builder.alignment = alignment
+        builder.epochs, builder.pims, builder.imu_params, builder.imu_factors = [], [], [], []
+        return builder
 
     # ----- epochs and preintegration -------------------------------------------------------------
     def _select_epochs(self) -> list[Epoch]:
@@ -116,12 +132,15 @@ class GraphBuilder:
             if dvl.t[j] - last_t < cfg.solver.keyframe_interval_s:
                 continue
             gi = min(int(gyro_index[j]), len(imu) - 1)
-            # body rate w.r.t. map for the lever-arm term: gyro minus Earth rate (attitude from alignment;
-            # the Earth-rate term times a lever arm of a metre is 7e-5 m/s, so attitude errors do not matter)
-            b_omega = imu.b_omega[gi] - self.alignment.n_R_b.T @ self._n_omega_ie()
-            epochs.append(Epoch(float(dvl.t[j]), int(j), b_omega))
+            epochs.append(Epoch(float(dvl.t[j]), int(j), self.body_rate(imu.b_omega[gi])))
             last_t = dvl.t[j]
         return epochs
+
+    def body_rate(self, b_omega_gyro: np.ndarray) -> np.ndarray:
+        """Body rate relative to map for the lever-arm term of a DVL epoch: the gyro sample covering the
+        ping minus Earth rate (attitude from the alignment; the Earth-rate term times a lever arm of a metre
+        is 7e-5 m/s, so attitude errors do not matter)."""
+        return np.asarray(b_omega_gyro - self.alignment.n_R_b.T @ self._n_omega_ie(), dtype=float)
 
     def _n_omega_ie(self) -> np.ndarray:
         return np.zeros(3) if self.config.solver.earth_model == "flat" else self.frame.n_omega_ie
@@ -142,23 +161,34 @@ class GraphBuilder:
         imu = self.log.imu
         t = imu.t
         dt_sample = np.diff(t, prepend=t[0] - (np.median(np.diff(t)) if len(t) > 1 else 0.01))
-        b_f = imu.b_f
-        if self.config.imu.rotation_compensation:
-            b_f = b_f + 0.5 * dt_sample[:, None] * np.cross(imu.b_omega, b_f)
+        b_f = self.compensate_rotation(imu.b_f, imu.b_omega, dt_sample)
         starts = t - dt_sample
         self.pims, self.imu_params = [], []
-        zero_bias = gtsam.imuBias.ConstantBias()
         for a, b in zip(self.epochs[:-1], self.epochs[1:], strict=True):
-            params = self._make_params()
-            pim = gtsam.PreintegratedImuMeasurements(params, zero_bias)
-            lo = int(np.searchsorted(t, a.t, side="right"))  # first sample ending after a.t
-            hi = int(np.searchsorted(t, b.t, side="left"))  # last sample that reaches b.t
-            for i in range(lo, min(hi, len(t) - 1) + 1):
-                dt = min(t[i], b.t) - max(starts[i], a.t)
-                if dt > 0.0:
-                    pim.integrateMeasurement(b_f[i], imu.b_omega[i], dt)
+            pim, params = self.preintegrate_interval(a.t, b.t, t, starts, b_f, imu.b_omega)
             self.pims.append(pim)
             self.imu_params.append(params)
+
+    def compensate_rotation(self, b_f: np.ndarray, b_omega: np.ndarray, dt_sample: np.ndarray) -> np.ndarray:
+        """Each delta-v rotated back to its sample's start (see module doc), if the configuration asks."""
+        if not self.config.imu.rotation_compensation:
+            return b_f
+        return np.asarray(b_f + 0.5 * dt_sample[:, None] * np.cross(b_omega, b_f))
+
+    def preintegrate_interval(self, t_a: float, t_b: float, t: np.ndarray, starts: np.ndarray, b_f: np.ndarray,
+                              b_omega: np.ndarray) -> tuple[gtsam.PreintegratedImuMeasurements,
+                                                            gtsam.PreintegrationParams]:
+        """Preintegration over (t_a, t_b] of samples i covering (starts[i], t[i]] (b_f already compensated);
+        a sample straddling t_a or t_b contributes its overlap. Returns the pim and its own parameters."""
+        params = self._make_params()
+        pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
+        lo = int(np.searchsorted(t, t_a, side="right"))  # first sample ending after t_a
+        hi = int(np.searchsorted(t, t_b, side="left"))  # last sample that reaches t_b
+        for i in range(lo, min(hi, len(t) - 1) + 1):
+            dt = min(t[i], t_b) - max(starts[i], t_a)
+            if dt > 0.0:
+                pim.integrateMeasurement(b_f[i], b_omega[i], dt)
+        return pim, params
 
     # ----- gravity -------------------------------------------------------------------------------
     def gravity_model(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -199,12 +229,23 @@ class GraphBuilder:
         """IMU factor between states i and i+1, gravity following position."""
         return self.imu_factors[i].factor
 
+    def new_imu_factor(self, i: int, pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams,
+                       dt: float) -> EarthImuFactor:
+        """The IMU factor between states i and i+1 from its preintegration (constant gravity if flat)."""
+        gravity = None if self.config.solver.earth_model == "flat" else self.gravity_model
+        return make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)), dt, gravity)
+
     def bias_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
         """Random-walk bias link between states i and i+1 (none for a random-constant bias)."""
         if self.config.imu.bias_model != "random_walk":
             return []
+        return self.bias_link_factors(i, self.epochs[i + 1].t - self.epochs[i].t)
+
+    def bias_link_factors(self, i: int, dt: float) -> list[gtsam.NonlinearFactor]:
+        """Random-walk bias link B_i -> B_i+1 over dt seconds (none for a random-constant bias)."""
+        if self.config.imu.bias_model != "random_walk":
+            return []
         imu_cfg = self.config.imu
-        dt = self.epochs[i + 1].t - self.epochs[i].t
         sig_a = imu_cfg.accel_bias_rw_ug_per_rth * UG / 60.0 * np.sqrt(dt)
         sig_g = imu_cfg.gyro_bias_rw_deg_per_h_per_rth * DEG_PER_H / 60.0 * np.sqrt(dt)
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sig_a] * 3 + [sig_g] * 3))
@@ -212,16 +253,22 @@ class GraphBuilder:
 
     def dvl_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
         """DVL factors of state i: the 3-D velocity, or one per valid beam."""
-        cfg = self.config.dvl
         dvl, ep = self.log.dvl, self.epochs[i]
-        j, b_l = ep.dvl_index, self.log.mounting.b_l
-        if cfg.use_beams and dvl.beams is not None:
-            beams = dvl.beams
+        j = ep.dvl_index
+        beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+        return self.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams)
+
+    def dvl_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
+                        beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> list[gtsam.NonlinearFactor]:
+        """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
+        dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate()."""
+        cfg = self.config.dvl
+        b_l = self.log.mounting.b_l
+        if cfg.use_beams and beams is not None:
+            d_u, v, valid = beams
             noise1 = self._robust(gtsam.noiseModel.Isotropic.Sigma(1, cfg.beam_noise_m_s))
-            return [make_dvl_beam_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, beams.d_u[j, b],
-                                         float(beams.v[j, b]), ep.b_omega, b_l)
-                    for b in np.flatnonzero(beams.valid[j])]
-        cov = dvl.d_cov[j]
+            return [make_dvl_beam_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, d_u[b], float(v[b]), b_omega, b_l)
+                    for b in np.flatnonzero(valid)]
         noise: gtsam.noiseModel.Base
         if cfg.noise_m_s > 0:
             noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.noise_m_s)
@@ -229,8 +276,7 @@ class GraphBuilder:
             noise = gtsam.noiseModel.Gaussian.Covariance(cov)
         else:
             noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.default_noise_m_s)
-        return [make_dvl_velocity_factor(self._robust(noise), X(i), V(i), K_SCALE, C_MISALIGN, dvl.d_v[j],
-                                         ep.b_omega, b_l)]
+        return [make_dvl_velocity_factor(self._robust(noise), X(i), V(i), K_SCALE, C_MISALIGN, d_y, b_omega, b_l)]
 
     def _robust(self, noise: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
         if self.config.dvl.robust == "huber":
@@ -299,6 +345,22 @@ class GraphBuilder:
         values.insert(K_SCALE, np.array([k0]))
         values.insert(C_MISALIGN, gtsam.Rot3(b_R_d0))
         self.set_gravity_from_positions(n_p_all)
+        return values
+
+    def first_state_values(self, d_y: np.ndarray | None) -> gtsam.Values:
+        """Initial guess of an incremental estimator's first state X(0), V(0) (attitude from the alignment,
+        at the map origin, velocity from ping d_y at the initial scale and nominal mounting, as in
+        initial_values) and of the bias, scale and misalignment."""
+        values = gtsam.Values()
+        n_R_b = gtsam.Rot3(self.alignment.n_R_b)
+        n_v = np.zeros(3)
+        if d_y is not None and np.all(np.isfinite(d_y)):
+            n_v = n_R_b.matrix() @ (self.log.mounting.b_R_d0 @ d_y) / self.config.priors.scale_initial
+        values.insert(X(0), gtsam.Pose3(n_R_b, np.zeros(3)))
+        values.insert(V(0), n_v)
+        values.insert(self.bias_key(0), gtsam.imuBias.ConstantBias())
+        values.insert(K_SCALE, np.array([self.config.priors.scale_initial]))
+        values.insert(C_MISALIGN, gtsam.Rot3(self.log.mounting.b_R_d0))
         return values
 
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:

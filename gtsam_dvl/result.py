@@ -51,7 +51,7 @@ class NavResult:
     t0_ns: int = 0
     b_omega: np.ndarray | None = None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
     pose_vel_cross: np.ndarray | None = None  # (N, 6, 3) cross-covariance of pose tangent and n_v
-    calib_joint_cov: np.ndarray | None = None  # (13, 13): [accel, gyro] bias, scale, b_R_d right tangent
+    calib_joint_cov: np.ndarray | None = None  # (10, 10): [accel, gyro] bias, scale, b_R_d right tangent
     timeline: Timeline | None = None  # filtering history (online estimators and the EKF)
     timing_s: dict[str, float] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)  # solver report, counters, alignment
