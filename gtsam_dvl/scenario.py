@@ -88,6 +88,7 @@ class MotionSegment:
     leg_duration_s: float = 0.0  # square
     turn_duration_s: float = 0.0  # square
     sides: int = 4  # square
+    turn_first: bool = False  # square: start with a turn instead of a leg
     direction: str = "left"  # square
 
     @property
@@ -161,11 +162,16 @@ class Scenario:
         return LocalFrame(self.origin.lat_deg, self.origin.lon_deg, self.origin.height_m)
 
     def segment_table(self) -> list[dict[str, Any]]:
-        """Rows {start_s, end_s, kind, type} with the paper's segment type (Table 1)."""
-        return [
-            {"start_s": s.start_s, "end_s": s.end_s, "kind": s.kind, "type": s.paper_type}
-            for s in self.segments
-        ]
+        """Rows {start_s, end_s, kind, type} with the paper's segment type (Table 1). Consecutive pieces of
+        the same kind and type (e.g. a speed-up then a surge, both level Type I) form one row, as the
+        paper's table counts segments by motion."""
+        rows: list[dict[str, Any]] = []
+        for s in self.segments:
+            if rows and rows[-1]["kind"] == s.kind and rows[-1]["type"] == s.paper_type and s.kind != "static":
+                rows[-1]["end_s"] = s.end_s
+            else:
+                rows.append({"start_s": s.start_s, "end_s": s.end_s, "kind": s.kind, "type": s.paper_type})
+        return rows
 
 
 def list_builtin_scenarios() -> list[str]:

@@ -127,11 +127,14 @@ class MotionProfile:
                 sign = 1.0 if seg.direction == "left" else -1.0
                 t = seg.start_s
                 for _ in range(seg.sides):
-                    add(t, seg.leg_duration_s)
-                    t += seg.leg_duration_s
-                    add(t, seg.turn_duration_s, dyaw=sign * 2.0 * np.pi / seg.sides,
-                        bank=-sign * np.radians(seg.bank_deg))
-                    t += seg.turn_duration_s
+                    for part in (("turn", "leg") if seg.turn_first else ("leg", "turn")):
+                        if part == "leg":
+                            add(t, seg.leg_duration_s)
+                            t += seg.leg_duration_s
+                        else:
+                            add(t, seg.turn_duration_s, dyaw=sign * 2.0 * np.pi / seg.sides,
+                                bank=-sign * np.radians(seg.bank_deg))
+                            t += seg.turn_duration_s
             else:  # the loader rejects unknown kinds; this guards programmatic scenarios
                 raise ValueError(f"unknown segment kind {seg.kind!r}")
         return cls(pieces)

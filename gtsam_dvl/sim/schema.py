@@ -10,8 +10,9 @@ Segment kinds (keys in brackets are optional; the vehicle keeps its attitude unl
 - descent / ascent: duration_s, peak_vertical_speed_m_s. Ballast: constant attitude and horizontal
   speed, the vertical speed rises smoothly to the peak and back to zero (paper Type I).
 - turn: duration_s, heading_change_deg (positive left), [bank_deg]. Constant speed (paper Type II).
-- square: leg_duration_s, turn_duration_s, [bank_deg], [direction = "left"], [sides = 4]: legs and
-  turns of 360/sides deg alternating, leg first (the paper's "I and II" segment).
+- square: leg_duration_s, turn_duration_s, [bank_deg], [direction = "left"], [sides = 4],
+  [turn_first = false]: legs and turns of 360/sides deg alternating, leg first unless turn_first (the
+  paper's "I and II" segment).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ SEGMENT_KEYS: dict[str, tuple[str, ...]] = {
     "descent": ("duration_s", "peak_vertical_speed_m_s"),
     "ascent": ("duration_s", "peak_vertical_speed_m_s"),
     "turn": ("duration_s", "heading_change_deg", "bank_deg"),
-    "square": ("leg_duration_s", "turn_duration_s", "bank_deg", "direction", "sides"),
+    "square": ("leg_duration_s", "turn_duration_s", "bank_deg", "direction", "sides", "turn_first"),
 }
 SEGMENT_KINDS = tuple(SEGMENT_KEYS)
 _REQUIRED = {
@@ -127,6 +128,9 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
             full = f"{pre}.{key}"
             if key == "direction":
                 r.require(d[key] in ("left", "right"), full, "must be 'left' or 'right'")
+                row[key] = d[key]
+            elif key == "turn_first":
+                r.require(isinstance(d[key], bool), full, "must be true or false")
                 row[key] = d[key]
             elif key == "sides":
                 r.require(isinstance(d[key], int) and not isinstance(d[key], bool) and d[key] >= 1,
