@@ -50,6 +50,11 @@ def _rows(factor: gtsam.GaussianFactor, columns: dict[int, slice], width: int) -
     return out
 
 
+def _qr_r(a: np.ndarray) -> np.ndarray:
+    """The R factor of a QR decomposition (numpy's mode="r"; its stubs type the result as a tuple)."""
+    return np.asarray(np.linalg.qr(a, mode="r"))
+
+
 def filtering_timeline(builder: GraphBuilder, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Timeline:
     """Filtering estimates are those of `values` (the smoother's); the sigmas are the filtering marginals
     at each epoch. Only the random-constant bias model (the paper's) is supported."""
@@ -72,7 +77,7 @@ def filtering_timeline(builder: GraphBuilder, graph: gtsam.NonlinearFactorGraph,
             cols = {X(0): slice(0, 6), V(0): slice(6, 9), **{k: slice(9 + s.start, 9 + s.stop)
                                                            for k, s in shared_cols.items()}}
             stack = np.vstack([_rows(f, cols, 19) for f in by_epoch[0]])
-            R = np.linalg.qr(stack, mode="r")[:19]
+            R = _qr_r(stack)[:19]
         else:
             cols = {X(i - 1): slice(0, 6), V(i - 1): slice(6, 9), X(i): slice(9, 15), V(i): slice(15, 18),
                     **{k: slice(18 + s.start, 18 + s.stop) for k, s in shared_cols.items()}}
@@ -81,7 +86,7 @@ def filtering_timeline(builder: GraphBuilder, graph: gtsam.NonlinearFactorGraph,
             prev[:, 18:28] = R[:, 9:19]
             prev[:, 28] = R[:, 19]
             stack = np.vstack([prev] + [_rows(f, cols, 28) for f in by_epoch[i]])
-            full = np.linalg.qr(stack, mode="r")
+            full = _qr_r(stack)
             R = full[9:28, 9:]  # marginal information of [X_i, V_i, shared] after eliminating X_{i-1}, V_{i-1}
         Rinv = np.linalg.inv(R[:, :19])
         cov = Rinv @ Rinv.T
