@@ -14,11 +14,12 @@ mission would need to halve the prior sigma.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from gtsam_dvl.config import DEG_PER_H, UG, EstimatorConfig
-from gtsam_dvl.result import NavResult
+from gtsam_dvl.result import NavResult, Timeline
 
 DETERMINED = 0.5
 NOT_DETERMINED = 0.9
@@ -150,3 +151,47 @@ def analyse(result: NavResult, config: EstimatorConfig | None = None) -> Observa
         order = [k for k in np.argsort(-w) if w[k] >= 0.1]
         directions.append(DirectionVerdict(ratio, verdict_of(ratio), {STATES[k][0]: float(w[k]) for k in order}))
     return ObservabilityReport(states, directions, float(result.t[-1] - result.t[0]))
+
+
+def _timeline_sigmas(timeline: Timeline) -> np.ndarray:
+    """(N, 10) sigmas in the order of STATES, user units (scale in ppm)."""
+    return np.column_stack([timeline.accel_bias_sigma_ug, timeline.gyro_bias_sigma_deg_per_h,
+                            timeline.scale_sigma * 1e6, timeline.misalignment_sigma_deg])
+
+
+def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments: list[dict[str, Any]],
+                       min_share: float = 0.25) -> dict[str, list[tuple[str, float]]]:
+    """Which segments made each state observable: the share of the total fall of log(sigma) (prior to
+    final) that happened inside each segment. Segments with at least min_share are credited on the
+    report's states (StateVerdict.credited_segments); returns every state's shares, largest first."""
+    sig = _timeline_sigmas(timeline)
+    p0 = np.array([s.prior_sigma for s in report.states])
+    log_sig = np.log(np.minimum(np.vstack([p0, sig]), p0))  # the prior is the sigma before the first epoch
+    t = np.concatenate([[timeline.t[0] - 1e-9], timeline.t])
+    total = log_sig[0] - log_sig[-1]
+    shares: dict[str, list[tuple[str, float]]] = {}
+    for j, state in enumerate(report.states):
+        rows = []
+        for seg in segments:
+            a = int(np.searchsorted(t, seg["start_s"], side="right")) - 1
+            b = int(np.searchsorted(t, seg["end_s"], side="right")) - 1
+            if b <= a or total[j] <= 1e-6:
+                continue
+            share = float((log_sig[max(a, 0), j] - log_sig[b, j]) / total[j])
+            label = f"{seg['kind']} {seg['start_s']:.0f}-{seg['end_s']:.0f} s (type {seg.get('type', '-')})"
+            rows.append((label, share))
+        rows.sort(key=lambda r: -r[1])
+        shares[state.key] = rows
+        if state.verdict != "not determined":
+            state.credited_segments = [label for label, share in rows if share >= min_share]
+    return shares
+
+
+def determined_at(report: ObservabilityReport, timeline: Timeline) -> dict[str, float | None]:
+    """Time (s) at which each state's filtering sigma first falls to DETERMINED of its prior (None: never)."""
+    sig = _timeline_sigmas(timeline)
+    out: dict[str, float | None] = {}
+    for j, state in enumerate(report.states):
+        below = np.flatnonzero(sig[:, j] <= DETERMINED * state.prior_sigma)
+        out[state.key] = float(timeline.t[below[0]]) if below.size else None
+    return out
