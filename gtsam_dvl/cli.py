@@ -28,6 +28,8 @@ def _user_errors(func: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return func(*args, **kwargs)
+        except BrokenPipeError:  # output piped into `head` and closed: not an error of ours
+            raise typer.Exit(0) from None
         except (GtsamDvlError, OSError) as exc:
             if _state["debug"]:
                 raise
@@ -115,6 +117,23 @@ def smooth(
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
                           show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair))
     typer.echo(outcome.describe())
+
+
+@app.command()
+@_user_errors
+def plan(
+    scenario: Annotated[str, typer.Argument(help="Built-in name (paper-3d, paper-2d, ...) or a scenario TOML file.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")],
+    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+) -> None:
+    """Will this mission calibrate the DVL, and when? Covariance analysis of a scenario (no noise)."""
+    from gtsam_dvl.pipeline import plan_to_dir
+
+    answer, written = plan_to_dir(scenario, output, config_path=config, show_progress=not quiet)
+    typer.echo(answer)
+    for path in written:
+        typer.echo(f"wrote {path}")
 
 
 @app.command()

@@ -147,6 +147,57 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     return SmoothOutcome(summ, written)
 
 
+def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
+    """Prior sigmas in the units of Timeline, for normalised-sigma figures."""
+    from gtsam_dvl.config import EstimatorConfig
+
+    cfg = EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
+    return {"scale": cfg.priors.scale_sigma, "misalignment_deg": np.array(cfg.priors.misalignment_sigma_deg),
+            "gyro_bias_deg_per_h": np.full(3, cfg.imu.gyro_bias_sigma_deg_per_h),
+            "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug)}
+
+
+def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = None,
+                show_progress: bool = True) -> tuple[str, list[Path]]:
+    """`gtsam-dvl plan`: covariance analysis of a scenario; writes plan.json, plan.md, timeline.npz and
+    figures, returns the answer text and the files written."""
+    from gtsam_dvl.atomic import atomic_write_bytes, atomic_write_json, atomic_write_text
+    from gtsam_dvl.config import EstimatorConfig
+    from gtsam_dvl.planning import plan_mission
+    from gtsam_dvl.plots.timeline_plots import plot_normalised_sigmas
+    from gtsam_dvl.scenario import load_scenario
+
+    config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
+    scen = load_scenario(scenario)
+    with progress_bar(f"planning {scen.name}", enabled=show_progress) as progress:
+        plan = plan_mission(scen, config, progress=progress)
+    out_dir = Path(out_dir)
+    answer = plan.answer()
+    data = {
+        "scenario": scen.name, "answer": answer.splitlines()[0], "wall_s": plan.wall_s,
+        "states": [{"key": s.key, "description": s.description, "unit": s.unit, "prior_sigma": s.prior_sigma,
+                    "final_sigma": s.posterior_sigma, "ratio": s.ratio, "verdict": s.verdict,
+                    "determined_at_s": plan.determined_at_s[s.key], "credited_segments": s.credited_segments,
+                    "segment_shares": plan.shares.get(s.key, []), "hours_to_halve": s.hours_to_halve}
+                   for s in plan.report.states],
+        "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
+        "segments": plan.segments, "config": config.to_dict(),
+    }
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, **plan.timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
+    written = [
+        atomic_write_json(out_dir / "plan.json", data),
+        atomic_write_text(out_dir / "plan.md", f"# Mission plan: {scen.name}\n\n" + answer.replace("\n  ", "\n- ")
+                          + "\n\n![normalised sigmas](normalised_sigmas.png)\n"),
+        atomic_write_bytes(out_dir / "timeline.npz", buf.getvalue()),
+        plot_normalised_sigmas(plan.timeline, out_dir / "normalised_sigmas.png", priors_for_plots(config.to_dict()),
+                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise)"),
+    ]
+    return answer, written
+
+
 def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:
     """Simulate paper-3d and paper-2d, smooth each log in batch, write logs, results and figures into
     out_dir and print a summary table. Returns the summaries."""
