@@ -103,20 +103,41 @@ def info(
 def smooth(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")] = None,
-    mode: Annotated[str, typer.Option(help="Estimator: batch.")] = "batch",
+    mode: Annotated[str, typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc.")
+                    ] = "batch",
     summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
     tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
     config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False,
+    timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
+    timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
+                            ] = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log."""
     from gtsam_dvl.pipeline import smooth_file
 
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
-                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair))
+                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair),
+                          timeline=timeline, timeline_path=timeline_npz)
     typer.echo(outcome.describe())
+
+
+@app.command()
+@_user_errors
+def evaluate(
+    result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for metrics.json and figures.")],
+    truth: Annotated[Path | None, typer.Option(help="Log with truth (default: the result's source log).")] = None,
+) -> None:
+    """Errors against the truth over time, observability verdict and the segments that made it."""
+    from gtsam_dvl.pipeline import evaluate_to_dir
+
+    lines, written = evaluate_to_dir(result, output, truth_path=truth)
+    typer.echo("\n".join(lines))
+    for path in written:
+        typer.echo(f"wrote {path}")
 
 
 @app.command()

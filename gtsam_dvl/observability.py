@@ -126,11 +126,18 @@ def analyse(result: NavResult, config: EstimatorConfig | None = None) -> Observa
         raise ValueError("the result has no joint covariance of the calibration and bias block")
     if config is None:
         config = EstimatorConfig.from_dict(result.config) if result.config else EstimatorConfig()
-    J = _user_units_jacobian(result.b_R_d)
-    cov = J @ result.calib_joint_cov @ J.T
+    return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config)
+
+
+def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: float,
+                  config: EstimatorConfig) -> ObservabilityReport:
+    """The analysis on the block's covariance itself ([accel bias, gyro bias, scale, b_R_d right tangent],
+    SI units), e.g. as stored in a result log."""
+    J = _user_units_jacobian(np.asarray(b_R_d))
+    cov = J @ np.asarray(calib_joint_cov) @ J.T
     p0 = prior_sigmas(config)
     post = np.sqrt(np.diag(cov))
-    duration_h = float(result.t[-1] - result.t[0]) / 3600.0
+    duration_h = duration_s / 3600.0
     states = []
     for i, (key, text, unit) in enumerate(STATES):
         ratio = float(min(post[i] / p0[i], 1.0))
@@ -150,7 +157,7 @@ def analyse(result: NavResult, config: EstimatorConfig | None = None) -> Observa
         w = evecs[:, j] ** 2
         order = [k for k in np.argsort(-w) if w[k] >= 0.1]
         directions.append(DirectionVerdict(ratio, verdict_of(ratio), {STATES[k][0]: float(w[k]) for k in order}))
-    return ObservabilityReport(states, directions, float(result.t[-1] - result.t[0]))
+    return ObservabilityReport(states, directions, duration_s)
 
 
 def _timeline_sigmas(timeline: Timeline) -> np.ndarray:

@@ -95,6 +95,10 @@ class SmoothOutcome:
 
     def describe(self) -> str:
         s = self.summary
+        if "states" not in s:  # io-dvlc: calibration only
+            return "\n".join([f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
+                              f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"]
+                             + [f"  wrote {p}" for p in self.written])
         mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
         lines = [
             f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
@@ -115,31 +119,68 @@ class SmoothOutcome:
         return "\n".join(lines)
 
 
+MODES = ("batch", "online", "online-full", "ekf", "io-dvlc")
+
+
+def run_estimator(log: LogData, mode: str, config: Any, progress: Any = None, timeline: bool = True) -> Any:
+    """One estimator on a log: NavResult (batch, online, online-full, ekf) or IoDvlcResult (io-dvlc)."""
+    if mode == "batch":
+        from gtsam_dvl.batch import smooth_batch
+
+        return smooth_batch(log, config, progress=progress, timeline=timeline)
+    if mode in ("online", "online-full"):
+        from gtsam_dvl.online import smooth_online
+
+        return smooth_online(log, config, mode="full" if mode == "online-full" else "fixed_lag", progress=progress)
+    if mode == "ekf":
+        from gtsam_dvl.ekf import run_ekf
+
+        return run_ekf(log, config, progress=progress)
+    if mode == "io-dvlc":
+        from gtsam_dvl.iodvlc import run_iodvlc
+
+        return run_iodvlc(log)
+    raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+
+
 def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,
                 tum_path: Path | None = None, config_path: Path | None = None, show_progress: bool = True,
-                read_options: dict[str, Any] | None = None) -> SmoothOutcome:
-    """Run one estimator on a log and write its results (MCAP, summary JSON, TUM)."""
-    from gtsam_dvl.atomic import atomic_write_json, write_tum
-    from gtsam_dvl.batch import smooth_batch
+                read_options: dict[str, Any] | None = None, timeline: bool = True,
+                timeline_path: Path | None = None) -> SmoothOutcome:
+    """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
+    The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz."""
+    from gtsam_dvl.atomic import atomic_write_bytes, atomic_write_json, write_tum
     from gtsam_dvl.config import EstimatorConfig
     from gtsam_dvl.evaluation import summary
+    from gtsam_dvl.result import NavResult
     from gtsam_dvl.rotations import matrix_to_quat_xyzw
 
+    if mode not in MODES:
+        raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
     config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
     t_read = time.perf_counter()
     log = load_log(log_path, **(read_options or {}))
     read_s = time.perf_counter() - t_read
-    if mode != "batch":
-        raise GtsamDvlError(f"unknown mode '{mode}' (available: batch)")
-    with progress_bar(f"{mode} smoothing {Path(log_path).name}", enabled=show_progress) as progress:
-        result = smooth_batch(log, config, progress=progress)
+    with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
+        result = run_estimator(log, mode, config, progress=progress, timeline=timeline)
+    written: list[Path] = []
+    if not isinstance(result, NavResult):  # io-dvlc: calibration only
+        summ = result.summary(log)
+        if summary_path is not None:
+            written.append(atomic_write_json(summary_path, summ))
+        return SmoothOutcome(summ, written)
     result.timing_s["read"] = read_s
     summ = summary(result, log)
-    written: list[Path] = []
     if output is not None:
-        from gtsam_dvl.io.results import write_result_log
+        from gtsam_dvl.io.results import timeline_npz_bytes, write_result_log
 
         written.append(write_result_log(output, result, log, summ))
+        if result.timeline is not None and timeline_path is None:
+            timeline_path = Path(output).with_suffix(".timeline.npz")
+    if timeline_path is not None and result.timeline is not None:
+        from gtsam_dvl.io.results import timeline_npz_bytes
+
+        written.append(atomic_write_bytes(timeline_path, timeline_npz_bytes(result)))
     if summary_path is not None:
         written.append(atomic_write_json(summary_path, summ))
     if tum_path is not None:
@@ -196,6 +237,51 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
                                plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise)"),
     ]
     return answer, written
+
+
+def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = None,
+                    read_options: dict[str, Any] | None = None) -> tuple[list[str], list[Path]]:
+    """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
+    result's source log has one), observability verdict with the segments credited, figures and
+    metrics.json. Returns the verdict lines and the files written."""
+    from gtsam_dvl.atomic import atomic_write_json, atomic_write_text
+    from gtsam_dvl.evaluate import evaluate_result
+    from gtsam_dvl.io.result_reader import read_result
+    from gtsam_dvl.plots.error_plots import plot_errors
+    from gtsam_dvl.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
+
+    res = read_result(result_path)
+    log_path = truth_path or (Path(res.source_log) if res.source_log and Path(res.source_log).exists() else None)
+    log = load_log(log_path, **(read_options or {})) if log_path is not None else None
+    ev = evaluate_result(res, log)
+    out_dir = Path(out_dir)
+    written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
+    label = res.estimator
+    if ev.attitude_error_deg is not None and ev.position_error_m is not None:
+        written.append(plot_errors([(label, ev.t, ev.attitude_error_deg, ev.attitude_sigma_deg)],
+                                   out_dir / "attitude_error.png", "attitude", ev.segments))
+        written.append(plot_errors([(label, ev.t, ev.position_error_m, ev.position_sigma_m)],
+                                   out_dir / "position_error.png", "position", ev.segments))
+    if res.timeline is not None:
+        truth_cal = log.true_calibration if log is not None else None
+        truth_imu = log.metadata.get("truth", {}).get("imu", {}) if log is not None else {}
+        truths: dict[str, Any] = {}
+        if truth_cal is not None:
+            truths = {"scale": truth_cal.scale, "misalignment": np.array(truth_cal.misalignment_deg)}
+        if "gyro_bias_rad_s" in truth_imu:
+            from gtsam_dvl.config import DEG_PER_H, UG
+
+            truths["gyro_bias"] = np.array(truth_imu["gyro_bias_rad_s"]) / DEG_PER_H
+            truths["accel_bias"] = np.array(truth_imu["accel_bias_m_s2"]) / UG
+        for q in ("scale", "misalignment", "gyro_bias", "accel_bias"):
+            written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
+                                          ev.segments, t_min=0.0))
+        written.append(plot_normalised_sigmas(res.timeline, out_dir / "normalised_sigmas.png",
+                                              priors_for_plots(res.calibration.get("config") or {}), ev.segments,
+                                              title=f"Normalised sigmas, {label}"))
+    lines = ev.report.lines() if ev.report is not None else ["no calibration covariance in this result"]
+    written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
+    return lines, written
 
 
 def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:

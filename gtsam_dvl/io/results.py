@@ -6,6 +6,7 @@ Covariances are converted from GTSAM's tangent spaces to ROS conventions: Odomet
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 from typing import Any
@@ -56,6 +57,41 @@ def ros_twist_covariance(result: NavResult) -> np.ndarray:
     return out
 
 
+TIMELINE_PREFIX = "/gtsam_dvl/filter"
+
+
+def calibration_record(result: NavResult) -> dict[str, Any]:
+    """What evaluation needs to redo the observability analysis without the graph."""
+    return {"estimator": result.estimator, "scale": result.scale, "b_R_d": result.b_R_d, "b_R_d0": result.b_R_d0,
+            "accel_bias_m_s2": result.accel_bias, "gyro_bias_rad_s": result.gyro_bias,
+            "calib_joint_cov": result.calib_joint_cov,
+            "calib_joint_cov_order": "accel bias (3, m/s^2), gyro bias (3, rad/s), scale (1), "
+                                     "b_R_d right tangent (3, rad)",
+            "t": [float(result.t[0]), float(result.t[-1])], "config": result.config}
+
+
+def timeline_npz_bytes(result: NavResult) -> bytes:
+    assert result.timeline is not None
+    buf = io.BytesIO()
+    np.savez(buf, **result.timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
+    return buf.getvalue()
+
+
+def write_timeline_topics(w: McapLogWriter, result: NavResult) -> None:
+    """The filtering history as topics: estimate and sigma of scale, misalignment, biases; attitude sigma."""
+    tl = result.timeline
+    assert tl is not None
+    p = TIMELINE_PREFIX
+    w.add_scalar_with_variance(f"{p}/dvl_scale", tl.t, tl.scale, tl.scale_sigma**2, "dvl_link")
+    w.add_vector3_stamped(f"{p}/dvl_misalignment_rpy_deg", tl.t, tl.misalignment_deg, "base_link")
+    w.add_vector3_stamped(f"{p}/dvl_misalignment_sigma_deg", tl.t, tl.misalignment_sigma_deg, "base_link")
+    w.add_vector3_stamped(f"{p}/gyro_bias_deg_per_h", tl.t, tl.gyro_bias_deg_per_h, "imu_link")
+    w.add_vector3_stamped(f"{p}/gyro_bias_sigma_deg_per_h", tl.t, tl.gyro_bias_sigma_deg_per_h, "imu_link")
+    w.add_vector3_stamped(f"{p}/accel_bias_ug", tl.t, tl.accel_bias_ug, "imu_link")
+    w.add_vector3_stamped(f"{p}/accel_bias_sigma_ug", tl.t, tl.accel_bias_sigma_ug, "imu_link")
+    w.add_vector3_stamped(f"{p}/attitude_sigma_deg", tl.t, tl.attitude_sigma_deg, "map")
+
+
 def write_result_log(path: Path | str, result: NavResult, log: LogData, summary: dict[str, Any]) -> Path:
     """Estimates with marginal covariances, path, biases and calibration, plus the summary and the
     effective configuration (metadata record and config.json attachment). Written atomically."""
@@ -86,6 +122,10 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
                                    cov_c[None], "base_link")
         w.add_vector3_stamped(TOPICS["misalignment_rpy"], t[-1:], mis_rpy[None], "base_link")
         w.add_vector3_stamped(TOPICS["misalignment_sigma"], t[-1:], np.sqrt(np.diag(mis_cov))[None], "base_link")
+        if result.timeline is not None:
+            write_timeline_topics(w, result)
+            w.add_attachment("timeline.npz", timeline_npz_bytes(result), "application/x-npz")
+        w.add_attachment("calibration.json", to_json(calibration_record(result)).encode(), "application/json")
         w.add_metadata("gtsam_dvl_result", {"estimator": result.estimator, "summary": to_json(summary),
                                             "source_log": str(log.source)})
         w.add_attachment("config.json", json.dumps({"estimator": result.estimator, "config": result.config},
