@@ -165,7 +165,9 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
         result = run_estimator(log, mode, config, progress=progress, timeline=timeline)
     written: list[Path] = []
     if not isinstance(result, NavResult):  # io-dvlc: calibration only
-        summ = result.summary(log)
+        from gtsam_dvl.iodvlc import iodvlc_summary
+
+        summ = iodvlc_summary(result, log)
         if summary_path is not None:
             written.append(atomic_write_json(summary_path, summ))
         return SmoothOutcome(summ, written)
