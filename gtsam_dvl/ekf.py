@@ -1,5 +1,7 @@
 """The paper's practical estimator (its section 3): an error-state extended Kalman filter on the full
 navigation equations with the DVL measurement of eq. 7, as a baseline for the factor-graph smoothers.
+The equations are the paper's eq. 3-5 written in the Earth-fixed map frame, as the smoother uses them:
+Earth rate and normal gravity at the vehicle's position, no transport rate, Cartesian position.
 
 Nominal state: n_R_b, n_v, n_p (map frame), gyro and accelerometer biases, DVL scale k, misalignment
 b_R_d; error state of dimension 19 (ekf_strapdown.py gives its definition and dynamics). The strapdown runs
@@ -29,19 +31,23 @@ from gtsam_dvl.ekf_strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, Na
 from gtsam_dvl.errors import GtsamDvlError
 from gtsam_dvl.graph import map_frame_of
 from gtsam_dvl.progress import ProgressFn
-from gtsam_dvl.result import NavResult, Timeline, misalignment_rpy_and_cov
-from gtsam_dvl.rotations import skew, so3_exp
+from gtsam_dvl.result import NavResult, Timeline
+from gtsam_dvl.rotations import matrix_to_rpy, skew, so3_exp
 from gtsam_dvl.types import LogData
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
-# estimate that is only noise (a static vehicle), the filter would read that noise as information: the
-# regression on a noisy regressor drags k towards 0 (0.8 -> 0.4 over the 600 s static start of paper-3d,
-# with a 0.045 sigma). Below this speed they are consider states (Schmidt): not corrected, their
-# covariance and cross-covariances kept consistent by the Joseph form, which holds for any gain.
+# estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
+# on a noisy regressor drags k towards 0 (0.8 -> 0.4 over the 600 s static start of paper-3d, sigma 0.045).
+# Treating them as consider states is not enough: with the k uncertainty times the noisy velocity in the
+# innovation covariance the DVL stops constraining the velocity, which then drifts (5 m/s in 600 s). The
+# true sensitivity of y to k and b_R_d is the true velocity, about zero, so below a speed ("slow": under
+# MIN_CALIBRATION_SPEED_M_S or under CALIBRATION_SPEED_SIGMAS velocity sigmas, as in the first seconds
+# when a 1 deg tilt prior lets the predicted velocity wander by 0.1 m/s) their Jacobian columns are zero.
 MIN_CALIBRATION_SPEED_M_S = 0.1
-MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (first order in Earth rate)
-GRADIENT_REFRESH_M = 100.0
-CALIBRATION = np.r_[SCALE, 16:19]  # error-state indices of the DVL scale and misalignment  # the gravity gradient is recomputed after this distance (it changes by 2e-5)
+CALIBRATION_SPEED_SIGMAS = 5.0
+CALIBRATION = np.r_[SCALE, 16:19]  # error-state indices of the DVL scale and misalignment
+MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
+GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
 
 
 @dataclass
@@ -73,21 +79,25 @@ class _History:
 
 
 class _Earth:
-    """Earth rate and gravity for the filter: WGS84 normal gravity at the position, or the flat model."""
+    """Earth rate and gravity for the filter: WGS84 normal gravity at the position, or the flat model.
+
+    Gravity is linearised about a point refreshed every GRADIENT_REFRESH_M: its curvature over that
+    distance is g (100 m / 6400 km)^2 = 2e-9 m/s^2."""
 
     def __init__(self, frame: LocalFrame, flat: bool) -> None:
         self.frame, self.flat = frame, flat
         self.n_omega_ie = np.zeros(3) if flat else frame.n_omega_ie
-        self._g0 = np.array([0.0, 0.0, -float(normal_gravity(frame.lat0, frame.height_m))])
+        self._g = np.array([0.0, 0.0, -float(normal_gravity(frame.lat0, frame.height_m))])
         self._G = np.zeros((3, 3))
-        self._G_at = np.full(3, np.inf)
+        self._at = np.full(3, np.inf)
 
     def gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.flat:
-            return self._g0, self._G
-        if np.linalg.norm(n_p - self._G_at) > GRADIENT_REFRESH_M:
-            self._G, self._G_at = gravity_gradient(self.frame, n_p), n_p.copy()
-        return self.frame.n_gravity(n_p), self._G
+            return self._g, self._G
+        if np.linalg.norm(n_p - self._at) > GRADIENT_REFRESH_M:
+            self._at = n_p.copy()
+            self._g, self._G = self.frame.n_gravity(n_p), gravity_gradient(self.frame, n_p)
+        return self._g + self._G @ (n_p - self._at), self._G
 
 
 def _select_pings(log: LogData, config: EstimatorConfig, counters: dict[str, int]) -> np.ndarray:
@@ -188,9 +198,8 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np
 
 
 def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray,
-           huber_k: float | None, consider: np.ndarray | None = None) -> tuple[float, bool]:
-    """Kalman update (Joseph form) and injection of the error into the nominal state. Error-state components
-    listed in `consider` are not corrected (Schmidt gain).
+           huber_k: float | None) -> tuple[float, bool]:
+    """Kalman update (Joseph form) and injection of the error into the nominal state.
 
     Returns the normalised innovation squared and whether the Huber weight reduced the measurement's weight.
     """
@@ -204,8 +213,6 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
         S = H @ P @ H.T + Rm
         down = True
     K = np.linalg.solve(S, H @ P).T
-    if consider is not None:
-        K[consider] = 0.0
     dx = K @ innovation
     IKH = np.eye(N_ERR) - K @ H
     P = IKH @ P @ IKH.T + K @ Rm @ K.T
@@ -223,11 +230,11 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             min_calibration_speed_m_s: float = MIN_CALIBRATION_SPEED_M_S) -> NavResult:
     """Filter a whole log: trajectory and calibration at every usable DVL ping, with the filtering history.
 
-    Scale and misalignment are corrected only while the predicted DVL speed exceeds
-    min_calibration_speed_m_s (see MIN_CALIBRATION_SPEED_M_S)."""
+    Below min_calibration_speed_m_s the measurement is taken as insensitive to scale and misalignment
+    (see MIN_CALIBRATION_SPEED_M_S)."""
     config = config or EstimatorConfig()
     t_start = time.perf_counter()
-    counters: dict[str, int] = {"dvl_consider_only": 0}
+    counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
     alignment = align(log.imu, log.dvl, frame, config.alignment)
     pings = _select_pings(log, config, counters)
@@ -263,9 +270,12 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         t1 = time.perf_counter()
         A, z, Rm = _ping_measurement(log, config, int(j))
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
-        slow = np.linalg.norm(y_hat) < min_calibration_speed_m_s * fs.scale
-        nis, down = update(fs, A @ H, z - A @ y_hat, Rm, huber_k, CALIBRATION if slow else None)
-        counters["dvl_consider_only"] += int(slow)
+        speed = np.linalg.norm(y_hat) / fs.scale
+        slow = speed < max(min_calibration_speed_m_s, CALIBRATION_SPEED_SIGMAS * np.sqrt(np.trace(fs.P[VEL, VEL])))
+        if slow:
+            H[:, CALIBRATION] = 0.0
+        nis, down = update(fs, A @ H, z - A @ y_hat, Rm, huber_k)
+        counters["dvl_slow"] += int(slow)
         nis_sum, nis_dof, downweighted = nis_sum + nis, nis_dof + len(z), downweighted + int(down)
         timing["propagate"] += t1 - t0
         timing["update"] += time.perf_counter() - t1
@@ -282,6 +292,23 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     if progress:
         progress(1.0)
     return result
+
+
+def misalignment_timeline(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
+                                                                                                  np.ndarray]:
+    """result.misalignment_rpy_and_cov over (N, 3, 3) stacks, vectorised: [roll, pitch, yaw] of
+    R_c = b_R_d b_R_d0^T (deg) and their covariance (deg^2), from the covariance in b_R_d's right tangent."""
+    R_c = b_R_d @ b_R_d0.T
+    cov_body = b_R_d @ cov_right @ np.transpose(b_R_d, (0, 2, 1))
+    rpy = matrix_to_rpy(R_c)
+    J = np.zeros(R_c.shape)
+    h = 1e-7
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        J[:, :, j] = (matrix_to_rpy(so3_exp(e) @ R_c) - matrix_to_rpy(so3_exp(-e) @ R_c)) / (2 * h)
+    cov = J @ cov_body @ np.transpose(J, (0, 2, 1))
+    return np.degrees(rpy), np.degrees(np.degrees(cov))
 
 
 def _record(hist: _History, fs: FilterState, t: float, b_omega: np.ndarray) -> None:
@@ -314,14 +341,14 @@ def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResu
     calib_idx = np.r_[12:15, 9:12, 15, 16:19]  # [accel, gyro] bias, scale, b_R_d right tangent
     calib = P[-1][np.ix_(calib_idx, calib_idx)]
     b_R_d0 = log.mounting.b_R_d0
-    mis = [misalignment_rpy_and_cov(R, b_R_d0, p[MIS, MIS]) for R, p in zip(hist.b_R_d, P, strict=True)]
+    mis_deg, mis_cov = misalignment_timeline(np.array(hist.b_R_d), b_R_d0, P[:, MIS, MIS])
     diag = np.einsum("nii->ni", P)
     timeline = Timeline(
         t=np.array(hist.t),
         scale=np.array(hist.scale),
         scale_sigma=np.sqrt(diag[:, SCALE]),
-        misalignment_deg=np.array([m[0] for m in mis]),
-        misalignment_sigma_deg=np.sqrt(np.array([np.diag(m[1]) for m in mis])),
+        misalignment_deg=mis_deg,
+        misalignment_sigma_deg=np.sqrt(np.einsum("nii->ni", mis_cov)),
         gyro_bias_deg_per_h=np.array(hist.gyro_bias) / DEG_PER_H,
         gyro_bias_sigma_deg_per_h=np.sqrt(diag[:, BG]) / DEG_PER_H,
         accel_bias_ug=np.array(hist.accel_bias) / UG,

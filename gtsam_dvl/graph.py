@@ -262,13 +262,18 @@ class GraphBuilder:
                         beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> list[gtsam.NonlinearFactor]:
         """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
         dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate()."""
-        cfg = self.config.dvl
         b_l = self.log.mounting.b_l
-        if cfg.use_beams and beams is not None:
+        if self.config.dvl.use_beams and beams is not None:
             d_u, v, valid = beams
-            noise1 = self._robust(gtsam.noiseModel.Isotropic.Sigma(1, cfg.beam_noise_m_s))
+            noise1 = self.beam_noise()
             return [make_dvl_beam_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, d_u[b], float(v[b]), b_omega, b_l)
                     for b in np.flatnonzero(valid)]
+        return [make_dvl_velocity_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, d_y, b_omega, b_l)]
+
+    def dvl_noise(self, cov: np.ndarray) -> gtsam.noiseModel.Base:
+        """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
+        definite, else the default sigma; robust if configured."""
+        cfg = self.config.dvl
         noise: gtsam.noiseModel.Base
         if cfg.noise_m_s > 0:
             noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.noise_m_s)
@@ -276,7 +281,11 @@ class GraphBuilder:
             noise = gtsam.noiseModel.Gaussian.Covariance(cov)
         else:
             noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.default_noise_m_s)
-        return [make_dvl_velocity_factor(self._robust(noise), X(i), V(i), K_SCALE, C_MISALIGN, d_y, b_omega, b_l)]
+        return self._robust(noise)
+
+    def beam_noise(self) -> gtsam.noiseModel.Base:
+        """Noise model of one beam velocity (robust if configured)."""
+        return self._robust(gtsam.noiseModel.Isotropic.Sigma(1, self.config.dvl.beam_noise_m_s))
 
     def _robust(self, noise: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
         if self.config.dvl.robust == "huber":

@@ -28,32 +28,42 @@ Design (the issue's traps, measured on the prototype and here):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from gtsam_dvl.errors import GtsamDvlError
+from gtsam_dvl.factors import EarthImuFactor
 from gtsam_dvl.graph import C_MISALIGN, K_SCALE, GraphBuilder, V, X
 
+RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see IncrementalSmoother._ordering)
 # tangent dimension of each variable type, by symbol character
 _DIMS = {"x": 6, "v": 3, "b": 6, "k": 1, "c": 3}
 
 
 @dataclass
 class RelinearizationThresholds:
-    """iSAM2 relinearises a variable when a component of its update since the last linearisation exceeds
-    these (tangent components, GTSAM order). Chosen so that the second-order error a stale linearisation
-    leaves is far below the noise of one factor: a tilt error dth leaves g dth^2 / 2 in an IMU velocity
-    residual (1e-4 m/s per second of accelerometer noise), a heading error almost nothing (gravity does not
-    move under it); the scale and misalignment enter the DVL model bilinearly with the velocity."""
+    """iSAM2 relinearises a variable when a component of its update since its last linearisation exceeds
+    these (tangent components, GTSAM order). A stale linearisation leaves an error of second order in the
+    update; the thresholds keep it far below the noise of one factor (accelerometer noise: 1e-4 m/s in an IMU
+    factor's velocity over 1 s; DVL: 0.02 m/s):
+    - attitude about the body x, y axes: g dth^2 / 2 = 1.2e-6 m/s at 5e-4 rad; about body z (near the
+      vertical) gravity does not move, and the DVL sees v dth^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
+    - position enters through gravity (its gradient is in the Jacobian) and through the coupling of Pose3's
+      rotation and translation, which cancels between neighbouring states when the window shifts as a whole,
+      as it does when the calibration is refined at the end of kilometres of dead reckoning: 10 m;
+    - velocity, scale and misalignment enter the DVL model bilinearly (k R^T v): dk dv = 2e-4 m/s at 0.02 and
+      0.01 m/s; the misalignment's curvature v dc^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
+    - the IMU factor is linear in the bias (first-order bias correction of the preintegration): 100 micro-g,
+      2 deg/h, i.e. the bias never triggers a relinearisation in practice.
+    iSAM2's default, 0.1 on everything, let the scale wander to 0.04 in a prototype."""
 
-    pose: tuple[float, ...] = (3e-4, 3e-4, 3e-3, 0.05, 0.05, 0.05)  # rad (body x, y, z), m (body)
-    velocity: tuple[float, ...] = (1e-3, 1e-3, 1e-3)  # m/s, map
-    bias: tuple[float, ...] = (1e-4, 1e-4, 1e-4, 5e-6, 5e-6, 5e-6)  # m/s^2, rad/s (the model is linear in it)
-    scale: float = 1e-3
-    misalignment_rad: float = 1e-3
+    pose: tuple[float, ...] = (5e-4, 5e-4, 5e-3, 10.0, 10.0, 10.0)  # rad (body x, y, z), m (body axes)
+    velocity: tuple[float, ...] = (0.01, 0.01, 0.01)  # m/s, map
+    bias: tuple[float, ...] = (1e-3, 1e-3, 1e-3, 1e-5, 1e-5, 1e-5)  # accel m/s^2, gyro rad/s
+    scale: float = 0.02
+    misalignment_rad: float = 5e-3
 
     def threshold_map(self) -> gtsam.ISAM2ThresholdMap:
         m = gtsam.ISAM2ThresholdMap()
@@ -96,24 +106,6 @@ class StateEstimate:
         return self.cov[9:, 9:]
 
 
-def _state_of(key: int, rw_bias: bool) -> int | None:
-    """The epoch index a key belongs to (X_i, V_i, and B_i for a random-walk bias), None for shared keys."""
-    sym = gtsam.Symbol(key)
-    c = chr(sym.chr())
-    if c in "xv" or (c == "b" and rw_bias):
-        return int(sym.index())
-    return None
-
-
-@dataclass
-class _Attached:
-    """iSAM2 factor slots whose oldest state is this one: removed when it leaves the window."""
-
-    t: float
-    slots: list[int] = field(default_factory=list)
-    factors: list[gtsam.NonlinearFactor] = field(default_factory=list)
-
-
 class IncrementalSmoother:
     """iSAM2 over the epochs given to `add_epoch` (factors from the shared GraphBuilder). `window_s` None
     keeps every state (full history); otherwise states older than window_s seconds behind the newest are
@@ -123,19 +115,22 @@ class IncrementalSmoother:
                  relinearize_skip: int = 1) -> None:
         self.builder = builder
         self.window_s = window_s
+        self.thresholds = thresholds
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
-        params = gtsam.ISAM2Params()
-        params.setFactorization("QR")
-        params.setRelinearizeThreshold(thresholds.threshold_map())
-        params.relinearizeSkip = relinearize_skip
-        params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
-        params.findUnusedFactorSlots = window_s is not None  # bounded slot table in fixed-lag mode
-        self.isam = gtsam.ISAM2(params)
-        self.attached: dict[int, _Attached] = {}  # by epoch index, oldest first
+        self.params = gtsam.ISAM2Params()
+        self.params.setFactorization("QR")
+        self.params.setRelinearizeThreshold(thresholds.threshold_map())
+        self.params.relinearizeSkip = relinearize_skip
+        self.params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
+        self.isam = gtsam.ISAM2(self.params)
+        self.first = 0  # oldest state in the window
+        self.times: dict[int, float] = {}  # of the states in the window
+        self.imus: dict[int, EarthImuFactor] = {}  # IMU factor from state i to i + 1, in the window
         self.n = 0  # epochs added
         self.t_last = -np.inf
-        self.relinearized = 0  # variables relinearised, summed over updates
         self.marginalised = 0
+        self.rebases = 0
+        self._last_imu: EarthImuFactor | None = None
 
     # ----- updates -------------------------------------------------------------------------------
     def add_epoch(self, t: float, dvl_factors: list[gtsam.NonlinearFactor],
@@ -161,64 +156,160 @@ class IncrementalSmoother:
             prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)])
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
             bias = prev.atConstantBias(b.bias_key(i - 1))
-            imu.set_gravity(pose.translation() + 0.5 * dt * n_v)
+            self._reference_gravity(imu, pose.translation() + 0.5 * dt * n_v)
+            self.imus[i - 1] = imu
             state = pim.predict(gtsam.NavState(pose, n_v), bias)
             values.insert(X(i), state.pose())
             values.insert(V(i), state.velocity())
             if self.rw_bias:
                 values.insert(b.bias_key(i), bias)
-
-        remove: list[int] = []
-        if self.window_s is not None:
-            old = [s for s, a in self.attached.items() if a.t < t - self.window_s and s < i - 1]
-            if old:
-                marg_factors, remove = self._marginal(old)
-                factors += marg_factors
-
+        self.n, self.t_last = i + 1, t
+        self.times[i] = t
         graph = gtsam.NonlinearFactorGraph()
         for f in factors:
             graph.add(f)
-        try:
-            result = self.isam.update(graph, values, remove)
-        except RuntimeError as exc:
-            raise GtsamDvlError(f"iSAM2 update at t = {t:.3f} s failed ({exc})") from None
-        self.relinearized += result.getVariablesRelinearized()
-        self.attached[i] = _Attached(t)
-        for slot, f in zip(result.getNewFactorsIndices(), factors, strict=True):
-            states = [s for s in (_state_of(k, self.rw_bias) for k in f.keys()) if s is not None]
-            if states:
-                a = self.attached[min(states)]
-                a.slots.append(int(slot))
-                a.factors.append(f)
-        self.n, self.t_last = i + 1, t
+        self._update(graph, values)
+        if self.window_s is not None:
+            self._slide(t - self.window_s)
 
-    def _marginal(self, old: list[int]) -> tuple[list[gtsam.NonlinearFactor], list[int]]:
-        """The marginal, on the oldest kept state and the shared keys, of the factors attached to the epochs
-        `old` (oldest first), linearised at the current estimate; and the iSAM2 slots to remove."""
-        removed = [self.attached.pop(s) for s in old]
-        factors = [f for a in removed for f in a.factors]
-        slots = [s for a in removed for s in a.slots]
-        keys = sorted({k for f in factors for k in f.keys()})
-        values = self.isam.calculateEstimate(keys)
-        linear = gtsam.GaussianFactorGraph()
-        for f in factors:
-            linear.push_back(f.linearize(values))
-        ordering = gtsam.Ordering()
-        for s in old:
-            for k in (X(s), V(s), *((self.builder.bias_key(s),) if self.rw_bias else ())):
-                ordering.push_back(k)
-        _, rest = linear.eliminatePartialSequential(ordering, gtsam.EliminateQR)
-        marg = [gtsam.LinearContainerFactor(rest.at(j), values) for j in range(rest.size()) if rest.at(j) is not None]
-        self.marginalised += len(old)
-        return marg, slots
+    def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, rebase: bool = False) -> None:
+        try:
+            if self.window_s is None:
+                self.isam.update(graph, values)
+            else:
+                groups, frozen = self._ordering(rebase)
+                self.isam.update(graph, values, [], groups, frozen)
+        except RuntimeError as exc:
+            raise GtsamDvlError(f"iSAM2 update at t = {self.t_last:.3f} s failed ({exc})") from None
+
+    def _state_keys(self, i: int) -> tuple[int, ...]:
+        return (X(i), V(i), self.builder.bias_key(i)) if self.rw_bias else (X(i), V(i))
+
+    def _ordering(self, rebase: bool) -> tuple[gtsam.KeyGroupMap, gtsam.KeyList]:
+        """Elimination groups (states oldest first, the bias, scale and misalignment last) and the states iSAM2
+        must not relinearise. The window's Bayes tree stays a chain with the oldest state alone at its leaf,
+        which marginalizeLeaves removes without touching the rest (GTSAM issue #1101: splitting a clique whose
+        keys are not in elimination order corrupts iSAM2), and the newest state with the shared keys at its
+        root, so that a new epoch re-eliminates the top only. Hence only the newest RECENT states are
+        relinearised by iSAM2 (a relinearised old state would re-eliminate the whole chain, in an order iSAM2
+        chooses); older ones are relinearised by a rebase when they drift past their threshold. CCOLAMD wants
+        every group number below the number of keys it orders, which only the rebase's full re-elimination
+        allows for a long window: the normal update gives groups to the RECENT newest states only (an update
+        re-eliminates at least the two newest states and the three shared keys)."""
+        groups = gtsam.KeyGroupMap()
+        frozen = gtsam.KeyList()
+        recent_from = self.first if rebase else max(self.first, self.n - RECENT)
+        for i in range(self.first, self.n):
+            if i < recent_from:
+                for k in self._state_keys(i):
+                    frozen.push_back(k)
+            else:
+                for k in self._state_keys(i):
+                    groups.insert2(k, i - recent_from)
+        for k in self.shared_keys(self.n - 1):
+            groups.insert2(k, self.n - recent_from)
+        return groups, frozen
+
+    def _slide(self, t_oldest: float) -> None:
+        """Marginalise the states older than t_oldest (keeping two at least), then rebase if a variable iSAM2
+        does not relinearise moved from its linearisation point by more than its threshold."""
+        while self.first < self.n - 2 and self.times[self.first] < t_oldest:
+            s = self.first
+            keys = gtsam.KeyList()
+            for k in self._state_keys(s):
+                keys.push_back(k)
+            try:
+                self.isam.marginalizeLeaves(keys)
+            except RuntimeError:  # not a leaf after all: rebuild in time order, then it is
+                self.rebase()
+                self.isam.marginalizeLeaves(keys)
+            del self.times[s]
+            self.imus.pop(s, None)
+            self.first = s + 1
+            self.marginalised += 1
+        if self._frozen_moved():
+            self.rebase()
+
+    def _frozen_moved(self) -> bool:
+        """Whether the shared keys or a state older than the RECENT newest moved from its linearisation point by
+        more than its relinearisation threshold (the shared keys are frozen by marginalizeLeaves, the old
+        states by _ordering)."""
+        delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, v, x (GTSAM symbols)
+        th = self.thresholds
+        n_states = self.n - self.first
+        old = max(0, n_states - RECENT)
+        check = lambda size, n_old: np.concatenate([np.ones(n_old, bool), np.zeros(size - n_old, bool)])  # noqa: E731
+        if self.rw_bias:
+            limit = [np.tile(th.bias, n_states)]
+            mask = [np.repeat(check(n_states, old), 6)]
+        else:
+            limit, mask = [np.asarray(th.bias, dtype=float)], [np.ones(6, bool)]
+        limit += [np.full(3, th.misalignment_rad), np.array([th.scale]), np.tile(th.velocity, n_states),
+                  np.tile(th.pose, n_states)]
+        mask += [np.ones(4, bool), np.repeat(check(n_states, old), 3), np.repeat(check(n_states, old), 6)]
+        lim, msk = np.concatenate(limit), np.concatenate(mask)
+        if lim.shape != delta.shape:
+            raise GtsamDvlError(f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}")
+        return bool(((np.abs(delta) > lim) & msk).any())
+
+    def rebase(self) -> None:
+        """A new iSAM2 holding the same factors (the window's and the marginal of what left it), linearised at
+        the current estimate. ISAM2.marginalizeLeaves freezes the linearisation point of every variable of the
+        marginal it keeps, the shared keys included, forever; this is how they get relinearised (the cost of
+        one relinearisation of the scale in iSAM2 without a window: every factor of the window once)."""
+        values = self.isam.calculateEstimate()
+        theta = self.isam.getLinearizationPoint()
+        factors = self.isam.getFactorsUnsafe()
+        graph = gtsam.NonlinearFactorGraph()
+        for j in range(factors.size()):
+            f = factors.at(j)
+            if isinstance(f, gtsam.LinearContainerFactor):
+                # marginalizeLeaves' marginals carry no linearisation point: they are in iSAM2's delta around
+                # its theta, which is about to change; pin them to it
+                f = gtsam.LinearContainerFactor(f.linearize(theta), theta)
+            if f is not None:
+                graph.add(f)
+        self.isam = gtsam.ISAM2(self.params)
+        self._update(graph, values, rebase=True)
+        self.rebases += 1
+
+    def _reference_gravity(self, imu: EarthImuFactor, n_p_mid: np.ndarray) -> None:
+        """Local gravity model of a new IMU factor: the previous factor's while within its range (evaluating
+        gravity and its gradient costs about a millisecond), else evaluated at n_p_mid."""
+        last = self._last_imu
+        if imu.gravity is not None:
+            if last is not None and last.ref_p is not None and not last.needs_reference(n_p_mid):
+                imu.set_reference(last.ref_p, last.ref_g, last.ref_G)
+            else:
+                g, G = self.builder.gravity_model(n_p_mid)
+                imu.set_reference(n_p_mid, g, G)
+        imu.set_gravity(n_p_mid)
+        self._last_imu = imu
+
+    def refresh_gravity(self) -> int:
+        """Re-reference the gravity of the IMU factors whose mid position moved out of their reference's range
+        (factors/imu_earth.py); returns how many."""
+        stale = []
+        for s, imu in self.imus.items():
+            ends = self.isam.calculateEstimate([X(s), X(s + 1)])
+            mid = 0.5 * (ends.atPose3(X(s)).translation() + ends.atPose3(X(s + 1)).translation())
+            if imu.needs_reference(mid):
+                stale.append((imu, mid))
+        if stale:
+            g, G = self.builder.gravity_model(np.array([m for _, m in stale]))
+            for k, (imu, mid) in enumerate(stale):
+                imu.set_reference(mid, g[k], G[k])
+        return len(stale)
 
     def refine(self, max_updates: int = 10) -> int:
         """Extra iSAM2 updates without new data until no variable is relinearised (the end of a run);
         returns the number of updates made."""
         for k in range(max_updates):
+            moved = self.window_s is not None and self._frozen_moved()
+            if moved:
+                self.rebase()
             result = self.isam.update()
-            self.relinearized += result.getVariablesRelinearized()
-            if result.getVariablesRelinearized() == 0:
+            if not moved and result.getVariablesRelinearized() == 0:
                 return k + 1
         return max_updates
 
@@ -291,7 +382,7 @@ def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndar
         row += n_rows
     if row != off:
         raise GtsamDvlError("marginal covariance: the Bayes net is not square (rank-deficient problem)")
-    Rinv = solve_triangular(R, np.eye(off))
+    Rinv = np.linalg.inv(R)  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular is 500x slower
     cov_elim = Rinv @ Rinv.T
     idx = np.concatenate([np.arange(offsets[k], offsets[k] + key_dim(k)) for k in keys])
     cov = cov_elim[np.ix_(idx, idx)]

@@ -58,6 +58,8 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
             ax.set_ylim(lo - pad, hi + pad)
         ax.set_ylabel(f"{title}\n({unit})")
         ax.grid(alpha=0.3)
+    if t_min > 0:
+        axes[-1, 0].set_xlim(left=t_min)
     axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
     fig.suptitle(f"{quantity.replace('_', ' ')} estimate and 3-sigma band over time")
