@@ -264,6 +264,9 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
                                    out_dir / "attitude_error.png", "attitude", ev.segments))
         written.append(plot_errors([(label, ev.t, ev.position_error_m, ev.position_sigma_m)],
                                    out_dir / "position_error.png", "position", ev.segments))
+        if ev.velocity_error_m_s is not None:
+            written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, res.velocity_sigma_m_s)],
+                                       out_dir / "velocity_error.png", "velocity", ev.segments))
     if res.timeline is not None:
         truth_cal = log.true_calibration if log is not None else None
         truth_imu = log.metadata.get("truth", {}).get("imu", {}) if log is not None else {}

@@ -14,11 +14,11 @@ from gtsam_dvl.plots.common import save_figure, shade_segments
 
 def plot_errors(runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], path: Path, what: str,
                 segments: list[dict[str, Any]] | None = None) -> Path:
-    """runs: (label, t, error (N,3), sigma (N,3)); what: "attitude" (deg, east/north/up axes) or
-    "position" (m, east/north/up)."""
+    """runs: (label, t, error (N,3), sigma (N,3)); what: "attitude" (deg, about east/north/up), "velocity"
+    (m/s) or "position" (m, east/north/up)."""
     names = ["about east (roll-like)", "about north (pitch-like)", "about up (heading)"] if what == "attitude" \
         else ["east", "north", "up"]
-    unit = "deg" if what == "attitude" else "m"
+    unit = {"attitude": "deg", "velocity": "m/s", "position": "m"}[what]
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for j, ax in enumerate(axes):
