@@ -63,6 +63,7 @@ def evaluate_result(res: ResultFile, log: LogData | None) -> Evaluation:
             "final_horizontal_position_pct_distance": 100 * final_h / dist if dist > 0 else None,
             "attitude_within_3_sigma": _within_3_sigma(ev.attitude_error_deg, ev.attitude_sigma_deg),
             "position_within_3_sigma": _within_3_sigma(ev.position_error_m, ev.position_sigma_m),
+            "velocity_within_3_sigma": _within_3_sigma(ev.velocity_error_m_s, res.velocity_sigma_m_s),
             "calibration_errors": res.summary.get("errors", {}),
         }
     cal = res.calibration

@@ -31,9 +31,11 @@ def test_evaluate_with_truth(smoothed: tuple[Path, Path], tmp_path: Path) -> Non
     m = json.loads((tmp_path / "metrics.json").read_text())
     truth = m["truth"]
     print(json.dumps({k: truth[k] for k in ("attitude_within_3_sigma", "position_within_3_sigma",
+                                            "velocity_within_3_sigma",
                                             "final_horizontal_position_pct_distance")}))
     # a consistent smoother keeps its errors inside 3 sigma nearly all the time
     assert min(truth["attitude_within_3_sigma"]) > 0.9 and min(truth["position_within_3_sigma"]) > 0.9
+    assert min(truth["velocity_within_3_sigma"]) > 0.9
     obs = {s["key"]: s for s in m["observability"]}
     assert any(c.startswith("descent 660-720") for c in obs["misalignment_roll"]["credited_segments"])
     assert any(c.startswith("square") for c in obs["accel_bias_x"]["credited_segments"])
