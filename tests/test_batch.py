@@ -49,20 +49,25 @@ def _print(tag: str, s: dict) -> None:
           f"{s['timing_s']['total']:.2f} s")
 
 
-def test_noise_free_recovery_paper_3d() -> None:
-    """No white noise, biases/scale/misalignment present, weak priors: every error below 1% of the noisy
-    run's 1-sigma."""
-    clean = _run("paper-3d", 7, white_noise=False, weak_priors=True)
-    noisy = _run("paper-3d", 7)
-    _print("noise-free", clean)
+def _noise_free_ratios(clean: dict, noisy: dict) -> dict[str, float]:
+    """Largest noise-free error of each group, as a fraction of the noisy run's 1-sigma."""
     e = clean["errors"]
-    ratios = {
+    return {
         "scale": abs(e["scale_ppm"]) * 1e-6 / noisy["scale"]["sigma"],
         "misalignment": np.max(np.abs(e["misalignment_deg"]) / np.array(noisy["misalignment_deg"]["sigma"])),
         "gyro bias": np.max(np.abs(e["gyro_bias_deg_per_h"]) / np.array(noisy["gyro_bias_deg_per_h"]["sigma"])),
         "accel bias": np.max(np.abs(e["accel_bias_ug"]) / np.array(noisy["accel_bias_ug"]["sigma"])),
         "final position": e["final_horizontal_position_m"] / noisy["final_horizontal_position_sigma_m"],
     }
+
+
+def test_noise_free_recovery_paper_3d() -> None:
+    """No white noise, biases/scale/misalignment present, weak priors: every error below 1% of the noisy
+    run's 1-sigma."""
+    clean = _run("paper-3d", 7, white_noise=False, weak_priors=True)
+    noisy = _run("paper-3d", 7)
+    _print("noise-free", clean)
+    ratios = _noise_free_ratios(clean, noisy)
     print("noise-free error / noisy sigma:", {k: f"{v:.4f}" for k, v in ratios.items()})
     for name, ratio in ratios.items():
         assert ratio < 0.01, f"{name}: noise-free error is {100 * ratio:.2f}% of the noisy 1-sigma"
@@ -76,15 +81,8 @@ def test_noise_free_recovery_straight_20km() -> None:
     noisy = _run("straight-20km", 3)
     _print("20 km noise-free", clean)
     _print("20 km noisy", noisy)
-    e = clean["errors"]
     assert clean["distance_travelled_m"] > 20_000
-    ratios = {
-        "scale": abs(e["scale_ppm"]) * 1e-6 / noisy["scale"]["sigma"],
-        "misalignment": np.max(np.abs(e["misalignment_deg"]) / np.array(noisy["misalignment_deg"]["sigma"])),
-        "gyro bias": np.max(np.abs(e["gyro_bias_deg_per_h"]) / np.array(noisy["gyro_bias_deg_per_h"]["sigma"])),
-        "accel bias": np.max(np.abs(e["accel_bias_ug"]) / np.array(noisy["accel_bias_ug"]["sigma"])),
-        "final position": e["final_horizontal_position_m"] / noisy["final_horizontal_position_sigma_m"],
-    }
+    ratios = _noise_free_ratios(clean, noisy)
     print("20 km noise-free error / noisy sigma:", {k: f"{v:.4f}" for k, v in ratios.items()})
     for name, ratio in ratios.items():
         assert ratio < 0.01, f"{name}: noise-free error is {100 * ratio:.2f}% of the noisy 1-sigma"
