@@ -184,8 +184,10 @@ class GraphBuilder:
         pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
         lo = int(np.searchsorted(t, t_a, side="right"))  # first sample ending after t_a
         hi = int(np.searchsorted(t, t_b, side="left"))  # last sample that reaches t_b
-        for i in range(lo, min(hi, len(t) - 1) + 1):
-            dt = min(t[i], t_b) - max(starts[i], t_a)
+        end = min(hi, len(t) - 1) + 1
+        # Python floats for the interval arithmetic: numpy scalars cost more than the integration itself
+        for i, t_i, start_i in zip(range(lo, end), t[lo:end].tolist(), starts[lo:end].tolist(), strict=True):
+            dt = min(t_i, t_b) - max(start_i, t_a)
             if dt > 0.0:
                 pim.integrateMeasurement(b_f[i], b_omega[i], dt)
         return pim, params

@@ -1,29 +1,46 @@
 """The iSAM2 engine of the online estimator: a state per DVL epoch, over a fixed-lag window or the whole history.
 
-Design (the issue's traps, measured on the prototype and here):
+Settings (the issue's traps):
+- Factorisation QR: Cholesky fails at navigation-grade noise. Wildfire threshold 0: rotations matter at
+  1e-4 rad, below iSAM2's default 1e-3 on every component. Relinearisation checked at every update against a
+  threshold per variable type and tangent component (RelinearizationThresholds), not iSAM2's 0.1 on all.
+- Marginal covariances by QR: ISAM2.marginalCovariance eliminates with Cholesky and fails. The joint of the
+  newest state, bias, scale and misalignment comes from jointBayesNet(keys, EliminateQR) (those keys sit in
+  the root clique: about 0.2 ms), its square-root information inverted as a triangular matrix (the
+  information matrix itself spans 1e18 and cannot be inverted in double precision).
 
-- Factorisation QR (Cholesky fails at navigation-grade noise), wildfire threshold 0 (rotations matter at
-  1e-4 rad, far below iSAM2's default 1e-3 on every component), relinearisation checked at every update
-  with a threshold per variable type and per tangent component (`RelinearizationThresholds`): iSAM2's
-  default 0.1 on everything let the scale wander to 0.04 in the static phase.
-- Marginal covariances by QR: `ISAM2.marginalCovariance` eliminates with Cholesky and fails; the joint of
-  the newest state and the shared keys comes from `jointBayesNet(keys, EliminateQR)`, whose upper-triangular
-  square-root information is inverted by a triangular solve (the information matrix itself spans 1e18 and
-  cannot be inverted in double precision).
-- Fixed lag: the window is managed here, not by GTSAM's fixed-lag smoothers. `ISAM2.marginalizeLeaves`
-  (which `IncrementalFixedLagSmoother` calls) freezes the linearisation point of every variable the marginal
-  touches, forever: the scale, misalignment and bias would keep the values they had when the first state left
-  the window, i.e. during the static phase where the scale is unobservable (0.8). Instead, when a state
-  leaves the window its factors are removed from iSAM2 (`removeFactorIndices`; iSAM2 then drops the
-  variables that have no factor left) and replaced by their marginal on the separator (the next state, the
-  bias, scale and misalignment), obtained here by QR elimination of those factors linearised at the current
-  estimate and added back as a `LinearContainerFactor`: linear in the tangent space at that point, with no
-  Python call when iSAM2 relinearises it, and no variable frozen. The window then holds a bounded number of
-  variables and factors, so neither iSAM2's work nor the copy of the Values that iSAM2 hands to each Python
-  CustomFactor it relinearises grows with the mission.
-- Full history: the same engine without marginalisation. Every relinearisation of the scale, misalignment or
-  bias relinearises every DVL or IMU factor of the mission, each call copying the whole Values: the cost per
-  update grows with time (the prototype: 262 s on the 2060 s run, update p99 2.3 s).
+Fixed lag, and why it is built this way (each alternative was measured on paper-3d):
+- The window is a chain of states sharing the bias, scale and misalignment. A new epoch touches its top, a
+  state leaving the window its bottom. Removing the old state's factors from iSAM2 and adding back their
+  marginal (removeFactorIndices plus a LinearContainerFactor) touches the bottom: iSAM2 re-eliminates from
+  there to the root, i.e. everything, which past 65 % of the variables is its batch step, relinearising every
+  factor through its Python callback: a median 5 to 11 ms per epoch for a 20 to 30 s window.
+- ISAM2.marginalizeLeaves cuts the bottom clique off and keeps its cached marginal, without re-eliminating
+  (IncrementalFixedLagSmoother is built on it). Its catch: every variable of the marginal it keeps is frozen at
+  its linearisation point, forever, the scale, misalignment and bias included; the first marginalisation
+  happens in the static phase, where the scale is its prior 0.8. Hence the rebase: when a frozen variable's
+  update exceeds its relinearisation threshold, a new iSAM2 is built from the same factors at the current
+  estimate (the marginals pinned to the old linearisation point as LinearContainerFactors, since
+  marginalizeLeaves keeps them relative to it). That costs what one relinearisation of the scale costs iSAM2
+  anyway, every factor of the window once (about 3 ms for a 20 s window, 5 ms for 30 s), and happens while the
+  estimate converges: about 70 times on paper-3d, 50 of them in the first 100 s (gyrocompassing from the
+  5 deg heading prior), 15 in the first Type-I manoeuvres; 80 in the 6-hour survey.
+- marginalizeLeaves needs the oldest state alone in a leaf clique (splitting a clique whose keys are not in
+  elimination order corrupts iSAM2, GTSAM issue #1101). Updates therefore give elimination groups (oldest
+  first, shared keys last) to the few newest states iSAM2 may relinearise, and mark older ones not to be
+  relinearised (an old state relinearised would re-eliminate the whole chain in an order of iSAM2's choosing);
+  they drift little and are relinearised by a rebase when they pass their threshold.
+- Bounded: the window holds a bounded number of variables and factors (and iSAM2 reuses the slots of removed
+  factors), so neither iSAM2's work per update nor the copy of the Values it hands to each Python CustomFactor
+  grows with the mission: the last hour of a 6-hour survey has a lower p99 than the first.
+- The alternative of a sliding-window Gauss-Newton written in Python (solver.py on the window, a QR marginal
+  prior on the oldest state) relinearises the whole window at every iteration: about 3 ms for 20 s (40 factors
+  at 45 to 95 us each), against a median 1.3 ms per epoch, everything included, here.
+
+Full history: iSAM2 with every state and its default ordering. Each relinearisation of the scale,
+misalignment or bias relinearises every DVL or IMU factor of the mission, each call copying all the Values:
+the cost per update grows with the mission (the whole paper-3d run: 25 to 40 s, single updates up to 10 s;
+the prototype took 262 s with iSAM2's default settings).
 """
 
 from __future__ import annotations
@@ -122,6 +139,9 @@ class IncrementalSmoother:
         self.params.setRelinearizeThreshold(thresholds.threshold_map())
         self.params.relinearizeSkip = relinearize_skip
         self.params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
+        # reuse the slots of removed factors: otherwise iSAM2's factor table grows by three empty slots per
+        # epoch, and walking it (rebase) took 40 ms after six hours
+        self.params.findUnusedFactorSlots = window_s is not None
         self.isam = gtsam.ISAM2(self.params)
         self.first = 0  # oldest state in the window
         self.times: dict[int, float] = {}  # of the states in the window
@@ -130,6 +150,9 @@ class IncrementalSmoother:
         self.t_last = -np.inf
         self.marginalised = 0
         self.rebases = 0
+        self._frozen = gtsam.KeyList()  # keys of the states older than the RECENT newest, oldest first
+        self._frozen_until = 0  # states below this index are in _frozen (or marginalised)
+        self._limits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._last_imu: EarthImuFactor | None = None
 
     # ----- updates -------------------------------------------------------------------------------
@@ -196,19 +219,18 @@ class IncrementalSmoother:
         every group number below the number of keys it orders, which only the rebase's full re-elimination
         allows for a long window: the normal update gives groups to the RECENT newest states only (an update
         re-eliminates at least the two newest states and the three shared keys)."""
-        groups = gtsam.KeyGroupMap()
-        frozen = gtsam.KeyList()
         recent_from = self.first if rebase else max(self.first, self.n - RECENT)
-        for i in range(self.first, self.n):
-            if i < recent_from:
-                for k in self._state_keys(i):
-                    frozen.push_back(k)
-            else:
-                for k in self._state_keys(i):
-                    groups.insert2(k, i - recent_from)
+        while self._frozen_until < recent_from:  # states that just left the RECENT ones
+            for k in self._state_keys(self._frozen_until):
+                self._frozen.push_back(k)
+            self._frozen_until += 1
+        groups = gtsam.KeyGroupMap()
+        for i in range(recent_from, self.n):
+            for k in self._state_keys(i):
+                groups.insert2(k, i - recent_from)
         for k in self.shared_keys(self.n - 1):
             groups.insert2(k, self.n - recent_from)
-        return groups, frozen
+        return groups, (gtsam.KeyList() if rebase else self._frozen)
 
     def _slide(self, t_oldest: float) -> None:
         """Marginalise the states older than t_oldest (keeping two at least), then rebase if a variable iSAM2
@@ -225,6 +247,11 @@ class IncrementalSmoother:
                 self.isam.marginalizeLeaves(keys)
             del self.times[s]
             self.imus.pop(s, None)
+            if self._frozen_until > s:
+                for _ in self._state_keys(s):
+                    self._frozen.pop_front()
+            else:
+                self._frozen_until = s + 1
             self.first = s + 1
             self.marginalised += 1
         if self._frozen_moved():
@@ -235,19 +262,20 @@ class IncrementalSmoother:
         more than its relinearisation threshold (the shared keys are frozen by marginalizeLeaves, the old
         states by _ordering)."""
         delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, v, x (GTSAM symbols)
-        th = self.thresholds
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
-        check = lambda size, n_old: np.concatenate([np.ones(n_old, bool), np.zeros(size - n_old, bool)])  # noqa: E731
-        if self.rw_bias:
-            limit = [np.tile(th.bias, n_states)]
-            mask = [np.repeat(check(n_states, old), 6)]
-        else:
-            limit, mask = [np.asarray(th.bias, dtype=float)], [np.ones(6, bool)]
-        limit += [np.full(3, th.misalignment_rad), np.array([th.scale]), np.tile(th.velocity, n_states),
-                  np.tile(th.pose, n_states)]
-        mask += [np.ones(4, bool), np.repeat(check(n_states, old), 3), np.repeat(check(n_states, old), 6)]
-        lim, msk = np.concatenate(limit), np.concatenate(mask)
+        if (n_states, old) not in self._limits:
+            th = self.thresholds
+            is_old = np.arange(n_states) < old
+            if self.rw_bias:
+                limit, mask = [np.tile(th.bias, n_states)], [np.repeat(is_old, 6)]
+            else:
+                limit, mask = [np.asarray(th.bias, dtype=float)], [np.ones(6, bool)]
+            limit += [np.full(3, th.misalignment_rad), np.array([th.scale]), np.tile(th.velocity, n_states),
+                      np.tile(th.pose, n_states)]
+            mask += [np.ones(4, bool), np.repeat(is_old, 3), np.repeat(is_old, 6)]
+            self._limits[(n_states, old)] = (np.concatenate(limit), np.concatenate(mask))
+        lim, msk = self._limits[(n_states, old)]
         if lim.shape != delta.shape:
             raise GtsamDvlError(f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}")
         return bool(((np.abs(delta) > lim) & msk).any())
@@ -336,42 +364,32 @@ class IncrementalSmoother:
             raise GtsamDvlError(f"marginal covariance failed ({exc})") from None
         return bayes_net_covariance(bn, keys)
 
-    def values(self) -> gtsam.Values:
-        return self.isam.calculateEstimate()
-
-    def factor_graph(self) -> gtsam.NonlinearFactorGraph:
-        """The factors iSAM2 holds now (window factors and marginal priors)."""
-        graph = gtsam.NonlinearFactorGraph()
+    def size(self) -> tuple[int, int]:
+        """(variables, factors) iSAM2 holds now: bounded in the fixed-lag mode."""
         factors = self.isam.getFactorsUnsafe()
-        for j in range(factors.size()):
-            f = factors.at(j)
-            if f is not None:
-                graph.add(f)
-        return graph
+        return self.isam.getLinearizationPoint().size(), sum(factors.at(j) is not None for j in range(factors.size()))
 
 
 def key_dim(key: int) -> int:
-    return _DIMS[chr(gtsam.Symbol(key).chr())]
+    """Tangent dimension of a variable from its key (GTSAM symbols keep the character in the top byte)."""
+    return _DIMS[chr(key >> 56)]
 
 
 def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndarray:
     """Covariance of a (joint marginal) Gaussian Bayes net, blocks in the order of keys: the net's square-root
-    information R (upper triangular in elimination order) is inverted by triangular solves."""
+    information R (upper triangular in elimination order) is inverted."""
     order: list[int] = []
     conds = [bn.at(j) for j in range(bn.size())]
-    frontal_sets = []
     for c in conds:
         ks = list(c.keys())
-        n_frontal = _frontal_count(c, ks)
-        frontal_sets.append(ks[:n_frontal])
-        order.extend(ks[:n_frontal])
+        order.extend(ks[:_frontal_count(c, ks)])
     offsets, off = {}, 0
     for k in order:
         offsets[k] = off
         off += key_dim(k)
     R = np.zeros((off, off))
     row = 0
-    for c, frontals in zip(conds, frontal_sets, strict=True):
+    for c in conds:
         A, _ = c.jacobian()  # whitened [R S], columns in c.keys() order
         n_rows = A.shape[0]
         col = 0
