@@ -18,7 +18,7 @@ demo: $(STAMP)
 	$(BIN)/gtsam-dvl demo -o demo-output
 
 lint: $(STAMP)
-	$(BIN)/ruff check gtsam_dvl factors tests bench
+	$(BIN)/ruff check gtsam_dvl factors tests bench examples
 
 typecheck: $(STAMP)
 	$(BIN)/mypy gtsam_dvl factors
@@ -28,6 +28,9 @@ test: lint typecheck
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_reader.py
+	$(BIN)/python bench/bench_batch.py
+	$(BIN)/python bench/bench_online.py
+	$(BIN)/python bench/bench_compare.py
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache .mypy_cache .ruff_cache
