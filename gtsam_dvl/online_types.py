@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gtsam_dvl.config import DEG_PER_H, UG
 from gtsam_dvl.errors import GtsamDvlError
 from gtsam_dvl.online_smoother import RelinearizationThresholds, StateEstimate
+from gtsam_dvl.result import CalibrationUnits, misalignment_rpy_and_cov
 
 MODES = ("fixed_lag", "full")
 
@@ -45,7 +45,7 @@ class OnlineConfig:
 
 
 @dataclass
-class OnlineEstimate:
+class OnlineEstimate(CalibrationUnits):
     """The estimate after one DVL epoch, with marginal covariances given the data so far (SI units, GTSAM
     tangents: pose [rotation, translation] in body axes, b_R_d perturbed on the right). The properties give
     the user units of NavResult."""
@@ -76,51 +76,13 @@ class OnlineEstimate:
                    b_R_d=s.b_R_d, b_R_d_cov=s.cov[16:19, 16:19], b_R_d0=b_R_d0, calib_cov=s.calib_cov)
 
     @property
-    def misalignment_deg(self) -> np.ndarray:
-        """[roll, pitch, yaw] of R_c = b_R_d b_R_d0^T, deg."""
-        return misalignment_deg_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[0]
-
-    @property
-    def misalignment_sigma_deg(self) -> np.ndarray:
-        return np.sqrt(np.diag(misalignment_deg_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[1]))
-
-    @property
     def attitude_sigma_deg(self) -> np.ndarray:
         """Attitude sigmas about map axes (east, north, up), deg."""
         return np.degrees(np.sqrt(np.diag(self.n_R_b @ self.pose_cov[:3, :3] @ self.n_R_b.T)))
 
-    @property
-    def gyro_bias_deg_per_h(self) -> np.ndarray:
-        return self.gyro_bias / DEG_PER_H
 
-    @property
-    def gyro_bias_sigma_deg_per_h(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.bias_cov)[3:]) / DEG_PER_H
-
-    @property
-    def accel_bias_ug(self) -> np.ndarray:
-        return self.accel_bias / UG
-
-    @property
-    def accel_bias_sigma_ug(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.bias_cov)[:3]) / UG
-
-
-def misalignment_deg_and_cov(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
-                                                                                                   np.ndarray]:
-    """result.misalignment_rpy_and_cov in closed form (it differentiates numerically through scipy: 1.5 ms a
-    call, too slow for every epoch): [roll, pitch, yaw] (deg) of R_c = b_R_d b_R_d0^T and their covariance
-    (deg^2). With R_c = Rz(y) Ry(p) Rx(r), a body-axes perturbation Exp(e) R_c moves the angles by E^-1 e,
-    E = [Rz Ry x, Rz y, z] (ZYX Euler rates)."""
-    R_c = b_R_d @ b_R_d0.T
-    roll = math.atan2(R_c[2, 1], R_c[2, 2])
-    pitch = -math.asin(max(-1.0, min(1.0, R_c[2, 0])))
-    yaw = math.atan2(R_c[1, 0], R_c[0, 0])
-    cp, sp, cy, sy = math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
-    E = np.array([[cp * cy, -sy, 0.0], [cp * sy, cy, 0.0], [-sp, 0.0, 1.0]])
-    J = np.linalg.inv(E)
-    cov_body = b_R_d @ cov_right @ b_R_d.T
-    return np.degrees([roll, pitch, yaw]), np.degrees(np.degrees(J @ cov_body @ J.T))
+# the closed form lives in gtsam_dvl.result; this name is kept for the online modules
+misalignment_deg_and_cov = misalignment_rpy_and_cov
 
 
 def latency_stats(latencies_s: list[float] | np.ndarray) -> dict[str, float]:

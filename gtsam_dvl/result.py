@@ -2,34 +2,70 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from gtsam_dvl.config import DEG_PER_H, UG
-from gtsam_dvl.rotations import matrix_to_rpy, so3_exp
 
 
 def misalignment_rpy_and_cov(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
                                                                                                         np.ndarray]:
     """[roll, pitch, yaw] (deg) of R_c = b_R_d b_R_d0^T and their covariance (deg^2), from the covariance of
-    b_R_d in GTSAM's right tangent (rad^2). R_c's perturbation in body axes is b_R_d times the right one."""
+    b_R_d in GTSAM's right tangent (rad^2). R_c's perturbation in body axes is b_R_d times the right one;
+    with R_c = Rz(y) Ry(p) Rx(r), a body-axes perturbation Exp(e) R_c moves the angles by E^-1 e,
+    E = [Rz Ry x, Rz y, z] (ZYX Euler rates). Closed form: it is called at every epoch by the filters."""
     R_c = b_R_d @ b_R_d0.T
+    roll = math.atan2(R_c[2, 1], R_c[2, 2])
+    pitch = -math.asin(max(-1.0, min(1.0, R_c[2, 0])))
+    yaw = math.atan2(R_c[1, 0], R_c[0, 0])
+    cp, sp, cy, sy = math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
+    E = np.array([[cp * cy, -sy, 0.0], [cp * sy, cy, 0.0], [-sp, 0.0, 1.0]])
+    J = np.linalg.inv(E)
     cov_body = b_R_d @ cov_right @ b_R_d.T
-    rpy = matrix_to_rpy(R_c)
-    J = np.zeros((3, 3))
-    h = 1e-7
-    for j in range(3):
-        e = np.zeros(3)
-        e[j] = h
-        J[:, j] = (matrix_to_rpy(so3_exp(e) @ R_c) - matrix_to_rpy(so3_exp(-e) @ R_c)) / (2 * h)
-    cov_rpy = J @ cov_body @ J.T
-    return np.degrees(rpy), np.degrees(np.degrees(cov_rpy))
+    return np.degrees([roll, pitch, yaw]), np.degrees(np.degrees(J @ cov_body @ J.T))
+
+
+class CalibrationUnits:
+    """User-unit views (degrees, deg/h, micro-g) shared by every result type that holds b_R_d, b_R_d0,
+    b_R_d_cov, gyro_bias, accel_bias and bias_cov in SI units."""
+
+    b_R_d: np.ndarray
+    b_R_d0: np.ndarray
+    b_R_d_cov: np.ndarray
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    bias_cov: np.ndarray
+
+    @property
+    def misalignment_deg(self) -> np.ndarray:
+        return misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[0]
+
+    @property
+    def misalignment_sigma_deg(self) -> np.ndarray:
+        return np.sqrt(np.diag(misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[1]))
+
+    @property
+    def gyro_bias_deg_per_h(self) -> np.ndarray:
+        return self.gyro_bias / DEG_PER_H
+
+    @property
+    def gyro_bias_sigma_deg_per_h(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.bias_cov)[3:]) / DEG_PER_H
+
+    @property
+    def accel_bias_ug(self) -> np.ndarray:
+        return self.accel_bias / UG
+
+    @property
+    def accel_bias_sigma_ug(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.bias_cov)[:3]) / UG
 
 
 @dataclass
-class NavResult:
+class NavResult(CalibrationUnits):
     """Estimates of one estimator on one log. Angles in radians and SI units inside; the accessors and
     the summary give degrees, deg/h and micro-g."""
 
@@ -56,30 +92,6 @@ class NavResult:
     timing_s: dict[str, float] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)  # solver report, counters, alignment
     config: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def misalignment_deg(self) -> np.ndarray:
-        return misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[0]
-
-    @property
-    def misalignment_sigma_deg(self) -> np.ndarray:
-        return np.sqrt(np.diag(misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[1]))
-
-    @property
-    def gyro_bias_deg_per_h(self) -> np.ndarray:
-        return self.gyro_bias / DEG_PER_H
-
-    @property
-    def gyro_bias_sigma_deg_per_h(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.bias_cov)[3:]) / DEG_PER_H
-
-    @property
-    def accel_bias_ug(self) -> np.ndarray:
-        return self.accel_bias / UG
-
-    @property
-    def accel_bias_sigma_ug(self) -> np.ndarray:
-        return np.sqrt(np.diag(self.bias_cov)[:3]) / UG
 
     @property
     def attitude_sigma_deg(self) -> np.ndarray:
