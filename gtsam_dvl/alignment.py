@@ -31,7 +31,7 @@ class Alignment:
 STATIC_MARGIN_S = 5.0  # the static segment ends this long before motion is first detected
 
 
-def _window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Means of x over consecutive windows of window_s seconds; returns (window end times, means)."""
     idx = np.floor((t - t[0]) / window_s).astype(int)
     n = int(idx[-1]) + 1
@@ -45,8 +45,8 @@ def _window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[
 
 def detect_static_end(imu: ImuData, dvl: DvlData, cfg: AlignmentConfig) -> float:
     """End time (s) of the static segment at the start of the log; 0 when the log starts moving."""
-    ends, f_means = _window_means(imu.t, imu.b_f)
-    _, w_means = _window_means(imu.t, imu.b_omega)
+    ends, f_means = window_means(imu.t, imu.b_f)
+    _, w_means = window_means(imu.t, imu.b_omega)
     n_ref = max(1, min(10, len(ends)))
     f_ref, w_ref = f_means[:n_ref].mean(axis=0), w_means[:n_ref].mean(axis=0)
     moving = (np.linalg.norm(f_means - f_ref, axis=1) > cfg.accel_threshold_m_s2) | (

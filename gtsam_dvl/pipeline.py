@@ -152,6 +152,7 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     from gtsam_dvl.atomic import atomic_write_bytes, atomic_write_json, write_tum
     from gtsam_dvl.config import EstimatorConfig
     from gtsam_dvl.evaluation import summary
+    from gtsam_dvl.io.results import timeline_npz_bytes, write_result_log
     from gtsam_dvl.result import NavResult
     from gtsam_dvl.rotations import matrix_to_quat_xyzw
 
@@ -174,14 +175,10 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     result.timing_s["read"] = read_s
     summ = summary(result, log)
     if output is not None:
-        from gtsam_dvl.io.results import timeline_npz_bytes, write_result_log
-
         written.append(write_result_log(output, result, log, summ))
         if result.timeline is not None and timeline_path is None:
             timeline_path = Path(output).with_suffix(".timeline.npz")
     if timeline_path is not None and result.timeline is not None:
-        from gtsam_dvl.io.results import timeline_npz_bytes
-
         written.append(atomic_write_bytes(timeline_path, timeline_npz_bytes(result)))
     if summary_path is not None:
         written.append(atomic_write_json(summary_path, summ))

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from gtsam_dvl.alignment import _window_means, detect_static_end
+from gtsam_dvl.alignment import detect_static_end, window_means
 from gtsam_dvl.config import AlignmentConfig
 from gtsam_dvl.iodvlc import detect_type1_segments
 from gtsam_dvl.types import LogData
@@ -23,7 +23,7 @@ MIN_SEGMENT_S = 5.0
 def classify_log(log: LogData) -> list[dict[str, Any]]:
     """Rows {start_s, end_s, kind, type} covering the log: kinds static, type1, turn, cruise."""
     imu = log.imu
-    ends, w_mean = _window_means(imu.t, imu.b_omega)
+    ends, w_mean = window_means(imu.t, imu.b_omega)
     starts = ends - 1.0
     labels = np.where(np.degrees(np.linalg.norm(w_mean, axis=1)) > TURN_RATE_DEG_S, "turn", "cruise").astype(object)
     t_static = detect_static_end(imu, log.dvl, AlignmentConfig())
