@@ -165,7 +165,7 @@ def demo(
     seed: Annotated[int, typer.Option(help="Random seed of the simulated runs.")] = 7,
 ) -> None:
     """Simulate the paper's 3-D and 2-D runs, process them and write figures into one folder."""
-    from gtsam_dvl.pipeline import run_demo
+    from gtsam_dvl.demo import run_demo
 
     run_demo(output, seed=seed)
 
