@@ -10,8 +10,6 @@ import numpy as np
 from gtsam_dvl.plots.common import save_figure, shade_segments
 from gtsam_dvl.types import LogData
 
-RAD_S_TO_DEG_H = np.degrees(1.0) * 3600.0
-
 
 def plot_trajectory(log: LogData, path: Path, n_p: np.ndarray | None = None, label: str = "truth") -> Path:
     """Figure 1: the 3-D trajectory in the map frame (truth, or a given estimate)."""

@@ -29,9 +29,6 @@ def bump6(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v, d
 
 
-BUMP6_INTEGRAL = 64.0 / 140.0
-
-
 def step7(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Septic smooth step 35 t^4 - 84 t^5 + 70 t^6 - 20 t^7: 0 -> 1, derivatives up to the third 0 at the
     ends. Its derivative is 140 t^3 (1 - t)^3 = (140/64) bump6, so a turn's roll can follow its yaw rate."""
