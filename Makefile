@@ -21,7 +21,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check gtsam_dvl factors tests bench examples
 
 typecheck: $(STAMP)
-	$(BIN)/mypy gtsam_dvl factors
+	$(BIN)/mypy gtsam_dvl
 
 test: lint typecheck
 	$(BIN)/python -m pytest -n 2 -q

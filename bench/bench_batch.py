@@ -13,14 +13,14 @@ from pathlib import Path
 
 import gtsam
 
-from gtsam_dvl.batch import extract_result
-from gtsam_dvl.config import EstimatorConfig
-from gtsam_dvl.graph import GraphBuilder
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.estimators.batch import extract_result
+from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.estimators.solver import gauss_newton_qr
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
-from gtsam_dvl.scenario import load_scenario
 from gtsam_dvl.sim import simulate
-from gtsam_dvl.solver import gauss_newton_qr
+from gtsam_dvl.sim.scenario import load_scenario
 
 
 def main() -> None:

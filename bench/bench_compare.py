@@ -12,12 +12,12 @@ import time
 
 import numpy as np
 
-from gtsam_dvl.config import EstimatorConfig
-from gtsam_dvl.evaluation import summary
-from gtsam_dvl.iodvlc import iodvlc_summary
-from gtsam_dvl.pipeline import run_estimator
-from gtsam_dvl.scenario import load_scenario
+from gtsam_dvl.analysis.metrics import summary
+from gtsam_dvl.app.commands import run_estimator
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.estimators.iodvlc import iodvlc_summary
 from gtsam_dvl.sim import simulate
+from gtsam_dvl.sim.scenario import load_scenario
 
 
 def main() -> None:

@@ -11,10 +11,10 @@ import argparse
 
 import numpy as np
 
-from gtsam_dvl.batch import smooth_batch
-from gtsam_dvl.evaluation import summary
-from gtsam_dvl.scenario import load_scenario
+from gtsam_dvl.analysis.metrics import summary
+from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
+from gtsam_dvl.sim.scenario import load_scenario
 
 NAMES = ["scale", "mis roll", "mis pitch", "mis yaw", "gyro x", "gyro y", "gyro z", "acc x", "acc y", "acc z"]
 

@@ -4,7 +4,8 @@
 
 For each scenario (paper-3d: 2060 s; survey-6h: a 6-hour lawnmower survey with the same sensors,
 data/scenarios/survey-6h.toml) the log is simulated first (not timed), then fed to the fixed-lag estimator
-message batch by message (gtsam_dvl.online.feed_log: the IMU samples up to each ping, then the ping). Printed:
+message batch by message (gtsam_dvl.estimators.online.feed_log: the IMU samples up to each ping,
+then the ping). Printed:
 
 - latency per DVL epoch (preintegration, factors, iSAM2 update, marginal covariances): p50, p99, max;
 - the p99 of the first and of the last hour of the mission (paper-3d is shorter than an hour: both are the
@@ -25,11 +26,11 @@ import time
 
 import numpy as np
 
-from gtsam_dvl.config import EstimatorConfig
-from gtsam_dvl.evaluation import summary
-from gtsam_dvl.online import OnlineConfig, OnlineEstimator, feed_log, latency_stats
-from gtsam_dvl.scenario import load_scenario
+from gtsam_dvl.analysis.metrics import summary
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.estimators.online import OnlineConfig, OnlineEstimator, feed_log, latency_stats
 from gtsam_dvl.sim import simulate
+from gtsam_dvl.sim.scenario import load_scenario
 
 HOUR = 3600.0
 

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, TruthData
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
-from gtsam_dvl.types import BeamData, DvlData, ImuData, LogData, TruthData
 
 
 def synthetic_log(duration: float = 2060.0, seed: int = 0) -> LogData:
@@ -40,8 +40,8 @@ def synthetic_log(duration: float = 2060.0, seed: int = 0) -> LogData:
 def make_log(path: Path) -> tuple[str, float]:
     """Write the benchmark log; returns where its arrays came from and the write_log time (s)."""
     try:
-        from gtsam_dvl.scenario import load_scenario
         from gtsam_dvl.sim import simulate
+        from gtsam_dvl.sim.scenario import load_scenario
 
         log = simulate(load_scenario("paper-3d"), 7)
         origin = "simulator, scenario paper-3d, seed 7"

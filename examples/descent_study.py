@@ -21,8 +21,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gtsam_dvl.planning import plan_mission  # noqa: E402
-from gtsam_dvl.scenario import load_scenario, scenario_from_dict  # noqa: E402
+from gtsam_dvl.analysis.planning import plan_mission  # noqa: E402
+from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict  # noqa: E402
 
 
 def scenario_with(descent_s: float, dvl_hz: float) -> dict:

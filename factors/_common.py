@@ -14,9 +14,6 @@ from typing import Any, Protocol
 import gtsam
 import numpy as np
 
-# Jacobian column counts for the keys [pose, velocity, scale, b_R_d].
-KEY_DIMS = (6, 3, 1, 3)
-
 _Z33 = np.zeros((3, 3))
 _Z33.setflags(write=False)  # shared by every Jacobian through np.concatenate, which copies it
 

@@ -1,7 +1,7 @@
 """gtsam_dvl: self-calibrating IMU + DVL navigation on GTSAM."""
 
-from gtsam_dvl.errors import GtsamDvlError
-from gtsam_dvl.types import BeamData, DvlCalibration, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.types import BeamData, DvlCalibration, DvlData, ImuData, LogData, Mounting, TruthData
 
 __version__ = "0.1.0"
 

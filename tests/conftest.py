@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from gtsam_dvl.scenario import Scenario, load_scenario
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
-from gtsam_dvl.types import LogData
+from gtsam_dvl.sim.scenario import Scenario, load_scenario
 
 
 @pytest.fixture(scope="session")

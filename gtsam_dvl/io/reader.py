@@ -18,13 +18,13 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gtsam_dvl.errors import GtsamDvlError
-from gtsam_dvl.io.cdr import stamps_ns
-from gtsam_dvl.io.decode import decode, decode_tf, first_string, to_base
-from gtsam_dvl.io.msgdefs import normalize_type
-from gtsam_dvl.io.salvage import salvage_report
-from gtsam_dvl.io.sources import Source, open_source
-from gtsam_dvl.types import BeamData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.io.ros2.cdr import stamps_ns
+from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
+from gtsam_dvl.io.ros2.msgdefs import normalize_type
+from gtsam_dvl.io.storage.salvage import salvage_report
+from gtsam_dvl.io.storage.sources import Source, open_source
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 ODOM_TYPE = "nav_msgs/msg/Odometry"

@@ -1,4 +1,4 @@
-"""Read a result MCAP written by gtsam_dvl.io.results back into arrays (for `evaluate` and scripts)."""
+"""Read a result MCAP written by gtsam_dvl.io.result_writer back into arrays (for `evaluate` and scripts)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from gtsam_dvl.errors import GtsamDvlError
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.result import Timeline
+from gtsam_dvl.core.rotations import quat_xyzw_to_matrix
 from gtsam_dvl.io.reader import read_odometry
-from gtsam_dvl.io.results import TOPICS
-from gtsam_dvl.io.sources import open_source
-from gtsam_dvl.result import Timeline
-from gtsam_dvl.rotations import quat_xyzw_to_matrix
+from gtsam_dvl.io.result_writer import TOPICS
+from gtsam_dvl.io.storage.sources import open_source
 
 
 @dataclass

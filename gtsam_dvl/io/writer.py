@@ -32,10 +32,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl import __version__
-from gtsam_dvl.errors import GtsamDvlError
-from gtsam_dvl.io import cdr
-from gtsam_dvl.io.mcap_writer import McapLogWriter
-from gtsam_dvl.types import DvlData, LogData
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.types import DvlData, LogData
+from gtsam_dvl.io.mcap.writer import McapLogWriter
+from gtsam_dvl.io.ros2 import cdr
 
 __all__ = ["McapLogWriter", "write_log", "UNMEASURED_VARIANCE", "BEAM_QUALITY_NOTE"]
 

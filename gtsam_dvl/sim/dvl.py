@@ -14,14 +14,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gtsam_dvl.rotations import rpy_deg_to_matrix
+from gtsam_dvl.core.rotations import rpy_deg_to_matrix
+from gtsam_dvl.core.types import BeamData, DvlData
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import PositionTrack
-from gtsam_dvl.types import BeamData, DvlData
 
 if TYPE_CHECKING:
-    from gtsam_dvl.scenario import DvlSpec
+    from gtsam_dvl.sim.scenario import DvlSpec
 
 AZIMUTHS_DEG = (45.0, 135.0, 225.0, 315.0)
 

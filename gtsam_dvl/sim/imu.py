@@ -14,13 +14,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gtsam_dvl.core.units import DEG_PER_H, MICRO_G, PER_SQRT_H
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import GL_W, PositionTrack, node_times
-from gtsam_dvl.sim.units import DEG_PER_H, MICRO_G, PER_SQRT_H
 
 if TYPE_CHECKING:
-    from gtsam_dvl.scenario import ImuSpec
+    from gtsam_dvl.sim.scenario import ImuSpec
 
 CHUNK = 1 << 15  # samples per vectorised block: bounds memory on long runs
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gtsam_dvl.earth import OMEGA_IE, normal_gravity, radii_of_curvature
+from gtsam_dvl.core.earth import OMEGA_IE, normal_gravity, radii_of_curvature
 from gtsam_dvl.sim.motion import MotionState
 
 

@@ -24,7 +24,7 @@ import numpy as np
 from gtsam_dvl.sim.blends import bump6, step5, step7
 
 if TYPE_CHECKING:
-    from gtsam_dvl.scenario import Scenario
+    from gtsam_dvl.sim.scenario import Scenario
 
 _FIELDS = ("t_start", "duration", "s0", "ds", "bump", "w_peak", "yaw0", "dyaw", "roll0", "bank", "pitch0")
 

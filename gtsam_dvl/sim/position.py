@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gtsam_dvl.earth import radii_of_curvature
+from gtsam_dvl.core.earth import radii_of_curvature
 from gtsam_dvl.sim.motion import MotionProfile
 
 GL_X, GL_W = np.polynomial.legendre.leggauss(4)  # nodes and weights on [-1, 1]

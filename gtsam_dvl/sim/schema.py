@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from gtsam_dvl.errors import GtsamDvlError
+from gtsam_dvl.core.errors import GtsamDvlError
 
 SEGMENT_KEYS: dict[str, tuple[str, ...]] = {
     "static": ("duration_s",),

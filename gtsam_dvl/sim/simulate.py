@@ -14,18 +14,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gtsam_dvl.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
+from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
+from gtsam_dvl.core.types import ImuData, LogData, Mounting, TruthData
 from gtsam_dvl.sim import imu as sim_imu
 from gtsam_dvl.sim.dvl import dvl_measure, dvl_true
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import PositionTrack, integrate_position
-from gtsam_dvl.types import ImuData, LogData, Mounting, TruthData
 
 if TYPE_CHECKING:
-    from gtsam_dvl.earth import LocalFrame
-    from gtsam_dvl.scenario import Scenario
+    from gtsam_dvl.core.earth import LocalFrame
+    from gtsam_dvl.sim.scenario import Scenario
 
 
 def simulate(

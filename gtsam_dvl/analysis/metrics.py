@@ -1,0 +1,99 @@
+"""Errors of an estimate against the simulated truth, and the summary every estimator reports."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
+from gtsam_dvl.core.types import LogData, TruthData
+from gtsam_dvl.core.units import DEG_PER_H, UG
+
+
+def truth_at(truth: TruthData, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Truth (n_p m, n_R_b, n_v m/s) interpolated at times t (linear; slerp for attitude)."""
+    t = np.clip(t, truth.t[0], truth.t[-1])
+    n_p = np.stack([np.interp(t, truth.t, truth.n_p[:, i]) for i in range(3)], axis=1)
+    n_v = np.stack([np.interp(t, truth.t, truth.n_v[:, i]) for i in range(3)], axis=1)
+    n_R_b = Slerp(truth.t, Rotation.from_quat(truth.n_q_b))(t).as_matrix()
+    return n_p, n_R_b, n_v
+
+
+def path_length(n_p: np.ndarray) -> float:
+    """Distance travelled along a sampled path, m."""
+    return float(np.linalg.norm(np.diff(n_p, axis=0), axis=1).sum()) if len(n_p) > 1 else 0.0
+
+
+def attitude_errors_deg(n_R_b_est: np.ndarray, n_R_b_true: np.ndarray) -> np.ndarray:
+    """(N, 3) attitude error about map axes (east, north, up) in degrees: log(R_est R_true^T)."""
+    return np.degrees(Rotation.from_matrix(n_R_b_est @ np.transpose(n_R_b_true, (0, 2, 1))).as_rotvec())
+
+
+def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
+    """The `errors` block of the summary: None when the log has no truth."""
+    if log.truth is None:
+        return None
+    out: dict[str, Any] = {}
+    truth_meta = log.metadata.get("truth", {})
+    cal = log.true_calibration
+    if cal is not None:
+        out["scale_ppm"] = (result.scale - cal.scale) / cal.scale * 1e6
+        R_c_true = rpy_deg_to_matrix(cal.misalignment_deg)
+        R_c_est = result.b_R_d @ result.b_R_d0.T
+        err_rpy = matrix_to_rpy_deg(R_c_est @ R_c_true.T)
+        out["misalignment_deg"] = err_rpy.tolist()
+        sig = result.misalignment_sigma_deg
+        out["misalignment_nsigma"] = (err_rpy / sig).tolist()
+        out["scale_nsigma"] = (result.scale - cal.scale) / result.scale_sigma
+    imu_truth = truth_meta.get("imu", {})
+    if "gyro_bias_rad_s" in imu_truth:
+        g_err = (result.gyro_bias - np.asarray(imu_truth["gyro_bias_rad_s"])) / DEG_PER_H
+        a_err = (result.accel_bias - np.asarray(imu_truth["accel_bias_m_s2"])) / UG
+        out["gyro_bias_deg_per_h"] = g_err.tolist()
+        out["accel_bias_ug"] = a_err.tolist()
+        out["gyro_bias_nsigma"] = (g_err / result.gyro_bias_sigma_deg_per_h).tolist()
+        out["accel_bias_nsigma"] = (a_err / result.accel_bias_sigma_ug).tolist()
+    n_p_true, n_R_b_true, n_v_true = truth_at(log.truth, result.t)
+    pos_err = result.n_p - n_p_true
+    dist = path_length(log.truth.n_p)
+    final_h = float(np.linalg.norm(pos_err[-1, :2]))
+    att_err = attitude_errors_deg(result.n_R_b, n_R_b_true)
+    out.update({
+        "final_horizontal_position_m": final_h,
+        "final_horizontal_position_pct_distance": 100.0 * final_h / dist if dist > 0 else None,
+        "position_rmse_m": float(np.sqrt(np.mean(np.sum(pos_err**2, axis=1)))),
+        "velocity_rmse_m_s": float(np.sqrt(np.mean(np.sum((result.n_v - n_v_true) ** 2, axis=1)))),
+        "attitude_rmse_deg": np.sqrt(np.mean(att_err**2, axis=0)).tolist(),
+        "final_attitude_deg": att_err[-1].tolist(),
+    })
+    return out
+
+
+def summary(result: NavResult, log: LogData) -> dict[str, Any]:
+    """The summary JSON of CONVENTIONS/issue 3, in user units (degrees, deg/h, micro-g, ppm)."""
+    truth_dist = path_length(log.truth.n_p) if log.truth is not None else path_length(result.n_p)
+    out: dict[str, Any] = {
+        "estimator": result.estimator,
+        "log": log.source,
+        "scale": {"value": result.scale, "sigma": result.scale_sigma},
+        "misalignment_deg": {"value": result.misalignment_deg.tolist(), "sigma": result.misalignment_sigma_deg.tolist(),
+                             "convention": "R_c = Rz(yaw) Ry(pitch) Rx(roll) in body FLU axes, b_R_d = R_c b_R_d0"},
+        "gyro_bias_deg_per_h": {"value": result.gyro_bias_deg_per_h.tolist(),
+                                "sigma": result.gyro_bias_sigma_deg_per_h.tolist()},
+        "accel_bias_ug": {"value": result.accel_bias_ug.tolist(), "sigma": result.accel_bias_sigma_ug.tolist()},
+        "distance_travelled_m": truth_dist,
+        "final_horizontal_position_sigma_m": float(np.hypot(*result.position_sigma_m[-1, :2])),
+        "duration_s": float(result.t[-1] - result.t[0]),
+        "states": len(result.t),
+        "timing_s": result.timing_s,
+        "real_time_factor": float((result.t[-1] - result.t[0]) / result.timing_s["total"])
+        if result.timing_s.get("total") else None,
+        "info": result.info,
+    }
+    errors = truth_errors(result, log)
+    if errors is not None:
+        out["errors"] = errors
+    return out

@@ -1,0 +1,205 @@
+"""Observability from marginal covariances: which calibration and bias directions a log determined.
+
+The calibration and bias block's posterior covariance (from any estimator) is compared with its prior:
+per state, ratio = posterior sigma / prior sigma; for directions, the eigen-decomposition of the
+prior-whitened posterior covariance P0^-1/2 Sigma P0^-1/2, whose eigenvalues are squared ratios along
+combinations of states (e.g. the misalignment about the thrust axis together with a bias). A ratio near 1
+means the data said nothing about that direction; near 0, the data fixed it.
+
+Verdicts: ratio <= DETERMINED ("determined"), <= NOT_DETERMINED ("weakly determined"), above that
+"not determined". For weak states the information gained per hour of this log tells how long a similar
+mission would need to halve the prior sigma.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.result import NavResult, Timeline
+from gtsam_dvl.core.units import DEG_PER_H, UG
+
+DETERMINED = 0.5
+NOT_DETERMINED = 0.9
+
+STATES = [
+    ("accel_bias_x", "accelerometer bias along body x (forward)", "micro-g"),
+    ("accel_bias_y", "accelerometer bias along body y (left)", "micro-g"),
+    ("accel_bias_z", "accelerometer bias along body z (up)", "micro-g"),
+    ("gyro_bias_x", "gyro bias about body x (forward)", "deg/h"),
+    ("gyro_bias_y", "gyro bias about body y (left)", "deg/h"),
+    ("gyro_bias_z", "gyro bias about body z (up, vertical)", "deg/h"),
+    ("scale", "DVL scale factor", "ppm"),
+    ("misalignment_roll", "DVL misalignment about body x, the thrust axis (roll)", "deg"),
+    ("misalignment_pitch", "DVL misalignment about body y (pitch)", "deg"),
+    ("misalignment_yaw", "DVL misalignment about body z (yaw)", "deg"),
+]
+
+
+def verdict_of(ratio: float) -> str:
+    if ratio <= DETERMINED:
+        return "determined"
+    if ratio <= NOT_DETERMINED:
+        return "weakly determined"
+    return "not determined"
+
+
+@dataclass
+class StateVerdict:
+    key: str
+    description: str
+    unit: str
+    prior_sigma: float
+    posterior_sigma: float
+    ratio: float
+    verdict: str
+    hours_to_halve: float | None = None  # at this log's information rate; None when already determined
+    credited_segments: list[str] = field(default_factory=list)  # filled by attribute_segments
+
+    def sentence(self) -> str:
+        s = (f"{self.description}: {self.verdict}; prior sigma {self.prior_sigma:.4g} {self.unit}, "
+             f"posterior {self.posterior_sigma:.4g} {self.unit} ({100 * self.ratio:.0f} % of prior)")
+        if self.credited_segments:
+            s += f"; determined during {', '.join(self.credited_segments)}"
+        if self.hours_to_halve is not None:
+            s += (f"; at this log's rate a mission of {self.hours_to_halve:.1f} h would halve the prior sigma"
+                  if np.isfinite(self.hours_to_halve) else "; this log gives it no information at all")
+        return s
+
+
+@dataclass
+class DirectionVerdict:
+    ratio: float
+    verdict: str
+    weights: dict[str, float]  # squared components of the unit eigenvector (prior-whitened), largest first
+
+    def sentence(self) -> str:
+        parts = ", ".join(f"{STATE_TEXT[k]} ({100 * w:.0f} %)" for k, w in self.weights.items())
+        return f"{self.verdict} direction ({100 * self.ratio:.0f} % of prior): {parts}"
+
+
+STATE_TEXT = {k: d for k, d, _ in STATES}
+
+
+@dataclass
+class ObservabilityReport:
+    states: list[StateVerdict]
+    directions: list[DirectionVerdict]  # sorted from least to best determined
+    duration_s: float
+
+    def state(self, key: str) -> StateVerdict:
+        return next(s for s in self.states if s.key == key)
+
+    def lines(self) -> list[str]:
+        out = ["Per state:"] + [f"  - {s.sentence()}" for s in self.states]
+        weak = [d for d in self.directions if d.verdict != "determined"]
+        if weak:
+            out.append("Directions the log did not fully determine (combinations of states):")
+            out += [f"  - {d.sentence()}" for d in weak]
+        else:
+            out.append("Every direction of the calibration and bias block is determined.")
+        return out
+
+
+def _user_units_jacobian(b_R_d: np.ndarray) -> np.ndarray:
+    """d(user units)/d(tangent) for [accel bias, gyro bias, scale, b_R_d right tangent]: micro-g, deg/h,
+    ppm, and degrees about body axes (body rotation = b_R_d * right tangent)."""
+    J = np.zeros((10, 10))
+    J[:3, :3] = np.eye(3) / UG
+    J[3:6, 3:6] = np.eye(3) / DEG_PER_H
+    J[6, 6] = 1e6
+    J[7:, 7:] = np.degrees(b_R_d)
+    return J
+
+
+def prior_sigmas(config: EstimatorConfig) -> np.ndarray:
+    """Prior sigmas of the block in user units (micro-g, deg/h, ppm, deg)."""
+    return np.array([config.imu.accel_bias_sigma_ug] * 3 + [config.imu.gyro_bias_sigma_deg_per_h] * 3
+                    + [config.priors.scale_sigma * 1e6] + list(config.priors.misalignment_sigma_deg), dtype=float)
+
+
+def analyse(result: NavResult, config: EstimatorConfig | None = None) -> ObservabilityReport:
+    """Per-state and per-direction verdicts from result.calib_joint_cov and the configuration's priors."""
+    if result.calib_joint_cov is None:
+        raise ValueError("the result has no joint covariance of the calibration and bias block")
+    if config is None:
+        config = EstimatorConfig.from_dict(result.config) if result.config else EstimatorConfig()
+    return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config)
+
+
+def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: float,
+                  config: EstimatorConfig) -> ObservabilityReport:
+    """The analysis on the block's covariance itself ([accel bias, gyro bias, scale, b_R_d right tangent],
+    SI units), e.g. as stored in a result log."""
+    J = _user_units_jacobian(np.asarray(b_R_d))
+    cov = J @ np.asarray(calib_joint_cov) @ J.T
+    p0 = prior_sigmas(config)
+    post = np.sqrt(np.diag(cov))
+    duration_h = duration_s / 3600.0
+    states = []
+    for i, (key, text, unit) in enumerate(STATES):
+        ratio = float(min(post[i] / p0[i], 1.0))
+        verdict = verdict_of(ratio)
+        hours = None
+        if verdict != "determined":
+            # information gained below 1 % of the prior's: numerically nothing, so no extrapolation
+            gained = 1.0 / post[i] ** 2 - 1.0 / p0[i] ** 2
+            info_rate = gained / max(duration_h, 1e-9) if gained > 0.01 / p0[i] ** 2 else 0.0
+            hours = float(3.0 / p0[i] ** 2 / info_rate) if info_rate > 0 else float("inf")
+        states.append(StateVerdict(key, text, unit, float(p0[i]), float(post[i]), ratio, verdict, hours))
+    white = cov / np.outer(p0, p0)
+    evals, evecs = np.linalg.eigh(0.5 * (white + white.T))
+    directions = []
+    for j in np.argsort(-evals):
+        ratio = float(np.sqrt(min(max(evals[j], 0.0), 1.0)))
+        w = evecs[:, j] ** 2
+        order = [k for k in np.argsort(-w) if w[k] >= 0.1]
+        directions.append(DirectionVerdict(ratio, verdict_of(ratio), {STATES[k][0]: float(w[k]) for k in order}))
+    return ObservabilityReport(states, directions, duration_s)
+
+
+def _timeline_sigmas(timeline: Timeline) -> np.ndarray:
+    """(N, 10) sigmas in the order of STATES, user units (scale in ppm)."""
+    return np.column_stack([timeline.accel_bias_sigma_ug, timeline.gyro_bias_sigma_deg_per_h,
+                            timeline.scale_sigma * 1e6, timeline.misalignment_sigma_deg])
+
+
+def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments: list[dict[str, Any]],
+                       min_share: float = 0.25) -> dict[str, list[tuple[str, float]]]:
+    """Which segments made each state observable: the share of the total fall of log(sigma) (prior to
+    final) that happened inside each segment. Segments with at least min_share are credited on the
+    report's states (StateVerdict.credited_segments); returns every state's shares, largest first."""
+    sig = _timeline_sigmas(timeline)
+    p0 = np.array([s.prior_sigma for s in report.states])
+    log_sig = np.log(np.minimum(np.vstack([p0, sig]), p0))  # the prior is the sigma before the first epoch
+    t = np.concatenate([[timeline.t[0] - 1e-9], timeline.t])
+    total = log_sig[0] - log_sig[-1]
+    shares: dict[str, list[tuple[str, float]]] = {}
+    for j, state in enumerate(report.states):
+        rows = []
+        for seg in segments:
+            a = int(np.searchsorted(t, seg["start_s"], side="right")) - 1
+            b = int(np.searchsorted(t, seg["end_s"], side="right")) - 1
+            if b <= a or total[j] <= 1e-6:
+                continue
+            share = float((log_sig[max(a, 0), j] - log_sig[b, j]) / total[j])
+            label = f"{seg['kind']} {seg['start_s']:.0f}-{seg['end_s']:.0f} s (type {seg.get('type', '-')})"
+            rows.append((label, share))
+        rows.sort(key=lambda r: -r[1])
+        shares[state.key] = rows
+        if state.verdict != "not determined":
+            state.credited_segments = [label for label, share in rows if share >= min_share]
+    return shares
+
+
+def determined_at(report: ObservabilityReport, timeline: Timeline) -> dict[str, float | None]:
+    """Time (s) at which each state's filtering sigma first falls to DETERMINED of its prior (None: never)."""
+    sig = _timeline_sigmas(timeline)
+    out: dict[str, float | None] = {}
+    for j, state in enumerate(report.states):
+        below = np.flatnonzero(sig[:, j] <= DETERMINED * state.prior_sigma)
+        out[state.key] = float(timeline.t[below[0]]) if below.size else None
+    return out

@@ -1,0 +1,179 @@
+"""The `gtsam-dvl` command line: each command parses, calls one library function, prints.
+
+Imports of the heavy modules (gtsam, matplotlib, the simulator) happen inside the commands so that
+`--help` is instant.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Annotated, Any, TypeVar
+
+import typer
+
+from gtsam_dvl.core.errors import GtsamDvlError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Self-calibrating IMU + DVL navigation on GTSAM.")
+_state = {"debug": False}
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def _user_errors(func: F) -> F:
+    """Turn a GtsamDvlError (or a bad-input OSError) into one line on stderr and exit code 1."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return func(*args, **kwargs)
+        except BrokenPipeError:  # output piped into `head` and closed: not an error of ours
+            raise typer.Exit(0) from None
+        except (GtsamDvlError, OSError) as exc:
+            if _state["debug"]:
+                raise
+            typer.echo(f"gtsam-dvl: error: {exc}", err=True)
+            raise typer.Exit(1) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+ImuTopic = Annotated[str, typer.Option("--imu-topic", help="IMU topic (sensor_msgs/msg/Imu).")]
+DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
+Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
+Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages.")]
+
+
+def _read_options(imu_topic: str, dvl_topic: str | None, salvage: bool, repair: bool) -> dict[str, Any]:
+    return {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
+
+
+@app.callback()
+def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
+    _state["debug"] = debug
+
+
+@app.command()
+@_user_errors
+def simulate(
+    scenario: Annotated[str, typer.Argument(help="Built-in name (paper-3d, paper-2d, straight-20km) or a TOML file.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="MCAP file to write.")],
+    seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes.")] = 7,
+    no_noise: Annotated[bool, typer.Option("--no-noise", help="No white noise (biases and calibration kept).")] = False,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+) -> None:
+    """Simulate a scenario and write it as a ROS 2 MCAP log with truth."""
+    from gtsam_dvl.app.commands import simulate_to_file
+
+    result = simulate_to_file(scenario, output, seed=seed, white_noise=not no_noise, show_progress=not quiet)
+    typer.echo(result.describe())
+
+
+@app.command("plot-log")
+@_user_errors
+def plot_log(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
+) -> None:
+    """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
+    from gtsam_dvl.app.commands import plot_log_to_dir
+
+    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair)):
+        typer.echo(str(path))
+
+
+@app.command()
+@_user_errors
+def info(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
+) -> None:
+    """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
+    from gtsam_dvl.app.commands import describe_log
+
+    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair)))
+
+
+@app.command()
+@_user_errors
+def smooth(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    output: Annotated[Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")] = None,
+    mode: Annotated[str, typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc.")
+                    ] = "batch",
+    summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
+    tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
+    timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
+    timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
+                            ] = None,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+) -> None:
+    """Estimate trajectory, IMU biases, DVL scale and misalignment from a log."""
+    from gtsam_dvl.app.commands import smooth_file
+
+    outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
+                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair),
+                          timeline=timeline, timeline_path=timeline_npz)
+    typer.echo(outcome.describe())
+
+
+@app.command()
+@_user_errors
+def evaluate(
+    result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for metrics.json and figures.")],
+    truth: Annotated[Path | None, typer.Option(help="Log with truth (default: the result's source log).")] = None,
+) -> None:
+    """Errors against the truth over time, observability verdict and the segments that made it."""
+    from gtsam_dvl.app.commands import evaluate_to_dir
+
+    lines, written = evaluate_to_dir(result, output, truth_path=truth)
+    typer.echo("\n".join(lines))
+    for path in written:
+        typer.echo(f"wrote {path}")
+
+
+@app.command()
+@_user_errors
+def plan(
+    scenario: Annotated[str, typer.Argument(help="Built-in name (paper-3d, paper-2d, ...) or a scenario TOML file.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")],
+    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
+    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+) -> None:
+    """Will this mission calibrate the DVL, and when? Covariance analysis of a scenario (no noise)."""
+    from gtsam_dvl.app.commands import plan_to_dir
+
+    answer, written = plan_to_dir(scenario, output, config_path=config, show_progress=not quiet)
+    typer.echo(answer)
+    for path in written:
+        typer.echo(f"wrote {path}")
+
+
+@app.command()
+@_user_errors
+def demo(
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for everything the demo writes.")] = Path(
+        "demo-output"),
+    seed: Annotated[int, typer.Option(help="Random seed of the simulated runs.")] = 7,
+) -> None:
+    """Simulate the paper's 3-D and 2-D runs, process them and write figures into one folder."""
+    from gtsam_dvl.app.demo import run_demo
+
+    run_demo(output, seed=seed)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    app(prog_name="gtsam-dvl")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,281 @@
+"""What the commands do, as plain functions returning typed results (the CLI only prints them)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.analysis.metrics import path_length
+from gtsam_dvl.app.progress import progress_bar
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.types import LogData
+
+
+@dataclass
+class SimulateResult:
+    path: Path
+    scenario: str
+    seed: int
+    duration_s: float
+    n_imu: int
+    n_dvl: int
+    distance_m: float
+    wall_s: float
+
+    def describe(self) -> str:
+        return (f"{self.path}: {self.scenario} seed {self.seed}, {self.duration_s:.0f} s, {self.n_imu} IMU and "
+                f"{self.n_dvl} DVL messages, {self.distance_m / 1000:.2f} km travelled ({self.wall_s:.1f} s)")
+
+
+def simulate_to_file(scenario: str | Path, output: Path, seed: int = 7, white_noise: bool = True,
+                     show_progress: bool = True) -> SimulateResult:
+    """Simulate a built-in or TOML scenario and write it as a ROS 2 MCAP log."""
+    from gtsam_dvl.io.writer import write_log
+    from gtsam_dvl.sim import simulate
+    from gtsam_dvl.sim.scenario import load_scenario
+
+    start = time.perf_counter()
+    scen = load_scenario(scenario)
+    with progress_bar(f"simulating {scen.name}", enabled=show_progress) as progress:
+        log = simulate(scen, seed, white_noise=white_noise, progress=progress)
+    write_log(output, log)
+    truth_p = log.truth.n_p if log.truth is not None else np.zeros((0, 3))
+    return SimulateResult(Path(output), scen.name, seed, float(log.imu.t[-1]), len(log.imu), len(log.dvl),
+                          path_length(truth_p), time.perf_counter() - start)
+
+
+def load_log(path: Path | str, **options: Any) -> LogData:
+    """Read a log (MCAP file or rosbag2 directory) with the project reader."""
+    from gtsam_dvl.io.reader import read_log
+
+    if not Path(path).exists():
+        raise GtsamDvlError(f"{path}: no such file or directory")
+    return read_log(path, **options)
+
+
+def plot_log_to_dir(log_path: Path, out_dir: Path, **read_options: Any) -> list[Path]:
+    """Figures 1-3 of a log."""
+    from gtsam_dvl.app.plots.log_plots import plot_log
+
+    return plot_log(load_log(log_path, **read_options), Path(out_dir))
+
+
+def describe_log(log_path: Path, **read_options: Any) -> str:
+    """A few lines about a log: what a navigator wants to know before processing it."""
+    log = load_log(log_path, **read_options)
+    imu, dvl = log.imu, log.dvl
+    imu_hz = 1.0 / np.median(np.diff(imu.t))
+    lines = [f"{log_path}",
+             f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({imu_hz:.1f} Hz), "
+             f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)"]
+    if dvl.beams is not None:
+        lines.append(f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}")
+    lines.append(f"  lever arm IMU->DVL in base_link: {np.round(log.mounting.b_l, 4).tolist()} m")
+    cal = log.true_calibration
+    if cal is not None:
+        lines.append(f"  truth: scale {cal.scale}, misalignment [roll, pitch, yaw] {list(cal.misalignment_deg)} deg")
+    for warning in log.metadata.get("reader_warnings", []):
+        lines.append(f"  warning: {warning}")
+    return "\n".join(lines)
+
+
+@dataclass
+class SmoothOutcome:
+    summary: dict
+    written: list[Path]
+
+    def describe(self) -> str:
+        s = self.summary
+        if "states" not in s:  # io-dvlc: calibration only
+            return "\n".join([f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
+                              f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"]
+                             + [f"  wrote {p}" for p in self.written])
+        mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
+        lines = [
+            f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
+            f"{s['timing_s'].get('total', float('nan')):.2f} s wall",
+            f"  scale        {s['scale']['value']:.6f} +- {s['scale']['sigma']:.6f}",
+            "  misalignment roll/pitch/yaw "
+            + ", ".join(f"{v:+.3f} +- {e:.3f}" for v, e in zip(mis, mis_sig, strict=True)) + " deg",
+            "  gyro bias    " + ", ".join(f"{v:+.4f}" for v in s["gyro_bias_deg_per_h"]["value"]) + " deg/h",
+            "  accel bias   " + ", ".join(f"{v:+.1f}" for v in s["accel_bias_ug"]["value"]) + " micro-g",
+        ]
+        err = s.get("errors")
+        if err:
+            lines.append(f"  vs truth: scale {err.get('scale_ppm', float('nan')):+.0f} ppm, misalignment "
+                         + ", ".join(f"{v:+.3f}" for v in err.get("misalignment_deg", [])) + " deg, final horizontal "
+                         f"position {err['final_horizontal_position_m']:.2f} m "
+                         f"({err['final_horizontal_position_pct_distance']:.3f} % of distance)")
+        lines += [f"  wrote {p}" for p in self.written]
+        return "\n".join(lines)
+
+
+MODES = ("batch", "online", "online-full", "ekf", "io-dvlc")
+
+
+def run_estimator(log: LogData, mode: str, config: Any, progress: Any = None, timeline: bool = True) -> Any:
+    """One estimator on a log: NavResult (batch, online, online-full, ekf) or IoDvlcResult (io-dvlc)."""
+    if mode == "batch":
+        from gtsam_dvl.estimators.batch import smooth_batch
+
+        return smooth_batch(log, config, progress=progress, timeline=timeline)
+    if mode in ("online", "online-full"):
+        from gtsam_dvl.estimators.online import smooth_online
+
+        return smooth_online(log, config, mode="full" if mode == "online-full" else "fixed_lag", progress=progress)
+    if mode == "ekf":
+        from gtsam_dvl.estimators.ekf import run_ekf
+
+        return run_ekf(log, config, progress=progress)
+    if mode == "io-dvlc":
+        from gtsam_dvl.estimators.iodvlc import run_iodvlc
+
+        return run_iodvlc(log)
+    raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+
+
+def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,
+                tum_path: Path | None = None, config_path: Path | None = None, show_progress: bool = True,
+                read_options: dict[str, Any] | None = None, timeline: bool = True,
+                timeline_path: Path | None = None) -> SmoothOutcome:
+    """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
+    The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz."""
+    from gtsam_dvl.analysis.metrics import summary
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.core.result import NavResult
+    from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
+    from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json, write_tum
+    from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
+
+    if mode not in MODES:
+        raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+    config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
+    t_read = time.perf_counter()
+    log = load_log(log_path, **(read_options or {}))
+    read_s = time.perf_counter() - t_read
+    with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
+        result = run_estimator(log, mode, config, progress=progress, timeline=timeline)
+    written: list[Path] = []
+    if not isinstance(result, NavResult):  # io-dvlc: calibration only
+        from gtsam_dvl.estimators.iodvlc import iodvlc_summary
+
+        summ = iodvlc_summary(result, log)
+        if summary_path is not None:
+            written.append(atomic_write_json(summary_path, summ))
+        return SmoothOutcome(summ, written)
+    result.timing_s["read"] = read_s
+    summ = summary(result, log)
+    if output is not None:
+        written.append(write_result_log(output, result, log, summ))
+        if result.timeline is not None and timeline_path is None:
+            timeline_path = Path(output).with_suffix(".timeline.npz")
+    if timeline_path is not None and result.timeline is not None:
+        written.append(atomic_write_bytes(timeline_path, timeline_npz_bytes(result)))
+    if summary_path is not None:
+        written.append(atomic_write_json(summary_path, summ))
+    if tum_path is not None:
+        written.append(write_tum(tum_path, log.t0_ns * 1e-9 + result.t, result.n_p, matrix_to_quat_xyzw(result.n_R_b)))
+    return SmoothOutcome(summ, written)
+
+
+def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
+    """Prior sigmas in the units of Timeline, for normalised-sigma figures."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    cfg = EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
+    return {"scale": cfg.priors.scale_sigma, "misalignment_deg": np.array(cfg.priors.misalignment_sigma_deg),
+            "gyro_bias_deg_per_h": np.full(3, cfg.imu.gyro_bias_sigma_deg_per_h),
+            "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug)}
+
+
+def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = None,
+                show_progress: bool = True) -> tuple[str, list[Path]]:
+    """`gtsam-dvl plan`: covariance analysis of a scenario; writes plan.json, plan.md, timeline.npz and
+    figures, returns the answer text and the files written."""
+    from gtsam_dvl.analysis.planning import plan_mission
+    from gtsam_dvl.app.plots.timeline_plots import plot_normalised_sigmas
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json, atomic_write_text
+    from gtsam_dvl.sim.scenario import load_scenario
+
+    config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
+    scen = load_scenario(scenario)
+    with progress_bar(f"planning {scen.name}", enabled=show_progress) as progress:
+        plan = plan_mission(scen, config, progress=progress)
+    out_dir = Path(out_dir)
+    answer = plan.answer()
+    data = {
+        "scenario": scen.name, "answer": answer.splitlines()[0], "wall_s": plan.wall_s,
+        "states": [{"key": s.key, "description": s.description, "unit": s.unit, "prior_sigma": s.prior_sigma,
+                    "final_sigma": s.posterior_sigma, "ratio": s.ratio, "verdict": s.verdict,
+                    "determined_at_s": plan.determined_at_s[s.key], "credited_segments": s.credited_segments,
+                    "segment_shares": plan.shares.get(s.key, []), "hours_to_halve": s.hours_to_halve}
+                   for s in plan.report.states],
+        "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
+        "segments": plan.segments, "config": config.to_dict(),
+    }
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, **plan.timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
+    written = [
+        atomic_write_json(out_dir / "plan.json", data),
+        atomic_write_text(out_dir / "plan.md", f"# Mission plan: {scen.name}\n\n" + answer.replace("\n  ", "\n- ")
+                          + "\n\n![normalised sigmas](normalised_sigmas.png)\n"),
+        atomic_write_bytes(out_dir / "timeline.npz", buf.getvalue()),
+        plot_normalised_sigmas(plan.timeline, out_dir / "normalised_sigmas.png", priors_for_plots(config.to_dict()),
+                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise)"),
+    ]
+    return answer, written
+
+
+def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = None,
+                    read_options: dict[str, Any] | None = None) -> tuple[list[str], list[Path]]:
+    """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
+    result's source log has one), observability verdict with the segments credited, figures and
+    metrics.json. Returns the verdict lines and the files written."""
+    from gtsam_dvl.analysis.evaluate import evaluate_result
+    from gtsam_dvl.app.plots.error_plots import plot_errors
+    from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
+    from gtsam_dvl.io.atomic import atomic_write_json, atomic_write_text
+    from gtsam_dvl.io.result_reader import read_result
+
+    res = read_result(result_path)
+    log_path = truth_path or (Path(res.source_log) if res.source_log and Path(res.source_log).exists() else None)
+    log = load_log(log_path, **(read_options or {})) if log_path is not None else None
+    ev = evaluate_result(res, log)
+    out_dir = Path(out_dir)
+    written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
+    label = res.estimator
+    if ev.attitude_error_deg is not None and ev.position_error_m is not None:
+        written.append(plot_errors([(label, ev.t, ev.attitude_error_deg, ev.attitude_sigma_deg)],
+                                   out_dir / "attitude_error.png", "attitude", ev.segments))
+        written.append(plot_errors([(label, ev.t, ev.position_error_m, ev.position_sigma_m)],
+                                   out_dir / "position_error.png", "position", ev.segments))
+        if ev.velocity_error_m_s is not None:
+            written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, res.velocity_sigma_m_s)],
+                                       out_dir / "velocity_error.png", "velocity", ev.segments))
+    if res.timeline is not None:
+        truth_cal = log.true_calibration if log is not None else None
+        truth_imu = log.metadata.get("truth", {}).get("imu", {}) if log is not None else {}
+        truths: dict[str, Any] = {}
+        if truth_cal is not None:
+            truths = {"scale": truth_cal.scale, "misalignment": np.array(truth_cal.misalignment_deg)}
+        if "gyro_bias_rad_s" in truth_imu:
+            from gtsam_dvl.core.units import DEG_PER_H, UG
+
+            truths["gyro_bias"] = np.array(truth_imu["gyro_bias_rad_s"]) / DEG_PER_H
+            truths["accel_bias"] = np.array(truth_imu["accel_bias_m_s2"]) / UG
+        for q in ("scale", "misalignment", "gyro_bias", "accel_bias"):
+            written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
+                                          ev.segments, t_min=0.0))
+        written.append(plot_normalised_sigmas(res.timeline, out_dir / "normalised_sigmas.png",
+                                              priors_for_plots(res.calibration.get("config") or {}), ev.segments,
+                                              title=f"Normalised sigmas, {label}"))
+    lines = ev.report.lines() if ev.report is not None else ["no calibration covariance in this result"]
+    written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
+    return lines, written

@@ -1,0 +1,97 @@
+"""Calibration and bias estimates with sigmas over time (the paper's Figures 4-9) and normalised sigmas
+(Figure 12), one or several estimators overlaid."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from gtsam_dvl.app.plots.common import save_figure, shade_segments
+from gtsam_dvl.core.result import Timeline
+
+AXES3 = ("x", "y", "z")
+MIS_AXES = ("roll (about x)", "pitch (about y)", "yaw (about z)")
+
+
+def _band(ax: Any, t: np.ndarray, value: np.ndarray, sigma: np.ndarray, label: str, colour: str) -> None:
+    ax.plot(t, value, color=colour, lw=1.1, label=label)
+    ax.fill_between(t, value - 3 * sigma, value + 3 * sigma, color=colour, alpha=0.15, lw=0)
+
+
+def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: str,
+                   truth: np.ndarray | float | None = None, segments: list[dict[str, Any]] | None = None,
+                   t_min: float = 0.0) -> Path:
+    """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias"; estimate +- 3 sigma."""
+    spec = {
+        "scale": ("scale", "scale_sigma", ["DVL scale factor"], "scale factor"),
+        "misalignment": ("misalignment_deg", "misalignment_sigma_deg", list(MIS_AXES), "deg"),
+        "gyro_bias": ("gyro_bias_deg_per_h", "gyro_bias_sigma_deg_per_h", [f"gyro bias {a}" for a in AXES3], "deg/h"),
+        "accel_bias": ("accel_bias_ug", "accel_bias_sigma_ug", [f"accel bias {a}" for a in AXES3], "micro-g"),
+    }[quantity]
+    value_name, sigma_name, titles, unit = spec
+    n = len(titles)
+    fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for row, title in enumerate(titles):
+        ax = axes[row, 0]
+        if segments:
+            shade_segments(ax, segments, label=(row == 0))
+        lo, hi = np.inf, -np.inf
+        for k, (label, tl) in enumerate(timelines):
+            sel = tl.t >= t_min
+            value = np.asarray(getattr(tl, value_name)).reshape(len(tl.t), -1)[sel, row]
+            sigma = np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
+            _band(ax, tl.t[sel], value, sigma, f"{label} (+-3 sigma)", colours[k % len(colours)])
+            # zoom on the converged part: the band at the end, not the prior's width
+            tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
+            lo = min(lo, float(np.min(tail[0] - 4 * tail[1])))
+            hi = max(hi, float(np.max(tail[0] + 4 * tail[1])))
+        if truth is not None:
+            tv = float(np.atleast_1d(truth)[row])
+            ax.axhline(tv, color="k", ls="--", lw=0.9, label="truth")
+            lo, hi = min(lo, tv), max(hi, tv)
+        if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+            pad = 0.15 * (hi - lo)
+            ax.set_ylim(lo - pad, hi + pad)
+        ax.set_ylabel(f"{title}\n({unit})")
+        ax.grid(alpha=0.3)
+    if t_min > 0:
+        axes[-1, 0].set_xlim(left=t_min)
+    axes[0, 0].legend(fontsize=8, loc="upper right")
+    axes[-1, 0].set_xlabel("time (s)")
+    fig.suptitle(f"{quantity.replace('_', ' ')} estimate and 3-sigma band over time")
+    return save_figure(fig, path)
+
+
+def plot_normalised_sigmas(timeline: Timeline, path: Path, priors: dict[str, np.ndarray | float],
+                           segments: list[dict[str, Any]] | None = None, title: str = "") -> Path:
+    """Figure 12: sigma(t) / sigma(prior) of attitude, biases, scale and misalignment, log scale."""
+    fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
+    groups = [
+        (axes[0, 0], "attitude (east, north, up)", timeline.attitude_sigma_deg, timeline.attitude_sigma_deg[0],
+         ["east", "north", "up"]),
+        (axes[0, 1], "DVL scale and misalignment",
+         np.column_stack([timeline.scale_sigma, timeline.misalignment_sigma_deg]),
+         np.concatenate([[priors["scale"]], np.atleast_1d(priors["misalignment_deg"])]),
+         ["scale", *MIS_AXES]),
+        (axes[1, 0], "gyro bias", timeline.gyro_bias_sigma_deg_per_h, priors["gyro_bias_deg_per_h"],
+         list(AXES3)),
+        (axes[1, 1], "accelerometer bias", timeline.accel_bias_sigma_ug, priors["accel_bias_ug"], list(AXES3)),
+    ]
+    for ax, name, sig, p0, labels in groups:
+        if segments:
+            shade_segments(ax, segments)
+        ratio = np.asarray(sig) / np.asarray(p0, dtype=float)
+        for j, lab in enumerate(labels):
+            ax.semilogy(timeline.t, ratio[:, j], lw=1.2, label=lab)
+        ax.set_title(name, fontsize=10)
+        ax.set_ylabel("sigma / initial sigma")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8, loc="lower left")
+    for ax in axes[1]:
+        ax.set_xlabel("time (s)")
+    fig.suptitle(title or "Normalised standard deviations (the paper's Figure 12)")
+    return save_figure(fig, path)

@@ -1,0 +1,88 @@
+"""Initialisation without the truth: static-segment detection and coarse alignment.
+
+Roll and pitch come from the mean specific force (it points up in a static body), heading from
+gyrocompassing: the horizontal part of the measured Earth rate points north.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gtsam_dvl.core.config import AlignmentConfig
+from gtsam_dvl.core.earth import LocalFrame
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.rotations import rpy_deg_to_matrix, rpy_to_matrix
+from gtsam_dvl.core.types import DvlData, ImuData
+
+
+@dataclass
+class Alignment:
+    """Initial attitude of base_link in map at t_end of the static segment (or at the first IMU sample)."""
+
+    n_R_b: np.ndarray
+    t_static_end: float  # end of the detected static segment, s (0 when none was used)
+    method: str  # "static" or "configured"
+    b_f_mean: np.ndarray | None = None  # mean specific force on the static segment, m/s^2
+    b_omega_mean: np.ndarray | None = None  # mean gyro on the static segment, rad/s
+
+
+STATIC_MARGIN_S = 5.0  # the static segment ends this long before motion is first detected
+
+
+def window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Means of x over consecutive windows of window_s seconds; returns (window end times, means)."""
+    idx = np.floor((t - t[0]) / window_s).astype(int)
+    n = int(idx[-1]) + 1
+    sums = np.zeros((n, x.shape[1]))
+    np.add.at(sums, idx, x)
+    counts = np.bincount(idx, minlength=n)[:, None]
+    ok = counts[:, 0] > 0
+    ends = t[0] + (np.arange(n) + 1) * window_s
+    return ends[ok], sums[ok] / counts[ok]
+
+
+def detect_static_end(imu: ImuData, dvl: DvlData, cfg: AlignmentConfig) -> float:
+    """End time (s) of the static segment at the start of the log; 0 when the log starts moving."""
+    ends, f_means = window_means(imu.t, imu.b_f)
+    _, w_means = window_means(imu.t, imu.b_omega)
+    n_ref = max(1, min(10, len(ends)))
+    f_ref, w_ref = f_means[:n_ref].mean(axis=0), w_means[:n_ref].mean(axis=0)
+    moving = (np.linalg.norm(f_means - f_ref, axis=1) > cfg.accel_threshold_m_s2) | (
+        np.degrees(np.linalg.norm(w_means - w_ref, axis=1)) > cfg.gyro_threshold_deg_s)
+    t_end = float(ends[np.argmax(moving)] - STATIC_MARGIN_S) if moving.any() else float(ends[-1])
+    speed = np.linalg.norm(dvl.d_v, axis=1)
+    fast = dvl.valid & (speed > cfg.dvl_speed_threshold_m_s)
+    if fast.any():
+        t_end = min(t_end, float(dvl.t[np.argmax(fast)]) - STATIC_MARGIN_S)
+    if cfg.max_static_s > 0:
+        t_end = min(t_end, float(imu.t[0]) + cfg.max_static_s)
+    return t_end if t_end > imu.t[0] else float(imu.t[0])
+
+
+def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame) -> np.ndarray:
+    """n_R_b from mean static specific force b_f (m/s^2) and gyro b_omega (rad/s), at the map origin."""
+    roll = np.arctan2(b_f[1], b_f[2])
+    pitch = np.arctan2(-b_f[0], np.hypot(b_f[1], b_f[2]))
+    l_R_b_level = rpy_to_matrix(float(roll), float(pitch), 0.0)  # heading still unknown
+    w_level = l_R_b_level @ b_omega  # = Rz(yaw)^T n_omega_ie
+    yaw = np.arctan2(w_level[0], w_level[1])
+    if np.hypot(w_level[0], w_level[1]) < 0.2 * np.linalg.norm(frame.n_omega_ie[:2]):
+        raise GtsamDvlError("gyrocompassing failed: the horizontal Earth rate is not visible in the gyros "
+                            "(IMU too noisy, or latitude near a pole); give alignment.initial_attitude_deg")
+    return rpy_to_matrix(float(roll), float(pitch), float(yaw))
+
+
+def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig) -> Alignment:
+    """Initial attitude: the configured one, else coarse alignment on the initial static segment."""
+    if cfg.initial_attitude_deg is not None:
+        return Alignment(rpy_deg_to_matrix(cfg.initial_attitude_deg), 0.0, "configured")
+    t_end = detect_static_end(imu, dvl, cfg)
+    if t_end - imu.t[0] < cfg.min_static_s:
+        raise GtsamDvlError(
+            f"no static segment of at least {cfg.min_static_s:.0f} s at the start of the log (found "
+            f"{max(t_end - imu.t[0], 0.0):.0f} s); set alignment.initial_attitude_deg in the configuration")
+    sel = imu.t <= t_end
+    b_f, b_omega = imu.b_f[sel].mean(axis=0), imu.b_omega[sel].mean(axis=0)
+    return Alignment(coarse_alignment(b_f, b_omega, frame), t_end, "static", b_f, b_omega)

@@ -1,0 +1,5 @@
+"""The paper's error-state EKF (filter.py) on a strapdown in the Earth-fixed map frame (strapdown.py)."""
+
+from gtsam_dvl.estimators.ekf.filter import FilterState, measurement_model, run_ekf
+
+__all__ = ["FilterState", "measurement_model", "run_ekf"]

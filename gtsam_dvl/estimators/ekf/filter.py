@@ -1,0 +1,368 @@
+"""The paper's practical estimator (its section 3): an error-state extended Kalman filter on the full
+navigation equations with the DVL measurement of eq. 7, as a baseline for the factor-graph smoothers.
+The equations are the paper's eq. 3-5 written in the Earth-fixed map frame, as the smoother uses them:
+Earth rate and normal gravity at the vehicle's position, no transport rate, Cartesian position.
+
+Nominal state: n_R_b, n_v, n_p (map frame), gyro and accelerometer biases, DVL scale k, misalignment
+b_R_d; error state of dimension 19 (ekf_strapdown.py gives its definition and dynamics). The strapdown runs
+at the IMU rate (vectorised per DVL interval); the covariance is propagated once per DVL interval with the
+interval's closed-form transition matrix. Each valid ping is a measurement update with
+
+    y = k * d_R_b * ( n_R_b^T n_v + b_omega x b_l ) + noise,     d_R_b = b_R_d^T      (CONVENTIONS.md)
+
+Same Earth model, initialisation, priors and noise as the smoother (graph.py, config.py): coarse alignment
+on the static segment, scale 0.8, misalignment at the nominal mounting, the first ping's velocity at that
+calibration, position 0 at the first ping. The error is injected after every update (no reset Jacobian:
+its effect is second order in the correction). Every ping is used: solver.keyframe_interval_s only thins
+the smoother's states.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.earth import LocalFrame, gravity_gradient, normal_gravity
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.progress import ProgressFn
+from gtsam_dvl.core.result import NavResult, Timeline
+from gtsam_dvl.core.rotations import matrix_to_rpy, skew, so3_exp
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.alignment import align
+from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
+from gtsam_dvl.estimators.graph import map_frame_of
+
+# Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
+# estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
+# on a noisy regressor drags k towards 0 (0.8 -> 0.4 over the 600 s static start of paper-3d, sigma 0.045).
+# Treating them as consider states is not enough: with the k uncertainty times the noisy velocity in the
+# innovation covariance the DVL stops constraining the velocity, which then drifts (5 m/s in 600 s). The
+# true sensitivity of y to k and b_R_d is the true velocity, about zero, so below a speed ("slow": under
+# MIN_CALIBRATION_SPEED_M_S or under CALIBRATION_SPEED_SIGMAS velocity sigmas, as in the first seconds
+# when a 1 deg tilt prior lets the predicted velocity wander by 0.1 m/s) their Jacobian columns are zero.
+MIN_CALIBRATION_SPEED_M_S = 0.1
+CALIBRATION_SPEED_SIGMAS = 5.0
+CALIBRATION = np.r_[SCALE, 16:19]  # error-state indices of the DVL scale and misalignment
+MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
+GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
+
+
+@dataclass
+class FilterState:
+    """Nominal state and error-state covariance of the filter."""
+
+    nav: NavState
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    scale: float
+    b_R_d: np.ndarray
+    P: np.ndarray
+
+
+@dataclass
+class _History:
+    """What is recorded after each update."""
+
+    t: list[float] = field(default_factory=list)
+    n_p: list[np.ndarray] = field(default_factory=list)
+    n_R_b: list[np.ndarray] = field(default_factory=list)
+    n_v: list[np.ndarray] = field(default_factory=list)
+    P: list[np.ndarray] = field(default_factory=list)
+    b_omega: list[np.ndarray] = field(default_factory=list)
+    gyro_bias: list[np.ndarray] = field(default_factory=list)
+    accel_bias: list[np.ndarray] = field(default_factory=list)
+    scale: list[float] = field(default_factory=list)
+    b_R_d: list[np.ndarray] = field(default_factory=list)
+
+
+class _Earth:
+    """Earth rate and gravity for the filter: WGS84 normal gravity at the position, or the flat model.
+
+    Gravity is linearised about a point refreshed every GRADIENT_REFRESH_M: its curvature over that
+    distance is g (100 m / 6400 km)^2 = 2e-9 m/s^2."""
+
+    def __init__(self, frame: LocalFrame, flat: bool) -> None:
+        self.frame, self.flat = frame, flat
+        self.n_omega_ie = np.zeros(3) if flat else frame.n_omega_ie
+        self._g = np.array([0.0, 0.0, -float(normal_gravity(frame.lat0, frame.height_m))])
+        self._G = np.zeros((3, 3))
+        self._at = np.full(3, np.inf)
+
+    def gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.flat:
+            return self._g, self._G
+        if np.linalg.norm(n_p - self._at) > GRADIENT_REFRESH_M:
+            self._at = n_p.copy()
+            self._g, self._G = self.frame.n_gravity(n_p), gravity_gradient(self.frame, n_p)
+        return self._g + self._G @ (n_p - self._at), self._G
+
+
+def _select_pings(log: LogData, config: EstimatorConfig, counters: dict[str, int]) -> np.ndarray:
+    """Indices of the usable DVL pings (the graph builder's rule, without keyframe thinning)."""
+    dvl, imu, cfg = log.dvl, log.imu, config.dvl
+    usable = dvl.valid.copy()
+    if cfg.use_beams and dvl.beams is not None:
+        usable = np.asarray(dvl.beams.valid.any(axis=1))
+    speed = np.linalg.norm(np.nan_to_num(dvl.d_v), axis=1)
+    too_fast = usable & (speed > cfg.max_speed_m_s) & (not cfg.use_beams)
+    counters["dvl_too_fast"] = int(too_fast.sum())
+    usable &= ~too_fast
+    usable &= (dvl.t > imu.t[0]) & (dvl.t <= imu.t[-1])
+    counters["dvl_unusable"] = int((~usable).sum())
+    return np.flatnonzero(usable)
+
+
+def _imu_pieces(t: np.ndarray, starts: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+    """Samples covering (a, b] and the part of each inside it (s): interval averages are split exactly."""
+    lo = int(np.searchsorted(t, a, side="right"))
+    hi = min(int(np.searchsorted(t, b, side="left")), len(t) - 1)
+    idx = np.arange(lo, hi + 1)
+    dt = np.minimum(t[idx], b) - np.maximum(starts[idx], a)
+    keep = dt > 0.0
+    return idx[keep], dt[keep]
+
+
+def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int) -> FilterState:
+    """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance."""
+    pri, imu_cfg = config.priors, config.imu
+    b_R_d0 = log.mounting.b_R_d0
+    k0 = pri.scale_initial
+    d_y = log.dvl.d_v[ping]
+    n_v = n_R_b @ (b_R_d0 @ d_y) / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
+    P = np.zeros((N_ERR, N_ERR))
+    rp, yaw = np.radians(pri.roll_pitch_sigma_deg), np.radians(pri.yaw_sigma_deg)
+    P[PHI, PHI] = np.diag([rp**2, rp**2, yaw**2])  # map axes: the error phi is about map axes
+    P[VEL, VEL] = np.eye(3) * pri.velocity_sigma_m_s**2
+    P[POS, POS] = np.eye(3) * pri.position_sigma_m**2
+    P[BG, BG] = np.eye(3) * (imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H) ** 2
+    P[BA, BA] = np.eye(3) * (imu_cfg.accel_bias_sigma_ug * UG) ** 2
+    P[SCALE, SCALE] = pri.scale_sigma**2
+    mis = np.radians(np.asarray(pri.misalignment_sigma_deg, dtype=float))
+    P[MIS, MIS] = b_R_d0.T @ np.diag(mis**2) @ b_R_d0  # body-axis sigmas in b_R_d's right tangent
+    return FilterState(NavState(n_R_b.copy(), n_v, np.zeros(3)), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P)
+
+
+def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
+    """Discrete process noise of an interval: trapezoid of the continuous white noise through Phi."""
+    imu_cfg = config.imu
+    q = np.zeros(N_ERR)
+    q[PHI] = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2
+    q[VEL] = (imu_cfg.accel_noise_ug_rthz * UG) ** 2
+    q[POS] = imu_cfg.integration_sigma_m_rts**2
+    if imu_cfg.bias_model == "random_walk":
+        q[BG] = (imu_cfg.gyro_bias_rw_deg_per_h_per_rth * DEG_PER_H / 60.0) ** 2
+        q[BA] = (imu_cfg.accel_bias_rw_ug_per_rth * UG / 60.0) ** 2
+    Qc = np.diag(q)
+    return 0.5 * T * (Phi @ Qc @ Phi.T + Qc)
+
+
+def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray,
+                      n_omega_ie: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Predicted DVL velocity y (3,), its Jacobian H (3, 19) w.r.t. the error state, and the body rate
+    relative to map used for the lever arm."""
+    R, v, k = fs.nav.n_R_b, fs.nav.n_v, fs.scale
+    d_R_b = fs.b_R_d.T
+    b_omega = b_omega_m - fs.gyro_bias - R.T @ n_omega_ie
+    u = R.T @ v + np.cross(b_omega, b_l)
+    d_u = d_R_b @ u
+    H = np.zeros((3, N_ERR))
+    k_d_R_b = k * d_R_b
+    # R_true^T = R^T Exp(-phi): R^T v gains R^T [v]x phi; omega gains -R^T [w_ie]x phi - dbg
+    H[:, PHI] = k_d_R_b @ (R.T @ skew(v) + skew(b_l) @ R.T @ skew(n_omega_ie))
+    H[:, VEL] = k_d_R_b @ R.T
+    H[:, BG] = k_d_R_b @ skew(b_l)
+    H[:, SCALE] = d_u
+    H[:, MIS] = k * skew(d_u)  # d_R_b_true = Exp(-psi) d_R_b
+    return k * d_u, H, b_omega
+
+
+def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A, z, Rm): the measurement A y = z with noise covariance Rm: the 3-D velocity (A = I) or the valid
+    beams (rows of A the beam unit vectors)."""
+    cfg, dvl = config.dvl, log.dvl
+    if cfg.use_beams and dvl.beams is not None:
+        ok = dvl.beams.valid[j]
+        A = dvl.beams.d_u[j][ok]
+        return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_noise_m_s**2
+    cov = dvl.d_cov[j]
+    if cfg.noise_m_s > 0:
+        Rm = np.eye(3) * cfg.noise_m_s**2
+    elif np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0):
+        Rm = np.asarray(cov, dtype=float)
+    else:
+        Rm = np.eye(3) * cfg.default_noise_m_s**2
+    return np.eye(3), dvl.d_v[j], Rm
+
+
+def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray,
+           huber_k: float | None) -> tuple[float, bool]:
+    """Kalman update (Joseph form) and injection of the error into the nominal state.
+
+    Returns the normalised innovation squared and whether the Huber weight reduced the measurement's weight.
+    """
+    P = fs.P
+    S = H @ P @ H.T + Rm
+    nis = float(innovation @ np.linalg.solve(S, innovation))
+    down = False
+    if huber_k is not None and np.sqrt(nis) > huber_k:
+        w = huber_k / np.sqrt(nis)  # Huber weight on the whitened innovation: inflate the noise by 1/w
+        Rm = Rm / w
+        S = H @ P @ H.T + Rm
+        down = True
+    K = np.linalg.solve(S, H @ P).T
+    dx = K @ innovation
+    IKH = np.eye(N_ERR) - K @ H
+    P = IKH @ P @ IKH.T + K @ Rm @ K.T
+    fs.P = 0.5 * (P + P.T)
+    nav = fs.nav
+    fs.nav = NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS])
+    fs.gyro_bias = fs.gyro_bias + dx[BG]
+    fs.accel_bias = fs.accel_bias + dx[BA]
+    fs.scale = fs.scale + float(dx[SCALE])
+    fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
+    return nis, down
+
+
+def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
+            min_calibration_speed_m_s: float = MIN_CALIBRATION_SPEED_M_S) -> NavResult:
+    """Filter a whole log: trajectory and calibration at every usable DVL ping, with the filtering history.
+
+    Below min_calibration_speed_m_s the measurement is taken as insensitive to scale and misalignment
+    (see MIN_CALIBRATION_SPEED_M_S)."""
+    config = config or EstimatorConfig()
+    t_start = time.perf_counter()
+    counters: dict[str, int] = {"dvl_slow": 0}
+    frame = map_frame_of(log, config)
+    alignment = align(log.imu, log.dvl, frame, config.alignment)
+    pings = _select_pings(log, config, counters)
+    if len(pings) < 2:
+        raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
+    earth = _Earth(frame, config.solver.earth_model == "flat")
+    imu, dvl = log.imu, log.dvl
+    t = imu.t
+    dt_sample = np.diff(t, prepend=t[0] - (np.median(np.diff(t)) if len(t) > 1 else 0.01))
+    starts = t - dt_sample
+    gyro_index = np.minimum(np.searchsorted(t, dvl.t), len(t) - 1)
+    b_l = log.mounting.b_l
+    huber_k = config.dvl.huber_k if config.dvl.robust == "huber" else None
+
+    fs = initial_state(log, config, alignment.n_R_b, int(pings[0]))
+    hist = _History()
+    nis_sum, nis_dof, downweighted = 0.0, 0, 0
+    timing = {"propagate": 0.0, "update": 0.0}
+    t_prev = float(dvl.t[pings[0]])
+    for count, j in enumerate(pings):
+        t_j = float(dvl.t[j])
+        t0 = time.perf_counter()
+        while t_prev < t_j - 1e-9:  # propagate (in steps of at most MAX_STEP_S)
+            t_next = min(t_j, t_prev + MAX_STEP_S)
+            idx, dt = _imu_pieces(t, starts, t_prev, t_next)
+            if len(idx):
+                n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
+                step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
+                                          dt, earth.n_omega_ie, n_g, G)
+                fs.nav = step.state
+                fs.P = step.Phi @ fs.P @ step.Phi.T + process_noise(config, step.Phi, step.duration)
+            t_prev = t_next
+        t1 = time.perf_counter()
+        A, z, Rm = _ping_measurement(log, config, int(j))
+        y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
+        speed = np.linalg.norm(y_hat) / fs.scale
+        slow = speed < max(min_calibration_speed_m_s, CALIBRATION_SPEED_SIGMAS * np.sqrt(np.trace(fs.P[VEL, VEL])))
+        if slow:
+            H[:, CALIBRATION] = 0.0
+        nis, down = update(fs, A @ H, z - A @ y_hat, Rm, huber_k)
+        counters["dvl_slow"] += int(slow)
+        nis_sum, nis_dof, downweighted = nis_sum + nis, nis_dof + len(z), downweighted + int(down)
+        timing["propagate"] += t1 - t0
+        timing["update"] += time.perf_counter() - t1
+        _record(hist, fs, t_j, b_omega)
+        if progress and count % 100 == 0:
+            progress(count / len(pings))
+    counters["dvl_updates"] = len(pings)
+    counters["dvl_downweighted"] = downweighted
+    result = _to_result(hist, log, config)
+    result.timing_s = {**timing, "total": time.perf_counter() - t_start}
+    result.info = {"alignment": {"method": alignment.method, "t_static_end": alignment.t_static_end},
+                   "counters": counters, "epochs": len(pings),
+                   "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "error_state": N_ERR}}
+    if progress:
+        progress(1.0)
+    return result
+
+
+def misalignment_timeline(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
+                                                                                                  np.ndarray]:
+    """result.misalignment_rpy_and_cov over (N, 3, 3) stacks, vectorised: [roll, pitch, yaw] of
+    R_c = b_R_d b_R_d0^T (deg) and their covariance (deg^2), from the covariance in b_R_d's right tangent."""
+    R_c = b_R_d @ b_R_d0.T
+    cov_body = b_R_d @ cov_right @ np.transpose(b_R_d, (0, 2, 1))
+    rpy = matrix_to_rpy(R_c)
+    J = np.zeros(R_c.shape)
+    h = 1e-7
+    for j in range(3):
+        e = np.zeros(3)
+        e[j] = h
+        J[:, :, j] = (matrix_to_rpy(so3_exp(e) @ R_c) - matrix_to_rpy(so3_exp(-e) @ R_c)) / (2 * h)
+    cov = J @ cov_body @ np.transpose(J, (0, 2, 1))
+    return np.degrees(rpy), np.degrees(np.degrees(cov))
+
+
+def _record(hist: _History, fs: FilterState, t: float, b_omega: np.ndarray) -> None:
+    hist.t.append(t)
+    hist.n_p.append(fs.nav.n_p.copy())
+    hist.n_R_b.append(fs.nav.n_R_b.copy())
+    hist.n_v.append(fs.nav.n_v.copy())
+    hist.P.append(fs.P.copy())
+    hist.b_omega.append(b_omega)
+    hist.gyro_bias.append(fs.gyro_bias.copy())
+    hist.accel_bias.append(fs.accel_bias.copy())
+    hist.scale.append(fs.scale)
+    hist.b_R_d.append(fs.b_R_d.copy())
+
+
+def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResult:
+    """NavResult and Timeline from the history. GTSAM's Pose3 tangent is [rotation, translation] in body
+    axes: n_R_b Exp(w) = Exp(n_R_b w) n_R_b gives w = n_R_b^T phi, and Pose3's translation perturbation
+    t + n_R_b v gives v = n_R_b^T dp; so pose_cov = J P[phi, p] J^T with J = diag(n_R_b^T, n_R_b^T)."""
+    P = np.array(hist.P)
+    n_R_b = np.array(hist.n_R_b)
+    n = len(hist.t)
+    J = np.zeros((n, 6, 6))
+    J[:, :3, :3] = np.transpose(n_R_b, (0, 2, 1))
+    J[:, 3:, 3:] = J[:, :3, :3]
+    pose_idx = np.r_[0:3, 6:9]
+    P_pose = P[:, pose_idx][:, :, pose_idx]
+    pose_cov = J @ P_pose @ np.transpose(J, (0, 2, 1))
+    pose_vel_cross = J @ P[:, pose_idx, 3:6]
+    calib_idx = np.r_[12:15, 9:12, 15, 16:19]  # [accel, gyro] bias, scale, b_R_d right tangent
+    calib = P[-1][np.ix_(calib_idx, calib_idx)]
+    b_R_d0 = log.mounting.b_R_d0
+    mis_deg, mis_cov = misalignment_timeline(np.array(hist.b_R_d), b_R_d0, P[:, MIS, MIS])
+    diag = np.einsum("nii->ni", P)
+    timeline = Timeline(
+        t=np.array(hist.t),
+        scale=np.array(hist.scale),
+        scale_sigma=np.sqrt(diag[:, SCALE]),
+        misalignment_deg=mis_deg,
+        misalignment_sigma_deg=np.sqrt(np.einsum("nii->ni", mis_cov)),
+        gyro_bias_deg_per_h=np.array(hist.gyro_bias) / DEG_PER_H,
+        gyro_bias_sigma_deg_per_h=np.sqrt(diag[:, BG]) / DEG_PER_H,
+        accel_bias_ug=np.array(hist.accel_bias) / UG,
+        accel_bias_sigma_ug=np.sqrt(diag[:, BA]) / UG,
+        attitude_sigma_deg=np.degrees(np.sqrt(diag[:, PHI])),
+    )
+    return NavResult(
+        estimator="ekf",
+        t=np.array(hist.t), n_p=np.array(hist.n_p), n_R_b=n_R_b, n_v=np.array(hist.n_v),
+        pose_cov=pose_cov, vel_cov=P[:, 3:6, 3:6].copy(),
+        accel_bias=hist.accel_bias[-1], gyro_bias=hist.gyro_bias[-1], bias_cov=calib[:6, :6].copy(),
+        scale=float(hist.scale[-1]), scale_sigma=float(np.sqrt(P[-1][SCALE, SCALE])),
+        b_R_d=hist.b_R_d[-1], b_R_d_cov=P[-1][MIS, MIS].copy(), b_R_d0=b_R_d0, t0_ns=log.t0_ns,
+        b_omega=np.array(hist.b_omega), pose_vel_cross=pose_vel_cross, calib_joint_cov=calib,
+        timeline=timeline, config=config.to_dict(),
+    )

@@ -1,0 +1,413 @@
+"""The iSAM2 engine of the online estimator: a state per DVL epoch, over a fixed-lag window or the whole history.
+
+Settings (the issue's traps):
+- Factorisation QR: Cholesky fails at navigation-grade noise. Wildfire threshold 0: rotations matter at
+  1e-4 rad, below iSAM2's default 1e-3 on every component. Relinearisation checked at every update against a
+  threshold per variable type and tangent component (RelinearizationThresholds), not iSAM2's 0.1 on all.
+- Marginal covariances by QR: ISAM2.marginalCovariance eliminates with Cholesky and fails. The joint of the
+  newest state, bias, scale and misalignment comes from jointBayesNet(keys, EliminateQR) (those keys sit in
+  the root clique: about 0.2 ms), its square-root information inverted as a triangular matrix (the
+  information matrix itself spans 1e18 and cannot be inverted in double precision).
+
+Fixed lag, and why it is built this way (each alternative was measured on paper-3d):
+- The window is a chain of states sharing the bias, scale and misalignment. A new epoch touches its top, a
+  state leaving the window its bottom. Removing the old state's factors from iSAM2 and adding back their
+  marginal (removeFactorIndices plus a LinearContainerFactor) touches the bottom: iSAM2 re-eliminates from
+  there to the root, i.e. everything, which past 65 % of the variables is its batch step, relinearising every
+  factor through its Python callback: a median 5 to 11 ms per epoch for a 20 to 30 s window.
+- ISAM2.marginalizeLeaves cuts the bottom clique off and keeps its cached marginal, without re-eliminating
+  (IncrementalFixedLagSmoother is built on it). Its catch: every variable of the marginal it keeps is frozen at
+  its linearisation point, forever, the scale, misalignment and bias included; the first marginalisation
+  happens in the static phase, where the scale is its prior 0.8. Hence the rebase: when a frozen variable's
+  update exceeds its relinearisation threshold, a new iSAM2 is built from the same factors at the current
+  estimate (the marginals pinned to the old linearisation point as LinearContainerFactors, since
+  marginalizeLeaves keeps them relative to it). That costs what one relinearisation of the scale costs iSAM2
+  anyway, every factor of the window once (about 3 ms for a 20 s window, 5 ms for 30 s), and happens while the
+  estimate converges: about 70 times on paper-3d, 50 of them in the first 100 s (gyrocompassing from the
+  5 deg heading prior), 15 in the first Type-I manoeuvres; 80 in the 6-hour survey.
+- marginalizeLeaves needs the oldest state alone in a leaf clique (splitting a clique whose keys are not in
+  elimination order corrupts iSAM2, GTSAM issue #1101). Updates therefore give elimination groups (oldest
+  first, shared keys last) to the few newest states iSAM2 may relinearise, and mark older ones not to be
+  relinearised (an old state relinearised would re-eliminate the whole chain in an order of iSAM2's choosing);
+  they drift little and are relinearised by a rebase when they pass their threshold.
+- Bounded: the window holds a bounded number of variables and factors (and iSAM2 reuses the slots of removed
+  factors), so neither iSAM2's work per update nor the copy of the Values it hands to each Python CustomFactor
+  grows with the mission: the last hour of a 6-hour survey has a lower p99 than the first.
+- The alternative of a sliding-window Gauss-Newton written in Python (solver.py on the window, a QR marginal
+  prior on the oldest state) relinearises the whole window at every iteration: about 3 ms for 20 s (40 factors
+  at 45 to 95 us each), against a median 1.3 ms per epoch, everything included, here.
+
+Full history: iSAM2 with every state and its default ordering. Each relinearisation of the scale,
+misalignment or bias relinearises every DVL or IMU factor of the mission, each call copying all the Values:
+the cost per update grows with the mission (the whole paper-3d run: 25 to 40 s, single updates up to 10 s;
+the prototype took 262 s with iSAM2's default settings).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, V, X, key_dim
+from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.factors import EarthImuFactor
+
+RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see IncrementalSmoother._ordering)
+
+
+@dataclass
+class RelinearizationThresholds:
+    """iSAM2 relinearises a variable when a component of its update since its last linearisation exceeds
+    these (tangent components, GTSAM order). A stale linearisation leaves an error of second order in the
+    update; the thresholds keep it far below the noise of one factor (accelerometer noise: 1e-4 m/s in an IMU
+    factor's velocity over 1 s; DVL: 0.02 m/s):
+    - attitude about the body x, y axes: g dth^2 / 2 = 1.2e-6 m/s at 5e-4 rad; about body z (near the
+      vertical) gravity does not move, and the DVL sees v dth^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
+    - position enters through gravity (its gradient is in the Jacobian) and through the coupling of Pose3's
+      rotation and translation, which cancels between neighbouring states when the window shifts as a whole,
+      as it does when the calibration is refined at the end of kilometres of dead reckoning: 10 m;
+    - velocity, scale and misalignment enter the DVL model bilinearly (k R^T v): dk dv = 2e-4 m/s at 0.02 and
+      0.01 m/s; the misalignment's curvature v dc^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
+    - the IMU factor is linear in the bias (first-order bias correction of the preintegration): 100 micro-g,
+      2 deg/h, i.e. the bias never triggers a relinearisation in practice.
+    iSAM2's default, 0.1 on everything, let the scale wander to 0.04 in a prototype."""
+
+    pose: tuple[float, ...] = (5e-4, 5e-4, 5e-3, 10.0, 10.0, 10.0)  # rad (body x, y, z), m (body axes)
+    velocity: tuple[float, ...] = (0.01, 0.01, 0.01)  # m/s, map
+    bias: tuple[float, ...] = (1e-3, 1e-3, 1e-3, 1e-5, 1e-5, 1e-5)  # accel m/s^2, gyro rad/s
+    scale: float = 0.02
+    misalignment_rad: float = 5e-3
+
+    def threshold_map(self) -> gtsam.ISAM2ThresholdMap:
+        m = gtsam.ISAM2ThresholdMap()
+        m.insert(("x", np.asarray(self.pose, dtype=float)))
+        m.insert(("v", np.asarray(self.velocity, dtype=float)))
+        m.insert(("b", np.asarray(self.bias, dtype=float)))
+        m.insert(("k", np.array([self.scale])))
+        m.insert(("c", np.full(3, self.misalignment_rad)))
+        return m
+
+
+@dataclass
+class StateEstimate:
+    """The newest state, bias and calibration with their joint marginal covariance (SI, GTSAM tangents)."""
+
+    index: int
+    t: float
+    pose: gtsam.Pose3
+    n_v: np.ndarray
+    bias: gtsam.imuBias.ConstantBias
+    scale: float
+    b_R_d: np.ndarray
+    cov: np.ndarray  # (25, 25): pose (6), n_v (3), bias [accel, gyro] (6), scale (1), b_R_d (3)
+
+    @property
+    def pose_cov(self) -> np.ndarray:
+        return self.cov[:6, :6]
+
+    @property
+    def vel_cov(self) -> np.ndarray:
+        return self.cov[6:9, 6:9]
+
+    @property
+    def pose_vel_cross(self) -> np.ndarray:
+        return self.cov[:6, 6:9]
+
+    @property
+    def calib_cov(self) -> np.ndarray:
+        """(10, 10) joint of [accel, gyro] bias, scale and b_R_d (the order of NavResult.calib_joint_cov)."""
+        return self.cov[9:, 9:]
+
+
+class IncrementalSmoother:
+    """iSAM2 over the epochs given to `add_epoch` (factors from the shared GraphBuilder). `window_s` None
+    keeps every state (full history); otherwise states older than window_s seconds behind the newest are
+    marginalised (at least two states stay)."""
+
+    def __init__(self, builder: GraphBuilder, window_s: float | None, thresholds: RelinearizationThresholds,
+                 relinearize_skip: int = 1) -> None:
+        self.builder = builder
+        self.window_s = window_s
+        self.thresholds = thresholds
+        self.rw_bias = builder.config.imu.bias_model == "random_walk"
+        self.params = gtsam.ISAM2Params()
+        self.params.setFactorization("QR")
+        self.params.setRelinearizeThreshold(thresholds.threshold_map())
+        self.params.relinearizeSkip = relinearize_skip
+        self.params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
+        # reuse the slots of removed factors: otherwise iSAM2's factor table grows by three empty slots per
+        # epoch, and walking it (rebase) took 40 ms after six hours
+        self.params.findUnusedFactorSlots = window_s is not None
+        self.isam = gtsam.ISAM2(self.params)
+        self.first = 0  # oldest state in the window
+        self.times: dict[int, float] = {}  # of the states in the window
+        self.imus: dict[int, EarthImuFactor] = {}  # IMU factor from state i to i + 1, in the window
+        self.n = 0  # epochs added
+        self.t_last = -np.inf
+        self.marginalised = 0
+        self.rebases = 0
+        self._frozen = gtsam.KeyList()  # keys of the states older than the RECENT newest, oldest first
+        self._frozen_until = 0  # states below this index are in _frozen (or marginalised)
+        self._limits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._last_imu: EarthImuFactor | None = None
+
+    # ----- updates -------------------------------------------------------------------------------
+    def add_epoch(self, t: float, dvl_factors: list[gtsam.NonlinearFactor],
+                  pim: gtsam.PreintegratedImuMeasurements | None = None,
+                  params: gtsam.PreintegrationParams | None = None, first_values: gtsam.Values | None = None) -> None:
+        """Add state n at time t with its DVL factors (built by the caller with builder.dvl_factors_for(n, ...))
+        and, for n > 0, the preintegration since the previous epoch; for n == 0, first_values (builder.
+        first_state_values) seed the state, bias and calibration and the priors."""
+        i, b = self.n, self.builder
+        factors: list[gtsam.NonlinearFactor] = list(dvl_factors)
+        values = gtsam.Values()
+        if i == 0:
+            if first_values is None:
+                raise GtsamDvlError("the first epoch needs its initial values")
+            values = first_values
+            factors = b.prior_factors(values) + factors
+        else:
+            if pim is None or params is None:
+                raise GtsamDvlError("an epoch after the first needs its preintegration")
+            dt = t - self.t_last
+            imu = b.new_imu_factor(i - 1, pim, params, dt)
+            factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
+            prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)])
+            pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
+            bias = prev.atConstantBias(b.bias_key(i - 1))
+            self._reference_gravity(imu, pose.translation() + 0.5 * dt * n_v)
+            self.imus[i - 1] = imu
+            state = pim.predict(gtsam.NavState(pose, n_v), bias)
+            values.insert(X(i), state.pose())
+            values.insert(V(i), state.velocity())
+            if self.rw_bias:
+                values.insert(b.bias_key(i), bias)
+        self.n, self.t_last = i + 1, t
+        self.times[i] = t
+        graph = gtsam.NonlinearFactorGraph()
+        for f in factors:
+            graph.add(f)
+        self._update(graph, values)
+        if self.window_s is not None:
+            self._slide(t - self.window_s)
+
+    def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, rebase: bool = False) -> None:
+        try:
+            if self.window_s is None:
+                self.isam.update(graph, values)
+            else:
+                groups, frozen = self._ordering(rebase)
+                self.isam.update(graph, values, [], groups, frozen)
+        except RuntimeError as exc:
+            raise GtsamDvlError(f"iSAM2 update at t = {self.t_last:.3f} s failed ({exc})") from None
+
+    def _state_keys(self, i: int) -> tuple[int, ...]:
+        return (X(i), V(i), self.builder.bias_key(i)) if self.rw_bias else (X(i), V(i))
+
+    def _ordering(self, rebase: bool) -> tuple[gtsam.KeyGroupMap, gtsam.KeyList]:
+        """Elimination groups (states oldest first, the bias, scale and misalignment last) and the states iSAM2
+        must not relinearise. The window's Bayes tree stays a chain with the oldest state alone at its leaf,
+        which marginalizeLeaves removes without touching the rest (GTSAM issue #1101: splitting a clique whose
+        keys are not in elimination order corrupts iSAM2), and the newest state with the shared keys at its
+        root, so that a new epoch re-eliminates the top only. Hence only the newest RECENT states are
+        relinearised by iSAM2 (a relinearised old state would re-eliminate the whole chain, in an order iSAM2
+        chooses); older ones are relinearised by a rebase when they drift past their threshold. CCOLAMD wants
+        every group number below the number of keys it orders, which only the rebase's full re-elimination
+        allows for a long window: the normal update gives groups to the RECENT newest states only (an update
+        re-eliminates at least the two newest states and the three shared keys)."""
+        recent_from = self.first if rebase else max(self.first, self.n - RECENT)
+        while self._frozen_until < recent_from:  # states that just left the RECENT ones
+            for k in self._state_keys(self._frozen_until):
+                self._frozen.push_back(k)
+            self._frozen_until += 1
+        groups = gtsam.KeyGroupMap()
+        for i in range(recent_from, self.n):
+            for k in self._state_keys(i):
+                groups.insert2(k, i - recent_from)
+        for k in self.shared_keys(self.n - 1):
+            groups.insert2(k, self.n - recent_from)
+        return groups, (gtsam.KeyList() if rebase else self._frozen)
+
+    def _slide(self, t_oldest: float) -> None:
+        """Marginalise the states older than t_oldest (keeping two at least), then rebase if a variable iSAM2
+        does not relinearise moved from its linearisation point by more than its threshold."""
+        while self.first < self.n - 2 and self.times[self.first] < t_oldest:
+            s = self.first
+            keys = gtsam.KeyList()
+            for k in self._state_keys(s):
+                keys.push_back(k)
+            try:
+                self.isam.marginalizeLeaves(keys)
+            except RuntimeError:  # not a leaf after all: rebuild in time order, then it is
+                self.rebase()
+                self.isam.marginalizeLeaves(keys)
+            del self.times[s]
+            self.imus.pop(s, None)
+            if self._frozen_until > s:
+                for _ in self._state_keys(s):
+                    self._frozen.pop_front()
+            else:
+                self._frozen_until = s + 1
+            self.first = s + 1
+            self.marginalised += 1
+        if self._frozen_moved():
+            self.rebase()
+
+    def _frozen_moved(self) -> bool:
+        """Whether the shared keys or a state older than the RECENT newest moved from its linearisation point by
+        more than its relinearisation threshold (the shared keys are frozen by marginalizeLeaves, the old
+        states by _ordering)."""
+        delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, v, x (GTSAM symbols)
+        n_states = self.n - self.first
+        old = max(0, n_states - RECENT)
+        if (n_states, old) not in self._limits:
+            th = self.thresholds
+            is_old = np.arange(n_states) < old
+            if self.rw_bias:
+                limit, mask = [np.tile(th.bias, n_states)], [np.repeat(is_old, 6)]
+            else:
+                limit, mask = [np.asarray(th.bias, dtype=float)], [np.ones(6, bool)]
+            limit += [np.full(3, th.misalignment_rad), np.array([th.scale]), np.tile(th.velocity, n_states),
+                      np.tile(th.pose, n_states)]
+            mask += [np.ones(4, bool), np.repeat(is_old, 3), np.repeat(is_old, 6)]
+            self._limits[(n_states, old)] = (np.concatenate(limit), np.concatenate(mask))
+        lim, msk = self._limits[(n_states, old)]
+        if lim.shape != delta.shape:
+            raise GtsamDvlError(f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}")
+        return bool(((np.abs(delta) > lim) & msk).any())
+
+    def rebase(self) -> None:
+        """A new iSAM2 holding the same factors (the window's and the marginal of what left it), linearised at
+        the current estimate. ISAM2.marginalizeLeaves freezes the linearisation point of every variable of the
+        marginal it keeps, the shared keys included, forever; this is how they get relinearised (the cost of
+        one relinearisation of the scale in iSAM2 without a window: every factor of the window once)."""
+        values = self.isam.calculateEstimate()
+        theta = self.isam.getLinearizationPoint()
+        factors = self.isam.getFactorsUnsafe()
+        graph = gtsam.NonlinearFactorGraph()
+        for j in range(factors.size()):
+            f = factors.at(j)
+            if isinstance(f, gtsam.LinearContainerFactor):
+                # marginalizeLeaves' marginals carry no linearisation point: they are in iSAM2's delta around
+                # its theta, which is about to change; pin them to it
+                f = gtsam.LinearContainerFactor(f.linearize(theta), theta)
+            if f is not None:
+                graph.add(f)
+        self.isam = gtsam.ISAM2(self.params)
+        self._update(graph, values, rebase=True)
+        self.rebases += 1
+
+    def _reference_gravity(self, imu: EarthImuFactor, n_p_mid: np.ndarray) -> None:
+        """Local gravity model of a new IMU factor: the previous factor's while within its range (evaluating
+        gravity and its gradient costs about a millisecond), else evaluated at n_p_mid."""
+        last = self._last_imu
+        if imu.gravity is not None:
+            if last is not None and last.ref_p is not None and not last.needs_reference(n_p_mid):
+                imu.set_reference(last.ref_p, last.ref_g, last.ref_G)
+            else:
+                g, G = self.builder.gravity_model(n_p_mid)
+                imu.set_reference(n_p_mid, g, G)
+        imu.set_gravity(n_p_mid)
+        self._last_imu = imu
+
+    def refresh_gravity(self) -> int:
+        """Re-reference the gravity of the IMU factors whose mid position moved out of their reference's range
+        (factors/imu_earth.py); returns how many."""
+        stale = []
+        for s, imu in self.imus.items():
+            ends = self.isam.calculateEstimate([X(s), X(s + 1)])
+            mid = 0.5 * (ends.atPose3(X(s)).translation() + ends.atPose3(X(s + 1)).translation())
+            if imu.needs_reference(mid):
+                stale.append((imu, mid))
+        if stale:
+            g, G = self.builder.gravity_model(np.array([m for _, m in stale]))
+            for k, (imu, mid) in enumerate(stale):
+                imu.set_reference(mid, g[k], G[k])
+        return len(stale)
+
+    def refine(self, max_updates: int = 10) -> int:
+        """Extra iSAM2 updates without new data until no variable is relinearised (the end of a run);
+        returns the number of updates made."""
+        for k in range(max_updates):
+            moved = self.window_s is not None and self._frozen_moved()
+            if moved:
+                self.rebase()
+            result = self.isam.update()
+            if not moved and result.getVariablesRelinearized() == 0:
+                return k + 1
+        return max_updates
+
+    # ----- estimates -----------------------------------------------------------------------------
+    def shared_keys(self, i: int) -> list[int]:
+        return [self.builder.bias_key(i), K_SCALE, C_MISALIGN]
+
+    def estimate(self, with_covariance: bool = True) -> StateEstimate:
+        """The newest state, the bias and the calibration, with their joint marginal covariance."""
+        i = self.n - 1
+        keys = [X(i), V(i), *self.shared_keys(i)]
+        values = self.isam.calculateEstimate(keys)
+        cov = self.joint_covariance(keys) if with_covariance else np.full((25, 25), np.nan)
+        return StateEstimate(
+            index=i, t=self.t_last, pose=values.atPose3(X(i)), n_v=values.atVector(V(i)),
+            bias=values.atConstantBias(keys[2]), scale=float(values.atVector(K_SCALE)[0]),
+            b_R_d=values.atRot3(C_MISALIGN).matrix(), cov=cov)
+
+    def joint_covariance(self, keys: list[int]) -> np.ndarray:
+        """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""
+        try:
+            bn = self.isam.jointBayesNet(keys, gtsam.EliminateQR)
+        except RuntimeError as exc:
+            raise GtsamDvlError(f"marginal covariance failed ({exc})") from None
+        return bayes_net_covariance(bn, keys)
+
+    def size(self) -> tuple[int, int]:
+        """(variables, factors) iSAM2 holds now: bounded in the fixed-lag mode."""
+        factors = self.isam.getFactorsUnsafe()
+        return self.isam.getLinearizationPoint().size(), sum(factors.at(j) is not None for j in range(factors.size()))
+
+
+def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndarray:
+    """Covariance of a (joint marginal) Gaussian Bayes net, blocks in the order of keys: the net's square-root
+    information R (upper triangular in elimination order) is inverted."""
+    order: list[int] = []
+    conds = [bn.at(j) for j in range(bn.size())]
+    for c in conds:
+        ks = list(c.keys())
+        order.extend(ks[:_frontal_count(c, ks)])
+    offsets, off = {}, 0
+    for k in order:
+        offsets[k] = off
+        off += key_dim(k)
+    R = np.zeros((off, off))
+    row = 0
+    for c in conds:
+        A, _ = c.jacobian()  # whitened [R S], columns in c.keys() order
+        n_rows = A.shape[0]
+        col = 0
+        for k in c.keys():
+            d = key_dim(k)
+            R[row:row + n_rows, offsets[k]:offsets[k] + d] = A[:, col:col + d]
+            col += d
+        row += n_rows
+    if row != off:
+        raise GtsamDvlError("marginal covariance: the Bayes net is not square (rank-deficient problem)")
+    Rinv = np.linalg.inv(R)  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular is 500x slower
+    cov_elim = Rinv @ Rinv.T
+    idx = np.concatenate([np.arange(offsets[k], offsets[k] + key_dim(k)) for k in keys])
+    cov = cov_elim[np.ix_(idx, idx)]
+    return 0.5 * (cov + cov.T)
+
+
+def _frontal_count(c: gtsam.GaussianConditional, keys: list[int]) -> int:
+    """Number of frontal keys of a conditional: its R block is square with the frontals' total dimension."""
+    dim_r = c.R().shape[0]
+    total, n = 0, 0
+    for k in keys:
+        if total >= dim_r:
+            break
+        total += key_dim(k)
+        n += 1
+    return n

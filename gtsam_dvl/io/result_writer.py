@@ -1,0 +1,134 @@
+"""Write an estimator's result as a ROS 2 MCAP (CONVENTIONS.md: /gtsam_dvl/* topics).
+
+Covariances are converted from GTSAM's tangent spaces to ROS conventions: Odometry pose covariance over
+(x, y, z, rot_x, rot_y, rot_z) in map axes, twist covariance in base_link.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
+from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, skew
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.io.atomic import to_json
+from gtsam_dvl.io.mcap.writer import McapLogWriter
+
+TOPICS = {
+    "odometry": "/gtsam_dvl/odometry",
+    "path": "/gtsam_dvl/path",
+    "imu_bias": "/gtsam_dvl/imu_bias",
+    "scale": "/gtsam_dvl/dvl_scale",
+    "misalignment": "/gtsam_dvl/dvl_misalignment",
+    "misalignment_rpy": "/gtsam_dvl/dvl_misalignment_rpy_deg",
+    "misalignment_sigma": "/gtsam_dvl/dvl_misalignment_sigma_deg",
+}
+
+
+def ros_pose_covariance(n_R_b: np.ndarray, pose_cov: np.ndarray) -> np.ndarray:
+    """(N,6,6) GTSAM Pose3 covariance [rot_body, trans_body] -> ROS [trans_map, rot_map]."""
+    n = len(n_R_b)
+    P = np.zeros((n, 6, 6))
+    P[:, :3, 3:] = n_R_b  # translation in map = R * body translation tangent
+    P[:, 3:, :3] = n_R_b  # rotation about map axes = R * body rotation tangent
+    return P @ pose_cov @ np.transpose(P, (0, 2, 1))
+
+
+def ros_twist_covariance(result: NavResult) -> np.ndarray:
+    """(N,6,6) covariance of (b_v, b_omega) in base_link; the angular block is left zero (unknown)."""
+    n = len(result.t)
+    out = np.zeros((n, 6, 6))
+    b_v = np.einsum("nji,nj->ni", result.n_R_b, result.n_v)
+    for i in range(n):
+        # b_v = R^T n_v: d b_v = [b_v]x d theta_body + R^T d n_v
+        J = np.hstack([skew(b_v[i]), np.zeros((3, 3)), result.n_R_b[i].T])
+        joint = np.zeros((9, 9))
+        joint[:6, :6] = result.pose_cov[i]
+        joint[6:, 6:] = result.vel_cov[i]
+        if result.pose_vel_cross is not None:
+            joint[:6, 6:] = result.pose_vel_cross[i]
+            joint[6:, :6] = result.pose_vel_cross[i].T
+        out[i, :3, :3] = J @ joint @ J.T
+    return out
+
+
+TIMELINE_PREFIX = "/gtsam_dvl/filter"
+
+
+def calibration_record(result: NavResult) -> dict[str, Any]:
+    """What evaluation needs to redo the observability analysis without the graph."""
+    return {"estimator": result.estimator, "scale": result.scale, "b_R_d": result.b_R_d, "b_R_d0": result.b_R_d0,
+            "accel_bias_m_s2": result.accel_bias, "gyro_bias_rad_s": result.gyro_bias,
+            "calib_joint_cov": result.calib_joint_cov,
+            "calib_joint_cov_order": "accel bias (3, m/s^2), gyro bias (3, rad/s), scale (1), "
+                                     "b_R_d right tangent (3, rad)",
+            "t": [float(result.t[0]), float(result.t[-1])], "config": result.config}
+
+
+def timeline_npz_bytes(result: NavResult) -> bytes:
+    assert result.timeline is not None
+    buf = io.BytesIO()
+    np.savez(buf, **result.timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
+    return buf.getvalue()
+
+
+def write_timeline_topics(w: McapLogWriter, result: NavResult) -> None:
+    """The filtering history as topics: estimate and sigma of scale, misalignment, biases; attitude sigma."""
+    tl = result.timeline
+    assert tl is not None
+    p = TIMELINE_PREFIX
+    w.add_scalar_with_variance(f"{p}/dvl_scale", tl.t, tl.scale, tl.scale_sigma**2, "dvl_link")
+    w.add_vector3_stamped(f"{p}/dvl_misalignment_rpy_deg", tl.t, tl.misalignment_deg, "base_link")
+    w.add_vector3_stamped(f"{p}/dvl_misalignment_sigma_deg", tl.t, tl.misalignment_sigma_deg, "base_link")
+    w.add_vector3_stamped(f"{p}/gyro_bias_deg_per_h", tl.t, tl.gyro_bias_deg_per_h, "imu_link")
+    w.add_vector3_stamped(f"{p}/gyro_bias_sigma_deg_per_h", tl.t, tl.gyro_bias_sigma_deg_per_h, "imu_link")
+    w.add_vector3_stamped(f"{p}/accel_bias_ug", tl.t, tl.accel_bias_ug, "imu_link")
+    w.add_vector3_stamped(f"{p}/accel_bias_sigma_ug", tl.t, tl.accel_bias_sigma_ug, "imu_link")
+    w.add_vector3_stamped(f"{p}/attitude_sigma_deg", tl.t, tl.attitude_sigma_deg, "map")
+
+
+def write_result_log(path: Path | str, result: NavResult, log: LogData, summary: dict[str, Any]) -> Path:
+    """Estimates with marginal covariances, path, biases and calibration, plus the summary and the
+    effective configuration (metadata record and config.json attachment). Written atomically."""
+    path = Path(path)
+    t = result.t
+    n = len(t)
+    n_q_b = matrix_to_quat_xyzw(result.n_R_b)
+    b_v = np.einsum("nji,nj->ni", result.n_R_b, result.n_v)
+    b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
+    mis_rpy, mis_cov = misalignment_rpy_and_cov(result.b_R_d, result.b_R_d0, result.b_R_d_cov)
+    R_c = result.b_R_d @ result.b_R_d0.T
+    ones = np.ones(n)
+    with McapLogWriter(path, t0_ns=result.t0_ns) as w:
+        m = log.mounting
+        w.add_tf_static("/tf_static", float(t[0]), [("base_link", "imu_link", m.b_R_imu, m.b_p_imu),
+                                                    ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl)])
+        w.add_odometry(TOPICS["odometry"], t, result.n_p, n_q_b, b_v, b_omega,
+                       ros_pose_covariance(result.n_R_b, result.pose_cov), ros_twist_covariance(result))
+        w.add_path(TOPICS["path"], t, result.n_p, n_q_b)
+        bias_cov = np.broadcast_to(result.bias_cov, (n, 6, 6))
+        w.add_accel_with_covariance(TOPICS["imu_bias"], t, np.outer(ones, result.accel_bias),
+                                    np.outer(ones, result.gyro_bias), bias_cov, "imu_link")
+        w.add_scalar_with_variance(TOPICS["scale"], t[-1:], np.array([result.scale]),
+                                   np.array([result.scale_sigma**2]), "dvl_link")
+        cov_c = np.zeros((6, 6))
+        cov_c[3:, 3:] = result.b_R_d @ result.b_R_d_cov @ result.b_R_d.T  # body axes, rad^2
+        w.add_pose_with_covariance(TOPICS["misalignment"], t[-1:], np.zeros((1, 3)), matrix_to_quat_xyzw(R_c)[None],
+                                   cov_c[None], "base_link")
+        w.add_vector3_stamped(TOPICS["misalignment_rpy"], t[-1:], mis_rpy[None], "base_link")
+        w.add_vector3_stamped(TOPICS["misalignment_sigma"], t[-1:], np.sqrt(np.diag(mis_cov))[None], "base_link")
+        if result.timeline is not None:
+            write_timeline_topics(w, result)
+            w.add_attachment("timeline.npz", timeline_npz_bytes(result), "application/x-npz")
+        w.add_attachment("calibration.json", to_json(calibration_record(result)).encode(), "application/json")
+        w.add_metadata("gtsam_dvl_result", {"estimator": result.estimator, "summary": to_json(summary),
+                                            "source_log": str(log.source)})
+        w.add_attachment("config.json", json.dumps({"estimator": result.estimator, "config": result.config},
+                                                   default=str, indent=2).encode(), "application/json")
+        w.add_attachment("summary.json", to_json(summary).encode(), "application/json")
+    return path

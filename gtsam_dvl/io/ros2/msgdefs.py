@@ -1,0 +1,75 @@
+"""ROS 2 message definitions shipped with the package, concatenated the way rosbag2 stores them.
+
+The .msg files live in ``msgdefs/`` named ``pkg__msg__Type.msg`` (flat, so pyproject's package-data glob
+ships them). We keep our own copies rather than asking a ROS installation because the writer must work
+without one; the definitions carry the standard field lists (comments shortened).
+"""
+
+from __future__ import annotations
+
+import re
+from functools import cache
+from importlib import resources
+
+SEPARATOR = "=" * 80
+PRIMITIVES = frozenset(
+    "bool byte char float32 float64 int8 uint8 int16 uint16 int32 uint32 int64 uint64 string wstring".split()
+)
+
+
+def normalize_type(name: str) -> str:
+    """'pkg/Type' or 'pkg/msg/Type' -> 'pkg/msg/Type'."""
+    parts = name.split("/")
+    return f"{parts[0]}/msg/{parts[-1]}" if len(parts) == 2 else name
+
+
+@cache
+def message_text(type_name: str) -> str:
+    """The .msg text of one type (no dependencies), e.g. 'sensor_msgs/msg/Imu'."""
+    pkg, _, msg = normalize_type(type_name).split("/")
+    path = resources.files("gtsam_dvl.io.ros2").joinpath("msgdefs", f"{pkg}__msg__{msg}.msg")
+    try:
+        return path.read_text(encoding="utf-8").rstrip("\n")
+    except FileNotFoundError:
+        raise KeyError(f"no message definition shipped for {type_name}") from None
+
+
+def dependencies(type_name: str) -> list[str]:
+    """Field types of a message (fully qualified 'pkg/msg/Type'), in field order, without repeats."""
+    pkg = normalize_type(type_name).split("/")[0]
+    out: list[str] = []
+    for line in message_text(type_name).splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        ftype = re.sub(r"\[.*\]$", "", line.split()[0])
+        if ftype in PRIMITIVES or ftype.startswith(("string<", "wstring<")):
+            continue  # primitives and constants
+        if ftype == "Header":
+            full = "std_msgs/msg/Header"
+        elif "/" in ftype:
+            full = normalize_type(ftype)
+        else:
+            full = f"{pkg}/msg/{ftype}"
+        if full not in out:
+            out.append(full)
+    return out
+
+
+@cache
+def full_definition(type_name: str) -> str:
+    """The main definition, then every dependency (depth first) after a separator line and
+    ``MSG: pkg/msg/Type``, as rosbag2 writes the ``ros2msg`` schema of a channel."""
+    main = normalize_type(type_name)
+    order: list[str] = []
+
+    def visit(name: str) -> None:
+        for dep in dependencies(name):
+            if dep not in order and dep != main:
+                order.append(dep)
+                visit(dep)
+
+    visit(main)
+    parts = [message_text(main)]
+    parts += [f"{SEPARATOR}\nMSG: {dep}\n{message_text(dep)}" for dep in order]
+    return "\n".join(parts) + "\n"

@@ -1,0 +1,259 @@
+"""Simulation scenarios: a typed view of a scenario TOML file (origin, rates, motion, sensors, mounting).
+
+Units in the files are the ones navigation people quote (degrees, deg/h, micro-g, deg/h/sqrt(Hz),
+micro-g/sqrt(Hz), m/s, seconds) and every key name carries its unit. The dataclasses keep those units;
+the simulator converts to SI. Built-in scenarios live in data/scenarios/, installed as the package
+`gtsam_dvl.scenarios`.
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from gtsam_dvl.core.earth import LocalFrame
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.units import DEG_PER_H, MICRO_G
+from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, parse_segments
+
+DEFAULT_T0_S = 1_700_000_000  # ROS time of t = 0 when the file gives none: fixed so logs are reproducible
+
+__all__ = [
+    "DEG_PER_H",
+    "MICRO_G",
+    "SEGMENT_KINDS",
+    "DvlSpec",
+    "ImuSpec",
+    "InitialState",
+    "MotionSegment",
+    "MountingSpec",
+    "Origin",
+    "Rates",
+    "Scenario",
+    "list_builtin_scenarios",
+    "load_scenario",
+    "scenario_from_dict",
+]
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Geodetic origin of the map frame and the vehicle's start point (WGS84)."""
+
+    lat_deg: float
+    lon_deg: float
+    height_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class Rates:
+    """Sensor and truth rates. DVL stamps are k / dvl_hz + dvl_time_offset_s."""
+
+    imu_hz: float = 100.0
+    dvl_hz: float = 1.0
+    truth_hz: float = 10.0
+    dvl_time_offset_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """Attitude of base_link in the local level (ENU; yaw counter-clockwise from east) and speed at t = 0."""
+
+    roll_deg: float = 0.0
+    pitch_deg: float = 0.0
+    yaw_deg: float = 0.0
+    speed_m_s: float = 0.0
+
+
+@dataclass(frozen=True)
+class MotionSegment:
+    """One row of the motion table. Times are filled in by the loader from the durations.
+
+    kind: static | level | straight | descent | ascent | turn | square (see sim/schema.py).
+    paper_type: the paper's segment type, "I", "II", "I+II" or "-".
+    """
+
+    kind: str
+    start_s: float
+    end_s: float
+    paper_type: str
+    speed_end_m_s: float | None = None  # level: speed at the end (None: unchanged)
+    speed_bump_m_s: float = 0.0  # level: peak of a smooth surge added on top
+    peak_vertical_speed_m_s: float = 0.0  # descent/ascent: peak sink/rise rate (positive)
+    heading_change_deg: float = 0.0  # turn: positive = left (counter-clockwise seen from above)
+    bank_deg: float = 0.0  # turn/square: peak roll into the turn
+    leg_duration_s: float = 0.0  # square
+    turn_duration_s: float = 0.0  # square
+    sides: int = 4  # square
+    turn_first: bool = False  # square: start with a turn instead of a leg
+    direction: str = "left"  # square
+
+    @property
+    def duration_s(self) -> float:
+        return self.end_s - self.start_s
+
+
+@dataclass(frozen=True)
+class ImuSpec:
+    """IMU errors in file units. Biases: 1-sigma of a random constant per axis unless values are given."""
+
+    gyro_bias_deg_per_h: float = 0.0
+    accel_bias_micro_g: float = 0.0
+    gyro_bias_values_deg_per_h: tuple[float, float, float] | None = None
+    accel_bias_values_micro_g: tuple[float, float, float] | None = None
+    gyro_noise_deg_per_h_per_sqrt_hz: float = 0.0
+    accel_noise_micro_g_per_sqrt_hz: float = 0.0
+    gyro_bias_walk_deg_per_h_per_sqrt_h: float = 0.0
+    accel_bias_walk_micro_g_per_sqrt_h: float = 0.0
+
+
+@dataclass(frozen=True)
+class DvlSpec:
+    """DVL truth calibration, beam geometry, noise and bottom-lock model (file units)."""
+
+    scale: float = 1.0
+    misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw of R_c (FLU)
+    noise_model: str = "velocity"  # "velocity": 3-D white noise; "beam": per-beam noise + least squares
+    noise_m_s: float = 0.0  # 1 sigma, per axis ("velocity") or per beam ("beam")
+    beam_angle_deg: float = 30.0  # from the face axis
+    face_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)  # in dvl_link, towards the bottom
+    altitude_m: float = 30.0  # flat seafloor this far below the starting height
+    max_range_m: float = 200.0  # beams longer than this lose bottom lock
+    dropout_ping_prob: float = 0.0
+    dropout_beam_prob: float = 0.0
+    outlier_prob: float = 0.0  # per ping ("velocity") or per beam ("beam")
+    outlier_m_s: float = 1.0  # size of a gross error
+
+
+@dataclass(frozen=True)
+class MountingSpec:
+    """Nominal DVL mounting in base_link (what /tf_static says) and lever arm from the IMU."""
+
+    dvl_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # b_R_d0 = Rz Ry Rx
+    dvl_lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A loaded scenario. raw keeps the TOML dict (goes into the log metadata unchanged)."""
+
+    name: str
+    description: str
+    origin: Origin
+    rates: Rates
+    initial: InitialState
+    imu: ImuSpec
+    dvl: DvlSpec
+    mounting: MountingSpec
+    segments: tuple[MotionSegment, ...]
+    raw: dict[str, Any]
+    source: str = "<dict>"
+    t0_ns: int = DEFAULT_T0_S * 1_000_000_000
+
+    @property
+    def duration_s(self) -> float:
+        return self.segments[-1].end_s
+
+    def local_frame(self) -> LocalFrame:
+        """The map frame: ENU at the origin."""
+        return LocalFrame(self.origin.lat_deg, self.origin.lon_deg, self.origin.height_m)
+
+    def segment_table(self) -> list[dict[str, Any]]:
+        """Rows {start_s, end_s, kind, type} with the paper's segment type (Table 1). Consecutive pieces of
+        the same kind and type (e.g. a speed-up then a surge, both level Type I) form one row, as the
+        paper's table counts segments by motion."""
+        rows: list[dict[str, Any]] = []
+        for s in self.segments:
+            if rows and rows[-1]["kind"] == s.kind and rows[-1]["type"] == s.paper_type and s.kind != "static":
+                rows[-1]["end_s"] = s.end_s
+            else:
+                rows.append({"start_s": s.start_s, "end_s": s.end_s, "kind": s.kind, "type": s.paper_type})
+        return rows
+
+
+def list_builtin_scenarios() -> list[str]:
+    """Names of the scenarios shipped with the package."""
+    files = importlib.resources.files("gtsam_dvl.scenarios")
+    return sorted(p.name[: -len(".toml")] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a built-in scenario by name ("paper-3d") or a scenario TOML file by path."""
+    text: str
+    if isinstance(name_or_path, str) and name_or_path in list_builtin_scenarios():
+        res = importlib.resources.files("gtsam_dvl.scenarios") / f"{name_or_path}.toml"
+        text, source, stem = res.read_text(encoding="utf-8"), f"{name_or_path}.toml", name_or_path
+    else:
+        path = Path(name_or_path)
+        if not path.is_file():
+            raise GtsamDvlError(
+                f"scenario '{name_or_path}' not found: no such file and not a built-in "
+                f"({', '.join(list_builtin_scenarios())})"
+            )
+        text, source, stem = path.read_text(encoding="utf-8"), str(path), path.stem
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise GtsamDvlError(f"{source}: invalid TOML: {exc}") from exc
+    return scenario_from_dict(raw, name=stem, source=source)
+
+
+def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = "<dict>") -> Scenario:
+    """Build a Scenario from a dict shaped like a scenario file (tests and scripts use this)."""
+    r = Reader(raw, source)
+    r.check_keys(
+        "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments"]
+    )
+    origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
+    r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
+    rates = Rates(**r.table("rates", _defaults(Rates)))
+    for key in ("imu_hz", "dvl_hz", "truth_hz"):
+        r.require(getattr(rates, key) > 0, f"rates.{key}", "must be positive")
+    ratio = rates.imu_hz / rates.truth_hz
+    r.require(abs(ratio - round(ratio)) < 1e-9, "rates.truth_hz", "must divide rates.imu_hz")
+    initial = InitialState(**r.table("initial", _defaults(InitialState)))
+    r.require(initial.speed_m_s >= 0, "initial.speed_m_s", "must be >= 0")
+    imu = ImuSpec(**r.table("imu", _defaults(ImuSpec), vectors=("gyro_bias_values_deg_per_h",
+                                                                   "accel_bias_values_micro_g")))
+    dvl = DvlSpec(**r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
+                            strings=("noise_model",)))
+    for key in ("gyro_bias_deg_per_h", "accel_bias_micro_g", "gyro_noise_deg_per_h_per_sqrt_hz",
+                "accel_noise_micro_g_per_sqrt_hz", "gyro_bias_walk_deg_per_h_per_sqrt_h",
+                "accel_bias_walk_micro_g_per_sqrt_h"):
+        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
+    for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
+        r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
+    r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
+    r.require(dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'")
+    r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
+    r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")
+    for key in ("dropout_ping_prob", "dropout_beam_prob", "outlier_prob"):
+        r.require(0.0 <= getattr(dvl, key) <= 1.0, f"dvl.{key}", "must be in [0, 1]")
+    mounting = MountingSpec(**r.table("mounting", _defaults(MountingSpec),
+                                      vectors=("dvl_rpy_deg", "dvl_lever_arm_m")))
+    segments = tuple(MotionSegment(**row) for row in parse_segments(r, initial.speed_m_s))
+    t0 = raw.get("t0_s", DEFAULT_T0_S)
+    r.number("t0_s", t0)
+    t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact
+    return Scenario(
+        name=str(raw.get("name", name)),
+        description=str(raw.get("description", "")),
+        origin=origin,
+        rates=rates,
+        initial=initial,
+        imu=imu,
+        dvl=dvl,
+        mounting=mounting,
+        segments=segments,
+        raw=raw,
+        source=source,
+        t0_ns=t0_ns,
+    )
+
+
+def _defaults(cls: type) -> dict[str, Any]:
+    """Field defaults of a dataclass, as the Reader's table of optional keys."""
+    return {k: v.default for k, v in cls.__dataclass_fields__.items()}  # type: ignore[attr-defined]

@@ -1,0 +1,146 @@
+"""Damaged and unusual logs: one-line GtsamDvlError messages, --salvage, --repair, missing topics."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_io_synthetic import T0_NS, make_log
+
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.io.reader import read_log
+from gtsam_dvl.io.ros2 import cdr
+from gtsam_dvl.io.writer import McapLogWriter, write_log
+
+
+@pytest.fixture(scope="module")
+def long_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[LogData, bytes]:
+    """300 s: about ten 1 MiB chunks, enough to lose some and keep others."""
+    log = make_log(300.0, seed=2)
+    path = tmp_path_factory.mktemp("err") / "long.mcap"
+    write_log(path, log)
+    return log, path.read_bytes()
+
+
+def one_line_error(path: Path, **kw: object) -> str:
+    with pytest.raises(GtsamDvlError) as e:
+        read_log(path, **kw)  # type: ignore[arg-type]
+    msg = str(e.value)
+    assert "\n" not in msg and str(path) in msg
+    return msg
+
+
+def test_truncated_file_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+    log, data = long_log
+    path = tmp_path / "cut.mcap"
+    path.write_bytes(data[: len(data) * 6 // 10])
+    msg = one_line_error(path)
+    assert f"truncated at byte {len(data) * 6 // 10} (footer missing)" in msg and "--salvage" in msg
+
+    got = read_log(path, salvage=True)
+    n = len(got.imu)
+    assert 0.4 * len(log.imu) < n < 0.65 * len(log.imu)
+    np.testing.assert_array_equal(got.imu.b_omega, log.imu.b_omega[:n])  # the kept prefix is intact
+    np.testing.assert_array_equal(got.dvl.d_v, log.dvl.d_v[: len(got.dvl)])
+    (report,) = [w for w in got.metadata["reader_warnings"] if w.startswith("salvage")]
+    kept, total, lost, at_least = map(int, re.search(r"kept (\d+) of (\d+) chunks; lost (\d+) chunk\(s\) "
+                                                     r"with at least (\d+) message", report).groups())
+    assert lost == 1 and kept == total - 1 and at_least > 0
+    start, end = map(float, re.search(r"log time ([\d.]+) s to ([\d.]+) s", report).groups())
+    assert start == pytest.approx(got.imu.t[-1] + 0.01, abs=0.011) and end > start
+
+
+def test_corrupt_chunk_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+    log, data = long_log
+    path = tmp_path / "bad.mcap"
+    damaged = bytearray(data)
+    damaged[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(damaged))
+    msg = one_line_error(path)
+    assert "corrupt chunk" in msg and "--salvage" in msg
+
+    got = read_log(path, salvage=True)
+    (report,) = [w for w in got.metadata["reader_warnings"] if w.startswith("salvage")]
+    lost_msgs = int(re.search(r"lost 1 chunk\(s\) with (\d+) message", report).group(1))
+    expected = len(log.imu) + len(log.dvl) + int(log.dvl.valid.sum()) + len(log.truth) + 1  # +1: /tf_static
+    found = len(got.imu) + len(got.dvl) + len(got.truth)
+    twist = read_log(path, salvage=True, dvl_topic="/dvl/twist")
+    assert found + len(twist.dvl) + 1 + lost_msgs == expected  # exact: from the chunk's message indexes
+    gap = np.diff(got.imu.t).max()
+    start, end = map(float, re.search(r"log time ([\d.]+) s to ([\d.]+) s", report).groups())
+    assert gap == pytest.approx(end - start + 0.02, abs=0.011)
+
+
+def test_intact_file_with_salvage_reports_nothing_lost(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+    path = tmp_path / "ok.mcap"
+    path.write_bytes(long_log[1])
+    got = read_log(path, salvage=True)
+    assert any("nothing lost" in w for w in got.metadata["reader_warnings"])
+    assert len(got.imu) == len(long_log[0].imu)
+
+
+def test_missing_topics_list_what_is_there(tmp_path: Path) -> None:
+    path = tmp_path / "log.mcap"
+    write_log(path, make_log(3.0))
+    msg = one_line_error(path, imu_topic="/imu")
+    assert "no IMU topic /imu" in msg and "/imu/data_raw [sensor_msgs/msg/Imu]" in msg and "/dvl/data" in msg
+    msg = one_line_error(path, dvl_topic="/dvl/velocity")
+    assert "no DVL topic /dvl/velocity" in msg and "/dvl/twist [geometry_msgs/msg/TwistWithCovarianceStamped]" in msg
+    msg = one_line_error(path, dvl_topic="/ground_truth/odometry")
+    assert "nav_msgs/msg/Odometry" in msg
+
+
+def test_nan_imu_and_repair(tmp_path: Path) -> None:
+    log = make_log(3.0)
+    log.imu.b_f[123, 1] = np.nan
+    path = tmp_path / "nan.mcap"
+    write_log(path, log)
+    msg = one_line_error(path)
+    assert "/imu/data_raw: NaN in message 123 (t = 1.240000 s)" in msg and "--repair" in msg
+    got = read_log(path, repair=True)
+    assert len(got.imu) == len(log.imu) - 1 and np.isfinite(got.imu.b_f).all()
+    assert any("dropped 1 message(s): 1 with NaN" in w for w in got.metadata["reader_warnings"])
+
+
+def test_duplicate_stamps_and_repair(tmp_path: Path) -> None:
+    log = make_log(3.0)
+    log.imu.t[50] = log.imu.t[49]
+    path = tmp_path / "dup.mcap"
+    write_log(path, log)
+    assert "/imu/data_raw: duplicate stamp at message 50 (t = 0.500000000 s)" in one_line_error(path)
+    got = read_log(path, repair=True)
+    assert len(got.imu) == len(log.imu) - 1 and (np.diff(got.imu.t) > 0).all()
+
+
+def test_backwards_time_and_repair(tmp_path: Path) -> None:
+    """Header stamps going back while log times (file order) go forward, as a driver's clock jump does."""
+    log = make_log(3.0, truth=False)
+    t = log.imu.t.copy()
+    t[200] = 1.5  # 0.51 s back
+    path = tmp_path / "back.mcap"
+    with McapLogWriter(path, t0_ns=T0_NS) as w:
+        arr = cdr.new_messages(cdr.IMU, {"frame_id": "imu_link"}, len(t))
+        cdr.set_stamps(arr, w.stamps_ns(t))
+        arr["angular_velocity"], arr["linear_acceleration"] = log.imu.b_omega, log.imu.b_f
+        w.add_encoded("/imu/data_raw", "sensor_msgs/msg/Imu", w.stamps_ns(log.imu.t), arr)
+        w.add_twist_with_covariance("/dvl/twist", log.dvl.t[log.dvl.valid], log.dvl.d_v[log.dvl.valid], None,
+                                    None, "dvl_link")
+    msg = one_line_error(path)
+    assert "/imu/data_raw: time goes backwards at message 200 (t = 1.500000000 s after 2.000000000 s)" in msg
+    got = read_log(path, repair=True)
+    assert len(got.imu) == len(t) - 1 and (np.diff(got.imu.t) > 0).all()
+    assert any("1 going back in time" in w for w in got.metadata["reader_warnings"])
+    # No /tf_static here: identity mounting, said in the warnings; zero twist covariance = unknown.
+    assert any("identity mounting" in w for w in got.metadata["reader_warnings"])
+    assert np.isnan(got.dvl.d_cov).all()
+
+
+def test_not_a_log(tmp_path: Path) -> None:
+    assert "no such file" in one_line_error(tmp_path / "nope.mcap")
+    (tmp_path / "x.mcap").write_bytes(b"hello world, not a log at all")
+    assert "neither an MCAP" in one_line_error(tmp_path / "x.mcap")
+    (tmp_path / "empty").mkdir()
+    assert "not a rosbag2 bag" in one_line_error(tmp_path / "empty")
