@@ -15,7 +15,7 @@ import gtsam
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.estimators.batch import extract_result
-from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.solver import gauss_newton_qr
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
@@ -39,7 +39,7 @@ def main() -> None:
 
     cfg = EstimatorConfig()
     t0 = time.perf_counter()
-    builder = GraphBuilder(log, cfg)
+    builder = LogGraph(log, cfg)
     t_pre = time.perf_counter() - t0
     t0 = time.perf_counter()
     graph, init = builder.build()

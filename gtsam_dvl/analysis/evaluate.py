@@ -15,7 +15,7 @@ from gtsam_dvl.analysis.metrics import attitude_errors_deg, path_length, truth_a
 from gtsam_dvl.analysis.observability import ObservabilityReport, analyse_block, attribute_segments
 from gtsam_dvl.analysis.segments import classify_log
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.types import LogData, Segment
 from gtsam_dvl.io.result_reader import ResultFile
 
 
@@ -29,7 +29,7 @@ class Evaluation:
     position_error_m: np.ndarray | None = None  # (N, 3)
     velocity_error_m_s: np.ndarray | None = None  # (N, 3)
     report: ObservabilityReport | None = None
-    segments: list[dict[str, Any]] = field(default_factory=list)
+    segments: list[Segment] = field(default_factory=list)
     shares: dict[str, list[tuple[str, float]]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
 
@@ -46,8 +46,8 @@ def evaluate_result(res: ResultFile, log: LogData | None) -> Evaluation:
                          "final": {k: res.summary.get(k) for k in ("scale", "misalignment_deg",
                                                                    "gyro_bias_deg_per_h", "accel_bias_ug")}}
     if log is not None:
-        ev.segments = log.metadata.get("truth", {}).get("segments") or classify_log(log)
-        m["segments_from"] = "simulation" if log.metadata.get("truth", {}).get("segments") else "classified from IMU"
+        ev.segments = log.segments or classify_log(log)
+        m["segments_from"] = "simulation" if log.segments else "classified from IMU"
     if log is not None and log.truth is not None:
         n_p, n_R_b, n_v = truth_at(log.truth, res.t)
         ev.attitude_error_deg = attitude_errors_deg(res.n_R_b, n_R_b)

@@ -32,12 +32,25 @@ def attitude_errors_deg(n_R_b_est: np.ndarray, n_R_b_true: np.ndarray) -> np.nda
     return np.degrees(Rotation.from_matrix(n_R_b_est @ np.transpose(n_R_b_true, (0, 2, 1))).as_rotvec())
 
 
+def truth_in_user_units(log: LogData) -> dict[str, Any]:
+    """The log's true calibration and biases in the units of Timeline (what figures draw as truth lines):
+    scale, misalignment (deg, [roll, pitch, yaw]), gyro_bias (deg/h), accel_bias (micro-g); absent ones
+    are left out."""
+    out: dict[str, Any] = {}
+    if (cal := log.true_calibration) is not None:
+        out["scale"] = cal.scale
+        out["misalignment"] = np.array(cal.misalignment_deg)
+    if (bias := log.true_imu_bias) is not None:
+        out["gyro_bias"] = np.array(bias.gyro_rad_s) / DEG_PER_H
+        out["accel_bias"] = np.array(bias.accel_m_s2) / UG
+    return out
+
+
 def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
     """The `errors` block of the summary: None when the log has no truth."""
     if log.truth is None:
         return None
     out: dict[str, Any] = {}
-    truth_meta = log.metadata.get("truth", {})
     cal = log.true_calibration
     if cal is not None:
         out["scale_ppm"] = (result.scale - cal.scale) / cal.scale * 1e6
@@ -48,10 +61,9 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         sig = result.misalignment_sigma_deg
         out["misalignment_nsigma"] = (err_rpy / sig).tolist()
         out["scale_nsigma"] = (result.scale - cal.scale) / result.scale_sigma
-    imu_truth = truth_meta.get("imu", {})
-    if "gyro_bias_rad_s" in imu_truth:
-        g_err = (result.gyro_bias - np.asarray(imu_truth["gyro_bias_rad_s"])) / DEG_PER_H
-        a_err = (result.accel_bias - np.asarray(imu_truth["accel_bias_m_s2"])) / UG
+    if log.true_imu_bias is not None:
+        g_err = (result.gyro_bias - np.asarray(log.true_imu_bias.gyro_rad_s)) / DEG_PER_H
+        a_err = (result.accel_bias - np.asarray(log.true_imu_bias.accel_m_s2)) / UG
         out["gyro_bias_deg_per_h"] = g_err.tolist()
         out["accel_bias_ug"] = a_err.tolist()
         out["gyro_bias_nsigma"] = (g_err / result.gyro_bias_sigma_deg_per_h).tolist()

@@ -14,12 +14,12 @@ mission would need to halve the prior sigma.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, Timeline
+from gtsam_dvl.core.types import Segment
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
 DETERMINED = 0.5
@@ -167,7 +167,7 @@ def _timeline_sigmas(timeline: Timeline) -> np.ndarray:
                             timeline.scale_sigma * 1e6, timeline.misalignment_sigma_deg])
 
 
-def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments: list[dict[str, Any]],
+def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments: list[Segment],
                        min_share: float = 0.25) -> dict[str, list[tuple[str, float]]]:
     """Which segments made each state observable: the share of the total fall of log(sigma) (prior to
     final) that happened inside each segment. Segments with at least min_share are credited on the
@@ -181,12 +181,12 @@ def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments
     for j, state in enumerate(report.states):
         rows = []
         for seg in segments:
-            a = int(np.searchsorted(t, seg["start_s"], side="right")) - 1
-            b = int(np.searchsorted(t, seg["end_s"], side="right")) - 1
+            a = int(np.searchsorted(t, seg.start_s, side="right")) - 1
+            b = int(np.searchsorted(t, seg.end_s, side="right")) - 1
             if b <= a or total[j] <= 1e-6:
                 continue
             share = float((log_sig[max(a, 0), j] - log_sig[b, j]) / total[j])
-            label = f"{seg['kind']} {seg['start_s']:.0f}-{seg['end_s']:.0f} s (type {seg.get('type', '-')})"
+            label = f"{seg.label()} (type {seg.type})"
             rows.append((label, share))
         rows.sort(key=lambda r: -r[1])
         shares[state.key] = rows

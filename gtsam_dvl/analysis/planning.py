@@ -1,9 +1,9 @@
 """Mission planning by covariance analysis: will this plan calibrate the DVL, and when?
 
-The scenario is simulated without white noise (biases, scale and misalignment kept), smoothed once, and
-the graph is linearised at that solution (which is the truth to within a fraction of a sigma); the
-smoother's marginals give the final sigmas, the square-root information filter over the same
-linearisation gives the sigma timeline, and the observability analysis gives the verdict. Sigmas of a
+The scenario is simulated without white noise (biases, scale and misalignment kept) and smoothed once by
+the batch smoother, whose solution is the truth to within a fraction of a sigma; its marginals give the final
+sigmas, its filtering timeline over the same linearisation gives the sigma timeline, and the observability
+analysis gives the verdict. Sigmas of a
 linear-Gaussian problem do not depend on the noise realisation, so no Monte Carlo is needed.
 """
 
@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
 
 from gtsam_dvl.analysis.observability import ObservabilityReport, analyse, attribute_segments, determined_at
 from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.estimators.batch import extract_result
-from gtsam_dvl.estimators.graph import GraphBuilder
-from gtsam_dvl.estimators.solver import gauss_newton_qr
-from gtsam_dvl.estimators.timeline import filtering_timeline
+from gtsam_dvl.core.types import Segment
+from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario
 
@@ -32,7 +30,7 @@ class PlanResult:
     timeline: Timeline  # filtering sigmas over time
     report: ObservabilityReport
     determined_at_s: dict[str, float | None]
-    segments: list[dict[str, Any]]
+    segments: list[Segment]
     shares: dict[str, list[tuple[str, float]]] = field(default_factory=dict)
     wall_s: float = 0.0
 
@@ -62,20 +60,18 @@ def plan_mission(scenario: Scenario, config: EstimatorConfig | None = None, seed
     """Covariance analysis of a scenario (see module doc); takes seconds."""
     start = time.perf_counter()
     config = config or EstimatorConfig()
+    if config.imu.bias_model != "constant":
+        raise GtsamDvlError("planning needs imu.bias_model = 'constant' (the filtering timeline of a random-walk "
+                            "bias is not implemented)")
     log = simulate(scenario, seed, white_noise=False)
     if progress:
         progress(0.2)
-    builder = GraphBuilder(log, config)
-    graph, values = builder.build()
-    ordering = builder.elimination_ordering()
-    values, report = gauss_newton_qr(graph, values, ordering, before_iteration=builder.refresh_gravity)
-    if progress:
-        progress(0.6)
-    result = extract_result(builder, graph, values, ordering, estimator="plan", bayes_net=report.bayes_net)
-    timeline = filtering_timeline(builder, graph, values)
-    result.timeline = timeline
+    result = smooth_batch(log, config, timeline=True, estimator="plan",
+                          progress=(lambda f: progress(0.2 + 0.7 * f)) if progress else None)
+    assert result.timeline is not None  # asked for, with a constant bias
+    timeline = result.timeline
     obs = analyse(result, config)
-    segments = scenario.segment_table()
+    segments = log.segments
     shares = attribute_segments(obs, timeline, segments)
     if progress:
         progress(1.0)

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.core.config import AlignmentConfig
-from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.types import LogData, Segment
 from gtsam_dvl.estimators.alignment import detect_static_end, window_means
 from gtsam_dvl.estimators.iodvlc import detect_type1_segments
 
@@ -20,8 +20,8 @@ TURN_RATE_DEG_S = 0.3
 MIN_SEGMENT_S = 5.0
 
 
-def classify_log(log: LogData) -> list[dict[str, Any]]:
-    """Rows {start_s, end_s, kind, type} covering the log: kinds static, type1, turn, cruise."""
+def classify_log(log: LogData) -> list[Segment]:
+    """Segments covering the log: kinds static, type1 (with the specific-force axis), turn, cruise."""
     imu = log.imu
     ends, w_mean = window_means(imu.t, imu.b_omega)
     starts = ends - 1.0
@@ -49,4 +49,4 @@ def classify_log(log: LogData) -> list[dict[str, Any]]:
     for row in merged:
         row["kind"] = row["kind"].split("#")[0]
         row["type"] = "I" if row["kind"].startswith("type1") else "II" if row["kind"] == "turn" else "-"
-    return merged
+    return [Segment.from_dict(row) for row in merged]

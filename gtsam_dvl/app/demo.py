@@ -25,13 +25,12 @@ def _iodvlc_timeline(res: Any) -> Any:
 
 def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any]:
     """One simulated run through every estimator, with figures named after the paper's and a report."""
-    from gtsam_dvl.analysis.metrics import attitude_errors_deg, summary, truth_at
+    from gtsam_dvl.analysis.metrics import attitude_errors_deg, summary, truth_at, truth_in_user_units
     from gtsam_dvl.app.plots.error_plots import plot_errors
     from gtsam_dvl.app.plots.log_plots import plot_log
     from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
     from gtsam_dvl.app.report import paper_findings, write_run_report
     from gtsam_dvl.core.config import EstimatorConfig
-    from gtsam_dvl.core.units import DEG_PER_H, UG
     from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
     from gtsam_dvl.io.writer import write_log
@@ -46,7 +45,7 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     log.source = str(log_path)
     figs = run_dir / "figures"
     written = plot_log(log, figs)
-    segments = log.metadata["truth"]["segments"]
+    segments = log.segments
     results, summaries = {}, []
     modes = ["batch", "online", "ekf"]
     for mode in modes:
@@ -73,11 +72,7 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     atomic_write_json(run_dir / "io-dvlc" / "summary.json", io_summ)
     summaries.append(io_summ)
 
-    cal = log.true_calibration
-    timu = log.metadata["truth"]["imu"]
-    truths = {"scale": cal.scale if cal else None, "misalignment": np.array(cal.misalignment_deg) if cal else None,
-              "gyro_bias": np.array(timu["gyro_bias_rad_s"]) / DEG_PER_H,
-              "accel_bias": np.array(timu["accel_bias_m_s2"]) / UG}
+    truths = {"scale": None, "misalignment": None, **truth_in_user_units(log)}
     two_d = name == "paper-2d"
     io_tl = _iodvlc_timeline(io_res)
     if not two_d:

@@ -2,7 +2,11 @@
 
 All times are float64 seconds relative to ``t0_ns`` (integer nanoseconds of the log's time base,
 ROS time), so that 100 Hz intervals stay exact to the nanosecond. Units are SI unless a name says
-otherwise; names carry frames (see CONVENTIONS.md).
+otherwise; names carry frames (see docs/conventions.md).
+
+What the estimators and the evaluation rely on is typed (the map origin, the simulated truth of the
+calibration, the biases and the segments): a renamed key fails the type check, not a run. `metadata` keeps
+the rest for people and files (scenario settings, seed, sensor specification, reader warnings).
 """
 
 from __future__ import annotations
@@ -103,21 +107,68 @@ class DvlCalibration:
         return self.R_c @ b_R_d0
 
 
+@dataclass(frozen=True)
+class GeoOrigin:
+    """Geodetic origin of the map frame on WGS84: latitude and longitude in degrees, height in metres
+    (ellipsoidal). Earth rate and gravity in map depend on it."""
+
+    lat_deg: float
+    lon_deg: float
+    height_m: float
+
+    def as_dict(self) -> dict[str, float]:
+        return {"lat_deg": self.lat_deg, "lon_deg": self.lon_deg, "height_m": self.height_m}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> GeoOrigin:
+        return cls(float(d["lat_deg"]), float(d["lon_deg"]), float(d["height_m"]))
+
+
+@dataclass(frozen=True)
+class ImuBiases:
+    """IMU biases in SI: accelerometer m/s^2 and gyro rad/s, in imu_link (the truth of a simulated log: its
+    random constants, or the values at t = 0 of a random walk)."""
+
+    accel_m_s2: tuple[float, float, float]
+    gyro_rad_s: tuple[float, float, float]
+
+
+SEGMENT_KINDS = ("static", "level", "descent", "ascent", "straight", "turn", "square", "type1", "motion")
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A stretch of a log with one kind of motion: [start_s, end_s] relative to the log's t0, its kind (static,
+    level, descent, ascent, straight, turn, ...) and the paper's segment type ("-", "I", "II", "I and II")."""
+
+    start_s: float
+    end_s: float
+    kind: str
+    type: str = "-"
+
+    def label(self) -> str:
+        return f"{self.kind} {self.start_s:.0f}-{self.end_s:.0f} s"
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"start_s": self.start_s, "end_s": self.end_s, "kind": self.kind, "type": self.type}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Segment:
+        return cls(float(d["start_s"]), float(d["end_s"]), str(d["kind"]), str(d.get("type", "-")))
+
+
 @dataclass
 class LogData:
-    """Everything one log holds, as numpy arrays. truth is None for real logs."""
+    """Everything one log holds, as numpy arrays. truth and the true_* fields are None for real logs."""
 
     imu: ImuData
     dvl: DvlData
     mounting: Mounting = field(default_factory=Mounting)
     truth: TruthData | None = None
     t0_ns: int = 0  # ROS time of t = 0
-    metadata: dict[str, Any] = field(default_factory=dict)  # scenario, seed, truth calibration, config
+    metadata: dict[str, Any] = field(default_factory=dict)  # scenario, seed, sensor spec, reader warnings
     source: str = ""  # file the data came from, for messages
-
-    @property
-    def true_calibration(self) -> DvlCalibration | None:
-        cal = self.metadata.get("truth", {}).get("dvl")
-        if not cal:
-            return None
-        return DvlCalibration(float(cal["scale"]), tuple(cal["misalignment_deg"]))  # type: ignore[arg-type]
+    origin: GeoOrigin | None = None  # map origin, when the log records one
+    true_calibration: DvlCalibration | None = None  # simulated logs
+    true_imu_bias: ImuBiases | None = None  # simulated logs
+    segments: list[Segment] = field(default_factory=list)  # simulated logs: the scenario's segments

@@ -1,4 +1,4 @@
-"""Initialisation without the truth: static-segment detection and coarse alignment.
+"""Initialisation without the truth: the map frame, static-segment detection and coarse alignment.
 
 Roll and pitch come from the mean specific force (it points up in a static body), heading from
 gyrocompassing: the horizontal part of the measured Earth rate points north.
@@ -10,11 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtsam_dvl.core.config import AlignmentConfig
+from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, rpy_to_matrix
-from gtsam_dvl.core.types import DvlData, ImuData
+from gtsam_dvl.core.types import DvlData, ImuData, LogData
 
 
 @dataclass
@@ -26,6 +26,17 @@ class Alignment:
     method: str  # "static" or "configured"
     b_f_mean: np.ndarray | None = None  # mean specific force on the static segment, m/s^2
     b_omega_mean: np.ndarray | None = None  # mean gyro on the static segment, rad/s
+
+
+def map_frame_of(log: LogData, config: EstimatorConfig) -> LocalFrame:
+    """The map origin: from the configuration if given, else the log's (LogData.origin)."""
+    a = config.alignment
+    if a.origin_lat_deg is not None:
+        return LocalFrame(a.origin_lat_deg, a.origin_lon_deg or 0.0, a.origin_height_m or 0.0)
+    if log.origin is None:
+        raise GtsamDvlError(f"{log.source or 'log'}: no map origin in the log; set alignment.origin_lat_deg "
+                            "(and lon, height) in the configuration: Earth rate and gravity need the latitude")
+    return LocalFrame(log.origin.lat_deg, log.origin.lon_deg, log.origin.height_m)
 
 
 STATIC_MARGIN_S = 5.0  # the static segment ends this long before motion is first detected

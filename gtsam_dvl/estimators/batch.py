@@ -12,19 +12,20 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.solver import bayes_net_marginals, gauss_newton_qr
+from gtsam_dvl.estimators.timeline import filtering_timeline
 
 
 def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
-                 progress: ProgressFn | None = None, timeline: bool = False) -> NavResult:
+                 progress: ProgressFn | None = None, timeline: bool = False, estimator: str = "batch") -> NavResult:
     """Estimate trajectory, IMU biases, DVL scale factor and misalignment from a whole log. timeline: also
     the filtering sigma timeline over the same linearisation (how the log's information accrued; about
-    1 s more on the paper's runs)."""
+    1 s more on the paper's runs). estimator: the name the result carries (the planner's is "plan")."""
     config = config or EstimatorConfig()
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
-    builder = GraphBuilder(log, config)
+    builder = LogGraph(log, config)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     graph, values = builder.build()
@@ -44,12 +45,10 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     t3 = time.perf_counter()
     # the converged iteration's Bayes net serves the marginals when its step was tiny (every GN
     # iteration's stop rule makes the last step change the error by < 0.01, i.e. far below one sigma)
-    result = extract_result(builder, graph, values, ordering,
+    result = extract_result(builder, graph, values, ordering, estimator=estimator,
                             bayes_net=report.bayes_net if report.converged else None)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
-        from gtsam_dvl.estimators.timeline import filtering_timeline
-
         t4 = time.perf_counter()
         result.timeline = filtering_timeline(builder, graph, values)
         timing["timeline"] = time.perf_counter() - t4
@@ -63,7 +62,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     return result
 
 
-def extract_result(builder: GraphBuilder, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                    ordering: gtsam.Ordering, estimator: str = "batch",
                    bayes_net: gtsam.GaussianBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse

@@ -21,7 +21,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.estimators.graph import LogGraph
 
 _SHARED = (B(0), K_SCALE, C_MISALIGN)
 def _epoch_of(keys: list[int]) -> int:
@@ -49,7 +49,7 @@ def _qr_r(a: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.qr(a, mode="r"))
 
 
-def filtering_timeline(builder: GraphBuilder, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Timeline:
+def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Timeline:
     """Filtering estimates are those of `values` (the smoother's); the sigmas are the filtering marginals
     at each epoch. Only the random-constant bias model (the paper's) is supported."""
     if builder.config.imu.bias_model != "constant":

@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
@@ -224,7 +225,7 @@ def read_log(
     if salvage:
         warnings.append(salvage_report(src, t0))
     meta["reader_warnings"] = warnings
-    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path))
+    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed_fields(meta, str(path)))
 
 
 def read_odometry(

@@ -34,6 +34,7 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl import __version__
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import DvlData, LogData
+from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap.writer import McapLogWriter
 from gtsam_dvl.io.ros2 import cdr
 
@@ -129,7 +130,7 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
     rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
     and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config"."""
     path = Path(path)
-    meta = dict(log.metadata)
+    meta = metadata_record(log)
     try:
         attachment = json.dumps({**meta, "config": config} if config is not None else meta, default=json_default)
         truth_json = json.dumps(meta.get("truth", {}), default=json_default)

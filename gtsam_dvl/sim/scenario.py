@@ -16,6 +16,7 @@ from typing import Any
 
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.types import Segment
 from gtsam_dvl.core.units import DEG_PER_H, MICRO_G
 from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, parse_segments
 
@@ -160,6 +161,10 @@ class Scenario:
     def local_frame(self) -> LocalFrame:
         """The map frame: ENU at the origin."""
         return LocalFrame(self.origin.lat_deg, self.origin.lon_deg, self.origin.height_m)
+
+    def segments_typed(self) -> list[Segment]:
+        """segment_table() as Segment values (LogData.segments of a simulated log)."""
+        return [Segment.from_dict(row) for row in self.segment_table()]
 
     def segment_table(self) -> list[dict[str, Any]]:
         """Rows {start_s, end_s, kind, type} with the paper's segment type (Table 1). Consecutive pieces of

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
-from gtsam_dvl.core.types import ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.types import DvlCalibration, GeoOrigin, ImuBiases, ImuData, LogData, Mounting, TruthData
 from gtsam_dvl.sim import imu as sim_imu
 from gtsam_dvl.sim.dvl import dvl_measure, dvl_true
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, true_imu
@@ -75,8 +75,14 @@ def simulate(
     metadata = _metadata(scenario, seed, white_noise, mounting, errors, rate)
     if progress is not None:
         progress(1.0)
+    o = scenario.origin
     return LogData(imu=imu, dvl=dvl, mounting=mounting, truth=truth, t0_ns=scenario.t0_ns, metadata=metadata,
-                   source=f"simulated:{scenario.name}:seed={seed}")
+                   source=f"simulated:{scenario.name}:seed={seed}",
+                   origin=GeoOrigin(float(o.lat_deg), float(o.lon_deg), float(o.height_m)),
+                   true_calibration=DvlCalibration(float(scenario.dvl.scale),
+                                                   tuple(float(a) for a in scenario.dvl.misalignment_deg)),  # type: ignore[arg-type]
+                   true_imu_bias=ImuBiases(tuple(errors.accel_bias0.tolist()), tuple(errors.gyro_bias0.tolist())),  # type: ignore[arg-type]
+                   segments=scenario.segments_typed())
 
 
 def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> np.ndarray:

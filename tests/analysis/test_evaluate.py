@@ -51,7 +51,7 @@ def test_evaluate_log_without_truth(smoothed: tuple[Path, Path], tmp_path: Path)
 
     log = read_log(log_path)
     meta = {k: v for k, v in log.metadata.items() if k not in ("truth",)}
-    real = dataclasses.replace(log, truth=None, metadata=meta)
+    real = dataclasses.replace(log, truth=None, metadata=meta, true_calibration=None, true_imu_bias=None, segments=[])
     real_path = tmp_path / "real.mcap"
     write_log(real_path, real)
     result = tmp_path / "real-result.mcap"

@@ -11,7 +11,7 @@ import pytest
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.estimators.batch import extract_result
-from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.solver import gauss_newton_qr
 from gtsam_dvl.estimators.timeline import filtering_timeline
 from gtsam_dvl.sim import simulate
@@ -21,7 +21,7 @@ from gtsam_dvl.sim.scenario import load_scenario
 @functools.cache
 def _run(name: str) -> tuple[Timeline, NavResult]:
     log = simulate(load_scenario(name), 8)
-    builder = GraphBuilder(log, EstimatorConfig())
+    builder = LogGraph(log, EstimatorConfig())
     graph, values = builder.build()
     ordering = builder.elimination_ordering()
     values, _ = gauss_newton_qr(graph, values, ordering, before_iteration=builder.refresh_gravity)

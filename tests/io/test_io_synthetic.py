@@ -3,12 +3,25 @@ definitions and CDR layouts every other I/O test relies on."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from mcap_ros2._dynamic import serialize_dynamic
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
-from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.types import (
+    BeamData,
+    DvlCalibration,
+    DvlData,
+    GeoOrigin,
+    ImuBiases,
+    ImuData,
+    LogData,
+    Mounting,
+    Segment,
+    TruthData,
+)
 from gtsam_dvl.io.ros2 import cdr
 from gtsam_dvl.io.ros2.msgdefs import SEPARATOR, full_definition
 
@@ -46,10 +59,16 @@ def make_log(duration: float = 60.0, seed: int = 0, beams: bool = True, truth: b
     meta = {
         "scenario": "unit-test",
         "seed": seed,
-        "truth": {"dvl": {"scale": 0.9998, "misalignment_deg": [-0.1, 0.2, -0.5]}},
         "sensors": {"imu": {"gyro_noise_density": 4.8e-7, "accel_noise_density": 9.8e-5}, "dvl": {"sigma": 0.02}},
     }
-    return LogData(imu, dvl, mounting, truth_data, t0_ns=T0_NS, metadata=meta)
+    typed: dict[str, Any] = {}
+    if truth:
+        typed = {"origin": GeoOrigin(30.0, 114.0, -100.0),
+                 "true_calibration": DvlCalibration(0.9998, (-0.1, 0.2, -0.5)),
+                 "true_imu_bias": ImuBiases((4e-4, -3e-4, 2e-4), (5e-8, -4e-8, 3e-8)),
+                 "segments": [Segment(0.0, 10.0, "static"), Segment(10.0, 40.0, "level", "I"),
+                              Segment(40.0, 60.0, "turn", "II")]}
+    return LogData(imu, dvl, mounting, truth_data, t0_ns=T0_NS, metadata=meta, **typed)
 
 
 def test_synthetic_log_is_consistent() -> None:

@@ -4,16 +4,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 
 from gtsam_dvl.app.plots.common import save_figure, shade_segments
+from gtsam_dvl.core.types import Segment
 
 
 def plot_errors(runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], path: Path, what: str,
-                segments: list[dict[str, Any]] | None = None) -> Path:
+                segments: list[Segment] | None = None) -> Path:
     """runs: (label, t, error (N,3), sigma (N,3)); what: "attitude" (deg, about east/north/up), "velocity"
     (m/s) or "position" (m, east/north/up)."""
     names = ["about east (roll-like)", "about north (pitch-like)", "about up (heading)"] if what == "attitude" \

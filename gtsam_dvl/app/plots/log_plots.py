@@ -33,7 +33,7 @@ def plot_trajectory(log: LogData, path: Path, n_p: np.ndarray | None = None, lab
 def plot_dvl(log: LogData, path: Path) -> Path:
     """Figure 2: DVL velocity output (dvl_link) over time, segments shaded."""
     dvl = log.dvl
-    segments = log.metadata.get("truth", {}).get("segments", [])
+    segments = log.segments
     fig, axes = plt.subplots(3, 1, figsize=(9, 6.5), sharex=True)
     for i, (ax, name) in enumerate(zip(axes, "xyz", strict=True)):
         shade_segments(ax, segments, label=(i == 0))
@@ -51,7 +51,7 @@ def plot_imu(log: LogData, path: Path, decimate_to_hz: float = 10.0) -> Path:
     dt = float(np.median(np.diff(imu.t))) if len(imu) > 1 else 1.0
     step = max(1, int(round(1.0 / (decimate_to_hz * dt))))
     t = imu.t[::step]
-    segments = log.metadata.get("truth", {}).get("segments", [])
+    segments = log.segments
     fig, axes = plt.subplots(3, 2, figsize=(12, 6.5), sharex=True)
     for i, name in enumerate("xyz"):
         for j, (data, unit, title) in enumerate([

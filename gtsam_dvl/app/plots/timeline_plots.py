@@ -11,6 +11,7 @@ import numpy as np
 
 from gtsam_dvl.app.plots.common import save_figure, shade_segments
 from gtsam_dvl.core.result import Timeline
+from gtsam_dvl.core.types import Segment
 
 AXES3 = ("x", "y", "z")
 MIS_AXES = ("roll (about x)", "pitch (about y)", "yaw (about z)")
@@ -22,7 +23,7 @@ def _band(ax: Any, t: np.ndarray, value: np.ndarray, sigma: np.ndarray, label: s
 
 
 def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: str,
-                   truth: np.ndarray | float | None = None, segments: list[dict[str, Any]] | None = None,
+                   truth: np.ndarray | float | None = None, segments: list[Segment] | None = None,
                    t_min: float = 0.0) -> Path:
     """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias"; estimate +- 3 sigma."""
     spec = {
@@ -67,7 +68,7 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
 
 
 def plot_normalised_sigmas(timeline: Timeline, path: Path, priors: dict[str, np.ndarray | float],
-                           segments: list[dict[str, Any]] | None = None, title: str = "") -> Path:
+                           segments: list[Segment] | None = None, title: str = "") -> Path:
     """Figure 12: sigma(t) / sigma(prior) of attitude, biases, scale and misalignment, log scale."""
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     groups = [
