@@ -118,7 +118,10 @@ MODES = ("batch", "online", "online-full", "ekf", "io-dvlc")
 
 
 def run_estimator(log: LogData, mode: str, config: Any, progress: Any = None, timeline: bool = True) -> Any:
-    """One estimator on a log: NavResult (batch, online, online-full, ekf) or IoDvlcResult (io-dvlc)."""
+    """One estimator on a log: NavResult (batch, online, online-full, ekf) or IoDvlcResult (io-dvlc). config: an
+    EstimatorConfig (None: the defaults), checked by value here; each estimator reads its own section of it."""
+    if config is not None:
+        config.validate()
     if mode == "batch":
         from gtsam_dvl.estimators.batch import smooth_batch
 
@@ -134,7 +137,7 @@ def run_estimator(log: LogData, mode: str, config: Any, progress: Any = None, ti
     if mode == "io-dvlc":
         from gtsam_dvl.estimators.iodvlc import run_iodvlc
 
-        return run_iodvlc(log)
+        return run_iodvlc(log, config)
     raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
 
 
@@ -216,7 +219,7 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
                     "segment_shares": plan.shares.get(s.key, []), "hours_to_halve": s.hours_to_halve}
                    for s in plan.report.states],
         "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
-        "segments": plan.segments, "config": config.to_dict(),
+        "segments": [s.as_dict() for s in plan.segments], "config": config.to_dict(),
     }
     import io
 
@@ -260,16 +263,9 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
             written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, res.velocity_sigma_m_s)],
                                        out_dir / "velocity_error.png", "velocity", ev.segments))
     if res.timeline is not None:
-        truth_cal = log.true_calibration if log is not None else None
-        truth_imu = log.metadata.get("truth", {}).get("imu", {}) if log is not None else {}
-        truths: dict[str, Any] = {}
-        if truth_cal is not None:
-            truths = {"scale": truth_cal.scale, "misalignment": np.array(truth_cal.misalignment_deg)}
-        if "gyro_bias_rad_s" in truth_imu:
-            from gtsam_dvl.core.units import DEG_PER_H, UG
+        from gtsam_dvl.analysis.metrics import truth_in_user_units
 
-            truths["gyro_bias"] = np.array(truth_imu["gyro_bias_rad_s"]) / DEG_PER_H
-            truths["accel_bias"] = np.array(truth_imu["accel_bias_m_s2"]) / UG
+        truths: dict[str, Any] = truth_in_user_units(log) if log is not None else {}
         for q in ("scale", "misalignment", "gyro_bias", "accel_bias"):
             written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
                                           ev.segments, t_min=0.0))

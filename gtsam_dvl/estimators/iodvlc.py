@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.core.config import EstimatorConfig, IodvlcConfig
 from gtsam_dvl.core.earth import OMEGA_IE, WGS84_A
 from gtsam_dvl.core.result import misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
@@ -53,39 +54,8 @@ MAX_SIGMA_RAD = np.pi  # sigma reported for a misalignment axis that no segment 
 MAX_SCALE_SIGMA = 0.1  # timeline scale and misalignment are NaN until the scale is known this well
 
 
-@dataclass(frozen=True)
-class IoDvlcOptions:
-    """Segment detector thresholds and observer options (defaults for a navigation-grade IMU at 100 Hz).
-
-    The detector works on windows of window_s seconds slid by 1 s over 1 s means of the IMU:
-    - constant attitude: | |mean gyro| - Earth rate | < gyro_threshold_deg_h. It must exceed the gyro bias
-      plus a few noise sigmas over the window (0.1 deg/h/sqrt(Hz) gives 0.05 deg/h over 5 s);
-    - specific-force rate: the least-squares slope of the specific force over the window; "non-zero" when
-      its norm exceeds sf_rate_threshold_m_s3 (4 sigma of the slope's noise for 10 micro-g/sqrt(Hz) over
-      5 s is 1.6e-4 m/s^3; the paper-3d manoeuvres peak at 3e-3 to 1e-2 m/s^3);
-    - a segment is a run of such windows; the rate passes through zero inside a manoeuvre, so gaps up to
-      max_gap_s are bridged; a new segment starts when the rate's axis turns by more than axis_change_deg
-      from the segment's principal axis (a descent after a surge) or the attitude changes;
-    - segments shorter than min_segment_s are dropped;
-    - a quiet stretch (constant attitude, rate below the threshold) of at least min_quiet_s seconds in the
-      same constant-attitude interval gives the zero-acceleration specific force b_f0: its last
-      reference_s seconds, so that the gyro's angle random walk between reference and segment stays small
-      (0.1 deg/h/sqrt(Hz) over 100 s is 5e-6 rad, 5e-5 m/s^2 of tilted gravity).
-    """
-
-    window_s: float = 5.0
-    gyro_threshold_deg_h: float = 1.0
-    sf_rate_threshold_m_s3: float = 2e-4
-    max_gap_s: float = 5.0
-    axis_change_deg: float = 45.0
-    min_segment_s: float = 10.0
-    min_quiet_s: float = 20.0
-    reference_s: float = 60.0  # the last this many seconds of the quiet stretch form the reference
-    earth_terms: bool = True
-    track_attitude: bool = True  # integrate the gyro's residual rotation theta (part of the earth terms)
-    noise_m_s: float | None = None  # DVL noise (1 sigma per axis); None: the median of the log's covariances
-    min_beta_m_s: float = 0.05  # the pointwise k = |gamma| / |beta| is reported only where |beta| exceeds this
-    prior_sigma_deg: float | None = 10.0  # weak prior at the nominal mounting (None: the paper's pure Wahba)
+# The segment detector thresholds and observer options (TOML section [iodvlc]): gtsam_dvl.core.config.
+IoDvlcOptions = IodvlcConfig
 
 
 @dataclass
@@ -395,9 +365,11 @@ def _misalignment(R: np.ndarray, cov_body: np.ndarray, b_R_d0: np.ndarray) -> tu
     return rpy, np.sqrt(np.diag(cov))
 
 
-def run_iodvlc(log: LogData, options: IoDvlcOptions | None = None) -> IoDvlcResult:
-    """Detect the Type-I segments and estimate the DVL scale and misalignment from them (IO-DVLC)."""
-    opt = options or IoDvlcOptions()
+def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = None) -> IoDvlcResult:
+    """Detect the Type-I segments and estimate the DVL scale and misalignment from them (IO-DVLC). options:
+    IoDvlcOptions, or an EstimatorConfig (its [iodvlc] section); None: the defaults."""
+    opt = options.iodvlc if isinstance(options, EstimatorConfig) else options or IoDvlcOptions()
+    opt.validate()
     t_start = time.perf_counter()
     dvl, b_R_d0 = log.dvl, log.mounting.b_R_d0
     ok = dvl.valid & np.all(np.isfinite(dvl.d_v), axis=1) & (dvl.t >= log.imu.t[0]) & (dvl.t <= log.imu.t[-1])

@@ -20,11 +20,11 @@ the smoother's states.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gravity_gradient, normal_gravity
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
@@ -32,9 +32,9 @@ from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.rotations import matrix_to_rpy, skew, so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import align
+from gtsam_dvl.estimators.alignment import align, map_frame_of
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
-from gtsam_dvl.estimators.graph import map_frame_of
+from gtsam_dvl.estimators.selection import covering_sample, imu_pieces, sample_starts, usable_pings
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
 # estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
@@ -44,8 +44,9 @@ from gtsam_dvl.estimators.graph import map_frame_of
 # true sensitivity of y to k and b_R_d is the true velocity, about zero, so below a speed ("slow": under
 # MIN_CALIBRATION_SPEED_M_S or under CALIBRATION_SPEED_SIGMAS velocity sigmas, as in the first seconds
 # when a 1 deg tilt prior lets the predicted velocity wander by 0.1 m/s) their Jacobian columns are zero.
-MIN_CALIBRATION_SPEED_M_S = 0.1
-CALIBRATION_SPEED_SIGMAS = 5.0
+# Both are set by the configuration's [ekf] section (EkfConfig); these are its defaults.
+MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
+CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 CALIBRATION = np.r_[SCALE, 16:19]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
@@ -99,31 +100,6 @@ class _Earth:
             self._at = n_p.copy()
             self._g, self._G = self.frame.n_gravity(n_p), gravity_gradient(self.frame, n_p)
         return self._g + self._G @ (n_p - self._at), self._G
-
-
-def _select_pings(log: LogData, config: EstimatorConfig, counters: dict[str, int]) -> np.ndarray:
-    """Indices of the usable DVL pings (the graph builder's rule, without keyframe thinning)."""
-    dvl, imu, cfg = log.dvl, log.imu, config.dvl
-    usable = dvl.valid.copy()
-    if cfg.use_beams and dvl.beams is not None:
-        usable = np.asarray(dvl.beams.valid.any(axis=1))
-    speed = np.linalg.norm(np.nan_to_num(dvl.d_v), axis=1)
-    too_fast = usable & (speed > cfg.max_speed_m_s) & (not cfg.use_beams)
-    counters["dvl_too_fast"] = int(too_fast.sum())
-    usable &= ~too_fast
-    usable &= (dvl.t > imu.t[0]) & (dvl.t <= imu.t[-1])
-    counters["dvl_unusable"] = int((~usable).sum())
-    return np.flatnonzero(usable)
-
-
-def _imu_pieces(t: np.ndarray, starts: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
-    """Samples covering (a, b] and the part of each inside it (s): interval averages are split exactly."""
-    lo = int(np.searchsorted(t, a, side="right"))
-    hi = min(int(np.searchsorted(t, b, side="left")), len(t) - 1)
-    idx = np.arange(lo, hi + 1)
-    dt = np.minimum(t[idx], b) - np.maximum(starts[idx], a)
-    keep = dt > 0.0
-    return idx[keep], dt[keep]
 
 
 def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int) -> FilterState:
@@ -228,25 +204,28 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
 
 
 def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
-            min_calibration_speed_m_s: float = MIN_CALIBRATION_SPEED_M_S) -> NavResult:
+            min_calibration_speed_m_s: float | None = None) -> NavResult:
     """Filter a whole log: trajectory and calibration at every usable DVL ping, with the filtering history.
 
-    Below min_calibration_speed_m_s the measurement is taken as insensitive to scale and misalignment
-    (see MIN_CALIBRATION_SPEED_M_S)."""
+    Below config.ekf.min_calibration_speed_m_s (or the keyword, which overrides it) or
+    config.ekf.calibration_speed_sigmas velocity sigmas the measurement is taken as insensitive to scale and
+    misalignment (see MIN_CALIBRATION_SPEED_M_S)."""
     config = config or EstimatorConfig()
+    if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
+        config = replace(config, ekf=replace(config.ekf, min_calibration_speed_m_s=min_calibration_speed_m_s))
+    ekf_cfg = config.validate().ekf
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
     alignment = align(log.imu, log.dvl, frame, config.alignment)
-    pings = _select_pings(log, config, counters)
+    pings = usable_pings(log.dvl, log.imu.t, config.dvl, counters)  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
     earth = _Earth(frame, config.solver.earth_model == "flat")
     imu, dvl = log.imu, log.dvl
     t = imu.t
-    dt_sample = np.diff(t, prepend=t[0] - (np.median(np.diff(t)) if len(t) > 1 else 0.01))
-    starts = t - dt_sample
-    gyro_index = np.minimum(np.searchsorted(t, dvl.t), len(t) - 1)
+    starts = sample_starts(t)
+    gyro_index = covering_sample(t, dvl.t)
     b_l = log.mounting.b_l
     huber_k = config.dvl.huber_k if config.dvl.robust == "huber" else None
 
@@ -260,7 +239,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         t0 = time.perf_counter()
         while t_prev < t_j - 1e-9:  # propagate (in steps of at most MAX_STEP_S)
             t_next = min(t_j, t_prev + MAX_STEP_S)
-            idx, dt = _imu_pieces(t, starts, t_prev, t_next)
+            idx, dt = imu_pieces(t, starts, t_prev, t_next)
             if len(idx):
                 n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
                 step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
@@ -272,7 +251,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         A, z, Rm = _ping_measurement(log, config, int(j))
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
         speed = np.linalg.norm(y_hat) / fs.scale
-        slow = speed < max(min_calibration_speed_m_s, CALIBRATION_SPEED_SIGMAS * np.sqrt(np.trace(fs.P[VEL, VEL])))
+        slow = speed < max(ekf_cfg.min_calibration_speed_m_s,
+                           ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
         if slow:
             H[:, CALIBRATION] = 0.0
         nis, down = update(fs, A @ H, z - A @ y_hat, Rm, huber_k)

@@ -23,8 +23,9 @@ Which mode:
   ping was processed, what the vehicle knew then (the batch smoother gives the smoothed one).
 
 Design (see also online_smoother.py for the iSAM2 engine):
-- The same GraphBuilder as the batch smoother makes every factor, prior and initial guess; `GraphBuilder.
-  incremental` gives one without a log, and its per-epoch methods are shared with the batch path.
+- The FactorMaker the batch smoother's whole-log graph uses (estimators/factor_maker.py) makes every factor,
+  prior and initial guess from explicit measurements; pings are selected and IMU intervals split by the rules
+  of estimators/selection.py, as in the batch smoother and the EKF.
 - IMU samples are kept raw since the last epoch and preintegrated when the epoch's ping is taken, exactly as
   the batch smoother does (a sample straddling the ping is split), so a ping that arrives after IMU samples
   past its stamp (another topic, another latency) is still placed exactly.
@@ -67,8 +68,8 @@ from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.types import DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import STATIC_MARGIN_S, Alignment, align
-from gtsam_dvl.estimators.graph import GraphBuilder, map_frame_of
+from gtsam_dvl.estimators.alignment import STATIC_MARGIN_S, Alignment, align, map_frame_of
+from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.online.types import (
     MODES,
     EpochHistory,
@@ -79,6 +80,7 @@ from gtsam_dvl.estimators.online.types import (
     misalignment_deg_and_cov,
 )
 from gtsam_dvl.estimators.online.window import IncrementalSmoother, RelinearizationThresholds
+from gtsam_dvl.estimators.selection import USABLE, KeyframeThinning, classify_pings, count_reasons
 from gtsam_dvl.factors import dvl_beam_error, dvl_velocity_error
 
 __all__ = ["MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
@@ -127,13 +129,14 @@ class OnlineEstimator:
 
     def __init__(self, config: EstimatorConfig | None = None, *, frame: LocalFrame, mounting: Mounting | None = None,
                  options: OnlineConfig | None = None, source: str = "") -> None:
-        self.config = config or EstimatorConfig()
-        self.options = options or OnlineConfig()
-        self.options.check()
+        config = config or EstimatorConfig()
+        self.options = options or config.online  # options=: overrides config.online
+        self.config = dataclasses.replace(config, online=self.options).validate()  # the effective config
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self.counters: dict[str, int] = {}
         self.latencies_s: list[float] = []  # per DVL epoch: preintegration, factors, iSAM2 update, covariances
-        self.builder: GraphBuilder | None = None
+        self.builder: FactorMaker | None = None
+        self._keyframes = KeyframeThinning(self.config.solver.keyframe_interval_s)
         self.smoother: IncrementalSmoother | None = None
         self._last_imu_t = -math.inf
         self._last_dvl_t = -math.inf
@@ -146,7 +149,6 @@ class OnlineEstimator:
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._buf_start: float | None = None  # end of the sample before the buffer's first
         self._pending: deque[_Ping] = deque()
-        self._last_key_t = -math.inf
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         if self.config.alignment.initial_attitude_deg is not None:
@@ -364,30 +366,26 @@ class OnlineEstimator:
         return done
 
     def _start(self, alignment: Alignment) -> None:
-        self.builder = GraphBuilder.incremental(self.config, self.frame, alignment, self.mounting, self.source)
+        self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source)
         window = self.options.window_s if self.options.mode == "fixed_lag" else None
         self.smoother = IncrementalSmoother(self.builder, window, self.options.relinearization)
 
     def _take_ping(self, p: _Ping) -> int:
-        cfg = self.config.dvl
-        if self._first_imu_t is None or p.t <= self._first_imu_t:
-            self._count("dvl_unusable")  # no IMU sample before it, as in the batch smoother
+        first = self._first_imu_t if self._first_imu_t is not None else math.inf
+        beam_valid: np.ndarray | None = None
+        beam_finite: np.ndarray | None = None
+        if p.beams is not None:
+            d_u, v, ok = p.beams
+            beam_valid = ok[None, :]
+            beam_finite = np.array([bool(np.isfinite(v[ok]).all() and np.isfinite(d_u[ok]).all())])
+        code = classify_pings(np.array([p.t]), p.d_v[None, :], np.array([p.valid]), beam_valid, beam_finite,
+                              self.config.dvl, first)
+        if code[0] != USABLE:
+            count_reasons(code, self.counters, keep_zero=False)
             return 0
-        if cfg.use_beams and p.beams is not None:
-            usable = bool(p.beams[2].any() and np.isfinite(p.beams[1][p.beams[2]]).all()
-                          and np.isfinite(p.beams[0][p.beams[2]]).all())
-        else:
-            usable = p.valid and bool(np.isfinite(p.d_v).all())
-            if usable and np.linalg.norm(p.d_v) > cfg.max_speed_m_s:
-                self._count("dvl_too_fast")
-                return 0
-        if not usable:
-            self._count("dvl_unusable")
-            return 0
-        if p.t - self._last_key_t < self.config.solver.keyframe_interval_s:
+        if not self._keyframes.keep(p.t):
             self._count("dvl_not_keyframe")
             return 0
-        self._last_key_t = p.t
         self._pending.append(p)
         return self._close_ready()
 
@@ -494,12 +492,12 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
                   window_s: float | None = None, progress: ProgressFn | None = None,
                   options: OnlineConfig | None = None) -> NavResult:
     """Run the online estimator over a whole log, message by message, and return its NavResult with the
-    timeline of filtering sigmas at every epoch. mode ("fixed_lag", the default, or "full") and window_s
-    override those of options."""
+    timeline of filtering sigmas at every epoch. options (default: config.online, TOML section [online]);
+    mode ("fixed_lag" or "full") and window_s override those of options."""
     config = config or EstimatorConfig()
-    options = dataclasses.replace(options) if options is not None else OnlineConfig()
+    options = dataclasses.replace(options if options is not None else config.online)
     if mode is not None:
-        options.mode = mode
+        options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
     if window_s is not None:
         options.window_s = window_s
     t_start = time.perf_counter()

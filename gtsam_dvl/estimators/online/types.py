@@ -4,44 +4,26 @@ epoch, and small helpers shared with the benchmark."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import get_args
 
 import numpy as np
 
-from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.config import OnlineConfig, OnlineMode
 from gtsam_dvl.core.result import CalibrationUnits, misalignment_rpy_and_cov
-from gtsam_dvl.estimators.online.window import RelinearizationThresholds, StateEstimate
+from gtsam_dvl.estimators.online.window import StateEstimate
 
-MODES = ("fixed_lag", "full")
+__all__ = ["MODES", "EpochHistory", "MessageDropped", "OnlineConfig", "OnlineEstimate", "latency_stats",
+           "misalignment_deg_and_cov"]
+
+MODES: tuple[str, ...] = get_args(OnlineMode)
 
 
 class MessageDropped(UserWarning):
     """A message was dropped (bad_messages = "drop"); OnlineEstimator.counters counts them by kind."""
 
 
-@dataclass
-class OnlineConfig:
-    """Options of the online estimator. The models, priors and alignment thresholds come from EstimatorConfig."""
-
-    mode: str = "fixed_lag"  # "fixed_lag" (bounded cost) or "full" (every state kept; see the module doc)
-    window_s: float = 20.0  # fixed_lag: states this far behind the newest are marginalised, s
-    align_s: float = 60.0  # seconds of the initial static segment to align on before the first estimate
-    calibration_min_speed_m_s: float = 0.1  # slower pings do not inform scale and misalignment (module doc)
-    bad_messages: str = "raise"  # "raise" (GtsamDvlError) or "drop" (counted, warned once per kind)
-    covariances: bool = True  # marginal covariances after every epoch (the timeline needs them)
-    record_history: bool = True  # keep every epoch's estimate for timeline() and result()
-    final_updates: int = 10  # iSAM2 updates without new data at finish(), until nothing is relinearised
-    relinearization: RelinearizationThresholds = field(default_factory=RelinearizationThresholds)
-
-    def check(self) -> None:
-        if self.mode not in MODES:
-            raise GtsamDvlError(f"unknown online mode '{self.mode}' (available: {', '.join(MODES)})")
-        if self.bad_messages not in ("raise", "drop"):
-            raise GtsamDvlError(f"bad_messages must be 'raise' or 'drop', got '{self.bad_messages}'")
-        if not self.window_s > 0:
-            raise GtsamDvlError(f"window_s must be positive, got {self.window_s}")
-        if not self.align_s > 0:
-            raise GtsamDvlError(f"align_s must be positive, got {self.align_s}")
+# OnlineConfig (the options, TOML section [online]) lives in gtsam_dvl.core.config and is re-exported here.
 
 
 @dataclass

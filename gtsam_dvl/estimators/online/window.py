@@ -50,45 +50,16 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, V, X, key_dim
-from gtsam_dvl.estimators.graph import GraphBuilder
+from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.factors import EarthImuFactor
 
 RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see IncrementalSmoother._ordering)
 
 
-@dataclass
-class RelinearizationThresholds:
-    """iSAM2 relinearises a variable when a component of its update since its last linearisation exceeds
-    these (tangent components, GTSAM order). A stale linearisation leaves an error of second order in the
-    update; the thresholds keep it far below the noise of one factor (accelerometer noise: 1e-4 m/s in an IMU
-    factor's velocity over 1 s; DVL: 0.02 m/s):
-    - attitude about the body x, y axes: g dth^2 / 2 = 1.2e-6 m/s at 5e-4 rad; about body z (near the
-      vertical) gravity does not move, and the DVL sees v dth^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
-    - position enters through gravity (its gradient is in the Jacobian) and through the coupling of Pose3's
-      rotation and translation, which cancels between neighbouring states when the window shifts as a whole,
-      as it does when the calibration is refined at the end of kilometres of dead reckoning: 10 m;
-    - velocity, scale and misalignment enter the DVL model bilinearly (k R^T v): dk dv = 2e-4 m/s at 0.02 and
-      0.01 m/s; the misalignment's curvature v dc^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
-    - the IMU factor is linear in the bias (first-order bias correction of the preintegration): 100 micro-g,
-      2 deg/h, i.e. the bias never triggers a relinearisation in practice.
-    iSAM2's default, 0.1 on everything, let the scale wander to 0.04 in a prototype."""
-
-    pose: tuple[float, ...] = (5e-4, 5e-4, 5e-3, 10.0, 10.0, 10.0)  # rad (body x, y, z), m (body axes)
-    velocity: tuple[float, ...] = (0.01, 0.01, 0.01)  # m/s, map
-    bias: tuple[float, ...] = (1e-3, 1e-3, 1e-3, 1e-5, 1e-5, 1e-5)  # accel m/s^2, gyro rad/s
-    scale: float = 0.02
-    misalignment_rad: float = 5e-3
-
-    def threshold_map(self) -> gtsam.ISAM2ThresholdMap:
-        m = gtsam.ISAM2ThresholdMap()
-        m.insert(("x", np.asarray(self.pose, dtype=float)))
-        m.insert(("v", np.asarray(self.velocity, dtype=float)))
-        m.insert(("b", np.asarray(self.bias, dtype=float)))
-        m.insert(("k", np.array([self.scale])))
-        m.insert(("c", np.full(3, self.misalignment_rad)))
-        return m
+# RelinearizationThresholds (its threshold_map() gives iSAM2's): gtsam_dvl.core.config, TOML [online.relinearization]
 
 
 @dataclass
@@ -123,11 +94,11 @@ class StateEstimate:
 
 
 class IncrementalSmoother:
-    """iSAM2 over the epochs given to `add_epoch` (factors from the shared GraphBuilder). `window_s` None
+    """iSAM2 over the epochs given to `add_epoch` (factors from the shared FactorMaker). `window_s` None
     keeps every state (full history); otherwise states older than window_s seconds behind the newest are
     marginalised (at least two states stay)."""
 
-    def __init__(self, builder: GraphBuilder, window_s: float | None, thresholds: RelinearizationThresholds,
+    def __init__(self, builder: FactorMaker, window_s: float | None, thresholds: RelinearizationThresholds,
                  relinearize_skip: int = 1) -> None:
         self.builder = builder
         self.window_s = window_s
