@@ -9,10 +9,14 @@ constructors live here too, so both factors reject bad input with the same messa
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Protocol
 
 import gtsam
 import numpy as np
+
+# A 3-vector given by the caller: an array or a sequence of numbers (not Any, so that mypy checks every call)
+Vector3Like = np.ndarray | Sequence[float]
 
 _Z33 = np.zeros((3, 3))
 _Z33.setflags(write=False)  # shared by every Jacobian through np.concatenate, which copies it

@@ -16,6 +16,7 @@ import numpy as np
 
 from ._common import (
     JacobianSlots,
+    Vector3Like,
     as_finite_float,
     as_scale,
     as_unit_vector3,
@@ -77,10 +78,10 @@ def make_dvl_beam_factor(
     vel_key: int,
     scale_key: int,
     b_R_d_key: int,
-    d_u: Any,
-    y_j: Any,
-    b_omega: Any,
-    b_l: Any,
+    d_u: Vector3Like,
+    y_j: float,
+    b_omega: Vector3Like,
+    b_l: Vector3Like,
 ) -> gtsam.CustomFactor:
     """DvlBeamFactor on [pose, velocity, scale, b_R_d]: y_j = d_u . (k b_R_d^T (n_R_b^T n_v + b_omega x b_l)).
 

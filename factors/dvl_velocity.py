@@ -16,6 +16,7 @@ import numpy as np
 
 from ._common import (
     JacobianSlots,
+    Vector3Like,
     as_scale,
     as_vector3,
     check_noise,
@@ -61,9 +62,9 @@ def make_dvl_velocity_factor(
     vel_key: int,
     scale_key: int,
     b_R_d_key: int,
-    d_y: Any,
-    b_omega: Any,
-    b_l: Any,
+    d_y: Vector3Like,
+    b_omega: Vector3Like,
+    b_l: Vector3Like,
 ) -> gtsam.CustomFactor:
     """DvlVelocityFactor on [pose, velocity, scale, b_R_d]: d_y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l).
 

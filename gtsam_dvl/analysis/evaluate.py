@@ -11,12 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from gtsam_dvl.analysis.metrics import attitude_errors_deg, path_length, truth_at
+from gtsam_dvl.analysis.metrics import trajectory_errors
 from gtsam_dvl.analysis.observability import ObservabilityReport, analyse_block, attribute_segments
 from gtsam_dvl.analysis.segments import classify_log
 from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.result import StoredResult
 from gtsam_dvl.core.types import LogData, Segment
-from gtsam_dvl.io.result_reader import ResultFile
 
 
 @dataclass
@@ -25,6 +25,7 @@ class Evaluation:
     t: np.ndarray
     attitude_sigma_deg: np.ndarray  # (N, 3) map axes
     position_sigma_m: np.ndarray  # (N, 3) map axes
+    velocity_sigma_m_s: np.ndarray  # (N, 3) map axes
     attitude_error_deg: np.ndarray | None = None  # (N, 3)
     position_error_m: np.ndarray | None = None  # (N, 3)
     velocity_error_m_s: np.ndarray | None = None  # (N, 3)
@@ -39,38 +40,30 @@ def _within_3_sigma(err: np.ndarray, sig: np.ndarray) -> list[float]:
     return np.mean(np.abs(err) <= 3 * sig, axis=0).tolist()
 
 
-def evaluate_result(res: ResultFile, log: LogData | None) -> Evaluation:
+def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
     """Errors against the log's truth (if any), observability verdict, segments credited."""
-    ev = Evaluation(res.estimator, res.t, res.attitude_sigma_deg, res.position_sigma_m)
-    m: dict[str, Any] = {"estimator": res.estimator, "result": str(res.path), "states": len(res.t),
-                         "final": {k: res.summary.get(k) for k in ("scale", "misalignment_deg",
-                                                                   "gyro_bias_deg_per_h", "accel_bias_ug")}}
+    res = stored.result
+    ev = Evaluation(res.estimator, res.t, res.attitude_sigma_deg, res.position_sigma_m, res.velocity_sigma_m_s)
+    m: dict[str, Any] = {"estimator": res.estimator, "result": stored.path, "states": len(res.t),
+                         "final": {k: stored.summary.get(k) for k in ("scale", "misalignment_deg",
+                                                                      "gyro_bias_deg_per_h", "accel_bias_ug")}}
     if log is not None:
         ev.segments = log.segments or classify_log(log)
         m["segments_from"] = "simulation" if log.segments else "classified from IMU"
     if log is not None and log.truth is not None:
-        n_p, n_R_b, n_v = truth_at(log.truth, res.t)
-        ev.attitude_error_deg = attitude_errors_deg(res.n_R_b, n_R_b)
-        ev.position_error_m = res.n_p - n_p
-        ev.velocity_error_m_s = res.n_v - n_v
-        dist = path_length(log.truth.n_p)
-        final_h = float(np.linalg.norm(ev.position_error_m[-1, :2]))
+        errors = trajectory_errors(res, log.truth)
+        ev.attitude_error_deg, ev.position_error_m, ev.velocity_error_m_s = (
+            errors.attitude_deg, errors.position_m, errors.velocity_m_s)
         m["truth"] = {
-            "attitude_rmse_deg": np.sqrt(np.mean(ev.attitude_error_deg**2, axis=0)).tolist(),
-            "position_rmse_m": np.sqrt(np.mean(ev.position_error_m**2, axis=0)).tolist(),
-            "velocity_rmse_m_s": np.sqrt(np.mean(ev.velocity_error_m_s**2, axis=0)).tolist(),
-            "final_horizontal_position_m": final_h,
-            "final_horizontal_position_pct_distance": 100 * final_h / dist if dist > 0 else None,
+            **errors.metrics(),
             "attitude_within_3_sigma": _within_3_sigma(ev.attitude_error_deg, ev.attitude_sigma_deg),
             "position_within_3_sigma": _within_3_sigma(ev.position_error_m, ev.position_sigma_m),
-            "velocity_within_3_sigma": _within_3_sigma(ev.velocity_error_m_s, res.velocity_sigma_m_s),
-            "calibration_errors": res.summary.get("errors", {}),
+            "velocity_within_3_sigma": _within_3_sigma(ev.velocity_error_m_s, ev.velocity_sigma_m_s),
+            "calibration_errors": stored.summary.get("errors", {}),
         }
-    cal = res.calibration
-    if cal.get("calib_joint_cov") is not None:
-        config = EstimatorConfig.from_dict(cal.get("config") or {})
-        ev.report = analyse_block(np.array(cal["calib_joint_cov"]), np.array(cal["b_R_d"]),
-                                  float(res.t[-1] - res.t[0]), config)
+    if res.calib_joint_cov is not None:
+        config = EstimatorConfig.from_dict(res.config) if res.config else EstimatorConfig()
+        ev.report = analyse_block(res.calib_joint_cov, res.b_R_d, float(res.t[-1] - res.t[0]), config)
         if res.timeline is not None and ev.segments:
             ev.shares = attribute_segments(ev.report, res.timeline, ev.segments)
         m["observability"] = [{"key": s.key, "verdict": s.verdict, "prior_sigma": s.prior_sigma,

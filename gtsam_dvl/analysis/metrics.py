@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,42 @@ def path_length(n_p: np.ndarray) -> float:
 def attitude_errors_deg(n_R_b_est: np.ndarray, n_R_b_true: np.ndarray) -> np.ndarray:
     """(N, 3) attitude error about map axes (east, north, up) in degrees: log(R_est R_true^T)."""
     return np.degrees(Rotation.from_matrix(n_R_b_est @ np.transpose(n_R_b_true, (0, 2, 1))).as_rotvec())
+
+
+@dataclass
+class TrajectoryErrors:
+    """Errors of an estimated trajectory against the truth at the estimate's epochs, and the one set of metrics
+    summary and evaluate report. Attitude errors about map axes (east, north, up), deg; position m and
+    velocity m/s in map axes."""
+
+    t: np.ndarray  # (N,) s
+    attitude_deg: np.ndarray  # (N, 3)
+    position_m: np.ndarray  # (N, 3)
+    velocity_m_s: np.ndarray  # (N, 3)
+    distance_m: float  # along the true path
+
+    def metrics(self) -> dict[str, Any]:
+        """RMSEs (3-D norms and per axis), the final horizontal position error (m and % of distance), the final
+        attitude error."""
+        final_h = float(np.linalg.norm(self.position_m[-1, :2]))
+        return {
+            "final_horizontal_position_m": final_h,
+            "final_horizontal_position_pct_distance": 100.0 * final_h / self.distance_m if self.distance_m > 0
+            else None,
+            "position_rmse_m": float(np.sqrt(np.mean(np.sum(self.position_m**2, axis=1)))),
+            "position_rmse_axes_m": np.sqrt(np.mean(self.position_m**2, axis=0)).tolist(),
+            "velocity_rmse_m_s": float(np.sqrt(np.mean(np.sum(self.velocity_m_s**2, axis=1)))),
+            "velocity_rmse_axes_m_s": np.sqrt(np.mean(self.velocity_m_s**2, axis=0)).tolist(),
+            "attitude_rmse_deg": np.sqrt(np.mean(self.attitude_deg**2, axis=0)).tolist(),
+            "final_attitude_deg": self.attitude_deg[-1].tolist(),
+        }
+
+
+def trajectory_errors(result: NavResult, truth: TruthData) -> TrajectoryErrors:
+    """Errors of result's states against the truth interpolated at their times."""
+    n_p_true, n_R_b_true, n_v_true = truth_at(truth, result.t)
+    return TrajectoryErrors(result.t, attitude_errors_deg(result.n_R_b, n_R_b_true), result.n_p - n_p_true,
+                            result.n_v - n_v_true, path_length(truth.n_p))
 
 
 def truth_in_user_units(log: LogData) -> dict[str, Any]:
@@ -68,19 +105,7 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         out["accel_bias_ug"] = a_err.tolist()
         out["gyro_bias_nsigma"] = (g_err / result.gyro_bias_sigma_deg_per_h).tolist()
         out["accel_bias_nsigma"] = (a_err / result.accel_bias_sigma_ug).tolist()
-    n_p_true, n_R_b_true, n_v_true = truth_at(log.truth, result.t)
-    pos_err = result.n_p - n_p_true
-    dist = path_length(log.truth.n_p)
-    final_h = float(np.linalg.norm(pos_err[-1, :2]))
-    att_err = attitude_errors_deg(result.n_R_b, n_R_b_true)
-    out.update({
-        "final_horizontal_position_m": final_h,
-        "final_horizontal_position_pct_distance": 100.0 * final_h / dist if dist > 0 else None,
-        "position_rmse_m": float(np.sqrt(np.mean(np.sum(pos_err**2, axis=1)))),
-        "velocity_rmse_m_s": float(np.sqrt(np.mean(np.sum((result.n_v - n_v_true) ** 2, axis=1)))),
-        "attitude_rmse_deg": np.sqrt(np.mean(att_err**2, axis=0)).tolist(),
-        "final_attitude_deg": att_err[-1].tolist(),
-    })
+    out.update(trajectory_errors(result, log.truth).metrics())
     return out
 
 

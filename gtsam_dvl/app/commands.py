@@ -247,10 +247,12 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
     from gtsam_dvl.io.atomic import atomic_write_json, atomic_write_text
     from gtsam_dvl.io.result_reader import read_result
 
-    res = read_result(result_path)
-    log_path = truth_path or (Path(res.source_log) if res.source_log and Path(res.source_log).exists() else None)
+    stored = read_result(result_path)
+    res = stored.result
+    log_path = truth_path or (Path(stored.source_log) if stored.source_log and Path(stored.source_log).exists()
+                              else None)
     log = load_log(log_path, **(read_options or {})) if log_path is not None else None
-    ev = evaluate_result(res, log)
+    ev = evaluate_result(stored, log)
     out_dir = Path(out_dir)
     written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
     label = res.estimator
@@ -260,7 +262,7 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         written.append(plot_errors([(label, ev.t, ev.position_error_m, ev.position_sigma_m)],
                                    out_dir / "position_error.png", "position", ev.segments))
         if ev.velocity_error_m_s is not None:
-            written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, res.velocity_sigma_m_s)],
+            written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, ev.velocity_sigma_m_s)],
                                        out_dir / "velocity_error.png", "velocity", ev.segments))
     if res.timeline is not None:
         from gtsam_dvl.analysis.metrics import truth_in_user_units
@@ -270,7 +272,7 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
             written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
                                           ev.segments, t_min=0.0))
         written.append(plot_normalised_sigmas(res.timeline, out_dir / "normalised_sigmas.png",
-                                              priors_for_plots(res.calibration.get("config") or {}), ev.segments,
+                                              priors_for_plots(res.config), ev.segments,
                                               title=f"Normalised sigmas, {label}"))
     lines = ev.report.lines() if ev.report is not None else ["no calibration covariance in this result"]
     written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))

@@ -105,6 +105,22 @@ class NavResult(CalibrationUnits):
         cov_map = self.n_R_b @ self.pose_cov[:, 3:, 3:] @ np.transpose(self.n_R_b, (0, 2, 1))
         return np.sqrt(np.einsum("nii->ni", cov_map))
 
+    @property
+    def velocity_sigma_m_s(self) -> np.ndarray:
+        """(N, 3) velocity sigmas in map axes, m/s."""
+        return np.sqrt(np.einsum("nii->ni", self.vel_cov))
+
+
+@dataclass
+class StoredResult:
+    """A result as read back from a result log (gtsam_dvl.io.result_reader): the NavResult that was written,
+    the summary written with it, and where it came from."""
+
+    result: NavResult
+    summary: dict[str, Any]
+    path: str = ""
+    source_log: str = ""
+
 
 @dataclass
 class Timeline:

@@ -70,6 +70,24 @@ def calibration_record(result: NavResult) -> dict[str, Any]:
             "t": [float(result.t[0]), float(result.t[-1])], "config": result.config}
 
 
+# NavResult's array fields, stored as they are in the attachment "states.npz" so that read_result gives back
+# the NavResult that was written (the ROS topics carry the same numbers in ROS conventions, for ROS tools)
+STATE_ARRAYS = ("t", "n_p", "n_R_b", "n_v", "pose_cov", "vel_cov", "accel_bias", "gyro_bias", "bias_cov", "b_R_d",
+                "b_R_d_cov", "b_R_d0")
+OPTIONAL_STATE_ARRAYS = ("b_omega", "pose_vel_cross", "calib_joint_cov")
+
+
+def states_npz_bytes(result: NavResult) -> bytes:
+    arrays = {name: np.asarray(getattr(result, name)) for name in STATE_ARRAYS}
+    arrays.update({name: np.asarray(getattr(result, name)) for name in OPTIONAL_STATE_ARRAYS
+                   if getattr(result, name) is not None})
+    arrays["scale"] = np.array([result.scale, result.scale_sigma])
+    arrays["t0_ns"] = np.array([result.t0_ns], dtype=np.int64)
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
+    return buf.getvalue()
+
+
 def timeline_npz_bytes(result: NavResult) -> bytes:
     assert result.timeline is not None
     buf = io.BytesIO()
@@ -131,4 +149,8 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
         w.add_attachment("config.json", json.dumps({"estimator": result.estimator, "config": result.config},
                                                    default=str, indent=2).encode(), "application/json")
         w.add_attachment("summary.json", to_json(summary).encode(), "application/json")
+        w.add_attachment("states.npz", states_npz_bytes(result), "application/x-npz")
+        w.add_attachment("result.json", to_json({"estimator": result.estimator, "info": result.info,
+                                                 "timing_s": result.timing_s, "config": result.config}).encode(),
+                         "application/json")
     return path
