@@ -1,4 +1,4 @@
-"""DVL 3-D bottom-track velocity factor (CONVENTIONS.md, paper eq. 2 and 7 with the lever arm).
+"""DVL 3-D bottom-track velocity factor (docs/conventions.md, paper eq. 2 and 7 with the lever arm).
 
     measured d_y = k * d_R_b * ( n_R_b^T * n_v  +  b_omega x b_l ) + noise,   d_R_b = b_R_d^T
 

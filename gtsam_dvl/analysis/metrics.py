@@ -110,7 +110,7 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 
 
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
-    """The summary JSON of CONVENTIONS/issue 3, in user units (degrees, deg/h, micro-g, ppm)."""
+    """The summary JSON (README, "Command line"), in user units (degrees, deg/h, micro-g, ppm)."""
     truth_dist = path_length(log.truth.n_p) if log.truth is not None else path_length(result.n_p)
     out: dict[str, Any] = {
         "estimator": result.estimator,

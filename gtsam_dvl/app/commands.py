@@ -177,7 +177,7 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
         if result.timeline is not None and timeline_path is None:
             timeline_path = Path(output).with_suffix(".timeline.npz")
     if timeline_path is not None and result.timeline is not None:
-        written.append(atomic_write_bytes(timeline_path, timeline_npz_bytes(result)))
+        written.append(atomic_write_bytes(timeline_path, timeline_npz_bytes(result.timeline)))
     if summary_path is not None:
         written.append(atomic_write_json(summary_path, summ))
     if tum_path is not None:
@@ -203,6 +203,7 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
     from gtsam_dvl.app.plots.timeline_plots import plot_normalised_sigmas
     from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json, atomic_write_text
+    from gtsam_dvl.io.result_writer import timeline_npz_bytes
     from gtsam_dvl.sim.scenario import load_scenario
 
     config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
@@ -221,15 +222,11 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
         "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
         "segments": [s.as_dict() for s in plan.segments], "config": config.to_dict(),
     }
-    import io
-
-    buf = io.BytesIO()
-    np.savez(buf, **plan.timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
     written = [
         atomic_write_json(out_dir / "plan.json", data),
         atomic_write_text(out_dir / "plan.md", f"# Mission plan: {scen.name}\n\n" + answer.replace("\n  ", "\n- ")
                           + "\n\n![normalised sigmas](normalised_sigmas.png)\n"),
-        atomic_write_bytes(out_dir / "timeline.npz", buf.getvalue()),
+        atomic_write_bytes(out_dir / "timeline.npz", timeline_npz_bytes(plan.timeline)),
         plot_normalised_sigmas(plan.timeline, out_dir / "normalised_sigmas.png", priors_for_plots(config.to_dict()),
                                plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise)"),
     ]

@@ -51,18 +51,14 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     for mode in modes:
         t0 = time.perf_counter()
         with progress_bar(f"{name}: {mode}") as progress:
-            try:
-                res = run_estimator(log, mode, config, progress=progress)
-            except ImportError as exc:  # an estimator not installed in this build
-                console.print(f"  {mode}: skipped ({exc})")
-                continue
+            res = run_estimator(log, mode, config, progress=progress)
         res.timing_s.setdefault("total", time.perf_counter() - t0)
         summ = summary(res, log)
         out = run_dir / mode
         write_result_log(out / "result.mcap", res, log, summ)
         atomic_write_json(out / "summary.json", summ)
         if res.timeline is not None:
-            atomic_write_bytes(out / "timeline.npz", timeline_npz_bytes(res))
+            atomic_write_bytes(out / "timeline.npz", timeline_npz_bytes(res.timeline))
         results[mode] = res
         summaries.append(summ)
     io_res = run_estimator(log, "io-dvlc", config)
@@ -73,7 +69,7 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     summaries.append(io_summ)
 
     truths = {"scale": None, "misalignment": None, **truth_in_user_units(log)}
-    two_d = name == "paper-2d"
+    two_d = not any(s.kind in ("descent", "ascent") for s in log.segments)  # the paper's 2-D run
     io_tl = _iodvlc_timeline(io_res)
     if not two_d:
         written.append(plot_estimates([("IO-DVLC", io_tl)], figs / "fig04_iodvlc_scale.png", "scale", truths["scale"],
@@ -102,7 +98,8 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     if results[ref].timeline is not None:
         written.append(plot_normalised_sigmas(results[ref].timeline, figs / "fig12_normalised_sigmas.png", priors,
                                               segments, title=f"Normalised sigmas, {name}, {ref}"))
-    findings = {m: paper_findings(r.timeline, priors, name) for m, r in results.items() if r.timeline is not None}
+    findings = {m: paper_findings(r.timeline, priors, log.segments)
+                for m, r in results.items() if r.timeline is not None}
     verdict = evaluate_to_dir(run_dir / "batch" / "result.mcap", run_dir / "batch" / "evaluation",
                               truth_path=log_path)[0] if "batch" in results else []
     report = write_run_report(run_dir / "report.md", name, summaries, findings, verdict, sorted(written))

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.core.result import Timeline
+from gtsam_dvl.core.types import Segment
 
 
 @dataclass
@@ -28,32 +29,45 @@ def _ratio_at(tl: Timeline, name: str, t: float, prior: np.ndarray | float) -> n
     return np.atleast_1d(np.asarray(getattr(tl, name))[i]) / np.asarray(prior)
 
 
-def paper_findings(tl: Timeline, priors: dict[str, Any], run: str, motion_start_s: float = 600.0,
-                   descent_s: float = 660.0, turns_s: float = 750.0) -> list[Finding]:
-    """The findings listed at the end of CONVENTIONS.md, checked on one timeline."""
+def _first_start(segments: list[Segment], kinds: tuple[str, ...]) -> float | None:
+    return next((s.start_s for s in segments if s.kind in kinds), None)
+
+
+def paper_findings(tl: Timeline, priors: dict[str, Any], segments: list[Segment]) -> list[Finding]:
+    """The paper's findings (docs/conventions.md, "The paper's scenarios"), checked on one timeline. The times
+    come from the run's segments: motion starts where the first segment that is not static starts, the roll
+    finding needs a descent, the accelerometer-bias finding the first turns; a run that never changes depth is
+    the paper's 2-D run."""
     mis_p, acc_p, gyr_p = priors["misalignment_deg"], priors["accel_bias_ug"], priors["gyro_bias_deg_per_h"]
+    motion_start_s = next((s.start_s for s in segments if s.kind != "static"), 0.0)
+    descent_s = _first_start(segments, ("descent",))
+    turns_s = _first_start(segments, ("square", "turn"))
+    changes_depth = descent_s is not None or _first_start(segments, ("ascent",)) is not None
     out = []
     before, after = _ratio_at(tl, "scale_sigma", motion_start_s - 1, priors["scale"])[0], \
         _ratio_at(tl, "scale_sigma", motion_start_s + 60, priors["scale"])[0]
-    out.append(Finding("the scale converges as soon as motion starts at 600 s", after < 0.1 * before,
-                       f"scale sigma/prior {before:.3f} at 599 s -> {after:.4f} at 660 s"))
+    out.append(Finding(f"the scale converges as soon as motion starts at {motion_start_s:.0f} s", after < 0.1 * before,
+                       f"scale sigma/prior {before:.3f} at {motion_start_s - 1:.0f} s -> {after:.4f} at "
+                       f"{motion_start_s + 60:.0f} s"))
     r = _ratio_at(tl, "misalignment_sigma_deg", motion_start_s + 60, mis_p)
-    out.append(Finding("yaw and pitch misalignment converge from 600 s", bool(np.all(r[1:] < 0.2)),
-                       f"pitch, yaw sigma/prior at 660 s: {r[1]:.3f}, {r[2]:.3f}"))
-    if run == "paper-3d":
+    out.append(Finding(f"yaw and pitch misalignment converge from {motion_start_s:.0f} s", bool(np.all(r[1:] < 0.2)),
+                       f"pitch, yaw sigma/prior at {motion_start_s + 60:.0f} s: {r[1]:.3f}, {r[2]:.3f}"))
+    if descent_s is not None:
         pre = _ratio_at(tl, "misalignment_sigma_deg", descent_s - 1, mis_p)[0]
         post = _ratio_at(tl, "misalignment_sigma_deg", descent_s + 60, mis_p)[0]
-        out.append(Finding("roll misalignment only once the descent starts at 660 s", pre > 0.9 and post < 0.5,
-                           f"roll sigma/prior {pre:.3f} at 659 s -> {post:.3f} at 720 s"))
-    a_pre = _ratio_at(tl, "accel_bias_sigma_ug", turns_s - 1, acc_p)[:2]
-    a_post = _ratio_at(tl, "accel_bias_sigma_ug", turns_s + 350, acc_p)[:2]
-    out.append(Finding("the accelerometer bias converges after the turns start", bool(np.all(a_pre > 0.8)
-                       and np.all(a_post < 0.3)), f"horizontal accel bias sigma/prior {np.round(a_pre, 3)} before "
-                       f"the turns -> {np.round(a_post, 3)} {350:.0f} s after they start"))
+        out.append(Finding(f"roll misalignment only once the descent starts at {descent_s:.0f} s",
+                           pre > 0.9 and post < 0.5, f"roll sigma/prior {pre:.3f} at {descent_s - 1:.0f} s -> "
+                           f"{post:.3f} at {descent_s + 60:.0f} s"))
+    if turns_s is not None:
+        a_pre = _ratio_at(tl, "accel_bias_sigma_ug", turns_s - 1, acc_p)[:2]
+        a_post = _ratio_at(tl, "accel_bias_sigma_ug", turns_s + 350, acc_p)[:2]
+        out.append(Finding("the accelerometer bias converges after the turns start", bool(np.all(a_pre > 0.8)
+                           and np.all(a_post < 0.3)), f"horizontal accel bias sigma/prior {np.round(a_pre, 3)} "
+                           f"before the turns -> {np.round(a_post, 3)} {350:.0f} s after they start"))
     g = np.asarray(tl.gyro_bias_sigma_deg_per_h)[-1] / np.asarray(gyr_p)
     out.append(Finding("the gyro bias converges slowly, the vertical axis slowest", bool(g[2] > max(g[0], g[1])),
                        f"final gyro bias sigma/prior x, y, z: {np.round(g, 3)}"))
-    if run == "paper-2d":
+    if not changes_depth:
         roll = np.asarray(tl.misalignment_sigma_deg)[:, 0] / np.asarray(mis_p)[0]
         others = np.concatenate([[np.asarray(tl.scale_sigma)[-1] / priors["scale"]],
                                  np.asarray(tl.misalignment_sigma_deg)[-1, 1:] / np.asarray(mis_p)[1:]])

@@ -1,7 +1,7 @@
 """WGS84 Earth model: radii of curvature, normal gravity, Earth rate, and the local `map` frame.
 
 The `map` frame (n) is the East-North-Up tangent frame at a fixed geodetic origin, Earth-fixed
-(CONVENTIONS.md). In it the Earth-rate vector is constant and gravity's direction turns with the
+(docs/conventions.md). In it the Earth-rate vector is constant and gravity's direction turns with the
 vehicle's position. The local-level frame (l) is the East-North-Up frame at the vehicle's current
 position; it differs from `map` by the small rotation n_R_l(lat, lon).
 

@@ -1,7 +1,7 @@
 """Rotation conventions shared by every module.
 
 Euler angles are ZYX (R = Rz(yaw) Ry(pitch) Rx(roll)) about the axes of the frame they rotate from,
-as in CONVENTIONS.md. Quaternions are stored [x, y, z, w] (ROS order). Angles are radians unless a
+as in docs/conventions.md. Quaternions are stored [x, y, z, w] (ROS order). Angles are radians unless a
 name ends in _deg.
 """
 

@@ -94,7 +94,7 @@ class Mounting:
 @dataclass(frozen=True)
 class DvlCalibration:
     """DVL scale factor and misalignment: b_R_d = R_c * b_R_d0 with R_c = Rz(yaw) Ry(pitch) Rx(roll)
-    in body FLU axes (CONVENTIONS.md). misalignment_deg = [roll, pitch, yaw]."""
+    in body FLU axes (docs/conventions.md). misalignment_deg = [roll, pitch, yaw]."""
 
     scale: float
     misalignment_deg: tuple[float, float, float]

@@ -10,11 +10,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig
+from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig, ImuConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, rpy_to_matrix
 from gtsam_dvl.core.types import DvlData, ImuData, LogData
+from gtsam_dvl.core.units import DEG_PER_H
 
 
 @dataclass
@@ -43,14 +44,15 @@ STATIC_MARGIN_S = 5.0  # the static segment ends this long before motion is firs
 
 
 def window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Means of x over consecutive windows of window_s seconds; returns (window end times, means)."""
+    """Means of x over consecutive windows of window_s seconds; returns (window end times, means). A window's
+    end is its nominal end, or the last sample's time for the last window (the data end there)."""
     idx = np.floor((t - t[0]) / window_s).astype(int)
     n = int(idx[-1]) + 1
     sums = np.zeros((n, x.shape[1]))
     np.add.at(sums, idx, x)
     counts = np.bincount(idx, minlength=n)[:, None]
     ok = counts[:, 0] > 0
-    ends = t[0] + (np.arange(n) + 1) * window_s
+    ends = np.minimum(t[0] + (np.arange(n) + 1) * window_s, t[-1])
     return ends[ok], sums[ok] / counts[ok]
 
 
@@ -72,21 +74,33 @@ def detect_static_end(imu: ImuData, dvl: DvlData, cfg: AlignmentConfig) -> float
     return t_end if t_end > imu.t[0] else float(imu.t[0])
 
 
-def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame) -> np.ndarray:
-    """n_R_b from mean static specific force b_f (m/s^2) and gyro b_omega (rad/s), at the map origin."""
+# Gyrocompassing needs the horizontal Earth rate well above the gyro bias: the heading error is about
+# bias / horizontal rate (rad), so 10x keeps it below 0.1 rad even for a bias at its 1-sigma prior.
+GYROCOMPASS_RATE_PER_BIAS = 10.0
+DEFAULT_GYRO_BIAS_SIGMA_RAD_S = ImuConfig().gyro_bias_sigma_deg_per_h * DEG_PER_H
+
+
+def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame,
+                     gyro_bias_sigma_rad_s: float = DEFAULT_GYRO_BIAS_SIGMA_RAD_S) -> np.ndarray:
+    """n_R_b from mean static specific force b_f (m/s^2) and gyro b_omega (rad/s), at the map origin.
+    gyro_bias_sigma_rad_s: the gyro bias the heading must survive (GYROCOMPASS_RATE_PER_BIAS)."""
     roll = np.arctan2(b_f[1], b_f[2])
     pitch = np.arctan2(-b_f[0], np.hypot(b_f[1], b_f[2]))
     l_R_b_level = rpy_to_matrix(float(roll), float(pitch), 0.0)  # heading still unknown
     w_level = l_R_b_level @ b_omega  # = Rz(yaw)^T n_omega_ie
     yaw = np.arctan2(w_level[0], w_level[1])
-    if np.hypot(w_level[0], w_level[1]) < 0.2 * np.linalg.norm(frame.n_omega_ie[:2]):
+    horizontal_rate = float(np.linalg.norm(frame.n_omega_ie[:2]))
+    if (np.hypot(w_level[0], w_level[1]) < 0.2 * horizontal_rate
+            or horizontal_rate < GYROCOMPASS_RATE_PER_BIAS * gyro_bias_sigma_rad_s):
         raise GtsamDvlError("gyrocompassing failed: the horizontal Earth rate is not visible in the gyros "
                             "(IMU too noisy, or latitude near a pole); give alignment.initial_attitude_deg")
     return rpy_to_matrix(float(roll), float(pitch), float(yaw))
 
 
-def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig) -> Alignment:
-    """Initial attitude: the configured one, else coarse alignment on the initial static segment."""
+def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig,
+          gyro_bias_sigma_rad_s: float = DEFAULT_GYRO_BIAS_SIGMA_RAD_S) -> Alignment:
+    """Initial attitude: the configured one, else coarse alignment on the initial static segment (heading by
+    gyrocompassing, refused when the gyro bias would set it: see coarse_alignment)."""
     if cfg.initial_attitude_deg is not None:
         return Alignment(rpy_deg_to_matrix(cfg.initial_attitude_deg), 0.0, "configured")
     t_end = detect_static_end(imu, dvl, cfg)
@@ -96,4 +110,4 @@ def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig) -
             f"{max(t_end - imu.t[0], 0.0):.0f} s); set alignment.initial_attitude_deg in the configuration")
     sel = imu.t <= t_end
     b_f, b_omega = imu.b_f[sel].mean(axis=0), imu.b_omega[sel].mean(axis=0)
-    return Alignment(coarse_alignment(b_f, b_omega, frame), t_end, "static", b_f, b_omega)
+    return Alignment(coarse_alignment(b_f, b_omega, frame, gyro_bias_sigma_rad_s), t_end, "static", b_f, b_omega)

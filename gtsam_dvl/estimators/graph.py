@@ -20,6 +20,7 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.units import DEG_PER_H
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.selection import covering_sample, sample_starts, select_epochs
@@ -51,7 +52,7 @@ class LogGraph:
     def __post_init__(self) -> None:
         cfg, log = self.config, self.log
         frame = map_frame_of(log, cfg)
-        alignment = align(log.imu, log.dvl, frame, cfg.alignment)
+        alignment = align(log.imu, log.dvl, frame, cfg.alignment, cfg.imu.gyro_bias_sigma_deg_per_h * DEG_PER_H)
         self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
         self.epochs = self._select_epochs()
         if len(self.epochs) < 2:

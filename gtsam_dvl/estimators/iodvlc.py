@@ -89,7 +89,7 @@ class SegmentEstimate:
 class IoDvlcResult:
     """IO-DVLC output: the timelines of the paper's Figures 4 and 5 and the final values.
 
-    misalignment_deg = [roll, pitch, yaw] of R_c = b_R_d b_R_d0^T in body axes (CONVENTIONS.md). Timelines
+    misalignment_deg = [roll, pitch, yaw] of R_c = b_R_d b_R_d0^T in body axes (docs/conventions.md). Timelines
     hold the estimate from the segments seen up to each DVL epoch (NaN before the first segment).
     """
 

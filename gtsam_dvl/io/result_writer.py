@@ -1,4 +1,4 @@
-"""Write an estimator's result as a ROS 2 MCAP (CONVENTIONS.md: /gtsam_dvl/* topics).
+"""Write an estimator's result as a ROS 2 MCAP (docs/conventions.md: /gtsam_dvl/* topics).
 
 Covariances are converted from GTSAM's tangent spaces to ROS conventions: Odometry pose covariance over
 (x, y, z, rot_x, rot_y, rot_z) in map axes, twist covariance in base_link.
@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
+from gtsam_dvl.core.result import NavResult, Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, skew
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.atomic import to_json
@@ -88,10 +88,10 @@ def states_npz_bytes(result: NavResult) -> bytes:
     return buf.getvalue()
 
 
-def timeline_npz_bytes(result: NavResult) -> bytes:
-    assert result.timeline is not None
+def timeline_npz_bytes(timeline: Timeline) -> bytes:
+    """A Timeline as .npz bytes (Timeline.from_arrays reads it back)."""
     buf = io.BytesIO()
-    np.savez(buf, **result.timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
+    np.savez(buf, **timeline.as_arrays())  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
     return buf.getvalue()
 
 
@@ -142,7 +142,7 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
         w.add_vector3_stamped(TOPICS["misalignment_sigma"], t[-1:], np.sqrt(np.diag(mis_cov))[None], "base_link")
         if result.timeline is not None:
             write_timeline_topics(w, result)
-            w.add_attachment("timeline.npz", timeline_npz_bytes(result), "application/x-npz")
+            w.add_attachment("timeline.npz", timeline_npz_bytes(result.timeline), "application/x-npz")
         w.add_attachment("calibration.json", to_json(calibration_record(result)).encode(), "application/json")
         w.add_metadata("gtsam_dvl_result", {"estimator": result.estimator, "summary": to_json(summary),
                                             "source_log": str(log.source)})

@@ -1,4 +1,4 @@
-"""Write a LogData as a ROS 2 MCAP log exactly as CONVENTIONS.md ("Logs: ROS 2 MCAP") lays it out.
+"""Write a LogData as a ROS 2 MCAP log exactly as docs/conventions.md ("Logs: ROS 2 MCAP") lays it out.
 
 Topics: /tf_static, /imu/data_raw, /dvl/twist, /dvl/data and, for simulated logs, /ground_truth/odometry.
 Choices the conventions leave open:
@@ -126,7 +126,7 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
 
 
 def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None) -> None:
-    """Write ``log`` to ``path`` as a ROS 2 MCAP per CONVENTIONS.md (atomically: temporary file, then
+    """Write ``log`` to ``path`` as a ROS 2 MCAP per docs/conventions.md (atomically: temporary file, then
     rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
     and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config"."""
     path = Path(path)

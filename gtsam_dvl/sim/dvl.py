@@ -1,4 +1,4 @@
-"""DVL measurements (CONVENTIONS.md): y = k d_R_b (n_R_b^T n_v + b_omega x b_l) + noise, in dvl_link.
+"""DVL measurements (docs/conventions.md): y = k d_R_b (n_R_b^T n_v + b_omega x b_l) + noise, in dvl_link.
 
 b_R_d = R_c b_R_d0 is the true mounting (the nominal one corrected by the misalignment R_c in body axes),
 b_omega the body rate relative to the Earth, b_l the lever arm. Janus geometry: four beams at

@@ -226,10 +226,6 @@ def test_log_starting_in_motion_has_no_static_segment() -> None:
     assert abs(rows[3][0] - 100.0) <= TYPE1_TOL_S
 
 
-@pytest.mark.xfail(strict=True, reason="window_means labels each 1 s window by its nominal end, so the last "
-                   "window (the last sample alone) ends 1 s after the log: the last row of paper-3d ends at 2061 s "
-                   "for a log whose last sample is at 2060 s (also detect_static_end, tests/estimators/"
-                   "test_alignment.py)")
 def test_rows_end_with_the_log(sim_paper3d_clean: LogData) -> None:
     """The rows cover the log, not beyond its last sample."""
     log = sim_paper3d_clean

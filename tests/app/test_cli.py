@@ -100,3 +100,75 @@ def test_truncated_log_salvage_recovers(sim_log: Path, tmp_path: Path) -> None:
     bad.write_bytes(sim_log.read_bytes()[: int(sim_log.stat().st_size * 0.6)])
     proc = run("info", str(bad), "--salvage")
     assert "salvage" in proc.stdout and "lost" in proc.stdout
+
+
+# ----- configuration checked by value, the effective configuration read back with -c ------------------
+
+@pytest.mark.parametrize(("name", "text", "expected"), [
+    ("cfg.toml", '[imu]\nbias_model = "walk"\n', "[imu] bias_model = 'walk' is not one of 'constant', 'random_walk'"),
+    ("cfg.toml", '[dvl]\nnoise_m_s = "abc"\n', "[dvl] noise_m_s must be a number >= 0, got 'abc'"),
+    ("cfg.toml", "[online]\nwindow_s = -5.0\n", "[online] window_s must be a number > 0, got -5.0"),
+    ("cfg.toml", '[ekf]\nmin_calibration_speed_m_s = "fast"\n',
+     "[ekf] min_calibration_speed_m_s must be a number >= 0, got 'fast'"),
+    ("cfg.json", '{"estimator": "batch", "config": {"solver": {"earth_model": "round"}}}',
+     "[solver] earth_model = 'round' is not one of 'wgs84', 'flat'"),
+])
+def test_bad_config_value_gives_one_line_and_exit_1(name: str, text: str, expected: str, sim_log: Path,
+                                                     tmp_path: Path) -> None:
+    cfg = tmp_path / name
+    cfg.write_text(text)
+    proc = run("smooth", str(sim_log), "-c", str(cfg), "-q", check=False)
+    assert proc.returncode == 1
+    lines = proc.stderr.strip().splitlines()
+    assert lines == [f"gtsam-dvl: error: {cfg}: {expected}"], proc.stderr
+    print(lines[0])
+
+
+@pytest.fixture(scope="module")
+def short_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """paper-2d cut to 350 s (150 s static, speed-up, two surges): a few seconds per estimator."""
+    import copy
+
+    from gtsam_dvl.io.writer import write_log
+    from gtsam_dvl.sim import simulate
+    from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+
+    raw = copy.deepcopy(load_scenario("paper-2d").raw)
+    raw["segments"] = raw["segments"][:4]
+    raw["segments"][0]["duration_s"] = 150.0
+    path = tmp_path_factory.mktemp("cli_short") / "short.mcap"
+    write_log(path, simulate(scenario_from_dict(raw, "paper-2d-short"), 5))
+    return path
+
+
+@pytest.mark.parametrize("mode", ["ekf", "online"])
+def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path: Path) -> None:
+    """Smooth with a non-default TOML, read back the config.json written with the result with -c: the same
+    configuration and the same estimates."""
+    from gtsam_dvl.io.storage.sources import open_source
+
+    toml = tmp_path / "cfg.toml"
+    toml.write_text('[dvl]\nrobust = "huber"\nhuber_k = 2.0\n[priors]\nscale_sigma = 0.3\n'
+                    "[online]\nwindow_s = 8.0\n[online.relinearization]\nscale = 0.01\n"
+                    "[ekf]\nmin_calibration_speed_m_s = 0.3\ncalibration_speed_sigmas = 4.0\n")
+    first, again = tmp_path / "first.mcap", tmp_path / "again.mcap"
+    run("smooth", str(short_log), "--mode", mode, "-c", str(toml), "-o", str(first), "--summary",
+        str(tmp_path / "first.json"), "-q")
+    effective = tmp_path / "config.json"
+    effective.write_bytes(open_source(first).attachments["config.json"][1])
+    written = json.loads(effective.read_text())
+    assert written["config"]["dvl"]["huber_k"] == 2.0 and written["config"]["ekf"]["calibration_speed_sigmas"] == 4.0
+    assert written["config"]["online"]["window_s"] == 8.0
+    assert written["config"]["online"]["relinearization"]["scale"] == 0.01
+    assert written["config"]["alignment"]["initial_attitude_deg"] is None  # null in JSON, read back as None
+    run("smooth", str(short_log), "--mode", mode, "-c", str(effective), "-o", str(again), "--summary",
+        str(tmp_path / "again.json"), "-q")
+    assert json.loads(open_source(again).attachments["config.json"][1]) == written
+    s1, s2 = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("first", "again"))
+    for key in ("scale", "misalignment_deg", "gyro_bias_deg_per_h", "accel_bias_ug"):
+        assert s1[key] == s2[key], key
+    np.testing.assert_array_equal(read_odometry(first, "/gtsam_dvl/odometry")[1],
+                                  read_odometry(again, "/gtsam_dvl/odometry")[1])
+    # and the non-default values took effect: the defaults give another estimate
+    run("smooth", str(short_log), "--mode", mode, "--summary", str(tmp_path / "default.json"), "-q")
+    assert json.loads((tmp_path / "default.json").read_text())["scale"] != s1["scale"]

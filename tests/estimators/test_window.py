@@ -272,10 +272,6 @@ def test_state_estimate_blocks_are_the_joint_covariances_of_their_keys() -> None
     np.testing.assert_array_equal(e.b_R_d, v.atRot3(C_MISALIGN).matrix())
 
 
-@pytest.mark.xfail(strict=True, reason="IncrementalSmoother.estimate(with_covariance=False) fills cov with a "
-                   "(25, 25) NaN matrix (as StateEstimate's comment says) but the joint is (19, 19): pose 6, velocity "
-                   "3, bias 6, scale 1, b_R_d 3; with OnlineConfig(covariances=False) every epoch's "
-                   "OnlineEstimate.calib_cov is then (16, 16) instead of (10, 10)")
 def test_estimate_without_covariance_has_the_shapes_of_one_with() -> None:
     """covariances=False (no marginals per epoch, for speed): the estimate keeps its shapes, NaN filled."""
     log = _log()
@@ -432,9 +428,6 @@ def test_add_epoch_without_its_inputs_is_a_clear_error() -> None:
     assert sm2.n == n
 
 
-@pytest.mark.xfail(strict=True, raises=IndexError, reason="joint_covariance converts only RuntimeError into "
-                   "GtsamDvlError; iSAM2's jointBayesNet raises IndexError (std::out_of_range: 'Requested the "
-                   "BayesTree clique for a key that is not in the BayesTree') for a state that left the window")
 def test_covariance_of_a_marginalised_state_is_a_clear_error() -> None:
     sm = _smoother(_run())
     assert sm.first > 0

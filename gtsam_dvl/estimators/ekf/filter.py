@@ -8,7 +8,7 @@ b_R_d; error state of dimension 19 (ekf_strapdown.py gives its definition and dy
 at the IMU rate (vectorised per DVL interval); the covariance is propagated once per DVL interval with the
 interval's closed-form transition matrix. Each valid ping is a measurement update with
 
-    y = k * d_R_b * ( n_R_b^T n_v + b_omega x b_l ) + noise,     d_R_b = b_R_d^T      (CONVENTIONS.md)
+    y = k * d_R_b * ( n_R_b^T n_v + b_omega x b_l ) + noise,     d_R_b = b_R_d^T      (docs/conventions.md)
 
 Same Earth model, initialisation, priors and noise as the smoother (graph.py, config.py): coarse alignment
 on the static segment, scale 0.8, misalignment at the nominal mounting, the first ping's velocity at that
@@ -217,7 +217,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
-    alignment = align(log.imu, log.dvl, frame, config.alignment)
+    alignment = align(log.imu, log.dvl, frame, config.alignment, config.imu.gyro_bias_sigma_deg_per_h * DEG_PER_H)
     pings = usable_pings(log.dvl, log.imu.t, config.dvl, counters)  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")

@@ -1,7 +1,7 @@
 """Strapdown mechanisation between two DVL epochs, vectorised over the IMU samples, and the error-state
-transition matrix of the same interval for the EKF (gtsam_dvl/estimators/ekf.py).
+transition matrix of the same interval for the EKF (gtsam_dvl/estimators/ekf/filter.py).
 
-Navigation equations in the Earth-fixed map frame (CONVENTIONS.md; the paper's eq. 3-5 with the map as
+Navigation equations in the Earth-fixed map frame (docs/conventions.md; the paper's eq. 3-5 with the map as
 reference frame, so there is no transport rate and position is Cartesian):
 
     d/dt n_R_b = n_R_b [b_omega_ib - b_g]x - [n_omega_ie]x n_R_b
@@ -32,7 +32,7 @@ with the linearised dynamics
     dp'  = dv
 integrated in closed form over the interval from the same sample quantities: exact in the time-varying
 attitude and specific force, first order in the Earth rate and the gravity gradient (the terms dropped
-are below 1e-4 of the ones kept over a one-second interval; tests/test_ekf.py checks it numerically).
+are below 1e-4 of the ones kept over a one-second interval; tests/estimators/test_ekf.py checks it numerically).
 """
 
 from __future__ import annotations

@@ -8,21 +8,21 @@ filtering sigmas at every epoch.
 
 Which mode:
 - `fixed_lag` (default): states older than `window_s` (20 s) behind the newest are marginalised; the bias,
-  scale and misalignment never leave. The cost per DVL epoch is bounded however long the mission (median
-  1.3 ms, p99 under 5 ms on paper-3d and over 6 hours: bench/bench_online.py): use it on the vehicle and for
-  any log longer than a few minutes. Its final calibration is the batch smoother's within 0.2 of a sigma (what
+  scale and misalignment never leave. The cost per DVL epoch is bounded however long the mission
+  (bench/bench_online.py prints the latencies; README, "Online estimator"): use it on the vehicle and for any
+  log longer than a few minutes. Its final calibration is the batch smoother's within 0.2 of a sigma (what
   left the window stays linearised where it was when it left); its sigmas are the batch's within 3 %, the
   vertical accelerometer bias's 10 % larger (the static phase's zero-velocity pings left the window while the
   scale was still its prior 0.8, and are credited the velocity information k^2 / sigma^2 at that scale).
 - `full`: every state is kept and iSAM2 may relinearise any of them; its final estimate is the batch
   smoother's (within 0.03 sigma measured). Each relinearisation of the calibration touches every DVL factor of
   the mission through a Python callback that receives a copy of all the variables, so its cost per update
-  grows with the mission (12 s for the first 1000 s of paper-3d, 25 to 40 s for all 2060 s, single updates
-  up to 10 s): use it to check the fixed-lag mode on short logs, or when every past state must stay adjustable.
+  grows with the mission (README, "Online estimator"): use it to check the fixed-lag mode on short logs, or
+  when every past state must stay adjustable.
 - The trajectory of the returned NavResult is the filtering one in both modes: each state as estimated when its
   ping was processed, what the vehicle knew then (the batch smoother gives the smoothed one).
 
-Design (see also online_smoother.py for the iSAM2 engine):
+Design (see also window.py for the iSAM2 engine):
 - The FactorMaker the batch smoother's whole-log graph uses (estimators/factor_maker.py) makes every factor,
   prior and initial guess from explicit measurements; pings are selected and IMU intervals split by the rules
   of estimators/selection.py, as in the batch smoother and the EKF.
@@ -355,7 +355,8 @@ class OnlineEstimator:
         cfg = dataclasses.replace(self.config.alignment)
         cfg.max_static_s = min(cfg.max_static_s, self.options.align_s) if cfg.max_static_s > 0 else self.options.align_s
         try:
-            alignment = align(ImuData(t, w, f), dvl, self.frame, cfg)
+            alignment = align(ImuData(t, w, f), dvl, self.frame, cfg,
+                              self.config.imu.gyro_bias_sigma_deg_per_h * DEG_PER_H)
         except GtsamDvlError as exc:
             raise GtsamDvlError(f"{self.source + ': ' if self.source else ''}online alignment: {exc}") from None
         self._start(alignment)

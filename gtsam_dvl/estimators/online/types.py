@@ -1,5 +1,5 @@
-"""Types of the online estimator (gtsam_dvl/estimators/online.py): its options, the estimate it gives after each DVL
-epoch, and small helpers shared with the benchmark."""
+"""Types of the online estimator (gtsam_dvl/estimators/online/estimator.py): its options, the estimate it gives
+after each DVL epoch, and small helpers shared with the benchmark."""
 
 from __future__ import annotations
 

@@ -6,15 +6,16 @@ Settings (the issue's traps):
   threshold per variable type and tangent component (RelinearizationThresholds), not iSAM2's 0.1 on all.
 - Marginal covariances by QR: ISAM2.marginalCovariance eliminates with Cholesky and fails. The joint of the
   newest state, bias, scale and misalignment comes from jointBayesNet(keys, EliminateQR) (those keys sit in
-  the root clique: about 0.2 ms), its square-root information inverted as a triangular matrix (the
+  the root clique, so this is cheap), its square-root information inverted as a triangular matrix (the
   information matrix itself spans 1e18 and cannot be inverted in double precision).
 
-Fixed lag, and why it is built this way (each alternative was measured on paper-3d):
+Fixed lag, and why it is built this way (each alternative was measured on paper-3d with bench/bench_online.py;
+the figures of the chosen design are in the README, "Online estimator"):
 - The window is a chain of states sharing the bias, scale and misalignment. A new epoch touches its top, a
   state leaving the window its bottom. Removing the old state's factors from iSAM2 and adding back their
   marginal (removeFactorIndices plus a LinearContainerFactor) touches the bottom: iSAM2 re-eliminates from
   there to the root, i.e. everything, which past 65 % of the variables is its batch step, relinearising every
-  factor through its Python callback: a median 5 to 11 ms per epoch for a 20 to 30 s window.
+  factor through its Python callback: several times the latency of the design below.
 - ISAM2.marginalizeLeaves cuts the bottom clique off and keeps its cached marginal, without re-eliminating
   (IncrementalFixedLagSmoother is built on it). Its catch: every variable of the marginal it keeps is frozen at
   its linearisation point, forever, the scale, misalignment and bias included; the first marginalisation
@@ -22,9 +23,9 @@ Fixed lag, and why it is built this way (each alternative was measured on paper-
   update exceeds its relinearisation threshold, a new iSAM2 is built from the same factors at the current
   estimate (the marginals pinned to the old linearisation point as LinearContainerFactors, since
   marginalizeLeaves keeps them relative to it). That costs what one relinearisation of the scale costs iSAM2
-  anyway, every factor of the window once (about 3 ms for a 20 s window, 5 ms for 30 s), and happens while the
-  estimate converges: about 70 times on paper-3d, 50 of them in the first 100 s (gyrocompassing from the
-  5 deg heading prior), 15 in the first Type-I manoeuvres; 80 in the 6-hour survey.
+  anyway, every factor of the window once, and happens while the estimate converges: mostly in the first 100 s
+  (gyrocompassing from the 5 deg heading prior) and the first Type-I manoeuvres (result.info["isam2"]
+  ["rebases"] counts them).
 - marginalizeLeaves needs the oldest state alone in a leaf clique (splitting a clique whose keys are not in
   elimination order corrupts iSAM2, GTSAM issue #1101). Updates therefore give elimination groups (oldest
   first, shared keys last) to the few newest states iSAM2 may relinearise, and mark older ones not to be
@@ -34,8 +35,8 @@ Fixed lag, and why it is built this way (each alternative was measured on paper-
   factors), so neither iSAM2's work per update nor the copy of the Values it hands to each Python CustomFactor
   grows with the mission: the last hour of a 6-hour survey has a lower p99 than the first.
 - The alternative of a sliding-window Gauss-Newton written in Python (solver.py on the window, a QR marginal
-  prior on the oldest state) relinearises the whole window at every iteration: about 3 ms for 20 s (40 factors
-  at 45 to 95 us each), against a median 1.3 ms per epoch, everything included, here.
+  prior on the oldest state) relinearises the whole window at every iteration: about twice the median latency of
+  this design, everything included.
 
 Full history: iSAM2 with every state and its default ordering. Each relinearisation of the scale,
 misalignment or bias relinearises every DVL or IMU factor of the mission, each call copying all the Values:
@@ -56,6 +57,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, V, X, key_dim
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.factors import EarthImuFactor
 
+STATE_DIM = 6 + 3 + 6 + 1 + 3  # the joint of StateEstimate: pose, velocity, bias, scale, misalignment
 RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see IncrementalSmoother._ordering)
 
 
@@ -73,7 +75,7 @@ class StateEstimate:
     bias: gtsam.imuBias.ConstantBias
     scale: float
     b_R_d: np.ndarray
-    cov: np.ndarray  # (25, 25): pose (6), n_v (3), bias [accel, gyro] (6), scale (1), b_R_d (3)
+    cov: np.ndarray  # (19, 19): pose (6), n_v (3), bias [accel, gyro] (6), scale (1), b_R_d (3)
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -320,7 +322,7 @@ class IncrementalSmoother:
         i = self.n - 1
         keys = [X(i), V(i), *self.shared_keys(i)]
         values = self.isam.calculateEstimate(keys)
-        cov = self.joint_covariance(keys) if with_covariance else np.full((25, 25), np.nan)
+        cov = self.joint_covariance(keys) if with_covariance else np.full((STATE_DIM, STATE_DIM), np.nan)
         return StateEstimate(
             index=i, t=self.t_last, pose=values.atPose3(X(i)), n_v=values.atVector(V(i)),
             bias=values.atConstantBias(keys[2]), scale=float(values.atVector(K_SCALE)[0]),
@@ -330,8 +332,8 @@ class IncrementalSmoother:
         """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""
         try:
             bn = self.isam.jointBayesNet(keys, gtsam.EliminateQR)
-        except RuntimeError as exc:
-            raise GtsamDvlError(f"marginal covariance failed ({exc})") from None
+        except (RuntimeError, IndexError) as exc:  # IndexError: a key no longer in iSAM2 (left the window)
+            raise GtsamDvlError(f"marginal covariance failed ({type(exc).__name__}: {exc})") from None
         return bayes_net_covariance(bn, keys)
 
     def size(self) -> tuple[int, int]:
