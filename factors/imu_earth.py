@@ -9,18 +9,37 @@ current positions without its derivative leaves the solver a slow (or, over long
 point; this factor adds the gradient term to the translation Jacobians so that Gauss-Newton converges as
 on the true model:
 
-    de/d(xi_t_i) += de/dg * G * 1/2 * n_R_b_i,   de/dg = [0; 1/2 dt^2 n_R_b_j^T; dt n_R_b_j^T]
+    de/d(xi_t_i) += de/dg * G * 1/2 * n_R_b_i,   de/dg = [0; n_R_b_j^T M_p; n_R_b_j^T M_v]
 
 (error order [rotation, position, velocity] in the frame of state j; translation tangents in body axes).
-de/dg is exact at zero error and off by the rotation error otherwise, which only affects the convergence
-rate, never the solution. The gravity model is a callable returning g and its gradient G at positions;
-it is evaluated at a reference position and extrapolated linearly; whoever drives the solver
-re-references factors whose mid position moved more than REFRESH_M (the quadratic term over 100 m is
-below 1e-8 m/s^2), in bulk (GraphBuilder.refresh_gravity).
+M = [M_p; M_v] = d(predicted n_p, n_v) / d n_g is [1/2 dt^2 I; dt I] (dt the pim's deltaTij) in an inertial
+frame; with omegaCoriolis set GTSAM 4.3 predicts in the rotating frame and M also carries the Earth-rate
+transport of the gravity terms (a relative omega dt, 1.5e-4 over 2 s). The prediction is affine in gravity,
+so each factor measures M once, exactly, from its pim. GTSAM's error is the SE_2(3) logarithm of
+X_j^-1 * prediction, so de/dg is exact when the rotation error is zero (whatever the position and velocity
+errors) and off by a relative O(|rotation error|) otherwise, which only affects the convergence rate,
+never the solution (tests/factors/test_imu_earth.py). The gravity model is a callable returning g and its
+gradient G at positions; it is evaluated at a reference position and extrapolated linearly; whoever drives
+the solver re-references factors whose mid position moved more than REFRESH_M (the quadratic term over
+100 m is below 1e-8 m/s^2), in bulk (refresh_gravity of the estimators' graphs).
+A factor evaluated before it has a reference takes it at the mid position of that first evaluation.
+
+Gravity reaches GTSAM through the parameters object: the factor writes its n_gravity before every
+evaluation (set_gravity), and the pim, which holds a shared pointer to the same object, predicts with it
+(the batch graph's initial guess and the online window call set_gravity before pim.predict for that reason).
+So each factor needs its own PreintegrationParams, the one its pim was made with; make_earth_imu_factor
+(and EarthImuFactor itself) refuse, with ValueError, parameters that are not the pim's or that already
+serve another EarthImuFactor: a second factor writing the same object would move the first one's
+gravity (a constant-gravity factor, which never writes, would then evaluate with the other's gravity,
+and pim.predict would use whichever factor was set last). With one object per factor, each error is a
+function of the values and the factor's own reference only, whatever the evaluation order: GTSAM marks
+CustomFactor not sendable, so Python factors are linearized one at a time, and write-then-evaluate
+cannot interleave.
 """
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable
 from typing import Any
 
@@ -31,19 +50,67 @@ GravityModel = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # n_p (3,)
 REFRESH_M = 100.0
 _DIMS = (6, 3, 6, 3, 6)
 
+# Parameters objects in use by an EarthImuFactor. Weak, so the set never keeps parameters alive itself (a
+# factor and its CustomFactor hold each other through C++, out of the garbage collector's sight, so in practice
+# a factor, and its claim, last as long as the process).
+_CLAIMED: weakref.WeakSet[gtsam.PreintegrationParams] = weakref.WeakSet()
+_PROBE_DG = 1.0  # m/s^2, the gravity change of _gravity_map's probe
+_PROBES = _PROBE_DG * np.eye(3)
+_ORIGIN, _NO_BIAS = gtsam.NavState(), gtsam.imuBias.ConstantBias()
+
+
+def _gravity_map(pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams) -> np.ndarray:
+    """M (6, 3) = d(n_p, n_v of the prediction) / d n_g, by changing params' gravity (restored after).
+
+    GTSAM's prediction is affine in gravity, so the differences are exact (to rounding); they also prove that
+    params is the pim's parameters object: otherwise the prediction would not move (ValueError). About 20 us,
+    once per factor."""
+    g0 = np.array(params.n_gravity, dtype=float)
+    Y = np.empty((4, 6))  # predicted (n_p, n_v) from the origin at rest, at g0 and at g0 + each probe
+    try:
+        for k, g in enumerate((g0, *(g0 + _PROBES))):
+            params.n_gravity = g
+            state = pim.predict(_ORIGIN, _NO_BIAS)
+            Y[k, :3], Y[k, 3:] = state.position(), state.velocity()
+    finally:
+        params.n_gravity = g0
+    M = (Y[1:] - Y[0]).T / _PROBE_DG
+    dt = pim.deltaTij()
+    if dt > 0.0 and not np.abs(M[3:]).max() > 0.5 * dt:  # (no time integrated: gravity has no effect)
+        raise ValueError(
+            "params is not the parameters object the pim was made with: the factor's gravity would not reach "
+            "the prediction; pass the PreintegrationParams given to PreintegratedImuMeasurements")
+    return M
+
+
+def _check_free(params: gtsam.PreintegrationParams) -> None:
+    """ValueError if params already serves an EarthImuFactor (module doc)."""
+    if params in _CLAIMED:
+        raise ValueError(
+            "these PreintegrationParams already serve another EarthImuFactor: each factor writes its gravity "
+            "into its parameters, which would change the other factor's prediction; preintegrate each interval "
+            "with its own PreintegrationParams")
+
 
 class EarthImuFactor:
     """One factor: the wrapped ImuFactor, its own parameters, the local gravity model, and `.factor`, the
-    gtsam.CustomFactor to add to a graph."""
+    gtsam.CustomFactor to add to a graph. dt is the interval as given; the Jacobian uses the time the pim
+    integrated (through M, module doc), which differs where the IMU data have a gap."""
 
     def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
                  gravity: GravityModel | None, keys: tuple[int, int, int, int, int]) -> None:
+        _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
         self.imu, self.params, self.dt, self.gravity, self.keys = imu, params, dt, gravity, keys
+        pim = imu.preintegratedMeasurements()  # a copy, sharing the parameters object with the ImuFactor's
+        self._M = _gravity_map(pim, params)  # d(prediction's n_p, n_v) / d n_g
+        self._MG: np.ndarray = np.zeros((6, 3))  # M @ ref_G, computed once per reference
+        self._MG_of: np.ndarray | None = None  # the ref_G it is of
         self.ref_p: np.ndarray | None = None
-        self.ref_g = np.asarray(params.n_gravity, dtype=float)
+        self.ref_g = np.array(params.n_gravity, dtype=float)  # a copy: the property is a view of the C++ vector
         self.ref_G = np.zeros((3, 3))
-        noise = gtsam.noiseModel.Gaussian.Covariance(imu.preintegratedMeasurements().preintMeasCov())
+        noise = gtsam.noiseModel.Gaussian.Covariance(pim.preintMeasCov())
         self.factor = gtsam.CustomFactor(noise, list(keys), self)
+        _CLAIMED.add(params)  # last: a factor that failed to build claims nothing
 
     def set_reference(self, n_p_ref: np.ndarray, g: np.ndarray, G: np.ndarray) -> None:
         """Give the local gravity model (a caller evaluating many factors at once can do it in bulk)."""
@@ -53,6 +120,7 @@ class EarthImuFactor:
         return self.gravity is not None and (self.ref_p is None or np.abs(n_p_mid - self.ref_p).max() > REFRESH_M)
 
     def set_gravity(self, n_p_mid: np.ndarray) -> np.ndarray:
+        """Gravity at n_p_mid from the reference, written into this factor's parameters (and so its pim's)."""
         if self.gravity is None:
             return self.ref_g
         if self.ref_p is None:
@@ -75,11 +143,12 @@ class EarthImuFactor:
         Hs = [np.zeros((9, d), order="F") for d in _DIMS]
         error = self.imu.evaluateError(pose_i, v_i, pose_j, v_j, bias, *Hs)
         if self.gravity is not None:
+            if self._MG_of is not self.ref_G:
+                self._MG, self._MG_of = self._M @ self.ref_G, self.ref_G
             R_i, R_j = pose_i.rotation().matrix(), pose_j.rotation().matrix()
-            dt = self.dt
             E_G = np.zeros((9, 3))
-            E_G[3:6] = (0.5 * dt * dt) * (R_j.T @ self.ref_G)
-            E_G[6:9] = dt * (R_j.T @ self.ref_G)
+            E_G[3:6] = R_j.T @ self._MG[:3]
+            E_G[6:9] = R_j.T @ self._MG[3:]
             Hs[0][:, 3:6] += 0.5 * (E_G @ R_i)
             Hs[2][:, 3:6] += 0.5 * (E_G @ R_j)
         for k in range(5):
@@ -96,8 +165,8 @@ def make_earth_imu_factor(
 ) -> EarthImuFactor:
     """IMU factor on [X_i, V_i, X_j, V_j, B] whose gravity follows position (gravity=None: constant).
 
-    `params` must be the pim's own parameters object (one per factor): the factor writes its gravity.
-    Add `result.factor` to a graph.
+    `params` must be the pim's own parameters object, used by no other EarthImuFactor (the factor writes
+    its gravity there; ValueError otherwise, see the module doc). Add `result.factor` to a graph.
     """
     if not np.isfinite(dt) or dt <= 0:
         raise ValueError(f"dt must be positive, got {dt}")

@@ -15,14 +15,15 @@ from gtsam_dvl.core.config import AlignmentConfig
 from gtsam_dvl.core.types import LogData, Segment
 from gtsam_dvl.estimators.alignment import detect_static_end, window_means
 from gtsam_dvl.estimators.iodvlc import detect_type1_segments
+from gtsam_dvl.estimators.mounting import imu_in_base_link
 
 TURN_RATE_DEG_S = 0.3
 MIN_SEGMENT_S = 5.0
 
 
 def classify_log(log: LogData) -> list[Segment]:
-    """Segments covering the log: kinds static, type1 (with the specific-force axis), turn, cruise."""
-    imu = log.imu
+    """Segments covering the log: kinds static, type1 (with the specific-force axis in base_link), turn, cruise."""
+    imu = imu_in_base_link(log.imu, log.mounting)
     ends, w_mean = window_means(imu.t, imu.b_omega)
     starts = ends - 1.0
     labels = np.where(np.degrees(np.linalg.norm(w_mean, axis=1)) > TURN_RATE_DEG_S, "turn", "cruise").astype(object)

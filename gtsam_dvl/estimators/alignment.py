@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig, ImuConfig
+from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, rpy_to_matrix
@@ -75,15 +75,13 @@ def detect_static_end(imu: ImuData, dvl: DvlData, cfg: AlignmentConfig) -> float
 
 
 # Gyrocompassing needs the horizontal Earth rate well above the gyro bias: the heading error is about
-# bias / horizontal rate (rad), so 10x keeps it below 0.1 rad even for a bias at its 1-sigma prior.
-GYROCOMPASS_RATE_PER_BIAS = 10.0
-DEFAULT_GYRO_BIAS_SIGMA_RAD_S = ImuConfig().gyro_bias_sigma_deg_per_h * DEG_PER_H
+# bias / horizontal rate (rad). Below 0.1 deg/h (latitudes beyond 89.6 deg) even a navigation-grade 0.01 deg/h
+# bias turns the heading by more than 0.1 rad, so there the heading must be given.
+GYROCOMPASS_MIN_HORIZONTAL_RATE_RAD_S = 0.1 * DEG_PER_H
 
 
-def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame,
-                     gyro_bias_sigma_rad_s: float = DEFAULT_GYRO_BIAS_SIGMA_RAD_S) -> np.ndarray:
-    """n_R_b from mean static specific force b_f (m/s^2) and gyro b_omega (rad/s), at the map origin.
-    gyro_bias_sigma_rad_s: the gyro bias the heading must survive (GYROCOMPASS_RATE_PER_BIAS)."""
+def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame) -> np.ndarray:
+    """n_R_b from mean static specific force b_f (m/s^2) and gyro b_omega (rad/s), at the map origin."""
     roll = np.arctan2(b_f[1], b_f[2])
     pitch = np.arctan2(-b_f[0], np.hypot(b_f[1], b_f[2]))
     l_R_b_level = rpy_to_matrix(float(roll), float(pitch), 0.0)  # heading still unknown
@@ -91,14 +89,13 @@ def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame,
     yaw = np.arctan2(w_level[0], w_level[1])
     horizontal_rate = float(np.linalg.norm(frame.n_omega_ie[:2]))
     if (np.hypot(w_level[0], w_level[1]) < 0.2 * horizontal_rate
-            or horizontal_rate < GYROCOMPASS_RATE_PER_BIAS * gyro_bias_sigma_rad_s):
+            or horizontal_rate < GYROCOMPASS_MIN_HORIZONTAL_RATE_RAD_S):
         raise GtsamDvlError("gyrocompassing failed: the horizontal Earth rate is not visible in the gyros "
                             "(IMU too noisy, or latitude near a pole); give alignment.initial_attitude_deg")
     return rpy_to_matrix(float(roll), float(pitch), float(yaw))
 
 
-def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig,
-          gyro_bias_sigma_rad_s: float = DEFAULT_GYRO_BIAS_SIGMA_RAD_S) -> Alignment:
+def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig) -> Alignment:
     """Initial attitude: the configured one, else coarse alignment on the initial static segment (heading by
     gyrocompassing, refused when the gyro bias would set it: see coarse_alignment)."""
     if cfg.initial_attitude_deg is not None:
@@ -110,4 +107,4 @@ def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig,
             f"{max(t_end - imu.t[0], 0.0):.0f} s); set alignment.initial_attitude_deg in the configuration")
     sel = imu.t <= t_end
     b_f, b_omega = imu.b_f[sel].mean(axis=0), imu.b_omega[sel].mean(axis=0)
-    return Alignment(coarse_alignment(b_f, b_omega, frame, gyro_bias_sigma_rad_s), t_end, "static", b_f, b_omega)
+    return Alignment(coarse_alignment(b_f, b_omega, frame), t_end, "static", b_f, b_omega)

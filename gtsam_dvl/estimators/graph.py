@@ -20,9 +20,9 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.core.units import DEG_PER_H
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, sample_starts, select_epochs
 from gtsam_dvl.factors import EarthImuFactor
 
@@ -50,9 +50,10 @@ class LogGraph:
     counters: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
         cfg, log = self.config, self.log
         frame = map_frame_of(log, cfg)
-        alignment = align(log.imu, log.dvl, frame, cfg.alignment, cfg.imu.gyro_bias_sigma_deg_per_h * DEG_PER_H)
+        alignment = align(log.imu, log.dvl, frame, cfg.alignment)
         self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
         self.epochs = self._select_epochs()
         if len(self.epochs) < 2:

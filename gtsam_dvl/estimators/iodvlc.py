@@ -49,6 +49,7 @@ from gtsam_dvl.core.earth import OMEGA_IE, WGS84_A
 from gtsam_dvl.core.result import misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
 from gtsam_dvl.core.types import ImuData, LogData
+from gtsam_dvl.estimators.mounting import log_in_base_link
 
 MAX_SIGMA_RAD = np.pi  # sigma reported for a misalignment axis that no segment has excited
 MAX_SCALE_SIGMA = 0.1  # timeline scale and misalignment are NaN until the scale is known this well
@@ -370,6 +371,7 @@ def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = N
     IoDvlcOptions, or an EstimatorConfig (its [iodvlc] section); None: the defaults."""
     opt = options.iodvlc if isinstance(options, EstimatorConfig) else options or IoDvlcOptions()
     opt.validate()
+    log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
     dvl, b_R_d0 = log.dvl, log.mounting.b_R_d0
     ok = dvl.valid & np.all(np.isfinite(dvl.d_v), axis=1) & (dvl.t >= log.imu.t[0]) & (dvl.t <= log.imu.t[-1])
