@@ -98,7 +98,8 @@ class EarthImuFactor:
     integrated (through M, module doc), which differs where the IMU data have a gap."""
 
     def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
-                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int]) -> None:
+                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int],
+                 extra_cov: np.ndarray | None = None) -> None:
         _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
         self.imu, self.params, self.dt, self.gravity, self.keys = imu, params, dt, gravity, keys
         pim = imu.preintegratedMeasurements()  # a copy, sharing the parameters object with the ImuFactor's
@@ -108,7 +109,8 @@ class EarthImuFactor:
         self.ref_p: np.ndarray | None = None
         self.ref_g = np.array(params.n_gravity, dtype=float)  # a copy: the property is a view of the C++ vector
         self.ref_G = np.zeros((3, 3))
-        noise = gtsam.noiseModel.Gaussian.Covariance(pim.preintMeasCov())
+        cov = pim.preintMeasCov() if extra_cov is None else pim.preintMeasCov() + extra_cov
+        noise = gtsam.noiseModel.Gaussian.Covariance(cov)
         self.factor = gtsam.CustomFactor(noise, list(keys), self)
         _CLAIMED.add(params)  # last: a factor that failed to build claims nothing
 
@@ -162,12 +164,17 @@ def make_earth_imu_factor(
     keys: tuple[int, int, int, int, int],
     dt: float,
     gravity: GravityModel | None,
+    extra_cov: np.ndarray | None = None,
 ) -> EarthImuFactor:
     """IMU factor on [X_i, V_i, X_j, V_j, B] whose gravity follows position (gravity=None: constant).
 
     `params` must be the pim's own parameters object, used by no other EarthImuFactor (the factor writes
-    its gravity there; ValueError otherwise, see the module doc). Add `result.factor` to a graph.
+    its gravity there; ValueError otherwise, see the module doc). extra_cov (9, 9): covariance added to the
+    preintegration's, in its error order [rotation, position, velocity] (e.g. the motion model across an IMU
+    gap). Add `result.factor` to a graph.
     """
     if not np.isfinite(dt) or dt <= 0:
         raise ValueError(f"dt must be positive, got {dt}")
-    return EarthImuFactor(gtsam.ImuFactor(*keys, pim), params, float(dt), gravity, keys)
+    if extra_cov is not None and np.shape(extra_cov) != (9, 9):
+        raise ValueError(f"extra_cov must be 9x9, got shape {np.shape(extra_cov)}")
+    return EarthImuFactor(gtsam.ImuFactor(*keys, pim), params, float(dt), gravity, keys, extra_cov)

@@ -110,7 +110,8 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 
 
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
-    """The summary JSON (README, "Command line"), in user units (degrees, deg/h, micro-g, ppm)."""
+    """The summary JSON (README, "Command line"), in user units (degrees, deg/h, micro-g, ppm), with the run's
+    health (analysis/health.py) and what the reader lost (LogData.metadata["reader_losses"])."""
     truth_dist = path_length(log.truth.n_p) if log.truth is not None else path_length(result.n_p)
     out: dict[str, Any] = {
         "estimator": result.estimator,
@@ -133,4 +134,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     errors = truth_errors(result, log)
     if errors is not None:
         out["errors"] = errors
+    from gtsam_dvl.analysis.health import assess_health  # health reads the config, which metrics does not need
+
+    out["health"] = assess_health(result, log).as_dict()
+    out["losses"] = log.metadata.get("reader_losses", {})
     return out

@@ -7,6 +7,8 @@ Imports of the heavy modules (gtsam, matplotlib, the simulator) happen inside th
 from __future__ import annotations
 
 import functools
+import signal
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, TypeVar
@@ -19,6 +21,22 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
                   help="Self-calibrating IMU + DVL navigation on GTSAM.")
 _state = {"debug": False}
 F = TypeVar("F", bound=Callable[..., Any])
+EXIT_UNHEALTHY = 3  # smooth --strict: the run's health is "degraded" or "failed"
+EXIT_SIGTERM = 128 + signal.SIGTERM  # the shell's convention for a process ended by SIGTERM
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that every atomic writer removes its temporary files (a
+    BaseException, like KeyboardInterrupt, so that no `except Exception` swallows it)."""
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    from gtsam_dvl.io import atomic
+
+    if atomic.deferring():  # outputs being renamed into place: finish the set first, then stop
+        atomic.defer(signum)
+        return
+    raise Terminated(signum)
 
 
 def _user_errors(func: F) -> F:
@@ -64,7 +82,9 @@ def simulate(
     quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
 ) -> None:
     """Simulate a scenario and write it as a ROS 2 MCAP log with truth."""
-    from gtsam_dvl.app.commands import simulate_to_file
+    from gtsam_dvl.app.commands import check_outputs, simulate_to_file
+
+    check_outputs({"the scenario": Path(scenario) if Path(scenario).exists() else None}, {"-o": output})
 
     result = simulate_to_file(scenario, output, seed=seed, white_noise=not no_noise, show_progress=not quiet)
     typer.echo(result.describe())
@@ -98,7 +118,20 @@ def info(
     typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair)))
 
 
-@app.command()
+SMOOTH_HELP = (
+    "Estimate trajectory, IMU biases, DVL scale and misalignment from a log.\n\n"
+    "After every run a self-diagnosis (solver convergence, chi^2 per degree of freedom, DVL residuals per 30 s "
+    "window, rejected pings, what --salvage and --repair lost) gives a health status, ok, degraded or failed, "
+    "printed with one line per warning and written into the summary and the result MCAP.\n\n"
+    "Exit codes: 0 done (whatever the health, unless --strict); 1 bad input (one line on stderr, nothing "
+    "written); 3 with --strict when the health is degraded or failed (the outputs are still written); 143 "
+    "terminated by SIGTERM (no partial output left behind).\n\n"
+    "An output path that is an input, or that cannot be written, is refused before any work; the outputs are "
+    "written all together or not at all."
+)
+
+
+@app.command(help=SMOOTH_HELP)
 @_user_errors
 def smooth(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
@@ -114,14 +147,19 @@ def smooth(
     timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
                             ] = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+    strict: Annotated[bool, typer.Option("--strict", help="Exit with code 3 when the run's health is degraded or "
+                                                          "failed (the outputs are still written).")] = False,
 ) -> None:
-    """Estimate trajectory, IMU biases, DVL scale and misalignment from a log."""
+    """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
     from gtsam_dvl.app.commands import smooth_file
 
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
                           show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair),
                           timeline=timeline, timeline_path=timeline_npz)
     typer.echo(outcome.describe())
+    if strict and outcome.status != "ok":
+        typer.echo(f"gtsam-dvl: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
+        raise typer.Exit(EXIT_UNHEALTHY)
 
 
 @app.command()
@@ -130,11 +168,15 @@ def evaluate(
     result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for metrics.json and figures.")],
     truth: Annotated[Path | None, typer.Option(help="Log with truth (default: the result's source log).")] = None,
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False,
 ) -> None:
-    """Errors against the truth over time, observability verdict and the segments that made it."""
+    """Errors against the truth over time, observability verdict and the segments that made it; the run's health
+    as smooth recorded it, and what reading the truth log lost. The reading options apply to the truth log."""
     from gtsam_dvl.app.commands import evaluate_to_dir
 
-    lines, written = evaluate_to_dir(result, output, truth_path=truth)
+    lines, written = evaluate_to_dir(result, output, truth_path=truth,
+                                     read_options=_read_options(imu_topic, dvl_topic, salvage, repair))
     typer.echo("\n".join(lines))
     for path in written:
         typer.echo(f"wrote {path}")
@@ -171,8 +213,16 @@ def demo(
 
 
 def main() -> None:
-    """Console-script entry point."""
-    app(prog_name="gtsam-dvl")
+    """Console-script entry point. SIGTERM becomes an exception (Terminated) so that the writers clean up,
+    then one line on stderr and exit code 143."""
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        app(prog_name="gtsam-dvl")
+    except Terminated:
+        sys.stderr.write("gtsam-dvl: terminated by SIGTERM; no partial output left behind\n")
+        sys.exit(EXIT_SIGTERM)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

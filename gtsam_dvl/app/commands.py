@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,12 +89,17 @@ class SmoothOutcome:
     summary: dict
     written: list[Path]
 
+    @property
+    def status(self) -> str:
+        """The run's health status: "ok", "degraded" or "failed" (analysis/health.py)."""
+        return str(self.summary.get("health", {}).get("status", "ok"))
+
     def describe(self) -> str:
         s = self.summary
         if "states" not in s:  # io-dvlc: calibration only
             return "\n".join([f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
                               f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"]
-                             + [f"  wrote {p}" for p in self.written])
+                             + health_lines(s.get("health")) + [f"  wrote {p}" for p in self.written])
         mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
         lines = [
             f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
@@ -106,12 +112,59 @@ class SmoothOutcome:
         ]
         err = s.get("errors")
         if err:
+            pct = err.get("final_horizontal_position_pct_distance")
+            of_distance = f"{pct:.3f} % of distance" if pct is not None else "no distance travelled"
             lines.append(f"  vs truth: scale {err.get('scale_ppm', float('nan')):+.0f} ppm, misalignment "
                          + ", ".join(f"{v:+.3f}" for v in err.get("misalignment_deg", [])) + " deg, final horizontal "
-                         f"position {err['final_horizontal_position_m']:.2f} m "
-                         f"({err['final_horizontal_position_pct_distance']:.3f} % of distance)")
+                         f"position {err['final_horizontal_position_m']:.2f} m ({of_distance})")
+        lines += health_lines(s.get("health"))
         lines += [f"  wrote {p}" for p in self.written]
         return "\n".join(lines)
+
+
+def health_lines(health: dict[str, Any] | None, indent: str = "  ") -> list[str]:
+    """The console lines of a summary's health section: its status, then one line per warning and note (what
+    the reader lost is among them)."""
+    if not health:
+        return []
+    return ([f"{indent}health: {health.get('status', '?')}"]
+            + [f"{indent}  warning: {w}" for w in health.get("warnings", [])]
+            + [f"{indent}  note: {n}" for n in health.get("notes", [])])
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Same file by inode when both exist (links, other spellings), else by resolved path."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def check_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None]) -> None:
+    """Before any work: refuse an output that is an input (the same file by path, link or inode), lies inside
+    an input bag folder, or is given twice; and check that every output can be written there. inputs and
+    outputs map a name for messages (e.g. "the input log", "--summary") to a path (None: not given)."""
+    from gtsam_dvl.io.atomic import check_writable
+
+    ins = {name: Path(p) for name, p in inputs.items() if p is not None}
+    outs = {name: Path(p) for name, p in outputs.items() if p is not None}
+    for name, out in outs.items():
+        for in_name, inp in ins.items():
+            if _same_file(out, inp):
+                raise GtsamDvlError(f"{out}: {name} is {in_name} ({inp}); writing it would destroy the input, "
+                                    "choose another output path")
+            if inp.is_dir() and out.resolve().is_relative_to(inp.resolve()):
+                raise GtsamDvlError(f"{out}: {name} lies inside {in_name}, the bag folder {inp}; write outputs "
+                                    "elsewhere")
+    items = list(outs.items())
+    for i, (name, out) in enumerate(items):
+        for other, path in items[i + 1:]:
+            if _same_file(out, path):
+                raise GtsamDvlError(f"{out}: given as both {name} and {other}; each output needs its own path")
+    for out in outs.values():
+        check_writable(out)
 
 
 MODES = ("batch", "online", "online-full", "ekf", "io-dvlc")
@@ -146,43 +199,62 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
                 read_options: dict[str, Any] | None = None, timeline: bool = True,
                 timeline_path: Path | None = None) -> SmoothOutcome:
     """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
-    The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz."""
+    The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz.
+
+    Safe outputs: before any work, an output that is an input (or another output) or cannot be written is a
+    one-line GtsamDvlError. The outputs are written as a set (io/atomic.py OutputSet): all of them, or none if
+    any fails or the run is interrupted. The summary carries the run's health (analysis/health.py)."""
+    from gtsam_dvl.analysis.health import assess_log_health
     from gtsam_dvl.analysis.metrics import summary
     from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.core.result import NavResult
     from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
-    from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json, write_tum
+    from gtsam_dvl.io.atomic import OutputSet, tum_text
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
 
     if mode not in MODES:
         raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+    default_timeline = (Path(output).with_suffix(".timeline.npz") if output is not None and timeline
+                        and timeline_path is None and mode != "io-dvlc" else None)
+    check_outputs({"the input log": Path(log_path), "the configuration": config_path},
+                  {"-o": output, "--summary": summary_path, "--tum": tum_path if mode != "io-dvlc" else None,
+                   "--timeline-npz": timeline_path, "the timeline file next to -o": default_timeline})
     config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
     t_read = time.perf_counter()
     log = load_log(log_path, **(read_options or {}))
     read_s = time.perf_counter() - t_read
     with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
         result = run_estimator(log, mode, config, progress=progress, timeline=timeline)
-    written: list[Path] = []
-    if not isinstance(result, NavResult):  # io-dvlc: calibration only
-        from gtsam_dvl.estimators.iodvlc import iodvlc_summary
+    outputs = OutputSet()
+    with outputs:
+        if not isinstance(result, NavResult):  # io-dvlc: calibration only
+            from gtsam_dvl.estimators.iodvlc import iodvlc_summary
 
-        summ = iodvlc_summary(result, log)
-        if summary_path is not None:
-            written.append(atomic_write_json(summary_path, summ))
-        return SmoothOutcome(summ, written)
-    result.timing_s["read"] = read_s
-    summ = summary(result, log)
-    if output is not None:
-        written.append(write_result_log(output, result, log, summ))
-        if result.timeline is not None and timeline_path is None:
-            timeline_path = Path(output).with_suffix(".timeline.npz")
-    if timeline_path is not None and result.timeline is not None:
-        written.append(atomic_write_bytes(timeline_path, timeline_npz_bytes(result.timeline)))
-    if summary_path is not None:
-        written.append(atomic_write_json(summary_path, summ))
-    if tum_path is not None:
-        written.append(write_tum(tum_path, log.t0_ns * 1e-9 + result.t, result.n_p, matrix_to_quat_xyzw(result.n_R_b)))
-    return SmoothOutcome(summ, written)
+            summ = iodvlc_summary(result, log)
+            health = assess_log_health(log)
+            if not np.isfinite(summ["scale"]["value"]):
+                health.flag("failed", "IO-DVLC computed no scale: the log has no Type-I segment (an acceleration at "
+                                      "constant attitude) it could use; run another estimator, or log such a segment")
+            summ["health"] = health.as_dict()
+            summ["losses"] = log.metadata.get("reader_losses", {})
+            if summary_path is not None:
+                outputs.write_json(summary_path, summ)
+        else:
+            result.timing_s["read"] = read_s
+            summ = summary(result, log)
+            if output is not None:
+                with outputs.staged(output) as tmp:
+                    write_result_log(tmp, result, log, summ)
+                if result.timeline is not None and timeline_path is None:
+                    timeline_path = default_timeline
+            if timeline_path is not None and result.timeline is not None:
+                outputs.write_bytes(timeline_path, timeline_npz_bytes(result.timeline))
+            if summary_path is not None:
+                outputs.write_json(summary_path, summ)
+            if tum_path is not None:
+                outputs.write_text(tum_path, tum_text(log.t0_ns * 1e-9 + result.t, result.n_p,
+                                                      matrix_to_quat_xyzw(result.n_R_b)))
+    return SmoothOutcome(summ, outputs.committed)
 
 
 def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
@@ -237,20 +309,27 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
                     read_options: dict[str, Any] | None = None) -> tuple[list[str], list[Path]]:
     """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
     result's source log has one), observability verdict with the segments credited, figures and
-    metrics.json. Returns the verdict lines and the files written."""
+    metrics.json (with the run's health and what reading the truth log lost). Returns the verdict lines, then the
+    health and loss lines, and the files written."""
     from gtsam_dvl.analysis.evaluate import evaluate_result
     from gtsam_dvl.app.plots.error_plots import plot_errors
     from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
     from gtsam_dvl.io.atomic import atomic_write_json, atomic_write_text
     from gtsam_dvl.io.result_reader import read_result
 
+    out_dir = Path(out_dir)
+    check_outputs({"the result": Path(result_path), "the truth log": truth_path}, {"-o": out_dir / "metrics.json"})
     stored = read_result(result_path)
     res = stored.result
     log_path = truth_path or (Path(stored.source_log) if stored.source_log and Path(stored.source_log).exists()
                               else None)
     log = load_log(log_path, **(read_options or {})) if log_path is not None else None
     ev = evaluate_result(stored, log)
-    out_dir = Path(out_dir)
+    # the health of the run (from the summary smooth wrote) and what reading the truth log here lost
+    health = stored.summary.get("health")
+    truth_losses = log.metadata.get("reader_losses", {}) if log is not None else {}
+    ev.metrics["health"] = health
+    ev.metrics["truth_log_losses"] = truth_losses
     written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
     label = res.estimator
     if ev.attitude_error_deg is not None and ev.position_error_m is not None:
@@ -273,4 +352,12 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
                                               title=f"Normalised sigmas, {label}"))
     lines = ev.report.lines() if ev.report is not None else ["no calibration covariance in this result"]
     written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
+    if health:
+        lines = lines + [f"result {line.strip()}" if i == 0 else line
+                         for i, line in enumerate(health_lines(health, indent=""))]
+    else:
+        lines = lines + ["result health: not recorded (a result written before health checks existed)"]
+    from gtsam_dvl.analysis.health import loss_lines
+
+    lines += [f"  reading {log_path}: {line}" for line in loss_lines(truth_losses)]
     return lines, written

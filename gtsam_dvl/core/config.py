@@ -38,7 +38,7 @@ POSITIVE: Mapping[str, float] = {"gt": 0.0}
 NON_NEGATIVE: Mapping[str, float] = {"ge": 0.0}
 
 BiasModel = Literal["constant", "random_walk"]
-RobustLoss = Literal["none", "huber"]
+RobustLoss = Literal["none", "huber", "cauchy"]
 EarthModel = Literal["wgs84", "flat"]
 OnlineMode = Literal["fixed_lag", "full"]
 BadMessages = Literal["raise", "drop"]
@@ -71,12 +71,37 @@ class ImuConfig(_Section):
     accel_bias_rw_ug_per_rth: float = field(default=1.0, metadata=POSITIVE)  # micro-g/sqrt(h), random_walk only
     # position integration noise of the preintegration, m/sqrt(s)
     integration_sigma_m_rts: float = field(default=1e-5, metadata=NON_NEGATIVE)
-    rotation_compensation: bool = True  # rotate each delta-v to its interval start (see graph.py)
+    rotation_compensation: bool = True  # rotate each delta-v to its interval start (see factor_maker.py)
+    # IMU gaps (estimators/gaps.py): a spacing longer than this many nominal periods is a gap, crossed by
+    # holding the last sample with the motion-model uncertainty below added to the covariance
+    gap_samples: float = field(default=3.0, metadata={"gt": 1.0})
+    gap_accel_sigma_m_s2: float = field(default=0.2, metadata=POSITIVE)  # change of acceleration over a gap
+    gap_rate_sigma_deg_s: float = field(default=1.0, metadata=POSITIVE)  # change of turn rate over a gap
+    # longer gaps are an error: a hold that long is no motion model (its error is systematic, not white)
+    max_gap_s: float = field(default=10.0, metadata=POSITIVE)
 
 
 @dataclass
 class DvlConfig(_Section):
-    """DVL measurement model options."""
+    """DVL measurement model options, and the screening of bogus pings before estimation.
+
+    Robust loss (batch and online: on every DVL factor; EKF: the same kernel's weight on the whitened
+    innovation, after the chi^2 gate of [ekf] gate_probability): "huber" (default), "cauchy" or "none".
+    robust_k is the kernel's threshold in sigmas of the whitened error (the norm of the 3-D error, or one
+    beam's). huber_k is its old name, kept as an alias: when set it overrides robust_k.
+
+    Screening (estimators/selection.py, PingScreen; the same causal rule in batch, online and EKF, against
+    the previous accepted ping and the IMU samples stamped since it), on when screen is true:
+    - an exact zero velocity (all three components 0.0) while moving, i.e. the IMU shows motion since the
+      previous accepted ping (the body's velocity changed by more than motion_dv_m_s by the specific force,
+      gravity turned by the gyro) or that ping was faster than moving_speed_m_s: "dvl_zero_while_moving";
+    - a velocity bit-identical to the previous accepted ping's while the IMU shows motion: "dvl_repeated";
+    - a velocity change |dv| since the previous accepted ping larger than
+      max_accel_m_s2 dt + accel_imu_factor * (the change the IMU allows over dt) + jump_margin_m_s:
+      "dvl_implausible_accel" (3-D velocity only, not with use_beams).
+    A real DVL's velocity is noisy: it never reads exact zeros, nor repeats a reading bit for bit; a
+    simulator without noise does both, at rest and at constant velocity (the IMU then shows no motion).
+    """
 
     SECTION: ClassVar[str] = "dvl"
 
@@ -84,9 +109,25 @@ class DvlConfig(_Section):
     default_noise_m_s: float = field(default=0.02, metadata=POSITIVE)  # for messages without a covariance
     use_beams: bool = False  # one scalar factor per valid beam instead of the 3-D velocity
     beam_noise_m_s: float = field(default=0.02, metadata=POSITIVE)
-    robust: RobustLoss = "none"  # "none" or "huber"
-    huber_k: float = field(default=3.0, metadata=POSITIVE)  # in sigmas
+    robust: RobustLoss = "huber"  # "huber" (default), "cauchy" or "none"
+    # kernel threshold, in sigmas: 4 leaves a clean log's estimates within 0.02 sigma of no kernel on paper-3d
+    # (3: up to 0.1 sigma), and a 0.5-2 m/s outlier (25-100 sigma) still counts like a 4 sigma residual
+    robust_k: float = field(default=4.0, metadata=POSITIVE)
+    huber_k: float | None = field(default=None, metadata=POSITIVE)  # old name of robust_k (overrides it if set)
     max_speed_m_s: float = field(default=10.0, metadata=POSITIVE)  # faster pings are outliers: dropped, counted
+    screen: bool = True  # drop bogus pings (zero while moving, repeated, implausible acceleration): see above
+    # no vehicle this package navigates accelerates this hard over a ping interval, m/s^2
+    max_accel_m_s2: float = field(default=2.0, metadata=POSITIVE)
+    # multiple of the velocity change the IMU allows (specific-force change, gravity turned by the gyro)
+    accel_imu_factor: float = field(default=5.0, metadata=NON_NEGATIVE)
+    jump_margin_m_s: float = field(default=0.3, metadata=NON_NEGATIVE)  # DVL noise of the two pings' difference
+    # the IMU shows motion when it says the DVL's velocity changed by more than this since the previous ping
+    motion_dv_m_s: float = field(default=0.05, metadata=POSITIVE)
+    moving_speed_m_s: float = field(default=0.1, metadata=POSITIVE)  # a previous ping this fast: moving
+
+    def robust_threshold(self) -> float:
+        """The robust kernel's threshold in sigmas: huber_k if set (the old name), else robust_k."""
+        return self.robust_k if self.huber_k is None else self.huber_k
 
 
 @dataclass
@@ -135,6 +176,9 @@ class SolverConfig(_Section):
     earth_model: EarthModel = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
     # 0: a state per DVL ping; >0: only pings at least this far apart
     keyframe_interval_s: float = field(default=0.0, metadata=NON_NEGATIVE)
+    # DVL dropouts: where pings are missing for more than 1.5 times this, states are added this far apart
+    # without a DVL factor, so that no IMU factor spans more than this (what the EKF's propagation does)
+    max_state_spacing_s: float = field(default=1.0, metadata=POSITIVE)
 
 
 @dataclass
@@ -216,6 +260,13 @@ class EkfConfig(_Section):
 
     min_calibration_speed_m_s: float = field(default=0.1, metadata=NON_NEGATIVE)
     calibration_speed_sigmas: float = field(default=5.0, metadata=NON_NEGATIVE)
+    # chi^2 gate of a DVL update: a ping whose normalised innovation squared exceeds the chi^2 quantile of
+    # this probability (dof: the measurement's dimension) is not used, only counted ("dvl_gated"); 1: no gate.
+    # 0.99999 (NIS 25.9 for 3-D): a 0.5 m/s outlier at 2 cm/s noise has NIS above 500; at 0.9999 (21.1) a
+    # clean paper-3d run lost 2 sound pings, which moved its estimates by 0.09 sigma
+    gate_probability: float = field(default=0.99999, metadata={"gt": 0.0, "le": 1.0})
+    # after this many consecutive gated pings the next one is used anyway (a filter that lost track recovers)
+    gate_reopen_after: int = field(default=10, metadata={"ge": 1})
 
 
 @dataclass

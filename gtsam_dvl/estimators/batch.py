@@ -30,6 +30,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     t1 = time.perf_counter()
     graph, values = builder.build()
     ordering = builder.elimination_ordering()
+    # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
+    dof = sum(graph.at(i).dim() for i in range(graph.size()) if graph.exists(i)) - values.dim()
     timing["build"] = time.perf_counter() - t1
     if progress:
         progress(0.2)
@@ -55,7 +57,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
-                             "initial_error": report.initial_error, "final_error": report.final_error,
+                             "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,
                              **{f"{k}_s": v for k, v in report.timing_s.items()}}
     if progress:
         progress(1.0)
@@ -99,6 +101,6 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values:
         t0_ns=builder.log.t0_ns, b_omega=b_omega, pose_vel_cross=pose_vel_cross,
         calib_joint_cov=marg.joints[calib_group],
         info={"alignment": {"method": builder.alignment.method, "t_static_end": builder.alignment.t_static_end},
-              "counters": dict(builder.counters), "epochs": n},
+              "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
         config=builder.config.to_dict(),
     )

@@ -32,6 +32,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import Alignment
+from gtsam_dvl.estimators.gaps import Gaps, hold_covariance, pieces_with_holds
 from gtsam_dvl.estimators.selection import imu_pieces
 from gtsam_dvl.factors import EarthImuFactor, make_dvl_beam_factor, make_dvl_velocity_factor, make_earth_imu_factor
 
@@ -83,18 +84,22 @@ class FactorMaker:
         return np.asarray(b_f + 0.5 * dt_sample[:, None] * np.cross(b_omega, b_f))
 
     def preintegrate_interval(self, t_a: float, t_b: float, t: np.ndarray, starts: np.ndarray, b_f: np.ndarray,
-                              b_omega: np.ndarray) -> tuple[gtsam.PreintegratedImuMeasurements,
-                                                            gtsam.PreintegrationParams]:
+                              b_omega: np.ndarray, gaps: Gaps | None = None) -> tuple[
+                                  gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, float]:
         """Preintegration over (t_a, t_b] of samples i covering (starts[i], t[i]] (b_f already compensated);
-        a sample straddling t_a or t_b contributes its overlap (selection.imu_pieces). Returns the pim and
-        its own parameters."""
+        a sample straddling t_a or t_b contributes its overlap (selection.imu_pieces), a gap the sample held
+        across it (estimators/gaps.py). Returns the pim, its own parameters and the held time, s."""
         params = self.make_params()
         pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
-        idx, dt = imu_pieces(t, starts, t_a, t_b)
+        if gaps is None:
+            idx, dt = imu_pieces(t, starts, t_a, t_b)
+            held_s = 0.0
+        else:
+            idx, dt, held_s = pieces_with_holds(t, starts, gaps, t_a, t_b)
         # Python floats and ints for the loop: numpy scalars cost more than the integration itself
         for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
             pim.integrateMeasurement(b_f[i], b_omega[i], dt_i)
-        return pim, params
+        return pim, params, held_s
 
     # ----- gravity -------------------------------------------------------------------------------
     def gravity_model(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -107,10 +112,13 @@ class FactorMaker:
 
     # ----- factors -------------------------------------------------------------------------------
     def new_imu_factor(self, i: int, pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams,
-                       dt: float) -> EarthImuFactor:
-        """The IMU factor between states i and i+1 from its preintegration (constant gravity if flat)."""
+                       dt: float, held_s: float = 0.0) -> EarthImuFactor:
+        """The IMU factor between states i and i+1 from its preintegration (constant gravity if flat); held_s
+        seconds of it crossed an IMU gap (their motion-model covariance is added: gaps.hold_covariance)."""
         gravity = None if self.config.solver.earth_model == "flat" else self.gravity_model
-        return make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)), dt, gravity)
+        extra = hold_covariance(self.config.imu, held_s, dt) if held_s > 0 else None
+        return make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)), dt, gravity,
+                                     extra)
 
     def bias_link_factors(self, i: int, dt: float) -> list[gtsam.NonlinearFactor]:
         """Random-walk bias link B_i -> B_i+1 over dt seconds (none for a random-constant bias)."""
@@ -136,7 +144,7 @@ class FactorMaker:
 
     def dvl_noise(self, cov: np.ndarray) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
-        definite, else the default sigma; robust if configured."""
+        definite, else the default sigma; in the robust kernel if configured (_robust)."""
         cfg = self.config.dvl
         noise: gtsam.noiseModel.Base
         if cfg.noise_m_s > 0:
@@ -152,9 +160,14 @@ class FactorMaker:
         return self._robust(gtsam.noiseModel.Isotropic.Sigma(1, self.config.dvl.beam_noise_m_s))
 
     def _robust(self, noise: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
-        if self.config.dvl.robust == "huber":
-            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(self.config.dvl.huber_k),
-                                                  noise)
+        """noise wrapped in the configured robust kernel ([dvl] robust, threshold robust_k in sigmas of the
+        whitened error: GTSAM applies it to the norm of the whitened 3-D error, or of one beam's)."""
+        cfg = self.config.dvl
+        k = cfg.robust_threshold()
+        if cfg.robust == "huber":
+            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(k), noise)
+        if cfg.robust == "cauchy":
+            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(k), noise)
         return noise
 
     def prior_factors(self, values: gtsam.Values) -> list[gtsam.NonlinearFactor]:

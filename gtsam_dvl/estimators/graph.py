@@ -22,8 +22,9 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.gaps import Gaps, check_gaps, find_gaps, sample_starts_with_gaps, with_fillers
 from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.selection import covering_sample, sample_starts, select_epochs
+from gtsam_dvl.estimators.selection import covering_sample, select_epochs
 from gtsam_dvl.factors import EarthImuFactor
 
 
@@ -32,7 +33,7 @@ class Epoch:
     """One state of the graph: a DVL ping used as keyframe."""
 
     t: float
-    dvl_index: int
+    dvl_index: int  # -1: a state without a ping (a DVL dropout: estimators/gaps.py)
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
 
 
@@ -47,6 +48,7 @@ class LogGraph:
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
     imu_params: list[gtsam.PreintegrationParams] = field(init=False)
     imu_factors: list[EarthImuFactor] = field(init=False)
+    gaps: Gaps = field(init=False)
     counters: dict[str, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -55,12 +57,14 @@ class LogGraph:
         frame = map_frame_of(log, cfg)
         alignment = align(log.imu, log.dvl, frame, cfg.alignment)
         self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
+        self.gaps = find_gaps(log.imu.t, cfg.imu.gap_samples)
+        check_gaps(self.gaps, cfg.imu, log.source)
         self.epochs = self._select_epochs()
-        if len(self.epochs) < 2:
+        if sum(e.dvl_index >= 0 for e in self.epochs) < 2:
             raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
-        self._preintegrate()
-        self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t)
-                            for i, (pim, params) in enumerate(zip(self.pims, self.imu_params, strict=True))]
+        held = self._preintegrate()
+        self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
+                            for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, held, strict=True))]
 
     @property
     def frame(self) -> LocalFrame:
@@ -73,20 +77,29 @@ class LogGraph:
     # ----- epochs and preintegration -------------------------------------------------------------
     def _select_epochs(self) -> list[Epoch]:
         dvl, imu, cfg = self.log.dvl, self.log.imu, self.config
-        idx = select_epochs(dvl, imu.t, cfg.dvl, cfg.solver.keyframe_interval_s, self.counters)
-        gyro = covering_sample(imu.t, dvl.t[idx])
-        return [Epoch(float(dvl.t[j]), int(j), self.maker.body_rate(imu.b_omega[g]))
-                for j, g in zip(idx.tolist(), gyro.tolist(), strict=True)]
+        idx = select_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, self.counters)
+        times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)
+        self.counters["states_without_ping"] = int(is_filler.sum())
+        self.counters["imu_gaps"] = len(self.gaps)
+        dvl_index = np.full(len(times), -1)
+        dvl_index[~is_filler] = idx
+        gyro = covering_sample(imu.t, times)
+        return [Epoch(float(t), int(j), self.maker.body_rate(imu.b_omega[g]))
+                for t, j, g in zip(times.tolist(), dvl_index.tolist(), gyro.tolist(), strict=True)]
 
-    def _preintegrate(self) -> None:
+    def _preintegrate(self) -> list[float]:
+        """The IMU intervals between the epochs; returns the time each held across IMU gaps, s."""
         imu = self.log.imu
-        starts = sample_starts(imu.t)
+        starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
         self.pims, self.imu_params = [], []
+        held = []
         for a, b in zip(self.epochs[:-1], self.epochs[1:], strict=True):
-            pim, params = self.maker.preintegrate_interval(a.t, b.t, imu.t, starts, b_f, imu.b_omega)
+            pim, params, h = self.maker.preintegrate_interval(a.t, b.t, imu.t, starts, b_f, imu.b_omega, self.gaps)
             self.pims.append(pim)
             self.imu_params.append(params)
+            held.append(h)
+        return held
 
     # ----- gravity -------------------------------------------------------------------------------
     def set_gravity_from_positions(self, n_p: np.ndarray, only_stale: bool = False) -> int:
@@ -124,6 +137,8 @@ class LogGraph:
         """DVL factors of state i: the 3-D velocity, or one per valid beam."""
         dvl, ep = self.log.dvl, self.epochs[i]
         j = ep.dvl_index
+        if j < 0:
+            return []
         beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
         return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams)
 
@@ -145,7 +160,7 @@ class LogGraph:
                 state = self.pims[i - 1].predict(gtsam.NavState(n_R_b, n_p, n_v), zero_bias)
                 n_R_b = state.attitude()
             j = ep.dvl_index
-            n_v_ping = self.maker.velocity_from_ping(n_R_b.matrix(), dvl.d_v[j] if dvl.valid[j] else None)
+            n_v_ping = self.maker.velocity_from_ping(n_R_b.matrix(), dvl.d_v[j] if j >= 0 and dvl.valid[j] else None)
             n_v_new = n_v if n_v_ping is None else n_v_ping
             if i > 0:
                 n_p = n_p + 0.5 * (n_v + n_v_new) * (ep.t - self.epochs[i - 1].t)

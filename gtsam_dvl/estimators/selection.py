@@ -4,8 +4,18 @@ EKF (estimators/ekf/), so that all three see the same epochs on the same log.
 
 Pings. A DVL ping is usable when it has a valid velocity (or, with `dvl.use_beams`, at least one valid beam
 with finite values), it is not faster than `dvl.max_speed_m_s` (a bottom-track outlier) and it lies after the
-first IMU sample (nothing before it can be propagated) and not after the last one. Every rejection is counted
-by reason. Keyframe thinning (`solver.keyframe_interval_s`) then keeps pings at least that far apart.
+first IMU sample (nothing before it can be propagated) and not after the last one (classify_pings), and when
+it is not bogus (PingScreen, with `dvl.screen`): an exact zero velocity while moving, a velocity repeated bit
+for bit while the IMU shows motion, or a velocity change the IMU cannot explain. Every rejection is counted by
+reason. Keyframe thinning (`solver.keyframe_interval_s`) then keeps pings at least that far apart.
+
+The screen is causal: it compares a ping with the previous accepted ping and the IMU samples stamped between
+the two (at most SCREEN_WINDOW_S before the ping), so that the online estimator, which sees pings one by one,
+makes the batch smoother's and the EKF's decisions (it waits until the IMU reaches the ping). A real DVL's
+velocity is noisy: a stationary vehicle reads near zero, never exact zeros, and no reading repeats bit for bit.
+A simulator without noise does both, at rest and at constant velocity, where the IMU shows no motion: hence
+"while moving". Exact zeros, a frozen output and a gross jump are what a DVL that lost bottom lock but still
+flags its velocity valid reports; the robust kernel (`dvl.robust`) takes care of the milder outliers.
 
 IMU samples. Sample i is the average over (starts[i], t[i]] (ImuData's convention); an interval (a, b] between
 two epochs takes each sample's overlap with it, so a sample straddling a ping is split exactly.
@@ -13,18 +23,23 @@ two epochs takes each sample's overlap with it, so a sample straddling a ping is
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from gtsam_dvl.core.config import DvlConfig
-from gtsam_dvl.core.types import DvlData
+from gtsam_dvl.core.types import DvlData, ImuData
 
 # Rejection reasons, in the counters every estimator reports.
 USABLE = 0
 UNUSABLE = 1  # no valid velocity or beam, or outside the IMU's time span
 TOO_FAST = 2  # faster than dvl.max_speed_m_s
-REASONS = {UNUSABLE: "dvl_unusable", TOO_FAST: "dvl_too_fast"}
+ZERO_WHILE_MOVING = 3  # exactly 0.0 in every component while moving (PingScreen)
+REPEATED = 4  # bit-identical to the previous accepted ping while the IMU shows motion (PingScreen)
+IMPLAUSIBLE_ACCEL = 5  # a velocity change the IMU cannot explain (PingScreen)
+REASONS = {UNUSABLE: "dvl_unusable", TOO_FAST: "dvl_too_fast", ZERO_WHILE_MOVING: "dvl_zero_while_moving",
+           REPEATED: "dvl_repeated", IMPLAUSIBLE_ACCEL: "dvl_implausible_accel"}
+SCREEN_WINDOW_S = 60.0  # the screen looks at most this far back in the IMU
 
 
 def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid: np.ndarray | None,
@@ -74,12 +89,150 @@ def beam_arrays(dvl: DvlData) -> tuple[np.ndarray | None, np.ndarray | None]:
     return np.asarray(ok), np.asarray(finite)
 
 
-def usable_pings(dvl: DvlData, imu_t: np.ndarray, cfg: DvlConfig, counters: dict[str, int]) -> np.ndarray:
-    """Indices of the usable pings of a whole log (module doc), counting the others."""
+def _turned_back(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """exp(theta_i)^T v for rotation vectors theta (N, 3): v, fixed in the start frame, seen from frames turned
+    by theta_i (Rodrigues)."""
+    angle = np.linalg.norm(theta, axis=1)
+    small = angle < 1e-12
+    k = theta / np.where(small, 1.0, angle)[:, None]
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return np.asarray(v * c - np.cross(k, v) * s + k * (k @ v)[:, None] * (1.0 - c))
+
+
+def screened_value(d_v: np.ndarray, beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                   cfg: DvlConfig) -> np.ndarray:
+    """What PingScreen compares of a ping: the 3-D velocity (3,), or with dvl.use_beams and beams
+    (d_u, v, valid) the beam velocities (B,), NaN where invalid."""
+    if cfg.use_beams and beams is not None:
+        return np.where(np.asarray(beams[2], dtype=bool), np.asarray(beams[1], dtype=float), np.nan)
+    return np.asarray(d_v, dtype=float)
+
+
+@dataclass
+class PingScreen:
+    """The screen for bogus pings (module doc; thresholds and rules in DvlConfig's doc), one ping at a time.
+
+    The previous accepted ping (last_t, last_y) is the reference. The IMU samples stamped in
+    (max(last_t, t - SCREEN_WINDOW_S), t] give the evidence for ping t. In body axes dv/dt = f + g - omega x v;
+    gravity g is unknown to the IMU alone, but it turns with the body as the gyro says, so the change of
+    f + g since the window's first sample is df = f - exp(theta)^T f_0 (theta the gyro's angle since then)
+    and omega x v changes by at most |omega - omega_0| |v_prev|. With a_0 the acceleration at the window's
+    start (the DVL's |dv/dt| between the two previous accepted pings, last_rate), the velocity changed by
+    at least | |a_0| T - |sum df dt| | - sum |omega - omega_0| |v_prev| dt over the window's T seconds: motion
+    when that exceeds dvl.motion_dv_m_s (a turn at constant velocity, or a vehicle turning on the spot, is no
+    motion of the DVL's velocity). The velocity change the IMU allows: dv_imu = sum of dt
+    (|df| + |omega - omega_0| |v_prev|), plus dvl.max_accel_m_s2 dt for the acceleration at the window's
+    start, which the IMU alone cannot see (gravity hides it). With dvl.use_beams the screen compares the
+    beam velocities (zero and repeat rules only). The whole-log estimators call check()
+    with the log's arrays; the online estimator feeds push_imu() and calls check_buffered()."""
+
+    cfg: DvlConfig
+    last_t: float = -np.inf
+    last_y: np.ndarray | None = None
+    last_rate: float = 0.0  # |dv/dt| between the two previous accepted pings (3-D velocity), m/s^2
+    _t: list[np.ndarray] = field(default_factory=list)
+    _w: list[np.ndarray] = field(default_factory=list)
+    _f: list[np.ndarray] = field(default_factory=list)
+
+    def check(self, t: float, y: np.ndarray, imu_t: np.ndarray, imu_w: np.ndarray, imu_f: np.ndarray) -> int:
+        """Reason code of ping t with value y (screened_value), given IMU stamps imu_t (sorted) with gyro
+        imu_w (rad/s) and specific force imu_f (m/s^2) holding at least the window's samples; an accepted
+        ping becomes the reference."""
+        cfg = self.cfg
+        code = USABLE
+        if cfg.screen and self.last_y is not None:
+            code = self._classify(t, y, imu_t, imu_w, imu_f)
+        if code == USABLE:
+            if self.last_y is not None and not self.cfg.use_beams and t > self.last_t:
+                self.last_rate = float(np.linalg.norm(y - self.last_y)) / (t - self.last_t)
+            self.last_t, self.last_y = t, np.array(y, dtype=float)
+        return code
+
+    def _classify(self, t: float, y: np.ndarray, imu_t: np.ndarray, imu_w: np.ndarray, imu_f: np.ndarray) -> int:
+        cfg, last = self.cfg, self.last_y
+        assert last is not None
+        t_from = max(self.last_t, t - SCREEN_WINDOW_S)
+        lo, hi = int(np.searchsorted(imu_t, t_from, side="right")), int(np.searchsorted(imu_t, t, side="right"))
+        # with beams, the largest beam velocity: a lower bound of the speed
+        prev_speed = float(np.nanmax(np.abs(last))) if cfg.use_beams else float(np.linalg.norm(last))
+        imu_motion, dv_imu = False, 0.0
+        if hi - lo >= 1:
+            tw, w, f = imu_t[lo:hi], imu_w[lo:hi], imu_f[lo:hi]
+            dt = np.diff(tw, prepend=t_from)
+            # the specific force's change that gravity turning with the body (the gyro's angle since the
+            # window's start, about a fixed axis) does not explain: the change of the body's acceleration
+            df = f - _turned_back(np.cumsum(w * dt[:, None], axis=0), f[0])
+            # what the change of the turn rate can do to a body velocity of the previous ping's size
+            dw_v = np.linalg.norm(w - w[0], axis=1) * prev_speed
+            # the acceleration at the window's start is the DVL's between the previous two pings; whatever its
+            # direction, |a_0 dt + sum df dt| >= | |a_0| dt - |sum df dt| |
+            dv_low = abs(float(np.linalg.norm(dt @ df)) - self.last_rate * (t - t_from)) - float(dt @ dw_v)
+            imu_motion = dv_low > cfg.motion_dv_m_s
+            dv_imu = float(dt @ (np.linalg.norm(df, axis=1) + dw_v))
+        valid = np.isfinite(y)
+        if valid.any() and bool(np.all(y[valid] == 0.0)) and (imu_motion or prev_speed > cfg.moving_speed_m_s):
+            return ZERO_WHILE_MOVING
+        if imu_motion and y.shape == last.shape and np.array_equal(y, last, equal_nan=True):
+            return REPEATED
+        if not cfg.use_beams:  # the 3-D velocity only: beams may change validity from ping to ping
+            allowed = cfg.max_accel_m_s2 * (t - self.last_t) + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+            if float(np.linalg.norm(y - last)) > allowed:
+                return IMPLAUSIBLE_ACCEL
+        return USABLE
+
+    # ----- online: IMU samples buffered as they come ---------------------------------------------
+    def push_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
+        """IMU samples in time order (after every earlier one pushed)."""
+        if len(t):
+            self._t.append(np.asarray(t, dtype=float))
+            self._w.append(np.asarray(w, dtype=float))
+            self._f.append(np.asarray(f, dtype=float))
+            if self._t[0][0] < self._t[-1][-1] - 3 * SCREEN_WINDOW_S:  # no ping for long: bounded memory
+                T, W, F = np.concatenate(self._t), np.concatenate(self._w), np.concatenate(self._f)
+                keep = int(np.searchsorted(T, T[-1] - 2 * SCREEN_WINDOW_S, side="right"))
+                self._t, self._w, self._f = [T[keep:]], [W[keep:]], [F[keep:]]
+
+    def reaches(self, t: float) -> bool:
+        """Whether the buffered IMU samples reach ping time t (the screen can decide)."""
+        return bool(self._t) and float(self._t[-1][-1]) >= t
+
+    def check_buffered(self, t: float, y: np.ndarray) -> int:
+        """check() on the buffered samples (reaches(t) must hold), then drop the samples no later ping needs."""
+        if len(self._t) > 1:
+            self._t, self._w, self._f = [np.concatenate(self._t)], [np.concatenate(self._w)], [np.concatenate(self._f)]
+        T, W, F = (self._t[0], self._w[0], self._f[0]) if self._t else (np.zeros(0), np.zeros((0, 3)),
+                                                                         np.zeros((0, 3)))
+        code = self.check(t, y, T, W, F)
+        keep = int(np.searchsorted(T, max(self.last_t, t - SCREEN_WINDOW_S), side="right"))
+        if keep:
+            self._t, self._w, self._f = ([T[keep:]], [W[keep:]], [F[keep:]]) if keep < len(T) else ([], [], [])
+        return code
+
+
+def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) -> np.ndarray:
+    """PingScreen's reason code for each of the pings idx (usable by classify_pings, in time order)."""
+    screen = PingScreen(cfg)
+    code = np.zeros(len(idx), dtype=np.int8)
+    b = dvl.beams
+    for n, j in enumerate(idx.tolist()):
+        beams = None if b is None else (b.d_u[j], b.v[j], b.valid[j])
+        code[n] = screen.check(float(dvl.t[j]), screened_value(dvl.d_v[j], beams, cfg), imu.t, imu.b_omega, imu.b_f)
+    return code
+
+
+def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counters: dict[str, int]) -> np.ndarray:
+    """Indices of the usable pings of a whole log (module doc), counting the others. imu: the log's IMU
+    samples; its stamps alone (an array) skip the screen's IMU evidence (no motion seen, no velocity change
+    allowed beyond dvl.max_accel_m_s2)."""
+    imu_t = imu.t if isinstance(imu, ImuData) else np.asarray(imu, dtype=float)
     beam_valid, beam_finite = beam_arrays(dvl)
     t_first = float(imu_t[0]) if len(imu_t) else np.inf
     t_last = float(imu_t[-1]) if len(imu_t) else -np.inf
     code = classify_pings(dvl.t, dvl.d_v, dvl.valid, beam_valid, beam_finite, cfg, t_first, t_last)
+    if cfg.screen:
+        idx = np.flatnonzero(code == USABLE)
+        samples = imu if isinstance(imu, ImuData) else ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        code[idx] = screen_pings(dvl, idx, samples, cfg)
     count_reasons(code, counters)
     return np.flatnonzero(code == USABLE)
 
@@ -99,10 +252,11 @@ class KeyframeThinning:
         return True
 
 
-def select_epochs(dvl: DvlData, imu_t: np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
+def select_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
                   counters: dict[str, int]) -> np.ndarray:
-    """Indices of the pings that become epochs: usable, then thinned to keyframes (module doc)."""
-    idx = usable_pings(dvl, imu_t, cfg, counters)
+    """Indices of the pings that become epochs: usable, then thinned to keyframes (module doc). imu: as in
+    usable_pings."""
+    idx = usable_pings(dvl, imu, cfg, counters)
     if keyframe_interval_s <= 0:
         return idx
     thin = KeyframeThinning(keyframe_interval_s)

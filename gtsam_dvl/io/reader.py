@@ -24,7 +24,7 @@ from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
-from gtsam_dvl.io.storage.salvage import salvage_report
+from gtsam_dvl.io.storage.salvage import salvage_losses, salvage_report
 from gtsam_dvl.io.storage.sources import Source, open_source
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -35,6 +35,10 @@ DVL_TYPES = (
     "geometry_msgs/msg/TwistStamped",
 )
 REPAIR_HINT = "rerun with --repair to drop such messages"
+# A step between stamps this many times the topic's median spacing is missing data, not jitter (a 100 Hz IMU:
+# 0.05 s; a 1 Hz DVL: 5 s). Such gaps are reported in metadata["reader_losses"]["gaps"] and as a warning.
+GAP_FACTOR = 5.0
+MAX_GAP_SPANS = 20  # spans listed per topic (the count and the seconds cover all of them)
 
 
 def _type(src: Source, topic: str) -> str:
@@ -48,10 +52,11 @@ def _missing(src: Source, what: str, topic: str, option: str) -> GtsamDvlError:
 
 
 def check_stamps(
-    path: Path, topic: str, ns: np.ndarray, t0: int, bad: np.ndarray | None, repair: bool, warnings: list[str]
+    path: Path, topic: str, ns: np.ndarray, t0: int, bad: np.ndarray | None, repair: bool, warnings: list[str],
+    dropped: dict[str, dict[str, int]] | None = None,
 ) -> np.ndarray:
     """Keep-mask of messages: raise on NaN (``bad``), duplicate or backwards stamps, or with ``repair``
-    drop them and record how many in ``warnings``."""
+    drop them and record how many in ``warnings`` (and by reason in ``dropped[topic]``)."""
     bad = np.zeros(len(ns), bool) if bad is None else bad
 
     def t(i: int) -> float:
@@ -79,7 +84,31 @@ def check_stamps(
             f"{topic}: dropped {n_drop} message(s): {int(bad.sum())} with NaN, {dup} duplicate stamp(s), "
             f"{n_drop - int(bad.sum()) - dup} going back in time"
         )
+        if dropped is not None:
+            dropped[topic] = {"dropped": n_drop, "nan": int(bad.sum()), "duplicate": dup,
+                              "backwards": n_drop - int(bad.sum()) - dup, "of": len(ns)}
     return keep
+
+
+def stamp_gaps(t: np.ndarray) -> dict[str, Any] | None:
+    """Missing data in one topic's stamps (s): steps longer than GAP_FACTOR times the median spacing, their
+    count, the seconds missing (each step minus one spacing) and the first MAX_GAP_SPANS spans; None if none."""
+    if len(t) < 3:
+        return None
+    d = np.diff(t)
+    period = float(np.median(d))
+    big = np.flatnonzero(d > GAP_FACTOR * period)
+    if period <= 0 or not len(big):
+        return None
+    return {"count": len(big), "seconds": float((d[big] - period).sum()), "period_s": period,
+            "longest_s": float(d[big].max()),
+            "spans_s": [[float(t[i]), float(t[i + 1])] for i in big[:MAX_GAP_SPANS].tolist()]}
+
+
+def _gap_warning(topic: str, gap: dict[str, Any]) -> str:
+    a, b = max(gap["spans_s"], key=lambda s: s[1] - s[0])
+    return (f"{topic}: {gap['count']} gap(s) in the data, {gap['seconds']:.1f} s missing in all "
+            f"(longest {a:.2f} s to {b:.2f} s)")
 
 
 def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
@@ -160,7 +189,10 @@ def read_log(
     """Read an IMU+DVL log. dvl_topic None: /dvl/data if present, else /dvl/twist. Without tf_topic the
     mounting is identity (warned). NaN IMU data, duplicate or backwards stamps raise GtsamDvlError, or
     with ``repair`` are dropped and counted. ``salvage`` recovers the intact chunks of a damaged MCAP.
-    Warnings go to metadata["reader_warnings"]; progress(fraction) is called while reading."""
+    Warnings go to metadata["reader_warnings"], and what was lost, structured, to metadata["reader_losses"]:
+    "repair" (per topic: messages dropped by reason), "gaps" (per topic: missing stretches, see stamp_gaps),
+    "salvage" (with ``salvage``: io.storage.salvage.salvage_losses) and "messages_lost" (per topic).
+    progress(fraction) is called while reading."""
     src = open_source(path, salvage=salvage)
     path = src.path
     if imu_topic not in src.topics:
@@ -174,6 +206,7 @@ def read_log(
     if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
         raise GtsamDvlError(f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}")
     warnings = list(src.warnings)
+    dropped: dict[str, dict[str, int]] = {}
     has_truth = truth_topic in src.topics and _type(src, truth_topic) == ODOM_TYPE
     if truth_topic in src.topics and not has_truth:
         warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
@@ -187,7 +220,7 @@ def read_log(
     b_omega, b_f = imu["angular_velocity"].astype(float), imu["linear_acceleration"].astype(float)
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
-    keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings)
+    keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
     imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, first_string(imu) or "imu_link")
@@ -196,14 +229,14 @@ def read_log(
     if not len(dvl_arr):
         raise GtsamDvlError(f"{path}: {dvl_topic} has no messages")
     dvl, dvl_ns = _dvl_data(src, dvl_topic, dvl_arr), stamps_ns(dvl_arr)
-    keep = check_stamps(path, dvl_topic, dvl_ns, t0, None, repair, warnings)
+    keep = check_stamps(path, dvl_topic, dvl_ns, t0, None, repair, warnings, dropped)
     dvl = _select(dvl, keep, (dvl_ns[keep] - t0) / 1e9)
 
     truth = None
     if has_truth:
         od = decode(path, truth_topic, ODOM_TYPE, raw[truth_topic])
         ns = stamps_ns(od)
-        keep = check_stamps(path, truth_topic, ns, t0, None, repair, warnings)
+        keep = check_stamps(path, truth_topic, ns, t0, None, repair, warnings, dropped)
         q = od["orientation"].astype(float)[keep]
         n_v = Rotation.from_quat(q).apply(od["linear"].astype(float)[keep]) if keep.any() else np.zeros((0, 3))
         truth = TruthData((ns[keep] - t0) / 1e9, od["position"].astype(float)[keep], q, n_v,
@@ -222,10 +255,27 @@ def read_log(
                 setattr(mounting, attrs[1], pose[1])
 
     meta = _metadata(src)
+    gaps: dict[str, dict[str, Any]] = {}
+    for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
+        if (gap := stamp_gaps(t)) is not None:
+            gaps[topic] = gap
+            warnings.append(_gap_warning(topic, gap))
+    losses: dict[str, Any] = {"repair": dropped, "gaps": gaps}
     if salvage:
-        warnings.append(salvage_report(src, t0))
+        losses["salvage"] = salvage_losses(src, t0)
+        warnings.append(salvage_report(losses["salvage"], src.path))
+    losses["messages_lost"] = _messages_lost(losses)
     meta["reader_warnings"] = warnings
+    meta["reader_losses"] = losses
     return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed_fields(meta, str(path)))
+
+
+def _messages_lost(losses: dict[str, Any]) -> dict[str, int]:
+    """Messages lost per topic: dropped by --repair plus those in chunks --salvage could not read."""
+    out = {topic: d["dropped"] for topic, d in losses["repair"].items()}
+    for topic, n in losses.get("salvage", {}).get("messages_lost_per_topic", {}).items():
+        out[topic] = out.get(topic, 0) + n
+    return out
 
 
 def read_odometry(

@@ -110,9 +110,18 @@ def write_timeline_topics(w: McapLogWriter, result: NavResult) -> None:
     w.add_vector3_stamped(f"{p}/attitude_sigma_deg", tl.t, tl.attitude_sigma_deg, "map")
 
 
+def health_record(health: dict[str, Any], losses: dict[str, Any]) -> dict[str, str]:
+    """The metadata record "gtsam_dvl_health" (strings only, as MCAP metadata is): status, warnings and notes
+    (JSON lists), the figures behind them and the reader's losses (JSON)."""
+    return {"status": str(health.get("status", "")), "warnings": to_json(health.get("warnings", [])),
+            "notes": to_json(health.get("notes", [])), "figures": to_json(health.get("figures", {})),
+            "losses": to_json(losses)}
+
+
 def write_result_log(path: Path | str, result: NavResult, log: LogData, summary: dict[str, Any]) -> Path:
     """Estimates with marginal covariances, path, biases and calibration, plus the summary and the
-    effective configuration (metadata record and config.json attachment). Written atomically."""
+    effective configuration (metadata record and config.json attachment) and the run's health (metadata
+    record "gtsam_dvl_health", and in summary.json). Written atomically."""
     path = Path(path)
     t = result.t
     n = len(t)
@@ -146,6 +155,8 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
         w.add_attachment("calibration.json", to_json(calibration_record(result)).encode(), "application/json")
         w.add_metadata("gtsam_dvl_result", {"estimator": result.estimator, "summary": to_json(summary),
                                             "source_log": str(log.source)})
+        if (health := summary.get("health")) is not None:
+            w.add_metadata("gtsam_dvl_health", health_record(health, summary.get("losses", {})))
         w.add_attachment("config.json", json.dumps({"estimator": result.estimator, "config": result.config},
                                                    default=str, indent=2).encode(), "application/json")
         w.add_attachment("summary.json", to_json(summary).encode(), "application/json")

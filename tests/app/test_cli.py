@@ -95,11 +95,40 @@ def test_bad_input_gives_one_line_and_exit_1(case: str, sim_log: Path, tmp_path:
     print(lines[0])
 
 
-def test_truncated_log_salvage_recovers(sim_log: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("fraction", [0.5, 0.6])
+def test_truncated_log_salvage_recovers(fraction: float, sim_log: Path, tmp_path: Path) -> None:
+    """info --salvage on a file cut short says so, with the time up to which data was read (it used to say
+    "lost 0 chunk(s)" when the cut fell between a chunk and its message indexes)."""
     bad = tmp_path / "cut.mcap"
-    bad.write_bytes(sim_log.read_bytes()[: int(sim_log.stat().st_size * 0.6)])
+    size = int(sim_log.stat().st_size * fraction)
+    bad.write_bytes(sim_log.read_bytes()[:size])
     proc = run("info", str(bad), "--salvage")
-    assert "salvage" in proc.stdout and "lost" in proc.stdout
+    print(proc.stdout)
+    assert "salvage" in proc.stdout and "lost 0 chunk" not in proc.stdout and "nothing lost" not in proc.stdout
+    assert f"the file is cut short at byte {size} (no footer): nothing after log time" in proc.stdout
+
+
+def test_smooth_and_evaluate_report_losses(sim_log: Path, tmp_path: Path) -> None:
+    """What --salvage dropped appears in smooth's and evaluate's console output, the summary and the result."""
+    from gtsam_dvl.io.storage.sources import open_source
+
+    bad = tmp_path / "cut.mcap"
+    bad.write_bytes(sim_log.read_bytes()[: sim_log.stat().st_size // 2])
+    out, summ = tmp_path / "r.mcap", tmp_path / "s.json"
+    proc = run("smooth", str(bad), "--salvage", "-o", str(out), "--summary", str(summ), "-q", "--no-timeline")
+    assert "  health: degraded" in proc.stdout and "warning: the log file is cut short at byte" in proc.stdout
+    s = json.loads(summ.read_text())
+    assert s["health"]["status"] == "degraded" and s["losses"]["salvage"]["truncated"][0]["at_byte"] == bad.stat(
+        ).st_size
+    assert json.loads(open_source(out).metadata["gtsam_dvl_health"]["losses"]) == s["losses"]
+    strict = run("smooth", str(bad), "--salvage", "--summary", str(tmp_path / "s2.json"), "-q", "--no-timeline",
+                 "--strict", check=False)
+    assert strict.returncode == 3
+    proc = run("evaluate", str(out), "-o", str(tmp_path / "eval"), "--truth", str(bad), "--salvage")
+    assert "result health: degraded" in proc.stdout
+    assert f"reading {bad}: the log file is cut short" in proc.stdout
+    metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())
+    assert metrics["health"]["status"] == "degraded" and metrics["truth_log_losses"]["salvage"]["truncated"]
 
 
 # ----- configuration checked by value, the effective configuration read back with -c ------------------

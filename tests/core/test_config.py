@@ -26,7 +26,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
-ENUMS = [("imu", "bias_model", "'constant', 'random_walk'"), ("dvl", "robust", "'none', 'huber'"),
+ENUMS = [("imu", "bias_model", "'constant', 'random_walk'"), ("dvl", "robust", "'none', 'huber', 'cauchy'"),
          ("solver", "earth_model", "'wgs84', 'flat'"), ("online", "mode", "'fixed_lag', 'full'"),
          ("online", "bad_messages", "'raise', 'drop'")]
 
@@ -206,8 +206,8 @@ def test_estimators_check_the_config_when_they_start(estimator: str) -> None:
         with pytest.raises(GtsamDvlError, match=match):
             run_iodvlc(log, cfg.iodvlc)
     else:
-        cfg.dvl.robust = "cauchy"  # type: ignore[assignment]
-        match = r"\[dvl\] robust = 'cauchy' is not one of 'none', 'huber'"
+        cfg.dvl.robust = "tukey"  # type: ignore[assignment]
+        match = r"\[dvl\] robust = 'tukey' is not one of 'none', 'huber', 'cauchy'"
         if estimator == "online":
             with pytest.raises(GtsamDvlError, match=match):
                 OnlineEstimator.for_log(log, cfg)
@@ -281,7 +281,8 @@ def test_ekf_section_reaches_the_filter() -> None:
     print("slow pings (never, default, always):", counts, "of", base.info["counters"]["dvl_updates"])
     assert counts[0] < counts[1] < counts[2] == always_slow.info["counters"]["dvl_updates"]
     assert always_slow.scale == 0.8  # never updated from its prior
-    assert always_slow.config["ekf"] == {"min_calibration_speed_m_s": 10.0, "calibration_speed_sigmas": 0.0}
+    assert always_slow.config["ekf"] == {"min_calibration_speed_m_s": 10.0, "calibration_speed_sigmas": 0.0,
+                                         "gate_probability": 0.99999, "gate_reopen_after": 10}
     # the keyword still works, overrides the config and is written to the effective configuration
     kw = run_ekf(log, cfg, min_calibration_speed_m_s=0.0)
     assert kw.info["counters"]["dvl_slow"] == counts[0] and kw.config["ekf"]["min_calibration_speed_m_s"] == 0.0

@@ -34,6 +34,7 @@ from gtsam_dvl.estimators.alignment import (
     align,
     coarse_alignment,
     detect_static_end,
+    dvl_motion_start,
     window_means,
 )
 from gtsam_dvl.sim import simulate
@@ -149,6 +150,35 @@ def test_static_end_from_the_dvl_and_the_cap() -> None:
     assert detect_static_end(log.imu, dvl, cfg) == pytest.approx(50.0 - STATIC_MARGIN_S, abs=1e-9)
     assert detect_static_end(log.imu, log.dvl, dataclasses.replace(cfg, max_static_s=40.0)) == pytest.approx(40.0)
     assert detect_static_end(log.imu, dvl, dataclasses.replace(cfg, max_static_s=40.0)) == pytest.approx(40.0)
+
+
+def test_single_fast_pings_neither_end_nor_abort_the_static_segment() -> None:
+    """Gross DVL outliers during the static phase (1.5 m/s at 20 s, 3 m/s at 60 s, and at 100 s, 4 s before the
+    data end): none starts a run of mostly fast pings (DVL_MOTION_PINGS), so the segment is the IMU's, as
+    without them, and the alignment is the same; 5 % of the pings fast at random (seeded) do not end it either.
+    A real start of motion is a run: 8 of 10 pings fast from 50 s (two slow ones inside) ends it at 45 s."""
+    log, frame = _log(static_s=104.0, moving=False)
+    cfg = AlignmentConfig()
+    t_ref = detect_static_end(log.imu, log.dvl, cfg)
+    d_v = log.dvl.d_v.copy()
+    for t_out, speed in ((20.0, 1.5), (60.0, 3.0), (100.0, 2.0)):
+        d_v[int(np.argmin(np.abs(log.dvl.t - t_out)))] = [speed, 0.0, 0.0]
+    outliers = dataclasses.replace(log.dvl, d_v=d_v)
+    t_end = detect_static_end(log.imu, outliers, cfg)
+    print(f"\nstatic segment without outliers ends at {t_ref} s, with three single fast pings at {t_end} s")
+    assert t_end == t_ref == float(log.imu.t[-1])
+    np.testing.assert_array_equal(align(log.imu, outliers, frame, cfg).n_R_b, align(log.imu, log.dvl, frame, cfg).n_R_b)
+    rng = np.random.default_rng(5)
+    d_v5 = log.dvl.d_v.copy()
+    k = rng.choice(len(d_v5), len(d_v5) // 20, replace=False)
+    d_v5[k] = rng.uniform(0.5, 2.0, (len(k), 1)) * np.array([1.0, 0.0, 0.0])
+    assert detect_static_end(log.imu, dataclasses.replace(log.dvl, d_v=d_v5), cfg) == t_ref
+    run = log.dvl.d_v.copy()
+    moving = log.dvl.t >= 50.0
+    run[moving] = [0.5, 0.0, 0.0]
+    run[np.flatnonzero(moving)[[3, 7]]] = 0.0  # two slow pings inside the run: 8 of 10 are fast
+    assert dvl_motion_start(dataclasses.replace(log.dvl, d_v=run), cfg.dvl_speed_threshold_m_s) == pytest.approx(50.0)
+    assert detect_static_end(log.imu, dataclasses.replace(log.dvl, d_v=run), cfg) == pytest.approx(45.0)
 
 
 def test_static_end_of_a_log_that_never_moves_is_its_last_sample() -> None:

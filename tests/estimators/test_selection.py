@@ -10,17 +10,24 @@ import numpy as np
 import pytest
 
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
-from gtsam_dvl.core.types import DvlData, LogData
+from gtsam_dvl.core.types import DvlData, ImuData, LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
-from gtsam_dvl.estimators.online import smooth_online
+from gtsam_dvl.estimators.gaps import with_fillers
+from gtsam_dvl.estimators.online import OnlineEstimator, smooth_online
 from gtsam_dvl.estimators.selection import (
+    IMPLAUSIBLE_ACCEL,
+    REPEATED,
     TOO_FAST,
     UNUSABLE,
     USABLE,
+    ZERO_WHILE_MOVING,
+    PingScreen,
     classify_pings,
     imu_pieces,
     sample_starts,
+    screen_pings,
+    screened_value,
     select_epochs,
 )
 
@@ -56,7 +63,10 @@ def test_batch_online_and_ekf_use_the_same_epochs(sim_paper3d_clean: LogData) ->
     batch = smooth_batch(log, cfg)
     online = smooth_online(log, cfg)
     ekf = run_ekf(log, cfg)
-    t_expected = log.dvl.t[expected]
+    # the pings, and states without a ping where pings are missing for more than 1.5 s (estimators/gaps.py)
+    t_expected, is_filler = with_fillers(log.dvl.t[expected], float(log.imu.t[-1]), cfg.solver.max_state_spacing_s)
+    assert is_filler.sum() > 30  # the 30 s block and every 7th ping
+    assert np.max(np.diff(t_expected)) <= 1.5 * cfg.solver.max_state_spacing_s
     print(f"{len(log.dvl)} pings, {len(expected)} epochs; counters batch {batch.info['counters']}, "
           f"online {online.info['counters']}, ekf {ekf.info['counters']}")
     np.testing.assert_array_equal(batch.t, t_expected)
@@ -79,8 +89,9 @@ def test_keyframe_thinning_is_the_same_online_and_in_batch(sim_paper3d_clean: Lo
     assert np.all(np.diff(log.dvl.t[idx]) >= 2.5) and counters["dvl_not_keyframe"] > 0
     batch = smooth_batch(log, cfg)
     online = smooth_online(log, cfg)
-    np.testing.assert_array_equal(batch.t, log.dvl.t[idx])
-    np.testing.assert_array_equal(online.t, log.dvl.t[idx])
+    t_states, _ = with_fillers(log.dvl.t[idx], float(log.imu.t[-1]), cfg.solver.max_state_spacing_s)
+    np.testing.assert_array_equal(batch.t, t_states)
+    np.testing.assert_array_equal(online.t, t_states)
     assert batch.info["counters"]["dvl_not_keyframe"] == online.info["counters"]["dvl_not_keyframe"]
 
 
@@ -108,3 +119,134 @@ def test_imu_pieces_split_samples_exactly(a: float, b: float) -> None:
     idx, dt = imu_pieces(t, starts, a + t[0], b + t[0])
     assert np.all(dt > 0) and np.all(np.diff(idx) == 1)
     assert abs(dt.sum() - (b - a)) < 1e-12
+
+
+# ----- bogus pings (PingScreen) -------------------------------------------------------------------------
+
+BOGUS_REASONS = ("dvl_zero_while_moving", "dvl_repeated", "dvl_implausible_accel")
+
+
+def _with_bogus(log: LogData) -> tuple[LogData, np.ndarray, dict[str, int]]:
+    """_with_dropouts, plus what a DVL that lost bottom lock but still flags its velocity valid reports: exact
+    zeros for 10 s at 2 m/s (700-710 s), its output frozen while the vehicle speeds up (606-614 s, at the value
+    of the last valid ping before), and 4 pings 4 m/s off (720-760 s). Returns the log, the pings that must
+    become epochs and the expected counts."""
+    log, expected = _with_dropouts(log)
+    d = log.dvl
+    t, d_v, ok = d.t, d.d_v.copy(), d.valid & np.isfinite(d.d_v).all(axis=1)
+    zero = ok & (t >= 700.0) & (t < 710.0)
+    d_v[zero] = 0.0
+    frozen = ok & (t > 606.0) & (t <= 614.0)
+    d_v[frozen] = d_v[np.flatnonzero(ok & (t <= 606.0))[-1]]
+    jump = np.flatnonzero(ok & (t > 720.0) & (t < 760.0))[::8][:4]
+    d_v[jump] += [4.0, 0.0, 0.0]
+    bogus = zero | frozen
+    bogus[jump] = True
+    counts = {"dvl_zero_while_moving": int(zero.sum()), "dvl_repeated": int(frozen.sum()),
+              "dvl_implausible_accel": len(jump)}
+    return dataclasses.replace(log, dvl=dataclasses.replace(d, d_v=d_v)), expected[~bogus[expected]], counts
+
+
+def _feed_pings_first(est: OnlineEstimator, log: LogData) -> None:
+    """A live order feed_log does not test: each ping arrives before the IMU samples up to its stamp."""
+    imu, dvl = log.imu, log.dvl
+    ends = np.searchsorted(imu.t, dvl.t, side="right")
+    start = 0
+    for j in range(len(dvl)):
+        est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
+        end = int(ends[j])
+        if end > start:
+            est.push_imu_batch(imu.t[start:end], imu.b_omega[start:end], imu.b_f[start:end])
+            start = end
+    est.push_imu_batch(imu.t[start:], imu.b_omega[start:], imu.b_f[start:])
+    est.finish()
+
+
+def test_bogus_pings_dropped_alike_by_batch_online_and_ekf(sim_paper3d_clean: LogData) -> None:
+    """The screen's rules are causal (the previous accepted ping and the IMU since it), so batch, online (in either
+    message order) and EKF drop the same bogus pings, count them alike and keep the same epochs; the noise-free
+    simulation's own exact zeros (at rest) and repeated velocities (constant velocity, steady turns) pass."""
+    log, expected, counts = _with_bogus(sim_paper3d_clean)
+    cfg = EstimatorConfig()
+    batch = smooth_batch(log, cfg)
+    online = smooth_online(log, cfg)
+    live = OnlineEstimator.for_log(log, cfg)
+    _feed_pings_first(live, log)
+    ekf = run_ekf(log, cfg)
+    t_expected, _ = with_fillers(log.dvl.t[expected], float(log.imu.t[-1]), cfg.solver.max_state_spacing_s)
+    print(f"expected drops {counts}; counters batch {batch.info['counters']}, online {online.info['counters']}, "
+          f"online pings first {live.counters}, ekf {ekf.info['counters']}")
+    for res in (batch, online, live.result(), ekf):
+        np.testing.assert_array_equal(res.t, t_expected)
+        assert {k: res.info["counters"].get(k, 0) for k in BOGUS_REASONS} == counts
+    clean: dict[str, int] = {}
+    select_epochs(sim_paper3d_clean.dvl, sim_paper3d_clean.imu, cfg.dvl, 0.0, clean)
+    assert all(clean[k] == 0 for k in BOGUS_REASONS)  # 601 exact zeros and 1621 bit-identical repeats there
+
+
+def _synthetic_imu(t_end: float, accel: float = 0.0, t_accel: float = np.inf, roll_rate: float = 0.0,
+                   hz: float = 100.0) -> ImuData:
+    """Level at rest (specific force up, g = 9.8), optionally accelerating along x by accel m/s^2 from t_accel,
+    or rolling at roll_rate rad/s on the spot (gravity turning in the body, no motion)."""
+    t = np.arange(1, int(t_end * hz) + 1) / hz
+    roll = roll_rate * (t - 0.5 / hz)  # the mid-interval attitude: the sample is the interval's mean
+    f = np.stack([np.where(t > t_accel, accel, 0.0), 9.8 * np.sin(roll), 9.8 * np.cos(roll)], axis=1)
+    w = np.zeros((len(t), 3))
+    w[:, 0] = roll_rate
+    return ImuData(t, w, f)
+
+
+def _codes(imu: ImuData, t: np.ndarray, d_v: np.ndarray, cfg: DvlConfig | None = None) -> list[int]:
+    dvl = DvlData(t, d_v, np.zeros((len(t), 3, 3)), np.ones(len(t), dtype=bool))
+    return screen_pings(dvl, np.arange(len(t)), imu, cfg or DvlConfig()).tolist()
+
+
+def test_ping_screen_rules() -> None:
+    """Each rule on synthetic data: exact zeros pass at rest and when the body only turns on the spot (gravity
+    turning in the body is no motion), are dropped when the IMU shows acceleration or the previous ping was
+    moving; repeats pass at constant velocity and are dropped while the vehicle speeds up; a jump the IMU cannot
+    explain is dropped and the next sound ping is compared with the last accepted one; dvl.screen = false keeps
+    everything."""
+    t = np.arange(1.0, 21.0)
+    zeros = np.zeros((20, 3))
+    assert _codes(_synthetic_imu(21.0), t, zeros) == [USABLE] * 20
+    assert _codes(_synthetic_imu(21.0, roll_rate=0.05), t, zeros) == [USABLE] * 20  # 1 rad rolled: 9.8 m/s^2 turned
+    moving = _codes(_synthetic_imu(21.0, accel=0.3, t_accel=10.5), t, zeros)
+    assert moving == [USABLE] * 10 + [ZERO_WHILE_MOVING] * 10  # 0.3 m/s^2 from 10.5 s: 0.15 m/s by 11 s
+    cruise = np.tile([2.0, 0.0, 0.0], (20, 1))
+    cruise[12:] = 0.0
+    assert _codes(_synthetic_imu(21.0), t, cruise) == [USABLE] * 12 + [ZERO_WHILE_MOVING] * 8  # the DVL said 2 m/s
+    assert _codes(_synthetic_imu(21.0), t, np.tile([2.0, 0.0, 0.0], (20, 1))) == [USABLE] * 20  # constant velocity
+    speeding = np.stack([np.clip(0.3 * (t - 10.5), 0.0, None), np.zeros(20), np.zeros(20)], axis=1)
+    speeding[14:] = speeding[13]  # frozen at 14 s while the vehicle keeps accelerating
+    assert _codes(_synthetic_imu(21.0, accel=0.3, t_accel=10.5), t, speeding) == [USABLE] * 14 + [REPEATED] * 6
+    jumps = np.tile([2.0, 0.0, 0.0], (20, 1))
+    jumps[5] = [5.0, 0.0, 0.0]  # 3 m/s in 1 s at constant IMU: more than 2 m/s^2 + 0.3 m/s
+    jumps[6] = [2.0, 0.0, 5.0]  # 5 m/s off the last accepted ping, 2 s before: allowed 4.3 m/s
+    # back to 2 m/s: compared with the last accepted ping (5 m/s off the previous one), and repeated from there
+    # on, at constant IMU and no change between the last two accepted pings: no motion
+    codes = _codes(_synthetic_imu(21.0), t, jumps)
+    assert codes[5:8] == [IMPLAUSIBLE_ACCEL, IMPLAUSIBLE_ACCEL, USABLE] and codes.count(USABLE) == 18
+    assert _codes(_synthetic_imu(21.0), t, jumps, DvlConfig(screen=False)) == [USABLE] * 20
+
+
+@pytest.mark.parametrize("chunk", [1, 37, 250])
+def test_ping_screen_online_matches_the_whole_log(chunk: int, sim_paper3d_clean: LogData) -> None:
+    """The online estimator's use (IMU pushed in chunks, each ping checked once the IMU reaches it) gives the
+    whole-log decisions exactly, whatever the chunking."""
+    log, _, counts = _with_bogus(sim_paper3d_clean)
+    cfg = DvlConfig()
+    code = classify_pings(log.dvl.t, log.dvl.d_v, log.dvl.valid, None, None, cfg, float(log.imu.t[0]),
+                          float(log.imu.t[-1]))
+    idx = np.flatnonzero(code == USABLE)
+    whole = screen_pings(log.dvl, idx, log.imu, cfg)
+    screen = PingScreen(cfg)
+    imu, online = log.imu, []
+    pos = 0
+    for j in idx.tolist():
+        while not screen.reaches(float(log.dvl.t[j])):
+            screen.push_imu(imu.t[pos:pos + chunk], imu.b_omega[pos:pos + chunk], imu.b_f[pos:pos + chunk])
+            pos += chunk
+        online.append(screen.check_buffered(float(log.dvl.t[j]), screened_value(log.dvl.d_v[j], None, cfg)))
+    assert online == whole.tolist()
+    assert [int((whole == c).sum()) for c in (ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL)] == list(counts.values())

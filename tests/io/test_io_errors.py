@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from pathlib import Path
 
@@ -144,3 +145,131 @@ def test_not_a_log(tmp_path: Path) -> None:
     assert "neither an MCAP" in one_line_error(tmp_path / "x.mcap")
     (tmp_path / "empty").mkdir()
     assert "not a rosbag2 bag" in one_line_error(tmp_path / "empty")
+
+
+# ----- what was lost, structured (metadata["reader_losses"]) ----------------------------------------------
+
+def _chunks(data: bytes, tmp_path: Path) -> list[tuple[int, int, int]]:
+    """(record start, end of the chunk's data, end log time ns) of each chunk of an intact file."""
+    from gtsam_dvl.io.mcap.scan import McapScan, _Chunk
+
+    path = tmp_path / "intact.mcap"
+    path.write_bytes(data)
+    return [(s.pos, s.data.stop, s.end_ns) for s in McapScan(path).segments if isinstance(s, _Chunk)]
+
+
+@pytest.mark.parametrize("where", ["inside a chunk", "inside the message indexes", "between two chunks"])
+def test_truncation_is_reported_wherever_the_cut_falls(where: str, long_log: tuple[LogData, bytes],
+                                                       tmp_path: Path) -> None:
+    """A file cut short lost the rest of the recording, however little of the cut-off record was there: the
+    report says so (it used to say "lost 0 chunk(s)", or "nothing lost" for a cut between records)."""
+    log, data = long_log
+    chunks = _chunks(data, tmp_path)
+    k = len(chunks) // 2
+    pos, stop, end_ns = chunks[k]
+    cut = {"inside a chunk": (pos + stop) // 2, "inside the message indexes": stop + 20,
+           "between two chunks": chunks[k + 1][0]}[where]
+    path = tmp_path / "cut.mcap"
+    path.write_bytes(data[:cut])
+    got = read_log(path, salvage=True)
+    losses = got.metadata["reader_losses"]["salvage"]
+    (report,) = [w for w in got.metadata["reader_warnings"] if w.startswith("salvage")]
+    print(report)
+    assert losses["anything_lost"] and "nothing lost" not in report and "lost 0 chunk" not in report
+    (truncated,) = losses["truncated"]
+    assert truncated["file"] == str(path) and truncated["at_byte"] == cut
+    assert truncated["data_end_s"] == pytest.approx(got.imu.t[-1], abs=0.011)  # the end of the last chunk read
+    assert f"the file is cut short at byte {cut} (no footer)" in report and "how long it went on" in report
+    if where == "inside a chunk":
+        assert losses["chunks_lost"] == 1 and losses["messages_lost"] > 0 and not losses["messages_lost_exact"]
+        assert losses["messages_lost_per_topic"]["/imu/data_raw"] > 0
+        assert sum(losses["messages_lost_per_topic"].values()) == losses["messages_lost"]
+        assert got.metadata["reader_losses"]["messages_lost"] == losses["messages_lost_per_topic"]
+    else:
+        assert losses["chunks_lost"] == 0 and f"kept all {losses['chunks_total']} chunks" in report
+        assert got.imu.t[-1] == pytest.approx((end_ns - got.t0_ns) / 1e9, abs=0.011)
+
+
+def test_corrupt_chunk_losses_per_topic_and_gap(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+    from gtsam_dvl.analysis.health import assess_log_health
+
+    log, data = long_log
+    path = tmp_path / "bad.mcap"
+    damaged = bytearray(data)
+    damaged[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(damaged))
+    got = read_log(path, salvage=True)
+    losses = got.metadata["reader_losses"]
+    salv = losses["salvage"]
+    assert salv["chunks_lost"] == 1 and salv["messages_lost_exact"] and salv["truncated"] == []
+    per = salv["messages_lost_per_topic"]
+    assert per["/imu/data_raw"] == len(log.imu) - len(got.imu)
+    assert per["/dvl/data"] == len(log.dvl) - len(got.dvl) and per["/ground_truth/odometry"] == len(log.truth) - len(
+        got.truth)
+    (span,) = salv["lost_spans_s"]
+    gap = losses["gaps"]["/imu/data_raw"]
+    assert gap["count"] == 1 and gap["seconds"] == pytest.approx(span[1] - span[0] + 0.01, abs=0.011)
+    assert any(w.startswith("/imu/data_raw: 1 gap(s) in the data") for w in got.metadata["reader_warnings"])
+    health = assess_log_health(got)
+    assert health.status == "degraded"
+    assert any(w.startswith("--salvage dropped 1 damaged chunk(s) with ") for w in health.warnings)
+    assert health.figures["losses"]["messages_lost"]["/imu/data_raw"] == per["/imu/data_raw"]
+
+
+def test_repair_losses_are_recorded_by_reason(tmp_path: Path) -> None:
+    log = make_log(3.0)
+    log.imu.b_f[123, 1] = np.nan
+    log.imu.t[50] = log.imu.t[49]
+    path = tmp_path / "bad.mcap"
+    write_log(path, log)
+    got = read_log(path, repair=True)
+    losses = got.metadata["reader_losses"]
+    assert losses["repair"] == {"/imu/data_raw": {"dropped": 2, "nan": 1, "duplicate": 1, "backwards": 0,
+                                                  "of": len(log.imu)}}
+    assert losses["messages_lost"] == {"/imu/data_raw": 2} and "salvage" not in losses
+    assert losses["gaps"] == {}  # two samples missing at 100 Hz is no gap
+    clean = tmp_path / "clean.mcap"
+    write_log(clean, make_log(3.0))
+    assert read_log(clean).metadata["reader_losses"] == {"repair": {}, "gaps": {}, "messages_lost": {}}
+
+
+def test_gaps_in_an_intact_log(tmp_path: Path) -> None:
+    """Stamps that skip 5 s of IMU data: not an error, but recorded and warned."""
+    log = make_log(30.0, truth=False)
+    keep = (log.imu.t < 10.0) | (log.imu.t >= 15.0)
+    log.imu = dataclasses.replace(log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep])
+    path = tmp_path / "gap.mcap"
+    write_log(path, log)
+    got = read_log(path)
+    gap = got.metadata["reader_losses"]["gaps"]["/imu/data_raw"]
+    assert gap["count"] == 1 and gap["seconds"] == pytest.approx(5.0, abs=1e-6)
+    assert gap["spans_s"] == [[pytest.approx(9.99), pytest.approx(15.0)]]
+    assert "/imu/data_raw: 1 gap(s) in the data, 5.0 s missing in all (longest 9.99 s to 15.00 s)" in got.metadata[
+        "reader_warnings"]
+
+
+def test_damaged_message_index_falls_back_to_the_intact_chunk(long_log: tuple[LogData, bytes],
+                                                              tmp_path: Path) -> None:
+    """A flipped byte in a MessageIndex record (outside the chunks, no CRC) made an offset negative and the
+    reader died with an IndexError; the chunk itself is intact (its CRC holds), so its records are walked and
+    every message is read exactly."""
+    from gtsam_dvl.io.mcap.scan import McapScan
+
+    log, data = long_log
+    good = tmp_path / "good.mcap"
+    good.write_bytes(data)
+    scan = McapScan(good)
+    chunk = next(s for s in scan.segments if not isinstance(s, list) and s.index)
+    import struct
+
+    # the MessageIndex record with the most entries (the IMU's): opcode, length, channel, entries length, entries
+    pos = max(chunk.index.values(), key=lambda q: struct.unpack_from("<I", data, q + 11)[0])
+    assert struct.unpack_from("<I", data, pos + 11)[0] >= 32
+    bad = bytearray(data)
+    bad[pos + 15 + 16 + 15] ^= 0xFF  # the top byte of the second entry's offset
+    path = tmp_path / "bad-index.mcap"
+    path.write_bytes(bytes(bad))
+    got, ref = read_log(path), read_log(good)
+    np.testing.assert_array_equal(got.imu.t, ref.imu.t)
+    np.testing.assert_array_equal(got.imu.b_f, ref.imu.b_f)
+    np.testing.assert_array_equal(got.dvl.d_v, ref.dvl.d_v)

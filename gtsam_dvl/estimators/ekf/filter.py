@@ -15,14 +15,23 @@ on the static segment, scale 0.8, misalignment at the nominal mounting, the firs
 calibration, position 0 at the first ping. The error is injected after every update (no reset Jacobian:
 its effect is second order in the correction). Every ping is used: solver.keyframe_interval_s only thins
 the smoother's states.
+
+Outliers: the pings are those the smoothers use (selection.usable_pings, with the screen for bogus data).
+An update whose normalised innovation squared exceeds the chi^2 quantile of [ekf] gate_probability (0.99999
+by default; dof the measurement's dimension) is skipped and counted in counters["dvl_gated"] (the state is
+still recorded at the ping); after [ekf] gate_reopen_after gated pings in a row the next one is used anyway,
+so that a filter that lost track recovers. The others are weighted by the smoothers' robust kernel
+([dvl] robust, robust_k) on the whitened innovation (counters["dvl_downweighted"]).
 """
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gravity_gradient, normal_gravity
@@ -34,7 +43,16 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import align, map_frame_of
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
-from gtsam_dvl.estimators.selection import covering_sample, imu_pieces, sample_starts, usable_pings
+from gtsam_dvl.estimators.gaps import (
+    check_gaps,
+    find_gaps,
+    hold_covariance,
+    pieces_with_holds,
+    sample_starts_with_gaps,
+    with_fillers,
+)
+from gtsam_dvl.estimators.mounting import log_in_base_link
+from gtsam_dvl.estimators.selection import covering_sample, usable_pings
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
 # estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
@@ -174,21 +192,42 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np
     return np.eye(3), dvl.d_v[j], Rm
 
 
-def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray,
-           huber_k: float | None) -> tuple[float, bool]:
-    """Kalman update (Joseph form) and injection of the error into the nominal state.
+def robust_weight(kernel: str, k: float, r: float) -> float:
+    """Weight of a measurement whose whitened innovation has norm r under the robust kernel [dvl] robust with
+    threshold k (GTSAM's mEstimator weights): 1 for "none"; "huber": 1 up to k, k / r beyond; "cauchy":
+    1 / (1 + (r / k)^2)."""
+    if kernel == "huber":
+        return 1.0 if r <= k else k / r
+    if kernel == "cauchy":
+        return 1.0 / (1.0 + (r / k) ** 2)
+    return 1.0
 
-    Returns the normalised innovation squared and whether the Huber weight reduced the measurement's weight.
+
+def gate_threshold(probability: float, dof: int) -> float:
+    """The chi^2 gate on the normalised innovation squared of a dof-dimensional measurement: its quantile of
+    probability ([ekf] gate_probability; 1 gates nothing)."""
+    return math.inf if probability >= 1.0 else float(chi2.ppf(probability, dof))
+
+
+def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray, kernel: str = "none",
+           k: float = 3.0, gate_nis: float = math.inf) -> tuple[float, bool, bool]:
+    """Kalman update (Joseph form) and injection of the error into the nominal state, unless the normalised
+    innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's weight
+    (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.
+
+    Returns the normalised innovation squared, whether the kernel reduced the measurement's weight and
+    whether the gate rejected it.
     """
     P = fs.P
     S = H @ P @ H.T + Rm
     nis = float(innovation @ np.linalg.solve(S, innovation))
-    down = False
-    if huber_k is not None and np.sqrt(nis) > huber_k:
-        w = huber_k / np.sqrt(nis)  # Huber weight on the whitened innovation: inflate the noise by 1/w
+    if nis > gate_nis:
+        return nis, False, True
+    w = robust_weight(kernel, k, math.sqrt(max(nis, 0.0)))
+    down = w < 1.0
+    if down:
         Rm = Rm / w
         S = H @ P @ H.T + Rm
-        down = True
     K = np.linalg.solve(S, H @ P).T
     dx = K @ innovation
     IKH = np.eye(N_ERR) - K @ H
@@ -200,7 +239,7 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
     fs.accel_bias = fs.accel_bias + dx[BA]
     fs.scale = fs.scale + float(dx[SCALE])
     fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
-    return nis, down
+    return nis, down, False
 
 
 def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
@@ -214,40 +253,61 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         config = replace(config, ekf=replace(config.ekf, min_calibration_speed_m_s=min_calibration_speed_m_s))
     ekf_cfg = config.validate().ekf
+    log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
-    alignment = align(log.imu, log.dvl, frame, config.alignment, config.imu.gyro_bias_sigma_deg_per_h * DEG_PER_H)
-    pings = usable_pings(log.dvl, log.imu.t, config.dvl, counters)  # every usable ping: no keyframe thinning
+    alignment = align(log.imu, log.dvl, frame, config.alignment)
+    pings = usable_pings(log.dvl, log.imu, config.dvl, counters)  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
     earth = _Earth(frame, config.solver.earth_model == "flat")
     imu, dvl = log.imu, log.dvl
     t = imu.t
-    starts = sample_starts(t)
+    gaps = find_gaps(t, config.imu.gap_samples)
+    check_gaps(gaps, config.imu, log.source)
+    starts = sample_starts_with_gaps(t, gaps)
     gyro_index = covering_sample(t, dvl.t)
     b_l = log.mounting.b_l
-    huber_k = config.dvl.huber_k if config.dvl.robust == "huber" else None
+    kernel, k_robust = config.dvl.robust, config.dvl.robust_threshold()
+    gates: dict[int, float] = {}  # gate_threshold per measurement dimension
+    gated, gated_run = 0, 0  # gated pings, and how many in a row
 
     fs = initial_state(log, config, alignment.n_R_b, int(pings[0]))
     hist = _History()
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
     timing = {"propagate": 0.0, "update": 0.0}
     t_prev = float(dvl.t[pings[0]])
-    for count, j in enumerate(pings):
-        t_j = float(dvl.t[j])
+    # the states of the factor-graph estimators: every usable ping, and states without a ping across DVL
+    # dropouts (estimators/gaps.py); the filter updates at the pings and records at both
+    state_t, is_filler = with_fillers(dvl.t[pings], float(t[-1]), config.solver.max_state_spacing_s)
+    ping_at = np.full(len(state_t), -1)
+    ping_at[~is_filler] = pings
+    counters["states_without_ping"] = int(is_filler.sum())
+    counters["imu_gaps"] = len(gaps)
+    for count, (t_j, j) in enumerate(zip(state_t.tolist(), ping_at.tolist(), strict=True)):
         t0 = time.perf_counter()
         while t_prev < t_j - 1e-9:  # propagate (in steps of at most MAX_STEP_S)
             t_next = min(t_j, t_prev + MAX_STEP_S)
-            idx, dt = imu_pieces(t, starts, t_prev, t_next)
+            idx, dt, held = pieces_with_holds(t, starts, gaps, t_prev, t_next)
             if len(idx):
                 n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
                 step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
                                           dt, earth.n_omega_ie, n_g, G)
                 fs.nav = step.state
                 fs.P = step.Phi @ fs.P @ step.Phi.T + process_noise(config, step.Phi, step.duration)
+                if held > 0:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
+                    q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
+                    fs.P[PHI, PHI] += np.diag(q[0:3])
+                    fs.P[POS, POS] += np.diag(q[3:6])
+                    fs.P[VEL, VEL] += np.diag(q[6:9])
             t_prev = t_next
         t1 = time.perf_counter()
+        if j < 0:  # a state without a ping: recorded, not updated
+            g_j = int(covering_sample(t, t_j))
+            _record(hist, fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie)
+            timing["propagate"] += t1 - t0
+            continue
         A, z, Rm = _ping_measurement(log, config, int(j))
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
         speed = np.linalg.norm(y_hat) / fs.scale
@@ -255,20 +315,28 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
         if slow:
             H[:, CALIBRATION] = 0.0
-        nis, down = update(fs, A @ H, z - A @ y_hat, Rm, huber_k)
+        # the chi^2 gate, reopened after ekf.gate_reopen_after gated pings in a row (a filter that lost track)
+        if gated_run < ekf_cfg.gate_reopen_after:
+            gate_nis = gates.setdefault(len(z), gate_threshold(ekf_cfg.gate_probability, len(z)))
+        else:
+            gate_nis = math.inf
+        nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis)
         counters["dvl_slow"] += int(slow)
-        nis_sum, nis_dof, downweighted = nis_sum + nis, nis_dof + len(z), downweighted + int(down)
+        gated, gated_run = gated + int(was_gated), gated_run + 1 if was_gated else 0
+        if not was_gated:
+            nis_sum, nis_dof, downweighted = nis_sum + nis, nis_dof + len(z), downweighted + int(down)
         timing["propagate"] += t1 - t0
         timing["update"] += time.perf_counter() - t1
         _record(hist, fs, t_j, b_omega)
         if progress and count % 100 == 0:
-            progress(count / len(pings))
-    counters["dvl_updates"] = len(pings)
+            progress(count / len(state_t))
+    counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
     counters["dvl_downweighted"] = downweighted
+    counters["dvl_gated"] = gated
     result = _to_result(hist, log, config)
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
     result.info = {"alignment": {"method": alignment.method, "t_static_end": alignment.t_static_end},
-                   "counters": counters, "epochs": len(pings),
+                   "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
                    "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "error_state": N_ERR}}
     if progress:
         progress(1.0)

@@ -44,7 +44,9 @@ Design (see also window.py for the iSAM2 engine):
 - Bad input: a message older than or as old as the previous one of its kind, or with a non-finite value, is
   rejected with GtsamDvlError (`bad_messages = "raise"`, the default) or dropped with a warning the first time
   and counted in `counters` (`"drop"`). DVL pings without a valid velocity, faster than dvl.max_speed_m_s or
-  not after the first IMU sample are counted and skipped, as the batch smoother does.
+  not after the first IMU sample are counted and skipped, as the batch smoother does; so are bogus pings
+  (selection.PingScreen: exact zeros while moving, repeats, implausible jumps), decided once the IMU samples
+  reach the ping (the screen looks at the IMU since the previous accepted ping), whatever the message order.
 """
 
 from __future__ import annotations
@@ -70,6 +72,8 @@ from gtsam_dvl.core.types import DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import STATIC_MARGIN_S, Alignment, align, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.gaps import check_gaps, filler_due, find_gaps, nominal_period, sample_starts_with_gaps
+from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.online.types import (
     MODES,
     EpochHistory,
@@ -80,7 +84,14 @@ from gtsam_dvl.estimators.online.types import (
     misalignment_deg_and_cov,
 )
 from gtsam_dvl.estimators.online.window import IncrementalSmoother, RelinearizationThresholds
-from gtsam_dvl.estimators.selection import USABLE, KeyframeThinning, classify_pings, count_reasons
+from gtsam_dvl.estimators.selection import (
+    USABLE,
+    KeyframeThinning,
+    PingScreen,
+    classify_pings,
+    count_reasons,
+    screened_value,
+)
 from gtsam_dvl.factors import dvl_beam_error, dvl_velocity_error
 
 __all__ = ["MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
@@ -125,7 +136,8 @@ def _considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega
 
 class OnlineEstimator:
     """Incremental estimator fed message by message (module doc). Times are seconds on the caller's clock,
-    the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention)."""
+    the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention). IMU samples are
+    given in imu_link and rotated into base_link with mounting.b_R_imu (estimators/mounting.py)."""
 
     def __init__(self, config: EstimatorConfig | None = None, *, frame: LocalFrame, mounting: Mounting | None = None,
                  options: OnlineConfig | None = None, source: str = "") -> None:
@@ -133,6 +145,7 @@ class OnlineEstimator:
         self.options = options or config.online  # options=: overrides config.online
         self.config = dataclasses.replace(config, online=self.options).validate()  # the effective config
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
+        self._imu_rotated = imu_is_rotated(self.mounting)
         self.counters: dict[str, int] = {}
         self.latencies_s: list[float] = []  # per DVL epoch: preintegration, factors, iSAM2 update, covariances
         self.builder: FactorMaker | None = None
@@ -147,8 +160,13 @@ class OnlineEstimator:
         self._pre_dvl: list[_Ping] = []
         # after alignment: IMU samples since the last epoch (and the one straddling it), pings waiting for IMU
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-        self._buf_start: float | None = None  # end of the sample before the buffer's first
+        self._imu_period: float | None = None  # nominal IMU period, s
+        self._gaps_seen: dict[float, float] = {}  # IMU gaps crossed: start -> duration, s
+        self._replaying = False  # replaying the messages buffered before the alignment
         self._pending: deque[_Ping] = deque()
+        # usable pings waiting for the IMU to reach them, then screened for bogus data (_screen_ready)
+        self._screen = PingScreen(self.config.dvl)
+        self._unscreened: deque[_Ping] = deque()
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         if self.config.alignment.initial_attitude_deg is not None:
@@ -241,8 +259,9 @@ class OnlineEstimator:
         iSAM2 relinearise until converged (options.final_updates). Returns the final estimate."""
         if self.smoother is None and self._pre_imu:
             self._align()
-        self._count("dvl_after_imu", len(self._pending))
+        self._count("dvl_after_imu", len(self._pending) + len(self._unscreened))
         self._pending.clear()
+        self._unscreened.clear()
         if self.smoother is not None and self.smoother.n > 0:
             self.smoother.refresh_gravity()
             self.smoother.refine(self.options.final_updates)
@@ -287,6 +306,8 @@ class OnlineEstimator:
             "mode": self.options.mode, "window_s": self.options.window_s if self.options.mode == "fixed_lag" else None,
             "trajectory": "filtered: each state as estimated when its DVL ping was processed",
             "counters": dict(self.counters), "epochs": len(h),
+            "imu_gaps": {"count": len(self._gaps_seen), "total_s": float(sum(self._gaps_seen.values())),
+                         "longest_s": float(max(self._gaps_seen.values(), default=0.0))},
             "alignment": {"method": self.builder.alignment.method, "t_static_end": self.builder.alignment.t_static_end},
             "latency_ms": latency_stats(self.latencies_s),
             "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
@@ -328,6 +349,8 @@ class OnlineEstimator:
         return False
 
     def _take_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> int:
+        if self._imu_rotated:  # samples in imu_link -> base_link (estimators/mounting.py)
+            w, f = rotate_imu_samples(self.mounting.b_R_imu, w, f)
         if self._first_imu_t is None:
             self._first_imu_t = float(t[0])
         if self.smoother is None:
@@ -338,11 +361,12 @@ class OnlineEstimator:
         return self._ingest_imu(t, w, f)
 
     def _ingest_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> int:
-        if self._buf_start is None:  # the very first sample: its interval's start is unknown, it only opens
-            self._buf_start = float(t[0])
-            t, w, f = t[1:], w[1:], f[1:]
+        if self._imu_period is None:  # the nominal period, for the gap rule (estimators/gaps.py)
+            self._imu_period = nominal_period(t) if len(t) > 1 else None
         if len(t):
             self._chunks.append((t, w, f))
+            self._screen.push_imu(t, w, f)
+        self._screen_ready()
         return self._close_ready()
 
     def _align(self) -> int:
@@ -355,16 +379,19 @@ class OnlineEstimator:
         cfg = dataclasses.replace(self.config.alignment)
         cfg.max_static_s = min(cfg.max_static_s, self.options.align_s) if cfg.max_static_s > 0 else self.options.align_s
         try:
-            alignment = align(ImuData(t, w, f), dvl, self.frame, cfg,
-                              self.config.imu.gyro_bias_sigma_deg_per_h * DEG_PER_H)
+            alignment = align(ImuData(t, w, f), dvl, self.frame, cfg)
         except GtsamDvlError as exc:
             raise GtsamDvlError(f"{self.source + ': ' if self.source else ''}online alignment: {exc}") from None
         self._start(alignment)
         self._pre_imu, self._pre_dvl = [], []
-        done = self._ingest_imu(t, w, f)
+        # replay: every buffered ping is queued before any epoch is made, so that the states without a ping
+        # (DVL dropouts) are placed between them as in the batch smoother
+        self._replaying = True
+        self._ingest_imu(t, w, f)
         for p in pings:
-            done += self._take_ping(p)
-        return done
+            self._take_ping(p)
+        self._replaying = False
+        return self._close_ready()
 
     def _start(self, alignment: Alignment) -> None:
         self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source)
@@ -384,42 +411,77 @@ class OnlineEstimator:
         if code[0] != USABLE:
             count_reasons(code, self.counters, keep_zero=False)
             return 0
-        if not self._keyframes.keep(p.t):
-            self._count("dvl_not_keyframe")
-            return 0
-        self._pending.append(p)
+        self._unscreened.append(p)
+        self._screen_ready()
         return self._close_ready()
 
+    def _screen_ready(self) -> None:
+        """Screen the usable pings the IMU now reaches, in order (selection.PingScreen: the batch smoother's
+        causal rule, on the previous accepted ping and the IMU samples since it), then thin them to keyframes;
+        the others wait for the IMU."""
+        while self._unscreened and self._screen.reaches(self._unscreened[0].t):
+            p = self._unscreened.popleft()
+            code = self._screen.check_buffered(p.t, screened_value(p.d_v, p.beams, self.config.dvl))
+            if code != USABLE:
+                count_reasons(np.array([code]), self.counters, keep_zero=False)
+            elif not self._keyframes.keep(p.t):
+                self._count("dvl_not_keyframe")
+            else:
+                self._pending.append(p)
+
     def _close_ready(self) -> int:
+        """Make the epochs the IMU samples now reach: pings, and states without a ping where pings are missing
+        (estimators/gaps.py, filler_due: the batch smoother's rule)."""
+        if self._replaying:
+            return 0
         done = 0
-        while self._pending and self._chunks and self._pending[0].t <= self._chunks[-1][0][-1]:
-            self._close(self._pending.popleft())
+        spacing = self.config.solver.max_state_spacing_s
+        while self._chunks and self.smoother is not None:
+            t_end = float(self._chunks[-1][0][-1])
+            nxt = self._pending[0].t if self._pending else None
+            if self.smoother.n > 0 and (t_f := filler_due(self.smoother.t_last, nxt, t_end, spacing)) is not None:
+                self._close(None, t_f)
+            elif self._pending and self._pending[0].t <= t_end:
+                self._close(self._pending.popleft())
+            else:
+                break
             done += 1
         return done
 
-    def _close(self, p: _Ping) -> None:
-        """Make the epoch of ping p: preintegrate since the previous one, add its factors, update iSAM2."""
-        assert self.builder is not None and self.smoother is not None and self._buf_start is not None
+    def _close(self, p: _Ping | None, t_state: float | None = None) -> None:
+        """Make the epoch of ping p (or, p None, a state without a ping at t_state): preintegrate since the
+        previous one, add its factors, update iSAM2. The buffer keeps, first, the last sample at or before the
+        previous epoch: the sample held across a gap that starts there (estimators/gaps.py)."""
+        assert self.builder is not None and self.smoother is not None
         t0 = time.perf_counter()
         b, sm = self.builder, self.smoother
+        t_epoch = p.t if p is not None else float(t_state)  # type: ignore[arg-type]
         if len(self._chunks) > 1:
             self._chunks = [tuple(np.concatenate(c) for c in zip(*self._chunks, strict=True))]  # type: ignore[list-item]
         T, W, F = self._chunks[0]
-        gi = int(np.searchsorted(T, p.t, side="left"))  # the sample covering the ping
+        gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
         i = sm.n
-        dvl = self._dvl_factors(i, p, b_omega)
+        dvl = self._dvl_factors(i, p, b_omega) if p is not None else []
+        if p is None:
+            self._count("states_without_ping")
         if i == 0:
-            sm.add_epoch(p.t, dvl, first_values=b.first_state_values(p.d_v if p.valid else None))
+            assert p is not None  # the first epoch is a ping (_close_ready)
+            sm.add_epoch(t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None))
         else:
-            starts = np.concatenate([[self._buf_start], T[:-1]])
+            period = self._imu_period or nominal_period(T)
+            gaps = find_gaps(T, self.config.imu.gap_samples, period)
+            check_gaps(gaps, self.config.imu, self.source)
+            for g0, g1 in zip(gaps.start.tolist(), gaps.end.tolist(), strict=True):
+                if g0 not in self._gaps_seen:
+                    self._gaps_seen[g0] = g1 - g0
+                    self._count("imu_gaps")
+            starts = sample_starts_with_gaps(T, gaps)
             b_f = b.compensate_rotation(F, W, T - starts)
-            pim, params = b.preintegrate_interval(sm.t_last, p.t, T, starts, b_f, W)
-            sm.add_epoch(p.t, dvl, pim, params)
-        keep = T > p.t
-        if not keep[0]:
-            self._buf_start = float(T[~keep][-1])
-        self._chunks = [(T[keep], W[keep], F[keep])] if keep.any() else []
+            pim, params, held = b.preintegrate_interval(sm.t_last, t_epoch, T, starts, b_f, W, gaps)
+            sm.add_epoch(t_epoch, dvl, pim, params, held_s=held)
+        first_kept = max(int(np.searchsorted(T, t_epoch, side="right")) - 1, 0)  # the last sample <= the epoch
+        self._chunks = [(T[first_kept:], W[first_kept:], F[first_kept:])]
         self._latest = self._read_estimate()
         if self.options.record_history:
             self._history.append(self._latest, b_omega)

@@ -126,11 +126,15 @@ class IncrementalSmoother:
         self._frozen_until = 0  # states below this index are in _frozen (or marginalised)
         self._limits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._last_imu: EarthImuFactor | None = None
+        # a normal update re-eliminated states outside its elimination groups: the chain's time order, which
+        # marginalizeLeaves needs, may be broken (see _update); the next marginalisation rebases first
+        self._order_suspect = False
 
     # ----- updates -------------------------------------------------------------------------------
     def add_epoch(self, t: float, dvl_factors: list[gtsam.NonlinearFactor],
                   pim: gtsam.PreintegratedImuMeasurements | None = None,
-                  params: gtsam.PreintegrationParams | None = None, first_values: gtsam.Values | None = None) -> None:
+                  params: gtsam.PreintegrationParams | None = None, first_values: gtsam.Values | None = None,
+                  held_s: float = 0.0) -> None:
         """Add state n at time t with its DVL factors (built by the caller with builder.dvl_factors_for(n, ...))
         and, for n > 0, the preintegration since the previous epoch; for n == 0, first_values (builder.
         first_state_values) seed the state, bias and calibration and the priors."""
@@ -146,7 +150,7 @@ class IncrementalSmoother:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
             dt = t - self.t_last
-            imu = b.new_imu_factor(i - 1, pim, params, dt)
+            imu = b.new_imu_factor(i - 1, pim, params, dt, held_s)
             factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
             prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)])
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
@@ -173,7 +177,15 @@ class IncrementalSmoother:
                 self.isam.update(graph, values)
             else:
                 groups, frozen = self._ordering(rebase)
-                self.isam.update(graph, values, [], groups, frozen)
+                result = self.isam.update(graph, values, [], groups, frozen)
+                # iSAM2 orders the keys without a group (older states) as CCOLAMD likes; when it re-eliminated
+                # more of them than the state just below the groups (a batch reorder, or a relinearisation
+                # reaching old states, as after a gross DVL outlier), the oldest state may share a clique with
+                # newer ones, and marginalizeLeaves would split it: iSAM2 corrupted (GTSAM issue #1101), an
+                # IndexError from getDelta a few epochs later. A rebase restores the time order.
+                if not rebase and (result.getBatchReorderTriggered() or result.getVariablesReeliminated()
+                                   > groups.size() + len(self._state_keys(0))):
+                    self._order_suspect = True
         except RuntimeError as exc:
             raise GtsamDvlError(f"iSAM2 update at t = {self.t_last:.3f} s failed ({exc})") from None
 
@@ -207,6 +219,8 @@ class IncrementalSmoother:
     def _slide(self, t_oldest: float) -> None:
         """Marginalise the states older than t_oldest (keeping two at least), then rebase if a variable iSAM2
         does not relinearise moved from its linearisation point by more than its threshold."""
+        if self._order_suspect and self.first < self.n - 2 and self.times[self.first] < t_oldest:
+            self.rebase()
         while self.first < self.n - 2 and self.times[self.first] < t_oldest:
             s = self.first
             keys = gtsam.KeyList()
@@ -272,6 +286,7 @@ class IncrementalSmoother:
         self.isam = gtsam.ISAM2(self.params)
         self._update(graph, values, rebase=True)
         self.rebases += 1
+        self._order_suspect = False
 
     def _reference_gravity(self, imu: EarthImuFactor, n_p_mid: np.ndarray) -> None:
         """Local gravity model of a new IMU factor: the previous factor's while within its range (evaluating

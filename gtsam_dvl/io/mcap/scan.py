@@ -90,6 +90,7 @@ class McapScan:
         self.segments: list[_Chunk | list[int]] = []  # chunks, and runs of messages outside chunks
         self.losses: list[Loss] = []
         self.tail_chunk_lost = False
+        self.complete = True  # False: no footer (a truncated file, read with salvage)
         self.warnings: list[str] = []
         self._zstd = zstandard.ZstdDecompressor()
         self._scan()
@@ -109,6 +110,7 @@ class McapScan:
         if buf[:8] != mc.MAGIC:
             raise GtsamDvlError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
         complete = n >= 45 and buf[-8:] == mc.MAGIC and buf[n - 37] == mc.OP_FOOTER
+        self.complete = complete
         if not complete and not self.salvage:
             raise GtsamDvlError(f"{self.path}: truncated at byte {n} (footer missing); {SALVAGE_HINT}")
         pos = 8
@@ -194,16 +196,24 @@ class McapScan:
         buf = self.buf
         if op == mc.OP_CHUNK and c + 16 <= len(buf):
             t0, t1 = struct.unpack_from("<QQ", buf, c)
-            count = 0
+            count, per_topic = 0, dict[str, int]()
             if c + 40 <= len(buf):
                 comp, p = _str(buf, c + 28)
+                part = b""
                 if comp == "zstd":
                     try:
                         part = zstandard.ZstdDecompressor().decompressobj().decompress(buf[p + 8 :])
-                        count = len(_walk_records(part, complete=False))
                     except zstandard.ZstdError:
-                        count = 0
-            self.losses.append(Loss(pos, t0, t1, count, False))
+                        part = b""
+                elif comp == "":
+                    part = buf[p + 8 :]
+                offs = _walk_records(part, complete=False)
+                count = len(offs)
+                for off in offs:
+                    if off + 11 <= len(part):
+                        topic = self._topic_of(struct.unpack_from("<H", part, off + 9)[0])
+                        per_topic[topic] = per_topic.get(topic, 0) + 1
+            self.losses.append(Loss(pos, t0, t1, count, False, per_topic))
             self.tail_chunk_lost = True
         else:
             self.losses.append(Loss(pos, None, None, 0, False))
@@ -233,10 +243,21 @@ class McapScan:
             return data
         if not self.salvage:
             raise self._fail(ch.pos, "corrupt chunk (CRC or decompression failed)")
-        count = sum(struct.unpack_from("<I", self.buf, p + 11)[0] // 16 for p in ch.index.values())
-        self.losses.append(Loss(ch.pos, ch.start_ns, ch.end_ns, count, bool(ch.index)))
+        per_topic: dict[str, int] = {}
+        for cid, p in ch.index.items():
+            topic = self._topic_of(cid)
+            per_topic[topic] = per_topic.get(topic, 0) + struct.unpack_from("<I", self.buf, p + 11)[0] // 16
+        self.losses.append(Loss(ch.pos, ch.start_ns, ch.end_ns, sum(per_topic.values()), bool(ch.index), per_topic))
         ch.lost = True
         return None
+
+    def _topic_of(self, cid: int) -> str:
+        return self.channels[cid].topic if cid in self.channels else f"channel {cid}"
+
+    def kept_end_ns(self) -> int | None:
+        """The last log time of the chunks read intact (None without any)."""
+        ends = [s.end_ns for s in self.segments if isinstance(s, _Chunk) and not s.lost]
+        return max(ends) if ends else None
 
     def chunk_count(self) -> int:
         """Chunks in the file, including a cut-off last one."""
@@ -259,6 +280,10 @@ class McapScan:
                 elif seg.index:
                     offs = [self._index_offsets(seg.index[c]) for c in want if c in seg.index]
                     offsets = np.concatenate(offs) if offs else np.zeros(0, np.int64)
+                    if len(offsets) and (offsets.min() < 0 or offsets.max() + 31 > len(u8)):
+                        # the message index (outside the chunk, without a CRC) is damaged, the chunk is intact
+                        # (its CRC held): find the messages by walking the chunk's own records instead
+                        offsets = self._walk(seg, data)
                 else:
                     offsets = self._walk(seg, data)
                 self._extract(u8, offsets, want, pieces, seg)
@@ -285,7 +310,7 @@ class McapScan:
         if not len(offsets):
             return
         offs = np.sort(offsets)
-        if offs[-1] + 31 > len(u8):
+        if offs[0] < 0 or offs[-1] + 31 > len(u8):
             raise self._fail(seg.pos if seg else int(offs[-1]), "message index points outside the chunk")
         hdr = _win(u8, 31)[offs].view(mc.MESSAGE_HEADER)[:, 0]
         lens = hdr["len"].astype(np.int64) - 22

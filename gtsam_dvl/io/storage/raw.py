@@ -43,10 +43,12 @@ class Bodies:
 
 @dataclass
 class Loss:
-    """A chunk (or file tail) salvage had to drop: log-time span (None if unknown), message count."""
+    """A chunk (or file tail) salvage had to drop: log-time span (None if unknown), message count (exact from
+    the chunk's MessageIndex records, else at least what could be decompressed), and the count per topic."""
 
     offset: int
     start_ns: int | None
     end_ns: int | None
     messages: int
     exact: bool
+    per_topic: dict[str, int] = field(default_factory=dict)

@@ -1,0 +1,396 @@
+"""Self-diagnosis of a run: is this result to be trusted, and if not, what to do about it.
+
+`assess_health(result, log)` looks at what every run leaves behind and turns it into a status ("ok",
+"degraded" or "failed"), warnings in words that say what to do, and the figures behind them:
+
+- the solver (batch: did Gauss-Newton converge; the normalised chi^2 of the final solution, chi^2 / dof,
+  whose expectation is 1 when the noise model fits; EKF: the mean normalised innovation squared per degree
+  of freedom, with the same expectation);
+- the DVL residuals, recomputed here from the result and the log with the model of docs/conventions.md,
+  y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l), whitened by the noise each ping was given (the rule of
+  FactorMaker.dvl_noise): their RMS overall and per time window (about 1 when the model fits; a window far
+  above it is a stretch where the DVL measured something else, e.g. water track after losing the bottom);
+- whether the log moves at all (nothing is calibratable on a static log);
+- the estimator's counters (DVL pings rejected by reason, messages dropped);
+- the reader's losses (LogData.metadata["reader_losses"]: what --salvage and --repair dropped, gaps in the
+  stamps) and its other warnings.
+
+Pure computation on NavResult and LogData: no files (analysis layer).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.types import LogData
+
+STATUSES = ("ok", "degraded", "failed")
+
+# Thresholds, and why.
+# chi^2 / dof has expectation 1 and, for the thousands of degrees of freedom of a log, a spread of
+# sqrt(2 / dof) ~ 0.02; the clean paper runs give 1.0-1.1. Twice its expectation is far outside chance: the noise
+# model does not fit (understated noise, a bad stretch of data, a wrong lever arm or mounting).
+CHI2_PER_DOF_DEGRADED = 2.0
+# Beyond this the solution is dominated by misfit: its covariances mean nothing.
+CHI2_PER_DOF_FAILED = 100.0
+# Below this the stated noise is far too large (the estimate is fine, its sigmas too pessimistic): a note.
+CHI2_PER_DOF_LOW = 0.25
+# DVL residual windows: 30 s holds 30 pings at 1 Hz (90 degrees of freedom), so a window RMS of whitened
+# residuals has a spread of about 0.07 around its expectation (<= 1: smoothed residuals are smaller than the
+# noise). 3x the stated noise is a bias of several sigma held over the window, not chance.
+RESIDUAL_WINDOW_S = 30.0
+RESIDUAL_WINDOW_DEGRADED = 3.0
+RESIDUAL_WINDOW_MIN_PINGS = 5  # fewer pings in a window: too few to judge it
+# The whole log's RMS: 2x the stated noise over thousands of pings means the noise is understated throughout.
+RESIDUAL_OVERALL_DEGRADED = 2.0
+MAX_WINDOW_WARNINGS = 5  # more bad windows are summarised in one line
+# A log whose DVL speed stays below this (95th percentile) never moves: scale and misalignment enter the DVL
+# model multiplied by the velocity, so nothing about them can be learnt (the DVL noise is 0.01-0.03 m/s).
+NEVER_MOVES_SPEED_M_S = 0.1
+# More than this share of the DVL pings rejected: a good part of the log did not reach the estimator.
+REJECTED_PINGS_DEGRADED = 0.05
+# More than this share of a topic's messages dropped by --repair: the log is damaged, not just untidy.
+REPAIRED_DEGRADED = 0.01
+# IMU gaps are integrated as if the next sample had lasted the whole gap: any gap longer than this corrupts the
+# trajectory there (a 100 Hz IMU dropping a few samples is harmless).
+IMU_GAP_DEGRADED_S = 0.5
+# The DVL may fall silent for a while (turns, bottom out of range); longer than this the trajectory is dead
+# reckoned for long enough that the user should know where.
+DVL_GAP_DEGRADED_S = 60.0
+
+# Counters that are not rejections (the EKF's slow pings still update the navigation; keyframe thinning is
+# by design).
+_NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweighted")
+
+
+@dataclass
+class Health:
+    """Status of one run ("ok", "degraded", "failed"), the warnings that set it (each says what to do),
+    notes that do not change it, and the figures behind them."""
+
+    status: str = "ok"
+    warnings: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    figures: dict[str, Any] = field(default_factory=dict)
+
+    def flag(self, severity: str, text: str) -> None:
+        """A finding: "note" (status unchanged), "degraded" or "failed" (status at least that)."""
+        if severity == "note":
+            self.notes.append(text)
+            return
+        self.warnings.append(text)
+        if STATUSES.index(severity) > STATUSES.index(self.status):
+            self.status = severity
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"status": self.status, "warnings": list(self.warnings), "notes": list(self.notes),
+                "figures": self.figures}
+
+    def lines(self) -> list[str]:
+        """One line per warning and note, for a console."""
+        return [f"health: {self.status}"] + [f"  warning: {w}" for w in self.warnings] + [
+            f"  note: {n}" for n in self.notes]
+
+
+def assess_health(result: NavResult, log: LogData) -> Health:
+    """The health of a run (module doc)."""
+    health = assess_log_health(log)
+    config = _config_of(result)
+    _check_finite(result, health)
+    _check_solver(result, health)
+    if len(result.t):
+        _check_dvl_residuals(result, log, config, health)
+    _check_counters(result, log, health)
+    return health
+
+
+def assess_log_health(log: LogData) -> Health:
+    """The checks that need only the log: does it move, what did the reader lose (also for results that are
+    not a NavResult, such as IO-DVLC's)."""
+    health = Health()
+    _check_motion(log, health)
+    _check_losses(log, health)
+    return health
+
+
+# ----- checks ----------------------------------------------------------------------------------------------
+
+def _config_of(result: NavResult) -> EstimatorConfig:
+    try:
+        return EstimatorConfig.from_dict(result.config) if result.config else EstimatorConfig()
+    except GtsamDvlError:
+        return EstimatorConfig()  # a result written by another version: judge it with the default noise rule
+
+
+def _check_finite(result: NavResult, health: Health) -> None:
+    arrays = {"position": result.n_p, "velocity": result.n_v, "attitude": result.n_R_b,
+              "position covariance": result.pose_cov, "calibration": np.r_[result.scale, result.scale_sigma],
+              "misalignment covariance": result.b_R_d_cov, "bias covariance": result.bias_cov}
+    bad = [name for name, a in arrays.items() if not np.all(np.isfinite(np.asarray(a, dtype=float)))]
+    health.figures["non_finite"] = bad
+    if not len(result.t):
+        health.flag("failed", "the estimator produced no state: check that the log has usable DVL pings during "
+                              "the IMU's time span")
+    elif bad:
+        health.flag("failed", f"the estimate contains NaN or infinity ({', '.join(bad)}): do not use it; rerun "
+                              "with --debug and report the log")
+
+
+def _check_solver(result: NavResult, health: Health) -> None:
+    solver = result.info.get("solver")
+    filt = result.info.get("filter")
+    figures: dict[str, Any] = {}
+    if isinstance(solver, dict):
+        figures["converged"] = bool(solver.get("converged", True))
+        figures["iterations"] = solver.get("iterations")
+        if not figures["converged"]:
+            health.flag("degraded", f"the solver did not converge in {solver.get('iterations')} iterations: the "
+                                    "estimate may not be the optimum; raise [solver] max_iterations or check the "
+                                    "alignment and the DVL data")
+        final_error, dof = solver.get("final_error"), solver.get("dof")
+        if final_error is not None and dof:
+            figures["chi2"] = 2.0 * float(final_error)
+            figures["dof"] = int(dof)
+            figures["chi2_per_dof"] = figures["chi2"] / int(dof)
+        elif final_error is not None and not np.isfinite(final_error):
+            figures["chi2_per_dof"] = float("inf")
+    elif isinstance(filt, dict) and filt.get("mean_nis_per_dof") is not None:
+        figures["chi2_per_dof"] = float(filt["mean_nis_per_dof"])
+        figures["chi2_kind"] = "mean normalised innovation squared per degree of freedom (EKF)"
+    health.figures["solver"] = figures
+    ratio = figures.get("chi2_per_dof")
+    if ratio is None:
+        return
+    what = "normalised chi^2" if "chi2_kind" not in figures else "normalised innovation squared"
+    if not np.isfinite(ratio) or ratio > CHI2_PER_DOF_FAILED:
+        health.flag("failed", f"{what} is {ratio:.3g} (expected 1): the model does not fit the data at all; do not "
+                              "use this result; check the topics, the mounting (/tf_static) and the DVL noise")
+    elif ratio > CHI2_PER_DOF_DEGRADED:
+        health.flag("degraded", f"{what} is {ratio:.2f} (expected 1): the noise model does not fit; look at the DVL "
+                                "residual windows below, or set [dvl] noise_m_s to the DVL's real noise")
+    elif ratio < CHI2_PER_DOF_LOW:
+        health.flag("note", f"{what} is {ratio:.2f} (expected 1): the stated noise is larger than the data's; the "
+                            "sigmas are pessimistic")
+
+
+@dataclass
+class DvlResiduals:
+    """Whitened DVL residuals at the result's states: per state its time, squared whitened norm and degrees of
+    freedom (3 for a 3-D velocity, the valid beams for beam factors)."""
+
+    t: np.ndarray
+    chi2: np.ndarray
+    dof: np.ndarray
+    unmatched: int  # states without a ping at their time
+
+    def rms(self, mask: np.ndarray | None = None) -> float:
+        c, d = (self.chi2, self.dof) if mask is None else (self.chi2[mask], self.dof[mask])
+        return float(np.sqrt(c.sum() / d.sum())) if d.sum() > 0 else float("nan")
+
+
+def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResiduals:
+    """Residuals y - h(x) of each state's DVL ping (states are matched to pings by time), whitened by the noise
+    that ping was given: config.noise_m_s if > 0, else the message's covariance if positive definite, else
+    config.default_noise_m_s (FactorMaker.dvl_noise); with config.use_beams, per beam with beam_noise_m_s."""
+    dvl = log.dvl
+    n = len(result.t)
+    if not len(dvl):
+        return DvlResiduals(np.asarray(result.t, dtype=float), np.zeros(n), np.zeros(n), n)
+    j = np.clip(np.searchsorted(dvl.t, result.t), 0, len(dvl) - 1)
+    prev = np.clip(j - 1, 0, len(dvl) - 1)
+    j = np.where(np.abs(dvl.t[prev] - result.t) < np.abs(dvl.t[j] - result.t), prev, j)
+    matched = np.abs(dvl.t[j] - result.t) < 1e-6
+    b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
+    b_v = np.einsum("nji,nj->ni", result.n_R_b, result.n_v) + np.cross(b_omega, log.mounting.b_l)
+    y_hat = result.scale * b_v @ result.b_R_d  # k * b_R_d^T b_v, row by row
+    chi2, dof = np.zeros(n), np.zeros(n)
+    if config.use_beams and dvl.beams is not None:
+        d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
+        ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2) & matched[:, None]
+        r = np.where(ok, v - np.einsum("nbi,ni->nb", np.where(ok[..., None], d_u, 0.0), y_hat), 0.0)
+        chi2 = (r**2).sum(axis=1) / config.beam_noise_m_s**2
+        dof = ok.sum(axis=1).astype(float)
+    else:
+        d_y = dvl.d_v[j]
+        ok = matched & dvl.valid[j] & np.isfinite(d_y).all(axis=1)
+        r = np.where(ok[:, None], d_y - y_hat, 0.0)
+        if config.noise_m_s > 0:
+            cov = np.broadcast_to(np.eye(3) * config.noise_m_s**2, (n, 3, 3)).copy()
+        else:
+            cov = np.array(dvl.d_cov[j], dtype=float)
+            finite = np.isfinite(cov).all(axis=(1, 2))
+            pd = np.zeros(n, bool)
+            if finite.any():
+                sym = 0.5 * (cov[finite] + np.transpose(cov[finite], (0, 2, 1)))
+                pd[finite] = np.linalg.eigvalsh(sym).min(axis=1) > 0
+            cov[~pd] = np.eye(3) * config.default_noise_m_s**2
+        cov[~ok] = np.eye(3)
+        chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
+        dof = 3.0 * ok
+    return DvlResiduals(np.asarray(result.t, dtype=float), chi2, dof, int((~matched).sum()))
+
+
+def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
+    res = dvl_residuals(result, log, config.dvl)
+    used = res.dof > 0
+    figures: dict[str, Any] = {"pings": int(used.sum()), "states_without_ping": res.unmatched,
+                               "whitened_rms": res.rms() if used.any() else None,
+                               "window_s": RESIDUAL_WINDOW_S, "windows": []}
+    health.figures["dvl_residuals"] = figures
+    if not used.any():
+        health.flag("degraded", "no DVL ping could be compared with the estimate: check the DVL topic and its "
+                                "valid flags")
+        return
+    start = np.floor(res.t[used][0] / RESIDUAL_WINDOW_S) * RESIDUAL_WINDOW_S
+    index = np.floor((res.t - start) / RESIDUAL_WINDOW_S).astype(int)
+    bad: list[tuple[float, float, float]] = []
+    for k in np.unique(index[used]).tolist():
+        mask = used & (index == k)
+        a = float(start + k * RESIDUAL_WINDOW_S)
+        rms = res.rms(mask)
+        figures["windows"].append({"start_s": a, "end_s": a + RESIDUAL_WINDOW_S, "pings": int(mask.sum()),
+                                   "whitened_rms": rms})
+        if mask.sum() >= RESIDUAL_WINDOW_MIN_PINGS and rms > RESIDUAL_WINDOW_DEGRADED:
+            bad.append((a, a + RESIDUAL_WINDOW_S, rms))
+    spans = _merge_windows(bad, res)
+    figures["bad_windows"] = [{"start_s": a, "end_s": b, "whitened_rms": rms} for a, b, rms in spans]
+    for a, b, rms in spans[:MAX_WINDOW_WARNINGS]:
+        health.flag("degraded", f"DVL residuals {rms:.1f}x their stated noise between {a:.0f} and {b:.0f} s: "
+                                "bottom lock lost? Check the DVL's bottom-track status there; exclude that stretch "
+                                "or rerun with [dvl] robust = \"huber\"")
+    if len(spans) > MAX_WINDOW_WARNINGS:
+        rest = spans[MAX_WINDOW_WARNINGS:]
+        health.flag("degraded", f"and {len(rest)} more stretches of DVL residuals above "
+                                f"{RESIDUAL_WINDOW_DEGRADED:g}x their noise ({rest[0][0]:.0f} to {rest[-1][1]:.0f} s)")
+    overall = figures["whitened_rms"]
+    if overall > RESIDUAL_OVERALL_DEGRADED and not spans:
+        health.flag("degraded", f"DVL residuals are {overall:.1f}x their stated noise over the whole log: the DVL "
+                                "noise is understated (set [dvl] noise_m_s), or the mounting or lever arm is wrong")
+
+
+def _merge_windows(bad: list[tuple[float, float, float]], res: DvlResiduals) -> list[tuple[float, float, float]]:
+    """Adjacent bad windows as one span, with the RMS over the span's pings."""
+    spans: list[tuple[float, float, float]] = []
+    for a, b, _ in bad:
+        if spans and abs(spans[-1][1] - a) < 1e-9:
+            spans[-1] = (spans[-1][0], b, 0.0)
+        else:
+            spans.append((a, b, 0.0))
+    used = res.dof > 0
+    return [(a, b, res.rms(used & (res.t >= a) & (res.t < b))) for a, b, _ in spans]
+
+
+def _check_motion(log: LogData, health: Health) -> None:
+    dvl = log.dvl
+    ok = dvl.valid & np.isfinite(dvl.d_v).all(axis=1) if len(dvl) else np.zeros(0, bool)
+    speed = float(np.percentile(np.linalg.norm(dvl.d_v[ok], axis=1), 95)) if ok.any() else 0.0
+    health.figures["dvl_speed_p95_m_s"] = speed
+    if speed < NEVER_MOVES_SPEED_M_S:
+        health.flag("degraded", f"nothing calibratable: the log never moves (95 % of the DVL speeds are below "
+                                f"{NEVER_MOVES_SPEED_M_S:g} m/s), so the DVL scale and misalignment keep their priors; "
+                                "calibrate on a log with motion (see `gtsam-dvl plan`)")
+
+
+def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
+    counters = {k: int(v) for k, v in result.info.get("counters", {}).items() if isinstance(v, (int, np.integer))}
+    rejected = {k: v for k, v in counters.items() if k.startswith("dvl_") and k not in _NOT_REJECTIONS and v}
+    dropped = {k: v for k, v in counters.items() if k.startswith("imu_") and v}
+    n_pings = max(len(log.dvl), 1)
+    share = sum(rejected.values()) / n_pings
+    health.figures["counters"] = {"dvl_rejected": rejected, "dvl_rejected_share": share, "imu_dropped": dropped,
+                                  "dvl_downweighted": counters.get("dvl_downweighted", 0)}
+    if rejected:
+        why = ", ".join(f"{v} {k.removeprefix('dvl_').replace('_', ' ')}" for k, v in sorted(rejected.items()))
+        text = f"{sum(rejected.values())} of {len(log.dvl)} DVL pings rejected ({why})"
+        if share > REJECTED_PINGS_DEGRADED:
+            health.flag("degraded", f"{text}: a good part of the log was not used; check the DVL's valid flags and "
+                                    "[dvl] max_speed_m_s")
+        else:
+            health.flag("note", text)
+    if dropped:
+        why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
+        health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
+                                "stream has holes; read the log with --repair to see where")
+
+
+def _check_losses(log: LogData, health: Health) -> None:
+    losses = log.metadata.get("reader_losses") or {}
+    health.figures["losses"] = loss_figures(losses)
+    for severity, text in loss_findings(losses):
+        health.flag(severity, text)
+    known = ("salvage:", "gap(s) in the data", ": dropped ")
+    for w in log.metadata.get("reader_warnings", []):
+        if not any(k in w for k in known):  # the losses are said above, from the structured record
+            health.flag("note", f"reader: {w}")
+
+
+def loss_figures(losses: dict[str, Any]) -> dict[str, Any]:
+    """The numbers of the reader's losses: messages lost per topic, seconds of data missing per topic (gaps in
+    the stamps), chunks lost, whether the file was cut short and where its data end."""
+    salv = losses.get("salvage") or {}
+    return {
+        "messages_lost": dict(losses.get("messages_lost", {})),
+        "seconds_missing": {t: g["seconds"] for t, g in (losses.get("gaps") or {}).items()},
+        "chunks_lost": salv.get("chunks_lost", 0),
+        "truncated": bool(salv.get("truncated")),
+        "data_end_s": min((c["data_end_s"] for c in salv.get("truncated", []) if c["data_end_s"] is not None),
+                          default=None),
+    }
+
+
+def loss_lines(losses: dict[str, Any]) -> list[str]:
+    """What the reader lost (LogData.metadata["reader_losses"]), one line per finding; [] if nothing."""
+    return [text for _, text in loss_findings(losses)]
+
+
+def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """(severity, text) per loss: salvaged chunks, a cut-off file, messages dropped by --repair per topic, gaps
+    in a topic's stamps. Severity "degraded" when the loss harms the result, else "note"."""
+    out: list[tuple[str, str]] = []
+    salv = losses.get("salvage") or {}
+    if salv.get("chunks_lost"):
+        per = ", ".join(f"{t} {n}" for t, n in sorted(salv.get("messages_lost_per_topic", {}).items()))
+        spans = salv.get("lost_spans_s", [])
+        when = (f", log time {min(s[0] for s in spans):.1f} to {max(s[1] for s in spans):.1f} s "
+                f"({salv.get('seconds_lost', 0.0):.1f} s of data)") if spans else ""
+        at_least = "" if salv.get("messages_lost_exact") else "at least "
+        out.append(("degraded", f"--salvage dropped {salv['chunks_lost']} damaged chunk(s) with {at_least}"
+                                f"{salv.get('messages_lost', 0)} message(s)" + (f" ({per})" if per else "") + when
+                    + ": the result has no data there"))
+    for cut in salv.get("truncated", []):
+        end = cut.get("data_end_s")
+        out.append(("degraded", f"the log file is cut short at byte {cut['at_byte']}: nothing after "
+                    + (f"{end:.1f} s" if end is not None else "its start")
+                    + " could be read and how much more it held is unknown; the result ends there"))
+    for topic, d in sorted((losses.get("repair") or {}).items()):
+        if d.get("of") and d["dropped"] / d["of"] > REPAIRED_DEGRADED:
+            out.append(("degraded", _repair_line(topic, d) + ": the log is damaged, check the recording"))
+        else:
+            out.append(("note", _repair_line(topic, d)))
+    for topic, g in sorted((losses.get("gaps") or {}).items()):
+        imu = "imu" in topic.lower()
+        if imu and g["longest_s"] > IMU_GAP_DEGRADED_S:
+            out.append(("degraded", _gap_line(topic, g) + ": the IMU has holes, the trajectory across them is "
+                                                          "wrong"))
+        elif not imu and g["longest_s"] > DVL_GAP_DEGRADED_S:
+            out.append(("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there"))
+        else:
+            out.append(("note", _gap_line(topic, g)))
+    return out
+
+
+def _repair_line(topic: str, d: dict[str, int]) -> str:
+    why = ", ".join(f"{d[k]} {name}" for k, name in (("nan", "with NaN"), ("duplicate", "duplicate stamp(s)"),
+                                                   ("backwards", "going back in time")) if d.get(k))
+    return f"--repair dropped {d['dropped']} of {d.get('of', '?')} {topic} message(s) ({why})"
+
+
+def _gap_line(topic: str, g: dict[str, Any]) -> str:
+    a, b = max(g["spans_s"], key=lambda s: s[1] - s[0]) if g.get("spans_s") else (float("nan"), float("nan"))
+    return (f"{topic}: {g['seconds']:.1f} s of data missing in {g['count']} gap(s) (longest {a:.1f} to {b:.1f} s)")
