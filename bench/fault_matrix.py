@@ -98,8 +98,20 @@ def _truncate(path: Path) -> None:
 
 
 def _flip(path: Path) -> None:
+    """A flipped byte in the middle of the file (in paper-3d's it lands in a MessageIndex record)."""
     data = bytearray(path.read_bytes())
     data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+
+
+def _flip_in_chunk(path: Path) -> None:
+    """A flipped byte inside the compressed data of a chunk in the middle of the file (its CRC fails)."""
+    from gtsam_dvl.io.mcap.scan import McapScan
+
+    chunks = [s for s in McapScan(path).segments if not isinstance(s, list)]
+    mid = chunks[len(chunks) // 2].data
+    data = bytearray(path.read_bytes())
+    data[(mid.start + mid.stop) // 2] ^= 0xFF
     path.write_bytes(bytes(data))
 
 
@@ -160,6 +172,8 @@ def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
         "truncated_salvaged": lambda: _through_file(base, _truncate, salvage=True),
         "flipped_byte_salvaged": lambda: _through_file(base, _flip, salvage=True),
         "flipped_byte_not_salvaged": lambda: _through_file(base, _flip),
+        "corrupt_chunk_salvaged": lambda: _through_file(base, _flip_in_chunk, salvage=True),
+        "corrupt_chunk_not_salvaged": lambda: _through_file(base, _flip_in_chunk),
         "nan_inf_repaired": lambda: _through_file(_nan_samples(base), lambda p: None, repair=True),
         "nan_inf_not_repaired": lambda: _through_file(_nan_samples(base), lambda p: None),
         "time_backwards_repaired": lambda: _through_file(_backwards(base), lambda p: None, repair=True),

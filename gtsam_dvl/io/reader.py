@@ -139,6 +139,16 @@ def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
         else:
             d_cov = np.full((m, 3, 3), np.nan)
     valid = np.isfinite(d_v).all(axis=1)
+    if type_name == "marine_acoustic_msgs/msg/Dvl":
+        # the message's own velocity mode: only bottom track is velocity over ground. A driver that fills the
+        # field marks other pings 0 (invalid) or 2 (water track); one that never fills it leaves every ping 0,
+        # and then only water-track pings are refused
+        mode = arr["velocity_mode"]
+        bottom = mode == 1
+        mode_ok = bottom if bottom.any() else mode != 2
+        valid &= mode_ok
+        if beams is not None:
+            beams.valid &= mode_ok[:, None]
     return DvlData(t=np.zeros(m), d_v=d_v, d_cov=d_cov, valid=valid, beams=beams,
                    frame_id=first_string(arr) or "dvl_link")
 

@@ -120,3 +120,26 @@ def test_imu_gap_longer_than_the_limit_is_a_clear_error(paper3d: LogData, mode: 
     log = _without_imu(paper3d, 780.0, 810.0)
     with pytest.raises(GtsamDvlError, match=r"IMU gap of 30.0 s at 780.00-810.00 s .*imu.max_gap_s = 10 s"):
         RUNS[mode](log, EstimatorConfig())
+
+
+def test_online_drops_a_ping_that_comes_after_its_missing_ping_state(paper3d: LogData) -> None:
+    """A ping pushed 5 s after the IMU samples of its time, in a dropout: a state without a ping was made in its
+    place (the IMU reached 2 s past it), so the ping is dropped and counted, not inserted out of order."""
+    from gtsam_dvl.estimators.online import OnlineConfig, OnlineEstimator
+
+    d = paper3d.dvl
+    est = OnlineEstimator.for_log(paper3d, EstimatorConfig(), OnlineConfig(window_s=10.0))
+    imu = paper3d.imu
+    stop = int(np.searchsorted(imu.t, 700.0, side="right"))
+    late = int(np.searchsorted(d.t, 690.0))
+    start = 0
+    for j in range(int(np.searchsorted(d.t, 685.0))):  # pings up to 685 s, in step with the IMU
+        end = int(np.searchsorted(imu.t, d.t[j], side="right"))
+        est.push_imu_batch(imu.t[start:end], imu.b_omega[start:end], imu.b_f[start:end])
+        start = end
+        est.push_dvl(d.t[j], d.d_v[j], d.d_cov[j], bool(d.valid[j]))
+    est.push_imu_batch(imu.t[start:stop], imu.b_omega[start:stop], imu.b_f[start:stop])
+    est.push_dvl(d.t[late], d.d_v[late], d.d_cov[late], True)  # 10 s behind the IMU
+    est.push_imu_batch(imu.t[stop:stop + 100], imu.b_omega[stop:stop + 100], imu.b_f[stop:stop + 100])
+    assert est.counters.get("dvl_late") == 1
+    assert est.counters.get("states_without_ping", 0) >= 8

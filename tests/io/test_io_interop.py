@@ -144,7 +144,9 @@ def _write_foreign_bag(folder: Path, plugin: StoragePlugin) -> None:
                 T["geometry_msgs/msg/TwistWithCovarianceStamped"](header=header(ns, "dvl"), twist=twc),
                 "geometry_msgs/msg/TwistWithCovarianceStamped"))
             dvl = T["marine_acoustic_msgs/msg/Dvl"](
-                header=header(ns, "teledyne"), velocity_mode=1, dvl_type=1, velocity=V3(x=1.0, y=2.0, z=float(i)),
+                # ping 150 in water-track mode (velocity through the water, not over ground)
+                header=header(ns, "teledyne"), velocity_mode=2 if i == 150 else 1, dvl_type=1,
+                velocity=V3(x=1.0, y=2.0, z=float(i)),
                 velocity_covar=np.full(9, -1.0), altitude=10.0, course_gnd=0.0, speed_gnd=0.0, num_good_beams=3,
                 sound_speed=1500.0, beam_ranges_valid=True, beam_velocities_valid=True,
                 beam_unit_vec=[V3(x=0.5, y=0.0, z=0.866)] * 4, range=np.full(4, 11.0),
@@ -173,6 +175,9 @@ def test_read_rosbags_written_bags(tmp_path: Path, plugin: StoragePlugin) -> Non
     np.testing.assert_array_equal(got.dvl.d_cov[0], np.diag([1e-4, 2e-4, 3e-4]))
     got = read_log(bag, imu_topic="/sensors/imu", dvl_topic="/sensors/dvl")
     assert got.dvl.frame_id == "teledyne" and np.isnan(got.dvl.d_cov).all()  # velocity_covar -1: unknown
+    # the message's own velocity mode is honoured: the water-track ping is not a bottom-track velocity
+    assert got.dvl.valid.tolist() == [j != 3 for j in range(10)]
+    assert got.dvl.beams is not None and not got.dvl.beams.valid[3].any()
     assert got.dvl.beams is not None
     np.testing.assert_array_equal(got.dvl.beams.valid[0], [True, False, True, True])  # NaN beam = bad
     np.testing.assert_array_equal(got.dvl.beams.v[0], [0.5, np.nan, 0.25, 1.0])

@@ -438,6 +438,12 @@ class OnlineEstimator:
         spacing = self.config.solver.max_state_spacing_s
         while self._chunks and self.smoother is not None:
             t_end = float(self._chunks[-1][0][-1])
+            if self._pending and self.smoother.n > 0 and self._pending[0].t <= self.smoother.t_last:
+                # a ping later than FILLER_MARGIN_S behind the IMU, older than the state without a ping made in
+                # its place: it cannot be inserted behind the newest state
+                self._pending.popleft()
+                self._count("dvl_late")
+                continue
             nxt = self._pending[0].t if self._pending else None
             if self.smoother.n > 0 and (t_f := filler_due(self.smoother.t_last, nxt, t_end, spacing)) is not None:
                 self._close(None, t_f)
