@@ -57,8 +57,9 @@ NEVER_MOVES_SPEED_M_S = 0.1
 REJECTED_PINGS_DEGRADED = 0.05
 # More than this share of a topic's messages dropped by --repair: the log is damaged, not just untidy.
 REPAIRED_DEGRADED = 0.01
-# IMU gaps are integrated as if the next sample had lasted the whole gap: any gap longer than this corrupts the
-# trajectory there (a 100 Hz IMU dropping a few samples is harmless).
+# IMU gaps are crossed by holding the last sample before them, with the motion model's uncertainty added
+# (estimators/gaps.py): honest, but the trajectory across a gap longer than this is a guess the user should
+# know about (a 100 Hz IMU dropping a few samples is harmless).
 IMU_GAP_DEGRADED_S = 0.5
 # The DVL may fall silent for a while (turns, bottom out of range); longer than this the trajectory is dead
 # reckoned for long enough that the user should know where.
@@ -376,8 +377,8 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     for topic, g in sorted((losses.get("gaps") or {}).items()):
         imu = "imu" in topic.lower()
         if imu and g["longest_s"] > IMU_GAP_DEGRADED_S:
-            out.append(("degraded", _gap_line(topic, g) + ": the IMU has holes, the trajectory across them is "
-                                                          "wrong"))
+            out.append(("degraded", _gap_line(topic, g) + ": the IMU has holes, crossed by holding the last "
+                                                          "sample (the sigmas grow there); check the IMU driver"))
         elif not imu and g["longest_s"] > DVL_GAP_DEGRADED_S:
             out.append(("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there"))
         else:

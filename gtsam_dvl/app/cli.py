@@ -167,16 +167,27 @@ def smooth(
 def evaluate(
     result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for metrics.json and figures.")],
-    truth: Annotated[Path | None, typer.Option(help="Log with truth (default: the result's source log).")] = None,
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False,
+    truth: Annotated[Path | None, typer.Option(help="Log with truth (default: the result's source log, found "
+                                                    "relative to the result file, else at its absolute path).")
+                     ] = None,
+    imu_topic: Annotated[str | None, typer.Option("--imu-topic", help="IMU topic (default: as smooth read the "
+                                                                      "source log, else /imu/data_raw).")] = None,
+    dvl_topic: DvlTopic = None,
+    salvage: Annotated[bool | None, typer.Option("--salvage/--no-salvage", help="Recover the intact chunks of a "
+                                                 "damaged log (default: as smooth read the source log).")] = None,
+    repair: Annotated[bool | None, typer.Option("--repair/--no-repair", help="Drop (and count) NaN, duplicate or "
+                                                "backwards messages (default: as smooth read the source log).")
+                      ] = None,
 ) -> None:
     """Errors against the truth over time, observability verdict and the segments that made it; the run's health
-    as smooth recorded it, and what reading the truth log lost. The reading options apply to the truth log."""
+    as smooth recorded it, and what reading the truth log lost. Without --truth the source log is read with the
+    options smooth recorded (the options given here override them); if it is not found, a line says so and the
+    errors against the truth are left out."""
     from gtsam_dvl.app.commands import evaluate_to_dir
 
     lines, written = evaluate_to_dir(result, output, truth_path=truth,
-                                     read_options=_read_options(imu_topic, dvl_topic, salvage, repair))
+                                     read_options={"imu_topic": imu_topic, "dvl_topic": dvl_topic,
+                                                   "salvage": salvage, "repair": repair})
     typer.echo("\n".join(lines))
     for path in written:
         typer.echo(f"wrote {path}")

@@ -13,6 +13,7 @@ import numpy as np
 from gtsam_dvl.analysis.metrics import path_length
 from gtsam_dvl.app.progress import progress_bar
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.result import StoredResult
 from gtsam_dvl.core.types import LogData
 
 
@@ -244,7 +245,7 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
             summ = summary(result, log)
             if output is not None:
                 with outputs.staged(output) as tmp:
-                    write_result_log(tmp, result, log, summ)
+                    write_result_log(tmp, result, log, summ, read_options=read_options, result_path=output)
                 if result.timeline is not None and timeline_path is None:
                     timeline_path = default_timeline
             if timeline_path is not None and result.timeline is not None:
@@ -305,12 +306,36 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
     return answer, written
 
 
+READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair")  # what smooth records of how it read the log
+
+
+def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
+    """The source log a StoredResult names: at its path relative to the result file's folder (the two moved
+    together), else at its absolute path. Returns (path, "") or (None, the line saying why there is none)."""
+    recorded = stored.source_log or stored.source_log_relative
+    if not recorded:
+        return None, "the result names no source log: errors against the truth not computed; give --truth LOG"
+    candidates = []
+    if stored.source_log_relative:
+        candidates.append(Path(stored.path).resolve().parent / stored.source_log_relative)
+    if stored.source_log:
+        candidates.append(Path(stored.source_log))
+    for candidate in candidates:
+        if candidate.exists():
+            return candidate, ""
+    return None, f"source log {recorded} not found: errors against the truth not computed; give --truth LOG"
+
+
 def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = None,
                     read_options: dict[str, Any] | None = None) -> tuple[list[str], list[Path]]:
     """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
     result's source log has one), observability verdict with the segments credited, figures and
     metrics.json (with the run's health and what reading the truth log lost). Returns the verdict lines, then the
-    health and loss lines, and the files written."""
+    health and loss lines, and the files written.
+
+    Without truth_path the source log is looked for where the result records it (find_source_log) and read with
+    the options smooth used; read_options given here (None values: not given) override them. When it is not
+    found, a line says so and the errors against the truth are left out."""
     from gtsam_dvl.analysis.evaluate import evaluate_result
     from gtsam_dvl.app.plots.error_plots import plot_errors
     from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
@@ -321,15 +346,23 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
     check_outputs({"the result": Path(result_path), "the truth log": truth_path}, {"-o": out_dir / "metrics.json"})
     stored = read_result(result_path)
     res = stored.result
-    log_path = truth_path or (Path(stored.source_log) if stored.source_log and Path(stored.source_log).exists()
-                              else None)
-    log = load_log(log_path, **(read_options or {})) if log_path is not None else None
+    given = {k: v for k, v in (read_options or {}).items() if v is not None}
+    missing = ""
+    if truth_path is not None:
+        log_path: Path | None = Path(truth_path)
+        options = given
+    else:
+        log_path, missing = find_source_log(stored)
+        options = {**{k: v for k, v in stored.read_options.items() if k in READ_OPTIONS}, **given}
+    log = load_log(log_path, **options) if log_path is not None else None
     ev = evaluate_result(stored, log)
     # the health of the run (from the summary smooth wrote) and what reading the truth log here lost
     health = stored.summary.get("health")
     truth_losses = log.metadata.get("reader_losses", {}) if log is not None else {}
     ev.metrics["health"] = health
     ev.metrics["truth_log_losses"] = truth_losses
+    ev.metrics["truth_log"] = str(log_path) if log_path is not None else None
+    ev.metrics["truth_log_read_options"] = options if log_path is not None else None
     written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
     label = res.estimator
     if ev.attitude_error_deg is not None and ev.position_error_m is not None:
@@ -360,4 +393,6 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
     from gtsam_dvl.analysis.health import loss_lines
 
     lines += [f"  reading {log_path}: {line}" for line in loss_lines(truth_losses)]
+    if missing:
+        lines.append(missing)
     return lines, written

@@ -114,12 +114,16 @@ class NavResult(CalibrationUnits):
 @dataclass
 class StoredResult:
     """A result as read back from a result log (gtsam_dvl.io.result_reader): the NavResult that was written,
-    the summary written with it, and where it came from."""
+    the summary written with it, and where it came from: the source log's absolute path when smoothed, its path
+    relative to the result file's folder, and the options it was read with (imu_topic, dvl_topic, salvage,
+    repair; empty for a result written before they were recorded)."""
 
     result: NavResult
     summary: dict[str, Any]
     path: str = ""
     source_log: str = ""
+    source_log_relative: str = ""
+    read_options: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass

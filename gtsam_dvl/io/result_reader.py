@@ -45,5 +45,11 @@ def read_result(path: Path | str) -> StoredResult:
             config=dict(meta.get("config") or {}))
     except (KeyError, ValueError, json.JSONDecodeError, OSError) as exc:
         raise GtsamDvlError(f"{path}: damaged result attachments ({type(exc).__name__}: {exc})") from None
-    source_log = str(src.metadata.get("gtsam_dvl_result", {}).get("source_log", ""))
-    return StoredResult(result, summary, str(path), source_log)
+    record = src.metadata.get("gtsam_dvl_result", {})
+    try:
+        read_options = json.loads(record["read_options"]) if record.get("read_options") else {}
+    except json.JSONDecodeError:
+        raise GtsamDvlError(f"{path}: damaged result metadata (read_options is not JSON)") from None
+    return StoredResult(result, summary, str(path), str(record.get("source_log", "")),
+                        str(record.get("source_log_relative", "")),
+                        dict(read_options) if isinstance(read_options, dict) else {})

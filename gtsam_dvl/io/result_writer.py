@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -118,10 +119,29 @@ def health_record(health: dict[str, Any], losses: dict[str, Any]) -> dict[str, s
             "losses": to_json(losses)}
 
 
-def write_result_log(path: Path | str, result: NavResult, log: LogData, summary: dict[str, Any]) -> Path:
+def source_record(log: LogData, result_path: Path | str, read_options: dict[str, Any] | None) -> dict[str, str]:
+    """Where the result came from, for the metadata record "gtsam_dvl_result": the source log's absolute path,
+    its path relative to the folder of the result file (so that the two can move together) and the reading
+    options (JSON: imu_topic, dvl_topic, salvage, repair)."""
+    options = {"imu_topic": "/imu/data_raw", "dvl_topic": None, "salvage": False, "repair": False}
+    options.update({k: v for k, v in (read_options or {}).items() if k in options})
+    if not log.source:
+        return {"source_log": "", "source_log_relative": "", "read_options": to_json(options)}
+    source = Path(log.source).resolve()
+    try:
+        relative = os.path.relpath(source, Path(result_path).resolve().parent)
+    except ValueError:  # another drive (Windows): no relative path
+        relative = ""
+    return {"source_log": str(source), "source_log_relative": relative, "read_options": to_json(options)}
+
+
+def write_result_log(path: Path | str, result: NavResult, log: LogData, summary: dict[str, Any],
+                     read_options: dict[str, Any] | None = None, result_path: Path | str | None = None) -> Path:
     """Estimates with marginal covariances, path, biases and calibration, plus the summary and the
     effective configuration (metadata record and config.json attachment) and the run's health (metadata
-    record "gtsam_dvl_health", and in summary.json). Written atomically."""
+    record "gtsam_dvl_health", and in summary.json). The record "gtsam_dvl_result" also names the source log
+    (absolute, and relative to result_path's folder: the final name when path is a temporary file) and the
+    options it was read with. Written atomically."""
     path = Path(path)
     t = result.t
     n = len(t)
@@ -154,7 +174,7 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
             w.add_attachment("timeline.npz", timeline_npz_bytes(result.timeline), "application/x-npz")
         w.add_attachment("calibration.json", to_json(calibration_record(result)).encode(), "application/json")
         w.add_metadata("gtsam_dvl_result", {"estimator": result.estimator, "summary": to_json(summary),
-                                            "source_log": str(log.source)})
+                                            **source_record(log, result_path or path, read_options)})
         if (health := summary.get("health")) is not None:
             w.add_metadata("gtsam_dvl_health", health_record(health, summary.get("losses", {})))
         w.add_attachment("config.json", json.dumps({"estimator": result.estimator, "config": result.config},
