@@ -5,19 +5,30 @@ Both factors implement, on the keys [pose n_T_b, velocity n_v, scale k, misalign
     y = k * b_R_d^T * ( n_R_b^T * n_v  +  b_omega x b_l ) + noise
 
 the 3-D velocity y in dvl_link (make_dvl_velocity_factor) or one beam y_j = d_u_j . y
-(make_dvl_beam_factor). The pure error functions serve tests and other callers.
+(make_dvl_beam_factor). make_depth_factor puts a depth sensor's measurement on a pose's vertical position
+(factors/depth.py). The pure error functions serve tests and other callers.
 """
 
+from .depth import depth_error, make_depth_factor
 from .dvl_beam import dvl_beam_error, make_dvl_beam_factor
-from .dvl_velocity import dvl_velocity_error, make_dvl_velocity_factor
+from .dvl_velocity import (
+    dvl_velocity_error,
+    dvl_velocity_offset_error,
+    make_dvl_velocity_factor,
+    make_dvl_velocity_offset_factor,
+)
 from .imu_earth import EarthImuFactor, GravityModel, make_earth_imu_factor
 
 __all__ = [
     "EarthImuFactor",
     "GravityModel",
     "make_earth_imu_factor",
+    "depth_error",
+    "make_depth_factor",
     "dvl_beam_error",
     "dvl_velocity_error",
+    "dvl_velocity_offset_error",
     "make_dvl_beam_factor",
     "make_dvl_velocity_factor",
+    "make_dvl_velocity_offset_factor",
 ]

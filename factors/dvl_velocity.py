@@ -92,3 +92,115 @@ def make_dvl_velocity_factor(
         return h - d_y
 
     return gtsam.CustomFactor(noise, [pose_key, vel_key, scale_key, b_R_d_key], error_func)
+
+
+def _offset_prediction(n_R_b: np.ndarray, n_v: np.ndarray, k: float, d_R_b: np.ndarray, dt: float,
+                       b_omega: np.ndarray, b_v_lever: np.ndarray, b_a: np.ndarray, n_g: np.ndarray,
+                       G: np.ndarray, H: JacobianSlots | None) -> np.ndarray:
+    """h = k d_R_b (b_v + dt * b_vdot + b_v_lever), b_v = n_R_b^T n_v,
+    b_vdot = b_a + G n_R_b^T n_g - b_omega x b_v (the body-frame velocity rate, first order in dt; G the
+    mean body rotation since the stamp, transposed, over the IMU window that b_a averages).
+
+    Jacobians (pose and b_R_d on the right, as in _common.predict_dvl_velocity), M = I - dt [b_omega]_x:
+        pose rotation: k d_R_b (M [b_v]_x + dt G [n_R_b^T n_g]_x), translation 0
+        n_v:           k d_R_b M n_R_b^T
+        k:             d_R_b b_v_eff
+        b_R_d:         k [d_R_b b_v_eff]_x
+        dt:            k d_R_b b_vdot
+    """
+    b_v = n_v @ n_R_b
+    b_g0 = n_g @ n_R_b
+    b_g = G @ b_g0
+    b_vdot = b_a + b_g - np.cross(b_omega, b_v)
+    b_v_eff = b_v + dt * b_vdot + b_v_lever
+    d_v = d_R_b @ b_v_eff
+    if H is not None:
+        k_d_R_b = k * d_R_b
+        M = np.eye(3) - dt * _skew3(b_omega)
+        H[0] = np.concatenate((k_d_R_b @ (M @ _skew3(b_v) + dt * G @ _skew3(b_g0)), np.zeros((3, 3))), axis=1)
+        H[1] = k_d_R_b @ M @ n_R_b.T
+        H[2] = d_v.reshape(3, 1)
+        H[3] = _skew3(k * d_v)
+        H[4] = (k_d_R_b @ b_vdot).reshape(3, 1)
+    return k * d_v
+
+
+def _skew3(a: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+def dvl_velocity_offset_error(
+    n_T_b: gtsam.Pose3,
+    n_v: np.ndarray,
+    k: float | np.ndarray,
+    b_R_d: gtsam.Rot3,
+    dt: float | np.ndarray,
+    d_y: np.ndarray,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    b_a: np.ndarray,
+    n_g: np.ndarray,
+    G: np.ndarray | None = None,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
+    """The DVL velocity with a DVL-IMU time offset dt (s, docs/conventions.md: the ping stamped t measures
+    the velocity at t + dt), to first order in dt:
+
+        e = k b_R_d^T (b_v + dt (b_a + G n_R_b^T n_g - b_omega x b_v) + b_omega x b_l) - d_y,  b_v = n_R_b^T n_v
+
+    b_a: the specific force from the IMU (mean over a window around the stamp, base_link, m/s^2; the
+    Coriolis acceleration is left out), b_omega the body rate relative to map, n_g the gravity in map (all
+    known inputs of the epoch); G (3x3, identity if None) the mean over the IMU window of the body rotation
+    since the stamp, transposed (gravity seen in the body while b_a was measured). H: 5 slots,
+    de/d(n_T_b) 3x6, de/d(n_v) 3x3, de/dk 3x1, de/d(b_R_d) 3x3, de/d(dt) 3x1.
+    """
+    computed: list[np.ndarray] | None = None if H is None else [np.empty(0)] * 5
+    h = _offset_prediction(n_T_b.rotation().matrix(), np.asarray(n_v, dtype=float), as_scale(k),
+                           b_R_d.matrix().T, as_scale(dt), np.asarray(b_omega, dtype=float),
+                           np.cross(b_omega, b_l), np.asarray(b_a, dtype=float), np.asarray(n_g, dtype=float),
+                           np.eye(3) if G is None else np.asarray(G, dtype=float), computed)
+    if H is not None and computed is not None:
+        fill_slots(H, computed)
+    return h - np.asarray(d_y, dtype=float)
+
+
+def make_dvl_velocity_offset_factor(
+    noise: gtsam.noiseModel.Base,
+    pose_key: int,
+    vel_key: int,
+    scale_key: int,
+    b_R_d_key: int,
+    offset_key: int,
+    d_y: Vector3Like,
+    b_omega: Vector3Like,
+    b_l: Vector3Like,
+    b_a: Vector3Like,
+    n_g: Vector3Like,
+    G: np.ndarray | None = None,
+) -> gtsam.CustomFactor:
+    """DvlVelocityOffsetFactor on [pose, velocity, scale, b_R_d, time offset (1-vector, s)]: the 3-D
+    velocity factor with the ping's velocity taken at its stamp + dt, first order in dt
+    (dvl_velocity_offset_error). b_a, n_g, b_omega, G are the epoch's IMU-derived constants."""
+    check_noise(noise, 3)
+    d_y = as_vector3("d_y", d_y)
+    b_om = as_vector3("b_omega", b_omega)
+    b_v_lever = lever_velocity(b_omega, b_l)
+    b_a_c = as_vector3("b_a", b_a)
+    n_g_c = as_vector3("n_g", n_g)
+    G_c = np.eye(3) if G is None else np.array(G, dtype=float)
+    if G_c.shape != (3, 3) or not np.all(np.isfinite(G_c)):
+        raise ValueError(f"G must be a finite 3x3 matrix, got {G_c}")
+
+    def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
+        pose_k, vel_k, scale_k, b_R_d_k, dt_k = this.keys()
+        h = _offset_prediction(
+            values.atPose3(pose_k).rotation().matrix(),
+            values.atPoint3(vel_k),
+            values.atVector(scale_k).item(),
+            values.atRot3(b_R_d_k).matrix().T,
+            values.atVector(dt_k).item(),
+            b_om, b_v_lever, b_a_c, n_g_c, G_c, H,
+        )
+        return h - d_y
+
+    return gtsam.CustomFactor(noise, [pose_key, vel_key, scale_key, b_R_d_key, offset_key], error_func)

@@ -301,7 +301,7 @@ def _check_motion(log: LogData, health: Health) -> None:
 def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     counters = {k: int(v) for k, v in result.info.get("counters", {}).items() if isinstance(v, (int, np.integer))}
     rejected = {k: v for k, v in counters.items() if k.startswith("dvl_") and k not in _NOT_REJECTIONS and v}
-    dropped = {k: v for k, v in counters.items() if k.startswith("imu_") and v}
+    dropped = {k: v for k, v in counters.items() if k.startswith("imu_") and k != "imu_gaps" and v}
     n_pings = max(len(log.dvl), 1)
     share = sum(rejected.values()) / n_pings
     health.figures["counters"] = {"dvl_rejected": rejected, "dvl_rejected_share": share, "imu_dropped": dropped,
@@ -318,6 +318,13 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
         why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
         health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
                                 "stream has holes; read the log with --repair to see where")
+    gaps = result.info.get("imu_gaps") or {}
+    reader_saw = any("imu" in topic.lower() for topic in ((log.metadata.get("reader_losses") or {}).get("gaps") or {}))
+    if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
+        text = (f"{gaps['count']} IMU gap(s), {gaps['total_s']:.2f} s in all, the longest {gaps['longest_s']:.2f} s, "
+                "crossed by holding the last sample (the sigmas grow there)")
+        health.flag("degraded" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else "note",
+                    text + ("; check the IMU driver" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else ""))
 
 
 def _check_losses(log: LogData, health: Health) -> None:

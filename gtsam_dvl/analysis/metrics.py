@@ -98,6 +98,9 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         sig = result.misalignment_sigma_deg
         out["misalignment_nsigma"] = (err_rpy / sig).tolist()
         out["scale_nsigma"] = (result.scale - cal.scale) / result.scale_sigma
+        if np.isfinite(result.time_offset_sigma_s):  # the DVL time offset was estimated
+            out["dvl_time_offset_s"] = result.time_offset_s - cal.time_offset_s
+            out["dvl_time_offset_nsigma"] = (result.time_offset_s - cal.time_offset_s) / result.time_offset_sigma_s
     if log.true_imu_bias is not None:
         g_err = (result.gyro_bias - np.asarray(log.true_imu_bias.gyro_rad_s)) / DEG_PER_H
         a_err = (result.accel_bias - np.asarray(log.true_imu_bias.accel_m_s2)) / UG
@@ -107,6 +110,22 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         out["accel_bias_nsigma"] = (a_err / result.accel_bias_sigma_ug).tolist()
     out.update(trajectory_errors(result, log.truth).metrics())
     return out
+
+
+def time_offset_verdict(result: NavResult) -> dict[str, Any]:
+    """The estimated DVL-IMU time offset (s) with its sigma and whether the log determined it: it is observable
+    only from turns and accelerations (the velocity rate), so on a straight, steady run its sigma stays near
+    the prior's ([dvl] time_offset_sigma_s)."""
+    prior = float(result.config.get("dvl", {}).get("time_offset_sigma_s", float("nan")))
+    determined = bool(result.time_offset_sigma_s < 0.1 * prior) if np.isfinite(prior) else None
+    if determined:
+        verdict = f"determined: sigma {result.time_offset_sigma_s * 1e3:.1f} ms (prior {prior * 1e3:.0f} ms)"
+    else:
+        verdict = (f"not observable from this log: sigma {result.time_offset_sigma_s * 1e3:.1f} ms, near the prior's "
+                   f"{prior * 1e3:.0f} ms (the offset shows only in turns and accelerations)")
+    return {"value": result.time_offset_s, "sigma": result.time_offset_sigma_s, "determined": determined,
+            "verdict": verdict,
+            "convention": "the DVL message stamped t measures the velocity at t + dt_d (dt_d > 0: stamps early)"}
 
 
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
@@ -131,6 +150,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         if result.timing_s.get("total") else None,
         "info": result.info,
     }
+    if np.isfinite(result.time_offset_sigma_s):
+        out["dvl_time_offset_s"] = time_offset_verdict(result)
     errors = truth_errors(result, log)
     if errors is not None:
         out["errors"] = errors

@@ -63,8 +63,15 @@ Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chu
 Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages.")]
 
 
-def _read_options(imu_topic: str, dvl_topic: str | None, salvage: bool, repair: bool) -> dict[str, Any]:
-    return {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
+DepthTopic = Annotated[str | None, typer.Option(
+    "--depth-topic", help="Depth topic: sensor_msgs/msg/FluidPressure, or a PoseWithCovarianceStamped / Odometry "
+    "whose z is -depth (default /depth/pressure if the log has it; 'none': no depth).")]
+
+
+def _read_options(imu_topic: str, dvl_topic: str | None, salvage: bool, repair: bool,
+                  depth_topic: str | None = None) -> dict[str, Any]:
+    options = {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
+    return options if depth_topic is None else {**options, "depth_topic": depth_topic}
 
 
 @app.callback()
@@ -96,12 +103,12 @@ def plot_log(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False,
+    repair: Repair = False, depth_topic: DepthTopic = None,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
     from gtsam_dvl.app.commands import plot_log_to_dir
 
-    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair)):
+    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic)):
         typer.echo(str(path))
 
 
@@ -110,12 +117,12 @@ def plot_log(
 def info(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False,
+    repair: Repair = False, depth_topic: DepthTopic = None,
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
     from gtsam_dvl.app.commands import describe_log
 
-    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair)))
+    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic)))
 
 
 SMOOTH_HELP = (
@@ -142,7 +149,7 @@ def smooth(
     tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
     config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False,
+    repair: Repair = False, depth_topic: DepthTopic = None,
     timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
     timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
                             ] = None,
@@ -154,7 +161,8 @@ def smooth(
     from gtsam_dvl.app.commands import smooth_file
 
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
-                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair),
+                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
+                                                                  depth_topic),
                           timeline=timeline, timeline_path=timeline_npz)
     typer.echo(outcome.describe())
     if strict and outcome.status != "ok":

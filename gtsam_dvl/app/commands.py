@@ -306,7 +306,8 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
     return answer, written
 
 
-READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair")  # what smooth records of how it read the log
+# what smooth records of how it read the log
+READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair", "depth_topic")
 
 
 def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:

@@ -2,9 +2,9 @@
 
 Every field carries its unit in its name. `EstimatorConfig.from_toml(path)` reads a file with the same
 sections as the dataclasses: [imu], [dvl], [priors], [alignment], [solver] (the models, shared by every
-estimator), [online] and [online.relinearization] (the iSAM2 estimator), [ekf] (the filter) and [iodvlc]
-(the ideal observer). It also reads the JSON of an effective configuration, as written with every result
-(config.json: {"estimator": ..., "config": {...}}, or the bare configuration).
+estimator), [online] and [online.relinearization] (the iSAM2 estimator), [ekf] (the filter), [iodvlc]
+(the ideal observer) and [depth] (the depth sensor). It also reads the JSON of an effective configuration,
+as written with every result (config.json: {"estimator": ..., "config": {...}}, or the bare configuration).
 
 Everything is checked by value on load: unknown sections and keys, enumerations (Literal fields: one of
 their values), types (a string where a number belongs, a float where an integer belongs) and ranges (declared
@@ -124,6 +124,14 @@ class DvlConfig(_Section):
     # the IMU shows motion when it says the DVL's velocity changed by more than this since the previous ping
     motion_dv_m_s: float = field(default=0.05, metadata=POSITIVE)
     moving_speed_m_s: float = field(default=0.1, metadata=POSITIVE)  # a previous ping this fast: moving
+    # DVL-IMU time offset dt_d (docs/conventions.md: the ping stamped t measures the velocity at t + dt_d), batch
+    # smoother only: a graph variable T_OFFSET with this prior; a tiny sigma fixes it at the prior value. Off by
+    # default: then every estimator takes dt_d = 0 (the prior value is not used)
+    estimate_time_offset: bool = False
+    time_offset_prior_s: float = 0.0
+    time_offset_sigma_s: float = field(default=0.5, metadata=POSITIVE)
+    # half-width of the IMU window averaged for the epoch's velocity rate (the time offset's Jacobian), s
+    time_offset_window_s: float = field(default=0.25, metadata=POSITIVE)
 
     def robust_threshold(self) -> float:
         """The robust kernel's threshold in sigmas: huber_k if set (the old name), else robust_k."""
@@ -312,6 +320,28 @@ class IodvlcConfig(_Section):
 
 
 @dataclass
+class DepthConfig(_Section):
+    """Depth sensor (TOML section [depth]; batch smoother only, see estimators/depth.py). With use (the
+    default) a log that has depth (LogData.depth) gets one factor per depth sample on the vertical position of
+    its nearest state, the time between them bridged by that state's vertical velocity; a sample farther than
+    max_time_to_state_s from every state is not used (counted). A pressure is converted to depth with
+    water_density_kg_m3, atmospheric_pa and the mean normal gravity of the water column (core/earth.py); the
+    water surface is at ellipsoidal height 0. noise_m > 0 overrides the message's variance; a message without
+    one takes default_noise_m. lever_arm_m: the pressure sensor in base_link (m); None takes /tf_static's
+    base_link -> pressure frame, else zero."""
+
+    SECTION: ClassVar[str] = "depth"
+
+    use: bool = True
+    water_density_kg_m3: float = field(default=1025.0, metadata=POSITIVE)
+    atmospheric_pa: float = field(default=101325.0, metadata=NON_NEGATIVE)
+    noise_m: float = field(default=0.0, metadata=NON_NEGATIVE)  # >0 overrides the message's variance
+    default_noise_m: float = field(default=0.1, metadata=POSITIVE)  # for messages without a variance
+    lever_arm_m: tuple[float, float, float] | None = None
+    max_time_to_state_s: float = field(default=0.5, metadata=NON_NEGATIVE)
+
+
+@dataclass
 class EstimatorConfig:
     imu: ImuConfig = field(default_factory=ImuConfig)
     dvl: DvlConfig = field(default_factory=DvlConfig)
@@ -321,6 +351,7 @@ class EstimatorConfig:
     online: OnlineConfig = field(default_factory=OnlineConfig)
     ekf: EkfConfig = field(default_factory=EkfConfig)
     iodvlc: IodvlcConfig = field(default_factory=IodvlcConfig)
+    depth: DepthConfig = field(default_factory=DepthConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain dict (tuples stay tuples, None stays None): json.dumps writes it, from_dict reads it."""

@@ -141,6 +141,43 @@ class LocalFrame:
         return -normal_gravity(lat, h)[..., None] * l_up
 
 
+# Hydrostatics of the depth sensor (docs/conventions.md: /depth/pressure). The water surface is taken at
+# ellipsoidal height 0, so a depth d is the height h = -d.
+WATER_DENSITY_KG_M3 = 1025.0  # sea water
+ATMOSPHERIC_PA = 101325.0  # standard atmosphere
+
+
+def column_gravity(lat: np.ndarray | float, depth_m: np.ndarray | float) -> np.ndarray:
+    """Mean normal gravity over a water column from the surface (h = 0) down to depth_m: gravity at its
+    middle (normal gravity is linear in h to 1e-13 over a few km), m/s^2."""
+    return normal_gravity(lat, -0.5 * np.asarray(depth_m, dtype=float))
+
+
+def depth_to_pressure(depth_m: np.ndarray | float, lat: float, density_kg_m3: float = WATER_DENSITY_KG_M3,
+                      atmospheric_pa: float = ATMOSPHERIC_PA) -> np.ndarray:
+    """Absolute pressure (Pa) at depth_m below the surface: p_atm + rho g_column d."""
+    d = np.asarray(depth_m, dtype=float)
+    return np.asarray(atmospheric_pa + density_kg_m3 * column_gravity(lat, d) * d)
+
+
+def pressure_to_depth(pressure_pa: np.ndarray | float, lat: float, density_kg_m3: float = WATER_DENSITY_KG_M3,
+                      atmospheric_pa: float = ATMOSPHERIC_PA) -> tuple[np.ndarray, np.ndarray]:
+    """Depth below the surface (m) of absolute pressure, the inverse of depth_to_pressure (fixed point on
+    the column's gravity, exact to 1e-9 m after three passes), and dd/dp (m/Pa) for the variance."""
+    dp = np.asarray(pressure_pa, dtype=float) - atmospheric_pa
+    d = dp / (density_kg_m3 * normal_gravity(lat, 0.0))
+    for _ in range(3):
+        d = dp / (density_kg_m3 * column_gravity(lat, d))
+    return np.asarray(d), np.asarray(1.0 / (density_kg_m3 * column_gravity(lat, d)))
+
+
+def gaussian_radius(lat: float) -> float:
+    """sqrt(R_N R_E) at lat (rad), m: the radius of the sphere that best fits the ellipsoid there. A map
+    position (x, y, z) has the ellipsoidal height h0 + z + (x^2 + y^2) / (2 R) to a millimetre within 10 km."""
+    r_n, r_e = radii_of_curvature(lat)
+    return float(np.sqrt(r_n * r_e))
+
+
 def gravity_gradient(frame: LocalFrame, n_p: np.ndarray, step_m: float = 10.0) -> np.ndarray:
     """(..., 3, 3) gradient d n_gravity / d n_p (1/s^2) at map positions, by central differences of
     LocalFrame.n_gravity (its curvature over step_m is 1e-12 of g: the differences are exact enough)."""

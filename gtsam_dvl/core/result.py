@@ -85,6 +85,9 @@ class NavResult(CalibrationUnits):
     b_R_d_cov: np.ndarray  # (3, 3) rad^2, right tangent of b_R_d
     b_R_d0: np.ndarray  # nominal mounting
     t0_ns: int = 0
+    # DVL-IMU time offset dt_d, s, and its sigma (nan: not estimated, dt_d taken as time_offset_s)
+    time_offset_s: float = 0.0
+    time_offset_sigma_s: float = float("nan")
     b_omega: np.ndarray | None = None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
     pose_vel_cross: np.ndarray | None = None  # (N, 6, 3) cross-covariance of pose tangent and n_v
     calib_joint_cov: np.ndarray | None = None  # (10, 10): [accel, gyro] bias, scale, b_R_d right tangent

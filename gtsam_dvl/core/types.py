@@ -98,6 +98,7 @@ class DvlCalibration:
 
     scale: float
     misalignment_deg: tuple[float, float, float]
+    time_offset_s: float = 0.0  # DVL-IMU time offset dt_d: the ping stamped t measures the velocity at t + dt_d
 
     @property
     def R_c(self) -> np.ndarray:
@@ -158,6 +159,30 @@ class Segment:
 
 
 @dataclass
+class DepthData:
+    """Depth of the pressure sensor (positive down, metres below the water surface) at each stamp.
+
+    From a pressure topic (sensor_msgs/msg/FluidPressure) pressure_pa and pressure_variance_pa2 hold the
+    absolute pressure and its variance as measured; depth_m and variance_m2 are then the reader's
+    conversion with the defaults of core/earth.py (pressure_to_depth), and the estimators convert the pressure
+    again with the [depth] section of the configuration (water density, atmospheric pressure). From a depth
+    topic (a pose's z) pressure_pa is None and depth_m is used as it is. NaN variance: unknown.
+    b_p_sensor: the sensor's position in base_link from /tf_static (None if the log has none).
+    """
+
+    t: np.ndarray  # (K,)
+    depth_m: np.ndarray  # (K,) m, positive down
+    variance_m2: np.ndarray  # (K,) m^2, NaN where unknown
+    pressure_pa: np.ndarray | None = None  # (K,) absolute pressure, Pa
+    pressure_variance_pa2: np.ndarray | None = None  # (K,) Pa^2, NaN where unknown
+    frame_id: str = "pressure_link"
+    b_p_sensor: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass
 class LogData:
     """Everything one log holds, as numpy arrays. truth and the true_* fields are None for real logs."""
 
@@ -172,3 +197,4 @@ class LogData:
     true_calibration: DvlCalibration | None = None  # simulated logs
     true_imu_bias: ImuBiases | None = None  # simulated logs
     segments: list[Segment] = field(default_factory=list)  # simulated logs: the scenario's segments
+    depth: DepthData | None = None  # pressure sensor or depth topic, when the log has one

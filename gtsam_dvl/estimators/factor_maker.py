@@ -27,14 +27,22 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.earth import LocalFrame, gravity_gradient, normal_gravity
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
+from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, B, V, X
+from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import Alignment
-from gtsam_dvl.estimators.gaps import Gaps, hold_covariance, pieces_with_holds
+from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.estimators.selection import imu_pieces
-from gtsam_dvl.factors import EarthImuFactor, make_dvl_beam_factor, make_dvl_velocity_factor, make_earth_imu_factor
+from gtsam_dvl.factors import (
+    EarthImuFactor,
+    make_depth_factor,
+    make_dvl_beam_factor,
+    make_dvl_velocity_factor,
+    make_dvl_velocity_offset_factor,
+    make_earth_imu_factor,
+)
 
 Beams = tuple[np.ndarray, np.ndarray, np.ndarray]  # d_u (B, 3) unit vectors in dvl_link, v (B,) m/s, valid (B,)
 
@@ -58,6 +66,36 @@ class FactorMaker:
         ping minus Earth rate (attitude from the alignment; the Earth-rate term times a lever arm of a metre
         is 7e-5 m/s, so attitude errors do not matter)."""
         return np.asarray(b_omega_gyro - self.alignment.n_R_b.T @ self.n_omega_ie(), dtype=float)
+
+    def velocity_rate_input(self, t: float, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
+                            dt: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU constants of the DVL time-offset model at an epoch t: the mean specific force b_a and the
+        mean body rate relative to map (base_link) over the samples in [t + min(0, dt) - w, t + max(0, dt) + w],
+        w = [dvl] time_offset_window_s. dt is the current offset estimate: the window is centred on t + dt / 2,
+        so that dt times the mean rate is the secant b_v(t + dt) - b_v(t) for a rate linear in time. The third
+        constant is G, the mean over those samples of dR^T, dR the body's rotation since t (from the gyros, a
+        rotation vector integrated from t): the specific force is measured in the rotating body, so gravity
+        must be seen there too (G n_R_b(t)^T n_g). The Coriolis acceleration (2 Omega x v: 3e-4 m/s^2 at
+        2 m/s) is left out."""
+        w = self.config.dvl.time_offset_window_s
+        sel = np.flatnonzero((imu_t >= t + min(0.0, dt) - w) & (imu_t <= t + max(0.0, dt) + w))
+        if sel.size == 0:
+            sel = np.array([int(np.clip(np.searchsorted(imu_t, t), 0, len(imu_t) - 1))])
+        b_a = np.asarray(b_f[sel].mean(axis=0), dtype=float)
+        w_rel = b_omega[sel] - self.alignment.n_R_b.T @ self.n_omega_ie()  # body_rate() of each sample
+        step = np.diff(imu_t[sel], prepend=imu_t[sel[0]])
+        phi = np.cumsum(w_rel * step[:, None], axis=0)
+        phi -= phi[int(np.argmin(np.abs(imu_t[sel] - t)))]  # rotation since t
+        G = so3_exp(-phi).reshape(-1, 3, 3).mean(axis=0)
+        return b_a, np.asarray(w_rel.mean(axis=0)), np.asarray(G)
+
+    def offset_gravity(self) -> np.ndarray:
+        """Gravity in map for the time-offset model: at the map origin (its direction turns by 1.6e-7 rad per
+        metre, far below what the offset's first-order term resolves)."""
+        g0 = normal_gravity(self.frame.lat0, self.frame.height_m)
+        if self.config.solver.earth_model == "flat":
+            return np.array([0.0, 0.0, -float(g0)])
+        return np.asarray(self.frame.n_gravity(np.zeros((1, 3)))[0], dtype=float)
 
     def n_omega_ie(self) -> np.ndarray:
         """Earth rate in map, rad/s (zero in the flat model)."""
@@ -85,21 +123,21 @@ class FactorMaker:
 
     def preintegrate_interval(self, t_a: float, t_b: float, t: np.ndarray, starts: np.ndarray, b_f: np.ndarray,
                               b_omega: np.ndarray, gaps: Gaps | None = None) -> tuple[
-                                  gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, float]:
+                                  gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
         """Preintegration over (t_a, t_b] of samples i covering (starts[i], t[i]] (b_f already compensated);
         a sample straddling t_a or t_b contributes its overlap (selection.imu_pieces), a gap the sample held
-        across it (estimators/gaps.py). Returns the pim, its own parameters and the held time, s."""
+        across it (estimators/gaps.py). Returns the pim, its own parameters and what was held (Holds)."""
         params = self.make_params()
         pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
         if gaps is None:
             idx, dt = imu_pieces(t, starts, t_a, t_b)
-            held_s = 0.0
+            held = Holds()
         else:
-            idx, dt, held_s = pieces_with_holds(t, starts, gaps, t_a, t_b)
+            idx, dt, held = pieces_with_holds(t, starts, gaps, t_a, t_b)
         # Python floats and ints for the loop: numpy scalars cost more than the integration itself
         for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
             pim.integrateMeasurement(b_f[i], b_omega[i], dt_i)
-        return pim, params, held_s
+        return pim, params, held
 
     # ----- gravity -------------------------------------------------------------------------------
     def gravity_model(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -112,11 +150,11 @@ class FactorMaker:
 
     # ----- factors -------------------------------------------------------------------------------
     def new_imu_factor(self, i: int, pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams,
-                       dt: float, held_s: float = 0.0) -> EarthImuFactor:
+                       dt: float, held: Holds | None = None) -> EarthImuFactor:
         """The IMU factor between states i and i+1 from its preintegration (constant gravity if flat); held_s
         seconds of it crossed an IMU gap (their motion-model covariance is added: gaps.hold_covariance)."""
         gravity = None if self.config.solver.earth_model == "flat" else self.gravity_model
-        extra = hold_covariance(self.config.imu, held_s, dt) if held_s > 0 else None
+        extra = hold_covariance(self.config.imu, held, dt) if held else None
         return make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)), dt, gravity,
                                      extra)
 
@@ -131,10 +169,18 @@ class FactorMaker:
         return [gtsam.BetweenFactorConstantBias(B(i), B(i + 1), gtsam.imuBias.ConstantBias(), noise)]
 
     def dvl_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
-                        beams: Beams | None = None) -> list[gtsam.NonlinearFactor]:
+                        beams: Beams | None = None,
+                        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                        ) -> list[gtsam.NonlinearFactor]:
         """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
-        dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate()."""
+        dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate(). With
+        dvl.estimate_time_offset, rate_input = velocity_rate_input() of the epoch gives the time-offset
+        factor on T_OFFSET too."""
         b_l = self.mounting.b_l
+        if self.config.dvl.estimate_time_offset and rate_input is not None:
+            b_a, b_omega_mean, G = rate_input
+            return [make_dvl_velocity_offset_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, T_OFFSET,
+                                                    d_y, b_omega_mean, b_l, b_a, self.offset_gravity(), G)]
         if self.config.dvl.use_beams and beams is not None:
             d_u, v, valid = beams
             noise1 = self.beam_noise()
@@ -158,6 +204,17 @@ class FactorMaker:
     def beam_noise(self) -> gtsam.noiseModel.Base:
         """Noise model of one beam velocity (robust if configured)."""
         return self._robust(gtsam.noiseModel.Isotropic.Sigma(1, self.config.dvl.beam_noise_m_s))
+
+    def depth_factors_for(self, i: int, z_meas: float, sigma: float, lever: np.ndarray,
+                          dt: float = 0.0) -> list[gtsam.NonlinearFactor]:
+        """The depth factor of state i from one sample: the sensor's height above the origin's height z_meas
+        (m, up; estimators/depth.py), its sigma (m), the sensor's lever arm in base_link and the time from the
+        state to the sample dt (s; bridged by V(i) when non-zero). Not robust: a depth sensor has no outliers
+        of the DVL's kind. The map's z axis leaves the ellipsoid with the Earth's curvature (factors/depth.py)."""
+        noise = gtsam.noiseModel.Isotropic.Sigma(1, float(sigma))
+        radius = gaussian_radius(self.frame.lat0)
+        vel_key = V(i) if dt != 0.0 else None
+        return [make_depth_factor(noise, X(i), z_meas, lever, radius, vel_key, dt)]
 
     def _robust(self, noise: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
         """noise wrapped in the configured robust kernel ([dvl] robust, threshold robust_k in sigmas of the
@@ -196,7 +253,15 @@ class FactorMaker:
             gtsam.PriorFactorVector(K_SCALE, np.array([pri.scale_initial]),
                                     gtsam.noiseModel.Isotropic.Sigma(1, pri.scale_sigma)),
             gtsam.PriorFactorRot3(C_MISALIGN, gtsam.Rot3(b_R_d0), gtsam.noiseModel.Gaussian.Covariance(cov_c)),
-        ]
+        ] + self.time_offset_prior()
+
+    def time_offset_prior(self) -> list[gtsam.NonlinearFactor]:
+        """The prior on the DVL time offset T_OFFSET (none unless dvl.estimate_time_offset)."""
+        cfg = self.config.dvl
+        if not cfg.estimate_time_offset:
+            return []
+        return [gtsam.PriorFactorVector(T_OFFSET, np.array([cfg.time_offset_prior_s]),
+                                        gtsam.noiseModel.Isotropic.Sigma(1, cfg.time_offset_sigma_s))]
 
     # ----- initial guesses -----------------------------------------------------------------------
     def velocity_from_ping(self, n_R_b: np.ndarray, d_y: np.ndarray | None) -> np.ndarray | None:
@@ -217,4 +282,6 @@ class FactorMaker:
         values.insert(self.bias_key(0), gtsam.imuBias.ConstantBias())
         values.insert(K_SCALE, np.array([self.config.priors.scale_initial]))
         values.insert(C_MISALIGN, gtsam.Rot3(self.mounting.b_R_d0))
+        if self.config.dvl.estimate_time_offset:
+            values.insert(T_OFFSET, np.array([self.config.dvl.time_offset_prior_s]))
         return values

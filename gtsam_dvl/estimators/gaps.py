@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtsam_dvl.core.config import ImuConfig
+from gtsam_dvl.core.config import ImuConfig, SolverConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.estimators.selection import imu_pieces
 
@@ -53,6 +53,12 @@ class Gaps:
                 "longest_s": float(np.max(self.end - self.start)) if len(self) else 0.0}
 
 
+def gaps_within(gaps: Gaps, t0: float, t1: float) -> Gaps:
+    """The gaps that overlap (t0, t1]: those the states cross."""
+    keep = (gaps.end > t0) & (gaps.start < t1)
+    return Gaps(gaps.period_s, gaps.start[keep], gaps.end[keep], gaps.index[keep])
+
+
 def nominal_period(t: np.ndarray) -> float:
     """Median spacing of the stamps, s (0.01 when there are fewer than two)."""
     return float(np.median(np.diff(t))) if len(t) > 1 else 0.01
@@ -64,6 +70,15 @@ def find_gaps(t: np.ndarray, gap_samples: float, period_s: float | None = None) 
     dt = np.diff(t)
     k = np.flatnonzero(dt > gap_samples * period) + 1  # first sample after each gap
     return Gaps(period, t[k - 1].astype(float), (t[k] - period).astype(float), (k - 1).astype(int))
+
+
+def check_spacing(cfg: SolverConfig) -> None:
+    """Keyframe thinning and the maximum state spacing must agree: with keyframes farther apart than 1.5 spacings,
+    states without a ping would take the places of the pings skipped (more states, fewer pings)."""
+    if cfg.keyframe_interval_s > 1.5 * cfg.max_state_spacing_s:
+        raise GtsamDvlError(f"solver.keyframe_interval_s = {cfg.keyframe_interval_s:g} s needs "
+                            f"solver.max_state_spacing_s >= {cfg.keyframe_interval_s / 1.5:g} s: states without a "
+                            "ping would take the places of the pings skipped")
 
 
 def check_gaps(gaps: Gaps, cfg: ImuConfig, source: str = "") -> None:
@@ -88,40 +103,68 @@ def sample_starts_with_gaps(t: np.ndarray, gaps: Gaps) -> np.ndarray:
     return starts
 
 
+@dataclass(frozen=True)
+class Holds:
+    """The parts of one interval crossed by holding a sample: for each gap it overlaps, (from_s, to_s) measured
+    from the gap's start (so that a gap spanning several intervals adds, interval by interval, the increments
+    of one motion-model covariance that grows with the time since the gap began)."""
+
+    spans: tuple[tuple[float, float], ...] = ()
+
+    def __bool__(self) -> bool:
+        return bool(self.spans)
+
+    @property
+    def total_s(self) -> float:
+        return float(sum(b - a for a, b in self.spans))
+
+
 def pieces_with_holds(t: np.ndarray, starts: np.ndarray, gaps: Gaps, a: float,
-                      b: float) -> tuple[np.ndarray, np.ndarray, float]:
+                      b: float) -> tuple[np.ndarray, np.ndarray, Holds]:
     """The pieces of (a, b] in time order: (sample index, duration s) of the samples covering it, with each
-    gap's overlap as a piece of the sample held across it; and the held time, s."""
+    gap's overlap as pieces of the sample held across it, one nominal period long (so that preintegration and
+    the strapdown turn the attitude through the hold as they do through samples: one piece of several seconds
+    would be integrated at the attitude of its start); and what was held."""
     idx, dt = imu_pieces(t, starts, a, b)
     if len(gaps) == 0:
-        return idx, dt, 0.0
+        return idx, dt, Holds()
     lo = np.maximum(gaps.start, a)
     hi = np.minimum(gaps.end, b)
     inside = np.flatnonzero(hi > lo)
     if len(inside) == 0:
-        return idx, dt, 0.0
-    hold_idx = gaps.index[inside]
-    hold_dt = (hi - lo)[inside]
-    # a held piece goes after every piece of its sample and before the next sample's
-    at = np.searchsorted(idx, hold_idx, side="right")
-    return np.insert(idx, at, hold_idx), np.insert(dt, at, hold_dt), float(hold_dt.sum())
+        return idx, dt, Holds()
+    spans = []
+    for g in inside.tolist():
+        T = float(hi[g] - lo[g])
+        n = max(1, int(np.ceil(T / gaps.period_s - 1e-9)))
+        at = int(np.searchsorted(idx, gaps.index[g], side="right"))  # after its sample, before the next one's
+        idx = np.insert(idx, at, np.full(n, gaps.index[g]))
+        dt = np.insert(dt, at, np.full(n, T / n))
+        spans.append((float(lo[g] - gaps.start[g]), float(hi[g] - gaps.start[g])))
+    return idx, dt, Holds(tuple(spans))
 
 
-def hold_covariance(cfg: ImuConfig, held_s: float, interval_s: float) -> np.ndarray:
-    """(9, 9) covariance added to an interval whose motion was held for held_s of its interval_s seconds,
-    in the order of GTSAM's preintegration error [rotation, position, velocity] (also the EKF's blocks):
-    rotation sigma w T, velocity a T + g w T^2 / 2, position a T^2 / 2 + g w T^3 / 6 (T = held_s), and the
-    velocity error carried over the rest of the interval into the position."""
-    if held_s <= 0:
-        return np.zeros((9, 9))
+def _hold_sigmas(cfg: ImuConfig, T: float) -> np.ndarray:
+    """[rotation, position, velocity] sigmas after holding for T seconds: w T, a T^2 / 2 + g w T^3 / 6,
+    a T + g w T^2 / 2 (the rate may drift by w, the acceleration by a; an attitude error tilts gravity)."""
     w = np.radians(cfg.gap_rate_sigma_deg_s)
     a = cfg.gap_accel_sigma_m_s2
-    T = held_s
-    rest = max(interval_s - held_s, 0.0)
-    sig_rot = w * T
-    sig_vel = a * T + G0 * w * T**2 / 2.0
-    sig_pos = a * T**2 / 2.0 + G0 * w * T**3 / 6.0 + sig_vel * rest
-    return np.diag(np.repeat([sig_rot**2, sig_pos**2, sig_vel**2], 3))
+    return np.array([w * T, a * T**2 / 2.0 + G0 * w * T**3 / 6.0, a * T + G0 * w * T**2 / 2.0])
+
+
+def hold_covariance(cfg: ImuConfig, holds: Holds, interval_s: float) -> np.ndarray:
+    """(9, 9) covariance added to an interval for what it held, in the order of GTSAM's preintegration error
+    [rotation, position, velocity] (also the EKF's blocks): for each span (T0, T1) from its gap's start, the
+    increment of the variances from T0 to T1 (the intervals of one gap then add up to the covariance of the
+    whole hold), and the velocity error carried over the rest of the interval into the position."""
+    var = np.zeros(3)
+    for t0, t1 in holds.spans:
+        s0, s1 = _hold_sigmas(cfg, t0), _hold_sigmas(cfg, t1)
+        inc = s1**2 - s0**2
+        rest = max(interval_s - (t1 - t0), 0.0)
+        inc[1] += (s1[2] * rest) ** 2
+        var += inc
+    return np.diag(np.repeat(var, 3)) if holds else np.zeros((9, 9))
 
 
 FILLER_MARGIN_S = 2.0  # the online estimator waits this long for a late ping before adding a state without one

@@ -18,11 +18,21 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, B, V, X
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
+from gtsam_dvl.estimators.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import Gaps, check_gaps, find_gaps, sample_starts_with_gaps, with_fillers
+from gtsam_dvl.estimators.gaps import (
+    Gaps,
+    Holds,
+    check_gaps,
+    check_spacing,
+    find_gaps,
+    gaps_within,
+    sample_starts_with_gaps,
+    with_fillers,
+)
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, select_epochs
 from gtsam_dvl.factors import EarthImuFactor
@@ -35,6 +45,8 @@ class Epoch:
     t: float
     dvl_index: int  # -1: a state without a ping (a DVL dropout: estimators/gaps.py)
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
+    # with dvl.estimate_time_offset: (mean specific force, mean body rate) around t (FactorMaker.velocity_rate_input)
+    rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 @dataclass
@@ -57,11 +69,18 @@ class LogGraph:
         frame = map_frame_of(log, cfg)
         alignment = align(log.imu, log.dvl, frame, cfg.alignment)
         self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
+        if cfg.dvl.estimate_time_offset and cfg.dvl.use_beams:
+            raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
+        if len(log.imu) < 2:
+            raise GtsamDvlError(f"{log.source or 'log'}: fewer than two IMU samples")
+        check_spacing(cfg.solver)
         self.gaps = find_gaps(log.imu.t, cfg.imu.gap_samples)
-        check_gaps(self.gaps, cfg.imu, log.source)
         self.epochs = self._select_epochs()
         if sum(e.dvl_index >= 0 for e in self.epochs) < 2:
             raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
+        self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)  # the gaps the states cross
+        self.counters["imu_gaps"] = len(self.gaps)
+        check_gaps(self.gaps, cfg.imu, log.source)
         held = self._preintegrate()
         self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
                             for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, held, strict=True))]
@@ -80,20 +99,30 @@ class LogGraph:
         idx = select_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, self.counters)
         times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)
         self.counters["states_without_ping"] = int(is_filler.sum())
-        self.counters["imu_gaps"] = len(self.gaps)
         dvl_index = np.full(len(times), -1)
         dvl_index[~is_filler] = idx
         gyro = covering_sample(imu.t, times)
-        return [Epoch(float(t), int(j), self.maker.body_rate(imu.b_omega[g]))
-                for t, j, g in zip(times.tolist(), dvl_index.tolist(), gyro.tolist(), strict=True)]
+        epochs = [Epoch(float(t), int(j), self.maker.body_rate(imu.b_omega[g]))
+                  for t, j, g in zip(times.tolist(), dvl_index.tolist(), gyro.tolist(), strict=True)]
+        if cfg.dvl.estimate_time_offset:
+            self.set_time_offset_window(cfg.dvl.time_offset_prior_s, epochs)
+        return epochs
 
-    def _preintegrate(self) -> list[float]:
-        """The IMU intervals between the epochs; returns the time each held across IMU gaps, s."""
+    def set_time_offset_window(self, dt: float, epochs: list[Epoch] | None = None) -> None:
+        """The epochs' IMU constants of the time-offset model, averaged around t + dt / 2 (dt: the current
+        estimate of the offset; FactorMaker.velocity_rate_input). Factors built afterwards use them."""
+        imu = self.log.imu
+        for ep in self.epochs if epochs is None else epochs:
+            if ep.dvl_index >= 0:
+                ep.rate_input = self.maker.velocity_rate_input(ep.t, imu.t, imu.b_f, imu.b_omega, dt)
+
+    def _preintegrate(self) -> list[Holds]:
+        """The IMU intervals between the epochs; returns what each held across IMU gaps."""
         imu = self.log.imu
         starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
         self.pims, self.imu_params = [], []
-        held = []
+        held: list[Holds] = []
         for a, b in zip(self.epochs[:-1], self.epochs[1:], strict=True):
             pim, params, h = self.maker.preintegrate_interval(a.t, b.t, imu.t, starts, b_f, imu.b_omega, self.gaps)
             self.pims.append(pim)
@@ -140,7 +169,24 @@ class LogGraph:
         if j < 0:
             return []
         beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-        return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams)
+        return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input)
+
+    def depth_factors(self) -> list[gtsam.NonlinearFactor]:
+        """Depth factors of the log's depth samples (estimators/depth.py), each on its nearest state; none
+        without depth data or with [depth] use = false. Counts "depth_used" and "depth_too_far"."""
+        depth = self.log.depth
+        if depth is None or not self.config.depth.use or not len(depth):
+            return []
+        samples = depth_samples(depth, self.config.depth, self.frame, self.counters)
+        t_states = np.array([ep.t for ep in self.epochs])
+        near, dt = nearest_states(t_states, samples.t, self.config.depth.max_time_to_state_s)
+        self.counters["depth_used"] = int((near >= 0).sum())
+        self.counters["depth_too_far"] = int((near < 0).sum())
+        out: list[gtsam.NonlinearFactor] = []
+        for k in np.flatnonzero(near >= 0).tolist():
+            out += self.maker.depth_factors_for(int(near[k]), float(samples.z_meas[k]), float(samples.sigma[k]),
+                                                samples.b_p_sensor, float(dt[k]))
+        return out
 
     # ----- initial guess -------------------------------------------------------------------------
     def initial_values(self) -> gtsam.Values:
@@ -172,6 +218,8 @@ class LogGraph:
                 values.insert(self.maker.bias_key(i), zero_bias)
         values.insert(K_SCALE, np.array([k0]))
         values.insert(C_MISALIGN, gtsam.Rot3(b_R_d0))
+        if self.config.dvl.estimate_time_offset:
+            values.insert(T_OFFSET, np.array([self.config.dvl.time_offset_prior_s]))
         self.set_gravity_from_positions(n_p_all)
         return values
 
@@ -188,6 +236,8 @@ class LogGraph:
                 graph.add(self.imu_factor(i))
                 for f in self.bias_factors(i):
                     graph.add(f)
+        for f in self.depth_factors():
+            graph.add(f)
         return graph, values
 
     def elimination_ordering(self) -> gtsam.Ordering:
@@ -204,4 +254,6 @@ class LogGraph:
             ordering.push_back(B(0))
         ordering.push_back(K_SCALE)
         ordering.push_back(C_MISALIGN)
+        if self.config.dvl.estimate_time_offset:
+            ordering.push_back(T_OFFSET)
         return ordering

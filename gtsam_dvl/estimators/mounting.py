@@ -30,7 +30,7 @@ def rotate_imu_samples(b_R_imu: np.ndarray, imu_omega: np.ndarray, imu_f: np.nda
 
 def imu_in_base_link(imu: ImuData, mounting: Mounting) -> ImuData:
     """The samples in base_link (the same object when the IMU is mounted with base_link's axes)."""
-    if not imu_is_rotated(mounting):
+    if not imu_is_rotated(mounting) or imu.frame_id == "base_link":  # nothing to rotate, or rotated already
         return imu
     b_omega, b_f = rotate_imu_samples(mounting.b_R_imu, imu.b_omega, imu.b_f)
     return dataclasses.replace(imu, b_omega=b_omega, b_f=b_f, frame_id="base_link")

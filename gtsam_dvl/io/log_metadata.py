@@ -19,7 +19,8 @@ def metadata_record(log: LogData) -> dict[str, Any]:
     if log.true_calibration is not None:
         cal = log.true_calibration
         truth["dvl"] = {**(truth.get("dvl") or {}), "scale": float(cal.scale),
-                        "misalignment_deg": [float(a) for a in cal.misalignment_deg]}
+                        "misalignment_deg": [float(a) for a in cal.misalignment_deg],
+                        "time_offset_s": float(cal.time_offset_s)}
     if log.true_imu_bias is not None:
         b = log.true_imu_bias
         truth["imu"] = {**(truth.get("imu") or {}), "gyro_bias_rad_s": list(b.gyro_rad_s),
@@ -47,7 +48,8 @@ def typed_fields(meta: dict[str, Any], source: str) -> dict[str, Any]:
         if not isinstance(truth, dict):
             raise TypeError("the truth record is not a table")
         if cal := truth.get("dvl"):
-            out["true_calibration"] = DvlCalibration(float(cal["scale"]), _vec3(cal["misalignment_deg"]))
+            out["true_calibration"] = DvlCalibration(float(cal["scale"]), _vec3(cal["misalignment_deg"]),
+                                                     float(cal.get("time_offset_s", 0.0)))
         imu = truth.get("imu") or {}
         if "gyro_bias_rad_s" in imu:
             out["true_imu_bias"] = ImuBiases(_vec3(imu["accel_bias_m_s2"]), _vec3(imu["gyro_bias_rad_s"]))

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
 from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
@@ -39,6 +40,10 @@ REPAIR_HINT = "rerun with --repair to drop such messages"
 # 0.05 s; a 1 Hz DVL: 5 s). Such gaps are reported in metadata["reader_losses"]["gaps"] and as a warning.
 GAP_FACTOR = 5.0
 MAX_GAP_SPANS = 20  # spans listed per topic (the count and the seconds cover all of them)
+PRESSURE_TYPE = "sensor_msgs/msg/FluidPressure"
+POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+DEPTH_TYPES = (PRESSURE_TYPE, POSE_COV_TYPE, ODOM_TYPE)
+DEPTH_TOPIC = "/depth/pressure"
 
 
 def _type(src: Source, topic: str) -> str:
@@ -192,6 +197,8 @@ def read_log(
     dvl_topic: str | None = None,
     truth_topic: str = "/ground_truth/odometry",
     tf_topic: str = "/tf_static",
+    depth_topic: str | None = None,
+    depth_z_down: bool = False,
     salvage: bool = False,
     repair: bool = False,
     progress: Callable[[float], None] | None = None,
@@ -202,7 +209,14 @@ def read_log(
     Warnings go to metadata["reader_warnings"], and what was lost, structured, to metadata["reader_losses"]:
     "repair" (per topic: messages dropped by reason), "gaps" (per topic: missing stretches, see stamp_gaps),
     "salvage" (with ``salvage``: io.storage.salvage.salvage_losses) and "messages_lost" (per topic).
-    progress(fraction) is called while reading."""
+    progress(fraction) is called while reading.
+
+    Depth (LogData.depth): depth_topic None reads /depth/pressure if the log has it; "" or "none" reads no
+    depth. A sensor_msgs/msg/FluidPressure topic keeps the pressure (the estimators convert it with their
+    [depth] settings) and fills depth_m with the defaults of core/earth.py at the origin's latitude (45 deg
+    without one); a geometry_msgs/msg/PoseWithCovarianceStamped or nav_msgs/msg/Odometry topic gives depth
+    = -z (z up, the ROS convention), or +z with depth_z_down, and its variance from the zz covariance (0 or
+    negative: unknown)."""
     src = open_source(path, salvage=salvage)
     path = src.path
     if imu_topic not in src.topics:
@@ -215,12 +229,22 @@ def read_log(
         raise GtsamDvlError(f"{path}: {imu_topic} is {kind}, expected {IMU_TYPE}")
     if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
         raise GtsamDvlError(f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}")
+    if depth_topic is None:
+        depth_topic = DEPTH_TOPIC if DEPTH_TOPIC in src.topics else ""
+    elif depth_topic == "none":
+        depth_topic = ""
+    if depth_topic and depth_topic not in src.topics:
+        raise _missing(src, "depth", depth_topic, "--depth-topic")
+    if depth_topic and (depth_type := _type(src, depth_topic)) not in DEPTH_TYPES:
+        raise GtsamDvlError(f"{path}: {depth_topic} is {depth_type}; depth topics must be one of "
+                            f"{', '.join(DEPTH_TYPES)}")
     warnings = list(src.warnings)
     dropped: dict[str, dict[str, int]] = {}
     has_truth = truth_topic in src.topics and _type(src, truth_topic) == ODOM_TYPE
     if truth_topic in src.topics and not has_truth:
         warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
     topics = [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
+    topics += [depth_topic] * bool(depth_topic)
     raw = src.read(topics, progress)
 
     imu = decode(path, imu_topic, IMU_TYPE, raw[imu_topic])
@@ -265,6 +289,13 @@ def read_log(
                 setattr(mounting, attrs[1], pose[1])
 
     meta = _metadata(src)
+    depth = None
+    if depth_topic:
+        depth = _depth_data(src, depth_topic, raw[depth_topic], t0, repair, warnings, dropped, depth_z_down,
+                            meta.get("origin"))
+        if tf_topic in src.topics and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]),
+                                                       depth.frame_id)) is not None:
+            depth.b_p_sensor = pose[1]
     gaps: dict[str, dict[str, Any]] = {}
     for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:
@@ -277,7 +308,30 @@ def read_log(
     losses["messages_lost"] = _messages_lost(losses)
     meta["reader_warnings"] = warnings
     meta["reader_losses"] = losses
-    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed_fields(meta, str(path)))
+    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed_fields(meta, str(path)),
+                   depth=depth)
+
+
+def _depth_data(src: Source, topic: str, bodies: Any, t0: int, repair: bool, warnings: list[str],
+                dropped: dict[str, dict[str, int]], z_down: bool, origin: Any) -> DepthData:
+    """DepthData from a FluidPressure, PoseWithCovarianceStamped or Odometry topic (read_log's doc)."""
+    type_name = _type(src, topic)
+    arr = decode(src.path, topic, type_name, bodies)
+    ns = stamps_ns(arr)
+    frame_id = first_string(arr) or "pressure_link"
+    if type_name == PRESSURE_TYPE:
+        p = arr["fluid_pressure"].astype(float)
+        var = arr["variance"].astype(float)
+        keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(p), repair, warnings, dropped)
+        p, var = p[keep], np.where(var[keep] > 0, var[keep], np.nan)
+        lat_deg = float(origin["lat_deg"]) if isinstance(origin, dict) and "lat_deg" in origin else 45.0
+        d, dd_dp = pressure_to_depth(p, float(np.radians(lat_deg)))
+        return DepthData((ns[keep] - t0) / 1e9, d, var * dd_dp**2, p, var, frame_id)
+    z = arr["position"].astype(float)[:, 2]
+    cov = arr["covariance" if type_name == POSE_COV_TYPE else "pose_covariance"].astype(float)[:, 14]
+    keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(z), repair, warnings, dropped)
+    d = z[keep] if z_down else -z[keep]
+    return DepthData((ns[keep] - t0) / 1e9, d, np.where(cov[keep] > 0, cov[keep], np.nan), frame_id=frame_id)
 
 
 def _messages_lost(losses: dict[str, Any]) -> dict[str, int]:

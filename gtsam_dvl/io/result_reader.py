@@ -38,6 +38,9 @@ def read_result(path: Path | str) -> StoredResult:
                 timeline = Timeline.from_arrays({k: npz[k] for k in npz.files})
         stored_arrays: dict[str, Any] = {name: arrays[name] for name in STATE_ARRAYS}
         stored_arrays.update({name: arrays.get(name) for name in OPTIONAL_STATE_ARRAYS})
+        if "time_offset_s" in arrays:
+            stored_arrays["time_offset_s"] = float(arrays["time_offset_s"][0])
+            stored_arrays["time_offset_sigma_s"] = float(arrays["time_offset_s"][1])
         result = NavResult(
             estimator=str(meta.get("estimator", summary.get("estimator", "?"))), **stored_arrays,
             scale=float(arrays["scale"][0]), scale_sigma=float(arrays["scale"][1]), t0_ns=int(arrays["t0_ns"][0]),

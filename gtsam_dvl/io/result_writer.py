@@ -28,6 +28,7 @@ TOPICS = {
     "misalignment": "/gtsam_dvl/dvl_misalignment",
     "misalignment_rpy": "/gtsam_dvl/dvl_misalignment_rpy_deg",
     "misalignment_sigma": "/gtsam_dvl/dvl_misalignment_sigma_deg",
+    "time_offset": "/gtsam_dvl/dvl_time_offset",  # s, only when estimated ([dvl] estimate_time_offset)
 }
 
 
@@ -83,6 +84,8 @@ def states_npz_bytes(result: NavResult) -> bytes:
     arrays.update({name: np.asarray(getattr(result, name)) for name in OPTIONAL_STATE_ARRAYS
                    if getattr(result, name) is not None})
     arrays["scale"] = np.array([result.scale, result.scale_sigma])
+    if np.isfinite(result.time_offset_sigma_s):
+        arrays["time_offset_s"] = np.array([result.time_offset_s, result.time_offset_sigma_s])
     arrays["t0_ns"] = np.array([result.t0_ns], dtype=np.int64)
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]  # numpy's stubs mistype **arrays
@@ -163,6 +166,9 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
                                     np.outer(ones, result.gyro_bias), bias_cov, "imu_link")
         w.add_scalar_with_variance(TOPICS["scale"], t[-1:], np.array([result.scale]),
                                    np.array([result.scale_sigma**2]), "dvl_link")
+        if np.isfinite(result.time_offset_sigma_s):
+            w.add_scalar_with_variance(TOPICS["time_offset"], t[-1:], np.array([result.time_offset_s]),
+                                       np.array([result.time_offset_sigma_s**2]), "dvl_link")
         cov_c = np.zeros((6, 6))
         cov_c[3:, 3:] = result.b_R_d @ result.b_R_d_cov @ result.b_R_d.T  # body axes, rad^2
         w.add_pose_with_covariance(TOPICS["misalignment"], t[-1:], np.zeros((1, 3)), matrix_to_quat_xyzw(R_c)[None],

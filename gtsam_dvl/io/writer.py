@@ -1,7 +1,11 @@
 """Write a LogData as a ROS 2 MCAP log exactly as docs/conventions.md ("Logs: ROS 2 MCAP") lays it out.
 
-Topics: /tf_static, /imu/data_raw, /dvl/twist, /dvl/data and, for simulated logs, /ground_truth/odometry.
-Choices the conventions leave open:
+Topics: /tf_static, /imu/data_raw, /dvl/twist, /dvl/data, /depth/pressure (when the log has depth) and, for
+simulated logs, /ground_truth/odometry. Choices the conventions leave open:
+
+* /depth/pressure (sensor_msgs/msg/FluidPressure, frame pressure_link) holds DepthData.pressure_pa and its
+  variance (0 = unknown); its lever arm goes into /tf_static as base_link -> pressure_link (identity
+  rotation) when DepthData.b_p_sensor is set.
 
 * /dvl/twist carries only valid 3-D velocities (invalid pings are skipped there but kept in
   /dvl/data). Its 6x6 covariance holds d_cov in the linear block; the DVL does not measure angular
@@ -32,6 +36,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl import __version__
+from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import DvlData, LogData
 from gtsam_dvl.io.log_metadata import metadata_record
@@ -125,6 +130,28 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     return arr
 
 
+def _pressure_messages(log: LogData, w: McapLogWriter) -> np.ndarray:
+    """/depth/pressure: the absolute pressure and its variance as measured; a depth-only DepthData (no
+    pressure) is converted with the default density and atmosphere at the origin's latitude (45 deg without
+    an origin). An unknown variance (NaN) is written 0, the message's "unknown"."""
+    dep = log.depth
+    assert dep is not None
+    if dep.pressure_pa is not None:
+        p = np.asarray(dep.pressure_pa, dtype=float)
+        var = (np.full(len(p), np.nan) if dep.pressure_variance_pa2 is None
+               else np.asarray(dep.pressure_variance_pa2, dtype=float))
+    else:
+        lat = np.radians(log.origin.lat_deg if log.origin is not None else 45.0)
+        p = depth_to_pressure(dep.depth_m, float(lat))
+        _, dd_dp = pressure_to_depth(p, float(lat))
+        var = np.asarray(dep.variance_m2, dtype=float) / dd_dp**2
+    arr = cdr.new_messages(cdr.FLUID_PRESSURE, {"frame_id": dep.frame_id}, len(dep))
+    cdr.set_stamps(arr, w.stamps_ns(dep.t))
+    arr["fluid_pressure"] = p
+    arr["variance"] = np.nan_to_num(var, nan=0.0)
+    return arr
+
+
 def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None) -> None:
     """Write ``log`` to ``path`` as a ROS 2 MCAP per docs/conventions.md (atomically: temporary file, then
     rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
@@ -161,7 +188,8 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
             [
                 ("base_link", log.imu.frame_id, mnt.b_R_imu, mnt.b_p_imu),
                 ("base_link", log.dvl.frame_id, mnt.b_R_d0, mnt.b_p_dvl),
-            ],
+            ] + ([] if log.depth is None or log.depth.b_p_sensor is None else
+                 [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)]),
         )
         gyro_var, accel_var = _imu_variances(meta, log.imu.t)
         w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var)
@@ -174,6 +202,9 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
         w.add_twist_with_covariance("/dvl/twist", dvl.t[ok], dvl.d_v[ok], None, cov, dvl.frame_id)
         dvl_arr = _dvl_messages(dvl, meta, w.stamps_ns(dvl.t), path)
         w.add_structured("/dvl/data", "marine_acoustic_msgs/msg/Dvl", dvl_arr)
+
+        if log.depth is not None:
+            w.add_structured("/depth/pressure", "sensor_msgs/msg/FluidPressure", _pressure_messages(log, w))
 
         if log.truth is not None:
             tr = log.truth

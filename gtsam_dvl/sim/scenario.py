@@ -26,6 +26,7 @@ __all__ = [
     "DEG_PER_H",
     "MICRO_G",
     "SEGMENT_KINDS",
+    "DepthSpec",
     "DvlSpec",
     "ImuSpec",
     "InitialState",
@@ -51,7 +52,8 @@ class Origin:
 
 @dataclass(frozen=True)
 class Rates:
-    """Sensor and truth rates. DVL stamps are k / dvl_hz + dvl_time_offset_s."""
+    """Sensor and truth rates. The DVL measures at k / dvl_hz and stamps each ping dvl_time_offset_s earlier
+    (a clock lag dt_d: the ping stamped t measures the velocity at t + dt_d, docs/conventions.md)."""
 
     imu_hz: float = 100.0
     dvl_hz: float = 1.0
@@ -138,6 +140,22 @@ class MountingSpec:
 
 
 @dataclass(frozen=True)
+class DepthSpec:
+    """Pressure sensor (optional [depth] table; a scenario without it has no /depth/pressure). The water surface
+    is at ellipsoidal height 0: the sensor at height h is at depth -h, and measures the absolute pressure
+    atmospheric_pa + water_density_kg_m3 * g_column * depth (core/earth.py depth_to_pressure) plus a constant
+    bias_m and white noise_m (both in metres of depth, converted to Pa). Stamps k / rate_hz, which must divide
+    the IMU rate. lever_arm_m: the sensor in base_link."""
+
+    rate_hz: float = 1.0
+    noise_m: float = 0.05
+    bias_m: float = 0.0
+    water_density_kg_m3: float = 1025.0
+    atmospheric_pa: float = 101325.0
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A loaded scenario. raw keeps the TOML dict (goes into the log metadata unchanged)."""
 
@@ -153,6 +171,7 @@ class Scenario:
     raw: dict[str, Any]
     source: str = "<dict>"
     t0_ns: int = DEFAULT_T0_S * 1_000_000_000
+    depth: DepthSpec | None = None  # the [depth] table, if the scenario has one
 
     @property
     def duration_s(self) -> float:
@@ -210,7 +229,8 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     """Build a Scenario from a dict shaped like a scenario file (tests and scripts use this)."""
     r = Reader(raw, source)
     r.check_keys(
-        "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments"]
+        "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments",
+             "depth"]
     )
     origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
     r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
@@ -240,6 +260,15 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     mounting = MountingSpec(**r.table("mounting", _defaults(MountingSpec),
                                       vectors=("dvl_rpy_deg", "dvl_lever_arm_m")))
     segments = tuple(MotionSegment(**row) for row in parse_segments(r, initial.speed_m_s))
+    depth = None
+    if "depth" in raw:
+        depth = DepthSpec(**r.table("depth", _defaults(DepthSpec), vectors=("lever_arm_m",)))
+        for key in ("rate_hz", "water_density_kg_m3"):
+            r.require(getattr(depth, key) > 0, f"depth.{key}", "must be positive")
+        r.require(depth.noise_m >= 0, "depth.noise_m", "must be >= 0")
+        r.require(depth.atmospheric_pa >= 0, "depth.atmospheric_pa", "must be >= 0")
+        dr = rates.imu_hz / depth.rate_hz
+        r.require(abs(dr - round(dr)) < 1e-9, "depth.rate_hz", "must divide rates.imu_hz")
     t0 = raw.get("t0_s", DEFAULT_T0_S)
     r.number("t0_s", t0)
     t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact
@@ -256,6 +285,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         raw=raw,
         source=source,
         t0_ns=t0_ns,
+        depth=depth,
     )
 
 

@@ -14,8 +14,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
-from gtsam_dvl.core.types import DvlCalibration, GeoOrigin, ImuBiases, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.types import (
+    DepthData,
+    DvlCalibration,
+    GeoOrigin,
+    ImuBiases,
+    ImuData,
+    LogData,
+    Mounting,
+    TruthData,
+)
 from gtsam_dvl.sim import imu as sim_imu
 from gtsam_dvl.sim.dvl import dvl_measure, dvl_true
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, true_imu
@@ -64,15 +74,18 @@ def simulate(
     mount = scenario.mounting
     mounting = Mounting(b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
                         b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float))
-    t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float(imu.t[-1]))
+    t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float(imu.t[-1]))
     floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
-    y, d_u, ranges = dvl_true(scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_dvl, floor_h)
+    y, d_u, ranges = dvl_true(scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas, floor_h)
     dvl = dvl_measure(
         scenario.dvl, t_dvl, y, d_u, ranges,
         np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
         np.random.Generator(np.random.PCG64(event_ss)) if white_noise else None,
     )
+    depth = None if scenario.depth is None else _depth(scenario, motion, track, frame, n, seed, white_noise)
     metadata = _metadata(scenario, seed, white_noise, mounting, errors, rate)
+    if scenario.depth is not None:
+        metadata["sensors"]["depth"] = _listify_spec(asdict(scenario.depth))
     if progress is not None:
         progress(1.0)
     o = scenario.origin
@@ -80,16 +93,48 @@ def simulate(
                    source=f"simulated:{scenario.name}:seed={seed}",
                    origin=GeoOrigin(float(o.lat_deg), float(o.lon_deg), float(o.height_m)),
                    true_calibration=DvlCalibration(float(scenario.dvl.scale),
-                                                   tuple(float(a) for a in scenario.dvl.misalignment_deg)),  # type: ignore[arg-type]
+                                                   tuple(float(a) for a in scenario.dvl.misalignment_deg),  # type: ignore[arg-type]
+                                                   float(rates.dvl_time_offset_s)),
                    true_imu_bias=ImuBiases(tuple(errors.accel_bias0.tolist()), tuple(errors.gyro_bias0.tolist())),  # type: ignore[arg-type]
-                   segments=scenario.segments_typed())
+                   segments=scenario.segments_typed(), depth=depth)
 
 
-def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> np.ndarray:
-    """k / dvl_hz + offset within [0, t_end]; integer k keeps the stamps exact multiples."""
-    j0 = int(np.ceil(-offset_s * dvl_hz - 1e-9))
-    j1 = int(np.floor((t_end - offset_s) * dvl_hz + 1e-9))
-    return np.arange(j0, j1 + 1) / dvl_hz + offset_s
+def _listify_spec(d: dict[str, Any]) -> dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+
+def _depth(scenario: Scenario, motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, seed: int,
+           white_noise: bool) -> DepthData:
+    """The pressure sensor (DepthSpec): depth of the sensor below the surface at h = 0, with bias and noise,
+    as absolute pressure. Its random stream is SeedSequence(seed)'s fifth child: the other four, and so every
+    other sensor's bytes, are those of a scenario without [depth]."""
+    spec = scenario.depth
+    assert spec is not None
+    k = np.arange(0, n, int(round(scenario.rates.imu_hz / spec.rate_hz)))
+    t = k / track.rate
+    lat, _, h = track.at_samples(k)
+    _, _, l_R_b, _ = imu_truth(motion.evaluate(t), lat, h)
+    lever = np.asarray(spec.lever_arm_m, dtype=float)
+    d_true = -(h + l_R_b[:, 2, :] @ lever)
+    d = d_true + spec.bias_m
+    if white_noise and spec.noise_m > 0:
+        ss = np.random.SeedSequence(seed).spawn(5)[4]
+        d = d + spec.noise_m * np.random.Generator(np.random.PCG64(ss)).standard_normal(len(t))
+    p = depth_to_pressure(d, frame.lat0, spec.water_density_kg_m3, spec.atmospheric_pa)
+    _, dd_dp = pressure_to_depth(p, frame.lat0, spec.water_density_kg_m3, spec.atmospheric_pa)
+    var_pa = np.full(len(t), (spec.noise_m / dd_dp) ** 2 if spec.noise_m > 0 else 0.0)
+    return DepthData(t=t, depth_m=d, variance_m2=np.full(len(t), spec.noise_m**2), pressure_pa=p,
+                     pressure_variance_pa2=var_pa, b_p_sensor=lever.copy())
+
+
+def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarray, np.ndarray]:
+    """(measurement times, stamps): the DVL measures at k / dvl_hz (integer k keeps them exact multiples) and
+    stamps each ping offset_s earlier, a clock lag dt_d (docs/conventions.md: the ping stamped t measures the
+    velocity at t + dt_d). Both within [0, t_end]."""
+    j0 = int(np.ceil(max(0.0, offset_s) * dvl_hz - 1e-9))
+    j1 = int(np.floor(min(t_end, t_end + offset_s) * dvl_hz + 1e-9))
+    t_meas = np.arange(j0, j1 + 1) / dvl_hz
+    return t_meas, t_meas - offset_s
 
 
 def _truth(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, step: int) -> TruthData:
@@ -140,6 +185,7 @@ def _metadata(
                 "misalignment_deg": [float(a) for a in scenario.dvl.misalignment_deg],
                 "b_R_d0": mounting.b_R_d0.tolist(),
                 "b_lever_arm_m": mounting.b_l.tolist(),
+                "time_offset_s": float(scenario.rates.dvl_time_offset_s),
             },
             "imu": imu_truth_md,
             "segments": scenario.segment_table(),

@@ -84,6 +84,7 @@ def test_keyframe_thinning_is_the_same_online_and_in_batch(sim_paper3d_clean: Lo
     log, _ = _with_dropouts(sim_paper3d_clean, t_end=700.0)
     cfg = EstimatorConfig()
     cfg.solver.keyframe_interval_s = 2.5
+    cfg.solver.max_state_spacing_s = 2.5  # keyframes 2.5 s apart need states allowed that far apart
     counters: dict[str, int] = {}
     idx = select_epochs(log.dvl, log.imu.t, cfg.dvl, 2.5, counters)
     assert np.all(np.diff(log.dvl.t[idx]) >= 2.5) and counters["dvl_not_keyframe"] > 0

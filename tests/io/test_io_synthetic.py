@@ -140,6 +140,8 @@ def _nested(type_name: str, v: dict, s: dict) -> dict:
         out["vector"] = vec(v["vector"])
     elif type_name == "sensor_msgs/msg/Temperature":
         out.update(temperature=float(v["temperature"]), variance=float(v["variance"]))
+    elif type_name == "sensor_msgs/msg/FluidPressure":
+        out.update(fluid_pressure=float(v["fluid_pressure"]), variance=float(v["variance"]))
     elif type_name == "nav_msgs/msg/Odometry":
         out["child_frame_id"] = s["child_frame_id"]
         out["pose"] = {"pose": {"position": vec(v["position"]), "orientation": quat(v["orientation"])},

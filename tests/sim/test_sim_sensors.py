@@ -104,19 +104,22 @@ def test_dvl_180_roll_mounting_lever_arm_beams_and_ranges() -> None:
     np.testing.assert_allclose(log.dvl.d_cov[0], 0.03**2 * np.linalg.inv(A.T @ A), rtol=1e-12, atol=1e-18)
 
 
-def test_dvl_time_offset_moves_stamps_off_the_imu_grid() -> None:
-    sc = _scenario(rates={"dvl_hz": 1.0, "dvl_time_offset_s": 0.005})
-    log = simulate(sc, 3, white_noise=False)
-    assert log.truth is not None
-    np.testing.assert_allclose(log.dvl.t, np.arange(len(log.dvl)) + 0.005, atol=1e-12)
-    assert log.dvl.t[-1] <= sc.duration_s
-    i = _truth_at(log, log.dvl.t[:-1] - 0.005)
-    y0, y1 = _model_y(log, sc, i), _model_y(log, sc, i + 1)
-    interp = y0 + 0.05 * (y1 - y0)  # 5 ms into the 100 ms truth interval
-    err = np.max(np.abs(log.dvl.d_v[:-1] - interp))
-    moved = np.max(np.abs(log.dvl.d_v[:-1] - y0))
-    print(f"offset stamps: vs interpolated model {err:.2e} m/s, change from the on-grid value up to {moved:.2e}")
-    assert err < 1e-5 and moved > 1e-4
+def test_dvl_time_offset_is_a_clock_lag() -> None:
+    """[rates] dvl_time_offset_s = dt_d: the DVL measures at k / dvl_hz and stamps the ping dt_d earlier, so the
+    ping stamped t measures the velocity at t + dt_d (docs/conventions.md); the truth record carries dt_d."""
+    for dt in (0.005, -0.3):
+        sc = _scenario(rates={"dvl_hz": 1.0, "dvl_time_offset_s": dt})
+        log = simulate(sc, 3, white_noise=False)
+        assert log.truth is not None and log.true_calibration is not None
+        assert log.true_calibration.time_offset_s == dt
+        assert log.metadata["truth"]["dvl"]["time_offset_s"] == dt
+        k0 = 1 if dt > 0 else 0
+        np.testing.assert_allclose(log.dvl.t, np.arange(k0, k0 + len(log.dvl)) - dt, atol=1e-12)
+        assert log.dvl.t[0] >= 0.0 and log.dvl.t[-1] <= sc.duration_s
+        i = _truth_at(log, log.dvl.t + dt)  # the measurement times, on the truth grid
+        err = np.max(np.abs(log.dvl.d_v - _model_y(log, sc, i)))
+        print(f"dt_d {dt} s: ping vs the model at stamp + dt_d {err:.2e} m/s")
+        assert err < 1e-9
 
 
 @pytest.mark.parametrize("model", ["velocity", "beam"])
@@ -241,7 +244,7 @@ def test_logdata_contract() -> None:
     md = log.metadata
     assert set(md) == {"scenario_name", "scenario", "seed", "white_noise", "origin", "truth", "sensors", "generator"}
     assert md["generator"].startswith("gtsam_dvl ") and md["seed"] == 5 and md["white_noise"] is True
-    assert set(md["truth"]["dvl"]) == {"scale", "misalignment_deg", "b_R_d0", "b_lever_arm_m"}
+    assert set(md["truth"]["dvl"]) == {"scale", "misalignment_deg", "b_R_d0", "b_lever_arm_m", "time_offset_s"}
     assert md["truth"]["segments"] == sc.segment_table()
     assert md["sensors"]["imu"]["gyro_noise_deg_per_h_per_sqrt_hz"] == 0.1
     assert log.true_calibration is not None and log.true_calibration.scale == 0.9998

@@ -46,6 +46,7 @@ from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCA
 from gtsam_dvl.estimators.gaps import (
     check_gaps,
     find_gaps,
+    gaps_within,
     hold_covariance,
     pieces_with_holds,
     sample_starts_with_gaps,
@@ -253,6 +254,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         config = replace(config, ekf=replace(config.ekf, min_calibration_speed_m_s=min_calibration_speed_m_s))
     ekf_cfg = config.validate().ekf
+    if config.dvl.estimate_time_offset:
+        raise GtsamDvlError("[dvl] estimate_time_offset is supported by the batch smoother only, not the EKF")
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
@@ -265,7 +268,6 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     imu, dvl = log.imu, log.dvl
     t = imu.t
     gaps = find_gaps(t, config.imu.gap_samples)
-    check_gaps(gaps, config.imu, log.source)
     starts = sample_starts_with_gaps(t, gaps)
     gyro_index = covering_sample(t, dvl.t)
     b_l = log.mounting.b_l
@@ -284,6 +286,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     ping_at = np.full(len(state_t), -1)
     ping_at[~is_filler] = pings
     counters["states_without_ping"] = int(is_filler.sum())
+    gaps = gaps_within(gaps, float(state_t[0]), float(state_t[-1]))  # the gaps the states cross
+    check_gaps(gaps, config.imu, log.source)
     counters["imu_gaps"] = len(gaps)
     for count, (t_j, j) in enumerate(zip(state_t.tolist(), ping_at.tolist(), strict=True)):
         t0 = time.perf_counter()
@@ -296,7 +300,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                                           dt, earth.n_omega_ie, n_g, G)
                 fs.nav = step.state
                 fs.P = step.Phi @ fs.P @ step.Phi.T + process_noise(config, step.Phi, step.duration)
-                if held > 0:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
+                if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
                     fs.P[POS, POS] += np.diag(q[3:6])
@@ -333,6 +337,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
     counters["dvl_downweighted"] = downweighted
     counters["dvl_gated"] = gated
+    if log.depth is not None:  # the EKF takes no depth yet (estimators/depth.py): counted
+        counters["depth_ignored"] = len(log.depth)
     result = _to_result(hist, log, config)
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
     result.info = {"alignment": {"method": alignment.method, "t_static_end": alignment.t_static_end},

@@ -72,7 +72,14 @@ from gtsam_dvl.core.types import DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import STATIC_MARGIN_S, Alignment, align, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import check_gaps, filler_due, find_gaps, nominal_period, sample_starts_with_gaps
+from gtsam_dvl.estimators.gaps import (
+    check_gaps,
+    check_spacing,
+    filler_due,
+    find_gaps,
+    nominal_period,
+    sample_starts_with_gaps,
+)
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.online.types import (
     MODES,
@@ -134,6 +141,9 @@ def _considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega
     return gtsam.CustomFactor(noise, [X(i), V(i), K_SCALE, C_MISALIGN], error_func)
 
 
+PERIOD_SAMPLES = 64  # IMU stamps that measure the nominal period (the median spacing)
+
+
 class OnlineEstimator:
     """Incremental estimator fed message by message (module doc). Times are seconds on the caller's clock,
     the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention). IMU samples are
@@ -144,6 +154,9 @@ class OnlineEstimator:
         config = config or EstimatorConfig()
         self.options = options or config.online  # options=: overrides config.online
         self.config = dataclasses.replace(config, online=self.options).validate()  # the effective config
+        check_spacing(self.config.solver)
+        if self.config.dvl.estimate_time_offset:
+            raise GtsamDvlError("[dvl] estimate_time_offset is supported by the batch smoother only, not online")
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self._imu_rotated = imu_is_rotated(self.mounting)
         self.counters: dict[str, int] = {}
@@ -161,6 +174,7 @@ class OnlineEstimator:
         # after alignment: IMU samples since the last epoch (and the one straddling it), pings waiting for IMU
         self._chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self._imu_period: float | None = None  # nominal IMU period, s
+        self._period_t: list[float] = []  # the first IMU stamps, to measure it
         self._gaps_seen: dict[float, float] = {}  # IMU gaps crossed: start -> duration, s
         self._replaying = False  # replaying the messages buffered before the alignment
         self._pending: deque[_Ping] = deque()
@@ -361,8 +375,10 @@ class OnlineEstimator:
         return self._ingest_imu(t, w, f)
 
     def _ingest_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> int:
-        if self._imu_period is None:  # the nominal period, for the gap rule (estimators/gaps.py)
-            self._imu_period = nominal_period(t) if len(t) > 1 else None
+        if self._imu_period is None:  # the nominal period, for the gap rule (estimators/gaps.py): from the first
+            self._period_t.extend(t[:PERIOD_SAMPLES].tolist())  # PERIOD_SAMPLES stamps, across chunks
+            if len(self._period_t) >= PERIOD_SAMPLES:
+                self._imu_period = nominal_period(np.asarray(self._period_t[:PERIOD_SAMPLES]))
         if len(t):
             self._chunks.append((t, w, f))
             self._screen.push_imu(t, w, f)
@@ -475,7 +491,8 @@ class OnlineEstimator:
             assert p is not None  # the first epoch is a ping (_close_ready)
             sm.add_epoch(t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None))
         else:
-            period = self._imu_period or nominal_period(T)
+            # until PERIOD_SAMPLES stamps have come, the median of those seen (an epoch's buffer may hold a gap)
+            period = self._imu_period or nominal_period(np.asarray(self._period_t) if len(self._period_t) > 2 else T)
             gaps = find_gaps(T, self.config.imu.gap_samples, period)
             check_gaps(gaps, self.config.imu, self.source)
             for g0, g1 in zip(gaps.start.tolist(), gaps.end.tolist(), strict=True):
@@ -485,7 +502,7 @@ class OnlineEstimator:
             starts = sample_starts_with_gaps(T, gaps)
             b_f = b.compensate_rotation(F, W, T - starts)
             pim, params, held = b.preintegrate_interval(sm.t_last, t_epoch, T, starts, b_f, W, gaps)
-            sm.add_epoch(t_epoch, dvl, pim, params, held_s=held)
+            sm.add_epoch(t_epoch, dvl, pim, params, held=held)
         first_kept = max(int(np.searchsorted(T, t_epoch, side="right")) - 1, 0)  # the last sample <= the epoch
         self._chunks = [(T[first_kept:], W[first_kept:], F[first_kept:])]
         self._latest = self._read_estimate()
@@ -573,6 +590,8 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     estimator = OnlineEstimator.for_log(log, config, options)
     feed_log(estimator, log, progress)
     result = estimator.result(log.t0_ns)
+    if log.depth is not None:  # the online estimator takes no depth yet (estimators/depth.py): counted
+        result.info.setdefault("counters", {})["depth_ignored"] = len(log.depth)
     total = time.perf_counter() - t_start
     result.timing_s = {"updates": float(np.sum(estimator.latencies_s)), "total": total}
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None

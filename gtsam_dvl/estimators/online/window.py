@@ -55,6 +55,7 @@ from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, V, X, key_dim
 from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
 
 STATE_DIM = 6 + 3 + 6 + 1 + 3  # the joint of StateEstimate: pose, velocity, bias, scale, misalignment
@@ -134,7 +135,7 @@ class IncrementalSmoother:
     def add_epoch(self, t: float, dvl_factors: list[gtsam.NonlinearFactor],
                   pim: gtsam.PreintegratedImuMeasurements | None = None,
                   params: gtsam.PreintegrationParams | None = None, first_values: gtsam.Values | None = None,
-                  held_s: float = 0.0) -> None:
+                  held: Holds | None = None) -> None:
         """Add state n at time t with its DVL factors (built by the caller with builder.dvl_factors_for(n, ...))
         and, for n > 0, the preintegration since the previous epoch; for n == 0, first_values (builder.
         first_state_values) seed the state, bias and calibration and the priors."""
@@ -150,7 +151,7 @@ class IncrementalSmoother:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
             dt = t - self.t_last
-            imu = b.new_imu_factor(i - 1, pim, params, dt, held_s)
+            imu = b.new_imu_factor(i - 1, pim, params, dt, held)
             factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
             prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)])
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))

@@ -55,6 +55,7 @@ POSE_COV_STAMPED: Spec = HEADER + (
 )
 VECTOR3_STAMPED: Spec = HEADER + (_f("vector", "f8", 3),)
 TEMPERATURE: Spec = HEADER + (_f("temperature", "f8"), _f("variance", "f8"))
+FLUID_PRESSURE: Spec = HEADER + (_f("fluid_pressure", "f8"), _f("variance", "f8"))
 ODOMETRY: Spec = HEADER + (
     _f("child_frame_id", "str"),
     _f("position", "f8", 3),
@@ -92,6 +93,7 @@ SPECS: dict[str, Spec] = {
     "geometry_msgs/msg/PoseWithCovarianceStamped": POSE_COV_STAMPED,
     "geometry_msgs/msg/Vector3Stamped": VECTOR3_STAMPED,
     "sensor_msgs/msg/Temperature": TEMPERATURE,
+    "sensor_msgs/msg/FluidPressure": FLUID_PRESSURE,
     "nav_msgs/msg/Odometry": ODOMETRY,
     "marine_acoustic_msgs/msg/Dvl": DVL,
 }
