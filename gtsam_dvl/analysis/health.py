@@ -29,6 +29,7 @@ from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.selection import ping_covariance
 
 STATUSES = ("ok", "degraded", "failed")
 
@@ -198,7 +199,7 @@ class DvlResiduals:
 def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResiduals:
     """Residuals y - h(x) of each state's DVL ping (states are matched to pings by time), whitened by the noise
     that ping was given: config.noise_m_s if > 0, else the message's covariance if positive definite, else
-    config.default_noise_m_s (FactorMaker.dvl_noise); with config.use_beams, per beam with beam_noise_m_s."""
+    config.default_noise_m_s (selection.ping_covariance); with config.use_beams, per beam with beam_noise_m_s."""
     dvl = log.dvl
     n = len(result.t)
     if not len(dvl):
@@ -221,16 +222,7 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         d_y = dvl.d_v[j]
         ok = matched & dvl.valid[j] & np.isfinite(d_y).all(axis=1)
         r = np.where(ok[:, None], d_y - y_hat, 0.0)
-        if config.noise_m_s > 0:
-            cov = np.broadcast_to(np.eye(3) * config.noise_m_s**2, (n, 3, 3)).copy()
-        else:
-            cov = np.array(dvl.d_cov[j], dtype=float)
-            finite = np.isfinite(cov).all(axis=(1, 2))
-            pd = np.zeros(n, bool)
-            if finite.any():
-                sym = 0.5 * (cov[finite] + np.transpose(cov[finite], (0, 2, 1)))
-                pd[finite] = np.linalg.eigvalsh(sym).min(axis=1) > 0
-            cov[~pd] = np.eye(3) * config.default_noise_m_s**2
+        cov = ping_covariance(config, dvl.d_cov[j])  # the noise each ping was given by the estimators
         cov[~ok] = np.eye(3)
         chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
         dof = 3.0 * ok

@@ -34,7 +34,7 @@ from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import Alignment
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
-from gtsam_dvl.estimators.selection import imu_pieces
+from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance
 from gtsam_dvl.factors import (
     EarthImuFactor,
     make_depth_factor,
@@ -191,15 +191,7 @@ class FactorMaker:
     def dvl_noise(self, cov: np.ndarray) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
         definite, else the default sigma; in the robust kernel if configured (_robust)."""
-        cfg = self.config.dvl
-        noise: gtsam.noiseModel.Base
-        if cfg.noise_m_s > 0:
-            noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.noise_m_s)
-        elif np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0):
-            noise = gtsam.noiseModel.Gaussian.Covariance(cov)
-        else:
-            noise = gtsam.noiseModel.Isotropic.Sigma(3, cfg.default_noise_m_s)
-        return self._robust(noise)
+        return self._robust(gtsam.noiseModel.Gaussian.Covariance(ping_covariance(self.config.dvl, cov)))
 
     def beam_noise(self) -> gtsam.noiseModel.Base:
         """Noise model of one beam velocity (robust if configured)."""

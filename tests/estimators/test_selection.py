@@ -251,3 +251,19 @@ def test_ping_screen_online_matches_the_whole_log(chunk: int, sim_paper3d_clean:
         online.append(screen.check_buffered(float(log.dvl.t[j]), screened_value(log.dvl.d_v[j], None, cfg)))
     assert online == whole.tolist()
     assert [int((whole == c).sum()) for c in (ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL)] == list(counts.values())
+
+
+def test_ping_covariance_rule() -> None:
+    """The one rule for a ping's noise: configured sigma, else the message's covariance when positive definite,
+    else the default sigma."""
+    from gtsam_dvl.estimators.selection import ping_covariance
+
+    good = np.diag([1e-4, 2e-4, 3e-4])
+    bad = np.diag([1e-4, -1.0, 1e-4])  # not positive definite
+    unknown = np.full((3, 3), np.nan)  # TwistStamped: no covariance
+    got = ping_covariance(DvlConfig(), np.stack([good, bad, unknown]))
+    np.testing.assert_array_equal(got[0], good)
+    np.testing.assert_array_equal(got[1], np.eye(3) * DvlConfig().default_noise_m_s**2)
+    np.testing.assert_array_equal(got[2], np.eye(3) * DvlConfig().default_noise_m_s**2)
+    fixed = ping_covariance(DvlConfig(noise_m_s=0.05), good)
+    np.testing.assert_allclose(fixed, np.eye(3) * 0.0025, rtol=1e-15)

@@ -53,7 +53,7 @@ from gtsam_dvl.estimators.gaps import (
     with_fillers,
 )
 from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.selection import covering_sample, usable_pings
+from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
 # estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
@@ -183,14 +183,7 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np
         ok = dvl.beams.valid[j]
         A = dvl.beams.d_u[j][ok]
         return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_noise_m_s**2
-    cov = dvl.d_cov[j]
-    if cfg.noise_m_s > 0:
-        Rm = np.eye(3) * cfg.noise_m_s**2
-    elif np.all(np.isfinite(cov)) and np.all(np.linalg.eigvalsh(cov) > 0):
-        Rm = np.asarray(cov, dtype=float)
-    else:
-        Rm = np.eye(3) * cfg.default_noise_m_s**2
-    return np.eye(3), dvl.d_v[j], Rm
+    return np.eye(3), dvl.d_v[j], ping_covariance(cfg, dvl.d_cov[j])
 
 
 def robust_weight(kernel: str, k: float, r: float) -> float:
