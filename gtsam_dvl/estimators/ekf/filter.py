@@ -314,7 +314,9 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             H[:, CALIBRATION] = 0.0
         # the chi^2 gate, reopened after ekf.gate_reopen_after gated pings in a row (a filter that lost track)
         if gated_run < ekf_cfg.gate_reopen_after:
-            gate_nis = gates.setdefault(len(z), gate_threshold(ekf_cfg.gate_probability, len(z)))
+            if len(z) not in gates:  # chi2.ppf once per measurement dimension, not once per ping
+                gates[len(z)] = gate_threshold(ekf_cfg.gate_probability, len(z))
+            gate_nis = gates[len(z)]
         else:
             gate_nis = math.inf
         nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis)
