@@ -16,7 +16,7 @@ import fault_matrix as fm  # noqa: E402
 from gtsam_dvl.core.errors import GtsamDvlError  # noqa: E402
 from gtsam_dvl.core.types import LogData  # noqa: E402
 from gtsam_dvl.sim import simulate  # noqa: E402
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict  # noqa: E402
+from gtsam_dvl.sim.scenario import load_scenario  # noqa: E402
 
 # the cases whose right outcome is a clear one-line error, and what it must say; a salvaged corrupt chunk
 # leaves a hole of about 24 s in the IMU data, longer than imu.max_gap_s, so it must be named as a gap
@@ -30,16 +30,8 @@ MAY_ERROR = {"flipped_byte_salvaged": "IMU gap of", "flipped_byte_not_salvaged":
 
 @pytest.fixture(scope="module")
 def short_run() -> LogData:
-    """paper-3d's manoeuvres, shortened: 120 s static, accelerate, descend, a 4-sided square of 60 s turns and
-    60 s legs, ascend (about 800 s)."""
-    raw = dict(load_scenario("paper-3d").raw)
-    segs = [dict(s) for s in raw["segments"]]
-    segs[0]["duration_s"] = 120.0
-    for s in segs:
-        if s["kind"] == "square":
-            s["leg_duration_s"] = 60.0
-    raw["segments"] = segs
-    return simulate(scenario_from_dict(raw), fm.SEED)
+    """paper-3d's manoeuvres, shortened (data/scenarios/paper-3d-short.toml: 120 s static, 60 s legs)."""
+    return simulate(load_scenario("paper-3d-short"), fm.SEED)
 
 
 CASES = ["clean", "imu_gap_1s_straight", "imu_gap_5s_turn", "imu_gap_30s_turn", "dvl_outliers_1pct",

@@ -31,14 +31,8 @@ SEED = 7
 
 @cache
 def short_run(dt: float, noise_m_s: float = 0.02) -> LogData:
-    """paper-3d shortened as in tests/test_fault_matrix.py (120 s static, 60 s legs), DVL stamps dt early."""
-    raw = dict(load_scenario("paper-3d").raw)
-    segs = [dict(s) for s in raw["segments"]]
-    segs[0]["duration_s"] = 120.0
-    for s in segs:
-        if s["kind"] == "square":
-            s["leg_duration_s"] = 60.0
-    raw["segments"] = segs
+    """paper-3d shortened (data/scenarios/paper-3d-short.toml: 120 s static, 60 s legs), DVL stamps dt early."""
+    raw = dict(load_scenario("paper-3d-short").raw)
     raw["rates"] = {**raw["rates"], "dvl_time_offset_s": dt}
     raw["dvl"] = {**raw["dvl"], "noise_m_s": noise_m_s}
     return simulate(scenario_from_dict(raw), SEED)
