@@ -183,6 +183,44 @@ class DepthData:
 
 
 @dataclass
+class GnssData:
+    """GNSS fixes of the antenna (sensor_msgs/msg/NavSatFix), geodetic on WGS84, taken at the surface.
+
+    status: the message's NavSatStatus.status (-1 no fix, 0 fix, 1 SBAS, 2 GBAS/RTK); a fix with status < 0
+    or a non-finite latitude is not a fix. cov_enu_m2: the message's position_covariance (ROS: East, North,
+    Up, m^2), NaN where the message says unknown (position_covariance_type 0). b_p_antenna: the antenna in
+    base_link from /tf_static (None if the log has none).
+    """
+
+    t: np.ndarray  # (K,)
+    lat_deg: np.ndarray  # (K,)
+    lon_deg: np.ndarray  # (K,)
+    height_m: np.ndarray  # (K,) ellipsoidal height
+    cov_enu_m2: np.ndarray  # (K, 3, 3) m^2, NaN where unknown
+    status: np.ndarray  # (K,) int
+    frame_id: str = "gnss_link"
+    b_p_antenna: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass
+class AttitudeData:
+    """Attitude of base_link in map from a sensor (an IMU's or AHRS's orientation, an INS pose), already
+    turned into base_link and ENU by the reader. cov_rad2: covariance of the attitude error in body axes
+    (rad^2), NaN where unknown. source: the topic it came from, for messages."""
+
+    t: np.ndarray  # (K,)
+    n_q_b: np.ndarray  # (K, 4) [x, y, z, w], rotates base_link vectors into map (ENU)
+    cov_rad2: np.ndarray  # (K, 3, 3) rad^2
+    source: str = ""
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
+@dataclass
 class LogData:
     """Everything one log holds, as numpy arrays. truth and the true_* fields are None for real logs."""
 
@@ -198,3 +236,5 @@ class LogData:
     true_imu_bias: ImuBiases | None = None  # simulated logs
     segments: list[Segment] = field(default_factory=list)  # simulated logs: the scenario's segments
     depth: DepthData | None = None  # pressure sensor or depth topic, when the log has one
+    gnss: GnssData | None = None  # GNSS fixes (at the surface), when the log has them
+    attitude: AttitudeData | None = None  # an attitude sensor (IMU orientation, AHRS, INS), when read
