@@ -68,10 +68,24 @@ DepthTopic = Annotated[str | None, typer.Option(
     "whose z is -depth (default /depth/pressure if the log has it; 'none': no depth).")]
 
 
-def _read_options(imu_topic: str, dvl_topic: str | None, salvage: bool, repair: bool,
-                  depth_topic: str | None = None) -> dict[str, Any]:
-    options = {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
-    return options if depth_topic is None else {**options, "depth_topic": depth_topic}
+GnssTopic = Annotated[str | None, typer.Option(
+    "--gnss-topic", help="GNSS topic (sensor_msgs/msg/NavSatFix; default /gnss/fix if the log has it; 'none': no "
+    "GNSS). The first good fix gives the map origin when the log has none.")]
+AttitudeTopic = Annotated[str | None, typer.Option(
+    "--attitude-topic", help="Attitude topic for the initial attitude (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry "
+    "or PoseWithCovarianceStamped; default: the IMU topic's orientation when its covariance is valid; 'none').")]
+TruthTopic = Annotated[str | None, typer.Option(
+    "--truth-topic", help="Ground-truth odometry topic (nav_msgs/msg/Odometry; default /ground_truth/odometry).")]
+
+
+def _read_options(imu_topic: str | None, dvl_topic: str | None, salvage: bool | None, repair: bool | None,
+                  depth_topic: str | None = None, gnss_topic: str | None = None,
+                  attitude_topic: str | None = None, truth_topic: str | None = None) -> dict[str, Any]:
+    """The reading options given on the command line (the topics left out when not given)."""
+    options: dict[str, Any] = {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
+    extra = {"depth_topic": depth_topic, "gnss_topic": gnss_topic, "attitude_topic": attitude_topic,
+             "truth_topic": truth_topic}
+    return {**options, **{k: v for k, v in extra.items() if v is not None}}
 
 
 @app.callback()
@@ -103,12 +117,14 @@ def plot_log(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None,
+    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
     from gtsam_dvl.app.commands import plot_log_to_dir
 
-    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic)):
+    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
+                                                                   gnss_topic, attitude_topic, truth_topic)):
         typer.echo(str(path))
 
 
@@ -117,12 +133,14 @@ def plot_log(
 def info(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None,
+    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
     from gtsam_dvl.app.commands import describe_log
 
-    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic)))
+    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
+                                                     attitude_topic, truth_topic)))
 
 
 SMOOTH_HELP = (
@@ -149,7 +167,8 @@ def smooth(
     tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
     config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None,
+    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
     timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
     timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
                             ] = None,
@@ -162,7 +181,8 @@ def smooth(
 
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
                           show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
-                                                                  depth_topic),
+                                                                  depth_topic, gnss_topic, attitude_topic,
+                                                                  truth_topic),
                           timeline=timeline, timeline_path=timeline_npz)
     typer.echo(outcome.describe())
     if strict and outcome.status != "ok":
@@ -186,6 +206,8 @@ def evaluate(
     repair: Annotated[bool | None, typer.Option("--repair/--no-repair", help="Drop (and count) NaN, duplicate or "
                                                 "backwards messages (default: as smooth read the source log).")
                       ] = None,
+    depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None, attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
 ) -> None:
     """Errors against the truth over time, observability verdict and the segments that made it; the run's health
     as smooth recorded it, and what reading the truth log lost. Without --truth the source log is read with the
@@ -194,8 +216,9 @@ def evaluate(
     from gtsam_dvl.app.commands import evaluate_to_dir
 
     lines, written = evaluate_to_dir(result, output, truth_path=truth,
-                                     read_options={"imu_topic": imu_topic, "dvl_topic": dvl_topic,
-                                                   "salvage": salvage, "repair": repair})
+                                     read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
+                                                                depth_topic, gnss_topic, attitude_topic,
+                                                                truth_topic))
     typer.echo("\n".join(lines))
     for path in written:
         typer.echo(f"wrote {path}")

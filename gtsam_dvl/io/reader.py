@@ -21,6 +21,8 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.io.attitude import read_attitude
+from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, first_fix_origin, first_fix_time, read_gnss
 from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
@@ -199,6 +201,8 @@ def read_log(
     tf_topic: str = "/tf_static",
     depth_topic: str | None = None,
     depth_z_down: bool = False,
+    gnss_topic: str | None = None,
+    attitude_topic: str | None = None,
     salvage: bool = False,
     repair: bool = False,
     progress: Callable[[float], None] | None = None,
@@ -216,7 +220,14 @@ def read_log(
     [depth] settings) and fills depth_m with the defaults of core/earth.py at the origin's latitude (45 deg
     without one); a geometry_msgs/msg/PoseWithCovarianceStamped or nav_msgs/msg/Odometry topic gives depth
     = -z (z up, the ROS convention), or +z with depth_z_down, and its variance from the zz covariance (0 or
-    negative: unknown)."""
+    negative: unknown).
+
+    GNSS (LogData.gnss): gnss_topic None reads /gnss/fix if the log has it; "" or "none" reads none; the topic
+    must be sensor_msgs/msg/NavSatFix (io/gnss.py). When the log records no map origin, LogData.origin is the
+    first good fix (estimators/gnss.py decides which fixes are good and how they are used).
+
+    Attitude (LogData.attitude, io/attitude.py): attitude_topic None takes the IMU topic's own orientation when
+    its covariance says it is valid; "" or "none" reads none; else the named topic."""
     src = open_source(path, salvage=salvage)
     path = src.path
     if imu_topic not in src.topics:
@@ -245,6 +256,21 @@ def read_log(
         warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
     topics = [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
     topics += [depth_topic] * bool(depth_topic)
+    if gnss_topic is None:
+        gnss_topic = GNSS_TOPIC if GNSS_TOPIC in src.topics else ""
+    elif gnss_topic == "none":
+        gnss_topic = ""
+    if gnss_topic and gnss_topic not in src.topics:
+        raise _missing(src, "GNSS", gnss_topic, "--gnss-topic")
+    if gnss_topic and (gnss_type := _type(src, gnss_topic)) != NAVSATFIX_TYPE:
+        raise GtsamDvlError(f"{path}: {gnss_topic} is {gnss_type}; the GNSS topic must be {NAVSATFIX_TYPE}")
+    topics += [gnss_topic] * bool(gnss_topic)
+    if attitude_topic == "none":
+        attitude_topic = ""
+    if attitude_topic and attitude_topic not in src.topics:
+        raise _missing(src, "attitude", attitude_topic, "--attitude-topic")
+    if attitude_topic and attitude_topic not in topics:
+        topics.append(attitude_topic)
     raw = src.read(topics, progress)
 
     imu = decode(path, imu_topic, IMU_TYPE, raw[imu_topic])
@@ -255,6 +281,7 @@ def read_log(
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
     keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
+    keep_imu = keep
     imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, first_string(imu) or "imu_link")
@@ -296,6 +323,14 @@ def read_log(
         if tf_topic in src.topics and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]),
                                                        depth.frame_id)) is not None:
             depth.b_p_sensor = pose[1]
+    gnss = None
+    if gnss_topic:
+        gnss = read_gnss(src, gnss_topic, raw[gnss_topic], t0, repair, warnings, dropped)
+        if tf_topic in src.topics and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]),
+                                                       gnss.frame_id)) is not None:
+            gnss.b_p_antenna = pose[1]
+    attitude = read_attitude(src, attitude_topic, imu_topic, raw, imu[keep_imu], t0, mounting, repair, warnings,
+                             dropped)
     gaps: dict[str, dict[str, Any]] = {}
     for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:
@@ -308,8 +343,14 @@ def read_log(
     losses["messages_lost"] = _messages_lost(losses)
     meta["reader_warnings"] = warnings
     meta["reader_losses"] = losses
-    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed_fields(meta, str(path)),
-                   depth=depth)
+    typed = typed_fields(meta, str(path))
+    if typed.get("origin") is None and gnss is not None:
+        typed["origin"] = first_fix_origin(gnss)
+        if typed["origin"] is not None:
+            warnings.append(f"map origin from the first good GNSS fix on {gnss_topic} (t = "
+                            f"{first_fix_time(gnss):.1f} s)")
+    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed, depth=depth, gnss=gnss,
+                   attitude=attitude)
 
 
 def _depth_data(src: Source, topic: str, bodies: Any, t0: int, repair: bool, warnings: list[str],

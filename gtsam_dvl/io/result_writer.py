@@ -125,9 +125,11 @@ def health_record(health: dict[str, Any], losses: dict[str, Any]) -> dict[str, s
 def source_record(log: LogData, result_path: Path | str, read_options: dict[str, Any] | None) -> dict[str, str]:
     """Where the result came from, for the metadata record "gtsam_dvl_result": the source log's absolute path,
     its path relative to the folder of the result file (so that the two can move together) and the reading
-    options (JSON: imu_topic, dvl_topic, salvage, repair)."""
-    options = {"imu_topic": "/imu/data_raw", "dvl_topic": None, "salvage": False, "repair": False}
-    options.update({k: v for k, v in (read_options or {}).items() if k in options})
+    options (JSON: imu_topic, dvl_topic, salvage, repair and, when given, depth_topic, gnss_topic, attitude_topic
+    and truth_topic)."""
+    options: dict[str, Any] = {"imu_topic": "/imu/data_raw", "dvl_topic": None, "salvage": False, "repair": False}
+    topics = ("depth_topic", "gnss_topic", "attitude_topic", "truth_topic")
+    options.update({k: v for k, v in (read_options or {}).items() if k in options or (k in topics and v is not None)})
     if not log.source:
         return {"source_log": "", "source_log_relative": "", "read_options": to_json(options)}
     source = Path(log.source).resolve()

@@ -1,8 +1,10 @@
 """Write a LogData as a ROS 2 MCAP log exactly as docs/conventions.md ("Logs: ROS 2 MCAP") lays it out.
 
-Topics: /tf_static, /imu/data_raw, /dvl/twist, /dvl/data, /depth/pressure (when the log has depth) and, for
+Topics: /tf_static, /imu/data_raw, /dvl/twist, /dvl/data, /depth/pressure (when the log has depth), /gnss/fix
+(when it has fixes) and, for
 simulated logs, /ground_truth/odometry. Choices the conventions leave open:
 
+* /gnss/fix (sensor_msgs/msg/NavSatFix, frame gnss_link) holds GnssData (io/gnss.py), when the log has fixes.
 * /depth/pressure (sensor_msgs/msg/FluidPressure, frame pressure_link) holds DepthData.pressure_pa and its
   variance (0 = unknown); its lever arm goes into /tf_static as base_link -> pressure_link (identity
   rotation) when DepthData.b_p_sensor is set.
@@ -39,6 +41,7 @@ from gtsam_dvl import __version__
 from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import DvlData, LogData
+from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages
 from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap.writer import McapLogWriter
 from gtsam_dvl.io.ros2 import cdr
@@ -189,7 +192,9 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
                 ("base_link", log.imu.frame_id, mnt.b_R_imu, mnt.b_p_imu),
                 ("base_link", log.dvl.frame_id, mnt.b_R_d0, mnt.b_p_dvl),
             ] + ([] if log.depth is None or log.depth.b_p_sensor is None else
-                 [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)]),
+                 [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)])
+              + ([] if log.gnss is None or log.gnss.b_p_antenna is None else
+                 [("base_link", log.gnss.frame_id, np.eye(3), log.gnss.b_p_antenna)]),
         )
         gyro_var, accel_var = _imu_variances(meta, log.imu.t)
         w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var)
@@ -205,6 +210,9 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
 
         if log.depth is not None:
             w.add_structured("/depth/pressure", "sensor_msgs/msg/FluidPressure", _pressure_messages(log, w))
+
+        if log.gnss is not None and len(log.gnss):
+            w.add_structured(GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages(log.gnss, w.stamps_ns(log.gnss.t)))
 
         if log.truth is not None:
             tr = log.truth

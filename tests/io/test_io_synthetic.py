@@ -101,7 +101,8 @@ def test_layouts_match_an_independent_cdr_encoder() -> None:
         for f in spec:
             if f.code == "str":
                 continue
-            v = (rng.integers(0, 200, f.count) if f.code in ("u1", "i4", "u4") else
+            v = (rng.integers(0, 200, f.count) if f.code in ("u1", "i4", "u4", "u2") else
+                 rng.integers(-1, 3, f.count) if f.code == "i1" else
                  rng.random(f.count) > 0.5 if f.code == "?" else rng.normal(size=f.count))
             arr[f.name] = v if f.count > 1 else v[0]
             values[f.name] = arr[f.name][0]
@@ -148,6 +149,11 @@ def _nested(type_name: str, v: dict, s: dict) -> dict:
                        "covariance": np.asarray(v["pose_covariance"]).tolist()}
         out["twist"] = {"twist": {"linear": vec(v["linear"]), "angular": vec(v["angular"])},
                         "covariance": np.asarray(v["twist_covariance"]).tolist()}
+    elif type_name == "sensor_msgs/msg/NavSatFix":
+        out["status"] = {"status": int(v["status"]), "service": int(v["service"])}
+        out.update(latitude=float(v["latitude"]), longitude=float(v["longitude"]), altitude=float(v["altitude"]),
+                   position_covariance=np.asarray(v["position_covariance"]).tolist(),
+                   position_covariance_type=int(v["position_covariance_type"]))
     elif type_name == "marine_acoustic_msgs/msg/Dvl":
         out.update({k: (np.asarray(v[k]).tolist() if np.ndim(v[k]) else np.asarray(v[k]).item())
                     for k in v if k not in ("sec", "nanosec", "velocity", "beam_unit_vec")})

@@ -56,6 +56,15 @@ POSE_COV_STAMPED: Spec = HEADER + (
 VECTOR3_STAMPED: Spec = HEADER + (_f("vector", "f8", 3),)
 TEMPERATURE: Spec = HEADER + (_f("temperature", "f8"), _f("variance", "f8"))
 FLUID_PRESSURE: Spec = HEADER + (_f("fluid_pressure", "f8"), _f("variance", "f8"))
+NAVSATFIX: Spec = HEADER + (
+    _f("status", "i1"),
+    _f("service", "u2"),
+    _f("latitude", "f8"),
+    _f("longitude", "f8"),
+    _f("altitude", "f8"),
+    _f("position_covariance", "f8", 9),
+    _f("position_covariance_type", "u1"),
+)
 ODOMETRY: Spec = HEADER + (
     _f("child_frame_id", "str"),
     _f("position", "f8", 3),
@@ -95,6 +104,7 @@ SPECS: dict[str, Spec] = {
     "sensor_msgs/msg/Temperature": TEMPERATURE,
     "sensor_msgs/msg/FluidPressure": FLUID_PRESSURE,
     "nav_msgs/msg/Odometry": ODOMETRY,
+    "sensor_msgs/msg/NavSatFix": NAVSATFIX,
     "marine_acoustic_msgs/msg/Dvl": DVL,
 }
 
