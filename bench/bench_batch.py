@@ -37,7 +37,7 @@ def main() -> None:
         log = read_log(path)
         t_read = time.perf_counter() - t0
 
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     t0 = time.perf_counter()
     builder = LogGraph(log, cfg)
     t_pre = time.perf_counter() - t0

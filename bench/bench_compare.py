@@ -32,7 +32,7 @@ def main() -> None:
         log = simulate(load_scenario(args.scenario), seed)
         for mode in modes:
             t0 = time.perf_counter()
-            res = run_estimator(log, mode, EstimatorConfig(), timeline=False)
+            res = run_estimator(log, mode, EstimatorConfig.paper(), timeline=False)
             wall = time.perf_counter() - t0
             s = iodvlc_summary(res, log) if mode == "io-dvlc" else summary(res, log)
             s["wall"] = wall

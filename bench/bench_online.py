@@ -39,7 +39,7 @@ def run(name: str, seed: int, mode: str) -> dict:
     t0 = time.perf_counter()
     log = simulate(load_scenario(name), seed)
     sim_s = time.perf_counter() - t0
-    config = EstimatorConfig()
+    config = EstimatorConfig.paper()
     t0 = time.perf_counter()
     est = OnlineEstimator.for_log(log, config, OnlineConfig(mode=mode))
     feed_log(est, log)

@@ -185,7 +185,7 @@ def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
 
 
 def evaluate(log: LogData, mode: str) -> dict[str, object]:
-    res = MODES[mode](log, EstimatorConfig())
+    res = MODES[mode](log, EstimatorConfig.paper())
     health = assess_health(res, log)  # type: ignore[arg-type]
     s = summary(res, log)  # type: ignore[arg-type]
     e = s.get("errors") or {}

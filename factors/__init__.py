@@ -6,16 +6,22 @@ Both factors implement, on the keys [pose n_T_b, velocity n_v, scale k, misalign
 
 the 3-D velocity y in dvl_link (make_dvl_velocity_factor) or one beam y_j = d_u_j . y
 (make_dvl_beam_factor). make_depth_factor puts a depth sensor's measurement on a pose's vertical position
-(factors/depth.py). The pure error functions serve tests and other callers.
+(factors/depth.py). The pure error functions serve tests and other callers. The *_lever variants take the
+lever arm b_l (m, base_link) as one more variable, a 3-vector key after the others ([dvl] estimate_lever_arm).
 """
 
 from .depth import depth_error, make_depth_factor
 from .dvl_beam import dvl_beam_error, make_dvl_beam_factor
+from .dvl_beam_lever import dvl_beam_lever_error, make_dvl_beam_lever_factor
 from .dvl_velocity import (
     dvl_velocity_error,
+    dvl_velocity_lever_error,
     dvl_velocity_offset_error,
+    dvl_velocity_offset_lever_error,
     make_dvl_velocity_factor,
+    make_dvl_velocity_lever_factor,
     make_dvl_velocity_offset_factor,
+    make_dvl_velocity_offset_lever_factor,
 )
 from .imu_earth import EarthImuFactor, GravityModel, make_earth_imu_factor
 
@@ -26,9 +32,15 @@ __all__ = [
     "depth_error",
     "make_depth_factor",
     "dvl_beam_error",
+    "dvl_beam_lever_error",
     "dvl_velocity_error",
+    "dvl_velocity_lever_error",
     "dvl_velocity_offset_error",
+    "dvl_velocity_offset_lever_error",
     "make_dvl_beam_factor",
+    "make_dvl_beam_lever_factor",
     "make_dvl_velocity_factor",
+    "make_dvl_velocity_lever_factor",
     "make_dvl_velocity_offset_factor",
+    "make_dvl_velocity_offset_lever_factor",
 ]

@@ -66,6 +66,33 @@ def predict_dvl_velocity(
     return k * d_v
 
 
+def predict_dvl_velocity_lever(
+    n_R_b: np.ndarray,
+    n_v: np.ndarray,
+    k: float,
+    d_R_b: np.ndarray,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
+    """predict_dvl_velocity with the lever arm b_l (m, base_link) a variable: h = k d_R_b (n_R_b^T n_v +
+    b_omega x b_l), b_omega the body rate relative to map (rad/s, base_link, a known input). H[0..3] as in
+    predict_dvl_velocity and H[4] = dh/d(b_l) 3x3:
+        b_l + dl:  b_omega x (b_l + dl) = b_omega x b_l + [b_omega]_x dl  =>  k d_R_b [b_omega]_x
+    (exact: h is linear in b_l).
+    """
+    h = predict_dvl_velocity(n_R_b, n_v, k, d_R_b, np.cross(b_omega, b_l), H)
+    if H is not None:
+        H[4] = lever_jacobian(k, d_R_b, b_omega)
+    return h
+
+
+def lever_jacobian(k: float, d_R_b: np.ndarray, b_omega: np.ndarray) -> np.ndarray:
+    """d/d(b_l) of k d_R_b (b_omega x b_l): k d_R_b [b_omega]_x, 3x3 (the lever arm's Jacobian of every DVL
+    model here, whatever else the model adds)."""
+    return np.asarray(k * d_R_b @ _skew(*b_omega.tolist()))
+
+
 def fill_slots(H: JacobianSlots, computed: list[np.ndarray]) -> None:
     """Copy Jacobians into H: in place where a slot holds a preallocated array of the right shape
     (the GTSAM OptionalJacobian habit), by assignment otherwise (None or an empty slot)."""

@@ -5,6 +5,10 @@
 d_y in dvl_link (m/s); pose n_T_b (base_link in map), velocity n_v (map), scale k (1-vector), misalignment
 b_R_d (dvl_link -> base_link) are the variables; b_omega (body rate relative to map, rad/s, base_link) and
 b_l (lever arm IMU -> DVL, m, base_link) are known inputs. Error = h(x) - d_y.
+
+The *_lever variants take the lever arm b_l as a variable too (a 3-vector key after the others, [dvl]
+estimate_lever_arm): h is linear in b_l, de/d(b_l) = k d_R_b [b_omega]_x exactly, so a lever arm is
+observable only from rotation, and a lever arm along the axis of every rotation of a log is not.
 """
 
 from __future__ import annotations
@@ -21,8 +25,10 @@ from ._common import (
     as_vector3,
     check_noise,
     fill_slots,
+    lever_jacobian,
     lever_velocity,
     predict_dvl_velocity,
+    predict_dvl_velocity_lever,
 )
 
 
@@ -92,6 +98,67 @@ def make_dvl_velocity_factor(
         return h - d_y
 
     return gtsam.CustomFactor(noise, [pose_key, vel_key, scale_key, b_R_d_key], error_func)
+
+
+def dvl_velocity_lever_error(
+    n_T_b: gtsam.Pose3,
+    n_v: np.ndarray,
+    k: float | np.ndarray,
+    b_R_d: gtsam.Rot3,
+    b_l: np.ndarray,
+    d_y: np.ndarray,
+    b_omega: np.ndarray,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
+    """dvl_velocity_error with the lever arm b_l (m, base_link) a variable: the same e, and with H a list of 5
+    slots the 4 Jacobians of dvl_velocity_error plus de/d(b_l) = k b_R_d^T [b_omega]_x, 3x3."""
+    computed: list[np.ndarray] | None = None if H is None else [np.empty(0)] * 5
+    h = predict_dvl_velocity_lever(
+        n_T_b.rotation().matrix(),
+        np.asarray(n_v, dtype=float),
+        as_scale(k),
+        b_R_d.matrix().T,
+        np.asarray(b_omega, dtype=float),
+        np.asarray(b_l, dtype=float).reshape(3),
+        computed,
+    )
+    if H is not None and computed is not None:
+        fill_slots(H, computed)
+    return h - np.asarray(d_y, dtype=float)
+
+
+def make_dvl_velocity_lever_factor(
+    noise: gtsam.noiseModel.Base,
+    pose_key: int,
+    vel_key: int,
+    scale_key: int,
+    b_R_d_key: int,
+    lever_key: int,
+    d_y: Vector3Like,
+    b_omega: Vector3Like,
+) -> gtsam.CustomFactor:
+    """DvlVelocityLeverFactor on [pose, velocity, scale, b_R_d, lever arm b_l (3-vector, m, base_link)]:
+    d_y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l), as make_dvl_velocity_factor with b_l estimated.
+    Raises ValueError on a non-finite or wrongly shaped d_y or b_omega, or a noise model of the wrong
+    dimension."""
+    check_noise(noise, 3)
+    d_y = as_vector3("d_y", d_y)
+    b_om = as_vector3("b_omega", b_omega)
+
+    def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
+        pose_k, vel_k, scale_k, b_R_d_k, lever_k = this.keys()
+        h = predict_dvl_velocity_lever(
+            values.atPose3(pose_k).rotation().matrix(),
+            values.atPoint3(vel_k),
+            values.atVector(scale_k).item(),
+            values.atRot3(b_R_d_k).matrix().T,
+            b_om,
+            values.atPoint3(lever_k),
+            H,
+        )
+        return h - d_y
+
+    return gtsam.CustomFactor(noise, [pose_key, vel_key, scale_key, b_R_d_key, lever_key], error_func)
 
 
 def _offset_prediction(n_R_b: np.ndarray, n_v: np.ndarray, k: float, d_R_b: np.ndarray, dt: float,
@@ -204,3 +271,81 @@ def make_dvl_velocity_offset_factor(
         return h - d_y
 
     return gtsam.CustomFactor(noise, [pose_key, vel_key, scale_key, b_R_d_key, offset_key], error_func)
+
+
+def _offset_lever_prediction(n_R_b: np.ndarray, n_v: np.ndarray, k: float, d_R_b: np.ndarray, dt: float,
+                             b_omega: np.ndarray, b_l: np.ndarray, b_a: np.ndarray, n_g: np.ndarray,
+                             G: np.ndarray, H: JacobianSlots | None) -> np.ndarray:
+    """_offset_prediction with the lever arm a variable: the lever term b_omega x b_l does not depend on dt
+    (first order), so H[0..4] are _offset_prediction's and H[5] = de/d(b_l) = k d_R_b [b_omega]_x."""
+    h = _offset_prediction(n_R_b, n_v, k, d_R_b, dt, b_omega, np.cross(b_omega, b_l), b_a, n_g, G, H)
+    if H is not None:
+        H[5] = lever_jacobian(k, d_R_b, b_omega)
+    return h
+
+
+def dvl_velocity_offset_lever_error(
+    n_T_b: gtsam.Pose3,
+    n_v: np.ndarray,
+    k: float | np.ndarray,
+    b_R_d: gtsam.Rot3,
+    dt: float | np.ndarray,
+    b_l: np.ndarray,
+    d_y: np.ndarray,
+    b_omega: np.ndarray,
+    b_a: np.ndarray,
+    n_g: np.ndarray,
+    G: np.ndarray | None = None,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
+    """dvl_velocity_offset_error with the lever arm b_l (m, base_link) a variable. H: 6 slots, those of
+    dvl_velocity_offset_error and de/d(b_l) 3x3."""
+    computed: list[np.ndarray] | None = None if H is None else [np.empty(0)] * 6
+    h = _offset_lever_prediction(n_T_b.rotation().matrix(), np.asarray(n_v, dtype=float), as_scale(k),
+                                 b_R_d.matrix().T, as_scale(dt), np.asarray(b_omega, dtype=float),
+                                 np.asarray(b_l, dtype=float).reshape(3), np.asarray(b_a, dtype=float),
+                                 np.asarray(n_g, dtype=float), np.eye(3) if G is None else np.asarray(G, dtype=float),
+                                 computed)
+    if H is not None and computed is not None:
+        fill_slots(H, computed)
+    return h - np.asarray(d_y, dtype=float)
+
+
+def make_dvl_velocity_offset_lever_factor(
+    noise: gtsam.noiseModel.Base,
+    pose_key: int,
+    vel_key: int,
+    scale_key: int,
+    b_R_d_key: int,
+    offset_key: int,
+    lever_key: int,
+    d_y: Vector3Like,
+    b_omega: Vector3Like,
+    b_a: Vector3Like,
+    n_g: Vector3Like,
+    G: np.ndarray | None = None,
+) -> gtsam.CustomFactor:
+    """DvlVelocityOffsetLeverFactor on [pose, velocity, scale, b_R_d, time offset (1-vector, s), lever arm
+    (3-vector, m, base_link)]: make_dvl_velocity_offset_factor with b_l estimated."""
+    check_noise(noise, 3)
+    d_y = as_vector3("d_y", d_y)
+    b_om = as_vector3("b_omega", b_omega)
+    b_a_c = as_vector3("b_a", b_a)
+    n_g_c = as_vector3("n_g", n_g)
+    G_c = np.eye(3) if G is None else np.array(G, dtype=float)
+    if G_c.shape != (3, 3) or not np.all(np.isfinite(G_c)):
+        raise ValueError(f"G must be a finite 3x3 matrix, got {G_c}")
+
+    def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
+        pose_k, vel_k, scale_k, b_R_d_k, dt_k, lever_k = this.keys()
+        h = _offset_lever_prediction(
+            values.atPose3(pose_k).rotation().matrix(),
+            values.atPoint3(vel_k),
+            values.atVector(scale_k).item(),
+            values.atRot3(b_R_d_k).matrix().T,
+            values.atVector(dt_k).item(),
+            b_om, values.atPoint3(lever_k), b_a_c, n_g_c, G_c, H,
+        )
+        return h - d_y
+
+    return gtsam.CustomFactor(noise, [pose_key, vel_key, scale_key, b_R_d_key, offset_key, lever_key], error_func)

@@ -143,6 +143,10 @@ def info(
                                                      attitude_topic, truth_topic)))
 
 
+CONFIG_HELP = ("Estimator configuration: a TOML file, a result's config.json, or a named configuration ('default': "
+               "a real DVL, scale prior 1 +- 1 %; 'paper': Pan & Wu's priors, scale 0.8 +- 0.5). Default: the one "
+               "the log's (or scenario's) estimator_config names, else 'default'.")
+
 SMOOTH_HELP = (
     "Estimate trajectory, IMU biases, DVL scale and misalignment from a log.\n\n"
     "After every run a self-diagnosis (solver convergence, chi^2 per degree of freedom, DVL residuals per 30 s "
@@ -165,7 +169,7 @@ def smooth(
                     ] = "batch",
     summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
     tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
-    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
@@ -229,7 +233,7 @@ def evaluate(
 def plan(
     scenario: Annotated[str, typer.Argument(help="Built-in name (paper-3d, paper-2d, ...) or a scenario TOML file.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")],
-    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration TOML.")] = None,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
 ) -> None:
     """Will this mission calibrate the DVL, and when? Covariance analysis of a scenario (no noise)."""

@@ -220,10 +220,12 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     check_outputs({"the input log": Path(log_path), "the configuration": config_path},
                   {"-o": output, "--summary": summary_path, "--tum": tum_path if mode != "io-dvlc" else None,
                    "--timeline-npz": timeline_path, "the timeline file next to -o": default_timeline})
-    config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
+    config = EstimatorConfig.load(config_path) if config_path else None
     t_read = time.perf_counter()
     log = load_log(log_path, **(read_options or {}))
     read_s = time.perf_counter() - t_read
+    if config is None:  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
+        config = EstimatorConfig.for_log(log.metadata)
     with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
         result = run_estimator(log, mode, config, progress=progress, timeline=timeline)
     outputs = OutputSet()
@@ -279,8 +281,8 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
     from gtsam_dvl.io.result_writer import timeline_npz_bytes
     from gtsam_dvl.sim.scenario import load_scenario
 
-    config = EstimatorConfig.from_toml(config_path) if config_path else EstimatorConfig()
     scen = load_scenario(scenario)
+    config = EstimatorConfig.load(config_path) if config_path else EstimatorConfig.named(scen.estimator_config)
     with progress_bar(f"planning {scen.name}", enabled=show_progress) as progress:
         plan = plan_mission(scen, config, progress=progress)
     out_dir = Path(out_dir)

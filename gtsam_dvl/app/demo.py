@@ -37,8 +37,8 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     from gtsam_dvl.sim import simulate
     from gtsam_dvl.sim.scenario import load_scenario
 
-    config = EstimatorConfig()
     scen = load_scenario(name)
+    config = EstimatorConfig.named(scen.estimator_config)  # the paper's runs: the paper's priors
     log = simulate(scen, seed)
     log_path = run_dir / f"{name}.mcap"
     write_log(log_path, log)

@@ -22,7 +22,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     """Estimate trajectory, IMU biases, DVL scale factor and misalignment from a whole log. timeline: also
     the filtering sigma timeline over the same linearisation (how the log's information accrued; about
     1 s more on the paper's runs). estimator: the name the result carries (the planner's is "plan")."""
-    config = (config or EstimatorConfig()).validate()
+    config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     builder = LogGraph(log, config)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from gtsam_dvl.core.config import NAMED_CONFIGS
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import Segment
@@ -172,6 +173,9 @@ class Scenario:
     source: str = "<dict>"
     t0_ns: int = DEFAULT_T0_S * 1_000_000_000
     depth: DepthSpec | None = None  # the [depth] table, if the scenario has one
+    # the named estimator configuration (core/config.py NAMED_CONFIGS) this scenario's runs are meant for:
+    # smooth and plan use it when no configuration is given (the paper's runs: "paper")
+    estimator_config: str = "default"
 
     @property
     def duration_s(self) -> float:
@@ -230,8 +234,11 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r = Reader(raw, source)
     r.check_keys(
         "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments",
-             "depth"]
+             "depth", "estimator_config"]
     )
+    estimator_config = raw.get("estimator_config", "default")
+    r.require(isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS, "estimator_config",
+              f"must be the name of a built-in configuration ({', '.join(NAMED_CONFIGS)})")
     origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
     r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
     rates = Rates(**r.table("rates", _defaults(Rates)))
@@ -286,6 +293,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         source=source,
         t0_ns=t0_ns,
         depth=depth,
+        estimator_config=estimator_config,
     )
 
 

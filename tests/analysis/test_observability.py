@@ -47,7 +47,7 @@ def test_paper_3d_thrust_axis_determined() -> None:
 
 def test_direction_analysis_on_a_hand_made_covariance() -> None:
     """Posterior = prior everywhere except a determined scale and a weak combination of roll and gyro z."""
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     p0 = prior_sigmas(cfg)
     base = _result("paper-3d")
     # build the covariance in user units, then map back to the tangent units the result stores

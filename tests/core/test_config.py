@@ -280,7 +280,7 @@ def test_ekf_section_reaches_the_filter() -> None:
     counts = [r.info["counters"]["dvl_slow"] for r in (never_slow, base, always_slow)]
     print("slow pings (never, default, always):", counts, "of", base.info["counters"]["dvl_updates"])
     assert counts[0] < counts[1] < counts[2] == always_slow.info["counters"]["dvl_updates"]
-    assert always_slow.scale == 0.8  # never updated from its prior
+    assert always_slow.scale == cfg.priors.scale_initial  # never updated from its prior
     assert always_slow.config["ekf"] == {"min_calibration_speed_m_s": 10.0, "calibration_speed_sigmas": 0.0,
                                          "gate_probability": 0.99999, "gate_reopen_after": 10}
     # the keyword still works, overrides the config and is written to the effective configuration
@@ -337,3 +337,44 @@ def test_iodvlc_section_reaches_the_observer(tmp_path: Path) -> None:
     assert noisy.final_scale_sigma > 2 * base.final_scale_sigma
     cfg.iodvlc.min_segment_s = 1000.0  # longer than the log: no segment
     assert len(base.segments) >= 1 and run_iodvlc(log, cfg).segments == []
+
+
+# ----- named configurations (issue 11 item 5) -------------------------------------------------------------------
+def test_defaults_are_a_real_dvls_priors_and_paper_is_named() -> None:
+    """The defaults: scale 1 +- 1 %, misalignment 1 deg per axis; "paper": 0.8 +- 0.5, the rest identical."""
+    cfg, paper = EstimatorConfig(), EstimatorConfig.paper()
+    assert (cfg.priors.scale_initial, cfg.priors.scale_sigma) == (1.0, 0.01)
+    assert cfg.priors.misalignment_sigma_deg == (1.0, 1.0, 1.0)
+    assert (paper.priors.scale_initial, paper.priors.scale_sigma) == (0.8, 0.5)
+    assert dataclasses.replace(paper, priors=cfg.priors) == cfg
+    assert EstimatorConfig.named("default") == cfg
+
+
+def test_unknown_named_configuration_is_one_line() -> None:
+    with pytest.raises(GtsamDvlError, match=r"no configuration named 'papr' \(named configurations: default, paper\)"):
+        EstimatorConfig.named("papr")
+    with pytest.raises(GtsamDvlError, match="not a named configuration"):
+        EstimatorConfig.load("papr")
+
+
+def test_preset_key_starts_from_a_named_configuration(tmp_path: Path) -> None:
+    toml = tmp_path / "c.toml"
+    toml.write_text('preset = "paper"\n[priors]\nscale_sigma = 0.2\n')
+    cfg = EstimatorConfig.load(toml)
+    assert (cfg.priors.scale_initial, cfg.priors.scale_sigma) == (0.8, 0.2)
+    assert EstimatorConfig.load("paper") == EstimatorConfig.paper()
+    toml.write_text('preset = "nope"\n')
+    with pytest.raises(GtsamDvlError, match="preset must be the name of a named configuration"):
+        EstimatorConfig.load(toml)
+
+
+def test_a_log_names_its_configuration() -> None:
+    """Simulated logs of the paper's scenarios recommend "paper"; other logs get the defaults."""
+    from gtsam_dvl.sim.scenario import load_scenario
+
+    assert load_scenario("paper-3d").estimator_config == "paper"
+    assert load_scenario("paper-2d").estimator_config == "paper"
+    assert load_scenario("straight-20km").estimator_config == "default"
+    assert EstimatorConfig.for_log({"scenario": {"estimator_config": "paper"}}) == EstimatorConfig.paper()
+    assert EstimatorConfig.for_log({}) == EstimatorConfig()
+    assert EstimatorConfig.for_log({"scenario": "not a table"}) == EstimatorConfig()

@@ -26,7 +26,7 @@ def _log(name: str, seed: int, white_noise: bool = True) -> LogData:
 
 @functools.cache
 def _run(name: str, seed: int, white_noise: bool = True, weak_priors: bool = False) -> dict:
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     if weak_priors:  # priors too weak to pull: 30 deg, scale 10, biases 1000x the specification
         cfg.priors.misalignment_sigma_deg = (30.0, 30.0, 30.0)
         cfg.priors.scale_sigma = 10.0
@@ -118,7 +118,7 @@ def test_noisy_paper_2d_thrust_axis_unobservable(seed: int) -> None:
     s2 = _run("paper-2d", seed)
     s3 = _run("paper-3d", seed)
     _print(f"paper-2d seed {seed}", s2)
-    prior = EstimatorConfig().priors.misalignment_sigma_deg[0]
+    prior = EstimatorConfig.paper().priors.misalignment_sigma_deg[0]
     roll_sig, pitch_sig, yaw_sig = s2["misalignment_deg"]["sigma"]
     print(f"2-D roll sigma / prior = {roll_sig / prior:.3f}")
     assert roll_sig >= 0.9 * prior

@@ -39,10 +39,10 @@ def test_random_walk_bias_model() -> None:
     """Bias as a random walk (a state per epoch): the truth is a random constant, so the estimate must
     still land within 3 sigma, with sigmas no smaller than the random-constant model's."""
     log = _paper3d()
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.imu.bias_model = "random_walk"
     rw = summary(smooth_batch(log, cfg), log)
-    const = summary(smooth_batch(log, EstimatorConfig()), log)
+    const = summary(smooth_batch(log, EstimatorConfig.paper()), log)
     _assert_within_3_sigma(rw)
     assert np.all(np.array(rw["accel_bias_ug"]["sigma"]) >= 0.99 * np.array(const["accel_bias_ug"]["sigma"]))
     assert rw["scale"]["sigma"] < 1500e-6
@@ -69,10 +69,10 @@ def _cut(log: LogData, t_start: float) -> LogData:
 def test_log_without_static_start_needs_and_uses_a_configured_attitude() -> None:
     log = _cut(_paper3d(), 595.0)
     with pytest.raises(GtsamDvlError, match="initial_attitude_deg"):
-        smooth_batch(log, EstimatorConfig())
+        smooth_batch(log, EstimatorConfig.paper())
     assert log.truth is not None
     rpy_true = matrix_to_rpy_deg(quat_xyzw_to_matrix(log.truth.n_q_b[0]))
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.alignment.initial_attitude_deg = tuple(rpy_true + np.array([0.02, -0.02, 0.5]))  # a compass-grade guess
     s = summary(smooth_batch(log, cfg), log)
     print("initial attitude given, no static start:", np.round(rpy_true, 3))
@@ -94,7 +94,7 @@ def test_beam_factors_with_beam_dropouts() -> None:
     good = log.dvl.beams.valid.sum(axis=1)
     print("pings with 4/3/2/1/0 valid beams:", [int((good == k).sum()) for k in (4, 3, 2, 1, 0)])
     assert (good < 3).sum() > 50  # many pings without a 3-D velocity
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.dvl.use_beams = True
     cfg.dvl.beam_noise_m_s = 0.02
     s = summary(smooth_batch(log, cfg), log)
@@ -110,5 +110,5 @@ def test_dvl_mounted_upside_down_with_lever_arm() -> None:
     raw["dvl"]["face_axis"] = [0.0, 0.0, 1.0]
     log = simulate(scenario_from_dict(raw, "paper-3d-flipped"), 6)
     print("b_R_d0 diag:", np.round(np.diag(log.mounting.b_R_d0), 3), "lever arm:", log.mounting.b_l)
-    s = summary(smooth_batch(log, EstimatorConfig()), log)
+    s = summary(smooth_batch(log, EstimatorConfig.paper()), log)
     _assert_within_3_sigma(s)

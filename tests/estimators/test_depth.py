@@ -43,7 +43,7 @@ def test_depth_bounds_vertical_position_and_improves_pitch_misalignment(seed: in
     log = _log(seed)
     out = {}
     for use in (False, True):
-        cfg = EstimatorConfig()
+        cfg = EstimatorConfig.paper()
         cfg.depth.use = use
         res = smooth_batch(log, cfg)
         err, sig = _vertical(res, log)
@@ -77,7 +77,7 @@ def test_noise_free_depth_is_exact() -> None:
     raw["segments"] = raw["segments"][:4]
     raw["depth"] = {"rate_hz": 2.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]}
     log = simulate(scenario_from_dict(raw), 1, white_noise=False)
-    res = smooth_batch(log, EstimatorConfig())
+    res = smooth_batch(log, EstimatorConfig.paper())
     err, _ = _vertical(res, log)
     print(f"\nnoise-free: max |vertical error| {np.max(np.abs(err)) * 1e3:.2f} mm; {res.info['counters']}")
     assert np.max(np.abs(err)) < 3e-3
@@ -85,7 +85,7 @@ def test_noise_free_depth_is_exact() -> None:
 
 
 def test_samples_far_from_states_are_not_used() -> None:
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.depth.max_time_to_state_s = 0.2
     res = smooth_batch(_log(2, rate_hz=2.0), cfg)
     c = res.info["counters"]
@@ -111,5 +111,5 @@ def test_online_and_ekf_count_depth_as_ignored() -> None:
 
     log = _log(2, segments=2)  # 0-630 s
     assert log.depth is not None
-    for res in (run_ekf(log, EstimatorConfig()), smooth_online(log, EstimatorConfig())):
+    for res in (run_ekf(log, EstimatorConfig.paper()), smooth_online(log, EstimatorConfig.paper())):
         assert res.info["counters"]["depth_ignored"] == len(log.depth)

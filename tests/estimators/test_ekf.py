@@ -178,7 +178,7 @@ def test_paper_3d_convergence_as_figures_6_and_7(seed: int) -> None:
     tl = _ekf(seed)[0].timeline
     assert tl is not None
     k_true = log.true_calibration.scale  # type: ignore[union-attr]
-    prior = EstimatorConfig().priors
+    prior = EstimatorConfig.paper().priors
     k_err = np.abs(tl.scale / k_true - 1.0)
 
     def at(t: float) -> int:
@@ -249,7 +249,7 @@ def test_beams_robust_random_walk_and_flat_earth_options() -> None:
     3-D velocity on 0-800 s of the noise-free log; the flat Earth model runs."""
     log = _truncated(_log(SEEDS[0], white_noise=False), 800.0)
     base = run_ekf(log)
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.dvl.use_beams = True
     cfg.dvl.robust = "huber"
     cfg.imu.bias_model = "random_walk"
@@ -265,7 +265,7 @@ def test_beams_robust_random_walk_and_flat_earth_options() -> None:
     assert dropped.info["counters"]["dvl_updates"] == base.info["counters"]["dvl_updates"] - 59
     assert dropped.info["counters"]["states_without_ping"] == 59 and len(dropped.t) == len(base.t)
     assert abs(dropped.scale - base.scale) < 3 * dropped.scale_sigma
-    flat_cfg = EstimatorConfig()
+    flat_cfg = EstimatorConfig.paper()
     flat_cfg.solver.earth_model = "flat"
     flat_cfg.alignment.initial_attitude_deg = (3.0, 0.0, 10.0)
     flat = run_ekf(log, flat_cfg)

@@ -91,7 +91,7 @@ def test_imu_gap_in_a_turn_is_crossed_inside_its_sigmas(paper3d: LogData, gap_s:
     """An IMU outage in the first turn of the square (780 s: 3.3 deg/s peak, body rolled 15 deg): counted, and
     the calibration and final position inside 3 sigma (before: scale 0.31 +- 0.0003, 1.2 km off)."""
     log = _without_imu(paper3d, 780.0, 780.0 + gap_s)
-    res = RUNS[mode](log, EstimatorConfig())
+    res = RUNS[mode](log, EstimatorConfig.paper())
     cal, pos = _worst_nsigma(res, log)
     print(f"{mode}, {gap_s:.0f} s IMU gap: calibration {cal:.2f} sigma, final position {pos:.2f} sigma, "
           f"gaps {res.info['imu_gaps']}")
@@ -106,7 +106,7 @@ def test_long_dvl_dropout_keeps_honest_sigmas(paper3d: LogData, mode: str) -> No
     d = paper3d.dvl
     lost = (d.t > 900.0) & (d.t < 1500.0)
     log = dataclasses.replace(paper3d, dvl=dataclasses.replace(d, valid=d.valid & ~lost))
-    res = RUNS[mode](log, EstimatorConfig())
+    res = RUNS[mode](log, EstimatorConfig.paper())
     cal, pos = _worst_nsigma(res, log)
     print(f"{mode}, 600 s DVL dropout: calibration {cal:.2f} sigma, final position {pos:.2f} sigma, "
           f"{res.info['counters'].get('states_without_ping')} states without a ping")
@@ -121,7 +121,7 @@ def test_imu_gap_longer_than_the_limit_is_a_clear_error(paper3d: LogData, mode: 
     3400 sigma off with the white-noise hold covariance), so it is an error that names the gap."""
     log = _without_imu(paper3d, 780.0, 810.0)
     with pytest.raises(GtsamDvlError, match=r"IMU gap of 30.0 s at 780.00-810.00 s .*imu.max_gap_s = 10 s"):
-        RUNS[mode](log, EstimatorConfig())
+        RUNS[mode](log, EstimatorConfig.paper())
 
 
 def test_online_drops_a_ping_that_comes_after_its_missing_ping_state(paper3d: LogData) -> None:
@@ -130,7 +130,7 @@ def test_online_drops_a_ping_that_comes_after_its_missing_ping_state(paper3d: Lo
     from gtsam_dvl.estimators.online import OnlineConfig, OnlineEstimator
 
     d = paper3d.dvl
-    est = OnlineEstimator.for_log(paper3d, EstimatorConfig(), OnlineConfig(window_s=10.0))
+    est = OnlineEstimator.for_log(paper3d, EstimatorConfig.paper(), OnlineConfig(window_s=10.0))
     imu = paper3d.imu
     stop = int(np.searchsorted(imu.t, 700.0, side="right"))
     late = int(np.searchsorted(d.t, 690.0))

@@ -50,7 +50,7 @@ def test_rotated_imu_with_its_tf_gives_the_same_calibration(sim_paper2d_clean: L
     rotated = read_log(path)
     np.testing.assert_allclose(rotated.mounting.b_R_imu, b_R_IMU, atol=1e-12)
     run = {"batch": smooth_batch, "online": smooth_online, "ekf": run_ekf}[estimator]
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     ref, got = run(sim_paper2d_clean, cfg), run(rotated, cfg)
     print(f"{estimator}: scale {ref.scale:.7f} / {got.scale:.7f}, misalignment {ref.misalignment_deg} / "
           f"{got.misalignment_deg} deg")
@@ -63,9 +63,9 @@ def test_rotated_imu_without_its_tf_is_wrong(sim_paper2d_clean: LogData) -> None
     """The check can fail: ignoring the mounting (identity tf) gives a misalignment wrong by far more than its
     sigma (what happened before the mounting was applied: 168 deg), or a clear error."""
     wrong = dataclasses.replace(_rotated(sim_paper2d_clean), mounting=sim_paper2d_clean.mounting)
-    ref = smooth_batch(sim_paper2d_clean, EstimatorConfig())
+    ref = smooth_batch(sim_paper2d_clean, EstimatorConfig.paper())
     try:
-        res = smooth_batch(wrong, EstimatorConfig())
+        res = smooth_batch(wrong, EstimatorConfig.paper())
     except GtsamDvlError as exc:
         print(f"identity tf: {exc}")
         return

@@ -26,7 +26,7 @@ from gtsam_dvl.estimators.online.types import misalignment_deg_and_cov
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
-PRIOR = EstimatorConfig().priors
+PRIOR = EstimatorConfig.paper().priors
 
 
 def _cut(log: LogData, t_end: float) -> LogData:
@@ -53,7 +53,7 @@ def _log(name: str, seed: int, t_end: float | None = None) -> LogData:
 
 @functools.cache
 def _batch(name: str, seed: int, t_end: float | None = None, bias_model: str = "constant") -> NavResult:
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.imu.bias_model = bias_model
     return smooth_batch(_log(name, seed, t_end), cfg)
 
@@ -61,7 +61,7 @@ def _batch(name: str, seed: int, t_end: float | None = None, bias_model: str = "
 @functools.cache
 def _online(name: str, seed: int, mode: str = "fixed_lag", t_end: float | None = None,
             bias_model: str = "constant") -> NavResult:
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.imu.bias_model = bias_model
     return smooth_online(_log(name, seed, t_end), cfg, mode=mode)
 
@@ -191,7 +191,7 @@ def test_sigma_timeline_paper_3d() -> None:
     assert np.all(roll[t <= 660] > 0.9 * PRIOR.misalignment_sigma_deg[0])
     assert m[720][0] < m[660][0] / 2
     # accelerometer bias: the horizontal axes stay at their prior until the turns start, then fall markedly
-    assert np.all(a[750][:2] > 0.9 * EstimatorConfig().imu.accel_bias_sigma_ug)
+    assert np.all(a[750][:2] > 0.9 * EstimatorConfig.paper().imu.accel_bias_sigma_ug)
     assert np.all(a[900][:2] < a[750][:2] / 4)
 
 

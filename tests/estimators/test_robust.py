@@ -65,7 +65,7 @@ def _bogus(case: str) -> tuple[LogData, int]:
 
 def _off() -> EstimatorConfig:
     """No kernel, no screen, no gate: the estimators as before issue 10."""
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.dvl.robust, cfg.dvl.screen, cfg.ekf.gate_probability = "none", False, 1.0
     return cfg
 
@@ -73,7 +73,7 @@ def _off() -> EstimatorConfig:
 @functools.cache
 def _run(mode: str, case: str, defaults: bool = True) -> NavResult:
     log = _clean() if case == "clean" else _bogus(case)[0]
-    return RUNS[mode](log, EstimatorConfig() if defaults else _off())
+    return RUNS[mode](log, EstimatorConfig.paper() if defaults else _off())
 
 
 def _changes(a: NavResult, b: NavResult) -> dict[str, np.ndarray]:

@@ -59,7 +59,7 @@ def _with_dropouts(log: LogData, t_end: float = 800.0) -> tuple[LogData, np.ndar
 
 def test_batch_online_and_ekf_use_the_same_epochs(sim_paper3d_clean: LogData) -> None:
     log, expected = _with_dropouts(sim_paper3d_clean)
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     batch = smooth_batch(log, cfg)
     online = smooth_online(log, cfg)
     ekf = run_ekf(log, cfg)
@@ -82,7 +82,7 @@ def test_batch_online_and_ekf_use_the_same_epochs(sim_paper3d_clean: LogData) ->
 
 def test_keyframe_thinning_is_the_same_online_and_in_batch(sim_paper3d_clean: LogData) -> None:
     log, _ = _with_dropouts(sim_paper3d_clean, t_end=700.0)
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.solver.keyframe_interval_s = 2.5
     cfg.solver.max_state_spacing_s = 2.5  # keyframes 2.5 s apart need states allowed that far apart
     counters: dict[str, int] = {}
@@ -168,7 +168,7 @@ def test_bogus_pings_dropped_alike_by_batch_online_and_ekf(sim_paper3d_clean: Lo
     message order) and EKF drop the same bogus pings, count them alike and keep the same epochs; the noise-free
     simulation's own exact zeros (at rest) and repeated velocities (constant velocity, steady turns) pass."""
     log, expected, counts = _with_bogus(sim_paper3d_clean)
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     batch = smooth_batch(log, cfg)
     online = smooth_online(log, cfg)
     live = OnlineEstimator.for_log(log, cfg)

@@ -39,7 +39,7 @@ def short_run(dt: float, noise_m_s: float = 0.02) -> LogData:
 
 
 def config(estimate: bool) -> EstimatorConfig:
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     return dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, estimate_time_offset=estimate))
 
 
@@ -62,7 +62,7 @@ def final_position_error(r: NavResult, log: LogData) -> float:
 
 
 def test_default_is_off_and_no_offset_is_reported() -> None:
-    assert not EstimatorConfig().dvl.estimate_time_offset
+    assert not EstimatorConfig.paper().dvl.estimate_time_offset
     r = solve(0.0, 0.02, False)
     assert r.time_offset_s == 0.0 and np.isnan(r.time_offset_sigma_s)
 

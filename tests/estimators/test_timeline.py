@@ -21,7 +21,7 @@ from gtsam_dvl.sim.scenario import load_scenario
 @functools.cache
 def _run(name: str) -> tuple[Timeline, NavResult]:
     log = simulate(load_scenario(name), 8)
-    builder = LogGraph(log, EstimatorConfig())
+    builder = LogGraph(log, EstimatorConfig.paper())
     graph, values = builder.build()
     ordering = builder.elimination_ordering()
     values, _ = gauss_newton_qr(graph, values, ordering, before_iteration=builder.refresh_gravity)

@@ -302,7 +302,7 @@ def test_rebase_changes_the_linearisation_point_not_the_estimate() -> None:
     calibration changes by less than 0.5 % (measured 0.06 %); the window keeps its variables and factors. Without
     the robust kernel: with it (the default Huber) a rebase also re-weights the DVL factors at the new point, an
     iteratively reweighted step (measured 0.038 sigma, then 0.0028)."""
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.dvl.robust = "none"
     est = OnlineEstimator.for_log(_log(), cfg, options=OnlineConfig(window_s=WINDOW_S))
     feed_log(est, _log())
@@ -418,7 +418,7 @@ def test_threshold_map_custom_values_and_dimensions() -> None:
 
 def test_add_epoch_without_its_inputs_is_a_clear_error() -> None:
     """The first epoch needs its initial values, a later one its preintegration."""
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()
     cfg.alignment.initial_attitude_deg = (3.0, 0.0, 10.0)  # starts the smoother at once, no data needed
     est = OnlineEstimator.for_log(_log(), cfg)
     sm = _smoother(est)

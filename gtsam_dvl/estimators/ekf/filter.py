@@ -242,8 +242,9 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
 
     Below config.ekf.min_calibration_speed_m_s (or the keyword, which overrides it) or
     config.ekf.calibration_speed_sigmas velocity sigmas the measurement is taken as insensitive to scale and
-    misalignment (see MIN_CALIBRATION_SPEED_M_S)."""
-    config = config or EstimatorConfig()
+    misalignment (see MIN_CALIBRATION_SPEED_M_S). config None: the one the log's scenario names, else the
+    defaults (EstimatorConfig.for_log)."""
+    config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         config = replace(config, ekf=replace(config.ekf, min_calibration_speed_m_s=min_calibration_speed_m_s))
     ekf_cfg = config.validate().ekf

@@ -189,8 +189,9 @@ class OnlineEstimator:
     @classmethod
     def for_log(cls, log: LogData, config: EstimatorConfig | None = None,
                 options: OnlineConfig | None = None) -> OnlineEstimator:
-        """An estimator with the map origin and mounting of a log (to replay it)."""
-        config = config or EstimatorConfig()
+        """An estimator with the map origin and mounting of a log (to replay it). config None: the one the
+        log's scenario names, else the defaults (EstimatorConfig.for_log)."""
+        config = config or EstimatorConfig.for_log(log.metadata)
         return cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
                    source=log.source)
 
@@ -579,8 +580,9 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
                   options: OnlineConfig | None = None) -> NavResult:
     """Run the online estimator over a whole log, message by message, and return its NavResult with the
     timeline of filtering sigmas at every epoch. options (default: config.online, TOML section [online]);
-    mode ("fixed_lag" or "full") and window_s override those of options."""
-    config = config or EstimatorConfig()
+    mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
+    scenario names, else the defaults (EstimatorConfig.for_log)."""
+    config = config or EstimatorConfig.for_log(log.metadata)
     options = dataclasses.replace(options if options is not None else config.online)
     if mode is not None:
         options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
