@@ -23,6 +23,7 @@ from .dvl_velocity import (
     make_dvl_velocity_offset_factor,
     make_dvl_velocity_offset_lever_factor,
 )
+from .gnss import gnss_error, make_gnss_factor
 from .imu_earth import EarthImuFactor, GravityModel, make_earth_imu_factor
 
 __all__ = [
@@ -36,11 +37,13 @@ __all__ = [
     "dvl_velocity_error",
     "dvl_velocity_lever_error",
     "dvl_velocity_offset_error",
+    "gnss_error",
     "dvl_velocity_offset_lever_error",
     "make_dvl_beam_factor",
     "make_dvl_beam_lever_factor",
     "make_dvl_velocity_factor",
     "make_dvl_velocity_lever_factor",
     "make_dvl_velocity_offset_factor",
+    "make_gnss_factor",
     "make_dvl_velocity_offset_lever_factor",
 ]

@@ -1,7 +1,8 @@
 """`evaluate`: a stored result against the truth over time, and what the log made observable.
 
-Works without truth (a real log): then only the observability analysis, the segment classification and
-the sigma timelines are reported.
+Works without truth (a real log): then only the observability analysis, the segment classification, the
+sigma timelines and, when the log has GNSS fixes, the errors at the held-out fixes and the surfacing error
+(analysis/surfacing.py: metrics["gnss"]) are reported.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 from gtsam_dvl.analysis.metrics import trajectory_errors
 from gtsam_dvl.analysis.observability import ObservabilityReport, analyse_block, attribute_segments
 from gtsam_dvl.analysis.segments import classify_log
+from gtsam_dvl.analysis.surfacing import SurfacingReport, surfacing_report
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import StoredResult
 from gtsam_dvl.core.types import LogData, Segment
@@ -33,6 +35,7 @@ class Evaluation:
     segments: list[Segment] = field(default_factory=list)
     shares: dict[str, list[tuple[str, float]]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
+    gnss: SurfacingReport | None = None  # held-out GNSS fixes and the surfacing error (log with fixes)
 
 
 def _within_3_sigma(err: np.ndarray, sig: np.ndarray) -> list[float]:
@@ -61,8 +64,12 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
             "velocity_within_3_sigma": _within_3_sigma(ev.velocity_error_m_s, ev.velocity_sigma_m_s),
             "calibration_errors": stored.summary.get("errors", {}),
         }
+    config = EstimatorConfig.from_dict(res.config) if res.config else EstimatorConfig()
+    if log is not None and log.gnss is not None:
+        ev.gnss = surfacing_report(res, log, config)
+        if ev.gnss is not None:
+            m["gnss"] = ev.gnss.as_dict()
     if res.calib_joint_cov is not None:
-        config = EstimatorConfig.from_dict(res.config) if res.config else EstimatorConfig()
         ev.report = analyse_block(res.calib_joint_cov, res.b_R_d, float(res.t[-1] - res.t[0]), config)
         if res.timeline is not None and ev.segments:
             ev.shares = attribute_segments(ev.report, res.timeline, ev.segments)

@@ -101,6 +101,12 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         if np.isfinite(result.time_offset_sigma_s):  # the DVL time offset was estimated
             out["dvl_time_offset_s"] = result.time_offset_s - cal.time_offset_s
             out["dvl_time_offset_nsigma"] = (result.time_offset_s - cal.time_offset_s) / result.time_offset_sigma_s
+    truth_md = log.metadata.get("truth")  # a simulated log's true lever arm (its /tf_static may be wrong)
+    true_lever = truth_md.get("dvl", {}).get("b_lever_arm_m") if isinstance(truth_md, dict) else None
+    if result.lever_arm_m is not None and result.lever_arm_sigma_m is not None and true_lever is not None:
+        err = result.lever_arm_m - np.asarray(true_lever, dtype=float)  # m, base_link
+        out["dvl_lever_arm_m"] = err.tolist()
+        out["dvl_lever_arm_nsigma"] = (err / result.lever_arm_sigma_m).tolist()
     if log.true_imu_bias is not None:
         g_err = (result.gyro_bias - np.asarray(log.true_imu_bias.gyro_rad_s)) / DEG_PER_H
         a_err = (result.accel_bias - np.asarray(log.true_imu_bias.accel_m_s2)) / UG
@@ -128,6 +134,33 @@ def time_offset_verdict(result: NavResult) -> dict[str, Any]:
             "convention": "the DVL message stamped t measures the velocity at t + dt_d (dt_d > 0: stamps early)"}
 
 
+def lever_arm_verdict(result: NavResult, log: LogData | None = None) -> dict[str, Any]:
+    """The estimated DVL lever arm b_l (IMU -> DVL, m, base_link) with its per-axis sigma and whether the log
+    determined each axis (analysis/observability.py lever_arm_verdicts: posterior sigma below a third of the
+    prior's [dvl] lever_arm_sigma_m), with the /tf_static value it started from when the log is given."""
+    if result.lever_arm_m is None or result.lever_arm_cov is None:
+        raise ValueError("the result has no estimated lever arm ([dvl] estimate_lever_arm)")
+    from gtsam_dvl.analysis.observability import LEVER_ARM_NOTE, lever_arm_verdicts
+
+    prior = float(result.config.get("dvl", {}).get("lever_arm_sigma_m", float("nan")))
+    sigma = np.sqrt(np.diag(result.lever_arm_cov))
+    out: dict[str, Any] = {"value": result.lever_arm_m.tolist(), "sigma": sigma.tolist(), "prior_sigma": prior,
+                           "frame": "base_link (x forward, y left, z up), from the IMU to the DVL, m"}
+    if log is not None:
+        out["tf_static"] = np.asarray(log.mounting.b_l, dtype=float).tolist()
+    if not np.isfinite(prior):
+        out.update(determined=None, verdict=None)
+        return out
+    duration = float(result.t[-1] - result.t[0]) if len(result.t) else 0.0
+    verdicts = lever_arm_verdicts(result.lever_arm_cov, prior, duration)
+    out["determined"] = [v.verdict == "determined" for v in verdicts]
+    out["verdict"] = [f"{v.key[-1]}: {v.verdict} (sigma {v.posterior_sigma:.3f} m, prior {prior:.3g} m)"
+                      for v in verdicts]
+    if not all(out["determined"]):
+        out["note"] = LEVER_ARM_NOTE
+    return out
+
+
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     """The summary JSON (README, "Command line"), in user units (degrees, deg/h, micro-g, ppm), with the run's
     health (analysis/health.py) and what the reader lost (LogData.metadata["reader_losses"])."""
@@ -152,6 +185,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     }
     if np.isfinite(result.time_offset_sigma_s):
         out["dvl_time_offset_s"] = time_offset_verdict(result)
+    if result.lever_arm_m is not None and result.lever_arm_cov is not None:
+        out["dvl_lever_arm_m"] = lever_arm_verdict(result, log)
     errors = truth_errors(result, log)
     if errors is not None:
         out["errors"] = errors

@@ -9,6 +9,13 @@ means the data said nothing about that direction; near 0, the data fixed it.
 Verdicts: ratio <= DETERMINED ("determined"), <= NOT_DETERMINED ("weakly determined"), above that
 "not determined". For weak states the information gained per hour of this log tells how long a similar
 mission would need to halve the prior sigma.
+
+With [dvl] estimate_lever_arm the lever arm b_l (m, base_link) is judged per axis too (ObservabilityReport.
+lever_arm, from NavResult.lever_arm_cov against [dvl] lever_arm_sigma_m), with a stricter threshold
+(LEVER_DETERMINED): a metre-sized prior that only halves still leaves the DVL's velocity wrong by b_omega x
+half a metre in turns. It enters the DVL model only as b_omega x b_l, so it is observable only from rotation:
+its component along the rotation axis of every turn of the log is not (turns about the vertical leave b_l's z
+undetermined, and a straight run determines none of it). It is not part of the direction analysis.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ from gtsam_dvl.core.units import DEG_PER_H, UG
 
 DETERMINED = 0.5
 NOT_DETERMINED = 0.9
+LEVER_DETERMINED = 1.0 / 3.0  # the lever arm's "determined": posterior sigma below a third of the prior's
 
 STATES = [
     ("accel_bias_x", "accelerometer bias along body x (forward)", "micro-g"),
@@ -81,7 +89,16 @@ class DirectionVerdict:
         return f"{self.verdict} direction ({100 * self.ratio:.0f} % of prior): {parts}"
 
 
-STATE_TEXT = {k: d for k, d, _ in STATES}
+LEVER_ARM_STATES = [
+    ("lever_arm_x", "DVL lever arm along body x (forward)", "m"),
+    ("lever_arm_y", "DVL lever arm along body y (left)", "m"),
+    ("lever_arm_z", "DVL lever arm along body z (up)", "m"),
+]
+LEVER_ARM_NOTE = ("the lever arm is observable only from rotation (it enters the DVL velocity as b_omega x b_l): "
+                  "a lever arm along the rotation axis of every turn is not, so turns about the vertical leave its "
+                  "z component undetermined and a run without turns determines none of it")
+
+STATE_TEXT = {k: d for k, d, _ in STATES + LEVER_ARM_STATES}
 
 
 @dataclass
@@ -89,12 +106,18 @@ class ObservabilityReport:
     states: list[StateVerdict]
     directions: list[DirectionVerdict]  # sorted from least to best determined
     duration_s: float
+    lever_arm: list[StateVerdict] = field(default_factory=list)  # x, y, z with [dvl] estimate_lever_arm
 
     def state(self, key: str) -> StateVerdict:
-        return next(s for s in self.states if s.key == key)
+        return next(s for s in self.states + self.lever_arm if s.key == key)
 
     def lines(self) -> list[str]:
         out = ["Per state:"] + [f"  - {s.sentence()}" for s in self.states]
+        if self.lever_arm:
+            out.append("DVL lever arm (IMU -> DVL, base_link), estimated:")
+            out += [f"  - {s.sentence()}" for s in self.lever_arm]
+            if any(s.verdict != "determined" for s in self.lever_arm):
+                out.append(f"  ({LEVER_ARM_NOTE})")
         weak = [d for d in self.directions if d.verdict != "determined"]
         if weak:
             out.append("Directions the log did not fully determine (combinations of states):")
@@ -122,18 +145,44 @@ def prior_sigmas(config: EstimatorConfig) -> np.ndarray:
 
 
 def analyse(result: NavResult, config: EstimatorConfig | None = None) -> ObservabilityReport:
-    """Per-state and per-direction verdicts from result.calib_joint_cov and the configuration's priors."""
+    """Per-state and per-direction verdicts from result.calib_joint_cov and the configuration's priors (and
+    the lever arm's per axis from result.lever_arm_cov when it was estimated)."""
     if result.calib_joint_cov is None:
         raise ValueError("the result has no joint covariance of the calibration and bias block")
     if config is None:
         config = EstimatorConfig.from_dict(result.config) if result.config else EstimatorConfig()
-    return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config)
+    return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config,
+                         result.lever_arm_cov)
+
+
+def _state_verdict(key: str, text: str, unit: str, prior: float, post: float, duration_h: float,
+                   determined: float) -> StateVerdict:
+    """One state's verdict: ratio = posterior / prior sigma, "determined" at or below `determined`, and for
+    the others the hours a similar mission would need to halve the prior sigma (as in analyse_block)."""
+    ratio = float(min(post / prior, 1.0))
+    verdict = ("determined" if ratio <= determined else
+               "weakly determined" if ratio <= NOT_DETERMINED else "not determined")
+    hours = None
+    if verdict != "determined":
+        gained = 1.0 / post**2 - 1.0 / prior**2
+        info_rate = gained / max(duration_h, 1e-9) if gained > 0.01 / prior**2 else 0.0
+        hours = float(3.0 / prior**2 / info_rate) if info_rate > 0 else float("inf")
+    return StateVerdict(key, text, unit, float(prior), float(post), ratio, verdict, hours)
+
+
+def lever_arm_verdicts(lever_arm_cov: np.ndarray, prior_sigma_m: float, duration_s: float) -> list[StateVerdict]:
+    """Per base_link axis, whether the log determined the lever arm: its marginal sigma (from the 3x3
+    covariance, m^2) against the prior's ([dvl] lever_arm_sigma_m), "determined" below LEVER_DETERMINED."""
+    post = np.sqrt(np.diag(np.asarray(lever_arm_cov, dtype=float)))
+    return [_state_verdict(key, text, unit, float(prior_sigma_m), float(post[i]), duration_s / 3600.0,
+                           LEVER_DETERMINED) for i, (key, text, unit) in enumerate(LEVER_ARM_STATES)]
 
 
 def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: float,
-                  config: EstimatorConfig) -> ObservabilityReport:
+                  config: EstimatorConfig, lever_arm_cov: np.ndarray | None = None) -> ObservabilityReport:
     """The analysis on the block's covariance itself ([accel bias, gyro bias, scale, b_R_d right tangent],
-    SI units), e.g. as stored in a result log."""
+    SI units), e.g. as stored in a result log; lever_arm_cov (3x3, m^2), when the lever arm was estimated,
+    adds its per-axis verdicts."""
     J = _user_units_jacobian(np.asarray(b_R_d))
     cov = J @ np.asarray(calib_joint_cov) @ J.T
     p0 = prior_sigmas(config)
@@ -158,7 +207,9 @@ def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: fl
         w = evecs[:, j] ** 2
         order = [k for k in np.argsort(-w) if w[k] >= 0.1]
         directions.append(DirectionVerdict(ratio, verdict_of(ratio), {STATES[k][0]: float(w[k]) for k in order}))
-    return ObservabilityReport(states, directions, duration_s)
+    lever = ([] if lever_arm_cov is None else
+             lever_arm_verdicts(lever_arm_cov, config.dvl.lever_arm_sigma_m, duration_s))
+    return ObservabilityReport(states, directions, duration_s, lever)
 
 
 def _timeline_sigmas(timeline: Timeline) -> np.ndarray:

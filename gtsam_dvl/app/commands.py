@@ -389,6 +389,9 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
                                               title=f"Normalised sigmas, {label}"))
     lines = ev.report.lines() if ev.report is not None else ["no calibration covariance in this result"]
     written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
+    from gtsam_dvl.app.report import gnss_lines
+
+    lines = lines + gnss_lines(ev.metrics.get("gnss"))  # the surfacing error (analysis/surfacing.py)
     if health:
         lines = lines + [f"result {line.strip()}" if i == 0 else line
                          for i, line in enumerate(health_lines(health, indent=""))]

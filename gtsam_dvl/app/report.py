@@ -121,3 +121,38 @@ def write_run_report(path: Path, run: str, summaries: list[dict[str, Any]],
         rel = fig.relative_to(path.parent) if fig.is_relative_to(path.parent) else fig
         lines += [f"### {fig.stem.replace('_', ' ')}", "", f"![{fig.stem}]({rel.as_posix()})", ""]
     return atomic_write_text(path, "\n".join(lines) + "\n")
+
+
+def gnss_lines(gnss: dict[str, Any] | None) -> list[str]:
+    """The printed lines of the GNSS check (metrics["gnss"] of `evaluate`, analysis/surfacing.py): how the fixes
+    were used, the held-out fixes' errors and the surfacing error; no lines for a log without fixes."""
+    if not gnss:
+        return []
+    c = gnss["counters"]
+    lines = [f"GNSS: {c['gnss_used'] + c['gnss_held_out'] + c['gnss_rejected']} fixes in "
+             f"{gnss['surface_intervals']} surface interval(s), use = {gnss['use']}: {c['gnss_used']} aided, "
+             f"{c['gnss_held_out']} held out, {c['gnss_rejected']} rejected (status {c['gnss_rejected_status']}, "
+             f"depth {c['gnss_rejected_depth']}, too far from a state {c['gnss_too_far']})"]
+    if not gnss["held_out_evaluated"]:
+        lines.append("GNSS: no held-out fixes, so no surfacing error (every good fix aided, or none came after the "
+                     "first dive); use = \"start\" holds out the fixes after the first surface interval")
+        return lines
+    lines.append(f"GNSS: held-out fixes {gnss['held_out_evaluated']}, horizontal error rms "
+                 f"{gnss['held_out_horizontal_rms_m']:.2f} m")
+    s = gnss["surfacing_error"]
+    if s is None:
+        lines.append("surfacing error: none (the last surface interval has no held-out fix)")
+        return lines
+    lines.append(f"surfacing error (first held-out fix of the last surfacing, t = {s['t_s']:.1f} s): horizontal "
+                 f"{s['horizontal_error_m']:.2f} m = {s['horizontal_error_pct']:.3f} % of "
+                 f"{s['distance_m']:.0f} m travelled, vertical {s['vertical_error_m']:+.2f} m; sigma of the fix "
+                 f"{s['fix_sigma_h_m']:.2f} m horizontal, {s['fix_sigma_v_m']:.2f} m vertical; of the estimate "
+                 f"{s['estimate_sigma_h_m']:.2f} m, {s['estimate_sigma_v_m']:.2f} m")
+    m = gnss.get("surfacing_error_mean")
+    if m is not None and gnss.get("surfacing_fixes", 0) > 1:
+        lines.append(f"surfacing error, mean over the {gnss['surfacing_fixes']} held-out fixes of the last surfacing: "
+                     f"horizontal {m['horizontal_error_m']:.2f} m = {m['horizontal_error_pct']:.3f} % of "
+                     f"{m['distance_m']:.0f} m travelled, vertical {m['vertical_error_m']:+.2f} m; sigma of the "
+                     f"fixes' mean {m['fix_sigma_h_m']:.2f} m horizontal; of the estimate "
+                     f"{m['estimate_sigma_h_m']:.2f} m")
+    return lines

@@ -3,8 +3,9 @@
 Every field carries its unit in its name. `EstimatorConfig.from_toml(path)` reads a file with the same
 sections as the dataclasses: [imu], [dvl], [priors], [alignment], [solver] (the models, shared by every
 estimator), [online] and [online.relinearization] (the iSAM2 estimator), [ekf] (the filter), [iodvlc]
-(the ideal observer) and [depth] (the depth sensor). It also reads the JSON of an effective configuration,
-as written with every result (config.json: {"estimator": ..., "config": {...}}, or the bare configuration).
+(the ideal observer), [depth] (the depth sensor) and [gnss] (GNSS fixes). It also reads the JSON of an
+effective configuration, as written with every result (config.json: {"estimator": ..., "config": {...}}, or the
+bare configuration).
 
 Everything is checked by value on load: unknown sections and keys, enumerations (Literal fields: one of
 their values), types (a string where a number belongs, a float where an integer belongs) and ranges (declared
@@ -124,14 +125,21 @@ class DvlConfig(_Section):
     # the IMU shows motion when it says the DVL's velocity changed by more than this since the previous ping
     motion_dv_m_s: float = field(default=0.05, metadata=POSITIVE)
     moving_speed_m_s: float = field(default=0.1, metadata=POSITIVE)  # a previous ping this fast: moving
-    # DVL-IMU time offset dt_d (docs/conventions.md: the ping stamped t measures the velocity at t + dt_d), batch
-    # smoother only: a graph variable T_OFFSET with this prior; a tiny sigma fixes it at the prior value. Off by
-    # default: then every estimator takes dt_d = 0 (the prior value is not used)
-    estimate_time_offset: bool = False
+    # DVL-IMU time offset dt_d (docs/conventions.md: the ping stamped t measures the velocity at t + dt_d): a graph
+    # variable T_OFFSET with this prior (batch, online), an EKF state; a tiny sigma fixes it at the prior value.
+    # On by default (real DVL stamps are 0.05-1.5 s off the IMU's); off (the "paper" configuration): every
+    # estimator takes dt_d = 0 and the prior value is not used
+    estimate_time_offset: bool = True
     time_offset_prior_s: float = 0.0
     time_offset_sigma_s: float = field(default=0.5, metadata=POSITIVE)
     # half-width of the IMU window averaged for the epoch's velocity rate (the time offset's Jacobian), s
     time_offset_window_s: float = field(default=0.25, metadata=POSITIVE)
+    # DVL lever arm b_l (IMU -> DVL, m, base_link; docs/conventions.md), batch smoother only: a graph variable
+    # L_LEVER with a prior around the /tf_static value (LogData.mounting.b_l), lever_arm_sigma_m per axis. Off by
+    # default: then every estimator takes b_l from /tf_static. Observable only from rotation (b_omega x b_l): a
+    # lever arm along the rotation axis of every turn stays at its prior
+    estimate_lever_arm: bool = False
+    lever_arm_sigma_m: float = field(default=0.5, metadata=POSITIVE)
 
     def robust_threshold(self) -> float:
         """The robust kernel's threshold in sigmas: huber_k if set (the old name), else robust_k."""
@@ -158,11 +166,18 @@ class PriorConfig(_Section):
 
 @dataclass
 class AlignmentConfig(_Section):
-    """Coarse alignment on the initial static segment, or a configured initial attitude."""
+    """The initial attitude (estimators/alignment.py align): method "auto" takes, in this order, an attitude
+    sensor in the log (LogData.attitude), initial_attitude_deg, coarse alignment on an initial static segment
+    of at least min_static_s, else in-motion alignment with DVL aiding over the first in_motion_window_s.
+    "attitude_topic", "static" and "in_motion" force one method (an error if it cannot be done)."""
 
     SECTION: ClassVar[str] = "alignment"
 
     initial_attitude_deg: tuple[float, float, float] | None = None  # [roll, pitch, yaw]; skips alignment
+    method: Literal["auto", "attitude_topic", "static", "in_motion"] = "auto"
+    in_motion_window_s: float = field(default=120.0, metadata={"ge": 10.0})  # in-motion alignment window
+    # attitude sensor sigmas (roll/pitch, yaw) when its messages give no covariance
+    attitude_sigma_deg: tuple[float, float] = field(default=(1.0, 5.0), metadata=POSITIVE)
     min_static_s: float = field(default=30.0, metadata=NON_NEGATIVE)
     max_static_s: float = field(default=0.0, metadata=NON_NEGATIVE)  # 0: the whole detected static segment
     # 1 s means of the specific force within this of the first 10 s
@@ -324,7 +339,7 @@ class IodvlcConfig(_Section):
 
 @dataclass
 class DepthConfig(_Section):
-    """Depth sensor (TOML section [depth]; batch smoother only, see estimators/depth.py). With use (the
+    """Depth sensor (TOML section [depth]; every estimator, see estimators/depth.py). With use (the
     default) a log that has depth (LogData.depth) gets one factor per depth sample on the vertical position of
     its nearest state, the time between them bridged by that state's vertical velocity; a sample farther than
     max_time_to_state_s from every state is not used (counted). A pressure is converted to depth with
@@ -344,6 +359,33 @@ class DepthConfig(_Section):
     max_time_to_state_s: float = field(default=0.5, metadata=NON_NEGATIVE)
 
 
+GnssUse = Literal["origin", "start", "all"]
+
+
+@dataclass
+class GnssConfig(_Section):
+    """GNSS fixes at the surface (TOML section [gnss]; batch smoother only, see estimators/gnss.py). A good fix
+    has status >= 0 and, when the log has depth, the depth sensor no deeper than max_depth_m at its time;
+    consecutive good fixes closer than surface_gap_s apart form one surface interval. use: "origin" (only the
+    map origin comes from the first fix: that fix is the one position factor when the log records no origin),
+    "start" (the default: the fixes of the first surface interval, before the first dive, are position
+    factors; later fixes are held out for the surfacing error) or "all" (every good fix aids). Each fix is a
+    factor on the antenna position of its nearest state within max_time_to_state_s (the time between bridged
+    by the state's velocity); farther ones are not used (counted). noise_m > 0 overrides the message's
+    covariance (sigma per axis, m); a message without one takes default_noise_m. lever_arm_m: the antenna in
+    base_link (m); None takes /tf_static's base_link -> gnss_link, else zero."""
+
+    SECTION: ClassVar[str] = "gnss"
+
+    use: GnssUse = "start"
+    max_depth_m: float = field(default=1.0, metadata=NON_NEGATIVE)  # depth gate (depth sensor), m
+    surface_gap_s: float = field(default=10.0, metadata=POSITIVE)  # a longer gap between fixes ends an interval
+    noise_m: float = field(default=0.0, metadata=NON_NEGATIVE)  # >0 overrides the message's covariance
+    default_noise_m: float = field(default=5.0, metadata=POSITIVE)  # for messages without a covariance
+    lever_arm_m: tuple[float, float, float] | None = None
+    max_time_to_state_s: float = field(default=0.5, metadata=NON_NEGATIVE)
+
+
 # Named configurations: the differences from the defaults, as a TOML file would give them. `-c NAME` on the
 # command line, EstimatorConfig.named(NAME) in scripts, `preset = "NAME"` at the top of a TOML file (its own
 # keys then override the preset's), and a scenario's estimator_config key (the configuration its runs are
@@ -351,7 +393,8 @@ class DepthConfig(_Section):
 NAMED_CONFIGS: dict[str, dict[str, dict[str, Any]]] = {
     "default": {},  # a real DVL: scale 1 +- 1 %, misalignment 1 deg per axis
     # Pan & Wu's runs: the scale starts at 0.8 with a 0.5 sigma so that its convergence can be watched
-    "paper": {"priors": {"scale_initial": 0.8, "scale_sigma": 0.5}},
+    # and their logs' stamps agree (no DVL time offset estimated)
+    "paper": {"priors": {"scale_initial": 0.8, "scale_sigma": 0.5}, "dvl": {"estimate_time_offset": False}},
 }
 
 
@@ -374,6 +417,7 @@ class EstimatorConfig:
     ekf: EkfConfig = field(default_factory=EkfConfig)
     iodvlc: IodvlcConfig = field(default_factory=IodvlcConfig)
     depth: DepthConfig = field(default_factory=DepthConfig)
+    gnss: GnssConfig = field(default_factory=GnssConfig)
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain dict (tuples stay tuples, None stays None): json.dumps writes it, from_dict reads it."""

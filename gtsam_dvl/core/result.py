@@ -88,13 +88,25 @@ class NavResult(CalibrationUnits):
     # DVL-IMU time offset dt_d, s, and its sigma (nan: not estimated, dt_d taken as time_offset_s)
     time_offset_s: float = 0.0
     time_offset_sigma_s: float = float("nan")
+    # DVL lever arm b_l (IMU -> DVL, m, base_link) and its 3x3 marginal covariance (m^2) with [dvl]
+    # estimate_lever_arm (None: not estimated, b_l taken from /tf_static)
+    lever_arm_m: np.ndarray | None = None
+    lever_arm_cov: np.ndarray | None = None
     b_omega: np.ndarray | None = None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
     pose_vel_cross: np.ndarray | None = None  # (N, 6, 3) cross-covariance of pose tangent and n_v
     calib_joint_cov: np.ndarray | None = None  # (10, 10): [accel, gyro] bias, scale, b_R_d right tangent
     timeline: Timeline | None = None  # filtering history (online estimators and the EKF)
     timing_s: dict[str, float] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)  # solver report, counters, alignment
+    # how the initial attitude was found: "attitude_topic", "configured", "static" or "in_motion" (details,
+    # with its sigmas, in info["alignment"])
+    alignment_method: str = ""
     config: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def lever_arm_sigma_m(self) -> np.ndarray | None:
+        """(3,) marginal sigmas of the estimated lever arm along base_link x, y, z, m (None: not estimated)."""
+        return None if self.lever_arm_cov is None else np.sqrt(np.diag(self.lever_arm_cov))
 
     @property
     def attitude_sigma_deg(self) -> np.ndarray:
@@ -145,13 +157,22 @@ class Timeline:
     accel_bias_ug: np.ndarray  # (N, 3)
     accel_bias_sigma_ug: np.ndarray  # (N, 3)
     attitude_sigma_deg: np.ndarray  # (N, 3)
+    # when estimated (None otherwise): the DVL time offset (s) and lever arm (m, base_link)
+    time_offset_s: np.ndarray | None = None  # (N,)
+    time_offset_sigma_s: np.ndarray | None = None  # (N,)
+    lever_arm_m: np.ndarray | None = None  # (N, 3)
+    lever_arm_sigma_m: np.ndarray | None = None  # (N, 3)
 
     FIELDS = ("t", "scale", "scale_sigma", "misalignment_deg", "misalignment_sigma_deg", "gyro_bias_deg_per_h",
               "gyro_bias_sigma_deg_per_h", "accel_bias_ug", "accel_bias_sigma_ug", "attitude_sigma_deg")
+    OPTIONAL = ("time_offset_s", "time_offset_sigma_s", "lever_arm_m", "lever_arm_sigma_m")
 
     def as_arrays(self) -> dict[str, np.ndarray]:
-        return {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
+        out = {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
+        out.update({name: np.asarray(getattr(self, name)) for name in self.OPTIONAL if getattr(self, name) is not None})
+        return out
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Timeline:
-        return cls(**{name: np.asarray(arrays[name]) for name in cls.FIELDS})
+        return cls(**{name: np.asarray(arrays[name]) for name in cls.FIELDS},
+                   **{name: np.asarray(arrays[name]) for name in cls.OPTIONAL if name in arrays})

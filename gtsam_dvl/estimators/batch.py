@@ -8,7 +8,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, B, V, X
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
@@ -59,8 +59,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     result = extract_result(builder, graph, values, ordering, estimator=estimator,
                             bayes_net=report.bayes_net if report.converged else None)
     timing["marginals"] = time.perf_counter() - t3
-    # the filtering timeline's layout has no time offset: left out when it is estimated
-    if timeline and config.imu.bias_model == "constant" and not config.dvl.estimate_time_offset:
+    if timeline and config.imu.bias_model == "constant":
         t4 = time.perf_counter()
         result.timeline = filtering_timeline(builder, graph, values)
         timing["timeline"] = time.perf_counter() - t4
@@ -87,6 +86,9 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values:
     offset = builder.config.dvl.estimate_time_offset
     if offset:
         groups.append((T_OFFSET,))
+    lever = builder.config.dvl.estimate_lever_arm
+    if lever:
+        groups.append((L_LEVER,))
     bn = bayes_net or graph.linearize(values).eliminateSequential(ordering, gtsam.EliminateQR)
     marg = bayes_net_marginals(bn, groups)
 
@@ -114,9 +116,12 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values:
         t0_ns=builder.log.t0_ns,
         time_offset_s=float(values.atVector(T_OFFSET)[0]) if offset else 0.0,
         time_offset_sigma_s=float(np.sqrt(marg.covariances[T_OFFSET][0, 0])) if offset else float("nan"),
+        lever_arm_m=np.asarray(values.atVector(L_LEVER), dtype=float) if lever else None,
+        lever_arm_cov=np.asarray(marg.covariances[L_LEVER]) if lever else None,
         b_omega=b_omega, pose_vel_cross=pose_vel_cross,
         calib_joint_cov=marg.joints[calib_group],
-        info={"alignment": {"method": builder.alignment.method, "t_static_end": builder.alignment.t_static_end},
+        info={"alignment": builder.alignment.info(),
               "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
         config=builder.config.to_dict(),
+        alignment_method=builder.alignment.method,
     )

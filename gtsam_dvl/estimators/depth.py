@@ -10,7 +10,7 @@ default_noise_m.
 Each sample goes to the state nearest in time (estimators/graph.py); the time between them, at most
 [depth] max_time_to_state_s, is bridged by the state's vertical velocity in the factor (factors/depth.py).
 Farther samples are not used ("depth_too_far" in the counters), nor are non-finite ones ("depth_invalid").
-Batch smoother only: the online estimator and the EKF do not take depth yet (counted as "depth_ignored").
+Every estimator takes depth: the batch smoother and the online estimator as factors, the EKF as updates.
 """
 
 from __future__ import annotations

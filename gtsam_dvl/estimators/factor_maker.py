@@ -21,14 +21,14 @@ Earth model in the Earth-fixed map frame (docs/conventions.md):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, B, V, X
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
@@ -39,9 +39,13 @@ from gtsam_dvl.factors import (
     EarthImuFactor,
     make_depth_factor,
     make_dvl_beam_factor,
+    make_dvl_beam_lever_factor,
     make_dvl_velocity_factor,
+    make_dvl_velocity_lever_factor,
     make_dvl_velocity_offset_factor,
+    make_dvl_velocity_offset_lever_factor,
     make_earth_imu_factor,
+    make_gnss_factor,
 )
 
 Beams = tuple[np.ndarray, np.ndarray, np.ndarray]  # d_u (B, 3) unit vectors in dvl_link, v (B,) m/s, valid (B,)
@@ -56,6 +60,7 @@ class FactorMaker:
     alignment: Alignment
     mounting: Mounting
     source: str = ""
+    _offset_gravity: np.ndarray | None = field(default=None, init=False, repr=False)  # offset_gravity()'s cache
 
     # ----- keys and rates ------------------------------------------------------------------------
     def bias_key(self, i: int) -> int:
@@ -91,11 +96,15 @@ class FactorMaker:
 
     def offset_gravity(self) -> np.ndarray:
         """Gravity in map for the time-offset model: at the map origin (its direction turns by 1.6e-7 rad per
-        metre, far below what the offset's first-order term resolves)."""
-        g0 = normal_gravity(self.frame.lat0, self.frame.height_m)
-        if self.config.solver.earth_model == "flat":
-            return np.array([0.0, 0.0, -float(g0)])
-        return np.asarray(self.frame.n_gravity(np.zeros((1, 3)))[0], dtype=float)
+        metre, far below what the offset's first-order term resolves). Computed once (1 ms per call, once per
+        ping otherwise)."""
+        if self._offset_gravity is None:
+            g0 = normal_gravity(self.frame.lat0, self.frame.height_m)
+            if self.config.solver.earth_model == "flat":
+                self._offset_gravity = np.array([0.0, 0.0, -float(g0)])
+            else:
+                self._offset_gravity = np.asarray(self.frame.n_gravity(np.zeros((1, 3)))[0], dtype=float)
+        return self._offset_gravity
 
     def n_omega_ie(self) -> np.ndarray:
         """Earth rate in map, rad/s (zero in the flat model)."""
@@ -175,17 +184,29 @@ class FactorMaker:
         """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
         dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate(). With
         dvl.estimate_time_offset, rate_input = velocity_rate_input() of the epoch gives the time-offset
-        factor on T_OFFSET too."""
+        factor on T_OFFSET too. With dvl.estimate_lever_arm the lever arm is the variable L_LEVER (the *_lever
+        factors), else the constant mounting.b_l."""
         b_l = self.mounting.b_l
+        lever = self.config.dvl.estimate_lever_arm
         if self.config.dvl.estimate_time_offset and rate_input is not None:
             b_a, b_omega_mean, G = rate_input
+            if lever:
+                return [make_dvl_velocity_offset_lever_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN,
+                                                              T_OFFSET, L_LEVER, d_y, b_omega_mean, b_a,
+                                                              self.offset_gravity(), G)]
             return [make_dvl_velocity_offset_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, T_OFFSET,
                                                     d_y, b_omega_mean, b_l, b_a, self.offset_gravity(), G)]
         if self.config.dvl.use_beams and beams is not None:
             d_u, v, valid = beams
             noise1 = self.beam_noise()
+            if lever:
+                return [make_dvl_beam_lever_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, L_LEVER, d_u[b],
+                                                   float(v[b]), b_omega) for b in np.flatnonzero(valid)]
             return [make_dvl_beam_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, d_u[b], float(v[b]), b_omega, b_l)
                     for b in np.flatnonzero(valid)]
+        if lever:
+            return [make_dvl_velocity_lever_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, L_LEVER, d_y,
+                                                   b_omega)]
         return [make_dvl_velocity_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, d_y, b_omega, b_l)]
 
     def dvl_noise(self, cov: np.ndarray) -> gtsam.noiseModel.Base:
@@ -208,6 +229,15 @@ class FactorMaker:
         vel_key = V(i) if dt != 0.0 else None
         return [make_depth_factor(noise, X(i), z_meas, lever, radius, vel_key, dt)]
 
+    def gnss_factors_for(self, i: int, z: np.ndarray, cov: np.ndarray, lever: np.ndarray,
+                         dt: float = 0.0) -> list[gtsam.NonlinearFactor]:
+        """The GNSS factor of state i from one fix: the antenna's position in map z (m; estimators/gnss.py),
+        its covariance cov (3x3, map axes, m^2), the antenna in base_link and the time from the state to the
+        fix dt (s; bridged by V(i) when non-zero). Not robust: the fixes come with their own covariance."""
+        vel_key = V(i) if dt != 0.0 else None
+        return [make_gnss_factor(gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=float)), X(i), z,
+                                 lever, vel_key, dt)]
+
     def _robust(self, noise: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
         """noise wrapped in the configured robust kernel ([dvl] robust, threshold robust_k in sigmas of the
         whitened error: GTSAM applies it to the norm of the whitened 3-D error, or of one beam's)."""
@@ -219,17 +249,25 @@ class FactorMaker:
             return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(k), noise)
         return noise
 
-    def prior_factors(self, values: gtsam.Values) -> list[gtsam.NonlinearFactor]:
-        """Priors on the first state, the bias, the scale and the misalignment."""
+    def prior_factors(self, values: gtsam.Values, position_cov: np.ndarray | None = None
+                      ) -> list[gtsam.NonlinearFactor]:
+        """Priors on the first state, the bias, the scale and the misalignment (and the time offset and lever
+        arm when estimated). position_cov: the first position's prior covariance in map axes (m^2) instead of
+        priors.position_sigma_m (estimators/gnss.py: when the map origin is a GNSS fix)."""
         pri, imu_cfg = self.config.priors, self.config.imu
         n_R_b = self.alignment.n_R_b
-        rp, yaw = np.radians(pri.roll_pitch_sigma_deg), np.radians(pri.yaw_sigma_deg)
-        # attitude sigmas are about map axes (roll/pitch ~ horizontal, yaw ~ vertical); Pose3's tangent is
-        # in body axes, so rotate the covariance into the body
-        cov_rot = n_R_b.T @ np.diag([rp**2, rp**2, yaw**2]) @ n_R_b
+        # attitude sigmas are about map axes (roll/pitch ~ horizontal, yaw ~ vertical): the alignment's own
+        # (attitude sensor, in motion) when it has them, else [priors]; Pose3's tangent is in body axes, so
+        # rotate the covariance into the body
+        if self.alignment.sigma_rpy_deg is not None:
+            sig_att = np.radians(np.asarray(self.alignment.sigma_rpy_deg, dtype=float))
+        else:
+            sig_att = np.radians([pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg])
+        cov_rot = n_R_b.T @ np.diag(sig_att**2) @ n_R_b
         cov_pose = np.zeros((6, 6))
         cov_pose[:3, :3] = cov_rot
-        cov_pose[3:, 3:] = np.eye(3) * pri.position_sigma_m**2
+        cov_pose[3:, 3:] = (np.eye(3) * pri.position_sigma_m**2 if position_cov is None
+                            else n_R_b.T @ position_cov @ n_R_b)  # translation tangent in body axes
         b_R_d0 = self.mounting.b_R_d0
         mis = np.radians(np.asarray(pri.misalignment_sigma_deg, dtype=float))
         # misalignment sigmas are about body axes (R_c on the left); b_R_d is perturbed on the right
@@ -245,7 +283,7 @@ class FactorMaker:
             gtsam.PriorFactorVector(K_SCALE, np.array([pri.scale_initial]),
                                     gtsam.noiseModel.Isotropic.Sigma(1, pri.scale_sigma)),
             gtsam.PriorFactorRot3(C_MISALIGN, gtsam.Rot3(b_R_d0), gtsam.noiseModel.Gaussian.Covariance(cov_c)),
-        ] + self.time_offset_prior()
+        ] + self.time_offset_prior() + self.lever_arm_prior()
 
     def time_offset_prior(self) -> list[gtsam.NonlinearFactor]:
         """The prior on the DVL time offset T_OFFSET (none unless dvl.estimate_time_offset)."""
@@ -254,6 +292,15 @@ class FactorMaker:
             return []
         return [gtsam.PriorFactorVector(T_OFFSET, np.array([cfg.time_offset_prior_s]),
                                         gtsam.noiseModel.Isotropic.Sigma(1, cfg.time_offset_sigma_s))]
+
+    def lever_arm_prior(self) -> list[gtsam.NonlinearFactor]:
+        """The prior on the lever arm L_LEVER (m, base_link): the /tf_static value mounting.b_l with
+        dvl.lever_arm_sigma_m per axis (none unless dvl.estimate_lever_arm)."""
+        cfg = self.config.dvl
+        if not cfg.estimate_lever_arm:
+            return []
+        return [gtsam.PriorFactorVector(L_LEVER, np.asarray(self.mounting.b_l, dtype=float),
+                                        gtsam.noiseModel.Isotropic.Sigma(3, cfg.lever_arm_sigma_m))]
 
     # ----- initial guesses -----------------------------------------------------------------------
     def velocity_from_ping(self, n_R_b: np.ndarray, d_y: np.ndarray | None) -> np.ndarray | None:
@@ -265,7 +312,7 @@ class FactorMaker:
     def first_state_values(self, d_y: np.ndarray | None) -> gtsam.Values:
         """Initial guess of the first state X(0), V(0) (attitude from the alignment, at the map origin,
         velocity from ping d_y at the initial scale and nominal mounting) and of the bias, scale and
-        misalignment."""
+        misalignment (and the time offset and lever arm when estimated: their priors' values)."""
         values = gtsam.Values()
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
         n_v = self.velocity_from_ping(n_R_b.matrix(), d_y)
@@ -276,4 +323,6 @@ class FactorMaker:
         values.insert(C_MISALIGN, gtsam.Rot3(self.mounting.b_R_d0))
         if self.config.dvl.estimate_time_offset:
             values.insert(T_OFFSET, np.array([self.config.dvl.time_offset_prior_s]))
+        if self.config.dvl.estimate_lever_arm:
+            values.insert(L_LEVER, np.asarray(self.mounting.b_l, dtype=float))
         return values

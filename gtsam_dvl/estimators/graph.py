@@ -18,7 +18,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, B, V, X
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.depth import depth_samples, nearest_states
@@ -33,6 +33,7 @@ from gtsam_dvl.estimators.gaps import (
     sample_starts_with_gaps,
     with_fillers,
 )
+from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, select_epochs
 from gtsam_dvl.factors import EarthImuFactor
@@ -67,7 +68,8 @@ class LogGraph:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
         cfg, log = self.config, self.log
         frame = map_frame_of(log, cfg)
-        alignment = align(log.imu, log.dvl, frame, cfg.alignment)
+        alignment = align(log.imu, log.dvl, frame, cfg.alignment, attitude=log.attitude, mounting=log.mounting,
+                          imu_cfg=cfg.imu)
         self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
         if cfg.dvl.estimate_time_offset and cfg.dvl.use_beams:
             raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
@@ -76,6 +78,8 @@ class LogGraph:
         check_spacing(cfg.solver)
         self.gaps = find_gaps(log.imu.t, cfg.imu.gap_samples)
         self.epochs = self._select_epochs()
+        # an attitude sensor's or the in-motion alignment's attitude is at its own time: carry it to the first state
+        self.maker.alignment = alignment.at(self.epochs[0].t, log.imu, frame)
         if sum(e.dvl_index >= 0 for e in self.epochs) < 2:
             raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
         self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)  # the gaps the states cross
@@ -188,6 +192,23 @@ class LogGraph:
                                                 samples.b_p_sensor, float(dt[k]))
         return out
 
+    def gnss_plan(self) -> GnssFixes | None:
+        """The role of every GNSS message (estimators/gnss.py: used, held out, rejected); None without fixes."""
+        return plan_fixes(self.log, self.config, self.frame, np.array([ep.t for ep in self.epochs]))
+
+    def gnss_factors(self, plan: GnssFixes | None = None) -> list[gtsam.NonlinearFactor]:
+        """GNSS factors of the fixes that aid ([gnss] use), each on its nearest state's antenna position; none
+        without fixes. Counts "gnss_used", "gnss_held_out" and "gnss_rejected" (with its reasons)."""
+        plan = self.gnss_plan() if plan is None else plan
+        if plan is None:
+            return []
+        self.counters.update(plan.counters())
+        out: list[gtsam.NonlinearFactor] = []
+        for k in np.flatnonzero(plan.mask("used")).tolist():
+            out += self.maker.gnss_factors_for(int(plan.state[k]), plan.n_p[k], plan.cov[k], plan.b_p_antenna,
+                                               float(plan.dt[k]))
+        return out
+
     # ----- initial guess -------------------------------------------------------------------------
     def initial_values(self) -> gtsam.Values:
         """Dead reckoning: attitude from the gyros (from the alignment), velocity from the DVL at the
@@ -200,7 +221,7 @@ class LogGraph:
         n_p_all = np.zeros((len(self.epochs), 3))
         self.set_gravity_from_positions(n_p_all)
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
-        n_p, n_v = np.zeros(3), np.zeros(3)
+        n_p, n_v = first_position(self.gnss_plan(), n_R_b.matrix()), np.zeros(3)  # the origin unless GNSS
         for i, ep in enumerate(self.epochs):
             if i > 0:
                 state = self.pims[i - 1].predict(gtsam.NavState(n_R_b, n_p, n_v), zero_bias)
@@ -220,6 +241,8 @@ class LogGraph:
         values.insert(C_MISALIGN, gtsam.Rot3(b_R_d0))
         if self.config.dvl.estimate_time_offset:
             values.insert(T_OFFSET, np.array([self.config.dvl.time_offset_prior_s]))
+        if self.config.dvl.estimate_lever_arm:  # the /tf_static value, as the prior
+            values.insert(L_LEVER, np.asarray(self.maker.mounting.b_l, dtype=float))
         self.set_gravity_from_positions(n_p_all)
         return values
 
@@ -227,7 +250,8 @@ class LogGraph:
         """The whole graph and its initial guess (batch smoothing, covariance analysis)."""
         values = self.initial_values()
         graph = gtsam.NonlinearFactorGraph()
-        for f in self.maker.prior_factors(values):
+        gnss = self.gnss_plan()
+        for f in self.maker.prior_factors(values, first_position_cov(gnss)):
             graph.add(f)
         for i in range(len(self.epochs)):
             for f in self.dvl_factors(i):
@@ -237,6 +261,8 @@ class LogGraph:
                 for f in self.bias_factors(i):
                     graph.add(f)
         for f in self.depth_factors():
+            graph.add(f)
+        for f in self.gnss_factors(gnss):
             graph.add(f)
         return graph, values
 
@@ -256,4 +282,6 @@ class LogGraph:
         ordering.push_back(C_MISALIGN)
         if self.config.dvl.estimate_time_offset:
             ordering.push_back(T_OFFSET)
+        if self.config.dvl.estimate_lever_arm:
+            ordering.push_back(L_LEVER)
         return ordering

@@ -203,6 +203,7 @@ def read_log(
     depth_z_down: bool = False,
     gnss_topic: str | None = None,
     attitude_topic: str | None = None,
+    attitude_frame: str = "enu",
     salvage: bool = False,
     repair: bool = False,
     progress: Callable[[float], None] | None = None,
@@ -227,7 +228,9 @@ def read_log(
     first good fix (estimators/gnss.py decides which fixes are good and how they are used).
 
     Attitude (LogData.attitude, io/attitude.py): attitude_topic None takes the IMU topic's own orientation when
-    its covariance says it is valid; "" or "none" reads none; else the named topic."""
+    its covariance says it is valid; "" or "none" reads none; else the named topic (sensor_msgs/msg/Imu,
+    nav_msgs/msg/Odometry or geometry_msgs/msg/PoseWithCovarianceStamped). attitude_frame: "enu" (REP-103) or
+    "ned" (an AHRS publishing NED orientation of an FRD body), turned into base_link in ENU."""
     src = open_source(path, salvage=salvage)
     path = src.path
     if imu_topic not in src.topics:
@@ -330,7 +333,7 @@ def read_log(
                                                        gnss.frame_id)) is not None:
             gnss.b_p_antenna = pose[1]
     attitude = read_attitude(src, attitude_topic, imu_topic, raw, imu[keep_imu], t0, mounting, repair, warnings,
-                             dropped)
+                             dropped, attitude_frame)
     gaps: dict[str, dict[str, Any]] = {}
     for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:

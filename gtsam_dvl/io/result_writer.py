@@ -29,6 +29,9 @@ TOPICS = {
     "misalignment_rpy": "/gtsam_dvl/dvl_misalignment_rpy_deg",
     "misalignment_sigma": "/gtsam_dvl/dvl_misalignment_sigma_deg",
     "time_offset": "/gtsam_dvl/dvl_time_offset",  # s, only when estimated ([dvl] estimate_time_offset)
+    # lever arm IMU -> DVL (m, base_link) as the position of a PoseWithCovarianceStamped with its 3x3 covariance,
+    # only when estimated ([dvl] estimate_lever_arm)
+    "lever_arm": "/gtsam_dvl/dvl_lever_arm",
 }
 
 
@@ -69,14 +72,17 @@ def calibration_record(result: NavResult) -> dict[str, Any]:
             "calib_joint_cov": result.calib_joint_cov,
             "calib_joint_cov_order": "accel bias (3, m/s^2), gyro bias (3, rad/s), scale (1), "
                                      "b_R_d right tangent (3, rad)",
-            "t": [float(result.t[0]), float(result.t[-1])], "config": result.config}
+            "t": [float(result.t[0]), float(result.t[-1])], "config": result.config,
+            **({"lever_arm_m": result.lever_arm_m, "lever_arm_cov": result.lever_arm_cov,
+                "lever_arm_frame": "base_link, IMU -> DVL, m (covariance m^2)"}
+               if result.lever_arm_m is not None else {})}
 
 
 # NavResult's array fields, stored as they are in the attachment "states.npz" so that read_result gives back
 # the NavResult that was written (the ROS topics carry the same numbers in ROS conventions, for ROS tools)
 STATE_ARRAYS = ("t", "n_p", "n_R_b", "n_v", "pose_cov", "vel_cov", "accel_bias", "gyro_bias", "bias_cov", "b_R_d",
                 "b_R_d_cov", "b_R_d0")
-OPTIONAL_STATE_ARRAYS = ("b_omega", "pose_vel_cross", "calib_joint_cov")
+OPTIONAL_STATE_ARRAYS = ("b_omega", "pose_vel_cross", "calib_joint_cov", "lever_arm_m", "lever_arm_cov")
 
 
 def states_npz_bytes(result: NavResult) -> bytes:
@@ -171,6 +177,11 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
         if np.isfinite(result.time_offset_sigma_s):
             w.add_scalar_with_variance(TOPICS["time_offset"], t[-1:], np.array([result.time_offset_s]),
                                        np.array([result.time_offset_sigma_s**2]), "dvl_link")
+        if result.lever_arm_m is not None and result.lever_arm_cov is not None:
+            cov_l = np.zeros((6, 6))
+            cov_l[:3, :3] = result.lever_arm_cov  # m^2, base_link; the rotation block is not estimated
+            w.add_pose_with_covariance(TOPICS["lever_arm"], t[-1:], result.lever_arm_m[None],
+                                       np.array([[0.0, 0.0, 0.0, 1.0]]), cov_l[None], "base_link")
         cov_c = np.zeros((6, 6))
         cov_c[3:, 3:] = result.b_R_d @ result.b_R_d_cov @ result.b_R_d.T  # body axes, rad^2
         w.add_pose_with_covariance(TOPICS["misalignment"], t[-1:], np.zeros((1, 3)), matrix_to_quat_xyzw(R_c)[None],

@@ -155,10 +155,14 @@ def _pressure_messages(log: LogData, w: McapLogWriter) -> np.ndarray:
     return arr
 
 
-def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None) -> None:
+def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None,
+              imu_orientation: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
     """Write ``log`` to ``path`` as a ROS 2 MCAP per docs/conventions.md (atomically: temporary file, then
     rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
-    and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config"."""
+    and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config".
+    imu_orientation: (q (K, 4) [x, y, z, w] of imu_link per IMU sample, covariance (3, 3) or (K, 3, 3) rad^2 or
+    None) written into the IMU messages' orientation (an AHRS-like IMU); None: no orientation (covariance[0]
+    = -1), the convention."""
     path = Path(path)
     meta = metadata_record(log)
     try:
@@ -197,7 +201,9 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
                  [("base_link", log.gnss.frame_id, np.eye(3), log.gnss.b_p_antenna)]),
         )
         gyro_var, accel_var = _imu_variances(meta, log.imu.t)
-        w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var)
+        q_imu, cov_imu = imu_orientation if imu_orientation is not None else (None, None)
+        w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var,
+                  q_imu, cov_imu)
 
         dvl = log.dvl
         ok = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)

@@ -29,6 +29,7 @@ __all__ = [
     "SEGMENT_KINDS",
     "DepthSpec",
     "DvlSpec",
+    "GnssSpec",
     "ImuSpec",
     "InitialState",
     "MotionSegment",
@@ -157,6 +158,26 @@ class DepthSpec:
 
 
 @dataclass(frozen=True)
+class GnssSpec:
+    """GNSS receiver (optional [gnss] table; a scenario without it has no /gnss/fix). Fixes of the antenna
+    (antenna_lever_arm_m in base_link) at k / rate_hz (must divide the IMU rate) while the vehicle is at the
+    surface, i.e. base_link's depth below the surface at ellipsoidal height 0 is under max_depth_m, and
+    within [start_s, end_s] (None: the whole run). White noise horizontal_sigma_m per horizontal axis and
+    vertical_sigma_m up, in ENU at the antenna; status 0; covariance diag(h^2, h^2, v^2). origin_in_log =
+    false: the log records no map origin, as on a real vehicle; the reader then takes the first fix as the
+    origin, and the simulated truth is expressed in that fix's ENU frame (sim/gnss.py)."""
+
+    rate_hz: float = 1.0
+    horizontal_sigma_m: float = 2.0
+    vertical_sigma_m: float = 4.0
+    antenna_lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.5)
+    max_depth_m: float = 0.5
+    start_s: float | None = None
+    end_s: float | None = None
+    origin_in_log: bool = True
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A loaded scenario. raw keeps the TOML dict (goes into the log metadata unchanged)."""
 
@@ -173,6 +194,7 @@ class Scenario:
     source: str = "<dict>"
     t0_ns: int = DEFAULT_T0_S * 1_000_000_000
     depth: DepthSpec | None = None  # the [depth] table, if the scenario has one
+    gnss: GnssSpec | None = None  # the [gnss] table, if the scenario has one
     # the named estimator configuration (core/config.py NAMED_CONFIGS) this scenario's runs are meant for:
     # smooth and plan use it when no configuration is given (the paper's runs: "paper")
     estimator_config: str = "default"
@@ -234,7 +256,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r = Reader(raw, source)
     r.check_keys(
         "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments",
-             "depth", "estimator_config"]
+             "depth", "gnss", "estimator_config"]
     )
     estimator_config = raw.get("estimator_config", "default")
     r.require(isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS, "estimator_config",
@@ -276,6 +298,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         r.require(depth.atmospheric_pa >= 0, "depth.atmospheric_pa", "must be >= 0")
         dr = rates.imu_hz / depth.rate_hz
         r.require(abs(dr - round(dr)) < 1e-9, "depth.rate_hz", "must divide rates.imu_hz")
+    gnss = _gnss_spec(r, rates.imu_hz) if "gnss" in raw else None
     t0 = raw.get("t0_s", DEFAULT_T0_S)
     r.number("t0_s", t0)
     t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact
@@ -294,7 +317,35 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         t0_ns=t0_ns,
         depth=depth,
         estimator_config=estimator_config,
+        gnss=gnss,
     )
+
+
+def _gnss_spec(r: Reader, imu_hz: float) -> GnssSpec:
+    """The [gnss] table, checked (the optional window and the origin flag read apart from the numbers)."""
+    d = r.raw["gnss"]
+    if not isinstance(d, dict):
+        raise r.fail("gnss", "expected a table")
+    r.check_keys("gnss", list(_defaults(GnssSpec)), d)
+    extra: dict[str, Any] = {}
+    for key in ("start_s", "end_s"):
+        if key in d:
+            extra[key] = r.number(f"gnss.{key}", d[key])
+    if "origin_in_log" in d:
+        r.require(isinstance(d["origin_in_log"], bool), "gnss.origin_in_log", "must be true or false")
+        extra["origin_in_log"] = d["origin_in_log"]
+    numbers = {k: v for k, v in _defaults(GnssSpec).items() if k not in ("start_s", "end_s", "origin_in_log")}
+    rest = {k: v for k, v in d.items() if k in numbers}
+    spec = GnssSpec(**Reader({"gnss": rest}, r.source).table("gnss", numbers, vectors=("antenna_lever_arm_m",)),
+                    **extra)
+    r.require(spec.rate_hz > 0, "gnss.rate_hz", "must be positive")
+    ratio = imu_hz / spec.rate_hz
+    r.require(abs(ratio - round(ratio)) < 1e-9, "gnss.rate_hz", "must divide rates.imu_hz")
+    for key in ("horizontal_sigma_m", "vertical_sigma_m", "max_depth_m"):
+        r.require(getattr(spec, key) >= 0, f"gnss.{key}", "must be >= 0")
+    if spec.start_s is not None and spec.end_s is not None:
+        r.require(spec.end_s >= spec.start_s, "gnss.end_s", "must be >= gnss.start_s")
+    return spec
 
 
 def _defaults(cls: type) -> dict[str, Any]:

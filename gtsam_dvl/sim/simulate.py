@@ -1,8 +1,9 @@
 """simulate(): scenario -> LogData (IMU, DVL, truth, mounting, metadata). No file I/O, no GTSAM.
 
 Steps: analytic motion in the local level -> geodetic position by quadrature -> true IMU increments ->
-biases and noise -> truth in the map frame -> DVL. Random streams are children of
-SeedSequence(seed) (PCG64), one per purpose, so switching white noise off keeps the same biases.
+biases and noise -> truth in the map frame -> DVL -> depth and GNSS fixes (when the scenario has them).
+Random streams are children of SeedSequence(seed) (PCG64), one per purpose, so switching white noise off keeps
+the same biases.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
+from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
 from gtsam_dvl.core.types import (
     DepthData,
@@ -28,6 +30,7 @@ from gtsam_dvl.core.types import (
 )
 from gtsam_dvl.sim import imu as sim_imu
 from gtsam_dvl.sim.dvl import dvl_measure, dvl_true
+from gtsam_dvl.sim.gnss import first_fix_frame, reframe_truth, simulate_gnss
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
@@ -86,17 +89,32 @@ def simulate(
     metadata = _metadata(scenario, seed, white_noise, mounting, errors, rate)
     if scenario.depth is not None:
         metadata["sensors"]["depth"] = _listify_spec(asdict(scenario.depth))
+    gnss = None
+    origin: GeoOrigin | None = GeoOrigin(float(scenario.origin.lat_deg), float(scenario.origin.lon_deg),
+                                         float(scenario.origin.height_m))
+    if scenario.gnss is not None:
+        gnss = simulate_gnss(scenario.gnss, motion, track, rate, n, seed, white_noise)
+        metadata["sensors"]["gnss"] = _listify_spec(asdict(scenario.gnss))
+        if not scenario.gnss.origin_in_log:  # the origin must come from the fixes (sim/gnss.py)
+            fix_frame = first_fix_frame(gnss)
+            if fix_frame is None:
+                raise GtsamDvlError(f"{scenario.source}: key 'gnss.origin_in_log': false needs at least one fix, "
+                                    "and the vehicle never surfaces while the receiver records")
+            truth = reframe_truth(truth, frame, fix_frame)
+            origin = None
+            metadata.pop("origin", None)
+            metadata["truth"]["map_origin"] = {"lat_deg": fix_frame.lat_deg, "lon_deg": fix_frame.lon_deg,
+                                               "height_m": fix_frame.height_m, "from": "first GNSS fix"}
     if progress is not None:
         progress(1.0)
-    o = scenario.origin
     return LogData(imu=imu, dvl=dvl, mounting=mounting, truth=truth, t0_ns=scenario.t0_ns, metadata=metadata,
                    source=f"simulated:{scenario.name}:seed={seed}",
-                   origin=GeoOrigin(float(o.lat_deg), float(o.lon_deg), float(o.height_m)),
+                   origin=origin,
                    true_calibration=DvlCalibration(float(scenario.dvl.scale),
                                                    tuple(float(a) for a in scenario.dvl.misalignment_deg),  # type: ignore[arg-type]
                                                    float(rates.dvl_time_offset_s)),
                    true_imu_bias=ImuBiases(tuple(errors.accel_bias0.tolist()), tuple(errors.gyro_bias0.tolist())),  # type: ignore[arg-type]
-                   segments=scenario.segments_typed(), depth=depth)
+                   segments=scenario.segments_typed(), depth=depth, gnss=gnss)
 
 
 def _listify_spec(d: dict[str, Any]) -> dict[str, Any]:

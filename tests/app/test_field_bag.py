@@ -22,7 +22,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from gtsam_dvl.core.earth import LocalFrame, depth_to_pressure
+from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate

@@ -156,7 +156,7 @@ def test_unknown_sections_and_keys_still_rejected(tmp_path: Path) -> None:
     assert _error(tmp_path, "[priors]\nscale_sigmaa = 1.0\n").startswith(
         "unknown key 'scale_sigmaa' in [priors] (known: scale_initial, scale_sigma, ")
     assert _error(tmp_path, "[onlin]\nwindow_s = 1.0\n") == (
-        "unknown section [onlin] (known: alignment, depth, dvl, ekf, imu, iodvlc, online, priors, solver)")
+        "unknown section [onlin] (known: alignment, depth, dvl, ekf, gnss, imu, iodvlc, online, priors, solver)")
     assert _error(tmp_path, "[online.relinearization]\nscales = 1.0\n").startswith(
         "unknown key 'scales' in [online.relinearization] (known: pose, velocity, bias, scale, misalignment_rad)")
     assert _error(tmp_path, "[ekf]\nmin_speed = 1.0\n").startswith("unknown key 'min_speed' in [ekf]")
@@ -346,7 +346,8 @@ def test_defaults_are_a_real_dvls_priors_and_paper_is_named() -> None:
     assert (cfg.priors.scale_initial, cfg.priors.scale_sigma) == (1.0, 0.01)
     assert cfg.priors.misalignment_sigma_deg == (1.0, 1.0, 1.0)
     assert (paper.priors.scale_initial, paper.priors.scale_sigma) == (0.8, 0.5)
-    assert dataclasses.replace(paper, priors=cfg.priors) == cfg
+    assert not paper.dvl.estimate_time_offset and cfg.dvl.estimate_time_offset
+    assert dataclasses.replace(paper, priors=cfg.priors, dvl=cfg.dvl) == cfg
     assert EstimatorConfig.named("default") == cfg
 
 

@@ -274,10 +274,11 @@ def test_configured_attitude_skips_the_static_segment() -> None:
 
 def test_too_short_static_segment_is_a_clear_error() -> None:
     """20 s at rest, then motion: the first window seen moving is [20, 21), so the static segment is 16 s, shorter
-    than alignment.min_static_s (30 s)."""
+    than alignment.min_static_s (30 s): an error with method = "static" (method "auto" aligns in motion then:
+    tests/estimators/test_alignment_motion.py)."""
     log, frame = _log(static_s=20.0)
     with pytest.raises(GtsamDvlError, match=r"no static segment of at least 30 s .*found 16 s.*initial_attitude_deg"):
-        align(log.imu, log.dvl, frame, AlignmentConfig())
+        align(log.imu, log.dvl, frame, AlignmentConfig(method="static"))
     # a lower minimum accepts it, and the attitude is still the truth (noise-free, no biases)
     a = align(log.imu, log.dvl, frame, AlignmentConfig(min_static_s=10.0))
     assert a.t_static_end == pytest.approx(16.0) and np.all(np.abs(_attitude_error(a.n_R_b, log, 0.0)) < 1e-10)
@@ -285,7 +286,7 @@ def test_too_short_static_segment_is_a_clear_error() -> None:
 
 def test_log_starting_in_motion_is_a_clear_error() -> None:
     """A log that starts at 1.5 m/s (DVL faster than dvl_speed_threshold_m_s from the first ping): no static
-    segment at all."""
+    segment at all: an error with method = "static"."""
     sc = scenario_from_dict({"origin": {"lat_deg": LAT, "lon_deg": 114.0}, "initial": {"speed_m_s": 1.5},
                              "dvl": {"noise_m_s": 0.02},
                              "segments": [{"kind": "straight", "duration_s": 60.0},
@@ -293,7 +294,7 @@ def test_log_starting_in_motion_is_a_clear_error() -> None:
     log = simulate(sc, 1, white_noise=False)
     assert detect_static_end(log.imu, log.dvl, AlignmentConfig()) == log.imu.t[0]
     with pytest.raises(GtsamDvlError, match=r"no static segment of at least 30 s .*found 0 s"):
-        align(log.imu, log.dvl, sc.local_frame(), AlignmentConfig())
+        align(log.imu, log.dvl, sc.local_frame(), AlignmentConfig(method="static"))
 
 
 def test_gyrocompassing_fails_clearly_when_the_earth_rate_is_hidden() -> None:

@@ -103,13 +103,3 @@ def test_nearest_states_and_pressure_conversion() -> None:
     np.testing.assert_allclose(back, d, atol=1e-9)
     assert 1.0e4 < (p[2] - 1e5) / 100.0 < 1.02e4  # rho g: about 1 dbar per metre
     np.testing.assert_allclose(dd_dp, 1.0 / (1030.0 * 9.79), rtol=2e-3)
-
-
-def test_online_and_ekf_count_depth_as_ignored() -> None:
-    from gtsam_dvl.estimators.ekf import run_ekf
-    from gtsam_dvl.estimators.online import smooth_online
-
-    log = _log(2, segments=2)  # 0-630 s
-    assert log.depth is not None
-    for res in (run_ekf(log, EstimatorConfig.paper()), smooth_online(log, EstimatorConfig.paper())):
-        assert res.info["counters"]["depth_ignored"] == len(log.depth)

@@ -20,8 +20,6 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.ekf.filter import run_ekf
-from gtsam_dvl.estimators.online.estimator import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
@@ -105,12 +103,9 @@ def test_ignoring_the_offset_is_measurably_worse() -> None:
     assert abs(s_ign) > abs(s_est) + 1.0
 
 
-def test_online_ekf_and_beams_refuse_the_offset_clearly() -> None:
+def test_beams_refuse_the_offset_clearly() -> None:
+    """The offset model is on the 3-D velocity (online and EKF: tests/estimators/test_online_depth_offset.py)."""
     log, cfg = short_run(0.0), config(True)
-    with pytest.raises(GtsamDvlError, match="batch smoother only"):
-        smooth_online(log, cfg)
-    with pytest.raises(GtsamDvlError, match="batch smoother only"):
-        run_ekf(log, cfg)
     beams = dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, use_beams=True))
     with pytest.raises(GtsamDvlError, match="use_beams"):
         smooth_batch(log, beams)
@@ -149,3 +144,19 @@ def test_offset_not_observable_without_motion_says_so() -> None:
     v = time_offset_verdict(r)
     print(v["verdict"])
     assert not v["determined"] and "not observable" in v["verdict"]
+
+
+def test_filtering_timeline_carries_the_offset_and_ends_at_the_smoother() -> None:
+    """With the offset estimated the filtering timeline has its sigma at every epoch: at the prior's 0.5 s during
+    the static start (a still vehicle shows no offset), far below it once moving, and equal to the smoother's
+    marginal at the last epoch (the filter's last marginal is the smoother's)."""
+    r = smooth_batch(short_run(0.6), config(True), timeline=True)
+    tl = r.timeline
+    assert tl is not None and tl.time_offset_sigma_s is not None and tl.time_offset_s is not None
+    static = tl.t < 100.0
+    print(f"\noffset sigma: static {tl.time_offset_sigma_s[static][-1]:.3f} s, last {tl.time_offset_sigma_s[-1]:.4f} "
+          f"s (smoother {r.time_offset_sigma_s:.4f} s)")
+    assert tl.time_offset_sigma_s[static][-1] > 0.45
+    np.testing.assert_allclose(tl.time_offset_sigma_s[-1], r.time_offset_sigma_s, rtol=1e-6)
+    np.testing.assert_allclose(tl.scale_sigma[-1], r.scale_sigma, rtol=1e-6)
+    assert np.all(tl.time_offset_s == r.time_offset_s)

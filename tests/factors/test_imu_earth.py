@@ -56,7 +56,8 @@ DT = {"earth": 10.0, "analytic": 2.0, "none": 1.0}  # s of preintegration per gr
 
 def earth_gravity() -> GravityModel:
     """The estimators' model (WGS-84 normal gravity plus the centrifugal fix, and its gradient)."""
-    return FactorMaker(EstimatorConfig.paper(), FRAME, Alignment(np.eye(3), 0.0, "configured"), Mounting()).gravity_model
+    maker = FactorMaker(EstimatorConfig.paper(), FRAME, Alignment(np.eye(3), 0.0, "configured"), Mounting())
+    return maker.gravity_model
 
 
 def analytic_gravity(rng: np.random.Generator, centre: np.ndarray) -> GravityModel:

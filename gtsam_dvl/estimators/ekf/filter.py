@@ -16,6 +16,29 @@ calibration, position 0 at the first ping. The error is injected after every upd
 its effect is second order in the correction). Every ping is used: solver.keyframe_interval_s only thins
 the smoother's states.
 
+Depth ([depth], LogData.depth, converted by estimators/depth.py depth_samples as the batch smoother converts
+it): a scalar update of the vertical position at the sample's own time (the propagation stops there), with the
+model of factors/depth.py, h = z + (x^2 + y^2) / (2 R) + (n_R_b b_p_s)_z, the sensor's lever arm b_p_s and the
+Earth's curvature; a sample before the first state or after the last one is bridged to it by the velocity,
+within [depth] max_time_to_state_s (else counted "depth_too_far"). The chi^2 gate of the DVL (1 dof) applies,
+reopened after gate_reopen_after gated samples in a row; counters "depth_used" (updates made), "depth_gated",
+"depth_too_far", "depth_invalid".
+
+DVL time offset ([dvl] estimate_time_offset, not with use_beams): dt_d is a 20th error-state component (a random
+constant with the prior time_offset_prior_s +- time_offset_sigma_s, no process noise). The ping stamped t
+measures the velocity at t + dt_d; the update is made with the filter's state at t and the batch smoother's
+first-order model (factors/dvl_velocity.py make_dvl_velocity_offset_factor),
+
+    y = k d_R_b (b_v + dt_d (b_a - b_a_bias + G n_R_b^T n_g - b_omega x b_v) + b_omega x b_l),  b_v = n_R_b^T n_v
+
+with the IMU constants of FactorMaker.velocity_rate_input (mean specific force, mean body rate less the gyro
+bias, mean body rotation G) over the samples within time_offset_window_s of [t, t + dt_c], dt_c the filter's
+estimate of the offset when the ping is processed (clipped to the prior +- 3 prior sigmas), as the online
+estimator re-centres its windows. Those samples come after the stamp: the ping is buffered, the filter held at
+its stamp until the IMU has reached t + max(0, dt_c) + time_offset_window_s (run_ekf, given the whole log, reads
+them from it; a real-time filter would wait that long, as the online estimator does). The estimate and its
+sigma are NavResult.time_offset_s / time_offset_sigma_s, as the batch smoother reports them.
+
 Outliers: the pings are those the smoothers use (selection.usable_pings, with the screen for bogus data).
 An update whose normalised innovation squared exceeds the chi^2 quantile of [ekf] gate_probability (0.99999
 by default; dof the measurement's dimension) is skipped and counted in counters["dvl_gated"] (the state is
@@ -34,7 +57,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
-from gtsam_dvl.core.earth import LocalFrame, gravity_gradient, normal_gravity
+from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
@@ -42,7 +65,9 @@ from gtsam_dvl.core.rotations import matrix_to_rpy, skew, so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import align, map_frame_of
+from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
+from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
     check_gaps,
     find_gaps,
@@ -69,6 +94,8 @@ CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 CALIBRATION = np.r_[SCALE, 16:19]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
+OFFSET = N_ERR  # error-state index of the DVL time offset dt_d (s), with [dvl] estimate_time_offset
+RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
 
 @dataclass
@@ -80,7 +107,8 @@ class FilterState:
     accel_bias: np.ndarray
     scale: float
     b_R_d: np.ndarray
-    P: np.ndarray
+    P: np.ndarray  # (19, 19), or (20, 20) with the time offset (OFFSET)
+    time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
 
 
 @dataclass
@@ -97,6 +125,7 @@ class _History:
     accel_bias: list[np.ndarray] = field(default_factory=list)
     scale: list[float] = field(default_factory=list)
     b_R_d: list[np.ndarray] = field(default_factory=list)
+    time_offset: list[float] = field(default_factory=list)
 
 
 class _Earth:
@@ -128,7 +157,10 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
     k0 = pri.scale_initial
     d_y = log.dvl.d_v[ping]
     n_v = n_R_b @ (b_R_d0 @ d_y) / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
-    P = np.zeros((N_ERR, N_ERR))
+    offset = config.dvl.estimate_time_offset
+    P = np.zeros((N_ERR + int(offset), N_ERR + int(offset)))
+    if offset:
+        P[OFFSET, OFFSET] = config.dvl.time_offset_sigma_s**2
     rp, yaw = np.radians(pri.roll_pitch_sigma_deg), np.radians(pri.yaw_sigma_deg)
     P[PHI, PHI] = np.diag([rp**2, rp**2, yaw**2])  # map axes: the error phi is about map axes
     P[VEL, VEL] = np.eye(3) * pri.velocity_sigma_m_s**2
@@ -138,7 +170,8 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
     P[SCALE, SCALE] = pri.scale_sigma**2
     mis = np.radians(np.asarray(pri.misalignment_sigma_deg, dtype=float))
     P[MIS, MIS] = b_R_d0.T @ np.diag(mis**2) @ b_R_d0  # body-axis sigmas in b_R_d's right tangent
-    return FilterState(NavState(n_R_b.copy(), n_v, np.zeros(3)), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P)
+    return FilterState(NavState(n_R_b.copy(), n_v, np.zeros(3)), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
+                       config.dvl.time_offset_prior_s if offset else 0.0)
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -164,7 +197,7 @@ def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray,
     b_omega = b_omega_m - fs.gyro_bias - R.T @ n_omega_ie
     u = R.T @ v + np.cross(b_omega, b_l)
     d_u = d_R_b @ u
-    H = np.zeros((3, N_ERR))
+    H = np.zeros((3, len(fs.P)))
     k_d_R_b = k * d_R_b
     # R_true^T = R^T Exp(-phi): R^T v gains R^T [v]x phi; omega gains -R^T [w_ie]x phi - dbg
     H[:, PHI] = k_d_R_b @ (R.T @ skew(v) + skew(b_l) @ R.T @ skew(n_omega_ie))
@@ -173,6 +206,50 @@ def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray,
     H[:, SCALE] = d_u
     H[:, MIS] = k * skew(d_u)  # d_R_b_true = Exp(-psi) d_R_b
     return k * d_u, H, b_omega
+
+
+def offset_measurement_model(fs: FilterState, b_l: np.ndarray, rate_input: RateInput,
+                             n_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The DVL velocity with the time offset (module doc), y (3,), and its Jacobian H (3, 20) w.r.t. the error
+    state. rate_input = (b_a, b_omega, G): FactorMaker.velocity_rate_input of the ping (body rate relative to
+    map, gyro bias not removed); n_g gravity in map. With M = I - dt [b_omega]x and b_v_eff the bracket:
+        phi: k d_R_b (M R^T [n_v]x + dt G R^T [n_g]x)     (R_true^T a = R^T a + R^T [a]x phi)
+        dv:  k d_R_b M R^T          dbg: k d_R_b ([b_l]x - dt [b_v]x)          dba: -dt k d_R_b
+        dk:  d_R_b b_v_eff          psi: k [d_R_b b_v_eff]x                    ddt: k d_R_b b_vdot"""
+    R, v, k, dt = fs.nav.n_R_b, fs.nav.n_v, fs.scale, fs.time_offset
+    d_R_b = fs.b_R_d.T
+    b_a, b_omega_mean, G = rate_input
+    b_omega = b_omega_mean - fs.gyro_bias
+    b_v = R.T @ v
+    b_vdot = b_a - fs.accel_bias + G @ (R.T @ n_g) - np.cross(b_omega, b_v)
+    b_v_eff = b_v + dt * b_vdot + np.cross(b_omega, b_l)
+    d_u = d_R_b @ b_v_eff
+    k_d_R_b = k * d_R_b
+    M = np.eye(3) - dt * skew(b_omega)
+    H = np.zeros((3, len(fs.P)))
+    H[:, PHI] = k_d_R_b @ (M @ R.T @ skew(v) + dt * G @ R.T @ skew(n_g))
+    H[:, VEL] = k_d_R_b @ M @ R.T
+    H[:, BG] = k_d_R_b @ (skew(b_l) - dt * skew(b_v))
+    H[:, BA] = -dt * k_d_R_b
+    H[:, SCALE] = d_u
+    H[:, MIS] = k * skew(d_u)
+    H[:, OFFSET] = k_d_R_b @ b_vdot
+    return k * d_u, H
+
+
+def depth_measurement_model(fs: FilterState, b_p_s: np.ndarray, radius_m: float,
+                            dt: float = 0.0) -> tuple[float, np.ndarray]:
+    """Predicted height of the depth sensor above the map origin's height (m, up; factors/depth.py), dt seconds
+    after the filter's time (bridged by the vertical velocity), and its Jacobian (1, n) w.r.t. the error state:
+    phi (map axes, left) moves the lever arm a = n_R_b b_p_s by phi x a, whose z is phi_x a_y - phi_y a_x."""
+    n_p, a = fs.nav.n_p, fs.nav.n_R_b @ b_p_s
+    x, y = float(n_p[0]), float(n_p[1])
+    h = float(n_p[2]) + 0.5 * (x * x + y * y) / radius_m + float(a[2]) + dt * float(fs.nav.n_v[2])
+    H = np.zeros((1, len(fs.P)))
+    H[0, PHI] = [a[1], -a[0], 0.0]
+    H[0, POS] = [x / radius_m, y / radius_m, 1.0]
+    H[0, 5] = dt  # vertical velocity
+    return h, H
 
 
 def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,7 +301,7 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
         S = H @ P @ H.T + Rm
     K = np.linalg.solve(S, H @ P).T
     dx = K @ innovation
-    IKH = np.eye(N_ERR) - K @ H
+    IKH = np.eye(len(P)) - K @ H
     P = IKH @ P @ IKH.T + K @ Rm @ K.T
     fs.P = 0.5 * (P + P.T)
     nav = fs.nav
@@ -233,7 +310,60 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
     fs.accel_bias = fs.accel_bias + dx[BA]
     fs.scale = fs.scale + float(dx[SCALE])
     fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
+    if len(dx) > OFFSET:
+        fs.time_offset = fs.time_offset + float(dx[OFFSET])
     return nis, down, False
+
+
+def _propagate_covariance(P: np.ndarray, Phi: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """P through the navigation error's transition Phi (19, 19) and process noise Q; the time offset (if P has
+    it) is a constant: its row and column are carried by Phi alone."""
+    if len(P) == N_ERR:
+        return np.asarray(Phi @ P @ Phi.T + Q)
+    out = P.copy()
+    out[:N_ERR, :N_ERR] = Phi @ P[:N_ERR, :N_ERR] @ Phi.T + Q
+    out[:N_ERR, N_ERR:] = Phi @ P[:N_ERR, N_ERR:]
+    out[N_ERR:, :N_ERR] = out[:N_ERR, N_ERR:].T
+    return out
+
+
+@dataclass
+class _DepthUpdates:
+    """The depth samples of a log (depth_samples) and the filter's use of them (module doc)."""
+
+    samples: DepthSamples
+    radius_m: float
+    max_dt: float
+    gate_nis: float
+    reopen_after: int
+    next: int = 0
+    gated_run: int = 0
+    counters: dict[str, int] = field(default_factory=dict)
+
+    def due(self, t: float) -> float | None:
+        """The next sample's time if it is before t (the propagation stops there), else None."""
+        return float(self.samples.t[self.next]) if self.next < len(self.samples.t) and \
+            self.samples.t[self.next] < t - 1e-9 else None
+
+    def apply(self, fs: FilterState, t: float, until: float, bridge_to: float | None = None) -> None:
+        """Update with the samples stamped up to `until`, the filter at t; a sample more than 1e-9 s from t is
+        bridged by the velocity if within max_dt (bridge_to: also those after t up to it, the last state)."""
+        s, c = self.samples, self.counters
+        end = until if bridge_to is None else bridge_to
+        while self.next < len(s.t) and s.t[self.next] <= end + 1e-9:
+            dt = float(s.t[self.next]) - t
+            if abs(dt) <= 1e-9:
+                dt = 0.0
+            if abs(dt) > self.max_dt + 1e-9:
+                c["depth_too_far"] += 1
+            else:
+                h, H = depth_measurement_model(fs, s.b_p_sensor, self.radius_m, dt)
+                gate = self.gate_nis if self.gated_run < self.reopen_after else math.inf
+                _, _, gated = update(fs, H, np.array([s.z_meas[self.next] - h]),
+                                     np.array([[float(s.sigma[self.next]) ** 2]]), gate_nis=gate)
+                self.gated_run = self.gated_run + 1 if gated else 0
+                c["depth_gated" if gated else "depth_used"] += 1
+            self.next += 1
 
 
 def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
@@ -248,16 +378,23 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         config = replace(config, ekf=replace(config.ekf, min_calibration_speed_m_s=min_calibration_speed_m_s))
     ekf_cfg = config.validate().ekf
-    if config.dvl.estimate_time_offset:
-        raise GtsamDvlError("[dvl] estimate_time_offset is supported by the batch smoother only, not the EKF")
+    offset = config.dvl.estimate_time_offset
+    if offset and config.dvl.use_beams:
+        raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
+    if config.dvl.estimate_lever_arm:
+        raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not the EKF")
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
-    alignment = align(log.imu, log.dvl, frame, config.alignment)
+    alignment = align(log.imu, log.dvl, frame, config.alignment, attitude=log.attitude, mounting=log.mounting,
+                      imu_cfg=config.imu)
     pings = usable_pings(log.dvl, log.imu, config.dvl, counters)  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
+    # an attitude sensor's or the in-motion alignment's attitude is at its own time: carry it to the first ping
+    # (the filter's initial covariance keeps the [priors] attitude sigmas, wider than the alignment's)
+    alignment = alignment.at(float(log.dvl.t[pings[0]]), log.imu, frame)
     earth = _Earth(frame, config.solver.earth_model == "flat")
     imu, dvl = log.imu, log.dvl
     t = imu.t
@@ -269,6 +406,15 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     gates: dict[int, float] = {}  # gate_threshold per measurement dimension
     gated, gated_run = 0, 0  # gated pings, and how many in a row
 
+    maker = FactorMaker(config, frame, alignment, log.mounting, log.source)  # the time offset's IMU constants
+    offset_bound = 3.0 * config.dvl.time_offset_sigma_s
+    depth: _DepthUpdates | None = None
+    if log.depth is not None and config.depth.use and len(log.depth):
+        dcounters = {"depth_used": 0, "depth_gated": 0, "depth_too_far": 0}
+        samples = depth_samples(log.depth, config.depth, frame, dcounters)
+        depth = _DepthUpdates(samples, gaussian_radius(frame.lat0), config.depth.max_time_to_state_s,
+                              gate_threshold(ekf_cfg.gate_probability, 1), ekf_cfg.gate_reopen_after,
+                              counters=dcounters)
     fs = initial_state(log, config, alignment.n_R_b, int(pings[0]))
     hist = _History()
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
@@ -283,24 +429,32 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     gaps = gaps_within(gaps, float(state_t[0]), float(state_t[-1]))  # the gaps the states cross
     check_gaps(gaps, config.imu, log.source)
     counters["imu_gaps"] = len(gaps)
+    if depth is not None:  # samples before the first state: bridged to it if near enough
+        depth.apply(fs, t_prev, t_prev)
     for count, (t_j, j) in enumerate(zip(state_t.tolist(), ping_at.tolist(), strict=True)):
         t0 = time.perf_counter()
-        while t_prev < t_j - 1e-9:  # propagate (in steps of at most MAX_STEP_S)
+        while t_prev < t_j - 1e-9:  # propagate (in steps of at most MAX_STEP_S, stopping at depth samples)
             t_next = min(t_j, t_prev + MAX_STEP_S)
+            if depth is not None and (t_d := depth.due(t_next)) is not None and t_d > t_prev:
+                t_next = t_d
             idx, dt, held = pieces_with_holds(t, starts, gaps, t_prev, t_next)
             if len(idx):
                 n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
                 step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
                                           dt, earth.n_omega_ie, n_g, G)
                 fs.nav = step.state
-                fs.P = step.Phi @ fs.P @ step.Phi.T + process_noise(config, step.Phi, step.duration)
+                fs.P = _propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
                 if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
                     fs.P[POS, POS] += np.diag(q[3:6])
                     fs.P[VEL, VEL] += np.diag(q[6:9])
             t_prev = t_next
+            if depth is not None:
+                depth.apply(fs, t_prev, t_prev)
         t1 = time.perf_counter()
+        if depth is not None and count == len(state_t) - 1:  # samples after the last state: bridged to it
+            depth.apply(fs, t_j, t_j, bridge_to=math.inf)
         if j < 0:  # a state without a ping: recorded, not updated
             g_j = int(covering_sample(t, t_j))
             _record(hist, fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie)
@@ -308,6 +462,11 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             continue
         A, z, Rm = _ping_measurement(log, config, int(j))
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
+        if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
+            prior = config.dvl.time_offset_prior_s
+            dt_c = float(np.clip(fs.time_offset, prior - offset_bound, prior + offset_bound))
+            rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
+            y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity())
         speed = np.linalg.norm(y_hat) / fs.scale
         slow = speed < max(ekf_cfg.min_calibration_speed_m_s,
                            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
@@ -333,13 +492,13 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
     counters["dvl_downweighted"] = downweighted
     counters["dvl_gated"] = gated
-    if log.depth is not None:  # the EKF takes no depth yet (estimators/depth.py): counted
-        counters["depth_ignored"] = len(log.depth)
+    if depth is not None:
+        counters.update(depth.counters)
     result = _to_result(hist, log, config)
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
-    result.info = {"alignment": {"method": alignment.method, "t_static_end": alignment.t_static_end},
+    result.info = {"alignment": alignment.info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
-                   "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "error_state": N_ERR}}
+                   "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "error_state": N_ERR + int(offset)}}
     if progress:
         progress(1.0)
     return result
@@ -373,6 +532,7 @@ def _record(hist: _History, fs: FilterState, t: float, b_omega: np.ndarray) -> N
     hist.accel_bias.append(fs.accel_bias.copy())
     hist.scale.append(fs.scale)
     hist.b_R_d.append(fs.b_R_d.copy())
+    hist.time_offset.append(fs.time_offset)
 
 
 def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResult:
@@ -415,4 +575,7 @@ def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResu
         b_R_d=hist.b_R_d[-1], b_R_d_cov=P[-1][MIS, MIS].copy(), b_R_d0=b_R_d0, t0_ns=log.t0_ns,
         b_omega=np.array(hist.b_omega), pose_vel_cross=pose_vel_cross, calib_joint_cov=calib,
         timeline=timeline, config=config.to_dict(),
+        time_offset_s=float(hist.time_offset[-1]) if P.shape[1] > OFFSET else 0.0,
+        time_offset_sigma_s=float(np.sqrt(P[-1][OFFSET, OFFSET])) if P.shape[1] > OFFSET else float("nan"),
+
     )

@@ -41,6 +41,21 @@ Design (see also window.py for the iSAM2 engine):
   Jacobians for scale and misalignment, which are "considered" at their current value. Given up: the
   information of pings slower than the threshold, (v / sigma)^2 per ping, nothing next to a manoeuvre (the
   final estimates agree with the batch smoother's to 0.03 sigma in the full-history mode).
+- Depth (`push_depth`, LogData.depth in feed_log; [depth], estimators/depth.py): each sample is converted as the
+  batch smoother converts it and waits until the state nearest to it in time is known, i.e. until the first
+  state at or after its stamp exists (or finish(), for samples after the newest state); its factor goes in with
+  that state's update, the time between them bridged by the state's velocity (factors/depth.py), the same factor
+  as the batch smoother's on the same state. Counters "depth_used", "depth_too_far" (farther than
+  max_time_to_state_s from the nearest state still held), "depth_invalid".
+- DVL time offset ([dvl] estimate_time_offset): T_OFFSET is a shared variable with its prior, like the scale, and
+  each ping's factor is the batch smoother's make_dvl_velocity_offset_factor with the IMU constants of
+  FactorMaker.velocity_rate_input over the IMU samples within time_offset_window_s of [t, t + dt_c], dt_c the
+  current estimate of the offset (clipped to the prior +- 3 prior sigmas): the batch smoother's second pass
+  re-centres its windows on its first estimate, the online estimator on the estimate it has when the ping is
+  processed. A ping therefore waits for the IMU to reach t + max(0, dt_c) + time_offset_window_s: a causal
+  delay of that much (0.25 s at dt_c <= 0; the epochs after it wait behind it); at finish() a ping still
+  waiting takes the IMU there is. Not with use_beams (as in the batch smoother). The estimate and its marginal
+  sigma are NavResult.time_offset_s / time_offset_sigma_s, as the batch smoother reports them.
 - Bad input: a message older than or as old as the previous one of its kind, or with a non-finite value, is
   rejected with GtsamDvlError (`bad_messages = "raise"`, the default) or dropped with a warning the first time
   and counted in `counters` (`"drop"`). DVL pings without a valid velocity, faster than dvl.max_speed_m_s or
@@ -65,12 +80,13 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, V, X
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.types import DvlData, ImuData, LogData, Mounting
+from gtsam_dvl.core.types import DepthData, DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import STATIC_MARGIN_S, Alignment, align, map_frame_of
+from gtsam_dvl.estimators.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
     check_gaps,
@@ -99,7 +115,7 @@ from gtsam_dvl.estimators.selection import (
     count_reasons,
     screened_value,
 )
-from gtsam_dvl.factors import dvl_beam_error, dvl_velocity_error
+from gtsam_dvl.factors import dvl_beam_error, dvl_velocity_error, dvl_velocity_offset_error
 
 __all__ = ["MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
            "feed_log", "latency_stats", "smooth_online"]
@@ -114,20 +130,35 @@ class _Ping:
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
 
 
+RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
+
+
 def _considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega: np.ndarray, b_l: np.ndarray,
                                    d_y: np.ndarray | None = None,
-                                   beam: tuple[np.ndarray, float] | None = None) -> gtsam.CustomFactor:
+                                   beam: tuple[np.ndarray, float] | None = None,
+                                   offset: tuple[RateInput, np.ndarray] | None = None) -> gtsam.CustomFactor:
     """The DVL factor of factors/ on [X_i, V_i, K, C] for a ping too slow to inform the calibration (module
     doc): same error, same Jacobians for pose and velocity, none for scale and misalignment, which are
     "considered" at their current estimate (the velocity's information scales with it). d_y: the 3-D velocity;
-    beam: (d_u, y_j) for one beam."""
-    if (beam is None) == (d_y is None):
-        raise ValueError("a considered-calibration DVL factor needs either d_y or beam")
+    beam: (d_u, y_j) for one beam. offset = (rate_input, n_g): the time-offset model of
+    make_dvl_velocity_offset_factor on [X_i, V_i, K, C, T_OFFSET] (with d_y), its T_OFFSET Jacobian kept (it is
+    the IMU's velocity rate, not the velocity's noise)."""
+    if (beam is None) == (d_y is None) or (offset is not None and d_y is None):
+        raise ValueError("a considered-calibration DVL factor needs either d_y or beam (d_y with offset)")
 
     def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
         pose, n_v = values.atPose3(X(i)), values.atVector(V(i))
         k, b_R_d = values.atVector(K_SCALE), values.atRot3(C_MISALIGN)
-        slots: list[Any] | None = None if H is None else [None] * 4
+        slots: list[Any] | None = None if H is None else [None] * (4 if offset is None else 5)
+        if offset is not None:
+            assert d_y is not None  # checked above; tells mypy
+            (b_a, b_omega_mean, G), n_g = offset
+            e = dvl_velocity_offset_error(pose, n_v, k, b_R_d, values.atVector(T_OFFSET), d_y, b_omega_mean, b_l,
+                                          b_a, n_g, G, slots)
+            if H is not None and slots is not None:
+                H[0], H[1], H[4] = slots[0], slots[1], slots[4]
+                H[2], H[3] = np.zeros((3, 1)), np.zeros((3, 3))
+            return e
         if beam is not None:
             e = dvl_beam_error(pose, n_v, k, b_R_d, beam[0], beam[1], b_omega, b_l, slots)
         else:
@@ -138,7 +169,8 @@ def _considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega
             H[2], H[3] = np.zeros((len(e), 1)), np.zeros((len(e), 3))
         return e
 
-    return gtsam.CustomFactor(noise, [X(i), V(i), K_SCALE, C_MISALIGN], error_func)
+    keys = [X(i), V(i), K_SCALE, C_MISALIGN] + ([T_OFFSET] if offset is not None else [])
+    return gtsam.CustomFactor(noise, keys, error_func)
 
 
 PERIOD_SAMPLES = 64  # IMU stamps that measure the nominal period (the median spacing)
@@ -147,16 +179,21 @@ PERIOD_SAMPLES = 64  # IMU stamps that measure the nominal period (the median sp
 class OnlineEstimator:
     """Incremental estimator fed message by message (module doc). Times are seconds on the caller's clock,
     the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention). IMU samples are
-    given in imu_link and rotated into base_link with mounting.b_R_imu (estimators/mounting.py)."""
+    given in imu_link and rotated into base_link with mounting.b_R_imu (estimators/mounting.py). depth_sensor:
+    the pressure sensor's position in base_link (m, from /tf_static; [depth] lever_arm_m overrides it).
+    recentre_offset_window (attribute, default True): the time offset's IMU windows centred on the current
+    estimate (module doc); False keeps them at the prior (to measure what the re-centring gives)."""
 
     def __init__(self, config: EstimatorConfig | None = None, *, frame: LocalFrame, mounting: Mounting | None = None,
-                 options: OnlineConfig | None = None, source: str = "") -> None:
+                 options: OnlineConfig | None = None, source: str = "", depth_sensor: Any = None) -> None:
         config = config or EstimatorConfig()
         self.options = options or config.online  # options=: overrides config.online
         self.config = dataclasses.replace(config, online=self.options).validate()  # the effective config
         check_spacing(self.config.solver)
-        if self.config.dvl.estimate_time_offset:
-            raise GtsamDvlError("[dvl] estimate_time_offset is supported by the batch smoother only, not online")
+        if self.config.dvl.estimate_time_offset and self.config.dvl.use_beams:
+            raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
+        if self.config.dvl.estimate_lever_arm:
+            raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not online")
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self._imu_rotated = imu_is_rotated(self.mounting)
         self.counters: dict[str, int] = {}
@@ -183,8 +220,19 @@ class OnlineEstimator:
         self._unscreened: deque[_Ping] = deque()
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
+        # the DVL time offset: the IMU samples of the last seconds (velocity-rate windows), pings closed at finish
+        self._offset = self.config.dvl.estimate_time_offset
+        self.recentre_offset_window = True
+        self._recent: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self._flushing = False
+        # depth samples (t, z_meas, sigma) waiting for their nearest state
+        self._depth: deque[tuple[float, float, float]] = deque()
+        self._depth_sensor = None if depth_sensor is None else _vector3("depth_sensor", depth_sensor)
+        self._depth_lever = np.zeros(3)
+        self._last_depth_t = -math.inf
         if self.config.alignment.initial_attitude_deg is not None:
-            self._start(align(_empty_imu(), _empty_dvl(), frame, self.config.alignment))
+            self._start(align(_empty_imu(), _empty_dvl(), frame,
+                              dataclasses.replace(self.config.alignment, method="auto")))
 
     @classmethod
     def for_log(cls, log: LogData, config: EstimatorConfig | None = None,
@@ -193,7 +241,7 @@ class OnlineEstimator:
         log's scenario names, else the defaults (EstimatorConfig.for_log)."""
         config = config or EstimatorConfig.for_log(log.metadata)
         return cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
-                   source=log.source)
+                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
 
     # ----- input ---------------------------------------------------------------------------------
     def push_imu(self, t: float, b_omega: Any, b_f: Any) -> int:
@@ -269,15 +317,54 @@ class OnlineEstimator:
             return 0
         return self._take_ping(ping)
 
+    def push_depth(self, t: float, depth_m: float = math.nan, variance_m2: float = math.nan, *,
+                   pressure_pa: float | None = None, pressure_variance_pa2: float = math.nan) -> None:
+        """One depth sample at t: the pressure sensor's depth (m below the surface, positive down) and its
+        variance (m^2, NaN: unknown), or with pressure_pa its absolute pressure (Pa) and variance (Pa^2),
+        converted with [depth] (estimators/depth.py depth_samples). Its factor is added with the first state at or
+        after t (module doc). A non-finite value is counted ("depth_invalid"), not an error; nothing is done with
+        [depth] use = false."""
+        t = float(t)
+        if not math.isfinite(t):
+            self._bad("depth_bad_time", f"depth sample with a non-finite stamp ({t})")
+            return
+        if t <= self._last_depth_t:
+            kind = "depth_duplicate" if t == self._last_depth_t else "depth_out_of_order"
+            what = "repeats the previous stamp" if t == self._last_depth_t else "is older than the previous one"
+            self._bad(kind, f"depth sample at t = {t:.6f} s {what} ({self._last_depth_t:.6f} s)")
+            return
+        self._last_depth_t = t
+        cfg = self.config.depth
+        if not cfg.use:
+            return
+        for name in ("depth_used", "depth_too_far", "depth_invalid"):  # reported even when zero, as by the batch
+            self.counters.setdefault(name, 0)
+        pressure = pressure_pa is not None
+        data = DepthData(np.array([t]), np.array([float(depth_m)]), np.array([float(variance_m2)]),
+                         np.array([float(pressure_pa)]) if pressure_pa is not None else None,
+                         np.array([float(pressure_variance_pa2)]) if pressure else None, b_p_sensor=self._depth_sensor)
+        invalid: dict[str, int] = {}
+        s = depth_samples(data, cfg, self.frame, invalid)
+        self._count("depth_invalid", invalid.get("depth_invalid", 0))
+        if len(s.t):
+            self._depth.append((float(s.t[0]), float(s.z_meas[0]), float(s.sigma[0])))
+            self._depth_lever = s.b_p_sensor
+
     def finish(self) -> OnlineEstimate | None:
-        """End of data: align on what there is if still waiting, drop pings no IMU sample reached, and let
-        iSAM2 relinearise until converged (options.final_updates). Returns the final estimate."""
+        """End of data: align on what there is if still waiting, process the pings that waited only for the IMU
+        after them (the time offset's window, cut at the end of the data), drop pings no IMU sample reached, put
+        the depth samples after the newest state on it (if near enough), and let iSAM2 relinearise until
+        converged (options.final_updates). Returns the final estimate."""
         if self.smoother is None and self._pre_imu:
             self._align()
+        self._flushing = True
+        self._close_ready()
+        self._flushing = False
         self._count("dvl_after_imu", len(self._pending) + len(self._unscreened))
         self._pending.clear()
         self._unscreened.clear()
         if self.smoother is not None and self.smoother.n > 0:
+            self.smoother.add_factors(self._depth_factors(self.smoother.n - 1, self.smoother.t_last, final=True))
             self.smoother.refresh_gravity()
             self.smoother.refine(self.options.final_updates)
             self._latest = self._read_estimate(with_covariance=True)
@@ -323,7 +410,7 @@ class OnlineEstimator:
             "counters": dict(self.counters), "epochs": len(h),
             "imu_gaps": {"count": len(self._gaps_seen), "total_s": float(sum(self._gaps_seen.values())),
                          "longest_s": float(max(self._gaps_seen.values(), default=0.0))},
-            "alignment": {"method": self.builder.alignment.method, "t_static_end": self.builder.alignment.t_static_end},
+            "alignment": self.builder.alignment.info(),
             "latency_ms": latency_stats(self.latencies_s),
             "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
                       "variables": n_vars, "factors": n_factors},
@@ -335,7 +422,8 @@ class OnlineEstimator:
             accel_bias=final.accel_bias, gyro_bias=final.gyro_bias, bias_cov=final.bias_cov,
             scale=final.scale, scale_sigma=final.scale_sigma, b_R_d=final.b_R_d, b_R_d_cov=final.b_R_d_cov,
             b_R_d0=self.mounting.b_R_d0, t0_ns=t0_ns, b_omega=h["b_omega"] - final.gyro_bias,
-            calib_joint_cov=final.calib_cov, timeline=self.timeline(), info=info, config=self.config.to_dict())
+            calib_joint_cov=final.calib_cov, timeline=self.timeline(), info=info, config=self.config.to_dict(),
+            time_offset_s=final.time_offset_s, time_offset_sigma_s=final.time_offset_sigma_s)
 
     # ----- internals -----------------------------------------------------------------------------
     def _bad(self, kind: str, message: str, n: int = 1) -> None:
@@ -383,6 +471,8 @@ class OnlineEstimator:
         if len(t):
             self._chunks.append((t, w, f))
             self._screen.push_imu(t, w, f)
+            if self._offset:
+                self._recent.append((t, w, f))
         self._screen_ready()
         return self._close_ready()
 
@@ -395,10 +485,20 @@ class OnlineEstimator:
                       np.array([p.d_cov for p in pings]).reshape(-1, 3, 3), np.array([p.valid for p in pings], bool))
         cfg = dataclasses.replace(self.config.alignment)
         cfg.max_static_s = min(cfg.max_static_s, self.options.align_s) if cfg.max_static_s > 0 else self.options.align_s
+        where = f"{self.source + ': ' if self.source else ''}"
+        # causal in-motion alignment and attitude topics are not done online (batch and EKF only)
+        need = ("online needs an attitude source or a static start: set alignment.initial_attitude_deg, or log "
+                f"a static start of alignment.min_static_s ({cfg.min_static_s:g} s)")
+        if cfg.method in ("attitude_topic", "in_motion"):
+            raise GtsamDvlError(f"{where}{need}; alignment.method = {cfg.method!r} is for the batch smoother and "
+                                "the EKF")
+        cfg.method = "static"
         try:
             alignment = align(ImuData(t, w, f), dvl, self.frame, cfg)
         except GtsamDvlError as exc:
-            raise GtsamDvlError(f"{self.source + ': ' if self.source else ''}online alignment: {exc}") from None
+            if str(exc).startswith("no static segment"):
+                raise GtsamDvlError(f"{where}online alignment: {str(exc).split(';')[0]}; {need}") from None
+            raise GtsamDvlError(f"{where}online alignment: {exc}") from None
         self._start(alignment)
         self._pre_imu, self._pre_dvl = [], []
         # replay: every buffered ping is queued before any epoch is made, so that the states without a ping
@@ -453,6 +553,8 @@ class OnlineEstimator:
             return 0
         done = 0
         spacing = self.config.solver.max_state_spacing_s
+        # with the time offset a ping waits for the IMU window after it (module doc), unless at finish()
+        ahead = max(0.0, self._offset_centre()) + self.config.dvl.time_offset_window_s if self._offset else 0.0
         while self._chunks and self.smoother is not None:
             t_end = float(self._chunks[-1][0][-1])
             if self._pending and self.smoother.n > 0 and self._pending[0].t <= self.smoother.t_last:
@@ -464,8 +566,10 @@ class OnlineEstimator:
             nxt = self._pending[0].t if self._pending else None
             if self.smoother.n > 0 and (t_f := filler_due(self.smoother.t_last, nxt, t_end, spacing)) is not None:
                 self._close(None, t_f)
-            elif self._pending and self._pending[0].t <= t_end:
+            elif self._pending and self._pending[0].t <= t_end and (self._flushing
+                                                                     or self._pending[0].t + ahead <= t_end):
                 self._close(self._pending.popleft())
+                ahead = max(0.0, self._offset_centre()) + self.config.dvl.time_offset_window_s if self._offset else 0.0
             else:
                 break
             done += 1
@@ -485,9 +589,11 @@ class OnlineEstimator:
         gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
         i = sm.n
-        dvl = self._dvl_factors(i, p, b_omega) if p is not None else []
+        rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
+        dvl = self._dvl_factors(i, p, b_omega, rate_input) if p is not None else []
         if p is None:
             self._count("states_without_ping")
+        dvl += self._depth_factors(i, t_epoch)
         if i == 0:
             assert p is not None  # the first epoch is a ping (_close_ready)
             sm.add_epoch(t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None))
@@ -506,12 +612,64 @@ class OnlineEstimator:
             sm.add_epoch(t_epoch, dvl, pim, params, held=held)
         first_kept = max(int(np.searchsorted(T, t_epoch, side="right")) - 1, 0)  # the last sample <= the epoch
         self._chunks = [(T[first_kept:], W[first_kept:], F[first_kept:])]
+        if self._offset:  # keep what the next epochs' velocity-rate windows can reach
+            cfg = self.config.dvl
+            reach = abs(cfg.time_offset_prior_s) + 3.0 * cfg.time_offset_sigma_s + cfg.time_offset_window_s
+            Tr, Wr, Fr = self._recent_imu()
+            k0 = int(np.searchsorted(Tr, t_epoch - reach - 1.0))
+            self._recent = [(Tr[k0:], Wr[k0:], Fr[k0:])]
         self._latest = self._read_estimate()
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
         self.latencies_s.append(time.perf_counter() - t0)
 
-    def _dvl_factors(self, i: int, p: _Ping, b_omega: np.ndarray) -> list[gtsam.NonlinearFactor]:
+    def _offset_centre(self) -> float:
+        """The offset the velocity-rate windows are centred on: the current estimate (the prior before the first
+        epoch, or with recentre_offset_window off), clipped to the prior +- 3 prior sigmas (module doc)."""
+        cfg = self.config.dvl
+        prior = cfg.time_offset_prior_s
+        if not self.recentre_offset_window or self._latest is None:
+            return prior
+        bound = 3.0 * cfg.time_offset_sigma_s
+        return float(np.clip(self._latest.time_offset_s, prior - bound, prior + bound))
+
+    def _recent_imu(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if len(self._recent) > 1:
+            self._recent = [tuple(np.concatenate(c) for c in zip(*self._recent, strict=True))]  # type: ignore[list-item]
+        return self._recent[0] if self._recent else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+
+    def _rate_input(self, t: float) -> RateInput:
+        """The time-offset model's IMU constants of a ping at t (FactorMaker.velocity_rate_input) over the IMU
+        samples kept, the window centred on _offset_centre()."""
+        assert self.builder is not None
+        T, W, F = self._recent_imu()
+        return self.builder.velocity_rate_input(t, T, F, W, self._offset_centre())
+
+    def _depth_factors(self, i: int, t_i: float, final: bool = False) -> list[gtsam.NonlinearFactor]:
+        """Depth factors of the waiting samples whose nearest state is now known: those stamped at or before
+        the new state i at t_i (all of them with final: i is the newest state), each on the nearest of the
+        states held and state i, within [depth] max_time_to_state_s (else "depth_too_far")."""
+        if not self._depth or (self._depth[0][0] > t_i and not final):
+            return []
+        assert self.builder is not None and self.smoother is not None
+        ready: list[tuple[float, float, float]] = []
+        while self._depth and (final or self._depth[0][0] <= t_i):
+            ready.append(self._depth.popleft())
+        held = sorted(k for k in self.smoother.times if k != i)
+        index = np.array(held + [i])
+        t_states = np.array([self.smoother.times[k] for k in held] + [t_i])
+        t_s = np.array([r[0] for r in ready])
+        near, dt = nearest_states(t_states, t_s, self.config.depth.max_time_to_state_s)
+        self._count("depth_used", int((near >= 0).sum()))
+        self._count("depth_too_far", int((near < 0).sum()))
+        out: list[gtsam.NonlinearFactor] = []
+        for k in np.flatnonzero(near >= 0).tolist():
+            out += self.builder.depth_factors_for(int(index[near[k]]), ready[k][1], ready[k][2], self._depth_lever,
+                                                  float(dt[k]))
+        return out
+
+    def _dvl_factors(self, i: int, p: _Ping, b_omega: np.ndarray,
+                     rate_input: RateInput | None = None) -> list[gtsam.NonlinearFactor]:
         b = self.builder
         assert b is not None
         use_beams = self.config.dvl.use_beams and p.beams is not None
@@ -520,8 +678,11 @@ class OnlineEstimator:
         else:
             speed = float(np.linalg.norm(p.d_v))
         if speed >= self.options.calibration_min_speed_m_s:
-            return b.dvl_factors_for(i, p.d_v, p.d_cov, b_omega, p.beams)
+            return b.dvl_factors_for(i, p.d_v, p.d_cov, b_omega, p.beams, rate_input)
         b_l = self.mounting.b_l
+        if rate_input is not None:  # estimate_time_offset (never with beams)
+            return [_considered_calibration_factor(b.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v,
+                                                   offset=(rate_input, b.offset_gravity()))]
         if use_beams and p.beams is not None:
             d_u, v, valid = p.beams
             noise1 = b.beam_noise()
@@ -553,26 +714,43 @@ def _empty_dvl() -> DvlData:
 
 def feed_log(estimator: OnlineEstimator, log: LogData, progress: ProgressFn | None = None) -> None:
     """Push a log's messages in time order: the IMU samples up to each ping's stamp as one batch, then the
-    ping (a sample stamped like the ping comes first), then the rest; finish()."""
+    depth samples up to it, then the ping (a sample stamped like the ping comes first), then the rest; finish()."""
     imu, dvl = log.imu, log.dvl
     ends = np.searchsorted(imu.t, dvl.t, side="right")
     start = 0
     n = len(dvl)
     step = max(1, n // 100)
+    depth = log.depth
+    n_depth = 0 if depth is None else len(depth)
+    k = 0
     for j in range(n):
         end = int(ends[j])
         if end > start:
             estimator.push_imu_batch(imu.t[start:end], imu.b_omega[start:end], imu.b_f[start:end])
             start = end
+        while depth is not None and k < n_depth and depth.t[k] <= dvl.t[j]:
+            _push_depth_sample(estimator, depth, k)
+            k += 1
         beams = None
         if dvl.beams is not None:
             beams = (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
         estimator.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams)
         if progress is not None and j % step == 0:
             progress(0.95 * j / n)
+    while depth is not None and k < n_depth:
+        _push_depth_sample(estimator, depth, k)
+        k += 1
     if start < len(imu):
         estimator.push_imu_batch(imu.t[start:], imu.b_omega[start:], imu.b_f[start:])
     estimator.finish()
+
+
+def _push_depth_sample(estimator: OnlineEstimator, depth: DepthData, k: int) -> None:
+    if depth.pressure_pa is not None:
+        var = math.nan if depth.pressure_variance_pa2 is None else float(depth.pressure_variance_pa2[k])
+        estimator.push_depth(float(depth.t[k]), pressure_pa=float(depth.pressure_pa[k]), pressure_variance_pa2=var)
+    else:
+        estimator.push_depth(float(depth.t[k]), float(depth.depth_m[k]), float(depth.variance_m2[k]))
 
 
 def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: str | None = None,
@@ -592,8 +770,6 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     estimator = OnlineEstimator.for_log(log, config, options)
     feed_log(estimator, log, progress)
     result = estimator.result(log.t0_ns)
-    if log.depth is not None:  # the online estimator takes no depth yet (estimators/depth.py): counted
-        result.info.setdefault("counters", {})["depth_ignored"] = len(log.depth)
     total = time.perf_counter() - t_start
     result.timing_s = {"updates": float(np.sum(estimator.latencies_s)), "total": total}
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None

@@ -48,6 +48,9 @@ class OnlineEstimate(CalibrationUnits):
     b_R_d_cov: np.ndarray  # (3, 3) rad^2
     b_R_d0: np.ndarray
     calib_cov: np.ndarray  # (10, 10) [accel, gyro] bias, scale, b_R_d
+    # the DVL time offset dt_d (s) and its sigma with dvl.estimate_time_offset (else 0 and nan)
+    time_offset_s: float = 0.0
+    time_offset_sigma_s: float = float("nan")
 
     @classmethod
     def from_state(cls, s: StateEstimate, b_R_d0: np.ndarray) -> OnlineEstimate:
@@ -55,7 +58,8 @@ class OnlineEstimate(CalibrationUnits):
                    pose_cov=s.pose_cov, vel_cov=s.vel_cov, pose_vel_cross=s.pose_vel_cross,
                    accel_bias=np.asarray(s.bias.accelerometer()), gyro_bias=np.asarray(s.bias.gyroscope()),
                    bias_cov=s.cov[9:15, 9:15], scale=s.scale, scale_sigma=float(np.sqrt(s.cov[15, 15])),
-                   b_R_d=s.b_R_d, b_R_d_cov=s.cov[16:19, 16:19], b_R_d0=b_R_d0, calib_cov=s.calib_cov)
+                   b_R_d=s.b_R_d, b_R_d_cov=s.cov[16:19, 16:19], b_R_d0=b_R_d0, calib_cov=s.calib_cov,
+                   time_offset_s=s.time_offset_s, time_offset_sigma_s=s.time_offset_sigma_s)
 
     @property
     def attitude_sigma_deg(self) -> np.ndarray:

@@ -38,7 +38,13 @@ the figures of the chosen design are in the README, "Online estimator"):
   prior on the oldest state) relinearises the whole window at every iteration: about twice the median latency of
   this design, everything included.
 
-Full history: iSAM2 with every state and its default ordering. Each relinearisation of the scale,
+Shared keys: the bias, the scale, the misalignment and, with [dvl] estimate_time_offset, the DVL time offset
+T_OFFSET (relinearised past TIME_OFFSET_THRESHOLD_S; part of the joint marginal of `estimate`, reported in
+StateEstimate.time_offset_s / time_offset_sigma_s). Factors on states already held (a depth sample after the
+newest state) go in through `add_factors`.
+
+Full history: iSAM2 with every state and its default ordering.
+ Each relinearisation of the scale,
 misalignment or bias relinearises every DVL or IMU factor of the mission, each call copying all the Values:
 the cost per update grows with the mission (the whole paper-3d run: 25 to 40 s, single updates up to 10 s;
 the prototype took 262 s with iSAM2's default settings).
@@ -53,13 +59,17 @@ import numpy as np
 
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, V, X, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X, key_dim
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
 
 STATE_DIM = 6 + 3 + 6 + 1 + 3  # the joint of StateEstimate: pose, velocity, bias, scale, misalignment
 RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see IncrementalSmoother._ordering)
+# relinearisation threshold of the DVL time offset T_OFFSET (s): it enters the DVL model as dt_d times the body's
+# velocity rate (at most 0.2 m/s^2 on paper-3d), linearly given the other variables; its cross terms with the
+# scale and attitude at 5 ms stay below 1e-5 m/s
+TIME_OFFSET_THRESHOLD_S = 5e-3
 
 
 # RelinearizationThresholds (its threshold_map() gives iSAM2's): gtsam_dvl.core.config, TOML [online.relinearization]
@@ -77,6 +87,9 @@ class StateEstimate:
     scale: float
     b_R_d: np.ndarray
     cov: np.ndarray  # (19, 19): pose (6), n_v (3), bias [accel, gyro] (6), scale (1), b_R_d (3)
+    # with dvl.estimate_time_offset: the DVL time offset dt_d (s) and its marginal sigma (nan: not estimated)
+    time_offset_s: float = 0.0
+    time_offset_sigma_s: float = float("nan")
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -107,9 +120,13 @@ class IncrementalSmoother:
         self.window_s = window_s
         self.thresholds = thresholds
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
+        self.offset = builder.config.dvl.estimate_time_offset  # T_OFFSET is a shared key
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
-        self.params.setRelinearizeThreshold(thresholds.threshold_map())
+        threshold_map = thresholds.threshold_map()
+        if self.offset:
+            threshold_map.insert(("t", np.array([TIME_OFFSET_THRESHOLD_S])))
+        self.params.setRelinearizeThreshold(threshold_map)
         self.params.relinearizeSkip = relinearize_skip
         self.params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
         # reuse the slots of removed factors: otherwise iSAM2's factor table grows by three empty slots per
@@ -171,6 +188,15 @@ class IncrementalSmoother:
         self._update(graph, values)
         if self.window_s is not None:
             self._slide(t - self.window_s)
+
+    def add_factors(self, factors: list[gtsam.NonlinearFactor]) -> None:
+        """Factors on variables already held (a depth sample that came after the newest state): one update."""
+        if not factors:
+            return
+        graph = gtsam.NonlinearFactorGraph()
+        for f in factors:
+            graph.add(f)
+        self._update(graph, gtsam.Values())
 
     def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, rebase: bool = False) -> None:
         try:
@@ -248,7 +274,7 @@ class IncrementalSmoother:
         """Whether the shared keys or a state older than the RECENT newest moved from its linearisation point by
         more than its relinearisation threshold (the shared keys are frozen by marginalizeLeaves, the old
         states by _ordering)."""
-        delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, v, x (GTSAM symbols)
+        delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
         if (n_states, old) not in self._limits:
@@ -258,9 +284,11 @@ class IncrementalSmoother:
                 limit, mask = [np.tile(th.bias, n_states)], [np.repeat(is_old, 6)]
             else:
                 limit, mask = [np.asarray(th.bias, dtype=float)], [np.ones(6, bool)]
-            limit += [np.full(3, th.misalignment_rad), np.array([th.scale]), np.tile(th.velocity, n_states),
-                      np.tile(th.pose, n_states)]
-            mask += [np.ones(4, bool), np.repeat(is_old, 3), np.repeat(is_old, 6)]
+            limit += [np.full(3, th.misalignment_rad), np.array([th.scale])]
+            if self.offset:
+                limit.append(np.array([TIME_OFFSET_THRESHOLD_S]))
+            limit += [np.tile(th.velocity, n_states), np.tile(th.pose, n_states)]
+            mask += [np.ones(4 + int(self.offset), bool), np.repeat(is_old, 3), np.repeat(is_old, 6)]
             self._limits[(n_states, old)] = (np.concatenate(limit), np.concatenate(mask))
         lim, msk = self._limits[(n_states, old)]
         if lim.shape != delta.shape:
@@ -331,18 +359,21 @@ class IncrementalSmoother:
 
     # ----- estimates -----------------------------------------------------------------------------
     def shared_keys(self, i: int) -> list[int]:
-        return [self.builder.bias_key(i), K_SCALE, C_MISALIGN]
+        return [self.builder.bias_key(i), K_SCALE, C_MISALIGN] + ([T_OFFSET] if self.offset else [])
 
     def estimate(self, with_covariance: bool = True) -> StateEstimate:
         """The newest state, the bias and the calibration, with their joint marginal covariance."""
         i = self.n - 1
         keys = [X(i), V(i), *self.shared_keys(i)]
         values = self.isam.calculateEstimate(keys)
-        cov = self.joint_covariance(keys) if with_covariance else np.full((STATE_DIM, STATE_DIM), np.nan)
+        dim = STATE_DIM + int(self.offset)  # T_OFFSET last
+        cov = self.joint_covariance(keys) if with_covariance else np.full((dim, dim), np.nan)
         return StateEstimate(
             index=i, t=self.t_last, pose=values.atPose3(X(i)), n_v=values.atVector(V(i)),
             bias=values.atConstantBias(keys[2]), scale=float(values.atVector(K_SCALE)[0]),
-            b_R_d=values.atRot3(C_MISALIGN).matrix(), cov=cov)
+            b_R_d=values.atRot3(C_MISALIGN).matrix(), cov=cov[:STATE_DIM, :STATE_DIM],
+            time_offset_s=float(values.atVector(T_OFFSET)[0]) if self.offset else 0.0,
+            time_offset_sigma_s=float(np.sqrt(cov[STATE_DIM, STATE_DIM])) if self.offset else float("nan"))
 
     def joint_covariance(self, keys: list[int]) -> np.ndarray:
         """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""

@@ -120,12 +120,21 @@ class McapLogWriter:
     def add_imu(
         self, topic: str, t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, frame_id: str = "imu_link",
         gyro_var: np.ndarray | None = None, accel_var: np.ndarray | None = None,
+        orientation: np.ndarray | None = None, orientation_cov: np.ndarray | None = None,
     ) -> None:
-        """sensor_msgs/msg/Imu without orientation (orientation_covariance[0] = -1); the rate and
-        specific-force covariances are diag(gyro_var), diag(accel_var) (zeros = unknown)."""
+        """sensor_msgs/msg/Imu, without orientation (orientation_covariance[0] = -1) unless orientation (K, 4)
+        [x, y, z, w] is given, with orientation_cov (3, 3) or (K, 3, 3) rad^2 (None: zeros = unknown); the rate
+        and specific-force covariances are diag(gyro_var), diag(accel_var) (zeros = unknown)."""
         arr = self._new("sensor_msgs/msg/Imu", t, {"frame_id": frame_id})
         k = len(arr)
-        arr["orientation_covariance"][:, 0] = -1.0
+        if orientation is None:
+            arr["orientation_covariance"][:, 0] = -1.0
+        else:
+            arr["orientation"] = _rows(orientation, k, (4,), "orientation")
+            if orientation_cov is not None:
+                cov = np.asarray(orientation_cov, dtype=float)
+                cov = np.broadcast_to(cov, (k, 3, 3)) if cov.shape == (3, 3) else cov
+                arr["orientation_covariance"] = _rows(cov, k, (3, 3), "orientation_cov").reshape(k, 9)
         arr["angular_velocity"] = _rows(b_omega, k, (3,), "b_omega")
         arr["linear_acceleration"] = _rows(b_f, k, (3,), "b_f")
         if gyro_var is not None:
