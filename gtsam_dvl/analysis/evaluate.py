@@ -70,7 +70,8 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
         if ev.gnss is not None:
             m["gnss"] = ev.gnss.as_dict()
     if res.calib_joint_cov is not None:
-        ev.report = analyse_block(res.calib_joint_cov, res.b_R_d, float(res.t[-1] - res.t[0]), config)
+        ev.report = analyse_block(res.calib_joint_cov, res.b_R_d, float(res.t[-1] - res.t[0]), config,
+                                  lever_arm_cov=res.lever_arm_cov)
         if res.timeline is not None and ev.segments:
             ev.shares = attribute_segments(ev.report, res.timeline, ev.segments)
         m["observability"] = [{"key": s.key, "verdict": s.verdict, "prior_sigma": s.prior_sigma,

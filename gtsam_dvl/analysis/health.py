@@ -28,6 +28,7 @@ import numpy as np
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.selection import ping_covariance
 
@@ -209,7 +210,15 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     j = np.where(np.abs(dvl.t[prev] - result.t) < np.abs(dvl.t[j] - result.t), prev, j)
     matched = np.abs(dvl.t[j] - result.t) < 1e-6
     b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
-    b_v = np.einsum("nji,nj->ni", result.n_R_b, result.n_v) + np.cross(b_omega, log.mounting.b_l)
+    # the model the estimator fitted: its lever arm when estimated, and the ping stamped t seen at t + dt_d (the
+    # state's velocity interpolated there, its attitude turned by the body rate over dt_d)
+    b_l = result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l
+    dt_d = float(result.time_offset_s) if np.isfinite(result.time_offset_s) else 0.0
+    n_R_b, n_v = result.n_R_b, result.n_v
+    if dt_d != 0.0 and n > 1:
+        n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, k]) for k in range(3)], axis=1)
+        n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d).reshape(n, 3, 3))
+    b_v = np.einsum("nji,nj->ni", n_R_b, n_v) + np.cross(b_omega, b_l)
     y_hat = result.scale * b_v @ result.b_R_d  # k * b_R_d^T b_v, row by row
     chi2, dof = np.zeros(n), np.zeros(n)
     if config.use_beams and dvl.beams is not None:

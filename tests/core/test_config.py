@@ -294,7 +294,7 @@ def test_online_section_reaches_the_estimator() -> None:
 
     log = _short_log()
     base = smooth_online(log)
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.paper()  # the log's configuration (its scenario names "paper"), with a shorter window
     cfg.online.window_s = 5.0
     short = smooth_online(log, cfg)
     print("window 20 s / 5 s: variables", base.info["isam2"]["variables"], short.info["isam2"]["variables"])
@@ -315,7 +315,7 @@ def test_online_relinearization_section_reaches_isam2(tmp_path: Path) -> None:
 
     log = _short_log()
     base = smooth_online(log)
-    cfg = _load(tmp_path, "[online.relinearization]\nscale = 10.0\nmisalignment_rad = 10.0\n"
+    cfg = _load(tmp_path, "preset = \"paper\"\n[online.relinearization]\nscale = 10.0\nmisalignment_rad = 10.0\n"
                           "velocity = [100.0, 100.0, 100.0]\npose = [10.0, 10.0, 10.0, 1e3, 1e3, 1e3]\n")
     loose = smooth_online(log, cfg)
     print("rebases with the default / loose thresholds:", base.info["isam2"]["rebases"],

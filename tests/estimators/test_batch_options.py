@@ -67,9 +67,13 @@ def _cut(log: LogData, t_start: float) -> LogData:
 
 
 def test_log_without_static_start_needs_and_uses_a_configured_attitude() -> None:
+    """paper-3d from 595 s (no static start): a clear error with alignment.method = "static"; a configured
+    attitude works (method "auto" aligns in motion then: tests/estimators/test_alignment_motion.py)."""
     log = _cut(_paper3d(), 595.0)
+    static_only = EstimatorConfig.paper()
+    static_only.alignment.method = "static"
     with pytest.raises(GtsamDvlError, match="initial_attitude_deg"):
-        smooth_batch(log, EstimatorConfig.paper())
+        smooth_batch(log, static_only)
     assert log.truth is not None
     rpy_true = matrix_to_rpy_deg(quat_xyzw_to_matrix(log.truth.n_q_b[0]))
     cfg = EstimatorConfig.paper()

@@ -30,6 +30,7 @@ DVL_HZ = 1.0
 STATES_IN_WINDOW = int(WINDOW_S * DVL_HZ) + 1  # the newest and every state at most window_s older
 SHORT = {
     "name": "window-test",
+    "estimator_config": "paper",  # the paper's sensors and priors, no time offset: a ping is an epoch at once
     "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
     "rates": {"imu_hz": 100.0, "dvl_hz": DVL_HZ},
     "initial": {"roll_deg": 3.0, "yaw_deg": 10.0},
