@@ -24,6 +24,7 @@ from ._common import (
     as_scale,
     as_vector3,
     check_noise,
+    cross3,
     fill_slots,
     lever_jacobian,
     lever_velocity,
@@ -178,7 +179,7 @@ def _offset_prediction(n_R_b: np.ndarray, n_v: np.ndarray, k: float, d_R_b: np.n
     b_v = n_v @ n_R_b
     b_g0 = n_g @ n_R_b
     b_g = G @ b_g0
-    b_vdot = b_a + b_g - np.cross(b_omega, b_v)
+    b_vdot = b_a + b_g - cross3(b_omega, b_v)
     b_v_eff = b_v + dt * b_vdot + b_v_lever
     d_v = d_R_b @ b_v_eff
     if H is not None:
@@ -278,7 +279,7 @@ def _offset_lever_prediction(n_R_b: np.ndarray, n_v: np.ndarray, k: float, d_R_b
                              G: np.ndarray, H: JacobianSlots | None) -> np.ndarray:
     """_offset_prediction with the lever arm a variable: the lever term b_omega x b_l does not depend on dt
     (first order), so H[0..4] are _offset_prediction's and H[5] = de/d(b_l) = k d_R_b [b_omega]_x."""
-    h = _offset_prediction(n_R_b, n_v, k, d_R_b, dt, b_omega, np.cross(b_omega, b_l), b_a, n_g, G, H)
+    h = _offset_prediction(n_R_b, n_v, k, d_R_b, dt, b_omega, cross3(b_omega, b_l), b_a, n_g, G, H)
     if H is not None:
         H[5] = lever_jacobian(k, d_R_b, b_omega)
     return h

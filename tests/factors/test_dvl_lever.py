@@ -163,3 +163,12 @@ def test_lever_factors_reject_bad_input() -> None:
     with pytest.raises(ValueError, match="unit vector"):
         make_dvl_beam_lever_factor(gtsam.noiseModel.Unit.Create(1), X(0), V(0), K(0), B(0), L(0), [1.0, 1.0, 0.0],
                                    0.1, np.zeros(3))
+
+
+def test_cross3_is_the_cross_product() -> None:
+    from gtsam_dvl.factors._common import cross3
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        a, b = rng.normal(size=3), rng.normal(size=3)
+        np.testing.assert_allclose(cross3(a, b), np.cross(a, b), rtol=0, atol=1e-15)
