@@ -17,7 +17,9 @@ import typer
 
 from gtsam_dvl.core.errors import GtsamDvlError
 
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+# rich_markup_mode=None: click's plain help, where a boolean flag reads as a flag ("--salvage"); typer 0.29's
+# rich help prints "<bool>" after every flag, as if it took a value
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
                   help="Self-calibrating IMU + DVL navigation on GTSAM.")
 _state = {"debug": False}
 F = TypeVar("F", bound=Callable[..., Any])
@@ -44,6 +46,8 @@ def _user_errors(func: F) -> F:
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
+        if kwargs.get("debug"):  # --debug after the command name (before it: the callback _root)
+            _state["debug"] = True
         try:
             return func(*args, **kwargs)
         except BrokenPipeError:  # output piped into `head` and closed: not an error of ours
@@ -58,6 +62,8 @@ def _user_errors(func: F) -> F:
 
 
 ImuTopic = Annotated[str, typer.Option("--imu-topic", help="IMU topic (sensor_msgs/msg/Imu).")]
+Debug = Annotated[bool, typer.Option("--debug", help="Show tracebacks (also accepted before the command).")]
+Quiet = Annotated[bool, typer.Option("-q", "--quiet", help="No progress bars.")]
 DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
 Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
 Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages.")]
@@ -88,6 +94,14 @@ def _read_options(imu_topic: str | None, dvl_topic: str | None, salvage: bool | 
     return {**options, **{k: v for k, v in extra.items() if v is not None}}
 
 
+def _builtin_scenarios() -> list[str]:
+    """The scenarios shipped with the package (listed without importing the simulator: --help stays instant)."""
+    from importlib import resources
+
+    files = resources.files("gtsam_dvl.scenarios")
+    return sorted(p.name[: -len(".toml")] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
 @app.callback()
 def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
     _state["debug"] = debug
@@ -96,11 +110,12 @@ def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks."
 @app.command()
 @_user_errors
 def simulate(
-    scenario: Annotated[str, typer.Argument(help="Built-in name (paper-3d, paper-2d, straight-20km) or a TOML file.")],
+    scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a TOML file.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="MCAP file to write.")],
     seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes.")] = 7,
     no_noise: Annotated[bool, typer.Option("--no-noise", help="No white noise (biases and calibration kept).")] = False,
-    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+    quiet: Quiet = False,
+    debug: Debug = False,
 ) -> None:
     """Simulate a scenario and write it as a ROS 2 MCAP log with truth."""
     from gtsam_dvl.app.commands import check_outputs, simulate_to_file
@@ -119,6 +134,7 @@ def plot_log(
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    debug: Debug = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
     from gtsam_dvl.app.commands import plot_log_to_dir
@@ -135,6 +151,7 @@ def info(
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    debug: Debug = False,
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
     from gtsam_dvl.app.commands import describe_log
@@ -176,9 +193,10 @@ def smooth(
     timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
     timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
                             ] = None,
-    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+    quiet: Quiet = False,
     strict: Annotated[bool, typer.Option("--strict", help="Exit with code 3 when the run's health is degraded or "
                                                           "failed (the outputs are still written).")] = False,
+    debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
     from gtsam_dvl.app.commands import smooth_file
@@ -212,6 +230,7 @@ def evaluate(
                       ] = None,
     depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None, attitude_topic: AttitudeTopic = None,
     truth_topic: TruthTopic = None,
+    debug: Debug = False,
 ) -> None:
     """Errors against the truth over time, observability verdict and the segments that made it; the run's health
     as smooth recorded it, and what reading the truth log lost. Without --truth the source log is read with the
@@ -231,10 +250,12 @@ def evaluate(
 @app.command()
 @_user_errors
 def plan(
-    scenario: Annotated[str, typer.Argument(help="Built-in name (paper-3d, paper-2d, ...) or a scenario TOML file.")],
+    scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario "
+                                                 "TOML file.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")],
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    quiet: Annotated[bool, typer.Option("-q", "--quiet")] = False,
+    quiet: Quiet = False,
+    debug: Debug = False,
 ) -> None:
     """Will this mission calibrate the DVL, and when? Covariance analysis of a scenario (no noise)."""
     from gtsam_dvl.app.commands import plan_to_dir
@@ -251,6 +272,7 @@ def demo(
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for everything the demo writes.")] = Path(
         "demo-output"),
     seed: Annotated[int, typer.Option(help="Random seed of the simulated runs.")] = 7,
+    debug: Debug = False,
 ) -> None:
     """Simulate the paper's 3-D and 2-D runs, process them and write figures into one folder."""
     from gtsam_dvl.app.demo import run_demo

@@ -76,13 +76,40 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
              f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)"]
     if dvl.beams is not None:
         lines.append(f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}")
-    lines.append(f"  lever arm IMU->DVL in base_link: {np.round(log.mounting.b_l, 4).tolist()} m")
+    from gtsam_dvl.core.rotations import matrix_to_rpy_deg
+
+    dvl_hz = 1.0 / np.median(np.diff(dvl.t)) if len(dvl) > 1 else float("nan")
+    lines.append(f"  rates: IMU {imu_hz:.1f} Hz, DVL {dvl_hz:.2f} Hz"
+                 + (f", depth {1.0 / np.median(np.diff(log.depth.t)):.2f} Hz ({len(log.depth)} msgs)"
+                    if log.depth is not None and len(log.depth) > 1 else ", no depth")
+                 + (f", GNSS {len(log.gnss)} msgs" if log.gnss is not None else ", no GNSS"))
+    o = log.origin
+    lines.append(f"  map origin: lat {o.lat_deg:.7f} deg, lon {o.lon_deg:.7f} deg, height {o.height_m:.2f} m"
+                 if o is not None else "  map origin: none in the log (give --gnss-topic or alignment.origin_lat_deg)")
+    m = log.mounting
+    lines.append("  mounting (base_link <- sensor, roll/pitch/yaw deg): IMU "
+                 + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_imu)) + ", DVL "
+                 + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_d0))
+                 + f"; lever arm IMU->DVL {np.round(m.b_l, 4).tolist()} m")
+    # stamps: where the DVL's fall between IMU samples, and the first stamps' offset (a hint of unsynchronised
+    # clocks; the DVL-IMU time offset itself is only seen by the estimator, from the motion)
+    if len(dvl) and len(imu) > 1:
+        period = float(np.median(np.diff(imu.t)))
+        phase = np.mod(dvl.t - imu.t[0], period) / period
+        lines.append(f"  stamps: first DVL {dvl.t[0] - imu.t[0]:+.3f} s after the first IMU sample; DVL stamps fall "
+                     f"at {np.median(phase):.2f} of an IMU period (median)")
+    gaps = log.metadata.get("reader_losses", {}).get("gaps", {})
+    lines.append("  gaps: none" if not gaps else "  gaps: " + "; ".join(
+        f"{topic} {g['count']} ({g['seconds']:.1f} s, longest {g['longest_s']:.2f} s)" for topic, g in gaps.items()))
     cal = log.true_calibration
     if cal is not None:
         lines.append(f"  truth: scale {cal.scale}, misalignment [roll, pitch, yaw] {list(cal.misalignment_deg)} deg")
     for warning in log.metadata.get("reader_warnings", []):
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)
+
+
+NOTHING_WRITTEN = "  wrote nothing (give -o RESULT.mcap, --summary FILE.json or --tum FILE.txt to keep the results)"
 
 
 @dataclass
@@ -100,7 +127,8 @@ class SmoothOutcome:
         if "states" not in s:  # io-dvlc: calibration only
             return "\n".join([f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
                               f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"]
-                             + health_lines(s.get("health")) + [f"  wrote {p}" for p in self.written])
+                             + health_lines(s.get("health"))
+                             + ([f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]))
         mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
         lines = [
             f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
@@ -118,8 +146,12 @@ class SmoothOutcome:
             lines.append(f"  vs truth: scale {err.get('scale_ppm', float('nan')):+.0f} ppm, misalignment "
                          + ", ".join(f"{v:+.3f}" for v in err.get("misalignment_deg", [])) + " deg, final horizontal "
                          f"position {err['final_horizontal_position_m']:.2f} m ({of_distance})")
+        off = s.get("dvl_time_offset_s")
+        if off:
+            lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
+                            f"({'determined' if off.get('determined') else 'not determined'})")
         lines += health_lines(s.get("health"))
-        lines += [f"  wrote {p}" for p in self.written]
+        lines += [f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]
         return "\n".join(lines)
 
 
@@ -215,6 +247,9 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
 
     if mode not in MODES:
         raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+    if mode == "io-dvlc" and (output is not None or tum_path is not None or timeline_path is not None):
+        raise GtsamDvlError("--mode io-dvlc estimates the calibration only (no trajectory): it writes --summary, "
+                            "not -o, --tum or --timeline-npz; run another mode for a result MCAP")
     default_timeline = (Path(output).with_suffix(".timeline.npz") if output is not None and timeline
                         and timeline_path is None and mode != "io-dvlc" else None)
     check_outputs({"the input log": Path(log_path), "the configuration": config_path},

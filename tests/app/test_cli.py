@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -201,3 +202,40 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
     # and the non-default values took effect: the defaults give another estimate
     run("smooth", str(short_log), "--mode", mode, "--summary", str(tmp_path / "default.json"), "-q")
     assert json.loads((tmp_path / "default.json").read_text())["scale"] != s1["scale"]
+
+
+# ----- the rough edges of issue 14, item 3 ------------------------------------------------------------------------
+def test_help_shows_flags_as_flags_and_lists_the_scenarios() -> None:
+    from gtsam_dvl.sim.scenario import list_builtin_scenarios
+
+    text = run("smooth", "--help").stdout
+    assert "<bool>" not in text
+    assert re.search(r"^\s+--salvage\s+Recover", text, re.M) and re.search(r"^\s+--strict\s+Exit", text, re.M)
+    assert re.search(r"^\s+-q, --quiet\s+No progress bars", text, re.M)
+    sim_help = " ".join(run("simulate", "--help").stdout.split())
+    for name in list_builtin_scenarios():
+        assert name in sim_help
+
+
+def test_debug_is_accepted_after_the_command(tmp_path: Path) -> None:
+    plain = run("info", str(tmp_path / "missing.mcap"), check=False)
+    assert plain.returncode == 1 and "Traceback" not in plain.stderr
+    after = run("info", str(tmp_path / "missing.mcap"), "--debug", check=False)
+    before = run("--debug", "info", str(tmp_path / "missing.mcap"), check=False)
+    for proc in (after, before):
+        assert proc.returncode == 1 and "Traceback" in proc.stderr and "no such file or directory" in proc.stderr
+
+
+def test_io_dvlc_refuses_outputs_it_cannot_write_and_smooth_says_what_it_wrote(sim_log: Path, tmp_path: Path) -> None:
+    proc = run("smooth", str(sim_log), "--mode", "io-dvlc", "-o", str(tmp_path / "r.mcap"), check=False)
+    assert proc.returncode == 1 and proc.stderr.count("\n") == 1
+    assert "--mode io-dvlc estimates the calibration only" in proc.stderr and not (tmp_path / "r.mcap").exists()
+    out = run("smooth", str(sim_log), "--mode", "ekf", "-q").stdout
+    assert "wrote nothing (give -o RESULT.mcap" in out
+
+
+def test_info_prints_origin_mounting_rates_and_gaps(sim_log: Path) -> None:
+    out = run("info", str(sim_log)).stdout
+    assert "map origin: lat 30.0000000 deg, lon 114.0000000 deg, height -100.00 m" in out
+    assert "mounting (base_link <- sensor, roll/pitch/yaw deg): IMU +0.00 +0.00 +0.00, DVL +0.00 +0.00 +0.00" in out
+    assert "rates: IMU 100.0 Hz, DVL 1.00 Hz" in out and "gaps: none" in out and "stamps: first DVL" in out

@@ -1,6 +1,6 @@
 """ROS 2 message definitions shipped with the package, concatenated the way rosbag2 stores them.
 
-The .msg files live in ``msgdefs/`` named ``pkg__msg__Type.msg`` (flat, so pyproject's package-data glob
+The .msg files live in ``msg-definitions/`` named ``pkg__msg__Type.msg`` (flat, so pyproject's package-data glob
 ships them). We keep our own copies rather than asking a ROS installation because the writer must work
 without one; the definitions carry the standard field lists (comments shortened).
 """
@@ -27,7 +27,7 @@ def normalize_type(name: str) -> str:
 def message_text(type_name: str) -> str:
     """The .msg text of one type (no dependencies), e.g. 'sensor_msgs/msg/Imu'."""
     pkg, _, msg = normalize_type(type_name).split("/")
-    path = resources.files("gtsam_dvl.io.ros2").joinpath("msgdefs", f"{pkg}__msg__{msg}.msg")
+    path = resources.files("gtsam_dvl.io.ros2").joinpath("msg-definitions", f"{pkg}__msg__{msg}.msg")
     try:
         return path.read_text(encoding="utf-8").rstrip("\n")
     except FileNotFoundError:
