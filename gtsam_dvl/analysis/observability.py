@@ -6,9 +6,13 @@ prior-whitened posterior covariance P0^-1/2 Sigma P0^-1/2, whose eigenvalues are
 combinations of states (e.g. the misalignment about the thrust axis together with a bias). A ratio near 1
 means the data said nothing about that direction; near 0, the data fixed it.
 
-Verdicts: ratio <= DETERMINED ("determined"), <= NOT_DETERMINED ("weakly determined"), above that
-"not determined". For weak states the information gained per hour of this log tells how long a similar
-mission would need to halve the prior sigma.
+Verdicts per state, against a useful accuracy (the [observability] targets, core/config.py: scale 0.1 %,
+misalignment 0.1 deg, biases half the paper's priors): "determined" when the posterior sigma is at or below the
+target and the log informed the state (ratio <= NOT_DETERMINED); "weakly determined" when informed but above the
+target; "not determined" when ratio > NOT_DETERMINED (the log gave it little; said when the prior alone already
+meets the target). Directions and the lever arm are judged on the ratio: <= DETERMINED "determined". For states
+not determined the information gained per hour of this log tells how long a similar mission would need to halve
+the prior sigma.
 
 With [dvl] estimate_lever_arm the lever arm b_l (m, base_link) is judged per axis too (ObservabilityReport.
 lever_arm, from NavResult.lever_arm_cov against [dvl] lever_arm_sigma_m), with a stricter threshold
@@ -67,15 +71,40 @@ class StateVerdict:
     hours_to_halve: float | None = None  # at this log's information rate; None when already determined
     credited_segments: list[str] = field(default_factory=list)  # filled by attribute_segments
 
+    target_sigma: float | None = None  # the useful accuracy it is judged against ([observability])
+    subject: str = "log"  # what informed it: "log", or "plan" for the mission planner
+
     def sentence(self) -> str:
-        s = (f"{self.description}: {self.verdict}; prior sigma {self.prior_sigma:.4g} {self.unit}, "
-             f"posterior {self.posterior_sigma:.4g} {self.unit} ({100 * self.ratio:.0f} % of prior)")
+        s = (f"{self.description}: {self.verdict}; prior sigma {number_text(self.prior_sigma)} {self.unit}, "
+             f"posterior {number_text(self.posterior_sigma)} {self.unit} ({fraction_text(self.ratio)} of the prior)")
+        if self.target_sigma is not None:
+            s += f", target {number_text(self.target_sigma)} {self.unit}"
+            if self.verdict == "not determined" and self.prior_sigma <= self.target_sigma:
+                s += " (the prior alone meets it)"
         if self.credited_segments:
-            s += f"; determined during {', '.join(self.credited_segments)}"
+            s += f"; informed during {', '.join(self.credited_segments)}"
         if self.hours_to_halve is not None:
-            s += (f"; at this log's rate a mission of {self.hours_to_halve:.1f} h would halve the prior sigma"
-                  if np.isfinite(self.hours_to_halve) else "; this log gives it no information at all")
+            s += (f"; at this {self.subject}'s rate a mission of {self.hours_to_halve:.1f} h would halve the prior "
+                  "sigma" if np.isfinite(self.hours_to_halve) else f"; this {self.subject} gives it no information")
         return s
+
+
+def fraction_text(ratio: float) -> str:
+    """A posterior/prior ratio in words with significant digits: "26 %", "3.1 %", "1/640"."""
+    if ratio >= 0.0995:
+        return f"{100 * ratio:.0f} %"
+    if ratio >= 0.01:
+        return f"{100 * ratio:.2g} %"
+    if ratio <= 0:
+        return "0"
+    n = 1.0 / ratio
+    step = 10.0 ** max(np.floor(np.log10(n)) - 1, 0)  # two significant digits: 1/640, 1/1400
+    return f"1/{int(round(n / step) * step)}"
+
+
+def number_text(x: float) -> str:
+    """A sigma for sentences: whole numbers from 100 up ("500,000", "780"), else three significant digits."""
+    return f"{x:,.0f}" if abs(x) >= 100 else f"{x:.3g}"
 
 
 @dataclass
@@ -86,7 +115,7 @@ class DirectionVerdict:
 
     def sentence(self) -> str:
         parts = ", ".join(f"{STATE_TEXT[k]} ({100 * w:.0f} %)" for k, w in self.weights.items())
-        return f"{self.verdict} direction ({100 * self.ratio:.0f} % of prior): {parts}"
+        return f"{self.verdict} direction ({fraction_text(self.ratio)} of the prior): {parts}"
 
 
 LEVER_ARM_STATES = [
@@ -108,6 +137,12 @@ class ObservabilityReport:
     duration_s: float
     lever_arm: list[StateVerdict] = field(default_factory=list)  # x, y, z with [dvl] estimate_lever_arm
 
+    def for_plan(self) -> ObservabilityReport:
+        """The same report worded for a mission plan ("this plan's rate", not "this log's")."""
+        for s in self.states + self.lever_arm:
+            s.subject = "plan"
+        return self
+
     def state(self, key: str) -> StateVerdict:
         return next(s for s in self.states + self.lever_arm if s.key == key)
 
@@ -120,7 +155,8 @@ class ObservabilityReport:
                 out.append(f"  ({LEVER_ARM_NOTE})")
         weak = [d for d in self.directions if d.verdict != "determined"]
         if weak:
-            out.append("Directions the log did not fully determine (combinations of states):")
+            subject = self.states[0].subject if self.states else "log"
+            out.append(f"Directions the {subject} did not fully determine (combinations of states):")
             out += [f"  - {d.sentence()}" for d in weak]
         else:
             out.append("Every direction of the calibration and bias block is determined.")
@@ -142,6 +178,25 @@ def prior_sigmas(config: EstimatorConfig) -> np.ndarray:
     """Prior sigmas of the block in user units (micro-g, deg/h, ppm, deg)."""
     return np.array([config.imu.accel_bias_sigma_ug] * 3 + [config.imu.gyro_bias_sigma_deg_per_h] * 3
                     + [config.priors.scale_sigma * 1e6] + list(config.priors.misalignment_sigma_deg), dtype=float)
+
+
+def target_sigmas(config: EstimatorConfig) -> np.ndarray:
+    """The [observability] targets in the order of STATES, user units (micro-g, deg/h, ppm, deg)."""
+    o = config.observability
+    return np.array([o.accel_bias_ug] * 3 + [o.gyro_bias_deg_per_h] * 3 + [o.scale_ppm] + [o.misalignment_deg] * 3,
+                    dtype=float)
+
+
+def state_verdict(ratio: float, posterior: float, target: float) -> str:
+    """The verdict of one state (module doc): informed (ratio <= NOT_DETERMINED) and at or below its target."""
+    if ratio > NOT_DETERMINED:
+        return "not determined"
+    return "determined" if posterior <= target else "weakly determined"
+
+
+def determined_threshold(prior: float, target: float) -> float:
+    """The sigma at or below which a state is "determined" (state_verdict): the target, and informed."""
+    return min(target, NOT_DETERMINED * prior)
 
 
 def analyse(result: NavResult, config: EstimatorConfig | None = None) -> ObservabilityReport:
@@ -186,19 +241,21 @@ def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: fl
     J = _user_units_jacobian(np.asarray(b_R_d))
     cov = J @ np.asarray(calib_joint_cov) @ J.T
     p0 = prior_sigmas(config)
+    targets = target_sigmas(config)
     post = np.sqrt(np.diag(cov))
     duration_h = duration_s / 3600.0
     states = []
     for i, (key, text, unit) in enumerate(STATES):
         ratio = float(min(post[i] / p0[i], 1.0))
-        verdict = verdict_of(ratio)
+        verdict = state_verdict(ratio, float(post[i]), float(targets[i]))
         hours = None
-        if verdict != "determined":
+        if verdict == "not determined":
             # information gained below 1 % of the prior's: numerically nothing, so no extrapolation
             gained = 1.0 / post[i] ** 2 - 1.0 / p0[i] ** 2
             info_rate = gained / max(duration_h, 1e-9) if gained > 0.01 / p0[i] ** 2 else 0.0
             hours = float(3.0 / p0[i] ** 2 / info_rate) if info_rate > 0 else float("inf")
-        states.append(StateVerdict(key, text, unit, float(p0[i]), float(post[i]), ratio, verdict, hours))
+        states.append(StateVerdict(key, text, unit, float(p0[i]), float(post[i]), ratio, verdict, hours,
+                                   target_sigma=float(targets[i])))
     white = cov / np.outer(p0, p0)
     evals, evecs = np.linalg.eigh(0.5 * (white + white.T))
     directions = []
@@ -247,10 +304,12 @@ def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments
 
 
 def determined_at(report: ObservabilityReport, timeline: Timeline) -> dict[str, float | None]:
-    """Time (s) at which each state's filtering sigma first falls to DETERMINED of its prior (None: never)."""
+    """Time (s) at which each state's filtering sigma first falls to its "determined" threshold
+    (determined_threshold: its target, and informed; None: never)."""
     sig = _timeline_sigmas(timeline)
     out: dict[str, float | None] = {}
     for j, state in enumerate(report.states):
-        below = np.flatnonzero(sig[:, j] <= DETERMINED * state.prior_sigma)
+        target = state.target_sigma if state.target_sigma is not None else DETERMINED * state.prior_sigma
+        below = np.flatnonzero(sig[:, j] <= determined_threshold(state.prior_sigma, target))
         out[state.key] = float(timeline.t[below[0]]) if below.size else None
     return out

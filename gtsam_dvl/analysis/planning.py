@@ -70,7 +70,7 @@ def plan_mission(scenario: Scenario, config: EstimatorConfig | None = None, seed
                           progress=(lambda f: progress(0.2 + 0.7 * f)) if progress else None)
     assert result.timeline is not None  # asked for, with a constant bias
     timeline = result.timeline
-    obs = analyse(result, config)
+    obs = analyse(result, config).for_plan()
     segments = log.segments
     shares = attribute_segments(obs, timeline, segments)
     if progress:

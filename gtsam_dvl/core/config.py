@@ -200,8 +200,13 @@ class SolverConfig(_Section):
     # error = chi^2 / 2: a decrease this small moves no estimate by 0.1 sigma
     absolute_error_tol: float = field(default=0.01, metadata=NON_NEGATIVE)
     earth_model: EarthModel = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
-    # 0: a state per DVL ping; >0: only pings at least this far apart
+    # 0: a state per DVL ping; >0: only pings at least this far apart (the others are dropped: decimation)
     keyframe_interval_s: float = field(default=0.0, metadata=NON_NEGATIVE)
+    # batch smoother: states only at pings at least this far apart (keyframes); every ping between two keyframes
+    # becomes a DVL factor on the keyframe before it through the IMU motion up to the ping (factors/dvl_keyframe.py),
+    # so that no ping's information is lost. 0: a state per ping. Applied after keyframe_interval_s; must not
+    # exceed max_state_spacing_s. The online estimator and the EKF keep a state per ping.
+    keyframe_spacing_s: float = field(default=0.0, metadata=NON_NEGATIVE)
     # DVL dropouts: where pings are missing for more than 1.5 times this, states are added this far apart
     # without a DVL factor, so that no IMU factor spans more than this (what the EKF's propagation does)
     max_state_spacing_s: float = field(default=1.0, metadata=POSITIVE)
@@ -386,6 +391,22 @@ class GnssConfig(_Section):
     max_time_to_state_s: float = field(default=0.5, metadata=NON_NEGATIVE)
 
 
+@dataclass
+class ObservabilityConfig(_Section):
+    """The accuracy at which the observability verdict (analysis/observability.py) calls a state "determined":
+    its posterior sigma at or below the target, and the log (or plan) having informed it (posterior below 90 % of
+    the prior). A state the log informed that stays above its target is "weakly determined". The defaults are
+    what makes a DVL-aided navigation good to 0.1 % of distance travelled: the scale to 0.1 % and the
+    misalignment to 0.1 deg (0.17 % of distance across track); the biases to half the paper's priors."""
+
+    SECTION: ClassVar[str] = "observability"
+
+    scale_ppm: float = field(default=1000.0, metadata=POSITIVE)
+    misalignment_deg: float = field(default=0.1, metadata=POSITIVE)
+    accel_bias_ug: float = field(default=25.0, metadata=POSITIVE)
+    gyro_bias_deg_per_h: float = field(default=0.005, metadata=POSITIVE)
+
+
 # Named configurations: the differences from the defaults, as a TOML file would give them. `-c NAME` on the
 # command line, EstimatorConfig.named(NAME) in scripts, `preset = "NAME"` at the top of a TOML file (its own
 # keys then override the preset's), and a scenario's estimator_config key (the configuration its runs are
@@ -417,6 +438,7 @@ class EstimatorConfig:
     ekf: EkfConfig = field(default_factory=EkfConfig)
     iodvlc: IodvlcConfig = field(default_factory=IodvlcConfig)
     depth: DepthConfig = field(default_factory=DepthConfig)
+    observability: ObservabilityConfig = field(default_factory=ObservabilityConfig)
     gnss: GnssConfig = field(default_factory=GnssConfig)
 
     def to_dict(self) -> dict[str, Any]:

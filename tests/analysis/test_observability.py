@@ -36,10 +36,14 @@ def test_paper_2d_thrust_axis_not_determined_rest_determined() -> None:
 
 
 def test_paper_3d_thrust_axis_determined() -> None:
+    """The 60 s descent informs the thrust-axis misalignment (26 % of its prior) but not to the 0.1 deg target:
+    weakly determined; every other calibration state is determined."""
     report = analyse(_result("paper-3d"))
     print("\n".join(report.lines()))
-    for key in [*CALIBRATION, "misalignment_roll"]:
+    for key in CALIBRATION:
         assert report.state(key).verdict == "determined", key
+    roll = report.state("misalignment_roll")
+    assert roll.verdict == "weakly determined" and roll.ratio < 0.5 and roll.posterior_sigma > 0.1
     # the vertical gyro bias barely moves in 34 min (heading drift is seen only through gyrocompassing)
     gz = report.state("gyro_bias_z")
     assert gz.ratio > 0.9 and gz.hours_to_halve is not None and gz.hours_to_halve > 10

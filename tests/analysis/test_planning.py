@@ -19,15 +19,36 @@ def _plan(name: str) -> PlanResult:
 
 
 def test_plan_paper_3d_credits_the_descent_and_the_turns() -> None:
+    """Against the default targets (scale 0.1 %, misalignment 0.1 deg) the paper's 60 s descent leaves the
+    thrust-axis misalignment at 0.26 deg: informed by the descent, but weakly determined; the plan says No."""
     p = _plan("paper-3d")
     print(p.answer())
-    assert p.answer().startswith("Yes")
+    assert p.answer().startswith("No") and "thrust axis" in p.answer().splitlines()[0]
     roll = p.report.state("misalignment_roll")
-    assert roll.verdict == "determined" and any(c.startswith("descent 660-720") for c in roll.credited_segments)
+    assert roll.verdict == "weakly determined" and 0.2 < roll.posterior_sigma < 0.3 and roll.target_sigma == 0.1
+    assert any(c.startswith("descent 660-720") for c in roll.credited_segments)
+    assert p.determined_at_s["misalignment_roll"] is None
     for axis in ("x", "y"):
         acc = p.report.state(f"accel_bias_{axis}")
         assert any(c.startswith("square 750-1970") for c in acc.credited_segments)
         assert p.determined_at_s[f"accel_bias_{axis}"] is not None and p.determined_at_s[f"accel_bias_{axis}"] > 750
+    assert (p.determined_at_s["scale"] or 0) > 660  # 1000 ppm is reached in the square, not at 600 s
+    assert "this plan's rate" in p.answer() and "this log" not in p.answer()
+
+
+def test_plan_paper_3d_with_the_targets_relaxed_says_yes() -> None:
+    """The targets are configurable: at half the priors (0.5 deg, 25 % of the scale prior: the paper's reading of
+    "converged") the same plan calibrates the DVL, the scale at 600-660 s (the first Type-I segment) and the roll
+    during the descent (660-720 s), as the paper finds."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    cfg = EstimatorConfig.paper()
+    cfg.observability.misalignment_deg = 0.5
+    cfg.observability.scale_ppm = 0.25 * cfg.priors.scale_sigma * 1e6
+    p = plan_mission(load_scenario("paper-3d"), cfg)
+    print(p.answer())
+    assert p.answer().startswith("Yes")
+    assert p.report.state("misalignment_roll").verdict == "determined"
     assert 600 < (p.determined_at_s["scale"] or 0) < 660
     assert 660 < (p.determined_at_s["misalignment_roll"] or 0) < 720
 
