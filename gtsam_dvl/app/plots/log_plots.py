@@ -7,26 +7,42 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from gtsam_dvl.app.plots.common import save_figure, shade_segments
+from gtsam_dvl.app.plots.common import save_figure, segment_legend, shade_segments
 from gtsam_dvl.core.types import LogData
 
 
 def plot_trajectory(log: LogData, path: Path, n_p: np.ndarray | None = None, label: str = "truth") -> Path:
-    """Figure 1: the 3-D trajectory in the map frame (truth, or a given estimate)."""
+    """Figure 1: the trajectory in the map frame (truth, or a given estimate): a plan view with equal axes and
+    the 3-D view, whose vertical axis is stretched at most 5 times the horizontal (a planar run stays flat)."""
     if n_p is None:
         if log.truth is None:
             raise ValueError("no trajectory: the log has no truth and no estimate was given")
         n_p = log.truth.n_p
-    fig = plt.figure(figsize=(7, 6))
-    ax = fig.add_subplot(projection="3d")
-    ax.plot(n_p[:, 0], n_p[:, 1], n_p[:, 2], lw=1.2, label=label)
-    ax.scatter(*n_p[0], color="green", s=20, label="start")
-    ax.scatter(*n_p[-1], color="red", s=20, label="end")
+    fig = plt.figure(figsize=(12, 5.5))
+    plan = fig.add_subplot(1, 2, 1)
+    plan.plot(n_p[:, 0], n_p[:, 1], lw=1.2, label=label)
+    plan.scatter(n_p[0, 0], n_p[0, 1], color="green", s=20, label="start", zorder=3)
+    plan.scatter(n_p[-1, 0], n_p[-1, 1], color="red", s=20, label="end", zorder=3)
+    plan.set_aspect("equal", adjustable="datalim")
+    plan.set_xlabel("east (m)")
+    plan.set_ylabel("north (m)")
+    plan.set_title("plan view (equal axes)")
+    plan.grid(alpha=0.3)
+    plan.legend(loc="best", fontsize=8)
+    ax = fig.add_subplot(1, 2, 2, projection="3d")
+    ax.plot(n_p[:, 0], n_p[:, 1], n_p[:, 2], lw=1.2)
+    ax.scatter(*n_p[0], color="green", s=20)
+    ax.scatter(*n_p[-1], color="red", s=20)
+    ranges = np.ptp(n_p, axis=0)
+    horizontal = max(float(ranges[0]), float(ranges[1]), 1.0)
+    vertical = max(float(ranges[2]), 1e-3)
+    ax.set_box_aspect((float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, min(vertical * 5.0, horizontal)))
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_zlabel("up (m)")
-    ax.set_title(f"Trajectory in map ({log.metadata.get('scenario_name', Path(log.source).name)})")
-    ax.legend(loc="upper left", fontsize=8)
+    stretch = min(vertical * 5.0, horizontal) / vertical
+    ax.set_title(f"3-D view (vertical stretched x{stretch:.1f})" if stretch > 1.01 else "3-D view (true scale)")
+    fig.suptitle(f"Trajectory in map ({log.metadata.get('scenario_name', Path(log.source).name)}), {label}")
     return save_figure(fig, path)
 
 
@@ -41,7 +57,8 @@ def plot_dvl(log: LogData, path: Path) -> Path:
         ax.set_ylabel(f"y_{name} (m/s)")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
-    axes[0].set_title("DVL output in dvl_link (shaded: Type-I blue, Type-II orange)")
+    axes[0].set_title("DVL output in dvl_link")
+    segment_legend(axes[0], segments, fontsize=7, loc="lower right")
     return save_figure(fig, path)
 
 
@@ -59,7 +76,7 @@ def plot_imu(log: LogData, path: Path, decimate_to_hz: float = 10.0) -> Path:
             (imu.b_f[::step, i], "m/s^2", "accelerometer"),
         ]):
             ax = axes[i, j]
-            shade_segments(ax, segments)
+            shade_segments(ax, segments, label=(i == 0))
             ax.plot(t, data, lw=0.8)
             ax.set_ylabel(f"{title} {name} ({unit})")
             ax.grid(alpha=0.3)
@@ -67,6 +84,8 @@ def plot_imu(log: LogData, path: Path, decimate_to_hz: float = 10.0) -> Path:
         ax.set_xlabel("time (s)")
     axes[0, 0].set_title("Gyro output in imu_link")
     axes[0, 1].set_title("Specific force in imu_link")
+    if segments:
+        segment_legend(axes[-1, 1], segments, fontsize=7, loc="lower right")
     return save_figure(fig, path)
 
 

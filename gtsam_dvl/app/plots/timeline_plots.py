@@ -9,7 +9,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from gtsam_dvl.app.plots.common import save_figure, shade_segments
+from gtsam_dvl.app.plots.common import save_figure, segment_legend, shade_segments
 from gtsam_dvl.core.result import Timeline
 from gtsam_dvl.core.types import Segment
 
@@ -27,7 +27,7 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
                    t_min: float = 0.0) -> Path:
     """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias"; estimate +- 3 sigma."""
     spec = {
-        "scale": ("scale", "scale_sigma", ["DVL scale factor"], "scale factor"),
+        "scale": ("scale", "scale_sigma", ["DVL scale factor k"], "dimensionless"),
         "misalignment": ("misalignment_deg", "misalignment_sigma_deg", list(MIS_AXES), "deg"),
         "gyro_bias": ("gyro_bias_deg_per_h", "gyro_bias_sigma_deg_per_h", [f"gyro bias {a}" for a in AXES3], "deg/h"),
         "accel_bias": ("accel_bias_ug", "accel_bias_sigma_ug", [f"accel bias {a}" for a in AXES3], "micro-g"),
@@ -36,18 +36,27 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
     n = len(titles)
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    t_max = max(float(tl.t[-1]) for _, tl in timelines) if timelines else None
     for row, title in enumerate(titles):
         ax = axes[row, 0]
         if segments:
-            shade_segments(ax, segments, label=(row == 0))
+            shade_segments(ax, segments, label=(row == 0), t_min=t_min, t_max=t_max)
         lo, hi = np.inf, -np.inf
         for k, (label, tl) in enumerate(timelines):
             sel = tl.t >= t_min
             value = np.asarray(getattr(tl, value_name)).reshape(len(tl.t), -1)[sel, row]
             sigma = np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
-            _band(ax, tl.t[sel], value, sigma, f"{label} (+-3 sigma)", colours[k % len(colours)])
+            colour = colours[k % len(colours)]
+            if len(value) and np.ptp(value) == 0.0:
+                # a smoother's timeline: its sigmas are filtering sigmas, its value the final estimate only; a
+                # flat line over a narrowing band would be neither, so the final estimate is a marker at the end
+                ax.errorbar([tl.t[sel][-1]], [value[-1]], yerr=[3 * sigma[-1]], fmt="D", color=colour, ms=5,
+                            capsize=4, label=f"{label}: final estimate +-3 sigma", zorder=4)
+                tail = value[-1:], sigma[-1:]
+            else:
+                _band(ax, tl.t[sel], value, sigma, f"{label} (+-3 sigma)", colour)
+                tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
             # zoom on the converged part: the band at the end, not the prior's width
-            tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
             lo = min(lo, float(np.min(tail[0] - 4 * tail[1])))
             hi = max(hi, float(np.max(tail[0] + 4 * tail[1])))
         if truth is not None:
@@ -61,9 +70,13 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
         ax.grid(alpha=0.3)
     if t_min > 0:
         axes[-1, 0].set_xlim(left=t_min)
-    axes[0, 0].legend(fontsize=8, loc="upper right")
+    if segments:
+        segment_legend(axes[0, 0], segments, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    else:
+        axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
-    fig.suptitle(f"{quantity.replace('_', ' ')} estimate and 3-sigma band over time")
+    fig.suptitle(f"{quantity.replace('_', ' ')} estimate and 3-sigma band over time\n(y zoomed on the converged part)",
+                 fontsize=11)
     return save_figure(fig, path)
 
 
@@ -82,16 +95,19 @@ def plot_normalised_sigmas(timeline: Timeline, path: Path, priors: dict[str, np.
          list(AXES3)),
         (axes[1, 1], "accelerometer bias", timeline.accel_bias_sigma_ug, priors["accel_bias_ug"], list(AXES3)),
     ]
-    for ax, name, sig, p0, labels in groups:
+    for k, (ax, name, sig, p0, labels) in enumerate(groups):
         if segments:
-            shade_segments(ax, segments)
+            shade_segments(ax, segments, label=(k < 2))
         ratio = np.asarray(sig) / np.asarray(p0, dtype=float)
         for j, lab in enumerate(labels):
             ax.semilogy(timeline.t, ratio[:, j], lw=1.2, label=lab)
         ax.set_title(name, fontsize=10)
-        ax.set_ylabel("sigma / initial sigma")
+        ax.set_ylabel("sigma / initial sigma (ratio)")
         ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8, loc="lower left")
+        if segments and k == 0:
+            segment_legend(ax, segments, fontsize=7, loc="lower left")
+        else:
+            ax.legend(fontsize=8, loc="lower left")
     for ax in axes[1]:
         ax.set_xlabel("time (s)")
     fig.suptitle(title or "Normalised standard deviations (the paper's Figure 12)")
