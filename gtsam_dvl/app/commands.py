@@ -104,6 +104,14 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
     cal = log.true_calibration
     if cal is not None:
         lines.append(f"  truth: scale {cal.scale}, misalignment [roll, pitch, yaw] {list(cal.misalignment_deg)} deg")
+    if log.truth is not None and len(log.truth) > 1:
+        tr = log.truth
+        path_m = float(np.sum(np.linalg.norm(np.diff(tr.n_p, axis=0), axis=1)))
+        up = tr.n_p[:, 2]
+        lines.append(f"  truth: {path_m / 1000:.3f} km travelled in {tr.t[-1] - tr.t[0]:.0f} s; height in map from "
+                     f"{up.min():+.2f} to {up.max():+.2f} m (start {up[0]:+.2f} m); peak sink "
+                     f"{max(0.0, -float(tr.n_v[:, 2].min())):.2f} m/s, "
+                     f"peak rise {max(0.0, float(tr.n_v[:, 2].max())):.2f} m/s")
     for warning in log.metadata.get("reader_warnings", []):
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)

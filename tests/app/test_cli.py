@@ -239,3 +239,4 @@ def test_info_prints_origin_mounting_rates_and_gaps(sim_log: Path) -> None:
     assert "map origin: lat 30.0000000 deg, lon 114.0000000 deg, height -100.00 m" in out
     assert "mounting (base_link <- sensor, roll/pitch/yaw deg): IMU +0.00 +0.00 +0.00, DVL +0.00 +0.00 +0.00" in out
     assert "rates: IMU 100.0 Hz, DVL 1.00 Hz" in out and "gaps: none" in out and "stamps: first DVL" in out
+    assert re.search(r"truth: \d\.\d{3} km travelled in 2040 s; height in map from [-+]\d", out)
