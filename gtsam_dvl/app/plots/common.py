@@ -35,13 +35,17 @@ def shade_segments(ax: Any, segments: list[Segment], label: bool = False, t_min:
             ax.axvspan(seg.start_s, seg.end_s, facecolor=style["facecolor"], hatch=style["hatch"],
                        edgecolor="0.75", lw=0, zorder=0)
     bounds = sorted({seg.start_s for seg in segments} | ({segments[-1].end_s} if segments else set()))
-    for b in bounds:
-        if (t_min is not None and b < t_min) or (t_max is not None and b > t_max):
-            continue
+    shown = [b for b in bounds if not ((t_min is not None and b < t_min) or (t_max is not None and b > t_max))]
+    span = (shown[-1] - shown[0]) if len(shown) > 1 else 1.0
+    previous, level = -float("inf"), 0
+    for b in shown:
         ax.axvline(b, color="0.6", lw=0.6, zorder=1)
         if label:
-            ax.text(b, 0.98, f"{b:.0f} ", transform=ax.get_xaxis_transform(), rotation=90, fontsize=7,
-                    va="top", ha="right", color="0.3", zorder=5)
+            # a boundary within 2.5 % of the span of the previous one is written lower, so the two do not touch
+            level = (level + 1) % 3 if b - previous < 0.025 * span else 0
+            previous = b
+            ax.text(b, 0.98 - 0.17 * level, f"{b:.0f} ", transform=ax.get_xaxis_transform(), rotation=90,
+                    fontsize=7, va="top", ha="right", color="0.3", zorder=5)
 
 
 def segment_legend(ax: Any, segments: list[Segment], **kwargs: Any) -> None:
