@@ -180,7 +180,8 @@ SMOOTH_HELP = (
 @app.command(help=SMOOTH_HELP)
 @_user_errors
 def smooth(
-    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    logs: Annotated[list[Path], typer.Argument(help="MCAP log (or rosbag2 directory); several with --out-dir.",
+                                               metavar="LOG...")],
     output: Annotated[Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")] = None,
     mode: Annotated[str, typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc.")
                     ] = "batch",
@@ -196,16 +197,41 @@ def smooth(
     quiet: Quiet = False,
     strict: Annotated[bool, typer.Option("--strict", help="Exit with code 3 when the run's health is degraded or "
                                                           "failed (the outputs are still written).")] = False,
+    out_dir: Annotated[Path | None, typer.Option("--out-dir", help="Fleet processing: smooth every LOG in parallel "
+                                                                   "(Dask) into DIR/<log name>/, with a table of all "
+                                                                   "runs in DIR/fleet.md.")] = None,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help="With --out-dir: a running Dask scheduler "
+                                                                      "(default: a LocalCluster here).")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")] = None,
     debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
     from gtsam_dvl.app.commands import smooth_file
 
+    read_options = _read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic, attitude_topic,
+                                 truth_topic)
+    if out_dir is not None or len(logs) > 1:
+        if out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz:
+            raise GtsamDvlError("several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
+                                "--summary, --tum and --timeline-npz take one log")
+        from gtsam_dvl.app.campaign import fleet_table, smooth_fleet
+
+        rows, written = smooth_fleet(logs, out_dir, mode=mode, config_path=config, read_options=read_options,
+                                     scheduler=scheduler, workers=workers, show_progress=not quiet)
+        typer.echo("\n".join(fleet_table(rows)))
+        for path in written:
+            typer.echo(f"wrote {path}")
+        bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] != "ok")]
+        if any(r["status"] == "error" for r in rows):
+            typer.echo(f"gtsam-dvl: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed "
+                       "(their error is in the table)", err=True)
+        if bad:
+            raise typer.Exit(EXIT_UNHEALTHY)
+        return
+    log = logs[0]
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
-                          show_progress=not quiet, read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
-                                                                  depth_topic, gnss_topic, attitude_topic,
-                                                                  truth_topic),
-                          timeline=timeline, timeline_path=timeline_npz)
+                          show_progress=not quiet, read_options=read_options, timeline=timeline,
+                          timeline_path=timeline_npz)
     typer.echo(outcome.describe())
     if strict and outcome.status != "ok":
         typer.echo(f"gtsam-dvl: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
@@ -266,6 +292,55 @@ def plan(
         typer.echo(f"wrote {path}")
 
 
+MONTECARLO_HELP = (
+    "Monte Carlo consistency of the estimators on a scenario, on Dask distributed.\n\n"
+    "Each task simulates one seed and runs the chosen estimators on it; the statistics per estimator and state "
+    "(error/sigma mean and spread, NEES with its 95 % band, RMSE against the reported sigma and the Cramer-Rao "
+    "bound) go to DIR/montecarlo.json and DIR/report.md with figures. A failed task is retried once, then listed "
+    "with its seed and error (exit code 3). Rerun with the same DIR to resume: finished seeds are kept.\n\n"
+    "Engine: a LocalCluster of --workers processes (default: the cores), or a running scheduler: "
+    "`dask scheduler` and `dask worker tcp://HOST:8786` on the machines, then --scheduler tcp://HOST:8786."
+)
+
+
+@app.command(help=MONTECARLO_HELP)
+@_user_errors
+def montecarlo(
+    scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario "
+                                                 "TOML file.")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Campaign folder (created; reused to resume).")],
+    runs: Annotated[int, typer.Option("--runs", help="Number of seeds.")] = 20,
+    estimators: Annotated[str, typer.Option("--estimators", help="Comma-separated: batch, online, ekf, "
+                                                                 "online-full.")] = "batch,online,ekf",
+    seed_start: Annotated[int, typer.Option("--seed-start", help="First seed.")] = 1,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help="Address of a running Dask scheduler "
+                                                                      "(default: a LocalCluster here).")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores).")
+                       ] = None,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    quiet: Quiet = False,
+    debug: Debug = False,
+) -> None:
+    """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
+    from gtsam_dvl.app.campaign import run_campaign
+
+    res = run_campaign(scenario, runs, [e.strip() for e in estimators.split(",") if e.strip()], output,
+                       seed_start=seed_start, scheduler=scheduler, workers=workers, config_path=config,
+                       show_progress=not quiet)
+    for name, est in res.statistics["estimators"].items():
+        z = ", ".join(f"{k} {v['z_std']:.2f}" for k, v in est["states"].items() if not k.startswith("final"))
+        nb = est["nees_block"]
+        typer.echo(f"{name}: error/sigma std {z}; block NEES {nb['mean']:.2f} (95 % band "
+                   f"{nb['band_95'][0]:.2f}-{nb['band_95'][1]:.2f}, {'inside' if nb['inside_band'] else 'OUTSIDE'})")
+    typer.echo(f"{res.runs_done} runs ({res.runs_new} new) in {res.out_dir}")
+    for f in res.failures:
+        typer.echo(f"gtsam-dvl: failed: seed {f['seed']}: {f['error']}", err=True)
+    for path in res.written[:2]:
+        typer.echo(f"wrote {path}")
+    if res.failures:
+        raise typer.Exit(EXIT_UNHEALTHY)
+
+
 @app.command()
 @_user_errors
 def demo(
@@ -278,6 +353,43 @@ def demo(
     from gtsam_dvl.app.demo import run_demo
 
     run_demo(output, seed=seed)
+
+
+LIVE_HELP = (
+    "Replay a log through the online estimator and show it live in Foxglove (needs pip install "
+    "'gtsam-dvl[live]').\n\n"
+    "Serves a Foxglove WebSocket on --host:--port and publishes, as they are computed: the estimated pose (/tf "
+    "map -> base_link, /gtsam_dvl/odometry with covariance), the path, DVL scale, misalignment, time offset and "
+    "IMU biases with their sigmas, the estimator's counters and the health warnings, the raw IMU / DVL / depth "
+    "messages and the truth when the log has it. In Foxglove: Open connection > Foxglove WebSocket > "
+    "ws://localhost:8765, then Layouts > Import from file > layouts/gtsam_dvl_live.json (README, Live view)."
+)
+
+
+@app.command(help=LIVE_HELP)
+@_user_errors
+def live(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    speed: Annotated[str, typer.Option(help="Times real time (e.g. 1, 10); 0 or 'max': as fast as possible.")
+                     ] = "1",
+    port: Annotated[int, typer.Option(help="WebSocket port (0: any free port, printed).")] = 8765,
+    host: Annotated[str, typer.Option(help="Address to serve on (127.0.0.1: this machine only; 0.0.0.0: every "
+                                           "interface).")] = "127.0.0.1",
+    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    wait: Annotated[bool, typer.Option("--wait", help="Start the replay only once a client subscribes.")] = False,
+    exit_when_done: Annotated[bool, typer.Option("--exit-when-done", help="Stop serving when the replay ends "
+                                                                          "(default: serve until Ctrl-C).")] = False,
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    debug: Debug = False,
+) -> None:
+    """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
+    from gtsam_dvl.app.live import serve_log
+
+    serve_log(log, speed=speed, port=port, host=host, config_path=config, wait=wait, linger=not exit_when_done,
+              read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
+                                         attitude_topic, truth_topic), echo=typer.echo)
 
 
 def main() -> None:

@@ -1,0 +1,49 @@
+"""Fleet processing (`gtsam-dvl smooth LOG... --out-dir DIR`, app/campaign.py smooth_fleet): several logs
+smoothed in parallel on Dask with one configuration, one result set per log and a table of all runs; a bad log
+gets its error line in the table and the others finish."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from gtsam_dvl.app.commands import simulate_to_file
+
+pytest.importorskip("distributed")
+
+
+def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None:
+    from tests.app.test_campaign import SCENARIO
+
+    scenario = tmp_path / "mc-tiny.toml"
+    scenario.write_text(SCENARIO)
+    logs = []
+    for seed in (1, 2):
+        logs.append(tmp_path / f"dive{seed}.mcap")
+        simulate_to_file(scenario, logs[-1], seed=seed, show_progress=False)
+    bad = tmp_path / "broken.mcap"
+    bad.write_bytes(b"not a log")
+    out = tmp_path / "fleet"
+    proc = subprocess.run([sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", str(logs[0]), str(bad), str(logs[1]),
+                           "--out-dir", str(out), "--workers", "2", "-q"], capture_output=True, text=True, timeout=600)
+    print(proc.stdout)
+    assert proc.returncode == 3, proc.stderr  # one log failed
+    assert "1 of 3 logs failed" in proc.stderr
+    rows = json.loads((out / "fleet.json").read_text())
+    assert [Path(r["log"]).name for r in rows] == ["dive1.mcap", "broken.mcap", "dive2.mcap"]  # the order given
+    assert [r["status"] for r in rows] == ["ok", "error", "ok"]
+    assert "neither an MCAP nor a rosbag2" in rows[1]["error"]
+    for r, seed in ((rows[0], 1), (rows[2], 2)):
+        summ = json.loads((out / f"dive{seed}" / "summary.json").read_text())
+        assert summ["scale"] == r["scale"] and (out / f"dive{seed}" / "result.mcap").exists()
+        assert abs(summ["errors"]["scale_nsigma"]) < 3
+    table = (out / "fleet.md").read_text()
+    assert "| broken.mcap | error |" in table and table.count("| ok |") == 2
+    # several logs need --out-dir; -o is for one log
+    proc = subprocess.run([sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", str(logs[0]), str(logs[1]), "-o",
+                           str(tmp_path / "r.mcap")], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 1 and "several logs are smoothed with --out-dir" in proc.stderr
