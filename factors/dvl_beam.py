@@ -21,6 +21,7 @@ from ._common import (
     as_scale,
     as_unit_vector3,
     check_noise,
+    cross3,
     fill_slots,
     lever_velocity,
     predict_dvl_velocity,
@@ -62,7 +63,7 @@ def dvl_beam_error(
         np.asarray(n_v, dtype=float),
         as_scale(k),
         b_R_d.matrix().T,
-        np.cross(b_omega, b_l),
+        cross3(b_omega, b_l),
         H3,
     )
     computed: list[np.ndarray] = [_EMPTY] * 4

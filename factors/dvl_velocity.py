@@ -55,7 +55,7 @@ def dvl_velocity_error(
         np.asarray(n_v, dtype=float),
         as_scale(k),
         b_R_d.matrix().T,
-        np.cross(b_omega, b_l),
+        cross3(b_omega, b_l),
         computed,
     )
     if H is not None and computed is not None:
@@ -225,7 +225,7 @@ def dvl_velocity_offset_error(
     computed: list[np.ndarray] | None = None if H is None else [np.empty(0)] * 5
     h = _offset_prediction(n_T_b.rotation().matrix(), np.asarray(n_v, dtype=float), as_scale(k),
                            b_R_d.matrix().T, as_scale(dt), np.asarray(b_omega, dtype=float),
-                           np.cross(b_omega, b_l), np.asarray(b_a, dtype=float), np.asarray(n_g, dtype=float),
+                           cross3(b_omega, b_l), np.asarray(b_a, dtype=float), np.asarray(n_g, dtype=float),
                            np.eye(3) if G is None else np.asarray(G, dtype=float), computed)
     if H is not None and computed is not None:
         fill_slots(H, computed)

@@ -35,6 +35,14 @@ and pim.predict would use whichever factor was set last). With one object per fa
 function of the values and the factor's own reference only, whatever the evaluation order: GTSAM marks
 CustomFactor not sendable, so Python factors are linearized one at a time, and write-then-evaluate
 cannot interleave.
+
+Memory: the CustomFactor holds its Python callback through C++ (a std::function), where the garbage collector
+cannot see it. The callback is therefore a separate model object (_EarthImuModel) with only the data the error
+needs, never the EarthImuFactor or the CustomFactor: EarthImuFactor -> CustomFactor -> model, no cycle, so
+when a graph (iSAM2's fixed-lag window, marginalising a state) and the caller drop a factor, it is freed at
+once, its parameters' claim with it. (The first form made the EarthImuFactor its own callback: a cycle through
+C++ that kept every IMU factor of a mission alive, 2.5 kB each, and all their parameters claimed;
+tests/estimators/test_online_memory.py.)
 """
 
 from __future__ import annotations
@@ -50,9 +58,8 @@ GravityModel = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # n_p (3,)
 REFRESH_M = 100.0
 _DIMS = (6, 3, 6, 3, 6)
 
-# Parameters objects in use by an EarthImuFactor. Weak, so the set never keeps parameters alive itself (a
-# factor and its CustomFactor hold each other through C++, out of the garbage collector's sight, so in practice
-# a factor, and its claim, last as long as the process).
+# Parameters objects in use by an EarthImuFactor. Weak, so the set never keeps parameters alive itself: a claim
+# ends when the factor's last holder (the Python object or a graph holding its CustomFactor) lets it go.
 _CLAIMED: weakref.WeakSet[gtsam.PreintegrationParams] = weakref.WeakSet()
 _PROBE_DG = 1.0  # m/s^2, the gravity change of _gravity_map's probe
 _PROBES = _PROBE_DG * np.eye(3)
@@ -92,37 +99,22 @@ def _check_free(params: gtsam.PreintegrationParams) -> None:
             "with its own PreintegrationParams")
 
 
-class EarthImuFactor:
-    """One factor: the wrapped ImuFactor, its own parameters, the local gravity model, and `.factor`, the
-    gtsam.CustomFactor to add to a graph. dt is the interval as given; the Jacobian uses the time the pim
-    integrated (through M, module doc), which differs where the IMU data have a gap."""
+class _EarthImuModel:
+    """What the CustomFactor's callback needs and nothing else: the wrapped ImuFactor, its parameters, the
+    gravity model and reference, M. It holds no reference to its CustomFactor or to the EarthImuFactor, so
+    that no reference cycle runs through C++ (module doc, "Memory")."""
 
     def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
-                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int],
-                 extra_cov: np.ndarray | None = None) -> None:
-        _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
+                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int], M: np.ndarray) -> None:
         self.imu, self.params, self.dt, self.gravity, self.keys = imu, params, dt, gravity, keys
-        pim = imu.preintegratedMeasurements()  # a copy, sharing the parameters object with the ImuFactor's
-        self._M = _gravity_map(pim, params)  # d(prediction's n_p, n_v) / d n_g
-        self._MG: np.ndarray = np.zeros((6, 3))  # M @ ref_G, computed once per reference
-        self._MG_of: np.ndarray | None = None  # the ref_G it is of
+        self.M = M  # d(prediction's n_p, n_v) / d n_g
+        self.MG: np.ndarray = np.zeros((6, 3))  # M @ ref_G, computed once per reference
+        self.MG_of: np.ndarray | None = None  # the ref_G it is of
         self.ref_p: np.ndarray | None = None
         self.ref_g = np.array(params.n_gravity, dtype=float)  # a copy: the property is a view of the C++ vector
         self.ref_G = np.zeros((3, 3))
-        cov = pim.preintMeasCov() if extra_cov is None else pim.preintMeasCov() + extra_cov
-        noise = gtsam.noiseModel.Gaussian.Covariance(cov)
-        self.factor = gtsam.CustomFactor(noise, list(keys), self)
-        _CLAIMED.add(params)  # last: a factor that failed to build claims nothing
-
-    def set_reference(self, n_p_ref: np.ndarray, g: np.ndarray, G: np.ndarray) -> None:
-        """Give the local gravity model (a caller evaluating many factors at once can do it in bulk)."""
-        self.ref_p, self.ref_g, self.ref_G = np.array(n_p_ref, dtype=float), np.asarray(g), np.asarray(G)
-
-    def needs_reference(self, n_p_mid: np.ndarray) -> bool:
-        return self.gravity is not None and (self.ref_p is None or np.abs(n_p_mid - self.ref_p).max() > REFRESH_M)
 
     def set_gravity(self, n_p_mid: np.ndarray) -> np.ndarray:
-        """Gravity at n_p_mid from the reference, written into this factor's parameters (and so its pim's)."""
         if self.gravity is None:
             return self.ref_g
         if self.ref_p is None:
@@ -145,17 +137,86 @@ class EarthImuFactor:
         Hs = [np.zeros((9, d), order="F") for d in _DIMS]
         error = self.imu.evaluateError(pose_i, v_i, pose_j, v_j, bias, *Hs)
         if self.gravity is not None:
-            if self._MG_of is not self.ref_G:
-                self._MG, self._MG_of = self._M @ self.ref_G, self.ref_G
+            if self.MG_of is not self.ref_G:
+                self.MG, self.MG_of = self.M @ self.ref_G, self.ref_G
             R_i, R_j = pose_i.rotation().matrix(), pose_j.rotation().matrix()
             E_G = np.zeros((9, 3))
-            E_G[3:6] = R_j.T @ self._MG[:3]
-            E_G[6:9] = R_j.T @ self._MG[3:]
+            E_G[3:6] = R_j.T @ self.MG[:3]
+            E_G[6:9] = R_j.T @ self.MG[3:]
             Hs[0][:, 3:6] += 0.5 * (E_G @ R_i)
             Hs[2][:, 3:6] += 0.5 * (E_G @ R_j)
         for k in range(5):
             H[k] = Hs[k]
         return error
+
+
+class EarthImuFactor:
+    """One factor: the wrapped ImuFactor, its own parameters, the local gravity model, and `.factor`, the
+    gtsam.CustomFactor to add to a graph. dt is the interval as given; the Jacobian uses the time the pim
+    integrated (through M, module doc), which differs where the IMU data have a gap. The CustomFactor's
+    callback is a separate model object (module doc, "Memory"): the factor stays valid in a graph after this
+    object is gone, and both are freed as soon as neither is held."""
+
+    def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
+                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int],
+                 extra_cov: np.ndarray | None = None) -> None:
+        _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
+        pim = imu.preintegratedMeasurements()  # a copy, sharing the parameters object with the ImuFactor's
+        self._model = _EarthImuModel(imu, params, dt, gravity, keys, _gravity_map(pim, params))
+        cov = pim.preintMeasCov() if extra_cov is None else pim.preintMeasCov() + extra_cov
+        noise = gtsam.noiseModel.Gaussian.Covariance(cov)
+        self.factor = gtsam.CustomFactor(noise, list(keys), self._model)
+        _CLAIMED.add(params)  # last: a factor that failed to build claims nothing
+
+    # the model's data, read-only here (set_reference changes the reference)
+    @property
+    def imu(self) -> gtsam.ImuFactor:
+        return self._model.imu
+
+    @property
+    def params(self) -> gtsam.PreintegrationParams:
+        return self._model.params
+
+    @property
+    def dt(self) -> float:
+        return self._model.dt
+
+    @property
+    def gravity(self) -> GravityModel | None:
+        return self._model.gravity
+
+    @property
+    def keys(self) -> tuple[int, int, int, int, int]:
+        return self._model.keys
+
+    @property
+    def ref_p(self) -> np.ndarray | None:
+        return self._model.ref_p
+
+    @property
+    def ref_g(self) -> np.ndarray:
+        return self._model.ref_g
+
+    @property
+    def ref_G(self) -> np.ndarray:
+        return self._model.ref_G
+
+    def set_reference(self, n_p_ref: np.ndarray, g: np.ndarray, G: np.ndarray) -> None:
+        """Give the local gravity model (a caller evaluating many factors at once can do it in bulk)."""
+        m = self._model
+        m.ref_p, m.ref_g, m.ref_G = np.array(n_p_ref, dtype=float), np.asarray(g), np.asarray(G)
+
+    def needs_reference(self, n_p_mid: np.ndarray) -> bool:
+        m = self._model
+        return m.gravity is not None and (m.ref_p is None or np.abs(n_p_mid - m.ref_p).max() > REFRESH_M)
+
+    def set_gravity(self, n_p_mid: np.ndarray) -> np.ndarray:
+        """Gravity at n_p_mid from the reference, written into this factor's parameters (and so its pim's)."""
+        return self._model.set_gravity(n_p_mid)
+
+    def __call__(self, _factor: Any, values: gtsam.Values, H: Any) -> np.ndarray:
+        """The error (and with H the Jacobians) as the CustomFactor computes it."""
+        return self._model(_factor, values, H)
 
 
 def make_earth_imu_factor(

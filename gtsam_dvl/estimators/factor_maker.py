@@ -37,9 +37,12 @@ from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_
 from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance
 from gtsam_dvl.factors import (
     EarthImuFactor,
+    PingMotion,
+    keyframe_ping_covariance,
     make_depth_factor,
     make_dvl_beam_factor,
     make_dvl_beam_lever_factor,
+    make_dvl_keyframe_factor,
     make_dvl_velocity_factor,
     make_dvl_velocity_lever_factor,
     make_dvl_velocity_offset_factor,
@@ -83,7 +86,11 @@ class FactorMaker:
         must be seen there too (G n_R_b(t)^T n_g). The Coriolis acceleration (2 Omega x v: 3e-4 m/s^2 at
         2 m/s) is left out."""
         w = self.config.dvl.time_offset_window_s
-        sel = np.flatnonzero((imu_t >= t + min(0.0, dt) - w) & (imu_t <= t + max(0.0, dt) + w))
+        # the samples in the window by binary search (imu_t is sorted): a mask over every sample made each ping
+        # cost O(samples), the whole log O(pings x samples)
+        lo = int(np.searchsorted(imu_t, t + min(0.0, dt) - w, side="left"))
+        hi = int(np.searchsorted(imu_t, t + max(0.0, dt) + w, side="right"))
+        sel = np.arange(lo, hi)
         if sel.size == 0:
             sel = np.array([int(np.clip(np.searchsorted(imu_t, t), 0, len(imu_t) - 1))])
         b_a = np.asarray(b_f[sel].mean(axis=0), dtype=float)
@@ -208,6 +215,50 @@ class FactorMaker:
             return [make_dvl_velocity_lever_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, L_LEVER, d_y,
                                                    b_omega)]
         return [make_dvl_velocity_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, d_y, b_omega, b_l)]
+
+    def keyframe_gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normal gravity in map at map positions n_p (N, 3), m/s^2, and its gradient (N, 3, 3), 1/s^2, for the
+        keyframe DVL factors (factors/dvl_keyframe.py; no centrifugal term about the origin: only GTSAM's IMU
+        prediction needs it). Flat model: the constant gravity at the origin, zero gradient."""
+        n_p = np.asarray(n_p, dtype=float).reshape(-1, 3)
+        if self.config.solver.earth_model == "flat":
+            g0 = normal_gravity(self.frame.lat0, self.frame.height_m)
+            return np.tile([0.0, 0.0, -float(g0)], (len(n_p), 1)), np.zeros((len(n_p), 3, 3))
+        return (np.asarray(self.frame.n_gravity(n_p), dtype=float).reshape(-1, 3),
+                np.asarray(gravity_gradient(self.frame, n_p), dtype=float).reshape(-1, 3, 3))
+
+    def dvl_keyframe_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
+                                 motion: PingMotion, pim_cov: np.ndarray, beams: Beams | None = None,
+                                 rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                                 ) -> list[gtsam.NonlinearFactor]:
+        """DVL factors of a ping between keyframes on state i (X(i), V(i), the bias, K_SCALE, C_MISALIGN, and
+        T_OFFSET / L_LEVER when estimated): the ping seen through the IMU motion from state i (motion,
+        factors/dvl_keyframe.py), as dvl_factors_for does for a ping at a state. pim_cov (9x9, [rotation,
+        position, velocity]): the preintegration's covariance up to the ping, mapped into the ping's noise at
+        the prior calibration (keyframe_ping_covariance; 1e-4 m/s at 1 s with the paper's IMU, against 2 cm/s)."""
+        cfg = self.config.dvl
+        k0 = self.config.priors.scale_initial
+        b_R_d0 = self.mounting.b_R_d0
+        d_y = np.asarray(d_y, dtype=float)
+        b_v = b_R_d0 @ d_y / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
+        extra = keyframe_ping_covariance(pim_cov, motion.dR, b_R_d0.T, b_v, k0)
+        lever_key = L_LEVER if cfg.estimate_lever_arm else None
+        keys = (X(i), V(i), self.bias_key(i), K_SCALE, C_MISALIGN)
+        b_l = self.mounting.b_l
+        if cfg.estimate_time_offset and rate_input is not None:
+            b_a, b_omega_mean, G = rate_input
+            noise = self._robust(gtsam.noiseModel.Gaussian.Covariance(ping_covariance(cfg, cov) + extra))
+            return [make_dvl_keyframe_factor(noise, *keys, d_y, b_omega_mean, b_l, motion, T_OFFSET,
+                                             (b_a, self.offset_gravity(), G), lever_key)]
+        if cfg.use_beams and beams is not None:
+            d_u, v, valid = beams
+            return [make_dvl_keyframe_factor(
+                self._robust(gtsam.noiseModel.Isotropic.Sigma(1, float(np.sqrt(
+                    cfg.beam_noise_m_s**2 + d_u[b] @ extra @ d_u[b])))),
+                *keys, float(v[b]), b_omega, b_l, motion, lever_key=lever_key, d_u=d_u[b])
+                for b in np.flatnonzero(valid)]
+        noise = self._robust(gtsam.noiseModel.Gaussian.Covariance(ping_covariance(cfg, cov) + extra))
+        return [make_dvl_keyframe_factor(noise, *keys, d_y, b_omega, b_l, motion, lever_key=lever_key)]
 
     def dvl_noise(self, cov: np.ndarray) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive

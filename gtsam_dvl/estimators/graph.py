@@ -1,9 +1,12 @@
 """The whole-log graph: the batch smoother's and the planner's factor graph over every epoch of a log.
 
-States (pose X_i = n_T_b, velocity V_i = n_v) at the DVL epochs chosen by estimators/selection.py;
-preintegrated IMU factors between consecutive states, integrated exactly to the DVL stamps; DVL velocity (or
-beam) factors on (X_i, V_i, scale K, misalignment C = b_R_d); IMU bias B (one random constant, or B_i as a
-random walk). Every factor comes from the FactorMaker (estimators/factor_maker.py: the Earth model and why it
+States (pose X_i = n_T_b, velocity V_i = n_v) at the DVL epochs chosen by estimators/selection.py (every
+usable ping, or with [solver] keyframe_spacing_s the keyframes) and at DVL-dropout fillers; preintegrated IMU
+factors between consecutive states, integrated exactly to the DVL stamps; DVL velocity (or beam) factors on
+(X_i, V_i, scale K, misalignment C = b_R_d); the pings between keyframes as DVL factors on the state before
+them through the IMU motion up to the ping (estimators/keyframes.py, factors/dvl_keyframe.py, also on the
+bias); IMU bias B (one random constant, or B_i as a random walk). Every factor comes from the FactorMaker
+(estimators/factor_maker.py: the Earth model and why it
 is exact), which the online estimator shares; this module owns the epochs, their preintegrations and the
 initial guess of the whole trajectory.
 """
@@ -34,9 +37,21 @@ from gtsam_dvl.estimators.gaps import (
     with_fillers,
 )
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
+from gtsam_dvl.estimators.keyframes import PimSnapshot, ping_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.selection import covering_sample, select_epochs
-from gtsam_dvl.factors import EarthImuFactor
+from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
+from gtsam_dvl.factors import EarthImuFactor, PingMotion
+
+
+@dataclass
+class BetweenPing:
+    """A usable ping between keyframes ([solver] keyframe_spacing_s): a DVL factor on the state before it."""
+
+    t: float
+    dvl_index: int
+    b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
+    rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # as Epoch.rate_input, at t
+    pim: PimSnapshot | None = None  # the IMU motion from the state before (estimators/keyframes.py)
 
 
 @dataclass
@@ -48,6 +63,7 @@ class Epoch:
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
     # with dvl.estimate_time_offset: (mean specific force, mean body rate) around t (FactorMaker.velocity_rate_input)
     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    between: list[BetweenPing] = field(default_factory=list)  # the pings up to the next state (keyframes)
 
 
 @dataclass
@@ -63,6 +79,10 @@ class LogGraph:
     imu_factors: list[EarthImuFactor] = field(init=False)
     gaps: Gaps = field(init=False)
     counters: dict[str, int] = field(default_factory=dict)
+    # map positions (N, 3) of the states at which the keyframe factors' gravity is referenced (initial_values)
+    gravity_positions: np.ndarray | None = field(default=None, init=False, repr=False)
+    _keyframe_gravity: tuple[np.ndarray | None, np.ndarray, np.ndarray] | None = field(default=None, init=False,
+                                                                                     repr=False)
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -86,6 +106,7 @@ class LogGraph:
         self.counters["imu_gaps"] = len(self.gaps)
         check_gaps(self.gaps, cfg.imu, log.source)
         held = self._preintegrate()
+        self._snapshot_between()
         self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
                             for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, held, strict=True))]
 
@@ -99,15 +120,32 @@ class LogGraph:
 
     # ----- epochs and preintegration -------------------------------------------------------------
     def _select_epochs(self) -> list[Epoch]:
+        """States at the keyframes among the usable (and decimated) pings and at the dropout fillers; the other
+        pings go to the state before them (Epoch.between)."""
         dvl, imu, cfg = self.log.dvl, self.log.imu, self.config
-        idx = select_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, self.counters)
+        spacing = cfg.solver.keyframe_spacing_s
+        if spacing > cfg.solver.max_state_spacing_s:
+            raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
+                                f"{spacing:g} s: states without a ping would take the places of the keyframes")
+        all_idx = select_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, self.counters)
+        key = keyframe_mask(dvl.t[all_idx], spacing)
+        key[-1:] = True  # the last ping too: every other ping lies between two states (and the gaps they cross)
+        idx = all_idx[key]
         times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)
         self.counters["states_without_ping"] = int(is_filler.sum())
+        self.counters["keyframes"] = int(key.sum())
+        self.counters["pings_between_keyframes"] = int((~key).sum())
         dvl_index = np.full(len(times), -1)
         dvl_index[~is_filler] = idx
         gyro = covering_sample(imu.t, times)
         epochs = [Epoch(float(t), int(j), self.maker.body_rate(imu.b_omega[g]))
                   for t, j, g in zip(times.tolist(), dvl_index.tolist(), gyro.tolist(), strict=True)]
+        rest = all_idx[~key]
+        if len(rest):
+            state = np.searchsorted(times, dvl.t[rest], side="left") - 1  # the latest state before each ping
+            gyro_p = covering_sample(imu.t, dvl.t[rest])
+            for j, i, g in zip(rest.tolist(), state.tolist(), gyro_p.tolist(), strict=True):
+                epochs[i].between.append(BetweenPing(float(dvl.t[j]), int(j), self.maker.body_rate(imu.b_omega[g])))
         if cfg.dvl.estimate_time_offset:
             self.set_time_offset_window(cfg.dvl.time_offset_prior_s, epochs)
         return epochs
@@ -119,6 +157,24 @@ class LogGraph:
         for ep in self.epochs if epochs is None else epochs:
             if ep.dvl_index >= 0:
                 ep.rate_input = self.maker.velocity_rate_input(ep.t, imu.t, imu.b_f, imu.b_omega, dt)
+            for p in ep.between:
+                p.rate_input = self.maker.velocity_rate_input(p.t, imu.t, imu.b_f, imu.b_omega, dt)
+
+    def _snapshot_between(self) -> None:
+        """The IMU motion from each state to the pings after it (estimators/keyframes.py), one preintegration
+        per state with pings between keyframes."""
+        imu = self.log.imu
+        if not any(ep.between for ep in self.epochs):
+            return
+        starts = sample_starts_with_gaps(imu.t, self.gaps)
+        b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
+        params = self.maker.make_params()
+        for ep in self.epochs:
+            if ep.between:
+                snaps = ping_snapshots(ep.t, [p.t for p in ep.between], params, imu.t, starts, b_f, imu.b_omega,
+                                       self.gaps, self.config.imu)
+                for p, snap in zip(ep.between, snaps, strict=True):
+                    p.pim = snap
 
     def _preintegrate(self) -> list[Holds]:
         """The IMU intervals between the epochs; returns what each held across IMU gaps."""
@@ -174,6 +230,32 @@ class LogGraph:
             return []
         beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
         return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input)
+
+    def between_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
+        """DVL factors of the pings between state i and the next (keyframes, factors/dvl_keyframe.py), with
+        gravity referenced at state i's position in gravity_positions (the initial guess; the map origin if
+        unset). Normal gravity's gradient, 1.5e-6 s^-2, is in the factor: over 1 s it moves the predicted
+        velocity by 1.5e-6 m/s per metre of position change."""
+        ep = self.epochs[i]
+        if not ep.between:
+            return []
+        dvl = self.log.dvl
+        n_p0 = np.zeros(3) if self.gravity_positions is None else self.gravity_positions[i]
+        if self._keyframe_gravity is None or self._keyframe_gravity[0] is not self.gravity_positions:
+            # every state's at once (1 ms per call otherwise)
+            n_p = np.zeros((len(self.epochs), 3)) if self.gravity_positions is None else self.gravity_positions
+            self._keyframe_gravity = (self.gravity_positions, *self.maker.keyframe_gravity(n_p))
+        g, G = self._keyframe_gravity[1][i:i + 1], self._keyframe_gravity[2][i:i + 1]
+        w = self.maker.n_omega_ie()
+        out: list[gtsam.NonlinearFactor] = []
+        for p in ep.between:
+            s, j = p.pim, p.dvl_index
+            assert s is not None
+            motion = PingMotion(s.dt, s.dR, s.dv, s.dp, s.dR_dbg, s.dv_dba, s.dv_dbg, w, g[0], n_p0, G[0])
+            beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+            out += self.maker.dvl_keyframe_factors_for(i, dvl.d_v[j], dvl.d_cov[j], p.b_omega, motion, s.cov, beams,
+                                                       p.rate_input)
+        return out
 
     def depth_factors(self) -> list[gtsam.NonlinearFactor]:
         """Depth factors of the log's depth samples (estimators/depth.py), each on its nearest state; none
@@ -244,6 +326,7 @@ class LogGraph:
         if self.config.dvl.estimate_lever_arm:  # the /tf_static value, as the prior
             values.insert(L_LEVER, np.asarray(self.maker.mounting.b_l, dtype=float))
         self.set_gravity_from_positions(n_p_all)
+        self.gravity_positions = n_p_all
         return values
 
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
@@ -254,7 +337,7 @@ class LogGraph:
         for f in self.maker.prior_factors(values, first_position_cov(gnss)):
             graph.add(f)
         for i in range(len(self.epochs)):
-            for f in self.dvl_factors(i):
+            for f in self.dvl_factors(i) + self.between_factors(i):
                 graph.add(f)
             if i + 1 < len(self.epochs):
                 graph.add(self.imu_factor(i))

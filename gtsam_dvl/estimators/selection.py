@@ -7,7 +7,9 @@ with finite values), it is not faster than `dvl.max_speed_m_s` (a bottom-track o
 first IMU sample (nothing before it can be propagated) and not after the last one (classify_pings), and when
 it is not bogus (PingScreen, with `dvl.screen`): an exact zero velocity while moving, a velocity repeated bit
 for bit while the IMU shows motion, or a velocity change the IMU cannot explain. Every rejection is counted by
-reason. Keyframe thinning (`solver.keyframe_interval_s`) then keeps pings at least that far apart.
+reason. Keyframe thinning (`solver.keyframe_interval_s`) then keeps pings at least that far apart (the others
+are dropped). Of those, the batch smoother makes states at keyframes `solver.keyframe_spacing_s` apart
+(keyframe_mask) and puts the pings between them on the keyframe before (no ping is dropped).
 
 The screen is causal: it compares a ping with the previous accepted ping and the IMU samples stamped between
 the two (at most SCREEN_WINDOW_S before the ping), so that the online estimator, which sees pings one by one,
@@ -279,6 +281,22 @@ def select_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyfr
     keep = np.array([thin.keep(float(dvl.t[j])) for j in idx], dtype=bool)
     counters["dvl_not_keyframe"] = counters.get("dvl_not_keyframe", 0) + int((~keep).sum())
     return idx[keep]
+
+
+KEYFRAME_TOLERANCE = 0.02  # share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
+
+
+def keyframe_mask(t: np.ndarray, spacing_s: float) -> np.ndarray:
+    """Which of the epoch pings t (sorted, s) are keyframes: the first, then each first ping at least spacing_s
+    after the previous keyframe (less KEYFRAME_TOLERANCE of it, so that a DVL whose period equals the spacing
+    makes a keyframe of every ping); all of them when spacing_s <= 0. The batch smoother puts states at the
+    keyframes and the other pings on the keyframe before them (estimators/keyframes.py)."""
+    keep = np.ones(len(t), dtype=bool)
+    if spacing_s <= 0 or len(t) == 0:
+        return keep
+    thin = KeyframeThinning(spacing_s * (1.0 - KEYFRAME_TOLERANCE))
+    keep[:] = [thin.keep(x) for x in np.asarray(t, dtype=float).tolist()]
+    return keep
 
 
 def sample_starts(t: np.ndarray) -> np.ndarray:

@@ -6,6 +6,12 @@ may be marine_acoustic_msgs/msg/Dvl (3-D velocity and beams), geometry_msgs/msg/
 geometry_msgs/msg/TwistStamped (no covariance: d_cov is NaN and the user must supply the DVL noise).
 Times: ``t0_ns`` is the first IMU stamp rounded down to the second; all t arrays are relative to it and
 come from the header stamps (log times are not used).
+
+Streaming (issue 12): the log is read in one pass, piece by piece (an MCAP's chunks, pages of a .db3), and the
+high-rate topics (the IMU, the truth odometry) are decoded piece by piece into arrays of the fields the
+reader uses (``_Stream``: about 56 bytes per IMU sample, plus the orientation only if some message has one),
+so that reading holds those arrays and one chunk, not every message body (5 GB for a day of 200 Hz IMU).
+The other topics are low-rate and decoded in bulk as before. Errors are raised in the order of a bulk read.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
+from gtsam_dvl.io.storage.raw import Bodies
 from gtsam_dvl.io.storage.salvage import salvage_losses, salvage_report
 from gtsam_dvl.io.storage.sources import Source, open_source
 
@@ -192,6 +199,106 @@ def _metadata(src: Source) -> dict[str, Any]:
     return meta
 
 
+IMU_FIELDS = ("sec", "nanosec", "angular_velocity", "linear_acceleration")
+IMU_ORIENTATION_FIELDS = ("orientation", "orientation_covariance", "frame_id")
+TRUTH_FIELDS = ("sec", "nanosec", "position", "orientation", "linear", "angular")
+
+
+class _Stream:
+    """One topic decoded piece by piece into preallocated arrays of some of its fields (grown by doubling
+    when the storage's message count was missing or short). Decoding errors are kept, not raised, so that
+    the caller raises them where a bulk read would (after the storage's own errors). With ``orientation``
+    (IMU only): the orientation and its covariance too, but stored only from the first piece in which some
+    message has one (orientation_covariance[0] != -1); earlier rows get "no orientation"."""
+
+    def __init__(self, path: Path, topic: str, type_name: str, fields: tuple[str, ...], capacity: int,
+                 orientation: bool = False) -> None:
+        self.path, self.topic, self.type_name, self.fields = path, topic, type_name, fields
+        self.capacity, self.n, self.frame_id = max(capacity, 1), 0, ""
+        self.orientation = orientation
+        self.out: np.ndarray | None = None
+        self.orient: np.ndarray | None = None
+        self.error: GtsamDvlError | None = None
+
+    def add(self, bodies: Any) -> None:
+        if self.error is not None or not len(bodies):
+            return
+        try:
+            arr = decode(self.path, self.topic, self.type_name, bodies)
+        except GtsamDvlError as e:
+            self.error = e
+            return
+        if self.out is None:
+            self.frame_id = first_string(arr)
+            self.out = np.empty(self.capacity, np.dtype([(f, arr.dtype[f]) for f in self.fields]))
+        k = len(arr)
+        if self.n + k > len(self.out):
+            self.out = self._grow(self.out, self.n + k)
+        for f in self.fields:
+            self.out[f][self.n : self.n + k] = arr[f]
+        if self.orientation:
+            self._add_orientation(arr)
+        self.n += k
+
+    def _grow(self, a: np.ndarray, need: int) -> np.ndarray:
+        b = np.empty(max(need, 2 * len(a)), a.dtype)
+        b[: self.n] = a[: self.n]
+        return b
+
+    def _add_orientation(self, arr: np.ndarray) -> None:
+        k = len(arr)
+        if self.orient is None:
+            if not (arr["orientation_covariance"][:, 0] != -1.0).any():
+                return
+            self.orient = np.zeros(len(self.out) if self.out is not None else k,
+                                   [("orientation", "<f8", (4,)), ("orientation_covariance", "<f8", (9,))])
+            self.orient["orientation_covariance"][: self.n] = -1.0
+        if self.n + k > len(self.orient):
+            self.orient = self._grow(self.orient, self.n + k)
+        self.orient["orientation"][self.n : self.n + k] = arr["orientation"]
+        self.orient["orientation_covariance"][self.n : self.n + k] = arr["orientation_covariance"]
+
+    def array(self) -> np.ndarray:
+        """The decoded fields of every message (raises a decoding error first)."""
+        if self.error is not None:
+            raise self.error
+        if self.out is None:
+            return np.zeros(0, [(f, "<f8") for f in self.fields])
+        return self.out[: self.n]
+
+    def attitude_array(self, keep: np.ndarray) -> np.ndarray:
+        """What io/attitude.read_attitude needs of the IMU's own orientation, for the messages kept: a
+        one-message array with "no orientation" when none had one (read_attitude then returns None)."""
+        stamps = self.array()
+        dt = [("sec", "<i4"), ("nanosec", "<u4"), ("orientation", "<f8", (4,)),
+              ("orientation_covariance", "<f8", (9,)), ("frame_id", "O")]
+        if self.orient is None:
+            out = np.zeros(1, dt)
+            out["orientation_covariance"] = -1.0
+            return out
+        out = np.zeros(int(keep.sum()), dt)
+        for f in ("sec", "nanosec"):
+            out[f] = stamps[f][keep]
+        for f in ("orientation", "orientation_covariance"):
+            out[f] = self.orient[f][: self.n][keep]
+        out["frame_id"] = self.frame_id
+        return out
+
+
+def _read_streaming(src: Source, topics: list[str], streams: dict[str, _Stream], keep_bodies: set[str],
+                    progress: Callable[[float], None] | None) -> dict[str, Any]:
+    """One pass over the log: streamed topics into their _Stream, the others' bodies (and those of streamed
+    topics in keep_bodies, which another part of the reader decodes itself) collected as src.read would."""
+    pieces: dict[str, list[Bodies]] = {t: [] for t in topics if t not in streams or t in keep_bodies}
+    for got in src.iter_read(topics, progress):
+        for topic, bodies in got.items():
+            if topic in streams:
+                streams[topic].add(bodies)
+            if topic in pieces:
+                pieces[topic].append(bodies)
+    return {t: p[0] if len(p) == 1 else Bodies.concat(p) for t, p in pieces.items() if p or t in src.topics}
+
+
 def read_log(
     path: str | Path,
     *,
@@ -274,9 +381,16 @@ def read_log(
         raise _missing(src, "attitude", attitude_topic, "--attitude-topic")
     if attitude_topic and attitude_topic not in topics:
         topics.append(attitude_topic)
-    raw = src.read(topics, progress)
+    counts = src.message_counts()
+    imu_stream = _Stream(path, imu_topic, IMU_TYPE, IMU_FIELDS, counts.get(imu_topic, 0),
+                         orientation=attitude_topic is None)
+    streams = {imu_topic: imu_stream}
+    if has_truth:
+        streams[truth_topic] = _Stream(path, truth_topic, ODOM_TYPE, TRUTH_FIELDS, counts.get(truth_topic, 0))
+    others = {depth_topic, gnss_topic, attitude_topic, tf_topic, dvl_topic}
+    raw = _read_streaming(src, topics, streams, {t for t in streams if t in others}, progress)
 
-    imu = decode(path, imu_topic, IMU_TYPE, raw[imu_topic])
+    imu = imu_stream.array()
     if not len(imu):
         raise GtsamDvlError(f"{path}: {imu_topic} has no messages")
     imu_ns = stamps_ns(imu)
@@ -287,7 +401,7 @@ def read_log(
     keep_imu = keep
     imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
-    imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, first_string(imu) or "imu_link")
+    imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
 
     dvl_arr = decode(path, dvl_topic, dvl_type, raw[dvl_topic])
     if not len(dvl_arr):
@@ -298,7 +412,7 @@ def read_log(
 
     truth = None
     if has_truth:
-        od = decode(path, truth_topic, ODOM_TYPE, raw[truth_topic])
+        od = streams[truth_topic].array()
         ns = stamps_ns(od)
         keep = check_stamps(path, truth_topic, ns, t0, None, repair, warnings, dropped)
         q = od["orientation"].astype(float)[keep]
@@ -332,8 +446,9 @@ def read_log(
         if tf_topic in src.topics and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]),
                                                        gnss.frame_id)) is not None:
             gnss.b_p_antenna = pose[1]
-    attitude = read_attitude(src, attitude_topic, imu_topic, raw, imu[keep_imu], t0, mounting, repair, warnings,
-                             dropped, attitude_frame)
+    attitude = read_attitude(src, attitude_topic, imu_topic, raw,
+                             imu_stream.attitude_array(keep_imu) if attitude_topic is None else imu[:0], t0,
+                             mounting, repair, warnings, dropped, attitude_frame)
     gaps: dict[str, dict[str, Any]] = {}
     for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:

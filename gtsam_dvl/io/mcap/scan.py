@@ -6,13 +6,18 @@ message records are located from the chunk's MessageIndex records (or by walking
 writer left them out), and a channel's bodies are cut out as one (N, L) uint8 array through a
 sliding-window view. Only the data section is read, so the same walk serves ``salvage``: a file without
 footer is scanned from the start and every chunk whose CRC checks is kept.
+
+Memory (issue 12): a file of MMAP_MIN_BYTES or more is memory-mapped, not read, and ``iter_read`` hands out
+the bodies chunk by chunk, each chunk's compressed bytes released from the process's memory once it is
+decompressed, so a reader that decodes as it goes holds one chunk and its own output, not the log.
 """
 
 from __future__ import annotations
 
+import mmap
 import struct
 import zlib
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,6 +30,8 @@ from gtsam_dvl.io.storage.raw import Bodies, Loss, TopicInfo
 
 _win = np.lib.stride_tricks.sliding_window_view
 SALVAGE_HINT = "rerun with --salvage to recover the intact chunks"
+MMAP_MIN_BYTES = 16 << 20  # files this large are memory-mapped (smaller ones are read: no difference then)
+Buf = bytes | mmap.mmap  # the file: read, or memory-mapped
 
 
 @dataclass
@@ -42,12 +49,12 @@ class _Chunk:
     lost: bool = False
 
 
-def _str(buf: bytes, off: int) -> tuple[str, int]:
+def _str(buf: Buf, off: int) -> tuple[str, int]:
     (n,) = struct.unpack_from("<I", buf, off)
     return buf[off + 4 : off + 4 + n].decode(), off + 4 + n
 
 
-def _map(buf: bytes, off: int) -> tuple[dict[str, str], int]:
+def _map(buf: Buf, off: int) -> tuple[dict[str, str], int]:
     (n,) = struct.unpack_from("<I", buf, off)
     out, p, end = {}, off + 4, off + 4 + n
     while p < end:
@@ -57,7 +64,7 @@ def _map(buf: bytes, off: int) -> tuple[dict[str, str], int]:
 
 
 def _walk_records(
-    data: bytes, complete: bool = True, other: Callable[[int, bytes, int], None] | None = None
+    data: Buf, complete: bool = True, other: Callable[[int, Buf, int], None] | None = None
 ) -> list[int]:
     """Offsets of the Message records in a chunk's records; other records go to ``other(op, data,
     content_offset)``. A Python loop: used only for chunks without MessageIndex records, for files
@@ -77,12 +84,21 @@ def _walk_records(
     return offs
 
 
+def _open_buffer(path: Path) -> Buf:
+    """The file's bytes: memory-mapped (read-only) from MMAP_MIN_BYTES on, else read."""
+    with path.open("rb") as f:
+        size = path.stat().st_size
+        if size < MMAP_MIN_BYTES:
+            return f.read()
+        return mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ)
+
+
 class McapScan:
     """One MCAP file: topics, metadata, attachments; ``read`` returns the bodies of chosen topics."""
 
     def __init__(self, path: Path, *, salvage: bool = False) -> None:
         self.path, self.salvage = path, salvage
-        self.buf = path.read_bytes()
+        self.buf: Buf = _open_buffer(path)
         self.schemas: dict[int, tuple[str, str, str]] = {}
         self.channels: dict[int, TopicInfo] = {}
         self.metadata: dict[str, dict[str, str]] = {}
@@ -175,7 +191,7 @@ class McapScan:
         else:
             self._definition(op, buf, c)
 
-    def _definition(self, op: int, buf: bytes, c: int) -> None:
+    def _definition(self, op: int, buf: Buf, c: int) -> None:
         """Schema and Channel records, wherever they are (data section, chunks, summary)."""
         if op == mc.OP_SCHEMA:
             (sid,) = struct.unpack_from("<H", buf, c)
@@ -265,14 +281,29 @@ class McapScan:
 
     def read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None) -> dict[str, Bodies]:
         """Bodies of every message on ``topics`` (present ones), in file order."""
-        want = {cid: info.topic for cid, info in self.channels.items() if info.topic in set(topics)}
-        pieces: dict[str, list[Bodies]] = {t: [] for t in want.values()}
+        topics = set(topics)
+        pieces: dict[str, list[Bodies]] = {info.topic: [] for info in self.channels.values() if info.topic in topics}
+        for got in self.iter_read(topics, progress):
+            for t, b in got.items():
+                pieces[t].append(b)
+        return {t: Bodies.concat(p) for t, p in pieces.items()}
+
+    def iter_read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+                  ) -> Iterator[dict[str, Bodies]]:
+        """The bodies of ``topics`` one chunk (or run of messages outside chunks) at a time, in file order;
+        topics without messages in a chunk are left out of its dict. The compressed chunk is dropped from
+        memory once decompressed (a memory-mapped file's pages are given back)."""
+        topics = set(topics)
+        want = {cid: info.topic for cid, info in self.channels.items() if info.topic in topics}
         file_u8 = np.frombuffer(self.buf, np.uint8)
         for seg in self.segments:
+            pieces: dict[str, list[Bodies]] = {t: [] for t in want.values()}
             if isinstance(seg, list):
                 self._extract(file_u8, np.array(seg, dtype=np.int64), want, pieces, None)
+                yield {t: p[0] if len(p) == 1 else Bodies.concat(p) for t, p in pieces.items() if p}
                 continue
             data = self._records(seg)
+            self._release(seg.data)
             if data is not None:
                 u8 = np.frombuffer(data, np.uint8)
                 if seg.offsets is not None:
@@ -290,7 +321,14 @@ class McapScan:
                 seg.records = None  # free it: read once
             if progress is not None:
                 progress(seg.data.stop / len(self.buf))
-        return {t: Bodies.concat(p) for t, p in pieces.items()}
+            yield {t: p[0] if len(p) == 1 else Bodies.concat(p) for t, p in pieces.items() if p}
+
+    def _release(self, span: slice) -> None:
+        """Give back the resident pages of a memory-mapped span (they are re-read from the file if needed)."""
+        if isinstance(self.buf, mmap.mmap) and hasattr(mmap, "MADV_DONTNEED"):
+            start = span.start - span.start % mmap.PAGESIZE
+            if span.stop > start:
+                self.buf.madvise(mmap.MADV_DONTNEED, start, span.stop - start)
 
     def _walk(self, seg: _Chunk, data: bytes, definitions: bool = False) -> np.ndarray:
         try:

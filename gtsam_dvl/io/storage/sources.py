@@ -3,13 +3,16 @@
 
 A .db3 is read with the standard library's sqlite3 (rosbag2's schema: tables ``topics`` and
 ``messages``, optionally ``message_definitions``), so no ROS installation is needed.
+
+``read`` returns every body of the chosen topics at once; ``iter_read`` the same bodies in pieces (an MCAP's
+chunks, pages of DB3_PAGE rows of a .db3), so that a reader decoding as it goes never holds them all.
 """
 
 from __future__ import annotations
 
 import re
 import sqlite3
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +20,8 @@ import numpy as np
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.io.mcap.scan import McapScan
 from gtsam_dvl.io.storage.raw import Bodies, Loss, TopicInfo
+
+DB3_PAGE = 100_000  # rows of a .db3 fetched at a time by iter_read
 
 
 class Db3Source:
@@ -66,15 +71,34 @@ class Db3Source:
                 ).fetchall()
             except sqlite3.Error as e:
                 raise GtsamDvlError(f"{self.path}: cannot read {topic} ({e})") from None
-            t = np.array([r[0] for r in rows], dtype=np.int64)
-            data = [bytes(r[1]) for r in rows]
-            if data and len({len(d) for d in data}) == 1:
-                out[topic] = Bodies(t, fixed=np.frombuffer(b"".join(data), np.uint8).reshape(len(data), -1))
-            else:
-                out[topic] = Bodies(t, var=data)
+            out[topic] = _bodies(rows)
             if progress is not None:
                 progress((i + 1) / len(wanted))
         return out
+
+    def iter_read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+                  ) -> Iterator[dict[str, Bodies]]:
+        """``read``'s bodies in pages of DB3_PAGE rows, topic after topic (each topic's in order)."""
+        wanted = [t for t in topics if t in self._ids]
+        for i, topic in enumerate(wanted):
+            try:
+                cur = self.con.execute(
+                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id", (self._ids[topic],))
+                while rows := cur.fetchmany(DB3_PAGE):
+                    yield {topic: _bodies(rows)}
+            except sqlite3.Error as e:
+                raise GtsamDvlError(f"{self.path}: cannot read {topic} ({e})") from None
+            if progress is not None:
+                progress((i + 1) / len(wanted))
+
+
+def _bodies(rows: list[tuple[int, bytes]]) -> Bodies:
+    """Bodies of (timestamp, data) rows: one (N, L) array when all have one length."""
+    t = np.array([r[0] for r in rows], dtype=np.int64)
+    data = [bytes(r[1]) for r in rows]
+    if data and len({len(d) for d in data}) == 1:
+        return Bodies(t, fixed=np.frombuffer(b"".join(data), np.uint8).reshape(len(data), -1))
+    return Bodies(t, var=data)
 
 
 Storage = McapScan | Db3Source
@@ -120,6 +144,15 @@ class Source:
             for k, b in p.read(topics, sub).items():
                 got.setdefault(k, []).append(b)
         return {k: v[0] if len(v) == 1 else Bodies.concat(v) for k, v in got.items()}
+
+    def iter_read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+                  ) -> Iterator[dict[str, Bodies]]:
+        """``read``'s bodies piece by piece (the storage's chunks or pages), parts in order, each topic's
+        bodies in file order."""
+        topics = list(topics)
+        for i, p in enumerate(self.parts):
+            sub = None if progress is None else (lambda f, i=i: progress((i + f) / len(self.parts)))
+            yield from p.iter_read(topics, sub)
 
     def describe_topics(self) -> str:
         return ", ".join(f"{k} [{v.type_name}]" for k, v in sorted(self.topics.items())) or "none"

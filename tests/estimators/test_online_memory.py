@@ -1,0 +1,141 @@
+"""Memory of the online estimator (issue 12, item 5): the IMU factors the fixed-lag window drops are freed.
+
+EarthImuFactor's CustomFactor holds its Python callback through C++, out of the garbage collector's sight; the
+callback is a separate model object that holds neither the factor nor its wrapper (factors/imu_earth.py,
+"Memory"), so nothing keeps a dropped factor alive. Measured with weak references (no timing): every factor
+made by the estimator's FactorMaker is tracked, and after a run only those of the states still in the window
+may be alive. The RSS over a 6-hour run is bench/bench_online_long.py's.
+"""
+
+from __future__ import annotations
+
+import gc
+import weakref
+from dataclasses import replace
+from typing import Any
+
+import gtsam
+import numpy as np
+import pytest
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.types import DvlData, ImuData, LogData
+from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
+from gtsam_dvl.factors import EarthImuFactor, imu_earth, make_earth_imu_factor
+from gtsam_dvl.sim import simulate
+from gtsam_dvl.sim.scenario import load_scenario
+
+T_END_S = 400.0  # paper-3d-short: 120 s static, then the Type-I manoeuvres and the first legs
+
+
+@pytest.fixture(scope="module")
+def log() -> LogData:
+    full = simulate(load_scenario("paper-3d-short"), 5)
+    i, d = full.imu.t <= T_END_S, full.dvl.t <= T_END_S
+    return replace(full, imu=ImuData(full.imu.t[i], full.imu.b_omega[i], full.imu.b_f[i]),
+                   dvl=DvlData(full.dvl.t[d], full.dvl.d_v[d], full.dvl.d_cov[d], full.dvl.valid[d]), truth=None)
+
+
+def _tracked_run(log: LogData, monkeypatch: pytest.MonkeyPatch, config: EstimatorConfig
+                 ) -> tuple[OnlineEstimator, list[weakref.ref[Any]], list[weakref.ref[Any]]]:
+    """Run the fixed-lag estimator over the log with a weak reference to every IMU factor it made (the
+    EarthImuFactor and its gtsam.CustomFactor)."""
+    made: list[weakref.ref[Any]] = []
+    custom: list[weakref.ref[Any]] = []
+    original = FactorMaker.new_imu_factor
+
+    def tracking(self: FactorMaker, *args: Any, **kwargs: Any) -> EarthImuFactor:
+        f = original(self, *args, **kwargs)
+        made.append(weakref.ref(f))
+        custom.append(weakref.ref(f.factor))
+        return f
+
+    monkeypatch.setattr(FactorMaker, "new_imu_factor", tracking)
+    est = OnlineEstimator.for_log(log, config)
+    feed_log(est, log)
+    return est, made, custom
+
+
+@pytest.mark.parametrize("preset", ["default", "paper"])
+def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str) -> None:
+    config = EstimatorConfig() if preset == "default" else EstimatorConfig.paper()
+    est, made, custom = _tracked_run(log, monkeypatch, config)
+    gc.collect()
+    assert est.smoother is not None
+    in_window = len(est.smoother.imus)
+    alive = sum(r() is not None for r in made)
+    alive_custom = sum(r() is not None for r in custom)
+    print(f"{preset}: {len(made)} IMU factors made, {alive} alive after the run ({alive_custom} CustomFactors), "
+          f"{in_window} in the window, {est.smoother.rebases} rebases")
+    assert len(made) > 5 * in_window  # the window dropped most of them
+    # alive: those of the window (the estimator's dict) and the newest (its gravity reference), nothing else
+    assert alive <= in_window + 1
+    assert alive_custom <= in_window + 1
+    del est
+    gc.collect()
+    assert sum(r() is not None for r in made) == 0
+    assert sum(r() is not None for r in custom) == 0
+
+
+def test_parameters_claims_are_released(log: LogData) -> None:
+    """Each factor claims its PreintegrationParams (imu_earth._CLAIMED); the claims of dropped factors end with
+    them, so the set stays bounded by the window."""
+    gc.collect()
+    before = len(imu_earth._CLAIMED)
+    est = OnlineEstimator.for_log(log, EstimatorConfig.paper())
+    feed_log(est, log)
+    gc.collect()
+    assert est.smoother is not None
+    during = len(imu_earth._CLAIMED) - before
+    print(f"claims held after {est.epochs} epochs: {during} (window: {len(est.smoother.imus)} IMU factors)")
+    assert during <= len(est.smoother.imus) + 1
+    del est
+    gc.collect()
+    assert len(imu_earth._CLAIMED) == before
+
+
+def _one_factor() -> tuple[EarthImuFactor, gtsam.Values]:
+    params = gtsam.PreintegrationParams.MakeSharedU(9.81)
+    params.setAccelerometerCovariance(1e-6 * np.eye(3))
+    params.setGyroscopeCovariance(1e-8 * np.eye(3))
+    params.setIntegrationCovariance(1e-8 * np.eye(3))
+    pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
+    for _ in range(100):
+        pim.integrateMeasurement(np.array([0.1, 0.0, 9.81]), np.array([0.0, 0.0, 0.01]), 0.01)
+    keys = (gtsam.symbol("x", 0), gtsam.symbol("v", 0), gtsam.symbol("x", 1), gtsam.symbol("v", 1),
+            gtsam.symbol("b", 0))
+
+    def gravity(n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # a made-up gradient, 1e-6 s^-2
+        G = 1e-6 * np.diag([-1.0, -1.0, 2.0])
+        return np.array([0.0, 0.0, -9.81]) + G @ n_p, G
+
+    f = make_earth_imu_factor(pim, params, keys, 1.0, gravity)
+    values = gtsam.Values()
+    values.insert(keys[0], gtsam.Pose3(gtsam.Rot3(), np.array([1.0, 2.0, 3.0])))
+    values.insert(keys[1], np.array([0.5, 0.0, 0.0]))
+    values.insert(keys[2], gtsam.Pose3(gtsam.Rot3.Yaw(0.01), np.array([1.6, 2.1, 3.0])))
+    values.insert(keys[3], np.array([0.6, 0.0, 0.01]))
+    values.insert(keys[4], gtsam.imuBias.ConstantBias())
+    return f, values
+
+
+def test_factor_outlives_its_python_object_in_a_graph() -> None:
+    """A graph that holds only the CustomFactor keeps a working factor (the same error and linearisation as
+    while the EarthImuFactor existed); once the graph lets it go too, everything is freed."""
+    f, values = _one_factor()
+    graph = gtsam.NonlinearFactorGraph()
+    graph.add(f.factor)
+    e_before = graph.error(values)
+    A_before, b_before = graph.linearize(values).jacobian()
+    ref_f, ref_custom = weakref.ref(f), weakref.ref(f.factor)
+    del f
+    gc.collect()
+    assert ref_f() is None  # nothing but the caller held the Python object
+    assert graph.error(values) == e_before > 0.0
+    A_after, b_after = graph.linearize(values).jacobian()
+    np.testing.assert_array_equal(A_after, A_before)
+    np.testing.assert_array_equal(b_after, b_before)
+    del graph
+    gc.collect()
+    assert ref_custom() is None
