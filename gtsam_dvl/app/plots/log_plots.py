@@ -35,13 +35,24 @@ def plot_trajectory(log: LogData, path: Path, n_p: np.ndarray | None = None, lab
     ax.scatter(*n_p[-1], color="red", s=20)
     ranges = np.ptp(n_p, axis=0)
     horizontal = max(float(ranges[0]), float(ranges[1]), 1.0)
-    vertical = max(float(ranges[2]), 1e-3)
-    ax.set_box_aspect((float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, min(vertical * 5.0, horizontal)))
+    vertical = float(ranges[2])
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_zlabel("up (m)")
-    stretch = min(vertical * 5.0, horizontal) / vertical
-    ax.set_title(f"3-D view (vertical stretched x{stretch:.1f})" if stretch > 1.01 else "3-D view (true scale)")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.zaxis.set_major_locator(MaxNLocator(3))  # a flat box has room for few vertical ticks
+    if vertical < 0.02 * horizontal / 5.0:
+        # a planar run: a vertical axis of a tenth of the horizontal span at true scale, not its millimetres
+        # stretched into a wall
+        mid = float(np.mean(n_p[:, 2]))
+        ax.set_zlim(mid - 0.05 * horizontal, mid + 0.05 * horizontal)
+        ax.set_box_aspect((float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, 0.1 * horizontal))
+        ax.set_title("3-D view (true scale; the run is level)")
+    else:
+        ax.set_box_aspect((float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, min(vertical * 5.0, horizontal)))
+        stretch = min(vertical * 5.0, horizontal) / vertical
+        ax.set_title(f"3-D view (vertical stretched x{stretch:.1f})" if stretch > 1.01 else "3-D view (true scale)")
     fig.suptitle(f"Trajectory in map ({log.metadata.get('scenario_name', Path(log.source).name)}), {label}")
     return save_figure(fig, path)
 
