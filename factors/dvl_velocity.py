@@ -21,6 +21,7 @@ import numpy as np
 from ._common import (
     JacobianSlots,
     Vector3Like,
+    _skew,
     as_scale,
     as_vector3,
     check_noise,
@@ -184,17 +185,14 @@ def _offset_prediction(n_R_b: np.ndarray, n_v: np.ndarray, k: float, d_R_b: np.n
     d_v = d_R_b @ b_v_eff
     if H is not None:
         k_d_R_b = k * d_R_b
-        M = np.eye(3) - dt * _skew3(b_omega)
-        H[0] = np.concatenate((k_d_R_b @ (M @ _skew3(b_v) + dt * G @ _skew3(b_g0)), np.zeros((3, 3))), axis=1)
+        M = np.eye(3) - dt * _skew(*b_omega.tolist())
+        H[0] = np.concatenate((k_d_R_b @ (M @ _skew(*b_v.tolist()) + dt * G @ _skew(*b_g0.tolist())),
+                               np.zeros((3, 3))), axis=1)
         H[1] = k_d_R_b @ M @ n_R_b.T
         H[2] = d_v.reshape(3, 1)
-        H[3] = _skew3(k * d_v)
+        H[3] = _skew(*(k * d_v).tolist())
         H[4] = (k_d_R_b @ b_vdot).reshape(3, 1)
     return k * d_v
-
-
-def _skew3(a: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 def dvl_velocity_offset_error(

@@ -30,6 +30,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_log
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.run import run_estimator
 
 # the states of a campaign, in the order of their vectors, with units
 STATES: list[tuple[str, str]] = [
@@ -42,23 +43,6 @@ TIME_OFFSET_STATE = ("time_offset", "s")
 ESTIMATORS = ("batch", "online", "ekf")
 BLOCK_DOF = 10  # [accel bias, gyro bias, scale, misalignment]: the joint covariance every estimator reports
 NEES_EVERY_S = 60.0  # the filters' NEES over time, sampled this often
-
-
-def run_estimator_on(log: LogData, name: str, config: EstimatorConfig) -> NavResult:
-    """One of batch, online (fixed lag), online-full, ekf on a log."""
-    if name == "batch":
-        from gtsam_dvl.estimators.batch import smooth_batch
-
-        return smooth_batch(log, config, timeline=False)
-    if name in ("online", "online-full"):
-        from gtsam_dvl.estimators.online import smooth_online
-
-        return smooth_online(log, config, mode="full" if name == "online-full" else "fixed_lag")
-    if name == "ekf":
-        from gtsam_dvl.estimators.ekf import run_ekf
-
-        return run_ekf(log, config)
-    raise ValueError(f"unknown estimator '{name}' (known: batch, online, online-full, ekf)")
 
 
 def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tuple[str, ...],
@@ -74,7 +58,7 @@ def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tup
     out: dict[str, Any] = {"seed": int(seed), "estimators": {}}
     for name in estimators:
         t0 = time.perf_counter()
-        res = run_estimator_on(log, name, cfg)
+        res = run_estimator(log, name, cfg, timeline=False)
         wall = time.perf_counter() - t0
         out["estimators"][name] = {**run_errors(res, log), "wall_s": wall}
     return out

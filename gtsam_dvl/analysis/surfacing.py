@@ -110,7 +110,8 @@ def surfacing_report(res: NavResult, log: LogData, config: EstimatorConfig | Non
         return None
     report = SurfacingReport(config.gnss.use, plan.counters(), n_intervals=plan.n_intervals)
     dist = distance_travelled(res)
-    for k in np.flatnonzero(plan.mask("held_out")).tolist():
+    held = np.flatnonzero(plan.mask("held_out")).tolist()  # the fixes behind report.checks, in their order
+    for k in held:
         i, dt = int(plan.state[k]), float(plan.dt[k])
         p, P = antenna_estimate(res, i, plan.b_p_antenna, dt)
         e = p - plan.n_p[k]
@@ -126,15 +127,12 @@ def surfacing_report(res: NavResult, log: LogData, config: EstimatorConfig | Non
             nis=float(e @ np.linalg.solve(P + C, e))))
     last = plan.n_intervals - 1
     report.surfacing = next((c for c in report.checks if c.interval == last), None)
-    in_last = [k for k, c in zip(np.flatnonzero(plan.mask("held_out")).tolist(), report.checks, strict=True)
-               if c.interval == last]
+    in_last = [(k, c) for k, c in zip(held, report.checks, strict=True) if c.interval == last]
     if report.surfacing is not None and in_last:
         first = report.surfacing
-        e = np.mean([report.checks[j].error_enu_m for j in range(len(report.checks))
-                     if report.checks[j].interval == last], axis=0)
-        C = np.mean([plan.cov[k] for k in in_last], axis=0) / len(in_last)
-        i, dt = int(plan.state[in_last[0]]), float(plan.dt[in_last[0]])
-        _, P = antenna_estimate(res, i, plan.b_p_antenna, dt)
+        e = np.mean([c.error_enu_m for _, c in in_last], axis=0)
+        C = np.mean([plan.cov[k] for k, _ in in_last], axis=0) / len(in_last)
+        _, P = antenna_estimate(res, int(plan.state[in_last[0][0]]), plan.b_p_antenna, float(plan.dt[in_last[0][0]]))
         h = float(np.hypot(e[0], e[1]))
         report.surfacing_fixes = len(in_last)
         report.surfacing_mean = FixCheck(

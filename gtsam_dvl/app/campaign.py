@@ -204,8 +204,8 @@ def plot_campaign(fig_dir: Path, stats: dict[str, Any]) -> list[Path]:
 
     out: list[Path] = []
     runs_dir = fig_dir.parent / "runs"
-    runs = [json.loads(p.read_text()) for p in sorted(runs_dir.glob("seed_*.json"))
-            if json.loads(p.read_text())["seed"] in set(stats.get("seeds", []))]
+    seeds = set(stats.get("seeds", []))
+    runs = [r for r in (json.loads(p.read_text()) for p in sorted(runs_dir.glob("seed_*.json"))) if r["seed"] in seeds]
     for name, est in stats["estimators"].items():
         states = list(est["states"])
         rows = [r["estimators"][name] for r in runs if name in r["estimators"]]
@@ -297,28 +297,27 @@ def smooth_fleet(logs: list[Path], out_dir: Path, mode: str = "batch", config_pa
     from gtsam_dvl.app.progress import progress_bar
 
     client = open_client(scheduler, workers)
-    rows: list[dict[str, Any]] = []
+    by_index: dict[int, dict[str, Any]] = {}  # rows in the order the logs were given, whatever the completion order
     try:
         futures = {client.submit(_smooth_task, str(Path(p).resolve()), str((out_dir / n).resolve()), mode,
                                  str(config_path.resolve()) if config_path else None, dict(read_options or {}),
-                                 pure=False, retries=1): (p, n) for p, n in zip(logs, names, strict=True)}
+                                 pure=False, retries=1): i for i, (p, n) in enumerate(zip(logs, names, strict=True))}
         with progress_bar(f"smoothing {len(logs)} logs ({mode})", enabled=show_progress) as progress:
             for k, fut in enumerate(as_completed(list(futures)), start=1):
-                path, name = futures[fut]
+                i = futures[fut]
                 if fut.status == "error":
                     exc = fut.exception()
-                    rows.append({"log": str(path), "dir": str(out_dir / name), "status": "error",
-                                 "error": f"{type(exc).__name__}: {exc}"})
+                    by_index[i] = {"log": str(logs[i]), "dir": str(out_dir / names[i]), "status": "error",
+                                   "error": f"{type(exc).__name__}: {exc}"}
                 else:
-                    rows.append(fut.result())
+                    by_index[i] = fut.result()
                 progress(k / len(futures))
     finally:
         cluster = getattr(client, "cluster", None)
         client.close()
         if cluster is not None:
             cluster.close()
-    order = {str(Path(p).resolve()): i for i, p in enumerate(logs)}
-    rows.sort(key=lambda r: order.get(r["log"], order.get(str(Path(r["log"]).resolve()), 0)))
+    rows = [by_index[i] for i in sorted(by_index)]
     table = "\n".join(fleet_table(rows)) + "\n"
     written = [atomic_write_json(out_dir / "fleet.json", rows), atomic_write_text(out_dir / "fleet.md", table)]
     return rows, written

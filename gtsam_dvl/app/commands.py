@@ -15,6 +15,7 @@ from gtsam_dvl.app.progress import progress_bar
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import StoredResult
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.run import MODES, run_estimator  # noqa: F401 - re-exported for the demo, tests, bench
 
 
 @dataclass
@@ -208,31 +209,6 @@ def check_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None
         check_writable(out)
 
 
-MODES = ("batch", "online", "online-full", "ekf", "io-dvlc")
-
-
-def run_estimator(log: LogData, mode: str, config: Any, progress: Any = None, timeline: bool = True) -> Any:
-    """One estimator on a log: NavResult (batch, online, online-full, ekf) or IoDvlcResult (io-dvlc). config: an
-    EstimatorConfig (None: the defaults), checked by value here; each estimator reads its own section of it."""
-    if config is not None:
-        config.validate()
-    if mode == "batch":
-        from gtsam_dvl.estimators.batch import smooth_batch
-
-        return smooth_batch(log, config, progress=progress, timeline=timeline)
-    if mode in ("online", "online-full"):
-        from gtsam_dvl.estimators.online import smooth_online
-
-        return smooth_online(log, config, mode="full" if mode == "online-full" else "fixed_lag", progress=progress)
-    if mode == "ekf":
-        from gtsam_dvl.estimators.ekf import run_ekf
-
-        return run_ekf(log, config, progress=progress)
-    if mode == "io-dvlc":
-        from gtsam_dvl.estimators.iodvlc import run_iodvlc
-
-        return run_iodvlc(log, config)
-    raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
 
 
 def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,

@@ -247,9 +247,8 @@ class FactorMaker:
         b_l = self.mounting.b_l
         if cfg.estimate_time_offset and rate_input is not None:
             b_a, b_omega_mean, G = rate_input
-            noise = self._robust(gtsam.noiseModel.Gaussian.Covariance(ping_covariance(cfg, cov) + extra))
-            return [make_dvl_keyframe_factor(noise, *keys, d_y, b_omega_mean, b_l, motion, T_OFFSET,
-                                             (b_a, self.offset_gravity(), G), lever_key)]
+            return [make_dvl_keyframe_factor(self.dvl_noise(cov, extra), *keys, d_y, b_omega_mean, b_l, motion,
+                                             T_OFFSET, (b_a, self.offset_gravity(), G), lever_key)]
         if cfg.use_beams and beams is not None:
             d_u, v, valid = beams
             return [make_dvl_keyframe_factor(
@@ -257,13 +256,15 @@ class FactorMaker:
                     cfg.beam_noise_m_s**2 + d_u[b] @ extra @ d_u[b])))),
                 *keys, float(v[b]), b_omega, b_l, motion, lever_key=lever_key, d_u=d_u[b])
                 for b in np.flatnonzero(valid)]
-        noise = self._robust(gtsam.noiseModel.Gaussian.Covariance(ping_covariance(cfg, cov) + extra))
-        return [make_dvl_keyframe_factor(noise, *keys, d_y, b_omega, b_l, motion, lever_key=lever_key)]
+        return [make_dvl_keyframe_factor(self.dvl_noise(cov, extra), *keys, d_y, b_omega, b_l, motion,
+                                         lever_key=lever_key)]
 
-    def dvl_noise(self, cov: np.ndarray) -> gtsam.noiseModel.Base:
+    def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
-        definite, else the default sigma; in the robust kernel if configured (_robust)."""
-        return self._robust(gtsam.noiseModel.Gaussian.Covariance(ping_covariance(self.config.dvl, cov)))
+        definite, else the default sigma, plus extra (3x3, m^2/s^2: a keyframe ping's preintegration noise) when
+        given; in the robust kernel if configured (_robust)."""
+        c = ping_covariance(self.config.dvl, cov)
+        return self._robust(gtsam.noiseModel.Gaussian.Covariance(c if extra is None else c + extra))
 
     def beam_noise(self) -> gtsam.noiseModel.Base:
         """Noise model of one beam velocity (robust if configured)."""

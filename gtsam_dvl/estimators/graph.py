@@ -40,7 +40,7 @@ from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_
 from gtsam_dvl.estimators.keyframes import PimSnapshot, ping_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
-from gtsam_dvl.factors import EarthImuFactor, PingMotion
+from gtsam_dvl.factors import EarthImuFactor
 
 
 @dataclass
@@ -251,7 +251,7 @@ class LogGraph:
         for p in ep.between:
             s, j = p.pim, p.dvl_index
             assert s is not None
-            motion = PingMotion(s.dt, s.dR, s.dv, s.dp, s.dR_dbg, s.dv_dba, s.dv_dbg, w, g[0], n_p0, G[0])
+            motion = s.motion(w, g[0], n_p0, G[0])
             beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
             out += self.maker.dvl_keyframe_factors_for(i, dvl.d_v[j], dvl.d_cov[j], p.b_omega, motion, s.cov, beams,
                                                        p.rate_input)

@@ -26,6 +26,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
+from gtsam_dvl.factors import PingMotion
 
 BIAS_STEP_ACC = 1e-2  # m/s^2, central-difference step of the accelerometer bias
 BIAS_STEP_GYRO = 1e-4  # rad/s, central-difference step of the gyro bias
@@ -46,6 +47,12 @@ class PimSnapshot:
     dv_dba: np.ndarray
     dv_dbg: np.ndarray
     cov: np.ndarray
+
+    def motion(self, n_omega_ie: np.ndarray, n_g0: np.ndarray, n_p0: np.ndarray, n_G: np.ndarray) -> PingMotion:
+        """The keyframe factor's PingMotion (factors/dvl_keyframe.py): these deltas with the Earth model at the
+        keyframe (Earth rate rad/s and gravity m/s^2 in map, at n_p0 m, its gradient 1/s^2)."""
+        return PingMotion(self.dt, self.dR, self.dv, self.dp, self.dR_dbg, self.dv_dba, self.dv_dbg, n_omega_ie,
+                          n_g0, n_p0, n_G)
 
 
 def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationParams:

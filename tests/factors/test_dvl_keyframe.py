@@ -171,8 +171,7 @@ def test_ping_state_is_gtsams_prediction() -> None:
                     pim.integrateMeasurement(b_f[i], b_omega[i], dt)
         assert snap.dt == pytest.approx(t_p - t_i, abs=1e-12)
         ref = pim.predict(gtsam.NavState(gtsam.Rot3(n_R_i), n_p_i, n_v_i), bias)
-        m = PingMotion(snap.dt, snap.dR, snap.dv, snap.dp, snap.dR_dbg, snap.dv_dba, snap.dv_dbg, W_IE, N_G0, n_p_i,
-                       np.zeros((3, 3)))
+        m = snap.motion(W_IE, N_G0, n_p_i, np.zeros((3, 3)))
         n_R_p, n_v_p, _ = ping_state(n_R_i, n_p_i, n_v_i, bias.accelerometer(), bias.gyroscope(), m)
         angle = np.linalg.norm(gtsam.Rot3.Logmap(ref.attitude().between(gtsam.Rot3(n_R_p))))
         print(f"ping at {t_p} s: attitude {angle:.2e} rad, velocity {np.max(np.abs(n_v_p - ref.velocity())):.2e} m/s "
@@ -191,8 +190,7 @@ def test_a_static_vehicle_stays_still_under_earth_rate() -> None:
     b_w, b_f = np.tile(n_R_b.T @ W_IE, (100, 1)), np.tile(n_R_b.T @ -N_G0, (100, 1))
     b_f = b_f + 0.5 * 0.01 * np.cross(b_w, b_f)  # each delta-v rotated back to its sample's start, as the graph does
     snap = ping_snapshots(0.0, [1.0], params, t, sample_starts(t), b_f, b_w, find_gaps(t, 5.0), ImuConfig())[0]
-    m = PingMotion(snap.dt, snap.dR, snap.dv, snap.dp, snap.dR_dbg, snap.dv_dba, snap.dv_dbg, W_IE, N_G0,
-                   np.zeros(3), np.zeros((3, 3)))
+    m = snap.motion(W_IE, N_G0, np.zeros(3), np.zeros((3, 3)))
     n_R_p, n_v_p, _ = ping_state(n_R_b, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), m)
     angle = np.linalg.norm(Rotation.from_matrix(n_R_b.T @ n_R_p).as_rotvec())
     print(f"static 1 s: attitude {angle:.1e} rad, velocity {np.linalg.norm(n_v_p):.1e} m/s")
