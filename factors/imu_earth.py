@@ -113,6 +113,8 @@ class _EarthImuModel:
         self.ref_p: np.ndarray | None = None
         self.ref_g = np.array(params.n_gravity, dtype=float)  # a copy: the property is a view of the C++ vector
         self.ref_G = np.zeros((3, 3))
+        self._MG2: np.ndarray = np.zeros((2, 3, 3))
+        self._Hs = [np.zeros((9, d), order="F") for d in _DIMS]
 
     def set_gravity(self, n_p_mid: np.ndarray) -> np.ndarray:
         if self.gravity is None:
@@ -134,19 +136,18 @@ class _EarthImuModel:
         self.set_gravity(0.5 * (pose_i.translation() + pose_j.translation()))
         if H is None:
             return self.imu.evaluateError(pose_i, v_i, pose_j, v_j, bias)
-        Hs = [np.zeros((9, d), order="F") for d in _DIMS]
+        # one set of output buffers per model: GTSAM copies each Jacobian when it is assigned to H
+        Hs = self._Hs
         error = self.imu.evaluateError(pose_i, v_i, pose_j, v_j, bias, *Hs)
         if self.gravity is not None:
             if self.MG_of is not self.ref_G:
                 self.MG, self.MG_of = self.M @ self.ref_G, self.ref_G
+                self._MG2 = 0.5 * self.MG.reshape(2, 3, 3)  # [M_p G; M_v G] / 2
             R_i, R_j = pose_i.rotation().matrix(), pose_j.rotation().matrix()
-            E_G = np.zeros((9, 3))
-            E_G[3:6] = R_j.T @ self.MG[:3]
-            E_G[6:9] = R_j.T @ self.MG[3:]
-            Hs[0][:, 3:6] += 0.5 * (E_G @ R_i)
-            Hs[2][:, 3:6] += 0.5 * (E_G @ R_j)
-        for k in range(5):
-            H[k] = Hs[k]
+            T = R_j.T @ self._MG2  # (2, 3, 3): de/dg G / 2 for the position and velocity rows
+            Hs[0][3:9, 3:6] += (T @ R_i).reshape(6, 3)
+            Hs[2][3:9, 3:6] += (T @ R_j).reshape(6, 3)
+        H[0], H[1], H[2], H[3], H[4] = Hs
         return error
 
 

@@ -12,6 +12,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.solver import bayes_net_marginals, gauss_newton_qr
 from gtsam_dvl.estimators.timeline import filtering_timeline
@@ -28,10 +29,13 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     builder = LogGraph(log, config)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    graph, values = builder.build()
+    # the DVL factors evaluated in bulk where the configuration allows (estimators/bulk.py: the same objective)
+    bulk = builder.bulk_supported()
+    graph: gtsam.NonlinearFactorGraph | BulkGraph
+    graph, values = builder.build_bulk() if bulk else builder.build()
     ordering = builder.elimination_ordering()
     # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
-    dof = sum(graph.at(i).dim() for i in range(graph.size()) if graph.exists(i)) - values.dim()
+    dof = graph_rows(graph) - values.dim()
     timing["build"] = time.perf_counter() - t1
     if progress:
         progress(0.2)
@@ -46,7 +50,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
         # second pass: the offset's velocity rates averaged over [t, t + dt_hat] (a secant, not the tangent at
         # t: at dt_d = 1.5 s on paper-3d's turns the tangent biases dt_d by 1.6 sigma and the scale by 2 sigma)
         builder.set_time_offset_window(float(values.atVector(T_OFFSET)[0]))
-        graph, _ = builder.build()
+        graph, _ = builder.build_bulk() if bulk else builder.build()
         values, report = gauss_newton_qr(
             graph, values, ordering, max_iterations=config.solver.max_iterations,
             relative_tol=config.solver.relative_error_tol, absolute_tol=config.solver.absolute_error_tol,
@@ -73,7 +77,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     return result
 
 
-def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
+def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
                    ordering: gtsam.Ordering, estimator: str = "batch",
                    bayes_net: gtsam.GaussianBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse

@@ -24,6 +24,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
+from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
 from gtsam_dvl.estimators.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
@@ -348,6 +349,32 @@ class LogGraph:
         for f in self.gnss_factors(gnss):
             graph.add(f)
         return graph, values
+
+    def bulk_supported(self) -> bool:
+        """Whether build_bulk covers this configuration: the 3-D velocity with a known lever arm (not [dvl]
+        use_beams, not estimate_lever_arm; estimators/bulk.py)."""
+        return not self.config.dvl.use_beams and not self.config.dvl.estimate_lever_arm
+
+    def build_bulk(self, values: gtsam.Values | None = None) -> tuple[BulkGraph, gtsam.Values]:
+        """build() with the DVL velocity factors evaluated in bulk (estimators/bulk.py): the same objective and
+        linear systems, several times faster to evaluate. values: an initial guess already made (a second
+        build after set_time_offset_window keeps the first's gravity references)."""
+        if not self.bulk_supported():
+            raise GtsamDvlError("the bulk DVL factors cover the 3-D velocity with a known lever arm only")
+        values = self.initial_values() if values is None else values
+        graph = gtsam.NonlinearFactorGraph()
+        gnss = self.gnss_plan()
+        for f in self.maker.prior_factors(values, first_position_cov(gnss)):
+            graph.add(f)
+        for i in range(len(self.epochs) - 1):
+            graph.add(self.imu_factor(i))
+            for f in self.bias_factors(i):
+                graph.add(f)
+        for f in self.depth_factors():
+            graph.add(f)
+        for f in self.gnss_factors(gnss):
+            graph.add(f)
+        return BulkGraph(graph, bulk_dvl(self)), values
 
     def elimination_ordering(self) -> gtsam.Ordering:
         """States in time order, the shared calibration and bias keys last: the Bayes net is a chain

@@ -16,6 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import gtsam
 import numpy as np
@@ -36,8 +37,16 @@ class SolveReport:
     bayes_net: gtsam.GaussianBayesNet | None = None
 
 
+class Objective(Protocol):
+    """What the solver needs of a graph: a NonlinearFactorGraph, or estimators/bulk.py's BulkGraph."""
+
+    def error(self, values: gtsam.Values) -> float: ...
+
+    def linearize(self, values: gtsam.Values) -> gtsam.GaussianFactorGraph: ...
+
+
 def gauss_newton_qr(
-    graph: gtsam.NonlinearFactorGraph,
+    graph: Objective,
     values: gtsam.Values,
     ordering: gtsam.Ordering,
     *,

@@ -22,6 +22,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X,
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.graph import LogGraph
 
 
@@ -50,7 +51,8 @@ def _qr_r(a: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.qr(a, mode="r"))
 
 
-def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> Timeline:
+def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph,
+                       values: gtsam.Values) -> Timeline:
     """Filtering estimates are those of `values` (the smoother's); the sigmas are the filtering marginals
     at each epoch. Only the random-constant bias model (the paper's) is supported."""
     if builder.config.imu.bias_model != "constant":

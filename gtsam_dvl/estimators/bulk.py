@@ -1,0 +1,292 @@
+"""The batch smoother's DVL factors evaluated in bulk: one numpy evaluation per linearisation, not a Python call
+per factor.
+
+Why: GTSAM calls a Python CustomFactor once per factor per linearisation and per error evaluation. On a 5 Hz log
+with 1 s keyframes that is 18,000 DVL factors per hour of log, ten evaluations per solve, 15-60 us each: most
+of the batch smoother's time. The batch smoother owns its Gauss-Newton loop (estimators/solver.py), so here the
+pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
+
+- `BulkDvl.error(values)`: the sum of the pings' losses, as GTSAM's factors would return it (Gaussian:
+  half the squared whitened error; robust: the kernel's loss of the whitened error's norm);
+- `BulkDvl.linearize(values)`: the Jacobian factors. GTSAM's Python constructors of JacobianFactor take at most
+  three keys, and a ping's factor has five or six (pose, velocity, bias, scale, misalignment, time offset), so
+  each state's pings are served to GTSAM by one "carrier" CustomFactor on those keys whose callback returns the
+  rows already computed (whitened, and reweighted by the robust kernel as GTSAM's Robust noise model does):
+  one cheap Python call per state instead of an evaluation per ping. Stacking a state's pings in one factor
+  changes nothing in the least-squares problem (the rows are the same); tests/estimators/test_bulk.py checks
+  the linear system against the per-factor graph's to 1e-9.
+- `BulkGraph`: the rest of the graph (GTSAM factors) plus the BulkDvl, with the error and linearize of a
+  NonlinearFactorGraph, for the solver, the marginals and the filtering timeline.
+
+The per-factor path (LogGraph.build) stays: iSAM2 (the online estimator) needs real factors, and it serves
+what this module does not cover: beam factors ([dvl] use_beams) and the lever arm as a variable ([dvl]
+estimate_lever_arm). LogGraph.bulk_supported() says which.
+
+Memory: the carriers reference only a small _Served holder (the rows of the last linearisation), never the
+BulkDvl or the graph, so no reference cycle runs through C++ (see factors/imu_earth.py, "Memory").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import gtsam
+import numpy as np
+
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
+from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants
+
+if TYPE_CHECKING:
+    from gtsam_dvl.estimators.graph import LogGraph
+
+
+@dataclass
+class _Served:
+    """The rows of the last linearisation, per state: what the carriers hand to GTSAM."""
+
+    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # whitened, reweighted error (N, 3)
+    blocks: list[np.ndarray] = field(default_factory=list)  # per key (N, 3, d)
+    ready: bool = False
+
+
+class _Carrier:
+    """A carrier's callback: state s's rows of _Served (pings lo:hi)."""
+
+    __slots__ = ("served", "lo", "hi")
+
+    def __init__(self, served: _Served, lo: int, hi: int) -> None:
+        self.served, self.lo, self.hi = served, lo, hi
+
+    def __call__(self, _factor: Any, _values: gtsam.Values, H: Any) -> np.ndarray:
+        s = self.served
+        if not s.ready:
+            raise RuntimeError("BulkDvl carrier evaluated outside BulkDvl.linearize")
+        lo, hi = self.lo, self.hi
+        if H is not None:
+            for n, J in enumerate(s.blocks):
+                H[n] = J[lo:hi].reshape(-1, J.shape[2])
+        return s.e[lo:hi].reshape(-1)
+
+
+@dataclass
+class BulkDvl:
+    """The DVL velocity factors of a LogGraph as arrays (module doc). Pings sorted by state."""
+
+    pings: PingArrays
+    whiten: np.ndarray  # (N, 3, 3) W with W^T W = the ping's inverse covariance (lower triangular)
+    n_omega_ie: np.ndarray
+    n_states: int
+    bias_keys: list[int]  # per state
+    robust: str  # "huber", "cauchy" or "none"
+    robust_k: float
+    offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
+    const: PingConstants = field(init=False)
+    _served: _Served = field(init=False, default_factory=_Served)
+    _bounds: np.ndarray = field(init=False)  # state s's pings are _bounds[s]:_bounds[s + 1]
+
+    def __post_init__(self) -> None:
+        self.const = ping_constants(self.pings, self.n_omega_ie)
+        state = self.pings.state
+        if len(state) and np.any(np.diff(state) < 0):
+            raise ValueError("BulkDvl: pings must be sorted by state")
+        self._bounds = np.searchsorted(state, np.arange(self.n_states + 1), side="left")
+        self._bias_random_walk = len(set(self.bias_keys)) > 1
+
+    @property
+    def offset(self) -> bool:
+        return self.offset_n_g is not None
+
+    def __len__(self) -> int:
+        return len(self.pings)
+
+    # ----- evaluation ----------------------------------------------------------------------------
+    def _states(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                                     float, np.ndarray, float | None]:
+        """Each ping's state: n_R_i (N, 3, 3), n_p_i, n_v_i, b_a, b_g (N, 3); k, b_R_d, dt_d."""
+        poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
+        vels = gtsam.utilities.extractVectors(values, "v")  # every V(i), in order
+        if poses.shape[0] != self.n_states or vels.shape[0] != self.n_states:
+            raise ValueError(f"BulkDvl: values hold {poses.shape[0]} poses and {vels.shape[0]} velocities, "
+                             f"the graph {self.n_states} states")
+        s = self.pings.state
+        n_R_i = poses[s, :9].reshape(-1, 3, 3)
+        n_p_i = poses[s, 9:]
+        n_v_i = vels[s]
+        if self._bias_random_walk:
+            biases = np.array([values.atConstantBias(k).vector() for k in self.bias_keys])
+            b_a, b_g = biases[s, :3], biases[s, 3:]
+        else:
+            b = values.atConstantBias(self.bias_keys[0]).vector()
+            b_a, b_g = np.broadcast_to(b[:3], (len(s), 3)), np.broadcast_to(b[3:], (len(s), 3))
+        k = float(values.atVector(K_SCALE)[0])
+        b_R_d = values.atRot3(C_MISALIGN).matrix()
+        dt_d = float(values.atVector(T_OFFSET)[0]) if self.offset else None
+        return n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d
+
+    def _evaluate(self, values: gtsam.Values, jacobians: bool) -> tuple[np.ndarray, Any]:
+        n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d = self._states(values)
+        e, J = dvl_ping_errors(self.pings, self.const, self.n_omega_ie, n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d,
+                               dt_d, self.offset_n_g, jacobians)
+        return np.einsum("nij,nj->ni", self.whiten, e), J
+
+    def _weights_and_losses(self, ew: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Robust weights and losses of the whitened errors' norms, as GTSAM's mEstimator computes them."""
+        x2 = np.einsum("ni,ni->n", ew, ew)
+        x = np.sqrt(x2)
+        kk = self.robust_k
+        if self.robust == "huber":
+            inside = x <= kk
+            w = np.where(inside, 1.0, kk / np.where(inside, 1.0, x))
+            return w, np.where(inside, 0.5 * x2, kk * (x - 0.5 * kk))
+        if self.robust == "cauchy":
+            k2 = kk * kk
+            return k2 / (k2 + x2), 0.5 * k2 * np.log1p(x2 / k2)
+        return np.ones_like(x), 0.5 * x2
+
+    def error(self, values: gtsam.Values) -> float:
+        """The pings' total loss at values (as graph.error of the per-factor graph counts it)."""
+        if not len(self):
+            return 0.0
+        ew, _ = self._evaluate(values, False)
+        return float(self._weights_and_losses(ew)[1].sum())
+
+    def carriers(self) -> gtsam.NonlinearFactorGraph:
+        """One carrier CustomFactor per state with pings (module doc), for linearize."""
+        graph = gtsam.NonlinearFactorGraph()
+        for s in range(self.n_states):
+            lo, hi = int(self._bounds[s]), int(self._bounds[s + 1])
+            if hi > lo:
+                keys = [X(s), V(s), self.bias_keys[s], K_SCALE, C_MISALIGN] + ([T_OFFSET] if self.offset else [])
+                graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * (hi - lo)), keys,
+                                             _Carrier(self._served, lo, hi)))
+        return graph
+
+    def prepare(self, values: gtsam.Values) -> None:
+        """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
+        (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
+        ew, J = self._evaluate(values, True)
+        w, _ = self._weights_and_losses(ew)
+        sw = np.sqrt(w)
+        W = self.whiten * sw[:, None, None]
+        blocks = [J.pose, J.vel, J.bias, J.scale, J.b_R_d] + ([J.offset] if self.offset else [])
+        self._served.blocks = [W @ B for B in blocks]
+        self._served.e = ew * sw[:, None]
+        self._served.ready = True
+
+    def rows(self) -> int:
+        return 3 * len(self)
+
+
+class BulkGraph:
+    """A NonlinearFactorGraph of GTSAM factors plus the bulk DVL factors (module doc): error and linearize as
+    the per-factor graph's, for gauss_newton_qr, the marginals and the filtering timeline."""
+
+    def __init__(self, graph: gtsam.NonlinearFactorGraph, bulk: BulkDvl) -> None:
+        self.graph, self.bulk = graph, bulk
+        self._carriers = bulk.carriers()
+
+    def error(self, values: gtsam.Values) -> float:
+        return float(self.graph.error(values)) + self.bulk.error(values)
+
+    def linearize(self, values: gtsam.Values) -> gtsam.GaussianFactorGraph:
+        linear = self.graph.linearize(values)
+        if len(self.bulk):
+            self.bulk.prepare(values)
+            linear.push_back(self._carriers.linearize(values))
+        return linear
+
+    def rows(self) -> int:
+        """Measurement rows (for the chi^2's degrees of freedom)."""
+        return graph_rows(self.graph) + self.bulk.rows()
+
+
+def graph_rows(graph: gtsam.NonlinearFactorGraph | BulkGraph) -> int:
+    """Measurement rows of a graph (a BulkGraph's too)."""
+    if isinstance(graph, BulkGraph):
+        return graph.rows()
+    return sum(graph.at(i).dim() for i in range(graph.size()) if graph.exists(i))
+
+
+def whitening(cov: np.ndarray) -> np.ndarray:
+    """W (N, 3, 3) with W^T W = cov^-1, as GTSAM's noiseModel.Gaussian.Covariance whitens: W = L^-1 for
+    cov = L L^T, except that a covariance whose off-diagonal entries are all at most 1e-9 in magnitude is taken
+    as diagonal (GTSAM's "smart" construction; a keyframe ping's 1e-12 m^2/s^2 cross terms are dropped)."""
+    upper = np.abs(cov[:, [0, 0, 1], [1, 2, 2]]).max(axis=1)
+    diagonal = upper <= 1e-9
+    W = np.empty_like(cov)
+    if (~diagonal).any():
+        W[~diagonal] = np.linalg.inv(np.linalg.cholesky(cov[~diagonal]))
+    if diagonal.any():
+        idx = np.flatnonzero(diagonal)[:, None]
+        W[idx[:, 0]] = 0.0
+        W[idx, [0, 1, 2], [0, 1, 2]] = 1.0 / np.sqrt(cov[idx, [0, 1, 2], [0, 1, 2]])
+    return W
+
+
+def bulk_dvl(builder: LogGraph) -> BulkDvl:
+    """The BulkDvl of a LogGraph's pings: each state's own ping, then the pings between it and the next state,
+    with the noise, IMU motion and gravity the per-factor path gives them (LogGraph.dvl_factors,
+    between_factors; FactorMaker.dvl_factors_for, dvl_keyframe_factors_for)."""
+    from gtsam_dvl.estimators.selection import ping_covariance
+    from gtsam_dvl.factors.dvl_keyframe import keyframe_ping_covariance
+
+    maker, cfg, dvl = builder.maker, builder.config, builder.log.dvl
+    offset = cfg.dvl.estimate_time_offset
+    b_l = np.asarray(maker.mounting.b_l, dtype=float)
+    k0 = cfg.priors.scale_initial
+    b_R_d0 = maker.mounting.b_R_d0
+    n_states = len(builder.epochs)
+    if builder.gravity_positions is None:
+        raise ValueError("bulk_dvl needs the initial guess first (LogGraph.initial_values)")
+    g_states, G_states = maker.keyframe_gravity(builder.gravity_positions)
+
+    state, dvl_idx, b_omega, rate_b_a, rate_G = [], [], [], [], []
+    motion: list[tuple[Any, ...] | None] = []
+    for i, ep in enumerate(builder.epochs):
+        of_state: list[tuple[int, Any, Any]] = []
+        if ep.dvl_index >= 0:
+            of_state.append((ep.dvl_index, ep, None))
+        of_state += [(p.dvl_index, p, p.pim) for p in ep.between]
+        for j, src, pim in of_state:
+            state.append(i)
+            dvl_idx.append(j)
+            if offset:
+                assert src.rate_input is not None
+                b_a, b_om_mean, G = src.rate_input
+                b_omega.append(b_om_mean)
+                rate_b_a.append(b_a)
+                rate_G.append(G)
+            else:
+                b_omega.append(src.b_omega)
+            motion.append(None if pim is None else (pim.dt, pim.dR, pim.dv, pim.dp, pim.dR_dbg, pim.dv_dba,
+                                                    pim.dv_dbg, pim.cov))
+    n = len(state)
+    st = np.asarray(state, dtype=int)
+    jj = np.asarray(dvl_idx, dtype=int)
+    om = np.asarray(b_omega, dtype=float).reshape(n, 3)
+    d_y = np.asarray(dvl.d_v[jj], dtype=float).reshape(n, 3)
+    cov = ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3))
+    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
+    dt, dR = np.zeros(n), eye.copy()
+    dv, dp = np.zeros((n, 3)), np.zeros((n, 3))
+    dR_dbg, dv_dba, dv_dbg = np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
+    for q, m in enumerate(motion):
+        if m is None:
+            continue
+        dt[q], dR[q], dv[q], dp[q], dR_dbg[q], dv_dba[q], dv_dbg[q], pim_cov = m
+        b_v = b_R_d0 @ d_y[q] / k0 if np.all(np.isfinite(d_y[q])) else np.zeros(3)
+        cov[q] = cov[q] + keyframe_ping_covariance(pim_cov, dR[q], b_R_d0.T, b_v, k0)
+    pings = PingArrays(
+        state=st, d_y=d_y, b_omega=om, b_v_lever=np.cross(om, b_l), dt=dt, dR=dR, dv=dv, dp=dp, dR_dbg=dR_dbg,
+        dv_dba=dv_dba, dv_dbg=dv_dbg, n_g0=np.asarray(g_states, dtype=float).reshape(-1, 3)[st],
+        n_p0=np.asarray(builder.gravity_positions, dtype=float)[st],
+        n_G=np.asarray(G_states, dtype=float).reshape(-1, 3, 3)[st],
+        offset_b_a=np.asarray(rate_b_a, dtype=float).reshape(n, 3) if offset else None,
+        offset_G=np.asarray(rate_G, dtype=float).reshape(n, 3, 3) if offset else None)
+    whiten = whitening(cov)
+    robust = cfg.dvl.robust if cfg.dvl.robust in ("huber", "cauchy") else "none"
+    return BulkDvl(pings=pings, whiten=whiten, n_omega_ie=np.asarray(maker.n_omega_ie(), dtype=float),
+                   n_states=n_states, bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
+                   robust_k=float(cfg.dvl.robust_threshold()),
+                   offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None)
