@@ -85,21 +85,46 @@ class FactorMaker:
         rotation vector integrated from t): the specific force is measured in the rotating body, so gravity
         must be seen there too (G n_R_b(t)^T n_g). The Coriolis acceleration (2 Omega x v: 3e-4 m/s^2 at
         2 m/s) is left out."""
+        b_a, w_mean, G = self.velocity_rate_inputs(np.array([t], dtype=float), imu_t, b_f, b_omega, dt)
+        return b_a[0], w_mean[0], G[0]
+
+    def velocity_rate_inputs(self, t: np.ndarray, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
+                             dt: float = 0.0, chunk_samples: int = 2_000_000) -> tuple[np.ndarray, np.ndarray,
+                                                                                      np.ndarray]:
+        """velocity_rate_input at the epochs t (P,) at once: b_a (P, 3), the mean body rate (P, 3), G (P, 3, 3).
+        Vectorised over the pings (one Python call per ping cost 0.2 ms, 8 s per hour of a 5 Hz log): each
+        window's samples are gathered into a padded block, chunk_samples (ping, sample) pairs at a time, and the
+        same per-window sums are taken (the cumulative rotation from the window's first sample, as before)."""
         w = self.config.dvl.time_offset_window_s
-        # the samples in the window by binary search (imu_t is sorted): a mask over every sample made each ping
-        # cost O(samples), the whole log O(pings x samples)
-        lo = int(np.searchsorted(imu_t, t + min(0.0, dt) - w, side="left"))
-        hi = int(np.searchsorted(imu_t, t + max(0.0, dt) + w, side="right"))
-        sel = np.arange(lo, hi)
-        if sel.size == 0:
-            sel = np.array([int(np.clip(np.searchsorted(imu_t, t), 0, len(imu_t) - 1))])
-        b_a = np.asarray(b_f[sel].mean(axis=0), dtype=float)
-        w_rel = b_omega[sel] - self.alignment.n_R_b.T @ self.n_omega_ie()  # body_rate() of each sample
-        step = np.diff(imu_t[sel], prepend=imu_t[sel[0]])
-        phi = np.cumsum(w_rel * step[:, None], axis=0)
-        phi -= phi[int(np.argmin(np.abs(imu_t[sel] - t)))]  # rotation since t
-        G = so3_exp(-phi).reshape(-1, 3, 3).mean(axis=0)
-        return b_a, np.asarray(w_rel.mean(axis=0)), np.asarray(G)
+        t = np.asarray(t, dtype=float).reshape(-1)
+        n_imu = len(imu_t)
+        # the samples in each window by binary search (imu_t is sorted): never a mask over every sample
+        lo = np.searchsorted(imu_t, t + min(0.0, dt) - w, side="left")
+        hi = np.searchsorted(imu_t, t + max(0.0, dt) + w, side="right")
+        empty = hi <= lo  # no sample in the window: the sample covering t alone
+        lo = np.where(empty, np.clip(np.searchsorted(imu_t, t), 0, n_imu - 1), lo)
+        hi = np.where(empty, lo + 1, hi)
+        w_earth = self.alignment.n_R_b.T @ self.n_omega_ie()  # body_rate() of each sample: minus this
+        b_a, w_mean, G = np.empty((len(t), 3)), np.empty((len(t), 3)), np.empty((len(t), 3, 3))
+        width = int((hi - lo).max()) if len(t) else 0
+        step_p = max(1, chunk_samples // max(width, 1))
+        col = np.arange(width)
+        for a in range(0, len(t), step_p):
+            sl = slice(a, a + step_p)
+            n_in = (hi[sl] - lo[sl])[:, None]
+            inside = col[None, :] < n_in
+            idx = np.minimum(lo[sl][:, None] + col[None, :], n_imu - 1)
+            ts = imu_t[idx]
+            b_a[sl] = np.where(inside[..., None], b_f[idx], 0.0).sum(axis=1) / n_in
+            w_rel = np.where(inside[..., None], b_omega[idx] - w_earth, 0.0)
+            w_mean[sl] = w_rel.sum(axis=1) / n_in
+            step = np.where(inside, np.diff(ts, axis=1, prepend=ts[:, :1]), 0.0)
+            phi = np.cumsum(w_rel * step[..., None], axis=1)
+            near = np.argmin(np.where(inside, np.abs(ts - t[sl][:, None]), np.inf), axis=1)
+            phi -= phi[np.arange(len(near)), near][:, None, :]  # rotation since t
+            R = so3_exp(-phi.reshape(-1, 3)).reshape(phi.shape[0], width, 3, 3)
+            G[sl] = np.where(inside[..., None, None], R, 0.0).sum(axis=1) / n_in[..., None]
+        return b_a, w_mean, G
 
     def offset_gravity(self) -> np.ndarray:
         """Gravity in map for the time-offset model: at the map origin (its direction turns by 1.6e-7 rad per

@@ -155,11 +155,17 @@ class LogGraph:
         """The epochs' IMU constants of the time-offset model, averaged around t + dt / 2 (dt: the current
         estimate of the offset; FactorMaker.velocity_rate_input). Factors built afterwards use them."""
         imu = self.log.imu
+        owners: list[Epoch | BetweenPing] = []
         for ep in self.epochs if epochs is None else epochs:
             if ep.dvl_index >= 0:
-                ep.rate_input = self.maker.velocity_rate_input(ep.t, imu.t, imu.b_f, imu.b_omega, dt)
-            for p in ep.between:
-                p.rate_input = self.maker.velocity_rate_input(p.t, imu.t, imu.b_f, imu.b_omega, dt)
+                owners.append(ep)
+            owners += ep.between
+        if not owners:
+            return
+        b_a, w_mean, G = self.maker.velocity_rate_inputs(np.array([o.t for o in owners]), imu.t, imu.b_f,
+                                                         imu.b_omega, dt)
+        for o, a, m, g in zip(owners, b_a, w_mean, G, strict=True):
+            o.rate_input = (a, m, g)
 
     def _snapshot_between(self) -> None:
         """The IMU motion from each state to the pings after it (estimators/keyframes.py), one preintegration
