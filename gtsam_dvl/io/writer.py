@@ -29,10 +29,14 @@ simulated logs, /ground_truth/odometry. Choices the conventions leave open:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
+import time
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from types import TracebackType
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -43,10 +47,11 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import DvlData, LogData
 from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages
 from gtsam_dvl.io.log_metadata import metadata_record
-from gtsam_dvl.io.mcap.writer import McapLogWriter
+from gtsam_dvl.io.mcap.writer import McapLogWriter, McapStreamWriter
 from gtsam_dvl.io.ros2 import cdr
 
-__all__ = ["McapLogWriter", "write_log", "UNMEASURED_VARIANCE", "BEAM_QUALITY_NOTE"]
+__all__ = ["McapLogWriter", "write_log", "LogStreamWriter", "LogSource", "write_log_stream", "imu_rate_hz",
+           "UNMEASURED_VARIANCE", "BEAM_QUALITY_NOTE"]
 
 UNMEASURED_VARIANCE = 1e6  # (rad/s)^2 on the angular diagonal of /dvl/twist
 BEAM_QUALITY_NOTE = "1 = beam valid, 0 = beam invalid"
@@ -74,8 +79,39 @@ _NOISE_KEYS = {
 
 def _imu_variances(meta: dict[str, Any], t: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Per-sample variances (diagonal) of gyro and accelerometer white noise: density^2 * rate."""
+    return _imu_variances_at(meta, 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0)
+
+
+def imu_rate_hz(t_parts: Iterable[np.ndarray]) -> float:
+    """The IMU rate write_log takes from a log's IMU stamps t (1 / median(diff(t)), 0 for fewer than two
+    samples), bit for bit, from t given in consecutive parts (each (K,) s) without holding all of it: the
+    steps are counted by value, and a median of counts is np.median's."""
+    values: dict[float, int] = {}
+    last: float | None = None
+    for part in t_parts:
+        part = np.asarray(part, dtype=float)
+        if not len(part):
+            continue
+        steps = np.diff(part) if last is None else np.diff(np.concatenate([[last], part]))
+        last = float(part[-1])
+        for v, c in zip(*np.unique(steps, return_counts=True), strict=True):
+            values[float(v)] = values.get(float(v), 0) + int(c)
+    m = sum(values.values())
+    if m == 0:
+        return 0.0
+    v = np.array(sorted(values))
+    ends = np.cumsum([values[x] for x in v])  # the sorted steps k with k < ends[i] have value v[i]
+
+    def kth(k: int) -> np.float64:
+        return np.float64(v[int(np.searchsorted(ends, k, side="right"))])
+
+    median = kth(m // 2) if m % 2 else (kth(m // 2 - 1) + kth(m // 2)) / 2.0
+    return 1.0 / float(median)
+
+
+def _imu_variances_at(meta: dict[str, Any], rate: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """_imu_variances at a given IMU rate (Hz)."""
     imu = (meta.get("sensors") or {}).get("imu") or {}
-    rate = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     out: list[np.ndarray | None] = []
     for kind, keys in _NOISE_KEYS.items():
         var = imu.get(f"{kind}_variance")
@@ -118,7 +154,7 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     def pad(a: np.ndarray, fill: float) -> np.ndarray:
         out = np.full((m, MAX_BEAMS, *a.shape[2:]), fill)
         out[:, :nb] = a
-        return out.reshape(m, -1)
+        return out.reshape(m, MAX_BEAMS * int(np.prod(a.shape[2:])))  # (m, -1) is ambiguous for m = 0
 
     bvalid = np.asarray(b.valid, bool)
     arr["beam_ranges_valid"] = arr["beam_velocities_valid"] = True
@@ -165,63 +201,190 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
     = -1), the convention."""
     path = Path(path)
     meta = metadata_record(log)
+    times = [a for a in (log.imu.t, log.dvl.t, log.truth.t if log.truth else None) if a is not None and len(a)]
+    t_first = float(min(a[0] for a in times)) if times else 0.0
+    with McapLogWriter(path, t0_ns=log.t0_ns) as w:
+        _write_head(w, path, log, meta, config, t_first)
+        gyro_var, accel_var = _imu_variances(meta, log.imu.t)
+        _write_data(w, path, log, meta, gyro_var, accel_var, imu_orientation, gnss_channel=False)
+
+
+def _write_head(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any], config: dict[str, Any] | None,
+                t_first: float) -> None:
+    """The metadata records, the config.json attachment and /tf_static (stamped t_first)."""
     try:
         attachment = json.dumps({**meta, "config": config} if config is not None else meta, default=json_default)
         truth_json = json.dumps(meta.get("truth", {}), default=json_default)
         sensors_json = json.dumps(meta.get("sensors", {}), default=json_default)
     except (TypeError, ValueError) as e:
         raise GtsamDvlError(f"{path}: metadata cannot be written as JSON ({e})") from None
-    times = [a for a in (log.imu.t, log.dvl.t, log.truth.t if log.truth else None) if a is not None and len(a)]
-    t_first = float(min(a[0] for a in times)) if times else 0.0
-    with McapLogWriter(path, t0_ns=log.t0_ns) as w:
-        beams = log.dvl.beams
-        w.add_metadata(
-            "gtsam_dvl",
-            {
-                "scenario": _scenario_name(meta),
-                "seed": str(meta.get("seed", "")),
-                "generator": str(meta.get("generator", f"gtsam_dvl {__version__}")),
-                "truth": truth_json,
-                "sensors": sensors_json,
-                "dvl_beam_quality": BEAM_QUALITY_NOTE,
-                "dvl_beams": str(beams.d_u.shape[1] if beams is not None else 0),
-            },
-        )
-        w.add_attachment("config.json", attachment.encode(), "application/json")
-        mnt = log.mounting
-        w.add_tf_static(
-            "/tf_static",
-            t_first,
-            [
-                ("base_link", log.imu.frame_id, mnt.b_R_imu, mnt.b_p_imu),
-                ("base_link", log.dvl.frame_id, mnt.b_R_d0, mnt.b_p_dvl),
-            ] + ([] if log.depth is None or log.depth.b_p_sensor is None else
-                 [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)])
-              + ([] if log.gnss is None or log.gnss.b_p_antenna is None else
-                 [("base_link", log.gnss.frame_id, np.eye(3), log.gnss.b_p_antenna)]),
-        )
-        gyro_var, accel_var = _imu_variances(meta, log.imu.t)
-        q_imu, cov_imu = imu_orientation if imu_orientation is not None else (None, None)
-        w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var,
-                  q_imu, cov_imu)
+    beams = log.dvl.beams
+    w.add_metadata(
+        "gtsam_dvl",
+        {
+            "scenario": _scenario_name(meta),
+            "seed": str(meta.get("seed", "")),
+            "generator": str(meta.get("generator", f"gtsam_dvl {__version__}")),
+            "truth": truth_json,
+            "sensors": sensors_json,
+            "dvl_beam_quality": BEAM_QUALITY_NOTE,
+            "dvl_beams": str(beams.d_u.shape[1] if beams is not None else 0),
+        },
+    )
+    w.add_attachment("config.json", attachment.encode(), "application/json")
+    mnt = log.mounting
+    w.add_tf_static(
+        "/tf_static",
+        t_first,
+        [
+            ("base_link", log.imu.frame_id, mnt.b_R_imu, mnt.b_p_imu),
+            ("base_link", log.dvl.frame_id, mnt.b_R_d0, mnt.b_p_dvl),
+        ] + ([] if log.depth is None or log.depth.b_p_sensor is None else
+             [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)])
+          + ([] if log.gnss is None or log.gnss.b_p_antenna is None else
+             [("base_link", log.gnss.frame_id, np.eye(3), log.gnss.b_p_antenna)]),
+    )
 
-        dvl = log.dvl
-        ok = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
-        cov = np.zeros((int(ok.sum()), 6, 6))
-        cov[:, :3, :3] = np.nan_to_num(np.asarray(dvl.d_cov, dtype=float)[ok], nan=0.0)
-        cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
-        w.add_twist_with_covariance("/dvl/twist", dvl.t[ok], dvl.d_v[ok], None, cov, dvl.frame_id)
-        dvl_arr = _dvl_messages(dvl, meta, w.stamps_ns(dvl.t), path)
-        w.add_structured("/dvl/data", "marine_acoustic_msgs/msg/Dvl", dvl_arr)
 
-        if log.depth is not None:
-            w.add_structured("/depth/pressure", "sensor_msgs/msg/FluidPressure", _pressure_messages(log, w))
+def _write_data(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any], gyro_var: np.ndarray | None,
+                accel_var: np.ndarray | None, imu_orientation: tuple[np.ndarray, np.ndarray | None] | None,
+                gnss_channel: bool) -> None:
+    """The messages of log's sensor data and truth, one batch per topic in the conventions' order (so channel
+    ids follow it). gnss_channel: write /gnss/fix even without fixes (its channel exists from here on)."""
+    q_imu, cov_imu = imu_orientation if imu_orientation is not None else (None, None)
+    w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var,
+              q_imu, cov_imu)
 
-        if log.gnss is not None and len(log.gnss):
-            w.add_structured(GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages(log.gnss, w.stamps_ns(log.gnss.t)))
+    dvl = log.dvl
+    ok = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
+    cov = np.zeros((int(ok.sum()), 6, 6))
+    cov[:, :3, :3] = np.nan_to_num(np.asarray(dvl.d_cov, dtype=float)[ok], nan=0.0)
+    cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
+    w.add_twist_with_covariance("/dvl/twist", dvl.t[ok], dvl.d_v[ok], None, cov, dvl.frame_id)
+    dvl_arr = _dvl_messages(dvl, meta, w.stamps_ns(dvl.t), path)
+    w.add_structured("/dvl/data", "marine_acoustic_msgs/msg/Dvl", dvl_arr)
 
-        if log.truth is not None:
-            tr = log.truth
-            b_v = Rotation.from_quat(tr.n_q_b).inv().apply(tr.n_v) if len(tr) else np.zeros((0, 3))
-            w.add_odometry("/ground_truth/odometry", tr.t, tr.n_p, tr.n_q_b, b_v, tr.b_omega,
-                           frame_id="map", child_frame_id="base_link")
+    if log.depth is not None:
+        w.add_structured("/depth/pressure", "sensor_msgs/msg/FluidPressure", _pressure_messages(log, w))
+
+    if log.gnss is not None and (len(log.gnss) or gnss_channel):
+        w.add_structured(GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages(log.gnss, w.stamps_ns(log.gnss.t)))
+
+    if log.truth is not None:
+        tr = log.truth
+        b_v = Rotation.from_quat(tr.n_q_b).inv().apply(tr.n_v) if len(tr) else np.zeros((0, 3))
+        w.add_odometry("/ground_truth/odometry", tr.t, tr.n_p, tr.n_q_b, b_v, tr.b_omega,
+                       frame_id="map", child_frame_id="base_link")
+
+
+class LogStreamWriter:
+    """Write a log too long to hold in memory, part by part, as write_log writes the whole log.
+
+    head: the log's metadata and typed fields, mounting, frames and sensors (its arrays are not written; a
+    sensor it has, every part has, possibly empty). t_first: the first stamp of the IMU, DVL and truth
+    (/tf_static's stamp); imu_rate_hz: write_log's IMU rate of the whole log (imu_rate_hz()); gnss_fixes: the
+    log's GNSS has fixes (/gnss/fix gets its channel where write_log gives it; False: no channel, as write_log
+    of a GnssData without fixes, and a part with fixes is an error). Each ``write(part, next_t)``
+    adds the part's messages and writes those stamped before next_t, which no later part may stamp earlier
+    (None: this was the last part). Parts that together are a LogData give the file write_log writes of it,
+    byte for byte (McapStreamWriter), so read_log reads both alike."""
+
+    def __init__(self, path: str | os.PathLike[str], head: LogData, *, t_first: float, imu_rate_hz: float,
+                 gnss_fixes: bool = True, config: dict[str, Any] | None = None) -> None:
+        self.path = Path(path)
+        self.head = head
+        self._gnss = head.gnss is not None and gnss_fixes
+        self._meta = metadata_record(head)
+        self._w = McapStreamWriter(self.path, t0_ns=head.t0_ns)
+        try:
+            _write_head(self._w, self.path, head, self._meta, config, t_first)
+        except BaseException:
+            self._w.abort()
+            raise
+        self._gyro_var, self._accel_var = _imu_variances_at(self._meta, imu_rate_hz)
+        self._bound = -np.inf  # no message may come before this time (s)
+        self.counts = {"imu": 0, "dvl": 0, "truth": 0, "depth": 0, "gnss": 0}
+
+    def write(self, part: LogData, next_t: float | None) -> None:
+        """Add a part (the next stretch of the log) and write what is complete; next_t (s): no later part has
+        a stamp before it (None: no later part)."""
+        head = self.head
+        for name in ("truth", "depth"):
+            if (getattr(part, name) is None) != (getattr(head, name) is None):
+                raise GtsamDvlError(f"{self.path}: a part {'lacks' if getattr(head, name) is not None else 'has'} "
+                                    f"the log's {name}")
+        if not self._gnss and part.gnss is not None and len(part.gnss):
+            raise GtsamDvlError(f"{self.path}: a part has GNSS fixes, the log was opened without them")
+        firsts = [float(a[0]) for a in (part.imu.t, part.dvl.t, part.truth.t if part.truth is not None else None,
+                                         part.depth.t if part.depth is not None else None,
+                                         part.gnss.t if part.gnss is not None else None) if a is not None and len(a)]
+        if firsts and min(firsts) < self._bound:
+            raise GtsamDvlError(f"{self.path}: a part starts at t = {min(firsts):.9g} s, before the previous "
+                                f"part's next_t {self._bound:.9g} s")
+        gnss = part.gnss
+        if self._gnss and gnss is None:
+            assert head.gnss is not None
+            gnss = dataclasses.replace(head.gnss, t=np.zeros(0), lat_deg=np.zeros(0), lon_deg=np.zeros(0),
+                                       height_m=np.zeros(0), cov_enu_m2=np.zeros((0, 3, 3)),
+                                       status=np.zeros(0, dtype=int))
+        part = dataclasses.replace(part, origin=head.origin, gnss=gnss if self._gnss else None)
+        _write_data(self._w, self.path, part, self._meta, self._gyro_var, self._accel_var, None,
+                    gnss_channel=self._gnss)
+        for name in self.counts:
+            data = getattr(part, name)
+            self.counts[name] += 0 if data is None else len(data)
+        if next_t is not None:
+            self._bound = float(next_t)
+        self._w.flush(None if next_t is None else int(self._w.stamps_ns([next_t])[0]))
+
+    def close(self) -> None:
+        """Write the rest, the summary and footer; then move the file into place."""
+        self._w.close()
+
+    def abort(self) -> None:
+        """Drop the temporary file; nothing appears under the final name."""
+        self._w.abort()
+
+    def __enter__(self) -> LogStreamWriter:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class LogSource(Protocol):
+    """A log given in parts (sim/stream.py's ChunkedSimulation is one): head, t_first and gnss_fixes as
+    LogStreamWriter takes them, imu_stamps() the IMU stamps in consecutive parts, parts() (part, next_t) pairs
+    as LogStreamWriter.write takes them."""
+
+    head: LogData
+    t_first: float
+    gnss_fixes: bool
+
+    def imu_stamps(self) -> Iterator[np.ndarray]: ...
+
+    def parts(self, progress: Callable[[float], None] | None = None) -> Iterator[tuple[LogData, float | None]]: ...
+
+
+def write_log_stream(path: str | os.PathLike[str], source: LogSource, *, config: dict[str, Any] | None = None,
+                     progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+    """Write a log given in parts to ``path`` (atomically) with LogStreamWriter, in memory bounded by a part:
+    write_log's file of the log the parts make. Returns the message counts per sensor ("imu", "dvl" pings,
+    "truth", "depth", "gnss"), "seconds" (wall time) and "write_seconds" (of it, in the writer: encoding,
+    compression, file; the rest is the source's)."""
+    start = time.perf_counter()
+    t_write = 0.0
+    with LogStreamWriter(path, source.head, t_first=source.t_first, imu_rate_hz=imu_rate_hz(source.imu_stamps()),
+                         gnss_fixes=source.gnss_fixes, config=config) as w:
+        for part, next_t in source.parts(progress):
+            t1 = time.perf_counter()
+            w.write(part, next_t)
+            t_write += time.perf_counter() - t1
+        t1 = time.perf_counter()
+    t_write += time.perf_counter() - t1  # closing: the last chunk and the summary
+    return {**w.counts, "seconds": time.perf_counter() - start, "write_seconds": t_write}

@@ -64,7 +64,8 @@ def dvl_measure(
     spec: DvlSpec, t: np.ndarray, y_true: np.ndarray, d_u: np.ndarray, ranges: np.ndarray,
     noise_rng: np.random.Generator | None, event_rng: np.random.Generator | None,
 ) -> DvlData:
-    """Add noise, dropouts and outliers (None generators: none of them) and build DvlData."""
+    """Add noise, dropouts and outliers (None generators: none of them) and build DvlData. The event
+    generator's draws come in the order event_blocks gives (sim/stream.py positions a generator at each)."""
     M, B = ranges.shape
     beam_ok: np.ndarray = np.asarray(ranges <= spec.max_range_m)
     if event_rng is not None:
@@ -107,3 +108,14 @@ def dvl_measure(
         valid=beam_ok,
     )
     return DvlData(t=t, d_v=y, d_cov=cov, valid=valid, beams=beams)
+
+
+def event_blocks(spec: DvlSpec, n_pings: int, n_beams: int) -> list[tuple[str, int]]:
+    """The draws dvl_measure takes from its event generator for n_pings pings, in order, as blocks
+    ("uniform" | "normal", count): ping and beam dropouts, then the outliers (velocity model: which pings, then
+    their directions; beam model: which beams, then their signs). Each call continues a block in ping order,
+    so a run cut into parts draws the same numbers from generators positioned at each block's start."""
+    m, b = n_pings, n_beams
+    if spec.noise_model == "velocity":
+        return [("uniform", m), ("uniform", m * b), ("uniform", m), ("normal", 3 * m)]
+    return [("uniform", m), ("uniform", m * b), ("uniform", m * b), ("uniform", m * b)]

@@ -39,6 +39,17 @@ def simulate_gnss(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, i
                   white_noise: bool) -> GnssData:
     """The fixes of GnssSpec over IMU samples 0..n-1 (module doc)."""
     k = np.arange(0, n, int(round(imu_hz / spec.rate_hz)))
+    return gnss_fixes(spec, motion, track, k, gnss_rng(seed) if white_noise else None)
+
+
+def gnss_rng(seed: int) -> np.random.Generator:
+    """The GNSS noise generator: SeedSequence(seed)'s sixth child, one (3,) draw per candidate stamp."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(GNSS_STREAM + 1)[GNSS_STREAM]))
+
+
+def gnss_fixes(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, k: np.ndarray,
+               rng: np.random.Generator | None) -> GnssData:
+    """The fixes among the candidate stamps k / rate (IMU sample indices), noise from rng (None: none)."""
     t = k / track.rate
     lat, lon, h = track.at_samples(k)
     _, _, l_R_b, _ = imu_truth(motion.evaluate(t), lat, h)
@@ -46,9 +57,8 @@ def simulate_gnss(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, i
     R_el = e_R_l(lat, lon)
     e_p = geodetic_to_ecef(lat, lon, h) + np.einsum("kij,kj->ki", R_el, l_R_b @ lever)
     sig = np.array([spec.horizontal_sigma_m, spec.horizontal_sigma_m, spec.vertical_sigma_m])
-    if white_noise:
-        ss = np.random.SeedSequence(seed).spawn(GNSS_STREAM + 1)[GNSS_STREAM]
-        noise = np.random.Generator(np.random.PCG64(ss)).standard_normal((len(t), 3)) * sig
+    if rng is not None:
+        noise = rng.standard_normal((len(t), 3)) * sig
         e_p = e_p + np.einsum("kij,kj->ki", R_el, noise)
     keep = -h < spec.max_depth_m
     if spec.start_s is not None:

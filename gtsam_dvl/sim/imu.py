@@ -32,20 +32,38 @@ def true_imu(
     progress: Callable[[float], None] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Error-free averaged gyro (rad/s) and specific force (m/s^2), (n_samples, 3) each."""
-    rate = track.rate
     b_omega = np.empty((n_samples, 3))
     b_f = np.empty((n_samples, 3))
-    avg_w = 0.5 * GL_W  # interval average = (1/dt) int = sum_i (w_i / 2) f(node_i)
     for a in range(0, n_samples, CHUNK):
-        k = np.arange(a, min(a + CHUNK, n_samples))
-        t = node_times(k, rate).ravel()
-        lat, h = (x.ravel() for x in track.at_nodes(a, a + len(k)))
-        w_ib, f, _, _ = imu_truth(motion.evaluate(t), lat, h)
-        b_omega[k] = np.einsum("kni,n->ki", w_ib.reshape(len(k), -1, 3), avg_w)
-        b_f[k] = np.einsum("kni,n->ki", f.reshape(len(k), -1, 3), avg_w)
+        b = min(a + CHUNK, n_samples)
+        b_omega[a:b], b_f[a:b] = _true_imu_block(motion, track, a, b)
         if progress is not None:
-            progress(0.1 + 0.8 * (k[-1] + 1) / n_samples)
+            progress(0.1 + 0.8 * b / n_samples)
     return b_omega, b_f
+
+
+def true_imu_range(motion: MotionProfile, track: PositionTrack, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """true_imu's outputs of samples a..b-1 only (track: any PositionTrack holding their grid points), in the
+    same blocks of CHUNK samples as true_imu, so the values are true_imu's bit for bit (sim/stream.py)."""
+    b_omega = np.empty((b - a, 3))
+    b_f = np.empty((b - a, 3))
+    lo = a
+    while lo < b:
+        hi = min((lo // CHUNK + 1) * CHUNK, b)
+        b_omega[lo - a : hi - a], b_f[lo - a : hi - a] = _true_imu_block(motion, track, lo, hi)
+        lo = hi
+    return b_omega, b_f
+
+
+def _true_imu_block(motion: MotionProfile, track: PositionTrack, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+    """Averaged rate and specific force of samples a..b-1."""
+    avg_w = 0.5 * GL_W  # interval average = (1/dt) int = sum_i (w_i / 2) f(node_i)
+    k = np.arange(a, b)
+    t = node_times(k, track.rate).ravel()
+    lat, h = (x.ravel() for x in track.at_nodes(a, b))
+    w_ib, f, _, _ = imu_truth(motion.evaluate(t), lat, h)
+    return (np.einsum("kni,n->ki", w_ib.reshape(len(k), -1, 3), avg_w),
+            np.einsum("kni,n->ki", f.reshape(len(k), -1, 3), avg_w))
 
 
 @dataclass
@@ -63,15 +81,8 @@ def draw_biases(spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Gener
 
     The draws always happen in the same order, so a seed gives the same biases with and without white noise.
     """
-    g0 = rng.normal(0.0, spec.gyro_bias_deg_per_h, 3) * DEG_PER_H
-    a0 = rng.normal(0.0, spec.accel_bias_micro_g, 3) * MICRO_G
-    if spec.gyro_bias_values_deg_per_h is not None:
-        g0 = np.asarray(spec.gyro_bias_values_deg_per_h, dtype=float) * DEG_PER_H
-    if spec.accel_bias_values_micro_g is not None:
-        a0 = np.asarray(spec.accel_bias_values_micro_g, dtype=float) * MICRO_G
-    sqrt_dt = np.sqrt(1.0 / rate)
-    g_walk = spec.gyro_bias_walk_deg_per_h_per_sqrt_h * DEG_PER_H * PER_SQRT_H * sqrt_dt
-    a_walk = spec.accel_bias_walk_micro_g_per_sqrt_h * MICRO_G * PER_SQRT_H * sqrt_dt
+    g0, a0 = initial_biases(spec, rng)
+    g_walk, a_walk = walk_step_sigmas(spec, rate)
 
     def walk(b0: np.ndarray, step_sigma: float) -> np.ndarray:
         if step_sigma == 0.0:
@@ -83,8 +94,34 @@ def draw_biases(spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Gener
     return ImuErrors(walk(g0, g_walk), walk(a0, a_walk), g0, a0)
 
 
-def white_noise(spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Gyro and accelerometer white noise of the averaged outputs: sigma = density * sqrt(rate)."""
+def initial_biases(spec: ImuSpec, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(gyro rad/s, accelerometer m/s^2) biases at t = 0: the first six draws of the bias stream."""
+    g0 = rng.normal(0.0, spec.gyro_bias_deg_per_h, 3) * DEG_PER_H
+    a0 = rng.normal(0.0, spec.accel_bias_micro_g, 3) * MICRO_G
+    if spec.gyro_bias_values_deg_per_h is not None:
+        g0 = np.asarray(spec.gyro_bias_values_deg_per_h, dtype=float) * DEG_PER_H
+    if spec.accel_bias_values_micro_g is not None:
+        a0 = np.asarray(spec.accel_bias_values_micro_g, dtype=float) * MICRO_G
+    return g0, a0
+
+
+def walk_step_sigmas(spec: ImuSpec, rate: float) -> tuple[float, float]:
+    """1-sigma per-sample steps of the gyro (rad/s) and accelerometer (m/s^2) bias random walks (0: none)."""
+    sqrt_dt = np.sqrt(1.0 / rate)
+    g_walk = spec.gyro_bias_walk_deg_per_h_per_sqrt_h * DEG_PER_H * PER_SQRT_H * sqrt_dt
+    a_walk = spec.accel_bias_walk_micro_g_per_sqrt_h * MICRO_G * PER_SQRT_H * sqrt_dt
+    return g_walk, a_walk
+
+
+def white_noise_sigmas(spec: ImuSpec, rate: float) -> tuple[float, float]:
+    """1-sigma white noise of the averaged gyro (rad/s) and accelerometer (m/s^2) outputs: density * sqrt(rate)."""
     sg = spec.gyro_noise_deg_per_h_per_sqrt_hz * DEG_PER_H * np.sqrt(rate)
     sa = spec.accel_noise_micro_g_per_sqrt_hz * MICRO_G * np.sqrt(rate)
+    return sg, sa
+
+
+def white_noise(spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Gyro and accelerometer white noise of the averaged outputs: sigma = density * sqrt(rate). All the gyro
+    draws come first, then the accelerometer's (sim/stream.py relies on this order)."""
+    sg, sa = white_noise_sigmas(spec, rate)
     return rng.normal(0.0, sg, (n_samples, 3)), rng.normal(0.0, sa, (n_samples, 3))

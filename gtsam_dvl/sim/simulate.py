@@ -86,39 +86,67 @@ def simulate(
         np.random.Generator(np.random.PCG64(event_ss)) if white_noise else None,
     )
     depth = None if scenario.depth is None else _depth(scenario, motion, track, frame, n, seed, white_noise)
-    metadata = _metadata(scenario, seed, white_noise, mounting, errors, rate)
-    if scenario.depth is not None:
-        metadata["sensors"]["depth"] = _listify_spec(asdict(scenario.depth))
+    metadata = _metadata(scenario, seed, white_noise, mounting, errors.gyro_bias0, errors.accel_bias0,
+                         _bias_series(scenario, errors, rate))
+    _sensor_metadata(scenario, metadata)
     gnss = None
-    origin: GeoOrigin | None = GeoOrigin(float(scenario.origin.lat_deg), float(scenario.origin.lon_deg),
-                                         float(scenario.origin.height_m))
+    origin: GeoOrigin | None = _origin(scenario)
     if scenario.gnss is not None:
         gnss = simulate_gnss(scenario.gnss, motion, track, rate, n, seed, white_noise)
-        metadata["sensors"]["gnss"] = _listify_spec(asdict(scenario.gnss))
         if not scenario.gnss.origin_in_log:  # the origin must come from the fixes (sim/gnss.py)
-            fix_frame = first_fix_frame(gnss)
-            if fix_frame is None:
-                raise GtsamDvlError(f"{scenario.source}: key 'gnss.origin_in_log': false needs at least one fix, "
-                                    "and the vehicle never surfaces while the receiver records")
+            fix_frame = _fix_frame(scenario, first_fix_frame(gnss), metadata)
             truth = reframe_truth(truth, frame, fix_frame)
             origin = None
-            metadata.pop("origin", None)
-            metadata["truth"]["map_origin"] = {"lat_deg": fix_frame.lat_deg, "lon_deg": fix_frame.lon_deg,
-                                               "height_m": fix_frame.height_m, "from": "first GNSS fix"}
     if progress is not None:
         progress(1.0)
-    return LogData(imu=imu, dvl=dvl, mounting=mounting, truth=truth, t0_ns=scenario.t0_ns, metadata=metadata,
+    return _log_data(scenario, seed, errors.gyro_bias0, errors.accel_bias0, metadata, origin,
+                     imu=imu, dvl=dvl, mounting=mounting, truth=truth, depth=depth, gnss=gnss)
+
+
+def _log_data(scenario: Scenario, seed: int, gyro_bias0: np.ndarray, accel_bias0: np.ndarray,
+              metadata: dict[str, Any], origin: GeoOrigin | None, **data: Any) -> LogData:
+    """The LogData of a simulation: its sensor data and truth (data) with the typed fields of the scenario."""
+    return LogData(t0_ns=scenario.t0_ns, metadata=metadata,
                    source=f"simulated:{scenario.name}:seed={seed}",
                    origin=origin,
                    true_calibration=DvlCalibration(float(scenario.dvl.scale),
                                                    tuple(float(a) for a in scenario.dvl.misalignment_deg),  # type: ignore[arg-type]
-                                                   float(rates.dvl_time_offset_s)),
-                   true_imu_bias=ImuBiases(tuple(errors.accel_bias0.tolist()), tuple(errors.gyro_bias0.tolist())),  # type: ignore[arg-type]
-                   segments=scenario.segments_typed(), depth=depth, gnss=gnss)
+                                                   float(scenario.rates.dvl_time_offset_s)),
+                   true_imu_bias=ImuBiases(tuple(accel_bias0.tolist()), tuple(gyro_bias0.tolist())),  # type: ignore[arg-type]
+                   segments=scenario.segments_typed(), **data)
+
+
+def _origin(scenario: Scenario) -> GeoOrigin:
+    return GeoOrigin(float(scenario.origin.lat_deg), float(scenario.origin.lon_deg), float(scenario.origin.height_m))
+
+
+def _sensor_metadata(scenario: Scenario, metadata: dict[str, Any]) -> None:
+    """The [depth] and [gnss] specifications into metadata["sensors"], when the scenario has them."""
+    if scenario.depth is not None:
+        metadata["sensors"]["depth"] = _listify_spec(asdict(scenario.depth))
+    if scenario.gnss is not None:
+        metadata["sensors"]["gnss"] = _listify_spec(asdict(scenario.gnss))
+
+
+def _fix_frame(scenario: Scenario, fix_frame: LocalFrame | None, metadata: dict[str, Any]) -> LocalFrame:
+    """gnss.origin_in_log = false: the first fix's frame becomes the map (metadata without "origin", the truth's
+    map origin recorded); an error without any fix."""
+    if fix_frame is None:
+        raise GtsamDvlError(f"{scenario.source}: key 'gnss.origin_in_log': false needs at least one fix, "
+                            "and the vehicle never surfaces while the receiver records")
+    metadata.pop("origin", None)
+    metadata["truth"]["map_origin"] = {"lat_deg": fix_frame.lat_deg, "lon_deg": fix_frame.lon_deg,
+                                       "height_m": fix_frame.height_m, "from": "first GNSS fix"}
+    return fix_frame
 
 
 def _listify_spec(d: dict[str, Any]) -> dict[str, Any]:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+
+def depth_rng(seed: int) -> np.random.Generator:
+    """The depth noise generator: SeedSequence(seed)'s fifth child, one draw per depth stamp."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(5)[4]))
 
 
 def _depth(scenario: Scenario, motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, seed: int,
@@ -129,15 +157,22 @@ def _depth(scenario: Scenario, motion: MotionProfile, track: PositionTrack, fram
     spec = scenario.depth
     assert spec is not None
     k = np.arange(0, n, int(round(scenario.rates.imu_hz / spec.rate_hz)))
+    return _depth_at(scenario, motion, track, frame, k, depth_rng(seed) if white_noise else None)
+
+
+def _depth_at(scenario: Scenario, motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k: np.ndarray,
+              rng: np.random.Generator | None) -> DepthData:
+    """The depth samples at the stamps k / rate (IMU sample indices), noise from rng (None: none)."""
+    spec = scenario.depth
+    assert spec is not None
     t = k / track.rate
     lat, _, h = track.at_samples(k)
     _, _, l_R_b, _ = imu_truth(motion.evaluate(t), lat, h)
     lever = np.asarray(spec.lever_arm_m, dtype=float)
     d_true = -(h + l_R_b[:, 2, :] @ lever)
     d = d_true + spec.bias_m
-    if white_noise and spec.noise_m > 0:
-        ss = np.random.SeedSequence(seed).spawn(5)[4]
-        d = d + spec.noise_m * np.random.Generator(np.random.PCG64(ss)).standard_normal(len(t))
+    if rng is not None and spec.noise_m > 0:
+        d = d + spec.noise_m * rng.standard_normal(len(t))
     p = depth_to_pressure(d, frame.lat0, spec.water_density_kg_m3, spec.atmospheric_pa)
     _, dd_dp = pressure_to_depth(p, frame.lat0, spec.water_density_kg_m3, spec.atmospheric_pa)
     var_pa = np.full(len(t), (spec.noise_m / dd_dp) ** 2 if spec.noise_m > 0 else 0.0)
@@ -157,7 +192,11 @@ def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarra
 
 def _truth(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, step: int) -> TruthData:
     """Truth of base_link in the map frame at every step-th IMU stamp."""
-    k = np.arange(0, n, step)
+    return _truth_at(motion, track, frame, np.arange(0, n, step))
+
+
+def _truth_at(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k: np.ndarray) -> TruthData:
+    """Truth of base_link in the map frame at the stamps k / rate (IMU sample indices)."""
     t = k / track.rate
     lat, lon, h = track.at_samples(k)
     m = motion.evaluate(t)
@@ -170,8 +209,22 @@ def _truth(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: in
                      n_v=n_v, b_omega=b_omega)
 
 
+def _bias_series(scenario: Scenario, errors: ImuErrors, rate: float) -> dict[str, Any] | None:
+    """The biases once a second (metadata truth "bias_series") when they walk, else None."""
+    spec = scenario.imu
+    if not (spec.gyro_bias_walk_deg_per_h_per_sqrt_h or spec.accel_bias_walk_micro_g_per_sqrt_h):
+        return None
+    k = np.arange(0, errors.gyro_bias.shape[0], int(round(rate)))
+    return {
+        "t": (k / rate).tolist(),
+        "gyro_rad_s": errors.gyro_bias[k].tolist(),
+        "accel_m_s2": errors.accel_bias[k].tolist(),
+    }
+
+
 def _metadata(
-    scenario: Scenario, seed: int, white: bool, mounting: Mounting, errors: ImuErrors, rate: float
+    scenario: Scenario, seed: int, white: bool, mounting: Mounting, gyro_bias0: np.ndarray,
+    accel_bias0: np.ndarray, bias_series: dict[str, Any] | None,
 ) -> dict[str, Any]:
     from gtsam_dvl import __version__
 
@@ -180,17 +233,11 @@ def _metadata(
 
     o = scenario.origin
     imu_truth_md: dict[str, Any] = {
-        "gyro_bias_rad_s": errors.gyro_bias0.tolist(),
-        "accel_bias_m_s2": errors.accel_bias0.tolist(),
+        "gyro_bias_rad_s": gyro_bias0.tolist(),
+        "accel_bias_m_s2": accel_bias0.tolist(),
     }
-    spec = scenario.imu
-    if spec.gyro_bias_walk_deg_per_h_per_sqrt_h or spec.accel_bias_walk_micro_g_per_sqrt_h:
-        k = np.arange(0, errors.gyro_bias.shape[0], int(round(rate)))
-        imu_truth_md["bias_series"] = {
-            "t": (k / rate).tolist(),
-            "gyro_rad_s": errors.gyro_bias[k].tolist(),
-            "accel_m_s2": errors.accel_bias[k].tolist(),
-        }
+    if bias_series is not None:
+        imu_truth_md["bias_series"] = bias_series
     return {
         "scenario_name": scenario.name,
         "scenario": copy.deepcopy(scenario.raw),

@@ -124,6 +124,14 @@ class McapContainer:
             if b > a:
                 self._chunk(channel[a:b], seq[a:b], log_time[a:b], pool, start[a:b], length[a:b])
 
+    def write_chunk(
+        self, channel: np.ndarray, seq: np.ndarray, log_time: np.ndarray, pool: np.ndarray, start: np.ndarray,
+        length: np.ndarray,
+    ) -> None:
+        """One chunk record holding exactly these K messages (arguments as write_messages'), for callers that
+        choose the chunk boundaries themselves (the streaming writer, mcap/writer.py)."""
+        self._chunk(channel, seq, log_time, pool, start, length)
+
     def _chunk(
         self, channel: np.ndarray, seq: np.ndarray, log_time: np.ndarray, pool: np.ndarray, start: np.ndarray,
         length: np.ndarray,

@@ -257,15 +257,7 @@ class McapLogWriter:
         if self._file.closed:
             return
         try:
-            if self._batches:
-                chan = np.concatenate([np.full(len(s), c, np.uint16) for c, s, _, _ in self._batches])
-                seq = np.concatenate([self._next_seq(c, len(s)) for c, s, _, _ in self._batches])
-                stamps = np.concatenate([s for _, s, _, _ in self._batches])
-                lens = np.concatenate([n for _, _, _, n in self._batches])
-                pool = np.concatenate([p for _, _, p, _ in self._batches])
-                start = np.concatenate([[0], np.cumsum(lens)[:-1]])
-                order = np.argsort(stamps, kind="stable")  # ties keep the order topics were added
-                self._mcap.write_messages(chan[order], seq[order], stamps[order], pool, start[order], lens[order])
+            self._write_batches()
             self._mcap.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
@@ -277,6 +269,25 @@ class McapLogWriter:
         except BaseException:
             self.abort()
             raise
+
+    def _write_batches(self) -> None:
+        """Every message added, merged in log-time order, into chunks."""
+        if self._batches:
+            chan, seq, stamps, pool, start, lens = self._take_batches()
+            order = np.argsort(stamps, kind="stable")  # ties keep the order topics were added
+            self._mcap.write_messages(chan[order], seq[order], stamps[order], pool, start[order], lens[order])
+
+    def _take_batches(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The messages added since the last call, concatenated in the order added, with their sequence numbers
+        (channel, seq, stamps, pool, start, length); the list of batches is emptied."""
+        batches, self._batches = self._batches, []
+        chan = np.concatenate([np.full(len(s), c, np.uint16) for c, s, _, _ in batches])
+        seq = np.concatenate([self._next_seq(c, len(s)) for c, s, _, _ in batches])
+        stamps = np.concatenate([s for _, s, _, _ in batches])
+        lens = np.concatenate([n for _, _, _, n in batches])
+        pool = np.concatenate([p for _, _, p, _ in batches])
+        start = np.concatenate([[0], np.cumsum(lens)[:-1]])
+        return chan, seq, stamps, pool, start, lens
 
     def _next_seq(self, cid: int, n: int) -> np.ndarray:
         first = self._seq[cid]
@@ -299,3 +310,62 @@ class McapLogWriter:
             self.close()
         else:
             self.abort()
+
+
+class McapStreamWriter(McapLogWriter):
+    """McapLogWriter for logs too long to hold: ``flush(before_ns)`` writes the messages added so far whose
+    stamps are before ``before_ns`` (the caller promises that no later message is stamped earlier), so memory
+    holds one part of the log at a time. The file is the one McapLogWriter writes from the same messages
+    when every topic is added in the same order on first use: one log-time order (ties by channel, then
+    sequence: McapLogWriter's order when each topic was one batch) and the same chunks, which are cut on
+    the running byte count of the message records from the first message."""
+
+    def __init__(self, path: str | os.PathLike[str], *, t0_ns: int = 0, chunk_size: int = 1 << 20) -> None:
+        super().__init__(path, t0_ns=t0_ns, chunk_size=chunk_size)
+        empty = np.zeros(0, np.int64)
+        # messages added and not yet in a chunk: channel, seq, stamp, body length, bodies back to back
+        self._pending: tuple[np.ndarray, ...] = (np.zeros(0, np.uint16), np.zeros(0, np.uint32), empty, empty,
+                                                 np.zeros(0, np.uint8))
+        self._bytes_written = 0  # message record bytes in the chunks written so far
+
+    def flush(self, before_ns: int | None = None) -> None:
+        """Write the complete chunks of the messages stamped before ``before_ns`` (None: all of them); the
+        last, unfilled chunk and later messages wait for the next flush or close."""
+        self._write_ready(before_ns, final=False)
+
+    def _write_batches(self) -> None:
+        self._write_ready(None, final=True)
+
+    def _write_ready(self, before_ns: int | None, final: bool) -> None:
+        chan, seq, stamps, lens, pool = self._pending
+        if self._batches:
+            c2, s2, t2, p2, _, n2 = self._take_batches()
+            chan, seq, stamps = np.concatenate([chan, c2]), np.concatenate([seq, s2]), np.concatenate([stamps, t2])
+            lens, pool = np.concatenate([lens, n2]), np.concatenate([pool, p2])
+        if not len(stamps):
+            return
+        start = np.concatenate([[0], np.cumsum(lens)[:-1]])
+        order = np.lexsort((seq, chan, stamps))
+        chan, seq, stamps, lens, start = chan[order], seq[order], stamps[order], lens[order], start[order]
+        ready = len(stamps) if before_ns is None else int(np.searchsorted(stamps, before_ns, side="left"))
+        rec_end = self._bytes_written + np.cumsum(31 + lens[:ready])
+        chunk_no = (rec_end - 1) // self._mcap.chunk_size  # as McapContainer.write_messages, from the first message
+        bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [ready]])
+        done = len(bounds) - 1 if final else len(bounds) - 2  # the last chunk may still grow
+        for a, b in zip(bounds[:done], bounds[1 : done + 1], strict=True):
+            if b > a:
+                self._mcap.write_chunk(chan[a:b], seq[a:b], stamps[a:b], pool, start[a:b], lens[a:b])
+        cut = int(bounds[done]) if done > 0 else 0
+        if cut:
+            self._bytes_written = int(rec_end[cut - 1])
+        keep = slice(cut, None)
+        self._pending = (chan[keep], seq[keep], stamps[keep], lens[keep], _gather(pool, start[keep], lens[keep]))
+
+
+def _gather(pool: np.ndarray, start: np.ndarray, lens: np.ndarray) -> np.ndarray:
+    """The bodies pool[start[k] : start[k] + lens[k]] back to back."""
+    if not len(lens):
+        return np.zeros(0, np.uint8)
+    new_start = np.cumsum(lens) - lens
+    idx = np.arange(int(lens.sum()), dtype=np.int64) + np.repeat(start - new_start, lens)
+    return pool[idx]
