@@ -6,11 +6,16 @@ before it (factors/dvl_keyframe.py) through the preintegrated IMU motion over [t
 integrates each keyframe interval's samples once, in time order, and takes a snapshot of the preintegration at
 each ping (PimSnapshot): the zero-bias deltas dR, dv, their bias Jacobians and the covariance of the
 preintegration error [rotation, position, velocity] (plus the motion-model covariance of any IMU gap held:
-estimators/gaps.py). GTSAM 4.3's Python wrapper exposes deltaRij, deltaVij and preintMeasCov but not the bias
-Jacobians, so these come from central differences of pim.predict over the bias (exact to rounding: the
-prediction is linear in the bias in the preintegration's tangent; 12 predictions of 2 us each per ping). The
-snapshot's parameters have no gravity and no Earth rate, so predict() returns the bias-corrected deltas
-themselves; the keyframe factor applies the Earth model.
+estimators/gaps.py). GTSAM 4.3's Python wrapper exposes deltaRij, deltaVij, preintMeasCov and the tangent
+preintegrated() = [theta, p, v] but not the bias Jacobians. The snapshot's parameters have no gravity and no
+Earth rate, so predict() returns the bias-corrected deltas themselves, and GTSAM's tangent preintegration
+corrects the tangent linearly in the bias: theta(b) = theta + H_theta b_g, v(b) = v + H_v b, with the
+attitude Exp(theta(b)) (NavState.retract from the identity). So one prediction per bias component gives H
+exactly (to rounding, whatever the step: PROBE_ACC, PROBE_GYRO), and dR's right-tangent Jacobian is
+J_r(theta) H_theta (Rot3.ExpmapDerivative): 6 predictions per ping. Up to ANALYTIC_MAX_ANGLE, where Logmap of
+the probed attitude cannot wrap at pi; beyond it, central differences of 12 predictions of the relative
+rotation dR^T R(b) (the earlier method, within 1e-9 relative of this one below it: the difference is its
+truncation error, tests/estimators/test_keyframes.py). The keyframe factor applies the Earth model.
 
 This integrates the samples of a keyframe interval up to its last ping a second time (the IMU factor's
 preintegration, graph._preintegrate, goes once over the whole interval): at 5 Hz pings and 1 s keyframes that
@@ -28,8 +33,15 @@ from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.factors import PingMotion
 
-BIAS_STEP_ACC = 1e-2  # m/s^2, central-difference step of the accelerometer bias
-BIAS_STEP_GYRO = 1e-4  # rad/s, central-difference step of the gyro bias
+BIAS_STEP_ACC = 1e-2  # m/s^2, central-difference step of the accelerometer bias (beyond ANALYTIC_MAX_ANGLE)
+BIAS_STEP_GYRO = 1e-4  # rad/s, central-difference step of the gyro bias (beyond ANALYTIC_MAX_ANGLE)
+ANALYTIC_MAX_ANGLE = 2.5  # rad, the largest |theta| whose Jacobians come from the tangent (module doc)
+PROBE_ACC = 1.0  # m/s^2, the accelerometer bias of each probing prediction (the prediction is linear in it)
+PROBE_GYRO = 1e-2  # rad/s, the gyro bias: theta's change small beside pi (Logmap's range)
+_STATE0 = gtsam.NavState()
+_PROBES = tuple(gtsam.imuBias.ConstantBias(np.eye(3)[k] * PROBE_ACC, np.zeros(3)) for k in range(3)) + tuple(
+    gtsam.imuBias.ConstantBias(np.zeros(3), np.eye(3)[k] * PROBE_GYRO) for k in range(3))
+_PROBE_SCALE = np.array([1.0 / PROBE_ACC] * 3 + [1.0 / PROBE_GYRO] * 6)[:, None]
 
 
 @dataclass(frozen=True)
@@ -65,16 +77,38 @@ def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationP
 
 
 def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None) -> PimSnapshot:
-    """The snapshot of pim now (its parameters from snapshot_params, bias estimate zero)."""
-    state0 = gtsam.NavState()
+    """The snapshot of pim now (its parameters from snapshot_params, bias estimate zero; module doc)."""
+    x = np.asarray(pim.preintegrated(), dtype=float)  # [theta, p, v] at zero bias
+    theta, dv = x[:3], x[6:]
+    if float(theta @ theta) <= ANALYTIC_MAX_ANGLE**2:
+        probes = [pim.predict(_STATE0, b) for b in _PROBES]
+        # columns: v per accelerometer bias, v per gyro bias, theta per gyro bias
+        d = np.concatenate([s.velocity() for s in probes]
+                           + [gtsam.Rot3.Logmap(s.attitude()) for s in probes[3:]]).reshape(9, 3)
+        d[:6] -= dv
+        d[6:] -= theta
+        d = (d * _PROBE_SCALE).T
+        dR_dbg = gtsam.Rot3.ExpmapDerivative(theta) @ d[:, 6:]
+        dv_dba, dv_dbg = d[:, :3].copy(), d[:, 3:6].copy()
+    else:
+        dR_dbg, dv_dba, dv_dbg = _central_differences(pim)
+    cov = np.asarray(pim.preintMeasCov(), dtype=float)
+    if extra_cov is not None:
+        cov = cov + extra_cov
+    return PimSnapshot(float(pim.deltaTij()), pim.deltaRij().matrix(), np.asarray(pim.deltaVij(), dtype=float),
+                       np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
+
+
+def _central_differences(pim: gtsam.PreintegratedImuMeasurements) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(dR_dbg, dv_dba, dv_dbg) by central differences of pim.predict (the relative rotation dR^T R(b): no
+    wrap at pi)."""
     zero = np.zeros(3)
 
     def predict(b_a: np.ndarray, b_g: np.ndarray) -> tuple[gtsam.Rot3, np.ndarray]:
-        s = pim.predict(state0, gtsam.imuBias.ConstantBias(b_a, b_g))
+        s = pim.predict(_STATE0, gtsam.imuBias.ConstantBias(b_a, b_g))
         return s.attitude(), np.asarray(s.velocity(), dtype=float)
 
     dR = pim.deltaRij()
-    dv = np.asarray(pim.deltaVij(), dtype=float)
     dR_dbg, dv_dba, dv_dbg = np.zeros((3, 3)), np.zeros((3, 3)), np.zeros((3, 3))
     for k in range(3):
         e = np.zeros(3)
@@ -84,11 +118,7 @@ def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | No
         (R_p, v_p), (R_m, v_m) = predict(zero, e), predict(zero, -e)
         dv_dbg[:, k] = (v_p - v_m) / (2 * BIAS_STEP_GYRO)
         dR_dbg[:, k] = (gtsam.Rot3.Logmap(dR.between(R_p)) - gtsam.Rot3.Logmap(dR.between(R_m))) / (2 * BIAS_STEP_GYRO)
-    cov = np.asarray(pim.preintMeasCov(), dtype=float)
-    if extra_cov is not None:
-        cov = cov + extra_cov
-    dt = float(pim.deltaTij())
-    return PimSnapshot(dt, dR.matrix(), dv, np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
+    return dR_dbg, dv_dba, dv_dbg
 
 
 def ping_snapshots(t_state: float, t_pings: list[float], params: gtsam.PreintegrationParams, imu_t: np.ndarray,
@@ -103,8 +133,8 @@ def ping_snapshots(t_state: float, t_pings: list[float], params: gtsam.Preintegr
     spans: list[tuple[float, float]] = []
     for t_p in t_pings:
         idx, dt, held = pieces_with_holds(imu_t, starts, gaps, a, t_p)
-        for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
-            pim.integrateMeasurement(b_f[i], b_omega[i], dt_i)
+        for f_i, w_i, dt_i in zip(b_f[idx], b_omega[idx], dt.tolist(), strict=True):  # rows: no per-sample indexing
+            pim.integrateMeasurement(f_i, w_i, dt_i)
         spans += list(held.spans)
         extra = hold_covariance(imu_cfg, Holds(tuple(spans)), t_p - t_state) if spans else None
         out.append(snapshot(pim, extra))

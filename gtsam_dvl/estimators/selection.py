@@ -141,8 +141,9 @@ class PingScreen:
     motion of the DVL's velocity). The velocity change the IMU allows: dv_imu = sum of dt
     (|df| + |omega - omega_0| |v_prev|), plus dvl.max_accel_m_s2 dt for the acceleration at the window's
     start, which the IMU alone cannot see (gravity hides it). With dvl.use_beams the screen compares the
-    beam velocities (zero and repeat rules only). The whole-log estimators call check()
-    with the log's arrays; the online estimator feeds push_imu() and calls check_buffered()."""
+    beam velocities (zero and repeat rules only). The online estimator feeds push_imu() and calls
+    check_buffered(); the whole-log estimators call screen_pings, which makes check()'s decisions in bulk and
+    runs _classify only where the bulk cannot decide (this class is its reference)."""
 
     cfg: DvlConfig
     last_t: float = -np.inf
@@ -228,14 +229,154 @@ class PingScreen:
 
 
 def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) -> np.ndarray:
-    """PingScreen's reason code for each of the pings idx (usable by classify_pings, in time order)."""
-    screen = PingScreen(cfg)
-    code = np.zeros(len(idx), dtype=np.int8)
+    """PingScreen's reason code for each of the pings idx (usable by classify_pings, in time order): the
+    decisions of PingScreen.check fed the pings one by one (the reference, and the online estimator's path),
+    computed in bulk.
+
+    Every ping's evidence is first computed at once assuming the ping before it was accepted and was the
+    reference (_bulk_screen: the IMU samples between consecutive pings are disjoint windows). A walk through
+    the pings then takes that code wherever the assumption holds (the previous ping accepted with the one
+    before it as its own reference, so that last_rate is the assumed one too) and the bulk evidence is clear
+    of every threshold; elsewhere (after a rejection, a window capped at SCREEN_WINDOW_S, a value within
+    _BAND of a threshold, a window longer than the bulk handles) it runs PingScreen's own check on the true
+    reference."""
+    m = len(idx)
+    code = np.zeros(m, dtype=np.int8)
+    if not cfg.screen or m == 0:
+        return code  # check() accepts every ping without the screen
+    t = np.asarray(dvl.t, dtype=float)[idx]
     b = dvl.beams
-    for n, j in enumerate(idx.tolist()):
-        beams = None if b is None else (b.d_u[j], b.v[j], b.valid[j])
-        code[n] = screen.check(float(dvl.t[j]), screened_value(dvl.d_v[j], beams, cfg), imu.t, imu.b_omega, imu.b_f)
+    if cfg.use_beams and b is not None:  # screened_value's choice
+        y = np.where(np.asarray(b.valid[idx], dtype=bool), np.asarray(b.v[idx], dtype=float), np.nan)
+    else:
+        y = np.asarray(dvl.d_v, dtype=float)[idx]
+    bulk, sure = _bulk_screen(t, y, imu, cfg)
+    screen = PingScreen(cfg)
+    t_list, bulk_list, sure_list = t.tolist(), bulk.tolist(), sure.tolist()
+    last = -1  # the reference: the last accepted ping
+    rate_of: tuple[int, int] | None = None  # the pings whose velocity change last_rate is (None: 0.0)
+    for n in range(m):
+        # the pair the bulk assumed for last_rate: none for the first reference, and never with beams
+        assumed = None if cfg.use_beams or n < 2 else (n - 2, n - 1)
+        if last < 0:
+            c = USABLE
+        elif last == n - 1 and sure_list[n] and rate_of == assumed:
+            c = bulk_list[n]
+        else:
+            screen.last_t, screen.last_y = t_list[last], np.array(y[last], dtype=float)
+            screen.last_rate = 0.0 if rate_of is None else (
+                float(np.linalg.norm(y[rate_of[1]] - y[rate_of[0]])) / (t_list[rate_of[1]] - t_list[rate_of[0]]))
+            c = screen._classify(t_list[n], y[n], imu.t, imu.b_omega, imu.b_f)
+        code[n] = c
+        if c == USABLE:
+            if last >= 0 and not cfg.use_beams and t_list[n] > t_list[last]:  # check()'s update of last_rate
+                rate_of = (last, n)
+            last = n
     return code
+
+
+# Relative margin around each threshold within which the bulk screen leaves the decision to PingScreen: the bulk
+# evaluates PingScreen's formulas on the same samples, differing only in the order of the window sums and in
+# dot products (a few ulps, 1e-16 relative, times the window's samples), far inside this.
+_BAND = 1e-9
+_BULK_MAX_SAMPLES = 1 << 14  # IMU samples per block of the bulk screen (bounded memory on long logs)
+
+
+def _window_sums(imu: ImuData, t_from: np.ndarray, lo: np.ndarray, cnt: np.ndarray) -> np.ndarray:
+    """PingScreen._classify's window sums for windows of cnt >= 1 samples from lo, starting at t_from (s):
+    columns sum dt df (3, m/s), sum dt |df| (m/s), sum dt |omega - omega_0| (rad), sum dt |f| (m/s, for the
+    band). Blocks of windows padded to the longest (padding has dt = 0), one array per axis (contiguous)."""
+    out = np.zeros((len(lo), 6))
+    b_omega, b_f = np.ascontiguousarray(imu.b_omega.T), np.ascontiguousarray(imu.b_f.T)  # (3, samples)
+    per_block = max(1, _BULK_MAX_SAMPLES // int(cnt.max()))
+    for start in range(0, len(lo), per_block):
+        stop = min(start + per_block, len(lo))
+        lo_b, cnt_b = lo[start:stop], cnt[start:stop]
+        col = np.arange(int(cnt_b.max()))[None, :]
+        inside = col < cnt_b[:, None]
+        i = np.where(inside, lo_b[:, None] + col, lo_b[:, None])  # (windows, width)
+        tw = imu.t[i]
+        dt = np.empty(tw.shape)
+        dt[:, 0] = tw[:, 0] - t_from[start:stop]
+        dt[:, 1:] = tw[:, 1:] - tw[:, :-1]
+        dt[~inside] = 0.0
+        w, f = b_omega[:, i], b_f[:, i]  # (3, windows, width)
+        # df = f - exp(theta)^T f_0 (_turned_back), theta the gyro's angle since the window's start
+        theta = np.cumsum(w * dt, axis=2)
+        angle = np.sqrt(theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2])
+        k = theta / np.where(angle < 1e-12, 1.0, angle)
+        c, s = np.cos(angle), np.sin(angle)
+        v = f[:, :, :1]
+        k_v = k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
+        k_x_v = np.stack([k[1] * v[2] - k[2] * v[1], k[2] * v[0] - k[0] * v[2], k[0] * v[1] - k[1] * v[0]])
+        df = f - (v * c - k_x_v * s + k * (k_v * (1.0 - c)))
+        dw = w - w[:, :, :1]
+        out[start:stop, :3] = np.sum(df * dt, axis=2).T
+        out[start:stop, 3] = np.sum(np.sqrt(df[0] * df[0] + df[1] * df[1] + df[2] * df[2]) * dt, axis=1)
+        out[start:stop, 4] = np.sum(np.sqrt(dw[0] * dw[0] + dw[1] * dw[1] + dw[2] * dw[2]) * dt, axis=1)
+        out[start:stop, 5] = np.sum(np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) * dt, axis=1)
+    return out
+
+
+def _bulk_screen(t: np.ndarray, y: np.ndarray, imu: ImuData, cfg: DvlConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(code, sure) of each ping n >= 1 (ping 0: USABLE, sure) with screened values y (M, K) under the assumption
+    that ping n - 1 is the reference and ping n - 2 was its reference (last_rate from the two; 0 for ping 1 and
+    with dvl.use_beams): PingScreen's rules on the samples in (t[n-1], t[n]]. sure: the assumption's code is
+    PingScreen's (no capped window, every value finite and clear of the thresholds by _BAND)."""
+    beams = cfg.use_beams  # PingScreen's beam rules (even on a 3-D velocity when the log has no beams)
+    m = len(t)
+    code = np.zeros(m, dtype=np.int8)
+    sure = np.ones(m, dtype=bool)
+    if m < 2:
+        return code, sure
+    t_prev, t_now, y_prev, y_now = t[:-1], t[1:], y[:-1], y[1:]
+    span = t_now - t_prev  # t - last_t
+    with np.errstate(all="ignore"):
+        if beams:
+            beam_prev = ~np.isnan(y_prev)
+            prev_speed = np.max(np.where(beam_prev, np.abs(y_prev), -np.inf), axis=1)  # nanmax
+            prev_speed[~beam_prev.any(axis=1)] = np.nan  # nanmax of no beam: NaN (left to PingScreen)
+            rate = np.zeros(m - 1)
+        else:
+            prev_speed = np.linalg.norm(y_prev, axis=1)
+            rate = np.zeros(m - 1)
+            rate[1:] = np.linalg.norm(y[1:-1] - y[:-2], axis=1) / (t[1:-1] - t[:-2])
+        lo = np.searchsorted(imu.t, t_prev, side="right")
+        cnt = np.searchsorted(imu.t, t_now, side="right") - lo
+        uncapped = t_now - SCREEN_WINDOW_S <= t_prev  # t_from = last_t
+        # a window far longer than the typical one (after a dropout) is left to PingScreen: it would widen the
+        # padding of its block
+        short = cnt <= 8 * int(np.median(cnt)) + 64
+        has = uncapped & short & (cnt >= 1)
+        sums = np.zeros((m - 1, 6))
+        if has.any():
+            sums[has] = _window_sums(imu, t_prev[has], lo[has], cnt[has])
+        s_df, s_adf, s_dw, s_af = np.linalg.norm(sums[:, :3], axis=1), sums[:, 3], sums[:, 4], sums[:, 5]
+        dv_low = np.abs(s_df - rate * span) - s_dw * prev_speed
+        motion = has & (dv_low > cfg.motion_dv_m_s)
+        dv_imu = np.where(has, s_adf + s_dw * prev_speed, 0.0)
+        scale = s_adf + s_af + rate * span + s_dw * prev_speed
+        clear = ~has | (np.abs(dv_low - cfg.motion_dv_m_s) > _BAND * (scale + cfg.motion_dv_m_s))
+        clear &= np.abs(prev_speed - cfg.moving_speed_m_s) > _BAND * cfg.moving_speed_m_s
+        finite_now = np.isfinite(y_now)
+        zero = finite_now.any(axis=1) & np.where(finite_now, y_now == 0.0, True).all(axis=1)
+        zero &= motion | (prev_speed > cfg.moving_speed_m_s)
+        repeated = motion & ((y_now == y_prev) | (np.isnan(y_now) & np.isnan(y_prev))).all(axis=1)
+        ok = uncapped & short & (span >= 0) & np.isfinite(prev_speed) & np.isfinite(rate)
+        ok &= np.isfinite(sums).all(axis=1)
+        implausible = np.zeros(m - 1, dtype=bool)
+        if not beams:
+            jump = np.linalg.norm(y_now - y_prev, axis=1)
+            allowed = cfg.max_accel_m_s2 * span + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+            implausible = jump > allowed
+            band = _BAND * (jump + allowed + np.linalg.norm(y_now, axis=1) + prev_speed
+                            + cfg.accel_imu_factor * scale)
+            clear &= np.abs(jump - allowed) > band
+            ok &= np.isfinite(y_now).all(axis=1) & np.isfinite(jump) & np.isfinite(allowed)
+    code[1:] = np.where(zero, ZERO_WHILE_MOVING, np.where(repeated, REPEATED,
+                                                          np.where(implausible, IMPLAUSIBLE_ACCEL, USABLE)))
+    sure[1:] = ok & clear
+    return code, sure
 
 
 def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counters: dict[str, int]) -> np.ndarray:
