@@ -22,12 +22,42 @@ Which mode:
 - The trajectory of the returned NavResult is the filtering one in both modes: each state as estimated when its
   ping was processed, what the vehicle knew then (the batch smoother gives the smoothed one).
 
+Keyframes (`[solver] keyframe_spacing_s`, 1 s by default; online/keyframes.py): the states are the batch
+smoother's, at the keyframes (selection.keyframe_mask's rule, decided ping by ping: the first usable ping,
+then each first one at least 0.98 spacings after the previous keyframe) and at the DVL-dropout fillers; every
+other usable ping becomes the batch smoother's DVL factor on the state before it through the IMU motion since
+that state (FactorMaker.dvl_keyframe_factors_for; the motion integrated as the pings come, to the same bits as
+keyframes.ping_snapshots). That state is always the newest: a ping between keyframes comes less than a spacing
+after its keyframe, a filler max_state_spacing_s >= spacing after a state. At finish() the last ping still
+between keyframes becomes a keyframe, as the batch smoother makes the last usable ping one. On a 1 Hz DVL, 1 s
+keyframes are a state per ping (the same result to the last bit as keyframe_spacing_s = 0).
+- Where a ping between keyframes goes (`defer_between_pings`): True (default), its factor waits for the next
+  state's iSAM2 update; False, an iSAM2 update of its own at once. Deferred, because it gives the lower p99
+  and the higher real-time factor: on bench/bench_online_long.py (1 h, 200 Hz IMU / 5 Hz DVL, the two runs
+  back to back on the shared 2-core machine, load 3.2) the CPU time per epoch has p99 2.8 ms deferred against
+  4.4 ms at once, p50 0.9 against 1.6 ms, and the real-time factor is 130 against 97 (the wall-time p99s, 6.2
+  and 5.9 ms, are the other processes' preemptions; a pair at load 3: 6.1 against 9.7 ms). An iSAM2 update has a fixed
+  cost (the ordering, re-eliminating the cliques of the newest state and the shared keys, the relinearisation
+  check, the marginal covariance of the estimate: about 1 ms) that deferral pays once per state instead of once
+  per ping, while the ping's own work (its IMU motion, its factor, the prediction below) is a fraction of a
+  millisecond; the state's update linearises four more factors (60 us each). What it gives up: until the next
+  state, the pings since the newest state are not in the estimate.
+- estimate() after a ping between keyframes: the state at the ping predicted from the newest state's estimate
+  through the IMU motion up to it (online/keyframes.predict_at_ping: the keyframe factor's own model, its
+  covariance propagated to first order), OnlineEstimate.t the ping's time and predicted_from_t the state's
+  (nan for the estimate of a state). Its errors against the simulated truth are consistent with its sigmas
+  (tests/estimators/test_online_keyframes.py). The Timeline and the NavResult hold the states only, each as
+  estimated when it was made, as the batch smoother's hold its states.
+- latencies_s, latencies_cpu_s and latency_t: one entry per epoch processed, each state (with or without a ping)
+  and each ping between keyframes.
+
 Design (see also window.py for the iSAM2 engine):
 - The FactorMaker the batch smoother's whole-log graph uses (estimators/factor_maker.py) makes every factor,
   prior and initial guess from explicit measurements; pings are selected and IMU intervals split by the rules
   of estimators/selection.py, as in the batch smoother and the EKF.
-- IMU samples are kept raw since the last epoch and preintegrated when the epoch's ping is taken, exactly as
-  the batch smoother does (a sample straddling the ping is split), so a ping that arrives after IMU samples
+- IMU samples are kept raw since the newest state and preintegrated up to the next one as its pings come and
+  when the state is made, exactly as the batch smoother does (a sample straddling the state's ping is split;
+  online/keyframes.StatePreintegration: the same pieces in the same order), so a ping that arrives after IMU samples
   past its stamp (another topic, another latency) is still placed exactly.
 - Alignment: the estimator waits for `align_s` seconds of the initial static segment (or motion, if sooner,
   after alignment.min_static_s) and aligns on them with the batch smoother's coarse alignment, then processes
@@ -38,7 +68,8 @@ Design (see also window.py for the iSAM2 engine):
   this, on paper-3d the scale went from 0.8 +- 0.5 to 1.17 +- 0.15 over the static phase, where the batch
   smoother's filtering sigma stays at 0.37 (linearised once, at its solution). Such a ping keeps its DVL factor
   (the same model, on pose, velocity, scale and misalignment: a zero-velocity update when static) with zero
-  Jacobians for scale and misalignment, which are "considered" at their current value. Given up: the
+  Jacobians for scale and misalignment, which are "considered" at their current value (a slow ping between
+  keyframes likewise: online/keyframes.considered_keyframe_factor). Given up: the
   information of pings slower than the threshold, (v / sigma)^2 per ping, nothing next to a manoeuvre (the
   final estimates agree with the batch smoother's to 0.03 sigma in the full-history mode).
 - Depth (`push_depth`, LogData.depth in feed_log; [depth], estimators/depth.py): each sample is converted as the
@@ -70,6 +101,7 @@ import dataclasses
 import math
 import time
 import warnings
+from array import array
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -89,6 +121,7 @@ from gtsam_dvl.estimators.alignment import STATIC_MARGIN_S, Alignment, align, ma
 from gtsam_dvl.estimators.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
+    Gaps,
     check_gaps,
     check_spacing,
     filler_due,
@@ -96,7 +129,15 @@ from gtsam_dvl.estimators.gaps import (
     nominal_period,
     sample_starts_with_gaps,
 )
+from gtsam_dvl.estimators.keyframes import PimSnapshot
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
+from gtsam_dvl.estimators.online.keyframes import (
+    BetweenPings,
+    KeyframeGravity,
+    StatePreintegration,
+    considered_keyframe_factor,
+    predict_at_ping,
+)
 from gtsam_dvl.estimators.online.types import (
     MODES,
     EpochHistory,
@@ -106,8 +147,9 @@ from gtsam_dvl.estimators.online.types import (
     latency_stats,
     misalignment_deg_and_cov,
 )
-from gtsam_dvl.estimators.online.window import IncrementalSmoother, RelinearizationThresholds
+from gtsam_dvl.estimators.online.window import IncrementalSmoother, RelinearizationThresholds, StateEstimate
 from gtsam_dvl.estimators.selection import (
+    KEYFRAME_TOLERANCE,
     USABLE,
     KeyframeThinning,
     PingScreen,
@@ -115,7 +157,7 @@ from gtsam_dvl.estimators.selection import (
     count_reasons,
     screened_value,
 )
-from gtsam_dvl.factors import dvl_beam_error, dvl_velocity_error, dvl_velocity_offset_error
+from gtsam_dvl.factors import PingMotion, dvl_beam_error, dvl_velocity_error, dvl_velocity_offset_error
 
 __all__ = ["MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
            "feed_log", "latency_stats", "smooth_online"]
@@ -128,6 +170,7 @@ class _Ping:
     d_cov: np.ndarray
     valid: bool
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    key: bool = True  # a keyframe (a state), else a ping between keyframes (a factor on the state before it)
 
 
 RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
@@ -190,6 +233,10 @@ class OnlineEstimator:
         self.options = options or config.online  # options=: overrides config.online
         self.config = dataclasses.replace(config, online=self.options).validate()  # the effective config
         check_spacing(self.config.solver)
+        spacing = self.config.solver.keyframe_spacing_s
+        if spacing > self.config.solver.max_state_spacing_s:  # the batch smoother's rule (estimators/graph.py)
+            raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
+                                f"{spacing:g} s: states without a ping would take the places of the keyframes")
         if self.config.dvl.estimate_time_offset and self.config.dvl.use_beams:
             raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
         if self.config.dvl.estimate_lever_arm:
@@ -197,9 +244,25 @@ class OnlineEstimator:
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self._imu_rotated = imu_is_rotated(self.mounting)
         self.counters: dict[str, int] = {}
-        self.latencies_s: list[float] = []  # per DVL epoch: preintegration, factors, iSAM2 update, covariances
+        # wall time (s) per epoch processed (a state, with or without a ping, or a ping between keyframes: the
+        # preintegration, factors, iSAM2 update, covariances), the process's CPU time over it (s: what other
+        # processes on a shared machine do not inflate) and the epoch's time (s): arrays, not lists of Python
+        # floats (8 bytes each)
+        self.latencies_s: array[float] = array("d")
+        self.latencies_cpu_s: array[float] = array("d")
+        self.latency_t: array[float] = array("d")
         self.builder: FactorMaker | None = None
         self._keyframes = KeyframeThinning(self.config.solver.keyframe_interval_s)
+        # keyframes ([solver] keyframe_spacing_s): selection.keyframe_mask's rule, ping by ping
+        self._spacing = KeyframeThinning(spacing * (1.0 - KEYFRAME_TOLERANCE))
+        # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
+        # at once (False; module doc, "Keyframes")
+        self.defer_between_pings = True
+        self._between: BetweenPings | None = None
+        self._interval: StatePreintegration | None = None  # the next IMU factor's, integrated at the pings between
+        self._gravity: KeyframeGravity | None = None
+        self._deferred: list[tuple[_Ping, list[gtsam.NonlinearFactor]]] = []
+        self._state: StateEstimate | None = None  # the newest state's estimate (after its update, or the last)
         self.smoother: IncrementalSmoother | None = None
         self._last_imu_t = -math.inf
         self._last_dvl_t = -math.inf
@@ -363,6 +426,11 @@ class OnlineEstimator:
         self._count("dvl_after_imu", len(self._pending) + len(self._unscreened))
         self._pending.clear()
         self._unscreened.clear()
+        if self._deferred:  # the batch smoother makes the last usable ping a keyframe: so does this
+            last, _ = self._deferred.pop()
+            self._count("pings_between_keyframes", -1)
+            last.key = True
+            self._close(last)
         if self.smoother is not None and self.smoother.n > 0:
             self.smoother.add_factors(self._depth_factors(self.smoother.n - 1, self.smoother.t_last, final=True))
             self.smoother.refresh_gravity()
@@ -372,7 +440,9 @@ class OnlineEstimator:
 
     # ----- output --------------------------------------------------------------------------------
     def estimate(self) -> OnlineEstimate | None:
-        """The estimate after the latest epoch (None before the first)."""
+        """The estimate after the latest epoch (None before the first): the newest state's, or after a ping between
+        keyframes the state at that ping predicted from the newest state (module doc, "Keyframes";
+        OnlineEstimate.predicted_from_t)."""
         return self._latest
 
     @property
@@ -408,6 +478,7 @@ class OnlineEstimator:
             "mode": self.options.mode, "window_s": self.options.window_s if self.options.mode == "fixed_lag" else None,
             "trajectory": "filtered: each state as estimated when its DVL ping was processed",
             "counters": dict(self.counters), "epochs": len(h),
+            "keyframe_spacing_s": self.config.solver.keyframe_spacing_s,
             "imu_gaps": {"count": len(self._gaps_seen), "total_s": float(sum(self._gaps_seen.values())),
                          "longest_s": float(max(self._gaps_seen.values(), default=0.0))},
             "alignment": self.builder.alignment.info(),
@@ -514,6 +585,9 @@ class OnlineEstimator:
         self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source)
         window = self.options.window_s if self.options.mode == "fixed_lag" else None
         self.smoother = IncrementalSmoother(self.builder, window, self.options.relinearization)
+        self._between = BetweenPings(self.builder.make_params(), self.config.imu)
+        self._interval = StatePreintegration(self.builder.make_params)
+        self._gravity = KeyframeGravity(self.builder.keyframe_gravity)
 
     def _take_ping(self, p: _Ping) -> int:
         first = self._first_imu_t if self._first_imu_t is not None else math.inf
@@ -544,6 +618,7 @@ class OnlineEstimator:
             elif not self._keyframes.keep(p.t):
                 self._count("dvl_not_keyframe")
             else:
+                p.key = self._spacing.keep(p.t)
                 self._pending.append(p)
 
     def _close_ready(self) -> int:
@@ -568,7 +643,11 @@ class OnlineEstimator:
                 self._close(None, t_f)
             elif self._pending and self._pending[0].t <= t_end and (self._flushing
                                                                      or self._pending[0].t + ahead <= t_end):
-                self._close(self._pending.popleft())
+                p = self._pending.popleft()
+                if p.key or self.smoother.n == 0:
+                    self._close(p)
+                else:
+                    self._between_ping(p)
                 ahead = max(0.0, self._offset_centre()) + self.config.dvl.time_offset_window_s if self._offset else 0.0
             else:
                 break
@@ -580,36 +659,31 @@ class OnlineEstimator:
         previous one, add its factors, update iSAM2. The buffer keeps, first, the last sample at or before the
         previous epoch: the sample held across a gap that starts there (estimators/gaps.py)."""
         assert self.builder is not None and self.smoother is not None
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         b, sm = self.builder, self.smoother
         t_epoch = p.t if p is not None else float(t_state)  # type: ignore[arg-type]
-        if len(self._chunks) > 1:
-            self._chunks = [tuple(np.concatenate(c) for c in zip(*self._chunks, strict=True))]  # type: ignore[list-item]
-        T, W, F = self._chunks[0]
+        T, W, F = self._buffer()
         gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
         i = sm.n
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
         dvl = self._dvl_factors(i, p, b_omega, rate_input) if p is not None else []
-        if p is None:
-            self._count("states_without_ping")
+        self._count("states_without_ping" if p is None else "keyframes")
         dvl += self._depth_factors(i, t_epoch)
         if i == 0:
             assert p is not None  # the first epoch is a ping (_close_ready)
             sm.add_epoch(t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None))
         else:
-            # until PERIOD_SAMPLES stamps have come, the median of those seen (an epoch's buffer may hold a gap)
-            period = self._imu_period or nominal_period(np.asarray(self._period_t) if len(self._period_t) > 2 else T)
-            gaps = find_gaps(T, self.config.imu.gap_samples, period)
-            check_gaps(gaps, self.config.imu, self.source)
-            for g0, g1 in zip(gaps.start.tolist(), gaps.end.tolist(), strict=True):
-                if g0 not in self._gaps_seen:
-                    self._gaps_seen[g0] = g1 - g0
-                    self._count("imu_gaps")
-            starts = sample_starts_with_gaps(T, gaps)
-            b_f = b.compensate_rotation(F, W, T - starts)
-            pim, params, held = b.preintegrate_interval(sm.t_last, t_epoch, T, starts, b_f, W, gaps)
-            sm.add_epoch(t_epoch, dvl, pim, params, held=held)
+            starts, b_f, gaps = self._buffer_pieces(T, W, F, final=True)
+            assert self._interval is not None
+            # FactorMaker.preintegrate_interval(sm.t_last, t_epoch, ...), the part up to the last ping done then
+            pim, params, held = self._interval.close(t_epoch, T, starts, b_f, W, gaps)
+            between = [f for _, fs in self._deferred for f in fs]  # the pings since the previous state (on it)
+            sm.add_epoch(t_epoch, between + dvl, pim, params, held=held)
+        self._deferred = []
+        assert self._between is not None and self._interval is not None
+        self._between.reset(t_epoch)
+        self._interval.reset(t_epoch)
         first_kept = max(int(np.searchsorted(T, t_epoch, side="right")) - 1, 0)  # the last sample <= the epoch
         self._chunks = [(T[first_kept:], W[first_kept:], F[first_kept:])]
         if self._offset:  # keep what the next epochs' velocity-rate windows can reach
@@ -618,10 +692,97 @@ class OnlineEstimator:
             Tr, Wr, Fr = self._recent_imu()
             k0 = int(np.searchsorted(Tr, t_epoch - reach - 1.0))
             self._recent = [(Tr[k0:], Wr[k0:], Fr[k0:])]
-        self._latest = self._read_estimate()
+        self._state = self._read_state()
+        self._latest = OnlineEstimate.from_state(self._state, self.mounting.b_R_d0)
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
+        self._record(t0, c0, t_epoch)
+
+    def _buffer(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU samples held since the newest state (and the last one at or before it), as one chunk."""
+        if len(self._chunks) > 1:
+            self._chunks = [tuple(np.concatenate(c) for c in zip(*self._chunks, strict=True))]  # type: ignore[list-item]
+        return self._chunks[0]
+
+    def _buffer_pieces(self, T: np.ndarray, W: np.ndarray, F: np.ndarray,
+                       final: bool) -> tuple[np.ndarray, np.ndarray, Gaps]:
+        """The buffer's sample starts, rotation-compensated specific forces and gaps (estimators/gaps.py);
+        final: the buffer of a new state's interval, whose gaps are checked and counted."""
+        assert self.builder is not None
+        # until PERIOD_SAMPLES stamps have come, the median of those seen (an epoch's buffer may hold a gap)
+        period = self._imu_period or nominal_period(np.asarray(self._period_t) if len(self._period_t) > 2 else T)
+        gaps = find_gaps(T, self.config.imu.gap_samples, period)
+        if final:
+            check_gaps(gaps, self.config.imu, self.source)
+            for g0, g1 in zip(gaps.start.tolist(), gaps.end.tolist(), strict=True):
+                if g0 not in self._gaps_seen:
+                    self._gaps_seen[g0] = g1 - g0
+                    self._count("imu_gaps")
+        starts = sample_starts_with_gaps(T, gaps)
+        return starts, self.builder.compensate_rotation(F, W, T - starts), gaps
+
+    def _between_ping(self, p: _Ping) -> None:
+        """A ping between keyframes: the IMU motion from the newest state up to it (online/keyframes.py,
+        BetweenPings), its keyframe DVL factor on that state, deferred to the next state's update or added to
+        iSAM2 now (defer_between_pings), and the estimate at the ping predicted from the newest state."""
+        assert self.builder is not None and self.smoother is not None and self._between is not None
+        assert self._gravity is not None and self._state is not None
+        t0, c0 = time.perf_counter(), time.process_time()
+        b, sm = self.builder, self.smoother
+        T, W, F = self._buffer()
+        starts, b_f, gaps = self._buffer_pieces(T, W, F, final=False)
+        snap = self._between.snapshot_at(p.t, T, starts, b_f, W, gaps)
+        assert self._interval is not None  # the next IMU factor's samples up to the ping, the last stamp <= it
+        k_cut = int(np.searchsorted(T, p.t, side="right")) - 1
+        if k_cut >= 0:
+            self._interval.advance(float(T[k_cut]), T, starts, b_f, W, gaps)
+        n_p0, n_g0, n_G = self._gravity.at(np.asarray(self._state.pose.translation(), dtype=float))
+        motion = snap.motion(b.n_omega_ie(), n_g0, n_p0, n_G)
+        b_omega = b.body_rate(W[int(np.searchsorted(T, p.t, side="left"))])
+        rate_input = self._rate_input(p.t) if self._offset else None
+        factors = self._keyframe_factors(sm.n - 1, p, b_omega, snap, motion, rate_input)
+        self._count("pings_between_keyframes")
+        if self.defer_between_pings:
+            self._deferred.append((p, factors))
+        else:
+            sm.add_factors(factors)
+            self._state = self._read_state()
+        self._latest = OnlineEstimate.from_state(predict_at_ping(self._state, p.t, snap, motion),
+                                                 self.mounting.b_R_d0)
+        self._record(t0, c0, p.t)
+
+    def _record(self, t0: float, c0: float, t: float) -> None:
         self.latencies_s.append(time.perf_counter() - t0)
+        self.latencies_cpu_s.append(time.process_time() - c0)
+        self.latency_t.append(t)
+
+    def _keyframe_factors(self, i: int, p: _Ping, b_omega: np.ndarray, snap: PimSnapshot, motion: PingMotion,
+                          rate_input: RateInput | None) -> list[gtsam.NonlinearFactor]:
+        """The batch smoother's DVL factors of a ping between keyframes on state i (FactorMaker.
+        dvl_keyframe_factors_for), with the calibration considered for a slow ping (as in _dvl_factors)."""
+        b = self.builder
+        assert b is not None
+        use_beams = self.config.dvl.use_beams and p.beams is not None
+        factors = b.dvl_keyframe_factors_for(i, p.d_v, p.d_cov, b_omega, motion, snap.cov,
+                                             p.beams if use_beams else None, rate_input)
+        if self._speed(p) >= self.options.calibration_min_speed_m_s:
+            return factors
+        b_l = self.mounting.b_l
+        if rate_input is not None:  # estimate_time_offset (never with beams)
+            b_a, b_omega_mean, G = rate_input
+            return [considered_keyframe_factor(factors[0], p.d_v, b_omega_mean, b_l, motion,
+                                               offset_input=(b_a, b.offset_gravity(), G))]
+        if use_beams and p.beams is not None:
+            d_u, v, valid = p.beams
+            return [considered_keyframe_factor(f, float(v[j]), b_omega, b_l, motion, d_u=d_u[j])
+                    for f, j in zip(factors, np.flatnonzero(valid).tolist(), strict=True)]
+        return [considered_keyframe_factor(factors[0], p.d_v, b_omega, b_l, motion)]
+
+    def _speed(self, p: _Ping) -> float:
+        """What the DVL saw of the speed (m/s): the 3-D velocity's norm, or the fastest valid beam (with beams)."""
+        if self.config.dvl.use_beams and p.beams is not None:
+            return float(np.abs(p.beams[1][p.beams[2]]).max())  # a beam sees at most the speed
+        return float(np.linalg.norm(p.d_v))
 
     def _offset_centre(self) -> float:
         """The offset the velocity-rate windows are centred on: the current estimate (the prior before the first
@@ -673,11 +834,7 @@ class OnlineEstimator:
         b = self.builder
         assert b is not None
         use_beams = self.config.dvl.use_beams and p.beams is not None
-        if use_beams and p.beams is not None:
-            speed = float(np.abs(p.beams[1][p.beams[2]]).max())  # a beam sees at most the speed
-        else:
-            speed = float(np.linalg.norm(p.d_v))
-        if speed >= self.options.calibration_min_speed_m_s:
+        if self._speed(p) >= self.options.calibration_min_speed_m_s:
             return b.dvl_factors_for(i, p.d_v, p.d_cov, b_omega, p.beams, rate_input)
         b_l = self.mounting.b_l
         if rate_input is not None:  # estimate_time_offset (never with beams)
@@ -690,11 +847,13 @@ class OnlineEstimator:
                     for j in np.flatnonzero(valid)]
         return [_considered_calibration_factor(b.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v)]
 
-    def _read_estimate(self, with_covariance: bool | None = None) -> OnlineEstimate:
+    def _read_state(self, with_covariance: bool | None = None) -> StateEstimate:
         assert self.smoother is not None
         cov = self.options.covariances if with_covariance is None else with_covariance
-        state = self.smoother.estimate(with_covariance=cov)
-        return OnlineEstimate.from_state(state, self.mounting.b_R_d0)
+        return self.smoother.estimate(with_covariance=cov)
+
+    def _read_estimate(self, with_covariance: bool | None = None) -> OnlineEstimate:
+        return OnlineEstimate.from_state(self._read_state(with_covariance), self.mounting.b_R_d0)
 
 
 def _vector3(name: str, x: Any) -> np.ndarray:

@@ -4,6 +4,7 @@ after each DVL epoch, and small helpers shared with the benchmark."""
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import get_args
 
@@ -51,6 +52,9 @@ class OnlineEstimate(CalibrationUnits):
     # the DVL time offset dt_d (s) and its sigma with dvl.estimate_time_offset (else 0 and nan)
     time_offset_s: float = 0.0
     time_offset_sigma_s: float = float("nan")
+    # nan: the estimate of the newest state, at its time t; else the estimate at a ping at t between keyframes,
+    # predicted from the newest state (at predicted_from_t, s) through the IMU motion (online/keyframes.py)
+    predicted_from_t: float = float("nan")
 
     @classmethod
     def from_state(cls, s: StateEstimate, b_R_d0: np.ndarray) -> OnlineEstimate:
@@ -59,7 +63,8 @@ class OnlineEstimate(CalibrationUnits):
                    accel_bias=np.asarray(s.bias.accelerometer()), gyro_bias=np.asarray(s.bias.gyroscope()),
                    bias_cov=s.cov[9:15, 9:15], scale=s.scale, scale_sigma=float(np.sqrt(s.cov[15, 15])),
                    b_R_d=s.b_R_d, b_R_d_cov=s.cov[16:19, 16:19], b_R_d0=b_R_d0, calib_cov=s.calib_cov,
-                   time_offset_s=s.time_offset_s, time_offset_sigma_s=s.time_offset_sigma_s)
+                   time_offset_s=s.time_offset_s, time_offset_sigma_s=s.time_offset_sigma_s,
+                   predicted_from_t=s.predicted_from_t)
 
     @property
     def attitude_sigma_deg(self) -> np.ndarray:
@@ -71,7 +76,7 @@ class OnlineEstimate(CalibrationUnits):
 misalignment_deg_and_cov = misalignment_rpy_and_cov
 
 
-def latency_stats(latencies_s: list[float] | np.ndarray) -> dict[str, float]:
+def latency_stats(latencies_s: Sequence[float] | np.ndarray) -> dict[str, float]:
     """p50, p99 and max of per-epoch latencies, ms."""
     lat = np.asarray(latencies_s, dtype=float) * 1e3
     if lat.size == 0:

@@ -1,4 +1,5 @@
-"""The iSAM2 engine of the online estimator: a state per DVL epoch, over a fixed-lag window or the whole history.
+"""The iSAM2 engine of the online estimator: a state per keyframe (or per DVL epoch without keyframes), over a
+fixed-lag window or the whole history.
 
 Settings (the issue's traps):
 - Factorisation QR: Cholesky fails at navigation-grade noise. Wildfire threshold 0: rotations matter at
@@ -96,6 +97,9 @@ class StateEstimate:
     # with dvl.estimate_time_offset: the DVL time offset dt_d (s) and its marginal sigma (nan: not estimated)
     time_offset_s: float = 0.0
     time_offset_sigma_s: float = float("nan")
+    # nan: the estimate of state `index` at its time t; else the estimate at a ping at t between states, predicted
+    # from state `index` at predicted_from_t (online/keyframes.py predict_at_ping)
+    predicted_from_t: float = float("nan")
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -159,8 +163,9 @@ class IncrementalSmoother:
                   pim: gtsam.PreintegratedImuMeasurements | None = None,
                   params: gtsam.PreintegrationParams | None = None, first_values: gtsam.Values | None = None,
                   held: Holds | None = None) -> None:
-        """Add state n at time t with its DVL factors (built by the caller with builder.dvl_factors_for(n, ...))
-        and, for n > 0, the preintegration since the previous epoch; for n == 0, first_values (builder.
+        """Add state n at time t with its DVL factors (built by the caller with builder.dvl_factors_for(n, ...),
+        and any other factors on the states held: the keyframe factors of the pings since the previous state) and,
+        for n > 0, the preintegration since the previous epoch; for n == 0, first_values (builder.
         first_state_values) seed the state, bias and calibration and the priors."""
         i, b = self.n, self.builder
         factors: list[gtsam.NonlinearFactor] = list(dvl_factors)

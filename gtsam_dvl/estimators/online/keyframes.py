@@ -1,0 +1,218 @@
+"""Keyframes online: the pings between two states, as the batch smoother puts them on the state before them.
+
+With `[solver] keyframe_spacing_s` > 0 the online estimator makes states where the batch smoother does (the
+keyframes of selection.keyframe_mask, decided ping by ping with the same KeyframeThinning, and the DVL-dropout
+fillers); every other usable ping becomes the batch smoother's DVL factor on the state before it through the
+IMU motion up to the ping (factors/dvl_keyframe.py, FactorMaker.dvl_keyframe_factors_for). This module holds
+what the online estimator needs for them and the batch path has no use for:
+
+- BetweenPings: the IMU motion from the newest state to each ping after it, integrated incrementally as the
+  pings come (estimators/keyframes.ping_snapshots integrates a whole keyframe interval at once; the same pieces
+  in the same order, so the snapshots are the same to the last bit: tests/estimators/test_online_keyframes.py).
+- KeyframeGravity: the keyframe factors' normal gravity and gradient, evaluated at the state's position and
+  reused while the state stays within GRAVITY_REUSE_M of where it was evaluated (the factor's gravity is first
+  order about the reference, n_g0 + G (p - n_p0): 100 m away its error is the second-order term, about
+  3 g / R^2 (100 m)^2 / 2 = 4e-9 m/s^2: nothing; an evaluation costs 1.3 ms, two thirds of a state's epoch,
+  once every 50 s at 2 m/s).
+- considered_keyframe_factor: a slow ping's keyframe factor with the scale and misalignment "considered"
+  (zero Jacobians, estimator.py module doc, calibration_min_speed_m_s), as the online estimator's slow pings at
+  a state.
+- predict_at_ping: the estimate reported after a ping between states, predicted from the newest state through
+  the same motion model, with its covariance propagated to first order.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from gtsam_dvl.core.config import ImuConfig
+from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
+from gtsam_dvl.estimators.keyframes import PimSnapshot, snapshot, snapshot_params
+from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
+from gtsam_dvl.factors import PingMotion, dvl_keyframe_error
+from gtsam_dvl.factors.dvl_keyframe import ping_state
+
+GRAVITY_REUSE_M = 100.0  # KeyframeGravity: distance from the reference within which it is reused (module doc)
+
+
+class BetweenPings:
+    """The preintegration from the newest state to the pings after it (estimators/keyframes.ping_snapshots,
+    one ping at a time): `reset(t_state)` at each new state, then `snapshot_at(t_p, ...)` for each ping after it,
+    in time order, with the IMU samples held since the state (samples i cover (starts[i], T[i]], b_f rotation
+    compensated, gaps of the buffer). Parameters: the IMU factors' noise, no gravity, no Earth rate
+    (keyframes.snapshot_params)."""
+
+    def __init__(self, params: gtsam.PreintegrationParams, imu_cfg: ImuConfig) -> None:
+        self.params = snapshot_params(params)
+        self.imu_cfg = imu_cfg
+        self.t_state = -np.inf
+        self._a = -np.inf
+        self._pim: gtsam.PreintegratedImuMeasurements | None = None
+        self._spans: list[tuple[float, float]] = []
+
+    def reset(self, t_state: float) -> None:
+        self.t_state, self._a, self._pim, self._spans = t_state, t_state, None, []
+
+    def snapshot_at(self, t_p: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
+                    gaps: Gaps) -> PimSnapshot:
+        if self._pim is None:
+            self._pim = gtsam.PreintegratedImuMeasurements(self.params, gtsam.imuBias.ConstantBias())
+        idx, dt, held = pieces_with_holds(T, starts, gaps, self._a, t_p)
+        pim = self._pim
+        for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
+            pim.integrateMeasurement(b_f[i], W[i], dt_i)
+        self._spans += list(held.spans)
+        extra = hold_covariance(self.imu_cfg, Holds(tuple(self._spans)), t_p - self.t_state) if self._spans else None
+        self._a = t_p
+        return snapshot(pim, extra)
+
+
+class StatePreintegration:
+    """The IMU factor's preintegration from the newest state (FactorMaker.preintegrate_interval), integrated as the
+    samples come: `advance(t_cut, ...)` at each ping between keyframes integrates the pieces up to t_cut, the
+    last sample stamp at or before the ping (a cut at a stamp splits no sample and no gap, so the pieces and their
+    order are preintegrate_interval's), and `close(t_b, ...)` the rest up to the next state at t_b, returning
+    (pim, params, held) as preintegrate_interval does: the same to the last bit (tests/estimators/
+    test_online_keyframes.py), most of the work done before the state's epoch."""
+
+    def __init__(self, make_params: Any) -> None:
+        self._make_params = make_params  # FactorMaker.make_params: a new PreintegrationParams per IMU factor
+        self._a = -np.inf
+        self._pim: gtsam.PreintegratedImuMeasurements | None = None
+        self._params: gtsam.PreintegrationParams | None = None
+        self._spans: list[tuple[float, float]] = []
+
+    def reset(self, t_state: float) -> None:
+        self._a, self._pim, self._params, self._spans = t_state, None, None, []
+
+    def advance(self, t_cut: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
+                gaps: Gaps) -> None:
+        if t_cut <= self._a:
+            return
+        if self._pim is None:
+            self._params = self._make_params()
+            self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
+        idx, dt, held = pieces_with_holds(T, starts, gaps, self._a, t_cut)
+        pim = self._pim
+        for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
+            pim.integrateMeasurement(b_f[i], W[i], dt_i)
+        self._spans += list(held.spans)
+        self._a = t_cut
+
+    def close(self, t_b: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
+              gaps: Gaps) -> tuple[gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
+        self.advance(t_b, T, starts, b_f, W, gaps)
+        if self._pim is None or self._params is None:  # t_b at the state: an empty interval
+            self._params = self._make_params()
+            self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
+        return self._pim, self._params, Holds(tuple(self._spans))
+
+
+class KeyframeGravity:
+    """Normal gravity (m/s^2, map) and its gradient (1/s^2) for the keyframe factors of a state at n_p (m, map):
+    FactorMaker.keyframe_gravity, reused within GRAVITY_REUSE_M of where it was last evaluated (module doc).
+    `at(n_p)` returns (n_p0, n_g0, n_G)."""
+
+    def __init__(self, evaluate: Any) -> None:
+        self._evaluate = evaluate  # FactorMaker.keyframe_gravity
+        self._ref: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.evaluations = 0
+
+    def at(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n_p = np.asarray(n_p, dtype=float)
+        ref = self._ref
+        if ref is None or float(np.sum((n_p - ref[0]) ** 2)) > GRAVITY_REUSE_M**2:
+            g, G = self._evaluate(n_p[None, :])
+            ref = self._ref = (n_p.copy(), np.asarray(g[0], dtype=float), np.asarray(G[0], dtype=float))
+            self.evaluations += 1
+        return ref
+
+
+def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float, b_omega: np.ndarray,
+                               b_l: np.ndarray, motion: PingMotion, d_u: np.ndarray | None = None,
+                               offset_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                               ) -> gtsam.CustomFactor:
+    """The keyframe factor f (FactorMaker.dvl_keyframe_factors_for: keys [X_i, V_i, B, K, C] + [T_OFFSET] with
+    offset_input) of a ping too slow to inform the calibration: the same noise, error and Jacobians for pose,
+    velocity, bias (and time offset), none for the scale and misalignment (estimator.py module doc). d_y, b_omega,
+    d_u, offset_input: what f was made from (for the time offset, b_omega is the rate input's mean body rate)."""
+    if not isinstance(f, gtsam.NoiseModelFactor):
+        raise TypeError(f"a keyframe DVL factor is a NoiseModelFactor, got {type(f).__name__}")
+    keys = list(f.keys())
+    n = len(keys)
+    if n != 5 + (offset_input is not None):
+        raise ValueError(f"a keyframe factor on {n} keys does not match offset_input {offset_input is not None}")
+    dim = 1 if d_u is not None else 3
+    zeros_k, zeros_c = np.zeros((dim, 1)), np.zeros((dim, 3))
+
+    def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
+        slots: list[Any] | None = None if H is None else [None] * n
+        dt_d = values.atVector(keys[5]) if offset_input is not None else None
+        e = dvl_keyframe_error(values.atPose3(keys[0]), values.atVector(keys[1]), values.atConstantBias(keys[2]),
+                               values.atVector(keys[3]), values.atRot3(keys[4]), d_y, b_omega, b_l, motion, dt_d,
+                               offset_input, False, d_u, slots)
+        if H is not None and slots is not None:
+            for k in range(n):
+                H[k] = slots[k]
+            H[3], H[4] = zeros_k, zeros_c
+        return e
+
+    return gtsam.CustomFactor(f.noiseModel(), keys, error_func)
+
+
+def _skew(a: np.ndarray) -> np.ndarray:
+    x, y, z = a.tolist()
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def predict_at_ping(s: StateEstimate, t: float, snap: PimSnapshot, m: PingMotion) -> StateEstimate:
+    """The state at a ping at t between states, predicted from state s (the newest state, its bias and
+    calibration with their joint covariance) through the IMU motion m = snap.motion(...): attitude and velocity
+    by the keyframe factor's own model (factors/dvl_keyframe.ping_state, the Earth model included), position
+    p_i + v_i dt + n_g dt^2 / 2 + n_R_i dp - n_omega_ie x v_i dt^2 (the Coriolis term; the Earth rate's effect on
+    the specific force, w dt^3 g / 6 = 1e-5 m at 1 s, left out). dp's bias Jacobians are not in the snapshot: dp
+    is corrected with dt / 2 times dv's accelerometer-bias Jacobian and dt / 3 times its gyro-bias Jacobian (exact
+    at constant attitude and specific force; in a turn at w rad/s the first is off by |b_a| w dt^3 / 12: 2e-5 m
+    at 200 micro-g, 0.2 rad/s, 0.8 s, against position sigmas of metres). Covariance: the state's propagated to
+    first order, plus the preintegration's noise up to the ping (snap.cov). The bias, scale, misalignment and time
+    offset are the state's. Returns a StateEstimate at t (predicted_from_t = s.t)."""
+    R_i = s.pose.rotation().matrix()
+    p_i = np.asarray(s.pose.translation(), dtype=float)
+    v_i = np.asarray(s.n_v, dtype=float)
+    b_a = np.asarray(s.bias.accelerometer(), dtype=float)
+    b_g = np.asarray(s.bias.gyroscope(), dtype=float)
+    R_p, v_p, A = ping_state(R_i, p_i, v_i, b_a, b_g, m)
+    A_R_pose, A_R_bias, A_v_pose, A_v_vel, A_v_bias = A
+    dt = m.dt
+    n_g = m.n_g0 + m.n_G @ (p_i - m.n_p0)
+    w_x = _skew(m.n_omega_ie)
+    dp_c = m.dp + dt / 2.0 * (m.dv_dba @ b_a) + dt / 3.0 * (m.dv_dbg @ b_g)
+    p_p = p_i + v_i * dt + 0.5 * dt**2 * n_g + R_i @ dp_c - dt**2 * (w_x @ v_i)
+    cov = s.cov
+    if np.all(np.isfinite(cov)):
+        J = np.eye(STATE_DIM)
+        J[0:3, 0:9] = 0.0
+        J[0:3, 0:6] = A_R_pose
+        J[0:3, 9:15] = A_R_bias
+        R_pT = R_p.T
+        J[3:6, 0:3] = R_pT @ (-R_i @ _skew(dp_c))
+        J[3:6, 3:6] = R_pT @ (R_i + 0.5 * dt**2 * m.n_G @ R_i)
+        J[3:6, 6:9] = R_pT @ (dt * np.eye(3) - dt**2 * w_x)
+        J[3:6, 9:12] = R_pT @ R_i @ (dt / 2.0 * m.dv_dba)
+        J[3:6, 12:15] = R_pT @ R_i @ (dt / 3.0 * m.dv_dbg)
+        J[6:9, 0:6] = A_v_pose
+        J[6:9, 6:9] = A_v_vel
+        J[6:9, 9:15] = A_v_bias
+        Jq = np.zeros((9, 9))  # the preintegration's error [rotation, position, velocity] into [rot, trans, n_v]
+        Jq[0:3, 0:3] = np.eye(3)
+        Jq[3:6, 3:6] = R_pT @ R_i
+        Jq[6:9, 6:9] = R_i
+        cov = J @ cov @ J.T
+        cov[0:9, 0:9] += Jq @ snap.cov @ Jq.T
+        cov = 0.5 * (cov + cov.T)
+    return StateEstimate(index=s.index, t=t, pose=gtsam.Pose3(gtsam.Rot3(R_p), p_p), n_v=v_p, bias=s.bias,
+                         scale=s.scale, b_R_d=s.b_R_d, cov=cov, time_offset_s=s.time_offset_s,
+                         time_offset_sigma_s=s.time_offset_sigma_s, predicted_from_t=s.t)
