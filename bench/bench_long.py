@@ -140,8 +140,7 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
     lin, elim, iterations = report.timing_s["linearize"], report.timing_s["eliminate"], report.iterations
     if cfg.dvl.estimate_time_offset:  # batch.smooth_batch's second pass
-        builder.set_time_offset_window(float(values.atVector(T_OFFSET)[0]))
-        graph, _ = builder.build_bulk() if builder.bulk_supported() else builder.build()
+        graph = builder.recentre_time_offset(graph, float(values.atVector(T_OFFSET)[0]))
         values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
         lin += report.timing_s["linearize"]
         elim += report.timing_s["eliminate"]

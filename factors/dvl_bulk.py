@@ -20,7 +20,9 @@ Jacobians against numerical derivatives.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -93,6 +95,12 @@ class PingArrays:
     def __len__(self) -> int:
         return len(self.state)
 
+    def part(self, sl: slice) -> PingArrays:
+        """The pings sl (views)."""
+        parts: dict[str, Any] = {f.name: None if getattr(self, f.name) is None else getattr(self, f.name)[sl]
+                                 for f in dataclasses.fields(self)}
+        return PingArrays(**parts)
+
 
 @dataclass
 class PingConstants:
@@ -103,6 +111,10 @@ class PingConstants:
     c: np.ndarray  # dt dv + dp (N, 3)
     c_x: np.ndarray  # [c]_x (N, 3, 3)
     trans_G: np.ndarray  # (dt I - dt^2 [w]_x) n_G (N, 3, 3)
+
+    def part(self, sl: slice) -> PingConstants:
+        """The pings sl (views)."""
+        return PingConstants(**{f.name: getattr(self, f.name)[sl] for f in dataclasses.fields(self)})
 
 
 def ping_constants(p: PingArrays, n_omega_ie: np.ndarray) -> PingConstants:

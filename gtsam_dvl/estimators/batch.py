@@ -49,8 +49,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     if config.dvl.estimate_time_offset:
         # second pass: the offset's velocity rates averaged over [t, t + dt_hat] (a secant, not the tangent at
         # t: at dt_d = 1.5 s on paper-3d's turns the tangent biases dt_d by 1.6 sigma and the scale by 2 sigma)
-        builder.set_time_offset_window(float(values.atVector(T_OFFSET)[0]))
-        graph, _ = builder.build_bulk() if bulk else builder.build()
+        graph = builder.recentre_time_offset(graph, float(values.atVector(T_OFFSET)[0]))
         values, report = gauss_newton_qr(
             graph, values, ordering, max_iterations=config.solver.max_iterations,
             relative_tol=config.solver.relative_error_tol, absolute_tol=config.solver.absolute_error_tol,

@@ -37,6 +37,8 @@ import numpy as np
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
 from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants, skew_n
 
+CHUNK = 20_000  # pings evaluated at once (about 50 MB of temporaries)
+
 if TYPE_CHECKING:
     from gtsam_dvl.estimators.graph import LogGraph
 
@@ -124,11 +126,26 @@ class BulkDvl:
         dt_d = float(values.atVector(T_OFFSET)[0]) if self.offset else None
         return n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d
 
-    def _evaluate(self, values: gtsam.Values, jacobians: bool) -> tuple[np.ndarray, Any]:
+    def _evaluate(self, values: gtsam.Values, jacobians: bool,
+                  out: list[np.ndarray] | None = None) -> np.ndarray:
+        """Whitened errors (N, 3); with jacobians, the whitened Jacobian blocks per key written into out (N, 3, d)
+        each, unweighted. Evaluated CHUNK pings at a time: the temporaries of a whole day's pings would take GBs."""
         n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d = self._states(values)
-        e, J = dvl_ping_errors(self.pings, self.const, self.n_omega_ie, n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d,
-                               dt_d, self.offset_n_g, jacobians)
-        return np.einsum("nij,nj->ni", self.whiten, e), J
+        ew = np.empty((len(self), 3))
+        for a in range(0, len(self), CHUNK):
+            sl = slice(a, a + CHUNK)
+            e, J = dvl_ping_errors(self.pings.part(sl), self.const.part(sl), self.n_omega_ie, n_R_i[sl], n_p_i[sl],
+                                   n_v_i[sl], b_a[sl], b_g[sl], k, b_R_d, dt_d, self.offset_n_g, jacobians)
+            W = self.whiten[sl]
+            ew[sl] = np.einsum("nij,nj->ni", W, e)
+            if jacobians:
+                assert J is not None and out is not None
+                blocks = [J.pose, J.vel, J.bias, J.scale, J.b_R_d]
+                if J.offset is not None:
+                    blocks.append(J.offset)
+                for dst, B in zip(out, blocks, strict=True):
+                    np.matmul(W, B, out=dst[sl])
+        return ew
 
     def _weights_and_losses(self, ew: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robust weights and losses of the whitened errors' norms, as GTSAM's mEstimator computes them."""
@@ -148,7 +165,7 @@ class BulkDvl:
         """The pings' total loss at values (as graph.error of the per-factor graph counts it)."""
         if not len(self):
             return 0.0
-        ew, _ = self._evaluate(values, False)
+        ew = self._evaluate(values, False)
         return float(self._weights_and_losses(ew)[1].sum())
 
     def carriers(self) -> gtsam.NonlinearFactorGraph:
@@ -165,17 +182,31 @@ class BulkDvl:
     def prepare(self, values: gtsam.Values) -> None:
         """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
         (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
-        ew, J = self._evaluate(values, True)
+        n = len(self)
+        dims = (6, 3, 6, 1, 3) + ((1,) if self.offset else ())
+        served = self._served
+        if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # buffers reused between linearisations
+            served.blocks = [np.empty((n, 3, d)) for d in dims]
+        ew = self._evaluate(values, True, served.blocks)
         w, _ = self._weights_and_losses(ew)
         sw = np.sqrt(w)
-        W = self.whiten * sw[:, None, None]
-        blocks = [J.pose, J.vel, J.bias, J.scale, J.b_R_d] + ([J.offset] if self.offset else [])
-        self._served.blocks = [W @ B for B in blocks]
-        self._served.e = ew * sw[:, None]
-        self._served.ready = True
+        if not np.all(sw == 1.0):
+            for B in served.blocks:
+                B *= sw[:, None, None]
+        served.e = ew * sw[:, None]
+        served.ready = True
 
     def rows(self) -> int:
         return 3 * len(self)
+
+    def set_offset_inputs(self, b_omega: np.ndarray, b_a: np.ndarray, G: np.ndarray, b_l: np.ndarray) -> None:
+        """New time-offset IMU constants of the pings, in their order (after LogGraph.set_time_offset_window:
+        offset_inputs(builder)); the rest of the model is unchanged."""
+        p = self.pings
+        if not self.offset or b_omega.shape != p.b_omega.shape:  # (the offset model has offset_b_a and G)
+            raise ValueError("BulkDvl.set_offset_inputs: not a time-offset model, or not the same pings")
+        p.b_omega, p.offset_b_a, p.offset_G = b_omega, b_a, G
+        p.b_v_lever = np.asarray(np.cross(b_omega, np.asarray(b_l, dtype=float)))
 
 
 class BulkGraph:
@@ -235,6 +266,20 @@ def whitening(cov: np.ndarray) -> np.ndarray:
         W[idx[:, 0]] = 0.0
         W[idx, [0, 1, 2], [0, 1, 2]] = 1.0 / np.sqrt(cov[idx, [0, 1, 2], [0, 1, 2]])
     return W
+
+
+def offset_inputs(builder: LogGraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The time-offset IMU constants (mean body rate, b_a, G) of the builder's pings in bulk_dvl's order."""
+    srcs = [src for ep in builder.epochs for src in ([ep] if ep.dvl_index >= 0 else []) + list(ep.between)]
+    rates: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for src in srcs:
+        if src.rate_input is None:
+            raise ValueError("offset_inputs: a ping has no time-offset window (LogGraph.set_time_offset_window)")
+        rates.append(src.rate_input)
+    n = len(rates)
+    return (np.asarray([r[1] for r in rates], dtype=float).reshape(n, 3),
+            np.asarray([r[0] for r in rates], dtype=float).reshape(n, 3),
+            np.asarray([r[2] for r in rates], dtype=float).reshape(n, 3, 3))
 
 
 def bulk_dvl(builder: LogGraph) -> BulkDvl:

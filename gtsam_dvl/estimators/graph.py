@@ -24,7 +24,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
-from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
+from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl, offset_inputs
 from gtsam_dvl.estimators.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
@@ -216,7 +216,11 @@ class LogGraph:
     def refresh_gravity(self, values: gtsam.Values) -> bool:
         """Between solver iterations: re-reference the factors that moved far (see factors/imu_earth.py).
         The objective changes by less than 1e-8 m/s^2 of gravity, so this reports no change."""
-        n_p = np.array([values.atPose3(X(i)).translation() for i in range(len(self.epochs))])
+        poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
+        if poses.shape[0] == len(self.epochs):
+            n_p = poses[:, 9:]
+        else:
+            n_p = np.array([values.atPose3(X(i)).translation() for i in range(len(self.epochs))])
         self.set_gravity_from_positions(n_p, only_stale=True)
         return False
 
@@ -381,6 +385,16 @@ class LogGraph:
         for f in self.gnss_factors(gnss):
             graph.add(f)
         return BulkGraph(graph, bulk_dvl(self)), values
+
+    def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,
+                             dt: float) -> gtsam.NonlinearFactorGraph | BulkGraph:
+        """The graph with the time-offset windows centred on the offset estimate dt (set_time_offset_window):
+        a BulkGraph is updated in place (only the pings' IMU constants change), a per-factor graph built again."""
+        self.set_time_offset_window(dt)
+        if isinstance(graph, BulkGraph):
+            graph.bulk.set_offset_inputs(*offset_inputs(self), self.maker.mounting.b_l)
+            return graph
+        return self.build()[0]
 
     def elimination_ordering(self) -> gtsam.Ordering:
         """States in time order, the shared calibration and bias keys last: the Bayes net is a chain

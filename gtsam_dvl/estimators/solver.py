@@ -71,6 +71,7 @@ def gauss_newton_qr(
             report.initial_error = error
             report.history.append(error)
         t0 = time.perf_counter()
+        report.bayes_net = None  # the previous iteration's: not alive beside this one's
         linear = graph.linearize(values)
         t1 = time.perf_counter()
         try:
@@ -90,6 +91,7 @@ def gauss_newton_qr(
             step *= 0.5
         report.iterations = it + 1
         report.bayes_net = bn
+        del linear  # before the next linearisation: two of a day's linear systems at once cost a GB
         if new_values is values:  # no step decreased the error: at the minimum to numerical precision
             report.converged = not changed
             if not changed:

@@ -398,10 +398,15 @@ def read_log(
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
     keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
-    keep_imu = keep
-    imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
+    # the IMU's own orientation (when no attitude topic) now, then the decoded messages let go: a day at 200 Hz
+    # is 1 GB of them beside the arrays made of them
+    imu_attitude = imu_stream.attitude_array(keep) if attitude_topic is None else imu[:0].copy()
+    imu_stream.out, imu_stream.orient, imu = None, None, imu[:0].copy()  # (a view would keep the buffer)
+    if not keep.all():
+        imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
+    del imu_ns
 
     dvl_arr = decode(path, dvl_topic, dvl_type, raw[dvl_topic])
     if not len(dvl_arr):
@@ -447,7 +452,7 @@ def read_log(
                                                        gnss.frame_id)) is not None:
             gnss.b_p_antenna = pose[1]
     attitude = read_attitude(src, attitude_topic, imu_topic, raw,
-                             imu_stream.attitude_array(keep_imu) if attitude_topic is None else imu[:0], t0,
+                             imu_attitude, t0,
                              mounting, repair, warnings, dropped, attitude_frame)
     gaps: dict[str, dict[str, Any]] = {}
     for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
