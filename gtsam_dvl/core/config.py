@@ -202,10 +202,10 @@ class SolverConfig(_Section):
     earth_model: EarthModel = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
     # 0: a state per DVL ping; >0: only pings at least this far apart (the others are dropped: decimation)
     keyframe_interval_s: float = field(default=0.0, metadata=NON_NEGATIVE)
-    # batch smoother: states only at pings at least this far apart (keyframes); every ping between two keyframes
-    # becomes a DVL factor on the keyframe before it through the IMU motion up to the ping (factors/dvl_keyframe.py),
-    # so that no ping's information is lost. 0: a state per ping. Applied after keyframe_interval_s; must not
-    # exceed max_state_spacing_s. The online estimator and the EKF keep a state per ping. 1 s: on a 5 Hz DVL the
+    # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping
+    # between two keyframes becomes a DVL factor on the keyframe before it through the IMU motion up to the ping
+    # (factors/dvl_keyframe.py), so that no ping's information is lost. 0: a state per ping. Applied after
+    # keyframe_interval_s; must not exceed max_state_spacing_s. The EKF keeps a state per ping. 1 s: on a 5 Hz DVL the
     # calibration sigmas within 0.05 % and the estimates within 0.003 sigma of a state per ping, with a fifth of
     # the states (tests/estimators/test_keyframes.py); a 1 Hz DVL keeps a state per ping.
     keyframe_spacing_s: float = field(default=1.0, metadata=NON_NEGATIVE)

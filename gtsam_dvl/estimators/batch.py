@@ -14,7 +14,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.solver import bayes_net_marginals, gauss_newton_qr
+from gtsam_dvl.estimators.solver import ChunkedOrdering, bayes_net_marginals, eliminate, gauss_newton_qr
 from gtsam_dvl.estimators.timeline import filtering_timeline
 
 
@@ -77,7 +77,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
 
 
 def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                   ordering: gtsam.Ordering, estimator: str = "batch",
+                   ordering: gtsam.Ordering | ChunkedOrdering, estimator: str = "batch",
                    bayes_net: gtsam.GaussianBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
     the solver's last elimination instead of linearising again."""
@@ -92,7 +92,7 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
     lever = builder.config.dvl.estimate_lever_arm
     if lever:
         groups.append((L_LEVER,))
-    bn = bayes_net or graph.linearize(values).eliminateSequential(ordering, gtsam.EliminateQR)
+    bn = bayes_net or eliminate(graph.linearize(values), ordering)
     marg = bayes_net_marginals(bn, groups)
 
     poses = [values.atPose3(X(i)) for i in range(n)]

@@ -41,7 +41,10 @@ from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_
 from gtsam_dvl.estimators.keyframes import PimSnapshot, ping_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
+from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
+
+CHUNK_STATES = 1000  # states eliminated at once (solver.eliminate_chunked)
 
 
 @dataclass
@@ -396,22 +399,19 @@ class LogGraph:
             return graph
         return self.build()[0]
 
-    def elimination_ordering(self) -> gtsam.Ordering:
+    def elimination_ordering(self, chunk_states: int = CHUNK_STATES) -> ChunkedOrdering:
         """States in time order, the shared calibration and bias keys last: the Bayes net is a chain
-        whose root holds the calibration block, and marginals follow by one backward pass."""
-        ordering = gtsam.Ordering()
+        whose root holds the calibration block, and marginals follow by one backward pass. Given in chunks of
+        chunk_states states, which the solver eliminates one at a time (solver.eliminate_chunked: the same
+        Bayes net, in time linear in the mission); .ordering() is the plain gtsam.Ordering."""
         rw = self.config.imu.bias_model == "random_walk"
+        keys: list[int] = []
+        chunks: list[list[int]] = []
         for i in range(len(self.epochs)):
-            ordering.push_back(X(i))
-            ordering.push_back(V(i))
-            if rw:
-                ordering.push_back(B(i))
-        if not rw:
-            ordering.push_back(B(0))
-        ordering.push_back(K_SCALE)
-        ordering.push_back(C_MISALIGN)
-        if self.config.dvl.estimate_time_offset:
-            ordering.push_back(T_OFFSET)
-        if self.config.dvl.estimate_lever_arm:
-            ordering.push_back(L_LEVER)
-        return ordering
+            keys += [X(i), V(i)] + ([B(i)] if rw else [])
+            if (i + 1) % chunk_states == 0 or i + 1 == len(self.epochs):
+                chunks.append(keys)
+                keys = []
+        rest = ([] if rw else [B(0)]) + [K_SCALE, C_MISALIGN] + [T_OFFSET] * self.config.dvl.estimate_time_offset \
+            + [L_LEVER] * self.config.dvl.estimate_lever_arm
+        return ChunkedOrdering(chunks, rest)
