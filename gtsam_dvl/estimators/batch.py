@@ -14,7 +14,13 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.solver import ChunkedOrdering, bayes_net_marginals, eliminate, gauss_newton_qr
+from gtsam_dvl.estimators.solver import (
+    ChunkedOrdering,
+    CompactBayesNet,
+    bayes_net_marginals,
+    eliminate,
+    gauss_newton_qr,
+)
 from gtsam_dvl.estimators.timeline import filtering_timeline
 
 
@@ -78,7 +84,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
 
 def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
                    ordering: gtsam.Ordering | ChunkedOrdering, estimator: str = "batch",
-                   bayes_net: gtsam.GaussianBayesNet | None = None) -> NavResult:
+                   bayes_net: CompactBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
     the solver's last elimination instead of linearising again."""
     n = len(builder.epochs)

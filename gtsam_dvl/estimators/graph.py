@@ -87,6 +87,7 @@ class LogGraph:
     gravity_positions: np.ndarray | None = field(default=None, init=False, repr=False)
     _keyframe_gravity: tuple[np.ndarray | None, np.ndarray, np.ndarray] | None = field(default=None, init=False,
                                                                                      repr=False)
+    _snapshots_released: bool = field(default=False, init=False, repr=False)  # by build_bulk
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -253,6 +254,9 @@ class LogGraph:
         ep = self.epochs[i]
         if not ep.between:
             return []
+        if self._snapshots_released:
+            raise GtsamDvlError("between_factors: build_bulk let the pings' IMU snapshots go; build the per-factor "
+                                "graph first, or make a new LogGraph")
         dvl = self.log.dvl
         n_p0 = np.zeros(3) if self.gravity_positions is None else self.gravity_positions[i]
         if self._keyframe_gravity is None or self._keyframe_gravity[0] is not self.gravity_positions:
@@ -387,7 +391,16 @@ class LogGraph:
             graph.add(f)
         for f in self.gnss_factors(gnss):
             graph.add(f)
-        return BulkGraph(graph, bulk_dvl(self)), values
+        if self._snapshots_released:
+            raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (they are "
+                                "4 kB a ping); make a new LogGraph for another graph")
+        bulk = BulkGraph(graph, bulk_dvl(self))
+        # the bulk factors hold the snapshots' numbers as arrays: let the per-ping objects go (1.4 GB a day at 5 Hz)
+        for ep in self.epochs:
+            for p in ep.between:
+                p.pim = None
+        self._snapshots_released = any(ep.between for ep in self.epochs)
+        return bulk, values
 
     def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,
                              dt: float) -> gtsam.NonlinearFactorGraph | BulkGraph:

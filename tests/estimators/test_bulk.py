@@ -65,16 +65,19 @@ def perturbed(values: gtsam.Values, rng: np.random.Generator) -> gtsam.Values:
     return out
 
 
-def dvl_linear(builder: LogGraph, graph, values: gtsam.Values) -> gtsam.GaussianFactorGraph:
-    """The linearised DVL factors alone (the other factors are the same objects in both graphs)."""
-    if isinstance(graph, BulkGraph):
-        graph.bulk.prepare(values)
-        return graph._carriers.linearize(values)
+def dvl_graph(builder: LogGraph) -> gtsam.NonlinearFactorGraph:
+    """The per-factor DVL factors alone (the other factors are the same objects in both graphs); before
+    build_bulk, which lets the pings' snapshots go."""
     dvl = gtsam.NonlinearFactorGraph()
     for i in range(len(builder.epochs)):
         for f in builder.dvl_factors(i) + builder.between_factors(i):
             dvl.add(f)
-    return dvl.linearize(values)
+    return dvl
+
+
+def bulk_linear(graph: BulkGraph, values: gtsam.Values) -> gtsam.GaussianFactorGraph:
+    graph.bulk.prepare(values)
+    return graph._carriers.linearize(values)
 
 
 def hessians(*linear: gtsam.GaussianFactorGraph) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -98,6 +101,7 @@ def test_same_objective_and_linear_system(name: str) -> None:
     builder = LogGraph(run_log(), configs()[name])
     assert builder.bulk_supported()
     per_factor, values = builder.build()
+    dvl = dvl_graph(builder)
     bulk, _ = builder.build_bulk(values)
     assert isinstance(bulk, BulkGraph)
     assert graph_rows(bulk) == graph_rows(per_factor)
@@ -105,7 +109,7 @@ def test_same_objective_and_linear_system(name: str) -> None:
     for vals in (values, perturbed(values, np.random.default_rng(1))):
         e1, e2 = per_factor.error(vals), bulk.error(vals)
         assert abs(e1 - e2) <= 1e-12 * e1
-        (H1, g1), (H2, g2) = hessians(dvl_linear(builder, per_factor, vals), dvl_linear(builder, bulk, vals))
+        (H1, g1), (H2, g2) = hessians(dvl.linearize(vals), bulk_linear(bulk, vals))
         assert H1.shape == H2.shape
         assert np.abs(H1 - H2).max() <= 1e-9 * np.abs(H1).max()
         assert np.abs(g1 - g2).max() <= 1e-9 * np.abs(g1).max()
@@ -157,4 +161,16 @@ def test_unsupported_configurations_use_the_per_factor_graph(option: str) -> Non
     builder = LogGraph(run_log(), cfg)
     assert not builder.bulk_supported()
     with pytest.raises(GtsamDvlError, match="bulk DVL factors cover"):
+        builder.build_bulk()
+
+
+def test_build_bulk_lets_the_snapshots_go() -> None:
+    """After build_bulk the per-ping snapshots are gone (their numbers are in the bulk arrays): asking for the
+    per-factor keyframe factors, or a second bulk graph, is a clear error, not a wrong graph."""
+    builder = LogGraph(run_log(), EstimatorConfig.paper())
+    builder.build_bulk()
+    i = next(i for i, ep in enumerate(builder.epochs) if ep.between)
+    with pytest.raises(GtsamDvlError, match="snapshots go"):
+        builder.between_factors(i)
+    with pytest.raises(GtsamDvlError, match="let go by an earlier build_bulk"):
         builder.build_bulk()
