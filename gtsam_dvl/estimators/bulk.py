@@ -298,16 +298,17 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
         raise ValueError("bulk_dvl needs the initial guess first (LogGraph.initial_values)")
     g_states, G_states = maker.keyframe_gravity(builder.gravity_positions)
 
-    state, dvl_idx, b_omega, rate_b_a, rate_G = [], [], [], [], []
-    motion: list[tuple[Any, ...] | None] = []
+    snaps = builder.snapshots
+    state, dvl_idx, b_omega, rate_b_a, rate_G, snap = [], [], [], [], [], []
     for i, ep in enumerate(builder.epochs):
-        of_state: list[tuple[int, Any, Any]] = []
+        of_state: list[tuple[int, Any, int]] = []
         if ep.dvl_index >= 0:
-            of_state.append((ep.dvl_index, ep, None))
-        of_state += [(p.dvl_index, p, p.pim) for p in ep.between]
-        for j, src, pim in of_state:
+            of_state.append((ep.dvl_index, ep, -1))
+        of_state += [(p.dvl_index, p, p.snap) for p in ep.between]
+        for j, src, q in of_state:
             state.append(i)
             dvl_idx.append(j)
+            snap.append(q)
             if offset:
                 assert src.rate_input is not None
                 b_a, b_om_mean, G = src.rate_input
@@ -316,8 +317,6 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
                 rate_G.append(G)
             else:
                 b_omega.append(src.b_omega)
-            motion.append(None if pim is None else (pim.dt, pim.dR, pim.dv, pim.dp, pim.dR_dbg, pim.dv_dba,
-                                                    pim.dv_dbg, pim.cov))
     n = len(state)
     st = np.asarray(state, dtype=int)
     jj = np.asarray(dvl_idx, dtype=int)
@@ -328,12 +327,16 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
     dt, dR = np.zeros(n), eye.copy()
     dv, dp = np.zeros((n, 3)), np.zeros((n, 3))
     dR_dbg, dv_dba, dv_dbg = np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
-    moving = np.array([m is not None for m in motion], dtype=bool)
-    pim_cov = np.zeros((n, 9, 9))
-    for q in np.flatnonzero(moving).tolist():
-        dt[q], dR[q], dv[q], dp[q], dR_dbg[q], dv_dba[q], dv_dbg[q], pim_cov[q] = motion[q]  # type: ignore[misc]
+    qs = np.asarray(snap, dtype=int)
+    moving = qs >= 0
     if moving.any():
-        cov[moving] += keyframe_ping_covariances(pim_cov[moving], dR[moving], b_R_d0.T, d_y[moving], b_R_d0, k0)
+        if snaps is None:
+            raise ValueError("bulk_dvl: the LogGraph's snapshots were let go (build_bulk); make a new LogGraph")
+        m = qs[moving]
+        dt[moving], dR[moving], dv[moving], dp[moving] = snaps.dt[m], snaps.dR[m], snaps.dv[m], snaps.dp[m]
+        dR_dbg[moving], dv_dba[moving], dv_dbg[moving] = snaps.dR_dbg[m], snaps.dv_dba[m], snaps.dv_dbg[m]
+        pim_cov = snaps.cov[m]
+        cov[moving] += keyframe_ping_covariances(pim_cov, dR[moving], b_R_d0.T, d_y[moving], b_R_d0, k0)
     pings = PingArrays(
         state=st, d_y=d_y, b_omega=om, b_v_lever=np.cross(om, b_l), dt=dt, dR=dR, dv=dv, dp=dp, dR_dbg=dR_dbg,
         dv_dba=dv_dba, dv_dbg=dv_dbg, n_g0=np.asarray(g_states, dtype=float).reshape(-1, 3)[st],

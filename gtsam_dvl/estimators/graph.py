@@ -38,7 +38,7 @@ from gtsam_dvl.estimators.gaps import (
     with_fillers,
 )
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
-from gtsam_dvl.estimators.keyframes import PimSnapshot, ping_snapshots
+from gtsam_dvl.estimators.keyframes import PimSnapshot, SnapshotArrays, ping_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
@@ -55,7 +55,7 @@ class BetweenPing:
     dvl_index: int
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # as Epoch.rate_input, at t
-    pim: PimSnapshot | None = None  # the IMU motion from the state before (estimators/keyframes.py)
+    snap: int = -1  # its IMU motion from the state before: row of LogGraph.snapshots (LogGraph.ping_snapshot)
 
 
 @dataclass
@@ -87,7 +87,8 @@ class LogGraph:
     gravity_positions: np.ndarray | None = field(default=None, init=False, repr=False)
     _keyframe_gravity: tuple[np.ndarray | None, np.ndarray, np.ndarray] | None = field(default=None, init=False,
                                                                                      repr=False)
-    _snapshots_released: bool = field(default=False, init=False, repr=False)  # by build_bulk
+    # the IMU motion to each ping between keyframes (BetweenPing.snap: its row); None once build_bulk let it go
+    snapshots: SnapshotArrays | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -175,17 +176,28 @@ class LogGraph:
         """The IMU motion from each state to the pings after it (estimators/keyframes.py), one preintegration
         per state with pings between keyframes."""
         imu = self.log.imu
-        if not any(ep.between for ep in self.epochs):
+        self.snapshots = SnapshotArrays.empty(sum(len(ep.between) for ep in self.epochs))
+        if not len(self.snapshots):
             return
         starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
         params = self.maker.make_params()
+        q = 0
         for ep in self.epochs:
             if ep.between:
                 snaps = ping_snapshots(ep.t, [p.t for p in ep.between], params, imu.t, starts, b_f, imu.b_omega,
                                        self.gaps, self.config.imu)
                 for p, snap in zip(ep.between, snaps, strict=True):
-                    p.pim = snap
+                    self.snapshots.put(q, snap)
+                    p.snap = q
+                    q += 1
+
+    def ping_snapshot(self, p: BetweenPing) -> PimSnapshot:
+        """The IMU motion from the state before a ping between keyframes up to it (estimators/keyframes.py)."""
+        if self.snapshots is None or p.snap < 0:
+            raise GtsamDvlError("between_factors: build_bulk let the pings' IMU snapshots go; build the per-factor "
+                                "graph first, or make a new LogGraph")
+        return self.snapshots.get(p.snap)
 
     def _preintegrate(self) -> list[Holds]:
         """The IMU intervals between the epochs; returns what each held across IMU gaps."""
@@ -254,9 +266,6 @@ class LogGraph:
         ep = self.epochs[i]
         if not ep.between:
             return []
-        if self._snapshots_released:
-            raise GtsamDvlError("between_factors: build_bulk let the pings' IMU snapshots go; build the per-factor "
-                                "graph first, or make a new LogGraph")
         dvl = self.log.dvl
         n_p0 = np.zeros(3) if self.gravity_positions is None else self.gravity_positions[i]
         if self._keyframe_gravity is None or self._keyframe_gravity[0] is not self.gravity_positions:
@@ -267,8 +276,7 @@ class LogGraph:
         w = self.maker.n_omega_ie()
         out: list[gtsam.NonlinearFactor] = []
         for p in ep.between:
-            s, j = p.pim, p.dvl_index
-            assert s is not None
+            s, j = self.ping_snapshot(p), p.dvl_index
             motion = s.motion(w, g[0], n_p0, G[0])
             beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
             out += self.maker.dvl_keyframe_factors_for(i, dvl.d_v[j], dvl.d_cov[j], p.b_omega, motion, s.cov, beams,
@@ -391,15 +399,12 @@ class LogGraph:
             graph.add(f)
         for f in self.gnss_factors(gnss):
             graph.add(f)
-        if self._snapshots_released:
-            raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (they are "
-                                "4 kB a ping); make a new LogGraph for another graph")
+        if self.snapshots is None:
+            raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (1 kB a "
+                                "ping); make a new LogGraph for another graph")
         bulk = BulkGraph(graph, bulk_dvl(self))
-        # the bulk factors hold the snapshots' numbers as arrays: let the per-ping objects go (1.4 GB a day at 5 Hz)
-        for ep in self.epochs:
-            for p in ep.between:
-                p.pim = None
-        self._snapshots_released = any(ep.between for ep in self.epochs)
+        # the bulk factors hold the snapshots' numbers: let the LogGraph's copy go (0.35 GB a day at 5 Hz)
+        self.snapshots = None
         return bulk, values
 
     def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,

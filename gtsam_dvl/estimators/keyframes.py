@@ -67,6 +67,37 @@ class PimSnapshot:
                           n_g0, n_p0, n_G)
 
 
+@dataclass
+class SnapshotArrays:
+    """Many pings' PimSnapshots as arrays (N, ...): 1 kB a ping instead of 4 kB of small numpy objects (a day of
+    5 Hz pings between 1 s keyframes: 0.35 GB instead of 1.4 GB)."""
+
+    dt: np.ndarray
+    dR: np.ndarray
+    dv: np.ndarray
+    dp: np.ndarray
+    dR_dbg: np.ndarray
+    dv_dba: np.ndarray
+    dv_dbg: np.ndarray
+    cov: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> SnapshotArrays:
+        return cls(np.zeros(n), np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3, 3)),
+                   np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.zeros((n, 9, 9)))
+
+    def __len__(self) -> int:
+        return len(self.dt)
+
+    def put(self, q: int, s: PimSnapshot) -> None:
+        self.dt[q], self.dR[q], self.dv[q], self.dp[q] = s.dt, s.dR, s.dv, s.dp
+        self.dR_dbg[q], self.dv_dba[q], self.dv_dbg[q], self.cov[q] = s.dR_dbg, s.dv_dba, s.dv_dbg, s.cov
+
+    def get(self, q: int) -> PimSnapshot:
+        return PimSnapshot(float(self.dt[q]), self.dR[q], self.dv[q], self.dp[q], self.dR_dbg[q], self.dv_dba[q],
+                           self.dv_dbg[q], self.cov[q])
+
+
 def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationParams:
     """Parameters with params' noise, no gravity and no Earth rate (predict() then gives the deltas)."""
     out = gtsam.PreintegrationParams(np.zeros(3))

@@ -96,7 +96,8 @@ class CompactBayesNet:
                 rhs = rhs - c.S() @ np.concatenate([x[k] for k in keys[1:]])
             sol = np.linalg.solve(c.R(), rhs)  # tiny (<= 6x6)
             if not np.all(np.isfinite(sol)):
-                raise GtsamDvlError(f"the linear system is indeterminate at variable {gtsam.DefaultKeyFormatter(keys[0])}")
+                raise GtsamDvlError("the linear system is indeterminate at variable "
+                                    f"{gtsam.DefaultKeyFormatter(keys[0])}")
             x[keys[0]] = sol
             out.insert(keys[0], sol)
         return out

@@ -394,14 +394,16 @@ def read_log(
     if not len(imu):
         raise GtsamDvlError(f"{path}: {imu_topic} has no messages")
     imu_ns = stamps_ns(imu)
-    b_omega, b_f = imu["angular_velocity"].astype(float), imu["linear_acceleration"].astype(float)
+    # views of the decoded messages, not copies (a day at 200 Hz: 0.8 GB less at the reader's peak)
+    b_omega, b_f = (imu[f] if imu.dtype[f].base == np.float64 else imu[f].astype(float)
+                    for f in ("angular_velocity", "linear_acceleration"))
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
     keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
-    # the IMU's own orientation (when no attitude topic) now, then the decoded messages let go: a day at 200 Hz
-    # is 1 GB of them beside the arrays made of them
+    # the IMU's own orientation (when no attitude topic) now, then the stream's references let go (b_omega and
+    # b_f keep the decoded messages' buffer, of which they are views)
     imu_attitude = imu_stream.attitude_array(keep) if attitude_topic is None else imu[:0].copy()
-    imu_stream.out, imu_stream.orient, imu = None, None, imu[:0].copy()  # (a view would keep the buffer)
+    imu_stream.out, imu_stream.orient, imu = None, None, imu[:0].copy()
     if not keep.all():
         imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
