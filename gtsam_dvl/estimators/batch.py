@@ -84,7 +84,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
 
 def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
                    ordering: gtsam.Ordering | ChunkedOrdering, estimator: str = "batch",
-                   bayes_net: CompactBayesNet | None = None) -> NavResult:
+                   bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
     the solver's last elimination instead of linearising again."""
     n = len(builder.epochs)

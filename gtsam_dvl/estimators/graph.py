@@ -420,8 +420,9 @@ class LogGraph:
     def elimination_ordering(self, chunk_states: int = CHUNK_STATES) -> ChunkedOrdering:
         """States in time order, the shared calibration and bias keys last: the Bayes net is a chain
         whose root holds the calibration block, and marginals follow by one backward pass. Given in chunks of
-        chunk_states states, which the solver eliminates one at a time (solver.eliminate_chunked: the same
-        Bayes net, in time linear in the mission); .ordering() is the plain gtsam.Ordering."""
+        chunk_states states, which the solver eliminates one at a time when there are more than
+        solver.CHUNKED_FROM_STATES states (solver.eliminate: the same Bayes net, in time linear in the mission);
+        .ordering() is the plain gtsam.Ordering."""
         rw = self.config.imu.bias_model == "random_walk"
         keys: list[int] = []
         chunks: list[list[int]] = []
