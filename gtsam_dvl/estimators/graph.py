@@ -358,22 +358,27 @@ class LogGraph:
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The whole graph and its initial guess (batch smoothing, covariance analysis)."""
         values = self.initial_values()
+        graph = self._factors_but_dvl(values)
+        for i in range(len(self.epochs)):
+            for f in self.dvl_factors(i) + self.between_factors(i):
+                graph.add(f)
+        return graph, values
+
+    def _factors_but_dvl(self, values: gtsam.Values) -> gtsam.NonlinearFactorGraph:
+        """The priors, IMU and bias-link factors, depth and GNSS factors: all but the DVL's."""
         graph = gtsam.NonlinearFactorGraph()
         gnss = self.gnss_plan()
         for f in self.maker.prior_factors(values, first_position_cov(gnss)):
             graph.add(f)
-        for i in range(len(self.epochs)):
-            for f in self.dvl_factors(i) + self.between_factors(i):
+        for i in range(len(self.epochs) - 1):
+            graph.add(self.imu_factor(i))
+            for f in self.bias_factors(i):
                 graph.add(f)
-            if i + 1 < len(self.epochs):
-                graph.add(self.imu_factor(i))
-                for f in self.bias_factors(i):
-                    graph.add(f)
         for f in self.depth_factors():
             graph.add(f)
         for f in self.gnss_factors(gnss):
             graph.add(f)
-        return graph, values
+        return graph
 
     def bulk_supported(self) -> bool:
         """Whether build_bulk covers this configuration: the 3-D velocity with a known lever arm (not [dvl]
@@ -387,18 +392,7 @@ class LogGraph:
         if not self.bulk_supported():
             raise GtsamDvlError("the bulk DVL factors cover the 3-D velocity with a known lever arm only")
         values = self.initial_values() if values is None else values
-        graph = gtsam.NonlinearFactorGraph()
-        gnss = self.gnss_plan()
-        for f in self.maker.prior_factors(values, first_position_cov(gnss)):
-            graph.add(f)
-        for i in range(len(self.epochs) - 1):
-            graph.add(self.imu_factor(i))
-            for f in self.bias_factors(i):
-                graph.add(f)
-        for f in self.depth_factors():
-            graph.add(f)
-        for f in self.gnss_factors(gnss):
-            graph.add(f)
+        graph = self._factors_but_dvl(values)
         if self.snapshots is None:
             raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (1 kB a "
                                 "ping); make a new LogGraph for another graph")
