@@ -83,6 +83,7 @@ class BulkDvl:
     robust: str  # "huber", "cauchy" or "none"
     robust_k: float
     offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
+    t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the pings' stamps (s), in their order
     const: PingConstants = field(init=False)
     _served: _Served = field(init=False, default_factory=_Served)
     _bounds: np.ndarray = field(init=False)  # state s's pings are _bounds[s]:_bounds[s + 1]
@@ -200,8 +201,8 @@ class BulkDvl:
         return 3 * len(self)
 
     def set_offset_inputs(self, b_omega: np.ndarray, b_a: np.ndarray, G: np.ndarray, b_l: np.ndarray) -> None:
-        """New time-offset IMU constants of the pings, in their order (after LogGraph.set_time_offset_window:
-        offset_inputs(builder)); the rest of the model is unchanged."""
+        """New time-offset IMU constants of the pings (mean body rate, b_a, G at t_ping, in their order:
+        LogGraph.recentre_time_offset); the rest of the model is unchanged."""
         p = self.pings
         if not self.offset or b_omega.shape != p.b_omega.shape:  # (the offset model has offset_b_a and G)
             raise ValueError("BulkDvl.set_offset_inputs: not a time-offset model, or not the same pings")
@@ -268,20 +269,6 @@ def whitening(cov: np.ndarray) -> np.ndarray:
     return W
 
 
-def offset_inputs(builder: LogGraph) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The time-offset IMU constants (mean body rate, b_a, G) of the builder's pings in bulk_dvl's order."""
-    srcs = [src for ep in builder.epochs for src in ([ep] if ep.dvl_index >= 0 else []) + list(ep.between)]
-    rates: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
-    for src in srcs:
-        if src.rate_input is None:
-            raise ValueError("offset_inputs: a ping has no time-offset window (LogGraph.set_time_offset_window)")
-        rates.append(src.rate_input)
-    n = len(rates)
-    return (np.asarray([r[1] for r in rates], dtype=float).reshape(n, 3),
-            np.asarray([r[0] for r in rates], dtype=float).reshape(n, 3),
-            np.asarray([r[2] for r in rates], dtype=float).reshape(n, 3, 3))
-
-
 def bulk_dvl(builder: LogGraph) -> BulkDvl:
     """The BulkDvl of a LogGraph's pings: each state's own ping, then the pings between it and the next state,
     with the noise, IMU motion and gravity the per-factor path gives them (LogGraph.dvl_factors,
@@ -299,7 +286,7 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
     g_states, G_states = maker.keyframe_gravity(builder.gravity_positions)
 
     snaps = builder.snapshots
-    state, dvl_idx, b_omega, rate_b_a, rate_G, snap = [], [], [], [], [], []
+    state, dvl_idx, b_omega, rate_b_a, rate_G, snap, t_ping = [], [], [], [], [], [], []
     for i, ep in enumerate(builder.epochs):
         of_state: list[tuple[int, Any, int]] = []
         if ep.dvl_index >= 0:
@@ -309,6 +296,7 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
             state.append(i)
             dvl_idx.append(j)
             snap.append(q)
+            t_ping.append(src.t)
             if offset:
                 assert src.rate_input is not None
                 b_a, b_om_mean, G = src.rate_input
@@ -349,4 +337,5 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
     return BulkDvl(pings=pings, whiten=whiten, n_omega_ie=np.asarray(maker.n_omega_ie(), dtype=float),
                    n_states=n_states, bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
                    robust_k=float(cfg.dvl.robust_threshold()),
-                   offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None)
+                   offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
+                   t_ping=np.asarray(t_ping, dtype=float))
