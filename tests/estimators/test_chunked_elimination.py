@@ -54,3 +54,22 @@ def test_same_bayes_net_as_one_sequential_elimination(name: str, chunk_states: i
     m_full, m_chunked = bayes_net_marginals(full), bayes_net_marginals(chunked)
     for key, cov in m_full.covariances.items():
         assert np.abs(m_chunked.covariances[key] - cov).max() <= 1e-9 * np.abs(cov).max()
+
+
+def test_smooth_batch_through_the_chunked_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """smooth_batch with the chunked elimination forced (as on logs of more than 8000 states) gives the plain
+    elimination's estimates and marginal covariances (to 1e-9 of a sigma, covariances to 1e-9 in correlation
+    units)."""
+    from gtsam_dvl.estimators import solver
+    from gtsam_dvl.estimators.batch import smooth_batch
+
+    plain = smooth_batch(short_log(), EstimatorConfig())
+    monkeypatch.setattr(solver, "CHUNKED_FROM_STATES", 10)
+    chunked = smooth_batch(short_log(), EstimatorConfig())
+    assert abs(chunked.scale - plain.scale) <= 1e-9 * plain.scale_sigma
+    assert abs(chunked.scale_sigma - plain.scale_sigma) <= 1e-9 * plain.scale_sigma
+    assert abs(chunked.time_offset_s - plain.time_offset_s) <= 1e-9 * plain.time_offset_sigma_s
+    assert np.allclose(chunked.n_p, plain.n_p, rtol=0, atol=1e-9)
+    # covariances compared in correlation units: each entry over the product of its two sigmas
+    sig = np.sqrt(np.einsum("nii->ni", plain.pose_cov))
+    assert np.abs((chunked.pose_cov - plain.pose_cov) / (sig[:, :, None] * sig[:, None, :])).max() < 1e-9
