@@ -76,6 +76,7 @@ def dvl_graph(builder: LogGraph) -> gtsam.NonlinearFactorGraph:
 
 
 def bulk_linear(graph: BulkGraph, values: gtsam.Values) -> gtsam.GaussianFactorGraph:
+    """The carriers' linearisation alone: the bulk DVL factors' Jacobian factors."""
     graph.bulk.prepare(values)
     return graph._carriers.linearize(values)
 
