@@ -52,6 +52,7 @@ from ._common import (
     lever_jacobian,
     predict_dvl_velocity,
 )
+from .dvl_bulk import skew_n
 from .dvl_velocity import _offset_prediction
 
 
@@ -292,5 +293,16 @@ def keyframe_ping_covariance(cov_pim: np.ndarray, dR: np.ndarray, d_R_b: np.ndar
     velocity] (cov_pim 9x9): a right rotation of the ping's attitude and a velocity increment in the keyframe's
     body axes. b_v (m/s, base_link) the body velocity at the ping (e.g. from the ping at the prior calibration),
     d_R_b = b_R_d^T. With navigation-grade noise (10 micro-g/sqrt(Hz)) it is 1e-4 m/s over 1 s."""
-    J = k * d_R_b @ np.concatenate((_skew(np.asarray(b_v, dtype=float)), np.zeros((3, 3)), dR.T), axis=1)
-    return np.asarray(J @ np.asarray(cov_pim, dtype=float) @ J.T)
+    return keyframe_ping_covariances(np.asarray(cov_pim, dtype=float)[None], np.asarray(dR, dtype=float)[None],
+                                     d_R_b, np.asarray(b_v, dtype=float).reshape(1, 3), k)[0]
+
+
+def keyframe_ping_covariances(cov_pim: np.ndarray, dR: np.ndarray, d_R_b: np.ndarray, b_v: np.ndarray,
+                              k: float = 1.0) -> np.ndarray:
+    """keyframe_ping_covariance of N pings at once: cov_pim (N, 9, 9), dR (N, 3, 3), b_v (N, 3) -> (N, 3, 3)."""
+    n = len(b_v)
+    J = np.zeros((n, 3, 9))
+    J[:, :, :3] = skew_n(np.asarray(b_v, dtype=float))
+    J[:, :, 6:] = np.transpose(dR, (0, 2, 1))
+    J = k * np.asarray(d_R_b, dtype=float) @ J
+    return np.asarray(J @ cov_pim @ np.transpose(J, (0, 2, 1)))

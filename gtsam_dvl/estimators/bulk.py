@@ -35,7 +35,8 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
-from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants, skew_n
+from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants
+from gtsam_dvl.factors.dvl_keyframe import keyframe_ping_covariances
 
 CHUNK = 20_000  # pings evaluated at once (about 50 MB of temporaries)
 
@@ -246,19 +247,6 @@ def graph_rows(graph: gtsam.NonlinearFactorGraph | BulkGraph) -> int:
     return sum(graph.at(i).dim() for i in range(graph.size()) if graph.exists(i))
 
 
-def keyframe_ping_covariances(cov_pim: np.ndarray, dR: np.ndarray, d_R_b: np.ndarray, d_y: np.ndarray,
-                              b_R_d0: np.ndarray, k0: float) -> np.ndarray:
-    """factors/dvl_keyframe.keyframe_ping_covariance of N pings (N, 3, 3): the preintegration noise
-    cov_pim (N, 9, 9) mapped into each ping's velocity with b_v = b_R_d0 d_y / k0 (zero if d_y is not finite)."""
-    finite = np.isfinite(d_y).all(axis=1)
-    b_v = np.where(finite[:, None], np.where(finite[:, None], d_y, 0.0) @ b_R_d0.T / k0, 0.0)
-    J = np.zeros((len(d_y), 3, 9))
-    J[:, :, :3] = skew_n(b_v)
-    J[:, :, 6:] = np.transpose(dR, (0, 2, 1))
-    J = k0 * d_R_b @ J
-    return np.asarray(J @ cov_pim @ np.transpose(J, (0, 2, 1)))
-
-
 def whitening(cov: np.ndarray) -> np.ndarray:
     """W (N, 3, 3) with W^T W = cov^-1, as GTSAM's noiseModel.Gaussian.Covariance whitens: W = L^-1 for
     cov = L L^T, except that a covariance whose off-diagonal entries are all at most 1e-9 in magnitude is taken
@@ -330,7 +318,11 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
         dt[moving], dR[moving], dv[moving], dp[moving] = snaps.dt[m], snaps.dR[m], snaps.dv[m], snaps.dp[m]
         dR_dbg[moving], dv_dba[moving], dv_dbg[moving] = snaps.dR_dbg[m], snaps.dv_dba[m], snaps.dv_dbg[m]
         pim_cov = snaps.cov[m]
-        cov[moving] += keyframe_ping_covariances(pim_cov, dR[moving], b_R_d0.T, d_y[moving], b_R_d0, k0)
+        # the body velocity at the ping from the ping at the prior calibration (as dvl_keyframe_factors_for)
+        d_y_m = d_y[moving]
+        finite = np.isfinite(d_y_m).all(axis=1)
+        b_v = np.where(finite[:, None], np.where(finite[:, None], d_y_m, 0.0) @ b_R_d0.T / k0, 0.0)
+        cov[moving] += keyframe_ping_covariances(pim_cov, dR[moving], b_R_d0.T, b_v, k0)
     pings = PingArrays(
         state=st, d_y=d_y, b_omega=om, b_v_lever=np.cross(om, b_l), dt=dt, dR=dR, dv=dv, dp=dp, dR_dbg=dR_dbg,
         dv_dba=dv_dba, dv_dbg=dv_dbg, n_g0=np.asarray(g_states, dtype=float).reshape(-1, 3)[st],
