@@ -191,6 +191,11 @@ class EarthImuFactor:
         return self._model.keys
 
     @property
+    def gravity_map(self) -> np.ndarray:
+        """M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)."""
+        return self._model.M
+
+    @property
     def ref_p(self) -> np.ndarray | None:
         return self._model.ref_p
 

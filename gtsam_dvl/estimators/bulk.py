@@ -35,6 +35,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
+from gtsam_dvl.estimators.bulk_imu import BulkImu
 from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants
 from gtsam_dvl.factors.dvl_keyframe import keyframe_ping_covariances
 
@@ -220,15 +221,21 @@ class BulkGraph:
     """A NonlinearFactorGraph of GTSAM factors plus the bulk DVL factors (module doc): error and linearize as
     the per-factor graph's, for gauss_newton_qr, the marginals and the filtering timeline."""
 
-    def __init__(self, graph: gtsam.NonlinearFactorGraph, bulk: BulkDvl) -> None:
-        self.graph, self.bulk = graph, bulk
+    def __init__(self, graph: gtsam.NonlinearFactorGraph, bulk: BulkDvl, imu: BulkImu | None = None) -> None:
+        self.graph, self.bulk, self.imu = graph, bulk, imu
         self._carriers = bulk.carriers()
+        self._imu_carriers = imu.carriers() if imu is not None else None
 
     def error(self, values: gtsam.Values) -> float:
-        return float(self.graph.error(values)) + self.bulk.error(values)
+        imu = self.imu.error(values) if self.imu is not None else 0.0
+        return float(self.graph.error(values)) + self.bulk.error(values) + imu
 
     def linearize(self, values: gtsam.Values) -> gtsam.GaussianFactorGraph:
         linear = self.graph.linearize(values)
+        if self.imu is not None and self._imu_carriers is not None and len(self.imu):
+            self.imu.prepare(values)
+            linear.push_back(self._imu_carriers.linearize(values))
+            self.imu.release()
         if len(self.bulk):
             self.bulk.prepare(values)
             linear.push_back(self._carriers.linearize(values))
@@ -237,7 +244,7 @@ class BulkGraph:
 
     def rows(self) -> int:
         """Measurement rows (for the chi^2's degrees of freedom)."""
-        return graph_rows(self.graph) + self.bulk.rows()
+        return graph_rows(self.graph) + self.bulk.rows() + (self.imu.rows() if self.imu is not None else 0)
 
 
 def graph_rows(graph: gtsam.NonlinearFactorGraph | BulkGraph) -> int:

@@ -25,6 +25,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
+from gtsam_dvl.estimators.bulk_imu import BulkImu, GravityRefs
 from gtsam_dvl.estimators.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
@@ -43,6 +44,8 @@ from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
+from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobian
+from gtsam_dvl.factors.imu_earth import REFRESH_M
 
 CHUNK_STATES = 1000  # states eliminated at once (solver.eliminate_chunked)
 
@@ -80,7 +83,9 @@ class LogGraph:
     epochs: list[Epoch] = field(init=False)
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
     imu_params: list[gtsam.PreintegrationParams] = field(init=False)
-    imu_factors: list[EarthImuFactor] = field(init=False)
+    imu_factors: list[EarthImuFactor] = field(init=False)  # empty once build_bulk has their numbers in arrays
+    # the IMU factors' gravity references, shared by the EarthImuFactors' copies and the bulk IMU factors
+    gravity_refs: GravityRefs = field(init=False, repr=False)
     gaps: Gaps = field(init=False)
     counters: dict[str, int] = field(default_factory=dict)
     # map positions (N, 3) of the states at which the keyframe factors' gravity is referenced (initial_values)
@@ -121,6 +126,11 @@ class LogGraph:
         del starts, b_f
         self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
                             for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, held, strict=True))]
+        n_f = len(self.imu_factors)
+        self.gravity_refs = GravityRefs(
+            np.full((n_f, 3), np.nan), np.array([f.ref_g for f in self.imu_factors]).reshape(n_f, 3),
+            np.zeros((n_f, 3, 3)), None if cfg.solver.earth_model == "flat" else self.maker.gravity_model)
+        self._per_factor_built = False
 
     @property
     def frame(self) -> LocalFrame:
@@ -224,10 +234,16 @@ class LogGraph:
         if self.config.solver.earth_model == "flat":
             return 0
         mid = 0.5 * (n_p[:-1] + n_p[1:])
-        idx = [i for i, f in enumerate(self.imu_factors) if not only_stale or f.needs_reference(mid[i])]
-        if idx:
+        refs = self.gravity_refs
+        if only_stale:  # (EarthImuFactor.needs_reference, on the shared arrays)
+            stale = np.isnan(refs.n_p[:, 0]) | (np.abs(mid - refs.n_p).max(axis=1) > REFRESH_M)
+            idx = np.flatnonzero(stale)
+        else:
+            idx = np.arange(len(mid))
+        if len(idx):
             g, G = self.maker.gravity_model(mid[idx])
-            for k, i in enumerate(idx):
+            refs.n_p[idx], refs.n_g[idx], refs.G[idx] = mid[idx], g, G
+            for k, i in enumerate(idx.tolist() if self.imu_factors else []):
                 self.imu_factors[i].set_reference(mid[i], g[k], G[k])
                 self.imu_factors[i].set_gravity(mid[i])
         return len(idx)
@@ -362,21 +378,27 @@ class LogGraph:
 
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The whole graph and its initial guess (batch smoothing, covariance analysis)."""
+        if not self.imu_factors:
+            raise GtsamDvlError("build: build_bulk let the IMU factors go (their numbers are in the bulk graph); "
+                                "make a new LogGraph")
         values = self.initial_values()
         graph = self._factors_but_dvl(values)
+        self._per_factor_built = True  # its IMU factors follow the gravity references too (build_bulk keeps them)
         for i in range(len(self.epochs)):
             for f in self.dvl_factors(i) + self.between_factors(i):
                 graph.add(f)
         return graph, values
 
-    def _factors_but_dvl(self, values: gtsam.Values) -> gtsam.NonlinearFactorGraph:
-        """The priors, IMU and bias-link factors, depth and GNSS factors: all but the DVL's."""
+    def _factors_but_dvl(self, values: gtsam.Values, imu: bool = True) -> gtsam.NonlinearFactorGraph:
+        """The priors, IMU (imu=False: not them) and bias-link factors, depth and GNSS factors: all but the
+        DVL's."""
         graph = gtsam.NonlinearFactorGraph()
         gnss = self.gnss_plan()
         for f in self.maker.prior_factors(values, first_position_cov(gnss)):
             graph.add(f)
         for i in range(len(self.epochs) - 1):
-            graph.add(self.imu_factor(i))
+            if imu:
+                graph.add(self.imu_factor(i))
             for f in self.bias_factors(i):
                 graph.add(f)
         for f in self.depth_factors():
@@ -400,17 +422,36 @@ class LogGraph:
             raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (1 kB a "
                                 "ping); make a new LogGraph for another graph")
         values = self.initial_values() if values is None else values
-        graph = self._factors_but_dvl(values)
-        bulk = BulkGraph(graph, bulk_dvl(self))
-        # the bulk factors hold the snapshots' and time-offset windows' numbers: let the LogGraph's copies go (a
-        # day at 5 Hz: 0.35 GB and 0.2 GB), and the preintegrations, which the IMU factors hold (0.12 GB)
+        graph = self._factors_but_dvl(values, imu=False)
+        bulk = BulkGraph(graph, bulk_dvl(self), self.bulk_imu())
+        # the bulk factors hold the snapshots', time-offset windows' and IMU factors' numbers: let the LogGraph's
+        # copies go (a day at 5 Hz: 0.35 GB, 0.2 GB and 0.2 GB) unless a per-factor graph holds the IMU factors,
+        # and the preintegrations
         self.snapshots = None
         for ep in self.epochs:
             ep.rate_input = None
             for p in ep.between:
                 p.rate_input = None
         self.pims = []
+        if not self._per_factor_built:
+            self.imu_factors = []
         return bulk, values
+
+    def bulk_imu(self) -> BulkImu:
+        """The IMU factors as arrays (estimators/bulk_imu.py): each EarthImuFactor's preintegration, bias Jacobian,
+        gravity map and whitening, with the gravity references this LogGraph keeps."""
+        if not self.imu_factors:
+            raise GtsamDvlError("bulk_imu: build_bulk let the IMU factors go; make a new LogGraph")
+        fs = self.imu_factors
+        pims = [f.imu.preintegratedMeasurements() for f in fs]
+        arrays = ImuArrays(
+            x=np.array([p.preintegrated() for p in pims], dtype=float).reshape(-1, 9),
+            H=np.array([bias_jacobian(p, f.params) for p, f in zip(pims, fs, strict=True)]).reshape(-1, 9, 6),
+            dt=np.array([p.deltaTij() for p in pims], dtype=float),
+            n_omega=np.asarray(self.maker.n_omega_ie(), dtype=float),
+            M=np.array([f.gravity_map for f in fs]).reshape(-1, 6, 3))
+        whiten = np.array([f.factor.noiseModel().R() for f in fs]).reshape(-1, 9, 9)
+        return BulkImu(arrays, whiten, [f.keys for f in fs], self.gravity_refs)
 
     def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,
                              dt: float) -> gtsam.NonlinearFactorGraph | BulkGraph:

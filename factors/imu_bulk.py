@@ -1,0 +1,298 @@
+"""GTSAM 4.3's ImuFactor with the EarthImuFactor's gravity gradient, evaluated for N factors at once with numpy.
+
+Why: through GTSAM's CustomFactor each IMU factor of the batch smoother costs a Python call of 20-35 us per
+linearisation and per error evaluation (factors/imu_earth.py), and a day of 1 s keyframes has 86,400 of them:
+about 30 s of a 24 h solve. The batch smoother owns its Gauss-Newton loop, so it evaluates them all in a few
+vectorised operations instead (estimators/bulk.py). The model is GTSAM's, written for stacks of factors; it is
+checked against gtsam.ImuFactor.evaluateError (errors and Jacobians to 1e-9) and against numerical derivatives
+in tests/factors/test_imu_bulk.py.
+
+The model (GTSAM 4.3: tangent preintegration, the rotating-frame prediction NavState::predictPIM, the SE_2(3)
+Logmap error of ImuFactorErrorMode::Logmap, the default). Per factor, from the preintegration at bias estimate
+zero: x = [theta, dp, dv] (PreintegratedImuMeasurements.preintegrated()), H = dx/d[b_a, b_g] (9x6), dt. With
+the bias b = [b_a, b_g] of state i the bias-corrected increment is x_c = x + H b, and with Earth rate Omega in map
+(zero: the inertial prediction, the same formula with A = I), A = Exp(-Omega dt), Gv = J_l(-Omega dt),
+Gp = Gv - Gamma_2(-Omega dt):
+
+    R_P = A n_R_i Exp(theta_c)
+    p_P = Gp n_g dt^2 + A (n_p_i + vbar dt + n_R_i dp_c),        vbar = n_v_i + Omega x n_p_i
+    v_P = Gv n_g dt   + A (vbar + n_R_i dv_c) - Omega x p_P
+    e   = Logmap_SE23( X_j^-1 * P )                                 [rotation, position, velocity]
+
+Jacobians on GTSAM's tangents: poses perturbed on the right ([rotation, translation], translation in body
+axes), velocities in map, bias [accelerometer, gyroscope]. With E = X_j^-1 P and J = LogmapDerivative(e), a
+variation of P (dR_P = R_P [eps_R], dp_P, dv_P) moves e by J [eps_R; R_P^T dp_P; R_P^T dv_P], one of X_j by
+J [-R_E^T w; R_E^T ([p_E] w - dp); R_E^T [v_E] w - R_P^T dv_j].
+
+The gravity n_g is the factor's reference extrapolated to the mid position, and its gradient enters the
+translation Jacobians as the EarthImuFactor adds it (factors/imu_earth.py): rows [position, velocity] of
+X_i and X_j get R_j^T (M G / 2) R_i and R_j^T (M G / 2) R_j.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from .dvl_bulk import skew_n, so3_exp_n, so3_right_jacobian_n
+
+_SMALL = 0.1  # rad: below, the rotation functions' coefficients from their series (closed forms cancel)
+
+
+def _theta2(phi: np.ndarray) -> np.ndarray:
+    return np.einsum("...i,...i->...", phi, phi)
+
+
+def so3_log_n(R: np.ndarray) -> np.ndarray:
+    """Rotation vectors of a stack of rotation matrices (N, 3, 3) -> (N, 3); exact near 0 and near pi."""
+    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    s = np.sqrt(_theta2(w))
+    c = 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0)
+    theta = np.arctan2(s, c)
+    small = s < 1e-8
+    scale = np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, s))
+    out = w * scale[:, None]
+    near_pi = c < -0.99  # sin(theta) small beside pi: the axis from the symmetric part
+    if near_pi.any():
+        for n in np.flatnonzero(near_pi):
+            B = 0.5 * (R[n] + np.eye(3))  # = cos^2(th/2) I + sin^2(th/2) u u^T ~ u u^T
+            k = int(np.argmax(np.diag(B)))
+            u = B[:, k] / np.sqrt(B[k, k])
+            u /= np.linalg.norm(u)
+            if u @ w < 0:
+                u = -u
+            out[n] = u * theta[n]
+    return out
+
+
+def so3_inv_right_jacobian_n(phi: np.ndarray) -> np.ndarray:
+    """J_r^-1 (N, 3, 3) = I + 1/2 [phi] + d(theta) [phi]^2, d = 1/theta^2 - (1 + cos)/(2 theta sin)."""
+    t2 = _theta2(phi)
+    t = np.sqrt(t2)
+    small = t < _SMALL
+    ts = np.where(small, 1.0, t)
+    d = np.where(small, 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0,
+                 1.0 / ts**2 - (1.0 + np.cos(ts)) / (2.0 * ts * np.sin(ts)))
+    K = skew_n(phi)
+    return np.eye(3) + 0.5 * K + d[:, None, None] * (K @ K)
+
+
+def _left_jacobian_apply_derivative(phi: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """d(J_l(phi) rho) / d phi (N, 3, 3), with J_l(phi) rho = rho + B phi x rho + C phi x (phi x rho),
+    B = (1 - cos)/theta^2, C = (theta - sin)/theta^3 (their derivatives B'/theta, C'/theta by series below
+    _SMALL)."""
+    t2 = _theta2(phi)
+    t = np.sqrt(t2)
+    small = t < _SMALL
+    ts = np.where(small, 1.0, t)
+    s, c = np.sin(ts), np.cos(ts)
+    B = np.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - c) / ts**2)
+    C = np.where(small, 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0, (ts - s) / ts**3)
+    dB = np.where(small, -1.0 / 12.0 + t2 / 180.0 - t2 * t2 / 6720.0, (ts * s - 2.0 * (1.0 - c)) / ts**4)
+    dC = np.where(small, -1.0 / 60.0 + t2 / 1260.0 - t2 * t2 / 60480.0,
+                  (1.0 - c) / ts**4 - 3.0 * (ts - s) / ts**5)
+    phi_x_rho = np.cross(phi, rho)
+    phi_x2_rho = np.cross(phi, phi_x_rho)
+    phi_dot_rho = np.einsum("ni,ni->n", phi, rho)
+    D = (phi_dot_rho[:, None, None] * np.eye(3) + phi[:, :, None] * rho[:, None, :]
+         - 2.0 * rho[:, :, None] * phi[:, None, :])  # d(phi x (phi x rho)) / d phi
+    return (-B[:, None, None] * skew_n(rho) + dB[:, None, None] * phi_x_rho[:, :, None] * phi[:, None, :]
+            + C[:, None, None] * D + dC[:, None, None] * phi_x2_rho[:, :, None] * phi[:, None, :])
+
+
+def se23_log_n(R: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Logmap of SE_2(3) elements (R, p, v) -> xi (N, 9) = [phi, J_l(phi)^-1 p, J_l(phi)^-1 v] and its derivative
+    LogmapDerivative (N, 9, 9) = [[Jw, 0, 0], [-Jw Q_p Jw, Jw, 0], [-Jw Q_v Jw, 0, Jw]], Jw = J_r(phi)^-1,
+    Q_x = Exp(phi)^T d(J_l(phi) x)/d phi at x = the log's translation parts (GTSAM's NavState::LogmapDerivative)."""
+    phi = so3_log_n(R)
+    Jw = so3_inv_right_jacobian_n(phi)
+    Jl_inv = np.swapaxes(Jw, 1, 2)  # J_l^-1 = (J_r^-1)^T
+    rho = np.einsum("nij,nj->ni", Jl_inv, p)
+    nu = np.einsum("nij,nj->ni", Jl_inv, v)
+    Rt = np.swapaxes(R, 1, 2)
+    J = np.zeros((len(phi), 9, 9))
+    J[:, 0:3, 0:3] = J[:, 3:6, 3:6] = J[:, 6:9, 6:9] = Jw
+    J[:, 3:6, 0:3] = -Jw @ (Rt @ _left_jacobian_apply_derivative(phi, rho)) @ Jw
+    J[:, 6:9, 0:3] = -Jw @ (Rt @ _left_jacobian_apply_derivative(phi, nu)) @ Jw
+    return np.concatenate([phi, rho, nu], axis=1), J
+
+
+def earth_increment(n_omega: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A = Exp(-Omega dt), Gv = J_l(-Omega dt), Gp = Gv - Gamma_2(-Omega dt) (N, 3, 3) for dt (N,), as GTSAM's
+    rotating-frame prediction forms them. |Omega dt| is the Earth's turn over an IMU interval (7.3e-5 rad per
+    second): the series to the fourth power are exact to rounding for intervals up to hours."""
+    w = -np.asarray(n_omega, dtype=float)[None, :] * dt[:, None]
+    K = skew_n(w)
+    K2 = K @ K
+    K3, K4 = K2 @ K, K2 @ K2
+    eye = np.eye(3)
+    A = so3_exp_n(w)
+    Gv = eye + K / 2.0 + K2 / 6.0 + K3 / 24.0 + K4 / 120.0
+    G2 = eye / 2.0 + K / 6.0 + K2 / 24.0 + K3 / 120.0 + K4 / 720.0
+    return A, Gv, Gv - G2
+
+
+@dataclass
+class ImuArrays:
+    """N IMU factors' preintegrations (factor n joins states state[n] and state[n] + 1).
+
+    x (N, 9): [theta (rad), dp (m), dv (m/s)] at bias estimate zero; H (N, 9, 6): dx / d[b_a, b_g]; dt (N,) s the
+    integrated time; n_omega (3,) rad/s Earth rate in map (zeros: inertial); M (N, 6, 3) d(predicted n_p, n_v) /
+    d n_g (EarthImuFactor's, for the gravity-gradient term)."""
+
+    x: np.ndarray
+    H: np.ndarray
+    dt: np.ndarray
+    n_omega: np.ndarray
+    M: np.ndarray
+
+    def __post_init__(self) -> None:
+        self.A, self.Gv, self.Gp = earth_increment(self.n_omega, self.dt)
+
+    def __len__(self) -> int:
+        return len(self.dt)
+
+    def part(self, sl: slice) -> ImuArrays:
+        """Factors sl (views, the Earth increments not computed again)."""
+        out = ImuArrays.__new__(ImuArrays)
+        out.x, out.H, out.dt, out.n_omega, out.M = self.x[sl], self.H[sl], self.dt[sl], self.n_omega, self.M[sl]
+        out.A, out.Gv, out.Gp = self.A[sl], self.Gv[sl], self.Gp[sl]
+        return out
+
+
+@dataclass
+class ImuJacobians:
+    """Jacobian blocks of N IMU factors: X_i (N, 9, 6), V_i (N, 9, 3), X_j (N, 9, 6), V_j (N, 9, 3), B (N, 9, 6)."""
+
+    pose_i: np.ndarray
+    vel_i: np.ndarray
+    pose_j: np.ndarray
+    vel_j: np.ndarray
+    bias: np.ndarray
+
+
+def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.ndarray, n_R_j: np.ndarray,
+               n_p_j: np.ndarray, n_v_j: np.ndarray, bias: np.ndarray, n_g: np.ndarray,
+               MG2: np.ndarray | None = None, jacobians: bool = False) -> tuple[np.ndarray, ImuJacobians | None]:
+    """Errors (N, 9) of N IMU factors (module doc) at states i and j (n_R (N, 3, 3), n_p (N, 3) m, n_v (N, 3)
+    m/s), bias (N, 6) [b_a m/s^2, b_g rad/s] and gravity n_g (N, 3) m/s^2; with jacobians, the blocks too, and
+    with MG2 (N, 2, 3, 3) = [M_p G; M_v G] / 2 the gravity-gradient term in the translation blocks."""
+    dt = f.dt
+    x_c = f.x + np.einsum("nij,nj->ni", f.H, bias)
+    theta_c, dp_c, dv_c = x_c[:, 0:3], x_c[:, 3:6], x_c[:, 6:9]
+    Om = np.broadcast_to(np.asarray(f.n_omega, dtype=float), n_p_i.shape)
+    R_U = so3_exp_n(theta_c)
+    AR_i = f.A @ n_R_i
+    R_P = AR_i @ R_U
+    vbar = n_v_i + np.cross(Om, n_p_i)
+    p_P = (np.einsum("nij,nj->ni", f.Gp, n_g) * (dt * dt)[:, None]
+           + np.einsum("nij,nj->ni", f.A, n_p_i + vbar * dt[:, None])
+           + np.einsum("nij,nj->ni", AR_i, dp_c))
+    v_P = (np.einsum("nij,nj->ni", f.Gv, n_g) * dt[:, None] + np.einsum("nij,nj->ni", f.A, vbar)
+           + np.einsum("nij,nj->ni", AR_i, dv_c) - np.cross(Om, p_P))
+    R_jt = np.swapaxes(n_R_j, 1, 2)
+    R_E = R_jt @ R_P
+    p_E = np.einsum("nij,nj->ni", R_jt, p_P - n_p_j)
+    v_E = np.einsum("nij,nj->ni", R_jt, v_P - n_v_j)
+    e, Jlog = se23_log_n(R_E, p_E, v_E)
+    if not jacobians:
+        return e, None
+
+    n = len(dt)
+    R_Pt = np.swapaxes(R_P, 1, 2)
+    R_Et = np.swapaxes(R_E, 1, 2)
+    OmX = skew_n(Om)
+    dt3 = dt[:, None, None]
+
+    def from_P(eps_R: np.ndarray | None, dp: np.ndarray, dv: np.ndarray) -> np.ndarray:
+        """J [eps_R; R_P^T dp; R_P^T (dv - Omega x dp)] for (N, 3, k) variations of (p_Y, v_Y)."""
+        k = dp.shape[2]
+        eps = np.zeros((n, 9, k))
+        if eps_R is not None:
+            eps[:, 0:3] = eps_R
+        eps[:, 3:6] = R_Pt @ dp
+        eps[:, 6:9] = R_Pt @ (dv - OmX @ dp)
+        return np.asarray(Jlog @ eps)
+
+    R_Ut = np.swapaxes(R_U, 1, 2)
+    # X_i rotation: R_P -> R_P Exp(R_U^T w); dp_Y = -A R_i [dp_c] w, dv_Y = -A R_i [dv_c] w
+    H_Ri = from_P(R_Ut, -AR_i @ skew_n(dp_c), -AR_i @ skew_n(dv_c))
+    # X_i translation (n_p_i + R_i d): vbar moves by Omega x R_i d
+    OmR = OmX @ n_R_i
+    H_pi = from_P(None, f.A @ (n_R_i + OmR * dt3), f.A @ OmR)
+    # V_i (map)
+    A_ = np.broadcast_to(f.A, (n, 3, 3))
+    H_vi = from_P(None, A_ * dt3, A_)
+    # bias: theta_c, dp_c, dv_c move by H b
+    H_B = from_P(so3_right_jacobian_n(theta_c) @ f.H[:, 0:3], AR_i @ f.H[:, 3:6], AR_i @ f.H[:, 6:9])
+    # X_j rotation and translation, V_j
+    eps = np.zeros((n, 9, 3))
+    eps[:, 0:3] = -R_Et
+    eps[:, 3:6] = R_Et @ skew_n(p_E)
+    eps[:, 6:9] = R_Et @ skew_n(v_E)
+    H_Rj = Jlog @ eps
+    eps = np.zeros((n, 9, 3))
+    eps[:, 3:6] = -R_Et
+    H_pj = Jlog @ eps
+    eps = np.zeros((n, 9, 3))
+    eps[:, 6:9] = -R_Pt
+    H_vj = Jlog @ eps
+
+    pose_i = np.concatenate([H_Ri, H_pi], axis=2)
+    pose_j = np.concatenate([H_Rj, H_pj], axis=2)
+    if MG2 is not None:  # the EarthImuFactor's gravity-gradient term (factors/imu_earth.py)
+        T = np.einsum("nba,nkbc->nkac", n_R_j, MG2)  # R_j^T (M G / 2), (N, 2, 3, 3)
+        pose_i[:, 3:9, 3:6] += (T @ n_R_i[:, None]).reshape(n, 6, 3)
+        pose_j[:, 3:9, 3:6] += (T @ n_R_j[:, None]).reshape(n, 6, 3)
+    return e, ImuJacobians(pose_i, H_vi, pose_j, H_vj, H_B)
+
+
+_NAV0 = gtsam.NavState()
+_ConstantBias = gtsam.imuBias.ConstantBias
+_Logmap = gtsam.Rot3.Logmap
+_PROBES = (1.0, 1.0, 1.0, 1e-2, 1e-2, 1e-2)  # m/s^2, rad/s: each bias component of a probing prediction
+
+
+def bias_jacobian(pim: Any, params: Any) -> np.ndarray:
+    """H (9, 6) = d preintegrated() / d[b_a, b_g] of a GTSAM pim at its bias estimate (zero), which GTSAM's Python
+    wrapper does not expose. The pim's parameters lose their gravity and Earth rate for the probes (restored
+    after), so that predict() from the identity state returns the bias-corrected increment itself:
+    Exp(theta + H_theta b), dp + H_p b, dv + H_v b, linear in b, so one prediction per bias component gives H
+    exactly (to rounding, whatever the probe). theta's Logmap is unwrapped by whole turns towards theta, so that
+    intervals turning by more than pi are exact too."""
+    g0 = np.array(params.n_gravity, dtype=float)
+    omega = params.getOmegaCoriolis()
+    x = np.asarray(pim.preintegrated(), dtype=float)
+    theta = x[:3]
+    H = np.empty((9, 6))
+    params.n_gravity = np.zeros(3)
+    if omega is not None:
+        params.setOmegaCoriolis(np.zeros(3))
+    try:
+        for k, step in enumerate(_PROBES):
+            b = np.zeros(6)
+            b[k] = step
+            s = pim.predict(_NAV0, _ConstantBias(b[:3], b[3:]))
+            th = np.asarray(_Logmap(s.attitude()), dtype=float)
+            H[:3, k] = (_unwrap(th, theta) - theta) / step
+            H[3:6, k] = (np.asarray(s.position(), dtype=float) - x[3:6]) / step
+            H[6:, k] = (np.asarray(s.velocity(), dtype=float) - x[6:]) / step
+    finally:
+        params.n_gravity = g0
+        if omega is not None:
+            params.setOmegaCoriolis(np.asarray(omega, dtype=float))
+    return H
+
+
+def _unwrap(th: np.ndarray, near: np.ndarray) -> np.ndarray:
+    """The rotation vector of the same rotation as th that lies nearest `near` (adding whole turns about th's
+    axis): a Logmap wraps at pi, a preintegrated theta does not."""
+    a = float(np.linalg.norm(th))
+    if a < 1e-12 or float(np.linalg.norm(near)) < 3.0:
+        return th
+    u = th / a
+    k = round((float(near @ u) - a) / (2.0 * np.pi))
+    return th + (2.0 * np.pi * k) * u
