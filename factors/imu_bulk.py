@@ -250,49 +250,38 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
     return e, ImuJacobians(pose_i, H_vi, pose_j, H_vj, H_B)
 
 
-_NAV0 = gtsam.NavState()
-_ConstantBias = gtsam.imuBias.ConstantBias
-_Logmap = gtsam.Rot3.Logmap
-_PROBES = (1.0, 1.0, 1.0, 1e-2, 1e-2, 1e-2)  # m/s^2, rad/s: each bias component of a probing prediction
+_Z3 = np.zeros(3)
+_BIAS0 = gtsam.imuBias.ConstantBias()
+_POSE0 = gtsam.Pose3()
 
 
-def bias_jacobian(pim: Any, params: Any) -> np.ndarray:
-    """H (9, 6) = d preintegrated() / d[b_a, b_g] of a GTSAM pim at its bias estimate (zero), which GTSAM's Python
-    wrapper does not expose. The pim's parameters lose their gravity and Earth rate for the probes (restored
-    after), so that predict() from the identity state returns the bias-corrected increment itself:
-    Exp(theta + H_theta b), dp + H_p b, dv + H_v b, linear in b, so one prediction per bias component gives H
-    exactly (to rounding, whatever the probe). theta's Logmap is unwrapped by whole turns towards theta, so that
-    intervals turning by more than pi are exact too."""
-    g0 = np.array(params.n_gravity, dtype=float)
-    omega = params.getOmegaCoriolis()
-    x = np.asarray(pim.preintegrated(), dtype=float)
-    theta = x[:3]
-    H = np.empty((9, 6))
-    params.n_gravity = np.zeros(3)
-    if omega is not None:
-        params.setOmegaCoriolis(np.zeros(3))
-    try:
-        for k, step in enumerate(_PROBES):
-            b = np.zeros(6)
-            b[k] = step
-            s = pim.predict(_NAV0, _ConstantBias(b[:3], b[3:]))
-            th = np.asarray(_Logmap(s.attitude()), dtype=float)
-            H[:3, k] = (_unwrap(th, theta) - theta) / step
-            H[3:6, k] = (np.asarray(s.position(), dtype=float) - x[3:6]) / step
-            H[6:, k] = (np.asarray(s.velocity(), dtype=float) - x[6:]) / step
-    finally:
-        params.n_gravity = g0
-        if omega is not None:
-            params.setOmegaCoriolis(np.asarray(omega, dtype=float))
-    return H
-
-
-def _unwrap(th: np.ndarray, near: np.ndarray) -> np.ndarray:
-    """The rotation vector of the same rotation as th that lies nearest `near` (adding whole turns about th's
-    axis): a Logmap wraps at pi, a preintegrated theta does not."""
-    a = float(np.linalg.norm(th))
-    if a < 1e-12 or float(np.linalg.norm(near)) < 3.0:
-        return th
-    u = th / a
-    k = round((float(near @ u) - a) / (2.0 * np.pi))
-    return th + (2.0 * np.pi * k) * u
+def bias_jacobians(imu_factors: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x (N, 9), H (N, 9, 6), dt (N,)) of N gtsam.ImuFactors: preintegrated(), its Jacobian d x / d[b_a, b_g] at
+    the bias estimate (zero), which GTSAM's Python wrapper does not expose, and deltaTij(). Each factor is
+    evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j = its own prediction there, where the error is zero and
+    the Logmap's derivative the identity, so that its bias Jacobian is (module doc, with R_i = I)
+    [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], solved here for H. n_omega: the Earth rate
+    the factors' parameters hold (zeros if none). Exact to rounding (tests/factors/test_imu_bulk.py)."""
+    n = len(imu_factors)
+    x = np.empty((n, 9))
+    H5 = np.empty((n, 9, 6))
+    R_P = np.empty((n, 3, 3))
+    dt = np.empty(n)
+    Hs = [np.zeros((9, d), order="F") for d in (6, 3, 6, 3, 6)]
+    state0 = gtsam.NavState()
+    for k, f in enumerate(imu_factors):
+        pim = f.preintegratedMeasurements()
+        x[k] = pim.preintegrated()
+        dt[k] = pim.deltaTij()
+        pred = pim.predict(state0, _BIAS0)
+        f.evaluateError(_POSE0, _Z3, pred.pose(), pred.velocity(), _BIAS0, *Hs)
+        H5[k] = Hs[4]
+        R_P[k] = pred.attitude().matrix()
+    A, _, _ = earth_increment(n_omega, dt)
+    At = np.swapaxes(A, 1, 2)
+    H = np.empty((n, 9, 6))
+    H[:, 0:3] = np.linalg.solve(so3_right_jacobian_n(x[:, 0:3]), H5[:, 0:3])
+    A_Hp = R_P @ H5[:, 3:6]
+    H[:, 3:6] = At @ A_Hp
+    H[:, 6:9] = At @ (R_P @ H5[:, 6:9] + skew_n(np.broadcast_to(n_omega, (n, 3))) @ A_Hp)
+    return x, H, dt

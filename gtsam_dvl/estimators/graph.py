@@ -44,7 +44,7 @@ from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
-from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobian
+from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians
 from gtsam_dvl.factors.imu_earth import REFRESH_M
 
 CHUNK_STATES = 1000  # states eliminated at once (solver.eliminate_chunked)
@@ -443,13 +443,9 @@ class LogGraph:
         if not self.imu_factors:
             raise GtsamDvlError("bulk_imu: build_bulk let the IMU factors go; make a new LogGraph")
         fs = self.imu_factors
-        pims = [f.imu.preintegratedMeasurements() for f in fs]
-        arrays = ImuArrays(
-            x=np.array([p.preintegrated() for p in pims], dtype=float).reshape(-1, 9),
-            H=np.array([bias_jacobian(p, f.params) for p, f in zip(pims, fs, strict=True)]).reshape(-1, 9, 6),
-            dt=np.array([p.deltaTij() for p in pims], dtype=float),
-            n_omega=np.asarray(self.maker.n_omega_ie(), dtype=float),
-            M=np.array([f.gravity_map for f in fs]).reshape(-1, 6, 3))
+        n_omega = np.asarray(self.maker.n_omega_ie(), dtype=float)
+        x, H, dt = bias_jacobians([f.imu for f in fs], n_omega)
+        arrays = ImuArrays(x=x, H=H, dt=dt, n_omega=n_omega, M=np.array([f.gravity_map for f in fs]).reshape(-1, 6, 3))
         whiten = np.array([f.factor.noiseModel().R() for f in fs]).reshape(-1, 9, 9)
         return BulkImu(arrays, whiten, [f.keys for f in fs], self.gravity_refs)
 
