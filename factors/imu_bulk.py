@@ -58,11 +58,11 @@ def so3_log_n(R: np.ndarray) -> np.ndarray:
     near_pi = c < -0.99  # sin(theta) small beside pi: the axis from the symmetric part
     if near_pi.any():
         for n in np.flatnonzero(near_pi):
-            B = 0.5 * (R[n] + np.eye(3))  # = cos^2(th/2) I + sin^2(th/2) u u^T ~ u u^T
-            k = int(np.argmax(np.diag(B)))
-            u = B[:, k] / np.sqrt(B[k, k])
+            uu = (0.5 * (R[n] + R[n].T) - c[n] * np.eye(3)) / (1.0 - c[n])  # symmetric part: cos I + (1 - cos) u u^T
+            k = int(np.argmax(np.diag(uu)))
+            u = uu[:, k] / np.sqrt(uu[k, k])
             u /= np.linalg.norm(u)
-            if u @ w < 0:
+            if u @ w[n] < 0:  # (sin theta u: the sign, where theta is not exactly pi)
                 u = -u
             out[n] = u * theta[n]
     return out
@@ -258,10 +258,11 @@ _POSE0 = gtsam.Pose3()
 def bias_jacobians(imu_factors: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x (N, 9), H (N, 9, 6), dt (N,)) of N gtsam.ImuFactors: preintegrated(), its Jacobian d x / d[b_a, b_g] at
     the bias estimate (zero), which GTSAM's Python wrapper does not expose, and deltaTij(). Each factor is
-    evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j = its own prediction there, where the error is zero and
-    the Logmap's derivative the identity, so that its bias Jacobian is (module doc, with R_i = I)
-    [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], solved here for H. n_omega: the Earth rate
-    the factors' parameters hold (zeros if none). Exact to rounding (tests/factors/test_imu_bulk.py)."""
+    evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j = its own prediction there,
+    where the error is zero and the Logmap's derivative the identity, so that its bias Jacobian is (module doc,
+    with R_i = I) [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], solved here for H. n_omega:
+    the Earth rate the factors' parameters hold (zeros if none). Exact to rounding (tests/factors/test_imu_bulk.py).
+    """
     n = len(imu_factors)
     x = np.empty((n, 9))
     H5 = np.empty((n, 9, 6))
@@ -277,6 +278,10 @@ def bias_jacobians(imu_factors: list[Any], n_omega: np.ndarray) -> tuple[np.ndar
         f.evaluateError(_POSE0, _Z3, pred.pose(), pred.velocity(), _BIAS0, *Hs)
         H5[k] = Hs[4]
         R_P[k] = pred.attitude().matrix()
+    turn = np.sqrt(_theta2(x[:, 0:3]))
+    if n and turn.max() > 2.0 * np.pi - 0.5:  # J_r(theta) is singular at a whole turn
+        raise ValueError(f"an IMU interval turns by {np.degrees(turn.max()):.0f} deg: more than the bias Jacobian's "
+                         "inversion takes (shorten the state spacing)")
     A, _, _ = earth_increment(n_omega, dt)
     At = np.swapaxes(A, 1, 2)
     H = np.empty((n, 9, 6))

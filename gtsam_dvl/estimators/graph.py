@@ -446,7 +446,8 @@ class LogGraph:
         n_omega = np.asarray(self.maker.n_omega_ie(), dtype=float)
         x, H, dt = bias_jacobians([f.imu for f in fs], n_omega)
         arrays = ImuArrays(x=x, H=H, dt=dt, n_omega=n_omega, M=np.array([f.gravity_map for f in fs]).reshape(-1, 6, 3))
-        whiten = np.array([f.factor.noiseModel().R() for f in fs]).reshape(-1, 9, 9)
+        # the noise models' own square root information (a Gaussian's R), so that the rows are GTSAM's
+        whiten = np.array([f.factor.noiseModel().R() for f in fs]).reshape(-1, 9, 9)  # type: ignore[attr-defined]
         return BulkImu(arrays, whiten, [f.keys for f in fs], self.gravity_refs)
 
     def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,

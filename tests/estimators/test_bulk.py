@@ -1,6 +1,6 @@
-"""estimators/bulk.py and bulk_imu.py: the batch smoother's DVL and IMU factors in bulk give the per-factor graph's objective and linear
-systems (error to 1e-12 relative, information matrix and vector to 1e-9), robust kernels included, and the same
-solution; the configurations it does not cover fall back to the per-factor graph.
+"""estimators/bulk.py and bulk_imu.py: the batch smoother's DVL and IMU factors in bulk give the per-factor graph's
+objective and linear systems (error to 1e-12 relative, information matrix and vector to 1e-9), robust kernels
+included, and the same solution; the configurations it does not cover fall back to the per-factor graph.
 
 Log: paper-3d-short cut to 330 s with a 5 Hz DVL (1 s keyframes: a state per second, four pings between), an
 outlier injected so that the robust kernel is active at the solution."""
