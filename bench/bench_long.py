@@ -84,10 +84,8 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     import gtsam
 
     from gtsam_dvl.core.config import EstimatorConfig
-    from gtsam_dvl.core.keys import T_OFFSET
     from gtsam_dvl.estimators import graph as graph_mod
-    from gtsam_dvl.estimators.batch import extract_result
-    from gtsam_dvl.estimators.solver import gauss_newton_qr
+    from gtsam_dvl.estimators.batch import extract_result, solve_graph
     from gtsam_dvl.io.reader import read_log
 
     stages: dict[str, float] = {}
@@ -131,20 +129,11 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     ordering = builder.elimination_ordering()
     stages["factors"] = stages.get("factors", 0.0) + time.perf_counter() - t0
     rss["factors"] = peak_rss_gib()
-    solver = cfg.solver
-    kw = {"max_iterations": solver.max_iterations, "relative_tol": solver.relative_error_tol,
-          "absolute_tol": solver.absolute_error_tol, "before_iteration": builder.refresh_gravity}
-    lin = elim = 0.0
-    iterations = 0
     t0 = time.perf_counter()
-    values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
-    lin, elim, iterations = report.timing_s["linearize"], report.timing_s["eliminate"], report.iterations
-    if cfg.dvl.estimate_time_offset:  # batch.smooth_batch's second pass
-        graph = builder.recentre_time_offset(graph, float(values.atVector(T_OFFSET)[0]))
-        values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
-        lin += report.timing_s["linearize"]
-        elim += report.timing_s["eliminate"]
-        iterations += report.iterations
+    graph, values, report, passes = solve_graph(builder, graph, values, ordering)  # as smooth_batch
+    lin = sum(p["linearize"] for p in passes)
+    elim = sum(p["eliminate"] for p in passes)
+    iterations = int(sum(p["iterations"] for p in passes))
     stages["solve"] = time.perf_counter() - t0
     rss["solve"] = peak_rss_gib()
     t0 = time.perf_counter()
