@@ -39,7 +39,7 @@ from gtsam_dvl.estimators.gaps import (
     with_fillers,
 )
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
-from gtsam_dvl.estimators.keyframes import PimSnapshot, SnapshotArrays, ping_snapshots
+from gtsam_dvl.estimators.keyframes import PimSnapshot, SnapshotArrays, interval_with_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
@@ -122,7 +122,6 @@ class LogGraph:
         starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
         held = self._preintegrate(starts, b_f)
-        self._snapshot_between(starts, b_f)
         del starts, b_f
         self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
                             for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, held, strict=True))]
@@ -188,24 +187,6 @@ class LogGraph:
         for o, a, m, g in zip(owners, b_a, w_mean, G, strict=True):
             o.rate_input = (a, m, g)
 
-    def _snapshot_between(self, starts: np.ndarray, b_f: np.ndarray) -> None:
-        """The IMU motion from each state to the pings after it (estimators/keyframes.py), one preintegration
-        per state with pings between keyframes (starts, b_f as for _preintegrate)."""
-        imu = self.log.imu
-        self.snapshots = SnapshotArrays.empty(sum(len(ep.between) for ep in self.epochs))
-        if not len(self.snapshots):
-            return
-        params = self.maker.make_params()
-        q = 0
-        for ep in self.epochs:
-            if ep.between:
-                snaps = ping_snapshots(ep.t, [p.t for p in ep.between], params, imu.t, starts, b_f, imu.b_omega,
-                                       self.gaps, self.config.imu)
-                for p, snap in zip(ep.between, snaps, strict=True):
-                    self.snapshots.put(q, snap)
-                    p.snap = q
-                    q += 1
-
     def ping_snapshot(self, p: BetweenPing) -> PimSnapshot:
         """The IMU motion from the state before a ping between keyframes up to it (estimators/keyframes.py)."""
         if self.snapshots is None or p.snap < 0:
@@ -215,12 +196,25 @@ class LogGraph:
 
     def _preintegrate(self, starts: np.ndarray, b_f: np.ndarray) -> list[Holds]:
         """The IMU intervals between the epochs (starts, b_f: each sample's interval start and rotation-compensated
-        specific force); returns what each held across IMU gaps."""
+        specific force), each integrated once, the IMU motion to each ping between keyframes taken on the way
+        (keyframes.interval_with_snapshots); returns what each interval held across IMU gaps."""
         imu = self.log.imu
         self.pims, self.imu_params = [], []
+        self.snapshots = SnapshotArrays.empty(sum(len(ep.between) for ep in self.epochs))
         held: list[Holds] = []
+        q = 0
         for a, b in zip(self.epochs[:-1], self.epochs[1:], strict=True):
-            pim, params, h = self.maker.preintegrate_interval(a.t, b.t, imu.t, starts, b_f, imu.b_omega, self.gaps)
+            if a.between:
+                params = self.maker.make_params()
+                pim, h, snaps = interval_with_snapshots(a.t, b.t, [p.t for p in a.between], params, imu.t, starts,
+                                                        b_f, imu.b_omega, self.gaps, self.config.imu)
+                for p, snap in zip(a.between, snaps, strict=True):
+                    self.snapshots.put(q, snap)
+                    p.snap = q
+                    q += 1
+            else:
+                pim, params, h = self.maker.preintegrate_interval(a.t, b.t, imu.t, starts, b_f, imu.b_omega,
+                                                                  self.gaps)
             self.pims.append(pim)
             self.imu_params.append(params)
             held.append(h)

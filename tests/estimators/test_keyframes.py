@@ -142,9 +142,11 @@ def test_spacing_beyond_the_state_spacing_is_refused() -> None:
 
 # ----- snapshots (estimators/keyframes.py) ----------------------------------------------------------------
 
-def reference_snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None) -> PimSnapshot:
+def reference_snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None,
+                       n_omega: np.ndarray | None = None) -> PimSnapshot:
     """keyframes.snapshot before the tangent's Jacobians: central differences of pim.predict over the bias
-    (steps 1e-2 m/s^2 and 1e-4 rad/s), 12 predictions."""
+    (steps 1e-2 m/s^2 and 1e-4 rad/s), 12 predictions; for parameters without Earth rate."""
+    assert n_omega is None or not np.any(n_omega)
     state0 = gtsam.NavState()
     zero = np.zeros(3)
 
@@ -191,8 +193,8 @@ def _assert_same(new: PimSnapshot, ref: PimSnapshot, worst: dict[str, float]) ->
 
 def test_snapshot_jacobians_match_the_central_differences() -> None:
     """Random turning, accelerating IMU traces at 50-400 Hz over 1.5 s (turn rates up to about 2 rad/s, some to
-    8 rad/s, so |theta| beyond ANALYTIC_MAX_ANGLE too), one near-identity (1e-7 rad/s): the snapshot after every few samples
-    matches the reference."""
+    8 rad/s, so |theta| beyond ANALYTIC_MAX_ANGLE too), one near-identity (1e-7 rad/s): the snapshot after every
+    few samples matches the reference."""
     rng = np.random.default_rng(11)
     worst: dict[str, float] = {}
     angles = []

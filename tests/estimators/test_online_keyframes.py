@@ -5,7 +5,7 @@ version of paper-3d-short cut at 300 s (120 s static, the Type-I manoeuvres, the
   every ping; its calibration agrees with the batch smoother's within the fixed-lag bounds of test_online.py and
   with the online estimator's with a state per ping within a twentieth of a sigma;
 - the IMU motion to each ping between keyframes is integrated to the same bits as the batch smoother's
-  (keyframes.ping_snapshots), across an IMU gap too;
+  (keyframes.interval_with_snapshots), across an IMU gap too;
 - the estimate after a ping between keyframes is the state predicted to the ping: its mean is GTSAM's prediction,
   its covariance the first-order propagation (numerical Jacobians), and it is consistent with the simulated truth;
 - the pings between keyframes added to iSAM2 one by one (defer_between_pings = False) give the deferred
@@ -36,9 +36,9 @@ from gtsam_dvl.estimators.alignment import map_frame_of
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
-from gtsam_dvl.estimators.keyframes import PimSnapshot, ping_snapshots, snapshot_params
+from gtsam_dvl.estimators.keyframes import PimSnapshot, interval_with_snapshots, snapshot_params
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
-from gtsam_dvl.estimators.online.keyframes import BetweenPings, StatePreintegration, predict_at_ping
+from gtsam_dvl.estimators.online.keyframes import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
 from gtsam_dvl.factors import EarthImuFactor, PingMotion
 from gtsam_dvl.sim import simulate
@@ -162,51 +162,47 @@ def test_online_keyframes_match_a_state_per_ping() -> None:
 
 
 def test_between_ping_motion_is_the_batch_smoothers_to_the_bit() -> None:
-    """BetweenPings (the online estimator's incremental preintegration, on the samples buffered since the state)
-    against keyframes.ping_snapshots over the whole log's arrays, across an IMU gap of 0.3 s between two pings."""
+    """StatePreintegration (the online estimator's incremental preintegration, on the samples buffered since the
+    state) against keyframes.interval_with_snapshots over the whole log's arrays, across an IMU gap of 0.3 s between
+    two pings: the same snapshots, and the same IMU factor preintegration as FactorMaker.preintegrate_interval's in
+    one go, to the last bit."""
     log = run_log(5.0)
     imu = log.imu
     keep = (imu.t < 250.31) | (imu.t > 250.61)
     t, w, f = imu.t[keep], imu.b_omega[keep], imu.b_f[keep]
     cfg = config(1.0)
-    params = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
-    params.setGyroscopeCovariance(1e-10 * np.eye(3))
-    params.setAccelerometerCovariance(1e-8 * np.eye(3))
-    params.setIntegrationCovariance(1e-12 * np.eye(3))
+    cfg.alignment.initial_attitude_deg = [3.0, 0.0, 10.0]
+    maker = OnlineEstimator(cfg, frame=map_frame_of(log, cfg)).builder
+    assert maker is not None
     gaps = find_gaps(t, cfg.imu.gap_samples)
     assert len(gaps) == 1
-    t_state, pings = 250.0, [250.2, 250.4, 250.6, 250.8]
+    t_state, pings, t_next = 250.0, [250.2, 250.4, 250.6, 250.8], 251.0
     starts = sample_starts_with_gaps(t, gaps)
     b_f = f + 0.5 * (t - starts)[:, None] * np.cross(w, f)
-    expected = ping_snapshots(t_state, pings, params, t, starts, b_f, w, gaps, cfg.imu)
+    batch_pim, batch_held, expected = interval_with_snapshots(t_state, t_next, pings, maker.make_params(), t, starts,
+                                                              b_f, w, gaps, cfg.imu)
     lo = int(np.searchsorted(t, t_state, side="right")) - 1  # the online buffer: from the last sample <= the state
     T, W, F = t[lo:], w[lo:], f[lo:]
     g_buf = find_gaps(T, cfg.imu.gap_samples, gaps.period_s)
     s_buf = sample_starts_with_gaps(T, g_buf)
     bf_buf = F + 0.5 * (T - s_buf)[:, None] * np.cross(W, F)
-    between = BetweenPings(params, cfg.imu)
-    between.reset(t_state)
+    interval = StatePreintegration(maker.make_params, cfg.imu)
+    interval.reset(t_state)
     for t_p, e in zip(pings, expected, strict=True):
-        got = between.snapshot_at(t_p, T, s_buf, bf_buf, W, g_buf)
+        got = interval.snapshot_at(t_p, T, s_buf, bf_buf, W, g_buf)
         for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg", "cov"):
             np.testing.assert_array_equal(getattr(got, name), getattr(e, name), err_msg=f"{name} at {t_p}")
     assert expected[-1].cov[8, 8] > 10 * expected[0].cov[8, 8]  # the hold's motion-model covariance is in
-    # the next IMU factor's preintegration, advanced to the last stamp before each ping, then closed at the state
-    cfg.alignment.initial_attitude_deg = [3.0, 0.0, 10.0]
-    maker = OnlineEstimator(cfg, frame=map_frame_of(log, cfg)).builder
-    assert maker is not None
-    t_next = 251.0
+    # the next IMU factor's preintegration, cut at the last stamp before each ping, then closed at the state: the
+    # batch smoother's, and preintegrate_interval's in one go
     ref, _, ref_held = maker.preintegrate_interval(t_state, t_next, T, s_buf, bf_buf, W, g_buf)
-    interval = StatePreintegration(maker.make_params)
-    interval.reset(t_state)
-    for t_p in pings:
-        interval.advance(float(T[np.searchsorted(T, t_p, side="right") - 1]), T, s_buf, bf_buf, W, g_buf)
     pim, _, held = interval.close(t_next, T, s_buf, bf_buf, W, g_buf)
-    assert held == ref_held and held.total_s > 0.2
+    assert held == ref_held == batch_held and held.total_s > 0.2
     for name in ("deltaRij", "deltaVij", "deltaPij", "preintMeasCov", "deltaTij"):
-        a, b = getattr(pim, name)(), getattr(ref, name)()
-        a, b = (a.matrix(), b.matrix()) if name == "deltaRij" else (a, b)
-        np.testing.assert_array_equal(a, b, err_msg=name)
+        for other in (ref, batch_pim):
+            a, b = getattr(pim, name)(), getattr(other, name)()
+            a, b = (a.matrix(), b.matrix()) if name == "deltaRij" else (a, b)
+            np.testing.assert_array_equal(a, b, err_msg=name)
 
 
 def _turn_motion() -> tuple[PimSnapshot, PingMotion, gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams]:

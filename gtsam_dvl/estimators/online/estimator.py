@@ -27,7 +27,7 @@ smoother's, at the keyframes (selection.keyframe_mask's rule, decided ping by pi
 then each first one at least 0.98 spacings after the previous keyframe) and at the DVL-dropout fillers; every
 other usable ping becomes the batch smoother's DVL factor on the state before it through the IMU motion since
 that state (FactorMaker.dvl_keyframe_factors_for; the motion integrated as the pings come, to the same bits as
-keyframes.ping_snapshots). That state is always the newest: a ping between keyframes comes less than a spacing
+keyframes.interval_with_snapshots). That state is always the newest: a ping between keyframes comes less than a spacing
 after its keyframe, a filler max_state_spacing_s >= spacing after a state. At finish() the last ping still
 between keyframes becomes a keyframe, as the batch smoother makes the last usable ping one. On a 1 Hz DVL, 1 s
 keyframes are a state per ping (the same result to the last bit as keyframe_spacing_s = 0).
@@ -132,7 +132,6 @@ from gtsam_dvl.estimators.gaps import (
 from gtsam_dvl.estimators.keyframes import PimSnapshot
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.online.keyframes import (
-    BetweenPings,
     KeyframeGravity,
     StatePreintegration,
     considered_keyframe_factor,
@@ -258,7 +257,6 @@ class OnlineEstimator:
         # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
         # at once (False; module doc, "Keyframes")
         self.defer_between_pings = True
-        self._between: BetweenPings | None = None
         self._interval: StatePreintegration | None = None  # the next IMU factor's, integrated at the pings between
         self._gravity: KeyframeGravity | None = None
         self._deferred: list[tuple[_Ping, list[gtsam.NonlinearFactor]]] = []
@@ -585,8 +583,7 @@ class OnlineEstimator:
         self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source)
         window = self.options.window_s if self.options.mode == "fixed_lag" else None
         self.smoother = IncrementalSmoother(self.builder, window, self.options.relinearization)
-        self._between = BetweenPings(self.builder.make_params(), self.config.imu)
-        self._interval = StatePreintegration(self.builder.make_params)
+        self._interval = StatePreintegration(self.builder.make_params, self.config.imu)
         self._gravity = KeyframeGravity(self.builder.keyframe_gravity)
 
     def _take_ping(self, p: _Ping) -> int:
@@ -681,8 +678,7 @@ class OnlineEstimator:
             between = [f for _, fs in self._deferred for f in fs]  # the pings since the previous state (on it)
             sm.add_epoch(t_epoch, between + dvl, pim, params, held=held)
         self._deferred = []
-        assert self._between is not None and self._interval is not None
-        self._between.reset(t_epoch)
+        assert self._interval is not None
         self._interval.reset(t_epoch)
         first_kept = max(int(np.searchsorted(T, t_epoch, side="right")) - 1, 0)  # the last sample <= the epoch
         self._chunks = [(T[first_kept:], W[first_kept:], F[first_kept:])]
@@ -723,19 +719,16 @@ class OnlineEstimator:
 
     def _between_ping(self, p: _Ping) -> None:
         """A ping between keyframes: the IMU motion from the newest state up to it (online/keyframes.py,
-        BetweenPings), its keyframe DVL factor on that state, deferred to the next state's update or added to
-        iSAM2 now (defer_between_pings), and the estimate at the ping predicted from the newest state."""
-        assert self.builder is not None and self.smoother is not None and self._between is not None
+        StatePreintegration.snapshot_at), its keyframe DVL factor on that state, deferred to the next state's update
+        or added to iSAM2 now (defer_between_pings), and the estimate at the ping predicted from the newest state."""
+        assert self.builder is not None and self.smoother is not None
         assert self._gravity is not None and self._state is not None
         t0, c0 = time.perf_counter(), time.process_time()
         b, sm = self.builder, self.smoother
         T, W, F = self._buffer()
         starts, b_f, gaps = self._buffer_pieces(T, W, F, final=False)
-        snap = self._between.snapshot_at(p.t, T, starts, b_f, W, gaps)
         assert self._interval is not None  # the next IMU factor's samples up to the ping, the last stamp <= it
-        k_cut = int(np.searchsorted(T, p.t, side="right")) - 1
-        if k_cut >= 0:
-            self._interval.advance(float(T[k_cut]), T, starts, b_f, W, gaps)
+        snap = self._interval.snapshot_at(p.t, T, starts, b_f, W, gaps)
         n_p0, n_g0, n_G = self._gravity.at(np.asarray(self._state.pose.translation(), dtype=float))
         motion = snap.motion(b.n_omega_ie(), n_g0, n_p0, n_G)
         b_omega = b.body_rate(W[int(np.searchsorted(T, p.t, side="left"))])

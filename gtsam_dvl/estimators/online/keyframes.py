@@ -6,9 +6,10 @@ fillers); every other usable ping becomes the batch smoother's DVL factor on the
 IMU motion up to the ping (factors/dvl_keyframe.py, FactorMaker.dvl_keyframe_factors_for). This module holds
 what the online estimator needs for them and the batch path has no use for:
 
-- BetweenPings: the IMU motion from the newest state to each ping after it, integrated incrementally as the
-  pings come (estimators/keyframes.ping_snapshots integrates a whole keyframe interval at once; the same pieces
-  in the same order, so the snapshots are the same to the last bit: tests/estimators/test_online_keyframes.py).
+- StatePreintegration: the next IMU factor's preintegration from the newest state, integrated as the samples
+  come, and the IMU motion to each ping between keyframes taken from it on the way (the batch smoother's
+  keyframes.interval_with_snapshots, one ping at a time: the same pieces in the same order, so the snapshots
+  are the same to the last bit: tests/estimators/test_online_keyframes.py).
 - KeyframeGravity: the keyframe factors' normal gravity and gradient, evaluated at the state's position and
   reused while the state stays within GRAVITY_REUSE_M of where it was evaluated (the factor's gravity is first
   order about the reference, n_g0 + G (p - n_p0): 100 m away its error is the second-order term, about
@@ -29,8 +30,8 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
-from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
-from gtsam_dvl.estimators.keyframes import PimSnapshot, snapshot, snapshot_params
+from gtsam_dvl.estimators.gaps import Gaps, Holds
+from gtsam_dvl.estimators.keyframes import PimSnapshot, integrate, last_stamp_at_or_before, snapshot_at
 from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
 from gtsam_dvl.factors import PingMotion, dvl_keyframe_error
 from gtsam_dvl.factors.dvl_keyframe import ping_state
@@ -38,55 +39,38 @@ from gtsam_dvl.factors.dvl_keyframe import ping_state
 GRAVITY_REUSE_M = 100.0  # KeyframeGravity: distance from the reference within which it is reused (module doc)
 
 
-class BetweenPings:
-    """The preintegration from the newest state to the pings after it (estimators/keyframes.ping_snapshots,
-    one ping at a time): `reset(t_state)` at each new state, then `snapshot_at(t_p, ...)` for each ping after it,
-    in time order, with the IMU samples held since the state (samples i cover (starts[i], T[i]], b_f rotation
-    compensated, gaps of the buffer). Parameters: the IMU factors' noise, no gravity, no Earth rate
-    (keyframes.snapshot_params)."""
-
-    def __init__(self, params: gtsam.PreintegrationParams, imu_cfg: ImuConfig) -> None:
-        self.params = snapshot_params(params)
-        self.imu_cfg = imu_cfg
-        self.t_state = -np.inf
-        self._a = -np.inf
-        self._pim: gtsam.PreintegratedImuMeasurements | None = None
-        self._spans: list[tuple[float, float]] = []
-
-    def reset(self, t_state: float) -> None:
-        self.t_state, self._a, self._pim, self._spans = t_state, t_state, None, []
-
-    def snapshot_at(self, t_p: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
-                    gaps: Gaps) -> PimSnapshot:
-        if self._pim is None:
-            self._pim = gtsam.PreintegratedImuMeasurements(self.params, gtsam.imuBias.ConstantBias())
-        idx, dt, held = pieces_with_holds(T, starts, gaps, self._a, t_p)
-        pim = self._pim
-        for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
-            pim.integrateMeasurement(b_f[i], W[i], dt_i)
-        self._spans += list(held.spans)
-        extra = hold_covariance(self.imu_cfg, Holds(tuple(self._spans)), t_p - self.t_state) if self._spans else None
-        self._a = t_p
-        return snapshot(pim, extra)
-
-
 class StatePreintegration:
     """The IMU factor's preintegration from the newest state (FactorMaker.preintegrate_interval), integrated as the
-    samples come: `advance(t_cut, ...)` at each ping between keyframes integrates the pieces up to t_cut, the
-    last sample stamp at or before the ping (a cut at a stamp splits no sample and no gap, so the pieces and their
-    order are preintegrate_interval's), and `close(t_b, ...)` the rest up to the next state at t_b, returning
-    (pim, params, held) as preintegrate_interval does: the same to the last bit (tests/estimators/
+    samples come: `snapshot_at(t_p, ...)` at each ping between keyframes integrates the pieces up to the last
+    sample stamp at or before the ping (a cut at a stamp splits no sample and no gap, so the pieces and their order
+    are preintegrate_interval's) and returns the ping's IMU motion (a copy with the rest up to the ping:
+    keyframes.snapshot_at), and `close(t_b, ...)` the rest up to the next state at t_b, returning (pim, params,
+    held) as preintegrate_interval does. The batch smoother integrates each interval the same way
+    (keyframes.interval_with_snapshots): the same pims and snapshots to the last bit (tests/estimators/
     test_online_keyframes.py), most of the work done before the state's epoch."""
 
-    def __init__(self, make_params: Any) -> None:
+    def __init__(self, make_params: Any, imu_cfg: ImuConfig) -> None:
         self._make_params = make_params  # FactorMaker.make_params: a new PreintegrationParams per IMU factor
+        self.imu_cfg = imu_cfg
+        self.t_state = -np.inf
         self._a = -np.inf
         self._pim: gtsam.PreintegratedImuMeasurements | None = None
         self._params: gtsam.PreintegrationParams | None = None
         self._spans: list[tuple[float, float]] = []
 
     def reset(self, t_state: float) -> None:
-        self._a, self._pim, self._params, self._spans = t_state, None, None, []
+        self.t_state, self._a, self._pim, self._params, self._spans = t_state, t_state, None, None, []
+
+    def snapshot_at(self, t_p: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
+                    gaps: Gaps) -> PimSnapshot:
+        """The IMU motion from the state to the ping at t_p (samples buffered since before the state: T, starts,
+        b_f rotation compensated, W, and the buffer's gaps)."""
+        self.advance(last_stamp_at_or_before(T, t_p), T, starts, b_f, W, gaps)
+        if self._pim is None or self._params is None:  # no sample stamp yet between the state and the ping
+            self._params = self._make_params()
+            self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
+        return snapshot_at(self._pim, self._a, t_p, self._spans, self.t_state, T, starts, b_f, W, gaps, self.imu_cfg,
+                           self._params.getOmegaCoriolis())
 
     def advance(self, t_cut: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
                 gaps: Gaps) -> None:
@@ -95,11 +79,7 @@ class StatePreintegration:
         if self._pim is None:
             self._params = self._make_params()
             self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
-        idx, dt, held = pieces_with_holds(T, starts, gaps, self._a, t_cut)
-        pim = self._pim
-        for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
-            pim.integrateMeasurement(b_f[i], W[i], dt_i)
-        self._spans += list(held.spans)
+        self._spans += list(integrate(self._pim, T, starts, b_f, W, gaps, self._a, t_cut).spans)
         self._a = t_cut
 
     def close(self, t_b: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
