@@ -20,6 +20,7 @@ from typing import Protocol
 
 import gtsam
 import numpy as np
+from scipy.linalg.lapack import dtrtrs as _trtrs
 
 from gtsam_dvl.core.errors import GtsamDvlError
 
@@ -51,9 +52,9 @@ class CompactConditional:
     __slots__ = ("_keys", "_R", "_S", "_d")
 
     def __init__(self, c: gtsam.GaussianConditional) -> None:
-        self._keys = list(c.keys())
-        # copies: the wrapper's arrays may view memory of the GTSAM conditional, which is let go
-        self._R, self._S, self._d = np.array(c.R()), np.array(c.S()), np.array(c.d())
+        self._keys = c.keys()  # (a new list)
+        # copies: the wrapper's arrays are read-only views of the GTSAM conditional, which is let go
+        self._R, self._S, self._d = c.R().copy(), c.S().copy(), c.d().copy()
 
     def keys(self) -> list[int]:
         return self._keys
@@ -90,12 +91,14 @@ class CompactBayesNet:
         x: dict[int, np.ndarray] = {}
         out = gtsam.VectorValues()
         for c in reversed(self.conds):
-            keys = c.keys()
-            rhs = c.d()
+            keys = c._keys
+            rhs = c._d
             if len(keys) > 1:
-                rhs = rhs - c.S() @ np.concatenate([x[k] for k in keys[1:]])
-            sol = np.linalg.solve(c.R(), rhs)  # tiny (<= 6x6)
-            if not np.all(np.isfinite(sol)):
+                rhs = rhs - c._S @ np.concatenate([x[k] for k in keys[1:]])
+            # R is upper triangular (QR): LAPACK's triangular solve, 1 us against np.linalg.solve's 4 us (a day of
+            # 1 s keyframes has 170,000 conditionals)
+            sol, info = _trtrs(c._R, rhs)
+            if info != 0 or not np.isfinite(sol).all():
                 raise GtsamDvlError("the linear system is indeterminate at variable "
                                     f"{gtsam.DefaultKeyFormatter(keys[0])}")
             x[keys[0]] = sol
