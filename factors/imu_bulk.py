@@ -135,6 +135,15 @@ def earth_increment(n_omega: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np
     return A, Gv, Gv - G2
 
 
+def gravity_maps(n_omega: np.ndarray, dt: np.ndarray) -> np.ndarray:
+    """M (N, 6, 3) = d(predicted n_p, n_v) / d n_g of the module doc's prediction: [Gp dt^2; Gv dt - [Omega]x Gp dt^2]
+    (the EarthImuFactor measures the same by probing its pim: factors/imu_earth.py)."""
+    _, Gv, Gp = earth_increment(n_omega, dt)
+    Mp = Gp * (dt * dt)[:, None, None]
+    Mv = Gv * dt[:, None, None] - skew_n(np.broadcast_to(np.asarray(n_omega, dtype=float), (len(dt), 3))) @ Mp
+    return np.concatenate([Mp, Mv], axis=1)
+
+
 @dataclass
 class ImuArrays:
     """N IMU factors' preintegrations (factor n joins states state[n] and state[n] + 1).
@@ -255,23 +264,23 @@ _BIAS0 = gtsam.imuBias.ConstantBias()
 _POSE0 = gtsam.Pose3()
 
 
-def bias_jacobians(imu_factors: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(x (N, 9), H (N, 9, 6), dt (N,)) of N gtsam.ImuFactors: preintegrated(), its Jacobian d x / d[b_a, b_g] at
-    the bias estimate (zero), which GTSAM's Python wrapper does not expose, and deltaTij(). Each factor is
-    evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j = its own prediction there,
+def bias_jacobians(pims: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x (N, 9), H (N, 9, 6), dt (N,)) of N gtsam.PreintegratedImuMeasurements: preintegrated(), its Jacobian
+    d x / d[b_a, b_g] at the bias estimate (zero), which GTSAM's Python wrapper does not expose, and deltaTij().
+    GTSAM's ImuFactor on each is evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j = its own prediction there,
     where the error is zero and the Logmap's derivative the identity, so that its bias Jacobian is (module doc,
     with R_i = I) [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], solved here for H. n_omega:
     the Earth rate the factors' parameters hold (zeros if none). Exact to rounding (tests/factors/test_imu_bulk.py).
     """
-    n = len(imu_factors)
+    n = len(pims)
     x = np.empty((n, 9))
     H5 = np.empty((n, 9, 6))
     R_P = np.empty((n, 3, 3))
     dt = np.empty(n)
     Hs = [np.zeros((9, d), order="F") for d in (6, 3, 6, 3, 6)]
     state0 = gtsam.NavState()
-    for k, f in enumerate(imu_factors):
-        pim = f.preintegratedMeasurements()
+    for k, pim in enumerate(pims):
+        f = gtsam.ImuFactor(0, 1, 2, 3, 4, pim)
         x[k] = pim.preintegrated()
         dt[k] = pim.deltaTij()
         pred = pim.predict(state0, _BIAS0)

@@ -35,6 +35,7 @@ from gtsam_dvl.estimators.gaps import (
     check_spacing,
     find_gaps,
     gaps_within,
+    hold_covariance,
     sample_starts_with_gaps,
     with_fillers,
 )
@@ -44,7 +45,7 @@ from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
-from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians
+from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians, gravity_maps
 from gtsam_dvl.factors.imu_earth import REFRESH_M
 
 CHUNK_STATES = 1000  # states eliminated at once (solver.eliminate_chunked)
@@ -83,7 +84,8 @@ class LogGraph:
     epochs: list[Epoch] = field(init=False)
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
     imu_params: list[gtsam.PreintegrationParams] = field(init=False)
-    imu_factors: list[EarthImuFactor] = field(init=False)  # empty once build_bulk has their numbers in arrays
+    imu_held: list[Holds] = field(init=False)  # what each IMU interval held across IMU gaps
+    _imu_factors: list[EarthImuFactor] | None = field(default=None, init=False, repr=False)  # (imu_factors)
     # the IMU factors' gravity references, shared by the EarthImuFactors' copies and the bulk IMU factors
     gravity_refs: GravityRefs = field(init=False, repr=False)
     gaps: Gaps = field(init=False)
@@ -121,15 +123,31 @@ class LogGraph:
         imu = log.imu
         starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
-        held = self._preintegrate(starts, b_f)
+        self.imu_held = self._preintegrate(starts, b_f)
         del starts, b_f
-        self.imu_factors = [self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
-                            for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, held, strict=True))]
-        n_f = len(self.imu_factors)
+        n_f = len(self.pims)
         self.gravity_refs = GravityRefs(
-            np.full((n_f, 3), np.nan), np.array([f.ref_g for f in self.imu_factors]).reshape(n_f, 3),
+            np.full((n_f, 3), np.nan), np.array([p.n_gravity for p in self.imu_params], dtype=float).reshape(n_f, 3),
             np.zeros((n_f, 3, 3)), None if cfg.solver.earth_model == "flat" else self.maker.gravity_model)
         self._per_factor_built = False
+
+    @property
+    def imu_factors(self) -> list[EarthImuFactor]:
+        """The per-factor graph's IMU factors (EarthImuFactor), made on first use with the gravity references set
+        so far (the bulk IMU factors of build_bulk need none: 50 us and 2.5 kB an interval saved); empty once
+        build_bulk let the preintegrations go."""
+        if self._imu_factors is None:
+            if len(self.pims) + 1 != len(self.epochs):
+                raise GtsamDvlError("the IMU factors: build_bulk let the preintegrations go; make a new LogGraph")
+            self._imu_factors = [
+                self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
+                for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, self.imu_held, strict=True))]
+            refs = self.gravity_refs
+            for i in np.flatnonzero(~np.isnan(refs.n_p[:, 0])).tolist():
+                f = self._imu_factors[i]
+                f.set_reference(refs.n_p[i], refs.n_g[i], refs.G[i])
+                f.set_gravity(refs.n_p[i])
+        return self._imu_factors
 
     @property
     def frame(self) -> LocalFrame:
@@ -237,9 +255,13 @@ class LogGraph:
         if len(idx):
             g, G = self.maker.gravity_model(mid[idx])
             refs.n_p[idx], refs.n_g[idx], refs.G[idx] = mid[idx], g, G
-            for k, i in enumerate(idx.tolist() if self.imu_factors else []):
-                self.imu_factors[i].set_reference(mid[i], g[k], G[k])
-                self.imu_factors[i].set_gravity(mid[i])
+            if self._imu_factors:
+                for k, i in enumerate(idx.tolist()):
+                    self._imu_factors[i].set_reference(mid[i], g[k], G[k])
+                    self._imu_factors[i].set_gravity(mid[i])
+            elif self.imu_params:  # what EarthImuFactor.set_gravity writes: the gravity pim.predict uses
+                for k, i in enumerate(idx.tolist()):
+                    self.imu_params[i].n_gravity = g[k]
         return len(idx)
 
     def refresh_gravity(self, values: gtsam.Values) -> bool:
@@ -372,7 +394,7 @@ class LogGraph:
 
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The whole graph and its initial guess (batch smoothing, covariance analysis)."""
-        if not self.imu_factors:
+        if self._imu_factors == []:
             raise GtsamDvlError("build: build_bulk let the IMU factors go (their numbers are in the bulk graph); "
                                 "make a new LogGraph")
         values = self.initial_values()
@@ -426,23 +448,30 @@ class LogGraph:
             ep.rate_input = None
             for p in ep.between:
                 p.rate_input = None
-        self.pims = []
+        self.pims, self.imu_params = [], []
         if not self._per_factor_built:
-            self.imu_factors = []
+            self._imu_factors = []
         return bulk, values
 
     def bulk_imu(self) -> BulkImu:
-        """The IMU factors as arrays (estimators/bulk_imu.py): each EarthImuFactor's preintegration, bias Jacobian,
-        gravity map and whitening, with the gravity references this LogGraph keeps."""
-        if not self.imu_factors:
-            raise GtsamDvlError("bulk_imu: build_bulk let the IMU factors go; make a new LogGraph")
-        fs = self.imu_factors
+        """The IMU factors as arrays (estimators/bulk_imu.py): each interval's preintegration, bias Jacobian, gravity
+        map and whitening (GTSAM's, of the covariance the EarthImuFactor gets: FactorMaker.new_imu_factor), with
+        the gravity references this LogGraph keeps."""
+        if len(self.pims) + 1 != len(self.epochs):
+            raise GtsamDvlError("bulk_imu: build_bulk let the preintegrations go; make a new LogGraph")
         n_omega = np.asarray(self.maker.n_omega_ie(), dtype=float)
-        x, H, dt = bias_jacobians([f.imu for f in fs], n_omega)
-        arrays = ImuArrays(x=x, H=H, dt=dt, n_omega=n_omega, M=np.array([f.gravity_map for f in fs]).reshape(-1, 6, 3))
-        # the noise models' own square root information (a Gaussian's R), so that the rows are GTSAM's
-        whiten = np.array([f.factor.noiseModel().R() for f in fs]).reshape(-1, 9, 9)  # type: ignore[attr-defined]
-        return BulkImu(arrays, whiten, [f.keys for f in fs], self.gravity_refs)
+        x, H, dt = bias_jacobians(self.pims, n_omega)
+        arrays = ImuArrays(x=x, H=H, dt=dt, n_omega=n_omega, M=gravity_maps(n_omega, dt))
+        whiten = np.empty((len(self.pims), 9, 9))
+        keys: list[tuple[int, int, int, int, int]] = []
+        for i, (pim, h) in enumerate(zip(self.pims, self.imu_held, strict=True)):
+            cov = pim.preintMeasCov()
+            if h:
+                cov = cov + hold_covariance(self.config.imu, h, self.epochs[i + 1].t - self.epochs[i].t)
+            # the noise model's own square root information (a Gaussian's R), so that the rows are GTSAM's
+            whiten[i] = gtsam.noiseModel.Gaussian.Covariance(cov).R()  # type: ignore[attr-defined]
+            keys.append((X(i), V(i), X(i + 1), V(i + 1), self.maker.bias_key(i)))
+        return BulkImu(arrays, whiten, keys, self.gravity_refs)
 
     def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,
                              dt: float) -> gtsam.NonlinearFactorGraph | BulkGraph:

@@ -146,6 +146,25 @@ def test_same_objective_and_linear_system(name: str) -> None:
         assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
 
 
+def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
+    """The bulk IMU factors' gravity maps (analytic) and whitening equal the EarthImuFactors' (probed from the pim;
+    GTSAM's noise model), and the gravity references are shared: a factor made after the references were set
+    holds them."""
+    builder = LogGraph(run_log(), configs()["default"])
+    per_factor, values = builder.build()
+    bulk, _ = builder.build_bulk(values)
+    assert bulk.imu is not None
+    fs = builder.imu_factors
+    M = np.array([f.gravity_map for f in fs])
+    assert np.abs(bulk.imu.arrays.M - M).max() <= 1e-12 * np.abs(M).max()
+    W = np.array([f.factor.noiseModel().R() for f in fs])
+    assert np.array_equal(bulk.imu.whiten, W)
+    refs = builder.gravity_refs
+    assert not np.isnan(refs.n_p).any()
+    for i in (0, len(fs) // 2, len(fs) - 1):
+        assert np.array_equal(fs[i].ref_p, refs.n_p[i]) and np.array_equal(fs[i].ref_G, refs.G[i])
+
+
 def test_same_solution_with_the_robust_kernel_active() -> None:
     cfg = configs()["default"]
     builder = LogGraph(run_log(), cfg)

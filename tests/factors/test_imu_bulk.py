@@ -62,7 +62,7 @@ def states(rng: np.random.Generator, near: bool) -> dict[str, np.ndarray]:
 def arrays(earth: bool) -> ImuArrays:
     fs, _ = factors(earth)
     w = W_IE if earth else np.zeros(3)
-    x, H, dt = bias_jacobians(fs, w)
+    x, H, dt = bias_jacobians([f.preintegratedMeasurements() for f in fs], w)
     return ImuArrays(x, H, dt, w, np.zeros((N, 6, 3)))
 
 
@@ -143,7 +143,7 @@ def test_bias_jacobian_against_independent_probes() -> None:
     component (the rotating-frame prediction from rest at the origin: A Exp(theta_c), A dp_c + gravity terms,
     A dv_c - Omega x p + gravity terms, so that differences between probes are A H b, linear in b)."""
     fs, _ = factors(True)
-    x, H, dt = bias_jacobians(fs, W_IE)
+    x, H, dt = bias_jacobians([f.preintegratedMeasurements() for f in fs], W_IE)
     for n, f in enumerate(fs):
         pim = f.preintegratedMeasurements()
         assert np.array_equal(x[n], pim.preintegrated()) and dt[n] == pim.deltaTij()
