@@ -7,10 +7,12 @@ numpy evaluation covers them all; GTSAM still sees one Jacobian factor per inter
 same whitening: the square root information matrix of the EarthImuFactor's own noise model), so the linear
 system is the per-factor graph's to rounding (tests/estimators/test_bulk.py).
 
-The preintegrations come from the EarthImuFactors' pims (x, their bias Jacobian by probing, dt) and their gravity
-map M; gravity follows position as in the EarthImuFactor: a reference per factor (n_p_ref, n_g_ref, G_ref) set by
-LogGraph.set_gravity_from_positions in the arrays it shares with this object, extrapolated linearly to the
-interval's mid position, and its gradient term added to the translation Jacobians.
+The preintegrations come from LogGraph's pims (x, dt, and the bias Jacobian from one ImuFactor evaluation each:
+factors/imu_bulk.bias_jacobians), with the gravity map M in closed form (the EarthImuFactor probes its pim for
+the same, tests/estimators/test_bulk.py). Gravity follows position as in the EarthImuFactor: a reference per
+factor (n_p_ref, n_g_ref, G_ref) set by LogGraph.set_gravity_from_positions in the arrays it shares with this
+object, extrapolated linearly to the interval's mid position, and its gradient term added to the translation
+Jacobians.
 """
 
 from __future__ import annotations
