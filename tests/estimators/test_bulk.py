@@ -165,6 +165,25 @@ def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
         assert np.array_equal(fs[i].ref_p, refs.n_p[i]) and np.array_equal(fs[i].ref_G, refs.G[i])
 
 
+def test_bulk_imu_factors_across_an_imu_gap() -> None:
+    """An IMU gap of 1.3 s in the banked turn (held, its motion-model covariance added to the intervals it crosses,
+    between keyframes too): the bulk IMU factors' objective and linear system are still the EarthImuFactors'."""
+    log = run_log()
+    keep = (log.imu.t <= 300.0) | (log.imu.t > 301.3)
+    log = dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep],
+                                                            b_f=log.imu.b_f[keep]))
+    builder = LogGraph(log, configs()["default"])
+    assert builder.counters["imu_gaps"] == 1 and sum(bool(h) for h in builder.imu_held) >= 2
+    per_factor, values = builder.build()
+    bulk, _ = builder.build_bulk(values)
+    vals = perturbed(values, np.random.default_rng(2))
+    e1, e2 = per_factor.error(vals), bulk.error(vals)
+    assert abs(e1 - e2) <= 1e-12 * e1
+    (H1, g1), (H2, g2) = hessians(imu_graph(builder).linearize(vals), bulk_imu_linear(bulk, vals))
+    assert np.abs(H1 - H2).max() <= 1e-9 * np.abs(H1).max()
+    assert np.abs(g1 - g2).max() <= 1e-9 * np.abs(g1).max()
+
+
 def test_same_solution_with_the_robust_kernel_active() -> None:
     cfg = configs()["default"]
     builder = LogGraph(run_log(), cfg)
