@@ -33,7 +33,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
-    builder = LogGraph(log, config)
+    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     # the DVL factors evaluated in bulk where the configuration allows (estimators/bulk.py: the same objective)

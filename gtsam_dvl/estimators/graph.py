@@ -22,6 +22,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
+from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
@@ -80,6 +81,8 @@ class LogGraph:
 
     log: LogData
     config: EstimatorConfig
+    # the fraction of the preintegration done, 20 times (a day of 1 s keyframes takes about a minute)
+    progress: ProgressFn | None = field(default=None, repr=False, compare=False)
     maker: FactorMaker = field(init=False)
     epochs: list[Epoch] = field(init=False)
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
@@ -221,7 +224,11 @@ class LogGraph:
         self.snapshots = SnapshotArrays.empty(sum(len(ep.between) for ep in self.epochs))
         held: list[Holds] = []
         q = 0
-        for a, b in zip(self.epochs[:-1], self.epochs[1:], strict=True):
+        n = len(self.epochs) - 1
+        every = max(1, n // 20)
+        for i, (a, b) in enumerate(zip(self.epochs[:-1], self.epochs[1:], strict=True)):
+            if self.progress is not None and i % every == 0:
+                self.progress(i / n)
             if a.between:
                 params = self.maker.make_params()
                 pim, h, snaps = interval_with_snapshots(a.t, b.t, [p.t for p in a.between], params, imu.t, starts,
