@@ -267,11 +267,11 @@ _POSE0 = gtsam.Pose3()
 def bias_jacobians(pims: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x (N, 9), H (N, 9, 6), dt (N,)) of N gtsam.PreintegratedImuMeasurements: preintegrated(), its Jacobian
     d x / d[b_a, b_g] at the bias estimate (zero), which GTSAM's Python wrapper does not expose, and deltaTij().
-    GTSAM's ImuFactor on each is evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j = its own prediction there,
-    where the error is zero and the Logmap's derivative the identity, so that its bias Jacobian is (module doc,
-    with R_i = I) [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], solved here for H. n_omega:
-    the Earth rate the factors' parameters hold (zeros if none). Exact to rounding (tests/factors/test_imu_bulk.py).
-    """
+    GTSAM's ImuFactor on each is evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j =
+    its own prediction there, where the error is zero and the Logmap's derivative the identity, so that its bias
+    Jacobian is (module doc, with R_i = I) [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], solved
+    here for H. n_omega: the Earth rate the pims' parameters hold (zeros if none). Exact to rounding
+    (tests/factors/test_imu_bulk.py)."""
     n = len(pims)
     x = np.empty((n, 9))
     H5 = np.empty((n, 9, 6))
