@@ -14,10 +14,10 @@ Jacobians at the identity state and its own prediction there (zero error, so the
 identity), has the bias Jacobian [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], R_P = A dR,
 A = Exp(-Omega dt) with the parameters' Earth rate Omega (factors/imu_bulk.py): dR's right-tangent Jacobian dR_dbg
 is its rotation rows, and dv_dba, dv_dbg follow from the velocity and position rows; exact to rounding, one
-evaluation per ping. Up to
-ANALYTIC_MAX_ANGLE (J_r is singular at a whole turn); beyond it, central differences of 12 predictions of the
-relative rotation dR^T R(b) (within 1e-9 relative of the former below it: the difference is their truncation
-error, tests/estimators/test_keyframes.py). The keyframe factor applies the Earth model.
+evaluation per ping. Up to ANALYTIC_MAX_ANGLE (J_r is singular at a whole turn); beyond it, central differences
+of 12 predictions of the relative rotation dR^T R(b) (within 1e-9 relative of the former below it: the
+difference is their truncation error, tests/estimators/test_keyframes.py). The keyframe factor applies the Earth
+model.
 
 Before, the snapshots came from a second preintegration of each interval up to its last ping, split at every
 ping (0.8 s of samples more per second of log at 5 Hz pings and 1 s keyframes: 40 % of the preintegration).

@@ -215,6 +215,30 @@ def test_snapshot_jacobians_match_the_central_differences() -> None:
     assert min(angles) < 1e-6 and max(angles) > ANALYTIC_MAX_ANGLE
 
 
+def test_snapshot_does_not_depend_on_the_parameters_earth_rate_or_gravity() -> None:
+    """The same samples preintegrated with the IMU factor's parameters (gravity, Earth rate: the snapshots are taken
+    from its preintegration) and with neither: the same snapshot (the increments and their bias Jacobians are the
+    preintegration's own; snapshot undoes the rotating-frame prediction it evaluates through)."""
+    rng = np.random.default_rng(8)
+    earth = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
+    for setter, getter in ((earth.setGyroscopeCovariance, _params().getGyroscopeCovariance),
+                           (earth.setAccelerometerCovariance, _params().getAccelerometerCovariance),
+                           (earth.setIntegrationCovariance, _params().getIntegrationCovariance)):
+        setter(getter())
+    w_ie = np.array([0.0, 6.3e-5, 3.6e-5]) * 50  # 50 times the Earth's rate, so that a wrong term would show
+    earth.setOmegaCoriolis(w_ie)
+    a = gtsam.PreintegratedImuMeasurements(earth, gtsam.imuBias.ConstantBias())
+    b = gtsam.PreintegratedImuMeasurements(_params(), gtsam.imuBias.ConstantBias())
+    for _ in range(180):
+        f, w = np.array([0.4, 0.1, 9.8]) + rng.normal(0.0, 0.3, 3), np.array([0.1, -0.2, 0.6]) + rng.normal(0, 0.05, 3)
+        a.integrateMeasurement(f, w, 0.005)
+        b.integrateMeasurement(f, w, 0.005)
+    sa, sb = snapshot(a, None, w_ie), snapshot(b)
+    for name in ("dt", "dR", "dv", "dp", "cov", "dR_dbg", "dv_dba", "dv_dbg"):
+        x, y = getattr(sa, name), getattr(sb, name)
+        assert np.abs(x - y).max() <= 1e-10 * max(np.abs(y).max(), 1e-300), name
+
+
 def test_snapshot_velocity_is_affine_in_the_bias() -> None:
     """What the tangent's Jacobians rest on: GTSAM's predicted velocity is the snapshot's dv + dv_dba b_a +
     dv_dbg b_g at any bias (to rounding), and its attitude dR Exp(dR_dbg b_g) to second order in b_g."""
