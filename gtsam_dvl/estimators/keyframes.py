@@ -210,7 +210,44 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
     what it held, and the snapshots at the pings t_pings (sorted, inside the interval) taken on the way: the
     interval is integrated once, cut at the last sample stamp at or before each ping, and each ping's snapshot is
     a copy with the rest up to the ping (snapshot_at). Samples i cover (starts[i], imu_t[i]] (b_f
-    rotation-compensated)."""
+    rotation-compensated).
+
+    Without an IMU gap in the interval its pieces are found once and cut at the pings (interval_cut_by_cut does
+    the same with the pieces of each cut, as the online estimator does: the same pieces, durations and order, so
+    the same bits, tests/estimators/test_keyframes.py; 9 look-ups in the log's sample arrays an interval
+    against 1)."""
+    idx, dt, held = pieces_with_holds(imu_t, starts, gaps, t_state, t_end)
+    if held:
+        return interval_cut_by_cut(t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg)
+    pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
+    n_omega = params.getOmegaCoriolis()
+    out: list[PimSnapshot] = []
+    ends = imu_t[idx]  # each piece's sample stamp: the cuts
+    rows_f, rows_w, dts = b_f[idx], b_omega[idx], dt.tolist()
+    done, a = 0, t_state
+    for t_p in t_pings:
+        k = int(np.searchsorted(ends, t_p, side="right"))  # the pieces up to the last stamp at or before t_p
+        if k > done:
+            for f_i, w_i, dt_i in zip(rows_f[done:k], rows_w[done:k], dts[done:k], strict=True):
+                pim.integrateMeasurement(f_i, w_i, dt_i)
+            done, a = k, float(ends[k - 1])
+        part = clone(pim)
+        if done < len(idx):  # the sample straddling the ping, from the cut (imu_pieces' duration)
+            j = int(idx[done])
+            d = min(float(imu_t[j]), t_p) - max(float(starts[j]), a)
+            if d > 0.0:
+                part.integrateMeasurement(b_f[j], b_omega[j], d)
+        out.append(snapshot(part, None, n_omega))
+    for f_i, w_i, dt_i in zip(rows_f[done:], rows_w[done:], dts[done:], strict=True):
+        pim.integrateMeasurement(f_i, w_i, dt_i)
+    return pim, Holds(), out
+
+
+def interval_cut_by_cut(t_state: float, t_end: float, t_pings: list[float], params: gtsam.PreintegrationParams,
+                        imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
+                        imu_cfg: ImuConfig) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PimSnapshot]]:
+    """interval_with_snapshots with the pieces of each cut found on their own (pieces_with_holds), across IMU gaps
+    too (their holds' pieces, and the hold covariance of everything held up to each ping in its snapshot)."""
     pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
     n_omega = params.getOmegaCoriolis()
     out: list[PimSnapshot] = []

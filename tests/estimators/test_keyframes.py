@@ -31,7 +31,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators import keyframes
 from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.gaps import find_gaps
+from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.keyframes import ANALYTIC_MAX_ANGLE, PimSnapshot, ping_snapshots, snapshot, snapshot_params
 from gtsam_dvl.estimators.selection import sample_starts
@@ -213,6 +213,42 @@ def test_snapshot_jacobians_match_the_central_differences() -> None:
     print(f"{len(angles)} snapshots, |theta| {min(angles):.1e} to {max(angles):.2f} rad; worst relative "
           f"difference {worst}")
     assert min(angles) < 1e-6 and max(angles) > ANALYTIC_MAX_ANGLE
+
+
+@pytest.mark.parametrize("gap", [False, True])
+def test_interval_pieces_found_once_are_the_cut_by_cut_ones(gap: bool) -> None:
+    """interval_with_snapshots (the interval's pieces found once, cut at the pings) against interval_cut_by_cut
+    (each cut's pieces on their own, as the online estimator integrates): the same preintegration and snapshots
+    to the last bit, with pings inside samples, exactly at a stamp and before the interval's first stamp; with an
+    IMU gap the two are one code path."""
+    rng = np.random.default_rng(9)
+    t = 0.0013 + np.arange(1, 401) * 0.005
+    if gap:
+        t = t[(t <= 0.8) | (t > 1.1)]
+    b_omega = np.array([0.05, -0.1, 0.8]) + 0.02 * rng.normal(size=(len(t), 3))
+    b_f = np.array([0.5, 0.1, 9.8]) + 0.2 * rng.normal(size=(len(t), 3))
+    gaps = find_gaps(t, 5.0)
+    assert len(gaps) == gap
+    starts = sample_starts_with_gaps(t, gaps)
+    t_state, t_end = 0.0115, 1.7
+    pings = [0.0131, 0.3, float(t[100]), 0.7777, 1.05, 1.3, 1.69]  # (0.0131: before the first stamp after t_state)
+    params = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
+    for setter, getter in ((params.setGyroscopeCovariance, _params().getGyroscopeCovariance),
+                           (params.setAccelerometerCovariance, _params().getAccelerometerCovariance),
+                           (params.setIntegrationCovariance, _params().getIntegrationCovariance)):
+        setter(getter())
+    params.setOmegaCoriolis(np.array([0.0, 6.3e-5, 3.6e-5]))
+    args = (t_state, t_end, pings, params, t, starts, b_f, b_omega, gaps, ImuConfig())
+    pim_a, held_a, snaps_a = keyframes.interval_with_snapshots(*args)
+    pim_b, held_b, snaps_b = keyframes.interval_cut_by_cut(*args)
+    assert held_a == held_b and bool(held_a) == gap
+    for name in ("deltaVij", "deltaPij", "preintMeasCov", "deltaTij", "preintegrated"):
+        assert np.array_equal(getattr(pim_a, name)(), getattr(pim_b, name)()), name
+    for sa, sb in zip(snaps_a, snaps_b, strict=True):
+        for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg", "cov"):
+            assert np.array_equal(getattr(sa, name), getattr(sb, name)), name
+    assert snaps_a[0].dt == pytest.approx(pings[0] - t_state, abs=1e-12) and pim_a.deltaTij() == pytest.approx(
+        t_end - t_state, abs=1e-12)
 
 
 def test_snapshot_does_not_depend_on_the_parameters_earth_rate_or_gravity() -> None:
