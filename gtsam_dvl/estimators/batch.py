@@ -76,7 +76,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
 # this (half a chi^2 unit: the step is within one sigma, Mahalanobis, of the first pass's solution), whatever the
 # configured tolerances: it only centres the offset's windows (the offset's sigma, 0.02 s, against windows of
 # 0.25 s), and the second pass converges to the configured tolerances. Saves the first pass's last iteration
-# (a day of 1 s keyframes: 10 s of 68).
+# where its decrease falls between the tolerances (a day of 1 s keyframes: linearise + eliminate 40.0 -> 26.2 s;
+# the estimates within 2.8e-4 sigma of a full first pass's).
 FIRST_PASS_TOL = 0.5
 
 
