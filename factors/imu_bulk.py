@@ -3,7 +3,7 @@
 Why: through GTSAM's CustomFactor each IMU factor of the batch smoother costs a Python call of 20-35 us per
 linearisation and per error evaluation (factors/imu_earth.py), and a day of 1 s keyframes has 86,400 of them:
 about 30 s of a 24 h solve. The batch smoother owns its Gauss-Newton loop, so it evaluates them all in a few
-vectorised operations instead (estimators/bulk.py). The model is GTSAM's, written for stacks of factors; it is
+vectorised operations instead (estimators/bulk_imu.py). The model is GTSAM's, written for stacks of factors; it is
 checked against gtsam.ImuFactor.evaluateError (errors and Jacobians to 1e-9) and against numerical derivatives
 in tests/factors/test_imu_bulk.py.
 
@@ -150,7 +150,7 @@ class ImuArrays:
 
     x (N, 9): [theta (rad), dp (m), dv (m/s)] at bias estimate zero; H (N, 9, 6): dx / d[b_a, b_g]; dt (N,) s the
     integrated time; n_omega (3,) rad/s Earth rate in map (zeros: inertial); M (N, 6, 3) d(predicted n_p, n_v) /
-    d n_g (EarthImuFactor's, for the gravity-gradient term)."""
+    d n_g (gravity_maps: the EarthImuFactor probes its pim for the same), for the gravity-gradient term."""
 
     x: np.ndarray
     H: np.ndarray
