@@ -192,16 +192,16 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
     dt = f.dt
     x_c = f.x + np.einsum("nij,nj->ni", f.H, bias)
     theta_c, dp_c, dv_c = x_c[:, 0:3], x_c[:, 3:6], x_c[:, 6:9]
-    Om = np.broadcast_to(np.asarray(f.n_omega, dtype=float), n_p_i.shape)
+    n_omega_ie = np.broadcast_to(np.asarray(f.n_omega, dtype=float), n_p_i.shape)  # Earth rate in map, rad/s
     R_U = so3_exp_n(theta_c)
     AR_i = f.A @ n_R_i
     R_P = AR_i @ R_U
-    vbar = n_v_i + np.cross(Om, n_p_i)
+    vbar = n_v_i + np.cross(n_omega_ie, n_p_i)
     p_P = (np.einsum("nij,nj->ni", f.Gp, n_g) * (dt * dt)[:, None]
            + np.einsum("nij,nj->ni", f.A, n_p_i + vbar * dt[:, None])
            + np.einsum("nij,nj->ni", AR_i, dp_c))
     v_P = (np.einsum("nij,nj->ni", f.Gv, n_g) * dt[:, None] + np.einsum("nij,nj->ni", f.A, vbar)
-           + np.einsum("nij,nj->ni", AR_i, dv_c) - np.cross(Om, p_P))
+           + np.einsum("nij,nj->ni", AR_i, dv_c) - np.cross(n_omega_ie, p_P))
     R_jt = np.swapaxes(n_R_j, 1, 2)
     R_E = R_jt @ R_P
     p_E = np.einsum("nij,nj->ni", R_jt, p_P - n_p_j)
@@ -213,7 +213,7 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
     n = len(dt)
     R_Pt = np.swapaxes(R_P, 1, 2)
     R_Et = np.swapaxes(R_E, 1, 2)
-    OmX = skew_n(Om)
+    n_omega_x = skew_n(n_omega_ie)
     dt3 = dt[:, None, None]
 
     def from_P(eps_R: np.ndarray | None, dp: np.ndarray, dv: np.ndarray) -> np.ndarray:
@@ -223,15 +223,15 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
         if eps_R is not None:
             eps[:, 0:3] = eps_R
         eps[:, 3:6] = R_Pt @ dp
-        eps[:, 6:9] = R_Pt @ (dv - OmX @ dp)
+        eps[:, 6:9] = R_Pt @ (dv - n_omega_x @ dp)
         return np.asarray(Jlog @ eps)
 
     R_Ut = np.swapaxes(R_U, 1, 2)
     # X_i rotation: R_P -> R_P Exp(R_U^T w); dp_Y = -A R_i [dp_c] w, dv_Y = -A R_i [dv_c] w
     H_Ri = from_P(R_Ut, -AR_i @ skew_n(dp_c), -AR_i @ skew_n(dv_c))
     # X_i translation (n_p_i + R_i d): vbar moves by Omega x R_i d
-    OmR = OmX @ n_R_i
-    H_pi = from_P(None, f.A @ (n_R_i + OmR * dt3), f.A @ OmR)
+    n_omega_x_R_i = n_omega_x @ n_R_i
+    H_pi = from_P(None, f.A @ (n_R_i + n_omega_x_R_i * dt3), f.A @ n_omega_x_R_i)
     # V_i (map)
     A_ = np.broadcast_to(f.A, (n, 3, 3))
     H_vi = from_P(None, A_ * dt3, A_)

@@ -35,7 +35,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
-from gtsam_dvl.estimators.bulk_imu import BulkImu
+from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
 from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants
 from gtsam_dvl.factors.dvl_keyframe import keyframe_ping_covariances
 
@@ -106,34 +106,26 @@ class BulkDvl:
         return len(self.pings)
 
     # ----- evaluation ----------------------------------------------------------------------------
-    def _states(self, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                                     float, np.ndarray, float | None]:
+    def states(self, values: gtsam.Values) -> StateArrays:
+        """The states' arrays at values (bulk_imu.state_arrays)."""
+        return state_arrays(values, self.n_states, self.bias_keys)
+
+    def _ping_states(self, values: gtsam.Values, st: StateArrays) -> tuple[
+            np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float | None]:
         """Each ping's state: n_R_i (N, 3, 3), n_p_i, n_v_i, b_a, b_g (N, 3); k, b_R_d, dt_d."""
-        poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
-        vels = gtsam.utilities.extractVectors(values, "v")  # every V(i), in order
-        if poses.shape[0] != self.n_states or vels.shape[0] != self.n_states:
-            raise ValueError(f"BulkDvl: values hold {poses.shape[0]} poses and {vels.shape[0]} velocities, "
-                             f"the graph {self.n_states} states")
         s = self.pings.state
-        n_R_i = poses[s, :9].reshape(-1, 3, 3)
-        n_p_i = poses[s, 9:]
-        n_v_i = vels[s]
-        if self._bias_random_walk:
-            biases = np.array([values.atConstantBias(k).vector() for k in self.bias_keys])
-            b_a, b_g = biases[s, :3], biases[s, 3:]
-        else:
-            b = values.atConstantBias(self.bias_keys[0]).vector()
-            b_a, b_g = np.broadcast_to(b[:3], (len(s), 3)), np.broadcast_to(b[3:], (len(s), 3))
+        bias = st.bias[s] if self._bias_random_walk else np.broadcast_to(st.bias[0], (len(s), 6))
         k = float(values.atVector(K_SCALE)[0])
         b_R_d = values.atRot3(C_MISALIGN).matrix()
         dt_d = float(values.atVector(T_OFFSET)[0]) if self.offset else None
-        return n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d
+        return st.n_R[s], st.n_p[s], st.n_v[s], bias[:, :3], bias[:, 3:], k, b_R_d, dt_d
 
-    def _evaluate(self, values: gtsam.Values, jacobians: bool,
-                  out: list[np.ndarray] | None = None) -> np.ndarray:
+    def _evaluate(self, values: gtsam.Values, jacobians: bool, out: list[np.ndarray] | None = None,
+                  states: StateArrays | None = None) -> np.ndarray:
         """Whitened errors (N, 3); with jacobians, the whitened Jacobian blocks per key written into out (N, 3, d)
         each, unweighted. Evaluated CHUNK pings at a time: the temporaries of a whole day's pings would take GBs."""
-        n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d = self._states(values)
+        n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d = self._ping_states(
+            values, self.states(values) if states is None else states)
         ew = np.empty((len(self), 3))
         for a in range(0, len(self), CHUNK):
             sl = slice(a, a + CHUNK)
@@ -164,11 +156,12 @@ class BulkDvl:
             return k2 / (k2 + x2), 0.5 * k2 * np.log1p(x2 / k2)
         return np.ones_like(x), 0.5 * x2
 
-    def error(self, values: gtsam.Values) -> float:
-        """The pings' total loss at values (as graph.error of the per-factor graph counts it)."""
+    def error(self, values: gtsam.Values, states: StateArrays | None = None) -> float:
+        """The pings' total loss at values (as graph.error of the per-factor graph counts it); states: its arrays,
+        if already extracted."""
         if not len(self):
             return 0.0
-        ew = self._evaluate(values, False)
+        ew = self._evaluate(values, False, states=states)
         return float(self._weights_and_losses(ew)[1].sum())
 
     def carriers(self) -> gtsam.NonlinearFactorGraph:
@@ -182,7 +175,7 @@ class BulkDvl:
                                              _Carrier(self._served, lo, hi)))
         return graph
 
-    def prepare(self, values: gtsam.Values) -> None:
+    def prepare(self, values: gtsam.Values, states: StateArrays | None = None) -> None:
         """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
         (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
         n = len(self)
@@ -190,7 +183,7 @@ class BulkDvl:
         served = self._served
         if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # (released after each linearisation)
             served.blocks = [np.empty((n, 3, d)) for d in dims]
-        ew = self._evaluate(values, True, served.blocks)
+        ew = self._evaluate(values, True, served.blocks, states)
         w, _ = self._weights_and_losses(ew)
         sw = np.sqrt(w)
         if not np.all(sw == 1.0):
@@ -227,17 +220,19 @@ class BulkGraph:
         self._imu_carriers = imu.carriers() if imu is not None else None
 
     def error(self, values: gtsam.Values) -> float:
-        imu = self.imu.error(values) if self.imu is not None else 0.0
-        return float(self.graph.error(values)) + self.bulk.error(values) + imu
+        states = self.bulk.states(values)  # once for both
+        imu = self.imu.error(values, states) if self.imu is not None else 0.0
+        return float(self.graph.error(values)) + self.bulk.error(values, states) + imu
 
     def linearize(self, values: gtsam.Values) -> gtsam.GaussianFactorGraph:
         linear = self.graph.linearize(values)
+        states = self.bulk.states(values)  # once for both
         if self.imu is not None and self._imu_carriers is not None and len(self.imu):
-            self.imu.prepare(values)
+            self.imu.prepare(values, states)
             linear.push_back(self._imu_carriers.linearize(values))
             self.imu.release()
         if len(self.bulk):
-            self.bulk.prepare(values)
+            self.bulk.prepare(values, states)
             linear.push_back(self._carriers.linearize(values))
             self.bulk.release()  # GTSAM copied the rows into its Jacobian factors
         return linear

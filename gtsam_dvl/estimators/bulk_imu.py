@@ -53,6 +53,33 @@ class GravityRefs:
 
 
 @dataclass
+class StateArrays:
+    """Every state's variables at a linearisation point, in state order: n_R (S, 3, 3) base_link -> map, n_p (S, 3)
+    m and n_v (S, 3) m/s in map, bias (S, 6) [b_a m/s^2, b_g rad/s] of each state's bias key. Extracted once per
+    evaluation and shared by the bulk IMU and DVL factors (estimators/bulk.py)."""
+
+    n_R: np.ndarray
+    n_p: np.ndarray
+    n_v: np.ndarray
+    bias: np.ndarray
+
+
+def state_arrays(values: gtsam.Values, n_states: int, bias_keys: list[int]) -> StateArrays:
+    """StateArrays of values, whose poses X(0..S-1) and velocities V(0..S-1) are all the Pose3 and V-keyed vectors
+    it holds; bias_keys: each state's bias key (one key for all: a random-constant bias)."""
+    poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
+    vels = gtsam.utilities.extractVectors(values, "v")  # every V(i), in order
+    if poses.shape[0] != n_states or vels.shape[0] != n_states:
+        raise ValueError(f"values hold {poses.shape[0]} poses and {vels.shape[0]} velocities, the graph {n_states} "
+                         "states")
+    if len(set(bias_keys)) > 1:
+        bias = np.array([values.atConstantBias(k).vector() for k in bias_keys])
+    else:
+        bias = np.broadcast_to(values.atConstantBias(bias_keys[0]).vector(), (n_states, 6))
+    return StateArrays(poses[:, :9].reshape(-1, 3, 3), poses[:, 9:], vels, bias)
+
+
+@dataclass
 class _ImuServed:
     e: np.ndarray = field(default_factory=lambda: np.zeros((0, 9)))
     blocks: list[np.ndarray] = field(default_factory=list)
@@ -79,36 +106,28 @@ class _ImuCarrier:
 
 @dataclass
 class BulkImu:
-    """The IMU factors of a LogGraph as arrays: factor n joins states n and n + 1 with bias key bias_keys[n]."""
+    """The IMU factors of a LogGraph as arrays: factor n joins states n and n + 1 with state n's bias key."""
 
     arrays: ImuArrays
     whiten: np.ndarray  # (N, 9, 9) the noise models' square root information matrices
     keys: list[tuple[int, int, int, int, int]]  # (X_i, V_i, X_j, V_j, B) per factor
     gravity: GravityRefs
+    state_bias_keys: list[int]  # each of the N + 1 states' bias key
     _served: _ImuServed = field(init=False, default_factory=_ImuServed)
 
     def __len__(self) -> int:
         return len(self.arrays)
 
-    def _states(self, values: gtsam.Values) -> tuple[np.ndarray, ...]:
-        poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
-        vels = gtsam.utilities.extractVectors(values, "v")
-        n = len(self)
-        if poses.shape[0] != n + 1 or vels.shape[0] != n + 1:
-            raise ValueError(f"BulkImu: values hold {poses.shape[0]} poses, the graph {n + 1} states")
-        n_R = poses[:, :9].reshape(-1, 3, 3)
-        n_p = poses[:, 9:]
-        bias_keys = [k[4] for k in self.keys]
-        if len(set(bias_keys)) > 1:
-            b = np.array([values.atConstantBias(k).vector() for k in bias_keys])
-        else:
-            b = np.broadcast_to(values.atConstantBias(bias_keys[0]).vector(), (n, 6))
-        n_g = self.gravity.gravity_at(0.5 * (n_p[:-1] + n_p[1:]))
-        return n_R, n_p, vels, b, n_g
+    def states(self, values: gtsam.Values) -> StateArrays:
+        """The states' arrays at values (state_arrays)."""
+        return state_arrays(values, len(self) + 1, self.state_bias_keys)
 
-    def _evaluate(self, values: gtsam.Values, out: list[np.ndarray] | None) -> np.ndarray:
+    def _evaluate(self, values: gtsam.Values, out: list[np.ndarray] | None,
+                  states: StateArrays | None = None) -> np.ndarray:
         """Whitened errors (N, 9); with out, the whitened Jacobian blocks written into it."""
-        n_R, n_p, n_v, b, n_g = self._states(values)
+        st = self.states(values) if states is None else states
+        n_R, n_p, n_v, b = st.n_R, st.n_p, st.n_v, st.bias[:-1]  # (bias: state i's, of factor i)
+        n_g = self.gravity.gravity_at(0.5 * (n_p[:-1] + n_p[1:]))
         a, gr = self.arrays, self.gravity
         ew = np.empty((len(self), 9))
         for lo in range(0, len(self), CHUNK):
@@ -128,11 +147,12 @@ class BulkImu:
                     np.matmul(W, B, out=dst[sl])
         return ew
 
-    def error(self, values: gtsam.Values) -> float:
-        """The IMU factors' total error at values (half the squared whitened errors, as GTSAM's)."""
+    def error(self, values: gtsam.Values, states: StateArrays | None = None) -> float:
+        """The IMU factors' total error at values (half the squared whitened errors, as GTSAM's); states: its
+        arrays, if already extracted."""
         if not len(self):
             return 0.0
-        ew = self._evaluate(values, None)
+        ew = self._evaluate(values, None, states)
         return 0.5 * float(np.einsum("ni,ni->", ew, ew))
 
     def carriers(self) -> gtsam.NonlinearFactorGraph:
@@ -142,12 +162,12 @@ class BulkImu:
             graph.add(gtsam.CustomFactor(unit, list(keys), _ImuCarrier(self._served, n)))
         return graph
 
-    def prepare(self, values: gtsam.Values) -> None:
+    def prepare(self, values: gtsam.Values, states: StateArrays | None = None) -> None:
         """Compute the whitened rows the carriers serve."""
         s = self._served
         if len(s.blocks) != len(_DIMS) or len(s.blocks[0]) != len(self):
             s.blocks = [np.empty((len(self), 9, d)) for d in _DIMS]
-        s.e = self._evaluate(values, s.blocks)
+        s.e = self._evaluate(values, s.blocks, states)
         s.ready = True
 
     def release(self) -> None:

@@ -80,6 +80,14 @@ def _mean_exp(phi: np.ndarray, wgt: np.ndarray) -> np.ndarray:
     return out
 
 
+def integrate_pieces(pim: gtsam.PreintegratedImuMeasurements, b_f: np.ndarray, b_omega: np.ndarray,
+                     dt: list[float]) -> None:
+    """Integrate the pieces (rows of b_f m/s^2 and b_omega rad/s, durations dt s as Python floats: numpy scalars
+    cost more than the integration itself) into pim, in order."""
+    for f_i, w_i, dt_i in zip(b_f, b_omega, dt, strict=True):
+        pim.integrateMeasurement(f_i, w_i, dt_i)
+
+
 @dataclass
 class FactorMaker:
     """Factors, priors and initial guesses of one epoch from explicit measurements (module doc)."""
@@ -204,9 +212,7 @@ class FactorMaker:
             held = Holds()
         else:
             idx, dt, held = pieces_with_holds(t, starts, gaps, t_a, t_b)
-        # Python floats and ints for the loop: numpy scalars cost more than the integration itself
-        for i, dt_i in zip(idx.tolist(), dt.tolist(), strict=True):
-            pim.integrateMeasurement(b_f[i], b_omega[i], dt_i)
+        integrate_pieces(pim, b_f[idx], b_omega[idx], dt.tolist())
         return pim, params, held
 
     # ----- gravity -------------------------------------------------------------------------------
@@ -219,14 +225,21 @@ class FactorMaker:
         return g, gravity_gradient(self.frame, n_p) + w_x2
 
     # ----- factors -------------------------------------------------------------------------------
+    def imu_keys(self, i: int) -> tuple[int, int, int, int, int]:
+        """The keys of the IMU factor between states i and i+1: X_i, V_i, X_i+1, V_i+1 and state i's bias."""
+        return X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)
+
+    def imu_hold_cov(self, held: Holds | None, dt: float) -> np.ndarray | None:
+        """(9, 9) covariance added to an IMU factor of dt seconds for what it held across IMU gaps (the motion
+        model: gaps.hold_covariance); None if nothing was held."""
+        return hold_covariance(self.config.imu, held, dt) if held else None
+
     def new_imu_factor(self, i: int, pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams,
                        dt: float, held: Holds | None = None) -> EarthImuFactor:
         """The IMU factor between states i and i+1 from its preintegration (constant gravity if flat); held_s
-        seconds of it crossed an IMU gap (their motion-model covariance is added: gaps.hold_covariance)."""
+        seconds of it crossed an IMU gap (their motion-model covariance is added: imu_hold_cov)."""
         gravity = None if self.config.solver.earth_model == "flat" else self.gravity_model
-        extra = hold_covariance(self.config.imu, held, dt) if held else None
-        return make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), self.bias_key(i)), dt, gravity,
-                                     extra)
+        return make_earth_imu_factor(pim, params, self.imu_keys(i), dt, gravity, self.imu_hold_cov(held, dt))
 
     def bias_link_factors(self, i: int, dt: float) -> list[gtsam.NonlinearFactor]:
         """Random-walk bias link B_i -> B_i+1 over dt seconds (none for a random-constant bias)."""

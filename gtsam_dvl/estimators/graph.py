@@ -36,7 +36,6 @@ from gtsam_dvl.estimators.gaps import (
     check_spacing,
     find_gaps,
     gaps_within,
-    hold_covariance,
     sample_starts_with_gaps,
     with_fillers,
 )
@@ -473,12 +472,14 @@ class LogGraph:
         keys: list[tuple[int, int, int, int, int]] = []
         for i, (pim, h) in enumerate(zip(self.pims, self.imu_held, strict=True)):
             cov = pim.preintMeasCov()
-            if h:
-                cov = cov + hold_covariance(self.config.imu, h, self.epochs[i + 1].t - self.epochs[i].t)
+            extra = self.maker.imu_hold_cov(h, self.epochs[i + 1].t - self.epochs[i].t)
+            if extra is not None:
+                cov = cov + extra
             # the noise model's own square root information (a Gaussian's R), so that the rows are GTSAM's
             whiten[i] = gtsam.noiseModel.Gaussian.Covariance(cov).R()  # type: ignore[attr-defined]
-            keys.append((X(i), V(i), X(i + 1), V(i + 1), self.maker.bias_key(i)))
-        return BulkImu(arrays, whiten, keys, self.gravity_refs)
+            keys.append(self.maker.imu_keys(i))
+        state_bias_keys = [self.maker.bias_key(i) for i in range(len(self.epochs))]
+        return BulkImu(arrays, whiten, keys, self.gravity_refs, state_bias_keys)
 
     def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,
                              dt: float) -> gtsam.NonlinearFactorGraph | BulkGraph:

@@ -31,6 +31,8 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
+from gtsam_dvl.core.rotations import skew
+from gtsam_dvl.estimators.factor_maker import integrate_pieces
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.factors import PingMotion
 
@@ -103,18 +105,12 @@ def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationP
     return out
 
 
-def _skew(w: np.ndarray) -> np.ndarray:
-    """[w]x (np.cross's axis handling costs 40 us a call)."""
-    x, y, z = w.tolist()
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None,
              n_omega: np.ndarray | None = None) -> PimSnapshot:
     """The snapshot of pim now (bias estimate zero; module doc). n_omega: the Earth rate (rad/s, map) its
     parameters hold, None or zeros for none (their gravity does not matter)."""
     theta = np.asarray(pim.preintegrated(), dtype=float)[:3]
-    w = np.zeros(3) if n_omega is None else np.asarray(n_omega, dtype=float)
+    n_omega_ie = np.zeros(3) if n_omega is None else np.asarray(n_omega, dtype=float)
     dR = pim.deltaRij().matrix()
     if float(theta @ theta) <= ANALYTIC_MAX_ANGLE**2:
         # GTSAM's ImuFactor on this pim, evaluated with its Jacobians at X_i = identity, v_i = 0 and X_j = the
@@ -129,11 +125,11 @@ def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | No
         H5 = Hs[4]
         dR_dbg = H5[0:3, 3:6].copy()
         dv_db = dR @ H5[6:9]
-        if w.any():
-            dv_db += _skew(w) @ (dR @ H5[3:6])
+        if n_omega_ie.any():  # (np.cross costs 40 us a call on 3-vectors)
+            dv_db += skew(n_omega_ie) @ (dR @ H5[3:6])
         dv_dba, dv_dbg = dv_db[:, :3], dv_db[:, 3:]
     else:
-        dR_dbg, dv_dba, dv_dbg = _central_differences(pim, w)
+        dR_dbg, dv_dba, dv_dbg = _central_differences(pim, n_omega_ie)
     cov = np.asarray(pim.preintMeasCov(), dtype=float)
     if extra_cov is not None:
         cov = cov + extra_cov
@@ -176,8 +172,7 @@ def integrate(pim: gtsam.PreintegratedImuMeasurements, imu_t: np.ndarray, starts
               b_omega: np.ndarray, gaps: Gaps, a: float, b: float) -> Holds:
     """Integrate the pieces of (a, b] (pieces_with_holds) into pim; returns what was held."""
     idx, dt, held = pieces_with_holds(imu_t, starts, gaps, a, b)
-    for f_i, w_i, dt_i in zip(b_f[idx], b_omega[idx], dt.tolist(), strict=True):  # rows: no per-sample indexing
-        pim.integrateMeasurement(f_i, w_i, dt_i)
+    integrate_pieces(pim, b_f[idx], b_omega[idx], dt.tolist())
     return held
 
 
@@ -228,8 +223,7 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
     for t_p in t_pings:
         k = int(np.searchsorted(ends, t_p, side="right"))  # the pieces up to the last stamp at or before t_p
         if k > done:
-            for f_i, w_i, dt_i in zip(rows_f[done:k], rows_w[done:k], dts[done:k], strict=True):
-                pim.integrateMeasurement(f_i, w_i, dt_i)
+            integrate_pieces(pim, rows_f[done:k], rows_w[done:k], dts[done:k])
             done, a = k, float(ends[k - 1])
         part = clone(pim)
         if done < len(idx):  # the sample straddling the ping, from the cut (imu_pieces' duration)
@@ -238,8 +232,7 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
             if d > 0.0:
                 part.integrateMeasurement(b_f[j], b_omega[j], d)
         out.append(snapshot(part, None, n_omega))
-    for f_i, w_i, dt_i in zip(rows_f[done:], rows_w[done:], dts[done:], strict=True):
-        pim.integrateMeasurement(f_i, w_i, dt_i)
+    integrate_pieces(pim, rows_f[done:], rows_w[done:], dts[done:])
     return pim, Holds(), out
 
 
@@ -266,13 +259,7 @@ def interval_cut_by_cut(t_state: float, t_end: float, t_pings: list[float], para
 def ping_snapshots(t_state: float, t_pings: list[float], params: gtsam.PreintegrationParams, imu_t: np.ndarray,
                    starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
                    imu_cfg: ImuConfig) -> list[PimSnapshot]:
-    """The snapshots at the pings t_pings (sorted, after t_state) of interval_with_snapshots from t_state (params:
-    as the IMU factors', copied)."""
-    own = gtsam.PreintegrationParams(np.asarray(params.n_gravity, dtype=float))
-    own.setGyroscopeCovariance(params.getGyroscopeCovariance())
-    own.setAccelerometerCovariance(params.getAccelerometerCovariance())
-    own.setIntegrationCovariance(params.getIntegrationCovariance())
-    if params.getOmegaCoriolis() is not None:
-        own.setOmegaCoriolis(np.asarray(params.getOmegaCoriolis(), dtype=float))
-    return interval_with_snapshots(t_state, t_pings[-1] if t_pings else t_state, t_pings, own, imu_t, starts, b_f,
-                                   b_omega, gaps, imu_cfg)[2]
+    """The snapshots at the pings t_pings (sorted, after t_state) of interval_with_snapshots from t_state up to
+    the last ping (params: as the IMU factors')."""
+    t_end = t_pings[-1] if t_pings else t_state
+    return interval_with_snapshots(t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg)[2]
