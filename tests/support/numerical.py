@@ -1,0 +1,61 @@
+"""Numerical derivatives on manifolds: the one helper every Jacobian test uses.
+
+Central differences of a vector-valued function of any number of arguments, each perturbed in its own tangent
+space the way GTSAM retracts it (Pose3 and Rot3 on the right, pose tangent [rotation, translation]; a
+ConstantBias as [accelerometer, gyroscope]; numbers and arrays additively). GTSAM's numericalDerivativeNM does
+the same, but exists only as a fixed family of functions per argument count and position; this takes any.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import gtsam
+import numpy as np
+
+
+def tangent_dim(x: Any) -> int:
+    """The dimension of x's tangent space (a float is 1, an array its size)."""
+    if hasattr(x, "retract") and hasattr(x, "localCoordinates"):
+        return int(np.asarray(x.localCoordinates(x)).size)
+    if isinstance(x, gtsam.imuBias.ConstantBias):
+        return 6
+    return int(np.asarray(x, dtype=float).size)
+
+
+def perturb(x: Any, d: np.ndarray) -> Any:
+    """x moved by the tangent vector d (GTSAM retract for manifold types)."""
+    if isinstance(x, gtsam.imuBias.ConstantBias):
+        return gtsam.imuBias.ConstantBias(x.accelerometer() + d[:3], x.gyroscope() + d[3:])
+    if hasattr(x, "retract"):
+        return x.retract(d)
+    if isinstance(x, float | int) and not isinstance(x, bool):
+        return float(x) + float(d[0])
+    arr = np.asarray(x, dtype=float)
+    return arr + d.reshape(arr.shape)
+
+
+def numerical_jacobian(f: Callable[..., Any], args: Sequence[Any], index: int, delta: float = 1e-6) -> np.ndarray:
+    """d f(args) / d args[index] (rows: f's output, columns: the argument's tangent), central differences."""
+    args = list(args)
+    x = args[index]
+    n = tangent_dim(x)
+    f0 = np.atleast_1d(np.asarray(f(*args), dtype=float))
+    J = np.zeros((f0.size, n))
+    for j in range(n):
+        d = np.zeros(n)
+        d[j] = delta
+        plus = args.copy()
+        minus = args.copy()
+        plus[index] = perturb(x, d)
+        minus[index] = perturb(x, -d)
+        fp = np.atleast_1d(np.asarray(f(*plus), dtype=float)).reshape(-1)
+        fm = np.atleast_1d(np.asarray(f(*minus), dtype=float)).reshape(-1)
+        J[:, j] = (fp - fm) / (2.0 * delta)
+    return J
+
+
+def numerical_jacobians(f: Callable[..., Any], args: Sequence[Any], delta: float = 1e-6) -> list[np.ndarray]:
+    """[d f / d args[i] for every i]: one block per argument, in order."""
+    return [numerical_jacobian(f, args, i, delta) for i in range(len(args))]
