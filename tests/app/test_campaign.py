@@ -1,4 +1,4 @@
-"""Monte Carlo campaigns on Dask (app/campaign.py, analysis/montecarlo.py): a small campaign on a LocalCluster,
+"""Monte Carlo campaigns on Dask (campaign/runner.py, campaign/montecarlo.py): a small campaign on a LocalCluster,
 the same campaign against a scheduler and two workers started here as separate processes (identical numbers), a
 task that fails reported with its seed and error, and a campaign resumed without redoing finished seeds."""
 
@@ -15,51 +15,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gtsam_dvl.analysis.montecarlo import nees_band, run_seed
-from gtsam_dvl.app.campaign import FAIL_SEED_ENV, run_campaign
+from gtsam_dvl.campaign.montecarlo import nees_band, run_seed
+from gtsam_dvl.campaign.runner import FAIL_SEED_ENV, run_campaign
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.campaign import SCENARIO
 
 pytest.importorskip("distributed")
 
-# 240 s: a static minute, a speed-up and surge, a descent and a banked turn (every calibration state informed)
-SCENARIO = """
-name = "mc-tiny"
-estimator_config = "paper"
-[origin]
-lat_deg = 30.0
-lon_deg = 114.0
-height_m = -100.0
-[rates]
-imu_hz = 100.0
-dvl_hz = 1.0
-[initial]
-roll_deg = 3.0
-yaw_deg = 10.0
-[dvl]
-scale = 0.9998
-misalignment_deg = [-0.1, 0.2, -0.5]
-noise_m_s = 0.02
-[[segments]]
-kind = "static"
-duration_s = 60.0
-[[segments]]
-kind = "level"
-duration_s = 15.0
-speed_end_m_s = 2.0
-[[segments]]
-kind = "level"
-duration_s = 45.0
-speed_bump_m_s = 0.5
-[[segments]]
-kind = "descent"
-duration_s = 60.0
-peak_vertical_speed_m_s = 0.8
-[[segments]]
-kind = "turn"
-duration_s = 60.0
-heading_change_deg = 90.0
-bank_deg = 15.0
-"""
 RUNS, FAIL_SEED = 6, 4
 ESTIMATORS = ["batch", "ekf"]
 

@@ -1,4 +1,4 @@
-"""Fleet processing (`gtsam-dvl smooth LOG... --out-dir DIR`, app/campaign.py smooth_fleet): several logs
+"""Fleet processing (`gtsam-dvl smooth LOG... --out-dir DIR`, campaign/fleet.py smooth_fleet): several logs
 smoothed in parallel on Dask with one configuration, one result set per log and a table of all runs; a bad log
 gets its error line in the table and the others finish."""
 
@@ -12,13 +12,12 @@ from pathlib import Path
 import pytest
 
 from gtsam_dvl.app.commands import simulate_to_file
+from tests.support.campaign import SCENARIO
 
 pytest.importorskip("distributed")
 
 
 def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None:
-    from tests.app.test_campaign import SCENARIO
-
     scenario = tmp_path / "mc-tiny.toml"
     scenario.write_text(SCENARIO)
     logs = []

@@ -5,7 +5,6 @@ what is allowed), every estimator's options reachable from it ([online], [online
 from __future__ import annotations
 
 import copy
-import dataclasses
 import functools
 import json
 import tomllib
@@ -13,6 +12,7 @@ import typing
 from pathlib import Path
 
 import pytest
+from pydantic import BaseModel
 
 from gtsam_dvl.core.config import (
     EkfConfig,
@@ -77,16 +77,16 @@ def _numeric_fields() -> list[tuple[str, str]]:
     """(section, key) of every float field, nested sections as 'online.relinearization'."""
     out = []
     cfg = EstimatorConfig()
-    todo = [(f.name, getattr(cfg, f.name)) for f in dataclasses.fields(cfg)]
+    todo = [(key, getattr(cfg, key)) for key in type(cfg).model_fields]
     while todo:
         name, section = todo.pop(0)
         hints = typing.get_type_hints(type(section))
-        for f in dataclasses.fields(section):
-            value = getattr(section, f.name)
-            if dataclasses.is_dataclass(value):
-                todo.append((f"{name}.{f.name}", value))
-            elif hints[f.name] is float or hints[f.name] == float | None:
-                out.append((name, f.name))
+        for key in type(section).model_fields:
+            value = getattr(section, key)
+            if isinstance(value, BaseModel):
+                todo.append((f"{name}.{key}", value))
+            elif hints[key] is float or hints[key] == float | None:
+                out.append((name, key))
     return out
 
 
@@ -348,7 +348,7 @@ def test_defaults_are_a_real_dvls_priors_and_paper_is_named() -> None:
     assert cfg.priors.misalignment_sigma_deg == (1.0, 1.0, 1.0)
     assert (paper.priors.scale_initial, paper.priors.scale_sigma) == (0.8, 0.5)
     assert not paper.dvl.estimate_time_offset and cfg.dvl.estimate_time_offset
-    assert dataclasses.replace(paper, priors=cfg.priors, dvl=cfg.dvl) == cfg
+    assert paper.model_copy(update={"priors": cfg.priors, "dvl": cfg.dvl}) == cfg
     assert EstimatorConfig.named("default") == cfg
 
 
@@ -380,3 +380,62 @@ def test_a_log_names_its_configuration() -> None:
     assert EstimatorConfig.for_log({"scenario": {"estimator_config": "paper"}}) == EstimatorConfig.paper()
     assert EstimatorConfig.for_log({}) == EstimatorConfig()
     assert EstimatorConfig.for_log({"scenario": "not a table"}) == EstimatorConfig()
+
+
+# ----- files written by an earlier version of the package still load ------------------------------------------
+# config_fixtures/: result_config_paper.json is the config.json of `gtsam-dvl smooth` on a paper-2d log;
+# default_config.json and default.toml are the default configuration's to_dict() (as JSON) and to_toml();
+# paper_modified.toml / .json a paper configuration with optional fields set and unset; all written by the
+# package's dataclass configuration, whose keys, defaults and TOML text these models keep.
+FIXTURES = Path(__file__).parent / "config_fixtures"
+
+
+def _tuples(value: object) -> object:
+    """JSON's lists as tuples, as to_dict() gives them."""
+    if isinstance(value, dict):
+        return {k: _tuples(v) for k, v in value.items()}
+    return tuple(value) if isinstance(value, list) else value
+
+
+def test_defaults_are_those_written_before() -> None:
+    cfg = EstimatorConfig()
+    written = (FIXTURES / "default_config.json").read_text()
+    assert cfg.model_dump() == _tuples(json.loads(written))
+    assert json.dumps(cfg.to_dict(), indent=2) + "\n" == written  # the same keys, order and number types
+    assert cfg.to_toml() == (FIXTURES / "default.toml").read_text()
+
+
+def test_result_config_json_written_before_loads() -> None:
+    path = FIXTURES / "result_config_paper.json"
+    cfg = EstimatorConfig.load(path)
+    assert cfg == EstimatorConfig.paper()
+    assert cfg.to_dict() == _tuples(json.loads(path.read_text())["config"])
+
+
+def test_toml_written_before_loads_and_writes_back_the_same_text() -> None:
+    text = (FIXTURES / "paper_modified.toml").read_text()
+    cfg = EstimatorConfig.load(FIXTURES / "paper_modified.toml")
+    assert cfg == EstimatorConfig.from_json(FIXTURES / "paper_modified.json")
+    assert (cfg.alignment.initial_attitude_deg, cfg.iodvlc.noise_m_s, cfg.iodvlc.prior_sigma_deg) == (
+        (1.0, 2.0, 3.0), None, None)
+    assert cfg.to_toml() == text
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).parents[2] / "data" / "scenarios").glob("*.toml")),
+                         ids=lambda p: p.stem)
+def test_every_scenarios_configuration_loads(path: Path) -> None:
+    scenario = load_scenario(path.stem)
+    assert EstimatorConfig.for_log({"scenario": {"estimator_config": scenario.estimator_config}}) == (
+        EstimatorConfig.named(scenario.estimator_config))
+
+
+def test_error_names_the_bad_table_of_a_section(tmp_path: Path) -> None:
+    """A section's constructor, and validate() after an assignment, give the same one line as a file."""
+    with pytest.raises(GtsamDvlError, match=r"^config: \[priors\] scale_sigma must be a number > 0, got -1.0$"):
+        EstimatorConfig(priors={"scale_sigma": -1.0})
+    cfg = EstimatorConfig()
+    cfg.online.relinearization.velocity = [0.1, 0.1]  # type: ignore[assignment]
+    with pytest.raises(GtsamDvlError, match=r"^config: \[online.relinearization\] velocity must be a list of 3 "):
+        cfg.validate()
+    cfg.online.relinearization.velocity = [1, 2, 3]  # type: ignore[assignment]
+    assert cfg.validate().online.relinearization.velocity == (1.0, 2.0, 3.0)  # normalised in place

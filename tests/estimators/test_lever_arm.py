@@ -11,7 +11,6 @@ Unbanked turns leave z at its prior, and a straight run all three axes.
 
 from __future__ import annotations
 
-import dataclasses
 from functools import cache
 from typing import Any
 
@@ -67,7 +66,7 @@ def wrong_tf_log(motion: str) -> LogData:
 
 def config(estimate: bool, **dvl: Any) -> EstimatorConfig:
     cfg = EstimatorConfig()
-    return dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, estimate_lever_arm=estimate, **dvl))
+    return cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"estimate_lever_arm": estimate, **dvl})})
 
 
 @cache

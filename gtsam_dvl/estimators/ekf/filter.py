@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2
@@ -376,7 +376,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     defaults (EstimatorConfig.for_log)."""
     config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
-        config = replace(config, ekf=replace(config.ekf, min_calibration_speed_m_s=min_calibration_speed_m_s))
+        ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
+        config = config.model_copy(update={"ekf": ekf})
     ekf_cfg = config.validate().ekf
     offset = config.dvl.estimate_time_offset
     if offset and config.dvl.use_beams:

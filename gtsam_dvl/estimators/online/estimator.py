@@ -97,7 +97,6 @@ Design (see also window.py for the iSAM2 engine):
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import warnings
@@ -230,7 +229,7 @@ class OnlineEstimator:
                  options: OnlineConfig | None = None, source: str = "", depth_sensor: Any = None) -> None:
         config = config or EstimatorConfig()
         self.options = options or config.online  # options=: overrides config.online
-        self.config = dataclasses.replace(config, online=self.options).validate()  # the effective config
+        self.config = config.model_copy(update={"online": self.options}).validate()  # the effective config
         check_spacing(self.config.solver)
         spacing = self.config.solver.keyframe_spacing_s
         if spacing > self.config.solver.max_state_spacing_s:  # the batch smoother's rule (estimators/graph.py)
@@ -293,7 +292,7 @@ class OnlineEstimator:
         self._last_depth_t = -math.inf
         if self.config.alignment.initial_attitude_deg is not None:
             self._start(align(_empty_imu(), _empty_dvl(), frame,
-                              dataclasses.replace(self.config.alignment, method="auto")))
+                              self.config.alignment.model_copy(update={"method": "auto"})))
 
     @classmethod
     def for_log(cls, log: LogData, config: EstimatorConfig | None = None,
@@ -552,7 +551,7 @@ class OnlineEstimator:
         pings = self._pre_dvl
         dvl = DvlData(np.array([p.t for p in pings]), np.array([p.d_v for p in pings]).reshape(-1, 3),
                       np.array([p.d_cov for p in pings]).reshape(-1, 3, 3), np.array([p.valid for p in pings], bool))
-        cfg = dataclasses.replace(self.config.alignment)
+        cfg = self.config.alignment.model_copy()
         cfg.max_static_s = min(cfg.max_static_s, self.options.align_s) if cfg.max_static_s > 0 else self.options.align_s
         where = f"{self.source + ': ' if self.source else ''}"
         # causal in-motion alignment and attitude topics are not done online (batch and EKF only)
@@ -913,7 +912,7 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
     scenario names, else the defaults (EstimatorConfig.for_log)."""
     config = config or EstimatorConfig.for_log(log.metadata)
-    options = dataclasses.replace(options if options is not None else config.online)
+    options = (options if options is not None else config.online).model_copy()
     if mode is not None:
         options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
     if window_s is not None:

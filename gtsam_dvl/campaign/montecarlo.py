@@ -7,7 +7,7 @@ the errors against the truth and the reported sigmas of every calibration and bi
 s, micro-g, deg/h, m), the NEES of the calibration and bias block (10 dof, from the estimator's joint covariance)
 and, for the filters, the NEES over time from their timelines (diagonal: the sum of squared normalised errors,
 the timeline keeps marginal sigmas only). Seeds decide everything, so a run is reproducible on any machine, which
-is what lets a campaign run on a Dask cluster (app/campaign.py) without shipping objects between processes.
+is what lets a campaign run on a Dask cluster (campaign/runner.py) without shipping objects between processes.
 
 Statistics (campaign_statistics), per estimator and state over N runs: the mean and standard deviation of
 error/sigma (0 and 1 when the sigmas are honest), the fraction of runs within 3 sigma (99.7 %), the RMSE against
