@@ -156,7 +156,28 @@ def _remove_with_helpers(tmp: Path) -> None:
         helper.unlink(missing_ok=True)
 
 
-class OutputSet:
+class AtomicWriter(abc.ABC):
+    """A writer whose files appear under their final names only on close(); abort() drops what it wrote. As a
+    context manager: closed when the block ends, aborted when it raises."""
+
+    @abc.abstractmethod
+    def close(self) -> None: ...
+
+    @abc.abstractmethod
+    def abort(self) -> None: ...
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class OutputSet(AtomicWriter):
     """The outputs of one run, all or none (module doc). Use as a context manager: the files are renamed into
     place when the block ends without an exception, and removed when it raises.
 
@@ -235,36 +256,9 @@ class OutputSet:
             _remove_with_helpers(tmp)
         self._staged = []
 
-    def __enter__(self) -> OutputSet:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.commit()
-        else:
-            self.abort()
-
-
-class AtomicWriter(abc.ABC):
-    """A writer whose file appears under its final name only on close(); abort() drops what it wrote. As a
-    context manager: closed when the block ends, aborted when it raises."""
-
-    @abc.abstractmethod
-    def close(self) -> None: ...
-
-    @abc.abstractmethod
-    def abort(self) -> None: ...
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
+    def close(self) -> None:
+        """commit(): the end of the with block."""
+        self.commit()
 
 
 def check_writable(path: Path | str) -> None:
