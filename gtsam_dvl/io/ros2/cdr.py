@@ -46,16 +46,16 @@ def _leaves(type_name: str) -> list[tuple[tuple[str, ...], str, int]]:
     scalar type (Vector3, Point, Quaternion) is one leaf of that type (a fixed array of them: count times)."""
     out: list[tuple[tuple[str, ...], str, int]] = []
     for f in fields(type_name):
-        if f.count is None:
+        if f.length is None:
             raise ValueError(f"{type_name}.{f.name}: a sequence has no fixed layout (CdrWriter/CdrReader)")
         if f.type in CODES:
-            out.append(((f.name,), CODES[f.type], f.count))
+            out.append(((f.name,), CODES[f.type], f.length))
             continue
         inner = _leaves(f.type)
         codes = {code for _, code, _ in inner}
         if len(codes) == 1 and "str" not in codes and all(n == 1 for _, _, n in inner):
-            out.append(((f.name,), codes.pop(), len(inner) * f.count))
-        elif f.count == 1:
+            out.append(((f.name,), codes.pop(), len(inner) * f.length))
+        elif f.length == 1:
             out += [((f.name, *path), code, n) for path, code, n in inner]
         else:
             raise ValueError(f"{type_name}.{f.name}: an array of {f.type} has no flat layout here")

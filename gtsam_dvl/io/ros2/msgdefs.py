@@ -37,12 +37,12 @@ def message_text(type_name: str) -> str:
 
 class MsgField(NamedTuple):
     """One field of a message definition: type a primitive ("float64", "string"; a bounded string<=N is "string")
-    or a message type "pkg/msg/Type"; count 1 (one value), N (a fixed array T[N]) or None (a sequence, T[] or
+    or a message type "pkg/msg/Type"; length 1 (one value), N (a fixed array T[N]) or None (a sequence, T[] or
     T[<=N])."""
 
     type: str
     name: str
-    count: int | None
+    length: int | None
 
 
 _FIELD_TYPE = re.compile(r"([^\[\]]+)(?:\[(<=)?(\d*)\])?")
@@ -62,12 +62,12 @@ def fields(type_name: str) -> tuple[MsgField, ...]:
             raise ValueError(f"{type_name}: cannot read the field type {parts[0]!r}")
         base, bounded, size = m.group(1), m.group(2), m.group(3)
         base = base.split("<", 1)[0]  # string<=N, wstring<=N
-        count = 1 if size is None else (None if bounded or not size else int(size))
+        length = 1 if size is None else (None if bounded or not size else int(size))
         if base == "Header":
             base = "std_msgs/msg/Header"
         elif base not in PRIMITIVES:
             base = normalize_type(base) if "/" in base else f"{pkg}/msg/{base}"
-        out.append(MsgField(base, parts[1], count))
+        out.append(MsgField(base, parts[1], length))
     return tuple(out)
 
 
