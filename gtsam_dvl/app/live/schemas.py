@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+# the topic of each published stream by key (the package doc says what each carries)
 TOPICS = {
     "tf": "/tf",
     "tf_static": "/tf_static",
@@ -52,6 +53,7 @@ def _axes(unit: str, names: tuple[str, ...] = ("x", "y", "z")) -> dict[str, Any]
     return {"type": "object", "properties": {n: _band(unit) for n in names}}
 
 
+# the JSON schema of each JSON topic, by its TOPICS key
 SCHEMAS: dict[str, dict[str, Any]] = {
     "scale": _object("gtsam_dvl.live.Scale", _band("DVL scale factor (1 = perfect)")["properties"]),
     "misalignment": _object("gtsam_dvl.live.MisalignmentDeg", _axes("deg", ("roll", "pitch", "yaw"))["properties"]),

@@ -38,6 +38,7 @@ MAX_PATH_POSES = 5000
 # messages, and at full speed a few hundred epochs may be computed while a client is busy drawing
 BACKLOG_MESSAGES = 8192
 
+
 def import_foxglove() -> Any:
     """The foxglove module, or GtsamDvlError with how to install it."""
     try:
@@ -92,6 +93,9 @@ class _Subscriptions:
 
 @dataclass
 class _Path:
+    """The poses of one path topic so far (stamps ns, n_p m, n_q_b [x, y, z, w]) and when it was last sent (wall
+    clock, s)."""
+
     stamps_ns: list[int] = field(default_factory=list)
     n_p: list[np.ndarray] = field(default_factory=list)
     n_q_b: list[np.ndarray] = field(default_factory=list)
@@ -110,8 +114,8 @@ class _Path:
 
 
 class LiveView:
-    """Publishes an online estimator's epochs, the raw messages and the truth on a Foxglove WebSocket (module
-    doc for the topics). port: start a server on host:port (0: a free port, see .port); or server: a
+    """Publishes an online estimator's epochs, the raw messages and the truth on a Foxglove WebSocket (the
+    package doc lists the topics). port: start a server on host:port (0: a free port, see .port); or server: a
     foxglove WebSocketServer the caller started, with the context it was started with (None: the SDK's global
     context). t0_ns: the ROS time of t = 0 (LogData.t0_ns). mounting: the nominal mounting, sent on /tf_static
     and used for the misalignment angles. path_period_s: the least wall time between two path messages."""
