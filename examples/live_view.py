@@ -4,7 +4,7 @@ On a vehicle the IMU and DVL drivers hand you messages; here a simulated run sta
 pushed into `OnlineEstimator` (push_imu_batch / push_dvl, estimators/online/), mirrored raw to the view
 (publish_imu / publish_dvl), and whenever a push completes a DVL epoch the estimate is published
 (publish_epoch): tf map -> base_link, odometry with covariance, the path, scale, misalignment, time offset and
-biases with their sigmas, the counters. `gtsam-dvl live LOG` does the same for a recorded log (app/live.py
+biases with their sigmas, the counters. `gtsam-dvl live LOG` does the same for a recorded log (app/live/replay.py
 replay_log).
 
     pip install 'gtsam-dvl[live]'

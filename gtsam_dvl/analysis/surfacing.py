@@ -31,6 +31,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew
+from gtsam_dvl.core.state_covariance import pose_velocity_covariance
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import map_frame_of
 from gtsam_dvl.estimators.gnss import plan_fixes
@@ -83,12 +84,8 @@ def antenna_estimate(res: NavResult, i: int, b_p_a: np.ndarray, dt: float) -> tu
     R = res.n_R_b[i]
     p = res.n_p[i] + R @ b_p_a + dt * res.n_v[i]
     J = np.hstack((-R @ skew(b_p_a), R, dt * np.eye(3)))  # [rotation (body), translation (body), n_v]
-    P = np.zeros((9, 9))
-    P[:6, :6] = res.pose_cov[i]
-    P[6:, 6:] = res.vel_cov[i]
-    if res.pose_vel_cross is not None:
-        P[:6, 6:] = res.pose_vel_cross[i]
-        P[6:, :6] = res.pose_vel_cross[i].T
+    P = pose_velocity_covariance(res.pose_cov[i], res.vel_cov[i],
+                                 None if res.pose_vel_cross is None else res.pose_vel_cross[i])
     return np.asarray(p), np.asarray(J @ P @ J.T)
 
 

@@ -13,6 +13,7 @@ path, never the temporary one.
 
 from __future__ import annotations
 
+import abc
 import contextlib
 import json
 import os
@@ -21,7 +22,7 @@ import signal
 from collections.abc import Iterator
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 
@@ -81,21 +82,27 @@ def _create_temp(path: Path) -> tuple[int, Path]:
     raise GtsamDvlError(f"{path}: cannot create a temporary file next to it")
 
 
-def _write_temp(path: Path, data: bytes) -> Path:
-    """data into a new temporary file next to path (folder created); returns the temporary path. Call with
-    signals deferred, so that no signal falls between creating the file and the caller taking charge of it."""
-    _mkdir(path)
-    fd, tmp = _create_temp(path)
+@contextlib.contextmanager
+def _removed_on_failure(tmp: Path, path: Path) -> Iterator[None]:
+    """If the block raises, tmp is removed and an OSError becomes the one-line error naming path."""
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
+        yield
     except BaseException as exc:
         tmp.unlink(missing_ok=True)
         if isinstance(exc, OSError):
             raise _cannot_write(path, exc) from None
         raise
+
+
+def _write_temp(path: Path, data: bytes) -> Path:
+    """data into a new temporary file next to path (folder created); returns the temporary path. Call with
+    signals deferred, so that no signal falls between creating the file and the caller taking charge of it."""
+    _mkdir(path)
+    fd, tmp = _create_temp(path)
+    with _removed_on_failure(tmp, path), os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+        fh.flush()
+        os.fsync(fh.fileno())
     return tmp
 
 
@@ -103,13 +110,8 @@ def atomic_write_bytes(path: Path | str, data: bytes) -> Path:
     path = Path(path)
     with _signals_deferred():  # small files: a signal waits until the file is in place or removed
         tmp = _write_temp(path, data)
-        try:
+        with _removed_on_failure(tmp, path):
             os.replace(tmp, path)
-        except BaseException as exc:
-            tmp.unlink(missing_ok=True)
-            if isinstance(exc, OSError):
-                raise _cannot_write(path, exc) from None
-            raise
     return path
 
 
@@ -154,7 +156,28 @@ def _remove_with_helpers(tmp: Path) -> None:
         helper.unlink(missing_ok=True)
 
 
-class OutputSet:
+class AtomicWriter(abc.ABC):
+    """A writer whose files appear under their final names only on close(); abort() drops what it wrote. As a
+    context manager: closed when the block ends, aborted when it raises."""
+
+    @abc.abstractmethod
+    def close(self) -> None: ...
+
+    @abc.abstractmethod
+    def abort(self) -> None: ...
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class OutputSet(AtomicWriter):
     """The outputs of one run, all or none (module doc). Use as a context manager: the files are renamed into
     place when the block ends without an exception, and removed when it raises.
 
@@ -233,15 +256,9 @@ class OutputSet:
             _remove_with_helpers(tmp)
         self._staged = []
 
-    def __enter__(self) -> OutputSet:
-        return self
-
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
-        if exc_type is None:
-            self.commit()
-        else:
-            self.abort()
+    def close(self) -> None:
+        """commit(): the end of the with block."""
+        self.commit()
 
 
 def check_writable(path: Path | str) -> None:

@@ -27,6 +27,7 @@ from gtsam_dvl.core.types import AttitudeData, Mounting
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, first_string
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
+from gtsam_dvl.io.stamps import check_stamps
 from gtsam_dvl.io.storage.sources import Source
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -67,8 +68,6 @@ def read_attitude(src: Source, topic: str | None, imu_topic: str, raw: dict[str,
     arr = decode(src.path, topic, type_name, raw[topic])
     if not len(arr):
         raise GtsamDvlError(f"{src.path}: {topic} has no messages")
-    from gtsam_dvl.io.reader import check_stamps  # the reader imports this module
-
     q = arr["orientation"].astype(float)
     keep = check_stamps(src.path, topic, stamps_ns(arr), t0, ~np.isfinite(q).all(axis=1), repair, warnings, dropped)
     sensor = first_string(arr) or "imu_link"

@@ -16,6 +16,7 @@ from gtsam_dvl.core.types import GeoOrigin, GnssData
 from gtsam_dvl.io.ros2 import cdr
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, first_string
+from gtsam_dvl.io.stamps import check_stamps
 from gtsam_dvl.io.storage.sources import Source
 
 NAVSATFIX_TYPE = "sensor_msgs/msg/NavSatFix"
@@ -28,8 +29,6 @@ def read_gnss(src: Source, topic: str, bodies: Any, t0: int, repair: bool, warni
     """GnssData of a NavSatFix topic. Stamps are checked like every topic's (duplicates and backwards
     stamps raise, or are dropped with ``repair``); messages that are not fixes are kept with their status
     (the estimators skip them and count them)."""
-    from gtsam_dvl.io.reader import check_stamps  # the one stamp rule of the reader (imported late: no cycle)
-
     arr = decode(src.path, topic, NAVSATFIX_TYPE, bodies)
     ns = stamps_ns(arr)
     keep = check_stamps(src.path, topic, ns, t0, None, repair, warnings, dropped)

@@ -33,6 +33,7 @@ from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
+from gtsam_dvl.io.stamps import check_stamps, gap_warning, stamp_gaps
 from gtsam_dvl.io.storage.raw import Bodies
 from gtsam_dvl.io.storage.salvage import salvage_losses, salvage_report
 from gtsam_dvl.io.storage.sources import Source, open_source
@@ -44,11 +45,6 @@ DVL_TYPES = (
     "geometry_msgs/msg/TwistWithCovarianceStamped",
     "geometry_msgs/msg/TwistStamped",
 )
-REPAIR_HINT = "rerun with --repair to drop such messages"
-# A step between stamps this many times the topic's median spacing is missing data, not jitter (a 100 Hz IMU:
-# 0.05 s; a 1 Hz DVL: 5 s). Such gaps are reported in metadata["reader_losses"]["gaps"] and as a warning.
-GAP_FACTOR = 5.0
-MAX_GAP_SPANS = 20  # spans listed per topic (the count and the seconds cover all of them)
 PRESSURE_TYPE = "sensor_msgs/msg/FluidPressure"
 POSE_COV_TYPE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 DEPTH_TYPES = (PRESSURE_TYPE, POSE_COV_TYPE, ODOM_TYPE)
@@ -65,64 +61,17 @@ def _missing(src: Source, what: str, topic: str, option: str) -> GtsamDvlError:
     )
 
 
-def check_stamps(
-    path: Path, topic: str, ns: np.ndarray, t0: int, bad: np.ndarray | None, repair: bool, warnings: list[str],
-    dropped: dict[str, dict[str, int]] | None = None,
-) -> np.ndarray:
-    """Keep-mask of messages: raise on NaN (``bad``), duplicate or backwards stamps, or with ``repair``
-    drop them and record how many in ``warnings`` (and by reason in ``dropped[topic]``)."""
-    bad = np.zeros(len(ns), bool) if bad is None else bad
-
-    def t(i: int) -> float:
-        return (int(ns[i]) - t0) / 1e9
-
-    if not repair:
-        if bad.any():
-            i = int(np.flatnonzero(bad)[0])
-            raise GtsamDvlError(f"{path}: {topic}: NaN in message {i} (t = {t(i):.6f} s); {REPAIR_HINT}")
-        d = np.diff(ns)
-        if (d <= 0).any():
-            i = int(np.flatnonzero(d <= 0)[0]) + 1
-            what = "duplicate stamp" if d[i - 1] == 0 else "time goes backwards"
-            after = "" if d[i - 1] == 0 else f" after {t(i - 1):.9f} s"
-            raise GtsamDvlError(f"{path}: {topic}: {what} at message {i} (t = {t(i):.9f} s{after}); {REPAIR_HINT}")
-        return np.ones(len(ns), bool)
-    keep = ~bad
-    idx = np.flatnonzero(keep)
-    run_max = np.maximum.accumulate(ns[idx])
-    later = np.concatenate([[True], ns[idx][1:] > run_max[:-1]])
-    dup = int((ns[idx][1:] == run_max[:-1]).sum())
-    keep[idx[~later]] = False
-    if (n_drop := len(ns) - int(keep.sum())) > 0:
-        warnings.append(
-            f"{topic}: dropped {n_drop} message(s): {int(bad.sum())} with NaN, {dup} duplicate stamp(s), "
-            f"{n_drop - int(bad.sum()) - dup} going back in time"
-        )
-        if dropped is not None:
-            dropped[topic] = {"dropped": n_drop, "nan": int(bad.sum()), "duplicate": dup,
-                              "backwards": n_drop - int(bad.sum()) - dup, "of": len(ns)}
-    return keep
-
-
-def stamp_gaps(t: np.ndarray) -> dict[str, Any] | None:
-    """Missing data in one topic's stamps (s): steps longer than GAP_FACTOR times the median spacing, their
-    count, the seconds missing (each step minus one spacing) and the first MAX_GAP_SPANS spans; None if none."""
-    if len(t) < 3:
-        return None
-    d = np.diff(t)
-    period = float(np.median(d))
-    big = np.flatnonzero(d > GAP_FACTOR * period)
-    if period <= 0 or not len(big):
-        return None
-    return {"count": len(big), "seconds": float((d[big] - period).sum()), "period_s": period,
-            "longest_s": float(d[big].max()),
-            "spans_s": [[float(t[i]), float(t[i + 1])] for i in big[:MAX_GAP_SPANS].tolist()]}
-
-
-def _gap_warning(topic: str, gap: dict[str, Any]) -> str:
-    a, b = max(gap["spans_s"], key=lambda s: s[1] - s[0])
-    return (f"{topic}: {gap['count']} gap(s) in the data, {gap['seconds']:.1f} s missing in all "
-            f"(longest {a:.2f} s to {b:.2f} s)")
+def _optional_topic(src: Source, given: str | None, default: str, what: str, types: tuple[str, ...],
+                    rule: str) -> str:
+    """The topic of an optional sensor ("" for none): given None takes default when the log has it, "none" takes
+    none; a named topic must be in the log (else the error names the option --<what>-topic) and of one of types
+    (else the error states rule)."""
+    topic = (default if default in src.topics else "") if given is None else ("" if given == "none" else given)
+    if topic and topic not in src.topics:
+        raise _missing(src, what, topic, f"--{what.lower()}-topic")
+    if topic and (kind := _type(src, topic)) not in types:
+        raise GtsamDvlError(f"{src.path}: {topic} is {kind}; {rule}")
+    return topic
 
 
 def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
@@ -350,15 +299,8 @@ def read_log(
         raise GtsamDvlError(f"{path}: {imu_topic} is {kind}, expected {IMU_TYPE}")
     if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
         raise GtsamDvlError(f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}")
-    if depth_topic is None:
-        depth_topic = DEPTH_TOPIC if DEPTH_TOPIC in src.topics else ""
-    elif depth_topic == "none":
-        depth_topic = ""
-    if depth_topic and depth_topic not in src.topics:
-        raise _missing(src, "depth", depth_topic, "--depth-topic")
-    if depth_topic and (depth_type := _type(src, depth_topic)) not in DEPTH_TYPES:
-        raise GtsamDvlError(f"{path}: {depth_topic} is {depth_type}; depth topics must be one of "
-                            f"{', '.join(DEPTH_TYPES)}")
+    depth_topic = _optional_topic(src, depth_topic, DEPTH_TOPIC, "depth", DEPTH_TYPES,
+                                  f"depth topics must be one of {', '.join(DEPTH_TYPES)}")
     warnings = list(src.warnings)
     dropped: dict[str, dict[str, int]] = {}
     has_truth = truth_topic in src.topics and _type(src, truth_topic) == ODOM_TYPE
@@ -366,14 +308,8 @@ def read_log(
         warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
     topics = [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
     topics += [depth_topic] * bool(depth_topic)
-    if gnss_topic is None:
-        gnss_topic = GNSS_TOPIC if GNSS_TOPIC in src.topics else ""
-    elif gnss_topic == "none":
-        gnss_topic = ""
-    if gnss_topic and gnss_topic not in src.topics:
-        raise _missing(src, "GNSS", gnss_topic, "--gnss-topic")
-    if gnss_topic and (gnss_type := _type(src, gnss_topic)) != NAVSATFIX_TYPE:
-        raise GtsamDvlError(f"{path}: {gnss_topic} is {gnss_type}; the GNSS topic must be {NAVSATFIX_TYPE}")
+    gnss_topic = _optional_topic(src, gnss_topic, GNSS_TOPIC, "GNSS", (NAVSATFIX_TYPE,),
+                                 f"the GNSS topic must be {NAVSATFIX_TYPE}")
     topics += [gnss_topic] * bool(gnss_topic)
     if attitude_topic == "none":
         attitude_topic = ""
@@ -460,7 +396,7 @@ def read_log(
     for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:
             gaps[topic] = gap
-            warnings.append(_gap_warning(topic, gap))
+            warnings.append(gap_warning(topic, gap))
     losses: dict[str, Any] = {"repair": dropped, "gaps": gaps}
     if salvage:
         losses["salvage"] = salvage_losses(src, t0)

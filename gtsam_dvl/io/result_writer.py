@@ -1,7 +1,7 @@
 """Write an estimator's result as a ROS 2 MCAP (docs/conventions.md: /gtsam_dvl/* topics).
 
-Covariances are converted from GTSAM's tangent spaces to ROS conventions: Odometry pose covariance over
-(x, y, z, rot_x, rot_y, rot_z) in map axes, twist covariance in base_link.
+Covariances are converted from GTSAM's tangent spaces to ROS conventions by io/ros2/covariance.py: Odometry pose
+covariance over (x, y, z, rot_x, rot_y, rot_z) in map axes, twist covariance in base_link.
 """
 
 from __future__ import annotations
@@ -15,10 +15,11 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.core.result import NavResult, Timeline, misalignment_rpy_and_cov
-from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, skew
+from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.atomic import to_json
 from gtsam_dvl.io.mcap.writer import McapLogWriter
+from gtsam_dvl.io.ros2.covariance import ros_pose_covariance, ros_twist_covariance
 
 TOPICS = {
     "odometry": "/gtsam_dvl/odometry",
@@ -33,33 +34,6 @@ TOPICS = {
     # only when estimated ([dvl] estimate_lever_arm)
     "lever_arm": "/gtsam_dvl/dvl_lever_arm",
 }
-
-
-def ros_pose_covariance(n_R_b: np.ndarray, pose_cov: np.ndarray) -> np.ndarray:
-    """(N,6,6) GTSAM Pose3 covariance [rot_body, trans_body] -> ROS [trans_map, rot_map]."""
-    n = len(n_R_b)
-    P = np.zeros((n, 6, 6))
-    P[:, :3, 3:] = n_R_b  # translation in map = R * body translation tangent
-    P[:, 3:, :3] = n_R_b  # rotation about map axes = R * body rotation tangent
-    return P @ pose_cov @ np.transpose(P, (0, 2, 1))
-
-
-def ros_twist_covariance(result: NavResult) -> np.ndarray:
-    """(N,6,6) covariance of (b_v, b_omega) in base_link; the angular block is left zero (unknown)."""
-    n = len(result.t)
-    out = np.zeros((n, 6, 6))
-    b_v = np.einsum("nji,nj->ni", result.n_R_b, result.n_v)
-    for i in range(n):
-        # b_v = R^T n_v: d b_v = [b_v]x d theta_body + R^T d n_v
-        J = np.hstack([skew(b_v[i]), np.zeros((3, 3)), result.n_R_b[i].T])
-        joint = np.zeros((9, 9))
-        joint[:6, :6] = result.pose_cov[i]
-        joint[6:, 6:] = result.vel_cov[i]
-        if result.pose_vel_cross is not None:
-            joint[:6, 6:] = result.pose_vel_cross[i]
-            joint[6:, :6] = result.pose_vel_cross[i].T
-        out[i, :3, :3] = J @ joint @ J.T
-    return out
 
 
 TIMELINE_PREFIX = "/gtsam_dvl/filter"
@@ -157,7 +131,8 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
     t = result.t
     n = len(t)
     n_q_b = matrix_to_quat_xyzw(result.n_R_b)
-    b_v = np.einsum("nji,nj->ni", result.n_R_b, result.n_v)
+    b_v, twist_cov = ros_twist_covariance(result.n_R_b, result.n_v, result.pose_cov, result.vel_cov,
+                                          result.pose_vel_cross)
     b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
     mis_rpy, mis_cov = misalignment_rpy_and_cov(result.b_R_d, result.b_R_d0, result.b_R_d_cov)
     R_c = result.b_R_d @ result.b_R_d0.T
@@ -167,7 +142,7 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
         w.add_tf_static("/tf_static", float(t[0]), [("base_link", "imu_link", m.b_R_imu, m.b_p_imu),
                                                     ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl)])
         w.add_odometry(TOPICS["odometry"], t, result.n_p, n_q_b, b_v, b_omega,
-                       ros_pose_covariance(result.n_R_b, result.pose_cov), ros_twist_covariance(result))
+                       ros_pose_covariance(result.n_R_b, result.pose_cov), twist_cov)
         w.add_path(TOPICS["path"], t, result.n_p, n_q_b)
         bias_cov = np.broadcast_to(result.bias_cov, (n, 6, 6))
         w.add_accel_with_covariance(TOPICS["imu_bias"], t, np.outer(ones, result.accel_bias),

@@ -35,7 +35,6 @@ import os
 import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
-from types import TracebackType
 from typing import Any, Protocol
 
 import numpy as np
@@ -45,6 +44,7 @@ from gtsam_dvl import __version__
 from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import DvlData, LogData
+from gtsam_dvl.io.atomic import AtomicWriter
 from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages
 from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap.writer import McapLogWriter, McapStreamWriter
@@ -277,7 +277,7 @@ def _write_data(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any]
                        frame_id="map", child_frame_id="base_link")
 
 
-class LogStreamWriter:
+class LogStreamWriter(AtomicWriter):
     """Write a log too long to hold in memory, part by part, as write_log writes the whole log.
 
     head: the log's metadata and typed fields, mounting, frames and sensors (its arrays are not written; a
@@ -345,16 +345,6 @@ class LogStreamWriter:
         """Drop the temporary file; nothing appears under the final name."""
         self._w.abort()
 
-    def __enter__(self) -> LogStreamWriter:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 class LogSource(Protocol):

@@ -1,4 +1,4 @@
-"""The live view (issue 14, item 1): a Foxglove WebSocket client subscribes to the pose and calibration
+"""The live view: a Foxglove WebSocket client subscribes to the pose and calibration
 channels while a short simulated log is replayed as fast as possible; the decoded messages are the online
 estimator's per-epoch estimates (its NavResult and timeline) to 1e-9, and the port is free afterwards.
 

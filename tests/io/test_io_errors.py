@@ -54,12 +54,17 @@ def test_truncated_file_and_salvage(long_log: tuple[LogData, bytes], tmp_path: P
     assert start == pytest.approx(got.imu.t[-1] + 0.01, abs=0.011) and end > start
 
 
-def test_corrupt_chunk_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
-    log, data = long_log
-    path = tmp_path / "bad.mcap"
+def _corrupt_middle(data: bytes, path: Path) -> Path:
+    """The log's bytes written to path with the byte in the middle flipped (inside a chunk of a long log)."""
     damaged = bytearray(data)
     damaged[len(data) // 2] ^= 0xFF
     path.write_bytes(bytes(damaged))
+    return path
+
+
+def test_corrupt_chunk_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+    log, data = long_log
+    path = _corrupt_middle(data, tmp_path / "bad.mcap")
     msg = one_line_error(path)
     assert "corrupt chunk" in msg and "--salvage" in msg
 
@@ -194,10 +199,7 @@ def test_corrupt_chunk_losses_per_topic_and_gap(long_log: tuple[LogData, bytes],
     from gtsam_dvl.analysis.health import assess_log_health
 
     log, data = long_log
-    path = tmp_path / "bad.mcap"
-    damaged = bytearray(data)
-    damaged[len(data) // 2] ^= 0xFF
-    path.write_bytes(bytes(damaged))
+    path = _corrupt_middle(data, tmp_path / "bad.mcap")
     got = read_log(path, salvage=True)
     losses = got.metadata["reader_losses"]
     salv = losses["salvage"]

@@ -23,7 +23,7 @@ from gtsam_dvl.core.types import (
     TruthData,
 )
 from gtsam_dvl.io.ros2 import cdr
-from gtsam_dvl.io.ros2.msgdefs import SEPARATOR, full_definition
+from gtsam_dvl.io.ros2.msgdefs import SEPARATOR, MsgField, fields, full_definition
 
 T0_NS = 1_700_000_123_000_000_000
 
@@ -89,6 +89,21 @@ def test_full_definition_is_concatenated_as_rosbag2_does() -> None:
     dvl = full_definition("marine_acoustic_msgs/msg/Dvl")
     assert "BSD 3-Clause License" in dvl and "University of Washington Applied Physics Laboratory" in dvl
     assert "apl-ocean-engineering/marine_msgs" in dvl
+
+
+def test_message_fields_are_read_from_the_definitions() -> None:
+    """Constants are left out, arrays keep their size, sequences have none, short type names are qualified."""
+    fix = fields("sensor_msgs/msg/NavSatFix")
+    assert [f.name for f in fix] == ["header", "status", "latitude", "longitude", "altitude", "position_covariance",
+                                     "position_covariance_type"]
+    assert fix[1] == MsgField("sensor_msgs/msg/NavSatStatus", "status", 1)
+    assert fix[5] == MsgField("float64", "position_covariance", 9)
+    assert fields("nav_msgs/msg/Path")[1] == MsgField("geometry_msgs/msg/PoseStamped", "poses", None)
+    assert MsgField("geometry_msgs/msg/Vector3", "beam_unit_vec", 4) in fields("marine_acoustic_msgs/msg/Dvl")
+    names = [f.name for f in cdr.SPECS["nav_msgs/msg/Odometry"]]
+    assert names == ["sec", "nanosec", "frame_id", "child_frame_id", "position", "orientation", "pose_covariance",
+                     "linear", "angular", "twist_covariance"]
+    assert cdr.Field("beam_unit_vec", "f8", 12) in cdr.DVL
 
 
 def test_layouts_match_an_independent_cdr_encoder() -> None:

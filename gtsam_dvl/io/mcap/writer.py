@@ -11,14 +11,14 @@ from __future__ import annotations
 import os
 import tempfile
 from pathlib import Path
-from types import TracebackType
 
 import numpy as np
 
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
+from gtsam_dvl.io.atomic import AtomicWriter
 from gtsam_dvl.io.mcap.container import McapContainer
-from gtsam_dvl.io.ros2 import cdr
+from gtsam_dvl.io.ros2 import cdr, messages
 from gtsam_dvl.io.ros2.msgdefs import full_definition
 
 _INFINITE = "    sec: 9223372036\n    nsec: 854775807\n"  # rmw's infinite duration, as rosbag2 writes it
@@ -37,16 +37,7 @@ QOS_LATCHED = qos_yaml("reliable", "transient_local", 1)  # /tf_static
 QOS_STREAM = qos_yaml("reliable", "volatile", 10)  # sensors and results
 
 
-def _rows(a: np.ndarray | None, k: int, shape: tuple[int, ...], name: str, fill: float = 0.0) -> np.ndarray:
-    if a is None:
-        return np.full((k, *shape), fill)
-    arr = np.asarray(a, dtype=float)
-    if arr.shape != (k, *shape):
-        raise ValueError(f"{name}: expected shape {(k, *shape)}, got {arr.shape}")
-    return arr
-
-
-class McapLogWriter:
+class McapLogWriter(AtomicWriter):
     """Context manager writing a ROS 2 MCAP (profile ros2, CDR, ros2msg schemas, zstd chunks)."""
 
     def __init__(self, path: str | os.PathLike[str], *, t0_ns: int = 0, chunk_size: int = 1 << 20) -> None:
@@ -111,55 +102,25 @@ class McapLogWriter:
         """Messages filled by ``cdr.new_messages``; stamps are read back from their headers."""
         self.add_encoded(topic, type_name, cdr.stamps_ns(arr), arr, qos)
 
-    def _new(self, type_name: str, t: np.ndarray, strings: dict[str, str]) -> np.ndarray:
-        arr = cdr.new_messages(cdr.SPECS[type_name], strings, len(np.atleast_1d(t)))
-        cdr.set_stamps(arr, self.stamps_ns(np.atleast_1d(t)))
-        return arr
-
-    # -- typed topics ---------------------------------------------------------------------------
+    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns) ------------------------------
     def add_imu(
         self, topic: str, t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, frame_id: str = "imu_link",
         gyro_var: np.ndarray | None = None, accel_var: np.ndarray | None = None,
         orientation: np.ndarray | None = None, orientation_cov: np.ndarray | None = None,
     ) -> None:
-        """sensor_msgs/msg/Imu, without orientation (orientation_covariance[0] = -1) unless orientation (K, 4)
-        [x, y, z, w] is given, with orientation_cov (3, 3) or (K, 3, 3) rad^2 (None: zeros = unknown); the rate
-        and specific-force covariances are diag(gyro_var), diag(accel_var) (zeros = unknown)."""
-        arr = self._new("sensor_msgs/msg/Imu", t, {"frame_id": frame_id})
-        k = len(arr)
-        if orientation is None:
-            arr["orientation_covariance"][:, 0] = -1.0
-        else:
-            arr["orientation"] = _rows(orientation, k, (4,), "orientation")
-            if orientation_cov is not None:
-                cov = np.asarray(orientation_cov, dtype=float)
-                cov = np.broadcast_to(cov, (k, 3, 3)) if cov.shape == (3, 3) else cov
-                arr["orientation_covariance"] = _rows(cov, k, (3, 3), "orientation_cov").reshape(k, 9)
-        arr["angular_velocity"] = _rows(b_omega, k, (3,), "b_omega")
-        arr["linear_acceleration"] = _rows(b_f, k, (3,), "b_f")
-        if gyro_var is not None:
-            arr["angular_velocity_covariance"][:, [0, 4, 8]] = np.asarray(gyro_var, dtype=float)
-        if accel_var is not None:
-            arr["linear_acceleration_covariance"][:, [0, 4, 8]] = np.asarray(accel_var, dtype=float)
-        self.add_structured(topic, "sensor_msgs/msg/Imu", arr)
-
-    def _six_dof(
-        self, type_name: str, topic: str, t: np.ndarray, linear: np.ndarray, angular: np.ndarray | None,
-        cov: np.ndarray | None, frame_id: str,
-    ) -> None:
-        arr = self._new(type_name, t, {"frame_id": frame_id})
-        k = len(arr)
-        arr["linear"] = _rows(linear, k, (3,), "linear")
-        arr["angular"] = _rows(angular, k, (3,), "angular")
-        arr["covariance"] = _rows(cov, k, (6, 6), "cov").reshape(k, 36)
-        self.add_structured(topic, type_name, arr)
+        """sensor_msgs/msg/Imu (messages.imu)."""
+        self.add_structured(topic, messages.IMU, messages.imu(self.stamps_ns(np.atleast_1d(t)), b_omega, b_f,
+                                                              frame_id, gyro_var, accel_var, orientation,
+                                                              orientation_cov))
 
     def add_twist_with_covariance(
         self, topic: str, t: np.ndarray, linear: np.ndarray, angular: np.ndarray | None,
         cov: np.ndarray | None, frame_id: str,
     ) -> None:
         """geometry_msgs/msg/TwistWithCovarianceStamped; cov (K,6,6), None = zeros (ROS: unknown)."""
-        self._six_dof("geometry_msgs/msg/TwistWithCovarianceStamped", topic, t, linear, angular, cov, frame_id)
+        arr = messages.six_dof_with_covariance(messages.TWIST_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular,
+                                               cov, frame_id)
+        self.add_structured(topic, messages.TWIST_COV, arr)
 
     def add_accel_with_covariance(
         self, topic: str, t: np.ndarray, linear: np.ndarray, angular: np.ndarray, cov: np.ndarray | None,
@@ -167,36 +128,30 @@ class McapLogWriter:
     ) -> None:
         """geometry_msgs/msg/AccelWithCovarianceStamped. For IMU biases: linear = accelerometer bias
         (m/s^2), angular = gyro bias (rad/s), cov (K,6,6) in that order."""
-        self._six_dof("geometry_msgs/msg/AccelWithCovarianceStamped", topic, t, linear, angular, cov, frame_id)
+        arr = messages.six_dof_with_covariance(messages.ACCEL_COV, self.stamps_ns(np.atleast_1d(t)), linear,
+                                               angular, cov, frame_id)
+        self.add_structured(topic, messages.ACCEL_COV, arr)
 
     def add_pose_with_covariance(
         self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q: np.ndarray, cov: np.ndarray | None, frame_id: str
     ) -> None:
         """geometry_msgs/msg/PoseWithCovarianceStamped; n_q [x, y, z, w]; cov (K,6,6) over
         (position, rotation vector)."""
-        arr = self._new("geometry_msgs/msg/PoseWithCovarianceStamped", t, {"frame_id": frame_id})
-        k = len(arr)
-        arr["position"], arr["orientation"] = _rows(n_p, k, (3,), "n_p"), _rows(n_q, k, (4,), "n_q")
-        arr["covariance"] = _rows(cov, k, (6, 6), "cov").reshape(k, 36)
-        self.add_structured(topic, "geometry_msgs/msg/PoseWithCovarianceStamped", arr)
+        arr = messages.pose_with_covariance(self.stamps_ns(np.atleast_1d(t)), n_p, n_q, cov, frame_id)
+        self.add_structured(topic, messages.POSE_COV, arr)
 
     def add_vector3_stamped(self, topic: str, t: np.ndarray, vec: np.ndarray, frame_id: str) -> None:
         """geometry_msgs/msg/Vector3Stamped."""
-        arr = self._new("geometry_msgs/msg/Vector3Stamped", t, {"frame_id": frame_id})
-        arr["vector"] = _rows(vec, len(arr), (3,), "vec")
-        self.add_structured(topic, "geometry_msgs/msg/Vector3Stamped", arr)
+        self.add_structured(topic, messages.VECTOR3,
+                            messages.vector3_stamped(self.stamps_ns(np.atleast_1d(t)), vec, frame_id))
 
     def add_scalar_with_variance(
         self, topic: str, t: np.ndarray, value: np.ndarray, variance: np.ndarray | None, frame_id: str = ""
     ) -> None:
-        """A stamped scalar and its variance as sensor_msgs/msg/Temperature (fields ``temperature``,
-        ``variance``): the one standard ROS 2 message that is exactly (header, float64 value, float64
-        variance), so ros2 bag, Foxglove and rosbags plot it without custom definitions. The name
-        of the value field is historical; the topic name says what it is (e.g. /gtsam_dvl/scale)."""
-        arr = self._new("sensor_msgs/msg/Temperature", t, {"frame_id": frame_id})
-        arr["temperature"] = _rows(value, len(arr), (), "value")
-        arr["variance"] = _rows(variance, len(arr), (), "variance")
-        self.add_structured(topic, "sensor_msgs/msg/Temperature", arr)
+        """A stamped scalar and its variance as sensor_msgs/msg/Temperature (messages.scalar_with_variance); the
+        topic name says what it is (e.g. /gtsam_dvl/scale)."""
+        arr = messages.scalar_with_variance(self.stamps_ns(np.atleast_1d(t)), value, variance, frame_id)
+        self.add_structured(topic, messages.TEMPERATURE, arr)
 
     def add_odometry(
         self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.ndarray,
@@ -205,43 +160,25 @@ class McapLogWriter:
     ) -> None:
         """nav_msgs/msg/Odometry: pose of child in frame_id, twist (b_v, b_omega) in the child frame;
         covariances (K,6,6) or None (zeros)."""
-        arr = self._new("nav_msgs/msg/Odometry", t, {"frame_id": frame_id, "child_frame_id": child_frame_id})
-        k = len(arr)
-        arr["position"], arr["orientation"] = _rows(n_p, k, (3,), "n_p"), _rows(n_q_b, k, (4,), "n_q_b")
-        arr["linear"], arr["angular"] = _rows(b_v, k, (3,), "b_v"), _rows(b_omega, k, (3,), "b_omega")
-        arr["pose_covariance"] = _rows(pose_cov, k, (6, 6), "pose_cov").reshape(k, 36)
-        arr["twist_covariance"] = _rows(twist_cov, k, (6, 6), "twist_cov").reshape(k, 36)
-        self.add_structured(topic, "nav_msgs/msg/Odometry", arr)
+        arr = messages.odometry(self.stamps_ns(np.atleast_1d(t)), n_p, n_q_b, b_v, b_omega, pose_cov, twist_cov,
+                                frame_id, child_frame_id)
+        self.add_structured(topic, messages.ODOMETRY, arr)
 
     def add_path(self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map") -> None:
-        """nav_msgs/msg/Path: one message, stamped at t[-1], holding every pose (PoseStamped at t[k])."""
+        """nav_msgs/msg/Path: one message, stamped at t[-1] (t0 without poses), holding every pose (PoseStamped
+        at t[k])."""
         stamps = self.stamps_ns(t)
-        k = len(stamps)
-        pos, quat = _rows(n_p, k, (3,), "n_p"), _rows(n_q_b, k, (4,), "n_q_b")
-        w = cdr.CdrWriter()
-        w.stamp(int(stamps[-1]) if k else self.t0_ns)
-        w.string(frame_id)
-        w.u32(k)
-        for i in range(k):  # one message; a Python loop over its poses is fine
-            w.stamp(int(stamps[i]))
-            w.string(frame_id)
-            w.f64(np.concatenate([pos[i], quat[i]]))
-        self.add_encoded(topic, "nav_msgs/msg/Path", stamps[-1:] if k else np.array([self.t0_ns]), [bytes(w.buf)])
+        stamp = stamps[-1:] if len(stamps) else np.array([self.t0_ns])
+        self.add_encoded(topic, messages.PATH, stamp, [messages.path(int(stamp[0]), stamps, n_p, n_q_b, frame_id)])
 
     def add_tf_static(
         self, topic: str, t: float, transforms: list[tuple[str, str, np.ndarray, np.ndarray]]
     ) -> None:
         """tf2_msgs/msg/TFMessage, latched QoS: (parent, child, parent_R_child, parent_p_child) each."""
         ns = int(self.stamps_ns([t])[0])
-        w = cdr.CdrWriter()
-        w.u32(len(transforms))
-        for parent, child, R, p in transforms:
-            w.stamp(ns)
-            w.string(parent)
-            w.string(child)
-            w.f64(np.asarray(p, dtype=float).reshape(3))
-            w.f64(matrix_to_quat_xyzw(np.asarray(R, dtype=float)))
-        self.add_encoded(topic, "tf2_msgs/msg/TFMessage", np.array([ns]), [bytes(w.buf)], QOS_LATCHED)
+        body = messages.tf_message([(ns, parent, child, p, matrix_to_quat_xyzw(np.asarray(R, dtype=float)))
+                                    for parent, child, R, p in transforms])
+        self.add_encoded(topic, messages.TF, np.array([ns]), [body], QOS_LATCHED)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """An MCAP Metadata record (string -> string)."""
@@ -300,16 +237,6 @@ class McapLogWriter:
             self._file.close()
         self._tmp.unlink(missing_ok=True)
 
-    def __enter__(self) -> McapLogWriter:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 class McapStreamWriter(McapLogWriter):

@@ -7,7 +7,8 @@ columns, decoding is ``np.frombuffer``. The layout is computed once per topic fr
 4-byte encapsulation header (00 01 00 00 = little endian), then every primitive aligned to its own size
 counted from the end of that header; a string is a uint32 length (including the NUL) and the bytes;
 fixed arrays have no count. Sequences (TFMessage, Path) are rare and go through the small
-``CdrWriter``/``CdrReader`` instead.
+``CdrWriter``/``CdrReader`` instead. The fields of each type are read from its shipped .msg definition
+(msgdefs.fields) and flattened (flat_spec), so the layouts and the schemas written into logs are one source.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from gtsam_dvl.io.ros2.msgdefs import fields
 
 ENCAP_LE = b"\x00\x01\x00\x00"
 
@@ -30,83 +33,57 @@ class Field:
     count: int = 1
 
 
-def _f(name: str, code: str, count: int = 1) -> Field:
-    return Field(name, code, count)
-
-
 Spec = tuple[Field, ...]
 
-HEADER: Spec = (_f("sec", "i4"), _f("nanosec", "u4"), _f("frame_id", "str"))
-IMU: Spec = HEADER + (
-    _f("orientation", "f8", 4),
-    _f("orientation_covariance", "f8", 9),
-    _f("angular_velocity", "f8", 3),
-    _f("angular_velocity_covariance", "f8", 9),
-    _f("linear_acceleration", "f8", 3),
-    _f("linear_acceleration_covariance", "f8", 9),
-)
-TWIST_STAMPED: Spec = HEADER + (_f("linear", "f8", 3), _f("angular", "f8", 3))
-# TwistWithCovarianceStamped and AccelWithCovarianceStamped share this layout.
-SIX_DOF_COV_STAMPED: Spec = TWIST_STAMPED + (_f("covariance", "f8", 36),)
-POSE_COV_STAMPED: Spec = HEADER + (
-    _f("position", "f8", 3),
-    _f("orientation", "f8", 4),
-    _f("covariance", "f8", 36),
-)
-VECTOR3_STAMPED: Spec = HEADER + (_f("vector", "f8", 3),)
-TEMPERATURE: Spec = HEADER + (_f("temperature", "f8"), _f("variance", "f8"))
-FLUID_PRESSURE: Spec = HEADER + (_f("fluid_pressure", "f8"), _f("variance", "f8"))
-NAVSATFIX: Spec = HEADER + (
-    _f("status", "i1"),
-    _f("service", "u2"),
-    _f("latitude", "f8"),
-    _f("longitude", "f8"),
-    _f("altitude", "f8"),
-    _f("position_covariance", "f8", 9),
-    _f("position_covariance_type", "u1"),
-)
-ODOMETRY: Spec = HEADER + (
-    _f("child_frame_id", "str"),
-    _f("position", "f8", 3),
-    _f("orientation", "f8", 4),
-    _f("pose_covariance", "f8", 36),
-    _f("linear", "f8", 3),
-    _f("angular", "f8", 3),
-    _f("twist_covariance", "f8", 36),
-)
-DVL: Spec = HEADER + (
-    _f("velocity_mode", "u1"),
-    _f("dvl_type", "u1"),
-    _f("velocity", "f8", 3),
-    _f("velocity_covar", "f8", 9),
-    _f("altitude", "f8"),
-    _f("course_gnd", "f8"),
-    _f("speed_gnd", "f8"),
-    _f("num_good_beams", "u1"),
-    _f("sound_speed", "f4"),
-    _f("beam_ranges_valid", "?"),
-    _f("beam_velocities_valid", "?"),
-    _f("beam_unit_vec", "f8", 12),
-    _f("range", "f8", 4),
-    _f("range_covar", "f4", 4),
-    _f("beam_quality", "f4", 4),
-    _f("beam_velocity", "f4", 4),
-    _f("beam_velocity_covar", "f4", 4),
-)
+# numpy scalar code of each ROS primitive ('str': a CDR string)
+CODES = {"bool": "?", "byte": "u1", "char": "u1", "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2",
+         "int32": "i4", "uint32": "u4", "int64": "i8", "uint64": "u8", "float32": "f4", "float64": "f8",
+         "string": "str"}
 
-SPECS: dict[str, Spec] = {
-    "sensor_msgs/msg/Imu": IMU,
-    "geometry_msgs/msg/TwistStamped": TWIST_STAMPED,
-    "geometry_msgs/msg/TwistWithCovarianceStamped": SIX_DOF_COV_STAMPED,
-    "geometry_msgs/msg/AccelWithCovarianceStamped": SIX_DOF_COV_STAMPED,
-    "geometry_msgs/msg/PoseWithCovarianceStamped": POSE_COV_STAMPED,
-    "geometry_msgs/msg/Vector3Stamped": VECTOR3_STAMPED,
-    "sensor_msgs/msg/Temperature": TEMPERATURE,
-    "sensor_msgs/msg/FluidPressure": FLUID_PRESSURE,
-    "nav_msgs/msg/Odometry": ODOMETRY,
-    "sensor_msgs/msg/NavSatFix": NAVSATFIX,
-    "marine_acoustic_msgs/msg/Dvl": DVL,
-}
+
+def _leaves(type_name: str) -> list[tuple[tuple[str, ...], str, int]]:
+    """(field path, code, count) of a message's primitive fields; a nested message whose fields are all one numeric
+    scalar type (Vector3, Point, Quaternion) is one leaf of that type (a fixed array of them: count times)."""
+    out: list[tuple[tuple[str, ...], str, int]] = []
+    for f in fields(type_name):
+        if f.length is None:
+            raise ValueError(f"{type_name}.{f.name}: a sequence has no fixed layout (CdrWriter/CdrReader)")
+        if f.type in CODES:
+            out.append(((f.name,), CODES[f.type], f.length))
+            continue
+        inner = _leaves(f.type)
+        codes = {code for _, code, _ in inner}
+        if len(codes) == 1 and "str" not in codes and all(n == 1 for _, _, n in inner):
+            out.append(((f.name,), codes.pop(), len(inner) * f.length))
+        elif f.length == 1:
+            out += [((f.name, *path), code, n) for path, code, n in inner]
+        else:
+            raise ValueError(f"{type_name}.{f.name}: an array of {f.type} has no flat layout here")
+    return out
+
+
+def flat_spec(type_name: str) -> Spec:
+    """The flattened fields of a message type from its shipped definition (msgdefs): every primitive field named by
+    its own name, prefixed with its top-level field where two share a name (Odometry: pose_covariance,
+    twist_covariance); Vector3, Point and Quaternion fields are float64 arrays (module doc for the byte layout)."""
+    leaves = _leaves(type_name)
+    names = [path[-1] for path, _, _ in leaves]
+    return tuple(Field(path[-1] if names.count(path[-1]) == 1 else f"{path[0]}_{path[-1]}", code, n)
+                 for path, code, n in leaves)
+
+
+# the fixed-layout types gtsam_dvl reads and writes in bulk (TwistWithCovarianceStamped and
+# AccelWithCovarianceStamped share one layout)
+SPECS: dict[str, Spec] = {name: flat_spec(name) for name in (
+    "sensor_msgs/msg/Imu", "geometry_msgs/msg/TwistStamped", "geometry_msgs/msg/TwistWithCovarianceStamped",
+    "geometry_msgs/msg/AccelWithCovarianceStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "geometry_msgs/msg/Vector3Stamped", "sensor_msgs/msg/Temperature", "sensor_msgs/msg/FluidPressure",
+    "nav_msgs/msg/Odometry", "sensor_msgs/msg/NavSatFix", "marine_acoustic_msgs/msg/Dvl")}
+IMU = SPECS["sensor_msgs/msg/Imu"]
+FLUID_PRESSURE = SPECS["sensor_msgs/msg/FluidPressure"]
+NAVSATFIX = SPECS["sensor_msgs/msg/NavSatFix"]
+ODOMETRY = SPECS["nav_msgs/msg/Odometry"]
+DVL = SPECS["marine_acoustic_msgs/msg/Dvl"]
 
 
 def layout(

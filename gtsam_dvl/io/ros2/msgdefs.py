@@ -10,6 +10,7 @@ from __future__ import annotations
 import re
 from functools import cache
 from importlib import resources
+from typing import NamedTuple
 
 SEPARATOR = "=" * 80
 PRIMITIVES = frozenset(
@@ -34,25 +35,48 @@ def message_text(type_name: str) -> str:
         raise KeyError(f"no message definition shipped for {type_name}") from None
 
 
+class MsgField(NamedTuple):
+    """One field of a message definition: type a primitive ("float64", "string"; a bounded string<=N is "string")
+    or a message type "pkg/msg/Type"; length 1 (one value), N (a fixed array T[N]) or None (a sequence, T[] or
+    T[<=N])."""
+
+    type: str
+    name: str
+    length: int | None
+
+
+_FIELD_TYPE = re.compile(r"([^\[\]]+)(?:\[(<=)?(\d*)\])?")
+
+
+@cache
+def fields(type_name: str) -> tuple[MsgField, ...]:
+    """The fields of a message type in definition order; constants (``uint8 NAME=1``) left out."""
+    pkg = normalize_type(type_name).split("/")[0]
+    out: list[MsgField] = []
+    for line in message_text(type_name).splitlines():
+        parts = line.split("#", 1)[0].split()
+        if len(parts) < 2 or "=" in "".join(parts[1:]):
+            continue  # blank, or a constant
+        m = _FIELD_TYPE.fullmatch(parts[0])
+        if m is None:
+            raise ValueError(f"{type_name}: cannot read the field type {parts[0]!r}")
+        base, bounded, size = m.group(1), m.group(2), m.group(3)
+        base = base.split("<", 1)[0]  # string<=N, wstring<=N
+        length = 1 if size is None else (None if bounded or not size else int(size))
+        if base == "Header":
+            base = "std_msgs/msg/Header"
+        elif base not in PRIMITIVES:
+            base = normalize_type(base) if "/" in base else f"{pkg}/msg/{base}"
+        out.append(MsgField(base, parts[1], length))
+    return tuple(out)
+
+
 def dependencies(type_name: str) -> list[str]:
     """Field types of a message (fully qualified 'pkg/msg/Type'), in field order, without repeats."""
-    pkg = normalize_type(type_name).split("/")[0]
     out: list[str] = []
-    for line in message_text(type_name).splitlines():
-        line = line.split("#", 1)[0].strip()
-        if not line:
-            continue
-        ftype = re.sub(r"\[.*\]$", "", line.split()[0])
-        if ftype in PRIMITIVES or ftype.startswith(("string<", "wstring<")):
-            continue  # primitives and constants
-        if ftype == "Header":
-            full = "std_msgs/msg/Header"
-        elif "/" in ftype:
-            full = normalize_type(ftype)
-        else:
-            full = f"{pkg}/msg/{ftype}"
-        if full not in out:
-            out.append(full)
+    for f in fields(type_name):
+        if f.type not in PRIMITIVES and f.type not in out:
+            out.append(f.type)
     return out
 
 

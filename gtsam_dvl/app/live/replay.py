@@ -1,0 +1,209 @@
+"""Replaying a recorded log through the online estimator into the live view (`gtsam-dvl live LOG`).
+
+replay_log pushes the log's messages in delivery order (core/message_order.py) at a chosen speed and publishes
+each message and each completed epoch on a LiveView; serve_log reads the log, starts the view and replays it.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from gtsam_dvl.app.live.server import DEFAULT_PORT, LiveView, import_foxglove
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.message_order import log_messages
+from gtsam_dvl.core.types import LogData
+
+if TYPE_CHECKING:
+    from gtsam_dvl.estimators.online import OnlineEstimator
+
+
+def parse_speed(text: str | float) -> float:
+    """--speed: a positive factor of real time; 0, "max" or "inf": as fast as possible (math.inf)."""
+    if isinstance(text, str) and text.strip().lower() in ("max", "inf", "0"):
+        return math.inf
+    try:
+        speed = float(text)
+    except ValueError:
+        raise GtsamDvlError(f"--speed must be a number (times real time) or 'max', got {text!r}") from None
+    if speed == 0 or speed == math.inf:
+        return math.inf
+    if not speed > 0:
+        raise GtsamDvlError(f"--speed must be > 0 (times real time) or 'max', got {text!r}")
+    return speed
+
+
+@dataclass
+class ReplayOutcome:
+    """What replay_log did: the estimator (its result() and counters), epochs published, wall and log time (s)."""
+
+    estimator: OnlineEstimator
+    epochs_published: int
+    wall_s: float
+    log_s: float
+    health: Any = None  # analysis.health.Health of the run (replay_log with health=True and an epoch)
+
+    def describe(self) -> str:
+        rate = f"{self.log_s / self.wall_s:.1f}x real time" if self.wall_s > 0 else "-"
+        return (f"replayed {self.log_s:.0f} s of log in {self.wall_s:.1f} s ({rate}), {self.epochs_published} "
+                f"epochs published, {self.estimator.epochs} states")
+
+
+def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None = None, *, speed: float = math.inf,
+               step_s: float = 0.1, health: bool = True, stop: threading.Event | None = None,
+               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+               ) -> ReplayOutcome:
+    """Push a log's messages through the online estimator in delivery order (core/message_order.log_messages:
+    the IMU samples up to each ping, then the depth samples up to it, then the ping; the rest; finish()),
+    publishing each message as it is pushed and each epoch as it is completed (the estimate after the push, the
+    latest when a push completes several), then the final estimate. speed: times real time (math.inf: as fast as
+    possible); with a finite speed the IMU goes in pieces of step_s log seconds, each pushed when the wall clock
+    reaches its last stamp. health: the log's health checks at the start and the run's (analysis/health.py
+    assess_health) at the end on the log channel. stop: set to end the replay early, checked before each ping's
+    group and before the messages after the last ping (finish() is still called). Warnings the estimator raises
+    (MessageDropped) go to the log channel, stamped at the ping of their group (after finish(): at the last
+    stamp). estimator None: OnlineEstimator.for_log(log)."""
+    from gtsam_dvl.estimators.online import MessageDropped, OnlineEstimator
+
+    if not (speed > 0):
+        raise GtsamDvlError(f"replay speed must be > 0 (math.inf: as fast as possible), got {speed}")
+    est = estimator if estimator is not None else OnlineEstimator.for_log(log)
+    imu, dvl, depth, truth = log.imu, log.dvl, log.depth, log.truth
+    if len(imu) == 0:
+        raise GtsamDvlError(f"{log.source or 'log'}: no IMU samples to replay")
+    if health:
+        from gtsam_dvl.analysis.health import assess_log_health
+
+        view.publish_health(assess_log_health(log), float(imu.t[0]))
+    t_first = float(min(imu.t[0], dvl.t[0] if len(dvl) else imu.t[0]))
+    wall0 = clock()
+    published = 0
+    run_health = None
+
+    def pace(t: float) -> None:
+        if math.isfinite(speed):
+            wait = wall0 + (t - t_first) / speed - clock()
+            if wait > 0:
+                sleep(wait)
+
+    def epoch_done(n: int) -> None:
+        nonlocal published
+        e = est.estimate()
+        if n and e is not None:
+            view.publish_epoch(e, counters=est.counters, latency_s=est.latencies_s[-1] if est.latencies_s else None)
+            published += 1
+            if truth is not None and len(truth):
+                k = min(int(np.searchsorted(truth.t, e.t)), len(truth) - 1)
+                if k > 0 and abs(truth.t[k - 1] - e.t) < abs(truth.t[k] - e.t):
+                    k -= 1
+                view.publish_truth(float(truth.t[k]), truth.n_p[k], truth.n_q_b[k], truth.n_v[k], truth.b_omega[k])
+
+    def push_imu(a: int, b: int) -> None:
+        step = len(imu) if not math.isfinite(speed) else max(1, int(np.searchsorted(imu.t, imu.t[a] + step_s) - a))
+        for s in range(a, b, step):
+            e = min(b, s + step)
+            pace(float(imu.t[e - 1]))
+            n = est.push_imu_batch(imu.t[s:e], imu.b_omega[s:e], imu.b_f[s:e])
+            view.publish_imu(imu.t[s:e], imu.b_omega[s:e], imu.b_f[s:e])
+            epoch_done(n)
+
+    def push_depth(k: int) -> None:
+        assert depth is not None
+        pace(float(depth.t[k]))
+        pa = None if depth.pressure_pa is None else float(depth.pressure_pa[k])
+        if pa is not None:
+            var = math.nan if depth.pressure_variance_pa2 is None else float(depth.pressure_variance_pa2[k])
+            est.push_depth(float(depth.t[k]), pressure_pa=pa, pressure_variance_pa2=var)
+        else:
+            est.push_depth(float(depth.t[k]), float(depth.depth_m[k]), float(depth.variance_m2[k]))
+        view.publish_depth(float(depth.t[k]), float(depth.depth_m[k]), pa)
+
+    def push_dvl(j: int) -> None:
+        beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+        pace(float(dvl.t[j]))
+        n = est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams)
+        view.publish_dvl(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
+        epoch_done(n)
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", MessageDropped)
+        seen = 0
+        group_opens = True  # the next message opens a ping's group (IMU block, depth samples, ping) or the tail
+        for m in log_messages(log):
+            if group_opens:  # stop is honoured between groups: a ping always goes in with the IMU before it
+                if stop is not None and stop.is_set():
+                    break
+                group_opens = False
+            if m.kind == "imu":
+                push_imu(m.start, m.stop)
+            elif m.kind == "depth":
+                push_depth(m.start)
+            else:
+                push_dvl(m.start)
+                for w in caught[seen:]:  # the group's warnings, stamped at its ping
+                    view.log("warning", str(w.message), float(dvl.t[m.start]))
+                seen = len(caught)
+                group_opens = True
+        final = est.finish()
+        for w in caught[seen:]:
+            view.log("warning", str(w.message))
+    if final is not None:
+        view.publish_epoch(final, counters=est.counters, final=True)
+        published += 1
+        if health:
+            from gtsam_dvl.analysis.health import assess_health
+
+            run_health = assess_health(est.result(log.t0_ns), log)
+            view.publish_health(run_health, final.t)
+    elif health:
+        view.log("error", f"{log.source or 'log'}: no DVL epoch was processed (nothing to estimate)")
+    return ReplayOutcome(est, published, clock() - wall0, float(imu.t[-1] - t_first), run_health)
+
+
+def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
+              config_path: Path | None = None, read_options: dict[str, Any] | None = None, wait: bool = False,
+              linger: bool = True, echo: Callable[[str], None] = print) -> ReplayOutcome:
+    """`gtsam-dvl live`: read the log, serve the view on host:port, replay the log through the online estimator at
+    speed (parse_speed), print the outcome and the run's health; then, with linger, keep serving until Ctrl-C.
+    wait: start the replay only once a client subscribes. The foxglove package is checked before anything else."""
+    import_foxglove()
+    factor = parse_speed(speed)
+    from gtsam_dvl.app.commands import load_log
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.estimators.online import OnlineEstimator
+
+    config = EstimatorConfig.load(config_path) if config_path else None
+    log = load_log(log_path, **(read_options or {}))
+    config = config or EstimatorConfig.for_log(log.metadata)
+    estimator = OnlineEstimator.for_log(log, config)
+    with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:
+        echo(f"live view on {view.url}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, and "
+             "Layouts > Import from file > layouts/gtsam_dvl_live.json")
+        outcome: ReplayOutcome | None = None
+        try:
+            if wait:
+                echo("waiting for a client to subscribe (Ctrl-C to stop)")
+                while not view.wait_for_subscribers(timeout_s=1.0):
+                    pass
+            pace = "as fast as possible" if math.isinf(factor) else f"at {factor:g}x real time"
+            echo(f"replaying {Path(log_path).name} {pace} through the online estimator "
+                 f"({estimator.options.mode.replace('_', '-')})")
+            outcome = replay_log(log, view, estimator, speed=factor)
+            echo(outcome.describe())
+            if outcome.health is not None:
+                echo("\n".join(outcome.health.lines()))
+            if linger:
+                echo(f"replay done; still serving on {view.url} (Ctrl-C to stop)")
+                while True:
+                    time.sleep(0.5)
+        except KeyboardInterrupt:
+            echo("live view stopped")
+    return outcome or ReplayOutcome(estimator, 0, 0.0, 0.0)
