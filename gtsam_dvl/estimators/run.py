@@ -1,8 +1,9 @@
 """The estimators by name: one interface (Estimator), one registry (ESTIMATORS, its names MODES) and the
 dispatcher the command line (`smooth --mode`), the demo and the Monte Carlo runs (analysis/montecarlo.py) share.
 
-Adding an estimator is one class with a name, a description and run(), and one entry in ESTIMATORS. Each run()
-imports its estimator when called, so that listing the modes loads no solver.
+Adding an estimator is one entry in ESTIMATORS: an Estimator (a name, a description and run()), e.g. a
+RegisteredEstimator around a function. Each function imports its estimator when called, so that listing the modes
+loads no solver.
 
 Results: the trajectory estimators (batch, online, online-full, ekf) return a NavResult. IO-DVLC returns an
 IoDvlcResult: it estimates the DVL scale and misalignment from the Type-I segments alone, with no trajectory and
@@ -14,6 +15,7 @@ a float): a NavResult holding it would carry empty or invented fields, so the tw
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal, Protocol, overload
 
@@ -43,69 +45,53 @@ class Estimator(Protocol):
             timeline: bool = True) -> EstimatorResult: ...
 
 
-@dataclass(frozen=True)
-class BatchSmoother:
-    """estimators/batch.py smooth_batch."""
-
-    name: str = "batch"
-    description: str = "batch smoother: the whole log in one factor graph (Gauss-Newton)"
-
-    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True) -> NavResult:
-        from gtsam_dvl.estimators.batch import smooth_batch
-
-        return smooth_batch(log, config, progress=progress, timeline=timeline)
+RunFn = Callable[[LogData, EstimatorConfig | None, ProgressFn | None, bool], EstimatorResult]
 
 
 @dataclass(frozen=True)
-class OnlineSmoother:
-    """estimators/online smooth_online in one of its modes ([online] mode)."""
+class RegisteredEstimator:
+    """An Estimator made of its name, its description and the function that runs it (which imports the
+    estimator's module when called)."""
 
     name: str
     description: str
-    mode: Literal["fixed_lag", "full"]
+    runner: RunFn
 
     def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True) -> NavResult:
+            timeline: bool = True) -> EstimatorResult:
+        return self.runner(log, config, progress, timeline)
+
+
+def _batch(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+    from gtsam_dvl.estimators.batch import smooth_batch
+    return smooth_batch(log, config, progress=progress, timeline=timeline)
+
+
+def _online(mode: Literal["fixed_lag", "full"]) -> RunFn:
+    def run(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
         from gtsam_dvl.estimators.online import smooth_online
-
-        return smooth_online(log, config, mode=self.mode, progress=progress)
-
-
-@dataclass(frozen=True)
-class Ekf:
-    """estimators/ekf run_ekf."""
-
-    name: str = "ekf"
-    description: str = "error-state EKF over the same pings"
-
-    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True) -> NavResult:
-        from gtsam_dvl.estimators.ekf import run_ekf
-
-        return run_ekf(log, config, progress=progress)
+        return smooth_online(log, config, mode=mode, progress=progress)
+    return run
 
 
-@dataclass(frozen=True)
-class IoDvlc:
-    """estimators/iodvlc.py run_iodvlc (calibration only: module doc, "Results")."""
+def _ekf(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+    from gtsam_dvl.estimators.ekf import run_ekf
+    return run_ekf(log, config, progress=progress)
 
-    name: str = "io-dvlc"
-    description: str = "the paper's ideal observer: DVL scale and misalignment from the Type-I segments"
 
-    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True) -> IoDvlcResult:
-        from gtsam_dvl.estimators.iodvlc import run_iodvlc
-
-        return run_iodvlc(log, config)
+def _iodvlc(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None,
+            timeline: bool) -> IoDvlcResult:
+    from gtsam_dvl.estimators.iodvlc import run_iodvlc
+    return run_iodvlc(log, config)
 
 
 ESTIMATORS: dict[str, Estimator] = {e.name: e for e in (
-    BatchSmoother(),
-    OnlineSmoother("online", "online iSAM2 smoother, fixed lag (bounded cost per ping)", "fixed_lag"),
-    OnlineSmoother("online-full", "online iSAM2 smoother keeping every state", "full"),
-    Ekf(),
-    IoDvlc(),
+    RegisteredEstimator("batch", "batch smoother: the whole log in one factor graph (Gauss-Newton)", _batch),
+    RegisteredEstimator("online", "online iSAM2 smoother, fixed lag (bounded cost per ping)", _online("fixed_lag")),
+    RegisteredEstimator("online-full", "online iSAM2 smoother keeping every state", _online("full")),
+    RegisteredEstimator("ekf", "error-state EKF over the same pings", _ekf),
+    RegisteredEstimator("io-dvlc", "the paper's ideal observer: DVL scale and misalignment from the Type-I "
+                                   "segments (no trajectory)", _iodvlc),
 )}
 MODES: tuple[str, ...] = tuple(ESTIMATORS)  # the estimators' names, the command line's --mode values
 

@@ -41,15 +41,16 @@ class MessageChecks:
         self.last_depth_t = -math.inf
         self._warned: set[str] = set()
 
-    def bad(self, kind: str, message: str, n: int = 1) -> None:
-        """Raise, or count n messages of this kind and warn the first time (module doc)."""
+    def bad(self, kind: str, message: str, n: int = 1, stacklevel: int = 4) -> None:
+        """Raise, or count n messages of this kind and warn the first time (module doc); stacklevel: the
+        warning's, which names the line that pushed the message."""
         if self.bad_messages == "raise":
             raise GtsamDvlError(f"{self.source + ': ' if self.source else ''}{message}")
         self.counters[kind] = self.counters.get(kind, 0) + n
         if kind not in self._warned:
             self._warned.add(kind)
             warnings.warn(f"{message}: dropped (further ones are counted in counters['{kind}'])", MessageDropped,
-                          stacklevel=4)
+                          stacklevel=stacklevel)
 
     def imu_sample(self, t: float, b_omega: Any, b_f: Any) -> ImuChunk | None:
         """One IMU sample as a chunk of one, or None when dropped."""
@@ -100,13 +101,8 @@ class MessageChecks:
 
     def ping(self, t: float, d_v: Any, d_cov: Any, valid: bool, beams: tuple[Any, Any, Any] | None) -> Ping | None:
         """One ping (OnlineEstimator.push_dvl's arguments) as a Ping, or None when dropped."""
-        if not math.isfinite(t):
-            self.bad("dvl_bad_time", f"DVL ping with a non-finite stamp ({t})")
-            return None
-        if t <= self.last_dvl_t:
-            kind = "dvl_duplicate" if t == self.last_dvl_t else "dvl_out_of_order"
-            what = "repeats the previous ping's stamp" if t == self.last_dvl_t else "is older than the previous ping"
-            self.bad(kind, f"DVL ping at t = {t:.6f} s {what} ({self.last_dvl_t:.6f} s)")
+        if not self._in_order("dvl", "DVL ping", t, self.last_dvl_t, "repeats the previous ping's stamp",
+                              "is older than the previous ping"):
             return None
         self.last_dvl_t = t
         d_v = vector3("DVL d_v", d_v)
@@ -123,13 +119,21 @@ class MessageChecks:
 
     def depth_stamp(self, t: float) -> bool:
         """Whether a depth sample at t (s) is in order (else dropped)."""
-        if not math.isfinite(t):
-            self.bad("depth_bad_time", f"depth sample with a non-finite stamp ({t})")
-            return False
-        if t <= self.last_depth_t:
-            kind = "depth_duplicate" if t == self.last_depth_t else "depth_out_of_order"
-            what = "repeats the previous stamp" if t == self.last_depth_t else "is older than the previous one"
-            self.bad(kind, f"depth sample at t = {t:.6f} s {what} ({self.last_depth_t:.6f} s)")
+        if not self._in_order("depth", "depth sample", t, self.last_depth_t, "repeats the previous stamp",
+                              "is older than the previous one"):
             return False
         self.last_depth_t = t
+        return True
+
+    def _in_order(self, kind: str, noun: str, t: float, last: float, same: str, older: str) -> bool:
+        """Whether stamp t is finite and after the previous one of its stream (last, s), else bad() with kind
+        "<kind>_bad_time", "<kind>_duplicate" or "<kind>_out_of_order"."""
+        if not math.isfinite(t):
+            self.bad(f"{kind}_bad_time", f"{noun} with a non-finite stamp ({t})", stacklevel=5)
+            return False
+        if t <= last:
+            dup = t == last
+            self.bad(f"{kind}_duplicate" if dup else f"{kind}_out_of_order",
+                     f"{noun} at t = {t:.6f} s {same if dup else older} ({last:.6f} s)", stacklevel=5)
+            return False
         return True
