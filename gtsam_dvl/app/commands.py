@@ -15,7 +15,12 @@ from gtsam_dvl.app.progress import progress_bar
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import StoredResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.run import MODES, run_estimator  # noqa: F401 - re-exported for the demo, tests, bench
+from gtsam_dvl.estimators.run import (  # noqa: F401 - re-exported for the demo, tests, bench
+    MODES,
+    get_estimator,
+    run_estimator,
+    run_trajectory_estimator,
+)
 
 
 @dataclass
@@ -243,8 +248,7 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     from gtsam_dvl.io.atomic import OutputSet, tum_text
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
 
-    if mode not in MODES:
-        raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+    get_estimator(mode)  # an unknown mode: a one-line error before the log is read
     if mode == "io-dvlc" and (output is not None or tum_path is not None or timeline_path is not None):
         raise GtsamDvlError("--mode io-dvlc estimates the calibration only (no trajectory): it writes --summary, "
                             "not -o, --tum or --timeline-npz; run another mode for a result MCAP")

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from gtsam_dvl.app.commands import evaluate_to_dir, priors_for_plots, run_estimator
+from gtsam_dvl.app.commands import evaluate_to_dir, priors_for_plots, run_estimator, run_trajectory_estimator
 from gtsam_dvl.app.progress import progress_bar
 
 
@@ -52,7 +52,7 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     for mode in modes:
         t0 = time.perf_counter()
         with progress_bar(f"{name}: {mode}") as progress:
-            res = run_estimator(log, mode, config, progress=progress)
+            res = run_trajectory_estimator(log, mode, config, progress=progress)
         res.timing_s.setdefault("total", time.perf_counter() - t0)
         summ = summary(res, log)
         out = run_dir / mode
@@ -96,8 +96,8 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
                                segments))
     priors = priors_for_plots(config.to_dict())
     ref = "ekf" if "ekf" in results else next(iter(results))
-    if results[ref].timeline is not None:
-        written.append(plot_normalised_sigmas(results[ref].timeline, figs / "fig12_normalised_sigmas.png", priors,
+    if (ref_timeline := results[ref].timeline) is not None:
+        written.append(plot_normalised_sigmas(ref_timeline, figs / "fig12_normalised_sigmas.png", priors,
                                               segments, title=f"Normalised sigmas, {name}, {ref}"))
     findings = {m: paper_findings(r.timeline, priors, log.segments)
                 for m, r in results.items() if r.timeline is not None}

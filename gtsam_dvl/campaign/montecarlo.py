@@ -30,7 +30,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_log
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.run import run_estimator
+from gtsam_dvl.estimators.run import run_trajectory_estimator
 
 # the states of a campaign, in the order of their vectors, with units
 STATES: list[tuple[str, str]] = [
@@ -58,7 +58,7 @@ def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tup
     out: dict[str, Any] = {"seed": int(seed), "estimators": {}}
     for name in estimators:
         t0 = time.perf_counter()
-        res = run_estimator(log, name, cfg, timeline=False)
+        res = run_trajectory_estimator(log, name, cfg, timeline=False)
         wall = time.perf_counter() - t0
         out["estimators"][name] = {**run_errors(res, log), "wall_s": wall}
     return out

@@ -1,39 +1,141 @@
-"""One estimator on a log by its name: the dispatcher the command line (`smooth --mode`), the demo and the Monte
-Carlo runs (analysis/montecarlo.py) share."""
+"""The estimators by name: one interface (Estimator), one registry (ESTIMATORS, its names MODES) and the
+dispatcher the command line (`smooth --mode`), the demo and the Monte Carlo runs (analysis/montecarlo.py) share.
+
+Adding an estimator is one entry in ESTIMATORS: an Estimator (a name, a description and run()), e.g. a
+RegisteredEstimator around a function. Each function imports its estimator when called, so that listing the modes
+loads no solver.
+
+Results: the trajectory estimators (batch, online, online-full, ekf) return a NavResult. IO-DVLC returns an
+IoDvlcResult: it estimates the DVL scale and misalignment from the Type-I segments alone, with no trajectory and
+no IMU biases (the fields a NavResult has and its users read), and its scale and misalignment are timelines over
+the DVL epochs under the names NavResult gives its final values (IoDvlcResult.scale (N,) against NavResult.scale,
+a float): a NavResult holding it would carry empty or invented fields, so the two stay distinct types
+(EstimatorResult).
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal, Protocol, overload
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
+from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.iodvlc import IoDvlcResult
 
-MODES = ("batch", "online", "online-full", "ekf", "io-dvlc")
+EstimatorResult = NavResult | IoDvlcResult
+
+
+class Estimator(Protocol):
+    """An estimator run on a whole log. config: an EstimatorConfig, already checked (None: the one the log's
+    scenario names, else the defaults); each estimator reads its own sections of it. progress: called with the
+    fraction done, 0 to 1. timeline: keep the filtering timeline where it costs extra (the batch smoother's; the
+    filters always keep theirs)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def description(self) -> str: ...
+
+    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
+            timeline: bool = True) -> EstimatorResult: ...
+
+
+RunFn = Callable[[LogData, EstimatorConfig | None, ProgressFn | None, bool], EstimatorResult]
+
+
+@dataclass(frozen=True)
+class RegisteredEstimator:
+    """An Estimator made of its name, its description and the function that runs it (which imports the
+    estimator's module when called)."""
+
+    name: str
+    description: str
+    runner: RunFn
+
+    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
+            timeline: bool = True) -> EstimatorResult:
+        return self.runner(log, config, progress, timeline)
+
+
+def _batch(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+    from gtsam_dvl.estimators.batch import smooth_batch
+    return smooth_batch(log, config, progress=progress, timeline=timeline)
+
+
+def _online(mode: Literal["fixed_lag", "full"]) -> RunFn:
+    def run(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+        from gtsam_dvl.estimators.online import smooth_online
+        return smooth_online(log, config, mode=mode, progress=progress)
+    return run
+
+
+def _ekf(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+    from gtsam_dvl.estimators.ekf import run_ekf
+    return run_ekf(log, config, progress=progress)
+
+
+def _iodvlc(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None,
+            timeline: bool) -> IoDvlcResult:
+    from gtsam_dvl.estimators.iodvlc import run_iodvlc
+    return run_iodvlc(log, config)
+
+
+ESTIMATORS: dict[str, Estimator] = {e.name: e for e in (
+    RegisteredEstimator("batch", "batch smoother: the whole log in one factor graph (Gauss-Newton)", _batch),
+    RegisteredEstimator("online", "online iSAM2 smoother, fixed lag (bounded cost per ping)", _online("fixed_lag")),
+    RegisteredEstimator("online-full", "online iSAM2 smoother keeping every state", _online("full")),
+    RegisteredEstimator("ekf", "error-state EKF over the same pings", _ekf),
+    RegisteredEstimator("io-dvlc", "the paper's ideal observer: DVL scale and misalignment from the Type-I "
+                                   "segments (no trajectory)", _iodvlc),
+)}
+MODES: tuple[str, ...] = tuple(ESTIMATORS)  # the estimators' names, the command line's --mode values
+
+
+def get_estimator(mode: str) -> Estimator:
+    """The estimator named mode, else a one-line GtsamDvlError listing MODES."""
+    try:
+        return ESTIMATORS[mode]
+    except KeyError:
+        raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})") from None
+
+
+@overload
+def run_estimator(log: LogData, mode: Literal["io-dvlc"], config: EstimatorConfig | None,
+                  progress: ProgressFn | None = None, timeline: bool = True) -> IoDvlcResult: ...
+
+
+@overload
+def run_estimator(log: LogData, mode: Literal["batch", "online", "online-full", "ekf"],
+                  config: EstimatorConfig | None, progress: ProgressFn | None = None,
+                  timeline: bool = True) -> NavResult: ...
+
+
+@overload
+def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progress: ProgressFn | None = None,
+                  timeline: bool = True) -> EstimatorResult: ...
 
 
 def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True) -> Any:
-    """NavResult (batch, online, online-full, ekf) or IoDvlcResult (io-dvlc). config: an EstimatorConfig (None:
-    the one the log's scenario names, else the defaults), checked by value here; each estimator reads its own
-    section of it. timeline: the batch smoother's filtering timeline (the filters always keep theirs)."""
+                  timeline: bool = True) -> EstimatorResult:
+    """Run the estimator named mode (ESTIMATORS) on a log: a NavResult, or an IoDvlcResult for io-dvlc (module
+    doc). config: an EstimatorConfig (None: the one the log's scenario names, else the defaults), checked by value
+    here; each estimator reads its own section of it. timeline: the batch smoother's filtering timeline (the
+    filters always keep theirs)."""
     if config is not None:
         config.validate()
-    if mode == "batch":
-        from gtsam_dvl.estimators.batch import smooth_batch
+    return get_estimator(mode).run(log, config, progress, timeline)
 
-        return smooth_batch(log, config, progress=progress, timeline=timeline)
-    if mode in ("online", "online-full"):
-        from gtsam_dvl.estimators.online import smooth_online
 
-        return smooth_online(log, config, mode="full" if mode == "online-full" else "fixed_lag", progress=progress)
-    if mode == "ekf":
-        from gtsam_dvl.estimators.ekf import run_ekf
-
-        return run_ekf(log, config, progress=progress)
-    if mode == "io-dvlc":
-        from gtsam_dvl.estimators.iodvlc import run_iodvlc
-
-        return run_iodvlc(log, config)
-    raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})")
+def run_trajectory_estimator(log: LogData, mode: str, config: EstimatorConfig | None,
+                             progress: ProgressFn | None = None, timeline: bool = True) -> NavResult:
+    """run_estimator for a mode that estimates a trajectory (a NavResult: every mode but io-dvlc), else a one-line
+    GtsamDvlError."""
+    result = run_estimator(log, mode, config, progress, timeline)
+    if not isinstance(result, NavResult):
+        raise GtsamDvlError(f"--mode {mode} estimates the calibration only, not a trajectory")
+    return result

@@ -7,9 +7,13 @@ with finite values), it is not faster than `dvl.max_speed_m_s` (a bottom-track o
 first IMU sample (nothing before it can be propagated) and not after the last one (classify_pings), and when
 it is not bogus (PingScreen, with `dvl.screen`): an exact zero velocity while moving, a velocity repeated bit
 for bit while the IMU shows motion, or a velocity change the IMU cannot explain. Every rejection is counted by
-reason. Keyframe thinning (`solver.keyframe_interval_s`) then keeps pings at least that far apart (the others
-are dropped). Of those, the batch smoother makes states at keyframes `solver.keyframe_spacing_s` apart
-(keyframe_mask) and puts the pings between them on the keyframe before (no ping is dropped).
+reason.
+
+Epochs. One causal rule, KeyframeRule, decides which of the usable pings become epochs: keyframe thinning
+(`solver.keyframe_interval_s`) keeps pings at least that far apart (the others are dropped); of those, the
+keyframes `solver.keyframe_spacing_s` apart become states and the pings between them go on the keyframe before
+(no ping is dropped). The whole-log estimators run it over the log (select_epochs, keyframe_mask); the online
+estimator feeds EpochScheduler (classification, screen and KeyframeRule) ping by ping and gets the same decisions.
 
 The screen is causal: it compares a ping with the previous accepted ping and the IMU samples stamped between
 the two (at most SCREEN_WINDOW_S before the ping), so that the online estimator, which sees pings one by one,
@@ -25,6 +29,7 @@ two epochs takes each sample's overlap with it, so a sample straddling a ping is
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -396,48 +401,145 @@ def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counte
     return np.flatnonzero(code == USABLE)
 
 
-@dataclass
-class KeyframeThinning:
-    """Keeps pings at least interval_s apart (0 keeps every one); stateful so an online estimator can feed
-    pings one at a time and get the batch smoother's choice."""
+KEYFRAME_TOLERANCE = 0.02  # share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
 
-    interval_s: float
-    last_t: float = -np.inf
+# KeyframeRule's decision for a screened ping
+THINNED = 0  # dropped: within solver.keyframe_interval_s of the previous kept ping (counter "dvl_not_keyframe")
+BETWEEN = 1  # kept, between keyframes: a DVL factor on the state before it
+KEYFRAME = 2  # kept, a keyframe: a state
 
-    def keep(self, t: float) -> bool:
-        if t - self.last_t < self.interval_s:
-            return False
-        self.last_t = t
-        return True
+
+class KeyframeRule:
+    """The causal rule that turns the usable, screened pings (in time order) into epochs: the one definition
+    the batch smoother (select_epochs and keyframe_mask over the whole log) and the online estimator
+    (EpochScheduler, ping by ping) apply; the EKF takes every usable ping.
+
+    decide(t): a ping at t is THINNED when it lies within interval_s (solver.keyframe_interval_s) of the previous
+    kept ping; a kept ping is a KEYFRAME when it is the first or lies at least spacing_s (solver.
+    keyframe_spacing_s) less KEYFRAME_TOLERANCE of it after the previous keyframe (so that a DVL whose period
+    equals the spacing makes a keyframe of every ping; spacing_s <= 0: every kept ping), else BETWEEN. The
+    decision depends on the pings before t only. The estimators also make the last kept ping a keyframe when
+    the data ends (the batch smoother's LogGraph, the online estimator's finish())."""
+
+    def __init__(self, interval_s: float, spacing_s: float) -> None:
+        self.interval_s, self.spacing_s = float(interval_s), float(spacing_s)
+        self._key_interval_s = self.spacing_s * (1.0 - KEYFRAME_TOLERANCE)
+        self.last_kept_t = -np.inf  # the previous kept ping's time, s
+        self.last_key_t = -np.inf  # the previous keyframe's time, s
+
+    def decide(self, t: float) -> int:
+        """THINNED, BETWEEN or KEYFRAME for the next ping, at t (s, after every earlier ping decided)."""
+        if t - self.last_kept_t < self.interval_s:
+            return THINNED
+        self.last_kept_t = t
+        if t - self.last_key_t < self._key_interval_s:  # never with spacing_s <= 0: the pings are in time order
+            return BETWEEN
+        self.last_key_t = t
+        return KEYFRAME
+
+    def decide_all(self, t: np.ndarray) -> np.ndarray:
+        """decide() on each of the pings t (sorted, s) in turn: (M,) int8. A loop over the pings: each decision
+        depends on the kept pings before it (about 0.6 us a ping)."""
+        decide = self.decide
+        return np.fromiter((decide(x) for x in np.asarray(t, dtype=float).tolist()), dtype=np.int8,
+                           count=len(t))
 
 
 def select_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
                   counters: dict[str, int]) -> np.ndarray:
-    """Indices of the pings that become epochs: usable, then thinned to keyframes (module doc). imu: as in
-    usable_pings."""
+    """Indices of the pings that become epochs: usable, then thinned to keyframe_interval_s (KeyframeRule's first
+    stage, counter "dvl_not_keyframe"). imu: as in usable_pings."""
     idx = usable_pings(dvl, imu, cfg, counters)
     if keyframe_interval_s <= 0:
         return idx
-    thin = KeyframeThinning(keyframe_interval_s)
-    keep = np.array([thin.keep(float(dvl.t[j])) for j in idx], dtype=bool)
+    keep = KeyframeRule(keyframe_interval_s, 0.0).decide_all(dvl.t[idx]) != THINNED
     counters["dvl_not_keyframe"] = counters.get("dvl_not_keyframe", 0) + int((~keep).sum())
     return idx[keep]
 
 
-KEYFRAME_TOLERANCE = 0.02  # share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
-
-
 def keyframe_mask(t: np.ndarray, spacing_s: float) -> np.ndarray:
-    """Which of the epoch pings t (sorted, s) are keyframes: the first, then each first ping at least spacing_s
-    after the previous keyframe (less KEYFRAME_TOLERANCE of it, so that a DVL whose period equals the spacing
-    makes a keyframe of every ping); all of them when spacing_s <= 0. The batch smoother puts states at the
-    keyframes and the other pings on the keyframe before them (estimators/keyframes.py)."""
-    keep = np.ones(len(t), dtype=bool)
+    """Which of the epoch pings t (sorted, s; select_epochs' pings) are keyframes under KeyframeRule with
+    spacing_s: the batch smoother puts states at the keyframes and the other pings on the keyframe before them
+    (estimators/keyframes.py)."""
     if spacing_s <= 0 or len(t) == 0:
-        return keep
-    thin = KeyframeThinning(spacing_s * (1.0 - KEYFRAME_TOLERANCE))
-    keep[:] = [thin.keep(x) for x in np.asarray(t, dtype=float).tolist()]
-    return keep
+        return np.ones(len(t), dtype=bool)
+    return KeyframeRule(0.0, spacing_s).decide_all(t) == KEYFRAME
+
+
+@dataclass
+class Ping:
+    """One DVL ping as an estimator receives it: time t (s), velocity d_v (m/s, dvl_link) with covariance d_cov
+    (3x3, m^2/s^2, NaN: the configured default), the velocity's valid flag and optionally the beams (d_u (B, 3),
+    v (B,), valid (B,)). key: the scheduler's decision, a keyframe (a state) or a ping between keyframes."""
+
+    t: float
+    d_v: np.ndarray
+    d_cov: np.ndarray
+    valid: bool
+    beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    key: bool = True
+
+
+class EpochScheduler:
+    """The epoch rules fed one message at a time, for an estimator that sees the pings as they come (the online
+    estimator): push_ping() classifies a ping (classify_pings, with the first IMU stamp; no last one: the
+    scheduler waits for the IMU), push_imu() feeds the screen, and ready() returns the pings whose IMU evidence
+    has come, screened (PingScreen) and decided by KeyframeRule, in time order, with Ping.key set. The decisions
+    are the whole-log ones (usable_pings, select_epochs, keyframe_mask) ping for ping, whatever the order in
+    which IMU samples and pings arrive (tests/estimators/test_scheduler.py). Rejections are counted in counters
+    by reason, as the whole-log functions count them."""
+
+    def __init__(self, cfg: DvlConfig, keyframe_interval_s: float, keyframe_spacing_s: float,
+                 counters: dict[str, int]) -> None:
+        self.cfg, self.counters = cfg, counters
+        self.rule = KeyframeRule(keyframe_interval_s, keyframe_spacing_s)
+        self.screen = PingScreen(cfg)
+        self._unscreened: deque[Ping] = deque()  # usable pings waiting for the IMU to reach them
+
+    def push_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
+        """IMU samples in time order (base_link: gyro w, rad/s, specific force f, m/s^2)."""
+        self.screen.push_imu(t, w, f)
+
+    def push_ping(self, p: Ping, t_imu_first: float) -> bool:
+        """Classify ping p (after every earlier ping); a usable one waits for the screen. t_imu_first: the first
+        IMU sample's stamp (inf before any). Returns whether p is usable."""
+        beam_valid: np.ndarray | None = None
+        beam_finite: np.ndarray | None = None
+        if p.beams is not None:
+            d_u, v, ok = p.beams
+            beam_valid = ok[None, :]
+            beam_finite = np.array([bool(np.isfinite(v[ok]).all() and np.isfinite(d_u[ok]).all())])
+        code = classify_pings(np.array([p.t]), p.d_v[None, :], np.array([p.valid]), beam_valid, beam_finite,
+                              self.cfg, t_imu_first)
+        if code[0] != USABLE:
+            count_reasons(code, self.counters, keep_zero=False)
+            return False
+        self._unscreened.append(p)
+        return True
+
+    def ready(self) -> list[Ping]:
+        """The pings the IMU now reaches, screened and decided, in time order: the kept ones (Ping.key set); the
+        others are counted."""
+        out: list[Ping] = []
+        while self._unscreened and self.screen.reaches(self._unscreened[0].t):
+            p = self._unscreened.popleft()
+            code = self.screen.check_buffered(p.t, screened_value(p.d_v, p.beams, self.cfg))
+            if code != USABLE:
+                count_reasons(np.array([code]), self.counters, keep_zero=False)
+                continue
+            decision = self.rule.decide(p.t)
+            if decision == THINNED:
+                self.counters["dvl_not_keyframe"] = self.counters.get("dvl_not_keyframe", 0) + 1
+                continue
+            p.key = decision == KEYFRAME
+            out.append(p)
+        return out
+
+    def drop_waiting(self) -> int:
+        """Forget the pings still waiting for the IMU (at the end of the data); returns how many."""
+        n = len(self._unscreened)
+        self._unscreened.clear()
+        return n
 
 
 def sample_starts(t: np.ndarray) -> np.ndarray:

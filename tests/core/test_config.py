@@ -254,7 +254,7 @@ def test_json_of_a_result_reads_back(tmp_path: Path) -> None:
 def test_old_names_are_the_config_sections() -> None:
     from gtsam_dvl.estimators.ekf.filter import CALIBRATION_SPEED_SIGMAS, MIN_CALIBRATION_SPEED_M_S
     from gtsam_dvl.estimators.iodvlc import IoDvlcOptions
-    from gtsam_dvl.estimators.online import MODES
+    from gtsam_dvl.estimators.online import ONLINE_MODES as MODES
     from gtsam_dvl.estimators.online import OnlineConfig as OldOnlineConfig
     from gtsam_dvl.estimators.online import RelinearizationThresholds as OldThresholds
 

@@ -37,7 +37,8 @@ from gtsam_dvl.estimators.ekf.filter import (
     run_ekf,
 )
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, POS, SCALE, VEL, NavState
-from gtsam_dvl.estimators.online.estimator import OnlineEstimator, _considered_calibration_factor, feed_log
+from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
+from gtsam_dvl.estimators.online.dvl_factors import considered_calibration_factor as _considered_calibration_factor
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 

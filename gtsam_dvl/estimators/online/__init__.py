@@ -1,9 +1,10 @@
-"""The online estimator: an iSAM2 smoother fed message by message (estimator.py), its fixed-lag window
-(window.py) and its options and estimate types (types.py)."""
+"""The online estimator: an iSAM2 smoother fed message by message (estimator.py, and the modules it names), its
+fixed-lag window (window.py) and its options and estimate types (types.py)."""
 
-from gtsam_dvl.estimators.online.estimator import OnlineEstimator, feed_log, smooth_online
+from gtsam_dvl.estimators.online.estimator import OnlineEstimator, smooth_online
+from gtsam_dvl.estimators.online.feed import feed_log
 from gtsam_dvl.estimators.online.types import (
-    MODES,
+    ONLINE_MODES,
     MessageDropped,
     OnlineConfig,
     OnlineEstimate,
@@ -11,5 +12,5 @@ from gtsam_dvl.estimators.online.types import (
 )
 from gtsam_dvl.estimators.online.window import RelinearizationThresholds
 
-__all__ = ["MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
-           "feed_log", "latency_stats", "smooth_online"]
+__all__ = ["ONLINE_MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator",
+           "RelinearizationThresholds", "feed_log", "latency_stats", "smooth_online"]

@@ -11,13 +11,14 @@ from typing import get_args
 import numpy as np
 
 from gtsam_dvl.core.config import OnlineConfig, OnlineMode
-from gtsam_dvl.core.result import CalibrationUnits, misalignment_rpy_and_cov
+from gtsam_dvl.core.result import CalibrationUnits, Timeline, misalignment_rpy_and_cov
+from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.online.window import StateEstimate
 
-__all__ = ["MODES", "EpochHistory", "MessageDropped", "OnlineConfig", "OnlineEstimate", "latency_stats",
+__all__ = ["ONLINE_MODES", "EpochHistory", "MessageDropped", "OnlineConfig", "OnlineEstimate", "latency_stats",
            "misalignment_deg_and_cov"]
 
-MODES: tuple[str, ...] = get_args(OnlineMode)
+ONLINE_MODES: tuple[str, ...] = get_args(OnlineMode)  # OnlineConfig.mode's values
 
 
 class MessageDropped(UserWarning):
@@ -116,3 +117,18 @@ class EpochHistory:
         if not self._blocks:
             return np.empty((0, *self.SHAPES[name]))
         return np.concatenate([b[name] for b in self._blocks])[:self.n]
+
+    def timeline(self, b_R_d0: np.ndarray) -> Timeline:
+        """The estimates and sigmas of every epoch, in NavResult's units (b_R_d0: the nominal mounting)."""
+        mis = [misalignment_rpy_and_cov(R, b_R_d0, P) for R, P in zip(self["b_R_d"], self["b_R_d_cov"], strict=True)]
+        n_R_b = self["n_R_b"]
+        att_cov = n_R_b @ self["pose_cov"][:, :3, :3] @ np.transpose(n_R_b, (0, 2, 1))
+        bias_var = np.einsum("nii->ni", self["bias_cov"])
+        return Timeline(
+            t=self["t"].copy(), scale=self["scale"].copy(), scale_sigma=self["scale_sigma"].copy(),
+            misalignment_deg=np.array([m[0] for m in mis]).reshape(-1, 3),
+            misalignment_sigma_deg=np.sqrt(np.array([np.diag(m[1]) for m in mis]).reshape(-1, 3)),
+            gyro_bias_deg_per_h=self["gyro_bias"] / DEG_PER_H,
+            gyro_bias_sigma_deg_per_h=np.sqrt(bias_var[:, 3:]) / DEG_PER_H,
+            accel_bias_ug=self["accel_bias"] / UG, accel_bias_sigma_ug=np.sqrt(bias_var[:, :3]) / UG,
+            attitude_sigma_deg=np.degrees(np.sqrt(np.einsum("nii->ni", att_cov))))
