@@ -17,13 +17,6 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, V, X
-from gtsam.utils.numerical_derivative import (
-    numericalDerivative51,
-    numericalDerivative52,
-    numericalDerivative53,
-    numericalDerivative54,
-    numericalDerivative55,
-)
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.config import EstimatorConfig
@@ -32,6 +25,7 @@ from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.estimators.alignment import Alignment
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.factors import EarthImuFactor, GravityModel, imu_earth, make_earth_imu_factor
+from tests.support.numerical import numerical_jacobians
 
 FRAME = LocalFrame(30.0, 120.0, -50.0)
 KEYS = (X(0), V(0), X(1), V(1), B(0))
@@ -49,8 +43,6 @@ ZERO_TOL = 1e-9  # error at the predicted state (rad, m, m/s); positions of 2e4 
 # test_gradient_term_is_visible checks it would be caught).
 JAC_RTOL = 1e-6
 STEP = 1e-4
-NUMERICAL = (numericalDerivative51, numericalDerivative52, numericalDerivative53, numericalDerivative54,
-             numericalDerivative55)
 DT = {"earth": 10.0, "analytic": 2.0, "none": 1.0}  # s of preintegration per gravity kind
 
 
@@ -196,7 +188,7 @@ def numerical(case: Case) -> list[np.ndarray]:
           bias: gtsam.imuBias.ConstantBias) -> np.ndarray:
         return case.factor(None, make_values(pose_i, v_i, pose_j, v_j, bias), None)
 
-    return [nd(h, *case.args(), delta=STEP) for nd in NUMERICAL]
+    return numerical_jacobians(h, case.args(), delta=STEP)
 
 
 def column_groups(J: np.ndarray) -> list[slice]:

@@ -1,4 +1,4 @@
-"""The GNSS factor (factors/gnss.py): zero error at the truth, Jacobians against GTSAM's numerical derivatives
+"""The GNSS factor (factors/gnss.py): zero error at the truth, Jacobians against numerical derivatives (tests/support/numerical.py)
 through retract at random, near-identity (1e-7 rad) and large rotations, with and without lever arm and
 velocity bridge, both for the plain error function and the factor through GTSAM's linearize."""
 
@@ -8,10 +8,10 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import V, X
-from gtsam.utils.numerical_derivative import numericalDerivative21, numericalDerivative22
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.factors import gnss_error, make_gnss_factor
+from tests.support.numerical import numerical_jacobian
 
 CASES = [(kind, seed) for kind in ("random", "near_identity", "large", "no_lever") for seed in range(4)]
 
@@ -47,8 +47,8 @@ def test_gnss_error_zero_at_truth_and_jacobians(kind: str, seed: int) -> None:
 
     H: list[np.ndarray | None] = [None, None]
     np.testing.assert_allclose(gnss_error(pose, z, lever, n_v, dt, H), [0.3, -1.2, 2.0], atol=1e-9)
-    for i, nd in enumerate((numericalDerivative21, numericalDerivative22)):
-        J_num = nd(h, pose, n_v)
+    for i in range(2):
+        J_num = numerical_jacobian(h, [pose, n_v], i)
         assert H[i] is not None and H[i].shape == J_num.shape == (3, 6 if i == 0 else 3)
         np.testing.assert_allclose(H[i], J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]")
 
@@ -74,9 +74,9 @@ def test_gnss_factor_linearize_matches_numerical(kind: str, seed: int, with_velo
 
     A, b = factor.linearize(values).jacobian()
     np.testing.assert_allclose(b, [0.2, 0.1, -0.4], atol=1e-9)
-    np.testing.assert_allclose(A[:, :6], numericalDerivative21(h, pose, n_v), atol=1e-6)
+    np.testing.assert_allclose(A[:, :6], numerical_jacobian(h, [pose, n_v], 0), atol=1e-6)
     if with_velocity:
-        np.testing.assert_allclose(A[:, 6:], numericalDerivative22(h, pose, n_v), atol=1e-6)
+        np.testing.assert_allclose(A[:, 6:], numerical_jacobian(h, [pose, n_v], 1), atol=1e-6)
     else:
         assert A.shape == (3, 6)
 
