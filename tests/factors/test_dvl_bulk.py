@@ -29,10 +29,12 @@ def random_case(rng: np.random.Generator, moving: np.ndarray, beam: bool) -> dic
     """N rows, those with moving[q] between keyframes (random IMU motion), the others at their state."""
     dt = np.where(moving, rng.uniform(0.2, 1.0, N), 0.0)
     mv, mm = moving[:, None], moving[:, None, None]
-    motion = PingMotion(dt, exp(np.where(mv, rng.normal(0, 0.3, (N, 3)), 0.0)),
-                        np.where(mv, rng.normal(0, 0.5, (N, 3)), 0.0), np.where(mv, rng.normal(0, 0.2, (N, 3)), 0.0),
-                        np.where(mm, rng.normal(0, 0.5, (N, 3, 3)), 0.0), np.where(mm, rng.normal(0, 0.5, (N, 3, 3)), 0.0),
-                        np.where(mm, rng.normal(0, 0.5, (N, 3, 3)), 0.0), np.zeros((N, 9, 9)), W_IE,
+
+    def moved(shape: tuple[int, ...], sigma: float) -> np.ndarray:
+        return np.where(mm if len(shape) == 2 else mv, rng.normal(0, sigma, (N, *shape)), 0.0)
+
+    motion = PingMotion(dt, exp(moved((3,), 0.3)), moved((3,), 0.5), moved((3,), 0.2), moved((3, 3), 0.5),
+                        moved((3, 3), 0.5), moved((3, 3), 0.5), np.zeros((N, 9, 9)), W_IE,
                         np.array([0.0, 0.0, -9.79]) + rng.normal(0, 1e-3, (N, 3)), rng.normal(0, 50, (N, 3)),
                         rng.normal(0, 1.5e-6, (N, 3, 3)))
     d_u = rng.normal(size=(N, 3))

@@ -1,6 +1,6 @@
-"""The GNSS factor (factors/gnss.py): zero error at the truth, Jacobians against numerical derivatives (tests/support/numerical.py)
-through retract at random, near-identity (1e-7 rad) and large rotations, with and without lever arm and
-velocity bridge, both for the plain error function and the factor through GTSAM's linearize."""
+"""The GNSS factor (factors/gnss.py): zero error at the truth, Jacobians against numerical derivatives
+(tests/support/numerical.py) through retract at random, near-identity (1e-7 rad) and large rotations, with and
+without lever arm and velocity bridge, both for the plain error function and the factor through GTSAM's linearize."""
 
 from __future__ import annotations
 
