@@ -162,14 +162,14 @@ def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
     bulk, _ = builder.build_bulk(values)
     assert bulk.imu is not None
     fs = builder.imu_factors
-    M = np.array([f.gravity_map for f in fs])
+    M = np.array([f.model.M for f in fs])
     assert np.abs(bulk.imu.arrays.M - M).max() <= 1e-12 * np.abs(M).max()
     W = np.array([f.factor.noiseModel().R() for f in fs])
     assert np.array_equal(bulk.imu.whiten, W)
     refs = builder.gravity_refs
     assert not np.isnan(refs.n_p).any()
     for i in (0, len(fs) // 2, len(fs) - 1):
-        assert np.array_equal(fs[i].ref_p, refs.n_p[i]) and np.array_equal(fs[i].ref_G, refs.G[i])
+        assert np.array_equal(fs[i].model.ref_p, refs.n_p[i]) and np.array_equal(fs[i].model.ref_G, refs.G[i])
 
 
 def test_bulk_imu_factors_across_an_imu_gap() -> None:
