@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Generic, TypeVar, cast
 
 import gtsam
 import numpy as np
@@ -97,6 +97,19 @@ def _check_free(params: gtsam.PreintegrationParams) -> None:
             "these PreintegrationParams already serve another EarthImuFactor: each factor writes its gravity "
             "into its parameters, which would change the other factor's prediction; preintegrate each interval "
             "with its own PreintegrationParams")
+
+
+T = TypeVar("T")
+
+
+class _ModelData(Generic[T]):
+    """A read-only attribute of EarthImuFactor that its model holds (the callback object owns the data)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: EarthImuFactor, owner: type | None = None) -> T:
+        return cast(T, getattr(obj.model, self.name))
 
 
 class _EarthImuModel:
@@ -156,9 +169,7 @@ class EarthImuFactor:
     gtsam.CustomFactor to add to a graph. dt is the interval as given; the Jacobian uses the time the pim
     integrated (through M, module doc), which differs where the IMU data have a gap. The CustomFactor's
     callback is a separate model object, `.model` (module doc, "Memory"): the factor stays valid in a graph after
-    this object is gone, and both are freed as soon as neither is held. Read the wrapped ImuFactor, the gravity
-    model and its reference from .model (imu, gravity, ref_p, ref_g, ref_G; M = d(predicted n_p, n_v) / d n_g);
-    set_reference changes the reference."""
+    this object is gone, and both are freed as soon as neither is held."""
 
     def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
                  gravity: GravityModel | None, keys: tuple[int, int, int, int, int],
@@ -170,6 +181,17 @@ class EarthImuFactor:
         noise = gtsam.noiseModel.Gaussian.Covariance(cov)
         self.factor = gtsam.CustomFactor(noise, list(keys), self.model)
         _CLAIMED.add(params)  # last: a factor that failed to build claims nothing
+
+    # the model's data, read-only here (set_reference changes the reference)
+    imu = _ModelData[gtsam.ImuFactor]("imu")
+    params = _ModelData[gtsam.PreintegrationParams]("params")
+    dt = _ModelData[float]("dt")
+    gravity = _ModelData["GravityModel | None"]("gravity")
+    keys = _ModelData[tuple[int, int, int, int, int]]("keys")
+    gravity_map = _ModelData[np.ndarray]("M")  # M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)
+    ref_p = _ModelData["np.ndarray | None"]("ref_p")
+    ref_g = _ModelData[np.ndarray]("ref_g")
+    ref_G = _ModelData[np.ndarray]("ref_G")
 
     def set_reference(self, n_p_ref: np.ndarray, g: np.ndarray, G: np.ndarray) -> None:
         """Give the local gravity model (a caller evaluating many factors at once can do it in bulk)."""
