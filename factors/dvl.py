@@ -130,16 +130,27 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
     pose_k, vel_k, scale_k, rot_k = at["pose"], at["vel"], at["scale"], at["b_R_d"]
     bias_k, offset_k, lever_k = at.get("bias"), at.get("offset"), at.get("lever")
     lever_v = cross(o.b_omega, o.b_l)  # a known lever arm's velocity, once (not per linearisation)
+    fields = [DvlJacobians._fields.index(name) for name in names]  # the keys' Jacobians in DvlJacobians
 
     def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
-        h, J = _evaluate(o, values.atPose3(pose_k), values.atPoint3(vel_k),  # (a Vector or a Point3 entry)
-                         None if bias_k is None else values.atConstantBias(bias_k),
-                         values.atVector(scale_k).item(),  # a Python float: cheaper arithmetic than np.float64
-                         values.atRot3(rot_k).matrix(), None if offset_k is None else values.atVector(offset_k).item(),
-                         None if lever_k is None else values.atPoint3(lever_k), H is not None, lever_v)
+        if bias_k is None and lever_k is None and offset_k is None:  # (the per-ping path: no second call layer)
+            h, J = dvl_model(values.atPose3(pose_k).rotation().matrix(), values.atPoint3(vel_k),
+                             values.atVector(scale_k).item(), values.atRot3(rot_k).matrix(), o.b_omega, o.b_l,
+                             d_u=o.d_u, jacobians=H is not None, lever_v=lever_v)
+        else:
+            h, J = _evaluate(o, values.atPose3(pose_k), values.atPoint3(vel_k),  # (a Vector or a Point3 entry)
+                             None if bias_k is None else values.atConstantBias(bias_k),
+                             values.atVector(scale_k).item(),  # a Python float: cheaper arithmetic than np.float64
+                             values.atRot3(rot_k).matrix(),
+                             None if offset_k is None else values.atVector(offset_k).item(),
+                             None if lever_k is None else values.atPoint3(lever_k), H is not None, lever_v)
         if H is not None and J is not None:
-            for i, Jk in enumerate(o.jacobians(J)):
-                H[i] = Jk
+            if o.considered:
+                for i, Jk in enumerate(o.jacobians(J)):
+                    H[i] = Jk
+            else:  # (J's fields of the keys, found once)
+                for i, field in enumerate(fields):
+                    H[i] = J[field]
         return h - y_c
 
     return gtsam.CustomFactor(noise, list(keys), error_func)

@@ -49,6 +49,8 @@ from .so3 import cross, rotate, skew, unrotate
 
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
+_Z33 = np.zeros((3, 3))  # (the translation block of a ping's pose Jacobian: np.concatenate copies it)
+_Z33.setflags(write=False)
 
 
 class OffsetInput(NamedTuple):
@@ -138,9 +140,7 @@ def dvl_model(n_R_b: np.ndarray, n_v: np.ndarray, k: float, b_R_d: np.ndarray, b
         J_omega = -(A @ b_l_x) if dt_d is None else A @ (dt_d * skew(b_v) - b_l_x)
         J_acc = None if dt_d is None else dt_d * A
     if A_motion is None:
-        J_pose = np.empty(h_R.shape[:-1] + (6,))
-        J_pose[..., :3] = h_R
-        J_pose[..., 3:] = 0.0
+        J_pose = np.concatenate((h_R, _Z33[:len(h_R)] if h_R.ndim == 2 else np.zeros(h_R.shape)), axis=-1)
         return h, DvlJacobians(J_pose, h_v, None, J_scale, J_rot, J_offset, J_lever, J_omega, J_acc)
     A_R_pose, A_R_bias, A_v_pose, A_v_vel, A_v_bias = A_motion
     return h, DvlJacobians(h_R @ A_R_pose + h_v @ A_v_pose, h_v @ A_v_vel, h_R @ A_R_bias + h_v @ A_v_bias, J_scale,
