@@ -85,15 +85,14 @@ class DvlOptions:
 def _evaluate(o: DvlOptions, pose: gtsam.Pose3, n_v: np.ndarray, bias: gtsam.imuBias.ConstantBias | None, k: float,
               b_R_d: np.ndarray, dt_d: float | None, b_l: np.ndarray | None, jacobians: bool,
               lever_v: np.ndarray | None = None) -> tuple[np.ndarray, DvlJacobians | None]:
-    """dvl_model on the variables' values (b_l None: the known o.b_l, whose b_omega x b_l is lever_v if given)."""
-    if bias is None:
-        return dvl_model(pose.rotation().matrix(), n_v, k, b_R_d, o.b_omega, o.b_l if b_l is None else b_l,
-                         d_u=o.d_u, dt_d=dt_d, offset=o.offset, jacobians=jacobians, lever=o.lever_variable,
-                         lever_v=None if b_l is not None else lever_v)
+    """dvl_model on the variables' values (bias: with o.motion; b_l None: the known o.b_l, whose b_omega x b_l is
+    lever_v if given)."""
+    n_p = bias_a = bias_g = None
+    if bias is not None:
+        n_p, bias_a, bias_g = pose.translation(), bias.accelerometer(), bias.gyroscope()
     return dvl_model(pose.rotation().matrix(), n_v, k, b_R_d, o.b_omega, o.b_l if b_l is None else b_l, d_u=o.d_u,
-                     dt_d=dt_d, offset=o.offset, motion=o.motion, n_p=pose.translation(),
-                     bias_a=bias.accelerometer(), bias_g=bias.gyroscope(), jacobians=jacobians,
-                     lever=o.lever_variable, lever_v=None if b_l is not None else lever_v)
+                     dt_d=dt_d, offset=o.offset, motion=o.motion, n_p=n_p, bias_a=bias_a, bias_g=bias_g,
+                     jacobians=jacobians, lever=o.lever_variable, lever_v=None if b_l is not None else lever_v)
 
 
 def dvl_error(x: Sequence[Any], y: np.ndarray | float, options: DvlOptions,

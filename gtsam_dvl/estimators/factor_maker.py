@@ -260,7 +260,7 @@ class FactorMaker:
 
     def keyframe_gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normal gravity in map at map positions n_p (N, 3), m/s^2, and its gradient (N, 3, 3), 1/s^2, for the
-        keyframe DVL factors (factors/dvl_keyframe.py; no centrifugal term about the origin: only GTSAM's IMU
+        keyframe DVL factors (factors/ping_motion.py; no centrifugal term about the origin: only GTSAM's IMU
         prediction needs it). Flat model: the constant gravity at the origin, zero gradient."""
         n_p = np.asarray(n_p, dtype=float).reshape(-1, 3)
         if self.config.solver.earth_model == "flat":

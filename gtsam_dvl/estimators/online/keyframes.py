@@ -3,8 +3,8 @@
 With `[solver] keyframe_spacing_s` > 0 the online estimator makes states where the batch smoother does (the
 keyframes of selection.keyframe_mask, decided ping by ping with the same KeyframeThinning, and the DVL-dropout
 fillers); every other usable ping becomes the batch smoother's DVL factor on the state before it through the
-IMU motion up to the ping (factors/dvl.py with a PingMotion, FactorMaker.dvl_keyframe_factors_for). This module holds
-what the online estimator needs for them and the batch path has no use for:
+IMU motion up to the ping (factors/dvl.py with a PingMotion, FactorMaker.dvl_keyframe_factors_for). This module
+holds what the online estimator needs for them and the batch path has no use for:
 
 - StatePreintegration: the next IMU factor's preintegration from the newest state, integrated as the samples
   come, and the IMU motion to each ping between keyframes taken from it on the way (the batch smoother's
