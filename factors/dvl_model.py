@@ -34,8 +34,9 @@ translation]. Jacobians at the ping's state, M = I - dt_d [b_omega]_x, A = k d_R
     lever arm:         A [b_omega]_x
 and, for a filter that holds them in its state, the inputs': b_omega: A (dt_d [b_v]_x - [b_l]_x), b_a: dt_d A.
 With a motion, the rotation and velocity Jacobians go through ping_state's to the keyframe's pose, velocity and
-bias. tests/factors/test_dvl_model.py checks the model against scipy's rotations and GTSAM's ImuFactor prediction
-and every Jacobian against numerical derivatives.
+bias. Tests: the model against scipy's rotations (tests/factors/test_dvl_model.py), the ping state against GTSAM's
+ImuFactor prediction (test_ping_motion.py), every Jacobian of every combination of options against numerical
+derivatives (test_dvl.py).
 """
 
 from __future__ import annotations
