@@ -1,56 +1,54 @@
 """Custom GTSAM factors for the DVL (installed as gtsam_dvl.factors).
 
-Both factors implement, on the keys [pose n_T_b, velocity n_v, scale k, misalignment b_R_d],
+The DVL measurement model (factors/dvl_model.py, one function for one ping or N),
 
-    y = k * b_R_d^T * ( n_R_b^T * n_v  +  b_omega x b_l ) + noise
+    y = k * b_R_d^T * ( n_R_b^T * n_v  [+ dt_d * b_vdot]  +  b_omega x b_l ) + noise,
 
-the 3-D velocity y in dvl_link (make_dvl_velocity_factor) or one beam y_j = d_u_j . y
-(make_dvl_beam_factor). make_depth_factor puts a depth sensor's measurement on a pose's vertical position
-(factors/depth.py). The pure error functions serve tests and other callers. The *_lever variants take the
-lever arm b_l (m, base_link) as one more variable, a 3-vector key after the others ([dvl] estimate_lever_arm).
-make_dvl_keyframe_factor puts a ping between keyframes on the keyframe before it, through the IMU motion up to
-the ping (factors/dvl_keyframe.py, [solver] keyframe_spacing_s).
+on the keys [pose n_T_b, velocity n_v, scale k, misalignment b_R_d] with its options: a time offset dt_d, the lever
+arm b_l (m, base_link) as a variable, one beam y_j = d_u_j . y, a ping between keyframes seen from the keyframe
+before it through the IMU motion (factors/ping_motion.py, [solver] keyframe_spacing_s). make_dvl_factor
+(factors/dvl.py) is its GTSAM factor, factors/dvl_bulk.py its evaluation for N pings at once (the batch smoother).
+make_depth_factor puts a depth sensor's measurement on a pose's vertical position (factors/depth.py),
+make_gnss_factor a GNSS fix on the antenna's position (factors/gnss.py), EarthImuFactor GTSAM's ImuFactor with
+gravity following the position (factors/imu_earth.py). Rotation helpers: factors/so3.py.
 """
 
 from .depth import depth_error, make_depth_factor
-from .dvl_beam import dvl_beam_error, make_dvl_beam_factor
-from .dvl_beam_lever import dvl_beam_lever_error, make_dvl_beam_lever_factor
-from .dvl_keyframe import PingMotion, dvl_keyframe_error, keyframe_ping_covariance, make_dvl_keyframe_factor
-from .dvl_velocity import (
+from .dvl import (
+    DvlOptions,
+    dvl_beam_error,
+    dvl_error,
     dvl_velocity_error,
-    dvl_velocity_lever_error,
     dvl_velocity_offset_error,
-    dvl_velocity_offset_lever_error,
+    make_dvl_beam_factor,
+    make_dvl_factor,
     make_dvl_velocity_factor,
-    make_dvl_velocity_lever_factor,
-    make_dvl_velocity_offset_factor,
-    make_dvl_velocity_offset_lever_factor,
 )
+from .dvl_model import DvlJacobians, OffsetInput, dvl_model
 from .gnss import gnss_error, make_gnss_factor
 from .imu_earth import EarthImuFactor, GravityModel, make_earth_imu_factor
+from .ping_motion import PingMotion, keyframe_ping_covariance, ping_state
 
 __all__ = [
+    "DvlJacobians",
+    "DvlOptions",
     "EarthImuFactor",
-    "PingMotion",
-    "dvl_keyframe_error",
-    "keyframe_ping_covariance",
-    "make_dvl_keyframe_factor",
     "GravityModel",
-    "make_earth_imu_factor",
+    "OffsetInput",
+    "PingMotion",
     "depth_error",
-    "make_depth_factor",
     "dvl_beam_error",
-    "dvl_beam_lever_error",
+    "dvl_error",
+    "dvl_model",
     "dvl_velocity_error",
-    "dvl_velocity_lever_error",
     "dvl_velocity_offset_error",
     "gnss_error",
-    "dvl_velocity_offset_lever_error",
+    "keyframe_ping_covariance",
+    "make_depth_factor",
     "make_dvl_beam_factor",
-    "make_dvl_beam_lever_factor",
+    "make_dvl_factor",
     "make_dvl_velocity_factor",
-    "make_dvl_velocity_lever_factor",
-    "make_dvl_velocity_offset_factor",
+    "make_earth_imu_factor",
     "make_gnss_factor",
-    "make_dvl_velocity_offset_lever_factor",
+    "ping_state",
 ]

@@ -21,12 +21,9 @@ import gtsam
 import numpy as np
 
 from ._common import JacobianSlots, Vector3Like, as_finite_float, as_vector3, check_noise, fill_slots
+from .so3 import skew
 
 _E3 = np.array([0.0, 0.0, 1.0])
-
-
-def _skew(a: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
 
 
 def predict_height(n_R_b: np.ndarray, n_p: np.ndarray, b_p_s: np.ndarray, radius_m: float,
@@ -39,7 +36,7 @@ def predict_height(n_R_b: np.ndarray, n_p: np.ndarray, b_p_s: np.ndarray, radius
     h = float(n_p[2]) + 0.5 * (x * x + y * y) * inv_r + float(lever[2])
     if H is not None:
         grad = np.array([x * inv_r, y * inv_r, 1.0])  # d h / d n_p
-        d_rot = -(n_R_b[2] @ _skew(b_p_s))  # d (n_R_b Exp(th) b_p)_z / d th
+        d_rot = -(n_R_b[2] @ skew(b_p_s))  # d (n_R_b Exp(th) b_p)_z / d th
         H[0] = np.concatenate((d_rot, grad @ n_R_b)).reshape(1, 6)
     return h
 

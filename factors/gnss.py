@@ -18,7 +18,8 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from ._common import JacobianSlots, Vector3Like, _skew, as_finite_float, as_vector3, check_noise, fill_slots
+from ._common import JacobianSlots, Vector3Like, as_finite_float, as_vector3, check_noise, fill_slots
+from .so3 import skew
 
 
 def predict_antenna(n_R_b: np.ndarray, n_p: np.ndarray, b_p_a: np.ndarray,
@@ -26,7 +27,7 @@ def predict_antenna(n_R_b: np.ndarray, n_p: np.ndarray, b_p_a: np.ndarray,
     """Antenna position in map (3,), and with H its Jacobian w.r.t. the pose (3x6, right perturbation) in H[0]."""
     p = np.asarray(n_p, dtype=float) + n_R_b @ b_p_a
     if H is not None:
-        H[0] = np.hstack((-n_R_b @ _skew(float(b_p_a[0]), float(b_p_a[1]), float(b_p_a[2])), n_R_b))
+        H[0] = np.hstack((-n_R_b @ skew(b_p_a), n_R_b))
     return np.asarray(p)
 
 
@@ -55,7 +56,7 @@ def make_gnss_factor(noise: gtsam.noiseModel.Base, pose_key: int, z: Vector3Like
     b_p = as_vector3("b_p_a", b_p_a)
     dt_f = as_finite_float("dt", dt)
     J_v = dt_f * np.eye(3)
-    S = _skew(float(b_p[0]), float(b_p[1]), float(b_p[2]))
+    S = skew(b_p)
 
     def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
         keys = this.keys()

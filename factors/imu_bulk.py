@@ -37,47 +37,13 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from .dvl_bulk import skew_n, so3_exp_n, so3_right_jacobian_n
+from .so3 import exp, inv_right_jacobian, log, right_jacobian, skew
 
 _SMALL = 0.1  # rad: below, the rotation functions' coefficients from their series (closed forms cancel)
 
 
 def _theta2(phi: np.ndarray) -> np.ndarray:
     return np.einsum("...i,...i->...", phi, phi)
-
-
-def so3_log_n(R: np.ndarray) -> np.ndarray:
-    """Rotation vectors of a stack of rotation matrices (N, 3, 3) -> (N, 3); exact near 0 and near pi."""
-    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
-    s = np.sqrt(_theta2(w))
-    c = 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0)
-    theta = np.arctan2(s, c)
-    small = s < 1e-8
-    scale = np.where(small, 1.0 + theta**2 / 6.0, theta / np.where(small, 1.0, s))
-    out = w * scale[:, None]
-    near_pi = c < -0.99  # sin(theta) small beside pi: the axis from the symmetric part
-    if near_pi.any():
-        for n in np.flatnonzero(near_pi):
-            uu = (0.5 * (R[n] + R[n].T) - c[n] * np.eye(3)) / (1.0 - c[n])  # symmetric part: cos I + (1 - cos) u u^T
-            k = int(np.argmax(np.diag(uu)))
-            u = uu[:, k] / np.sqrt(uu[k, k])
-            u /= np.linalg.norm(u)
-            if u @ w[n] < 0:  # (sin theta u: the sign, where theta is not exactly pi)
-                u = -u
-            out[n] = u * theta[n]
-    return out
-
-
-def so3_inv_right_jacobian_n(phi: np.ndarray) -> np.ndarray:
-    """J_r^-1 (N, 3, 3) = I + 1/2 [phi] + d(theta) [phi]^2, d = 1/theta^2 - (1 + cos)/(2 theta sin)."""
-    t2 = _theta2(phi)
-    t = np.sqrt(t2)
-    small = t < _SMALL
-    ts = np.where(small, 1.0, t)
-    d = np.where(small, 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0,
-                 1.0 / ts**2 - (1.0 + np.cos(ts)) / (2.0 * ts * np.sin(ts)))
-    K = skew_n(phi)
-    return np.eye(3) + 0.5 * K + d[:, None, None] * (K @ K)
 
 
 def _left_jacobian_apply_derivative(phi: np.ndarray, rho: np.ndarray) -> np.ndarray:
@@ -99,7 +65,7 @@ def _left_jacobian_apply_derivative(phi: np.ndarray, rho: np.ndarray) -> np.ndar
     phi_dot_rho = np.einsum("ni,ni->n", phi, rho)
     D = (phi_dot_rho[:, None, None] * np.eye(3) + phi[:, :, None] * rho[:, None, :]
          - 2.0 * rho[:, :, None] * phi[:, None, :])  # d(phi x (phi x rho)) / d phi
-    return (-B[:, None, None] * skew_n(rho) + dB[:, None, None] * phi_x_rho[:, :, None] * phi[:, None, :]
+    return (-B[:, None, None] * skew(rho) + dB[:, None, None] * phi_x_rho[:, :, None] * phi[:, None, :]
             + C[:, None, None] * D + dC[:, None, None] * phi_x2_rho[:, :, None] * phi[:, None, :])
 
 
@@ -107,8 +73,8 @@ def se23_log_n(R: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     """Logmap of SE_2(3) elements (R, p, v) -> xi (N, 9) = [phi, J_l(phi)^-1 p, J_l(phi)^-1 v] and its derivative
     LogmapDerivative (N, 9, 9) = [[Jw, 0, 0], [-Jw Q_p Jw, Jw, 0], [-Jw Q_v Jw, 0, Jw]], Jw = J_r(phi)^-1,
     Q_x = Exp(phi)^T d(J_l(phi) x)/d phi at x = the log's translation parts (GTSAM's NavState::LogmapDerivative)."""
-    phi = so3_log_n(R)
-    Jw = so3_inv_right_jacobian_n(phi)
+    phi = log(R)
+    Jw = inv_right_jacobian(phi)
     Jl_inv = np.swapaxes(Jw, 1, 2)  # J_l^-1 = (J_r^-1)^T
     rho = np.einsum("nij,nj->ni", Jl_inv, p)
     nu = np.einsum("nij,nj->ni", Jl_inv, v)
@@ -125,11 +91,11 @@ def earth_increment(n_omega: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np
     rotating-frame prediction forms them. |Omega dt| is the Earth's turn over an IMU interval (7.3e-5 rad per
     second): the series to the fourth power are exact to rounding for intervals up to hours."""
     w = -np.asarray(n_omega, dtype=float)[None, :] * dt[:, None]
-    K = skew_n(w)
+    K = skew(w)
     K2 = K @ K
     K3, K4 = K2 @ K, K2 @ K2
     eye = np.eye(3)
-    A = so3_exp_n(w)
+    A = exp(w)
     Gv = eye + K / 2.0 + K2 / 6.0 + K3 / 24.0 + K4 / 120.0
     G2 = eye / 2.0 + K / 6.0 + K2 / 24.0 + K3 / 120.0 + K4 / 720.0
     return A, Gv, Gv - G2
@@ -140,7 +106,7 @@ def gravity_maps(n_omega: np.ndarray, dt: np.ndarray) -> np.ndarray:
     (the EarthImuFactor measures the same by probing its pim: factors/imu_earth.py)."""
     _, Gv, Gp = earth_increment(n_omega, dt)
     Mp = Gp * (dt * dt)[:, None, None]
-    Mv = Gv * dt[:, None, None] - skew_n(np.broadcast_to(np.asarray(n_omega, dtype=float), (len(dt), 3))) @ Mp
+    Mv = Gv * dt[:, None, None] - skew(np.broadcast_to(np.asarray(n_omega, dtype=float), (len(dt), 3))) @ Mp
     return np.concatenate([Mp, Mv], axis=1)
 
 
@@ -193,7 +159,7 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
     x_c = f.x + np.einsum("nij,nj->ni", f.H, bias)
     theta_c, dp_c, dv_c = x_c[:, 0:3], x_c[:, 3:6], x_c[:, 6:9]
     n_omega_ie = np.broadcast_to(np.asarray(f.n_omega, dtype=float), n_p_i.shape)  # Earth rate in map, rad/s
-    R_U = so3_exp_n(theta_c)
+    R_U = exp(theta_c)
     AR_i = f.A @ n_R_i
     R_P = AR_i @ R_U
     vbar = n_v_i + np.cross(n_omega_ie, n_p_i)
@@ -213,7 +179,7 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
     n = len(dt)
     R_Pt = np.swapaxes(R_P, 1, 2)
     R_Et = np.swapaxes(R_E, 1, 2)
-    n_omega_x = skew_n(n_omega_ie)
+    n_omega_x = skew(n_omega_ie)
     dt3 = dt[:, None, None]
 
     def from_P(eps_R: np.ndarray | None, dp: np.ndarray, dv: np.ndarray) -> np.ndarray:
@@ -228,7 +194,7 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
 
     R_Ut = np.swapaxes(R_U, 1, 2)
     # X_i rotation: R_P -> R_P Exp(R_U^T w); dp_Y = -A R_i [dp_c] w, dv_Y = -A R_i [dv_c] w
-    H_Ri = from_P(R_Ut, -AR_i @ skew_n(dp_c), -AR_i @ skew_n(dv_c))
+    H_Ri = from_P(R_Ut, -AR_i @ skew(dp_c), -AR_i @ skew(dv_c))
     # X_i translation (n_p_i + R_i d): vbar moves by Omega x R_i d
     n_omega_x_R_i = n_omega_x @ n_R_i
     H_pi = from_P(None, f.A @ (n_R_i + n_omega_x_R_i * dt3), f.A @ n_omega_x_R_i)
@@ -236,12 +202,12 @@ def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.nda
     A_ = np.broadcast_to(f.A, (n, 3, 3))
     H_vi = from_P(None, A_ * dt3, A_)
     # bias: theta_c, dp_c, dv_c move by H b
-    H_B = from_P(so3_right_jacobian_n(theta_c) @ f.H[:, 0:3], AR_i @ f.H[:, 3:6], AR_i @ f.H[:, 6:9])
+    H_B = from_P(right_jacobian(theta_c) @ f.H[:, 0:3], AR_i @ f.H[:, 3:6], AR_i @ f.H[:, 6:9])
     # X_j rotation and translation, V_j
     eps = np.zeros((n, 9, 3))
     eps[:, 0:3] = -R_Et
-    eps[:, 3:6] = R_Et @ skew_n(p_E)
-    eps[:, 6:9] = R_Et @ skew_n(v_E)
+    eps[:, 3:6] = R_Et @ skew(p_E)
+    eps[:, 6:9] = R_Et @ skew(v_E)
     H_Rj = Jlog @ eps
     eps = np.zeros((n, 9, 3))
     eps[:, 3:6] = -R_Et
@@ -294,8 +260,8 @@ def bias_jacobians(pims: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np
     A, _, _ = earth_increment(n_omega, dt)
     At = np.swapaxes(A, 1, 2)
     H = np.empty((n, 9, 6))
-    H[:, 0:3] = np.linalg.solve(so3_right_jacobian_n(x[:, 0:3]), H5[:, 0:3])
+    H[:, 0:3] = np.linalg.solve(right_jacobian(x[:, 0:3]), H5[:, 0:3])
     A_Hp = R_P @ H5[:, 3:6]
     H[:, 3:6] = At @ A_Hp
-    H[:, 6:9] = At @ (R_P @ H5[:, 6:9] + skew_n(np.broadcast_to(n_omega, (n, 3))) @ A_Hp)
+    H[:, 6:9] = At @ (R_P @ H5[:, 6:9] + skew(np.broadcast_to(n_omega, (n, 3))) @ A_Hp)
     return x, H, dt

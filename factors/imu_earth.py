@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Generic, TypeVar, cast
 
 import gtsam
 import numpy as np
@@ -97,6 +97,19 @@ def _check_free(params: gtsam.PreintegrationParams) -> None:
             "these PreintegrationParams already serve another EarthImuFactor: each factor writes its gravity "
             "into its parameters, which would change the other factor's prediction; preintegrate each interval "
             "with its own PreintegrationParams")
+
+
+T = TypeVar("T")
+
+
+class _ModelData(Generic[T]):
+    """A read-only attribute of EarthImuFactor that its model holds (the callback object owns the data)."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj: EarthImuFactor, owner: type | None = None) -> T:
+        return cast(T, getattr(obj.model, self.name))
 
 
 class _EarthImuModel:
@@ -155,74 +168,47 @@ class EarthImuFactor:
     """One factor: the wrapped ImuFactor, its own parameters, the local gravity model, and `.factor`, the
     gtsam.CustomFactor to add to a graph. dt is the interval as given; the Jacobian uses the time the pim
     integrated (through M, module doc), which differs where the IMU data have a gap. The CustomFactor's
-    callback is a separate model object (module doc, "Memory"): the factor stays valid in a graph after this
-    object is gone, and both are freed as soon as neither is held."""
+    callback is a separate model object, `.model` (module doc, "Memory"): the factor stays valid in a graph after
+    this object is gone, and both are freed as soon as neither is held."""
 
     def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
                  gravity: GravityModel | None, keys: tuple[int, int, int, int, int],
                  extra_cov: np.ndarray | None = None) -> None:
         _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
         pim = imu.preintegratedMeasurements()  # a copy, sharing the parameters object with the ImuFactor's
-        self._model = _EarthImuModel(imu, params, dt, gravity, keys, _gravity_map(pim, params))
+        self.model = _EarthImuModel(imu, params, dt, gravity, keys, _gravity_map(pim, params))
         cov = pim.preintMeasCov() if extra_cov is None else pim.preintMeasCov() + extra_cov
         noise = gtsam.noiseModel.Gaussian.Covariance(cov)
-        self.factor = gtsam.CustomFactor(noise, list(keys), self._model)
+        self.factor = gtsam.CustomFactor(noise, list(keys), self.model)
         _CLAIMED.add(params)  # last: a factor that failed to build claims nothing
 
     # the model's data, read-only here (set_reference changes the reference)
-    @property
-    def imu(self) -> gtsam.ImuFactor:
-        return self._model.imu
-
-    @property
-    def params(self) -> gtsam.PreintegrationParams:
-        return self._model.params
-
-    @property
-    def dt(self) -> float:
-        return self._model.dt
-
-    @property
-    def gravity(self) -> GravityModel | None:
-        return self._model.gravity
-
-    @property
-    def keys(self) -> tuple[int, int, int, int, int]:
-        return self._model.keys
-
-    @property
-    def gravity_map(self) -> np.ndarray:
-        """M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)."""
-        return self._model.M
-
-    @property
-    def ref_p(self) -> np.ndarray | None:
-        return self._model.ref_p
-
-    @property
-    def ref_g(self) -> np.ndarray:
-        return self._model.ref_g
-
-    @property
-    def ref_G(self) -> np.ndarray:
-        return self._model.ref_G
+    imu = _ModelData[gtsam.ImuFactor]("imu")
+    params = _ModelData[gtsam.PreintegrationParams]("params")
+    dt = _ModelData[float]("dt")
+    gravity = _ModelData["GravityModel | None"]("gravity")
+    keys = _ModelData[tuple[int, int, int, int, int]]("keys")
+    gravity_map = _ModelData[np.ndarray]("M")  # M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)
+    ref_p = _ModelData["np.ndarray | None"]("ref_p")
+    ref_g = _ModelData[np.ndarray]("ref_g")
+    ref_G = _ModelData[np.ndarray]("ref_G")
 
     def set_reference(self, n_p_ref: np.ndarray, g: np.ndarray, G: np.ndarray) -> None:
         """Give the local gravity model (a caller evaluating many factors at once can do it in bulk)."""
-        m = self._model
+        m = self.model
         m.ref_p, m.ref_g, m.ref_G = np.array(n_p_ref, dtype=float), np.asarray(g), np.asarray(G)
 
     def needs_reference(self, n_p_mid: np.ndarray) -> bool:
-        m = self._model
+        m = self.model
         return m.gravity is not None and (m.ref_p is None or np.abs(n_p_mid - m.ref_p).max() > REFRESH_M)
 
     def set_gravity(self, n_p_mid: np.ndarray) -> np.ndarray:
         """Gravity at n_p_mid from the reference, written into this factor's parameters (and so its pim's)."""
-        return self._model.set_gravity(n_p_mid)
+        return self.model.set_gravity(n_p_mid)
 
     def __call__(self, _factor: Any, values: gtsam.Values, H: Any) -> np.ndarray:
         """The error (and with H the Jacobians) as the CustomFactor computes it."""
-        return self._model(_factor, values, H)
+        return self.model(_factor, values, H)
 
 
 def make_earth_imu_factor(

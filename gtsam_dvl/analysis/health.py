@@ -31,6 +31,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
+from gtsam_dvl.factors.dvl_model import dvl_model
 
 STATUSES = ("ok", "degraded", "failed")
 
@@ -222,8 +223,9 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     if dt_d != 0.0 and n > 1:
         n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, k]) for k in range(3)], axis=1)
         n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d).reshape(n, 3, 3))
-    b_v = np.einsum("nji,nj->ni", n_R_b, n_v) + np.cross(b_omega, b_l)
-    y_state = result.scale * b_v @ result.b_R_d  # k * b_R_d^T b_v, row by row
+    # the DVL model at each state (factors/dvl_model.py), for all states at once
+    y_state, _ = dvl_model(n_R_b, n_v, float(result.scale), np.asarray(result.b_R_d, dtype=float), b_omega,
+                           np.asarray(b_l, dtype=float), jacobians=False)
     t0, t1 = float(result.t[0]), float(result.t[-1])
     pings = usable_pings(dvl, log.imu, config, {})
     j = pings[(dvl.t[pings] >= t0 - 1e-6) & (dvl.t[pings] <= t1 + 1e-6)]

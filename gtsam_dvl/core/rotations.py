@@ -2,13 +2,20 @@
 
 Euler angles are ZYX (R = Rz(yaw) Ry(pitch) Rx(roll)) about the axes of the frame they rotate from,
 as in docs/conventions.md. Quaternions are stored [x, y, z, w] (ROS order). Angles are radians unless a
-name ends in _deg.
+name ends in _deg. skew, so3_exp and so3_log are factors/so3.py's (one 3-vector or a stack).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from gtsam_dvl.factors.so3 import exp as so3_exp
+from gtsam_dvl.factors.so3 import log as so3_log
+from gtsam_dvl.factors.so3 import skew
+
+__all__ = ["matrix_to_quat_xyzw", "matrix_to_rpy", "matrix_to_rpy_deg", "quat_xyzw_to_matrix", "rpy_deg_to_matrix",
+           "rpy_to_matrix", "skew", "so3_exp", "so3_log"]
 
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
@@ -38,19 +45,3 @@ def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
 
 def quat_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:
     return Rotation.from_quat(q).as_matrix()
-
-
-def skew(v: np.ndarray) -> np.ndarray:
-    """[v]x such that skew(a) @ b = a x b."""
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def so3_exp(phi: np.ndarray) -> np.ndarray:
-    """Rotation matrix of the rotation vector phi (radians)."""
-    return Rotation.from_rotvec(phi).as_matrix()
-
-
-def so3_log(R: np.ndarray) -> np.ndarray:
-    """Rotation vector (radians) of R."""
-    return Rotation.from_matrix(R).as_rotvec()

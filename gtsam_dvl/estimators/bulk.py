@@ -9,7 +9,8 @@ pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
 - `BulkDvl.error(values)`: the sum of the pings' losses, as GTSAM's factors would return it (Gaussian:
   half the squared whitened error; robust: the kernel's loss of the whitened error's norm);
 - `BulkDvl.linearize(values)`: the Jacobian factors. GTSAM's Python constructors of JacobianFactor take at most
-  three keys, and a ping's factor has five or six (pose, velocity, bias, scale, misalignment, time offset), so
+  three keys, and a ping's factor has five to seven (pose, velocity, bias, scale, misalignment, time offset, lever
+  arm), so
   each state's pings are served to GTSAM by one "carrier" CustomFactor on those keys whose callback returns the
   rows already computed (whitened, and reweighted by the robust kernel as GTSAM's Robust noise model does):
   one cheap Python call per state instead of an evaluation per ping. Stacking a state's pings in one factor
@@ -18,9 +19,10 @@ pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
 - `BulkGraph`: the rest of the graph (GTSAM factors) plus the BulkDvl, with the error and linearize of a
   NonlinearFactorGraph, for the solver, the marginals and the filtering timeline.
 
-The per-factor path (LogGraph.build) stays: iSAM2 (the online estimator) needs real factors, and it serves
-what this module does not cover: beam factors ([dvl] use_beams) and the lever arm as a variable ([dvl]
-estimate_lever_arm). LogGraph.bulk_supported() says which.
+Every configuration is covered: a row is a ping's 3-D velocity, or with [dvl] use_beams one beam's (its own robust
+kernel, as each beam factor has), and the lever arm is a known input or, with [dvl] estimate_lever_arm, the variable
+L_LEVER. The per-factor path (LogGraph.build) stays for iSAM2 (the online estimator), which needs real factors, and
+for the tests that check this module against it.
 
 Memory: the carriers reference only a small _Served holder (the rows of the last linearisation), never the
 BulkDvl or the graph, so no reference cycle runs through C++ (see factors/imu_earth.py, "Memory").
@@ -28,29 +30,55 @@ BulkDvl or the graph, so no reference cycle runs through C++ (see factors/imu_ea
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, V, X
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
-from gtsam_dvl.factors.dvl_bulk import PingArrays, PingConstants, dvl_ping_errors, ping_constants
-from gtsam_dvl.factors.dvl_keyframe import keyframe_ping_covariances
+from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.selection import ping_covariance
+from gtsam_dvl.factors.dvl_bulk import BulkPings, dvl_ping_errors
+from gtsam_dvl.factors.ping_motion import PingMotion, keyframe_ping_covariance
 
-CHUNK = 20_000  # pings evaluated at once (about 50 MB of temporaries)
+CHUNK = 20_000  # rows evaluated at once (about 50 MB of temporaries)
 
-if TYPE_CHECKING:
-    from gtsam_dvl.estimators.graph import LogGraph
+
+class BulkSource(Protocol):
+    """What bulk_dvl reads of a LogGraph (estimators/graph.py): its factor maker, configuration, log, epochs (each
+    with dvl_index, t, b_omega, rate_input and the pings between it and the next state), the states' gravity
+    reference positions and the IMU motion to each ping between keyframes."""
+
+    @property
+    def maker(self) -> FactorMaker: ...
+
+    @property
+    def config(self) -> EstimatorConfig: ...
+
+    @property
+    def log(self) -> LogData: ...
+
+    @property
+    def epochs(self) -> Sequence[Any]: ...
+
+    @property
+    def gravity_positions(self) -> np.ndarray | None: ...
+
+    @property
+    def snapshots(self) -> PingMotion | None: ...
 
 
 @dataclass
 class _Served:
     """The rows of the last linearisation, per state: what the carriers hand to GTSAM."""
 
-    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # whitened, reweighted error (N, 3)
-    blocks: list[np.ndarray] = field(default_factory=list)  # per key (N, 3, d)
+    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # whitened, reweighted error (N, m)
+    blocks: list[np.ndarray] = field(default_factory=list)  # per key (N, m, d)
     ready: bool = False
 
 
@@ -75,23 +103,24 @@ class _Carrier:
 
 @dataclass
 class BulkDvl:
-    """The DVL velocity factors of a LogGraph as arrays (module doc). Pings sorted by state."""
+    """The DVL factors of a LogGraph as arrays (module doc): N rows (pings, or beams) of m = 3 (or 1) measurements,
+    sorted by state."""
 
-    pings: PingArrays
-    whiten: np.ndarray  # (N, 3, 3) W with W^T W = the ping's inverse covariance (lower triangular)
-    n_omega_ie: np.ndarray
+    pings: BulkPings
+    whiten: np.ndarray  # (N, m, m) W with W^T W = the row's inverse covariance (lower triangular)
     n_states: int
     bias_keys: list[int]  # per state
     robust: str  # "huber", "cauchy" or "none"
     robust_k: float
     offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
-    t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the pings' stamps (s), in their order
-    const: PingConstants = field(init=False)
+    b_l: np.ndarray  # the known lever arm (m, base_link); with lever, L_LEVER's value is used
+    lever: bool = False  # the lever arm is the variable L_LEVER
+    t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the rows' ping stamps (s), in their order
     _served: _Served = field(init=False, default_factory=_Served)
-    _bounds: np.ndarray = field(init=False)  # state s's pings are _bounds[s]:_bounds[s + 1]
+    _bounds: np.ndarray = field(init=False)  # state s's rows are _bounds[s]:_bounds[s + 1]
 
     def __post_init__(self) -> None:
-        self.const = ping_constants(self.pings, self.n_omega_ie)
+        _ = self.pings.motion.earth  # the motion's Earth terms, once (each chunk takes its part of them)
         state = self.pings.state
         if len(state) and np.any(np.diff(state) < 0):
             raise ValueError("BulkDvl: pings must be sorted by state")
@@ -111,34 +140,32 @@ class BulkDvl:
         return state_arrays(values, self.n_states, self.bias_keys)
 
     def _ping_states(self, values: gtsam.Values, st: StateArrays) -> tuple[
-            np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float | None]:
-        """Each ping's state: n_R_i (N, 3, 3), n_p_i, n_v_i, b_a, b_g (N, 3); k, b_R_d, dt_d."""
+            np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float | None, np.ndarray]:
+        """Each row's state: n_R_i (N, 3, 3), n_p_i, n_v_i, b_a, b_g (N, 3); k, b_R_d, dt_d, b_l."""
         s = self.pings.state
         bias = st.bias[s] if self._bias_random_walk else np.broadcast_to(st.bias[0], (len(s), 6))
         k = float(values.atVector(K_SCALE)[0])
         b_R_d = values.atRot3(C_MISALIGN).matrix()
         dt_d = float(values.atVector(T_OFFSET)[0]) if self.offset else None
-        return st.n_R[s], st.n_p[s], st.n_v[s], bias[:, :3], bias[:, 3:], k, b_R_d, dt_d
+        b_l = np.asarray(values.atVector(L_LEVER), dtype=float) if self.lever else self.b_l
+        return st.n_R[s], st.n_p[s], st.n_v[s], bias[:, :3], bias[:, 3:], k, b_R_d, dt_d, b_l
 
     def _evaluate(self, values: gtsam.Values, jacobians: bool, out: list[np.ndarray] | None = None,
                   states: StateArrays | None = None) -> np.ndarray:
-        """Whitened errors (N, 3); with jacobians, the whitened Jacobian blocks per key written into out (N, 3, d)
-        each, unweighted. Evaluated CHUNK pings at a time: the temporaries of a whole day's pings would take GBs."""
-        n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d = self._ping_states(
+        """Whitened errors (N, m); with jacobians, the whitened Jacobian blocks per key written into out (N, m, d)
+        each, unweighted. Evaluated CHUNK rows at a time: the temporaries of a whole day's pings would take GBs."""
+        n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d, b_l = self._ping_states(
             values, self.states(values) if states is None else states)
-        ew = np.empty((len(self), 3))
+        ew = np.empty((len(self), self.pings.dim))
         for a in range(0, len(self), CHUNK):
             sl = slice(a, a + CHUNK)
-            e, J = dvl_ping_errors(self.pings.part(sl), self.const.part(sl), self.n_omega_ie, n_R_i[sl], n_p_i[sl],
-                                   n_v_i[sl], b_a[sl], b_g[sl], k, b_R_d, dt_d, self.offset_n_g, jacobians)
+            e, J = dvl_ping_errors(self.pings.part(sl), n_R_i[sl], n_p_i[sl], n_v_i[sl], b_a[sl], b_g[sl], k, b_R_d,
+                                   b_l, dt_d, self.offset_n_g, self.lever, jacobians)
             W = self.whiten[sl]
             ew[sl] = np.einsum("nij,nj->ni", W, e)
             if jacobians:
                 assert J is not None and out is not None
-                blocks = [J.pose, J.vel, J.bias, J.scale, J.b_R_d]
-                if J.offset is not None:
-                    blocks.append(J.offset)
-                for dst, B in zip(out, blocks, strict=True):
+                for dst, B in zip(out, J.variables(), strict=True):
                     np.matmul(W, B, out=dst[sl])
         return ew
 
@@ -170,8 +197,9 @@ class BulkDvl:
         for s in range(self.n_states):
             lo, hi = int(self._bounds[s]), int(self._bounds[s + 1])
             if hi > lo:
-                keys = [X(s), V(s), self.bias_keys[s], K_SCALE, C_MISALIGN] + ([T_OFFSET] if self.offset else [])
-                graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3 * (hi - lo)), keys,
+                keys = [X(s), V(s), self.bias_keys[s], K_SCALE, C_MISALIGN] + ([T_OFFSET] if self.offset else []) \
+                    + ([L_LEVER] if self.lever else [])
+                graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(self.pings.dim * (hi - lo)), keys,
                                              _Carrier(self._served, lo, hi)))
         return graph
 
@@ -179,10 +207,10 @@ class BulkDvl:
         """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
         (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
         n = len(self)
-        dims = (6, 3, 6, 1, 3) + ((1,) if self.offset else ())
+        dims = (6, 3, 6, 1, 3) + ((1,) if self.offset else ()) + ((3,) if self.lever else ())
         served = self._served
         if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # (released after each linearisation)
-            served.blocks = [np.empty((n, 3, d)) for d in dims]
+            served.blocks = [np.empty((n, self.pings.dim, d)) for d in dims]
         ew = self._evaluate(values, True, served.blocks, states)
         w, _ = self._weights_and_losses(ew)
         sw = np.sqrt(w)
@@ -193,7 +221,7 @@ class BulkDvl:
         served.ready = True
 
     def rows(self) -> int:
-        return 3 * len(self)
+        return self.pings.dim * len(self)
 
     def release(self) -> None:
         """Let the served rows go (60 doubles a ping: 0.2 GB a day at 5 Hz) once GTSAM has linearised the
@@ -201,13 +229,13 @@ class BulkDvl:
         self._served.blocks, self._served.e, self._served.ready = [], np.zeros((0, 3)), False
 
     def set_offset_inputs(self, b_omega: np.ndarray, b_a: np.ndarray, G: np.ndarray, b_l: np.ndarray) -> None:
-        """New time-offset IMU constants of the pings (mean body rate, b_a, G at t_ping, in their order:
-        LogGraph.recentre_time_offset); the rest of the model is unchanged."""
+        """New time-offset IMU constants of the rows (mean body rate, b_a, G at t_ping, in their order:
+        LogGraph.recentre_time_offset) and the known lever arm b_l (m); the rest of the model is unchanged."""
         p = self.pings
         if not self.offset or b_omega.shape != p.b_omega.shape:  # (the offset model has offset_b_a and G)
             raise ValueError("BulkDvl.set_offset_inputs: not a time-offset model, or not the same pings")
         p.b_omega, p.offset_b_a, p.offset_G = b_omega, b_a, G
-        p.b_v_lever = np.asarray(np.cross(b_omega, np.asarray(b_l, dtype=float)))
+        self.b_l = np.asarray(b_l, dtype=float)
 
 
 class BulkGraph:
@@ -265,15 +293,13 @@ def whitening(cov: np.ndarray) -> np.ndarray:
     return W
 
 
-def bulk_dvl(builder: LogGraph) -> BulkDvl:
-    """The BulkDvl of a LogGraph's pings: each state's own ping, then the pings between it and the next state,
-    with the noise, IMU motion and gravity the per-factor path gives them (LogGraph.dvl_factors,
-    between_factors; FactorMaker.dvl_factors_for, dvl_keyframe_factors_for)."""
-    from gtsam_dvl.estimators.selection import ping_covariance
-
+def bulk_dvl(builder: BulkSource) -> BulkDvl:
+    """The BulkDvl of a LogGraph's pings: each state's own ping, then the pings between it and the next state
+    (their rows: the 3-D velocity, or with [dvl] use_beams each valid beam in its order), with the noise, IMU motion
+    and gravity the per-factor path gives them (LogGraph.dvl_factors, between_factors; FactorMaker.dvl_factors_for,
+    dvl_keyframe_factors_for)."""
     maker, cfg, dvl = builder.maker, builder.config, builder.log.dvl
     offset = cfg.dvl.estimate_time_offset
-    b_l = np.asarray(maker.mounting.b_l, dtype=float)
     k0 = cfg.priors.scale_initial
     b_R_d0 = maker.mounting.b_R_d0
     n_states = len(builder.epochs)
@@ -281,7 +307,6 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
         raise ValueError("bulk_dvl needs the initial guess first (LogGraph.initial_values)")
     g_states, G_states = maker.keyframe_gravity(builder.gravity_positions)
 
-    snaps = builder.snapshots
     state, dvl_idx, b_omega, rate_b_a, rate_G, snap, t_ping = [], [], [], [], [], [], []
     for i, ep in enumerate(builder.epochs):
         of_state: list[tuple[int, Any, int]] = []
@@ -304,38 +329,49 @@ def bulk_dvl(builder: LogGraph) -> BulkDvl:
     n = len(state)
     st = np.asarray(state, dtype=int)
     jj = np.asarray(dvl_idx, dtype=int)
-    om = np.asarray(b_omega, dtype=float).reshape(n, 3)
     d_y = np.asarray(dvl.d_v[jj], dtype=float).reshape(n, 3)
-    cov = ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3))
-    eye = np.broadcast_to(np.eye(3), (n, 3, 3))
-    dt, dR = np.zeros(n), eye.copy()
-    dv, dp = np.zeros((n, 3)), np.zeros((n, 3))
-    dR_dbg, dv_dba, dv_dbg = np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
+    motion = PingMotion.none(n)
+    extra = np.zeros((n, 3, 3))  # the preintegration's noise in each ping between keyframes
     qs = np.asarray(snap, dtype=int)
     moving = qs >= 0
     if moving.any():
+        snaps = builder.snapshots
         if snaps is None:
             raise ValueError("bulk_dvl: the LogGraph's snapshots were let go (build_bulk); make a new LogGraph")
         m = qs[moving]
-        dt[moving], dR[moving], dv[moving], dp[moving] = snaps.dt[m], snaps.dR[m], snaps.dv[m], snaps.dp[m]
-        dR_dbg[moving], dv_dba[moving], dv_dbg[moving] = snaps.dR_dbg[m], snaps.dv_dba[m], snaps.dv_dbg[m]
-        pim_cov = snaps.cov[m]
+        for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg"):
+            getattr(motion, name)[moving] = getattr(snaps, name)[m]
         # the body velocity at the ping from the ping at the prior calibration (as dvl_keyframe_factors_for)
         d_y_m = d_y[moving]
         finite = np.isfinite(d_y_m).all(axis=1)
         b_v = np.where(finite[:, None], np.where(finite[:, None], d_y_m, 0.0) @ b_R_d0.T / k0, 0.0)
-        cov[moving] += keyframe_ping_covariances(pim_cov, dR[moving], b_R_d0.T, b_v, k0)
-    pings = PingArrays(
-        state=st, d_y=d_y, b_omega=om, b_v_lever=np.cross(om, b_l), dt=dt, dR=dR, dv=dv, dp=dp, dR_dbg=dR_dbg,
-        dv_dba=dv_dba, dv_dbg=dv_dbg, n_g0=np.asarray(g_states, dtype=float).reshape(-1, 3)[st],
-        n_p0=np.asarray(builder.gravity_positions, dtype=float)[st],
-        n_G=np.asarray(G_states, dtype=float).reshape(-1, 3, 3)[st],
-        offset_b_a=np.asarray(rate_b_a, dtype=float).reshape(n, 3) if offset else None,
-        offset_G=np.asarray(rate_G, dtype=float).reshape(n, 3, 3) if offset else None)
-    whiten = whitening(cov)
+        extra[moving] = keyframe_ping_covariance(snaps.cov[m], motion.dR[moving], b_R_d0.T, b_v, k0)
+    motion = motion.motion(np.asarray(maker.n_omega_ie(), dtype=float),
+                           np.asarray(g_states, dtype=float).reshape(-1, 3)[st],
+                           np.asarray(builder.gravity_positions, dtype=float)[st],
+                           np.asarray(G_states, dtype=float).reshape(-1, 3, 3)[st])
+    om = np.asarray(b_omega, dtype=float).reshape(n, 3)
+    t_rows = np.asarray(t_ping, dtype=float)
+    rate = (np.asarray(rate_b_a, dtype=float).reshape(n, 3), np.asarray(rate_G, dtype=float).reshape(n, 3, 3)) \
+        if offset else None
+    beams = dvl.beams if cfg.dvl.use_beams else None
+    if beams is None:
+        rows: np.ndarray | slice = slice(None)
+        y, d_u = d_y, None
+        whiten = whitening(ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3)) + extra)
+    else:  # one row per valid beam, in the beams' order (FactorMaker's beam factors)
+        rows, b = np.nonzero(beams.valid[jj])
+        d_u = np.asarray(beams.d_u[jj][rows, b], dtype=float)
+        y = np.asarray(beams.v[jj][rows, b], dtype=float)[:, None]
+        var = cfg.dvl.beam_noise_m_s**2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
+        whiten = (1.0 / np.sqrt(var))[:, None, None]
+    pings = BulkPings(state=st[rows], y=y, b_omega=om[rows], motion=motion[rows], d_u=d_u,
+                      offset_b_a=None if rate is None else rate[0][rows],
+                      offset_G=None if rate is None else rate[1][rows])
     robust = cfg.dvl.robust if cfg.dvl.robust in ("huber", "cauchy") else "none"
-    return BulkDvl(pings=pings, whiten=whiten, n_omega_ie=np.asarray(maker.n_omega_ie(), dtype=float),
-                   n_states=n_states, bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
+    return BulkDvl(pings=pings, whiten=whiten, n_states=n_states,
+                   bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
                    robust_k=float(cfg.dvl.robust_threshold()),
                    offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
-                   t_ping=np.asarray(t_ping, dtype=float))
+                   b_l=np.asarray(maker.mounting.b_l, dtype=float), lever=cfg.dvl.estimate_lever_arm,
+                   t_ping=t_rows[rows])

@@ -35,17 +35,13 @@ from gtsam_dvl.estimators.alignment import Alignment
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance
 from gtsam_dvl.factors import (
+    DvlOptions,
     EarthImuFactor,
+    OffsetInput,
     PingMotion,
     keyframe_ping_covariance,
     make_depth_factor,
-    make_dvl_beam_factor,
-    make_dvl_beam_lever_factor,
-    make_dvl_keyframe_factor,
-    make_dvl_velocity_factor,
-    make_dvl_velocity_lever_factor,
-    make_dvl_velocity_offset_factor,
-    make_dvl_velocity_offset_lever_factor,
+    make_dvl_factor,
     make_earth_imu_factor,
     make_gnss_factor,
 )
@@ -258,34 +254,13 @@ class FactorMaker:
         """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
         dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate(). With
         dvl.estimate_time_offset, rate_input = velocity_rate_input() of the epoch gives the time-offset
-        factor on T_OFFSET too. With dvl.estimate_lever_arm the lever arm is the variable L_LEVER (the *_lever
-        factors), else the constant mounting.b_l."""
-        b_l = self.mounting.b_l
-        lever = self.config.dvl.estimate_lever_arm
-        if self.config.dvl.estimate_time_offset and rate_input is not None:
-            b_a, b_omega_mean, G = rate_input
-            if lever:
-                return [make_dvl_velocity_offset_lever_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN,
-                                                              T_OFFSET, L_LEVER, d_y, b_omega_mean, b_a,
-                                                              self.offset_gravity(), G)]
-            return [make_dvl_velocity_offset_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, T_OFFSET,
-                                                    d_y, b_omega_mean, b_l, b_a, self.offset_gravity(), G)]
-        if self.config.dvl.use_beams and beams is not None:
-            d_u, v, valid = beams
-            noise1 = self.beam_noise()
-            if lever:
-                return [make_dvl_beam_lever_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, L_LEVER, d_u[b],
-                                                   float(v[b]), b_omega) for b in np.flatnonzero(valid)]
-            return [make_dvl_beam_factor(noise1, X(i), V(i), K_SCALE, C_MISALIGN, d_u[b], float(v[b]), b_omega, b_l)
-                    for b in np.flatnonzero(valid)]
-        if lever:
-            return [make_dvl_velocity_lever_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, L_LEVER, d_y,
-                                                   b_omega)]
-        return [make_dvl_velocity_factor(self.dvl_noise(cov), X(i), V(i), K_SCALE, C_MISALIGN, d_y, b_omega, b_l)]
+        model on T_OFFSET too. With dvl.estimate_lever_arm the lever arm is the variable L_LEVER, else the constant
+        mounting.b_l (factors/dvl.py make_dvl_factor)."""
+        return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input)
 
     def keyframe_gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normal gravity in map at map positions n_p (N, 3), m/s^2, and its gradient (N, 3, 3), 1/s^2, for the
-        keyframe DVL factors (factors/dvl_keyframe.py; no centrifugal term about the origin: only GTSAM's IMU
+        keyframe DVL factors (factors/ping_motion.py; no centrifugal term about the origin: only GTSAM's IMU
         prediction needs it). Flat model: the constant gravity at the origin, zero gradient."""
         n_p = np.asarray(n_p, dtype=float).reshape(-1, 3)
         if self.config.solver.earth_model == "flat":
@@ -299,32 +274,46 @@ class FactorMaker:
                                  rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
                                  ) -> list[gtsam.NonlinearFactor]:
         """DVL factors of a ping between keyframes on state i (X(i), V(i), the bias, K_SCALE, C_MISALIGN, and
-        T_OFFSET / L_LEVER when estimated): the ping seen through the IMU motion from state i (motion,
-        factors/dvl_keyframe.py), as dvl_factors_for does for a ping at a state. pim_cov (9x9, [rotation,
+        T_OFFSET / L_LEVER when estimated): the ping seen through the IMU motion from state i (motion, with its
+        Earth model: factors/ping_motion.py), as dvl_factors_for does for a ping at a state. pim_cov (9x9, [rotation,
         position, velocity]): the preintegration's covariance up to the ping, mapped into the ping's noise at
         the prior calibration (keyframe_ping_covariance; 1e-4 m/s at 1 s with the paper's IMU, against 2 cm/s)."""
-        cfg = self.config.dvl
         k0 = self.config.priors.scale_initial
         b_R_d0 = self.mounting.b_R_d0
         d_y = np.asarray(d_y, dtype=float)
         b_v = b_R_d0 @ d_y / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
         extra = keyframe_ping_covariance(pim_cov, motion.dR, b_R_d0.T, b_v, k0)
-        lever_key = L_LEVER if cfg.estimate_lever_arm else None
-        keys = (X(i), V(i), self.bias_key(i), K_SCALE, C_MISALIGN)
-        b_l = self.mounting.b_l
+        return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input, motion, extra)
+
+    def dvl_keys(self, i: int, options: DvlOptions) -> list[int]:
+        """The keys of a DVL factor of state i with these options (DvlOptions.key_names)."""
+        at = {"pose": X(i), "vel": V(i), "bias": self.bias_key(i), "scale": K_SCALE, "b_R_d": C_MISALIGN,
+              "offset": T_OFFSET, "lever": L_LEVER}
+        return [at[name] for name in options.key_names()]
+
+    def _dvl_factors(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray, beams: Beams | None,
+                     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None, motion: PingMotion | None = None,
+                     extra: np.ndarray | None = None) -> list[gtsam.NonlinearFactor]:
+        """dvl_factors_for, or with motion and extra (the preintegration's noise in the ping, 3x3 m^2/s^2)
+        dvl_keyframe_factors_for."""
+        cfg = self.config.dvl
+        b_l, lever = self.mounting.b_l, cfg.estimate_lever_arm
         if cfg.estimate_time_offset and rate_input is not None:
             b_a, b_omega_mean, G = rate_input
-            return [make_dvl_keyframe_factor(self.dvl_noise(cov, extra), *keys, d_y, b_omega_mean, b_l, motion,
-                                             T_OFFSET, (b_a, self.offset_gravity(), G), lever_key)]
+            o = DvlOptions(b_omega_mean, b_l, offset=OffsetInput(b_a, self.offset_gravity(), G), motion=motion,
+                           lever_variable=lever)
+            return [make_dvl_factor(self.dvl_noise(cov, extra), self.dvl_keys(i, o), d_y, o)]
         if cfg.use_beams and beams is not None:
             d_u, v, valid = beams
-            return [make_dvl_keyframe_factor(
-                self._robust(gtsam.noiseModel.Isotropic.Sigma(1, float(np.sqrt(
-                    cfg.beam_noise_m_s**2 + d_u[b] @ extra @ d_u[b])))),
-                *keys, float(v[b]), b_omega, b_l, motion, lever_key=lever_key, d_u=d_u[b])
-                for b in np.flatnonzero(valid)]
-        return [make_dvl_keyframe_factor(self.dvl_noise(cov, extra), *keys, d_y, b_omega, b_l, motion,
-                                         lever_key=lever_key)]
+            out: list[gtsam.NonlinearFactor] = []
+            for b in np.flatnonzero(valid).tolist():
+                o = DvlOptions(b_omega, b_l, d_u[b], motion=motion, lever_variable=lever)
+                noise = self.beam_noise() if extra is None else self._robust(gtsam.noiseModel.Isotropic.Sigma(
+                    1, float(np.sqrt(cfg.beam_noise_m_s**2 + d_u[b] @ extra @ d_u[b]))))
+                out.append(make_dvl_factor(noise, self.dvl_keys(i, o), float(v[b]), o))
+            return out
+        o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever)
+        return [make_dvl_factor(self.dvl_noise(cov, extra), self.dvl_keys(i, o), d_y, o)]
 
     def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive

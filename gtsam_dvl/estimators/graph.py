@@ -430,9 +430,9 @@ class LogGraph:
         return graph
 
     def bulk_supported(self) -> bool:
-        """Whether build_bulk covers this configuration: the 3-D velocity with a known lever arm (not [dvl]
-        use_beams, not estimate_lever_arm; estimators/bulk.py)."""
-        return not self.config.dvl.use_beams and not self.config.dvl.estimate_lever_arm
+        """Whether build_bulk covers this configuration: every one (beams and the lever arm included;
+        estimators/bulk.py)."""
+        return True
 
     def build_bulk(self, values: gtsam.Values | None = None) -> tuple[BulkGraph, gtsam.Values]:
         """build() with the DVL velocity factors evaluated in bulk (estimators/bulk.py): the same objective and

@@ -2,12 +2,12 @@
 
 With `[solver] keyframe_spacing_s` > 0 the batch smoother (estimators/graph.py) makes states only at keyframes
 (selection.keyframe_mask) and DVL-dropout fillers; each other usable ping becomes a DVL factor on the state
-before it (factors/dvl_keyframe.py) through the preintegrated IMU motion over [t_i, t_ping]. This module
-integrates each keyframe interval's samples once, in time order, for the IMU factor (cut at the last sample stamp
-at or before each ping, which splits no sample: the pieces of one integration over the whole interval), and
-takes a snapshot at each ping (PimSnapshot) from a copy of that preintegration with the rest of the sample
-straddling the ping: the zero-bias deltas dR, dv, their bias Jacobians and the covariance of the preintegration
-error [rotation, position, velocity] (plus the motion-model covariance of any IMU gap held:
+before it (factors/dvl.py with a PingMotion) through the preintegrated IMU motion over [t_i, t_ping]. This
+module integrates each keyframe interval's samples once, in time order, for the IMU factor (cut at the last sample
+stamp at or before each ping, which splits no sample: the pieces of one integration over the whole interval), and
+takes a snapshot at each ping (a PingMotion, factors/ping_motion.py) from a copy of that preintegration with the
+rest of the sample straddling the ping: the zero-bias deltas dR, dv, their bias Jacobians and the covariance of
+the preintegration error [rotation, position, velocity] (plus the motion-model covariance of any IMU gap held:
 estimators/gaps.py). GTSAM 4.3's Python wrapper exposes deltaRij, deltaVij, preintMeasCov and the tangent
 preintegrated() = [theta, p, v] but not the bias Jacobians. GTSAM's ImuFactor on the pim, evaluated with its
 Jacobians at the identity state and its own prediction there (zero error, so the Logmap's derivative is the
@@ -18,23 +18,18 @@ evaluation per ping. Up to ANALYTIC_MAX_ANGLE (J_r is singular at a whole turn);
 of 12 predictions of the relative rotation dR^T R(b) (within 1e-9 relative of the former below it: the
 difference is their truncation error, tests/estimators/test_keyframes.py). The keyframe factor applies the Earth
 model.
-
-Before, the snapshots came from a second preintegration of each interval up to its last ping, split at every
-ping (0.8 s of samples more per second of log at 5 Hz pings and 1 s keyframes: 40 % of the preintegration).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
-from gtsam_dvl.core.rotations import skew
 from gtsam_dvl.estimators.factor_maker import integrate_pieces
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.factors import PingMotion
+from gtsam_dvl.factors.so3 import skew
 
 BIAS_STEP_ACC = 1e-2  # m/s^2, central-difference step of the accelerometer bias (beyond ANALYTIC_MAX_ANGLE)
 BIAS_STEP_GYRO = 1e-4  # rad/s, central-difference step of the gyro bias (beyond ANALYTIC_MAX_ANGLE)
@@ -42,58 +37,10 @@ ANALYTIC_MAX_ANGLE = 5.5  # rad, the largest |theta| whose Jacobians come from t
 _STATE0, _BIAS0, _POSE0, _Z3 = gtsam.NavState(), gtsam.imuBias.ConstantBias(), gtsam.Pose3(), np.zeros(3)
 
 
-@dataclass(frozen=True)
-class PimSnapshot:
-    """The preintegration from a keyframe to a ping (module doc): dt (s), dR (3x3, body at the ping in the
-    keyframe's body), dv (3,) m/s in the keyframe's body axes, dp (3,) m dv integrated once more (deltaPij),
-    dR_dbg, dv_dba, dv_dbg (3x3 each: dR's right
-    tangent and dv per gyro / accelerometer bias), cov (9x9, [rotation, position, velocity])."""
-
-    dt: float
-    dR: np.ndarray
-    dv: np.ndarray
-    dp: np.ndarray
-    dR_dbg: np.ndarray
-    dv_dba: np.ndarray
-    dv_dbg: np.ndarray
-    cov: np.ndarray
-
-    def motion(self, n_omega_ie: np.ndarray, n_g0: np.ndarray, n_p0: np.ndarray, n_G: np.ndarray) -> PingMotion:
-        """The keyframe factor's PingMotion (factors/dvl_keyframe.py): these deltas with the Earth model at the
-        keyframe (Earth rate rad/s and gravity m/s^2 in map, at n_p0 m, its gradient 1/s^2)."""
-        return PingMotion(self.dt, self.dR, self.dv, self.dp, self.dR_dbg, self.dv_dba, self.dv_dbg, n_omega_ie,
-                          n_g0, n_p0, n_G)
-
-
-@dataclass
-class SnapshotArrays:
-    """Many pings' PimSnapshots as arrays (N, ...): 1 kB a ping instead of 4 kB of small numpy objects (a day of
-    5 Hz pings between 1 s keyframes: 0.35 GB instead of 1.4 GB)."""
-
-    dt: np.ndarray
-    dR: np.ndarray
-    dv: np.ndarray
-    dp: np.ndarray
-    dR_dbg: np.ndarray
-    dv_dba: np.ndarray
-    dv_dbg: np.ndarray
-    cov: np.ndarray
-
-    @classmethod
-    def empty(cls, n: int) -> SnapshotArrays:
-        return cls(np.zeros(n), np.zeros((n, 3, 3)), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3, 3)),
-                   np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), np.zeros((n, 9, 9)))
-
-    def __len__(self) -> int:
-        return len(self.dt)
-
-    def put(self, q: int, s: PimSnapshot) -> None:
-        self.dt[q], self.dR[q], self.dv[q], self.dp[q] = s.dt, s.dR, s.dv, s.dp
-        self.dR_dbg[q], self.dv_dba[q], self.dv_dbg[q], self.cov[q] = s.dR_dbg, s.dv_dba, s.dv_dbg, s.cov
-
-    def get(self, q: int) -> PimSnapshot:
-        return PimSnapshot(float(self.dt[q]), self.dR[q], self.dv[q], self.dp[q], self.dR_dbg[q], self.dv_dba[q],
-                           self.dv_dbg[q], self.cov[q])
+# The IMU motion to a ping is factors/ping_motion.py's PingMotion (one ping, or arrays of N with put/get); the names
+# estimators/graph.py and the online estimator give it
+PimSnapshot = PingMotion
+SnapshotArrays = PingMotion
 
 
 def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationParams:
@@ -106,7 +53,7 @@ def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationP
 
 
 def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None,
-             n_omega: np.ndarray | None = None) -> PimSnapshot:
+             n_omega: np.ndarray | None = None) -> PingMotion:
     """The snapshot of pim now (bias estimate zero; module doc). n_omega: the Earth rate (rad/s, map) its
     parameters hold, None or zeros for none (their gravity does not matter)."""
     theta = np.asarray(pim.preintegrated(), dtype=float)[:3]
@@ -133,8 +80,8 @@ def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | No
     cov = np.asarray(pim.preintMeasCov(), dtype=float)
     if extra_cov is not None:
         cov = cov + extra_cov
-    return PimSnapshot(float(pim.deltaTij()), dR, np.asarray(pim.deltaVij(), dtype=float),
-                       np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
+    return PingMotion(float(pim.deltaTij()), dR, np.asarray(pim.deltaVij(), dtype=float),
+                      np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
 
 
 def _central_differences(pim: gtsam.PreintegratedImuMeasurements,
@@ -186,7 +133,7 @@ def last_stamp_at_or_before(imu_t: np.ndarray, t: float) -> float:
 
 def snapshot_at(pim: gtsam.PreintegratedImuMeasurements, a: float, t_p: float, spans: list[tuple[float, float]],
                 t_state: float, imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-                gaps: Gaps, imu_cfg: ImuConfig, n_omega: np.ndarray | None) -> PimSnapshot:
+                gaps: Gaps, imu_cfg: ImuConfig, n_omega: np.ndarray | None) -> PingMotion:
     """The snapshot at ping t_p of an interval's preintegration from t_state that has integrated (t_state, a] (a, the
     interval's cut at or before t_p, last_stamp_at_or_before) and held spans: a copy of it with (a, t_p] added, the
     hold covariance of everything held up to t_p (module doc)."""
@@ -200,7 +147,7 @@ def snapshot_at(pim: gtsam.PreintegratedImuMeasurements, a: float, t_p: float, s
 def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], params: gtsam.PreintegrationParams,
                             imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
                             imu_cfg: ImuConfig) -> tuple[gtsam.PreintegratedImuMeasurements, Holds,
-                                                         list[PimSnapshot]]:
+                                                         list[PingMotion]]:
     """The IMU factor's preintegration over (t_state, t_end] (with params, a new PreintegrationParams of its own),
     what it held, and the snapshots at the pings t_pings (sorted, inside the interval) taken on the way: the
     interval is integrated once, cut at the last sample stamp at or before each ping, and each ping's snapshot is
@@ -216,7 +163,7 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
         return interval_cut_by_cut(t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg)
     pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
     n_omega = params.getOmegaCoriolis()
-    out: list[PimSnapshot] = []
+    out: list[PingMotion] = []
     ends = imu_t[idx]  # each piece's sample stamp: the cuts
     rows_f, rows_w, dts = b_f[idx], b_omega[idx], dt.tolist()
     done, a = 0, t_state
@@ -238,12 +185,12 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
 
 def interval_cut_by_cut(t_state: float, t_end: float, t_pings: list[float], params: gtsam.PreintegrationParams,
                         imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
-                        imu_cfg: ImuConfig) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PimSnapshot]]:
+                        imu_cfg: ImuConfig) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PingMotion]]:
     """interval_with_snapshots with the pieces of each cut found on their own (pieces_with_holds), across IMU gaps
     too (their holds' pieces, and the hold covariance of everything held up to each ping in its snapshot)."""
     pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
     n_omega = params.getOmegaCoriolis()
-    out: list[PimSnapshot] = []
+    out: list[PingMotion] = []
     a = t_state
     spans: list[tuple[float, float]] = []
     for t_p in t_pings:
@@ -258,7 +205,7 @@ def interval_cut_by_cut(t_state: float, t_end: float, t_pings: list[float], para
 
 def ping_snapshots(t_state: float, t_pings: list[float], params: gtsam.PreintegrationParams, imu_t: np.ndarray,
                    starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
-                   imu_cfg: ImuConfig) -> list[PimSnapshot]:
+                   imu_cfg: ImuConfig) -> list[PingMotion]:
     """The snapshots at the pings t_pings (sorted, after t_state) of interval_with_snapshots from t_state up to
     the last ping (params: as the IMU factors')."""
     t_end = t_pings[-1] if t_pings else t_state

@@ -1,6 +1,6 @@
 """estimators/bulk.py and bulk_imu.py: the batch smoother's DVL and IMU factors in bulk give the per-factor graph's
 objective and linear systems (error to 1e-12 relative, information matrix and vector to 1e-9), robust kernels
-included, and the same solution; the configurations it does not cover fall back to the per-factor graph.
+included, beams and the lever arm as a variable included, and the same solution.
 
 Log: paper-3d-short cut to 330 s with a 5 Hz DVL (1 s keyframes: a state per second, four pings between), an
 outlier injected so that the robust kernel is active at the solution."""
@@ -16,7 +16,7 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, key_dim
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
@@ -52,6 +52,10 @@ def configs() -> dict[str, EstimatorConfig]:
         "no-robust-flat": dataclasses.replace(
             default, dvl=dataclasses.replace(default.dvl, robust="none"),
             solver=dataclasses.replace(default.solver, earth_model="flat")),
+        # one row per valid beam, each with its own Huber kernel; the lever arm a variable
+        "beams-lever": dataclasses.replace(paper, dvl=dataclasses.replace(paper.dvl, use_beams=True,
+                                                                          estimate_lever_arm=True)),
+        "offset-lever": dataclasses.replace(default, dvl=dataclasses.replace(default.dvl, estimate_lever_arm=True)),
     }
 
 
@@ -62,6 +66,8 @@ def perturbed(values: gtsam.Values, rng: np.random.Generator) -> gtsam.Values:
     out.update(C_MISALIGN, values.atRot3(C_MISALIGN).retract(rng.normal(0, 0.01, 3)))
     if values.exists(T_OFFSET):
         out.update(T_OFFSET, np.array([0.12]))
+    if values.exists(L_LEVER):
+        out.update(L_LEVER, values.atVector(L_LEVER) + rng.normal(0, 0.05, 3))
     return out
 
 
@@ -121,7 +127,8 @@ def test_same_objective_and_linear_system(name: str) -> None:
     bulk, _ = builder.build_bulk(values)
     assert isinstance(bulk, BulkGraph)
     assert graph_rows(bulk) == graph_rows(per_factor)
-    assert len(bulk.bulk) == builder.counters["keyframes"] + builder.counters["pings_between_keyframes"]
+    pings = builder.counters["keyframes"] + builder.counters["pings_between_keyframes"]
+    assert len(bulk.bulk) == pings if not builder.config.dvl.use_beams else len(bulk.bulk) > pings
     for vals in (values, perturbed(values, np.random.default_rng(1))):
         e1, e2 = per_factor.error(vals), bulk.error(vals)
         assert abs(e1 - e2) <= 1e-12 * e1
@@ -155,14 +162,14 @@ def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
     bulk, _ = builder.build_bulk(values)
     assert bulk.imu is not None
     fs = builder.imu_factors
-    M = np.array([f.gravity_map for f in fs])
+    M = np.array([f.model.M for f in fs])
     assert np.abs(bulk.imu.arrays.M - M).max() <= 1e-12 * np.abs(M).max()
     W = np.array([f.factor.noiseModel().R() for f in fs])
     assert np.array_equal(bulk.imu.whiten, W)
     refs = builder.gravity_refs
     assert not np.isnan(refs.n_p).any()
     for i in (0, len(fs) // 2, len(fs) - 1):
-        assert np.array_equal(fs[i].ref_p, refs.n_p[i]) and np.array_equal(fs[i].ref_G, refs.G[i])
+        assert np.array_equal(fs[i].model.ref_p, refs.n_p[i]) and np.array_equal(fs[i].model.ref_G, refs.G[i])
 
 
 def test_bulk_imu_factors_across_an_imu_gap() -> None:
@@ -230,16 +237,6 @@ def test_smooth_batch_unchanged_by_bulk() -> None:
                              before_iteration=builder.refresh_gravity)
     assert abs(r.scale - ref.atVector(K_SCALE)[0]) < 1e-6 * r.scale_sigma
     assert r.info["solver"]["dof"] == graph_rows(graph) - values.dim()
-
-
-@pytest.mark.parametrize("option", ["use_beams", "estimate_lever_arm"])
-def test_unsupported_configurations_use_the_per_factor_graph(option: str) -> None:
-    cfg = EstimatorConfig.paper()
-    cfg = dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, **{option: True}))
-    builder = LogGraph(run_log(), cfg)
-    assert not builder.bulk_supported()
-    with pytest.raises(GtsamDvlError, match="bulk DVL factors cover"):
-        builder.build_bulk()
 
 
 def test_build_bulk_lets_the_snapshots_go() -> None:

@@ -1,5 +1,5 @@
 """Keyframes that keep every ping's information ([solver] keyframe_spacing_s; estimators/keyframes.py,
-factors/dvl_keyframe.py): on a 5 Hz DVL version of paper-3d-short, the batch smoother with 1 s keyframes (a
+factors/ping_motion.py): on a 5 Hz DVL version of paper-3d-short, the batch smoother with 1 s keyframes (a
 fifth of the states, the other pings as factors on the keyframe before them through the IMU motion) against a
 state per ping:
 
@@ -33,8 +33,9 @@ from gtsam_dvl.estimators import keyframes
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.keyframes import ANALYTIC_MAX_ANGLE, PimSnapshot, ping_snapshots, snapshot, snapshot_params
+from gtsam_dvl.estimators.keyframes import ANALYTIC_MAX_ANGLE, ping_snapshots, snapshot, snapshot_params
 from gtsam_dvl.estimators.selection import sample_starts
+from gtsam_dvl.factors import PingMotion
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
@@ -143,7 +144,7 @@ def test_spacing_beyond_the_state_spacing_is_refused() -> None:
 # ----- snapshots (estimators/keyframes.py) ----------------------------------------------------------------
 
 def reference_snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None,
-                       n_omega: np.ndarray | None = None) -> PimSnapshot:
+                       n_omega: np.ndarray | None = None) -> PingMotion:
     """keyframes.snapshot before the tangent's Jacobians: central differences of pim.predict over the bias
     (steps 1e-2 m/s^2 and 1e-4 rad/s), 12 predictions; for parameters without Earth rate."""
     assert n_omega is None or not np.any(n_omega)
@@ -169,7 +170,7 @@ def reference_snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.nd
     if extra_cov is not None:
         cov = cov + extra_cov
     dt = float(pim.deltaTij())
-    return PimSnapshot(dt, dR.matrix(), dv, np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
+    return PingMotion(dt, dR.matrix(), dv, np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
 
 
 def _params() -> gtsam.PreintegrationParams:
@@ -181,7 +182,7 @@ def _params() -> gtsam.PreintegrationParams:
     return snapshot_params(params)
 
 
-def _assert_same(new: PimSnapshot, ref: PimSnapshot, worst: dict[str, float]) -> None:
+def _assert_same(new: PingMotion, ref: PingMotion, worst: dict[str, float]) -> None:
     for name in ("dt", "dR", "dv", "dp", "cov"):
         assert np.array_equal(getattr(new, name), getattr(ref, name)), name
     for name in ("dR_dbg", "dv_dba", "dv_dbg"):

@@ -36,7 +36,7 @@ from gtsam_dvl.estimators.alignment import map_frame_of
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
-from gtsam_dvl.estimators.keyframes import PimSnapshot, interval_with_snapshots, snapshot_params
+from gtsam_dvl.estimators.keyframes import interval_with_snapshots, snapshot_params
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.keyframes import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
@@ -207,7 +207,7 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
             np.testing.assert_array_equal(a, b, err_msg=name)
 
 
-def _turn_motion() -> tuple[PimSnapshot, PingMotion, gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams]:
+def _turn_motion() -> tuple[PingMotion, PingMotion, gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams]:
     """0.8 s of a 0.2 rad/s turn while accelerating, preintegrated with gravity (GTSAM's prediction) and as a
     keyframe snapshot (zero gravity) in a flat model: no Earth rate, constant gravity."""
     from gtsam_dvl.estimators.keyframes import snapshot
@@ -343,9 +343,9 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
     estimator is gone."""
     made: list[weakref.ref[Any]] = []
     imus: list[weakref.ref[Any]] = []
-    original, original_imu = PimSnapshot.motion, FactorMaker.new_imu_factor
+    original, original_imu = PingMotion.motion, FactorMaker.new_imu_factor
 
-    def tracking(self: PimSnapshot, *args: Any) -> PingMotion:
+    def tracking(self: PingMotion, *args: Any) -> PingMotion:
         m = original(self, *args)
         made.append(weakref.ref(m))
         return m
@@ -355,7 +355,7 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
         imus.append(weakref.ref(f.factor))
         return f
 
-    monkeypatch.setattr(PimSnapshot, "motion", tracking)
+    monkeypatch.setattr(PingMotion, "motion", tracking)
     monkeypatch.setattr(FactorMaker, "new_imu_factor", tracking_imu)
     log = run_log(5.0, 200.0)
     est = OnlineEstimator.for_log(log, config(1.0))

@@ -17,13 +17,6 @@ import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import B, V, X
-from gtsam.utils.numerical_derivative import (
-    numericalDerivative51,
-    numericalDerivative52,
-    numericalDerivative53,
-    numericalDerivative54,
-    numericalDerivative55,
-)
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.config import EstimatorConfig
@@ -32,6 +25,7 @@ from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.estimators.alignment import Alignment
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.factors import EarthImuFactor, GravityModel, imu_earth, make_earth_imu_factor
+from tests.support.numerical import numerical_jacobians
 
 FRAME = LocalFrame(30.0, 120.0, -50.0)
 KEYS = (X(0), V(0), X(1), V(1), B(0))
@@ -49,8 +43,6 @@ ZERO_TOL = 1e-9  # error at the predicted state (rad, m, m/s); positions of 2e4 
 # test_gradient_term_is_visible checks it would be caught).
 JAC_RTOL = 1e-6
 STEP = 1e-4
-NUMERICAL = (numericalDerivative51, numericalDerivative52, numericalDerivative53, numericalDerivative54,
-             numericalDerivative55)
 DT = {"earth": 10.0, "analytic": 2.0, "none": 1.0}  # s of preintegration per gravity kind
 
 
@@ -196,7 +188,7 @@ def numerical(case: Case) -> list[np.ndarray]:
           bias: gtsam.imuBias.ConstantBias) -> np.ndarray:
         return case.factor(None, make_values(pose_i, v_i, pose_j, v_j, bias), None)
 
-    return [nd(h, *case.args(), delta=STEP) for nd in NUMERICAL]
+    return numerical_jacobians(h, case.args(), delta=STEP)
 
 
 def column_groups(J: np.ndarray) -> list[slice]:
@@ -262,7 +254,7 @@ def test_jacobians_with_rotation_residual(gravity: str, kind: str, seed: int) ->
     phi = float(np.linalg.norm(e[:3]))
     assert phi > 1e-3
     raw = [np.zeros((9, d), order="F") for d in DIMS]
-    case.factor.imu.evaluateError(*case.args(), *raw)
+    case.factor.model.imu.evaluateError(*case.args(), *raw)
     for k, (J, J_num) in enumerate(zip(H, numerical(case), strict=True)):
         if k in (0, 2):
             assert_jacobian_close(J[:, :3], J_num[:, :3], f"H[{k}] rotation")
@@ -280,7 +272,7 @@ def test_gradient_term_is_visible(gravity: str, margin: float) -> None:
     case = make_case(gravity, "far", 7, "pv")
     _, H = analytic(case)
     raw = [np.zeros((9, d), order="F") for d in DIMS]
-    case.factor.imu.evaluateError(*case.args(), *raw)
+    case.factor.model.imu.evaluateError(*case.args(), *raw)
     num = numerical(case)
     for k in (0, 2):
         t = slice(3, 6)
@@ -313,8 +305,8 @@ def test_jacobian_uses_the_preintegrated_time() -> None:
     rng = np.random.default_rng(11)
     for _ in range(20):
         pim2.integrateMeasurement(rng.normal(size=3) + [0.0, 0.0, 9.8], rng.normal(scale=0.1, size=3), 0.1)
-    short = make_earth_imu_factor(pim2, params, KEYS, 2.5, f.gravity)  # 2 s integrated
-    short.set_reference(f.ref_p, f.ref_g, f.ref_G)
+    short = make_earth_imu_factor(pim2, params, KEYS, 2.5, f.model.gravity)  # 2 s integrated
+    short.set_reference(f.model.ref_p, f.model.ref_g, f.model.ref_G)
     state = pim2.predict(gtsam.NavState(case.pose_i, case.v_i), case.bias)  # for a zero rotation error
     pose_j = gtsam.Pose3(state.attitude(), state.position() + rng.normal(scale=0.5, size=3))
     gapped = Case(short, pim2, case.pose_i, case.v_i, pose_j, state.velocity() + rng.normal(scale=0.1, size=3),
@@ -327,17 +319,17 @@ def test_jacobian_uses_the_preintegrated_time() -> None:
 def test_first_evaluation_takes_the_reference() -> None:
     """Without a reference the first evaluation takes it at its own mid position (then extrapolates)."""
     case = make_case("earth", "far", 3, "pv")
-    model = case.factor.gravity
+    model = case.factor.model.gravity
     assert model is not None
     params = make_params()
     pim = preintegrate(np.random.default_rng(3), params, 10.0, case.pose_i.rotation(), False, case.pim.biasHat())
     lazy = make_earth_imu_factor(pim, params, KEYS, 10.0, model)
-    assert lazy.ref_p is None and lazy.needs_reference(np.zeros(3))
+    assert lazy.model.ref_p is None and lazy.needs_reference(np.zeros(3))
     e_lazy = lazy(None, case.values(), None)
     mid = 0.5 * (case.pose_i.translation() + case.pose_j.translation())
-    np.testing.assert_array_equal(lazy.ref_p, mid)
+    np.testing.assert_array_equal(lazy.model.ref_p, mid)
     g, G = model(mid)
-    np.testing.assert_array_equal(lazy.ref_g, g)
+    np.testing.assert_array_equal(lazy.model.ref_g, g)
     np.testing.assert_array_equal(params.n_gravity, g)
     assert not lazy.needs_reference(mid + 99.0) and lazy.needs_reference(mid + [0.0, 101.0, 0.0])
     lazy.set_reference(mid, g, G)
@@ -437,16 +429,16 @@ def test_shared_params_would_give_wrong_errors(monkeypatch: pytest.MonkeyPatch) 
 def test_shared_params_are_rejected() -> None:
     case = make_case("earth", "far", 5, "pv")
     a = case.factor
-    before = np.array(a.params.n_gravity)
+    before = np.array(a.model.params.n_gravity)
     rng = np.random.default_rng(5)
-    pim_b = preintegrate(rng, a.params, 1.0, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias())
+    pim_b = preintegrate(rng, a.model.params, 1.0, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias())
     keys_b = (X(5), V(5), X(6), V(6), B(5))
-    for gravity in (None, a.gravity):
+    for gravity in (None, a.model.gravity):
         with pytest.raises(ValueError, match="already serve another EarthImuFactor"):
-            make_earth_imu_factor(pim_b, a.params, keys_b, 1.0, gravity)
+            make_earth_imu_factor(pim_b, a.model.params, keys_b, 1.0, gravity)
         with pytest.raises(ValueError, match="already serve another EarthImuFactor"):
-            make_earth_imu_factor(case.pim, a.params, keys_b, 1.0, gravity)  # the same pim twice
-    np.testing.assert_array_equal(a.params.n_gravity, before)
+            make_earth_imu_factor(case.pim, a.model.params, keys_b, 1.0, gravity)  # the same pim twice
+    np.testing.assert_array_equal(a.model.params.n_gravity, before)
 
 
 def test_params_not_the_pims_are_rejected() -> None:
@@ -479,4 +471,4 @@ def test_one_params_per_factor_is_accepted_and_untouched() -> None:
         pim = preintegrate(rng, params, 0.5, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias())
         f = make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), B(0)), 0.5, model if i % 2 else None)
         np.testing.assert_array_equal(params.n_gravity, g)
-        np.testing.assert_array_equal(f.ref_g, g)
+        np.testing.assert_array_equal(f.model.ref_g, g)

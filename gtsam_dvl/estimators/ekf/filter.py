@@ -27,7 +27,7 @@ reopened after gate_reopen_after gated samples in a row; counters "depth_used" (
 DVL time offset ([dvl] estimate_time_offset, not with use_beams): dt_d is a 20th error-state component (a random
 constant with the prior time_offset_prior_s +- time_offset_sigma_s, no process noise). The ping stamped t
 measures the velocity at t + dt_d; the update is made with the filter's state at t and the batch smoother's
-first-order model (factors/dvl_velocity.py make_dvl_velocity_offset_factor),
+first-order model (factors/dvl_model.py),
 
     y = k d_R_b (b_v + dt_d (b_a - b_a_bias + G n_R_b^T n_g - b_omega x b_v) + b_omega x b_l),  b_v = n_R_b^T n_v
 
@@ -79,6 +79,7 @@ from gtsam_dvl.estimators.gaps import (
 )
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings
+from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
 # estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
@@ -190,51 +191,47 @@ def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndar
 
 def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray,
                       n_omega_ie: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Predicted DVL velocity y (3,), its Jacobian H (3, 19) w.r.t. the error state, and the body rate
-    relative to map used for the lever arm."""
-    R, v, k = fs.nav.n_R_b, fs.nav.n_v, fs.scale
-    d_R_b = fs.b_R_d.T
+    """Predicted DVL velocity y (3,) (factors/dvl_model.py), its Jacobian H (3, n) w.r.t. the error state, and the
+    body rate relative to map used for the lever arm, b_omega = b_omega_m - b_g - n_R_b^T n_omega_ie (its attitude
+    dependence -n_R_b^T [n_omega_ie]x phi enters H through the model's b_omega Jacobian)."""
+    R = fs.nav.n_R_b
     b_omega = b_omega_m - fs.gyro_bias - R.T @ n_omega_ie
-    u = R.T @ v + np.cross(b_omega, b_l)
-    d_u = d_R_b @ u
-    H = np.zeros((3, len(fs.P)))
-    k_d_R_b = k * d_R_b
-    # R_true^T = R^T Exp(-phi): R^T v gains R^T [v]x phi; omega gains -R^T [w_ie]x phi - dbg
-    H[:, PHI] = k_d_R_b @ (R.T @ skew(v) + skew(b_l) @ R.T @ skew(n_omega_ie))
-    H[:, VEL] = k_d_R_b @ R.T
-    H[:, BG] = k_d_R_b @ skew(b_l)
-    H[:, SCALE] = d_u
-    H[:, MIS] = k * skew(d_u)  # d_R_b_true = Exp(-psi) d_R_b
-    return k * d_u, H, b_omega
+    y, J = dvl_model(R, fs.nav.n_v, fs.scale, fs.b_R_d, b_omega, np.asarray(b_l, dtype=float), inputs=True)
+    assert J is not None
+    return y, _error_state_jacobian(fs, J, -R.T @ skew(n_omega_ie)), b_omega
 
 
 def offset_measurement_model(fs: FilterState, b_l: np.ndarray, rate_input: RateInput,
                              n_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The DVL velocity with the time offset (module doc), y (3,), and its Jacobian H (3, 20) w.r.t. the error
-    state. rate_input = (b_a, b_omega, G): FactorMaker.velocity_rate_input of the ping (body rate relative to
-    map, gyro bias not removed); n_g gravity in map. With M = I - dt [b_omega]x and b_v_eff the bracket:
-        phi: k d_R_b (M R^T [n_v]x + dt G R^T [n_g]x)     (R_true^T a = R^T a + R^T [a]x phi)
-        dv:  k d_R_b M R^T          dbg: k d_R_b ([b_l]x - dt [b_v]x)          dba: -dt k d_R_b
-        dk:  d_R_b b_v_eff          psi: k [d_R_b b_v_eff]x                    ddt: k d_R_b b_vdot"""
-    R, v, k, dt = fs.nav.n_R_b, fs.nav.n_v, fs.scale, fs.time_offset
-    d_R_b = fs.b_R_d.T
+    """The DVL velocity with the time offset (module doc; factors/dvl_model.py), y (3,), and its Jacobian H (3, n)
+    w.r.t. the error state. rate_input = (b_a, b_omega, G): FactorMaker.velocity_rate_input of the ping (body rate
+    relative to map, gyro bias not removed); n_g gravity in map. The model's inputs b_a - accelerometer bias and
+    b_omega - gyro bias give the bias columns."""
     b_a, b_omega_mean, G = rate_input
-    b_omega = b_omega_mean - fs.gyro_bias
-    b_v = R.T @ v
-    b_vdot = b_a - fs.accel_bias + G @ (R.T @ n_g) - np.cross(b_omega, b_v)
-    b_v_eff = b_v + dt * b_vdot + np.cross(b_omega, b_l)
-    d_u = d_R_b @ b_v_eff
-    k_d_R_b = k * d_R_b
-    M = np.eye(3) - dt * skew(b_omega)
+    y, J = dvl_model(fs.nav.n_R_b, fs.nav.n_v, fs.scale, fs.b_R_d, b_omega_mean - fs.gyro_bias,
+                     np.asarray(b_l, dtype=float), dt_d=fs.time_offset,
+                     offset=OffsetInput(b_a - fs.accel_bias, np.asarray(n_g, dtype=float), G), inputs=True)
+    assert J is not None
+    return y, _error_state_jacobian(fs, J, None)
+
+
+def _error_state_jacobian(fs: FilterState, J: DvlJacobians, d_omega_d_phi: np.ndarray | None) -> np.ndarray:
+    """The model's Jacobians (factors/dvl_model.py) on the error state (strapdown.py): phi is a left perturbation in
+    map axes (n_R_b Exp(theta) = Exp(n_R_b theta) n_R_b: theta = n_R_b^T phi), the biases enter through the inputs
+    b_omega and b_a with a minus sign, psi is b_R_d's right tangent as in the model; d_omega_d_phi: the body rate's
+    dependence on phi, if any."""
     H = np.zeros((3, len(fs.P)))
-    H[:, PHI] = k_d_R_b @ (M @ R.T @ skew(v) + dt * G @ R.T @ skew(n_g))
-    H[:, VEL] = k_d_R_b @ M @ R.T
-    H[:, BG] = k_d_R_b @ (skew(b_l) - dt * skew(b_v))
-    H[:, BA] = -dt * k_d_R_b
-    H[:, SCALE] = d_u
-    H[:, MIS] = k * skew(d_u)
-    H[:, OFFSET] = k_d_R_b @ b_vdot
-    return k * d_u, H
+    assert J.b_omega is not None
+    H[:, PHI] = J.pose[:, :3] @ fs.nav.n_R_b.T + (0.0 if d_omega_d_phi is None else J.b_omega @ d_omega_d_phi)
+    H[:, VEL] = J.vel
+    H[:, BG] = -J.b_omega
+    if J.b_a is not None:
+        H[:, BA] = -J.b_a
+    H[:, SCALE] = J.scale[:, 0]
+    H[:, MIS] = J.b_R_d
+    if J.offset is not None:
+        H[:, OFFSET] = J.offset[:, 0]
+    return H
 
 
 def depth_measurement_model(fs: FilterState, b_p_s: np.ndarray, radius_m: float,

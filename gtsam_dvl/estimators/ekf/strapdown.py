@@ -166,13 +166,13 @@ def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt
     R_dt = R_mid * dt[:, None, None]
     S_R = np.concatenate([np.zeros((1, 3, 3)), np.cumsum(R_dt, axis=0)])  # int_0^tau n_R_b
     S_R_mid = S_R[:-1] + 0.5 * R_dt
-    dv_skew = _skew_rows(dv_n)  # [a dt]x per piece
+    dv_skew = skew(dv_n)  # [a dt]x per piece
     tau_mid = 0.5 * (tau[:-1] + tau[1:])
     zero = np.zeros((1, 3, 3))
     # velocity error at each piece boundary per unit initial phi, dbg, dba (without Coriolis), (m + 1, 3, 9):
     # phi(tau) = phi - tau w x phi - int n_R_b dbg enters through -[a]x; dba through -n_R_b
     V = np.concatenate([
-        -_skew_rows(sum_dv) + np.concatenate([zero, np.cumsum(dv_skew * tau_mid[:, None, None], axis=0)]) @ W,
+        -skew(sum_dv) + np.concatenate([zero, np.cumsum(dv_skew * tau_mid[:, None, None], axis=0)]) @ W,
         np.concatenate([zero, np.cumsum(dv_skew @ S_R_mid, axis=0)]),
         -S_R], axis=2)
     P = np.concatenate([np.zeros((1, 3, 9)), np.cumsum(0.5 * (V[:-1] + V[1:]) * dt[:, None, None], axis=0)])
@@ -195,12 +195,3 @@ def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise a x b of (m, 3) arrays (np.cross's axis handling costs more than the product here)."""
     return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
                      a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
-
-
-def _skew_rows(v: np.ndarray) -> np.ndarray:
-    """[v_j]x for each row of v (m, 3) -> (m, 3, 3)."""
-    S = np.zeros(v.shape[:-1] + (3, 3))
-    S[..., 0, 1], S[..., 0, 2] = -v[..., 2], v[..., 1]
-    S[..., 1, 0], S[..., 1, 2] = v[..., 2], -v[..., 0]
-    S[..., 2, 0], S[..., 2, 1] = -v[..., 1], v[..., 0]
-    return S

@@ -3,8 +3,8 @@
 With `[solver] keyframe_spacing_s` > 0 the online estimator makes states where the batch smoother does (the
 keyframes of selection.keyframe_mask, decided ping by ping with the same KeyframeThinning, and the DVL-dropout
 fillers); every other usable ping becomes the batch smoother's DVL factor on the state before it through the
-IMU motion up to the ping (factors/dvl_keyframe.py, FactorMaker.dvl_keyframe_factors_for). This module holds
-what the online estimator needs for them and the batch path has no use for:
+IMU motion up to the ping (factors/dvl.py with a PingMotion, FactorMaker.dvl_keyframe_factors_for). This module
+holds what the online estimator needs for them and the batch path has no use for:
 
 - StatePreintegration: the next IMU factor's preintegration from the newest state, integrated as the samples
   come, and the IMU motion to each ping between keyframes taken from it on the way (the batch smoother's
@@ -31,10 +31,10 @@ import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.estimators.gaps import Gaps, Holds
-from gtsam_dvl.estimators.keyframes import PimSnapshot, integrate, last_stamp_at_or_before, snapshot_at
+from gtsam_dvl.estimators.keyframes import integrate, last_stamp_at_or_before, snapshot_at
 from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
-from gtsam_dvl.factors import PingMotion, dvl_keyframe_error
-from gtsam_dvl.factors.dvl_keyframe import ping_state
+from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor, ping_state
+from gtsam_dvl.factors.so3 import skew
 
 GRAVITY_REUSE_M = 100.0  # KeyframeGravity: distance from the reference within which it is reused (module doc)
 
@@ -62,7 +62,7 @@ class StatePreintegration:
         self.t_state, self._a, self._pim, self._params, self._spans = t_state, t_state, None, None, []
 
     def snapshot_at(self, t_p: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
-                    gaps: Gaps) -> PimSnapshot:
+                    gaps: Gaps) -> PingMotion:
         """The IMU motion from the state to the ping at t_p (samples buffered since before the state: T, starts,
         b_f rotation compensated, W, and the buffer's gaps)."""
         self.advance(last_stamp_at_or_before(T, t_p), T, starts, b_f, W, gaps)
@@ -117,41 +117,20 @@ def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float
                                ) -> gtsam.CustomFactor:
     """The keyframe factor f (FactorMaker.dvl_keyframe_factors_for: keys [X_i, V_i, B, K, C] + [T_OFFSET] with
     offset_input) of a ping too slow to inform the calibration: the same noise, error and Jacobians for pose,
-    velocity, bias (and time offset), none for the scale and misalignment (estimator.py module doc). d_y, b_omega,
-    d_u, offset_input: what f was made from (for the time offset, b_omega is the rate input's mean body rate)."""
+    velocity, bias (and time offset), none for the scale and misalignment (estimator.py module doc; DvlOptions
+    considered). d_y, b_omega, d_u, offset_input: what f was made from (for the time offset, b_omega is the rate
+    input's mean body rate)."""
     if not isinstance(f, gtsam.NoiseModelFactor):
         raise TypeError(f"a keyframe DVL factor is a NoiseModelFactor, got {type(f).__name__}")
-    keys = list(f.keys())
-    n = len(keys)
-    if n != 5 + (offset_input is not None):
-        raise ValueError(f"a keyframe factor on {n} keys does not match offset_input {offset_input is not None}")
-    dim = 1 if d_u is not None else 3
-    zeros_k, zeros_c = np.zeros((dim, 1)), np.zeros((dim, 3))
-
-    def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
-        slots: list[Any] | None = None if H is None else [None] * n
-        dt_d = values.atVector(keys[5]) if offset_input is not None else None
-        e = dvl_keyframe_error(values.atPose3(keys[0]), values.atVector(keys[1]), values.atConstantBias(keys[2]),
-                               values.atVector(keys[3]), values.atRot3(keys[4]), d_y, b_omega, b_l, motion, dt_d,
-                               offset_input, False, d_u, slots)
-        if H is not None and slots is not None:
-            for k in range(n):
-                H[k] = slots[k]
-            H[3], H[4] = zeros_k, zeros_c
-        return e
-
-    return gtsam.CustomFactor(f.noiseModel(), keys, error_func)
+    offset = None if offset_input is None else OffsetInput(*offset_input)
+    options = DvlOptions(b_omega, b_l, d_u, offset, motion, considered=True)
+    return make_dvl_factor(f.noiseModel(), list(f.keys()), d_y, options)
 
 
-def _skew(a: np.ndarray) -> np.ndarray:
-    x, y, z = a.tolist()
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def predict_at_ping(s: StateEstimate, t: float, snap: PimSnapshot, m: PingMotion) -> StateEstimate:
+def predict_at_ping(s: StateEstimate, t: float, snap: PingMotion, m: PingMotion) -> StateEstimate:
     """The state at a ping at t between states, predicted from state s (the newest state, its bias and
     calibration with their joint covariance) through the IMU motion m = snap.motion(...): attitude and velocity
-    by the keyframe factor's own model (factors/dvl_keyframe.ping_state, the Earth model included), position
+    by the keyframe factor's own model (factors/ping_motion.ping_state, the Earth model included), position
     p_i + v_i dt + n_g dt^2 / 2 + n_R_i dp - n_omega_ie x v_i dt^2 (the Coriolis term; the Earth rate's effect on
     the specific force, w dt^3 g / 6 = 1e-5 m at 1 s, left out). dp's bias Jacobians are not in the snapshot: dp
     is corrected with dt / 2 times dv's accelerometer-bias Jacobian and dt / 3 times its gyro-bias Jacobian (exact
@@ -165,10 +144,11 @@ def predict_at_ping(s: StateEstimate, t: float, snap: PimSnapshot, m: PingMotion
     b_a = np.asarray(s.bias.accelerometer(), dtype=float)
     b_g = np.asarray(s.bias.gyroscope(), dtype=float)
     R_p, v_p, A = ping_state(R_i, p_i, v_i, b_a, b_g, m)
+    assert A is not None and m.n_g0 is not None and m.n_p0 is not None and m.n_G is not None
     A_R_pose, A_R_bias, A_v_pose, A_v_vel, A_v_bias = A
-    dt = m.dt
+    dt = float(m.dt)
     n_g = m.n_g0 + m.n_G @ (p_i - m.n_p0)
-    w_x = _skew(m.n_omega_ie)
+    w_x = skew(m.n_omega_ie)
     dp_c = m.dp + dt / 2.0 * (m.dv_dba @ b_a) + dt / 3.0 * (m.dv_dbg @ b_g)
     p_p = p_i + v_i * dt + 0.5 * dt**2 * n_g + R_i @ dp_c - dt**2 * (w_x @ v_i)
     cov = s.cov
@@ -178,7 +158,7 @@ def predict_at_ping(s: StateEstimate, t: float, snap: PimSnapshot, m: PingMotion
         J[0:3, 0:6] = A_R_pose
         J[0:3, 9:15] = A_R_bias
         R_pT = R_p.T
-        J[3:6, 0:3] = R_pT @ (-R_i @ _skew(dp_c))
+        J[3:6, 0:3] = R_pT @ (-R_i @ skew(dp_c))
         J[3:6, 3:6] = R_pT @ (R_i + 0.5 * dt**2 * m.n_G @ R_i)
         J[3:6, 6:9] = R_pT @ (dt * np.eye(3) - dt**2 * w_x)
         J[3:6, 9:12] = R_pT @ R_i @ (dt / 2.0 * m.dv_dba)

@@ -1,7 +1,8 @@
-"""Tests of the DVL factors, GTSAM style: the measurement built from the model gives zero error at the
-truth, and every Jacobian matches a numerical derivative (central differences through retract) at random
-states, near-identity (1e-7 rad) and large rotations, a 180 deg roll mounting, non-zero lever arm and body
-rate, and a non-zero residual.
+"""The DVL factor (factors/dvl.py), GTSAM style: the measurement built from the model gives zero error at the
+truth, and every Jacobian matches a numerical derivative (central differences through retract, tests/support/
+numerical.py) at random states, near-identity (1e-7 rad) and large rotations, a 180 deg roll mounting, non-zero
+lever arm and body rate, and a non-zero residual; every combination of the options (time offset, lever arm as a
+variable, beam, motion from a keyframe) likewise, the factor's linearisation equal to the error function's.
 
     y = k * b_R_d^T * ( n_R_b^T * n_v  +  b_omega x b_l )          y_j = d_u_j . y
 """
@@ -9,26 +10,27 @@ rate, and a non-zero residual.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import gtsam
 import numpy as np
 import pytest
-from gtsam.symbol_shorthand import B, K, V, X
-from gtsam.utils.numerical_derivative import (
-    numericalDerivative41,
-    numericalDerivative42,
-    numericalDerivative43,
-    numericalDerivative44,
-)
+from gtsam.symbol_shorthand import B, K, L, T, V, X
 from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.factors import (
+    DvlOptions,
+    OffsetInput,
+    PingMotion,
     dvl_beam_error,
+    dvl_error,
     dvl_velocity_error,
     make_dvl_beam_factor,
+    make_dvl_factor,
     make_dvl_velocity_factor,
 )
+from tests.support.numerical import numerical_jacobians
 
 KEYS = (X(0), V(0), K(0), B(0))
 KEY_DIMS = (6, 3, 1, 3)
@@ -141,12 +143,9 @@ def assert_jacobian_close(actual: np.ndarray, numerical: np.ndarray, what: str) 
     np.testing.assert_allclose(actual, numerical, rtol=0.0, atol=JAC_RTOL * scale, err_msg=what)
 
 
-NUMERICAL = (numericalDerivative41, numericalDerivative42, numericalDerivative43, numericalDerivative44)
-
-
-def numerical_jacobians(h: Callable[..., np.ndarray], s: State) -> list[np.ndarray]:
+def numerical_of(h: Callable[..., np.ndarray], s: State) -> list[np.ndarray]:
     """Central differences of h(pose, n_v, k, b_R_d) on the manifold (Pose3/Rot3 retract, k + dk)."""
-    return [nd(h, s.pose, s.n_v, s.k, s.rot) for nd in NUMERICAL]
+    return numerical_jacobians(h, [s.pose, s.n_v, s.k, s.rot])
 
 
 def split_columns(A: np.ndarray) -> list[np.ndarray]:
@@ -179,7 +178,7 @@ def test_velocity_jacobians_pure_function(kind: str, seed: int) -> None:
     e = dvl_velocity_error(s.pose, s.n_v, s.k, s.rot, y, s.b_omega, s.b_l, H)
     np.testing.assert_allclose(e, s.y_model() - y, atol=ZERO_TOL)
     assert np.abs(e).max() > 1e-3  # the residual really is non-zero
-    for i, (J, J_num) in enumerate(zip(H, numerical_jacobians(h, s), strict=True)):
+    for i, (J, J_num) in enumerate(zip(H, numerical_of(h, s), strict=True)):
         assert J is not None
         assert_jacobian_close(J, J_num, f"H[{i}]")
     assert [J.shape for J in H if J is not None] == [(3, 6), (3, 3), (3, 1), (3, 3)]
@@ -195,7 +194,7 @@ def test_velocity_jacobians_custom_factor(kind: str, seed: int) -> None:
     def h(pose: gtsam.Pose3, n_v: np.ndarray, k: float, rot: gtsam.Rot3) -> np.ndarray:
         return factor.unwhitenedError(make_values(pose, n_v, k, rot))
 
-    numerical = numerical_jacobians(h, s)
+    numerical = numerical_of(h, s)
     jv = gtsam.JacobianVector([np.empty((0, 0))] * 4)
     e = factor.unwhitenedError(s.values(), jv)
     np.testing.assert_allclose(e, -s.residual, atol=ZERO_TOL)
@@ -258,7 +257,7 @@ def test_beam_jacobians_numerical(kind: str, seed: int) -> None:
     def h(pose: gtsam.Pose3, n_v: np.ndarray, k: float, rot: gtsam.Rot3) -> np.ndarray:
         return dvl_beam_error(pose, n_v, k, rot, d_u, y_j, s.b_omega, s.b_l)
 
-    numerical = numerical_jacobians(h, s)
+    numerical = numerical_of(h, s)
     H: list[np.ndarray | None] = [None] * 4
     dvl_beam_error(s.pose, s.n_v, s.k, s.rot, d_u, y_j, s.b_omega, s.b_l, H)
     for i in range(4):
@@ -456,3 +455,136 @@ def test_end_to_end_recovers_calibration(truth: Calibration, b_R_d0: np.ndarray,
     assert abs(k - truth.k) < CAL_TOL
     angle = np.linalg.norm(gtsam.Rot3(truth.b_R_d).localCoordinates(b_R_d))
     assert angle < CAL_TOL
+
+
+# ------------------------------------------------------------------ options: time offset, lever arm, motion, beam
+
+N_G = np.array([0.0, 0.0, -9.79])
+OPTION_SETS = [pytest.param(offset, lever, beam, motion, id=f"offset{offset:d}-lever{lever:d}-beam{beam:d}-"
+                            f"motion{motion:d}")
+               for offset in (False, True) for lever in (False, True) for beam in (False, True)
+               for motion in (False, True)]
+OPTION_CASES = [(kind, seed) for kind in ("random", "near_identity", "roll_180") for seed in range(2)]
+
+
+def option_state(kind: str, seed: int, random_motion: Callable[..., PingMotion]) -> dict[str, Any]:
+    """A state, the known inputs and a random IMU motion (large biases, so that the bias correction's curvature is
+    exercised)."""
+    rng = np.random.default_rng(100 + seed)
+    n_R_b = Rotation.from_rotvec(rng.normal(size=3)).as_matrix()
+    b_R_d = Rotation.from_rotvec(0.05 * rng.normal(size=3)).as_matrix()
+    if kind == "near_identity":
+        n_R_b = Rotation.from_rotvec(1e-7 * rng.normal(size=3)).as_matrix()
+        b_R_d = Rotation.from_rotvec(1e-7 * rng.normal(size=3)).as_matrix()
+    if kind == "roll_180":
+        b_R_d = b_R_d @ ROLL_180
+    d_u = rng.normal(size=3)
+    return {"pose": gtsam.Pose3(gtsam.Rot3(n_R_b), rng.normal(size=3) * 200), "n_v": rng.normal(size=3) * 2,
+            "bias": gtsam.imuBias.ConstantBias(0.05 * rng.normal(size=3), 0.02 * rng.normal(size=3)),
+            "k": np.array([1.0 + 0.01 * rng.normal()]), "rot": gtsam.Rot3(b_R_d),
+            "dt": np.array([rng.uniform(-1.0, 1.0)]), "b_l": rng.normal(size=3),
+            "b_omega": 0.1 * rng.normal(size=3), "b_a": 0.2 * rng.normal(size=3) + n_R_b.T @ -N_G,
+            "G": Rotation.from_rotvec(0.02 * rng.normal(size=3)).as_matrix() + 1e-4 * rng.normal(size=(3, 3)),
+            "d_u": d_u / np.linalg.norm(d_u), "motion": random_motion(seed)}
+
+
+def options_of(s: dict[str, Any], offset: bool, lever: bool, beam: bool, motion: bool,
+               considered: bool = False) -> tuple[DvlOptions, list[Any]]:
+    """The options and the variables in their keys' order."""
+    o = DvlOptions(s["b_omega"], s["b_l"], s["d_u"] if beam else None,
+                   OffsetInput(s["b_a"], N_G, s["G"]) if offset else None, s["motion"] if motion else None, lever,
+                   considered)
+    x = [s["pose"], s["n_v"]] + [s["bias"]] * motion + [s["k"], s["rot"]] + [s["dt"]] * offset + [s["b_l"]] * lever
+    return o, x
+
+
+def linearized(factor: gtsam.CustomFactor, x: list[Any], dims: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
+    """b and the Jacobian blocks (of dims columns) of factor linearised at the variables x (in its keys' order)."""
+    values = gtsam.Values()
+    for key, value in zip(factor.keys(), x, strict=True):
+        values.insert(key, value)
+    A, b = factor.linearize(values).jacobian()
+    return b, np.split(A, np.cumsum(dims)[:-1], axis=1)
+
+
+@pytest.mark.parametrize("offset, lever, beam, motion", OPTION_SETS)
+@pytest.mark.parametrize("kind, seed", OPTION_CASES)
+def test_every_option_against_numerical_derivatives(kind: str, seed: int, offset: bool, lever: bool, beam: bool,
+                                                    motion: bool, random_motion: Callable[..., PingMotion]) -> None:
+    """dvl_error's Jacobians against numerical derivatives on the manifold for every combination of options; the
+    factor's linearisation equals them (unit noise); a lever arm as a variable gives the known-lever-arm error."""
+    s = option_state(kind, seed, random_motion)
+    o, x = options_of(s, offset, lever, beam, motion)
+    y: np.ndarray | float = 0.3 if beam else np.array([0.3, -0.2, 0.1])  # a non-zero residual
+    H: list[Any] = [None] * len(x)
+    e = dvl_error(x, y, o, H)
+    assert e.shape == ((1,) if beam else (3,))
+    for i, (J, Jn) in enumerate(zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)):
+        assert J.shape == Jn.shape, f"block {i}"
+        np.testing.assert_allclose(J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())),
+                                   err_msg=f"block {i}")
+    if lever:
+        o_known, x_known = options_of(s, offset, False, beam, motion)
+        np.testing.assert_allclose(dvl_error(x_known, y, o_known), e, atol=1e-14)
+    keys = [X(0), V(0)] + [B(1)] * motion + [K(0), B(0)] + [T(0)] * offset + [L(0)] * lever
+    factor = make_dvl_factor(gtsam.noiseModel.Unit.Create(len(e)), keys, y, o)
+    b, blocks = linearized(factor, x, [J.shape[1] for J in H])
+    np.testing.assert_allclose(b, -e, atol=1e-12)
+    for i, J in enumerate(blocks):
+        np.testing.assert_allclose(J, H[i], atol=1e-12, err_msg=f"linearize block {i}")
+
+
+def test_options_reduce_to_the_base_case(random_motion: Callable[..., PingMotion],
+                                         earth: tuple[np.ndarray, np.ndarray]) -> None:
+    """dt_d = 0 is the model without offset; no motion (PingMotion.none with the Earth model) is the ping at its
+    state (zero bias columns); a considered factor keeps the error and zeroes the scale's and misalignment's
+    Jacobians."""
+    s = option_state("random", 0, random_motion)
+    d_y = np.array([0.3, -0.2, 0.1])
+    o, x = options_of(s, False, False, False, False)
+    e = dvl_error(x, d_y, o)
+    o_off, x_off = options_of(s, True, False, False, False)
+    x_off[4] = np.array([0.0])
+    np.testing.assert_allclose(dvl_error(x_off, d_y, o_off), e, atol=1e-14)
+    still = dict(s, motion=PingMotion.none().motion(earth[0], N_G, np.zeros(3), np.zeros((3, 3))))
+    o_m, x_m = options_of(still, False, False, False, True)
+    H: list[Any] = [None] * 5
+    np.testing.assert_allclose(dvl_error(x_m, d_y, o_m, H), e, atol=1e-14)
+    assert np.array_equal(H[2], np.zeros((3, 6)))
+    o_c, x_c = options_of(s, True, False, False, True, considered=True)
+    Hc: list[Any] = [None] * 6
+    np.testing.assert_allclose(dvl_error(x_c, d_y, o_c, Hc), dvl_error(x_c, d_y, options_of(s, True, False, False,
+                                                                                            True)[0]), atol=0)
+    assert not Hc[3].any() and not Hc[4].any() and Hc[5].any()
+
+
+def test_lever_arm_along_the_rotation_axis_is_invisible(random_motion: Callable[..., PingMotion]) -> None:
+    """h depends on b_l only through b_omega x b_l: the Jacobian's null space is the rotation axis; its closed form
+    is k b_R_d^T [b_omega]_x."""
+    s = option_state("random", 0, random_motion)
+    o, x = options_of(s, False, True, False, False)
+    H: list[Any] = [None] * 5
+    dvl_error(x, np.zeros(3), o, H)
+    axis = s["b_omega"] / np.linalg.norm(s["b_omega"])
+    assert np.linalg.norm(H[4] @ axis) < 1e-14
+    assert np.linalg.matrix_rank(H[4], tol=1e-10) == 2
+    k_d_R_b = s["k"][0] * s["rot"].matrix().T
+    np.testing.assert_allclose(H[4], k_d_R_b @ np.cross(s["b_omega"], np.eye(3), axisb=0, axisc=0), atol=1e-14)
+
+
+def test_option_factors_reject_bad_input(random_motion: Callable[..., PingMotion]) -> None:
+    s = option_state("random", 1, random_motion)
+    unit3 = gtsam.noiseModel.Unit.Create(3)
+    o, _ = options_of(s, True, True, False, True)
+    keys = [X(0), V(0), B(1), K(0), B(0), T(0), L(0)]
+    with pytest.raises(ValueError, match="b_a"):
+        make_dvl_factor(unit3, keys, np.zeros(3), replace(o, offset=OffsetInput(np.array([np.inf, 0, 0]), N_G,
+                                                                                 s["G"])))
+    with pytest.raises(ValueError, match="G must be"):
+        make_dvl_factor(unit3, keys, np.zeros(3), replace(o, offset=OffsetInput(s["b_a"], N_G, np.eye(2))))
+    with pytest.raises(ValueError, match="7 keys"):
+        make_dvl_factor(unit3, keys[:-1], np.zeros(3), o)
+    with pytest.raises(ValueError, match="Earth model"):
+        make_dvl_factor(unit3, keys, np.zeros(3), replace(o, motion=replace(s["motion"], n_G=None)))
+    with pytest.raises(ValueError, match="unit vector"):
+        make_dvl_factor(gtsam.noiseModel.Unit.Create(1), keys, 0.1, replace(o, d_u=np.array([1.0, 1.0, 0.0])))

@@ -5,29 +5,26 @@ the curvature term, lever arm and velocity bridge; the factor through GTSAM's li
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import gtsam
 import numpy as np
 import pytest
 from gtsam.symbol_shorthand import V, X
-from gtsam.utils.numerical_derivative import numericalDerivative21, numericalDerivative22
-from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.factors import depth_error, make_depth_factor
+from tests.support.numerical import numerical_jacobian
 
 R_EARTH = 6.37e6
+Attitude = Callable[[str, np.random.Generator], np.ndarray]  # the attitude fixture (conftest.py)
+Check = Callable[..., None]  # the assert_linearization fixture (conftest.py)
 CASES = [(kind, seed) for kind in ("random", "near_identity", "large", "no_lever", "flat") for seed in range(4)]
 
 
-def _state(kind: str, seed: int) -> tuple[gtsam.Pose3, np.ndarray, np.ndarray, float, float]:
+def _state(kind: str, seed: int, attitude: Attitude) -> tuple[gtsam.Pose3, np.ndarray, np.ndarray, float,
+                                                              float]:
     rng = np.random.default_rng(seed)
-    if kind == "near_identity":
-        R = Rotation.from_rotvec(1e-7 * rng.normal(size=3)).as_matrix()
-    elif kind == "large":
-        u = rng.normal(size=3)
-        R = Rotation.from_rotvec((np.pi - 1e-4) * u / np.linalg.norm(u)).as_matrix()
-    else:
-        R = Rotation.random(random_state=rng).as_matrix()
+    R = attitude(kind, rng)
     n_p = rng.normal(scale=2000.0, size=3)
     lever = np.zeros(3) if kind == "no_lever" else rng.normal(scale=0.8, size=3)
     radius = math.inf if kind == "flat" else R_EARTH
@@ -42,8 +39,8 @@ def _height(pose: gtsam.Pose3, lever: np.ndarray, radius: float, n_v: np.ndarray
 
 
 @pytest.mark.parametrize("kind, seed", CASES)
-def test_depth_zero_error_at_truth_and_jacobians(kind: str, seed: int) -> None:
-    pose, n_v, lever, radius, dt = _state(kind, seed)
+def test_depth_zero_error_at_truth_and_jacobians(kind: str, seed: int, attitude: Attitude) -> None:
+    pose, n_v, lever, radius, dt = _state(kind, seed, attitude)
     z_true = _height(pose, lever, radius, n_v, dt)
     assert abs(depth_error(pose, z_true, lever, radius, n_v, dt)[0]) < 1e-9
     z_meas = z_true - 0.3  # a non-zero residual
@@ -54,16 +51,17 @@ def test_depth_zero_error_at_truth_and_jacobians(kind: str, seed: int) -> None:
     H: list[np.ndarray | None] = [None, None]
     e = depth_error(pose, z_meas, lever, radius, n_v, dt, H)
     np.testing.assert_allclose(e, [0.3], atol=1e-9)
-    for i, nd in enumerate((numericalDerivative21, numericalDerivative22)):
-        J_num = nd(h, pose, n_v)
+    for i in range(2):
+        J_num = numerical_jacobian(h, [pose, n_v], i)
         assert H[i] is not None and H[i].shape == J_num.shape
         np.testing.assert_allclose(H[i], J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]")
 
 
 @pytest.mark.parametrize("kind, seed", CASES[::3])
 @pytest.mark.parametrize("with_velocity", [False, True])
-def test_depth_factor_linearize_matches_numerical(kind: str, seed: int, with_velocity: bool) -> None:
-    pose, n_v, lever, radius, dt = _state(kind, seed)
+def test_depth_factor_linearize_matches_numerical(kind: str, seed: int, with_velocity: bool,
+                                                  attitude: Attitude, assert_linearization: Check) -> None:
+    pose, n_v, lever, radius, dt = _state(kind, seed, attitude)
     z_meas = _height(pose, lever, radius, n_v, dt if with_velocity else 0.0) + 0.2
     factor = make_depth_factor(gtsam.noiseModel.Unit.Create(1), X(0), z_meas, lever, radius,
                                V(0) if with_velocity else None, dt if with_velocity else 0.0)
@@ -71,21 +69,7 @@ def test_depth_factor_linearize_matches_numerical(kind: str, seed: int, with_vel
     values.insert(X(0), pose)
     values.insert(V(0), n_v)
     assert factor.unwhitenedError(values)[0] == pytest.approx(-0.2, abs=1e-9)
-
-    def h(p: gtsam.Pose3, v: np.ndarray) -> np.ndarray:
-        vals = gtsam.Values()
-        vals.insert(X(0), p)
-        vals.insert(V(0), v)
-        return factor.unwhitenedError(vals)
-
-    A, b = factor.linearize(values).jacobian()
-    np.testing.assert_allclose(b, [0.2], atol=1e-9)
-    J_pose = numericalDerivative21(h, pose, n_v)
-    np.testing.assert_allclose(A[:, :6], J_pose, atol=1e-6)
-    if with_velocity:
-        np.testing.assert_allclose(A[:, 6:], numericalDerivative22(h, pose, n_v), atol=1e-6)
-    else:
-        assert A.shape == (1, 6)
+    assert_linearization(factor, pose, n_v, np.array([0.2]), with_velocity)
 
 
 def test_depth_factor_rejects_bad_input() -> None:
