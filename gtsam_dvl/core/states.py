@@ -152,7 +152,8 @@ STATES: tuple[SharedState, ...] = (
         "gyro_bias", "gyro bias", B(0), "bias", 3, "rad/s", "deg/h", 1.0 / DEG_PER_H,
         prior=lambda c, m: _bias_prior(c.imu.gyro_bias_sigma_deg_per_h, DEG_PER_H),
         target=lambda o: o.gyro_bias_deg_per_h, vehicle=False,
-        components=(("x", "about body x (forward)"), ("y", "about body y (left)"), ("z", "about body z (up, vertical)")),
+        components=(("x", "about body x (forward)"), ("y", "about body y (left)"),
+                    ("z", "about body z (up, vertical)")),
         offset=3, per_state=_random_walk, in_block=True, relinearization=lambda th: np.asarray(th.bias[3:])),
     SharedState(
         "accel_bias", "accelerometer bias", B(0), "bias", 3, "m/s^2", "micro-g", 1.0 / UG,
@@ -183,6 +184,11 @@ STATES: tuple[SharedState, ...] = (
         target=None, vehicle=True, components=_BODY_AXES, enabled=lambda c: c.dvl.estimate_lever_arm, ekf=False),
 )
 BY_NAME: dict[str, SharedState] = {s.name: s for s in STATES}
+
+
+def required_states() -> list[SharedState]:
+    """The states every configuration estimates (every result holds them)."""
+    return [s for s in STATES if s.enabled is _always]
 
 
 def enabled_states(config: EstimatorConfig) -> list[SharedState]:
@@ -253,14 +259,6 @@ def _by_key(states: list[SharedState]) -> list[tuple[int, list[SharedState]]]:
             for k in _unique(s.key for s in states)]
 
 
-def _gtsam_value(kind: Kind, value: np.ndarray) -> object:
-    if kind == "rot3":
-        return gtsam.Rot3(value)
-    if kind == "bias":
-        return gtsam.imuBias.ConstantBias(value[:3], value[3:])
-    return np.asarray(value, dtype=float)
-
-
 def _key_priors(config: EstimatorConfig, mounting: Mounting) -> list[tuple[int, Kind, np.ndarray, Prior, bool]]:
     """Per key of the enabled states: key, kind, value (the states' values joined) and the joined Prior."""
     out = []
@@ -294,7 +292,12 @@ def initial_values(config: EstimatorConfig, mounting: Mounting) -> gtsam.Values:
     """The enabled states' keys (at the first state) at their priors' values."""
     values = gtsam.Values()
     for key, kind, value, _, _ in _key_priors(config, mounting):
-        values.insert(key, _gtsam_value(kind, value))
+        if kind == "rot3":
+            values.insert(key, gtsam.Rot3(value))
+        elif kind == "bias":
+            values.insert(key, gtsam.imuBias.ConstantBias(value[:3], value[3:]))
+        else:
+            values.insert(key, np.asarray(value, dtype=float))
     return values
 
 
