@@ -195,7 +195,7 @@ def analyse(result: NavResult, config: EstimatorConfig | None = None) -> Observa
     if result.calib_joint_cov is None:
         raise ValueError("the result has no joint covariance of the calibration and bias block")
     if config is None:
-        config = _config_of(result)
+        config = result_config(result)
     return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config,
                          result.lever_arm_cov)
 
@@ -215,7 +215,7 @@ def _state_verdict(key: str, text: str, unit: str, prior: float, post: float, du
     return StateVerdict(key, text, unit, float(prior), float(post), ratio, verdict, hours)
 
 
-def _config_of(result: NavResult) -> EstimatorConfig:
+def result_config(result: NavResult) -> EstimatorConfig:
     """The configuration the result was made with (GtsamDvlError if it does not read)."""
     if result.estimator_config is None:
         raise GtsamDvlError("the result's configuration does not read (a result of another gtsam_dvl version)")
