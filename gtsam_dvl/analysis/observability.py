@@ -1,4 +1,6 @@
-"""Observability from marginal covariances: which calibration and bias directions a log determined.
+"""Observability from marginal covariances: which calibration and bias directions a log determined. Every
+verdict on the shared states lives here; their rows, units, priors and targets come from the registry
+(core/states.py).
 
 The calibration and bias block's posterior covariance (from any estimator) is compared with its prior:
 per state, ratio = posterior sigma / prior sigma; for directions, the eigen-decomposition of the
@@ -20,6 +22,9 @@ lever_arm, from NavResult.lever_arm_cov against [dvl] lever_arm_sigma_m), with a
 half a metre in turns. It enters the DVL model only as b_omega x b_l, so it is observable only from rotation:
 its component along the rotation axis of every turn of the log is not (turns about the vertical leave b_l's z
 undetermined, and a straight run determines none of it). It is not part of the direction analysis.
+
+With [dvl] estimate_time_offset the DVL time offset is "determined" when its sigma falls below
+TIME_OFFSET_DETERMINED of its prior's (time_offset_verdict, the summary's dvl_time_offset_s).
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ DETERMINED = 0.5
 NOT_DETERMINED = 0.9
 LEVER_DETERMINED = 1.0 / 3.0  # the lever arm's "determined": posterior sigma below a third of the prior's
 TIME_OFFSET_DETERMINED = 0.1  # the time offset's "determined": posterior sigma below a tenth of the prior's
+
 
 def _rows(states: list[SharedState]) -> list[tuple[str, str, str]]:
     """(key, description, display unit) of each tangent component of the states, in their order."""

@@ -72,6 +72,10 @@ def _always(config: EstimatorConfig) -> bool:
     return True
 
 
+def _never(config: EstimatorConfig) -> bool:
+    return False
+
+
 def _random_walk(config: EstimatorConfig) -> bool:
     return config.imu.bias_model == "random_walk"
 
@@ -95,7 +99,7 @@ class SharedState:
     components: tuple[tuple[str, str], ...]
     enabled: Callable[[EstimatorConfig], bool] = _always  # whether the configuration estimates it
     offset: int = 0  # where its tangent starts in its key's
-    per_state: Callable[[EstimatorConfig], bool] = lambda config: False  # a variable per state (random walk)
+    per_state: Callable[[EstimatorConfig], bool] = _never  # a variable per state (the random-walk bias)
     in_block: bool = False  # in the joint calibration block (NavResult.calib_joint_cov, the direction analysis)
     ekf: bool = True  # the EKF carries it in its error state
     # the online estimator's iSAM2 relinearises it past these (per tangent component); None: not estimated online
