@@ -13,10 +13,9 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.analysis.metrics import trajectory_errors
-from gtsam_dvl.analysis.observability import ObservabilityReport, analyse_block, attribute_segments
+from gtsam_dvl.analysis.observability import ObservabilityReport, analyse_block, attribute_segments, result_config
 from gtsam_dvl.analysis.segments import classify_log
 from gtsam_dvl.analysis.surfacing import SurfacingReport, surfacing_report
-from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import StoredResult
 from gtsam_dvl.core.types import LogData, Segment
 
@@ -64,7 +63,7 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
             "velocity_within_3_sigma": _within_3_sigma(ev.velocity_error_m_s, ev.velocity_sigma_m_s),
             "calibration_errors": stored.summary.get("errors", {}),
         }
-    config = EstimatorConfig.from_dict(res.config) if res.config else EstimatorConfig()
+    config = result_config(res)
     if log is not None and log.gnss is not None:
         ev.gnss = surfacing_report(res, log, config)
         if ev.gnss is not None:

@@ -26,7 +26,6 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
-from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
@@ -105,7 +104,8 @@ class Health:
 def assess_health(result: NavResult, log: LogData) -> Health:
     """The health of a run (module doc)."""
     health = assess_log_health(log)
-    config = _config_of(result)
+    # the configuration the result was made with; a result of another version: judged with the default noise rule
+    config = result.estimator_config or EstimatorConfig()
     _check_finite(result, health)
     _check_solver(result, health)
     if len(result.t):
@@ -124,13 +124,6 @@ def assess_log_health(log: LogData) -> Health:
 
 
 # ----- checks ----------------------------------------------------------------------------------------------
-
-def _config_of(result: NavResult) -> EstimatorConfig:
-    try:
-        return EstimatorConfig.from_dict(result.config) if result.config else EstimatorConfig()
-    except GtsamDvlError:
-        return EstimatorConfig()  # a result written by another version: judge it with the default noise rule
-
 
 def _check_finite(result: NavResult, health: Health) -> None:
     arrays = {"position": result.n_p, "velocity": result.n_v, "attitude": result.n_R_b,

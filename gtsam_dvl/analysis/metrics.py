@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from gtsam_dvl.analysis.observability import lever_arm_verdict, time_offset_verdict
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
 from gtsam_dvl.core.types import LogData, TruthData
@@ -115,49 +116,6 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         out["gyro_bias_nsigma"] = (g_err / result.gyro_bias_sigma_deg_per_h).tolist()
         out["accel_bias_nsigma"] = (a_err / result.accel_bias_sigma_ug).tolist()
     out.update(trajectory_errors(result, log.truth).metrics())
-    return out
-
-
-def time_offset_verdict(result: NavResult) -> dict[str, Any]:
-    """The estimated DVL-IMU time offset (s) with its sigma and whether the log determined it: it is observable
-    only from turns and accelerations (the velocity rate), so on a straight, steady run its sigma stays near
-    the prior's ([dvl] time_offset_sigma_s)."""
-    prior = float(result.config.get("dvl", {}).get("time_offset_sigma_s", float("nan")))
-    determined = bool(result.time_offset_sigma_s < 0.1 * prior) if np.isfinite(prior) else None
-    if determined:
-        verdict = f"determined: sigma {result.time_offset_sigma_s * 1e3:.1f} ms (prior {prior * 1e3:.0f} ms)"
-    else:
-        verdict = (f"not observable from this log: sigma {result.time_offset_sigma_s * 1e3:.1f} ms, near the prior's "
-                   f"{prior * 1e3:.0f} ms (the offset shows only in turns and accelerations)")
-    return {"value": result.time_offset_s, "sigma": result.time_offset_sigma_s, "determined": determined,
-            "verdict": verdict,
-            "convention": "the DVL message stamped t measures the velocity at t + dt_d (dt_d > 0: stamps early)"}
-
-
-def lever_arm_verdict(result: NavResult, log: LogData | None = None) -> dict[str, Any]:
-    """The estimated DVL lever arm b_l (IMU -> DVL, m, base_link) with its per-axis sigma and whether the log
-    determined each axis (analysis/observability.py lever_arm_verdicts: posterior sigma below a third of the
-    prior's [dvl] lever_arm_sigma_m), with the /tf_static value it started from when the log is given."""
-    if result.lever_arm_m is None or result.lever_arm_cov is None:
-        raise ValueError("the result has no estimated lever arm ([dvl] estimate_lever_arm)")
-    from gtsam_dvl.analysis.observability import LEVER_ARM_NOTE, lever_arm_verdicts
-
-    prior = float(result.config.get("dvl", {}).get("lever_arm_sigma_m", float("nan")))
-    sigma = np.sqrt(np.diag(result.lever_arm_cov))
-    out: dict[str, Any] = {"value": result.lever_arm_m.tolist(), "sigma": sigma.tolist(), "prior_sigma": prior,
-                           "frame": "base_link (x forward, y left, z up), from the IMU to the DVL, m"}
-    if log is not None:
-        out["tf_static"] = np.asarray(log.mounting.b_l, dtype=float).tolist()
-    if not np.isfinite(prior):
-        out.update(determined=None, verdict=None)
-        return out
-    duration = float(result.t[-1] - result.t[0]) if len(result.t) else 0.0
-    verdicts = lever_arm_verdicts(result.lever_arm_cov, prior, duration)
-    out["determined"] = [v.verdict == "determined" for v in verdicts]
-    out["verdict"] = [f"{v.key[-1]}: {v.verdict} (sigma {v.posterior_sigma:.3f} m, prior {prior:.3g} m)"
-                      for v in verdicts]
-    if not all(out["determined"]):
-        out["note"] = LEVER_ARM_NOTE
     return out
 
 

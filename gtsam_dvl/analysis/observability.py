@@ -1,4 +1,6 @@
-"""Observability from marginal covariances: which calibration and bias directions a log determined.
+"""Observability from marginal covariances: which calibration and bias directions a log determined. Every
+verdict on the shared states lives here; their rows, units, priors and targets come from the registry
+(core/states.py).
 
 The calibration and bias block's posterior covariance (from any estimator) is compared with its prior:
 per state, ratio = posterior sigma / prior sigma; for directions, the eigen-decomposition of the
@@ -20,35 +22,39 @@ lever_arm, from NavResult.lever_arm_cov against [dvl] lever_arm_sigma_m), with a
 half a metre in turns. It enters the DVL model only as b_omega x b_l, so it is observable only from rotation:
 its component along the rotation axis of every turn of the log is not (turns about the vertical leave b_l's z
 undetermined, and a straight run determines none of it). It is not part of the direction analysis.
+
+With [dvl] estimate_time_offset the DVL time offset is "determined" when its sigma falls below
+TIME_OFFSET_DETERMINED of its prior's (time_offset_verdict, the summary's dvl_time_offset_s).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.types import Segment
-from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.core.states import BY_NAME, SharedState, block_states
+from gtsam_dvl.core.types import LogData, Mounting, Segment
 
 DETERMINED = 0.5
 NOT_DETERMINED = 0.9
 LEVER_DETERMINED = 1.0 / 3.0  # the lever arm's "determined": posterior sigma below a third of the prior's
+TIME_OFFSET_DETERMINED = 0.1  # the time offset's "determined": posterior sigma below a tenth of the prior's
 
-STATES = [
-    ("accel_bias_x", "accelerometer bias along body x (forward)", "micro-g"),
-    ("accel_bias_y", "accelerometer bias along body y (left)", "micro-g"),
-    ("accel_bias_z", "accelerometer bias along body z (up)", "micro-g"),
-    ("gyro_bias_x", "gyro bias about body x (forward)", "deg/h"),
-    ("gyro_bias_y", "gyro bias about body y (left)", "deg/h"),
-    ("gyro_bias_z", "gyro bias about body z (up, vertical)", "deg/h"),
-    ("scale", "DVL scale factor", "ppm"),
-    ("misalignment_roll", "DVL misalignment about body x, the thrust axis (roll)", "deg"),
-    ("misalignment_pitch", "DVL misalignment about body y (pitch)", "deg"),
-    ("misalignment_yaw", "DVL misalignment about body z (yaw)", "deg"),
-]
+
+def _rows(states: list[SharedState]) -> list[tuple[str, str, str]]:
+    """(key, description, display unit) of each tangent component of the states, in their order."""
+    return [(key, text, s.display_unit) for s in states
+            for key, text in zip(s.component_names(), s.component_texts(), strict=True)]
+
+
+# the calibration block's components (core/states.py block_states): accelerometer and gyro bias, scale, misalignment
+STATES = _rows(block_states())
 
 
 def verdict_of(ratio: float) -> str:
@@ -118,11 +124,7 @@ class DirectionVerdict:
         return f"{self.verdict} direction ({fraction_text(self.ratio)} of the prior): {parts}"
 
 
-LEVER_ARM_STATES = [
-    ("lever_arm_x", "DVL lever arm along body x (forward)", "m"),
-    ("lever_arm_y", "DVL lever arm along body y (left)", "m"),
-    ("lever_arm_z", "DVL lever arm along body z (up)", "m"),
-]
+LEVER_ARM_STATES = _rows([BY_NAME["lever_arm"]])
 LEVER_ARM_NOTE = ("the lever arm is observable only from rotation (it enters the DVL velocity as b_omega x b_l): "
                   "a lever arm along the rotation axis of every turn is not, so turns about the vertical leave its "
                   "z component undetermined and a run without turns determines none of it")
@@ -164,27 +166,21 @@ class ObservabilityReport:
 
 
 def _user_units_jacobian(b_R_d: np.ndarray) -> np.ndarray:
-    """d(user units)/d(tangent) for [accel bias, gyro bias, scale, b_R_d right tangent]: micro-g, deg/h,
+    """d(user units)/d(tangent) of the calibration block (states.SharedState.display_jacobian): micro-g, deg/h,
     ppm, and degrees about body axes (body rotation = b_R_d * right tangent)."""
-    J = np.zeros((10, 10))
-    J[:3, :3] = np.eye(3) / UG
-    J[3:6, 3:6] = np.eye(3) / DEG_PER_H
-    J[6, 6] = 1e6
-    J[7:, 7:] = np.degrees(b_R_d)
-    return J
+    return block_diag(*[s.display_jacobian(np.asarray(b_R_d) if s.kind == "rot3" else np.zeros(s.dim))
+                        for s in block_states()])
 
 
 def prior_sigmas(config: EstimatorConfig) -> np.ndarray:
     """Prior sigmas of the block in user units (micro-g, deg/h, ppm, deg)."""
-    return np.array([config.imu.accel_bias_sigma_ug] * 3 + [config.imu.gyro_bias_sigma_deg_per_h] * 3
-                    + [config.priors.scale_sigma * 1e6] + list(config.priors.misalignment_sigma_deg), dtype=float)
+    return np.concatenate([s.prior_display_sigma(config) for s in block_states()])
 
 
 def target_sigmas(config: EstimatorConfig) -> np.ndarray:
     """The [observability] targets in the order of STATES, user units (micro-g, deg/h, ppm, deg)."""
-    o = config.observability
-    return np.array([o.accel_bias_ug] * 3 + [o.gyro_bias_deg_per_h] * 3 + [o.scale_ppm] + [o.misalignment_deg] * 3,
-                    dtype=float)
+    return np.concatenate([np.full(s.dim, s.target(config.observability) if s.target else np.nan, dtype=float)
+                           for s in block_states()])
 
 
 def state_verdict(ratio: float, posterior: float, target: float) -> str:
@@ -205,7 +201,7 @@ def analyse(result: NavResult, config: EstimatorConfig | None = None) -> Observa
     if result.calib_joint_cov is None:
         raise ValueError("the result has no joint covariance of the calibration and bias block")
     if config is None:
-        config = EstimatorConfig.from_dict(result.config) if result.config else EstimatorConfig()
+        config = result_config(result)
     return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config,
                          result.lever_arm_cov)
 
@@ -225,12 +221,66 @@ def _state_verdict(key: str, text: str, unit: str, prior: float, post: float, du
     return StateVerdict(key, text, unit, float(prior), float(post), ratio, verdict, hours)
 
 
+def result_config(result: NavResult) -> EstimatorConfig:
+    """The configuration the result was made with (GtsamDvlError if it does not read)."""
+    if result.estimator_config is None:
+        raise GtsamDvlError("the result's configuration does not read (a result of another gtsam_dvl version)")
+    return result.estimator_config
+
+
 def lever_arm_verdicts(lever_arm_cov: np.ndarray, prior_sigma_m: float, duration_s: float) -> list[StateVerdict]:
     """Per base_link axis, whether the log determined the lever arm: its marginal sigma (from the 3x3
     covariance, m^2) against the prior's ([dvl] lever_arm_sigma_m), "determined" below LEVER_DETERMINED."""
     post = np.sqrt(np.diag(np.asarray(lever_arm_cov, dtype=float)))
     return [_state_verdict(key, text, unit, float(prior_sigma_m), float(post[i]), duration_s / 3600.0,
                            LEVER_DETERMINED) for i, (key, text, unit) in enumerate(LEVER_ARM_STATES)]
+
+
+def time_offset_verdict(result: NavResult) -> dict[str, Any]:
+    """The estimated DVL-IMU time offset (s) with its sigma and whether the log determined it (its sigma below
+    TIME_OFFSET_DETERMINED of the prior's, [dvl] time_offset_sigma_s): it is observable only from turns and
+    accelerations (the velocity rate), so on a straight, steady run its sigma stays near the prior's."""
+    state = BY_NAME["time_offset"]
+    config = result.estimator_config if result.config else None
+    prior = float(state.prior(config, Mounting()).sigma[0]) if config is not None else float("nan")
+    est = result.calibration.get("time_offset")
+    value, sigma = (0.0, float("nan")) if est is None else (float(est.value[0]), float(est.sigma[0]))
+    determined = bool(sigma < TIME_OFFSET_DETERMINED * prior) if np.isfinite(prior) else None
+    ms = state.to_display
+    if determined:
+        verdict = f"determined: sigma {sigma * ms:.1f} ms (prior {prior * ms:.0f} ms)"
+    else:
+        verdict = (f"not observable from this log: sigma {sigma * ms:.1f} ms, near the prior's "
+                   f"{prior * ms:.0f} ms (the offset shows only in turns and accelerations)")
+    return {"value": value, "sigma": sigma, "determined": determined, "verdict": verdict,
+            "convention": "the DVL message stamped t measures the velocity at t + dt_d (dt_d > 0: stamps early)"}
+
+
+def lever_arm_verdict(result: NavResult, log: LogData | None = None) -> dict[str, Any]:
+    """The estimated DVL lever arm b_l (IMU -> DVL, m, base_link) with its per-axis sigma and whether the log
+    determined each axis (lever_arm_verdicts: posterior sigma below LEVER_DETERMINED of the prior's, [dvl]
+    lever_arm_sigma_m), with the /tf_static value it started from when the log is given."""
+    est = result.calibration.get("lever_arm")
+    if est is None:
+        raise ValueError("the result has no estimated lever arm ([dvl] estimate_lever_arm)")
+    config = result.estimator_config if result.config else None
+    prior = (float(BY_NAME["lever_arm"].prior_display_sigma(config)[0]) if config is not None
+             else float("nan"))
+    out: dict[str, Any] = {"value": est.value.tolist(), "sigma": est.sigma.tolist(), "prior_sigma": prior,
+                           "frame": "base_link (x forward, y left, z up), from the IMU to the DVL, m"}
+    if log is not None:
+        out["tf_static"] = np.asarray(log.mounting.b_l, dtype=float).tolist()
+    if not np.isfinite(prior):
+        out.update(determined=None, verdict=None)
+        return out
+    duration = float(result.t[-1] - result.t[0]) if len(result.t) else 0.0
+    verdicts = lever_arm_verdicts(est.cov, prior, duration)
+    out["determined"] = [v.verdict == "determined" for v in verdicts]
+    out["verdict"] = [f"{v.key[-1]}: {v.verdict} (sigma {v.posterior_sigma:.3f} m, prior {prior:.3g} m)"
+                      for v in verdicts]
+    if not all(out["determined"]):
+        out["note"] = LEVER_ARM_NOTE
+    return out
 
 
 def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: float,
@@ -265,7 +315,8 @@ def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: fl
         order = [k for k in np.argsort(-w) if w[k] >= 0.1]
         directions.append(DirectionVerdict(ratio, verdict_of(ratio), {STATES[k][0]: float(w[k]) for k in order}))
     lever = ([] if lever_arm_cov is None else
-             lever_arm_verdicts(lever_arm_cov, config.dvl.lever_arm_sigma_m, duration_s))
+             lever_arm_verdicts(lever_arm_cov, float(BY_NAME["lever_arm"].prior_display_sigma(config)[0]),
+                                duration_s))
     return ObservabilityReport(states, directions, duration_s, lever)
 
 

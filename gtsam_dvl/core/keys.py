@@ -1,23 +1,31 @@
 """Graph keys and their tangent dimensions: the one naming of the variables every estimator shares.
 
 X(i) pose n_T_b of state i (Pose3: tangent [rotation, translation] in body axes), V(i) velocity n_v (m/s,
-map), B(i) IMU bias [accel, gyro] (B(0) alone for a random-constant bias), K_SCALE the DVL scale factor
-(a 1-vector), C_MISALIGN the calibrated DVL mounting b_R_d (Rot3, perturbed on the right), T_OFFSET the
-DVL-IMU time offset dt_d (a 1-vector, s; only with [dvl] estimate_time_offset), L_LEVER the lever arm b_l from
-the IMU to the DVL (a 3-vector in base_link, m; only with [dvl] estimate_lever_arm).
+map), B(i) IMU bias [accel, gyro] (B(0) alone for a random-constant bias). The keys of the shared states
+(core/states.py names what each is, its prior and units): K_SCALE the DVL scale factor (a 1-vector),
+C_MISALIGN the calibrated DVL mounting b_R_d (Rot3, perturbed on the right), T_OFFSET the DVL-IMU time offset
+dt_d (a 1-vector, s; only with [dvl] estimate_time_offset), L_LEVER the lever arm b_l from the IMU to the DVL
+(a 3-vector in base_link, m; only with [dvl] estimate_lever_arm).
 """
 
 from __future__ import annotations
 
 import gtsam
 
-K_SCALE = gtsam.symbol("k", 0)
-C_MISALIGN = gtsam.symbol("c", 0)
-T_OFFSET = gtsam.symbol("t", 0)  # DVL-IMU time offset dt_d, s (a 1-vector; docs/conventions.md)
-L_LEVER = gtsam.symbol("l", 0)  # lever arm b_l IMU -> DVL, m, base_link (a 3-vector)
-
 # tangent dimension of each variable type, by symbol character
-DIMS = {"x": 6, "v": 3, "b": 6, "k": 1, "c": 3, "t": 1, "l": 3}
+DIMS = {"x": 6, "v": 3, "b": 6}
+
+
+def shared_key(char: str, dim: int) -> int:
+    """The key of a shared variable (index 0 of its symbol character), its tangent dimension recorded in DIMS."""
+    DIMS[char] = dim
+    return gtsam.symbol(char, 0)
+
+
+K_SCALE = shared_key("k", 1)
+C_MISALIGN = shared_key("c", 3)
+T_OFFSET = shared_key("t", 1)  # DVL-IMU time offset dt_d, s (a 1-vector; docs/conventions.md)
+L_LEVER = shared_key("l", 3)  # lever arm b_l IMU -> DVL, m, base_link (a 3-vector)
 
 
 def X(i: int) -> int:

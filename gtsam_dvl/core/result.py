@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.states import Estimate, required_states
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
 
@@ -30,14 +34,24 @@ def misalignment_rpy_and_cov(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: n
 
 class CalibrationUnits:
     """User-unit views (degrees, deg/h, micro-g) shared by every result type that holds b_R_d, b_R_d0,
-    b_R_d_cov, gyro_bias, accel_bias and bias_cov in SI units."""
+    b_R_d_cov, gyro_bias, accel_bias and bias_cov in SI units (as attributes, or NavResult's properties)."""
 
-    b_R_d: np.ndarray
     b_R_d0: np.ndarray
-    b_R_d_cov: np.ndarray
-    gyro_bias: np.ndarray
-    accel_bias: np.ndarray
-    bias_cov: np.ndarray
+    if TYPE_CHECKING:  # read-only here: NavResult reads them from its calibration
+        @property
+        def b_R_d(self) -> np.ndarray: ...
+
+        @property
+        def b_R_d_cov(self) -> np.ndarray: ...
+
+        @property
+        def gyro_bias(self) -> np.ndarray: ...
+
+        @property
+        def accel_bias(self) -> np.ndarray: ...
+
+        @property
+        def bias_cov(self) -> np.ndarray: ...
 
     @property
     def misalignment_deg(self) -> np.ndarray:
@@ -64,10 +78,15 @@ class CalibrationUnits:
         return np.sqrt(np.diag(self.bias_cov)[:3]) / UG
 
 
-@dataclass
+@dataclass(init=False)
 class NavResult(CalibrationUnits):
     """Estimates of one estimator on one log. Angles in radians and SI units inside; the accessors and
-    the summary give degrees, deg/h and micro-g."""
+    the summary give degrees, deg/h and micro-g.
+
+    The shared states (core/states.py) are `calibration`: state name -> Estimate (value and marginal covariance
+    in its tangent), the estimated ones only. Their attributes of old (scale, scale_sigma, b_R_d, b_R_d_cov,
+    accel_bias, gyro_bias, bias_cov, time_offset_s, time_offset_sigma_s, lever_arm_m, lever_arm_cov) read it, and
+    the constructor takes them as keywords too (hand-written for that): a result is made from either."""
 
     estimator: str
     t: np.ndarray  # (N,) s, relative to t0_ns
@@ -76,32 +95,130 @@ class NavResult(CalibrationUnits):
     n_v: np.ndarray  # (N, 3) m/s
     pose_cov: np.ndarray  # (N, 6, 6) GTSAM Pose3 tangent [rotation (body), translation (body)]
     vel_cov: np.ndarray  # (N, 3, 3) m^2/s^2, map frame
-    accel_bias: np.ndarray  # (3,) m/s^2 (final; or the constant)
-    gyro_bias: np.ndarray  # (3,) rad/s
-    bias_cov: np.ndarray  # (6, 6) [accel, gyro] SI
-    scale: float
-    scale_sigma: float
-    b_R_d: np.ndarray  # (3, 3)
-    b_R_d_cov: np.ndarray  # (3, 3) rad^2, right tangent of b_R_d
+    calibration: dict[str, Estimate]  # the estimated shared states by name (final; or the constants)
     b_R_d0: np.ndarray  # nominal mounting
-    t0_ns: int = 0
-    # DVL-IMU time offset dt_d, s, and its sigma (nan: not estimated, dt_d taken as time_offset_s)
-    time_offset_s: float = 0.0
-    time_offset_sigma_s: float = float("nan")
-    # DVL lever arm b_l (IMU -> DVL, m, base_link) and its 3x3 marginal covariance (m^2) with [dvl]
-    # estimate_lever_arm (None: not estimated, b_l taken from /tf_static)
-    lever_arm_m: np.ndarray | None = None
-    lever_arm_cov: np.ndarray | None = None
-    b_omega: np.ndarray | None = None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
-    pose_vel_cross: np.ndarray | None = None  # (N, 6, 3) cross-covariance of pose tangent and n_v
-    calib_joint_cov: np.ndarray | None = None  # (10, 10): [accel, gyro] bias, scale, b_R_d right tangent
-    timeline: Timeline | None = None  # filtering history (online estimators and the EKF)
-    timing_s: dict[str, float] = field(default_factory=dict)
-    info: dict[str, Any] = field(default_factory=dict)  # solver report, counters, alignment
+    t0_ns: int
+    b_omega: np.ndarray | None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
+    pose_vel_cross: np.ndarray | None  # (N, 6, 3) cross-covariance of pose tangent and n_v
+    # (10, 10) joint of the calibration block (states.block_states): [accel, gyro] bias, scale, b_R_d right tangent
+    calib_joint_cov: np.ndarray | None
+    timeline: Timeline | None  # filtering history (online estimators and the EKF)
+    timing_s: dict[str, float]
+    info: dict[str, Any]  # solver report, counters, alignment
     # how the initial attitude was found: "attitude_topic", "configured", "static" or "in_motion" (details,
     # with its sigmas, in info["alignment"])
-    alignment_method: str = ""
-    config: dict[str, Any] = field(default_factory=dict)
+    alignment_method: str
+    config: dict[str, Any]  # the effective configuration (EstimatorConfig.to_dict)
+
+    def __init__(self, estimator: str, t: np.ndarray, n_p: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray,
+                 pose_cov: np.ndarray, vel_cov: np.ndarray, *, b_R_d0: np.ndarray,
+                 calibration: dict[str, Estimate] | None = None, t0_ns: int = 0, b_omega: np.ndarray | None = None,
+                 pose_vel_cross: np.ndarray | None = None, calib_joint_cov: np.ndarray | None = None,
+                 timeline: Timeline | None = None, timing_s: dict[str, float] | None = None,
+                 info: dict[str, Any] | None = None, alignment_method: str = "", config: dict[str, Any] | None = None,
+                 accel_bias: np.ndarray | None = None, gyro_bias: np.ndarray | None = None,
+                 bias_cov: np.ndarray | None = None, scale: float | None = None, scale_sigma: float | None = None,
+                 b_R_d: np.ndarray | None = None, b_R_d_cov: np.ndarray | None = None, time_offset_s: float = 0.0,
+                 time_offset_sigma_s: float = float("nan"), lever_arm_m: np.ndarray | None = None,
+                 lever_arm_cov: np.ndarray | None = None) -> None:
+        self.estimator, self.t, self.n_p, self.n_R_b, self.n_v = estimator, t, n_p, n_R_b, n_v
+        self.pose_cov, self.vel_cov, self.b_R_d0, self.t0_ns = pose_cov, vel_cov, b_R_d0, t0_ns
+        self.b_omega, self.pose_vel_cross, self.calib_joint_cov, self.timeline = (b_omega, pose_vel_cross,
+                                                                                 calib_joint_cov, timeline)
+        self.timing_s = {} if timing_s is None else timing_s
+        self.info = {} if info is None else info
+        self.alignment_method = alignment_method
+        self.config = {} if config is None else config
+        self.calibration = dict(calibration or {})
+        # the keywords of old: the states they give (a time offset only when estimated, or not zero)
+        if bias_cov is not None:
+            bias_cov = np.asarray(bias_cov)
+        given: dict[str, tuple[Any, Any]] = {
+            "accel_bias": (accel_bias, None if bias_cov is None else bias_cov[:3, :3]),
+            "gyro_bias": (gyro_bias, None if bias_cov is None else bias_cov[3:, 3:]),
+            "scale": (None if scale is None else [scale],
+                      None if scale_sigma is None else [[float(scale_sigma) ** 2]]),
+            "misalignment": (b_R_d, b_R_d_cov),
+            "time_offset": (([time_offset_s], [[float(time_offset_sigma_s) ** 2]])
+                            if math.isfinite(time_offset_sigma_s) or time_offset_s != 0.0 else (None, None)),
+            "lever_arm": (lever_arm_m, lever_arm_cov),
+        }
+        for name, (value, cov) in given.items():
+            if value is not None and cov is not None:
+                self.calibration[name] = Estimate(np.asarray(value, dtype=float), np.asarray(cov, dtype=float))
+            elif value is not None or cov is not None:
+                raise ValueError(f"NavResult: {name} needs both its value and its covariance")
+        missing = [s.name for s in required_states() if s.name not in self.calibration]
+        if missing:
+            raise ValueError(f"NavResult: no estimate of {', '.join(missing)}")
+
+    # ----- the shared states by their attributes of old -------------------------------------------------
+    @property
+    def accel_bias(self) -> np.ndarray:  # (3,) m/s^2 (final; or the constant)
+        return self.calibration["accel_bias"].value
+
+    @property
+    def gyro_bias(self) -> np.ndarray:  # (3,) rad/s
+        return self.calibration["gyro_bias"].value
+
+    @property
+    def bias_cov(self) -> np.ndarray:
+        """(6, 6) [accel, gyro] SI: the calibration block's (with their cross-covariance), else the two blocks."""
+        if self.calib_joint_cov is not None:
+            return np.asarray(self.calib_joint_cov)[:6, :6]
+        out = np.zeros((6, 6))
+        out[:3, :3], out[3:, 3:] = self.calibration["accel_bias"].cov, self.calibration["gyro_bias"].cov
+        return out
+
+    @property
+    def scale(self) -> float:
+        return float(self.calibration["scale"].value[0])
+
+    @property
+    def scale_sigma(self) -> float:
+        return float(self.calibration["scale"].sigma[0])
+
+    @property
+    def b_R_d(self) -> np.ndarray:  # (3, 3)
+        return self.calibration["misalignment"].value
+
+    @property
+    def b_R_d_cov(self) -> np.ndarray:  # (3, 3) rad^2, right tangent of b_R_d
+        return self.calibration["misalignment"].cov
+
+    @property
+    def time_offset_s(self) -> float:
+        """The DVL-IMU time offset dt_d, s (0 when not estimated: every estimator then takes dt_d = 0)."""
+        est = self.calibration.get("time_offset")
+        return 0.0 if est is None else float(est.value[0])
+
+    @property
+    def time_offset_sigma_s(self) -> float:
+        """Its sigma, s (nan: not estimated)."""
+        est = self.calibration.get("time_offset")
+        return float("nan") if est is None else float(est.sigma[0])
+
+    @property
+    def lever_arm_m(self) -> np.ndarray | None:
+        """The DVL lever arm b_l (IMU -> DVL, m, base_link) with [dvl] estimate_lever_arm (None: not estimated, b_l
+        taken from /tf_static)."""
+        est = self.calibration.get("lever_arm")
+        return None if est is None else est.value
+
+    @property
+    def lever_arm_cov(self) -> np.ndarray | None:
+        """Its 3x3 marginal covariance, m^2 (None: not estimated)."""
+        est = self.calibration.get("lever_arm")
+        return None if est is None else est.cov
+
+    @functools.cached_property
+    def estimator_config(self) -> EstimatorConfig | None:
+        """The configuration the result was made with, read once from `config` (None: a result written by
+        another version, whose configuration does not read)."""
+        try:
+            return EstimatorConfig.from_dict(self.config) if self.config else EstimatorConfig()
+        except GtsamDvlError:
+            return None
 
     @property
     def lever_arm_sigma_m(self) -> np.ndarray | None:

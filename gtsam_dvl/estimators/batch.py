@@ -8,9 +8,10 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
+from gtsam_dvl.core.keys import T_OFFSET, V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.states import read_estimates, shared_keys
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
@@ -108,18 +109,14 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
                    ordering: gtsam.Ordering | ChunkedOrdering, estimator: str = "batch",
                    bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
-    the solver's last elimination instead of linearising again."""
+    the solver's last elimination instead of linearising again. The shared states (core/states.py) at the last
+    state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own."""
+    cfg = builder.config
     n = len(builder.epochs)
-    rw = builder.config.imu.bias_model == "random_walk"
-    bias_last = B(n - 1) if rw else B(0)
-    calib_group = (bias_last, K_SCALE, C_MISALIGN)
+    last = shared_keys(cfg, n - 1)
+    calib_group = tuple(shared_keys(cfg, n - 1, block=True))
     groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
-    offset = builder.config.dvl.estimate_time_offset
-    if offset:
-        groups.append((T_OFFSET,))
-    lever = builder.config.dvl.estimate_lever_arm
-    if lever:
-        groups.append((L_LEVER,))
+    groups += [(k,) for k in last if k not in calib_group]
     bn = bayes_net or eliminate(graph.linearize(values), ordering)
     marg = bayes_net_marginals(bn, groups)
 
@@ -131,28 +128,18 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
     pose_cov = np.array([j[:6, :6] for j in joints])
     vel_cov = np.array([j[6:, 6:] for j in joints])
     pose_vel_cross = np.array([j[:6, 6:] for j in joints])
-    bias = values.atConstantBias(bias_last)
-    gyro_bias = np.asarray(bias.gyroscope())
+    calibration = read_estimates(values, marg.covariances, cfg, n - 1)
     # epochs' body rates already exclude Earth rate; remove the estimated gyro bias too
-    b_omega = np.array([e.b_omega for e in builder.epochs]) - gyro_bias
-    b_R_d = values.atRot3(C_MISALIGN).matrix()
+    b_omega = np.array([e.b_omega for e in builder.epochs]) - calibration["gyro_bias"].value
     return NavResult(
         estimator=estimator,
         t=np.array([e.t for e in builder.epochs]),
         n_p=n_p, n_R_b=n_R_b, n_v=n_v, pose_cov=pose_cov, vel_cov=vel_cov,
-        accel_bias=np.asarray(bias.accelerometer()), gyro_bias=gyro_bias,
-        bias_cov=marg.covariances[bias_last],
-        scale=float(values.atVector(K_SCALE)[0]), scale_sigma=float(np.sqrt(marg.covariances[K_SCALE][0, 0])),
-        b_R_d=b_R_d, b_R_d_cov=marg.covariances[C_MISALIGN], b_R_d0=builder.log.mounting.b_R_d0,
-        t0_ns=builder.log.t0_ns,
-        time_offset_s=float(values.atVector(T_OFFSET)[0]) if offset else 0.0,
-        time_offset_sigma_s=float(np.sqrt(marg.covariances[T_OFFSET][0, 0])) if offset else float("nan"),
-        lever_arm_m=np.asarray(values.atVector(L_LEVER), dtype=float) if lever else None,
-        lever_arm_cov=np.asarray(marg.covariances[L_LEVER]) if lever else None,
+        calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
         b_omega=b_omega, pose_vel_cross=pose_vel_cross,
         calib_joint_cov=marg.joints[calib_group],
         info={"alignment": builder.alignment.info(),
               "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
-        config=builder.config.to_dict(),
+        config=cfg.to_dict(),
         alignment_method=builder.alignment.method,
     )

@@ -29,6 +29,8 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
+from gtsam_dvl.core.states import initial_values as initial_shared_values
+from gtsam_dvl.core.states import prior_factors as shared_prior_factors
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import Alignment
@@ -359,10 +361,11 @@ class FactorMaker:
 
     def prior_factors(self, values: gtsam.Values, position_cov: np.ndarray | None = None
                       ) -> list[gtsam.NonlinearFactor]:
-        """Priors on the first state, the bias, the scale and the misalignment (and the time offset and lever
-        arm when estimated). position_cov: the first position's prior covariance in map axes (m^2) instead of
-        priors.position_sigma_m (estimators/gnss.py: when the map origin is a GNSS fix)."""
-        pri, imu_cfg = self.config.priors, self.config.imu
+        """Priors on the first state and on the shared states (core/states.py: the bias, the scale and the
+        misalignment, and the time offset and lever arm when estimated). position_cov: the first position's prior
+        covariance in map axes (m^2) instead of priors.position_sigma_m (estimators/gnss.py: when the map origin is
+        a GNSS fix)."""
+        pri = self.config.priors
         n_R_b = self.alignment.n_R_b
         # attitude sigmas are about map axes (roll/pitch ~ horizontal, yaw ~ vertical): the alignment's own
         # (attitude sensor, in motion) when it has them, else [priors]; Pose3's tangent is in body axes, so
@@ -376,39 +379,11 @@ class FactorMaker:
         cov_pose[:3, :3] = cov_rot
         cov_pose[3:, 3:] = (np.eye(3) * pri.position_sigma_m**2 if position_cov is None
                             else n_R_b.T @ position_cov @ n_R_b)  # translation tangent in body axes
-        b_R_d0 = self.mounting.b_R_d0
-        mis = np.radians(np.asarray(pri.misalignment_sigma_deg, dtype=float))
-        # misalignment sigmas are about body axes (R_c on the left); b_R_d is perturbed on the right
-        cov_c = b_R_d0.T @ np.diag(mis**2) @ b_R_d0
-        bias_sig = np.array([imu_cfg.accel_bias_sigma_ug * UG] * 3
-                            + [imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H] * 3)
         return [
             gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
             gtsam.PriorFactorVector(V(0), values.atVector(V(0)),
                                     gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s)),
-            gtsam.PriorFactorConstantBias(B(0), gtsam.imuBias.ConstantBias(),
-                                          gtsam.noiseModel.Diagonal.Sigmas(bias_sig)),
-            gtsam.PriorFactorVector(K_SCALE, np.array([pri.scale_initial]),
-                                    gtsam.noiseModel.Isotropic.Sigma(1, pri.scale_sigma)),
-            gtsam.PriorFactorRot3(C_MISALIGN, gtsam.Rot3(b_R_d0), gtsam.noiseModel.Gaussian.Covariance(cov_c)),
-        ] + self.time_offset_prior() + self.lever_arm_prior()
-
-    def time_offset_prior(self) -> list[gtsam.NonlinearFactor]:
-        """The prior on the DVL time offset T_OFFSET (none unless dvl.estimate_time_offset)."""
-        cfg = self.config.dvl
-        if not cfg.estimate_time_offset:
-            return []
-        return [gtsam.PriorFactorVector(T_OFFSET, np.array([cfg.time_offset_prior_s]),
-                                        gtsam.noiseModel.Isotropic.Sigma(1, cfg.time_offset_sigma_s))]
-
-    def lever_arm_prior(self) -> list[gtsam.NonlinearFactor]:
-        """The prior on the lever arm L_LEVER (m, base_link): the /tf_static value mounting.b_l with
-        dvl.lever_arm_sigma_m per axis (none unless dvl.estimate_lever_arm)."""
-        cfg = self.config.dvl
-        if not cfg.estimate_lever_arm:
-            return []
-        return [gtsam.PriorFactorVector(L_LEVER, np.asarray(self.mounting.b_l, dtype=float),
-                                        gtsam.noiseModel.Isotropic.Sigma(3, cfg.lever_arm_sigma_m))]
+        ] + shared_prior_factors(self.config, self.mounting)  # the shared states' (core/states.py)
 
     # ----- initial guesses -----------------------------------------------------------------------
     def velocity_from_ping(self, n_R_b: np.ndarray, d_y: np.ndarray | None) -> np.ndarray | None:
@@ -426,11 +401,5 @@ class FactorMaker:
         n_v = self.velocity_from_ping(n_R_b.matrix(), d_y)
         values.insert(X(0), gtsam.Pose3(n_R_b, np.zeros(3)))
         values.insert(V(0), np.zeros(3) if n_v is None else n_v)
-        values.insert(self.bias_key(0), gtsam.imuBias.ConstantBias())
-        values.insert(K_SCALE, np.array([self.config.priors.scale_initial]))
-        values.insert(C_MISALIGN, gtsam.Rot3(self.mounting.b_R_d0))
-        if self.config.dvl.estimate_time_offset:
-            values.insert(T_OFFSET, np.array([self.config.dvl.time_offset_prior_s]))
-        if self.config.dvl.estimate_lever_arm:
-            values.insert(L_LEVER, np.asarray(self.mounting.b_l, dtype=float))
+        values.insert(initial_shared_values(self.config, self.mounting))
         return values

@@ -21,8 +21,10 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
+from gtsam_dvl.core.keys import B, V, X
 from gtsam_dvl.core.progress import ProgressFn
+from gtsam_dvl.core.states import initial_values as initial_shared_values
+from gtsam_dvl.core.states import shared_keys
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
@@ -364,10 +366,8 @@ class LogGraph:
         initial scale and nominal mounting, position by integrating that velocity."""
         if len(self.pims) + 1 != len(self.epochs):
             raise GtsamDvlError("initial_values: build_bulk let the preintegrations go; make a new LogGraph")
-        values = gtsam.Values()
+        values = initial_shared_values(self.config, self.maker.mounting)  # the shared states at their priors
         dvl = self.log.dvl
-        k0 = self.config.priors.scale_initial
-        b_R_d0 = self.maker.mounting.b_R_d0
         zero_bias = gtsam.imuBias.ConstantBias()
         n_p_all = np.zeros((len(self.epochs), 3))
         self.set_gravity_from_positions(n_p_all)
@@ -386,14 +386,8 @@ class LogGraph:
             n_p_all[i] = n_p
             values.insert(X(i), gtsam.Pose3(n_R_b, n_p))
             values.insert(V(i), n_v)
-            if i == 0 or self.config.imu.bias_model == "random_walk":
+            if i > 0 and self.config.imu.bias_model == "random_walk":
                 values.insert(self.maker.bias_key(i), zero_bias)
-        values.insert(K_SCALE, np.array([k0]))
-        values.insert(C_MISALIGN, gtsam.Rot3(b_R_d0))
-        if self.config.dvl.estimate_time_offset:
-            values.insert(T_OFFSET, np.array([self.config.dvl.time_offset_prior_s]))
-        if self.config.dvl.estimate_lever_arm:  # the /tf_static value, as the prior
-            values.insert(L_LEVER, np.asarray(self.maker.mounting.b_l, dtype=float))
         self.set_gravity_from_positions(n_p_all)
         self.gravity_positions = n_p_all
         return values
@@ -494,7 +488,7 @@ class LogGraph:
         return self.build()[0]
 
     def elimination_ordering(self, chunk_states: int = CHUNK_STATES) -> ChunkedOrdering:
-        """States in time order, the shared calibration and bias keys last: the Bayes net is a chain
+        """States in time order, the shared states' keys last (core/states.py): the Bayes net is a chain
         whose root holds the calibration block, and marginals follow by one backward pass. Given in chunks of
         chunk_states states, which the solver eliminates one at a time when there are more than
         solver.CHUNKED_FROM_STATES states (solver.eliminate: the same Bayes net, in time linear in the mission);
@@ -507,6 +501,4 @@ class LogGraph:
             if (i + 1) % chunk_states == 0 or i + 1 == len(self.epochs):
                 chunks.append(keys)
                 keys = []
-        rest = ([] if rw else [B(0)]) + [K_SCALE, C_MISALIGN] + [T_OFFSET] * self.config.dvl.estimate_time_offset \
-            + [L_LEVER] * self.config.dvl.estimate_lever_arm
-        return ChunkedOrdering(chunks, rest)
+        return ChunkedOrdering(chunks, shared_keys(self.config, per_state=False))

@@ -2,8 +2,8 @@
 accrued over the log.
 
 A square-root information filter run over the graph's linearisation (at the batch solution, or at the
-truth for mission planning): the state [X_i (6), V_i (3), B (6), K (1), C (3)] (and the DVL time offset T (1)
-and lever arm L (3) when they are estimated) is carried from epoch to
+truth for mission planning): the state [X_i (6), V_i (3)] and the shared states' keys (core/states.py: B (6),
+K (1), C (3), and the DVL time offset T (1) and lever arm L (3) when they are estimated) is carried from epoch to
 epoch by stacking its square-root information with the IMU factor's and the next epoch's DVL factors'
 whitened Jacobian rows, QR-factoring with X_i, V_i first, and keeping the bottom-right triangle (the
 marginal information of the rest). Its covariance at epoch i is the filtering marginal given data up to
@@ -18,9 +18,10 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X, key_dim
+from gtsam_dvl.core.keys import V, X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
+from gtsam_dvl.core.states import columns, read_values, shared_keys
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.graph import LogGraph
@@ -66,18 +67,19 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
         by_epoch[max(e, 0)].append(f)
 
     # filter layout at epoch i: [X_i, V_i, shared]; transition layout adds X_{i+1}, V_{i+1} after X_i, V_i.
-    # shared: [B, K, C] and, when estimated, T (time offset) and L (lever arm)
-    dvl_cfg = builder.config.dvl
-    shared = [B(0), K_SCALE, C_MISALIGN] + [T_OFFSET] * dvl_cfg.estimate_time_offset \
-        + [L_LEVER] * dvl_cfg.estimate_lever_arm
+    # shared: the keys of the shared states the configuration estimates (core/states.py: B, K, C, and T, L)
+    cfg = builder.config
+    shared = shared_keys(cfg)
     shared_cols: dict[int, slice] = {}
+    start = 0
     for k in shared:
-        start = shared_cols[shared[shared.index(k) - 1]].stop if shared_cols else 0
         shared_cols[k] = slice(start, start + key_dim(k))
-    n_shared = sum(key_dim(k) for k in shared)
-    m = 9 + n_shared  # filter state size
+        start += key_dim(k)
+    m = 9 + start  # filter state size
+    state_cols = columns(shared, cfg, start=9)  # each shared state's columns in the filter state
+    blocks: dict[str, list[np.ndarray]] = {name: [] for name in state_cols}  # its covariance at each epoch
     R = np.zeros((0, m + 1))  # square-root information rows over [X_i, V_i, shared] + rhs
-    sig_scale, sig_mis, sig_gyro, sig_acc, sig_att, sig_t, sig_l = [], [], [], [], [], [], []
+    sig_att = []
     for i in range(n):
         if i == 0:
             cols = {X(0): slice(0, 6), V(0): slice(6, 9), **{k: slice(9 + s.start, 9 + s.stop)
@@ -96,35 +98,29 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
             R = full[9:m + 9, 9:]  # marginal information of [X_i, V_i, shared] after eliminating X_{i-1}, V_{i-1}
         Rinv = np.linalg.inv(R[:, :m])
         cov = Rinv @ Rinv.T
-        sig_acc.append(np.sqrt(np.diag(cov)[9:12]) / UG)
-        sig_gyro.append(np.sqrt(np.diag(cov)[12:15]) / DEG_PER_H)
-        sig_scale.append(np.sqrt(cov[15, 15]))
-        b_R_d = values.atRot3(C_MISALIGN).matrix()
-        sig_mis.append(np.sqrt(np.diag(misalignment_rpy_and_cov(b_R_d, builder.log.mounting.b_R_d0,
-                                                                cov[16:19, 16:19])[1])))
+        for name, c in state_cols.items():
+            blocks[name].append(cov[c, c])
         n_R_b = values.atPose3(X(i)).rotation().matrix()
         sig_att.append(np.degrees(np.sqrt(np.diag(n_R_b @ cov[0:3, 0:3] @ n_R_b.T))))
-        if T_OFFSET in shared_cols:
-            j = 9 + shared_cols[T_OFFSET].start
-            sig_t.append(np.sqrt(cov[j, j]))
-        if L_LEVER in shared_cols:
-            sl = slice(9 + shared_cols[L_LEVER].start, 9 + shared_cols[L_LEVER].stop)
-            sig_l.append(np.sqrt(np.diag(cov[sl, sl])))
 
-    bias = values.atConstantBias(B(0))
-    b_R_d = values.atRot3(C_MISALIGN).matrix()
-    mis = matrix_to_rpy_deg(b_R_d @ builder.log.mounting.b_R_d0.T)
+    est = read_values(values, cfg)
+    sig = {name: np.sqrt(np.einsum("nii->ni", np.array(b))) for name, b in blocks.items()}
+    b_R_d0 = builder.log.mounting.b_R_d0
+    sig_mis = [np.sqrt(np.diag(misalignment_rpy_and_cov(est["misalignment"], b_R_d0, c)[1]))
+               for c in blocks["misalignment"]]
+    mis = matrix_to_rpy_deg(est["misalignment"] @ b_R_d0.T)
     ones = np.ones((n, 1))
+    offset, lever = "time_offset" in est, "lever_arm" in est
     return Timeline(
         t=np.array([e.t for e in builder.epochs]),
-        scale=np.full(n, float(values.atVector(K_SCALE)[0])), scale_sigma=np.array(sig_scale),
+        scale=np.full(n, float(est["scale"][0])), scale_sigma=sig["scale"][:, 0],
         misalignment_deg=ones * mis, misalignment_sigma_deg=np.array(sig_mis),
-        gyro_bias_deg_per_h=ones * (np.asarray(bias.gyroscope()) / DEG_PER_H),
-        gyro_bias_sigma_deg_per_h=np.array(sig_gyro),
-        accel_bias_ug=ones * (np.asarray(bias.accelerometer()) / UG), accel_bias_sigma_ug=np.array(sig_acc),
+        gyro_bias_deg_per_h=ones * (est["gyro_bias"] / DEG_PER_H),
+        gyro_bias_sigma_deg_per_h=sig["gyro_bias"] / DEG_PER_H,
+        accel_bias_ug=ones * (est["accel_bias"] / UG), accel_bias_sigma_ug=sig["accel_bias"] / UG,
         attitude_sigma_deg=np.array(sig_att),
-        time_offset_s=np.full(n, float(values.atVector(T_OFFSET)[0])) if sig_t else None,
-        time_offset_sigma_s=np.array(sig_t) if sig_t else None,
-        lever_arm_m=ones * np.asarray(values.atVector(L_LEVER)) if sig_l else None,
-        lever_arm_sigma_m=np.array(sig_l) if sig_l else None,
+        time_offset_s=np.full(n, float(est["time_offset"][0])) if offset else None,
+        time_offset_sigma_s=sig["time_offset"][:, 0] if offset else None,
+        lever_arm_m=ones * est["lever_arm"] if lever else None,
+        lever_arm_sigma_m=sig["lever_arm"] if lever else None,
     )

@@ -62,6 +62,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.rotations import matrix_to_rpy, skew, so3_exp
+from gtsam_dvl.core.states import BY_NAME, Estimate, block_states, ekf_layout
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import align, map_frame_of
@@ -92,10 +93,14 @@ from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 # Both are set by the configuration's [ekf] section (EkfConfig); these are its defaults.
 MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
-CALIBRATION = np.r_[SCALE, 16:19]  # error-state indices of the DVL scale and misalignment
+# the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
+# (core/states.py ekf_layout: gyro and accelerometer bias, scale, misalignment, and the time offset when estimated)
+N_NAV = 9
+LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
+CALIBRATION = np.r_[LAYOUT["scale"], LAYOUT["misalignment"]]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
-OFFSET = N_ERR  # error-state index of the DVL time offset dt_d (s), with [dvl] estimate_time_offset
+OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s), with estimate_time_offset
 RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
 
@@ -153,24 +158,21 @@ class _Earth:
 
 def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int) -> FilterState:
     """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance."""
-    pri, imu_cfg = config.priors, config.imu
+    pri = config.priors
     b_R_d0 = log.mounting.b_R_d0
     k0 = pri.scale_initial
     d_y = log.dvl.d_v[ping]
     n_v = n_R_b @ (b_R_d0 @ d_y) / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
     offset = config.dvl.estimate_time_offset
-    P = np.zeros((N_ERR + int(offset), N_ERR + int(offset)))
-    if offset:
-        P[OFFSET, OFFSET] = config.dvl.time_offset_sigma_s**2
+    layout = ekf_layout(config, N_NAV)
+    n = N_NAV + sum(sl.stop - sl.start for sl in layout.values())
+    P = np.zeros((n, n))
     rp, yaw = np.radians(pri.roll_pitch_sigma_deg), np.radians(pri.yaw_sigma_deg)
     P[PHI, PHI] = np.diag([rp**2, rp**2, yaw**2])  # map axes: the error phi is about map axes
     P[VEL, VEL] = np.eye(3) * pri.velocity_sigma_m_s**2
     P[POS, POS] = np.eye(3) * pri.position_sigma_m**2
-    P[BG, BG] = np.eye(3) * (imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H) ** 2
-    P[BA, BA] = np.eye(3) * (imu_cfg.accel_bias_sigma_ug * UG) ** 2
-    P[SCALE, SCALE] = pri.scale_sigma**2
-    mis = np.radians(np.asarray(pri.misalignment_sigma_deg, dtype=float))
-    P[MIS, MIS] = b_R_d0.T @ np.diag(mis**2) @ b_R_d0  # body-axis sigmas in b_R_d's right tangent
+    for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
+        P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
     return FilterState(NavState(n_R_b.copy(), n_v, np.zeros(3)), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
                        config.dvl.time_offset_prior_s if offset else 0.0)
 
@@ -547,7 +549,8 @@ def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResu
     P_pose = P[:, pose_idx][:, :, pose_idx]
     pose_cov = J @ P_pose @ np.transpose(J, (0, 2, 1))
     pose_vel_cross = J @ P[:, pose_idx, 3:6]
-    calib_idx = np.r_[12:15, 9:12, 15, 16:19]  # [accel, gyro] bias, scale, b_R_d right tangent
+    layout = ekf_layout(config, N_NAV)
+    calib_idx = np.r_[tuple(layout[s.name] for s in block_states())]  # [accel, gyro] bias, scale, b_R_d tangent
     calib = P[-1][np.ix_(calib_idx, calib_idx)]
     b_R_d0 = log.mounting.b_R_d0
     mis_deg, mis_cov = misalignment_timeline(np.array(hist.b_R_d), b_R_d0, P[:, MIS, MIS])
@@ -564,16 +567,15 @@ def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResu
         accel_bias_sigma_ug=np.sqrt(diag[:, BA]) / UG,
         attitude_sigma_deg=np.degrees(np.sqrt(diag[:, PHI])),
     )
+    final = {"gyro_bias": hist.gyro_bias[-1], "accel_bias": hist.accel_bias[-1], "scale": [hist.scale[-1]],
+             "misalignment": hist.b_R_d[-1], "time_offset": [hist.time_offset[-1]]}
     return NavResult(
         estimator="ekf",
         t=np.array(hist.t), n_p=np.array(hist.n_p), n_R_b=n_R_b, n_v=np.array(hist.n_v),
         pose_cov=pose_cov, vel_cov=P[:, 3:6, 3:6].copy(),
-        accel_bias=hist.accel_bias[-1], gyro_bias=hist.gyro_bias[-1], bias_cov=calib[:6, :6].copy(),
-        scale=float(hist.scale[-1]), scale_sigma=float(np.sqrt(P[-1][SCALE, SCALE])),
-        b_R_d=hist.b_R_d[-1], b_R_d_cov=P[-1][MIS, MIS].copy(), b_R_d0=b_R_d0, t0_ns=log.t0_ns,
+        calibration={name: Estimate(np.asarray(final[name], dtype=float), P[-1][sl, sl].copy())
+                     for name, sl in layout.items()},
+        b_R_d0=b_R_d0, t0_ns=log.t0_ns,
         b_omega=np.array(hist.b_omega), pose_vel_cross=pose_vel_cross, calib_joint_cov=calib,
         timeline=timeline, config=config.to_dict(),
-        time_offset_s=float(hist.time_offset[-1]) if P.shape[1] > OFFSET else 0.0,
-        time_offset_sigma_s=float(np.sqrt(P[-1][OFFSET, OFFSET])) if P.shape[1] > OFFSET else float("nan"),
-
     )

@@ -41,9 +41,10 @@ the figures of the chosen design are in the README, "Online estimator"):
   prior on the oldest state) relinearises the whole window at every iteration: about twice the median latency of
   this design, everything included.
 
-Shared keys: the bias, the scale, the misalignment and, with [dvl] estimate_time_offset, the DVL time offset
-T_OFFSET (relinearised past TIME_OFFSET_THRESHOLD_S; part of the joint marginal of `estimate`, reported in
-StateEstimate.time_offset_s / time_offset_sigma_s). Factors on states already held (a depth sample after the
+Shared keys: those of the shared states the configuration estimates (core/states.py: the bias, the scale, the
+misalignment and, with [dvl] estimate_time_offset, the DVL time offset, relinearised past the registry's
+thresholds), part of the joint marginal of `estimate` (the time offset reported in StateEstimate.time_offset_s /
+time_offset_sigma_s). Factors on states already held (a depth sample after the
 newest state) go in through `add_factors`.
 
 Full history: iSAM2 with every state and its default ordering.
@@ -62,21 +63,15 @@ import numpy as np
 
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X, key_dim
+from gtsam_dvl.core.keys import V, X, key_dim
+from gtsam_dvl.core.states import block_states, read_estimates, relinearization, shared_keys
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
 
-STATE_DIM = 6 + 3 + 6 + 1 + 3  # the joint of StateEstimate: pose, velocity, bias, scale, misalignment
+# the joint of StateEstimate: pose, velocity and the calibration block (core/states.py: bias, scale, misalignment)
+STATE_DIM = 6 + 3 + sum(s.dim for s in block_states())
 RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see IncrementalSmoother._ordering)
-# relinearisation threshold of the DVL time offset T_OFFSET (s): it enters the DVL model as dt_d times the body's
-# velocity rate (at most 0.2 m/s^2 on paper-3d), linearly given the other variables; a stale linearisation leaves
-# its cross terms: with the scale dk dt_d |b_vdot| = 8e-5 m/s, with the attitude (through gravity) g dth dt_d =
-# 1e-4 m/s at 20 ms and the thresholds of RelinearizationThresholds, within their budget (2e-4 m/s, 1 % of the
-# DVL noise). 5 ms (the first value) made 728 rebases in the first 30 min of a 5 Hz survey, where the offset is
-# unobservable (static start) and wanders; 20 ms makes 242 and moves the estimates by 0.04 sigma at most
-# (per-epoch position and velocity; the calibration 0.011 sigma; paper-3d-short, 50 ms offset, default config)
-TIME_OFFSET_THRESHOLD_S = 2e-2
 
 
 # RelinearizationThresholds (its threshold_map() gives iSAM2's): gtsam_dvl.core.config, TOML [online.relinearization]
@@ -130,12 +125,15 @@ class IncrementalSmoother:
         self.window_s = window_s
         self.thresholds = thresholds
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
-        self.offset = builder.config.dvl.estimate_time_offset  # T_OFFSET is a shared key
+        # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py)
+        self._threshold = {"x": np.asarray(thresholds.pose, dtype=float),
+                           "v": np.asarray(thresholds.velocity, dtype=float),
+                           **relinearization(builder.config, thresholds)}
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
-        threshold_map = thresholds.threshold_map()
-        if self.offset:
-            threshold_map.insert(("t", np.array([TIME_OFFSET_THRESHOLD_S])))
+        threshold_map = gtsam.ISAM2ThresholdMap()
+        for char, limit in self._threshold.items():
+            threshold_map.insert((char, limit))
         self.params.setRelinearizeThreshold(threshold_map)
         self.params.relinearizeSkip = relinearize_skip
         self.params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
@@ -289,18 +287,14 @@ class IncrementalSmoother:
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
         if (n_states, old) not in self._limits:
-            th = self.thresholds
-            is_old = np.arange(n_states) < old
-            if self.rw_bias:
-                limit, mask = [np.tile(th.bias, n_states)], [np.repeat(is_old, 6)]
-            else:
-                limit, mask = [np.asarray(th.bias, dtype=float)], [np.ones(6, bool)]
-            limit += [np.full(3, th.misalignment_rad), np.array([th.scale])]
-            if self.offset:
-                limit.append(np.array([TIME_OFFSET_THRESHOLD_S]))
-            limit += [np.tile(th.velocity, n_states), np.tile(th.pose, n_states)]
-            mask += [np.ones(4 + int(self.offset), bool), np.repeat(is_old, 3), np.repeat(is_old, 6)]
-            self._limits[(n_states, old)] = (np.concatenate(limit), np.concatenate(mask))
+            # (key, whether iSAM2 leaves it alone): the states', old ones only, and the shared keys, always
+            held = [(k, j < old) for j in range(n_states) for k in self._state_keys(self.first + j)]
+            held += [(k, True) for k in shared_keys(self.builder.config, per_state=False)]
+            held.sort()
+            limits = [self._threshold[chr(k >> 56)] for k, _ in held]
+            self._limits[(n_states, old)] = (np.concatenate(limits),
+                                             np.concatenate([np.full(len(lim), frozen)
+                                                             for lim, (_, frozen) in zip(limits, held, strict=True)]))
         lim, msk = self._limits[(n_states, old)]
         if lim.shape != delta.shape:
             raise GtsamDvlError(f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}")
@@ -370,21 +364,29 @@ class IncrementalSmoother:
 
     # ----- estimates -----------------------------------------------------------------------------
     def shared_keys(self, i: int) -> list[int]:
-        return [self.builder.bias_key(i), K_SCALE, C_MISALIGN] + ([T_OFFSET] if self.offset else [])
+        """The keys of the shared states at state i (core/states.py; the random-walk bias B(i))."""
+        return shared_keys(self.builder.config, i)
 
     def estimate(self, with_covariance: bool = True) -> StateEstimate:
         """The newest state, the bias and the calibration, with their joint marginal covariance."""
         i = self.n - 1
-        keys = [X(i), V(i), *self.shared_keys(i)]
+        shared = self.shared_keys(i)
+        keys = [X(i), V(i), *shared]
         values = self.isam.calculateEstimate(keys)
-        dim = STATE_DIM + int(self.offset)  # T_OFFSET last
+        dim = 9 + sum(key_dim(k) for k in shared)
         cov = self.joint_covariance(keys) if with_covariance else np.full((dim, dim), np.nan)
+        key_cols, col = {}, 9
+        for k in shared:
+            key_cols[k] = slice(col, col + key_dim(k))
+            col += key_dim(k)
+        est = read_estimates(values, {k: cov[c, c] for k, c in key_cols.items()}, self.builder.config, i)
+        offset = est.get("time_offset")
         return StateEstimate(
             index=i, t=self.t_last, pose=values.atPose3(X(i)), n_v=values.atVector(V(i)),
-            bias=values.atConstantBias(keys[2]), scale=float(values.atVector(K_SCALE)[0]),
-            b_R_d=values.atRot3(C_MISALIGN).matrix(), cov=cov[:STATE_DIM, :STATE_DIM],
-            time_offset_s=float(values.atVector(T_OFFSET)[0]) if self.offset else 0.0,
-            time_offset_sigma_s=float(np.sqrt(cov[STATE_DIM, STATE_DIM])) if self.offset else float("nan"))
+            bias=values.atConstantBias(self.builder.bias_key(i)), scale=float(est["scale"].value[0]),
+            b_R_d=est["misalignment"].value, cov=cov[:STATE_DIM, :STATE_DIM],
+            time_offset_s=0.0 if offset is None else float(offset.value[0]),
+            time_offset_sigma_s=float("nan") if offset is None else float(offset.sigma[0]))
 
     def joint_covariance(self, keys: list[int]) -> np.ndarray:
         """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""
