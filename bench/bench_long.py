@@ -125,7 +125,7 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     rss["preintegration"] = peak_rss_gib()
     t0 = time.perf_counter()
     # as smooth_batch: the DVL factors in bulk where the configuration allows (estimators/bulk.py)
-    graph, values = builder.build_bulk() if builder.bulk_supported() else builder.build()
+    graph, values = builder.build_bulk()
     ordering = builder.elimination_ordering()
     stages["factors"] = stages.get("factors", 0.0) + time.perf_counter() - t0
     rss["factors"] = peak_rss_gib()

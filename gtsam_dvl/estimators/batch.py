@@ -37,10 +37,9 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    # the DVL factors evaluated in bulk where the configuration allows (estimators/bulk.py: the same objective)
-    bulk = builder.bulk_supported()
+    # the DVL and IMU factors evaluated in bulk (estimators/bulk.py: the same objective as builder.build())
     graph: gtsam.NonlinearFactorGraph | BulkGraph
-    graph, values = builder.build_bulk() if bulk else builder.build()
+    graph, values = builder.build_bulk()
     ordering = builder.elimination_ordering()
     # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
     dof = graph_rows(graph) - values.dim()

@@ -423,17 +423,10 @@ class LogGraph:
             graph.add(f)
         return graph
 
-    def bulk_supported(self) -> bool:
-        """Whether build_bulk covers this configuration: every one (beams and the lever arm included;
-        estimators/bulk.py)."""
-        return True
-
     def build_bulk(self, values: gtsam.Values | None = None) -> tuple[BulkGraph, gtsam.Values]:
         """build() with the DVL velocity factors evaluated in bulk (estimators/bulk.py): the same objective and
         linear systems, several times faster to evaluate. values: an initial guess already made (a second
         build after set_time_offset_window keeps the first's gravity references)."""
-        if not self.bulk_supported():
-            raise GtsamDvlError("the bulk DVL factors cover the 3-D velocity with a known lever arm only")
         if self.snapshots is None:
             raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (1 kB a "
                                 "ping); make a new LogGraph for another graph")

@@ -121,7 +121,6 @@ def hessians(*linear: gtsam.GaussianFactorGraph) -> list[tuple[np.ndarray, np.nd
 @pytest.mark.parametrize("name", list(configs()))
 def test_same_objective_and_linear_system(name: str) -> None:
     builder = LogGraph(run_log(), configs()[name])
-    assert builder.bulk_supported()
     per_factor, values = builder.build()
     dvl = dvl_graph(builder)
     bulk, _ = builder.build_bulk(values)
