@@ -148,8 +148,8 @@ def test_static_end_from_the_dvl_and_the_cap() -> None:
     dvl = dataclasses.replace(log.dvl, d_v=d_v, valid=valid)
     cfg = AlignmentConfig()
     assert detect_static_end(log.imu, dvl, cfg) == pytest.approx(50.0 - STATIC_MARGIN_S, abs=1e-9)
-    assert detect_static_end(log.imu, log.dvl, dataclasses.replace(cfg, max_static_s=40.0)) == pytest.approx(40.0)
-    assert detect_static_end(log.imu, dvl, dataclasses.replace(cfg, max_static_s=40.0)) == pytest.approx(40.0)
+    assert detect_static_end(log.imu, log.dvl, cfg.model_copy(update={"max_static_s": 40.0})) == pytest.approx(40.0)
+    assert detect_static_end(log.imu, dvl, cfg.model_copy(update={"max_static_s": 40.0})) == pytest.approx(40.0)
 
 
 def test_single_fast_pings_neither_end_nor_abort_the_static_segment() -> None:

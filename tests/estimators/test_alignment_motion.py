@@ -54,7 +54,7 @@ def moving_log() -> LogData:
 
 def _config(**alignment: object) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return dataclasses.replace(cfg, alignment=dataclasses.replace(cfg.alignment, **alignment))
+    return cfg.model_copy(update={"alignment": cfg.alignment.model_copy(update=alignment)})
 
 
 def _true_R(log: LogData, t: float) -> np.ndarray:

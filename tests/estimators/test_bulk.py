@@ -46,16 +46,16 @@ def configs() -> dict[str, EstimatorConfig]:
     return {
         "paper": paper,  # random-constant bias, Huber, no time offset
         "default": default,  # time offset estimated, real-DVL priors
-        "random-walk-cauchy": dataclasses.replace(
-            paper, imu=dataclasses.replace(paper.imu, bias_model="random_walk"),
-            dvl=dataclasses.replace(paper.dvl, robust="cauchy")),
-        "no-robust-flat": dataclasses.replace(
-            default, dvl=dataclasses.replace(default.dvl, robust="none"),
-            solver=dataclasses.replace(default.solver, earth_model="flat")),
+        "random-walk-cauchy": paper.model_copy(update={
+            "imu": paper.imu.model_copy(update={"bias_model": "random_walk"}),
+            "dvl": paper.dvl.model_copy(update={"robust": "cauchy"})}),
+        "no-robust-flat": default.model_copy(update={
+            "dvl": default.dvl.model_copy(update={"robust": "none"}),
+            "solver": default.solver.model_copy(update={"earth_model": "flat"})}),
         # one row per valid beam, each with its own Huber kernel; the lever arm a variable
-        "beams-lever": dataclasses.replace(paper, dvl=dataclasses.replace(paper.dvl, use_beams=True,
-                                                                          estimate_lever_arm=True)),
-        "offset-lever": dataclasses.replace(default, dvl=dataclasses.replace(default.dvl, estimate_lever_arm=True)),
+        "beams-lever": paper.model_copy(update={
+            "dvl": paper.dvl.model_copy(update={"use_beams": True, "estimate_lever_arm": True})}),
+        "offset-lever": default.model_copy(update={"dvl": default.dvl.model_copy(update={"estimate_lever_arm": True})}),
     }
 
 

@@ -5,7 +5,6 @@ state in the chunks) and with the time offset among the shared keys."""
 
 from __future__ import annotations
 
-import dataclasses
 from functools import cache
 
 import gtsam
@@ -33,7 +32,7 @@ def short_log() -> LogData:
 def configs() -> dict[str, EstimatorConfig]:
     paper = EstimatorConfig.paper()
     return {"default": EstimatorConfig(),
-            "random-walk": dataclasses.replace(paper, imu=dataclasses.replace(paper.imu, bias_model="random_walk"))}
+            "random-walk": paper.model_copy(update={"imu": paper.imu.model_copy(update={"bias_model": "random_walk"})})}
 
 
 @pytest.mark.parametrize("name", list(configs()))

@@ -16,7 +16,6 @@ predictions they replaced (a copy here): within 1e-9 relative, the deltas and co
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from functools import cache
 
@@ -52,7 +51,7 @@ def run_log(dvl_hz: float) -> LogData:
 
 def config(spacing_s: float) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, keyframe_spacing_s=spacing_s))
+    return cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"keyframe_spacing_s": spacing_s})})
 
 
 @cache

@@ -15,7 +15,6 @@ Together about 16 s of CPU.
 from __future__ import annotations
 
 import copy
-import dataclasses
 from functools import cache
 
 import gtsam
@@ -62,7 +61,7 @@ def depth_log() -> LogData:
 
 def offset_config() -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, estimate_time_offset=True))
+    return cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"estimate_time_offset": True})})
 
 
 @cache
@@ -144,7 +143,7 @@ def test_recentred_windows_matter_at_1_5_s() -> None:
 
 def test_offset_with_beams_is_refused() -> None:
     cfg = offset_config()
-    cfg = dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, use_beams=True))
+    cfg = cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"use_beams": True})})
     with pytest.raises(GtsamDvlError, match="use_beams"):
         OnlineEstimator.for_log(offset_log(0.6), cfg)
     with pytest.raises(GtsamDvlError, match="use_beams"):

@@ -73,7 +73,7 @@ def run_log(dvl_hz: float, t_end: float = T_END_S) -> LogData:
 
 def config(spacing_s: float) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return dataclasses.replace(cfg, solver=dataclasses.replace(cfg.solver, keyframe_spacing_s=spacing_s))
+    return cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"keyframe_spacing_s": spacing_s})})
 
 
 @dataclasses.dataclass

@@ -9,7 +9,6 @@ the final position are as good as with no offset.
 
 from __future__ import annotations
 
-import dataclasses
 from functools import cache
 
 import numpy as np
@@ -38,7 +37,7 @@ def short_run(dt: float, noise_m_s: float = 0.02) -> LogData:
 
 def config(estimate: bool) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, estimate_time_offset=estimate))
+    return cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"estimate_time_offset": estimate})})
 
 
 @cache
@@ -106,7 +105,7 @@ def test_ignoring_the_offset_is_measurably_worse() -> None:
 def test_beams_refuse_the_offset_clearly() -> None:
     """The offset model is on the 3-D velocity (online and EKF: tests/estimators/test_online_depth_offset.py)."""
     log, cfg = short_run(0.0), config(True)
-    beams = dataclasses.replace(cfg, dvl=dataclasses.replace(cfg.dvl, use_beams=True))
+    beams = cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"use_beams": True})})
     with pytest.raises(GtsamDvlError, match="use_beams"):
         smooth_batch(log, beams)
 
@@ -139,7 +138,8 @@ def test_offset_not_observable_without_motion_says_so() -> None:
     raw["initial"] = {**raw["initial"], "speed_m_s": 2.0}
     raw["segments"] = [{"kind": "level", "duration_s": 300.0, "speed_end_m_s": 2.0}]
     cfg = config(True)
-    cfg = dataclasses.replace(cfg, alignment=dataclasses.replace(cfg.alignment, initial_attitude_deg=(3.0, 0.0, 10.0)))
+    alignment = cfg.alignment.model_copy(update={"initial_attitude_deg": (3.0, 0.0, 10.0)})
+    cfg = cfg.model_copy(update={"alignment": alignment})
     r = smooth_batch(simulate(scenario_from_dict(raw), SEED), cfg)
     v = time_offset_verdict(r)
     print(v["verdict"])
