@@ -1,8 +1,8 @@
 """GTSAM 4.3's ImuFactor with the EarthImuFactor's gravity gradient, evaluated for N factors at once with numpy.
 
-Why: through GTSAM's CustomFactor each IMU factor of the batch smoother costs a Python call of 20-35 us per
-linearisation and per error evaluation (factors/imu_earth.py), and a day of 1 s keyframes has 86,400 of them:
-about 30 s of a 24 h solve. The batch smoother owns its Gauss-Newton loop, so it evaluates them all in a few
+Why: through GTSAM's CustomFactor each IMU factor of the batch smoother costs a Python call per linearisation
+and per error evaluation (factors/imu_earth.py), and a day of 1 s keyframes has 86,400 of them (the timings:
+docs/results.md, Speed). The batch smoother owns its Gauss-Newton loop, so it evaluates them all in a few
 vectorised operations instead (estimators/bulk_imu.py). The model is GTSAM's, written for stacks of factors; it is
 checked against gtsam.ImuFactor.evaluateError (errors and Jacobians to 1e-9) and against numerical derivatives
 in tests/factors/test_imu_bulk.py.

@@ -40,9 +40,9 @@ Memory: the CustomFactor holds its Python callback through C++ (a std::function)
 cannot see it. The callback is therefore a separate model object (_EarthImuModel) with only the data the error
 needs, never the EarthImuFactor or the CustomFactor: EarthImuFactor -> CustomFactor -> model, no cycle, so
 when a graph (iSAM2's fixed-lag window, marginalising a state) and the caller drop a factor, it is freed at
-once, its parameters' claim with it. (The first form made the EarthImuFactor its own callback: a cycle through
-C++ that kept every IMU factor of a mission alive, 2.5 kB each, and all their parameters claimed;
-tests/estimators/test_online_memory.py.)
+once, its parameters' claim with it. (An EarthImuFactor that were its own callback would make a cycle through
+C++ that keeps every IMU factor of a mission alive and all their parameters claimed;
+tests/estimators/test_online_memory.py checks that dropped factors are freed.)
 """
 
 from __future__ import annotations
@@ -70,8 +70,8 @@ def _gravity_map(pim: gtsam.PreintegratedImuMeasurements, params: gtsam.Preinteg
     """M (6, 3) = d(n_p, n_v of the prediction) / d n_g, by changing params' gravity (restored after).
 
     GTSAM's prediction is affine in gravity, so the differences are exact (to rounding); they also prove that
-    params is the pim's parameters object: otherwise the prediction would not move (ValueError). About 20 us,
-    once per factor."""
+    params is the pim's parameters object: otherwise the prediction would not move (ValueError). Once per
+    factor."""
     g0 = np.array(params.n_gravity, dtype=float)
     Y = np.empty((4, 6))  # predicted (n_p, n_v) from the origin at rest, at g0 and at g0 + each probe
     try:
@@ -136,7 +136,7 @@ class _EarthImuModel:
             self.ref_g, self.ref_G = self.gravity(n_p_mid)
             self.ref_p = n_p_mid.copy()
         # Extrapolate from the reference (re-referencing is the owner's job, in bulk, via needs_reference
-        # and set_reference: 1 ms per factor one by one). The quadratic term is 1e-8 m/s^2 at 500 m and
+        # and set_reference, not one factor at a time). The quadratic term is 1e-8 m/s^2 at 500 m and
         # 1e-6 m/s^2 at 5 km, so extrapolation stays right between re-referencings.
         g = self.ref_g + self.ref_G @ (n_p_mid - self.ref_p)
         self.params.n_gravity = g

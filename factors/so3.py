@@ -4,8 +4,8 @@ Each function takes one 3-vector (or 3x3 matrix) or a stack with any leading axe
 does. One 3-vector takes a fast path on Python floats: a DVL factor's linearisation calls skew three or four
 times, and numpy's setup for a (3,) array costs more than the arithmetic. Hand-written rather than
 scipy.spatial.transform.Rotation: the factors need skew and the right Jacobian, which scipy does not give, and
-Rotation's object costs 10 us a call on a single rotation. Conventions are GTSAM's Rot3: Exp(phi) rotates by |phi|
-about phi, and J_r(phi) is defined by Exp(phi + d) = Exp(phi) Exp(J_r(phi) d) to first order.
+building a Rotation object costs more than the arithmetic on a single rotation. Conventions are GTSAM's Rot3:
+Exp(phi) rotates by |phi| about phi, and J_r(phi) is defined by Exp(phi + d) = Exp(phi) Exp(J_r(phi) d) to first order.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def skew(a: np.ndarray) -> np.ndarray:
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a x b (..., 3); two 3-vectors written out (np.cross's axis handling costs 15 us a call on them)."""
+    """a x b (..., 3); two 3-vectors written out (np.cross's axis handling costs more than the arithmetic)."""
     if not (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)):
         a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
     if a.shape == (3,) and b.shape == (3,):

@@ -2,9 +2,9 @@
 per factor.
 
 Why: GTSAM calls a Python CustomFactor once per factor per linearisation and per error evaluation. On a 5 Hz log
-with 1 s keyframes that is 18,000 DVL factors per hour of log, ten evaluations per solve, 15-60 us each: most
-of the batch smoother's time. The batch smoother owns its Gauss-Newton loop (estimators/solver.py), so here the
-pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
+with 1 s keyframes that is 18,000 DVL factors per hour of log, ten evaluations per solve, each a Python call:
+most of the per-factor graph's solve (docs/results.md, Speed). The batch smoother owns its Gauss-Newton loop
+(estimators/solver.py), so here the pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
 
 - `BulkDvl.error(values)`: the sum of the pings' losses, as GTSAM's factors would return it (Gaussian:
   half the squared whitened error; robust: the kernel's loss of the whitened error's norm);
@@ -224,7 +224,7 @@ class BulkDvl:
         return self.pings.dim * len(self)
 
     def release(self) -> None:
-        """Let the served rows go (60 doubles a ping: 0.2 GB a day at 5 Hz) once GTSAM has linearised the
+        """Let the served rows go (60 doubles a ping) once GTSAM has linearised the
         carriers; the next prepare() makes them again."""
         self._served.blocks, self._served.e, self._served.ready = [], np.zeros((0, 3)), False
 

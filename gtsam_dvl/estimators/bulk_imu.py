@@ -2,7 +2,7 @@
 once (factors/imu_bulk.py), served to GTSAM by carrier factors (estimators/bulk.py explains carriers).
 
 Why: each EarthImuFactor (factors/imu_earth.py) is a Python CustomFactor; GTSAM calls it once per factor per
-linearisation and per error evaluation, 20-35 us each, and a day of 1 s keyframes has 86,400 of them. Here one
+linearisation and per error evaluation, and a day of 1 s keyframes has 86,400 of them. Here one
 numpy evaluation covers them all; GTSAM still sees one Jacobian factor per interval, with the same rows (the
 same whitening: the square root information matrix of the EarthImuFactor's own noise model), so the linear
 system is the per-factor graph's to rounding (tests/estimators/test_bulk.py).

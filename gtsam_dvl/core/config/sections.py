@@ -224,7 +224,7 @@ class OnlineConfig(ConfigModel):
     window_s: Positive = 20.0
     # seconds of the initial static segment to align on before the first estimate
     align_s: Positive = 60.0
-    # slower pings do not inform scale and misalignment (online/estimator.py module doc)
+    # slower pings do not inform scale and misalignment (online/dvl_factors.py module doc)
     calibration_min_speed_m_s: NonNegative = 0.1
     bad_messages: BadMessages = "raise"  # "raise" (GtsamDvlError) or "drop" (counted, warned once per kind)
     covariances: Flag = True  # marginal covariances after every epoch (the timeline needs them)

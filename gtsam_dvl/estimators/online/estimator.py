@@ -9,15 +9,15 @@ filtering sigmas at every epoch.
 Which mode:
 - `fixed_lag` (default): states older than `window_s` (20 s) behind the newest are marginalised; the bias,
   scale and misalignment never leave. The cost per DVL epoch is bounded however long the mission
-  (bench/bench_online.py prints the latencies; README, "Online estimator"): use it on the vehicle and for any
-  log longer than a few minutes. Its final calibration is the batch smoother's within 0.2 of a sigma (what
-  left the window stays linearised where it was when it left); its sigmas are the batch's within 3 %, the
-  vertical accelerometer bias's 10 % larger (the static phase's zero-velocity pings left the window while the
+  (bench/bench_online.py prints the latencies; docs/results.md, "Online estimator"): use it on the vehicle and
+  for any log longer than a few minutes. Its final calibration is the batch smoother's to a fraction of a sigma
+  (what left the window stays linearised where it was when it left) and so are its sigmas, but the vertical
+  accelerometer bias's is larger (the static phase's zero-velocity pings left the window while the
   scale was still its prior 0.8, and are credited the velocity information k^2 / sigma^2 at that scale).
 - `full`: every state is kept and iSAM2 may relinearise any of them; its final estimate is the batch
-  smoother's (within 0.03 sigma measured). Each relinearisation of the calibration touches every DVL factor of
-  the mission through a Python callback that receives a copy of all the variables, so its cost per update
-  grows with the mission (README, "Online estimator"): use it to check the fixed-lag mode on short logs, or
+  smoother's to a few hundredths of a sigma (docs/results.md, "Online estimator"). Each relinearisation of the
+  calibration touches every DVL factor of the mission through a Python callback that receives a copy of all the
+  variables, so its cost per update grows with the mission: use it to check the fixed-lag mode on short logs, or
   when every past state must stay adjustable.
 - The trajectory of the returned NavResult is the filtering one in both modes: each state as estimated when its
   ping was processed, what the vehicle knew then (the batch smoother gives the smoothed one).
@@ -33,15 +33,12 @@ between keyframes becomes a keyframe, as the batch smoother makes the last usabl
 keyframes are a state per ping (the same result to the last bit as keyframe_spacing_s = 0).
 - Where a ping between keyframes goes (`defer_between_pings`): True (default), its factor waits for the next
   state's iSAM2 update; False, an iSAM2 update of its own at once. Deferred, because it gives the lower p99
-  and the higher real-time factor: on bench/bench_online_long.py (1 h, 200 Hz IMU / 5 Hz DVL, the two runs
-  back to back on the shared 2-core machine, load 3.2) the CPU time per epoch has p99 2.8 ms deferred against
-  4.4 ms at once, p50 0.9 against 1.6 ms, and the real-time factor is 130 against 97 (the wall-time p99s, 6.2
-  and 5.9 ms, are the other processes' preemptions; a pair at load 3: 6.1 against 9.7 ms). An iSAM2 update has a fixed
-  cost (the ordering, re-eliminating the cliques of the newest state and the shared keys, the relinearisation
-  check, the marginal covariance of the estimate: about 1 ms) that deferral pays once per state instead of once
-  per ping, while the ping's own work (its IMU motion, its factor, the prediction below) is a fraction of a
-  millisecond; the state's update linearises four more factors (60 us each). What it gives up: until the next
-  state, the pings since the newest state are not in the estimate.
+  and the higher real-time factor (bench/bench_online_long.py --between deferred / immediate; docs/results.md,
+  "Online estimator"). An iSAM2 update has a fixed cost (the ordering, re-eliminating the cliques of the newest
+  state and the shared keys, the relinearisation check, the marginal covariance of the estimate) that deferral
+  pays once per state instead of once per ping, while the ping's own work (its IMU motion, its factor, the
+  prediction below) is a fraction of it; the state's update linearises four more factors. What it gives up:
+  until the next state, the pings since the newest state are not in the estimate.
 - estimate() after a ping between keyframes: the state at the ping predicted from the newest state's estimate
   through the IMU motion up to it (online/keyframes.predict_at_ping: the keyframe factor's own model, its
   covariance propagated to first order), OnlineEstimate.t the ping's time and predicted_from_t the state's

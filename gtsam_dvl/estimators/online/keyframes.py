@@ -13,10 +13,10 @@ holds what the online estimator needs for them and the batch path has no use for
 - KeyframeGravity: the keyframe factors' normal gravity and gradient, evaluated at the state's position and
   reused while the state stays within GRAVITY_REUSE_M of where it was evaluated (the factor's gravity is first
   order about the reference, n_g0 + G (p - n_p0): 100 m away its error is the second-order term, about
-  3 g / R^2 (100 m)^2 / 2 = 4e-9 m/s^2: nothing; an evaluation costs 1.3 ms, two thirds of a state's epoch,
-  once every 50 s at 2 m/s).
+  3 g / R^2 (100 m)^2 / 2 = 4e-9 m/s^2: nothing; an evaluation costs more than the rest of a state's epoch, and
+  reused it runs once every 50 s at 2 m/s).
 - considered_keyframe_factor: a slow ping's keyframe factor with the scale and misalignment "considered"
-  (zero Jacobians, estimator.py module doc, calibration_min_speed_m_s), as the online estimator's slow pings at
+  (zero Jacobians, online/dvl_factors.py module doc, calibration_min_speed_m_s), as the online estimator's slow pings at
   a state.
 - predict_at_ping: the estimate reported after a ping between states, predicted from the newest state through
   the same motion model, with its covariance propagated to first order.
@@ -117,7 +117,7 @@ def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float
                                ) -> gtsam.CustomFactor:
     """The keyframe factor f (FactorMaker.dvl_keyframe_factors_for: keys [X_i, V_i, B, K, C] + [T_OFFSET] with
     offset_input) of a ping too slow to inform the calibration: the same noise, error and Jacobians for pose,
-    velocity, bias (and time offset), none for the scale and misalignment (estimator.py module doc; DvlOptions
+    velocity, bias (and time offset), none for the scale and misalignment (online/dvl_factors.py module doc; DvlOptions
     considered). d_y, b_omega, d_u, offset_input: what f was made from (for the time offset, b_omega is the rate
     input's mean body rate)."""
     if not isinstance(f, gtsam.NoiseModelFactor):

@@ -88,7 +88,7 @@ def latency_stats(latencies_s: Sequence[float] | np.ndarray) -> dict[str, float]
 class EpochHistory:
     """Every epoch's estimate, in numpy arrays filled block by block. No Python object is kept per epoch (the
     garbage collector's pauses grow with the number of live objects) and nothing is copied when the history
-    grows (doubling an array copies it: 8 ms at 16384 epochs). About 1.5 kB per epoch: 33 MB for six hours
+    grows (doubling an array would copy every epoch so far). A fixed number of doubles per epoch (SHAPES)
     (OnlineConfig.record_history = False keeps none)."""
 
     BLOCK = 4096

@@ -1,7 +1,7 @@
 """The iSAM2 engine of the online estimator: a state per keyframe (or per DVL epoch without keyframes), over a
 fixed-lag window or the whole history.
 
-Settings (the issue's traps):
+Settings (where iSAM2's defaults fail on this problem):
 - Factorisation QR: Cholesky fails at navigation-grade noise. Wildfire threshold 0: rotations matter at
   1e-4 rad, below iSAM2's default 1e-3 on every component. Relinearisation checked at every update against a
   threshold per variable type and tangent component (RelinearizationThresholds), not iSAM2's 0.1 on all.
@@ -10,8 +10,8 @@ Settings (the issue's traps):
   the root clique, so this is cheap), its square-root information inverted as a triangular matrix (the
   information matrix itself spans 1e18 and cannot be inverted in double precision).
 
-Fixed lag, and why it is built this way (each alternative was measured on paper-3d with bench/bench_online.py;
-the figures of the chosen design are in the README, "Online estimator"):
+Fixed lag, and why it is built this way (the alternatives compared on paper-3d with bench/bench_online.py; the
+figures of this design: docs/results.md, "Online estimator"):
 - The window is a chain of states sharing the bias, scale and misalignment. A new epoch touches its top, a
   state leaving the window its bottom. Removing the old state's factors from iSAM2 and adding back their
   marginal (removeFactorIndices plus a LinearContainerFactor) touches the bottom: iSAM2 re-eliminates from
@@ -34,11 +34,11 @@ the figures of the chosen design are in the README, "Online estimator"):
   they drift little and are relinearised by a rebase when they pass their threshold.
 - Bounded: the window holds a bounded number of variables and factors (and iSAM2 reuses the slots of removed
   factors), so neither iSAM2's work per update nor the copy of the Values it hands to each Python CustomFactor
-  grows with the mission: the last hour of a 6-hour survey has a lower p99 than the first. The factors it drops
-  are freed (the IMU factor's callback holds no reference back to it: factors/imu_earth.py, "Memory"), so
+  grows with the mission: the last hour of a 6-hour survey has no higher p99 than the first (docs/results.md).
+  The factors it drops are freed (the IMU factor's callback holds no reference back to it: factors/imu_earth.py, "Memory"), so
   memory is flat too; at 200 Hz IMU / 5 Hz DVL over 6 h see bench/bench_online_long.py.
 - The alternative of a sliding-window Gauss-Newton written in Python (solver.py on the window, a QR marginal
-  prior on the oldest state) relinearises the whole window at every iteration: about twice the median latency of
+  prior on the oldest state) relinearises the whole window at every iteration: a higher median latency than
   this design, everything included.
 
 Shared keys: those of the shared states the configuration estimates (core/states.py: the bias, the scale, the
@@ -50,8 +50,8 @@ newest state) go in through `add_factors`.
 Full history: iSAM2 with every state and its default ordering.
  Each relinearisation of the scale,
 misalignment or bias relinearises every DVL or IMU factor of the mission, each call copying all the Values:
-the cost per update grows with the mission (the whole paper-3d run: 25 to 40 s, single updates up to 10 s;
-the prototype took 262 s with iSAM2's default settings).
+the cost per update grows with the mission (docs/results.md, "Online estimator": the full history on
+paper-3d).
 """
 
 from __future__ import annotations
@@ -138,7 +138,7 @@ class IncrementalSmoother:
         self.params.relinearizeSkip = relinearize_skip
         self.params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.0))
         # reuse the slots of removed factors: otherwise iSAM2's factor table grows by three empty slots per
-        # epoch, and walking it (rebase) took 40 ms after six hours
+        # epoch, and walking it (rebase) costs more the longer the mission
         self.params.findUnusedFactorSlots = window_s is not None
         self.isam = gtsam.ISAM2(self.params)
         self.first = 0  # oldest state in the window
@@ -427,7 +427,7 @@ def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndar
         row += n_rows
     if row != off:
         raise GtsamDvlError("marginal covariance: the Bayes net is not square (rank-deficient problem)")
-    Rinv = np.linalg.inv(R)  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular is 500x slower
+    Rinv = np.linalg.inv(R)  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular costs more a call
     cov_elim = Rinv @ Rinv.T
     idx = np.concatenate([np.arange(offsets[k], offsets[k] + key_dim(k)) for k in keys])
     cov = cov_elim[np.ix_(idx, idx)]
