@@ -1,4 +1,4 @@
-"""Long missions in the batch smoother (issue 12): wall time per stage, peak RSS and real-time factor of the
+"""Long missions in the batch smoother: wall time per stage, peak RSS and real-time factor of the
 survey-24h scenario (200 Hz IMU, 5 Hz DVL, the paper's IMU grade, survey-6h's calibration manoeuvres at the
 start) cut to 1, 3, 6, 12 and 24 h, and the cost against mission length, measured in one run.
 
@@ -17,9 +17,9 @@ and --per-ping-hours runs those lengths a second time with a state per ping (key
 prints both solutions' calibration sigmas side by side.
 
 The logs are simulated in 600 s chunks straight into the MCAP (gtsam_dvl.sim.stream.ChunkedSimulation written by
-gtsam_dvl.io.writer.write_log_stream: the file write_log writes of simulate()'s log, byte for byte, in about 0.25
-GB whatever the length; simulate() and write_log held the whole mission, 0.7 GB per hour): a length is skipped,
-and said so, only if even that would need more than --sim-memory-gb.
+gtsam_dvl.io.writer.write_log_stream: the file write_log writes of simulate()'s log, byte for byte, in a memory
+that does not grow with the mission): a length is skipped, and said so, only if even that would need more than
+--sim-memory-gb.
 """
 
 from __future__ import annotations
@@ -38,8 +38,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 SCENARIO = ROOT / "data" / "scenarios" / "survey-24h.toml"
 SEED = 7
-# peak RSS of the chunked simulation (write_log_stream of ChunkedSimulation, 600 s chunks at 200 Hz): 0.22 GiB at
-# 1 h, 0.24 GiB at 24 h; it does not grow with the mission
+# peak RSS of the chunked simulation (write_log_stream of ChunkedSimulation, 600 s chunks at 200 Hz): this script
+# prints it for each length (docs/results.md, "Speed"); it does not grow with the mission
 SIM_GB_PER_H = 0.0
 SIM_GB_FIXED = 0.3
 

@@ -1,4 +1,4 @@
-"""Online estimator benchmark (issue 4): latency per DVL epoch and real-time factor, measured in one run.
+"""Online estimator benchmark: latency per DVL epoch and real-time factor, measured in one run.
 
     .venv/bin/python bench/bench_online.py [--seed 1] [--no-full] [--scenarios paper-3d survey-6h]
 
@@ -12,10 +12,10 @@ then the ping). Printed:
   whole run) and their ratio, which stays near or below 1 when the cost does not grow with the mission;
 - the real-time factor: mission duration / wall time of the whole run (feeding, alignment, every update,
   the final refinement and the result with its timeline);
-- iSAM2 rebases (relinearisation of the whole window; online_smoother.py) and the variables in the window.
+- iSAM2 rebases (relinearisation of the whole window; estimators/online/window.py) and the variables in the window.
 
 For contrast, paper-3d also runs in the full-history mode (every state kept), whose updates grow with the
-mission; --no-full skips it. Targets (issue 4): fixed-lag p99 under 10 ms, last-hour p99 within 1.5x of the
+mission; --no-full skips it. Targets: fixed-lag p99 under 10 ms, last-hour p99 within 1.5x of the
 first, real-time factor above 300. The machine's load shows in these figures: run it alone.
 """
 

@@ -1,4 +1,4 @@
-"""Online estimator on a long, high-rate mission (issue 12, item 5): per-epoch time, real-time factor, memory.
+"""Online estimator on a long, high-rate mission: per-epoch time, real-time factor, memory.
 
     .venv/bin/python bench/bench_online_long.py [--hours 6] [--imu-hz 200] [--dvl-hz 5] [--config default]
         [--cache-dir bench/.cache] [--baseline-hours 1] [--no-baseline] [--plot out.png] [--profile out.prof]
@@ -26,8 +26,7 @@ Printed:
 - every 10 simulated minutes: the process's resident memory (RSS from /proc/self/statm), the number of live
   EarthImuFactor objects (gc), the variables iSAM2 holds, and the p99 of the epochs of those 10 minutes (wall
   and CPU); the RSS slope over the mission after the first hour (MB/h): flat memory is a slope near 0 (the
-  per-state history kept for the result, EpochHistory, grows by about 1.3 kB per state: 28 MB over 6 h of
-  1 s keyframes);
+  per-state history kept for the result, EpochHistory, grows by a fixed amount per state);
 - a baseline measured in the same run: the first --baseline-hours of the same mission at 100 Hz IMU / 1 Hz
   DVL (the rates of survey-6h.toml), and the ratios of the high-rate run's figures to it.
 --plot writes a PNG (matplotlib) of RSS and per-epoch time against mission time; --profile writes a cProfile

@@ -8,7 +8,8 @@ estimate with health "ok" and some error beyond 3 sigma: the script counts them 
 
     python bench/fault_matrix.py [--cases a,b,...] [--modes batch,online,ekf] [--scenario paper-3d]
 
-Takes about 10 minutes for the whole matrix on 2 cores (tests/test_fault_matrix.py runs a short subset).
+The whole matrix takes minutes per mode (docs/results.md, "Faulty logs"); tests/test_fault_matrix.py runs a short
+subset.
 """
 
 from __future__ import annotations

@@ -4,10 +4,11 @@ Why: evaluated one by one through GTSAM's CustomFactor, each DVL factor costs a 
 or error evaluation, and on a 5 Hz log with 1 s keyframes there are 18,000 of them per hour, evaluated about ten
 times per solve (the timings: docs/results.md, Speed). The batch smoother owns its Gauss-Newton loop
 (estimators/solver.py), so it can evaluate them all in a few vectorised numpy operations instead
-(estimators/bulk.py turns the result into GTSAM Jacobian factors). The model is the per-factor one, factors/dvl_model.py, called on stacks: every row
-is a ping between keyframes, seen from the state before it through its IMU motion (factors/ping_motion.py); a ping
-at its own state has the motion of length zero (PingMotion.none), which gives the state's own attitude and
-velocity, the per-factor Jacobians and zero bias columns. A row is a ping's 3-D velocity, or with beams one beam.
+(estimators/bulk.py turns the result into GTSAM Jacobian factors). The model is the per-factor one,
+factors/dvl_model.py, called on stacks: every row is a ping between keyframes, seen from the state before it through its
+IMU motion (factors/ping_motion.py); a ping at its own state has the motion of length zero (PingMotion.none), which
+gives the state's own attitude and velocity, the per-factor Jacobians and zero bias columns. A row is a ping's 3-D
+velocity, or with beams one beam.
 
 Keys per row (the carrier's order in estimators/bulk.py): [pose X_i (rotation, translation), velocity V_i,
 bias B ([accelerometer, gyroscope]), scale k, misalignment b_R_d] + [time offset dt_d] + [lever arm b_l].

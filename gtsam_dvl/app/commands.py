@@ -39,8 +39,8 @@ class SimulateResult:
                 f"{self.n_dvl} DVL messages, {self.distance_m / 1000:.2f} km travelled ({self.wall_s:.1f} s)")
 
 
-# IMU samples above which simulate_to_file simulates in chunks (sim/stream.py: the same file, in about 0.25 GB
-# instead of 0.7 GB per hour of 200 Hz held whole)
+# IMU samples above which simulate_to_file simulates in chunks (sim/stream.py: the same file, in a memory that does
+# not grow with the mission)
 STREAM_ABOVE_SAMPLES = 720_000
 
 

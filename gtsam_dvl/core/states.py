@@ -133,10 +133,10 @@ _BODY_AXES = (("x", "along body x (forward)"), ("y", "along body y (left)"), ("z
 # relinearisation threshold of the DVL time offset (s): it enters the DVL model as dt_d times the body's velocity
 # rate (at most 0.2 m/s^2 on paper-3d), linearly given the other variables; a stale linearisation leaves its cross
 # terms: with the scale dk dt_d |b_vdot| = 8e-5 m/s, with the attitude (through gravity) g dth dt_d = 1e-4 m/s at
-# 20 ms and the thresholds of RelinearizationThresholds, within their budget (2e-4 m/s, 1 % of the DVL noise). 5 ms
-# made 728 rebases in the first 30 min of a 5 Hz survey, where the offset is unobservable (static start) and
-# wanders; 20 ms makes 242 and moves the estimates by 0.04 sigma at most (per-epoch position and velocity; the
-# calibration 0.011 sigma; paper-3d-short, 50 ms offset, default config)
+# 20 ms and the thresholds of RelinearizationThresholds, within their budget (2e-4 m/s, 1 % of the DVL noise). A
+# smaller threshold makes many more iSAM2 rebases in the first 30 min of a 5 Hz survey, where the offset is
+# unobservable (static start) and wanders, for estimates a few hundredths of a sigma apart (docs/results.md,
+# "Online estimator")
 TIME_OFFSET_THRESHOLD_S = 2e-2
 
 

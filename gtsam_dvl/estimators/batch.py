@@ -29,8 +29,8 @@ from gtsam_dvl.estimators.timeline import filtering_timeline
 def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
                  progress: ProgressFn | None = None, timeline: bool = False, estimator: str = "batch") -> NavResult:
     """Estimate trajectory, IMU biases, DVL scale factor and misalignment from a whole log. timeline: also
-    the filtering sigma timeline over the same linearisation (how the log's information accrued; about
-    1 s more on the paper's runs). estimator: the name the result carries (the planner's is "plan")."""
+    the filtering sigma timeline over the same linearisation (how the log's information accrued; one more
+    pass over the states). estimator: the name the result carries (the planner's is "plan")."""
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -76,8 +76,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
 # this (half a chi^2 unit: the step is within one sigma, Mahalanobis, of the first pass's solution), whatever the
 # configured tolerances: it only centres the offset's windows (the offset's sigma, 0.02 s, against windows of
 # 0.25 s), and the second pass converges to the configured tolerances. Saves the first pass's last iteration
-# where its decrease falls between the tolerances (a day of 1 s keyframes: linearise + eliminate 40.0 -> 26.2 s;
-# the estimates within 2.8e-4 sigma of a full first pass's).
+# where its decrease falls between the tolerances (its time and the estimates' agreement with a full first pass:
+# docs/results.md, Speed).
 FIRST_PASS_TOL = 0.5
 
 

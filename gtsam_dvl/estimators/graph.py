@@ -82,7 +82,7 @@ class LogGraph:
 
     log: LogData
     config: EstimatorConfig
-    # the fraction of the preintegration done, 20 times (a day of 1 s keyframes takes about a minute)
+    # the fraction of the preintegration done, 20 times (the longest stage on a long log: docs/results.md)
     progress: ProgressFn | None = field(default=None, repr=False, compare=False)
     maker: FactorMaker = field(init=False)
     epochs: list[Epoch] = field(init=False)
@@ -122,8 +122,8 @@ class LogGraph:
         self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)  # the gaps the states cross
         self.counters["imu_gaps"] = len(self.gaps)
         check_gaps(self.gaps, cfg.imu, log.source)
-        # the samples' intervals and rotation-compensated specific force, made once for both integrations (a
-        # day at 200 Hz: 0.4 GB and about a second each)
+        # the samples' intervals and rotation-compensated specific force, made once for both integrations (each
+        # an array over every IMU sample of the log)
         imu = log.imu
         starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
@@ -137,9 +137,9 @@ class LogGraph:
 
     @property
     def imu_factors(self) -> list[EarthImuFactor]:
-        """The per-factor graph's IMU factors (EarthImuFactor), made on first use with the gravity references set
-        so far (the bulk IMU factors of build_bulk need none: 50 us and 2.5 kB an interval saved); empty once
-        build_bulk let the preintegrations go."""
+        """The per-factor graph's IMU factors (EarthImuFactor), made on first use with the gravity references set so far
+        (the bulk IMU factors of build_bulk need none, which saves an EarthImuFactor's time and memory per interval:
+        docs/results.md, Speed); empty once build_bulk let the preintegrations go."""
         if self._imu_factors is None:
             if len(self.pims) + 1 != len(self.epochs):
                 raise GtsamDvlError("the IMU factors: build_bulk let the preintegrations go; make a new LogGraph")
@@ -249,7 +249,7 @@ class LogGraph:
     # ----- gravity -------------------------------------------------------------------------------
     def set_gravity_from_positions(self, n_p: np.ndarray, only_stale: bool = False) -> int:
         """Reference gravity of the IMU factors at the mid positions of states n_p (N+1, 3), evaluated
-        for all factors in one vectorised call (per-factor evaluation costs 1 ms each). only_stale: just
+        for all factors in one vectorised call, not a normal-gravity evaluation per factor. only_stale: just
         the factors whose mid position left their reference's range. Returns how many were updated."""
         if self.config.solver.earth_model == "flat":
             return 0
@@ -312,7 +312,7 @@ class LogGraph:
         dvl = self.log.dvl
         n_p0 = np.zeros(3) if self.gravity_positions is None else self.gravity_positions[i]
         if self._keyframe_gravity is None or self._keyframe_gravity[0] is not self.gravity_positions:
-            # every state's at once (1 ms per call otherwise)
+            # every state's at once, in one vectorised call
             n_p = np.zeros((len(self.epochs), 3)) if self.gravity_positions is None else self.gravity_positions
             self._keyframe_gravity = (self.gravity_positions, *self.maker.keyframe_gravity(n_p))
         g, G = self._keyframe_gravity[1][i:i + 1], self._keyframe_gravity[2][i:i + 1]
@@ -434,8 +434,7 @@ class LogGraph:
         graph = self._factors_but_dvl(values, imu=False)
         bulk = BulkGraph(graph, bulk_dvl(self), self.bulk_imu())
         # the bulk factors hold the snapshots', time-offset windows' and IMU factors' numbers: let the LogGraph's
-        # copies go (a day at 5 Hz: 0.35 GB, 0.2 GB and 0.2 GB) unless a per-factor graph holds the IMU factors,
-        # and the preintegrations
+        # copies go unless a per-factor graph holds the IMU factors, and the preintegrations
         self.snapshots = None
         for ep in self.epochs:
             ep.rate_input = None

@@ -65,14 +65,14 @@ def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | No
         # [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)] with R_P = A dR, A = Exp(-Omega dt)
         # (factors/imu_bulk.py): the rotation rows are dR_dbg themselves, and H_v = [dv_dba, dv_dbg] is
         # dR (velocity rows) + Omega x dR (position rows), since A^T [Omega]x A = [Omega]x. One evaluation
-        # instead of six predictions (30 us against 50 us a ping).
+        # instead of six predictions (docs/results.md, Speed).
         pred = pim.predict(_STATE0, _BIAS0)
         Hs = [np.empty((9, d), order="F") for d in (6, 3, 6, 3, 6)]
         gtsam.ImuFactor(0, 1, 2, 3, 4, pim).evaluateError(_POSE0, _Z3, pred.pose(), pred.velocity(), _BIAS0, *Hs)
         H5 = Hs[4]
         dR_dbg = H5[0:3, 3:6].copy()
         dv_db = dR @ H5[6:9]
-        if n_omega_ie.any():  # (np.cross costs 40 us a call on 3-vectors)
+        if n_omega_ie.any():  # (a matrix product: np.cross costs more a call on 3-vectors)
             dv_db += skew(n_omega_ie) @ (dR @ H5[3:6])
         dv_dba, dv_dbg = dv_db[:, :3], dv_db[:, 3:]
     else:
@@ -111,7 +111,7 @@ def _central_differences(pim: gtsam.PreintegratedImuMeasurements,
 
 
 def clone(pim: gtsam.PreintegratedImuMeasurements) -> gtsam.PreintegratedImuMeasurements:
-    """A copy of pim, sharing its parameters (through an ImuFactor: 7 us; Python's copy.copy pickles, 130 us)."""
+    """A copy of pim, sharing its parameters (through an ImuFactor: cheaper than Python's copy.copy, which pickles)."""
     return gtsam.ImuFactor(0, 1, 2, 3, 4, pim).preintegratedMeasurements()
 
 

@@ -439,7 +439,7 @@ class KeyframeRule:
 
     def decide_all(self, t: np.ndarray) -> np.ndarray:
         """decide() on each of the pings t (sorted, s) in turn: (M,) int8. A loop over the pings: each decision
-        depends on the kept pings before it (about 0.6 us a ping)."""
+        depends on the kept pings before it."""
         decide = self.decide
         return np.fromiter((decide(x) for x in np.asarray(t, dtype=float).tolist()), dtype=np.int8,
                            count=len(t))

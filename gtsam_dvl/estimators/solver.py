@@ -71,8 +71,8 @@ class CompactConditional:
 
 class CompactBayesNet:
     """A QR Bayes net kept as numpy arrays: GTSAM's conditionals keep the whole matrix of the factor they were
-    eliminated from (measured: 5.4 kB per conditional against 0.7 kB for R, S and d; 1.3 GB for a day of 1 s
-    keyframes), so each elimination's conditionals are copied out (3 us each) and GTSAM's let go. optimize() is
+    eliminated from, several times the size of R, S and d (docs/results.md, Speed), so each elimination's
+    conditionals are copied out and GTSAM's let go. optimize() is
     GTSAM's back-substitution, x_F = R^-1 (d - S x_P), from the last conditional to the first."""
 
     def __init__(self) -> None:
@@ -95,8 +95,8 @@ class CompactBayesNet:
             rhs = c._d
             if len(keys) > 1:
                 rhs = rhs - c._S @ np.concatenate([x[k] for k in keys[1:]])
-            # R is upper triangular (QR): LAPACK's triangular solve, 1 us against np.linalg.solve's 4 us (a day of
-            # 1 s keyframes has 170,000 conditionals)
+            # R is upper triangular (QR): LAPACK's triangular solve, cheaper than np.linalg.solve (a day of 1 s
+            # keyframes has 170,000 conditionals; docs/results.md, Speed)
             sol, info = _trtrs(c._R, rhs)
             if info != 0 or not np.isfinite(sol).all():
                 raise GtsamDvlError("the linear system is indeterminate at variable "
@@ -127,8 +127,8 @@ def eliminate_chunked(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering) 
 
     Why: GTSAM's sequential elimination keeps one variable index over the whole graph, and the shared keys
     (bias, scale, misalignment, time offset) are in nearly every factor; each eliminated variable removes its
-    factors from those keys' lists, which costs in proportion to their length: quadratic in the mission (1 h of
-    5 Hz log: 1.3 s, 24 h: 230 s measured, not 31 s). Chunks keep each index short: linear again."""
+    factors from those keys' lists, which costs in proportion to their length: quadratic in the mission
+    (docs/results.md, Speed). Chunks keep each index short: linear again."""
     chunk_of = {k: c for c, ks in enumerate(plan.chunks) for k in ks}
     groups: list[list[gtsam.GaussianFactor]] = [[] for _ in plan.chunks]
     tail: list[gtsam.GaussianFactor] = []
@@ -161,14 +161,14 @@ def eliminate_chunked(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering) 
     return bn
 
 
-CHUNKED_FROM_STATES = 8000  # below, one GTSAM elimination is faster (paper-3d, 2060 states: 0.07 s against 0.16 s)
+CHUNKED_FROM_STATES = 8000  # below, one GTSAM elimination is faster (docs/results.md, Speed)
 
 
 def eliminate(linear: gtsam.GaussianFactorGraph,
               ordering: gtsam.Ordering | ChunkedOrdering) -> gtsam.GaussianBayesNet | CompactBayesNet:
     """QR elimination in the given order: chunk by chunk (a CompactBayesNet) for a ChunkedOrdering of more than
     CHUNKED_FROM_STATES states' chunks, else GTSAM's one sequential elimination (its Bayes net: its quadratic
-    cost and its memory only tell beyond a few hours of 1 s states; measured crossover 2-3 h)."""
+    cost and its memory only tell beyond a few hours of 1 s states)."""
     if isinstance(ordering, ChunkedOrdering):
         if sum(len(ks) for ks in ordering.chunks) > 2 * CHUNKED_FROM_STATES:  # two or three keys a state
             return eliminate_chunked(linear, ordering)
@@ -280,7 +280,7 @@ def bayes_net_marginals(
     joints: dict[tuple[int, ...], np.ndarray] = {}
 
     # the inverses of the conditionals' R (tiny, <= 6x6), by stacks of equal size: one numpy call per size, not
-    # one per conditional (scipy's solve_triangular costs 0.7 ms per call here, np.linalg.inv 30 us)
+    # one per conditional (scipy's solve_triangular and np.linalg.inv cost more per call than these blocks' arithmetic)
     Rs = [c.R() for c in conds]
     Rinvs: list[np.ndarray] = [np.empty((0, 0))] * n
     for d in {R.shape[0] for R in Rs}:

@@ -9,7 +9,7 @@ whitened Jacobian rows, QR-factoring with X_i, V_i first, and keeping the bottom
 marginal information of the rest). Its covariance at epoch i is the filtering marginal given data up to
 epoch i; at the last epoch it equals the smoother's marginal of the calibration block.
 
-Written by hand (numpy QR on 31x28 blocks, about 0.1 ms an epoch; a little larger with T and L) because
+Written by hand (numpy QR on 31x28 blocks an epoch, a little larger with T and L) because
 GTSAM's Python API does not expose the intermediate marginal factors of a sequential elimination.
 """
 

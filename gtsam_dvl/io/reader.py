@@ -7,11 +7,11 @@ geometry_msgs/msg/TwistStamped (no covariance: d_cov is NaN and the user must su
 Times: ``t0_ns`` is the first IMU stamp rounded down to the second; all t arrays are relative to it and
 come from the header stamps (log times are not used).
 
-Streaming (issue 12): the log is read in one pass, piece by piece (an MCAP's chunks, pages of a .db3), and the
+Streaming: the log is read in one pass, piece by piece (an MCAP's chunks, pages of a .db3), and the
 high-rate topics (the IMU, the truth odometry) are decoded piece by piece into arrays of the fields the
 reader uses (``_Stream``: about 56 bytes per IMU sample, plus the orientation only if some message has one),
-so that reading holds those arrays and one chunk, not every message body (5 GB for a day of 200 Hz IMU).
-The other topics are low-rate and decoded in bulk as before. Errors are raised in the order of a bulk read.
+so that reading holds those arrays and one chunk, not every message body (docs/results.md, "Log reader").
+The other topics are low-rate and decoded in bulk. Errors are raised in the order of a bulk read.
 """
 
 from __future__ import annotations
@@ -330,7 +330,7 @@ def read_log(
     if not len(imu):
         raise GtsamDvlError(f"{path}: {imu_topic} has no messages")
     imu_ns = stamps_ns(imu)
-    # views of the decoded messages, not copies (a day at 200 Hz: 0.8 GB less at the reader's peak)
+    # views of the decoded messages, not copies (two fewer arrays over every IMU sample at the reader's peak)
     b_omega, b_f = (imu[f] if imu.dtype[f].base == np.float64 else imu[f].astype(float)
                     for f in ("angular_velocity", "linear_acceleration"))
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000

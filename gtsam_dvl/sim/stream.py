@@ -1,11 +1,11 @@
-"""simulate() in time chunks with bounded memory, written to an MCAP as it goes (issue 12: a 24 h, 200 Hz survey
-is 17.3 M IMU samples, about 17 GB held whole).
+"""simulate() in time chunks with bounded memory, written to an MCAP as it goes (a 24 h, 200 Hz survey is 17.3 M
+IMU samples, too many to hold whole with their truth).
 
 ChunkedSimulation cuts the IMU samples 0..n-1 into chunks of chunk_s and yields each chunk's part of the log
 (IMU samples, truth, pings, depth and fixes) as a LogData; io/writer.py's write_log_stream writes the parts as
 they come (``write_log_stream(path, ChunkedSimulation(scenario, seed))``: the file write_log writes of
-simulate(scenario, seed), byte for byte). Memory holds one chunk whatever the length: peak RSS 0.24 GiB for 1 h and for
-24 h of 200 Hz in 600 s chunks (bench/bench_long.py), against 0.7 GiB per hour for simulate() and write_log.
+simulate(scenario, seed), byte for byte). Memory holds one chunk whatever the length, where simulate() and
+write_log hold the whole mission (the peak RSS: bench/bench_long.py, docs/results.md "Speed").
 
 The parts are simulate()'s log, bit for bit, for the same scenario and seed (tests/sim/test_stream.py):
 

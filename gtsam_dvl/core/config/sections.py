@@ -51,7 +51,7 @@ class DvlConfig(ConfigModel):
     Robust loss (batch and online: on every DVL factor; EKF: the same kernel's weight on the whitened
     innovation, after the chi^2 gate of [ekf] gate_probability): "huber" (default), "cauchy" or "none".
     robust_k is the kernel's threshold in sigmas of the whitened error (the norm of the 3-D error, or one
-    beam's). huber_k is its old name, kept as an alias: when set it overrides robust_k.
+    beam's). huber_k is an alias of robust_k (a TOML file may set either): when set it overrides robust_k.
 
     Screening (estimators/selection.py, PingScreen; the same causal rule in batch, online and EKF, against
     the previous accepted ping and the IMU samples stamped since it), on when screen is true:
@@ -73,10 +73,11 @@ class DvlConfig(ConfigModel):
     use_beams: Flag = False  # one scalar factor per valid beam instead of the 3-D velocity
     beam_noise_m_s: Positive = 0.02
     robust: RobustLoss = "huber"  # "huber" (default), "cauchy" or "none"
-    # kernel threshold, in sigmas: 4 leaves a clean log's estimates within 0.02 sigma of no kernel on paper-3d
-    # (3: up to 0.1 sigma), and a 0.5-2 m/s outlier (25-100 sigma) still counts like a 4 sigma residual
+    # kernel threshold, in sigmas: 4 leaves a clean log's estimates where no kernel puts them, to a small fraction
+    # of a sigma (docs/results.md, "Faulty logs"), and a 0.5-2 m/s outlier (25-100 sigma) still counts like a
+    # 4 sigma residual
     robust_k: Positive = 4.0
-    huber_k: Positive | None = None  # old name of robust_k (overrides it if set)
+    huber_k: Positive | None = None  # alias of robust_k (overrides it if set)
     max_speed_m_s: Positive = 10.0  # faster pings are outliers: dropped, counted
     screen: Flag = True  # drop bogus pings (zero while moving, repeated, implausible acceleration): see above
     # no vehicle this package navigates accelerates this hard over a ping interval, m/s^2
@@ -104,7 +105,7 @@ class DvlConfig(ConfigModel):
     lever_arm_sigma_m: Positive = 0.5
 
     def robust_threshold(self) -> float:
-        """The robust kernel's threshold in sigmas: huber_k if set (the old name), else robust_k."""
+        """The robust kernel's threshold in sigmas: huber_k if set (its alias), else robust_k."""
         return self.robust_k if self.huber_k is None else self.huber_k
 
 
@@ -161,12 +162,12 @@ class SolverConfig(ConfigModel):
     earth_model: EarthModel = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
     # 0: a state per DVL ping; >0: only pings at least this far apart (the others are dropped: decimation)
     keyframe_interval_s: NonNegative = 0.0
-    # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping
-    # between two keyframes becomes a DVL factor on the keyframe before it through the IMU motion up to the ping
-    # (factors/dvl_keyframe.py), so that no ping's information is lost. 0: a state per ping. Applied after
-    # keyframe_interval_s; must not exceed max_state_spacing_s. The EKF keeps a state per ping. 1 s: on a 5 Hz DVL the
-    # calibration sigmas within 0.05 % and the estimates within 0.003 sigma of a state per ping, with a fifth of
-    # the states (tests/estimators/test_keyframes.py); a 1 Hz DVL keeps a state per ping.
+    # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping #
+    between two keyframes becomes a DVL factor on the keyframe before it through the IMU motion up to the ping #
+    (factors/dvl.py with a PingMotion), so that no ping's information is lost. 0: a state per ping. Applied after #
+    keyframe_interval_s; must not exceed max_state_spacing_s. The EKF keeps a state per ping. 1 s: on a 5 Hz DVL a fifth
+    # of the states, with calibration sigmas and estimates those of a state per ping to a small fraction #
+    (docs/results.md, "Keyframes"); a 1 Hz DVL keeps a state per ping.
     keyframe_spacing_s: NonNegative = 1.0
     # DVL dropouts: where pings are missing for more than 1.5 times this, states are added this far apart
     # without a DVL factor, so that no IMU factor spans more than this (what the EKF's propagation does)
@@ -187,7 +188,8 @@ class RelinearizationThresholds(ConfigModel):
       0.01 m/s; the misalignment's curvature v dc^2 / 2 = 2.5e-5 m/s at 5e-3 rad;
     - the IMU factor is linear in the bias (first-order bias correction of the preintegration): 100 micro-g,
       2 deg/h, i.e. the bias never triggers a relinearisation in practice.
-    iSAM2's default, 0.1 on everything, let the scale wander to 0.04 in a prototype.
+    iSAM2's default, 0.1 on everything, is far above the scale's and the misalignment's sigmas: they would stay
+    linearised where they were first set while they converge.
     TOML section [online.relinearization]."""
 
     SECTION: ClassVar[str] = "online.relinearization"
@@ -234,7 +236,7 @@ class OnlineConfig(ConfigModel):
     relinearization: RelinearizationThresholds = Field(default_factory=RelinearizationThresholds)
 
     def check(self) -> None:
-        """validate() under its old name."""
+        """An alias of validate()."""
         self.validate()
 
 
@@ -249,8 +251,8 @@ class EkfConfig(ConfigModel):
     calibration_speed_sigmas: NonNegative = 5.0
     # chi^2 gate of a DVL update: a ping whose normalised innovation squared exceeds the chi^2 quantile of
     # this probability (dof: the measurement's dimension) is not used, only counted ("dvl_gated"); 1: no gate.
-    # 0.99999 (NIS 25.9 for 3-D): a 0.5 m/s outlier at 2 cm/s noise has NIS above 500; at 0.9999 (21.1) a
-    # clean paper-3d run lost 2 sound pings, which moved its estimates by 0.09 sigma
+    # 0.99999 (NIS 25.9 for 3-D): a 0.5 m/s outlier at 2 cm/s noise has NIS above 500; at 0.9999 (21.1) sound
+    # pings of a clean paper-3d run are gated
     gate_probability: Number = Field(default=0.99999, gt=0.0, le=1.0)
     # after this many consecutive gated pings the next one is used anyway (a filter that lost track recovers)
     gate_reopen_after: Integer = Field(default=10, ge=1)

@@ -35,8 +35,8 @@ figures of this design: docs/results.md, "Online estimator"):
 - Bounded: the window holds a bounded number of variables and factors (and iSAM2 reuses the slots of removed
   factors), so neither iSAM2's work per update nor the copy of the Values it hands to each Python CustomFactor
   grows with the mission: the last hour of a 6-hour survey has no higher p99 than the first (docs/results.md).
-  The factors it drops are freed (the IMU factor's callback holds no reference back to it: factors/imu_earth.py, "Memory"), so
-  memory is flat too; at 200 Hz IMU / 5 Hz DVL over 6 h see bench/bench_online_long.py.
+  The factors it drops are freed (the IMU factor's callback holds no reference back to it: factors/imu_earth.py,
+  "Memory"), so memory is flat too; at 200 Hz IMU / 5 Hz DVL over 6 h see bench/bench_online_long.py.
 - The alternative of a sliding-window Gauss-Newton written in Python (solver.py on the window, a QR marginal
   prior on the oldest state) relinearises the whole window at every iteration: a higher median latency than
   this design, everything included.

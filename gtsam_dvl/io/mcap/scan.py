@@ -7,7 +7,7 @@ writer left them out), and a channel's bodies are cut out as one (N, L) uint8 ar
 sliding-window view. Only the data section is read, so the same walk serves ``salvage``: a file without
 footer is scanned from the start and every chunk whose CRC checks is kept.
 
-Memory (issue 12): a file of MMAP_MIN_BYTES or more is memory-mapped, not read, and ``iter_read`` hands out
+Memory: a file of MMAP_MIN_BYTES or more is memory-mapped, not read, and ``iter_read`` hands out
 the bodies chunk by chunk, each chunk's compressed bytes released from the process's memory once it is
 decompressed, so a reader that decodes as it goes holds one chunk and its own output, not the log.
 """
