@@ -162,12 +162,12 @@ class SolverConfig(ConfigModel):
     earth_model: EarthModel = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
     # 0: a state per DVL ping; >0: only pings at least this far apart (the others are dropped: decimation)
     keyframe_interval_s: NonNegative = 0.0
-    # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping #
-    between two keyframes becomes a DVL factor on the keyframe before it through the IMU motion up to the ping #
-    (factors/dvl.py with a PingMotion), so that no ping's information is lost. 0: a state per ping. Applied after #
-    keyframe_interval_s; must not exceed max_state_spacing_s. The EKF keeps a state per ping. 1 s: on a 5 Hz DVL a fifth
-    # of the states, with calibration sigmas and estimates those of a state per ping to a small fraction #
-    (docs/results.md, "Keyframes"); a 1 Hz DVL keeps a state per ping.
+    # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping
+    # between two keyframes becomes a DVL factor on the keyframe before it through the IMU motion up to the ping
+    # (factors/dvl.py with a PingMotion), so that no ping's information is lost. 0: a state per ping. Applied after
+    # keyframe_interval_s; must not exceed max_state_spacing_s. The EKF keeps a state per ping. 1 s: on a 5 Hz DVL
+    # a fifth of the states, with calibration sigmas and estimates those of a state per ping to a small fraction
+    # (docs/results.md, "Keyframes"); a 1 Hz DVL keeps a state per ping.
     keyframe_spacing_s: NonNegative = 1.0
     # DVL dropouts: where pings are missing for more than 1.5 times this, states are added this far apart
     # without a DVL factor, so that no IMU factor spans more than this (what the EKF's propagation does)
