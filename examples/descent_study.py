@@ -5,7 +5,7 @@ Covariance analysis with the planning API (no Monte Carlo: sigmas of the lineari
 depend on the noise draw). Starts from the paper's 3-D run and changes the 660-720 s descent's duration
 (0 = no descent: the 2-D case) and the DVL ping rate. Writes a plot and a CSV.
 
-    .venv/bin/python examples/descent_study.py -o study/            # full grid, about 2 minutes
+    .venv/bin/python examples/descent_study.py -o study/            # full grid (minutes)
     .venv/bin/python examples/descent_study.py -o study/ --quick    # 2 x 2 grid
 """
 

@@ -193,7 +193,7 @@ class FactorMaker:
         """Each delta-v rotated back to its sample's start (see module doc), if the configuration asks."""
         if not self.config.imu.rotation_compensation:
             return b_f
-        out = np.cross(b_omega, b_f)  # in place from here: one array of the log's size, not three (a day: 0.4 GB each)
+        out = np.cross(b_omega, b_f)  # in place from here: one array of the log's size, not three
         out *= 0.5 * dt_sample[:, None]
         out += b_f
         return np.asarray(out)

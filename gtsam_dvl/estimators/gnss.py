@@ -21,7 +21,7 @@ sample deeper than max_depth_m before it), "all" every good fix.
 The first state: when the map origin is the first fix, the log does not say where the vehicle started; the
 first state's position prior is then loose (LOOSE_POSITION_SIGMA_M: the fixes place it) and its initial guess
 is the first fix minus the antenna's offset. When no fix aids, the prior is the origin fix's covariance.
-When the log records its own origin (the simulator's), the first state stays pinned at it as before.
+When the log records its own origin (the simulator's), the first state stays pinned at it ([priors]).
 Batch smoother only: the online estimator and the EKF do not take fixes yet.
 """
 

@@ -98,8 +98,8 @@ def test_bad_input_gives_one_line_and_exit_1(case: str, sim_log: Path, tmp_path:
 
 @pytest.mark.parametrize("fraction", [0.5, 0.6])
 def test_truncated_log_salvage_recovers(fraction: float, sim_log: Path, tmp_path: Path) -> None:
-    """info --salvage on a file cut short says so, with the time up to which data was read (it used to say
-    "lost 0 chunk(s)" when the cut fell between a chunk and its message indexes)."""
+    """info --salvage on a file cut short says so, with the time up to which data was read (also when
+    the cut falls between a chunk and its message indexes: not "lost 0 chunk(s)")."""
     bad = tmp_path / "cut.mcap"
     size = int(sim_log.stat().st_size * fraction)
     bad.write_bytes(sim_log.read_bytes()[:size])
@@ -204,7 +204,7 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
     assert json.loads((tmp_path / "default.json").read_text())["scale"] != s1["scale"]
 
 
-# ----- the rough edges of issue 14, item 3 ------------------------------------------------------------------------
+# ----- help, flags and scenario lists -----------------------------------------------------------------------------
 def test_help_shows_flags_as_flags_and_lists_the_scenarios() -> None:
     from gtsam_dvl.sim.scenario import list_builtin_scenarios
 

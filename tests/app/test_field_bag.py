@@ -1,4 +1,4 @@
-"""A log as a real vehicle records it, smoothed with topic options only (issue 11, "done when").
+"""A log as a real vehicle records it, smoothed with topic options only.
 
 The bag is written with rosbags (not our writer), in a rosbag2 folder: another driver's topic names and frame
 ids, a 200 Hz IMU, a 5 Hz DVL mounted z-down (180 deg roll) with a lever arm in /tf_static, a pressure sensor,

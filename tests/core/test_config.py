@@ -340,7 +340,7 @@ def test_iodvlc_section_reaches_the_observer(tmp_path: Path) -> None:
     assert len(base.segments) >= 1 and run_iodvlc(log, cfg).segments == []
 
 
-# ----- named configurations (issue 11 item 5) -------------------------------------------------------------------
+# ----- named configurations ------------------------------------------------------------------------------------
 def test_defaults_are_a_real_dvls_priors_and_paper_is_named() -> None:
     """The defaults: scale 1 +- 1 %, misalignment 1 deg per axis; "paper": 0.8 +- 0.5, the rest identical."""
     cfg, paper = EstimatorConfig(), EstimatorConfig.paper()

@@ -167,7 +167,7 @@ def test_forced_static_and_online_need_an_attitude_source(moving_log: LogData) -
 
 
 def test_static_start_keeps_the_prior_sigmas() -> None:
-    """A static start aligns as before: no sigmas of its own, so the graph's prior keeps [priors]."""
+    """A static start aligns from the static phase: no sigmas of its own, so the graph's prior keeps [priors]."""
     log = simulate(load_scenario("paper-3d-short"), SEED)
     a = align(log.imu, log.dvl, map_frame_of(log, EstimatorConfig.paper()), AlignmentConfig())
     assert a.method == "static" and a.sigma_rpy_deg is None and a.t_ref is None

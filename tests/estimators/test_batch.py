@@ -1,4 +1,4 @@
-"""Batch smoother against the simulated truth (issue 3's acceptance numbers).
+"""Batch smoother against the simulated truth (its accuracy targets on the paper's runs).
 
 Each test prints the numbers it measured. Simulations are cached per (scenario, seed, noise) within the
 test session so that the noisy and noise-free runs share work.

@@ -1,9 +1,9 @@
-"""Online (iSAM2) estimator (issue 4): agreement with the batch smoother, the sigma timeline of the paper's
+"""Online (iSAM2) estimator: agreement with the batch smoother, the sigma timeline of the paper's
 observability story, and message handling. Every test prints what it measured.
 
 Runs are cached per session and worker: the fixed-lag runs on the full paper logs serve both the agreement and
 the timeline tests; the full-history mode runs on paper-3d cut at 1000 s (static, Type-I manoeuvres, the first
-turns), where it takes about 10 s (the whole 2060 s run takes about 25 s: see bench/bench_online.py).
+turns), which keeps it short (its cost grows with the mission: see bench/bench_online.py).
 """
 
 from __future__ import annotations
@@ -160,11 +160,11 @@ def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
 
 
 def test_sigma_timeline_paper_3d() -> None:
-    """Issue 4's timeline criteria on paper-3d (fixed lag, seed 1).
+    """The sigma timeline's criteria on paper-3d (fixed lag, seed 1).
 
-    The issue asks the yaw misalignment sigma to fall 10x within 60 s of the motion starting. These data do not
-    support that: with 2 cm/s DVL noise the level acceleration of 600-660 s brings it from 1 deg to 0.14 deg
-    (7x); the batch smoother's own filtering timeline (covariance_analysis.filtering_timeline) gives 0.134 deg
+    A target of the yaw misalignment sigma falling 10x within 60 s of the motion starting is not what these data
+    support: with 2 cm/s DVL noise the level acceleration of 600-660 s brings it from 1 deg to 0.14 deg
+    (7x); the batch smoother's own filtering timeline (estimators/timeline.filtering_timeline) gives 0.134 deg
     at 660 s too. It passes 10x during the first banked turn, at 813 s. Asserted here: 6x by 660 s, 10x by
     900 s."""
     r = _online("paper-3d", 1)

@@ -1,4 +1,4 @@
-"""Memory of the online estimator (issue 12, item 5): the IMU factors the fixed-lag window drops are freed.
+"""Memory of the online estimator: the IMU factors the fixed-lag window drops are freed.
 
 EarthImuFactor's CustomFactor holds its Python callback through C++, out of the garbage collector's sight; the
 callback is a separate model object that holds neither the factor nor its wrapper (factors/imu_earth.py,

@@ -27,7 +27,7 @@ def maker_and_imu() -> tuple[FactorMaker, np.ndarray, np.ndarray, np.ndarray]:
 
 def reference(maker: FactorMaker, t: float, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
               dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The per-ping implementation before vectorisation (session 3), verbatim in substance."""
+    """velocity_rate_input written per ping, one window at a time: the reference for the vectorised one."""
     w = maker.config.dvl.time_offset_window_s
     lo = int(np.searchsorted(imu_t, t + min(0.0, dt) - w, side="left"))
     hi = int(np.searchsorted(imu_t, t + max(0.0, dt) + w, side="right"))

@@ -1,4 +1,4 @@
-"""Never silently wrong (issue 10): gross DVL outliers and a DVL reporting exact zeros while the vehicle moves,
+"""Never silently wrong: gross DVL outliers and a DVL reporting exact zeros while the vehicle moves,
 injected into a simulated paper-3d run, against the batch smoother, the online estimator and the EKF with their
 defaults (robust Huber kernel on every DVL factor, the screen for bogus pings of estimators/selection.py, the
 EKF's chi^2 gate), and the same defaults on the clean log against everything off.
@@ -64,7 +64,7 @@ def _bogus(case: str) -> tuple[LogData, int]:
 
 
 def _off() -> EstimatorConfig:
-    """No kernel, no screen, no gate: the estimators as before issue 10."""
+    """No kernel, no screen, no gate: the estimators without their robust defaults."""
     cfg = EstimatorConfig.paper()
     cfg.dvl.robust, cfg.dvl.screen, cfg.ekf.gate_probability = "none", False, 1.0
     return cfg

@@ -167,7 +167,7 @@ def _chunks(data: bytes, tmp_path: Path) -> list[tuple[int, int, int]]:
 def test_truncation_is_reported_wherever_the_cut_falls(where: str, long_log: tuple[LogData, bytes],
                                                        tmp_path: Path) -> None:
     """A file cut short lost the rest of the recording, however little of the cut-off record was there: the
-    report says so (it used to say "lost 0 chunk(s)", or "nothing lost" for a cut between records)."""
+    report says so (not "lost 0 chunk(s)", nor "nothing lost" for a cut between records)."""
     log, data = long_log
     chunks = _chunks(data, tmp_path)
     k = len(chunks) // 2

@@ -1,4 +1,4 @@
-"""Streaming reading (issue 12): the log is read chunk by chunk (pages of a .db3) and the IMU and truth are
+"""Streaming reading: the log is read chunk by chunk (pages of a .db3) and the IMU and truth are
 decoded as they come, into arrays of the fields used; the result must be the bulk read's, bit for bit, with
 the file memory-mapped or read, with the storage's message counts right or missing, and its peak memory must
 stay below the IMU's message bodies (which the bulk read held, twice)."""
