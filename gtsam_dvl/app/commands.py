@@ -260,7 +260,7 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     config = EstimatorConfig.load(config_path) if config_path else None
     t_read = time.perf_counter()
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
-        log = load_log(log_path, progress=read_progress, **(read_options or {}))  # (a day's log: docs/results.md, Speed)
+        log = load_log(log_path, progress=read_progress, **(read_options or {}))  # (a day: docs/results.md, Speed)
     read_s = time.perf_counter() - t_read
     if config is None:  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
         config = EstimatorConfig.for_log(log.metadata)
