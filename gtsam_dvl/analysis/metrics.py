@@ -120,7 +120,7 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 
 
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
-    """The summary JSON (README, "Command line"), in user units (degrees, deg/h, micro-g, ppm), with the run's
+    """The summary JSON (docs/command-line.md), in user units (degrees, deg/h, micro-g, ppm), with the run's
     health (analysis/health.py) and what the reader lost (LogData.metadata["reader_losses"])."""
     truth_dist = path_length(log.truth.n_p) if log.truth is not None else path_length(result.n_p)
     out: dict[str, Any] = {

@@ -8,13 +8,12 @@ prior-whitened posterior covariance P0^-1/2 Sigma P0^-1/2, whose eigenvalues are
 combinations of states (e.g. the misalignment about the thrust axis together with a bias). A ratio near 1
 means the data said nothing about that direction; near 0, the data fixed it.
 
-Verdicts per state, against a useful accuracy (the [observability] targets, core/config.py: scale 0.1 %,
-misalignment 0.1 deg, biases half the paper's priors): "determined" when the posterior sigma is at or below the
-target and the log informed the state (ratio <= NOT_DETERMINED); "weakly determined" when informed but above the
-target; "not determined" when ratio > NOT_DETERMINED (the log gave it little; said when the prior alone already
-meets the target). Directions and the lever arm are judged on the ratio: <= DETERMINED "determined". For states
-not determined the information gained per hour of this log tells how long a similar mission would need to halve
-the prior sigma.
+Verdicts per state, against a useful accuracy (the [observability] targets, core/config/sections.py ObservabilityConfig:
+scale 0.1 %, misalignment 0.1 deg, biases half the paper's priors): "determined" when the posterior sigma is at or below
+the target and the log informed the state (ratio <= NOT_DETERMINED); "weakly determined" when informed but above the
+target; "not determined" when ratio > NOT_DETERMINED (the log gave it little; said when the prior alone already meets
+the target). Directions and the lever arm are judged on the ratio: <= DETERMINED "determined". For states not determined
+the information gained per hour of this log tells how long a similar mission would need to halve the prior sigma.
 
 With [dvl] estimate_lever_arm the lever arm b_l (m, base_link) is judged per axis too (ObservabilityReport.
 lever_arm, from NavResult.lever_arm_cov against [dvl] lever_arm_sigma_m), with a stricter threshold

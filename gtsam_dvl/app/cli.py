@@ -362,7 +362,7 @@ LIVE_HELP = (
     "map -> base_link, /gtsam_dvl/odometry with covariance), the path, DVL scale, misalignment, time offset and "
     "IMU biases with their sigmas, the estimator's counters and the health warnings, the raw IMU / DVL / depth "
     "messages and the truth when the log has it. In Foxglove: Open connection > Foxglove WebSocket > "
-    "ws://localhost:8765, then Layouts > Import from file > layouts/gtsam_dvl_live.json (README, Live view)."
+    "ws://localhost:8765, then Layouts > Import from file > layouts/gtsam_dvl_live.json (docs/live-view.md)."
 )
 
 

@@ -4,7 +4,7 @@ States (pose X_i = n_T_b, velocity V_i = n_v) at the DVL epochs chosen by estima
 usable ping, or with [solver] keyframe_spacing_s the keyframes) and at DVL-dropout fillers; preintegrated IMU
 factors between consecutive states, integrated exactly to the DVL stamps; DVL velocity (or beam) factors on
 (X_i, V_i, scale K, misalignment C = b_R_d); the pings between keyframes as DVL factors on the state before
-them through the IMU motion up to the ping (estimators/keyframes.py, factors/dvl_keyframe.py, also on the
+them through the IMU motion up to the ping (estimators/keyframes.py, factors/dvl.py with a PingMotion, also on the
 bias); IMU bias B (one random constant, or B_i as a random walk). Every factor comes from the FactorMaker
 (estimators/factor_maker.py: the Earth model and why it
 is exact), which the online estimator shares; this module owns the epochs, their preintegrations and the
@@ -302,7 +302,7 @@ class LogGraph:
         return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input)
 
     def between_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
-        """DVL factors of the pings between state i and the next (keyframes, factors/dvl_keyframe.py), with
+        """DVL factors of the pings between state i and the next (keyframes, factors/dvl.py with a PingMotion), with
         gravity referenced at state i's position in gravity_positions (the initial guess; the map origin if
         unset). Normal gravity's gradient, 1.5e-6 s^-2, is in the factor: over 1 s it moves the predicted
         velocity by 1.5e-6 m/s per metre of position change."""

@@ -1,5 +1,5 @@
 """The estimators by name: one interface (Estimator), one registry (ESTIMATORS, its names MODES) and the
-dispatcher the command line (`smooth --mode`), the demo and the Monte Carlo runs (analysis/montecarlo.py) share.
+dispatcher the command line (`smooth --mode`), the demo and the Monte Carlo runs (campaign/montecarlo.py) share.
 
 Adding an estimator is one entry in ESTIMATORS: an Estimator (a name, a description and run()), e.g. a
 RegisteredEstimator around a function. Each function imports its estimator when called, so that listing the modes

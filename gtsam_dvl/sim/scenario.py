@@ -195,7 +195,7 @@ class Scenario:
     t0_ns: int = DEFAULT_T0_S * 1_000_000_000
     depth: DepthSpec | None = None  # the [depth] table, if the scenario has one
     gnss: GnssSpec | None = None  # the [gnss] table, if the scenario has one
-    # the named estimator configuration (core/config.py NAMED_CONFIGS) this scenario's runs are meant for:
+    # the named estimator configuration (core/config/estimator.py NAMED_CONFIGS) this scenario's runs are meant for:
     # smooth and plan use it when no configuration is given (the paper's runs: "paper")
     estimator_config: str = "default"
 

@@ -10,7 +10,7 @@ interval's closed-form transition matrix. Each valid ping is a measurement updat
 
     y = k * d_R_b * ( n_R_b^T n_v + b_omega x b_l ) + noise,     d_R_b = b_R_d^T      (docs/conventions.md)
 
-Same Earth model, initialisation, priors and noise as the smoother (graph.py, config.py): coarse alignment
+Same Earth model, initialisation, priors and noise as the smoother (estimators/graph.py, core/config/): coarse alignment
 on the static segment, scale 0.8, misalignment at the nominal mounting, the first ping's velocity at that
 calibration, position 0 at the first ping. The error is injected after every update (no reset Jacobian:
 its effect is second order in the correction). Every ping is used: solver.keyframe_interval_s only thins

@@ -38,8 +38,8 @@ def considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega:
     doc): same error, same Jacobians for pose and velocity, none for scale and misalignment, which are
     "considered" at their current estimate (the velocity's information scales with it). d_y: the 3-D velocity
     (m/s, dvl_link); beam: (d_u, y_j) for one beam; b_omega: the body rate at the ping (rad/s); b_l: the DVL's
-    lever arm (m, base_link). offset = (rate_input, n_g): the time-offset model of
-    make_dvl_velocity_offset_factor on [X_i, V_i, K, C, T_OFFSET] (with d_y), its T_OFFSET Jacobian kept (it is
+    lever arm (m, base_link). offset = (rate_input, n_g): the time-offset model of factors/dvl.py
+    (make_dvl_factor with an OffsetInput) on [X_i, V_i, K, C, T_OFFSET] (with d_y), its T_OFFSET Jacobian kept (it is
     the IMU's velocity rate, not the velocity's noise)."""
     if (beam is None) == (d_y is None) or (offset is not None and d_y is None):
         raise ValueError("a considered-calibration DVL factor needs either d_y or beam (d_y with offset)")

@@ -1,7 +1,7 @@
 """Keyframes online: the pings between two states, as the batch smoother puts them on the state before them.
 
 With `[solver] keyframe_spacing_s` > 0 the online estimator makes states where the batch smoother does (the
-keyframes of selection.keyframe_mask, decided ping by ping with the same KeyframeThinning, and the DVL-dropout
+keyframes of selection.keyframe_mask, decided ping by ping with the same selection.KeyframeRule, and the DVL-dropout
 fillers); every other usable ping becomes the batch smoother's DVL factor on the state before it through the
 IMU motion up to the ping (factors/dvl.py with a PingMotion, FactorMaker.dvl_keyframe_factors_for). This module
 holds what the online estimator needs for them and the batch path has no use for:
