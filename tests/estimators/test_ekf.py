@@ -23,6 +23,7 @@ from gtsam_dvl.estimators.ekf import FilterState, measurement_model, run_ekf
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.numerical import numerical_jacobian
 
 SEEDS = [1, 2, 3]
 
@@ -84,11 +85,7 @@ def test_transition_matrix_matches_numerical_derivative(near_identity: bool) -> 
         return out
 
     steps = np.array([1e-6] * 3 + [1e-4] * 3 + [1e-2] * 3 + [1e-6] * 3 + [1e-4] * 3 + [1e-3] * 4)
-    numerical = np.zeros((N_ERR, N_ERR))
-    for j in range(N_ERR):
-        e = np.zeros(N_ERR)
-        e[j] = steps[j]
-        numerical[:, j] = (end_error(e) - end_error(-e)) / (2 * steps[j])
+    numerical = numerical_jacobian(end_error, [np.zeros(N_ERR)], 0, delta=steps)
     err = np.abs(nominal.Phi - numerical)
     scale = np.abs(numerical).max(axis=1, keepdims=True)
     print(f"\nmax |Phi - numerical| / row scale = {np.max(err / scale):.2e}")
@@ -133,11 +130,7 @@ def test_measurement_jacobian_matches_numerical_derivative(near_identity: bool) 
                             b_R_d @ so3_exp(dx[MIS]), fs.P)
         return measurement_model(moved, b_omega_m, b_l, frame.n_omega_ie)[0]
 
-    numerical = np.zeros((3, N_ERR))
-    for j in range(N_ERR):
-        e = np.zeros(N_ERR)
-        e[j] = 1e-6
-        numerical[:, j] = (h(e) - h(-e)) / 2e-6
+    numerical = numerical_jacobian(h, [np.zeros(N_ERR)], 0)
     print(f"\nmax |H - numerical| = {np.max(np.abs(H - numerical)):.2e} (|y| = {np.linalg.norm(y0):.2f} m/s)")
     np.testing.assert_allclose(H, numerical, atol=1e-8)
 

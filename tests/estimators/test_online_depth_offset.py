@@ -40,6 +40,7 @@ from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, POS, SCALE, VEL
 from gtsam_dvl.estimators.online.estimator import OnlineEstimator, _considered_calibration_factor, feed_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.numerical import numerical_jacobian, numerical_jacobians
 
 SEED = 7
 
@@ -203,13 +204,8 @@ def _inject(fs: FilterState, dx: np.ndarray) -> FilterState:
                        fs.b_R_d @ so3_exp(dx[MIS]), fs.P, fs.time_offset + (dx[OFFSET] if len(dx) > OFFSET else 0.0))
 
 
-def _numerical(f, fs: FilterState, n: int, h: float = 1e-6) -> np.ndarray:  # type: ignore[no-untyped-def]
-    cols = []
-    for j in range(n):
-        dx = np.zeros(n)
-        dx[j] = h
-        cols.append((np.atleast_1d(f(_inject(fs, dx))) - np.atleast_1d(f(_inject(fs, -dx)))) / (2 * h))
-    return np.array(cols).T
+def _numerical(f, fs: FilterState, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    return numerical_jacobian(lambda dx: f(_inject(fs, dx)), [np.zeros(n)], 0)
 
 
 def test_ekf_offset_and_depth_jacobians_match_finite_differences() -> None:
@@ -250,19 +246,17 @@ def test_considered_offset_factor_jacobians() -> None:
     H = A * sigma
     dims = dict(zip(keys, (6, 3, 1, 3, 1), strict=True))
 
-    def moved(key: int, dx: np.ndarray) -> gtsam.Values:
-        delta = gtsam.VectorValues()
-        for k, d in dims.items():
-            delta.insert(k, dx if k == key else np.zeros(d))
-        return values.retract(delta)
+    def error(pose: gtsam.Pose3, n_v: np.ndarray, scale: np.ndarray, b_R_d: gtsam.Rot3, offset: np.ndarray
+              ) -> np.ndarray:
+        moved = gtsam.Values()
+        for key, value in zip(keys, (pose, n_v, scale, b_R_d, offset), strict=True):
+            moved.insert(key, value)
+        return f.unwhitenedError(moved)
 
+    numerical = numerical_jacobians(error, [values.atPose3(X(2)), values.atVector(V(2)), values.atVector(K_SCALE),
+                                            values.atRot3(C_MISALIGN), values.atVector(T_OFFSET)])
     col = 0
-    for key, d in dims.items():
-        num = np.zeros((3, d))
-        for j in range(d):
-            dx = np.zeros(d)
-            dx[j] = 1e-6
-            num[:, j] = (f.unwhitenedError(moved(key, dx)) - f.unwhitenedError(moved(key, -dx))) / 2e-6
+    for (key, d), num in zip(dims.items(), numerical, strict=True):
         block = H[:, col:col + d]
         if key in (K_SCALE, C_MISALIGN):
             assert np.all(block == 0.0)

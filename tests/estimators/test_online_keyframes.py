@@ -43,6 +43,7 @@ from gtsam_dvl.estimators.online.window import StateEstimate
 from gtsam_dvl.factors import EarthImuFactor, PingMotion
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.numerical import numerical_jacobian
 
 SEED = 7
 T_END_S = 300.0
@@ -288,14 +289,7 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
     t_p = s.t + snap.dt
     quiet = dataclasses.replace(snap, cov=np.zeros((9, 9)))
     p = predict_at_ping(s, t_p, quiet, motion)
-    J = np.zeros((19, 19))
-    for k in range(19):
-        h = 1e-6
-        e = np.zeros(19)
-        e[k] = h
-        plus = predict_at_ping(_retract(s, e), t_p, quiet, motion)
-        minus = predict_at_ping(_retract(s, -e), t_p, quiet, motion)
-        J[:, k] = (_local(p, plus) - _local(p, minus)) / (2 * h)
+    J = numerical_jacobian(lambda e: _local(p, predict_at_ping(_retract(s, e), t_p, quiet, motion)), [np.zeros(19)], 0)
     expected = J @ cov @ J.T
     d = np.sqrt(np.diag(expected))
     rel = np.abs(p.cov - expected) / np.outer(d, d)
