@@ -35,9 +35,8 @@ from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.keyframes import ANALYTIC_MAX_ANGLE, PimSnapshot, ping_snapshots, snapshot, snapshot_params
 from gtsam_dvl.estimators.selection import sample_starts
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.numerical import numerical_jacobian
+from tests.support.scenarios import simulate_variant
 
 SEED = 7
 
@@ -45,9 +44,7 @@ SEED = 7
 @cache
 def run_log(dvl_hz: float) -> LogData:
     """paper-3d-short (120 s static, 60 s legs, the paper's sensors) with the DVL at dvl_hz."""
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_hz": dvl_hz}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_hz": dvl_hz})
 
 
 def config(spacing_s: float) -> EstimatorConfig:

@@ -14,7 +14,6 @@ Together about 16 s of CPU.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from functools import cache
 
@@ -38,9 +37,8 @@ from gtsam_dvl.estimators.ekf.filter import (
 )
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, POS, SCALE, VEL, NavState
 from gtsam_dvl.estimators.online.estimator import OnlineEstimator, _considered_calibration_factor, feed_log
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.numerical import numerical_jacobian, numerical_jacobians
+from tests.support.scenarios import simulate_variant
 
 SEED = 7
 
@@ -48,16 +46,13 @@ SEED = 7
 @cache
 def offset_log(dt: float) -> LogData:
     """paper-3d-short whose DVL stamps are dt seconds early (a clock lag: tests/estimators/test_time_offset.py)."""
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_time_offset_s": dt}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_time_offset_s": dt})
 
 
 @cache
 def depth_log() -> LogData:
-    raw = copy.deepcopy(load_scenario("paper-3d-short").raw)
-    raw["depth"] = {"rate_hz": 1.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]}
-    return simulate(scenario_from_dict(raw, name="paper-3d-short-depth"), SEED)
+    return simulate_variant(SEED, name="paper-3d-short-depth",
+                            depth={"rate_hz": 1.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]})
 
 
 def offset_config() -> EstimatorConfig:

@@ -41,9 +41,8 @@ from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_lo
 from gtsam_dvl.estimators.online.keyframes import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
 from gtsam_dvl.factors import EarthImuFactor, PingMotion
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.numerical import numerical_jacobian
+from tests.support.scenarios import simulate_variant
 
 SEED = 7
 T_END_S = 300.0
@@ -61,9 +60,7 @@ def _cut(log: LogData, t_end: float) -> LogData:
 
 @cache
 def _simulated(dvl_hz: float) -> LogData:
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_hz": dvl_hz}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_hz": dvl_hz})
 
 
 @cache

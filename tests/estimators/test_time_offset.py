@@ -22,6 +22,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.scenarios import simulate_variant
 
 OFFSETS = (-0.2, 0.1, 0.6, 1.5)
 SEED = 7
@@ -30,10 +31,7 @@ SEED = 7
 @cache
 def short_run(dt: float, noise_m_s: float = 0.02) -> LogData:
     """paper-3d shortened (data/scenarios/paper-3d-short.toml: 120 s static, 60 s legs), DVL stamps dt early."""
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_time_offset_s": dt}
-    raw["dvl"] = {**raw["dvl"], "noise_m_s": noise_m_s}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_time_offset_s": dt}, dvl={"noise_m_s": noise_m_s})
 
 
 def config(estimate: bool) -> EstimatorConfig:
