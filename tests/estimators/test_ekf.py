@@ -17,12 +17,13 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gravity_gradient
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp, so3_log
-from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.ekf import FilterState, measurement_model, run_ekf
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.logs import cut_log
 from tests.support.numerical import numerical_jacobian
 
 SEEDS = [1, 2, 3]
@@ -38,15 +39,6 @@ def _ekf(seed: int) -> tuple[NavResult, float]:
     start = time.perf_counter()
     result = run_ekf(_log(seed))
     return result, time.perf_counter() - start
-
-
-def _truncated(log: LogData, t_end: float) -> LogData:
-    keep, ping = log.imu.t <= t_end, log.dvl.t <= t_end
-    imu = ImuData(log.imu.t[keep], log.imu.b_omega[keep], log.imu.b_f[keep])
-    b = log.dvl.beams
-    beams = None if b is None else BeamData(b.d_u[ping], b.v[ping], b.range[ping], b.valid[ping])
-    dvl = DvlData(log.dvl.t[ping], log.dvl.d_v[ping], log.dvl.d_cov[ping], log.dvl.valid[ping], beams)
-    return dataclasses.replace(log, imu=imu, dvl=dvl)
 
 
 # ----- Jacobians ------------------------------------------------------------------------------------
@@ -210,7 +202,7 @@ def test_paper_3d_agrees_with_batch_smoother() -> None:
         assert np.all(np.abs(se / sb - 1.0) < 0.15)
     print(f"position RMSE EKF {ekf['errors']['position_rmse_m']:.2f} m, "
           f"batch {batch['errors']['position_rmse_m']:.2f} m")
-    cut = smooth_batch(_truncated(log, 720.0))
+    cut = smooth_batch(cut_log(log, 720.0, cut_truth=False))
     tl = _ekf(seed)[0].timeline
     assert tl is not None
     roll_ekf = tl.misalignment_sigma_deg[np.searchsorted(tl.t, 720.0), 0]
@@ -240,7 +232,7 @@ def test_result_shapes_and_covariances() -> None:
 def test_beams_robust_random_walk_and_flat_earth_options() -> None:
     """Per-beam updates (with the Huber weight and random-walk biases) give the same calibration as the
     3-D velocity on 0-800 s of the noise-free log; the flat Earth model runs."""
-    log = _truncated(_log(SEEDS[0], white_noise=False), 800.0)
+    log = cut_log(_log(SEEDS[0], white_noise=False), 800.0, cut_truth=False)
     base = run_ekf(log)
     cfg = EstimatorConfig.paper()
     cfg.dvl.use_beams = True

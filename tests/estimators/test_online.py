@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import warnings
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,36 +18,22 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
-from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, TruthData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.online import MessageDropped, OnlineConfig, OnlineEstimator, feed_log, smooth_online
 from gtsam_dvl.estimators.online.types import misalignment_deg_and_cov
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.logs import cut_log
+from tests.support.results import changes_in_sigmas
 
 PRIOR = EstimatorConfig.paper().priors
-
-
-def _cut(log: LogData, t_end: float) -> LogData:
-    """The log up to t_end (IMU, DVL with beams, truth)."""
-    i, d = log.imu.t <= t_end, log.dvl.t <= t_end
-    beams = None
-    if log.dvl.beams is not None:
-        b = log.dvl.beams
-        beams = BeamData(b.d_u[d], b.v[d], b.range[d], b.valid[d])
-    truth = None
-    if log.truth is not None:
-        k = log.truth.t <= t_end
-        tr = log.truth
-        truth = TruthData(tr.t[k], tr.n_p[k], tr.n_q_b[k], tr.n_v[k], tr.b_omega[k])
-    return replace(log, imu=ImuData(log.imu.t[i], log.imu.b_omega[i], log.imu.b_f[i]),
-                   dvl=DvlData(log.dvl.t[d], log.dvl.d_v[d], log.dvl.d_cov[d], log.dvl.valid[d], beams), truth=truth)
 
 
 @functools.cache
 def _log(name: str, seed: int, t_end: float | None = None) -> LogData:
     log = simulate(load_scenario(name), seed)
-    return log if t_end is None else _cut(log, t_end)
+    return log if t_end is None else cut_log(log, t_end)
 
 
 @functools.cache
@@ -66,16 +51,6 @@ def _online(name: str, seed: int, mode: str = "fixed_lag", t_end: float | None =
     return smooth_online(_log(name, seed, t_end), cfg, mode=mode)
 
 
-def _nsigma(online: NavResult, batch: NavResult) -> dict[str, np.ndarray]:
-    """Online minus batch final estimates, in batch sigmas."""
-    return {
-        "scale": np.array([(online.scale - batch.scale) / batch.scale_sigma]),
-        "misalignment": (online.misalignment_deg - batch.misalignment_deg) / batch.misalignment_sigma_deg,
-        "gyro bias": (online.gyro_bias_deg_per_h - batch.gyro_bias_deg_per_h) / batch.gyro_bias_sigma_deg_per_h,
-        "accel bias": (online.accel_bias_ug - batch.accel_bias_ug) / batch.accel_bias_sigma_ug,
-    }
-
-
 def _sigma_ratio(online: NavResult, batch: NavResult) -> np.ndarray:
     return np.concatenate([[online.scale_sigma / batch.scale_sigma],
                            online.misalignment_sigma_deg / batch.misalignment_sigma_deg,
@@ -84,7 +59,7 @@ def _sigma_ratio(online: NavResult, batch: NavResult) -> np.ndarray:
 
 
 def _report(tag: str, online: NavResult, batch: NavResult) -> dict[str, np.ndarray]:
-    d = _nsigma(online, batch)
+    d = changes_in_sigmas(online, batch)  # online minus batch final estimates, in batch sigmas
     print(f"\n{tag}: online - batch in batch sigmas: " + "; ".join(f"{k} {np.round(v, 3)}" for k, v in d.items()))
     print(f"{tag}: sigma online / batch {np.round(_sigma_ratio(online, batch), 3)}; latency ms "
           f"{ {k: round(v, 2) for k, v in online.info['latency_ms'].items()} }; iSAM2 {online.info['isam2']}; "
@@ -342,7 +317,7 @@ def test_bad_messages_dropped_and_counted() -> None:
 
 
 def test_too_short_static_segment_is_a_clear_error() -> None:
-    log = _cut(_short(), 20.0)
+    log = cut_log(_short(), 20.0)
     est = OnlineEstimator.for_log(log)
     with pytest.raises(GtsamDvlError, match="online alignment: no static segment"):
         feed_log(est, log)

@@ -18,10 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import gc
-import weakref
-from dataclasses import replace
 from functools import cache
-from typing import Any
 
 import gtsam
 import numpy as np
@@ -30,7 +27,7 @@ import pytest
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.types import DvlData, ImuData, LogData, TruthData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import map_frame_of
 from gtsam_dvl.estimators.batch import smooth_batch
@@ -40,22 +37,14 @@ from gtsam_dvl.estimators.keyframes import PimSnapshot, interval_with_snapshots,
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.keyframes import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
-from gtsam_dvl.factors import EarthImuFactor, PingMotion
+from gtsam_dvl.factors import PingMotion
+from tests.support.logs import cut_log
+from tests.support.memory import track_returns
 from tests.support.numerical import numerical_jacobian
 from tests.support.scenarios import simulate_variant
 
 SEED = 7
 T_END_S = 300.0
-
-
-def _cut(log: LogData, t_end: float) -> LogData:
-    i, d = log.imu.t <= t_end, log.dvl.t <= t_end
-    tr = log.truth
-    assert tr is not None
-    k = tr.t <= t_end
-    return replace(log, imu=ImuData(log.imu.t[i], log.imu.b_omega[i], log.imu.b_f[i]),
-                   dvl=DvlData(log.dvl.t[d], log.dvl.d_v[d], log.dvl.d_cov[d], log.dvl.valid[d]),
-                   truth=TruthData(tr.t[k], tr.n_p[k], tr.n_q_b[k], tr.n_v[k], tr.b_omega[k]))
 
 
 @cache
@@ -66,7 +55,7 @@ def _simulated(dvl_hz: float) -> LogData:
 @cache
 def run_log(dvl_hz: float, t_end: float = T_END_S) -> LogData:
     """paper-3d-short (the paper's sensors, 120 s static) with the DVL at dvl_hz, cut at t_end."""
-    return _cut(_simulated(dvl_hz), t_end)
+    return cut_log(_simulated(dvl_hz), t_end, beams=False)
 
 
 def config(spacing_s: float) -> EstimatorConfig:
@@ -332,30 +321,15 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
     """Every PingMotion a keyframe factor holds and every IMU factor is tracked; after the run only those of the
     states still in the window may be alive (and the newest IMU factor, the gravity reference), and none once the
     estimator is gone."""
-    made: list[weakref.ref[Any]] = []
-    imus: list[weakref.ref[Any]] = []
-    original, original_imu = PimSnapshot.motion, FactorMaker.new_imu_factor
-
-    def tracking(self: PimSnapshot, *args: Any) -> PingMotion:
-        m = original(self, *args)
-        made.append(weakref.ref(m))
-        return m
-
-    def tracking_imu(self: FactorMaker, *args: Any, **kwargs: Any) -> EarthImuFactor:
-        f = original_imu(self, *args, **kwargs)
-        imus.append(weakref.ref(f.factor))
-        return f
-
-    monkeypatch.setattr(PimSnapshot, "motion", tracking)
-    monkeypatch.setattr(FactorMaker, "new_imu_factor", tracking_imu)
+    made = track_returns(monkeypatch, PimSnapshot, "motion")
+    imus = track_returns(monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor)
     log = run_log(5.0, 200.0)
     est = OnlineEstimator.for_log(log, config(1.0))
     feed_log(est, log)
     gc.collect()
     assert est.smoother is not None
     in_window = len(est.smoother.times)
-    alive = sum(r() is not None for r in made)
-    alive_imu = sum(r() is not None for r in imus)
+    alive, alive_imu = made.alive(), imus.alive()
     print(f"\n{len(made)} keyframe factors made, {alive} alive after the run; {len(imus)} IMU factors, {alive_imu} "
           f"alive; {in_window} states in the window")
     assert len(made) > 30 * in_window and len(imus) > 8 * in_window
@@ -363,8 +337,8 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
     assert alive_imu <= in_window
     del est
     gc.collect()
-    assert sum(r() is not None for r in made) == 0
-    assert sum(r() is not None for r in imus) == 0
+    assert made.alive() == 0
+    assert imus.alive() == 0
 
 
 def test_one_second_keyframes_on_a_1_hz_log_are_a_state_per_ping() -> None:
