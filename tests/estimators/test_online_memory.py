@@ -50,7 +50,6 @@ def _tracked_run(log: LogData, monkeypatch: pytest.MonkeyPatch, config: Estimato
 def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str) -> None:
     config = EstimatorConfig() if preset == "default" else EstimatorConfig.paper()
     est, made, custom = _tracked_run(log, monkeypatch, config)
-    gc.collect()
     assert est.smoother is not None
     in_window = len(est.smoother.imus)
     alive, alive_custom = made.alive(), custom.alive()
@@ -61,7 +60,6 @@ def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyP
     assert alive <= in_window + 1
     assert alive_custom <= in_window + 1
     del est
-    gc.collect()
     assert made.alive() == 0
     assert custom.alive() == 0
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -20,7 +21,8 @@ class Made:
         return len(self.refs)
 
     def alive(self) -> int:
-        """How many of them are still alive (after gc.collect(): without it, cycles not yet collected count)."""
+        """How many of them are still alive once the garbage collector has run."""
+        gc.collect()
         return sum(r() is not None for r in self.refs)
 
 
