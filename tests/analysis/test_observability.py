@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+import pytest
 
 from gtsam_dvl.analysis.observability import STATES, analyse, prior_sigmas
 from gtsam_dvl.core.config import EstimatorConfig
@@ -23,6 +24,7 @@ def _result(name: str) -> NavResult:
     return smooth_batch(simulate(load_scenario(name), 9))
 
 
+@pytest.mark.slow
 def test_paper_2d_thrust_axis_not_determined_rest_determined() -> None:
     report = analyse(_result("paper-2d"))
     print("\n".join(report.lines()))
@@ -35,6 +37,7 @@ def test_paper_2d_thrust_axis_not_determined_rest_determined() -> None:
     assert worst.ratio > 0.99 and next(iter(worst.weights)) == "misalignment_roll"
 
 
+@pytest.mark.slow
 def test_paper_3d_thrust_axis_determined() -> None:
     """The 60 s descent informs the thrust-axis misalignment (26 % of its prior) but not to the 0.1 deg target:
     weakly determined; every other calibration state is determined."""
