@@ -16,9 +16,12 @@ SHORT = "paper-3d-short"
 
 def scenario_raw(base: str = SHORT, **tables: Any) -> dict[str, Any]:
     """A copy of the built-in scenario base's TOML dict with each keyword's table updated by its dict
-    (rates={"dvl_hz": 5.0}); a list (segments=[...]), a value, or a table the base lacks is set as given."""
+    (rates={"dvl_hz": 5.0}); a list (segments=[...]), a value, or a table the base lacks is set as given; None
+    leaves the base's as it is."""
     raw = copy.deepcopy(load_scenario(base).raw)
     for key, value in tables.items():
+        if value is None:
+            continue
         raw[key] = {**raw[key], **value} if isinstance(value, dict) and key in raw else copy.deepcopy(value)
     return raw
 
