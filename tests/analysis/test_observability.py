@@ -15,6 +15,8 @@ from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
+pytestmark = pytest.mark.slow
+
 CALIBRATION = ["scale", "misalignment_pitch", "misalignment_yaw", "accel_bias_x", "accel_bias_y", "accel_bias_z",
                "gyro_bias_x", "gyro_bias_y"]
 
@@ -24,7 +26,6 @@ def _result(name: str) -> NavResult:
     return smooth_batch(simulate(load_scenario(name), 9))
 
 
-@pytest.mark.slow
 def test_paper_2d_thrust_axis_not_determined_rest_determined() -> None:
     report = analyse(_result("paper-2d"))
     print("\n".join(report.lines()))
@@ -37,7 +38,6 @@ def test_paper_2d_thrust_axis_not_determined_rest_determined() -> None:
     assert worst.ratio > 0.99 and next(iter(worst.weights)) == "misalignment_roll"
 
 
-@pytest.mark.slow
 def test_paper_3d_thrust_axis_determined() -> None:
     """The 60 s descent informs the thrust-axis misalignment (26 % of its prior) but not to the 0.1 deg target:
     weakly determined; every other calibration state is determined."""
