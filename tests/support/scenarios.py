@@ -36,7 +36,6 @@ def surface_dive_raw(segments: list[dict[str, Any]], **tables: Any) -> dict[str,
     """paper-3d-short's sensors on a dive from the surface: the origin at height 0 (the vehicle starts at the
     surface), the given segments, the default estimator configuration (as for a real log), the other tables
     (gnss=..., depth=...) as scenario_raw sets them."""
-    raw = scenario_raw(SHORT, segments=segments, **tables)
+    raw = scenario_raw(SHORT, origin={"height_m": 0.0}, segments=segments, **tables)
     raw.pop("estimator_config", None)
-    raw["origin"]["height_m"] = 0.0
     return raw
