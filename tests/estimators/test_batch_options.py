@@ -21,6 +21,8 @@ from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.logs import cut_log
 
+pytestmark = pytest.mark.slow
+
 
 @functools.cache
 def _paper3d(seed: int = 5) -> LogData:

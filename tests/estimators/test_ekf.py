@@ -140,6 +140,7 @@ def _print_summary(tag: str, s: dict) -> None:
           f"attitude RMSE {np.round(e['attitude_rmse_deg'], 4)} deg; wall {s['timing_s']['total']:.1f} s")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
 def test_paper_3d_final_calibration_inside_3_sigma(seed: int) -> None:
     result, wall = _ekf(seed)
@@ -155,6 +156,7 @@ def test_paper_3d_final_calibration_inside_3_sigma(seed: int) -> None:
     assert 0.8 < result.info["filter"]["mean_nis_per_dof"] < 1.2  # innovations as large as the filter predicts
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
 def test_paper_3d_convergence_as_figures_6_and_7(seed: int) -> None:
     """Scale from 0.8 as soon as the motion starts; yaw and pitch misalignment at 600 s; roll only with the
@@ -184,6 +186,7 @@ def test_paper_3d_convergence_as_figures_6_and_7(seed: int) -> None:
     assert roll720 < 0.5 * roll659
 
 
+@pytest.mark.slow
 def test_paper_3d_agrees_with_batch_smoother() -> None:
     """Filter and smoother on the same log: the final calibration (constant states: the filter's last
     estimate uses all the data) agrees within 2 combined sigmas, and so do the sigmas themselves (10 %);
@@ -210,6 +213,7 @@ def test_paper_3d_agrees_with_batch_smoother() -> None:
     assert roll_ekf == pytest.approx(cut.misalignment_sigma_deg[0], rel=0.05)
 
 
+@pytest.mark.slow
 def test_result_shapes_and_covariances() -> None:
     result = _ekf(SEEDS[0])[0]
     n = len(result.t)
@@ -229,6 +233,7 @@ def test_result_shapes_and_covariances() -> None:
     np.testing.assert_allclose(result.timeline.misalignment_sigma_deg[-1], result.misalignment_sigma_deg, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_beams_robust_random_walk_and_flat_earth_options() -> None:
     """Per-beam updates (with the Huber weight and random-walk biases) give the same calibration as the
     3-D velocity on 0-800 s of the noise-free log; the flat Earth model runs."""

@@ -77,6 +77,7 @@ def _antenna_errors(res: NavResult, log: LogData, t: np.ndarray) -> tuple[np.nda
     return est - true, sig
 
 
+@pytest.mark.slow
 def test_dive_held_out_final_fixes_within_3_sigma(dive_log: LogData, smoothed: dict[str, NavResult]) -> None:
     log = dive_log
     g = log.gnss
@@ -113,6 +114,7 @@ def test_dive_held_out_final_fixes_within_3_sigma(dive_log: LogData, smoothed: d
     assert np.all(sig_start[:2] < 0.5 * sig_origin[:2]) and np.all(sig_origin[:2] > 1.9)
 
 
+@pytest.mark.slow
 def test_all_mode_uses_every_good_fix(dive_log: LogData, smoothed: dict[str, NavResult]) -> None:
     res = smoothed["all"]
     c = res.info["counters"]

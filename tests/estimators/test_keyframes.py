@@ -80,6 +80,7 @@ def truth(log: LogData, r: NavResult) -> np.ndarray:
                            np.array(tb.gyro_rad_s) / DEG_PER_H, tr.n_p[j]])
 
 
+@pytest.mark.slow
 def test_one_second_keyframes_match_a_state_per_ping_on_a_5_hz_dvl() -> None:
     log = run_log(5.0)
     (per_ping, wall_ping), (keyed, wall_key) = solve(0.0), solve(1.0)
@@ -108,6 +109,7 @@ def test_one_second_keyframes_match_a_state_per_ping_on_a_5_hz_dvl() -> None:
     assert np.all(np.abs(v1 - true) < 3 * s1)
 
 
+@pytest.mark.slow
 def test_health_checks_every_ping_with_keyframes() -> None:
     """The health's DVL residuals take every usable ping, those between keyframes too (interpolated between
     states), and stay near 1 (whitened) as with a state per ping."""
