@@ -71,6 +71,7 @@ def test_depth_bounds_vertical_position_and_improves_pitch_misalignment(seed: in
     assert abs(s["errors"]["misalignment_deg"][1]) < 3 * pitch
 
 
+@pytest.mark.slow
 def test_noise_free_depth_is_exact() -> None:
     """No white noise: the model of the factor and the simulator agree to a millimetre (the map's z against
     the ellipsoidal height, the column's gravity, the map origin 100 m below the surface)."""
