@@ -69,6 +69,7 @@ def _report(tag: str, online: NavResult, batch: NavResult) -> dict[str, np.ndarr
 
 # ----- agreement with the batch smoother -----------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "seed"), [("paper-3d", 1), ("paper-3d", 2), ("paper-2d", 1), ("paper-2d", 2)])
 def test_fixed_lag_agrees_with_batch(name: str, seed: int) -> None:
     """Final scale, misalignment and biases within 1 batch sigma (measured: below 0.2), with the same sigmas
@@ -85,6 +86,7 @@ def test_fixed_lag_agrees_with_batch(name: str, seed: int) -> None:
     assert online.info["isam2"]["states_marginalized"] > 0.9 * len(online.t)
 
 
+@pytest.mark.slow
 def test_full_history_agrees_with_batch() -> None:
     """paper-3d cut at 1000 s (static, Type I, descent, the first turns): within 0.1 batch sigma (measured:
     0.02), same sigmas within 1 %."""
@@ -96,6 +98,7 @@ def test_full_history_agrees_with_batch() -> None:
     assert online.info["isam2"]["states_marginalized"] == 0 and online.info["isam2"]["variables"] > 2000
 
 
+@pytest.mark.slow
 def test_fixed_lag_timeline_matches_full_history() -> None:
     """The fixed-lag filtering sigmas follow the full-history ones (iSAM2 keeping every state) within 10 % at
     every epoch (measured: 8.5 % at worst, the pitch misalignment near 800 s), and its window stays bounded. What
@@ -119,6 +122,7 @@ def test_fixed_lag_timeline_matches_full_history() -> None:
     assert lag.info["isam2"]["variables"] <= 2 * (window + 2) + 3
 
 
+@pytest.mark.slow
 def test_random_walk_bias_fixed_lag_agrees_with_batch() -> None:
     """The bias as a random walk (a bias state per epoch, the newest in the window): paper-3d cut at 900 s."""
     online = _online("paper-3d", 3, "fixed_lag", 900.0, "random_walk")
@@ -134,6 +138,7 @@ def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
     return np.asarray(x[int(np.searchsorted(t, when))])
 
 
+@pytest.mark.slow
 def test_sigma_timeline_paper_3d() -> None:
     """Issue 4's timeline criteria on paper-3d (fixed lag, seed 1).
 
@@ -170,6 +175,7 @@ def test_sigma_timeline_paper_3d() -> None:
     assert np.all(a[900][:2] < a[750][:2] / 4)
 
 
+@pytest.mark.slow
 def test_sigma_timeline_paper_2d_roll_unobservable() -> None:
     """Without depth change the misalignment about the thrust axis keeps its prior to the end (Remark 3)."""
     for seed in (1, 2):
@@ -230,6 +236,7 @@ def test_estimate_after_each_epoch() -> None:
     assert np.all(e.attitude_sigma_deg < [0.01, 0.01, 1.0])
 
 
+@pytest.mark.slow
 def test_per_message_and_late_pings_give_the_batch_feed_result() -> None:
     """One push_imu per sample, and DVL pings delivered 0.35 s late (after IMU samples past their stamps, as
     from another topic): the same result as feed_log's batches, to rounding."""
@@ -280,6 +287,7 @@ def test_bad_messages_rejected_with_a_clear_error() -> None:
     print("\nrejected: every bad message raised GtsamDvlError with its stamp")
 
 
+@pytest.mark.slow
 def test_bad_messages_dropped_and_counted() -> None:
     """bad_messages = "drop": duplicates, out-of-order and non-finite samples and pings are dropped, warned
     about once per kind and counted; the estimate is that of the clean stream."""

@@ -101,6 +101,7 @@ def vertical(r: NavResult, log: LogData) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ----- the time offset -----------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["online", "ekf"])
 def test_offset_recovered_with_the_batch_sigma(estimator: str) -> None:
     dt, log = 0.6, offset_log(0.6)
@@ -117,6 +118,7 @@ def test_offset_recovered_with_the_batch_sigma(estimator: str) -> None:
     assert abs(r.time_offset_s - rb.time_offset_s) < 0.5 * rb.time_offset_sigma_s
 
 
+@pytest.mark.slow
 def test_offset_not_estimated_is_reported_as_such() -> None:
     r = depth_run("online", False)
     e = depth_run("ekf", False)
@@ -124,6 +126,7 @@ def test_offset_not_estimated_is_reported_as_such() -> None:
         assert res.time_offset_s == 0.0 and np.isnan(res.time_offset_sigma_s)
 
 
+@pytest.mark.slow
 def test_recentred_windows_matter_at_1_5_s() -> None:
     """At dt_d = 1.5 s the IMU window kept at the prior (the tangent at the stamp) biases the offset and the scale;
     centred on the current estimate, as the batch smoother's second pass does, it does not."""
@@ -147,6 +150,7 @@ def test_offset_with_beams_is_refused() -> None:
 
 
 # ----- depth ---------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["online", "ekf"])
 def test_depth_bounds_the_vertical_position(estimator: str) -> None:
     log = depth_log()

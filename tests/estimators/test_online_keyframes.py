@@ -118,6 +118,7 @@ def _compare(label: str, a: NavResult, b: NavResult) -> tuple[np.ndarray, np.nda
     return shift, ratio
 
 
+@pytest.mark.slow
 def test_online_keyframes_are_the_batch_smoothers() -> None:
     on, ba = online(1.0).result, batch(1.0)
     c_on, c_ba = on.info["counters"], ba.info["counters"]
@@ -137,6 +138,7 @@ def test_online_keyframes_are_the_batch_smoothers() -> None:
     assert np.all(np.abs(ratio) < 0.05)
 
 
+@pytest.mark.slow
 def test_online_keyframes_match_a_state_per_ping() -> None:
     keyed, per_ping = online(1.0).result, online(0.0).result
     print(f"\nonline: {len(keyed.t)} states with 1 s keyframes, {len(per_ping.t)} with a state per ping")
@@ -286,6 +288,7 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
     np.testing.assert_allclose(np.trace(added[6:9, 6:9]), np.trace(snap.cov[6:9, 6:9]), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_estimate_between_keyframes_is_consistent_with_the_truth() -> None:
     run, log = online(1.0), run_log(5.0)
     tr = log.truth
@@ -316,6 +319,7 @@ def test_estimate_between_keyframes_is_consistent_with_the_truth() -> None:
         assert np.abs(z).max() < 4.5
 
 
+@pytest.mark.slow
 def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every PingMotion a keyframe factor holds and every IMU factor is tracked; after the run only those of the
     states still in the window may be alive (and the newest IMU factor, the gravity reference), and none once the
@@ -338,6 +342,7 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
     assert imus.alive() == 0
 
 
+@pytest.mark.slow
 def test_one_second_keyframes_on_a_1_hz_log_are_a_state_per_ping() -> None:
     a, b = online(1.0, 1.0, 300.0).result, online(0.0, 1.0, 300.0).result
     assert "pings_between_keyframes" not in a.info["counters"]
@@ -347,6 +352,7 @@ def test_one_second_keyframes_on_a_1_hz_log_are_a_state_per_ping() -> None:
     np.testing.assert_array_equal(a.timeline.scale_sigma, b.timeline.scale_sigma)
 
 
+@pytest.mark.slow
 def test_pings_between_keyframes_added_at_once_give_the_deferred_estimates() -> None:
     """defer_between_pings = False (an iSAM2 update per ping between keyframes, the alternative measured in
     bench/bench_online_long.py): the same states but the last (a ping between keyframes stays one), the same

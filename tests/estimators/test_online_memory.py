@@ -46,6 +46,7 @@ def _tracked_run(log: LogData, monkeypatch: pytest.MonkeyPatch, config: Estimato
     return est, made, custom
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["default", "paper"])
 def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str) -> None:
     config = EstimatorConfig() if preset == "default" else EstimatorConfig.paper()
@@ -64,6 +65,7 @@ def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyP
     assert custom.alive() == 0
 
 
+@pytest.mark.slow
 def test_parameters_claims_are_released(log: LogData) -> None:
     """Each factor claims its PreintegrationParams (imu_earth._CLAIMED); the claims of dropped factors end with
     them, so the set stays bounded by the window."""

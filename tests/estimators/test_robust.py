@@ -28,6 +28,8 @@ from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.results import changes_in_sigmas
 
+pytestmark = pytest.mark.slow
+
 SEED = 1
 ZERO_FROM_S, ZERO_TO_S = 800.0, 830.0  # exact zeros at 2 m/s, at the end of the square's first turn
 RUNS: dict[str, Any] = {"batch": smooth_batch, "online": smooth_online, "ekf": run_ekf}
