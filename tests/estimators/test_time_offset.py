@@ -63,6 +63,7 @@ def test_default_is_off_and_no_offset_is_reported() -> None:
     assert r.time_offset_s == 0.0 and np.isnan(r.time_offset_sigma_s)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", OFFSETS)
 def test_offset_recovered_with_paper_noise(dt: float) -> None:
     log, r, r0 = short_run(dt), solve(dt, 0.02, True), solve(0.0, 0.02, False)
@@ -79,6 +80,7 @@ def test_offset_recovered_with_paper_noise(dt: float) -> None:
     assert pe < pe0 + 0.5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", OFFSETS)
 def test_offset_sigma_below_5_ms_with_a_precise_dvl(dt: float) -> None:
     log, r = short_run(dt, 0.002), solve(dt, 0.002, True)
