@@ -18,6 +18,8 @@ from gtsam_dvl.core.types import LogData  # noqa: E402
 from gtsam_dvl.sim import simulate  # noqa: E402
 from gtsam_dvl.sim.scenario import load_scenario  # noqa: E402
 
+pytestmark = pytest.mark.slow
+
 # the cases whose right outcome is a clear one-line error, and what it must say; a salvaged corrupt chunk
 # leaves a hole of about 24 s in the IMU data, longer than imu.max_gap_s, so it must be named as a gap
 EXPECTED_ERRORS = {"imu_gap_30s_turn": "IMU gap of 30.0 s", "nan_inf_not_repaired": "NaN",

@@ -35,6 +35,7 @@ def batch_2d(logs: dict[str, LogData]) -> NavResult:
     return smooth_batch(logs["paper-2d"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["paper-3d", "paper-2d"])
 @pytest.mark.parametrize("estimator", ["batch", "online", "ekf"])
 def test_clean_runs_are_ok(scenario: str, estimator: str, logs: dict[str, LogData],
@@ -59,6 +60,7 @@ def test_clean_runs_are_ok(scenario: str, estimator: str, logs: dict[str, LogDat
         assert f["solver"]["converged"] and f["solver"]["dof"] > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["batch", "ekf"])
 def test_corrupted_dvl_window_is_degraded_and_named(estimator: str, logs: dict[str, LogData]) -> None:
     log = copy.deepcopy(logs["paper-2d"])
@@ -75,6 +77,7 @@ def test_corrupted_dvl_window_is_degraded_and_named(estimator: str, logs: dict[s
         assert "between 1200 and 1230 s" in windows[0]
 
 
+@pytest.mark.slow
 def test_residuals_follow_the_noise_rule(logs: dict[str, LogData], batch_2d: NavResult) -> None:
     """A configured noise_m_s twice the simulated 0.02 m/s halves the whitened RMS; beams give their own."""
     log = logs["paper-2d"]
@@ -85,6 +88,7 @@ def test_residuals_follow_the_noise_rule(logs: dict[str, LogData], batch_2d: Nav
     assert beams.dof.max() == 4 and 0.5 < beams.rms() < 1.5
 
 
+@pytest.mark.slow
 def test_solver_not_converged_and_non_finite(batch_2d: NavResult, logs: dict[str, LogData]) -> None:
     log = logs["paper-2d"]
     info = copy.deepcopy(batch_2d.info)
@@ -112,6 +116,7 @@ def test_static_log_has_nothing_calibratable() -> None:
     assert health.figures["dvl_speed_p95_m_s"] < 0.1
 
 
+@pytest.mark.slow
 def test_losses_and_rejections(logs: dict[str, LogData], batch_2d: NavResult) -> None:
     log = logs["paper-2d"]
     meta = dict(log.metadata)

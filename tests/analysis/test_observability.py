@@ -7,6 +7,7 @@ import dataclasses
 import functools
 
 import numpy as np
+import pytest
 
 from gtsam_dvl.analysis.observability import STATES, analyse, prior_sigmas
 from gtsam_dvl.core.config import EstimatorConfig
@@ -14,6 +15,8 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+
+pytestmark = pytest.mark.slow
 
 CALIBRATION = ["scale", "misalignment_pitch", "misalignment_yaw", "accel_bias_x", "accel_bias_y", "accel_bias_z",
                "gyro_bias_x", "gyro_bias_y"]
@@ -69,7 +72,7 @@ def test_direction_analysis_on_a_hand_made_covariance() -> None:
     J[6, 6] = 1e6
     J[7:, 7:] = np.degrees(base.b_R_d)
     Jinv = np.linalg.inv(J)
-    fake = dataclasses.replace(base, calib_joint_cov=Jinv @ cov_user @ Jinv.T)
+    fake = base.model_copy(update={"calib_joint_cov": Jinv @ cov_user @ Jinv.T})
     report = analyse(fake, cfg)
     mixed = [d for d in report.directions if set(d.weights) == {"misalignment_roll", "gyro_bias_z"}]
     # the combination (ratio 0.6) and its orthogonal complement (untouched, ratio 1)

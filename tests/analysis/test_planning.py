@@ -12,6 +12,8 @@ from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
+pytestmark = pytest.mark.slow
+
 
 @functools.cache
 def _plan(name: str) -> PlanResult:

@@ -6,7 +6,6 @@ out."""
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 from typing import Any
 
@@ -23,17 +22,15 @@ from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.scenarios import surface_dive_raw
 
 LEVER = [0.2, 0.0, 0.6]
 
 
 def _raw() -> dict[str, Any]:
     """60 s static at the surface, away, a 24 m dive with one banked turn, up and 40 s on at the surface."""
-    raw = copy.deepcopy(load_scenario("paper-3d-short").raw)
-    raw.pop("estimator_config", None)
-    raw["origin"]["height_m"] = 0.0
-    raw["segments"] = [
+    return surface_dive_raw([
         {"kind": "static", "duration_s": 60.0},
         {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
         {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
@@ -41,9 +38,7 @@ def _raw() -> dict[str, Any]:
         {"kind": "straight", "duration_s": 60.0},
         {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
         {"kind": "straight", "duration_s": 40.0},
-    ]
-    raw["gnss"] = {"rate_hz": 1.0, "antenna_lever_arm_m": LEVER, "origin_in_log": False}
-    return raw
+    ], gnss={"rate_hz": 1.0, "antenna_lever_arm_m": LEVER, "origin_in_log": False})
 
 
 @pytest.fixture(scope="module")

@@ -30,6 +30,7 @@ def sim_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_simulate_is_deterministic_byte_for_byte(sim_log: Path, tmp_path: Path) -> None:
     again = tmp_path / "again.mcap"
     run("simulate", "paper-2d", "-o", str(again), "--seed", "11", "-q")
@@ -39,6 +40,7 @@ def test_simulate_is_deterministic_byte_for_byte(sim_log: Path, tmp_path: Path) 
     assert other.read_bytes() != sim_log.read_bytes()
 
 
+@pytest.mark.slow
 def test_smooth_writes_result_summary_and_tum(sim_log: Path, tmp_path: Path) -> None:
     out, summ, tum = tmp_path / "result.mcap", tmp_path / "summary.json", tmp_path / "traj.tum"
     proc = run("smooth", str(sim_log), "-o", str(out), "--mode", "batch", "--summary", str(summ), "--tum", str(tum),
@@ -61,6 +63,7 @@ def test_smooth_writes_result_summary_and_tum(sim_log: Path, tmp_path: Path) -> 
     assert abs(s["errors"]["scale_nsigma"]) < 3
 
 
+@pytest.mark.slow
 def test_info_and_plot_log(sim_log: Path, tmp_path: Path) -> None:
     proc = run("info", str(sim_log))
     assert "IMU" in proc.stdout and "truth: scale 0.9998" in proc.stdout
@@ -109,6 +112,7 @@ def test_truncated_log_salvage_recovers(fraction: float, sim_log: Path, tmp_path
     assert f"the file is cut short at byte {size} (no footer): nothing after log time" in proc.stdout
 
 
+@pytest.mark.slow
 def test_smooth_and_evaluate_report_losses(sim_log: Path, tmp_path: Path) -> None:
     """What --salvage dropped appears in smooth's and evaluate's console output, the summary and the result."""
     from gtsam_dvl.io.storage.sources import open_source
@@ -171,6 +175,7 @@ def short_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["ekf", "online"])
 def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path: Path) -> None:
     """Smooth with a non-default TOML, read back the config.json written with the result with -c: the same
@@ -226,6 +231,7 @@ def test_debug_is_accepted_after_the_command(tmp_path: Path) -> None:
         assert proc.returncode == 1 and "Traceback" in proc.stderr and "no such file or directory" in proc.stderr
 
 
+@pytest.mark.slow
 def test_io_dvlc_refuses_outputs_it_cannot_write_and_smooth_says_what_it_wrote(sim_log: Path, tmp_path: Path) -> None:
     proc = run("smooth", str(sim_log), "--mode", "io-dvlc", "-o", str(tmp_path / "r.mcap"), check=False)
     assert proc.returncode == 1 and proc.stderr.count("\n") == 1

@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from gtsam_dvl.app.demo import run_demo
+
+pytestmark = pytest.mark.slow
 
 
 def test_demo_writes_reports_figures_and_reproduces_the_findings(tmp_path: Path) -> None:

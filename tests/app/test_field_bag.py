@@ -28,6 +28,8 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
+pytestmark = pytest.mark.slow
+
 LEVER_M = [0.5, 0.0, -0.3]  # IMU -> DVL in base_link: forward and below
 ORIGIN = (44.1, -68.2, 0.0)  # at the surface (ellipsoidal height 0)
 SEED = 5

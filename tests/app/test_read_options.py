@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow
+
 CLI = [sys.executable, "-m", "gtsam_dvl.app.cli"]
 NOT_FOUND = "not found: errors against the truth not computed; give --truth LOG"
 

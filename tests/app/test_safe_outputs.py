@@ -222,6 +222,7 @@ def test_static_log_exits_cleanly_and_strict_gives_3(static_log: Path, tmp_path:
     assert (tmp_path / "s2.json").exists()  # the outputs are still written
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("phase", ["first file", "mcap being written"])
 def test_sigterm_leaves_no_stray_files(phase: str, short_log: Path, tmp_path: Path) -> None:
     """SIGTERM as soon as the first temporary file appears (the check that the folder is writable), or while
@@ -252,6 +253,7 @@ def test_sigterm_leaves_no_stray_files(phase: str, short_log: Path, tmp_path: Pa
         assert stderr.strip().splitlines() == ["gtsam-dvl: terminated by SIGTERM; no partial output left behind"]
 
 
+@pytest.mark.slow
 def test_sigterm_mid_run(tmp_path_factory: pytest.TempPathFactory, tmp_path: Path) -> None:
     """SIGTERM while estimating: nothing written. The online estimator with the full iSAM2 history on paper-2d (14 s
     of estimation; the batch smoother's 1.4 s would be over before the signal)."""

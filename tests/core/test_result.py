@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
 from gtsam_dvl.core.states import Estimate
+from tests.support.numerical import numerical_jacobian
 
 
 def _rpy(R: np.ndarray) -> np.ndarray:
@@ -28,13 +29,7 @@ def test_closed_form_matches_numerical_derivative(seed: int) -> None:
     rpy, cov_rpy = misalignment_rpy_and_cov(b_R_d, b_R_d0, cov)
     np.testing.assert_allclose(rpy, np.degrees(_rpy(R_c)), atol=1e-9)
     # independent: d(rpy)/d(right tangent of b_R_d) by central differences through scipy
-    J = np.zeros((3, 3))
-    for j in range(3):
-        e = np.zeros(3)
-        e[j] = 1e-6
-        plus = _rpy(b_R_d @ Rotation.from_rotvec(e).as_matrix() @ b_R_d0.T)
-        minus = _rpy(b_R_d @ Rotation.from_rotvec(-e).as_matrix() @ b_R_d0.T)
-        J[:, j] = (plus - minus) / 2e-6
+    J = numerical_jacobian(lambda e: _rpy(b_R_d @ Rotation.from_rotvec(e).as_matrix() @ b_R_d0.T), [np.zeros(3)], 0)
     np.testing.assert_allclose(cov_rpy, np.degrees(np.degrees(J @ cov @ J.T)), rtol=1e-5, atol=1e-14)
 
 

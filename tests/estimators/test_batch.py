@@ -18,6 +18,8 @@ from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
+pytestmark = pytest.mark.slow
+
 
 @functools.cache
 def _log(name: str, seed: int, white_noise: bool = True) -> LogData:
@@ -73,7 +75,6 @@ def test_noise_free_recovery_paper_3d() -> None:
         assert ratio < 0.01, f"{name}: noise-free error is {100 * ratio:.2f}% of the noisy 1-sigma"
 
 
-@pytest.mark.slow
 def test_noise_free_recovery_straight_20km() -> None:
     """Calibration manoeuvres then a 20 km straight transit: proves the Earth model over distance (gravity
     turns by 3.1 mrad in the map frame). Same 1% criterion as paper-3d."""

@@ -15,10 +15,13 @@ from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, quat_xyzw_to_matrix
-from gtsam_dvl.core.types import DvlData, ImuData, LogData, TruthData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.logs import cut_log
+
+pytestmark = pytest.mark.slow
 
 
 @functools.cache
@@ -49,21 +52,10 @@ def test_random_walk_bias_model() -> None:
 
 
 def _cut(log: LogData, t_start: float) -> LogData:
-    """The log from t_start on (no static start), times kept."""
-    imu_sel, dvl_sel = log.imu.t >= t_start, log.dvl.t >= t_start
-    beams = log.dvl.beams
-    new_beams = None if beams is None else dataclasses.replace(
-        beams, d_u=beams.d_u[dvl_sel], v=beams.v[dvl_sel], range=beams.range[dvl_sel], valid=beams.valid[dvl_sel])
-    assert log.truth is not None
-    tr_sel = log.truth.t >= t_start
-    return dataclasses.replace(
-        log,
-        imu=ImuData(log.imu.t[imu_sel], log.imu.b_omega[imu_sel], log.imu.b_f[imu_sel]),
-        dvl=DvlData(log.dvl.t[dvl_sel], log.dvl.d_v[dvl_sel], log.dvl.d_cov[dvl_sel], log.dvl.valid[dvl_sel],
-                    new_beams),
-        truth=TruthData(log.truth.t[tr_sel], log.truth.n_p[tr_sel] - log.truth.n_p[tr_sel][0],
-                        log.truth.n_q_b[tr_sel], log.truth.n_v[tr_sel], log.truth.b_omega[tr_sel]),
-    )
+    """The log from t_start on (no static start), times kept, truth positions from the first kept one."""
+    cut = cut_log(log, t_start=t_start)
+    assert cut.truth is not None
+    return dataclasses.replace(cut, truth=dataclasses.replace(cut.truth, n_p=cut.truth.n_p - cut.truth.n_p[0]))
 
 
 def test_log_without_static_start_needs_and_uses_a_configured_attitude() -> None:

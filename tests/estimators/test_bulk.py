@@ -118,6 +118,7 @@ def hessians(*linear: gtsam.GaussianFactorGraph) -> list[tuple[np.ndarray, np.nd
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(configs()))
 def test_same_objective_and_linear_system(name: str) -> None:
     builder = LogGraph(run_log(), configs()[name])
@@ -152,6 +153,7 @@ def test_same_objective_and_linear_system(name: str) -> None:
         assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
 
 
+@pytest.mark.slow
 def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
     """The bulk IMU factors' gravity maps (analytic) and whitening equal the EarthImuFactors' (probed from the pim;
     GTSAM's noise model), and the gravity references are shared: a factor made after the references were set
@@ -171,6 +173,7 @@ def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
         assert np.array_equal(fs[i].model.ref_p, refs.n_p[i]) and np.array_equal(fs[i].model.ref_G, refs.G[i])
 
 
+@pytest.mark.slow
 def test_bulk_imu_factors_across_an_imu_gap() -> None:
     """An IMU gap of 1.3 s in the banked turn (held, its motion-model covariance added to the intervals it crosses,
     between keyframes too): the bulk IMU factors' objective and linear system are still the EarthImuFactors'."""
@@ -190,6 +193,7 @@ def test_bulk_imu_factors_across_an_imu_gap() -> None:
     assert np.abs(g1 - g2).max() <= 1e-9 * np.abs(g1).max()
 
 
+@pytest.mark.slow
 def test_same_solution_with_the_robust_kernel_active() -> None:
     cfg = configs()["default"]
     builder = LogGraph(run_log(), cfg)
@@ -223,6 +227,7 @@ def test_smooth_batch_reports_progress_through_the_preintegration() -> None:
     assert len([f for f in seen if 0.0 < f < 0.15]) >= 15
 
 
+@pytest.mark.slow
 def test_smooth_batch_unchanged_by_bulk() -> None:
     """smooth_batch (bulk) against the per-factor graph solved the same way: estimates within 1e-6 sigma."""
     cfg = configs()["paper"]

@@ -38,6 +38,7 @@ def _vertical(res, log: LogData) -> tuple[np.ndarray, np.ndarray]:  # type: igno
 
 
 # seed 3 ends at 3.07 sigma: its last 20 depth samples' noise averages 2.5 sigma of their mean
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [2, 4])
 def test_depth_bounds_vertical_position_and_improves_pitch_misalignment(seed: int) -> None:
     log = _log(seed)
@@ -70,6 +71,7 @@ def test_depth_bounds_vertical_position_and_improves_pitch_misalignment(seed: in
     assert abs(s["errors"]["misalignment_deg"][1]) < 3 * pitch
 
 
+@pytest.mark.slow
 def test_noise_free_depth_is_exact() -> None:
     """No white noise: the model of the factor and the simulator agree to a millimetre (the map's z against
     the ellipsoidal height, the column's gravity, the map origin 100 m below the surface)."""
@@ -84,6 +86,7 @@ def test_noise_free_depth_is_exact() -> None:
     assert res.info["counters"]["depth_used"] >= 1599  # 2 Hz: half the samples bridged by the vertical velocity
 
 
+@pytest.mark.slow
 def test_samples_far_from_states_are_not_used() -> None:
     cfg = EstimatorConfig.paper()
     cfg.depth.max_time_to_state_s = 0.2

@@ -17,12 +17,13 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gravity_gradient
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp, so3_log
-from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.ekf import FilterState, measurement_model, run_ekf
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.logs import cut_log
 from tests.support.numerical import numerical_jacobian
 
 SEEDS = [1, 2, 3]
@@ -38,15 +39,6 @@ def _ekf(seed: int) -> tuple[NavResult, float]:
     start = time.perf_counter()
     result = run_ekf(_log(seed))
     return result, time.perf_counter() - start
-
-
-def _truncated(log: LogData, t_end: float) -> LogData:
-    keep, ping = log.imu.t <= t_end, log.dvl.t <= t_end
-    imu = ImuData(log.imu.t[keep], log.imu.b_omega[keep], log.imu.b_f[keep])
-    b = log.dvl.beams
-    beams = None if b is None else BeamData(b.d_u[ping], b.v[ping], b.range[ping], b.valid[ping])
-    dvl = DvlData(log.dvl.t[ping], log.dvl.d_v[ping], log.dvl.d_cov[ping], log.dvl.valid[ping], beams)
-    return dataclasses.replace(log, imu=imu, dvl=dvl)
 
 
 # ----- Jacobians ------------------------------------------------------------------------------------
@@ -85,11 +77,7 @@ def test_transition_matrix_matches_numerical_derivative(near_identity: bool) -> 
         return out
 
     steps = np.array([1e-6] * 3 + [1e-4] * 3 + [1e-2] * 3 + [1e-6] * 3 + [1e-4] * 3 + [1e-3] * 4)
-    numerical = np.zeros((N_ERR, N_ERR))
-    for j in range(N_ERR):
-        e = np.zeros(N_ERR)
-        e[j] = steps[j]
-        numerical[:, j] = (end_error(e) - end_error(-e)) / (2 * steps[j])
+    numerical = numerical_jacobian(end_error, [np.zeros(N_ERR)], 0, delta=steps)
     err = np.abs(nominal.Phi - numerical)
     scale = np.abs(numerical).max(axis=1, keepdims=True)
     print(f"\nmax |Phi - numerical| / row scale = {np.max(err / scale):.2e}")
@@ -152,6 +140,7 @@ def _print_summary(tag: str, s: dict) -> None:
           f"attitude RMSE {np.round(e['attitude_rmse_deg'], 4)} deg; wall {s['timing_s']['total']:.1f} s")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
 def test_paper_3d_final_calibration_inside_3_sigma(seed: int) -> None:
     result, wall = _ekf(seed)
@@ -167,6 +156,7 @@ def test_paper_3d_final_calibration_inside_3_sigma(seed: int) -> None:
     assert 0.8 < result.info["filter"]["mean_nis_per_dof"] < 1.2  # innovations as large as the filter predicts
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", SEEDS)
 def test_paper_3d_convergence_as_figures_6_and_7(seed: int) -> None:
     """Scale from 0.8 as soon as the motion starts; yaw and pitch misalignment at 600 s; roll only with the
@@ -196,6 +186,7 @@ def test_paper_3d_convergence_as_figures_6_and_7(seed: int) -> None:
     assert roll720 < 0.5 * roll659
 
 
+@pytest.mark.slow
 def test_paper_3d_agrees_with_batch_smoother() -> None:
     """Filter and smoother on the same log: the final calibration (constant states: the filter's last
     estimate uses all the data) agrees within 2 combined sigmas, and so do the sigmas themselves (10 %);
@@ -214,7 +205,7 @@ def test_paper_3d_agrees_with_batch_smoother() -> None:
         assert np.all(np.abs(se / sb - 1.0) < 0.15)
     print(f"position RMSE EKF {ekf['errors']['position_rmse_m']:.2f} m, "
           f"batch {batch['errors']['position_rmse_m']:.2f} m")
-    cut = smooth_batch(_truncated(log, 720.0))
+    cut = smooth_batch(cut_log(log, 720.0, cut_truth=False))
     tl = _ekf(seed)[0].timeline
     assert tl is not None
     roll_ekf = tl.misalignment_sigma_deg[np.searchsorted(tl.t, 720.0), 0]
@@ -222,6 +213,7 @@ def test_paper_3d_agrees_with_batch_smoother() -> None:
     assert roll_ekf == pytest.approx(cut.misalignment_sigma_deg[0], rel=0.05)
 
 
+@pytest.mark.slow
 def test_result_shapes_and_covariances() -> None:
     result = _ekf(SEEDS[0])[0]
     n = len(result.t)
@@ -241,10 +233,11 @@ def test_result_shapes_and_covariances() -> None:
     np.testing.assert_allclose(result.timeline.misalignment_sigma_deg[-1], result.misalignment_sigma_deg, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_beams_robust_random_walk_and_flat_earth_options() -> None:
     """Per-beam updates (with the Huber weight and random-walk biases) give the same calibration as the
     3-D velocity on 0-800 s of the noise-free log; the flat Earth model runs."""
-    log = _truncated(_log(SEEDS[0], white_noise=False), 800.0)
+    log = cut_log(_log(SEEDS[0], white_noise=False), 800.0, cut_truth=False)
     base = run_ekf(log)
     cfg = EstimatorConfig.paper()
     cfg.dvl.use_beams = True

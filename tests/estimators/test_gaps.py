@@ -85,6 +85,7 @@ def _worst_nsigma(result: object, log: LogData) -> tuple[float, float]:
     return float(cal), float(e["final_horizontal_position_m"] / final_sigma)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gap_s", [5.0, 9.0])
 @pytest.mark.parametrize("mode", ["batch", "online", "ekf"])
 def test_imu_gap_in_a_turn_is_crossed_inside_its_sigmas(paper3d: LogData, gap_s: float, mode: str) -> None:
@@ -100,6 +101,7 @@ def test_imu_gap_in_a_turn_is_crossed_inside_its_sigmas(paper3d: LogData, gap_s:
     assert cal < 3.0 and pos < 3.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["batch", "online", "ekf"])
 def test_long_dvl_dropout_keeps_honest_sigmas(paper3d: LogData, mode: str) -> None:
     """600 s without a ping in the square (before: batch and online final position 6.6 sigma off)."""
@@ -115,6 +117,7 @@ def test_long_dvl_dropout_keeps_honest_sigmas(paper3d: LogData, mode: str) -> No
     assert cal < 3.0 and pos < 3.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["batch", "online", "ekf"])
 def test_imu_gap_longer_than_the_limit_is_a_clear_error(paper3d: LogData, mode: str) -> None:
     """30 s without IMU in a turn: held that long the motion model's error is systematic (measured: batch scale
@@ -124,6 +127,7 @@ def test_imu_gap_longer_than_the_limit_is_a_clear_error(paper3d: LogData, mode: 
         RUNS[mode](log, EstimatorConfig.paper())
 
 
+@pytest.mark.slow
 def test_online_drops_a_ping_that_comes_after_its_missing_ping_state(paper3d: LogData) -> None:
     """A ping pushed 5 s after the IMU samples of its time, in a dropout: a state without a ping was made in its
     place (the IMU reached 2 s past it), so the ping is dropped and counted, not inserted out of order."""

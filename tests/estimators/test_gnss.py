@@ -5,7 +5,6 @@ an origin and read back (origin from the first fix): the estimated antenna at th
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +21,8 @@ from gtsam_dvl.estimators.gnss import plan_fixes
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.scenarios import surface_dive_raw
 
 LEVER = np.array([0.0, 0.0, 0.5])
 
@@ -31,10 +31,7 @@ def dive_raw(origin_in_log: bool = False) -> dict[str, Any]:
     """90 s static at the surface, away at 2 m/s, a dive to about 24 m, a square of four banked turns, up
     again and 60 s on at the surface (585 s, about 850 m); 1 Hz fixes at the surface (2 m horizontal, 4 m
     vertical), a pressure sensor."""
-    raw = copy.deepcopy(load_scenario("paper-3d-short").raw)
-    raw.pop("estimator_config", None)
-    raw["origin"]["height_m"] = 0.0
-    raw["segments"] = [
+    return surface_dive_raw([
         {"kind": "static", "duration_s": 90.0},
         {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
         {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.5},
@@ -44,10 +41,8 @@ def dive_raw(origin_in_log: bool = False) -> dict[str, Any]:
         {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.4},
         {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
         {"kind": "straight", "duration_s": 60.0},
-    ]
-    raw["depth"] = {"rate_hz": 1.0, "noise_m": 0.05}
-    raw["gnss"] = {"rate_hz": 1.0, "antenna_lever_arm_m": LEVER.tolist(), "origin_in_log": origin_in_log}
-    return raw
+    ], depth={"rate_hz": 1.0, "noise_m": 0.05},
+        gnss={"rate_hz": 1.0, "antenna_lever_arm_m": LEVER.tolist(), "origin_in_log": origin_in_log})
 
 
 @pytest.fixture(scope="module")
@@ -82,6 +77,7 @@ def _antenna_errors(res: NavResult, log: LogData, t: np.ndarray) -> tuple[np.nda
     return est - true, sig
 
 
+@pytest.mark.slow
 def test_dive_held_out_final_fixes_within_3_sigma(dive_log: LogData, smoothed: dict[str, NavResult]) -> None:
     log = dive_log
     g = log.gnss
@@ -118,6 +114,7 @@ def test_dive_held_out_final_fixes_within_3_sigma(dive_log: LogData, smoothed: d
     assert np.all(sig_start[:2] < 0.5 * sig_origin[:2]) and np.all(sig_origin[:2] > 1.9)
 
 
+@pytest.mark.slow
 def test_all_mode_uses_every_good_fix(dive_log: LogData, smoothed: dict[str, NavResult]) -> None:
     res = smoothed["all"]
     c = res.info["counters"]

@@ -16,6 +16,8 @@ from gtsam_dvl.estimators.iodvlc import IoDvlcOptions, IoDvlcResult, detect_type
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
+pytestmark = pytest.mark.slow
+
 SEEDS = [1, 2, 3]
 
 

@@ -30,6 +30,8 @@ from gtsam_dvl.estimators.online.estimator import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
+pytestmark = pytest.mark.slow
+
 TRUE_LEVER_M = np.array([0.8, 0.3, -0.5])  # base_link
 SEED = 3
 START = [{"kind": "static", "duration_s": 60.0},

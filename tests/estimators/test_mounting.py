@@ -41,6 +41,7 @@ def test_rotation_is_undone_exactly(sim_paper2d_clean: LogData) -> None:
     np.testing.assert_allclose(f, [[0.0, 1.0, 0.0]], atol=1e-15)  # imu x is base_link +y: Rz(90) Rx(180) x = y
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["batch", "online", "ekf"])
 def test_rotated_imu_with_its_tf_gives_the_same_calibration(sim_paper2d_clean: LogData, tmp_path: Path,
                                                             estimator: str) -> None:
@@ -59,6 +60,7 @@ def test_rotated_imu_with_its_tf_gives_the_same_calibration(sim_paper2d_clean: L
     np.testing.assert_allclose(got.n_p[-1], ref.n_p[-1], atol=1e-3)
 
 
+@pytest.mark.slow
 def test_rotated_imu_without_its_tf_is_wrong(sim_paper2d_clean: LogData) -> None:
     """The check can fail: ignoring the mounting (identity tf) gives a misalignment wrong by far more than its
     sigma (what happened before the mounting was applied: 168 deg), or a clear error."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import warnings
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,36 +18,22 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
-from gtsam_dvl.core.types import BeamData, DvlData, ImuData, LogData, TruthData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.online import MessageDropped, OnlineConfig, OnlineEstimator, feed_log, smooth_online
 from gtsam_dvl.estimators.online.types import misalignment_deg_and_cov
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.logs import cut_log
+from tests.support.results import changes_in_sigmas
 
 PRIOR = EstimatorConfig.paper().priors
-
-
-def _cut(log: LogData, t_end: float) -> LogData:
-    """The log up to t_end (IMU, DVL with beams, truth)."""
-    i, d = log.imu.t <= t_end, log.dvl.t <= t_end
-    beams = None
-    if log.dvl.beams is not None:
-        b = log.dvl.beams
-        beams = BeamData(b.d_u[d], b.v[d], b.range[d], b.valid[d])
-    truth = None
-    if log.truth is not None:
-        k = log.truth.t <= t_end
-        tr = log.truth
-        truth = TruthData(tr.t[k], tr.n_p[k], tr.n_q_b[k], tr.n_v[k], tr.b_omega[k])
-    return replace(log, imu=ImuData(log.imu.t[i], log.imu.b_omega[i], log.imu.b_f[i]),
-                   dvl=DvlData(log.dvl.t[d], log.dvl.d_v[d], log.dvl.d_cov[d], log.dvl.valid[d], beams), truth=truth)
 
 
 @functools.cache
 def _log(name: str, seed: int, t_end: float | None = None) -> LogData:
     log = simulate(load_scenario(name), seed)
-    return log if t_end is None else _cut(log, t_end)
+    return log if t_end is None else cut_log(log, t_end)
 
 
 @functools.cache
@@ -66,16 +51,6 @@ def _online(name: str, seed: int, mode: str = "fixed_lag", t_end: float | None =
     return smooth_online(_log(name, seed, t_end), cfg, mode=mode)
 
 
-def _nsigma(online: NavResult, batch: NavResult) -> dict[str, np.ndarray]:
-    """Online minus batch final estimates, in batch sigmas."""
-    return {
-        "scale": np.array([(online.scale - batch.scale) / batch.scale_sigma]),
-        "misalignment": (online.misalignment_deg - batch.misalignment_deg) / batch.misalignment_sigma_deg,
-        "gyro bias": (online.gyro_bias_deg_per_h - batch.gyro_bias_deg_per_h) / batch.gyro_bias_sigma_deg_per_h,
-        "accel bias": (online.accel_bias_ug - batch.accel_bias_ug) / batch.accel_bias_sigma_ug,
-    }
-
-
 def _sigma_ratio(online: NavResult, batch: NavResult) -> np.ndarray:
     return np.concatenate([[online.scale_sigma / batch.scale_sigma],
                            online.misalignment_sigma_deg / batch.misalignment_sigma_deg,
@@ -84,7 +59,7 @@ def _sigma_ratio(online: NavResult, batch: NavResult) -> np.ndarray:
 
 
 def _report(tag: str, online: NavResult, batch: NavResult) -> dict[str, np.ndarray]:
-    d = _nsigma(online, batch)
+    d = changes_in_sigmas(online, batch)  # online minus batch final estimates, in batch sigmas
     print(f"\n{tag}: online - batch in batch sigmas: " + "; ".join(f"{k} {np.round(v, 3)}" for k, v in d.items()))
     print(f"{tag}: sigma online / batch {np.round(_sigma_ratio(online, batch), 3)}; latency ms "
           f"{ {k: round(v, 2) for k, v in online.info['latency_ms'].items()} }; iSAM2 {online.info['isam2']}; "
@@ -94,6 +69,7 @@ def _report(tag: str, online: NavResult, batch: NavResult) -> dict[str, np.ndarr
 
 # ----- agreement with the batch smoother -----------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("name", "seed"), [("paper-3d", 1), ("paper-3d", 2), ("paper-2d", 1), ("paper-2d", 2)])
 def test_fixed_lag_agrees_with_batch(name: str, seed: int) -> None:
     """Final scale, misalignment and biases within 1 batch sigma (measured: below 0.2), with the same sigmas
@@ -110,6 +86,7 @@ def test_fixed_lag_agrees_with_batch(name: str, seed: int) -> None:
     assert online.info["isam2"]["states_marginalized"] > 0.9 * len(online.t)
 
 
+@pytest.mark.slow
 def test_full_history_agrees_with_batch() -> None:
     """paper-3d cut at 1000 s (static, Type I, descent, the first turns): within 0.1 batch sigma (measured:
     0.02), same sigmas within 1 %."""
@@ -121,6 +98,7 @@ def test_full_history_agrees_with_batch() -> None:
     assert online.info["isam2"]["states_marginalized"] == 0 and online.info["isam2"]["variables"] > 2000
 
 
+@pytest.mark.slow
 def test_fixed_lag_timeline_matches_full_history() -> None:
     """The fixed-lag filtering sigmas follow the full-history ones (iSAM2 keeping every state) within 10 % at
     every epoch (measured: 8.5 % at worst, the pitch misalignment near 800 s), and its window stays bounded. What
@@ -144,6 +122,7 @@ def test_fixed_lag_timeline_matches_full_history() -> None:
     assert lag.info["isam2"]["variables"] <= 2 * (window + 2) + 3
 
 
+@pytest.mark.slow
 def test_random_walk_bias_fixed_lag_agrees_with_batch() -> None:
     """The bias as a random walk (a bias state per epoch, the newest in the window): paper-3d cut at 900 s."""
     online = _online("paper-3d", 3, "fixed_lag", 900.0, "random_walk")
@@ -159,6 +138,7 @@ def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
     return np.asarray(x[int(np.searchsorted(t, when))])
 
 
+@pytest.mark.slow
 def test_sigma_timeline_paper_3d() -> None:
     """The sigma timeline's criteria on paper-3d (fixed lag, seed 1).
 
@@ -195,6 +175,7 @@ def test_sigma_timeline_paper_3d() -> None:
     assert np.all(a[900][:2] < a[750][:2] / 4)
 
 
+@pytest.mark.slow
 def test_sigma_timeline_paper_2d_roll_unobservable() -> None:
     """Without depth change the misalignment about the thrust axis keeps its prior to the end (Remark 3)."""
     for seed in (1, 2):
@@ -255,6 +236,7 @@ def test_estimate_after_each_epoch() -> None:
     assert np.all(e.attitude_sigma_deg < [0.01, 0.01, 1.0])
 
 
+@pytest.mark.slow
 def test_per_message_and_late_pings_give_the_batch_feed_result() -> None:
     """One push_imu per sample, and DVL pings delivered 0.35 s late (after IMU samples past their stamps, as
     from another topic): the same result as feed_log's batches, to rounding."""
@@ -305,6 +287,7 @@ def test_bad_messages_rejected_with_a_clear_error() -> None:
     print("\nrejected: every bad message raised GtsamDvlError with its stamp")
 
 
+@pytest.mark.slow
 def test_bad_messages_dropped_and_counted() -> None:
     """bad_messages = "drop": duplicates, out-of-order and non-finite samples and pings are dropped, warned
     about once per kind and counted; the estimate is that of the clean stream."""
@@ -342,7 +325,7 @@ def test_bad_messages_dropped_and_counted() -> None:
 
 
 def test_too_short_static_segment_is_a_clear_error() -> None:
-    log = _cut(_short(), 20.0)
+    log = cut_log(_short(), 20.0)
     est = OnlineEstimator.for_log(log)
     with pytest.raises(GtsamDvlError, match="online alignment: no static segment"):
         feed_log(est, log)

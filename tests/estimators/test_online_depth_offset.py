@@ -14,7 +14,6 @@ Together about 16 s of CPU.
 
 from __future__ import annotations
 
-import copy
 from functools import cache
 
 import gtsam
@@ -38,8 +37,8 @@ from gtsam_dvl.estimators.ekf.filter import (
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, POS, SCALE, VEL, NavState
 from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.dvl_factors import considered_calibration_factor as _considered_calibration_factor
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.numerical import numerical_jacobian, numerical_jacobians
+from tests.support.scenarios import simulate_variant
 
 SEED = 7
 
@@ -47,16 +46,13 @@ SEED = 7
 @cache
 def offset_log(dt: float) -> LogData:
     """paper-3d-short whose DVL stamps are dt seconds early (a clock lag: tests/estimators/test_time_offset.py)."""
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_time_offset_s": dt}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_time_offset_s": dt})
 
 
 @cache
 def depth_log() -> LogData:
-    raw = copy.deepcopy(load_scenario("paper-3d-short").raw)
-    raw["depth"] = {"rate_hz": 1.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]}
-    return simulate(scenario_from_dict(raw, name="paper-3d-short-depth"), SEED)
+    return simulate_variant(SEED, name="paper-3d-short-depth",
+                            depth={"rate_hz": 1.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]})
 
 
 def offset_config() -> EstimatorConfig:
@@ -105,6 +101,7 @@ def vertical(r: NavResult, log: LogData) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ----- the time offset -----------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["online", "ekf"])
 def test_offset_recovered_with_the_batch_sigma(estimator: str) -> None:
     dt, log = 0.6, offset_log(0.6)
@@ -121,6 +118,7 @@ def test_offset_recovered_with_the_batch_sigma(estimator: str) -> None:
     assert abs(r.time_offset_s - rb.time_offset_s) < 0.5 * rb.time_offset_sigma_s
 
 
+@pytest.mark.slow
 def test_offset_not_estimated_is_reported_as_such() -> None:
     r = depth_run("online", False)
     e = depth_run("ekf", False)
@@ -128,6 +126,7 @@ def test_offset_not_estimated_is_reported_as_such() -> None:
         assert res.time_offset_s == 0.0 and np.isnan(res.time_offset_sigma_s)
 
 
+@pytest.mark.slow
 def test_recentred_windows_matter_at_1_5_s() -> None:
     """At dt_d = 1.5 s the IMU window kept at the prior (the tangent at the stamp) biases the offset and the scale;
     centred on the current estimate, as the batch smoother's second pass does, it does not."""
@@ -151,6 +150,7 @@ def test_offset_with_beams_is_refused() -> None:
 
 
 # ----- depth ---------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["online", "ekf"])
 def test_depth_bounds_the_vertical_position(estimator: str) -> None:
     log = depth_log()
@@ -203,13 +203,8 @@ def _inject(fs: FilterState, dx: np.ndarray) -> FilterState:
                        fs.b_R_d @ so3_exp(dx[MIS]), fs.P, fs.time_offset + (dx[OFFSET] if len(dx) > OFFSET else 0.0))
 
 
-def _numerical(f, fs: FilterState, n: int, h: float = 1e-6) -> np.ndarray:  # type: ignore[no-untyped-def]
-    cols = []
-    for j in range(n):
-        dx = np.zeros(n)
-        dx[j] = h
-        cols.append((np.atleast_1d(f(_inject(fs, dx))) - np.atleast_1d(f(_inject(fs, -dx)))) / (2 * h))
-    return np.array(cols).T
+def _numerical(f, fs: FilterState, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    return numerical_jacobian(lambda dx: f(_inject(fs, dx)), [np.zeros(n)], 0)
 
 
 def test_ekf_offset_and_depth_jacobians_match_finite_differences() -> None:
@@ -250,19 +245,17 @@ def test_considered_offset_factor_jacobians() -> None:
     H = A * sigma
     dims = dict(zip(keys, (6, 3, 1, 3, 1), strict=True))
 
-    def moved(key: int, dx: np.ndarray) -> gtsam.Values:
-        delta = gtsam.VectorValues()
-        for k, d in dims.items():
-            delta.insert(k, dx if k == key else np.zeros(d))
-        return values.retract(delta)
+    def error(pose: gtsam.Pose3, n_v: np.ndarray, scale: np.ndarray, b_R_d: gtsam.Rot3, offset: np.ndarray
+              ) -> np.ndarray:
+        moved = gtsam.Values()
+        for key, value in zip(keys, (pose, n_v, scale, b_R_d, offset), strict=True):
+            moved.insert(key, value)
+        return f.unwhitenedError(moved)
 
+    numerical = numerical_jacobians(error, [values.atPose3(X(2)), values.atVector(V(2)), values.atVector(K_SCALE),
+                                            values.atRot3(C_MISALIGN), values.atVector(T_OFFSET)])
     col = 0
-    for key, d in dims.items():
-        num = np.zeros((3, d))
-        for j in range(d):
-            dx = np.zeros(d)
-            dx[j] = 1e-6
-            num[:, j] = (f.unwhitenedError(moved(key, dx)) - f.unwhitenedError(moved(key, -dx))) / 2e-6
+    for (key, d), num in zip(dims.items(), numerical, strict=True):
         block = H[:, col:col + d]
         if key in (K_SCALE, C_MISALIGN):
             assert np.all(block == 0.0)

@@ -17,11 +17,7 @@ version of paper-3d-short cut at 300 s (120 s static, the Type-I manoeuvres, the
 from __future__ import annotations
 
 import dataclasses
-import gc
-import weakref
-from dataclasses import replace
 from functools import cache
-from typing import Any
 
 import gtsam
 import numpy as np
@@ -30,7 +26,7 @@ import pytest
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.types import DvlData, ImuData, LogData, TruthData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import map_frame_of
 from gtsam_dvl.estimators.batch import smooth_batch
@@ -40,35 +36,25 @@ from gtsam_dvl.estimators.keyframes import interval_with_snapshots, snapshot_par
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.keyframes import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
-from gtsam_dvl.factors import EarthImuFactor, PingMotion
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from gtsam_dvl.factors import PingMotion
+from tests.support.logs import cut_log
+from tests.support.memory import track_returns
+from tests.support.numerical import numerical_jacobian
+from tests.support.scenarios import simulate_variant
 
 SEED = 7
 T_END_S = 300.0
 
 
-def _cut(log: LogData, t_end: float) -> LogData:
-    i, d = log.imu.t <= t_end, log.dvl.t <= t_end
-    tr = log.truth
-    assert tr is not None
-    k = tr.t <= t_end
-    return replace(log, imu=ImuData(log.imu.t[i], log.imu.b_omega[i], log.imu.b_f[i]),
-                   dvl=DvlData(log.dvl.t[d], log.dvl.d_v[d], log.dvl.d_cov[d], log.dvl.valid[d]),
-                   truth=TruthData(tr.t[k], tr.n_p[k], tr.n_q_b[k], tr.n_v[k], tr.b_omega[k]))
-
-
 @cache
 def _simulated(dvl_hz: float) -> LogData:
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_hz": dvl_hz}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_hz": dvl_hz})
 
 
 @cache
 def run_log(dvl_hz: float, t_end: float = T_END_S) -> LogData:
     """paper-3d-short (the paper's sensors, 120 s static) with the DVL at dvl_hz, cut at t_end."""
-    return _cut(_simulated(dvl_hz), t_end)
+    return cut_log(_simulated(dvl_hz), t_end, beams=False)
 
 
 def config(spacing_s: float) -> EstimatorConfig:
@@ -132,6 +118,7 @@ def _compare(label: str, a: NavResult, b: NavResult) -> tuple[np.ndarray, np.nda
     return shift, ratio
 
 
+@pytest.mark.slow
 def test_online_keyframes_are_the_batch_smoothers() -> None:
     on, ba = online(1.0).result, batch(1.0)
     c_on, c_ba = on.info["counters"], ba.info["counters"]
@@ -151,6 +138,7 @@ def test_online_keyframes_are_the_batch_smoothers() -> None:
     assert np.all(np.abs(ratio) < 0.05)
 
 
+@pytest.mark.slow
 def test_online_keyframes_match_a_state_per_ping() -> None:
     keyed, per_ping = online(1.0).result, online(0.0).result
     print(f"\nonline: {len(keyed.t)} states with 1 s keyframes, {len(per_ping.t)} with a state per ping")
@@ -288,14 +276,7 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
     t_p = s.t + snap.dt
     quiet = dataclasses.replace(snap, cov=np.zeros((9, 9)))
     p = predict_at_ping(s, t_p, quiet, motion)
-    J = np.zeros((19, 19))
-    for k in range(19):
-        h = 1e-6
-        e = np.zeros(19)
-        e[k] = h
-        plus = predict_at_ping(_retract(s, e), t_p, quiet, motion)
-        minus = predict_at_ping(_retract(s, -e), t_p, quiet, motion)
-        J[:, k] = (_local(p, plus) - _local(p, minus)) / (2 * h)
+    J = numerical_jacobian(lambda e: _local(p, predict_at_ping(_retract(s, e), t_p, quiet, motion)), [np.zeros(19)], 0)
     expected = J @ cov @ J.T
     d = np.sqrt(np.diag(expected))
     rel = np.abs(p.cov - expected) / np.outer(d, d)
@@ -307,6 +288,7 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
     np.testing.assert_allclose(np.trace(added[6:9, 6:9]), np.trace(snap.cov[6:9, 6:9]), rtol=1e-9)
 
 
+@pytest.mark.slow
 def test_estimate_between_keyframes_is_consistent_with_the_truth() -> None:
     run, log = online(1.0), run_log(5.0)
     tr = log.truth
@@ -337,45 +319,30 @@ def test_estimate_between_keyframes_is_consistent_with_the_truth() -> None:
         assert np.abs(z).max() < 4.5
 
 
+@pytest.mark.slow
 def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every PingMotion a keyframe factor holds and every IMU factor is tracked; after the run only those of the
     states still in the window may be alive (and the newest IMU factor, the gravity reference), and none once the
     estimator is gone."""
-    made: list[weakref.ref[Any]] = []
-    imus: list[weakref.ref[Any]] = []
-    original, original_imu = PingMotion.motion, FactorMaker.new_imu_factor
-
-    def tracking(self: PingMotion, *args: Any) -> PingMotion:
-        m = original(self, *args)
-        made.append(weakref.ref(m))
-        return m
-
-    def tracking_imu(self: FactorMaker, *args: Any, **kwargs: Any) -> EarthImuFactor:
-        f = original_imu(self, *args, **kwargs)
-        imus.append(weakref.ref(f.factor))
-        return f
-
-    monkeypatch.setattr(PingMotion, "motion", tracking)
-    monkeypatch.setattr(FactorMaker, "new_imu_factor", tracking_imu)
+    made = track_returns(monkeypatch, PingMotion, "motion")
+    imus = track_returns(monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor)
     log = run_log(5.0, 200.0)
     est = OnlineEstimator.for_log(log, config(1.0))
     feed_log(est, log)
-    gc.collect()
     assert est.smoother is not None
     in_window = len(est.smoother.times)
-    alive = sum(r() is not None for r in made)
-    alive_imu = sum(r() is not None for r in imus)
+    alive, alive_imu = made.alive(), imus.alive()
     print(f"\n{len(made)} keyframe factors made, {alive} alive after the run; {len(imus)} IMU factors, {alive_imu} "
           f"alive; {in_window} states in the window")
     assert len(made) > 30 * in_window and len(imus) > 8 * in_window
     assert alive <= 4 * in_window
     assert alive_imu <= in_window
     del est
-    gc.collect()
-    assert sum(r() is not None for r in made) == 0
-    assert sum(r() is not None for r in imus) == 0
+    assert made.alive() == 0
+    assert imus.alive() == 0
 
 
+@pytest.mark.slow
 def test_one_second_keyframes_on_a_1_hz_log_are_a_state_per_ping() -> None:
     a, b = online(1.0, 1.0, 300.0).result, online(0.0, 1.0, 300.0).result
     assert "pings_between_keyframes" not in a.info["counters"]
@@ -385,6 +352,7 @@ def test_one_second_keyframes_on_a_1_hz_log_are_a_state_per_ping() -> None:
     np.testing.assert_array_equal(a.timeline.scale_sigma, b.timeline.scale_sigma)
 
 
+@pytest.mark.slow
 def test_pings_between_keyframes_added_at_once_give_the_deferred_estimates() -> None:
     """defer_between_pings = False (an iSAM2 update per ping between keyframes, the alternative measured in
     bench/bench_online_long.py): the same states but the last (a ping between keyframes stays one), the same

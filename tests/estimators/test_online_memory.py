@@ -12,60 +12,48 @@ from __future__ import annotations
 import gc
 import weakref
 from dataclasses import replace
-from typing import Any
 
 import gtsam
 import numpy as np
 import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.types import DvlData, ImuData, LogData
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
 from gtsam_dvl.factors import EarthImuFactor, imu_earth, make_earth_imu_factor
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.logs import cut_log
+from tests.support.memory import Made, track_returns
 
 T_END_S = 400.0  # paper-3d-short: 120 s static, then the Type-I manoeuvres and the first legs
 
 
 @pytest.fixture(scope="module")
 def log() -> LogData:
-    full = simulate(load_scenario("paper-3d-short"), 5)
-    i, d = full.imu.t <= T_END_S, full.dvl.t <= T_END_S
-    return replace(full, imu=ImuData(full.imu.t[i], full.imu.b_omega[i], full.imu.b_f[i]),
-                   dvl=DvlData(full.dvl.t[d], full.dvl.d_v[d], full.dvl.d_cov[d], full.dvl.valid[d]), truth=None)
+    return replace(cut_log(simulate(load_scenario("paper-3d-short"), 5), T_END_S, beams=False), truth=None)
 
 
 def _tracked_run(log: LogData, monkeypatch: pytest.MonkeyPatch, config: EstimatorConfig
-                 ) -> tuple[OnlineEstimator, list[weakref.ref[Any]], list[weakref.ref[Any]]]:
+                 ) -> tuple[OnlineEstimator, Made, Made]:
     """Run the fixed-lag estimator over the log with a weak reference to every IMU factor it made (the
     EarthImuFactor and its gtsam.CustomFactor)."""
-    made: list[weakref.ref[Any]] = []
-    custom: list[weakref.ref[Any]] = []
-    original = FactorMaker.new_imu_factor
-
-    def tracking(self: FactorMaker, *args: Any, **kwargs: Any) -> EarthImuFactor:
-        f = original(self, *args, **kwargs)
-        made.append(weakref.ref(f))
-        custom.append(weakref.ref(f.factor))
-        return f
-
-    monkeypatch.setattr(FactorMaker, "new_imu_factor", tracking)
+    made = track_returns(monkeypatch, FactorMaker, "new_imu_factor")
+    custom = track_returns(monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor)
     est = OnlineEstimator.for_log(log, config)
     feed_log(est, log)
     return est, made, custom
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("preset", ["default", "paper"])
 def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str) -> None:
     config = EstimatorConfig() if preset == "default" else EstimatorConfig.paper()
     est, made, custom = _tracked_run(log, monkeypatch, config)
-    gc.collect()
     assert est.smoother is not None
     in_window = len(est.smoother.imus)
-    alive = sum(r() is not None for r in made)
-    alive_custom = sum(r() is not None for r in custom)
+    alive, alive_custom = made.alive(), custom.alive()
     print(f"{preset}: {len(made)} IMU factors made, {alive} alive after the run ({alive_custom} CustomFactors), "
           f"{in_window} in the window, {est.smoother.rebases} rebases")
     assert len(made) > 5 * in_window  # the window dropped most of them
@@ -73,11 +61,11 @@ def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyP
     assert alive <= in_window + 1
     assert alive_custom <= in_window + 1
     del est
-    gc.collect()
-    assert sum(r() is not None for r in made) == 0
-    assert sum(r() is not None for r in custom) == 0
+    assert made.alive() == 0
+    assert custom.alive() == 0
 
 
+@pytest.mark.slow
 def test_parameters_claims_are_released(log: LogData) -> None:
     """Each factor claims its PreintegrationParams (imu_earth._CLAIMED); the claims of dropped factors end with
     them, so the set stays bounded by the window."""

@@ -26,6 +26,9 @@ from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.results import changes_in_sigmas
+
+pytestmark = pytest.mark.slow
 
 SEED = 1
 ZERO_FROM_S, ZERO_TO_S = 800.0, 830.0  # exact zeros at 2 m/s, at the end of the square's first turn
@@ -76,17 +79,6 @@ def _run(mode: str, case: str, defaults: bool = True) -> NavResult:
     return RUNS[mode](log, EstimatorConfig.paper() if defaults else _off())
 
 
-def _changes(a: NavResult, b: NavResult) -> dict[str, np.ndarray]:
-    """(a - b) / b's sigma: scale, misalignment, biases, final position (map axes)."""
-    return {
-        "scale": np.array([(a.scale - b.scale) / b.scale_sigma]),
-        "misalignment": (a.misalignment_deg - b.misalignment_deg) / b.misalignment_sigma_deg,
-        "accel bias": (a.accel_bias_ug - b.accel_bias_ug) / b.accel_bias_sigma_ug,
-        "gyro bias": (a.gyro_bias_deg_per_h - b.gyro_bias_deg_per_h) / b.gyro_bias_sigma_deg_per_h,
-        "final position": (a.n_p[-1] - b.n_p[-1]) / b.position_sigma_m[-1],
-    }
-
-
 @pytest.mark.parametrize("mode", list(RUNS))
 def test_clean_log_unchanged_by_the_robust_defaults(mode: str) -> None:
     """On the clean (noisy, outlier-free) log the defaults move no estimate by 0.1 of its sigma: the Huber kernel
@@ -94,7 +86,7 @@ def test_clean_log_unchanged_by_the_robust_defaults(mode: str) -> None:
     (measured on seeds 1, 2, 3, 5, 6, 8: at most 0.02 sigma in any mode; a 3 sigma kernel gave up to 0.105, a
     0.9999 gate 0.088 with two sound pings gated)."""
     default, off = _run(mode, "clean"), _run(mode, "clean", defaults=False)
-    changes = _changes(default, off)
+    changes = changes_in_sigmas(default, off, final_position=True)
     worst = max(float(np.max(np.abs(v))) for v in changes.values())
     print(f"\n{mode}, clean log, defaults - everything off (sigmas): "
           + ", ".join(f"{k} {np.round(v, 3).tolist()}" for k, v in changes.items())

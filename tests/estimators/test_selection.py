@@ -57,6 +57,7 @@ def _with_dropouts(log: LogData, t_end: float = 800.0) -> tuple[LogData, np.ndar
     return dataclasses.replace(log, imu=imu, dvl=dvl, truth=None), expected
 
 
+@pytest.mark.slow
 def test_batch_online_and_ekf_use_the_same_epochs(sim_paper3d_clean: LogData) -> None:
     log, expected = _with_dropouts(sim_paper3d_clean)
     cfg = EstimatorConfig.paper()
@@ -163,6 +164,7 @@ def _feed_pings_first(est: OnlineEstimator, log: LogData) -> None:
     est.finish()
 
 
+@pytest.mark.slow
 def test_bogus_pings_dropped_alike_by_batch_online_and_ekf(sim_paper3d_clean: LogData) -> None:
     """The screen's rules are causal (the previous accepted ping and the IMU since it), so batch, online (in either
     message order) and EKF drop the same bogus pings, count them alike and keep the same epochs; the noise-free

@@ -31,8 +31,7 @@ from gtsam_dvl.estimators.selection import (
     screened_value,
     usable_pings,
 )
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.scenarios import simulate_variant
 
 SEED = 7
 
@@ -52,9 +51,7 @@ def sequential_codes(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig
 def base_log(white_noise: bool = True) -> LogData:
     """paper-3d-short (120 s static, then the manoeuvres: surge 0 -> 2 m/s over 120-180 s, descent, the square)
     with a 5 Hz DVL (4200 pings, 100 Hz IMU)."""
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_hz": 5.0}
-    return simulate(scenario_from_dict(raw), SEED, white_noise=white_noise)
+    return simulate_variant(SEED, white_noise=white_noise, rates={"dvl_hz": 5.0})
 
 
 def _dvl(log: LogData, **kw: Any) -> LogData:

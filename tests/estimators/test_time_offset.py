@@ -21,6 +21,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.scenarios import simulate_variant
 
 OFFSETS = (-0.2, 0.1, 0.6, 1.5)
 SEED = 7
@@ -29,10 +30,7 @@ SEED = 7
 @cache
 def short_run(dt: float, noise_m_s: float = 0.02) -> LogData:
     """paper-3d shortened (data/scenarios/paper-3d-short.toml: 120 s static, 60 s legs), DVL stamps dt early."""
-    raw = dict(load_scenario("paper-3d-short").raw)
-    raw["rates"] = {**raw["rates"], "dvl_time_offset_s": dt}
-    raw["dvl"] = {**raw["dvl"], "noise_m_s": noise_m_s}
-    return simulate(scenario_from_dict(raw), SEED)
+    return simulate_variant(SEED, rates={"dvl_time_offset_s": dt}, dvl={"noise_m_s": noise_m_s})
 
 
 def config(estimate: bool) -> EstimatorConfig:
@@ -64,6 +62,7 @@ def test_default_is_off_and_no_offset_is_reported() -> None:
     assert r.time_offset_s == 0.0 and np.isnan(r.time_offset_sigma_s)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", OFFSETS)
 def test_offset_recovered_with_paper_noise(dt: float) -> None:
     log, r, r0 = short_run(dt), solve(dt, 0.02, True), solve(0.0, 0.02, False)
@@ -80,6 +79,7 @@ def test_offset_recovered_with_paper_noise(dt: float) -> None:
     assert pe < pe0 + 0.5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dt", OFFSETS)
 def test_offset_sigma_below_5_ms_with_a_precise_dvl(dt: float) -> None:
     log, r = short_run(dt, 0.002), solve(dt, 0.002, True)

@@ -17,6 +17,8 @@ from gtsam_dvl.estimators.timeline import filtering_timeline
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
+pytestmark = pytest.mark.slow
+
 
 @functools.cache
 def _run(name: str) -> tuple[Timeline, NavResult]:

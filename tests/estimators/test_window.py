@@ -200,6 +200,7 @@ def test_fixed_lag_estimate_close_to_full_history() -> None:
 
 # ----- covariances ------------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["fixed_lag", "full"])
 def test_joint_covariance_matches_a_dense_inversion(mode: str) -> None:
     """The joint of the newest state, bias, scale and misalignment from iSAM2's joint Bayes net (QR) against numpy's

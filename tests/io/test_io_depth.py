@@ -11,7 +11,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mcap.reader import make_reader
-from test_io_synthetic import make_log
 from typer.testing import CliRunner
 
 from gtsam_dvl.app.cli import app
@@ -22,6 +21,7 @@ from gtsam_dvl.io.reader import read_log, read_topic
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.synthetic_log import make_log
 
 
 def _with_depth(seed: int = 0) -> DepthData:

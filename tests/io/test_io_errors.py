@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_io_synthetic import T0_NS, make_log
 
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.ros2 import cdr
 from gtsam_dvl.io.writer import McapLogWriter, write_log
+from tests.support.synthetic_log import T0_NS, make_log
 
 
 @pytest.fixture(scope="module")
@@ -24,6 +24,14 @@ def long_log(tmp_path_factory: pytest.TempPathFactory) -> tuple[LogData, bytes]:
     path = tmp_path_factory.mktemp("err") / "long.mcap"
     write_log(path, log)
     return log, path.read_bytes()
+
+
+def with_byte_flipped(data: bytes, at: int, path: Path) -> Path:
+    """The file path holding data with every bit of the byte at offset at inverted."""
+    damaged = bytearray(data)
+    damaged[at] ^= 0xFF
+    path.write_bytes(bytes(damaged))
+    return path
 
 
 def one_line_error(path: Path, **kw: object) -> str:
@@ -54,17 +62,9 @@ def test_truncated_file_and_salvage(long_log: tuple[LogData, bytes], tmp_path: P
     assert start == pytest.approx(got.imu.t[-1] + 0.01, abs=0.011) and end > start
 
 
-def _corrupt_middle(data: bytes, path: Path) -> Path:
-    """The log's bytes written to path with the byte in the middle flipped (inside a chunk of a long log)."""
-    damaged = bytearray(data)
-    damaged[len(data) // 2] ^= 0xFF
-    path.write_bytes(bytes(damaged))
-    return path
-
-
 def test_corrupt_chunk_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
     log, data = long_log
-    path = _corrupt_middle(data, tmp_path / "bad.mcap")
+    path = with_byte_flipped(data, len(data) // 2, tmp_path / "bad.mcap")
     msg = one_line_error(path)
     assert "corrupt chunk" in msg and "--salvage" in msg
 
@@ -199,7 +199,7 @@ def test_corrupt_chunk_losses_per_topic_and_gap(long_log: tuple[LogData, bytes],
     from gtsam_dvl.analysis.health import assess_log_health
 
     log, data = long_log
-    path = _corrupt_middle(data, tmp_path / "bad.mcap")
+    path = with_byte_flipped(data, len(data) // 2, tmp_path / "bad.mcap")
     got = read_log(path, salvage=True)
     losses = got.metadata["reader_losses"]
     salv = losses["salvage"]
@@ -267,10 +267,8 @@ def test_damaged_message_index_falls_back_to_the_intact_chunk(long_log: tuple[Lo
     # the MessageIndex record with the most entries (the IMU's): opcode, length, channel, entries length, entries
     pos = max(chunk.index.values(), key=lambda q: struct.unpack_from("<I", data, q + 11)[0])
     assert struct.unpack_from("<I", data, pos + 11)[0] >= 32
-    bad = bytearray(data)
-    bad[pos + 15 + 16 + 15] ^= 0xFF  # the top byte of the second entry's offset
-    path = tmp_path / "bad-index.mcap"
-    path.write_bytes(bytes(bad))
+    # the top byte of the second entry's offset
+    path = with_byte_flipped(data, pos + 15 + 16 + 15, tmp_path / "bad-index.mcap")
     got, ref = read_log(path), read_log(good)
     np.testing.assert_array_equal(got.imu.t, ref.imu.t)
     np.testing.assert_array_equal(got.imu.b_f, ref.imu.b_f)

@@ -18,13 +18,13 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from scipy.spatial.transform import Rotation
-from test_io_synthetic import T0_NS, make_log
 
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.ros2.msgdefs import message_text
 from gtsam_dvl.io.storage.bagdir import make_bag_dir
 from gtsam_dvl.io.writer import write_log
+from tests.support.synthetic_log import T0_NS, make_log
 
 
 @pytest.fixture(scope="module")

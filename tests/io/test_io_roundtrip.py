@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from rosbags.rosbag2.metadata import parse_qos
-from test_io_synthetic import T0_NS, make_log
 
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap import container as mcap_container
 from gtsam_dvl.io.reader import read_log, read_odometry, read_topic
 from gtsam_dvl.io.writer import UNMEASURED_VARIANCE, McapLogWriter, write_log
+from tests.support.synthetic_log import T0_NS, make_log
 
 
 @pytest.fixture(scope="module")

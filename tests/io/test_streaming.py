@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_io_synthetic import make_log
 
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.mcap import scan
@@ -19,6 +18,7 @@ from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.storage import sources
 from gtsam_dvl.io.storage.sources import open_source
 from gtsam_dvl.io.writer import write_log
+from tests.support.synthetic_log import make_log
 
 TOPICS = ["/imu/data_raw", "/dvl/data", "/ground_truth/odometry", "/tf_static"]
 

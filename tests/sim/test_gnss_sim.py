@@ -5,7 +5,6 @@ measured."""
 
 from __future__ import annotations
 
-import copy
 import functools
 from typing import Any
 
@@ -17,7 +16,8 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import quat_xyzw_to_matrix
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.scenarios import scenario_raw
 
 LEVER = [0.3, -0.2, 0.6]
 
@@ -25,19 +25,14 @@ LEVER = [0.3, -0.2, 0.6]
 def _raw(gnss: dict[str, Any] | None = None) -> dict[str, Any]:
     """At the surface (origin height 0) 60 s static, then away at 2 m/s, a dive to about 24 m, up again and on
     at the surface: 360 s."""
-    raw = copy.deepcopy(load_scenario("paper-3d-short").raw)
-    raw["origin"]["height_m"] = 0.0
-    raw["segments"] = [
+    return scenario_raw(origin={"height_m": 0.0}, gnss=gnss, segments=[
         {"kind": "static", "duration_s": 60.0},
         {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
         {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
         {"kind": "turn", "duration_s": 60.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
         {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
         {"kind": "straight", "duration_s": 100.0},
-    ]
-    if gnss is not None:
-        raw["gnss"] = gnss
-    return raw
+    ])
 
 
 @functools.cache

@@ -184,6 +184,7 @@ def test_strapdown_reproduces_truth_paper3d(sim_paper3d_clean: LogData, sim_pape
     _check_window(sim_paper3d_clean, sim_paper3d.local_frame(), label, t_start)
 
 
+@pytest.mark.slow
 def test_strapdown_reproduces_truth_far_from_origin() -> None:
     """The 20 km transit, about 13 km out at 6000 s: the map-frame gravity has turned by 2 mrad there."""
     sc = load_scenario("straight-20km")

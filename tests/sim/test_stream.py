@@ -18,6 +18,7 @@ from gtsam_dvl.io.writer import LogStreamWriter, imu_rate_hz, write_log, write_l
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, scenario_from_dict
 from gtsam_dvl.sim.stream import ChunkedSimulation, simulate_chunked
+from tests.support.scenarios import scenario_raw
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "data" / "scenarios"
 
@@ -27,16 +28,13 @@ def _small(variant: str) -> Scenario:
     "beam": the per-beam noise model with dropouts and outliers, walking biases, stamps 0.25 s late, fixes from 3 s;
     "field": the velocity model with dropouts and outliers, a z-down DVL with lever arm and 0.3 s lag, and the map
     origin from the first fix (origin_in_log = false)."""
-    raw: dict[str, Any] = tomllib.loads((SCENARIOS / "paper-3d-short.toml").read_text())
-    raw["rates"].update(dvl_hz=2.0)
-    raw["segments"] = [
+    raw = scenario_raw(rates={"dvl_hz": 2.0}, segments=[
         {"kind": "static", "duration_s": 5.0},
         {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
         {"kind": "descent", "duration_s": 10.0, "peak_vertical_speed_m_s": 0.3},
         {"kind": "turn", "duration_s": 10.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
         {"kind": "ascent", "duration_s": 10.0, "peak_vertical_speed_m_s": 0.3},
-    ]
-    raw["depth"] = {"rate_hz": 5.0, "noise_m": 0.05, "bias_m": 0.1, "lever_arm_m": [0.1, 0.0, 0.2]}
+    ], depth={"rate_hz": 5.0, "noise_m": 0.05, "bias_m": 0.1, "lever_arm_m": [0.1, 0.0, 0.2]})
     if variant == "beam":
         raw["dvl"].update(noise_model="beam", dropout_ping_prob=0.05, dropout_beam_prob=0.1, outlier_prob=0.05)
         raw["imu"].update(gyro_bias_walk_deg_per_h_per_sqrt_h=0.01, accel_bias_walk_micro_g_per_sqrt_h=20.0)
@@ -80,7 +78,8 @@ def _assert_same_log(a: LogData, b: LogData, fields: tuple[str, ...] = ("source"
         assert getattr(a, f) == getattr(b, f), f
 
 
-@pytest.mark.parametrize(("variant", "chunk_s"), [("beam", 7.7), ("beam", 0.13), ("field", 0.37), ("field", 60.0)])
+@pytest.mark.parametrize(("variant", "chunk_s"), [("beam", 7.7), pytest.param("beam", 0.13, marks=pytest.mark.slow),
+                                                  pytest.param("field", 0.37, marks=pytest.mark.slow), ("field", 60.0)])
 def test_chunked_log_is_simulate_bit_for_bit(variant: str, chunk_s: float) -> None:
     """0.13 s and 0.37 s chunks hold zero or one ping, depth sample and candidate fix, and one or a few truth
     stamps (the single-row paths); 60 s is one chunk for the whole run."""
@@ -91,10 +90,12 @@ def test_chunked_log_is_simulate_bit_for_bit(variant: str, chunk_s: float) -> No
     _assert_same_log(simulate_chunked(sc, 11, chunk_s=chunk_s), ref)
 
 
+@pytest.mark.slow
 def test_chunked_paper3d_without_white_noise(sim_paper3d: Scenario, sim_paper3d_clean: LogData) -> None:
     _assert_same_log(simulate_chunked(sim_paper3d, 7, white_noise=False, chunk_s=600.0), sim_paper3d_clean)
 
 
+@pytest.mark.slow
 def test_chunked_survey_at_200hz() -> None:
     """survey-24h's start (static, the calibration manoeuvres and a turn: 870 s of 200 Hz / 5 Hz) in chunks that
     cut samples and pings anywhere."""
@@ -104,6 +105,7 @@ def test_chunked_survey_at_200hz() -> None:
     _assert_same_log(simulate_chunked(sc, 7, chunk_s=97.3), simulate(sc, 7))
 
 
+@pytest.mark.slow
 def test_streamed_file_is_write_log_file(tmp_path: Path) -> None:
     """write_log_stream of ChunkedSimulation writes write_log's file of simulate()'s log, byte for byte, and read_log
     reads both alike; the same seed gives the same bytes again, another seed other bytes."""

@@ -36,24 +36,26 @@ def perturb(x: Any, d: np.ndarray) -> Any:
     return arr + d.reshape(arr.shape)
 
 
-def numerical_jacobian(f: Callable[..., Any], args: Sequence[Any], index: int, delta: float = 1e-6) -> np.ndarray:
-    """d f(args) / d args[index] (rows: f's output, columns: the argument's tangent), central differences."""
+def numerical_jacobian(f: Callable[..., Any], args: Sequence[Any], index: int,
+                       delta: float | Sequence[float] | np.ndarray = 1e-6) -> np.ndarray:
+    """d f(args) / d args[index] (rows: f's output, columns: the argument's tangent), central differences with
+    step delta: one for every tangent component, or one per component (states of different units)."""
     args = list(args)
     x = args[index]
     n = tangent_dim(x)
-    f0 = np.atleast_1d(np.asarray(f(*args), dtype=float))
-    J = np.zeros((f0.size, n))
+    steps = np.broadcast_to(np.asarray(delta, dtype=float), (n,))
+    columns = []
     for j in range(n):
         d = np.zeros(n)
-        d[j] = delta
+        d[j] = steps[j]
         plus = args.copy()
         minus = args.copy()
         plus[index] = perturb(x, d)
         minus[index] = perturb(x, -d)
         fp = np.atleast_1d(np.asarray(f(*plus), dtype=float)).reshape(-1)
         fm = np.atleast_1d(np.asarray(f(*minus), dtype=float)).reshape(-1)
-        J[:, j] = (fp - fm) / (2.0 * delta)
-    return J
+        columns.append((fp - fm) / (2.0 * steps[j]))
+    return np.stack(columns, axis=1)
 
 
 def numerical_jacobians(f: Callable[..., Any], args: Sequence[Any], delta: float = 1e-6) -> list[np.ndarray]:
