@@ -72,7 +72,7 @@ def test_direction_analysis_on_a_hand_made_covariance() -> None:
     J[6, 6] = 1e6
     J[7:, 7:] = np.degrees(base.b_R_d)
     Jinv = np.linalg.inv(J)
-    fake = base.model_copy(update={"calib_joint_cov": Jinv @ cov_user @ Jinv.T})
+    fake = dataclasses.replace(base, calib_joint_cov=Jinv @ cov_user @ Jinv.T)
     report = analyse(fake, cfg)
     mixed = [d for d in report.directions if set(d.weights) == {"misalignment_roll", "gyro_bias_z"}]
     # the combination (ratio 0.6) and its orthogonal complement (untouched, ratio 1)
