@@ -13,7 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from gtsam_dvl.campaign.runner import run_campaign
+from gtsam_dvl.app.campaign.runner import run_campaign
 
 
 def campaign(scenario: str, runs: int, estimators: list[str], workers: int, folder: Path) -> tuple[float, float]:

@@ -214,7 +214,7 @@ def smooth(
         if out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz:
             raise GtsamDvlError("several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
                                 "--summary, --tum and --timeline-npz take one log")
-        from gtsam_dvl.campaign.fleet import fleet_table, smooth_fleet
+        from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
 
         rows, written = smooth_fleet(logs, out_dir, mode=mode, config_path=config, read_options=read_options,
                                      scheduler=scheduler, workers=workers, show_progress=not quiet)
@@ -322,7 +322,7 @@ def montecarlo(
     debug: Debug = False,
 ) -> None:
     """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
-    from gtsam_dvl.campaign.runner import run_campaign
+    from gtsam_dvl.app.campaign.runner import run_campaign
 
     res = run_campaign(scenario, runs, [e.strip() for e in estimators.split(",") if e.strip()], output,
                        seed_start=seed_start, scheduler=scheduler, workers=workers, config_path=config,

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gtsam_dvl.campaign.montecarlo import nees_band, run_seed
-from gtsam_dvl.campaign.runner import FAIL_SEED_ENV, run_campaign
+from gtsam_dvl.app.campaign.montecarlo import nees_band, run_seed
+from gtsam_dvl.app.campaign.runner import FAIL_SEED_ENV, run_campaign
 from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.campaign import SCENARIO
 

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.campaign.cluster import dask_client
+from gtsam_dvl.app.campaign.cluster import dask_client
 from gtsam_dvl.core.errors import GtsamDvlError
 
 

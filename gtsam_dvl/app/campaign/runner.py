@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.campaign.cluster import dask_client
-from gtsam_dvl.campaign.montecarlo import ESTIMATORS, campaign_statistics, cramer_rao_sigmas, run_seed
-from gtsam_dvl.campaign.report import write_report
+from gtsam_dvl.app.campaign.cluster import dask_client
+from gtsam_dvl.app.campaign.montecarlo import ESTIMATORS, campaign_statistics, cramer_rao_sigmas, run_seed
+from gtsam_dvl.app.campaign.report import write_report
 from gtsam_dvl.core.errors import GtsamDvlError
 
 # for tests of the engine only: the run of this seed raises (a task that fails on every try)

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from gtsam_dvl.campaign.montecarlo import BLOCK_DOF
+from gtsam_dvl.app.campaign.montecarlo import BLOCK_DOF
 
 
 def write_report(out_dir: Path, stats: dict[str, Any]) -> list[Path]:
