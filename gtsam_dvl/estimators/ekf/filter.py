@@ -381,7 +381,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     offset = enabled(config, "time_offset")
     if offset and config.dvl.use_beams:
         raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
-    if config.dvl.estimate_lever_arm:
+    if enabled(config, "lever_arm"):
         raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not the EKF")
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
