@@ -185,6 +185,8 @@ class DvlResiduals:
     chi2: np.ndarray
     dof: np.ndarray
     unmatched: int  # states without a ping at their time
+    # pings selected again here (selection.usable_pings): the result does not record its own (NavResult.dvl_pings)
+    selected_again: int = 0
 
     def rms(self, mask: np.ndarray | None = None) -> float:
         c, d = (self.chi2, self.dof) if mask is None else (self.chi2[mask], self.dof[mask])
@@ -192,7 +194,7 @@ class DvlResiduals:
 
 
 def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResiduals:
-    """Residuals y - h(x) of every usable ping (selection.usable_pings) between the result's first and last
+    """Residuals y - h(x) of every usable ping (NavResult.dvl_pings) between the result's first and last
     state: at a state's time the state's prediction, between states (keyframes, [solver] keyframe_spacing_s, or
     decimated pings) the states' predictions interpolated linearly in time (in dvl_link: the body-frame
     velocity stays smooth through turns; over 1 s in a 0.05 rad/s turn the chord error is below 1e-3 m/s).
@@ -220,7 +222,11 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     y_state, _ = dvl_model(n_R_b, n_v, float(result.scale), np.asarray(result.b_R_d, dtype=float), b_omega,
                            np.asarray(b_l, dtype=float), jacobians=False)
     t0, t1 = float(result.t[0]), float(result.t[-1])
-    pings = usable_pings(dvl, log.imu, config, {})
+    pings = result.dvl_pings
+    selected_again = 0
+    if pings is None or (len(pings) and int(pings.max()) >= len(dvl)):
+        pings = usable_pings(dvl, log.imu, config, {})
+        selected_again = len(pings)
     j = pings[(dvl.t[pings] >= t0 - 1e-6) & (dvl.t[pings] <= t1 + 1e-6)]
     t_p = np.clip(dvl.t[j], t0, t1)
     y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(-1, 3)
@@ -241,7 +247,7 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         cov[~ok] = np.eye(3)
         chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
         dof = 3.0 * ok
-    return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched)
+    return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
 
 
 def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
@@ -251,6 +257,11 @@ def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfi
                                "whitened_rms": res.rms() if used.any() else None,
                                "window_s": RESIDUAL_WINDOW_S, "windows": []}
     health.figures["dvl_residuals"] = figures
+    if res.selected_again:
+        figures["pings_selected_again"] = res.selected_again
+        health.flag("note", f"the result does not record which DVL pings its estimator used (a result file without "
+                            f"them): the residuals are of the {res.selected_again} pings selected again with its "
+                            "configuration")
     if not used.any():
         health.flag("degraded", "no DVL ping could be compared with the estimate: check the DVL topic and its "
                                 "valid flags")

@@ -100,7 +100,8 @@ def surfacing_report(res: NavResult, log: LogData, config: EstimatorConfig | Non
     if log.gnss is None or not len(log.gnss):
         return None
     if config is None:
-        config = EstimatorConfig.from_dict(res.config) if res.config else EstimatorConfig()
+        # (a configuration that does not read: from_dict raises why)
+        config = res.estimator_config or EstimatorConfig.from_dict(res.config)
     frame = map_frame_of(log, config)
     plan = plan_fixes(log, config, frame, res.t)
     if plan is None:

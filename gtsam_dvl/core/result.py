@@ -109,6 +109,9 @@ class NavResult(CalibrationUnits):
     # with its sigmas, in info["alignment"])
     alignment_method: str
     config: dict[str, Any]  # the effective configuration (EstimatorConfig.to_dict)
+    # the indices of the DVL pings the estimator found usable (estimators/selection.py: before keyframe thinning),
+    # in the log's DVL data (online: in the order pushed); None: not recorded (a result read from an older file)
+    dvl_pings: np.ndarray | None
 
     def __init__(self, estimator: str, t: np.ndarray, n_p: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray,
                  pose_cov: np.ndarray, vel_cov: np.ndarray, *, b_R_d0: np.ndarray,
@@ -116,6 +119,7 @@ class NavResult(CalibrationUnits):
                  pose_vel_cross: np.ndarray | None = None, calib_joint_cov: np.ndarray | None = None,
                  timeline: Timeline | None = None, timing_s: dict[str, float] | None = None,
                  info: dict[str, Any] | None = None, alignment_method: str = "", config: dict[str, Any] | None = None,
+                 dvl_pings: np.ndarray | None = None,
                  accel_bias: np.ndarray | None = None, gyro_bias: np.ndarray | None = None,
                  bias_cov: np.ndarray | None = None, scale: float | None = None, scale_sigma: float | None = None,
                  b_R_d: np.ndarray | None = None, b_R_d_cov: np.ndarray | None = None, time_offset_s: float = 0.0,
@@ -129,6 +133,7 @@ class NavResult(CalibrationUnits):
         self.info = {} if info is None else info
         self.alignment_method = alignment_method
         self.config = {} if config is None else config
+        self.dvl_pings = None if dvl_pings is None else np.asarray(dvl_pings, dtype=np.int64)
         self.calibration = dict(calibration or {})
         # the keywords of old: the states they give (a time offset only when estimated, or not zero)
         if bias_cov is not None:

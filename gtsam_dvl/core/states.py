@@ -29,7 +29,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig, ObservabilityConfig, RelinearizationThresholds
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X, key_dim
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
@@ -104,6 +104,9 @@ class SharedState:
     ekf: bool = True  # the EKF carries it in its error state
     # the online estimator's iSAM2 relinearises it past these (per tangent component); None: not estimated online
     relinearization: Callable[[RelinearizationThresholds], np.ndarray] | None = None
+    # a variable of the DVL factor (factors/dvl.py): "ping" of every one, "motion" of a ping seen through the IMU
+    # motion from a keyframe (the IMU biases), "" of none
+    dvl: Literal["ping", "motion", ""] = ""
 
     def key_at(self, i: int, config: EstimatorConfig) -> int:
         """Its variable's key at state i (the shared key unless per_state)."""
@@ -158,34 +161,36 @@ STATES: tuple[SharedState, ...] = (
         target=lambda o: o.gyro_bias_deg_per_h, vehicle=False,
         components=(("x", "about body x (forward)"), ("y", "about body y (left)"),
                     ("z", "about body z (up, vertical)")),
-        offset=3, per_state=_random_walk, in_block=True, relinearization=lambda th: np.asarray(th.bias[3:])),
+        offset=3, per_state=_random_walk, in_block=True, relinearization=lambda th: np.asarray(th.bias[3:]),
+        dvl="motion"),
     SharedState(
         "accel_bias", "accelerometer bias", B(0), "bias", 3, "m/s^2", "micro-g", 1.0 / UG,
         prior=lambda c, m: _bias_prior(c.imu.accel_bias_sigma_ug, UG),
         target=lambda o: o.accel_bias_ug, vehicle=False, components=_BODY_AXES, per_state=_random_walk,
-        in_block=True, relinearization=lambda th: np.asarray(th.bias[:3])),
+        in_block=True, relinearization=lambda th: np.asarray(th.bias[:3]), dvl="motion"),
     SharedState(
         "scale", "DVL scale factor", K_SCALE, "vector", 1, "1", "ppm", 1e6,
         prior=lambda c, m: Prior(np.array([c.priors.scale_initial]), np.array([c.priors.scale_sigma])),
         target=lambda o: o.scale_ppm, vehicle=True, components=(("", ""),), in_block=True,
-        relinearization=lambda th: np.array([th.scale])),
+        relinearization=lambda th: np.array([th.scale]), dvl="ping"),
     SharedState(
         "misalignment", "DVL misalignment", C_MISALIGN, "rot3", 3, "rad", "deg", float(np.degrees(1.0)),
         prior=lambda c, m: _misalignment_prior(np.asarray(c.priors.misalignment_sigma_deg, dtype=float), m),
         target=lambda o: o.misalignment_deg, vehicle=True,
         components=(("roll", "about body x, the thrust axis (roll)"), ("pitch", "about body y (pitch)"),
                     ("yaw", "about body z (yaw)")), in_block=True,
-        relinearization=lambda th: np.full(3, th.misalignment_rad)),
+        relinearization=lambda th: np.full(3, th.misalignment_rad), dvl="ping"),
     SharedState(
         "time_offset", "DVL-IMU time offset", T_OFFSET, "vector", 1, "s", "ms", 1e3,
         prior=lambda c, m: Prior(np.array([c.dvl.time_offset_prior_s]), np.array([c.dvl.time_offset_sigma_s])),
         target=None, vehicle=True, components=(("", ""),), enabled=lambda c: c.dvl.estimate_time_offset,
-        relinearization=lambda th: np.array([TIME_OFFSET_THRESHOLD_S])),
+        relinearization=lambda th: np.array([TIME_OFFSET_THRESHOLD_S]), dvl="ping"),
     SharedState(
         "lever_arm", "DVL lever arm", L_LEVER, "vector", 3, "m", "m", 1.0,
         # around the /tf_static value
         prior=lambda c, m: Prior(np.asarray(m.b_l, dtype=float), np.array([c.dvl.lever_arm_sigma_m] * 3)),
-        target=None, vehicle=True, components=_BODY_AXES, enabled=lambda c: c.dvl.estimate_lever_arm, ekf=False),
+        target=None, vehicle=True, components=_BODY_AXES, enabled=lambda c: c.dvl.estimate_lever_arm, ekf=False,
+        dvl="ping"),
 )
 BY_NAME: dict[str, SharedState] = {s.name: s for s in STATES}
 
@@ -198,6 +203,11 @@ def required_states() -> list[SharedState]:
 def enabled_states(config: EstimatorConfig) -> list[SharedState]:
     """The states the configuration estimates, in registry order."""
     return [s for s in STATES if s.enabled(config)]
+
+
+def enabled(config: EstimatorConfig, name: str) -> bool:
+    """Whether the configuration estimates the state `name`."""
+    return BY_NAME[name].enabled(config)
 
 
 def block_states() -> list[SharedState]:
@@ -221,6 +231,15 @@ def shared_keys(config: EstimatorConfig, i: int = 0, per_state: bool = True, blo
     block=True: only the calibration block's (NavResult.calib_joint_cov)."""
     return _unique(s.key_at(i, config) for s in enabled_states(config)
                    if (per_state or not s.per_state(config)) and (s.in_block or not block))
+
+
+def dvl_factor_keys(config: EstimatorConfig, i: int, motion: bool = False) -> list[int]:
+    """The keys of a DVL factor on state i, in the order of its variables (factors/dvl.py DvlOptions.key_names):
+    X(i), V(i), then the keys of the enabled states it reads (SharedState.dvl) in registry order: the IMU bias with
+    motion (a ping seen through the IMU motion from state i), the scale, the misalignment, the time offset and the
+    lever arm when estimated."""
+    wanted = ("ping", "motion") if motion else ("ping",)
+    return [X(i), V(i)] + _unique(s.key_at(i, config) for s in enabled_states(config) if s.dvl in wanted)
 
 
 def columns(keys: Iterable[int], config: EstimatorConfig, start: int = 0) -> dict[str, slice]:

@@ -45,7 +45,7 @@ import numpy as np
 from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig, ImuConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.rotations import quat_xyzw_to_matrix, rpy_deg_to_matrix, rpy_to_matrix, so3_log
+from gtsam_dvl.core.rotations import quat_xyzw_to_matrix, rpy_deg_to_matrix, rpy_to_matrix, so3_exp, so3_log
 from gtsam_dvl.core.types import AttitudeData, DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
@@ -88,7 +88,7 @@ class Alignment:
         R = body_rotation(imu, a, b)
         if t < self.t_ref:
             R = R.T
-        E = _exp(-frame.n_omega_ie * (t - self.t_ref))
+        E = so3_exp(-frame.n_omega_ie * (t - self.t_ref))
         return replace(self, n_R_b=E @ self.n_R_b @ R, t_ref=float(t))
 
 
@@ -184,19 +184,6 @@ def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame) ->
     return rpy_to_matrix(float(roll), float(pitch), float(yaw))
 
 
-def _exp(phi: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of rotation vectors phi (..., 3), rad (Rodrigues)."""
-    phi = np.asarray(phi, dtype=float)
-    th = np.linalg.norm(phi, axis=-1)[..., None, None]
-    K = np.zeros(phi.shape[:-1] + (3, 3))
-    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -phi[..., 2], phi[..., 1], -phi[..., 0]
-    K = K - np.swapaxes(K, -1, -2)
-    small = th < 1e-8
-    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(th) / np.where(small, 1.0, th))
-    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(th)) / np.where(small, 1.0, th) ** 2)
-    return np.eye(3) + a * K + b * (K @ K)
-
-
 def _pieces(imu: ImuData, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
     """IMU samples covering (a, b] and the seconds of each inside it (sample k covers (t[k-1], t[k]])."""
     from gtsam_dvl.estimators.selection import imu_pieces, sample_starts
@@ -208,7 +195,7 @@ def body_rotation(imu: ImuData, a: float, b: float) -> np.ndarray:
     """b(a)_R_b(b): the body's rotation from time a to b >= a (s) relative to inertial space, from the gyros."""
     idx, dt = _pieces(imu, a, b)
     R = np.eye(3)
-    for D in _exp(imu.b_omega[idx] * dt[:, None]):
+    for D in so3_exp(imu.b_omega[idx] * dt[:, None]):
         R = R @ D
     return R
 
@@ -249,13 +236,13 @@ def _body_integrals(imu: ImuData, sel: np.ndarray, tk: np.ndarray, j: np.ndarray
     (zero, or a bias to see what it does)."""
     dt = np.diff(tk)
     w, f = imu.b_omega[sel] + d_omega, imu.b_f[sel] + d_f
-    D, half = _exp(w * dt[:, None]), _exp(w * (0.5 * dt)[:, None])
+    D, half = so3_exp(w * dt[:, None]), so3_exp(w * (0.5 * dt)[:, None])
     R = np.empty((len(tk), 3, 3))
     R[0] = np.eye(3)
     for i in range(len(sel)):
         R[i + 1] = R[i] @ D[i]
     V = np.vstack([np.zeros(3), np.cumsum(np.einsum("kij,kjl,kl->ki", R[:-1], half, f) * dt[:, None], axis=0)])
-    Rp = R[j - 1] @ _exp(w[j - 1] * s[:, None])
+    Rp = R[j - 1] @ so3_exp(w[j - 1] * s[:, None])
     Vp = V[j - 1] + (V[j] - V[j - 1]) * (s / dt[j - 1])[:, None]
     return R, Rp, Vp
 
@@ -292,7 +279,7 @@ def in_motion_alignment(imu: ImuData, dvl: DvlData, frame: LocalFrame, mounting:
     P = np.vstack([np.zeros(3), np.cumsum(0.5 * (q_grid[1:] + q_grid[:-1]) * np.diff(tk)[:, None], axis=0)])
     Pp = np.column_stack([np.interp(tp, tk, P[:, a]) for a in range(3)])
     w_ie = frame.n_omega_ie
-    n0_R_n = _exp(w_ie[None, :] * (tk - t_ref)[:, None])
+    n0_R_n = so3_exp(w_ie[None, :] * (tk - t_ref)[:, None])
     step = max(1, len(tk) // 2000)  # gravity along the track, on a coarser grid (it changes by 1e-4 per km)
     coarse = np.r_[np.arange(0, len(tk), step), len(tk) - 1]
     C = np.eye(3)

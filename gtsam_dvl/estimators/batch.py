@@ -8,10 +8,10 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import T_OFFSET, V, X
+from gtsam_dvl.core.keys import V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import read_estimates, shared_keys
+from gtsam_dvl.core.states import enabled, read_estimates, read_values, shared_keys
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
@@ -89,7 +89,7 @@ def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph
     recentred one), the solution, the last pass's report (its Bayes net serves the marginals) and each pass's
     iterations and seconds."""
     s = builder.config.solver
-    offset = builder.config.dvl.estimate_time_offset
+    offset = enabled(builder.config, "time_offset")
     kw = dict(max_iterations=s.max_iterations, relative_tol=s.relative_error_tol,
               absolute_tol=s.absolute_error_tol, before_iteration=builder.refresh_gravity)
     first = {**kw, "absolute_tol": max(s.absolute_error_tol, FIRST_PASS_TOL)} if offset else kw
@@ -98,7 +98,7 @@ def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph
     if offset:
         # second pass: the offset's velocity rates averaged over [t, t + dt_hat] (a secant, not the tangent at
         # t: at dt_d = 1.5 s on paper-3d's turns the tangent biases dt_d by 1.6 sigma and the scale by 2 sigma)
-        graph = builder.recentre_time_offset(graph, float(values.atVector(T_OFFSET)[0]))
+        graph = builder.recentre_time_offset(graph, float(read_values(values, builder.config)["time_offset"][0]))
         values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
         passes.append({"iterations": report.iterations, **report.timing_s})
     return graph, values, report, passes
@@ -141,4 +141,5 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
               "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
         config=cfg.to_dict(),
         alignment_method=builder.alignment.method,
+        dvl_pings=builder.usable,
     )

@@ -38,7 +38,8 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, V, X
+from gtsam_dvl.core.keys import key_dim
+from gtsam_dvl.core.states import dvl_factor_keys, enabled, read_values
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
 from gtsam_dvl.estimators.factor_maker import FactorMaker
@@ -109,12 +110,12 @@ class BulkDvl:
     pings: BulkPings
     whiten: np.ndarray  # (N, m, m) W with W^T W = the row's inverse covariance (lower triangular)
     n_states: int
+    config: EstimatorConfig  # its enabled shared states are the factors' variables (core/states.py)
     bias_keys: list[int]  # per state
     robust: str  # "huber", "cauchy" or "none"
     robust_k: float
     offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
     b_l: np.ndarray  # the known lever arm (m, base_link); with lever, L_LEVER's value is used
-    lever: bool = False  # the lever arm is the variable L_LEVER
     t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the rows' ping stamps (s), in their order
     _served: _Served = field(init=False, default_factory=_Served)
     _bounds: np.ndarray = field(init=False)  # state s's rows are _bounds[s]:_bounds[s + 1]
@@ -131,6 +132,11 @@ class BulkDvl:
     def offset(self) -> bool:
         return self.offset_n_g is not None
 
+    @property
+    def lever(self) -> bool:
+        """The lever arm is the variable L_LEVER."""
+        return enabled(self.config, "lever_arm")
+
     def __len__(self) -> int:
         return len(self.pings)
 
@@ -144,10 +150,11 @@ class BulkDvl:
         """Each row's state: n_R_i (N, 3, 3), n_p_i, n_v_i, b_a, b_g (N, 3); k, b_R_d, dt_d, b_l."""
         s = self.pings.state
         bias = st.bias[s] if self._bias_random_walk else np.broadcast_to(st.bias[0], (len(s), 6))
-        k = float(values.atVector(K_SCALE)[0])
-        b_R_d = values.atRot3(C_MISALIGN).matrix()
-        dt_d = float(values.atVector(T_OFFSET)[0]) if self.offset else None
-        b_l = np.asarray(values.atVector(L_LEVER), dtype=float) if self.lever else self.b_l
+        shared = read_values(values, self.config)
+        k = float(shared["scale"][0])
+        b_R_d = shared["misalignment"]
+        dt_d = float(shared["time_offset"][0]) if "time_offset" in shared else None
+        b_l = shared.get("lever_arm", self.b_l)
         return st.n_R[s], st.n_p[s], st.n_v[s], bias[:, :3], bias[:, 3:], k, b_R_d, dt_d, b_l
 
     def _evaluate(self, values: gtsam.Values, jacobians: bool, out: list[np.ndarray] | None = None,
@@ -197,8 +204,7 @@ class BulkDvl:
         for s in range(self.n_states):
             lo, hi = int(self._bounds[s]), int(self._bounds[s + 1])
             if hi > lo:
-                keys = [X(s), V(s), self.bias_keys[s], K_SCALE, C_MISALIGN] + ([T_OFFSET] if self.offset else []) \
-                    + ([L_LEVER] if self.lever else [])
+                keys = dvl_factor_keys(self.config, s, motion=True)
                 graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(self.pings.dim * (hi - lo)), keys,
                                              _Carrier(self._served, lo, hi)))
         return graph
@@ -207,7 +213,7 @@ class BulkDvl:
         """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
         (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
         n = len(self)
-        dims = (6, 3, 6, 1, 3) + ((1,) if self.offset else ()) + ((3,) if self.lever else ())
+        dims = [key_dim(k) for k in dvl_factor_keys(self.config, 0, motion=True)]
         served = self._served
         if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # (released after each linearisation)
             served.blocks = [np.empty((n, self.pings.dim, d)) for d in dims]
@@ -299,7 +305,7 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
     and gravity the per-factor path gives them (LogGraph.dvl_factors, between_factors; FactorMaker.dvl_factors_for,
     dvl_keyframe_factors_for)."""
     maker, cfg, dvl = builder.maker, builder.config, builder.log.dvl
-    offset = cfg.dvl.estimate_time_offset
+    offset = enabled(cfg, "time_offset")
     k0 = cfg.priors.scale_initial
     b_R_d0 = maker.mounting.b_R_d0
     n_states = len(builder.epochs)
@@ -369,9 +375,8 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
                       offset_b_a=None if rate is None else rate[0][rows],
                       offset_G=None if rate is None else rate[1][rows])
     robust = cfg.dvl.robust if cfg.dvl.robust in ("huber", "cauchy") else "none"
-    return BulkDvl(pings=pings, whiten=whiten, n_states=n_states,
+    return BulkDvl(pings=pings, whiten=whiten, n_states=n_states, config=cfg,
                    bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
                    robust_k=float(cfg.dvl.robust_threshold()),
                    offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
-                   b_l=np.asarray(maker.mounting.b_l, dtype=float), lever=cfg.dvl.estimate_lever_arm,
-                   t_ping=t_rows[rows])
+                   b_l=np.asarray(maker.mounting.b_l, dtype=float), t_ping=t_rows[rows])

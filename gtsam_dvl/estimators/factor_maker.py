@@ -28,7 +28,8 @@ import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X
+from gtsam_dvl.core.keys import B, V, X
+from gtsam_dvl.core.states import dvl_factor_keys, enabled
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.states import prior_factors as shared_prior_factors
 from gtsam_dvl.core.types import Mounting
@@ -288,11 +289,9 @@ class FactorMaker:
         extra = keyframe_ping_covariance(pim_cov, motion.dR, b_R_d0.T, b_v, k0)
         return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input, motion, extra)
 
-    def dvl_keys(self, i: int, options: DvlOptions) -> list[int]:
-        """The keys of a DVL factor of state i with these options (DvlOptions.key_names)."""
-        at = {"pose": X(i), "vel": V(i), "bias": self.bias_key(i), "scale": K_SCALE, "b_R_d": C_MISALIGN,
-              "offset": T_OFFSET, "lever": L_LEVER}
-        return [at[name] for name in options.key_names()]
+    def dvl_keys(self, i: int, motion: bool = False) -> list[int]:
+        """The keys of a DVL factor of state i (states.dvl_factor_keys; motion: a ping between keyframes)."""
+        return dvl_factor_keys(self.config, i, motion)
 
     def _dvl_factors(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray, beams: Beams | None,
                      rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None, motion: PingMotion | None = None,
@@ -300,12 +299,15 @@ class FactorMaker:
         """dvl_factors_for, or with motion and extra (the preintegration's noise in the ping, 3x3 m^2/s^2)
         dvl_keyframe_factors_for."""
         cfg = self.config.dvl
-        b_l, lever = self.mounting.b_l, cfg.estimate_lever_arm
-        if cfg.estimate_time_offset and rate_input is not None:
+        b_l, lever = self.mounting.b_l, enabled(self.config, "lever_arm")
+        keys = self.dvl_keys(i, motion is not None)
+        if enabled(self.config, "time_offset"):
+            if rate_input is None:
+                raise ValueError("a DVL factor with the time offset needs its IMU constants (rate_input)")
             b_a, b_omega_mean, G = rate_input
             o = DvlOptions(b_omega_mean, b_l, offset=OffsetInput(b_a, self.offset_gravity(), G), motion=motion,
                            lever_variable=lever)
-            return [make_dvl_factor(self.dvl_noise(cov, extra), self.dvl_keys(i, o), d_y, o)]
+            return [make_dvl_factor(self.dvl_noise(cov, extra), keys, d_y, o)]
         if cfg.use_beams and beams is not None:
             d_u, v, valid = beams
             out: list[gtsam.NonlinearFactor] = []
@@ -313,10 +315,10 @@ class FactorMaker:
                 o = DvlOptions(b_omega, b_l, d_u[b], motion=motion, lever_variable=lever)
                 noise = self.beam_noise() if extra is None else self._robust(gtsam.noiseModel.Isotropic.Sigma(
                     1, float(np.sqrt(cfg.beam_noise_m_s**2 + d_u[b] @ extra @ d_u[b]))))
-                out.append(make_dvl_factor(noise, self.dvl_keys(i, o), float(v[b]), o))
+                out.append(make_dvl_factor(noise, keys, float(v[b]), o))
             return out
         o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever)
-        return [make_dvl_factor(self.dvl_noise(cov, extra), self.dvl_keys(i, o), d_y, o)]
+        return [make_dvl_factor(self.dvl_noise(cov, extra), keys, d_y, o)]
 
     def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive

@@ -23,8 +23,8 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import B, V, X
 from gtsam_dvl.core.progress import ProgressFn
+from gtsam_dvl.core.states import enabled, shared_keys
 from gtsam_dvl.core.states import initial_values as initial_shared_values
-from gtsam_dvl.core.states import shared_keys
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
@@ -44,7 +44,7 @@ from gtsam_dvl.estimators.gaps import (
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
 from gtsam_dvl.estimators.keyframes import PimSnapshot, SnapshotArrays, interval_with_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.selection import covering_sample, keyframe_mask, select_epochs
+from gtsam_dvl.estimators.selection import KEYFRAME, THINNED, KeyframeRule, covering_sample, usable_pings
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
 from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians, gravity_maps
@@ -100,6 +100,7 @@ class LogGraph:
                                                                                      repr=False)
     # the IMU motion to each ping between keyframes (BetweenPing.snap: its row); None once build_bulk let it go
     snapshots: SnapshotArrays | None = field(default=None, init=False, repr=False)
+    usable: np.ndarray = field(init=False, repr=False)  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -108,7 +109,7 @@ class LogGraph:
         alignment = align(log.imu, log.dvl, frame, cfg.alignment, attitude=log.attitude, mounting=log.mounting,
                           imu_cfg=cfg.imu)
         self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
-        if cfg.dvl.estimate_time_offset and cfg.dvl.use_beams:
+        if enabled(cfg, "time_offset") and cfg.dvl.use_beams:
             raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
         if len(log.imu) < 2:
             raise GtsamDvlError(f"{log.source or 'log'}: fewer than two IMU samples")
@@ -170,8 +171,14 @@ class LogGraph:
         if spacing > cfg.solver.max_state_spacing_s:
             raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
                                 f"{spacing:g} s: states without a ping would take the places of the keyframes")
-        all_idx = select_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, self.counters)
-        key = keyframe_mask(dvl.t[all_idx], spacing)
+        self.usable = usable_pings(dvl, imu, cfg.dvl, self.counters)
+        interval = cfg.solver.keyframe_interval_s
+        decision = KeyframeRule(interval, spacing).decide_all(dvl.t[self.usable])
+        if interval > 0:
+            self.counters["dvl_not_keyframe"] = self.counters.get("dvl_not_keyframe", 0) + int(
+                (decision == THINNED).sum())
+        all_idx = self.usable[decision != THINNED]
+        key = decision[decision != THINNED] == KEYFRAME
         key[-1:] = True  # the last ping too: every other ping lies between two states (and the gaps they cross)
         idx = all_idx[key]
         times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)
@@ -189,7 +196,7 @@ class LogGraph:
             gyro_p = covering_sample(imu.t, dvl.t[rest])
             for j, i, g in zip(rest.tolist(), state.tolist(), gyro_p.tolist(), strict=True):
                 epochs[i].between.append(BetweenPing(float(dvl.t[j]), int(j), self.maker.body_rate(imu.b_omega[g])))
-        if cfg.dvl.estimate_time_offset:
+        if enabled(cfg, "time_offset"):
             self.set_time_offset_window(cfg.dvl.time_offset_prior_s, epochs)
         return epochs
 

@@ -29,6 +29,7 @@ two epochs takes each sample's overlap with it, so a sample straddling a ping is
 
 from __future__ import annotations
 
+from array import array
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -478,6 +479,7 @@ class Ping:
     valid: bool
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     key: bool = True
+    index: int = -1  # its place among the pings pushed (OnlineEstimator.push_dvl's calls, from 0)
 
 
 class EpochScheduler:
@@ -490,11 +492,14 @@ class EpochScheduler:
     by reason, as the whole-log functions count them."""
 
     def __init__(self, cfg: DvlConfig, keyframe_interval_s: float, keyframe_spacing_s: float,
-                 counters: dict[str, int]) -> None:
+                 counters: dict[str, int], keep_usable: bool = True) -> None:
         self.cfg, self.counters = cfg, counters
         self.rule = KeyframeRule(keyframe_interval_s, keyframe_spacing_s)
         self.screen = PingScreen(cfg)
         self._unscreened: deque[Ping] = deque()  # usable pings waiting for the IMU to reach them
+        # the indices (Ping.index) of the pings the screen passed, with keep_usable (8 bytes a ping)
+        self.usable: array[int] = array("q")
+        self._keep_usable = keep_usable
 
     def push_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """IMU samples in time order (base_link: gyro w, rad/s, specific force f, m/s^2)."""
@@ -527,6 +532,8 @@ class EpochScheduler:
             if code != USABLE:
                 count_reasons(np.array([code]), self.counters, keep_zero=False)
                 continue
+            if self._keep_usable:
+                self.usable.append(p.index)
             decision = self.rule.decide(p.t)
             if decision == THINNED:
                 self.counters["dvl_not_keyframe"] = self.counters.get("dvl_not_keyframe", 0) + 1

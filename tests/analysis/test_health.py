@@ -149,3 +149,28 @@ def test_losses_and_rejections(logs: dict[str, LogData], batch_2d: NavResult) ->
         health = assess_health(dataclasses.replace(batch_2d, info=info), log)
         assert health.status == status
         assert any(f"{rejected + 1} of {len(log.dvl)} DVL pings rejected" in x for x in health.notes + health.warnings)
+
+
+def test_residuals_use_the_pings_the_estimator_used(logs: dict[str, LogData], batch_2d: NavResult) -> None:
+    """Each result records the usable pings its estimator used (NavResult.dvl_pings: the selection's, before keyframe
+    thinning); a result without them (a file written without them) has them selected again, counted and said."""
+    from gtsam_dvl.estimators.selection import usable_pings
+
+    log = logs["paper-2d"]
+    cfg = batch_2d.estimator_config
+    assert cfg is not None and batch_2d.dvl_pings is not None
+    expected = usable_pings(log.dvl, log.imu, cfg.dvl, {})
+    np.testing.assert_array_equal(batch_2d.dvl_pings, expected)
+    ekf = run_ekf(log)
+    assert ekf.dvl_pings is not None
+    np.testing.assert_array_equal(ekf.dvl_pings, expected)
+    own = dvl_residuals(batch_2d, log, cfg.dvl)
+    bare = copy.copy(batch_2d)
+    bare.dvl_pings = None
+    again = dvl_residuals(bare, log, cfg.dvl)
+    assert own.selected_again == 0 and again.selected_again == len(expected)
+    np.testing.assert_array_equal(again.chi2, own.chi2)
+    health = assess_health(bare, log)
+    assert health.figures["dvl_residuals"]["pings_selected_again"] == len(expected)
+    assert any("selected again" in n for n in health.notes)
+    assert "pings_selected_again" not in assess_health(batch_2d, log).figures["dvl_residuals"]

@@ -87,6 +87,15 @@ def test_fixed_lag_agrees_with_batch(name: str, seed: int) -> None:
 
 
 @pytest.mark.slow
+def test_usable_pings_are_the_batch_smoothers() -> None:
+    """The usable pings the online estimator records (NavResult.dvl_pings, numbered as pushed: the log's by
+    feed_log) are the batch smoother's, ping for ping."""
+    online, batch = _online("paper-2d", 1), _batch("paper-2d", 1)
+    assert online.dvl_pings is not None and batch.dvl_pings is not None and len(batch.dvl_pings) > 1000
+    np.testing.assert_array_equal(online.dvl_pings, batch.dvl_pings)
+
+
+@pytest.mark.slow
 def test_full_history_agrees_with_batch() -> None:
     """paper-3d cut at 1000 s (static, Type I, descent, the first turns): within 0.1 batch sigma (measured:
     0.02), same sigmas within 1 %."""

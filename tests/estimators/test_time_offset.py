@@ -124,6 +124,8 @@ def test_offset_reported_in_summary_and_result_log(tmp_path) -> None:  # type: i
     path = write_result_log(tmp_path / "r.mcap", r, log, s)
     back = read_result(path).result
     assert back.time_offset_s == r.time_offset_s and back.time_offset_sigma_s == r.time_offset_sigma_s
+    assert back.dvl_pings is not None and r.dvl_pings is not None  # the usable pings too (health reads them)
+    np.testing.assert_array_equal(back.dvl_pings, r.dvl_pings)
     assert TOPICS["time_offset"] == "/gtsam_dvl/dvl_time_offset"
     # not estimated: no offset in the summary
     assert "dvl_time_offset_s" not in summary(solve(0.0, 0.02, False), short_run(0.0))

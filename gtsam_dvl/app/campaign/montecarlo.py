@@ -28,18 +28,18 @@ from scipy.stats import chi2
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_log
+from gtsam_dvl.core.states import BY_NAME
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.run import run_trajectory_estimator
 
-# the states of a campaign, in the order of their vectors, with units
+# the states of a campaign, in the order of their vectors, with units: the registry's (core/states.py) components
+# in their display units, then the final position
 STATES: list[tuple[str, str]] = [
-    ("scale", "ppm"), ("misalignment_roll", "deg"), ("misalignment_pitch", "deg"), ("misalignment_yaw", "deg"),
-    ("accel_bias_x", "micro-g"), ("accel_bias_y", "micro-g"), ("accel_bias_z", "micro-g"),
-    ("gyro_bias_x", "deg/h"), ("gyro_bias_y", "deg/h"), ("gyro_bias_z", "deg/h"),
-    ("final_position_east", "m"), ("final_position_north", "m"), ("final_position_up", "m"),
-]
-TIME_OFFSET_STATE = ("time_offset", "s")
+    (name, BY_NAME[state].display_unit) for state in ("scale", "misalignment", "accel_bias", "gyro_bias")
+    for name in BY_NAME[state].component_names()
+] + [("final_position_east", "m"), ("final_position_north", "m"), ("final_position_up", "m")]
+TIME_OFFSET_STATE = (BY_NAME["time_offset"].name, BY_NAME["time_offset"].unit)  # in s (the registry shows ms)
 ESTIMATORS = ("batch", "online", "ekf")
 BLOCK_DOF = 10  # [accel bias, gyro bias, scale, misalignment]: the joint covariance every estimator reports
 NEES_EVERY_S = 60.0  # the filters' NEES over time, sampled this often

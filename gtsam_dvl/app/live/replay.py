@@ -72,6 +72,7 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
     (MessageDropped) go to the log channel, stamped at the ping of their group (after finish(): at the last
     stamp). estimator None: OnlineEstimator.for_log(log)."""
     from gtsam_dvl.estimators.online import MessageDropped, OnlineEstimator
+    from gtsam_dvl.estimators.online.feed import push_depth_sample
 
     if not (speed > 0):
         raise GtsamDvlError(f"replay speed must be > 0 (math.inf: as fast as possible), got {speed}")
@@ -118,12 +119,8 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
     def push_depth(k: int) -> None:
         assert depth is not None
         pace(float(depth.t[k]))
+        push_depth_sample(est, depth, k)
         pa = None if depth.pressure_pa is None else float(depth.pressure_pa[k])
-        if pa is not None:
-            var = math.nan if depth.pressure_variance_pa2 is None else float(depth.pressure_variance_pa2[k])
-            est.push_depth(float(depth.t[k]), pressure_pa=pa, pressure_variance_pa2=var)
-        else:
-            est.push_depth(float(depth.t[k]), float(depth.depth_m[k]), float(depth.variance_m2[k]))
         view.publish_depth(float(depth.t[k]), float(depth.depth_m[k]), pa)
 
     def push_dvl(j: int) -> None:

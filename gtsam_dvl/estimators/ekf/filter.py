@@ -62,7 +62,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.rotations import matrix_to_rpy, skew, so3_exp
-from gtsam_dvl.core.states import BY_NAME, Estimate, block_states, ekf_layout
+from gtsam_dvl.core.states import BY_NAME, Estimate, block_states, ekf_layout, enabled
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import align, map_frame_of
@@ -163,7 +163,7 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
     k0 = pri.scale_initial
     d_y = log.dvl.d_v[ping]
     n_v = n_R_b @ (b_R_d0 @ d_y) / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
-    offset = config.dvl.estimate_time_offset
+    offset = enabled(config, "time_offset")
     layout = ekf_layout(config, N_NAV)
     n = N_NAV + sum(sl.stop - sl.start for sl in layout.values())
     P = np.zeros((n, n))
@@ -378,10 +378,10 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
         config = config.model_copy(update={"ekf": ekf})
     ekf_cfg = config.validate().ekf
-    offset = config.dvl.estimate_time_offset
+    offset = enabled(config, "time_offset")
     if offset and config.dvl.use_beams:
         raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
-    if config.dvl.estimate_lever_arm:
+    if enabled(config, "lever_arm"):
         raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not the EKF")
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
@@ -495,6 +495,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     if depth is not None:
         counters.update(depth.counters)
     result = _to_result(hist, log, config)
+    result.dvl_pings = pings
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
     result.info = {"alignment": alignment.info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),

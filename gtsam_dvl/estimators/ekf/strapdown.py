@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtsam_dvl.core.rotations import skew
+from gtsam_dvl.core.rotations import skew, so3_exp
 
 N_ERR = 19
 PHI, VEL, POS, BG, BA, SCALE, MIS = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15), 15, slice(
@@ -123,16 +123,6 @@ def small_rotation(phi: np.ndarray) -> np.ndarray:
     return np.eye(3) + S + 0.5 * S @ S
 
 
-def earth_rotation(n_omega_ie: np.ndarray, tau: np.ndarray) -> np.ndarray:
-    """Exp(-w_ie tau) for each tau (m,) -> (m, 3, 3): the map frame's turn relative to inertial space."""
-    rate = float(np.linalg.norm(n_omega_ie))
-    if rate == 0.0:
-        return np.broadcast_to(np.eye(3), (len(tau), 3, 3))
-    K = skew(n_omega_ie / rate)
-    a = rate * tau[:, None, None]
-    return np.eye(3) - np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)
-
-
 def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt: np.ndarray,
                        n_omega_ie: np.ndarray, n_g: np.ndarray, G: np.ndarray) -> IntervalResult:
     """Integrate bias-corrected IMU pieces (b_omega, b_f (m, 3); durations dt (m,)) from `state`.
@@ -147,7 +137,7 @@ def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt
     tau = np.concatenate([[0.0], np.cumsum(dt)])  # piece boundaries relative to the interval start
     R0B = state.n_R_b @ B  # (m + 1, 3, 3) = R0 B_j
     W = skew(n_omega_ie)
-    R = earth_rotation(n_omega_ie, tau) @ R0B  # Exp(-w tau) R0 B_j
+    R = so3_exp(-np.outer(tau, n_omega_ie)) @ R0B  # Exp(-w tau) R0 B_j
     dtheta_nb = dtheta - np.einsum("jba,b->ja", R[:-1], n_omega_ie) * dt[:, None]  # turn relative to map
     dv_start = dv + 0.5 * _cross_rows(dtheta_nb, dv)  # delta-v in the body at the sample's start
     dv_n = np.einsum("jab,jb->ja", R[:-1], dv_start)  # specific-force velocity increments in map

@@ -15,17 +15,16 @@ the batch smoother's: docs/results.md, "Online estimator").
 
 from __future__ import annotations
 
-from typing import Any
-
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
+from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
+from gtsam_dvl.core.states import dvl_factor_keys
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.keyframes import PimSnapshot
 from gtsam_dvl.estimators.online.keyframes import considered_keyframe_factor
 from gtsam_dvl.estimators.selection import Ping
-from gtsam_dvl.factors import PingMotion, dvl_beam_error, dvl_velocity_error, dvl_velocity_offset_error
+from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor
 
 RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
@@ -33,42 +32,27 @@ RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_ra
 def considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega: np.ndarray, b_l: np.ndarray,
                                   d_y: np.ndarray | None = None,
                                   beam: tuple[np.ndarray, float] | None = None,
-                                  offset: tuple[RateInput, np.ndarray] | None = None) -> gtsam.CustomFactor:
+                                  offset: tuple[RateInput, np.ndarray] | None = None,
+                                  config: EstimatorConfig | None = None) -> gtsam.CustomFactor:
     """The DVL factor of factors/ on [X_i, V_i, K, C] for a ping too slow to inform the calibration (module
     doc): same error, same Jacobians for pose and velocity, none for scale and misalignment, which are
     "considered" at their current estimate (the velocity's information scales with it). d_y: the 3-D velocity
     (m/s, dvl_link); beam: (d_u, y_j) for one beam; b_omega: the body rate at the ping (rad/s); b_l: the DVL's
     lever arm (m, base_link). offset = (rate_input, n_g): the time-offset model of factors/dvl.py
     (make_dvl_factor with an OffsetInput) on [X_i, V_i, K, C, T_OFFSET] (with d_y), its T_OFFSET Jacobian kept (it is
-    the IMU's velocity rate, not the velocity's noise)."""
+    the IMU's velocity rate, not the velocity's noise). The keys are states.dvl_factor_keys of config (None: the
+    defaults, with the time offset estimated when offset is given)."""
     if (beam is None) == (d_y is None) or (offset is not None and d_y is None):
         raise ValueError("a considered-calibration DVL factor needs either d_y or beam (d_y with offset)")
-
-    def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
-        pose, n_v = values.atPose3(X(i)), values.atVector(V(i))
-        k, b_R_d = values.atVector(K_SCALE), values.atRot3(C_MISALIGN)
-        slots: list[Any] | None = None if H is None else [None] * (4 if offset is None else 5)
-        if offset is not None:
-            assert d_y is not None  # checked above; tells mypy
-            (b_a, b_omega_mean, G), n_g = offset
-            e = dvl_velocity_offset_error(pose, n_v, k, b_R_d, values.atVector(T_OFFSET), d_y, b_omega_mean, b_l,
-                                          b_a, n_g, G, slots)
-            if H is not None and slots is not None:
-                H[0], H[1], H[4] = slots[0], slots[1], slots[4]
-                H[2], H[3] = np.zeros((3, 1)), np.zeros((3, 3))
-            return e
-        if beam is not None:
-            e = dvl_beam_error(pose, n_v, k, b_R_d, beam[0], beam[1], b_omega, b_l, slots)
-        else:
-            assert d_y is not None  # checked above; tells mypy
-            e = dvl_velocity_error(pose, n_v, k, b_R_d, d_y, b_omega, b_l, slots)
-        if H is not None and slots is not None:
-            H[0], H[1] = slots[0], slots[1]
-            H[2], H[3] = np.zeros((len(e), 1)), np.zeros((len(e), 3))
-        return e
-
-    keys = [X(i), V(i), K_SCALE, C_MISALIGN] + ([T_OFFSET] if offset is not None else [])
-    return gtsam.CustomFactor(noise, keys, error_func)
+    if config is None:
+        config = EstimatorConfig(dvl=DvlConfig(estimate_time_offset=offset is not None))
+    offset_input = None
+    if offset is not None:
+        (b_a, b_omega, G), n_g = offset  # the model's body rate is the rate input's mean over its window
+        offset_input = OffsetInput(b_a, n_g, G)
+    y: np.ndarray | float = beam[1] if beam is not None else np.asarray(d_y)
+    options = DvlOptions(b_omega, b_l, None if beam is None else beam[0], offset_input, considered=True)
+    return make_dvl_factor(noise, dvl_factor_keys(config, i), y, options)
 
 
 def ping_speed(p: Ping, use_beams: bool) -> float:
@@ -89,13 +73,13 @@ def state_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarray, 
     b_l = maker.mounting.b_l
     if rate_input is not None:  # estimate_time_offset (never with beams)
         return [considered_calibration_factor(maker.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v,
-                                              offset=(rate_input, maker.offset_gravity()))]
+                                              offset=(rate_input, maker.offset_gravity()), config=maker.config)]
     if use_beams and p.beams is not None:
         d_u, v, valid = p.beams
         noise1 = maker.beam_noise()
-        return [considered_calibration_factor(noise1, i, b_omega, b_l, beam=(d_u[j], float(v[j])))
+        return [considered_calibration_factor(noise1, i, b_omega, b_l, beam=(d_u[j], float(v[j])), config=maker.config)
                 for j in np.flatnonzero(valid)]
-    return [considered_calibration_factor(maker.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v)]
+    return [considered_calibration_factor(maker.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v, config=maker.config)]
 
 
 def keyframe_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarray, snap: PimSnapshot,

@@ -84,6 +84,7 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
+from gtsam_dvl.core.states import enabled
 from gtsam_dvl.core.types import LogData, Mounting
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
@@ -130,9 +131,9 @@ class OnlineEstimator:
         if spacing > solver.max_state_spacing_s:  # the batch smoother's rule (estimators/graph.py)
             raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
                                 f"{spacing:g} s: states without a ping would take the places of the keyframes")
-        if dvl.estimate_time_offset and dvl.use_beams:
+        if enabled(self.config, "time_offset") and dvl.use_beams:
             raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
-        if dvl.estimate_lever_arm:
+        if enabled(self.config, "lever_arm"):
             raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not online")
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self._imu_rotated = imu_is_rotated(self.mounting)
@@ -148,7 +149,8 @@ class OnlineEstimator:
         self.smoother: IncrementalSmoother | None = None
         self._checks = MessageChecks(self.options.bad_messages, source, self.counters)
         # classification, screen and keyframes (selection.EpochScheduler: the batch smoother's decisions)
-        self._scheduler = EpochScheduler(dvl, solver.keyframe_interval_s, spacing, self.counters)
+        self._scheduler = EpochScheduler(dvl, solver.keyframe_interval_s, spacing, self.counters,
+                                         keep_usable=self.options.record_history)
         # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
         # at once (False; module doc, "Keyframes")
         self.defer_between_pings = True
@@ -161,9 +163,10 @@ class OnlineEstimator:
         self._imu = ImuBuffer(self.config.imu, source, self._count)  # after it: the IMU since the newest state
         self._replaying = False  # replaying the messages buffered before the alignment
         self._pending: deque[Ping] = deque()  # pings decided, waiting for their epoch
+        self._pings_pushed = 0  # push_dvl's calls (Ping.index)
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
-        self._offset = dvl.estimate_time_offset
+        self._offset = enabled(self.config, "time_offset")
         self._offset_windows = OffsetWindows(dvl)
         self._flushing = False
         self._depth = DepthQueue(self.config.depth, frame,
@@ -205,9 +208,12 @@ class OnlineEstimator:
         """One DVL ping at t: velocity d_v (m/s, dvl_link) with covariance d_cov (3x3, None: the configured
         default), valid flag, and optionally beams = (d_u (B, 3), v (B,), valid (B,)). A ping without a valid
         velocity (NaN) is counted, not an error. Returns the number of epochs completed."""
+        index = self._pings_pushed
+        self._pings_pushed += 1
         ping = self._checks.ping(float(t), d_v, d_cov, valid, beams)
         if ping is None:
             return 0
+        ping.index = index
         if self.smoother is None:
             self._wait.pings.append(ping)
             return 0
@@ -291,11 +297,9 @@ class OnlineEstimator:
             estimator=f"online-{self.options.mode.replace('_', '-')}",
             t=h["t"].copy(), n_p=h["n_p"].copy(), n_R_b=h["n_R_b"].copy(), n_v=h["n_v"].copy(),
             pose_cov=h["pose_cov"].copy(), vel_cov=h["vel_cov"].copy(), pose_vel_cross=h["pose_vel_cross"].copy(),
-            accel_bias=final.accel_bias, gyro_bias=final.gyro_bias, bias_cov=final.bias_cov,
-            scale=final.scale, scale_sigma=final.scale_sigma, b_R_d=final.b_R_d, b_R_d_cov=final.b_R_d_cov,
-            b_R_d0=self.mounting.b_R_d0, t0_ns=t0_ns, b_omega=h["b_omega"] - final.gyro_bias,
-            calib_joint_cov=final.calib_cov, timeline=self.timeline(), info=info, config=self.config.to_dict(),
-            time_offset_s=final.time_offset_s, time_offset_sigma_s=final.time_offset_sigma_s)
+            calibration=final.calibration, b_R_d0=self.mounting.b_R_d0, t0_ns=t0_ns,
+            b_omega=h["b_omega"] - final.gyro_bias, calib_joint_cov=final.calib_cov, timeline=self.timeline(),
+            info=info, config=self.config.to_dict(), dvl_pings=np.asarray(self._scheduler.usable, dtype=np.int64))
 
     # ----- internals -----------------------------------------------------------------------------
     def _count(self, kind: str, n: int = 1) -> None:

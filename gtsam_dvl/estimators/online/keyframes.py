@@ -175,4 +175,4 @@ def predict_at_ping(s: StateEstimate, t: float, snap: PingMotion, m: PingMotion)
         cov = 0.5 * (cov + cov.T)
     return StateEstimate(index=s.index, t=t, pose=gtsam.Pose3(gtsam.Rot3(R_p), p_p), n_v=v_p, bias=s.bias,
                          scale=s.scale, b_R_d=s.b_R_d, cov=cov, time_offset_s=s.time_offset_s,
-                         time_offset_sigma_s=s.time_offset_sigma_s, predicted_from_t=s.t)
+                         time_offset_sigma_s=s.time_offset_sigma_s, predicted_from_t=s.t, calibration=s.calibration)

@@ -5,13 +5,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import get_args
 
 import numpy as np
 
 from gtsam_dvl.core.config import OnlineConfig, OnlineMode
 from gtsam_dvl.core.result import CalibrationUnits, Timeline, misalignment_rpy_and_cov
+from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.online.window import StateEstimate
 
@@ -56,6 +57,7 @@ class OnlineEstimate(CalibrationUnits):
     # nan: the estimate of the newest state, at its time t; else the estimate at a ping at t between keyframes,
     # predicted from the newest state (at predicted_from_t, s) through the IMU motion (online/keyframes.py)
     predicted_from_t: float = float("nan")
+    calibration: dict[str, Estimate] = field(default_factory=dict)  # the shared states by name (core/states.py)
 
     @classmethod
     def from_state(cls, s: StateEstimate, b_R_d0: np.ndarray) -> OnlineEstimate:
@@ -65,7 +67,7 @@ class OnlineEstimate(CalibrationUnits):
                    bias_cov=s.cov[9:15, 9:15], scale=s.scale, scale_sigma=float(np.sqrt(s.cov[15, 15])),
                    b_R_d=s.b_R_d, b_R_d_cov=s.cov[16:19, 16:19], b_R_d0=b_R_d0, calib_cov=s.calib_cov,
                    time_offset_s=s.time_offset_s, time_offset_sigma_s=s.time_offset_sigma_s,
-                   predicted_from_t=s.predicted_from_t)
+                   predicted_from_t=s.predicted_from_t, calibration=s.calibration)
 
     @property
     def attitude_sigma_deg(self) -> np.ndarray:

@@ -56,7 +56,7 @@ paper-3d).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
@@ -64,7 +64,7 @@ import numpy as np
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import V, X, key_dim
-from gtsam_dvl.core.states import block_states, read_estimates, relinearization, shared_keys
+from gtsam_dvl.core.states import Estimate, block_states, read_estimates, relinearization, shared_keys
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
@@ -95,6 +95,7 @@ class StateEstimate:
     # nan: the estimate of state `index` at its time t; else the estimate at a ping at t between states, predicted
     # from state `index` at predicted_from_t (online/keyframes.py predict_at_ping)
     predicted_from_t: float = float("nan")
+    calibration: dict[str, Estimate] = field(default_factory=dict)  # the shared states by name (core/states.py)
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -386,7 +387,7 @@ class IncrementalSmoother:
             bias=values.atConstantBias(self.builder.bias_key(i)), scale=float(est["scale"].value[0]),
             b_R_d=est["misalignment"].value, cov=cov[:STATE_DIM, :STATE_DIM],
             time_offset_s=0.0 if offset is None else float(offset.value[0]),
-            time_offset_sigma_s=float("nan") if offset is None else float(offset.sigma[0]))
+            time_offset_sigma_s=float("nan") if offset is None else float(offset.sigma[0]), calibration=est)
 
     def joint_covariance(self, keys: list[int]) -> np.ndarray:
         """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""
