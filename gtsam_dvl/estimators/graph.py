@@ -42,13 +42,14 @@ from gtsam_dvl.estimators.gaps import (
     with_fillers,
 )
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
-from gtsam_dvl.estimators.keyframes import PimSnapshot, SnapshotArrays, interval_with_snapshots
+from gtsam_dvl.estimators.keyframes import interval_with_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.selection import KEYFRAME, THINNED, KeyframeRule, covering_sample, usable_pings
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
 from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians, gravity_maps
 from gtsam_dvl.factors.imu_earth import REFRESH_M
+from gtsam_dvl.factors.ping_motion import PingMotion
 
 CHUNK_STATES = 1000  # states eliminated at once (solver.eliminate_chunked)
 
@@ -99,7 +100,7 @@ class LogGraph:
     _keyframe_gravity: tuple[np.ndarray | None, np.ndarray, np.ndarray] | None = field(default=None, init=False,
                                                                                      repr=False)
     # the IMU motion to each ping between keyframes (BetweenPing.snap: its row); None once build_bulk let it go
-    snapshots: SnapshotArrays | None = field(default=None, init=False, repr=False)
+    snapshots: PingMotion | None = field(default=None, init=False, repr=False)
     usable: np.ndarray = field(init=False, repr=False)  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
 
     def __post_init__(self) -> None:
@@ -216,7 +217,7 @@ class LogGraph:
         for o, a, m, g in zip(owners, b_a, w_mean, G, strict=True):
             o.rate_input = (a, m, g)
 
-    def ping_snapshot(self, p: BetweenPing) -> PimSnapshot:
+    def ping_snapshot(self, p: BetweenPing) -> PingMotion:
         """The IMU motion from the state before a ping between keyframes up to it (estimators/keyframes.py)."""
         if self.snapshots is None or p.snap < 0:
             raise GtsamDvlError("between_factors: build_bulk let the pings' IMU snapshots go; build the per-factor "
@@ -229,7 +230,7 @@ class LogGraph:
         (keyframes.interval_with_snapshots); returns what each interval held across IMU gaps."""
         imu = self.log.imu
         self.pims, self.imu_params = [], []
-        self.snapshots = SnapshotArrays.empty(sum(len(ep.between) for ep in self.epochs))
+        self.snapshots = PingMotion.empty(sum(len(ep.between) for ep in self.epochs))
         held: list[Holds] = []
         q = 0
         n = len(self.epochs) - 1

@@ -37,11 +37,6 @@ ANALYTIC_MAX_ANGLE = 5.5  # rad, the largest |theta| whose Jacobians come from t
 _STATE0, _BIAS0, _POSE0, _Z3 = gtsam.NavState(), gtsam.imuBias.ConstantBias(), gtsam.Pose3(), np.zeros(3)
 
 
-# The IMU motion to a ping is factors/ping_motion.py's PingMotion (one ping, or arrays of N with put/get); the names
-# estimators/graph.py and the online estimator give it
-PimSnapshot = PingMotion
-SnapshotArrays = PingMotion
-
 
 def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationParams:
     """Parameters with params' noise, no gravity and no Earth rate (predict() then gives the deltas)."""

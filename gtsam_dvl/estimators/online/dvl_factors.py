@@ -21,7 +21,6 @@ import numpy as np
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.states import dvl_factor_keys
 from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.keyframes import PimSnapshot
 from gtsam_dvl.estimators.online.keyframes import considered_keyframe_factor
 from gtsam_dvl.estimators.selection import Ping
 from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor
@@ -82,7 +81,7 @@ def state_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarray, 
     return [considered_calibration_factor(maker.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v, config=maker.config)]
 
 
-def keyframe_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarray, snap: PimSnapshot,
+def keyframe_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarray, snap: PingMotion,
                          motion: PingMotion, min_speed_m_s: float,
                          rate_input: RateInput | None) -> list[gtsam.NonlinearFactor]:
     """The DVL factors of a ping between keyframes on state i through the IMU motion from it (snap, motion): the
