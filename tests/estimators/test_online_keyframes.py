@@ -1,4 +1,4 @@
-"""Keyframes in the online estimator ([solver] keyframe_spacing_s; estimators/online/keyframes.py), on a 5 Hz DVL
+"""Keyframes in the online estimator ([solver] keyframe_spacing_s; estimators/online/between_pings.py), on a 5 Hz DVL
 version of paper-3d-short cut at 300 s (120 s static, the Type-I manoeuvres, the start of the first leg):
 
 - the online estimator makes the batch smoother's states (the same keyframes, the last ping included) and uses
@@ -34,7 +34,7 @@ from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.keyframes import interval_with_snapshots, snapshot_params
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
-from gtsam_dvl.estimators.online.keyframes import StatePreintegration, predict_at_ping
+from gtsam_dvl.estimators.online.between_pings import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
 from gtsam_dvl.factors import PingMotion
 from tests.support.logs import cut_log
@@ -237,7 +237,7 @@ def test_prediction_at_a_ping_is_gtsams() -> None:
     assert p.t == s.t + snap.dt and p.predicted_from_t == s.t and p.index == s.index
     assert np.abs(d_rot).max() < 1e-9 and np.abs(d_vel).max() < 1e-8
     # dp's accelerometer-bias correction is dt / 2 times dv's, off by |b_a| w dt^3 / 12 in a turn at w rad/s
-    # (online/keyframes.py predict_at_ping)
+    # (online/between_pings.py predict_at_ping)
     bound = np.linalg.norm(s.bias.accelerometer()) * 0.2 * snap.dt**3 / 12
     assert np.abs(d_pos).max() < 1.5 * bound
     zero = dataclasses.replace(s, bias=gtsam.imuBias.ConstantBias())

@@ -8,7 +8,7 @@ sigma would shrink over the static phase, where the batch smoother's filtering s
 once, at its solution). Such a ping keeps its DVL factor (the same
 model, on pose, velocity, scale and misalignment: a zero-velocity update when static) with zero Jacobians for
 scale and misalignment, which are "considered" at their current value (considered_calibration_factor; a slow ping
-between keyframes likewise: online/keyframes.considered_keyframe_factor). Given up: the information of pings
+between keyframes likewise: online/between_pings.considered_keyframe_factor). Given up: the information of pings
 slower than the threshold, (v / sigma)^2 per ping, nothing next to a manoeuvre (the final estimates agree with
 the batch smoother's: docs/results.md, "Online estimator").
 """
@@ -21,7 +21,7 @@ import numpy as np
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.states import dvl_factor_keys
 from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.online.keyframes import considered_keyframe_factor
+from gtsam_dvl.estimators.online.between_pings import considered_keyframe_factor
 from gtsam_dvl.estimators.selection import Ping
 from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor
 

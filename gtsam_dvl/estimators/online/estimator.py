@@ -22,7 +22,7 @@ Which mode:
 - The trajectory of the returned NavResult is the filtering one in both modes: each state as estimated when its
   ping was processed, what the vehicle knew then (the batch smoother gives the smoothed one).
 
-Keyframes (`[solver] keyframe_spacing_s`, 1 s by default; online/keyframes.py): the states are the batch
+Keyframes (`[solver] keyframe_spacing_s`, 1 s by default; online/between_pings.py): the states are the batch
 smoother's, at the keyframes (selection.KeyframeRule, decided ping by ping: the first usable ping, then each
 first one at least 0.98 spacings after the previous keyframe) and at the DVL-dropout fillers; every
 other usable ping becomes the batch smoother's DVL factor on the state before it through the IMU motion since
@@ -40,7 +40,7 @@ keyframes are a state per ping (the same result to the last bit as keyframe_spac
   prediction below) is a fraction of it; the state's update linearises four more factors. What it gives up:
   until the next state, the pings since the newest state are not in the estimate.
 - estimate() after a ping between keyframes: the state at the ping predicted from the newest state's estimate
-  through the IMU motion up to it (online/keyframes.predict_at_ping: the keyframe factor's own model, its
+  through the IMU motion up to it (online/between_pings.predict_at_ping: the keyframe factor's own model, its
   covariance propagated to first order), OnlineEstimate.t the ping's time and predicted_from_t the state's
   (nan for the estimate of a state). Its errors against the simulated truth are consistent with its sigmas
   (tests/estimators/test_online_keyframes.py). The Timeline and the NavResult hold the states only, each as
@@ -60,7 +60,7 @@ Design (the modules of this package):
   (selection.KeyframeRule); IMU intervals are split by the rules of estimators/selection.py.
 - IMU samples are kept raw since the newest state and preintegrated up to the next one as its pings come and
   when the state is made, exactly as the batch smoother does (a sample straddling the state's ping is split;
-  online/keyframes.StatePreintegration: the same pieces in the same order), so a ping that arrives after IMU samples
+  online/between_pings.StatePreintegration: the same pieces in the same order), so a ping that arrives after IMU samples
   past its stamp (another topic, another latency) is still placed exactly.
 - Pings without a valid velocity, faster than dvl.max_speed_m_s or not after the first IMU sample are counted and
   skipped, as the batch smoother does; so are bogus pings (selection.PingScreen: exact zeros while moving,
@@ -91,11 +91,11 @@ from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.online.alignment_wait import AlignmentWait, given_attitude
+from gtsam_dvl.estimators.online.between_pings import KeyframeGravity, StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.depth_queue import DepthQueue
 from gtsam_dvl.estimators.online.dvl_factors import RateInput, keyframe_dvl_factors, state_dvl_factors
 from gtsam_dvl.estimators.online.feed import feed_log
 from gtsam_dvl.estimators.online.imu_buffer import ImuBuffer
-from gtsam_dvl.estimators.online.keyframes import KeyframeGravity, StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.messages import MessageChecks, vector3
 from gtsam_dvl.estimators.online.offset_windows import OffsetWindows
 from gtsam_dvl.estimators.online.types import (
@@ -427,7 +427,7 @@ class OnlineEstimator:
         self._record(t0, c0, t_epoch)
 
     def _between_ping(self, p: Ping) -> None:
-        """A ping between keyframes: the IMU motion from the newest state up to it (online/keyframes.py,
+        """A ping between keyframes: the IMU motion from the newest state up to it (online/between_pings.py,
         StatePreintegration.snapshot_at), its keyframe DVL factor on that state, deferred to the next state's update
         or added to iSAM2 now (defer_between_pings), and the estimate at the ping predicted from the newest state."""
         assert self.builder is not None and self.smoother is not None

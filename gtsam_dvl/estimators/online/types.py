@@ -55,7 +55,7 @@ class OnlineEstimate(CalibrationUnits):
     time_offset_s: float = 0.0
     time_offset_sigma_s: float = float("nan")
     # nan: the estimate of the newest state, at its time t; else the estimate at a ping at t between keyframes,
-    # predicted from the newest state (at predicted_from_t, s) through the IMU motion (online/keyframes.py)
+    # predicted from the newest state (at predicted_from_t, s) through the IMU motion (online/between_pings.py)
     predicted_from_t: float = float("nan")
     calibration: dict[str, Estimate] = field(default_factory=dict)  # the shared states by name (core/states.py)
 

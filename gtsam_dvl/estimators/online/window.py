@@ -93,7 +93,7 @@ class StateEstimate:
     time_offset_s: float = 0.0
     time_offset_sigma_s: float = float("nan")
     # nan: the estimate of state `index` at its time t; else the estimate at a ping at t between states, predicted
-    # from state `index` at predicted_from_t (online/keyframes.py predict_at_ping)
+    # from state `index` at predicted_from_t (online/between_pings.py predict_at_ping)
     predicted_from_t: float = float("nan")
     calibration: dict[str, Estimate] = field(default_factory=dict)  # the shared states by name (core/states.py)
 

@@ -1,4 +1,4 @@
-"""Keyframes online: the pings between two states, as the batch smoother puts them on the state before them.
+"""Pings between keyframes, online: the pings between two states, on the state before them as the batch has them.
 
 With `[solver] keyframe_spacing_s` > 0 the online estimator makes states where the batch smoother does (the
 keyframes of selection.keyframe_mask, decided ping by ping with the same selection.KeyframeRule, and the DVL-dropout
