@@ -1,5 +1,5 @@
 """This checkout against another git revision, in one run: bench_factors.py and bench_batch.py run alternately in
-both trees, several rounds, each figure the best of its rounds, and the ratio this / base.
+both trees, several rounds, each figure the best and the median of its rounds, and the ratios this / base.
 
     .venv/bin/python bench/compare_revisions.py [--base HEAD~1] [--rounds 3]
 
@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -54,19 +55,20 @@ def main() -> None:
         base = Path(tmp) / "base"
         subprocess.run(["git", "worktree", "add", "-q", "--detach", str(base), args.base], cwd=ROOT, check=True)
         try:
-            best: dict[str, dict[str, float]] = {"this": {}, "base": {}}
+            seen: dict[str, dict[str, list[float]]] = {"this": {}, "base": {}}
             for r in range(args.rounds):
                 for name, tree in (("base", base), ("this", ROOT)) if r % 2 == 0 else (("this", ROOT), ("base", base)):
                     for k, v in figures(tree).items():
-                        best[name][k] = min(v, best[name].get(k, float("inf")))
+                        seen[name].setdefault(k, []).append(v)
                 print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, check=False)
-    print(f"best of {args.rounds} rounds; base {args.base}")
-    print(f"{'figure':<42}{'this':>10}{'base':>10}{'this/base':>11}")
-    for k in best["this"]:
-        this, old = best["this"][k], best["base"][k]
-        print(f"{k:<42}{this:>10.3f}{old:>10.3f}{this / old:>11.2f}")
+    print(f"{args.rounds} rounds; base {args.base}; best (min) and median of the rounds")
+    print(f"{'figure':<40}{'this best':>10}{'base best':>10}{'ratio':>7}{'this med':>10}{'base med':>10}{'ratio':>7}")
+    for k, this in seen["this"].items():
+        old = seen["base"][k]
+        b_t, b_o, m_t, m_o = min(this), min(old), statistics.median(this), statistics.median(old)
+        print(f"{k:<40}{b_t:>10.3f}{b_o:>10.3f}{b_t / b_o:>7.2f}{m_t:>10.3f}{m_o:>10.3f}{m_t / m_o:>7.2f}")
 
 
 if __name__ == "__main__":
