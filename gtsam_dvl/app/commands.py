@@ -269,7 +269,9 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     outputs = OutputSet()
     with outputs:
         if not isinstance(result, NavResult):  # io-dvlc: calibration only
-            from gtsam_dvl.estimators.iodvlc import iodvlc_summary
+            from gtsam_dvl.estimators.iodvlc import IoDvlcResult, iodvlc_summary
+
+            assert isinstance(result, IoDvlcResult), type(result)
 
             summ = iodvlc_summary(result, log)
             health = assess_log_health(log)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -30,6 +30,17 @@ def misalignment_rpy_and_cov(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: n
     J = np.linalg.inv(E)
     cov_body = b_R_d @ cov_right @ b_R_d.T
     return np.degrees([roll, pitch, yaw]), np.degrees(np.degrees(J @ cov_body @ J.T))
+
+
+class EstimatorResult(Protocol):
+    """What every estimator returns (estimators/run.py): which estimator made it, the shared states it estimated
+    by name (core/states.py; an Estimate: value and marginal covariance in the state's tangent, SI) and its wall
+    times (s). A NavResult (batch, online, EKF: a trajectory too) and an IoDvlcResult (the DVL calibration alone,
+    with its timelines over the DVL epochs) are both one."""
+
+    estimator: str
+    calibration: dict[str, Estimate]
+    timing_s: dict[str, float]
 
 
 class CalibrationUnits:

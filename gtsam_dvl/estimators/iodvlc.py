@@ -48,6 +48,7 @@ from gtsam_dvl.core.config import EstimatorConfig, IodvlcConfig
 from gtsam_dvl.core.earth import OMEGA_IE, WGS84_A
 from gtsam_dvl.core.result import misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
+from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.estimators.mounting import log_in_base_link
 
@@ -112,6 +113,10 @@ class IoDvlcResult:
     final_misalignment_sigma_deg: np.ndarray
     noise_m_s: float
     timing_s: dict[str, float] = field(default_factory=dict)
+    # the final estimates as every estimator reports them (core/result.EstimatorResult): "scale" and
+    # "misalignment" (b_R_d, its covariance in GTSAM's right tangent, rad^2)
+    calibration: dict[str, Estimate] = field(default_factory=dict)
+    estimator: str = "io-dvlc"
 
 
 # ----- segment detection -----------------------------------------------------------------------------
@@ -414,12 +419,15 @@ def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = N
         _fill(last, slice(next_row, n), scale, scale_sig, mis, mis_sig, b_R_d0)
         final = last
     rpy, rpy_sig = _misalignment(final[2], final[3], b_R_d0)
+    b_R_d, cov_body = final[2], final[3]
+    calibration = {"scale": Estimate(np.array([final[0]]), np.array([[final[1] ** 2]])),
+                   "misalignment": Estimate(b_R_d.copy(), b_R_d.T @ cov_body @ b_R_d)}
     return IoDvlcResult(
         t=t, scale=scale, scale_sigma=scale_sig, misalignment_deg=mis, misalignment_sigma_deg=mis_sig,
         scale_pointwise=pointwise, beta=beta_all, gamma=gamma_all, segments=segments, per_segment=per_segment,
         final_scale=float(final[0]), final_scale_sigma=float(final[1]), b_R_d=final[2], b_R_d0=b_R_d0,
         final_misalignment_deg=rpy, final_misalignment_sigma_deg=rpy_sig, noise_m_s=sigma,
-        timing_s={"total": time.perf_counter() - t_start})
+        timing_s={"total": time.perf_counter() - t_start}, calibration=calibration)
 
 
 def _fill(est: tuple[float, float, np.ndarray, np.ndarray], rows: slice, scale: np.ndarray, scale_sig: np.ndarray,

@@ -5,12 +5,11 @@ Adding an estimator is one entry in ESTIMATORS: an Estimator (a name, a descript
 RegisteredEstimator around a function. Each function imports its estimator when called, so that listing the modes
 loads no solver.
 
-Results: the trajectory estimators (batch, online, online-full, ekf) return a NavResult. IO-DVLC returns an
-IoDvlcResult: it estimates the DVL scale and misalignment from the Type-I segments alone, with no trajectory and
-no IMU biases (the fields a NavResult has and its users read), and its scale and misalignment are timelines over
-the DVL epochs under the names NavResult gives its final values (IoDvlcResult.scale (N,) against NavResult.scale,
-a float): a NavResult holding it would carry empty or invented fields, so the two stay distinct types
-(EstimatorResult).
+Results: every estimator returns an EstimatorResult (core/result.py): its name, the shared states it estimated
+by name (`calibration`: state name -> Estimate, value and marginal covariance) and its wall times. The
+trajectory estimators (batch, online, online-full, ekf) return a NavResult, which adds the trajectory, the biases
+and their covariances. IO-DVLC returns an IoDvlcResult: it estimates the DVL scale and misalignment from the
+Type-I segments alone, with no trajectory and no IMU biases, and adds their timelines over the DVL epochs.
 """
 
 from __future__ import annotations
@@ -22,11 +21,9 @@ from typing import Literal, Protocol, overload
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.result import EstimatorResult, NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.iodvlc import IoDvlcResult
-
-EstimatorResult = NavResult | IoDvlcResult
 
 
 class Estimator(Protocol):
