@@ -1,5 +1,6 @@
 """estimators/run.py: every registered estimator behind one interface returns one kind of result
-(core/result.EstimatorResult) whose calibration covers the truth of a simulated paper-3d-short run (the paper-3d manoeuvres, 800 s)."""
+(core/result.EstimatorResult) whose calibration covers the truth of a simulated paper-3d-short run (the paper-3d
+manoeuvres in 800 s)."""
 
 from __future__ import annotations
 
