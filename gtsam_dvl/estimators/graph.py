@@ -44,7 +44,7 @@ from gtsam_dvl.estimators.gaps import (
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
 from gtsam_dvl.estimators.keyframes import interval_with_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.selection import KEYFRAME, THINNED, KeyframeRule, covering_sample, usable_pings
+from gtsam_dvl.estimators.selection import covering_sample, decide_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
 from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians, gravity_maps
@@ -172,14 +172,8 @@ class LogGraph:
         if spacing > cfg.solver.max_state_spacing_s:
             raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
                                 f"{spacing:g} s: states without a ping would take the places of the keyframes")
-        self.usable = usable_pings(dvl, imu, cfg.dvl, self.counters)
-        interval = cfg.solver.keyframe_interval_s
-        decision = KeyframeRule(interval, spacing).decide_all(dvl.t[self.usable])
-        if interval > 0:
-            self.counters["dvl_not_keyframe"] = self.counters.get("dvl_not_keyframe", 0) + int(
-                (decision == THINNED).sum())
-        all_idx = self.usable[decision != THINNED]
-        key = decision[decision != THINNED] == KEYFRAME
+        self.usable, all_idx, key = decide_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, spacing,
+                                                  self.counters)
         key[-1:] = True  # the last ping too: every other ping lies between two states (and the gaps they cross)
         idx = all_idx[key]
         times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)

@@ -446,16 +446,23 @@ class KeyframeRule:
                            count=len(t))
 
 
+def decide_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
+                  keyframe_spacing_s: float, counters: dict[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The whole log's decisions of KeyframeRule(keyframe_interval_s, keyframe_spacing_s): (usable, epochs, key):
+    the usable pings' indices, those of the pings kept after thinning (counter "dvl_not_keyframe"), and which of
+    those are keyframes. imu: as in usable_pings."""
+    usable = usable_pings(dvl, imu, cfg, counters)
+    decision = KeyframeRule(keyframe_interval_s, keyframe_spacing_s).decide_all(dvl.t[usable])
+    kept = decision != THINNED
+    if keyframe_interval_s > 0:
+        counters["dvl_not_keyframe"] = counters.get("dvl_not_keyframe", 0) + int((~kept).sum())
+    return usable, usable[kept], decision[kept] == KEYFRAME
+
+
 def select_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
                   counters: dict[str, int]) -> np.ndarray:
-    """Indices of the pings that become epochs: usable, then thinned to keyframe_interval_s (KeyframeRule's first
-    stage, counter "dvl_not_keyframe"). imu: as in usable_pings."""
-    idx = usable_pings(dvl, imu, cfg, counters)
-    if keyframe_interval_s <= 0:
-        return idx
-    keep = KeyframeRule(keyframe_interval_s, 0.0).decide_all(dvl.t[idx]) != THINNED
-    counters["dvl_not_keyframe"] = counters.get("dvl_not_keyframe", 0) + int((~keep).sum())
-    return idx[keep]
+    """Indices of the pings that become epochs: usable, then thinned to keyframe_interval_s (decide_epochs)."""
+    return decide_epochs(dvl, imu, cfg, keyframe_interval_s, 0.0, counters)[1]
 
 
 def keyframe_mask(t: np.ndarray, spacing_s: float) -> np.ndarray:
