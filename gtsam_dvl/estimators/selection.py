@@ -12,7 +12,7 @@ reason.
 Epochs. One causal rule, KeyframeRule, decides which of the usable pings become epochs: keyframe thinning
 (`solver.keyframe_interval_s`) keeps pings at least that far apart (the others are dropped); of those, the
 keyframes `solver.keyframe_spacing_s` apart become states and the pings between them go on the keyframe before
-(no ping is dropped). The whole-log estimators run it over the log (select_epochs, keyframe_mask); the online
+(no ping is dropped). The whole-log estimators run it over the log (decide_epochs); the online
 estimator feeds EpochScheduler (classification, screen and KeyframeRule) ping by ping and gets the same decisions.
 
 The screen is causal: it compares a ping with the previous accepted ping and the IMU samples stamped between
@@ -412,7 +412,7 @@ KEYFRAME = 2  # kept, a keyframe: a state
 
 class KeyframeRule:
     """The causal rule that turns the usable, screened pings (in time order) into epochs: the one definition
-    the batch smoother (select_epochs and keyframe_mask over the whole log) and the online estimator
+    the batch smoother (decide_epochs over the whole log) and the online estimator
     (EpochScheduler, ping by ping) apply; the EKF takes every usable ping.
 
     decide(t): a ping at t is THINNED when it lies within interval_s (solver.keyframe_interval_s) of the previous
