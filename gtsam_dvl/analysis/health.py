@@ -237,7 +237,7 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
         ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2) & matched[:, None]
         r = np.where(ok, v - np.einsum("nbi,ni->nb", np.where(ok[..., None], d_u, 0.0), y_hat), 0.0)
-        chi2 = (r**2).sum(axis=1) / config.beam_noise_m_s**2
+        chi2 = (r**2).sum(axis=1) / config.beam_sigma_m_s()**2
         dof = ok.sum(axis=1).astype(float)
     else:
         d_y = dvl.d_v[j]

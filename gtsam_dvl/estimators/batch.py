@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -15,6 +16,16 @@ from gtsam_dvl.core.states import enabled, read_estimates, read_values, shared_k
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
+from gtsam_dvl.estimators.noise_levels import (
+    NoiseReport,
+    apply_imu_floor,
+    dvl_fit_enabled,
+    dvl_fit_report,
+    fitted_multiplier,
+    median_ping_sigma,
+    variance_ratio,
+    with_multiplier,
+)
 from gtsam_dvl.estimators.solver import (
     ChunkedOrdering,
     CompactBayesNet,
@@ -34,6 +45,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
+    noise = NoiseReport()
+    config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
@@ -50,6 +63,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     t2 = time.perf_counter()
     graph, values, report, passes = solve_graph(builder, graph, values, ordering,
                                                 progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
+    if dvl_fit_enabled(builder.config) and isinstance(graph, BulkGraph):
+        values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
     timing["solve"] = time.perf_counter() - t2
 
     t3 = time.perf_counter()
@@ -64,6 +79,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
         timing["timeline"] = time.perf_counter() - t4
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
+    result.info["noise"] = noise.as_dict()
     result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
                              "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,
                              "passes": passes, **{f"{k}_s": v for k, v in report.timing_s.items()}}
@@ -88,11 +104,9 @@ def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph
     windows are centred on the first pass's estimate (LogGraph.recentre_time_offset). Returns the graph (the
     recentred one), the solution, the last pass's report (its Bayes net serves the marginals) and each pass's
     iterations and seconds."""
-    s = builder.config.solver
     offset = enabled(builder.config, "time_offset")
-    kw = dict(max_iterations=s.max_iterations, relative_tol=s.relative_error_tol,
-              absolute_tol=s.absolute_error_tol, before_iteration=builder.refresh_gravity)
-    first = {**kw, "absolute_tol": max(s.absolute_error_tol, FIRST_PASS_TOL)} if offset else kw
+    kw = _solver_options(builder)
+    first = {**kw, "absolute_tol": max(kw["absolute_tol"], FIRST_PASS_TOL)} if offset else kw
     values, report = gauss_newton_qr(graph, values, ordering, progress=progress, **first)  # type: ignore[arg-type]
     passes = [{"iterations": report.iterations, **report.timing_s}]
     if offset:
@@ -102,6 +116,51 @@ def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph
         values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
         passes.append({"iterations": report.iterations, **report.timing_s})
     return graph, values, report, passes
+
+
+def _solver_options(builder: LogGraph) -> dict[str, Any]:
+    """gauss_newton_qr's options from the [solver] section, gravity following the positions."""
+    s = builder.config.solver
+    return dict(max_iterations=s.max_iterations, relative_tol=s.relative_error_tol,
+                absolute_tol=s.absolute_error_tol, before_iteration=builder.refresh_gravity)
+
+
+def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: ChunkedOrdering,
+                  report: SolveReport, passes: list[dict[str, float]], noise: NoiseReport
+                  ) -> tuple[gtsam.Values, SolveReport]:
+    """The DVL's variance component (estimators/noise_levels.py), fitted on the solution and re-solved with
+    until it changes by at most [noise] fit_tolerance, in at most fit_passes solves (the first included). The
+    factor is applied only with a re-solve, so the solution and its Bayes net are always at the weights
+    reported; builder.config takes the factor used ([dvl] noise_multiplier), noise.dvl says how it came."""
+    cfg = builder.config
+    n = cfg.noise
+    bulk = graph.bulk
+    used = cfg.dvl.noise_multiplier
+    rows, at_bound, settled, solves = 0, False, False, 1
+    while True:
+        ratio, rows = variance_ratio(bulk.whitened_errors(values), bulk.robust_k)
+        if rows * bulk.pings.dim < n.min_rows or not np.isfinite(ratio):
+            noise.dvl = {"multiplier": used, "rows": rows, "why": f"DVL noise not fitted: {rows} usable residual "
+                         f"rows, fewer than [noise] min_rows = {n.min_rows}"}
+            return values, report
+        new, at_bound = fitted_multiplier(used, ratio, cfg)
+        if abs(new / used - 1.0) <= n.fit_tolerance:
+            settled = True
+            break
+        if solves >= n.fit_passes:
+            break
+        bulk.whiten *= used / new  # W ~ 1 / sigma
+        used = new
+        values, report = gauss_newton_qr(graph, values, ordering, **_solver_options(builder))  # type: ignore[arg-type]
+        passes.append({"iterations": report.iterations, **report.timing_s})
+        solves += 1
+    builder.config = with_multiplier(cfg, used)
+    how = f"{solves} solve" + ("s" if solves > 1 else "")
+    if not settled:
+        how += f", not settled: the last fit asked for x {new / used:.3g}"
+    noise.dvl = dvl_fit_report(builder.config, used, rows * bulk.pings.dim, solves, at_bound,
+                               median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]), how)
+    return values, report
 
 
 def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,

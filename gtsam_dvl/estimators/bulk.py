@@ -176,6 +176,10 @@ class BulkDvl:
                     np.matmul(W, B, out=dst[sl])
         return ew
 
+    def whitened_errors(self, values: gtsam.Values) -> np.ndarray:
+        """The rows' whitened errors (N, m) at values, before the robust kernel."""
+        return self._evaluate(values, False) if len(self) else np.zeros((0, self.pings.dim))
+
     def _weights_and_losses(self, ew: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Robust weights and losses of the whitened errors' norms, as GTSAM's mEstimator computes them."""
         x2 = np.einsum("ni,ni->n", ew, ew)
@@ -369,7 +373,7 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
         rows, b = np.nonzero(beams.valid[jj])
         d_u = np.asarray(beams.d_u[jj][rows, b], dtype=float)
         y = np.asarray(beams.v[jj][rows, b], dtype=float)[:, None]
-        var = cfg.dvl.beam_noise_m_s**2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
+        var = cfg.dvl.beam_sigma_m_s()**2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
         whiten = (1.0 / np.sqrt(var))[:, None, None]
     pings = BulkPings(state=st[rows], y=y, b_omega=om[rows], motion=motion[rows], d_u=d_u,
                       offset_b_a=None if rate is None else rate[0][rows],

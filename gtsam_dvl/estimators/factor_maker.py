@@ -314,7 +314,7 @@ class FactorMaker:
             for b in np.flatnonzero(valid).tolist():
                 o = DvlOptions(b_omega, b_l, d_u[b], motion=motion, lever_variable=lever)
                 noise = self.beam_noise() if extra is None else self._robust(gtsam.noiseModel.Isotropic.Sigma(
-                    1, float(np.sqrt(cfg.beam_noise_m_s**2 + d_u[b] @ extra @ d_u[b]))))
+                    1, float(np.sqrt(cfg.beam_sigma_m_s()**2 + d_u[b] @ extra @ d_u[b]))))
                 out.append(make_dvl_factor(noise, keys, float(v[b]), o))
             return out
         o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever)
@@ -329,7 +329,7 @@ class FactorMaker:
 
     def beam_noise(self) -> gtsam.noiseModel.Base:
         """Noise model of one beam velocity (robust if configured)."""
-        return self._robust(gtsam.noiseModel.Isotropic.Sigma(1, self.config.dvl.beam_noise_m_s))
+        return self._robust(gtsam.noiseModel.Isotropic.Sigma(1, self.config.dvl.beam_sigma_m_s()))
 
     def depth_factors_for(self, i: int, z_meas: float, sigma: float, lever: np.ndarray,
                           dt: float = 0.0) -> list[gtsam.NonlinearFactor]:

@@ -53,17 +53,19 @@ SCREEN_WINDOW_S = 60.0  # the screen looks at most this far back in the IMU
 def ping_covariance(cfg: DvlConfig, d_cov: np.ndarray) -> np.ndarray:
     """The covariance a ping's 3-D velocity is given (m^2/s^2), for (..., 3, 3) message covariances: the
     configured sigma (dvl.noise_m_s > 0), else the message's own if finite and positive definite, else
-    dvl.default_noise_m_s. The one rule for the factor graphs, the EKF and the health check."""
+    dvl.default_noise_m_s; every one times dvl.noise_multiplier^2 (the fitted variance component). The one rule
+    for the factor graphs, the EKF and the health check."""
     cov = np.array(d_cov, dtype=float)
+    m2 = cfg.noise_multiplier**2
     if cfg.noise_m_s > 0:
-        return np.broadcast_to(np.eye(3) * cfg.noise_m_s**2, cov.shape).copy()
+        return np.broadcast_to(np.eye(3) * (m2 * cfg.noise_m_s**2), cov.shape).copy()
     flat = cov.reshape(-1, 3, 3)
     ok = np.isfinite(flat).all(axis=(1, 2))
     if ok.any():
         sym = 0.5 * (flat[ok] + np.transpose(flat[ok], (0, 2, 1)))
         ok[ok] = np.linalg.eigvalsh(sym).min(axis=1) > 0
     flat[~ok] = np.eye(3) * cfg.default_noise_m_s**2
-    return flat.reshape(cov.shape)
+    return (flat if m2 == 1.0 else m2 * flat).reshape(cov.shape)
 
 
 def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid: np.ndarray | None,

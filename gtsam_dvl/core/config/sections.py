@@ -103,6 +103,13 @@ class DvlConfig(ConfigModel):
     # lever arm along the rotation axis of every turn stays at its prior
     estimate_lever_arm: Flag = False
     lever_arm_sigma_m: Positive = 0.5
+    # every ping's sigma (configured, from its message, or the default) times this: the variance component the
+    # estimators fit from the residuals ([noise] fit_dvl, core/config/noise.py); set here, it pins the factor
+    noise_multiplier: Positive = 1.0
+
+    def beam_sigma_m_s(self) -> float:
+        """One beam's sigma: beam_noise_m_s times the fitted noise_multiplier (m/s)."""
+        return self.beam_noise_m_s * self.noise_multiplier
 
     def robust_threshold(self) -> float:
         """The robust kernel's threshold in sigmas: huber_k if set (its alias), else robust_k."""

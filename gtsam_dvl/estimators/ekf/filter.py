@@ -60,13 +60,14 @@ from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.rotations import matrix_to_rpy, skew, so3_exp
-from gtsam_dvl.core.states import BY_NAME, Estimate, block_states, ekf_layout, enabled
+from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.rotations import skew, so3_exp
+from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import align, map_frame_of
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
+from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
@@ -79,6 +80,14 @@ from gtsam_dvl.estimators.gaps import (
     with_fillers,
 )
 from gtsam_dvl.estimators.mounting import log_in_base_link
+from gtsam_dvl.estimators.noise_levels import (
+    NoiseReport,
+    WarmupFit,
+    apply_imu_floor,
+    dvl_fit_enabled,
+    median_ping_sigma,
+    with_multiplier,
+)
 from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 
@@ -95,7 +104,6 @@ MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 # the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
 # (core/states.py ekf_layout: gyro and accelerometer bias, scale, misalignment, and the time offset when estimated)
-N_NAV = 9
 LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
 CALIBRATION = np.r_[LAYOUT["scale"], LAYOUT["misalignment"]]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
@@ -115,23 +123,6 @@ class FilterState:
     b_R_d: np.ndarray
     P: np.ndarray  # (19, 19), or (20, 20) with the time offset (OFFSET)
     time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
-
-
-@dataclass
-class _History:
-    """What is recorded after each update."""
-
-    t: list[float] = field(default_factory=list)
-    n_p: list[np.ndarray] = field(default_factory=list)
-    n_R_b: list[np.ndarray] = field(default_factory=list)
-    n_v: list[np.ndarray] = field(default_factory=list)
-    P: list[np.ndarray] = field(default_factory=list)
-    b_omega: list[np.ndarray] = field(default_factory=list)
-    gyro_bias: list[np.ndarray] = field(default_factory=list)
-    accel_bias: list[np.ndarray] = field(default_factory=list)
-    scale: list[float] = field(default_factory=list)
-    b_R_d: list[np.ndarray] = field(default_factory=list)
-    time_offset: list[float] = field(default_factory=list)
 
 
 class _Earth:
@@ -258,7 +249,7 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np
     if cfg.use_beams and dvl.beams is not None:
         ok = dvl.beams.valid[j]
         A = dvl.beams.d_u[j][ok]
-        return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_noise_m_s**2
+        return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_sigma_m_s()**2
     return np.eye(3), dvl.d_v[j], ping_covariance(cfg, dvl.d_cov[j])
 
 
@@ -372,12 +363,41 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     Below config.ekf.min_calibration_speed_m_s (or the keyword, which overrides it) or
     config.ekf.calibration_speed_sigmas velocity sigmas the measurement is taken as insensitive to scale and
     misalignment (see MIN_CALIBRATION_SPEED_M_S). config None: the one the log's scenario names, else the
-    defaults (EstimatorConfig.for_log)."""
+    defaults (EstimatorConfig.for_log).
+
+    Noise levels from the data ([noise], estimators/noise_levels.py): the IMU's quantisation floor; the DVL's
+    variance component by covariance matching of the innovations over the warm-up window ([noise] warmup_s), the
+    window filtered again with each new fit until it changes by at most [noise] fit_tolerance (a covariance
+    matching is only unbiased with the P of the right R: P is computed with the R assumed), at most fit_passes
+    times, then held for the whole log (a real-time filter keeps the window's messages for that)."""
     config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
         config = config.model_copy(update={"ekf": ekf})
-    ekf_cfg = config.validate().ekf
+    config.validate()
+    noise = NoiseReport()
+    config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise])
+    if dvl_fit_enabled(config):
+        n = config.noise
+        for k in range(n.fit_passes):
+            fit = WarmupFit(config)
+            _filter(log, config, None, fit)
+            new = fit.finish("covariance matching of the EKF's innovations")
+            settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
+            config = with_multiplier(config, new)
+            noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
+            if settled:
+                break
+    result = _filter(log, config, progress)
+    result.info["noise"] = noise.as_dict()
+    return result
+
+
+def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, fit: WarmupFit | None = None
+            ) -> NavResult:
+    """run_ekf at config's noise levels; with fit, only up to its warm-up window's end, the innovations there
+    collected into it (the NavResult then holds the window's states)."""
+    ekf_cfg = config.ekf
     offset = enabled(config, "time_offset")
     if offset and config.dvl.use_beams:
         raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
@@ -416,8 +436,10 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                               gate_threshold(ekf_cfg.gate_probability, 1), ekf_cfg.gate_reopen_after,
                               counters=dcounters)
     fs = initial_state(log, config, alignment.n_R_b, int(pings[0]))
-    hist = _History()
+    hist = History()
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
+    if fit is not None:
+        fit.start(float(dvl.t[pings[0]]), median_ping_sigma(config, dvl.d_cov[pings]))
     timing = {"propagate": 0.0, "update": 0.0}
     t_prev = float(dvl.t[pings[0]])
     # the states of the factor-graph estimators: every usable ping, and states without a ping across DVL
@@ -457,9 +479,11 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             depth.apply(fs, t_j, t_j, bridge_to=math.inf)
         if j < 0:  # a state without a ping: recorded, not updated
             g_j = int(covering_sample(t, t_j))
-            _record(hist, fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie)
+            hist.record(fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie)
             timing["propagate"] += t1 - t0
             continue
+        if fit is not None and t_j > fit.t_end:
+            break
         A, z, Rm = _ping_measurement(log, config, int(j))
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
         if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
@@ -479,14 +503,19 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             gate_nis = gates[len(z)]
         else:
             gate_nis = math.inf
+        if fit is not None:
+            AH = A @ H
+            hph = AH @ fs.P @ AH.T
         nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis)
+        if fit is not None and not was_gated:
+            fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
         counters["dvl_slow"] += int(slow)
         gated, gated_run = gated + int(was_gated), gated_run + 1 if was_gated else 0
         if not was_gated:
             nis_sum, nis_dof, downweighted = nis_sum + nis, nis_dof + len(z), downweighted + int(down)
         timing["propagate"] += t1 - t0
         timing["update"] += time.perf_counter() - t1
-        _record(hist, fs, t_j, b_omega)
+        hist.record(fs, t_j, b_omega)
         if progress and count % 100 == 0:
             progress(count / len(state_t))
     counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
@@ -494,89 +523,13 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     counters["dvl_gated"] = gated
     if depth is not None:
         counters.update(depth.counters)
-    result = _to_result(hist, log, config)
+    result = history_result(hist, log, config)
     result.dvl_pings = pings
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
     result.info = {"alignment": alignment.info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
-                   "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "error_state": N_ERR + int(offset)}}
+                   "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
+                              "error_state": N_ERR + int(offset)}}
     if progress:
         progress(1.0)
     return result
-
-
-def misalignment_timeline(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
-                                                                                                  np.ndarray]:
-    """result.misalignment_rpy_and_cov over (N, 3, 3) stacks, vectorised: [roll, pitch, yaw] of
-    R_c = b_R_d b_R_d0^T (deg) and their covariance (deg^2), from the covariance in b_R_d's right tangent."""
-    R_c = b_R_d @ b_R_d0.T
-    cov_body = b_R_d @ cov_right @ np.transpose(b_R_d, (0, 2, 1))
-    rpy = matrix_to_rpy(R_c)
-    J = np.zeros(R_c.shape)
-    h = 1e-7
-    for j in range(3):
-        e = np.zeros(3)
-        e[j] = h
-        J[:, :, j] = (matrix_to_rpy(so3_exp(e) @ R_c) - matrix_to_rpy(so3_exp(-e) @ R_c)) / (2 * h)
-    cov = J @ cov_body @ np.transpose(J, (0, 2, 1))
-    return np.degrees(rpy), np.degrees(np.degrees(cov))
-
-
-def _record(hist: _History, fs: FilterState, t: float, b_omega: np.ndarray) -> None:
-    hist.t.append(t)
-    hist.n_p.append(fs.nav.n_p.copy())
-    hist.n_R_b.append(fs.nav.n_R_b.copy())
-    hist.n_v.append(fs.nav.n_v.copy())
-    hist.P.append(fs.P.copy())
-    hist.b_omega.append(b_omega)
-    hist.gyro_bias.append(fs.gyro_bias.copy())
-    hist.accel_bias.append(fs.accel_bias.copy())
-    hist.scale.append(fs.scale)
-    hist.b_R_d.append(fs.b_R_d.copy())
-    hist.time_offset.append(fs.time_offset)
-
-
-def _to_result(hist: _History, log: LogData, config: EstimatorConfig) -> NavResult:
-    """NavResult and Timeline from the history. GTSAM's Pose3 tangent is [rotation, translation] in body
-    axes: n_R_b Exp(w) = Exp(n_R_b w) n_R_b gives w = n_R_b^T phi, and Pose3's translation perturbation
-    t + n_R_b v gives v = n_R_b^T dp; so pose_cov = J P[phi, p] J^T with J = diag(n_R_b^T, n_R_b^T)."""
-    P = np.array(hist.P)
-    n_R_b = np.array(hist.n_R_b)
-    n = len(hist.t)
-    J = np.zeros((n, 6, 6))
-    J[:, :3, :3] = np.transpose(n_R_b, (0, 2, 1))
-    J[:, 3:, 3:] = J[:, :3, :3]
-    pose_idx = np.r_[0:3, 6:9]
-    P_pose = P[:, pose_idx][:, :, pose_idx]
-    pose_cov = J @ P_pose @ np.transpose(J, (0, 2, 1))
-    pose_vel_cross = J @ P[:, pose_idx, 3:6]
-    layout = ekf_layout(config, N_NAV)
-    calib_idx = np.r_[tuple(layout[s.name] for s in block_states())]  # [accel, gyro] bias, scale, b_R_d tangent
-    calib = P[-1][np.ix_(calib_idx, calib_idx)]
-    b_R_d0 = log.mounting.b_R_d0
-    mis_deg, mis_cov = misalignment_timeline(np.array(hist.b_R_d), b_R_d0, P[:, MIS, MIS])
-    diag = np.einsum("nii->ni", P)
-    timeline = Timeline(
-        t=np.array(hist.t),
-        scale=np.array(hist.scale),
-        scale_sigma=np.sqrt(diag[:, SCALE]),
-        misalignment_deg=mis_deg,
-        misalignment_sigma_deg=np.sqrt(np.einsum("nii->ni", mis_cov)),
-        gyro_bias_deg_per_h=np.array(hist.gyro_bias) / DEG_PER_H,
-        gyro_bias_sigma_deg_per_h=np.sqrt(diag[:, BG]) / DEG_PER_H,
-        accel_bias_ug=np.array(hist.accel_bias) / UG,
-        accel_bias_sigma_ug=np.sqrt(diag[:, BA]) / UG,
-        attitude_sigma_deg=np.degrees(np.sqrt(diag[:, PHI])),
-    )
-    final = {"gyro_bias": hist.gyro_bias[-1], "accel_bias": hist.accel_bias[-1], "scale": [hist.scale[-1]],
-             "misalignment": hist.b_R_d[-1], "time_offset": [hist.time_offset[-1]]}
-    return NavResult(
-        estimator="ekf",
-        t=np.array(hist.t), n_p=np.array(hist.n_p), n_R_b=n_R_b, n_v=np.array(hist.n_v),
-        pose_cov=pose_cov, vel_cov=P[:, 3:6, 3:6].copy(),
-        calibration={name: Estimate(np.asarray(final[name], dtype=float), P[-1][sl, sl].copy())
-                     for name, sl in layout.items()},
-        b_R_d0=b_R_d0, t0_ns=log.t0_ns,
-        b_omega=np.array(hist.b_omega), pose_vel_cross=pose_vel_cross, calib_joint_cov=calib,
-        timeline=timeline, config=config.to_dict(),
-    )

@@ -90,6 +90,13 @@ from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
+from gtsam_dvl.estimators.noise_levels import (
+    NoiseReport,
+    apply_imu_floor,
+    dvl_fit_enabled,
+    median_ping_sigma,
+    with_multiplier,
+)
 from gtsam_dvl.estimators.online.alignment_wait import AlignmentWait, given_attitude
 from gtsam_dvl.estimators.online.between_pings import KeyframeGravity, StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.depth_queue import DepthQueue
@@ -97,6 +104,7 @@ from gtsam_dvl.estimators.online.dvl_factors import RateInput, keyframe_dvl_fact
 from gtsam_dvl.estimators.online.feed import feed_log
 from gtsam_dvl.estimators.online.imu_buffer import ImuBuffer
 from gtsam_dvl.estimators.online.messages import MessageChecks, vector3
+from gtsam_dvl.estimators.online.noise_fit import OnlineNoiseFit
 from gtsam_dvl.estimators.online.offset_windows import OffsetWindows
 from gtsam_dvl.estimators.online.types import (
     EpochHistory,
@@ -171,6 +179,10 @@ class OnlineEstimator:
         self._flushing = False
         self._depth = DepthQueue(self.config.depth, frame,
                                  None if depth_sensor is None else vector3("depth_sensor", depth_sensor), self._count)
+        # the DVL noise fitted on the warm-up window (online/noise_fit.py); noise: the levels used and why
+        lag = min(10.0, 0.5 * self.options.window_s) if self.options.mode == "fixed_lag" else 10.0
+        self._noise_fit = OnlineNoiseFit(self.config, lag) if dvl_fit_enabled(self.config) else None
+        self.noise = NoiseReport()
         if self.config.alignment.initial_attitude_deg is not None:
             self._start(given_attitude(frame, self.config.alignment))
 
@@ -180,8 +192,12 @@ class OnlineEstimator:
         """An estimator with the map origin and mounting of a log (to replay it). config None: the one the
         log's scenario names, else the defaults (EstimatorConfig.for_log)."""
         config = config or EstimatorConfig.for_log(log.metadata)
-        return cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
-                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
+        noise = NoiseReport()
+        config = apply_imu_floor(log.imu, config, noise)  # the log's IMU quantisation floor ([noise])
+        est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
+                  source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
+        est.noise.imu = noise.imu
+        return est
 
     @property
     def recentre_offset_window(self) -> bool:
@@ -257,6 +273,10 @@ class OnlineEstimator:
             sm.refresh_gravity()
             sm.refine(self.options.final_updates)
             self._latest = self._read_estimate(with_covariance=True)
+        if self._noise_fit is not None and not self._noise_fit.done:
+            self.noise.dvl = {"multiplier": self.config.dvl.noise_multiplier,
+                              "why": "DVL noise not fitted: the log ends within the warm-up window ([noise] warmup_s) "
+                                     "and the residuals' lag"}
         return self._latest
 
     # ----- output --------------------------------------------------------------------------------
@@ -289,6 +309,7 @@ class OnlineEstimator:
             "keyframe_spacing_s": self.config.solver.keyframe_spacing_s,
             "imu_gaps": self._imu.gaps_info(),
             "alignment": self.builder.alignment.info(),
+            "noise": self.noise.as_dict(),
             "latency_ms": latency_stats(self.latencies_s),
             "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
                       "variables": n_vars, "factors": n_factors},
@@ -404,6 +425,9 @@ class OnlineEstimator:
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
         min_speed = self.options.calibration_min_speed_m_s
         dvl = state_dvl_factors(b, i, p, b_omega, min_speed, rate_input) if p is not None else []
+        if self._noise_fit is not None:  # the pings of this epoch (those between keyframes, then its own)
+            for q, fs in [*self._deferred, *(((p, dvl),) if p is not None else ())]:
+                self._noise_fit.record(q.t, list(fs), median_ping_sigma(self.config, q.d_cov))
         self._count("states_without_ping" if p is None else "keyframes")
         dvl += self._depth.factors(b, sm.times, i, t_epoch)
         if i == 0:
@@ -416,6 +440,10 @@ class OnlineEstimator:
             between = [f for _, fs in self._deferred for f in fs]  # the pings since the previous state (on it)
             sm.add_epoch(t_epoch, between + dvl, pim, params, held=held)
         self._deferred = []
+        if self._noise_fit is not None and (new := self._noise_fit.after_epoch(t_epoch, sm.isam)) is not None:
+            self.noise.dvl = self._noise_fit.report  # held from now on: the next factors take it
+            self.config = with_multiplier(self.config, new)
+            b.config = self.config
         self._interval.reset(t_epoch)
         self._imu.keep_from(t_epoch)
         if self._offset:  # keep what the next epochs' velocity-rate windows can reach

@@ -1,0 +1,47 @@
+"""[noise]: the noise levels the estimators take from the data (estimators/noise_levels.py).
+
+Datasheet densities and a DVL's stated noise describe the sensor, not the log: an IMU whose samples were
+quantised by its driver or an export (steps of 1e-4 rad/s and 1e-4 m/s^2 are common) carries white noise of
+q / sqrt(12) per sample on top of the sensor's own, and a real DVL's ping noise (5-9 mm/s on Teledyne- and
+Nortek-class units) is rarely what its messages' covariance or the configured default says. With from_data on
+(the default), every estimator
+
+- finds the quantisation step of each IMU axis from the samples (core/sensor_noise.py) and raises the
+  configured white-noise density to the root sum of squares of it and the rounding error's density
+  q / sqrt(12 f) (imu_quantisation);
+- fits a factor on every DVL sigma (a variance component: [dvl] noise_multiplier) from the whitened DVL
+  residuals (fit_dvl): the batch smoother re-solves with the fitted factor until it changes by less than
+  fit_tolerance (at most fit_passes solves); the online estimator and the EKF fit it on the pings of the first
+  warmup_s seconds and hold it from then on.
+
+The fitted factor is clipped to [dvl_min_multiplier, dvl_max_multiplier] (a fit at a bound is reported: the
+model does not fit, whatever the factor). The fit starts from [dvl] noise_multiplier; fit_dvl = false pins
+the DVL at it, imu_quantisation = false pins the IMU densities as configured.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+from pydantic import Field
+
+from gtsam_dvl.core.config.base import ConfigModel, Flag, Integer, Positive
+
+
+class NoiseConfig(ConfigModel):
+    SECTION: ClassVar[str] = "noise"
+
+    from_data: Flag = True  # false: every level as configured (the "paper" configuration)
+    imu_quantisation: Flag = True  # raise the IMU white noise to its quantisation floor
+    fit_dvl: Flag = True  # fit the DVL noise factor from the residuals
+    fit_passes: Integer = Field(default=4, ge=1)  # batch: solves at most, the first included
+    # batch: re-solve while the fitted factor changes by more than this fraction (0.03: the fit's own sampling
+    # error on 400 pings of 3 axes is 2 %)
+    fit_tolerance: Positive = 0.03
+    # bounds of the fitted factor: 0.1-10 covers a stated noise ten times too large or too small
+    dvl_min_multiplier: Positive = 0.1
+    dvl_max_multiplier: Positive = 10.0
+    # fewer DVL rows than this: no fit (the factor's sampling error would exceed 10 %)
+    min_rows: Integer = Field(default=60, ge=3)
+    # online estimator and EKF: the fit's window from the first ping, s (then held)
+    warmup_s: Positive = 120.0

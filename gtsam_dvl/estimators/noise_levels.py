@@ -1,0 +1,224 @@
+"""The noise levels every estimator takes from the data ([noise], core/config/noise.py).
+
+IMU quantisation floor. A sample rounded to a step q carries a rounding error uniform on [-q/2, q/2]: white noise
+of variance q^2 / 12 per sample while the vehicle moves (the signal sweeps many steps between samples), i.e. a
+density of q / sqrt(12 f) at the sample rate f. It adds to the sensor's own white noise:
+
+    N_used = sqrt(N_configured^2 + (q / sqrt(12 f))^2)
+
+per sensor, with the largest step of its three axes (the preintegration takes one isotropic density). At 100 Hz and
+q = 1e-4 rad/s that is 0.60 deg/h/sqrt(Hz), six times a FOG's 0.1.
+
+DVL variance component. Every ping's covariance R_i (configured, from its message, or the default) is taken as
+lambda^2 R_i, and lambda is fitted from the whitened residuals e_i = W_i r_i (W_i^T W_i = (lambda^2 R_i)^-1) at the
+solution: lambda_new^2 = lambda^2 sum |e_i|^2 / (m n), the variance-component estimate of the group (Helmert /
+Foerstner) with the redundancy of the DVL rows taken as their number: the other states absorb a small part of the
+residual (on a 400 s, 1 Hz run: the calibration, biases, initial velocity and attitude, 15-20 of 1200 rows, so
+lambda is low by about 1 %). Robust to bad pings: the rows beyond the robust kernel's threshold at a median-based
+scale are left out, and the truncation of the chi^2 distribution there is corrected for exactly
+(E[x | x <= c] = m F_{m+2}(c) / F_m(c) for x ~ chi^2_m). The batch smoother iterates fit and solve; the online
+estimator and the EKF fit on a warm-up window and hold the factor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.stats import chi2
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.sensor_noise import imu_quantisation, quantisation_density
+from gtsam_dvl.core.types import ImuData
+from gtsam_dvl.core.units import DEG_PER_H, UG
+
+
+@dataclass
+class NoiseReport:
+    """Which noise levels an estimator used and why (result.info["noise"], the summary and the console)."""
+
+    imu: dict[str, Any] = field(default_factory=dict)
+    dvl: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"imu": self.imu, "dvl": self.dvl}
+
+    def lines(self) -> list[str]:
+        """One line per level that differs from the configuration, and the DVL fit."""
+        out = [str(v["why"]) for v in self.imu.values() if isinstance(v, dict) and v.get("why")]
+        if self.dvl.get("why"):
+            out.append(str(self.dvl["why"]))
+        return out
+
+
+def imu_rate_hz(imu: ImuData) -> float:
+    """The IMU's sample rate from the median spacing of its stamps (Hz)."""
+    dt = np.diff(np.asarray(imu.t, dtype=float))
+    dt = dt[dt > 0]
+    return float(1.0 / np.median(dt)) if len(dt) else math.nan
+
+
+def apply_imu_floor(imu: ImuData, config: EstimatorConfig, report: NoiseReport) -> EstimatorConfig:
+    """config with each IMU white-noise density raised by the quantisation floor of its samples (module doc), the
+    steps and the densities used written into report.imu. Unchanged when [noise] from_data or imu_quantisation is
+    off, or the samples are not quantised."""
+    n = config.noise
+    if not (n.from_data and n.imu_quantisation) or len(imu.t) < 100:
+        return config
+    gyro_q, accel_q = imu_quantisation(np.asarray(imu.b_omega), np.asarray(imu.b_f))
+    rate = imu_rate_hz(imu)
+    update: dict[str, float] = {}
+    for name, steps, unit, key, per in (("gyro", gyro_q, "rad/s", "gyro_noise_deg_per_h_rthz", DEG_PER_H),
+                                        ("accel", accel_q, "m/s^2", "accel_noise_ug_rthz", UG)):
+        configured = float(getattr(config.imu, key))
+        entry: dict[str, Any] = {"step": [None if not np.isfinite(s) else float(s) for s in steps],
+                                 "configured": configured, "used": configured}
+        finite = steps[np.isfinite(steps)]
+        if len(finite) and np.isfinite(rate):
+            q = float(finite.max())
+            floor = quantisation_density(q, rate) / per  # in the configuration's unit
+            used = math.hypot(configured, floor)
+            entry.update(floor=floor, used=used)
+            update[key] = used
+            unit_cfg = "deg/h/sqrt(Hz)" if name == "gyro" else "micro-g/sqrt(Hz)"
+            entry["why"] = (f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): white noise {used:.3g} {unit_cfg} "
+                            f"instead of {configured:.3g} (floor q/sqrt(12 f) = {floor:.3g})")
+        report.imu[name] = entry
+    if not update:
+        return config
+    return config.model_copy(update={"imu": config.imu.model_copy(update=update)})
+
+
+def dvl_fit_enabled(config: EstimatorConfig) -> bool:
+    """Whether the DVL noise factor is fitted ([noise] from_data and fit_dvl); the fit starts from [dvl]
+    noise_multiplier (a result's configuration, reloaded, starts at its fitted factor)."""
+    return config.noise.from_data and config.noise.fit_dvl
+
+
+def truncated_chi2_mean(m: int, c: float) -> float:
+    """E[x | x <= c] for x ~ chi^2 with m degrees of freedom: m F_{m+2}(c) / F_m(c)."""
+    return float(m * chi2.cdf(c, m + 2) / chi2.cdf(c, m))
+
+
+def variance_ratio(ew: np.ndarray, robust_k: float) -> tuple[float, int]:
+    """The factor on the variance of whitened errors ew (N, m) that makes them unit variance (module doc), and
+    the rows used: those whose squared norm is within robust_k^2 at a median-based first scale, with the
+    truncated chi^2 mean as expectation. (nan, 0) when no row is finite."""
+    ew = np.asarray(ew, dtype=float).reshape(len(ew), -1)
+    m = ew.shape[1]
+    x2 = np.einsum("ni,ni->n", ew, ew)
+    x2 = x2[np.isfinite(x2)]
+    if not len(x2):
+        return math.nan, 0
+    s0 = float(np.median(x2) / chi2.median(m))  # robust first scale
+    c = robust_k**2
+    inside = x2 <= c * max(s0, 1e-300)
+    used = int(inside.sum())
+    if not used:
+        return math.nan, 0
+    return float(x2[inside].mean() / truncated_chi2_mean(m, c)), used
+
+
+def fitted_multiplier(current: float, ratio: float, config: EstimatorConfig) -> tuple[float, bool]:
+    """The new multiplier current * sqrt(ratio), clipped to the [noise] bounds; and whether it hit one."""
+    n = config.noise
+    raw = current * math.sqrt(ratio)
+    clipped = min(max(raw, n.dvl_min_multiplier), n.dvl_max_multiplier)
+    return clipped, clipped != raw
+
+
+def dvl_fit_report(config: EstimatorConfig, multiplier: float, rows: int, passes: int, at_bound: bool,
+                   sigma_m_s: float, how: str) -> dict[str, Any]:
+    """report.dvl of a fit: the factor, the median ping sigma it gives, the rows and passes, and the line."""
+    n = config.noise
+    why = (f"DVL noise fitted from {rows} residual rows ({how}): sigma x {multiplier:.3g} = {sigma_m_s * 1e3:.2g} "
+           f"mm/s per axis")
+    if at_bound:
+        why += (f", at the bound [{n.dvl_min_multiplier:g}, {n.dvl_max_multiplier:g}] of [noise]: the DVL model "
+                "does not fit its data whatever the noise level")
+    return {"multiplier": multiplier, "sigma_m_s": sigma_m_s, "rows": rows, "passes": passes,
+            "at_bound": at_bound, "how": how, "why": why}
+
+
+def median_ping_sigma(config: EstimatorConfig, d_cov: np.ndarray) -> float:
+    """The median over pings of the per-axis sigma a ping is given (ping_covariance, with the multiplier), m/s."""
+    from gtsam_dvl.estimators.selection import ping_covariance
+
+    if config.dvl.use_beams:
+        return config.dvl.beam_sigma_m_s()
+    cov = ping_covariance(config.dvl, np.asarray(d_cov, dtype=float).reshape(-1, 3, 3))
+    return float(np.median(np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0))) if len(cov) else math.nan
+
+
+def with_multiplier(config: EstimatorConfig, multiplier: float) -> EstimatorConfig:
+    """config with [dvl] noise_multiplier set."""
+    return config.model_copy(update={"dvl": config.dvl.model_copy(update={"noise_multiplier": multiplier})})
+
+
+@dataclass
+class WarmupFit:
+    """The DVL's variance component fitted on the pings of a warm-up window ([noise] warmup_s from the first
+    ping), then held (the online estimator and the EKF). Either from the pings' whitened residuals (add_whitened:
+    the smoother's, once the pings that followed have updated the states around the ping) or by covariance
+    matching of the filter's innovations (add_innovation: E[nu nu^T] = H P H^T + R, so
+    lambda^2 = lambda_0^2 sum(nu.nu - tr H P H^T) / sum tr R over the pings whose tr H P H^T <= tr R, i.e. whose
+    innovation is mostly measurement noise; Mehra's innovation-based adaptive estimation, unbiased when P is the
+    P of the right R: the EKF filters the window again with each fit). Robust as variance_ratio: the rows beyond
+    the kernel's threshold at a median-based scale are left out."""
+
+    config: EstimatorConfig  # its [dvl] noise_multiplier: the factor the window was processed with
+    t_first: float = math.nan
+    sigma_m_s: float = math.nan  # the median ping sigma at the configuration's multiplier (m/s)
+    report: dict[str, Any] = field(default_factory=dict)
+    _ew: list[np.ndarray] = field(default_factory=list)
+    _innov: list[tuple[float, float, float, float, int]] = field(default_factory=list)
+
+    def start(self, t_first: float, sigma_m_s: float) -> None:
+        self.t_first, self.sigma_m_s = t_first, sigma_m_s
+
+    @property
+    def t_end(self) -> float:
+        return self.t_first + self.config.noise.warmup_s
+
+    def add_whitened(self, ew: np.ndarray) -> None:
+        self._ew.append(np.asarray(ew, dtype=float).reshape(1, -1))
+
+    def add_innovation(self, nu: np.ndarray, hph: np.ndarray, R: np.ndarray, nis: float) -> None:
+        tr_hph, tr_r = float(np.trace(hph)), float(np.trace(R))
+        if tr_hph <= tr_r:
+            self._innov.append((float(nu @ nu), tr_hph, tr_r, nis, len(nu)))
+
+    def finish(self, how: str) -> float:
+        """The multiplier fitted from what was collected (the configuration's when too few rows); report says
+        how."""
+        n = self.config.noise
+        current = self.config.dvl.noise_multiplier
+        ratio, rows = math.nan, 0
+        if self._ew:
+            ew = np.concatenate([e.reshape(-1, 1) for e in self._ew])
+            dims = {e.shape[1] for e in self._ew}
+            if len(dims) == 1:
+                ew = np.concatenate(self._ew)
+            ratio, used = variance_ratio(ew, self.config.dvl.robust_threshold())
+            rows = used * ew.shape[1]
+        elif self._innov:
+            a = np.array(self._innov)
+            m = int(np.median(a[:, 4]))
+            s0 = float(np.median(a[:, 3]) / chi2.median(m))
+            c = self.config.dvl.robust_threshold()**2
+            keep = a[:, 3] <= c * max(s0, 1e-300)
+            rows = int(a[keep, 4].sum())
+            if keep.any():
+                ratio = float((a[keep, 0] - a[keep, 1]).sum() / a[keep, 2].sum()) * m / truncated_chi2_mean(m, c)
+        self._ew, self._innov = [], []
+        if rows < n.min_rows or not np.isfinite(ratio) or ratio <= 0:
+            self.report = {"multiplier": current, "rows": rows,
+                           "why": f"DVL noise not fitted: {rows} usable rows in the first {n.warmup_s:g} s "
+                                  f"(fewer than [noise] min_rows = {n.min_rows}, or no positive variance left)"}
+            return current
+        new, at_bound = fitted_multiplier(current, ratio, self.config)
+        self.report = dvl_fit_report(self.config, new, rows, 1, at_bound, self.sigma_m_s * new / current,
+                                     f"{how} over the first {n.warmup_s:g} s, then held")
+        return new
