@@ -111,7 +111,17 @@ def assess_health(result: NavResult, log: LogData) -> Health:
     if len(result.t):
         _check_dvl_residuals(result, log, config, health)
     _check_counters(result, log, health)
+    _check_noise_fit(result, health)
     return health
+
+
+def _check_noise_fit(result: NavResult, health: Health) -> None:
+    """A DVL noise fit that ended at a bound of [noise] is no fit: the DVL model does not fit its data at any
+    noise level within ten times the stated one (a wrong mounting, a wrong topic, water track)."""
+    noise = result.info.get("noise")
+    dvl = noise.get("dvl") if isinstance(noise, dict) else None
+    if isinstance(dvl, dict) and dvl.get("at_bound"):
+        health.flag("degraded", str(dvl.get("why")))
 
 
 def assess_log_health(log: LogData) -> Health:

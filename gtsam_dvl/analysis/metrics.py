@@ -119,6 +119,15 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
     return out
 
 
+def noise_lines(noise: Any) -> list[str]:
+    """The noise levels an estimator took from the data, one line each (result.info["noise"],
+    estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor, the DVL fit."""
+    if not isinstance(noise, dict):
+        return []
+    parts = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)] + [noise.get("dvl") or {}]
+    return [str(p["why"]) for p in parts if isinstance(p, dict) and p.get("why")]
+
+
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     """The summary JSON (docs/command-line.md), in user units (degrees, deg/h, micro-g, ppm), with the run's
     health (analysis/health.py) and what the reader lost (LogData.metadata["reader_losses"])."""
@@ -141,6 +150,7 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         if result.timing_s.get("total") else None,
         "info": result.info,
     }
+    out["noise_levels"] = noise_lines(result.info.get("noise"))
     if np.isfinite(result.time_offset_sigma_s):
         out["dvl_time_offset_s"] = time_offset_verdict(result)
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:

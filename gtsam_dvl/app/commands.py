@@ -178,6 +178,7 @@ class SmoothOutcome:
         if off:
             lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
                             f"({'determined' if off.get('determined') else 'not determined'})")
+        lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
         lines += health_lines(s.get("health"))
         lines += [f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]
         return "\n".join(lines)

@@ -45,13 +45,6 @@ class NoiseReport:
     def as_dict(self) -> dict[str, Any]:
         return {"imu": self.imu, "dvl": self.dvl}
 
-    def lines(self) -> list[str]:
-        """One line per level that differs from the configuration, and the DVL fit."""
-        out = [str(v["why"]) for v in self.imu.values() if isinstance(v, dict) and v.get("why")]
-        if self.dvl.get("why"):
-            out.append(str(self.dvl["why"]))
-        return out
-
 
 def imu_rate_hz(imu: ImuData) -> float:
     """The IMU's sample rate from the median spacing of its stamps (Hz)."""
