@@ -104,8 +104,9 @@ class Health:
 def assess_health(result: NavResult, log: LogData) -> Health:
     """The health of a run (module doc)."""
     health = assess_log_health(log)
-    # the configuration the result was made with; a result of another version: judged with the default noise rule
-    config = result.estimator_config or EstimatorConfig()
+    # the configuration the result was made with, at the noise levels it used (the IMU quantisation floor and
+    # the fitted DVL noise of info["noise"]); a result of another version: judged with the default noise rule
+    config = result.noise_config or EstimatorConfig()
     _check_finite(result, health)
     _check_solver(result, health)
     if len(result.t):

@@ -237,6 +237,27 @@ class NavResult(CalibrationUnits):
             return None
 
     @property
+    def noise_config(self) -> EstimatorConfig | None:
+        """The configuration with the noise levels the estimator used: `config` holds the configuration as given
+        (reading it back with -c reproduces the run), info["noise"] the levels taken from the data
+        (estimators/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL noise
+        factor). What the residuals are judged against. None: the configuration does not read."""
+        config = self.estimator_config
+        noise = self.info.get("noise") if isinstance(self.info, dict) else None
+        if config is None or not isinstance(noise, dict):
+            return config
+        imu_update = {key: float(entry["used"]) for name, key in (("gyro", "gyro_noise_deg_per_h_rthz"),
+                                                                  ("accel", "accel_noise_ug_rthz"))
+                      if isinstance(entry := noise.get("imu", {}).get(name), dict) and entry.get("used") is not None}
+        multiplier = noise.get("dvl", {}).get("multiplier")
+        update: dict[str, Any] = {}
+        if imu_update:
+            update["imu"] = config.imu.model_copy(update=imu_update)
+        if multiplier is not None and math.isfinite(float(multiplier)):
+            update["dvl"] = config.dvl.model_copy(update={"noise_multiplier": float(multiplier)})
+        return config.model_copy(update=update) if update else config
+
+    @property
     def lever_arm_sigma_m(self) -> np.ndarray | None:
         """(3,) marginal sigmas of the estimated lever arm along base_link x, y, z, m (None: not estimated)."""
         return None if self.lever_arm_cov is None else np.sqrt(np.diag(self.lever_arm_cov))

@@ -46,6 +46,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     noise = NoiseReport()
+    stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
@@ -80,6 +81,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["noise"] = noise.as_dict()
+    result.config = stated.to_dict()
     result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
                              "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,
                              "passes": passes, **{f"{k}_s": v for k, v in report.timing_s.items()}}

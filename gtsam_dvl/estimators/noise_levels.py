@@ -86,7 +86,8 @@ def apply_imu_floor(imu: ImuData, config: EstimatorConfig, report: NoiseReport) 
 
 def dvl_fit_enabled(config: EstimatorConfig) -> bool:
     """Whether the DVL noise factor is fitted ([noise] from_data and fit_dvl); the fit starts from [dvl]
-    noise_multiplier (a result's configuration, reloaded, starts at its fitted factor)."""
+    noise_multiplier. A result's configuration holds the configuration as given and info["noise"] the levels
+    used (NavResult.noise_config joins them), so that a result's configuration, reloaded, reproduces the run."""
     return config.noise.from_data and config.noise.fit_dvl
 
 
@@ -184,8 +185,8 @@ class WarmupFit:
             self._innov.append((float(nu @ nu), tr_hph, tr_r, nis, len(nu)))
 
     def finish(self, how: str) -> float:
-        """The multiplier fitted from what was collected (the configuration's when too few rows); report says
-        how."""
+        """The multiplier fitted from what was collected (the configuration's when too few rows, or when the fit
+        is within [noise] fit_tolerance of it); report says how."""
         n = self.config.noise
         current = self.config.dvl.noise_multiplier
         ratio, rows = math.nan, 0
@@ -212,6 +213,10 @@ class WarmupFit:
                                   f"(fewer than [noise] min_rows = {n.min_rows}, or no positive variance left)"}
             return current
         new, at_bound = fitted_multiplier(current, ratio, self.config)
+        if abs(new / current - 1.0) <= n.fit_tolerance:
+            # within the tolerance the factor the window was processed with is kept, as the batch fit does: a
+            # result's configuration, reloaded, then reproduces its estimates instead of moving by the fit's scatter
+            new = current
         self.report = dvl_fit_report(self.config, new, rows, 1, at_bound, self.sigma_m_s * new / current,
                                      f"{how} over the first {n.warmup_s:g} s, then held")
         return new

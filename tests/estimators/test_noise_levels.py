@@ -55,7 +55,9 @@ def test_batch_fits_the_dvl_noise(log: LogData) -> None:
     dvl = fitted.info["noise"]["dvl"]
     assert dvl["sigma_m_s"] == pytest.approx(TRUE_NOISE_M_S, rel=0.05)
     assert dvl["multiplier"] == pytest.approx(TRUE_NOISE_M_S / STATED_M_S, rel=0.05)
-    assert fitted.config["dvl"]["noise_multiplier"] == dvl["multiplier"]
+    # the result's configuration is the one given (reloaded, it reproduces the run); noise_config the one used
+    assert fitted.config["dvl"]["noise_multiplier"] == 1.0
+    assert fitted.noise_config is not None and fitted.noise_config.dvl.noise_multiplier == dvl["multiplier"]
     s = fitted.info["solver"]
     assert 0.9 <= 2 * s["final_error"] / s["dof"] <= 1.1
     assert "DVL noise fitted" in dvl["why"]
@@ -85,11 +87,13 @@ def test_ekf_fits_the_dvl_noise(log: LogData) -> None:
 
 def test_online_fits_the_dvl_noise_on_its_warmup(log: LogData) -> None:
     """The online smoother's residuals 10 s after each ping over the first 300 s: the simulated sigma within 8 %,
-    and the factors after the warm-up take it (the result's configuration carries the fitted multiplier)."""
+    and the factors after the warm-up take it (the result's noise_config carries the fitted multiplier, its
+    configuration the one given)."""
     r = smooth_online(log, _stated(warmup_s=300.0))
     dvl = r.info["noise"]["dvl"]
     assert dvl["sigma_m_s"] == pytest.approx(TRUE_NOISE_M_S, rel=0.08)
-    assert r.config["dvl"]["noise_multiplier"] == pytest.approx(dvl["multiplier"])
+    assert r.noise_config is not None and r.noise_config.dvl.noise_multiplier == pytest.approx(dvl["multiplier"])
+    assert r.config["dvl"]["noise_multiplier"] == 1.0
 
 
 def test_paper_configuration_takes_the_stated_noise(log: LogData) -> None:

@@ -376,6 +376,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         config = config.model_copy(update={"ekf": ekf})
     config.validate()
     noise = NoiseReport()
+    stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise])
     if dvl_fit_enabled(config):
         n = config.noise
@@ -390,6 +391,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                 break
     result = _filter(log, config, progress)
     result.info["noise"] = noise.as_dict()
+    result.config = stated.to_dict()
     return result
 
 
