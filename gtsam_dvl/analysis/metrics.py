@@ -121,10 +121,12 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 
 def noise_lines(noise: Any) -> list[str]:
     """The noise levels an estimator took from the data, one line each (result.info["noise"],
-    estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor, the DVL fit."""
+    estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor or to the static
+    segment's measured density, the DVL fit."""
     if not isinstance(noise, dict):
         return []
-    parts = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)] + [noise.get("dvl") or {}]
+    imu = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)]
+    parts = imu + [v["static"] for v in imu if isinstance(v.get("static"), dict)] + [noise.get("dvl") or {}]
     return [str(p["why"]) for p in parts if isinstance(p, dict) and p.get("why")]
 
 

@@ -18,10 +18,10 @@ from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
-    apply_imu_floor,
     dvl_fit_enabled,
     dvl_fit_report,
     fitted_multiplier,
+    imu_levels,
     median_ping_sigma,
     variance_ratio,
     with_multiplier,
@@ -47,7 +47,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     t0 = time.perf_counter()
     noise = NoiseReport()
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
+    config = imu_levels(log, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()

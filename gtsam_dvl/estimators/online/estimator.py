@@ -92,8 +92,8 @@ from gtsam_dvl.estimators.gaps import check_spacing, filler_due
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
-    apply_imu_floor,
     dvl_fit_enabled,
+    imu_levels,
     median_ping_sigma,
     with_multiplier,
 )
@@ -197,7 +197,7 @@ class OnlineEstimator:
         config = config or EstimatorConfig.for_log(log.metadata)
         noise = NoiseReport()
         stated = config
-        config = apply_imu_floor(log.imu, config, noise)  # the log's IMU quantisation floor ([noise])
+        config = imu_levels(log, config, noise)  # the log's IMU quantisation floor ([noise])
         est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
         est.noise.imu = noise.imu
