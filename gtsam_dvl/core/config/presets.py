@@ -347,6 +347,7 @@ def describe_preset(name: str) -> str:
     lines = [f"{name}: {title}", *extra, "fills (unless the configuration sets them):"]
     lines += [f"  [{section}] {k} = {v:g}" for k, v in values.items()]
     if section == "dvl":
-        lines.append(f"  [priors] scale_sigma = {dvl.scale_accuracy:g} (scale accuracy +-{dvl.scale_accuracy * 100:g} %)")
+        accuracy = DVL_PRESETS[name].scale_accuracy
+        lines.append(f"  [priors] scale_sigma = {accuracy:g} (scale accuracy +-{accuracy * 100:g} %)")
     lines += ["sources:", *(f"  - {s}" for s in sources), "", "TOML:", f"[{section}]", f'model = "{name}"']
     return "\n".join(lines)
