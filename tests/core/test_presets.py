@@ -160,3 +160,15 @@ def test_presets_command_lists_every_preset_and_describes_one() -> None:
     assert EstimatorConfig.from_dict(tomllib.loads(block)).dvl.model == "teledyne-pathfinder"
     res = runner.invoke(app, ["presets", "nope"])
     assert res.exit_code == 1 and "known: ixblue-phins" in res.output
+
+
+def test_docs_table_has_every_preset_with_its_values() -> None:
+    text = (Path(__file__).resolve().parents[2] / "docs" / "sensors.md").read_text()
+    rows = {line.split("|")[1].strip().strip("`"): [c.strip() for c in line.split("|")[3:-2]]
+            for line in text.splitlines() if line.startswith("| `")}
+    for name, p in IMU_PRESETS.items():
+        assert rows[name] == [f"{p.gyro_noise_deg_per_h_rthz:g}", f"{p.accel_noise_ug_rthz:g}",
+                              f"{p.gyro_bias_stability_deg_per_h:g}", f"{p.accel_bias_stability_ug:g}"], name
+    for name, d in DVL_PRESETS.items():
+        assert rows[name][:3] == [f"{d.ping_noise_m_s * 1000:g}", f"{d.scale_accuracy * 100:g}",
+                                  f"{d.min_altitude_m:g}-{d.max_altitude_m:g}"], name

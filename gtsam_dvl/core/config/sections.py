@@ -137,8 +137,7 @@ class DvlConfig(ConfigModel):
     # estimators fit from the residuals ([noise] fit_dvl, core/config/noise.py); set here, it pins the factor
     noise_multiplier: Positive = 1.0
     # a first-order Gauss-Markov velocity error (per axis, m/s) and its time constant (s), from a preset or set
-    # here: recorded with the configuration and read by the simulator's presets; the estimators do not model it
-    # yet (their DVL error is white)
+    # here: recorded with the configuration; the estimators do not model it yet (their DVL error is white)
     correlated_sigma_m_s: NonNegative = 0.0
     correlated_tau_s: Positive = 60.0
 
