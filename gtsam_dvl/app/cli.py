@@ -343,6 +343,19 @@ def montecarlo(
 
 @app.command()
 @_user_errors
+def presets(
+    name: Annotated[str | None, typer.Argument(help="A preset's name: its values, their sources and the TOML block "
+                                                    "to use it.")] = None,
+    debug: Debug = False,
+) -> None:
+    """The sensor presets ([imu] model, [dvl] model): every one in a table, or one with its sources."""
+    from gtsam_dvl.core.config.presets import describe_preset, preset_table
+
+    typer.echo(describe_preset(name) if name is not None else "\n".join(preset_table()))
+
+
+@app.command()
+@_user_errors
 def demo(
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for everything the demo writes.")] = Path(
         "demo-output"),
