@@ -68,6 +68,8 @@ DEPTH_CHANGE_M = 2.0
 # of the distance travelled (0.1 %: the accuracy of a good DVL-aided INS, 0.1-0.3 % of distance)
 MATTERS_FRACTION = 1e-3
 
+# the directions a depth change separates (their sentence says "with no depth change" on a level log)
+DEPTH_COLUMNS = ("misalignment roll", "misalignment pitch")
 MANOEUVRES = {
     # (column, motion kind) -> the manoeuvre that separates it; (column, "") for any motion
     ("scale", "steady turn"): "a speed change or an S-turn",
@@ -101,11 +103,12 @@ class MotionSummary:
     depth_change_m: float = 0.0
     distance_m: float = 0.0
 
-    def during(self) -> str:
-        """The motion in words, for a sentence: "during a steady turn", "on a straight track"."""
+    def during(self, depth: bool = False) -> str:
+        """The motion in words, for a sentence: "during a steady turn", "on a straight track"; depth: say "with no
+        depth change" when level."""
         text = {"straight": "on a straight track", "steady turn": "during a steady turn",
                 "varied": "in this log's manoeuvres", "static": "on a static log"}[self.kind]
-        if self.level and self.kind != "static":
+        if depth and self.level and self.kind != "static":
             text += " with no depth change"
         return text
 
@@ -262,12 +265,13 @@ def _finding(name: str, ratio: float, partner: tuple[SharedState, str, str] | No
     kind = "level" if name == "misalignment roll" and motion.level else motion.kind
     manoeuvre = MANOEUVRES.get((name, kind)) or MANOEUVRES.get((name, ""), "more varied motion")
     head = f"{name} leans on its prior" if ratio > LEANS_ON_PRIOR else f"{name} is tied to another state"
+    during = motion.during(depth=name in DEPTH_COLUMNS)
     verb = "separates" if manoeuvre.startswith(("a ", "an ")) else "separate"
     if partner is not None:
-        text = f"{head}: correlated {rho:.2f} with {_words(partner[0], partner[1])} {motion.during()}; " \
+        text = f"{head}: correlated {rho:.2f} with {_words(partner[0], partner[1])} {during}; " \
                f"{manoeuvre} {verb} them"
     else:
-        text = f"{head} {motion.during()}; {manoeuvre} {verb} it" + (
+        text = f"{head} {during}; {manoeuvre} {verb} it" + (
             " from the heading" if name == "misalignment yaw" and motion.kind == "straight" else "")
     pct = 100.0 * shift_m / motion.distance_m if motion.distance_m > 0 else 0.0
     matters = motion.distance_m > 0 and shift_m > MATTERS_FRACTION * motion.distance_m
