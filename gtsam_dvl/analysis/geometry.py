@@ -61,9 +61,12 @@ STEADY_SPEED_SPREAD = 0.1
 # MIN_TURN_RATE_DEG_S (a slower heading drift is a straight track's)
 STEADY_TURN_SPREAD = 0.5
 MIN_TURN_RATE_DEG_S = 0.1
-# "no depth change": the depth spans less than this (m); the misalignment about the thrust axis shows only in
-# the vertical (and lateral) velocity
+# "no depth change" (level): the depth spans less than this (m), or the vertical speed stays below
+# LEVEL_VERTICAL_SPEED_M_S (99th percentile: an estimate without a depth sensor drifts a few metres in height
+# at mm/s, a descent is tenths of m/s); the misalignment about the thrust axis shows only in the vertical (and
+# lateral) velocity
 DEPTH_CHANGE_M = 2.0
+LEVEL_VERTICAL_SPEED_M_S = 0.05
 # a weak direction "matters" (warn) when one sigma of it moves the horizontal track by more than this fraction
 # of the distance travelled (0.1 %: the accuracy of a good DVL-aided INS, 0.1-0.3 % of distance)
 MATTERS_FRACTION = 1e-3
@@ -145,7 +148,8 @@ def classify_motion(t: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray, n_p: np.n
         kind = "steady turn"
     else:
         kind = "varied"
-    return MotionSummary(kind, depth < DEPTH_CHANGE_M, span, float(s50), float((s95 - s5) / s50), float(r50), depth,
+    level = depth < DEPTH_CHANGE_M or float(np.percentile(np.abs(n_v[moving, 2]), 99)) < LEVEL_VERTICAL_SPEED_M_S
+    return MotionSummary(kind, level, span, float(s50), float((s95 - s5) / s50), float(r50), depth,
                          distance)
 
 

@@ -55,8 +55,8 @@ def test_motion_classes() -> None:
     assert classify_motion(T, *STRAIGHT).kind == "straight"
     assert classify_motion(T, *S_TURN).kind == "varied"
     assert classify_motion(T, *SPEED_CHANGE).kind == "varied"  # straight, but the speed changes
-    diving = classify_motion(T, *_trajectory(np.full_like(T, 1.9), np.zeros_like(T), T, climb_m_s=-0.05))
-    assert diving.kind == "straight" and not diving.level and diving.depth_change_m == pytest.approx(19.95)
+    diving = classify_motion(T, *_trajectory(np.full_like(T, 1.9), np.zeros_like(T), T, climb_m_s=-0.1))
+    assert diving.kind == "straight" and not diving.level and diving.depth_change_m == pytest.approx(39.9)
     still = classify_motion(T, *_trajectory(np.zeros_like(T), np.zeros_like(T), T))
     assert still.kind == "static"
 
