@@ -164,6 +164,9 @@ def test_paper_3d_short_has_no_calibration_finding(estimator: str) -> None:
     res = smooth_batch(log, config) if estimator == "batch" else run_ekf(log, config)
     assert res.shared_joint_cov is not None
     assert res.shared_joint_cov.shape == (len(joint_columns(config, ekf=estimator == "ekf")),) * 2
+    # its leading block is the calibration block, the same numbers (batch: the same marginal; EKF: its covariance)
+    assert res.calib_joint_cov is not None
+    np.testing.assert_allclose(res.shared_joint_cov[:10, :10], res.calib_joint_cov, rtol=1e-9, atol=0.0)
     report = assess_geometry(res)
     print(report.motion.line(), [f.message for f in report.findings])
     assert report.motion.kind == "varied" and not report.motion.level
