@@ -161,9 +161,9 @@ def motion_of(result: NavResult) -> MotionSummary:
 @dataclass
 class Finding:
     """A weak calibration direction: its column (states.joint_columns), posterior / prior sigma ratio, the
-    state it is most correlated with and the correlation, the motion, the manoeuvre that separates them, how
-    far one sigma of it moves the horizontal track (m, and % of the distance), the severity ("warn" or "note")
-    and the sentence."""
+    state it is most correlated with and the correlation (when beyond CORRELATED; "" and 0 otherwise), the
+    motion, the manoeuvre that separates them, how far one sigma of it moves the horizontal track (m, and % of
+    the distance), the severity ("warn" or "note") and the sentence."""
 
     column: str
     ratio: float
