@@ -5,6 +5,8 @@ none; a simulated straight run smoothed by the batch smoother reports the yaw mi
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,7 @@ from gtsam_dvl.analysis.geometry import (
     motion_of,
 )
 from gtsam_dvl.analysis.health import assess_health
+from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
@@ -24,6 +27,8 @@ from gtsam_dvl.core.states import Estimate, joint_columns, joint_slices, joint_s
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
+from gtsam_dvl.io.result_reader import read_result
+from gtsam_dvl.io.result_writer import write_result_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.scenarios import scenario_raw
@@ -129,7 +134,7 @@ def test_yaw_misalignment_on_a_straight_track_and_the_thrust_axis_when_level() -
 
 
 @pytest.mark.slow
-def test_straight_run_warns_of_the_yaw_misalignment() -> None:
+def test_straight_run_warns_of_the_yaw_misalignment(tmp_path: Path) -> None:
     """A 300 s straight run at 1.9 m/s, underway from the start with the initial attitude given (the default
     configuration: scale prior 1 %, misalignment 1 deg, the time offset estimated)."""
     raw = scenario_raw(initial={"speed_m_s": 1.9}, segments=[{"kind": "straight", "duration_s": 300.0}])
@@ -154,6 +159,12 @@ def test_straight_run_warns_of_the_yaw_misalignment() -> None:
     assert log.true_calibration is not None
     err_deg = res.misalignment_deg[2] - log.true_calibration.misalignment_deg[2]
     assert abs(err_deg) < 3 * res.misalignment_sigma_deg[2]
+    # the result file keeps the shared joint: the verdict reads the same from it
+    back = read_result(write_result_log(tmp_path / "r.mcap", res, log, summary(res, log))).result
+    assert back.shared_joint_cov is not None
+    np.testing.assert_array_equal(back.shared_joint_cov, res.shared_joint_cov)
+    assert [f.message for f in assess_geometry(back).findings] == [
+        f["message"] for f in health.figures["geometry"]["findings"]]
 
 
 @pytest.mark.slow
