@@ -132,7 +132,8 @@ def noise_lines(noise: Any) -> list[str]:
 
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     """The summary JSON (docs/command-line.md), in user units (degrees, deg/h, micro-g, ppm), with the run's
-    health (analysis/health.py) and what the reader lost (LogData.metadata["reader_losses"])."""
+    health (analysis/health.py), its geometry (analysis/geometry.py) and what the reader lost
+    (LogData.metadata["reader_losses"])."""
     truth_dist = path_length(log.truth.n_p) if log.truth is not None else path_length(result.n_p)
     out: dict[str, Any] = {
         "estimator": result.estimator,
@@ -163,5 +164,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     from gtsam_dvl.analysis.health import assess_health  # health reads the config, which metrics does not need
 
     out["health"] = assess_health(result, log).as_dict()
+    # the motion and the weak calibration directions (analysis/geometry.py; their sentences are health warnings
+    # or notes)
+    out["geometry"] = out["health"]["figures"].get("geometry")
     out["losses"] = log.metadata.get("reader_losses", {})
     return out

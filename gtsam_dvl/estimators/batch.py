@@ -170,13 +170,17 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
                    bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
     the solver's last elimination instead of linearising again. The shared states (core/states.py) at the last
-    state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own."""
+    state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own, and all of
+    them jointly (shared_joint_cov)."""
     cfg = builder.config
     n = len(builder.epochs)
     last = shared_keys(cfg, n - 1)
     calib_group = tuple(shared_keys(cfg, n - 1, block=True))
     groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
     groups += [(k,) for k in last if k not in calib_group]
+    shared_group = tuple(last)  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
+    if shared_group != calib_group:
+        groups.append(shared_group)
     bn = bayes_net or eliminate(graph.linearize(values), ordering)
     marg = bayes_net_marginals(bn, groups)
 
@@ -197,7 +201,7 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
         n_p=n_p, n_R_b=n_R_b, n_v=n_v, pose_cov=pose_cov, vel_cov=vel_cov,
         calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
         b_omega=b_omega, pose_vel_cross=pose_vel_cross,
-        calib_joint_cov=marg.joints[calib_group],
+        calib_joint_cov=marg.joints[calib_group], shared_joint_cov=marg.joints[shared_group],
         info={"alignment": builder.alignment.info(),
               "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
         config=cfg.to_dict(),
