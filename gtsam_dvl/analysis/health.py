@@ -216,6 +216,8 @@ class DvlResiduals:
     unmatched: int  # states without a ping at their time
     # pings selected again here (selection.usable_pings): the result does not record its own (NavResult.dvl_pings)
     selected_again: int = 0
+    # y - h(x) per ping, m/s in dvl_link, nan where the ping is not used (3-D velocity; None with beam factors)
+    residual_m_s: np.ndarray | None = None
 
     def rms(self, mask: np.ndarray | None = None) -> float:
         c, d = (self.chi2, self.dof) if mask is None else (self.chi2[mask], self.dof[mask])
@@ -276,6 +278,8 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         cov[~ok] = np.eye(3)
         chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
         dof = 3.0 * ok
+        return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again,
+                            np.where(ok[:, None], r, np.nan))
     return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
 
 

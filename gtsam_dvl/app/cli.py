@@ -239,6 +239,42 @@ def smooth(
         raise typer.Exit(EXIT_UNHEALTHY)
 
 
+CHARACTERISE_HELP = (
+    "What the log says about its sensors, and the [imu] / [dvl] settings it recommends.\n\n"
+    "Per sensor (IMU, DVL, depth, GNSS) the rate, the stamp jitter and the gaps; the quantisation step of every "
+    "IMU axis and the white noise it adds, q/sqrt(12 f), against the configured density; the Allan deviation of "
+    "every IMU axis on the longest static stretch (else the whole log, with a warning); the DVL noise fitted by "
+    "the batch smoother, chi^2/dof, and the DVL residuals' autocorrelation and Gauss-Markov fit.\n\n"
+    "Writes DIR/characterise.json, DIR/allan.png and DIR/recommended.toml (use it with `gtsam-dvl smooth LOG -c "
+    "DIR/recommended.toml`), all together or none. A DIR that exists and is not empty is refused unless --force."
+)
+
+
+@app.command(help=CHARACTERISE_HELP)
+@_user_errors
+def characterise(
+    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for characterise.json, allan.png and "
+                                                                "recommended.toml.")],
+    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    force: Annotated[bool, typer.Option("--force", help="Write into a folder that is not empty (the three files "
+                                                        "are replaced).")] = False,
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    quiet: Quiet = False,
+    debug: Debug = False,
+) -> None:
+    """Sensor rates, jitter, quantisation, Allan deviation, DVL noise; a recommended configuration (help:
+    CHARACTERISE_HELP)."""
+    from gtsam_dvl.app.characterise import characterise_to_dir
+
+    ch = characterise_to_dir(log, output, config_path=config, force=force, show_progress=not quiet,
+                             read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
+                                                        gnss_topic, attitude_topic, truth_topic))
+    typer.echo(ch.describe())
+
+
 @app.command()
 @_user_errors
 def evaluate(
