@@ -14,7 +14,8 @@ recommends.
   says: estimators/noise_levels.py), its fitted ping sigma, chi^2/dof (the whole graph's and the DVL rows'), the
   residuals' autocorrelation and a white plus first-order Gauss-Markov fit of them (gauss_markov_fit).
 - The recommendation: each IMU white noise raised to its quantisation floor (root sum of squares, as the
-  estimators do), or to the static Allan white density when that is larger; the DVL sigma the fit found.
+  estimators do), or to the static Allan white density when that is larger by ALLAN_MARGIN; the DVL sigma the fit
+  found.
   recommended.toml loads with `gtsam-dvl smooth LOG -c DIR/recommended.toml`; as the floor is already in [imu],
   it turns [noise] imu_quantisation off (else the estimators would add the floor a second time).
 
@@ -60,6 +61,9 @@ AUTOCORR_LAGS = 30
 # its rounding error is a slowly changing bias, not white noise (white noise of sigma s on a step q repeats with a
 # probability of about q / (2 sqrt(pi) s): 0.3 at s = q)
 STUCK_FRACTION = 0.5  # DVL residual autocorrelation reported at lags 0..this many pings
+# the static Allan white density replaces the recommended one when it is this much larger (its own spread on a
+# 60-120 s stretch is several per cent: a smaller excess is no evidence)
+ALLAN_MARGIN = 1.2
 AXES = ("x", "y", "z")
 OUTPUT_FILES = ("characterise.json", "allan.png", "recommended.toml")
 
@@ -264,7 +268,7 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
             why = (f"{name}: quantised, floor {max(floors):.3g} {unit}: {value:.3g} (configured {configured:.3g} "
                    "and the floor, root sum of squares)")
         measured = [a["white_density"] for a in imu["allan"][name] if a["white_density"] is not None]
-        if static and measured and max(measured) > value:
+        if static and measured and max(measured) > ALLAN_MARGIN * value:
             value = max(measured)
             why += f"; the static Allan deviation's white density is higher: {value:.3g}"
         rec["imu"][key] = _sig(value)
