@@ -47,7 +47,7 @@ from gtsam_dvl.core.units import DEG_PER_H, UG
 
 GAP_PERIODS = 2.0  # a stamp spacing longer than this many nominal periods is a gap
 # static stretches: 1 s blocks of IMU samples whose mean turn rate is below STATIC_RATE_DEG_S (Earth rate is
-# 0.004 deg/s), whose mean specific force changed by less than STATIC_DF_M_S2 from the neighbouring block's,
+# 0.004 deg/s), whose mean specific force differs by less than STATIC_DF_M_S2 from both neighbouring blocks',
 # and, where the DVL has valid pings within STATIC_PING_WINDOW_S, whose DVL speed (median of 5 pings) is below
 # STATIC_SPEED_M_S (a cruise at constant velocity looks static to the IMU, not to the DVL)
 STATIC_BLOCK_S = 1.0
@@ -108,7 +108,8 @@ def static_stretches(log: LogData, rate_hz: float) -> list[tuple[float, float]]:
     w = np.asarray(imu.b_omega[:nb * m], dtype=float).reshape(nb, m, 3).mean(axis=1)
     f = np.asarray(imu.b_f[:nb * m], dtype=float).reshape(nb, m, 3).mean(axis=1)
     df = np.linalg.norm(np.diff(f, axis=0), axis=1)
-    df_block = np.minimum(np.concatenate([[np.inf], df]), np.concatenate([df, [np.inf]]))
+    # a block is still when its mean differs little from both neighbours' (the first and last: from their one)
+    df_block = np.maximum(np.concatenate([[0.0], df]), np.concatenate([df, [0.0]]))
     still = (np.linalg.norm(w, axis=1) < math.radians(STATIC_RATE_DEG_S)) & (df_block < STATIC_DF_M_S2)
     t_mid = np.asarray(imu.t[:nb * m], dtype=float).reshape(nb, m).mean(axis=1)
     dvl = log.dvl
@@ -122,7 +123,9 @@ def static_stretches(log: LogData, rate_hz: float) -> list[tuple[float, float]]:
         seen = np.abs(t_p[j] - t_mid) <= STATIC_PING_WINDOW_S
         still &= ~(seen & (speed[j] >= STATIC_SPEED_M_S))
     t = np.asarray(imu.t, dtype=float)
-    out = [(float(t[a * m]), float(t[b * m - 1])) for a, b in _runs(still)]
+    # one block off each end: a motion that starts smoothly (a C2 blend) shows in the block means only once it
+    # has grown for a while
+    out = [(float(t[(a + 1) * m]), float(t[(b - 1) * m - 1])) for a, b in _runs(still) if b - a > 2]
     return sorted((s for s in out if s[1] - s[0] >= MIN_STATIC_S), key=lambda s: s[0] - s[1])
 
 

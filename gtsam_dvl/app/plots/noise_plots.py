@@ -22,8 +22,8 @@ def allan_png(curves: Sequence[AllanCurve], configured: Mapping[str, float],
               floors: Mapping[str, Sequence[float | None]], title: str) -> bytes:
     """The figure as PNG bytes (written with the command's other outputs, all or none): one panel per sensor
     (gyro in deg/h, accelerometer in micro-g), log-log; configured: the configured white density per sensor
-    (dashed black line); floors: the quantisation floor's density per axis (dotted, in the axis' colour; None:
-    the axis is not quantised)."""
+    (dashed black line); floors: the quantisation floor's density per axis (dotted: in the axis' colour, grey for
+    a floor the axes share; None: the axis is not quantised)."""
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
     for ax, sensor in zip(axes, ("gyro", "accel"), strict=True):
         unit, density_unit = UNITS[sensor]
@@ -36,10 +36,19 @@ def allan_png(curves: Sequence[AllanCurve], configured: Mapping[str, float],
             ax.loglog(c.taus[pos], c.adev[pos], "o-", ms=2.5, lw=1.2, color=AXIS_COLOURS[c.axis], label=label)
         n_cfg = float(configured[sensor])
         ax.loglog(span, n_cfg / np.sqrt(span), "k--", lw=1.0, label=f"configured {n_cfg:.3g} {density_unit}")
+        # one line per distinct floor (the axes of one sensor usually share their step), in the axis' colour
+        drawn: list[tuple[float, list[str]]] = []
         for axis, floor in zip(("x", "y", "z"), floors[sensor], strict=True):
-            if floor is not None:
-                ax.loglog(span, floor / np.sqrt(span), ":", lw=1.5, color=AXIS_COLOURS[axis],
-                          label=f"{axis} quantisation floor {floor:.3g}")
+            if floor is None:
+                continue
+            same = next((d for d in drawn if abs(d[0] - floor) <= 1e-3 * floor), None)
+            if same is None:
+                drawn.append((floor, [axis]))
+            else:
+                same[1].append(axis)
+        for floor, named in drawn:
+            ax.loglog(span, floor / np.sqrt(span), ":", lw=1.5, color=AXIS_COLOURS[named[0]] if len(named) == 1
+                      else "0.4", label=f"{', '.join(named)} quantisation floor {floor:.3g}")
         ax.set_xlabel("averaging time tau, s")
         ax.set_ylabel(f"Allan deviation, {unit}")
         ax.set_title("gyro" if sensor == "gyro" else "accelerometer")
