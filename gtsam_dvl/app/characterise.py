@@ -56,11 +56,14 @@ STATIC_DF_M_S2 = 0.02
 STATIC_SPEED_M_S = 0.1
 STATIC_PING_WINDOW_S = 5.0
 MIN_STATIC_S = 60.0  # shorter static stretches give no Allan deviation beyond a few seconds
+# DVL residual autocorrelation reported at lags 0..this many pings, or AUTOCORR_SPAN_S if that is more (bottom-track
+# errors are correlated over seconds to minutes)
 AUTOCORR_LAGS = 30
+AUTOCORR_SPAN_S = 60.0
 # an IMU axis whose samples repeat the previous one more often than this does not sweep its quantisation steps:
 # its rounding error is a slowly changing bias, not white noise (white noise of sigma s on a step q repeats with a
 # probability of about q / (2 sqrt(pi) s): 0.3 at s = q)
-STUCK_FRACTION = 0.5  # DVL residual autocorrelation reported at lags 0..this many pings
+STUCK_FRACTION = 0.5
 # the static Allan white density replaces the recommended one when it is this much larger (its own spread on a
 # 60-120 s stretch is several per cent: a smaller excess is no evidence)
 ALLAN_MARGIN = 1.2
@@ -240,7 +243,7 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
     period = float(timing.get("period_s", math.nan))
     residuals: dict[str, Any] = {"pings": int(ok.sum()), "rms_m_s": np.sqrt(np.mean(r**2, axis=0)).tolist()}
     if len(t) >= 20 and np.isfinite(period):
-        lags = min(AUTOCORR_LAGS, len(t) // 4)
+        lags = min(max(AUTOCORR_LAGS, int(round(AUTOCORR_SPAN_S / period))), len(t) // 4)
         c, pairs = autocovariance(t, r - r.mean(axis=0), period, lags)
         residuals["autocorrelation"] = {"lag_s": (np.arange(lags + 1) * period).tolist(),
                                         "rho": (c / c[0]).tolist() if c[0] > 0 else None, "pairs": pairs.tolist()}
@@ -326,7 +329,7 @@ class Characterisation:
             if "rate_hz" not in s:
                 out.append(f"  {name:<5} {s['messages']} messages")
                 continue
-            gaps = (f"{s['gaps']} gaps ({s['gap_lost_s']:.1f} s lost, longest {s['longest_gap_s']:.2f} s)"
+            gaps = (f"{s['gaps']} gap{'s' if s['gaps'] > 1 else ''} ({s['gap_lost_s']:.1f} s lost, longest {s['longest_gap_s']:.2f} s)"
                     if s["gaps"] else "no gaps")
             out.append(f"  {name:<5} {s['rate_hz']:.2f} Hz, {s['messages']} messages, stamp jitter "
                        f"{s['jitter_std_s'] * 1e3:.2f} ms std (max {s['jitter_max_s'] * 1e3:.2f} ms), {gaps}")
@@ -362,11 +365,12 @@ class Characterisation:
         else:
             out.append(f"  DVL: {dvl['fit'].get('why', 'no noise fit')}")
         res = dvl.get("residuals", {})
-        rho = res.get("autocorrelation", {}).get("rho")
+        auto = res.get("autocorrelation", {})
+        rho, lag_s = auto.get("rho"), auto.get("lag_s")
         if rho:
-            shown = [k for k in (1, 5, 10, 30) if k < len(rho)]
-            out.append("  DVL residual autocorrelation at lag " + ", ".join(f"{k}: {rho[k]:+.2f}" for k in shown)
-                       + " pings")
+            shown = sorted({k for k in (1, 5, 10, 30) if k < len(rho)} | {len(rho) - 1})
+            out.append("  DVL residual autocorrelation at lag " + ", ".join(f"{lag_s[k]:.3g} s: {rho[k]:+.2f}"
+                                                                            for k in shown))
         gm = res.get("gauss_markov")
         if gm:
             out.append(f"  DVL residuals: white {gm['white_sigma_m_s'] * 1e3:.3g} mm/s + Gauss-Markov "
