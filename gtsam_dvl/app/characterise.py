@@ -329,7 +329,8 @@ class Characterisation:
             if "rate_hz" not in s:
                 out.append(f"  {name:<5} {s['messages']} messages")
                 continue
-            gaps = (f"{s['gaps']} gap{'s' if s['gaps'] > 1 else ''} ({s['gap_lost_s']:.1f} s lost, longest {s['longest_gap_s']:.2f} s)"
+            gaps = (f"{s['gaps']} gap{'s' if s['gaps'] > 1 else ''} ({s['gap_lost_s']:.1f} s lost, longest "
+                    f"{s['longest_gap_s']:.2f} s)"
                     if s["gaps"] else "no gaps")
             out.append(f"  {name:<5} {s['rate_hz']:.2f} Hz, {s['messages']} messages, stamp jitter "
                        f"{s['jitter_std_s'] * 1e3:.2f} ms std (max {s['jitter_max_s'] * 1e3:.2f} ms), {gaps}")
