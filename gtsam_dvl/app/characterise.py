@@ -285,6 +285,9 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
     if sigma is not None and np.isfinite(sigma) and not dvl.get("at_bound"):
         key = "beam_noise_m_s" if dvl.get("use_beams") else "noise_m_s"
         rec["dvl"][key] = _sig(float(sigma))
+        if dvl.get("use_beams"):  # the sigma is a beam's: only with the beam factors it was fitted with (which
+            rec["dvl"]["use_beams"] = True  # take no time offset)
+            rec["dvl"]["estimate_time_offset"] = False
         rec["why"].append(f"DVL: fitted ping sigma {sigma * 1e3:.3g} mm/s per "
                           f"{'beam' if dvl.get('use_beams') else 'axis'} (factor {dvl.get('multiplier', 1.0):.3g} "
                           "on the stated)")
@@ -303,7 +306,10 @@ def recommended_toml(rec: dict[str, Any], log_name: str) -> str:
         lines += [f"# {next(why)}", f"{key} = {value!r}"]
     lines += ["", "[dvl]"]
     for key, value in rec["dvl"].items():
-        lines += [f"# {next(why)}", f"{key} = {value!r}"]
+        if isinstance(value, bool):
+            lines.append(f"{key} = {str(value).lower()}")
+        else:
+            lines += [f"# {next(why)}", f"{key} = {value!r}"]
     if not rec["dvl"]:
         lines.append(f"# {next(why)}")
     if rec["noise"]:
@@ -380,7 +386,7 @@ class Characterisation:
                        + ")")
         rec = d["recommended"]
         out.append("  recommended: " + ", ".join(f"{k} = {v:g}" for sec in ("imu", "dvl")
-                                                 for k, v in rec[sec].items()))
+                                                 for k, v in rec[sec].items() if not isinstance(v, bool)))
         out += [f"  wrote {p}" for p in self.written]
         return out
 

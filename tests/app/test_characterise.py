@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from gtsam_dvl.app.characterise import MIN_STATIC_S, stream_timing
+from gtsam_dvl.app.characterise import MIN_STATIC_S, recommend, recommended_toml, stream_timing
 from gtsam_dvl.app.cli import app
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.sensor_noise import quantisation_density
@@ -162,3 +162,23 @@ def test_stream_timing_rate_jitter_and_gaps() -> None:
     assert s["gaps"] == 1
     assert s["longest_gap_s"] == pytest.approx(301 * period, abs=5 * jitter)
     assert s["gap_lost_s"] == pytest.approx(300 * period, abs=5 * jitter)
+
+
+def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
+    """A DVL fitted with beam factors recommends a beam sigma with the beam factors (and no time offset, which
+    they do not take); an IMU that is not quantised keeps its configured densities and the [noise] defaults."""
+    config = EstimatorConfig()
+    allan = {"on": "whole log", "gyro": [{"white_density": 0.5}] * 3, "accel": [{"white_density": 30.0}] * 3}
+    imu = {name: {"configured_density": dens, "floor_density": [None] * 3}
+           for name, dens in (("gyro", 0.1), ("accel", 10.0))}
+    rec = recommend(config, {**imu, "allan": allan},
+                    {"fitted_sigma_m_s": 0.0071, "multiplier": 0.355, "at_bound": False, "use_beams": True})
+    path = tmp_path / "recommended.toml"
+    path.write_text(recommended_toml(rec, "dive.mcap"))
+    loaded = EstimatorConfig.load(path)
+    assert loaded.dvl.use_beams and not loaded.dvl.estimate_time_offset
+    assert loaded.dvl.beam_noise_m_s == pytest.approx(0.0071)
+    # not quantised, and the Allan deviation of a moving log is no evidence: the configured densities
+    assert loaded.imu.gyro_noise_deg_per_h_rthz == pytest.approx(0.1)
+    assert loaded.imu.accel_noise_ug_rthz == pytest.approx(10.0)
+    assert loaded.noise == EstimatorConfig().noise
