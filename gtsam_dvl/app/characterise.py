@@ -251,6 +251,12 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
         residuals["gauss_markov"] = {"white_sigma_m_s": gm.white_sigma, "gm_sigma_m_s": gm.gm_sigma,
                                      "gm_tau_s": gm.gm_tau_s, "significant": gm.significant,
                                      "gm_sigma_noise_m_s": gm.gm_sigma_noise, "samples": gm.samples}
+        if gm.significant and gm.gm_sigma > gm.white_sigma:
+            out["warnings"] = [
+                f"the DVL residuals are mostly a correlated error ({gm.gm_sigma * 1e3:.3g} mm/s over "
+                f"{gm.gm_tau_s:.3g} s against {gm.white_sigma * 1e3:.3g} mm/s white): a bottom-track error of the "
+                "DVL, or a model error of the smoother (a wrong initial attitude or mounting, a gyro whose "
+                "quantisation acts as a bias); the fitted noise then measures that error too"]
     out["residuals"] = residuals
     return out
 
@@ -384,6 +390,7 @@ class Characterisation:
                        f"{gm['gm_sigma_m_s'] * 1e3:.3g} mm/s, time constant {gm['gm_tau_s']:.3g} s ("
                        + ("significant" if gm["significant"] else "not significant: white noise explains them")
                        + ")")
+        out += [f"  warning: {w}" for w in dvl.get("warnings", [])]
         rec = d["recommended"]
         out.append("  recommended: " + ", ".join(f"{k} = {v:g}" for sec in ("imu", "dvl")
                                                  for k, v in rec[sec].items() if not isinstance(v, bool)))
