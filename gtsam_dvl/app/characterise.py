@@ -14,8 +14,9 @@ recommends.
   says: estimators/noise_levels.py), its fitted ping sigma, chi^2/dof (the whole graph's and the DVL rows'), the
   residuals' autocorrelation and a white plus first-order Gauss-Markov fit of them (gauss_markov_fit).
 - The recommendation: each IMU white noise raised to its quantisation floor (root sum of squares, as the
-  estimators do), or to the static Allan white density when that is larger by ALLAN_MARGIN; the DVL sigma the fit
-  found.
+  estimators do), or to the static Allan white density when that is larger by STATIC_RAISE_FACTOR (the axes whose
+  static samples scatter over fewer than STATIC_MIN_STEPS steps left out, as the estimators do); the DVL sigma the
+  fit found.
   recommended.toml loads with `gtsam-dvl smooth LOG -c DIR/recommended.toml`; as the floor is already in [imu],
   it turns [noise] imu_quantisation off (else the estimators would add the floor a second time).
 
@@ -44,6 +45,7 @@ from gtsam_dvl.core.sensor_noise import (
 )
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.noise_levels import STATIC_MIN_STEPS, STATIC_RAISE_FACTOR
 
 GAP_PERIODS = 2.0  # a stamp spacing longer than this many nominal periods is a gap
 # static stretches: 1 s blocks of IMU samples whose mean turn rate is below STATIC_RATE_DEG_S (Earth rate is
@@ -64,9 +66,6 @@ AUTOCORR_SPAN_S = 60.0
 # its rounding error is a slowly changing bias, not white noise (white noise of sigma s on a step q repeats with a
 # probability of about q / (2 sqrt(pi) s): 0.3 at s = q)
 STUCK_FRACTION = 0.5
-# the static Allan white density replaces the recommended one when it is this much larger (its own spread on a
-# 60-120 s stretch is several per cent: a smaller excess is no evidence)
-ALLAN_MARGIN = 1.2
 AXES = ("x", "y", "z")
 OUTPUT_FILES = ("characterise.json", "allan.png", "recommended.toml")
 
@@ -204,8 +203,16 @@ def imu_section(log: LogData, config: EstimatorConfig, timing: dict[str, Any]) -
                             "log, where the motion dominates all but the shortest averaging times (its white "
                             "density is an upper bound, its bias instability meaningless)")
     curves = allan_curves(log, rate, span)
+    t = np.asarray(log.imu.t, dtype=float)
+    sel = np.ones(len(t), bool) if span is None else (t >= span[0]) & (t <= span[1])
     for name in ("gyro", "accel"):
         allan[name] = [c.as_dict() for c in curves if c.sensor == name]
+        # at rest an axis that scatters over fewer than STATIC_MIN_STEPS steps shows its rounding, not its noise
+        # (estimators/noise_levels.py leaves such axes out of the static density the same way)
+        x = np.asarray(log.imu.b_omega if name == "gyro" else log.imu.b_f, dtype=float)[sel]
+        for k, entry in enumerate(allan[name]):
+            q = out[name]["step"][k]
+            entry["dominated_by_quantisation"] = bool(q is not None and np.std(x[:, k]) < STATIC_MIN_STEPS * q)
         if any(c.white_density is None for c in curves if c.sensor == name):
             allan.setdefault("notes", []).append(
                 f"{name}: an axis never left its quantisation level on the stretch (its Allan deviation is zero): "
@@ -229,7 +236,7 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
                            "multiplier": noise.get("multiplier"), "at_bound": bool(noise.get("at_bound", False))}
     dof = solver.get("dof")
     out["chi2_per_dof"] = (2.0 * float(solver["final_error"]) / int(dof)) if dof else None
-    used = result.estimator_config or fit_config
+    used = result.noise_config or fit_config  # the levels the smoother used (the fitted DVL factor among them)
     res = dvl_residuals(result, log, used.dvl)
     out["dvl_chi2_per_dof"] = res.rms() ** 2 if res.dof.sum() > 0 else None
     out["use_beams"] = used.dvl.use_beams
@@ -279,8 +286,9 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
             value = math.hypot(configured, max(floors))
             why = (f"{name}: quantised, floor {max(floors):.3g} {unit}: {value:.3g} (configured {configured:.3g} "
                    "and the floor, root sum of squares)")
-        measured = [a["white_density"] for a in imu["allan"][name] if a["white_density"] is not None]
-        if static and measured and max(measured) > ALLAN_MARGIN * value:
+        measured = [a["white_density"] for a in imu["allan"][name]
+                    if a["white_density"] is not None and not a.get("dominated_by_quantisation")]
+        if static and measured and max(measured) > STATIC_RAISE_FACTOR * value:
             value = max(measured)
             why += f"; the static Allan deviation's white density is higher: {value:.3g}"
         rec["imu"][key] = _sig(value)
