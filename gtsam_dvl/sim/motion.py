@@ -46,11 +46,11 @@ class Oscillation:
     in s. Each term is amplitude * sin(2 pi t / period), zero at t = 0."""
 
     roll_rad: float = 0.0
-    roll_period_s: float = 7.0
+    roll_period_s: float = 3.0
     pitch_rad: float = 0.0
-    pitch_period_s: float = 11.0
+    pitch_period_s: float = 3.5
     yaw_rad: float = 0.0
-    yaw_period_s: float = 13.0
+    yaw_period_s: float = 4.5
     heave_m: float = 0.0
     heave_period_s: float = 9.0
 

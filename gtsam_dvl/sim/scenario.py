@@ -156,11 +156,11 @@ class OscillationSpec:
     constant, not white. The truth, the IMU and the DVL all include it."""
 
     roll_deg: float = 0.0
-    roll_period_s: float = 7.0
+    roll_period_s: float = 3.0
     pitch_deg: float = 0.0
-    pitch_period_s: float = 11.0
+    pitch_period_s: float = 3.5
     yaw_deg: float = 0.0
-    yaw_period_s: float = 13.0
+    yaw_period_s: float = 4.5
     heave_m: float = 0.0
     heave_period_s: float = 9.0
 
