@@ -18,8 +18,8 @@ rate starts and stops at once (at a segment boundary, which is an IMU stamp when
 the sample interval, so each sample's quadrature sees one side only). A first arc holds its rate before t = 0
 (lo = -inf) and a last one after its end (hi = +inf): a log that starts while the vehicle already turns.
 
-Oscillation (optional, the scenario's [oscillation] table): a sin(2 pi t / period) added to roll, pitch and yaw
-and a heave a sin(2 pi t / period) in metres (its derivative added to w), over the whole run. The truth, the IMU
+Oscillation (optional, the scenario's [oscillation] table): sums of a sin(2 pi t / period) added to roll, pitch and
+yaw and a heave a sin(2 pi t / period) in metres (its derivative added to w), over the whole run. The truth, the IMU
 and the DVL all come from these same states, so they agree; the sinusoids keep the IMU's outputs moving across
 its quantisation steps, as a real vehicle's small motions do.
 """
@@ -42,23 +42,11 @@ _FIELDS = ("t_start", "duration", "s0", "ds", "bump", "w_peak", "yaw0", "dyaw", 
 
 @dataclass(frozen=True)
 class Oscillation:
-    """Sinusoids added to the motion (module doc): amplitudes in rad (roll, pitch, yaw) and m (heave), periods
-    in s. Each term is amplitude * sin(2 pi t / period), zero at t = 0."""
+    """Sinusoids added to the motion (module doc): terms (channel, amplitude, angular frequency rad/s), channel
+    "roll", "pitch" or "yaw" (amplitude in rad) or "heave" (m). Each term is amplitude * sin(omega t), zero at
+    t = 0."""
 
-    roll_rad: float = 0.0
-    roll_period_s: float = 3.0
-    pitch_rad: float = 0.0
-    pitch_period_s: float = 3.5
-    yaw_rad: float = 0.0
-    yaw_period_s: float = 4.5
-    heave_m: float = 0.0
-    heave_period_s: float = 9.0
-
-    def terms(self) -> list[tuple[str, float, float]]:
-        """(channel, amplitude, angular frequency rad/s) of the non-zero terms."""
-        rows = [("roll", self.roll_rad, self.roll_period_s), ("pitch", self.pitch_rad, self.pitch_period_s),
-                ("yaw", self.yaw_rad, self.yaw_period_s), ("heave", self.heave_m, self.heave_period_s)]
-        return [(name, a, 2.0 * np.pi / p) for name, a, p in rows if a != 0.0]
+    terms: tuple[tuple[str, float, float], ...]
 
 
 @dataclass
@@ -202,18 +190,20 @@ class MotionProfile:
 
 
 def _oscillation(scenario: Scenario) -> Oscillation | None:
-    """The scenario's [oscillation] table in radians, or None."""
+    """The scenario's [oscillation] table as terms in radians, or None."""
     spec = scenario.oscillation
     if spec is None:
         return None
-    return Oscillation(np.radians(spec.roll_deg), spec.roll_period_s, np.radians(spec.pitch_deg),
-                       spec.pitch_period_s, np.radians(spec.yaw_deg), spec.yaw_period_s, spec.heave_m,
-                       spec.heave_period_s)
+    terms = []
+    for channel, amplitudes, periods in spec.channels():
+        scale = 1.0 if channel == "heave" else np.pi / 180.0
+        terms += [(channel, a * scale, 2.0 * np.pi / p) for a, p in zip(amplitudes, periods, strict=True) if a != 0.0]
+    return Oscillation(tuple(terms))
 
 
 def _oscillate(out: dict[str, np.ndarray], t: np.ndarray, osc: Oscillation) -> None:
     """Add the oscillation's terms (and their time derivatives) to the states out at times t."""
-    for name, a, w in osc.terms():
+    for name, a, w in osc.terms:
         s, c = np.sin(w * t), np.cos(w * t)
         if name == "heave":  # height a sin(w t): vertical speed a w cos(w t)
             out["w"] += a * w * c

@@ -151,18 +151,24 @@ class DvlSpec:
 @dataclass(frozen=True)
 class OscillationSpec:
     """Small sinusoidal motion added to the whole trajectory (optional [oscillation] table; sim/motion.py):
-    amplitude * sin(2 pi t / period) on roll, pitch and yaw (deg) and on the height (heave, m). A real vehicle
-    never holds a perfectly constant rate; without such motion a quantised IMU's rounding error would be
-    constant, not white. The truth, the IMU and the DVL all include it."""
+    amplitude * sin(2 pi t / period) on roll, pitch and yaw (deg) and on the height (heave, m); each key a number
+    or a list (a sum of sinusoids: as many periods as amplitudes). A real vehicle never holds a perfectly constant
+    rate: its slow motions and its vibration keep a quantised IMU's outputs crossing their steps, so that the
+    rounding error is white. The truth, the IMU and the DVL all include the oscillation."""
 
-    roll_deg: float = 0.0
-    roll_period_s: float = 3.0
-    pitch_deg: float = 0.0
-    pitch_period_s: float = 3.5
-    yaw_deg: float = 0.0
-    yaw_period_s: float = 4.5
-    heave_m: float = 0.0
-    heave_period_s: float = 9.0
+    roll_deg: tuple[float, ...] = (0.0,)
+    roll_period_s: tuple[float, ...] = (7.0,)
+    pitch_deg: tuple[float, ...] = (0.0,)
+    pitch_period_s: tuple[float, ...] = (11.0,)
+    yaw_deg: tuple[float, ...] = (0.0,)
+    yaw_period_s: tuple[float, ...] = (13.0,)
+    heave_m: tuple[float, ...] = (0.0,)
+    heave_period_s: tuple[float, ...] = (9.0,)
+
+    def channels(self) -> list[tuple[str, tuple[float, ...], tuple[float, ...]]]:
+        """(channel, amplitudes, periods) of roll, pitch, yaw (deg) and heave (m)."""
+        return [(c, getattr(self, f"{c}_{'m' if c == 'heave' else 'deg'}"), getattr(self, f"{c}_period_s"))
+                for c in ("roll", "pitch", "yaw", "heave")]
 
 
 @dataclass(frozen=True)
@@ -345,14 +351,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         dr = rates.imu_hz / depth.rate_hz
         r.require(abs(dr - round(dr)) < 1e-9, "depth.rate_hz", "must divide rates.imu_hz")
     gnss = _gnss_spec(r, rates.imu_hz) if "gnss" in raw else None
-    oscillation = None
-    if "oscillation" in raw:
-        oscillation = OscillationSpec(**r.table("oscillation", _defaults(OscillationSpec)))
-        for key in ("roll_period_s", "pitch_period_s", "yaw_period_s", "heave_period_s"):
-            r.require(getattr(oscillation, key) > 0, f"oscillation.{key}", "must be positive")
-        for key in ("roll_deg", "pitch_deg", "yaw_deg"):
-            r.require(abs(getattr(oscillation, key)) <= 10.0, f"oscillation.{key}",
-                      "must be within +-10 deg (a small oscillation)")
+    oscillation = _oscillation_spec(r, rates.imu_hz) if "oscillation" in raw else None
     estimator = raw.get("estimator", {})
     r.require(isinstance(estimator, dict), "estimator", "expected a table of estimator configuration tables")
     EstimatorConfig.for_scenario(raw, source=f"{source}: [estimator]")  # checked now: a bad key fails at load
@@ -378,6 +377,31 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         oscillation=oscillation,
         estimator=copy.deepcopy(estimator),
     )
+
+
+def _oscillation_spec(r: Reader, imu_hz: float) -> OscillationSpec:
+    """The [oscillation] table, checked: each key a number or a list of numbers, as many periods as amplitudes,
+    periods of at least 4 IMU samples (the IMU quadrature's accuracy), angles within +-10 deg."""
+    d = r.raw["oscillation"]
+    if not isinstance(d, dict):
+        raise r.fail("oscillation", "expected a table")
+    defaults = _defaults(OscillationSpec)
+    r.check_keys("oscillation", list(defaults), d)
+    values: dict[str, tuple[float, ...]] = {}
+    for key, default in defaults.items():
+        v = d.get(key, list(default))
+        items = v if isinstance(v, list) else [v]
+        r.require(len(items) > 0, f"oscillation.{key}", "expected a number or a list of numbers")
+        values[key] = tuple(r.number(f"oscillation.{key}", x) for x in items)
+    spec = OscillationSpec(**values)
+    for channel, amplitudes, periods in spec.channels():
+        key = f"oscillation.{channel}_period_s"
+        r.require(len(periods) == len(amplitudes), key, f"give one period per amplitude ({len(amplitudes)})")
+        r.require(min(periods) >= 4.0 / imu_hz, key, f"must be at least 4 IMU samples ({4.0 / imu_hz:g} s)")
+        if channel != "heave":
+            r.require(max(abs(a) for a in amplitudes) <= 10.0, f"oscillation.{channel}_deg",
+                      "must be within +-10 deg (a small oscillation)")
+    return spec
 
 
 def _gnss_spec(r: Reader, imu_hz: float) -> GnssSpec:

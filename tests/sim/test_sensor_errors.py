@@ -88,7 +88,8 @@ def _mean_rms_ratio(err: np.ndarray, q: np.ndarray, n: int = 100) -> np.ndarray:
 def test_rounding_error_is_white_while_oscillating_and_not_at_a_constant_rate() -> None:
     """The rounding error (the log minus the same seed's unquantised log) has std q / sqrt(12) per axis within
     5 %, nearly no correlation from one sample to the next and 1 s means at the white level, while the vehicle
-    oscillates; without the oscillation the gyro outputs hold still and the error stays a fraction of a step:
+    oscillates and vibrates (straight-transect's [oscillation]); its slow motions alone leave the error correlated
+    from sample to sample; without any oscillation the gyro outputs hold still and the error stays a fraction of a step:
     a gyro bias of several deg/h, not white noise."""
     raw = _raw(200.0)
     q = np.concatenate([Q_GYRO, np.full(3, Q_ACCEL)])
@@ -102,6 +103,14 @@ def test_rounding_error_is_white_while_oscillating_and_not_at_a_constant_rate() 
     assert np.all(np.abs(ratio - 1.0) < 0.05)
     assert np.all(np.abs(lag1) < 0.15)
     assert np.all((mean_ratio > 0.7) & (mean_ratio < 1.3))  # 200 means: +-5 % sampling (1 sigma)
+
+    slow = _raw(200.0)  # the slow motions without the vibration: pitch and yaw rates move 0.1-0.2 steps a sample
+    for key in ("roll_deg", "roll_period_s", "pitch_deg", "pitch_period_s", "yaw_deg", "yaw_period_s"):
+        slow["oscillation"][key] = slow["oscillation"][key][0]
+    e, f = _sim(slow), _sim(_unquantised(slow))
+    lag1_slow = _lag_corr(e.imu.b_omega - f.imu.b_omega, 1)
+    print(f"slow motions only: gyro rounding error lag-1 correlation {np.round(lag1_slow, 3)}")
+    assert np.max(lag1_slow) > 0.3
 
     still = _raw(200.0, oscillation=None)
     c, d = _sim(still), _sim(_unquantised(still))
@@ -213,8 +222,10 @@ def test_bad_error_and_oscillation_keys_are_one_line_errors() -> None:
         ("imu", "quantisation_accel_m_s2", [1e-4, 1e-4], "list of 3 numbers"),
         ("dvl", "correlated_sigma_m_s", -0.001, "must be >= 0"),
         ("dvl", "correlated_tau_s", 0.0, "must be positive"),
-        ("oscillation", "roll_period_s", 0.0, "must be positive"),
-        ("oscillation", "yaw_deg", 20.0, "within +-10 deg"),
+        ("oscillation", "roll_period_s", [7.0, 0.01], "at least 4 IMU samples (0.04 s)"),
+        ("oscillation", "pitch_period_s", 11.0, "one period per amplitude (2)"),
+        ("oscillation", "heave_m", [], "a number or a list of numbers"),
+        ("oscillation", "yaw_deg", [20.0, 0.0], "within +-10 deg"),
         ("oscillation", "sway_m", 1.0, "unknown key"),
     ):
         raw = _raw(10.0)
