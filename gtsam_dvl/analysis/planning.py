@@ -59,7 +59,7 @@ def plan_mission(scenario: Scenario, config: EstimatorConfig | None = None, seed
                  progress: ProgressFn | None = None) -> PlanResult:
     """Covariance analysis of a scenario (see module doc); takes seconds."""
     start = time.perf_counter()
-    config = config or EstimatorConfig.named(scenario.estimator_config)
+    config = config or scenario.estimator_configuration()
     if config.imu.bias_model != "constant":
         raise GtsamDvlError("planning needs imu.bias_model = 'constant' (the filtering timeline of a random-walk "
                             "bias is not implemented)")

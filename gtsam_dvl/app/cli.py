@@ -114,7 +114,9 @@ def simulate(
     scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a TOML file.")],
     output: Annotated[Path, typer.Option("-o", "--output", help="MCAP file to write.")],
     seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes.")] = 7,
-    no_noise: Annotated[bool, typer.Option("--no-noise", help="No white noise (biases and calibration kept).")] = False,
+    no_noise: Annotated[bool, typer.Option("--no-noise", help="No white noise, correlated DVL error, dropouts or "
+                                                           "outliers (biases, quantisation and calibration kept).")
+                        ] = False,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:

@@ -247,7 +247,7 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     any fails or the run is interrupted. The summary carries the run's health (analysis/health.py)."""
     from gtsam_dvl.analysis.health import assess_log_health
     from gtsam_dvl.analysis.metrics import summary
-    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
     from gtsam_dvl.core.result import NavResult
     from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
     from gtsam_dvl.io.atomic import OutputSet, tum_text
@@ -267,6 +267,8 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
         log = load_log(log_path, progress=read_progress, **(read_options or {}))  # (a day: docs/results.md, Speed)
     read_s = time.perf_counter() - t_read
+    if config_path:  # the log's scenario's [estimator] table (e.g. its initial attitude) below the -c configuration
+        config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
     if config is None:  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
         config = EstimatorConfig.for_log(log.metadata)
     with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
@@ -327,7 +329,8 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
     from gtsam_dvl.sim.scenario import load_scenario
 
     scen = load_scenario(scenario)
-    config = EstimatorConfig.load(config_path) if config_path else EstimatorConfig.named(scen.estimator_config)
+    config = (EstimatorConfig.load(config_path, under=scen.estimator) if config_path
+              else scen.estimator_configuration())
     with progress_bar(f"planning {scen.name}", enabled=show_progress) as progress:
         plan = plan_mission(scen, config, progress=progress)
     out_dir = Path(out_dir)

@@ -31,7 +31,6 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     from gtsam_dvl.app.plots.log_plots import plot_log
     from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
     from gtsam_dvl.app.report import paper_findings, write_run_report
-    from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
     from gtsam_dvl.io.writer import write_log
@@ -39,7 +38,7 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     from gtsam_dvl.sim.scenario import load_scenario
 
     scen = load_scenario(name)
-    config = EstimatorConfig.named(scen.estimator_config)  # the paper's runs: the paper's priors
+    config = scen.estimator_configuration()  # the paper's runs: the paper's priors
     log = simulate(scen, seed)
     log_path = run_dir / f"{name}.mcap"
     write_log(log_path, log)

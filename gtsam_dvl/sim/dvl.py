@@ -119,3 +119,42 @@ def event_blocks(spec: DvlSpec, n_pings: int, n_beams: int) -> list[tuple[str, i
     if spec.noise_model == "velocity":
         return [("uniform", m), ("uniform", m * b), ("uniform", m), ("normal", 3 * m)]
     return [("uniform", m), ("uniform", m * b), ("uniform", m * b), ("uniform", m * b)]
+
+
+CORRELATED_STREAM = 6  # index of the correlated error's child of SeedSequence(seed) (sim/simulate.py)
+
+
+def correlated_error(spec: DvlSpec, dvl_hz: float, seed: int) -> GaussMarkov | None:
+    """The DVL's Gauss-Markov error process of a run (None when correlated_sigma_m_s is 0): its own child of
+    SeedSequence(seed), so the other streams, and so every other number of the log, are those of a scenario
+    without it."""
+    if spec.correlated_sigma_m_s <= 0:
+        return None
+    ss = np.random.SeedSequence(seed).spawn(CORRELATED_STREAM + 1)[CORRELATED_STREAM]
+    return GaussMarkov(spec.correlated_sigma_m_s, spec.correlated_tau_s, 1.0 / dvl_hz,
+                       np.random.Generator(np.random.PCG64(ss)))
+
+
+class GaussMarkov:
+    """A first-order Gauss-Markov error per DVL axis, drawn ping by ping across calls (sim/stream.py continues it
+    chunk by chunk: the same numbers as one call). Exact discretisation of dx = -x / tau dt + noise over the
+    ping interval dt: x_{k+1} = phi x_k + sigma sqrt(1 - phi^2) w_k, phi = exp(-dt / tau), w_k ~ N(0, I); the
+    first ping's x_0 = sigma w_0 (the stationary distribution), so the std is sigma at every ping and the
+    correlation at lag L is exp(-L / tau)."""
+
+    def __init__(self, sigma_m_s: float, tau_s: float, dt_s: float, rng: np.random.Generator) -> None:
+        self.sigma, self.rng = sigma_m_s, rng
+        self.phi = float(np.exp(-dt_s / tau_s))
+        self.drive = sigma_m_s * float(np.sqrt(1.0 - self.phi**2))
+        self.x: np.ndarray | None = None  # the last ping's error
+
+    def take(self, n_pings: int) -> np.ndarray:
+        """The errors (n_pings, 3) m/s of the next n_pings pings."""
+        w = self.rng.standard_normal((n_pings, 3))
+        out = np.empty((n_pings, 3))
+        x = self.x
+        for k in range(n_pings):
+            x = self.sigma * w[k] if x is None else self.phi * x + self.drive * w[k]
+            out[k] = x
+        self.x = x
+        return out

@@ -125,3 +125,13 @@ def white_noise(spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Gener
     draws come first, then the accelerometer's (sim/stream.py relies on this order)."""
     sg, sa = white_noise_sigmas(spec, rate)
     return rng.normal(0.0, sg, (n_samples, 3)), rng.normal(0.0, sa, (n_samples, 3))
+
+
+def quantise(x: np.ndarray, step: float | tuple[float, float, float]) -> np.ndarray:
+    """x (n, 3) rounded to multiples of step per axis, round(x / q) q (a step of 0 leaves that axis alone): the
+    logged output of an IMU whose driver or export keeps a fixed resolution."""
+    q = np.broadcast_to(np.asarray(step, dtype=float), (3,))
+    if not np.any(q > 0):
+        return x
+    safe = np.where(q > 0, q, 1.0)
+    return np.where(q > 0, np.round(x / safe) * safe, x)

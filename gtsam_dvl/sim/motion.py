@@ -12,6 +12,16 @@ derivatives (sim/blends.py):
 with tau = (t - t_start) / T clamped to [0, 1]. The vehicle moves along its heading (course = yaw, no
 sideslip), so v^l = [s cos(yaw), s sin(yaw), w] and, at zero pitch, the horizontal velocity stays on the
 body x axis: the thrust-axis misalignment of the DVL is then unobservable unless w changes (paper Remark 3).
+
+An arc (a steady turn) adds yaw_rate * clip(t - t_start, lo, hi) to the yaw, with [lo, hi] = [0, T]: its turn
+rate starts and stops at once (at a segment boundary, which is an IMU stamp when the durations are multiples of
+the sample interval, so each sample's quadrature sees one side only). A first arc holds its rate before t = 0
+(lo = -inf) and a last one after its end (hi = +inf): a log that starts while the vehicle already turns.
+
+Oscillation (optional, the scenario's [oscillation] table): sums of a sin(2 pi t / period) added to roll, pitch and
+yaw and a heave a sin(2 pi t / period) in metres (its derivative added to w), over the whole run. The truth, the IMU
+and the DVL all come from these same states, so they agree; the sinusoids keep the IMU's outputs moving across
+its quantisation steps, as a real vehicle's small motions do.
 """
 
 from __future__ import annotations
@@ -26,7 +36,17 @@ from gtsam_dvl.sim.blends import bump6, step5, step7
 if TYPE_CHECKING:
     from gtsam_dvl.sim.scenario import Scenario
 
-_FIELDS = ("t_start", "duration", "s0", "ds", "bump", "w_peak", "yaw0", "dyaw", "roll0", "bank", "pitch0")
+_FIELDS = ("t_start", "duration", "s0", "ds", "bump", "w_peak", "yaw0", "dyaw", "roll0", "bank", "pitch0",
+           "yaw_rate", "arc_lo", "arc_hi")
+
+
+@dataclass(frozen=True)
+class Oscillation:
+    """Sinusoids added to the motion (module doc): terms (channel, amplitude, angular frequency rad/s), channel
+    "roll", "pitch" or "yaw" (amplitude in rad) or "heave" (m). Each term is amplitude * sin(omega t), zero at
+    t = 0."""
+
+    terms: tuple[tuple[str, float, float], ...]
 
 
 @dataclass
@@ -91,8 +111,9 @@ class MotionState:
 class MotionProfile:
     """The scenario's motion as elementary pieces, evaluated vectorised at any times."""
 
-    def __init__(self, pieces: list[dict[str, float]]) -> None:
+    def __init__(self, pieces: list[dict[str, float]], oscillation: Oscillation | None = None) -> None:
         self.p = {k: np.array([pc[k] for pc in pieces], dtype=float) for k in _FIELDS}
+        self.oscillation = oscillation
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> MotionProfile:
@@ -103,11 +124,11 @@ class MotionProfile:
         pieces: list[dict[str, float]] = []
 
         def add(t0: float, T: float, ds: float = 0.0, bump: float = 0.0, w_peak: float = 0.0,
-                dyaw: float = 0.0, bank: float = 0.0) -> None:
+                dyaw: float = 0.0, bank: float = 0.0, yaw_rate: float = 0.0) -> None:
             pieces.append({"t_start": t0, "duration": T, "ds": ds, "bump": bump, "w_peak": w_peak,
-                           "dyaw": dyaw, "bank": bank, **state})
+                           "dyaw": dyaw, "bank": bank, "yaw_rate": yaw_rate, "arc_lo": 0.0, "arc_hi": T, **state})
             state["s0"] += ds
-            state["yaw0"] += dyaw
+            state["yaw0"] += dyaw + yaw_rate * T
 
         for seg in scenario.segments:
             T = seg.duration_s
@@ -135,9 +156,15 @@ class MotionProfile:
                             add(t, seg.turn_duration_s, dyaw=sign * 2.0 * np.pi / seg.sides,
                                 bank=-sign * np.radians(seg.bank_deg))
                             t += seg.turn_duration_s
+            elif seg.kind == "arc":
+                add(seg.start_s, T, yaw_rate=np.radians(seg.turn_rate_deg_s))
             else:  # the loader rejects unknown kinds; this guards programmatic scenarios
                 raise ValueError(f"unknown segment kind {seg.kind!r}")
-        return cls(pieces)
+        if pieces and pieces[0]["yaw_rate"] != 0.0:
+            pieces[0]["arc_lo"] = -np.inf  # already turning before t = 0
+        if pieces and pieces[-1]["yaw_rate"] != 0.0:
+            pieces[-1]["arc_hi"] = np.inf  # still turning after the end
+        return cls(pieces, _oscillation(scenario))
 
     def evaluate(self, t: np.ndarray) -> MotionState:
         """Motion at times t (any shape); before 0 and after the end the end states continue."""
@@ -157,7 +184,33 @@ class MotionProfile:
             i = np.clip(np.searchsorted(p["t_start"], flat, side="right") - 1, 0, n_pieces - 1)
             out = {f: np.empty(flat.size) for f in _STATE}
             _piece(out, slice(None), flat, {k: v[i] for k, v in p.items()})
+        if self.oscillation is not None:
+            _oscillate(out, flat, self.oscillation)
         return MotionState(**{f: out[f].reshape(t.shape) for f in _STATE})
+
+
+def _oscillation(scenario: Scenario) -> Oscillation | None:
+    """The scenario's [oscillation] table as terms in radians, or None."""
+    spec = scenario.oscillation
+    if spec is None:
+        return None
+    terms = []
+    for channel, amplitudes, periods in spec.channels():
+        scale = 1.0 if channel == "heave" else np.pi / 180.0
+        terms += [(channel, a * scale, 2.0 * np.pi / p) for a, p in zip(amplitudes, periods, strict=True) if a != 0.0]
+    return Oscillation(tuple(terms))
+
+
+def _oscillate(out: dict[str, np.ndarray], t: np.ndarray, osc: Oscillation) -> None:
+    """Add the oscillation's terms (and their time derivatives) to the states out at times t."""
+    for name, a, w in osc.terms:
+        s, c = np.sin(w * t), np.cos(w * t)
+        if name == "heave":  # height a sin(w t): vertical speed a w cos(w t)
+            out["w"] += a * w * c
+            out["w_dot"] -= a * w * w * s
+        else:
+            out[name] += a * s
+            out[f"{name}_dot"] += a * w * c
 
 
 _STATE = ("s", "s_dot", "w", "w_dot", "yaw", "yaw_dot", "pitch", "pitch_dot", "roll", "roll_dot")
@@ -176,6 +229,12 @@ def _piece(out: dict[str, np.ndarray], sl: slice, t: np.ndarray, q: dict[str, An
     out["w_dot"][sl] = q["w_peak"] * dbu / T
     out["yaw"][sl] = q["yaw0"] + q["dyaw"] * s7
     out["yaw_dot"][sl] = q["dyaw"] * ds7 / T
+    rate = q["yaw_rate"]
+    if np.any(rate != 0.0):  # arcs only: other pieces keep their bits
+        d = t - q["t_start"]
+        lo, hi = q["arc_lo"], q["arc_hi"]
+        out["yaw"][sl] += rate * np.clip(d, lo, hi)
+        out["yaw_dot"][sl] += np.where((d >= lo) & (d <= hi), rate, 0.0)
     out["pitch"][sl] = q["pitch0"]
     out["pitch_dot"][sl] = 0.0
     out["roll"][sl] = q["roll0"] + q["bank"] * bu

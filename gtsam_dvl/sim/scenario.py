@@ -8,13 +8,16 @@ the simulator converts to SI. Built-in scenarios live in data/scenarios/, instal
 
 from __future__ import annotations
 
+import copy
 import importlib.resources
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.core.config import NAMED_CONFIGS
+import numpy as np
+
+from gtsam_dvl.core.config import NAMED_CONFIGS, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import Segment
@@ -34,6 +37,7 @@ __all__ = [
     "InitialState",
     "MotionSegment",
     "MountingSpec",
+    "OscillationSpec",
     "Origin",
     "Rates",
     "Scenario",
@@ -77,7 +81,7 @@ class InitialState:
 class MotionSegment:
     """One row of the motion table. Times are filled in by the loader from the durations.
 
-    kind: static | level | straight | descent | ascent | turn | square (see sim/schema.py).
+    kind: static | level | straight | descent | ascent | turn | arc | square (see sim/schema.py).
     paper_type: the paper's segment type, "I", "II", "I+II" or "-".
     """
 
@@ -90,6 +94,7 @@ class MotionSegment:
     peak_vertical_speed_m_s: float = 0.0  # descent/ascent: peak sink/rise rate (positive)
     heading_change_deg: float = 0.0  # turn: positive = left (counter-clockwise seen from above)
     bank_deg: float = 0.0  # turn/square: peak roll into the turn
+    turn_rate_deg_s: float = 0.0  # arc: constant turn rate, positive = left
     leg_duration_s: float = 0.0  # square
     turn_duration_s: float = 0.0  # square
     sides: int = 4  # square
@@ -103,7 +108,10 @@ class MotionSegment:
 
 @dataclass(frozen=True)
 class ImuSpec:
-    """IMU errors in file units. Biases: 1-sigma of a random constant per axis unless values are given."""
+    """IMU errors in file units. Biases: 1-sigma of a random constant per axis unless values are given.
+    quantisation_*: the logged outputs' step per axis (a number for all three, or a list of 3; 0: none): each
+    sample is rounded to a multiple of it, round(x / q) q, after the biases and the noise (a driver's fixed-point
+    format, or an export with a fixed number of decimals)."""
 
     gyro_bias_deg_per_h: float = 0.0
     accel_bias_micro_g: float = 0.0
@@ -113,11 +121,16 @@ class ImuSpec:
     accel_noise_micro_g_per_sqrt_hz: float = 0.0
     gyro_bias_walk_deg_per_h_per_sqrt_h: float = 0.0
     accel_bias_walk_micro_g_per_sqrt_h: float = 0.0
+    quantisation_gyro_rad_s: float | tuple[float, float, float] = 0.0
+    quantisation_accel_m_s2: float | tuple[float, float, float] = 0.0
 
 
 @dataclass(frozen=True)
 class DvlSpec:
-    """DVL truth calibration, beam geometry, noise and bottom-lock model (file units)."""
+    """DVL truth calibration, beam geometry, noise and bottom-lock model (file units). The velocity error is the
+    white ping noise (noise_m_s) plus, when correlated_sigma_m_s > 0, a first-order Gauss-Markov error per DVL
+    axis of stationary std correlated_sigma_m_s and time constant correlated_tau_s (sim/dvl.py
+    gauss_markov), added to the velocity in dvl_link before the beams are formed."""
 
     scale: float = 1.0
     misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw of R_c (FLU)
@@ -131,6 +144,31 @@ class DvlSpec:
     dropout_beam_prob: float = 0.0
     outlier_prob: float = 0.0  # per ping ("velocity") or per beam ("beam")
     outlier_m_s: float = 1.0  # size of a gross error
+    correlated_sigma_m_s: float = 0.0  # Gauss-Markov error: stationary 1 sigma per axis (0: none)
+    correlated_tau_s: float = 60.0  # its time constant
+
+
+@dataclass(frozen=True)
+class OscillationSpec:
+    """Small sinusoidal motion added to the whole trajectory (optional [oscillation] table; sim/motion.py):
+    amplitude * sin(2 pi t / period) on roll, pitch and yaw (deg) and on the height (heave, m); each key a number
+    or a list (a sum of sinusoids: as many periods as amplitudes). A real vehicle never holds a perfectly constant
+    rate: its slow motions and its vibration keep a quantised IMU's outputs crossing their steps, so that the
+    rounding error is white. The truth, the IMU and the DVL all include the oscillation."""
+
+    roll_deg: tuple[float, ...] = (0.0,)
+    roll_period_s: tuple[float, ...] = (7.0,)
+    pitch_deg: tuple[float, ...] = (0.0,)
+    pitch_period_s: tuple[float, ...] = (11.0,)
+    yaw_deg: tuple[float, ...] = (0.0,)
+    yaw_period_s: tuple[float, ...] = (13.0,)
+    heave_m: tuple[float, ...] = (0.0,)
+    heave_period_s: tuple[float, ...] = (9.0,)
+
+    def channels(self) -> list[tuple[str, tuple[float, ...], tuple[float, ...]]]:
+        """(channel, amplitudes, periods) of roll, pitch, yaw (deg) and heave (m)."""
+        return [(c, getattr(self, f"{c}_{'m' if c == 'heave' else 'deg'}"), getattr(self, f"{c}_period_s"))
+                for c in ("roll", "pitch", "yaw", "heave")]
 
 
 @dataclass(frozen=True)
@@ -198,6 +236,15 @@ class Scenario:
     # the named estimator configuration (core/config/estimator.py NAMED_CONFIGS) this scenario's runs are meant for:
     # smooth and plan use it when no configuration is given (the paper's runs: "paper")
     estimator_config: str = "default"
+    oscillation: OscillationSpec | None = None  # the [oscillation] table, if the scenario has one
+    # the [estimator] table: a partial estimator configuration (EstimatorConfig's tables) applied over the named
+    # one, e.g. what is known about this log (its initial attitude); empty: none
+    estimator: dict[str, Any] = field(default_factory=dict)
+
+    def estimator_configuration(self) -> EstimatorConfig:
+        """The configuration this scenario's runs are meant for: estimator_config's named configuration with the
+        [estimator] table's overrides (EstimatorConfig.for_scenario)."""
+        return EstimatorConfig.for_scenario(self.raw)
 
     @property
     def duration_s(self) -> float:
@@ -256,7 +303,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r = Reader(raw, source)
     r.check_keys(
         "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments",
-             "depth", "gnss", "estimator_config"]
+             "depth", "gnss", "estimator_config", "oscillation", "estimator"]
     )
     estimator_config = raw.get("estimator_config", "default")
     r.require(isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS, "estimator_config",
@@ -271,16 +318,21 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     initial = InitialState(**r.table("initial", _defaults(InitialState)))
     r.require(initial.speed_m_s >= 0, "initial.speed_m_s", "must be >= 0")
     imu = ImuSpec(**r.table("imu", _defaults(ImuSpec), vectors=("gyro_bias_values_deg_per_h",
-                                                                   "accel_bias_values_micro_g")))
+                                                                   "accel_bias_values_micro_g"),
+                            per_axis=("quantisation_gyro_rad_s", "quantisation_accel_m_s2")))
     dvl = DvlSpec(**r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
                             strings=("noise_model",)))
     for key in ("gyro_bias_deg_per_h", "accel_bias_micro_g", "gyro_noise_deg_per_h_per_sqrt_hz",
                 "accel_noise_micro_g_per_sqrt_hz", "gyro_bias_walk_deg_per_h_per_sqrt_h",
                 "accel_bias_walk_micro_g_per_sqrt_h"):
         r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
+    for key in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2"):
+        r.require(min(np.atleast_1d(getattr(imu, key))) >= 0, f"imu.{key}", "must be >= 0 (0: not quantised)")
     for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
         r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
     r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
+    r.require(dvl.correlated_sigma_m_s >= 0, "dvl.correlated_sigma_m_s", "must be >= 0 (0: no correlated error)")
+    r.require(dvl.correlated_tau_s > 0, "dvl.correlated_tau_s", "must be positive")
     r.require(dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'")
     r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
     r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")
@@ -299,6 +351,10 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         dr = rates.imu_hz / depth.rate_hz
         r.require(abs(dr - round(dr)) < 1e-9, "depth.rate_hz", "must divide rates.imu_hz")
     gnss = _gnss_spec(r, rates.imu_hz) if "gnss" in raw else None
+    oscillation = _oscillation_spec(r, rates.imu_hz) if "oscillation" in raw else None
+    estimator = raw.get("estimator", {})
+    r.require(isinstance(estimator, dict), "estimator", "expected a table of estimator configuration tables")
+    EstimatorConfig.for_scenario(raw, source=f"{source}: [estimator]")  # checked now: a bad key fails at load
     t0 = raw.get("t0_s", DEFAULT_T0_S)
     r.number("t0_s", t0)
     t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact
@@ -318,7 +374,34 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         depth=depth,
         estimator_config=estimator_config,
         gnss=gnss,
+        oscillation=oscillation,
+        estimator=copy.deepcopy(estimator),
     )
+
+
+def _oscillation_spec(r: Reader, imu_hz: float) -> OscillationSpec:
+    """The [oscillation] table, checked: each key a number or a list of numbers, as many periods as amplitudes,
+    periods of at least 4 IMU samples (the IMU quadrature's accuracy), angles within +-10 deg."""
+    d = r.raw["oscillation"]
+    if not isinstance(d, dict):
+        raise r.fail("oscillation", "expected a table")
+    defaults = _defaults(OscillationSpec)
+    r.check_keys("oscillation", list(defaults), d)
+    values: dict[str, tuple[float, ...]] = {}
+    for key, default in defaults.items():
+        v = d.get(key, list(default))
+        items = v if isinstance(v, list) else [v]
+        r.require(len(items) > 0, f"oscillation.{key}", "expected a number or a list of numbers")
+        values[key] = tuple(r.number(f"oscillation.{key}", x) for x in items)
+    spec = OscillationSpec(**values)
+    for channel, amplitudes, periods in spec.channels():
+        key = f"oscillation.{channel}_period_s"
+        r.require(len(periods) == len(amplitudes), key, f"give one period per amplitude ({len(amplitudes)})")
+        r.require(min(periods) >= 4.0 / imu_hz, key, f"must be at least 4 IMU samples ({4.0 / imu_hz:g} s)")
+        if channel != "heave":
+            r.require(max(abs(a) for a in amplitudes) <= 10.0, f"oscillation.{channel}_deg",
+                      "must be within +-10 deg (a small oscillation)")
+    return spec
 
 
 def _gnss_spec(r: Reader, imu_hz: float) -> GnssSpec:

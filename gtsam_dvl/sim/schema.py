@@ -10,6 +10,9 @@ Segment kinds (keys in brackets are optional; the vehicle keeps its attitude unl
 - descent / ascent: duration_s, peak_vertical_speed_m_s. Ballast: constant attitude and horizontal
   speed, the vertical speed rises smoothly to the peak and back to zero (paper Type I).
 - turn: duration_s, heading_change_deg (positive left), [bank_deg]. Constant speed (paper Type II).
+- arc: duration_s, turn_rate_deg_s (positive left). A steady turn: constant speed and attitude but the yaw, the
+  turn rate constant from the segment's start to its end (held before t = 0 when it is the first segment, after
+  the end when the last: sim/motion.py). Paper Type II.
 - square: leg_duration_s, turn_duration_s, [bank_deg], [direction = "left"], [sides = 4],
   [turn_first = false]: legs and turns of 360/sides deg alternating, leg first unless turn_first (the
   paper's "I and II" segment).
@@ -28,6 +31,7 @@ SEGMENT_KEYS: dict[str, tuple[str, ...]] = {
     "descent": ("duration_s", "peak_vertical_speed_m_s"),
     "ascent": ("duration_s", "peak_vertical_speed_m_s"),
     "turn": ("duration_s", "heading_change_deg", "bank_deg"),
+    "arc": ("duration_s", "turn_rate_deg_s"),
     "square": ("leg_duration_s", "turn_duration_s", "bank_deg", "direction", "sides", "turn_first"),
 }
 SEGMENT_KINDS = tuple(SEGMENT_KEYS)
@@ -35,6 +39,7 @@ _REQUIRED = {
     "descent": ("duration_s", "peak_vertical_speed_m_s"),
     "ascent": ("duration_s", "peak_vertical_speed_m_s"),
     "turn": ("duration_s", "heading_change_deg"),
+    "arc": ("duration_s", "turn_rate_deg_s"),
     "square": ("leg_duration_s", "turn_duration_s"),
 }
 
@@ -71,14 +76,20 @@ class Reader:
         x, y, z = (self.number(key, v) for v in value)
         return (x, y, z)
 
+    def scalar_or_vector(self, key: str, value: Any) -> float | tuple[float, float, float]:
+        """A number, or a list of 3 (one per axis)."""
+        return self.vector(key, value) if isinstance(value, list) else self.number(key, value)
+
     def table(
         self,
         name: str,
         defaults: dict[str, Any],
         vectors: tuple[str, ...] = (),
         strings: tuple[str, ...] = (),
+        per_axis: tuple[str, ...] = (),
     ) -> dict[str, Any]:
-        """Values of table `name`: defaults filled in, None defaults (except vectors) required."""
+        """Values of table `name`: defaults filled in, None defaults (except vectors) required. per_axis: keys that
+        take a number or a list of 3."""
         d = self.raw.get(name, {})
         if not isinstance(d, dict):
             raise self.fail(name, "expected a table")
@@ -92,6 +103,8 @@ class Reader:
                 out[key] = default
             elif key in vectors:
                 out[key] = self.vector(full, d[key])
+            elif key in per_axis:
+                out[key] = self.scalar_or_vector(full, d[key])
             elif key in strings:
                 if not isinstance(d[key], str):
                     raise self.fail(full, f"expected a string, got {d[key]!r}")
@@ -144,7 +157,7 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
         for key in ("peak_vertical_speed_m_s", "bank_deg"):
             if key in row:
                 r.require(0 <= row[key] < 90, f"{pre}.{key}", "must be >= 0 (the kind gives the sign)")
-        paper_type = {"static": "-", "straight": "-", "descent": "I", "ascent": "I", "turn": "II",
+        paper_type = {"static": "-", "straight": "-", "descent": "I", "ascent": "I", "turn": "II", "arc": "II",
                       "square": "I+II"}.get(kind, "-")
         if kind == "static":
             r.require(speed == 0.0, pre, f"a static segment needs the vehicle at rest, speed is {speed} m/s")

@@ -3,7 +3,9 @@
 Steps: analytic motion in the local level -> geodetic position by quadrature -> true IMU increments ->
 biases and noise -> truth in the map frame -> DVL -> depth and GNSS fixes (when the scenario has them).
 Random streams are children of SeedSequence(seed) (PCG64), one per purpose, so switching white noise off keeps
-the same biases.
+the same biases: 0 IMU biases, 1 IMU white noise, 2 DVL white noise, 3 DVL dropouts and outliers, 4 depth, 5 GNSS,
+6 the DVL's correlated (Gauss-Markov) error. A stream a scenario does not use is never drawn, so adding a sensor
+or an error to a scenario leaves every other stream's numbers as they were.
 """
 
 from __future__ import annotations
@@ -29,9 +31,9 @@ from gtsam_dvl.core.types import (
     TruthData,
 )
 from gtsam_dvl.sim import imu as sim_imu
-from gtsam_dvl.sim.dvl import dvl_measure, dvl_true
+from gtsam_dvl.sim.dvl import correlated_error, dvl_measure, dvl_true
 from gtsam_dvl.sim.gnss import first_fix_frame, reframe_truth, simulate_gnss
-from gtsam_dvl.sim.imu import ImuErrors, draw_biases, true_imu
+from gtsam_dvl.sim.imu import ImuErrors, draw_biases, quantise, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import PositionTrack, integrate_position
@@ -50,8 +52,9 @@ def simulate(
 ) -> LogData:
     """Simulate the scenario's IMU (rate and specific force averaged over each sample), DVL and truth.
 
-    white_noise=False drops IMU and DVL white noise, DVL dropouts and outliers, but keeps the biases,
-    the DVL scale and misalignment, the mounting and the lever arm. Same seed, same arrays, bit for bit.
+    white_noise=False drops IMU and DVL white noise, the DVL's correlated error, DVL dropouts and outliers, but
+    keeps the biases, the IMU's quantisation, the DVL scale and misalignment, the mounting and the lever arm.
+    Same seed, same arrays, bit for bit.
     """
     rates = scenario.rates
     rate = rates.imu_hz
@@ -70,7 +73,8 @@ def simulate(
         ng, na = sim_imu.white_noise(scenario.imu, n, rate, np.random.Generator(np.random.PCG64(imu_ss)))
         b_omega += ng
         b_f += na
-    imu = ImuData(t=np.arange(n) / rate, b_omega=b_omega, b_f=b_f)
+    imu = ImuData(t=np.arange(n) / rate, b_omega=quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
+                  b_f=quantise(b_f, scenario.imu.quantisation_accel_m_s2))
 
     truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)))
 
@@ -80,6 +84,9 @@ def simulate(
     t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float(imu.t[-1]))
     floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
     y, d_u, ranges = dvl_true(scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas, floor_h)
+    correlated = correlated_error(scenario.dvl, rates.dvl_hz, seed) if white_noise else None
+    if correlated is not None:
+        y = y + correlated.take(len(t_meas))
     dvl = dvl_measure(
         scenario.dvl, t_dvl, y, d_u, ranges,
         np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
@@ -138,6 +145,11 @@ def _fix_frame(scenario: Scenario, fix_frame: LocalFrame | None, metadata: dict[
     metadata["truth"]["map_origin"] = {"lat_deg": fix_frame.lat_deg, "lon_deg": fix_frame.lon_deg,
                                        "height_m": fix_frame.height_m, "from": "first GNSS fix"}
     return fix_frame
+
+
+def _without(d: dict[str, Any], keys: tuple[str, ...]) -> dict[str, Any]:
+    """d without keys (the settings of an error that is off)."""
+    return {k: v for k, v in d.items() if k not in keys}
 
 
 def _listify_spec(d: dict[str, Any]) -> dict[str, Any]:
@@ -255,9 +267,12 @@ def _metadata(
             "imu": imu_truth_md,
             "segments": scenario.segment_table(),
         },
-        "sensors": {
-            "imu": listify(asdict(scenario.imu)),
-            "dvl": listify(asdict(scenario.dvl)),
+        "sensors": {  # the optional errors only when on (the metadata of a scenario without them stays as it was)
+            "imu": _without(listify(asdict(scenario.imu)), tuple(
+                k for k in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2")
+                if not np.any(getattr(scenario.imu, k)))),
+            "dvl": _without(listify(asdict(scenario.dvl)), ("correlated_sigma_m_s", "correlated_tau_s")
+                            if scenario.dvl.correlated_sigma_m_s == 0 else ()),
             "rates": asdict(scenario.rates),
             "mounting": listify(asdict(scenario.mounting)),
         },

@@ -54,9 +54,9 @@ from gtsam_dvl.core.types import (
     Mounting,
     TruthData,
 )
-from gtsam_dvl.sim.dvl import dvl_measure, dvl_true, event_blocks, janus_beams
+from gtsam_dvl.sim.dvl import GaussMarkov, correlated_error, dvl_measure, dvl_true, event_blocks, janus_beams
 from gtsam_dvl.sim.gnss import first_fix_frame, gnss_fixes, gnss_rng, reframe_truth
-from gtsam_dvl.sim.imu import initial_biases, true_imu_range, walk_step_sigmas, white_noise_sigmas
+from gtsam_dvl.sim.imu import initial_biases, quantise, true_imu_range, walk_step_sigmas, white_noise_sigmas
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import GL_U, GL_W, PositionTrack, node_times
 from gtsam_dvl.sim.simulate import (
@@ -280,6 +280,7 @@ class _Streams:
     dvl_events: _Draws | None
     depth: np.random.Generator | None
     gnss: np.random.Generator | None
+    dvl_correlated: GaussMarkov | None  # continued ping by ping
 
 
 class ChunkedSimulation:
@@ -416,7 +417,7 @@ class ChunkedSimulation:
 
     def _streams(self) -> _Streams:
         g_sigma, a_sigma = self._walk_sigmas
-        white = self.white_noise
+        white, sc = self.white_noise, self.scenario
         events = None
         if white:
             blocks = event_blocks(self.scenario.dvl, self.n_pings, self.n_beams)
@@ -438,6 +439,7 @@ class ChunkedSimulation:
             dvl_events=events,
             depth=depth_rng(self.seed) if white and self.scenario.depth is not None else None,
             gnss=gnss_rng(self.seed) if white and self.scenario.gnss is not None else None,
+            dvl_correlated=correlated_error(sc.dvl, sc.rates.dvl_hz, self.seed) if white else None,
         )
 
     # -- the parts ----------------------------------------------------------------------------------
@@ -457,7 +459,8 @@ class ChunkedSimulation:
             if streams.gyro_noise is not None and streams.accel_noise is not None:
                 b_omega += streams.gyro_noise.normal(0.0, sg, (b - a, 3))
                 b_f += streams.accel_noise.normal(0.0, sa, (b - a, 3))
-            imu = ImuData(t=np.arange(a, b) / rate, b_omega=b_omega, b_f=b_f)
+            imu = ImuData(t=np.arange(a, b) / rate, b_omega=quantise(b_omega, sc.imu.quantisation_gyro_rad_s),
+                          b_f=quantise(b_f, sc.imu.quantisation_accel_m_s2))
 
             truth = self._truth(win, self._stamps(a, b, self.truth_step))
             n_p = np.concatenate([last_p, truth.n_p])
@@ -513,6 +516,9 @@ class ChunkedSimulation:
         if m:
             y, d_u, ranges = dvl_true(sc.dvl, self.mounting.b_R_d0, self.mounting.b_l, self.motion, win,
                                       _padded(self.t_meas[j0:j1]), self.floor_h)
+            if streams.dvl_correlated is not None:
+                e = streams.dvl_correlated.take(m)
+                y = y + (np.concatenate([e, e]) if m == 1 else e)  # the padded copy's: the real ping's
         else:
             y, ranges = np.zeros((0, 3)), np.zeros((0, self.n_beams))
             d_u = janus_beams(sc.dvl.beam_angle_deg, np.asarray(sc.dvl.face_axis))

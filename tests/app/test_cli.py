@@ -222,7 +222,8 @@ def test_help_shows_flags_as_flags_and_lists_the_scenarios() -> None:
     assert "<bool>" not in text
     assert re.search(r"^\s+--salvage\s+Recover", text, re.M) and re.search(r"^\s+--strict\s+Exit", text, re.M)
     assert re.search(r"^\s+-q, --quiet\s+No progress bars", text, re.M)
-    sim_help = " ".join(run("simulate", "--help").stdout.split())
+    # the help wraps at hyphens ("straight-" at a line's end, "transect" on the next): joined back
+    sim_help = " ".join(re.sub(r"-\n\s*", "-", run("simulate", "--help").stdout).split())
     for name in list_builtin_scenarios():
         assert name in sim_help
 

@@ -54,7 +54,7 @@ def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tup
 
     sc = scenario_from_dict(dict(scenario), name=scenario_name, source=f"{scenario_name} (seed {seed})")
     log = simulate(sc, int(seed))
-    cfg = EstimatorConfig.from_dict(config) if config else EstimatorConfig.named(sc.estimator_config)
+    cfg = EstimatorConfig.from_dict(config) if config else sc.estimator_configuration()
     out: dict[str, Any] = {"seed": int(seed), "estimators": {}}
     for name in estimators:
         t0 = time.perf_counter()

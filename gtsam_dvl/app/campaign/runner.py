@@ -67,7 +67,8 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
     if runs < 1:
         raise GtsamDvlError(f"--runs must be at least 1, got {runs}")
     sc = load_scenario(scenario)
-    config = EstimatorConfig.load(config_path).to_dict() if config_path else None
+    # -c: the scenario's [estimator] table below it (None: the scenario's own configuration, in run_seed)
+    config = EstimatorConfig.load(config_path, under=sc.estimator).to_dict() if config_path else None
     record = json.loads(json.dumps(_campaign_record(sc.name, sc.raw, estimators, config), default=str))
     out_dir = Path(out_dir)
     runs_dir = out_dir / "runs"

@@ -174,11 +174,13 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     import_foxglove()
     factor = parse_speed(speed)
     from gtsam_dvl.app.commands import load_log
-    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
     from gtsam_dvl.estimators.online import OnlineEstimator
 
-    config = EstimatorConfig.load(config_path) if config_path else None
+    config = EstimatorConfig.load(config_path) if config_path else None  # a bad -c fails before the log is read
     log = load_log(log_path, **(read_options or {}))
+    if config_path:  # the log's scenario's [estimator] table below the -c configuration
+        config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
     config = config or EstimatorConfig.for_log(log.metadata)
     estimator = OnlineEstimator.for_log(log, config)
     with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:

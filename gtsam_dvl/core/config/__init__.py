@@ -24,7 +24,12 @@ configurations, loading).
 """
 
 from gtsam_dvl.core.config.base import ConfigModel
-from gtsam_dvl.core.config.estimator import NAMED_CONFIGS, EstimatorConfig, recommended_config_name
+from gtsam_dvl.core.config.estimator import (
+    NAMED_CONFIGS,
+    EstimatorConfig,
+    estimator_overrides,
+    recommended_config_name,
+)
 from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
     BadMessages,
@@ -50,5 +55,5 @@ __all__ = [
     "NAMED_CONFIGS", "AlignmentConfig", "BadMessages", "BiasModel", "ConfigModel", "DepthConfig", "DvlConfig",
     "EarthModel", "EkfConfig", "EstimatorConfig", "GnssConfig", "GnssUse", "ImuConfig", "IodvlcConfig",
     "ObservabilityConfig", "OnlineConfig", "OnlineMode", "PriorConfig", "RelinearizationThresholds", "RobustLoss",
-    "SolverConfig", "recommended_config_name",
+    "SolverConfig", "estimator_overrides", "recommended_config_name",
 ]

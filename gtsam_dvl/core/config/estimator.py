@@ -51,6 +51,14 @@ def recommended_config_name(metadata: Mapping[str, Any]) -> str:
     return name if isinstance(name, str) and name in NAMED_CONFIGS else "default"
 
 
+def estimator_overrides(metadata: Mapping[str, Any]) -> dict[str, Any]:
+    """A log's scenario's [estimator] table (what the scenario tells its estimators, e.g. the initial attitude),
+    {} when it has none: the layer under a configuration given with -c (EstimatorConfig.load's under)."""
+    scenario = metadata.get("scenario")
+    table = scenario.get("estimator", {}) if isinstance(scenario, Mapping) else {}
+    return dict(table) if isinstance(table, Mapping) else {}
+
+
 class EstimatorConfig(ConfigModel):
     """Every estimator's configuration: the models ([imu], [dvl], [priors], [alignment], [solver]) shared by
     every estimator, [online] (the iSAM2 estimator), [ekf], [iodvlc], [depth], [gnss] and [observability]."""
@@ -99,24 +107,41 @@ class EstimatorConfig(ConfigModel):
     @classmethod
     def for_log(cls, metadata: Mapping[str, Any]) -> EstimatorConfig:
         """The configuration a log's scenario names (its estimator_config key: a simulated paper run names
-        "paper"), else the defaults: what every estimator uses when no configuration is given."""
-        return cls.named(recommended_config_name(metadata))
+        "paper") with its [estimator] overrides (for_scenario), else the defaults: what every estimator uses when
+        no configuration is given."""
+        return cls.for_scenario(metadata.get("scenario"), source="the log's scenario [estimator]")
 
     @classmethod
-    def load(cls, spec: Path | str) -> EstimatorConfig:
+    def for_scenario(cls, scenario: Any, source: str = "scenario [estimator]") -> EstimatorConfig:
+        """A scenario's configuration (scenario: its TOML tables as a dict): the named configuration its
+        estimator_config names (else "default"), with its [estimator] table (a partial configuration: tables and
+        keys of EstimatorConfig, e.g. [estimator.alignment] initial_attitude_deg) over it."""
+        raw = scenario if isinstance(scenario, Mapping) else {}
+        overrides = raw.get("estimator", {})
+        if not isinstance(overrides, Mapping) or "preset" in overrides:
+            raise GtsamDvlError(f"{source}: expected tables of estimator configuration keys (the named "
+                                "configuration is the scenario's estimator_config key, not a preset)")
+        name = recommended_config_name({"scenario": raw})
+        return cls.from_dict(_merged(NAMED_CONFIGS[name], overrides), source=source)
+
+    @classmethod
+    def load(cls, spec: Path | str, under: Mapping[str, Any] | None = None) -> EstimatorConfig:
         """A configuration from the command line's -c: a file (TOML, or a result's config.json), else the
-        name of a named configuration."""
+        name of a named configuration. under: keys the configuration's own keys override (a scenario's [estimator]
+        table, estimator_overrides): applied below the -c configuration, above the defaults."""
         if not Path(spec).exists() and str(spec) in NAMED_CONFIGS:
-            return cls.named(str(spec))
+            return cls.from_dict({"preset": str(spec)}, source=f"configuration '{spec}'", under=under)
         if not Path(spec).exists():
             raise GtsamDvlError(f"{spec}: no such configuration file, and not a named configuration "
                                 f"({', '.join(NAMED_CONFIGS)})")
-        return cls.from_toml(spec)
+        return cls.from_toml(spec, under=under)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], source: str = "config") -> EstimatorConfig:
+    def from_dict(cls, data: Mapping[str, Any], source: str = "config",
+                  under: Mapping[str, Any] | None = None) -> EstimatorConfig:
         """Sections from a dict shaped like the TOML file. A top-level key preset = "NAME" starts from that
-        named configuration instead of the defaults."""
+        named configuration instead of the defaults. under: keys below data's (and its preset's), above the
+        defaults."""
         if not isinstance(data, Mapping):
             raise GtsamDvlError(f"{source}: a configuration is a table of sections, got {data!r}")
         if "preset" in data:
@@ -125,13 +150,15 @@ class EstimatorConfig(ConfigModel):
                 raise GtsamDvlError(f"{source}: preset must be the name of a named configuration "
                                     f"({', '.join(NAMED_CONFIGS)}), got {preset!r}")
             data = _merged(NAMED_CONFIGS[preset], {k: v for k, v in data.items() if k != "preset"})
+        if under:
+            data = _merged(under, data)
         return cls.checked(data, source)
 
     @classmethod
-    def from_toml(cls, path: Path | str) -> EstimatorConfig:
+    def from_toml(cls, path: Path | str, under: Mapping[str, Any] | None = None) -> EstimatorConfig:
         """A TOML configuration file, or (*.json) the effective configuration written with a result."""
         if str(path).lower().endswith(".json"):
-            return cls.from_json(path)
+            return cls.from_json(path, under=under)
         try:
             with open(path, "rb") as fh:
                 data = tomllib.load(fh)
@@ -139,10 +166,10 @@ class EstimatorConfig(ConfigModel):
             raise GtsamDvlError(f"{path}: no such configuration file") from None
         except tomllib.TOMLDecodeError as exc:
             raise GtsamDvlError(f"{path}: not valid TOML ({exc})") from None
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(data, source=str(path), under=under)
 
     @classmethod
-    def from_json(cls, path: Path | str) -> EstimatorConfig:
+    def from_json(cls, path: Path | str, under: Mapping[str, Any] | None = None) -> EstimatorConfig:
         """The config.json of a result ({"estimator": ..., "config": {...}}) or a bare configuration dict."""
         try:
             with open(path, encoding="utf-8") as fh:
@@ -153,7 +180,7 @@ class EstimatorConfig(ConfigModel):
             raise GtsamDvlError(f"{path}: not valid JSON ({exc})") from None
         if isinstance(data, dict) and "config" in data and set(data) <= {"estimator", "config"}:
             data = data["config"]
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(data, source=str(path), under=under)
 
 
 def _merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:
