@@ -154,6 +154,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         "info": result.info,
     }
     out["noise_levels"] = noise_lines(result.info.get("noise"))
+    if isinstance(recentred := result.info.get("time_offset_prior"), dict) and recentred.get("why"):
+        out["noise_levels"].append(str(recentred["why"]))  # the EKF's warm-up: where its offset prior was centred
     if np.isfinite(result.time_offset_sigma_s):
         out["dvl_time_offset_s"] = time_offset_verdict(result)
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:

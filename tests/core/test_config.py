@@ -394,7 +394,7 @@ FIXTURES = Path(__file__).parent / "config_fixtures"
 # takes their defaults (the fit on, no preset), also a paper configuration's
 ADDED = {"noise": None, "imu": {"model"},
          "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
-         "priors": {"mounting_tolerance_deg"}}
+         "priors": {"mounting_tolerance_deg"}, "ekf": {"recentre_time_offset"}}
 
 
 def _without_added(d: dict) -> dict:  # type: ignore[type-arg]

@@ -313,6 +313,11 @@ class EkfConfig(ConfigModel):
     gate_probability: Number = Field(default=0.99999, gt=0.0, le=1.0)
     # after this many consecutive gated pings the next one is used anyway (a filter that lost track recovers)
     gate_reopen_after: Integer = Field(default=10, ge=1)
+    # with [dvl] estimate_time_offset: filter the warm-up window ([noise] warmup_s) first and centre the time
+    # offset's prior at the window's estimate (its sigma kept), so that the whole log is filtered linearised at
+    # the offset the data show: an EKF never relinearises the past, and a DVL stamped 1 s early (2 prior sigmas)
+    # otherwise leaves the scale and the yaw misalignment 4-6 sigma off (straight-transect)
+    recentre_time_offset: Flag = True
 
 
 class IodvlcConfig(ConfigModel):

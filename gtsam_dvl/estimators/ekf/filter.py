@@ -52,6 +52,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.stats import chi2
@@ -378,21 +379,57 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     noise = NoiseReport()
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     config = imu_levels(log, config, noise)  # the IMU's quantisation floor ([noise])
-    if dvl_fit_enabled(config):
+    recentre = enabled(config, "time_offset") and config.ekf.recentre_time_offset
+    offset_info: dict[str, Any] = {}
+    if dvl_fit_enabled(config) or recentre:
         n = config.noise
         for k in range(n.fit_passes):
             fit = WarmupFit(config)
-            _filter(log, config, None, fit)
-            new = fit.finish("covariance matching of the EKF's innovations")
-            settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
-            config = with_multiplier(config, new)
-            noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
+            window = _filter(log, config, None, fit)
+            settled = True
+            if dvl_fit_enabled(config):
+                new = fit.finish("covariance matching of the EKF's innovations")
+                settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
+                config = with_multiplier(config, new)
+                noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
+            if recentre:
+                config, moved = _recentred_offset(config, window, offset_info, k + 1)
+                settled = settled and not moved
             if settled:
                 break
     result = _filter(log, config, progress)
     result.info["noise"] = noise.as_dict()
+    if offset_info:
+        result.info["time_offset_prior"] = offset_info
     result.config = stated.to_dict()
     return result
+
+
+# The warm-up passes stop recentring once the window's offset moves the prior's centre by less than this fraction
+# of its sigma (0.05 x 0.5 s = 25 ms, about the window's own sigma of the offset).
+RECENTRE_TOLERANCE = 0.05
+# The window's offset recentres the prior only when the window determined it: its sigma at most this fraction of
+# the prior's (a straight run at constant speed leaves the offset unobservable, and its window estimate is noise).
+RECENTRE_DETERMINED = 0.5
+
+
+def _recentred_offset(config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
+                      ) -> tuple[EstimatorConfig, bool]:
+    """config with the time offset's prior centred at the warm-up window's estimate ([ekf] recentre_time_offset),
+    and whether that moved it by more than RECENTRE_TOLERANCE prior sigmas; info says where from."""
+    dvl = config.dvl
+    dt, sigma = float(window.time_offset_s), float(window.time_offset_sigma_s)
+    if not (np.isfinite(dt) and np.isfinite(sigma)) or sigma > RECENTRE_DETERMINED * dvl.time_offset_sigma_s:
+        info.update(window_sigma_s=sigma, passes=passes,
+                    why=f"time offset prior kept at {dvl.time_offset_prior_s:+.3f} s: the warm-up window did not "
+                        f"determine the offset (sigma {sigma:.3g} s of the prior's {dvl.time_offset_sigma_s:g} s)")
+        return config, False
+    moved = abs(dt - dvl.time_offset_prior_s) > RECENTRE_TOLERANCE * dvl.time_offset_sigma_s
+    info.setdefault("configured_s", dvl.time_offset_prior_s)
+    info.update(centre_s=dt, window_sigma_s=sigma, passes=passes,
+                why=f"time offset prior centred at {dt:+.3f} s, the warm-up window's estimate (configured "
+                    f"{info['configured_s']:+.3f} s, sigma {dvl.time_offset_sigma_s:g} s kept)")
+    return config.model_copy(update={"dvl": dvl.model_copy(update={"time_offset_prior_s": dt})}), moved
 
 
 def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, fit: WarmupFit | None = None
