@@ -283,7 +283,8 @@ def test_ekf_section_reaches_the_filter() -> None:
     assert counts[0] < counts[1] < counts[2] == always_slow.info["counters"]["dvl_updates"]
     assert always_slow.scale == cfg.priors.scale_initial  # never updated from its prior
     assert always_slow.config["ekf"] == {"min_calibration_speed_m_s": 10.0, "calibration_speed_sigmas": 0.0,
-                                         "gate_probability": 0.99999, "gate_reopen_after": 10}
+                                         "gate_probability": 0.99999, "gate_reopen_after": 10,
+                                         "recentre_time_offset": True}
     # the keyword still works, overrides the config and is written to the effective configuration
     kw = run_ekf(log, cfg, min_calibration_speed_m_s=0.0)
     assert kw.info["counters"]["dvl_slow"] == counts[0] and kw.config["ekf"]["min_calibration_speed_m_s"] == 0.0
