@@ -182,11 +182,12 @@ def plan_fixes(log: LogData, config: EstimatorConfig, frame: LocalFrame, t_state
                      np.asarray(state), np.asarray(dt), antenna_lever(gnss, config), from_gnss, origin_index)
 
 
-def first_position(fixes: GnssFixes | None, n_R_b: np.ndarray) -> np.ndarray:
-    """Initial guess of the first state's position (m, map): the map origin, or, when the origin is the first
-    fix, that fix minus the antenna's offset n_R_b b_p_antenna."""
+def first_position(fixes: GnssFixes | None, n_R_b: np.ndarray, n_p_origin: np.ndarray | None = None) -> np.ndarray:
+    """Initial guess of the first state's position (m, map): n_p_origin (the map origin carried to the first
+    state: alignment.first_state; None: the origin), or, when the origin is the first fix, that fix minus the
+    antenna's offset n_R_b b_p_antenna."""
     if fixes is None or not fixes.origin_from_gnss or fixes.origin_index < 0:
-        return np.zeros(3)
+        return np.zeros(3) if n_p_origin is None else np.asarray(n_p_origin, dtype=float)
     return np.asarray(fixes.n_p[fixes.origin_index] - n_R_b @ fixes.b_p_antenna)
 
 

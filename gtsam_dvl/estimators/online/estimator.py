@@ -85,7 +85,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.states import enabled
-from gtsam_dvl.core.types import LogData, Mounting
+from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due
@@ -308,7 +308,7 @@ class OnlineEstimator:
             "counters": dict(self.counters), "epochs": len(h),
             "keyframe_spacing_s": self.config.solver.keyframe_spacing_s,
             "imu_gaps": self._imu.gaps_info(),
-            "alignment": self.builder.alignment.info(),
+            "alignment": self.builder.alignment_info(),
             "noise": self.noise.as_dict(),
             "latency_ms": latency_stats(self.latencies_s),
             "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
@@ -419,9 +419,11 @@ class OnlineEstimator:
         b, sm = self.builder, self.smoother
         t_epoch = p.t if p is not None else float(t_state)  # type: ignore[arg-type]
         T, W, F = self._imu.samples()
+        i = sm.n
+        if i == 0 and p is not None:  # the given attitude and origin (at the first IMU stamp) carried to the epoch
+            b.carry_to_first(ImuData(T, W, F), t_epoch, p.d_v if p.valid else None, p.d_cov)
         gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
-        i = sm.n
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
         min_speed = self.options.calibration_min_speed_m_s
         dvl = state_dvl_factors(b, i, p, b_omega, min_speed, rate_input) if p is not None else []
