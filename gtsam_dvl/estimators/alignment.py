@@ -33,6 +33,15 @@ Accuracy: sigma^2 (sum |beta~|^2 I - beta~ beta~^T)^-1 about map axes, sigma^2 f
 bias floors: roll/pitch accel_bias / g; heading gyro_bias / (omega_ie cos lat) and accel_bias tan(lat) / g
 (the errors of gyrocompassing). Measured on a simulated navigation-grade run starting at 2 m/s with turns
 (0.01 deg/h, 50 micro-g, 2 cm/s DVL; tests/estimators/test_alignment_motion.py): see that test's numbers.
+
+The given initial state means the log's first IMU stamp: the configured attitude, the in-motion alignment's
+and the map origin (the vehicle's position then). first_state carries them to the first state, the first
+usable ping, which may come later (a log that starts underway, DVL stamps offset, unusable first pings):
+n_R_b(t1) = Exp(-n_omega_ie (t1 - t0)) n_R_b(t0) prod_k Exp(b_omega_k dt_k) (Alignment.at) and the position
+by the first ping's body velocity turned with that attitude; the prior covariance grows by the gyro noise
+and bias over the interval and by the velocity error times it, and the attitude error turns the distance
+travelled (tests/estimators/test_initial_state.py). The batch smoother, the online estimator and the EKF all
+start from it.
 """
 
 from __future__ import annotations
@@ -58,8 +67,8 @@ ATTITUDE_SOURCES = ("an attitude topic (--attitude-topic: sensor_msgs/msg/Imu, n
 @dataclass
 class Alignment:
     """Initial attitude of base_link in map. Static and configured: the attitude of the whole static segment
-    (up to t_static_end) or of the first state. Attitude sensor and in motion: the attitude at t_ref, which
-    at() carries to another time with the gyros."""
+    (up to t_static_end) or at the log's first IMU stamp. Attitude sensor and in motion: the attitude at t_ref,
+    which at() carries to another time with the gyros (first_state: to the first state, with its sigmas)."""
 
     n_R_b: np.ndarray
     t_static_end: float  # end of the detected static segment, s (0 when none was used)

@@ -431,9 +431,10 @@ class FactorMaker:
         return np.asarray(n_R_b @ (self.mounting.b_R_d0 @ d_y) / self.config.priors.scale_initial)
 
     def first_state_values(self, d_y: np.ndarray | None) -> gtsam.Values:
-        """Initial guess of the first state X(0), V(0) (attitude from the alignment, at the map origin,
-        velocity from ping d_y at the initial scale and nominal mounting) and of the bias, scale and
-        misalignment (and the time offset and lever arm when estimated: their priors' values)."""
+        """Initial guess of the first state X(0), V(0) (attitude from the alignment, position the map origin
+        carried to the first state by carry_to_first, velocity from ping d_y at the initial scale and nominal
+        mounting) and of the bias, scale and misalignment (and the time offset and lever arm when estimated:
+        their priors' values)."""
         values = gtsam.Values()
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
         n_v = self.velocity_from_ping(n_R_b.matrix(), d_y)
