@@ -1,6 +1,6 @@
 """Self-diagnosis of a run: is this result to be trusted, and if not, what to do about it.
 
-`assess_health(result, log)` looks at what every run leaves behind and turns it into a status ("ok",
+`assess_health(result, log)` looks at what every run leaves behind and turns it into a status ("ok", "warn",
 "degraded" or "failed"), warnings in words that say what to do, and the figures behind them:
 
 - the solver (batch: did Gauss-Newton converge; the normalised chi^2 of the final solution, chi^2 / dof,
@@ -13,7 +13,11 @@
 - whether the log moves at all (nothing is calibratable on a static log);
 - the estimator's counters (DVL pings rejected by reason, messages dropped);
 - the reader's losses (LogData.metadata["reader_losses"]: what --salvage and --repair dropped, gaps in the
-  stamps) and its other warnings.
+  stamps) and its other warnings;
+- the geometry (analysis/geometry.py): a calibration direction that leans on its prior or trades against
+  another state, with the manoeuvre that would separate them. "warn" when it moves this log's track by more than
+  geometry.MATTERS_FRACTION of the distance, else a note: not "degraded", since the estimate stays honest while
+  its sigma covers the error; it says the result rests on the prior there.
 
 Pure computation on NavResult and LogData: no files (analysis layer).
 """
@@ -25,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.analysis.geometry import assess_geometry
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
@@ -32,7 +37,9 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
 
-STATUSES = ("ok", "degraded", "failed")
+# in order of severity: "warn" is an honest result that leans on its prior somewhere (weak geometry); --strict
+# fails only on "degraded" and "failed"
+STATUSES = ("ok", "warn", "degraded", "failed")
 
 # Thresholds, and why.
 # chi^2 / dof has expectation 1 and, for the thousands of degrees of freedom of a log, a spread of
@@ -74,7 +81,7 @@ _NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweigh
 
 @dataclass
 class Health:
-    """Status of one run ("ok", "degraded", "failed"), the warnings that set it (each says what to do),
+    """Status of one run ("ok", "warn", "degraded", "failed"), the warnings that set it (each says what to do),
     notes that do not change it, and the figures behind them."""
 
     status: str = "ok"
@@ -83,7 +90,7 @@ class Health:
     figures: dict[str, Any] = field(default_factory=dict)
 
     def flag(self, severity: str, text: str) -> None:
-        """A finding: "note" (status unchanged), "degraded" or "failed" (status at least that)."""
+        """A finding: "note" (status unchanged), "warn", "degraded" or "failed" (status at least that)."""
         if severity == "note":
             self.notes.append(text)
             return
@@ -104,15 +111,27 @@ class Health:
 def assess_health(result: NavResult, log: LogData) -> Health:
     """The health of a run (module doc)."""
     health = assess_log_health(log)
-    # the configuration the result was made with; a result of another version: judged with the default noise rule
-    config = result.estimator_config or EstimatorConfig()
+    # the configuration the result was made with, at the noise levels it used (the IMU quantisation floor and
+    # the fitted DVL noise of info["noise"]); a result of another version: judged with the default noise rule
+    config = result.noise_config or EstimatorConfig()
     _check_finite(result, health)
     _check_solver(result, health)
     if len(result.t):
         _check_dvl_residuals(result, log, config, health)
     _check_counters(result, log, health)
     _check_noise_fit(result, health)
+    if len(result.t):
+        _check_geometry(result, health)
     return health
+
+
+def _check_geometry(result: NavResult, health: Health) -> None:
+    """The weak calibration directions (analysis/geometry.py): "warn" when one sigma of one moves the track by
+    more than geometry.MATTERS_FRACTION of the distance, else a note."""
+    report = assess_geometry(result)
+    health.figures["geometry"] = report.as_dict()
+    for finding in report.findings:
+        health.flag(finding.severity, finding.message)
 
 
 def _check_noise_fit(result: NavResult, health: Health) -> None:

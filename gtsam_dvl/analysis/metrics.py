@@ -121,16 +121,19 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 
 def noise_lines(noise: Any) -> list[str]:
     """The noise levels an estimator took from the data, one line each (result.info["noise"],
-    estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor, the DVL fit."""
+    estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor or to the static
+    segment's measured density, the DVL fit."""
     if not isinstance(noise, dict):
         return []
-    parts = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)] + [noise.get("dvl") or {}]
+    imu = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)]
+    parts = imu + [v["static"] for v in imu if isinstance(v.get("static"), dict)] + [noise.get("dvl") or {}]
     return [str(p["why"]) for p in parts if isinstance(p, dict) and p.get("why")]
 
 
 def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     """The summary JSON (docs/command-line.md), in user units (degrees, deg/h, micro-g, ppm), with the run's
-    health (analysis/health.py) and what the reader lost (LogData.metadata["reader_losses"])."""
+    health (analysis/health.py), its geometry (analysis/geometry.py) and what the reader lost
+    (LogData.metadata["reader_losses"])."""
     truth_dist = path_length(log.truth.n_p) if log.truth is not None else path_length(result.n_p)
     out: dict[str, Any] = {
         "estimator": result.estimator,
@@ -161,5 +164,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     from gtsam_dvl.analysis.health import assess_health  # health reads the config, which metrics does not need
 
     out["health"] = assess_health(result, log).as_dict()
+    # the motion and the weak calibration directions (analysis/geometry.py; their sentences are health warnings
+    # or notes)
+    out["geometry"] = out["health"]["figures"].get("geometry")
     out["losses"] = log.metadata.get("reader_losses", {})
     return out

@@ -24,6 +24,7 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
 _state = {"debug": False}
 F = TypeVar("F", bound=Callable[..., Any])
 EXIT_UNHEALTHY = 3  # smooth --strict: the run's health is "degraded" or "failed"
+UNHEALTHY = ("degraded", "failed")  # --strict fails on these; "warn" (weak geometry) is an honest result
 EXIT_SIGTERM = 128 + signal.SIGTERM  # the shell's convention for a process ended by SIGTERM
 
 
@@ -167,7 +168,7 @@ CONFIG_HELP = ("Estimator configuration: a TOML file, a result's config.json, or
 SMOOTH_HELP = (
     "Estimate trajectory, IMU biases, DVL scale and misalignment from a log.\n\n"
     "After every run a self-diagnosis (solver convergence, chi^2 per degree of freedom, DVL residuals per 30 s "
-    "window, rejected pings, what --salvage and --repair lost) gives a health status, ok, degraded or failed, "
+    "window, rejected pings, what --salvage and --repair lost) gives a health status, ok, warn, degraded or failed, "
     "printed with one line per warning and written into the summary and the result MCAP.\n\n"
     "Exit codes: 0 done (whatever the health, unless --strict); 1 bad input (one line on stderr, nothing "
     "written); 3 with --strict when the health is degraded or failed (the outputs are still written); 143 "
@@ -221,7 +222,7 @@ def smooth(
         typer.echo("\n".join(fleet_table(rows)))
         for path in written:
             typer.echo(f"wrote {path}")
-        bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] != "ok")]
+        bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] in UNHEALTHY)]
         if any(r["status"] == "error" for r in rows):
             typer.echo(f"gtsam-dvl: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed "
                        "(their error is in the table)", err=True)
@@ -233,7 +234,7 @@ def smooth(
                           show_progress=not quiet, read_options=read_options, timeline=timeline,
                           timeline_path=timeline_npz)
     typer.echo(outcome.describe())
-    if strict and outcome.status != "ok":
+    if strict and outcome.status in UNHEALTHY:
         typer.echo(f"gtsam-dvl: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
         raise typer.Exit(EXIT_UNHEALTHY)
 
@@ -339,6 +340,19 @@ def montecarlo(
         typer.echo(f"wrote {path}")
     if res.failures:
         raise typer.Exit(EXIT_UNHEALTHY)
+
+
+@app.command()
+@_user_errors
+def presets(
+    name: Annotated[str | None, typer.Argument(help="A preset's name: its values, their sources and the TOML block "
+                                                    "to use it.")] = None,
+    debug: Debug = False,
+) -> None:
+    """The sensor presets ([imu] model, [dvl] model): every one in a table, or one with its sources."""
+    from gtsam_dvl.core.config.presets import describe_preset, preset_table
+
+    typer.echo(describe_preset(name) if name is not None else "\n".join(preset_table()))
 
 
 @app.command()

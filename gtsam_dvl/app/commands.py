@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.analysis.geometry import MotionSummary
 from gtsam_dvl.analysis.metrics import path_length
 from gtsam_dvl.app.progress import progress_bar
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -147,7 +148,7 @@ class SmoothOutcome:
 
     @property
     def status(self) -> str:
-        """The run's health status: "ok", "degraded" or "failed" (analysis/health.py)."""
+        """The run's health status: "ok", "warn", "degraded" or "failed" (analysis/health.py)."""
         return str(self.summary.get("health", {}).get("status", "ok"))
 
     def describe(self) -> str:
@@ -179,6 +180,9 @@ class SmoothOutcome:
             lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
                             f"({'determined' if off.get('determined') else 'not determined'})")
         lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
+        motion = (s.get("geometry") or {}).get("motion")
+        if motion:
+            lines.append(f"  {MotionSummary(**motion).line()}")
         lines += health_lines(s.get("health"))
         lines += [f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]
         return "\n".join(lines)

@@ -113,6 +113,10 @@ class NavResult(CalibrationUnits):
     pose_vel_cross: np.ndarray | None  # (N, 6, 3) cross-covariance of pose tangent and n_v
     # (10, 10) joint of the calibration block (states.block_states): [accel, gyro] bias, scale, b_R_d right tangent
     calib_joint_cov: np.ndarray | None
+    # joint of every estimated shared state at the last state (states.joint_states, columns named by
+    # states.joint_columns): [accel, gyro] bias, scale, b_R_d right tangent, then the time offset and the lever arm
+    # when estimated; SI. The geometry verdict (analysis/geometry.py) reads it; None: not given (online)
+    shared_joint_cov: np.ndarray | None
     timeline: Timeline | None  # filtering history (online estimators and the EKF)
     timing_s: dict[str, float]
     info: dict[str, Any]  # solver report, counters, alignment
@@ -128,7 +132,8 @@ class NavResult(CalibrationUnits):
                  pose_cov: np.ndarray, vel_cov: np.ndarray, *, b_R_d0: np.ndarray,
                  calibration: dict[str, Estimate] | None = None, t0_ns: int = 0, b_omega: np.ndarray | None = None,
                  pose_vel_cross: np.ndarray | None = None, calib_joint_cov: np.ndarray | None = None,
-                 timeline: Timeline | None = None, timing_s: dict[str, float] | None = None,
+                 shared_joint_cov: np.ndarray | None = None, timeline: Timeline | None = None,
+                 timing_s: dict[str, float] | None = None,
                  info: dict[str, Any] | None = None, alignment_method: str = "", config: dict[str, Any] | None = None,
                  dvl_pings: np.ndarray | None = None,
                  accel_bias: np.ndarray | None = None, gyro_bias: np.ndarray | None = None,
@@ -140,6 +145,7 @@ class NavResult(CalibrationUnits):
         self.pose_cov, self.vel_cov, self.b_R_d0, self.t0_ns = pose_cov, vel_cov, b_R_d0, t0_ns
         self.b_omega, self.pose_vel_cross, self.calib_joint_cov, self.timeline = (b_omega, pose_vel_cross,
                                                                                  calib_joint_cov, timeline)
+        self.shared_joint_cov = shared_joint_cov
         self.timing_s = {} if timing_s is None else timing_s
         self.info = {} if info is None else info
         self.alignment_method = alignment_method
@@ -235,6 +241,27 @@ class NavResult(CalibrationUnits):
             return EstimatorConfig.from_dict(self.config) if self.config else EstimatorConfig()
         except GtsamDvlError:
             return None
+
+    @property
+    def noise_config(self) -> EstimatorConfig | None:
+        """The configuration with the noise levels the estimator used: `config` holds the configuration as given
+        (reading it back with -c reproduces the run), info["noise"] the levels taken from the data
+        (estimators/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL noise
+        factor). What the residuals are judged against. None: the configuration does not read."""
+        config = self.estimator_config
+        noise = self.info.get("noise") if isinstance(self.info, dict) else None
+        if config is None or not isinstance(noise, dict):
+            return config
+        imu_update = {key: float(entry["used"]) for name, key in (("gyro", "gyro_noise_deg_per_h_rthz"),
+                                                                  ("accel", "accel_noise_ug_rthz"))
+                      if isinstance(entry := noise.get("imu", {}).get(name), dict) and entry.get("used") is not None}
+        multiplier = noise.get("dvl", {}).get("multiplier")
+        update: dict[str, Any] = {}
+        if imu_update:
+            update["imu"] = config.imu.model_copy(update=imu_update)
+        if multiplier is not None and math.isfinite(float(multiplier)):
+            update["dvl"] = config.dvl.model_copy(update={"noise_multiplier": float(multiplier)})
+        return config.model_copy(update=update) if update else config
 
     @property
     def lever_arm_sigma_m(self) -> np.ndarray | None:

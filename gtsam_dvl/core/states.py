@@ -217,6 +217,32 @@ def block_states() -> list[SharedState]:
     return sorted((s for s in STATES if s.in_block), key=lambda s: (order.index(s.key), s.offset))
 
 
+def joint_states(config: EstimatorConfig, ekf: bool = False) -> list[SharedState]:
+    """The enabled states of the shared joint covariance (NavResult.shared_joint_cov), in its order: by key in
+    the order of their first state, then place in the key's tangent: [accel bias, gyro bias, scale,
+    misalignment, time offset, lever arm] (those enabled). ekf: only those the EKF carries."""
+    order = _unique(s.key for s in STATES)
+    chosen = [s for s in enabled_states(config) if s.ekf or not ekf]
+    return sorted(chosen, key=lambda s: (order.index(s.key), s.offset))
+
+
+def joint_slices(config: EstimatorConfig, ekf: bool = False) -> dict[str, slice]:
+    """Each state's columns in the shared joint covariance (joint_states' order)."""
+    out: dict[str, slice] = {}
+    col = 0
+    for s in joint_states(config, ekf):
+        out[s.name] = slice(col, col + s.dim)
+        col += s.dim
+    return out
+
+
+def joint_columns(config: EstimatorConfig, ekf: bool = False) -> list[str]:
+    """The name of each column of the shared joint covariance: "accel bias x", ..., "gyro bias z", "scale",
+    "misalignment roll" (b_R_d's right tangent), ..., "time offset", "lever arm x", ..."""
+    return [f"{s.name.replace('_', ' ')} {suffix}".strip() for s in joint_states(config, ekf)
+            for suffix, _ in s.components]
+
+
 def _unique(keys: Iterable[int]) -> list[int]:
     out: list[int] = []
     for k in keys:

@@ -18,10 +18,10 @@ from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
-    apply_imu_floor,
     dvl_fit_enabled,
     dvl_fit_report,
     fitted_multiplier,
+    imu_levels,
     median_ping_sigma,
     variance_ratio,
     with_multiplier,
@@ -46,7 +46,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     noise = NoiseReport()
-    config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
+    stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    config = imu_levels(log, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
@@ -80,6 +81,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["noise"] = noise.as_dict()
+    result.config = stated.to_dict()
     result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
                              "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,
                              "passes": passes, **{f"{k}_s": v for k, v in report.timing_s.items()}}
@@ -168,13 +170,17 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
                    bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
     the solver's last elimination instead of linearising again. The shared states (core/states.py) at the last
-    state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own."""
+    state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own, and all of
+    them jointly (shared_joint_cov)."""
     cfg = builder.config
     n = len(builder.epochs)
     last = shared_keys(cfg, n - 1)
     calib_group = tuple(shared_keys(cfg, n - 1, block=True))
     groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
     groups += [(k,) for k in last if k not in calib_group]
+    shared_group = tuple(last)  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
+    if shared_group != calib_group:
+        groups.append(shared_group)
     bn = bayes_net or eliminate(graph.linearize(values), ordering)
     marg = bayes_net_marginals(bn, groups)
 
@@ -195,7 +201,7 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
         n_p=n_p, n_R_b=n_R_b, n_v=n_v, pose_cov=pose_cov, vel_cov=vel_cov,
         calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
         b_omega=b_omega, pose_vel_cross=pose_vel_cross,
-        calib_joint_cov=marg.joints[calib_group],
+        calib_joint_cov=marg.joints[calib_group], shared_joint_cov=marg.joints[shared_group],
         info={"alignment": builder.maker.alignment_info(),
               "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
         config=cfg.to_dict(),

@@ -29,10 +29,12 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
+from gtsam_dvl.core import sensor_noise
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.sensor_noise import imu_quantisation, quantisation_density
-from gtsam_dvl.core.types import ImuData
+from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.alignment import detect_static_end
 
 
 @dataclass
@@ -84,9 +86,86 @@ def apply_imu_floor(imu: ImuData, config: EstimatorConfig, report: NoiseReport) 
     return config.model_copy(update={"imu": config.imu.model_copy(update=update)})
 
 
+# A static segment shorter than this gives no Allan fit: the tau^-1/2 line is read at taus up to a tenth of the
+# segment, and a density from under 60 s of data (600 clusters at 0.1 s, 60 at 1 s) has a sampling error of 10-20 %.
+STATIC_MIN_S = 60.0
+# An axis whose static samples scatter by less than this many quantisation steps is dominated by the rounding:
+# at rest the rounding error is not white (the signal sits on one or two steps), so its Allan deviation says
+# nothing about the sensor (a FOG at rest under q = 1e-4 rad/s).
+STATIC_MIN_STEPS = 2.0
+# The measured density raises the one used only when it exceeds it by this factor: the fit's sampling error on a
+# 60-120 s segment is 10-20 %, and a datasheet density is a bound, so a measured value near it changes nothing.
+STATIC_RAISE_FACTOR = 1.2
+
+
+def apply_static_noise(imu: ImuData, static_end_s: float, config: EstimatorConfig, report: NoiseReport
+                       ) -> EstimatorConfig:
+    """config with each IMU white-noise density raised to the one measured on the log's initial static segment
+    (imu.t[0] to static_end_s, estimators/alignment.py detect_static_end), when the segment is at least
+    STATIC_MIN_S long: the overlapping Allan deviation of every axis not dominated by its quantisation
+    (STATIC_MIN_STEPS), its tau^-1/2 line's density and its bias instability (core/sensor_noise.py allan_fit),
+    the largest over the axes. Raised only (STATIC_RAISE_FACTOR): a short segment cannot show that a sensor is
+    better than its datasheet. What was measured goes into report.imu[sensor]["static"], also when nothing
+    changes. Unchanged when [noise] from_data or static_allan is off."""
+    n = config.noise
+    t = np.asarray(imu.t, dtype=float)
+    if not (n.from_data and n.static_allan) or not len(t) or static_end_s - t[0] < STATIC_MIN_S:
+        return config
+    sel = t <= static_end_s
+    rate = imu_rate_hz(imu)
+    duration = float(static_end_s - t[0])
+    update: dict[str, float] = {}
+    for name, x, key, per, unit in (("gyro", np.asarray(imu.b_omega)[sel], "gyro_noise_deg_per_h_rthz", DEG_PER_H,
+                                     "deg/h/sqrt(Hz)"),
+                                    ("accel", np.asarray(imu.b_f)[sel], "accel_noise_ug_rthz", UG,
+                                     "micro-g/sqrt(Hz)")):
+        entry = report.imu.setdefault(name, {})
+        steps = entry.get("step") or [None, None, None]
+        taus = sensor_noise.default_taus(len(x), rate)
+        taus = taus[taus <= duration / 10.0]
+        densities, instabilities, skipped = [], [], []
+        for k in range(3):
+            q = steps[k]
+            if q is not None and np.std(x[:, k]) < STATIC_MIN_STEPS * q:
+                skipped.append("xyz"[k])
+                continue
+            if len(taus) < 3 or not np.isfinite(x[:, k]).all():
+                skipped.append("xyz"[k])
+                continue
+            fit = sensor_noise.allan_fit(*sensor_noise.allan_deviation(x[:, k], rate, taus))
+            densities.append(fit.white_density / per)
+            instabilities.append(fit.bias_instability / per)  # deg/h or micro-g
+        current = float(getattr(config.imu, key))  # the quantisation floor's, when it applied
+        static: dict[str, Any] = {"segment_s": duration, "axes_skipped_quantised": skipped}
+        if densities:
+            measured = max(densities)
+            static.update(density=measured, density_per_axis=densities,
+                          bias_instability=max(instabilities))
+            if measured > STATIC_RAISE_FACTOR * current:
+                update[key] = measured
+                entry.update(used=measured, configured=entry.get("configured", getattr(config.imu, key)))
+                static["why"] = (f"{name} white noise {measured:.3g} {unit} measured on the first {duration:.0f} s "
+                                 f"(static, Allan deviation) instead of {current:.3g}")
+        entry["static"] = static
+    if not update:
+        return config
+    return config.model_copy(update={"imu": config.imu.model_copy(update=update)})
+
+
+def imu_levels(log: LogData, config: EstimatorConfig, report: NoiseReport) -> EstimatorConfig:
+    """The IMU white-noise densities every estimator uses on log: the quantisation floor (apply_imu_floor), then
+    the density measured on an initial static segment (apply_static_noise)."""
+    config = apply_imu_floor(log.imu, config, report)
+    n = config.noise
+    if not (n.from_data and n.static_allan) or len(log.imu.t) < 100:
+        return config
+    return apply_static_noise(log.imu, detect_static_end(log.imu, log.dvl, config.alignment), config, report)
+
+
 def dvl_fit_enabled(config: EstimatorConfig) -> bool:
     """Whether the DVL noise factor is fitted ([noise] from_data and fit_dvl); the fit starts from [dvl]
-    noise_multiplier (a result's configuration, reloaded, starts at its fitted factor)."""
+    noise_multiplier. A result's configuration holds the configuration as given and info["noise"] the levels
+    used (NavResult.noise_config joins them), so that a result's configuration, reloaded, reproduces the run."""
     return config.noise.from_data and config.noise.fit_dvl
 
 
@@ -184,8 +263,8 @@ class WarmupFit:
             self._innov.append((float(nu @ nu), tr_hph, tr_r, nis, len(nu)))
 
     def finish(self, how: str) -> float:
-        """The multiplier fitted from what was collected (the configuration's when too few rows); report says
-        how."""
+        """The multiplier fitted from what was collected (the configuration's when too few rows, or when the fit
+        is within [noise] fit_tolerance of it); report says how."""
         n = self.config.noise
         current = self.config.dvl.noise_multiplier
         ratio, rows = math.nan, 0
@@ -212,6 +291,10 @@ class WarmupFit:
                                   f"(fewer than [noise] min_rows = {n.min_rows}, or no positive variance left)"}
             return current
         new, at_bound = fitted_multiplier(current, ratio, self.config)
+        if abs(new / current - 1.0) <= n.fit_tolerance:
+            # within the tolerance the factor the window was processed with is kept, as the batch fit does: a
+            # result's configuration, reloaded, then reproduces its estimates instead of moving by the fit's scatter
+            new = current
         self.report = dvl_fit_report(self.config, new, rows, 1, at_bound, self.sigma_m_s * new / current,
                                      f"{how} over the first {n.warmup_s:g} s, then held")
         return new

@@ -56,7 +56,8 @@ def calibration_record(result: NavResult) -> dict[str, Any]:
 # the NavResult that was written (the ROS topics carry the same numbers in ROS conventions, for ROS tools)
 STATE_ARRAYS = ("t", "n_p", "n_R_b", "n_v", "pose_cov", "vel_cov", "accel_bias", "gyro_bias", "bias_cov", "b_R_d",
                 "b_R_d_cov", "b_R_d0")
-OPTIONAL_STATE_ARRAYS = ("b_omega", "pose_vel_cross", "calib_joint_cov", "lever_arm_m", "lever_arm_cov", "dvl_pings")
+OPTIONAL_STATE_ARRAYS = ("b_omega", "pose_vel_cross", "calib_joint_cov", "shared_joint_cov", "lever_arm_m",
+                         "lever_arm_cov", "dvl_pings")
 
 
 def states_npz_bytes(result: NavResult) -> bytes:

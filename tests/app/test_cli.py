@@ -183,7 +183,8 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
     from gtsam_dvl.io.storage.sources import open_source
 
     toml = tmp_path / "cfg.toml"
-    toml.write_text('[dvl]\nrobust = "huber"\nhuber_k = 2.0\n[priors]\nscale_sigma = 0.3\n'
+    toml.write_text('[dvl]\nmodel = "teledyne-pathfinder"\nrobust = "huber"\nhuber_k = 2.0\n'
+                    '[priors]\nscale_sigma = 0.3\nmounting_tolerance_deg = 0.8\n'
                     "[online]\nwindow_s = 8.0\n[online.relinearization]\nscale = 0.01\n"
                     "[ekf]\nmin_calibration_speed_m_s = 0.3\ncalibration_speed_sigmas = 4.0\n")
     first, again = tmp_path / "first.mcap", tmp_path / "again.mcap"
@@ -196,6 +197,10 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
     assert written["config"]["online"]["window_s"] == 8.0
     assert written["config"]["online"]["relinearization"]["scale"] == 0.01
     assert written["config"]["alignment"]["initial_attitude_deg"] is None  # null in JSON, read back as None
+    # the DVL preset's values, the explicit scale sigma over its scale accuracy, the mounting tolerance
+    assert written["config"]["dvl"]["model"] == "teledyne-pathfinder"
+    assert written["config"]["dvl"]["default_noise_m_s"] == 0.008 and written["config"]["priors"]["scale_sigma"] == 0.3
+    assert written["config"]["priors"]["misalignment_sigma_deg"] == [0.8, 0.8, 0.8]
     run("smooth", str(short_log), "--mode", mode, "-c", str(effective), "-o", str(again), "--summary",
         str(tmp_path / "again.json"), "-q")
     assert json.loads(open_source(again).attachments["config.json"][1]) == written

@@ -389,9 +389,12 @@ def test_a_log_names_its_configuration() -> None:
 # paper_modified.toml / .json a paper configuration with optional fields set and unset; all written by the
 # package's dataclass configuration, whose keys, defaults and TOML text these models keep.
 FIXTURES = Path(__file__).parent / "config_fixtures"
-# keys those files do not have: the noise levels from the data ([noise], and the fitted [dvl] noise_multiplier).
-# A file without them takes their defaults (the fit on), also a paper configuration's
-ADDED = {"noise": None, "dvl": {"noise_multiplier"}}
+# keys those files do not have: the noise levels from the data ([noise], and the fitted [dvl] noise_multiplier), the
+# sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting tolerance. A file without them
+# takes their defaults (the fit on, no preset), also a paper configuration's
+ADDED = {"noise": None, "imu": {"model"},
+         "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
+         "priors": {"mounting_tolerance_deg"}}
 
 
 def _without_added(d: dict) -> dict:  # type: ignore[type-arg]

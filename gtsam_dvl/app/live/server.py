@@ -295,7 +295,8 @@ class LiveView:
 
     def publish_health(self, health: Any, t: float | None = None) -> None:
         """An analysis.health.Health: its status, each warning (level warning) and note (level info)."""
-        level = {"ok": "info", "degraded": "warning", "failed": "error"}.get(health.status, "warning")
+        level = {"ok": "info", "warn": "warning", "degraded": "warning", "failed": "error"}.get(health.status,
+                                                                                              "warning")
         self.log(level, f"health: {health.status}", t)
         for w in health.warnings:
             self.log("warning", w, t)

@@ -14,8 +14,13 @@ no entry where None is its default. `validate()` checks a configuration built or
 the estimators call it when they start. `to_dict()` (None kept, for JSON) and `to_toml()` read back with
 `from_dict` / `from_toml` to an equal configuration.
 
+Sensor presets: `[imu] model = "..."` and `[dvl] model = "..."` name a preset (presets.py, `gtsam-dvl presets`) whose
+datasheet values fill the noise, bias and scale-prior fields the configuration does not set itself; explicit values
+win. `[priors] mounting_tolerance_deg` likewise sets the misalignment prior.
+
 Modules: base.py (the checked model, one-line errors, TOML writing), sections.py (one model per TOML table),
-estimator.py (EstimatorConfig, the named configurations, loading).
+presets.py (the sensor presets and their sources), noise.py ([noise]), estimator.py (EstimatorConfig, the named
+configurations, loading).
 """
 
 from gtsam_dvl.core.config.base import ConfigModel

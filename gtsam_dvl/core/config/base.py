@@ -80,18 +80,23 @@ class ConfigModel(BaseModel):
         return self
 
     def _take(self, checked: ConfigModel) -> None:
-        """Set every field from checked, a section in place (a caller's reference to it stays valid)."""
+        """Set every field from checked, a section in place (a caller's reference to it stays valid); the fields
+        counted as set are checked's (those set on construction or by assignment, not those a preset filled)."""
         for name in type(self).model_fields:
             new, current = getattr(checked, name), getattr(self, name)
             if isinstance(new, ConfigModel) and type(current) is type(new):
                 current._take(new)
             else:
                 setattr(self, name, new)
+        object.__setattr__(self, "__pydantic_fields_set__", set(checked.model_fields_set))
 
 
 def _raw(model: ConfigModel) -> dict[str, Any]:
-    """The fields as they are (unchecked values included), sections as dicts."""
-    return {name: _raw(v) if isinstance(v, ConfigModel) else v for name, v in model.__dict__.items()}
+    """The fields set on construction or by assignment as they are (unchecked values included), and every section
+    as a dict. The others hold their defaults, or a preset's values, which the check fills again (from the preset
+    the configuration names now: a sensor model changed in Python takes effect on validate())."""
+    return {name: _raw(v) if isinstance(v, ConfigModel) else v for name, v in model.__dict__.items()
+            if isinstance(v, ConfigModel) or name in model.model_fields_set}
 
 
 def _sub_model(f: FieldInfo) -> type[ConfigModel] | None:

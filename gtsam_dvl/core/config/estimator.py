@@ -7,12 +7,13 @@ import json
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from gtsam_dvl.core.config.base import ConfigModel, toml_text
 from gtsam_dvl.core.config.noise import NoiseConfig
+from gtsam_dvl.core.config.presets import DVL_PRESETS
 from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
     DepthConfig,
@@ -66,6 +67,14 @@ class EstimatorConfig(ConfigModel):
     observability: ObservabilityConfig = Field(default_factory=ObservabilityConfig)
     gnss: GnssConfig = Field(default_factory=GnssConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
+
+    @model_validator(mode="after")
+    def _dvl_scale_accuracy(self) -> Self:
+        """A DVL preset's scale accuracy is the scale prior's sigma unless [priors] scale_sigma is set (the
+        presets' other values are filled by their own sections)."""
+        if self.dvl.model is not None and "scale_sigma" not in self.priors.model_fields_set:
+            self.priors.__dict__["scale_sigma"] = DVL_PRESETS[self.dvl.model].scale_accuracy  # not counted as set
+        return self
 
     def to_dict(self) -> dict[str, Any]:
         """Nested plain dict (tuples stay tuples, None stays None): json.dumps writes it, from_dict reads it."""

@@ -9,6 +9,8 @@ Nortek-class units) is rarely what its messages' covariance or the configured de
 - finds the quantisation step of each IMU axis from the samples (core/sensor_noise.py) and raises the
   configured white-noise density to the root sum of squares of it and the rounding error's density
   q / sqrt(12 f) (imu_quantisation);
+- measures each IMU axis's white noise on the log's initial static segment, when it lasts at least 60 s, from its
+  Allan deviation, and raises the density used to it when it is larger (static_allan);
 - fits a factor on every DVL sigma (a variance component: [dvl] noise_multiplier) from the whitened DVL
   residuals (fit_dvl): the batch smoother re-solves with the fitted factor until it changes by less than
   fit_tolerance (at most fit_passes solves); the online estimator and the EKF fit it on the pings of the first
@@ -33,6 +35,8 @@ class NoiseConfig(ConfigModel):
 
     from_data: Flag = True  # false: every level as configured (the "paper" configuration)
     imu_quantisation: Flag = True  # raise the IMU white noise to its quantisation floor
+    # raise the IMU white noise to the one measured on an initial static segment (Allan deviation, at least 60 s)
+    static_allan: Flag = True
     fit_dvl: Flag = True  # fit the DVL noise factor from the residuals
     fit_passes: Integer = Field(default=4, ge=1)  # batch: solves at most, the first included
     # batch: re-solve while the fitted factor changes by more than this fraction (0.03: the fit's own sampling

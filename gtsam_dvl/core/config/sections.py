@@ -5,12 +5,13 @@ how they are checked and estimator.py for the whole configuration."""
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Literal
+from typing import TYPE_CHECKING, Any, ClassVar, Literal, Self
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from gtsam_dvl.core.config.base import ConfigModel, Flag, Integer, NonNegative, Number, Positive
+from gtsam_dvl.core.config.presets import DVL_PRESETS, IMU_PRESETS
 
 BiasModel = Literal["constant", "random_walk"]
 RobustLoss = Literal["none", "huber", "cauchy"]
@@ -18,13 +19,31 @@ EarthModel = Literal["wgs84", "flat"]
 OnlineMode = Literal["fixed_lag", "full"]
 BadMessages = Literal["raise", "drop"]
 GnssUse = Literal["origin", "start", "all"]
+if TYPE_CHECKING:
+    ImuModel = str
+    DvlModel = str
+else:  # the preset names (presets.py): an unknown name is refused on load, the error listing the known ones
+    ImuModel = Literal[tuple(IMU_PRESETS)]
+    DvlModel = Literal[tuple(DVL_PRESETS)]
+
+
+def _fill_from_preset(section: ConfigModel, values: dict[str, Any]) -> None:
+    """Set the fields of values the configuration did not set itself (pydantic's model_fields_set): explicit
+    values win over a preset's. The filled fields are not counted as set, so that validate() fills them again
+    from the preset named then (base.py _raw)."""
+    for key, value in values.items():
+        if key not in section.model_fields_set:
+            section.__dict__[key] = value
 
 
 class ImuConfig(ConfigModel):
-    """IMU noise model. Densities are white noise; bias sigmas are the priors of the random-constant bias."""
+    """IMU noise model. Densities are white noise; bias sigmas are the priors of the random-constant bias.
+    model: an IMU preset (presets.py, `gtsam-dvl presets`): its datasheet white noise and bias stabilities fill
+    the four fields below that the configuration does not set itself."""
 
     SECTION: ClassVar[str] = "imu"
 
+    model: ImuModel | None = None
     gyro_noise_deg_per_h_rthz: Positive = 0.1
     accel_noise_ug_rthz: Positive = 10.0
     gyro_bias_sigma_deg_per_h: Positive = 0.01
@@ -43,6 +62,12 @@ class ImuConfig(ConfigModel):
     gap_rate_sigma_deg_s: Positive = 1.0  # change of turn rate over a gap
     # longer gaps are an error: a hold that long is no motion model (its error is systematic, not white)
     max_gap_s: Positive = 10.0
+
+    @model_validator(mode="after")
+    def _apply_model(self) -> Self:
+        if self.model is not None:
+            _fill_from_preset(self, IMU_PRESETS[self.model].config_values())
+        return self
 
 
 class DvlConfig(ConfigModel):
@@ -64,10 +89,15 @@ class DvlConfig(ConfigModel):
       "dvl_implausible_accel" (3-D velocity only, not with use_beams).
     A real DVL's velocity is noisy: it never reads exact zeros, nor repeats a reading bit for bit; a
     simulator without noise does both, at rest and at constant velocity (the IMU then shows no motion).
+
+    model: a DVL preset (presets.py, `gtsam-dvl presets`): its ping noise fills default_noise_m_s and
+    beam_noise_m_s, its correlated error correlated_sigma_m_s and correlated_tau_s, and its scale accuracy
+    [priors] scale_sigma (estimator.py), each unless the configuration sets it itself.
     """
 
     SECTION: ClassVar[str] = "dvl"
 
+    model: DvlModel | None = None
     noise_m_s: NonNegative = 0.0  # >0 overrides the per-message covariance
     default_noise_m_s: Positive = 0.02  # for messages without a covariance
     use_beams: Flag = False  # one scalar factor per valid beam instead of the 3-D velocity
@@ -106,6 +136,16 @@ class DvlConfig(ConfigModel):
     # every ping's sigma (configured, from its message, or the default) times this: the variance component the
     # estimators fit from the residuals ([noise] fit_dvl, core/config/noise.py); set here, it pins the factor
     noise_multiplier: Positive = 1.0
+    # a first-order Gauss-Markov velocity error (per axis, m/s) and its time constant (s), from a preset or set
+    # here: recorded with the configuration; the estimators do not model it yet (their DVL error is white)
+    correlated_sigma_m_s: NonNegative = 0.0
+    correlated_tau_s: Positive = 60.0
+
+    @model_validator(mode="after")
+    def _apply_model(self) -> Self:
+        if self.model is not None:
+            _fill_from_preset(self, DVL_PRESETS[self.model].config_values())
+        return self
 
     def beam_sigma_m_s(self) -> float:
         """One beam's sigma: beam_noise_m_s times the fitted noise_multiplier (m/s)."""
@@ -131,6 +171,16 @@ class PriorConfig(ConfigModel):
     yaw_sigma_deg: Positive = 5.0
     position_sigma_m: Positive = 0.01  # the first state defines the map origin
     velocity_sigma_m_s: Positive = 1.0
+    # the DVL's mounting tolerance (deg): when set, the misalignment prior sigma on all three axes, unless
+    # misalignment_sigma_deg is set in the same configuration
+    mounting_tolerance_deg: Positive | None = None
+
+    @model_validator(mode="after")
+    def _apply_mounting_tolerance(self) -> Self:
+        if self.mounting_tolerance_deg is not None:
+            tol = self.mounting_tolerance_deg
+            _fill_from_preset(self, {"misalignment_sigma_deg": (tol, tol, tol)})
+        return self
 
 
 class AlignmentConfig(ConfigModel):

@@ -83,8 +83,8 @@ from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
     WarmupFit,
-    apply_imu_floor,
     dvl_fit_enabled,
+    imu_levels,
     median_ping_sigma,
     with_multiplier,
 )
@@ -384,7 +384,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         config = config.model_copy(update={"ekf": ekf})
     config.validate()
     noise = NoiseReport()
-    config = apply_imu_floor(log.imu, config, noise)  # the IMU's quantisation floor ([noise])
+    stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    config = imu_levels(log, config, noise)  # the IMU's quantisation floor ([noise])
     if dvl_fit_enabled(config):
         n = config.noise
         for k in range(n.fit_passes):
@@ -398,6 +399,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                 break
     result = _filter(log, config, progress)
     result.info["noise"] = noise.as_dict()
+    result.config = stated.to_dict()
     return result
 
 

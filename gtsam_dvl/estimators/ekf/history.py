@@ -10,7 +10,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.rotations import matrix_to_rpy, so3_exp
-from gtsam_dvl.core.states import Estimate, block_states, ekf_layout
+from gtsam_dvl.core.states import Estimate, block_states, ekf_layout, joint_states
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, SCALE
@@ -86,6 +86,8 @@ def history_result(hist: History, log: LogData, config: EstimatorConfig) -> NavR
     layout = ekf_layout(config, N_NAV)
     calib_idx = np.r_[tuple(layout[s.name] for s in block_states())]  # [accel, gyro] bias, scale, b_R_d tangent
     calib = P[-1][np.ix_(calib_idx, calib_idx)]
+    shared_idx = np.r_[tuple(layout[s.name] for s in joint_states(config, ekf=True))]  # NavResult.shared_joint_cov
+    shared = P[-1][np.ix_(shared_idx, shared_idx)]
     b_R_d0 = log.mounting.b_R_d0
     mis_deg, mis_cov = misalignment_timeline(np.array(hist.b_R_d), b_R_d0, P[:, MIS, MIS])
     diag = np.einsum("nii->ni", P)
@@ -111,5 +113,5 @@ def history_result(hist: History, log: LogData, config: EstimatorConfig) -> NavR
                      for name, sl in layout.items()},
         b_R_d0=b_R_d0, t0_ns=log.t0_ns,
         b_omega=np.array(hist.b_omega), pose_vel_cross=pose_vel_cross, calib_joint_cov=calib,
-        timeline=timeline, config=config.to_dict(),
+        shared_joint_cov=shared, timeline=timeline, config=config.to_dict(),
     )

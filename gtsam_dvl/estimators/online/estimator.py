@@ -92,8 +92,8 @@ from gtsam_dvl.estimators.gaps import check_spacing, filler_due
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
-    apply_imu_floor,
     dvl_fit_enabled,
+    imu_levels,
     median_ping_sigma,
     with_multiplier,
 )
@@ -133,6 +133,9 @@ class OnlineEstimator:
         config = config or EstimatorConfig()
         self.options = options or config.online  # options=: overrides config.online
         self.config = config.model_copy(update={"online": self.options}).validate()  # the effective config
+        # what result.config records: the configuration as given, before the levels taken from the data
+        # (noise_levels.py; those are in info["noise"]), so that reading it back with -c reproduces the run
+        self.stated_config = self.config
         solver, dvl = self.config.solver, self.config.dvl
         check_spacing(solver)
         spacing = solver.keyframe_spacing_s
@@ -193,10 +196,12 @@ class OnlineEstimator:
         log's scenario names, else the defaults (EstimatorConfig.for_log)."""
         config = config or EstimatorConfig.for_log(log.metadata)
         noise = NoiseReport()
-        config = apply_imu_floor(log.imu, config, noise)  # the log's IMU quantisation floor ([noise])
+        stated = config
+        config = imu_levels(log, config, noise)  # the log's IMU quantisation floor ([noise])
         est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
         est.noise.imu = noise.imu
+        est.stated_config = stated.model_copy(update={"online": est.options}).validate()
         return est
 
     @property
@@ -320,7 +325,8 @@ class OnlineEstimator:
             pose_cov=h["pose_cov"].copy(), vel_cov=h["vel_cov"].copy(), pose_vel_cross=h["pose_vel_cross"].copy(),
             calibration=final.calibration, b_R_d0=self.mounting.b_R_d0, t0_ns=t0_ns,
             b_omega=h["b_omega"] - final.gyro_bias, calib_joint_cov=final.calib_cov, timeline=self.timeline(),
-            info=info, config=self.config.to_dict(), dvl_pings=np.asarray(self._scheduler.usable, dtype=np.int64))
+            info=info, config=self.stated_config.to_dict(),
+            dvl_pings=np.asarray(self._scheduler.usable, dtype=np.int64))
 
     # ----- internals -----------------------------------------------------------------------------
     def _count(self, kind: str, n: int = 1) -> None:

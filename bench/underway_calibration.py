@@ -1,0 +1,177 @@
+"""Does estimating the DVL calibration cost accuracy on short underway logs, and are the sigmas honest? (issue 21)
+
+Per scenario (default: straight-transect and steady-turn) and seed, one simulated log goes through
+- "defaults": batch, online and EKF with the default configuration (plus the scenario's [estimator] overrides):
+  error/sigma of every calibration and bias state and of the final position, and the block NEES
+  (app/campaign/montecarlo.py run_errors and campaign_statistics);
+- "presets": batch and online with the sensor presets of the scenario's units (--imu-model, --dvl-model);
+- "truth": the same estimators with the calibration fixed at the truth (the nominal mounting replaced by the true
+  b_R_d, the scale prior at the true scale, both with negligible sigmas);
+- "nominal": the calibration fixed at nominal (scale 1, the nominal mounting): what a plain INS/DVL filter assumes.
+All variants run on the same log in the same process, so their final horizontal errors (in % of the distance run)
+compare run for run. The runs are Dask tasks (app/campaign/cluster.py: a LocalCluster of --workers processes).
+
+    .venv/bin/python bench/underway_calibration.py --runs 50 [--scenarios straight-transect,steady-turn]
+        [--imu-model NAME] [--dvl-model NAME] [--workers 2] [--out underway.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+FIXED_SCALE_SIGMA = 1e-7  # "fixed": a prior sigma far below anything the data can resolve (0.1 ppm)
+FIXED_MISALIGNMENT_SIGMA_DEG = 1e-5
+VARIANTS: dict[str, tuple[str, ...]] = {"defaults": ("batch", "online", "ekf"), "presets": ("batch", "online"),
+                                        "truth": ("batch", "online"), "nominal": ("batch", "online")}
+
+
+def _with(config: Any, section: str, **values: Any) -> Any:
+    return config.model_copy(update={section: getattr(config, section).model_copy(update=values)})
+
+
+def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str | None) -> dict[str, Any]:
+    """Every variant on one simulated log: per variant and estimator the final horizontal error (m, % of the
+    distance), its sigma, and for "defaults" the campaign's error/sigma record (run_errors)."""
+    from gtsam_dvl.app.campaign.montecarlo import run_errors
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.estimators.run import run_trajectory_estimator
+    from gtsam_dvl.sim import simulate
+    from gtsam_dvl.sim.scenario import load_scenario
+
+    sc = load_scenario(scenario_name)
+    log = simulate(sc, seed)
+    cal, truth = log.true_calibration, log.truth
+    assert cal is not None and truth is not None
+    distance_m = float(np.sum(np.linalg.norm(np.diff(truth.n_p[:, :2], axis=0), axis=1)))
+    base = sc.estimator()
+    preset = base
+    if imu_model or dvl_model:
+        d = base.to_dict()
+        if imu_model:
+            d["imu"] = {**d["imu"], "model": imu_model}
+        if dvl_model:
+            d["dvl"] = {**d["dvl"], "model": dvl_model}
+        preset = EstimatorConfig.from_dict(d)
+    true_mounting = dataclasses.replace(log.mounting, b_R_d0=cal.b_R_d(log.mounting.b_R_d0))
+    fixed_at = {
+        "truth": (dataclasses.replace(log, mounting=true_mounting), cal.scale),
+        "nominal": (log, 1.0),
+    }
+    out: dict[str, Any] = {"scenario": scenario_name, "seed": seed, "distance_m": distance_m, "variants": {}}
+    for variant, estimators in VARIANTS.items():
+        if variant == "presets" and preset is base:
+            continue
+        run_log, cfg = log, preset if variant == "presets" else base
+        if variant in fixed_at:
+            run_log, scale = fixed_at[variant]
+            cfg = _with(cfg, "priors", scale_initial=scale, scale_sigma=FIXED_SCALE_SIGMA,
+                        misalignment_sigma_deg=(FIXED_MISALIGNMENT_SIGMA_DEG,) * 3)
+        rows: dict[str, Any] = {}
+        for name in estimators:
+            t0 = time.perf_counter()
+            try:
+                res = run_trajectory_estimator(run_log, name, cfg, timeline=name != "batch")
+            except Exception as exc:  # a run that fails is reported, not a campaign that stops
+                rows[name] = {"failed": f"{type(exc).__name__}: {exc}"}
+                continue
+            n_p_true = np.array([np.interp(res.t[-1], truth.t, truth.n_p[:, k]) for k in range(2)])
+            e_h = res.n_p[-1, :2] - n_p_true
+            row: dict[str, Any] = {"horizontal_error_m": float(np.linalg.norm(e_h)),
+                                   "horizontal_error_pct": float(100.0 * np.linalg.norm(e_h) / distance_m),
+                                   "horizontal_z": (e_h / res.position_sigma_m[-1, :2]).tolist(),
+                                   "wall_s": time.perf_counter() - t0}
+            if variant == "defaults":
+                row["campaign"] = {**run_errors(res, log), "wall_s": row["wall_s"]}
+            rows[name] = row
+        out["variants"][variant] = rows
+    return out
+
+
+def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """Per scenario: per variant and estimator the RMS final horizontal error (% of distance) and the error/sigma
+    std of the horizontal components; for "defaults" the campaign statistics (error/sigma std per state, NEES)."""
+    from gtsam_dvl.app.campaign.montecarlo import campaign_statistics
+
+    out: dict[str, Any] = {}
+    for scenario in sorted({r["scenario"] for r in runs}):
+        mine = [r for r in runs if r["scenario"] == scenario]
+        table: dict[str, Any] = {}
+        for variant in VARIANTS:
+            for name in VARIANTS[variant]:
+                rows = [r["variants"][variant][name] for r in mine if variant in r["variants"]
+                        and name in r["variants"][variant]]
+                ok = [x for x in rows if "failed" not in x]
+                if not rows:
+                    continue
+                pct = np.array([x["horizontal_error_pct"] for x in ok])
+                z = np.array([x["horizontal_z"] for x in ok]).reshape(-1)
+                table[f"{variant}/{name}"] = {
+                    "runs": len(ok), "failed": len(rows) - len(ok),
+                    "rms_pct": float(np.sqrt(np.mean(pct**2))) if len(pct) else math.nan,
+                    "median_pct": float(np.median(pct)) if len(pct) else math.nan,
+                    "horizontal_z_std": float(np.std(z, ddof=1)) if len(z) > 1 else math.nan}
+        campaign = [{"estimators": {n: x["campaign"] for n, x in r["variants"]["defaults"].items()
+                                    if "campaign" in x}} for r in mine]
+        out[scenario] = {"errors": table, "defaults": campaign_statistics(campaign) if campaign else {}}
+    return out
+
+
+def print_summary(summary: dict[str, Any]) -> None:
+    for scenario, s in summary.items():
+        print(f"\n{scenario}: final horizontal error, % of distance (RMS over runs; horizontal error/sigma std)")
+        for key, row in s["errors"].items():
+            print(f"  {key:18s} {row['rms_pct']:7.3f} %  median {row['median_pct']:6.3f} %  z std "
+                  f"{row['horizontal_z_std']:5.2f}  ({row['runs']} runs, {row['failed']} failed)")
+        for variant, est in (("batch", "truth"), ("online", "truth"), ("batch", "nominal"), ("online", "nominal")):
+            p, f = s["errors"].get(f"presets/{variant}"), s["errors"].get(f"{est}/{variant}")
+            if p and f:
+                print(f"  presets/{variant} over {est}/{variant}: {p['rms_pct'] / f['rms_pct']:.2f}x")
+        for name, est in s["defaults"].get("estimators", {}).items():
+            worst = max(est["states"].items(), key=lambda kv: kv[1]["z_std"])
+            nees = est["nees_block"]
+            print(f"  defaults/{name}: largest error/sigma std {worst[1]['z_std']:.2f} ({worst[0]}); block NEES "
+                  f"{nees['mean']:.2f} in [{nees['band_95'][0]:.2f}, {nees['band_95'][1]:.2f}]: "
+                  f"{'inside' if nees['inside_band'] else 'OUTSIDE'}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--runs", type=int, default=50)
+    ap.add_argument("--scenarios", default="straight-transect,steady-turn")
+    ap.add_argument("--imu-model", default=None, help="[imu] model of the 'presets' variant")
+    ap.add_argument("--dvl-model", default=None, help="[dvl] model of the 'presets' variant")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed-start", type=int, default=1)
+    ap.add_argument("--out", type=Path, default=Path("underway_calibration.json"))
+    args = ap.parse_args()
+    from gtsam_dvl.app.campaign.cluster import dask_client
+
+    tasks = [(s, seed) for s in args.scenarios.split(",") for seed in range(args.seed_start,
+                                                                            args.seed_start + args.runs)]
+    t0 = time.perf_counter()
+    runs: list[dict[str, Any]] = []
+    with dask_client(None, args.workers) as client:
+        futures = [client.submit(run_one, s, seed, args.imu_model, args.dvl_model, pure=False) for s, seed in tasks]
+        from dask.distributed import as_completed
+
+        for k, fut in enumerate(as_completed(futures), 1):
+            runs.append(fut.result())
+            print(f"\r{k}/{len(tasks)} runs, {time.perf_counter() - t0:.0f} s", end="", flush=True)
+            if k % 10 == 0 or k == len(tasks):  # partial results survive an interrupted campaign
+                tmp = args.out.with_suffix(".tmp")
+                tmp.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
+                tmp.replace(args.out)
+    print(f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}")
+    print_summary(summarise(runs))
+
+
+if __name__ == "__main__":
+    main()
