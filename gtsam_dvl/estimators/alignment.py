@@ -405,13 +405,15 @@ def given_covariance(alignment: Alignment, config: EstimatorConfig, *, alignment
 
 
 def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float, b_v: np.ndarray | None,
-                config: EstimatorConfig, velocity_sigma_m_s: float, cov0: np.ndarray | None = None) -> FirstState:
+                config: EstimatorConfig, velocity_sigma_m_s: float, cov0: np.ndarray | None = None,
+                t_origin: float | None = None) -> FirstState:
     """The given initial attitude and map origin carried to the first state's time t1 (s). They refer to the
     log's first IMU stamp (configured attitude, in-motion alignment; the map origin is where the vehicle is
-    then), to the attitude sensor's first sample (its t_ref), or for a static alignment to the end of the static
-    segment (nothing moves before it). The attitude is carried with the gyros and the Earth rate (Alignment.at);
-    the position by the first ping's body velocity b_v (m/s, base_link: held constant in the body, turned with
-    the carried attitude; None: no displacement). The covariance cov0 (given_covariance when None) grows by
+    then, or at t_origin when given: the first GNSS fix's time when the origin is that fix), to the attitude
+    sensor's first sample (its t_ref), or for a static alignment to the end of the static segment (nothing moves
+    before it). The attitude is carried with the gyros and the Earth rate (Alignment.at); the position by the
+    first ping's body velocity b_v (m/s, base_link: held constant in the body, turned with the carried attitude;
+    None: no displacement). The covariance cov0 (given_covariance when None) grows by
     - the gyro white noise over |t1 - t_ref| (gyro_noise * sqrt(dt)) and the bias (gyro_bias_sigma * dt), per
       axis about map axes;
     - the attitude error at the start turning the displacement d (delta_p = delta_theta x d, correlated with the
@@ -422,23 +424,35 @@ def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float
     velocity; the sigma does not cover that."""
     cov0 = given_covariance(alignment, config) if cov0 is None else cov0
     t_imu0 = float(imu.t[0]) if len(imu) else t1
+    static = alignment.method == "static" and alignment.t_ref is None
     if alignment.t_ref is not None:
-        t_att, t_pos = alignment.t_ref, t_imu0
-    elif alignment.method == "static":
-        t_att = t_pos = max(alignment.t_static_end, t_imu0)
+        t_att = alignment.t_ref
+    elif static:
+        t_att = max(alignment.t_static_end, t_imu0)
     else:  # configured: the first IMU stamp
-        t_att = t_pos = t_imu0
-    if (t1 <= t_att if alignment.t_ref is None else (t1 == t_att and t1 <= t_pos)):
+        t_att = t_imu0
+    t_pos = t_imu0 if t_origin is None else float(t_origin)
+    if static:  # nothing moves before the end of the static segment
+        t_pos = max(t_pos, t_att)
+        att_moves, pos_moves = t1 > t_att, t1 > t_pos
+    else:
+        att_moves, pos_moves = t1 != t_att, t1 != t_pos
+    if not (att_moves or pos_moves):
         return FirstState(alignment, np.zeros(3), cov0, False, min(t_att, t_pos), t1)
-    at1 = replace(alignment, t_ref=t_att).at(t1, imu, frame)  # t_ref = t1
+    at1 = replace(alignment, t_ref=t_att).at(t1, imu, frame) if att_moves else replace(alignment, t_ref=t1)
     imu_cfg, pri = config.imu, config.priors
-    dt_att, dt_pos = abs(t1 - t_att), max(t1 - t_pos, 0.0)
+    dt_att = abs(t1 - t_att) if att_moves else 0.0
+    dt_pos = abs(t1 - t_pos) if pos_moves else 0.0
     var_gyro = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2 * dt_att + (
         imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H * dt_att) ** 2
     d = np.zeros(3)
     speed = 0.0
     if b_v is not None and np.all(np.isfinite(b_v)) and dt_pos > 0:
-        d = _displacement(at1.n_R_b, imu, frame, t_pos, t1, np.asarray(b_v, dtype=float))
+        b_v = np.asarray(b_v, dtype=float)
+        if t1 > t_pos:
+            d = _displacement(at1.n_R_b, imu, frame, t_pos, t1, b_v)
+        else:  # the origin refers to a later time (a GNSS fix after the first ping): back from it
+            d = -_displacement(at1.at(t_pos, imu, frame).n_R_b, imu, frame, t1, t_pos, b_v)
         speed = float(np.linalg.norm(b_v))
     sig_v = float(np.sqrt(velocity_sigma_m_s**2 + (pri.scale_sigma * speed) ** 2
                           + (np.radians(max(pri.misalignment_sigma_deg)) * speed) ** 2))

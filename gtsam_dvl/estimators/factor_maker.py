@@ -410,17 +410,18 @@ class FactorMaker:
         return out
 
     def carry_to_first(self, imu: ImuData, t1: float, d_y: np.ndarray | None, d_cov: np.ndarray,
-                       cov0: np.ndarray | None = None) -> FirstState:
-        """The given initial attitude and map origin (at the log's first IMU stamp, imu's first sample: see
-        alignment.first_state) carried to the first state's time t1 (s) with imu (base_link) and the first ping
-        (d_y m/s in dvl_link, d_cov its covariance); sets self.first and self.alignment (the attitude at t1)."""
+                       cov0: np.ndarray | None = None, t_origin: float | None = None) -> FirstState:
+        """The given initial attitude and map origin (at the log's first IMU stamp, imu's first sample, or the
+        origin at t_origin: see alignment.first_state) carried to the first state's time t1 (s) with imu
+        (base_link) and the first ping (d_y m/s in dvl_link, d_cov its covariance); sets self.first and
+        self.alignment (the attitude at t1)."""
         from gtsam_dvl.estimators.noise_levels import median_ping_sigma
 
         b_v = self.velocity_from_ping(np.eye(3), d_y)
         sigma = median_ping_sigma(self.config, np.asarray(d_cov, dtype=float).reshape(1, 3, 3))
         if not np.isfinite(sigma) or b_v is None:
             sigma = self.config.priors.velocity_sigma_m_s
-        self.first = first_state(self.alignment, imu, self.frame, t1, b_v, self.config, sigma, cov0)
+        self.first = first_state(self.alignment, imu, self.frame, t1, b_v, self.config, sigma, cov0, t_origin)
         self.alignment = self.first.alignment
         return self.first
 

@@ -94,6 +94,15 @@ def origin_is_first_fix(log: LogData, config: EstimatorConfig) -> bool:
                 and abs(gnss.height_m[i] - o.height_m) < 1e-6)
 
 
+def origin_fix_time(log: LogData, config: EstimatorConfig) -> float | None:
+    """The time (s) the map origin refers to when it is the log's first good fix (origin_is_first_fix), else
+    None (the origin is the position at the first IMU stamp): for alignment.first_state."""
+    if not origin_is_first_fix(log, config):
+        return None
+    assert log.gnss is not None
+    return float(log.gnss.t[int(np.flatnonzero(valid_fixes(log.gnss))[0])])
+
+
 def antenna_lever(gnss: GnssData, config: EstimatorConfig) -> np.ndarray:
     """The antenna in base_link (m): [gnss] lever_arm_m, else /tf_static's, else zero."""
     if config.gnss.lever_arm_m is not None:

@@ -140,3 +140,19 @@ def test_online(late_log: LogData, config: EstimatorConfig) -> None:
 
 def test_ekf(late_log: LogData, config: EstimatorConfig) -> None:
     _check(run_ekf(late_log, config), late_log)
+
+
+def test_origin_at_a_later_fix(late_log: LogData, config: EstimatorConfig) -> None:
+    """A map origin that is a GNSS fix taken after the first state (t_origin): the first state's position is
+    the origin carried back from the fix's time, the truth's relative position within its sigma."""
+    log, frame = late_log, map_frame_of(late_log, config)
+    k = int(np.flatnonzero(log.dvl.valid)[0])
+    t1, t_fix = float(log.dvl.t[k]), float(log.dvl.t[k]) + 5.0
+    a = align(log.imu, log.dvl, frame, config.alignment)
+    sigma_v = float(np.sqrt(np.trace(log.dvl.d_cov[k]) / 3.0))
+    first = first_state(a, log.imu, frame, t1, log.dvl.d_v[k], config, sigma_v, t_origin=t_fix)
+    want = _truth(log, t1)[0] - _truth(log, t_fix)[0]
+    sig_pos = np.sqrt(np.diag(first.cov)[3:])
+    print(f"origin 5 s after the first state: position {np.round(first.n_p, 3)} m, truth {np.round(want, 3)} m")
+    assert first.carried and np.all(np.abs(first.n_p - want) < 3.0 * sig_pos)
+    assert np.linalg.norm(want) > 5.0 * sig_pos.max()  # the origin at the first state would be far off

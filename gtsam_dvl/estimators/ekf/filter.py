@@ -79,6 +79,7 @@ from gtsam_dvl.estimators.gaps import (
     sample_starts_with_gaps,
     with_fillers,
 )
+from gtsam_dvl.estimators.gnss import origin_fix_time
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
@@ -428,7 +429,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     maker = FactorMaker(config, frame, alignment, log.mounting, log.source)  # the time offset's IMU constants
     p0 = int(pings[0])
     first = maker.carry_to_first(log.imu, float(log.dvl.t[p0]), log.dvl.d_v[p0] if log.dvl.valid[p0] else None,
-                                 log.dvl.d_cov[p0], given_covariance(alignment, config, alignment_sigmas=False))
+                                 log.dvl.d_cov[p0], given_covariance(alignment, config, alignment_sigmas=False),
+                                 origin_fix_time(log, config))
     alignment = maker.alignment
     earth = _Earth(frame, config.solver.earth_model == "flat")
     imu, dvl = log.imu, log.dvl
