@@ -33,6 +33,15 @@ Accuracy: sigma^2 (sum |beta~|^2 I - beta~ beta~^T)^-1 about map axes, sigma^2 f
 bias floors: roll/pitch accel_bias / g; heading gyro_bias / (omega_ie cos lat) and accel_bias tan(lat) / g
 (the errors of gyrocompassing). Measured on a simulated navigation-grade run starting at 2 m/s with turns
 (0.01 deg/h, 50 micro-g, 2 cm/s DVL; tests/estimators/test_alignment_motion.py): see that test's numbers.
+
+The given initial state means the log's first IMU stamp: the configured attitude, the in-motion alignment's
+and the map origin (the vehicle's position then). first_state carries them to the first state, the first
+usable ping, which may come later (a log that starts underway, DVL stamps offset, unusable first pings):
+n_R_b(t1) = Exp(-n_omega_ie (t1 - t0)) n_R_b(t0) prod_k Exp(b_omega_k dt_k) (Alignment.at) and the position
+by the first ping's body velocity turned with that attitude; the prior covariance grows by the gyro noise
+and bias over the interval and by the velocity error times it, and the attitude error turns the distance
+travelled (tests/estimators/test_initial_state.py). The batch smoother, the online estimator and the EKF all
+start from it.
 """
 
 from __future__ import annotations
@@ -45,7 +54,7 @@ import numpy as np
 from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig, ImuConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.rotations import quat_xyzw_to_matrix, rpy_deg_to_matrix, rpy_to_matrix, so3_exp, so3_log
+from gtsam_dvl.core.rotations import quat_xyzw_to_matrix, rpy_deg_to_matrix, rpy_to_matrix, skew, so3_exp, so3_log
 from gtsam_dvl.core.types import AttitudeData, DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
@@ -58,8 +67,8 @@ ATTITUDE_SOURCES = ("an attitude topic (--attitude-topic: sensor_msgs/msg/Imu, n
 @dataclass
 class Alignment:
     """Initial attitude of base_link in map. Static and configured: the attitude of the whole static segment
-    (up to t_static_end) or of the first state. Attitude sensor and in motion: the attitude at t_ref, which
-    at() carries to another time with the gyros."""
+    (up to t_static_end) or at the log's first IMU stamp. Attitude sensor and in motion: the attitude at t_ref,
+    which at() carries to another time with the gyros (first_state: to the first state, with its sigmas)."""
 
     n_R_b: np.ndarray
     t_static_end: float  # end of the detected static segment, s (0 when none was used)
@@ -359,3 +368,116 @@ def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig, *
     sel = imu.t <= t_end
     b_f, b_omega = imu.b_f[sel].mean(axis=0), imu.b_omega[sel].mean(axis=0)
     return Alignment(coarse_alignment(b_f, b_omega, frame), t_end, "static", b_f, b_omega)
+
+
+@dataclass
+class FirstState:
+    """The given initial state carried to the first state's time t1 (first_state): attitude n_R_b (base_link in
+    map) and position n_p (m, map) at t1, and their prior covariance cov (6x6, map axes: attitude error about map
+    axes in rad, then position in m). carried False: nothing was carried (t1 at or before the time they refer
+    to); n_p is then the map origin and cov the covariance given."""
+
+    alignment: Alignment  # the alignment at t1 (n_R_b)
+    n_p: np.ndarray
+    cov: np.ndarray
+    carried: bool
+    t_from: float  # the time the given attitude / origin referred to, s
+    t1: float
+
+    def info(self) -> dict[str, Any]:
+        """What the results report (NavResult.info["alignment"]["first_state"])."""
+        sig = np.sqrt(np.diag(self.cov))
+        return {"carried": self.carried, "t_from": self.t_from, "t1": self.t1,
+                "n_p": [float(v) for v in self.n_p], "sigma_rpy_deg": [float(v) for v in np.degrees(sig[:3])],
+                "position_sigma_m": [float(v) for v in sig[3:]]}
+
+
+def given_covariance(alignment: Alignment, config: EstimatorConfig, *, alignment_sigmas: bool = True) -> np.ndarray:
+    """The prior covariance (6x6, map axes: attitude rad, position m) of the given initial state at its own time:
+    the alignment's attitude sigmas when it has them (alignment_sigmas; the EKF keeps [priors]'), else [priors]
+    roll_pitch_sigma_deg / yaw_sigma_deg, and [priors] position_sigma_m about the map origin."""
+    pri = config.priors
+    if alignment_sigmas and alignment.sigma_rpy_deg is not None:
+        sig_att = np.radians(np.asarray(alignment.sigma_rpy_deg, dtype=float))
+    else:
+        sig_att = np.radians([pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg])
+    return np.diag(np.concatenate([sig_att**2, np.full(3, pri.position_sigma_m**2)]))
+
+
+def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float, b_v: np.ndarray | None,
+                config: EstimatorConfig, velocity_sigma_m_s: float, cov0: np.ndarray | None = None,
+                t_origin: float | None = None) -> FirstState:
+    """The given initial attitude and map origin carried to the first state's time t1 (s). They refer to the
+    log's first IMU stamp (configured attitude, in-motion alignment; the map origin is where the vehicle is
+    then, or at t_origin when given: the first GNSS fix's time when the origin is that fix), to the attitude
+    sensor's first sample (its t_ref), or for a static alignment to the end of the static segment (nothing moves
+    before it). The attitude is carried with the gyros and the Earth rate (Alignment.at); the position by the
+    first ping's body velocity b_v (m/s, base_link: held constant in the body, turned with the carried attitude;
+    None: no displacement). The covariance cov0 (given_covariance when None) grows by
+    - the gyro white noise over |t1 - t_ref| (gyro_noise * sqrt(dt)) and the bias (gyro_bias_sigma * dt), per
+      axis about map axes;
+    - the attitude error at the start turning the displacement d (delta_p = delta_theta x d, correlated with the
+      attitude);
+    - the velocity error: velocity_sigma_m_s (the ping's sigma, with the scale and misalignment priors times the
+      speed, added here) times the interval.
+    A vehicle that changes speed between the first IMU stamp and the first state breaks the constant body
+    velocity; the sigma does not cover that."""
+    cov0 = given_covariance(alignment, config) if cov0 is None else cov0
+    t_imu0 = float(imu.t[0]) if len(imu) else t1
+    static = alignment.method == "static" and alignment.t_ref is None
+    if alignment.t_ref is not None:
+        t_att = alignment.t_ref
+    elif static:
+        t_att = max(alignment.t_static_end, t_imu0)
+    else:  # configured: the first IMU stamp
+        t_att = t_imu0
+    t_pos = t_imu0 if t_origin is None else float(t_origin)
+    if static:  # nothing moves before the end of the static segment
+        t_pos = max(t_pos, t_att)
+        att_moves, pos_moves = t1 > t_att, t1 > t_pos
+    else:
+        att_moves, pos_moves = t1 != t_att, t1 != t_pos
+    if not (att_moves or pos_moves):
+        return FirstState(alignment, np.zeros(3), cov0, False, min(t_att, t_pos), t1)
+    at1 = replace(alignment, t_ref=t_att).at(t1, imu, frame) if att_moves else replace(alignment, t_ref=t1)
+    imu_cfg, pri = config.imu, config.priors
+    dt_att = abs(t1 - t_att) if att_moves else 0.0
+    dt_pos = abs(t1 - t_pos) if pos_moves else 0.0
+    var_gyro = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2 * dt_att + (
+        imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H * dt_att) ** 2
+    d = np.zeros(3)
+    speed = 0.0
+    if b_v is not None and np.all(np.isfinite(b_v)) and dt_pos > 0:
+        b_v = np.asarray(b_v, dtype=float)
+        if t1 > t_pos:
+            d = _displacement(at1.n_R_b, imu, frame, t_pos, t1, b_v)
+        else:  # the origin refers to a later time (a GNSS fix after the first ping): back from it
+            d = -_displacement(at1.at(t_pos, imu, frame).n_R_b, imu, frame, t1, t_pos, b_v)
+        speed = float(np.linalg.norm(b_v))
+    sig_v = float(np.sqrt(velocity_sigma_m_s**2 + (pri.scale_sigma * speed) ** 2
+                          + (np.radians(max(pri.misalignment_sigma_deg)) * speed) ** 2))
+    J = np.eye(6)
+    J[3:, :3] = -skew(d)
+    cov = J @ cov0 @ J.T
+    cov[:3, :3] += np.eye(3) * var_gyro
+    cov[3:, 3:] += np.eye(3) * (sig_v * dt_pos) ** 2
+    return FirstState(at1, d, 0.5 * (cov + cov.T), True, min(t_att, t_pos), t1)
+
+
+def _displacement(n_R_b1: np.ndarray, imu: ImuData, frame: LocalFrame, a: float, b: float,
+                  b_v: np.ndarray) -> np.ndarray:
+    """Map displacement (m) from a to b (s) at the constant body velocity b_v (m/s), the attitude n_R_b1 at b
+    carried back with the gyros and the Earth rate: n_R_b(t) = Exp(-n_omega_ie (t - b)) n_R_b1 b(a)_R_b(b)^T
+    b(a)_R_b(t); each sample's piece at the mean of its ends' attitudes' velocities."""
+    idx, dt = _pieces(imu, a, b)
+    if not len(idx):
+        return np.asarray(n_R_b1 @ b_v * (b - a), dtype=float)
+    D = so3_exp(imu.b_omega[idx] * dt[:, None])
+    R = np.empty((len(idx) + 1, 3, 3))
+    R[0] = np.eye(3)
+    for k in range(len(idx)):
+        R[k + 1] = R[k] @ D[k]
+    tk = a + np.concatenate([[0.0], np.cumsum(dt)])
+    E = so3_exp(-frame.n_omega_ie[None, :] * (tk - b)[:, None])
+    n_v = np.einsum("kij,kj->ki", E, (R @ b_v) @ (n_R_b1 @ R[-1].T).T)
+    return np.asarray(np.sum(0.5 * (n_v[1:] + n_v[:-1]) * dt[:, None], axis=0), dtype=float)

@@ -202,7 +202,7 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
         calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
         b_omega=b_omega, pose_vel_cross=pose_vel_cross,
         calib_joint_cov=marg.joints[calib_group], shared_joint_cov=marg.joints[shared_group],
-        info={"alignment": builder.alignment.info(),
+        info={"alignment": builder.maker.alignment_info(),
               "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
         config=cfg.to_dict(),
         alignment_method=builder.alignment.method,

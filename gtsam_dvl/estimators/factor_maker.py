@@ -22,6 +22,7 @@ Earth model in the Earth-fixed map frame (docs/conventions.md):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -32,9 +33,9 @@ from gtsam_dvl.core.keys import B, V, X
 from gtsam_dvl.core.states import dvl_factor_keys, enabled
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.states import prior_factors as shared_prior_factors
-from gtsam_dvl.core.types import Mounting
+from gtsam_dvl.core.types import ImuData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import Alignment
+from gtsam_dvl.estimators.alignment import Alignment, FirstState, first_state
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance
 from gtsam_dvl.factors import (
@@ -96,6 +97,8 @@ class FactorMaker:
     alignment: Alignment
     mounting: Mounting
     source: str = ""
+    # the given initial attitude and origin carried to the first state (carry_to_first); None: not yet
+    first: FirstState | None = None
     _offset_gravity: np.ndarray | None = field(default=None, init=False, repr=False)  # offset_gravity()'s cache
 
     # ----- keys and rates ------------------------------------------------------------------------
@@ -370,6 +373,16 @@ class FactorMaker:
         a GNSS fix)."""
         pri = self.config.priors
         n_R_b = self.alignment.n_R_b
+        if self.first is not None and self.first.carried:  # map axes -> Pose3's tangent (body axes)
+            cov_pose = np.kron(np.eye(2), n_R_b.T) @ self.first.cov @ np.kron(np.eye(2), n_R_b)
+            if position_cov is not None:  # the origin is a GNSS fix: its covariance, at the fix
+                cov_pose[3:, :3] = cov_pose[:3, 3:] = 0.0
+                cov_pose[3:, 3:] = n_R_b.T @ position_cov @ n_R_b
+            return [
+                gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
+                gtsam.PriorFactorVector(V(0), values.atVector(V(0)),
+                                        gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s)),
+            ] + shared_prior_factors(self.config, self.mounting)
         # attitude sigmas are about map axes (roll/pitch ~ horizontal, yaw ~ vertical): the alignment's own
         # (attitude sensor, in motion) when it has them, else [priors]; Pose3's tangent is in body axes, so
         # rotate the covariance into the body
@@ -389,6 +402,29 @@ class FactorMaker:
         ] + shared_prior_factors(self.config, self.mounting)  # the shared states' (core/states.py)
 
     # ----- initial guesses -----------------------------------------------------------------------
+    def alignment_info(self) -> dict[str, Any]:
+        """NavResult.info["alignment"]: the alignment's, with the given state carried to the first (first_state)."""
+        out = self.alignment.info()
+        if self.first is not None:
+            out["first_state"] = self.first.info()
+        return out
+
+    def carry_to_first(self, imu: ImuData, t1: float, d_y: np.ndarray | None, d_cov: np.ndarray,
+                       cov0: np.ndarray | None = None, t_origin: float | None = None) -> FirstState:
+        """The given initial attitude and map origin (at the log's first IMU stamp, imu's first sample, or the
+        origin at t_origin: see alignment.first_state) carried to the first state's time t1 (s) with imu
+        (base_link) and the first ping (d_y m/s in dvl_link, d_cov its covariance); sets self.first and
+        self.alignment (the attitude at t1)."""
+        from gtsam_dvl.estimators.noise_levels import median_ping_sigma
+
+        b_v = self.velocity_from_ping(np.eye(3), d_y)
+        sigma = median_ping_sigma(self.config, np.asarray(d_cov, dtype=float).reshape(1, 3, 3))
+        if not np.isfinite(sigma) or b_v is None:
+            sigma = self.config.priors.velocity_sigma_m_s
+        self.first = first_state(self.alignment, imu, self.frame, t1, b_v, self.config, sigma, cov0, t_origin)
+        self.alignment = self.first.alignment
+        return self.first
+
     def velocity_from_ping(self, n_R_b: np.ndarray, d_y: np.ndarray | None) -> np.ndarray | None:
         """n_v from a ping at the initial scale and nominal mounting (None if the ping has no velocity)."""
         if d_y is None or not np.all(np.isfinite(d_y)):
@@ -396,13 +432,15 @@ class FactorMaker:
         return np.asarray(n_R_b @ (self.mounting.b_R_d0 @ d_y) / self.config.priors.scale_initial)
 
     def first_state_values(self, d_y: np.ndarray | None) -> gtsam.Values:
-        """Initial guess of the first state X(0), V(0) (attitude from the alignment, at the map origin,
-        velocity from ping d_y at the initial scale and nominal mounting) and of the bias, scale and
-        misalignment (and the time offset and lever arm when estimated: their priors' values)."""
+        """Initial guess of the first state X(0), V(0) (attitude from the alignment, position the map origin
+        carried to the first state by carry_to_first, velocity from ping d_y at the initial scale and nominal
+        mounting) and of the bias, scale and misalignment (and the time offset and lever arm when estimated:
+        their priors' values)."""
         values = gtsam.Values()
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
         n_v = self.velocity_from_ping(n_R_b.matrix(), d_y)
-        values.insert(X(0), gtsam.Pose3(n_R_b, np.zeros(3)))
+        n_p = np.zeros(3) if self.first is None else self.first.n_p  # the map origin carried to the first state
+        values.insert(X(0), gtsam.Pose3(n_R_b, n_p))
         values.insert(V(0), np.zeros(3) if n_v is None else n_v)
         values.insert(initial_shared_values(self.config, self.mounting))
         return values

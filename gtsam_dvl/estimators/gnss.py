@@ -94,6 +94,15 @@ def origin_is_first_fix(log: LogData, config: EstimatorConfig) -> bool:
                 and abs(gnss.height_m[i] - o.height_m) < 1e-6)
 
 
+def origin_fix_time(log: LogData, config: EstimatorConfig) -> float | None:
+    """The time (s) the map origin refers to when it is the log's first good fix (origin_is_first_fix), else
+    None (the origin is the position at the first IMU stamp): for alignment.first_state."""
+    if not origin_is_first_fix(log, config):
+        return None
+    assert log.gnss is not None
+    return float(log.gnss.t[int(np.flatnonzero(valid_fixes(log.gnss))[0])])
+
+
 def antenna_lever(gnss: GnssData, config: EstimatorConfig) -> np.ndarray:
     """The antenna in base_link (m): [gnss] lever_arm_m, else /tf_static's, else zero."""
     if config.gnss.lever_arm_m is not None:
@@ -182,11 +191,12 @@ def plan_fixes(log: LogData, config: EstimatorConfig, frame: LocalFrame, t_state
                      np.asarray(state), np.asarray(dt), antenna_lever(gnss, config), from_gnss, origin_index)
 
 
-def first_position(fixes: GnssFixes | None, n_R_b: np.ndarray) -> np.ndarray:
-    """Initial guess of the first state's position (m, map): the map origin, or, when the origin is the first
-    fix, that fix minus the antenna's offset n_R_b b_p_antenna."""
+def first_position(fixes: GnssFixes | None, n_R_b: np.ndarray, n_p_origin: np.ndarray | None = None) -> np.ndarray:
+    """Initial guess of the first state's position (m, map): n_p_origin (the map origin carried to the first
+    state: alignment.first_state; None: the origin), or, when the origin is the first fix, that fix minus the
+    antenna's offset n_R_b b_p_antenna."""
     if fixes is None or not fixes.origin_from_gnss or fixes.origin_index < 0:
-        return np.zeros(3)
+        return np.zeros(3) if n_p_origin is None else np.asarray(n_p_origin, dtype=float)
     return np.asarray(fixes.n_p[fixes.origin_index] - n_R_b @ fixes.b_p_antenna)
 
 

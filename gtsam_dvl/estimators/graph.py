@@ -117,10 +117,13 @@ class LogGraph:
         check_spacing(cfg.solver)
         self.gaps = find_gaps(log.imu.t, cfg.imu.gap_samples)
         self.epochs = self._select_epochs()
-        # an attitude sensor's or the in-motion alignment's attitude is at its own time: carry it to the first state
-        self.maker.alignment = alignment.at(self.epochs[0].t, log.imu, frame)
         if sum(e.dvl_index >= 0 for e in self.epochs) < 2:
             raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
+        # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own
+        # time): carry them to the first state (alignment.first_state)
+        j0 = self.epochs[0].dvl_index
+        d_y0 = log.dvl.d_v[j0] if log.dvl.valid[j0] else None
+        self.maker.carry_to_first(log.imu, self.epochs[0].t, d_y0, log.dvl.d_cov[j0])
         self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)  # the gaps the states cross
         self.counters["imu_gaps"] = len(self.gaps)
         check_gaps(self.gaps, cfg.imu, log.source)
@@ -374,7 +377,8 @@ class LogGraph:
         n_p_all = np.zeros((len(self.epochs), 3))
         self.set_gravity_from_positions(n_p_all)
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
-        n_p, n_v = first_position(self.gnss_plan(), n_R_b.matrix()), np.zeros(3)  # the origin unless GNSS
+        n_p0 = None if self.maker.first is None else self.maker.first.n_p  # the origin carried to the first state
+        n_p, n_v = first_position(self.gnss_plan(), n_R_b.matrix(), n_p0), np.zeros(3)  # that unless GNSS
         for i, ep in enumerate(self.epochs):
             if i > 0:
                 state = self.pims[i - 1].predict(gtsam.NavState(n_R_b, n_p, n_v), zero_bias)

@@ -187,11 +187,15 @@ class AlignmentConfig(ConfigModel):
     """The initial attitude (estimators/alignment.py align): method "auto" takes, in this order, an attitude
     sensor in the log (LogData.attitude), initial_attitude_deg, coarse alignment on an initial static segment
     of at least min_static_s, else in-motion alignment with DVL aiding over the first in_motion_window_s.
-    "attitude_topic", "static" and "in_motion" force one method (an error if it cannot be done)."""
+    "attitude_topic", "static" and "in_motion" force one method (an error if it cannot be done).
+    initial_attitude_deg and the map origin (origin_*, or the log's) are the attitude and the position at the log's
+    first IMU stamp: when the first state (the first usable DVL ping) comes later, the estimators carry them to it
+    with the gyros and the first ping's velocity and widen the prior by what that adds (alignment.first_state)."""
 
     SECTION: ClassVar[str] = "alignment"
 
-    initial_attitude_deg: tuple[Number, Number, Number] | None = None  # [roll, pitch, yaw]; skips alignment
+    # [roll, pitch, yaw] of base_link in map at the first IMU stamp (carried to the first state); skips alignment
+    initial_attitude_deg: tuple[Number, Number, Number] | None = None
     method: Literal["auto", "attitude_topic", "static", "in_motion"] = "auto"
     in_motion_window_s: Number = Field(default=120.0, ge=10.0)  # in-motion alignment window
     # attitude sensor sigmas (roll/pitch, yaw) when its messages give no covariance
@@ -203,7 +207,8 @@ class AlignmentConfig(ConfigModel):
     # 1 s means of the gyro within this of the first 10 s
     gyro_threshold_deg_s: Positive = 0.01
     dvl_speed_threshold_m_s: Positive = 0.1
-    # map origin when the log has none (needed for Earth rate and gravity)
+    # map origin when the log has none (needed for Earth rate and gravity): the vehicle's position at the first
+    # IMU stamp (carried to the first state)
     origin_lat_deg: Number | None = Field(default=None, ge=-90.0, le=90.0)
     origin_lon_deg: Number | None = Field(default=None, ge=-180.0, le=360.0)
     origin_height_m: Number | None = None

@@ -66,7 +66,7 @@ from gtsam_dvl.core.rotations import skew, so3_exp
 from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import align, map_frame_of
+from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
@@ -80,6 +80,7 @@ from gtsam_dvl.estimators.gaps import (
     sample_starts_with_gaps,
     with_fillers,
 )
+from gtsam_dvl.estimators.gnss import origin_fix_time
 from gtsam_dvl.estimators.mounting import log_in_base_link
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
@@ -148,8 +149,10 @@ class _Earth:
         return self._g + self._G @ (n_p - self._at), self._G
 
 
-def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int) -> FilterState:
-    """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance."""
+def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int,
+                  first: FirstState | None = None) -> FilterState:
+    """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance; first: the given
+    attitude and origin carried to the first ping (alignment.first_state), its position and covariance."""
     pri = config.priors
     b_R_d0 = log.mounting.b_R_d0
     k0 = pri.scale_initial
@@ -163,9 +166,15 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
     P[PHI, PHI] = np.diag([rp**2, rp**2, yaw**2])  # map axes: the error phi is about map axes
     P[VEL, VEL] = np.eye(3) * pri.velocity_sigma_m_s**2
     P[POS, POS] = np.eye(3) * pri.position_sigma_m**2
+    n_p = np.zeros(3)
+    if first is not None and first.carried:
+        n_p = first.n_p.copy()
+        for r, rows in ((0, PHI), (3, POS)):
+            for c, cols in ((0, PHI), (3, POS)):
+                P[rows, cols] = first.cov[r:r + 3, c:c + 3]
     for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
         P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
-    return FilterState(NavState(n_R_b.copy(), n_v, np.zeros(3)), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
+    return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
                        config.dvl.time_offset_prior_s if offset else 0.0)
 
 
@@ -451,9 +460,15 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     pings = usable_pings(log.dvl, log.imu, config.dvl, counters)  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
-    # an attitude sensor's or the in-motion alignment's attitude is at its own time: carry it to the first ping
-    # (the filter's initial covariance keeps the [priors] attitude sigmas, wider than the alignment's)
-    alignment = alignment.at(float(log.dvl.t[pings[0]]), log.imu, frame)
+    # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own time):
+    # carry them to the first ping (alignment.first_state; the filter's initial covariance starts from the [priors]
+    # attitude sigmas, wider than the alignment's)
+    maker = FactorMaker(config, frame, alignment, log.mounting, log.source)  # the time offset's IMU constants
+    p0 = int(pings[0])
+    first = maker.carry_to_first(log.imu, float(log.dvl.t[p0]), log.dvl.d_v[p0] if log.dvl.valid[p0] else None,
+                                 log.dvl.d_cov[p0], given_covariance(alignment, config, alignment_sigmas=False),
+                                 origin_fix_time(log, config))
+    alignment = maker.alignment
     earth = _Earth(frame, config.solver.earth_model == "flat")
     imu, dvl = log.imu, log.dvl
     t = imu.t
@@ -465,7 +480,6 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     gates: dict[int, float] = {}  # gate_threshold per measurement dimension
     gated, gated_run = 0, 0  # gated pings, and how many in a row
 
-    maker = FactorMaker(config, frame, alignment, log.mounting, log.source)  # the time offset's IMU constants
     offset_bound = 3.0 * config.dvl.time_offset_sigma_s
     depth: _DepthUpdates | None = None
     if log.depth is not None and config.depth.use and len(log.depth):
@@ -474,7 +488,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         depth = _DepthUpdates(samples, gaussian_radius(frame.lat0), config.depth.max_time_to_state_s,
                               gate_threshold(ekf_cfg.gate_probability, 1), ekf_cfg.gate_reopen_after,
                               counters=dcounters)
-    fs = initial_state(log, config, alignment.n_R_b, int(pings[0]))
+    fs = initial_state(log, config, alignment.n_R_b, p0, first)
     hist = History()
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
     if fit is not None:
@@ -565,7 +579,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     result = history_result(hist, log, config)
     result.dvl_pings = pings
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
-    result.info = {"alignment": alignment.info(),
+    result.info = {"alignment": maker.alignment_info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
                    "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
                               "error_state": N_ERR + int(offset)}}

@@ -85,10 +85,11 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.states import enabled
-from gtsam_dvl.core.types import LogData, Mounting
+from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due
+from gtsam_dvl.estimators.gnss import origin_fix_time
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
@@ -170,6 +171,9 @@ class OnlineEstimator:
         self._deferred: list[tuple[Ping, list[gtsam.NonlinearFactor]]] = []
         self._state: StateEstimate | None = None  # the newest state's estimate (after its update, or the last)
         self._first_imu_t: float | None = None
+        # the time the map origin refers to (s): None, the first IMU stamp; a GNSS fix's when it is the origin
+        # (for_log); the first state's position is the origin carried from it (alignment.first_state)
+        self.origin_t: float | None = None
         self._wait = AlignmentWait(frame, self.config.alignment, self.options.align_s, source)  # before alignment
         self._imu = ImuBuffer(self.config.imu, source, self._count)  # after it: the IMU since the newest state
         self._replaying = False  # replaying the messages buffered before the alignment
@@ -201,6 +205,7 @@ class OnlineEstimator:
         est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
         est.noise.imu = noise.imu
+        est.origin_t = origin_fix_time(log, config)
         est.stated_config = stated.model_copy(update={"online": est.options}).validate()
         return est
 
@@ -313,7 +318,7 @@ class OnlineEstimator:
             "counters": dict(self.counters), "epochs": len(h),
             "keyframe_spacing_s": self.config.solver.keyframe_spacing_s,
             "imu_gaps": self._imu.gaps_info(),
-            "alignment": self.builder.alignment.info(),
+            "alignment": self.builder.alignment_info(),
             "noise": self.noise.as_dict(),
             "latency_ms": latency_stats(self.latencies_s),
             "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
@@ -425,9 +430,11 @@ class OnlineEstimator:
         b, sm = self.builder, self.smoother
         t_epoch = p.t if p is not None else float(t_state)  # type: ignore[arg-type]
         T, W, F = self._imu.samples()
+        i = sm.n
+        if i == 0 and p is not None:  # the given attitude and origin (at the first IMU stamp) carried to the epoch
+            b.carry_to_first(ImuData(T, W, F), t_epoch, p.d_v if p.valid else None, p.d_cov, None, self.origin_t)
         gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
-        i = sm.n
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
         min_speed = self.options.calibration_min_speed_m_s
         dvl = state_dvl_factors(b, i, p, b_omega, min_speed, rate_input) if p is not None else []
