@@ -36,6 +36,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.sensor_noise import (
+    AllanCurve,
     allan_deviation,
     allan_fit,
     autocovariance,
@@ -129,25 +130,6 @@ def static_stretches(log: LogData, rate_hz: float) -> list[tuple[float, float]]:
     # has grown for a while
     out = [(float(t[(a + 1) * m]), float(t[(b - 1) * m - 1])) for a, b in _runs(still) if b - a > 2]
     return sorted((s for s in out if s[1] - s[0] >= MIN_STATIC_S), key=lambda s: s[0] - s[1])
-
-
-@dataclass
-class AllanCurve:
-    """One axis's Allan deviation: taus (s), adev (deg/h or micro-g), its fit (None when the curve is zero: the
-    samples never left their quantisation level)."""
-
-    sensor: str  # "gyro" or "accel"
-    axis: str
-    taus: np.ndarray
-    adev: np.ndarray
-    white_density: float | None  # deg/h/sqrt(Hz) or micro-g/sqrt(Hz)
-    bias_instability: float | None  # deg/h or micro-g
-    bias_bound: bool
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"axis": self.axis, "white_density": self.white_density, "bias_instability": self.bias_instability,
-                "bias_instability_is_upper_bound": self.bias_bound, "tau_s": self.taus.tolist(),
-                "adev": self.adev.tolist()}
 
 
 def allan_curves(log: LogData, rate_hz: float, span: tuple[float, float] | None) -> list[AllanCurve]:

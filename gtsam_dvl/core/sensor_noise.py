@@ -21,6 +21,7 @@ sg^2, time constant tau) has the autocovariance C(0) = sw^2 + sg^2, C(lag) = sg^
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -324,3 +325,22 @@ def gauss_markov_fit(t: np.ndarray, r: np.ndarray, dt_nominal: float, max_lag: i
     sg2 = min(max(sg2, 0.0), c0)
     return GaussMarkovFit(float(np.sqrt(c0 - sg2)), float(np.sqrt(sg2)), tau,
                           bool(sg2 > SIGNIFICANCE_SIGMAS * noise), n * r.shape[1], float(np.sqrt(noise)))
+
+
+@dataclass
+class AllanCurve:
+    """One axis's Allan deviation: taus (s), adev (deg/h or micro-g), its fit (None when the curve is zero: the
+    samples never left their quantisation level)."""
+
+    sensor: str  # "gyro" or "accel"
+    axis: str
+    taus: np.ndarray
+    adev: np.ndarray
+    white_density: float | None  # deg/h/sqrt(Hz) or micro-g/sqrt(Hz)
+    bias_instability: float | None  # deg/h or micro-g
+    bias_bound: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"axis": self.axis, "white_density": self.white_density, "bias_instability": self.bias_instability,
+                "bias_instability_is_upper_bound": self.bias_bound, "tau_s": self.taus.tolist(),
+                "adev": self.adev.tolist()}

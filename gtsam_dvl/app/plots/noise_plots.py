@@ -5,14 +5,11 @@ from __future__ import annotations
 
 import io
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gtsam_dvl.app.plots.common import plt
-
-if TYPE_CHECKING:
-    from gtsam_dvl.app.characterise import AllanCurve
+from gtsam_dvl.core.sensor_noise import AllanCurve
 
 AXIS_COLOURS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 UNITS = {"gyro": ("deg/h", "deg/h/sqrt(Hz)"), "accel": ("micro-g", "micro-g/sqrt(Hz)")}

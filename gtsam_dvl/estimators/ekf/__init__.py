@@ -1,5 +1,6 @@
 """The paper's error-state EKF (filter.py) on a strapdown in the Earth-fixed map frame (strapdown.py)."""
 
-from gtsam_dvl.estimators.ekf.filter import FilterState, measurement_model, run_ekf
+from gtsam_dvl.estimators.ekf.filter import measurement_model, run_ekf
+from gtsam_dvl.estimators.ekf.strapdown import FilterState
 
 __all__ = ["FilterState", "measurement_model", "run_ekf"]

@@ -69,7 +69,19 @@ from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
-from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, NavState, propagate_interval
+from gtsam_dvl.estimators.ekf.strapdown import (
+    BA,
+    BG,
+    MIS,
+    N_ERR,
+    PHI,
+    POS,
+    SCALE,
+    VEL,
+    FilterState,
+    NavState,
+    propagate_interval,
+)
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import (
     check_gaps,
@@ -112,19 +124,6 @@ MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
 OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s), with estimate_time_offset
 RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
-
-
-@dataclass
-class FilterState:
-    """Nominal state and error-state covariance of the filter."""
-
-    nav: NavState
-    gyro_bias: np.ndarray
-    accel_bias: np.ndarray
-    scale: float
-    b_R_d: np.ndarray
-    P: np.ndarray  # (19, 19), or (20, 20) with the time offset (OFFSET)
-    time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
 
 
 class _Earth:

@@ -16,7 +16,7 @@ from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, SCALE
 
 if TYPE_CHECKING:
-    from gtsam_dvl.estimators.ekf.filter import FilterState
+    from gtsam_dvl.estimators.ekf.strapdown import FilterState
 
 N_NAV = 9  # attitude, velocity, position: the error state's navigation part
 

@@ -58,6 +58,19 @@ class NavState:
 
 
 @dataclass
+class FilterState:
+    """Nominal state and error-state covariance of the filter."""
+
+    nav: NavState
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    scale: float
+    b_R_d: np.ndarray
+    P: np.ndarray  # (19, 19), or (20, 20) with the time offset (filter.py OFFSET)
+    time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
+
+
+@dataclass
 class IntervalResult:
     """The state at the interval's end and the quantities the covariance propagation needs."""
 
