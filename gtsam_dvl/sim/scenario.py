@@ -146,6 +146,20 @@ class DvlSpec:
     outlier_m_s: float = 1.0  # size of a gross error
     correlated_sigma_m_s: float = 0.0  # Gauss-Markov error: stationary 1 sigma per axis (0: none)
     correlated_tau_s: float = 60.0  # its time constant
+    # a DVL preset (core/config/presets.py DVL_PRESETS, "" none): fills the keys the table does not set, the ping
+    # noise (noise_m_s: per axis, or per beam with noise_model "beam"), the correlated error, the bottom-track range
+    # (max_range_m) and the beam angle (dvl_preset_values); the truth scale stays the table's
+    model: str = ""
+
+
+def dvl_preset_values(model: str, noise_model: str) -> dict[str, float]:
+    """The DvlSpec keys a DVL preset gives (DvlSpec.model)."""
+    from gtsam_dvl.core.config.presets import DVL_PRESETS
+
+    p = DVL_PRESETS[model]
+    return {"noise_m_s": p.beam_noise_m_s() if noise_model == "beam" else p.ping_noise_m_s,
+            "correlated_sigma_m_s": p.correlated_sigma_m_s, "correlated_tau_s": p.correlated_tau_s,
+            "max_range_m": p.max_altitude_m, "beam_angle_deg": p.beam_angle_deg}
 
 
 @dataclass(frozen=True)
@@ -320,8 +334,17 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     imu = ImuSpec(**r.table("imu", _defaults(ImuSpec), vectors=("gyro_bias_values_deg_per_h",
                                                                    "accel_bias_values_micro_g"),
                             per_axis=("quantisation_gyro_rad_s", "quantisation_accel_m_s2")))
-    dvl = DvlSpec(**r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
-                            strings=("noise_model",)))
+    dvl_table = r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
+                        strings=("noise_model", "model"))
+    if dvl_table["model"]:
+        from gtsam_dvl.core.config.presets import DVL_PRESETS
+
+        r.require(dvl_table["model"] in DVL_PRESETS, "dvl.model",
+                  f"{dvl_table['model']!r} is not one of {', '.join(DVL_PRESETS)}")
+        given = raw.get("dvl", {})
+        dvl_table.update({k: v for k, v in dvl_preset_values(dvl_table["model"], dvl_table["noise_model"]).items()
+                          if k not in given})
+    dvl = DvlSpec(**dvl_table)
     for key in ("gyro_bias_deg_per_h", "accel_bias_micro_g", "gyro_noise_deg_per_h_per_sqrt_hz",
                 "accel_noise_micro_g_per_sqrt_hz", "gyro_bias_walk_deg_per_h_per_sqrt_h",
                 "accel_bias_walk_micro_g_per_sqrt_h"):

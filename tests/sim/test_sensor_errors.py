@@ -233,3 +233,25 @@ def test_bad_error_and_oscillation_keys_are_one_line_errors() -> None:
         with pytest.raises(GtsamDvlError, match=re.escape(f"key '{table}.{key}'") + ".*" + re.escape(text)) as exc:
             scenario_from_dict(raw, source="x.toml")
         assert "\n" not in str(exc.value)
+
+
+def test_dvl_preset_fills_what_the_scenario_does_not_set() -> None:
+    """[dvl] model = a DVL preset: its ping noise, correlated error, bottom-track range and beam angle, unless the
+    table sets them; the truth scale stays the table's; an unknown name is one line naming the known ones."""
+    from gtsam_dvl.core.config.presets import DVL_PRESETS
+    from gtsam_dvl.core.errors import GtsamDvlError
+    from gtsam_dvl.sim.scenario import scenario_from_dict
+    from tests.support.scenarios import scenario_raw
+
+    p = DVL_PRESETS["teledyne-pathfinder"]
+    raw = scenario_raw(dvl={"model": "teledyne-pathfinder", "scale": 1.003})
+    for key in ("noise_m_s", "correlated_sigma_m_s", "max_range_m"):
+        raw["dvl"].pop(key, None)
+    spec = scenario_from_dict(raw).dvl
+    assert spec.noise_m_s == p.ping_noise_m_s and spec.max_range_m == p.max_altitude_m
+    assert spec.correlated_sigma_m_s == p.correlated_sigma_m_s > 0 and spec.scale == 1.003
+    explicit = scenario_from_dict(scenario_raw(dvl={"model": "teledyne-pathfinder", "noise_m_s": 0.004})).dvl
+    assert explicit.noise_m_s == 0.004
+    with pytest.raises(GtsamDvlError, match="'nortek-x' is not one of .*teledyne-pathfinder") as err:
+        scenario_from_dict(scenario_raw(dvl={"model": "nortek-x"}))
+    assert "\n" not in str(err.value)
