@@ -78,8 +78,12 @@ def apply_imu_floor(imu: ImuData, config: EstimatorConfig, report: NoiseReport) 
             entry.update(floor=floor, used=used)
             update[key] = used
             unit_cfg = "deg/h/sqrt(Hz)" if name == "gyro" else "micro-g/sqrt(Hz)"
-            entry["why"] = (f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): white noise {used:.3g} {unit_cfg} "
-                            f"instead of {configured:.3g} (floor q/sqrt(12 f) = {floor:.3g})")
+            if used > 1.01 * configured:
+                entry["why"] = (f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): white noise {used:.3g} "
+                                f"{unit_cfg} instead of {configured:.3g} (floor q/sqrt(12 f) = {floor:.3g})")
+            else:  # a floor far below the sensor's own noise changes nothing worth a line of its own
+                entry["why"] = (f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): its floor q/sqrt(12 f) = "
+                                f"{floor:.3g} {unit_cfg} is below the configured {configured:.3g}, which stands")
         report.imu[name] = entry
     if not update:
         return config

@@ -134,7 +134,8 @@ def test_static_segment_of_a_quantised_imu_at_rest_is_not_read() -> None:
     log = simulate_variant(3)
     q = 1e-4
     imu = log.imu
-    quantised = type(imu)(**{**imu.__dict__, "b_omega": np.round(np.asarray(imu.b_omega) / q) * q})
+    quantised = type(imu)(**{**imu.__dict__, "b_omega": np.round(np.asarray(imu.b_omega) / q) * q,
+                             "b_f": np.round(np.asarray(imu.b_f) / q) * q})
     log = type(log)(**{**log.__dict__, "imu": quantised})
     report = NoiseReport()
     imu_levels(log, EstimatorConfig(), report)
@@ -142,3 +143,8 @@ def test_static_segment_of_a_quantised_imu_at_rest_is_not_read() -> None:
     assert gyro["step"] == pytest.approx([q, q, q], rel=0.01)
     assert sorted(gyro["static"]["axes_skipped_quantised"]) == ["x", "y", "z"]
     assert "density" not in gyro["static"]
+    # the console's words: the gyro's floor (0.6 deg/h/sqrt(Hz)) raises the configured 0.1, the accelerometer's
+    # (0.29 micro-g/sqrt(Hz)) is far below its configured 10 and changes nothing
+    assert "white noise 0.6" in gyro["why"] and "instead of 0.1" in gyro["why"]
+    accel = report.imu["accel"]
+    assert accel["used"] == pytest.approx(10.0, rel=1e-3) and "which stands" in accel["why"]
