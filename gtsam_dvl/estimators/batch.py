@@ -47,7 +47,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     t0 = time.perf_counter()
     noise = NoiseReport()
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    config = imu_levels(log, config, noise)  # the IMU's quantisation floor ([noise], noise_levels.py)
+    config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()

@@ -37,6 +37,7 @@ from gtsam_dvl.core.types import ImuData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import Alignment, FirstState, first_state
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
+from gtsam_dvl.estimators.noise_levels import median_ping_sigma
 from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance
 from gtsam_dvl.factors import (
     DvlOptions,
@@ -378,23 +379,18 @@ class FactorMaker:
             if position_cov is not None:  # the origin is a GNSS fix: its covariance, at the fix
                 cov_pose[3:, :3] = cov_pose[:3, 3:] = 0.0
                 cov_pose[3:, 3:] = n_R_b.T @ position_cov @ n_R_b
-            return [
-                gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
-                gtsam.PriorFactorVector(V(0), values.atVector(V(0)),
-                                        gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s)),
-            ] + shared_prior_factors(self.config, self.mounting)
-        # attitude sigmas are about map axes (roll/pitch ~ horizontal, yaw ~ vertical): the alignment's own
-        # (attitude sensor, in motion) when it has them, else [priors]; Pose3's tangent is in body axes, so
-        # rotate the covariance into the body
-        if self.alignment.sigma_rpy_deg is not None:
-            sig_att = np.radians(np.asarray(self.alignment.sigma_rpy_deg, dtype=float))
         else:
-            sig_att = np.radians([pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg])
-        cov_rot = n_R_b.T @ np.diag(sig_att**2) @ n_R_b
-        cov_pose = np.zeros((6, 6))
-        cov_pose[:3, :3] = cov_rot
-        cov_pose[3:, 3:] = (np.eye(3) * pri.position_sigma_m**2 if position_cov is None
-                            else n_R_b.T @ position_cov @ n_R_b)  # translation tangent in body axes
+            # attitude sigmas are about map axes (roll/pitch ~ horizontal, yaw ~ vertical): the alignment's own
+            # (attitude sensor, in motion) when it has them, else [priors]; Pose3's tangent is in body axes, so
+            # rotate the covariance into the body
+            if self.alignment.sigma_rpy_deg is not None:
+                sig_att = np.radians(np.asarray(self.alignment.sigma_rpy_deg, dtype=float))
+            else:
+                sig_att = np.radians([pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg])
+            cov_pose = np.zeros((6, 6))
+            cov_pose[:3, :3] = n_R_b.T @ np.diag(sig_att**2) @ n_R_b
+            cov_pose[3:, 3:] = (np.eye(3) * pri.position_sigma_m**2 if position_cov is None
+                                else n_R_b.T @ position_cov @ n_R_b)  # translation tangent in body axes
         return [
             gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
             gtsam.PriorFactorVector(V(0), values.atVector(V(0)),
@@ -415,8 +411,6 @@ class FactorMaker:
         origin at t_origin: see alignment.first_state) carried to the first state's time t1 (s) with imu
         (base_link) and the first ping (d_y m/s in dvl_link, d_cov its covariance); sets self.first and
         self.alignment (the attitude at t1)."""
-        from gtsam_dvl.estimators.noise_levels import median_ping_sigma
-
         b_v = self.velocity_from_ping(np.eye(3), d_y)
         sigma = median_ping_sigma(self.config, np.asarray(d_cov, dtype=float).reshape(1, 3, 3))
         if not np.isfinite(sigma) or b_v is None:

@@ -29,9 +29,14 @@ from typing import Any
 import numpy as np
 from scipy.stats import chi2
 
-from gtsam_dvl.core import sensor_noise
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.sensor_noise import imu_quantisation, quantisation_density
+from gtsam_dvl.core.sensor_noise import (
+    allan_deviation,
+    allan_fit,
+    default_taus,
+    imu_quantisation,
+    quantisation_density,
+)
 from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import detect_static_end
@@ -125,7 +130,7 @@ def apply_static_noise(imu: ImuData, static_end_s: float, config: EstimatorConfi
                                      "micro-g/sqrt(Hz)")):
         entry = report.imu.setdefault(name, {})
         steps = entry.get("step") or [None, None, None]
-        taus = sensor_noise.default_taus(len(x), rate)
+        taus = default_taus(len(x), rate)
         taus = taus[taus <= duration / 10.0]
         densities, instabilities, skipped = [], [], []
         for k in range(3):
@@ -136,7 +141,7 @@ def apply_static_noise(imu: ImuData, static_end_s: float, config: EstimatorConfi
             if len(taus) < 3 or not np.isfinite(x[:, k]).all():
                 skipped.append("xyz"[k])
                 continue
-            fit = sensor_noise.allan_fit(*sensor_noise.allan_deviation(x[:, k], rate, taus))
+            fit = allan_fit(*allan_deviation(x[:, k], rate, taus))
             densities.append(fit.white_density / per)
             instabilities.append(fit.bias_instability / per)  # deg/h or micro-g
         current = float(getattr(config.imu, key))  # the quantisation floor's, when it applied

@@ -386,7 +386,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     config.validate()
     noise = NoiseReport()
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    config = imu_levels(log, config, noise)  # the IMU's quantisation floor ([noise])
+    config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
     recentre = enabled(config, "time_offset") and config.ekf.recentre_time_offset
     offset_info: dict[str, Any] = {}
     if dvl_fit_enabled(config) or recentre:

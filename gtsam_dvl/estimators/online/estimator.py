@@ -201,7 +201,7 @@ class OnlineEstimator:
         config = config or EstimatorConfig.for_log(log.metadata)
         noise = NoiseReport()
         stated = config
-        config = imu_levels(log, config, noise)  # the log's IMU quantisation floor ([noise])
+        config = imu_levels(log, config, noise)  # the IMU's white noise from the log ([noise])
         est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
         est.noise.imu = noise.imu
