@@ -30,7 +30,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.keys import B, V, X
-from gtsam_dvl.core.states import dvl_factor_keys, enabled
+from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.states import prior_factors as shared_prior_factors
 from gtsam_dvl.core.types import ImuData, Mounting
@@ -305,23 +305,24 @@ class FactorMaker:
         cfg = self.config.dvl
         b_l, lever = self.mounting.b_l, enabled(self.config, "lever_arm")
         keys = self.dvl_keys(i, motion is not None)
+        gm = correlated_error(self.config)  # the correlated error E(i) a variable of every DVL factor
         if enabled(self.config, "time_offset"):
             if rate_input is None:
                 raise ValueError("a DVL factor with the time offset needs its IMU constants (rate_input)")
             b_a, b_omega_mean, G = rate_input
             o = DvlOptions(b_omega_mean, b_l, offset=OffsetInput(b_a, self.offset_gravity(), G), motion=motion,
-                           lever_variable=lever)
+                           lever_variable=lever, error_variable=gm)
             return [make_dvl_factor(self.dvl_noise(cov, extra), keys, d_y, o)]
         if cfg.use_beams and beams is not None:
             d_u, v, valid = beams
             out: list[gtsam.NonlinearFactor] = []
             for b in np.flatnonzero(valid).tolist():
-                o = DvlOptions(b_omega, b_l, d_u[b], motion=motion, lever_variable=lever)
+                o = DvlOptions(b_omega, b_l, d_u[b], motion=motion, lever_variable=lever, error_variable=gm)
                 noise = self.beam_noise() if extra is None else self._robust(gtsam.noiseModel.Isotropic.Sigma(
                     1, float(np.sqrt(cfg.beam_sigma_m_s()**2 + d_u[b] @ extra @ d_u[b]))))
                 out.append(make_dvl_factor(noise, keys, float(v[b]), o))
             return out
-        o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever)
+        o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever, error_variable=gm)
         return [make_dvl_factor(self.dvl_noise(cov, extra), keys, d_y, o)]
 
     def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None) -> gtsam.noiseModel.Base:

@@ -63,10 +63,11 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew, so3_exp
-from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled
+from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
+from gtsam_dvl.estimators.correlated import ekf_propagate
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
 from gtsam_dvl.estimators.ekf.strapdown import (
@@ -173,8 +174,13 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
                 P[rows, cols] = first.cov[r:r + 3, c:c + 3]
     for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
         P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
+    d_e = None
+    if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
+        P = np.pad(P, ((0, 3), (0, 3)))
+        P[n:, n:] = np.eye(3) * config.dvl.correlated_sigma_m_s**2
+        d_e = np.zeros(3)
     return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
-                       config.dvl.time_offset_prior_s if offset else 0.0)
+                       config.dvl.time_offset_prior_s if offset else 0.0, d_e)
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -309,7 +315,11 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
     fs.accel_bias = fs.accel_bias + dx[BA]
     fs.scale = fs.scale + float(dx[SCALE])
     fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
-    if len(dx) > OFFSET:
+    gm = fs.error_slice()
+    if gm is not None:
+        assert fs.dvl_error is not None
+        fs.dvl_error = fs.dvl_error + dx[gm]
+    if len(dx) - (0 if gm is None else 3) > OFFSET:
         fs.time_offset = fs.time_offset + float(dx[OFFSET])
     return nis, down, False
 
@@ -518,6 +528,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                                           dt, earth.n_omega_ie, n_g, G)
                 fs.nav = step.state
                 fs.P = _propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
+                if (gm := fs.error_slice()) is not None:  # the correlated DVL error decays (correlated.py)
+                    assert fs.dvl_error is not None
+                    fs.P, fs.dvl_error = ekf_propagate(config, fs.P, fs.dvl_error, gm, t_next - t_prev)
                 if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
@@ -543,6 +556,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             dt_c = float(np.clip(fs.time_offset, prior - offset_bound, prior + offset_bound))
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
             y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity())
+        if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)
+            assert fs.dvl_error is not None
+            y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
         speed = np.linalg.norm(y_hat) / fs.scale
         slow = speed < max(ekf_cfg.min_calibration_speed_m_s,
                            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
@@ -581,7 +597,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     result.info = {"alignment": maker.alignment_info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
                    "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
-                              "error_state": N_ERR + int(offset)}}
+                              "error_state": len(fs.P)}}
     if progress:
         progress(1.0)
     return result
