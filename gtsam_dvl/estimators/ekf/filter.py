@@ -55,21 +55,27 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import skew, so3_exp
+from gtsam_dvl.core.rotations import skew
 from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
 from gtsam_dvl.estimators.correlated import ekf_propagate
+from gtsam_dvl.estimators.correlated import info as correlated_info
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
+from gtsam_dvl.estimators.ekf.kalman import (
+    OFFSET,
+    gate_threshold,
+    propagate_covariance,
+    update,
+)
 from gtsam_dvl.estimators.ekf.strapdown import (
     BA,
     BG,
@@ -123,7 +129,6 @@ LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
 CALIBRATION = np.r_[LAYOUT["scale"], LAYOUT["misalignment"]]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
-OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s), with estimate_time_offset
 RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
 
@@ -266,74 +271,6 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np
         A = dvl.beams.d_u[j][ok]
         return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_sigma_m_s()**2
     return np.eye(3), dvl.d_v[j], ping_covariance(cfg, dvl.d_cov[j])
-
-
-def robust_weight(kernel: str, k: float, r: float) -> float:
-    """Weight of a measurement whose whitened innovation has norm r under the robust kernel [dvl] robust with
-    threshold k (GTSAM's mEstimator weights): 1 for "none"; "huber": 1 up to k, k / r beyond; "cauchy":
-    1 / (1 + (r / k)^2)."""
-    if kernel == "huber":
-        return 1.0 if r <= k else k / r
-    if kernel == "cauchy":
-        return 1.0 / (1.0 + (r / k) ** 2)
-    return 1.0
-
-
-def gate_threshold(probability: float, dof: int) -> float:
-    """The chi^2 gate on the normalised innovation squared of a dof-dimensional measurement: its quantile of
-    probability ([ekf] gate_probability; 1 gates nothing)."""
-    return math.inf if probability >= 1.0 else float(chi2.ppf(probability, dof))
-
-
-def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray, kernel: str = "none",
-           k: float = 3.0, gate_nis: float = math.inf) -> tuple[float, bool, bool]:
-    """Kalman update (Joseph form) and injection of the error into the nominal state, unless the normalised
-    innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's weight
-    (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.
-
-    Returns the normalised innovation squared, whether the kernel reduced the measurement's weight and
-    whether the gate rejected it.
-    """
-    P = fs.P
-    S = H @ P @ H.T + Rm
-    nis = float(innovation @ np.linalg.solve(S, innovation))
-    if nis > gate_nis:
-        return nis, False, True
-    w = robust_weight(kernel, k, math.sqrt(max(nis, 0.0)))
-    down = w < 1.0
-    if down:
-        Rm = Rm / w
-        S = H @ P @ H.T + Rm
-    K = np.linalg.solve(S, H @ P).T
-    dx = K @ innovation
-    IKH = np.eye(len(P)) - K @ H
-    P = IKH @ P @ IKH.T + K @ Rm @ K.T
-    fs.P = 0.5 * (P + P.T)
-    nav = fs.nav
-    fs.nav = NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS])
-    fs.gyro_bias = fs.gyro_bias + dx[BG]
-    fs.accel_bias = fs.accel_bias + dx[BA]
-    fs.scale = fs.scale + float(dx[SCALE])
-    fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
-    gm = fs.error_slice()
-    if gm is not None:
-        assert fs.dvl_error is not None
-        fs.dvl_error = fs.dvl_error + dx[gm]
-    if len(dx) - (0 if gm is None else 3) > OFFSET:
-        fs.time_offset = fs.time_offset + float(dx[OFFSET])
-    return nis, down, False
-
-
-def _propagate_covariance(P: np.ndarray, Phi: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """P through the navigation error's transition Phi (19, 19) and process noise Q; the time offset (if P has
-    it) is a constant: its row and column are carried by Phi alone."""
-    if len(P) == N_ERR:
-        return np.asarray(Phi @ P @ Phi.T + Q)
-    out = P.copy()
-    out[:N_ERR, :N_ERR] = Phi @ P[:N_ERR, :N_ERR] @ Phi.T + Q
-    out[:N_ERR, N_ERR:] = Phi @ P[:N_ERR, N_ERR:]
-    out[N_ERR:, :N_ERR] = out[:N_ERR, N_ERR:].T
-    return out
 
 
 @dataclass
@@ -527,7 +464,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                 step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
                                           dt, earth.n_omega_ie, n_g, G)
                 fs.nav = step.state
-                fs.P = _propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
+                fs.P = propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
                 if (gm := fs.error_slice()) is not None:  # the correlated DVL error decays (correlated.py)
                     assert fs.dvl_error is not None
                     fs.P, fs.dvl_error = ekf_propagate(config, fs.P, fs.dvl_error, gm, t_next - t_prev)
@@ -598,6 +535,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
                    "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
                               "error_state": len(fs.P)}}
+    if fs.dvl_error is not None:
+        result.info["dvl_correlated_error"] = correlated_info(config)
     if progress:
         progress(1.0)
     return result
