@@ -48,11 +48,16 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
             sigma = np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
             colour = colours[k % len(colours)]
             if len(value) and np.ptp(value) == 0.0:
-                # a smoother's timeline: its sigmas are filtering sigmas, its value the final estimate only; a
-                # flat line over a narrowing band would be neither, so the final estimate is a marker at the end
-                ax.errorbar([tl.t[sel][-1]], [value[-1]], yerr=[3 * sigma[-1]], fmt="D", color=colour, ms=5,
+                # a smoother's timeline: its sigmas are filtering sigmas (the data up to t), its value the final
+                # estimate only; the filtering band is drawn about the final estimate (dashed: not an estimate at
+                # t), and the final estimate with its smoothed sigma is a marker at the end
+                t_sel = tl.t[sel]
+                ax.plot(t_sel, value, color=colour, lw=0.9, ls="--")
+                ax.fill_between(t_sel, value - 3 * sigma, value + 3 * sigma, color=colour, alpha=0.15, lw=0,
+                                label=f"{label}: filtering +-3 sigma (data up to t) about the final estimate")
+                ax.errorbar([t_sel[-1]], [value[-1]], yerr=[3 * sigma[-1]], fmt="D", color=colour, ms=5,
                             capsize=4, label=f"{label}: final estimate +-3 sigma", zorder=4)
-                tail = value[-1:], sigma[-1:]
+                tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
             else:
                 _band(ax, tl.t[sel], value, sigma, f"{label} (+-3 sigma)", colour)
                 tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
@@ -75,8 +80,9 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
     else:
         axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
-    fig.suptitle(f"{quantity.replace('_', ' ')} estimate and 3-sigma band over time\n(y zoomed on the converged part)",
-                 fontsize=11)
+    smoothed = all(len(tl.t) and np.ptp(np.asarray(getattr(tl, value_name))) == 0.0 for _, tl in timelines)
+    what = "final estimate and filtering 3-sigma band" if timelines and smoothed else "estimate and 3-sigma band"
+    fig.suptitle(f"{quantity.replace('_', ' ')} {what} over time\n(y zoomed on the converged part)", fontsize=11)
     return save_figure(fig, path)
 
 
