@@ -445,7 +445,9 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         from gtsam_dvl.analysis.metrics import truth_in_user_units
 
         truths: dict[str, Any] = truth_in_user_units(log) if log is not None else {}
-        for q in ("scale", "misalignment", "gyro_bias", "accel_bias"):
+        estimated = [q for q, sigma in (("time_offset", res.timeline.time_offset_sigma_s),
+                                        ("lever_arm", res.timeline.lever_arm_sigma_m)) if sigma is not None]
+        for q in ("scale", "misalignment", "gyro_bias", "accel_bias", *estimated):
             written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
                                           ev.segments, t_min=0.0))
         written.append(plot_normalised_sigmas(res.timeline, out_dir / "normalised_sigmas.png",

@@ -213,3 +213,33 @@ def test_smooth_vs_truth_without_true_calibration_has_no_nan() -> None:
     text = SmoothOutcome(s, []).describe()
     assert "  vs truth: final horizontal position 1.50 m (0.200 % of distance)" in text.splitlines()
     assert "nan" not in text and "  deg" not in text
+
+
+# ----- figures "over time" draw the timeline -------------------------------------------------------------------
+
+
+def test_smoother_figures_draw_the_filtering_band_over_time(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """A smoother's timeline (its value the final estimate, its sigmas the filtering ones): the figure shows the
+    band over the whole timeline, not one point; the time offset in ms with its truth."""
+    from matplotlib.collections import PolyCollection
+
+    from gtsam_dvl.app.plots import timeline_plots
+
+    figures: list[Any] = []
+    monkeypatch.setattr(timeline_plots, "save_figure", lambda fig, path: figures.append(fig) or path)
+    n = 50
+    t = np.linspace(0.0, 490.0, n)
+    ones3 = np.ones((n, 3))
+    shrinking = np.linspace(0.5, 0.02, n)  # s
+    tl = Timeline(t, np.ones(n), np.full(n, 1e-3), 0 * ones3, ones3, 0 * ones3, ones3, 0 * ones3, ones3, ones3,
+                  time_offset_s=np.full(n, 0.3), time_offset_sigma_s=shrinking)
+    timeline_plots.plot_estimates([("batch", tl)], tmp_path / "time_offset.png", "time_offset", truth=0.31)
+    (fig,) = figures
+    ax = fig.axes[0]
+    bands = [c for c in ax.collections if isinstance(c, PolyCollection)]
+    x = np.concatenate([p.vertices[:, 0] for band in bands for p in band.get_paths()])
+    y = np.concatenate([p.vertices[:, 1] for band in bands for p in band.get_paths()])
+    assert x.min() == pytest.approx(0.0) and x.max() == pytest.approx(490.0)  # the whole timeline
+    assert y.max() == pytest.approx(300.0 + 3 * 500.0)  # ms: the prior's band at the start about the final estimate
+    assert [line.get_ydata()[0] for line in ax.get_lines() if line.get_linestyle() == "--"][-1] == pytest.approx(310.0)
+    assert "filtering 3-sigma band over time" in fig._suptitle.get_text()

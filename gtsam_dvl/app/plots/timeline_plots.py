@@ -25,14 +25,19 @@ def _band(ax: Any, t: np.ndarray, value: np.ndarray, sigma: np.ndarray, label: s
 def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: str,
                    truth: np.ndarray | float | None = None, segments: list[Segment] | None = None,
                    t_min: float = 0.0) -> Path:
-    """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias"; estimate +- 3 sigma."""
+    """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias", and when the timelines hold
+    them "time_offset" (shown in ms; the truth given in s, as the Timeline holds it) and "lever_arm" (m);
+    estimate +- 3 sigma."""
     spec = {
         "scale": ("scale", "scale_sigma", ["DVL scale factor k"], "dimensionless"),
         "misalignment": ("misalignment_deg", "misalignment_sigma_deg", list(MIS_AXES), "deg"),
         "gyro_bias": ("gyro_bias_deg_per_h", "gyro_bias_sigma_deg_per_h", [f"gyro bias {a}" for a in AXES3], "deg/h"),
         "accel_bias": ("accel_bias_ug", "accel_bias_sigma_ug", [f"accel bias {a}" for a in AXES3], "micro-g"),
+        "time_offset": ("time_offset_s", "time_offset_sigma_s", ["DVL time offset dt_d"], "ms"),
+        "lever_arm": ("lever_arm_m", "lever_arm_sigma_m", [f"lever arm {a}" for a in AXES3], "m"),
     }[quantity]
     value_name, sigma_name, titles, unit = spec
+    to_unit = 1e3 if quantity == "time_offset" else 1.0  # the Timeline's unit to the figure's
     n = len(titles)
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -44,8 +49,8 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
         lo, hi = np.inf, -np.inf
         for k, (label, tl) in enumerate(timelines):
             sel = tl.t >= t_min
-            value = np.asarray(getattr(tl, value_name)).reshape(len(tl.t), -1)[sel, row]
-            sigma = np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
+            value = to_unit * np.asarray(getattr(tl, value_name)).reshape(len(tl.t), -1)[sel, row]
+            sigma = to_unit * np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
             colour = colours[k % len(colours)]
             if len(value) and np.ptp(value) == 0.0:
                 # a smoother's timeline: its sigmas are filtering sigmas (the data up to t), its value the final
@@ -65,7 +70,7 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
             lo = min(lo, float(np.min(tail[0] - 4 * tail[1])))
             hi = max(hi, float(np.max(tail[0] + 4 * tail[1])))
         if truth is not None:
-            tv = float(np.atleast_1d(truth)[row])
+            tv = to_unit * float(np.atleast_1d(truth)[row])
             ax.axhline(tv, color="k", ls="--", lw=0.9, label="truth")
             lo, hi = min(lo, tv), max(hi, tv)
         if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
