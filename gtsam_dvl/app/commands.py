@@ -342,9 +342,9 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
         "scenario": scen.name, "answer": answer.splitlines()[0], "wall_s": plan.wall_s,
         "states": [{"key": s.key, "description": s.description, "unit": s.unit, "prior_sigma": s.prior_sigma,
                     "final_sigma": s.posterior_sigma, "ratio": s.ratio, "verdict": s.verdict,
-                    "determined_at_s": plan.determined_at_s[s.key], "credited_segments": s.credited_segments,
+                    "determined_at_s": plan.determined_at_s.get(s.key), "credited_segments": s.credited_segments,
                     "segment_shares": plan.shares.get(s.key, []), "hours_to_halve": s.hours_to_halve}
-                   for s in plan.report.states],
+                   for s in plan.report.all_states()],
         "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
         "segments": [s.as_dict() for s in plan.segments], "config": config.to_dict(),
     }
