@@ -99,7 +99,7 @@ def truth_error_lines(errors: dict[str, Any]) -> list[str]:
             ("misalignment_deg", "misalignment_nsigma", "misalignment roll/pitch/yaw", "+.3f", "deg", 1.0),
             ("dvl_time_offset_s", "dvl_time_offset_nsigma", "time offset", "+.1f", "ms", 1e3),
             ("dvl_lever_arm_m", "dvl_lever_arm_nsigma", "lever arm x/y/z", "+.3f", "m", 1.0),
-            ("gyro_bias_deg_per_h", "gyro_bias_nsigma", "gyro bias x/y/z", "+.3f", "deg/h", 1.0),
+            ("gyro_bias_deg_per_h", "gyro_bias_nsigma", "gyro bias x/y/z", "+.4f", "deg/h", 1.0),
             ("accel_bias_ug", "accel_bias_nsigma", "accel bias x/y/z", "+.1f", "micro-g", 1.0)):
         value = errors.get(key)
         if value is None or not np.size(value) or not _finite(value):

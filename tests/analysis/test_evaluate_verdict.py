@@ -115,6 +115,10 @@ def test_evaluate_refuses_another_dive_unless_forced(tiny_dive: tuple[Path, Path
     cli = CliRunner().invoke(app, ["evaluate", str(result), "-o", str(tmp_path / "cli"), "--truth", str(other)])
     assert cli.exit_code == 1 and not (tmp_path / "cli").exists()
     assert "is not the source of" in cli.output and len(cli.output.strip().splitlines()) == 1
+
+
+def test_evaluate_forced_says_so_then_the_verdict(tiny_dive: tuple[Path, Path, Path], tmp_path: Path) -> None:
+    _, other, result = tiny_dive
     lines, _ = evaluate_to_dir(result, tmp_path / "forced", truth_path=other, force=True)
     print("\n".join(lines))
     assert lines[0].startswith(f"--force: judged against {other}, which is not the result's source: its content")
