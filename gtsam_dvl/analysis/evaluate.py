@@ -53,6 +53,7 @@ class Evaluation:
     gnss: SurfacingReport | None = None  # held-out GNSS fixes and the surfacing error (log with fixes)
     determined_at_s: dict[str, float | None] = field(default_factory=dict)  # from the filtering timeline
     truth_errors: dict[str, Any] | None = None  # metrics.truth_errors against the log's truth
+    notes: list[str] = field(default_factory=list)  # printed after the verdict
 
     def lines(self) -> list[str]:
         """The verdict (headline, advice, every state), the directions not determined, the errors against the
@@ -61,7 +62,7 @@ class Evaluation:
             out = ["no calibration covariance in this result"]
         else:
             out = calibration_answer(self.report, self.determined_at_s, "log") + self.report.direction_lines()
-        return out + truth_error_lines(self.truth_errors or {})
+        return out + truth_error_lines(self.truth_errors or {}) + self.notes
 
 
 def _finite(*values: Any) -> bool:
@@ -166,6 +167,9 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
     m: dict[str, Any] = {"estimator": res.estimator, "result": stored.path, "states": len(res.t),
                          "final": {k: stored.summary.get(k) for k in ("scale", "misalignment_deg",
                                                                       "gyro_bias_deg_per_h", "accel_bias_ug")}}
+    if log is not None and not stored.source_sha256:
+        ev.notes.append(f"the result records no content hash of its source log (written by an older gtsam_dvl): "
+                        f"{log.source or 'the log'} is taken as its source on its stamps and origin alone")
     if log is not None:
         ev.segments = log.segments or classify_log(log)
         m["segments_from"] = "simulation" if log.segments else "classified from IMU"

@@ -247,3 +247,15 @@ def test_smoother_figures_draw_the_filtering_band_over_time(monkeypatch: pytest.
     assert y.max() == pytest.approx(300.0 + 3 * 500.0)  # ms: the prior's band at the start about the final estimate
     assert [line.get_ydata()[0] for line in ax.get_lines() if line.get_linestyle() == "--"][-1] == pytest.approx(310.0)
     assert "filtering 3-sigma band over time" in fig._suptitle.get_text()
+
+
+def test_a_result_without_source_hash_says_what_the_check_rests_on(tiny_dive: tuple[Path, Path, Path]) -> None:
+    from gtsam_dvl.analysis.evaluate import evaluate_result
+    from gtsam_dvl.io.reader import read_log
+
+    source, _, result = tiny_dive
+    stored = dataclasses.replace(read_result(result), source_sha256="")
+    notes = evaluate_result(stored, read_log(source)).notes
+    assert notes == [f"the result records no content hash of its source log (written by an older gtsam_dvl): "
+                     f"{source} is taken as its source on its stamps and origin alone"]
+    assert evaluate_result(read_result(result), read_log(source)).notes == []
