@@ -392,7 +392,8 @@ def test_a_log_names_its_configuration() -> None:
 FIXTURES = Path(__file__).parent / "config_fixtures"
 # keys those files do not have: the noise levels from the data ([noise], and the fitted [dvl] noise_multiplier), the
 # sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting tolerance. A file without them
-# takes their defaults (the fit on, no preset), also a paper configuration's
+# takes their defaults (the fit on, no preset), also a paper configuration's; but a result's config.json without
+# the correlated error takes it as white, as the runs that wrote it did (test below)
 ADDED = {"noise": None, "imu": {"model"},
          "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
          "priors": {"mounting_tolerance_deg"}, "ekf": {"recentre_time_offset"}}
@@ -433,6 +434,19 @@ def test_result_config_json_written_before_loads() -> None:
     cfg = EstimatorConfig.load(path)
     assert cfg.model_copy(update={"noise": EstimatorConfig.paper().noise}) == EstimatorConfig.paper()
     assert _without_added(cfg.to_dict()) == _tuples(json.loads(path.read_text())["config"])
+
+
+def test_config_json_without_the_correlated_error_repeats_a_white_dvl(tmp_path: Path) -> None:
+    """A config.json written before [dvl] correlated_sigma_m_s existed describes runs with a white DVL error: it
+    loads with 0, while a TOML file leaving it out (a user's partial configuration) takes the default."""
+    d = EstimatorConfig().to_dict()
+    d["dvl"].pop("correlated_sigma_m_s")
+    old = tmp_path / "config.json"
+    old.write_text(json.dumps({"estimator": "batch", "config": d}))
+    assert EstimatorConfig.load(old).dvl.correlated_sigma_m_s == 0.0
+    toml = tmp_path / "mine.toml"
+    toml.write_text("[dvl]\nnoise_m_s = 0.007\n")
+    assert EstimatorConfig.load(toml).dvl.correlated_sigma_m_s == EstimatorConfig().dvl.correlated_sigma_m_s > 0
 
 
 def test_toml_written_before_loads_and_writes_back_the_same_text() -> None:

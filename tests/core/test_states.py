@@ -13,7 +13,7 @@ import pytest
 from gtsam_dvl.core import states
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, X, key_dim
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
@@ -144,7 +144,7 @@ def test_elimination_ordering_lists_the_enabled_states(offset: bool, lever: bool
     shared = _keys(cfg)[1:] if random_walk else _keys(cfg)
     assert ordering.rest == shared
     assert [k for ks in ordering.chunks for k in ks] == [k for i in range(3)
-                                                         for k in [X(i), V(i)] + [B(i)] * random_walk]
+                                                         for k in [X(i), V(i)] + [B(i)] * random_walk + [E(i)]]
 
 
 @pytest.mark.parametrize(("offset", "random_walk"), [(False, False), (True, False), (True, True)])
@@ -153,7 +153,9 @@ def test_window_shares_the_enabled_states(offset: bool, random_walk: bool) -> No
     maker = SimpleNamespace(config=cfg, bias_key=lambda i: B(i) if random_walk else B(0))
     smoother = IncrementalSmoother(maker, 10.0, cfg.online.relinearization)  # type: ignore[arg-type]
     assert smoother.shared_keys(4) == [B(4) if random_walk else B(0)] + _keys(cfg)[1:]
-    assert set(smoother._threshold) == {"x", "v", "b", "k", "c"} | ({"t"} if offset else set())
+    # (e: the DVL's correlated error, modelled by default: estimators/correlated.py)
+    assert set(smoother._threshold) == {"x", "v", "b", "k", "c", "e"} | ({"t"} if offset else set())
+    assert smoother._state_keys(4)[-1] == E(4)
 
 
 @pytest.mark.parametrize(("offset", "lever"), CONFIGS)
@@ -172,7 +174,8 @@ def test_timeline_and_ekf_layouts_list_the_enabled_states(offset: bool, lever: b
     assert (layout["scale"], layout["misalignment"]) == (slice(strapdown.SCALE, strapdown.SCALE + 1), strapdown.MIS)
     log = SimpleNamespace(mounting=MOUNTING, dvl=SimpleNamespace(d_v=np.array([[1.0, 0.0, 0.0]])))
     fs = initial_state(log, cfg, np.eye(3), 0)  # type: ignore[arg-type]
-    assert fs.P.shape == (strapdown.N_ERR + offset,) * 2
+    assert fs.P.shape == (strapdown.N_ERR + offset + 3,) * 2  # the correlated DVL error last
+    assert fs.error_slice() == slice(strapdown.N_ERR + offset, strapdown.N_ERR + offset + 3)
     for name, sl in layout.items():
         np.testing.assert_array_equal(fs.P[sl, sl], states.BY_NAME[name].prior(cfg, MOUNTING).cov)
     assert fs.scale == 0.9 and fs.time_offset == (0.3 if offset else 0.0)

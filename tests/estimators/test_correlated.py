@@ -107,7 +107,9 @@ def test_result_reports_the_model() -> None:
     error is white."""
     sc, log = _scenario(), _log(1)
     base = sc.estimator_configuration()
-    white, with_gm = smooth_batch(log, base), smooth_batch(log, _with_gm(base))
+    white = smooth_batch(log, base.model_copy(update={"dvl": base.dvl.model_copy(update={
+        "correlated_sigma_m_s": 0.0})}))
+    with_gm = smooth_batch(log, _with_gm(base))
     info = with_gm.info["dvl_correlated_error"]
     assert info["sigma_m_s"] == SIGMA and info["tau_s"] == TAU
     assert all(0.0 < r < 3 * SIGMA for r in info["estimate_rms_m_s"])

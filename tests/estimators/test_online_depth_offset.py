@@ -20,7 +20,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
 from gtsam_dvl.core.result import NavResult
@@ -230,7 +230,8 @@ def test_considered_offset_factor_jacobians() -> None:
     n_g = np.array([0.0, 0.0, -9.79])
     f = _considered_calibration_factor(gtsam.noiseModel.Isotropic.Sigma(3, 0.02), 2, np.zeros(3),
                                        np.array([0.5, -0.2, 0.3]), d_y=np.array([0.05, 0.01, -0.02]),
-                                       offset=(rate, n_g))
+                                       offset=(rate, n_g), config=EstimatorConfig(dvl=DvlConfig(
+                                           estimate_time_offset=True, correlated_sigma_m_s=0.0)))  # (E: test_dvl.py)
     values = gtsam.Values()
     values.insert(X(2), gtsam.Pose3(gtsam.Rot3(so3_exp(rng.normal(size=3))), rng.normal(size=3)))
     values.insert(V(2), rng.normal(size=3) * 0.05)

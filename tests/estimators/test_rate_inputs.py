@@ -29,8 +29,12 @@ def reference(maker: FactorMaker, t: float, imu_t: np.ndarray, b_f: np.ndarray, 
               dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """velocity_rate_input written per ping, one window at a time: the reference for the vectorised one."""
     w = maker.config.dvl.time_offset_window_s
-    lo = int(np.searchsorted(imu_t, t + min(0.0, dt) - w, side="left"))
-    hi = int(np.searchsorted(imu_t, t + max(0.0, dt) + w, side="right"))
+    start, end = (t, t + dt) if dt >= 0 else (t + dt, t)  # [t, t + dt], widened to 2 w about its middle
+    if end - start < 2 * w:
+        mid = 0.5 * (start + end)
+        start, end = mid - w, mid + w
+    lo = int(np.searchsorted(imu_t, start, side="left"))
+    hi = int(np.searchsorted(imu_t, end, side="right"))
     sel = np.arange(lo, hi)
     if sel.size == 0:
         sel = np.array([int(np.clip(np.searchsorted(imu_t, t), 0, len(imu_t) - 1))])

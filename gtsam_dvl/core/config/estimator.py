@@ -36,9 +36,10 @@ from gtsam_dvl.core.errors import GtsamDvlError
 NAMED_CONFIGS: dict[str, dict[str, dict[str, Any]]] = {
     "default": {},  # a real DVL: scale 1 +- 1 %, misalignment 1 deg per axis
     # Pan & Wu's runs: the scale starts at 0.8 with a 0.5 sigma so that its convergence can be watched
-    # and their logs' stamps agree (no DVL time offset estimated)
-    # and their logs' stamps agree (no DVL time offset estimated); the noise is the paper's Table 1, as stated
-    "paper": {"priors": {"scale_initial": 0.8, "scale_sigma": 0.5}, "dvl": {"estimate_time_offset": False},
+    # and their logs' stamps agree (no DVL time offset estimated); the noise is the paper's Table 1, as stated, and
+    # its DVL error white
+    "paper": {"priors": {"scale_initial": 0.8, "scale_sigma": 0.5},
+              "dvl": {"estimate_time_offset": False, "correlated_sigma_m_s": 0.0},
               "noise": {"from_data": False}},
 }
 
@@ -166,7 +167,7 @@ class EstimatorConfig(ConfigModel):
             raise GtsamDvlError(f"{path}: no such configuration file") from None
         except tomllib.TOMLDecodeError as exc:
             raise GtsamDvlError(f"{path}: not valid TOML ({exc})") from None
-        return cls.from_dict(data, source=str(path), under=under)
+        return cls.from_dict(_white_dvl_if_written_before(data), source=str(path), under=under)
 
     @classmethod
     def from_json(cls, path: Path | str, under: Mapping[str, Any] | None = None) -> EstimatorConfig:
@@ -180,7 +181,22 @@ class EstimatorConfig(ConfigModel):
             raise GtsamDvlError(f"{path}: not valid JSON ({exc})") from None
         if isinstance(data, dict) and "config" in data and set(data) <= {"estimator", "config"}:
             data = data["config"]
-        return cls.from_dict(data, source=str(path), under=under)
+        return cls.from_dict(_white_dvl_if_written_before(data), source=str(path), under=under)
+
+
+# keys of [dvl] that only a whole written configuration (a result's config.json, to_toml) lists, not a user's
+DUMP_KEYS = {"time_offset_window_s", "jump_margin_m_s", "motion_dv_m_s", "accel_imu_factor"}
+
+
+def _white_dvl_if_written_before(data: Any) -> Any:
+    """A whole configuration written before [dvl] correlated_sigma_m_s existed (its [dvl] lists DUMP_KEYS, not
+    correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it; a user's file
+    that leaves the key out takes the default."""
+    dvl = data.get("dvl") if isinstance(data, dict) else None
+    if (isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "correlated_sigma_m_s" not in dvl
+            and dvl.get("model") is None):
+        return {**data, "dvl": {**dvl, "correlated_sigma_m_s": 0.0}}
+    return data
 
 
 def _merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:

@@ -139,8 +139,9 @@ class DvlConfig(ConfigModel):
     # a first-order Gauss-Markov velocity error (per dvl_link axis, m/s) and its time constant (s), from a preset
     # or set here: when > 0 every estimator carries it as a state of each epoch (estimators/correlated.py), so that
     # the position sigma grows as the error's, and the calibration does not over-trust pings whose errors are
-    # correlated; 0: the DVL's error is white
-    correlated_sigma_m_s: NonNegative = 0.0
+    # correlated; 0: the DVL's error is white (the paper's). The default, 2 mm/s over 60 s, is the offset term of
+    # a 300-600 kHz bottom-track DVL's long-term accuracy, typical of the class (presets.py)
+    correlated_sigma_m_s: NonNegative = 0.002
     correlated_tau_s: Positive = 60.0
 
     @model_validator(mode="after")
