@@ -177,8 +177,11 @@ class SmoothOutcome:
                          f"position {err['final_horizontal_position_m']:.2f} m ({of_distance})")
         off = s.get("dvl_time_offset_s")
         if off:
+            from gtsam_dvl.analysis.observability import time_offset_words
+
             lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
-                            f"({'determined' if off.get('determined') else 'not determined'})")
+                            f"({'determined' if off.get('determined') else 'not determined'}): "
+                            f"{off.get('words') or time_offset_words(off['value'])}")
         lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
         motion = (s.get("geometry") or {}).get("motion")
         if motion:
@@ -233,6 +236,26 @@ def check_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None
         check_writable(out)
 
 
+
+
+def check_folders(files: dict[str, Path | None], folders: dict[str, Path | None] | None = None) -> None:
+    """The command line's rule for output paths (docs/command-line.md): the folder of an output file must exist
+    (no folder tree is created for it, a mistyped path is refused); an output folder is created if missing, but
+    only inside a folder that exists, and must not be a file. files / folders map the option's name to its path
+    (None: not given). A one-line GtsamDvlError before any work."""
+    for name, path in files.items():
+        if path is not None and not Path(path).absolute().parent.exists():
+            raise GtsamDvlError(f"{path}: no folder {Path(path).parent} for {name}; create it first (outputs "
+                                "never create folder trees)")
+    for name, path in (folders or {}).items():
+        if path is None:
+            continue
+        path = Path(path)
+        if path.exists() and not path.is_dir():
+            raise GtsamDvlError(f"{path}: is a file, and {name} takes a folder; choose another path")
+        if not path.absolute().parent.exists():
+            raise GtsamDvlError(f"{path}: no folder {path.parent} to create it in for {name}; create it first "
+                                "(outputs never create folder trees)")
 
 
 def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,

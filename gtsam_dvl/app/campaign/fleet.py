@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.app.campaign.cluster import dask_client
+from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
 from gtsam_dvl.core.errors import GtsamDvlError
 
 
@@ -44,7 +44,8 @@ def _smooth_task(log_path: str, run_dir: str, mode: str, config_path: str | None
 
 def smooth_fleet(logs: list[Path], out_dir: Path, mode: str = "batch", config_path: Path | None = None,
                  read_options: dict[str, Any] | None = None, scheduler: str | None = None,
-                 workers: int | None = None, show_progress: bool = True) -> tuple[list[dict[str, Any]], list[Path]]:
+                 workers: int | None = None, show_progress: bool = True,
+                 scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S) -> tuple[list[dict[str, Any]], list[Path]]:
     """`gtsam-dvl smooth LOG... --out-dir DIR`: every log smoothed in parallel with the same configuration, one
     folder per log (DIR/<log name>/), and a table of all runs (DIR/fleet.json, DIR/fleet.md). Tasks ship the
     log's path: a remote cluster's workers must see the same file system. One bad log gets its error line in
@@ -53,16 +54,17 @@ def smooth_fleet(logs: list[Path], out_dir: Path, mode: str = "batch", config_pa
 
     if not logs:
         raise GtsamDvlError("no logs given")
+    require_dask()  # before anything is written
     names = [Path(p).name.removesuffix(".mcap").removesuffix(".db3") or "log" for p in logs]
     if len(set(names)) != len(names):  # two logs of one name in different folders: number them
         names = [f"{i:03d}_{n}" for i, n in enumerate(names)]
     out_dir = Path(out_dir)
-    from dask.distributed import as_completed
-
     from gtsam_dvl.app.progress import progress_bar
 
     by_index: dict[int, dict[str, Any]] = {}  # rows in the order the logs were given, whatever the completion order
-    with dask_client(scheduler, workers) as client:
+    with dask_client(scheduler, workers, scheduler_timeout_s) as client:
+        from dask.distributed import as_completed
+
         futures = {client.submit(_smooth_task, str(Path(p).resolve()), str((out_dir / n).resolve()), mode,
                                  str(config_path.resolve()) if config_path else None, dict(read_options or {}),
                                  pure=False, retries=1): i for i, (p, n) in enumerate(zip(logs, names, strict=True))}
