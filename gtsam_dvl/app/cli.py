@@ -176,9 +176,14 @@ def info(
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
     debug: Debug = False,
 ) -> None:
-    """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
-    from gtsam_dvl.app.commands import describe_log
+    """Summarise a log: duration, message counts, rates, mounting, truth calibration; of a result of `smooth -o`,
+    its estimator, source log, calibration and health."""
+    from gtsam_dvl.app.commands import describe_log, describe_result
 
+    as_result = describe_result(log) if log.is_file() else None
+    if as_result is not None:
+        typer.echo(as_result)
+        return
     typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
                                                      attitude_topic, truth_topic)))
 

@@ -138,6 +138,31 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
     return "\n".join(lines)
 
 
+def describe_result(path: Path) -> str | None:
+    """What `info` prints for a result of `smooth -o` (None: the file is not one): that it is a result, its source
+    log and how it was read, then the estimator's summary as smooth printed it (calibration, noise, health)."""
+    from gtsam_dvl.io.result_writer import TOPICS
+    from gtsam_dvl.io.storage.sources import open_source
+
+    try:
+        src = open_source(Path(path))
+    except (GtsamDvlError, OSError):
+        return None  # not a readable MCAP: describe_log says why
+    if TOPICS["odometry"] not in src.topics or "summary.json" not in src.attachments:
+        return None
+    import json
+
+    summary = json.loads(src.attachments["summary.json"][1])
+    record = src.metadata.get("gtsam_dvl_result", {})
+    options = json.loads(record["read_options"]) if record.get("read_options") else {}
+    given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
+    lines = [f"{path}: a gtsam_dvl result ({summary.get('estimator', '?')}); `gtsam-dvl evaluate {path} -o DIR` "
+             "evaluates it",
+             f"  source log: {record.get('source_log') or 'not recorded'}" + (f" (read with {given})" if given else "")]
+    body = SmoothOutcome(summary, []).describe().splitlines()
+    return "\n".join(lines + [line for line in body if line != NOTHING_WRITTEN])
+
+
 NOTHING_WRITTEN = "  wrote nothing (give -o RESULT.mcap, --summary FILE.json or --tum FILE.txt to keep the results)"
 
 
@@ -340,6 +365,15 @@ def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
             "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug)}
 
 
+def targets_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
+    """The [observability] accuracy targets in the units and keys of priors_for_plots (the scale as a fraction)."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    obs = (EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()).observability
+    return {"scale": obs.scale_ppm * 1e-6, "misalignment_deg": obs.misalignment_deg,
+            "gyro_bias_deg_per_h": obs.gyro_bias_deg_per_h, "accel_bias_ug": obs.accel_bias_ug}
+
+
 def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = None,
                 show_progress: bool = True) -> tuple[str, list[Path]]:
     """`gtsam-dvl plan`: covariance analysis of a scenario; writes plan.json, plan.md, timeline.npz and
@@ -374,7 +408,8 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
                           + "\n\n![normalised sigmas](normalised_sigmas.png)\n"),
         atomic_write_bytes(out_dir / "timeline.npz", timeline_npz_bytes(plan.timeline)),
         plot_normalised_sigmas(plan.timeline, out_dir / "normalised_sigmas.png", priors_for_plots(config.to_dict()),
-                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise)"),
+                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise; "
+                               "dashed: the targets)", targets=targets_for_plots(config.to_dict())),
     ]
     return answer, written
 
