@@ -505,12 +505,41 @@ def live(
                                          attitude_topic, truth_topic), echo=typer.echo)
 
 
+def _run_app() -> Any:
+    """The app, with click's usage errors (an unknown option, a missing argument, a bad value) as one line in the
+    style of every other error, exit code 2 as click gives them."""
+    import importlib
+
+    try:  # typer >= 0.2x carries its own copy of click; older ones use click itself
+        cx: Any = importlib.import_module("typer._click.exceptions")
+    except ImportError:
+        cx = importlib.import_module("click.exceptions")
+
+    no_args = getattr(cx, "NoArgsIsHelpError", ())  # click >= 8.2
+    try:
+        return app(prog_name="gtsam-dvl", standalone_mode=False)
+    except no_args as exc:  # `gtsam-dvl` alone: the help, as click prints it
+        exc.show()
+        return exc.exit_code
+    except cx.UsageError as exc:
+        where = exc.ctx.command_path if exc.ctx is not None else "gtsam-dvl"
+        sys.stderr.write(f"gtsam-dvl: error: {exc.format_message().rstrip('.')}; `{where} -h` lists the options\n")
+        return exc.exit_code
+    except cx.ClickException as exc:
+        sys.stderr.write(f"gtsam-dvl: error: {exc.format_message()}\n")
+        return exc.exit_code
+    except typer.Abort:  # Ctrl-C
+        sys.stderr.write("gtsam-dvl: error: interrupted\n")
+        return 130
+
+
 def main() -> None:
     """Console-script entry point. SIGTERM becomes an exception (Terminated) so that the writers clean up,
     then one line on stderr and exit code 143."""
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        app(prog_name="gtsam-dvl")
+        code = _run_app()
+        sys.exit(code if isinstance(code, int) else 0)
     except Terminated:
         sys.stderr.write("gtsam-dvl: error: terminated by SIGTERM; no partial output left behind\n")
         sys.exit(EXIT_SIGTERM)

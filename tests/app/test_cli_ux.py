@@ -98,6 +98,21 @@ def test_missing_output_folder_and_file_as_folder_are_refused(tmp_path: Path) ->
     assert sorted(p.name for p in tmp_path.iterdir()) == ["figure.png"]  # nothing created
 
 
+@pytest.mark.parametrize(("args", "expected"), [
+    (["smooth", "--foo"], "gtsam-dvl: error: No such option: --foo; `gtsam-dvl smooth -h` lists the options"),
+    (["smooth"], "gtsam-dvl: error: Missing argument 'LOG...'; `gtsam-dvl smooth -h` lists the options"),
+    (["bogus"], "gtsam-dvl: error: No such command 'bogus'; `gtsam-dvl -h` lists the options"),
+])
+def test_usage_errors_are_one_line_in_the_same_style(args: list[str], expected: str, monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    from gtsam_dvl.app import cli
+
+    monkeypatch.setattr(sys, "argv", ["gtsam-dvl", *args])
+    assert cli._run_app() == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines() == [expected]
+
+
 # ----- --version, -h, completion, config --------------------------------------------------------------------------
 def test_version_and_h_on_every_command() -> None:
     from importlib.metadata import version
