@@ -45,6 +45,15 @@ def _on_sigterm(signum: int, frame: object) -> None:
     raise Terminated(signum)
 
 
+def _error_text(exc: Exception) -> str:
+    """An error's line in the style of the others: an OSError as "PATH: what went wrong" rather than Python's
+    "[Errno 17] File exists: 'PATH'"."""
+    if isinstance(exc, OSError) and exc.strerror:
+        what = exc.strerror[:1].lower() + exc.strerror[1:]
+        return f"{exc.filename}: {what}" if exc.filename is not None else what
+    return str(exc)
+
+
 def _user_errors(func: F) -> F:
     """Turn a GtsamDvlError (or a bad-input OSError) into one line on stderr and exit code 1."""
 
@@ -59,7 +68,7 @@ def _user_errors(func: F) -> F:
         except (GtsamDvlError, OSError) as exc:
             if _state["debug"]:
                 raise
-            typer.echo(f"gtsam-dvl: error: {exc}", err=True)
+            typer.echo(f"gtsam-dvl: error: {_error_text(exc)}", err=True)
             raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]

@@ -114,6 +114,20 @@ def test_usage_errors_are_one_line_in_the_same_style(args: list[str], expected: 
     assert out == "" and err.splitlines() == [expected]
 
 
+def test_an_os_error_is_one_line_in_the_same_style(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An OSError from deep inside (here a folder in the way) reads "PATH: what", not "[Errno 17] ..."."""
+    import errno
+
+    from gtsam_dvl.app import commands
+
+    def in_the_way(*args: Any, **kwargs: Any) -> list[Path]:
+        raise FileExistsError(errno.EEXIST, "File exists", str(tmp_path / "figs" / "fig01.png"))
+
+    monkeypatch.setattr(commands, "plot_log_to_dir", in_the_way)
+    line = one_error_line(invoke("plot-log", tmp_path / "log.mcap", "-o", tmp_path / "figs"))
+    assert line == f"gtsam-dvl: error: {tmp_path / 'figs' / 'fig01.png'}: file exists"
+
+
 # ----- --version, -h, completion, config --------------------------------------------------------------------------
 def test_version_and_h_on_every_command() -> None:
     from importlib.metadata import version
