@@ -53,8 +53,8 @@ def open_client(scheduler: str | None, workers: int | None, timeout_s: float = S
                            dashboard_address=":0" if has_bokeh else None, silence_logs=logging.ERROR)
     client = Client(cluster)
     dashboard = (f"dashboard {client.dashboard_link}" if has_bokeh and client.dashboard_link
-                 else "no dashboard: pip install bokeh for one")
-    sys.stderr.write(f"Dask LocalCluster: {n} worker processes, {dashboard}\n")
+                 else "no dashboard (it needs bokeh: pip install 'gtsam-dvl[distributed]')")
+    sys.stderr.write(f"Dask LocalCluster: {n} worker process{'es' if n != 1 else ''}, {dashboard}\n")
     return client
 
 
