@@ -141,6 +141,8 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
 def describe_result(path: Path) -> str | None:
     """What `info` prints for a result of `smooth -o` (None: the file is not one): that it is a result, its source
     log and how it was read, then the estimator's summary as smooth printed it (calibration, noise, health)."""
+    import json
+
     from gtsam_dvl.io.result_writer import TOPICS
     from gtsam_dvl.io.storage.sources import open_source
 
@@ -150,16 +152,18 @@ def describe_result(path: Path) -> str | None:
         return None  # not a readable MCAP: describe_log says why
     if TOPICS["odometry"] not in src.topics or "summary.json" not in src.attachments:
         return None
-    import json
-
-    summary = json.loads(src.attachments["summary.json"][1])
-    record = src.metadata.get("gtsam_dvl_result", {})
-    options = json.loads(record["read_options"]) if record.get("read_options") else {}
-    given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
+    try:
+        summary = json.loads(src.attachments["summary.json"][1])
+        record = src.metadata.get("gtsam_dvl_result", {})
+        options = json.loads(record["read_options"]) if record.get("read_options") else {}
+        given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
+        body = SmoothOutcome(summary, []).describe().splitlines()
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise GtsamDvlError(f"{path}: a gtsam_dvl result whose summary cannot be read ({type(exc).__name__}: "
+                            f"{exc}); smooth the log again") from None
     lines = [f"{path}: a gtsam_dvl result ({summary.get('estimator', '?')}); `gtsam-dvl evaluate {path} -o DIR` "
              "evaluates it",
              f"  source log: {record.get('source_log') or 'not recorded'}" + (f" (read with {given})" if given else "")]
-    body = SmoothOutcome(summary, []).describe().splitlines()
     return "\n".join(lines + [line for line in body if line != NOTHING_WRITTEN])
 
 
