@@ -288,3 +288,45 @@ def test_normalised_sigma_figure_draws_the_targets(tmp_path: Path, monkeypatch: 
     assert dashed["DVL scale and misalignment"] == sorted({
         round(1000e-6 / priors["scale"], 6), round(0.1 / float(np.atleast_1d(priors["misalignment_deg"])[0]), 6)})
     assert dashed["accelerometer bias"] == [round(10.0 / float(priors["accel_bias_ug"][0]), 6)]
+
+
+TINY_PLAN = """
+name = "tiny"
+[origin]
+lat_deg = 30.0
+lon_deg = 114.0
+[rates]
+imu_hz = 20.0
+dvl_hz = 1.0
+[[segments]]
+kind = "static"
+duration_s = 10.0
+[[segments]]
+kind = "level"
+duration_s = 20.0
+speed_end_m_s = 2.0
+"""
+
+
+def test_plan_figure_has_the_target_lines(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """`plan`'s normalised-sigma figure: one dashed line per calibration group at target / prior sigma."""
+    from gtsam_dvl.app import commands
+    from gtsam_dvl.app.plots import timeline_plots
+
+    scenario = tmp_path / "tiny.toml"
+    scenario.write_text(TINY_PLAN)
+    figures: list[Any] = []
+    monkeypatch.setattr(timeline_plots, "save_figure", lambda fig, path: figures.append(fig) or path)
+    commands.plan_to_dir(scenario, tmp_path / "plan", show_progress=False)
+    (fig,) = figures
+    config = EstimatorConfig.named("default")  # what a scenario without estimator_config plans with
+    obs, priors = config.observability, commands.priors_for_plots(config.to_dict())
+    dashed = {ax.get_title(): [float(line.get_ydata()[0]) for line in ax.get_lines() if line.get_linestyle() == "--"]
+              for ax in fig.axes}
+    assert dashed["DVL scale and misalignment"] == pytest.approx([obs.scale_ppm * 1e-6 / priors["scale"]])
+    # the misalignment's target is at the same fraction of its prior: one line for the group
+    assert obs.misalignment_deg / priors["misalignment_deg"][0] == pytest.approx(
+        dashed["DVL scale and misalignment"][0])
+    assert dashed["gyro bias"] == pytest.approx([obs.gyro_bias_deg_per_h / priors["gyro_bias_deg_per_h"][0]])
+    assert dashed["accelerometer bias"] == pytest.approx([obs.accel_bias_ug / priors["accel_bias_ug"][0]])
+    assert "dashed: the targets" in fig.texts[0].get_text()
