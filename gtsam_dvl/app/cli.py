@@ -207,9 +207,11 @@ SMOOTH_HELP = (
     "window, rejected pings, what --salvage and --repair lost) gives a health status, ok, warn, degraded or failed, "
     "printed with one line per warning and written into the summary and the result MCAP.\n\n"
     "Exit codes: 0 done (whatever the health, unless --strict); 1 bad input (one line on stderr, nothing "
-    "written); 3 with --strict when the health is degraded or failed (the outputs are still written); 143 "
+    "written); 2 a usage error (an unknown option, a missing argument; one line); 3 with --strict when the health "
+    "is degraded or failed (the outputs are still written); 143 "
     "terminated by SIGTERM (no partial output left behind).\n\n"
-    "An output path that is an input, or that cannot be written, is refused before any work; the outputs are "
+    "An output path that is an input, that cannot be written or whose folder does not exist (no folder tree is "
+    "created) is refused before any work; the outputs are "
     "written all together or not at all."
 )
 
