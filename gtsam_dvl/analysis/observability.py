@@ -278,7 +278,25 @@ def time_offset_verdict(result: NavResult) -> dict[str, Any]:
         verdict = (f"not observable from this log: sigma {sigma * ms:.1f} ms, near the prior's "
                    f"{prior * ms:.0f} ms (the offset shows only in turns and accelerations)")
     return {"value": value, "sigma": sigma, "determined": determined, "verdict": verdict,
-            "convention": "the DVL message stamped t measures the velocity at t + dt_d (dt_d > 0: stamps early)"}
+            "words": time_offset_words(value), "convention": TIME_OFFSET_CONVENTION}
+
+
+# the one definition of the time offset's sign (docs/conventions.md), in every message that shows one
+TIME_OFFSET_CONVENTION = ("the DVL message stamped t measures the velocity at t + dt_d: dt_d > 0, the DVL's stamps "
+                          "are early; dt_d < 0, late")
+
+
+def time_offset_words(dt_d_s: float) -> str:
+    """The time offset dt_d (s) in words, the same everywhere (TIME_OFFSET_CONVENTION): "dt_d = +1.000 s: the
+    DVL's stamps are 1.000 s early (each ping measures the velocity 1.000 s after its stamp)"."""
+    if not np.isfinite(dt_d_s):
+        return "dt_d unknown"
+    size = f"{abs(dt_d_s):.3f} s"
+    if size == "0.000 s":
+        return "dt_d = 0.000 s: the DVL's stamps are on time (each ping measures the velocity at its stamp)"
+    when, where = ("early", "after") if dt_d_s > 0 else ("late", "before")
+    return (f"dt_d = {dt_d_s:+.3f} s: the DVL's stamps are {size} {when} (each ping measures the velocity {size} "
+            f"{where} its stamp)")
 
 
 def lever_arm_verdict(result: NavResult, log: LogData | None = None) -> dict[str, Any]:

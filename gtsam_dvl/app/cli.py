@@ -19,7 +19,10 @@ from gtsam_dvl.core.errors import GtsamDvlError
 
 # rich_markup_mode=None: click's plain help, where a boolean flag reads as a flag ("--salvage"); typer 0.29's
 # rich help prints "<bool>" after every flag, as if it took a value
-app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+# add_completion: typer's --install-completion / --show-completion (bash, zsh, fish, PowerShell); -h as well as
+# --help on every command (click passes help_option_names down to the subcommands)
+app = typer.Typer(add_completion=True, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+                  context_settings={"help_option_names": ["-h", "--help"]},
                   help="Self-calibrating IMU + DVL navigation on GTSAM.")
 _state = {"debug": False}
 F = TypeVar("F", bound=Callable[..., Any])
@@ -42,6 +45,15 @@ def _on_sigterm(signum: int, frame: object) -> None:
     raise Terminated(signum)
 
 
+def _error_text(exc: Exception) -> str:
+    """An error's line in the style of the others: an OSError as "PATH: what went wrong" rather than Python's
+    "[Errno 17] File exists: 'PATH'"."""
+    if isinstance(exc, OSError) and exc.strerror:
+        what = exc.strerror[:1].lower() + exc.strerror[1:]
+        return f"{exc.filename}: {what}" if exc.filename is not None else what
+    return str(exc)
+
+
 def _user_errors(func: F) -> F:
     """Turn a GtsamDvlError (or a bad-input OSError) into one line on stderr and exit code 1."""
 
@@ -56,7 +68,7 @@ def _user_errors(func: F) -> F:
         except (GtsamDvlError, OSError) as exc:
             if _state["debug"]:
                 raise
-            typer.echo(f"gtsam-dvl: error: {exc}", err=True)
+            typer.echo(f"gtsam-dvl: error: {_error_text(exc)}", err=True)
             raise typer.Exit(1) from None
 
     return wrapper  # type: ignore[return-value]
@@ -68,6 +80,8 @@ Quiet = Annotated[bool, typer.Option("-q", "--quiet", help="No progress bars.")]
 DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
 Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
 Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages.")]
+SchedulerTimeout = Annotated[float, typer.Option("--scheduler-timeout", metavar="SECONDS",
+                                                 help="How long to try to reach --scheduler before giving up.")]
 
 
 DepthTopic = Annotated[str | None, typer.Option(
@@ -103,8 +117,21 @@ def _builtin_scenarios() -> list[str]:
     return sorted(p.name[: -len(".toml")] for p in files.iterdir() if p.name.endswith(".toml"))
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            typer.echo(f"gtsam-dvl {version('gtsam-dvl')}")
+        except PackageNotFoundError:  # run from a source tree that was never installed
+            typer.echo("gtsam-dvl (version unknown: not installed)")
+        raise typer.Exit(0)
+
+
 @app.callback()
-def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False) -> None:
+def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
+          version: Annotated[bool, typer.Option("--version", help="Print the version and exit.", is_eager=True,
+                                                callback=_print_version)] = False) -> None:
     _state["debug"] = debug
 
 
@@ -121,8 +148,9 @@ def simulate(
     debug: Debug = False,
 ) -> None:
     """Simulate a scenario and write it as a ROS 2 MCAP log with truth."""
-    from gtsam_dvl.app.commands import check_outputs, simulate_to_file
+    from gtsam_dvl.app.commands import check_folders, check_outputs, simulate_to_file
 
+    check_folders({"-o": output})
     check_outputs({"the scenario": Path(scenario) if Path(scenario).exists() else None}, {"-o": output})
 
     result = simulate_to_file(scenario, output, seed=seed, white_noise=not no_noise, show_progress=not quiet)
@@ -140,8 +168,9 @@ def plot_log(
     debug: Debug = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
-    from gtsam_dvl.app.commands import plot_log_to_dir
+    from gtsam_dvl.app.commands import check_folders, plot_log_to_dir
 
+    check_folders({}, {"-o": output})
     for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
                                                                    gnss_topic, attitude_topic, truth_topic)):
         typer.echo(str(path))
@@ -156,9 +185,14 @@ def info(
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
     debug: Debug = False,
 ) -> None:
-    """Summarise a log: duration, message counts, rates, mounting, truth calibration."""
-    from gtsam_dvl.app.commands import describe_log
+    """Summarise a log: duration, message counts, rates, mounting, truth calibration; of a result of `smooth -o`,
+    its estimator, source log, calibration and health."""
+    from gtsam_dvl.app.commands import describe_log, describe_result
 
+    as_result = describe_result(log) if log.is_file() else None
+    if as_result is not None:
+        typer.echo(as_result)
+        return
     typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
                                                      attitude_topic, truth_topic)))
 
@@ -173,9 +207,11 @@ SMOOTH_HELP = (
     "window, rejected pings, what --salvage and --repair lost) gives a health status, ok, warn, degraded or failed, "
     "printed with one line per warning and written into the summary and the result MCAP.\n\n"
     "Exit codes: 0 done (whatever the health, unless --strict); 1 bad input (one line on stderr, nothing "
-    "written); 3 with --strict when the health is degraded or failed (the outputs are still written); 143 "
+    "written); 2 a usage error (an unknown option, a missing argument; one line); 3 with --strict when the health "
+    "is degraded or failed (the outputs are still written); 143 "
     "terminated by SIGTERM (no partial output left behind).\n\n"
-    "An output path that is an input, or that cannot be written, is refused before any work; the outputs are "
+    "An output path that is an input, that cannot be written or whose folder does not exist (no folder tree is "
+    "created) is refused before any work; the outputs are "
     "written all together or not at all."
 )
 
@@ -206,11 +242,14 @@ def smooth(
     scheduler: Annotated[str | None, typer.Option("--scheduler", help="With --out-dir: a running Dask scheduler "
                                                                       "(default: a LocalCluster here).")] = None,
     workers: Annotated[int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")] = None,
+    scheduler_timeout: SchedulerTimeout = 10.0,
     debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
-    from gtsam_dvl.app.commands import smooth_file
+    from gtsam_dvl.app.commands import check_folders, smooth_file
 
+    check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz},
+                  {"--out-dir": out_dir})
     read_options = _read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic, attitude_topic,
                                  truth_topic)
     if out_dir is not None or len(logs) > 1:
@@ -220,14 +259,15 @@ def smooth(
         from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
 
         rows, written = smooth_fleet(logs, out_dir, mode=mode, config_path=config, read_options=read_options,
-                                     scheduler=scheduler, workers=workers, show_progress=not quiet)
+                                     scheduler=scheduler, workers=workers, show_progress=not quiet,
+                                     scheduler_timeout_s=scheduler_timeout)
         typer.echo("\n".join(fleet_table(rows)))
         for path in written:
             typer.echo(f"wrote {path}")
         bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] in UNHEALTHY)]
         if any(r["status"] == "error" for r in rows):
-            typer.echo(f"gtsam-dvl: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed "
-                       "(their error is in the table)", err=True)
+            typer.echo(f"gtsam-dvl: error: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed; "
+                       "their errors are in the table", err=True)
         if bad:
             raise typer.Exit(EXIT_UNHEALTHY)
         return
@@ -237,7 +277,7 @@ def smooth(
                           timeline_path=timeline_npz)
     typer.echo(outcome.describe())
     if strict and outcome.status in UNHEALTHY:
-        typer.echo(f"gtsam-dvl: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
+        typer.echo(f"gtsam-dvl: error: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
         raise typer.Exit(EXIT_UNHEALTHY)
 
 
@@ -270,7 +310,9 @@ def characterise(
     """Sensor rates, jitter, quantisation, Allan deviation, DVL noise; a recommended configuration (help:
     CHARACTERISE_HELP)."""
     from gtsam_dvl.app.characterise import characterise_to_dir
+    from gtsam_dvl.app.commands import check_folders
 
+    check_folders({}, {"-o": output})
     ch = characterise_to_dir(log, output, config_path=config, force=force, show_progress=not quiet,
                              read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
                                                         gnss_topic, attitude_topic, truth_topic))
@@ -303,8 +345,9 @@ def evaluate(
     as smooth recorded it, and what reading the truth log lost. Without --truth the source log is read with the
     options smooth recorded (the options given here override them); if it is not found, a line says so and the
     errors against the truth are left out."""
-    from gtsam_dvl.app.commands import evaluate_to_dir
+    from gtsam_dvl.app.commands import check_folders, evaluate_to_dir
 
+    check_folders({}, {"-o": output})
     lines, written = evaluate_to_dir(result, output, truth_path=truth,
                                      read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
                                                                 depth_topic, gnss_topic, attitude_topic,
@@ -325,8 +368,9 @@ def plan(
     debug: Debug = False,
 ) -> None:
     """Will this mission calibrate the DVL, and when? Covariance analysis of a scenario (no noise)."""
-    from gtsam_dvl.app.commands import plan_to_dir
+    from gtsam_dvl.app.commands import check_folders, plan_to_dir
 
+    check_folders({}, {"-o": output})
     answer, written = plan_to_dir(scenario, output, config_path=config, show_progress=not quiet)
     typer.echo(answer)
     for path in written:
@@ -358,16 +402,19 @@ def montecarlo(
                                                                       "(default: a LocalCluster here).")] = None,
     workers: Annotated[int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores).")
                        ] = None,
+    scheduler_timeout: SchedulerTimeout = 10.0,
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
     """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
     from gtsam_dvl.app.campaign.runner import run_campaign
+    from gtsam_dvl.app.commands import check_folders
 
+    check_folders({}, {"-o": output})
     res = run_campaign(scenario, runs, [e.strip() for e in estimators.split(",") if e.strip()], output,
                        seed_start=seed_start, scheduler=scheduler, workers=workers, config_path=config,
-                       show_progress=not quiet)
+                       show_progress=not quiet, scheduler_timeout_s=scheduler_timeout)
     for name, est in res.statistics["estimators"].items():
         z = ", ".join(f"{k} {v['z_std']:.2f}" for k, v in est["states"].items() if not k.startswith("final"))
         nb = est["nees_block"]
@@ -375,7 +422,8 @@ def montecarlo(
                    f"{nb['band_95'][0]:.2f}-{nb['band_95'][1]:.2f}, {'inside' if nb['inside_band'] else 'OUTSIDE'})")
     typer.echo(f"{res.runs_done} runs ({res.runs_new} new) in {res.out_dir}")
     for f in res.failures:
-        typer.echo(f"gtsam-dvl: failed: seed {f['seed']}: {f['error']}", err=True)
+        typer.echo(f"gtsam-dvl: error: seed {f['seed']} failed: {f['error']}" if f["seed"] is not None
+                   else f"gtsam-dvl: error: {f['error']}", err=True)
     for path in res.written[:2]:
         typer.echo(f"wrote {path}")
     if res.failures:
@@ -395,6 +443,28 @@ def presets(
     typer.echo(describe_preset(name) if name is not None else "\n".join(preset_table()))
 
 
+@app.command("config")
+@_user_errors
+def config_command(
+    default: Annotated[bool, typer.Option("--default", help="The default configuration (what smooth uses when "
+                                                            "neither -c nor the log names one).")] = False,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help="A TOML file, a result's config.json or a "
+                                                                       "named configuration (default, paper).")
+                      ] = None,
+    debug: Debug = False,
+) -> None:
+    """Print the effective estimator configuration as TOML: every key with its value, presets filled in (save it
+    and pass it back with -c for the same configuration)."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    if default and config is not None:
+        raise GtsamDvlError("give --default or -c FILE, not both")
+    cfg = EstimatorConfig.load(config) if config is not None else EstimatorConfig.named("default")
+    source = f"from {config}" if config is not None else "'default'"
+    typer.echo(f"# estimator configuration {source}, every key; use it with: gtsam-dvl smooth LOG -c FILE\n\n"
+               f"{cfg.to_toml()}")
+
+
 @app.command()
 @_user_errors
 def demo(
@@ -404,8 +474,10 @@ def demo(
     debug: Debug = False,
 ) -> None:
     """Simulate the paper's 3-D and 2-D runs, process them and write figures into one folder."""
+    from gtsam_dvl.app.commands import check_folders
     from gtsam_dvl.app.demo import run_demo
 
+    check_folders({}, {"-o": output})
     run_demo(output, seed=seed)
 
 
@@ -446,14 +518,43 @@ def live(
                                          attitude_topic, truth_topic), echo=typer.echo)
 
 
+def _run_app() -> Any:
+    """The app, with click's usage errors (an unknown option, a missing argument, a bad value) as one line in the
+    style of every other error, exit code 2 as click gives them."""
+    import importlib
+
+    try:  # typer >= 0.2x carries its own copy of click; older ones use click itself
+        cx: Any = importlib.import_module("typer._click.exceptions")
+    except ImportError:
+        cx = importlib.import_module("click.exceptions")
+
+    no_args = getattr(cx, "NoArgsIsHelpError", ())  # click >= 8.2
+    try:
+        return app(prog_name="gtsam-dvl", standalone_mode=False)
+    except no_args as exc:  # `gtsam-dvl` alone: the help, as click prints it
+        exc.show()
+        return exc.exit_code
+    except cx.UsageError as exc:
+        where = exc.ctx.command_path if exc.ctx is not None else "gtsam-dvl"
+        sys.stderr.write(f"gtsam-dvl: error: {exc.format_message().rstrip('.')}; `{where} -h` lists the options\n")
+        return exc.exit_code
+    except cx.ClickException as exc:
+        sys.stderr.write(f"gtsam-dvl: error: {exc.format_message()}\n")
+        return exc.exit_code
+    except typer.Abort:  # Ctrl-C
+        sys.stderr.write("gtsam-dvl: error: interrupted\n")
+        return 130
+
+
 def main() -> None:
     """Console-script entry point. SIGTERM becomes an exception (Terminated) so that the writers clean up,
     then one line on stderr and exit code 143."""
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
-        app(prog_name="gtsam-dvl")
+        code = _run_app()
+        sys.exit(code if isinstance(code, int) else 0)
     except Terminated:
-        sys.stderr.write("gtsam-dvl: terminated by SIGTERM; no partial output left behind\n")
+        sys.stderr.write("gtsam-dvl: error: terminated by SIGTERM; no partial output left behind\n")
         sys.exit(EXIT_SIGTERM)
     finally:
         signal.signal(signal.SIGTERM, previous)

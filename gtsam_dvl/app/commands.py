@@ -138,6 +138,35 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
     return "\n".join(lines)
 
 
+def describe_result(path: Path) -> str | None:
+    """What `info` prints for a result of `smooth -o` (None: the file is not one): that it is a result, its source
+    log and how it was read, then the estimator's summary as smooth printed it (calibration, noise, health)."""
+    import json
+
+    from gtsam_dvl.io.result_writer import TOPICS
+    from gtsam_dvl.io.storage.sources import open_source
+
+    try:
+        src = open_source(Path(path))
+    except (GtsamDvlError, OSError):
+        return None  # not a readable MCAP: describe_log says why
+    if TOPICS["odometry"] not in src.topics or "summary.json" not in src.attachments:
+        return None
+    try:
+        summary = json.loads(src.attachments["summary.json"][1])
+        record = src.metadata.get("gtsam_dvl_result", {})
+        options = json.loads(record["read_options"]) if record.get("read_options") else {}
+        given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
+        body = SmoothOutcome(summary, []).describe().splitlines()
+    except (ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise GtsamDvlError(f"{path}: a gtsam_dvl result whose summary cannot be read ({type(exc).__name__}: "
+                            f"{exc}); smooth the log again") from None
+    lines = [f"{path}: a gtsam_dvl result ({summary.get('estimator', '?')}); `gtsam-dvl evaluate {path} -o DIR` "
+             "evaluates it",
+             f"  source log: {record.get('source_log') or 'not recorded'}" + (f" (read with {given})" if given else "")]
+    return "\n".join(lines + [line for line in body if line != NOTHING_WRITTEN])
+
+
 NOTHING_WRITTEN = "  wrote nothing (give -o RESULT.mcap, --summary FILE.json or --tum FILE.txt to keep the results)"
 
 
@@ -180,8 +209,11 @@ class SmoothOutcome:
                                                                    f"({of_distance})"]))
         off = s.get("dvl_time_offset_s")
         if off:
+            from gtsam_dvl.analysis.observability import time_offset_words
+
             lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
-                            f"({'determined' if off.get('determined') else 'not determined'})")
+                            f"({'determined' if off.get('determined') else 'not determined'}): "
+                            f"{off.get('words') or time_offset_words(off['value'])}")
         lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
         motion = (s.get("geometry") or {}).get("motion")
         if motion:
@@ -236,6 +268,26 @@ def check_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None
         check_writable(out)
 
 
+
+
+def check_folders(files: dict[str, Path | None], folders: dict[str, Path | None] | None = None) -> None:
+    """The command line's rule for output paths (docs/command-line.md): the folder of an output file must exist
+    (no folder tree is created for it, a mistyped path is refused); an output folder is created if missing, but
+    only inside a folder that exists, and must not be a file. files / folders map the option's name to its path
+    (None: not given). A one-line GtsamDvlError before any work."""
+    for name, path in files.items():
+        if path is not None and not Path(path).absolute().parent.exists():
+            raise GtsamDvlError(f"{path}: no folder {Path(path).parent} for {name}; create it first (outputs "
+                                "never create folder trees)")
+    for name, path in (folders or {}).items():
+        if path is None:
+            continue
+        path = Path(path)
+        if path.exists() and not path.is_dir():
+            raise GtsamDvlError(f"{path}: is a file, and {name} takes a folder; choose another path")
+        if not path.absolute().parent.exists():
+            raise GtsamDvlError(f"{path}: no folder {path.parent} to create it in for {name}; create it first "
+                                "(outputs never create folder trees)")
 
 
 def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,
@@ -320,6 +372,15 @@ def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
             "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug)}
 
 
+def targets_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
+    """The [observability] accuracy targets in the units and keys of priors_for_plots (the scale as a fraction)."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    obs = (EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()).observability
+    return {"scale": obs.scale_ppm * 1e-6, "misalignment_deg": obs.misalignment_deg,
+            "gyro_bias_deg_per_h": obs.gyro_bias_deg_per_h, "accel_bias_ug": obs.accel_bias_ug}
+
+
 def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = None,
                 show_progress: bool = True) -> tuple[str, list[Path]]:
     """`gtsam-dvl plan`: covariance analysis of a scenario; writes plan.json, plan.md, timeline.npz and
@@ -354,7 +415,8 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
                           + "\n\n![normalised sigmas](normalised_sigmas.png)\n"),
         atomic_write_bytes(out_dir / "timeline.npz", timeline_npz_bytes(plan.timeline)),
         plot_normalised_sigmas(plan.timeline, out_dir / "normalised_sigmas.png", priors_for_plots(config.to_dict()),
-                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise)"),
+                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise; "
+                               "dashed: the targets)", targets=targets_for_plots(config.to_dict())),
     ]
     return answer, written
 

@@ -201,7 +201,7 @@ def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:
         console.print("  " + line[2:])
     index += [f"## {FIELD_SCENARIO}", "",
               "A survey dive as a vehicle records it (data/scenarios/field-survey.toml): underway GNSS start, 5 Hz "
-              "z-down DVL with a 0.3 s stamp lag and a lever arm, 200 Hz IMU, pressure, the origin only in the "
+              "z-down DVL whose stamps are 0.3 s early, a lever arm, 200 Hz IMU, pressure, the origin only in the "
               "fixes; smoothed with the default configuration.", "", *_field_table(field), ""]
     atomic_write_text(out_dir / "report.md", "\n".join(index) + "\n")
     console.print(f"Reports: {out_dir / 'report.md'} ({time.perf_counter() - t_start:.0f} s)")

@@ -59,7 +59,7 @@ class Origin:
 @dataclass(frozen=True)
 class Rates:
     """Sensor and truth rates. The DVL measures at k / dvl_hz and stamps each ping dvl_time_offset_s earlier
-    (a clock lag dt_d: the ping stamped t measures the velocity at t + dt_d, docs/conventions.md)."""
+    (dt_d > 0: the stamps are early; the ping stamped t measures the velocity at t + dt_d, docs/conventions.md)."""
 
     imu_hz: float = 100.0
     dvl_hz: float = 1.0

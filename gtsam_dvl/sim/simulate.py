@@ -194,8 +194,8 @@ def _depth_at(scenario: Scenario, motion: MotionProfile, track: PositionTrack, f
 
 def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarray, np.ndarray]:
     """(measurement times, stamps): the DVL measures at k / dvl_hz (integer k keeps them exact multiples) and
-    stamps each ping offset_s earlier, a clock lag dt_d (docs/conventions.md: the ping stamped t measures the
-    velocity at t + dt_d). Both within [0, t_end]."""
+    stamps each ping offset_s earlier: dt_d = offset_s, stamps early when > 0 (docs/conventions.md: the ping stamped
+    t measures the velocity at t + dt_d). Both within [0, t_end]."""
     j0 = int(np.ceil(max(0.0, offset_s) * dvl_hz - 1e-9))
     j1 = int(np.floor(min(t_end, t_end + offset_s) * dvl_hz + 1e-9))
     t_meas = np.arange(j0, j1 + 1) / dvl_hz

@@ -4,6 +4,7 @@ gets its error line in the table and the others finish."""
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import subprocess
 import sys
@@ -21,8 +22,9 @@ def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None
     scenario = tmp_path / "mc-tiny.toml"
     scenario.write_text(SCENARIO)
     logs = []
-    for seed in (1, 2):
-        logs.append(tmp_path / f"dive{seed}.mcap")
+    for seed in (1, 2):  # two logs of one name in two folders: DIR/dive1_dive/, DIR/dive2_dive/
+        (tmp_path / f"dive{seed}").mkdir()
+        logs.append(tmp_path / f"dive{seed}" / "dive.mcap")
         simulate_to_file(scenario, logs[-1], seed=seed, show_progress=False)
     bad = tmp_path / "broken.mcap"
     bad.write_bytes(b"not a log")
@@ -31,17 +33,22 @@ def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None
                            "--out-dir", str(out), "--workers", "2", "-q"], capture_output=True, text=True, timeout=600)
     print(proc.stdout)
     assert proc.returncode == 3, proc.stderr  # one log failed
-    assert "1 of 3 logs failed" in proc.stderr
+    assert "gtsam-dvl: error: 1 of 3 logs failed" in proc.stderr
+    # where it runs, with the dashboard's address when bokeh is there to serve it
+    dashboard = "dashboard http://" if importlib.util.find_spec("bokeh") is not None else "no dashboard"
+    assert f"Dask LocalCluster: 2 worker processes, {dashboard}" in proc.stderr
     rows = json.loads((out / "fleet.json").read_text())
-    assert [Path(r["log"]).name for r in rows] == ["dive1.mcap", "broken.mcap", "dive2.mcap"]  # the order given
+    assert [Path(r["log"]).resolve() for r in rows] == [p.resolve() for p in (logs[0], bad, logs[1])]  # as given
+    assert [Path(r["dir"]).name for r in rows] == ["dive1_dive", "broken", "dive2_dive"]
     assert [r["status"] for r in rows] == ["ok", "error", "ok"]
     assert "neither an MCAP nor a rosbag2" in rows[1]["error"]
     for r, seed in ((rows[0], 1), (rows[2], 2)):
-        summ = json.loads((out / f"dive{seed}" / "summary.json").read_text())
-        assert summ["scale"] == r["scale"] and (out / f"dive{seed}" / "result.mcap").exists()
+        summ = json.loads((out / f"dive{seed}_dive" / "summary.json").read_text())
+        assert summ["scale"] == r["scale"] and (out / f"dive{seed}_dive" / "result.mcap").exists()
         assert abs(summ["errors"]["scale_nsigma"]) < 3
     table = (out / "fleet.md").read_text()
-    assert "| broken.mcap | error |" in table and table.count("| ok |") == 2
+    assert "| broken | error |" in table and table.count("| ok |") == 2
+    assert "| dive1_dive | ok |" in table and "| dive2_dive | ok |" in table
     # several logs need --out-dir; -o is for one log
     proc = subprocess.run([sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", str(logs[0]), str(logs[1]), "-o",
                            str(tmp_path / "r.mcap")], capture_output=True, text=True, timeout=60)

@@ -218,7 +218,7 @@ def test_static_log_exits_cleanly_and_strict_gives_3(static_log: Path, tmp_path:
     assert json.loads((tmp_path / "s.json").read_text())["health"]["status"] == "degraded"
     strict = cli("smooth", static_log, "--summary", tmp_path / "s2.json", "-q", "--strict")
     assert strict.exit_code == 3
-    assert strict.stderr.strip().splitlines() == ["gtsam-dvl: health degraded (--strict): exit code 3"]
+    assert strict.stderr.strip().splitlines() == ["gtsam-dvl: error: health degraded (--strict): exit code 3"]
     assert (tmp_path / "s2.json").exists()  # the outputs are still written
 
 
@@ -250,7 +250,7 @@ def test_sigterm_leaves_no_stray_files(phase: str, short_log: Path, tmp_path: Pa
     assert names in (set(), {"r.mcap", "r.timeline.npz", "s.json", "t.tum"})
     if caught:
         assert proc.returncode == 143
-        assert stderr.strip().splitlines() == ["gtsam-dvl: terminated by SIGTERM; no partial output left behind"]
+        assert stderr.strip().splitlines() == ["gtsam-dvl: error: terminated by SIGTERM; no partial output left behind"]
 
 
 @pytest.mark.slow
@@ -266,5 +266,5 @@ def test_sigterm_mid_run(tmp_path_factory: pytest.TempPathFactory, tmp_path: Pat
     proc.send_signal(signal.SIGTERM)
     _, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 143, stderr
-    assert stderr.strip().splitlines() == ["gtsam-dvl: terminated by SIGTERM; no partial output left behind"]
+    assert stderr.strip().splitlines() == ["gtsam-dvl: error: terminated by SIGTERM; no partial output left behind"]
     assert visible_and_hidden(tmp_path) == set()

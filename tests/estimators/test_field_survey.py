@@ -1,6 +1,6 @@
 """The realistic scenario (data/scenarios/field-survey.toml) with the default configuration, as
 `make demo` runs it: a dive that starts underway at the surface (no static phase: the attitude is aligned in
-motion), the origin only in the GNSS fixes (read back from MCAP), a 5 Hz z-down DVL whose stamps lag by 0.3 s
+motion), the origin only in the GNSS fixes (read back from MCAP), a 5 Hz z-down DVL whose stamps are 0.3 s early
 with a lever arm, 200 Hz IMU, pressure, and a surfacing with fixes at the end that are held out.
 
 Targets: calibration (scale, misalignment, time offset) within 3 sigma of the truth; final

@@ -45,7 +45,7 @@ SEED = 7
 
 @cache
 def offset_log(dt: float) -> LogData:
-    """paper-3d-short whose DVL stamps are dt seconds early (a clock lag: tests/estimators/test_time_offset.py)."""
+    """paper-3d-short whose DVL stamps are dt seconds early (tests/estimators/test_time_offset.py)."""
     return simulate_variant(SEED, rates={"dvl_time_offset_s": dt})
 
 

@@ -1,5 +1,5 @@
 """The DVL-IMU time offset dt_d (docs/conventions.md: the ping stamped t measures the velocity at t + dt_d) as a
-batch-smoother variable, on a shortened paper-3d run whose simulated DVL stamps lag by dt_d.
+batch-smoother variable, on a shortened paper-3d run whose simulated DVL stamps are dt_d early.
 
 Measured on this run (seed 7, about 800 s, four 60 s turns): with the paper's 2 cm/s DVL noise the offset's
 sigma is 27 ms (its information comes only from the turns and accelerations), so the < 5 ms target is met

@@ -26,8 +26,8 @@ SCENARIOS = Path(__file__).resolve().parents[2] / "data" / "scenarios"
 def _small(variant: str) -> Scenario:
     """45 s at 100 Hz with every stream simulate() has: 2 Hz DVL, depth, GNSS, and per variant
     "beam": the per-beam noise model with dropouts and outliers, walking biases, stamps 0.25 s late, fixes from 3 s;
-    "field": the velocity model with dropouts and outliers, a z-down DVL with lever arm and 0.3 s lag, and the map
-    origin from the first fix (origin_in_log = false)."""
+    "field": the velocity model with dropouts and outliers, a z-down DVL with lever arm and stamps 0.3 s early, and
+    the map origin from the first fix (origin_in_log = false)."""
     raw = scenario_raw(rates={"dvl_hz": 2.0}, segments=[
         {"kind": "static", "duration_s": 5.0},
         {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.app.campaign.cluster import dask_client
+from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
 from gtsam_dvl.core.errors import GtsamDvlError
 
 
@@ -33,7 +33,12 @@ def _smooth_task(log_path: str, run_dir: str, mode: str, config_path: str | None
             evaluate_to_dir(result, out / "evaluation", read_options={})
             metrics = json.loads((out / "evaluation" / "metrics.json").read_text())
             gnss = metrics.get("gnss") or {}
-            row["surfacing_error"] = gnss.get("surfacing_error_mean") or gnss.get("surfacing_error")
+            mean, first = gnss.get("surfacing_error_mean"), gnss.get("surfacing_error")
+            n_fixes = int(gnss.get("surfacing_fixes") or 0)
+            # the mean over the last surfacing's held-out fixes when there are several, else the first fix's
+            row["surfacing_error"] = mean if mean is not None and n_fixes > 1 else first
+            row["surfacing_figure"] = (f"mean of {n_fixes} fixes" if mean is not None and n_fixes > 1
+                                       else "first fix" if first is not None else None)
             row["errors"] = s.get("errors")
     except GtsamDvlError as exc:
         row.update(status="error", error=str(exc))
@@ -42,9 +47,30 @@ def _smooth_task(log_path: str, run_dir: str, mode: str, config_path: str | None
     return row
 
 
+def run_names(logs: list[Path]) -> list[str]:
+    """One readable folder name per log: the file's name without .mcap / .db3; where names clash, the parent
+    folder's name before it (dive1/dive.mcap, dive2/dive.mcap: dive1_dive, dive2_dive); still clashing, a
+    number after it (_2, _3, in the order given)."""
+    def stem(p: Path) -> str:
+        return p.name.removesuffix(".mcap").removesuffix(".db3") or "log"
+
+    paths = [Path(p) for p in logs]
+    names = [stem(p) for p in paths]
+    names = [f"{p.absolute().parent.name}_{n}" if names.count(n) > 1 else n for p, n in zip(paths, names, strict=True)]
+    out: list[str] = []
+    for n in names:
+        k, name = 1, n
+        while name in out:
+            k += 1
+            name = f"{n}_{k}"
+        out.append(name)
+    return out
+
+
 def smooth_fleet(logs: list[Path], out_dir: Path, mode: str = "batch", config_path: Path | None = None,
                  read_options: dict[str, Any] | None = None, scheduler: str | None = None,
-                 workers: int | None = None, show_progress: bool = True) -> tuple[list[dict[str, Any]], list[Path]]:
+                 workers: int | None = None, show_progress: bool = True,
+                 scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S) -> tuple[list[dict[str, Any]], list[Path]]:
     """`gtsam-dvl smooth LOG... --out-dir DIR`: every log smoothed in parallel with the same configuration, one
     folder per log (DIR/<log name>/), and a table of all runs (DIR/fleet.json, DIR/fleet.md). Tasks ship the
     log's path: a remote cluster's workers must see the same file system. One bad log gets its error line in
@@ -53,16 +79,15 @@ def smooth_fleet(logs: list[Path], out_dir: Path, mode: str = "batch", config_pa
 
     if not logs:
         raise GtsamDvlError("no logs given")
-    names = [Path(p).name.removesuffix(".mcap").removesuffix(".db3") or "log" for p in logs]
-    if len(set(names)) != len(names):  # two logs of one name in different folders: number them
-        names = [f"{i:03d}_{n}" for i, n in enumerate(names)]
+    require_dask()  # before anything is written
+    names = run_names(logs)
     out_dir = Path(out_dir)
-    from dask.distributed import as_completed
-
     from gtsam_dvl.app.progress import progress_bar
 
     by_index: dict[int, dict[str, Any]] = {}  # rows in the order the logs were given, whatever the completion order
-    with dask_client(scheduler, workers) as client:
+    with dask_client(scheduler, workers, scheduler_timeout_s) as client:
+        from dask.distributed import as_completed
+
         futures = {client.submit(_smooth_task, str(Path(p).resolve()), str((out_dir / n).resolve()), mode,
                                  str(config_path.resolve()) if config_path else None, dict(read_options or {}),
                                  pure=False, retries=1): i for i, (p, n) in enumerate(zip(logs, names, strict=True))}
@@ -85,10 +110,11 @@ def smooth_fleet(logs: list[Path], out_dir: Path, mode: str = "batch", config_pa
 def fleet_table(rows: list[dict[str, Any]]) -> list[str]:
     """The fleet's table in Markdown: per log the health, scale, misalignment, time offset and surfacing error,
     or its error line."""
-    lines = ["| log | health | scale | misalignment r/p/y (deg) | time offset (ms) | surfacing error |",
+    lines = ["| log | health | scale | misalignment r/p/y (deg) | time offset (ms, + = stamps early) | "
+             "surfacing error (last surfacing) |",
              "| --- | --- | --- | --- | --- | --- |"]
     for r in rows:
-        name = Path(r["log"]).name
+        name = Path(r["dir"]).name  # the run's folder: unique and readable (run_names)
         if r["status"] == "error":
             lines.append(f"| {name} | error | {r['error']} | | | |")
             continue
@@ -98,6 +124,6 @@ def fleet_table(rows: list[dict[str, Any]]) -> list[str]:
                  " ".join(f"{v:+.3f}" for v in mis["value"]) + " +- " + " ".join(f"{v:.3f}" for v in mis["sigma"]),
                  f"{off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f}" if off else "-",
                  (f"{surf['horizontal_error_m']:.2f} m ({surf['horizontal_error_pct']:.3f} % of "
-                  f"{surf['distance_m']:.0f} m)") if surf else "-"]
+                  f"{surf['distance_m']:.0f} m), {r.get('surfacing_figure') or 'first fix'}") if surf else "-"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines

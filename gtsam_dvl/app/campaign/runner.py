@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.app.campaign.cluster import dask_client
+from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
 from gtsam_dvl.app.campaign.montecarlo import ESTIMATORS, campaign_statistics, cramer_rao_sigmas, run_seed
 from gtsam_dvl.app.campaign.report import write_report
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -53,8 +53,10 @@ def _campaign_record(scenario_name: str, scenario: dict[str, Any], estimators: l
 
 def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir: Path, seed_start: int = 1,
                  scheduler: str | None = None, workers: int | None = None, config_path: Path | None = None,
-                 show_progress: bool = True) -> CampaignResult:
-    """Run (or resume) a campaign of seeds seed_start .. seed_start + runs - 1 (module doc)."""
+                 show_progress: bool = True, scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S) -> CampaignResult:
+    """Run (or resume) a campaign of seeds seed_start .. seed_start + runs - 1 (module doc). Nothing is written
+    before the Dask client is up: without Dask, or with a scheduler out of reach, a one-line GtsamDvlError and an
+    untouched folder."""
     from gtsam_dvl.app.progress import progress_bar
     from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.io.atomic import atomic_write_json
@@ -66,6 +68,7 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
                             f"(known: {', '.join(ESTIMATORS)}, online-full)")
     if runs < 1:
         raise GtsamDvlError(f"--runs must be at least 1, got {runs}")
+    require_dask()
     sc = load_scenario(scenario)
     # -c: the scenario's [estimator] table below it (None: the scenario's own configuration, in run_seed)
     config = EstimatorConfig.load(config_path, under=sc.estimator).to_dict() if config_path else None
@@ -78,8 +81,6 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
         if old != record:
             raise GtsamDvlError(f"{out_dir}: holds a campaign with other settings (scenario, estimators or "
                                 "configuration); choose another folder")
-    else:
-        atomic_write_json(meta_path, record)
     seeds = list(range(seed_start, seed_start + runs))
     done = {s for s in seeds if (runs_dir / f"seed_{s:06d}.json").exists()}
     todo = [s for s in seeds if s not in done]
@@ -87,9 +88,11 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
     crb = None
     crb_path = out_dir / "cramer_rao.json"
     if todo or not crb_path.exists():
-        from dask.distributed import as_completed
+        with dask_client(scheduler, workers, scheduler_timeout_s) as client:
+            from dask.distributed import as_completed
 
-        with dask_client(scheduler, workers) as client:
+            if not meta_path.exists():  # the client is up: the campaign starts, its record first
+                atomic_write_json(meta_path, record)
             futures = {client.submit(_run_task, record["scenario"], s, list(estimators), config, sc.name,
                                      key=f"gtsam-dvl-seed-{sc.name}-{s}", pure=False, retries=1): s for s in todo}
             crb_future = (client.submit(cramer_rao_sigmas, record["scenario"], config, sc.name, pure=False)

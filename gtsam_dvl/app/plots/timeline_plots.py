@@ -92,8 +92,11 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
 
 
 def plot_normalised_sigmas(timeline: Timeline, path: Path, priors: dict[str, np.ndarray | float],
-                           segments: list[Segment] | None = None, title: str = "") -> Path:
-    """Figure 12: sigma(t) / sigma(prior) of attitude, biases, scale and misalignment, log scale."""
+                           segments: list[Segment] | None = None, title: str = "",
+                           targets: dict[str, np.ndarray | float] | None = None) -> Path:
+    """Figure 12: sigma(t) / sigma(prior) of attitude, biases, scale and misalignment, log scale. targets (the
+    units and keys of priors): the accuracy each state is judged against, drawn as a dashed line of its curve's
+    colour at target / prior (below it: "determined")."""
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     groups = [
         (axes[0, 0], "attitude (east, north, up)", timeline.attitude_sigma_deg, timeline.attitude_sigma_deg[0],
@@ -106,12 +109,25 @@ def plot_normalised_sigmas(timeline: Timeline, path: Path, priors: dict[str, np.
          list(AXES3)),
         (axes[1, 1], "accelerometer bias", timeline.accel_bias_sigma_ug, priors["accel_bias_ug"], list(AXES3)),
     ]
+    target_of: list[np.ndarray | None] = [None, None, None, None]  # per group; the attitude has none
+    if targets is not None:
+        target_of[1:] = [np.concatenate([[targets["scale"]], np.broadcast_to(targets["misalignment_deg"], 3)]),
+                         np.broadcast_to(targets["gyro_bias_deg_per_h"], 3),
+                         np.broadcast_to(targets["accel_bias_ug"], 3)]
     for k, (ax, name, sig, p0, labels) in enumerate(groups):
         if segments:
             shade_segments(ax, segments, label=(k < 2))
         ratio = np.asarray(sig) / np.asarray(p0, dtype=float)
-        for j, lab in enumerate(labels):
-            ax.semilogy(timeline.t, ratio[:, j], lw=1.2, label=lab)
+        target = target_of[k]
+        target_ratio = (np.asarray(target, dtype=float) / np.broadcast_to(np.asarray(p0, dtype=float), len(labels))
+                        if target is not None else None)
+        curves = [ax.semilogy(timeline.t, ratio[:, j], lw=1.2, label=lab)[0] for j, lab in enumerate(labels)]
+        if target_ratio is not None and np.allclose(target_ratio, target_ratio[0]):  # one target for the group
+            ax.axhline(target_ratio[0], color="0.2", ls="--", lw=0.9, label="target")
+        elif target_ratio is not None:
+            for j, curve in enumerate(curves):
+                ax.axhline(target_ratio[j], color=curve.get_color(), ls="--", lw=0.9,
+                           label="targets (dashed)" if j == len(curves) - 1 else None)
         ax.set_title(name, fontsize=10)
         ax.set_ylabel("sigma / initial sigma (ratio)")
         ax.grid(alpha=0.3, which="both")
