@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.analysis.geometry import assess_geometry
+from gtsam_dvl.analysis.prior_check import check_priors
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
@@ -116,6 +117,7 @@ def assess_health(result: NavResult, log: LogData) -> Health:
     config = result.noise_config or EstimatorConfig()
     _check_finite(result, health)
     _check_solver(result, health)
+    _check_priors(result, log, result.estimator_config or EstimatorConfig(), health)
     if len(result.t):
         _check_dvl_residuals(result, log, config, health)
     _check_counters(result, log, health)
@@ -132,6 +134,15 @@ def _check_geometry(result: NavResult, health: Health) -> None:
     health.figures["geometry"] = report.as_dict()
     for finding in report.findings:
         health.flag(finding.severity, finding.message)
+
+
+def _check_priors(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
+    """Every estimated shared state against its prior (analysis/prior_check.py): "failed" beyond
+    prior_check.PRIOR_NSIGMA_FAILED prior sigmas, naming the state and the likely cause."""
+    report = check_priors(result, log, config)
+    health.figures["prior_nsigma"] = report.as_dict()
+    for severity, text in report.findings:
+        health.flag(severity, text)
 
 
 def _check_noise_fit(result: NavResult, health: Health) -> None:
@@ -321,7 +332,12 @@ def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfi
         health.flag("degraded", f"and {len(rest)} more stretches of DVL residuals above "
                                 f"{RESIDUAL_WINDOW_DEGRADED:g}x their noise ({rest[0][0]:.0f} to {rest[-1][1]:.0f} s)")
     overall = figures["whitened_rms"]
-    if overall > RESIDUAL_OVERALL_DEGRADED and not spans:
+    if health.figures.get("solver", {}).get("chi2_per_dof") is None and overall**2 > CHI2_PER_DOF_FAILED:
+        # no chi^2 from the solver (online): the residuals' mean square is its chi^2 / dof, judged alike
+        health.flag("failed", f"DVL residuals are {overall:.1f}x their stated noise over the whole log (chi^2 / dof "
+                              f"{overall**2:.3g}, expected 1): the model does not fit the data at all; do not use this "
+                              "result; check the topics, the mounting (/tf_static) and the DVL noise")
+    elif overall > RESIDUAL_OVERALL_DEGRADED and not spans:
         health.flag("degraded", f"DVL residuals are {overall:.1f}x their stated noise over the whole log: the DVL "
                                 "noise is understated (set [dvl] noise_m_s), or the mounting or lever arm is wrong")
 
@@ -369,6 +385,12 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
         why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
         health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
                                 "stream has holes; read the log with --repair to see where")
+    clipped = counters.get("time_offset_window_clipped", 0)
+    health.figures["counters"]["time_offset_window_clipped"] = clipped
+    if clipped:  # the filters' IMU windows of the offset model held at the prior +- 3 sigma
+        health.flag("degraded", f"the DVL time offset went beyond its prior +- 3 sigma: the IMU windows of {clipped} "
+                                "ping(s) were held at that bound, so the offset model is approximate there; set [dvl] "
+                                "time_offset_prior_s near the estimate or widen [dvl] time_offset_sigma_s")
     gaps = result.info.get("imu_gaps") or {}
     reader_saw = any("imu" in topic.lower() for topic in ((log.metadata.get("reader_losses") or {}).get("gaps") or {}))
     if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
