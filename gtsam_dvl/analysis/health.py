@@ -33,7 +33,7 @@ from gtsam_dvl.analysis.geometry import assess_geometry
 from gtsam_dvl.analysis.prior_check import check_priors
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import so3_exp
+from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
@@ -253,16 +253,15 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     unmatched = int((np.abs(dvl.t[j] - result.t) >= 1e-6).sum())
     b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
     # the model the estimator fitted: its lever arm when estimated, and the ping stamped t seen at t + dt_d (the
-    # state's velocity interpolated there, its attitude turned by the body rate over dt_d)
-    b_l = result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l
-    dt_d = float(result.time_offset_s) if np.isfinite(result.time_offset_s) else 0.0
+    # state's velocity interpolated there, its attitude turned by the body rate over dt_d); a filter's states with
+    # the calibration it held at their time (state_calibration)
+    k, b_R_d, dt_d, b_l = state_calibration(result, log)
     n_R_b, n_v = result.n_R_b, result.n_v
-    if dt_d != 0.0 and n > 1:
-        n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, k]) for k in range(3)], axis=1)
-        n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d).reshape(n, 3, 3))
+    if np.any(dt_d != 0.0) and n > 1:
+        n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, i]) for i in range(3)], axis=1)
+        n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d[:, None]).reshape(n, 3, 3))
     # the DVL model at each state (factors/dvl_model.py), for all states at once
-    y_state, _ = dvl_model(n_R_b, n_v, float(result.scale), np.asarray(result.b_R_d, dtype=float), b_omega,
-                           np.asarray(b_l, dtype=float), jacobians=False)
+    y_state, _ = dvl_model(n_R_b, n_v, k[:, None], b_R_d, b_omega, b_l, jacobians=False)  # type: ignore[arg-type]
     t0, t1 = float(result.t[0]), float(result.t[-1])
     pings = result.dvl_pings
     selected_again = 0
@@ -292,6 +291,39 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again,
                             np.where(ok[:, None], r, np.nan))
     return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
+
+
+def is_filtered(result: NavResult) -> bool:
+    """Whether the trajectory is a filter's (the EKF's, the online estimator's): each state as estimated when its
+    ping was processed, with the calibration of that time (its timeline), not the final one."""
+    return result.estimator == "ekf" or str(result.info.get("trajectory", "")).startswith("filtered")
+
+
+def state_calibration(result: NavResult, log: LogData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per state: the scale (N,), b_R_d (N, 3, 3), the time offset dt_d (N,) s and the lever arm b_l (N, 3) m of
+    the model the state was estimated with. A smoother's states share the final calibration; a filter's (is_filtered)
+    were estimated with the calibration of their time, which its timeline records: judged with the final one, a
+    filter's early states, whose calibration was still converging (an in-motion alignment, a descent), would show
+    residuals of the calibration's later change, not of the data. What the timeline lacks is the final value."""
+    n = len(result.t)
+    k = np.full(n, float(result.scale))
+    b_R_d = np.broadcast_to(np.asarray(result.b_R_d, dtype=float), (n, 3, 3)).copy()
+    dt_d = np.full(n, float(result.time_offset_s) if np.isfinite(result.time_offset_s) else 0.0)
+    b_l = np.broadcast_to(np.asarray(result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l,
+                                     dtype=float), (n, 3)).copy()
+    tl = result.timeline
+    if tl is None or not is_filtered(result) or not len(tl.t) or not n:
+        return k, b_R_d, dt_d, b_l
+    # the timeline's entry at or before each state (a state before the first entry: the first)
+    i = np.clip(np.searchsorted(tl.t, result.t + 1e-9, side="right") - 1, 0, len(tl.t) - 1)
+    k = np.asarray(tl.scale, dtype=float)[i]
+    R_c = np.stack([rpy_deg_to_matrix(rpy) for rpy in np.asarray(tl.misalignment_deg, dtype=float)[i]])
+    b_R_d = R_c @ np.asarray(result.b_R_d0, dtype=float)
+    if tl.time_offset_s is not None:
+        dt_d = np.asarray(tl.time_offset_s, dtype=float)[i]
+    if tl.lever_arm_m is not None:
+        b_l = np.asarray(tl.lever_arm_m, dtype=float)[i]
+    return k, b_R_d, dt_d, b_l
 
 
 def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
