@@ -355,10 +355,11 @@ def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfi
             bad.append((a, a + RESIDUAL_WINDOW_S, rms))
     spans = _merge_windows(bad, res)
     figures["bad_windows"] = [{"start_s": a, "end_s": b, "whitened_rms": rms} for a, b, rms in spans]
+    advice = _kernel_advice(config.dvl.robust)
     for a, b, rms in spans[:MAX_WINDOW_WARNINGS]:
         health.flag("degraded", f"DVL residuals {rms:.1f}x their stated noise between {a:.0f} and {b:.0f} s: "
-                                "bottom lock lost? Check the DVL's bottom-track status there; exclude that stretch "
-                                "or rerun with [dvl] robust = \"huber\"")
+                                "bottom lock lost? Check the DVL's bottom-track status and valid flags there"
+                                + advice)
     if len(spans) > MAX_WINDOW_WARNINGS:
         rest = spans[MAX_WINDOW_WARNINGS:]
         health.flag("degraded", f"and {len(rest)} more stretches of DVL residuals above "
@@ -372,6 +373,16 @@ def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfi
     elif overall > RESIDUAL_OVERALL_DEGRADED and not spans:
         health.flag("degraded", f"DVL residuals are {overall:.1f}x their stated noise over the whole log: the DVL "
                                 "noise is understated (set [dvl] noise_m_s), or the mounting or lever arm is wrong")
+
+
+def _kernel_advice(robust: str) -> str:
+    """What a stronger robust kernel would do for a bad stretch, naming the next one of [dvl] robust ("" when the
+    strongest, cauchy, is on already)."""
+    if robust == "none":
+        return "; or rerun with [dvl] robust = \"huber\" (the default) to down-weight such pings"
+    if robust == "huber":
+        return "; or rerun with [dvl] robust = \"cauchy\", which gives gross outliers less weight than huber"
+    return ""
 
 
 def _merge_windows(bad: list[tuple[float, float, float]], res: DvlResiduals) -> list[tuple[float, float, float]]:

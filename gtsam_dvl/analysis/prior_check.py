@@ -134,7 +134,7 @@ def _cause(s: SharedState, d: PriorDistance, config: EstimatorConfig, peak_rate_
     if s.name == "time_offset":
         dt = float(d.offset_display[0]) / 1e3 + config.dvl.time_offset_prior_s
         sign = "early" if dt > 0 else "late"
-        return (f"the DVL-IMU time offset is beyond its prior (the DVL stamps {sign} by {abs(dt):.3f} s); set "
+        return (f"the time offset is beyond its prior (the DVL stamps {sign} by {abs(dt):.3f} s); set "
                 "[dvl] time_offset_prior_s near it or widen [dvl] time_offset_sigma_s")
     if s.name == "lever_arm":
         return (f"the DVL lever arm in /tf_static is off by {float(np.linalg.norm(d.offset_display)):.2f} m; "
