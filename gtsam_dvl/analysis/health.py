@@ -430,10 +430,8 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
                                 "stream has holes; read the log with --repair to see where")
     clipped = counters.get("time_offset_window_clipped", 0)
     health.figures["counters"]["time_offset_window_clipped"] = clipped
-    if clipped:  # the filters' IMU windows of the offset model held at the prior +- 3 sigma
-        health.flag("degraded", f"the DVL time offset went beyond its prior +- 3 sigma: the IMU windows of {clipped} "
-                                "ping(s) were held at that bound, so the offset model is approximate there; set [dvl] "
-                                "time_offset_prior_s near the estimate or widen [dvl] time_offset_sigma_s")
+    if clipped:
+        _check_offset_clip(result, clipped, health)
     gaps = result.info.get("imu_gaps") or {}
     reader_saw = any("imu" in topic.lower() for topic in ((log.metadata.get("reader_losses") or {}).get("gaps") or {}))
     if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
@@ -441,6 +439,26 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
                 "crossed by holding the last sample (the sigmas grow there)")
         health.flag("degraded" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else "note",
                     text + ("; check the IMU driver" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else ""))
+
+
+def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
+    """The filters (EKF, online) centre the IMU windows of their time-offset model on the offset's estimate held
+    within the prior +- 3 prior sigmas; `clipped` pings had their window held at that bound. "degraded" when the
+    final estimate is beyond it (the late pings' model is approximate), a note when the estimate came back within
+    (a transient: the bound held a filter that was still converging)."""
+    config = result.estimator_config or EstimatorConfig()
+    recentred = result.info.get("time_offset_prior")  # the EKF's warm-up may move the prior's centre
+    centre = float(recentred["centre_s"]) if isinstance(recentred, dict) and "centre_s" in recentred else (
+        config.dvl.time_offset_prior_s)
+    bound = 3.0 * config.dvl.time_offset_sigma_s
+    text = (f"the DVL time offset's estimate went beyond its prior +- 3 sigma ({centre:+.3f} +- {bound:.3f} s): the "
+            f"IMU windows of its offset model were held at that bound for {clipped} ping(s)")
+    if abs(result.time_offset_s - centre) > bound:
+        health.flag("degraded", f"{text}, to the end ({result.time_offset_s:+.3f} s), so the offset model is "
+                                "approximate; set [dvl] time_offset_prior_s near the estimate or widen [dvl] "
+                                "time_offset_sigma_s")
+    else:
+        health.flag("note", f"{text}, while the filter converged (it ended within, at {result.time_offset_s:+.3f} s)")
 
 
 def _check_losses(log: LogData, health: Health) -> None:

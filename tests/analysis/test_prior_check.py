@@ -140,4 +140,4 @@ def test_time_offset_beyond_its_prior_is_reported(mode: str) -> None:
         assert clipped == 0
     else:
         assert clipped > 0
-        assert any(f"the IMU windows of {clipped} ping(s) were held at that bound" in w for w in health.warnings)
+        assert any(f"held at that bound for {clipped} ping(s), to the end" in w for w in health.warnings)
