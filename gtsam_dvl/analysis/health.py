@@ -6,10 +6,14 @@
 - the solver (batch: did Gauss-Newton converge; the normalised chi^2 of the final solution, chi^2 / dof,
   whose expectation is 1 when the noise model fits; EKF: the mean normalised innovation squared per degree
   of freedom, with the same expectation);
+- every estimated shared state against its prior (analysis/prior_check.py): beyond 4 prior sigmas "failed",
+  naming the state, the distance and the likely cause;
 - the DVL residuals, recomputed here from the result and the log with the model of docs/conventions.md,
   y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l), whitened by the noise each ping was given (the rule of
   FactorMaker.dvl_noise): their RMS overall and per time window (about 1 when the model fits; a window far
-  above it is a stretch where the DVL measured something else, e.g. water track after losing the bottom);
+  above it is a stretch where the DVL measured something else, e.g. water track after losing the bottom). A
+  filter's states (EKF, online) with the calibration they were estimated with (state_calibration); without a
+  chi^2 from the solver (online) the residuals' mean square is judged as one;
 - whether the log moves at all (nothing is calibratable on a static log);
 - the estimator's counters (DVL pings rejected by reason, messages dropped);
 - the reader's losses (LogData.metadata["reader_losses"]: what --salvage and --repair dropped, gaps in the
@@ -260,8 +264,9 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     if np.any(dt_d != 0.0) and n > 1:
         n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, i]) for i in range(3)], axis=1)
         n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d[:, None]).reshape(n, 3, 3))
-    # the DVL model at each state (factors/dvl_model.py), for all states at once
-    y_state, _ = dvl_model(n_R_b, n_v, k[:, None], b_R_d, b_omega, b_l, jacobians=False)  # type: ignore[arg-type]
+    # the DVL model at each state (factors/dvl_model.py), for all states at once (h is linear in the scale)
+    y_unit, _ = dvl_model(n_R_b, n_v, 1.0, b_R_d, b_omega, b_l, jacobians=False)
+    y_state = k[:, None] * y_unit
     t0, t1 = float(result.t[0]), float(result.t[-1])
     pings = result.dvl_pings
     selected_again = 0

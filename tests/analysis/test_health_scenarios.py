@@ -28,19 +28,22 @@ MAX_DURATION_S = 480.0  # the segments after this are dropped
 
 
 def shortened(name: str) -> dict[str, Any]:
-    """The built-in scenario name with its segments cut to MAX_SEGMENT_S and the log to about MAX_DURATION_S: the
-    same start (static or underway), manoeuvres and sensors in a few minutes of data."""
+    """The built-in scenario name with its segments cut to MAX_SEGMENT_S (a static start to 60 s, a square to two
+    sides) and the log to about MAX_DURATION_S: the same start (static or underway), manoeuvres and sensors in a
+    few minutes of data."""
     raw = copy.deepcopy(load_scenario(name).raw)
     segments, total = [], 0.0
+    longest = MAX_SEGMENT_S if len(raw["segments"]) > 1 else MAX_DURATION_S  # a one-segment scenario: cut to length
     for seg in raw["segments"]:
         if total >= MAX_DURATION_S:
             break
         if "duration_s" in seg:
-            seg["duration_s"] = min(seg["duration_s"], 60.0 if seg["kind"] == "static" else MAX_SEGMENT_S)
+            seg["duration_s"] = min(seg["duration_s"], 60.0 if seg["kind"] == "static" else longest)
             total += seg["duration_s"]
-        if seg["kind"] == "square":
+        if seg["kind"] == "square":  # two sides: a turn each way of the heading
             seg["leg_duration_s"] = min(seg["leg_duration_s"], MAX_SEGMENT_S / 2)
-            total += seg.get("sides", 4) * (seg["leg_duration_s"] + seg["turn_duration_s"])
+            seg["sides"] = min(seg.get("sides", 4), 2)
+            total += seg["sides"] * (seg["leg_duration_s"] + seg["turn_duration_s"])
         segments.append(seg)
     raw["segments"] = segments
     return raw
