@@ -117,8 +117,8 @@ def _peak_rate_deg_s(log: LogData) -> float:
 
 def _cause(s: SharedState, d: PriorDistance, config: EstimatorConfig, peak_rate_deg_s: float) -> str:
     """The likely cause of a state far from its prior, and what to do, in words that name existing settings."""
-    saturation = (f"IMU saturation? (the gyro clipping at its range in fast turns reads as a wrong bias or scale; "
-                  f"the peak body rate in this log is {peak_rate_deg_s:.1f} deg/s)")
+    saturation = (f"IMU saturation? (an IMU axis clipping at its range, the gyro in fast turns, reads as a wrong "
+                  f"bias or scale; the peak body rate in this log is {peak_rate_deg_s:.1f} deg/s)")
     if s.name == "misalignment":
         angle = float(np.linalg.norm(d.offset_display))
         return (f"the DVL mounting in /tf_static (base_link -> dvl_link) is off by {angle:.1f} deg; correct the "
