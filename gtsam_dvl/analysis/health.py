@@ -6,10 +6,14 @@
 - the solver (batch: did Gauss-Newton converge; the normalised chi^2 of the final solution, chi^2 / dof,
   whose expectation is 1 when the noise model fits; EKF: the mean normalised innovation squared per degree
   of freedom, with the same expectation);
+- every estimated shared state against its prior (analysis/prior_check.py): beyond 4 prior sigmas "failed",
+  naming the state, the distance and the likely cause;
 - the DVL residuals, recomputed here from the result and the log with the model of docs/conventions.md,
   y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l), whitened by the noise each ping was given (the rule of
   FactorMaker.dvl_noise): their RMS overall and per time window (about 1 when the model fits; a window far
-  above it is a stretch where the DVL measured something else, e.g. water track after losing the bottom);
+  above it is a stretch where the DVL measured something else, e.g. water track after losing the bottom). A
+  filter's states (EKF, online) with the calibration they were estimated with (state_calibration); without a
+  chi^2 from the solver (online) the residuals' mean square is judged as one;
 - whether the log moves at all (nothing is calibratable on a static log);
 - the estimator's counters (DVL pings rejected by reason, messages dropped);
 - the reader's losses (LogData.metadata["reader_losses"]: what --salvage and --repair dropped, gaps in the
@@ -30,9 +34,10 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.analysis.geometry import assess_geometry
+from gtsam_dvl.analysis.prior_check import check_priors
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import so3_exp
+from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
@@ -116,6 +121,7 @@ def assess_health(result: NavResult, log: LogData) -> Health:
     config = result.noise_config or EstimatorConfig()
     _check_finite(result, health)
     _check_solver(result, health)
+    _check_priors(result, log, result.estimator_config or EstimatorConfig(), health)
     if len(result.t):
         _check_dvl_residuals(result, log, config, health)
     _check_counters(result, log, health)
@@ -132,6 +138,15 @@ def _check_geometry(result: NavResult, health: Health) -> None:
     health.figures["geometry"] = report.as_dict()
     for finding in report.findings:
         health.flag(finding.severity, finding.message)
+
+
+def _check_priors(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
+    """Every estimated shared state against its prior (analysis/prior_check.py): "failed" beyond
+    prior_check.PRIOR_NSIGMA_FAILED prior sigmas, naming the state and the likely cause."""
+    report = check_priors(result, log, config)
+    health.figures["prior_nsigma"] = report.as_dict()
+    for severity, text in report.findings:
+        health.flag(severity, text)
 
 
 def _check_noise_fit(result: NavResult, health: Health) -> None:
@@ -242,16 +257,16 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     unmatched = int((np.abs(dvl.t[j] - result.t) >= 1e-6).sum())
     b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
     # the model the estimator fitted: its lever arm when estimated, and the ping stamped t seen at t + dt_d (the
-    # state's velocity interpolated there, its attitude turned by the body rate over dt_d)
-    b_l = result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l
-    dt_d = float(result.time_offset_s) if np.isfinite(result.time_offset_s) else 0.0
+    # state's velocity interpolated there, its attitude turned by the body rate over dt_d); a filter's states with
+    # the calibration it held at their time (state_calibration)
+    k, b_R_d, dt_d, b_l = state_calibration(result, log)
     n_R_b, n_v = result.n_R_b, result.n_v
-    if dt_d != 0.0 and n > 1:
-        n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, k]) for k in range(3)], axis=1)
-        n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d).reshape(n, 3, 3))
-    # the DVL model at each state (factors/dvl_model.py), for all states at once
-    y_state, _ = dvl_model(n_R_b, n_v, float(result.scale), np.asarray(result.b_R_d, dtype=float), b_omega,
-                           np.asarray(b_l, dtype=float), jacobians=False)
+    if np.any(dt_d != 0.0) and n > 1:
+        n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, i]) for i in range(3)], axis=1)
+        n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d[:, None]).reshape(n, 3, 3))
+    # the DVL model at each state (factors/dvl_model.py), for all states at once (h is linear in the scale)
+    y_unit, _ = dvl_model(n_R_b, n_v, 1.0, b_R_d, b_omega, b_l, jacobians=False)
+    y_state = k[:, None] * y_unit
     t0, t1 = float(result.t[0]), float(result.t[-1])
     pings = result.dvl_pings
     selected_again = 0
@@ -283,6 +298,39 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
 
 
+def is_filtered(result: NavResult) -> bool:
+    """Whether the trajectory is a filter's (the EKF's, the online estimator's): each state as estimated when its
+    ping was processed, with the calibration of that time (its timeline), not the final one."""
+    return result.estimator == "ekf" or str(result.info.get("trajectory", "")).startswith("filtered")
+
+
+def state_calibration(result: NavResult, log: LogData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per state: the scale (N,), b_R_d (N, 3, 3), the time offset dt_d (N,) s and the lever arm b_l (N, 3) m of
+    the model the state was estimated with. A smoother's states share the final calibration; a filter's (is_filtered)
+    were estimated with the calibration of their time, which its timeline records: judged with the final one, a
+    filter's early states, whose calibration was still converging (an in-motion alignment, a descent), would show
+    residuals of the calibration's later change, not of the data. What the timeline lacks is the final value."""
+    n = len(result.t)
+    k = np.full(n, float(result.scale))
+    b_R_d = np.broadcast_to(np.asarray(result.b_R_d, dtype=float), (n, 3, 3)).copy()
+    dt_d = np.full(n, float(result.time_offset_s) if np.isfinite(result.time_offset_s) else 0.0)
+    b_l = np.broadcast_to(np.asarray(result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l,
+                                     dtype=float), (n, 3)).copy()
+    tl = result.timeline
+    if tl is None or not is_filtered(result) or not len(tl.t) or not n:
+        return k, b_R_d, dt_d, b_l
+    # the timeline's entry at or before each state (a state before the first entry: the first)
+    i = np.clip(np.searchsorted(tl.t, result.t + 1e-9, side="right") - 1, 0, len(tl.t) - 1)
+    k = np.asarray(tl.scale, dtype=float)[i]
+    R_c = np.stack([rpy_deg_to_matrix(rpy) for rpy in np.asarray(tl.misalignment_deg, dtype=float)[i]])
+    b_R_d = R_c @ np.asarray(result.b_R_d0, dtype=float)
+    if tl.time_offset_s is not None:
+        dt_d = np.asarray(tl.time_offset_s, dtype=float)[i]
+    if tl.lever_arm_m is not None:
+        b_l = np.asarray(tl.lever_arm_m, dtype=float)[i]
+    return k, b_R_d, dt_d, b_l
+
+
 def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
     res = dvl_residuals(result, log, config.dvl)
     used = res.dof > 0
@@ -312,18 +360,34 @@ def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfi
             bad.append((a, a + RESIDUAL_WINDOW_S, rms))
     spans = _merge_windows(bad, res)
     figures["bad_windows"] = [{"start_s": a, "end_s": b, "whitened_rms": rms} for a, b, rms in spans]
+    advice = _kernel_advice(config.dvl.robust)
     for a, b, rms in spans[:MAX_WINDOW_WARNINGS]:
         health.flag("degraded", f"DVL residuals {rms:.1f}x their stated noise between {a:.0f} and {b:.0f} s: "
-                                "bottom lock lost? Check the DVL's bottom-track status there; exclude that stretch "
-                                "or rerun with [dvl] robust = \"huber\"")
+                                "bottom lock lost? Check the DVL's bottom-track status and valid flags there"
+                                + advice)
     if len(spans) > MAX_WINDOW_WARNINGS:
         rest = spans[MAX_WINDOW_WARNINGS:]
         health.flag("degraded", f"and {len(rest)} more stretches of DVL residuals above "
                                 f"{RESIDUAL_WINDOW_DEGRADED:g}x their noise ({rest[0][0]:.0f} to {rest[-1][1]:.0f} s)")
     overall = figures["whitened_rms"]
-    if overall > RESIDUAL_OVERALL_DEGRADED and not spans:
+    if health.figures.get("solver", {}).get("chi2_per_dof") is None and overall**2 > CHI2_PER_DOF_FAILED:
+        # no chi^2 from the solver (online): the residuals' mean square is its chi^2 / dof, judged alike
+        health.flag("failed", f"DVL residuals are {overall:.1f}x their stated noise over the whole log (chi^2 / dof "
+                              f"{overall**2:.3g}, expected 1): the model does not fit the data at all; do not use this "
+                              "result; check the topics, the mounting (/tf_static) and the DVL noise")
+    elif overall > RESIDUAL_OVERALL_DEGRADED and not spans:
         health.flag("degraded", f"DVL residuals are {overall:.1f}x their stated noise over the whole log: the DVL "
                                 "noise is understated (set [dvl] noise_m_s), or the mounting or lever arm is wrong")
+
+
+def _kernel_advice(robust: str) -> str:
+    """What a stronger robust kernel would do for a bad stretch, naming the next one of [dvl] robust ("" when the
+    strongest, cauchy, is on already)."""
+    if robust == "none":
+        return "; or rerun with [dvl] robust = \"huber\" (the default) to down-weight such pings"
+    if robust == "huber":
+        return "; or rerun with [dvl] robust = \"cauchy\", which gives gross outliers less weight than huber"
+    return ""
 
 
 def _merge_windows(bad: list[tuple[float, float, float]], res: DvlResiduals) -> list[tuple[float, float, float]]:
@@ -369,6 +433,10 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
         why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
         health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
                                 "stream has holes; read the log with --repair to see where")
+    clipped = counters.get("time_offset_window_clipped", 0)
+    health.figures["counters"]["time_offset_window_clipped"] = clipped
+    if clipped:
+        _check_offset_clip(result, clipped, health)
     gaps = result.info.get("imu_gaps") or {}
     reader_saw = any("imu" in topic.lower() for topic in ((log.metadata.get("reader_losses") or {}).get("gaps") or {}))
     if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
@@ -376,6 +444,26 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
                 "crossed by holding the last sample (the sigmas grow there)")
         health.flag("degraded" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else "note",
                     text + ("; check the IMU driver" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else ""))
+
+
+def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
+    """The filters (EKF, online) centre the IMU windows of their time-offset model on the offset's estimate held
+    within the prior +- 3 prior sigmas; `clipped` pings had their window held at that bound. "degraded" when the
+    final estimate is beyond it (the late pings' model is approximate), a note when the estimate came back within
+    (a transient: the bound held a filter that was still converging)."""
+    config = result.estimator_config or EstimatorConfig()
+    recentred = result.info.get("time_offset_prior")  # the EKF's warm-up may move the prior's centre
+    centre = float(recentred["centre_s"]) if isinstance(recentred, dict) and "centre_s" in recentred else (
+        config.dvl.time_offset_prior_s)
+    bound = 3.0 * config.dvl.time_offset_sigma_s
+    text = (f"the DVL time offset's estimate went beyond its prior +- 3 sigma ({centre:+.3f} +- {bound:.3f} s): the "
+            f"IMU windows of its offset model were held at that bound for {clipped} ping(s)")
+    if abs(result.time_offset_s - centre) > bound:
+        health.flag("degraded", f"{text}, to the end ({result.time_offset_s:+.3f} s), so the offset model is "
+                                "approximate; set [dvl] time_offset_prior_s near the estimate or widen [dvl] "
+                                "time_offset_sigma_s")
+    else:
+        health.flag("note", f"{text}, while the filter converged (it ended within, at {result.time_offset_s:+.3f} s)")
 
 
 def _check_losses(log: LogData, health: Health) -> None:

@@ -491,6 +491,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
             prior = config.dvl.time_offset_prior_s
             dt_c = float(np.clip(fs.time_offset, prior - offset_bound, prior + offset_bound))
+            if dt_c != fs.time_offset:  # the window held at the bound: counted, reported (analysis/health.py)
+                counters["time_offset_window_clipped"] = counters.get("time_offset_window_clipped", 0) + 1
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
             y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity())
         if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)

@@ -183,7 +183,7 @@ class OnlineEstimator:
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         self._offset = enabled(self.config, "time_offset")
-        self._offset_windows = OffsetWindows(dvl)
+        self._offset_windows = OffsetWindows(dvl, self.counters)
         self._flushing = False
         self._depth = DepthQueue(self.config.depth, frame,
                                  None if depth_sensor is None else vector3("depth_sensor", depth_sensor), self._count)

@@ -27,10 +27,12 @@ class OffsetWindows:
     windows' centre (module doc). recentre: the windows centred on the current estimate (default), else on the
     prior (to measure what the re-centring gives)."""
 
-    def __init__(self, cfg: DvlConfig) -> None:
+    def __init__(self, cfg: DvlConfig, counters: dict[str, int] | None = None) -> None:
         self.cfg = cfg
         self.recentre = True
         self._recent: list[ImuChunk] = []
+        # the estimator's counters: "time_offset_window_clipped" counts the pings whose window was held at the bound
+        self.counters = {} if counters is None else counters
 
     def push(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """IMU samples in time order (base_link)."""
@@ -57,9 +59,13 @@ class OffsetWindows:
 
     def rate_input(self, maker: FactorMaker, t: float, estimate_s: float | None) -> RateInput:
         """The time-offset model's IMU constants of a ping at t (FactorMaker.velocity_rate_input) over the samples
-        kept, the window centred on centre(estimate_s)."""
+        kept, the window centred on centre(estimate_s); a ping whose window the bound held is counted in
+        counters["time_offset_window_clipped"]."""
         T, W, F = self.samples()
-        return maker.velocity_rate_input(t, T, F, W, self.centre(estimate_s))
+        centre = self.centre(estimate_s)
+        if estimate_s is not None and self.recentre and centre != estimate_s:  # reported (analysis/health.py)
+            self.counters["time_offset_window_clipped"] = self.counters.get("time_offset_window_clipped", 0) + 1
+        return maker.velocity_rate_input(t, T, F, W, centre)
 
     def trim(self, t_epoch: float) -> None:
         """Keep what the windows of the epochs after t_epoch (s) can reach: the prior's offset, 3 prior sigmas
