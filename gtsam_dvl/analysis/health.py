@@ -246,7 +246,8 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     velocity stays smooth through turns; over 1 s in a 0.05 rad/s turn the chord error is below 1e-3 m/s).
     Whitened by the noise that ping was given: config.noise_m_s if > 0, else the message's covariance if
     positive definite, else config.default_noise_m_s (selection.ping_covariance); with config.use_beams, per
-    beam with beam_noise_m_s. unmatched: the states without a ping at their time (DVL dropouts)."""
+    beam with beam_noise_m_s; plus the correlated error's variance correlated_sigma_m_s^2 per axis. unmatched:
+    the states without a ping at their time (DVL dropouts)."""
     dvl = log.dvl
     n = len(result.t)
     if not len(dvl) or not n:
@@ -278,18 +279,21 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(-1, 3)
     matched = np.ones(len(j), dtype=bool)
     n = len(j)
+    gm_var = config.correlated_sigma_m_s**2  # the DVL's correlated error's variance (estimators/correlated.py)
     chi2, dof = np.zeros(n), np.zeros(n)
     if config.use_beams and dvl.beams is not None:
         d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
         ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2) & matched[:, None]
         r = np.where(ok, v - np.einsum("nbi,ni->nb", np.where(ok[..., None], d_u, 0.0), y_hat), 0.0)
-        chi2 = (r**2).sum(axis=1) / config.beam_sigma_m_s()**2
+        chi2 = (r**2).sum(axis=1) / (config.beam_sigma_m_s()**2 + gm_var)
         dof = ok.sum(axis=1).astype(float)
     else:
         d_y = dvl.d_v[j]
         ok = matched & dvl.valid[j] & np.isfinite(d_y).all(axis=1)
         r = np.where(ok[:, None], d_y - y_hat, 0.0)
-        cov = ping_covariance(config, dvl.d_cov[j])  # the noise each ping was given by the estimators
+        # the noise each ping was given by the estimators, and the correlated error they modelled beside it (its
+        # estimate is not in the result: the residual holds it)
+        cov = ping_covariance(config, dvl.d_cov[j]) + gm_var * np.eye(3)
         cov[~ok] = np.eye(3)
         chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
         dof = 3.0 * ok
