@@ -45,6 +45,7 @@ def moved(tmp_path_factory: pytest.TempPathFactory) -> Path:
     log = dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=t))
     root = tmp_path_factory.mktemp("read_options")
     (root / "base" / "logs").mkdir(parents=True)
+    (root / "base" / "results").mkdir()  # (outputs never create folders)
     write_log(root / "base" / "logs" / "short.mcap", log)
     no_repair = run("info", "base/logs/short.mcap", cwd=root, check=False)
     assert no_repair.returncode == 1 and "--repair" in no_repair.stderr  # the log needs --repair
