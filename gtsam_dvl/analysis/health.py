@@ -34,6 +34,7 @@ from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.ping_screen import frozen_runs
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
 
@@ -76,7 +77,8 @@ DVL_GAP_DEGRADED_S = 60.0
 
 # Counters that are not rejections (the EKF's slow pings still update the navigation; keyframe thinning is
 # by design).
-_NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweighted")
+_NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweighted", "dvl_water_track",
+                   "dvl_before_imu", "dvl_after_imu")
 
 
 @dataclass
@@ -365,6 +367,7 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
                                     "[dvl] max_speed_m_s")
         else:
             health.flag("note", text)
+    _check_unused_pings(counters, log, health)
     if dropped:
         why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
         health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
@@ -376,6 +379,31 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
                 "crossed by holding the last sample (the sigmas grow there)")
         health.flag("degraded" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else "note",
                     text + ("; check the IMU driver" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else ""))
+
+
+def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) -> None:
+    """The pings not used for no fault of their own (water track, outside the IMU's span) and the frozen DVL
+    output (ping_screen.frozen_runs), each in its own words."""
+    n_pings = max(len(log.dvl), 1)
+    if water := counters.get("dvl_water_track", 0):
+        text = (f"{water} of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over "
+                "ground): not used")
+        many = water / n_pings > REJECTED_PINGS_DEGRADED
+        health.flag("degraded" if many else "note", text + ("; the DVL had no bottom lock there, so the "
+                                                            "trajectory is dead reckoned on the IMU" if many else ""))
+    before, after = counters.get("dvl_before_imu", 0), counters.get("dvl_after_imu", 0)
+    if before + after > 1:  # one ping at the IMU's first stamp: the sensors started together
+        health.flag("note", f"{before + after} DVL pings outside the IMU's time span ({before} at or before its "
+                            f"first sample, {after} after its last): not used")
+    if repeated := counters.get("dvl_repeated", 0):
+        runs = frozen_runs(log.dvl)
+        longest = max(runs, key=lambda r: r[2]) if runs else None
+        text = (f"DVL output frozen: {longest[2]} pings repeated bit for bit between {longest[0]:.0f} and "
+                f"{longest[1]:.0f} s" + (f" ({repeated} in {len(runs)} stretches)" if len(runs) > 1 else "")
+                + ", dropped; check the DVL") if longest else (
+                f"DVL output frozen: {repeated} pings repeated bit for bit while the IMU showed motion, dropped")
+        long = longest is not None and longest[1] - longest[0] > DVL_GAP_DEGRADED_S
+        health.flag("degraded" if long or repeated / n_pings > REJECTED_PINGS_DEGRADED else "warn", text)
 
 
 def _check_losses(log: LogData, health: Health) -> None:

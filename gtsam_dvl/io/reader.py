@@ -102,24 +102,27 @@ def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
         else:
             d_cov = np.full((m, 3, 3), np.nan)
     valid = np.isfinite(d_v).all(axis=1)
+    water = None
     if type_name == "marine_acoustic_msgs/msg/Dvl":
         # the message's own velocity mode: only bottom track is velocity over ground. A driver that fills the
         # field marks other pings 0 (invalid) or 2 (water track); one that never fills it leaves every ping 0,
-        # and then only water-track pings are refused
+        # and then only water-track pings are refused. Water-track pings are kept apart (DvlData.water_track)
         mode = arr["velocity_mode"]
         bottom = mode == 1
         mode_ok = bottom if bottom.any() else mode != 2
         valid &= mode_ok
         if beams is not None:
             beams.valid &= mode_ok[:, None]
+        water = np.asarray(mode == 2) if (mode == 2).any() else None
     return DvlData(t=np.zeros(m), d_v=d_v, d_cov=d_cov, valid=valid, beams=beams,
-                   frame_id=first_string(arr) or "dvl_link")
+                   frame_id=first_string(arr) or "dvl_link", water_track=water)
 
 
 def _select(dvl: DvlData, keep: np.ndarray, t: np.ndarray) -> DvlData:
     b = dvl.beams
     beams = None if b is None else BeamData(b.d_u[keep], b.v[keep], b.range[keep], b.valid[keep])
-    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id)
+    water = None if dvl.water_track is None else dvl.water_track[keep]
+    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water)
 
 
 def _metadata(src: Source) -> dict[str, Any]:
@@ -376,6 +379,7 @@ def read_log(
                 setattr(mounting, attrs[1], pose[1])
 
     meta = _metadata(src)
+    dvl.noise_free = meta.get("white_noise") is False  # a simulation without noise (DvlData.noise_free)
     depth = None
     if depth_topic:
         depth = _depth_data(src, depth_topic, raw[depth_topic], t0, repair, warnings, dropped, depth_z_down,

@@ -113,6 +113,8 @@ def simulate(
 def _log_data(scenario: Scenario, seed: int, gyro_bias0: np.ndarray, accel_bias0: np.ndarray,
               metadata: dict[str, Any], origin: GeoOrigin | None, **data: Any) -> LogData:
     """The LogData of a simulation: its sensor data and truth (data) with the typed fields of the scenario."""
+    if "dvl" in data:  # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
+        data["dvl"].noise_free = not metadata.get("white_noise", True)
     return LogData(t0_ns=scenario.t0_ns, metadata=metadata,
                    source=f"simulated:{scenario.name}:seed={seed}",
                    origin=origin,

@@ -525,6 +525,7 @@ class ChunkedSimulation:
         noise, events = (None if d is None else d.start(m == 1) for d in (streams.dvl_noise, streams.dvl_events))
         dvl = dvl_measure(sc.dvl, _padded(self.t_dvl[j0:j1]), y, d_u, ranges,
                           noise, events)  # type: ignore[arg-type]  # _Draws: the draws dvl_measure takes
+        dvl.noise_free = not self.white_noise  # as simulate's (sim/simulate.py _log_data)
         return _rows(dvl, m) if m == 1 else dvl
 
 
