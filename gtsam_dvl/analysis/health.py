@@ -34,6 +34,7 @@ from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.imu_faults import saturation_words
 from gtsam_dvl.estimators.ping_screen import frozen_runs
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
@@ -411,7 +412,7 @@ def _check_losses(log: LogData, health: Health) -> None:
     health.figures["losses"] = loss_figures(losses)
     for severity, text in loss_findings(losses):
         health.flag(severity, text)
-    known = ("salvage:", "gap(s) in the data", ": dropped ")
+    known = ("salvage:", "gap(s) in the data", ": dropped ", "the IMU saturated", "clock step at")
     for w in log.metadata.get("reader_warnings", []):
         if not any(k in w for k in known):  # the losses are said above, from the structured record
             health.flag("note", f"reader: {w}")
@@ -469,6 +470,15 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
             out.append(("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there"))
         else:
             out.append(("note", _gap_line(topic, g)))
+    for topic, report in sorted((losses.get("saturation") or {}).items()):
+        out.append(("degraded", f"{topic}: {saturation_words(report)}: those samples were dropped and crossed "
+                                "as IMU gaps, holding the last sample before (the sigmas grow there); an IMU with "
+                                "a larger range avoids it"))
+    for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
+        for c in steps:
+            out.append(("note", f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump by {c['jump_s']:.3f} s "
+                                f"while the samples run on): --repair shifted the later stamps back by "
+                                f"{c['step_s']:.3f} s"))
     return out
 
 

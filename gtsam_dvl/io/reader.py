@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.estimators.imu_faults import drop_saturated, undo_clock_steps
 from gtsam_dvl.io.attitude import read_attitude
 from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, first_fix_origin, first_fix_time, read_gnss
 from gtsam_dvl.io.log_metadata import typed_fields
@@ -272,6 +273,8 @@ def read_log(
     with ``repair`` are dropped and counted. ``salvage`` recovers the intact chunks of a damaged MCAP.
     Warnings go to metadata["reader_warnings"], and what was lost, structured, to metadata["reader_losses"]:
     "repair" (per topic: messages dropped by reason), "gaps" (per topic: missing stretches, see stamp_gaps),
+    "clock_steps" (the IMU's, undone with ``repair``, else an error) and "saturation" (the IMU samples at their
+    range limit, dropped: estimators/imu_faults.py),
     "salvage" (with ``salvage``: io.storage.salvage.salvage_losses) and "messages_lost" (per topic).
     progress(fraction) is called while reading.
 
@@ -348,6 +351,17 @@ def read_log(
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
     del imu_ns
+    # clock steps undone (with repair), saturated samples dropped (estimators/imu_faults.py; not in a noise-free
+    # simulation, whose values repeat by design); the gap record below is of the data missing from the log
+    meta = _metadata(src)
+    try:
+        imu_data, clock = undo_clock_steps(imu_data, imu_topic, repair, warnings)
+    except GtsamDvlError as exc:
+        raise GtsamDvlError(f"{path}: {exc}") from None
+    imu_logged_t = imu_data.t
+    saturation = None
+    if meta.get("white_noise") is not False:
+        imu_data, saturation = drop_saturated(imu_data, imu_topic, warnings)
 
     dvl_arr = decode(path, dvl_topic, dvl_type, raw[dvl_topic])
     if not len(dvl_arr):
@@ -378,7 +392,6 @@ def read_log(
                 setattr(mounting, attrs[0], pose[0])
                 setattr(mounting, attrs[1], pose[1])
 
-    meta = _metadata(src)
     dvl.noise_free = meta.get("white_noise") is False  # a simulation without noise (DvlData.noise_free)
     depth = None
     if depth_topic:
@@ -397,11 +410,15 @@ def read_log(
                              imu_attitude, t0,
                              mounting, repair, warnings, dropped, attitude_frame)
     gaps: dict[str, dict[str, Any]] = {}
-    for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
+    for topic, t in ((imu_topic, imu_logged_t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:
             gaps[topic] = gap
             warnings.append(gap_warning(topic, gap))
     losses: dict[str, Any] = {"repair": dropped, "gaps": gaps}
+    if clock:
+        losses["clock_steps"] = {imu_topic: clock}
+    if saturation:
+        losses["saturation"] = {imu_topic: saturation}
     if salvage:
         losses["salvage"] = salvage_losses(src, t0)
         warnings.append(salvage_report(losses["salvage"], src.path))
