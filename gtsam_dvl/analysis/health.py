@@ -34,7 +34,6 @@ from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.imu_faults import saturation_words
 from gtsam_dvl.estimators.ping_screen import frozen_runs
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
@@ -471,9 +470,13 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
         else:
             out.append(("note", _gap_line(topic, g)))
     for topic, report in sorted((losses.get("saturation") or {}).items()):
-        out.append(("degraded", f"{topic}: {saturation_words(report)}: those samples were dropped and crossed "
-                                "as IMU gaps, holding the last sample before (the sigmas grow there); an IMU with "
-                                "a larger range avoids it"))
+        axes = ", ".join(f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} "
+                         f"{'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}" for a in report["axes"])
+        a, b = max(report["spans_s"], key=lambda s: s[1] - s[0]) if report["spans_s"] else (float("nan"),) * 2
+        out.append(("degraded", f"{topic}: the IMU saturated ({axes}): {report['samples']} samples at the range "
+                                f"limit in {report['stretches']} stretch(es), the longest {a:.2f} to {b:.2f} s, "
+                                "dropped and crossed as IMU gaps, holding the last sample before (the sigmas grow "
+                                "there); an IMU with a larger range avoids it"))
     for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
         for c in steps:
             out.append(("note", f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump by {c['jump_s']:.3f} s "

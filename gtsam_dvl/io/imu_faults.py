@@ -1,6 +1,6 @@
 """IMU faults found from the samples alone, before any estimator sees them: saturation and clock steps. The
 log reader (io/reader.py) applies them to every log it reads and records what it found in
-metadata["reader_losses"] ("saturation", "clock_steps"), which the health report states.
+metadata["reader_losses"] ("saturation", "clock_steps"), which the health report states (analysis/health.py).
 
 Saturation. A gyro or accelerometer driven past its range reports the range's limit: a run of samples all
 equal to the axis's largest (or most negative) value in the log. A real sensor's noise makes equal consecutive
@@ -10,7 +10,7 @@ samples, about N p^(n - 1); a run of at least SATURATION_MIN_RUN samples at the 
 the axis's floor (SATURATION_FLOOR: not a dead axis or the Earth rate), whose chance is below
 SATURATION_CHANCE, is saturation. A quantised or noise-free stream, which repeats its values everywhere, shows
 no saturation this way (its runs are its own); neither does a steady turn on a noisy gyro. The saturated
-samples are dropped, so that the estimators cross them as an IMU gap (estimators/gaps.py: the last sample
+samples are dropped, so that every estimator crosses them as an IMU gap (estimators/gaps.py: the last sample
 before is held, the motion model's uncertainty added; longer than imu.max_gap_s the run stops naming it).
 
 Clock steps. A stamp step of more than STEP_FACTOR nominal periods is either missing data (a gap) or the
