@@ -373,7 +373,9 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
         health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
                                 "stream has holes; read the log with --repair to see where")
     gaps = result.info.get("imu_gaps") or {}
-    reader_saw = any("imu" in topic.lower() for topic in ((log.metadata.get("reader_losses") or {}).get("gaps") or {}))
+    losses = log.metadata.get("reader_losses") or {}
+    # the reader's record says where the IMU data are missing, and its saturation record the gaps it made
+    reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(losses.get("saturation"))
     if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
         text = (f"{gaps['count']} IMU gap(s), {gaps['total_s']:.2f} s in all, the longest {gaps['longest_s']:.2f} s, "
                 "crossed by holding the last sample (the sigmas grow there)")
