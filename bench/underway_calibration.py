@@ -4,7 +4,10 @@ Per scenario (default: straight-transect and steady-turn) and seed, one simulate
 - "defaults": batch, online and EKF with the default configuration (plus the scenario's [estimator] overrides):
   error/sigma of every calibration and bias state and of the final position, and the block NEES
   (app/campaign/montecarlo.py run_errors and campaign_statistics);
-- "presets": batch and online with the sensor presets of the scenario's units (--imu-model, --dvl-model);
+- "correlated": the defaults plus the DVL's correlated (Gauss-Markov) error modelled at the scenario's level
+  ([dvl] correlated_sigma_m_s, correlated_tau_s: estimators/correlated.py), batch, online and EKF;
+- "presets": batch, online and EKF with the sensor presets of the scenario's units (--imu-model, --dvl-model;
+  a DVL preset brings its correlated error, so these model it too);
 - "truth": the same estimators with the calibration fixed at the truth (the nominal mounting replaced by the true
   b_R_d, the scale prior at the true scale, both with negligible sigmas);
 - "nominal": the calibration fixed at nominal (scale 1, the nominal mounting): what a plain INS/DVL filter assumes.
@@ -29,8 +32,10 @@ import numpy as np
 
 FIXED_SCALE_SIGMA = 1e-7  # "fixed": a prior sigma far below anything the data can resolve (0.1 ppm)
 FIXED_MISALIGNMENT_SIGMA_DEG = 1e-5
-VARIANTS: dict[str, tuple[str, ...]] = {"defaults": ("batch", "online", "ekf"), "presets": ("batch", "online"),
+ALL3 = ("batch", "online", "ekf")
+VARIANTS: dict[str, tuple[str, ...]] = {"defaults": ALL3, "correlated": ALL3, "presets": ALL3,
                                         "truth": ("batch", "online"), "nominal": ("batch", "online")}
+CAMPAIGN_VARIANTS = ("defaults", "correlated", "presets")  # those whose error/sigma statistics are recorded
 
 
 def _with(config: Any, section: str, **values: Any) -> Any:
@@ -74,6 +79,9 @@ def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str
         if variant == "presets" and preset is base:
             continue
         run_log, cfg = log, preset if variant == "presets" else base
+        if variant == "correlated":
+            cfg = _with(base, "dvl", correlated_sigma_m_s=sc.dvl.correlated_sigma_m_s,
+                        correlated_tau_s=sc.dvl.correlated_tau_s)
         if variant in fixed_at:
             run_log, scale = fixed_at[variant]
             cfg = _with(cfg, "priors", scale_initial=scale, scale_sigma=FIXED_SCALE_SIGMA,
@@ -92,7 +100,7 @@ def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str
                                    "horizontal_error_pct": float(100.0 * np.linalg.norm(e_h) / distance_m),
                                    "horizontal_z": (e_h / res.position_sigma_m[-1, :2]).tolist(),
                                    "wall_s": time.perf_counter() - t0}
-            if variant == "defaults":
+            if variant in CAMPAIGN_VARIANTS:
                 row["campaign"] = {**run_errors(res, log), "wall_s": row["wall_s"]}
             rows[name] = row
         out["variants"][variant] = rows
@@ -122,9 +130,11 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
                     "rms_pct": float(np.sqrt(np.mean(pct**2))) if len(pct) else math.nan,
                     "median_pct": float(np.median(pct)) if len(pct) else math.nan,
                     "horizontal_z_std": float(np.std(z, ddof=1)) if len(z) > 1 else math.nan}
-        campaign = [{"estimators": {n: x["campaign"] for n, x in r["variants"]["defaults"].items()
-                                    if "campaign" in x}} for r in mine]
-        out[scenario] = {"errors": table, "defaults": campaign_statistics(campaign) if campaign else {}}
+        out[scenario] = {"errors": table}
+        for variant in CAMPAIGN_VARIANTS:
+            campaign = [{"estimators": {n: x["campaign"] for n, x in r["variants"][variant].items()
+                                        if "campaign" in x}} for r in mine if variant in r["variants"]]
+            out[scenario][variant] = campaign_statistics(campaign) if campaign else {}
     return out
 
 
@@ -138,12 +148,13 @@ def print_summary(summary: dict[str, Any]) -> None:
             p, f = s["errors"].get(f"presets/{variant}"), s["errors"].get(f"{est}/{variant}")
             if p and f:
                 print(f"  presets/{variant} over {est}/{variant}: {p['rms_pct'] / f['rms_pct']:.2f}x")
-        for name, est in s["defaults"].get("estimators", {}).items():
-            worst = max(est["states"].items(), key=lambda kv: kv[1]["z_std"])
-            nees = est["nees_block"]
-            print(f"  defaults/{name}: largest error/sigma std {worst[1]['z_std']:.2f} ({worst[0]}); block NEES "
-                  f"{nees['mean']:.2f} in [{nees['band_95'][0]:.2f}, {nees['band_95'][1]:.2f}]: "
-                  f"{'inside' if nees['inside_band'] else 'OUTSIDE'}")
+        for variant in CAMPAIGN_VARIANTS:
+            for name, est in s.get(variant, {}).get("estimators", {}).items():
+                worst = max(est["states"].items(), key=lambda kv: kv[1]["z_std"])
+                nees = est["nees_block"]
+                print(f"  {variant}/{name}: largest error/sigma std {worst[1]['z_std']:.2f} ({worst[0]}); block NEES "
+                      f"{nees['mean']:.2f} in [{nees['band_95'][0]:.2f}, {nees['band_95'][1]:.2f}]: "
+                      f"{'inside' if nees['inside_band'] else 'OUTSIDE'}")
 
 
 def main() -> None:

@@ -5,7 +5,9 @@
 h is the model's prediction: the 3-D velocity in dvl_link (m/s), or one beam's velocity with DvlOptions.d_u; with
 a time offset, a lever arm as a variable, a ping seen through the IMU motion from a keyframe, as the options say.
 Keys, in this order (DvlOptions.key_names): pose X = n_T_b, velocity V = n_v, [bias B with a motion], scale K,
-misalignment C = b_R_d, [time offset T with an OffsetInput], [lever arm L when lever_variable]. make_dvl_factor is
+misalignment C = b_R_d, [time offset T with an OffsetInput], [lever arm L when lever_variable], [the DVL's
+correlated velocity error E (a 3-vector in dvl_link, m/s, added to h: its Jacobian I, or d_u^T for a beam) when
+error_variable]. make_dvl_factor is
 the one constructor, dvl_error the same error as a pure function (tests, callers that wrap the factor). The
 wrappers below it keep the signatures the online estimator and bench/ call.
 """
@@ -50,10 +52,12 @@ class DvlOptions:
     motion: PingMotion | None = None
     lever_variable: bool = False
     considered: bool = False
+    error_variable: bool = False
 
     def key_names(self) -> list[str]:
         return (["pose", "vel"] + ["bias"] * (self.motion is not None) + ["scale", "b_R_d"]
-                + ["offset"] * (self.offset is not None) + ["lever"] * self.lever_variable)
+                + ["offset"] * (self.offset is not None) + ["lever"] * self.lever_variable
+                + ["error"] * self.error_variable)
 
     @property
     def dim(self) -> int:
@@ -75,11 +79,15 @@ class DvlOptions:
 
     def jacobians(self, J: DvlJacobians) -> list[np.ndarray]:
         """The Jacobians per key (those of the scale and misalignment zero when considered)."""
-        out = J.variables()
+        out = J.variables() + ([self.error_jacobian()] if self.error_variable else [])
         if self.considered:
             i = 2 + (self.motion is not None)
             out[i], out[i + 1] = np.zeros_like(out[i]), np.zeros_like(out[i + 1])
         return out
+
+    def error_jacobian(self) -> np.ndarray:
+        """d h / d E of the correlated error: I (3x3), or a beam's d_u^T (1x3)."""
+        return np.eye(3) if self.d_u is None else self.d_u.reshape(1, 3).copy()
 
 
 def _evaluate(o: DvlOptions, pose: gtsam.Pose3, n_v: np.ndarray, bias: gtsam.imuBias.ConstantBias | None, k: float,
@@ -107,6 +115,9 @@ def dvl_error(x: Sequence[Any], y: np.ndarray | float, options: DvlOptions,
     h, J = _evaluate(options, v["pose"], np.asarray(v["vel"], dtype=float), v.get("bias"), as_scale(v["scale"]),
                      v["b_R_d"].matrix(), as_scale(v["offset"]) if "offset" in v else None,
                      np.asarray(v["lever"], dtype=float).reshape(3) if "lever" in v else None, H is not None)
+    if "error" in v:
+        e = np.asarray(v["error"], dtype=float).reshape(3)
+        h = h + (e if options.d_u is None else np.asarray(options.d_u, dtype=float) @ e)
     if H is not None and J is not None:
         fill_slots(H, options.jacobians(J))
     return h - np.asarray(y, dtype=float).reshape(-1)
@@ -127,9 +138,11 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
     y_c = as_vector3("d_y", y) if o.d_u is None else np.array([as_finite_float("y_j", y)])
     at = dict(zip(names, keys, strict=True))
     pose_k, vel_k, scale_k, rot_k = at["pose"], at["vel"], at["scale"], at["b_R_d"]
-    bias_k, offset_k, lever_k = at.get("bias"), at.get("offset"), at.get("lever")
+    bias_k, offset_k, lever_k, error_k = at.get("bias"), at.get("offset"), at.get("lever"), at.get("error")
+    J_error = o.error_jacobian() if error_k is not None else None
     lever_v = cross(o.b_omega, o.b_l)  # a known lever arm's velocity, once (not per linearisation)
-    fields = [DvlJacobians._fields.index(name) for name in names]  # the keys' Jacobians in DvlJacobians
+    # the keys' Jacobians in DvlJacobians (-1: the correlated error's, J_error)
+    fields = [-1 if name == "error" else DvlJacobians._fields.index(name) for name in names]
 
     def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
         if bias_k is None and lever_k is None and offset_k is None:  # (the per-ping path: no second call layer)
@@ -143,13 +156,16 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
                              values.atRot3(rot_k).matrix(),
                              None if offset_k is None else values.atVector(offset_k).item(),
                              None if lever_k is None else values.atPoint3(lever_k), H is not None, lever_v)
+        if error_k is not None:
+            e = values.atVector(error_k)
+            h = h + (e if o.d_u is None else o.d_u @ e)
         if H is not None and J is not None:
             if o.considered:
                 for i, Jk in enumerate(o.jacobians(J)):
                     H[i] = Jk
             else:  # (J's fields of the keys, found once)
                 for i, field in enumerate(fields):
-                    H[i] = J[field]
+                    H[i] = J_error if field < 0 else J[field]
         return h - y_c
 
     return gtsam.CustomFactor(noise, list(keys), error_func)

@@ -72,12 +72,16 @@ def trajectory_errors(result: NavResult, truth: TruthData) -> TrajectoryErrors:
 
 def truth_in_user_units(log: LogData) -> dict[str, Any]:
     """The log's true calibration and biases in the units of Timeline (what figures draw as truth lines):
-    scale, misalignment (deg, [roll, pitch, yaw]), gyro_bias (deg/h), accel_bias (micro-g); absent ones
-    are left out."""
+    scale, misalignment (deg, [roll, pitch, yaw]), time_offset (s), lever_arm (m, base_link), gyro_bias (deg/h),
+    accel_bias (micro-g); absent ones are left out."""
     out: dict[str, Any] = {}
     if (cal := log.true_calibration) is not None:
         out["scale"] = cal.scale
         out["misalignment"] = np.array(cal.misalignment_deg)
+        out["time_offset"] = cal.time_offset_s
+    truth_md = log.metadata.get("truth")
+    if isinstance(truth_md, dict) and (lever := (truth_md.get("dvl") or {}).get("b_lever_arm_m")) is not None:
+        out["lever_arm"] = np.asarray(lever, dtype=float)
     if (bias := log.true_imu_bias) is not None:
         out["gyro_bias"] = np.array(bias.gyro_rad_s) / DEG_PER_H
         out["accel_bias"] = np.array(bias.accel_m_s2) / UG

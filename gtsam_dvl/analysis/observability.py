@@ -137,15 +137,20 @@ class ObservabilityReport:
     directions: list[DirectionVerdict]  # sorted from least to best determined
     duration_s: float
     lever_arm: list[StateVerdict] = field(default_factory=list)  # x, y, z with [dvl] estimate_lever_arm
+    time_offset: list[StateVerdict] = field(default_factory=list)  # with [dvl] estimate_time_offset
 
     def for_plan(self) -> ObservabilityReport:
         """The same report worded for a mission plan ("this plan's rate", not "this log's")."""
-        for s in self.states + self.lever_arm:
+        for s in self.all_states():
             s.subject = "plan"
         return self
 
+    def all_states(self) -> list[StateVerdict]:
+        """Every estimated shared state's verdict: the calibration block's, the time offset's, the lever arm's."""
+        return self.states + self.time_offset + self.lever_arm
+
     def state(self, key: str) -> StateVerdict:
-        return next(s for s in self.states + self.lever_arm if s.key == key)
+        return next(s for s in self.all_states() if s.key == key)
 
     def lines(self) -> list[str]:
         out = ["Per state:"] + [f"  - {s.sentence()}" for s in self.states]
@@ -154,14 +159,19 @@ class ObservabilityReport:
             out += [f"  - {s.sentence()}" for s in self.lever_arm]
             if any(s.verdict != "determined" for s in self.lever_arm):
                 out.append(f"  ({LEVER_ARM_NOTE})")
+        if self.time_offset:
+            out.append("DVL-IMU time offset, estimated:")
+            out += [f"  - {s.sentence()}" for s in self.time_offset]
+        return out + self.direction_lines()
+
+    def direction_lines(self) -> list[str]:
+        """The directions of the calibration and bias block not determined, or a line saying all are."""
         weak = [d for d in self.directions if d.verdict != "determined"]
-        if weak:
-            subject = self.states[0].subject if self.states else "log"
-            out.append(f"Directions the {subject} did not fully determine (combinations of states):")
-            out += [f"  - {d.sentence()}" for d in weak]
-        else:
-            out.append("Every direction of the calibration and bias block is determined.")
-        return out
+        if not weak:
+            return ["Every direction of the calibration and bias block is determined."]
+        subject = self.states[0].subject if self.states else "log"
+        return ([f"Directions the {subject} did not fully determine (combinations of states):"]
+                + [f"  - {d.sentence()}" for d in weak])
 
 
 def _user_units_jacobian(b_R_d: np.ndarray) -> np.ndarray:
@@ -196,13 +206,19 @@ def determined_threshold(prior: float, target: float) -> float:
 
 def analyse(result: NavResult, config: EstimatorConfig | None = None) -> ObservabilityReport:
     """Per-state and per-direction verdicts from result.calib_joint_cov and the configuration's priors (and
-    the lever arm's per axis from result.lever_arm_cov when it was estimated)."""
+    the lever arm's per axis from result.lever_arm_cov, the time offset's from its sigma, when estimated)."""
     if result.calib_joint_cov is None:
         raise ValueError("the result has no joint covariance of the calibration and bias block")
     if config is None:
         config = result_config(result)
     return analyse_block(result.calib_joint_cov, result.b_R_d, float(result.t[-1] - result.t[0]), config,
-                         result.lever_arm_cov)
+                         result.lever_arm_cov, estimated_time_offset_sigma(result))
+
+
+def estimated_time_offset_sigma(result: NavResult) -> float | None:
+    """The DVL time offset's posterior sigma (s) when the result estimated it, else None."""
+    sigma = float(result.time_offset_sigma_s)
+    return sigma if np.isfinite(sigma) else None
 
 
 def _state_verdict(key: str, text: str, unit: str, prior: float, post: float, duration_h: float,
@@ -233,6 +249,16 @@ def lever_arm_verdicts(lever_arm_cov: np.ndarray, prior_sigma_m: float, duration
     post = np.sqrt(np.diag(np.asarray(lever_arm_cov, dtype=float)))
     return [_state_verdict(key, text, unit, float(prior_sigma_m), float(post[i]), duration_s / 3600.0,
                            LEVER_DETERMINED) for i, (key, text, unit) in enumerate(LEVER_ARM_STATES)]
+
+
+def time_offset_verdicts(sigma_s: float, config: EstimatorConfig, duration_s: float) -> list[StateVerdict]:
+    """The time offset's verdict (in ms) as a StateVerdict: its posterior sigma sigma_s (s) against the prior's
+    ([dvl] time_offset_sigma_s), "determined" below TIME_OFFSET_DETERMINED of it."""
+    state = BY_NAME["time_offset"]
+    ((key, text, unit),) = _rows([state])
+    prior = float(state.prior_display_sigma(config)[0])
+    return [_state_verdict(key, text, unit, prior, sigma_s * state.to_display, duration_s / 3600.0,
+                           TIME_OFFSET_DETERMINED)]
 
 
 def time_offset_verdict(result: NavResult) -> dict[str, Any]:
@@ -283,10 +309,11 @@ def lever_arm_verdict(result: NavResult, log: LogData | None = None) -> dict[str
 
 
 def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: float,
-                  config: EstimatorConfig, lever_arm_cov: np.ndarray | None = None) -> ObservabilityReport:
+                  config: EstimatorConfig, lever_arm_cov: np.ndarray | None = None,
+                  time_offset_sigma_s: float | None = None) -> ObservabilityReport:
     """The analysis on the block's covariance itself ([accel bias, gyro bias, scale, b_R_d right tangent],
     SI units), e.g. as stored in a result log; lever_arm_cov (3x3, m^2), when the lever arm was estimated,
-    adds its per-axis verdicts."""
+    adds its per-axis verdicts, time_offset_sigma_s (s), when the time offset was, its verdict."""
     J = _user_units_jacobian(np.asarray(b_R_d))
     cov = J @ np.asarray(calib_joint_cov) @ J.T
     p0 = prior_sigmas(config)
@@ -316,7 +343,9 @@ def analyse_block(calib_joint_cov: np.ndarray, b_R_d: np.ndarray, duration_s: fl
     lever = ([] if lever_arm_cov is None else
              lever_arm_verdicts(lever_arm_cov, float(BY_NAME["lever_arm"].prior_display_sigma(config)[0]),
                                 duration_s))
-    return ObservabilityReport(states, directions, duration_s, lever)
+    offset = ([] if time_offset_sigma_s is None else
+              time_offset_verdicts(time_offset_sigma_s, config, duration_s))
+    return ObservabilityReport(states, directions, duration_s, lever, offset)
 
 
 def _timeline_sigmas(timeline: Timeline) -> np.ndarray:
@@ -355,11 +384,76 @@ def attribute_segments(report: ObservabilityReport, timeline: Timeline, segments
 
 def determined_at(report: ObservabilityReport, timeline: Timeline) -> dict[str, float | None]:
     """Time (s) at which each state's filtering sigma first falls to its "determined" threshold
-    (determined_threshold: its target, and informed; None: never)."""
+    (determined_threshold: its target, and informed; for the time offset and the lever arm TIME_OFFSET_DETERMINED
+    and LEVER_DETERMINED of the prior's; None: never, or not in the timeline)."""
     sig = _timeline_sigmas(timeline)
     out: dict[str, float | None] = {}
     for j, state in enumerate(report.states):
         target = state.target_sigma if state.target_sigma is not None else DETERMINED * state.prior_sigma
         below = np.flatnonzero(sig[:, j] <= determined_threshold(state.prior_sigma, target))
         out[state.key] = float(timeline.t[below[0]]) if below.size else None
+    for verdicts, sigmas, fraction, name in ((report.time_offset, timeline.time_offset_sigma_s,
+                                              TIME_OFFSET_DETERMINED, "time_offset"),
+                                             (report.lever_arm, timeline.lever_arm_sigma_m, LEVER_DETERMINED,
+                                              "lever_arm")):
+        if not verdicts:
+            continue
+        display = (np.asarray(sigmas, dtype=float).reshape(len(timeline.t), -1) * BY_NAME[name].to_display
+                   if sigmas is not None else None)
+        for j, state in enumerate(verdicts):
+            below = (np.flatnonzero(display[:, j] <= fraction * state.prior_sigma) if display is not None
+                     else np.array([], dtype=int))
+            out[state.key] = float(timeline.t[below[0]]) if below.size else None
     return out
+
+
+# the DVL's calibration (the vehicle's states, core/states.py) in a verdict's headline, with their words
+_DVL_PARTS = (("scale", "scale"), ("misalignment", "all three misalignment angles"),
+              ("time_offset", "the time offset"), ("lever_arm", "the lever arm"))
+
+
+def _of_state(key: str, name: str) -> bool:
+    return key == name or key.startswith(name + "_")
+
+
+def calibration_answer(report: ObservabilityReport, determined_at_s: dict[str, float | None],
+                       subject: str = "log") -> list[str]:
+    """The verdict in a navigator's words: a Yes/No headline on the DVL's calibration (scale, misalignment, and
+    the time offset and lever arm when estimated: the vehicle's states, core/states.py), advice on what would
+    determine what is missing, then every state's sentence with the time it was determined at (when known).
+    subject "plan" (the mission planner: "this plan calibrates ... into the mission") or "log" (`evaluate`)."""
+    plan = subject == "plan"
+    vehicle = [s.name for s in BY_NAME.values() if s.vehicle]
+    dvl = [v for v in report.all_states() if any(_of_state(v.key, name) for name in vehicle)]
+    missing = [v for v in dvl if v.verdict != "determined"]
+    lines = []
+    if not missing:
+        present = [words for name, words in _DVL_PARTS if any(_of_state(v.key, name) for v in dvl)]
+        what = present[0] if len(present) == 1 else ", ".join(present[:-1]) + " and " + present[-1]
+        times = [determined_at_s.get(v.key) for v in dvl]
+        when = ""
+        if dvl and all(t is not None for t in times):
+            last = max(t for t in times if t is not None)
+            when = (f"; the last of them is determined {last:.0f} s into the mission" if plan
+                    else f"; the last of them was determined {last:.0f} s into the log")
+        lines.append(f"Yes: this {subject} {'calibrates' if plan else 'calibrated'} the DVL ({what}){when}.")
+    else:
+        groups = [f"{'; '.join(v.description for v in missing if v.verdict == verdict)} {verdict}"
+                  for verdict in ("not determined", "weakly determined")
+                  if any(v.verdict == verdict for v in missing)]
+        lines.append(f"No: this {subject} leaves {', and '.join(groups)}.")
+        keys = {v.key for v in missing}
+        if "misalignment_roll" in keys:
+            lines.append("  The misalignment about the thrust axis needs a specific-force change off that axis: "
+                         + ("add a descent or ascent (ballast) with constant attitude." if plan else
+                            "a dive with a descent or ascent (ballast) at constant attitude determines it."))
+        if "time_offset" in keys:
+            lines.append("  The time offset shows only in turns and accelerations: "
+                         + ("add turns or speed changes." if plan else
+                            "a dive with more turns or speed changes determines it."))
+        if any(_of_state(k, "lever_arm") for k in keys):
+            lines.append(f"  {LEVER_ARM_NOTE[0].upper()}{LEVER_ARM_NOTE[1:]}.")
+    for v in report.all_states():
+        when_s = determined_at_s.get(v.key)
+        lines.append(f"  {v.sentence()}" + (f"; determined at {when_s:.0f} s" if when_s is not None else ""))
+    return lines

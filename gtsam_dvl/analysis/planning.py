@@ -12,7 +12,13 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-from gtsam_dvl.analysis.observability import ObservabilityReport, analyse, attribute_segments, determined_at
+from gtsam_dvl.analysis.observability import (
+    ObservabilityReport,
+    analyse,
+    attribute_segments,
+    calibration_answer,
+    determined_at,
+)
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
@@ -35,24 +41,8 @@ class PlanResult:
     wall_s: float = 0.0
 
     def answer(self) -> str:
-        """The planner's answer in a navigator's words."""
-        dvl = ["scale", "misalignment_roll", "misalignment_pitch", "misalignment_yaw"]
-        missing = [s for s in self.report.states if s.key in dvl and s.verdict != "determined"]
-        lines = []
-        if not missing:
-            last = max(self.determined_at_s[k] or 0.0 for k in dvl)
-            lines.append(f"Yes: this plan calibrates the DVL (scale and all three misalignment angles); the last "
-                         f"of them is determined {last:.0f} s into the mission.")
-        else:
-            names = "; ".join(s.description for s in missing)
-            lines.append(f"No: this plan leaves {names} {missing[0].verdict}.")
-            if any(s.key == "misalignment_roll" for s in missing):
-                lines.append("  The misalignment about the thrust axis needs a specific-force change off that axis: "
-                             "add a descent or ascent (ballast) with constant attitude.")
-        for s in self.report.states:
-            when = self.determined_at_s.get(s.key)
-            lines.append(f"  {s.sentence()}" + (f"; determined at {when:.0f} s" if when is not None else ""))
-        return "\n".join(lines)
+        """The planner's answer in a navigator's words (observability.calibration_answer)."""
+        return "\n".join(calibration_answer(self.report, self.determined_at_s, "plan"))
 
 
 def plan_mission(scenario: Scenario, config: EstimatorConfig | None = None, seed: int = 0,

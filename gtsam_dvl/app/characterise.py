@@ -287,6 +287,14 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
         rec["why"].append(f"DVL: fitted ping sigma {sigma * 1e3:.3g} mm/s per "
                           f"{'beam' if dvl.get('use_beams') else 'axis'} (factor {dvl.get('multiplier', 1.0):.3g} "
                           "on the stated)")
+        gm = (dvl.get("residuals") or {}).get("gauss_markov")
+        if gm and gm["significant"]:  # the estimators then carry it as a state (estimators/correlated.py)
+            rec["dvl"]["correlated_sigma_m_s"] = _sig(float(gm["gm_sigma_m_s"]))
+            rec["dvl"]["correlated_tau_s"] = _sig(float(gm["gm_tau_s"]))
+            rec["why"] += [f"DVL: the residuals hold a correlated (Gauss-Markov) error of "
+                           f"{gm['gm_sigma_m_s'] * 1e3:.3g} mm/s (a lower bound: the smoother's states absorb its "
+                           "slow part)",
+                           f"its time constant, {gm['gm_tau_s']:.3g} s"]
     else:
         rec["why"].append("DVL: no usable noise fit (too few pings, or at a bound of [noise]): left as configured")
     return rec

@@ -296,6 +296,8 @@ def evaluate(
                       ] = None,
     depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None, attitude_topic: AttitudeTopic = None,
     truth_topic: TruthTopic = None,
+    force: Annotated[bool, typer.Option("--force", help="Judge the result against a --truth log that is not its "
+                                                        "source (another content, stamps or origin).")] = False,
     debug: Debug = False,
 ) -> None:
     """Errors against the truth over time, observability verdict and the segments that made it; the run's health
@@ -307,7 +309,7 @@ def evaluate(
     lines, written = evaluate_to_dir(result, output, truth_path=truth,
                                      read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
                                                                 depth_topic, gnss_topic, attitude_topic,
-                                                                truth_topic))
+                                                                truth_topic), force=force)
     typer.echo("\n".join(lines))
     for path in written:
         typer.echo(f"wrote {path}")

@@ -172,9 +172,12 @@ class SmoothOutcome:
         if err:
             pct = err.get("final_horizontal_position_pct_distance")
             of_distance = f"{pct:.3f} % of distance" if pct is not None else "no distance travelled"
-            lines.append(f"  vs truth: scale {err.get('scale_ppm', float('nan')):+.0f} ppm, misalignment "
-                         + ", ".join(f"{v:+.3f}" for v in err.get("misalignment_deg", [])) + " deg, final horizontal "
-                         f"position {err['final_horizontal_position_m']:.2f} m ({of_distance})")
+            calibration = ([f"scale {err['scale_ppm']:+.0f} ppm"] if "scale_ppm" in err else []) + (
+                ["misalignment " + ", ".join(f"{v:+.3f}" for v in err["misalignment_deg"]) + " deg"]
+                if err.get("misalignment_deg") else [])  # a truth without calibration: left out, not NaN
+            lines.append("  vs truth: " + ", ".join(calibration + [f"final horizontal position "
+                                                                   f"{err['final_horizontal_position_m']:.2f} m "
+                                                                   f"({of_distance})"]))
         off = s.get("dvl_time_offset_s")
         if off:
             lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
@@ -339,9 +342,9 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
         "scenario": scen.name, "answer": answer.splitlines()[0], "wall_s": plan.wall_s,
         "states": [{"key": s.key, "description": s.description, "unit": s.unit, "prior_sigma": s.prior_sigma,
                     "final_sigma": s.posterior_sigma, "ratio": s.ratio, "verdict": s.verdict,
-                    "determined_at_s": plan.determined_at_s[s.key], "credited_segments": s.credited_segments,
+                    "determined_at_s": plan.determined_at_s.get(s.key), "credited_segments": s.credited_segments,
                     "segment_shares": plan.shares.get(s.key, []), "hours_to_halve": s.hours_to_halve}
-                   for s in plan.report.states],
+                   for s in plan.report.all_states()],
         "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
         "segments": [s.as_dict() for s in plan.segments], "config": config.to_dict(),
     }
@@ -379,7 +382,7 @@ def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
 
 
 def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = None,
-                    read_options: dict[str, Any] | None = None) -> tuple[list[str], list[Path]]:
+                    read_options: dict[str, Any] | None = None, force: bool = False) -> tuple[list[str], list[Path]]:
     """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
     result's source log has one), observability verdict with the segments credited, figures and
     metrics.json (with the run's health and what reading the truth log lost). Returns the verdict lines, then the
@@ -387,7 +390,9 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
 
     Without truth_path the source log is looked for where the result records it (find_source_log) and read with
     the options smooth used; read_options given here (None values: not given) override them. When it is not
-    found, a line says so and the errors against the truth are left out."""
+    found, a line says so and the errors against the truth are left out. A log that is not the result's source
+    (analysis/evaluate.py source_mismatch: its content hash, stamps, origin) is refused with one line unless
+    force, and then a line says so."""
     from gtsam_dvl.analysis.evaluate import evaluate_result
     from gtsam_dvl.app.plots.error_plots import plot_errors
     from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
@@ -407,7 +412,18 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         log_path, missing = find_source_log(stored)
         options = {**{k: v for k, v in stored.read_options.items() if k in READ_OPTIONS}, **given}
     log = load_log(log_path, **options) if log_path is not None else None
+    forced = ""
+    if log is not None and log_path is not None:
+        from gtsam_dvl.analysis.evaluate import source_mismatch
+        from gtsam_dvl.io.result_writer import file_sha256
+
+        if why := source_mismatch(stored, log, file_sha256(log_path)):
+            if not force:
+                raise GtsamDvlError(f"{log_path} is not the source of {result_path}: {why}; give the log it was "
+                                    "smoothed from, or --force to judge it against this one")
+            forced = f"--force: judged against {log_path}, which is not the result's source: {why}"
     ev = evaluate_result(stored, log)
+    ev.metrics["truth_log_not_source"] = forced or None
     # the health of the run (from the summary smooth wrote) and what reading the truth log here lost
     health = stored.summary.get("health")
     truth_losses = log.metadata.get("reader_losses", {}) if log is not None else {}
@@ -429,13 +445,15 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         from gtsam_dvl.analysis.metrics import truth_in_user_units
 
         truths: dict[str, Any] = truth_in_user_units(log) if log is not None else {}
-        for q in ("scale", "misalignment", "gyro_bias", "accel_bias"):
+        estimated = [q for q, sigma in (("time_offset", res.timeline.time_offset_sigma_s),
+                                        ("lever_arm", res.timeline.lever_arm_sigma_m)) if sigma is not None]
+        for q in ("scale", "misalignment", "gyro_bias", "accel_bias", *estimated):
             written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
                                           ev.segments, t_min=0.0))
         written.append(plot_normalised_sigmas(res.timeline, out_dir / "normalised_sigmas.png",
                                               priors_for_plots(res.config), ev.segments,
                                               title=f"Normalised sigmas, {label}"))
-    lines = ev.report.lines() if ev.report is not None else ["no calibration covariance in this result"]
+    lines = ([forced] if forced else []) + ev.lines()
     written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
     from gtsam_dvl.app.report import gnss_lines
 

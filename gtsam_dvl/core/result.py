@@ -291,7 +291,8 @@ class StoredResult:
     """A result as read back from a result log (gtsam_dvl.io.result_reader): the NavResult that was written,
     the summary written with it, and where it came from: the source log's absolute path when smoothed, its path
     relative to the result file's folder, and the options it was read with (imu_topic, dvl_topic, salvage,
-    repair; empty for a result written before they were recorded)."""
+    repair; empty for a result written before they were recorded); the SHA-256 of the source log's content and
+    the map origin it read (lat_deg, lon_deg, height_m), "" and None when not recorded."""
 
     result: NavResult
     summary: dict[str, Any]
@@ -299,6 +300,8 @@ class StoredResult:
     source_log: str = ""
     source_log_relative: str = ""
     read_options: dict[str, Any] = field(default_factory=dict)
+    source_sha256: str = ""
+    source_origin: dict[str, float] | None = None
 
 
 @dataclass

@@ -29,7 +29,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig, ObservabilityConfig, RelinearizationThresholds
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, V, X, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, X, key_dim
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
@@ -263,9 +263,17 @@ def dvl_factor_keys(config: EstimatorConfig, i: int, motion: bool = False) -> li
     """The keys of a DVL factor on state i, in the order of its variables (factors/dvl.py DvlOptions.key_names):
     X(i), V(i), then the keys of the enabled states it reads (SharedState.dvl) in registry order: the IMU bias with
     motion (a ping seen through the IMU motion from state i), the scale, the misalignment, the time offset and the
-    lever arm when estimated."""
+    lever arm when estimated; last, the DVL's correlated error E(i) when the configuration models it
+    (correlated_error)."""
     wanted = ("ping", "motion") if motion else ("ping",)
-    return [X(i), V(i)] + _unique(s.key_at(i, config) for s in enabled_states(config) if s.dvl in wanted)
+    keys = [X(i), V(i)] + _unique(s.key_at(i, config) for s in enabled_states(config) if s.dvl in wanted)
+    return keys + [E(i)] if correlated_error(config) else keys
+
+
+def correlated_error(config: EstimatorConfig) -> bool:
+    """Whether the estimators model the DVL's correlated (first-order Gauss-Markov) velocity error: a 3-vector
+    E(i) per state in dvl_link ([dvl] correlated_sigma_m_s > 0; estimators/correlated.py)."""
+    return config.dvl.correlated_sigma_m_s > 0
 
 
 def columns(keys: Iterable[int], config: EstimatorConfig, start: int = 0) -> dict[str, slice]:

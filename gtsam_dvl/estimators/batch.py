@@ -12,8 +12,9 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import V, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import enabled, read_estimates, read_values, shared_keys
+from gtsam_dvl.core.states import correlated_error, enabled, read_estimates, read_values, shared_keys
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators import correlated
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
@@ -81,6 +82,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["noise"] = noise.as_dict()
+    if correlated_error(config):
+        result.info["dvl_correlated_error"] = correlated.info(config, values, len(builder.epochs))
     result.config = stated.to_dict()
     result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
                              "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,

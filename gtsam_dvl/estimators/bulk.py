@@ -38,8 +38,8 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import key_dim
-from gtsam_dvl.core.states import dvl_factor_keys, enabled, read_values
+from gtsam_dvl.core.keys import E, key_dim
+from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled, read_values
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
 from gtsam_dvl.estimators.factor_maker import FactorMaker
@@ -163,18 +163,35 @@ class BulkDvl:
         each, unweighted. Evaluated CHUNK rows at a time: the temporaries of a whole day's pings would take GBs."""
         n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d, b_l = self._ping_states(
             values, self.states(values) if states is None else states)
+        d_e = self._correlated_errors(values)  # (N, 3) the rows' correlated DVL error E(state), or None
+        d_u = self.pings.d_u
         ew = np.empty((len(self), self.pings.dim))
         for a in range(0, len(self), CHUNK):
             sl = slice(a, a + CHUNK)
             e, J = dvl_ping_errors(self.pings.part(sl), n_R_i[sl], n_p_i[sl], n_v_i[sl], b_a[sl], b_g[sl], k, b_R_d,
                                    b_l, dt_d, self.offset_n_g, self.lever, jacobians)
+            if d_e is not None:  # h + E (a beam: d_u . E)
+                e = e + (d_e[sl] if d_u is None else np.einsum("ni,ni->n", d_u[sl], d_e[sl])[:, None])
             W = self.whiten[sl]
             ew[sl] = np.einsum("nij,nj->ni", W, e)
             if jacobians:
                 assert J is not None and out is not None
-                for dst, B in zip(out, J.variables(), strict=True):
+                blocks = J.variables()
+                if d_e is not None:  # dh/dE: I, or a beam's d_u^T
+                    blocks = [*blocks, np.broadcast_to(np.eye(3), (len(e), 3, 3)) if d_u is None
+                              else d_u[sl][:, None, :]]
+                for dst, B in zip(out, blocks, strict=True):
                     np.matmul(W, B, out=dst[sl])
         return ew
+
+    def _correlated_errors(self, values: gtsam.Values) -> np.ndarray | None:
+        """Each row's correlated DVL error E(state) (N, 3) m/s, dvl_link; None when not modelled."""
+        if not correlated_error(self.config):
+            return None
+        per_state = np.zeros((self.n_states, 3))
+        for s in np.unique(self.pings.state).tolist():
+            per_state[s] = values.atVector(E(s))
+        return per_state[self.pings.state]
 
     def whitened_errors(self, values: gtsam.Values) -> np.ndarray:
         """The rows' whitened errors (N, m) at values, before the robust kernel."""

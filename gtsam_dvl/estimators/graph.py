@@ -21,11 +21,12 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import B, V, X
+from gtsam_dvl.core.keys import B, E, V, X
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.states import enabled, shared_keys
+from gtsam_dvl.core.states import correlated_error, enabled, shared_keys
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators import correlated
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
 from gtsam_dvl.estimators.bulk_imu import BulkImu, GravityRefs
@@ -394,6 +395,8 @@ class LogGraph:
             values.insert(V(i), n_v)
             if i > 0 and self.config.imu.bias_model == "random_walk":
                 values.insert(self.maker.bias_key(i), zero_bias)
+        if correlated_error(self.config):
+            correlated.initial_values(values, len(self.epochs))
         self.set_gravity_from_positions(n_p_all)
         self.gravity_positions = n_p_all
         return values
@@ -422,6 +425,9 @@ class LogGraph:
             if imu:
                 graph.add(self.imu_factor(i))
             for f in self.bias_factors(i):
+                graph.add(f)
+        if correlated_error(self.config):  # the DVL's correlated error: prior and Gauss-Markov links
+            for f in correlated.factors(self.config, np.array([ep.t for ep in self.epochs])):
                 graph.add(f)
         for f in self.depth_factors():
             graph.add(f)
@@ -492,10 +498,11 @@ class LogGraph:
         solver.CHUNKED_FROM_STATES states (solver.eliminate: the same Bayes net, in time linear in the mission);
         .ordering() is the plain gtsam.Ordering."""
         rw = self.config.imu.bias_model == "random_walk"
+        gm = correlated_error(self.config)
         keys: list[int] = []
         chunks: list[list[int]] = []
         for i in range(len(self.epochs)):
-            keys += [X(i), V(i)] + ([B(i)] if rw else [])
+            keys += [X(i), V(i)] + ([B(i)] if rw else []) + ([E(i)] if gm else [])
             if (i + 1) % chunk_states == 0 or i + 1 == len(self.epochs):
                 chunks.append(keys)
                 keys = []

@@ -18,10 +18,10 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import V, X, key_dim
+from gtsam_dvl.core.keys import E, V, X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
-from gtsam_dvl.core.states import columns, read_values, shared_keys
+from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.graph import LogGraph
@@ -29,7 +29,7 @@ from gtsam_dvl.estimators.graph import LogGraph
 
 def _epoch_of(keys: list[int]) -> int:
     """The latest state index a factor touches (-1: shared keys only)."""
-    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in "xv"]
+    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in "xve"]
     return max(idx) if idx else -1
 
 
@@ -66,36 +66,42 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
         e = _epoch_of(list(f.keys()))
         by_epoch[max(e, 0)].append(f)
 
-    # filter layout at epoch i: [X_i, V_i, shared]; transition layout adds X_{i+1}, V_{i+1} after X_i, V_i.
-    # shared: the keys of the shared states the configuration estimates (core/states.py: B, K, C, and T, L)
+    # filter layout at epoch i: [X_i, V_i, (E_i), shared]; transition layout adds X_{i+1}, V_{i+1}, (E_{i+1})
+    # after X_i, V_i, (E_i). shared: the keys of the shared states the configuration estimates (core/states.py: B,
+    # K, C, and T, L); E_i the DVL's correlated error when modelled (estimators/correlated.py)
     cfg = builder.config
+    gm = correlated_error(cfg)
+    d = 12 if gm else 9  # the epoch's own state
+
+    def own(i: int, at: int) -> dict[int, slice]:
+        return {X(i): slice(at, at + 6), V(i): slice(at + 6, at + 9), **({E(i): slice(at + 9, at + 12)} if gm else {})}
+
     shared = shared_keys(cfg)
     shared_cols: dict[int, slice] = {}
     start = 0
     for k in shared:
         shared_cols[k] = slice(start, start + key_dim(k))
         start += key_dim(k)
-    m = 9 + start  # filter state size
-    state_cols = columns(shared, cfg, start=9)  # each shared state's columns in the filter state
+    m = d + start  # filter state size
+    state_cols = columns(shared, cfg, start=d)  # each shared state's columns in the filter state
     blocks: dict[str, list[np.ndarray]] = {name: [] for name in state_cols}  # its covariance at each epoch
     R = np.zeros((0, m + 1))  # square-root information rows over [X_i, V_i, shared] + rhs
     sig_att = []
     for i in range(n):
         if i == 0:
-            cols = {X(0): slice(0, 6), V(0): slice(6, 9), **{k: slice(9 + s.start, 9 + s.stop)
-                                                           for k, s in shared_cols.items()}}
+            cols = {**own(0, 0), **{k: slice(d + s.start, d + s.stop) for k, s in shared_cols.items()}}
             stack = np.vstack([_rows(f, cols, m) for f in by_epoch[0]])
             R = _qr_r(stack)[:m]
         else:
-            cols = {X(i - 1): slice(0, 6), V(i - 1): slice(6, 9), X(i): slice(9, 15), V(i): slice(15, 18),
-                    **{k: slice(18 + s.start, 18 + s.stop) for k, s in shared_cols.items()}}
-            prev = np.zeros((R.shape[0], m + 10))
-            prev[:, 0:9] = R[:, 0:9]
-            prev[:, 18:m + 9] = R[:, 9:m]
-            prev[:, m + 9] = R[:, m]
-            stack = np.vstack([prev] + [_rows(f, cols, m + 9) for f in by_epoch[i]])
+            cols = {**own(i - 1, 0), **own(i, d),
+                    **{k: slice(2 * d + s.start, 2 * d + s.stop) for k, s in shared_cols.items()}}
+            prev = np.zeros((R.shape[0], m + d + 1))
+            prev[:, 0:d] = R[:, 0:d]
+            prev[:, 2 * d:m + d] = R[:, d:m]
+            prev[:, m + d] = R[:, m]
+            stack = np.vstack([prev] + [_rows(f, cols, m + d) for f in by_epoch[i]])
             full = _qr_r(stack)
-            R = full[9:m + 9, 9:]  # marginal information of [X_i, V_i, shared] after eliminating X_{i-1}, V_{i-1}
+            R = full[d:m + d, d:]  # marginal information of [X_i, V_i, (E_i), shared] after eliminating epoch i-1's
         Rinv = np.linalg.inv(R[:, :m])
         cov = Rinv @ Rinv.T
         for name, c in state_cols.items():

@@ -51,8 +51,10 @@ def read_result(path: Path | str) -> StoredResult:
     record = src.metadata.get("gtsam_dvl_result", {})
     try:
         read_options = json.loads(record["read_options"]) if record.get("read_options") else {}
+        origin = json.loads(record["source_origin"]) if record.get("source_origin") else None
     except json.JSONDecodeError:
-        raise GtsamDvlError(f"{path}: damaged result metadata (read_options is not JSON)") from None
+        raise GtsamDvlError(f"{path}: damaged result metadata (read_options or source_origin is not JSON)") from None
     return StoredResult(result, summary, str(path), str(record.get("source_log", "")),
                         str(record.get("source_log_relative", "")),
-                        dict(read_options) if isinstance(read_options, dict) else {})
+                        dict(read_options) if isinstance(read_options, dict) else {},
+                        str(record.get("source_sha256", "")), origin if isinstance(origin, dict) else None)

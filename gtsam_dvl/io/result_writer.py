@@ -6,6 +6,7 @@ covariance over (x, y, z, rot_x, rot_y, rot_z) in map axes, twist covariance in 
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import os
@@ -103,22 +104,44 @@ def health_record(health: dict[str, Any], losses: dict[str, Any]) -> dict[str, s
             "losses": to_json(losses)}
 
 
+def file_sha256(path: Path | str) -> str:
+    """The SHA-256 of a log's content, hex: of the file, or of a rosbag2 folder's files (their paths relative to
+    it and their bytes, in sorted order); "" when there is no such file or folder."""
+    path = Path(path)
+    files = ([path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file()) if path.is_dir()
+             else [])
+    if not files:
+        return ""
+    digest = hashlib.sha256()
+    for f in files:
+        if path.is_dir():
+            digest.update(f.relative_to(path).as_posix().encode() + b"\0")
+        with f.open("rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(chunk)
+    return digest.hexdigest()
+
+
 def source_record(log: LogData, result_path: Path | str, read_options: dict[str, Any] | None) -> dict[str, str]:
     """Where the result came from, for the metadata record "gtsam_dvl_result": the source log's absolute path,
-    its path relative to the folder of the result file (so that the two can move together) and the reading
-    options (JSON: imu_topic, dvl_topic, salvage, repair and, when given, depth_topic, gnss_topic, attitude_topic
-    and truth_topic)."""
+    its path relative to the folder of the result file (so that the two can move together), the SHA-256 of its
+    content (file_sha256: `evaluate --truth` checks that it is given the source), the map origin it read (JSON,
+    "" when the log records none) and the reading options (JSON: imu_topic, dvl_topic, salvage, repair and, when
+    given, depth_topic, gnss_topic, attitude_topic and truth_topic)."""
     options: dict[str, Any] = {"imu_topic": "/imu/data_raw", "dvl_topic": None, "salvage": False, "repair": False}
     topics = ("depth_topic", "gnss_topic", "attitude_topic", "truth_topic")
     options.update({k: v for k, v in (read_options or {}).items() if k in options or (k in topics and v is not None)})
+    origin = to_json(log.origin.as_dict()) if log.origin is not None else ""
     if not log.source:
-        return {"source_log": "", "source_log_relative": "", "read_options": to_json(options)}
+        return {"source_log": "", "source_log_relative": "", "source_sha256": "", "source_origin": origin,
+                "read_options": to_json(options)}
     source = Path(log.source).resolve()
     try:
         relative = os.path.relpath(source, Path(result_path).resolve().parent)
     except ValueError:  # another drive (Windows): no relative path
         relative = ""
-    return {"source_log": str(source), "source_log_relative": relative, "read_options": to_json(options)}
+    return {"source_log": str(source), "source_log_relative": relative, "source_sha256": file_sha256(source),
+            "source_origin": origin, "read_options": to_json(options)}
 
 
 def write_result_log(path: Path | str, result: NavResult, log: LogData, summary: dict[str, Any],

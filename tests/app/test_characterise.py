@@ -183,3 +183,25 @@ def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
     assert loaded.imu.gyro_noise_deg_per_h_rthz == pytest.approx(0.1)
     assert loaded.imu.accel_noise_ug_rthz == pytest.approx(10.0)
     assert loaded.noise == EstimatorConfig().noise
+
+
+def test_recommendation_models_a_significant_correlated_error(tmp_path: Path) -> None:
+    """Residuals with a significant Gauss-Markov part: the recommended [dvl] carries its level and time constant
+    (which the estimators then model, estimators/correlated.py), each line with its reason; a non-significant fit
+    adds nothing."""
+    allan = {"on": "whole log", "gyro": [{"white_density": 0.5}] * 3, "accel": [{"white_density": 30.0}] * 3}
+    imu = {name: {"configured_density": dens, "floor_density": [None] * 3}
+           for name, dens in (("gyro", 0.1), ("accel", 10.0))}
+    gm = {"white_sigma_m_s": 0.007, "gm_sigma_m_s": 0.0031, "gm_tau_s": 42.0, "significant": True}
+    dvl = {"fitted_sigma_m_s": 0.0072, "multiplier": 0.36, "at_bound": False, "residuals": {"gauss_markov": gm}}
+    text = recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap")
+    path = tmp_path / "recommended.toml"
+    path.write_text(text)
+    loaded = EstimatorConfig.load(path)
+    assert loaded.dvl.correlated_sigma_m_s == pytest.approx(0.0031)
+    assert loaded.dvl.correlated_tau_s == pytest.approx(42.0)
+    assert loaded.dvl.noise_m_s == pytest.approx(0.0072)
+    assert "# its time constant, 42 s\ncorrelated_tau_s = 42.0" in text
+    dvl["residuals"] = {"gauss_markov": {**gm, "significant": False}}
+    path.write_text(recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap"))
+    assert EstimatorConfig.load(path).dvl.correlated_sigma_m_s == EstimatorConfig().dvl.correlated_sigma_m_s

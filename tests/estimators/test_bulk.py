@@ -16,7 +16,7 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, E, key_dim
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
@@ -56,6 +56,11 @@ def configs() -> dict[str, EstimatorConfig]:
         "beams-lever": paper.model_copy(update={
             "dvl": paper.dvl.model_copy(update={"use_beams": True, "estimate_lever_arm": True})}),
         "offset-lever": default.model_copy(update={"dvl": default.dvl.model_copy(update={"estimate_lever_arm": True})}),
+        # the DVL's correlated error E(i) a variable of every DVL factor (estimators/correlated.py)
+        "correlated": default.model_copy(update={"dvl": default.dvl.model_copy(update={
+            "correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0})}),
+        "correlated-beams": paper.model_copy(update={"dvl": paper.dvl.model_copy(update={
+            "use_beams": True, "correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0})}),
     }
 
 
@@ -68,6 +73,10 @@ def perturbed(values: gtsam.Values, rng: np.random.Generator) -> gtsam.Values:
         out.update(T_OFFSET, np.array([0.12]))
     if values.exists(L_LEVER):
         out.update(L_LEVER, values.atVector(L_LEVER) + rng.normal(0, 0.05, 3))
+    i = 0
+    while values.exists(E(i)):
+        out.update(E(i), rng.normal(0, 0.002, 3))
+        i += 1
     return out
 
 

@@ -588,3 +588,31 @@ def test_option_factors_reject_bad_input(random_motion: Callable[..., PingMotion
         make_dvl_factor(unit3, keys, np.zeros(3), replace(o, motion=replace(s["motion"], n_G=None)))
     with pytest.raises(ValueError, match="unit vector"):
         make_dvl_factor(gtsam.noiseModel.Unit.Create(1), keys, 0.1, replace(o, d_u=np.array([1.0, 1.0, 0.0])))
+
+
+@pytest.mark.parametrize("beam", [False, True])
+@pytest.mark.parametrize("offset, motion", [(False, False), (True, True)])
+def test_correlated_error_variable(beam: bool, offset: bool, motion: bool,
+                                   random_motion: Callable[..., PingMotion]) -> None:
+    """The DVL's correlated error E (error_variable, last key): h + E (a beam: d_u . E), its Jacobian and every
+    other's against numerical derivatives, the factor's linearisation equal to them; E = 0 is the model without it."""
+    s = option_state("random", 1, random_motion)
+    o0, x0 = options_of(s, offset, False, beam, motion)
+    o = replace(o0, error_variable=True)
+    d_e = np.array([0.004, -0.003, 0.002])  # m/s, dvl_link
+    x = [*x0, d_e]
+    y: np.ndarray | float = 0.3 if beam else np.array([0.3, -0.2, 0.1])
+    H: list[Any] = [None] * len(x)
+    e = dvl_error(x, y, o, H)
+    expected = dvl_error(x0, y, o0) + (s["d_u"] @ d_e if beam else d_e)  # an independent sum
+    np.testing.assert_allclose(e, expected, atol=1e-15)
+    np.testing.assert_allclose(dvl_error([*x0, np.zeros(3)], y, o), dvl_error(x0, y, o0), atol=0)
+    for i, (J, Jn) in enumerate(zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)):
+        np.testing.assert_allclose(J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())),
+                                   err_msg=f"block {i}")
+    keys = [X(0), V(0)] + [B(1)] * motion + [K(0), B(0)] + [T(0)] * offset + [L(0)]
+    factor = make_dvl_factor(gtsam.noiseModel.Unit.Create(len(e)), keys, y, o)
+    b, blocks = linearized(factor, x, [J.shape[1] for J in H])
+    np.testing.assert_allclose(b, -e, atol=1e-12)
+    for i, J in enumerate(blocks):
+        np.testing.assert_allclose(J, H[i], atol=1e-12, err_msg=f"linearize block {i}")

@@ -25,14 +25,19 @@ def _band(ax: Any, t: np.ndarray, value: np.ndarray, sigma: np.ndarray, label: s
 def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: str,
                    truth: np.ndarray | float | None = None, segments: list[Segment] | None = None,
                    t_min: float = 0.0) -> Path:
-    """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias"; estimate +- 3 sigma."""
+    """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias", and when the timelines hold
+    them "time_offset" (shown in ms; the truth given in s, as the Timeline holds it) and "lever_arm" (m);
+    estimate +- 3 sigma."""
     spec = {
         "scale": ("scale", "scale_sigma", ["DVL scale factor k"], "dimensionless"),
         "misalignment": ("misalignment_deg", "misalignment_sigma_deg", list(MIS_AXES), "deg"),
         "gyro_bias": ("gyro_bias_deg_per_h", "gyro_bias_sigma_deg_per_h", [f"gyro bias {a}" for a in AXES3], "deg/h"),
         "accel_bias": ("accel_bias_ug", "accel_bias_sigma_ug", [f"accel bias {a}" for a in AXES3], "micro-g"),
+        "time_offset": ("time_offset_s", "time_offset_sigma_s", ["DVL time offset dt_d"], "ms"),
+        "lever_arm": ("lever_arm_m", "lever_arm_sigma_m", [f"lever arm {a}" for a in AXES3], "m"),
     }[quantity]
     value_name, sigma_name, titles, unit = spec
+    to_unit = 1e3 if quantity == "time_offset" else 1.0  # the Timeline's unit to the figure's
     n = len(titles)
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.6 * n + 0.6), sharex=True, squeeze=False)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -44,15 +49,20 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
         lo, hi = np.inf, -np.inf
         for k, (label, tl) in enumerate(timelines):
             sel = tl.t >= t_min
-            value = np.asarray(getattr(tl, value_name)).reshape(len(tl.t), -1)[sel, row]
-            sigma = np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
+            value = to_unit * np.asarray(getattr(tl, value_name)).reshape(len(tl.t), -1)[sel, row]
+            sigma = to_unit * np.asarray(getattr(tl, sigma_name)).reshape(len(tl.t), -1)[sel, row]
             colour = colours[k % len(colours)]
             if len(value) and np.ptp(value) == 0.0:
-                # a smoother's timeline: its sigmas are filtering sigmas, its value the final estimate only; a
-                # flat line over a narrowing band would be neither, so the final estimate is a marker at the end
-                ax.errorbar([tl.t[sel][-1]], [value[-1]], yerr=[3 * sigma[-1]], fmt="D", color=colour, ms=5,
+                # a smoother's timeline: its sigmas are filtering sigmas (the data up to t), its value the final
+                # estimate only; the filtering band is drawn about the final estimate (dashed: not an estimate at
+                # t), and the final estimate with its smoothed sigma is a marker at the end
+                t_sel = tl.t[sel]
+                ax.plot(t_sel, value, color=colour, lw=0.9, ls="--")
+                ax.fill_between(t_sel, value - 3 * sigma, value + 3 * sigma, color=colour, alpha=0.15, lw=0,
+                                label=f"{label}: filtering +-3 sigma (data up to t) about the final estimate")
+                ax.errorbar([t_sel[-1]], [value[-1]], yerr=[3 * sigma[-1]], fmt="D", color=colour, ms=5,
                             capsize=4, label=f"{label}: final estimate +-3 sigma", zorder=4)
-                tail = value[-1:], sigma[-1:]
+                tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
             else:
                 _band(ax, tl.t[sel], value, sigma, f"{label} (+-3 sigma)", colour)
                 tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
@@ -60,7 +70,7 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
             lo = min(lo, float(np.min(tail[0] - 4 * tail[1])))
             hi = max(hi, float(np.max(tail[0] + 4 * tail[1])))
         if truth is not None:
-            tv = float(np.atleast_1d(truth)[row])
+            tv = to_unit * float(np.atleast_1d(truth)[row])
             ax.axhline(tv, color="k", ls="--", lw=0.9, label="truth")
             lo, hi = min(lo, tv), max(hi, tv)
         if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
@@ -75,8 +85,9 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
     else:
         axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
-    fig.suptitle(f"{quantity.replace('_', ' ')} estimate and 3-sigma band over time\n(y zoomed on the converged part)",
-                 fontsize=11)
+    smoothed = all(len(tl.t) and np.ptp(np.asarray(getattr(tl, value_name))) == 0.0 for _, tl in timelines)
+    what = "final estimate and filtering 3-sigma band" if timelines and smoothed else "estimate and 3-sigma band"
+    fig.suptitle(f"{quantity.replace('_', ' ')} {what} over time\n(y zoomed on the converged part)", fontsize=11)
     return save_figure(fig, path)
 
 

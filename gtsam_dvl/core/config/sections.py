@@ -137,8 +137,10 @@ class DvlConfig(ConfigModel):
     # every ping's sigma (configured, from its message, or the default) times this: the variance component the
     # estimators fit from the residuals ([noise] fit_dvl, core/config/noise.py); set here, it pins the factor
     noise_multiplier: Positive = 1.0
-    # a first-order Gauss-Markov velocity error (per axis, m/s) and its time constant (s), from a preset or set
-    # here: recorded with the configuration; the estimators do not model it yet (their DVL error is white)
+    # a first-order Gauss-Markov velocity error (per dvl_link axis, m/s) and its time constant (s), from a preset
+    # or set here: when > 0 every estimator carries it as a state of each epoch (estimators/correlated.py), so that
+    # the position sigma grows as the error's, and the calibration does not over-trust pings whose errors are
+    # correlated; 0: the DVL's error is white
     correlated_sigma_m_s: NonNegative = 0.0
     correlated_tau_s: Positive = 60.0
 

@@ -55,20 +55,27 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import skew, so3_exp
-from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled
+from gtsam_dvl.core.rotations import skew
+from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
+from gtsam_dvl.estimators.correlated import ekf_propagate
+from gtsam_dvl.estimators.correlated import info as correlated_info
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
+from gtsam_dvl.estimators.ekf.kalman import (
+    OFFSET,
+    gate_threshold,
+    propagate_covariance,
+    update,
+)
 from gtsam_dvl.estimators.ekf.strapdown import (
     BA,
     BG,
@@ -122,7 +129,6 @@ LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
 CALIBRATION = np.r_[LAYOUT["scale"], LAYOUT["misalignment"]]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
-OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s), with estimate_time_offset
 RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
 
@@ -173,8 +179,13 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
                 P[rows, cols] = first.cov[r:r + 3, c:c + 3]
     for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
         P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
+    d_e = None
+    if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
+        P = np.pad(P, ((0, 3), (0, 3)))
+        P[n:, n:] = np.eye(3) * config.dvl.correlated_sigma_m_s**2
+        d_e = np.zeros(3)
     return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
-                       config.dvl.time_offset_prior_s if offset else 0.0)
+                       config.dvl.time_offset_prior_s if offset else 0.0, d_e)
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -260,70 +271,6 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np
         A = dvl.beams.d_u[j][ok]
         return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_sigma_m_s()**2
     return np.eye(3), dvl.d_v[j], ping_covariance(cfg, dvl.d_cov[j])
-
-
-def robust_weight(kernel: str, k: float, r: float) -> float:
-    """Weight of a measurement whose whitened innovation has norm r under the robust kernel [dvl] robust with
-    threshold k (GTSAM's mEstimator weights): 1 for "none"; "huber": 1 up to k, k / r beyond; "cauchy":
-    1 / (1 + (r / k)^2)."""
-    if kernel == "huber":
-        return 1.0 if r <= k else k / r
-    if kernel == "cauchy":
-        return 1.0 / (1.0 + (r / k) ** 2)
-    return 1.0
-
-
-def gate_threshold(probability: float, dof: int) -> float:
-    """The chi^2 gate on the normalised innovation squared of a dof-dimensional measurement: its quantile of
-    probability ([ekf] gate_probability; 1 gates nothing)."""
-    return math.inf if probability >= 1.0 else float(chi2.ppf(probability, dof))
-
-
-def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray, kernel: str = "none",
-           k: float = 3.0, gate_nis: float = math.inf) -> tuple[float, bool, bool]:
-    """Kalman update (Joseph form) and injection of the error into the nominal state, unless the normalised
-    innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's weight
-    (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.
-
-    Returns the normalised innovation squared, whether the kernel reduced the measurement's weight and
-    whether the gate rejected it.
-    """
-    P = fs.P
-    S = H @ P @ H.T + Rm
-    nis = float(innovation @ np.linalg.solve(S, innovation))
-    if nis > gate_nis:
-        return nis, False, True
-    w = robust_weight(kernel, k, math.sqrt(max(nis, 0.0)))
-    down = w < 1.0
-    if down:
-        Rm = Rm / w
-        S = H @ P @ H.T + Rm
-    K = np.linalg.solve(S, H @ P).T
-    dx = K @ innovation
-    IKH = np.eye(len(P)) - K @ H
-    P = IKH @ P @ IKH.T + K @ Rm @ K.T
-    fs.P = 0.5 * (P + P.T)
-    nav = fs.nav
-    fs.nav = NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS])
-    fs.gyro_bias = fs.gyro_bias + dx[BG]
-    fs.accel_bias = fs.accel_bias + dx[BA]
-    fs.scale = fs.scale + float(dx[SCALE])
-    fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
-    if len(dx) > OFFSET:
-        fs.time_offset = fs.time_offset + float(dx[OFFSET])
-    return nis, down, False
-
-
-def _propagate_covariance(P: np.ndarray, Phi: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """P through the navigation error's transition Phi (19, 19) and process noise Q; the time offset (if P has
-    it) is a constant: its row and column are carried by Phi alone."""
-    if len(P) == N_ERR:
-        return np.asarray(Phi @ P @ Phi.T + Q)
-    out = P.copy()
-    out[:N_ERR, :N_ERR] = Phi @ P[:N_ERR, :N_ERR] @ Phi.T + Q
-    out[:N_ERR, N_ERR:] = Phi @ P[:N_ERR, N_ERR:]
-    out[N_ERR:, :N_ERR] = out[:N_ERR, N_ERR:].T
-    return out
 
 
 @dataclass
@@ -517,7 +464,10 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                 step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
                                           dt, earth.n_omega_ie, n_g, G)
                 fs.nav = step.state
-                fs.P = _propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
+                fs.P = propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
+                if (gm := fs.error_slice()) is not None:  # the correlated DVL error decays (correlated.py)
+                    assert fs.dvl_error is not None
+                    fs.P, fs.dvl_error = ekf_propagate(config, fs.P, fs.dvl_error, gm, t_next - t_prev)
                 if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
@@ -543,6 +493,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             dt_c = float(np.clip(fs.time_offset, prior - offset_bound, prior + offset_bound))
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
             y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity())
+        if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)
+            assert fs.dvl_error is not None
+            y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
         speed = np.linalg.norm(y_hat) / fs.scale
         slow = speed < max(ekf_cfg.min_calibration_speed_m_s,
                            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
@@ -581,7 +534,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     result.info = {"alignment": maker.alignment_info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
                    "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
-                              "error_state": N_ERR + int(offset)}}
+                              "error_state": len(fs.P)}}
+    if fs.dvl_error is not None:
+        result.info["dvl_correlated_error"] = correlated_info(config)
     if progress:
         progress(1.0)
     return result

@@ -68,6 +68,13 @@ class FilterState:
     b_R_d: np.ndarray
     P: np.ndarray  # (19, 19), or (20, 20) with the time offset (filter.py OFFSET)
     time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
+    # the DVL's correlated velocity error E (3,) m/s in dvl_link, the last 3 error-state components (with [dvl]
+    # correlated_sigma_m_s > 0: estimators/correlated.py)
+    dvl_error: np.ndarray | None = None
+
+    def error_slice(self) -> slice | None:
+        """The correlated DVL error's error-state columns (the last three), None when not modelled."""
+        return None if self.dvl_error is None else slice(len(self.P) - 3, len(self.P))
 
 
 @dataclass

@@ -30,6 +30,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
+from gtsam_dvl.core.keys import E
 from gtsam_dvl.estimators.gaps import Gaps, Holds
 from gtsam_dvl.estimators.keyframes import integrate, last_stamp_at_or_before, snapshot_at
 from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
@@ -123,8 +124,11 @@ def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float
     if not isinstance(f, gtsam.NoiseModelFactor):
         raise TypeError(f"a keyframe DVL factor is a NoiseModelFactor, got {type(f).__name__}")
     offset = None if offset_input is None else OffsetInput(*offset_input)
-    options = DvlOptions(b_omega, b_l, d_u, offset, motion, considered=True)
-    return make_dvl_factor(f.noiseModel(), list(f.keys()), d_y, options)
+    keys = list(f.keys())
+    # the correlated DVL error E(i), when modelled, is the factor's last key (states.dvl_factor_keys)
+    options = DvlOptions(b_omega, b_l, d_u, offset, motion, considered=True,
+                         error_variable=chr(keys[-1] >> 56) == chr(E(0) >> 56))
+    return make_dvl_factor(f.noiseModel(), keys, d_y, options)
 
 
 def predict_at_ping(s: StateEstimate, t: float, snap: PingMotion, m: PingMotion) -> StateEstimate:

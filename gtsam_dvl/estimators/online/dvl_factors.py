@@ -19,7 +19,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
-from gtsam_dvl.core.states import dvl_factor_keys
+from gtsam_dvl.core.states import correlated_error, dvl_factor_keys
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.online.between_pings import considered_keyframe_factor
 from gtsam_dvl.estimators.selection import Ping
@@ -50,7 +50,8 @@ def considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega:
         (b_a, b_omega, G), n_g = offset  # the model's body rate is the rate input's mean over its window
         offset_input = OffsetInput(b_a, n_g, G)
     y: np.ndarray | float = beam[1] if beam is not None else np.asarray(d_y)
-    options = DvlOptions(b_omega, b_l, None if beam is None else beam[0], offset_input, considered=True)
+    options = DvlOptions(b_omega, b_l, None if beam is None else beam[0], offset_input, considered=True,
+                         error_variable=correlated_error(config))
     return make_dvl_factor(noise, dvl_factor_keys(config, i), y, options)
 
 

@@ -84,8 +84,9 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.states import enabled
+from gtsam_dvl.core.states import correlated_error, enabled
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
+from gtsam_dvl.estimators import correlated
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due
@@ -531,6 +532,8 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     total = time.perf_counter() - t_start
     result.timing_s = {"updates": float(np.sum(estimator.latencies_s)), "total": total}
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
+    if correlated_error(config):
+        result.info["dvl_correlated_error"] = correlated.info(config)
     if progress is not None:
         progress(1.0)
     return result

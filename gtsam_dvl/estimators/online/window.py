@@ -63,8 +63,16 @@ import numpy as np
 
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import V, X, key_dim
-from gtsam_dvl.core.states import Estimate, block_states, read_estimates, relinearization, shared_keys
+from gtsam_dvl.core.keys import E, V, X, key_dim
+from gtsam_dvl.core.states import (
+    Estimate,
+    block_states,
+    correlated_error,
+    read_estimates,
+    relinearization,
+    shared_keys,
+)
+from gtsam_dvl.estimators import correlated
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
@@ -126,10 +134,13 @@ class IncrementalSmoother:
         self.window_s = window_s
         self.thresholds = thresholds
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
-        # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py)
+        self.gm = correlated_error(builder.config)  # the DVL's correlated error E(i) a state (correlated.py)
+        # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py);
+        # every factor is linear in E (the DVL's, the links), so its threshold is a formality: a tenth of its sigma
         self._threshold = {"x": np.asarray(thresholds.pose, dtype=float),
                            "v": np.asarray(thresholds.velocity, dtype=float),
-                           **relinearization(builder.config, thresholds)}
+                           **relinearization(builder.config, thresholds),
+                           **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {})}
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
         threshold_map = gtsam.ISAM2ThresholdMap()
@@ -174,13 +185,16 @@ class IncrementalSmoother:
                 raise GtsamDvlError("the first epoch needs its initial values")
             values = first_values
             factors = b.prior_factors(values) + factors
+            if self.gm:
+                values.insert(E(0), np.zeros(3))
+                factors.append(correlated.prior_factor(b.config))
         else:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
             dt = t - self.t_last
             imu = b.new_imu_factor(i - 1, pim, params, dt, held)
             factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
-            prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)])
+            prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)] + [E(i - 1)] * self.gm)
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
             bias = prev.atConstantBias(b.bias_key(i - 1))
             self._reference_gravity(imu, pose.translation() + 0.5 * dt * n_v)
@@ -190,6 +204,10 @@ class IncrementalSmoother:
             values.insert(V(i), state.velocity())
             if self.rw_bias:
                 values.insert(b.bias_key(i), bias)
+            if self.gm:  # E's prediction: the previous state's estimate, decayed
+                phi, _ = correlated.transition(b.config, dt)
+                values.insert(E(i), phi * prev.atVector(E(i - 1)))
+                factors.append(correlated.link_factor(b.config, i - 1, i, dt))
         self.n, self.t_last = i + 1, t
         self.times[i] = t
         graph = gtsam.NonlinearFactorGraph()
@@ -227,7 +245,8 @@ class IncrementalSmoother:
             raise GtsamDvlError(f"iSAM2 update at t = {self.t_last:.3f} s failed ({exc})") from None
 
     def _state_keys(self, i: int) -> tuple[int, ...]:
-        return (X(i), V(i), self.builder.bias_key(i)) if self.rw_bias else (X(i), V(i))
+        keys = (X(i), V(i), self.builder.bias_key(i)) if self.rw_bias else (X(i), V(i))
+        return (*keys, E(i)) if self.gm else keys
 
     def _ordering(self, rebase: bool) -> tuple[gtsam.KeyGroupMap, gtsam.KeyList]:
         """Elimination groups (states oldest first, the bias, scale and misalignment last) and the states iSAM2
