@@ -481,9 +481,10 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
                                 "there); an IMU with a larger range avoids it"))
     for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
         for c in steps:
-            out.append(("note", f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump by {c['jump_s']:.3f} s "
-                                f"while the samples run on): --repair shifted the later stamps back by "
-                                f"{c['step_s']:.3f} s"))
+            back = c["jump_s"] < 0
+            out.append(("note", f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump {'back ' * back}by "
+                                f"{abs(c['jump_s']):.3f} s while the samples run on): --repair shifted the later "
+                                f"stamps {'forward' if back else 'back'} by {abs(c['step_s']):.3f} s"))
     return out
 
 

@@ -13,8 +13,8 @@ no saturation this way (its runs are its own); neither does a steady turn on a n
 samples are dropped, so that every estimator crosses them as an IMU gap (estimators/gaps.py: the last sample
 before is held, the motion model's uncertainty added; longer than imu.max_gap_s the run stops naming it).
 
-Clock steps. A stamp step of more than STEP_FACTOR nominal periods is either missing data (a gap) or the
-IMU's clock jumping while the samples run on (a clock step). The samples tell which where the motion
+Clock steps. A stamp step of more than STEP_FACTOR nominal periods is either missing data (a gap; back in
+time: older samples logged late) or the IMU's clock jumping while the samples run on (a clock step). The samples tell which where the motion
 changes (a turn, an acceleration): fitting a line to the WINDOW samples on each side (per gyro and
 accelerometer axis), continuous data joins up at the next sample (the two lines agree one period after the
 last sample before the step, within STEP_JOIN_SIGMAS of their standard errors on every axis), while a gap of
@@ -22,8 +22,10 @@ n missing samples would have moved the signal by about its slope times n (GAP_SH
 axis). Both must hold to call it a clock step; in steady motion (no slope) the two cannot be told apart and
 the step stays a gap. After a clock step the samples continue one period after the last one before it: the
 later stamps are ahead by the step less one period, and shifting them back by that restores the IMU's
-timeline against the other sensors' clocks (the DVL's stamps, on their own clock, did not jump). The reader
-does so with --repair and otherwise stops with an error naming the step.
+timeline against the other sensors' clocks (the DVL's stamps, on their own clock, did not jump); a step back
+is undone forward the same way, where the stamps' rule would otherwise drop the samples until they pass the
+newest one. The reader does so with --repair, before its stamp checks, and otherwise stops with an error naming
+the step.
 """
 
 from __future__ import annotations
@@ -129,24 +131,31 @@ class ClockStep:
     step_s: float  # how far the later stamps are ahead: the jump less one nominal period
 
     def words(self) -> str:
-        return (f"clock step at {self.t_before:.3f} s: the stamps jump by {self.t_after - self.t_before:.3f} s "
-                "while the samples run on without a break")
+        jump = self.t_after - self.t_before
+        return (f"clock step at {self.t_before:.3f} s: the stamps jump {'back ' if jump < 0 else ''}by "
+                f"{abs(jump):.3f} s while the samples run on without a break")
+
+    def shift_words(self) -> str:
+        """How the later stamps are corrected."""
+        return f"{'back' if self.step_s > 0 else 'forward'} by {abs(self.step_s):.3f} s"
 
 
 def clock_steps(t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray) -> list[ClockStep]:
-    """The stamp steps of an IMU stream (t increasing, s) that are clock steps, not gaps (module doc)."""
+    """The stamp steps of an IMU stream (t in s, as logged) that are clock steps (module doc): forward, not a
+    gap, or back, not older samples logged late (the alternative's samples then belong |jump| earlier)."""
     t = np.asarray(t, dtype=float)
     if len(t) < 2 * MIN_WINDOW:
         return []
     d = np.diff(t)
     period = float(np.median(d))
-    x = np.concatenate([np.asarray(b_omega, dtype=float), np.asarray(b_f, dtype=float)], axis=1)
+    steps = (np.flatnonzero(np.abs(d) > STEP_FACTOR * period) + 1).tolist()
+    del d  # the windows below are small: no other array over the whole log (the reader's memory)
     out = []
-    steps = (np.flatnonzero(d > STEP_FACTOR * period) + 1).tolist()
     for j, k in enumerate(steps):  # the windows stop at the neighbouring steps
         lo = max(k - WINDOW, steps[j - 1] if j else 0)
         hi = min(k + WINDOW, steps[j + 1] if j + 1 < len(steps) else len(t))
-        if _continuous(x[lo:k], x[k:hi], (t[k] - t[k - 1]) / period - 1.0):
+        x = np.concatenate([np.asarray(b_omega[lo:hi], dtype=float), np.asarray(b_f[lo:hi], dtype=float)], axis=1)
+        if _continuous(x[:k - lo], x[k - lo:], (t[k] - t[k - 1]) / period - 1.0):
             out.append(ClockStep(k, float(t[k - 1]), float(t[k]), float(t[k] - t[k - 1] - period)))
     return out
 
@@ -178,23 +187,30 @@ def _continuous(before: np.ndarray, after: np.ndarray, n_missing: float) -> bool
     return bool(np.all(join < STEP_JOIN_SIGMAS) and np.any(shown > GAP_SHOW_SIGMAS))
 
 
-def undo_clock_steps(imu: ImuData, topic: str, repair: bool,
-                     warnings: list[str]) -> tuple[ImuData, list[dict[str, float]]]:
-    """The IMU stream with its clock steps undone (module doc) and the steps found ([{"at_s", "jump_s",
-    "step_s"}], one warning each); without repair a clock step is a GtsamDvlError naming it."""
-    steps = clock_steps(imu.t, imu.b_omega, imu.b_f)
+def undo_clock_steps(ns: np.ndarray, t0_ns: int, b_omega: np.ndarray, b_f: np.ndarray, topic: str, repair: bool,
+                     warnings: list[str]) -> tuple[np.ndarray, list[dict[str, float]]]:
+    """The IMU's stamps (ns, as logged; t0_ns the log's time base) with its clock steps undone (module doc;
+    samples with a non-finite value are left out of the test and shifted with their neighbours), and the steps
+    found ([{"at_s", "jump_s", "step_s"}], one warning each). Without repair a clock step is a GtsamDvlError
+    naming it."""
+    finite = np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1)
+    if finite.all():  # no copies of the samples
+        rows = None
+        steps = clock_steps((np.asarray(ns, dtype=np.int64) - t0_ns) / 1e9, b_omega, b_f)
+    else:
+        rows = np.flatnonzero(finite)
+        steps = clock_steps((np.asarray(ns, dtype=np.int64)[rows] - t0_ns) / 1e9, b_omega[rows], b_f[rows])
     if steps and not repair:
         s = steps[0]
         raise GtsamDvlError(f"{topic}: {s.words()}{f' (and {len(steps) - 1} more)' if len(steps) > 1 else ''}; "
-                            f"rerun with --repair to shift the later stamps back by {s.step_s:.3f} s")
+                            f"rerun with --repair to shift the later stamps {s.shift_words()}")
     if not steps:
-        return imu, []
-    t = imu.t.copy()
+        return ns, []
+    out = np.array(ns, dtype=np.int64)
     for s in steps:
-        t[s.index:] -= s.step_s
-    warnings.extend(f"{topic}: {s.words()}; the later stamps shifted back by {s.step_s:.3f} s" for s in steps)
-    return dataclasses.replace(imu, t=t), [{"at_s": s.t_before, "jump_s": s.t_after - s.t_before,
-                                            "step_s": s.step_s} for s in steps]
+        out[s.index if rows is None else rows[s.index]:] -= int(round(s.step_s * 1e9))
+    warnings.extend(f"{topic}: {s.words()}; the later stamps shifted {s.shift_words()}" for s in steps)
+    return out, [{"at_s": s.t_before, "jump_s": s.t_after - s.t_before, "step_s": s.step_s} for s in steps]
 
 
 def drop_saturated(imu: ImuData, topic: str, warnings: list[str]) -> tuple[ImuData, dict[str, Any] | None]:

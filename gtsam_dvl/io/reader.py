@@ -341,6 +341,11 @@ def read_log(
                     for f in ("angular_velocity", "linear_acceleration"))
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
+    # a clock step (io/imu_faults.py) is undone with repair, else named in an error
+    try:
+        imu_ns, clock = undo_clock_steps(imu_ns, t0, b_omega, b_f, imu_topic, repair, warnings)
+    except GtsamDvlError as exc:
+        raise GtsamDvlError(f"{path}: {exc}") from None
     keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
     # the IMU's own orientation (when no attitude topic) now, then the stream's references let go (b_omega and
     # b_f keep the decoded messages' buffer, of which they are views)
@@ -351,13 +356,9 @@ def read_log(
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
     del imu_ns
-    # clock steps undone (with repair), saturated samples dropped (io/imu_faults.py; not in a noise-free
-    # simulation, whose values repeat by design); the gap record below is of the data missing from the log
+    # saturated samples dropped (io/imu_faults.py; not in a noise-free simulation, whose values repeat by
+    # design); the gap record below is of the data missing from the log
     meta = _metadata(src)
-    try:
-        imu_data, clock = undo_clock_steps(imu_data, imu_topic, repair, warnings)
-    except GtsamDvlError as exc:
-        raise GtsamDvlError(f"{path}: {exc}") from None
     imu_logged_t = imu_data.t
     saturation = None
     if meta.get("white_noise") is not False:

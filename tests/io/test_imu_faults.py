@@ -13,7 +13,7 @@ import pytest
 from gtsam_dvl.analysis.health import assess_log_health
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import ImuData, LogData
-from gtsam_dvl.io.imu_faults import clock_steps, saturated_mask, saturated_runs
+from gtsam_dvl.io.imu_faults import clock_steps, saturated_mask, saturated_runs, undo_clock_steps
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 
@@ -75,6 +75,18 @@ def test_a_clock_step_is_told_from_a_gap(at_s: float) -> None:
     assert found[0].step_s == pytest.approx(3.0, abs=1e-9) and found[0].t_before == pytest.approx(imu.t[k - 1])
     keep = (imu.t <= at_s) | (imu.t > at_s + 3.0)  # 3 s of samples missing: a gap
     assert clock_steps(imu.t[keep], imu.b_omega[keep], imu.b_f[keep]) == []
+    # the clock stepping back by 3 s, the samples running on
+    back = imu.t.copy()
+    back[k:] -= 3.0
+    found = clock_steps(back, imu.b_omega, imu.b_f)
+    assert len(found) == 1 and found[0].index == k and found[0].step_s == pytest.approx(-3.0, abs=1e-9)
+    # samples logged late (1 s of older samples again after the newest): no clock step
+    late = np.r_[np.arange(k), np.arange(k - 100, len(imu))]
+    assert clock_steps(imu.t[late], imu.b_omega[late], imu.b_f[late]) == []
+    # one sample's stamp wrong (back by 0.1 s): no window on its side, no clock step
+    one = imu.t.copy()
+    one[k] = one[k - 10]
+    assert clock_steps(one, imu.b_omega, imu.b_f) == []
     # steady motion: a step and a gap look alike, so it stays a gap
     flat = _turning_imu(60.0, seed=3)
     flat.b_omega[:, 2] -= 0.1 * np.sin(2 * np.pi * flat.t / 20.0)
@@ -112,6 +124,23 @@ def test_reader_names_a_clock_step_or_undoes_it(sim_paper3d_short: LogData, tmp_
     assert "/imu/data_raw" not in losses["gaps"]
     notes = assess_log_health(fixed).notes
     assert any("clock step at 284.990 s" in n and "shifted the later stamps back by 4.000 s" in n for n in notes)
+    # the clock stepping back by 4 s (on the stamps as the reader gets them: the file's messages in the order a
+    # recorder logged them, which our writer, ordering by stamp, cannot make): without the repair the stamps would
+    # go back (an error), with it the samples would be dropped until the stamps pass the newest one
+    ns = 1_700_000_000 * 10**9 + np.round(log.imu.t * 1e9).astype(np.int64)
+    back = ns.copy()
+    back[k:] -= 4_000_000_000
+    with pytest.raises(GtsamDvlError, match=r"clock step at 284\.990 s: the stamps jump back by 3\.990 s .*"
+                                            r"forward by 4\.000 s$"):
+        undo_clock_steps(back, 1_700_000_000 * 10**9, log.imu.b_omega, log.imu.b_f, "/imu", False, [])
+    warnings: list[str] = []
+    fixed_ns, found = undo_clock_steps(back, 1_700_000_000 * 10**9, log.imu.b_omega, log.imu.b_f, "/imu", True,
+                                       warnings)
+    np.testing.assert_array_equal(fixed_ns, ns)
+    assert found[0]["step_s"] == pytest.approx(-4.0, abs=1e-6) and "forward by 4.000 s" in warnings[0]
+    notes = assess_log_health(dataclasses.replace(log, metadata={"reader_losses": {"clock_steps": {"/imu": found}}}))
+    assert any("jump back by 3.990 s" in n and "shifted the later stamps forward by 4.000 s" in n
+               for n in notes.notes)
 
 
 def test_reader_drops_saturated_samples_as_gaps(sim_paper3d_short: LogData, tmp_path: Path) -> None:
