@@ -14,18 +14,18 @@ samples are dropped, so that every estimator crosses them as an IMU gap (estimat
 before is held, the motion model's uncertainty added; longer than imu.max_gap_s the run stops naming it).
 
 Clock steps. A stamp step of more than STEP_FACTOR nominal periods is either missing data (a gap; back in
-time: older samples logged late) or the IMU's clock jumping while the samples run on (a clock step). The samples tell which where the motion
-changes (a turn, an acceleration): fitting a line to the WINDOW samples on each side (per gyro and
-accelerometer axis), continuous data joins up at the next sample (the two lines agree one period after the
-last sample before the step, within STEP_JOIN_SIGMAS of their standard errors on every axis), while a gap of
-n missing samples would have moved the signal by about its slope times n (GAP_SHOW_SIGMAS or more on some
-axis). Both must hold to call it a clock step; in steady motion (no slope) the two cannot be told apart and
-the step stays a gap. After a clock step the samples continue one period after the last one before it: the
-later stamps are ahead by the step less one period, and shifting them back by that restores the IMU's
-timeline against the other sensors' clocks (the DVL's stamps, on their own clock, did not jump); a step back
-is undone forward the same way, where the stamps' rule would otherwise drop the samples until they pass the
-newest one. The reader does so with --repair, before its stamp checks, and otherwise stops with an error naming
-the step.
+time: older samples logged late) or the IMU's clock jumping while the samples run on (a clock step). The
+samples tell which where the motion changes (a turn, an acceleration): fitting a line to the WINDOW samples on
+each side (per gyro and accelerometer axis), continuous data joins up at the next sample (the two lines agree
+one period after the last sample before the step, within STEP_JOIN_SIGMAS of their standard errors on every
+axis), while a gap of n missing samples would have moved the signal by about its slope times n
+(GAP_SHOW_SIGMAS or more on some axis). Both must hold to call it a clock step; in steady motion (no slope) the
+two cannot be told apart and the step stays a gap. After a clock step the samples continue one period after
+the last one before it: the later stamps are ahead by the step less one period, and shifting them back by that
+restores the IMU's timeline against the other sensors' clocks (the DVL's stamps, on their own clock, did not
+jump); a step back is undone forward the same way, where the stamps' rule would otherwise drop the samples
+until they pass the newest one. The reader does so with --repair, before its stamp checks, and otherwise stops
+with an error naming the step.
 """
 
 from __future__ import annotations
