@@ -137,6 +137,33 @@ def _duplicates(log: LogData) -> LogData:
     return dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=t))
 
 
+def _clock_step(log: LogData, t: float, step_s: float) -> LogData:
+    """The IMU's stamps step_s ahead from t on, the samples running on (the IMU's clock jumped)."""
+    stamps = log.imu.t.copy()
+    stamps[int(np.searchsorted(stamps, t)):] += step_s
+    return dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=stamps))
+
+
+def _saturated_gyro(base: LogData, limit_rad_s: float) -> LogData:
+    """The same run with the gyro's range +-limit_rad_s (the simulator clips every axis there)."""
+    raw = dict(base.metadata["scenario"])
+    raw["imu"] = {**raw.get("imu", {}), "saturation_gyro_rad_s": limit_rad_s}
+    return simulate(scenario_from_dict(raw), SEED)
+
+
+def _frozen_dvl(log: LogData, t0: float, t1: float) -> LogData:
+    """The DVL's output frozen on the ping at t0 until t1."""
+    d_v = log.dvl.d_v.copy()
+    d_v[(log.dvl.t > t0) & (log.dvl.t <= t1)] = d_v[int(np.searchsorted(log.dvl.t, t0))]
+    return _replace_dvl(log, d_v=d_v)
+
+
+def _water_track(log: LogData, t0: float, t1: float) -> LogData:
+    """The DVL in water-track mode from t0 to t1 (its pings marked so, not valid as velocity over ground)."""
+    water = (log.dvl.t >= t0) & (log.dvl.t < t1)
+    return _replace_dvl(log, valid=log.dvl.valid & ~water, water_track=water)
+
+
 def _static_only(base: LogData) -> LogData:
     raw = dict(base.metadata["scenario"])
     raw["segments"] = [{"kind": "static", "duration_s": 300.0}]
@@ -182,6 +209,14 @@ def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
         "missing_dvl_topic": lambda: _through_file(base, lambda p: None, dvl_topic="/no/such/topic"),
         "static_only": lambda: _static_only(base),
         "dvl_5hz": lambda: _dvl_rate(base, 5.0),
+        # read through the file: the reader finds the IMU's faults (io/imu_faults.py)
+        "imu_clock_step_5s_turn_repaired": lambda: _through_file(_clock_step(base, turn - 15.0, 5.0),
+                                                                 lambda p: None, repair=True),
+        "imu_clock_step_5s_turn": lambda: _through_file(_clock_step(base, turn - 15.0, 5.0), lambda p: None),
+        "gyro_saturated_in_turns": lambda: _through_file(_saturated_gyro(base, 0.055), lambda p: None),
+        "gyro_saturated_long": lambda: _through_file(_saturated_gyro(base, 0.05), lambda p: None),
+        "dvl_frozen_40s_turn": lambda: _frozen_dvl(base, turn - 20.0, turn + 20.0),
+        "dvl_water_track_20s": lambda: _through_file(_water_track(base, leg + 20.0, leg + 40.0), lambda p: None),
     }
 
 

@@ -23,3 +23,9 @@ def sim_paper3d_clean(sim_paper3d: Scenario) -> LogData:
 @pytest.fixture(scope="session")
 def sim_paper2d_clean() -> LogData:
     return simulate(load_scenario("paper-2d"), seed=7, white_noise=False)
+
+
+@pytest.fixture(scope="session")
+def sim_paper3d_short() -> LogData:
+    """paper-3d-short with noise (seed 11, as the fault matrix's): 840 s, the paper's manoeuvres shortened."""
+    return simulate(load_scenario("paper-3d-short"), seed=11)

@@ -39,6 +39,7 @@ from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.ping_screen import frozen_runs
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
 
@@ -81,7 +82,8 @@ DVL_GAP_DEGRADED_S = 60.0
 
 # Counters that are not rejections (the EKF's slow pings still update the navigation; keyframe thinning is
 # by design).
-_NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweighted")
+_NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweighted", "dvl_water_track",
+                   "dvl_before_imu", "dvl_after_imu")
 
 
 @dataclass
@@ -433,6 +435,7 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
                                     "[dvl] max_speed_m_s")
         else:
             health.flag("note", text)
+    _check_unused_pings(counters, log, health)
     if dropped:
         why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
         health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
@@ -442,7 +445,9 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     if clipped:
         _check_offset_clip(result, clipped, health)
     gaps = result.info.get("imu_gaps") or {}
-    reader_saw = any("imu" in topic.lower() for topic in ((log.metadata.get("reader_losses") or {}).get("gaps") or {}))
+    losses = log.metadata.get("reader_losses") or {}
+    # the reader's record says where the IMU data are missing, and its saturation record the gaps it made
+    reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(losses.get("saturation"))
     if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
         text = (f"{gaps['count']} IMU gap(s), {gaps['total_s']:.2f} s in all, the longest {gaps['longest_s']:.2f} s, "
                 "crossed by holding the last sample (the sigmas grow there)")
@@ -470,12 +475,37 @@ def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
         health.flag("note", f"{text}, while the filter converged (it ended within, at {result.time_offset_s:+.3f} s)")
 
 
+def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) -> None:
+    """The pings not used for no fault of their own (water track, outside the IMU's span) and the frozen DVL
+    output (ping_screen.frozen_runs), each in its own words."""
+    n_pings = max(len(log.dvl), 1)
+    if water := counters.get("dvl_water_track", 0):
+        text = (f"{water} of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over "
+                "ground): not used")
+        many = water / n_pings > REJECTED_PINGS_DEGRADED
+        health.flag("degraded" if many else "note", text + ("; the DVL had no bottom lock there, so the "
+                                                            "trajectory is dead reckoned on the IMU" if many else ""))
+    before, after = counters.get("dvl_before_imu", 0), counters.get("dvl_after_imu", 0)
+    if before + after > 1:  # one ping at the IMU's first stamp: the sensors started together
+        health.flag("note", f"{before + after} DVL pings outside the IMU's time span ({before} at or before its "
+                            f"first sample, {after} after its last): not used")
+    if repeated := counters.get("dvl_repeated", 0):
+        runs = frozen_runs(log.dvl)
+        longest = max(runs, key=lambda r: r[2]) if runs else None
+        text = (f"DVL output frozen: {longest[2]} pings repeated bit for bit between {longest[0]:.0f} and "
+                f"{longest[1]:.0f} s" + (f" ({repeated} in {len(runs)} stretches)" if len(runs) > 1 else "")
+                + ", dropped; check the DVL") if longest else (
+                f"DVL output frozen: {repeated} pings repeated bit for bit while the IMU showed motion, dropped")
+        long = longest is not None and longest[1] - longest[0] > DVL_GAP_DEGRADED_S
+        health.flag("degraded" if long or repeated / n_pings > REJECTED_PINGS_DEGRADED else "warn", text)
+
+
 def _check_losses(log: LogData, health: Health) -> None:
     losses = log.metadata.get("reader_losses") or {}
     health.figures["losses"] = loss_figures(losses)
     for severity, text in loss_findings(losses):
         health.flag(severity, text)
-    known = ("salvage:", "gap(s) in the data", ": dropped ")
+    known = ("salvage:", "gap(s) in the data", ": dropped ", "the IMU saturated", "clock step at")
     for w in log.metadata.get("reader_warnings", []):
         if not any(k in w for k in known):  # the losses are said above, from the structured record
             health.flag("note", f"reader: {w}")
@@ -533,6 +563,20 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
             out.append(("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there"))
         else:
             out.append(("note", _gap_line(topic, g)))
+    for topic, report in sorted((losses.get("saturation") or {}).items()):
+        axes = ", ".join(f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} "
+                         f"{'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}" for a in report["axes"])
+        a, b = max(report["spans_s"], key=lambda s: s[1] - s[0]) if report["spans_s"] else (float("nan"),) * 2
+        out.append(("degraded", f"{topic}: the IMU saturated ({axes}): {report['samples']} samples at the range "
+                                f"limit in {report['stretches']} stretch(es), the longest {a:.2f} to {b:.2f} s, "
+                                "dropped and crossed as IMU gaps, holding the last sample before (the sigmas grow "
+                                "there); an IMU with a larger range avoids it"))
+    for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
+        for c in steps:
+            back = c["jump_s"] < 0
+            out.append(("note", f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump {'back ' * back}by "
+                                f"{abs(c['jump_s']):.3f} s while the samples run on): --repair shifted the later "
+                                f"stamps {'forward' if back else 'back'} by {abs(c['step_s']):.3f} s"))
     return out
 
 

@@ -79,7 +79,8 @@ Debug = Annotated[bool, typer.Option("--debug", help="Show tracebacks (also acce
 Quiet = Annotated[bool, typer.Option("-q", "--quiet", help="No progress bars.")]
 DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
 Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
-Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages.")]
+Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages; "
+                                                      "shift the IMU stamps back across a clock step.")]
 SchedulerTimeout = Annotated[float, typer.Option("--scheduler-timeout", metavar="SECONDS",
                                                  help="How long to try to reach --scheduler before giving up.")]
 

@@ -57,6 +57,12 @@ class DvlData:
     valid: np.ndarray  # (M,) bool: the 3-D velocity is usable
     beams: BeamData | None = None
     frame_id: str = "dvl_link"
+    # (M,) bool: water-track pings (velocity relative to the water, its own mode in the message), never valid
+    # as velocity over ground; None: none
+    water_track: np.ndarray | None = None
+    # a simulation without white noise: its velocity repeats bit for bit at constant velocity, which a real
+    # DVL's never does (estimators/ping_screen.py drops such repeats as frozen output unless this is set)
+    noise_free: bool = False
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -29,6 +29,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
 from gtsam_dvl.io.attitude import read_attitude
 from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, first_fix_origin, first_fix_time, read_gnss
+from gtsam_dvl.io.imu_faults import drop_saturated, undo_clock_steps
 from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
@@ -102,24 +103,27 @@ def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
         else:
             d_cov = np.full((m, 3, 3), np.nan)
     valid = np.isfinite(d_v).all(axis=1)
+    water = None
     if type_name == "marine_acoustic_msgs/msg/Dvl":
         # the message's own velocity mode: only bottom track is velocity over ground. A driver that fills the
         # field marks other pings 0 (invalid) or 2 (water track); one that never fills it leaves every ping 0,
-        # and then only water-track pings are refused
+        # and then only water-track pings are refused. Water-track pings are kept apart (DvlData.water_track)
         mode = arr["velocity_mode"]
         bottom = mode == 1
         mode_ok = bottom if bottom.any() else mode != 2
         valid &= mode_ok
         if beams is not None:
             beams.valid &= mode_ok[:, None]
+        water = np.asarray(mode == 2) if (mode == 2).any() else None
     return DvlData(t=np.zeros(m), d_v=d_v, d_cov=d_cov, valid=valid, beams=beams,
-                   frame_id=first_string(arr) or "dvl_link")
+                   frame_id=first_string(arr) or "dvl_link", water_track=water)
 
 
 def _select(dvl: DvlData, keep: np.ndarray, t: np.ndarray) -> DvlData:
     b = dvl.beams
     beams = None if b is None else BeamData(b.d_u[keep], b.v[keep], b.range[keep], b.valid[keep])
-    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id)
+    water = None if dvl.water_track is None else dvl.water_track[keep]
+    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water)
 
 
 def _metadata(src: Source) -> dict[str, Any]:
@@ -269,6 +273,8 @@ def read_log(
     with ``repair`` are dropped and counted. ``salvage`` recovers the intact chunks of a damaged MCAP.
     Warnings go to metadata["reader_warnings"], and what was lost, structured, to metadata["reader_losses"]:
     "repair" (per topic: messages dropped by reason), "gaps" (per topic: missing stretches, see stamp_gaps),
+    "clock_steps" (the IMU's, undone with ``repair``, else an error) and "saturation" (the IMU samples at their
+    range limit, dropped: io/imu_faults.py),
     "salvage" (with ``salvage``: io.storage.salvage.salvage_losses) and "messages_lost" (per topic).
     progress(fraction) is called while reading.
 
@@ -335,6 +341,11 @@ def read_log(
                     for f in ("angular_velocity", "linear_acceleration"))
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
+    # a clock step (io/imu_faults.py) is undone with repair, else named in an error
+    try:
+        imu_ns, clock = undo_clock_steps(imu_ns, t0, b_omega, b_f, imu_topic, repair, warnings)
+    except GtsamDvlError as exc:
+        raise GtsamDvlError(f"{path}: {exc}") from None
     keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
     # the IMU's own orientation (when no attitude topic) now, then the stream's references let go (b_omega and
     # b_f keep the decoded messages' buffer, of which they are views)
@@ -345,6 +356,13 @@ def read_log(
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
     del imu_ns
+    # saturated samples dropped (io/imu_faults.py; not in a noise-free simulation, whose values repeat by
+    # design); the gap record below is of the data missing from the log
+    meta = _metadata(src)
+    imu_logged_t = imu_data.t
+    saturation = None
+    if meta.get("white_noise") is not False:
+        imu_data, saturation = drop_saturated(imu_data, imu_topic, warnings)
 
     dvl_arr = decode(path, dvl_topic, dvl_type, raw[dvl_topic])
     if not len(dvl_arr):
@@ -375,7 +393,7 @@ def read_log(
                 setattr(mounting, attrs[0], pose[0])
                 setattr(mounting, attrs[1], pose[1])
 
-    meta = _metadata(src)
+    dvl.noise_free = meta.get("white_noise") is False  # a simulation without noise (DvlData.noise_free)
     depth = None
     if depth_topic:
         depth = _depth_data(src, depth_topic, raw[depth_topic], t0, repair, warnings, dropped, depth_z_down,
@@ -393,11 +411,15 @@ def read_log(
                              imu_attitude, t0,
                              mounting, repair, warnings, dropped, attitude_frame)
     gaps: dict[str, dict[str, Any]] = {}
-    for topic, t in ((imu_topic, imu_data.t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
+    for topic, t in ((imu_topic, imu_logged_t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
         if (gap := stamp_gaps(t)) is not None:
             gaps[topic] = gap
             warnings.append(gap_warning(topic, gap))
     losses: dict[str, Any] = {"repair": dropped, "gaps": gaps}
+    if clock:
+        losses["clock_steps"] = {imu_topic: clock}
+    if saturation:
+        losses["saturation"] = {imu_topic: saturation}
     if salvage:
         losses["salvage"] = salvage_losses(src, t0)
         warnings.append(salvage_report(losses["salvage"], src.path))

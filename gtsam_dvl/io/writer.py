@@ -137,6 +137,8 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     v = np.where(valid[:, None], dvl.d_v, np.nan)
     cov = np.asarray(dvl.d_cov, dtype=float).reshape(m, 9)
     arr["velocity_mode"], arr["dvl_type"] = 1, 0  # DVL_MODE_BOTTOM, DVL_TYPE_PISTON
+    if dvl.water_track is not None:
+        arr["velocity_mode"][np.asarray(dvl.water_track, dtype=bool)] = 2  # DVL_MODE_WATER
     arr["velocity"] = v
     arr["velocity_covar"] = np.where(np.isnan(cov).all(axis=1, keepdims=True), -1.0, cov)
     arr["course_gnd"] = np.arctan2(v[:, 1], v[:, 0])

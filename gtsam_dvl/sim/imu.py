@@ -135,3 +135,9 @@ def quantise(x: np.ndarray, step: float | tuple[float, float, float]) -> np.ndar
         return x
     safe = np.where(q > 0, q, 1.0)
     return np.where(q > 0, np.round(x / safe) * safe, x)
+
+
+def saturate(x: np.ndarray, limit: float) -> np.ndarray:
+    """x (n, 3) clipped to +-limit on every axis (limit 0: untouched): the output of a sensor driven past its
+    range, which reports the range's limit while the true value exceeds it."""
+    return x if limit <= 0 else np.clip(x, -limit, limit)

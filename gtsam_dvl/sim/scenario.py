@@ -111,7 +111,9 @@ class ImuSpec:
     """IMU errors in file units. Biases: 1-sigma of a random constant per axis unless values are given.
     quantisation_*: the logged outputs' step per axis (a number for all three, or a list of 3; 0: none): each
     sample is rounded to a multiple of it, round(x / q) q, after the biases and the noise (a driver's fixed-point
-    format, or an export with a fixed number of decimals)."""
+    format, or an export with a fixed number of decimals). saturation_*: the output range per axis (0: none):
+    every sample is clipped to +-it, after the quantisation (a sensor whose rate or specific force exceeds its
+    range reports the range's limit, so a turn faster than the gyro's range logs a run of equal samples)."""
 
     gyro_bias_deg_per_h: float = 0.0
     accel_bias_micro_g: float = 0.0
@@ -123,6 +125,8 @@ class ImuSpec:
     accel_bias_walk_micro_g_per_sqrt_h: float = 0.0
     quantisation_gyro_rad_s: float | tuple[float, float, float] = 0.0
     quantisation_accel_m_s2: float | tuple[float, float, float] = 0.0
+    saturation_gyro_rad_s: float = 0.0
+    saturation_accel_m_s2: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -351,6 +355,8 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
     for key in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2"):
         r.require(min(np.atleast_1d(getattr(imu, key))) >= 0, f"imu.{key}", "must be >= 0 (0: not quantised)")
+    for key in ("saturation_gyro_rad_s", "saturation_accel_m_s2"):
+        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (0: no saturation)")
     for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
         r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
     r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")

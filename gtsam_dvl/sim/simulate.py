@@ -33,7 +33,7 @@ from gtsam_dvl.core.types import (
 from gtsam_dvl.sim import imu as sim_imu
 from gtsam_dvl.sim.dvl import correlated_error, dvl_measure, dvl_true
 from gtsam_dvl.sim.gnss import first_fix_frame, reframe_truth, simulate_gnss
-from gtsam_dvl.sim.imu import ImuErrors, draw_biases, quantise, true_imu
+from gtsam_dvl.sim.imu import ImuErrors, draw_biases, quantise, saturate, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import PositionTrack, integrate_position
@@ -73,8 +73,11 @@ def simulate(
         ng, na = sim_imu.white_noise(scenario.imu, n, rate, np.random.Generator(np.random.PCG64(imu_ss)))
         b_omega += ng
         b_f += na
-    imu = ImuData(t=np.arange(n) / rate, b_omega=quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
-                  b_f=quantise(b_f, scenario.imu.quantisation_accel_m_s2))
+    imu = ImuData(t=np.arange(n) / rate,
+                  b_omega=saturate(quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
+                                   scenario.imu.saturation_gyro_rad_s),
+                  b_f=saturate(quantise(b_f, scenario.imu.quantisation_accel_m_s2),
+                               scenario.imu.saturation_accel_m_s2))
 
     truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)))
 
@@ -113,6 +116,8 @@ def simulate(
 def _log_data(scenario: Scenario, seed: int, gyro_bias0: np.ndarray, accel_bias0: np.ndarray,
               metadata: dict[str, Any], origin: GeoOrigin | None, **data: Any) -> LogData:
     """The LogData of a simulation: its sensor data and truth (data) with the typed fields of the scenario."""
+    if "dvl" in data:  # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
+        data["dvl"].noise_free = not metadata.get("white_noise", True)
     return LogData(t0_ns=scenario.t0_ns, metadata=metadata,
                    source=f"simulated:{scenario.name}:seed={seed}",
                    origin=origin,
@@ -269,7 +274,8 @@ def _metadata(
         },
         "sensors": {  # the optional errors only when on (the metadata of a scenario without them stays as it was)
             "imu": _without(listify(asdict(scenario.imu)), tuple(
-                k for k in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2")
+                k for k in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2", "saturation_gyro_rad_s",
+                            "saturation_accel_m_s2")
                 if not np.any(getattr(scenario.imu, k)))),
             "dvl": _without(listify(asdict(scenario.dvl)), ("correlated_sigma_m_s", "correlated_tau_s")
                             if scenario.dvl.correlated_sigma_m_s == 0 else ()),

@@ -56,7 +56,14 @@ from gtsam_dvl.core.types import (
 )
 from gtsam_dvl.sim.dvl import GaussMarkov, correlated_error, dvl_measure, dvl_true, event_blocks, janus_beams
 from gtsam_dvl.sim.gnss import first_fix_frame, gnss_fixes, gnss_rng, reframe_truth
-from gtsam_dvl.sim.imu import initial_biases, quantise, true_imu_range, walk_step_sigmas, white_noise_sigmas
+from gtsam_dvl.sim.imu import (
+    initial_biases,
+    quantise,
+    saturate,
+    true_imu_range,
+    walk_step_sigmas,
+    white_noise_sigmas,
+)
 from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import GL_U, GL_W, PositionTrack, node_times
 from gtsam_dvl.sim.simulate import (
@@ -459,8 +466,10 @@ class ChunkedSimulation:
             if streams.gyro_noise is not None and streams.accel_noise is not None:
                 b_omega += streams.gyro_noise.normal(0.0, sg, (b - a, 3))
                 b_f += streams.accel_noise.normal(0.0, sa, (b - a, 3))
-            imu = ImuData(t=np.arange(a, b) / rate, b_omega=quantise(b_omega, sc.imu.quantisation_gyro_rad_s),
-                          b_f=quantise(b_f, sc.imu.quantisation_accel_m_s2))
+            imu = ImuData(t=np.arange(a, b) / rate,
+                          b_omega=saturate(quantise(b_omega, sc.imu.quantisation_gyro_rad_s),
+                                           sc.imu.saturation_gyro_rad_s),
+                          b_f=saturate(quantise(b_f, sc.imu.quantisation_accel_m_s2), sc.imu.saturation_accel_m_s2))
 
             truth = self._truth(win, self._stamps(a, b, self.truth_step))
             n_p = np.concatenate([last_p, truth.n_p])
@@ -525,6 +534,7 @@ class ChunkedSimulation:
         noise, events = (None if d is None else d.start(m == 1) for d in (streams.dvl_noise, streams.dvl_events))
         dvl = dvl_measure(sc.dvl, _padded(self.t_dvl[j0:j1]), y, d_u, ranges,
                           noise, events)  # type: ignore[arg-type]  # _Draws: the draws dvl_measure takes
+        dvl.noise_free = not self.white_noise  # as simulate's (sim/simulate.py _log_data)
         return _rows(dvl, m) if m == 1 else dvl
 
 

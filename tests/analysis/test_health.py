@@ -142,13 +142,25 @@ def test_losses_and_rejections(logs: dict[str, LogData], batch_2d: NavResult) ->
     assert any("identity mounting" in n for n in health.notes)
     assert health.figures["losses"]["messages_lost"] == {"/imu/data_raw": 1501}
     assert len(loss_lines(meta["reader_losses"])) == 3
-    # rejected pings: a note below 5 % of the pings, degraded above
+    # rejected pings: a note below 5 % of the pings, degraded above; the ping at the first IMU stamp is none
+    assert batch_2d.info["counters"]["dvl_before_imu"] == 1 and batch_2d.info["counters"]["dvl_unusable"] == 0
+    assert not any("DVL ping" in x for x in assess_health(batch_2d, log).notes)
     for rejected, status in ((20, "ok"), (200, "degraded")):
         info = copy.deepcopy(batch_2d.info)
         info["counters"]["dvl_too_fast"] = rejected
         health = assess_health(dataclasses.replace(batch_2d, info=info), log)
         assert health.status == status
-        assert any(f"{rejected + 1} of {len(log.dvl)} DVL pings rejected" in x for x in health.notes + health.warnings)
+        assert any(f"{rejected} of {len(log.dvl)} DVL pings rejected ({rejected} too fast)" in x
+                   for x in health.notes + health.warnings)
+    # water track and pings outside the IMU's span in their own words, not as rejections
+    info = copy.deepcopy(batch_2d.info)
+    info["counters"].update(dvl_water_track=30, dvl_before_imu=3, dvl_after_imu=2)
+    health = assess_health(dataclasses.replace(batch_2d, info=info), log)
+    assert health.status == "ok" and not any("rejected" in n for n in health.notes)
+    assert f"30 of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over ground): " \
+           "not used" in health.notes
+    assert "5 DVL pings outside the IMU's time span (3 at or before its first sample, 2 after its last): not " \
+           "used" in health.notes
 
 
 def test_residuals_use_the_pings_the_estimator_used(logs: dict[str, LogData], batch_2d: NavResult) -> None:

@@ -46,7 +46,7 @@ def _ping_by_ping(log: LogData, cfg: DvlConfig, interval_s: float, spacing_s: fl
                   imu_last: bool = False) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     """EpochScheduler fed in delivery order (or every ping before any IMU sample, imu_last)."""
     counters: dict[str, int] = {}
-    sched = EpochScheduler(cfg, interval_s, spacing_s, counters)
+    sched = EpochScheduler(cfg, interval_s, spacing_s, counters, noise_free=log.dvl.noise_free)
     index = {float(t): j for j, t in enumerate(log.dvl.t.tolist())}
     imu, dvl = log.imu, log.dvl
     t_first = float(imu.t[0])
@@ -63,7 +63,7 @@ def _ping_by_ping(log: LogData, cfg: DvlConfig, interval_s: float, spacing_s: fl
         kept += sched.ready()
     late = sched.drop_waiting()  # the pings after the last IMU sample: outside the IMU's span (classify_pings)
     if late:
-        counters["dvl_unusable"] = counters.get("dvl_unusable", 0) + late
+        counters["dvl_after_imu"] = counters.get("dvl_after_imu", 0) + late
     return np.array([index[p.t] for p in kept]), np.array([p.key for p in kept]), counters
 
 

@@ -15,12 +15,16 @@ from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.gaps import with_fillers
 from gtsam_dvl.estimators.online import OnlineEstimator, smooth_online
+from gtsam_dvl.estimators.ping_screen import frozen_runs
 from gtsam_dvl.estimators.selection import (
+    AFTER_IMU,
+    BEFORE_IMU,
     IMPLAUSIBLE_ACCEL,
     REPEATED,
     TOO_FAST,
     UNUSABLE,
     USABLE,
+    WATER_TRACK,
     ZERO_WHILE_MOVING,
     PingScreen,
     classify_pings,
@@ -51,7 +55,7 @@ def _with_dropouts(log: LogData, t_end: float = 800.0) -> tuple[LogData, np.ndar
     valid[nan_ping] = valid[fast_ping] = True
     d_v[nan_ping] = np.nan
     d_v[fast_ping] = [15.0, 0.0, 0.0]
-    dvl = DvlData(t, d_v, d.d_cov[dvl_keep], valid, None)
+    dvl = DvlData(t, d_v, d.d_cov[dvl_keep], valid, None, noise_free=d.noise_free)
     expected = np.flatnonzero(valid & np.isfinite(d_v).all(axis=1) & (np.linalg.norm(np.nan_to_num(d_v), axis=1) < 10)
                               & (t > imu.t[0]))
     return dataclasses.replace(log, imu=imu, dvl=dvl, truth=None), expected
@@ -73,12 +77,14 @@ def test_batch_online_and_ekf_use_the_same_epochs(sim_paper3d_clean: LogData) ->
     np.testing.assert_array_equal(batch.t, t_expected)
     np.testing.assert_array_equal(online.t, t_expected)
     np.testing.assert_array_equal(ekf.t, t_expected)
-    # invalid, the NaN ping flagged valid, and the ping at the first IMU stamp (nothing to propagate from)
-    n_unusable = int((~log.dvl.valid).sum()) + 1 + int((log.dvl.t <= log.imu.t[0]).sum())
-    assert n_unusable + 1 + len(expected) == len(log.dvl)
+    # invalid and the NaN ping flagged valid; apart, the ping at the first IMU stamp (nothing to propagate from)
+    n_before = int((log.dvl.t <= log.imu.t[0]).sum())
+    n_unusable = int((~log.dvl.valid[n_before:]).sum()) + 1
+    assert n_before == 1 and n_unusable + n_before + 1 + len(expected) == len(log.dvl)
     for res in (batch, online, ekf):
         assert res.info["counters"].get("dvl_too_fast", 0) == 1
         assert res.info["counters"].get("dvl_unusable", 0) == n_unusable
+        assert res.info["counters"].get("dvl_before_imu", 0) == n_before
 
 
 def test_keyframe_thinning_is_the_same_online_and_in_batch(sim_paper3d_clean: LogData) -> None:
@@ -103,12 +109,16 @@ def test_classify_pings_reasons() -> None:
     valid = np.array([True, True, True, False, True, True])
     code = classify_pings(t, d_v, valid, None, None, DvlConfig(), t_imu_first=1.0, t_imu_last=9.0)
     # before the first IMU sample; NaN; too fast; flagged invalid; usable; after the last IMU sample
-    assert code.tolist() == [UNUSABLE, UNUSABLE, TOO_FAST, UNUSABLE, USABLE, UNUSABLE]
+    assert code.tolist() == [BEFORE_IMU, UNUSABLE, TOO_FAST, UNUSABLE, USABLE, AFTER_IMU]
     beams_ok = np.array([[True, False], [False, False], [True, True], [False, True], [True, True], [True, True]])
     finite = np.array([True, True, True, True, False, True])
     code = classify_pings(t, d_v, valid, beams_ok, finite, DvlConfig(use_beams=True), 1.0, 10.0)
     # with beams: any valid finite beam counts, the 3-D flag and speed do not
-    assert code.tolist() == [UNUSABLE, UNUSABLE, USABLE, USABLE, UNUSABLE, USABLE]
+    assert code.tolist() == [BEFORE_IMU, UNUSABLE, USABLE, USABLE, UNUSABLE, USABLE]
+    # water track, whatever its flag says (the reader marks it invalid), is counted as such
+    water = np.array([False, False, True, True, True, False])
+    code = classify_pings(t, d_v, valid, None, None, DvlConfig(), 1.0, 9.0, water_track=water)
+    assert code.tolist() == [BEFORE_IMU, UNUSABLE, WATER_TRACK, WATER_TRACK, WATER_TRACK, AFTER_IMU]
 
 
 @pytest.mark.parametrize("a,b", [(0.0, 1.0), (0.013, 0.987), (0.5, 0.5 + 1e-9), (0.9999, 3.0)])
@@ -199,9 +209,14 @@ def _synthetic_imu(t_end: float, accel: float = 0.0, t_accel: float = np.inf, ro
     return ImuData(t, w, f)
 
 
-def _codes(imu: ImuData, t: np.ndarray, d_v: np.ndarray, cfg: DvlConfig | None = None) -> list[int]:
-    dvl = DvlData(t, d_v, np.zeros((len(t), 3, 3)), np.ones(len(t), dtype=bool))
-    return screen_pings(dvl, np.arange(len(t)), imu, cfg or DvlConfig()).tolist()
+def _codes(imu: ImuData, t: np.ndarray, d_v: np.ndarray, cfg: DvlConfig | None = None,
+           noise_free: bool = True) -> list[int]:
+    """The screen's codes; noise_free: the velocities are a noise-free simulation's (repeats need motion)."""
+    dvl = DvlData(t, d_v, np.zeros((len(t), 3, 3)), np.ones(len(t), dtype=bool), noise_free=noise_free)
+    got = screen_pings(dvl, np.arange(len(t)), imu, cfg or DvlConfig()).tolist()
+    screen = PingScreen(cfg or DvlConfig(), repeats_need_motion=noise_free)  # the reference, ping by ping
+    assert [screen.check(float(x), y, imu.t, imu.b_omega, imu.b_f) for x, y in zip(t, d_v, strict=True)] == got
+    return got
 
 
 def test_ping_screen_rules() -> None:
@@ -233,17 +248,40 @@ def test_ping_screen_rules() -> None:
     assert _codes(_synthetic_imu(21.0), t, jumps, DvlConfig(screen=False)) == [USABLE] * 20
 
 
-@pytest.mark.parametrize("chunk", [1, 37, 250])
-def test_ping_screen_online_matches_the_whole_log(chunk: int, sim_paper3d_clean: LogData) -> None:
+def test_frozen_dvl_dropped_whatever_the_imu_shows() -> None:
+    """A real DVL (not a noise-free simulation) never repeats a velocity bit for bit: a frozen output is dropped
+    at constant velocity, in a steady turn (the IMU shows no change of the velocity) and while speeding up; the
+    first ping of the stretch is the real reading and stays; noisy pings pass; exact zeros at rest are left to
+    the zero rule (they pass at rest)."""
+    t = np.arange(1.0, 21.0)
+    rng = np.random.default_rng(5)
+    noisy = np.tile([2.0, 0.0, 0.0], (20, 1)) + rng.normal(0.0, 0.02, (20, 3))
+    assert _codes(_synthetic_imu(21.0), t, noisy, noise_free=False) == [USABLE] * 20
+    frozen = noisy.copy()
+    frozen[8:14] = frozen[7]
+    want = [USABLE] * 8 + [REPEATED] * 6 + [USABLE] * 6
+    assert _codes(_synthetic_imu(21.0), t, frozen, noise_free=False) == want
+    assert _codes(_synthetic_imu(21.0, roll_rate=0.05), t, frozen, noise_free=False) == want
+    assert _codes(_synthetic_imu(21.0), t, frozen, noise_free=True) == [USABLE] * 20  # no motion: the model's
+    assert _codes(_synthetic_imu(21.0), t, np.zeros((20, 3)), noise_free=False) == [USABLE] * 20
+    dvl = DvlData(t, frozen, np.zeros((20, 3, 3)), np.ones(20, dtype=bool))
+    assert frozen_runs(dvl) == [(9.0, 14.0, 6)]
+    assert frozen_runs(dataclasses.replace(dvl, noise_free=True)) == []
+
+
+@pytest.mark.parametrize(("chunk", "noise_free"), [(1, True), (37, True), (250, True), (37, False)])
+def test_ping_screen_online_matches_the_whole_log(chunk: int, noise_free: bool, sim_paper3d_clean: LogData) -> None:
     """The online estimator's use (IMU pushed in chunks, each ping checked once the IMU reaches it) gives the
-    whole-log decisions exactly, whatever the chunking."""
+    whole-log decisions exactly, whatever the chunking; also when the noise-free simulation is taken for a real
+    DVL (its repeats at constant velocity are then frozen output)."""
     log, _, counts = _with_bogus(sim_paper3d_clean)
+    log = dataclasses.replace(log, dvl=dataclasses.replace(log.dvl, noise_free=noise_free))
     cfg = DvlConfig()
     code = classify_pings(log.dvl.t, log.dvl.d_v, log.dvl.valid, None, None, cfg, float(log.imu.t[0]),
                           float(log.imu.t[-1]))
     idx = np.flatnonzero(code == USABLE)
     whole = screen_pings(log.dvl, idx, log.imu, cfg)
-    screen = PingScreen(cfg)
+    screen = PingScreen(cfg, repeats_need_motion=noise_free)
     imu, online = log.imu, []
     pos = 0
     for j in idx.tolist():
@@ -252,7 +290,11 @@ def test_ping_screen_online_matches_the_whole_log(chunk: int, sim_paper3d_clean:
             pos += chunk
         online.append(screen.check_buffered(float(log.dvl.t[j]), screened_value(log.dvl.d_v[j], None, cfg)))
     assert online == whole.tolist()
-    assert [int((whole == c).sum()) for c in (ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL)] == list(counts.values())
+    got = [int((whole == c).sum()) for c in (ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL)]
+    if noise_free:
+        assert got == list(counts.values())
+    else:  # the simulation's own repeats at constant velocity too
+        assert got[1] > counts["dvl_repeated"]
 
 
 def test_ping_covariance_rule() -> None:

@@ -1,4 +1,4 @@
-"""The whole-log ping screen (selection.screen_pings, bulk) against the sequential PingScreen fed one ping at a
+"""The whole-log ping screen (ping_screen.screen_pings, bulk) against the sequential PingScreen fed one ping at a
 time (the reference, and the online estimator's path): the same code for every ping, on a 5 Hz DVL version of
 paper-3d-short with faults injected into its DVL arrays (exact zeros while moving, a frozen output, repeated
 messages, gross outliers, a dropout longer than SCREEN_WINDOW_S, an IMU gap, beams switching on and off),
@@ -17,7 +17,7 @@ import pytest
 
 from gtsam_dvl.core.config import DvlConfig
 from gtsam_dvl.core.types import DvlData, ImuData, LogData
-from gtsam_dvl.estimators import selection
+from gtsam_dvl.estimators import ping_screen
 from gtsam_dvl.estimators.selection import (
     IMPLAUSIBLE_ACCEL,
     REPEATED,
@@ -38,7 +38,7 @@ SEED = 7
 
 def sequential_codes(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) -> np.ndarray:
     """The reference: PingScreen.check on each ping in turn (screen_pings before it was vectorised)."""
-    screen = PingScreen(cfg)
+    screen = PingScreen(cfg, repeats_need_motion=dvl.noise_free)
     code = np.zeros(len(idx), dtype=np.int8)
     b = dvl.beams
     for n, j in enumerate(idx.tolist()):
@@ -260,7 +260,7 @@ def test_band_zero_and_infinite(band: float, monkeypatch: pytest.MonkeyPatch) ->
     """With no safety band the bulk's own arithmetic decides every ping it can and still agrees (its sums differ
     from PingScreen's by rounding only); with an infinite band every ping after the first goes through
     PingScreen on the reference the walk tracks (last accepted ping, last_rate)."""
-    monkeypatch.setattr(selection, "_BAND", band)
+    monkeypatch.setattr(ping_screen, "_BAND", band)
     for cfg_name, beams in (("default", False), ("tight", False), ("beams", True)):
         _, bulk, seq = screened("everything", cfg_name, beams=beams)
         np.testing.assert_array_equal(bulk, seq)

@@ -126,7 +126,8 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
     def push_dvl(j: int) -> None:
         beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
         pace(float(dvl.t[j]))
-        n = est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams)
+        n = est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams,
+                         water_track=dvl.water_track is not None and bool(dvl.water_track[j]))
         view.publish_dvl(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
         epoch_done(n)
 

@@ -78,17 +78,18 @@ class DvlConfig(ConfigModel):
     robust_k is the kernel's threshold in sigmas of the whitened error (the norm of the 3-D error, or one
     beam's). huber_k is an alias of robust_k (a TOML file may set either): when set it overrides robust_k.
 
-    Screening (estimators/selection.py, PingScreen; the same causal rule in batch, online and EKF, against
+    Screening (estimators/ping_screen.py, PingScreen; the same causal rule in batch, online and EKF, against
     the previous accepted ping and the IMU samples stamped since it), on when screen is true:
     - an exact zero velocity (all three components 0.0) while moving, i.e. the IMU shows motion since the
       previous accepted ping (the body's velocity changed by more than motion_dv_m_s by the specific force,
       gravity turned by the gyro) or that ping was faster than moving_speed_m_s: "dvl_zero_while_moving";
-    - a velocity bit-identical to the previous accepted ping's while the IMU shows motion: "dvl_repeated";
+    - a non-zero velocity bit-identical to the previous accepted ping's (a frozen output), whatever the IMU
+      shows; in a noise-free simulation (DvlData.noise_free) only while the IMU shows motion: "dvl_repeated";
     - a velocity change |dv| since the previous accepted ping larger than
       max_accel_m_s2 dt + accel_imu_factor * (the change the IMU allows over dt) + jump_margin_m_s:
       "dvl_implausible_accel" (3-D velocity only, not with use_beams).
     A real DVL's velocity is noisy: it never reads exact zeros, nor repeats a reading bit for bit; a
-    simulator without noise does both, at rest and at constant velocity (the IMU then shows no motion).
+    simulator without noise does both, at rest and at constant velocity (its logs say so).
 
     model: a DVL preset (presets.py, `gtsam-dvl presets`): its ping noise fills default_noise_m_s and
     beam_noise_m_s, its correlated error correlated_sigma_m_s and correlated_tau_s, and its scale accuracy

@@ -207,6 +207,7 @@ class OnlineEstimator:
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
         est.noise.imu = noise.imu
         est.origin_t = origin_fix_time(log, config)
+        est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
         est.stated_config = stated.model_copy(update={"online": est.options}).validate()
         return est
 
@@ -231,16 +232,17 @@ class OnlineEstimator:
         return 0 if chunk is None else self._take_imu(*chunk)
 
     def push_dvl(self, t: float, d_v: Any, d_cov: Any = None, valid: bool = True,
-                 beams: tuple[Any, Any, Any] | None = None) -> int:
+                 beams: tuple[Any, Any, Any] | None = None, water_track: bool = False) -> int:
         """One DVL ping at t: velocity d_v (m/s, dvl_link) with covariance d_cov (3x3, None: the configured
         default), valid flag, and optionally beams = (d_u (B, 3), v (B,), valid (B,)). A ping without a valid
-        velocity (NaN) is counted, not an error. Returns the number of epochs completed."""
+        velocity (NaN) is counted, not an error, and so is a water-track ping (water_track). Returns the number
+        of epochs completed."""
         index = self._pings_pushed
         self._pings_pushed += 1
         ping = self._checks.ping(float(t), d_v, d_cov, valid, beams)
         if ping is None:
             return 0
-        ping.index = index
+        ping.index, ping.water_track = index, bool(water_track)
         if self.smoother is None:
             self._wait.pings.append(ping)
             return 0

@@ -17,7 +17,7 @@ class MessageSink(Protocol):
     def push_imu_batch(self, t: Any, b_omega: Any, b_f: Any) -> int: ...
 
     def push_dvl(self, t: float, d_v: Any, d_cov: Any = None, valid: bool = True,
-                 beams: tuple[Any, Any, Any] | None = None) -> int: ...
+                 beams: tuple[Any, Any, Any] | None = None, water_track: bool = False) -> int: ...
 
     def push_depth(self, t: float, depth_m: float = math.nan, variance_m2: float = math.nan, *,
                    pressure_pa: float | None = None, pressure_variance_pa2: float = math.nan) -> None: ...
@@ -50,7 +50,8 @@ def feed_log(estimator: MessageSink, log: LogData, progress: ProgressFn | None =
         else:
             j = m.start
             beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-            estimator.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams)
+            estimator.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams,
+                               water_track=dvl.water_track is not None and bool(dvl.water_track[j]))
             if progress is not None and j % step == 0:
                 progress(0.95 * j / n)
     estimator.finish()
