@@ -23,8 +23,8 @@ from gtsam_dvl.sim.scenario import list_builtin_scenarios, load_scenario, scenar
 pytestmark = pytest.mark.slow
 
 MODES = ("batch", "online", "ekf")
-MAX_SEGMENT_S = 90.0  # each segment (a square's legs: half of it), a static start 60 s
-MAX_DURATION_S = 480.0  # the segments after this are dropped
+MAX_SEGMENT_S = 70.0  # each segment (a square's legs: half of it), a static start 60 s
+MAX_DURATION_S = 360.0  # the segments after this are dropped
 
 
 def shortened(name: str) -> dict[str, Any]:

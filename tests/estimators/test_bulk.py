@@ -56,11 +56,10 @@ def configs() -> dict[str, EstimatorConfig]:
         "beams-lever": paper.model_copy(update={
             "dvl": paper.dvl.model_copy(update={"use_beams": True, "estimate_lever_arm": True})}),
         "offset-lever": default.model_copy(update={"dvl": default.dvl.model_copy(update={"estimate_lever_arm": True})}),
-        # the DVL's correlated error E(i) a variable of every DVL factor (estimators/correlated.py)
+        # the DVL's correlated error E(i) a variable of every DVL factor (estimators/correlated.py; with beams:
+        # its Jacobian d_u^T, tests/factors/test_dvl.py)
         "correlated": default.model_copy(update={"dvl": default.dvl.model_copy(update={
             "correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0})}),
-        "correlated-beams": paper.model_copy(update={"dvl": paper.dvl.model_copy(update={
-            "use_beams": True, "correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0})}),
     }
 
 
