@@ -209,7 +209,7 @@ def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
         "missing_dvl_topic": lambda: _through_file(base, lambda p: None, dvl_topic="/no/such/topic"),
         "static_only": lambda: _static_only(base),
         "dvl_5hz": lambda: _dvl_rate(base, 5.0),
-        # read through the file: the reader finds the IMU's faults (io/imu_faults.py)
+        # read through the file: the reader finds the IMU's faults (core/imu_faults.py)
         "imu_clock_step_5s_turn_repaired": lambda: _through_file(_clock_step(base, turn - 15.0, 5.0),
                                                                  lambda p: None, repair=True),
         "imu_clock_step_5s_turn": lambda: _through_file(_clock_step(base, turn - 15.0, 5.0), lambda p: None),

@@ -117,7 +117,7 @@ class Health:
 
 def assess_health(result: NavResult, log: LogData) -> Health:
     """The health of a run (module doc)."""
-    health = assess_log_health(log)
+    health = assess_log_health(log, result.info.get("screened_losses"))
     # the configuration the result was made with, at the noise levels it used (the IMU quantisation floor and
     # the fitted DVL noise of info["noise"]); a result of another version: judged with the default noise rule
     config = result.noise_config or EstimatorConfig()
@@ -160,12 +160,13 @@ def _check_noise_fit(result: NavResult, health: Health) -> None:
         health.flag("degraded", str(dvl.get("why")))
 
 
-def assess_log_health(log: LogData) -> Health:
+def assess_log_health(log: LogData, screened: dict[str, Any] | None = None) -> Health:
     """The checks that need only the log: does it move, what did the reader lose (also for results that are
-    not a NavResult, such as IO-DVLC's)."""
+    not a NavResult, such as IO-DVLC's); screened: what an estimator's own screen of a log that did not come
+    through the reader found (its result's info["screened_losses"])."""
     health = Health()
     _check_motion(log, health)
-    _check_losses(log, health)
+    _check_losses(log, health, screened)
     return health
 
 
@@ -445,7 +446,7 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     if clipped:
         _check_offset_clip(result, clipped, health)
     gaps = result.info.get("imu_gaps") or {}
-    losses = log.metadata.get("reader_losses") or {}
+    losses = log.metadata.get("reader_losses") or result.info.get("screened_losses") or {}
     # the reader's record says where the IMU data are missing, and its saturation record the gaps it made
     reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(losses.get("saturation"))
     if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
@@ -500,8 +501,10 @@ def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) 
         health.flag("degraded" if long or repeated / n_pings > REJECTED_PINGS_DEGRADED else "warn", text)
 
 
-def _check_losses(log: LogData, health: Health) -> None:
-    losses = log.metadata.get("reader_losses") or {}
+def _check_losses(log: LogData, health: Health, screened: dict[str, Any] | None = None) -> None:
+    """The reader's losses, or for a log that did not come through it those the estimator's own screen found
+    (estimators/gaps.py screened_in_memory: result.info["screened_losses"])."""
+    losses = log.metadata.get("reader_losses") or screened or {}
     health.figures["losses"] = loss_figures(losses)
     for severity, text in loss_findings(losses):
         health.flag(severity, text)

@@ -16,6 +16,7 @@ from gtsam_dvl.core.states import correlated_error, enabled, read_estimates, rea
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators import correlated
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
+from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
@@ -48,6 +49,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     t0 = time.perf_counter()
     noise = NoiseReport()
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
     timing["preintegrate"] = time.perf_counter() - t0
@@ -82,6 +84,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["noise"] = noise.as_dict()
+    if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
+        result.info["screened_losses"] = screened
     if correlated_error(config):
         result.info["dvl_correlated_error"] = correlated.info(config, values, len(builder.epochs))
     result.config = stated.to_dict()

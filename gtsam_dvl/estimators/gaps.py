@@ -19,12 +19,16 @@ EKF's strapdown, so all three cross a gap the same way.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig, SolverConfig
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.imu_faults import clock_steps, drop_saturated
+from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.selection import imu_pieces
 
 G0 = 9.80665  # m/s^2: how much specific force an attitude error of 1 rad turns into acceleration
@@ -194,3 +198,30 @@ def with_fillers(ping_t: np.ndarray, t_imu_end: float, max_spacing_s: float) -> 
             times.append(f)
             filler.append(True)
     return np.array(times), np.array(filler, dtype=bool)
+
+
+def screened_in_memory(log: LogData) -> LogData:
+    """A log that did not come through the reader (no metadata["reader_losses"]: built in memory, e.g. simulated
+    and handed to an estimator) screened as the reader screens one (core/imu_faults.py): a clock step in the IMU's
+    stamps is an error naming it (shift the stamps, or read the log from a file with --repair), saturated IMU
+    samples are dropped and crossed as IMU gaps, recorded in metadata["reader_losses"]["saturation"], which the
+    estimators copy to their result's info["screened_losses"] (screened_losses) for the health report. A
+    noise-free simulation (DvlData.noise_free), whose values repeat by design, is left as it is."""
+    if "reader_losses" in log.metadata or log.dvl.noise_free or not len(log.imu):
+        return log
+    steps = clock_steps(np.asarray(log.imu.t, dtype=float), log.imu.b_omega, log.imu.b_f)
+    if steps:
+        raise GtsamDvlError(f"{log.source or 'log'}: IMU {steps[0].words()}; shift the later stamps "
+                            f"{steps[0].shift_words()}, or read the log from its file with --repair")
+    warnings: list[str] = []
+    imu, report = drop_saturated(log.imu, "IMU", warnings)
+    if report is None:
+        return log
+    meta = {**log.metadata, "reader_losses": {"saturation": {"IMU": report}}, "screened_in_memory": True,
+            "reader_warnings": [*log.metadata.get("reader_warnings", []), *warnings]}
+    return dataclasses.replace(log, imu=imu, metadata=meta)
+
+
+def screened_losses(log: LogData) -> dict[str, Any] | None:
+    """What screened_in_memory found on log (the reader's record's shape), None for a log it left as it was."""
+    return log.metadata.get("reader_losses") if log.metadata.get("screened_in_memory") else None

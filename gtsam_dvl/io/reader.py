@@ -26,10 +26,10 @@ from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.imu_faults import drop_saturated, undo_clock_steps
 from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
 from gtsam_dvl.io.attitude import read_attitude
 from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, first_fix_origin, first_fix_time, read_gnss
-from gtsam_dvl.io.imu_faults import drop_saturated, undo_clock_steps
 from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
@@ -274,7 +274,7 @@ def read_log(
     Warnings go to metadata["reader_warnings"], and what was lost, structured, to metadata["reader_losses"]:
     "repair" (per topic: messages dropped by reason), "gaps" (per topic: missing stretches, see stamp_gaps),
     "clock_steps" (the IMU's, undone with ``repair``, else an error) and "saturation" (the IMU samples at their
-    range limit, dropped: io/imu_faults.py),
+    range limit, dropped: core/imu_faults.py),
     "salvage" (with ``salvage``: io.storage.salvage.salvage_losses) and "messages_lost" (per topic).
     progress(fraction) is called while reading.
 
@@ -341,7 +341,7 @@ def read_log(
                     for f in ("angular_velocity", "linear_acceleration"))
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
-    # a clock step (io/imu_faults.py) is undone with repair, else named in an error
+    # a clock step (core/imu_faults.py) is undone with repair, else named in an error
     try:
         imu_ns, clock = undo_clock_steps(imu_ns, t0, b_omega, b_f, imu_topic, repair, warnings)
     except GtsamDvlError as exc:
@@ -356,7 +356,7 @@ def read_log(
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
     del imu_ns
-    # saturated samples dropped (io/imu_faults.py; not in a noise-free simulation, whose values repeat by
+    # saturated samples dropped (core/imu_faults.py; not in a noise-free simulation, whose values repeat by
     # design); the gap record below is of the data missing from the log
     meta = _metadata(src)
     imu_logged_t = imu_data.t

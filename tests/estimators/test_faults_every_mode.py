@@ -16,6 +16,7 @@ import pytest
 from gtsam_dvl.analysis.health import assess_health
 from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
@@ -134,3 +135,24 @@ def test_frozen_dvl_and_water_track_in_every_mode(frozen_log: LogData, mode: str
         health.warnings)
     assert any(n.startswith("20 of 461 DVL pings are water track") for n in health.notes)
     assert any(n.startswith("40 of 461 DVL pings rejected (40 repeated)") for n in health.warnings)
+
+
+def test_a_log_built_in_memory_is_screened_as_the_reader_screens(sim_paper3d_short: LogData) -> None:
+    """A log handed straight to an estimator (not read from a file) is screened as the reader screens one
+    (estimators/gaps.py screened_in_memory): the saturated gyro samples dropped and said (before, the batch
+    smoother said "ok" with a calibration state 177 sigma off, measured), a clock step an error naming it."""
+    raw = copy.deepcopy(sim_paper3d_short.metadata["scenario"])
+    raw.setdefault("imu", {})["saturation_gyro_rad_s"] = 0.055
+    log = simulate(scenario_from_dict(raw), 11)
+    assert "reader_losses" not in log.metadata
+    res = smooth_batch(log, EstimatorConfig.paper())
+    worst, final = _worst_nsigma(res, log)
+    health = assess_health(res, log)
+    assert worst < 3.0 and final < 3.0, (worst, final)
+    assert health.status == "degraded"
+    assert any("the IMU saturated (gyro z at +0.055 rad/s)" in w for w in health.warnings)
+    t = sim_paper3d_short.imu.t.copy()
+    t[int(np.searchsorted(t, 285.0)):] += 5.0
+    stepped = dataclasses.replace(sim_paper3d_short, imu=dataclasses.replace(sim_paper3d_short.imu, t=t))
+    with pytest.raises(GtsamDvlError, match=r"IMU clock step at 284\.990 s.*--repair"):
+        run_ekf(stepped, EstimatorConfig())

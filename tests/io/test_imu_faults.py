@@ -1,4 +1,4 @@
-"""IMU faults the reader finds in the samples (io/imu_faults.py): a clipped axis is saturation and nothing else
+"""IMU faults the reader finds in the samples (core/imu_faults.py): a clipped axis is saturation and nothing else
 is; a clock step is told from a gap where the motion changes; the reader drops the saturated samples, names a
 clock step or undoes it with --repair, and records both."""
 
@@ -12,8 +12,8 @@ import pytest
 
 from gtsam_dvl.analysis.health import assess_log_health
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.imu_faults import clock_steps, saturated_mask, saturated_runs, undo_clock_steps
 from gtsam_dvl.core.types import ImuData, LogData
-from gtsam_dvl.io.imu_faults import clock_steps, saturated_mask, saturated_runs, undo_clock_steps
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 

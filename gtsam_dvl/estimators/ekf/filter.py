@@ -97,6 +97,8 @@ from gtsam_dvl.estimators.gaps import (
     hold_covariance,
     pieces_with_holds,
     sample_starts_with_gaps,
+    screened_in_memory,
+    screened_losses,
     with_fillers,
 )
 from gtsam_dvl.estimators.gnss import origin_fix_time
@@ -333,6 +335,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     config.validate()
     noise = NoiseReport()
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
     recentre = enabled(config, "time_offset") and config.ekf.recentre_time_offset
     offset_info: dict[str, Any] = {}
@@ -354,6 +357,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                 break
     result = _filter(log, config, progress)
     result.info["noise"] = noise.as_dict()
+    if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
+        result.info["screened_losses"] = screened
     if offset_info:
         result.info["time_offset_prior"] = offset_info
     result.config = stated.to_dict()

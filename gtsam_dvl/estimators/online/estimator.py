@@ -89,7 +89,7 @@ from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators import correlated
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import check_spacing, filler_due
+from gtsam_dvl.estimators.gaps import check_spacing, filler_due, screened_in_memory, screened_losses
 from gtsam_dvl.estimators.gnss import origin_fix_time
 from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.noise_levels import (
@@ -520,6 +520,7 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
     scenario names, else the defaults (EstimatorConfig.for_log)."""
     config = config or EstimatorConfig.for_log(log.metadata)
+    log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     options = (options if options is not None else config.online).model_copy()
     if mode is not None:
         options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
@@ -534,6 +535,8 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
     if correlated_error(config):
         result.info["dvl_correlated_error"] = correlated.info(config)
+    if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
+        result.info["screened_losses"] = screened
     if progress is not None:
         progress(1.0)
     return result
