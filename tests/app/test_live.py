@@ -229,10 +229,12 @@ def test_port_is_free_after_close(session: dict[str, Any]) -> None:
 
 
 def test_layout_file_is_the_generated_one_and_names_published_topics() -> None:
-    from pathlib import Path
+    from importlib import resources
 
-    path = Path(__file__).resolve().parents[2] / "layouts" / "gtsam_dvl_live.json"
-    assert path.read_text() == live.layout_json(), "regenerate: python -m gtsam_dvl.app.live --write-layout"
+    # the file as the installed package holds it (package data), not a path into the repository
+    installed = resources.files("gtsam_dvl.app.live").joinpath("layout.json").read_text(encoding="utf-8")
+    assert installed == live.installed_layout()
+    assert installed == live.layout_json(), "regenerate: python -m gtsam_dvl.app.live --write-layout"
     text = json.dumps(live.layout())
     topics = set(live.TOPICS.values())
     for series in (s for c in live.layout()["configById"].values() for s in c.get("paths", [])):
@@ -253,6 +255,26 @@ def test_without_foxglove_the_command_says_how_to_install(monkeypatch: pytest.Mo
     res = CliRunner().invoke(app, ["live", "missing.mcap"])
     assert res.exit_code == 1
     assert "pip install 'gtsam-dvl[live]'" in res.output and "Traceback" not in res.output
+
+
+def test_layout_option_writes_a_copy_and_never_overwrites(tmp_path: Any) -> None:
+    from typer.testing import CliRunner
+
+    from gtsam_dvl.app.cli import app
+
+    out = tmp_path / "my_layout.json"
+    res = CliRunner().invoke(app, ["live", "--layout", str(out)])  # no LOG: only the layout, no foxglove needed
+    assert res.exit_code == 0, res.output
+    assert out.read_text(encoding="utf-8") == live.installed_layout() and str(out) in res.output
+    json.loads(out.read_text(encoding="utf-8"))  # a JSON file Foxglove can import
+    out.write_text("mine")
+    again = CliRunner().invoke(app, ["live", "--layout", str(out)])
+    assert again.exit_code == 1 and "does not overwrite" in again.output and len(again.output.splitlines()) == 1
+    assert out.read_text() == "mine"
+    missing = CliRunner().invoke(app, ["live", "--layout", str(tmp_path / "no" / "layout.json")])
+    assert missing.exit_code == 1 and "create it first" in missing.output and not (tmp_path / "no").exists()
+    neither = CliRunner().invoke(app, ["live"])
+    assert neither.exit_code == 1 and "--layout" in neither.output and "Traceback" not in neither.output
 
 
 def test_speed_option() -> None:

@@ -168,10 +168,12 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
 
 def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
               config_path: Path | None = None, read_options: dict[str, Any] | None = None, wait: bool = False,
-              linger: bool = True, echo: Callable[[str], None] = print) -> ReplayOutcome:
+              linger: bool = True, echo: Callable[[str], None] = print, layout_path: Path | None = None,
+              ) -> ReplayOutcome:
     """`gtsam-dvl live`: read the log, serve the view on host:port, replay the log through the online estimator at
     speed (parse_speed), print the outcome and the run's health; then, with linger, keep serving until Ctrl-C.
-    wait: start the replay only once a client subscribes. The foxglove package is checked before anything else."""
+    wait: start the replay only once a client subscribes. layout_path: the layout file written for this run (the
+    console names it; None: it says how to write one). The foxglove package is checked before anything else."""
     import_foxglove()
     factor = parse_speed(speed)
     from gtsam_dvl.app.commands import load_log
@@ -185,8 +187,9 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     config = config or EstimatorConfig.for_log(log.metadata)
     estimator = OnlineEstimator.for_log(log, config)
     with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:
+        layout = layout_path or "the file that `gtsam-dvl live --layout gtsam_dvl_live.json` writes"
         echo(f"live view on {view.url}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, and "
-             "Layouts > Import from file > layouts/gtsam_dvl_live.json")
+             f"Layouts > Import from file > {layout}")
         outcome: ReplayOutcome | None = None
         try:
             if wait:
