@@ -219,6 +219,25 @@ def test_truth_and_status(session: dict[str, Any]) -> None:
     assert last["final"] and last["counters"] == session["result"].info["counters"]
 
 
+def test_final_status_has_the_consoles_numbers(session: dict[str, Any]) -> None:
+    """The last status message and the console's last line (ReplayOutcome.describe) are one computation: the same
+    epochs, wall time, log time and real-time factor. The client connected and subscribed before the replay (as
+    --wait does): that time is not in the wall time."""
+    outcome = session["outcome"]
+    statuses = [json.loads(b) for _, b in session["out"].messages[live.TOPICS["status"]]]
+    last = statuses[-1]
+    print(outcome.describe(), "| final status:", {k: last[k] for k in ("epochs", "wall_s", "log_s",
+                                                                       "real_time_factor")})
+    assert last["epochs"] == outcome.epochs_published == len(statuses)  # one status per epoch, none missed
+    assert last["wall_s"] == outcome.wall_s and last["log_s"] == outcome.log_s
+    assert last["real_time_factor"] == outcome.real_time_factor == pytest.approx(outcome.log_s / outcome.wall_s)
+    assert outcome.wall_s <= session["replay_s"]  # the replay only, not the client's connection before it
+    log = session["log"]
+    assert outcome.log_s == pytest.approx(float(log.imu.t[-1] - min(log.imu.t[0], log.dvl.t[0])), abs=1e-9)
+    assert f"{outcome.real_time_factor:.1f}x real time" in outcome.describe()
+    assert f"{last['epochs']} epochs published" in outcome.describe()
+
+
 def test_port_is_free_after_close(session: dict[str, Any]) -> None:
     port = session["port"]
     again = live.LiveView(port=port)
@@ -328,9 +347,11 @@ def test_replay_is_paced_at_the_requested_speed(session: dict[str, Any]) -> None
         now[0] += s
 
     with live.LiveView(port=0, t0_ns=log.t0_ns) as view:
+        now[0] = 100.0  # the view waited 100 s for a client (--wait): not part of the replay's wall time
         out = live.replay_log(log, view, OnlineEstimator.for_log(log, EstimatorConfig.paper()), speed=25.0,
                               health=False, clock=lambda: now[0], sleep=sleep)
     span = float(log.imu.t[-1] - log.imu.t[0])
     print(f"{len(sleeps)} sleeps, fake wall {out.wall_s:.3f} s for {span:.0f} s of log at 25x")
     assert out.wall_s == pytest.approx(span / 25.0, abs=0.1 / 25.0)
+    assert out.real_time_factor == pytest.approx(25.0, rel=0.01) and "25.0x real time" in out.describe()
     assert len(sleeps) > span / 0.1 * 0.9  # the IMU in pieces of about 0.1 s

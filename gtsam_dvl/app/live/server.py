@@ -13,6 +13,7 @@ import math
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -113,6 +114,60 @@ class _Path:
                              np.asarray(self.n_q_b)[keep])
 
 
+@dataclass
+class Progress:
+    """A run's progress: the epochs published, the log time pushed (t_first to t_last, s) and the wall time it took
+    (clock, s). The status topic and the console's last line (ReplayOutcome) both read it, so they give the same
+    numbers. It starts at start() (replay_log: when the replay starts, after any wait for a client) or at the
+    first message; finish() freezes the wall time at the final estimate."""
+
+    clock: Callable[[], float] = time.monotonic
+    wall0: float | None = None
+    wall_end: float | None = None
+    t_first: float | None = None
+    t_last: float | None = None
+    epochs: int = 0
+
+    def start(self, t_first: float, clock: Callable[[], float] | None = None) -> float:
+        """Restart at log time t_first (s) now; returns the wall clock's start."""
+        if clock is not None:
+            self.clock = clock
+        self.wall0, self.wall_end = self.clock(), None
+        self.t_first = self.t_last = float(t_first)
+        self.epochs = 0
+        return self.wall0
+
+    def tick(self, t: float) -> None:
+        """A message at log time t (s) was pushed."""
+        if self.wall0 is None or self.t_first is None or self.t_last is None:
+            self.start(t)
+        else:
+            self.t_first, self.t_last = min(self.t_first, float(t)), max(self.t_last, float(t))
+
+    def finish(self) -> None:
+        """Freeze the wall time (the run is over)."""
+        if self.wall_end is None:
+            self.wall_end = self.clock()
+
+    @property
+    def wall_s(self) -> float:
+        """Wall time since start(), s (frozen by finish())."""
+        if self.wall0 is None:
+            return 0.0
+        return (self.wall_end if self.wall_end is not None else self.clock()) - self.wall0
+
+    @property
+    def log_s(self) -> float:
+        """Log time pushed, s."""
+        return 0.0 if self.t_first is None or self.t_last is None else self.t_last - self.t_first
+
+    @property
+    def real_time_factor(self) -> float | None:
+        """Log seconds per wall second; None before both are positive (or if not finite)."""
+        wall, span = self.wall_s, self.log_s
+        return num(span / wall) if wall > 0 and span > 0 else None
+
+
 class LiveView:
     """Publishes an online estimator's epochs, the raw messages and the truth on a Foxglove WebSocket (the
     package doc lists the topics). port: start a server on host:port (0: a free port, see .port); or server: a
@@ -147,10 +202,9 @@ class LiveView:
         self.host = host
         self._context = context  # the channels live as long as their context: keep it
         self._closed = False
-        self._wall0 = time.monotonic()
+        self.progress = Progress()  # epochs published, log and wall time: the status's numbers
         self._last_t: float | None = None
         self._broadcast_ns = -1
-        self._first_t: float | None = None
         self._counters: dict[str, int] = {}
         self._path, self._truth_path = _Path(), _Path()
         ch: dict[str, Any] = {}
@@ -223,8 +277,7 @@ class LiveView:
         if broadcast and ns > self._broadcast_ns:
             self._broadcast_ns = ns
             self.server.broadcast_time(ns)
-        if self._first_t is None:
-            self._first_t = float(t)
+        self.progress.tick(t)
         return ns
 
     def publish_epoch(self, estimate: OnlineEstimate, *, counters: dict[str, int] | None = None,
@@ -256,11 +309,14 @@ class LiveView:
                             "gyro_deg_per_h": xyz(estimate.gyro_bias / DEG_PER_H, sig[3:] / DEG_PER_H)}, log_time=ns)
         if counters is not None:
             self._publish_counters(t, ns, counters)
-        wall = time.monotonic() - self._wall0
-        span = t - (self._first_t if self._first_t is not None else t)
-        ch["status"].log({**head, "epochs": len(self._path.stamps_ns), "counters": dict(self._counters),
-                          "latency_ms": None if latency_s is None else num(latency_s * 1e3), "wall_s": wall,
-                          "real_time_factor": num(span / wall) if wall > 0 and span > 0 else None}, log_time=ns)
+        progress = self.progress
+        progress.epochs += 1
+        if final:
+            progress.finish()
+        ch["status"].log({**head, "epochs": progress.epochs, "counters": dict(self._counters),
+                          "latency_ms": None if latency_s is None else num(latency_s * 1e3),
+                          "wall_s": progress.wall_s, "log_s": progress.log_s,
+                          "real_time_factor": progress.real_time_factor}, log_time=ns)
 
     def _publish_counters(self, t: float, ns: int, counters: dict[str, int]) -> None:
         for name, n in counters.items():
@@ -307,6 +363,7 @@ class LiveView:
         """IMU samples (N,), (N, 3) rad/s, (N, 3) m/s^2 in imu_link, as pushed (only while subscribed)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if len(t):
+            self.progress.tick(float(t[0]))
             self._tick(float(t[-1]))
         channel = self._channels["imu"]
         if not channel.has_sinks():
