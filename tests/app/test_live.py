@@ -296,6 +296,26 @@ def test_layout_option_writes_a_copy_and_never_overwrites(tmp_path: Any) -> None
     assert neither.exit_code == 1 and "--layout" in neither.output and "Traceback" not in neither.output
 
 
+def test_every_interface_prints_addresses_a_client_can_open() -> None:
+    """Served on 0.0.0.0, the view names ws://127.0.0.1:PORT (a client connects to it) and this machine's name and
+    network address, never ws://0.0.0.0, which a browser cannot open."""
+    import socket
+
+    from gtsam_dvl.app.live.server import reachable_urls
+
+    assert reachable_urls("127.0.0.1", 8765) == ["ws://127.0.0.1:8765"]
+    assert reachable_urls("::1", 8765) == ["ws://[::1]:8765"]
+    assert reachable_urls("::", 8765)[0] == "ws://[::1]:8765"
+    with live.LiveView(port=0, host="0.0.0.0") as view:
+        urls = view.urls
+        print(urls)
+        assert view.url == urls[0] == f"ws://127.0.0.1:{view.port}"
+        assert f"ws://{socket.gethostname()}:{view.port}" in urls
+        assert not any("0.0.0.0" in u for u in urls) and all(u.endswith(f":{view.port}") for u in urls)
+        with websockets_sync.connect(view.url, subprotocols=SUBPROTOCOLS, open_timeout=5, proxy=None) as ws:
+            assert json.loads(ws.recv(timeout=5))["op"] == "serverInfo"
+
+
 def test_speed_option() -> None:
     assert live.parse_speed("max") == math.inf and live.parse_speed("0") == math.inf
     assert live.parse_speed("2.5") == 2.5
@@ -315,10 +335,11 @@ def test_live_command_replays_a_log_file(session: dict[str, Any], tmp_path: Any)
     write_log(path, session["log"])
     t0 = time.perf_counter()
     res = CliRunner().invoke(app, ["live", str(path), "--speed", "max", "--port", "0", "--exit-when-done", "-c",
-                                   "paper"])
+                                   "paper", "--host", "0.0.0.0"])
     print(res.output, f"({time.perf_counter() - t0:.1f} s)")
     assert res.exit_code == 0, res.output
     assert "live view on ws://127.0.0.1:" in res.output and "health:" in res.output
+    assert "from other machines: ws://" in res.output and "ws://0.0.0.0" not in res.output  # served on 0.0.0.0
     published = int(res.output.split(" epochs published")[0].rsplit(" ", 1)[1])
     assert published == session["outcome"].epochs_published  # the file replays as the in-memory log does
 

@@ -188,8 +188,9 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     estimator = OnlineEstimator.for_log(log, config)
     with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:
         layout = layout_path or "the file that `gtsam-dvl live --layout gtsam_dvl_live.json` writes"
-        echo(f"live view on {view.url}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, and "
-             f"Layouts > Import from file > {layout}")
+        others = f" (from other machines: {', '.join(view.urls[1:])})" if len(view.urls) > 1 else ""
+        echo(f"live view on {view.url}{others}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, "
+             f"and Layouts > Import from file > {layout}")
         outcome: ReplayOutcome | None = None
         try:
             if wait:

@@ -58,6 +58,41 @@ def _odometry(stamp_ns: int, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.ndarray
                              np.reshape(twist_cov, (1, 6, 6))).tobytes()
 
 
+WILDCARD_HOSTS = ("0.0.0.0", "::", "")  # serve on every interface: not an address a client can open
+
+
+def ws_url(host: str, port: int) -> str:
+    """ws://host:port, an IPv6 address in brackets."""
+    return f"ws://[{host}]:{port}" if ":" in host else f"ws://{host}:{port}"
+
+
+def _outward_address(ipv6: bool) -> str | None:
+    """This machine's address on the network it routes to (the UDP socket is only connected: no packet is sent;
+    the documentation prefixes of RFC 5737 / RFC 3849 as the peer), or None without a route."""
+    family, peer = (socket.AF_INET6, "2001:db8::1") if ipv6 else (socket.AF_INET, "192.0.2.1")
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as s:
+            s.connect((peer, 9))
+            address = str(s.getsockname()[0])
+    except OSError:
+        return None
+    return None if address.startswith("127.") or address in ("::1", "0.0.0.0", "::") else address
+
+
+def reachable_urls(host: str, port: int) -> list[str]:
+    """The addresses a client opens for a server on host:port: the host itself; for a wildcard host (0.0.0.0 or
+    ::, every interface), this machine's loopback address, then its hostname and its address on the network for
+    other machines (ws://0.0.0.0 is not an address a browser can open)."""
+    if host not in WILDCARD_HOSTS:
+        return [ws_url(host, port)]
+    ipv6 = host == "::"
+    urls = [ws_url("::1" if ipv6 else "127.0.0.1", port)]
+    for name in (socket.gethostname(), _outward_address(ipv6)):
+        if name and ws_url(name, port) not in urls:
+            urls.append(ws_url(name, port))
+    return urls
+
+
 def _wait_port_free(host: str, port: int, timeout_s: float = 2.0) -> None:
     """WebSocketServer.stop() returns before the listening socket is closed: wait until a new server could bind
     the port (SO_REUSEADDR, as servers bind), at most timeout_s."""
@@ -226,7 +261,14 @@ class LiveView:
 
     @property
     def url(self) -> str:
-        return f"ws://{self.host}:{self.port}"
+        """The address to open on this machine (for host 0.0.0.0: ws://127.0.0.1:port)."""
+        return self.urls[0]
+
+    @property
+    def urls(self) -> list[str]:
+        """The addresses to open: url, then, when serving on every interface, the ones for other machines
+        (reachable_urls)."""
+        return reachable_urls(self.host, self.port)
 
     def wait_for_subscribers(self, topics: list[str] | None = None, timeout_s: float = 10.0) -> bool:
         """Block until a client subscribes to every topic of topics (None: to any topic), at most timeout_s.
