@@ -25,6 +25,7 @@ import pytest
 # missing one fails the suite instead of hiding the live view's test
 import websockets.sync.client as websockets_sync
 from rosbags import typesys
+from websockets.exceptions import ConnectionClosed, ConnectionClosedOK
 
 from gtsam_dvl.app import live
 from gtsam_dvl.core.config import EstimatorConfig
@@ -59,16 +60,23 @@ class Received:
     advertised: dict[str, dict[str, Any]] = field(default_factory=dict)
     messages: dict[str, list[tuple[int, bytes]]] = field(default_factory=dict)
     error: BaseException | None = None
+    closed: ConnectionClosed | None = None  # how the server ended the connection
+    after_final: int = 0  # frames received after the final epoch's status
 
 
 def _reader(ws: Any, subs: dict[int, str], out: Received, done: threading.Event) -> None:
-    """Collect binary message frames until the final epoch's status (or 20 s without a frame)."""
+    """Collect binary message frames until the server closes the connection (or 20 s without a frame)."""
+    final_seen = False
     try:
         while not done.is_set():
             try:
                 frame = ws.recv(timeout=20.0)
             except TimeoutError:
                 break
+            except ConnectionClosed as closed:
+                out.closed = closed
+                break
+            out.after_final += final_seen
             if isinstance(frame, str):
                 continue
             if frame[0] != 1:  # 2 = time, others not subscribed
@@ -77,8 +85,7 @@ def _reader(ws: Any, subs: dict[int, str], out: Received, done: threading.Event)
             topic = subs[sub_id]
             payload = bytes(frame[13:])
             out.messages.setdefault(topic, []).append((log_ns, payload))
-            if topic == live.TOPICS["status"] and json.loads(payload)["final"]:  # the last of the final epoch
-                break
+            final_seen = final_seen or (topic == live.TOPICS["status"] and json.loads(payload)["final"])
     except BaseException as exc:  # surfaced by the test
         out.error = exc
 
@@ -111,6 +118,7 @@ def session() -> dict[str, Any]:
             t0 = time.perf_counter()
             outcome = live.replay_log(log, view, estimator, speed=math.inf)
             replay_s = time.perf_counter() - t0
+            view.close()  # at once, as `live --exit-when-done` does: the client still gets everything, then a close
             reader.join(timeout=20)
             done.set()
     finally:
@@ -236,6 +244,19 @@ def test_final_status_has_the_consoles_numbers(session: dict[str, Any]) -> None:
     assert outcome.log_s == pytest.approx(float(log.imu.t[-1] - min(log.imu.t[0], log.dvl.t[0])), abs=1e-9)
     assert f"{outcome.real_time_factor:.1f}x real time" in outcome.describe()
     assert f"{last['epochs']} epochs published" in outcome.describe()
+
+
+def test_the_server_closes_the_connection_normally_after_the_replay(session: dict[str, Any]) -> None:
+    """Closed at the end of the replay, the server sends a close frame and the closing handshake completes (not a
+    dropped socket, 1006) after every message: the final epoch's status arrives before it. foxglove-sdk's server
+    sends its close frame without a status code, which a client reports as 1005 (no status, a normal close)."""
+    out = session["out"]
+    closed = out.closed
+    print(f"close: received {closed.rcvd if closed else None}, sent {closed.sent if closed else None}; "
+          f"{out.after_final} frames after the final status")
+    assert isinstance(closed, ConnectionClosedOK), closed  # a clean closing handshake, not a dropped socket
+    assert closed.rcvd is not None and closed.rcvd.code in (1000, 1005)  # the server's close frame arrived
+    assert json.loads(out.messages[live.TOPICS["status"]][-1][1])["final"]
 
 
 def test_port_is_free_after_close(session: dict[str, Any]) -> None:

@@ -286,7 +286,8 @@ class LiveView:
                 self._listener.cond.wait(left)
 
     def close(self) -> None:
-        """Stop the server (if this view started it) and free its port."""
+        """Stop the server (if this view started it) and free its port. Each client gets a close frame (a normal
+        closing handshake; foxglove-sdk sends it without a status code: clients report 1005)."""
         if self._closed:
             return
         self._closed = True
