@@ -497,7 +497,7 @@ LIVE_HELP = (
 @app.command(help=LIVE_HELP)
 @_user_errors
 def live(
-    log: Annotated[Path | None, typer.Argument(help="MCAP log (or rosbag2 directory).")] = None,
+    log: Annotated[Path | None, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")] = None,
     layout: Annotated[Path | None, typer.Option("--layout", help="Write the Foxglove layout of the live view to "
                                                 "this file (not overwritten; its folder must exist); without a "
                                                 "LOG, only that.")] = None,
