@@ -10,7 +10,7 @@ replay_log).
     pip install 'gtsam-dvl[live]'
     python examples/live_view.py --speed 10          # then in Foxglove: Open connection > Foxglove WebSocket >
                                                      # ws://localhost:8765; Layouts > Import from file >
-                                                     # layouts/gtsam_dvl_live.json
+                                                     # the file `gtsam-dvl live --layout FILE` writes
 
 Options: --scenario (a built-in name or TOML file), --seed, --duration-s (cut the run), --speed (times real
 time; 0: as fast as possible), --port (0: any free port), --wait (start once Foxglove subscribes).

@@ -489,14 +489,18 @@ LIVE_HELP = (
     "map -> base_link, /gtsam_dvl/odometry with covariance), the path, DVL scale, misalignment, time offset and "
     "IMU biases with their sigmas, the estimator's counters and the health warnings, the raw IMU / DVL / depth "
     "messages and the truth when the log has it. In Foxglove: Open connection > Foxglove WebSocket > "
-    "ws://localhost:8765, then Layouts > Import from file > layouts/gtsam_dvl_live.json (docs/live-view.md)."
+    "ws://localhost:8765, then Layouts > Import from file > the layout that `gtsam-dvl live --layout "
+    "gtsam_dvl_live.json` writes (docs/live-view.md)."
 )
 
 
 @app.command(help=LIVE_HELP)
 @_user_errors
 def live(
-    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    log: Annotated[Path | None, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")] = None,
+    layout: Annotated[Path | None, typer.Option("--layout", help="Write the Foxglove layout of the live view to "
+                                                "this file (not overwritten; its folder must exist); without a "
+                                                "LOG, only that.")] = None,
     speed: Annotated[str, typer.Option(help="Times real time (e.g. 1, 10); 0 or 'max': as fast as possible.")
                      ] = "1",
     port: Annotated[int, typer.Option(help="WebSocket port (0: any free port, printed).")] = 8765,
@@ -512,9 +516,16 @@ def live(
     debug: Debug = False,
 ) -> None:
     """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
-    from gtsam_dvl.app.live import serve_log
+    from gtsam_dvl.app.live import copy_layout, serve_log
 
+    if layout is not None:
+        typer.echo(f"wrote {copy_layout(layout)}: in Foxglove, Layouts > Import from file")
+    if log is None:
+        if layout is None:
+            raise GtsamDvlError("live: give a LOG to replay (or --layout PATH to write the Foxglove layout)")
+        return
     serve_log(log, speed=speed, port=port, host=host, config_path=config, wait=wait, linger=not exit_when_done,
+              layout_path=layout,
               read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
                                          attitude_topic, truth_topic), echo=typer.echo)
 

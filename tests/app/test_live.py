@@ -25,6 +25,7 @@ import pytest
 # missing one fails the suite instead of hiding the live view's test
 import websockets.sync.client as websockets_sync
 from rosbags import typesys
+from websockets.exceptions import ConnectionClosed, ConnectionClosedOK
 
 from gtsam_dvl.app import live
 from gtsam_dvl.core.config import EstimatorConfig
@@ -59,16 +60,23 @@ class Received:
     advertised: dict[str, dict[str, Any]] = field(default_factory=dict)
     messages: dict[str, list[tuple[int, bytes]]] = field(default_factory=dict)
     error: BaseException | None = None
+    closed: ConnectionClosed | None = None  # how the server ended the connection
+    after_final: int = 0  # frames received after the final epoch's status
 
 
 def _reader(ws: Any, subs: dict[int, str], out: Received, done: threading.Event) -> None:
-    """Collect binary message frames until the final epoch's status (or 20 s without a frame)."""
+    """Collect binary message frames until the server closes the connection (or 20 s without a frame)."""
+    final_seen = False
     try:
         while not done.is_set():
             try:
                 frame = ws.recv(timeout=20.0)
             except TimeoutError:
                 break
+            except ConnectionClosed as closed:
+                out.closed = closed
+                break
+            out.after_final += final_seen
             if isinstance(frame, str):
                 continue
             if frame[0] != 1:  # 2 = time, others not subscribed
@@ -77,8 +85,7 @@ def _reader(ws: Any, subs: dict[int, str], out: Received, done: threading.Event)
             topic = subs[sub_id]
             payload = bytes(frame[13:])
             out.messages.setdefault(topic, []).append((log_ns, payload))
-            if topic == live.TOPICS["status"] and json.loads(payload)["final"]:  # the last of the final epoch
-                break
+            final_seen = final_seen or (topic == live.TOPICS["status"] and json.loads(payload)["final"])
     except BaseException as exc:  # surfaced by the test
         out.error = exc
 
@@ -111,6 +118,7 @@ def session() -> dict[str, Any]:
             t0 = time.perf_counter()
             outcome = live.replay_log(log, view, estimator, speed=math.inf)
             replay_s = time.perf_counter() - t0
+            view.close()  # at once, as `live --exit-when-done` does: the client still gets everything, then a close
             reader.join(timeout=20)
             done.set()
     finally:
@@ -219,6 +227,38 @@ def test_truth_and_status(session: dict[str, Any]) -> None:
     assert last["final"] and last["counters"] == session["result"].info["counters"]
 
 
+def test_final_status_has_the_consoles_numbers(session: dict[str, Any]) -> None:
+    """The last status message and the console's last line (ReplayOutcome.describe) are one computation: the same
+    epochs, wall time, log time and real-time factor. The client connected and subscribed before the replay (as
+    --wait does): that time is not in the wall time."""
+    outcome = session["outcome"]
+    statuses = [json.loads(b) for _, b in session["out"].messages[live.TOPICS["status"]]]
+    last = statuses[-1]
+    print(outcome.describe(), "| final status:", {k: last[k] for k in ("epochs", "wall_s", "log_s",
+                                                                       "real_time_factor")})
+    assert last["epochs"] == outcome.epochs_published == len(statuses)  # one status per epoch, none missed
+    assert last["wall_s"] == outcome.wall_s and last["log_s"] == outcome.log_s
+    assert last["real_time_factor"] == outcome.real_time_factor == pytest.approx(outcome.log_s / outcome.wall_s)
+    assert outcome.wall_s <= session["replay_s"]  # the replay only, not the client's connection before it
+    log = session["log"]
+    assert outcome.log_s == pytest.approx(float(log.imu.t[-1] - min(log.imu.t[0], log.dvl.t[0])), abs=1e-9)
+    assert f"{outcome.real_time_factor:.1f}x real time" in outcome.describe()
+    assert f"{last['epochs']} epochs published" in outcome.describe()
+
+
+def test_the_server_closes_the_connection_normally_after_the_replay(session: dict[str, Any]) -> None:
+    """Closed at the end of the replay, the server sends a close frame and the closing handshake completes (not a
+    dropped socket, 1006) after every message: the final epoch's status arrives before it. foxglove-sdk's server
+    sends its close frame without a status code, which a client reports as 1005 (no status, a normal close)."""
+    out = session["out"]
+    closed = out.closed
+    print(f"close: received {closed.rcvd if closed else None}, sent {closed.sent if closed else None}; "
+          f"{out.after_final} frames after the final status")
+    assert isinstance(closed, ConnectionClosedOK), closed  # a clean closing handshake, not a dropped socket
+    assert closed.rcvd is not None and closed.rcvd.code in (1000, 1005)  # the server's close frame arrived
+    assert json.loads(out.messages[live.TOPICS["status"]][-1][1])["final"]
+
+
 def test_port_is_free_after_close(session: dict[str, Any]) -> None:
     port = session["port"]
     again = live.LiveView(port=port)
@@ -229,10 +269,12 @@ def test_port_is_free_after_close(session: dict[str, Any]) -> None:
 
 
 def test_layout_file_is_the_generated_one_and_names_published_topics() -> None:
-    from pathlib import Path
+    from importlib import resources
 
-    path = Path(__file__).resolve().parents[2] / "layouts" / "gtsam_dvl_live.json"
-    assert path.read_text() == live.layout_json(), "regenerate: python -m gtsam_dvl.app.live --write-layout"
+    # the file as the installed package holds it (package data), not a path into the repository
+    installed = resources.files("gtsam_dvl.app.live").joinpath("layout.json").read_text(encoding="utf-8")
+    assert installed == live.installed_layout()
+    assert installed == live.layout_json(), "regenerate: python -m gtsam_dvl.app.live --write-layout"
     text = json.dumps(live.layout())
     topics = set(live.TOPICS.values())
     for series in (s for c in live.layout()["configById"].values() for s in c.get("paths", [])):
@@ -255,6 +297,46 @@ def test_without_foxglove_the_command_says_how_to_install(monkeypatch: pytest.Mo
     assert "pip install 'gtsam-dvl[live]'" in res.output and "Traceback" not in res.output
 
 
+def test_layout_option_writes_a_copy_and_never_overwrites(tmp_path: Any) -> None:
+    from typer.testing import CliRunner
+
+    from gtsam_dvl.app.cli import app
+
+    out = tmp_path / "my_layout.json"
+    res = CliRunner().invoke(app, ["live", "--layout", str(out)])  # no LOG: only the layout, no foxglove needed
+    assert res.exit_code == 0, res.output
+    assert out.read_text(encoding="utf-8") == live.installed_layout() and str(out) in res.output
+    json.loads(out.read_text(encoding="utf-8"))  # a JSON file Foxglove can import
+    out.write_text("mine")
+    again = CliRunner().invoke(app, ["live", "--layout", str(out)])
+    assert again.exit_code == 1 and "does not overwrite" in again.output and len(again.output.splitlines()) == 1
+    assert out.read_text() == "mine"
+    missing = CliRunner().invoke(app, ["live", "--layout", str(tmp_path / "no" / "layout.json")])
+    assert missing.exit_code == 1 and "create it first" in missing.output and not (tmp_path / "no").exists()
+    neither = CliRunner().invoke(app, ["live"])
+    assert neither.exit_code == 1 and "--layout" in neither.output and "Traceback" not in neither.output
+
+
+def test_every_interface_prints_addresses_a_client_can_open() -> None:
+    """Served on 0.0.0.0, the view names ws://127.0.0.1:PORT (a client connects to it) and this machine's name and
+    network address, never ws://0.0.0.0, which a browser cannot open."""
+    import socket
+
+    from gtsam_dvl.app.live.server import reachable_urls
+
+    assert reachable_urls("127.0.0.1", 8765) == ["ws://127.0.0.1:8765"]
+    assert reachable_urls("::1", 8765) == ["ws://[::1]:8765"]
+    assert reachable_urls("::", 8765)[0] == "ws://[::1]:8765"
+    with live.LiveView(port=0, host="0.0.0.0") as view:
+        urls = view.urls
+        print(urls)
+        assert view.url == urls[0] == f"ws://127.0.0.1:{view.port}"
+        assert f"ws://{socket.gethostname()}:{view.port}" in urls
+        assert not any("0.0.0.0" in u for u in urls) and all(u.endswith(f":{view.port}") for u in urls)
+        with websockets_sync.connect(view.url, subprotocols=SUBPROTOCOLS, open_timeout=5, proxy=None) as ws:
+            assert json.loads(ws.recv(timeout=5))["op"] == "serverInfo"
+
+
 def test_speed_option() -> None:
     assert live.parse_speed("max") == math.inf and live.parse_speed("0") == math.inf
     assert live.parse_speed("2.5") == 2.5
@@ -274,10 +356,11 @@ def test_live_command_replays_a_log_file(session: dict[str, Any], tmp_path: Any)
     write_log(path, session["log"])
     t0 = time.perf_counter()
     res = CliRunner().invoke(app, ["live", str(path), "--speed", "max", "--port", "0", "--exit-when-done", "-c",
-                                   "paper"])
+                                   "paper", "--host", "0.0.0.0"])
     print(res.output, f"({time.perf_counter() - t0:.1f} s)")
     assert res.exit_code == 0, res.output
     assert "live view on ws://127.0.0.1:" in res.output and "health:" in res.output
+    assert "from other machines: ws://" in res.output and "ws://0.0.0.0" not in res.output  # served on 0.0.0.0
     published = int(res.output.split(" epochs published")[0].rsplit(" ", 1)[1])
     assert published == session["outcome"].epochs_published  # the file replays as the in-memory log does
 
@@ -306,9 +389,11 @@ def test_replay_is_paced_at_the_requested_speed(session: dict[str, Any]) -> None
         now[0] += s
 
     with live.LiveView(port=0, t0_ns=log.t0_ns) as view:
+        now[0] = 100.0  # the view waited 100 s for a client (--wait): not part of the replay's wall time
         out = live.replay_log(log, view, OnlineEstimator.for_log(log, EstimatorConfig.paper()), speed=25.0,
                               health=False, clock=lambda: now[0], sleep=sleep)
     span = float(log.imu.t[-1] - log.imu.t[0])
     print(f"{len(sleeps)} sleeps, fake wall {out.wall_s:.3f} s for {span:.0f} s of log at 25x")
     assert out.wall_s == pytest.approx(span / 25.0, abs=0.1 / 25.0)
+    assert out.real_time_factor == pytest.approx(25.0, rel=0.01) and "25.0x real time" in out.describe()
     assert len(sleeps) > span / 0.1 * 0.9  # the IMU in pieces of about 0.1 s

@@ -32,7 +32,8 @@ null, so the Plot panel leaves a gap instead of drawing a wrong band. The path i
 `path_period_s` of wall time, thinned to at most `MAX_PATH_POSES` poses. Raw messages are encoded only while a
 client subscribes to them.
 
-The layout `layouts/gtsam_dvl_live.json` (written by `layout()`) shows these topics: a 3-D panel following
+The layout file `layout.json` of this package (written by `layout()`, installed as package data; `gtsam-dvl live
+--layout PATH` writes a copy of it) shows these topics: a 3-D panel following
 base_link in map with the path, the odometry's covariance and the truth; Plot panels of the calibration and the
 biases with their sigma bands; a Log panel and a Raw Messages panel of the status.
 
@@ -40,7 +41,7 @@ Modules: server.py (LiveView, the Foxglove WebSocket server), replay.py (replay_
 topics and the JSON schemas), layout.py (the Foxglove layout).
 """
 
-from gtsam_dvl.app.live.layout import layout, layout_json
+from gtsam_dvl.app.live.layout import copy_layout, installed_layout, layout, layout_json
 from gtsam_dvl.app.live.replay import ReplayOutcome, parse_speed, replay_log, serve_log
 from gtsam_dvl.app.live.schemas import SCHEMAS, TOPICS, band
 from gtsam_dvl.app.live.server import (
@@ -53,5 +54,5 @@ from gtsam_dvl.app.live.server import (
 )
 
 __all__ = ["BACKLOG_MESSAGES", "DEFAULT_PORT", "INSTALL_HINT", "MAX_PATH_POSES", "SCHEMAS", "TOPICS", "LiveView",
-           "ReplayOutcome", "band", "import_foxglove", "layout", "layout_json", "parse_speed", "replay_log",
-           "serve_log"]
+           "ReplayOutcome", "band", "copy_layout", "import_foxglove", "installed_layout", "layout", "layout_json",
+           "parse_speed", "replay_log", "serve_log"]

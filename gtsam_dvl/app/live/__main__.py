@@ -1,4 +1,4 @@
-"""`python -m gtsam_dvl.app.live --write-layout`: regenerate layouts/gtsam_dvl_live.json from layout()."""
+"""`python -m gtsam_dvl.app.live --write-layout`: regenerate layout.json (package data) from layout()."""
 
 from __future__ import annotations
 

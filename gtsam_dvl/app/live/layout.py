@@ -1,5 +1,6 @@
-"""The Foxglove layout of the live view: layouts/gtsam_dvl_live.json is layout_json(), regenerated with
-`python -m gtsam_dvl.app.live --write-layout`.
+"""The Foxglove layout of the live view: layout.json beside this module (installed with the package as
+package data) is layout_json(), regenerated with `python -m gtsam_dvl.app.live --write-layout`;
+`gtsam-dvl live --layout PATH` writes a copy of it (copy_layout).
 
 A 3-D panel following base_link in map with the path, the odometry's covariance and the truth; Plot panels of
 the calibration and the biases, each series drawn with its value - sigma and value + sigma; a Log panel and a
@@ -9,12 +10,15 @@ Raw Messages panel of the status.
 from __future__ import annotations
 
 import json
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from gtsam_dvl.app.live.schemas import TOPICS
+from gtsam_dvl.core.errors import GtsamDvlError
 
-LAYOUT_FILE = Path(__file__).resolve().parents[3] / "layouts" / "gtsam_dvl_live.json"
+LAYOUT_NAME = "layout.json"  # package data of gtsam_dvl.app.live (pyproject.toml)
+LAYOUT_FILE = Path(__file__).resolve().with_name(LAYOUT_NAME)  # in the source tree, for write_layout
 
 
 def _series(topic: str, field_path: str, label: str, color: str, dashed: bool = False) -> dict[str, Any]:
@@ -41,7 +45,7 @@ AXIS_COLORS = ("#e6194b", "#3cb44b", "#4363d8")
 
 
 def layout() -> dict[str, Any]:
-    """The Foxglove layout of layouts/gtsam_dvl_live.json (Layouts > Import from file): a 3-D panel following
+    """The Foxglove layout of the installed layout.json (Layouts > Import from file): a 3-D panel following
     base_link in map with the estimated path, odometry covariance and truth; Plot panels of scale,
     misalignment, time offset and biases, each series drawn with its value - sigma and value + sigma; a Log
     panel of the health and a Raw Messages panel of the status."""
@@ -104,12 +108,35 @@ def layout() -> dict[str, Any]:
 
 
 def layout_json() -> str:
-    """layout() as the text of layouts/gtsam_dvl_live.json."""
+    """layout() as the text of layout.json."""
     return json.dumps(layout(), indent=2) + "\n"
 
 
 def write_layout(path: Path = LAYOUT_FILE) -> Path:
-    """Write layout_json() to path (default: the repository's layouts/gtsam_dvl_live.json)."""
-    path.parent.mkdir(exist_ok=True)
+    """Write layout_json() to path (default: layout.json beside this module, in the source tree)."""
     path.write_text(layout_json())
+    return path
+
+
+def installed_layout() -> str:
+    """The text of the layout file installed with the package (importlib.resources: a wheel, an editable install
+    or a zip)."""
+    return resources.files("gtsam_dvl.app.live").joinpath(LAYOUT_NAME).read_text(encoding="utf-8")
+
+
+def copy_layout(path: Path) -> Path:
+    """`gtsam-dvl live --layout PATH`: write a copy of the installed layout file to path, for Foxglove's Layouts >
+    Import from file. Its folder must exist and an existing file is not overwritten (one-line GtsamDvlError)."""
+    from gtsam_dvl.app.commands import check_folders
+
+    path = Path(path)
+    check_folders({"--layout": path})
+    text = installed_layout()
+    try:
+        with path.open("x", encoding="utf-8") as f:  # exclusive creation: never overwrites
+            f.write(text)
+    except FileExistsError:
+        raise GtsamDvlError(f"{path}: exists; --layout does not overwrite a file, choose another path") from None
+    except IsADirectoryError:
+        raise GtsamDvlError(f"{path}: is a folder; --layout takes a file path (e.g. gtsam_dvl_live.json)") from None
     return path

@@ -43,16 +43,18 @@ def parse_speed(text: str | float) -> float:
 
 @dataclass
 class ReplayOutcome:
-    """What replay_log did: the estimator (its result() and counters), epochs published, wall and log time (s)."""
+    """What replay_log did: the estimator (its result() and counters), epochs published, wall and log time (s) and
+    their ratio: the numbers of the view's last status message (server.Progress)."""
 
     estimator: OnlineEstimator
     epochs_published: int
     wall_s: float
     log_s: float
     health: Any = None  # analysis.health.Health of the run (replay_log with health=True and an epoch)
+    real_time_factor: float | None = None  # log_s / wall_s (None: not both positive)
 
     def describe(self) -> str:
-        rate = f"{self.log_s / self.wall_s:.1f}x real time" if self.wall_s > 0 else "-"
+        rate = f"{self.real_time_factor:.1f}x real time" if self.real_time_factor is not None else "-"
         return (f"replayed {self.log_s:.0f} s of log in {self.wall_s:.1f} s ({rate}), {self.epochs_published} "
                 f"epochs published, {self.estimator.epochs} states")
 
@@ -85,8 +87,8 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
 
         view.publish_health(assess_log_health(log), float(imu.t[0]))
     t_first = float(min(imu.t[0], dvl.t[0] if len(dvl) else imu.t[0]))
-    wall0 = clock()
-    published = 0
+    progress = view.progress  # the epochs, log and wall time of the status messages and of the outcome
+    wall0 = progress.start(t_first, clock)
     run_health = None
 
     def pace(t: float) -> None:
@@ -96,11 +98,9 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
                 sleep(wait)
 
     def epoch_done(n: int) -> None:
-        nonlocal published
         e = est.estimate()
         if n and e is not None:
             view.publish_epoch(e, counters=est.counters, latency_s=est.latencies_s[-1] if est.latencies_s else None)
-            published += 1
             if truth is not None and len(truth):
                 k = min(int(np.searchsorted(truth.t, e.t)), len(truth) - 1)
                 if k > 0 and abs(truth.t[k - 1] - e.t) < abs(truth.t[k] - e.t):
@@ -154,8 +154,7 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
         for w in caught[seen:]:
             view.log("warning", str(w.message))
     if final is not None:
-        view.publish_epoch(final, counters=est.counters, final=True)
-        published += 1
+        view.publish_epoch(final, counters=est.counters, final=True)  # freezes the progress's wall time
         if health:
             from gtsam_dvl.analysis.health import assess_health
 
@@ -163,15 +162,18 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
             view.publish_health(run_health, final.t)
     elif health:
         view.log("error", f"{log.source or 'log'}: no DVL epoch was processed (nothing to estimate)")
-    return ReplayOutcome(est, published, clock() - wall0, float(imu.t[-1] - t_first), run_health)
+    progress.finish()
+    return ReplayOutcome(est, progress.epochs, progress.wall_s, progress.log_s, run_health, progress.real_time_factor)
 
 
 def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
               config_path: Path | None = None, read_options: dict[str, Any] | None = None, wait: bool = False,
-              linger: bool = True, echo: Callable[[str], None] = print) -> ReplayOutcome:
+              linger: bool = True, echo: Callable[[str], None] = print, layout_path: Path | None = None,
+              ) -> ReplayOutcome:
     """`gtsam-dvl live`: read the log, serve the view on host:port, replay the log through the online estimator at
     speed (parse_speed), print the outcome and the run's health; then, with linger, keep serving until Ctrl-C.
-    wait: start the replay only once a client subscribes. The foxglove package is checked before anything else."""
+    wait: start the replay only once a client subscribes. layout_path: the layout file written for this run (the
+    console names it; None: it says how to write one). The foxglove package is checked before anything else."""
     import_foxglove()
     factor = parse_speed(speed)
     from gtsam_dvl.app.commands import load_log
@@ -185,8 +187,10 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     config = config or EstimatorConfig.for_log(log.metadata)
     estimator = OnlineEstimator.for_log(log, config)
     with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:
-        echo(f"live view on {view.url}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, and "
-             "Layouts > Import from file > layouts/gtsam_dvl_live.json")
+        layout = layout_path or "the file that `gtsam-dvl live --layout gtsam_dvl_live.json` writes"
+        others = f" (from other machines: {', '.join(view.urls[1:])})" if len(view.urls) > 1 else ""
+        echo(f"live view on {view.url}{others}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, "
+             f"and Layouts > Import from file > {layout}")
         outcome: ReplayOutcome | None = None
         try:
             if wait:

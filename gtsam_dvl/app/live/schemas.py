@@ -63,9 +63,12 @@ SCHEMAS: dict[str, dict[str, Any]] = {
     "imu_bias": _object("gtsam_dvl.live.ImuBias", {"accel_ug": _axes("micro-g, imu_link"),
                                                     "gyro_deg_per_h": _axes("deg/h, imu_link")}),
     "status": _object("gtsam_dvl.live.Status", {
-        "epochs": {"type": "integer"}, "counters": {"type": "object", "additionalProperties": {"type": "integer"}},
-        "latency_ms": _number("the last epoch's update, ms"), "wall_s": _number("wall time since the start, s"),
-        "real_time_factor": _number("log seconds per wall second so far")}),
+        "epochs": {"type": "integer", "description": "epochs published (the final estimate included)"},
+        "counters": {"type": "object", "additionalProperties": {"type": "integer"}},
+        "latency_ms": _number("the last epoch's update, ms"),
+        "wall_s": _number("wall time since the start (of the replay, or the first message), s"),
+        "log_s": _number("log time pushed since the start, s"),
+        "real_time_factor": _number("log_s / wall_s")}),
     "imu": {"title": "gtsam_dvl.live.Imu", "type": "object", "properties": {
         "t_s": _number("s"), "b_omega_rad_s": _axes("rad/s, imu_link"),
         "b_f_m_s2": _axes("specific force, m/s^2, imu_link")}},

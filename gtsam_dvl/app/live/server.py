@@ -13,6 +13,7 @@ import math
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -55,6 +56,41 @@ def _odometry(stamp_ns: int, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.ndarray
     return messages.odometry(np.array([stamp_ns]), np.reshape(n_p, (1, 3)), np.reshape(n_q_b, (1, 4)),
                              np.reshape(b_v, (1, 3)), np.reshape(b_omega, (1, 3)), np.reshape(pose_cov, (1, 6, 6)),
                              np.reshape(twist_cov, (1, 6, 6))).tobytes()
+
+
+WILDCARD_HOSTS = ("0.0.0.0", "::", "")  # serve on every interface: not an address a client can open
+
+
+def ws_url(host: str, port: int) -> str:
+    """ws://host:port, an IPv6 address in brackets."""
+    return f"ws://[{host}]:{port}" if ":" in host else f"ws://{host}:{port}"
+
+
+def _outward_address(ipv6: bool) -> str | None:
+    """This machine's address on the network it routes to (the UDP socket is only connected: no packet is sent;
+    the documentation prefixes of RFC 5737 / RFC 3849 as the peer), or None without a route."""
+    family, peer = (socket.AF_INET6, "2001:db8::1") if ipv6 else (socket.AF_INET, "192.0.2.1")
+    try:
+        with socket.socket(family, socket.SOCK_DGRAM) as s:
+            s.connect((peer, 9))
+            address = str(s.getsockname()[0])
+    except OSError:
+        return None
+    return None if address.startswith("127.") or address in ("::1", "0.0.0.0", "::") else address
+
+
+def reachable_urls(host: str, port: int) -> list[str]:
+    """The addresses a client opens for a server on host:port: the host itself; for a wildcard host (0.0.0.0 or
+    ::, every interface), this machine's loopback address, then its hostname and its address on the network for
+    other machines (ws://0.0.0.0 is not an address a browser can open)."""
+    if host not in WILDCARD_HOSTS:
+        return [ws_url(host, port)]
+    ipv6 = host == "::"
+    urls = [ws_url("::1" if ipv6 else "127.0.0.1", port)]
+    for name in (socket.gethostname(), _outward_address(ipv6)):
+        if name and ws_url(name, port) not in urls:
+            urls.append(ws_url(name, port))
+    return urls
 
 
 def _wait_port_free(host: str, port: int, timeout_s: float = 2.0) -> None:
@@ -113,6 +149,60 @@ class _Path:
                              np.asarray(self.n_q_b)[keep])
 
 
+@dataclass
+class Progress:
+    """A run's progress: the epochs published, the log time pushed (t_first to t_last, s) and the wall time it took
+    (clock, s). The status topic and the console's last line (ReplayOutcome) both read it, so they give the same
+    numbers. It starts at start() (replay_log: when the replay starts, after any wait for a client) or at the
+    first message; finish() freezes the wall time at the final estimate."""
+
+    clock: Callable[[], float] = time.monotonic
+    wall0: float | None = None
+    wall_end: float | None = None
+    t_first: float | None = None
+    t_last: float | None = None
+    epochs: int = 0
+
+    def start(self, t_first: float, clock: Callable[[], float] | None = None) -> float:
+        """Restart at log time t_first (s) now; returns the wall clock's start."""
+        if clock is not None:
+            self.clock = clock
+        self.wall0, self.wall_end = self.clock(), None
+        self.t_first = self.t_last = float(t_first)
+        self.epochs = 0
+        return self.wall0
+
+    def tick(self, t: float) -> None:
+        """A message at log time t (s) was pushed."""
+        if self.wall0 is None or self.t_first is None or self.t_last is None:
+            self.start(t)
+        else:
+            self.t_first, self.t_last = min(self.t_first, float(t)), max(self.t_last, float(t))
+
+    def finish(self) -> None:
+        """Freeze the wall time (the run is over)."""
+        if self.wall_end is None:
+            self.wall_end = self.clock()
+
+    @property
+    def wall_s(self) -> float:
+        """Wall time since start(), s (frozen by finish())."""
+        if self.wall0 is None:
+            return 0.0
+        return (self.wall_end if self.wall_end is not None else self.clock()) - self.wall0
+
+    @property
+    def log_s(self) -> float:
+        """Log time pushed, s."""
+        return 0.0 if self.t_first is None or self.t_last is None else self.t_last - self.t_first
+
+    @property
+    def real_time_factor(self) -> float | None:
+        """Log seconds per wall second; None before both are positive (or if not finite)."""
+        wall, span = self.wall_s, self.log_s
+        return num(span / wall) if wall > 0 and span > 0 else None
+
+
 class LiveView:
     """Publishes an online estimator's epochs, the raw messages and the truth on a Foxglove WebSocket (the
     package doc lists the topics). port: start a server on host:port (0: a free port, see .port); or server: a
@@ -147,10 +237,9 @@ class LiveView:
         self.host = host
         self._context = context  # the channels live as long as their context: keep it
         self._closed = False
-        self._wall0 = time.monotonic()
+        self.progress = Progress()  # epochs published, log and wall time: the status's numbers
         self._last_t: float | None = None
         self._broadcast_ns = -1
-        self._first_t: float | None = None
         self._counters: dict[str, int] = {}
         self._path, self._truth_path = _Path(), _Path()
         ch: dict[str, Any] = {}
@@ -172,7 +261,14 @@ class LiveView:
 
     @property
     def url(self) -> str:
-        return f"ws://{self.host}:{self.port}"
+        """The address to open on this machine (for host 0.0.0.0: ws://127.0.0.1:port)."""
+        return self.urls[0]
+
+    @property
+    def urls(self) -> list[str]:
+        """The addresses to open: url, then, when serving on every interface, the ones for other machines
+        (reachable_urls)."""
+        return reachable_urls(self.host, self.port)
 
     def wait_for_subscribers(self, topics: list[str] | None = None, timeout_s: float = 10.0) -> bool:
         """Block until a client subscribes to every topic of topics (None: to any topic), at most timeout_s.
@@ -190,7 +286,8 @@ class LiveView:
                 self._listener.cond.wait(left)
 
     def close(self) -> None:
-        """Stop the server (if this view started it) and free its port."""
+        """Stop the server (if this view started it) and free its port. Each client gets a close frame (a normal
+        closing handshake; foxglove-sdk sends it without a status code: clients report 1005)."""
         if self._closed:
             return
         self._closed = True
@@ -223,8 +320,7 @@ class LiveView:
         if broadcast and ns > self._broadcast_ns:
             self._broadcast_ns = ns
             self.server.broadcast_time(ns)
-        if self._first_t is None:
-            self._first_t = float(t)
+        self.progress.tick(t)
         return ns
 
     def publish_epoch(self, estimate: OnlineEstimate, *, counters: dict[str, int] | None = None,
@@ -256,11 +352,14 @@ class LiveView:
                             "gyro_deg_per_h": xyz(estimate.gyro_bias / DEG_PER_H, sig[3:] / DEG_PER_H)}, log_time=ns)
         if counters is not None:
             self._publish_counters(t, ns, counters)
-        wall = time.monotonic() - self._wall0
-        span = t - (self._first_t if self._first_t is not None else t)
-        ch["status"].log({**head, "epochs": len(self._path.stamps_ns), "counters": dict(self._counters),
-                          "latency_ms": None if latency_s is None else num(latency_s * 1e3), "wall_s": wall,
-                          "real_time_factor": num(span / wall) if wall > 0 and span > 0 else None}, log_time=ns)
+        progress = self.progress
+        progress.epochs += 1
+        if final:
+            progress.finish()
+        ch["status"].log({**head, "epochs": progress.epochs, "counters": dict(self._counters),
+                          "latency_ms": None if latency_s is None else num(latency_s * 1e3),
+                          "wall_s": progress.wall_s, "log_s": progress.log_s,
+                          "real_time_factor": progress.real_time_factor}, log_time=ns)
 
     def _publish_counters(self, t: float, ns: int, counters: dict[str, int]) -> None:
         for name, n in counters.items():
@@ -307,6 +406,7 @@ class LiveView:
         """IMU samples (N,), (N, 3) rad/s, (N, 3) m/s^2 in imu_link, as pushed (only while subscribed)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         if len(t):
+            self.progress.tick(float(t[0]))
             self._tick(float(t[-1]))
         channel = self._channels["imu"]
         if not channel.has_sinks():
