@@ -6,7 +6,7 @@ CRASH: any other exception, a bug), the health status of the run, the largest |e
 calibration and biases, and the final horizontal position error (m and in sigmas). A silent wrong answer is an
 estimate with health "ok" and some error beyond 3 sigma: the script counts them and exits 1 if there is any.
 
-    python bench/fault_matrix.py [--cases a,b,...] [--modes batch,online,ekf] [--scenario paper-3d]
+    python bench/fault_matrix.py [--cases a,b,...] [--modes batch,online,ekf] [--scenario paper-3d] [--config paper]
 
 The whole matrix takes minutes per mode (docs/results.md, "Faulty logs"); tests/test_fault_matrix.py runs a short
 subset.
@@ -158,6 +158,17 @@ def _frozen_dvl(log: LogData, t0: float, t1: float) -> LogData:
     return _replace_dvl(log, d_v=d_v)
 
 
+def _mounting_off(log: LogData, yaw_deg: float) -> LogData:
+    """The DVL's mounting in /tf_static (b_R_d0) off by yaw_deg about body z; the DVL's data unchanged."""
+    b_R_d0 = rpy_deg_to_matrix([0.0, 0.0, yaw_deg]) @ np.asarray(log.mounting.b_R_d0, dtype=float)
+    return dataclasses.replace(log, mounting=dataclasses.replace(log.mounting, b_R_d0=b_R_d0))
+
+
+def _dvl_late(log: LogData, late_s: float) -> LogData:
+    """The DVL's stamps late_s late (each ping measured the velocity late_s before its stamp)."""
+    return _replace_dvl(log, t=log.dvl.t + late_s)
+
+
 def _water_track(log: LogData, t0: float, t1: float) -> LogData:
     """The DVL in water-track mode from t0 to t1 (its pings marked so, not valid as velocity over ground)."""
     water = (log.dvl.t >= t0) & (log.dvl.t < t1)
@@ -217,11 +228,13 @@ def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
         "gyro_saturated_long": lambda: _through_file(_saturated_gyro(base, 0.05), lambda p: None),
         "dvl_frozen_40s_turn": lambda: _frozen_dvl(base, turn - 20.0, turn + 20.0),
         "dvl_water_track_20s": lambda: _through_file(_water_track(base, leg + 20.0, leg + 40.0), lambda p: None),
+        "tf_static_yaw_off_25deg": lambda: _mounting_off(base, 25.0),
+        "dvl_stamps_late_2s": lambda: _dvl_late(base, 2.0),
     }
 
 
-def evaluate(log: LogData, mode: str) -> dict[str, object]:
-    res = MODES[mode](log, EstimatorConfig.paper())
+def evaluate(log: LogData, mode: str, config: str = "paper") -> dict[str, object]:
+    res = MODES[mode](log, EstimatorConfig.named(config))
     health = assess_health(res, log)  # type: ignore[arg-type]
     s = summary(res, log)  # type: ignore[arg-type]
     e = s.get("errors") or {}
@@ -239,6 +252,7 @@ def main() -> int:
     ap.add_argument("--cases", default="")
     ap.add_argument("--modes", default="batch,online,ekf")
     ap.add_argument("--scenario", default="paper-3d")
+    ap.add_argument("--config", default="paper", help="the named configuration of the estimators (paper, default)")
     args = ap.parse_args()
     t0 = time.perf_counter()
     base = simulate(load_scenario(args.scenario), SEED)
@@ -262,7 +276,7 @@ def main() -> int:
                 print(f"{name:28s} {mode:7s} {outcome:8s} {'-':9s} {'-':>12s} {'-':>14s}  {load_error[:90]}")
                 continue
             try:
-                r = evaluate(log, mode)
+                r = evaluate(log, mode, args.config)
             except GtsamDvlError as exc:
                 print(f"{name:28s} {mode:7s} {'error':8s} {'-':9s} {'-':>12s} {'-':>14s}  {str(exc)[:90]}")
                 continue
