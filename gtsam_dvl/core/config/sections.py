@@ -126,7 +126,8 @@ class DvlConfig(ConfigModel):
     estimate_time_offset: Flag = True
     time_offset_prior_s: Number = 0.0
     time_offset_sigma_s: Positive = 0.5
-    # half-width of the IMU window averaged for the epoch's velocity rate (the time offset's Jacobian), s
+    # the IMU window averaged for the epoch's velocity rate (the time offset's Jacobian) is [t, t + dt_d], at least
+    # twice this long about its middle (FactorMaker.velocity_rate_inputs), s
     time_offset_window_s: Positive = 0.25
     # DVL lever arm b_l (IMU -> DVL, m, base_link; docs/conventions.md), batch smoother only: a graph variable
     # L_LEVER with a prior around the /tf_static value (LogData.mounting.b_l), lever_arm_sigma_m per axis. Off by

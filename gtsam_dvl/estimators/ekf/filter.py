@@ -32,7 +32,8 @@ first-order model (factors/dvl_model.py),
     y = k d_R_b (b_v + dt_d (b_a - b_a_bias + G n_R_b^T n_g - b_omega x b_v) + b_omega x b_l),  b_v = n_R_b^T n_v
 
 with the IMU constants of FactorMaker.velocity_rate_input (mean specific force, mean body rate less the gyro
-bias, mean body rotation G) over the samples within time_offset_window_s of [t, t + dt_c], dt_c the filter's
+bias, mean body rotation G) over the samples of [t, t + dt_c] (widened to 2 time_offset_window_s about its
+middle when shorter), dt_c the filter's
 estimate of the offset when the ping is processed (clipped to the prior +- 3 prior sigmas), as the online
 estimator re-centres its windows. Those samples come after the stamp: the ping is buffered, the filter held at
 its stamp until the IMU has reached t + max(0, dt_c) + time_offset_window_s (run_ekf, given the whole log, reads

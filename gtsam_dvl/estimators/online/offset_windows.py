@@ -2,7 +2,8 @@
 
 T_OFFSET is a shared variable with its prior, like the scale, and each ping's factor is the batch smoother's
 make_dvl_factor with an OffsetInput of the IMU constants of FactorMaker.velocity_rate_input over the IMU samples
-within time_offset_window_s of [t, t + dt_c], dt_c the current estimate of the offset (clipped to the prior +- 3
+of [t, t + dt_c] (widened to 2 time_offset_window_s about its middle when shorter), dt_c the current estimate of
+the offset (clipped to the prior +- 3
 prior sigmas): the batch smoother's second pass re-centres its windows on its first estimate, the online
 estimator on the estimate it has when the ping is processed. A ping therefore waits for the IMU to reach
 t + max(0, dt_c) + time_offset_window_s: a causal delay of that much (0.25 s at dt_c <= 0; the epochs after it
