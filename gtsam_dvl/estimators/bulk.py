@@ -119,6 +119,7 @@ class BulkDvl:
     t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the rows' ping stamps (s), in their order
     _served: _Served = field(init=False, default_factory=_Served)
     _bounds: np.ndarray = field(init=False)  # state s's rows are _bounds[s]:_bounds[s + 1]
+    _states_with_rows: list[int] = field(init=False)
 
     def __post_init__(self) -> None:
         _ = self.pings.motion.earth  # the motion's Earth terms, once (each chunk takes its part of them)
@@ -127,6 +128,7 @@ class BulkDvl:
             raise ValueError("BulkDvl: pings must be sorted by state")
         self._bounds = np.searchsorted(state, np.arange(self.n_states + 1), side="left")
         self._bias_random_walk = len(set(self.bias_keys)) > 1
+        self._states_with_rows = np.unique(state).tolist()  # (found once: read per evaluation, _correlated_errors)
 
     @property
     def offset(self) -> bool:
@@ -189,7 +191,7 @@ class BulkDvl:
         if not correlated_error(self.config):
             return None
         per_state = np.zeros((self.n_states, 3))
-        for s in np.unique(self.pings.state).tolist():
+        for s in self._states_with_rows:
             per_state[s] = values.atVector(E(s))
         return per_state[self.pings.state]
 

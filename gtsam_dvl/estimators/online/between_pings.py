@@ -127,7 +127,7 @@ def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float
     keys = list(f.keys())
     # the correlated DVL error E(i), when modelled, is the factor's last key (states.dvl_factor_keys)
     options = DvlOptions(b_omega, b_l, d_u, offset, motion, considered=True,
-                         error_variable=chr(keys[-1] >> 56) == chr(E(0) >> 56))
+                         error_variable=keys[-1] >> 56 == E(0) >> 56)
     return make_dvl_factor(f.noiseModel(), keys, d_y, options)
 
 
