@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import gtsam
 import numpy as np
@@ -431,6 +431,17 @@ def calibration_prior(config: EstimatorConfig, calibration: VehicleCalibration |
         return np.asarray(S @ np.concatenate(parts))
 
     return gtsam.CustomFactor(noise, keys, error)
+
+
+def calibration_info(config: EstimatorConfig, calibration: VehicleCalibration) -> dict[str, Any]:
+    """The prior a run took from a calibration (NavResult.info["calibration_prior"], plain JSON): its vehicle, date,
+    method and sources, the states that took it (calibration_states), their values (SI; the misalignment as b_R_d)
+    and their joint covariance, for the verdict on the new estimate (analysis/calibration_check.py)."""
+    names = [s.name for s in calibration_states(config, calibration)]
+    return {"vehicle": calibration.vehicle, "date": calibration.date, "method": calibration.method,
+            "sources": [{"path": s.path, "sha256": s.sha256} for s in calibration.sources],
+            "states": names, "values": {n: np.asarray(calibration.values[n], dtype=float).tolist() for n in names},
+            "cov": calibration.block(names).tolist()}
 
 
 def _key_value(states: list[SharedState], key: int, mean: dict[str, np.ndarray]) -> np.ndarray:
