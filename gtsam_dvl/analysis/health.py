@@ -7,7 +7,7 @@
   whose expectation is 1 when the noise model fits; EKF: the mean normalised innovation squared per degree
   of freedom, with the same expectation);
 - every estimated shared state against its prior (analysis/prior_check.py): beyond 4 prior sigmas "failed",
-  naming the state, the distance and the likely cause;
+  naming the state, the distance and the likely cause; a calibration file's states against it (calibration_check);
 - the DVL residuals, recomputed here from the result and the log with the model of docs/conventions.md,
   y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l), whitened by the noise each ping was given (the rule of
   FactorMaker.dvl_noise): their RMS overall and per time window (about 1 when the model fits; a window far
@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.analysis.calibration_check import check_calibration
 from gtsam_dvl.analysis.geometry import assess_geometry
 from gtsam_dvl.analysis.prior_check import check_priors
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
@@ -130,6 +131,10 @@ def assess_health(result: NavResult, log: LogData) -> Health:
     _check_noise_fit(result, health)
     if len(result.t):
         _check_geometry(result, health)
+    if (calib := check_calibration(result)) is not None:  # against a calibration file's prior (calibration_check)
+        health.figures["calibration_check"] = calib.as_dict()
+        for severity, text in calib.findings:
+            health.flag(severity, text)
     return health
 
 

@@ -33,6 +33,7 @@ from gtsam_dvl.core.config.estimator import (
 from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
     BadMessages,
+    CalibrationConfig,
     BiasModel,
     DepthConfig,
     DvlConfig,
@@ -52,7 +53,7 @@ from gtsam_dvl.core.config.sections import (
 )
 
 __all__ = [
-    "NAMED_CONFIGS", "AlignmentConfig", "BadMessages", "BiasModel", "ConfigModel", "DepthConfig", "DvlConfig",
+    "NAMED_CONFIGS", "AlignmentConfig", "BadMessages", "BiasModel", "CalibrationConfig", "ConfigModel", "DepthConfig", "DvlConfig",
     "EarthModel", "EkfConfig", "EstimatorConfig", "GnssConfig", "GnssUse", "ImuConfig", "IodvlcConfig",
     "ObservabilityConfig", "OnlineConfig", "OnlineMode", "PriorConfig", "RelinearizationThresholds", "RobustLoss",
     "SolverConfig", "estimator_overrides", "recommended_config_name",
