@@ -244,19 +244,26 @@ def smooth(
                                                                       "(default: a LocalCluster here).")] = None,
     workers: Annotated[int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")] = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior of its states "
+                                                     "(inflated by [calibration] inflation_per_day for its age).")
+                           ] = None,
+    calibration_out: Annotated[Path | None, typer.Option(help="Write this run's calibration file (TOML).")] = None,
+    vehicle: Annotated[str | None, typer.Option(help="Vehicle name (default: --calibration's, else the log's "
+                                                     "folder name).")] = None,
     debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
     from gtsam_dvl.app.commands import check_folders, smooth_file
 
-    check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz},
-                  {"--out-dir": out_dir})
+    check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz,
+                   "--calibration-out": calibration_out}, {"--out-dir": out_dir})
     read_options = _read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic, attitude_topic,
                                  truth_topic)
     if out_dir is not None or len(logs) > 1:
-        if out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz:
+        if (out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz
+                or calibration or calibration_out):
             raise GtsamDvlError("several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
-                                "--summary, --tum and --timeline-npz take one log")
+                                "--summary, --tum, --timeline-npz, --calibration and --calibration-out take one log")
         from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
 
         rows, written = smooth_fleet(logs, out_dir, mode=mode, config_path=config, read_options=read_options,
@@ -275,7 +282,8 @@ def smooth(
     log = logs[0]
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
                           show_progress=not quiet, read_options=read_options, timeline=timeline,
-                          timeline_path=timeline_npz)
+                          timeline_path=timeline_npz, calibration_path=calibration, calibration_out=calibration_out,
+                          vehicle=vehicle)
     typer.echo(outcome.describe())
     if strict and outcome.status in UNHEALTHY:
         typer.echo(f"gtsam-dvl: error: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)

@@ -156,8 +156,8 @@ def test_unknown_sections_and_keys_still_rejected(tmp_path: Path) -> None:
     assert _error(tmp_path, "[priors]\nscale_sigmaa = 1.0\n").startswith(
         "unknown key 'scale_sigmaa' in [priors] (known: scale_initial, scale_sigma, ")
     assert _error(tmp_path, "[onlin]\nwindow_s = 1.0\n") == (
-        "unknown section [onlin] (known: alignment, calibration, depth, dvl, ekf, gnss, imu, iodvlc, noise, observability, "
-        "online, priors, solver)")
+        "unknown section [onlin] (known: alignment, calibration, depth, dvl, ekf, gnss, imu, iodvlc, noise, "
+        "observability, online, priors, solver)")
     assert _error(tmp_path, "[online.relinearization]\nscales = 1.0\n").startswith(
         "unknown key 'scales' in [online.relinearization] (known: pose, velocity, bias, scale, misalignment_rad)")
     assert _error(tmp_path, "[ekf]\nmin_speed = 1.0\n").startswith("unknown key 'min_speed' in [ekf]")

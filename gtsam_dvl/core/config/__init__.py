@@ -33,8 +33,8 @@ from gtsam_dvl.core.config.estimator import (
 from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
     BadMessages,
-    CalibrationConfig,
     BiasModel,
+    CalibrationConfig,
     DepthConfig,
     DvlConfig,
     EarthModel,
@@ -53,8 +53,8 @@ from gtsam_dvl.core.config.sections import (
 )
 
 __all__ = [
-    "NAMED_CONFIGS", "AlignmentConfig", "BadMessages", "BiasModel", "CalibrationConfig", "ConfigModel", "DepthConfig", "DvlConfig",
+    "NAMED_CONFIGS", "AlignmentConfig", "BadMessages", "BiasModel", "ConfigModel", "DepthConfig", "DvlConfig",
     "EarthModel", "EkfConfig", "EstimatorConfig", "GnssConfig", "GnssUse", "ImuConfig", "IodvlcConfig",
     "ObservabilityConfig", "OnlineConfig", "OnlineMode", "PriorConfig", "RelinearizationThresholds", "RobustLoss",
-    "SolverConfig", "estimator_overrides", "recommended_config_name",
+    "SolverConfig", "estimator_overrides", "recommended_config_name", "CalibrationConfig",
 ]
