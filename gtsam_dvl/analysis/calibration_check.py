@@ -21,9 +21,11 @@ probability of +- [calibration] moved_sigmas in one dimension (3: 0.27 % of cons
 
 Per state and tangent component, in words: z = d_i / sqrt((P0 - P1)_ii); beyond moved_sigmas "DVL scale moved
 4.1 sigma since 2026-11-02 (+10000 ppm): remounted, or another sound-speed setting?"; a component the dive hardly
-informed is "from the calibration". The health (analysis/health.py) takes the findings: "warn" when the
-calibration moved (the result itself is sound: its prior was wide enough for the data to move it), a note when
-it is consistent.
+informed (under LITTLE_FRACTION of its variance removed) is "from the calibration", and not said to have moved
+(its shift follows the others' through the file's correlations: the scale's drags a correlated yaw). The health
+(analysis/health.py) takes the findings: "degraded" when the calibration moved (the result leans on a prior its
+data contradict: the estimates are pulled towards the file's), with a "warn" line per state that moved; a note
+when it is consistent.
 
 Pure computation on NavResult (analysis layer).
 """
@@ -45,6 +47,9 @@ from gtsam_dvl.core.states import BY_NAME, block_states, joint_states
 # A direction the dive informed: it removed at least this fraction of the prior's variance there (P0 - P1 in P0's
 # metric). Below it the shift there is numerical noise over a tiny variance, not evidence.
 INFORMED_FRACTION = 0.02
+# A component the dive added less than this fraction of its prior's variance to is named as "from the calibration"
+# in the verdict (a straight transect's yaw).
+LITTLE_FRACTION = 0.1
 
 # what a move of each state suggests, for the verdict's words
 CAUSES = {
@@ -199,11 +204,12 @@ def _amount(c: ComponentShift) -> str:
 
 
 def _findings(check: CalibrationCheck, nsigma: float) -> list[tuple[str, str]]:
-    """The verdict as sentences (module doc): "warn" per component that moved (and for the block when none alone
-    did), else one note."""
+    """The verdict as sentences (module doc): "degraded" with a "warn" per component that moved (and for the block
+    when none alone did), else one note."""
     since = f"since {check.date[:10]}" if check.date else "since the calibration"
     whose = f"{check.vehicle}'s calibration" if check.vehicle else "the calibration file"
-    moved = [c for c in check.components if abs(c.z) > nsigma]
+    # a component the dive hardly informed only follows the others through the file's correlations: not named
+    moved = [c for c in check.components if abs(c.z) > nsigma and c.informed >= LITTLE_FRACTION]
     out: list[tuple[str, str]] = []
     for c in moved:
         cause = CAUSES.get(c.state, "")
@@ -212,13 +218,15 @@ def _findings(check: CalibrationCheck, nsigma: float) -> list[tuple[str, str]]:
         out.append(("warn", f"the calibration moved {since}: chi^2 {check.chi2:.1f} over {check.dof} informed "
                             f"directions (threshold {check.threshold:.1f}), no single state beyond {nsigma:g} sigma"))
     if out:
-        out.insert(0, ("warn", f"{whose} no longer fits this dive (chi^2 {check.chi2:.1f}, {check.dof} dof, "
-                               f"p = {check.p_value:.2g}): it was re-estimated here; write it with "
-                               "--calibration-out if the change is real"))
+        out.insert(0, ("degraded", f"{whose} no longer fits this dive (chi^2 {check.chi2:.1f}, {check.dof} dof, "
+                                   f"p = {check.p_value:.2g}): this result leans on it; if the change is real, "
+                                   "smooth again without --calibration (and write the new one with "
+                                   "--calibration-out)"))
         return out
-    held = [c.text for c in check.components if c.informed <= INFORMED_FRACTION]
+    held = [c.text for c in check.components if c.informed < LITTLE_FRACTION]
     note = (f"consistent with {whose} of {check.date[:10] or 'unknown date'} (chi^2 {check.chi2:.1f}, "
             f"{check.dof} dof, p = {check.p_value:.2g})")
     if held:
-        note += "; from the calibration, this dive adding little: " + ", ".join(held)
+        note += (f"; from the calibration (this dive removed under {LITTLE_FRACTION:.0%} of its variance): "
+                 + ", ".join(held))
     return [("note", note)]
