@@ -79,3 +79,21 @@ def test_batch_recovers_the_current(water_log: LogData) -> None:
     refused = smooth_batch(water_log, _config(water_log, "refuse"))
     assert refused.info["counters"]["dvl_water_track"] == int(water_log.dvl.water_track.sum())
     assert "water_current" not in refused.info
+
+
+def test_ekf_recovers_the_current(water_log: LogData) -> None:
+    """The EKF carries the current as two more error-state components: at the end of the water-track stretch its
+    filtered current is within 3 sigma of the truth; refusing the pings counts them."""
+    from gtsam_dvl.estimators.ekf import run_ekf
+    used = run_ekf(water_log, _config(water_log, "auto"))
+    wc = used.info["water_current"]
+    t = np.asarray(wc["t_s"])
+    end = int(np.flatnonzero(t < T_WATER[1] - 1)[-1])
+    for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
+        est, sig = wc[f"{axis}_m_s"][end], wc[f"{axis}_sigma_m_s"][end]
+        assert sig < 0.02 and abs(est - truth) < 3 * sig, (axis, est, sig)
+    assert used.info["counters"]["dvl_water_track"] == 0
+    truth_cal = water_log.true_calibration
+    assert truth_cal is not None
+    scale = used.calibration["scale"]
+    assert abs(scale.value[0] - truth_cal.scale) < 3 * scale.sigma[0]
