@@ -239,7 +239,7 @@ class Ping:
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     key: bool = True
     index: int = -1  # its place among the pings pushed (OnlineEstimator.push_dvl's calls, from 0)
-    water_track: bool = False  # measured relative to the water (never used, counted "dvl_water_track")
+    water_track: bool = False  # measured relative to the water (used with the current, else counted)
 
 
 class EpochScheduler:
@@ -253,10 +253,14 @@ class EpochScheduler:
     (DvlData.noise_free: repeats are frozen output only while the IMU shows motion)."""
 
     def __init__(self, cfg: DvlConfig, keyframe_interval_s: float, keyframe_spacing_s: float,
-                 counters: dict[str, int], keep_usable: bool = True, noise_free: bool = False) -> None:
+                 counters: dict[str, int], keep_usable: bool = True, noise_free: bool = False,
+                 water_usable: bool = False) -> None:
         self.cfg, self.counters = cfg, counters
         self.rule = KeyframeRule(keyframe_interval_s, keyframe_spacing_s)
         self.screen = PingScreen(cfg, repeats_need_motion=noise_free)
+        # water-track pings (used when water_usable) are screened among themselves (usable_pings)
+        self.water_usable = water_usable
+        self.water_screen = PingScreen(cfg, repeats_need_motion=noise_free)
         self._unscreened: deque[Ping] = deque()  # usable pings waiting for the IMU to reach them
         # the indices (Ping.index) of the pings the screen passed, with keep_usable (8 bytes a ping)
         self.usable: array[int] = array("q")
@@ -265,6 +269,8 @@ class EpochScheduler:
     def push_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """IMU samples in time order (base_link: gyro w, rad/s, specific force f, m/s^2)."""
         self.screen.push_imu(t, w, f)
+        if self.water_usable:
+            self.water_screen.push_imu(t, w, f)
 
     def push_ping(self, p: Ping, t_imu_first: float) -> bool:
         """Classify ping p (after every earlier ping); a usable one waits for the screen. t_imu_first: the first
@@ -276,7 +282,8 @@ class EpochScheduler:
             beam_valid = ok[None, :]
             beam_finite = np.array([bool(np.isfinite(v[ok]).all() and np.isfinite(d_u[ok]).all())])
         code = classify_pings(np.array([p.t]), p.d_v[None, :], np.array([p.valid]), beam_valid, beam_finite,
-                              self.cfg, t_imu_first, water_track=np.array([p.water_track]))
+                              self.cfg, t_imu_first, water_track=np.array([p.water_track]),
+                              water_usable=self.water_usable)
         if code[0] != USABLE:
             count_reasons(code, self.counters, keep_zero=False)
             return False
@@ -289,7 +296,8 @@ class EpochScheduler:
         out: list[Ping] = []
         while self._unscreened and self.screen.reaches(self._unscreened[0].t):
             p = self._unscreened.popleft()
-            code = self.screen.check_buffered(p.t, screened_value(p.d_v, p.beams, self.cfg))
+            screen = self.water_screen if p.water_track else self.screen
+            code = screen.check_buffered(p.t, screened_value(p.d_v, p.beams, self.cfg))
             if code != USABLE:
                 count_reasons(np.array([code]), self.counters, keep_zero=False)
                 continue
