@@ -134,35 +134,42 @@ def check_calibration(result: NavResult, config: EstimatorConfig | None = None) 
 
 def _block(cov: np.ndarray, order: list[str], names: list[str]) -> np.ndarray:
     """The joint covariance of `names` out of one over `order` (each state's tangent columns)."""
-    start, cols = 0, {}
-    for n in order:
-        cols[n] = np.arange(start, start + BY_NAME[n].dim)
-        start += BY_NAME[n].dim
+    cols = _columns(order)
     idx = np.concatenate([cols[n] for n in names])
     return cov[np.ix_(idx, idx)]
 
 
 def _posterior(result: NavResult, config: EstimatorConfig, names: list[str]) -> np.ndarray:
     """The posterior joint covariance of `names`: from shared_joint_cov (its states as analysis/geometry.py finds
-    them), else the calibration block (scale, misalignment), else each state's marginal (no correlations)."""
-    sources: list[tuple[np.ndarray, list[str]]] = []
+    them) when it holds them all, else each state's marginal with the calibration block's (scale, misalignment)
+    joint over those it holds (the online estimator's), without the correlations no block gives."""
     if result.shared_joint_cov is not None:
         cov = np.asarray(result.shared_joint_cov, dtype=float)
         for states in (joint_states(config), joint_states(config, ekf=True)):
-            if sum(s.dim for s in states) == cov.shape[0]:
-                sources.append((cov, [s.name for s in states]))
-    if result.calib_joint_cov is not None:
-        sources.append((np.asarray(result.calib_joint_cov, dtype=float), [s.name for s in block_states()]))
-    for cov, order in sources:
-        if all(n in order for n in names):
-            return _block(cov, order, names)
+            order = [s.name for s in states]
+            if sum(s.dim for s in states) == cov.shape[0] and all(n in order for n in names):
+                return _block(cov, order, names)
     dims = [BY_NAME[n].dim for n in names]
     out = np.zeros((sum(dims), sum(dims)))
     col = 0
     for n, dim in zip(names, dims, strict=True):
         out[col:col + dim, col:col + dim] = np.asarray(result.calibration[n].cov, dtype=float)
         col += dim
+    if result.calib_joint_cov is not None:
+        order = [s.name for s in block_states()]
+        shared = [n for n in names if n in order]
+        idx = np.concatenate([_columns(names)[n] for n in shared])
+        out[np.ix_(idx, idx)] = _block(np.asarray(result.calib_joint_cov, dtype=float), order, shared)
     return out
+
+
+def _columns(order: list[str]) -> dict[str, np.ndarray]:
+    """Each state's columns in a covariance over `order`."""
+    start, cols = 0, {}
+    for n in order:
+        cols[n] = np.arange(start, start + BY_NAME[n].dim)
+        start += BY_NAME[n].dim
+    return cols
 
 
 def _shift(name: str, before: np.ndarray, after: np.ndarray) -> np.ndarray:

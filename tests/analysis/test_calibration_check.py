@@ -94,6 +94,21 @@ def test_a_moved_scale_is_flagged_in_words_and_the_uninformed_yaw_left_to_the_fi
     assert yaw.informed < 0.1 and same.components[1].informed > 0.15  # yaw only through the scale
 
 
+def test_without_the_shared_joint_the_calibration_block_keeps_the_correlations() -> None:
+    """The online estimator's result has no shared_joint_cov: the calibration block (bias, scale, misalignment) and
+    the time offset's marginal give the same chi^2 here (the time offset uncorrelated with the rest)."""
+    rng = np.random.default_rng(2)
+    d1, P1 = _dive(rng, np.array([0.002, 0, 0, 0, 0.0]))
+    full = _result(d1, P1)
+    online = _result(d1, P1)
+    block = np.eye(10) * 1e-10
+    block[6:, 6:] = P1[:4, :4]  # [accel, gyro] bias, scale, misalignment
+    online.shared_joint_cov, online.calib_joint_cov = None, block
+    a, b = check_calibration(full), check_calibration(online)
+    assert a is not None and b is not None and a.dof == b.dof == 4 and a.chi2 > 5
+    assert b.chi2 == pytest.approx(a.chi2, rel=1e-9)
+
+
 def test_no_verdict_without_a_calibration_prior() -> None:
     assert check_calibration(SimpleNamespace(info={}, calibration={})) is None
 
