@@ -521,6 +521,7 @@ def live(
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior.")] = None,
     debug: Debug = False,
 ) -> None:
     """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
@@ -533,7 +534,7 @@ def live(
             raise GtsamDvlError("live: give a LOG to replay (or --layout PATH to write the Foxglove layout)")
         return
     serve_log(log, speed=speed, port=port, host=host, config_path=config, wait=wait, linger=not exit_when_done,
-              layout_path=layout,
+              layout_path=layout, calibration_path=calibration,
               read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
                                          attitude_topic, truth_topic), echo=typer.echo)
 

@@ -84,3 +84,16 @@ def test_refused_in_one_line(dives: tuple[Path, Path], tmp_path: Path) -> None:
     assert out.exit_code == 1 and "io-dvlc takes no --calibration" in out.stderr
     out = cli("smooth", first, "--calibration", tmp_path / "nothing.toml", "-q")
     assert out.exit_code == 1 and "no such calibration file" in out.stderr
+
+
+def test_live_takes_the_calibration(dives: tuple[Path, Path], tmp_path: Path) -> None:
+    """`live --calibration`: the online estimator's prior, the verdict in the health it prints."""
+    from gtsam_dvl.io.calibration_file import write_calibration
+    from gtsam_dvl.io.reader import read_log
+    from tests.estimators.test_calibration_prior import calibration_at_truth
+
+    first, _ = dives
+    path = write_calibration(tmp_path / "auv.toml", calibration_at_truth(read_log(first)))
+    out = cli("live", first, "--speed", "max", "--port", "0", "--exit-when-done", "--calibration", path)
+    assert out.exit_code == 0, out.output
+    assert "consistent with auv-7's calibration of 2023-11-01" in out.output
