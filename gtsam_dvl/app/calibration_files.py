@@ -17,6 +17,7 @@ logs per vehicle). A prior file of another vehicle than --vehicle is refused.
 
 from __future__ import annotations
 
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -45,11 +46,25 @@ def calibration_prior(path: Path | str, log: LogData, config: EstimatorConfig, v
     cal = read_calibration(path)
     if vehicle and cal.vehicle and vehicle != cal.vehicle:
         raise GtsamDvlError(f"{path}: a calibration of vehicle {cal.vehicle!r}, not of {vehicle!r} (--vehicle)")
+    inflated, inflation = inflated_for(cal, log, config)
+    return inflated, {"file": str(path), **inflation}
+
+
+def inflated_for(cal: VehicleCalibration, log: LogData, config: EstimatorConfig
+                 ) -> tuple[VehicleCalibration, dict[str, Any]]:
+    """A calibration inflated for the days from its date to the log's start ([calibration] inflation_per_day),
+    and the inflation (days, per_day, the variances' factor)."""
     days = cal.days_before(iso_date(log.t0_ns))
     per_day = config.calibration.inflation_per_day
-    inflated = cal.inflated(days, per_day)
-    return inflated, {"file": str(path), "days": days, "per_day": per_day,
-                      "variance_factor": 1.0 + per_day * max(days, 0.0)}
+    return cal.inflated(days, per_day), {"days": days, "per_day": per_day,
+                                         "variance_factor": 1.0 + per_day * max(days, 0.0)}
+
+
+def calibration_data(path: Path | str) -> dict[str, Any]:
+    """A calibration file as plain data (its parsed TOML, checked by read_calibration), to ship to a campaign's
+    workers (calibration_from_dict reads it back)."""
+    read_calibration(path)
+    return tomllib.loads(Path(path).read_text())
 
 
 def record_prior(result: NavResult, inflation: dict[str, Any]) -> None:

@@ -414,6 +414,8 @@ def montecarlo(
     scheduler_timeout: SchedulerTimeout = 10.0,
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     quiet: Quiet = False,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as every run's prior.")
+                           ] = None,
     debug: Debug = False,
 ) -> None:
     """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
@@ -423,7 +425,7 @@ def montecarlo(
     check_folders({}, {"-o": output})
     res = run_campaign(scenario, runs, [e.strip() for e in estimators.split(",") if e.strip()], output,
                        seed_start=seed_start, scheduler=scheduler, workers=workers, config_path=config,
-                       show_progress=not quiet, scheduler_timeout_s=scheduler_timeout)
+                       show_progress=not quiet, scheduler_timeout_s=scheduler_timeout, calibration_path=calibration)
     for name, est in res.statistics["estimators"].items():
         z = ", ".join(f"{k} {v['z_std']:.2f}" for k, v in est["states"].items() if not k.startswith("final"))
         nb = est["nees_block"]
