@@ -194,7 +194,9 @@ class OnlineEstimator:
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         self._offset = enabled(self.config, "time_offset")
-        self._offset_windows = OffsetWindows(dvl, self.counters)
+        held = calibration.values.get("time_offset") if calibration is not None else None  # centres the windows
+        self._offset_windows = OffsetWindows(dvl if held is None else dvl.model_copy(
+            update={"time_offset_prior_s": float(np.ravel(held)[0])}), self.counters)
         self._flushing = False
         self._depth = DepthQueue(self.config.depth, frame,
                                  None if depth_sensor is None else vector3("depth_sensor", depth_sensor), self._count)
