@@ -97,3 +97,22 @@ def test_live_takes_the_calibration(dives: tuple[Path, Path], tmp_path: Path) ->
     out = cli("live", first, "--speed", "max", "--port", "0", "--exit-when-done", "--calibration", path)
     assert out.exit_code == 0, out.output
     assert "consistent with auv-7's calibration of 2023-11-01" in out.output
+
+
+def test_montecarlo_run_takes_the_calibration(tmp_path: Path) -> None:
+    """A Monte Carlo run (campaign/montecarlo.run_seed, a worker's task) with a calibration file's data: on a log
+    at rest every estimator ends at the file's sigma, inflated for the days to the simulated log's date."""
+    from gtsam_dvl.app.calibration_files import calibration_data
+    from gtsam_dvl.app.campaign.montecarlo import run_seed
+    from gtsam_dvl.io.calibration_file import write_calibration
+    from tests.estimators.test_calibration_prior import STATIC, calibration_at_truth
+    from tests.support.scenarios import scenario_raw
+
+    raw = scenario_raw(segments=STATIC, t0_s=T0_S)
+    log = simulate_variant(1, segments=STATIC, t0_s=T0_S)
+    cal = calibration_at_truth(log)  # dated 2023-11-01, 1055 days before the log: variances x 11.55
+    data = calibration_data(write_calibration(tmp_path / "auv.toml", cal))
+    out = run_seed(raw, 1, ["ekf"], None, "static", data)
+    sigma_ppm = out["estimators"]["ekf"]["sigma"][0]
+    factor = 1.0 + 0.01 * cal.days_before(iso_date(T0_S * 10**9))
+    assert sigma_ppm == pytest.approx(cal.sigma("scale")[0] * 1e6 * np.sqrt(factor), rel=0.01)
