@@ -1,0 +1,93 @@
+"""The water around a simulated vehicle: the current (optional [current] table) and the seafloor (optional
+[seafloor] table) that decides the DVL's bottom lock.
+
+Current, in the map frame (ENU at the origin), horizontal, m/s: a sheared profile in depth plus a slow,
+depth-uniform variation (a tide moves the whole water column, so its part of the current does not shear):
+
+    n_c(d, t) = c_s + (c_r - c_s) * clip(d / d_r, 0, 1) + c_v * sin(2 pi t / T_v)
+
+d the depth below the water surface (m, positive down; the surface is at ellipsoidal height 0, as for the
+pressure sensor), c_s = surface_m_s at and above the surface, c_r = reference_m_s at and below
+reference_depth_m = d_r (linear in depth between them: a vector interpolation, so the current turns as well
+as weakens when the two differ in direction), c_v = variation_m_s, T_v = variation_period_s (default the M2
+tide's 12.42 h). Vectors are [east, north]; the vertical component is 0. The truth (TruthData.n_c) gives it at
+base_link's depth, and the DVL's water-track pings see it at the same depth (sim/dvl.py).
+
+Seafloor: flat, depth_m below the surface. The DVL is in bottom lock while its altitude (seafloor depth minus
+the DVL's depth) is at most its bottom-track range ([dvl] bottom_range_m); beyond, it reports water track. A
+scenario without [seafloor] keeps the DVL's older model: a seafloor [dvl] altitude_m below the start, and
+beams lost one by one where their slant range exceeds [dvl] max_range_m, never water track.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.sim.schema import Reader
+
+M2_PERIOD_S = 44714.0  # the principal lunar semidiurnal tide, 12.42 h
+
+
+@dataclass(frozen=True)
+class CurrentSpec:
+    """The [current] table (module doc): [east, north] vectors in m/s, depths in m, period in s."""
+
+    surface_m_s: tuple[float, float] = (0.0, 0.0)
+    reference_m_s: tuple[float, float] = (0.0, 0.0)
+    reference_depth_m: float = 100.0
+    variation_m_s: tuple[float, float] = (0.0, 0.0)
+    variation_period_s: float = M2_PERIOD_S
+
+    def at(self, depth_m: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """n_c (K, 3) m/s in map at depths depth_m (K,) m (positive down) and times t (K,) s."""
+        d = np.asarray(depth_m, dtype=float)
+        w = np.clip(d / self.reference_depth_m, 0.0, 1.0)[:, None]
+        c_s, c_r = np.asarray(self.surface_m_s), np.asarray(self.reference_m_s)
+        tide = np.sin(2.0 * np.pi * np.asarray(t, dtype=float) / self.variation_period_s)[:, None]
+        horizontal = c_s + (c_r - c_s) * w + np.asarray(self.variation_m_s) * tide
+        return np.concatenate([horizontal, np.zeros((len(d), 1))], axis=1)
+
+
+@dataclass(frozen=True)
+class SeafloorSpec:
+    """The [seafloor] table: a flat seafloor depth_m below the water surface (module doc)."""
+
+    depth_m: float
+
+
+def _pair(r: Reader, key: str, value: Any) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise r.fail(key, f"expected [east, north] in m/s, got {value!r}")
+    e, n = (r.number(key, v) for v in value)
+    return (e, n)
+
+
+def current_spec(r: Reader) -> CurrentSpec:
+    """The [current] table, checked."""
+    d = r.raw["current"]
+    if not isinstance(d, dict):
+        raise r.fail("current", "expected a table")
+    defaults = {k: v.default for k, v in CurrentSpec.__dataclass_fields__.items()}
+    r.check_keys("current", list(defaults), d)
+    values: dict[str, Any] = {}
+    for key, default in defaults.items():
+        if key not in d:
+            values[key] = default
+        elif isinstance(default, tuple):
+            values[key] = _pair(r, f"current.{key}", d[key])
+        else:
+            values[key] = r.number(f"current.{key}", d[key])
+    spec = CurrentSpec(**values)
+    for key in ("reference_depth_m", "variation_period_s"):
+        r.require(getattr(spec, key) > 0, f"current.{key}", "must be positive")
+    return spec
+
+
+def seafloor_spec(r: Reader) -> SeafloorSpec:
+    """The [seafloor] table, checked."""
+    spec = SeafloorSpec(**r.table("seafloor", {"depth_m": None}))
+    r.require(spec.depth_m > 0, "seafloor.depth_m", "must be positive (metres below the surface)")
+    return spec
