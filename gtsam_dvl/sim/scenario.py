@@ -155,9 +155,9 @@ class DvlSpec:
     correlated_tau_s: float = 60.0  # its time constant
     # with a [seafloor] table (sim/current.py): bottom lock while the DVL's altitude is at most bottom_range_m (0: the
     # max_range_m, which a preset fills with its maximum altitude), water track beyond, with its own white noise
-    # (per axis, or per beam with noise_model "beam"). 1 cm/s: a single water-track ping averages the Doppler
-    # of a water layer, not of a hard seafloor echo, so it is noisier than a navigation-grade DVL's bottom track
-    # (typical of the class; the estimator should be given its own, looser, value)
+    # (per axis, or per beam with noise_model "beam"). 1 cm/s, typical of the class: a water-track ping measures the
+    # Doppler of the scatterers in a water layer a few metres below the DVL (Water Linked's water-tracking page:
+    # 1.5-4.5 m), weaker and more diffuse than a seafloor echo, so it is noisier than the same DVL's bottom track
     bottom_range_m: float = 0.0
     water_track_noise_m_s: float = 0.01
     # a DVL preset (core/config/presets.py DVL_PRESETS, "" none): fills the keys the table does not set, the ping

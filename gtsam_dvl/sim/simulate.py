@@ -4,8 +4,8 @@ Steps: analytic motion in the local level -> geodetic position by quadrature -> 
 biases and noise -> truth in the map frame -> DVL -> depth and GNSS fixes (when the scenario has them).
 Random streams are children of SeedSequence(seed) (PCG64), one per purpose, so switching white noise off keeps
 the same biases: 0 IMU biases, 1 IMU white noise, 2 DVL white noise, 3 DVL dropouts and outliers, 4 depth, 5 GNSS,
-6 the DVL's correlated (Gauss-Markov) error, 7 the DVL's water-track noise. A stream a scenario does not use is never drawn, so adding a sensor
-or an error to a scenario leaves every other stream's numbers as they were.
+6 the DVL's correlated (Gauss-Markov) error, 7 the DVL's water-track noise. A stream a scenario does not use is
+never drawn, so adding a sensor or an error to a scenario leaves every other stream's numbers as they were.
 """
 
 from __future__ import annotations
