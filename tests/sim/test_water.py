@@ -16,7 +16,7 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import scenario_from_dict
+from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.scenarios import surface_dive_raw
 
 SEAFLOOR_M, RANGE_M = 30.0, 20.0  # lock from 10 m down
@@ -186,3 +186,25 @@ def test_bottom_range_defaults_to_the_presets_altitude() -> None:
     from gtsam_dvl.core.config.presets import DVL_PRESETS
 
     assert sc.dvl.bottom_range_m == DVL_PRESETS["teledyne-workhorse-navigator-300"].max_altitude_m == sc.dvl.max_range_m
+
+
+def test_deep_descent_timeline() -> None:
+    """deep-descent as its comments state: 25-35 min from the surface with GNSS fixes, 300 m down in water track
+    through a 0.2-0.5 m/s current, lock near 295 m, lost again on the way up, fixes at the end."""
+    sc = load_scenario("deep-descent")
+    assert 25 * 60 <= sc.duration_s <= 35 * 60 and sc.origin.height_m == 0.0 and sc.gnss is not None
+    log = simulate(sc, 1, white_noise=False)
+    truth, dvl, gnss = log.truth, log.dvl, log.gnss
+    assert truth is not None and truth.n_c is not None and dvl.water_track is not None and gnss is not None
+    depth_m = -truth.n_p[:, 2]  # within 0.4 m of the depth (the map's curvature over 2 km)
+    assert abs(depth_m[0]) < 1e-9 and abs(depth_m[-1]) < 0.5 and 299.5 < depth_m.max() < 300.5
+    speed = np.linalg.norm(truth.n_c, axis=1)
+    assert 0.2 <= speed.min() and speed.max() <= 0.5
+    changes = dvl.t[1:][np.diff(dvl.water_track.astype(int)) != 0]
+    assert len(changes) == 2 and dvl.water_track[0] and dvl.water_track[-1]
+    descent, ascent = (s for s in sc.segments if s.kind in ("descent", "ascent"))
+    assert descent.start_s < changes[0] < descent.end_s and ascent.start_s < changes[1] < ascent.end_s
+    depth = np.interp(changes, truth.t, depth_m)
+    assert np.all(np.abs(depth - (sc.seafloor.depth_m - sc.dvl.bottom_range_m)) < 1.0)  # type: ignore[union-attr]
+    assert gnss.t[0] == 0.0 and gnss.t[-1] == sc.duration_s and not np.any((gnss.t > 300) & (gnss.t < 1800))
+    print(f"lock {changes[0]:.0f}-{changes[1]:.0f} s at {depth.round(1)} m; {dvl.water_track.sum()} water pings")
