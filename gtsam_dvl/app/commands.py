@@ -423,7 +423,7 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
 
 # what smooth records of how it read the log
 READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair", "depth_topic", "gnss_topic", "attitude_topic",
-                "truth_topic")
+                "truth_topic", "dvl_water_topic")
 
 
 def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:

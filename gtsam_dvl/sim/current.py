@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.sim.schema import Reader
 
 M2_PERIOD_S = 44714.0  # the principal lunar semidiurnal tide, 12.42 h
@@ -91,3 +92,22 @@ def seafloor_spec(r: Reader) -> SeafloorSpec:
     spec = SeafloorSpec(**r.table("seafloor", {"depth_m": None}))
     r.require(spec.depth_m > 0, "seafloor.depth_m", "must be positive (metres below the surface)")
     return spec
+
+
+def truth_current(metadata: dict[str, Any], t: np.ndarray, n_p: np.ndarray) -> np.ndarray | None:
+    """TruthData.n_c (K, 3) of a simulated log read back from its file: the current the metadata's truth records
+    ("current", the [current] table) at the truth's times t (K,) and positions n_p (K, 3) in the truth's map
+    (metadata truth "map_origin" when the origin came from the first GNSS fix, else the scenario's origin);
+    None when the log records no current."""
+    truth = metadata.get("truth") or {}
+    if not isinstance(truth, dict) or not truth.get("current"):
+        return None
+    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in truth["current"].items()}
+    spec = CurrentSpec(**values)
+    o = (metadata.get("scenario") or {}).get("origin") or metadata.get("origin") or {}
+    frame = LocalFrame(float(o["lat_deg"]), float(o["lon_deg"]), float(o.get("height_m", 0.0)))
+    m = truth.get("map_origin")
+    truth_frame = frame if not m else LocalFrame(float(m["lat_deg"]), float(m["lon_deg"]), float(m["height_m"]))
+    _, _, h = truth_frame.map_to_geodetic(n_p)
+    n_c = spec.at(-np.asarray(h), t)
+    return n_c if not m else n_c @ (truth_frame.e_R_n.T @ frame.e_R_n).T

@@ -5,7 +5,6 @@ the new tables unchanged."""
 
 from __future__ import annotations
 
-import copy
 from typing import Any
 
 import numpy as np
@@ -17,41 +16,20 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
-from tests.support.scenarios import surface_dive_raw
+from tests.support.scenarios import WATER_DIVE, water_dive_raw
 
-SEAFLOOR_M, RANGE_M = 30.0, 20.0  # lock from 10 m down
-CURRENT = {"surface_m_s": [0.45, 0.1], "reference_m_s": [-0.1, 0.2], "reference_depth_m": 15.0,
-           "variation_m_s": [0.05, -0.03], "variation_period_s": 80.0}
-LEVER_M = np.array([0.6, 0.1, -0.3])
-MIS_DEG = (0.3, -0.2, 0.5)  # roll, pitch, yaw of R_c
-SCALE = 1.002
-
-
-def _raw(noise_model: str = "velocity", **dvl: Any) -> dict[str, Any]:
-    """A dive from the surface to 18.3 m and back (2 Hz DVL, z-down mounting with a lever arm) in a sheared,
-    varying current over a seafloor 30 m down: water track to 10 m, bottom lock below, water track again."""
-    raw = surface_dive_raw([
-        {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
-        {"kind": "descent", "duration_s": 40.0, "peak_vertical_speed_m_s": 1.0},
-        {"kind": "turn", "duration_s": 20.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
-        {"kind": "ascent", "duration_s": 40.0, "peak_vertical_speed_m_s": 1.0},
-    ], rates={"dvl_hz": 2.0}, mounting={"dvl_rpy_deg": [180.0, 0.0, 0.0], "dvl_lever_arm_m": LEVER_M.tolist()})
-    raw["initial"]["speed_m_s"] = 0.5
-    raw["dvl"].update(face_axis=[0.0, 0.0, 1.0], scale=SCALE, misalignment_deg=list(MIS_DEG), bottom_range_m=RANGE_M,
-                      noise_model=noise_model, **dvl)
-    raw["seafloor"] = {"depth_m": SEAFLOOR_M}
-    raw["current"] = copy.deepcopy(CURRENT)
-    return raw
+CURRENT, LEVER_M, MIS_DEG, RANGE_M, SCALE, SEAFLOOR_M = (WATER_DIVE[k] for k in (
+    "current", "lever_m", "misalignment_deg", "bottom_range_m", "scale", "seafloor_m"))
 
 
 @pytest.fixture(scope="module")
 def clean() -> LogData:
-    return simulate(scenario_from_dict(_raw(), "water"), 3, white_noise=False)
+    return simulate(scenario_from_dict(water_dive_raw(), "water"), 3, white_noise=False)
 
 
 @pytest.fixture(scope="module")
 def noisy() -> LogData:
-    return simulate(scenario_from_dict(_raw(water_track_noise_m_s=0.03), "water"), 3)
+    return simulate(scenario_from_dict(water_dive_raw(water_track_noise_m_s=0.03), "water"), 3)
 
 
 def _at_pings(log: LogData) -> dict[str, np.ndarray]:
@@ -132,7 +110,7 @@ def test_pings_are_the_model_computed_from_the_truth(clean: LogData) -> None:
 def test_water_track_noise_is_its_own(noise_model: str) -> None:
     """Water-track pings carry water_track_noise_m_s (here 3 cm/s, the bottom track's 2 cm/s) and say so in their
     covariance; the bottom-track pings keep theirs."""
-    log = simulate(scenario_from_dict(_raw(noise_model, water_track_noise_m_s=0.03, noise_m_s=0.02), "water"), 5)
+    log = simulate(scenario_from_dict(water_dive_raw(noise_model, water_track_noise_m_s=0.03, noise_m_s=0.02), "water"), 5)
     wt = log.dvl.water_track
     assert wt is not None
     for mask, water, sigma in ((wt, True, 0.03), (~wt, False, 0.02)):
@@ -149,7 +127,7 @@ def test_water_track_noise_is_its_own(noise_model: str) -> None:
 def test_without_seafloor_the_dvl_is_as_before() -> None:
     """A current without [seafloor] is truth only: the DVL's arrays are those of the scenario without it, bit for
     bit, no water track, no altitude."""
-    raw = _raw()
+    raw = water_dive_raw()
     raw.pop("seafloor")
     with_current = simulate(scenario_from_dict(raw, "a"), 2)
     raw.pop("current")
@@ -170,7 +148,7 @@ def test_without_seafloor_the_dvl_is_as_before() -> None:
     ("seafloor", {"depth_m": -5.0}, "seafloor.depth_m"),
 ])
 def test_bad_tables_fail_in_one_line(table: str, value: dict[str, Any], key: str) -> None:
-    raw = _raw()
+    raw = water_dive_raw()
     raw[table] = value
     with pytest.raises(GtsamDvlError, match=f"key '{key}'") as exc:
         scenario_from_dict(raw)
@@ -178,7 +156,7 @@ def test_bad_tables_fail_in_one_line(table: str, value: dict[str, Any], key: str
 
 
 def test_bottom_range_defaults_to_the_presets_altitude() -> None:
-    raw = _raw()
+    raw = water_dive_raw()
     del raw["dvl"]["bottom_range_m"]
     raw["dvl"].pop("max_range_m", None)
     raw["dvl"]["model"] = "teledyne-workhorse-navigator-300"
