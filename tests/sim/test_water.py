@@ -27,11 +27,6 @@ def clean() -> LogData:
     return simulate(scenario_from_dict(water_dive_raw(), "water"), 3, white_noise=False)
 
 
-@pytest.fixture(scope="module")
-def noisy() -> LogData:
-    return simulate(scenario_from_dict(water_dive_raw(water_track_noise_m_s=0.03), "water"), 3)
-
-
 def _at_pings(log: LogData) -> dict[str, np.ndarray]:
     """The truth at the DVL stamps (both on the same 0.1 s grid; the stamps are the measurement times)."""
     assert log.truth is not None and log.truth.n_c is not None
@@ -110,7 +105,8 @@ def test_pings_are_the_model_computed_from_the_truth(clean: LogData) -> None:
 def test_water_track_noise_is_its_own(noise_model: str) -> None:
     """Water-track pings carry water_track_noise_m_s (here 3 cm/s, the bottom track's 2 cm/s) and say so in their
     covariance; the bottom-track pings keep theirs."""
-    log = simulate(scenario_from_dict(water_dive_raw(noise_model, water_track_noise_m_s=0.03, noise_m_s=0.02), "water"), 5)
+    raw = water_dive_raw(noise_model, water_track_noise_m_s=0.03, noise_m_s=0.02)
+    log = simulate(scenario_from_dict(raw, "water"), 5)
     wt = log.dvl.water_track
     assert wt is not None
     for mask, water, sigma in ((wt, True, 0.03), (~wt, False, 0.02)):
