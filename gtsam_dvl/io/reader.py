@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gtsam_dvl.core.current import truth_current
 from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.imu_faults import drop_saturated, undo_clock_steps
@@ -39,7 +40,6 @@ from gtsam_dvl.io.storage.raw import Bodies
 from gtsam_dvl.io.storage.salvage import salvage_losses, salvage_report
 from gtsam_dvl.io.storage.sources import Source, open_source
 from gtsam_dvl.io.water_track import WATER_TOPIC_TYPES, as_water_track, merge_pings
-from gtsam_dvl.sim.current import truth_current
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 ODOM_TYPE = "nav_msgs/msg/Odometry"
@@ -302,7 +302,7 @@ def read_log(
 
     Water track on a topic of its own (dvl_water_topic, a twist: io/water_track.py): its pings join the DVL's in
     stamp order, marked DvlData.water_track. Simulated truth gets the current the metadata records
-    (TruthData.n_c, sim/current.py truth_current)."""
+    (TruthData.n_c, core/current.py truth_current)."""
     src = open_source(path, salvage=salvage)
     path = src.path
     if imu_topic not in src.topics:
