@@ -58,14 +58,14 @@ class DvlData:
     beams: BeamData | None = None
     frame_id: str = "dvl_link"
     # (M,) bool: water-track pings (velocity relative to the water, its own mode in the message), never valid
-    # as velocity over ground; None: none
+    # as velocity over ground; their d_v (and beam velocities) are kept, finite where measured; None: none
     water_track: np.ndarray | None = None
-    # (M,) m: the DVL's range to the seafloor along the vertical (the message's altitude), NaN where not known or
-    # out of bottom-track range; None: the log has none
-    altitude: np.ndarray | None = None
     # a simulation without white noise: its velocity repeats bit for bit at constant velocity, which a real
     # DVL's never does (estimators/ping_screen.py drops such repeats as frozen output unless this is set)
     noise_free: bool = False
+    # (M,) m: the DVL's range to the seafloor along the vertical (the message's altitude), NaN where not known or
+    # out of bottom-track range; None: the log has none
+    altitude: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

@@ -128,7 +128,7 @@ def _select(dvl: DvlData, keep: np.ndarray, t: np.ndarray) -> DvlData:
     beams = None if b is None else BeamData(b.d_u[keep], b.v[keep], b.range[keep], b.valid[keep])
     water = None if dvl.water_track is None else dvl.water_track[keep]
     altitude = None if dvl.altitude is None else dvl.altitude[keep]
-    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water, altitude)
+    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water, altitude=altitude)
 
 
 def _metadata(src: Source) -> dict[str, Any]:

@@ -43,5 +43,5 @@ def merge_pings(dvl: DvlData, water: DvlData) -> DvlData:
                                                                                  np.nan, ())
     return DvlData(np.concatenate([dvl.t, water.t])[order], join(dvl.d_v, water.d_v, np.nan, (3,)),
                    join(dvl.d_cov, water.d_cov, np.nan, (3, 3)), join(dvl.valid, water.valid, False, ()).astype(bool),
-                   beams, dvl.frame_id, join(dvl.water_track, water.water_track, False, ()).astype(bool), altitude,
-                   dvl.noise_free)
+                   beams, dvl.frame_id, join(dvl.water_track, water.water_track, False, ()).astype(bool),
+                   noise_free=dvl.noise_free, altitude=altitude)
