@@ -139,6 +139,17 @@ def test_streamed_file_is_write_log_file(tmp_path: Path) -> None:
     assert again.read_bytes() != path.read_bytes()
 
 
+def test_streamed_water_log_is_write_log_file(tmp_path: Path) -> None:
+    """With water track (velocity mode, altitude) and a current, the streamed file is write_log's, byte for byte."""
+    sc = _small("water")
+    ref_path, path = tmp_path / "ref.mcap", tmp_path / "streamed.mcap"
+    write_log(ref_path, simulate(sc, 5))
+    write_log_stream(path, ChunkedSimulation(sc, 5, chunk_s=7.7))
+    assert path.read_bytes() == ref_path.read_bytes()
+    back = read_log(path)
+    assert back.dvl.water_track is not None and back.truth is not None and back.truth.n_c is not None
+
+
 def test_parts_are_chunks() -> None:
     """The parts cover the run once, in chunks of chunk_s (a last one-sample chunk joins the one before), with
     next_t no later than any later part's first stamp."""
