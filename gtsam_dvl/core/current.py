@@ -55,7 +55,9 @@ def truth_current(metadata: dict[str, Any], t: np.ndarray, n_p: np.ndarray) -> n
         return None
     values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in truth["current"].items()}
     spec = CurrentSpec(**values)
-    o = (metadata.get("scenario") or {}).get("origin") or metadata.get("origin") or {}
+    o = (metadata.get("scenario") or {}).get("origin") or metadata.get("origin")
+    if not o:
+        return None
     frame = LocalFrame(float(o["lat_deg"]), float(o["lon_deg"]), float(o.get("height_m", 0.0)))
     m = truth.get("map_origin")
     truth_frame = frame if not m else LocalFrame(float(m["lat_deg"]), float(m["lon_deg"]), float(m["height_m"]))

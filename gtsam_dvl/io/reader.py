@@ -390,6 +390,9 @@ def read_log(
         w_ns = stamps_ns(w_arr)
         keep = check_stamps(path, dvl_water_topic, w_ns, t0, None, repair, warnings, dropped)
         water = _select(_dvl_data(src, dvl_water_topic, w_arr), keep, (w_ns[keep] - t0) / 1e9)
+        if water.frame_id != dvl.frame_id:
+            warnings.append(f"{dvl_water_topic} is in frame {water.frame_id}, {dvl_topic} in {dvl.frame_id}: its "
+                            f"velocity taken in {dvl.frame_id}")
         dvl = merge_pings(dvl, as_water_track(water))
 
     truth = None

@@ -11,7 +11,8 @@ Water track (a scenario with [seafloor], sim/current.py): while the DVL's altitu
 depth) exceeds its bottom-track range, the ping measures the vehicle's velocity relative to the water, seen
 through the same scale, misalignment and lever arm: y = k d_R_b (n_R_b^T (n_v - n_c) + b_omega x b_l), n_c the
 current at base_link's depth. Such a ping has its own white noise (water_track_noise_m_s, from its own random
-stream), no beam ranges and no altitude; DvlData marks it water_track and not valid (valid means usable as
+stream) instead of noise_m_s, the correlated error, dropouts and outliers as a bottom-track ping, no beam ranges
+and no altitude; DvlData marks it water_track and not valid (valid means usable as
 velocity over ground), its velocity and beam velocities kept.
 """
 

@@ -54,17 +54,8 @@ from gtsam_dvl.core.types import (
     Mounting,
     TruthData,
 )
-from gtsam_dvl.sim.dvl import (
-    GaussMarkov,
-    WaterPings,
-    correlated_error,
-    dvl_measure,
-    dvl_true,
-    event_blocks,
-    janus_beams,
-    water_model,
-    water_noise_rng,
-)
+from gtsam_dvl.sim import dvl as sim_dvl
+from gtsam_dvl.sim.dvl import GaussMarkov, correlated_error, dvl_measure, dvl_true, event_blocks, janus_beams
 from gtsam_dvl.sim.gnss import first_fix_frame, gnss_fixes, gnss_rng, reframe_truth
 from gtsam_dvl.sim.imu import (
     initial_biases,
@@ -330,7 +321,7 @@ class ChunkedSimulation:
         # the grid interval each ping's time falls in (TrackWindow.grid_index_of_time): the chunk that has it
         self._ping_g = np.clip(np.floor(self.t_meas * rate + 1.0).astype(np.int64), 0, n - 1)
         self.floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
-        self.water = water_model(scenario)
+        self.water = sim_dvl.water_model(scenario)
         self.truth_step = int(round(rate / rates.truth_hz))
         self.n_beams = janus_beams(scenario.dvl.beam_angle_deg, np.asarray(scenario.dvl.face_axis)).shape[0]
 
@@ -462,7 +453,7 @@ class ChunkedSimulation:
             depth=depth_rng(self.seed) if white and self.scenario.depth is not None else None,
             gnss=gnss_rng(self.seed) if white and self.scenario.gnss is not None else None,
             dvl_correlated=correlated_error(sc.dvl, sc.rates.dvl_hz, self.seed) if white else None,
-            dvl_water=_Draws([water_noise_rng(self.seed)]) if white and self.water is not None else None,
+            dvl_water=_Draws([sim_dvl.water_noise_rng(self.seed)]) if white and self.water is not None else None,
         )
 
     # -- the parts ----------------------------------------------------------------------------------
@@ -549,7 +540,7 @@ class ChunkedSimulation:
             y, ranges = np.zeros((0, 3)), np.zeros((0, self.n_beams))
             d_u = janus_beams(sc.dvl.beam_angle_deg, np.asarray(sc.dvl.face_axis))
             if self.water is not None:
-                water = WaterPings(np.zeros(0, bool), np.zeros(0))
+                water = sim_dvl.WaterPings(np.zeros(0, bool), np.zeros(0))
         noise, events, water_noise = (None if d is None else d.start(m == 1)
                                       for d in (streams.dvl_noise, streams.dvl_events, streams.dvl_water))
         dvl = dvl_measure(sc.dvl, _padded(self.t_dvl[j0:j1]), y, d_u, ranges,
