@@ -508,6 +508,11 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         if ev.velocity_error_m_s is not None:
             written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, ev.velocity_sigma_m_s)],
                                        out_dir / "velocity_error.png", "velocity", ev.segments))
+    if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
+        from gtsam_dvl.app.plots.current_plots import plot_current
+        truth = log.truth if log is not None else None
+        written.append(plot_current(wc, out_dir / "water_current.png", None if truth is None else truth.t,
+                                    None if truth is None else truth.n_c, label))
     if res.timeline is not None:
         from gtsam_dvl.analysis.metrics import truth_in_user_units
 
