@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from scipy.special import gammaincc, gammainccinv  # chi^2(k) tails (scipy.stats costs a second to import)
@@ -100,6 +100,24 @@ class CalibrationCheck:
                 "threshold": self.threshold, "p_value": self.p_value, "moved": self.moved,
                 "components": [c.as_dict() for c in self.components],
                 "verdict": self.findings[0][1] if self.findings else ""}
+
+
+class Findings(Protocol):
+    """What takes the verdict: analysis/health.py's Health (its figures and flag)."""
+
+    figures: dict[str, Any]
+
+    def flag(self, severity: str, text: str) -> None: ...
+
+
+def judge_calibration(result: NavResult, health: Findings) -> None:
+    """The verdict into the health: its figures under "calibration_check" and its findings flagged; nothing for a
+    run without a calibration prior."""
+    check = check_calibration(result)
+    if check is not None:
+        health.figures["calibration_check"] = check.as_dict()
+        for severity, text in check.findings:
+            health.flag(severity, text)
 
 
 def tail_probability(nsigma: float) -> float:

@@ -97,6 +97,11 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
              f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)"]
     if dvl.beams is not None:
         lines.append(f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}")
+    if dvl.water_track is not None and dvl.water_track.any():
+        lines.append(f"  DVL water track (velocity relative to the water): {int(dvl.water_track.sum())} pings")
+    if dvl.altitude is not None and np.isfinite(dvl.altitude).any():
+        alt = dvl.altitude[np.isfinite(dvl.altitude)]
+        lines.append(f"  DVL altitude {alt.min():.1f}-{alt.max():.1f} m ({len(alt)} pings with one)")
     from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 
     dvl_hz = 1.0 / np.median(np.diff(dvl.t)) if len(dvl) > 1 else float("nan")
@@ -445,7 +450,7 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
 
 # what smooth records of how it read the log
 READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair", "depth_topic", "gnss_topic", "attitude_topic",
-                "truth_topic")
+                "truth_topic", "dvl_water_topic")
 
 
 def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
@@ -525,6 +530,11 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         if ev.velocity_error_m_s is not None:
             written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, ev.velocity_sigma_m_s)],
                                        out_dir / "velocity_error.png", "velocity", ev.segments))
+    if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
+        from gtsam_dvl.app.plots.current_plots import plot_current
+        truth = log.truth if log is not None else None
+        written.append(plot_current(wc, out_dir / "water_current.png", None if truth is None else truth.t,
+                                    None if truth is None else truth.n_c, label))
     if res.timeline is not None:
         from gtsam_dvl.analysis.metrics import truth_in_user_units
 

@@ -452,6 +452,18 @@ def calibration_info(config: EstimatorConfig, calibration: VehicleCalibration) -
             "cov": calibration.block(names).tolist()}
 
 
+def calibration_in_layout(config: EstimatorConfig, calibration: VehicleCalibration | None,
+                          layout: dict[str, slice]) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """A filter's start from a calibration (the EKF's error state, ekf_layout): the values of the states it holds
+    that the layout carries (calibration_states), their columns in the layout and their joint covariance (empty
+    without a calibration)."""
+    held = [s.name for s in calibration_states(config, calibration) if s.name in layout]
+    if calibration is None or not held:
+        return {}, np.zeros(0, dtype=int), np.zeros((0, 0))
+    idx = np.concatenate([np.arange(layout[n].start, layout[n].stop) for n in held])
+    return {n: np.asarray(calibration.values[n], dtype=float) for n in held}, idx, calibration.block(held)
+
+
 def _key_value(states: list[SharedState], key: int, mean: dict[str, np.ndarray]) -> np.ndarray:
     """A key's value (a vector; a rotation's 3x3 matrix) from its states' values."""
     group = sorted((s for s in states if s.key == key), key=lambda s: s.offset)

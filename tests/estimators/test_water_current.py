@@ -36,8 +36,11 @@ def with_water_track(log: LogData) -> LogData:
 
 
 def _config(log: LogData, water_track: str) -> EstimatorConfig:
+    """The log's configuration, water track as given; the water-track pings' noise is the log's (paper-3d's
+    2 cm/s: the pings were bottom-track pings)."""
     cfg = EstimatorConfig.for_log(log.metadata)
-    return cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track": water_track})})
+    return cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track": water_track,
+                                                                             "water_track_sigma_m_s": 0.02})})
 
 
 @pytest.fixture(scope="module")
@@ -59,8 +62,10 @@ def test_random_walk_variance() -> None:
 
 
 def test_batch_recovers_the_current(water_log: LogData) -> None:
-    used = smooth_batch(water_log, _config(water_log, "auto"))
+    used = smooth_batch(water_log, _config(water_log, "auto"), timeline=True)
     assert used.config["current"]["water_track"] == "use"
+    assert used.timeline is not None  # the filtering timeline carries W(i) too: its last sigma is the smoother's
+    assert used.timeline.scale_sigma[-1] == pytest.approx(used.calibration["scale"].sigma[0], rel=1e-6)
     wc = used.info["water_current"]
     t = np.asarray(wc["t_s"])
     inside = (t > T_WATER[0] + 5) & (t < T_WATER[1] - 5)
@@ -91,7 +96,7 @@ def test_ekf_recovers_the_current(water_log: LogData) -> None:
     end = int(np.flatnonzero(t < T_WATER[1] - 1)[-1])
     for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
         est, sig = wc[f"{axis}_m_s"][end], wc[f"{axis}_sigma_m_s"][end]
-        assert sig < 0.02 and abs(est - truth) < 3 * sig, (axis, est, sig)
+        assert sig < 0.04 and abs(est - truth) < 3 * sig, (axis, est, sig)  # (the prior: 0.5 m/s)
     assert used.info["counters"]["dvl_water_track"] == 0
     truth_cal = water_log.true_calibration
     assert truth_cal is not None
@@ -111,9 +116,38 @@ def test_online_recovers_the_current(water_log: LogData) -> None:
     end = int(np.flatnonzero(t < T_WATER[1] - 1)[-1])
     for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
         est, sig = wc[f"{axis}_m_s"][end], wc[f"{axis}_sigma_m_s"][end]
-        assert sig < 0.02 and abs(est - truth) < 3 * sig, (axis, est, sig)
+        assert sig < 0.04 and abs(est - truth) < 3 * sig, (axis, est, sig)  # (the prior: 0.5 m/s)
     assert used.info["counters"].get("dvl_water_track", 0) == 0
     truth_cal = water_log.true_calibration
     assert truth_cal is not None
     scale = used.calibration["scale"]
     assert abs(scale.value[0] - truth_cal.scale) < 3 * scale.sigma[0]
+
+
+def test_health_counts_water_track_and_flags_false_lock(water_log: LogData) -> None:
+    """The health notes the water-track stretch and judges its residuals with the current (no warning on a
+    consistent log); bottom-track pings that report the velocity relative to the water (a false lock, 200-210 s)
+    are flagged as such."""
+    from gtsam_dvl.analysis.health import assess_health
+    clean = smooth_batch(water_log, _config(water_log, "auto"))
+    health = assess_health(clean, water_log)
+    fig = health.figures["water_track"]
+    assert fig["used"] and fig["pings"] == int(water_log.dvl.water_track.sum()) and len(fig["stretches"]) == 1
+    assert fig["whitened_rms"] < 1.5 and fig["false_lock_pings"] == 0
+    assert any("water-track pings in 1 stretch" in n for n in health.notes)
+    assert not any("water" in w for w in health.warnings), health.warnings
+
+    # bottom-track pings at 200-210 s that measured the velocity relative to the water (the current unchanged)
+    lock = with_water_track(water_log)  # (its water stretch unchanged)
+    dvl, truth = lock.dvl, lock.truth
+    assert truth is not None and lock.true_calibration is not None
+    k, b_R_d = lock.true_calibration.scale, lock.true_calibration.b_R_d(lock.mounting.b_R_d0)
+    bad = (dvl.t > 200.0) & (dvl.t < 210.0)
+    idx = np.searchsorted(truth.t, dvl.t)
+    d_v = water_log.dvl.d_v.copy()
+    for j in np.flatnonzero(bad):
+        d_v[j] = d_v[j] - k * b_R_d.T @ quat_xyzw_to_matrix(truth.n_q_b[idx[j]]).T @ N_C
+    lock = dataclasses.replace(lock, dvl=dataclasses.replace(water_log.dvl, d_v=d_v))
+    health = assess_health(smooth_batch(lock, _config(lock, "auto")), lock)
+    assert health.figures["water_track"]["false_lock_pings"] >= int(bad.sum()) - 1
+    assert any("false bottom lock" in w for w in health.warnings), health.warnings

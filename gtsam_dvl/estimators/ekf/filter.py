@@ -57,6 +57,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.core import states
 from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
@@ -64,15 +65,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew
-from gtsam_dvl.core.states import (
-    BY_NAME,
-    calibration_info,
-    calibration_states,
-    correlated_error,
-    ekf_layout,
-    enabled,
-    water_current,
-)
+from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators import current
@@ -174,8 +167,7 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
     attitude and origin carried to the first ping (alignment.first_state), its position and covariance;
     calibration: the states it holds (states.calibration_states) at its values with its joint covariance."""
     pri = config.priors
-    held = [s.name for s in calibration_states(config, calibration) if s.ekf]
-    file = {n: np.asarray(calibration.values[n], dtype=float) for n in held} if calibration is not None else {}
+    file, held, held_cov = states.calibration_in_layout(config, calibration, ekf_layout(config, N_NAV))
     b_R_d0 = file.get("misalignment", log.mounting.b_R_d0)
     k0 = float(file.get("scale", [pri.scale_initial])[0])
     d_y = log.dvl.d_v[ping]
@@ -196,10 +188,7 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
                 P[rows, cols] = first.cov[r:r + 3, c:c + 3]
     for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
         P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
-    if held:  # the calibration's joint covariance over the states it holds, in place of their priors
-        assert calibration is not None
-        idx = np.concatenate([np.arange(layout[n].start, layout[n].stop) for n in held])
-        P[np.ix_(idx, idx)] = calibration.block(held)
+    P[np.ix_(held, held)] = held_cov  # a calibration's joint covariance over the states it holds, in their place
     d_e = None
     if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
         P = np.pad(P, ((0, 3), (0, 3)))
@@ -212,8 +201,7 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
         P[m:, m:] = np.eye(2) * config.current.prior_sigma_m_s**2
         n_c = np.zeros(2)
     return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
-                       float(file.get("time_offset", [config.dvl.time_offset_prior_s])[0]) if offset else 0.0, d_e,
-                       n_c)
+                       file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0, d_e, n_c)
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -296,7 +284,7 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int, water: bool
     beams (rows of A the beam unit vectors); a water-track ping (water): its 3-D velocity, its own noise."""
     cfg, dvl = config.dvl, log.dvl
     if water:
-        return np.eye(3), dvl.d_v[j], water_covariance(config)
+        return np.eye(3), dvl.d_v[j], water_covariance(config, dvl.d_cov[j])
     if cfg.use_beams and dvl.beams is not None:
         ok = dvl.beams.valid[j]
         A = dvl.beams.d_u[j][ok]
@@ -344,8 +332,7 @@ class _DepthUpdates:
 
 
 def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
-            min_calibration_speed_m_s: float | None = None, calibration: VehicleCalibration | None = None
-            ) -> NavResult:
+            min_calibration_speed_m_s: float | None = None, calibration: VehicleCalibration | None = None) -> NavResult:
     """Filter a whole log: trajectory and calibration at every usable DVL ping, with the filtering history.
 
     Below config.ekf.min_calibration_speed_m_s (or the keyword, which overrides it) or
@@ -357,10 +344,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     variance component by covariance matching of the innovations over the warm-up window ([noise] warmup_s), the
     window filtered again with each new fit until it changes by at most [noise] fit_tolerance (a covariance
     matching is only unbiased with the P of the right R: P is computed with the R assumed), at most fit_passes
-    times, then held for the whole log (a real-time filter keeps the window's messages for that).
-
-    calibration: a vehicle's calibration, inflated for its age: the initial mean and joint covariance of the
-    states it holds (initial_state); a time offset it holds is not recentred ([ekf] recentre_time_offset)."""
+    times, then held for the whole log (a real-time filter keeps the window's messages for that). calibration: a
+    vehicle's calibration (inflated): the start of the states it holds (initial_state), its offset not recentred."""
     config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
@@ -371,7 +356,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
     recentre = (enabled(config, "time_offset") and config.ekf.recentre_time_offset
-                and "time_offset" not in [s.name for s in calibration_states(config, calibration)])
+                and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0])
     offset_info: dict[str, Any] = {}
     if dvl_fit_enabled(config) or recentre:
         n = config.noise
@@ -396,7 +381,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     if offset_info:
         result.info["time_offset_prior"] = offset_info
     if calibration is not None:
-        result.info["calibration_prior"] = calibration_info(config, calibration)
+        result.info["calibration_prior"] = states.calibration_info(config, calibration)
     result.config = stated.to_dict()
     return result
 
