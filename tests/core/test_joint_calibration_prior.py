@@ -129,3 +129,24 @@ def test_a_key_held_in_part_is_refused() -> None:
                              np.eye(3) * 1e-8)
     with pytest.raises(GtsamDvlError, match="holds part of the gyro bias's variable"):
         states.prior_factors(_config(), MOUNTING, cal)
+
+
+def test_from_result_without_the_shared_joint_keeps_the_calibration_block() -> None:
+    """A result without shared_joint_cov (the online estimator's): the file's scale and misalignment jointly from
+    calib_joint_cov ([accel, gyro] bias, scale, misalignment), the time offset's marginal beside them."""
+    from types import SimpleNamespace
+
+    from gtsam_dvl.core.calibration import from_result
+    from gtsam_dvl.core.states import Estimate
+
+    cfg = _config(offset=True, lever=False)
+    cal = _calibration(("scale", "misalignment", "time_offset"))
+    block = np.eye(10) * 1e-9
+    block[6:, 6:] = cal.block(["scale", "misalignment"])
+    result = SimpleNamespace(calibration={n: Estimate(cal.values[n], cal.block([n])) for n in cal.states},
+                             shared_joint_cov=None, calib_joint_cov=block, t0_ns=0, config={})
+    out = from_result(result, cfg, "auv-1")
+    assert out.states == cal.states
+    np.testing.assert_allclose(out.block(["scale", "misalignment"]), cal.block(["scale", "misalignment"]))
+    np.testing.assert_allclose(out.block(["time_offset"]), cal.block(["time_offset"]))
+    assert np.all(out.cov[:4, 4] == 0.0)
