@@ -39,6 +39,7 @@ from typing import Any, Protocol
 import numpy as np
 from scipy.special import gammaincc, gammainccinv  # chi^2(k) tails (scipy.stats costs a second to import)
 
+from gtsam_dvl.core.calibration import config_hash
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_log
@@ -147,6 +148,10 @@ def check_calibration(result: NavResult, config: EstimatorConfig | None = None) 
     check = CalibrationCheck(str(prior.get("vehicle", "")), str(prior.get("date", "")), chi2, dof, threshold,
                              p_value, bool(dof and chi2 > threshold), _components(names, d, P0, P1))
     check.findings = _findings(check, nsigma)
+    theirs, ours = prior.get("config_hash"), config_hash(getattr(result, "config", None) or {})
+    if theirs and getattr(result, "config", None) and theirs != ours:  # another model: a cause of a move
+        check.findings.append(("note", f"the calibration was made with another configuration (hash {theirs}; this "
+                                       f"run's {ours}): a different noise or error model moves estimates too"))
     return check
 
 

@@ -447,6 +447,7 @@ def calibration_info(config: EstimatorConfig, calibration: VehicleCalibration) -
     and their joint covariance, for the verdict on the new estimate (analysis/calibration_check.py)."""
     names = [s.name for s in calibration_states(config, calibration)]
     return {"vehicle": calibration.vehicle, "date": calibration.date, "method": calibration.method,
+            "config_hash": calibration.config_hash,
             "sources": [{"path": s.path, "sha256": s.sha256} for s in calibration.sources],
             "states": names, "values": {n: np.asarray(calibration.values[n], dtype=float).tolist() for n in names},
             "cov": calibration.block(names).tolist()}

@@ -109,6 +109,16 @@ def test_without_the_shared_joint_the_calibration_block_keeps_the_correlations()
     assert b.chi2 == pytest.approx(a.chi2, rel=1e-9)
 
 
+def test_a_calibration_of_another_configuration_is_noted() -> None:
+    result = _result(*_dive(np.random.default_rng(3), np.zeros(5)))
+    result.info["calibration_prior"]["config_hash"] = "0123456789abcdef"
+    result.config = CONFIG.to_dict()
+    check = check_calibration(result)
+    assert check is not None
+    assert any(s == "note" and t.startswith("the calibration was made with another configuration (hash 0123")
+               for s, t in check.findings)
+
+
 def test_no_verdict_without_a_calibration_prior() -> None:
     assert check_calibration(SimpleNamespace(info={}, calibration={})) is None
 

@@ -64,6 +64,7 @@ def test_round_trip_out_then_in(dives: tuple[Path, Path], tmp_path: Path) -> Non
                                infl["variance_factor"], rtol=1e-12)
     check = s["calibration_check"]
     assert check["moved"] is False and check["verdict"].startswith("consistent with auv-3's calibration")
+    assert not any("another configuration" in n for n in s["health"]["notes"])  # both dives: the log's "paper"
     c2 = read_calibration(cal1)
     assert [src.path for src in c2.sources] == [str(first), str(second)]
     assert c2.date == iso_date((T0_S + 10 * DAY_S) * 10**9)
