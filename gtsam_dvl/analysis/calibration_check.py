@@ -23,9 +23,10 @@ Per state and tangent component, in words: z = d_i / sqrt((P0 - P1)_ii); beyond 
 4.1 sigma since 2026-11-02 (+10000 ppm): remounted, or another sound-speed setting?"; a component the dive hardly
 informed (under LITTLE_FRACTION of its variance removed) is "from the calibration", and not said to have moved
 (its shift follows the others' through the file's correlations: the scale's drags a correlated yaw). The health
-(analysis/health.py) takes the findings: "degraded" when the calibration moved (the result leans on a prior its
-data contradict: the estimates are pulled towards the file's), with a "warn" line per state that moved; a note
-when it is consistent.
+(analysis/health.py) takes the findings: "degraded" when the joint test rejects the file (the result leans on a
+prior its data contradict: the estimates are pulled towards the file's), with a "warn" line per state that moved;
+a "warn" alone for a state beyond moved_sigmas that the joint test does not reject (it has more directions to
+spread its tail over); a note when it is consistent.
 
 Pure computation on NavResult (analysis layer).
 """
@@ -234,24 +235,26 @@ def _amount(c: ComponentShift) -> str:
 
 
 def _findings(check: CalibrationCheck, nsigma: float) -> list[tuple[str, str]]:
-    """The verdict as sentences (module doc): "degraded" with a "warn" per component that moved (and for the block
-    when none alone did), else one note."""
+    """The verdict as sentences (module doc): when the joint test rejects the file, "degraded" with a "warn" per
+    component that moved (or one for the block when none alone did); a component beyond nsigma that the joint test
+    does not reject, a "warn" that says so; else one note."""
     since = f"since {check.date[:10]}" if check.date else "since the calibration"
     whose = f"{check.vehicle}'s calibration" if check.vehicle else "the calibration file"
     # a component the dive hardly informed only follows the others through the file's correlations: not named
     moved = [c for c in check.components if abs(c.z) > nsigma and c.informed >= LITTLE_FRACTION]
+    joint = f"chi^2 {check.chi2:.1f} over {check.dof} informed directions, threshold {check.threshold:.1f}"
     out: list[tuple[str, str]] = []
     for c in moved:
-        cause = CAUSES.get(c.state, "")
-        out.append(("warn", f"{c.text} moved {abs(c.z):.1f} sigma {since} ({_amount(c)}): {cause}"))
+        out.append(("warn", f"{c.text} moved {abs(c.z):.1f} sigma {since} ({_amount(c)}): {CAUSES.get(c.state, '')}"
+                            + ("" if check.moved else f" (the joint test does not reject the file: {joint})")))
     if check.moved and not moved:
-        out.append(("warn", f"the calibration moved {since}: chi^2 {check.chi2:.1f} over {check.dof} informed "
-                            f"directions (threshold {check.threshold:.1f}), no single state beyond {nsigma:g} sigma"))
-    if out:
+        out.append(("warn", f"the calibration moved {since} ({joint}), no single state beyond {nsigma:g} sigma"))
+    if check.moved:
         out.insert(0, ("degraded", f"{whose} no longer fits this dive (chi^2 {check.chi2:.1f}, {check.dof} dof, "
                                    f"p = {check.p_value:.2g}): this result leans on it; if the change is real, "
                                    "smooth again without --calibration (and write the new one with "
                                    "--calibration-out)"))
+    if out:
         return out
     held = [c.text for c in check.components if c.informed < LITTLE_FRACTION]
     note = (f"consistent with {whose} of {check.date[:10] or 'unknown date'} (chi^2 {check.chi2:.1f}, "
