@@ -109,6 +109,19 @@ def test_without_the_shared_joint_the_calibration_block_keeps_the_correlations()
     assert b.chi2 == pytest.approx(a.chi2, rel=1e-9)
 
 
+def test_one_state_beyond_3_sigma_that_the_joint_test_keeps_is_a_warning() -> None:
+    """The scale 3.5 sigma off alone (sigma of what the dive could move it): the joint test over 4 directions keeps
+    the file (chi^2 12.3 < 16.3), the scale's line says so, the health is not degraded."""
+    P1 = np.linalg.inv(np.linalg.inv(P0) + INFO)
+    d1 = np.zeros(5)
+    d1[0] = 3.5 * np.sqrt(P0[0, 0] - P1[0, 0])
+    check = check_calibration(_result(d1, P1))
+    assert check is not None and not check.moved and check.chi2 < check.threshold
+    assert [sev for sev, _ in check.findings] == ["warn"]
+    assert check.findings[0][1].startswith("DVL scale factor moved 3.5 sigma")
+    assert "the joint test does not reject the file" in check.findings[0][1]
+
+
 def test_a_calibration_of_another_configuration_is_noted() -> None:
     result = _result(*_dive(np.random.default_rng(3), np.zeros(5)))
     result.info["calibration_prior"]["config_hash"] = "0123456789abcdef"
