@@ -78,9 +78,7 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     fig: dict[str, Any] = {"pings": int(water.sum()), "stretches": [list(r) for r in runs],
                            "used": isinstance(profile, dict)}
     figures["water_track"] = fig
-    if not isinstance(profile, dict):
-        flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) refused "
-                     "([current] water_track = \"refuse\"): the position there leans on the IMU alone")
+    if not isinstance(profile, dict):  # refused: counted and judged by analysis/health.py (dvl_water_track)
         return
     flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
                  f"current as a state; the current: {profile.get('verdict', '')}")
