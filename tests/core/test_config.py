@@ -25,6 +25,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+from tests.support.logs import cut_log
 
 ENUMS = [("imu", "bias_model", "'constant', 'random_walk'"), ("dvl", "robust", "'none', 'huber', 'cauchy'"),
          ("solver", "earth_model", "'wgs84', 'flat'"), ("online", "mode", "'fixed_lag', 'full'"),
@@ -32,8 +33,10 @@ ENUMS = [("imu", "bias_model", "'constant', 'random_walk'"), ("dvl", "robust", "
 
 
 @functools.cache
+@functools.cache
 def _short_log() -> LogData:
-    """paper-2d cut to 350 s: 150 s static, speed-up and two surges (one Type-I segment)."""
+    """paper-2d cut to 350 s: 150 s static, speed-up and two surges (one Type-I segment); simulated once (the
+    estimators do not change a log)."""
     raw = copy.deepcopy(load_scenario("paper-2d").raw)
     raw["segments"] = raw["segments"][:4]
     raw["segments"][0]["duration_s"] = 150.0
@@ -303,9 +306,10 @@ def test_online_section_reaches_the_estimator() -> None:
     assert base.info["window_s"] == 20.0 and short.info["window_s"] == 5.0
     assert short.info["isam2"]["variables"] < base.info["isam2"]["variables"]
     assert short.config["online"]["window_s"] == 5.0
-    # the keyword arguments and options= still override the section
-    assert smooth_online(log, cfg, window_s=10.0).info["window_s"] == 10.0
-    assert smooth_online(log, cfg, options=OnlineConfig(window_s=8.0)).info["window_s"] == 8.0
+    # the keyword arguments and options= still override the section (on the log's first 200 s: a setting's path)
+    start = cut_log(log, 200.0)
+    assert smooth_online(start, cfg, window_s=10.0).info["window_s"] == 10.0
+    assert smooth_online(start, cfg, options=OnlineConfig(window_s=8.0)).info["window_s"] == 8.0
     cfg.online.mode = "full"
     full = smooth_online(log, cfg)
     assert full.estimator == "online-full" and full.info["window_s"] is None
