@@ -43,7 +43,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import key_dim
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import BY_NAME, Estimate, enabled_states, prior_factors, read_values
+from gtsam_dvl.core.states import BY_NAME, Estimate, enabled_states, joint_slices, prior_factors, read_values
 from gtsam_dvl.core.types import LogData, Mounting
 from gtsam_dvl.estimators.batch import extract_result, fit_dvl_noise, solve_graph
 from gtsam_dvl.estimators.bulk import BulkGraph
@@ -283,31 +283,23 @@ class JointSolution:
         return {n: Estimate(self.values[n], self.cov[sl[n], sl[n]]) for n in self.states}
 
 
-# what the caller needs of the dives, wherever they run: reduce all (returns one Reduction per dive, or an
-# exception for a dive that failed) and advance all (ds, new shared values)
-ReduceAll = Callable[[], list[Reduction | BaseException]]
+# what the caller needs of the dives, wherever they run: reduce every dive still in (one Reduction each) and
+# advance them (ds, the new shared values)
+ReduceAll = Callable[[], list[Reduction]]
 AdvanceAll = Callable[[np.ndarray, dict[str, np.ndarray]], None]
 
 
 def iterate_joint(names: list[str], start: dict[str, np.ndarray], prior: gtsam.NonlinearFactorGraph,
                   reduce_all: ReduceAll, advance_all: AdvanceAll, tol: float = TOL,
-                  max_iterations: int = MAX_ITERATIONS,
-                  on_failure: Callable[[int, BaseException], None] | None = None) -> JointSolution:
+                  max_iterations: int = MAX_ITERATIONS) -> JointSolution:
     """The joint Gauss-Newton iterations (module doc) over dives that the callbacks reach: reduce_all linearises
     and reduces every dive at the current shared values (which advance_all set), advance_all back-substitutes ds.
-    A dive whose reduction failed is reported to on_failure(index, error) and left out by the callbacks."""
+    The callbacks leave out a dive that failed (and report it), so that the others finish."""
     values = dict(start)
     history: list[dict[str, float]] = []
     cov = np.zeros((0, 0))
     for it in range(1, max_iterations + 1):
-        parts: list[Reduction] = []
-        for i, r in enumerate(reduce_all()):
-            if isinstance(r, BaseException):
-                if on_failure is None:
-                    raise r
-                on_failure(i, r)
-            else:
-                parts.append(r)
+        parts = reduce_all()
         if not parts:
             raise GtsamDvlError("calibrate: every dive failed")
         p = prior_rows(prior, names, values)
@@ -328,7 +320,7 @@ def calibrate_in_process(dives: list[DiveState], tol: float = TOL,
     for d in dives:
         set_shared(d, start)
 
-    def reduce_all() -> list[Reduction | BaseException]:
+    def reduce_all() -> list[Reduction]:
         return [reduce_dive(d) for d in dives]
 
     def advance_all(ds: np.ndarray, new: dict[str, np.ndarray]) -> None:
@@ -367,14 +359,20 @@ class DiveSummary:
     config: EstimatorConfig
     mounting: Mounting
     alone: dict[str, Estimate]
+    alone_cov: np.ndarray  # the joint covariance of `states` alone (SI, `states` order)
     t0_ns: int
     info: dict[str, Any]
 
 
 def summarise(dive: DiveState) -> DiveSummary:
-    return DiveSummary(dive.name, list(dive.states), dive.config, dive.mounting, dict(dive.alone.calibration),
-                       int(dive.alone.t0_ns), {"epochs": dive.alone.info.get("epochs"),
-                                               "noise": dive.alone.info.get("noise")})
+    """The dive's DiveSummary (its estimates alone, from the result of prepare_dive)."""
+    result = dive.alone
+    sl = joint_slices(dive.config)
+    idx = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in dive.states])
+    cov = np.asarray(result.shared_joint_cov)[np.ix_(idx, idx)]
+    return DiveSummary(dive.name, list(dive.states), dive.config, dive.mounting, dict(result.calibration), cov,
+                       int(result.t0_ns), {"epochs": result.info.get("epochs"), "noise": result.info.get("noise"),
+                                           "solver": result.info.get("solver")})
 
 
 # ----- the independent check: every dive in one graph ---------------------------------------------------------
