@@ -1,0 +1,111 @@
+"""`calibrate` on 4 simulated paper-3d dives: accuracy against one dive, the truth and the one-graph solve, and the
+wall time on Dask with 1 and 2 workers.
+
+    .venv/bin/python bench/calibrate_workers.py [--scenario paper-3d] [--dives 4] [--repeats 2]
+
+Simulates the dives (seeds 1..N, the same truth calibration) as MCAP logs, then
+1. in this process: each dive prepared once (smoothed alone), the joint calibration (estimators/multi_dive.py,
+   the per-dive reduction) and, on the same prepared dives, the one-graph solve (every dive's linearised factors
+   in ONE graph, solved at once): joint sigma / (mean one-dive sigma) against 1/sqrt(N), the distance between
+   the two solutions in joint sigmas, and the joint calibration's error against the truth in sigmas;
+2. on a Dask LocalCluster of 1, then 2 workers (warmed: imports done before timing), the whole calibrate from
+   the log files (read, smooth alone, joint iterations), the best of --repeats runs each; prints both times
+   and their ratio, and how long the preparation takes against a joint iteration (what keeping each dive's state
+   on its worker saves per iteration: a dive rebuilt from its log would cost its preparation again).
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from gtsam_dvl.app.campaign.calibrate import calibrate_logs
+from gtsam_dvl.app.campaign.cluster import dask_client
+from gtsam_dvl.app.commands import simulate_to_file
+from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_log
+from gtsam_dvl.estimators import multi_dive as md
+from gtsam_dvl.io.reader import read_log
+
+
+def _warm() -> None:
+    import gtsam_dvl.app.campaign.calibrate  # noqa: F401 - the workers' imports, before timing
+
+
+def accuracy(paths: list[Path]) -> None:
+    logs = [read_log(p) for p in paths]
+    t0 = time.perf_counter()
+    dives = [md.prepare_dive(log, name=p.name) for log, p in zip(logs, paths, strict=True)]
+    t1 = time.perf_counter()
+    one = md.solve_one_graph(dives)
+    t2 = time.perf_counter()
+    joint = md.calibrate_in_process(dives)
+    t3 = time.perf_counter()
+    n = len(dives)
+    print(f"in this process: {n} dives prepared in {t1 - t0:.1f} s, one-graph solve {t2 - t1:.1f} s "
+          f"({one.iterations} iterations), calibrate's joint iterations {t3 - t2:.1f} s ({joint.iterations})")
+    sig = np.sqrt(np.diag(joint.cov))
+    alone = np.array([np.concatenate([d.alone.calibration[s].sigma for s in joint.states]) for d in dives])
+    cols = [c for s in joint.states for c in md.BY_NAME[s].component_names()]
+    ratio = sig / alone.mean(axis=0)
+    print(f"sigma joint / mean sigma of one dive (1/sqrt({n}) = {1 / np.sqrt(n):.3f}; within 15 %: "
+          f"{np.all(np.abs(ratio * np.sqrt(n) - 1) <= 0.15)}):")
+    for c, r, s in zip(cols, ratio, sig, strict=True):
+        print(f"  {c:20s} {r:.3f}  ({(r * np.sqrt(n) - 1) * 100:+.1f} %), joint sigma {s:.3g}")
+    sl = md.state_slices(joint.states)
+    d_one = np.concatenate([joint.values["scale"] - one.values["scale"],
+                            so3_log(one.values["misalignment"].T @ joint.values["misalignment"])]) / sig[:4]
+    print(f"calibrate - one graph, in joint sigmas: {np.array2string(d_one, precision=2)} (max |.| "
+          f"{np.max(np.abs(d_one)):.2g}); sigma ratio calibrate / one graph "
+          f"{np.array2string(sig / np.sqrt(np.diag(one.cov)), precision=6)}")
+    truth = logs[0].true_calibration
+    if truth is not None:
+        b_R_d = rpy_deg_to_matrix(truth.misalignment_deg) @ np.asarray(logs[0].mounting.b_R_d0)
+        err = np.concatenate([joint.values["scale"] - truth.scale,
+                              so3_log(b_R_d.T @ joint.values["misalignment"])]) / sig[sl["scale"].start:4]
+        print(f"joint calibration - truth, in joint sigmas: {np.array2string(err, precision=2)} (within 3: "
+              f"{np.all(np.abs(err) <= 3)})")
+
+
+def timed(paths: list[Path], workers: int, repeats: int) -> tuple[float, dict[str, float]]:
+    best, timing = np.inf, {}
+    with dask_client(None, workers) as client:
+        client.run(_warm)
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            out = calibrate_logs(paths, show_progress=False, client=client)
+            dt = time.perf_counter() - t0
+            if dt < best:
+                best, timing = dt, dict(out.timing_s)
+                timing["iterations"] = float(out.solution.iterations) if out.solution else 0.0
+    return best, timing
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenario", default="paper-3d")
+    ap.add_argument("--dives", type=int, default=4)
+    ap.add_argument("--repeats", type=int, default=2)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = []
+        for seed in range(1, args.dives + 1):
+            p = Path(tmp) / f"{args.scenario}-seed{seed}.mcap"
+            simulate_to_file(args.scenario, p, seed=seed, show_progress=False)
+            paths.append(p)
+        print(f"{args.dives} dives of {args.scenario} (seeds 1-{args.dives})")
+        accuracy(paths)
+        t1, timing1 = timed(paths, 1, args.repeats)
+        t2, timing2 = timed(paths, 2, args.repeats)
+        for w, t, timing in ((1, t1, timing1), (2, t2, timing2)):
+            per_it = timing["joint"] / max(timing["iterations"], 1.0)
+            print(f"Dask, {w} worker{'s' if w > 1 else ''}: {t:.2f} s (read and smooth alone {timing['prepare']:.2f} "
+                  f"s, joint {timing['joint']:.2f} s = {timing['iterations']:.0f} iterations, {per_it:.2f} s each)")
+        print(f"speed-up 2 workers / 1 worker: {t1 / t2:.2f}x (best of {args.repeats} runs each)")
+
+
+if __name__ == "__main__":
+    main()
