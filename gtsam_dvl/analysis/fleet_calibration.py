@@ -3,15 +3,17 @@
 For every dive, its estimate alone (smoothed with the priors: x_d, covariance S_d) is compared with the joint
 calibration of all dives (x_J, S_J), which holds that dive. When every dive sees the same calibration, the joint
 estimate is the efficient combination of the dives, and cov(x_d - x_J) = S_d - S_J (the covariance of an
-efficient estimator with any other unbiased one is its own). So over the shared block
+efficient estimator with any other unbiased one is its own; the priors are in both once). Per state (the scale;
+the misalignment, three components)
 
-    chi^2_d = r^T (S_d - S_J)^-1 r,   r = x_d - x_J   (the misalignment: Log(b_R_d,J^T b_R_d,d), right tangent)
+    chi^2 = r^T (S_d - S_J)^-1 r,   r = x_d - x_J   (the misalignment: Log(b_R_d,J^T b_R_d,d), right tangent)
 
-is chi^2 with n degrees of freedom (n the block's dimension); per tangent component z_i = r_i / sqrt(S_d,ii -
-S_J,ii). A dive "moved beyond 3 sigma" when chi^2_d exceeds the chi^2 quantile of the two-sided 3-sigma
-probability (0.9973: 14.2 for n = 4), the block test, so that a direction the dive did not determine (S_d,ii
-close to its prior) cannot raise it alone; the components beyond 3 in |z| are named. Directions the dive did not
-inform (S_d - S_J with a tiny or negative eigenvalue) are left out of the test (a pseudo-inverse).
+is chi^2 with the state's dimension as degrees of freedom; it is also given as the number of sigmas of one normal
+variable with the same tail probability (n_sigma: for the scale, |r| / sqrt(sigma_d^2 - sigma_J^2)). A state
+"moved beyond 3 sigma" when n_sigma > 3 (probability 0.27 % for a dive that did not move, per state); a dive moved
+when one of its states did. The whole block's chi^2 is given too. Directions the dive did not inform (S_d - S_J
+with a tiny eigenvalue against S_d: the dive added nothing there, e.g. a straight transect's yaw misalignment)
+are left out (a pseudo-inverse), with the degrees of freedom they would have had.
 
 Pure computation (analysis layer); the table and figure are app/campaign/calibrate.py's.
 """
@@ -23,12 +25,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import norm
 
 from gtsam_dvl.core.rotations import so3_log
 from gtsam_dvl.core.states import BY_NAME, Estimate
 
-MOVED_PROBABILITY = 0.9973  # two-sided 3 sigma of a normal variable
-NSIGMA = 3.0
+NSIGMA = 3.0  # a state moved when its chi^2 is beyond this many sigmas (tail probability of one normal variable)
+INFORMED = 1e-6  # an eigenvalue of (S_d - S_J) below this fraction of S_d's: a direction the dive did not inform
+
+
+@dataclass
+class StateMove:
+    """One state of a dive against the joint: chi^2 over its informed directions, their number, the equivalent
+    number of sigmas of one normal variable, and the residual in the display unit (misalignment: degrees about
+    body axes, scale: ppm)."""
+
+    name: str
+    chi2: float
+    dof: int
+    n_sigma: float
+    residual_display: np.ndarray
+
+    @property
+    def moved(self) -> bool:
+        return self.n_sigma > NSIGMA
 
 
 @dataclass
@@ -37,25 +57,42 @@ class DiveVsJoint:
 
     name: str
     residual: np.ndarray  # x_d - x_J in the block's tangent, SI, `states` order
-    chi2: float
-    dof: int  # the directions the dive informed
-    threshold: float  # chi^2 quantile at MOVED_PROBABILITY for dof
-    z: np.ndarray  # per component r_i / sqrt(S_d,ii - S_J,ii) (nan where the dive added nothing)
-    components: list[str] = field(default_factory=list)
+    chi2: float  # over the whole block
+    dof: int
+    states: dict[str, StateMove] = field(default_factory=dict)
 
     @property
     def moved(self) -> bool:
-        return self.dof > 0 and self.chi2 > self.threshold
+        return any(m.moved for m in self.states.values())
 
-    def beyond(self) -> list[str]:
-        """The components beyond NSIGMA in |z|."""
-        return [c for c, z in zip(self.components, self.z, strict=True) if np.isfinite(z) and abs(z) > NSIGMA]
+    def moved_states(self) -> list[str]:
+        return [n for n, m in self.states.items() if m.moved]
+
+    @property
+    def n_sigma(self) -> float:
+        """The block's chi^2 as sigmas of one normal variable."""
+        return _n_sigma(self.chi2, self.dof)
+
+
+def _n_sigma(chi2: float, dof: int) -> float:
+    if dof == 0:
+        return 0.0
+    return float(norm.isf(0.5 * chi2_dist.sf(chi2, dof)))
+
+
+def _chi2(r: np.ndarray, D: np.ndarray, Sd: np.ndarray) -> tuple[float, int]:
+    """r^T D^+ r over the directions D informs (relative to Sd's scale), and their number."""
+    s = np.sqrt(np.diag(Sd))
+    w, U = np.linalg.eigh(0.5 * (D + D.T) / np.outer(s, s))
+    keep = w > INFORMED
+    proj = U[:, keep].T @ (r / s)
+    return float(np.sum(proj**2 / w[keep])), int(keep.sum())
 
 
 def block_residual(states: Sequence[str], alone: dict[str, Estimate], joint: dict[str, Estimate]
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """r = x_d - x_J over the states (the misalignment's in b_R_d,J's right tangent), S_d (block-diagonal from the
-    per-state marginals when no joint block is given) and S_J's diagonal blocks (likewise)."""
+    """r = x_d - x_J over the states (the misalignment's in b_R_d,J's right tangent), S_d and S_J from the
+    per-state marginals (block-diagonal)."""
     parts, Sd, Sj = [], [], []
     for n in states:
         a, j = alone[n], joint[n]
@@ -85,19 +122,14 @@ def dive_vs_joint(name: str, states: Sequence[str], alone: dict[str, Estimate], 
     r, Sd, Sj = block_residual(states, alone, joint)
     Sd = Sd if alone_cov is None else np.asarray(alone_cov, dtype=float)
     Sj = Sj if joint_cov is None else np.asarray(joint_cov, dtype=float)
-    D = 0.5 * ((Sd - Sj) + (Sd - Sj).T)
-    # scale each component by the dive's own sigma, so that the eigenvalue threshold is relative
-    s = np.sqrt(np.diag(Sd))
-    Dn = D / np.outer(s, s)
-    w, U = np.linalg.eigh(Dn)
-    keep = w > 1e-6
-    rn = r / s
-    proj = U[:, keep].T @ rn
-    chi2 = float(np.sum(proj**2 / w[keep]))
-    dof = int(keep.sum())
-    diag = np.diag(D)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        z = np.where(diag > 1e-6 * s**2, r / np.sqrt(np.where(diag > 0, diag, 1.0)), np.nan)
-    threshold = float(chi2_dist.ppf(MOVED_PROBABILITY, dof)) if dof else float("inf")
-    components = [c for n in states for c in BY_NAME[n].component_names()]
-    return DiveVsJoint(name, r, chi2, dof, threshold, z, components)
+    chi2, dof = _chi2(r, Sd - Sj, Sd)
+    out = DiveVsJoint(name, r, chi2, dof)
+    col = 0
+    for n in states:
+        st = BY_NAME[n]
+        sl = slice(col, col + st.dim)
+        col += st.dim
+        c, k = _chi2(r[sl], (Sd - Sj)[sl, sl], Sd[sl, sl])
+        display = st.to_display * (np.asarray(joint[n].value) @ r[sl] if st.kind == "rot3" else r[sl])
+        out.states[n] = StateMove(n, c, k, _n_sigma(c, k), np.asarray(display, dtype=float))
+    return out

@@ -436,7 +436,7 @@ CALIBRATE_HELP = (
     "on Dask.\n\n"
     "Each dive is smoothed alone, then the dives are solved jointly: each dive (a Dask task on the worker that "
     "holds it) linearises its graph and eliminates its own states; the client sums their information on the "
-    "shared calibration, solves, and sends the step back, until it settles (docs/calibration.md). IMU biases and "
+    "shared calibration, solves, and sends the step back, until it settles (docs/calibration-across-dives.md). IMU biases and "
     "time offsets stay per dive. Writes the calibration file (-o, TOML: `smooth --calibration`) and, with "
     "--out-dir, the per-dive table and figure (each dive alone against the joint; which moved beyond 3 sigma). A "
     "dive that fails is reported with its error and left out (exit code 3); the others finish.\n\n"

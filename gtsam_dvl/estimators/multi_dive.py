@@ -119,9 +119,9 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     log = screened_in_memory(log)
     config = imu_levels(log, config, noise)
     builder = LogGraph(log, config)
-    graph, values = builder.build_bulk()
+    bulk, values = builder.build_bulk()
     ordering = builder.elimination_ordering()
-    graph, values, report, passes = solve_graph(builder, graph, values, ordering)
+    graph, values, report, passes = solve_graph(builder, bulk, values, ordering)
     if dvl_fit_enabled(builder.config) and isinstance(graph, BulkGraph):
         values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
     alone = extract_result(builder, graph, values, ordering,
@@ -166,7 +166,7 @@ def set_shared(dive: DiveState, values: dict[str, np.ndarray]) -> None:
 
 def _square_root(A: np.ndarray, b: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """[R | d] (n rows, zero-padded) of the rows A x - b by QR (Householder, numpy/LAPACK)."""
-    r = np.linalg.qr(np.column_stack([A, b]), mode="r")
+    r = np.asarray(np.linalg.qr(np.column_stack([A, b]), mode="r"))
     out = np.zeros((n, n + 1))
     m = min(n, r.shape[0])
     out[:m] = r[:m]
@@ -415,6 +415,12 @@ def renamed(linear: gtsam.GaussianFactorGraph, rename: Callable[[int], int]
     return carriers.linearize(at), keys
 
 
+def _renaming(shared: set[int], offset: int) -> Callable[[int], int]:
+    def rename(k: int) -> int:
+        return k if k in shared else k + offset
+    return rename
+
+
 def solve_one_graph(dives: Sequence[DiveState], tol: float = TOL,
                     max_iterations: int = MAX_ITERATIONS) -> JointSolution:
     """The independent check of calibrate: the dives' linearised graphs, each dive's own keys renamed (the symbol
@@ -437,7 +443,7 @@ def solve_one_graph(dives: Sequence[DiveState], tol: float = TOL,
         for d, (dive, v) in enumerate(zip(dives, values, strict=True)):
             dive.builder.refresh_gravity(v)
             error += float(dive.graph.error(v))
-            lin, _ = renamed(dive.graph.linearize(v), lambda k, d=d: k if k in shared else k + (d + 1) * shift)
+            lin, _ = renamed(dive.graph.linearize(v), _renaming(shared, (d + 1) * shift))
             graph.push_back(lin)
             for j in range(dive.own.size()):
                 order.push_back(dive.own.at(j) + (d + 1) * shift)

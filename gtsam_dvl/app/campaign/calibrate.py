@@ -319,7 +319,8 @@ def _on_client(client: Any, paths: list[str], cfg: str | None, options: dict[str
 
 def fleet_rows(outcome: CalibrateOutcome) -> list[dict[str, Any]]:
     """One row per dive (and one for the joint calibration): scale, misalignment (deg, R_c's roll, pitch, yaw),
-    time offset with sigmas, and the comparison with the joint (chi^2, dof, threshold, moved, |z| beyond 3)."""
+    time offset with sigmas, and the comparison with the joint (per state chi^2, dof, sigmas, moved; the block's
+    chi^2; analysis/fleet_calibration.py)."""
     rows: list[dict[str, Any]] = []
     for s, c in zip(outcome.dives, outcome.comparisons, strict=True):
         b_R_d0 = np.asarray(s.mounting.b_R_d0)
@@ -331,8 +332,11 @@ def fleet_rows(outcome: CalibrateOutcome) -> list[dict[str, Any]]:
                      "misalignment_sigma_deg": np.sqrt(np.diag(cov)).tolist(),
                      "time_offset_s": None if off is None else float(off.value[0]),
                      "time_offset_sigma_s": None if off is None else float(off.sigma[0]),
-                     "chi2": c.chi2, "dof": c.dof, "threshold": c.threshold, "moved": c.moved,
-                     "z": [None if not np.isfinite(z) else float(z) for z in c.z], "beyond_3_sigma": c.beyond()})
+                     "chi2": c.chi2, "dof": c.dof, "n_sigma": c.n_sigma, "moved": c.moved,
+                     "moved_states": c.moved_states(),
+                     "vs_joint": {n: {"chi2": m.chi2, "dof": m.dof, "n_sigma": m.n_sigma, "moved": m.moved,
+                                      "residual_display": m.residual_display.tolist()}
+                                  for n, m in c.states.items()}})
     if outcome.solution is not None and outcome.dives:
         j = outcome.solution.estimates()
         rpy, cov = misalignment_rpy_and_cov(np.asarray(j["misalignment"].value),
@@ -348,7 +352,7 @@ def fleet_table(outcome: CalibrateOutcome) -> list[str]:
     """The per-dive table in Markdown (the fleet table's columns, app/campaign/fleet.py, plus each dive against
     the joint calibration), the joint calibration last, the dives left out with their errors."""
     lines = ["| dive | scale | misalignment r/p/y (deg) | time offset (ms, + = stamps early) | "
-             "vs joint: chi^2 (dof, 3-sigma limit) | moved |",
+             "vs joint (sigmas, per state) | moved beyond 3 sigma |",
              "| --- | --- | --- | --- | --- | --- |"]
     for r in fleet_rows(outcome):
         mis = (" ".join(f"{v:+.3f}" for v in r["misalignment_deg"]) + " +- "
@@ -359,10 +363,11 @@ def fleet_table(outcome: CalibrateOutcome) -> list[str]:
             lines.append(f"| **joint ({r['dives']} dives)** | {r['scale']:.5f} +- {r['scale_sigma']:.5f} | {mis} | "
                          "per dive | | |")
             continue
-        moved = ("MOVED" + (f" ({', '.join(r['beyond_3_sigma'])} beyond 3 sigma)" if r["beyond_3_sigma"] else "")
-                 if r["moved"] else "no")
+        vs = ", ".join(f"{n.replace('_', ' ')} {m['n_sigma']:.1f}" for n, m in r["vs_joint"].items())
+        moved = ("MOVED: " + ", ".join(f"{n.replace('_', ' ')} {r['vs_joint'][n]['n_sigma']:.1f} sigma"
+                                       for n in r["moved_states"])) if r["moved"] else "no"
         lines.append(f"| {Path(r['log']).name} | {r['scale']:.5f} +- {r['scale_sigma']:.5f} | {mis} | {off} | "
-                     f"{r['chi2']:.1f} ({r['dof']}, {r['threshold']:.1f}) | {moved} |")
+                     f"{vs} | {moved} |")
     for f in outcome.failures:
         lines.append(f"| {Path(f.log).name} | error | {f.error} | | | |")
     return lines
@@ -377,16 +382,19 @@ def plot_fleet(outcome: CalibrateOutcome, path: Path) -> Path:
     dives, joint = rows[:-1], rows[-1]
     fig, axes = plt.subplots(1, 4, figsize=(13, 3.4))
     x = np.arange(len(dives))
-    panels = [("scale (ppm from 1)", lambda r: ((r["scale"] - 1) * 1e6, r["scale_sigma"] * 1e6))]
-    for i, axis in enumerate(("roll", "pitch", "yaw")):
-        panels.append((f"misalignment {axis} (deg)",
-                       lambda r, i=i: (r["misalignment_deg"][i], r["misalignment_sigma_deg"][i])))
-    for ax, (title, get) in zip(axes, panels, strict=True):
-        jv, js = get(joint)
+    titles = ["scale (ppm from 1)"] + [f"misalignment {a} (deg)" for a in ("roll", "pitch", "yaw")]
+
+    def get(r: dict[str, Any], panel: int) -> tuple[float, float]:
+        if panel == 0:
+            return (r["scale"] - 1) * 1e6, r["scale_sigma"] * 1e6
+        return r["misalignment_deg"][panel - 1], r["misalignment_sigma_deg"][panel - 1]
+
+    for panel, (ax, title) in enumerate(zip(axes, titles, strict=True)):
+        jv, js = get(joint, panel)
         ax.axhspan(jv - 3 * js, jv + 3 * js, color="0.85", label="joint, 3 sigma")
         ax.axhline(jv, color="k", lw=1)
         for k, r in zip(x, dives, strict=True):
-            v, s = get(r)
+            v, s = get(r, panel)
             ax.errorbar(k, v, yerr=3 * s, fmt="o", capsize=3, color="tab:red" if r["moved"] else "tab:blue")
         ax.set_xticks(x, [Path(r["log"]).stem for r in dives], rotation=45, ha="right", fontsize=7)
         ax.set_title(title, fontsize=9)
