@@ -277,6 +277,9 @@ class JointSolution:
     iterations: int
     converged: bool
     history: list[dict[str, float]] = field(default_factory=list)
+    # the last iteration's rows: each dive's reduction (in the order of the dives kept) and the priors'
+    reductions: list[Reduction] = field(default_factory=list, repr=False)
+    prior_rows: list[Reduction] = field(default_factory=list, repr=False)
 
     def estimates(self) -> dict[str, Estimate]:
         sl = state_slices(self.states)
@@ -298,6 +301,8 @@ def iterate_joint(names: list[str], start: dict[str, np.ndarray], prior: gtsam.N
     values = dict(start)
     history: list[dict[str, float]] = []
     cov = np.zeros((0, 0))
+    parts: list[Reduction] = []
+    p = Reduction(np.zeros((0, 0)), np.zeros(0), 0.0)
     for it in range(1, max_iterations + 1):
         parts = reduce_all()
         if not parts:
@@ -309,8 +314,8 @@ def iterate_joint(names: list[str], start: dict[str, np.ndarray], prior: gtsam.N
         values = retract_shared(names, values, ds)
         advance_all(ds, values)
         if step < tol:
-            return JointSolution(names, values, cov, it, True, history)
-    return JointSolution(names, values, cov, max_iterations, False, history)
+            return JointSolution(names, values, cov, it, True, history, parts, [p])
+    return JointSolution(names, values, cov, max_iterations, False, history, parts, [p])
 
 
 def calibrate_in_process(dives: list[DiveState], tol: float = TOL,

@@ -1,0 +1,213 @@
+"""A log cut at its long IMU gaps: the pieces smoothed with one shared calibration, one result with marked breaks.
+
+An IMU gap longer than [imu] max_gap_s cannot be crossed by holding the last sample (estimators/gaps.py): over a
+30 s gap in a turn that motion model is wrong, not just uncertain. The batch smoother then cuts the log at each such
+gap into pieces (cut_log: the IMU samples, pings, depth, GNSS and truth of each piece's time span; what falls in a
+gap is left out) and smooths them as the dives of one vehicle (estimators/multi_dive.py): each piece has its own
+trajectory, IMU biases and time offset, and the pieces share the DVL calibration (scale, misalignment, lever arm
+when estimated), solved jointly. Each piece after the first starts in motion: it is aligned in motion
+(estimators/alignment.py, the DVL-aided alignment) and its position, which no measurement ties to the piece
+before, is placed by dead reckoning across the gap (the last state's position plus the mean of the velocities on
+either side times the gap's duration) with the position prior widened by the DVL's noise and the misalignment
+prior's sigma times the distance crossed: a marked break, not a measurement.
+
+The result is one NavResult: the pieces' states in time order, info["pieces"] (each piece's first state index in
+the result, its time span, its IMU biases and time offset, alone) and info["breaks"] (the gaps), the shared states
+the joint calibration's marginals, each piece's trajectory covariances conditioned on every piece's information
+about the shared states (the other pieces' reduced information enters each piece's graph as a linear factor on the
+shared keys).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any
+
+import gtsam
+import numpy as np
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.progress import ProgressFn
+from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.batch import extract_result
+from gtsam_dvl.estimators.bulk import BulkGraph
+from gtsam_dvl.estimators.gaps import find_gaps
+from gtsam_dvl.estimators.multi_dive import (
+    BY_NAME,
+    DiveState,
+    JointSolution,
+    Reduction,
+    calibrate_in_process,
+    prepare_dive,
+    state_keys,
+    state_slices,
+)
+
+
+def long_gaps(log: LogData, config: EstimatorConfig) -> list[tuple[float, float]]:
+    """The IMU gaps longer than [imu] max_gap_s between the first and last usable DVL stamps: (start, end) in s,
+    start the last sample before the gap, end the first after it."""
+    imu = log.imu
+    if len(imu) < 3 or not len(log.dvl):
+        return []
+    gaps = find_gaps(imu.t, config.imu.gap_samples)
+    t0, t1 = float(log.dvl.t[0]), float(log.dvl.t[-1])
+    out = []
+    for j in range(len(gaps)):
+        k = int(gaps.index[j])
+        start, end = float(imu.t[k]), float(imu.t[k + 1])
+        if gaps.end[j] - gaps.start[j] > config.imu.max_gap_s and end > t0 and start < t1:
+            out.append((start, end))
+    return out
+
+
+def _take(obj: Any, keep: np.ndarray) -> Any:
+    """A dataclass of per-message arrays (and nested ones, e.g. DvlData.beams) restricted to keep (bool)."""
+    n = len(keep)
+    changes: dict[str, Any] = {}
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n:
+            changes[f.name] = v[keep]
+        elif dataclasses.is_dataclass(v) and not isinstance(v, type) and hasattr(v, "__len__") and len(v) == n:
+            changes[f.name] = _take(v, keep)
+    return dataclasses.replace(obj, **changes)
+
+
+def cut_log(log: LogData, gaps: list[tuple[float, float]]) -> list[LogData]:
+    """The log's pieces between the gaps: piece k spans [after gap k-1, before gap k] (the IMU samples at its
+    ends included); every stream's messages in that span."""
+    edges = [-np.inf] + [x for g in gaps for x in g] + [np.inf]
+    out = []
+    for k in range(len(gaps) + 1):
+        lo, hi = edges[2 * k], edges[2 * k + 1]
+        streams: dict[str, Any] = {}
+        for name in ("imu", "dvl", "truth", "depth", "gnss", "attitude"):
+            data = getattr(log, name)
+            if data is not None:
+                streams[name] = _take(data, (data.t >= lo) & (data.t <= hi))
+        out.append(dataclasses.replace(log, **streams, source=f"{log.source or 'log'} (piece {k + 1})"))
+    return out
+
+
+def _piece_config(config: EstimatorConfig, sigma_m: float) -> EstimatorConfig:
+    """A later piece's configuration: aligned in motion, its first position's prior widened to sigma_m."""
+    d = config.to_dict()
+    d.setdefault("alignment", {})["method"] = "in_motion"
+    d["alignment"]["initial_attitude_deg"] = None
+    d.setdefault("priors", {})["position_sigma_m"] = max(float(config.priors.position_sigma_m), sigma_m)
+    return EstimatorConfig.from_dict(d)
+
+
+def _linear_prior(parts: list[Reduction], names: list[str], values: gtsam.Values) -> gtsam.NonlinearFactor:
+    """The stacked square-root rows [R | d] on the shared keys as a factor linearised at values (the other pieces'
+    and the priors' information for one piece's marginals)."""
+    R = np.vstack([p.R for p in parts])
+    d = np.concatenate([p.d for p in parts])
+    keys = state_keys(names)
+    sl = state_slices(names)
+    blocks = [R[:, sl[n]] for n in names]
+    model = gtsam.noiseModel.Unit.Create(R.shape[0])
+    if len(keys) == 1:
+        jf = gtsam.JacobianFactor(keys[0], blocks[0], d, model)
+    elif len(keys) == 2:
+        jf = gtsam.JacobianFactor(keys[0], blocks[0], keys[1], blocks[1], d, model)
+    else:
+        jf = gtsam.JacobianFactor(keys[0], blocks[0], keys[1], blocks[1], keys[2], blocks[2], d, model)
+    lin = gtsam.Values()
+    for n in names:
+        k = BY_NAME[n].key
+        if BY_NAME[n].kind == "rot3":
+            lin.insert(k, values.atRot3(k))
+        else:
+            lin.insert(k, values.atVector(k))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+def _piece_result(dive: DiveState, others: list[Reduction]) -> NavResult:
+    graph = gtsam.NonlinearFactorGraph()
+    graph.push_back(dive.graph.graph)
+    graph.add(_linear_prior(others, dive.states, dive.values))
+    full = BulkGraph(graph, dive.graph.bulk, dive.graph.imu)
+    result = extract_result(dive.builder, full, dive.values, dive.builder.elimination_ordering())
+    result.info["noise"] = dive.alone.info.get("noise")
+    return result
+
+
+def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float, float]],
+                  progress: ProgressFn | None = None, estimator: str = "batch") -> NavResult:
+    """Smooth a log cut at its long IMU gaps (module doc)."""
+    t0 = time.perf_counter()
+    pieces = cut_log(log, gaps)
+    dives: list[DiveState] = []
+    for k, piece in enumerate(pieces):
+        if len(piece.dvl) < 2 or len(piece.imu) < 2:
+            raise GtsamDvlError(f"{log.source or 'log'}: piece {k + 1} of {len(pieces)} between IMU gaps longer "
+                                f"than imu.max_gap_s ({piece.dvl.t[0] if len(piece.dvl) else 0:.0f} s) has too "
+                                "few samples to smooth")
+        cfg = config
+        if k > 0:
+            prev = dives[-1].alone
+            gap_s = float(piece.imu.t[0] - prev.t[-1])
+            speed = float(np.linalg.norm(prev.n_v[-1]))
+            distance = speed * gap_s
+            # the dead-reckoned position's error: the misalignment prior's sigma (rad) and the DVL's noise
+            sig_mis = float(np.radians(np.max(config.priors.misalignment_sigma_deg)))
+            cfg = _piece_config(config, max(1.0, distance * max(sig_mis, 0.01)))
+        dives.append(prepare_dive(piece, cfg, name=piece.source))
+        if progress:
+            progress(0.6 * (k + 1) / len(pieces))
+    solution = calibrate_in_process(dives)
+    if progress:
+        progress(0.8)
+    results = []
+    for k, dive in enumerate(dives):
+        others = [r for j, r in enumerate(solution.reductions) if j != k] + solution.prior_rows
+        result = _piece_result(dive, others)
+        if result.dvl_pings is not None:  # the piece's ping indices in the log's
+            result.dvl_pings = result.dvl_pings + int(np.searchsorted(log.dvl.t, pieces[k].dvl.t[0]))
+        results.append(result)
+    out = _joined(results, dives, solution, gaps, estimator)
+    out.timing_s = {"total": time.perf_counter() - t0}
+    if progress:
+        progress(1.0)
+    return out
+
+
+def _joined(results: list[NavResult], dives: list[DiveState], solution: JointSolution,
+            gaps: list[tuple[float, float]], estimator: str) -> NavResult:
+    """The pieces' results as one, each later piece's positions placed by dead reckoning across its gap."""
+    n_p = [results[0].n_p]
+    for k in range(1, len(results)):
+        prev, cur = results[k - 1], results[k]
+        dt = float(cur.t[0] - prev.t[-1])
+        guess = n_p[-1][-1] + 0.5 * (prev.n_v[-1] + cur.n_v[0]) * dt
+        n_p.append(cur.n_p + (guess - cur.n_p[0]))
+    first = results[0]
+
+    def cat(name: str) -> Any:
+        parts = [getattr(r, name) for r in results]
+        return None if any(p is None for p in parts) else np.concatenate(parts)
+
+    starts = np.cumsum([0] + [len(r.t) for r in results[:-1]]).tolist()
+    pieces = [{"start_index": int(s), "t_start_s": float(r.t[0]), "t_end_s": float(r.t[-1]), "states": len(r.t),
+               "alone": {name: {"value": np.asarray(e.value).tolist(), "sigma": e.sigma.tolist()}
+                         for name, e in d.alone.calibration.items()}}
+              for s, r, d in zip(starts, results, dives, strict=True)]
+    info = dict(first.info)
+    info.update(epochs=int(sum(len(r.t) for r in results)), pieces=pieces,
+                breaks=[{"after_index": int(s) - 1, "gap_start_s": g[0], "gap_end_s": g[1]}
+                        for s, g in zip(starts[1:], gaps, strict=True)],
+                joint={"iterations": solution.iterations, "converged": solution.converged,
+                       "history": solution.history})
+    pings = [r.dvl_pings for r in results]
+    return NavResult(
+        estimator=estimator, t=cat("t"), n_p=np.concatenate(n_p), n_R_b=cat("n_R_b"), n_v=cat("n_v"),
+        pose_cov=cat("pose_cov"), vel_cov=cat("vel_cov"), calibration=dict(first.calibration),
+        b_R_d0=first.b_R_d0, t0_ns=first.t0_ns, b_omega=cat("b_omega"), pose_vel_cross=cat("pose_vel_cross"),
+        calib_joint_cov=first.calib_joint_cov, shared_joint_cov=first.shared_joint_cov, info=info,
+        config=first.config, alignment_method=first.alignment_method,
+        dvl_pings=None if any(p is None for p in pings) else np.concatenate(pings))
