@@ -7,9 +7,9 @@ gap is left out) and smooths them as the dives of one vehicle (estimators/multi_
 trajectory, IMU biases and time offset, and the pieces share the DVL calibration (scale, misalignment, lever arm
 when estimated), solved jointly. Each piece after the first starts in motion: it is aligned in motion
 (estimators/alignment.py, the DVL-aided alignment) and its position, which no measurement ties to the piece
-before, is placed by dead reckoning across the gap (the last state's position plus the mean of the velocities on
-either side times the gap's duration) with the position prior widened by the DVL's noise and the misalignment
-prior's sigma times the distance crossed: a marked break, not a measurement.
+before, is placed by dead reckoning across the gap (across_gap: a constant-rate turn between the velocities on
+either side) with its first position's prior sigma DEAD_RECKONING_M plus DEAD_RECKONING_FRACTION of the distance
+crossed: a marked break, not a measurement.
 
 The result is one NavResult: the pieces' states in time order, info["pieces"] (each piece's first state index in
 the result, its time span, its IMU biases and time offset, alone) and info["breaks"] (the gaps), the shared states
@@ -47,6 +47,27 @@ from gtsam_dvl.estimators.multi_dive import (
 )
 
 
+# the first position of a piece after a gap: its prior sigma (m), a floor plus a fraction of the distance crossed
+# (the path across the gap is a constant-rate turn between the velocities on either side: across_gap; a vehicle
+# that changes its turn or speed in the gap leaves it, which this sigma is meant to cover)
+DEAD_RECKONING_M = 1.0
+DEAD_RECKONING_FRACTION = 0.05
+
+
+def across_gap(n_v0: np.ndarray, n_v1: np.ndarray, dt: float) -> np.ndarray:
+    """The displacement (m, map) across a gap of dt seconds between the velocities n_v0 before and n_v1 after it,
+    as a horizontal arc at constant speed and turn rate (the chord: the mean velocity times dt, lengthened by
+    (sin(a) / a) / cos(a) for the half heading change a; a straight line when the heading does not change), the
+    vertical at the mean vertical velocity."""
+    n_v0, n_v1 = np.asarray(n_v0, dtype=float), np.asarray(n_v1, dtype=float)
+    mean = 0.5 * (n_v0 + n_v1) * dt
+    h0, h1 = np.arctan2(n_v0[1], n_v0[0]), np.arctan2(n_v1[1], n_v1[0])
+    a = 0.5 * float(np.angle(np.exp(1j * (h1 - h0))))
+    if abs(a) > 1e-6 and np.hypot(*n_v0[:2]) > 0.1 and np.hypot(*n_v1[:2]) > 0.1 and abs(a) < 0.45 * np.pi:
+        mean[:2] *= np.sin(a) / a / np.cos(a)
+    return mean
+
+
 def long_gaps(log: LogData, config: EstimatorConfig) -> list[tuple[float, float]]:
     """The IMU gaps longer than [imu] max_gap_s between the first and last usable DVL stamps: (start, end) in s,
     start the last sample before the gap, end the first after it."""
@@ -64,6 +85,15 @@ def long_gaps(log: LogData, config: EstimatorConfig) -> list[tuple[float, float]
     return out
 
 
+def _length(obj: Any) -> int | None:
+    """The leading length of a dataclass's first array field (its messages), None without one."""
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, np.ndarray) and v.ndim >= 1:
+            return int(v.shape[0])
+    return None
+
+
 def _take(obj: Any, keep: np.ndarray) -> Any:
     """A dataclass of per-message arrays (and nested ones, e.g. DvlData.beams) restricted to keep (bool)."""
     n = len(keep)
@@ -72,7 +102,7 @@ def _take(obj: Any, keep: np.ndarray) -> Any:
         v = getattr(obj, f.name)
         if isinstance(v, np.ndarray) and v.ndim >= 1 and v.shape[0] == n:
             changes[f.name] = v[keep]
-        elif dataclasses.is_dataclass(v) and not isinstance(v, type) and hasattr(v, "__len__") and len(v) == n:
+        elif dataclasses.is_dataclass(v) and not isinstance(v, type) and _length(v) == n:
             changes[f.name] = _take(v, keep)
     return dataclasses.replace(obj, **changes)
 
@@ -151,12 +181,8 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
         cfg = config
         if k > 0:
             prev = dives[-1].alone
-            gap_s = float(piece.imu.t[0] - prev.t[-1])
-            speed = float(np.linalg.norm(prev.n_v[-1]))
-            distance = speed * gap_s
-            # the dead-reckoned position's error: the misalignment prior's sigma (rad) and the DVL's noise
-            sig_mis = float(np.radians(np.max(config.priors.misalignment_sigma_deg)))
-            cfg = _piece_config(config, max(1.0, distance * max(sig_mis, 0.01)))
+            distance = float(np.linalg.norm(prev.n_v[-1])) * float(piece.imu.t[0] - prev.t[-1])
+            cfg = _piece_config(config, DEAD_RECKONING_M + DEAD_RECKONING_FRACTION * distance)
         dives.append(prepare_dive(piece, cfg, name=piece.source))
         if progress:
             progress(0.6 * (k + 1) / len(pieces))
@@ -183,9 +209,8 @@ def _joined(results: list[NavResult], dives: list[DiveState], solution: JointSol
     n_p = [results[0].n_p]
     for k in range(1, len(results)):
         prev, cur = results[k - 1], results[k]
-        dt = float(cur.t[0] - prev.t[-1])
-        guess = n_p[-1][-1] + 0.5 * (prev.n_v[-1] + cur.n_v[0]) * dt
-        n_p.append(cur.n_p + (guess - cur.n_p[0]))
+        n_p.append(cur.n_p + (n_p[-1][-1] + across_gap(prev.n_v[-1], cur.n_v[0], float(cur.t[0] - prev.t[-1]))
+                              - cur.n_p[0]))
     first = results[0]
 
     def cat(name: str) -> Any:
@@ -203,11 +228,11 @@ def _joined(results: list[NavResult], dives: list[DiveState], solution: JointSol
                         for s, g in zip(starts[1:], gaps, strict=True)],
                 joint={"iterations": solution.iterations, "converged": solution.converged,
                        "history": solution.history})
-    pings = [r.dvl_pings for r in results]
+    pings = [r.dvl_pings for r in results if r.dvl_pings is not None]
     return NavResult(
         estimator=estimator, t=cat("t"), n_p=np.concatenate(n_p), n_R_b=cat("n_R_b"), n_v=cat("n_v"),
         pose_cov=cat("pose_cov"), vel_cov=cat("vel_cov"), calibration=dict(first.calibration),
         b_R_d0=first.b_R_d0, t0_ns=first.t0_ns, b_omega=cat("b_omega"), pose_vel_cross=cat("pose_vel_cross"),
         calib_joint_cov=first.calib_joint_cov, shared_joint_cov=first.shared_joint_cov, info=info,
         config=first.config, alignment_method=first.alignment_method,
-        dvl_pings=None if any(p is None for p in pings) else np.concatenate(pings))
+        dvl_pings=np.concatenate(pings) if len(pings) == len(results) else None)
