@@ -7,9 +7,11 @@ a time offset, a lever arm as a variable, a ping seen through the IMU motion fro
 Keys, in this order (DvlOptions.key_names): pose X = n_T_b, velocity V = n_v, [bias B with a motion], scale K,
 misalignment C = b_R_d, [time offset T with an OffsetInput], [lever arm L when lever_variable], [the DVL's
 correlated velocity error E (a 3-vector in dvl_link, m/s, added to h: its Jacobian I, or d_u^T for a beam) when
-error_variable]. make_dvl_factor is
-the one constructor, dvl_error the same error as a pure function (tests, callers that wrap the factor). The
-wrappers below it keep the signatures the online estimator and bench/ call.
+error_variable], [the horizontal water current W = [c_east, c_north] (m/s, map) of a water-track ping when
+current_variable: h then reads the velocity relative to the water, n_v - [W, 0], and its Jacobian is minus the
+velocity's first two columns]. make_dvl_factor is the one constructor, dvl_error the same error as a pure
+function (tests, callers that wrap the factor). The wrappers below it keep the signatures the online estimator
+and bench/ call.
 """
 
 from __future__ import annotations
@@ -53,11 +55,12 @@ class DvlOptions:
     lever_variable: bool = False
     considered: bool = False
     error_variable: bool = False
+    current_variable: bool = False
 
     def key_names(self) -> list[str]:
         return (["pose", "vel"] + ["bias"] * (self.motion is not None) + ["scale", "b_R_d"]
                 + ["offset"] * (self.offset is not None) + ["lever"] * self.lever_variable
-                + ["error"] * self.error_variable)
+                + ["error"] * self.error_variable + ["current"] * self.current_variable)
 
     @property
     def dim(self) -> int:
@@ -80,6 +83,7 @@ class DvlOptions:
     def jacobians(self, J: DvlJacobians) -> list[np.ndarray]:
         """The Jacobians per key (those of the scale and misalignment zero when considered)."""
         out = J.variables() + ([self.error_jacobian()] if self.error_variable else [])
+        out += [current_jacobian(J.vel)] if self.current_variable else []
         if self.considered:
             i = 2 + (self.motion is not None)
             out[i], out[i + 1] = np.zeros_like(out[i]), np.zeros_like(out[i + 1])
@@ -88,6 +92,18 @@ class DvlOptions:
     def error_jacobian(self) -> np.ndarray:
         """d h / d E of the correlated error: I (3x3), or a beam's d_u^T (1x3)."""
         return np.eye(3) if self.d_u is None else self.d_u.reshape(1, 3).copy()
+
+
+def current_jacobian(J_vel: np.ndarray) -> np.ndarray:
+    """d h / d W of a water-track ping's current W = [c_east, c_north] (m/s, map): h reads the velocity relative to
+    the water, n_v - [W, 0], so its Jacobian is minus the velocity's first two columns (..., m, 2)."""
+    return -np.asarray(J_vel)[..., :2]
+
+
+def _water_relative(n_v: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """n_v - [c_east, c_north, 0] (m/s, map)."""
+    c = np.asarray(current, dtype=float).reshape(2)
+    return np.asarray(n_v, dtype=float) - np.array([c[0], c[1], 0.0])
 
 
 def _evaluate(o: DvlOptions, pose: gtsam.Pose3, n_v: np.ndarray, bias: gtsam.imuBias.ConstantBias | None, k: float,
@@ -112,7 +128,10 @@ def dvl_error(x: Sequence[Any], y: np.ndarray | float, options: DvlOptions,
     if len(x) != len(names):
         raise ValueError(f"the DVL factor with these options has {len(names)} variables {names}, got {len(x)}")
     v = dict(zip(names, x, strict=True))
-    h, J = _evaluate(options, v["pose"], np.asarray(v["vel"], dtype=float), v.get("bias"), as_scale(v["scale"]),
+    n_v = np.asarray(v["vel"], dtype=float)
+    if "current" in v:  # a water-track ping: the velocity relative to the water
+        n_v = _water_relative(n_v, v["current"])
+    h, J = _evaluate(options, v["pose"], n_v, v.get("bias"), as_scale(v["scale"]),
                      v["b_R_d"].matrix(), as_scale(v["offset"]) if "offset" in v else None,
                      np.asarray(v["lever"], dtype=float).reshape(3) if "lever" in v else None, H is not None)
     if "error" in v:
@@ -139,18 +158,23 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
     at = dict(zip(names, keys, strict=True))
     pose_k, vel_k, scale_k, rot_k = at["pose"], at["vel"], at["scale"], at["b_R_d"]
     bias_k, offset_k, lever_k, error_k = at.get("bias"), at.get("offset"), at.get("lever"), at.get("error")
+    current_k = at.get("current")
     J_error = o.error_jacobian() if error_k is not None else None
     lever_v = cross(o.b_omega, o.b_l)  # a known lever arm's velocity, once (not per linearisation)
-    # the keys' Jacobians in DvlJacobians (-1: the correlated error's, J_error)
-    fields = [-1 if name == "error" else DvlJacobians._fields.index(name) for name in names]
+    # the keys' Jacobians in DvlJacobians (-1: the correlated error's, J_error; -2: the current's)
+    fields = [-1 if name == "error" else -2 if name == "current" else DvlJacobians._fields.index(name)
+              for name in names]
 
     def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
+        n_v = values.atPoint3(vel_k)  # (a Vector or a Point3 entry)
+        if current_k is not None:  # a water-track ping: the velocity relative to the water
+            n_v = _water_relative(n_v, values.atVector(current_k))
         if bias_k is None and lever_k is None and offset_k is None:  # (the per-ping path: no second call layer)
-            h, J = dvl_model(values.atPose3(pose_k).rotation().matrix(), values.atPoint3(vel_k),
+            h, J = dvl_model(values.atPose3(pose_k).rotation().matrix(), n_v,
                              values.atVector(scale_k).item(), values.atRot3(rot_k).matrix(), o.b_omega, o.b_l,
                              d_u=o.d_u, jacobians=H is not None, lever_v=lever_v)
         else:
-            h, J = _evaluate(o, values.atPose3(pose_k), values.atPoint3(vel_k),  # (a Vector or a Point3 entry)
+            h, J = _evaluate(o, values.atPose3(pose_k), n_v,
                              None if bias_k is None else values.atConstantBias(bias_k),
                              values.atVector(scale_k).item(),  # a Python float: cheaper arithmetic than np.float64
                              values.atRot3(rot_k).matrix(),
@@ -165,7 +189,7 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
                     H[i] = Jk
             else:  # (J's fields of the keys, found once)
                 for i, field in enumerate(fields):
-                    H[i] = J_error if field < 0 else J[field]
+                    H[i] = J[field] if field >= 0 else J_error if field == -1 else current_jacobian(J.vel)
         return h - y_c
 
     return gtsam.CustomFactor(noise, list(keys), error_func)

@@ -35,6 +35,7 @@ import numpy as np
 
 from gtsam_dvl.analysis.geometry import assess_geometry
 from gtsam_dvl.analysis.prior_check import check_priors
+from gtsam_dvl.analysis.water_track import check_water_track
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
@@ -234,8 +235,11 @@ class DvlResiduals:
     unmatched: int  # states without a ping at their time
     # pings selected again here (selection.usable_pings): the result does not record its own (NavResult.dvl_pings)
     selected_again: int = 0
-    # y - h(x) per ping, m/s in dvl_link, nan where the ping is not used (3-D velocity; None with beam factors)
+    # y - h(x) per ping, m/s in dvl_link, nan where the ping is not used (3-D velocity; None with beam factors);
+    # a water-track ping's against the velocity over ground (analysis/water_track.py adds the current), not in chi2
     residual_m_s: np.ndarray | None = None
+    index: np.ndarray | None = None  # each ping's index in the log's DVL data
+    water: np.ndarray | None = None  # which are water-track pings
 
     def rms(self, mask: np.ndarray | None = None) -> float:
         c, d = (self.chi2, self.dof) if mask is None else (self.chi2[mask], self.dof[mask])
@@ -292,7 +296,9 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         dof = ok.sum(axis=1).astype(float)
     else:
         d_y = dvl.d_v[j]
-        ok = matched & dvl.valid[j] & np.isfinite(d_y).all(axis=1)
+        water = np.zeros(len(j), bool) if dvl.water_track is None else np.asarray(dvl.water_track, bool)[j]
+        seen = matched & (dvl.valid[j] | water) & np.isfinite(d_y).all(axis=1)
+        ok = seen & ~water  # water-track pings: judged with the current (analysis/water_track.py)
         r = np.where(ok[:, None], d_y - y_hat, 0.0)
         # the noise each ping was given by the estimators, and the correlated error they modelled beside it (its
         # estimate is not in the result: the residual holds it)
@@ -301,7 +307,7 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
         dof = 3.0 * ok
         return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again,
-                            np.where(ok[:, None], r, np.nan))
+                            np.where(seen[:, None], d_y - y_hat, np.nan), j, water)
     return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
 
 
@@ -340,6 +346,7 @@ def state_calibration(result: NavResult, log: LogData) -> tuple[np.ndarray, np.n
 
 def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
     res = dvl_residuals(result, log, config.dvl)
+    check_water_track(result, log, config, res, health.figures, health.flag)  # (analysis/water_track.py)
     used = res.dof > 0
     figures: dict[str, Any] = {"pings": int(used.sum()), "states_without_ping": res.unmatched,
                                "whitened_rms": res.rms() if used.any() else None,

@@ -96,17 +96,21 @@ GnssTopic = Annotated[str | None, typer.Option(
 AttitudeTopic = Annotated[str | None, typer.Option(
     "--attitude-topic", help="Attitude topic for the initial attitude (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry "
     "or PoseWithCovarianceStamped; default: the IMU topic's orientation when its covariance is valid; 'none').")]
+DvlWaterTopic = Annotated[str | None, typer.Option(
+    "--dvl-water-topic", help="A separate water-track topic (TwistWithCovarianceStamped or TwistStamped: velocity "
+    "relative to the water), merged with the DVL's pings in stamp order.")]
 TruthTopic = Annotated[str | None, typer.Option(
     "--truth-topic", help="Ground-truth odometry topic (nav_msgs/msg/Odometry; default /ground_truth/odometry).")]
 
 
 def _read_options(imu_topic: str | None, dvl_topic: str | None, salvage: bool | None, repair: bool | None,
                   depth_topic: str | None = None, gnss_topic: str | None = None,
-                  attitude_topic: str | None = None, truth_topic: str | None = None) -> dict[str, Any]:
+                  attitude_topic: str | None = None, truth_topic: str | None = None,
+                  dvl_water_topic: str | None = None) -> dict[str, Any]:
     """The reading options given on the command line (the topics left out when not given)."""
     options: dict[str, Any] = {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
     extra = {"depth_topic": depth_topic, "gnss_topic": gnss_topic, "attitude_topic": attitude_topic,
-             "truth_topic": truth_topic}
+             "truth_topic": truth_topic, "dvl_water_topic": dvl_water_topic}
     return {**options, **{k: v for k, v in extra.items() if v is not None}}
 
 
@@ -165,7 +169,7 @@ def plot_log(
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
     debug: Debug = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
@@ -173,7 +177,8 @@ def plot_log(
 
     check_folders({}, {"-o": output})
     for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
-                                                                   gnss_topic, attitude_topic, truth_topic)):
+                                                                   gnss_topic, attitude_topic, truth_topic,
+                                                                   dvl_water_topic)):
         typer.echo(str(path))
 
 
@@ -183,7 +188,7 @@ def info(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
     debug: Debug = False,
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration; of a result of `smooth -o`,
@@ -195,7 +200,7 @@ def info(
         typer.echo(as_result)
         return
     typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
-                                                     attitude_topic, truth_topic)))
+                                                     attitude_topic, truth_topic, dvl_water_topic)))
 
 
 CONFIG_HELP = ("Estimator configuration: a TOML file, a result's config.json, or a named configuration ('default': "
@@ -230,7 +235,7 @@ def smooth(
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
     timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
     timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
                             ] = None,
@@ -252,7 +257,7 @@ def smooth(
     check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz},
                   {"--out-dir": out_dir})
     read_options = _read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic, attitude_topic,
-                                 truth_topic)
+                                 truth_topic, dvl_water_topic)
     if out_dir is not None or len(logs) > 1:
         if out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz:
             raise GtsamDvlError("several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
@@ -304,7 +309,7 @@ def characterise(
                                                         "are replaced).")] = False,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
@@ -316,7 +321,7 @@ def characterise(
     check_folders({}, {"-o": output})
     ch = characterise_to_dir(log, output, config_path=config, force=force, show_progress=not quiet,
                              read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
-                                                        gnss_topic, attitude_topic, truth_topic))
+                                                        gnss_topic, attitude_topic, truth_topic, dvl_water_topic))
     typer.echo(ch.describe())
 
 
@@ -337,7 +342,7 @@ def evaluate(
                                                 "backwards messages (default: as smooth read the source log).")
                       ] = None,
     depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None, attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
+    truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
     force: Annotated[bool, typer.Option("--force", help="Judge the result against a --truth log that is not its "
                                                         "source (another content, stamps or origin).")] = False,
     debug: Debug = False,
@@ -352,7 +357,7 @@ def evaluate(
     lines, written = evaluate_to_dir(result, output, truth_path=truth,
                                      read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
                                                                 depth_topic, gnss_topic, attitude_topic,
-                                                                truth_topic), force=force)
+                                                                truth_topic, dvl_water_topic), force=force)
     typer.echo("\n".join(lines))
     for path in written:
         typer.echo(f"wrote {path}")
@@ -565,7 +570,7 @@ def live(
                                                                           "(default: serve until Ctrl-C).")] = False,
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None,
+    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
     debug: Debug = False,
 ) -> None:
     """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
@@ -580,7 +585,7 @@ def live(
     serve_log(log, speed=speed, port=port, host=host, config_path=config, wait=wait, linger=not exit_when_done,
               layout_path=layout,
               read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
-                                         attitude_topic, truth_topic), echo=typer.echo)
+                                         attitude_topic, truth_topic, dvl_water_topic), echo=typer.echo)
 
 
 def _run_app() -> Any:

@@ -97,6 +97,11 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
              f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)"]
     if dvl.beams is not None:
         lines.append(f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}")
+    if dvl.water_track is not None and dvl.water_track.any():
+        lines.append(f"  DVL water track (velocity relative to the water): {int(dvl.water_track.sum())} pings")
+    if dvl.altitude is not None and np.isfinite(dvl.altitude).any():
+        alt = dvl.altitude[np.isfinite(dvl.altitude)]
+        lines.append(f"  DVL altitude {alt.min():.1f}-{alt.max():.1f} m ({len(alt)} pings with one)")
     from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 
     dvl_hz = 1.0 / np.median(np.diff(dvl.t)) if len(dvl) > 1 else float("nan")
@@ -423,7 +428,7 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
 
 # what smooth records of how it read the log
 READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair", "depth_topic", "gnss_topic", "attitude_topic",
-                "truth_topic")
+                "truth_topic", "dvl_water_topic")
 
 
 def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:

@@ -29,7 +29,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig, ObservabilityConfig, RelinearizationThresholds
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, X, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, W, X, key_dim
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
@@ -259,15 +259,23 @@ def shared_keys(config: EstimatorConfig, i: int = 0, per_state: bool = True, blo
                    if (per_state or not s.per_state(config)) and (s.in_block or not block))
 
 
-def dvl_factor_keys(config: EstimatorConfig, i: int, motion: bool = False) -> list[int]:
+def dvl_factor_keys(config: EstimatorConfig, i: int, motion: bool = False, water: bool = False) -> list[int]:
     """The keys of a DVL factor on state i, in the order of its variables (factors/dvl.py DvlOptions.key_names):
     X(i), V(i), then the keys of the enabled states it reads (SharedState.dvl) in registry order: the IMU bias with
     motion (a ping seen through the IMU motion from state i), the scale, the misalignment, the time offset and the
-    lever arm when estimated; last, the DVL's correlated error E(i) when the configuration models it
-    (correlated_error)."""
+    lever arm when estimated; then the DVL's correlated error E(i) when the configuration models it
+    (correlated_error); last, the water current W(i) of a water-track ping (water) when the configuration uses
+    them (water_current)."""
     wanted = ("ping", "motion") if motion else ("ping",)
     keys = [X(i), V(i)] + _unique(s.key_at(i, config) for s in enabled_states(config) if s.dvl in wanted)
-    return keys + [E(i)] if correlated_error(config) else keys
+    keys += [E(i)] if correlated_error(config) else []
+    return keys + [W(i)] if water and water_current(config) else keys
+
+
+def water_current(config: EstimatorConfig) -> bool:
+    """Whether the estimators use water-track pings and carry the horizontal water current W(i) per state
+    ([current] water_track "use": "auto" resolved for a log by estimators/current.py resolve_water_track)."""
+    return config.current.water_track == "use"
 
 
 def correlated_error(config: EstimatorConfig) -> bool:

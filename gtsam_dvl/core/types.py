@@ -58,11 +58,14 @@ class DvlData:
     beams: BeamData | None = None
     frame_id: str = "dvl_link"
     # (M,) bool: water-track pings (velocity relative to the water, its own mode in the message), never valid
-    # as velocity over ground; None: none
+    # as velocity over ground; their d_v (and beam velocities) are kept, finite where measured; None: none
     water_track: np.ndarray | None = None
     # a simulation without white noise: its velocity repeats bit for bit at constant velocity, which a real
     # DVL's never does (estimators/ping_screen.py drops such repeats as frozen output unless this is set)
     noise_free: bool = False
+    # (M,) m: the DVL's range to the seafloor along the vertical (the message's altitude), NaN where not known or
+    # out of bottom-track range; None: the log has none
+    altitude: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])
@@ -77,6 +80,8 @@ class TruthData:
     n_q_b: np.ndarray  # (K, 4) [x, y, z, w], rotates base_link vectors into map
     n_v: np.ndarray  # (K, 3) m/s, velocity relative to the Earth, in map
     b_omega: np.ndarray  # (K, 3) rad/s, body rate relative to map, in base_link
+    # (K, 3) m/s: the water current in map at base_link's depth and time (vertical component 0); None: no current
+    n_c: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.t.shape[0])

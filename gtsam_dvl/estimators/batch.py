@@ -9,13 +9,21 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import V, X
+from gtsam_dvl.core.keys import V, W, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import correlated_error, enabled, read_estimates, read_values, shared_keys
+from gtsam_dvl.core.states import (
+    correlated_error,
+    enabled,
+    read_estimates,
+    read_values,
+    shared_keys,
+    water_current,
+)
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated
+from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
+from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
@@ -48,6 +56,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     noise = NoiseReport()
+    config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     from gtsam_dvl.estimators.pieces import long_gaps, smooth_pieces  # (pieces.py imports this module)
@@ -206,6 +215,12 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
     calibration = read_estimates(values, marg.covariances, cfg, n - 1)
     # epochs' body rates already exclude Earth rate; remove the estimated gyro bias too
     b_omega = np.array([e.b_omega for e in builder.epochs]) - calibration["gyro_bias"].value
+    info: dict[str, Any] = {"alignment": builder.maker.alignment_info(), "counters": dict(builder.counters),
+                            "epochs": n, "imu_gaps": builder.gaps.summary()}
+    if water_current(cfg):  # the water current per state with its marginal sigmas (estimators/current.py)
+        info["water_current"] = current.profile(
+            np.array([e.t for e in builder.epochs]), n_p[:, 2], np.array([values.atVector(W(i)) for i in range(n)]),
+            np.array([marg.covariances[W(i)] for i in range(n)]), cfg, current.epochs_with_water(builder))
     return NavResult(
         estimator=estimator,
         t=np.array([e.t for e in builder.epochs]),
@@ -213,9 +228,7 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
         calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
         b_omega=b_omega, pose_vel_cross=pose_vel_cross,
         calib_joint_cov=marg.joints[calib_group], shared_joint_cov=marg.joints[shared_group],
-        info={"alignment": builder.maker.alignment_info(),
-              "counters": dict(builder.counters), "epochs": n, "imu_gaps": builder.gaps.summary()},
-        config=cfg.to_dict(),
+        info=info, config=cfg.to_dict(),
         alignment_method=builder.alignment.method,
         dvl_pings=builder.usable,
     )

@@ -38,12 +38,13 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import E, key_dim
-from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled, read_values
+from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.keys import E, W, key_dim
+from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled, read_values, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
 from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.selection import ping_covariance
+from gtsam_dvl.estimators.selection import ping_covariance, water_covariance
 from gtsam_dvl.factors.dvl_bulk import BulkPings, dvl_ping_errors
 from gtsam_dvl.factors.ping_motion import PingMotion, keyframe_ping_covariance
 
@@ -72,6 +73,9 @@ class BulkSource(Protocol):
 
     @property
     def snapshots(self) -> PingMotion | None: ...
+
+    @property
+    def water(self) -> np.ndarray: ...
 
 
 @dataclass
@@ -117,6 +121,8 @@ class BulkDvl:
     offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
     b_l: np.ndarray  # the known lever arm (m, base_link); with lever, L_LEVER's value is used
     t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the rows' ping stamps (s), in their order
+    # (N,) bool: the water-track rows (velocity relative to the water, on W(state)); None: none used
+    water: np.ndarray | None = None
     _served: _Served = field(init=False, default_factory=_Served)
     _bounds: np.ndarray = field(init=False)  # state s's rows are _bounds[s]:_bounds[s + 1]
     _states_with_rows: list[int] = field(init=False)
@@ -166,6 +172,9 @@ class BulkDvl:
         n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d, b_l = self._ping_states(
             values, self.states(values) if states is None else states)
         d_e = self._correlated_errors(values)  # (N, 3) the rows' correlated DVL error E(state), or None
+        n_c = self._currents(values)  # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
+        if n_c is not None:  # the velocity relative to the water (factors/dvl.py current_variable)
+            n_v_i = n_v_i - n_c
         d_u = self.pings.d_u
         ew = np.empty((len(self), self.pings.dim))
         for a in range(0, len(self), CHUNK):
@@ -182,6 +191,9 @@ class BulkDvl:
                 if d_e is not None:  # dh/dE: I, or a beam's d_u^T
                     blocks = [*blocks, np.broadcast_to(np.eye(3), (len(e), 3, 3)) if d_u is None
                               else d_u[sl][:, None, :]]
+                if n_c is not None:  # dh/dW: minus the velocity's east and north columns, on water-track rows
+                    on = np.zeros(len(e), dtype=bool) if self.water is None else self.water[sl]
+                    blocks = [*blocks, np.where(on[:, None, None], -J.vel[:, :, :2], 0.0)]
                 for dst, B in zip(out, blocks, strict=True):
                     np.matmul(W, B, out=dst[sl])
         return ew
@@ -194,6 +206,21 @@ class BulkDvl:
         for s in self._states_with_rows:
             per_state[s] = values.atVector(E(s))
         return per_state[self.pings.state]
+
+    def _currents(self, values: gtsam.Values) -> np.ndarray | None:
+        """Each row's water current [c_east, c_north, 0] (N, 3) m/s, map: W(state) on water-track rows, 0 on the
+        others; None when water-track pings are not used."""
+        if not water_current(self.config):
+            return None
+        per_state = np.zeros((self.n_states, 3))
+        for s in self._states_with_rows:
+            per_state[s, :2] = values.atVector(W(s))
+        out = per_state[self.pings.state]
+        if self.water is not None:
+            out[~self.water] = 0.0
+        else:
+            out[:] = 0.0
+        return out
 
     def whitened_errors(self, values: gtsam.Values) -> np.ndarray:
         """The rows' whitened errors (N, m) at values, before the robust kernel."""
@@ -227,7 +254,7 @@ class BulkDvl:
         for s in range(self.n_states):
             lo, hi = int(self._bounds[s]), int(self._bounds[s + 1])
             if hi > lo:
-                keys = dvl_factor_keys(self.config, s, motion=True)
+                keys = dvl_factor_keys(self.config, s, motion=True, water=True)  # (W(s) on bottom-track rows: 0)
                 graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(self.pings.dim * (hi - lo)), keys,
                                              _Carrier(self._served, lo, hi)))
         return graph
@@ -236,7 +263,7 @@ class BulkDvl:
         """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
         (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
         n = len(self)
-        dims = [key_dim(k) for k in dvl_factor_keys(self.config, 0, motion=True)]
+        dims = [key_dim(k) for k in dvl_factor_keys(self.config, 0, motion=True, water=True)]
         served = self._served
         if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # (released after each linearisation)
             served.blocks = [np.empty((n, self.pings.dim, d)) for d in dims]
@@ -384,10 +411,16 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
     rate = (np.asarray(rate_b_a, dtype=float).reshape(n, 3), np.asarray(rate_G, dtype=float).reshape(n, 3, 3)) \
         if offset else None
     beams = dvl.beams if cfg.dvl.use_beams else None
+    water = builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)  # (water track: 3-D, own noise)
+    if beams is not None and water.any():
+        raise GtsamDvlError("[dvl] use_beams with water-track pings: not supported; set [current] water_track = "
+                            "\"refuse\" or use_beams = false")
     if beams is None:
         rows: np.ndarray | slice = slice(None)
         y, d_u = d_y, None
-        whiten = whitening(ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3)) + extra)
+        cov = ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3))
+        cov[water] = water_covariance(cfg)
+        whiten = whitening(cov + extra)
     else:  # one row per valid beam, in the beams' order (FactorMaker's beam factors)
         rows, b = np.nonzero(beams.valid[jj])
         d_u = np.asarray(beams.d_u[jj][rows, b], dtype=float)
@@ -402,4 +435,5 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
                    bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
                    robust_k=float(cfg.dvl.robust_threshold()),
                    offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
-                   b_l=np.asarray(maker.mounting.b_l, dtype=float), t_ping=t_rows[rows])
+                   b_l=np.asarray(maker.mounting.b_l, dtype=float), t_ping=t_rows[rows],
+                   water=water[rows] if water.any() else None)

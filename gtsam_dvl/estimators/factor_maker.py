@@ -30,7 +30,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.keys import B, V, X
-from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled
+from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled, water_current
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.states import prior_factors as shared_prior_factors
 from gtsam_dvl.core.types import ImuData, Mounting
@@ -38,7 +38,7 @@ from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import Alignment, FirstState, first_state
 from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.estimators.noise_levels import median_ping_sigma
-from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance
+from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance, water_covariance
 from gtsam_dvl.factors import (
     DvlOptions,
     EarthImuFactor,
@@ -262,14 +262,15 @@ class FactorMaker:
 
     def dvl_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
                         beams: Beams | None = None,
-                        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, water: bool = False
                         ) -> list[gtsam.NonlinearFactor]:
         """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
         dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate(). With
         dvl.estimate_time_offset, rate_input = velocity_rate_input() of the epoch gives the time-offset
         model on T_OFFSET too. With dvl.estimate_lever_arm the lever arm is the variable L_LEVER, else the constant
-        mounting.b_l (factors/dvl.py make_dvl_factor)."""
-        return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input)
+        mounting.b_l (factors/dvl.py make_dvl_factor). water: a water-track ping (the 3-D velocity relative to the
+        water, on the current W(i) too: estimators/current.py; its noise [current] water_track_sigma_m_s)."""
+        return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input, water=water)
 
     def keyframe_gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normal gravity in map at map positions n_p (N, 3), m/s^2, and its gradient (N, 3, 3), 1/s^2, for the
@@ -284,8 +285,8 @@ class FactorMaker:
 
     def dvl_keyframe_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
                                  motion: PingMotion, pim_cov: np.ndarray, beams: Beams | None = None,
-                                 rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-                                 ) -> list[gtsam.NonlinearFactor]:
+                                 rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                                 water: bool = False) -> list[gtsam.NonlinearFactor]:
         """DVL factors of a ping between keyframes on state i (X(i), V(i), the bias, K_SCALE, C_MISALIGN, and
         T_OFFSET / L_LEVER when estimated): the ping seen through the IMU motion from state i (motion, with its
         Earth model: factors/ping_motion.py), as dvl_factors_for does for a ping at a state. pim_cov (9x9, [rotation,
@@ -296,29 +297,31 @@ class FactorMaker:
         d_y = np.asarray(d_y, dtype=float)
         b_v = b_R_d0 @ d_y / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
         extra = keyframe_ping_covariance(pim_cov, motion.dR, b_R_d0.T, b_v, k0)
-        return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input, motion, extra)
+        return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input, motion, extra, water)
 
-    def dvl_keys(self, i: int, motion: bool = False) -> list[int]:
-        """The keys of a DVL factor of state i (states.dvl_factor_keys; motion: a ping between keyframes)."""
-        return dvl_factor_keys(self.config, i, motion)
+    def dvl_keys(self, i: int, motion: bool = False, water: bool = False) -> list[int]:
+        """The keys of a DVL factor of state i (states.dvl_factor_keys; motion: a ping between keyframes; water: a
+        water-track ping)."""
+        return dvl_factor_keys(self.config, i, motion, water)
 
     def _dvl_factors(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray, beams: Beams | None,
                      rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None, motion: PingMotion | None = None,
-                     extra: np.ndarray | None = None) -> list[gtsam.NonlinearFactor]:
+                     extra: np.ndarray | None = None, water: bool = False) -> list[gtsam.NonlinearFactor]:
         """dvl_factors_for, or with motion and extra (the preintegration's noise in the ping, 3x3 m^2/s^2)
         dvl_keyframe_factors_for."""
         cfg = self.config.dvl
         b_l, lever = self.mounting.b_l, enabled(self.config, "lever_arm")
-        keys = self.dvl_keys(i, motion is not None)
+        water = water and water_current(self.config)
+        keys = self.dvl_keys(i, motion is not None, water)
         gm = correlated_error(self.config)  # the correlated error E(i) a variable of every DVL factor
         if enabled(self.config, "time_offset"):
             if rate_input is None:
                 raise ValueError("a DVL factor with the time offset needs its IMU constants (rate_input)")
             b_a, b_omega_mean, G = rate_input
             o = DvlOptions(b_omega_mean, b_l, offset=OffsetInput(b_a, self.offset_gravity(), G), motion=motion,
-                           lever_variable=lever, error_variable=gm)
-            return [make_dvl_factor(self.dvl_noise(cov, extra), keys, d_y, o)]
-        if cfg.use_beams and beams is not None:
+                           lever_variable=lever, error_variable=gm, current_variable=water)
+            return [make_dvl_factor(self.dvl_noise(cov, extra, water), keys, d_y, o)]
+        if cfg.use_beams and beams is not None and not water:  # (a water-track ping: its 3-D velocity)
             d_u, v, valid = beams
             out: list[gtsam.NonlinearFactor] = []
             for b in np.flatnonzero(valid).tolist():
@@ -327,14 +330,15 @@ class FactorMaker:
                     1, float(np.sqrt(cfg.beam_sigma_m_s()**2 + d_u[b] @ extra @ d_u[b]))))
                 out.append(make_dvl_factor(noise, keys, float(v[b]), o))
             return out
-        o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever, error_variable=gm)
-        return [make_dvl_factor(self.dvl_noise(cov, extra), keys, d_y, o)]
+        o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever, error_variable=gm, current_variable=water)
+        return [make_dvl_factor(self.dvl_noise(cov, extra, water), keys, d_y, o)]
 
-    def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None) -> gtsam.noiseModel.Base:
+    def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None, water: bool = False
+                  ) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
-        definite, else the default sigma, plus extra (3x3, m^2/s^2: a keyframe ping's preintegration noise) when
-        given; in the robust kernel if configured (_robust)."""
-        c = ping_covariance(self.config.dvl, cov)
+        definite, else the default sigma (a water-track ping: [current] water_track_sigma_m_s), plus extra (3x3,
+        m^2/s^2: a keyframe ping's preintegration noise) when given; in the robust kernel if configured (_robust)."""
+        c = water_covariance(self.config) if water else ping_covariance(self.config.dvl, cov)
         return self._robust(gtsam.noiseModel.Gaussian.Covariance(c if extra is None else c + extra))
 
     def beam_noise(self) -> gtsam.noiseModel.Base:

@@ -21,12 +21,12 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import B, E, V, X
+from gtsam_dvl.core.keys import B, E, V, W, X
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.states import correlated_error, enabled, shared_keys
+from gtsam_dvl.core.states import correlated_error, enabled, shared_keys, water_current
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated
+from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
 from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
 from gtsam_dvl.estimators.bulk_imu import BulkImu, GravityRefs
@@ -103,6 +103,7 @@ class LogGraph:
     # the IMU motion to each ping between keyframes (BetweenPing.snap: its row); None once build_bulk let it go
     snapshots: PingMotion | None = field(default=None, init=False, repr=False)
     usable: np.ndarray = field(init=False, repr=False)  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
+    water: np.ndarray = field(init=False, repr=False)  # (M,) bool: log.dvl's water-track pings
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -123,7 +124,8 @@ class LogGraph:
         # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own
         # time): carry them to the first state (alignment.first_state)
         j0 = self.epochs[0].dvl_index
-        d_y0 = log.dvl.d_v[j0] if log.dvl.valid[j0] else None
+        self.water = current.water_pings(log)  # (M,) the water-track pings (used when water_current(cfg))
+        d_y0 = log.dvl.d_v[j0] if log.dvl.valid[j0] and not self.water[j0] else None
         self.maker.carry_to_first(log.imu, self.epochs[0].t, d_y0, log.dvl.d_cov[j0])
         self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)  # the gaps the states cross
         self.counters["imu_gaps"] = len(self.gaps)
@@ -177,7 +179,7 @@ class LogGraph:
             raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
                                 f"{spacing:g} s: states without a ping would take the places of the keyframes")
         self.usable, all_idx, key = decide_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, spacing,
-                                                  self.counters)
+                                                  self.counters, water_current(cfg))
         key[-1:] = True  # the last ping too: every other ping lies between two states (and the gaps they cross)
         idx = all_idx[key]
         times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)
@@ -305,7 +307,8 @@ class LogGraph:
         if j < 0:
             return []
         beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-        return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input)
+        return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input,
+                                          bool(self.water[j]))
 
     def between_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
         """DVL factors of the pings between state i and the next (keyframes, factors/dvl.py with a PingMotion), with
@@ -329,7 +332,7 @@ class LogGraph:
             motion = s.motion(w, g[0], n_p0, G[0])
             beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
             out += self.maker.dvl_keyframe_factors_for(i, dvl.d_v[j], dvl.d_cov[j], p.b_omega, motion, s.cov, beams,
-                                                       p.rate_input)
+                                                       p.rate_input, bool(self.water[j]))
         return out
 
     def depth_factors(self) -> list[gtsam.NonlinearFactor]:
@@ -385,7 +388,8 @@ class LogGraph:
                 state = self.pims[i - 1].predict(gtsam.NavState(n_R_b, n_p, n_v), zero_bias)
                 n_R_b = state.attitude()
             j = ep.dvl_index
-            n_v_ping = self.maker.velocity_from_ping(n_R_b.matrix(), dvl.d_v[j] if j >= 0 and dvl.valid[j] else None)
+            usable = j >= 0 and (dvl.valid[j] or self.water[j])  # (water track: relative to the water, W = 0)
+            n_v_ping = self.maker.velocity_from_ping(n_R_b.matrix(), dvl.d_v[j] if usable else None)
             n_v_new = n_v if n_v_ping is None else n_v_ping
             if i > 0:
                 n_p = n_p + 0.5 * (n_v + n_v_new) * (ep.t - self.epochs[i - 1].t)
@@ -397,6 +401,8 @@ class LogGraph:
                 values.insert(self.maker.bias_key(i), zero_bias)
         if correlated_error(self.config):
             correlated.initial_values(values, len(self.epochs))
+        if water_current(self.config):
+            current.initial_values(values, len(self.epochs))
         self.set_gravity_from_positions(n_p_all)
         self.gravity_positions = n_p_all
         return values
@@ -428,6 +434,10 @@ class LogGraph:
                 graph.add(f)
         if correlated_error(self.config):  # the DVL's correlated error: prior and Gauss-Markov links
             for f in correlated.factors(self.config, np.array([ep.t for ep in self.epochs])):
+                graph.add(f)
+        if water_current(self.config):  # the water current: prior and random walk in time and depth
+            z = np.zeros(len(self.epochs)) if self.gravity_positions is None else self.gravity_positions[:, 2]
+            for f in current.factors(self.config, np.array([ep.t for ep in self.epochs]), z):
                 graph.add(f)
         for f in self.depth_factors():
             graph.add(f)
@@ -499,10 +509,11 @@ class LogGraph:
         .ordering() is the plain gtsam.Ordering."""
         rw = self.config.imu.bias_model == "random_walk"
         gm = correlated_error(self.config)
+        wc = water_current(self.config)
         keys: list[int] = []
         chunks: list[list[int]] = []
         for i in range(len(self.epochs)):
-            keys += [X(i), V(i)] + ([B(i)] if rw else []) + ([E(i)] if gm else [])
+            keys += [X(i), V(i)] + ([B(i)] if rw else []) + ([E(i)] if gm else []) + ([W(i)] if wc else [])
             if (i + 1) % chunk_states == 0 or i + 1 == len(self.epochs):
                 chunks.append(keys)
                 keys = []

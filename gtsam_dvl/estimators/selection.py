@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gtsam_dvl.core.config import DvlConfig
+from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.types import DvlData, ImuData
 from gtsam_dvl.estimators.ping_screen import AFTER_IMU as AFTER_IMU
 from gtsam_dvl.estimators.ping_screen import BEFORE_IMU as BEFORE_IMU
@@ -64,15 +64,24 @@ def ping_covariance(cfg: DvlConfig, d_cov: np.ndarray) -> np.ndarray:
     return (flat if m2 == 1.0 else m2 * flat).reshape(cov.shape)
 
 
+def water_covariance(config: EstimatorConfig) -> np.ndarray:
+    """The covariance of a water-track ping's 3-D velocity (m^2/s^2): ([dvl] noise_multiplier times [current]
+    water_track_sigma_m_s)^2 I."""
+    return np.eye(3) * (config.dvl.noise_multiplier * config.current.water_track_sigma_m_s)**2
+
+
 def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid: np.ndarray | None,
                    beam_finite: np.ndarray | None, cfg: DvlConfig, t_imu_first: float,
-                   t_imu_last: float = np.inf, water_track: np.ndarray | None = None) -> np.ndarray:
+                   t_imu_last: float = np.inf, water_track: np.ndarray | None = None,
+                   water_usable: bool = False) -> np.ndarray:
     """Reason code per ping (USABLE, BEFORE_IMU, AFTER_IMU, WATER_TRACK, UNUSABLE, TOO_FAST, in this order of
     precedence), vectorised over M pings.
 
     t (M,) s; d_v (M, 3) m/s in dvl_link; valid (M,) the 3-D velocity's flag; beam_valid (M, B) and
     beam_finite (M,) (all valid beams finite) when the log has beams; water_track (M,) the water-track pings
-    (None: none). t_imu_last: inf for an online estimator, which waits for the IMU samples that reach a ping.
+    (None: none), usable as such when water_usable (the estimators then carry the water current,
+    estimators/current.py) if their velocity is finite, whatever the message's bottom-track validity says.
+    t_imu_last: inf for an online estimator, which waits for the IMU samples that reach a ping.
     """
     t = np.asarray(t, dtype=float)
     if cfg.use_beams and beam_valid is not None:
@@ -89,7 +98,14 @@ def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid
     code[usable] = USABLE
     code[too_fast] = TOO_FAST
     if water_track is not None:
-        code[np.asarray(water_track, dtype=bool)] = WATER_TRACK
+        water = np.asarray(water_track, dtype=bool)
+        if water_usable:
+            finite = np.isfinite(d_v).all(axis=1)
+            code[water] = np.where(finite[water], USABLE, UNUSABLE)
+            code[water & finite & (np.linalg.norm(np.where(finite[:, None], d_v, 0.0), axis=1)
+                                   > cfg.max_speed_m_s)] = TOO_FAST
+        else:
+            code[water] = WATER_TRACK
     code[t <= t_imu_first] = BEFORE_IMU
     code[t > t_imu_last] = AFTER_IMU
     return code
@@ -115,19 +131,24 @@ def beam_arrays(dvl: DvlData) -> tuple[np.ndarray | None, np.ndarray | None]:
     return np.asarray(ok), np.asarray(finite)
 
 
-def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counters: dict[str, int]) -> np.ndarray:
+def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counters: dict[str, int],
+                 water_usable: bool = False) -> np.ndarray:
     """Indices of the usable pings of a whole log (module doc), counting the others. imu: the log's IMU
     samples; its stamps alone (an array) skip the screen's IMU evidence (no motion seen, no velocity change
-    allowed beyond dvl.max_accel_m_s2)."""
+    allowed beyond dvl.max_accel_m_s2). water_usable: water-track pings are used (classify_pings); the screen then
+    compares each mode's pings among themselves (a water-track ping differs from bottom track by the current)."""
     imu_t = imu.t if isinstance(imu, ImuData) else np.asarray(imu, dtype=float)
     beam_valid, beam_finite = beam_arrays(dvl)
     t_first = float(imu_t[0]) if len(imu_t) else np.inf
     t_last = float(imu_t[-1]) if len(imu_t) else -np.inf
-    code = classify_pings(dvl.t, dvl.d_v, dvl.valid, beam_valid, beam_finite, cfg, t_first, t_last, dvl.water_track)
+    code = classify_pings(dvl.t, dvl.d_v, dvl.valid, beam_valid, beam_finite, cfg, t_first, t_last, dvl.water_track,
+                          water_usable)
     if cfg.screen:
-        idx = np.flatnonzero(code == USABLE)
         samples = imu if isinstance(imu, ImuData) else ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
-        code[idx] = screen_pings(dvl, idx, samples, cfg)
+        water = np.zeros(len(code), dtype=bool) if dvl.water_track is None else np.asarray(dvl.water_track, bool)
+        for mode in (~water, water):
+            idx = np.flatnonzero((code == USABLE) & mode)
+            code[idx] = screen_pings(dvl, idx, samples, cfg)
     count_reasons(code, counters)
     return np.flatnonzero(code == USABLE)
 
@@ -177,11 +198,12 @@ class KeyframeRule:
 
 
 def decide_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
-                  keyframe_spacing_s: float, counters: dict[str, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  keyframe_spacing_s: float, counters: dict[str, int], water_usable: bool = False
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The whole log's decisions of KeyframeRule(keyframe_interval_s, keyframe_spacing_s): (usable, epochs, key):
     the usable pings' indices, those of the pings kept after thinning (counter "dvl_not_keyframe"), and which of
-    those are keyframes. imu: as in usable_pings."""
-    usable = usable_pings(dvl, imu, cfg, counters)
+    those are keyframes. imu, water_usable: as in usable_pings."""
+    usable = usable_pings(dvl, imu, cfg, counters, water_usable)
     decision = KeyframeRule(keyframe_interval_s, keyframe_spacing_s).decide_all(dvl.t[usable])
     kept = decision != THINNED
     if keyframe_interval_s > 0:
@@ -217,7 +239,7 @@ class Ping:
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     key: bool = True
     index: int = -1  # its place among the pings pushed (OnlineEstimator.push_dvl's calls, from 0)
-    water_track: bool = False  # measured relative to the water (never used, counted "dvl_water_track")
+    water_track: bool = False  # measured relative to the water (used with the current, else counted)
 
 
 class EpochScheduler:
@@ -231,10 +253,14 @@ class EpochScheduler:
     (DvlData.noise_free: repeats are frozen output only while the IMU shows motion)."""
 
     def __init__(self, cfg: DvlConfig, keyframe_interval_s: float, keyframe_spacing_s: float,
-                 counters: dict[str, int], keep_usable: bool = True, noise_free: bool = False) -> None:
+                 counters: dict[str, int], keep_usable: bool = True, noise_free: bool = False,
+                 water_usable: bool = False) -> None:
         self.cfg, self.counters = cfg, counters
         self.rule = KeyframeRule(keyframe_interval_s, keyframe_spacing_s)
         self.screen = PingScreen(cfg, repeats_need_motion=noise_free)
+        # water-track pings (used when water_usable) are screened among themselves (usable_pings)
+        self.water_usable = water_usable
+        self.water_screen = PingScreen(cfg, repeats_need_motion=noise_free)
         self._unscreened: deque[Ping] = deque()  # usable pings waiting for the IMU to reach them
         # the indices (Ping.index) of the pings the screen passed, with keep_usable (8 bytes a ping)
         self.usable: array[int] = array("q")
@@ -243,6 +269,8 @@ class EpochScheduler:
     def push_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """IMU samples in time order (base_link: gyro w, rad/s, specific force f, m/s^2)."""
         self.screen.push_imu(t, w, f)
+        if self.water_usable:
+            self.water_screen.push_imu(t, w, f)
 
     def push_ping(self, p: Ping, t_imu_first: float) -> bool:
         """Classify ping p (after every earlier ping); a usable one waits for the screen. t_imu_first: the first
@@ -254,7 +282,8 @@ class EpochScheduler:
             beam_valid = ok[None, :]
             beam_finite = np.array([bool(np.isfinite(v[ok]).all() and np.isfinite(d_u[ok]).all())])
         code = classify_pings(np.array([p.t]), p.d_v[None, :], np.array([p.valid]), beam_valid, beam_finite,
-                              self.cfg, t_imu_first, water_track=np.array([p.water_track]))
+                              self.cfg, t_imu_first, water_track=np.array([p.water_track]),
+                              water_usable=self.water_usable)
         if code[0] != USABLE:
             count_reasons(code, self.counters, keep_zero=False)
             return False
@@ -267,7 +296,8 @@ class EpochScheduler:
         out: list[Ping] = []
         while self._unscreened and self.screen.reaches(self._unscreened[0].t):
             p = self._unscreened.popleft()
-            code = self.screen.check_buffered(p.t, screened_value(p.d_v, p.beams, self.cfg))
+            screen = self.water_screen if p.water_track else self.screen
+            code = screen.check_buffered(p.t, screened_value(p.d_v, p.beams, self.cfg))
             if code != USABLE:
                 count_reasons(np.array([code]), self.counters, keep_zero=False)
                 continue

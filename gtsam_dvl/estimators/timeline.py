@@ -18,10 +18,10 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import E, V, X, key_dim
+from gtsam_dvl.core.keys import E, V, W, X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
-from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys
+from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys, water_current
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.graph import LogGraph
@@ -29,7 +29,7 @@ from gtsam_dvl.estimators.graph import LogGraph
 
 def _epoch_of(keys: list[int]) -> int:
     """The latest state index a factor touches (-1: shared keys only)."""
-    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in "xve"]
+    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in "xvew"]
     return max(idx) if idx else -1
 
 
@@ -66,15 +66,21 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
         e = _epoch_of(list(f.keys()))
         by_epoch[max(e, 0)].append(f)
 
-    # filter layout at epoch i: [X_i, V_i, (E_i), shared]; transition layout adds X_{i+1}, V_{i+1}, (E_{i+1})
-    # after X_i, V_i, (E_i). shared: the keys of the shared states the configuration estimates (core/states.py: B,
-    # K, C, and T, L); E_i the DVL's correlated error when modelled (estimators/correlated.py)
+    # filter layout at epoch i: [X_i, V_i, (E_i), (W_i), shared]; transition layout adds X_{i+1}, V_{i+1}, (E_{i+1}),
+    # (W_{i+1}) after X_i, V_i, (E_i), (W_i). shared: the keys of the shared states the configuration estimates
+    # (core/states.py: B, K, C, and T, L); E_i the DVL's correlated error when modelled (estimators/correlated.py),
+    # W_i the water current when water-track pings are used (estimators/current.py)
     cfg = builder.config
-    gm = correlated_error(cfg)
-    d = 12 if gm else 9  # the epoch's own state
+    gm, wc = correlated_error(cfg), water_current(cfg)
+    d = 9 + 3 * gm + 2 * wc  # the epoch's own state
 
     def own(i: int, at: int) -> dict[int, slice]:
-        return {X(i): slice(at, at + 6), V(i): slice(at + 6, at + 9), **({E(i): slice(at + 9, at + 12)} if gm else {})}
+        out = {X(i): slice(at, at + 6), V(i): slice(at + 6, at + 9)}
+        if gm:
+            out[E(i)] = slice(at + 9, at + 12)
+        if wc:
+            out[W(i)] = slice(at + d - 2, at + d)
+        return out
 
     shared = shared_keys(cfg)
     shared_cols: dict[int, slice] = {}

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gtsam_dvl.core.current import truth_current
 from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.imu_faults import drop_saturated, undo_clock_steps
@@ -38,6 +39,7 @@ from gtsam_dvl.io.stamps import check_stamps, gap_warning, stamp_gaps
 from gtsam_dvl.io.storage.raw import Bodies
 from gtsam_dvl.io.storage.salvage import salvage_losses, salvage_report
 from gtsam_dvl.io.storage.sources import Source, open_source
+from gtsam_dvl.io.water_track import WATER_TOPIC_TYPES, as_water_track, merge_pings
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
 ODOM_TYPE = "nav_msgs/msg/Odometry"
@@ -103,8 +105,10 @@ def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
         else:
             d_cov = np.full((m, 3, 3), np.nan)
     valid = np.isfinite(d_v).all(axis=1)
-    water = None
+    water, altitude = None, None
     if type_name == "marine_acoustic_msgs/msg/Dvl":
+        altitude = arr["altitude"].astype(float)
+        altitude[~(altitude > 0)] = np.nan  # the mean altitude of the good beams: none (NaN, 0 or negative): unknown
         # the message's own velocity mode: only bottom track is velocity over ground. A driver that fills the
         # field marks other pings 0 (invalid) or 2 (water track); one that never fills it leaves every ping 0,
         # and then only water-track pings are refused. Water-track pings are kept apart (DvlData.water_track)
@@ -116,14 +120,15 @@ def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
             beams.valid &= mode_ok[:, None]
         water = np.asarray(mode == 2) if (mode == 2).any() else None
     return DvlData(t=np.zeros(m), d_v=d_v, d_cov=d_cov, valid=valid, beams=beams,
-                   frame_id=first_string(arr) or "dvl_link", water_track=water)
+                   frame_id=first_string(arr) or "dvl_link", water_track=water, altitude=altitude)
 
 
 def _select(dvl: DvlData, keep: np.ndarray, t: np.ndarray) -> DvlData:
     b = dvl.beams
     beams = None if b is None else BeamData(b.d_u[keep], b.v[keep], b.range[keep], b.valid[keep])
     water = None if dvl.water_track is None else dvl.water_track[keep]
-    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water)
+    altitude = None if dvl.altitude is None else dvl.altitude[keep]
+    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water, altitude=altitude)
 
 
 def _metadata(src: Source) -> dict[str, Any]:
@@ -257,6 +262,7 @@ def read_log(
     *,
     imu_topic: str = "/imu/data_raw",
     dvl_topic: str | None = None,
+    dvl_water_topic: str | None = None,
     truth_topic: str = "/ground_truth/odometry",
     tf_topic: str = "/tf_static",
     depth_topic: str | None = None,
@@ -292,7 +298,11 @@ def read_log(
     Attitude (LogData.attitude, io/attitude.py): attitude_topic None takes the IMU topic's own orientation when
     its covariance says it is valid; "" or "none" reads none; else the named topic (sensor_msgs/msg/Imu,
     nav_msgs/msg/Odometry or geometry_msgs/msg/PoseWithCovarianceStamped). attitude_frame: "enu" (REP-103) or
-    "ned" (an AHRS publishing NED orientation of an FRD body), turned into base_link in ENU."""
+    "ned" (an AHRS publishing NED orientation of an FRD body), turned into base_link in ENU.
+
+    Water track on a topic of its own (dvl_water_topic, a twist: io/water_track.py): its pings join the DVL's in
+    stamp order, marked DvlData.water_track. Simulated truth gets the current the metadata records
+    (TruthData.n_c, core/current.py truth_current)."""
     src = open_source(path, salvage=salvage)
     path = src.path
     if imu_topic not in src.topics:
@@ -305,6 +315,11 @@ def read_log(
         raise GtsamDvlError(f"{path}: {imu_topic} is {kind}, expected {IMU_TYPE}")
     if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
         raise GtsamDvlError(f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}")
+    if dvl_water_topic and dvl_water_topic not in src.topics:
+        raise _missing(src, "DVL water-track", dvl_water_topic, "--dvl-water-topic")
+    if dvl_water_topic and (kind := _type(src, dvl_water_topic)) not in WATER_TOPIC_TYPES:
+        raise GtsamDvlError(f"{path}: {dvl_water_topic} is {kind}; water-track topics must be one of "
+                            f"{', '.join(WATER_TOPIC_TYPES)}")
     depth_topic = _optional_topic(src, depth_topic, DEPTH_TOPIC, "depth", DEPTH_TYPES,
                                   f"depth topics must be one of {', '.join(DEPTH_TYPES)}")
     warnings = list(src.warnings)
@@ -313,7 +328,7 @@ def read_log(
     if truth_topic in src.topics and not has_truth:
         warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
     topics = [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
-    topics += [depth_topic] * bool(depth_topic)
+    topics += [depth_topic] * bool(depth_topic) + ([dvl_water_topic] if dvl_water_topic else [])
     gnss_topic = _optional_topic(src, gnss_topic, GNSS_TOPIC, "GNSS", (NAVSATFIX_TYPE,),
                                  f"the GNSS topic must be {NAVSATFIX_TYPE}")
     topics += [gnss_topic] * bool(gnss_topic)
@@ -329,7 +344,7 @@ def read_log(
     streams = {imu_topic: imu_stream}
     if has_truth:
         streams[truth_topic] = _Stream(path, truth_topic, ODOM_TYPE, TRUTH_FIELDS, counts.get(truth_topic, 0))
-    others = {depth_topic, gnss_topic, attitude_topic, tf_topic, dvl_topic}
+    others = {depth_topic, gnss_topic, attitude_topic, tf_topic, dvl_topic, dvl_water_topic}
     raw = _read_streaming(src, topics, streams, {t for t in streams if t in others}, progress)
 
     imu = imu_stream.array()
@@ -370,6 +385,15 @@ def read_log(
     dvl, dvl_ns = _dvl_data(src, dvl_topic, dvl_arr), stamps_ns(dvl_arr)
     keep = check_stamps(path, dvl_topic, dvl_ns, t0, None, repair, warnings, dropped)
     dvl = _select(dvl, keep, (dvl_ns[keep] - t0) / 1e9)
+    if dvl_water_topic:
+        w_arr = decode(path, dvl_water_topic, _type(src, dvl_water_topic), raw[dvl_water_topic])
+        w_ns = stamps_ns(w_arr)
+        keep = check_stamps(path, dvl_water_topic, w_ns, t0, None, repair, warnings, dropped)
+        water = _select(_dvl_data(src, dvl_water_topic, w_arr), keep, (w_ns[keep] - t0) / 1e9)
+        if water.frame_id != dvl.frame_id:
+            warnings.append(f"{dvl_water_topic} is in frame {water.frame_id}, {dvl_topic} in {dvl.frame_id}: its "
+                            f"velocity taken in {dvl.frame_id}")
+        dvl = merge_pings(dvl, as_water_track(water))
 
     truth = None
     if has_truth:
@@ -378,8 +402,9 @@ def read_log(
         keep = check_stamps(path, truth_topic, ns, t0, None, repair, warnings, dropped)
         q = od["orientation"].astype(float)[keep]
         n_v = Rotation.from_quat(q).apply(od["linear"].astype(float)[keep]) if keep.any() else np.zeros((0, 3))
-        truth = TruthData((ns[keep] - t0) / 1e9, od["position"].astype(float)[keep], q, n_v,
-                          od["angular"].astype(float)[keep])
+        n_p, t_truth = od["position"].astype(float)[keep], (ns[keep] - t0) / 1e9
+        truth = TruthData(t_truth, n_p, q, n_v, od["angular"].astype(float)[keep],
+                          truth_current(meta, t_truth, n_p))
 
     mounting = Mounting()
     if tf_topic not in src.topics:

@@ -127,9 +127,9 @@ def source_record(log: LogData, result_path: Path | str, read_options: dict[str,
     its path relative to the folder of the result file (so that the two can move together), the SHA-256 of its
     content (file_sha256: `evaluate --truth` checks that it is given the source), the map origin it read (JSON,
     "" when the log records none) and the reading options (JSON: imu_topic, dvl_topic, salvage, repair and, when
-    given, depth_topic, gnss_topic, attitude_topic and truth_topic)."""
+    given, depth_topic, gnss_topic, attitude_topic, truth_topic and dvl_water_topic)."""
     options: dict[str, Any] = {"imu_topic": "/imu/data_raw", "dvl_topic": None, "salvage": False, "repair": False}
-    topics = ("depth_topic", "gnss_topic", "attitude_topic", "truth_topic")
+    topics = ("depth_topic", "gnss_topic", "attitude_topic", "truth_topic", "dvl_water_topic")
     options.update({k: v for k, v in (read_options or {}).items() if k in options or (k in topics and v is not None)})
     origin = to_json(log.origin.as_dict()) if log.origin is not None else ""
     if not log.source:

@@ -20,7 +20,10 @@ simulated logs, /ground_truth/odometry. Choices the conventions leave open:
   0 = invalid, which the message leaves DVL-specific; recorded in the "gtsam_dvl" metadata); beam
   velocities are float32 in that message, so they round-trip to float32 precision only. Range and beam
   velocity variances are -1 (not known); sound speed from metadata["sensors"]["dvl"]["sound_speed"]
-  or 1500 m/s.
+  or 1500 m/s. A water-track ping (DvlData.water_track) has velocity_mode 2 (DVL_MODE_WATER), its velocity
+  relative to the water (not over ground: course_gnd and speed_gnd NaN), and its measuring beams 1 in
+  ``beam_quality``. ``altitude``: DvlData.altitude when the log has it (NaN: none), else the mean vertical range
+  of the valid beams.
 * IMU covariance: diag from metadata["sensors"]["imu"]: "gyro_variance"/"accel_variance" (per-sample,
   SI), else the white-noise density (the simulator's "gyro_noise_deg_per_h_per_sqrt_hz" and
   "accel_noise_micro_g_per_sqrt_hz", or SI "gyro_noise_density"/"accel_noise_density") squared times the
@@ -133,13 +136,14 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     m = len(dvl)
     arr = cdr.new_messages(cdr.DVL, {"frame_id": dvl.frame_id}, m)
     cdr.set_stamps(arr, stamps)
-    valid = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
-    v = np.where(valid[:, None], dvl.d_v, np.nan)
+    finite = np.isfinite(dvl.d_v).all(axis=1)
+    valid = np.asarray(dvl.valid, bool) & finite
+    water = np.zeros(m, bool) if dvl.water_track is None else np.asarray(dvl.water_track, dtype=bool)
+    v = np.where(valid[:, None], dvl.d_v, np.nan)  # over ground
     cov = np.asarray(dvl.d_cov, dtype=float).reshape(m, 9)
     arr["velocity_mode"], arr["dvl_type"] = 1, 0  # DVL_MODE_BOTTOM, DVL_TYPE_PISTON
-    if dvl.water_track is not None:
-        arr["velocity_mode"][np.asarray(dvl.water_track, dtype=bool)] = 2  # DVL_MODE_WATER
-    arr["velocity"] = v
+    arr["velocity_mode"][water] = 2  # DVL_MODE_WATER
+    arr["velocity"] = np.where((valid | water & finite)[:, None], dvl.d_v, np.nan)  # water track: through the water
     arr["velocity_covar"] = np.where(np.isnan(cov).all(axis=1, keepdims=True), -1.0, cov)
     arr["course_gnd"] = np.arctan2(v[:, 1], v[:, 0])
     arr["speed_gnd"] = np.hypot(v[:, 0], v[:, 1])
@@ -147,7 +151,7 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     arr["range_covar"] = arr["beam_velocity_covar"] = -1.0
     b = dvl.beams
     if b is None:
-        arr["altitude"] = np.nan
+        arr["altitude"] = np.nan if dvl.altitude is None else dvl.altitude
         return arr
     nb = b.d_u.shape[1]
     if nb > MAX_BEAMS:
@@ -159,6 +163,8 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
         return out.reshape(m, MAX_BEAMS * int(np.prod(a.shape[2:])))  # (m, -1) is ambiguous for m = 0
 
     bvalid = np.asarray(b.valid, bool)
+    if water.any():  # a water-track ping's beams measured the water where they have a velocity
+        bvalid = bvalid | water[:, None] & np.isfinite(b.v)
     arr["beam_ranges_valid"] = arr["beam_velocities_valid"] = True
     arr["beam_unit_vec"] = pad(b.d_u, 0.0)
     arr["range"] = pad(b.range, 0.0)
@@ -168,6 +174,8 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     vertical = np.where(bvalid, b.range * np.abs(b.d_u[..., 2]), 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         arr["altitude"] = vertical.sum(axis=1) / bvalid.sum(axis=1)
+    if dvl.altitude is not None:  # the DVL's own altitude (NaN: none)
+        arr["altitude"] = dvl.altitude
     return arr
 
 
@@ -194,13 +202,15 @@ def _pressure_messages(log: LogData, w: McapLogWriter) -> np.ndarray:
 
 
 def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None,
-              imu_orientation: tuple[np.ndarray, np.ndarray | None] | None = None) -> None:
+              imu_orientation: tuple[np.ndarray, np.ndarray | None] | None = None,
+              dvl_water_topic: str | None = None) -> None:
     """Write ``log`` to ``path`` as a ROS 2 MCAP per docs/conventions.md (atomically: temporary file, then
     rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
     and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config".
     imu_orientation: (q (K, 4) [x, y, z, w] of imu_link per IMU sample, covariance (3, 3) or (K, 3, 3) rad^2 or
     None) written into the IMU messages' orientation (an AHRS-like IMU); None: no orientation (covariance[0]
-    = -1), the convention."""
+    = -1), the convention. dvl_water_topic: the water-track pings on this topic (TwistWithCovarianceStamped) instead
+    of /dvl/data, as drivers that publish water track apart do."""
     path = Path(path)
     meta = metadata_record(log)
     times = [a for a in (log.imu.t, log.dvl.t, log.truth.t if log.truth else None) if a is not None and len(a)]
@@ -208,7 +218,25 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
     with McapLogWriter(path, t0_ns=log.t0_ns) as w:
         _write_head(w, path, log, meta, config, t_first)
         gyro_var, accel_var = _imu_variances(meta, log.imu.t)
-        _write_data(w, path, log, meta, gyro_var, accel_var, imu_orientation, gnss_channel=False)
+        if dvl_water_topic and log.dvl.water_track is not None:
+            wt = np.asarray(log.dvl.water_track, dtype=bool)
+            _write_data(w, path, dataclasses.replace(log, dvl=_dvl_rows(log.dvl, ~wt)), meta, gyro_var, accel_var,
+                        imu_orientation, gnss_channel=False)
+            water = _dvl_rows(log.dvl, wt)
+            cov = np.zeros((len(water), 6, 6))
+            cov[:, :3, :3] = np.nan_to_num(water.d_cov, nan=0.0)
+            cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
+            w.add_twist_with_covariance(dvl_water_topic, water.t, water.d_v, None, cov, water.frame_id)
+        else:
+            _write_data(w, path, log, meta, gyro_var, accel_var, imu_orientation, gnss_channel=False)
+
+
+def _dvl_rows(dvl: DvlData, keep: np.ndarray) -> DvlData:
+    """The pings keep of dvl."""
+    def rows(obj: Any) -> Any:
+        return dataclasses.replace(obj, **{f.name: getattr(obj, f.name)[keep] for f in dataclasses.fields(obj)
+                                           if isinstance(getattr(obj, f.name), np.ndarray)})
+    return dataclasses.replace(rows(dvl), beams=None if dvl.beams is None else rows(dvl.beams))
 
 
 def _write_head(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any], config: dict[str, Any] | None,

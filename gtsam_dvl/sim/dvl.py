@@ -6,10 +6,19 @@ beam_angle from the face axis a (in dvl_link, towards the bottom) at azimuths 45
 d_u_j = cos(beam) a + sin(beam) (cos(az_j) e1 + sin(az_j) e2), e1 the dvl x axis made perpendicular to a
 and e2 = e1 x a. Beam j measures y_j = d_u_j . y; its slant range reaches a flat seafloor at a constant
 height. The output is instantaneous at the stamp.
+
+Water track (a scenario with [seafloor], sim/current.py): while the DVL's altitude (seafloor depth minus its
+depth) exceeds its bottom-track range, the ping measures the vehicle's velocity relative to the water, seen
+through the same scale, misalignment and lever arm: y = k d_R_b (n_R_b^T (n_v - n_c) + b_omega x b_l), n_c the
+current at base_link's depth. Such a ping has its own white noise (water_track_noise_m_s, from its own random
+stream) instead of noise_m_s, the correlated error, dropouts and outliers as a bottom-track ping, no beam ranges
+and no altitude; DvlData marks it water_track and not valid (valid means usable as
+velocity over ground), its velocity and beam velocities kept.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -21,7 +30,9 @@ from gtsam_dvl.sim.motion import MotionProfile
 from gtsam_dvl.sim.position import PositionTrack
 
 if TYPE_CHECKING:
-    from gtsam_dvl.sim.scenario import DvlSpec
+    from gtsam_dvl.core.earth import LocalFrame
+    from gtsam_dvl.sim.current import CurrentSpec, SeafloorSpec
+    from gtsam_dvl.sim.scenario import DvlSpec, Scenario
 
 AZIMUTHS_DEG = (45.0, 135.0, 225.0, 315.0)
 
@@ -39,35 +50,76 @@ def janus_beams(beam_angle_deg: float, face_axis: np.ndarray) -> np.ndarray:
     return np.cos(b) * a + np.sin(b) * (np.cos(az) * e1 + np.sin(az) * e2)
 
 
+@dataclass(frozen=True)
+class Water:
+    """What a DVL with water track needs of the scenario: the map frame (the current is given in it), the current
+    (None: still water) and the seafloor."""
+
+    frame: LocalFrame
+    current: CurrentSpec | None
+    seafloor: SeafloorSpec
+
+
+@dataclass
+class WaterPings:
+    """dvl_true's water-track part: water_track (M,) the pings out of bottom-track range and altitude (M,) m,
+    the DVL's altitude above the seafloor (NaN out of range)."""
+
+    water_track: np.ndarray
+    altitude: np.ndarray
+
+
 def dvl_true(
     spec: DvlSpec, b_R_d0: np.ndarray, b_l: np.ndarray, motion: MotionProfile, track: PositionTrack,
-    t: np.ndarray, floor_h: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Error-free y (M, 3) m/s, beam unit vectors d_u (4, 3) and slant ranges (M, 4) m (inf: no bottom)."""
+    t: np.ndarray, floor_h: float, water: Water | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, WaterPings | None]:
+    """Error-free y (M, 3) m/s, beam unit vectors d_u (4, 3), slant ranges (M, 4) m (inf: no bottom) and, with
+    water (floor_h then ignored: the seafloor is water.seafloor), the water-track pings: their y is relative to
+    the water and their ranges inf."""
     m = motion.evaluate(t)
-    lat, _, h = track.at(t)
+    lat, lon, h = track.at(t)
     _, _, l_R_b, b_omega_eb = imu_truth(m, lat, h)
-    b_v = np.einsum("kji,kj->ki", l_R_b, m.l_v()) + np.cross(b_omega_eb, b_l)
+    b_lever_v = np.cross(b_omega_eb, b_l)
+    b_v = np.einsum("kji,kj->ki", l_R_b, m.l_v()) + b_lever_v
     b_R_d = rpy_deg_to_matrix(spec.misalignment_deg) @ b_R_d0
     y = spec.scale * b_v @ b_R_d  # rows: (d_R_b b_v)^T = b_v^T b_R_d
     d_u = janus_beams(spec.beam_angle_deg, np.asarray(spec.face_axis))
     l_u = np.einsum("kij,bj->kbi", l_R_b, d_u @ b_R_d.T)  # beams in the local level
     h_dvl = h + (l_R_b @ b_l)[:, 2]
+    if water is not None:
+        floor_h = -water.seafloor.depth_m
     down = -l_u[..., 2]
     with np.errstate(divide="ignore"):
         rng = np.where(down > 1e-9, (h_dvl - floor_h)[:, None] / down, np.inf)
     rng = np.where(rng > 0, rng, np.inf)  # a DVL above its seafloor only
-    return y, d_u, rng
+    if water is None:
+        return y, d_u, rng, None
+    altitude = h_dvl - floor_h
+    out = altitude > spec.bottom_range_m
+    l_v_water = m.l_v()
+    if water.current is not None:  # the current at base_link's depth, from map into the local level
+        n_c = water.current.at(-h, t)
+        l_v_water = l_v_water - np.einsum("kji,kj->ki", water.frame.n_R_l(lat, lon), n_c)
+    y_water = spec.scale * (np.einsum("kji,kj->ki", l_R_b, l_v_water) + b_lever_v) @ b_R_d
+    y = np.where(out[:, None], y_water, y)
+    rng = np.where(out[:, None], np.inf, rng)
+    return y, d_u, rng, WaterPings(water_track=out, altitude=np.where(out, np.nan, altitude))
 
 
 def dvl_measure(
     spec: DvlSpec, t: np.ndarray, y_true: np.ndarray, d_u: np.ndarray, ranges: np.ndarray,
     noise_rng: np.random.Generator | None, event_rng: np.random.Generator | None,
+    water: WaterPings | None = None, water_rng: np.random.Generator | None = None,
 ) -> DvlData:
     """Add noise, dropouts and outliers (None generators: none of them) and build DvlData. The event
-    generator's draws come in the order event_blocks gives (sim/stream.py positions a generator at each)."""
+    generator's draws come in the order event_blocks gives (sim/stream.py positions a generator at each).
+    water (dvl_true's): the water-track pings get their noise from water_rng (drawn for every ping, so that the
+    stream advances ping by ping whatever the mode) and are marked; every beam of a bottom-track ping with a
+    range is valid (bottom lock is decided on the altitude, not beam by beam), every beam of a water-track ping
+    measures."""
     M, B = ranges.shape
-    beam_ok: np.ndarray = np.asarray(ranges <= spec.max_range_m)
+    wt = None if water is None else np.asarray(water.water_track, dtype=bool)
+    beam_ok: np.ndarray = np.asarray(ranges <= spec.max_range_m) if wt is None else np.isfinite(ranges) | wt[:, None]
     if event_rng is not None:
         ping_lost: np.ndarray = event_rng.random((M,)) < spec.dropout_ping_prob
         beam_lost: np.ndarray = event_rng.random((M, B)) < spec.dropout_beam_prob
@@ -77,6 +129,8 @@ def dvl_measure(
         y = y_true.copy()
         if noise_rng is not None:
             y += noise_rng.normal(0.0, sigma, (M, 3))
+        if wt is not None and water_rng is not None:
+            y = np.where(wt[:, None], y_true + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y)
         if event_rng is not None:
             ping_out: np.ndarray = event_rng.random((M,)) < spec.outlier_prob
             direction = event_rng.normal(size=(M, 3))
@@ -84,10 +138,15 @@ def dvl_measure(
             y[ping_out] += spec.outlier_m_s * direction[ping_out]
         v_beam = y @ d_u.T
         cov = np.broadcast_to(sigma**2 * np.eye(3), (M, 3, 3)).copy()
+        if wt is not None:
+            cov[wt] = spec.water_track_noise_m_s**2 * np.eye(3)
     else:
         v_beam = y_true @ d_u.T
         if noise_rng is not None:
             v_beam += noise_rng.normal(0.0, sigma, (M, B))
+        if wt is not None and water_rng is not None:
+            v_water = y_true @ d_u.T + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, B))
+            v_beam = np.where(wt[:, None], v_water, v_beam)
         if event_rng is not None:
             beam_out: np.ndarray = event_rng.random((M, B)) < spec.outlier_prob
             v_beam += np.where(beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0)
@@ -97,17 +156,24 @@ def dvl_measure(
         enough = beam_ok.sum(axis=1) >= 3
         normal[~enough] = np.eye(3)  # placeholder, overwritten with NaN below
         y = np.linalg.solve(normal, rhs[..., None])[..., 0]
-        cov = sigma**2 * np.linalg.inv(normal)
+        inv_normal = np.linalg.inv(normal)
+        cov = sigma**2 * inv_normal
+        if wt is not None:
+            cov[wt] = spec.water_track_noise_m_s**2 * inv_normal[wt]
     valid = beam_ok.sum(axis=1) >= 3
     y[~valid] = np.nan
     cov[~valid] = np.nan
     beams = BeamData(
         d_u=np.broadcast_to(d_u, (M, B, 3)).copy(),
         v=np.where(beam_ok, v_beam, np.nan),
-        range=np.where(beam_ok, ranges, np.nan),  # no bottom lock, no range
+        range=np.where(beam_ok & np.isfinite(ranges), ranges, np.nan),  # no bottom lock, no range
         valid=beam_ok,
     )
-    return DvlData(t=t, d_v=y, d_cov=cov, valid=valid, beams=beams)
+    if wt is None:
+        return DvlData(t=t, d_v=y, d_cov=cov, valid=valid, beams=beams)
+    beams.valid = beam_ok & ~wt[:, None]  # valid: usable as velocity over ground (core/types.py)
+    return DvlData(t=t, d_v=y, d_cov=cov, valid=valid & ~wt, beams=beams, water_track=wt.copy(),
+                   altitude=np.asarray(water.altitude, dtype=float).copy())  # type: ignore[union-attr]
 
 
 def event_blocks(spec: DvlSpec, n_pings: int, n_beams: int) -> list[tuple[str, int]]:
@@ -119,6 +185,22 @@ def event_blocks(spec: DvlSpec, n_pings: int, n_beams: int) -> list[tuple[str, i
     if spec.noise_model == "velocity":
         return [("uniform", m), ("uniform", m * b), ("uniform", m), ("normal", 3 * m)]
     return [("uniform", m), ("uniform", m * b), ("uniform", m * b), ("uniform", m * b)]
+
+
+WATER_STREAM = 7  # index of the water-track noise's child of SeedSequence(seed) (sim/simulate.py)
+
+
+def water_noise_rng(seed: int) -> np.random.Generator:
+    """The water-track noise generator of a run: its own child of SeedSequence(seed), drawn only by a scenario with
+    a [seafloor], so that every other stream's numbers are those of a scenario without it."""
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(WATER_STREAM + 1)[WATER_STREAM]))
+
+
+def water_model(scenario: Scenario) -> Water | None:
+    """The scenario's Water (None without a [seafloor]: bottom lock always, the older model)."""
+    if scenario.seafloor is None:
+        return None
+    return Water(scenario.local_frame(), scenario.current, scenario.seafloor)
 
 
 CORRELATED_STREAM = 6  # index of the correlated error's child of SeedSequence(seed) (sim/simulate.py)

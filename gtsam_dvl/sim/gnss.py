@@ -86,4 +86,4 @@ def reframe_truth(truth: TruthData, frame: LocalFrame, new: LocalFrame) -> Truth
     n_R_b = quat_xyzw_to_matrix(truth.n_q_b)
     return TruthData(t=truth.t.copy(), n_p=new.geodetic_to_map(lat, lon, h),
                      n_q_b=matrix_to_quat_xyzw(m_R_n @ n_R_b), n_v=truth.n_v @ m_R_n.T,
-                     b_omega=truth.b_omega.copy())
+                     b_omega=truth.b_omega.copy(), n_c=None if truth.n_c is None else truth.n_c @ m_R_n.T)

@@ -22,6 +22,7 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import Segment
 from gtsam_dvl.core.units import DEG_PER_H, MICRO_G
+from gtsam_dvl.sim.current import CurrentSpec, SeafloorSpec, current_spec, seafloor_spec
 from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, parse_segments
 
 DEFAULT_T0_S = 1_700_000_000  # ROS time of t = 0 when the file gives none: fixed so logs are reproducible
@@ -30,6 +31,7 @@ __all__ = [
     "DEG_PER_H",
     "MICRO_G",
     "SEGMENT_KINDS",
+    "CurrentSpec",
     "DepthSpec",
     "DvlSpec",
     "GnssSpec",
@@ -41,6 +43,7 @@ __all__ = [
     "Origin",
     "Rates",
     "Scenario",
+    "SeafloorSpec",
     "list_builtin_scenarios",
     "load_scenario",
     "scenario_from_dict",
@@ -150,6 +153,13 @@ class DvlSpec:
     outlier_m_s: float = 1.0  # size of a gross error
     correlated_sigma_m_s: float = 0.0  # Gauss-Markov error: stationary 1 sigma per axis (0: none)
     correlated_tau_s: float = 60.0  # its time constant
+    # with a [seafloor] table (sim/current.py): bottom lock while the DVL's altitude is at most bottom_range_m (0: the
+    # max_range_m, which a preset fills with its maximum altitude), water track beyond, with its own white noise
+    # (per axis, or per beam with noise_model "beam"). 1 cm/s, typical of the class: a water-track ping measures the
+    # Doppler of the scatterers in a water layer a few metres below the DVL (Water Linked's water-tracking page:
+    # 1.5-4.5 m), weaker and more diffuse than a seafloor echo, so it is noisier than the same DVL's bottom track
+    bottom_range_m: float = 0.0
+    water_track_noise_m_s: float = 0.01
     # a DVL preset (core/config/presets.py DVL_PRESETS, "" none): fills the keys the table does not set, the ping
     # noise (noise_m_s: per axis, or per beam with noise_model "beam"), the correlated error, the bottom-track range
     # (max_range_m) and the beam angle (dvl_preset_values); the truth scale stays the table's
@@ -258,6 +268,8 @@ class Scenario:
     # the [estimator] table: a partial estimator configuration (EstimatorConfig's tables) applied over the named
     # one, e.g. what is known about this log (its initial attitude); empty: none
     estimator: dict[str, Any] = field(default_factory=dict)
+    current: CurrentSpec | None = None  # the [current] table, if the scenario has one (sim/current.py)
+    seafloor: SeafloorSpec | None = None  # the [seafloor] table: bottom lock by altitude and water track
 
     def estimator_configuration(self) -> EstimatorConfig:
         """The configuration this scenario's runs are meant for: estimator_config's named configuration with the
@@ -321,7 +333,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r = Reader(raw, source)
     r.check_keys(
         "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments",
-             "depth", "gnss", "estimator_config", "oscillation", "estimator"]
+             "depth", "gnss", "estimator_config", "oscillation", "estimator", "current", "seafloor"]
     )
     estimator_config = raw.get("estimator_config", "default")
     r.require(isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS, "estimator_config",
@@ -348,6 +360,8 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         given = raw.get("dvl", {})
         dvl_table.update({k: v for k, v in dvl_preset_values(dvl_table["model"], dvl_table["noise_model"]).items()
                           if k not in given})
+    if not dvl_table["bottom_range_m"]:
+        dvl_table["bottom_range_m"] = dvl_table["max_range_m"]
     dvl = DvlSpec(**dvl_table)
     for key in ("gyro_bias_deg_per_h", "accel_bias_micro_g", "gyro_noise_deg_per_h_per_sqrt_hz",
                 "accel_noise_micro_g_per_sqrt_hz", "gyro_bias_walk_deg_per_h_per_sqrt_h",
@@ -360,6 +374,8 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
         r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
     r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
+    r.require(dvl.water_track_noise_m_s >= 0, "dvl.water_track_noise_m_s", "must be >= 0")
+    r.require(dvl.bottom_range_m > 0, "dvl.bottom_range_m", "must be positive (0: max_range_m)")
     r.require(dvl.correlated_sigma_m_s >= 0, "dvl.correlated_sigma_m_s", "must be >= 0 (0: no correlated error)")
     r.require(dvl.correlated_tau_s > 0, "dvl.correlated_tau_s", "must be positive")
     r.require(dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'")
@@ -405,6 +421,8 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
         gnss=gnss,
         oscillation=oscillation,
         estimator=copy.deepcopy(estimator),
+        current=current_spec(r) if "current" in raw else None,
+        seafloor=seafloor_spec(r) if "seafloor" in raw else None,
     )
 
 

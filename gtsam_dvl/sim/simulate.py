@@ -4,8 +4,8 @@ Steps: analytic motion in the local level -> geodetic position by quadrature -> 
 biases and noise -> truth in the map frame -> DVL -> depth and GNSS fixes (when the scenario has them).
 Random streams are children of SeedSequence(seed) (PCG64), one per purpose, so switching white noise off keeps
 the same biases: 0 IMU biases, 1 IMU white noise, 2 DVL white noise, 3 DVL dropouts and outliers, 4 depth, 5 GNSS,
-6 the DVL's correlated (Gauss-Markov) error. A stream a scenario does not use is never drawn, so adding a sensor
-or an error to a scenario leaves every other stream's numbers as they were.
+6 the DVL's correlated (Gauss-Markov) error, 7 the DVL's water-track noise. A stream a scenario does not use is
+never drawn, so adding a sensor or an error to a scenario leaves every other stream's numbers as they were.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from gtsam_dvl.core.types import (
     TruthData,
 )
 from gtsam_dvl.sim import imu as sim_imu
-from gtsam_dvl.sim.dvl import correlated_error, dvl_measure, dvl_true
+from gtsam_dvl.sim.dvl import correlated_error, dvl_measure, dvl_true, water_model, water_noise_rng
 from gtsam_dvl.sim.gnss import first_fix_frame, reframe_truth, simulate_gnss
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, quantise, saturate, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
@@ -79,14 +79,16 @@ def simulate(
                   b_f=saturate(quantise(b_f, scenario.imu.quantisation_accel_m_s2),
                                scenario.imu.saturation_accel_m_s2))
 
-    truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)))
+    truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)), scenario)
 
     mount = scenario.mounting
     mounting = Mounting(b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
                         b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float))
     t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float(imu.t[-1]))
     floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
-    y, d_u, ranges = dvl_true(scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas, floor_h)
+    water = water_model(scenario)
+    y, d_u, ranges, water_pings = dvl_true(scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas,
+                                           floor_h, water)
     correlated = correlated_error(scenario.dvl, rates.dvl_hz, seed) if white_noise else None
     if correlated is not None:
         y = y + correlated.take(len(t_meas))
@@ -94,6 +96,7 @@ def simulate(
         scenario.dvl, t_dvl, y, d_u, ranges,
         np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
         np.random.Generator(np.random.PCG64(event_ss)) if white_noise else None,
+        water_pings, water_noise_rng(seed) if white_noise and water is not None else None,
     )
     depth = None if scenario.depth is None else _depth(scenario, motion, track, frame, n, seed, white_noise)
     metadata = _metadata(scenario, seed, white_noise, mounting, errors.gyro_bias0, errors.accel_bias0,
@@ -152,6 +155,16 @@ def _fix_frame(scenario: Scenario, fix_frame: LocalFrame | None, metadata: dict[
     return fix_frame
 
 
+def _water_truth(scenario: Scenario) -> dict[str, Any]:
+    """metadata["truth"]'s "current" and "seafloor" (sim/current.py), those the scenario has."""
+    out: dict[str, Any] = {}
+    if scenario.current is not None:
+        out["current"] = _listify_spec(asdict(scenario.current))
+    if scenario.seafloor is not None:
+        out["seafloor"] = asdict(scenario.seafloor)
+    return out
+
+
 def _without(d: dict[str, Any], keys: tuple[str, ...]) -> dict[str, Any]:
     """d without keys (the settings of an error that is off)."""
     return {k: v for k, v in d.items() if k not in keys}
@@ -207,13 +220,16 @@ def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarra
     return t_meas, t_meas - offset_s
 
 
-def _truth(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, step: int) -> TruthData:
+def _truth(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, step: int,
+           scenario: Scenario) -> TruthData:
     """Truth of base_link in the map frame at every step-th IMU stamp."""
-    return _truth_at(motion, track, frame, np.arange(0, n, step))
+    return _truth_at(motion, track, frame, np.arange(0, n, step), scenario)
 
 
-def _truth_at(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k: np.ndarray) -> TruthData:
-    """Truth of base_link in the map frame at the stamps k / rate (IMU sample indices)."""
+def _truth_at(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k: np.ndarray,
+              scenario: Scenario) -> TruthData:
+    """Truth of base_link in the map frame at the stamps k / rate (IMU sample indices), with the current at its
+    depth when the scenario has one."""
     t = k / track.rate
     lat, lon, h = track.at_samples(k)
     m = motion.evaluate(t)
@@ -222,8 +238,9 @@ def _truth_at(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k:
     n_R_b = n_R_l @ l_R_b
     n_v = np.einsum("kij,kj->ki", n_R_l, m.l_v())
     b_omega = b_omega_ib - np.einsum("kji,j->ki", n_R_b, frame.n_omega_ie)  # relative to map
+    n_c = None if scenario.current is None else scenario.current.at(-h, t)
     return TruthData(t=t, n_p=frame.geodetic_to_map(lat, lon, h), n_q_b=matrix_to_quat_xyzw(n_R_b),
-                     n_v=n_v, b_omega=b_omega)
+                     n_v=n_v, b_omega=b_omega, n_c=n_c)
 
 
 def _bias_series(scenario: Scenario, errors: ImuErrors, rate: float) -> dict[str, Any] | None:
@@ -271,14 +288,16 @@ def _metadata(
             },
             "imu": imu_truth_md,
             "segments": scenario.segment_table(),
+            **_water_truth(scenario),
         },
         "sensors": {  # the optional errors only when on (the metadata of a scenario without them stays as it was)
             "imu": _without(listify(asdict(scenario.imu)), tuple(
                 k for k in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2", "saturation_gyro_rad_s",
                             "saturation_accel_m_s2")
                 if not np.any(getattr(scenario.imu, k)))),
-            "dvl": _without(listify(asdict(scenario.dvl)), ("correlated_sigma_m_s", "correlated_tau_s")
-                            if scenario.dvl.correlated_sigma_m_s == 0 else ()),
+            "dvl": _without(listify(asdict(scenario.dvl)), (("correlated_sigma_m_s", "correlated_tau_s")
+                            if scenario.dvl.correlated_sigma_m_s == 0 else ())
+                            + (("bottom_range_m", "water_track_noise_m_s") if scenario.seafloor is None else ())),
             "rates": asdict(scenario.rates),
             "mounting": listify(asdict(scenario.mounting)),
         },

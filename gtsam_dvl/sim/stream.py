@@ -54,6 +54,7 @@ from gtsam_dvl.core.types import (
     Mounting,
     TruthData,
 )
+from gtsam_dvl.sim import dvl as sim_dvl
 from gtsam_dvl.sim.dvl import GaussMarkov, correlated_error, dvl_measure, dvl_true, event_blocks, janus_beams
 from gtsam_dvl.sim.gnss import first_fix_frame, gnss_fixes, gnss_rng, reframe_truth
 from gtsam_dvl.sim.imu import (
@@ -288,6 +289,7 @@ class _Streams:
     depth: np.random.Generator | None
     gnss: np.random.Generator | None
     dvl_correlated: GaussMarkov | None  # continued ping by ping
+    dvl_water: _Draws | None  # the water-track noise (a scenario with [seafloor])
 
 
 class ChunkedSimulation:
@@ -319,6 +321,7 @@ class ChunkedSimulation:
         # the grid interval each ping's time falls in (TrackWindow.grid_index_of_time): the chunk that has it
         self._ping_g = np.clip(np.floor(self.t_meas * rate + 1.0).astype(np.int64), 0, n - 1)
         self.floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
+        self.water = sim_dvl.water_model(scenario)
         self.truth_step = int(round(rate / rates.truth_hz))
         self.n_beams = janus_beams(scenario.dvl.beam_angle_deg, np.asarray(scenario.dvl.face_axis)).shape[0]
 
@@ -408,10 +411,13 @@ class ChunkedSimulation:
         sc = self.scenario
         B = self.n_beams
         z3, z1 = np.zeros((0, 3)), np.zeros(0)
+        water = sc.seafloor is not None
         dvl = DvlData(t=z1, d_v=z3, d_cov=np.zeros((0, 3, 3)), valid=np.zeros(0, bool),
                       beams=BeamData(d_u=np.zeros((0, B, 3)), v=np.zeros((0, B)), range=np.zeros((0, B)),
-                                     valid=np.zeros((0, B), bool)))
-        truth = TruthData(t=z1, n_p=z3, n_q_b=np.zeros((0, 4)), n_v=z3, b_omega=z3)
+                                     valid=np.zeros((0, B), bool)),
+                      water_track=np.zeros(0, bool) if water else None, altitude=z1 if water else None)
+        truth = TruthData(t=z1, n_p=z3, n_q_b=np.zeros((0, 4)), n_v=z3, b_omega=z3,
+                          n_c=None if sc.current is None else z3)
         depth = None if sc.depth is None else DepthData(
             t=z1, depth_m=z1, variance_m2=z1, pressure_pa=z1, pressure_variance_pa2=z1,
             b_p_sensor=np.asarray(sc.depth.lever_arm_m, dtype=float))
@@ -447,6 +453,7 @@ class ChunkedSimulation:
             depth=depth_rng(self.seed) if white and self.scenario.depth is not None else None,
             gnss=gnss_rng(self.seed) if white and self.scenario.gnss is not None else None,
             dvl_correlated=correlated_error(sc.dvl, sc.rates.dvl_hz, self.seed) if white else None,
+            dvl_water=_Draws([sim_dvl.water_noise_rng(self.seed)]) if white and self.water is not None else None,
         )
 
     # -- the parts ----------------------------------------------------------------------------------
@@ -503,7 +510,7 @@ class ChunkedSimulation:
         assert self.head.truth is not None
         if not len(k):
             return _rows(self.head.truth, 0)
-        truth = _truth_at(self.motion, win, self.frame, _padded(k))
+        truth = _truth_at(self.motion, win, self.frame, _padded(k), self.scenario)
         if self.fix_frame is not None:
             truth = reframe_truth(truth, self.frame, self.fix_frame)
         return _rows(truth, len(k))  # type: ignore[no-any-return]
@@ -522,18 +529,22 @@ class ChunkedSimulation:
         """The pings j0..j1-1 (one: measured doubled, _padded, its copy's numbers the real one's)."""
         sc = self.scenario
         m = j1 - j0
+        water = None
         if m:
-            y, d_u, ranges = dvl_true(sc.dvl, self.mounting.b_R_d0, self.mounting.b_l, self.motion, win,
-                                      _padded(self.t_meas[j0:j1]), self.floor_h)
+            y, d_u, ranges, water = dvl_true(sc.dvl, self.mounting.b_R_d0, self.mounting.b_l, self.motion, win,
+                                             _padded(self.t_meas[j0:j1]), self.floor_h, self.water)
             if streams.dvl_correlated is not None:
                 e = streams.dvl_correlated.take(m)
                 y = y + (np.concatenate([e, e]) if m == 1 else e)  # the padded copy's: the real ping's
         else:
             y, ranges = np.zeros((0, 3)), np.zeros((0, self.n_beams))
             d_u = janus_beams(sc.dvl.beam_angle_deg, np.asarray(sc.dvl.face_axis))
-        noise, events = (None if d is None else d.start(m == 1) for d in (streams.dvl_noise, streams.dvl_events))
+            if self.water is not None:
+                water = sim_dvl.WaterPings(np.zeros(0, bool), np.zeros(0))
+        noise, events, water_noise = (None if d is None else d.start(m == 1)
+                                      for d in (streams.dvl_noise, streams.dvl_events, streams.dvl_water))
         dvl = dvl_measure(sc.dvl, _padded(self.t_dvl[j0:j1]), y, d_u, ranges,
-                          noise, events)  # type: ignore[arg-type]  # _Draws: the draws dvl_measure takes
+                          noise, events, water, water_noise)  # type: ignore[arg-type]  # _Draws: the draws dvl_measure takes
         dvl.noise_free = not self.white_noise  # as simulate's (sim/simulate.py _log_data)
         return _rows(dvl, m) if m == 1 else dvl
 

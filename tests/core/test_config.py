@@ -156,7 +156,7 @@ def test_unknown_sections_and_keys_still_rejected(tmp_path: Path) -> None:
     assert _error(tmp_path, "[priors]\nscale_sigmaa = 1.0\n").startswith(
         "unknown key 'scale_sigmaa' in [priors] (known: scale_initial, scale_sigma, ")
     assert _error(tmp_path, "[onlin]\nwindow_s = 1.0\n") == (
-        "unknown section [onlin] (known: alignment, depth, dvl, ekf, gnss, imu, iodvlc, noise, observability, "
+        "unknown section [onlin] (known: alignment, current, depth, dvl, ekf, gnss, imu, iodvlc, noise, observability, "
         "online, priors, solver)")
     assert _error(tmp_path, "[online.relinearization]\nscales = 1.0\n").startswith(
         "unknown key 'scales' in [online.relinearization] (known: pose, velocity, bias, scale, misalignment_rad)")
@@ -394,7 +394,7 @@ FIXTURES = Path(__file__).parent / "config_fixtures"
 # sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting tolerance. A file without them
 # takes their defaults (the fit on, no preset), also a paper configuration's; but a result's config.json without
 # the correlated error takes it as white, as the runs that wrote it did (test below)
-ADDED = {"noise": None, "imu": {"model"},
+ADDED = {"noise": None, "current": None, "imu": {"model"},
          "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
          "priors": {"mounting_tolerance_deg"}, "ekf": {"recentre_time_offset"}}
 
@@ -432,7 +432,9 @@ def test_defaults_are_those_written_before() -> None:
 def test_result_config_json_written_before_loads() -> None:
     path = FIXTURES / "result_config_paper.json"
     cfg = EstimatorConfig.load(path)
-    assert cfg.model_copy(update={"noise": EstimatorConfig.paper().noise}) == EstimatorConfig.paper()
+    assert cfg.current.water_track == "refuse"  # written before water-track pings were used: its runs refused them
+    paper = EstimatorConfig.paper()
+    assert cfg.model_copy(update={"noise": paper.noise, "current": paper.current}) == paper
     assert _without_added(cfg.to_dict()) == _tuples(json.loads(path.read_text())["config"])
 
 

@@ -616,3 +616,37 @@ def test_correlated_error_variable(beam: bool, offset: bool, motion: bool,
     np.testing.assert_allclose(b, -e, atol=1e-12)
     for i, J in enumerate(blocks):
         np.testing.assert_allclose(J, H[i], atol=1e-12, err_msg=f"linearize block {i}")
+
+
+@pytest.mark.parametrize("beam", [False, True])
+@pytest.mark.parametrize("offset, motion, error", [(False, False, False), (True, True, True)])
+def test_water_current_variable(beam: bool, offset: bool, motion: bool, error: bool,
+                                random_motion: Callable[..., PingMotion]) -> None:
+    """A water-track ping (current_variable, last key W = [c_east, c_north]): the model of the velocity relative to
+    the water, i.e. the bottom-track factor at n_v - [W, 0] (an independent evaluation), its Jacobian and every
+    other's against numerical derivatives, the factor's linearisation equal to them; W = 0 is bottom track."""
+    s = option_state("random", 1, random_motion)
+    o0, x0 = options_of(s, offset, False, beam, motion)
+    o0 = replace(o0, error_variable=error)
+    x0 = [*x0, np.array([0.004, -0.003, 0.002])] if error else x0
+    o = replace(o0, current_variable=True)
+    n_c = np.array([0.35, -0.22])  # m/s, east and north
+    x = [*x0, n_c]
+    y: np.ndarray | float = 0.3 if beam else np.array([0.3, -0.2, 0.1])
+    H: list[Any] = [None] * len(x)
+    e = dvl_error(x, y, o, H)
+    x_water = list(x0)
+    x_water[1] = np.asarray(x0[1]) - np.array([n_c[0], n_c[1], 0.0])  # the velocity relative to the water
+    np.testing.assert_allclose(e, dvl_error(x_water, y, o0), atol=1e-15)
+    np.testing.assert_allclose(dvl_error([*x0, np.zeros(2)], y, o), dvl_error(x0, y, o0), atol=0)
+    assert np.abs(e - dvl_error(x0, y, o0)).max() > 0.1  # the current matters
+    for i, (J, Jn) in enumerate(zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)):
+        np.testing.assert_allclose(J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())),
+                                   err_msg=f"block {i}")
+    keys = ([X(0), V(0)] + [B(1)] * motion + [K(0), B(0)] + [T(0)] * offset + [L(0)] * error
+            + [gtsam.symbol("w", 0)])
+    factor = make_dvl_factor(gtsam.noiseModel.Unit.Create(len(e)), keys, y, o)
+    b, blocks = linearized(factor, x, [J.shape[1] for J in H])
+    np.testing.assert_allclose(b, -e, atol=1e-12)
+    for i, J in enumerate(blocks):
+        np.testing.assert_allclose(J, H[i], atol=1e-12, err_msg=f"linearize block {i}")

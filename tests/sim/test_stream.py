@@ -27,7 +27,9 @@ def _small(variant: str) -> Scenario:
     """45 s at 100 Hz with every stream simulate() has: 2 Hz DVL, depth, GNSS, and per variant
     "beam": the per-beam noise model with dropouts and outliers, walking biases, stamps 0.25 s late, fixes from 3 s;
     "field": the velocity model with dropouts and outliers, a z-down DVL with lever arm and stamps 0.3 s early, and
-    the map origin from the first fix (origin_in_log = false)."""
+    the map origin from the first fix (origin_in_log = false);
+    "water": "field" in a sheared, varying current over a seafloor that the descent brings into bottom-track range
+    and the ascent takes out of it (water-track pings before and after)."""
     raw = scenario_raw(rates={"dvl_hz": 2.0}, segments=[
         {"kind": "static", "duration_s": 5.0},
         {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
@@ -46,6 +48,11 @@ def _small(variant: str) -> Scenario:
         raw["mounting"] = {"dvl_rpy_deg": [180.0, 0.0, 0.0], "dvl_lever_arm_m": [0.5, 0.0, -0.2]}
         raw["dvl"]["face_axis"] = [0.0, 0.0, 1.0]
         raw["gnss"] = {"rate_hz": 1.0, "max_depth_m": 1000.0, "origin_in_log": False}
+    if variant == "water":  # the start 100 m down, the descent 1.4 m: lock from its middle to the ascent's middle
+        raw["dvl"]["bottom_range_m"] = 20.0
+        raw["seafloor"] = {"depth_m": 100.0 + 20.0 + 0.7}
+        raw["current"] = {"surface_m_s": [0.4, 0.2], "reference_m_s": [0.1, -0.2], "reference_depth_m": 200.0,
+                          "variation_m_s": [0.05, 0.05], "variation_period_s": 30.0}
     return scenario_from_dict(raw, f"small-{variant}")
 
 
@@ -79,7 +86,8 @@ def _assert_same_log(a: LogData, b: LogData, fields: tuple[str, ...] = ("source"
 
 
 @pytest.mark.parametrize(("variant", "chunk_s"), [("beam", 7.7), pytest.param("beam", 0.13, marks=pytest.mark.slow),
-                                                  pytest.param("field", 0.37, marks=pytest.mark.slow), ("field", 60.0)])
+                                                  pytest.param("field", 0.37, marks=pytest.mark.slow), ("field", 60.0),
+                                                  ("water", 0.37), ("water", 7.7)])
 def test_chunked_log_is_simulate_bit_for_bit(variant: str, chunk_s: float) -> None:
     """0.13 s and 0.37 s chunks hold zero or one ping, depth sample and candidate fix, and one or a few truth
     stamps (the single-row paths); 60 s is one chunk for the whole run."""
@@ -87,6 +95,9 @@ def test_chunked_log_is_simulate_bit_for_bit(variant: str, chunk_s: float) -> No
     ref = simulate(sc, 11)
     assert ref.gnss is not None and ref.dvl.beams is not None
     assert len(ref.gnss) > 10 and np.any(~ref.dvl.valid) and np.any(~ref.dvl.beams.valid)  # the streams are there
+    if variant == "water":
+        assert ref.dvl.water_track is not None and ref.truth is not None and ref.truth.n_c is not None
+        assert 0 < ref.dvl.water_track.sum() < len(ref.dvl) - 10
     _assert_same_log(simulate_chunked(sc, 11, chunk_s=chunk_s), ref)
 
 
@@ -126,6 +137,17 @@ def test_streamed_file_is_write_log_file(tmp_path: Path) -> None:
     assert again.read_bytes() == path.read_bytes()
     write_log_stream(again, ChunkedSimulation(sc, 6, chunk_s=10.0))
     assert again.read_bytes() != path.read_bytes()
+
+
+def test_streamed_water_log_is_write_log_file(tmp_path: Path) -> None:
+    """With water track (velocity mode, altitude) and a current, the streamed file is write_log's, byte for byte."""
+    sc = _small("water")
+    ref_path, path = tmp_path / "ref.mcap", tmp_path / "streamed.mcap"
+    write_log(ref_path, simulate(sc, 5))
+    write_log_stream(path, ChunkedSimulation(sc, 5, chunk_s=7.7))
+    assert path.read_bytes() == ref_path.read_bytes()
+    back = read_log(path)
+    assert back.dvl.water_track is not None and back.truth is not None and back.truth.n_c is not None
 
 
 def test_parts_are_chunks() -> None:

@@ -12,6 +12,7 @@ from typing import Any, Self
 from pydantic import Field, model_validator
 
 from gtsam_dvl.core.config.base import ConfigModel, toml_text
+from gtsam_dvl.core.config.current import CurrentConfig
 from gtsam_dvl.core.config.noise import NoiseConfig
 from gtsam_dvl.core.config.presets import DVL_PRESETS
 from gtsam_dvl.core.config.sections import (
@@ -76,6 +77,7 @@ class EstimatorConfig(ConfigModel):
     observability: ObservabilityConfig = Field(default_factory=ObservabilityConfig)
     gnss: GnssConfig = Field(default_factory=GnssConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
+    current: CurrentConfig = Field(default_factory=CurrentConfig)
 
     @model_validator(mode="after")
     def _dvl_scale_accuracy(self) -> Self:
@@ -190,9 +192,13 @@ DUMP_KEYS = {"time_offset_window_s", "jump_margin_m_s", "motion_dv_m_s", "accel_
 
 def _white_dvl_if_written_before(data: Any) -> Any:
     """A whole configuration written before [dvl] correlated_sigma_m_s existed (its [dvl] lists DUMP_KEYS, not
-    correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it; a user's file
-    that leaves the key out takes the default."""
+    correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it, and one written
+    before [current] existed with water-track pings refused; a user's file that leaves the keys out takes the
+    defaults."""
     dvl = data.get("dvl") if isinstance(data, dict) else None
+    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "current" not in data:
+        # written before [current] existed: its runs refused water-track pings
+        data = {**data, "current": {"water_track": "refuse"}}
     if (isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "correlated_sigma_m_s" not in dvl
             and dvl.get("model") is None):
         return {**data, "dvl": {**dvl, "correlated_sigma_m_s": 0.0}}

@@ -63,12 +63,14 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew
-from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled
+from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators import current
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
 from gtsam_dvl.estimators.correlated import ekf_propagate
 from gtsam_dvl.estimators.correlated import info as correlated_info
+from gtsam_dvl.estimators.current import resolve_water_track, water_pings
 from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
 from gtsam_dvl.estimators.ekf.kalman import (
@@ -112,7 +114,7 @@ from gtsam_dvl.estimators.noise_levels import (
     median_ping_sigma,
     with_multiplier,
 )
-from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings
+from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings, water_covariance
 from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
@@ -187,8 +189,14 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
         P = np.pad(P, ((0, 3), (0, 3)))
         P[n:, n:] = np.eye(3) * config.dvl.correlated_sigma_m_s**2
         d_e = np.zeros(3)
+    n_c = None
+    if water_current(config):  # the water current, last: its prior
+        m = len(P)
+        P = np.pad(P, ((0, 2), (0, 2)))
+        P[m:, m:] = np.eye(2) * config.current.prior_sigma_m_s**2
+        n_c = np.zeros(2)
     return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
-                       config.dvl.time_offset_prior_s if offset else 0.0, d_e)
+                       config.dvl.time_offset_prior_s if offset else 0.0, d_e, n_c)
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -265,10 +273,13 @@ def depth_measurement_model(fs: FilterState, b_p_s: np.ndarray, radius_m: float,
     return h, H
 
 
-def _ping_measurement(log: LogData, config: EstimatorConfig, j: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _ping_measurement(log: LogData, config: EstimatorConfig, j: int, water: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(A, z, Rm): the measurement A y = z with noise covariance Rm: the 3-D velocity (A = I) or the valid
-    beams (rows of A the beam unit vectors)."""
+    beams (rows of A the beam unit vectors); a water-track ping (water): its 3-D velocity, its own noise."""
     cfg, dvl = config.dvl, log.dvl
+    if water:
+        return np.eye(3), dvl.d_v[j], water_covariance(config)
     if cfg.use_beams and dvl.beams is not None:
         ok = dvl.beams.valid[j]
         A = dvl.beams.d_u[j][ok]
@@ -409,7 +420,13 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     frame = map_frame_of(log, config)
     alignment = align(log.imu, log.dvl, frame, config.alignment, attitude=log.attitude, mounting=log.mounting,
                       imu_cfg=config.imu)
-    pings = usable_pings(log.dvl, log.imu, config.dvl, counters)  # every usable ping: no keyframe thinning
+    config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
+    wc_on = water_current(config)
+    water = water_pings(log) if wc_on else np.zeros(len(log.dvl), dtype=bool)
+    if wc_on and config.dvl.use_beams and water.any():
+        raise GtsamDvlError("[dvl] use_beams with water-track pings: not supported in the EKF; set [current] "
+                            "water_track = \"refuse\" or use_beams = false")
+    pings = usable_pings(log.dvl, log.imu, config.dvl, counters, wc_on)  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
     # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own time):
@@ -417,7 +434,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     # attitude sigmas, wider than the alignment's)
     maker = FactorMaker(config, frame, alignment, log.mounting, log.source)  # the time offset's IMU constants
     p0 = int(pings[0])
-    first = maker.carry_to_first(log.imu, float(log.dvl.t[p0]), log.dvl.d_v[p0] if log.dvl.valid[p0] else None,
+    first = maker.carry_to_first(log.imu, float(log.dvl.t[p0]),
+                                 log.dvl.d_v[p0] if log.dvl.valid[p0] and not water[p0] else None,
                                  log.dvl.d_cov[p0], given_covariance(alignment, config, alignment_sigmas=False),
                                  origin_fix_time(log, config))
     alignment = maker.alignment
@@ -442,6 +460,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                               counters=dcounters)
     fs = initial_state(log, config, alignment.n_R_b, p0, first)
     hist = History()
+    currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []  # (t, z, W, its covariance, water)
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
     if fit is not None:
         fit.start(float(dvl.t[pings[0]]), median_ping_sigma(config, dvl.d_cov[pings]))
@@ -474,6 +493,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                 if (gm := fs.error_slice()) is not None:  # the correlated DVL error decays (correlated.py)
                     assert fs.dvl_error is not None
                     fs.P, fs.dvl_error = ekf_propagate(config, fs.P, fs.dvl_error, gm, t_next - t_prev)
+                if (wc := fs.current_slice()) is not None:  # the current's random walk in time and depth
+                    fs.P = current.ekf_propagate(config, fs.P, wc, t_next - t_prev,
+                                                 float(fs.nav.n_v[2]) * (t_next - t_prev))
                 if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
@@ -492,7 +514,13 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             continue
         if fit is not None and t_j > fit.t_end:
             break
-        A, z, Rm = _ping_measurement(log, config, int(j))
+        on_water = bool(water[j])
+        A, z, Rm = _ping_measurement(log, config, int(j), on_water)
+        if on_water:  # the model at the velocity relative to the water (estimators/current.py), restored after
+            assert fs.current is not None
+            nav_over_ground = fs.nav
+            fs.nav = NavState(nav_over_ground.n_R_b, nav_over_ground.n_v - np.array([*fs.current, 0.0]),
+                              nav_over_ground.n_p)
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
         if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
             prior = config.dvl.time_offset_prior_s
@@ -501,9 +529,13 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                 counters["time_offset_window_clipped"] = counters.get("time_offset_window_clipped", 0) + 1
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
             y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity())
+        if on_water:
+            fs.nav = nav_over_ground
         if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)
             assert fs.dvl_error is not None
             y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
+        if (wc := fs.current_slice()) is not None:  # dh/dW: minus the velocity's east and north columns
+            H[:, wc] = -H[:, VEL][:, :2] if on_water else 0.0
         speed = np.linalg.norm(y_hat) / fs.scale
         slow = speed < max(ekf_cfg.min_calibration_speed_m_s,
                            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
@@ -529,6 +561,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         timing["propagate"] += t1 - t0
         timing["update"] += time.perf_counter() - t1
         hist.record(fs, t_j, b_omega)
+        if (wc := fs.current_slice()) is not None:
+            assert fs.current is not None
+            currents.append((t_j, float(fs.nav.n_p[2]), fs.current.copy(), fs.P[wc, wc].copy(), on_water))
         if progress and count % 100 == 0:
             progress(count / len(state_t))
     counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
@@ -545,6 +580,11 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                               "error_state": len(fs.P)}}
     if fs.dvl_error is not None:
         result.info["dvl_correlated_error"] = correlated_info(config)
+    if currents:  # the current at each update, its filtered sigmas (estimators/current.py profile)
+        result.info["water_current"] = current.profile(
+            np.array([c[0] for c in currents]), np.array([c[1] for c in currents]),
+            np.array([c[2] for c in currents]), np.array([c[3] for c in currents]), config,
+            np.array([c[4] for c in currents], dtype=bool))
     if progress:
         progress(1.0)
     return result

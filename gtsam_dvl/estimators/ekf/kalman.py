@@ -4,7 +4,8 @@ through an interval's transition.
 
 The error state is strapdown.py's navigation and calibration error (N_ERR), then the time offset when estimated
 (core/states.py ekf_layout), then the DVL's correlated error when modelled (FilterState.error_slice,
-estimators/correlated.py).
+estimators/correlated.py), then the water current when water-track pings are used (FilterState.current_slice,
+estimators/current.py).
 """
 
 from __future__ import annotations
@@ -73,7 +74,10 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
     if gm is not None:
         assert fs.dvl_error is not None
         fs.dvl_error = fs.dvl_error + dx[gm]
-    if len(dx) - (0 if gm is None else 3) > OFFSET:
+    if (wc := fs.current_slice()) is not None:
+        assert fs.current is not None
+        fs.current = fs.current + dx[wc]
+    if len(dx) - fs.extra_states() > OFFSET:
         fs.time_offset = fs.time_offset + float(dx[OFFSET])
     return nis, down, False
 

@@ -71,10 +71,24 @@ class FilterState:
     # the DVL's correlated velocity error E (3,) m/s in dvl_link, the last 3 error-state components (with [dvl]
     # correlated_sigma_m_s > 0: estimators/correlated.py)
     dvl_error: np.ndarray | None = None
+    # the water current [c_east, c_north] (2,) m/s in map, the last 2 error-state components (when water-track
+    # pings are used: estimators/current.py)
+    current: np.ndarray | None = None
 
     def error_slice(self) -> slice | None:
-        """The correlated DVL error's error-state columns (the last three), None when not modelled."""
-        return None if self.dvl_error is None else slice(len(self.P) - 3, len(self.P))
+        """The correlated DVL error's error-state columns (the last three before the current's), None when not
+        modelled."""
+        end = len(self.P) - (0 if self.current is None else 2)
+        return None if self.dvl_error is None else slice(end - 3, end)
+
+    def current_slice(self) -> slice | None:
+        """The water current's error-state columns (the last two), None when not modelled."""
+        return None if self.current is None else slice(len(self.P) - 2, len(self.P))
+
+    def extra_states(self) -> int:
+        """How many error-state components follow the time offset's place: the correlated error's and the
+        current's."""
+        return (0 if self.dvl_error is None else 3) + (0 if self.current is None else 2)
 
 
 @dataclass

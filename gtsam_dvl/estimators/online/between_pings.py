@@ -30,7 +30,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
-from gtsam_dvl.core.keys import E
+from gtsam_dvl.core.keys import E, W
 from gtsam_dvl.estimators.gaps import Gaps, Holds
 from gtsam_dvl.estimators.keyframes import integrate, last_stamp_at_or_before, snapshot_at
 from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
@@ -125,9 +125,11 @@ def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float
         raise TypeError(f"a keyframe DVL factor is a NoiseModelFactor, got {type(f).__name__}")
     offset = None if offset_input is None else OffsetInput(*offset_input)
     keys = list(f.keys())
-    # the correlated DVL error E(i), when modelled, is the factor's last key (states.dvl_factor_keys)
+    # the correlated DVL error E(i) and a water-track ping's current W(i), when modelled, are the factor's last
+    # keys (states.dvl_factor_keys)
+    chars = [k >> 56 for k in keys]
     options = DvlOptions(b_omega, b_l, d_u, offset, motion, considered=True,
-                         error_variable=keys[-1] >> 56 == E(0) >> 56)
+                         error_variable=E(0) >> 56 in chars, current_variable=W(0) >> 56 in chars)
     return make_dvl_factor(f.noiseModel(), keys, d_y, options)
 
 

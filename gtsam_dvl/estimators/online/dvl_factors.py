@@ -19,7 +19,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
-from gtsam_dvl.core.states import correlated_error, dvl_factor_keys
+from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, water_current
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.online.between_pings import considered_keyframe_factor
 from gtsam_dvl.estimators.selection import Ping
@@ -32,7 +32,7 @@ def considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega:
                                   d_y: np.ndarray | None = None,
                                   beam: tuple[np.ndarray, float] | None = None,
                                   offset: tuple[RateInput, np.ndarray] | None = None,
-                                  config: EstimatorConfig | None = None) -> gtsam.CustomFactor:
+                                  config: EstimatorConfig | None = None, water: bool = False) -> gtsam.CustomFactor:
     """The DVL factor of factors/ on [X_i, V_i, K, C] for a ping too slow to inform the calibration (module
     doc): same error, same Jacobians for pose and velocity, none for scale and misalignment, which are
     "considered" at their current estimate (the velocity's information scales with it). d_y: the 3-D velocity
@@ -40,7 +40,8 @@ def considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega:
     lever arm (m, base_link). offset = (rate_input, n_g): the time-offset model of factors/dvl.py
     (make_dvl_factor with an OffsetInput) on [X_i, V_i, K, C, T_OFFSET] (with d_y), its T_OFFSET Jacobian kept (it is
     the IMU's velocity rate, not the velocity's noise). The keys are states.dvl_factor_keys of config (None: the
-    defaults, with the time offset estimated when offset is given)."""
+    defaults, with the time offset estimated when offset is given); water: a water-track ping (on the current W_i
+    too, when config uses them)."""
     if (beam is None) == (d_y is None) or (offset is not None and d_y is None):
         raise ValueError("a considered-calibration DVL factor needs either d_y or beam (d_y with offset)")
     if config is None:
@@ -50,9 +51,10 @@ def considered_calibration_factor(noise: gtsam.noiseModel.Base, i: int, b_omega:
         (b_a, b_omega, G), n_g = offset  # the model's body rate is the rate input's mean over its window
         offset_input = OffsetInput(b_a, n_g, G)
     y: np.ndarray | float = beam[1] if beam is not None else np.asarray(d_y)
+    water = water and water_current(config)
     options = DvlOptions(b_omega, b_l, None if beam is None else beam[0], offset_input, considered=True,
-                         error_variable=correlated_error(config))
-    return make_dvl_factor(noise, dvl_factor_keys(config, i), y, options)
+                         error_variable=correlated_error(config), current_variable=water)
+    return make_dvl_factor(noise, dvl_factor_keys(config, i, water=water), y, options)
 
 
 def ping_speed(p: Ping, use_beams: bool) -> float:
@@ -67,13 +69,18 @@ def state_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarray, 
     """The DVL factors of ping p on state i (b_omega: the body rate at the ping, rad/s; rate_input: the time-offset
     model's IMU constants, with [dvl] estimate_time_offset): the batch smoother's, with the calibration considered
     when the ping is slower than min_speed_m_s (module doc)."""
-    use_beams = maker.config.dvl.use_beams and p.beams is not None
+    water = p.water_track and water_current(maker.config)  # (a water-track ping: its 3-D velocity)
+    use_beams = maker.config.dvl.use_beams and p.beams is not None and not water
     if ping_speed(p, maker.config.dvl.use_beams) >= min_speed_m_s:
-        return maker.dvl_factors_for(i, p.d_v, p.d_cov, b_omega, p.beams, rate_input)
+        return maker.dvl_factors_for(i, p.d_v, p.d_cov, b_omega, p.beams, rate_input, water)
     b_l = maker.mounting.b_l
     if rate_input is not None:  # estimate_time_offset (never with beams)
-        return [considered_calibration_factor(maker.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v,
-                                              offset=(rate_input, maker.offset_gravity()), config=maker.config)]
+        return [considered_calibration_factor(maker.dvl_noise(p.d_cov, water=water), i, b_omega, b_l, d_y=p.d_v,
+                                              offset=(rate_input, maker.offset_gravity()), config=maker.config,
+                                              water=water)]
+    if water:
+        return [considered_calibration_factor(maker.dvl_noise(p.d_cov, water=True), i, b_omega, b_l, d_y=p.d_v,
+                                              config=maker.config, water=True)]
     if use_beams and p.beams is not None:
         d_u, v, valid = p.beams
         noise1 = maker.beam_noise()
@@ -88,9 +95,10 @@ def keyframe_dvl_factors(maker: FactorMaker, i: int, p: Ping, b_omega: np.ndarra
     """The DVL factors of a ping between keyframes on state i through the IMU motion from it (snap, motion): the
     batch smoother's (FactorMaker.dvl_keyframe_factors_for), with the calibration considered for a slow ping (as
     in state_dvl_factors)."""
-    use_beams = maker.config.dvl.use_beams and p.beams is not None
+    water = p.water_track and water_current(maker.config)  # (a water-track ping: its 3-D velocity)
+    use_beams = maker.config.dvl.use_beams and p.beams is not None and not water
     factors = maker.dvl_keyframe_factors_for(i, p.d_v, p.d_cov, b_omega, motion, snap.cov,
-                                             p.beams if use_beams else None, rate_input)
+                                             p.beams if use_beams else None, rate_input, water)
     if ping_speed(p, maker.config.dvl.use_beams) >= min_speed_m_s:
         return factors
     b_l = maker.mounting.b_l

@@ -82,12 +82,14 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.states import correlated_error, enabled
+from gtsam_dvl.core.states import correlated_error, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
-from gtsam_dvl.estimators import correlated
+from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
+from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due, screened_in_memory, screened_losses
 from gtsam_dvl.estimators.gnss import origin_fix_time
@@ -133,6 +135,8 @@ class OnlineEstimator:
     def __init__(self, config: EstimatorConfig | None = None, *, frame: LocalFrame, mounting: Mounting | None = None,
                  options: OnlineConfig | None = None, source: str = "", depth_sensor: Any = None) -> None:
         config = config or EstimatorConfig()
+        if config.current.water_track == "auto":  # live: water-track pings may come (for_log resolves by the log)
+            config = config.model_copy(update={"current": config.current.model_copy(update={"water_track": "use"})})
         self.options = options or config.online  # options=: overrides config.online
         self.config = config.model_copy(update={"online": self.options}).validate()  # the effective config
         # what result.config records: the configuration as given, before the levels taken from the data
@@ -163,7 +167,8 @@ class OnlineEstimator:
         self._checks = MessageChecks(self.options.bad_messages, source, self.counters)
         # classification, screen and keyframes (selection.EpochScheduler: the batch smoother's decisions)
         self._scheduler = EpochScheduler(dvl, solver.keyframe_interval_s, spacing, self.counters,
-                                         keep_usable=self.options.record_history)
+                                         keep_usable=self.options.record_history,
+                                         water_usable=water_current(self.config))
         # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
         # at once (False; module doc, "Keyframes")
         self.defer_between_pings = True
@@ -180,6 +185,8 @@ class OnlineEstimator:
         self._replaying = False  # replaying the messages buffered before the alignment
         self._pending: deque[Ping] = deque()  # pings decided, waiting for their epoch
         self._pings_pushed = 0  # push_dvl's calls (Ping.index)
+        # the water current at each state after its update: (t, z, W, its covariance, water-track pings on it)
+        self.current_history: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         self._offset = enabled(self.config, "time_offset")
@@ -199,7 +206,7 @@ class OnlineEstimator:
                 options: OnlineConfig | None = None) -> OnlineEstimator:
         """An estimator with the map origin and mounting of a log (to replay it). config None: the one the
         log's scenario names, else the defaults (EstimatorConfig.for_log)."""
-        config = config or EstimatorConfig.for_log(log.metadata)
+        config = resolve_water_track(config or EstimatorConfig.for_log(log.metadata), log)
         noise = NoiseReport()
         stated = config
         config = imu_levels(log, config, noise)  # the IMU's white noise from the log ([noise])
@@ -208,6 +215,7 @@ class OnlineEstimator:
         est.noise.imu = noise.imu
         est.origin_t = origin_fix_time(log, config)
         est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
+        est._scheduler.water_screen.repeats_need_motion = log.dvl.noise_free
         est.stated_config = stated.model_copy(update={"online": est.options}).validate()
         return est
 
@@ -293,6 +301,13 @@ class OnlineEstimator:
         return self._latest
 
     # ----- output --------------------------------------------------------------------------------
+    def current_profile(self) -> dict[str, Any]:
+        """NavResult.info["water_current"]: the filtered current at each state (estimators/current.py profile)."""
+        h = self.current_history
+        return current.profile(np.array([c[0] for c in h]), np.array([c[1] for c in h]),
+                               np.array([c[2] for c in h]), np.array([c[3] for c in h]), self.config,
+                               np.array([c[4] for c in h], dtype=bool))
+
     def estimate(self) -> OnlineEstimate | None:
         """The estimate after the latest epoch (None before the first): the newest state's, or after a ping between
         keyframes the state at that ping predicted from the newest state (module doc, "Keyframes";
@@ -455,6 +470,7 @@ class OnlineEstimator:
             pim, params, held = self._interval.close(t_epoch, T, starts, b_f, W, gaps)
             between = [f for _, fs in self._deferred for f in fs]  # the pings since the previous state (on it)
             sm.add_epoch(t_epoch, between + dvl, pim, params, held=held)
+        epoch_water = (p is not None and p.water_track) or any(q.water_track for q, _ in self._deferred)
         self._deferred = []
         if self._noise_fit is not None and (new := self._noise_fit.after_epoch(t_epoch, sm.isam)) is not None:
             self.noise.dvl = self._noise_fit.report  # held from now on: the next factors take it
@@ -468,6 +484,10 @@ class OnlineEstimator:
         self._latest = OnlineEstimate.from_state(self._state, self.mounting.b_R_d0)
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
+            if sm.wc:  # the newest state's current, filtered (as the EKF's), for current_profile
+                self.current_history.append((t_epoch, float(self._state.pose.translation()[2]),
+                                             sm.isam.calculateEstimate([W_KEY(i)]).atVector(W_KEY(i)).copy(),
+                                             sm.joint_covariance([W_KEY(i)]), epoch_water))
         self._record(t0, c0, t_epoch)
 
     def _between_ping(self, p: Ping) -> None:
@@ -535,6 +555,8 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
     if correlated_error(config):
         result.info["dvl_correlated_error"] = correlated.info(config)
+    if estimator.current_history:  # the water current at each state as it left the window (or at the end)
+        result.info["water_current"] = estimator.current_profile()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
     if progress is not None:

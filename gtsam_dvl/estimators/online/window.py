@@ -63,7 +63,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import E, V, X, key_dim
+from gtsam_dvl.core.keys import E, V, W, X, key_dim
 from gtsam_dvl.core.states import (
     Estimate,
     block_states,
@@ -71,8 +71,9 @@ from gtsam_dvl.core.states import (
     read_estimates,
     relinearization,
     shared_keys,
+    water_current,
 )
-from gtsam_dvl.estimators import correlated
+from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
@@ -135,12 +136,16 @@ class IncrementalSmoother:
         self.thresholds = thresholds
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
         self.gm = correlated_error(builder.config)  # the DVL's correlated error E(i) a state (correlated.py)
+        self.wc = water_current(builder.config)  # the water current W(i) a state (current.py)
         # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py);
         # every factor is linear in E (the DVL's, the links), so its threshold is a formality: a tenth of its sigma
         self._threshold = {"x": np.asarray(thresholds.pose, dtype=float),
                            "v": np.asarray(thresholds.velocity, dtype=float),
                            **relinearization(builder.config, thresholds),
-                           **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {})}
+                           **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {}),
+                           # linear too: a hundredth of the water-track ping's sigma
+                           **({"w": np.full(2, 0.01 * builder.config.current.water_track_sigma_m_s)} if self.wc
+                              else {})}
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
         threshold_map = gtsam.ISAM2ThresholdMap()
@@ -188,13 +193,17 @@ class IncrementalSmoother:
             if self.gm:
                 values.insert(E(0), np.zeros(3))
                 factors.append(correlated.prior_factor(b.config))
+            if self.wc:
+                values.insert(W(0), np.zeros(2))
+                factors.append(current.prior_factor(b.config))
         else:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
             dt = t - self.t_last
             imu = b.new_imu_factor(i - 1, pim, params, dt, held)
             factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
-            prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)] + [E(i - 1)] * self.gm)
+            prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)] + [E(i - 1)] * self.gm
+                                               + [W(i - 1)] * self.wc)
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
             bias = prev.atConstantBias(b.bias_key(i - 1))
             self._reference_gravity(imu, pose.translation() + 0.5 * dt * n_v)
@@ -208,6 +217,10 @@ class IncrementalSmoother:
                 phi, _ = correlated.transition(b.config, dt)
                 values.insert(E(i), phi * prev.atVector(E(i - 1)))
                 factors.append(correlated.link_factor(b.config, i - 1, i, dt))
+            if self.wc:  # W's prediction: the previous state's; its random walk over dt and the predicted depth change
+                values.insert(W(i), prev.atVector(W(i - 1)))
+                dz = float(state.pose().translation()[2] - pose.translation()[2])
+                factors.append(current.link_factor(b.config, i - 1, i, dt, dz))
         self.n, self.t_last = i + 1, t
         self.times[i] = t
         graph = gtsam.NonlinearFactorGraph()
@@ -246,7 +259,8 @@ class IncrementalSmoother:
 
     def _state_keys(self, i: int) -> tuple[int, ...]:
         keys = (X(i), V(i), self.builder.bias_key(i)) if self.rw_bias else (X(i), V(i))
-        return (*keys, E(i)) if self.gm else keys
+        keys = (*keys, E(i)) if self.gm else keys
+        return (*keys, W(i)) if self.wc else keys
 
     def _ordering(self, rebase: bool) -> tuple[gtsam.KeyGroupMap, gtsam.KeyList]:
         """Elimination groups (states oldest first, the bias, scale and misalignment last) and the states iSAM2

@@ -1,0 +1,129 @@
+"""Water-track pings in the health check: the stretches, their residuals against the estimated current, and false
+bottom lock.
+
+A water-track ping measures the velocity relative to the water (estimators/current.py): its residual is the
+bottom-track residual (analysis/health.py dvl_residuals, against the velocity over ground) plus the current seen in
+dvl_link, k d_R_b n_R_b^T [c_east, c_north, 0]. This module
+
+- counts the water-track pings and their stretches (runs of water-track pings without a bottom-track ping between
+  them), and says whether they were used (with the current as a state) or refused;
+- judges the used ones: their whitened residuals against the model with the estimated current, noise
+  [current] water_track_sigma_m_s plus the current's own uncertainty ("warn" beyond WATER_RMS_WARN);
+- flags false bottom lock: a bottom-track ping whose velocity disagrees with the velocity over ground (its whitened
+  residual beyond FALSE_LOCK_CHI2) but agrees with the water track, i.e. with the vehicle's velocity relative to
+  the water (residual within WATER_AGREES_CHI2 once the current is added), where the current is determined and
+  large enough to tell the two apart (|c| above three sigmas of the ping): what a DVL that locked on a scattering
+  layer, or on the water near the range limit, reports as bottom track.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.selection import ping_covariance
+
+WATER_RMS_WARN = 2.0  # whitened RMS of the water-track residuals above which the current model does not fit
+FALSE_LOCK_CHI2 = 16.27  # chi^2 (3 dof) 0.999 quantile: a bottom-track ping that disagrees with the ground
+WATER_AGREES_CHI2 = 7.81  # chi^2 (3 dof) 0.95 quantile: ...and agrees with the water track
+STRETCH_GAP_S = 5.0  # water-track pings further apart than this are two stretches
+
+
+def stretches(t: np.ndarray, water: np.ndarray) -> list[tuple[float, float, int]]:
+    """(start s, end s, pings) of each run of water-track pings: consecutive in the log (no bottom-track ping
+    between) and at most STRETCH_GAP_S apart."""
+    out: list[tuple[float, float, int]] = []
+    idx = np.flatnonzero(water)
+    if not len(idx):
+        return out
+    start = prev = int(idx[0])
+    for j in idx[1:].tolist():
+        if j != prev + 1 or t[j] - t[prev] > STRETCH_GAP_S:
+            out.append((float(t[start]), float(t[prev]), prev - start + 1))
+            start = j
+        prev = j
+    out.append((float(t[start]), float(t[prev]), prev - start + 1))
+    return out
+
+
+def _current_at(profile: dict[str, Any], t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The estimated current [c_east, c_north, 0] (N, 3) at times t and its per-axis variance (N, 2), interpolated
+    between the profile's states."""
+    ts = np.asarray(profile["t_s"], dtype=float)
+    c = np.zeros((len(t), 3))
+    var = np.zeros((len(t), 2))
+    for a, axis in enumerate(("east", "north")):
+        c[:, a] = np.interp(t, ts, np.asarray(profile[f"{axis}_m_s"], dtype=float))
+        var[:, a] = np.interp(t, ts, np.asarray(profile[f"{axis}_sigma_m_s"], dtype=float) ** 2)
+    return c, var
+
+
+def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, res: Any,
+                      figures: dict[str, Any], flag: Callable[[str, str], None]) -> None:
+    """The water-track findings of a run (module doc) into the health's figures ("water_track") and flags. res:
+    analysis/health.py DvlResiduals of the run (its raw residuals, ping indices and water-track mask)."""
+    dvl = log.dvl
+    if dvl.water_track is None or not np.any(dvl.water_track):
+        return
+    water = np.asarray(dvl.water_track, dtype=bool)
+    runs = stretches(np.asarray(dvl.t, dtype=float), water)
+    profile = result.info.get("water_current")
+    span = ", ".join(f"{a:.0f}-{b:.0f} s ({n})" for a, b, n in runs[:5]) + (" ..." if len(runs) > 5 else "")
+    fig: dict[str, Any] = {"pings": int(water.sum()), "stretches": [list(r) for r in runs],
+                           "used": isinstance(profile, dict)}
+    figures["water_track"] = fig
+    if not isinstance(profile, dict):
+        flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) refused "
+                     "([current] water_track = \"refuse\"): the position there leans on the IMU alone")
+        return
+    flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
+                 f"current as a state; the current: {profile.get('verdict', '')}")
+    r, idx, on_water = res.residual_m_s, res.index, res.water
+    if r is None or idx is None or on_water is None or not len(idx):
+        return
+    t_p = np.asarray(dvl.t[idx], dtype=float)
+    c, var_c = _current_at(profile, t_p)
+    # the current seen in dvl_link at each ping: k d_R_b n_R_b^T c, with the nearest state's attitude
+    state = np.clip(np.searchsorted(result.t, t_p), 0, len(result.t) - 1)
+    n_R_b = np.asarray(result.n_R_b)[state]
+    d_R_n = np.einsum("ij,njk->nik", float(result.scale) * np.asarray(result.b_R_d).T,
+                      np.transpose(n_R_b, (0, 2, 1)))
+    c_d = np.einsum("nij,nj->ni", d_R_n, c)
+    # its covariance from the current's (east, north)
+    cov_c = np.einsum("nia,na,nja->nij", d_R_n[:, :, :2], var_c, d_R_n[:, :, :2])
+    sigma_w = config.dvl.noise_multiplier * config.current.water_track_sigma_m_s
+    seen = np.isfinite(r).all(axis=1)
+    wt = on_water & seen
+    if wt.any():
+        r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
+        cov = sigma_w**2 * np.eye(3) + cov_c[wt]
+        chi2 = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov, r_w[..., None])[..., 0])
+        rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))
+        fig["whitened_rms"] = rms
+        if rms > WATER_RMS_WARN:
+            flag("warn", f"water-track residuals {rms:.1f}x their noise ([current] water_track_sigma_m_s = "
+                         f"{config.current.water_track_sigma_m_s:g} m/s) with the estimated current: the current "
+                         "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
+                         "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger")
+    bt = ~on_water & seen
+    determined = np.sqrt(var_c.max(axis=1)) < 0.5 * config.current.prior_sigma_m_s
+    if bt.any():
+        cov_g = ping_covariance(config.dvl, dvl.d_cov[idx[bt]])
+        r_g = r[bt]
+        chi2_g = np.einsum("ni,ni->n", r_g, np.linalg.solve(cov_g, r_g[..., None])[..., 0])
+        r_w = r_g + c_d[bt]
+        chi2_w = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov_g + cov_c[bt], r_w[..., None])[..., 0])
+        big = np.linalg.norm(c[bt, :2], axis=1) > 3.0 * np.sqrt(np.trace(cov_g, axis1=1, axis2=2) / 3.0)
+        false_lock = (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]
+        fig["false_lock_pings"] = int(false_lock.sum())
+        if false_lock.any():
+            times = t_p[bt][false_lock]
+            flag("warn", f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) disagree "
+                         "with the velocity over ground and agree with the water track (velocity relative to the "
+                         "water): a false bottom lock (a scattering layer, or the water near the DVL's range limit); "
+                         "their factors were down-weighted by the robust kernel, check the DVL's altitude there")

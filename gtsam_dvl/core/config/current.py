@@ -1,0 +1,40 @@
+"""[current]: water-track pings and the water current they need (estimators/current.py).
+
+A DVL that loses the seafloor (out of range on a descent, over steep terrain, in mid-water) measures its velocity
+relative to a water layer instead: a water-track ping (velocity_mode 2 of marine_acoustic_msgs/msg/Dvl, or a
+separate topic). Such a ping is the bottom-track model with the vehicle's velocity relative to the water,
+n_v - n_c, where n_c = [c_east, c_north, 0] is the horizontal current in map: the same scale, misalignment and lever
+arm (docs/conventions.md). With water_track "auto" (the default) a log's water-track pings are used when it has
+any, and the estimators then carry the current as a state of every epoch W(i):
+
+- its first value has the prior N(0, prior_sigma_m_s^2) per axis;
+- it moves as a random walk in time and in depth: between two states dt s and dz m apart its change has the
+  variance time_rw_m_s_per_sqrt_s^2 dt + depth_rw_m_s_per_sqrt_m^2 |dz| per axis. The time term is the slow
+  change of the current at one place (tides: ~0.1 m/s an hour, 1.7e-3 m/s/sqrt(s)); the depth term the shear met
+  descending or ascending through the water column (0.25 m/s over 300 m is 0.014 m/s/sqrt(m)).
+
+Water-track pings have their own noise: water_track_sigma_m_s per axis (a water-track ping averages over a water
+layer whose own turbulence adds to the Doppler noise; about twice a bottom-track ping's on 300-600 kHz units,
+typical of the class), scaled like every DVL sigma by [dvl] noise_multiplier. water_track "refuse" counts them
+("dvl_water_track") and leaves them out, as does a log without them. Each estimator resolves "auto" for its log
+(current.resolve_water_track): its result's configuration says "use" or "refuse".
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+from gtsam_dvl.core.config.base import ConfigModel, Positive
+
+
+class CurrentConfig(ConfigModel):
+    SECTION: ClassVar[str] = "current"
+
+    # "auto": use water-track pings when the log has any (each estimator resolves it to "use" or "refuse" for the
+    # log: its effective configuration says which); "use": always, the current a state even without them;
+    # "refuse": never
+    water_track: Literal["auto", "use", "refuse"] = "auto"
+    water_track_sigma_m_s: Positive = 0.01  # a water-track ping's white noise per axis, m/s
+    prior_sigma_m_s: Positive = 0.5  # the first state's current, per horizontal axis, m/s (mean 0)
+    time_rw_m_s_per_sqrt_s: Positive = 1.0e-3  # the current's random walk in time, m/s/sqrt(s)
+    depth_rw_m_s_per_sqrt_m: Positive = 0.02  # and in depth (shear), m/s/sqrt(m)

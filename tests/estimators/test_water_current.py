@@ -1,0 +1,153 @@
+"""Water-track pings and the water current (estimators/current.py): a stretch of a simulated log's pings turned
+into water-track pings (the velocity relative to a known current, through the true attitude and calibration) is
+used with the current as a state; the current comes back within its sigmas, the calibration within its sigmas."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.rotations import quat_xyzw_to_matrix
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.current import resolve_water_track, step_variance
+
+N_C = np.array([0.3, -0.2, 0.0])  # m/s, east, north (map)
+T_WATER = (60.0, 160.0)  # s: the water-track stretch
+
+
+def with_water_track(log: LogData) -> LogData:
+    """The log with its pings in T_WATER turned into water-track pings: y - k d_R_b n_R_b^T n_c (an independent
+    evaluation of the model's change, at the truth's attitude and calibration)."""
+    dvl, truth = log.dvl, log.truth
+    assert truth is not None and log.true_calibration is not None
+    k = log.true_calibration.scale
+    b_R_d = log.true_calibration.b_R_d(log.mounting.b_R_d0)
+    water = (dvl.t > T_WATER[0]) & (dvl.t < T_WATER[1])
+    idx = np.searchsorted(truth.t, dvl.t).clip(0, len(truth.t) - 1)
+    assert np.abs(truth.t[idx[water]] - dvl.t[water]).max() < 1e-9  # truth at the ping stamps
+    d_v = dvl.d_v.copy()
+    for j in np.flatnonzero(water):
+        d_v[j] = d_v[j] - k * b_R_d.T @ quat_xyzw_to_matrix(truth.n_q_b[idx[j]]).T @ N_C
+    return dataclasses.replace(log, dvl=dataclasses.replace(dvl, d_v=d_v, water_track=water))
+
+
+def _config(log: LogData, water_track: str) -> EstimatorConfig:
+    """The log's configuration, water track as given; the water-track pings' noise is the log's (paper-3d's
+    2 cm/s: the pings were bottom-track pings)."""
+    cfg = EstimatorConfig.for_log(log.metadata)
+    return cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track": water_track,
+                                                                             "water_track_sigma_m_s": 0.02})})
+
+
+@pytest.fixture(scope="module")
+def water_log(sim_paper3d_short: LogData) -> LogData:
+    return with_water_track(sim_paper3d_short)
+
+
+def test_auto_resolves_by_the_log(water_log: LogData, sim_paper3d_short: LogData) -> None:
+    assert resolve_water_track(_config(water_log, "auto"), water_log).current.water_track == "use"
+    assert resolve_water_track(_config(water_log, "auto"), sim_paper3d_short).current.water_track == "refuse"
+    assert resolve_water_track(_config(water_log, "refuse"), water_log).current.water_track == "refuse"
+
+
+def test_random_walk_variance() -> None:
+    cfg = EstimatorConfig()
+    c = cfg.current
+    assert step_variance(cfg, 10.0, -30.0) == pytest.approx(c.time_rw_m_s_per_sqrt_s**2 * 10
+                                                            + c.depth_rw_m_s_per_sqrt_m**2 * 30)
+
+
+def test_batch_recovers_the_current(water_log: LogData) -> None:
+    used = smooth_batch(water_log, _config(water_log, "auto"), timeline=True)
+    assert used.config["current"]["water_track"] == "use"
+    assert used.timeline is not None  # the filtering timeline carries W(i) too: its last sigma is the smoother's
+    assert used.timeline.scale_sigma[-1] == pytest.approx(used.calibration["scale"].sigma[0], rel=1e-6)
+    wc = used.info["water_current"]
+    t = np.asarray(wc["t_s"])
+    inside = (t > T_WATER[0] + 5) & (t < T_WATER[1] - 5)
+    assert inside.sum() > 50 and wc["water_track_states"] >= inside.sum()
+    for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
+        est, sig = np.asarray(wc[f"{axis}_m_s"])[inside], np.asarray(wc[f"{axis}_sigma_m_s"])[inside]
+        assert np.all(sig < 0.02), sig.max()  # determined: bottom track on both sides ties the velocity
+        assert abs(est.mean() - truth) < 3 * sig.mean(), (axis, est.mean(), sig.mean())
+    assert wc["determined_during_water_track"]
+    assert used.info["counters"]["dvl_water_track"] == 0  # used, not refused
+    truth = water_log.true_calibration
+    assert truth is not None
+    scale = used.calibration["scale"]
+    assert abs(scale.value[0] - truth.scale) < 3 * scale.sigma[0]
+
+    refused = smooth_batch(water_log, _config(water_log, "refuse"))
+    assert refused.info["counters"]["dvl_water_track"] == int(water_log.dvl.water_track.sum())
+    assert "water_current" not in refused.info
+
+
+def test_ekf_recovers_the_current(water_log: LogData) -> None:
+    """The EKF carries the current as two more error-state components: at the end of the water-track stretch its
+    filtered current is within 3 sigma of the truth; refusing the pings counts them."""
+    from gtsam_dvl.estimators.ekf import run_ekf
+    used = run_ekf(water_log, _config(water_log, "auto"))
+    wc = used.info["water_current"]
+    t = np.asarray(wc["t_s"])
+    end = int(np.flatnonzero(t < T_WATER[1] - 1)[-1])
+    for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
+        est, sig = wc[f"{axis}_m_s"][end], wc[f"{axis}_sigma_m_s"][end]
+        assert sig < 0.04 and abs(est - truth) < 3 * sig, (axis, est, sig)  # (the prior: 0.5 m/s)
+    assert used.info["counters"]["dvl_water_track"] == 0
+    truth_cal = water_log.true_calibration
+    assert truth_cal is not None
+    scale = used.calibration["scale"]
+    assert abs(scale.value[0] - truth_cal.scale) < 3 * scale.sigma[0]
+
+
+def test_online_recovers_the_current(water_log: LogData) -> None:
+    """The online estimator (fixed lag) carries W(i) in its window: the filtered current at the end of the
+    water-track stretch within 3 sigma of the truth, and the calibration within its sigmas."""
+    from gtsam_dvl.estimators.online import smooth_online
+    from tests.support.logs import cut_log
+    used = smooth_online(cut_log(water_log, T_WATER[1] + 20.0), _config(water_log, "auto"))  # (its first 180 s)
+    assert used.config["current"]["water_track"] == "use"
+    wc = used.info["water_current"]
+    t = np.asarray(wc["t_s"])
+    end = int(np.flatnonzero(t < T_WATER[1] - 1)[-1])
+    for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
+        est, sig = wc[f"{axis}_m_s"][end], wc[f"{axis}_sigma_m_s"][end]
+        assert sig < 0.04 and abs(est - truth) < 3 * sig, (axis, est, sig)  # (the prior: 0.5 m/s)
+    assert used.info["counters"].get("dvl_water_track", 0) == 0
+    truth_cal = water_log.true_calibration
+    assert truth_cal is not None
+    scale = used.calibration["scale"]
+    assert abs(scale.value[0] - truth_cal.scale) < 3 * scale.sigma[0]
+
+
+def test_health_counts_water_track_and_flags_false_lock(water_log: LogData) -> None:
+    """The health notes the water-track stretch and judges its residuals with the current (no warning on a
+    consistent log); bottom-track pings that report the velocity relative to the water (a false lock, 200-210 s)
+    are flagged as such."""
+    from gtsam_dvl.analysis.health import assess_health
+    clean = smooth_batch(water_log, _config(water_log, "auto"))
+    health = assess_health(clean, water_log)
+    fig = health.figures["water_track"]
+    assert fig["used"] and fig["pings"] == int(water_log.dvl.water_track.sum()) and len(fig["stretches"]) == 1
+    assert fig["whitened_rms"] < 1.5 and fig["false_lock_pings"] == 0
+    assert any("water-track pings in 1 stretch" in n for n in health.notes)
+    assert not any("water" in w for w in health.warnings), health.warnings
+
+    # bottom-track pings at 200-210 s that measured the velocity relative to the water (the current unchanged)
+    lock = with_water_track(water_log)  # (its water stretch unchanged)
+    dvl, truth = lock.dvl, lock.truth
+    assert truth is not None and lock.true_calibration is not None
+    k, b_R_d = lock.true_calibration.scale, lock.true_calibration.b_R_d(lock.mounting.b_R_d0)
+    bad = (dvl.t > 200.0) & (dvl.t < 210.0)
+    idx = np.searchsorted(truth.t, dvl.t)
+    d_v = water_log.dvl.d_v.copy()
+    for j in np.flatnonzero(bad):
+        d_v[j] = d_v[j] - k * b_R_d.T @ quat_xyzw_to_matrix(truth.n_q_b[idx[j]]).T @ N_C
+    lock = dataclasses.replace(lock, dvl=dataclasses.replace(water_log.dvl, d_v=d_v))
+    health = assess_health(smooth_batch(lock, _config(lock, "auto")), lock)
+    assert health.figures["water_track"]["false_lock_pings"] >= int(bad.sum()) - 1
+    assert any("false bottom lock" in w for w in health.warnings), health.warnings
