@@ -11,7 +11,9 @@ Simulates the dives (seeds 1..N, the same truth calibration) as MCAP logs, then
 2. on a Dask LocalCluster of 1, then 2 workers (warmed: imports done before timing), the whole calibrate from
    the log files (read, smooth alone, joint iterations), the best of --repeats runs each; prints both times
    and their ratio, and how long the preparation takes against a joint iteration (what keeping each dive's state
-   on its worker saves per iteration: a dive rebuilt from its log would cost its preparation again).
+   on its worker saves per iteration: a dive rebuilt from its log would cost its preparation again);
+3. pieces: a dive (seed 3) with its IMU samples of 30 s in a turn removed (paper-3d: 1070-1100 s), smoothed
+   (estimators/pieces.py: two pieces sharing the calibration) against the truth, and the same dive without the gap.
 """
 
 from __future__ import annotations
@@ -70,6 +72,37 @@ def accuracy(paths: list[Path]) -> None:
               f"{np.all(np.abs(err) <= 3)})")
 
 
+def pieces(scenario: str) -> None:
+    import dataclasses
+
+    from gtsam_dvl.estimators.batch import smooth_batch
+    from gtsam_dvl.estimators.pieces import _take
+    from gtsam_dvl.sim import simulate
+    from gtsam_dvl.sim.scenario import load_scenario
+
+    gap = (1070.0, 1100.0) if scenario == "paper-3d" else (285.0, 315.0)  # in the second (short: first) turn
+    whole = simulate(load_scenario(scenario), seed=3)
+    keep = (whole.imu.t <= gap[0]) | (whole.imu.t > gap[1])
+    log = dataclasses.replace(whole, imu=_take(whole.imu, keep))
+    t0 = time.perf_counter()
+    r = smooth_batch(log)
+    dt = time.perf_counter() - t0
+    ref = smooth_batch(whole)
+    truth = log.true_calibration
+    assert truth is not None and log.truth is not None
+    b_R_d = rpy_deg_to_matrix(truth.misalignment_deg) @ np.asarray(log.mounting.b_R_d0)
+    mis = r.calibration["misalignment"]
+    z = np.concatenate([[(r.scale - truth.scale) / r.scale_sigma], so3_log(b_R_d.T @ mis.value) / mis.sigma])
+    j = np.searchsorted(log.truth.t, r.t[-1])
+    err = float(np.linalg.norm(r.n_p[-1, :2] - log.truth.n_p[j, :2]))
+    alone = [p["alone"]["scale"]["sigma"][0] * 1e6 for p in r.info["pieces"]]
+    print(f"pieces: {scenario} seed 3 with a {gap[1] - gap[0]:.0f} s IMU gap at {gap[0]:.0f} s: "
+          f"{len(r.info['pieces'])} pieces in {dt:.1f} s; scale, misalignment r/p/y - truth in sigmas "
+          f"{np.array2string(z, precision=2)} (within 3: {np.all(np.abs(z) < 3)}); scale sigma "
+          f"{r.scale_sigma * 1e6:.0f} ppm (pieces alone {', '.join(f'{a:.0f}' for a in alone)}; the log without "
+          f"the gap {ref.scale_sigma * 1e6:.0f}); final horizontal position error {err:.1f} m")
+
+
 def timed(paths: list[Path], workers: int, repeats: int) -> tuple[float, dict[str, float]]:
     best, timing = np.inf, {}
     with dask_client(None, workers) as client:
@@ -105,6 +138,7 @@ def main() -> None:
             print(f"Dask, {w} worker{'s' if w > 1 else ''}: {t:.2f} s (read and smooth alone {timing['prepare']:.2f} "
                   f"s, joint {timing['joint']:.2f} s = {timing['iterations']:.0f} iterations, {per_it:.2f} s each)")
         print(f"speed-up 2 workers / 1 worker: {t1 / t2:.2f}x (best of {args.repeats} runs each)")
+    pieces(args.scenario)
 
 
 if __name__ == "__main__":

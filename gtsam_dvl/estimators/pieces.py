@@ -115,10 +115,10 @@ def cut_log(log: LogData, gaps: list[tuple[float, float]]) -> list[LogData]:
     for k in range(len(gaps) + 1):
         lo, hi = edges[2 * k], edges[2 * k + 1]
         streams: dict[str, Any] = {}
-        for name in ("imu", "dvl", "truth", "depth", "gnss", "attitude"):
-            data = getattr(log, name)
-            if data is not None:
-                streams[name] = _take(data, (data.t >= lo) & (data.t <= hi))
+        for f in dataclasses.fields(log):  # every stream: a field with per-message stamps t
+            data = getattr(log, f.name)
+            if dataclasses.is_dataclass(data) and isinstance(getattr(data, "t", None), np.ndarray):
+                streams[f.name] = _take(data, (data.t >= lo) & (data.t <= hi))
         out.append(dataclasses.replace(log, **streams, source=f"{log.source or 'log'} (piece {k + 1})"))
     return out
 
