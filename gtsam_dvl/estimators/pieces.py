@@ -46,7 +46,6 @@ from gtsam_dvl.estimators.multi_dive import (
     state_slices,
 )
 
-
 # the first position of a piece after a gap: its prior sigma (m), a floor plus a fraction of the distance crossed
 # (the path across the gap is a constant-rate turn between the velocities on either side: across_gap; a vehicle
 # that changes its turn or speed in the gap leaves it, which this sigma is meant to cover)
@@ -116,9 +115,10 @@ def cut_log(log: LogData, gaps: list[tuple[float, float]]) -> list[LogData]:
         lo, hi = edges[2 * k], edges[2 * k + 1]
         streams: dict[str, Any] = {}
         for f in dataclasses.fields(log):  # every stream: a field with per-message stamps t
-            data = getattr(log, f.name)
-            if dataclasses.is_dataclass(data) and isinstance(getattr(data, "t", None), np.ndarray):
-                streams[f.name] = _take(data, (data.t >= lo) & (data.t <= hi))
+            data: Any = getattr(log, f.name)
+            t = getattr(data, "t", None)
+            if dataclasses.is_dataclass(data) and isinstance(t, np.ndarray):
+                streams[f.name] = _take(data, (t >= lo) & (t <= hi))
         out.append(dataclasses.replace(log, **streams, source=f"{log.source or 'log'} (piece {k + 1})"))
     return out
 
