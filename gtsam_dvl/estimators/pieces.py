@@ -68,13 +68,14 @@ def across_gap(n_v0: np.ndarray, n_v1: np.ndarray, dt: float) -> np.ndarray:
 
 
 def long_gaps(log: LogData, config: EstimatorConfig) -> list[tuple[float, float]]:
-    """The IMU gaps longer than [imu] max_gap_s between the first and last usable DVL stamps: (start, end) in s,
+    """The IMU gaps longer than [imu] max_gap_s between the first and last valid DVL pings: (start, end) in s,
     start the last sample before the gap, end the first after it."""
     imu = log.imu
     if len(imu) < 3 or not len(log.dvl):
         return []
     gaps = find_gaps(imu.t, config.imu.gap_samples)
-    t0, t1 = float(log.dvl.t[0]), float(log.dvl.t[-1])
+    valid = log.dvl.t[log.dvl.valid] if log.dvl.valid.any() else log.dvl.t
+    t0, t1 = float(valid[0]), float(valid[-1])
     out = []
     for j in range(len(gaps)):
         k = int(gaps.index[j])
@@ -173,17 +174,26 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
     t0 = time.perf_counter()
     pieces = cut_log(log, gaps)
     dives: list[DiveState] = []
+    kept: list[int] = []
+    left_out: list[dict[str, Any]] = []
     for k, piece in enumerate(pieces):
-        if len(piece.dvl) < 2 or len(piece.imu) < 2:
-            raise GtsamDvlError(f"{log.source or 'log'}: piece {k + 1} of {len(pieces)} between IMU gaps longer "
-                                f"than imu.max_gap_s ({piece.dvl.t[0] if len(piece.dvl) else 0:.0f} s) has too "
-                                "few samples to smooth")
         cfg = config
-        if k > 0:
+        if dives:
             prev = dives[-1].alone
-            distance = float(np.linalg.norm(prev.n_v[-1])) * float(piece.imu.t[0] - prev.t[-1])
+            distance = float(np.linalg.norm(prev.n_v[-1])) * float(piece.imu.t[0] - prev.t[-1]) if len(
+                piece.imu) else 0.0
             cfg = _piece_config(config, DEAD_RECKONING_M + DEAD_RECKONING_FRACTION * distance)
-        dives.append(prepare_dive(piece, cfg, name=piece.source))
+        try:
+            dives.append(prepare_dive(piece, cfg, name=piece.source))
+            kept.append(k)
+        except GtsamDvlError as exc:
+            if k == 0:  # the piece that holds the log's start (its map origin and alignment): no result without it
+                raise GtsamDvlError(f"{log.source or 'log'}: cut at {len(gaps)} IMU gap(s) longer than "
+                                    f"imu.max_gap_s ({gaps[0][0]:.2f}-{gaps[0][1]:.2f} s first): the first piece "
+                                    f"cannot be smoothed: {exc}") from None
+            t = piece.imu.t
+            left_out.append({"piece": k + 1, "t_start_s": float(t[0]) if len(t) else None,
+                             "t_end_s": float(t[-1]) if len(t) else None, "error": str(exc)})
         if progress:
             progress(0.6 * (k + 1) / len(pieces))
     solution = calibrate_in_process(dives)
@@ -194,9 +204,13 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
         others = [r for j, r in enumerate(solution.reductions) if j != k] + solution.prior_rows
         result = _piece_result(dive, others)
         if result.dvl_pings is not None:  # the piece's ping indices in the log's
-            result.dvl_pings = result.dvl_pings + int(np.searchsorted(log.dvl.t, pieces[k].dvl.t[0]))
+            result.dvl_pings = result.dvl_pings + int(np.searchsorted(log.dvl.t, pieces[kept[k]].dvl.t[0]))
         results.append(result)
-    out = _joined(results, dives, solution, gaps, estimator)
+    # the breaks between the pieces kept: from the last IMU sample of one to the first of the next
+    breaks = [(float(pieces[a].imu.t[-1]), float(pieces[b].imu.t[0])) for a, b in zip(kept, kept[1:], strict=False)]
+    out = _joined(results, dives, solution, breaks, estimator)
+    if left_out:
+        out.info["pieces_left_out"] = left_out
     out.timing_s = {"total": time.perf_counter() - t0}
     if progress:
         progress(1.0)
