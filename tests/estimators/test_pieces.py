@@ -62,6 +62,19 @@ def test_a_30s_imu_gap_in_a_turn_smooths_as_two_pieces(sim_paper3d_short: LogDat
     j = np.searchsorted(log.truth.t, result.t[-1])
     err = np.linalg.norm(result.n_p[-1, :2] - log.truth.n_p[j, :2])
     assert err < 3 * np.hypot(*result.position_sigma_m[-1, :2])
+    # the result MCAP: a Path message per piece (no line across the break), the health names the break
+    from mcap.reader import make_reader
+
+    from gtsam_dvl.analysis.metrics import summary
+    from gtsam_dvl.io.result_writer import write_result_log
+
+    s = summary(result, log)
+    assert s["health"]["status"] == "degraded" and any("smoothed as 2 pieces" in w for w in s["health"]["warnings"])
+    path = write_result_log(tmp_path / "result.mcap", result, log, s)
+    with path.open("rb") as f:
+        stamps = [m.log_time for _, ch, m in make_reader(f).iter_messages(topics=["/gtsam_dvl/path"])]
+    assert len(stamps) == 2
+    assert stamps[0] == result.t0_ns + round(result.t[k - 1] * 1e9)
 
 
 def test_across_gap_is_the_chord_of_a_constant_rate_turn() -> None:
