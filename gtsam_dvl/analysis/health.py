@@ -496,7 +496,7 @@ def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) 
     n_pings = max(len(log.dvl), 1)
     if water := counters.get("dvl_water_track", 0):
         text = (f"{water} of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over "
-                "ground): not used")
+                "ground): refused ([current] water_track = \"refuse\"; \"auto\" uses them with the current as a state)")
         many = water / n_pings > REJECTED_PINGS_DEGRADED
         health.flag("degraded" if many else "note", text + ("; the DVL had no bottom lock there, so the "
                                                             "trajectory is dead reckoned on the IMU" if many else ""))

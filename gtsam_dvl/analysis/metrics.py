@@ -88,6 +88,37 @@ def truth_in_user_units(log: LogData) -> dict[str, Any]:
     return out
 
 
+def current_summary(wc: dict[str, Any], log: LogData) -> dict[str, Any]:
+    """The water current in the summary (its per-state profile is in info["water_current"]): the verdict, the
+    water-track pings used, the current's range with its sigma where determined, per 50 m of depth, and against the
+    simulated truth when the log has it (RMS error and error/sigma over the determined states)."""
+    t = np.asarray(wc["t_s"], dtype=float)
+    c = np.stack([wc["east_m_s"], wc["north_m_s"]], axis=1)
+    sig = np.stack([wc["east_sigma_m_s"], wc["north_sigma_m_s"]], axis=1)
+    det = np.asarray(wc["determined"], dtype=bool)
+    depth = np.asarray(wc["depth_m"], dtype=float)
+    water = log.dvl.water_track
+    out: dict[str, Any] = {"verdict": wc.get("verdict", ""), "states": len(t), "determined_share": float(det.mean())
+                           if len(det) else 0.0,
+                           "water_track_pings": int(np.sum(water)) if water is not None else 0}
+    layers = []
+    for top in np.arange(0.0, float(depth.max()) + 50.0, 50.0) if len(depth) else []:
+        m = (depth >= top) & (depth < top + 50.0) & det
+        if m.any():
+            mean = c[m].mean(axis=0)
+            layers.append({"depth_m": [float(top), float(top + 50.0)], "east_m_s": float(mean[0]),
+                           "north_m_s": float(mean[1]), "sigma_m_s": float(sig[m].mean()),
+                           "speed_m_s": float(np.hypot(*mean)), "states": int(m.sum())})
+    out["by_depth"] = layers
+    truth = log.truth
+    if truth is not None and truth.n_c is not None and det.any():
+        k = np.clip(np.searchsorted(truth.t, t[det]), 0, len(truth.t) - 1)
+        err = c[det] - truth.n_c[k, :2]
+        out["errors"] = {"rms_m_s": float(np.sqrt(np.mean(err**2))),
+                         "max_abs_z": float(np.max(np.abs(err / sig[det])))}
+    return out
+
+
 def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
     """The `errors` block of the summary: None when the log has no truth."""
     if log.truth is None:
@@ -164,6 +195,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         out["dvl_time_offset_s"] = time_offset_verdict(result)
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:
         out["dvl_lever_arm_m"] = lever_arm_verdict(result, log)
+    if isinstance(wc := result.info.get("water_current"), dict):
+        out["water_current"] = current_summary(wc, log)
     errors = truth_errors(result, log)
     if errors is not None:
         out["errors"] = errors

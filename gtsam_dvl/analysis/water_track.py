@@ -8,7 +8,8 @@ dvl_link, k d_R_b n_R_b^T [c_east, c_north, 0]. This module
 - counts the water-track pings and their stretches (runs of water-track pings without a bottom-track ping between
   them), and says whether they were used (with the current as a state) or refused;
 - judges the used ones: their whitened residuals against the model with the estimated current, noise
-  [current] water_track_sigma_m_s plus the current's own uncertainty ("warn" beyond WATER_RMS_WARN);
+  the noise they were given (selection.water_covariance) plus the current's own uncertainty ("warn" beyond
+  WATER_RMS_WARN);
 - flags false bottom lock: a bottom-track ping whose velocity disagrees with the velocity over ground (its whitened
   residual beyond FALSE_LOCK_CHI2) but agrees with the water track, i.e. with the vehicle's velocity relative to
   the water (residual within WATER_AGREES_CHI2 once the current is added), where the current is determined and
@@ -26,7 +27,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.selection import ping_covariance
+from gtsam_dvl.estimators.selection import ping_covariance, water_covariance
 
 WATER_RMS_WARN = 2.0  # whitened RMS of the water-track residuals above which the current model does not fit
 FALSE_LOCK_CHI2 = 16.27  # chi^2 (3 dof) 0.999 quantile: a bottom-track ping that disagrees with the ground
@@ -77,9 +78,7 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     fig: dict[str, Any] = {"pings": int(water.sum()), "stretches": [list(r) for r in runs],
                            "used": isinstance(profile, dict)}
     figures["water_track"] = fig
-    if not isinstance(profile, dict):
-        flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) refused "
-                     "([current] water_track = \"refuse\"): the position there leans on the IMU alone")
+    if not isinstance(profile, dict):  # refused: counted and judged by analysis/health.py (dvl_water_track)
         return
     flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
                  f"current as a state; the current: {profile.get('verdict', '')}")
@@ -96,18 +95,17 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     c_d = np.einsum("nij,nj->ni", d_R_n, c)
     # its covariance from the current's (east, north)
     cov_c = np.einsum("nia,na,nja->nij", d_R_n[:, :, :2], var_c, d_R_n[:, :, :2])
-    sigma_w = config.dvl.noise_multiplier * config.current.water_track_sigma_m_s
     seen = np.isfinite(r).all(axis=1)
     wt = on_water & seen
     if wt.any():
         r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
-        cov = sigma_w**2 * np.eye(3) + cov_c[wt]
+        cov = water_covariance(config, dvl.d_cov[idx[wt]]) + cov_c[wt]
         chi2 = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov, r_w[..., None])[..., 0])
         rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))
         fig["whitened_rms"] = rms
         if rms > WATER_RMS_WARN:
-            flag("warn", f"water-track residuals {rms:.1f}x their noise ([current] water_track_sigma_m_s = "
-                         f"{config.current.water_track_sigma_m_s:g} m/s) with the estimated current: the current "
+            flag("warn", f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
+                         "water_track_sigma_m_s) with the estimated current: the current "
                          "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
                          "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger")
     bt = ~on_water & seen

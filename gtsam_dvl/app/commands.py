@@ -220,6 +220,11 @@ class SmoothOutcome:
                             f"({'determined' if off.get('determined') else 'not determined'}): "
                             f"{off.get('words') or time_offset_words(off['value'])}")
         lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
+        if wc := s.get("water_current"):  # water-track pings used, the current a state (estimators/current.py)
+            layers = "; ".join(f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
+                               f"{a['sigma_m_s']:.2f} m/s" for a in wc.get("by_depth", [])[:6])
+            lines.append(f"  water current ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
+                         + (f"; {layers}" if layers else ""))
         motion = (s.get("geometry") or {}).get("motion")
         if motion:
             lines.append(f"  {MotionSummary(**motion).line()}")
@@ -508,6 +513,11 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
         if ev.velocity_error_m_s is not None:
             written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, ev.velocity_sigma_m_s)],
                                        out_dir / "velocity_error.png", "velocity", ev.segments))
+    if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
+        from gtsam_dvl.app.plots.current_plots import plot_current
+        truth = log.truth if log is not None else None
+        written.append(plot_current(wc, out_dir / "water_current.png", None if truth is None else truth.t,
+                                    None if truth is None else truth.n_c, label))
     if res.timeline is not None:
         from gtsam_dvl.analysis.metrics import truth_in_user_units
 

@@ -419,7 +419,7 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
         rows: np.ndarray | slice = slice(None)
         y, d_u = d_y, None
         cov = ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3))
-        cov[water] = water_covariance(cfg)
+        cov[water] = water_covariance(cfg, np.asarray(dvl.d_cov[jj[water]], dtype=float))
         whiten = whitening(cov + extra)
     else:  # one row per valid beam, in the beams' order (FactorMaker's beam factors)
         rows, b = np.nonzero(beams.valid[jj])

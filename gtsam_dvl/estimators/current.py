@@ -124,7 +124,7 @@ def profile(t: np.ndarray, z: np.ndarray, n_c: np.ndarray, cov: np.ndarray, conf
         "determined": determined.tolist(),
         "prior_sigma_m_s": prior, "time_rw_m_s_per_sqrt_s": config.current.time_rw_m_s_per_sqrt_s,
         "depth_rw_m_s_per_sqrt_m": config.current.depth_rw_m_s_per_sqrt_m,
-        "water_track_sigma_m_s": config.current.water_track_sigma_m_s,
+        "water_track_sigma_m_s": config.current.water_track_sigma_m_s or "from the messages",
     }
     if water is not None:
         w = np.asarray(water, dtype=bool)

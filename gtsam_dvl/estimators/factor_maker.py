@@ -338,7 +338,7 @@ class FactorMaker:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
         definite, else the default sigma (a water-track ping: [current] water_track_sigma_m_s), plus extra (3x3,
         m^2/s^2: a keyframe ping's preintegration noise) when given; in the robust kernel if configured (_robust)."""
-        c = water_covariance(self.config) if water else ping_covariance(self.config.dvl, cov)
+        c = water_covariance(self.config, cov) if water else ping_covariance(self.config.dvl, cov)
         return self._robust(gtsam.noiseModel.Gaussian.Covariance(c if extra is None else c + extra))
 
     def beam_noise(self) -> gtsam.noiseModel.Base:

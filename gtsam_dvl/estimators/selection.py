@@ -64,10 +64,15 @@ def ping_covariance(cfg: DvlConfig, d_cov: np.ndarray) -> np.ndarray:
     return (flat if m2 == 1.0 else m2 * flat).reshape(cov.shape)
 
 
-def water_covariance(config: EstimatorConfig) -> np.ndarray:
-    """The covariance of a water-track ping's 3-D velocity (m^2/s^2): ([dvl] noise_multiplier times [current]
-    water_track_sigma_m_s)^2 I."""
-    return np.eye(3) * (config.dvl.noise_multiplier * config.current.water_track_sigma_m_s)**2
+def water_covariance(config: EstimatorConfig, d_cov: np.ndarray) -> np.ndarray:
+    """The covariance a water-track ping's 3-D velocity is given (m^2/s^2), for (..., 3, 3) message covariances:
+    [current] water_track_sigma_m_s when > 0, else the message's own if finite and positive definite, else
+    [current] water_track_default_sigma_m_s; times [dvl] noise_multiplier^2 (ping_covariance's rule with the
+    water-track settings)."""
+    cur = config.current
+    dvl = config.dvl.model_copy(update={"noise_m_s": cur.water_track_sigma_m_s,
+                                        "default_noise_m_s": cur.water_track_default_sigma_m_s})
+    return ping_covariance(dvl, d_cov)
 
 
 def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid: np.ndarray | None,

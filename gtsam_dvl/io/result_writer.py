@@ -34,6 +34,10 @@ TOPICS = {
     # lever arm IMU -> DVL (m, base_link) as the position of a PoseWithCovarianceStamped with its 3x3 covariance,
     # only when estimated ([dvl] estimate_lever_arm)
     "lever_arm": "/gtsam_dvl/dvl_lever_arm",
+    # the water current [east, north, 0] (m/s, map) at each state and its sigmas, when water-track pings were used
+    # (estimators/current.py; NavResult.info["water_current"])
+    "water_current": "/gtsam_dvl/water_current",
+    "water_current_sigma": "/gtsam_dvl/water_current_sigma",
 }
 
 
@@ -191,6 +195,13 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
                                    cov_c[None], "base_link")
         w.add_vector3_stamped(TOPICS["misalignment_rpy"], t[-1:], mis_rpy[None], "base_link")
         w.add_vector3_stamped(TOPICS["misalignment_sigma"], t[-1:], np.sqrt(np.diag(mis_cov))[None], "base_link")
+        if isinstance(wc := result.info.get("water_current"), dict) and len(wc.get("t_s", [])):
+            t_c = np.asarray(wc["t_s"], dtype=float)
+            zero = np.zeros(len(t_c))
+            w.add_vector3_stamped(TOPICS["water_current"], t_c,
+                                  np.stack([wc["east_m_s"], wc["north_m_s"], zero], axis=1), "map")
+            w.add_vector3_stamped(TOPICS["water_current_sigma"], t_c,
+                                  np.stack([wc["east_sigma_m_s"], wc["north_sigma_m_s"], zero], axis=1), "map")
         if result.timeline is not None:
             write_timeline_topics(w, result)
             w.add_attachment("timeline.npz", timeline_npz_bytes(result.timeline), "application/x-npz")

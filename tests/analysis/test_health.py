@@ -158,7 +158,8 @@ def test_losses_and_rejections(logs: dict[str, LogData], batch_2d: NavResult) ->
     health = assess_health(dataclasses.replace(batch_2d, info=info), log)
     assert health.status == "ok" and not any("rejected" in n for n in health.notes)
     assert f"30 of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over ground): " \
-           "not used" in health.notes
+           "refused ([current] water_track = \"refuse\"; \"auto\" uses them with the current as a state)" \
+           in health.notes
     assert "5 DVL pings outside the IMU's time span (3 at or before its first sample, 2 after its last): not " \
            "used" in health.notes
 

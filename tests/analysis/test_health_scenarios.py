@@ -66,13 +66,8 @@ def logs() -> dict[str, LogData]:
     return out
 
 
-# water track refused (no current state) degrades the health of a log that has it: expected until it is used
-WATER_TRACK = pytest.mark.xfail(reason="water-track pings are refused by the estimators", strict=False)
-
-
 @pytest.mark.parametrize("mode", MODES)
-@pytest.mark.parametrize("scenario", [pytest.param(name, marks=WATER_TRACK) if "seafloor" in load_scenario(name).raw
-                                      else name for name in list_builtin_scenarios()])
+@pytest.mark.parametrize("scenario", list_builtin_scenarios())
 def test_clean_scenario_is_not_degraded(scenario: str, mode: str, logs: dict[str, LogData]) -> None:
     log = logs[scenario]
     try:

@@ -29,3 +29,19 @@ def test_demo_writes_reports_figures_and_reproduces_the_findings(tmp_path: Path)
             for f in findings:
                 print(f"{run['run']} {estimator}: {'yes' if f.held else 'NO'}: {f.text} ({f.evidence})")
                 assert f.held, f"{run['run']} {estimator}: {f.text} ({f.evidence})"
+    # the deep descent: water track used against refused, on the same log (app/demo.py deep_run)
+    import json
+
+    deep = tmp_path / "deep-descent"
+    used, refused = (json.loads((deep / name).read_text()) for name in ("summary.json", "summary-refused.json"))
+    e_used, e_ref = used["errors"], refused["errors"]
+    assert used["health"]["status"] == "ok", used["health"]["warnings"]
+    # within 3 sigma: the final horizontal position and every calibration state
+    assert e_used["final_horizontal_position_m"] < 3 * used["final_horizontal_position_sigma_m"]
+    assert abs(e_used["scale_nsigma"]) < 3 and max(abs(v) for v in e_used["misalignment_nsigma"]) < 3
+    # the final horizontal error at least 2x smaller than with water track refused; the thrust-axis (roll)
+    # misalignment better determined (the descent's change of specific force, seen through the water track)
+    assert 2 * e_used["final_horizontal_position_m"] < e_ref["final_horizontal_position_m"], (e_used, e_ref)
+    assert used["misalignment_deg"]["sigma"][0] < refused["misalignment_deg"]["sigma"][0]
+    assert used["water_current"]["determined_share"] > 0.9 and used["water_current"]["errors"]["rms_m_s"] < 0.05
+    assert (deep / "evaluation" / "water_current.png").exists()

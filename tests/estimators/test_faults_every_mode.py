@@ -122,8 +122,10 @@ def frozen_log(sim_paper3d_short: LogData, tmp_path_factory: pytest.TempPathFact
 def test_frozen_dvl_and_water_track_in_every_mode(frozen_log: LogData, mode: str) -> None:
     """The frozen stretch is in a steady turn, where the IMU shows no change of the velocity: it is dropped
     anyway, counted alike by every mode and named; the water-track pings are counted as such; the ping at the
-    first IMU stamp is no rejection."""
-    res = MODES[mode](frozen_log, EstimatorConfig.paper())
+    first IMU stamp is no rejection. (Water track refused here; used, it is test_water_current.py's.)"""
+    paper = EstimatorConfig.paper()
+    res = MODES[mode](frozen_log, paper.model_copy(update={"current": paper.current.model_copy(
+        update={"water_track": "refuse"})}))
     worst, final = _worst_nsigma(res, frozen_log)
     health = assess_health(res, frozen_log)
     print(f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}")

@@ -13,9 +13,10 @@ any, and the estimators then carry the current as a state of every epoch W(i):
   change of the current at one place (tides: ~0.1 m/s an hour, 1.7e-3 m/s/sqrt(s)); the depth term the shear met
   descending or ascending through the water column (0.25 m/s over 300 m is 0.014 m/s/sqrt(m)).
 
-Water-track pings have their own noise: water_track_sigma_m_s per axis (a water-track ping averages over a water
-layer whose own turbulence adds to the Doppler noise; about twice a bottom-track ping's on 300-600 kHz units,
-typical of the class), scaled like every DVL sigma by [dvl] noise_multiplier. water_track "refuse" counts them
+Water-track pings have their own noise: the message's covariance, or water_track_sigma_m_s per axis when set (> 0),
+or water_track_default_sigma_m_s for a message without one (a water-track ping averages over a water layer whose
+own turbulence adds to the Doppler noise; about twice a bottom-track ping's on 300-600 kHz units, typical of the
+class), scaled like every DVL sigma by [dvl] noise_multiplier. water_track "refuse" counts them
 ("dvl_water_track") and leaves them out, as does a log without them. Each estimator resolves "auto" for its log
 (current.resolve_water_track): its result's configuration says "use" or "refuse".
 """
@@ -24,7 +25,7 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from gtsam_dvl.core.config.base import ConfigModel, Positive
+from gtsam_dvl.core.config.base import ConfigModel, NonNegative, Positive
 
 
 class CurrentConfig(ConfigModel):
@@ -34,7 +35,10 @@ class CurrentConfig(ConfigModel):
     # log: its effective configuration says which); "use": always, the current a state even without them;
     # "refuse": never
     water_track: Literal["auto", "use", "refuse"] = "auto"
-    water_track_sigma_m_s: Positive = 0.01  # a water-track ping's white noise per axis, m/s
+    # a water-track ping's white noise per axis, m/s: > 0 overrides the message's covariance; 0 takes it, and a
+    # message without one takes water_track_default_sigma_m_s
+    water_track_sigma_m_s: NonNegative = 0.0
+    water_track_default_sigma_m_s: Positive = 0.01
     prior_sigma_m_s: Positive = 0.5  # the first state's current, per horizontal axis, m/s (mean 0)
     time_rw_m_s_per_sqrt_s: Positive = 1.0e-3  # the current's random walk in time, m/s/sqrt(s)
     depth_rw_m_s_per_sqrt_m: Positive = 0.02  # and in depth (shear), m/s/sqrt(m)

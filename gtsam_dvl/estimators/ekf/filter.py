@@ -279,7 +279,7 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int, water: bool
     beams (rows of A the beam unit vectors); a water-track ping (water): its 3-D velocity, its own noise."""
     cfg, dvl = config.dvl, log.dvl
     if water:
-        return np.eye(3), dvl.d_v[j], water_covariance(config)
+        return np.eye(3), dvl.d_v[j], water_covariance(config, dvl.d_cov[j])
     if cfg.use_beams and dvl.beams is not None:
         ok = dvl.beams.valid[j]
         A = dvl.beams.d_u[j][ok]

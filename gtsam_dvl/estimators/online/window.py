@@ -144,7 +144,7 @@ class IncrementalSmoother:
                            **relinearization(builder.config, thresholds),
                            **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {}),
                            # linear too: a hundredth of the water-track ping's sigma
-                           **({"w": np.full(2, 0.01 * builder.config.current.water_track_sigma_m_s)} if self.wc
+                           **({"w": np.full(2, 0.01 * builder.config.current.water_track_default_sigma_m_s)} if self.wc
                               else {})}
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
