@@ -47,7 +47,8 @@ from gtsam_dvl.core.states import BY_NAME, Estimate, enabled_states, joint_slice
 from gtsam_dvl.core.types import LogData, Mounting
 from gtsam_dvl.estimators.batch import extract_result, fit_dvl_noise, solve_graph
 from gtsam_dvl.estimators.bulk import BulkGraph
-from gtsam_dvl.estimators.gaps import screened_in_memory
+from gtsam_dvl.estimators.current import resolve_water_track
+from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import NoiseReport, dvl_fit_enabled, imu_levels
 from gtsam_dvl.estimators.solver import bayes_net_marginals
@@ -114,6 +115,7 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     """A dive smoothed alone as the batch smoother does (its passes and DVL noise fit, estimators/batch.py), then
     its graph without the priors of the shared states, ready for the joint iterations."""
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
+    config = resolve_water_track(config, log)  # (the steps of batch.smooth_batch, in its order)
     stated = config
     noise = NoiseReport()
     log = screened_in_memory(log)
@@ -127,6 +129,8 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     alone = extract_result(builder, graph, values, ordering,
                            bayes_net=report.bayes_net if report.converged else None)
     alone.info["noise"] = noise.as_dict()
+    if (screened := screened_losses(log)) is not None:
+        alone.info["screened_losses"] = screened
     alone.config = stated.to_dict()
     if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
         raise GtsamDvlError("prepare_dive: the batch smoother's bulk graph expected")
