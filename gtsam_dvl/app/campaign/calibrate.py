@@ -123,8 +123,14 @@ class LocalDives:
         return out
 
     def advance_all(self, ds: np.ndarray, values: dict[str, np.ndarray]) -> None:
+        keep = []
         for d in self.dives:
-            advance_dive(d, ds, values)
+            try:
+                advance_dive(d, ds, values)
+                keep.append(d)
+            except Exception as exc:  # noqa: BLE001 - reported, the dive left out
+                self.failures.append(DiveFailure(d.name, _error_text(exc)))
+        self.dives = keep
 
     def names(self) -> list[str]:
         return [d.name for d in self.dives]
