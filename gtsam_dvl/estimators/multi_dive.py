@@ -51,7 +51,7 @@ from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import NoiseReport, dvl_fit_enabled, imu_levels
-from gtsam_dvl.estimators.solver import bayes_net_marginals
+from gtsam_dvl.estimators.solver import CHUNKED_FROM_STATES, ChunkedOrdering, CompactBayesNet, bayes_net_marginals
 
 # states that stay per dive although core/states.py marks them as the vehicle's: a dive's own clocks
 PER_DIVE = ("time_offset",)
@@ -100,7 +100,9 @@ class DiveState:
     own: gtsam.Ordering  # the dive's own keys, eliminated in this order
     shared: gtsam.Ordering  # the shared keys, in `states` order
     alone: NavResult  # the dive smoothed alone, with the priors
-    bayes_net: gtsam.GaussianBayesNet | None = field(default=None, repr=False)
+    # the states' keys in chunks (estimators/graph.py elimination_ordering) and the dive's own shared keys after
+    plan: ChunkedOrdering = field(default_factory=lambda: ChunkedOrdering([], []), repr=False)
+    bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = field(default=None, repr=False)
 
     @property
     def config(self) -> EstimatorConfig:
@@ -149,7 +151,12 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     for k in keys:
         shared.push_back(k)
     return DiveState(name or log.source, builder, BulkGraph(without, graph.bulk, graph.imu), values, names, own,
-                     shared, alone)
+                     shared, alone, ChunkedOrdering(ordering.chunks, [k for k in ordering.rest if k not in keys]))
+
+
+def own_keys(dive: DiveState) -> list[int]:
+    """The dive's own variables' keys, in elimination order."""
+    return [dive.own.at(j) for j in range(dive.own.size())]
 
 
 def shared_values(dive: DiveState) -> dict[str, np.ndarray]:
@@ -177,13 +184,74 @@ def _square_root(A: np.ndarray, b: np.ndarray, n: int) -> tuple[np.ndarray, np.n
     return out[:, :n], out[:, n]
 
 
+def eliminate_own(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering, own: gtsam.Ordering
+                  ) -> tuple[gtsam.GaussianBayesNet | CompactBayesNet, gtsam.GaussianFactorGraph]:
+    """QR elimination of a dive's own variables (plan: its states' chunks, then its own shared keys in plan.rest),
+    leaving the factor graph on the shared keys: GTSAM's one partial elimination (`own`, the same order), or above
+    solver.CHUNKED_FROM_STATES states a chunk at a time, as solver.eliminate_chunked does (GTSAM's one elimination
+    costs in proportion to the mission squared there)."""
+    if sum(len(ks) for ks in plan.chunks) <= 2 * CHUNKED_FROM_STATES:
+        return linear.eliminatePartialSequential(own, gtsam.EliminateQR)
+    chunk_of = {k: c for c, ks in enumerate(plan.chunks) for k in ks}
+    groups: list[list[gtsam.GaussianFactor]] = [[] for _ in plan.chunks]
+    tail = gtsam.GaussianFactorGraph()
+    for i in range(linear.size()):
+        f = linear.at(i)
+        if f is None:
+            continue
+        cs = [chunk_of[k] for k in f.keys() if k in chunk_of]
+        if cs:
+            groups[min(cs)].append(f)
+        else:
+            tail.push_back(f)
+    bn = CompactBayesNet()
+    carry = gtsam.GaussianFactorGraph()
+    for ks, factors in zip(plan.chunks, groups, strict=True):
+        g = gtsam.GaussianFactorGraph()
+        for f in factors:
+            g.push_back(f)
+        g.push_back(carry)
+        order = gtsam.Ordering()
+        for k in ks:
+            order.push_back(k)
+        part, carry = g.eliminatePartialSequential(order, gtsam.EliminateQR)
+        bn.push_back(part)
+    tail.push_back(carry)
+    order = gtsam.Ordering()
+    for k in plan.rest:
+        order.push_back(k)
+    part, rest = tail.eliminatePartialSequential(order, gtsam.EliminateQR)
+    bn.push_back(part)
+    return bn, rest
+
+
+def back_substitute(bn: gtsam.GaussianBayesNet | CompactBayesNet, given: dict[int, np.ndarray]
+                    ) -> gtsam.VectorValues:
+    """x_F = R^-1 (d - S x_P) from the last conditional to the first, the shared keys' values given."""
+    if isinstance(bn, gtsam.GaussianBayesNet):
+        vv = gtsam.VectorValues()
+        for k, v in given.items():
+            vv.insert(k, v)
+        return bn.optimize(vv)
+    x = dict(given)
+    out = gtsam.VectorValues()
+    for c in reversed(bn.conds):
+        keys = c.keys()
+        rhs = c.d()
+        if len(keys) > 1:
+            rhs = rhs - c.S() @ np.concatenate([x[k] for k in keys[1:]])
+        x[keys[0]] = sol = solve_triangular(c.R(), rhs)
+        out.insert(keys[0], sol)
+    return out
+
+
 def reduce_dive(dive: DiveState) -> Reduction:
     """Linearise the dive at its values and eliminate its own variables (QR): its information on the shared
     states; keeps the Bayes net p(x_d | s) for advance_dive."""
     dive.builder.refresh_gravity(dive.values)
     linear = dive.graph.linearize(dive.values)
     try:
-        bn, rest = linear.eliminatePartialSequential(dive.own, gtsam.EliminateQR)
+        bn, rest = eliminate_own(linear, dive.plan, dive.own)
     except RuntimeError as exc:
         raise GtsamDvlError(f"{dive.name}: its own variables could not be eliminated ({exc})") from None
     dive.bayes_net = bn
@@ -198,10 +266,8 @@ def advance_dive(dive: DiveState, ds: np.ndarray, new_shared: dict[str, np.ndarr
     dive's own step, retract, and set the shared states to new_shared (the caller's retraction of ds)."""
     if dive.bayes_net is None:
         raise GtsamDvlError(f"{dive.name}: advance_dive before reduce_dive")
-    given = gtsam.VectorValues()
-    for n, sl in state_slices(dive.states).items():
-        given.insert(BY_NAME[n].key, np.asarray(ds[sl], dtype=float))
-    dx = dive.bayes_net.optimize(given)
+    given = {BY_NAME[n].key: np.asarray(ds[sl], dtype=float) for n, sl in state_slices(dive.states).items()}
+    dx = back_substitute(dive.bayes_net, given)
     for n, sl in state_slices(dive.states).items():
         if not dx.exists(BY_NAME[n].key):
             dx.insert(BY_NAME[n].key, np.asarray(ds[sl], dtype=float))

@@ -90,3 +90,30 @@ def test_dives_of_different_vehicles_are_refused(two_dives: dict[str, Any]) -> N
     with pytest.raises(GtsamDvlError, match="one vehicle's dives share one mounting"):
         md.joint_setup([a, other])
 
+
+
+def test_a_long_dive_eliminated_chunk_by_chunk_reduces_the_same(two_dives: dict[str, Any],
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """Above solver.CHUNKED_FROM_STATES states a dive's own variables are eliminated a chunk at a time: the same
+    information on the shared block and the same back-substitution as GTSAM's one elimination."""
+    import dataclasses
+
+    from gtsam_dvl.estimators.solver import ChunkedOrdering
+
+    d = two_dives["dives"][0]
+    one = md.reduce_dive(d)
+    assert d.bayes_net is not None
+    given = {k: np.full(md.BY_NAME[n].dim, 1e-4) for n, k in zip(d.states, md.state_keys(d.states), strict=True)}
+    dx_one = md.back_substitute(d.bayes_net, given)
+    plan = d.builder.elimination_ordering(chunk_states=40)
+    shared = set(md.state_keys(d.states))
+    chunked = dataclasses.replace(d, plan=ChunkedOrdering(plan.chunks, [k for k in plan.rest if k not in shared]),
+                                  bayes_net=None)
+    monkeypatch.setattr(md, "CHUNKED_FROM_STATES", 10)
+    many = md.reduce_dive(chunked)
+    assert isinstance(chunked.bayes_net, md.CompactBayesNet) and len(plan.chunks) > 3
+    np.testing.assert_allclose(many.R.T @ many.R, one.R.T @ one.R, rtol=1e-7, atol=1e-9 * np.abs(one.R).max() ** 2)
+    np.testing.assert_allclose(many.R.T @ many.d, one.R.T @ one.d, rtol=1e-7, atol=1e-9 * np.abs(one.R.T @ one.d).max())
+    dx_many = md.back_substitute(chunked.bayes_net, given)
+    for k in md.own_keys(d):
+        np.testing.assert_allclose(dx_many.at(k), dx_one.at(k), rtol=1e-6, atol=1e-12)
