@@ -256,8 +256,10 @@ def assess_geometry(result: NavResult, motion: MotionSummary | None = None,
     columns = [(s, suffix, f"{s.name.replace('_', ' ')} {suffix}".strip()) for s in states
                for suffix, _ in s.components]
     shifts = np.concatenate([_track_shift(result, s) for s in states])
+    # a state whose prior is a vehicle's calibration file leans on it by design (analysis/calibration_check.py)
+    from_file = (result.info.get("calibration_prior") or {}).get("states", [])
     for c, (state, _, name) in enumerate(columns):
-        if not state.vehicle or not prior[c] > 0:
+        if not state.vehicle or not prior[c] > 0 or state.name in from_file:
             continue
         ratio = float(sigma[c] / prior[c])
         others = np.abs(np.where(np.arange(len(columns)) == c, 0.0, corr[c]))

@@ -7,7 +7,7 @@
   whose expectation is 1 when the noise model fits; EKF: the mean normalised innovation squared per degree
   of freedom, with the same expectation);
 - every estimated shared state against its prior (analysis/prior_check.py): beyond 4 prior sigmas "failed",
-  naming the state, the distance and the likely cause;
+  naming the state, the distance and the likely cause; a calibration file's states against it (calibration_check);
 - the DVL residuals, recomputed here from the result and the log with the model of docs/conventions.md,
   y = k * b_R_d^T (n_R_b^T n_v + b_omega x b_l), whitened by the noise each ping was given (the rule of
   FactorMaker.dvl_noise): their RMS overall and per time window (about 1 when the model fits; a window far
@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.analysis.calibration_check import judge_calibration
 from gtsam_dvl.analysis.geometry import assess_geometry
 from gtsam_dvl.analysis.prior_check import check_priors
 from gtsam_dvl.analysis.water_track import check_water_track
@@ -124,32 +125,23 @@ def assess_health(result: NavResult, log: LogData) -> Health:
     config = result.noise_config or EstimatorConfig()
     _check_finite(result, health)
     _check_solver(result, health)
-    _check_priors(result, log, result.estimator_config or EstimatorConfig(), health)
+    # every estimated shared state against its prior (analysis/prior_check.py): "failed" beyond
+    # prior_check.PRIOR_NSIGMA_FAILED prior sigmas, naming the state and the likely cause
+    priors = check_priors(result, log, result.estimator_config or EstimatorConfig())
+    health.figures["prior_nsigma"] = priors.as_dict()
+    for severity, text in priors.findings:
+        health.flag(severity, text)
     if len(result.t):
         _check_dvl_residuals(result, log, config, health)
     _check_counters(result, log, health)
     _check_noise_fit(result, health)
-    if len(result.t):
-        _check_geometry(result, health)
+    if len(result.t):  # the weak calibration directions (analysis/geometry.py): "warn" or a note
+        geometry = assess_geometry(result)
+        health.figures["geometry"] = geometry.as_dict()
+        for finding in geometry.findings:
+            health.flag(finding.severity, finding.message)
+    judge_calibration(result, health)  # against a calibration file's prior (analysis/calibration_check.py)
     return health
-
-
-def _check_geometry(result: NavResult, health: Health) -> None:
-    """The weak calibration directions (analysis/geometry.py): "warn" when one sigma of one moves the track by
-    more than geometry.MATTERS_FRACTION of the distance, else a note."""
-    report = assess_geometry(result)
-    health.figures["geometry"] = report.as_dict()
-    for finding in report.findings:
-        health.flag(finding.severity, finding.message)
-
-
-def _check_priors(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
-    """Every estimated shared state against its prior (analysis/prior_check.py): "failed" beyond
-    prior_check.PRIOR_NSIGMA_FAILED prior sigmas, naming the state and the likely cause."""
-    report = check_priors(result, log, config)
-    health.figures["prior_nsigma"] = report.as_dict()
-    for severity, text in report.findings:
-        health.flag(severity, text)
 
 
 def _check_noise_fit(result: NavResult, health: Health) -> None:

@@ -206,5 +206,7 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     # the motion and the weak calibration directions (analysis/geometry.py; their sentences are health warnings
     # or notes)
     out["geometry"] = out["health"]["figures"].get("geometry")
+    if "calibration_check" in out["health"]["figures"]:  # against a calibration file (analysis/calibration_check.py)
+        out["calibration_check"] = out["health"]["figures"]["calibration_check"]
     out["losses"] = log.metadata.get("reader_losses", {})
     return out

@@ -10,7 +10,8 @@ vector, b_R_d0 the nominal mounting from /tf_static that centres the prior). |z_
 a calibration but a sign that the prior's centre is wrong (a mounting in /tf_static off by tens of degrees, a
 wrong sound speed) or that the data are (a saturated gyro read as a bias or a scale): the run is "failed", with a
 warning that names the state, the distance and the likely cause. A random-walk bias (a variable per state) is not
-checked: its prior holds at the first state only, the final value may wander away from it by design.
+checked: its prior holds at the first state only, the final value may wander away from it by design. Nor is a state
+whose prior came from a vehicle's calibration file (analysis/calibration_check.py judges those).
 
 Pure computation on NavResult and LogData (analysis layer).
 """
@@ -69,9 +70,10 @@ def prior_distances(result: NavResult, log: LogData, config: EstimatorConfig) ->
     around the mounting the result was made with (its b_R_d0 from /tf_static, the log's lever arm)."""
     mounting = dataclasses.replace(log.mounting, b_R_d0=np.asarray(result.b_R_d0, dtype=float))
     out: dict[str, PriorDistance] = {}
+    from_file = (result.info.get("calibration_prior") or {}).get("states", [])  # judged by calibration_check.py
     for s in STATES:
         est = result.calibration.get(s.name)
-        if est is None or not s.enabled(config) or s.per_state(config):
+        if est is None or not s.enabled(config) or s.per_state(config) or s.name in from_file:
             continue
         prior = s.prior(config, mounting)
         if s.kind == "rot3":  # R_c's rotation vector about body axes (the prior's sigmas are about them)

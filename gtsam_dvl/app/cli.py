@@ -249,19 +249,26 @@ def smooth(
                                                                       "(default: a LocalCluster here).")] = None,
     workers: Annotated[int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")] = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior of its states "
+                                                     "(inflated by [calibration] inflation_per_day for its age).")
+                           ] = None,
+    calibration_out: Annotated[Path | None, typer.Option(help="Write this run's calibration file (TOML).")] = None,
+    vehicle: Annotated[str | None, typer.Option(help="Vehicle name (default: --calibration's, else the log's "
+                                                     "folder name).")] = None,
     debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
     from gtsam_dvl.app.commands import check_folders, smooth_file
 
-    check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz},
-                  {"--out-dir": out_dir})
+    check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz,
+                   "--calibration-out": calibration_out}, {"--out-dir": out_dir})
     read_options = _read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic, attitude_topic,
                                  truth_topic, dvl_water_topic)
     if out_dir is not None or len(logs) > 1:
-        if out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz:
+        if (out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz
+                or calibration or calibration_out):
             raise GtsamDvlError("several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
-                                "--summary, --tum and --timeline-npz take one log")
+                                "--summary, --tum, --timeline-npz, --calibration and --calibration-out take one log")
         from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
 
         rows, written = smooth_fleet(logs, out_dir, mode=mode, config_path=config, read_options=read_options,
@@ -280,7 +287,8 @@ def smooth(
     log = logs[0]
     outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
                           show_progress=not quiet, read_options=read_options, timeline=timeline,
-                          timeline_path=timeline_npz)
+                          timeline_path=timeline_npz, calibration_path=calibration, calibration_out=calibration_out,
+                          vehicle=vehicle)
     typer.echo(outcome.describe())
     if strict and outcome.status in UNHEALTHY:
         typer.echo(f"gtsam-dvl: error: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
@@ -411,6 +419,8 @@ def montecarlo(
     scheduler_timeout: SchedulerTimeout = 10.0,
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     quiet: Quiet = False,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as every run's prior.")
+                           ] = None,
     debug: Debug = False,
 ) -> None:
     """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
@@ -420,7 +430,7 @@ def montecarlo(
     check_folders({}, {"-o": output})
     res = run_campaign(scenario, runs, [e.strip() for e in estimators.split(",") if e.strip()], output,
                        seed_start=seed_start, scheduler=scheduler, workers=workers, config_path=config,
-                       show_progress=not quiet, scheduler_timeout_s=scheduler_timeout)
+                       show_progress=not quiet, scheduler_timeout_s=scheduler_timeout, calibration_path=calibration)
     for name, est in res.statistics["estimators"].items():
         z = ", ".join(f"{k} {v['z_std']:.2f}" for k, v in est["states"].items() if not k.startswith("final"))
         nb = est["nees_block"]
@@ -571,6 +581,7 @@ def live(
     imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
     repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
     attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior.")] = None,
     debug: Debug = False,
 ) -> None:
     """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
@@ -583,7 +594,7 @@ def live(
             raise GtsamDvlError("live: give a LOG to replay (or --layout PATH to write the Foxglove layout)")
         return
     serve_log(log, speed=speed, port=port, host=host, config_path=config, wait=wait, linger=not exit_when_done,
-              layout_path=layout,
+              layout_path=layout, calibration_path=calibration,
               read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
                                          attitude_topic, truth_topic, dvl_water_topic), echo=typer.echo)
 

@@ -220,6 +220,9 @@ class SmoothOutcome:
                             f"({'determined' if off.get('determined') else 'not determined'}): "
                             f"{off.get('words') or time_offset_words(off['value'])}")
         lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
+        from gtsam_dvl.app.calibration_files import prior_line
+
+        lines += [line] if (line := prior_line(s)) else []
         if wc := s.get("water_current"):  # water-track pings used, the current a state (estimators/current.py)
             layers = "; ".join(f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
                                f"{a['sigma_m_s']:.2f} m/s" for a in wc.get("by_depth", [])[:6])
@@ -303,19 +306,26 @@ def check_folders(files: dict[str, Path | None], folders: dict[str, Path | None]
 def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,
                 tum_path: Path | None = None, config_path: Path | None = None, show_progress: bool = True,
                 read_options: dict[str, Any] | None = None, timeline: bool = True,
-                timeline_path: Path | None = None) -> SmoothOutcome:
+                timeline_path: Path | None = None, calibration_path: Path | None = None,
+                calibration_out: Path | None = None, vehicle: str | None = None) -> SmoothOutcome:
     """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
     The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz.
 
     Safe outputs: before any work, an output that is an input (or another output) or cannot be written is a
     one-line GtsamDvlError. The outputs are written as a set (io/atomic.py OutputSet): all of them, or none if
-    any fails or the run is interrupted. The summary carries the run's health (analysis/health.py)."""
+    any fails or the run is interrupted. The summary carries the run's health (analysis/health.py).
+
+    calibration_path: a vehicle's calibration file as the prior (app/calibration_files.py, inflated for its age);
+    calibration_out: the run's calibration written as one (one of the outputs; it may be calibration_path: the
+    file is read first and replaced whole); vehicle: its name (vehicle_name)."""
     from gtsam_dvl.analysis.health import assess_log_health
     from gtsam_dvl.analysis.metrics import summary
+    from gtsam_dvl.app.calibration_files import calibration_of_run, calibration_prior, record_prior, vehicle_name
     from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
     from gtsam_dvl.core.result import NavResult
     from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
     from gtsam_dvl.io.atomic import OutputSet, tum_text
+    from gtsam_dvl.io.calibration_file import calibration_text
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
 
     get_estimator(mode)  # an unknown mode: a one-line error before the log is read
@@ -324,9 +334,13 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
                             "not -o, --tum or --timeline-npz; run another mode for a result MCAP")
     default_timeline = (Path(output).with_suffix(".timeline.npz") if output is not None and timeline
                         and timeline_path is None and mode != "io-dvlc" else None)
+    if mode == "io-dvlc" and (calibration_path is not None or calibration_out is not None):
+        raise GtsamDvlError("--mode io-dvlc takes no --calibration and writes no --calibration-out (it estimates "
+                            "from the Type-I segments alone); run another mode")
     check_outputs({"the input log": Path(log_path), "the configuration": config_path},
                   {"-o": output, "--summary": summary_path, "--tum": tum_path if mode != "io-dvlc" else None,
-                   "--timeline-npz": timeline_path, "the timeline file next to -o": default_timeline})
+                   "--timeline-npz": timeline_path, "the timeline file next to -o": default_timeline,
+                   "--calibration-out": calibration_out})
     config = EstimatorConfig.load(config_path) if config_path else None
     t_read = time.perf_counter()
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
@@ -336,8 +350,13 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
         config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
     if config is None:  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
         config = EstimatorConfig.for_log(log.metadata)
+    prior = inflation = None
+    if calibration_path is not None:  # the vehicle's calibration as the prior (app/calibration_files.py)
+        prior, inflation = calibration_prior(calibration_path, log, config, vehicle)
     with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
-        result = run_estimator(log, mode, config, progress=progress, timeline=timeline)
+        result = run_estimator(log, mode, config, progress=progress, timeline=timeline, calibration=prior)
+    if inflation is not None and isinstance(result, NavResult):
+        record_prior(result, inflation)
     outputs = OutputSet()
     with outputs:
         if not isinstance(result, NavResult):  # io-dvlc: calibration only
@@ -369,6 +388,9 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
             if tum_path is not None:
                 outputs.write_text(tum_path, tum_text(log.t0_ns * 1e-9 + result.t, result.n_p,
                                                       matrix_to_quat_xyzw(result.n_R_b)))
+            if calibration_out is not None:
+                cal = calibration_of_run(result, log_path, config, vehicle_name(log_path, vehicle, prior), prior)
+                outputs.write_text(calibration_out, calibration_text(cal))
     return SmoothOutcome(summ, outputs.committed)
 
 

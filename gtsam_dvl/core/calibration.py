@@ -127,7 +127,8 @@ def vehicle_state_names(config: Any) -> list[str]:
 def from_result(result: Any, config: Any, vehicle: str, sources: tuple[SourceLog, ...] = (),
                 ekf: bool = False) -> VehicleCalibration:
     """The vehicle calibration of one result (NavResult): its vehicle states' values and their joint covariance
-    from result.shared_joint_cov (or, when it has none, the marginals, without their correlations). ekf: the
+    from result.shared_joint_cov (or, when it has none, the marginals with the calibration block's joint over the
+    scale and misalignment, without the other correlations). ekf: the
     result's joint covariance has the EKF's columns (states.joint_states(config, ekf=True))."""
     from gtsam_dvl.core.states import joint_slices
     names = [n for n in vehicle_state_names(config) if n in result.calibration]
@@ -145,6 +146,15 @@ def from_result(result: Any, config: Any, vehicle: str, sources: tuple[SourceLog
         for b in blocks:
             cov[col:col + b.shape[0], col:col + b.shape[0]] = b
             col += b.shape[0]
+        if getattr(result, "calib_joint_cov", None) is not None:  # the online estimator's: scale and misalignment
+            from gtsam_dvl.core.states import BY_NAME, block_states  # jointly from the calibration block
+            order = [s.name for s in block_states()]
+            own = [n for n in names if n in order]
+            at = np.cumsum([0] + [BY_NAME[n].dim for n in order])
+            here = np.cumsum([0] + [BY_NAME[n].dim for n in names])
+            src = np.concatenate([np.arange(at[order.index(n)], at[order.index(n) + 1]) for n in own])
+            dst = np.concatenate([np.arange(here[names.index(n)], here[names.index(n) + 1]) for n in own])
+            cov[np.ix_(dst, dst)] = np.asarray(result.calib_joint_cov)[np.ix_(src, src)]
     values = {n: np.array(result.calibration[n].value, dtype=float) for n in names}
     return VehicleCalibration(vehicle=vehicle, date=iso_date(int(result.t0_ns)), states=tuple(names),
                               values=values, cov=0.5 * (cov + cov.T), sources=sources,

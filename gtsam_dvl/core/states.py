@@ -22,16 +22,20 @@ L_LEVER, the order of every elimination ordering's shared block.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, Literal
 
 import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig, ObservabilityConfig, RelinearizationThresholds
+from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, W, X, key_dim
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
+
+if TYPE_CHECKING:  # core/calibration.py reads STATES lazily; only the type is needed here
+    from gtsam_dvl.core.calibration import VehicleCalibration
 
 # How a key's value is held in gtsam.Values: a Vector, a Rot3 (its value here the 3x3 matrix, its tangent the
 # right perturbation), or an imuBias.ConstantBias (tangent [accel, gyro]).
@@ -324,11 +328,17 @@ def _by_key(states: list[SharedState]) -> list[tuple[int, list[SharedState]]]:
             for k in _unique(s.key for s in states)]
 
 
-def _key_priors(config: EstimatorConfig, mounting: Mounting) -> list[tuple[int, Kind, np.ndarray, Prior, bool]]:
-    """Per key of the enabled states: key, kind, value (the states' values joined) and the joined Prior."""
+def _key_priors(config: EstimatorConfig, mounting: Mounting, calibration: VehicleCalibration | None = None
+                ) -> list[tuple[int, Kind, np.ndarray, Prior, bool]]:
+    """Per key of the enabled states: key, kind, value (the states' values joined) and the joined Prior; the
+    states a calibration holds (calibration_states) at its values."""
+    held = {s.name for s in calibration_states(config, calibration)}
     out = []
     for key, group in _by_key(enabled_states(config)):
         priors = [s.prior(config, mounting) for s in group]
+        if calibration is not None and all(s.name in held for s in group):
+            priors = [replace(p, value=np.asarray(calibration.values[s.name], dtype=float))
+                      for s, p in zip(group, priors, strict=True)]
         kind = group[0].kind
         value = priors[0].value if kind == "rot3" else np.concatenate([p.value for p in priors])
         axes = [p.axes for p in priors if p.axes is not None]
@@ -337,11 +347,17 @@ def _key_priors(config: EstimatorConfig, mounting: Mounting) -> list[tuple[int, 
     return out
 
 
-def prior_factors(config: EstimatorConfig, mounting: Mounting) -> list[gtsam.NonlinearFactor]:
+def prior_factors(config: EstimatorConfig, mounting: Mounting, calibration: VehicleCalibration | None = None
+                  ) -> list[gtsam.NonlinearFactor]:
     """The priors of the enabled states, one factor per key: diagonal sigmas (isotropic when equal), a full
-    covariance where the sigmas are about other axes (the misalignment)."""
+    covariance where the sigmas are about other axes (the misalignment). calibration: a vehicle's calibration
+    (core/calibration.py, already inflated for its age): the states it holds that the configuration estimates
+    (calibration_states) take ONE joint prior from it instead (calibration_prior), the others keep theirs."""
+    held = {s.key for s in calibration_states(config, calibration)}
     out: list[gtsam.NonlinearFactor] = []
     for key, kind, value, prior, rotated in _key_priors(config, mounting):
+        if key in held:
+            continue
         noise = (gtsam.noiseModel.Gaussian.Covariance(prior.cov) if rotated
                  else gtsam.noiseModel.Diagonal.Sigmas(prior.sigma))
         if kind == "rot3":
@@ -350,13 +366,16 @@ def prior_factors(config: EstimatorConfig, mounting: Mounting) -> list[gtsam.Non
             out.append(gtsam.PriorFactorConstantBias(key, gtsam.imuBias.ConstantBias(value[:3], value[3:]), noise))
         else:
             out.append(gtsam.PriorFactorVector(key, value, noise))
-    return out
+    joint = calibration_prior(config, calibration)
+    return out if joint is None else out + [joint]
 
 
-def initial_values(config: EstimatorConfig, mounting: Mounting) -> gtsam.Values:
-    """The enabled states' keys (at the first state) at their priors' values."""
+def initial_values(config: EstimatorConfig, mounting: Mounting, calibration: VehicleCalibration | None = None
+                   ) -> gtsam.Values:
+    """The enabled states' keys (at the first state) at their priors' values; those a calibration holds
+    (calibration_states) at its values."""
     values = gtsam.Values()
-    for key, kind, value, _, _ in _key_priors(config, mounting):
+    for key, kind, value, _, _ in _key_priors(config, mounting, calibration):
         if kind == "rot3":
             values.insert(key, gtsam.Rot3(value))
         elif kind == "bias":
@@ -364,6 +383,102 @@ def initial_values(config: EstimatorConfig, mounting: Mounting) -> gtsam.Values:
         else:
             values.insert(key, np.asarray(value, dtype=float))
     return values
+
+
+# ----- a vehicle's calibration as the prior ----------------------------------------------------------------
+
+def calibration_states(config: EstimatorConfig, calibration: VehicleCalibration | None) -> list[SharedState]:
+    """The states of a vehicle's calibration (core/calibration.py) that the configuration estimates, one variable
+    per log (not the random-walk bias), in the calibration's order: those that take its joint prior. A key only
+    partly held (e.g. the bias key's accelerometer half without its gyro half) is a one-line GtsamDvlError."""
+    if calibration is None:
+        return []
+    out = [BY_NAME[n] for n in calibration.states
+           if n in BY_NAME and BY_NAME[n].enabled(config) and not BY_NAME[n].per_state(config)]
+    names = {s.name for s in out}
+    for s in enabled_states(config):
+        if s.name not in names and any(o.key == s.key for o in out):
+            raise GtsamDvlError(f"calibration of {calibration.vehicle!r}: it holds part of the {s.description}'s "
+                                f"variable but not the {s.description}; give both or neither")
+    return out
+
+
+def calibration_prior(config: EstimatorConfig, calibration: VehicleCalibration | None
+                      ) -> gtsam.NonlinearFactor | None:
+    """ONE Gaussian prior over the keys of calibration_states, with the calibration's joint covariance (the block
+    of those states; a marginal of a Gaussian is its block) and its mean at the calibration's values; None when
+    it holds none of the estimated states.
+
+    Its error is e = S [Local(x0_k, x_k)]_k, the stacked local coordinates of each key at the file's value x0_k
+    (a vector's difference; for the misalignment Log(b_R_d0^T b_R_d), b_R_d's right perturbation, as the file's
+    covariance; the bias [accel, gyro]) reordered by S into the calibration's order, whitened by its covariance:
+    0.5 e^T Sigma^-1 e is the exact Gaussian on the manifold around the file's values (its Jacobian the inverse
+    right Jacobian of SO(3) for the rotation). A CustomFactor: GTSAM's Python JacobianFactor takes at most three
+    keys, the calibration may hold four (scale, misalignment, time offset, lever arm)."""
+    states = calibration_states(config, calibration)
+    if calibration is None or not states:
+        return None
+    keys = _unique(s.key for s in states)
+    kinds = {s.key: s.kind for s in states}
+    start = dict(zip(keys, np.cumsum([0] + [key_dim(k) for k in keys]).tolist(), strict=False))
+    cols = np.concatenate([start[s.key] + s.offset + np.arange(s.dim) for s in states])
+    S = np.zeros((len(cols), len(cols)))  # row r (the calibration's order) reads column cols[r] of the keys'
+    S[np.arange(len(cols)), cols] = 1.0
+    x0 = {k: _key_value(states, k, calibration.values) for k in keys}
+    noise = gtsam.noiseModel.Gaussian.Covariance(calibration.block([s.name for s in states]))
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+        parts, jacs = [], []
+        for k in keys:
+            d, J = _local(kinds[k], x0[k], values, k)
+            parts.append(d)
+            jacs.append(J)
+        if H is not None:
+            for i, k in enumerate(keys):
+                H[i] = S[:, start[k]:start[k] + key_dim(k)] @ jacs[i]
+        return np.asarray(S @ np.concatenate(parts))
+
+    return gtsam.CustomFactor(noise, keys, error)
+
+
+def calibration_info(config: EstimatorConfig, calibration: VehicleCalibration) -> dict[str, Any]:
+    """The prior a run took from a calibration (NavResult.info["calibration_prior"], plain JSON): its vehicle, date,
+    method and sources, the states that took it (calibration_states), their values (SI; the misalignment as b_R_d)
+    and their joint covariance, for the verdict on the new estimate (analysis/calibration_check.py)."""
+    names = [s.name for s in calibration_states(config, calibration)]
+    return {"vehicle": calibration.vehicle, "date": calibration.date, "method": calibration.method,
+            "config_hash": calibration.config_hash,
+            "sources": [{"path": s.path, "sha256": s.sha256} for s in calibration.sources],
+            "states": names, "values": {n: np.asarray(calibration.values[n], dtype=float).tolist() for n in names},
+            "cov": calibration.block(names).tolist()}
+
+
+def calibration_in_layout(config: EstimatorConfig, calibration: VehicleCalibration | None,
+                          layout: dict[str, slice]) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """A filter's start from a calibration (the EKF's error state, ekf_layout): the values of the states it holds
+    that the layout carries (calibration_states), their columns in the layout and their joint covariance (empty
+    without a calibration)."""
+    held = [s.name for s in calibration_states(config, calibration) if s.name in layout]
+    if calibration is None or not held:
+        return {}, np.zeros(0, dtype=int), np.zeros((0, 0))
+    idx = np.concatenate([np.arange(layout[n].start, layout[n].stop) for n in held])
+    return {n: np.asarray(calibration.values[n], dtype=float) for n in held}, idx, calibration.block(held)
+
+
+def _key_value(states: list[SharedState], key: int, mean: dict[str, np.ndarray]) -> np.ndarray:
+    """A key's value (a vector; a rotation's 3x3 matrix) from its states' values."""
+    group = sorted((s for s in states if s.key == key), key=lambda s: s.offset)
+    if group[0].kind == "rot3":
+        return np.asarray(mean[group[0].name], dtype=float)
+    return np.concatenate([np.asarray(mean[s.name], dtype=float).ravel() for s in group])
+
+
+def _local(kind: Kind, x0: np.ndarray, values: gtsam.Values, key: int) -> tuple[np.ndarray, np.ndarray]:
+    """The local coordinates of a key's value at x0 and their Jacobian in the value's own tangent."""
+    if kind == "rot3":
+        d = gtsam.Rot3.Logmap(gtsam.Rot3(x0).between(values.atRot3(key)))
+        return np.asarray(d, dtype=float), np.asarray(gtsam.Rot3.LogmapDerivative(d))
+    return _read(values, key, kind) - x0, np.eye(len(x0))
 
 
 def _read(values: gtsam.Values, key: int, kind: Kind) -> np.ndarray:

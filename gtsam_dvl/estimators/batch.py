@@ -8,11 +8,13 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import V, W, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.states import (
+    calibration_info,
     correlated_error,
     enabled,
     read_estimates,
@@ -48,10 +50,13 @@ from gtsam_dvl.estimators.timeline import filtering_timeline
 
 
 def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
-                 progress: ProgressFn | None = None, timeline: bool = False, estimator: str = "batch") -> NavResult:
+                 progress: ProgressFn | None = None, timeline: bool = False, estimator: str = "batch",
+                 calibration: VehicleCalibration | None = None) -> NavResult:
     """Estimate trajectory, IMU biases, DVL scale factor and misalignment from a whole log. timeline: also
     the filtering sigma timeline over the same linearisation (how the log's information accrued; one more
-    pass over the states). estimator: the name the result carries (the planner's is "plan")."""
+    pass over the states). estimator: the name the result carries (the planner's is "plan"). calibration: a
+    vehicle's calibration, already inflated for its age, as the joint prior of the states it holds
+    (core/states.py calibration_prior; recorded in info["calibration_prior"])."""
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -64,7 +69,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
         return smooth_pieces(log, stated, gaps, progress, estimator)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
-    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None)
+    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None,
+                       calibration=calibration)
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
     # the DVL and IMU factors evaluated in bulk (estimators/bulk.py: the same objective as builder.build())
@@ -102,6 +108,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     if correlated_error(config):
         result.info["dvl_correlated_error"] = correlated.info(config, values, len(builder.epochs))
     result.config = stated.to_dict()
+    if calibration is not None:
+        result.info["calibration_prior"] = calibration_info(config, calibration)
     result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
                              "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,
                              "passes": passes, **{f"{k}_s": v for k, v in report.timing_s.items()}}

@@ -27,6 +27,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.keys import B, V, X
@@ -100,6 +101,9 @@ class FactorMaker:
     source: str = ""
     # the given initial attitude and origin carried to the first state (carry_to_first); None: not yet
     first: FirstState | None = None
+    # a vehicle's calibration (already inflated for its age): the joint prior of the states it holds
+    # (core/states.py calibration_prior) and their initial values; None: the configuration's priors
+    calibration: VehicleCalibration | None = None
     _offset_gravity: np.ndarray | None = field(default=None, init=False, repr=False)  # offset_gravity()'s cache
 
     # ----- keys and rates ------------------------------------------------------------------------
@@ -405,7 +409,7 @@ class FactorMaker:
             gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
             gtsam.PriorFactorVector(V(0), values.atVector(V(0)),
                                     gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s)),
-        ] + shared_prior_factors(self.config, self.mounting)  # the shared states' (core/states.py)
+        ] + shared_prior_factors(self.config, self.mounting, self.calibration)  # the shared states' (core/states.py)
 
     # ----- initial guesses -----------------------------------------------------------------------
     def alignment_info(self) -> dict[str, Any]:
@@ -446,5 +450,5 @@ class FactorMaker:
         n_p = np.zeros(3) if self.first is None else self.first.n_p  # the map origin carried to the first state
         values.insert(X(0), gtsam.Pose3(n_R_b, n_p))
         values.insert(V(0), np.zeros(3) if n_v is None else n_v)
-        values.insert(initial_shared_values(self.config, self.mounting))
+        values.insert(initial_shared_values(self.config, self.mounting, self.calibration))
         return values

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -86,6 +87,8 @@ class LogGraph:
     config: EstimatorConfig
     # the fraction of the preintegration done, 20 times (the longest stage on a long log: docs/results.md)
     progress: ProgressFn | None = field(default=None, repr=False, compare=False)
+    # a vehicle's calibration as the prior of the states it holds (FactorMaker.calibration); None: the configuration's
+    calibration: VehicleCalibration | None = field(default=None, repr=False, compare=False)
     maker: FactorMaker = field(init=False)
     epochs: list[Epoch] = field(init=False)
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
@@ -111,7 +114,7 @@ class LogGraph:
         frame = map_frame_of(log, cfg)
         alignment = align(log.imu, log.dvl, frame, cfg.alignment, attitude=log.attitude, mounting=log.mounting,
                           imu_cfg=cfg.imu)
-        self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source)
+        self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source, calibration=self.calibration)
         if enabled(cfg, "time_offset") and cfg.dvl.use_beams:
             raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
         if len(log.imu) < 2:
@@ -375,7 +378,7 @@ class LogGraph:
         initial scale and nominal mounting, position by integrating that velocity."""
         if len(self.pims) + 1 != len(self.epochs):
             raise GtsamDvlError("initial_values: build_bulk let the preintegrations go; make a new LogGraph")
-        values = initial_shared_values(self.config, self.maker.mounting)  # the shared states at their priors
+        values = initial_shared_values(self.config, self.maker.mounting, self.calibration)  # at their priors
         dvl = self.log.dvl
         zero_bias = gtsam.imuBias.ConstantBias()
         n_p_all = np.zeros((len(self.epochs), 3))

@@ -5,6 +5,10 @@ Adding an estimator is one entry in ESTIMATORS: an Estimator (a name, a descript
 RegisteredEstimator around a function. Each function imports its estimator when called, so that listing the modes
 loads no solver.
 
+A vehicle's calibration (core/calibration.py VehicleCalibration, already inflated for its age) reaches every
+trajectory estimator through run_estimator's `calibration`: the joint prior of the states it holds (core/states.py
+calibration_prior; the EKF's initial mean and covariance), recorded in the result's info["calibration_prior"].
+
 Results: every estimator returns an EstimatorResult (core/result.py): its name, the shared states it estimated
 by name (`calibration`: state name -> Estimate, value and marginal covariance) and its wall times. The
 trajectory estimators (batch, online, online-full, ekf) return a NavResult, which adds the trajectory, the biases
@@ -18,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Literal, Protocol, overload
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
@@ -30,7 +35,7 @@ class Estimator(Protocol):
     """An estimator run on a whole log. config: an EstimatorConfig, already checked (None: the one the log's
     scenario names, else the defaults); each estimator reads its own sections of it. progress: called with the
     fraction done, 0 to 1. timeline: keep the filtering timeline where it costs extra (the batch smoother's; the
-    filters always keep theirs)."""
+    filters always keep theirs). calibration: a vehicle's calibration as the prior (module doc)."""
 
     @property
     def name(self) -> str: ...
@@ -39,10 +44,11 @@ class Estimator(Protocol):
     def description(self) -> str: ...
 
     def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True) -> EstimatorResult: ...
+            timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult: ...
 
 
-RunFn = Callable[[LogData, EstimatorConfig | None, ProgressFn | None, bool], EstimatorResult]
+RunFn = Callable[[LogData, EstimatorConfig | None, ProgressFn | None, bool, VehicleCalibration | None],
+                 EstimatorResult]
 
 
 @dataclass(frozen=True)
@@ -55,30 +61,35 @@ class RegisteredEstimator:
     runner: RunFn
 
     def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True) -> EstimatorResult:
-        return self.runner(log, config, progress, timeline)
+            timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult:
+        return self.runner(log, config, progress, timeline, calibration)
 
 
-def _batch(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+def _batch(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool,
+           calibration: VehicleCalibration | None) -> NavResult:
     from gtsam_dvl.estimators.batch import smooth_batch
-    return smooth_batch(log, config, progress=progress, timeline=timeline)
+    return smooth_batch(log, config, progress=progress, timeline=timeline, calibration=calibration)
 
 
 def _online(mode: Literal["fixed_lag", "full"]) -> RunFn:
-    def run(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+    def run(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool,
+            calibration: VehicleCalibration | None) -> NavResult:
         from gtsam_dvl.estimators.online import smooth_online
-        return smooth_online(log, config, mode=mode, progress=progress)
+        return smooth_online(log, config, mode=mode, progress=progress, calibration=calibration)
     return run
 
 
-def _ekf(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool) -> NavResult:
+def _ekf(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool,
+         calibration: VehicleCalibration | None) -> NavResult:
     from gtsam_dvl.estimators.ekf import run_ekf
-    return run_ekf(log, config, progress=progress)
+    return run_ekf(log, config, progress=progress, calibration=calibration)
 
 
 def _iodvlc(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None,
-            timeline: bool) -> IoDvlcResult:
+            timeline: bool, calibration: VehicleCalibration | None) -> IoDvlcResult:
     from gtsam_dvl.estimators.iodvlc import run_iodvlc
+    if calibration is not None:
+        raise GtsamDvlError("--mode io-dvlc takes no calibration prior (it estimates from the Type-I segments alone)")
     return run_iodvlc(log, config)
 
 
@@ -103,36 +114,39 @@ def get_estimator(mode: str) -> Estimator:
 
 @overload
 def run_estimator(log: LogData, mode: Literal["io-dvlc"], config: EstimatorConfig | None,
-                  progress: ProgressFn | None = None, timeline: bool = True) -> IoDvlcResult: ...
+                  progress: ProgressFn | None = None, timeline: bool = True,
+                  calibration: VehicleCalibration | None = None) -> IoDvlcResult: ...
 
 
 @overload
 def run_estimator(log: LogData, mode: Literal["batch", "online", "online-full", "ekf"],
                   config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True) -> NavResult: ...
+                  timeline: bool = True, calibration: VehicleCalibration | None = None) -> NavResult: ...
 
 
 @overload
 def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True) -> EstimatorResult: ...
+                  timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult: ...
 
 
 def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True) -> EstimatorResult:
+                  timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult:
     """Run the estimator named mode (ESTIMATORS) on a log: a NavResult, or an IoDvlcResult for io-dvlc (module
     doc). config: an EstimatorConfig (None: the one the log's scenario names, else the defaults), checked by value
     here; each estimator reads its own section of it. timeline: the batch smoother's filtering timeline (the
-    filters always keep theirs)."""
+    filters always keep theirs). calibration: a vehicle's calibration, inflated for its age, as the prior of the
+    states it holds (module doc)."""
     if config is not None:
         config.validate()
-    return get_estimator(mode).run(log, config, progress, timeline)
+    return get_estimator(mode).run(log, config, progress, timeline, calibration)
 
 
 def run_trajectory_estimator(log: LogData, mode: str, config: EstimatorConfig | None,
-                             progress: ProgressFn | None = None, timeline: bool = True) -> NavResult:
+                             progress: ProgressFn | None = None, timeline: bool = True,
+                             calibration: VehicleCalibration | None = None) -> NavResult:
     """run_estimator for a mode that estimates a trajectory (a NavResult: every mode but io-dvlc), else a one-line
     GtsamDvlError."""
-    result = run_estimator(log, mode, config, progress, timeline)
+    result = run_estimator(log, mode, config, progress, timeline, calibration)
     if not isinstance(result, NavResult):
         raise GtsamDvlError(f"--mode {mode} estimates the calibration only, not a trajectory")
     return result

@@ -156,8 +156,8 @@ def test_unknown_sections_and_keys_still_rejected(tmp_path: Path) -> None:
     assert _error(tmp_path, "[priors]\nscale_sigmaa = 1.0\n").startswith(
         "unknown key 'scale_sigmaa' in [priors] (known: scale_initial, scale_sigma, ")
     assert _error(tmp_path, "[onlin]\nwindow_s = 1.0\n") == (
-        "unknown section [onlin] (known: alignment, current, depth, dvl, ekf, gnss, imu, iodvlc, noise, observability, "
-        "online, priors, solver)")
+        "unknown section [onlin] (known: alignment, calibration, current, depth, dvl, ekf, gnss, imu, iodvlc, noise, "
+        "observability, online, priors, solver)")
     assert _error(tmp_path, "[online.relinearization]\nscales = 1.0\n").startswith(
         "unknown key 'scales' in [online.relinearization] (known: pose, velocity, bias, scale, misalignment_rad)")
     assert _error(tmp_path, "[ekf]\nmin_speed = 1.0\n").startswith("unknown key 'min_speed' in [ekf]")
@@ -394,7 +394,7 @@ FIXTURES = Path(__file__).parent / "config_fixtures"
 # sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting tolerance. A file without them
 # takes their defaults (the fit on, no preset), also a paper configuration's; but a result's config.json without
 # the correlated error takes it as white, as the runs that wrote it did (test below)
-ADDED = {"noise": None, "current": None, "imu": {"model"},
+ADDED = {"noise": None, "current": None, "calibration": None, "imu": {"model"},
          "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
          "priors": {"mounting_tolerance_deg"}, "ekf": {"recentre_time_offset"}}
 

@@ -46,19 +46,28 @@ NEES_EVERY_S = 60.0  # the filters' NEES over time, sampled this often
 
 
 def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tuple[str, ...],
-             config: Mapping[str, Any] | None = None, scenario_name: str = "scenario") -> dict[str, Any]:
+             config: Mapping[str, Any] | None = None, scenario_name: str = "scenario",
+             calibration: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """One Monte Carlo run (module doc). scenario: a scenario dict (the TOML's tables); config: an
-    EstimatorConfig as a dict (None: the configuration the scenario names). Returns plain data (JSON-able)."""
+    EstimatorConfig as a dict (None: the configuration the scenario names); calibration: a vehicle's calibration
+    file's data (app/calibration_files.py calibration_data), every estimator's prior, inflated for the days to the
+    simulated log's date. Returns plain data (JSON-able)."""
     from gtsam_dvl.sim import simulate
     from gtsam_dvl.sim.scenario import scenario_from_dict
 
     sc = scenario_from_dict(dict(scenario), name=scenario_name, source=f"{scenario_name} (seed {seed})")
     log = simulate(sc, int(seed))
     cfg = EstimatorConfig.from_dict(config) if config else sc.estimator_configuration()
+    prior = None
+    if calibration is not None:
+        from gtsam_dvl.app.calibration_files import inflated_for
+        from gtsam_dvl.io.calibration_file import calibration_from_dict
+
+        prior, _ = inflated_for(calibration_from_dict(dict(calibration), "the campaign's calibration"), log, cfg)
     out: dict[str, Any] = {"seed": int(seed), "estimators": {}}
     for name in estimators:
         t0 = time.perf_counter()
-        res = run_trajectory_estimator(log, name, cfg, timeline=False)
+        res = run_trajectory_estimator(log, name, cfg, timeline=False, calibration=prior)
         wall = time.perf_counter() - t0
         out["estimators"][name] = {**run_errors(res, log), "wall_s": wall}
     return out

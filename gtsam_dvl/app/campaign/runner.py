@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gtsam_dvl.app.calibration_files import calibration_data
 from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
 from gtsam_dvl.app.campaign.montecarlo import ESTIMATORS, campaign_statistics, cramer_rao_sigmas, run_seed
 from gtsam_dvl.app.campaign.report import write_report
@@ -29,11 +30,11 @@ FAIL_SEED_ENV = "GTSAM_DVL_MONTECARLO_FAIL_SEED"
 
 
 def _run_task(scenario: dict[str, Any], seed: int, estimators: list[str], config: dict[str, Any] | None,
-              name: str) -> dict[str, Any]:
+              name: str, calibration: dict[str, Any] | None = None) -> dict[str, Any]:
     """The worker's task: one seed (campaign/montecarlo.run_seed)."""
     if os.environ.get(FAIL_SEED_ENV) == str(seed):
         raise RuntimeError(f"{FAIL_SEED_ENV}={seed}: this run fails on purpose")
-    return run_seed(scenario, seed, estimators, config, name)
+    return run_seed(scenario, seed, estimators, config, name, calibration)
 
 
 @dataclass
@@ -53,10 +54,12 @@ def _campaign_record(scenario_name: str, scenario: dict[str, Any], estimators: l
 
 def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir: Path, seed_start: int = 1,
                  scheduler: str | None = None, workers: int | None = None, config_path: Path | None = None,
-                 show_progress: bool = True, scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S) -> CampaignResult:
+                 show_progress: bool = True, scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
+                 calibration_path: Path | None = None) -> CampaignResult:
     """Run (or resume) a campaign of seeds seed_start .. seed_start + runs - 1 (module doc). Nothing is written
     before the Dask client is up: without Dask, or with a scheduler out of reach, a one-line GtsamDvlError and an
-    untouched folder."""
+    untouched folder. calibration_path: a vehicle's calibration file, the prior of every run (shipped as data,
+    recorded in campaign.json)."""
     from gtsam_dvl.app.progress import progress_bar
     from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.io.atomic import atomic_write_json
@@ -72,7 +75,10 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
     sc = load_scenario(scenario)
     # -c: the scenario's [estimator] table below it (None: the scenario's own configuration, in run_seed)
     config = EstimatorConfig.load(config_path, under=sc.estimator).to_dict() if config_path else None
+    calibration = calibration_data(calibration_path) if calibration_path else None
     record = json.loads(json.dumps(_campaign_record(sc.name, sc.raw, estimators, config), default=str))
+    if calibration is not None:  # only then: the records of campaigns without one stay as they were
+        record["calibration"] = json.loads(json.dumps(calibration, default=str))
     out_dir = Path(out_dir)
     runs_dir = out_dir / "runs"
     meta_path = out_dir / "campaign.json"
@@ -94,7 +100,8 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
             if not meta_path.exists():  # the client is up: the campaign starts, its record first
                 atomic_write_json(meta_path, record)
             futures = {client.submit(_run_task, record["scenario"], s, list(estimators), config, sc.name,
-                                     key=f"gtsam-dvl-seed-{sc.name}-{s}", pure=False, retries=1): s for s in todo}
+                                     calibration, key=f"gtsam-dvl-seed-{sc.name}-{s}", pure=False,
+                                     retries=1): s for s in todo}
             crb_future = (client.submit(cramer_rao_sigmas, record["scenario"], config, sc.name, pure=False)
                           if not crb_path.exists() else None)
             with progress_bar(f"montecarlo {sc.name}: {len(todo)} runs", enabled=show_progress) as progress:

@@ -169,11 +169,12 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
 def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
               config_path: Path | None = None, read_options: dict[str, Any] | None = None, wait: bool = False,
               linger: bool = True, echo: Callable[[str], None] = print, layout_path: Path | None = None,
-              ) -> ReplayOutcome:
+              calibration_path: Path | None = None) -> ReplayOutcome:
     """`gtsam-dvl live`: read the log, serve the view on host:port, replay the log through the online estimator at
     speed (parse_speed), print the outcome and the run's health; then, with linger, keep serving until Ctrl-C.
     wait: start the replay only once a client subscribes. layout_path: the layout file written for this run (the
-    console names it; None: it says how to write one). The foxglove package is checked before anything else."""
+    console names it; None: it says how to write one). calibration_path: a vehicle's calibration file as the
+    prior (app/calibration_files.py). The foxglove package is checked before anything else."""
     import_foxglove()
     factor = parse_speed(speed)
     from gtsam_dvl.app.commands import load_log
@@ -185,7 +186,12 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     if config_path:  # the log's scenario's [estimator] table below the -c configuration
         config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
     config = config or EstimatorConfig.for_log(log.metadata)
-    estimator = OnlineEstimator.for_log(log, config)
+    prior = None
+    if calibration_path is not None:  # the vehicle's calibration as the prior, inflated for its age
+        from gtsam_dvl.app.calibration_files import calibration_prior
+
+        prior, _ = calibration_prior(calibration_path, log, config)
+    estimator = OnlineEstimator.for_log(log, config, calibration=prior)
     with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:
         layout = layout_path or "the file that `gtsam-dvl live --layout gtsam_dvl_live.json` writes"
         others = f" (from other machines: {', '.join(view.urls[1:])})" if len(view.urls) > 1 else ""

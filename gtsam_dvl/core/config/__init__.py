@@ -34,6 +34,7 @@ from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
     BadMessages,
     BiasModel,
+    CalibrationConfig,
     DepthConfig,
     DvlConfig,
     EarthModel,
@@ -55,5 +56,5 @@ __all__ = [
     "NAMED_CONFIGS", "AlignmentConfig", "BadMessages", "BiasModel", "ConfigModel", "DepthConfig", "DvlConfig",
     "EarthModel", "EkfConfig", "EstimatorConfig", "GnssConfig", "GnssUse", "ImuConfig", "IodvlcConfig",
     "ObservabilityConfig", "OnlineConfig", "OnlineMode", "PriorConfig", "RelinearizationThresholds", "RobustLoss",
-    "SolverConfig", "estimator_overrides", "recommended_config_name",
+    "SolverConfig", "estimator_overrides", "recommended_config_name", "CalibrationConfig",
 ]

@@ -17,6 +17,7 @@ from gtsam_dvl.core.config.noise import NoiseConfig
 from gtsam_dvl.core.config.presets import DVL_PRESETS
 from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
+    CalibrationConfig,
     DepthConfig,
     DvlConfig,
     EkfConfig,
@@ -63,7 +64,8 @@ def estimator_overrides(metadata: Mapping[str, Any]) -> dict[str, Any]:
 
 class EstimatorConfig(ConfigModel):
     """Every estimator's configuration: the models ([imu], [dvl], [priors], [alignment], [solver]) shared by
-    every estimator, [online] (the iSAM2 estimator), [ekf], [iodvlc], [depth], [gnss] and [observability]."""
+    every estimator, [online] (the iSAM2 estimator), [ekf], [iodvlc], [depth], [gnss], [observability] and
+    [calibration] (a vehicle's calibration file as the prior)."""
 
     imu: ImuConfig = Field(default_factory=ImuConfig)
     dvl: DvlConfig = Field(default_factory=DvlConfig)
@@ -78,6 +80,7 @@ class EstimatorConfig(ConfigModel):
     gnss: GnssConfig = Field(default_factory=GnssConfig)
     noise: NoiseConfig = Field(default_factory=NoiseConfig)
     current: CurrentConfig = Field(default_factory=CurrentConfig)
+    calibration: CalibrationConfig = Field(default_factory=CalibrationConfig)
 
     @model_validator(mode="after")
     def _dvl_scale_accuracy(self) -> Self:

@@ -428,3 +428,19 @@ class ObservabilityConfig(ConfigModel):
     misalignment_deg: Positive = 0.1
     accel_bias_ug: Positive = 25.0
     gyro_bias_deg_per_h: Positive = 0.005
+
+
+class CalibrationConfig(ConfigModel):
+    """A vehicle's calibration file as the prior of a new dive (`smooth --calibration FILE`; TOML section
+    [calibration]), and the verdict on the new estimate against it (analysis/calibration_check.py)."""
+
+    SECTION: ClassVar[str] = "calibration"
+
+    # the file's covariance grows with the days from its date to the dive's: each variance by this fraction of
+    # itself per day, cov * (1 + inflation_per_day * days), correlations kept. 0.01: the variances doubled after
+    # 100 days (sigmas x 1.41), x 4.65 after a year (sigmas x 2.2); 0: the file as written, whatever its age
+    inflation_per_day: NonNegative = 0.01
+    # a state "moved" since the file when the new estimate is beyond this many sigmas of the file's value (sigmas
+    # of what the dive could move it: the file's variance minus the new one); the joint chi^2 test over the file's
+    # states flags the dive at the same tail probability (3: 0.27 % of consistent dives flagged)
+    moved_sigmas: Positive = 3.0

@@ -57,6 +57,8 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.core import states
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EkfConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, normal_gravity
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -160,12 +162,14 @@ class _Earth:
 
 
 def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int,
-                  first: FirstState | None = None) -> FilterState:
+                  first: FirstState | None = None, calibration: VehicleCalibration | None = None) -> FilterState:
     """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance; first: the given
-    attitude and origin carried to the first ping (alignment.first_state), its position and covariance."""
+    attitude and origin carried to the first ping (alignment.first_state), its position and covariance;
+    calibration: the states it holds (states.calibration_states) at its values with its joint covariance."""
     pri = config.priors
-    b_R_d0 = log.mounting.b_R_d0
-    k0 = pri.scale_initial
+    file, held, held_cov = states.calibration_in_layout(config, calibration, ekf_layout(config, N_NAV))
+    b_R_d0 = file.get("misalignment", log.mounting.b_R_d0)
+    k0 = float(file.get("scale", [pri.scale_initial])[0])
     d_y = log.dvl.d_v[ping]
     n_v = n_R_b @ (b_R_d0 @ d_y) / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
     offset = enabled(config, "time_offset")
@@ -184,6 +188,7 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
                 P[rows, cols] = first.cov[r:r + 3, c:c + 3]
     for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
         P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
+    P[np.ix_(held, held)] = held_cov  # a calibration's joint covariance over the states it holds, in their place
     d_e = None
     if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
         P = np.pad(P, ((0, 3), (0, 3)))
@@ -196,7 +201,7 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
         P[m:, m:] = np.eye(2) * config.current.prior_sigma_m_s**2
         n_c = np.zeros(2)
     return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
-                       config.dvl.time_offset_prior_s if offset else 0.0, d_e, n_c)
+                       file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0, d_e, n_c)
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -327,7 +332,7 @@ class _DepthUpdates:
 
 
 def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
-            min_calibration_speed_m_s: float | None = None) -> NavResult:
+            min_calibration_speed_m_s: float | None = None, calibration: VehicleCalibration | None = None) -> NavResult:
     """Filter a whole log: trajectory and calibration at every usable DVL ping, with the filtering history.
 
     Below config.ekf.min_calibration_speed_m_s (or the keyword, which overrides it) or
@@ -339,7 +344,8 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     variance component by covariance matching of the innovations over the warm-up window ([noise] warmup_s), the
     window filtered again with each new fit until it changes by at most [noise] fit_tolerance (a covariance
     matching is only unbiased with the P of the right R: P is computed with the R assumed), at most fit_passes
-    times, then held for the whole log (a real-time filter keeps the window's messages for that)."""
+    times, then held for the whole log (a real-time filter keeps the window's messages for that). calibration: a
+    vehicle's calibration (inflated): the start of the states it holds (initial_state), its offset not recentred."""
     config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
@@ -349,13 +355,14 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
-    recentre = enabled(config, "time_offset") and config.ekf.recentre_time_offset
+    recentre = (enabled(config, "time_offset") and config.ekf.recentre_time_offset
+                and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0])
     offset_info: dict[str, Any] = {}
     if dvl_fit_enabled(config) or recentre:
         n = config.noise
         for k in range(n.fit_passes):
             fit = WarmupFit(config)
-            window = _filter(log, config, None, fit)
+            window = _filter(log, config, None, fit, calibration)
             settled = True
             if dvl_fit_enabled(config):
                 new = fit.finish("covariance matching of the EKF's innovations")
@@ -367,12 +374,14 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                 settled = settled and not moved
             if settled:
                 break
-    result = _filter(log, config, progress)
+    result = _filter(log, config, progress, calibration=calibration)
     result.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
     if offset_info:
         result.info["time_offset_prior"] = offset_info
+    if calibration is not None:
+        result.info["calibration_prior"] = states.calibration_info(config, calibration)
     result.config = stated.to_dict()
     return result
 
@@ -404,8 +413,8 @@ def _recentred_offset(config: EstimatorConfig, window: NavResult, info: dict[str
     return config.model_copy(update={"dvl": dvl.model_copy(update={"time_offset_prior_s": dt})}), moved
 
 
-def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, fit: WarmupFit | None = None
-            ) -> NavResult:
+def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, fit: WarmupFit | None = None,
+            calibration: VehicleCalibration | None = None) -> NavResult:
     """run_ekf at config's noise levels; with fit, only up to its warm-up window's end, the innovations there
     collected into it (the NavResult then holds the window's states)."""
     ekf_cfg = config.ekf
@@ -458,7 +467,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         depth = _DepthUpdates(samples, gaussian_radius(frame.lat0), config.depth.max_time_to_state_s,
                               gate_threshold(ekf_cfg.gate_probability, 1), ekf_cfg.gate_reopen_after,
                               counters=dcounters)
-    fs = initial_state(log, config, alignment.n_R_b, p0, first)
+    fs = initial_state(log, config, alignment.n_R_b, p0, first, calibration)
+    offset_centre = fs.time_offset  # the time offset prior's centre (the configured one, or the calibration's)
     hist = History()
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []  # (t, z, W, its covariance, water)
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
@@ -523,8 +533,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                               nav_over_ground.n_p)
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
         if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
-            prior = config.dvl.time_offset_prior_s
-            dt_c = float(np.clip(fs.time_offset, prior - offset_bound, prior + offset_bound))
+            dt_c = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
             if dt_c != fs.time_offset:  # the window held at the bound: counted, reported (analysis/health.py)
                 counters["time_offset_window_clipped"] = counters.get("time_offset_window_clipped", 0) + 1
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)

@@ -79,13 +79,14 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.states import correlated_error, enabled, water_current
+from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
@@ -133,8 +134,11 @@ class OnlineEstimator:
     estimate (online/offset_windows.py); False keeps them at the prior (to measure what the re-centring gives)."""
 
     def __init__(self, config: EstimatorConfig | None = None, *, frame: LocalFrame, mounting: Mounting | None = None,
-                 options: OnlineConfig | None = None, source: str = "", depth_sensor: Any = None) -> None:
+                 options: OnlineConfig | None = None, source: str = "", depth_sensor: Any = None,
+                 calibration: VehicleCalibration | None = None) -> None:
         config = config or EstimatorConfig()
+        # a vehicle's calibration (inflated for its age): the joint prior of the states it holds (FactorMaker)
+        self.calibration = calibration
         if config.current.water_track == "auto":  # live: water-track pings may come (for_log resolves by the log)
             config = config.model_copy(update={"current": config.current.model_copy(update={"water_track": "use"})})
         self.options = options or config.online  # options=: overrides config.online
@@ -190,7 +194,9 @@ class OnlineEstimator:
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         self._offset = enabled(self.config, "time_offset")
-        self._offset_windows = OffsetWindows(dvl, self.counters)
+        held = calibration.values.get("time_offset") if calibration is not None else None  # centres the windows
+        self._offset_windows = OffsetWindows(dvl if held is None else dvl.model_copy(
+            update={"time_offset_prior_s": float(np.ravel(held)[0])}), self.counters)
         self._flushing = False
         self._depth = DepthQueue(self.config.depth, frame,
                                  None if depth_sensor is None else vector3("depth_sensor", depth_sensor), self._count)
@@ -203,15 +209,17 @@ class OnlineEstimator:
 
     @classmethod
     def for_log(cls, log: LogData, config: EstimatorConfig | None = None,
-                options: OnlineConfig | None = None) -> OnlineEstimator:
+                options: OnlineConfig | None = None, calibration: VehicleCalibration | None = None
+                ) -> OnlineEstimator:
         """An estimator with the map origin and mounting of a log (to replay it). config None: the one the
-        log's scenario names, else the defaults (EstimatorConfig.for_log)."""
+        log's scenario names, else the defaults (EstimatorConfig.for_log). calibration: as in __init__."""
         config = resolve_water_track(config or EstimatorConfig.for_log(log.metadata), log)
         noise = NoiseReport()
         stated = config
         config = imu_levels(log, config, noise)  # the IMU's white noise from the log ([noise])
         est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
-                  source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor)
+                  source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor,
+                  calibration=calibration)
         est.noise.imu = noise.imu
         est.origin_t = origin_fix_time(log, config)
         est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
@@ -342,6 +350,8 @@ class OnlineEstimator:
             "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
                       "variables": n_vars, "factors": n_factors},
         }
+        if self.calibration is not None:
+            info["calibration_prior"] = calibration_info(self.config, self.calibration)
         return NavResult(
             estimator=f"online-{self.options.mode.replace('_', '-')}",
             t=h["t"].copy(), n_p=h["n_p"].copy(), n_R_b=h["n_R_b"].copy(), n_v=h["n_v"].copy(),
@@ -387,7 +397,8 @@ class OnlineEstimator:
         return self._close_ready()
 
     def _start(self, alignment: Alignment) -> None:
-        self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source)
+        self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source,
+                                   calibration=self.calibration)
         window = self.options.window_s if self.options.mode == "fixed_lag" else None
         self.smoother = IncrementalSmoother(self.builder, window, self.options.relinearization)
         self._interval = StatePreintegration(self.builder.make_params, self.config.imu)
@@ -534,11 +545,12 @@ class OnlineEstimator:
 
 def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: str | None = None,
                   window_s: float | None = None, progress: ProgressFn | None = None,
-                  options: OnlineConfig | None = None) -> NavResult:
+                  options: OnlineConfig | None = None, calibration: VehicleCalibration | None = None) -> NavResult:
     """Run the online estimator over a whole log, message by message, and return its NavResult with the
     timeline of filtering sigmas at every epoch. options (default: config.online, TOML section [online]);
     mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
-    scenario names, else the defaults (EstimatorConfig.for_log)."""
+    scenario names, else the defaults (EstimatorConfig.for_log). calibration: a vehicle's calibration, inflated
+    for its age, as the joint prior of the states it holds (core/states.py calibration_prior)."""
     config = config or EstimatorConfig.for_log(log.metadata)
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     options = (options if options is not None else config.online).model_copy()
@@ -547,7 +559,7 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     if window_s is not None:
         options.window_s = window_s
     t_start = time.perf_counter()
-    estimator = OnlineEstimator.for_log(log, config, options)
+    estimator = OnlineEstimator.for_log(log, config, options, calibration)
     feed_log(estimator, log, progress)
     result = estimator.result(log.t0_ns)
     total = time.perf_counter() - t_start
