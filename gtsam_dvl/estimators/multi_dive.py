@@ -437,6 +437,7 @@ class DiveSummary:
     alone_cov: np.ndarray  # the joint covariance of `states` alone (SI, `states` order)
     t0_ns: int
     info: dict[str, Any]
+    stated_config: dict[str, Any] = field(default_factory=dict)  # the configuration as given (NavResult.config)
 
 
 def summarise(dive: DiveState) -> DiveSummary:
@@ -447,7 +448,7 @@ def summarise(dive: DiveState) -> DiveSummary:
     cov = np.asarray(result.shared_joint_cov)[np.ix_(idx, idx)]
     return DiveSummary(dive.name, list(dive.states), dive.config, dive.mounting, dict(result.calibration), cov,
                        int(result.t0_ns), {"epochs": result.info.get("epochs"), "noise": result.info.get("noise"),
-                                           "solver": result.info.get("solver")})
+                                           "solver": result.info.get("solver")}, dict(result.config))
 
 
 # ----- the independent check: every dive in one graph ---------------------------------------------------------

@@ -46,6 +46,15 @@ def test_calibrate_writes_the_file_reports_the_bad_dive_and_the_moved_scale(dive
     assert cal.method == "calibrate" and cal.vehicle == "auv-7" and cal.states == ("scale", "misalignment")
     assert [Path(s.path).name for s in cal.sources] == ["dive1.mcap", "dive2.mcap"]
     assert all(len(s.sha256) == 64 for s in cal.sources)
+    # the hash of the configuration as smooth records it (so that `smooth --calibration` recognises it)
+    from gtsam_dvl.core.calibration import config_hash
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.estimators.current import resolve_water_track
+    from gtsam_dvl.io.reader import read_log
+
+    log = read_log(dives["logs"][0])
+    stated = resolve_water_track(EstimatorConfig.for_log(log.metadata).validate(), log)
+    assert cal.config_hash == config_hash(stated.to_dict())
     # the joint scale between the dives' (0.9998 and 1.0198), its sigma about 1/sqrt(2) of one dive's
     fleet = json.loads((d / "fleet" / "calibration-fleet.json").read_text())
     rows = {Path(r["log"]).name: r for r in fleet["dives"]}

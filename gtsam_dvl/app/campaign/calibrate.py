@@ -283,7 +283,7 @@ def calibrate_logs(logs: list[Path], output: Path | None = None, config_path: Pa
         vehicle=vehicle, date=iso_date(max(s.t0_ns for s in summaries)), states=tuple(solution.states),
         values={n: np.asarray(v, dtype=float) for n, v in solution.values.items()}, cov=solution.cov,
         sources=tuple(SourceLog(s.name, _sha256(s.name)) for s in summaries),
-        config_hash=config_hash(summaries[0].config.to_dict()), method="calibrate",
+        config_hash=config_hash(summaries[0].stated_config or summaries[0].config.to_dict()), method="calibrate",
         notes={"dives": len(summaries), "iterations": solution.iterations, "converged": solution.converged})
     if output is not None:
         from gtsam_dvl.io.calibration_file import write_calibration
