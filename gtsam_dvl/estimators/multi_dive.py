@@ -39,11 +39,21 @@ import gtsam
 import numpy as np
 from scipy.linalg import solve_triangular
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import key_dim
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import BY_NAME, Estimate, enabled_states, joint_slices, prior_factors, read_values
+from gtsam_dvl.core.states import (
+    BY_NAME,
+    Estimate,
+    calibration_info,
+    enabled_states,
+    joint_slices,
+    prior_factors,
+    read_values,
+)
+from gtsam_dvl.core.states import calibration_states as states_held
 from gtsam_dvl.core.types import LogData, Mounting
 from gtsam_dvl.estimators.batch import extract_result, fit_dvl_noise, solve_graph
 from gtsam_dvl.estimators.bulk import BulkGraph
@@ -59,9 +69,12 @@ TOL = 1e-2  # stop when every |ds_i| < TOL sigma_i
 MAX_ITERATIONS = 20
 
 
-def calibration_states(config: EstimatorConfig) -> list[str]:
-    """The vehicle's calibration states the dives share, in registry (= key, = covariance) order."""
-    return [s.name for s in enabled_states(config) if s.vehicle and s.name not in PER_DIVE]
+def calibration_states(config: EstimatorConfig, calibration: VehicleCalibration | None = None) -> list[str]:
+    """The vehicle's calibration states the dives share, in registry (= key, = covariance) order: the vehicle's
+    states the configuration estimates but the time offset, and with a vehicle's calibration as the prior
+    (core/states.py calibration_states) every state it holds, the time offset too (one joint prior)."""
+    held = {s.name for s in states_held(config, calibration)}
+    return [s.name for s in enabled_states(config) if (s.vehicle and s.name not in PER_DIVE) or s.name in held]
 
 
 def state_keys(names: Sequence[str]) -> list[int]:
@@ -103,6 +116,7 @@ class DiveState:
     # the states' keys in chunks (estimators/graph.py elimination_ordering) and the dive's own shared keys after
     plan: ChunkedOrdering = field(default_factory=lambda: ChunkedOrdering([], []), repr=False)
     bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = field(default=None, repr=False)
+    calibration: VehicleCalibration | None = field(default=None, repr=False)  # the prior (prepare_dive)
 
     @property
     def config(self) -> EstimatorConfig:
@@ -113,16 +127,18 @@ class DiveState:
         return self.builder.maker.mounting
 
 
-def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str = "") -> DiveState:
+def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str = "",
+                 calibration: VehicleCalibration | None = None) -> DiveState:
     """A dive smoothed alone as the batch smoother does (its passes and DVL noise fit, estimators/batch.py), then
-    its graph without the priors of the shared states, ready for the joint iterations."""
+    its graph without the priors of the shared states, ready for the joint iterations. calibration: a vehicle's
+    calibration as the joint prior of the states it holds (batch.smooth_batch's), counted once by the caller."""
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     config = resolve_water_track(config, log)  # (the steps of batch.smooth_batch, in its order)
     stated = config
     noise = NoiseReport()
     log = screened_in_memory(log)
     config = imu_levels(log, config, noise)
-    builder = LogGraph(log, config)
+    builder = LogGraph(log, config, calibration=calibration)
     bulk, values = builder.build_bulk()
     ordering = builder.elimination_ordering()
     graph, values, report, passes = solve_graph(builder, bulk, values, ordering)
@@ -136,13 +152,15 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     alone.config = stated.to_dict()
     if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
         raise GtsamDvlError("prepare_dive: the batch smoother's bulk graph expected")
-    names = calibration_states(builder.config)
+    if calibration is not None:
+        alone.info["calibration_prior"] = calibration_info(builder.config, calibration)
+    names = calibration_states(builder.config, calibration)
     keys = state_keys(names)
     without = gtsam.NonlinearFactorGraph()  # the graph without the shared states' priors (the joint holds them)
     for i in range(graph.graph.size()):
         if graph.graph.exists(i):
             f = graph.graph.at(i)
-            if not (len(f.keys()) == 1 and f.keys()[0] in keys):
+            if not all(k in keys for k in f.keys()):  # (a factor on shared keys alone: their prior)
                 without.add(f)
     own = gtsam.Ordering()
     for k in [k for chunk in ordering.chunks for k in chunk] + [k for k in ordering.rest if k not in keys]:
@@ -151,7 +169,8 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     for k in keys:
         shared.push_back(k)
     return DiveState(name or log.source, builder, BulkGraph(without, graph.bulk, graph.imu), values, names, own,
-                     shared, alone, ChunkedOrdering(ordering.chunks, [k for k in ordering.rest if k not in keys]))
+                     shared, alone, ChunkedOrdering(ordering.chunks, [k for k in ordering.rest if k not in keys]),
+                     calibration=calibration)
 
 
 def own_keys(dive: DiveState) -> list[int]:
@@ -278,12 +297,14 @@ def advance_dive(dive: DiveState, ds: np.ndarray, new_shared: dict[str, np.ndarr
 
 # ----- the caller's side: the shared priors, the joint solve, the iterations -----------------------------------
 
-def shared_prior_graph(config: EstimatorConfig, mounting: Mounting, names: Sequence[str]) -> gtsam.NonlinearFactorGraph:
-    """The priors of the shared states (core/states.py prior_factors), once for all dives."""
+def shared_prior_graph(config: EstimatorConfig, mounting: Mounting, names: Sequence[str],
+                       calibration: VehicleCalibration | None = None) -> gtsam.NonlinearFactorGraph:
+    """The priors of the shared states (core/states.py prior_factors: with a vehicle's calibration, its one joint
+    prior), once for all dives."""
     keys = set(state_keys(names))
     graph = gtsam.NonlinearFactorGraph()
-    for f in prior_factors(config, mounting):
-        if len(f.keys()) == 1 and f.keys()[0] in keys:
+    for f in prior_factors(config, mounting, calibration):
+        if all(k in keys for k in f.keys()):
             graph.add(f)
     return graph
 
@@ -421,7 +442,8 @@ def joint_setup(dives: Sequence[DiveState] | Sequence[DiveSummary]
                                 "one vehicle's dives share one mounting")
     best = min(summaries, key=lambda s: float(s.alone["scale"].sigma[0]) if "scale" in s.alone else 0.0)
     start = {n: np.asarray(best.alone[n].value, dtype=float) for n in first.states}
-    return list(first.states), start, shared_prior_graph(first.config, first.mounting, first.states)
+    return list(first.states), start, shared_prior_graph(first.config, first.mounting, first.states,
+                                                         first.calibration)
 
 
 @dataclass
@@ -438,6 +460,7 @@ class DiveSummary:
     t0_ns: int
     info: dict[str, Any]
     stated_config: dict[str, Any] = field(default_factory=dict)  # the configuration as given (NavResult.config)
+    calibration: VehicleCalibration | None = None  # a vehicle's calibration as the prior (prepare_dive)
 
 
 def summarise(dive: DiveState) -> DiveSummary:
@@ -448,13 +471,15 @@ def summarise(dive: DiveState) -> DiveSummary:
     cov = np.asarray(result.shared_joint_cov)[np.ix_(idx, idx)]
     return DiveSummary(dive.name, list(dive.states), dive.config, dive.mounting, dict(result.calibration), cov,
                        int(result.t0_ns), {"epochs": result.info.get("epochs"), "noise": result.info.get("noise"),
-                                           "solver": result.info.get("solver")}, dict(result.config))
+                                           "solver": result.info.get("solver")}, dict(result.config),
+                       dive.calibration)
 
 
 # ----- the independent check: every dive in one graph ---------------------------------------------------------
 
-class _Rows:
-    """A renamed linear factor's callback: the whitened rows A dx - b as a CustomFactor returns them."""
+class Rows:
+    """Fixed whitened rows A dx - b as a CustomFactor serves them: a linear factor on any number of keys (GTSAM's
+    Python JacobianFactor takes at most three)."""
 
     __slots__ = ("blocks", "e")
 
@@ -484,7 +509,7 @@ def renamed(linear: gtsam.GaussianFactorGraph, rename: Callable[[int], int]
         new = [rename(k) for k in old]
         keys.update(new)
         carriers.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(A.shape[0]), new,
-                                        _Rows([A[:, cols[j]:cols[j + 1]] for j in range(len(old))], np.ravel(b))))
+                                        Rows([A[:, cols[j]:cols[j + 1]] for j in range(len(old))], np.ravel(b))))
     at = gtsam.Values()
     for k in keys:
         at.insert(k, np.zeros(key_dim(k)))

@@ -27,6 +27,7 @@ from typing import Any
 import gtsam
 import numpy as np
 
+from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
@@ -36,10 +37,10 @@ from gtsam_dvl.estimators.batch import extract_result
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.gaps import find_gaps
 from gtsam_dvl.estimators.multi_dive import (
-    BY_NAME,
     DiveState,
     JointSolution,
     Reduction,
+    Rows,
     calibrate_in_process,
     prepare_dive,
     state_keys,
@@ -133,35 +134,21 @@ def _piece_config(config: EstimatorConfig, sigma_m: float) -> EstimatorConfig:
     return EstimatorConfig.from_dict(d)
 
 
-def _linear_prior(parts: list[Reduction], names: list[str], values: gtsam.Values) -> gtsam.NonlinearFactor:
-    """The stacked square-root rows [R | d] on the shared keys as a factor linearised at values (the other pieces'
-    and the priors' information for one piece's marginals)."""
+def _linear_prior(parts: list[Reduction], names: list[str]) -> gtsam.NonlinearFactor:
+    """The stacked square-root rows [R | d] on the shared keys as a factor whose linearisation they are (the other
+    pieces' and the priors' information, for one piece's marginals at its values; GTSAM's Python JacobianFactor
+    takes at most three keys, the shared states may be four)."""
     R = np.vstack([p.R for p in parts])
     d = np.concatenate([p.d for p in parts])
-    keys = state_keys(names)
     sl = state_slices(names)
-    blocks = [R[:, sl[n]] for n in names]
-    model = gtsam.noiseModel.Unit.Create(R.shape[0])
-    if len(keys) == 1:
-        jf = gtsam.JacobianFactor(keys[0], blocks[0], d, model)
-    elif len(keys) == 2:
-        jf = gtsam.JacobianFactor(keys[0], blocks[0], keys[1], blocks[1], d, model)
-    else:
-        jf = gtsam.JacobianFactor(keys[0], blocks[0], keys[1], blocks[1], keys[2], blocks[2], d, model)
-    lin = gtsam.Values()
-    for n in names:
-        k = BY_NAME[n].key
-        if BY_NAME[n].kind == "rot3":
-            lin.insert(k, values.atRot3(k))
-        else:
-            lin.insert(k, values.atVector(k))
-    return gtsam.LinearContainerFactor(jf, lin)
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(R.shape[0]), state_keys(names),
+                              Rows([R[:, sl[n]] for n in names], d))
 
 
 def _piece_result(dive: DiveState, others: list[Reduction]) -> NavResult:
     graph = gtsam.NonlinearFactorGraph()
     graph.push_back(dive.graph.graph)
-    graph.add(_linear_prior(others, dive.states, dive.values))
+    graph.add(_linear_prior(others, dive.states))
     full = BulkGraph(graph, dive.graph.bulk, dive.graph.imu)
     result = extract_result(dive.builder, full, dive.values, dive.builder.elimination_ordering())
     result.info["noise"] = dive.alone.info.get("noise")
@@ -169,8 +156,10 @@ def _piece_result(dive: DiveState, others: list[Reduction]) -> NavResult:
 
 
 def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float, float]],
-                  progress: ProgressFn | None = None, estimator: str = "batch") -> NavResult:
-    """Smooth a log cut at its long IMU gaps (module doc)."""
+                  progress: ProgressFn | None = None, estimator: str = "batch",
+                  calibration: VehicleCalibration | None = None) -> NavResult:
+    """Smooth a log cut at its long IMU gaps (module doc). calibration: a vehicle's calibration as the joint prior
+    of the states it holds (batch.smooth_batch's), which the pieces then share."""
     t0 = time.perf_counter()
     pieces = cut_log(log, gaps)
     dives: list[DiveState] = []
@@ -184,7 +173,7 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
                 piece.imu) else 0.0
             cfg = _piece_config(config, DEAD_RECKONING_M + DEAD_RECKONING_FRACTION * distance)
         try:
-            dives.append(prepare_dive(piece, cfg, name=piece.source))
+            dives.append(prepare_dive(piece, cfg, name=piece.source, calibration=calibration))
             kept.append(k)
         except GtsamDvlError as exc:
             if k == 0:  # the piece that holds the log's start (its map origin and alignment): no result without it
@@ -209,6 +198,8 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
     # the breaks between the pieces kept: from the last IMU sample of one to the first of the next
     breaks = [(float(pieces[a].imu.t[-1]), float(pieces[b].imu.t[0])) for a, b in zip(kept, kept[1:], strict=False)]
     out = _joined(results, dives, solution, breaks, estimator)
+    if calibration is not None:
+        out.info["calibration_prior"] = dives[0].alone.info.get("calibration_prior")
     if left_out:
         out.info["pieces_left_out"] = left_out
     out.timing_s = {"total": time.perf_counter() - t0}

@@ -75,6 +75,17 @@ def test_a_30s_imu_gap_in_a_turn_smooths_as_two_pieces(sim_paper3d_short: LogDat
         stamps = [m.log_time for _, ch, m in make_reader(f).iter_messages(topics=["/gtsam_dvl/path"])]
     assert len(stamps) == 2
     assert stamps[0] == result.t0_ns + round(result.t[k - 1] * 1e9)
+    # with a vehicle's calibration as the prior (smooth --calibration): held once by the joint, not once per piece
+    from gtsam_dvl.core.calibration import VehicleCalibration
+
+    cov = np.diag([8e-4**2, *np.radians([0.3, 0.1, 0.1]) ** 2])
+    cal = VehicleCalibration("auv", "2026-11-02T00:00:00Z", ("scale", "misalignment"),
+                             {"scale": np.array([truth.scale]), "misalignment": b_R_d}, cov)
+    with_file = smooth_batch(log, calibration=cal)
+    assert with_file.info["calibration_prior"] and len(with_file.info["pieces"]) == 2
+    # the scale's information: the file's plus the pieces' (the paper's prior, 0.5, adds nothing)
+    expected = 1 / np.sqrt(1 / 8e-4**2 + 1 / result.scale_sigma**2)
+    assert with_file.scale_sigma == pytest.approx(expected, rel=0.05)
 
 
 def test_across_gap_is_the_chord_of_a_constant_rate_turn() -> None:
