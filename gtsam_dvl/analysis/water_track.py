@@ -99,6 +99,9 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     wt = on_water & seen
     if wt.any():
         r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
+        if (k_w := result.calibration.get("water_scale")) is not None:  # their own scale: y - (k_w / k) h_water
+            y = np.asarray(dvl.d_v[idx[wt]], dtype=float)
+            r_w = y - (y - r_w) * float(k_w.value[0]) / float(result.scale)
         cov = water_covariance(config, dvl.d_cov[idx[wt]]) + cov_c[wt]
         chi2 = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov, r_w[..., None])[..., 0])
         rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))

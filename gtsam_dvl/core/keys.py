@@ -7,7 +7,8 @@ error (m/s, dvl_link; only when the configuration models it), W(i) the horizonta
 (core/states.py names what each is, its prior and units): K_SCALE the DVL scale factor (a 1-vector),
 C_MISALIGN the calibrated DVL mounting b_R_d (Rot3, perturbed on the right), T_OFFSET the DVL-IMU time offset
 dt_d (a 1-vector, s; only with [dvl] estimate_time_offset), L_LEVER the lever arm b_l from the IMU to the DVL
-(a 3-vector in base_link, m; only with [dvl] estimate_lever_arm).
+(a 3-vector in base_link, m; only with [dvl] estimate_lever_arm), K_WATER the water-track pings' own scale factor
+(a 1-vector; only with [current] water_track_scale and water-track pings used).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ K_SCALE = shared_key("k", 1)
 C_MISALIGN = shared_key("c", 3)
 T_OFFSET = shared_key("t", 1)  # DVL-IMU time offset dt_d, s (a 1-vector; docs/conventions.md)
 L_LEVER = shared_key("l", 3)  # lever arm b_l IMU -> DVL, m, base_link (a 3-vector)
+K_WATER = shared_key("q", 1)  # the water-track pings' own scale factor (a 1-vector; [current] water_track_scale)
 
 
 def X(i: int) -> int:

@@ -30,7 +30,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig, ObservabilityConfig, RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, W, X, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, K_WATER, L_LEVER, T_OFFSET, B, E, V, W, X, key_dim
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
@@ -109,8 +109,8 @@ class SharedState:
     # the online estimator's iSAM2 relinearises it past these (per tangent component); None: not estimated online
     relinearization: Callable[[RelinearizationThresholds], np.ndarray] | None = None
     # a variable of the DVL factor (factors/dvl.py): "ping" of every one, "motion" of a ping seen through the IMU
-    # motion from a keyframe (the IMU biases), "" of none
-    dvl: Literal["ping", "motion", ""] = ""
+    # motion from a keyframe (the IMU biases), "water" of a water-track ping in place of the scale, "" of none
+    dvl: Literal["ping", "motion", "water", ""] = ""
 
     def key_at(self, i: int, config: EstimatorConfig) -> int:
         """Its variable's key at state i (the shared key unless per_state)."""
@@ -195,6 +195,13 @@ STATES: tuple[SharedState, ...] = (
         prior=lambda c, m: Prior(np.asarray(m.b_l, dtype=float), np.array([c.dvl.lever_arm_sigma_m] * 3)),
         target=None, vehicle=True, components=_BODY_AXES, enabled=lambda c: c.dvl.estimate_lever_arm, ekf=False,
         dvl="ping"),
+    SharedState(
+        "water_scale", "DVL water-track scale factor", K_WATER, "vector", 1, "1", "ppm", 1e6,
+        # the scale's prior, and a link to the scale: k_w - k ~ N(0, (water_track_scale_sigma k_0)^2) (prior_factors)
+        prior=lambda c, m: Prior(np.array([c.priors.scale_initial]), np.array([c.priors.scale_sigma])),
+        target=None, vehicle=True, components=(("", ""),),
+        enabled=lambda c: c.current.water_track_scale and c.current.water_track == "use", ekf=False,
+        relinearization=lambda th: np.array([th.scale]), dvl="water"),
 )
 BY_NAME: dict[str, SharedState] = {s.name: s for s in STATES}
 
@@ -263,17 +270,28 @@ def shared_keys(config: EstimatorConfig, i: int = 0, per_state: bool = True, blo
                    if (per_state or not s.per_state(config)) and (s.in_block or not block))
 
 
-def dvl_factor_keys(config: EstimatorConfig, i: int, motion: bool = False, water: bool = False) -> list[int]:
+def dvl_factor_keys(config: EstimatorConfig, i: int, motion: bool = False, water: bool = False,
+                    swap_scale: bool = True) -> list[int]:
     """The keys of a DVL factor on state i, in the order of its variables (factors/dvl.py DvlOptions.key_names):
     X(i), V(i), then the keys of the enabled states it reads (SharedState.dvl) in registry order: the IMU bias with
     motion (a ping seen through the IMU motion from state i), the scale, the misalignment, the time offset and the
     lever arm when estimated; then the DVL's correlated error E(i) when the configuration models it
     (correlated_error); last, the water current W(i) of a water-track ping (water) when the configuration uses
-    them (water_current)."""
+    them (water_current). A water-track ping reads the water-track scale K_WATER in the scale's place when the
+    configuration estimates it (swap_scale; the batch smoother's bulk rows keep both, water_scale_key)."""
     wanted = ("ping", "motion") if motion else ("ping",)
     keys = [X(i), V(i)] + _unique(s.key_at(i, config) for s in enabled_states(config) if s.dvl in wanted)
     keys += [E(i)] if correlated_error(config) else []
-    return keys + [W(i)] if water and water_current(config) else keys
+    if not (water and water_current(config)):
+        return keys
+    if swap_scale and enabled(config, "water_scale"):
+        keys[keys.index(K_SCALE)] = K_WATER
+    return keys + [W(i)]
+
+
+def water_scale_key(config: EstimatorConfig) -> int | None:
+    """K_WATER when the configuration gives water-track pings their own scale factor, else None."""
+    return K_WATER if enabled(config, "water_scale") else None
 
 
 def water_current(config: EstimatorConfig) -> bool:
@@ -366,6 +384,15 @@ def prior_factors(config: EstimatorConfig, mounting: Mounting, calibration: Vehi
             out.append(gtsam.PriorFactorConstantBias(key, gtsam.imuBias.ConstantBias(value[:3], value[3:]), noise))
         else:
             out.append(gtsam.PriorFactorVector(key, value, noise))
+    if enabled(config, "water_scale"):  # the water-track scale differs from the bottom track's by a fraction
+        k0 = config.priors.scale_initial
+        s = config.current.water_track_scale_sigma * k0
+        link = gtsam.JacobianFactor(K_WATER, np.array([[1.0 / s]]), K_SCALE, np.array([[-1.0 / s]]), np.zeros(1),
+                                    gtsam.noiseModel.Unit.Create(1))
+        at = gtsam.Values()
+        at.insert(K_WATER, np.array([k0]))
+        at.insert(K_SCALE, np.array([k0]))
+        out.append(gtsam.LinearContainerFactor(link, at))  # (linear in the two scales: exact)
     joint = calibration_prior(config, calibration)
     return out if joint is None else out + [joint]
 

@@ -40,7 +40,14 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import E, W, key_dim
-from gtsam_dvl.core.states import correlated_error, dvl_factor_keys, enabled, read_values, water_current
+from gtsam_dvl.core.states import (
+    correlated_error,
+    dvl_factor_keys,
+    enabled,
+    read_values,
+    water_current,
+    water_scale_key,
+)
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
 from gtsam_dvl.estimators.factor_maker import FactorMaker
@@ -172,6 +179,12 @@ class BulkDvl:
         n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d, b_l = self._ping_states(
             values, self.states(values) if states is None else states)
         d_e = self._correlated_errors(values)  # (N, 3) the rows' correlated DVL error E(state), or None
+        # the water-track rows' own scale (water_scale): h and every Jacobian but the scale's are linear in k, so
+        # those rows are evaluated at k and taken times k_w / k; their scale Jacobian goes to K_WATER
+        k_water = water_scale_key(self.config)
+        ratio = None
+        if k_water is not None and self.water is not None:
+            ratio = float(values.atVector(k_water)[0]) / k
         n_c = self._currents(values)  # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
         if n_c is not None:  # the velocity relative to the water (factors/dvl.py current_variable)
             n_v_i = n_v_i - n_c
@@ -181,6 +194,11 @@ class BulkDvl:
             sl = slice(a, a + CHUNK)
             e, J = dvl_ping_errors(self.pings.part(sl), n_R_i[sl], n_p_i[sl], n_v_i[sl], b_a[sl], b_g[sl], k, b_R_d,
                                    b_l, dt_d, self.offset_n_g, self.lever, jacobians)
+            on_water = None
+            if ratio is not None:
+                assert self.water is not None
+                on_water = self.water[sl]
+                e = np.where(on_water[:, None], (e + self.pings.y[sl]) * ratio - self.pings.y[sl], e)
             if d_e is not None:  # h + E (a beam: d_u . E)
                 e = e + (d_e[sl] if d_u is None else np.einsum("ni,ni->n", d_u[sl], d_e[sl])[:, None])
             W = self.whiten[sl]
@@ -188,12 +206,21 @@ class BulkDvl:
             if jacobians:
                 assert J is not None and out is not None
                 blocks = J.variables()
+                if on_water is not None:
+                    w3 = on_water[:, None, None]
+                    i_scale = next(n for n, B in enumerate(blocks) if B is J.scale)
+                    blocks = [B if n == i_scale else np.where(w3, B * ratio, B) for n, B in enumerate(blocks)]
+                    scale_block = blocks[i_scale]
+                    blocks[i_scale] = np.where(w3, 0.0, scale_block)
                 if d_e is not None:  # dh/dE: I, or a beam's d_u^T
                     blocks = [*blocks, np.broadcast_to(np.eye(3), (len(e), 3, 3)) if d_u is None
                               else d_u[sl][:, None, :]]
                 if n_c is not None:  # dh/dW: minus the velocity's east and north columns, on water-track rows
                     on = np.zeros(len(e), dtype=bool) if self.water is None else self.water[sl]
-                    blocks = [*blocks, np.where(on[:, None, None], -J.vel[:, :, :2], 0.0)]
+                    blocks = [*blocks, np.where(on[:, None, None], -J.vel[:, :, :2] * (1.0 if ratio is None
+                                                                                      else ratio), 0.0)]
+                if on_water is not None:  # dh/dk_w on the water-track rows
+                    blocks = [*blocks, np.where(on_water[:, None, None], scale_block, 0.0)]
                 for dst, B in zip(out, blocks, strict=True):
                     np.matmul(W, B, out=dst[sl])
         return ew
@@ -248,13 +275,20 @@ class BulkDvl:
         ew = self._evaluate(values, False, states=states)
         return float(self._weights_and_losses(ew)[1].sum())
 
+    def _keys(self, s: int) -> list[int]:
+        """The carrier's keys of state s: the DVL factor's, with W(s) (its Jacobian 0 on bottom-track rows) and the
+        water-track scale K_WATER last when estimated (the rows' scale Jacobian on K or on K_WATER by their mode)."""
+        keys = dvl_factor_keys(self.config, s, motion=True, water=True, swap_scale=False)
+        k_water = water_scale_key(self.config)
+        return keys if k_water is None else [*keys, k_water]
+
     def carriers(self) -> gtsam.NonlinearFactorGraph:
         """One carrier CustomFactor per state with pings (module doc), for linearize."""
         graph = gtsam.NonlinearFactorGraph()
         for s in range(self.n_states):
             lo, hi = int(self._bounds[s]), int(self._bounds[s + 1])
             if hi > lo:
-                keys = dvl_factor_keys(self.config, s, motion=True, water=True)  # (W(s) on bottom-track rows: 0)
+                keys = self._keys(s)
                 graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(self.pings.dim * (hi - lo)), keys,
                                              _Carrier(self._served, lo, hi)))
         return graph
@@ -263,7 +297,7 @@ class BulkDvl:
         """Compute the rows the carriers serve: whitened Jacobians and errors, reweighted by the robust kernel
         (GTSAM's Robust noise model: both scaled by sqrt(weight(|whitened error|)))."""
         n = len(self)
-        dims = [key_dim(k) for k in dvl_factor_keys(self.config, 0, motion=True, water=True)]
+        dims = [key_dim(k) for k in self._keys(0)]
         served = self._served
         if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # (released after each linearisation)
             served.blocks = [np.empty((n, self.pings.dim, d)) for d in dims]

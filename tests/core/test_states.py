@@ -13,7 +13,7 @@ import pytest
 from gtsam_dvl.core import states
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, B, E, V, X, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, K_WATER, L_LEVER, T_OFFSET, B, E, V, X, key_dim
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
@@ -31,6 +31,7 @@ EXPECTED = {  # name: key, dimension, unit, display unit, display per unit, vehi
     "misalignment": (C_MISALIGN, 3, "rad", "deg", 180.0 / np.pi, True),
     "time_offset": (T_OFFSET, 1, "s", "ms", 1e3, True),
     "lever_arm": (L_LEVER, 3, "m", "m", 1.0, True),
+    "water_scale": (K_WATER, 1, "1", "ppm", 1e6, True),
 }
 
 
@@ -51,9 +52,9 @@ CONFIGS = [(o, lv) for o in (False, True) for lv in (False, True)]
 
 
 def _names(cfg: EstimatorConfig) -> list[str]:
-    return [n for n in EXPECTED if n not in ("time_offset", "lever_arm")
+    return [n for n in EXPECTED if n not in ("time_offset", "lever_arm", "water_scale")
             or (n == "time_offset" and cfg.dvl.estimate_time_offset)
-            or (n == "lever_arm" and cfg.dvl.estimate_lever_arm)]
+            or (n == "lever_arm" and cfg.dvl.estimate_lever_arm)]  # (water_scale: test_water_track_scale_link)
 
 
 def _keys(cfg: EstimatorConfig) -> list[int]:
@@ -93,7 +94,8 @@ def test_priors_and_targets_from_the_configuration() -> None:
     np.testing.assert_array_equal(p["lever_arm"].cov, np.eye(3) * 0.4**2)
     shown = {s.name: s.prior_display_sigma(cfg).tolist() for s in states.STATES}
     assert shown == {"gyro_bias": [0.03] * 3, "accel_bias": [70.0] * 3, "scale": [0.2e6],
-                     "misalignment": [1.0, 2.0, 3.0], "time_offset": [700.0], "lever_arm": [0.4] * 3}
+                     "misalignment": [1.0, 2.0, 3.0], "time_offset": [700.0], "lever_arm": [0.4] * 3,
+                     "water_scale": [0.2e6]}  # the scale's, and linked to it (test_water_track_scale_link)
     targets = {s.name: s.target(cfg.observability) for s in states.STATES if s.target is not None}
     assert targets == {"gyro_bias": 0.002, "accel_bias": 11.0, "scale": 500.0, "misalignment": 0.2}
 
@@ -196,3 +198,19 @@ def test_values_read_back_by_state() -> None:
     np.testing.assert_array_equal(est["gyro_bias"].cov, np.diag([4.0, 5.0, 6.0]))
     np.testing.assert_array_equal(est["time_offset"].value, [0.25])
     np.testing.assert_array_equal(est["lever_arm"].sigma, np.sqrt([1.0, 2.0, 3.0]))
+
+
+def test_water_track_scale_link() -> None:
+    """[current] water_track_scale: the water-track scale K_WATER a state (only with water-track pings used), its
+    prior the scale's and a link k_w - k ~ N(0, (sigma k_0)^2) among the priors: 0.5 ((k_w - k) / (sigma k_0))^2."""
+    cfg = EstimatorConfig.from_dict({"priors": {"scale_initial": 0.9, "scale_sigma": 0.2},
+                                     "current": {"water_track": "use", "water_track_scale": True,
+                                                 "water_track_scale_sigma": 0.02}})
+    assert states.enabled(cfg, "water_scale") and not states.enabled(EstimatorConfig(), "water_scale")
+    factors = states.prior_factors(cfg, MOUNTING)
+    links = [f for f in factors if set(f.keys()) == {K_WATER, K_SCALE}]
+    assert len(links) == 1
+    values = states.initial_values(cfg, MOUNTING)
+    values.update(K_WATER, np.array([0.93]))
+    values.update(K_SCALE, np.array([0.91]))
+    assert links[0].error(values) == pytest.approx(0.5 * (0.02 / (0.02 * 0.9)) ** 2)

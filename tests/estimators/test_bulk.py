@@ -16,7 +16,7 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, L_LEVER, T_OFFSET, E, key_dim
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, K_WATER, L_LEVER, T_OFFSET, E, W, key_dim
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
@@ -57,10 +57,20 @@ def configs() -> dict[str, EstimatorConfig]:
             "dvl": paper.dvl.model_copy(update={"use_beams": True, "estimate_lever_arm": True})}),
         "offset-lever": default.model_copy(update={"dvl": default.dvl.model_copy(update={"estimate_lever_arm": True})}),
         # the DVL's correlated error E(i) a variable of every DVL factor (estimators/correlated.py; with beams:
-        # its Jacobian d_u^T, tests/factors/test_dvl.py)
-        "correlated": default.model_copy(update={"dvl": default.dvl.model_copy(update={
-            "correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0})}),
+        # its Jacobian d_u^T, tests/factors/test_dvl.py); with water-track pings (run on water_log): the current
+        # W(i) and the water-track scale K_WATER (estimators/current.py)
+        "correlated-water-scale": default.model_copy(update={
+            "dvl": default.dvl.model_copy(update={"correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0}),
+            "current": default.current.model_copy(update={"water_track": "use", "water_track_scale": True})}),
     }
+
+
+@cache
+def water_log() -> LogData:
+    """run_log with its pings from 150 to 250 s marked water track (the comparison needs no physics)."""
+    log = run_log()
+    water = (log.dvl.t > 150.0) & (log.dvl.t < 250.0)
+    return dataclasses.replace(log, dvl=dataclasses.replace(log.dvl, water_track=water))
 
 
 def perturbed(values: gtsam.Values, rng: np.random.Generator) -> gtsam.Values:
@@ -76,6 +86,12 @@ def perturbed(values: gtsam.Values, rng: np.random.Generator) -> gtsam.Values:
     while values.exists(E(i)):
         out.update(E(i), rng.normal(0, 0.002, 3))
         i += 1
+    i = 0
+    while values.exists(W(i)):
+        out.update(W(i), rng.normal(0, 0.3, 2))
+        i += 1
+    if values.exists(K_WATER):
+        out.update(K_WATER, np.array([values.atVector(K_WATER)[0] - 0.006]))
     return out
 
 
@@ -129,7 +145,7 @@ def hessians(*linear: gtsam.GaussianFactorGraph) -> list[tuple[np.ndarray, np.nd
 @pytest.mark.slow
 @pytest.mark.parametrize("name", list(configs()))
 def test_same_objective_and_linear_system(name: str) -> None:
-    builder = LogGraph(run_log(), configs()[name])
+    builder = LogGraph(water_log() if "water" in name else run_log(), configs()[name])
     per_factor, values = builder.build()
     dvl = dvl_graph(builder)
     bulk, _ = builder.build_bulk(values)

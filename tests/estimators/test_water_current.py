@@ -151,3 +151,27 @@ def test_health_counts_water_track_and_flags_false_lock(water_log: LogData) -> N
     health = assess_health(smooth_batch(lock, _config(lock, "auto")), lock)
     assert health.figures["water_track"]["false_lock_pings"] >= int(bad.sum()) - 1
     assert any("false bottom lock" in w for w in health.warnings), health.warnings
+
+
+def test_water_track_scale(water_log: LogData) -> None:
+    """[current] water_track_scale: water-track pings whose scale is 1 % above bottom track's get their own scale
+    factor (batch and online), found within 3 sigma, the bottom-track scale unmoved; the EKF refuses it."""
+    from gtsam_dvl.core.errors import GtsamDvlError
+    from gtsam_dvl.estimators.ekf import run_ekf
+    from gtsam_dvl.estimators.online import smooth_online
+    from tests.support.logs import cut_log
+    truth = water_log.true_calibration
+    assert truth is not None and water_log.dvl.water_track is not None
+    water = water_log.dvl.water_track
+    d_v = water_log.dvl.d_v.copy()
+    d_v[water] *= 1.01  # the water-track pings at scale 1.01 k
+    log = dataclasses.replace(water_log, dvl=dataclasses.replace(water_log.dvl, d_v=d_v))
+    cfg = _config(log, "auto")
+    cfg = cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track_scale": True})})
+    for res in (smooth_batch(log, cfg), smooth_online(cut_log(log, T_WATER[1] + 20.0), cfg)):
+        k, k_w = res.calibration["scale"], res.calibration["water_scale"]
+        # within 3 sigma, and informed by the 100 s of water track (its prior: 0.01 about the scale)
+        assert abs(k_w.value[0] - 1.01 * truth.scale) < 3 * k_w.sigma[0] and k_w.sigma[0] < 0.007, (res.estimator, k_w)
+        assert abs(k.value[0] - truth.scale) < 3 * k.sigma[0], (res.estimator, k)
+    with pytest.raises(GtsamDvlError, match="water_track_scale is batch and online only"):
+        run_ekf(log, cfg)

@@ -17,7 +17,9 @@ Water-track pings have their own noise: the message's covariance, or water_track
 or water_track_default_sigma_m_s for a message without one (a water-track ping averages over a water layer whose
 own turbulence adds to the Doppler noise; about twice a bottom-track ping's on 300-600 kHz units, typical of the
 class), scaled like every DVL sigma by [dvl] noise_multiplier. water_track "refuse" counts them
-("dvl_water_track") and leaves them out, as does a log without them. Each estimator resolves "auto" for its log
+("dvl_water_track") and leaves them out, as does a log without them. With water_track_scale the water-track pings
+have their own scale factor (a DVL whose water-track calibration differs from its bottom track's; batch and
+online), the misalignment and lever arm still shared. Each estimator resolves "auto" for its log
 (current.resolve_water_track): its result's configuration says "use" or "refuse".
 """
 
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 from typing import ClassVar, Literal
 
-from gtsam_dvl.core.config.base import ConfigModel, NonNegative, Positive
+from gtsam_dvl.core.config.base import ConfigModel, Flag, NonNegative, Positive
 
 
 class CurrentConfig(ConfigModel):
@@ -42,3 +44,8 @@ class CurrentConfig(ConfigModel):
     prior_sigma_m_s: Positive = 0.5  # the first state's current, per horizontal axis, m/s (mean 0)
     time_rw_m_s_per_sqrt_s: Positive = 1.0e-3  # the current's random walk in time, m/s/sqrt(s)
     depth_rw_m_s_per_sqrt_m: Positive = 0.02  # and in depth (shear), m/s/sqrt(m)
+    # a DVL whose water-track calibration differs from its bottom track's: the water-track pings get their own scale
+    # factor k_w (a shared state, "water_scale", batch and online), k_w - k ~ N(0, (sigma k_0)^2), sigma this
+    # fraction (1 %: a DVL's water-track and bottom-track scales differ by less, typical of the class)
+    water_track_scale: Flag = False
+    water_track_scale_sigma: Positive = 0.01

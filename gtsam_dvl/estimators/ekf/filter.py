@@ -421,8 +421,6 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     offset = enabled(config, "time_offset")
     if offset and config.dvl.use_beams:
         raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
-    if enabled(config, "lever_arm"):
-        raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not the EKF")
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
@@ -430,6 +428,10 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     alignment = align(log.imu, log.dvl, frame, config.alignment, attitude=log.attitude, mounting=log.mounting,
                       imu_cfg=config.imu)
     config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
+    for name, what in (("lever_arm", "[dvl] estimate_lever_arm is batch only (the batch smoother)"),
+                       ("water_scale", "[current] water_track_scale is batch and online only")):
+        if enabled(config, name):  # (not in the EKF's error state: core/states.py ekf=False)
+            raise GtsamDvlError(f"{what}, not the EKF")
     wc_on = water_current(config)
     water = water_pings(log) if wc_on else np.zeros(len(log.dvl), dtype=bool)
     if wc_on and config.dvl.use_beams and water.any():
