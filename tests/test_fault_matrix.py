@@ -25,6 +25,8 @@ pytestmark = pytest.mark.slow
 EXPECTED_ERRORS = {"imu_gap_30s_turn": "IMU gap of 30.0 s", "nan_inf_not_repaired": "NaN",
                    "missing_dvl_topic": "no DVL topic", "corrupt_chunk_not_salvaged": "--salvage",
                    "corrupt_chunk_salvaged": "IMU gap of"}
+# the batch smoother cuts a log at IMU gaps longer than imu.max_gap_s and smooths the pieces (estimators/pieces.py)
+SMOOTHED_AS_PIECES = {"imu_gap_30s_turn", "corrupt_chunk_salvaged", "flipped_byte_salvaged"}
 # where a byte in the middle of the file lands depends on the file: in a MessageIndex record nothing is lost
 # (the chunk is walked), in a chunk's data it is one of the two errors above
 MAY_ERROR = {"flipped_byte_salvaged": "IMU gap of", "flipped_byte_not_salvaged": "--salvage"}
@@ -63,7 +65,8 @@ def test_fault_case_is_an_error_or_an_honest_estimate(short_run: LogData, case: 
             continue
         print(f"{case} {mode}: health {r['health']}, max |err/sigma| {r['worst_nsigma']:.2f}, final position "
               f"{r['final_nsigma']:.2f} sigma")
-        assert case not in EXPECTED_ERRORS, f"{mode}: expected an error"
+        assert case not in EXPECTED_ERRORS or (mode == "batch" and case in SMOOTHED_AS_PIECES), (
+            f"{mode}: expected an error")
         honest = r["worst_nsigma"] <= 3.0 and r["final_nsigma"] <= 3.0  # type: ignore[operator]
         if not np.isfinite(r["worst_nsigma"]):  # type: ignore[arg-type]
             honest = r["health"] != "ok"

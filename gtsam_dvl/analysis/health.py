@@ -444,6 +444,13 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     health.figures["counters"]["time_offset_window_clipped"] = clipped
     if clipped:
         _check_offset_clip(result, clipped, health)
+    if breaks := result.info.get("breaks"):  # estimators/pieces.py
+        health.flag("degraded", f"smoothed as {len(breaks) + 1} pieces, cut at IMU gaps longer than imu.max_gap_s ("
+                    + ", ".join(f"{b['gap_start_s']:.1f}-{b['gap_end_s']:.1f} s" for b in breaks)
+                    + "): the DVL calibration is the pieces' joint one; each later piece is aligned in motion and "
+                    "its position placed by dead reckoning across the gap; check the IMU driver"
+                    + "".join(f"; piece {p['piece']} left out: {p['error']}"
+                              for p in result.info.get("pieces_left_out") or []))
     gaps = result.info.get("imu_gaps") or {}
     losses = log.metadata.get("reader_losses") or result.info.get("screened_losses") or {}
     # the reader's record says where the IMU data are missing, and its saturation record the gaps it made

@@ -446,6 +446,59 @@ def montecarlo(
         raise typer.Exit(EXIT_UNHEALTHY)
 
 
+CALIBRATE_HELP = (
+    "One DVL calibration (scale, misalignment; the lever arm when estimated) from several dives of one vehicle, "
+    "on Dask.\n\n"
+    "Each dive is smoothed alone, then the dives are solved jointly: each dive (a Dask task on the worker that "
+    "holds it) linearises its graph and eliminates its own states; the client sums their information on the "
+    "shared calibration, solves, and sends the step back, until it settles (docs/calibration-across-dives.md). "
+    "IMU biases and time offsets stay per dive. Writes the calibration file (-o, TOML: `smooth --calibration`) "
+    "and, with --out-dir, the per-dive table and figure (each dive alone against the joint; which moved beyond 3 "
+    "sigma). A dive that fails is reported with its error and left out (exit code 3); the others finish.\n\n"
+    "Engine: a LocalCluster of --workers processes (default: the cores), a running scheduler (--scheduler), or "
+    "this process with --workers 1 (also when Dask is not installed)."
+)
+
+
+@app.command(help=CALIBRATE_HELP)
+@_user_errors
+def calibrate(
+    logs: Annotated[list[Path], typer.Argument(help="The dives' logs (MCAP or rosbag2 directories).",
+                                               metavar="LOG...")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Calibration file to write (TOML).")],
+    out_dir: Annotated[Path | None, typer.Option("--out-dir", help="Folder for calibration-fleet.md, .json and "
+                                                                   ".png.")] = None,
+    vehicle: Annotated[str, typer.Option("--vehicle", help="The vehicle's name in the file.")] = "vehicle",
+    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
+    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
+    scheduler: Annotated[str | None, typer.Option("--scheduler", help="A running Dask scheduler (default: a "
+                                                                      "LocalCluster here).")] = None,
+    workers: Annotated[int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores; "
+                                                                  "1: in this process).")] = None,
+    scheduler_timeout: SchedulerTimeout = 10.0,
+    quiet: Quiet = False,
+    debug: Debug = False,
+) -> None:
+    """One calibration from several dives (help: CALIBRATE_HELP)."""
+    from gtsam_dvl.app.campaign.calibrate import calibrate_logs
+    from gtsam_dvl.app.commands import check_folders
+
+    check_folders({"-o": output}, {"--out-dir": out_dir})
+    outcome = calibrate_logs(logs, output, config_path=config,
+                             read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
+                                                        gnss_topic),
+                             scheduler=scheduler, workers=workers, vehicle=vehicle, out_dir=out_dir,
+                             show_progress=not quiet, scheduler_timeout_s=scheduler_timeout)
+    typer.echo(outcome.describe())
+    if outcome.calibration is None:
+        raise GtsamDvlError("calibrate: no dive could be smoothed; their errors are above")
+    if outcome.failures:
+        typer.echo(f"gtsam-dvl: error: {len(outcome.failures)} of {len(logs)} dives left out; their errors are "
+                   "above", err=True)
+        raise typer.Exit(EXIT_UNHEALTHY)
+
+
 @app.command()
 @_user_errors
 def presets(

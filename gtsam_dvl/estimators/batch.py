@@ -64,6 +64,10 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
+    from gtsam_dvl.estimators.pieces import long_gaps, smooth_pieces  # (pieces.py imports this module)
+
+    if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
+        return smooth_pieces(log, stated, gaps, progress, estimator, calibration)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
     builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None,
                        calibration=calibration)

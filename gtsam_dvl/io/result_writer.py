@@ -171,7 +171,11 @@ def write_result_log(path: Path | str, result: NavResult, log: LogData, summary:
                                                     ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl)])
         w.add_odometry(TOPICS["odometry"], t, result.n_p, n_q_b, b_v, b_omega,
                        ros_pose_covariance(result.n_R_b, result.pose_cov), twist_cov)
-        w.add_path(TOPICS["path"], t, result.n_p, n_q_b)
+        # one Path message per piece of a log smoothed at its long IMU gaps (estimators/pieces.py), so that no
+        # line crosses a break; else one of the whole trajectory
+        starts = [int(p["start_index"]) for p in result.info.get("pieces") or []] or [0]
+        for a, b in zip(starts, starts[1:] + [n], strict=True):
+            w.add_path(TOPICS["path"], t[a:b], result.n_p[a:b], n_q_b[a:b])
         bias_cov = np.broadcast_to(result.bias_cov, (n, 6, 6))
         w.add_accel_with_covariance(TOPICS["imu_bias"], t, np.outer(ones, result.accel_bias),
                                     np.outer(ones, result.gyro_bias), bias_cov, "imu_link")

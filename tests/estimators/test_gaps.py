@@ -118,13 +118,27 @@ def test_long_dvl_dropout_keeps_honest_sigmas(paper3d: LogData, mode: str) -> No
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("mode", ["batch", "online", "ekf"])
+@pytest.mark.parametrize("mode", ["online", "ekf"])
 def test_imu_gap_longer_than_the_limit_is_a_clear_error(paper3d: LogData, mode: str) -> None:
     """30 s without IMU in a turn: held that long the motion model's error is systematic (measured: batch scale
-    3400 sigma off with the white-noise hold covariance), so it is an error that names the gap."""
+    3400 sigma off with the white-noise hold covariance), so the filters stop with an error that names the gap
+    (the batch smoother cuts the log there: tests/estimators/test_pieces.py)."""
     log = _without_imu(paper3d, 780.0, 810.0)
     with pytest.raises(GtsamDvlError, match=r"IMU gap of 30.0 s at 780.00-810.00 s .*imu.max_gap_s = 10 s"):
         RUNS[mode](log, EstimatorConfig.paper())
+
+
+@pytest.mark.slow
+def test_imu_gap_longer_than_the_limit_batch_smooths_the_pieces(paper3d: LogData) -> None:
+    """The same 30 s gap in paper-3d's first turn: the batch smoother cuts the log there and smooths two pieces
+    with one DVL calibration (estimators/pieces.py), within 3 sigma of the truth."""
+    log = _without_imu(paper3d, 780.0, 810.0)
+    res = RUNS["batch"](log, EstimatorConfig.paper())
+    cal, pos = _worst_nsigma(res, log)
+    print(f"batch, 30 s IMU gap in a turn: {len(res.info['pieces'])} pieces, calibration {cal:.2f} sigma, final "
+          f"position {pos:.2f} sigma")
+    assert len(res.info["pieces"]) == 2 and res.info["breaks"][0]["gap_start_s"] == pytest.approx(780.0)
+    assert cal < 3.0 and pos < 3.0
 
 
 @pytest.mark.slow
