@@ -197,8 +197,9 @@ STATES: tuple[SharedState, ...] = (
         dvl="ping"),
     SharedState(
         "water_scale", "DVL water-track scale factor", K_WATER, "vector", 1, "1", "ppm", 1e6,
-        # the scale's prior, and a link to the scale: k_w - k ~ N(0, (water_track_scale_sigma k_0)^2) (prior_factors)
-        prior=lambda c, m: Prior(np.array([c.priors.scale_initial]), np.array([c.priors.scale_sigma])),
+        # its information is the link to the scale, k_w - k ~ N(0, (water_track_scale_sigma k_0)^2) (prior_factors);
+        # its own prior only keeps it defined (1: the scale's prior would count twice)
+        prior=lambda c, m: Prior(np.array([c.priors.scale_initial]), np.array([1.0])),
         target=None, vehicle=True, components=(("", ""),),
         enabled=lambda c: c.current.water_track_scale and c.current.water_track == "use", ekf=False,
         relinearization=lambda th: np.array([th.scale]), dvl="water"),

@@ -182,8 +182,9 @@ class BulkDvl:
         # the water-track rows' own scale (water_scale): h and every Jacobian but the scale's are linear in k, so
         # those rows are evaluated at k and taken times k_w / k; their scale Jacobian goes to K_WATER
         k_water = water_scale_key(self.config)
-        ratio = None
-        if k_water is not None and self.water is not None:
+        ratio = None  # (a log without water-track rows: K_WATER's block all zeros)
+        water_rows = self.water if self.water is not None else np.zeros(len(self), dtype=bool)
+        if k_water is not None:
             ratio = float(values.atVector(k_water)[0]) / k
         n_c = self._currents(values)  # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
         if n_c is not None:  # the velocity relative to the water (factors/dvl.py current_variable)
@@ -196,8 +197,7 @@ class BulkDvl:
                                    b_l, dt_d, self.offset_n_g, self.lever, jacobians)
             on_water = None
             if ratio is not None:
-                assert self.water is not None
-                on_water = self.water[sl]
+                on_water = water_rows[sl]
                 e = np.where(on_water[:, None], (e + self.pings.y[sl]) * ratio - self.pings.y[sl], e)
             if d_e is not None:  # h + E (a beam: d_u . E)
                 e = e + (d_e[sl] if d_u is None else np.einsum("ni,ni->n", d_u[sl], d_e[sl])[:, None])

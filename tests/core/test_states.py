@@ -95,7 +95,7 @@ def test_priors_and_targets_from_the_configuration() -> None:
     shown = {s.name: s.prior_display_sigma(cfg).tolist() for s in states.STATES}
     assert shown == {"gyro_bias": [0.03] * 3, "accel_bias": [70.0] * 3, "scale": [0.2e6],
                      "misalignment": [1.0, 2.0, 3.0], "time_offset": [700.0], "lever_arm": [0.4] * 3,
-                     "water_scale": [0.2e6]}  # the scale's, and linked to it (test_water_track_scale_link)
+                     "water_scale": [1e6]}  # its information is the link to the scale (test_water_track_scale_link)
     targets = {s.name: s.target(cfg.observability) for s in states.STATES if s.target is not None}
     assert targets == {"gyro_bias": 0.002, "accel_bias": 11.0, "scale": 500.0, "misalignment": 0.2}
 

@@ -175,3 +175,16 @@ def test_water_track_scale(water_log: LogData) -> None:
         assert abs(k.value[0] - truth.scale) < 3 * k.sigma[0], (res.estimator, k)
     with pytest.raises(GtsamDvlError, match="water_track_scale is batch and online only"):
         run_ekf(log, cfg)
+
+
+def test_water_track_scale_without_water_track_pings(sim_paper3d_short: LogData) -> None:
+    """water_track "use" with water_track_scale on a log without water-track pings: the water-track scale stays at
+    its link to the scale (its sigma the link's 1 % and the scale's combined), nothing fails."""
+    from tests.support.logs import cut_log
+    log = cut_log(sim_paper3d_short, 200.0)
+    cfg = _config(log, "use")
+    cfg = cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track_scale": True})})
+    res = smooth_batch(log, cfg)
+    k, k_w = res.calibration["scale"], res.calibration["water_scale"]
+    assert abs(k_w.value[0] - k.value[0]) < 0.01 * k_w.sigma[0]  # (within the solver's tolerance)
+    assert k_w.sigma[0] == pytest.approx(np.hypot(k.sigma[0], 0.01 * cfg.priors.scale_initial), rel=0.02)
