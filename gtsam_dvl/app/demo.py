@@ -194,6 +194,14 @@ def _field_table(run: dict[str, Any]) -> list[str]:
     return out
 
 
+def _section(console: Any, name: str, headline: str, intro: str, table: list[str]) -> list[str]:
+    """A further run's lines printed (headline, then its table's lines) and its section of the index report."""
+    console.print(f"{name}: {headline}")
+    for line in table:
+        console.print("  " + line[2:])
+    return [f"## {name}", "", intro, "", *table, ""]
+
+
 def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:
     """Simulate paper-3d and paper-2d, run every estimator (batch, online, EKF, IO-DVLC), evaluate, write the
     paper's figures and a report per run plus an index report; print the comparison table."""
@@ -234,24 +242,18 @@ def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:
             console.print(f"  {run['run']} {est}: {held}/{len(items)} of the paper's findings hold")
             index.append(f"- {est}: " + "; ".join(f"{'yes' if f.held else 'NO'}: {f.text}" for f in items))
         index.append("")
-    field = field_run(out_dir / FIELD_SCENARIO, seed, console)
-    console.print(f"{FIELD_SCENARIO}: a survey dive smoothed with the default configuration "
-                  "(`gtsam-dvl smooth` then `gtsam-dvl evaluate`)")
-    for line in _field_table(field):
-        console.print("  " + line[2:])
-    index += [f"## {FIELD_SCENARIO}", "",
-              "A survey dive as a vehicle records it (data/scenarios/field-survey.toml): underway GNSS start, 5 Hz "
-              "z-down DVL whose stamps are 0.3 s early, a lever arm, 200 Hz IMU, pressure, the origin only in the "
-              "fixes; smoothed with the default configuration.", "", *_field_table(field), ""]
-    deep = deep_run(out_dir / DEEP_SCENARIO, seed)
-    console.print(f"{DEEP_SCENARIO}: a 300 m descent without bottom lock in a sheared current, smoothed with water "
-                  "track used and refused")
-    for line in _deep_table(deep):
-        console.print("  " + line[2:])
-    index += [f"## {DEEP_SCENARIO}", "",
-              "GNSS at the surface, a 300 m descent in water track through a 0.45 to 0.2 m/s sheared current, bottom "
-              "lock, the paper's square, the ascent in water track (data/scenarios/deep-descent.toml); smoothed with "
-              "the default configuration, water-track pings used and refused.", "", *_deep_table(deep), ""]
+    index += _section(console, FIELD_SCENARIO, "a survey dive smoothed with the default configuration "
+                      "(`gtsam-dvl smooth` then `gtsam-dvl evaluate`)",
+                      "A survey dive as a vehicle records it (data/scenarios/field-survey.toml): underway GNSS start, "
+                      "5 Hz z-down DVL whose stamps are 0.3 s early, a lever arm, 200 Hz IMU, pressure, the origin "
+                      "only in the fixes; smoothed with the default configuration.",
+                      _field_table(field_run(out_dir / FIELD_SCENARIO, seed, console)))
+    index += _section(console, DEEP_SCENARIO, "a 300 m descent without bottom lock in a sheared current, smoothed "
+                      "with water track used and refused",
+                      "GNSS at the surface, a 300 m descent in water track through a 0.45 to 0.2 m/s sheared "
+                      "current, bottom lock, the paper's square, the ascent in water track "
+                      "(data/scenarios/deep-descent.toml); smoothed with the default configuration, water-track "
+                      "pings used and refused.", _deep_table(deep_run(out_dir / DEEP_SCENARIO, seed)))
     atomic_write_text(out_dir / "report.md", "\n".join(index) + "\n")
     console.print(f"Reports: {out_dir / 'report.md'} ({time.perf_counter() - t_start:.0f} s)")
     return runs

@@ -10,6 +10,7 @@ import numpy as np
 
 from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import V, W, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
@@ -68,27 +69,9 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
 
     if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
         return smooth_pieces(log, stated, gaps, progress, estimator, calibration)
-    config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
-    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None,
-                       calibration=calibration)
-    timing["preintegrate"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    # the DVL and IMU factors evaluated in bulk (estimators/bulk.py: the same objective as builder.build())
-    graph: gtsam.NonlinearFactorGraph | BulkGraph
-    graph, values = builder.build_bulk()
-    ordering = builder.elimination_ordering()
-    # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
-    dof = graph_rows(graph) - values.dim()
-    timing["build"] = time.perf_counter() - t1
-    if progress:
-        progress(0.2)
-
-    t2 = time.perf_counter()
-    graph, values, report, passes = solve_graph(builder, graph, values, ordering,
-                                                progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
-    if dvl_fit_enabled(builder.config) and isinstance(graph, BulkGraph):
-        values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
-    timing["solve"] = time.perf_counter() - t2
+    builder, graph, values, ordering, report, passes, dof = solve_log(log, config, noise, timing, calibration,
+                                                                      progress, t0)
+    config = builder.config  # (at the levels taken from the data)
 
     t3 = time.perf_counter()
     # the converged iteration's Bayes net serves the marginals when its step was tiny (every GN
@@ -116,6 +99,40 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     if progress:
         progress(1.0)
     return result
+
+
+def solve_log(log: LogData, config: EstimatorConfig, noise: NoiseReport, timing: dict[str, float],
+              calibration: VehicleCalibration | None = None, progress: ProgressFn | None = None,
+              t0: float | None = None) -> tuple[LogGraph, BulkGraph, gtsam.Values, ChunkedOrdering, SolveReport,
+                                                list[dict[str, float]], int]:
+    """The batch smoother's solve of a screened log (config with "auto" resolved): the IMU levels from the data,
+    the graph in bulk, Gauss-Newton (both passes with the time offset) and the DVL noise fit. Returns the LogGraph,
+    the graph, the solution, the ordering, the last pass's report, each pass's figures and the chi^2's degrees of
+    freedom; noise records the levels used, timing the phases' seconds (t0: when the run began)."""
+    t0 = time.perf_counter() if t0 is None else t0
+    config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
+    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None,
+                       calibration=calibration)
+    timing["preintegrate"] = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    # the DVL and IMU factors evaluated in bulk (estimators/bulk.py: the same objective as builder.build())
+    bulk, values = builder.build_bulk()
+    ordering = builder.elimination_ordering()
+    # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
+    dof = graph_rows(bulk) - values.dim()
+    timing["build"] = time.perf_counter() - t1
+    if progress:
+        progress(0.2)
+
+    t2 = time.perf_counter()
+    graph, values, report, passes = solve_graph(builder, bulk, values, ordering,
+                                                progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
+    if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
+        raise GtsamDvlError("solve_log: the batch smoother's bulk graph expected")
+    if dvl_fit_enabled(builder.config):
+        values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
+    timing["solve"] = time.perf_counter() - t2
+    return builder, graph, values, ordering, report, passes, dof
 
 
 # A first pass that the time offset's second pass follows stops once an iteration lowers the error by less than

@@ -55,13 +55,19 @@ from gtsam_dvl.core.states import (
 )
 from gtsam_dvl.core.states import calibration_states as states_held
 from gtsam_dvl.core.types import LogData, Mounting
-from gtsam_dvl.estimators.batch import extract_result, fit_dvl_noise, solve_graph
+from gtsam_dvl.estimators.batch import extract_result, solve_log
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.noise_levels import NoiseReport, dvl_fit_enabled, imu_levels
-from gtsam_dvl.estimators.solver import CHUNKED_FROM_STATES, ChunkedOrdering, CompactBayesNet, bayes_net_marginals
+from gtsam_dvl.estimators.noise_levels import NoiseReport
+from gtsam_dvl.estimators.solver import (
+    CHUNKED_FROM_STATES,
+    ChunkedOrdering,
+    CompactBayesNet,
+    bayes_net_marginals,
+    eliminate_chunks,
+)
 
 # states that stay per dive although core/states.py marks them as the vehicle's: a dive's own clocks
 PER_DIVE = ("time_offset",)
@@ -137,21 +143,13 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     stated = config
     noise = NoiseReport()
     log = screened_in_memory(log)
-    config = imu_levels(log, config, noise)
-    builder = LogGraph(log, config, calibration=calibration)
-    bulk, values = builder.build_bulk()
-    ordering = builder.elimination_ordering()
-    graph, values, report, passes = solve_graph(builder, bulk, values, ordering)
-    if dvl_fit_enabled(builder.config) and isinstance(graph, BulkGraph):
-        values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
+    builder, graph, values, ordering, report, _, _ = solve_log(log, config, noise, {}, calibration)
     alone = extract_result(builder, graph, values, ordering,
                            bayes_net=report.bayes_net if report.converged else None)
     alone.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:
         alone.info["screened_losses"] = screened
     alone.config = stated.to_dict()
-    if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
-        raise GtsamDvlError("prepare_dive: the batch smoother's bulk graph expected")
     if calibration is not None:
         alone.info["calibration_prior"] = calibration_info(builder.config, calibration)
     names = calibration_states(builder.config, calibration)
@@ -211,31 +209,7 @@ def eliminate_own(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering, own:
     costs in proportion to the mission squared there)."""
     if sum(len(ks) for ks in plan.chunks) <= 2 * CHUNKED_FROM_STATES:
         return linear.eliminatePartialSequential(own, gtsam.EliminateQR)
-    chunk_of = {k: c for c, ks in enumerate(plan.chunks) for k in ks}
-    groups: list[list[gtsam.GaussianFactor]] = [[] for _ in plan.chunks]
-    tail = gtsam.GaussianFactorGraph()
-    for i in range(linear.size()):
-        f = linear.at(i)
-        if f is None:
-            continue
-        cs = [chunk_of[k] for k in f.keys() if k in chunk_of]
-        if cs:
-            groups[min(cs)].append(f)
-        else:
-            tail.push_back(f)
-    bn = CompactBayesNet()
-    carry = gtsam.GaussianFactorGraph()
-    for ks, factors in zip(plan.chunks, groups, strict=True):
-        g = gtsam.GaussianFactorGraph()
-        for f in factors:
-            g.push_back(f)
-        g.push_back(carry)
-        order = gtsam.Ordering()
-        for k in ks:
-            order.push_back(k)
-        part, carry = g.eliminatePartialSequential(order, gtsam.EliminateQR)
-        bn.push_back(part)
-    tail.push_back(carry)
+    bn, tail = eliminate_chunks(linear, plan)
     order = gtsam.Ordering()
     for k in plan.rest:
         order.push_back(k)
@@ -252,16 +226,7 @@ def back_substitute(bn: gtsam.GaussianBayesNet | CompactBayesNet, given: dict[in
         for k, v in given.items():
             vv.insert(k, v)
         return bn.optimize(vv)
-    x = dict(given)
-    out = gtsam.VectorValues()
-    for c in reversed(bn.conds):
-        keys = c.keys()
-        rhs = c.d()
-        if len(keys) > 1:
-            rhs = rhs - c.S() @ np.concatenate([x[k] for k in keys[1:]])
-        x[keys[0]] = sol = solve_triangular(c.R(), rhs)
-        out.insert(keys[0], sol)
-    return out
+    return bn.optimize(given)
 
 
 def reduce_dive(dive: DiveState) -> Reduction:

@@ -87,8 +87,10 @@ class CompactBayesNet:
     def at(self, i: int) -> CompactConditional:
         return self.conds[i]
 
-    def optimize(self) -> gtsam.VectorValues:
-        x: dict[int, np.ndarray] = {}
+    def optimize(self, given: dict[int, np.ndarray] | None = None) -> gtsam.VectorValues:
+        """The back-substitution; given: the values of parents that no conditional of the net holds (a partial
+        elimination's remaining keys), not in the output."""
+        x: dict[int, np.ndarray] = dict(given or {})
         out = gtsam.VectorValues()
         for c in reversed(self.conds):
             keys = c._keys
@@ -129,6 +131,18 @@ def eliminate_chunked(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering) 
     (bias, scale, misalignment, time offset) are in nearly every factor; each eliminated variable removes its
     factors from those keys' lists, which costs in proportion to their length: quadratic in the mission
     (docs/results.md, Speed). Chunks keep each index short: linear again."""
+    bn, rest = eliminate_chunks(linear, plan)
+    order = gtsam.Ordering()
+    for k in plan.rest:
+        order.push_back(k)
+    bn.push_back(rest.eliminateSequential(order, gtsam.EliminateQR))
+    return bn
+
+
+def eliminate_chunks(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering
+                     ) -> tuple[CompactBayesNet, gtsam.GaussianFactorGraph]:
+    """plan's chunks eliminated one at a time (eliminate_chunked's method): their Bayes net, and the factor graph
+    left on the other keys (plan.rest and any key in no chunk)."""
     chunk_of = {k: c for c, ks in enumerate(plan.chunks) for k in ks}
     groups: list[list[gtsam.GaussianFactor]] = [[] for _ in plan.chunks]
     tail: list[gtsam.GaussianFactor] = []
@@ -154,11 +168,7 @@ def eliminate_chunked(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering) 
     for f in tail:
         g.push_back(f)
     g.push_back(carry)
-    order = gtsam.Ordering()
-    for k in plan.rest:
-        order.push_back(k)
-    bn.push_back(g.eliminateSequential(order, gtsam.EliminateQR))
-    return bn
+    return bn, g
 
 
 CHUNKED_FROM_STATES = 8000  # below, one GTSAM elimination is faster (docs/results.md, Speed)

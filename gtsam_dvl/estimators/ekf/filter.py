@@ -218,26 +218,28 @@ def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndar
     return 0.5 * T * (Phi @ Qc @ Phi.T + Qc)
 
 
-def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray,
-                      n_omega_ie: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray, n_omega_ie: np.ndarray,
+                      n_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Predicted DVL velocity y (3,) (factors/dvl_model.py), its Jacobian H (3, n) w.r.t. the error state, and the
     body rate relative to map used for the lever arm, b_omega = b_omega_m - b_g - n_R_b^T n_omega_ie (its attitude
-    dependence -n_R_b^T [n_omega_ie]x phi enters H through the model's b_omega Jacobian)."""
+    dependence -n_R_b^T [n_omega_ie]x phi enters H through the model's b_omega Jacobian). n_v (m/s, map): the
+    velocity the DVL sees, fs.nav.n_v unless given (a water-track ping's: relative to the water)."""
     R = fs.nav.n_R_b
     b_omega = b_omega_m - fs.gyro_bias - R.T @ n_omega_ie
-    y, J = dvl_model(R, fs.nav.n_v, fs.scale, fs.b_R_d, b_omega, np.asarray(b_l, dtype=float), inputs=True)
+    y, J = dvl_model(R, fs.nav.n_v if n_v is None else n_v, fs.scale, fs.b_R_d, b_omega,
+                     np.asarray(b_l, dtype=float), inputs=True)
     assert J is not None
     return y, _error_state_jacobian(fs, J, -R.T @ skew(n_omega_ie)), b_omega
 
 
-def offset_measurement_model(fs: FilterState, b_l: np.ndarray, rate_input: RateInput,
-                             n_g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def offset_measurement_model(fs: FilterState, b_l: np.ndarray, rate_input: RateInput, n_g: np.ndarray,
+                             n_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The DVL velocity with the time offset (module doc; factors/dvl_model.py), y (3,), and its Jacobian H (3, n)
     w.r.t. the error state. rate_input = (b_a, b_omega, G): FactorMaker.velocity_rate_input of the ping (body rate
     relative to map, gyro bias not removed); n_g gravity in map. The model's inputs b_a - accelerometer bias and
-    b_omega - gyro bias give the bias columns."""
+    b_omega - gyro bias give the bias columns. n_v: as in measurement_model."""
     b_a, b_omega_mean, G = rate_input
-    y, J = dvl_model(fs.nav.n_R_b, fs.nav.n_v, fs.scale, fs.b_R_d, b_omega_mean - fs.gyro_bias,
+    y, J = dvl_model(fs.nav.n_R_b, fs.nav.n_v if n_v is None else n_v, fs.scale, fs.b_R_d, b_omega_mean - fs.gyro_bias,
                      np.asarray(b_l, dtype=float), dt_d=fs.time_offset,
                      offset=OffsetInput(b_a - fs.accel_bias, np.asarray(n_g, dtype=float), G), inputs=True)
     assert J is not None
@@ -528,20 +530,17 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             break
         on_water = bool(water[j])
         A, z, Rm = _ping_measurement(log, config, int(j), on_water)
-        if on_water:  # the model at the velocity relative to the water (estimators/current.py), restored after
+        n_v = fs.nav.n_v  # the velocity the DVL sees (m/s, map): over ground, or relative to the water (current.py)
+        if on_water:
             assert fs.current is not None
-            nav_over_ground = fs.nav
-            fs.nav = NavState(nav_over_ground.n_R_b, nav_over_ground.n_v - np.array([*fs.current, 0.0]),
-                              nav_over_ground.n_p)
-        y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie)
+            n_v = n_v - np.array([*fs.current, 0.0])
+        y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie, n_v)
         if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
             dt_c = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
             if dt_c != fs.time_offset:  # the window held at the bound: counted, reported (analysis/health.py)
                 counters["time_offset_window_clipped"] = counters.get("time_offset_window_clipped", 0) + 1
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
-            y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity())
-        if on_water:
-            fs.nav = nav_over_ground
+            y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity(), n_v)
         if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)
             assert fs.dvl_error is not None
             y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
