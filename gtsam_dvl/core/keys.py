@@ -3,7 +3,9 @@
 X(i) pose n_T_b of state i (Pose3: tangent [rotation, translation] in body axes), V(i) velocity n_v (m/s,
 map), B(i) IMU bias [accel, gyro] (B(0) alone for a random-constant bias), E(i) the DVL's correlated velocity
 error (m/s, dvl_link; only when the configuration models it), W(i) the horizontal water current [east, north]
-(m/s, map; only when water-track pings are used, estimators/current.py). The keys of the shared states
+(m/s, map; only when water-track pings are used, estimators/current.py), S(b) the change of the current across
+the boundary b between depth layers b and b + 1 (deeper minus shallower, [east, north] m/s, map; only with
+[current] layer_thickness_m > 0). The keys of the shared states
 (core/states.py names what each is, its prior and units): K_SCALE the DVL scale factor (a 1-vector),
 C_MISALIGN the calibrated DVL mounting b_R_d (Rot3, perturbed on the right), T_OFFSET the DVL-IMU time offset
 dt_d (a 1-vector, s; only with [dvl] estimate_time_offset), L_LEVER the lever arm b_l from the IMU to the DVL
@@ -16,7 +18,7 @@ from __future__ import annotations
 import gtsam
 
 # tangent dimension of each variable type, by symbol character
-DIMS = {"x": 6, "v": 3, "b": 6, "e": 3, "w": 2}
+DIMS = {"x": 6, "v": 3, "b": 6, "e": 3, "w": 2, "s": 2}
 
 
 def shared_key(char: str, dim: int) -> int:
@@ -54,6 +56,13 @@ def W(i: int) -> int:
     """The horizontal water current at state i: [east, north] in map, m/s (only when water-track pings are used;
     estimators/current.py)."""
     return gtsam.symbol("w", i)
+
+
+def S(b: int) -> int:
+    """The change of the water current across the boundary between depth layers b and b + 1 (the deeper's minus
+    the shallower's, [east, north] in map, m/s; only with [current] layer_thickness_m > 0: estimators/current.py,
+    "Layers")."""
+    return gtsam.symbol("s", b)
 
 
 def key_dim(key: int) -> int:

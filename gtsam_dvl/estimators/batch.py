@@ -11,7 +11,7 @@ import numpy as np
 from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import V, W, X
+from gtsam_dvl.core.keys import S, V, W, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.states import (
@@ -245,7 +245,8 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
     if water_current(cfg):  # the water current per state with its marginal sigmas (estimators/current.py)
         info["water_current"] = current.profile(
             np.array([e.t for e in builder.epochs]), n_p[:, 2], np.array([values.atVector(W(i)) for i in range(n)]),
-            np.array([marg.covariances[W(i)] for i in range(n)]), cfg, current.epochs_with_water(builder))
+            np.array([marg.covariances[W(i)] for i in range(n)]), cfg, current.epochs_with_water(builder),
+            {b: (values.atVector(S(b)), marg.covariances[S(b)]) for b in builder.shear})
     return NavResult(
         estimator=estimator,
         t=np.array([e.t for e in builder.epochs]),

@@ -72,7 +72,16 @@ def water_covariance(config: EstimatorConfig, d_cov: np.ndarray) -> np.ndarray:
     cur = config.current
     dvl = config.dvl.model_copy(update={"noise_m_s": cur.water_track_sigma_m_s,
                                         "default_noise_m_s": cur.water_track_default_sigma_m_s})
-    return ping_covariance(dvl, d_cov)
+    # with the current per depth layer, plus the current's spread within a layer (estimators/current.py, "Layers")
+    return ping_covariance(dvl, d_cov) + within_layer_variance(config) * np.eye(3)
+
+
+def within_layer_variance(config: EstimatorConfig) -> float:
+    """The variance per axis (m^2/s^2) of the current about its layer's value at a depth drawn evenly from the
+    layer, for the random walk in depth of density q_z over a layer of thickness h: q_z^2 h / 6 (the mean over
+    the layer of Var(B(x) - mean of B), a Brownian motion B); 0 without layers."""
+    cur = config.current
+    return cur.depth_rw_m_s_per_sqrt_m**2 * cur.layer_thickness_m / 6.0
 
 
 def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid: np.ndarray | None,

@@ -18,7 +18,7 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import E, V, W, X, key_dim
+from gtsam_dvl.core.keys import E, S, V, W, X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys, water_current
@@ -82,7 +82,7 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
             out[W(i)] = slice(at + d - 2, at + d)
         return out
 
-    shared = shared_keys(cfg)
+    shared = shared_keys(cfg) + [S(b) for b in builder.shear]  # (the water current's layer boundaries: current.py)
     shared_cols: dict[int, slice] = {}
     start = 0
     for k in shared:

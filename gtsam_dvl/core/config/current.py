@@ -21,6 +21,12 @@ class), scaled like every DVL sigma by [dvl] noise_multiplier. water_track "refu
 have their own scale factor (a DVL whose water-track calibration differs from its bottom track's; batch and
 online), the misalignment and lever arm still shared. Each estimator resolves "auto" for its log
 (current.resolve_water_track): its result's configuration says "use" or "refuse".
+
+With layer_thickness_m > 0 the depth dependence is per layer: the water column is cut into layers of that
+thickness from the surface down, the current is uniform within a layer up to a random walk in time shared by all
+of them, and the change across each boundary crossed is a state with the variance depth_rw_m_s_per_sqrt_m^2 times
+the thickness. A vehicle that descends and ascends through the same water meets the same layers twice, and the
+pings of both passes inform one current per layer.
 """
 
 from __future__ import annotations
@@ -49,3 +55,7 @@ class CurrentConfig(ConfigModel):
     # fraction (1 %: a DVL's water-track and bottom-track scales differ by less, typical of the class)
     water_track_scale: Flag = False
     water_track_scale_sigma: Positive = 0.01
+    # > 0: the current per depth layer of this thickness (m, from the water surface down) plus one random walk in
+    # time shared by every layer, instead of the random walk in depth per state (estimators/current.py,
+    # "Layers"): a layer crossed on the descent and again on the ascent is one unknown, not two
+    layer_thickness_m: NonNegative = 0.0

@@ -472,6 +472,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                               gate_threshold(ekf_cfg.gate_probability, 1), ekf_cfg.gate_reopen_after,
                               counters=dcounters)
     fs = initial_state(log, config, alignment.n_R_b, p0, first, calibration)
+    current.ekf_start(config, fs, frame.height_m)
     offset_centre = fs.time_offset  # the time offset prior's centre (the configured one, or the calibration's)
     hist = History()
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []  # (t, z, W, its covariance, water)
@@ -507,9 +508,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                 if (gm := fs.error_slice()) is not None:  # the correlated DVL error decays (correlated.py)
                     assert fs.dvl_error is not None
                     fs.P, fs.dvl_error = ekf_propagate(config, fs.P, fs.dvl_error, gm, t_next - t_prev)
-                if (wc := fs.current_slice()) is not None:  # the current's random walk in time and depth
-                    fs.P = current.ekf_propagate(config, fs.P, wc, t_next - t_prev,
-                                                 float(fs.nav.n_v[2]) * (t_next - t_prev))
+                # the current's random walk in time and depth, or across the layer boundaries (current.py)
+                current.ekf_propagate(config, fs, t_next - t_prev, frame.height_m)
                 if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
@@ -594,7 +594,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         result.info["water_current"] = current.profile(
             np.array([c[0] for c in currents]), np.array([c[1] for c in currents]),
             np.array([c[2] for c in currents]), np.array([c[3] for c in currents]), config,
-            np.array([c[4] for c in currents], dtype=bool))
+            np.array([c[4] for c in currents], dtype=bool), current.ekf_shear(fs))
     if progress:
         progress(1.0)
     return result

@@ -77,6 +77,9 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
     if (wc := fs.current_slice()) is not None:
         assert fs.current is not None
         fs.current = fs.current + dx[wc]
+    if (sh := fs.shear_slice()) is not None:
+        assert fs.shear is not None
+        fs.shear = fs.shear + dx[sh].reshape(-1, 2)
     if len(dx) - fs.extra_states() > OFFSET:
         fs.time_offset = fs.time_offset + float(dx[OFFSET])
     return nis, down, False

@@ -37,7 +37,7 @@ are below 1e-4 of the ones kept over a one-second interval; tests/estimators/tes
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -74,6 +74,12 @@ class FilterState:
     # the water current [c_east, c_north] (2,) m/s in map, the last 2 error-state components (when water-track
     # pings are used: estimators/current.py)
     current: np.ndarray | None = None
+    # with [current] layer_thickness_m > 0: the current's change across each layer boundary crossed so far
+    # (estimators/current.py, "Layers"), (n, 2) m/s in map, boundary shear_ids[r] in row r; their error-state
+    # components sit before the correlated error's and the current's, two per boundary
+    shear: np.ndarray | None = None
+    shear_ids: list[int] = field(default_factory=list)
+    layer: int = 0  # the depth layer of the nominal state (with layers)
 
     def error_slice(self) -> slice | None:
         """The correlated DVL error's error-state columns (the last three before the current's), None when not
@@ -81,14 +87,23 @@ class FilterState:
         end = len(self.P) - (0 if self.current is None else 2)
         return None if self.dvl_error is None else slice(end - 3, end)
 
+    def shear_slice(self) -> slice | None:
+        """The layer boundaries' error-state columns (before the correlated error's and the current's), None
+        without layers."""
+        if self.shear is None:
+            return None
+        end = len(self.P) - (0 if self.current is None else 2) - (0 if self.dvl_error is None else 3)
+        return slice(end - 2 * len(self.shear_ids), end)
+
     def current_slice(self) -> slice | None:
         """The water current's error-state columns (the last two), None when not modelled."""
         return None if self.current is None else slice(len(self.P) - 2, len(self.P))
 
     def extra_states(self) -> int:
-        """How many error-state components follow the time offset's place: the correlated error's and the
-        current's."""
-        return (0 if self.dvl_error is None else 3) + (0 if self.current is None else 2)
+        """How many error-state components follow the time offset's place: the layer boundaries', the correlated
+        error's and the current's."""
+        return ((0 if self.dvl_error is None else 3) + (0 if self.current is None else 2)
+                + 2 * len(self.shear_ids))
 
 
 @dataclass

@@ -83,6 +83,7 @@ from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.keys import S as S_KEY  # (the water current's layer boundaries)
 from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
@@ -311,10 +312,13 @@ class OnlineEstimator:
     # ----- output --------------------------------------------------------------------------------
     def current_profile(self) -> dict[str, Any]:
         """NavResult.info["water_current"]: the filtered current at each state (estimators/current.py profile)."""
-        h = self.current_history
+        h, sm = self.current_history, self.smoother
+        shear = {} if sm is None else {  # with layers, each boundary crossed (never marginalised)
+            b: (sm.isam.calculateEstimate([S_KEY(b)]).atVector(S_KEY(b)), sm.joint_covariance([S_KEY(b)]))
+            for b in sm.shear}
         return current.profile(np.array([c[0] for c in h]), np.array([c[1] for c in h]),
                                np.array([c[2] for c in h]), np.array([c[3] for c in h]), self.config,
-                               np.array([c[4] for c in h], dtype=bool))
+                               np.array([c[4] for c in h], dtype=bool), shear)
 
     def estimate(self) -> OnlineEstimate | None:
         """The estimate after the latest epoch (None before the first): the newest state's, or after a ping between

@@ -63,7 +63,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import E, V, W, X, key_dim
+from gtsam_dvl.core.keys import E, S, V, W, X, key_dim
 from gtsam_dvl.core.states import (
     Estimate,
     block_states,
@@ -137,6 +137,10 @@ class IncrementalSmoother:
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
         self.gm = correlated_error(builder.config)  # the DVL's correlated error E(i) a state (correlated.py)
         self.wc = water_current(builder.config)  # the water current W(i) a state (current.py)
+        # with layers: the boundaries S(b) crossed so far (shared keys, never marginalised) and the newest layer
+        self.layers = self.wc and current.layered(builder.config)
+        self.shear: list[int] = []
+        self.layer = 0
         # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py);
         # every factor is linear in E (the DVL's, the links), so its threshold is a formality: a tenth of its sigma
         self._threshold = {"x": np.asarray(thresholds.pose, dtype=float),
@@ -146,8 +150,9 @@ class IncrementalSmoother:
                            # the water current enters the DVL factor linearly but for its cross terms with the
                            # attitude and scale ((k dtheta + dk) dW: 2e-4 m/s at 1e-2 and 0.02 m/s, 2 % of a
                            # water-track ping's sigma): twice that sigma
-                           **({"w": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s)} if self.wc
-                              else {})}
+                           **({"w": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s),
+                               "s": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s)}
+                              if self.wc else {})}
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
         threshold_map = gtsam.ISAM2ThresholdMap()
@@ -169,7 +174,7 @@ class IncrementalSmoother:
         self.rebases = 0
         self._frozen = gtsam.KeyList()  # keys of the states older than the RECENT newest, oldest first
         self._frozen_until = 0  # states below this index are in _frozen (or marginalised)
-        self._limits: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._limits: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._last_imu: EarthImuFactor | None = None
         # a normal update re-eliminated states outside its elimination groups: the chain's time order, which
         # marginalizeLeaves needs, may be broken (see _update); the next marginalisation rebases first
@@ -198,6 +203,8 @@ class IncrementalSmoother:
             if self.wc:
                 values.insert(W(0), np.zeros(2))
                 factors.append(current.prior_factor(b.config))
+                self.layer = int(current.layer_index(b.config, values.atPose3(X(0)).translation()[2],
+                                                     b.frame.height_m)) if self.layers else 0
         else:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
@@ -221,8 +228,11 @@ class IncrementalSmoother:
                 factors.append(correlated.link_factor(b.config, i - 1, i, dt))
             if self.wc:  # W's prediction: the previous state's; its random walk over dt and the predicted depth change
                 values.insert(W(i), prev.atVector(W(i - 1)))
-                dz = float(state.pose().translation()[2] - pose.translation()[2])
-                factors.append(current.link_factor(b.config, i - 1, i, dt, dz))
+                if self.layers:  # or across the layer boundaries crossed, each new one with its prior (current.py)
+                    factors += self._cross_layers(i, dt, float(state.pose().translation()[2]), values)
+                else:
+                    dz = float(state.pose().translation()[2] - pose.translation()[2])
+                    factors.append(current.link_factor(b.config, i - 1, i, dt, dz))
         self.n, self.t_last = i + 1, t
         self.times[i] = t
         graph = gtsam.NonlinearFactorGraph()
@@ -231,6 +241,22 @@ class IncrementalSmoother:
         self._update(graph, values)
         if self.window_s is not None:
             self._slide(t - self.window_s)
+
+    def _cross_layers(self, i: int, dt: float, z: float, values: gtsam.Values) -> list[gtsam.NonlinearFactor]:
+        """The current's link from state i - 1 to state i at height z (m, map): the random walk in time, plus the
+        layer boundaries crossed; a boundary met for the first time gets its variable (inserted into values,
+        predicted by the previous value: zero) and prior, and joins the shared keys' elimination group."""
+        cfg = self.builder.config
+        j = int(current.layer_index(cfg, z, self.builder.frame.height_m))
+        out: list[gtsam.NonlinearFactor] = []
+        for bnd, _ in current.crossings(self.layer, j):
+            if bnd not in self.shear:
+                self.shear.append(bnd)
+                values.insert(S(bnd), np.zeros(2))
+                out.append(current.shear_prior(cfg, bnd))
+        out.append(current.crossing_link(cfg, i - 1, i, dt, self.layer, j))
+        self.layer = j
+        return out
 
     def add_factors(self, factors: list[gtsam.NonlinearFactor]) -> None:
         """Factors on variables already held (a depth sample that came after the newest state): one update."""
@@ -284,7 +310,7 @@ class IncrementalSmoother:
         for i in range(recent_from, self.n):
             for k in self._state_keys(i):
                 groups.insert2(k, i - recent_from)
-        for k in self.shared_keys(self.n - 1):
+        for k in self.shared_keys(self.n - 1) + [S(b) for b in self.shear]:  # (the current's layer boundaries too)
             groups.insert2(k, self.n - recent_from)
         return groups, (gtsam.KeyList() if rebase else self._frozen)
 
@@ -322,16 +348,17 @@ class IncrementalSmoother:
         delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
-        if (n_states, old) not in self._limits:
+        if (n_states, old, len(self.shear)) not in self._limits:
             # (key, whether iSAM2 leaves it alone): the states', old ones only, and the shared keys, always
             held = [(k, j < old) for j in range(n_states) for k in self._state_keys(self.first + j)]
             held += [(k, True) for k in shared_keys(self.builder.config, per_state=False)]
+            held += [(S(b), True) for b in self.shear]
             held.sort()
             limits = [self._threshold[chr(k >> 56)] for k, _ in held]
-            self._limits[(n_states, old)] = (np.concatenate(limits),
+            self._limits[(n_states, old, len(self.shear))] = (np.concatenate(limits),
                                              np.concatenate([np.full(len(lim), frozen)
                                                              for lim, (_, frozen) in zip(limits, held, strict=True)]))
-        lim, msk = self._limits[(n_states, old)]
+        lim, msk = self._limits[(n_states, old, len(self.shear))]
         if lim.shape != delta.shape:
             raise GtsamDvlError(f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}")
         return bool(((np.abs(delta) > lim) & msk).any())
