@@ -125,3 +125,19 @@ def test_a_log_without_depth_or_fixes_is_unchanged(dive: LogData) -> None:
     assert on.info["noise"] == off.info["noise"]
     assert set(on.info["noise"]) == {"imu", "dvl"}
     assert on.info["solver"]["final_error"] == off.info["solver"]["final_error"]
+
+
+def test_online_and_ekf_say_they_hold_the_configured_depth_level(dive: LogData) -> None:
+    """The online estimator and the EKF do not fit the depth: it stays at its configured level, and the report
+    and the console say so (no GNSS entry: neither takes fixes); a log without depth, or the depth fit off, has no
+    such entry. (The online estimator as set up for the log; the EKF's entry is made the same way.)"""
+    from gtsam_dvl.estimators.noise_levels import held_depth_level
+    from gtsam_dvl.estimators.online.estimator import OnlineEstimator
+
+    cfg = _config(DEPTH_M / 3.0, GNSS_M)
+    noise = OnlineEstimator.for_log(dive, cfg).noise.as_dict()
+    assert noise["depth"]["held"] and noise["depth"]["multiplier"] == 1.0 and "gnss" not in noise
+    assert any("the online estimator holds it" in line for line in noise_lines(noise))
+    assert "the EKF holds it" in held_depth_level(dive, cfg, "EKF")["why"]
+    assert held_depth_level(dataclasses.replace(dive, depth=None), cfg, "EKF") == {}
+    assert held_depth_level(dive, _config(DEPTH_M, GNSS_M, fit_depth=False), "EKF") == {}
