@@ -91,10 +91,13 @@ def test_batch_fits_the_depth_and_gnss_noise(dive: LogData, factor: float) -> No
 
 def test_fitted_factors_stay_within_their_bounds(dive: LogData) -> None:
     """Depth stated three times too small against a bound of 2, fixes three times too large against a bound of
-    0.5: each factor ends at its bound, said so; the health is degraded (the model does not fit its data)."""
+    0.5: each factor ends at its bound, said so; the health is degraded (the model does not fit its data). With
+    the DVL's fit off (its entry empty) the depth and GNSS fits run alone."""
     from gtsam_dvl.analysis.health import assess_health
 
-    r = smooth_batch(dive, _config(DEPTH_M / 3.0, GNSS_M * 3.0, depth_max_multiplier=2.0, gnss_min_multiplier=0.5))
+    r = smooth_batch(dive, _config(DEPTH_M / 3.0, GNSS_M * 3.0, depth_max_multiplier=2.0, gnss_min_multiplier=0.5,
+                                   fit_dvl=False))
+    assert r.info["noise"]["dvl"] == {}
     depth, gnss = r.info["noise"]["depth"], r.info["noise"]["gnss"]
     assert depth["multiplier"] == 2.0 and depth["at_bound"] and "at the bound [0.1, 2]" in depth["why"]
     assert gnss["multiplier"] == 0.5 and gnss["at_bound"] and "at the bound [0.5, 10]" in gnss["why"]
