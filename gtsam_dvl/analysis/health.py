@@ -148,9 +148,10 @@ def _check_noise_fit(result: NavResult, health: Health) -> None:
     """A DVL noise fit that ended at a bound of [noise] is no fit: the DVL model does not fit its data at any
     noise level within ten times the stated one (a wrong mounting, a wrong topic, water track)."""
     noise = result.info.get("noise")
-    dvl = noise.get("dvl") if isinstance(noise, dict) else None
-    if isinstance(dvl, dict) and dvl.get("at_bound"):
-        health.flag("degraded", str(dvl.get("why")))
+    for sensor in ("dvl", "depth", "gnss"):  # (the depth's and the fixes' fits likewise)
+        entry = noise.get(sensor) if isinstance(noise, dict) else None
+        if isinstance(entry, dict) and entry.get("at_bound"):
+            health.flag("degraded", str(entry.get("why")))
 
 
 def assess_log_health(log: LogData, screened: dict[str, Any] | None = None) -> Health:

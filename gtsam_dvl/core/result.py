@@ -246,8 +246,8 @@ class NavResult(CalibrationUnits):
     def noise_config(self) -> EstimatorConfig | None:
         """The configuration with the noise levels the estimator used: `config` holds the configuration as given
         (reading it back with -c reproduces the run), info["noise"] the levels taken from the data
-        (estimators/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL noise
-        factor). What the residuals are judged against. None: the configuration does not read."""
+        (estimators/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL, depth and
+        GNSS noise factors). What the residuals are judged against. None: the configuration does not read."""
         config = self.estimator_config
         noise = self.info.get("noise") if isinstance(self.info, dict) else None
         if config is None or not isinstance(noise, dict):
@@ -261,6 +261,12 @@ class NavResult(CalibrationUnits):
             update["imu"] = config.imu.model_copy(update=imu_update)
         if multiplier is not None and math.isfinite(float(multiplier)):
             update["dvl"] = config.dvl.model_copy(update={"noise_multiplier": float(multiplier)})
+        for sensor in ("depth", "gnss"):  # the batch smoother's fitted depth and GNSS factors
+            entry = noise.get(sensor)
+            if isinstance(entry, dict) and entry.get("multiplier") is not None \
+                    and math.isfinite(float(entry["multiplier"])):
+                update[sensor] = getattr(config, sensor).model_copy(
+                    update={"noise_multiplier": float(entry["multiplier"])})
         return config.model_copy(update=update) if update else config
 
     @property

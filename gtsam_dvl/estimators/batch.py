@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -27,17 +28,25 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.current import resolve_water_track
+from gtsam_dvl.estimators.depth import depth_samples
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
+    SCREEN_K,
+    SENSOR_GROUPS,
     NoiseReport,
+    chi2_ratio,
     dvl_fit_enabled,
     dvl_fit_report,
     fitted_multiplier,
     imu_levels,
     median_ping_sigma,
+    sensor_fit_enabled,
+    sensor_fit_report,
+    sensor_multiplier,
+    sensor_not_fitted,
     variance_ratio,
-    with_multiplier,
+    with_sensor_multiplier,
 )
 from gtsam_dvl.estimators.solver import (
     ChunkedOrdering,
@@ -129,7 +138,7 @@ def solve_log(log: LogData, config: EstimatorConfig, noise: NoiseReport, timing:
                                                 progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
     if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
         raise GtsamDvlError("solve_log: the batch smoother's bulk graph expected")
-    if dvl_fit_enabled(builder.config):
+    if dvl_fit_enabled(builder.config) or fitted_sensors(builder):
         values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
     timing["solve"] = time.perf_counter() - t2
     return builder, graph, values, ordering, report, passes, dof
@@ -172,41 +181,107 @@ def _solver_options(builder: LogGraph) -> dict[str, Any]:
                 absolute_tol=s.absolute_error_tol, before_iteration=builder.refresh_gravity)
 
 
+def fitted_sensors(builder: LogGraph) -> list[str]:
+    """The sensor groups besides the DVL whose noise factor the batch fit takes (SENSOR_GROUPS): fitting
+    enabled ([noise] fit_depth, fit_gnss) and factors in the graph."""
+    slots = getattr(builder, "factor_slots", {})
+    return [s for s in SENSOR_GROUPS if sensor_fit_enabled(builder.config, s) and len(slots.get(s, ()))]
+
+
+def _sensor_squares(graph: BulkGraph, slots: range, values: gtsam.Values) -> np.ndarray:
+    """The squared norms of the whitened errors of the (non-robust) factors at slots: 2 x their error."""
+    return np.array([2.0 * graph.graph.at(i).error(values) for i in slots])
+
+
+def _sensor_sigma(builder: LogGraph, sensor: str) -> float:
+    """The median sigma of sensor's factors at builder.config's factor (m; a fix's per axis)."""
+    if sensor == "depth":
+        assert builder.log.depth is not None
+        sigma = depth_samples(builder.log.depth, builder.config.depth, builder.frame).sigma
+    else:
+        plan = builder.gnss_plan()
+        assert plan is not None
+        cov = plan.cov[plan.mask("used")]
+        sigma = np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0)
+    return float(np.median(sigma)) if len(sigma) else math.nan
+
+
+def _replace_sensor_factors(builder: LogGraph, graph: BulkGraph, sensor: str) -> None:
+    """sensor's factors in graph made again at builder.config's noise factor, in their slots."""
+    factors = builder.depth_factors() if sensor == "depth" else builder.gnss_factors()
+    slots = builder.factor_slots[sensor]
+    if len(factors) != len(slots):
+        raise GtsamDvlError(f"fit_dvl_noise: {len(factors)} {sensor} factors made again for {len(slots)} slots")
+    for i, f in zip(slots, factors, strict=True):
+        graph.graph.replace(i, f)
+
+
 def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: ChunkedOrdering,
                   report: SolveReport, passes: list[dict[str, float]], noise: NoiseReport
                   ) -> tuple[gtsam.Values, SolveReport]:
-    """The DVL's variance component (estimators/noise_levels.py), fitted on the solution and re-solved with
-    until it changes by at most [noise] fit_tolerance, in at most fit_passes solves (the first included). The
-    factor is applied only with a re-solve, so the solution and its Bayes net are always at the weights
-    reported; builder.config takes the factor used ([dvl] noise_multiplier), noise.dvl says how it came."""
+    """The variance components (estimators/noise_levels.py) of the DVL and of the depth and GNSS factors
+    (fitted_sensors), each fitted on the solution from its own whitened residuals, and re-solved with until none
+    changes by more than [noise] fit_tolerance, in at most fit_passes solves (the first included). A factor is
+    applied only with a re-solve, so the solution and its Bayes net are always at the weights reported; a
+    sensor with fewer than min_rows rows keeps its configured factor. builder.config takes the factors used
+    ([dvl], [depth], [gnss] noise_multiplier), noise.dvl, noise.depth and noise.gnss say how they came."""
     cfg = builder.config
     n = cfg.noise
     bulk = graph.bulk
-    used = cfg.dvl.noise_multiplier
-    rows, at_bound, settled, solves = 0, False, False, 1
+    sensors = (["dvl"] if dvl_fit_enabled(cfg) else []) + fitted_sensors(builder)
+    used = {s: sensor_multiplier(cfg, s) for s in sensors}
+    configured = {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"}
+    rows: dict[str, int] = {}
+    fits: dict[str, tuple[float, bool]] = {}
+    settled, solves = False, 1
     while True:
-        ratio, rows = variance_ratio(bulk.whitened_errors(values), bulk.robust_k)
-        if rows * bulk.pings.dim < n.min_rows or not np.isfinite(ratio):
-            noise.dvl = {"multiplier": used, "rows": rows, "why": f"DVL noise not fitted: {rows} usable residual "
-                         f"rows, fewer than [noise] min_rows = {n.min_rows}"}
-            return values, report
-        new, at_bound = fitted_multiplier(used, ratio, cfg)
-        if abs(new / used - 1.0) <= n.fit_tolerance:
+        for s in list(sensors):
+            if s == "dvl":
+                ratio, used_rows = variance_ratio(bulk.whitened_errors(values), bulk.robust_k)
+                dim = bulk.pings.dim
+            else:
+                dim = 3 if s == "gnss" else 1
+                ratio, used_rows = chi2_ratio(_sensor_squares(graph, builder.factor_slots[s], values), dim, SCREEN_K)
+            rows[s] = used_rows * dim
+            if rows[s] < n.min_rows or not np.isfinite(ratio):
+                sensors.remove(s)  # keeps the factor it has
+                fits.pop(s, None)
+                if s == "dvl":
+                    noise.dvl = {"multiplier": used[s], "rows": used_rows, "why": f"DVL noise not fitted: "
+                                 f"{used_rows} usable residual rows, fewer than [noise] min_rows = {n.min_rows}"}
+                else:
+                    setattr(noise, s, sensor_not_fitted(s, used[s], rows[s], n.min_rows))
+                continue
+            fits[s] = fitted_multiplier(used[s], ratio, cfg, s)
+        moving = [s for s in sensors if abs(fits[s][0] / used[s] - 1.0) > n.fit_tolerance]
+        if not moving:
             settled = True
             break
         if solves >= n.fit_passes:
             break
-        bulk.whiten *= used / new  # W ~ 1 / sigma
-        used = new
+        for s in moving:
+            new = fits[s][0]
+            if s == "dvl":
+                bulk.whiten *= used[s] / new  # W ~ 1 / sigma
+            else:
+                builder.config = with_sensor_multiplier(builder.config, s, new)
+                _replace_sensor_factors(builder, graph, s)
+            used[s] = new
         values, report = gauss_newton_qr(graph, values, ordering, **_solver_options(builder))  # type: ignore[arg-type]
         passes.append({"iterations": report.iterations, **report.timing_s})
         solves += 1
-    builder.config = with_multiplier(cfg, used)
-    how = f"{solves} solve" + ("s" if solves > 1 else "")
-    if not settled:
-        how += f", not settled: the last fit asked for x {new / used:.3g}"
-    noise.dvl = dvl_fit_report(builder.config, used, rows * bulk.pings.dim, solves, at_bound,
-                               median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]), how)
+    for s in sensors:
+        builder.config = with_sensor_multiplier(builder.config, s, used[s])
+        how = f"{solves} solve" + ("s" if solves > 1 else "")
+        new, at_bound = fits[s]
+        if not settled and abs(new / used[s] - 1.0) > n.fit_tolerance:
+            how += f", not settled: the last fit asked for x {new / used[s]:.3g}"
+        if s == "dvl":
+            noise.dvl = dvl_fit_report(builder.config, used[s], rows[s], solves, at_bound,
+                                       median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]), how)
+        else:
+            setattr(noise, s, sensor_fit_report(builder.config, s, *configured[s], used[s], rows[s], solves,
+                                                at_bound, how))
     return values, report
 
 

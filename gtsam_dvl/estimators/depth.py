@@ -5,7 +5,7 @@ ellipsoidal height 0: the sensor is at height -d, i.e. z_meas = -d - h0 above th
 A pressure sample is converted here with the [depth] section (water density, atmospheric pressure) and the
 mean normal gravity of the water column at the origin's latitude (core/earth.py pressure_to_depth); its
 variance is carried through dd/dp. The noise is [depth] noise_m if > 0, else the message's, else
-default_noise_m.
+default_noise_m, times [depth] noise_multiplier (the variance component the batch smoother fits: [noise] fit_depth).
 
 Each sample goes to the state nearest in time (estimators/graph.py); the time between them, at most
 [depth] max_time_to_state_s, is bridged by the state's vertical velocity in the factor (factors/depth.py).
@@ -49,6 +49,7 @@ def depth_samples(depth: DepthData, cfg: DepthConfig, frame: LocalFrame,
     else:
         ok_var = np.isfinite(var) & (var > 0)
         sigma = np.where(ok_var, np.sqrt(np.where(ok_var, var, 1.0)), cfg.default_noise_m)
+    sigma = sigma * cfg.noise_multiplier  # the fitted (or pinned) variance component ([noise] fit_depth)
     ok = np.isfinite(d) & np.isfinite(depth.t)
     if counters is not None:
         counters["depth_invalid"] = int((~ok).sum())

@@ -3,7 +3,8 @@
 A fix (LogData.gnss, sensor_msgs/msg/NavSatFix) is the antenna's geodetic position at the surface. Here it
 becomes the antenna's position in map, z = LocalFrame.geodetic_to_map(lat, lon, h), with its covariance
 rotated from the ENU axes at the fix into map axes ([gnss] noise_m if > 0, else the message's, else
-default_noise_m). Each fix gets a role:
+default_noise_m; times [gnss] noise_multiplier squared, the variance component the batch smoother fits: [noise]
+fit_gnss). Each fix gets a role:
 
 - "rejected_status": not a fix (status < 0, or a non-finite latitude, longitude or height);
 - "rejected_depth": the depth sensor (if the log has one) says deeper than [gnss] max_depth_m at its time;
@@ -114,11 +115,12 @@ def antenna_lever(gnss: GnssData, config: EstimatorConfig) -> np.ndarray:
 
 def fix_covariances(gnss: GnssData, config: EstimatorConfig, frame: LocalFrame) -> np.ndarray:
     """(K, 3, 3) covariances of the fixes in map axes (m^2): noise_m, else the message's ENU covariance at the
-    fix if it is finite and positive definite, else default_noise_m; rotated by n_R_l at the fix."""
+    fix if it is finite and positive definite, else default_noise_m; rotated by n_R_l at the fix; times
+    [gnss] noise_multiplier squared."""
     cfg = config.gnss
     k = len(gnss)
     if cfg.noise_m > 0:
-        return np.broadcast_to(np.eye(3) * cfg.noise_m**2, (k, 3, 3)).copy()
+        return np.broadcast_to(np.eye(3) * (cfg.noise_m * cfg.noise_multiplier)**2, (k, 3, 3)).copy()
     cov = np.asarray(gnss.cov_enu_m2, dtype=float).copy()
     ok = np.isfinite(cov).all(axis=(1, 2))
     for i in np.flatnonzero(ok).tolist():
@@ -129,7 +131,7 @@ def fix_covariances(gnss: GnssData, config: EstimatorConfig, frame: LocalFrame) 
     lat = np.radians(np.where(np.isfinite(gnss.lat_deg), gnss.lat_deg, frame.lat_deg))
     lon = np.radians(np.where(np.isfinite(gnss.lon_deg), gnss.lon_deg, frame.lon_deg))
     n_R_l = frame.n_R_l(lat, lon).reshape(k, 3, 3)
-    return np.asarray(n_R_l @ cov @ np.transpose(n_R_l, (0, 2, 1)))
+    return np.asarray(n_R_l @ cov @ np.transpose(n_R_l, (0, 2, 1))) * cfg.noise_multiplier**2
 
 
 def fixes_in_map(gnss: GnssData, frame: LocalFrame) -> np.ndarray:

@@ -459,10 +459,13 @@ class LogGraph:
             z = self.layer_heights(z) if current.layered(self.config) else z
             for f in current.factors(self.config, np.array([ep.t for ep in self.epochs]), z, self.frame.height_m):
                 graph.add(f)
-        for f in self.depth_factors():
-            graph.add(f)
-        for f in self.gnss_factors(gnss):
-            graph.add(f)
+        # where the depth and GNSS factors sit in the graph (the batch smoother's noise fit replaces them)
+        self.factor_slots: dict[str, range] = {}
+        for name, factors in (("depth", self.depth_factors()), ("gnss", self.gnss_factors(gnss))):
+            start = graph.size()
+            for f in factors:
+                graph.add(f)
+            self.factor_slots[name] = range(start, graph.size())
         return graph
 
     def build_bulk(self, values: gtsam.Values | None = None) -> tuple[BulkGraph, gtsam.Values]:

@@ -394,13 +394,14 @@ def test_a_log_names_its_configuration() -> None:
 # paper_modified.toml / .json a paper configuration with optional fields set and unset; all written by the
 # package's dataclass configuration, whose keys, defaults and TOML text these models keep.
 FIXTURES = Path(__file__).parent / "config_fixtures"
-# keys those files do not have: the noise levels from the data ([noise], and the fitted [dvl] noise_multiplier), the
-# sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting tolerance. A file without them
-# takes their defaults (the fit on, no preset), also a paper configuration's; but a result's config.json without
-# the correlated error takes it as white, as the runs that wrote it did (test below)
+# keys those files do not have: the noise levels from the data ([noise], and the fitted [dvl], [depth] and [gnss]
+# noise_multiplier), the sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting
+# tolerance. A file without them takes their defaults (the fit on, no preset), also a paper configuration's; but a
+# result's config.json without the correlated error takes it as white, as the runs that wrote it did (test below)
 ADDED = {"noise": None, "current": None, "calibration": None, "imu": {"model"},
          "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
-         "priors": {"mounting_tolerance_deg"}, "ekf": {"recentre_time_offset"}}
+         "priors": {"mounting_tolerance_deg"}, "ekf": {"recentre_time_offset"},
+         "depth": {"noise_multiplier"}, "gnss": {"noise_multiplier"}}
 
 
 def _without_added(d: dict) -> dict:  # type: ignore[type-arg]

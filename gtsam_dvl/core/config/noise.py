@@ -14,11 +14,18 @@ Nortek-class units) is rarely what its messages' covariance or the configured de
 - fits a factor on every DVL sigma (a variance component: [dvl] noise_multiplier) from the whitened DVL
   residuals (fit_dvl): the batch smoother re-solves with the fitted factor until it changes by less than
   fit_tolerance (at most fit_passes solves); the online estimator and the EKF fit it on the pings of the first
-  warmup_s seconds and hold it from then on.
+  warmup_s seconds and hold it from then on;
+- fits a factor on every depth sigma ([depth] noise_multiplier, fit_depth) and one on every GNSS fix's sigma
+  ([gnss] noise_multiplier, fit_gnss) the same way, each from its own sensor's whitened residuals, jointly with
+  the DVL's in the batch smoother's fit and solve loop (a log without depth samples or aiding fixes has no such
+  factor and nothing to fit). The online estimator and the EKF hold the configured depth level and say so (they
+  take no GNSS fixes).
 
 The fitted factor is clipped to [dvl_min_multiplier, dvl_max_multiplier] (a fit at a bound is reported: the
-model does not fit, whatever the factor). The fit starts from [dvl] noise_multiplier; fit_dvl = false pins
-the DVL at it, imu_quantisation = false pins the IMU densities as configured.
+model does not fit, whatever the factor), the depth's to [depth_min_multiplier, depth_max_multiplier] and the
+GNSS's to [gnss_min_multiplier, gnss_max_multiplier]. The fit starts from [dvl] noise_multiplier; fit_dvl =
+false pins the DVL at it (fit_depth = false, fit_gnss = false: the depth and the fixes at theirs),
+imu_quantisation = false pins the IMU densities as configured.
 """
 
 from __future__ import annotations
@@ -45,7 +52,15 @@ class NoiseConfig(ConfigModel):
     # bounds of the fitted factor: 0.1-10 covers a stated noise ten times too large or too small
     dvl_min_multiplier: Positive = 0.1
     dvl_max_multiplier: Positive = 10.0
-    # fewer DVL rows than this: no fit (the factor's sampling error would exceed 10 %)
+    # fit the depth sensor's and the GNSS fixes' noise factors from their residuals (batch smoother), each within
+    # its bounds (0.1-10, as the DVL's)
+    fit_depth: Flag = True
+    fit_gnss: Flag = True
+    depth_min_multiplier: Positive = 0.1
+    depth_max_multiplier: Positive = 10.0
+    gnss_min_multiplier: Positive = 0.1
+    gnss_max_multiplier: Positive = 10.0
+    # fewer rows of a sensor than this: no fit of its factor (its sampling error would exceed 10 %)
     min_rows: Integer = Field(default=60, ge=3)
     # online estimator and EKF: the fit's window from the first ping, s (then held)
     warmup_s: Positive = 120.0

@@ -388,6 +388,9 @@ class DepthConfig(ConfigModel):
     atmospheric_pa: NonNegative = 101325.0
     noise_m: NonNegative = 0.0  # >0 overrides the message's variance
     default_noise_m: Positive = 0.1  # for messages without a variance
+    # every sample's sigma (noise_m, the message's or the default) times this: the variance component the batch
+    # smoother fits from the residuals ([noise] fit_depth, core/config/noise.py); set here, it pins the factor
+    noise_multiplier: Positive = 1.0
     lever_arm_m: tuple[Number, Number, Number] | None = None
     max_time_to_state_s: NonNegative = 0.5
 
@@ -411,6 +414,9 @@ class GnssConfig(ConfigModel):
     surface_gap_s: Positive = 10.0  # a longer gap between fixes ends an interval
     noise_m: NonNegative = 0.0  # >0 overrides the message's covariance
     default_noise_m: Positive = 5.0  # for messages without a covariance
+    # every fix's sigma (noise_m, the message's or the default) times this: the variance component the batch
+    # smoother fits from the residuals ([noise] fit_gnss, core/config/noise.py); set here, it pins the factor
+    noise_multiplier: Positive = 1.0
     lever_arm_m: tuple[Number, Number, Number] | None = None
     max_time_to_state_s: NonNegative = 0.5
 
