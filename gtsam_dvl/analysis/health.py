@@ -148,9 +148,8 @@ def _check_noise_fit(result: NavResult, health: Health) -> None:
     """A DVL noise fit that ended at a bound of [noise] is no fit: the DVL model does not fit its data at any
     noise level within ten times the stated one (a wrong mounting, a wrong topic, water track)."""
     noise = result.info.get("noise")
-    for sensor in ("dvl", "depth", "gnss"):  # (the depth's and the fixes' fits likewise)
-        entry = noise.get(sensor) if isinstance(noise, dict) else None
-        if isinstance(entry, dict) and entry.get("at_bound"):
+    for entry in (noise.get(s) for s in ("dvl", "depth", "gnss")) if isinstance(noise, dict) else ():
+        if isinstance(entry, dict) and entry.get("at_bound"):  # (the depth's and the fixes' fits likewise)
             health.flag("degraded", str(entry.get("why")))
 
 

@@ -235,6 +235,15 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
     fs.layer = j
 
 
+def seen_velocity(fs: FilterState, water: bool) -> np.ndarray:
+    """The velocity (m/s, map) an EKF's ping sees: over ground, or for a water-track ping relative to the water,
+    n_v - [c_east, c_north, 0]."""
+    if not water:
+        return fs.nav.n_v
+    assert fs.current is not None
+    return fs.nav.n_v - np.array([*fs.current, 0.0])
+
+
 def ekf_shear(fs: FilterState) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     """The EKF's layer boundaries: b -> (S(b), its covariance) (profile)."""
     sh = fs.shear_slice()

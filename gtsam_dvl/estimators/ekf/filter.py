@@ -532,10 +532,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             break
         on_water = bool(water[j])
         A, z, Rm = _ping_measurement(log, config, int(j), on_water)
-        n_v = fs.nav.n_v  # the velocity the DVL sees (m/s, map): over ground, or relative to the water (current.py)
-        if on_water:
-            assert fs.current is not None
-            n_v = n_v - np.array([*fs.current, 0.0])
+        n_v = current.seen_velocity(fs, on_water)  # (m/s, map): over ground, or relative to the water
         y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie, n_v)
         if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
             dt_c = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
