@@ -9,7 +9,10 @@ error and sigma (app/campaign/montecarlo.py run_errors), the thrust-axis (roll) 
 current's error/sigma where it is determined (its sigma below half its prior's), sampled every 20 states.
 
     .venv/bin/python bench/water_track.py --runs 30 [--workers 2] [--estimators batch,online,ekf]
-        [--out data/water-track/water_track.json]
+        [--layers 10] [--out data/water-track/water_track.json]
+
+--layers H adds each estimator with the current per depth layer of H m ([current] layer_thickness_m: "layers/..."
+rows), compared with the random walk in depth on the same logs.
 
 The summary prints, per estimator: the RMS final horizontal error used vs refused (batch), the error/sigma std of
 every calibration state and of the current, the mean roll-misalignment sigma used vs refused, and the
@@ -35,7 +38,8 @@ def _with(config: Any, section: str, **values: Any) -> Any:
     return config.model_copy(update={section: getattr(config, section).model_copy(update=values)})
 
 
-def run_one(seed: int, estimators: tuple[str, ...], scenario: str = "deep-descent") -> dict[str, Any]:
+def run_one(seed: int, estimators: tuple[str, ...], scenario: str = "deep-descent", layers_m: float = 0.0
+            ) -> dict[str, Any]:
     from gtsam_dvl.app.campaign.montecarlo import run_errors
     from gtsam_dvl.estimators.run import run_trajectory_estimator
     from gtsam_dvl.sim import simulate
@@ -48,8 +52,10 @@ def run_one(seed: int, estimators: tuple[str, ...], scenario: str = "deep-descen
     base = sc.estimator_configuration()
     out: dict[str, Any] = {"seed": seed, "runs": {}}
     plan = [("use", name) for name in estimators] + [("refuse", "batch")]
+    plan += [("layers", name) for name in estimators] if layers_m > 0 else []
     for variant, name in plan:
-        cfg = _with(base, "current", water_track=variant)
+        cfg = _with(base, "current", water_track="use" if variant == "layers" else variant,
+                    layer_thickness_m=layers_m if variant == "layers" else 0.0)
         t0 = time.perf_counter()
         try:
             res = run_trajectory_estimator(log, name, cfg, timeline=name != "batch")
@@ -115,13 +121,17 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     if use and ref:
         out["refused_over_used_rms"] = ref["rms_horizontal_error_m"] / use["rms_horizontal_error_m"]
         out["roll_sigma_used_over_refused"] = use["roll_sigma_deg_mean"] / ref["roll_sigma_deg_mean"]
+    for name in ("batch", "online", "ekf"):  # the current per depth layer against the random walk in depth
+        use, lay = out["by"].get(f"use/{name}"), out["by"].get(f"layers/{name}")
+        if use and lay:
+            out[f"{name}_random_walk_over_layers_rms"] = use["rms_horizontal_error_m"] / lay["rms_horizontal_error_m"]
     # the estimators' agreement: final scale and misalignment, differences in the sigma of the difference (the
     # larger sigma: the smoother's and a filter's estimates are correlated, so that is a bound)
     agree: dict[str, Any] = {}
-    for other in ("online", "ekf"):
+    for other in ("use/online", "use/ekf", "layers/online", "layers/ekf"):
         d = []
         for r in runs:
-            a, b = r["runs"].get("use/batch"), r["runs"].get(f"use/{other}")
+            a, b = r["runs"].get(f"{other.split('/')[0]}/batch"), r["runs"].get(other)
             if not a or not b or "failed" in a or "failed" in b:
                 continue
             ca, cb = a["calibration"], b["calibration"]
@@ -149,6 +159,10 @@ def print_summary(s: dict[str, Any]) -> None:
     if "refused_over_used_rms" in s:
         print(f"  batch: refused / used final horizontal RMS {s['refused_over_used_rms']:.2f}x; roll-misalignment "
               f"sigma used / refused {s['roll_sigma_used_over_refused']:.2f}")
+    for name in ("batch", "online", "ekf"):
+        if f"{name}_random_walk_over_layers_rms" in s:
+            print(f"  {name}: final horizontal RMS, random walk in depth / per layer "
+                  f"{s[f'{name}_random_walk_over_layers_rms']:.2f}x")
     for other, a in s.get("agreement_with_batch", {}).items():
         print(f"  {other} vs batch, final calibration: max |difference| {a['max_abs']:.2f} sigma, "
               f"{100 * a['share_within_1']:.0f} % within 1 sigma")
@@ -161,6 +175,8 @@ def main() -> None:
     ap.add_argument("--estimators", default="batch,online,ekf")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=Path("water_track.json"))
+    ap.add_argument("--layers", type=float, default=0.0,
+                    help="> 0: also run each estimator with the current per depth layer of this thickness (m)")
     args = ap.parse_args()
     from gtsam_dvl.app.campaign.cluster import dask_client
 
@@ -171,7 +187,7 @@ def main() -> None:
     with dask_client(None, args.workers) as client:
         from dask.distributed import as_completed
 
-        futures = [client.submit(run_one, seed, estimators, pure=False) for seed in seeds]
+        futures = [client.submit(run_one, seed, estimators, layers_m=args.layers, pure=False) for seed in seeds]
         for k, fut in enumerate(as_completed(futures), 1):
             runs.append(fut.result())
             print(f"\r{k}/{len(seeds)} runs, {time.perf_counter() - t0:.0f} s", end="", flush=True)

@@ -110,6 +110,9 @@ def current_summary(wc: dict[str, Any], log: LogData) -> dict[str, Any]:
                            "north_m_s": float(mean[1]), "sigma_m_s": float(sig[m].mean()),
                            "speed_m_s": float(np.hypot(*mean)), "states": int(m.sum())})
     out["by_depth"] = layers
+    if "layer_thickness_m" in wc:  # the current per depth layer: each boundary crossed, the change across it
+        out["layers"] = {"thickness_m": wc["layer_thickness_m"], "boundaries": len(wc.get("layer_boundaries", [])),
+                         "shear": wc.get("layer_shear", [])}
     truth = log.truth
     if truth is not None and truth.n_c is not None and det.any():
         k = np.clip(np.searchsorted(truth.t, t[det]), 0, len(truth.t) - 1)

@@ -226,7 +226,9 @@ class SmoothOutcome:
         if wc := s.get("water_current"):  # water-track pings used, the current a state (estimators/current.py)
             layers = "; ".join(f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
                                f"{a['sigma_m_s']:.2f} m/s" for a in wc.get("by_depth", [])[:6])
-            lines.append(f"  water current ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
+            per = (f" per {wc['layers']['thickness_m']:g} m layer ({wc['layers']['boundaries']} boundaries crossed)"
+                   if wc.get("layers") else "")
+            lines.append(f"  water current{per} ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
                          + (f"; {layers}" if layers else ""))
         motion = (s.get("geometry") or {}).get("motion")
         if motion:

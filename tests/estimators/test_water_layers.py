@@ -10,6 +10,7 @@ import gtsam
 import numpy as np
 import pytest
 
+from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import S, W
 from gtsam_dvl.core.result import NavResult
@@ -180,6 +181,14 @@ def test_batch_follows_the_sheared_current_per_layer(layered_log: LogData) -> No
     layers = np.floor(true_depth(res.t, layered_log) / H).astype(int)
     assert res.info["water_current"]["layer_boundaries"] == list(range(layers.min(), layers.max()))
     _assert_current(res, layered_log, T_WATER[0] + 5.0, T_WATER[1] - 5.0, 0.03)
+    # each boundary's change: the truth's SHEAR * H (a linear profile: the difference of the layers' means)
+    shear = res.info["water_current"]["layer_shear"]
+    assert len(shear) == layers.max() - layers.min()
+    for s in shear:
+        for k, axis in enumerate(("east", "north")):
+            assert abs(s[f"{axis}_m_s"] - SHEAR[k] * H) < 3 * s[f"{axis}_sigma_m_s"], s
+    headline = summary(res, layered_log)["water_current"]["layers"]
+    assert headline["thickness_m"] == H and headline["boundaries"] == len(shear)
 
 
 @pytest.mark.slow
