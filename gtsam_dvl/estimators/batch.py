@@ -25,7 +25,7 @@ from gtsam_dvl.core.states import (
     water_current,
 )
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated, current
+from gtsam_dvl.estimators import correlated, current, weak_hold
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.depth import depth_samples
@@ -87,6 +87,12 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     # iteration's stop rule makes the last step change the error by < 0.01, i.e. far below one sigma)
     result = extract_result(builder, graph, values, ordering, estimator=estimator,
                             bayes_net=report.bayes_net if report.converged else None)
+    hold = None if calibration is not None or result.calib_joint_cov is None else weak_hold.plan(
+        config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1)
+    if hold is not None and hold["weak"].any():  # weakly determined calibration directions held (weak_hold.py)
+        graph, values, result = _hold_weak(builder, graph, values, ordering, hold, estimator)
+    elif hold is not None:
+        result.info["calibration_hold"] = weak_hold.report({**hold, "below": config.priors.hold_weak_information}, 0.0)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
         t4 = time.perf_counter()
@@ -283,6 +289,31 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
             setattr(noise, s, sensor_fit_report(builder.config, s, *configured[s], used[s], rows[s], solves,
                                                 at_bound, how))
     return values, report
+
+
+def _hold_weak(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
+               ordering: gtsam.Ordering | ChunkedOrdering, hold: dict[str, Any], estimator: str
+               ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+    """The held estimate (the weak directions pinned at the prior's mean, the rest solved again) and its result
+    with the consider covariance (estimators/weak_hold.py); returns the graph of that covariance (for the
+    timeline), the held values and the result."""
+    if not isinstance(graph, BulkGraph):
+        raise GtsamDvlError("internal: the weak-direction hold works on the batch smoother's bulk graph")
+    pinned, consider = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
+    slots = set(weak_hold.prior_slots(graph.graph))
+    for j in range(graph.graph.size()):
+        pinned.add(graph.graph.at(j))
+        if j not in slots:
+            consider.add(graph.graph.at(j))
+    pinned.add(weak_hold.hold_factor(hold))
+    consider.add(weak_hold.consider_prior(hold))
+    held, _ = gauss_newton_qr(BulkGraph(pinned, graph.bulk, graph.imu), values, ordering,
+                              **_solver_options(builder))  # type: ignore[arg-type]
+    cov_graph = BulkGraph(consider, graph.bulk, graph.imu)
+    result = extract_result(builder, cov_graph, held, ordering, estimator=estimator)
+    result.info["calibration_hold"] = weak_hold.report({**hold, "below": builder.config.priors.hold_weak_information},
+                                                       2.0 * (graph.error(held) - graph.error(values)))
+    return cov_graph, held, result
 
 
 def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,

@@ -179,6 +179,10 @@ class PriorConfig(ConfigModel):
     # the DVL's mounting tolerance (deg): when set, the misalignment prior sigma on all three axes, unless
     # misalignment_sigma_deg is set in the same configuration
     mounting_tolerance_deg: Positive | None = None
+    # the batch smoother holds a direction of the DVL scale and misalignment at the prior's mean when the data's
+    # information along it is below this fraction of the prior's, with the prior's uncertainty carried into every
+    # sigma (estimators/weak_hold.py); 0: every direction estimated, however little the run informs it
+    hold_weak_information: NonNegative = 0.25
 
     @model_validator(mode="after")
     def _apply_mounting_tolerance(self) -> Self:

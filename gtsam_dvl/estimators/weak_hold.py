@@ -1,0 +1,146 @@
+"""Weakly determined DVL calibration directions held at their prior ([priors] hold_weak_information, batch).
+
+A run that excites the calibration little (a straight transect: the yaw misalignment; a steady turn: the scale,
+which trades with the horizontal accelerometer bias) still moves the estimate: in a direction whose data carry the
+information lambda (in units of its prior's), the estimate's shift from the prior's mean has the standard deviation
+sqrt(lambda / (1 + lambda)) prior sigmas, while the sigma hardly shrinks (1 / sqrt(1 + lambda)). When the truth is
+near the prior's mean (a DVL mounted as drawn, a scale the factory set), that shift is pure error: the
+calibration wanders, and a filter that assumes the nominal calibration ends closer. Holding such directions at the
+prior's mean is what an engineer does by hand ("do not calibrate what the run cannot see"). This module does it
+for the DVL's scale and misalignment, with sigmas that stay honest:
+
+- In the prior-whitened calibration u = L0^-1 (theta - theta0) (P0 = L0 L0^T the prior's covariance of
+  theta = [scale, misalignment in b_R_d's right tangent at the prior's mean]), the posterior covariance
+  M = L0^-1 P1 L0^-T has eigen-directions v_k with M v_k = v_k / (1 + lambda_k): lambda_k is the data's
+  information along v_k. Those with lambda_k < hold_weak_information are weak.
+- The held estimate solves the graph with the weak directions' whitened components pinned at 0 (a factor of
+  sigma 1e-4 prior sigmas): the navigation and the other calibration directions follow.
+- Its covariance is the "consider" covariance of the held estimate (the weak directions' prior uncertainty carried
+  into every state, their data not used): the marginals of the graph whose calibration prior has the precision
+  1 - lambda_k along each weak v_k (and 1 elsewhere, whitened), linearised at the held estimate. Along v_k the
+  posterior then has precision (1 - lambda_k) + lambda_k = 1: the prior's, and every other state's covariance
+  gains the weak direction's full prior uncertainty through its sensitivity to it (the Schur complement).
+
+The chi^2 increase of the held solution over the free one is reported: a large one (beyond the chi^2 of the weak
+directions' dimension) says the data disagree with the prior along a direction they inform little, and the result
+says so. Not applied with a vehicle calibration file as prior (its covariance is already the previous dives'
+posterior), nor by the online estimator or the EKF, which cannot know while running which directions the rest of
+the log will inform.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gtsam
+import numpy as np
+from scipy.stats import chi2
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE
+from gtsam_dvl.core.states import BY_NAME, columns, shared_keys
+from gtsam_dvl.core.types import Mounting
+
+HOLD_SIGMA = 1e-4  # the pinned directions' sigma, in prior sigmas (a constraint, to within 1e-4 of a prior sigma)
+
+
+def calibration_prior(config: EstimatorConfig, mounting: Mounting) -> tuple[float, np.ndarray, np.ndarray]:
+    """(k0, b_R_d0, P0): the scale's and misalignment's prior means and their joint covariance (4, 4) over
+    [scale, misalignment right tangent] (the registry's priors, core/states.py)."""
+    ks, mis = BY_NAME["scale"].prior(config, mounting), BY_NAME["misalignment"].prior(config, mounting)
+    P0 = np.zeros((4, 4))
+    P0[:1, :1], P0[1:, 1:] = ks.cov, mis.cov
+    return float(np.asarray(ks.value).reshape(-1)[0]), np.asarray(mis.value, dtype=float), P0
+
+
+def weak_directions(P0: np.ndarray, P1: np.ndarray, below: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lambda (n,), V (n, n) columns v_k, weak (n,) bool) of the posterior P1 against the prior P0 (module doc)."""
+    L0 = np.linalg.cholesky(P0)
+    Li = np.linalg.inv(L0)
+    M = Li @ P1 @ Li.T
+    mu, V = np.linalg.eigh(0.5 * (M + M.T))
+    lam = 1.0 / np.clip(mu, 1e-300, None) - 1.0
+    return lam, V, lam < below
+
+
+def _tangent(values: gtsam.Values, k0: float, b_R_d0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """theta - theta0 (4,) and its Jacobian (4, 4) w.r.t. [scale, misalignment right perturbation]."""
+    R = values.atRot3(C_MISALIGN)
+    phi = gtsam.Rot3.Logmap(gtsam.Rot3(b_R_d0).between(R))
+    J = np.eye(4)
+    J[1:, 1:] = gtsam.Rot3.LogmapDerivative(phi)  # d Log(R0^T R Exp(d)) / d d at d = 0
+    return np.r_[values.atVector(K_SCALE)[0] - k0, phi], J
+
+
+def _linear_factor(A: np.ndarray, k0: float, b_R_d0: np.ndarray) -> gtsam.CustomFactor:
+    """A factor on [K_SCALE, C_MISALIGN] of whitened residual A (theta - theta0) (A: (m, 4))."""
+
+    def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+        d, J = _tangent(values, k0, b_R_d0)
+        if H is not None:
+            AJ = A @ J
+            H[0], H[1] = AJ[:, :1].copy(), AJ[:, 1:].copy()
+        return A @ d
+
+    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(A.shape[0]), [K_SCALE, C_MISALIGN], error)
+
+
+def prior_slots(graph: gtsam.NonlinearFactorGraph) -> list[int]:
+    """The slots of the scale's and the misalignment's own prior factors (a factor on that key alone)."""
+    out = []
+    for j in range(graph.size()):
+        f = graph.at(j)
+        if f is not None and list(f.keys()) in ([K_SCALE], [C_MISALIGN]):
+            out.append(j)
+    return out
+
+
+def plan(config: EstimatorConfig, mounting: Mounting, calib_joint_cov: np.ndarray, n_last: int,
+         ) -> dict[str, Any] | None:
+    """The weak directions of a batch result (its calibration block's joint covariance at the last state n_last):
+    None when holding does not apply (off, or the scale or misalignment not both in the block)."""
+    below = config.priors.hold_weak_information
+    if below <= 0:
+        return None
+    cols = columns(shared_keys(config, n_last, block=True), config)
+    if "scale" not in cols or "misalignment" not in cols:
+        return None
+    idx = np.r_[np.arange(cols["scale"].start, cols["scale"].stop),
+                np.arange(cols["misalignment"].start, cols["misalignment"].stop)]
+    k0, b_R_d0, P0 = calibration_prior(config, mounting)
+    lam, V, weak = weak_directions(P0, calib_joint_cov[np.ix_(idx, idx)], below)
+    return {"k0": k0, "b_R_d0": b_R_d0, "P0": P0, "lambda": lam, "V": V, "weak": weak}
+
+
+def hold_factor(p: dict[str, Any]) -> gtsam.CustomFactor:
+    """The weak directions' whitened components pinned at 0 (module doc)."""
+    Li = np.linalg.inv(np.linalg.cholesky(p["P0"]))
+    return _linear_factor(p["V"][:, p["weak"]].T @ Li / HOLD_SIGMA, p["k0"], p["b_R_d0"])
+
+
+def consider_prior(p: dict[str, Any]) -> gtsam.CustomFactor:
+    """The calibration prior with the precision 1 - lambda_k along each weak direction (whitened; module doc):
+    replaces the scale's and misalignment's own priors for the held estimate's marginals."""
+    Li = np.linalg.inv(np.linalg.cholesky(p["P0"]))
+    V, lam, weak = p["V"], p["lambda"], p["weak"]
+    prec = np.eye(4) - V[:, weak] @ np.diag(np.clip(lam[weak], 0.0, 1.0 - 1e-9)) @ V[:, weak].T
+    U = np.linalg.cholesky(prec).T  # U^T U = prec
+    return _linear_factor(U @ Li, p["k0"], p["b_R_d0"])
+
+
+def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
+    """NavResult.info["calibration_hold"]: each direction's information (in prior units) and whether it was held,
+    the held directions in the calibration's units (scale; misalignment deg), and the chi^2 increase's verdict."""
+    names = ["scale", "misalignment roll", "misalignment pitch", "misalignment yaw"]
+    held = []
+    for k in np.flatnonzero(p["weak"]):
+        v = np.linalg.cholesky(p["P0"]) @ p["V"][:, k]  # one prior sigma along v_k, in [scale, rad] units
+        w = np.abs(v) / np.linalg.norm(np.abs(v))
+        main = names[int(np.argmax(w))]
+        held.append({"information": float(p["lambda"][k]), "mostly": main,
+                     "direction": {n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)}})
+    m = int(p["weak"].sum())
+    limit = float(chi2.ppf(0.99, m)) if m else 0.0
+    return {"threshold": float(p.get("below", np.nan)), "information": p["lambda"].tolist(), "held": held,
+            "chi2_increase": chi2_increase, "chi2_limit_99": limit,
+            "consistent": bool(chi2_increase <= limit)}
