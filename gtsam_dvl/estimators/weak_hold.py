@@ -37,7 +37,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE
+from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, key_dim
 from gtsam_dvl.core.states import BY_NAME, columns, shared_keys
 from gtsam_dvl.core.types import Mounting
 
@@ -141,6 +141,46 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
                      "direction": {n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)}})
     m = int(p["weak"].sum())
     limit = float(chi2.ppf(0.99, m)) if m else 0.0
-    return {"threshold": float(p.get("below", np.nan)), "information": p["lambda"].tolist(), "held": held,
-            "chi2_increase": chi2_increase, "chi2_limit_99": limit,
-            "consistent": bool(chi2_increase <= limit)}
+    out: dict[str, Any] = {"threshold": float(p.get("below", np.nan)), "information": p["lambda"].tolist(),
+                           "held": held}
+    if np.isfinite(chi2_increase):  # (the batch smoother's: a filter holds its reported estimate only)
+        out.update(chi2_increase=chi2_increase, chi2_limit_99=limit, consistent=bool(chi2_increase <= limit))
+    return out
+
+
+def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values, keys: list[int],
+               cov: np.ndarray) -> tuple[gtsam.Values, np.ndarray, dict[str, Any]] | None:
+    """The weak directions held in one joint estimate (a filter's newest state with the shared states: values
+    over keys, cov their stacked tangents' joint covariance), to first order: the calibration moved to its held
+    value theta_h, every other component by its regression on the calibration (K = P_x,theta P_theta^-1), and the
+    covariance with the calibration's marginal replaced by the held one (the prior's along the weak directions:
+    the consider covariance, module doc). None when nothing is held (off, or no weak direction)."""
+    below = config.priors.hold_weak_information
+    cols = columns(keys, config)
+    if below <= 0 or "scale" not in cols or "misalignment" not in cols or not np.all(np.isfinite(cov)):
+        return None
+    idx = np.r_[np.arange(cols["scale"].start, cols["scale"].stop),
+                np.arange(cols["misalignment"].start, cols["misalignment"].stop)]
+    k0, b_R_d0, P0 = calibration_prior(config, mounting)
+    P_tt = cov[np.ix_(idx, idx)]
+    lam, V, weak = weak_directions(P0, P_tt, below)
+    if not weak.any():
+        return None
+    L0 = np.linalg.cholesky(P0)
+    d, _ = _tangent(values, k0, b_R_d0)
+    u = np.linalg.solve(L0, d)
+    d_theta = L0 @ (-V[:, weak] @ (V[:, weak].T @ u))  # to the prior's mean along the weak directions
+    K = np.linalg.solve(P_tt, cov[idx, :]).T  # (n, 4)
+    c = np.where(weak, 1.0, 1.0 / (1.0 + lam))  # the held calibration's whitened variances
+    C = L0 @ V @ np.diag(c) @ V.T @ L0.T
+    cov_h = cov - K @ P_tt @ K.T + K @ C @ K.T
+    dx = K @ d_theta
+    delta = gtsam.VectorValues()
+    col = 0
+    for k in keys:
+        n = key_dim(k)
+        delta.insert(k, dx[col:col + n])
+        col += n
+    plan = {"k0": k0, "b_R_d0": b_R_d0, "P0": P0, "lambda": lam, "V": V, "weak": weak, "below": below}
+    return values.retract(delta), 0.5 * (cov_h + cov_h.T), plan
+

@@ -89,7 +89,7 @@ from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
-from gtsam_dvl.estimators import correlated, current
+from gtsam_dvl.estimators import correlated, current, weak_hold
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.factor_maker import FactorMaker
@@ -573,6 +573,8 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
     if correlated_error(config):
         result.info["dvl_correlated_error"] = correlated.info(config)
+    if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
+        result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
     if estimator.current_history:  # the water current at each state as it left the window (or at the end)
         result.info["water_current"] = estimator.current_profile()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)

@@ -57,6 +57,7 @@ paper-3d).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -73,7 +74,7 @@ from gtsam_dvl.core.states import (
     shared_keys,
     water_current,
 )
-from gtsam_dvl.estimators import correlated, current
+from gtsam_dvl.estimators import correlated, current, weak_hold
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import Holds
 from gtsam_dvl.factors import EarthImuFactor
@@ -138,6 +139,7 @@ class IncrementalSmoother:
         self.gm = correlated_error(builder.config)  # the DVL's correlated error E(i) a state (correlated.py)
         self.wc = water_current(builder.config)  # the water current W(i) a state (current.py)
         # with layers: the boundaries S(b) crossed so far (shared keys, never marginalised) and the newest layer
+        self.hold: dict[str, Any] | None = None  # the newest estimate's held calibration directions (weak_hold.py)
         self.layers = self.wc and current.layered(builder.config)
         self.shear: list[int] = []
         self.layer = 0
@@ -438,6 +440,10 @@ class IncrementalSmoother:
         values = self.isam.calculateEstimate(keys)
         dim = 9 + sum(key_dim(k) for k in shared)
         cov = self.joint_covariance(keys) if with_covariance else np.full((dim, dim), np.nan)
+        self.hold = None
+        if self.builder.calibration is None and (held := weak_hold.hold_joint(
+                self.builder.config, self.builder.mounting, values, keys, cov)) is not None:
+            values, cov, self.hold = held  # weakly determined calibration directions held (weak_hold.py)
         key_cols, col = {}, 9
         for k in shared:
             key_cols[k] = slice(col, col + key_dim(k))
