@@ -81,3 +81,50 @@ def test_straight_transect_holds_yaw_and_scale() -> None:
         e = res.n_p[-1, :2] - [np.interp(res.t[-1], truth.t, truth.n_p[:, k]) for k in range(2)]
         assert np.all(np.abs(e) < 3 * res.position_sigma_m[-1, :2]), (e, res.position_sigma_m[-1, :2])
     assert np.all(held.position_sigma_m[-1, :2] >= 0.98 * free.position_sigma_m[-1, :2])  # (the prior carried in)
+
+
+def test_hold_joint_properties() -> None:
+    """A filter's joint [X, V, bias, scale, misalignment] held (weak_hold.hold_joint): the weak directions'
+    whitened components at the prior's mean and their whitened variance 1 (the prior's), the informed ones' and
+    the conditional covariance of everything else given the calibration unchanged (the hold replaces the
+    calibration's marginal only)."""
+    from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
+    from gtsam_dvl.core.states import columns
+    from gtsam_dvl.core.types import Mounting
+    cfg = EstimatorConfig()
+    mounting = Mounting()
+    keys = [X(0), V(0), B(0), K_SCALE, C_MISALIGN]
+    k0, R0, P0 = weak_hold.calibration_prior(cfg, mounting)
+    values = gtsam.Values()
+    values.insert(X(0), gtsam.Pose3(gtsam.Rot3.Ypr(0.3, 0.01, -0.02), np.array([10.0, -4.0, -2.0])))
+    values.insert(V(0), np.array([1.5, 0.2, 0.0]))
+    values.insert(B(0), gtsam.imuBias.ConstantBias(np.full(3, 1e-4), np.full(3, 1e-6)))
+    values.insert(K_SCALE, np.array([k0 + 0.004]))
+    values.insert(C_MISALIGN, gtsam.Rot3(R0).compose(gtsam.Rot3.Expmap(np.radians([0.1, -0.3, 0.5]))))
+    rng = np.random.default_rng(7)
+    n = 6 + 3 + 6 + 1 + 3
+    A = rng.normal(size=(n, n)) * np.r_[np.full(15, 0.1), np.sqrt(np.diag(P0))][:, None]
+    cov = A @ A.T + np.diag(np.r_[np.full(15, 1e-4), 0.9 * np.diag(P0)])  # the calibration barely informed
+    held = weak_hold.hold_joint(cfg, mounting, values, keys, cov)
+    assert held is not None
+    values_h, cov_h, plan = held
+    idx = np.r_[columns(keys, cfg)["scale"].start, np.arange(columns(keys, cfg)["misalignment"].start,
+                                                             columns(keys, cfg)["misalignment"].stop)]
+    Li = np.linalg.inv(np.linalg.cholesky(P0))
+    d = np.r_[values_h.atVector(K_SCALE)[0] - k0,
+              gtsam.Rot3.Logmap(gtsam.Rot3(R0).between(values_h.atRot3(C_MISALIGN)))]
+    u, M = Li @ d, Li @ cov_h[np.ix_(idx, idx)] @ Li.T
+    M_before = Li @ cov[np.ix_(idx, idx)] @ Li.T
+    Vk, weak = plan["V"], plan["weak"]
+    assert weak.any()
+    for k in range(4):
+        if weak[k]:
+            assert abs(Vk[:, k] @ u) < 1e-6 and Vk[:, k] @ M @ Vk[:, k] == pytest.approx(1.0, rel=1e-9)
+        else:
+            assert Vk[:, k] @ M @ Vk[:, k] == pytest.approx(Vk[:, k] @ M_before @ Vk[:, k], rel=1e-9)
+    rest = np.setdiff1d(np.arange(n), idx)
+
+    def conditional(P: np.ndarray) -> np.ndarray:
+        return P[np.ix_(rest, rest)] - P[np.ix_(rest, idx)] @ np.linalg.solve(P[np.ix_(idx, idx)], P[np.ix_(idx, rest)])
+
+    np.testing.assert_allclose(conditional(cov_h), conditional(cov), rtol=1e-7, atol=1e-15)
