@@ -199,6 +199,8 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         out["dvl_time_offset_s"] = time_offset_verdict(result)
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:
         out["dvl_lever_arm_m"] = lever_arm_verdict(result, log)
+    if isinstance(hold := result.info.get("calibration_hold"), dict):  # (estimators/weak_hold.py)
+        out["calibration_hold"] = hold
     if isinstance(wc := result.info.get("water_current"), dict):
         out["water_current"] = current_summary(wc, log)
     errors = truth_errors(result, log)

@@ -223,6 +223,9 @@ class SmoothOutcome:
         from gtsam_dvl.app.calibration_files import prior_line
 
         lines += [line] if (line := prior_line(s)) else []
+        if held := (s.get("calibration_hold") or {}).get("held"):  # (estimators/weak_hold.py)
+            lines.append("  held at the prior (the run informs them little): " + ", ".join(
+                f"{h['mostly']} ({h['information']:.2f} of the prior's information)" for h in held))
         if wc := s.get("water_current"):  # water-track pings used, the current a state (estimators/current.py)
             layers = "; ".join(f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
                                f"{a['sigma_m_s']:.2f} m/s" for a in wc.get("by_depth", [])[:6])

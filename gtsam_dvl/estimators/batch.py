@@ -90,7 +90,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     hold = None if calibration is not None or result.calib_joint_cov is None else weak_hold.plan(
         config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1)
     if hold is not None and hold["weak"].any():  # weakly determined calibration directions held (weak_hold.py)
-        graph, values, result = _hold_weak(builder, graph, values, ordering, hold, estimator)
+        graph, values, result = _hold_weak(builder, graph, values, ordering, hold, estimator, result)
     elif hold is not None:
         result.info["calibration_hold"] = weak_hold.report({**hold, "below": config.priors.hold_weak_information}, 0.0)
     timing["marginals"] = time.perf_counter() - t3
@@ -291,14 +291,13 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     return values, report
 
 
-def _hold_weak(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-               ordering: gtsam.Ordering | ChunkedOrdering, hold: dict[str, Any], estimator: str
-               ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: gtsam.Ordering | ChunkedOrdering,
+               hold: dict[str, Any], estimator: str, free: NavResult) -> tuple[BulkGraph, gtsam.Values, NavResult]:
     """The held estimate (the weak directions pinned at the prior's mean, the rest solved again) and its result
     with the consider covariance (estimators/weak_hold.py); returns the graph of that covariance (for the
-    timeline), the held values and the result."""
-    if not isinstance(graph, BulkGraph):
-        raise GtsamDvlError("internal: the weak-direction hold works on the batch smoother's bulk graph")
+    timeline), the held values and the result. When pinning costs more chi^2 than its 99 % limit (the data
+    disagree with the prior along directions they inform little), the free solution (graph, values, result)
+    stands and the report says why."""
     pinned, consider = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
     slots = set(weak_hold.prior_slots(graph.graph))
     for j in range(graph.graph.size()):
@@ -309,10 +308,16 @@ def _hold_weak(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph,
     consider.add(weak_hold.consider_prior(hold))
     held, _ = gauss_newton_qr(BulkGraph(pinned, graph.bulk, graph.imu), values, ordering,
                               **_solver_options(builder))  # type: ignore[arg-type]
+    info = weak_hold.report({**hold, "below": builder.config.priors.hold_weak_information},
+                            2.0 * (graph.error(held) - graph.error(values)))
+    if not info["consistent"]:
+        free.info["calibration_hold"] = {**info, "held": [], "released": info["held"], "why": (
+            f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "
+            "data disagree with the prior along directions they inform little")}
+        return graph, values, free
     cov_graph = BulkGraph(consider, graph.bulk, graph.imu)
     result = extract_result(builder, cov_graph, held, ordering, estimator=estimator)
-    result.info["calibration_hold"] = weak_hold.report({**hold, "below": builder.config.priors.hold_weak_information},
-                                                       2.0 * (graph.error(held) - graph.error(values)))
+    result.info["calibration_hold"] = info
     return cov_graph, held, result
 
 

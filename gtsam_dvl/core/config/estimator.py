@@ -196,12 +196,17 @@ DUMP_KEYS = {"time_offset_window_s", "jump_margin_m_s", "motion_dv_m_s", "accel_
 def _white_dvl_if_written_before(data: Any) -> Any:
     """A whole configuration written before [dvl] correlated_sigma_m_s existed (its [dvl] lists DUMP_KEYS, not
     correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it, and one written
-    before [current] existed with water-track pings refused; a user's file that leaves the keys out takes the
+    before [current] existed with water-track pings refused, one written before [priors] hold_weak_information
+    existed with every calibration direction estimated; a user's file that leaves the keys out takes the
     defaults."""
     dvl = data.get("dvl") if isinstance(data, dict) else None
     if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "current" not in data:
         # written before [current] existed: its runs refused water-track pings
         data = {**data, "current": {"water_track": "refuse"}}
+    priors = data.get("priors") if isinstance(data, dict) else None
+    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and isinstance(priors, dict) and (
+            "hold_weak_information" not in priors):  # its runs estimated every calibration direction
+        data = {**data, "priors": {**priors, "hold_weak_information": 0.0}}
     if (isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "correlated_sigma_m_s" not in dvl
             and dvl.get("model") is None):
         return {**data, "dvl": {**dvl, "correlated_sigma_m_s": 0.0}}
