@@ -115,6 +115,11 @@ def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str
                                    "wall_s": time.perf_counter() - t0}
             if variant in CAMPAIGN_VARIANTS:
                 row["campaign"] = {**run_errors(res, log), "wall_s": row["wall_s"]}
+            solver, ekf = res.info.get("solver") or {}, res.info.get("filter") or {}
+            if solver.get("dof"):  # the batch smoother's chi^2/dof after the noise fit, the EKF's NIS/dof
+                row["chi2_dof"] = 2.0 * float(solver["final_error"]) / float(solver["dof"])
+            if "mean_nis_per_dof" in ekf:
+                row["nis_dof"] = float(ekf["mean_nis_per_dof"])
             rows[name] = row
         out["variants"][variant] = rows
     return out
@@ -142,7 +147,9 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
                     "runs": len(ok), "failed": len(rows) - len(ok),
                     "rms_pct": float(np.sqrt(np.mean(pct**2))) if len(pct) else math.nan,
                     "median_pct": float(np.median(pct)) if len(pct) else math.nan,
-                    "horizontal_z_std": float(np.std(z, ddof=1)) if len(z) > 1 else math.nan}
+                    "horizontal_z_std": float(np.std(z, ddof=1)) if len(z) > 1 else math.nan,
+                    **{k: float(np.mean([x[k] for x in ok])) for k in ("chi2_dof", "nis_dof")
+                       if ok and all(k in x for x in ok)}}
         out[scenario] = {"errors": table}
         for variant in CAMPAIGN_VARIANTS:
             campaign = [{"estimators": {n: x["campaign"] for n, x in r["variants"][variant].items()
@@ -155,8 +162,10 @@ def print_summary(summary: dict[str, Any]) -> None:
     for scenario, s in summary.items():
         print(f"\n{scenario}: final horizontal error, % of distance (RMS over runs; horizontal error/sigma std)")
         for key, row in s["errors"].items():
+            fit = "".join(f"  mean {k.replace('_dof', '')}/dof {row[k]:.3f}"
+                          for k in ("chi2_dof", "nis_dof") if k in row)
             print(f"  {key:18s} {row['rms_pct']:7.3f} %  median {row['median_pct']:6.3f} %  z std "
-                  f"{row['horizontal_z_std']:5.2f}  ({row['runs']} runs, {row['failed']} failed)")
+                  f"{row['horizontal_z_std']:5.2f}  ({row['runs']} runs, {row['failed']} failed){fit}")
         for variant, est in (("batch", "truth"), ("online", "truth"), ("batch", "nominal"), ("online", "nominal")):
             for pre in ("presets", "presets_free"):
                 p, f = s["errors"].get(f"{pre}/{variant}"), s["errors"].get(f"{est}/{variant}")
