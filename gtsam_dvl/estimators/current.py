@@ -161,12 +161,10 @@ def crossing_link(config: EstimatorConfig, i: int, j: int, dt: float, j_from: in
                   ) -> gtsam.NonlinearFactor:
     """W_j - W_i - sum_b s_b S(b) ~ N(0, q_t^2 dt I2) between states i and j in layers j_from and j_to (module
     doc, "Layers"); the random walk in time alone within one layer."""
-    q = max(step_variance(config, dt, 0.0), (1e-6 * config.current.prior_sigma_m_s)**2)
-    s = float(np.sqrt(q))
     cross = crossings(j_from, j_to)
     if len(cross) == 0:
-        jf = gtsam.JacobianFactor(W(i), -_EYE2 / s, W(j), _EYE2 / s, np.zeros(2), gtsam.noiseModel.Unit.Create(2))
-        return gtsam.LinearContainerFactor(jf, _zeros(W(i), W(j)))
+        return link_factor(config, i, j, dt, 0.0)
+    s = float(np.sqrt(max(step_variance(config, dt, 0.0), (1e-6 * config.current.prior_sigma_m_s)**2)))
     if len(cross) == 1:
         (b, sign), = cross
         jf = gtsam.JacobianFactor(W(i), -_EYE2 / s, W(j), _EYE2 / s, S(b), -sign * _EYE2 / s, np.zeros(2),
