@@ -62,10 +62,12 @@ class NoiseReport:
     dvl: dict[str, Any] = field(default_factory=dict)
     depth: dict[str, Any] = field(default_factory=dict)  # only for a log with depth factors (the batch smoother)
     gnss: dict[str, Any] = field(default_factory=dict)  # only for a log with aiding fixes (the batch smoother)
+    # the DVL's correlated error's level and time constant: fitted (batch) or held; only with [noise] fit_correlated
+    dvl_correlated: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         out = {"imu": self.imu, "dvl": self.dvl}
-        for name in SENSOR_GROUPS:  # a log without them reports as before
+        for name in (*SENSOR_GROUPS, "dvl_correlated"):  # a log without them reports as before
             if entry := getattr(self, name):
                 out[name] = entry
         return out
