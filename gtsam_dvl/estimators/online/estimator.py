@@ -91,6 +91,7 @@ from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, w
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
+from gtsam_dvl.estimators.correlated_fit import held_correlated_level
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due, screened_in_memory, screened_losses
@@ -224,6 +225,7 @@ class OnlineEstimator:
                   calibration=calibration)
         est.noise.imu = noise.imu
         est.noise.depth = held_depth_level(log, config, "online estimator")  # (the batch smoother fits it)
+        est.noise.dvl_correlated = held_correlated_level(config, "online estimator")  # (the batch smoother's fit)
         est.origin_t = origin_fix_time(log, config)
         est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
         est._scheduler.water_screen.repeats_need_motion = log.dvl.noise_free
