@@ -19,7 +19,10 @@ Nortek-class units) is rarely what its messages' covariance or the configured de
   ([gnss] noise_multiplier, fit_gnss) the same way, each from its own sensor's whitened residuals, jointly with
   the DVL's in the batch smoother's fit and solve loop (a log without depth samples or aiding fixes has no such
   factor and nothing to fit). The online estimator and the EKF hold the configured depth level and say so (they
-  take no GNSS fixes).
+  take no GNSS fixes);
+- with fit_correlated (off by default), fits the DVL's correlated error's level and time constant ([dvl]
+  correlated_sigma_m_s, correlated_tau_s) in the batch smoother's loop, within their bounds
+  (estimators/correlated_fit.py: why it is off).
 
 The fitted factor is clipped to [dvl_min_multiplier, dvl_max_multiplier] (a fit at a bound is reported: the
 model does not fit, whatever the factor), the depth's to [depth_min_multiplier, depth_max_multiplier] and the
