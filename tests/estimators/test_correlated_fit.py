@@ -11,10 +11,12 @@ from functools import cache
 import numpy as np
 import pytest
 
+from gtsam_dvl.analysis.metrics import noise_lines
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.correlated_fit import fit_level, held_correlated_level
+from gtsam_dvl.estimators.run import run_trajectory_estimator
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
 
@@ -102,6 +104,7 @@ def test_batch_loop_finds_the_part_of_a_strong_error_the_imu_separates() -> None
     assert used is not None and used.dvl.correlated_sigma_m_s == entry["sigma_m_s"]
     assert res.estimator_config is not None and res.estimator_config.dvl.correlated_sigma_m_s == 0.002
     assert entry["why"].startswith("DVL correlated error fitted from")
+    assert entry["why"] in noise_lines(res.info["noise"])  # (the summary's and the console's noise lines)
 
 
 def test_nothing_to_fit_gives_the_configured_results() -> None:
@@ -120,8 +123,11 @@ def test_nothing_to_fit_gives_the_configured_results() -> None:
 
 
 def test_held_by_the_online_estimator_and_the_ekf() -> None:
-    """With the fit on, the estimators that hold the level say so; with it off (the default), or the error white,
-    nothing is said."""
+    """With the fit on, the estimators that hold the level say so (the EKF on 60 s of the log above, in its
+    info["noise"]); with it off (the default), or the error white, nothing is said."""
+    sc = _scenario(0.0, 60.0)
+    ekf = run_trajectory_estimator(_log(0.0, 60.0, 3), "ekf", _config(sc, True), timeline=False)
+    assert ekf.info["noise"]["dvl_correlated"]["held"]
     on = held_correlated_level(_fit_config(), "EKF")
     assert on["held"] and on["sigma_m_s"] == 0.002 and "the EKF holds it" in on["why"]
     assert held_correlated_level(EstimatorConfig(), "EKF") == {}

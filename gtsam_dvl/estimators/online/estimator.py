@@ -91,7 +91,6 @@ from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, w
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators import correlated, current
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
-from gtsam_dvl.estimators.correlated_fit import held_correlated_level
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due, screened_in_memory, screened_losses
@@ -100,7 +99,7 @@ from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
     dvl_fit_enabled,
-    held_depth_level,
+    held_levels,
     imu_levels,
     median_ping_sigma,
     with_multiplier,
@@ -224,8 +223,7 @@ class OnlineEstimator:
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor,
                   calibration=calibration)
         est.noise.imu = noise.imu
-        est.noise.depth = held_depth_level(log, config, "online estimator")  # (the batch smoother fits it)
-        est.noise.dvl_correlated = held_correlated_level(config, "online estimator")  # (the batch smoother's fit)
+        held_levels(log, config, "online estimator", est.noise)  # (depth, correlated DVL error: the batch fits them)
         est.origin_t = origin_fix_time(log, config)
         est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
         est._scheduler.water_screen.repeats_need_motion = log.dvl.noise_free
