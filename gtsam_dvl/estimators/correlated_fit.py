@@ -16,7 +16,8 @@ DVL alone the navigation solution follows the DVL's slow error (an error of 2 mm
 acceleration of a few micro-g, below what a tilt drift of a thousandth of a degree makes), so the residuals lose
 most of it whatever its level, and a fit taken at its word would drive the model to white and the position sigma
 to the paper's (measured on straight-transect and steady-turn: docs/command-line.md). What the residuals show
-is a lower bound of the level; a log whose position is aided (GNSS, a fix) shows more of it.
+is a lower bound of the level (a log whose position is aided throughout, GNSS or USBL, should show more of it;
+not measured).
 
 Pings left out of the fit: the water-track rows (their error holds the current's), the rows beyond the robust
 kernel's threshold at a median-based scale, and every row of beam factors (each beam sees d_u . E: not fitted;
@@ -59,10 +60,9 @@ def factor_slots(graph: gtsam.NonlinearFactorGraph) -> list[int]:
     """The slots of the correlated error's prior and links in graph: the factors whose every key is an E(i)."""
     out = []
     for i in range(graph.size()):
-        f = graph.at(i)
-        if f is None:
+        if not graph.exists(i):
             continue
-        keys = f.keys()
+        keys = graph.at(i).keys()
         if len(keys) and all(gtsam.Symbol(k).chr() == _E_CHR for k in keys):
             out.append(i)
     return out
