@@ -16,8 +16,9 @@ DVL alone the navigation solution follows the DVL's slow error (an error of 2 mm
 acceleration of a few micro-g, below what a tilt drift of a thousandth of a degree makes), so the residuals lose
 most of it whatever its level, and a fit taken at its word would drive the model to white and the position sigma
 to the paper's (measured on straight-transect and steady-turn: docs/command-line.md). What the residuals show
-is a lower bound of the level (a log whose position is aided throughout, GNSS or USBL, should show more of it;
-not measured).
+is a lower bound of the level. Position fixes help only when they resolve the error's integral: 2 mm/s over
+60 s moves the position by about sigma tau = 0.12 m per time constant, far below a 2 m GNSS fix, within an RTK
+fix's reach (not measured).
 
 Pings left out of the fit: the water-track rows (their error holds the current's), the rows beyond the robust
 kernel's threshold at a median-based scale, and every row of beam factors (each beam sees d_u . E: not fitted;
