@@ -15,7 +15,7 @@ from gtsam_dvl.analysis.metrics import noise_lines
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.correlated_fit import fit_level, held_correlated_level
+from gtsam_dvl.estimators.correlated_fit import fit_enabled, fit_level, held_correlated_level
 from gtsam_dvl.estimators.run import run_trajectory_estimator
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
@@ -133,3 +133,14 @@ def test_held_by_the_online_estimator_and_the_ekf() -> None:
     assert held_correlated_level(EstimatorConfig(), "EKF") == {}
     white = EstimatorConfig.from_dict({"noise": {"fit_correlated": True}, "dvl": {"correlated_sigma_m_s": 0.0}})
     assert held_correlated_level(white, "EKF") == {}
+
+
+def test_off_by_default_and_never_in_the_paper_configuration() -> None:
+    """The defaults leave the fit off; the paper configuration (its DVL error white, from_data off) has nothing to
+    fit even with fit_correlated on, so its runs (make demo's tables) take the path they always took."""
+    assert not fit_enabled(EstimatorConfig())
+    paper = EstimatorConfig.named("paper")
+    on = paper.model_copy(update={"noise": paper.noise.model_copy(update={"fit_correlated": True})})
+    assert not fit_enabled(on)
+    white = on.model_copy(update={"noise": on.noise.model_copy(update={"from_data": True})})
+    assert white.dvl.correlated_sigma_m_s == 0.0 and not fit_enabled(white)
