@@ -160,12 +160,13 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 def noise_lines(noise: Any) -> list[str]:
     """The noise levels an estimator took from the data, one line each (result.info["noise"],
     estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor or to the static
-    segment's measured density, the DVL fit, the depth and GNSS fits."""
+    segment's measured density, the DVL fit, the depth and GNSS fits, the DVL's correlated error's."""
     if not isinstance(noise, dict):
         return []
     imu = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)]
     parts = imu + [v["static"] for v in imu if isinstance(v.get("static"), dict)] + [noise.get("dvl") or {}]
     parts += [noise.get("depth") or {}, noise.get("gnss") or {}]  # the batch smoother's depth and GNSS fits
+    parts += [noise.get("dvl_correlated") or {}]  # the DVL's correlated error: fitted (batch) or held
     return [str(p["why"]) for p in parts if isinstance(p, dict) and p.get("why")]
 
 

@@ -247,7 +247,8 @@ class NavResult(CalibrationUnits):
         """The configuration with the noise levels the estimator used: `config` holds the configuration as given
         (reading it back with -c reproduces the run), info["noise"] the levels taken from the data
         (estimators/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL, depth and
-        GNSS noise factors). What the residuals are judged against. None: the configuration does not read."""
+        GNSS noise factors, the DVL's fitted correlated error). What the residuals are judged against. None: the
+        configuration does not read."""
         config = self.estimator_config
         noise = self.info.get("noise") if isinstance(self.info, dict) else None
         if config is None or not isinstance(noise, dict):
@@ -259,8 +260,15 @@ class NavResult(CalibrationUnits):
         update: dict[str, Any] = {}
         if imu_update:
             update["imu"] = config.imu.model_copy(update=imu_update)
+        dvl_update: dict[str, float] = {}
         if multiplier is not None and math.isfinite(float(multiplier)):
-            update["dvl"] = config.dvl.model_copy(update={"noise_multiplier": float(multiplier)})
+            dvl_update["noise_multiplier"] = float(multiplier)
+        gm = noise.get("dvl_correlated")  # the batch smoother's fitted correlated error (estimators/correlated_fit.py)
+        if isinstance(gm, dict) and all(isinstance(gm.get(k), float) and math.isfinite(gm[k]) and gm[k] > 0
+                                        for k in ("sigma_m_s", "tau_s")):
+            dvl_update.update(correlated_sigma_m_s=gm["sigma_m_s"], correlated_tau_s=gm["tau_s"])
+        if dvl_update:
+            update["dvl"] = config.dvl.model_copy(update=dvl_update)
         for sensor in ("depth", "gnss"):  # the batch smoother's fitted depth and GNSS factors
             entry = noise.get(sensor)
             if isinstance(entry, dict) and entry.get("multiplier") is not None \

@@ -25,7 +25,7 @@ from gtsam_dvl.core.states import (
     water_current,
 )
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated, current, weak_hold
+from gtsam_dvl.estimators import correlated, correlated_fit, current, weak_hold
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.depth import depth_samples
@@ -144,7 +144,7 @@ def solve_log(log: LogData, config: EstimatorConfig, noise: NoiseReport, timing:
                                                 progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
     if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
         raise GtsamDvlError("solve_log: the batch smoother's bulk graph expected")
-    if dvl_fit_enabled(builder.config) or fitted_sensors(builder):
+    if dvl_fit_enabled(builder.config) or fitted_sensors(builder) or correlated_fit.fit_enabled(builder.config):
         values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
     timing["solve"] = time.perf_counter() - t2
     return builder, graph, values, ordering, report, passes, dof
@@ -229,8 +229,11 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     (fitted_sensors), each fitted on the solution from its own whitened residuals, and re-solved with until none
     changes by more than [noise] fit_tolerance, in at most fit_passes solves (the first included). A factor is
     applied only with a re-solve, so the solution and its Bayes net are always at the weights reported; a
-    sensor with fewer than min_rows rows keeps its configured factor. builder.config takes the factors used
-    ([dvl], [depth], [gnss] noise_multiplier), noise.dvl, noise.depth and noise.gnss say how they came."""
+    sensor with fewer than min_rows rows keeps its configured factor. With [noise] fit_correlated, the DVL's
+    correlated error's level and time constant too (estimators/correlated_fit.py; settled within
+    correlated_tolerance). builder.config takes the factors used ([dvl], [depth], [gnss] noise_multiplier, [dvl]
+    correlated_sigma_m_s and correlated_tau_s), noise.dvl, noise.depth, noise.gnss and noise.dvl_correlated say
+    how they came."""
     cfg = builder.config
     n = cfg.noise
     bulk = graph.bulk
@@ -239,6 +242,10 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     configured = {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"}
     rows: dict[str, int] = {}
     fits: dict[str, tuple[float, bool]] = {}
+    gm_configured = builder.config
+    gm_slots = correlated_fit.factor_slots(graph.graph) if correlated_fit.fit_enabled(cfg) else []
+    t_states = np.array([ep.t for ep in builder.epochs])
+    gm_fit: correlated_fit.LevelFit | None = None
     settled, solves = False, 1
     while True:
         for s in list(sensors):
@@ -260,12 +267,23 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
                 continue
             fits[s] = fitted_multiplier(used[s], ratio, cfg, s)
         moving = [s for s in sensors if abs(fits[s][0] / used[s] - 1.0) > n.fit_tolerance]
+        if gm_slots:  # the correlated error's level and time constant (correlated_fit.py)
+            d = builder.config.dvl
+            gm_fit = correlated_fit.fit_level(*correlated_fit.residual_series(bulk, values), builder.config)
+            if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
+                moving.append("dvl_correlated")
         if not moving:
             settled = True
             break
         if solves >= n.fit_passes:
             break
         for s in moving:
+            if s == "dvl_correlated":
+                assert gm_fit is not None
+                builder.config = correlated_fit.with_level(builder.config, gm_fit.sigma_m_s, gm_fit.tau_s)
+                bulk.config = correlated_fit.with_level(bulk.config, gm_fit.sigma_m_s, gm_fit.tau_s)
+                correlated_fit.replace_factors(graph.graph, gm_slots, builder.config, t_states)
+                continue
             new = fits[s][0]
             if s == "dvl":
                 bulk.whiten *= used[s] / new  # W ~ 1 / sigma
@@ -276,6 +294,13 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
         values, report = gauss_newton_qr(graph, values, ordering, **_solver_options(builder))  # type: ignore[arg-type]
         passes.append({"iterations": report.iterations, **report.timing_s})
         solves += 1
+    if gm_fit is not None:
+        d = builder.config.dvl
+        how = f"{solves} solve" + ("s" if solves > 1 else "")
+        if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
+            how += (f", not settled: the last fit asked for {gm_fit.sigma_m_s * 1e3:.3g} mm/s over "
+                    f"{gm_fit.tau_s:.3g} s")
+        noise.dvl_correlated = correlated_fit.fit_report(gm_configured, builder.config, gm_fit, solves, how)
     for s in sensors:
         builder.config = with_sensor_multiplier(builder.config, s, used[s])
         how = f"{solves} solve" + ("s" if solves > 1 else "")

@@ -29,7 +29,8 @@ the IMU's integrated vertical motion between samples, so a part of its residual 
 the fixes of one surface interval give the interval's position (3 of their rows; the sigma low by about 2 %).
 Neither factor is robust: the fit leaves out the rows beyond SCREEN_K sigma at a median-based scale and corrects for
 the truncation as the DVL's. The online estimator and the EKF hold the configured depth level and say so
-(held_depth_level; neither takes GNSS fixes).
+(held_depth_level; neither takes GNSS fixes), and the DVL's correlated error's level, which the batch smoother
+fits with [noise] fit_correlated (estimators/correlated_fit.py; held_levels).
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from gtsam_dvl.core.sensor_noise import (
 from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.alignment import detect_static_end
+from gtsam_dvl.estimators.correlated_fit import held_correlated_level
 
 
 @dataclass
@@ -62,10 +64,12 @@ class NoiseReport:
     dvl: dict[str, Any] = field(default_factory=dict)
     depth: dict[str, Any] = field(default_factory=dict)  # only for a log with depth factors (the batch smoother)
     gnss: dict[str, Any] = field(default_factory=dict)  # only for a log with aiding fixes (the batch smoother)
+    # the DVL's correlated error's level and time constant: fitted (batch) or held; only with [noise] fit_correlated
+    dvl_correlated: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         out = {"imu": self.imu, "dvl": self.dvl}
-        for name in SENSOR_GROUPS:  # a log without them reports as before
+        for name in (*SENSOR_GROUPS, "dvl_correlated"):  # a log without them reports as before
             if entry := getattr(self, name):
                 out[name] = entry
         return out
@@ -234,6 +238,13 @@ def held_depth_level(log: LogData, config: EstimatorConfig, estimator: str) -> d
     return {"configured": m, "multiplier": m, "held": True,
             "why": f"depth noise as configured ({stated}, x {m:.3g}): the {estimator} holds it (the batch smoother "
                    "fits it from the residuals)"}
+
+
+def held_levels(log: LogData, config: EstimatorConfig, estimator: str, report: NoiseReport) -> None:
+    """report.depth and report.dvl_correlated of an estimator that holds the configured levels (held_depth_level,
+    estimators/correlated_fit.py held_correlated_level)."""
+    report.depth = held_depth_level(log, config, estimator)
+    report.dvl_correlated = held_correlated_level(config, estimator)
 
 
 def truncated_chi2_mean(m: int, c: float) -> float:

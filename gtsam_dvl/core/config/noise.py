@@ -19,7 +19,10 @@ Nortek-class units) is rarely what its messages' covariance or the configured de
   ([gnss] noise_multiplier, fit_gnss) the same way, each from its own sensor's whitened residuals, jointly with
   the DVL's in the batch smoother's fit and solve loop (a log without depth samples or aiding fixes has no such
   factor and nothing to fit). The online estimator and the EKF hold the configured depth level and say so (they
-  take no GNSS fixes).
+  take no GNSS fixes);
+- with fit_correlated (off by default), fits the DVL's correlated error's level and time constant ([dvl]
+  correlated_sigma_m_s, correlated_tau_s) in the batch smoother's loop, within their bounds
+  (estimators/correlated_fit.py: why it is off).
 
 The fitted factor is clipped to [dvl_min_multiplier, dvl_max_multiplier] (a fit at a bound is reported: the
 model does not fit, whatever the factor), the depth's to [depth_min_multiplier, depth_max_multiplier] and the
@@ -34,7 +37,7 @@ from typing import ClassVar
 
 from pydantic import Field
 
-from gtsam_dvl.core.config.base import ConfigModel, Flag, Integer, Positive
+from gtsam_dvl.core.config.base import ConfigModel, Flag, Integer, NonNegative, Positive
 
 
 class NoiseConfig(ConfigModel):
@@ -60,6 +63,18 @@ class NoiseConfig(ConfigModel):
     depth_max_multiplier: Positive = 10.0
     gnss_min_multiplier: Positive = 0.1
     gnss_max_multiplier: Positive = 10.0
+    # batch: fit the DVL's correlated error ([dvl] correlated_sigma_m_s, correlated_tau_s: a first-order Gauss-Markov
+    # process) from the DVL residuals with the estimated error added back, within the bounds below; off by default:
+    # on IMU + DVL logs the navigation solution absorbs the slow part of the DVL's error, the residuals do not show
+    # it and the configured (or preset) level holds (estimators/correlated_fit.py)
+    fit_correlated: Flag = False
+    correlated_min_sigma_m_s: NonNegative = 0.0
+    correlated_max_sigma_m_s: Positive = 0.05
+    correlated_min_tau_s: Positive = 5.0
+    correlated_max_tau_s: Positive = 600.0
+    # re-solve while the fitted level or time constant changes by more than this fraction (the fit's own sampling
+    # error on a 400 s, 1 Hz log is 15-30 % of the level)
+    correlated_tolerance: Positive = 0.1
     # fewer rows of a sensor than this: no fit of its factor (its sampling error would exceed 10 %)
     min_rows: Integer = Field(default=60, ge=3)
     # online estimator and EKF: the fit's window from the first ping, s (then held)

@@ -112,7 +112,7 @@ from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
     WarmupFit,
     dvl_fit_enabled,
-    held_depth_level,
+    held_levels,
     imu_levels,
     median_ping_sigma,
     with_multiplier,
@@ -358,7 +358,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
-    noise.depth = held_depth_level(log, config, "EKF")  # (the batch smoother fits it)
+    held_levels(log, config, "EKF", noise)  # (the depth and the DVL's correlated error: the batch smoother fits them)
     recentre = (enabled(config, "time_offset") and config.ekf.recentre_time_offset
                 and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0])
     offset_info: dict[str, Any] = {}

@@ -99,7 +99,7 @@ from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.noise_levels import (
     NoiseReport,
     dvl_fit_enabled,
-    held_depth_level,
+    held_levels,
     imu_levels,
     median_ping_sigma,
     with_multiplier,
@@ -223,7 +223,7 @@ class OnlineEstimator:
                   source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor,
                   calibration=calibration)
         est.noise.imu = noise.imu
-        est.noise.depth = held_depth_level(log, config, "online estimator")  # (the batch smoother fits it)
+        held_levels(log, config, "online estimator", est.noise)  # (depth, correlated DVL error: the batch fits them)
         est.origin_t = origin_fix_time(log, config)
         est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
         est._scheduler.water_screen.repeats_need_motion = log.dvl.noise_free
