@@ -142,7 +142,9 @@ def true_current(t: np.ndarray, log: LogData) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def layered_log(sim_paper3d_short: LogData) -> LogData:
-    return sheared_water_track(sim_paper3d_short)
+    """The log to 30 s after the water-track stretch (the descent's pings on bottom track before and after it)."""
+    from tests.support.logs import cut_log
+    return cut_log(sheared_water_track(sim_paper3d_short), T_WATER[1] + 30.0)
 
 
 def _log_config(log: LogData, h: float = H) -> EstimatorConfig:
@@ -177,7 +179,9 @@ def test_batch_follows_the_sheared_current_per_layer(layered_log: LogData) -> No
     from gtsam_dvl.estimators.batch import smooth_batch
     res = smooth_batch(layered_log, _log_config(layered_log), timeline=True)
     assert res.timeline is not None
-    assert res.timeline.scale_sigma[-1] == pytest.approx(res.calibration["scale"].sigma[0], rel=1e-6)
+    # (rel 1e-5: the smoother's marginals come from its last iteration's linearisation, the timeline's from the
+    # solution's)
+    assert res.timeline.scale_sigma[-1] == pytest.approx(res.calibration["scale"].sigma[0], rel=1e-5)
     layers = np.floor(true_depth(res.t, layered_log) / H).astype(int)
     assert res.info["water_current"]["layer_boundaries"] == list(range(layers.min(), layers.max()))
     _assert_current(res, layered_log, T_WATER[0] + 5.0, T_WATER[1] - 5.0, 0.03)
@@ -197,11 +201,10 @@ def test_filters_follow_the_sheared_current_per_layer(layered_log: LogData) -> N
     boundary with the shared states): the current over the last 60 s of the descent within 3 sigma."""
     from gtsam_dvl.estimators.ekf import run_ekf
     from gtsam_dvl.estimators.online import smooth_online
-    from tests.support.logs import cut_log
     cfg = _log_config(layered_log)
     ekf = run_ekf(layered_log, cfg)
     layers = np.floor(true_depth(ekf.t, layered_log) / H).astype(int)
     assert ekf.info["filter"]["error_state"] == 19 + 2 + 2 * (layers.max() - layers.min())
     _assert_current(ekf, layered_log, T_WATER[1] - 60.0, T_WATER[1] - 1.0, 0.05)
-    online = smooth_online(cut_log(layered_log, T_WATER[1] + 10.0), cfg)
+    online = smooth_online(layered_log, cfg)
     _assert_current(online, layered_log, T_WATER[1] - 60.0, T_WATER[1] - 1.0, 0.05)
