@@ -19,22 +19,13 @@ from gtsam_dvl.estimators.correlated_fit import fit_enabled, fit_level, held_cor
 from gtsam_dvl.estimators.run import run_trajectory_estimator
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
-
-
-def _gauss_markov(n: int, sigma: float, tau: float, rng: np.random.Generator) -> np.ndarray:
-    phi = np.exp(-1.0 / tau)
-    g = np.empty(n)
-    g[0] = rng.normal(0.0, sigma)
-    drive = rng.normal(0.0, sigma * np.sqrt(1.0 - phi**2), n)
-    for i in range(1, n):
-        g[i] = phi * g[i - 1] + drive[i]
-    return g
+from tests.core.test_sensor_noise import gauss_markov
 
 
 def _series(seed: int, sigma: float, n: int = 1200) -> tuple[np.ndarray, np.ndarray]:
     """n pings at 1 Hz of 3 axes: 7 mm/s white plus sigma over 60 s."""
     rng = np.random.default_rng(seed)
-    r = np.column_stack([rng.normal(0.0, 0.007, n) + (_gauss_markov(n, sigma, 60.0, rng) if sigma else 0.0)
+    r = np.column_stack([rng.normal(0.0, 0.007, n) + (gauss_markov(n, 1.0, sigma, 60.0, rng) if sigma else 0.0)
                          for _ in range(3)])
     return np.arange(n, dtype=float), r
 

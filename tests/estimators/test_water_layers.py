@@ -14,10 +14,10 @@ from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import S, W
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import quat_xyzw_to_matrix
 from gtsam_dvl.core.types import DepthData, LogData
 from gtsam_dvl.estimators import current
 from gtsam_dvl.estimators.ekf.strapdown import FilterState, NavState
+from tests.estimators.test_water_current import with_water_track
 
 C0 = np.array([0.25, -0.15])  # m/s, east, north: the current at the surface
 SHEAR = np.array([-0.008, 0.006])  # m/s per m of depth
@@ -108,23 +108,15 @@ def test_ekf_crossing_is_the_linear_map() -> None:
 
 def sheared_water_track(log: LogData) -> LogData:
     """The log with its pings in T_WATER turned into water-track pings in the current c0 + SHEAR * depth (the true
-    depth at each ping), through the true attitude and calibration (an independent evaluation of the model)."""
-    dvl, truth = log.dvl, log.truth
-    assert truth is not None and log.true_calibration is not None
-    k = log.true_calibration.scale
-    b_R_d = log.true_calibration.b_R_d(log.mounting.b_R_d0)
-    water = (dvl.t > T_WATER[0]) & (dvl.t < T_WATER[1])
-    idx = np.searchsorted(truth.t, dvl.t).clip(0, len(truth.t) - 1)
-    d_v = dvl.d_v.copy()
-    for j in np.flatnonzero(water):
-        n_c = np.array([*(C0 + SHEAR * -truth.n_p[idx[j], 2]), 0.0])
-        d_v[j] = d_v[j] - k * b_R_d.T @ quat_xyzw_to_matrix(truth.n_q_b[idx[j]]).T @ n_c
+    depth at each ping; test_water_current.with_water_track: an independent evaluation of the model)."""
+    truth = log.truth
+    assert truth is not None
+    log = with_water_track(log, T_WATER, lambda k: np.array([*(C0 + SHEAR * -truth.n_p[k, 2]), 0.0]))
     # and a depth sensor at 2 Hz (1 cm): what places the states in their layers (LogGraph.layer_heights)
     t_d = np.arange(truth.t[0], truth.t[-1], 0.5)
     depth_m = -np.interp(t_d, truth.t, truth.n_p[:, 2]) - float(log.metadata["origin"]["height_m"])
     depth_m = depth_m + np.random.default_rng(5).normal(0.0, 0.01, len(t_d))
-    return dataclasses.replace(log, dvl=dataclasses.replace(dvl, d_v=d_v, water_track=water),
-                               depth=DepthData(t_d, depth_m, np.full(len(t_d), 1e-4)))
+    return dataclasses.replace(log, depth=DepthData(t_d, depth_m, np.full(len(t_d), 1e-4)))
 
 
 def true_depth(t: np.ndarray, log: LogData) -> np.ndarray:
