@@ -26,7 +26,7 @@ typecheck: $(STAMP)
 	$(BIN)/mypy gtsam_dvl
 
 test: lint typecheck
-	$(BIN)/python -m pytest -n 2 -q
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -q
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_reader.py

@@ -17,12 +17,15 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.paper_runs import GROUP, paper_batch, paper_log
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(GROUP)]
 
 
 @functools.cache
 def _log(name: str, seed: int, white_noise: bool = True) -> LogData:
+    if white_noise:
+        return paper_log(name, seed)  # shared with test_online.py and test_robust.py
     return simulate(load_scenario(name), seed, white_noise=white_noise)
 
 
@@ -35,6 +38,8 @@ def _run(name: str, seed: int, white_noise: bool = True, weak_priors: bool = Fal
         cfg.imu.gyro_bias_sigma_deg_per_h = 10.0
         cfg.imu.accel_bias_sigma_ug = 50000.0
     log = _log(name, seed, white_noise)
+    if white_noise and not weak_priors:  # the paper configuration's run, shared with test_online.py, test_robust.py
+        return summary(paper_batch(name, seed), log)
     return summary(smooth_batch(log, cfg), log)
 
 

@@ -11,6 +11,7 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
@@ -41,10 +42,16 @@ def test_rotation_is_undone_exactly(sim_paper2d_clean: LogData) -> None:
     np.testing.assert_allclose(f, [[0.0, 1.0, 0.0]], atol=1e-15)  # imu x is base_link +y: Rz(90) Rx(180) x = y
 
 
+@pytest.fixture(scope="module")
+def batch_reference(sim_paper2d_clean: LogData) -> NavResult:
+    """The batch smoother on the unrotated log with the paper configuration (both batch checks compare to it)."""
+    return smooth_batch(sim_paper2d_clean, EstimatorConfig.paper())
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("estimator", ["batch", "online", "ekf"])
 def test_rotated_imu_with_its_tf_gives_the_same_calibration(sim_paper2d_clean: LogData, tmp_path: Path,
-                                                            estimator: str) -> None:
+                                                            estimator: str, request: pytest.FixtureRequest) -> None:
     """Through a written and read log, so the tf is the reader's: same scale and misalignment to 1e-3 sigma."""
     path = tmp_path / "rotated.mcap"
     write_log(path, _rotated(sim_paper2d_clean))
@@ -52,7 +59,8 @@ def test_rotated_imu_with_its_tf_gives_the_same_calibration(sim_paper2d_clean: L
     np.testing.assert_allclose(rotated.mounting.b_R_imu, b_R_IMU, atol=1e-12)
     run = {"batch": smooth_batch, "online": smooth_online, "ekf": run_ekf}[estimator]
     cfg = EstimatorConfig.paper()
-    ref, got = run(sim_paper2d_clean, cfg), run(rotated, cfg)
+    ref = (request.getfixturevalue("batch_reference") if estimator == "batch" else run(sim_paper2d_clean, cfg))
+    got = run(rotated, cfg)
     print(f"{estimator}: scale {ref.scale:.7f} / {got.scale:.7f}, misalignment {ref.misalignment_deg} / "
           f"{got.misalignment_deg} deg")
     assert abs(got.scale - ref.scale) < 1e-3 * ref.scale_sigma
@@ -61,11 +69,11 @@ def test_rotated_imu_with_its_tf_gives_the_same_calibration(sim_paper2d_clean: L
 
 
 @pytest.mark.slow
-def test_rotated_imu_without_its_tf_is_wrong(sim_paper2d_clean: LogData) -> None:
+def test_rotated_imu_without_its_tf_is_wrong(sim_paper2d_clean: LogData, batch_reference: NavResult) -> None:
     """The check can fail: ignoring the mounting (identity tf) gives a misalignment wrong by far more than its
     sigma (what happened before the mounting was applied: 168 deg), or a clear error."""
     wrong = dataclasses.replace(_rotated(sim_paper2d_clean), mounting=sim_paper2d_clean.mounting)
-    ref = smooth_batch(sim_paper2d_clean, EstimatorConfig.paper())
+    ref = batch_reference
     try:
         res = smooth_batch(wrong, EstimatorConfig.paper())
     except GtsamDvlError as exc:

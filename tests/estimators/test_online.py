@@ -22,22 +22,24 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.online import MessageDropped, OnlineConfig, OnlineEstimator, feed_log, smooth_online
 from gtsam_dvl.estimators.online.types import misalignment_deg_and_cov
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.logs import cut_log
+from tests.support.paper_runs import GROUP, paper_batch, paper_log, paper_online
 from tests.support.results import changes_in_sigmas
 
 PRIOR = EstimatorConfig.paper().priors
+pytestmark = pytest.mark.xdist_group(GROUP)  # the paper runs shared with test_batch.py, test_robust.py
 
 
 @functools.cache
 def _log(name: str, seed: int, t_end: float | None = None) -> LogData:
-    log = simulate(load_scenario(name), seed)
+    log = paper_log(name, seed)
     return log if t_end is None else cut_log(log, t_end)
 
 
 @functools.cache
 def _batch(name: str, seed: int, t_end: float | None = None, bias_model: str = "constant") -> NavResult:
+    if t_end is None and bias_model == "constant":
+        return paper_batch(name, seed)
     cfg = EstimatorConfig.paper()
     cfg.imu.bias_model = bias_model
     return smooth_batch(_log(name, seed, t_end), cfg)
@@ -46,6 +48,8 @@ def _batch(name: str, seed: int, t_end: float | None = None, bias_model: str = "
 @functools.cache
 def _online(name: str, seed: int, mode: str = "fixed_lag", t_end: float | None = None,
             bias_model: str = "constant") -> NavResult:
+    if t_end is None and mode == "fixed_lag" and bias_model == "constant":
+        return paper_online(name, seed)
     cfg = EstimatorConfig.paper()
     cfg.imu.bias_model = bias_model
     return smooth_online(_log(name, seed, t_end), cfg, mode=mode)

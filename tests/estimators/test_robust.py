@@ -24,11 +24,10 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.online import smooth_online
-from gtsam_dvl.sim import simulate
-from gtsam_dvl.sim.scenario import load_scenario
+from tests.support.paper_runs import GROUP, paper_batch, paper_log, paper_online
 from tests.support.results import changes_in_sigmas
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group(GROUP)]
 
 SEED = 1
 ZERO_FROM_S, ZERO_TO_S = 800.0, 830.0  # exact zeros at 2 m/s, at the end of the square's first turn
@@ -39,7 +38,7 @@ SCREEN_REASONS = ("dvl_zero_while_moving", "dvl_repeated", "dvl_implausible_acce
 
 @functools.cache
 def _clean(seed: int = SEED) -> LogData:
-    return simulate(load_scenario("paper-3d"), seed)
+    return paper_log("paper-3d", seed)  # shared with test_batch.py and test_online.py
 
 
 def with_outliers(log: LogData, fraction: float, seed: int) -> tuple[LogData, np.ndarray]:
@@ -75,6 +74,8 @@ def _off() -> EstimatorConfig:
 
 @functools.cache
 def _run(mode: str, case: str, defaults: bool = True) -> NavResult:
+    if case == "clean" and defaults and mode in ("batch", "online"):  # the runs test_batch.py, test_online.py use
+        return {"batch": paper_batch, "online": paper_online}[mode]("paper-3d", SEED)
     log = _clean() if case == "clean" else _bogus(case)[0]
     return RUNS[mode](log, EstimatorConfig.paper() if defaults else _off())
 
