@@ -7,12 +7,22 @@ name ends in _deg. skew, so3_exp and so3_log are factors/so3.py's (one 3-vector 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.factors.so3 import exp as so3_exp
 from gtsam_dvl.factors.so3 import log as so3_log
 from gtsam_dvl.factors.so3 import skew
+
+
+def _rotation() -> Any:
+    """scipy's Rotation, imported when first needed: scipy.spatial costs about 0.45 s to import, which every
+    command-line process would pay at start (gtsam_dvl.core.types imports this module) whether it rotates or not."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
 
 __all__ = ["matrix_to_quat_xyzw", "matrix_to_rpy", "matrix_to_rpy_deg", "quat_xyzw_to_matrix", "rpy_deg_to_matrix",
            "rpy_to_matrix", "skew", "so3_exp", "so3_log"]
@@ -20,7 +30,7 @@ __all__ = ["matrix_to_quat_xyzw", "matrix_to_rpy", "matrix_to_rpy_deg", "quat_xy
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll), radians."""
-    return Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
+    return _rotation().from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
 
 
 def rpy_deg_to_matrix(rpy_deg: np.ndarray | list[float] | tuple[float, ...]) -> np.ndarray:
@@ -31,7 +41,7 @@ def rpy_deg_to_matrix(rpy_deg: np.ndarray | list[float] | tuple[float, ...]) -> 
 
 def matrix_to_rpy(R: np.ndarray) -> np.ndarray:
     """[roll, pitch, yaw] in radians of R = Rz(yaw) Ry(pitch) Rx(roll); works on (...,3,3)."""
-    ypr = Rotation.from_matrix(R).as_euler("ZYX")
+    ypr = _rotation().from_matrix(R).as_euler("ZYX")
     return ypr[..., ::-1].copy()
 
 
@@ -40,8 +50,8 @@ def matrix_to_rpy_deg(R: np.ndarray) -> np.ndarray:
 
 
 def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
-    return Rotation.from_matrix(R).as_quat()
+    return _rotation().from_matrix(R).as_quat()
 
 
 def quat_xyzw_to_matrix(q: np.ndarray) -> np.ndarray:
-    return Rotation.from_quat(q).as_matrix()
+    return _rotation().from_quat(q).as_matrix()

@@ -141,7 +141,7 @@ def test_priors_are_those_of_the_factor_maker() -> None:
                          + [(True, False, True)])
 def test_elimination_ordering_lists_the_enabled_states(offset: bool, lever: bool, random_walk: bool) -> None:
     cfg = _config(offset, lever, random_walk)
-    graph = SimpleNamespace(config=cfg, epochs=[None] * 3)
+    graph = SimpleNamespace(config=cfg, epochs=[None] * 3, shear=[])  # (no water-current layer boundaries)
     ordering = LogGraph.elimination_ordering(graph, chunk_states=2)  # type: ignore[arg-type]
     shared = _keys(cfg)[1:] if random_walk else _keys(cfg)
     assert ordering.rest == shared
