@@ -135,8 +135,7 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
     held = []
     for k in np.flatnonzero(p["weak"]):
         v = np.linalg.cholesky(p["P0"]) @ p["V"][:, k]  # one prior sigma along v_k, in [scale, rad] units
-        w = np.abs(v) / np.linalg.norm(np.abs(v))
-        main = names[int(np.argmax(w))]
+        main = names[int(np.argmax(np.abs(p["V"][:, k])))]  # (its largest component in prior sigmas)
         held.append({"information": float(p["lambda"][k]), "mostly": main,
                      "direction": {n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)}})
     m = int(p["weak"].sum())
