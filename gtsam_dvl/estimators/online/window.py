@@ -138,8 +138,8 @@ class IncrementalSmoother:
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
         self.gm = correlated_error(builder.config)  # the DVL's correlated error E(i) a state (correlated.py)
         self.wc = water_current(builder.config)  # the water current W(i) a state (current.py)
-        # with layers: the boundaries S(b) crossed so far (shared keys, never marginalised) and the newest layer
         self.hold: dict[str, Any] | None = None  # the newest estimate's held calibration directions (weak_hold.py)
+        # with layers: the boundaries S(b) crossed so far (shared keys, never marginalised) and the newest layer
         self.layers = self.wc and current.layered(builder.config)
         self.shear: list[int] = []
         self.layer = 0
