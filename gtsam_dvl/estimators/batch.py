@@ -92,7 +92,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     if hold is not None and hold["weak"].any():  # weakly determined calibration directions held (weak_hold.py)
         graph, values, result = _hold_weak(builder, graph, values, ordering, hold, estimator, result)
     elif hold is not None:
-        result.info["calibration_hold"] = weak_hold.report({**hold, "below": config.priors.hold_weak_information}, 0.0)
+        result.info["calibration_hold"] = weak_hold.report(hold, 0.0)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
         t4 = time.perf_counter()
@@ -190,8 +190,7 @@ def _solver_options(builder: LogGraph) -> dict[str, Any]:
 def fitted_sensors(builder: LogGraph) -> list[str]:
     """The sensor groups besides the DVL whose noise factor the batch fit takes (SENSOR_GROUPS): fitting
     enabled ([noise] fit_depth, fit_gnss) and factors in the graph."""
-    slots = getattr(builder, "factor_slots", {})
-    return [s for s in SENSOR_GROUPS if sensor_fit_enabled(builder.config, s) and len(slots.get(s, ()))]
+    return [s for s in SENSOR_GROUPS if sensor_fit_enabled(builder.config, s) and len(builder.factor_slots.get(s, ()))]
 
 
 def _sensor_squares(graph: BulkGraph, slots: range, values: gtsam.Values) -> np.ndarray:
@@ -243,7 +242,7 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     rows: dict[str, int] = {}
     fits: dict[str, tuple[float, bool]] = {}
     gm_configured = builder.config
-    gm_slots = correlated_fit.factor_slots(graph.graph) if correlated_fit.fit_enabled(cfg) else []
+    gm_slots = builder.factor_slots.get("correlated", range(0)) if correlated_fit.fit_enabled(cfg) else range(0)
     t_states = np.array([ep.t for ep in builder.epochs])
     gm_fit: correlated_fit.LevelFit | None = None
     settled, solves = False, 1
@@ -333,8 +332,7 @@ def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, orderi
     consider.add(weak_hold.consider_prior(hold))
     held, _ = gauss_newton_qr(BulkGraph(pinned, graph.bulk, graph.imu), values, ordering,
                               **_solver_options(builder))  # type: ignore[arg-type]
-    info = weak_hold.report({**hold, "below": builder.config.priors.hold_weak_information},
-                            2.0 * (graph.error(held) - graph.error(values)))
+    info = weak_hold.report(hold, 2.0 * (graph.error(held) - graph.error(values)))
     if not info["consistent"]:
         free.info["calibration_hold"] = {**info, "held": [], "released": info["held"], "why": (
             f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "

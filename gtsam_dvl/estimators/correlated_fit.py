@@ -41,8 +41,6 @@ from gtsam_dvl.core.sensor_noise import MIN_LAGS, GaussMarkovFit, gauss_markov_f
 from gtsam_dvl.core.states import correlated_error
 from gtsam_dvl.estimators import correlated
 
-_E_CHR = ord("e")  # core/keys.py E(i)
-
 
 def fit_enabled(config: EstimatorConfig) -> bool:
     """Whether the batch smoother fits the correlated error: [noise] from_data and fit_correlated, the error
@@ -57,22 +55,10 @@ def with_level(config: EstimatorConfig, sigma_m_s: float, tau_s: float) -> Estim
         update={"correlated_sigma_m_s": float(sigma_m_s), "correlated_tau_s": float(tau_s)})})
 
 
-def factor_slots(graph: gtsam.NonlinearFactorGraph) -> list[int]:
-    """The slots of the correlated error's prior and links in graph: the factors whose every key is an E(i)."""
-    out = []
-    for i in range(graph.size()):
-        if not graph.exists(i):
-            continue
-        keys = graph.at(i).keys()
-        if len(keys) and all(gtsam.Symbol(k).chr() == _E_CHR for k in keys):
-            out.append(i)
-    return out
-
-
-def replace_factors(graph: gtsam.NonlinearFactorGraph, slots: list[int], config: EstimatorConfig,
+def replace_factors(graph: gtsam.NonlinearFactorGraph, slots: range, config: EstimatorConfig,
                     t_states: np.ndarray) -> None:
-    """The prior and links of E made again at config's level and time constant, into their slots (factor_slots:
-    the prior first, then the links in state order, as LogGraph adds them)."""
+    """The prior and links of E made again at config's level and time constant, into their slots
+    (LogGraph.factor_slots["correlated"]: the prior first, then the links in state order)."""
     factors = correlated.factors(config, t_states)
     if len(factors) != len(slots):
         raise GtsamDvlError(f"correlated error fit: {len(factors)} factors made again for {len(slots)} slots")

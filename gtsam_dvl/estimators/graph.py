@@ -107,8 +107,13 @@ class LogGraph:
     snapshots: PingMotion | None = field(default=None, init=False, repr=False)
     usable: np.ndarray = field(init=False, repr=False)  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
     water: np.ndarray = field(init=False, repr=False)  # (M,) bool: log.dvl's water-track pings
-    # the water current's layer boundaries S(b) the initial guess crosses ([current] layer_thickness_m > 0)
+    # the water current's layer boundaries S(b) the states cross ([current] layer_thickness_m > 0), and the states'
+    # heights (m above the map origin) that place them in the layers (layer_heights; initial_values)
     shear: list[int] = field(default_factory=list, init=False, repr=False)
+    layer_z: np.ndarray | None = field(default=None, init=False, repr=False)
+    # where the correlated error's, depth and GNSS factors sit in the graph of _factors_but_dvl (the batch
+    # smoother's noise fit makes them again in place): "correlated", "depth", "gnss" -> slots
+    factor_slots: dict[str, range] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -420,7 +425,8 @@ class LogGraph:
         if correlated_error(self.config):
             correlated.initial_values(values, len(self.epochs))
         if water_current(self.config):  # (with layers, the boundaries the states cross: current.py)
-            self.shear = current.boundaries(self.config, self.layer_heights(n_p_all[:, 2]), self.frame.height_m)
+            self.layer_z = self.layer_heights(n_p_all[:, 2])
+            self.shear = current.boundaries(self.config, self.layer_z, self.frame.height_m)
             current.initial_values(values, len(self.epochs), self.shear)
         self.set_gravity_from_positions(n_p_all)
         self.gravity_positions = n_p_all
@@ -443,6 +449,14 @@ class LogGraph:
         """The priors, IMU (imu=False: not them) and bias-link factors, depth and GNSS factors: all but the
         DVL's."""
         graph = gtsam.NonlinearFactorGraph()
+        self.factor_slots = {}
+
+        def add(name: str, factors: list[gtsam.NonlinearFactor]) -> None:  # (their slots: factor_slots[name])
+            start = graph.size()
+            for f in factors:
+                graph.add(f)
+            self.factor_slots[name] = range(start, graph.size())
+
         gnss = self.gnss_plan()
         for f in self.maker.prior_factors(values, first_position_cov(gnss)):
             graph.add(f)
@@ -452,20 +466,14 @@ class LogGraph:
             for f in self.bias_factors(i):
                 graph.add(f)
         if correlated_error(self.config):  # the DVL's correlated error: prior and Gauss-Markov links
-            for f in correlated.factors(self.config, np.array([ep.t for ep in self.epochs])):
-                graph.add(f)
+            add("correlated", correlated.factors(self.config, np.array([ep.t for ep in self.epochs])))
         if water_current(self.config):  # the water current: prior and random walk in time and depth
             z = np.zeros(len(self.epochs)) if self.gravity_positions is None else self.gravity_positions[:, 2]
-            z = self.layer_heights(z) if current.layered(self.config) else z
+            z = self.layer_z if current.layered(self.config) and self.layer_z is not None else z
             for f in current.factors(self.config, np.array([ep.t for ep in self.epochs]), z, self.frame.height_m):
                 graph.add(f)
-        # where the depth and GNSS factors sit in the graph (the batch smoother's noise fit replaces them)
-        self.factor_slots: dict[str, range] = {}
-        for name, factors in (("depth", self.depth_factors()), ("gnss", self.gnss_factors(gnss))):
-            start = graph.size()
-            for f in factors:
-                graph.add(f)
-            self.factor_slots[name] = range(start, graph.size())
+        add("depth", self.depth_factors())
+        add("gnss", self.gnss_factors(gnss))
         return graph
 
     def build_bulk(self, values: gtsam.Values | None = None) -> tuple[BulkGraph, gtsam.Values]:

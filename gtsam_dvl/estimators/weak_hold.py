@@ -95,21 +95,27 @@ def prior_slots(graph: gtsam.NonlinearFactorGraph) -> list[int]:
     return out
 
 
-def plan(config: EstimatorConfig, mounting: Mounting, calib_joint_cov: np.ndarray, n_last: int,
-         ) -> dict[str, Any] | None:
-    """The weak directions of a batch result (its calibration block's joint covariance at the last state n_last):
-    None when holding does not apply (off, or the scale or misalignment not both in the block)."""
+def _directions(config: EstimatorConfig, mounting: Mounting, keys: list[int], cov: np.ndarray
+                ) -> dict[str, Any] | None:
+    """The plan of a joint covariance cov over the stacked tangents of keys (the prior, the whitened eigen-
+    directions and which are weak, the threshold, the scale's and misalignment's columns idx in cov): None when
+    holding does not apply (off, or the scale or misalignment not among keys)."""
     below = config.priors.hold_weak_information
-    if below <= 0:
-        return None
-    cols = columns(shared_keys(config, n_last, block=True), config)
-    if "scale" not in cols or "misalignment" not in cols:
+    cols = columns(keys, config)
+    if below <= 0 or "scale" not in cols or "misalignment" not in cols:
         return None
     idx = np.r_[np.arange(cols["scale"].start, cols["scale"].stop),
                 np.arange(cols["misalignment"].start, cols["misalignment"].stop)]
     k0, b_R_d0, P0 = calibration_prior(config, mounting)
-    lam, V, weak = weak_directions(P0, calib_joint_cov[np.ix_(idx, idx)], below)
-    return {"k0": k0, "b_R_d0": b_R_d0, "P0": P0, "lambda": lam, "V": V, "weak": weak}
+    lam, V, weak = weak_directions(P0, cov[np.ix_(idx, idx)], below)
+    return {"k0": k0, "b_R_d0": b_R_d0, "P0": P0, "lambda": lam, "V": V, "weak": weak, "below": below, "idx": idx}
+
+
+def plan(config: EstimatorConfig, mounting: Mounting, calib_joint_cov: np.ndarray, n_last: int,
+         ) -> dict[str, Any] | None:
+    """The weak directions of a batch result (its calibration block's joint covariance at the last state n_last):
+    None when holding does not apply."""
+    return _directions(config, mounting, shared_keys(config, n_last, block=True), calib_joint_cov)
 
 
 def hold_factor(p: dict[str, Any]) -> gtsam.CustomFactor:
@@ -140,7 +146,7 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
                      "direction": {n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)}})
     m = int(p["weak"].sum())
     limit = float(chi2.ppf(0.99, m)) if m else 0.0
-    out: dict[str, Any] = {"threshold": float(p.get("below", np.nan)), "information": p["lambda"].tolist(),
+    out: dict[str, Any] = {"threshold": float(p["below"]), "information": p["lambda"].tolist(),
                            "held": held}
     if np.isfinite(chi2_increase):  # (the batch smoother's: a filter holds its reported estimate only)
         out.update(chi2_increase=chi2_increase, chi2_limit_99=limit, consistent=bool(chi2_increase <= limit))
@@ -154,19 +160,13 @@ def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values
     value theta_h, every other component by its regression on the calibration (K = P_x,theta P_theta^-1), and the
     covariance with the calibration's marginal replaced by the held one (the prior's along the weak directions:
     the consider covariance, module doc). None when nothing is held (off, or no weak direction)."""
-    below = config.priors.hold_weak_information
-    cols = columns(keys, config)
-    if below <= 0 or "scale" not in cols or "misalignment" not in cols or not np.all(np.isfinite(cov)):
+    p = _directions(config, mounting, keys, cov) if np.all(np.isfinite(cov)) else None
+    if p is None or not p["weak"].any():
         return None
-    idx = np.r_[np.arange(cols["scale"].start, cols["scale"].stop),
-                np.arange(cols["misalignment"].start, cols["misalignment"].stop)]
-    k0, b_R_d0, P0 = calibration_prior(config, mounting)
+    idx, lam, V, weak = p["idx"], p["lambda"], p["V"], p["weak"]
     P_tt = cov[np.ix_(idx, idx)]
-    lam, V, weak = weak_directions(P0, P_tt, below)
-    if not weak.any():
-        return None
-    L0 = np.linalg.cholesky(P0)
-    d, _ = _tangent(values, k0, b_R_d0)
+    L0 = np.linalg.cholesky(p["P0"])
+    d, _ = _tangent(values, p["k0"], p["b_R_d0"])
     u = np.linalg.solve(L0, d)
     d_theta = L0 @ (-V[:, weak] @ (V[:, weak].T @ u))  # to the prior's mean along the weak directions
     K = np.linalg.solve(P_tt, cov[idx, :]).T  # (n, 4)
@@ -180,6 +180,5 @@ def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values
         n = key_dim(k)
         delta.insert(k, dx[col:col + n])
         col += n
-    plan = {"k0": k0, "b_R_d0": b_R_d0, "P0": P0, "lambda": lam, "V": V, "weak": weak, "below": below}
-    return values.retract(delta), 0.5 * (cov_h + cov_h.T), plan
+    return values.retract(delta), 0.5 * (cov_h + cov_h.T), p
 
