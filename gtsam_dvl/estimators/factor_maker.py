@@ -117,7 +117,8 @@ class FactorMaker:
         return np.asarray(b_omega_gyro - self.alignment.n_R_b.T @ self.n_omega_ie(), dtype=float)
 
     def velocity_rate_input(self, t: float, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-                            dt: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                            dt: float = 0.0, bias: tuple[np.ndarray, np.ndarray] | None = None,
+                            n_R_b: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The IMU constants of the DVL time-offset model at an epoch t: the mean specific force b_a and the
         mean body rate relative to map (base_link) over the samples of a window centred on t + dt / 2, of length
         max(|dt|, 2 w), w = [dvl] time_offset_window_s. dt is the current offset estimate: dt times the mean rate
@@ -126,18 +127,23 @@ class FactorMaker:
         constant is G, the mean over those samples of dR^T, dR the body's rotation since t (from the gyros, a
         rotation vector integrated from t): the specific force is measured in the rotating body, so gravity
         must be seen there too (G n_R_b(t)^T n_g). The Coriolis acceleration (2 Omega x v: 3e-4 m/s^2 at
-        2 m/s) is left out."""
-        b_a, w_mean, G = self.velocity_rate_inputs(np.array([t], dtype=float), imu_t, b_f, b_omega, dt)
+        2 m/s) is left out. bias = (accelerometer m/s^2, gyro rad/s): the current estimate of the IMU biases,
+        taken off the samples (a 280 micro-g accelerometer bias over a 1 s offset is a 3 mm/s phantom velocity);
+        n_R_b: the body's attitude at the ping for the Earth rate's removal (default: the alignment's)."""
+        b_a, w_mean, G = self.velocity_rate_inputs(np.array([t], dtype=float), imu_t, b_f, b_omega, dt, bias=bias,
+                                                   n_R_b=None if n_R_b is None else np.asarray(n_R_b)[None])
         return b_a[0], w_mean[0], G[0]
 
     def velocity_rate_inputs(self, t: np.ndarray, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-                             dt: float = 0.0, chunk_samples: int = 500_000) -> tuple[np.ndarray, np.ndarray,
-                                                                                      np.ndarray]:
+                             dt: float = 0.0, chunk_samples: int = 500_000,
+                             bias: tuple[np.ndarray, np.ndarray] | None = None, n_R_b: np.ndarray | None = None
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """velocity_rate_input at the epochs t (P,) at once: b_a (P, 3), the mean body rate (P, 3), G (P, 3, 3).
         Vectorised over the pings (a Python call per ping would cost 18,000 calls per hour of a 5 Hz log): each
         window's samples are gathered into a padded block, chunk_samples (ping, sample) pairs at a time, and the
         per-window sums of velocity_rate_input are taken (the cumulative rotation from the window's first
-        sample)."""
+        sample). bias: (accelerometer (3,) or (P, 3) m/s^2, gyro (3,) or (P, 3) rad/s) taken off the samples;
+        n_R_b (P, 3, 3): each ping's attitude for its Earth rate (default: the alignment's)."""
         w = self.config.dvl.time_offset_window_s
         t = np.asarray(t, dtype=float).reshape(-1)
         n_imu = len(imu_t)
@@ -151,7 +157,15 @@ class FactorMaker:
         empty = hi <= lo  # no sample in the window: the sample covering t alone
         lo = np.where(empty, np.clip(np.searchsorted(imu_t, t), 0, n_imu - 1), lo)
         hi = np.where(empty, lo + 1, hi)
-        w_earth = self.alignment.n_R_b.T @ self.n_omega_ie()  # body_rate() of each sample: minus this
+        # Earth rate in each ping's body (the same for every sample of its window: the body turns by at most a few
+        # degrees in one) plus the gyro bias: what each sample's rate loses to be relative to map
+        n_omega = self.n_omega_ie()
+        w_off = np.broadcast_to(self.alignment.n_R_b.T @ n_omega if n_R_b is None
+                                else np.einsum("pji,j->pi", np.asarray(n_R_b, dtype=float), n_omega), (len(t), 3))
+        a_off = np.zeros((len(t), 3))
+        if bias is not None:
+            a_off = np.broadcast_to(np.asarray(bias[0], dtype=float), (len(t), 3))
+            w_off = w_off + np.broadcast_to(np.asarray(bias[1], dtype=float), (len(t), 3))
         b_a, w_mean, G = np.empty((len(t), 3)), np.empty((len(t), 3)), np.empty((len(t), 3, 3))
         width = int((hi - lo).max()) if len(t) else 0
         step_p = max(1, chunk_samples // max(width, 1))
@@ -163,8 +177,8 @@ class FactorMaker:
             wgt = (inside / n_in)[:, None, :]  # (P, 1, W): the mean over the window's samples as a product
             idx = np.minimum(lo[sl][:, None] + col[None, :], n_imu - 1)
             ts = imu_t[idx]
-            b_a[sl] = (wgt @ b_f[idx])[:, 0]
-            w_rel = b_omega[idx] - w_earth
+            b_a[sl] = (wgt @ b_f[idx])[:, 0] - a_off[sl]
+            w_rel = b_omega[idx] - w_off[sl][:, None, :]
             w_mean[sl] = (wgt @ w_rel)[:, 0]
             step = np.where(inside, np.diff(ts, axis=1, prepend=ts[:, :1]), 0.0)
             phi = np.cumsum(w_rel * step[..., None], axis=1)

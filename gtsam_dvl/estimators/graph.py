@@ -14,6 +14,7 @@ initial guess of the whole trajectory.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -46,6 +47,7 @@ from gtsam_dvl.estimators.gaps import (
 from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
 from gtsam_dvl.estimators.keyframes import interval_with_snapshots
 from gtsam_dvl.estimators.mounting import log_in_base_link
+from gtsam_dvl.estimators.offset_guess import OffsetGuess, guess_offset
 from gtsam_dvl.estimators.selection import covering_sample, decide_epochs
 from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.factors import EarthImuFactor
@@ -114,6 +116,13 @@ class LogGraph:
     # where the correlated error's, depth and GNSS factors sit in the graph of _factors_but_dvl (the batch
     # smoother's noise fit makes them again in place): "correlated", "depth", "gnss" -> slots
     factor_slots: dict[str, range] = field(default_factory=dict, init=False, repr=False)
+    # the time offset's IMU windows as last set (set_time_offset_window, recentre_time_offset): the offset (s) they
+    # are centred on and the accelerometer bias (m/s^2, per ping row of the bulk or (3,)) taken off their samples
+    offset_centre: float = field(default=0.0, init=False, repr=False)
+    offset_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int), init=False, repr=False)
+    offset_accel_bias: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
+    # the batch smoother's last check of the windows against its solution (batch.solve_centred)
+    offset_centring: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
@@ -211,21 +220,64 @@ class LogGraph:
             self.set_time_offset_window(cfg.dvl.time_offset_prior_s, epochs)
         return epochs
 
-    def set_time_offset_window(self, dt: float, epochs: list[Epoch] | None = None) -> None:
+    def set_time_offset_window(self, dt: float, epochs: list[Epoch] | None = None,
+                               values: gtsam.Values | None = None) -> None:
         """The epochs' IMU constants of the time-offset model, averaged around t + dt / 2 (dt: the current
-        estimate of the offset; FactorMaker.velocity_rate_input). Factors built afterwards use them."""
+        estimate of the offset; FactorMaker.velocity_rate_input). Factors built afterwards use them. values: the
+        current estimate, whose IMU biases are taken off the samples and whose attitudes remove the Earth rate
+        (offset_state); None: no bias, the alignment's attitude."""
         imu = self.log.imu
         owners: list[Epoch | BetweenPing] = []
-        for ep in self.epochs if epochs is None else epochs:
+        state: list[int] = []
+        for i, ep in enumerate(self.epochs if epochs is None else epochs):
             if ep.dvl_index >= 0:
                 owners.append(ep)
+                state.append(i)
             owners += ep.between
+            state += [i] * len(ep.between)
         if not owners:
             return
+        bias, n_R_b = self.offset_state(np.array(state), values)
         b_a, w_mean, G = self.maker.velocity_rate_inputs(np.array([o.t for o in owners]), imu.t, imu.b_f,
-                                                         imu.b_omega, dt)
+                                                         imu.b_omega, dt, bias=bias, n_R_b=n_R_b)
         for o, a, m, g in zip(owners, b_a, w_mean, G, strict=True):
             o.rate_input = (a, m, g)
+        self._windows_set(dt, np.array(state), bias)
+
+    def _windows_set(self, dt: float, state: np.ndarray, bias: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Records what the time offset's windows were last set at: their centre, states and accelerometer bias."""
+        self.offset_centre = float(dt)
+        self.offset_rows = np.asarray(state, dtype=int)
+        self.offset_accel_bias = np.zeros((len(state), 3)) if bias is None else np.asarray(bias[0])
+
+    def offset_guess(self) -> OffsetGuess:
+        """The time offset's first guess from the data (estimators/offset_guess.py) on the usable bottom-track
+        pings, from the alignment's attitude."""
+        log, cfg = self.log, self.config
+        idx = self.usable[~self.water[self.usable]] if len(self.water) else self.usable
+        t_ref = float(log.imu.t[0]) if self.alignment.t_ref is None else float(self.alignment.t_ref)
+        return guess_offset(np.asarray(log.imu.t, dtype=float), np.asarray(log.imu.b_omega, dtype=float),
+                            np.asarray(log.imu.b_f, dtype=float), self.alignment.n_R_b, t_ref,
+                            np.asarray(log.dvl.t, dtype=float)[idx], np.asarray(log.dvl.d_v, dtype=float)[idx],
+                            log.mounting.b_R_d0, self.maker.offset_gravity(), self.maker.n_omega_ie(),
+                            cfg.dvl.time_offset_prior_s)
+
+    def offset_state(self, state: np.ndarray, values: gtsam.Values | None, attitude: bool = True
+                     ) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray | None]:
+        """The IMU biases (accelerometer m/s^2, gyro rad/s; each (P, 3)) and, with attitude, the attitudes n_R_b
+        (P, 3, 3) of the states `state` (indices) in values, for the time offset's IMU windows; (None, None) without
+        values."""
+        if values is None:
+            return None, None
+        state = np.asarray(state, dtype=int)
+        ks = [self.maker.bias_key(int(i)) for i in state]
+        biases = {k: values.atConstantBias(k) for k in set(ks)}
+        acc = np.array([biases[k].accelerometer() for k in ks]).reshape(-1, 3)
+        gyro = np.array([biases[k].gyroscope() for k in ks]).reshape(-1, 3)
+        if not attitude:
+            return (acc, gyro), None
+        rot = {int(i): values.atPose3(X(int(i))).rotation().matrix() for i in np.unique(state)}
+        return (acc, gyro), np.array([rot[int(i)] for i in state]).reshape(-1, 3, 3)
 
     def ping_snapshot(self, p: BetweenPing) -> PingMotion:
         """The IMU motion from the state before a ping between keyframes up to it (estimators/keyframes.py)."""
@@ -520,16 +572,21 @@ class LogGraph:
         state_bias_keys = [self.maker.bias_key(i) for i in range(len(self.epochs))]
         return BulkImu(arrays, whiten, keys, self.gravity_refs, state_bias_keys)
 
-    def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph,
-                             dt: float) -> gtsam.NonlinearFactorGraph | BulkGraph:
-        """The graph with the time-offset windows centred on the offset estimate dt (set_time_offset_window):
-        a BulkGraph is updated in place (only the pings' IMU constants change), a per-factor graph built again."""
+    def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph, dt: float,
+                             values: gtsam.Values | None = None) -> gtsam.NonlinearFactorGraph | BulkGraph:
+        """The graph with the time-offset windows centred on the offset estimate dt (set_time_offset_window),
+        the IMU biases of values taken off their samples and each ping's attitude in values removing the Earth
+        rate: a BulkGraph is updated in place (only the pings' IMU constants change), a per-factor graph built
+        again."""
         if isinstance(graph, BulkGraph):  # straight into the bulk factors (the epochs' own let go by build_bulk)
             imu = self.log.imu
-            b_a, w_mean, G = self.maker.velocity_rate_inputs(graph.bulk.t_ping, imu.t, imu.b_f, imu.b_omega, dt)
+            bias, n_R_b = self.offset_state(graph.bulk.pings.state, values)
+            b_a, w_mean, G = self.maker.velocity_rate_inputs(graph.bulk.t_ping, imu.t, imu.b_f, imu.b_omega, dt,
+                                                             bias=bias, n_R_b=n_R_b)
             graph.bulk.set_offset_inputs(w_mean, b_a, G, self.maker.mounting.b_l)
+            self._windows_set(dt, graph.bulk.pings.state, bias)
             return graph
-        self.set_time_offset_window(dt)
+        self.set_time_offset_window(dt, values=values)
         return self.build()[0]
 
     def elimination_ordering(self, chunk_states: int = CHUNK_STATES) -> ChunkedOrdering:

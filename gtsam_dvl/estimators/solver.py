@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import gtsam
 import numpy as np
@@ -249,6 +249,55 @@ def gauss_newton_qr(
     report.final_error = graph.error(values)
     report.timing_s = {"linearize": t_lin, "eliminate": t_elim}
     return values, report
+
+
+def tail_covariance(bn: gtsam.GaussianBayesNet | CompactBayesNet, keys: Iterable[int]) -> np.ndarray:
+    """The joint marginal covariance of keys that a QR Bayes net eliminated last (the shared states: every
+    ordering of the estimators puts them there), from the last conditionals alone: the tail from the first of
+    keys to the end conditions only on itself, so its R gives the block's covariance without a pass over the
+    states (cheap enough to ask after every solve)."""
+    keys = list(keys)
+    wanted = set(keys)
+    n = bn.size()
+    tail: list[Any] = []
+    for i in range(n - 1, -1, -1):
+        c = bn.at(i)
+        tail.append(c)
+        wanted.discard(c.keys()[0])
+        if not wanted:
+            break
+    if wanted:
+        raise GtsamDvlError("tail_covariance: a key is not a frontal variable of the Bayes net")
+    tail.reverse()
+    starts: dict[int, int] = {}
+    col = 0
+    for c in tail:
+        starts[c.keys()[0]] = col
+        col += c.R().shape[0]
+    R = np.zeros((col, col))
+    for c in tail:
+        a = starts[c.keys()[0]]
+        d = c.R().shape[0]
+        R[a:a + d, a:a + d] = c.R()
+        S, j = c.S(), 0
+        for k in c.keys()[1:]:
+            if k not in starts:
+                raise GtsamDvlError("tail_covariance: the keys were not eliminated last")
+            dk = S.shape[1] if len(c.keys()) == 2 else _parent_dim(tail, k)
+            R[a:a + d, starts[k]:starts[k] + dk] = S[:, j:j + dk]
+            j += dk
+    R_inv = np.linalg.inv(R)
+    cov = R_inv @ R_inv.T
+    idx = np.concatenate([np.arange(starts[k], starts[k] + _parent_dim(tail, k)) for k in keys])
+    return np.asarray(cov[np.ix_(idx, idx)])
+
+
+def _parent_dim(conds: list[Any], key: int) -> int:
+    """The dimension of key, a frontal variable of one of conds."""
+    for c in conds:
+        if c.keys()[0] == key:
+            return int(c.R().shape[0])
+    raise GtsamDvlError("tail_covariance: a key is not a frontal variable of the Bayes net")
 
 
 @dataclass

@@ -454,8 +454,13 @@ class OnlineEstimator:
         return done
 
     def _rate_input(self, t: float) -> RateInput:
+        """The time-offset IMU constants of a ping at t: the windows on the latest estimate's offset, biases and
+        attitude (online/offset_windows.py)."""
         assert self.builder is not None
-        return self._offset_windows.rate_input(self.builder, t, self._offset_estimate())
+        est = self._latest
+        bias = None if est is None else (est.accel_bias, est.gyro_bias)
+        return self._offset_windows.rate_input(self.builder, t, self._offset_estimate(), bias,
+                                               None if est is None else est.n_R_b)
 
     def _close(self, p: Ping | None, t_state: float | None = None) -> None:
         """Make the epoch of ping p (or, p None, a state without a ping at t_state): preintegrate since the

@@ -58,15 +58,18 @@ class OffsetWindows:
             self._recent = [tuple(np.concatenate(c) for c in zip(*self._recent, strict=True))]  # type: ignore[list-item]
         return self._recent[0] if self._recent else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
 
-    def rate_input(self, maker: FactorMaker, t: float, estimate_s: float | None) -> RateInput:
+    def rate_input(self, maker: FactorMaker, t: float, estimate_s: float | None,
+                   bias: tuple[np.ndarray, np.ndarray] | None = None, n_R_b: np.ndarray | None = None) -> RateInput:
         """The time-offset model's IMU constants of a ping at t (FactorMaker.velocity_rate_input) over the samples
-        kept, the window centred on centre(estimate_s); a ping whose window the bound held is counted in
+        kept, the window centred on centre(estimate_s), the current IMU bias estimate (accelerometer m/s^2, gyro
+        rad/s) taken off the samples and the Earth rate removed at the current attitude n_R_b (None before the first
+        estimate: no bias, the alignment's attitude); a ping whose window the bound held is counted in
         counters["time_offset_window_clipped"]."""
         T, W, F = self.samples()
         centre = self.centre(estimate_s)
         if estimate_s is not None and self.recentre and centre != estimate_s:  # reported (analysis/health.py)
             self.counters["time_offset_window_clipped"] = self.counters.get("time_offset_window_clipped", 0) + 1
-        return maker.velocity_rate_input(t, T, F, W, centre)
+        return maker.velocity_rate_input(t, T, F, W, centre, bias=bias, n_R_b=n_R_b)
 
     def trim(self, t_epoch: float) -> None:
         """Keep what the windows of the epochs after t_epoch (s) can reach: the prior's offset, 3 prior sigmas
