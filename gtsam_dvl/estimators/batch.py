@@ -34,18 +34,23 @@ from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.noise_levels import (
     SCREEN_K,
     SENSOR_GROUPS,
+    LongLevel,
     NoiseReport,
     chi2_ratio,
     dvl_fit_enabled,
     dvl_fit_report,
     fitted_multiplier,
+    honest_multiplier,
     imu_levels,
+    long_level,
     median_ping_sigma,
+    multiplier_bounds,
+    robust_inside,
     sensor_fit_enabled,
     sensor_fit_report,
     sensor_multiplier,
     sensor_not_fitted,
-    variance_ratio,
+    with_levels,
     with_sensor_multiplier,
 )
 from gtsam_dvl.estimators.solver import (
@@ -252,9 +257,35 @@ def fitted_sensors(builder: LogGraph) -> list[str]:
     return [s for s in SENSOR_GROUPS if sensor_fit_enabled(builder.config, s) and len(builder.factor_slots.get(s, ()))]
 
 
-def _sensor_squares(graph: BulkGraph, slots: range, values: gtsam.Values) -> np.ndarray:
-    """The squared norms of the whitened errors of the (non-robust) factors at slots: 2 x their error."""
-    return np.array([2.0 * graph.graph.at(i).error(values) for i in slots])
+def _long_level(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values, t_rows: np.ndarray,
+                ew: np.ndarray, robust_k: float) -> LongLevel | None:
+    """The long-window level (noise_levels.long_level) of sensor's rows within the robust screen: the DVL's
+    bottom-track rows with the estimated correlated error E added back (correlated_fit.residual_series: what the
+    DVL's slow error is, not what E left of it), whitened at the current level."""
+    if sensor == "dvl" and correlated_error(builder.config) and graph.bulk.pings.dim == 3:
+        t, r = correlated_fit.residual_series(graph.bulk, values)
+        ok = np.isfinite(r).all(axis=1)
+        return long_level(t[ok], np.einsum("nij,nj->ni", graph.bulk.whiten[ok], r[ok]))
+    inside = robust_inside(np.einsum("ni,ni->n", ew, ew), ew.shape[1], robust_k)
+    if sensor == "dvl" and graph.bulk.water is not None:  # the slow error is the bottom track's
+        inside &= ~graph.bulk.water
+    return long_level(t_rows[inside], ew[inside])
+
+
+def _fit_rows(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The times (N,) s and whitened errors (N, m) at values of sensor's rows that its noise fit takes: the DVL's
+    bulk rows (before the robust kernel), or the (non-robust) depth or GNSS factors at their slots (each at its
+    state's time)."""
+    if sensor == "dvl":
+        return graph.bulk.t_ping, graph.bulk.whitened_errors(values)
+    t_states = np.array([ep.t for ep in builder.epochs])
+    factors = [graph.graph.at(i) for i in builder.factor_slots[sensor]]
+    dim = 3 if sensor == "gnss" else 1
+    ew = np.array([np.asarray(f.whitenedError(values))  # type: ignore[attr-defined,type-var]
+                   for f in factors], dtype=float).reshape(-1, dim)
+    t = np.array([t_states[gtsam.Symbol(f.keys()[0]).index()] for f in factors], dtype=float)
+    return t, ew
 
 
 def _sensor_sigma(builder: LogGraph, sensor: str) -> float:
@@ -300,6 +331,8 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     configured = {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"}
     rows: dict[str, int] = {}
     fits: dict[str, tuple[float, bool]] = {}
+    stated = dict(used)  # the levels given (configured, preset, message covariances): the honest level's floor
+    levels: dict[str, dict[str, Any]] = {}  # the white fit and the long-window level behind each fit
     gm_configured = builder.config
     gm_slots = builder.factor_slots.get("correlated", range(0)) if correlated_fit.fit_enabled(cfg) else range(0)
     t_states = np.array([ep.t for ep in builder.epochs])
@@ -307,12 +340,10 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     settled, solves = False, 1
     while True:
         for s in list(sensors):
-            if s == "dvl":
-                ratio, used_rows = variance_ratio(bulk.whitened_errors(values), bulk.robust_k)
-                dim = bulk.pings.dim
-            else:
-                dim = 3 if s == "gnss" else 1
-                ratio, used_rows = chi2_ratio(_sensor_squares(graph, builder.factor_slots[s], values), dim, SCREEN_K)
+            t_rows, ew = _fit_rows(builder, graph, s, values)
+            dim = ew.shape[1]
+            k = bulk.robust_k if s == "dvl" else SCREEN_K
+            ratio, used_rows = chi2_ratio(np.einsum("ni,ni->n", ew, ew), dim, k)
             rows[s] = used_rows * dim
             if rows[s] < n.min_rows or not np.isfinite(ratio):
                 sensors.remove(s)  # keeps the factor it has
@@ -323,7 +354,15 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
                 else:
                     setattr(noise, s, sensor_not_fitted(s, used[s], rows[s], n.min_rows))
                 continue
-            fits[s] = fitted_multiplier(used[s], ratio, cfg, s)
+            white, at_bound = fitted_multiplier(used[s], ratio, cfg, s)
+            long = _long_level(builder, graph, s, values, t_rows, ew, k)
+            # only GNSS fixes observe the DVL's slow error (the IMU cannot, at 30-60 s); nothing in these logs
+            # observes the depth sensor's or the fixes' own
+            can_lower = s == "dvl" and len(builder.factor_slots.get("gnss", ())) > 0
+            honest, why = honest_multiplier(white, used[s], stated[s], long, multiplier_bounds(cfg, s), can_lower)
+            fits[s] = honest, at_bound and honest == white
+            levels[s] = {"white_multiplier": white, "stated_multiplier": stated[s], "honest_why": why,
+                         "long": None if long is None else long.as_dict(used[s])}
         moving = [s for s in sensors if abs(fits[s][0] / used[s] - 1.0) > n.fit_tolerance]
         if gm_slots:  # the correlated error's level and time constant (correlated_fit.py)
             d = builder.config.dvl
@@ -371,6 +410,7 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
         else:
             setattr(noise, s, sensor_fit_report(builder.config, s, *configured[s], used[s], rows[s], solves,
                                                 at_bound, how))
+        with_levels(getattr(noise, s), levels[s], used[s])
     return values, report
 
 

@@ -263,16 +263,108 @@ def variance_ratio(ew: np.ndarray, robust_k: float) -> tuple[float, int]:
 def chi2_ratio(x2: np.ndarray, m: int, robust_k: float) -> tuple[float, int]:
     """variance_ratio of the squared norms x2 (N,) of whitened errors of dimension m."""
     x2 = np.asarray(x2, dtype=float)
-    x2 = x2[np.isfinite(x2)]
-    if not len(x2):
-        return math.nan, 0
-    s0 = float(np.median(x2) / chi2.median(m))  # robust first scale
-    c = robust_k**2
-    inside = x2 <= c * max(s0, 1e-300)
+    inside = robust_inside(x2, m, robust_k)
     used = int(inside.sum())
     if not used:
         return math.nan, 0
-    return float(x2[inside].mean() / truncated_chi2_mean(m, c)), used
+    return float(x2[inside].mean() / truncated_chi2_mean(m, robust_k**2)), used
+
+
+def robust_inside(x2: np.ndarray, m: int, robust_k: float) -> np.ndarray:
+    """The rows (N,) bool of squared norms x2 of whitened errors of dimension m that are finite and within
+    robust_k^2 at a median-based scale: the rows every fit of a noise level uses."""
+    x2 = np.asarray(x2, dtype=float)
+    finite = np.isfinite(x2)
+    if not finite.any():
+        return finite
+    s0 = float(np.median(x2[finite]) / chi2.median(m))  # robust first scale
+    return finite & (np.where(finite, x2, np.inf) <= robust_k**2 * max(s0, 1e-300))
+
+
+# The time scales the calibration lives on (s): a real DVL's error is not white there (bottom type, attitude-dependent
+# beam errors, the speed of sound): its ping-to-ping scatter is 3-9 mm/s while its 30-60 s means stay at a few mm/s.
+# A level fitted to the scatter alone weights the DVL as if those means were scatter / sqrt(30-60), and the scale and
+# misalignment then chase the slow errors while chi^2/dof looks perfect.
+LONG_WINDOWS_S = (30.0, 60.0)
+LONG_CONFIDENCE = 0.90  # the two-sided interval of a long-window level (chi^2 on blocks x axes degrees of freedom)
+LONG_MIN_BLOCKS = 3  # fewer blocks of a window than this: it says nothing
+LONG_MIN_ROWS = 5  # a block with fewer rows is left out (a dropout, the log's end)
+
+
+@dataclass(frozen=True)
+class LongLevel:
+    """The variance factor on the current level that a sensor's residuals show when averaged over window_s: the
+    mean over blocks and axes of n_b mean_b(e)^2 (e whitened at the current level; for white errors its expectation
+    is the white ratio), with its LONG_CONFIDENCE interval [lo, hi] on dof = blocks x axes."""
+
+    ratio: float
+    lo: float
+    hi: float
+    window_s: float
+    blocks: int
+    dof: int
+
+    def as_dict(self, sigma_m_s: float) -> dict[str, float]:
+        """The level as an equivalent white sigma (m/s or m: sigma_m_s is the current level's) with its interval."""
+        return {"window_s": self.window_s, "blocks": self.blocks, "sigma": sigma_m_s * math.sqrt(self.ratio),
+                "sigma_lo": sigma_m_s * math.sqrt(self.lo), "sigma_hi": sigma_m_s * math.sqrt(self.hi)}
+
+
+def long_level(t: np.ndarray, ew: np.ndarray, excess: np.ndarray | None = None,
+               windows: tuple[float, ...] = LONG_WINDOWS_S) -> LongLevel | None:
+    """The LongLevel of whitened errors ew (N, m) at times t (N,) s, the window of LONG_WINDOWS_S whose ratio is the
+    largest (the slow error's time scale is not known); excess (N,): each row's expected variance beyond the noise's
+    (a filter's innovation carries its prediction's, tr HPH / tr R), taken off. None when no window has
+    LONG_MIN_BLOCKS blocks."""
+    t = np.asarray(t, dtype=float)
+    ew = np.asarray(ew, dtype=float).reshape(len(t), -1)
+    if not len(t):
+        return None
+    best: LongLevel | None = None
+    for T in windows:
+        block = np.floor((t - t[0]) / T).astype(int)
+        counts = np.bincount(block)
+        full = np.flatnonzero(counts >= LONG_MIN_ROWS)
+        if len(full) < LONG_MIN_BLOCKS:
+            continue
+        sums = np.stack([np.bincount(block, weights=ew[:, a], minlength=len(counts)) for a in range(ew.shape[1])], 1)
+        n_b = counts[full].astype(float)
+        stat = (sums[full] ** 2 / n_b[:, None]).mean()  # n_b mean_b^2 = sum_b^2 / n_b
+        if excess is not None:
+            stat -= float(np.bincount(block, weights=excess, minlength=len(counts))[full].sum() / n_b.sum())
+        ratio = max(float(stat), 0.0)
+        dof = len(full) * ew.shape[1]
+        a = 0.5 * (1.0 - LONG_CONFIDENCE)
+        level = LongLevel(ratio, ratio * dof / chi2.ppf(1.0 - a, dof), ratio * dof / chi2.ppf(a, dof), T, len(full),
+                          dof)
+        if best is None or level.ratio > best.ratio:
+            best = level
+    return best
+
+
+def honest_multiplier(white: float, current: float, stated: float, long: LongLevel | None,
+                      bounds: tuple[float, float], can_lower: bool) -> tuple[float, str]:
+    """The multiplier a sensor's factors take (module doc, "Honest level"): the white fit `white`, raised to the
+    long-window level when that is significantly above it (its interval's lower end above white); never below the
+    stated multiplier unless can_lower (an independent absolute reference observes the sensor's slow errors) and
+    the long-window level's upper end is below it. current: the multiplier long's errors were whitened at. Clipped
+    to bounds. Returns it and the reason in words ("" when the white fit stands)."""
+    used, why = white, ""
+    m_long = m_lo = m_hi = math.nan
+    if long is not None:
+        m_long, m_lo, m_hi = (current * math.sqrt(r) for r in (long.ratio, long.lo, long.hi))
+        if m_lo > white:
+            used, why = m_long, (f"raised to what its {long.window_s:g} s means show (x {m_long:.3g}, "
+                                 f"{LONG_CONFIDENCE:.0%} interval x {m_lo:.3g}-{m_hi:.3g}; white x {white:.3g})")
+    if used < stated:
+        if not can_lower:
+            used, why = stated, (f"held at the stated level (x {stated:.3g}; white x {white:.3g}): the scatter does "
+                                 "not show the slow errors the calibration sees, and no absolute reference in the "
+                                 "log observes them")
+        elif long is None or m_hi >= stated:
+            used, why = stated, (f"held at the stated level (x {stated:.3g}; white x {white:.3g}): its "
+                                 f"{LONG_WINDOWS_S[0]:g}-{LONG_WINDOWS_S[-1]:g} s means do not show it better")
+    return min(max(used, bounds[0]), bounds[1]), why
 
 
 def multiplier_bounds(config: EstimatorConfig, sensor: str = "dvl") -> tuple[float, float]:
@@ -301,6 +393,22 @@ def dvl_fit_report(config: EstimatorConfig, multiplier: float, rows: int, passes
                 "does not fit its data whatever the noise level")
     return {"multiplier": multiplier, "sigma_m_s": sigma_m_s, "rows": rows, "passes": passes,
             "at_bound": at_bound, "how": how, "why": why}
+
+
+def with_levels(entry: dict[str, Any], levels: dict[str, Any], used: float) -> None:
+    """entry (a fit's report) with the levels behind it (honest_multiplier): the white fit's sigma, the long-window
+    level's, the stated one, and why the used level is not the white fit. Sigmas in the entry's unit (sigma_m_s of
+    the DVL, sigma_m of depth and GNSS), scaled from the used multiplier's."""
+    key = "sigma_m_s" if "sigma_m_s" in entry else "sigma_m"
+    sigma = float(entry.get(key, math.nan))
+    per = sigma / used if used > 0 else math.nan  # the sigma at multiplier 1
+    entry["white_sigma"] = per * levels["white_multiplier"]
+    entry["stated_sigma"] = per * levels["stated_multiplier"]
+    long = levels["long"]
+    if long is not None:  # as_dict at the multiplier the residuals were whitened at: scale to m/s or m
+        entry["long"] = {k: (v * per if k.startswith("sigma") else v) for k, v in long.items()}
+    if levels["honest_why"]:
+        entry["why"] += "; " + levels["honest_why"]
 
 
 def sensor_fit_report(config: EstimatorConfig, sensor: str, configured: float, configured_sigma_m: float,
@@ -353,6 +461,9 @@ class WarmupFit:
     the kernel's threshold at a median-based scale are left out."""
 
     config: EstimatorConfig  # its [dvl] noise_multiplier: the factor the window was processed with
+    # the stated multiplier (the configuration's before any fit; None: config's): the fit never goes below it
+    # (honest_multiplier: a filter has no absolute reference that observes the DVL's slow errors)
+    stated: float | None = None
     t_first: float = math.nan
     sigma_m_s: float = math.nan  # the median ping sigma at the configuration's multiplier (m/s)
     report: dict[str, Any] = field(default_factory=dict)
@@ -402,11 +513,16 @@ class WarmupFit:
                            "why": f"DVL noise not fitted: {rows} usable rows in the first {n.warmup_s:g} s "
                                   f"(fewer than [noise] min_rows = {n.min_rows}, or no positive variance left)"}
             return current
-        new, at_bound = fitted_multiplier(current, ratio, self.config)
+        white, at_bound = fitted_multiplier(current, ratio, self.config)
+        stated = current if self.stated is None else self.stated
+        new, why = honest_multiplier(white, current, stated, None, multiplier_bounds(self.config), False)
+        at_bound = at_bound and new == white
         if abs(new / current - 1.0) <= n.fit_tolerance:
             # within the tolerance the factor the window was processed with is kept, as the batch fit does: a
             # result's configuration, reloaded, then reproduces its estimates instead of moving by the fit's scatter
             new = current
         self.report = dvl_fit_report(self.config, new, rows, 1, at_bound, self.sigma_m_s * new / current,
                                      f"{how} over the first {n.warmup_s:g} s, then held")
+        with_levels(self.report, {"white_multiplier": white, "stated_multiplier": stated, "honest_why": why,
+                                  "long": None}, new)
         return new

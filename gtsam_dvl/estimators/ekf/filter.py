@@ -364,8 +364,9 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     offset_info: dict[str, Any] = {}
     if dvl_fit_enabled(config) or recentre:
         n = config.noise
+        stated_multiplier = config.dvl.noise_multiplier
         for k in range(n.fit_passes):
-            fit = WarmupFit(config)
+            fit = WarmupFit(config, stated=stated_multiplier)
             window = _filter(log, config, None, fit, calibration)
             settled = True
             if dvl_fit_enabled(config):
