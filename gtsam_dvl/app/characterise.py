@@ -209,13 +209,27 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
     from gtsam_dvl.analysis.health import dvl_residuals
     from gtsam_dvl.estimators.run import run_trajectory_estimator
 
-    fit_config = config.model_copy(update={"noise": config.noise.model_copy(
-        update={"from_data": True, "fit_dvl": True, "imu_quantisation": True})})
+    # the DVL's level started at the lowest the fit allows: the smoother holds a fitted level at the stated one
+    # (estimators/noise_levels.py honest_multiplier), and this command measures what the data show, not what was
+    # stated (the multiplier reported is still on the stated level)
+    start = config.noise.dvl_min_multiplier
+    fit_config = config.model_copy(update={
+        "noise": config.noise.model_copy(update={"from_data": True, "fit_dvl": True, "imu_quantisation": True}),
+        "dvl": config.dvl.model_copy(update={"noise_multiplier": start * config.dvl.noise_multiplier})})
     result = run_trajectory_estimator(log, "batch", fit_config, progress=progress, timeline=False)
     noise = result.info.get("noise", {}).get("dvl", {})
     solver = result.info.get("solver", {})
-    out: dict[str, Any] = {"fit": noise, "fitted_sigma_m_s": noise.get("sigma_m_s"),
-                           "multiplier": noise.get("multiplier"), "at_bound": bool(noise.get("at_bound", False))}
+    # the ping scatter (the white fit) is what this command measures; the level the smoother used (held at the
+    # stated one, or raised to the 30-60 s means: estimators/noise_levels.py honest_multiplier) is reported beside it,
+    # and the recommendation takes the larger of the scatter and the 30-60 s means (what the data show at both scales)
+    white = noise.get("white_sigma", noise.get("sigma_m_s"))
+    stated = None if noise.get("stated_sigma") is None else noise["stated_sigma"] / start
+    long = (noise.get("long") or {}).get("sigma")
+    out: dict[str, Any] = {"fit": noise, "fitted_sigma_m_s": white,
+                           "multiplier": (white / stated) if white is not None and stated else noise.get("multiplier"),
+                           "used_sigma_m_s": noise.get("sigma_m_s"), "long_sigma_m_s": long,
+                           "recommended_sigma_m_s": None if white is None else max(white, long or 0.0),
+                           "at_bound": bool(noise.get("at_bound", False))}
     dof = solver.get("dof")
     out["chi2_per_dof"] = (2.0 * float(solver["final_error"]) / int(dof)) if dof else None
     used = result.noise_config or fit_config  # the levels the smoother used (the fitted DVL factor among them)
@@ -277,16 +291,16 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
         rec["why"].append(why)
     if any(f is not None for n in ("gyro", "accel") for f in imu[n]["floor_density"]):
         rec["noise"]["imu_quantisation"] = False
-    sigma = dvl.get("fitted_sigma_m_s")
+    sigma = dvl.get("recommended_sigma_m_s", dvl.get("fitted_sigma_m_s"))
     if sigma is not None and np.isfinite(sigma) and not dvl.get("at_bound"):
         key = "beam_noise_m_s" if dvl.get("use_beams") else "noise_m_s"
         rec["dvl"][key] = _sig(float(sigma))
         if dvl.get("use_beams"):  # the sigma is a beam's: only with the beam factors it was fitted with (which
             rec["dvl"]["use_beams"] = True  # take no time offset)
             rec["dvl"]["estimate_time_offset"] = False
-        rec["why"].append(f"DVL: fitted ping sigma {sigma * 1e3:.3g} mm/s per "
-                          f"{'beam' if dvl.get('use_beams') else 'axis'} (factor {dvl.get('multiplier', 1.0):.3g} "
-                          "on the stated)")
+        rec["why"].append(f"DVL: {sigma * 1e3:.3g} mm/s per {'beam' if dvl.get('use_beams') else 'axis'}, the larger "
+                          f"of the ping scatter ({dvl['fitted_sigma_m_s'] * 1e3:.3g} mm/s, factor "
+                          f"{dvl.get('multiplier', 1.0):.3g} on the stated) and the level its 30-60 s means show")
         gm = (dvl.get("residuals") or {}).get("gauss_markov")
         if gm and gm["significant"]:  # the estimators then carry it as a state (estimators/correlated.py)
             rec["dvl"]["correlated_sigma_m_s"] = _sig(float(gm["gm_sigma_m_s"]))

@@ -132,8 +132,8 @@ def test_lever_arm_recovered_from_turns() -> None:
 
 def test_ignoring_a_wrong_lever_arm_is_measurably_worse() -> None:
     """Option off with the wrong /tf_static: velocity RMSE against the truth, the DVL noise the fit needs ([noise]
-    fit_dvl: the unmodelled lever arm shows as a larger fitted DVL noise, not as a larger chi^2 at the fitted
-    level) and the calibration all worse than with the lever arm estimated."""
+    fit_dvl: the unmodelled lever arm shows as a larger DVL noise level, not as a larger chi^2 at the level used)
+    and the calibration all worse than with the lever arm estimated."""
     log = wrong_tf_log("turns")
     assert log.truth is not None
     r_est, r_off = solve("turns", True), solve("turns", False)
@@ -145,8 +145,12 @@ def test_ignoring_a_wrong_lever_arm_is_measurably_worse() -> None:
           f"fitted DVL noise x {m_est:.3f} vs x {m_off:.3f}; "
           f"calibration errors {np.round(cal_est, 2)} vs {np.round(cal_off, 2)} sigma")
     assert v_off > 2.0 * v_est
-    assert m_off > 1.1 * m_est  # measured 1.14 vs 1.00
-    assert np.max(np.abs(cal_off)) > 4.0 > 3.0 > np.max(np.abs(cal_est))
+    # the unmodelled lever arm's error follows the turns: its 30-60 s means raise the level used (measured 1.95 vs
+    # 1.00; the white fit alone gave 1.14), so the calibration's sigmas grow with it and its error, 3.05 sigma
+    # (4.5 at the white fit's level), stays more than twice the estimated run's
+    assert m_off > 1.5 * m_est
+    assert np.max(np.abs(cal_off)) > 2.5 and np.max(np.abs(cal_off)) > 2.0 * np.max(np.abs(cal_est))
+    assert np.max(np.abs(cal_est)) < 3.0
 
 
 def test_beams_and_time_offset_variants_recover_it_too() -> None:
