@@ -94,7 +94,8 @@ def test_batch_fits_the_depth_and_gnss_noise(dive: LogData, factor: float) -> No
 
 def test_fitted_factors_stay_within_their_bounds(dive: LogData) -> None:
     """Depth stated three times too small against a bound of 2: the factor ends at its bound, said so; fixes three
-    times too large against a bound of 0.5: held at the stated level, said so; the health is degraded (the model does not fit its data). With
+    times too large against a bound of 0.5: held at the stated level, said so; the health is degraded (the model
+    does not fit its data). With
     the DVL's fit off (its entry empty) the depth and GNSS fits run alone."""
     from gtsam_dvl.analysis.health import assess_health
 
