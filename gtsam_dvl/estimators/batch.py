@@ -8,6 +8,7 @@ from typing import Any
 
 import gtsam
 import numpy as np
+from scipy.stats import chi2
 
 from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
@@ -95,10 +96,8 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
                             bayes_net=report.bayes_net if report.converged else None)
     hold = None if calibration is not None or result.calib_joint_cov is None else weak_hold.plan(
         config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1)
-    if hold is not None and hold["weak"].any():  # weakly determined calibration directions held (weak_hold.py)
-        graph, values, result = _hold_weak(builder, graph, values, ordering, hold, estimator, result)
-    elif hold is not None:
-        result.info["calibration_hold"] = weak_hold.report(hold, 0.0)
+    if hold is not None:  # the nominal calibration's check, then weakly determined directions held (weak_hold.py)
+        graph, values, result = _hold_calibration(builder, graph, values, ordering, hold, estimator, result)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
         t4 = time.perf_counter()
@@ -414,13 +413,52 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     return values, report
 
 
-def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: gtsam.Ordering | ChunkedOrdering,
-               hold: dict[str, Any], estimator: str, free: NavResult) -> tuple[BulkGraph, gtsam.Values, NavResult]:
-    """The held estimate (the weak directions pinned at the prior's mean, the rest solved again) and its result
-    with the consider covariance (estimators/weak_hold.py); returns the graph of that covariance (for the
-    timeline), the held values and the result. When pinning costs more chi^2 than its 99 % limit (the data
-    disagree with the prior along directions they inform little), the free solution (graph, values, result)
-    stands and the report says why."""
+# Estimating the DVL scale and misalignment pays for its four extra states when fitting them lowers the chi^2 by
+# more than this quantile of chi^2 with 4 degrees of freedom (a likelihood-ratio test against the nominal: scale 1,
+# the mounting's misalignment); else the calibration is held at the nominal with its prior's sigma.
+NOMINAL_LEVEL = 0.95
+
+
+def _hold_calibration(builder: LogGraph, graph: BulkGraph, values: gtsam.Values,
+                      ordering: gtsam.Ordering | ChunkedOrdering, hold: dict[str, Any], estimator: str,
+                      free: NavResult) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+    """The nominal-calibration check and the weak-direction hold (estimators/weak_hold.py): the log solved again
+    with the scale and misalignment pinned at the prior's mean (the nominal); when the free estimate does not lower
+    the chi^2 by more than NOMINAL_LEVEL's quantile of chi^2(4), the calibration is held at the nominal with the
+    consider covariance (its prior's sigma) and the result says so; else the weak directions alone are held (when
+    any). Returns the graph of the result's covariance (for the timeline), its values and the result."""
+    everything = {**hold, "weak": np.ones_like(hold["weak"])}
+    nominal_values, gain, nominal_graph = _pinned(builder, graph, values, ordering, everything)
+    limit = float(chi2.ppf(NOMINAL_LEVEL, len(hold["weak"])))
+    check = {"chi2_gain": gain, "chi2_limit": limit, "level": NOMINAL_LEVEL, "pays": bool(gain > limit)}
+    if not check["pays"]:
+        result = extract_result(builder, nominal_graph, nominal_values, ordering, estimator=estimator)
+        result.info["calibration_hold"] = {**weak_hold.report(everything, gain), "consistent": True,
+                                           "nominal": check, "why": (
+            f"held at the nominal calibration: estimating the DVL scale and misalignment lowers chi^2 by "
+            f"{gain:.1f}, not more than {limit:.1f} ({NOMINAL_LEVEL:.0%} of chi^2 with 4 dof): it does not pay for "
+            "its four states; the nominal's sigmas are its prior's")}
+        return nominal_graph, nominal_values, result
+    if not hold["weak"].any():
+        free.info["calibration_hold"] = {**weak_hold.report(hold, 0.0), "nominal": check}
+        return graph, values, free
+    held, increase, cov_graph = _pinned(builder, graph, values, ordering, hold)
+    info = {**weak_hold.report(hold, increase), "nominal": check}
+    if not info["consistent"]:
+        free.info["calibration_hold"] = {**info, "held": [], "released": info["held"], "why": (
+            f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "
+            "data disagree with the prior along directions they inform little")}
+        return graph, values, free
+    result = extract_result(builder, cov_graph, held, ordering, estimator=estimator)
+    result.info["calibration_hold"] = info
+    return cov_graph, held, result
+
+
+def _pinned(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: gtsam.Ordering | ChunkedOrdering,
+            hold: dict[str, Any]) -> tuple[gtsam.Values, float, BulkGraph]:
+    """The estimate with hold's weak directions pinned at the prior's mean (the rest solved again, the offset's
+    windows re-centred), its chi^2 increase over values', and the graph of its consider covariance (the prior's
+    precision taken off along the pinned directions: estimators/weak_hold.py)."""
     pinned, consider = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
     slots = set(weak_hold.prior_slots(graph.graph))
     for j in range(graph.graph.size()):
@@ -429,17 +467,10 @@ def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, orderi
             consider.add(graph.graph.at(j))
     pinned.add(weak_hold.hold_factor(hold))
     consider.add(weak_hold.consider_prior(hold))
+    free_error = graph.error(values)
     _, held, _ = solve_centred(builder, BulkGraph(pinned, graph.bulk, graph.imu), values, ordering, [])
-    info = weak_hold.report(hold, 2.0 * (graph.error(held) - graph.error(values)))
-    if not info["consistent"]:
-        free.info["calibration_hold"] = {**info, "held": [], "released": info["held"], "why": (
-            f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "
-            "data disagree with the prior along directions they inform little")}
-        return graph, values, free
-    cov_graph = BulkGraph(consider, graph.bulk, graph.imu)
-    result = extract_result(builder, cov_graph, held, ordering, estimator=estimator)
-    result.info["calibration_hold"] = info
-    return cov_graph, held, result
+    increase = 2.0 * (graph.error(held) - free_error)
+    return held, increase, BulkGraph(consider, graph.bulk, graph.imu)
 
 
 def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
