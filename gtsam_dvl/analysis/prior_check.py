@@ -89,17 +89,45 @@ def check_priors(result: NavResult, log: LogData, config: EstimatorConfig) -> Pr
     """The distances from the priors and a "failed" finding per state beyond PRIOR_NSIGMA_FAILED prior sigmas."""
     report = PriorReport(prior_distances(result, log, config))
     peak_rate_deg_s = _peak_rate_deg_s(log)
+    straight = heading_span_deg(result) < STRAIGHT_SPAN_DEG
     for d in report.distances.values():
         k = d.worst
         if not abs(d.z[k]) > PRIOR_NSIGMA_FAILED:  # nan: judged elsewhere (non-finite estimates)
             continue
         s = d.state
         what = s.component_texts()[k]
+        if straight and s.name == "accel_bias" and k == 0:  # the forward axis on one heading: the pitch coupling
+            report.findings.append(("degraded", _pitch_coupling(what, d, s)))
+            continue
         text = (f"{what} is {abs(d.z[k]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[k])} off; "
                 f"the prior allows {PRIOR_NSIGMA_FAILED:g} sigmas): {_cause(s, d, config, peak_rate_deg_s)}; do not "
                 "use this result")
         report.findings.append(("failed", text))
     return report
+
+
+# A run whose heading spans less than this is straight: its forward accelerometer bias and its pitch (and the
+# DVL's pitch misalignment) trade against each other through gravity, g * d_pitch = d_bias, and only the priors and
+# the small pitch motions tell them apart.
+STRAIGHT_SPAN_DEG = 20.0
+
+
+def heading_span_deg(result: NavResult) -> float:
+    """The span of the estimated heading over the run (deg; the yaw of n_R_b, unwrapped)."""
+    R = np.asarray(result.n_R_b, dtype=float)
+    if not len(R):
+        return float("nan")
+    yaw = np.unwrap(np.arctan2(R[:, 1, 0], R[:, 0, 0]))
+    return float(np.degrees(yaw.max() - yaw.min()))
+
+
+def _pitch_coupling(what: str, d: PriorDistance, s: SharedState) -> str:
+    """The warning for a forward accelerometer bias far from its prior on a straight run (STRAIGHT_SPAN_DEG)."""
+    pitch_deg = float(np.degrees(d.offset_display[0] * 1e-6))  # a bias of 1 micro-g is a pitch of 1e-6 rad
+    return (f"{what} is {abs(d.z[0]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[0])} off) on a "
+            f"straight run: on one heading the forward accelerometer bias trades against the pitch (a pitch or DVL "
+            f"pitch-misalignment error of {pitch_deg:+.3f} deg reads as this bias); not determined by this run, "
+            "treat the along-track bias and the pitch with caution (a turn or a depth change separates them)")
 
 
 def _amount(s: SharedState, value: float) -> str:

@@ -142,3 +142,33 @@ def test_time_offset_beyond_its_prior_is_reported(mode: str) -> None:
     else:
         assert clipped > 0
         assert any(f"held at that bound for {clipped} ping(s), to the end" in w for w in health.warnings)
+
+
+def test_forward_accel_bias_on_a_straight_run_names_the_pitch_coupling() -> None:
+    """A forward accelerometer bias 5 prior sigmas off: on a straight run (one heading) a "degraded" warning that
+    names the pitch coupling and the pitch it is worth (1 micro-g = 1e-6 rad); the lateral axis and a run that
+    turns 90 deg stay "failed"."""
+    from gtsam_dvl.core.units import UG
+
+    config = EstimatorConfig()
+    sigma_ug = config.imu.accel_bias_sigma_ug
+    small = 1e-12 * np.eye(3)
+
+    def result(axis: int, heading_deg: float) -> tuple[NavResult, LogData]:
+        b = np.zeros(3)
+        b[axis] = 5.0 * sigma_ug * UG
+        r, log = _tiny({"accel_bias": Estimate(b, small), "gyro_bias": Estimate(np.zeros(3), small),
+                        "scale": Estimate(np.ones(1), small[:1, :1]), "misalignment": Estimate(np.eye(3), small),
+                        "time_offset": Estimate(np.zeros(1), small[:1, :1])})
+        a = np.radians(heading_deg)
+        r.n_R_b[1] = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+        return r, log
+
+    straight = check_priors(*result(0, 0.0), config).findings
+    assert len(straight) == 1 and straight[0][0] == "degraded"
+    assert "trades against the pitch" in straight[0][1] and "5.0 prior sigmas" in straight[0][1]
+    assert f"{np.degrees(5.0 * sigma_ug * 1e-6):+.3f} deg" in straight[0][1]
+    lateral = check_priors(*result(1, 0.0), config).findings
+    assert len(lateral) == 1 and lateral[0][0] == "failed"
+    turning = check_priors(*result(0, 90.0), config).findings
+    assert len(turning) == 1 and turning[0][0] == "failed"
