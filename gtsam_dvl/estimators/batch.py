@@ -413,12 +413,6 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     return values, report
 
 
-# Estimating the DVL scale and misalignment pays for its four extra states when fitting them lowers the chi^2 by
-# more than this quantile of chi^2 with 4 degrees of freedom (a likelihood-ratio test against the nominal: scale 1,
-# the mounting's misalignment); else the calibration is held at the nominal with its prior's sigma.
-NOMINAL_LEVEL = 0.95
-
-
 def _hold_calibration(builder: LogGraph, graph: BulkGraph, values: gtsam.Values,
                       ordering: gtsam.Ordering | ChunkedOrdering, hold: dict[str, Any], estimator: str,
                       free: NavResult) -> tuple[BulkGraph, gtsam.Values, NavResult]:
@@ -427,23 +421,34 @@ def _hold_calibration(builder: LogGraph, graph: BulkGraph, values: gtsam.Values,
     the chi^2 by more than NOMINAL_LEVEL's quantile of chi^2(4), the calibration is held at the nominal with the
     consider covariance (its prior's sigma) and the result says so; else the weak directions alone are held (when
     any). Returns the graph of the result's covariance (for the timeline), its values and the result."""
+    if not builder.config.priors.nominal_check:
+        return _hold_weak(builder, graph, values, ordering, hold, estimator, free, None)
     everything = {**hold, "weak": np.ones_like(hold["weak"])}
     nominal_values, gain, nominal_graph = _pinned(builder, graph, values, ordering, everything)
-    limit = float(chi2.ppf(NOMINAL_LEVEL, len(hold["weak"])))
-    check = {"chi2_gain": gain, "chi2_limit": limit, "level": NOMINAL_LEVEL, "pays": bool(gain > limit)}
+    limit = float(chi2.ppf(weak_hold.NOMINAL_LEVEL, len(hold["weak"])))
+    check = {"chi2_gain": gain, "chi2_limit": limit, "level": weak_hold.NOMINAL_LEVEL, "pays": bool(gain > limit)}
     if not check["pays"]:
         result = extract_result(builder, nominal_graph, nominal_values, ordering, estimator=estimator)
         result.info["calibration_hold"] = {**weak_hold.report(everything, gain), "consistent": True,
                                            "nominal": check, "why": (
             f"held at the nominal calibration: estimating the DVL scale and misalignment lowers chi^2 by "
-            f"{gain:.1f}, not more than {limit:.1f} ({NOMINAL_LEVEL:.0%} of chi^2 with 4 dof): it does not pay for "
-            "its four states; the nominal's sigmas are its prior's")}
+            f"{gain:.1f}, not more than {limit:.1f} ({weak_hold.NOMINAL_LEVEL:.0%} of chi^2 with 4 dof): it does not "
+            "pay for its four states; the nominal's sigmas are its prior's")}
         return nominal_graph, nominal_values, result
+    return _hold_weak(builder, graph, values, ordering, hold, estimator, free, check)
+
+
+def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: gtsam.Ordering | ChunkedOrdering,
+               hold: dict[str, Any], estimator: str, free: NavResult, check: dict[str, Any] | None
+               ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+    """The weak directions held (weak_hold.py) when any, the result with its consider covariance; the free one when
+    pinning costs more chi^2 than its 99 % limit. check: the nominal calibration's, reported beside."""
+    nominal = {} if check is None else {"nominal": check}
     if not hold["weak"].any():
-        free.info["calibration_hold"] = {**weak_hold.report(hold, 0.0), "nominal": check}
+        free.info["calibration_hold"] = {**weak_hold.report(hold, 0.0), **nominal}
         return graph, values, free
     held, increase, cov_graph = _pinned(builder, graph, values, ordering, hold)
-    info = {**weak_hold.report(hold, increase), "nominal": check}
+    info = {**weak_hold.report(hold, increase), **nominal}
     if not info["consistent"]:
         free.info["calibration_hold"] = {**info, "held": [], "released": info["held"], "why": (
             f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "

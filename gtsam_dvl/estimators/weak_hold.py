@@ -148,9 +148,27 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
     limit = float(chi2.ppf(0.99, m)) if m else 0.0
     out: dict[str, Any] = {"threshold": float(p["below"]), "information": p["lambda"].tolist(),
                            "held": held}
+    if "nominal" in p:  # the nominal calibration's check (nominal_check), a filter's
+        out["nominal"] = p["nominal"]
     if np.isfinite(chi2_increase):  # (the batch smoother's: a filter holds its reported estimate only)
         out.update(chi2_increase=chi2_increase, chi2_limit_99=limit, consistent=bool(chi2_increase <= limit))
     return out
+
+
+# Estimating the DVL scale and misalignment pays for its four states when it lowers the chi^2 by more than this
+# quantile of chi^2(4) against the nominal (scale 1, the mounting's misalignment: the prior's mean); else the
+# calibration is held at the nominal with its prior's sigma (the batch smoother by a pinned solve, a filter's
+# reported estimate by hold_joint).
+NOMINAL_LEVEL = 0.95
+
+
+def nominal_check(d: np.ndarray, P: np.ndarray) -> dict[str, Any]:
+    """The chi^2 gain of the estimated calibration over the nominal, d' P^-1 d (d the estimate's tangent from the
+    prior's mean, P its marginal covariance: the likelihood ratio to first order), against NOMINAL_LEVEL's quantile
+    of chi^2 with len(d) degrees of freedom."""
+    gain = float(d @ np.linalg.solve(P, d))
+    limit = float(chi2.ppf(NOMINAL_LEVEL, len(d)))
+    return {"chi2_gain": gain, "chi2_limit": limit, "level": NOMINAL_LEVEL, "pays": bool(gain > limit)}
 
 
 def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values, keys: list[int],
@@ -161,12 +179,19 @@ def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values
     covariance with the calibration's marginal replaced by the held one (the prior's along the weak directions:
     the consider covariance, module doc). None when nothing is held (off, or no weak direction)."""
     p = _directions(config, mounting, keys, cov) if np.all(np.isfinite(cov)) else None
-    if p is None or not p["weak"].any():
+    if p is None:
         return None
-    idx, lam, V, weak = p["idx"], p["lambda"], p["V"], p["weak"]
+    idx = p["idx"]
     P_tt = cov[np.ix_(idx, idx)]
-    L0 = np.linalg.cholesky(p["P0"])
     d, _ = _tangent(values, p["k0"], p["b_R_d0"])
+    if config.priors.nominal_check:
+        p["nominal"] = nominal_check(d, P_tt)
+        if not p["nominal"]["pays"]:  # the nominal calibration's check: every direction held
+            p["weak"] = np.ones_like(p["weak"])
+    if not p["weak"].any():
+        return None
+    lam, V, weak = p["lambda"], p["V"], p["weak"]
+    L0 = np.linalg.cholesky(p["P0"])
     u = np.linalg.solve(L0, d)
     d_theta = L0 @ (-V[:, weak] @ (V[:, weak].T @ u))  # to the prior's mean along the weak directions
     K = np.linalg.solve(P_tt, cov[idx, :]).T  # (n, 4)

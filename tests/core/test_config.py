@@ -400,7 +400,8 @@ FIXTURES = Path(__file__).parent / "config_fixtures"
 # result's config.json without the correlated error takes it as white, as the runs that wrote it did (test below)
 ADDED = {"noise": None, "current": None, "calibration": None, "imu": {"model"},
          "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
-         "priors": {"mounting_tolerance_deg", "hold_weak_information"}, "ekf": {"recentre_time_offset"},
+         "priors": {"mounting_tolerance_deg", "hold_weak_information", "nominal_check"},
+         "ekf": {"recentre_time_offset"},
          "depth": {"noise_multiplier"}, "gnss": {"noise_multiplier"}}
 
 
@@ -440,6 +441,7 @@ def test_result_config_json_written_before_loads() -> None:
     assert cfg.current.water_track == "refuse"  # written before water-track pings were used: its runs refused them
     paper = EstimatorConfig.paper()
     assert cfg.priors.hold_weak_information == 0.0  # written before the hold: its runs held nothing
+    assert not cfg.priors.nominal_check  # nor checked the nominal calibration
     assert cfg.model_copy(update={"noise": paper.noise, "current": paper.current}) == paper
     assert _without_added(cfg.to_dict()) == _tuples(json.loads(path.read_text())["config"])
 

@@ -34,6 +34,7 @@ def _presets(base: EstimatorConfig) -> EstimatorConfig:
                 "model": "ixblue-phins"}
     d["dvl"] = {**{k: v for k, v in d["dvl"].items() if k not in DVL_PRESETS["teledyne-pathfinder"].config_values()},
                 "model": "teledyne-pathfinder"}
+    d["priors"]["nominal_check"] = False  # the weak directions alone (the nominal check: test_nominal_check.py)
     return EstimatorConfig.from_dict(d)
 
 
@@ -91,7 +92,7 @@ def test_hold_joint_properties() -> None:
     from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X
     from gtsam_dvl.core.states import columns
     from gtsam_dvl.core.types import Mounting
-    cfg = EstimatorConfig()
+    cfg = EstimatorConfig.from_dict({"priors": {"nominal_check": False}})  # the weak directions alone
     mounting = Mounting()
     keys = [X(0), V(0), B(0), K_SCALE, C_MISALIGN]
     k0, R0, P0 = weak_hold.calibration_prior(cfg, mounting)

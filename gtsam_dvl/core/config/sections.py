@@ -183,6 +183,10 @@ class PriorConfig(ConfigModel):
     # information along it is below this fraction of the prior's, with the prior's uncertainty carried into every
     # sigma (estimators/weak_hold.py); 0: every direction estimated, however little the run informs it
     hold_weak_information: NonNegative = 0.25
+    # with the hold on: the nominal calibration's check (scale 1, the mounting's misalignment) in every run; where
+    # estimating the scale and misalignment does not lower the chi^2 by more than the 95 % quantile of chi^2(4), the
+    # calibration is held at the nominal with its prior's sigma (estimators/weak_hold.py nominal_check)
+    nominal_check: Flag = True
 
     @model_validator(mode="after")
     def _apply_mounting_tolerance(self) -> Self:

@@ -399,6 +399,45 @@ RECENTRE_TOLERANCE = 0.05
 RECENTRE_DETERMINED = 0.5
 
 
+# The filter has diverged when the mean NIS per degree of freedom of its last DIVERGENCE_PINGS updates exceeds
+# DIVERGENCE_NIS (a consistent filter: 1, with a spread of 0.15 over 30 three-axis pings; a ping far off is gated or
+# down-weighted, so only a filter whose own state is wrong gets there). From then on its IMU biases, DVL calibration
+# and time offset take no more DVL updates: a filter that chases its own error with them runs them away (seen: a
+# 38 deg/s turn with stamps 1 s early took the offset to -1.84 s and a lateral accelerometer bias to -1372 micro-g).
+DIVERGENCE_PINGS = 30
+DIVERGENCE_NIS = 6.0
+# (and the time offset, OFFSET, when estimated: its slot exists only then)
+FROZEN_ON_DIVERGENCE = np.r_[np.arange(BG.start, BG.stop), np.arange(BA.start, BA.stop), CALIBRATION]
+
+
+@dataclass
+class DivergenceWatch:
+    """The running mean of the NIS per degree of freedom over the last DIVERGENCE_PINGS updates, and when it first
+    passed DIVERGENCE_NIS."""
+
+    recent: list[float] = field(default_factory=list)
+    diverged_at_s: float | None = None
+
+    @property
+    def diverged(self) -> bool:
+        return self.diverged_at_s is not None
+
+    def add(self, t: float, nis_per_dof: float) -> bool:
+        """One update's NIS per dof at t (s); True when this one is where the filter is found diverged."""
+        self.recent = (self.recent + [nis_per_dof])[-DIVERGENCE_PINGS:]
+        if (not self.diverged and len(self.recent) == DIVERGENCE_PINGS
+                and float(np.mean(self.recent)) > DIVERGENCE_NIS):
+            self.diverged_at_s = t
+            return True
+        return False
+
+    def info(self) -> dict[str, Any]:
+        return {} if self.diverged_at_s is None else {
+            "diverged_at_s": self.diverged_at_s,
+            "why": f"the EKF diverged at {self.diverged_at_s:.1f} s (mean NIS per dof over {DIVERGENCE_PINGS} "
+                   f"pings above {DIVERGENCE_NIS:g}): its biases, calibration and time offset were frozen there"}
+
+
 def _recentred_offset(config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
                       ) -> tuple[EstimatorConfig, bool]:
     """config with the time offset's prior centred at the warm-up window's estimate ([ekf] recentre_time_offset),
@@ -477,6 +516,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     fs = initial_state(log, config, alignment.n_R_b, p0, first, calibration)
     current.ekf_start(config, fs, frame.height_m)
     offset_centre = fs.time_offset  # the time offset prior's centre (the configured one, or the calibration's)
+    watch = DivergenceWatch()
     hist = History()
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []  # (t, z, W, its covariance, water)
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
@@ -539,7 +579,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             dt_c = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
             if dt_c != fs.time_offset:  # the window held at the bound: counted, reported (analysis/health.py)
                 counters["time_offset_window_clipped"] = counters.get("time_offset_window_clipped", 0) + 1
-            rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c)
+            rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c, n_R_b=fs.nav.n_R_b)
             y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity(), n_v)
         if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)
             assert fs.dvl_error is not None
@@ -551,6 +591,10 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL])))
         if slow:
             H[:, CALIBRATION] = 0.0
+        if watch.diverged:  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter from here on
+            H[:, FROZEN_ON_DIVERGENCE] = 0.0
+            if offset:
+                H[:, OFFSET] = 0.0
         # the chi^2 gate, reopened after ekf.gate_reopen_after gated pings in a row (a filter that lost track)
         if gated_run < ekf_cfg.gate_reopen_after:
             if len(z) not in gates:  # chi2.ppf once per measurement dimension, not once per ping
@@ -562,6 +606,11 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             AH = A @ H
             hph = AH @ fs.P @ AH.T
         nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis)
+        if offset and abs(fs.time_offset - offset_centre) > offset_bound:  # held within its window's bound
+            fs.time_offset = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
+            counters["time_offset_bounded"] = counters.get("time_offset_bounded", 0) + 1
+        if not was_gated and watch.add(t_j, nis / len(z)):
+            counters["diverged_at_ping"] = int(j)
         if fit is not None and not was_gated:
             fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
         counters["dvl_slow"] += int(slow)
@@ -587,7 +636,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     result.info = {"alignment": maker.alignment_info(),
                    "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
                    "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
-                              "error_state": len(fs.P)}}
+                              "error_state": len(fs.P), **watch.info()}}
     if fs.dvl_error is not None:
         result.info["dvl_correlated_error"] = correlated_info(config)
     if currents:  # the current at each update, its filtered sigmas (estimators/current.py profile)
