@@ -1,0 +1,79 @@
+"""The nominal calibration's check (estimators/batch.py _hold_calibration, estimators/weak_hold.py nominal_check):
+where estimating the DVL scale and misalignment does not pay for its four states, the calibration is held at the
+nominal with its prior's sigma; where it does, it is estimated. And the EKF's divergence watch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.stats import chi2
+
+from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators import weak_hold
+from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.ekf.filter import DIVERGENCE_NIS, DIVERGENCE_PINGS, DivergenceWatch
+from gtsam_dvl.sim import simulate
+from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
+
+
+def test_nominal_check_is_the_likelihood_ratio() -> None:
+    """d' P^-1 d against chi^2(4)'s 95 % quantile, worked by hand on a diagonal P."""
+    P = np.diag([1e-4, 4e-4, 1e-6, 9e-6])
+    d = np.array([1e-2, 2e-2, 0.0, 0.0])  # 1 and 1 sigma: chi^2 2
+    c = weak_hold.nominal_check(d, P)
+    assert c["chi2_gain"] == pytest.approx(2.0) and c["chi2_limit"] == pytest.approx(chi2.ppf(0.95, 4))
+    assert not c["pays"]
+    assert weak_hold.nominal_check(3 * d, P)["pays"]  # chi^2 18
+
+
+def _straight(scale: float) -> tuple[LogData, EstimatorConfig]:
+    sc = load_scenario("straight-transect")
+    raw = dict(sc.raw)
+    raw["dvl"] = {**raw["dvl"], "scale": scale, "misalignment_deg": [0.0, 0.0, 0.0]}
+    return simulate(scenario_from_dict(raw, name="straight"), 4), sc.estimator_configuration()
+
+
+def test_straight_run_at_nominal_is_held_there() -> None:
+    """A straight run whose DVL is at its nominal (scale 1, misalignment 0): the check finds no gain worth four
+    states, the calibration is the nominal exactly with the prior's sigmas, the result says why, and the final
+    position is within 3 sigma of the truth."""
+    log, cfg = _straight(1.0)
+    r = smooth_batch(log, cfg)
+    hold = r.info["calibration_hold"]
+    assert not hold["nominal"]["pays"] and "held at the nominal calibration" in hold["why"]
+    assert r.calibration["scale"].value[0] == pytest.approx(1.0, abs=1e-6)
+    assert r.calibration["scale"].sigma[0] == pytest.approx(cfg.priors.scale_sigma, rel=0.01)
+    np.testing.assert_allclose(r.calibration["misalignment"].value, log.mounting.b_R_d0, atol=1e-7)
+    truth = log.truth
+    assert truth is not None
+    e = r.n_p[-1, :2] - [np.interp(r.t[-1], truth.t, truth.n_p[:, k]) for k in range(2)]
+    assert np.all(np.abs(e) < 3 * r.position_sigma_m[-1, :2])
+
+
+def test_a_scale_the_run_shows_is_estimated() -> None:
+    """paper-3d-short (speed changes, a descent, turns) with the DVL's scale 3 % off (3 prior sigmas) and the
+    default configuration: the gain pays, the scale is estimated, the truth is within 3 of its sigmas, which are
+    below half the prior's. (On the straight run above a scale is not observable and stays held.)"""
+    sc = load_scenario("paper-3d-short")
+    raw = dict(sc.raw)
+    raw["dvl"] = {**raw["dvl"], "scale": 1.03}
+    raw.pop("estimator_config", None)
+    log = simulate(scenario_from_dict(raw, name="off"), 4)
+    cfg = EstimatorConfig()
+    r = smooth_batch(log, cfg)
+    hold = r.info["calibration_hold"]
+    assert hold["nominal"]["pays"]
+    k, sk = r.calibration["scale"].value[0], r.calibration["scale"].sigma[0]
+    assert abs(k - 1.03) < 3 * sk and sk < 0.5 * cfg.priors.scale_sigma
+
+
+def test_divergence_watch() -> None:
+    """Consistent NIS (1 per dof) never trips it; a run of DIVERGENCE_PINGS at twice the threshold trips it once,
+    at the ping where the running mean crosses."""
+    w = DivergenceWatch()
+    rng = np.random.default_rng(0)
+    assert not any(w.add(float(t), float(x)) for t, x in enumerate(rng.chisquare(3, 1000) / 3))
+    tripped = [w.add(1000.0 + t, 2 * DIVERGENCE_NIS) for t in range(2 * DIVERGENCE_PINGS)]
+    assert sum(tripped) == 1 and w.diverged and "frozen" in w.info()["why"]
+    assert 1000.0 < w.diverged_at_s < 1000.0 + DIVERGENCE_PINGS  # type: ignore[operator]
