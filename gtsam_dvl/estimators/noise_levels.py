@@ -31,6 +31,23 @@ Neither factor is robust: the fit leaves out the rows beyond SCREEN_K sigma at a
 the truncation as the DVL's. The online estimator and the EKF hold the configured depth level and say so
 (held_depth_level; neither takes GNSS fixes), and the DVL's correlated error's level, which the batch smoother
 fits with [noise] fit_correlated (estimators/correlated_fit.py; held_levels).
+
+Honest level. A real DVL's error is not white: its ping-to-ping scatter is 3-9 mm/s while its 30-60 s means stay
+at a few mm/s (bottom type, attitude-dependent beam errors, the speed of sound), and those slow errors are what the
+scale and misalignment see. A variance component fitted to the scatter alone weights the DVL as if its 30 s means
+were scatter / sqrt(30): the calibration then chases the slow errors while chi^2/dof looks perfect. So the white fit
+(above) is only the first of three levels (honest_multiplier):
+- the long-window level: the residuals (with the estimated correlated error E added back) averaged over blocks of
+  30 and 60 s, n_b mean_b(e)^2 averaged over blocks and axes (for white errors it is the white ratio; long_level),
+  with its 90 % chi^2 interval. Where its lower end is above the white fit, the level is raised to it;
+- the stated level (the configuration's, a preset's, the messages' covariance): never gone below unless an
+  absolute reference observes the sensor's slow errors and the long-window level's upper end is below it. In an
+  IMU + DVL log nothing does: at 30-60 s the IMU cannot tell a slow DVL error from the velocity (a 4 mm/s error
+  over 60 s is a 7 micro-g acceleration), the navigation solution absorbs it and the residuals do not show it
+  (measured: a 4 mm/s, 60 s Gauss-Markov error leaves 30 s means of 0.6 mm/s). GNSS fixes in the graph observe
+  the DVL's; nothing in these logs observes the depth sensor's or the fixes' own slow errors.
+The report keeps all three (white_sigma, long, stated_sigma) beside the level used. The online estimator and the
+EKF fit on their warm-up window and hold the stated level as the floor (no absolute reference).
 """
 
 from __future__ import annotations
