@@ -18,12 +18,13 @@ velocity over ground), its velocity and beam velocities kept.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gtsam_dvl.core.rotations import rpy_deg_to_matrix
+from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix, so3_exp
 from gtsam_dvl.core.types import BeamData, DvlData
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
@@ -125,6 +126,7 @@ def dvl_measure(
         beam_lost: np.ndarray = event_rng.random((M, B)) < spec.dropout_beam_prob
         beam_ok &= ~ping_lost[:, None] & ~beam_lost
     sigma = spec.noise_m_s
+    stated = spec.stated_noise_m_s or sigma  # what the covariance says, not what the noise is
     if spec.noise_model == "velocity":
         y = y_true.copy()
         if noise_rng is not None:
@@ -137,7 +139,7 @@ def dvl_measure(
             direction /= np.linalg.norm(direction, axis=1, keepdims=True)
             y[ping_out] += spec.outlier_m_s * direction[ping_out]
         v_beam = y @ d_u.T
-        cov = np.broadcast_to(sigma**2 * np.eye(3), (M, 3, 3)).copy()
+        cov = np.broadcast_to(stated**2 * np.eye(3), (M, 3, 3)).copy()
         if wt is not None:
             cov[wt] = spec.water_track_noise_m_s**2 * np.eye(3)
     else:
@@ -157,7 +159,7 @@ def dvl_measure(
         normal[~enough] = np.eye(3)  # placeholder, overwritten with NaN below
         y = np.linalg.solve(normal, rhs[..., None])[..., 0]
         inv_normal = np.linalg.inv(normal)
-        cov = sigma**2 * inv_normal
+        cov = stated**2 * inv_normal
         if wt is not None:
             cov[wt] = spec.water_track_noise_m_s**2 * inv_normal[wt]
     valid = beam_ok.sum(axis=1) >= 3
@@ -240,3 +242,41 @@ class GaussMarkov:
             out[k] = x
         self.x = x
         return out
+
+
+CALIBRATION_STREAM = 8  # index of the drawn calibration's child of SeedSequence(seed) (sim/simulate.py)
+CONSTANT_STREAM = 9  # index of the per-run constant error's child
+
+
+def _child_rng(seed: int, index: int) -> np.random.Generator:
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(index + 1)[index]))
+
+
+def draw_calibration(spec: DvlSpec) -> bool:
+    """Whether the scenario draws its truth calibration per seed (DvlSpec.draw_scale_sigma and
+    draw_misalignment_sigma_deg)."""
+    return bool(spec.draw_scale_sigma > 0 or np.any(np.asarray(spec.draw_misalignment_sigma_deg) > 0))
+
+
+def drawn_calibration(spec: DvlSpec, seed: int) -> DvlSpec:
+    """spec with the truth scale and misalignment of this seed: k = scale + draw_scale_sigma z_0 and
+    R_c = Exp(r) Rz Ry Rx(misalignment_deg), r = radians(draw_misalignment_sigma_deg) * z_1..3 in body axes (the
+    estimators' prior on b_R_d, core/states.py: sigmas about body axes, R_c on the left), z ~ N(0, I_4) from its own
+    child of SeedSequence(seed); spec itself when nothing is drawn. Four numbers are always drawn, so a sigma set to
+    0 leaves the other draws as they were."""
+    if not draw_calibration(spec):
+        return spec
+    z = _child_rng(seed, CALIBRATION_STREAM).standard_normal(4)
+    r_rad = np.radians(np.broadcast_to(np.asarray(spec.draw_misalignment_sigma_deg, dtype=float), (3,))) * z[1:]
+    R_c = so3_exp(r_rad) @ rpy_deg_to_matrix(spec.misalignment_deg)
+    rpy = matrix_to_rpy_deg(R_c)
+    return dataclasses.replace(spec, scale=float(spec.scale + spec.draw_scale_sigma * z[0]),
+                               misalignment_deg=(float(rpy[0]), float(rpy[1]), float(rpy[2])))
+
+
+def constant_error(spec: DvlSpec, seed: int) -> np.ndarray | None:
+    """The run's constant velocity error (3,) m/s in dvl_link, constant_error_sigma_m_s per axis from its own child
+    of SeedSequence(seed) (None when the sigma is 0)."""
+    if spec.constant_error_sigma_m_s <= 0:
+        return None
+    return spec.constant_error_sigma_m_s * _child_rng(seed, CONSTANT_STREAM).standard_normal(3)

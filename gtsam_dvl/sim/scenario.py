@@ -23,7 +23,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import Segment
 from gtsam_dvl.core.units import DEG_PER_H, MICRO_G
 from gtsam_dvl.sim.current import CurrentSpec, SeafloorSpec, current_spec, seafloor_spec
-from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, parse_segments
+from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, check_dvl_draws, parse_segments
 
 DEFAULT_T0_S = 1_700_000_000  # ROS time of t = 0 when the file gives none: fixed so logs are reproducible
 
@@ -160,6 +160,18 @@ class DvlSpec:
     # 1.5-4.5 m), weaker and more diffuse than a seafloor echo, so it is noisier than the same DVL's bottom track
     bottom_range_m: float = 0.0
     water_track_noise_m_s: float = 0.01
+    # what the messages' covariance states, 1 sigma per axis (or per beam); 0: noise_m_s. A real DVL's stated
+    # noise is often several times its ping-to-ping scatter (a datasheet's long-term accuracy, or a driver's fixed
+    # covariance), so an estimator that fits the scatter weights the DVL above its slow errors (issue 31)
+    stated_noise_m_s: float = 0.0
+    # a constant velocity error per dvl_link axis, drawn per seed (its own random stream, sim/dvl.py): 1 sigma
+    # (0: none). Beside the Gauss-Markov error, what a DVL's long-term accuracy leaves in a run
+    constant_error_sigma_m_s: float = 0.0
+    # the truth calibration drawn per seed around scale and misalignment_deg (sim/dvl.py draw_calibration): the
+    # scale's 1 sigma and the misalignment's about body x, y, z (deg, a number or a list of 3), drawn as a
+    # rotation vector in body axes as the estimators' prior states it (core/states.py); 0: the table's values
+    draw_scale_sigma: float = 0.0
+    draw_misalignment_sigma_deg: float | tuple[float, float, float] = 0.0
     # a DVL preset (core/config/presets.py DVL_PRESETS, "" none): fills the keys the table does not set, the ping
     # noise (noise_m_s: per axis, or per beam with noise_model "beam"), the correlated error, the bottom-track range
     # (max_range_m) and the beam angle (dvl_preset_values); the truth scale stays the table's
@@ -351,7 +363,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
                                                                    "accel_bias_values_micro_g"),
                             per_axis=("quantisation_gyro_rad_s", "quantisation_accel_m_s2")))
     dvl_table = r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
-                        strings=("noise_model", "model"))
+                        strings=("noise_model", "model"), per_axis=("draw_misalignment_sigma_deg",))
     if dvl_table["model"]:
         from gtsam_dvl.core.config.presets import DVL_PRESETS
 
@@ -378,6 +390,7 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r.require(dvl.bottom_range_m > 0, "dvl.bottom_range_m", "must be positive (0: max_range_m)")
     r.require(dvl.correlated_sigma_m_s >= 0, "dvl.correlated_sigma_m_s", "must be >= 0 (0: no correlated error)")
     r.require(dvl.correlated_tau_s > 0, "dvl.correlated_tau_s", "must be positive")
+    check_dvl_draws(r, dvl)
     r.require(dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'")
     r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
     r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")

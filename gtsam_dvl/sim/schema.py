@@ -177,3 +177,16 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
         rows.append(row)
         t += duration
     return rows
+
+
+def check_dvl_draws(r: Reader, dvl: Any) -> None:
+    """The [dvl] keys of the stated noise, the per-run constant error and the drawn calibration (a DvlSpec): each
+    bad one a GtsamDvlError naming it."""
+    r.require(dvl.stated_noise_m_s >= 0, "dvl.stated_noise_m_s", "must be >= 0 (0: noise_m_s)")
+    r.require(dvl.constant_error_sigma_m_s >= 0, "dvl.constant_error_sigma_m_s", "must be >= 0 (0: none)")
+    # 5 sigma below the mean must stay a positive scale
+    r.require(0 <= dvl.draw_scale_sigma < dvl.scale / 5.0, "dvl.draw_scale_sigma",
+              f"must be in [0, scale / 5 = {dvl.scale / 5.0:g}) (0: the scale as given)")
+    sigmas = dvl.draw_misalignment_sigma_deg
+    r.require(all(0 <= s <= 10.0 for s in (sigmas if isinstance(sigmas, tuple) else (sigmas,))),
+              "dvl.draw_misalignment_sigma_deg", "must be in [0, 10] deg (0: the misalignment as given)")

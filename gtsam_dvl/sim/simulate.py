@@ -4,13 +4,15 @@ Steps: analytic motion in the local level -> geodetic position by quadrature -> 
 biases and noise -> truth in the map frame -> DVL -> depth and GNSS fixes (when the scenario has them).
 Random streams are children of SeedSequence(seed) (PCG64), one per purpose, so switching white noise off keeps
 the same biases: 0 IMU biases, 1 IMU white noise, 2 DVL white noise, 3 DVL dropouts and outliers, 4 depth, 5 GNSS,
-6 the DVL's correlated (Gauss-Markov) error, 7 the DVL's water-track noise. A stream a scenario does not use is
-never drawn, so adding a sensor or an error to a scenario leaves every other stream's numbers as they were.
+6 the DVL's correlated (Gauss-Markov) error, 7 the DVL's water-track noise, 8 the DVL's truth calibration (when
+drawn per seed), 9 the DVL's per-run constant error. A stream a scenario does not use is never drawn, so adding a
+sensor or an error to a scenario leaves every other stream's numbers as they were.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections.abc import Callable
 from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
@@ -31,7 +33,15 @@ from gtsam_dvl.core.types import (
     TruthData,
 )
 from gtsam_dvl.sim import imu as sim_imu
-from gtsam_dvl.sim.dvl import correlated_error, dvl_measure, dvl_true, water_model, water_noise_rng
+from gtsam_dvl.sim.dvl import (
+    constant_error,
+    correlated_error,
+    drawn_calibration,
+    dvl_measure,
+    dvl_true,
+    water_model,
+    water_noise_rng,
+)
 from gtsam_dvl.sim.gnss import first_fix_frame, reframe_truth, simulate_gnss
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, quantise, saturate, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
@@ -40,7 +50,7 @@ from gtsam_dvl.sim.position import PositionTrack, integrate_position
 
 if TYPE_CHECKING:
     from gtsam_dvl.core.earth import LocalFrame
-    from gtsam_dvl.sim.scenario import Scenario
+    from gtsam_dvl.sim.scenario import DvlSpec, Scenario
 
 
 def simulate(
@@ -54,8 +64,11 @@ def simulate(
 
     white_noise=False drops IMU and DVL white noise, the DVL's correlated error, DVL dropouts and outliers, but
     keeps the biases, the IMU's quantisation, the DVL scale and misalignment, the mounting and the lever arm.
-    Same seed, same arrays, bit for bit.
+    It drops the DVL's per-run constant error too (an error of the DVL's output, as the correlated one); a drawn
+    calibration is a truth, kept. Same seed, same arrays, bit for bit.
     """
+    given_dvl = scenario.dvl
+    scenario = with_drawn_calibration(scenario, seed)
     rates = scenario.rates
     rate = rates.imu_hz
     n = int(np.floor(scenario.duration_s * rate + 1e-6)) + 1  # stamps k / rate, k = 0..n-1
@@ -92,6 +105,9 @@ def simulate(
     correlated = correlated_error(scenario.dvl, rates.dvl_hz, seed) if white_noise else None
     if correlated is not None:
         y = y + correlated.take(len(t_meas))
+    constant = constant_error(scenario.dvl, seed) if white_noise else None
+    if constant is not None:
+        y = y + constant
     dvl = dvl_measure(
         scenario.dvl, t_dvl, y, d_u, ranges,
         np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
@@ -102,6 +118,7 @@ def simulate(
     metadata = _metadata(scenario, seed, white_noise, mounting, errors.gyro_bias0, errors.accel_bias0,
                          _bias_series(scenario, errors, rate))
     _sensor_metadata(scenario, metadata)
+    drawn_metadata(metadata, given_dvl, constant)
     gnss = None
     origin: GeoOrigin | None = _origin(scenario)
     if scenario.gnss is not None:
@@ -129,6 +146,28 @@ def _log_data(scenario: Scenario, seed: int, gyro_bias0: np.ndarray, accel_bias0
                                                    float(scenario.rates.dvl_time_offset_s)),
                    true_imu_bias=ImuBiases(tuple(accel_bias0.tolist()), tuple(gyro_bias0.tolist())),  # type: ignore[arg-type]
                    segments=scenario.segments_typed(), **data)
+
+
+# the DvlSpec keys whose error is off at 0: left out of the metadata then (an older scenario's stays as it was)
+_DVL_OPTIONAL = ("stated_noise_m_s", "constant_error_sigma_m_s", "draw_scale_sigma", "draw_misalignment_sigma_deg")
+
+
+def with_drawn_calibration(scenario: Scenario, seed: int) -> Scenario:
+    """The scenario with this seed's truth DVL scale and misalignment (sim/dvl.py drawn_calibration; itself when
+    its [dvl] table draws none)."""
+    dvl = drawn_calibration(scenario.dvl, seed)
+    return scenario if dvl is scenario.dvl else dataclasses.replace(scenario, dvl=dvl)
+
+
+def drawn_metadata(metadata: dict[str, Any], given: DvlSpec, constant: np.ndarray | None) -> None:
+    """A drawn calibration and a constant error in the metadata: "sensors" keeps the [dvl] table's scale and
+    misalignment (the draw's mean; "truth" has the drawn ones), "truth" gets the run's constant error (m/s in
+    dvl_link). Nothing changes for a scenario without them."""
+    sensors, truth = metadata["sensors"]["dvl"], metadata["truth"]["dvl"]
+    if sensors.get("draw_scale_sigma") or sensors.get("draw_misalignment_sigma_deg"):
+        sensors["scale"], sensors["misalignment_deg"] = float(given.scale), list(given.misalignment_deg)
+    if constant is not None:
+        truth["constant_error_m_s"] = constant.tolist()
 
 
 def _origin(scenario: Scenario) -> GeoOrigin:
@@ -297,7 +336,8 @@ def _metadata(
                 if not np.any(getattr(scenario.imu, k)))),
             "dvl": _without(listify(asdict(scenario.dvl)), (("correlated_sigma_m_s", "correlated_tau_s")
                             if scenario.dvl.correlated_sigma_m_s == 0 else ())
-                            + (("bottom_range_m", "water_track_noise_m_s") if scenario.seafloor is None else ())),
+                            + (("bottom_range_m", "water_track_noise_m_s") if scenario.seafloor is None else ())
+                            + tuple(k for k in _DVL_OPTIONAL if not np.any(getattr(scenario.dvl, k)))),
             "rates": asdict(scenario.rates),
             "mounting": listify(asdict(scenario.mounting)),
         },

@@ -77,6 +77,8 @@ from gtsam_dvl.sim.simulate import (
     _sensor_metadata,
     _truth_at,
     depth_rng,
+    drawn_metadata,
+    with_drawn_calibration,
 )
 
 if TYPE_CHECKING:
@@ -306,7 +308,10 @@ class ChunkedSimulation:
                  chunk_s: float = DEFAULT_CHUNK_S) -> None:
         if not np.isfinite(chunk_s) or chunk_s <= 0:
             raise GtsamDvlError(f"chunk length {chunk_s!r} s: must be a positive number of seconds")
+        given_dvl = scenario.dvl
+        scenario = with_drawn_calibration(scenario, seed)
         self.scenario, self.seed, self.white_noise = scenario, seed, white_noise
+        self.constant = sim_dvl.constant_error(scenario.dvl, seed) if white_noise else None
         rates = scenario.rates
         self.rate = rate = rates.imu_hz
         self.n_samples = n = int(np.floor(scenario.duration_s * rate + 1e-6)) + 1  # as simulate()
@@ -341,6 +346,7 @@ class ChunkedSimulation:
         metadata = _metadata(scenario, seed, white_noise, self.mounting, self.gyro_bias0, self.accel_bias0,
                              bias_series)
         _sensor_metadata(scenario, metadata)
+        drawn_metadata(metadata, given_dvl, self.constant)
         origin: GeoOrigin | None = _origin(scenario)
         self.fix_frame: LocalFrame | None = None
         self.gnss_fixes = False  # the log has GNSS fixes
@@ -536,6 +542,8 @@ class ChunkedSimulation:
             if streams.dvl_correlated is not None:
                 e = streams.dvl_correlated.take(m)
                 y = y + (np.concatenate([e, e]) if m == 1 else e)  # the padded copy's: the real ping's
+            if self.constant is not None:
+                y = y + self.constant
         else:
             y, ranges = np.zeros((0, 3)), np.zeros((0, self.n_beams))
             d_u = janus_beams(sc.dvl.beam_angle_deg, np.asarray(sc.dvl.face_axis))
