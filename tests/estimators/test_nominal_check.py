@@ -77,3 +77,22 @@ def test_divergence_watch() -> None:
     tripped = [w.add(1000.0 + t, 2 * DIVERGENCE_NIS) for t in range(2 * DIVERGENCE_PINGS)]
     assert sum(tripped) == 1 and w.diverged and "frozen" in w.info()["why"]
     assert 1000.0 < w.diverged_at_s < 1000.0 + DIVERGENCE_PINGS  # type: ignore[operator]
+
+
+def test_ekf_holds_the_nominal_as_consider_states() -> None:
+    """The EKF on the straight run at nominal: its final calibration's chi^2 gain does not pay, so it filters again
+    with the scale and misalignment as consider states: they end exactly at the nominal with the prior's sigmas,
+    and the position is within 3 sigma of the truth."""
+    from gtsam_dvl.estimators.ekf.filter import run_ekf
+
+    log, cfg = _straight(1.0)
+    r = run_ekf(log, cfg)
+    hold = r.info["calibration_hold"]
+    assert not hold["nominal"]["pays"] and "consider states" in hold["why"]
+    assert r.calibration["scale"].value[0] == pytest.approx(1.0, abs=1e-12)
+    assert r.calibration["scale"].sigma[0] == pytest.approx(cfg.priors.scale_sigma, rel=1e-6)
+    np.testing.assert_allclose(r.calibration["misalignment"].value, log.mounting.b_R_d0, atol=1e-12)
+    truth = log.truth
+    assert truth is not None
+    e = r.n_p[-1, :2] - [np.interp(r.t[-1], truth.t, truth.n_p[:, k]) for k in range(2)]
+    assert np.all(np.abs(e) < 3 * r.position_sigma_m[-1, :2])

@@ -64,11 +64,11 @@ from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, 
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import skew
+from gtsam_dvl.core.rotations import skew, so3_log
 from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators import current
+from gtsam_dvl.estimators import current, weak_hold
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
 from gtsam_dvl.estimators.correlated import ekf_propagate
 from gtsam_dvl.estimators.correlated import info as correlated_info
@@ -380,6 +380,16 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             if settled:
                 break
     result = _filter(log, config, progress, calibration=calibration)
+    check = result.info["filter"].pop("nominal", None)
+    if check is not None and not check["pays"]:  # held at nominal: filtered again with it as a consider state
+        result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
+        result.info["filter"].pop("nominal", None)
+        result.info["calibration_hold"] = {"nominal": check, "held": ["scale", "misalignment"], "why": (
+            f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
+            f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} of chi^2 with "
+            "4 dof); filtered again with the scale and misalignment as consider states (their prior's sigma)")}
+    elif check is not None:
+        result.info["calibration_hold"] = {"nominal": check, "held": []}
     result.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
@@ -458,9 +468,12 @@ def _recentred_offset(config: EstimatorConfig, window: NavResult, info: dict[str
 
 
 def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, fit: WarmupFit | None = None,
-            calibration: VehicleCalibration | None = None) -> NavResult:
+            calibration: VehicleCalibration | None = None, consider_calibration: bool = False) -> NavResult:
     """run_ekf at config's noise levels; with fit, only up to its warm-up window's end, the innovations there
-    collected into it (the NavResult then holds the window's states)."""
+    collected into it (the NavResult then holds the window's states). consider_calibration: the DVL scale and
+    misalignment held at their start as consider states (kalman.update). Without a calibration file and with
+    [priors] nominal_check (and the hold on), info["filter"]["nominal"] has the final calibration's nominal check
+    (estimators/weak_hold.py nominal_check)."""
     ekf_cfg = config.ekf
     offset = enabled(config, "time_offset")
     if offset and config.dvl.use_beams:
@@ -605,7 +618,8 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         if fit is not None:
             AH = A @ H
             hph = AH @ fs.P @ AH.T
-        nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis)
+        nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis,
+                                      CALIBRATION if consider_calibration else None)
         if offset and abs(fs.time_offset - offset_centre) > offset_bound:  # held within its window's bound
             fs.time_offset = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
             counters["time_offset_bounded"] = counters.get("time_offset_bounded", 0) + 1
@@ -639,6 +653,11 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
                               "error_state": len(fs.P), **watch.info()}}
     if fs.dvl_error is not None:
         result.info["dvl_correlated_error"] = correlated_info(config)
+    if (calibration is None and fit is None and config.priors.nominal_check
+            and config.priors.hold_weak_information > 0):
+        k0, b_R_d0, _ = weak_hold.calibration_prior(config, log.mounting)
+        d = np.r_[fs.scale - k0, so3_log(np.asarray(b_R_d0).T @ fs.b_R_d)]
+        result.info["filter"]["nominal"] = weak_hold.nominal_check(d, fs.P[np.ix_(CALIBRATION, CALIBRATION)])
     if currents:  # the current at each update, its filtered sigmas (estimators/current.py profile)
         result.info["water_current"] = current.profile(
             np.array([c[0] for c in currents]), np.array([c[1] for c in currents]),

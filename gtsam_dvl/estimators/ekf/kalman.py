@@ -41,10 +41,15 @@ def gate_threshold(probability: float, dof: int) -> float:
 
 
 def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray, kernel: str = "none",
-           k: float = 3.0, gate_nis: float = math.inf) -> tuple[float, bool, bool]:
+           k: float = 3.0, gate_nis: float = math.inf, consider: np.ndarray | None = None
+           ) -> tuple[float, bool, bool]:
     """Kalman update (Joseph form) and injection of the error into the nominal state, unless the normalised
     innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's weight
     (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.
+
+    consider: error-state indices held as "consider" states (a Schmidt-Kalman filter: their gain rows zero, so
+    they keep their values while their uncertainty still enters every other state's covariance; the Joseph form
+    is exact for any gain).
 
     Returns the normalised innovation squared, whether the kernel reduced the measurement's weight and
     whether the gate rejected it.
@@ -60,6 +65,8 @@ def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarra
         Rm = Rm / w
         S = H @ P @ H.T + Rm
     K = np.linalg.solve(S, H @ P).T
+    if consider is not None:
+        K[consider, :] = 0.0
     dx = K @ innovation
     IKH = np.eye(len(P)) - K @ H
     P = IKH @ P @ IKH.T + K @ Rm @ K.T
