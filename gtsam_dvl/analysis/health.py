@@ -444,6 +444,9 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     health.figures["counters"]["time_offset_window_clipped"] = clipped
     if clipped:
         _check_offset_clip(result, clipped, health)
+    if bounded := counters.get("time_offset_bounded", 0):  # the EKF held its offset state at the bound
+        health.figures["counters"]["time_offset_bounded"] = bounded
+        _check_offset_bound(result, bounded, health)
     if breaks := result.info.get("breaks"):  # estimators/pieces.py
         health.flag("degraded", f"smoothed as {len(breaks) + 1} pieces, cut at IMU gaps longer than imu.max_gap_s ("
                     + ", ".join(f"{b['gap_start_s']:.1f}-{b['gap_end_s']:.1f} s" for b in breaks)
@@ -480,6 +483,26 @@ def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
                                 "time_offset_sigma_s")
     else:
         health.flag("note", f"{text}, while the filter converged (it ended within, at {result.time_offset_s:+.3f} s)")
+
+
+def _check_offset_bound(result: NavResult, bounded: int, health: Health) -> None:
+    """The EKF holds its time-offset state within the prior +- 3 prior sigmas (a filter chasing its own error runs
+    the offset away); held there at the end, the stamps are beyond the prior: "failed", as prior_check would say of
+    an unbounded estimate that far."""
+    config = result.estimator_config or EstimatorConfig()
+    recentred = result.info.get("time_offset_prior")
+    centre = float(recentred["centre_s"]) if isinstance(recentred, dict) and "centre_s" in recentred else (
+        config.dvl.time_offset_prior_s)
+    bound = 3.0 * config.dvl.time_offset_sigma_s
+    # at the bound: within a tenth of a prior sigma of it (an update after the last hold moves it a little inward)
+    if abs(result.time_offset_s - centre) >= bound - 0.1 * config.dvl.time_offset_sigma_s:
+        health.flag("failed", f"DVL-IMU time offset is held at its bound ({result.time_offset_s:+.3f} s, the prior "
+                              f"{centre:+.3f} +- 3 x {config.dvl.time_offset_sigma_s:g} s) to the end, after "
+                              f"{bounded} ping(s) pushed it beyond its prior: set [dvl] time_offset_prior_s near the "
+                              "DVL's real offset or widen [dvl] time_offset_sigma_s; do not use this result")
+    else:
+        health.flag("note", f"the EKF held its DVL time offset at its prior's bound (+- 3 sigma) for {bounded} "
+                            f"update(s) while it converged (it ended within, at {result.time_offset_s:+.3f} s)")
 
 
 def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) -> None:

@@ -139,6 +139,11 @@ def test_time_offset_beyond_its_prior_is_reported(mode: str) -> None:
     assert health.figures["counters"]["time_offset_window_clipped"] == clipped
     if mode == "batch":  # its windows are centred on its first estimate, unbounded
         assert clipped == 0
+    elif mode == "ekf":  # the EKF holds the offset state itself at the bound: its windows never pass it
+        bounded = result.info["counters"]["time_offset_bounded"]
+        assert bounded > 0 and clipped == 0
+        assert any(w.startswith("DVL-IMU time offset is held at its bound") and f"after {bounded} ping(s)" in w
+                   for w in health.warnings)
     else:
         assert clipped > 0
         assert any(f"held at that bound for {clipped} ping(s), to the end" in w for w in health.warnings)

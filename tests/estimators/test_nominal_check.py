@@ -69,11 +69,13 @@ def test_a_scale_the_run_shows_is_estimated() -> None:
 
 
 def test_divergence_watch() -> None:
-    """Consistent NIS (1 per dof) never trips it; a run of DIVERGENCE_PINGS at twice the threshold trips it once,
-    at the ping where the running mean crosses."""
+    """Consistent NIS (1 per dof) never trips it, nor a large NIS that falls (a filter converging from a wrong
+    prior); a growing run at twice the threshold trips it once, where the running mean crosses."""
     w = DivergenceWatch()
     rng = np.random.default_rng(0)
     assert not any(w.add(float(t), float(x)) for t, x in enumerate(rng.chisquare(3, 1000) / 3))
+    falling = DivergenceWatch()
+    assert not any(falling.add(float(t), 100.0 * 0.97**t) for t in range(300))
     tripped = [w.add(1000.0 + t, 2 * DIVERGENCE_NIS) for t in range(2 * DIVERGENCE_PINGS)]
     assert sum(tripped) == 1 and w.diverged and "frozen" in w.info()["why"]
     assert 1000.0 < w.diverged_at_s < 1000.0 + DIVERGENCE_PINGS  # type: ignore[operator]

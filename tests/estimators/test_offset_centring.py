@@ -33,7 +33,8 @@ def test_final_centre_is_the_final_offset(turn: tuple[LogData, EstimatorConfig])
     assert c["consistent"] and c["recentred"] >= 1
     assert c["estimate_s"] == pytest.approx(float(est.value[0]))
     assert abs(c["centre_s"] - c["estimate_s"]) <= RECENTRE_FRACTION * c["sigma_s"]
-    assert c["sigma_s"] == pytest.approx(float(est.sigma[0]), rel=1e-6)
+    # (the check's sigma is the last solve's; the result's may be the held calibration's consider covariance)
+    assert c["sigma_s"] == pytest.approx(float(est.sigma[0]), rel=0.1)
     assert c["bias_step_m_s"] <= 1e-4
     assert abs(float(est.value[0]) - TRUE_OFFSET_S) < 3.0 * float(est.sigma[0])
 

@@ -410,8 +410,8 @@ RECENTRE_DETERMINED = 0.5
 
 
 # The filter has diverged when the mean NIS per degree of freedom of its last DIVERGENCE_PINGS updates exceeds
-# DIVERGENCE_NIS (a consistent filter: 1, with a spread of 0.15 over 30 three-axis pings; a ping far off is gated or
-# down-weighted, so only a filter whose own state is wrong gets there). From then on its IMU biases, DVL calibration
+# DIVERGENCE_NIS and is growing (a consistent filter: 1, with a spread of 0.15 over 30 three-axis pings; a ping
+# far off is gated or down-weighted, so only a filter whose own state is wrong gets there). From then on its IMU biases, DVL calibration
 # and time offset take no more DVL updates: a filter that chases its own error with them runs them away (seen: a
 # 38 deg/s turn with stamps 1 s early took the offset to -1.84 s and a lateral accelerometer bias to -1372 micro-g).
 DIVERGENCE_PINGS = 30
@@ -433,10 +433,14 @@ class DivergenceWatch:
         return self.diverged_at_s is not None
 
     def add(self, t: float, nis_per_dof: float) -> bool:
-        """One update's NIS per dof at t (s); True when this one is where the filter is found diverged."""
-        self.recent = (self.recent + [nis_per_dof])[-DIVERGENCE_PINGS:]
-        if (not self.diverged and len(self.recent) == DIVERGENCE_PINGS
-                and float(np.mean(self.recent)) > DIVERGENCE_NIS):
+        """One update's NIS per dof at t (s); True when this one is where the filter is found diverged: the mean of
+        the last DIVERGENCE_PINGS above DIVERGENCE_NIS and above the mean of the DIVERGENCE_PINGS before them (a
+        filter converging from a wrong prior, a mounting tens of degrees off, has a large but falling NIS)."""
+        self.recent = (self.recent + [nis_per_dof])[-2 * DIVERGENCE_PINGS:]
+        if self.diverged or len(self.recent) < 2 * DIVERGENCE_PINGS:
+            return False
+        before, last = (float(np.mean(self.recent[:DIVERGENCE_PINGS])), float(np.mean(self.recent[DIVERGENCE_PINGS:])))
+        if last > DIVERGENCE_NIS and last > before:
             self.diverged_at_s = t
             return True
         return False
@@ -530,6 +534,7 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     current.ekf_start(config, fs, frame.height_m)
     offset_centre = fs.time_offset  # the time offset prior's centre (the configured one, or the calibration's)
     watch = DivergenceWatch()
+    t_first = float(dvl.t[pings[0]])
     hist = History()
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []  # (t, z, W, its covariance, water)
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
@@ -623,7 +628,9 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         if offset and abs(fs.time_offset - offset_centre) > offset_bound:  # held within its window's bound
             fs.time_offset = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
             counters["time_offset_bounded"] = counters.get("time_offset_bounded", 0) + 1
-        if not was_gated and watch.add(t_j, nis / len(z)):
+        # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
+        # has a large and growing NIS while the vehicle gathers speed)
+        if not was_gated and t_j > t_first + config.noise.warmup_s and watch.add(t_j, nis / len(z)):
             counters["diverged_at_ping"] = int(j)
         if fit is not None and not was_gated:
             fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
