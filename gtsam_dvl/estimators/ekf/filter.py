@@ -410,10 +410,11 @@ RECENTRE_DETERMINED = 0.5
 
 
 # The filter has diverged when the mean NIS per degree of freedom of its last DIVERGENCE_PINGS updates exceeds
-# DIVERGENCE_NIS and is growing (a consistent filter: 1, with a spread of 0.15 over 30 three-axis pings; a ping
-# far off is gated or down-weighted, so only a filter whose own state is wrong gets there). From then on its IMU biases, DVL calibration
-# and time offset take no more DVL updates: a filter that chases its own error with them runs them away (seen: a
-# 38 deg/s turn with stamps 1 s early took the offset to -1.84 s and a lateral accelerometer bias to -1372 micro-g).
+# DIVERGENCE_NIS and is growing, after the warm-up window (a consistent filter: 1, with a spread of 0.15 over 30
+# three-axis pings; a ping far off is gated or down-weighted, so only a filter whose own state is wrong gets there).
+# From then on its IMU biases, DVL calibration and time offset take no more DVL updates: a filter that chases its own
+# error with them runs them away (seen: a 38 deg/s turn with stamps 1 s early took the offset to -1.84 s and a
+# lateral accelerometer bias to -1372 micro-g).
 DIVERGENCE_PINGS = 30
 DIVERGENCE_NIS = 6.0
 # (and the time offset, OFFSET, when estimated: its slot exists only then)
