@@ -444,6 +444,12 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     health.figures["counters"]["time_offset_window_clipped"] = clipped
     if clipped:
         _check_offset_clip(result, clipped, health)
+    centring = result.info.get("time_offset_centring") or {}
+    if centring.get("consistent") is False:  # the batch smoother's windows never agreed with its solution
+        health.flag("degraded", f"the DVL time offset's IMU windows did not settle on the estimate (centred at "
+                                f"{centring['centre_s']:+.3f} s, estimate {centring['estimate_s']:+.3f} s, sigma "
+                                f"{centring['sigma_s']:.3f} s) after {centring['recentred']} re-centrings: the offset "
+                                "model is approximate here (sharp turns with a large offset)")
     if bounded := counters.get("time_offset_bounded", 0):  # the EKF held its offset state at the bound
         health.figures["counters"]["time_offset_bounded"] = bounded
         _check_offset_bound(result, bounded, health)

@@ -186,13 +186,13 @@ def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph
     until they agree with the solution (solve_centred). Returns the graph (the recentred one), the solution, the
     last pass's report (its Bayes net serves the marginals) and each pass's iterations and seconds."""
     passes: list[dict[str, float]] = []
-    graph, values, report = solve_centred(builder, graph, values, ordering, passes, progress=progress)
+    graph, values, report = solve_centred(builder, graph, values, ordering, passes, progress=progress, first=True)
     return graph, values, report, passes
 
 
 def solve_centred(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
                   ordering: gtsam.Ordering | ChunkedOrdering, passes: list[dict[str, float]],
-                  progress: ProgressFn | None = None
+                  progress: ProgressFn | None = None, first: bool = False
                   ) -> tuple[gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport]:
     """Gauss-Newton, and with the time offset: while the offset's IMU windows disagree with the solution (their
     centre more than RECENTRE_FRACTION of the offset's sigma from its estimate, or the accelerometer bias taken off
@@ -201,11 +201,12 @@ def solve_centred(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGra
     biases and the ping's attitude of the solution) and solved again. A linearisation point fixed after one early
     pass converges to the wrong answer (0.90 s centred, 1.02 s estimated: the scale 2 % off); re-centred until
     consistent, the final centre is the final offset. Every solve of the batch smoother goes through here (the first,
-    the noise fit's, the weak hold's). builder.offset_centring records the last check; each pass is appended to
+    the noise fit's, the weak hold's). first: the log's first solve, whose first pass stops at FIRST_PASS_TOL (a
+    re-solve starts near its solution). builder.offset_centring records the last check; each pass is appended to
     passes."""
     kw = _solver_options(builder)
     offset = enabled(builder.config, "time_offset")
-    loose = offset
+    loose = offset and first
     values, report = gauss_newton_qr(graph, values, ordering, progress=progress,  # type: ignore[arg-type]
                                      **({**kw, "absolute_tol": max(kw["absolute_tol"], FIRST_PASS_TOL)} if loose
                                         else kw))
