@@ -39,7 +39,7 @@ from gtsam_dvl.analysis.prior_check import check_priors
 from gtsam_dvl.analysis.water_track import check_water_track
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
+from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp, so3_log
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.ping_screen import frozen_runs
 from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
@@ -263,7 +263,8 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     n_R_b, n_v = result.n_R_b, result.n_v
     if np.any(dt_d != 0.0) and n > 1:
         n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, i]) for i in range(3)], axis=1)
-        n_R_b = np.einsum("nij,njk->nik", result.n_R_b, so3_exp(b_omega * dt_d[:, None]).reshape(n, 3, 3))
+        n_R_b = attitude_at(result.t, result.n_R_b, b_omega, result.t + dt_d)
+        b_omega = np.stack([np.interp(result.t + dt_d, result.t, b_omega[:, i]) for i in range(3)], axis=1)
     # the DVL model at each state (factors/dvl_model.py), for all states at once (h is linear in the scale)
     y_unit, _ = dvl_model(n_R_b, n_v, 1.0, b_R_d, b_omega, b_l, jacobians=False)
     y_state = k[:, None] * y_unit
@@ -301,6 +302,28 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again,
                             np.where(seen[:, None], d_y - y_hat, np.nan), j, water)
     return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
+
+
+def attitude_at(t: np.ndarray, n_R_b: np.ndarray, b_omega: np.ndarray, t_q: np.ndarray) -> np.ndarray:
+    """The attitude n_R_b (Q, 3, 3) at the times t_q from the states' (t (N,) sorted, n_R_b (N, 3, 3)): along the
+    geodesic between the two states around each time (their relative rotation, scaled by the fraction of the
+    interval), and beyond the first or last state turned by that state's body rate b_omega (N, 3) rad/s. The
+    geodesic, not a state's rate times the offset: in a turn that starts within the second after a ping, the ping's
+    own rate (near zero) would leave the attitude a second later up to 0.3 rad short, 0.5 m/s at 1.9 m/s, and the
+    residuals of a correct fit 2.5 times the stated noise (realistic-turns, issue 31)."""
+    t = np.asarray(t, dtype=float)
+    t_q = np.asarray(t_q, dtype=float)
+    a = np.clip(np.searchsorted(t, t_q, side="right") - 1, 0, len(t) - 2)
+    span = t[a + 1] - t[a]
+    f = np.where(span > 0, (t_q - t[a]) / np.where(span > 0, span, 1.0), 0.0)
+    inside = (f >= 0.0) & (f <= 1.0)
+    rel = np.einsum("nji,njk->nik", n_R_b[a], n_R_b[a + 1])  # n_R_b[a]^T n_R_b[a + 1]
+    phi = so3_log(rel).reshape(-1, 3) * np.clip(f, 0.0, 1.0)[:, None]
+    # beyond the ends: the nearest state turned by its own rate over the time from it
+    end = np.where(t_q < t[0], 0, len(t) - 1)
+    base = np.where(inside, a, end)
+    phi = np.where(inside[:, None], phi, b_omega[end] * (t_q - t[end])[:, None])
+    return np.einsum("nij,njk->nik", n_R_b[base], so3_exp(phi).reshape(-1, 3, 3))
 
 
 def is_filtered(result: NavResult) -> bool:

@@ -188,10 +188,15 @@ def test_paper_3d_short_has_no_calibration_finding(estimator: str) -> None:
 def test_ekf_sigma_on_a_straight_track_is_not_taken_as_information() -> None:
     """straight-transect (seed 1): the EKF reports the yaw misalignment at about a fifth of its prior's sigma, which
     a straight track cannot give; the verdict says it cannot be determined, judged at the prior's sigma (warn), and
-    the batch smoother's sigma of the same log is near the prior (the direction is truly undetermined)."""
+    the batch smoother's sigma of the same log is near the prior (the direction is truly undetermined). With the
+    nominal check off: on (the default) the EKF's calibration does not pay for its states here and is held at the
+    nominal with the prior's sigma, which the last lines check."""
     sc = load_scenario("straight-transect")
     log = simulate(sc, 1)
-    config = sc.estimator_configuration()
+    d = sc.estimator_configuration().to_dict()
+    default = EstimatorConfig.from_dict(d)
+    d["priors"] = {**d["priors"], "nominal_check": False}
+    config = EstimatorConfig.from_dict(d)
     ekf, batch = run_ekf(log, config), smooth_batch(log, config)
     prior = config.priors.misalignment_sigma_deg[2]
     print("yaw sigma: EKF", ekf.misalignment_sigma_deg[2], "batch", batch.misalignment_sigma_deg[2], "prior", prior)
@@ -201,3 +206,7 @@ def test_ekf_sigma_on_a_straight_track_is_not_taken_as_information() -> None:
     print(*health.warnings, sep="\n")
     assert len(yaw) == 1 and "claims information this motion does not hold" in yaw[0]
     assert health.status in ("warn", "degraded", "failed")
+    held = run_ekf(log, default)
+    print("default:", held.info["calibration_hold"])
+    assert held.info["calibration_hold"]["held"] == ["scale", "misalignment"]
+    assert held.misalignment_sigma_deg[2] == pytest.approx(prior, rel=0.02)
