@@ -28,6 +28,7 @@ from gtsam_dvl.core.states import (
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators import correlated, correlated_fit, current, weak_hold
 from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
+from gtsam_dvl.estimators.constant_error import consider_constant_error
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.depth import depth_samples
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
@@ -84,7 +85,9 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     from gtsam_dvl.estimators.pieces import long_gaps, smooth_pieces  # (pieces.py imports this module)
 
     if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
-        return smooth_pieces(log, stated, gaps, progress, estimator, calibration)
+        pieces = smooth_pieces(log, stated, gaps, progress, estimator, calibration)
+        consider_constant_error(pieces, config)
+        return pieces
     builder, graph, values, ordering, report, passes, dof = solve_log(log, config, noise, timing, calibration,
                                                                       progress, t0)
     config = builder.config  # (at the levels taken from the data)
@@ -98,6 +101,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
         config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1)
     if hold is not None:  # the nominal calibration's check, then weakly determined directions held (weak_hold.py)
         graph, values, result = _hold_calibration(builder, graph, values, ordering, hold, estimator, result)
+    consider_constant_error(result, config)  # (constant_error.py: what no estimator tells from the calibration)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
         t4 = time.perf_counter()

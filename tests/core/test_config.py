@@ -399,7 +399,7 @@ FIXTURES = Path(__file__).parent / "config_fixtures"
 # tolerance. A file without them takes their defaults (the fit on, no preset), also a paper configuration's; but a
 # result's config.json without the correlated error takes it as white, as the runs that wrote it did (test below)
 ADDED = {"noise": None, "current": None, "calibration": None, "imu": {"model"},
-         "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s"},
+         "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s", "constant_error_sigma_m_s"},
          "priors": {"mounting_tolerance_deg", "hold_weak_information", "nominal_check"},
          "ekf": {"recentre_time_offset"},
          "depth": {"noise_multiplier"}, "gnss": {"noise_multiplier"}}
@@ -442,6 +442,7 @@ def test_result_config_json_written_before_loads() -> None:
     paper = EstimatorConfig.paper()
     assert cfg.priors.hold_weak_information == 0.0  # written before the hold: its runs held nothing
     assert not cfg.priors.nominal_check  # nor checked the nominal calibration
+    assert cfg.dvl.constant_error_sigma_m_s == 0.0  # nor gave the calibration a constant DVL error's share
     assert cfg.model_copy(update={"noise": paper.noise, "current": paper.current}) == paper
     assert _without_added(cfg.to_dict()) == _tuples(json.loads(path.read_text())["config"])
 

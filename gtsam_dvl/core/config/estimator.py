@@ -42,7 +42,7 @@ NAMED_CONFIGS: dict[str, dict[str, dict[str, Any]]] = {
     # its DVL error white; every calibration direction estimated, as theirs (the thrust axis's too on a level run)
     "paper": {"priors": {"scale_initial": 0.8, "scale_sigma": 0.5, "hold_weak_information": 0.0,
                          "nominal_check": False},
-              "dvl": {"estimate_time_offset": False, "correlated_sigma_m_s": 0.0},
+              "dvl": {"estimate_time_offset": False, "correlated_sigma_m_s": 0.0, "constant_error_sigma_m_s": 0.0},
               "noise": {"from_data": False}},
 }
 
@@ -199,7 +199,7 @@ def _white_dvl_if_written_before(data: Any) -> Any:
     correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it, and one written
     before [current] existed with water-track pings refused, one written before [priors] hold_weak_information
     existed with every calibration direction estimated, one written before [priors] nominal_check existed without
-    it; a user's file that leaves the keys out takes the defaults."""
+    it, one written before [dvl] constant_error_sigma_m_s existed without it; a user's file that leaves the keys out takes the defaults."""
     dvl = data.get("dvl") if isinstance(data, dict) else None
     if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "current" not in data:
         # written before [current] existed: its runs refused water-track pings
@@ -212,6 +212,10 @@ def _white_dvl_if_written_before(data: Any) -> Any:
     if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and isinstance(priors, dict) and (
             "nominal_check" not in priors):  # its runs did not check the nominal calibration
         data = {**data, "priors": {**priors, "nominal_check": False}}
+    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "constant_error_sigma_m_s" not in dvl:
+        # its runs gave the calibration's covariance no share of a constant DVL error
+        dvl = {**dvl, "constant_error_sigma_m_s": 0.0}
+        data = {**data, "dvl": dvl}
     if (isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "correlated_sigma_m_s" not in dvl
             and dvl.get("model") is None):
         return {**data, "dvl": {**dvl, "correlated_sigma_m_s": 0.0}}

@@ -145,6 +145,12 @@ class DvlConfig(ConfigModel):
     # a 300-600 kHz bottom-track DVL's long-term accuracy, typical of the class (presets.py)
     correlated_sigma_m_s: NonNegative = 0.002
     correlated_tau_s: Positive = 60.0
+    # the DVL's velocity error that stays constant over a run (per dvl_link axis, m/s): no estimator can tell it
+    # from the scale and misalignment, so their covariance takes its share (estimators/constant_error.py); the
+    # default, 2 mm/s, is the offset term of a bottom-track DVL's long-term accuracy (+-0.1 cm/s on the Teledyne
+    # Workhorse Navigator and Nortek DVL1000 sheets) doubled for what a run's bottom and sound speed add (issue 31
+    # measured a few mm/s at 30-60 s averaging on real logs); 0: the calibration's sigmas from the data alone
+    constant_error_sigma_m_s: NonNegative = 0.002
 
     @model_validator(mode="after")
     def _apply_model(self) -> Self:

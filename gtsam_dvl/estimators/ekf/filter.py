@@ -70,6 +70,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators import current, weak_hold
 from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
+from gtsam_dvl.estimators.constant_error import consider_constant_error
 from gtsam_dvl.estimators.correlated import ekf_propagate
 from gtsam_dvl.estimators.correlated import info as correlated_info
 from gtsam_dvl.estimators.current import resolve_water_track, water_pings
@@ -390,6 +391,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             "4 dof); filtered again with the scale and misalignment as consider states (their prior's sigma)")}
     elif check is not None:
         result.info["calibration_hold"] = {"nominal": check, "held": []}
+    consider_constant_error(result, config)  # (constant_error.py: what no estimator tells from the calibration)
     result.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened

@@ -91,6 +91,7 @@ from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, w
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators import correlated, current, weak_hold
 from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
+from gtsam_dvl.estimators.constant_error import consider_constant_error
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.factor_maker import FactorMaker
 from gtsam_dvl.estimators.gaps import check_spacing, filler_due, screened_in_memory, screened_losses
@@ -580,6 +581,7 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
         result.info["dvl_correlated_error"] = correlated.info(config)
     if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
         result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
+    consider_constant_error(result, config)  # (constant_error.py: what no estimator tells from the calibration)
     if estimator.current_history:  # the water current at each state as it left the window (or at the end)
         result.info["water_current"] = estimator.current_profile()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
