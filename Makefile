@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-test
 
-.PHONY: demo test lint typecheck bench clean
+.PHONY: demo test check lint typecheck bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,10 @@ typecheck: $(STAMP)
 
 test: lint typecheck
 	$(BIN)/python -m pytest -n 2 --dist loadgroup -q
+
+# the quick loop while editing: lint, types and the tests not marked slow
+check: lint typecheck
+	$(BIN)/python -m pytest -n 2 --dist loadgroup -q -m "not slow"
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_reader.py

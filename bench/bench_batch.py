@@ -18,7 +18,7 @@ import gtsam
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import extract_result
+from gtsam_dvl.estimators.batch_solve import extract_result
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.solver import gauss_newton_qr
 from gtsam_dvl.io.reader import read_log

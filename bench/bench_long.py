@@ -85,7 +85,7 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
 
     from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.estimators import graph as graph_mod
-    from gtsam_dvl.estimators.batch import extract_result, solve_graph
+    from gtsam_dvl.estimators.batch_solve import extract_result, solve_graph
     from gtsam_dvl.io.reader import read_log
 
     stages: dict[str, float] = {}

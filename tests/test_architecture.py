@@ -86,3 +86,95 @@ def test_the_check_sees_a_violation(tmp_path: Path) -> None:
     src = tmp_path / "m.py"
     src.write_text("def f():\n    from gtsam_dvl.io.reader import read_log\n    import matplotlib.pyplot\n")
     assert [m for _, m in _imports(src)] == ["gtsam_dvl.io.reader", "matplotlib.pyplot"]
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _runtime_imports(path: Path) -> list[str]:
+    """The gtsam_dvl modules a file imports at run time, lazy ones inside functions included; the imports under
+    `if TYPE_CHECKING:` (annotations only, never executed) left out. `from a.b import c` counts as a.b.c when that
+    is a module, else as a.b."""
+    tree = ast.parse(path.read_text(), str(path))
+    skip: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+            skip |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out += [f"{node.module}.{a.name}" for a in node.names]
+    return [m for m in out if m.startswith("gtsam_dvl")]
+
+
+def import_cycles(files: dict[str, Path]) -> list[list[str]]:
+    """The import cycles among the modules (name -> file): the strongly connected components of more than one
+    module of the import graph (Tarjan's algorithm, by hand: a dozen lines, no graph library in the test set)."""
+    def resolve(name: str) -> str | None:
+        while name and name not in files:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    edges = {m: {t for imp in _runtime_imports(p) if (t := resolve(imp)) and t != m} for m, p in files.items()}
+    # a module importing its own package's __init__ (or a package its submodule) is not a cycle of design
+    edges = {m: {t for t in ts if not m.startswith(t + ".") and not t.startswith(m + ".")} for m, ts in edges.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(edges[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(files):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def _package_files() -> dict[str, Path]:
+    files = {_module_name(p): p for p in PKG.rglob("*.py")}
+    factors = PKG / "factors"  # a symlink to the top-level factors/ (pyproject.toml), which rglob does not follow
+    files |= {"gtsam_dvl.factors." + p.stem if p.stem != "__init__" else "gtsam_dvl.factors": p
+              for p in sorted(factors.resolve().glob("*.py"))}
+    return files
+
+
+def test_no_import_cycle() -> None:
+    """No module imports, even lazily inside a function, a module that imports it back (directly or through
+    others): such a cycle hides an order of initialisation that one moved import breaks."""
+    cycles = import_cycles(_package_files())
+    assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
+    root = tmp_path / "gtsam_dvl"
+    root.mkdir()
+    (root / "a.py").write_text("def f():\n    from gtsam_dvl.b import g\n")
+    (root / "b.py").write_text("from gtsam_dvl.a import f\n")
+    (root / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from gtsam_dvl.a import f\n")
+    (root / "d.py").write_text("from gtsam_dvl.c import x\n")
+    files = {"gtsam_dvl." + p.stem: p for p in root.glob("*.py")}
+    assert import_cycles(files) == [["gtsam_dvl.a", "gtsam_dvl.b"]]

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from gtsam_dvl.app.cli import (
+from gtsam_dvl.app.cli_options import (
     CONFIG_HELP,
     EXIT_UNHEALTHY,
     Debug,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 
@@ -12,58 +11,26 @@ from scipy.stats import chi2
 
 from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import T_OFFSET, S, V, W, X
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import (
-    calibration_info,
-    correlated_error,
-    enabled,
-    read_estimates,
-    read_values,
-    shared_keys,
-    water_current,
-)
+from gtsam_dvl.core.states import calibration_info, correlated_error
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated, correlated_fit, current, weak_hold
-from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
+from gtsam_dvl.estimators import correlated, weak_hold
+from gtsam_dvl.estimators.batch_solve import (  # noqa: F401  (re-exported: the solve's names of old)
+    RECENTRE_FRACTION,
+    extract_result,
+    solve_centred,
+    solve_graph,
+    solve_log,
+)
+from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.constant_error import consider_constant_error
 from gtsam_dvl.estimators.current import resolve_water_track
-from gtsam_dvl.estimators.depth import depth_samples
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
 from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.noise_levels import (
-    SCREEN_K,
-    SENSOR_GROUPS,
-    LongLevel,
-    NoiseReport,
-    chi2_ratio,
-    dvl_fit_enabled,
-    dvl_fit_report,
-    fitted_multiplier,
-    honest_multiplier,
-    imu_levels,
-    long_level,
-    median_ping_sigma,
-    multiplier_bounds,
-    robust_inside,
-    sensor_fit_enabled,
-    sensor_fit_report,
-    sensor_multiplier,
-    sensor_not_fitted,
-    with_levels,
-    with_sensor_multiplier,
-)
-from gtsam_dvl.estimators.solver import (
-    ChunkedOrdering,
-    CompactBayesNet,
-    SolveReport,
-    bayes_net_marginals,
-    eliminate,
-    gauss_newton_qr,
-    tail_covariance,
-)
+from gtsam_dvl.estimators.noise_levels import NoiseReport
+from gtsam_dvl.estimators.pieces import long_gaps, smooth_pieces
+from gtsam_dvl.estimators.solver import ChunkedOrdering
 from gtsam_dvl.estimators.timeline import filtering_timeline
 
 
@@ -82,8 +49,6 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
     stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
-    from gtsam_dvl.estimators.pieces import long_gaps, smooth_pieces  # (pieces.py imports this module)
-
     if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
         pieces = smooth_pieces(log, stated, gaps, progress, estimator, calibration)
         consider_constant_error(pieces, config)
@@ -125,297 +90,6 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     if progress:
         progress(1.0)
     return result
-
-
-def solve_log(log: LogData, config: EstimatorConfig, noise: NoiseReport, timing: dict[str, float],
-              calibration: VehicleCalibration | None = None, progress: ProgressFn | None = None,
-              t0: float | None = None) -> tuple[LogGraph, BulkGraph, gtsam.Values, ChunkedOrdering, SolveReport,
-                                                list[dict[str, float]], int]:
-    """The batch smoother's solve of a screened log (config with "auto" resolved): the IMU levels from the data,
-    the graph in bulk, Gauss-Newton (both passes with the time offset) and the DVL noise fit. Returns the LogGraph,
-    the graph, the solution, the ordering, the last pass's report, each pass's figures and the chi^2's degrees of
-    freedom; noise records the levels used, timing the phases' seconds (t0: when the run began)."""
-    t0 = time.perf_counter() if t0 is None else t0
-    config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
-    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None,
-                       calibration=calibration)
-    timing["preintegrate"] = time.perf_counter() - t0
-    t1 = time.perf_counter()
-    # the DVL and IMU factors evaluated in bulk (estimators/bulk.py: the same objective as builder.build())
-    bulk, values = builder.build_bulk()
-    ordering = builder.elimination_ordering()
-    # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
-    dof = graph_rows(bulk) - values.dim()
-    if enabled(builder.config, "time_offset"):  # the offset's first guess (estimators/offset_guess.py)
-        guess = builder.offset_guess()
-        builder.offset_centring = {"guess": guess.as_dict()}
-        if guess.used:
-            values.update(T_OFFSET, np.array([guess.dt_s]))
-            builder.recentre_time_offset(bulk, guess.dt_s)
-    timing["build"] = time.perf_counter() - t1
-    if progress:
-        progress(0.2)
-
-    t2 = time.perf_counter()
-    graph, values, report, passes = solve_graph(builder, bulk, values, ordering,
-                                                progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
-    if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
-        raise GtsamDvlError("solve_log: the batch smoother's bulk graph expected")
-    if dvl_fit_enabled(builder.config) or fitted_sensors(builder) or correlated_fit.fit_enabled(builder.config):
-        values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
-    timing["solve"] = time.perf_counter() - t2
-    return builder, graph, values, ordering, report, passes, dof
-
-
-# A first pass that the time offset's re-centring follows stops once an iteration lowers the error by less than
-# this (half a chi^2 unit: the step is within one sigma, Mahalanobis, of the first pass's solution), whatever the
-# configured tolerances: its solution only centres the offset's windows, and the passes after it converge to the
-# configured tolerances.
-FIRST_PASS_TOL = 0.5
-# The time offset's IMU windows are consistent with a solution when their centre is within this fraction of the
-# offset's sigma of its estimate, and the accelerometer bias taken off their samples differs from the estimate's
-# by less than RECENTRE_BIAS_M_S over the offset (a phantom velocity of 0.1 mm/s, 50 ppm of scale at 2 m/s: far
-# below what a DVL's slow error of a few mm/s lets the calibration resolve).
-RECENTRE_FRACTION = 0.1
-RECENTRE_BIAS_M_S = 1e-4
-# Re-centrings at the most in one solve_centred call; each is one more Gauss-Newton pass. The offset's first-order
-# model converges in two or three from a guess within its window (docs/results.md): more says the model is off.
-MAX_RECENTRES = 6
-
-
-def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                ordering: gtsam.Ordering | ChunkedOrdering, progress: ProgressFn | None = None
-                ) -> tuple[gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport, list[dict[str, float]]]:
-    """Gauss-Newton (QR) on a LogGraph's graph, with [dvl] estimate_time_offset the offset's windows re-centred
-    until they agree with the solution (solve_centred). Returns the graph (the recentred one), the solution, the
-    last pass's report (its Bayes net serves the marginals) and each pass's iterations and seconds."""
-    passes: list[dict[str, float]] = []
-    graph, values, report = solve_centred(builder, graph, values, ordering, passes, progress=progress, first=True)
-    return graph, values, report, passes
-
-
-def solve_centred(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                  ordering: gtsam.Ordering | ChunkedOrdering, passes: list[dict[str, float]],
-                  progress: ProgressFn | None = None, first: bool = False
-                  ) -> tuple[gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport]:
-    """Gauss-Newton, and with the time offset: while the offset's IMU windows disagree with the solution (their
-    centre more than RECENTRE_FRACTION of the offset's sigma from its estimate, or the accelerometer bias taken off
-    their samples more than RECENTRE_BIAS_M_S / |dt| from the estimate's), the windows re-centred on the solution
-    (LogGraph.recentre_time_offset: the offset's velocity rate averaged over [t, t + dt_hat], a secant, with the
-    biases and the ping's attitude of the solution) and solved again. A linearisation point fixed after one early
-    pass converges to the wrong answer (0.90 s centred, 1.02 s estimated: the scale 2 % off); re-centred until
-    consistent, the final centre is the final offset. Every solve of the batch smoother goes through here (the first,
-    the noise fit's, the weak hold's). first: the log's first solve, whose first pass stops at FIRST_PASS_TOL (a
-    re-solve starts near its solution). builder.offset_centring records the last check; each pass is appended to
-    passes."""
-    kw = _solver_options(builder)
-    offset = enabled(builder.config, "time_offset")
-    loose = offset and first
-    values, report = gauss_newton_qr(graph, values, ordering, progress=progress,  # type: ignore[arg-type]
-                                     **({**kw, "absolute_tol": max(kw["absolute_tol"], FIRST_PASS_TOL)} if loose
-                                        else kw))
-    passes.append({"iterations": report.iterations, **report.timing_s})
-    recentres = 0
-    while offset:
-        check = offset_check(builder, values, report)
-        builder.offset_centring = {**builder.offset_centring, **check, "recentred": recentres}
-        if check["consistent"] and not loose:
-            break
-        if not check["consistent"]:
-            if recentres >= MAX_RECENTRES:
-                break  # reported: offset_centring["consistent"] is False
-            graph = builder.recentre_time_offset(graph, check["estimate_s"], values)
-            recentres += 1
-        values, report = gauss_newton_qr(graph, values, ordering, **kw)  # type: ignore[arg-type]
-        passes.append({"iterations": report.iterations, **report.timing_s})
-        loose = False
-    return graph, values, report
-
-
-def offset_check(builder: LogGraph, values: gtsam.Values, report: SolveReport) -> dict[str, Any]:
-    """Whether the time offset's windows agree with the solution values (solve_centred): the estimate, its sigma
-    (from the last Bayes net's tail: core/states.py puts the shared keys last), the windows' centre and bias."""
-    dt_hat = float(read_values(values, builder.config)["time_offset"][0])
-    sigma = math.nan
-    if report.bayes_net is not None:
-        sigma = float(math.sqrt(tail_covariance(report.bayes_net, [T_OFFSET])[0, 0]))
-    bias_now, _ = builder.offset_state(builder.offset_rows, values, attitude=False)
-    assert bias_now is not None
-    step = np.abs(builder.offset_accel_bias - bias_now[0])
-    bias_step = float(step.max()) * abs(dt_hat) if step.size else 0.0
-    centre_ok = abs(dt_hat - builder.offset_centre) <= RECENTRE_FRACTION * sigma
-    return {"estimate_s": dt_hat, "sigma_s": sigma, "centre_s": builder.offset_centre,
-            "bias_step_m_s": bias_step, "consistent": bool(centre_ok and bias_step <= RECENTRE_BIAS_M_S)}
-
-
-def _solver_options(builder: LogGraph) -> dict[str, Any]:
-    """gauss_newton_qr's options from the [solver] section, gravity following the positions."""
-    s = builder.config.solver
-    return dict(max_iterations=s.max_iterations, relative_tol=s.relative_error_tol,
-                absolute_tol=s.absolute_error_tol, before_iteration=builder.refresh_gravity)
-
-
-def fitted_sensors(builder: LogGraph) -> list[str]:
-    """The sensor groups besides the DVL whose noise factor the batch fit takes (SENSOR_GROUPS): fitting
-    enabled ([noise] fit_depth, fit_gnss) and factors in the graph."""
-    return [s for s in SENSOR_GROUPS if sensor_fit_enabled(builder.config, s) and len(builder.factor_slots.get(s, ()))]
-
-
-def _long_level(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values, t_rows: np.ndarray,
-                ew: np.ndarray, robust_k: float) -> LongLevel | None:
-    """The long-window level (noise_levels.long_level) of sensor's rows within the robust screen: the DVL's
-    bottom-track rows with the estimated correlated error E added back (correlated_fit.residual_series: what the
-    DVL's slow error is, not what E left of it), whitened at the current level."""
-    if sensor == "dvl" and correlated_error(builder.config) and graph.bulk.pings.dim == 3:
-        t, r = correlated_fit.residual_series(graph.bulk, values)
-        ok = np.isfinite(r).all(axis=1)
-        return long_level(t[ok], np.einsum("nij,nj->ni", graph.bulk.whiten[ok], r[ok]))
-    inside = robust_inside(np.einsum("ni,ni->n", ew, ew), ew.shape[1], robust_k)
-    if sensor == "dvl" and graph.bulk.water is not None:  # the slow error is the bottom track's
-        inside &= ~graph.bulk.water
-    return long_level(t_rows[inside], ew[inside])
-
-
-def _fit_rows(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values
-              ) -> tuple[np.ndarray, np.ndarray]:
-    """The times (N,) s and whitened errors (N, m) at values of sensor's rows that its noise fit takes: the DVL's
-    bulk rows (before the robust kernel), or the (non-robust) depth or GNSS factors at their slots (each at its
-    state's time)."""
-    if sensor == "dvl":
-        return graph.bulk.t_ping, graph.bulk.whitened_errors(values)
-    t_states = np.array([ep.t for ep in builder.epochs])
-    factors = [graph.graph.at(i) for i in builder.factor_slots[sensor]]
-    dim = 3 if sensor == "gnss" else 1
-    ew = np.array([np.asarray(f.whitenedError(values))  # type: ignore[attr-defined,type-var]
-                   for f in factors], dtype=float).reshape(-1, dim)
-    t = np.array([t_states[gtsam.Symbol(f.keys()[0]).index()] for f in factors], dtype=float)
-    return t, ew
-
-
-def _sensor_sigma(builder: LogGraph, sensor: str) -> float:
-    """The median sigma of sensor's factors at builder.config's factor (m; a fix's per axis)."""
-    if sensor == "depth":
-        assert builder.log.depth is not None
-        sigma = depth_samples(builder.log.depth, builder.config.depth, builder.frame).sigma
-    else:
-        plan = builder.gnss_plan()
-        assert plan is not None
-        cov = plan.cov[plan.mask("used")]
-        sigma = np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0)
-    return float(np.median(sigma)) if len(sigma) else math.nan
-
-
-def _replace_sensor_factors(builder: LogGraph, graph: BulkGraph, sensor: str) -> None:
-    """sensor's factors in graph made again at builder.config's noise factor, in their slots."""
-    factors = builder.depth_factors() if sensor == "depth" else builder.gnss_factors()
-    slots = builder.factor_slots[sensor]
-    if len(factors) != len(slots):
-        raise GtsamDvlError(f"fit_dvl_noise: {len(factors)} {sensor} factors made again for {len(slots)} slots")
-    for i, f in zip(slots, factors, strict=True):
-        graph.graph.replace(i, f)
-
-
-def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: ChunkedOrdering,
-                  report: SolveReport, passes: list[dict[str, float]], noise: NoiseReport
-                  ) -> tuple[gtsam.Values, SolveReport]:
-    """The variance components (estimators/noise_levels.py) of the DVL and of the depth and GNSS factors
-    (fitted_sensors), each fitted on the solution from its own whitened residuals, and re-solved with until none
-    changes by more than [noise] fit_tolerance, in at most fit_passes solves (the first included). A factor is
-    applied only with a re-solve, so the solution and its Bayes net are always at the weights reported; a
-    sensor with fewer than min_rows rows keeps its configured factor. With [noise] fit_correlated, the DVL's
-    correlated error's level and time constant too (estimators/correlated_fit.py; settled within
-    correlated_tolerance). builder.config takes the factors used ([dvl], [depth], [gnss] noise_multiplier, [dvl]
-    correlated_sigma_m_s and correlated_tau_s), noise.dvl, noise.depth, noise.gnss and noise.dvl_correlated say
-    how they came."""
-    cfg = builder.config
-    n = cfg.noise
-    bulk = graph.bulk
-    sensors = (["dvl"] if dvl_fit_enabled(cfg) else []) + fitted_sensors(builder)
-    used = {s: sensor_multiplier(cfg, s) for s in sensors}
-    configured = {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"}
-    rows: dict[str, int] = {}
-    fits: dict[str, tuple[float, bool]] = {}
-    stated = dict(used)  # the levels given (configured, preset, message covariances): the honest level's floor
-    levels: dict[str, dict[str, Any]] = {}  # the white fit and the long-window level behind each fit
-    gm_configured = builder.config
-    gm_slots = builder.factor_slots.get("correlated", range(0)) if correlated_fit.fit_enabled(cfg) else range(0)
-    t_states = np.array([ep.t for ep in builder.epochs])
-    gm_fit: correlated_fit.LevelFit | None = None
-    settled, solves = False, 1
-    while True:
-        for s in list(sensors):
-            t_rows, ew = _fit_rows(builder, graph, s, values)
-            dim = ew.shape[1]
-            k = bulk.robust_k if s == "dvl" else SCREEN_K
-            ratio, used_rows = chi2_ratio(np.einsum("ni,ni->n", ew, ew), dim, k)
-            rows[s] = used_rows * dim
-            if rows[s] < n.min_rows or not np.isfinite(ratio):
-                sensors.remove(s)  # keeps the factor it has
-                fits.pop(s, None)
-                if s == "dvl":
-                    noise.dvl = {"multiplier": used[s], "rows": used_rows, "why": f"DVL noise not fitted: "
-                                 f"{used_rows} usable residual rows, fewer than [noise] min_rows = {n.min_rows}"}
-                else:
-                    setattr(noise, s, sensor_not_fitted(s, used[s], rows[s], n.min_rows))
-                continue
-            white, at_bound = fitted_multiplier(used[s], ratio, cfg, s)
-            long = _long_level(builder, graph, s, values, t_rows, ew, k)
-            # only GNSS fixes observe the DVL's slow error (the IMU cannot, at 30-60 s); nothing in these logs
-            # observes the depth sensor's or the fixes' own
-            can_lower = s == "dvl" and len(builder.factor_slots.get("gnss", ())) > 0
-            honest, why = honest_multiplier(white, used[s], stated[s], long, multiplier_bounds(cfg, s), can_lower)
-            fits[s] = honest, at_bound and honest == white
-            levels[s] = {"white_multiplier": white, "stated_multiplier": stated[s], "honest_why": why,
-                         "long": None if long is None else long.as_dict(used[s])}
-        moving = [s for s in sensors if abs(fits[s][0] / used[s] - 1.0) > n.fit_tolerance]
-        if gm_slots:  # the correlated error's level and time constant (correlated_fit.py)
-            d = builder.config.dvl
-            gm_fit = correlated_fit.fit_level(*correlated_fit.residual_series(bulk, values), builder.config)
-            if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
-                moving.append("dvl_correlated")
-        if not moving:
-            settled = True
-            break
-        if solves >= n.fit_passes:
-            break
-        for s in moving:
-            if s == "dvl_correlated":
-                assert gm_fit is not None
-                builder.config = correlated_fit.with_level(builder.config, gm_fit.sigma_m_s, gm_fit.tau_s)
-                bulk.config = correlated_fit.with_level(bulk.config, gm_fit.sigma_m_s, gm_fit.tau_s)
-                correlated_fit.replace_factors(graph.graph, gm_slots, builder.config, t_states)
-                continue
-            new = fits[s][0]
-            if s == "dvl":
-                bulk.whiten *= used[s] / new  # W ~ 1 / sigma
-            else:
-                builder.config = with_sensor_multiplier(builder.config, s, new)
-                _replace_sensor_factors(builder, graph, s)
-            used[s] = new
-        graph_c, values, report = solve_centred(builder, graph, values, ordering, passes)
-        assert isinstance(graph_c, BulkGraph)
-        solves += 1
-    if gm_fit is not None:
-        d = builder.config.dvl
-        how = f"{solves} solve" + ("s" if solves > 1 else "")
-        if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
-            how += (f", not settled: the last fit asked for {gm_fit.sigma_m_s * 1e3:.3g} mm/s over "
-                    f"{gm_fit.tau_s:.3g} s")
-        noise.dvl_correlated = correlated_fit.fit_report(gm_configured, builder.config, gm_fit, solves, how)
-    for s in sensors:
-        builder.config = with_sensor_multiplier(builder.config, s, used[s])
-        how = f"{solves} solve" + ("s" if solves > 1 else "")
-        new, at_bound = fits[s]
-        if not settled and abs(new / used[s] - 1.0) > n.fit_tolerance:
-            how += f", not settled: the last fit asked for x {new / used[s]:.3g}"
-        if s == "dvl":
-            noise.dvl = dvl_fit_report(builder.config, used[s], rows[s], solves, at_bound,
-                                       median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]), how)
-        else:
-            setattr(noise, s, sensor_fit_report(builder.config, s, *configured[s], used[s], rows[s], solves,
-                                                at_bound, how))
-        with_levels(getattr(noise, s), levels[s], used[s])
-    return values, report
 
 
 def _hold_calibration(builder: LogGraph, graph: BulkGraph, values: gtsam.Values,
@@ -481,53 +155,3 @@ def _pinned(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering:
     _, held, _ = solve_centred(builder, BulkGraph(pinned, graph.bulk, graph.imu), values, ordering, [])
     increase = 2.0 * (graph.error(held) - free_error)
     return held, increase, BulkGraph(consider, graph.bulk, graph.imu)
-
-
-def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                   ordering: gtsam.Ordering | ChunkedOrdering, estimator: str = "batch",
-                   bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None) -> NavResult:
-    """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
-    the solver's last elimination instead of linearising again. The shared states (core/states.py) at the last
-    state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own, and all of
-    them jointly (shared_joint_cov)."""
-    cfg = builder.config
-    n = len(builder.epochs)
-    last = shared_keys(cfg, n - 1)
-    calib_group = tuple(shared_keys(cfg, n - 1, block=True))
-    groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
-    groups += [(k,) for k in last if k not in calib_group]
-    shared_group = tuple(last)  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
-    if shared_group != calib_group:
-        groups.append(shared_group)
-    bn = bayes_net or eliminate(graph.linearize(values), ordering)
-    marg = bayes_net_marginals(bn, groups)
-
-    poses = [values.atPose3(X(i)) for i in range(n)]
-    n_p = np.array([p.translation() for p in poses])
-    n_R_b = np.array([p.rotation().matrix() for p in poses])
-    n_v = np.array([values.atVector(V(i)) for i in range(n)])
-    joints = [marg.joints[(X(i), V(i))] for i in range(n)]
-    pose_cov = np.array([j[:6, :6] for j in joints])
-    vel_cov = np.array([j[6:, 6:] for j in joints])
-    pose_vel_cross = np.array([j[:6, 6:] for j in joints])
-    calibration = read_estimates(values, marg.covariances, cfg, n - 1)
-    # epochs' body rates already exclude Earth rate; remove the estimated gyro bias too
-    b_omega = np.array([e.b_omega for e in builder.epochs]) - calibration["gyro_bias"].value
-    info: dict[str, Any] = {"alignment": builder.maker.alignment_info(), "counters": dict(builder.counters),
-                            "epochs": n, "imu_gaps": builder.gaps.summary()}
-    if water_current(cfg):  # the water current per state with its marginal sigmas (estimators/current.py)
-        info["water_current"] = current.profile(
-            np.array([e.t for e in builder.epochs]), n_p[:, 2], np.array([values.atVector(W(i)) for i in range(n)]),
-            np.array([marg.covariances[W(i)] for i in range(n)]), cfg, current.epochs_with_water(builder),
-            {b: (values.atVector(S(b)), marg.covariances[S(b)]) for b in builder.shear})
-    return NavResult(
-        estimator=estimator,
-        t=np.array([e.t for e in builder.epochs]),
-        n_p=n_p, n_R_b=n_R_b, n_v=n_v, pose_cov=pose_cov, vel_cov=vel_cov,
-        calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
-        b_omega=b_omega, pose_vel_cross=pose_vel_cross,
-        calib_joint_cov=marg.joints[calib_group], shared_joint_cov=marg.joints[shared_group],
-        info=info, config=cfg.to_dict(),
-        alignment_method=builder.alignment.method,
-        dvl_pings=builder.usable,
-    )

@@ -55,7 +55,7 @@ from gtsam_dvl.core.states import (
 )
 from gtsam_dvl.core.states import calibration_states as states_held
 from gtsam_dvl.core.types import LogData, Mounting
-from gtsam_dvl.estimators.batch import extract_result, solve_log
+from gtsam_dvl.estimators.batch_solve import extract_result, solve_log
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.current import resolve_water_track
 from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses

@@ -33,7 +33,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import extract_result
+from gtsam_dvl.estimators.batch_solve import extract_result
 from gtsam_dvl.estimators.bulk import BulkGraph
 from gtsam_dvl.estimators.gaps import find_gaps
 from gtsam_dvl.estimators.multi_dive import (

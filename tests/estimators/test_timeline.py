@@ -10,7 +10,7 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.estimators.batch import extract_result
+from gtsam_dvl.estimators.batch_solve import extract_result
 from gtsam_dvl.estimators.graph import LogGraph
 from gtsam_dvl.estimators.solver import gauss_newton_qr
 from gtsam_dvl.estimators.timeline import filtering_timeline

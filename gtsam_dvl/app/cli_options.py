@@ -1,0 +1,123 @@
+"""What the `gtsam-dvl` commands share: the Typer app, the exit codes, the one-line error handling and the reading
+options. Its own module so that app/cli.py and app/cli_campaign.py (the commands) both import it and not each
+other (no import cycle, tests/test_architecture.py)."""
+
+from __future__ import annotations
+
+import functools
+import signal
+from collections.abc import Callable
+from typing import Annotated, Any, TypeVar
+
+import typer
+
+from gtsam_dvl.core.errors import GtsamDvlError
+
+# rich_markup_mode=None: click's plain help, where a boolean flag reads as a flag ("--salvage"); typer 0.29's
+# rich help prints "<bool>" after every flag, as if it took a value
+# add_completion: typer's --install-completion / --show-completion (bash, zsh, fish, PowerShell); -h as well as
+# --help on every command (click passes help_option_names down to the subcommands)
+app = typer.Typer(add_completion=True, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
+                  context_settings={"help_option_names": ["-h", "--help"]},
+                  help="Self-calibrating IMU + DVL navigation on GTSAM.")
+_state = {"debug": False}
+F = TypeVar("F", bound=Callable[..., Any])
+EXIT_UNHEALTHY = 3  # smooth --strict: the run's health is "degraded" or "failed"
+UNHEALTHY = ("degraded", "failed")  # --strict fails on these; "warn" (weak geometry) is an honest result
+EXIT_SIGTERM = 128 + signal.SIGTERM  # the shell's convention for a process ended by SIGTERM
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that every atomic writer removes its temporary files (a
+    BaseException, like KeyboardInterrupt, so that no `except Exception` swallows it)."""
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    from gtsam_dvl.io import atomic
+
+    if atomic.deferring():  # outputs being renamed into place: finish the set first, then stop
+        atomic.defer(signum)
+        return
+    raise Terminated(signum)
+
+
+def _error_text(exc: Exception) -> str:
+    """An error's line in the style of the others: an OSError as "PATH: what went wrong" rather than Python's
+    "[Errno 17] File exists: 'PATH'"."""
+    if isinstance(exc, OSError) and exc.strerror:
+        what = exc.strerror[:1].lower() + exc.strerror[1:]
+        return f"{exc.filename}: {what}" if exc.filename is not None else what
+    return str(exc)
+
+
+def _user_errors(func: F) -> F:
+    """Turn a GtsamDvlError (or a bad-input OSError) into one line on stderr and exit code 1."""
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        if kwargs.get("debug"):  # --debug after the command name (before it: the callback _root)
+            _state["debug"] = True
+        try:
+            return func(*args, **kwargs)
+        except BrokenPipeError:  # output piped into `head` and closed: not an error of ours
+            raise typer.Exit(0) from None
+        except (GtsamDvlError, OSError) as exc:
+            if _state["debug"]:
+                raise
+            typer.echo(f"gtsam-dvl: error: {_error_text(exc)}", err=True)
+            raise typer.Exit(1) from None
+
+    return wrapper  # type: ignore[return-value]
+
+
+ImuTopic = Annotated[str, typer.Option("--imu-topic", help="IMU topic (sensor_msgs/msg/Imu).")]
+Debug = Annotated[bool, typer.Option("--debug", help="Show tracebacks (also accepted before the command).")]
+Quiet = Annotated[bool, typer.Option("-q", "--quiet", help="No progress bars.")]
+DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
+Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
+Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages; "
+                                                      "shift the IMU stamps back across a clock step.")]
+SchedulerTimeout = Annotated[float, typer.Option("--scheduler-timeout", metavar="SECONDS",
+                                                 help="How long to try to reach --scheduler before giving up.")]
+
+
+DepthTopic = Annotated[str | None, typer.Option(
+    "--depth-topic", help="Depth topic: sensor_msgs/msg/FluidPressure, or a PoseWithCovarianceStamped / Odometry "
+    "whose z is -depth (default /depth/pressure if the log has it; 'none': no depth).")]
+
+
+GnssTopic = Annotated[str | None, typer.Option(
+    "--gnss-topic", help="GNSS topic (sensor_msgs/msg/NavSatFix; default /gnss/fix if the log has it; 'none': no "
+    "GNSS). The first good fix gives the map origin when the log has none.")]
+AttitudeTopic = Annotated[str | None, typer.Option(
+    "--attitude-topic", help="Attitude topic for the initial attitude (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry "
+    "or PoseWithCovarianceStamped; default: the IMU topic's orientation when its covariance is valid; 'none').")]
+DvlWaterTopic = Annotated[str | None, typer.Option(
+    "--dvl-water-topic", help="A separate water-track topic (TwistWithCovarianceStamped or TwistStamped: velocity "
+    "relative to the water), merged with the DVL's pings in stamp order.")]
+TruthTopic = Annotated[str | None, typer.Option(
+    "--truth-topic", help="Ground-truth odometry topic (nav_msgs/msg/Odometry; default /ground_truth/odometry).")]
+
+
+def _read_options(imu_topic: str | None, dvl_topic: str | None, salvage: bool | None, repair: bool | None,
+                  depth_topic: str | None = None, gnss_topic: str | None = None,
+                  attitude_topic: str | None = None, truth_topic: str | None = None,
+                  dvl_water_topic: str | None = None) -> dict[str, Any]:
+    """The reading options given on the command line (the topics left out when not given)."""
+    options: dict[str, Any] = {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
+    extra = {"depth_topic": depth_topic, "gnss_topic": gnss_topic, "attitude_topic": attitude_topic,
+             "truth_topic": truth_topic, "dvl_water_topic": dvl_water_topic}
+    return {**options, **{k: v for k, v in extra.items() if v is not None}}
+
+
+def _builtin_scenarios() -> list[str]:
+    """The scenarios shipped with the package (listed without importing the simulator: --help stays instant)."""
+    from importlib import resources
+
+    files = resources.files("gtsam_dvl.scenarios")
+    return sorted(p.name[: -len(".toml")] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+CONFIG_HELP = ("Estimator configuration: a TOML file, a result's config.json, or a named configuration ('default': "
+               "a real DVL, scale prior 1 +- 1 %; 'paper': Pan & Wu's priors, scale 0.8 +- 0.5). Default: the one "
+               "the log's (or scenario's) estimator_config names, else 'default'.")
