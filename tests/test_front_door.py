@@ -1,6 +1,6 @@
 """The package's front door (gtsam_dvl/__init__.py): the names a script needs, each the library's own object,
-imported on first use (`import gtsam_dvl` loads neither the reader, the simulator, scipy nor matplotlib), and an unknown name one clear
-AttributeError."""
+imported on first use (`import gtsam_dvl` loads neither the reader, the simulator, scipy nor matplotlib), and an
+unknown name one clear AttributeError."""
 
 from __future__ import annotations
 

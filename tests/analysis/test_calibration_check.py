@@ -18,7 +18,7 @@ from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
 from gtsam_dvl.core.states import Estimate, joint_slices
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.run import run_estimator
-from tests.estimators.test_calibration_prior import calibration_at_truth
+from tests.support.calibration import calibration_at_truth
 
 CONFIG = EstimatorConfig()
 NAMES = ["scale", "misalignment", "time_offset"]

@@ -17,7 +17,7 @@ from gtsam_dvl.core.calibration import iso_date
 from gtsam_dvl.io.calibration_file import read_calibration
 from gtsam_dvl.io.result_writer import file_sha256
 from gtsam_dvl.io.writer import write_log
-from tests.estimators.test_calibration_prior import MOVING
+from tests.support.calibration import MOVING
 from tests.support.scenarios import simulate_variant
 
 T0_S = 1_790_000_000  # 2026-09-21
@@ -91,7 +91,7 @@ def test_live_takes_the_calibration(dives: tuple[Path, Path], tmp_path: Path) ->
     """`live --calibration`: the online estimator's prior, the verdict in the health it prints."""
     from gtsam_dvl.io.calibration_file import write_calibration
     from gtsam_dvl.io.reader import read_log
-    from tests.estimators.test_calibration_prior import calibration_at_truth
+    from tests.support.calibration import calibration_at_truth
 
     first, _ = dives
     path = write_calibration(tmp_path / "auv.toml", calibration_at_truth(read_log(first)))
@@ -106,7 +106,7 @@ def test_montecarlo_run_takes_the_calibration(tmp_path: Path) -> None:
     from gtsam_dvl.app.calibration_files import calibration_data
     from gtsam_dvl.app.campaign.montecarlo import run_seed
     from gtsam_dvl.io.calibration_file import write_calibration
-    from tests.estimators.test_calibration_prior import STATIC, calibration_at_truth
+    from tests.support.calibration import STATIC, calibration_at_truth
     from tests.support.scenarios import scenario_raw
 
     raw = scenario_raw(segments=STATIC, t0_s=T0_S)

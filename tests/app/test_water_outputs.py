@@ -17,7 +17,8 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch import smooth_batch
 from gtsam_dvl.io.result_writer import TOPICS, write_result_log
-from tests.estimators.test_water_current import N_C, _config, with_water_track
+from tests.support.water import N_C, with_water_track
+from tests.support.water import water_config as _config
 
 
 @pytest.fixture(scope="module")

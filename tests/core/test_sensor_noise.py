@@ -16,6 +16,7 @@ from gtsam_dvl.core.sensor_noise import (
     quantisation_step,
 )
 from gtsam_dvl.core.units import DEG_PER_H
+from tests.support.numerical import gauss_markov
 
 RATE_HZ = 100.0
 N = 60_000  # 10 minutes at 100 Hz
@@ -140,16 +141,6 @@ def test_allan_deviation_finds_a_bias_floor() -> None:
     fit = allan_fit(*allan_deviation(x, RATE_HZ))
     assert fit.white_density == pytest.approx(density, rel=0.10)
     assert not fit.bias_bound
-
-
-def gauss_markov(n: int, dt: float, sigma: float, tau: float, rng: np.random.Generator) -> np.ndarray:
-    phi = np.exp(-dt / tau)
-    g = np.empty(n)
-    g[0] = rng.normal(0.0, sigma)
-    drive = rng.normal(0.0, sigma * np.sqrt(1.0 - phi**2), n)
-    for i in range(1, n):
-        g[i] = phi * g[i - 1] + drive[i]
-    return g
 
 
 def test_gauss_markov_fit_over_seeds() -> None:

@@ -19,7 +19,7 @@ from gtsam_dvl.estimators.correlated_fit import fit_enabled, fit_level, held_cor
 from gtsam_dvl.estimators.run import run_trajectory_estimator
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
-from tests.core.test_sensor_noise import gauss_markov
+from tests.support.numerical import gauss_markov
 
 
 def _series(seed: int, sigma: float, n: int = 1200) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import DepthData, LogData
 from gtsam_dvl.estimators import current
 from gtsam_dvl.estimators.ekf.strapdown import FilterState, NavState
-from tests.estimators.test_water_current import with_water_track
+from tests.support.water import with_water_track
 
 C0 = np.array([0.25, -0.15])  # m/s, east, north: the current at the surface
 SHEAR = np.array([-0.008, 0.006])  # m/s per m of depth

@@ -21,8 +21,8 @@ from gtsam_dvl.sim.dvl import GaussMarkov, correlated_error
 from gtsam_dvl.sim.imu import quantise
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from gtsam_dvl.sim.stream import simulate_chunked
-from tests.sim.test_sim_physics import _check_window
 from tests.support.scenarios import scenario_raw
+from tests.support.strapdown import _check_window
 
 Q_GYRO = (1e-4, 2e-4, 5e-5)  # rad/s, a different step per axis
 Q_ACCEL = 1e-4  # m/s^2, one step for all three

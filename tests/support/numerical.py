@@ -61,3 +61,15 @@ def numerical_jacobian(f: Callable[..., Any], args: Sequence[Any], index: int,
 def numerical_jacobians(f: Callable[..., Any], args: Sequence[Any], delta: float = 1e-6) -> list[np.ndarray]:
     """[d f / d args[i] for every i]: one block per argument, in order."""
     return [numerical_jacobian(f, args, i, delta) for i in range(len(args))]
+
+
+def gauss_markov(n: int, dt: float, sigma: float, tau: float, rng: np.random.Generator) -> np.ndarray:
+    """n samples at dt of a stationary first-order Gauss-Markov process (sigma, time constant tau), exactly
+    discretised."""
+    phi = np.exp(-dt / tau)
+    g = np.empty(n)
+    g[0] = rng.normal(0.0, sigma)
+    drive = rng.normal(0.0, sigma * np.sqrt(1.0 - phi**2), n)
+    for i in range(1, n):
+        g[i] = phi * g[i - 1] + drive[i]
+    return g
