@@ -322,9 +322,9 @@ class OnlineConfig(ConfigModel):
 
 
 class EkfConfig(ConfigModel):
-    """Options of the error-state EKF (TOML section [ekf]). Below a speed ("slow": under
-    min_calibration_speed_m_s, or under calibration_speed_sigmas velocity sigmas) a DVL update is taken as
-    insensitive to scale and misalignment (see gtsam_dvl/estimators/ekf/filter.py)."""
+    """Options of the error-state EKF (TOML section [ekf]). Below min_calibration_speed_m_s a DVL update is taken
+    as insensitive to scale and misalignment; above it but under calibration_speed_sigmas velocity sigmas (the
+    velocity still unknown) they are consider states of that update (see gtsam_dvl/estimators/ekf/filter.py)."""
 
     SECTION: ClassVar[str] = "ekf"
 
