@@ -51,7 +51,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
     if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
         pieces = smooth_pieces(log, stated, gaps, progress, estimator, calibration)
-        consider_constant_error(pieces, config)
+        consider_constant_error(pieces, config, calibration is not None)
         return pieces
     builder, graph, values, ordering, report, passes, dof = solve_log(log, config, noise, timing, calibration,
                                                                       progress, t0)
@@ -66,7 +66,7 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
         config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1)
     if hold is not None:  # the nominal calibration's check, then weakly determined directions held (weak_hold.py)
         graph, values, result = _hold_calibration(builder, graph, values, ordering, hold, estimator, result)
-    consider_constant_error(result, config)  # (constant_error.py: what no estimator tells from the calibration)
+    consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
         t4 = time.perf_counter()

@@ -70,12 +70,14 @@ def _held_directions(result: NavResult, P0: np.ndarray) -> np.ndarray:
     return q
 
 
-def consider_constant_error(result: NavResult, config: EstimatorConfig) -> None:
+def consider_constant_error(result: NavResult, config: EstimatorConfig, file_prior: bool = False) -> None:
     """Add the constant DVL error's share (module doc) to the result's scale and misalignment covariance (their
     Estimates, calib_joint_cov and shared_joint_cov), outside the held directions; recorded in
-    info["dvl_constant_error"]. Nothing when [dvl] constant_error_sigma_m_s is 0 or the result has no states."""
+    info["dvl_constant_error"]. Nothing when [dvl] constant_error_sigma_m_s is 0, the result has no states, or
+    file_prior: a vehicle calibration file is the prior, whose covariance (the earlier dives' posteriors, each with
+    its own constant error's share) stands for it and which the data only tighten."""
     sigma_b = float(config.dvl.constant_error_sigma_m_s)
-    if sigma_b <= 0.0 or not len(result.t) or "scale" not in result.calibration:
+    if sigma_b <= 0.0 or file_prior or not len(result.t) or "scale" not in result.calibration:
         return
     pr = config.priors
     P0 = np.diag([pr.scale_sigma**2, *np.radians(pr.misalignment_sigma_deg) ** 2])

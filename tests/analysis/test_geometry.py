@@ -5,6 +5,7 @@ none; a simulated straight run smoothed by the batch smoother reports the yaw mi
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -186,11 +187,13 @@ def test_paper_3d_short_has_no_calibration_finding(estimator: str) -> None:
 
 @pytest.mark.slow
 def test_ekf_sigma_on_a_straight_track_is_not_taken_as_information() -> None:
-    """straight-transect (seed 1): the EKF reports the yaw misalignment at about a fifth of its prior's sigma, which
-    a straight track cannot give; the verdict says it cannot be determined, judged at the prior's sigma (warn), and
-    the batch smoother's sigma of the same log is near the prior (the direction is truly undetermined). With the
-    nominal check off: on (the default) the EKF's calibration does not pay for its states here and is held at the
-    nominal with the prior's sigma, which the last lines check."""
+    """straight-transect (seed 1), the nominal check off: the EKF's yaw misalignment sigma agrees with the batch
+    smoother's within 10 %, both near the prior (measured 0.83 and 0.85 of it: a straight track cannot give it; an
+    underway start's first ping once gave the EKF a fifth, estimators/ekf/filter.py), and the verdict says it leans
+    on its prior. A filter that claims that fifth anyway (the EKF's result with its misalignment sigmas shrunk five
+    times, as it reported before) is judged at the prior's sigma: "claims information this motion does not hold".
+    With the nominal check on (the default) the EKF's calibration does not pay for its states here and is held at
+    the nominal with the prior's sigma, which the last lines check."""
     sc = load_scenario("straight-transect")
     log = simulate(sc, 1)
     d = sc.estimator_configuration().to_dict()
@@ -200,12 +203,26 @@ def test_ekf_sigma_on_a_straight_track_is_not_taken_as_information() -> None:
     ekf, batch = run_ekf(log, config), smooth_batch(log, config)
     prior = config.priors.misalignment_sigma_deg[2]
     print("yaw sigma: EKF", ekf.misalignment_sigma_deg[2], "batch", batch.misalignment_sigma_deg[2], "prior", prior)
-    assert ekf.misalignment_sigma_deg[2] < LEANS_ON_PRIOR * prior < batch.misalignment_sigma_deg[2]
+    assert ekf.misalignment_sigma_deg[2] == pytest.approx(batch.misalignment_sigma_deg[2], rel=0.1)
+    assert LEANS_ON_PRIOR * prior < ekf.misalignment_sigma_deg[2]
     health = assess_health(ekf, log)
-    yaw = [w for w in health.warnings if w.startswith("misalignment yaw cannot be determined on a straight track")]
-    print(*health.warnings, sep="\n")
+    yaw = [w for w in health.warnings if w.startswith("misalignment yaw leans on its prior on a straight track")]
+    assert len(yaw) == 1, health.warnings
+    # an over-confident filter: the misalignment's rows and columns scaled by 1/5 (its sigmas a fifth)
+    over = copy.deepcopy(ekf)
+    mis = over.calibration["misalignment"]
+    over.calibration["misalignment"] = Estimate(mis.value, mis.cov / 25.0)
+    for name in ("calib_joint_cov", "shared_joint_cov"):
+        joint = getattr(over, name)
+        if joint is not None:
+            f = np.ones(len(joint))
+            f[7:10] = 0.2  # [accel, gyro] bias, scale, misalignment (core/states.py joint_states)
+            setattr(over, name, np.asarray(joint) * np.outer(f, f))
+    claimed = assess_health(over, log)
+    yaw = [w for w in claimed.warnings if w.startswith("misalignment yaw cannot be determined on a straight track")]
+    print(*claimed.warnings, sep="\n")
     assert len(yaw) == 1 and "claims information this motion does not hold" in yaw[0]
-    assert health.status in ("warn", "degraded", "failed")
+    assert claimed.status in ("warn", "degraded", "failed")
     held = run_ekf(log, default)
     print("default:", held.info["calibration_hold"])
     assert held.info["calibration_hold"]["held"] == ["scale", "misalignment"]

@@ -48,7 +48,7 @@ def test_named_settings_exist() -> None:
 def test_named_options_exist() -> None:
     options = {o for (o,) in _named(r"(--[a-z][a-z-]+)")}
     assert "--repair" in options
-    cli = (PACKAGE / "app" / "cli.py").read_text()
+    cli = "".join((PACKAGE / "app" / name).read_text() for name in ("cli.py", "cli_options.py", "cli_campaign.py"))
     for option in options:
         assert f'"{option}"' in cli, option
 

@@ -151,7 +151,9 @@ def test_field_bag_smoothed_with_topic_options_only(field_bag: tuple[Path, LogDa
           f"misalignment {np.round(s['misalignment_deg']['value'], 4)} +- {np.round(s['misalignment_deg']['sigma'], 4)}"
           f" deg, z {np.round(mis_z, 2)}; states {s['states']}, {s['timing_s'].get('total', 0):.1f} s")
     assert abs(scale_z) < 3 and np.all(np.abs(mis_z) < 3)
-    # determined, not just held by the priors (1 %, 1 deg): the roll (about the thrust axis) only by the descent
-    assert s["scale"]["sigma"] < 1e-3 and np.all(np.array(s["misalignment_deg"]["sigma"]) < 0.2)
+    # determined, not just held by the priors (1 %, 1 deg): the roll (about the thrust axis) only by the descent;
+    # the scale's sigma above the run-constant DVL error's share (2 mm/s over the speed, constant_error.py: 1.2e-3
+    # measured), five times below its prior
+    assert s["scale"]["sigma"] < 2e-3 and np.all(np.array(s["misalignment_deg"]["sigma"]) < 0.2)
     # the map origin came from the first fix, and the reader said so
     assert any("map origin from the first good GNSS fix on /ublox/fix" in w for w in s["health"]["notes"])

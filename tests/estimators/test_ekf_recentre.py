@@ -38,7 +38,8 @@ def test_recentred_time_offset_keeps_the_ekf_consistent() -> None:
     assert "warm-up window" in info["time_offset_prior"]["why"]
     calibration = [NAMES.index(n) for n in NAMES if n == "scale" or n.startswith("misalignment")]
     position = [NAMES.index("final_position_east"), NAMES.index("final_position_north")]
-    # measured, seed 1: recentred scale -1.2, pitch 1.3, yaw -1.8, east/north 1.6/-1.1 sigma; at the prior's 0: pitch
-    # 2.0, up -2.3 (recentring moved the pitch misalignment and the height closer on seeds 1-4 of both scenarios)
+    # measured, seed 1: recentred scale -0.6, pitch -1.0, yaw 0.6, east/north -0.1/0.7 sigma; at the prior's 0: scale
+    # -1.0, the rest within 0.3 sigma of the recentred (before the EKF's underway-start fix, estimators/ekf/filter.py,
+    # the run at the prior was 2.0 sigma off in pitch and recentring brought it closer; since, both are consistent)
     assert np.all(np.abs(z_on[calibration + position]) < 3.0)
-    assert abs(z_on[NAMES.index("misalignment_pitch")]) < abs(z_off[NAMES.index("misalignment_pitch")])
+    assert np.all(np.abs(z_off[calibration + position]) < 3.0)

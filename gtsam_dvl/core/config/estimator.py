@@ -199,7 +199,8 @@ def _white_dvl_if_written_before(data: Any) -> Any:
     correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it, and one written
     before [current] existed with water-track pings refused, one written before [priors] hold_weak_information
     existed with every calibration direction estimated, one written before [priors] nominal_check existed without
-    it, one written before [dvl] constant_error_sigma_m_s existed without it; a user's file that leaves the keys out takes the defaults."""
+    it, one written before [dvl] constant_error_sigma_m_s existed without it; a user's file that leaves the keys
+    out takes the defaults."""
     dvl = data.get("dvl") if isinstance(data, dict) else None
     if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "current" not in data:
         # written before [current] existed: its runs refused water-track pings

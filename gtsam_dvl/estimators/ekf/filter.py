@@ -121,19 +121,19 @@ from gtsam_dvl.estimators.noise_levels import (
 from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings, water_covariance
 from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 
-# Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity
-# estimate that is only noise (a static vehicle), the filter reads that noise as information: regression
-# on a noisy regressor drags k towards 0 (0.8 -> 0.4 over the 600 s static start of paper-3d, sigma 0.045).
-# Treating them as consider states is not enough: with the k uncertainty times the noisy velocity in the
-# innovation covariance the DVL stops constraining the velocity, which then drifts (5 m/s in 600 s). The
-# true sensitivity of y to k and b_R_d is the true velocity, about zero, so below MIN_CALIBRATION_SPEED_M_S
-# ("slow") their Jacobian columns are zero. A vehicle that moves while its velocity is still uncertain (under
-# CALIBRATION_SPEED_SIGMAS velocity sigmas: an underway start's first ping, whose velocity the filter takes from
-# that ping) has a good regressor but no velocity to separate the calibration from: there they are consider
-# states. Zeroing their columns there instead pinned the velocity as if the calibration had no part in the ping,
-# and the next pings read the misalignment off that velocity: the pitch and yaw misalignment at 0.65 of their
-# prior's sigma after two pings of a straight run (realistic-turns; the smoother: 1.00), the pitch's error/sigma
-# std 1.85 over 50 runs. Both are set by the configuration's [ekf] section (EkfConfig); these are its defaults.
+# Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity estimate that
+# is only noise (a static vehicle), the filter reads that noise as information: regression on a noisy regressor drags
+# k towards 0 (0.8 -> 0.4 over the 600 s static start of paper-3d, sigma 0.045). Treating them as consider states is
+# not enough: with the k uncertainty times the noisy velocity in the innovation covariance the DVL stops constraining
+# the velocity, which then drifts (5 m/s in 600 s). The true sensitivity of y to k and b_R_d is the true velocity,
+# about zero, so below MIN_CALIBRATION_SPEED_M_S ("slow") their Jacobian columns are zero. A vehicle that moves while
+# its velocity is still uncertain (under CALIBRATION_SPEED_SIGMAS velocity sigmas, its ping faster than as many of its
+# own sigmas: an underway start's first ping, whose velocity the filter takes from that ping) has a good regressor but
+# no velocity to separate the calibration from: there they are consider states. Zeroing their columns there instead
+# pinned the velocity as if the calibration had no part in the ping, and the next pings read the misalignment off that
+# velocity: the pitch and yaw misalignment at 0.65 of their prior's sigma after two pings of a straight run
+# (realistic-turns; the smoother: 1.00), the pitch's error/sigma std 1.85 over 50 runs. Both are set by the
+# configuration's [ekf] section (EkfConfig); these are its defaults.
 MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 # the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
@@ -395,7 +395,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
             "4 dof); filtered again with the scale and misalignment as consider states (their prior's sigma)")}
     elif check is not None:
         result.info["calibration_hold"] = {"nominal": check, "held": []}
-    consider_constant_error(result, config)  # (constant_error.py: what no estimator tells from the calibration)
+    consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
@@ -613,11 +613,15 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             H[:, wc] = -H[:, VEL][:, :2] if on_water else 0.0
         speed = np.linalg.norm(y_hat) / fs.scale
         slow = speed < ekf_cfg.min_calibration_speed_m_s
-        # moving, but the velocity still uncertain (an underway start's first ping): the calibration as consider
-        # states (see the comment at MIN_CALIBRATION_SPEED_M_S)
         unsure = not slow and speed < ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL]))
-        if slow:
+        # the ping itself moving beyond its noise (an underway start's first ping), while the filter's velocity
+        # is still uncertain: the calibration as consider states (see the comment at MIN_CALIBRATION_SPEED_M_S);
+        # a still vehicle whose filtered velocity wanders above the speed keeps the columns zero
+        moving = (len(z) == 3 and np.linalg.norm(z) / fs.scale > max(
+            ekf_cfg.min_calibration_speed_m_s, ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(Rm))))
+        if slow or (unsure and not moving):
             H[:, CALIBRATION] = 0.0
+        unsure = unsure and moving
         if watch.diverged:  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter from here on
             H[:, FROZEN_ON_DIVERGENCE] = 0.0
             if offset:

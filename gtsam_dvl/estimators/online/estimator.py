@@ -581,7 +581,7 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
         result.info["dvl_correlated_error"] = correlated.info(config)
     if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
         result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
-    consider_constant_error(result, config)  # (constant_error.py: what no estimator tells from the calibration)
+    consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     if estimator.current_history:  # the water current at each state as it left the window (or at the end)
         result.info["water_current"] = estimator.current_profile()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
