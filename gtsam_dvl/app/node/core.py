@@ -95,7 +95,7 @@ class NodeCore:
         self.config = config.model_copy(update={"online": config.online.model_copy(update={"bad_messages": "drop"})})
         self.calibration_file = calibration
         self.clock = clock
-        self.log = log or (lambda level, text: None)
+        self.log: Callable[[str, str], None] = log or (lambda level, text: None)
         s = settings
         self.topics = {"imu": s.imu_topic, "dvl": s.dvl_topic, "pressure": s.pressure_topic, "gnss": s.gnss_topic}
         self.types = {"imu": IMU_TYPE, "dvl": s.dvl_type, "pressure": PRESSURE_TYPE, "gnss": NAVSATFIX_TYPE}
@@ -119,6 +119,13 @@ class NodeCore:
         self.last_wall = -math.inf
         self.finished = False
 
+    def _say(self, level: str, text: str) -> None:
+        """A log line; a logger that fails loses the line, never the message being processed."""
+        try:
+            self.log(level, text)
+        except Exception:  # noqa: BLE001, S110
+            pass
+
     # ----- input ---------------------------------------------------------------------------------------------
     def receive(self, kind: str, body: bytes, wall: float | None = None) -> list[OnlineEstimate]:
         """A serialized message of one input ("imu", "dvl", "pressure", "gnss"): the estimates it completed."""
@@ -129,7 +136,7 @@ class NodeCore:
         except GtsamDvlError as exc:
             self.undecodable[kind] += 1
             if self.undecodable[kind] == 1:
-                self.log("warn", f"{exc}: dropped (further ones are counted)")
+                self._say("warn", f"{exc}: dropped (further ones are counted)")
             return []
         ns = int(stamps_ns(arr)[0])
         frame = first_string(arr)
@@ -139,8 +146,9 @@ class NodeCore:
         if kind != "imu" and imu_newest is not None and abs(ns - imu_newest) > self.settings.clock_skew_s * 1e9:
             self.off_clock[kind] += 1
             if self.off_clock[kind] == 1:
-                self.log("warn", f"{self.topics[kind]}: stamp {(ns - imu_newest) * 1e-9:+.3f} s from the IMU's newest: "
-                                 "not on the IMU's clock, dropped (further ones are counted)")
+                skew = (ns - imu_newest) * 1e-9
+                self._say("warn", f"{self.topics[kind]}: stamp {skew:+.3f} s from the IMU's newest: not on the IMU's "
+                                  "clock, dropped (further ones are counted)")
             return []
         if kind == "imu" and self.t0_ns is None:
             self.t0_ns = ns // 1_000_000_000 * 1_000_000_000
@@ -156,7 +164,7 @@ class NodeCore:
             self.tf.update(decode_tf(Path(self.settings.tf_static_topic), self.settings.tf_static_topic,
                                      Bodies(np.zeros(1, np.int64), var=[body])))
         except GtsamDvlError as exc:
-            self.log("warn", str(exc))
+            self._say("warn", str(exc))
 
     def tick(self, wall: float | None = None) -> list[OnlineEstimate]:
         """The wall-time timer: with no message for flush_after_s, every held message is released."""
@@ -205,7 +213,7 @@ class NodeCore:
                     out.append(e)
                 i = j
         for w in caught:
-            self.log("warn", str(w.message))
+            self._say("warn", str(w.message))
         return out
 
     def _feed(self, group: list[Held]) -> int:
@@ -218,10 +226,10 @@ class NodeCore:
         if est is None:
             return 0
         if kind == "imu":
-            t = np.array([self._t(m.stamp_ns) for m in group])
+            t_imu = np.array([self._t(m.stamp_ns) for m in group])
             w = np.array([m.payload["angular_velocity"][0] for m in group], dtype=float)
             f = np.array([m.payload["linear_acceleration"][0] for m in group], dtype=float)
-            return est.push_imu_batch(t, w, f)
+            return est.push_imu_batch(t_imu, w, f)
         m = group[0]
         t = self._t(m.stamp_ns)
         if kind == "pressure":
@@ -246,7 +254,7 @@ class NodeCore:
             self.frame = LocalFrame(float(gnss.lat_deg[0]), float(gnss.lon_deg[0]), float(gnss.height_m[0]))
             self.origin_t = float(gnss.t[0])
             o = self.frame
-            self.log("info", f"map origin from the GNSS fix at t = {self.origin_t:.1f} s: lat {o.lat_deg:.7f}, "
+            self._say("info", f"map origin from the GNSS fix at t = {self.origin_t:.1f} s: lat {o.lat_deg:.7f}, "
                              f"lon {o.lon_deg:.7f}, height {o.height_m:.2f} m")
 
     def _ensure_estimator(self) -> OnlineEstimator | None:
@@ -286,7 +294,7 @@ class NodeCore:
         self.stop_error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
         self.stop_t = self._newest_t()
         self.restarts += 1
-        self.log("error", f"estimator stopped at t = {t:.2f} s ({self.stop_error}); a new one starts on the next "
+        self._say("error", f"estimator stopped at t = {t:.2f} s ({self.stop_error}); a new one starts on the next "
                           "messages (it aligns again)")
         self.estimator = None
         self.finished = False

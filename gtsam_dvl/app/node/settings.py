@@ -28,7 +28,8 @@ from gtsam_dvl.core.errors import GtsamDvlError
 DVL_TYPES = ("geometry_msgs/msg/TwistWithCovarianceStamped", "geometry_msgs/msg/TwistStamped",
              "marine_acoustic_msgs/msg/Dvl")
 Reliability = Literal["best_effort", "reliable"]
-ESTIMATOR_PREFIX = "estimator."
+# the parameters every rclpy node declares itself
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
 
 
 class QosSettings(ConfigModel):
@@ -151,8 +152,8 @@ def load_settings(config: Path | str | None = None, parameters: Mapping[str, Any
             estimator = data
         else:
             base = EstimatorConfig.load(config)
-    params = nested(parameters or {})
-    params.pop("use_sim_time", None)  # rclpy's own parameter
+    params = nested({k: v for k, v in (parameters or {}).items()
+                     if k not in RCLPY_PARAMETERS and not k.startswith("qos_overrides.")})
     over = params.pop("estimator", {})
     if not isinstance(over, dict):
         raise GtsamDvlError(f"{source}: estimator must be a table of configuration sections")
