@@ -50,7 +50,7 @@ from gtsam_dvl.io.reader import IMU_TYPE, PRESSURE_TYPE, dvl_from_messages, pres
 from gtsam_dvl.io.ros2 import messages
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.covariance import ros_pose_covariance, ros_twist_covariance
-from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
+from gtsam_dvl.io.ros2.decode import MessageDecoder, decode_tf, first_string, to_base
 from gtsam_dvl.io.storage.raw import Bodies
 
 if TYPE_CHECKING:
@@ -76,12 +76,6 @@ class EpochTiming:
     published: float = math.nan
 
 
-def _decode_one(topic: str, type_name: str, body: bytes) -> np.ndarray:
-    """One serialized message as a one-row structured array (io/ros2/decode.py, the reader's layouts)."""
-    row = np.frombuffer(body, np.uint8)[None, :]
-    return decode(Path(topic), topic, type_name, Bodies(np.zeros(1, np.int64), fixed=row))
-
-
 class NodeCore:
     """The node without ROS (module doc). receive() takes a serialized message and returns the estimates to publish;
     tick() is called on a wall-time timer (flush, stalls); odometry(), calibration_rows(), health() and path() make
@@ -99,6 +93,7 @@ class NodeCore:
         s = settings
         self.topics = {"imu": s.imu_topic, "dvl": s.dvl_topic, "pressure": s.pressure_topic, "gnss": s.gnss_topic}
         self.types = {"imu": IMU_TYPE, "dvl": s.dvl_type, "pressure": PRESSURE_TYPE, "gnss": NAVSATFIX_TYPE}
+        self.decoders = {k: MessageDecoder(self.topics[k] or k, self.types[k]) for k in self.topics}
         self.buffer = ReorderBuffer(round(s.reorder_window_s * 1e9), round(s.stamp_jump_s * 1e9))
         self.off_clock = {k: 0 for k in self.topics}
         self.undecodable = {k: 0 for k in self.topics}
@@ -132,7 +127,7 @@ class NodeCore:
         wall = self.clock() if wall is None else wall
         self.last_wall = wall
         try:
-            arr = _decode_one(self.topics[kind], self.types[kind], body)
+            arr = self.decoders[kind](body)
         except GtsamDvlError as exc:
             self.undecodable[kind] += 1
             if self.undecodable[kind] == 1:
@@ -343,6 +338,10 @@ class NodeCore:
             return None
         return self.path.payload(self.path.stamps_ns[-1])
 
+    def newest_t(self) -> float:
+        """The IMU's newest stamp (s): the node's sensor time."""
+        return self._newest_t()
+
     def _newest_t(self) -> float:
         n = self.buffer.newest_ns
         return math.nan if n is None or self.t0_ns is None else self._t(n)
@@ -382,8 +381,9 @@ class NodeCore:
                                                                  s.bottom_lock_degraded_s, s.imu_silent_s))
 
     def key_values(self) -> dict[str, str]:
-        """The figures beside the verdict in the diagnostics: the latest estimate and each input's counts."""
-        out: dict[str, str] = {}
+        """The figures beside the verdict in the diagnostics: its sensor time (sensor_t_s), the latest estimate
+        (t_s, its time, and its values with sigmas) and each input's counts."""
+        out: dict[str, str] = {"sensor_t_s": f"{self._newest_t():.3f}"}  # the verdict's time (the IMU's newest)
         e = self.latest
         if e is not None:
             rows = self.calibration_rows(e)

@@ -2,7 +2,7 @@
 
 Why: the online estimator takes each stream in stamp order (a message older than its stream's previous one is
 dropped: estimators/online/messages.py), while DDS delivers each topic in its own order and a driver may stamp a
-message after a later one. ReorderBuffer holds every message until the newest stamp seen (any stream, sensor time)
+message after a later one. ReorderBuffer holds every message until the IMU's newest stamp (the estimator's clock)
 is `window` past it, then releases the held ones in stamp order, an IMU sample before a ping stamped the same (the
 order of core/message_order.py, which `smooth --mode online` replays). A message arriving later than that, behind
 what its stream already released, is counted and dropped ("late"); one with the stamp its stream just released,
@@ -99,12 +99,13 @@ class ReorderBuffer:
                 s.late += 1
             return False
         s.newest_ns = stamp_ns if s.newest_ns is None else max(s.newest_ns, stamp_ns)
-        self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
+        if kind == "imu":  # the IMU is the clock: a ping stamped ahead of it (another clock) releases nothing
+            self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
         heapq.heappush(self._heap, Held(stamp_ns, RANK[kind], next(self._seq), kind, payload))
         return True
 
     def ready(self) -> list[Held]:
-        """The held messages now a window behind the newest stamp, in release order."""
+        """The held messages now a window behind the IMU's newest stamp, in release order."""
         if self.newest_ns is None:
             return []
         return self._pop(self.newest_ns - self.window_ns)

@@ -29,6 +29,9 @@ INSTALL_HINT = ("gtsam-dvl node needs ROS 2's rclpy and message packages (wheels
 # but is not to be trusted at its stated accuracy; failed: no estimate or a stopped estimator)
 LEVELS = {"ok": 0, "warn": 1, "degraded": 2, "failed": 2}
 DIAGNOSTIC_NAME = "gtsam_dvl: navigation"
+# the verdict is checked this often in sensor time (as the IMU comes) and published when it changes, besides the
+# estimates and the wall-time timer: a stall shows within this of its threshold, at any replay rate
+CHECK_EVERY_S = 0.5
 
 
 def import_ros() -> Any:
@@ -77,6 +80,7 @@ class RosNode:
         s = core.settings
         self._errors: dict[str, int] = {}
         self._last_status: str | None = None
+        self._checked_t = -math.inf  # sensor time of the last check of the verdict
         self._path_wall = -math.inf
         core.log = self.say
         inputs = qos(s.qos_inputs.reliability, s.qos_inputs.depth)
@@ -142,9 +146,12 @@ class RosNode:
         def take(body: bytes) -> None:
             for e in core.receive(kind, body, time.monotonic()):
                 self.publish(e)
+            if kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S:  # (nan: never checked)
+                self._checked_t = core.newest_t()
+                self.publish_diagnostics()
         return self._guard(kind, take)
 
-    def _tick(self) -> None:
+    def _tick(self, *_: Any) -> None:  # (rclpy passes a TimerInfo to a callback that takes arguments)
         for e in self.core.tick(time.monotonic()):
             self.publish(e)
         self.publish_diagnostics(force=True)

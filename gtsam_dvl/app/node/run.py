@@ -19,6 +19,34 @@ from gtsam_dvl.app.node.settings import load_settings
 from gtsam_dvl.core.errors import GtsamDvlError
 
 DELIVER_S = 0.3  # after the final messages, before the context closes: reliable delivery to the subscribers
+DRAIN_QUIET_S = 0.3  # at a stop, the messages already received are processed until none came for this long
+DRAIN_MAX_S = 10.0
+
+
+def drain(executor: Any, ros: RosNode) -> None:
+    """Process the messages DDS already delivered (a node behind a fast replay has a backlog) before finishing:
+    until nothing new came for DRAIN_QUIET_S, at most DRAIN_MAX_S."""
+    streams = ros.core.buffer.streams
+    end = time.monotonic() + DRAIN_MAX_S
+    count, quiet = -1, time.monotonic()
+    while time.monotonic() < end and time.monotonic() - quiet < DRAIN_QUIET_S:
+        executor.spin_once(timeout_sec=0.02)
+        n = sum(s.received for s in streams.values())
+        if n != count:
+            count, quiet = n, time.monotonic()
+
+
+def new_executor(context: Any) -> Any:
+    """rclpy's EventsExecutor (its dispatch in C++: about 20 us of CPU per message against 170 us for the
+    SingleThreadedExecutor, measured on 10,000 IMU messages), else the SingleThreadedExecutor."""
+    try:
+        from rclpy.experimental import EventsExecutor
+
+        return EventsExecutor(context=context)
+    except ImportError:
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor(context=context)
 
 
 def ros_arguments(params_file: Path | None, ros_args: Sequence[str] = (), name: str | None = None) -> list[str]:
@@ -44,7 +72,7 @@ def run_node(config: Path | str | None = None, params_file: Path | None = None, 
     parameter file (YAML); ros_args: further ROS arguments; calibration: a vehicle's calibration file as the prior
     (the parameter `calibration` otherwise); until: stop when it returns True (tests)."""
     rclpy = import_ros()
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
     args = ros_arguments(params_file, ros_args, name)
@@ -75,7 +103,7 @@ def run_node(config: Path | str | None = None, params_file: Path | None = None, 
         echo(f"gtsam-dvl node {node.get_fully_qualified_name()}: IMU {settings.imu_topic}, DVL {settings.dvl_topic} "
              f"({settings.dvl_type.rsplit('/', 1)[-1]}), odometry on {settings.odometry_topic} "
              f"({settings.map_frame} -> {settings.base_frame}); Ctrl-C to stop")
-        executor = SingleThreadedExecutor(context=context)
+        executor = new_executor(context)
         executor.add_node(node)
         try:
             while context.ok() and not (until is not None and until()):
@@ -84,6 +112,7 @@ def run_node(config: Path | str | None = None, params_file: Path | None = None, 
             pass  # the normal ways to stop a node: finish below
         finally:
             if context.ok():
+                drain(executor, ros)
                 ros.shutdown()
                 end = time.monotonic() + DELIVER_S
                 while time.monotonic() < end:

@@ -80,8 +80,10 @@ class NodeSettings(ConfigModel):
     # with no new message for this long (wall time) every held message is released (a stalled IMU does not hold
     # the others back)
     flush_after_s: Positive = 0.5
-    # a DVL, pressure or GNSS stamp further than this from the IMU's newest: not on the IMU's clock (dropped, said)
-    clock_skew_s: Positive = 5.0
+    # a DVL, pressure or GNSS stamp further than this from the IMU's newest: not on the IMU's clock (dropped, said).
+    # Generous: a node that falls behind a fast replay holds an IMU backlog of seconds, and offsets below it are
+    # the DVL time offset's to estimate ([dvl] estimate_time_offset)
+    clock_skew_s: Positive = 30.0
     # a stamp stepping forward by more than this (sensor time) from the stream's previous one: a stamp jump
     stamp_jump_s: Positive = 1.0
     # health (diagnostics): the DVL topic silent this long in sensor time: warn, then degraded; the IMU silent this
