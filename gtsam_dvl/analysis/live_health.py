@@ -2,8 +2,7 @@
 diagnostics). The same verdicts as analysis/health.py (Health: "ok", "warn", "degraded", "failed", with warnings
 that say what to do), judged on the present instead of on a finished run:
 
-- the estimator stopped (an exception inside it: the node keeps running, restarts it and says so): "failed" until
-  a new estimate comes;
+- the estimator stopped (an exception inside it: the node keeps running and says so): "failed";
 - the IMU silent (wall time: the IMU is the clock, so sensor time stops with it): "failed", no estimate;
 - the DVL topic silent (sensor time, the IMU's newest stamp against the DVL's): "warn", then "degraded" (the
   trajectory is dead reckoned on the IMU and depth, its covariance growing); lost bottom lock (pings coming
@@ -24,7 +23,7 @@ from typing import Any
 
 from gtsam_dvl.analysis.health import _NOT_REJECTIONS, DVL_GAP_DEGRADED_S, Health
 
-RECENT_S = 60.0  # a stamp jump or a stop of the estimator is reported this long (sensor time) after it
+RECENT_S = 60.0  # a stamp jump is reported this long (sensor time) after it
 
 
 @dataclass
@@ -57,9 +56,9 @@ class StreamState:
 
 @dataclass
 class LiveState:
-    """A snapshot of the node: the estimator's phase ("waiting_origin", "aligning", "running"), the last stop
-    (error text, seconds since it, restarts), the IMU's wall-time silence (s), the streams, the seconds without a
-    valid ping while pings arrive (sensor time), the estimator's counters, epochs, and t (s, sensor time)."""
+    """A snapshot of the node: the estimator's phase ("waiting_origin", "aligning", "running", "stopped"), its
+    stop (error text, seconds since it), the IMU's wall-time silence (s), the streams, the seconds without a valid
+    ping while pings arrive (sensor time), the estimator's counters, epochs, and t (s, sensor time)."""
 
     phase: str = "aligning"
     streams: dict[str, StreamState] = field(default_factory=dict)
@@ -67,7 +66,6 @@ class LiveState:
     no_lock_s: float = 0.0
     stop_error: str = ""
     since_stop_s: float = math.inf
-    restarts: int = 0
     counters: dict[str, int] = field(default_factory=dict)
     epochs: int = 0
     t: float = math.nan
@@ -77,11 +75,11 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
     """The verdict on a running estimator (module doc); figures: the numbers behind it."""
     lim = limits or LiveThresholds()
     h = Health()
-    h.figures = {"phase": state.phase, "epochs": state.epochs, "t_s": state.t, "restarts": state.restarts,
+    h.figures = {"phase": state.phase, "epochs": state.epochs, "t_s": state.t,
                  "imu_wall_silent_s": state.imu_wall_silent_s, "no_lock_s": state.no_lock_s}
-    if state.stop_error and state.since_stop_s < RECENT_S:
-        h.flag("failed", f"the estimator stopped {state.since_stop_s:.1f} s ago ({state.stop_error}) and was "
-                         f"restarted ({state.restarts} restart(s)): it aligns again before the next estimate")
+    if state.stop_error:
+        h.flag("failed", f"the estimator stopped {state.since_stop_s:.1f} s ago ({state.stop_error}): no estimate "
+                         "from here on; restart the node (and report the error with its log)")
     imu = state.streams.get("imu")
     if imu is not None and (imu.received == 0 or state.imu_wall_silent_s > lim.imu_silent_s):
         what = "no IMU message yet" if imu.received == 0 else f"silent for {state.imu_wall_silent_s:.1f} s"

@@ -14,8 +14,9 @@ makes them: a node fed a log's messages and `smooth --mode online` on that log g
 The estimator starts when the map origin is known (the configuration's alignment.origin_*, else the first good GNSS
 fix, which is then the origin and its time origin_t, as estimators/gnss.py makes it for a log) and the first IMU
 sample is released; the mounting is /tf_static's when it was received, else the settings'. An exception inside the
-estimator never reaches ROS: one log line, the error kept for the diagnostics, and a new estimator started on the
-next messages (it aligns again), with the vehicle's calibration file as its prior as at the start.
+estimator never reaches ROS: one log line, the error kept for the diagnostics ("failed: the estimator stopped"),
+and nothing more fed to it; the node itself goes on (diagnostics, services) until it is restarted. A new estimator
+is not started in its place: in motion it could not align again, nor know its position.
 """
 
 from __future__ import annotations
@@ -109,7 +110,7 @@ class NodeCore:
         self.latest: OnlineEstimate | None = None
         self.path = PosePath()
         self.timings: deque[EpochTiming] = deque(maxlen=TIMINGS_KEPT)
-        self.stop_error, self.stop_t, self.restarts = "", math.nan, 0
+        self.stop_error, self.stop_t, self.stops = "", math.nan, 0
         self.last_ping_t, self.last_valid_ping_t = math.nan, math.nan
         self.last_wall = -math.inf
         self.finished = False
@@ -253,7 +254,7 @@ class NodeCore:
                              f"lon {o.lon_deg:.7f}, height {o.height_m:.2f} m")
 
     def _ensure_estimator(self) -> OnlineEstimator | None:
-        if self.estimator is not None or self.frame is None or self.t0_ns is None:
+        if self.estimator is not None or self.frame is None or self.t0_ns is None or self.stop_error:
             return self.estimator
         from gtsam_dvl.estimators.online import OnlineEstimator
 
@@ -283,16 +284,15 @@ class NodeCore:
         return m, np.asarray(chosen["pressure"][1], dtype=float)
 
     def _stopped(self, exc: BaseException) -> None:
-        """The estimator raised: say it in one line, keep the error for the diagnostics, start a new one on the next
-        messages (module doc)."""
+        """The estimator raised: say it in one line, keep the error for the diagnostics, feed nothing more (module
+        doc)."""
         t = self.latest.t if self.latest is not None else math.nan
         self.stop_error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
         self.stop_t = self._newest_t()
-        self.restarts += 1
-        self._say("error", f"estimator stopped at t = {t:.2f} s ({self.stop_error}); a new one starts on the next "
-                          "messages (it aligns again)")
+        self.stops += 1
+        self._say("error", f"estimator stopped at t = {t:.2f} s ({self.stop_error}): no estimate from here on; "
+                           "the node goes on (diagnostics, services) until it is restarted")
         self.estimator = None
-        self.finished = False
 
     def _published(self, e: OnlineEstimate, arrived: float) -> None:
         self.latest = e
@@ -368,10 +368,11 @@ class NodeCore:
         if math.isfinite(self.last_ping_t) and not self.last_ping_t == self.last_valid_ping_t:
             since = self.last_valid_ping_t if math.isfinite(self.last_valid_ping_t) else 0.0
             no_lock = self.last_ping_t - since
-        return LiveState(phase=phase, streams=streams, imu_wall_silent_s=max(0.0, wall - imu.last_wall)
-                         if imu.received else math.inf, no_lock_s=no_lock, stop_error=self.stop_error,
+        imu_silent = max(0.0, wall - imu.last_wall) if imu.received else math.inf
+        return LiveState(phase="stopped" if self.stop_error else phase, streams=streams, imu_wall_silent_s=imu_silent,
+                         no_lock_s=no_lock, stop_error=self.stop_error,
                          since_stop_s=newest - self.stop_t if self.stop_error else math.inf,
-                         restarts=self.restarts, counters=dict(est.counters) if est is not None else {},
+                         counters=dict(est.counters) if est is not None else {},
                          epochs=est.epochs if est is not None else 0, t=newest)
 
     def health(self, wall: float | None = None) -> Health:
