@@ -67,14 +67,15 @@ TIMINGS_KEPT = 200_000  # per-epoch timing records kept for stats_file (about 40
 @dataclass
 class EpochTiming:
     """One published estimate: its time (s), the wall times (steady clock, s) at which the message that released
-    it arrived, the estimator finished and the message was published, and the estimator's own time for the epoch
-    (s, OnlineEstimator.latencies_s)."""
+    it arrived, the estimator finished and the message was published, the estimator's own time for the epoch
+    (s, OnlineEstimator.latencies_s) and which message released it."""
 
     t: float
     arrived: float
     done: float
     processing_s: float
     published: float = math.nan
+    trigger: tuple[str, int] = ("", 0)  # the message that released it: input kind and header stamp (ns)
 
 
 class NodeCore:
@@ -114,6 +115,7 @@ class NodeCore:
         self.last_ping_t, self.last_valid_ping_t = math.nan, math.nan
         self.last_wall = -math.inf
         self.finished = False
+        self._trigger: tuple[str, int] = ("", 0)
 
     def _say(self, level: str, text: str) -> None:
         """A log line; a logger that fails loses the line, never the message being processed."""
@@ -151,6 +153,7 @@ class NodeCore:
         self.buffer.push(kind, ns, arr, wall)
         if self.t0_ns is None:  # nothing is released before the first IMU sample sets the time origin
             return []
+        self._trigger = (kind, ns)
         return self._release(self.buffer.ready(), wall)
 
     def receive_tf(self, body: bytes) -> None:
@@ -298,7 +301,7 @@ class NodeCore:
         self.latest = e
         est = self.estimator
         processing = est.latencies_s[-1] if est is not None and len(est.latencies_s) else math.nan
-        self.timings.append(EpochTiming(float(e.t), arrived, self.clock(), processing))
+        self.timings.append(EpochTiming(float(e.t), arrived, self.clock(), processing, trigger=self._trigger))
         if math.isnan(e.predicted_from_t):  # a state (not a ping between keyframes): on the path
             self.path.add(self.stamp_ns(e.t), e.n_p, matrix_to_quat_xyzw(e.n_R_b))
 
@@ -421,5 +424,6 @@ class NodeCore:
 
     def timing_records(self) -> list[dict[str, Any]]:
         """The per-epoch timings (EpochTiming) as dicts, for stats_file."""
-        return [{"t": r.t, "arrived": r.arrived, "done": r.done, "processing_s": r.processing_s,
-                 "published": r.published} for r in self.timings]
+        return [{"t": r.t, "stamp_ns": self.stamp_ns(r.t), "arrived": r.arrived, "done": r.done,
+                 "processing_s": r.processing_s, "published": r.published, "trigger_kind": r.trigger[0],
+                 "trigger_ns": r.trigger[1]} for r in self.timings]
