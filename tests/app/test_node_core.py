@@ -160,3 +160,20 @@ def test_node_without_the_extra_is_one_line_and_exit_code_1() -> None:
     assert run.stderr.strip().splitlines() == [
         "gtsam-dvl: error: gtsam-dvl node needs ROS 2's rclpy and message packages (wheels from PyPI, no system "
         "ROS): pip install 'gtsam-dvl[ros2]' (rclpy is missing)"]
+
+
+def test_the_example_parameter_file_loads() -> None:
+    """examples/node.yaml as rcl hands it to the node: its nested keys flattened to dotted names."""
+    import yaml  # PyYAML comes with rclpy (the test extra)
+
+    def flat(d: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {f"{prefix}{k}": v})
+        return out
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "node.yaml"
+    params = flat(yaml.safe_load(path.read_text())["/**"]["ros__parameters"])
+    settings, config = load_settings(None, params, source=str(path))
+    assert settings.dvl_rpy_deg == (180.0, 0.0, 0.0) and settings.gnss_topic == "/gnss/fix"
+    assert config.dvl.estimate_time_offset and config.imu.model == "kvh-1750"
