@@ -38,6 +38,9 @@ from gtsam_dvl.io.ros2.decode import MessageDecoder
 from gtsam_dvl.io.writer import write_log
 from tests.support.node import GAP_S, cli, config_toml, gap_log, params_yaml, ros_env, sigma_distance
 
+# one worker runs the module's tests: its fixture (a simulated log, the processes) is made once
+pytestmark = pytest.mark.xdist_group(name="ros2_node")
+
 RATE = 20.0  # times real time
 
 

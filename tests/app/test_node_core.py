@@ -24,6 +24,9 @@ from gtsam_dvl.io.storage.sources import open_source
 from gtsam_dvl.io.writer import write_log
 from tests.support.node import config_toml, gap_log
 
+# one worker runs the module's tests: its fixture (a simulated log, the processes) is made once
+pytestmark = pytest.mark.xdist_group(name="ros2_node_core")
+
 MS = 1_000_000
 
 
