@@ -54,7 +54,13 @@ def inflated_for(cal: VehicleCalibration, log: LogData, config: EstimatorConfig
                  ) -> tuple[VehicleCalibration, dict[str, Any]]:
     """A calibration inflated for the days from its date to the log's start ([calibration] inflation_per_day),
     and the inflation (days, per_day, the variances' factor)."""
-    days = cal.days_before(iso_date(log.t0_ns))
+    return inflated_at(cal, log.t0_ns, config)
+
+
+def inflated_at(cal: VehicleCalibration, t0_ns: int, config: EstimatorConfig
+                ) -> tuple[VehicleCalibration, dict[str, Any]]:
+    """inflated_for a dive that starts at t0_ns (ns since the Unix epoch): the ROS 2 node's start."""
+    days = cal.days_before(iso_date(t0_ns))
     per_day = config.calibration.inflation_per_day
     return cal.inflated(days, per_day), {"days": days, "per_day": per_day,
                                          "variance_factor": 1.0 + per_day * max(days, 0.0)}

@@ -412,6 +412,54 @@ def live(
                                          attitude_topic, truth_topic, dvl_water_topic), echo=typer.echo)
 
 
+NODE_HELP = (
+    "Run the online estimator as a ROS 2 node on live topics (needs pip install 'gtsam-dvl[ros2]').\n\n"
+    "Subscribes the IMU (sensor_msgs/Imu), the DVL (TwistWithCovarianceStamped, TwistStamped or "
+    "marine_acoustic_msgs/Dvl), pressure (FluidPressure) and GNSS (NavSatFix, the map origin); publishes "
+    "nav_msgs/Odometry (map -> base_link with covariances), the calibration with sigmas (Float64MultiArray), "
+    "diagnostics and the path; the service ~/save_calibration writes the vehicle's calibration file. Settings and "
+    "the estimator configuration: -c TOML ([node] table) and/or --params YAML (docs/ros2.md). Arguments after "
+    "--ros-args go to ROS (remappings, -p name:=value)."
+)
+
+
+@app.command(help=NODE_HELP, context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+@_user_errors
+def node(
+    ctx: typer.Context,
+    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration (TOML, with an "
+                                                "optional [node] table of the node's settings) or its name.")
+                      ] = None,
+    params: Annotated[Path | None, typer.Option("--params", help="ROS parameter file (YAML) with the node's "
+                                                "settings and estimator.* configuration keys.")] = None,
+    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior.")] = None,
+    name: Annotated[str | None, typer.Option(help="The node's name (default gtsam_dvl).")] = None,
+    debug: Debug = False,
+) -> None:
+    """Run the online estimator as a ROS 2 node (help: NODE_HELP)."""
+    from gtsam_dvl.app.node.run import run_node
+
+    run_node(config, params, ctx.args, calibration=calibration, name=name, echo=typer.echo)
+
+
+@app.command()
+@_user_errors
+def play(
+    log: Annotated[Path, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")],
+    rate: Annotated[str, typer.Option(help="Times real time (e.g. 1, 10); 'max': as fast as possible.")] = "1",
+    topic: Annotated[list[str] | None, typer.Option("--topic", help="A topic to play (repeat; default: every "
+                                                    "sensor topic).")] = None,
+    wait: Annotated[float, typer.Option(help="Wait up to this long (s) for a subscriber on every topic.")] = 0.0,
+    debug: Debug = False,
+) -> None:
+    """Publish a recorded log's messages on their ROS 2 topics, as recorded (needs the ros2 extra)."""
+    from gtsam_dvl.app.live.replay import parse_speed
+    from gtsam_dvl.app.node.player import play_log
+
+    outcome = play_log(log, rate=parse_speed(rate), topics=topic or None, wait_for_subscribers_s=wait)
+    typer.echo(outcome.describe())
+
+
 def _run_app() -> Any:
     """The app, with click's usage errors (an unknown option, a missing argument, a bad value) as one line in the
     style of every other error, exit code 2 as click gives them."""

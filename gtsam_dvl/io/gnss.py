@@ -32,7 +32,12 @@ def read_gnss(src: Source, topic: str, bodies: Any, t0: int, repair: bool, warni
     arr = decode(src.path, topic, NAVSATFIX_TYPE, bodies)
     ns = stamps_ns(arr)
     keep = check_stamps(src.path, topic, ns, t0, None, repair, warnings, dropped)
-    arr, ns = arr[keep], ns[keep]
+    return gnss_from_messages(arr[keep], ns[keep], t0)
+
+
+def gnss_from_messages(arr: np.ndarray, ns: np.ndarray, t0: int) -> GnssData:
+    """GnssData of decoded NavSatFix messages stamped ns (ns, t relative to t0 ns): the one mapping of a fix (a
+    covariance of type 0 unknown, a non-finite position no fix), for the reader and the ROS 2 node (app/node)."""
     cov = arr["position_covariance"].astype(float).reshape(-1, 3, 3).copy()
     cov[arr["position_covariance_type"] == 0] = np.nan
     status = arr["status"].astype(int)

@@ -79,10 +79,16 @@ def _optional_topic(src: Source, given: str | None, default: str, what: str, typ
 
 def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
     """DvlData (t left zero) from decoded Dvl, TwistWithCovarianceStamped or TwistStamped messages."""
-    type_name = _type(src, topic)
+    return dvl_from_messages(_type(src, topic), arr, src.metadata.get("gtsam_dvl", {}))
+
+
+def dvl_from_messages(type_name: str, arr: np.ndarray, ours: dict[str, Any] | None = None) -> DvlData:
+    """DvlData (t left zero) from decoded messages of a DVL type (DVL_TYPES): the one mapping of a DVL message to
+    a ping, for the reader and the ROS 2 node (app/node). ours: the log's gtsam_dvl metadata record ({} for
+    another tool's log or a live topic): whether beam_quality holds our writer's per-beam validity."""
+    ours = ours or {}
     m = len(arr)
     beams = None
-    ours = src.metadata.get("gtsam_dvl", {})
     if type_name == "marine_acoustic_msgs/msg/Dvl":
         d_v = arr["velocity"].astype(float)
         d_cov = arr["velocity_covar"].astype(float).reshape(m, 3, 3)
@@ -469,10 +475,9 @@ def _depth_data(src: Source, topic: str, bodies: Any, t0: int, repair: bool, war
     ns = stamps_ns(arr)
     frame_id = first_string(arr) or "pressure_link"
     if type_name == PRESSURE_TYPE:
-        p = arr["fluid_pressure"].astype(float)
-        var = arr["variance"].astype(float)
+        p, var = pressure_from_messages(arr)
         keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(p), repair, warnings, dropped)
-        p, var = p[keep], np.where(var[keep] > 0, var[keep], np.nan)
+        p, var = p[keep], var[keep]
         lat_deg = float(origin["lat_deg"]) if isinstance(origin, dict) and "lat_deg" in origin else 45.0
         d, dd_dp = pressure_to_depth(p, float(np.radians(lat_deg)))
         return DepthData((ns[keep] - t0) / 1e9, d, var * dd_dp**2, p, var, frame_id)
@@ -481,6 +486,13 @@ def _depth_data(src: Source, topic: str, bodies: Any, t0: int, repair: bool, war
     keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(z), repair, warnings, dropped)
     d = z[keep] if z_down else -z[keep]
     return DepthData((ns[keep] - t0) / 1e9, d, np.where(cov[keep] > 0, cov[keep], np.nan), frame_id=frame_id)
+
+
+def pressure_from_messages(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(absolute pressure Pa, its variance Pa^2) of decoded sensor_msgs/msg/FluidPressure messages; a variance of
+    0 or below is ROS's "unknown" and becomes NaN. The reader and the ROS 2 node (app/node) share it."""
+    var = arr["variance"].astype(float)
+    return arr["fluid_pressure"].astype(float), np.where(var > 0, var, np.nan)
 
 
 def _messages_lost(losses: dict[str, Any]) -> dict[str, int]:

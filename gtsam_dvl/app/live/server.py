@@ -128,7 +128,7 @@ class _Subscriptions:
 
 
 @dataclass
-class _Path:
+class PosePath:
     """The poses of one path topic so far (stamps ns, n_p m, n_q_b [x, y, z, w]) and when it was last sent (wall
     clock, s)."""
 
@@ -241,7 +241,7 @@ class LiveView:
         self._last_t: float | None = None
         self._broadcast_ns = -1
         self._counters: dict[str, int] = {}
-        self._path, self._truth_path = _Path(), _Path()
+        self._path, self._truth_path = PosePath(), PosePath()
         ch: dict[str, Any] = {}
         self._channels = ch
         for keys, type_name in ((("tf", "tf_static"), messages.TF), (("odometry", "truth"), messages.ODOMETRY),

@@ -1,7 +1,7 @@
 """The online estimator: an iSAM2 smoother fed message by message (estimator.py, and the modules it names), its
 fixed-lag window (window.py) and its options and estimate types (types.py)."""
 
-from gtsam_dvl.estimators.online.estimator import OnlineEstimator, smooth_online
+from gtsam_dvl.estimators.online.estimator import OnlineEstimator, run_result, smooth_online
 from gtsam_dvl.estimators.online.feed import feed_log
 from gtsam_dvl.estimators.online.types import (
     ONLINE_MODES,
@@ -13,4 +13,4 @@ from gtsam_dvl.estimators.online.types import (
 from gtsam_dvl.estimators.online.window import RelinearizationThresholds
 
 __all__ = ["ONLINE_MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator",
-           "RelinearizationThresholds", "feed_log", "latency_stats", "smooth_online"]
+           "RelinearizationThresholds", "feed_log", "latency_stats", "run_result", "smooth_online"]

@@ -125,7 +125,7 @@ from gtsam_dvl.estimators.online.window import IncrementalSmoother, Relinearizat
 from gtsam_dvl.estimators.selection import EpochScheduler, Ping
 
 __all__ = ["MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
-           "feed_log", "latency_stats", "smooth_online"]
+           "feed_log", "latency_stats", "run_result", "smooth_online"]
 
 
 class OnlineEstimator:
@@ -555,6 +555,23 @@ class OnlineEstimator:
         return OnlineEstimate.from_state(self._read_state(with_covariance), self.mounting.b_R_d0)
 
 
+def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int = 0) -> NavResult:
+    """estimator.result(t0_ns) with what every online run reports beside it: the correlated DVL error's settings,
+    the weak directions held, the run-constant DVL error's consider term on the calibration's covariance and the
+    water current. smooth_online and the ROS 2 node (app/node: the calibration file it saves) both call it, so a
+    live run's calibration is the one `smooth --mode online` gives for the same messages."""
+    result = estimator.result(t0_ns)
+    if correlated_error(config):
+        result.info["dvl_correlated_error"] = correlated.info(config)
+    if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
+        result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
+    # (constant_error.py; none with a vehicle calibration file as prior)
+    consider_constant_error(result, config, estimator.calibration is not None)
+    if estimator.current_history:  # the water current at each state as it left the window (or at the end)
+        result.info["water_current"] = estimator.current_profile()
+    return result
+
+
 def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: str | None = None,
                   window_s: float | None = None, progress: ProgressFn | None = None,
                   options: OnlineConfig | None = None, calibration: VehicleCalibration | None = None) -> NavResult:
@@ -573,17 +590,10 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     t_start = time.perf_counter()
     estimator = OnlineEstimator.for_log(log, config, options, calibration)
     feed_log(estimator, log, progress)
-    result = estimator.result(log.t0_ns)
+    result = run_result(estimator, config, log.t0_ns)
     total = time.perf_counter() - t_start
     result.timing_s = {"updates": float(np.sum(estimator.latencies_s)), "total": total}
     result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
-    if correlated_error(config):
-        result.info["dvl_correlated_error"] = correlated.info(config)
-    if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
-        result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
-    consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
-    if estimator.current_history:  # the water current at each state as it left the window (or at the end)
-        result.info["water_current"] = estimator.current_profile()
     if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
     if progress is not None:

@@ -68,6 +68,30 @@ def decode(path: Path, topic: str, type_name: str, bodies: Bodies) -> np.ndarray
     return out
 
 
+class MessageDecoder:
+    """One topic's messages decoded one at a time (a live subscription: the ROS 2 node), as decode() decodes them:
+    the layout of the last body is kept and reused while the length, encapsulation and strings (the frame_id) stay
+    the same, which is every message of a topic from one driver; anything else goes through decode()."""
+
+    def __init__(self, topic: str, type_name: str) -> None:
+        self.topic, self.type_name, self.spec = topic, type_name, SPECS[type_name]
+        self._dtype: np.dtype | None = None
+        self._size = -1
+        self._fixed: list[tuple[int, int, bytes]] = []  # (start, stop, bytes) that must match to reuse the layout
+
+    def __call__(self, body: bytes) -> np.ndarray:
+        """A one-row structured array of the message (decode()'s fields)."""
+        dt = self._dtype
+        if dt is not None and len(body) == self._size and all(body[a:b] == v for a, b, v in self._fixed):
+            return np.frombuffer(body, dt, count=1)
+        arr = decode(Path(self.topic), self.topic, self.type_name,
+                     Bodies(np.zeros(1, np.int64), fixed=np.frombuffer(body, np.uint8)[None, :]))
+        if arr.dtype.names is not None and "encap" in arr.dtype.names:  # decode()'s fast path: its layout fits
+            self._dtype, self._size = arr.dtype, len(body)
+            self._fixed = [(a, b, body[a:b]) for a, b in [(0, 4), *string_ranges(arr.dtype, self.spec)]]
+        return arr
+
+
 def first_string(arr: np.ndarray, name: str = "frame_id") -> str:
     """The string field of the first message ('' if none)."""
     if not len(arr):
