@@ -43,8 +43,10 @@ def main() -> None:
         return np.mean([f(s) for s in rows[mode]], axis=0)
 
     print(f"\n{args.scenario}, seeds {args.seeds}: means over seeds (errors are |error|)")
-    hdr = f"{'estimator':<10}{'|scale| ppm':>12}{'sig ppm':>9}{'|mis| r/p/y deg':>22}{'sig r/p/y deg':>22}" \
-          f"{'att RMSE e/n/u deg':>26}{'pos RMSE m':>11}{'wall s':>8}"
+    hdr = (
+        f"{'estimator':<10}{'|scale| ppm':>12}{'sig ppm':>9}{'|mis| r/p/y deg':>22}{'sig r/p/y deg':>22}"
+        f"{'att RMSE e/n/u deg':>26}{'pos RMSE m':>11}{'wall s':>8}"
+    )
     print(hdr)
     for mode in modes:
         sc = mean(mode, lambda s: abs(s["errors"]["scale_ppm"]))
@@ -55,16 +57,22 @@ def main() -> None:
         if mode == "io-dvlc":
             att, pos = "-", "-"
         else:
-            att = " ".join(f"{v:.4f}" for v in mean(mode, lambda s: np.array(s["errors"]["attitude_rmse_deg"])))
+            att = " ".join(
+                f"{v:.4f}" for v in mean(mode, lambda s: np.array(s["errors"]["attitude_rmse_deg"]))
+            )
             pos = f"{mean(mode, lambda s: s['errors']['position_rmse_m']):.2f}"
-        print(f"{mode:<10}{sc:>12.0f}{sg:>9.0f}{' '.join(f'{v:.3f}' for v in mis):>22}"
-              f"{' '.join(f'{v:.3f}' for v in ms):>22}{att:>26}{pos:>11}{wall:>8.2f}")
+        print(
+            f"{mode:<10}{sc:>12.0f}{sg:>9.0f}{' '.join(f'{v:.3f}' for v in mis):>22}"
+            f"{' '.join(f'{v:.3f}' for v in ms):>22}{att:>26}{pos:>11}{wall:>8.2f}"
+        )
     b = mean("batch", lambda s: s["errors"]["position_rmse_m"])
     e = mean("ekf", lambda s: s["errors"]["position_rmse_m"])
     ba = mean("batch", lambda s: np.array(s["errors"]["attitude_rmse_deg"]))
     ea = mean("ekf", lambda s: np.array(s["errors"]["attitude_rmse_deg"]))
-    print(f"\nbatch vs EKF: position RMSE {b:.2f} m vs {e:.2f} m ({100 * (1 - b / e):.0f} % lower); attitude RMSE "
-          f"e/n/u {np.round(ba, 4)} vs {np.round(ea, 4)} deg ({np.round(ea / ba, 1)}x lower)")
+    print(
+        f"\nbatch vs EKF: position RMSE {b:.2f} m vs {e:.2f} m ({100 * (1 - b / e):.0f} % lower); attitude RMSE "
+        f"e/n/u {np.round(ba, 4)} vs {np.round(ea, 4)} deg ({np.round(ea / ba, 1)}x lower)"
+    )
 
 
 if __name__ == "__main__":

@@ -41,13 +41,20 @@ def main() -> None:
 
     names = ("dvl_velocity", "dvl_beam", "BetweenFactorPose3")
     graphs = {name: gtsam.NonlinearFactorGraph() for name in names}
-    noise3, noise1 = gtsam.noiseModel.Isotropic.Sigma(3, 0.02), gtsam.noiseModel.Isotropic.Sigma(1, 0.02)
+    noise3, noise1 = (
+        gtsam.noiseModel.Isotropic.Sigma(3, 0.02),
+        gtsam.noiseModel.Isotropic.Sigma(1, 0.02),
+    )
     noise6 = gtsam.noiseModel.Isotropic.Sigma(6, 0.1)
     for i in range(N):
         keys = (X(i), V(i), K(0), B(0))
-        graphs["dvl_velocity"].add(make_dvl_velocity_factor(noise3, *keys, rng.normal(size=3), b_omega, b_l))
+        graphs["dvl_velocity"].add(
+            make_dvl_velocity_factor(noise3, *keys, rng.normal(size=3), b_omega, b_l)
+        )
         graphs["dvl_beam"].add(make_dvl_beam_factor(noise1, *keys, d_u, rng.normal(), b_omega, b_l))
-        graphs["BetweenFactorPose3"].add(gtsam.BetweenFactorPose3(X(i), X(i + 1), gtsam.Pose3(), noise6))
+        graphs["BetweenFactorPose3"].add(
+            gtsam.BetweenFactorPose3(X(i), X(i + 1), gtsam.Pose3(), noise6)
+        )
 
     lin = {name: best_of(lambda g=g: g.linearize(values)) for name, g in graphs.items()}
     err = {name: best_of(lambda g=g: g.error(values)) for name, g in graphs.items()}

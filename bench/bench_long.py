@@ -74,9 +74,17 @@ def child_simulate(hours: float, out: Path) -> dict[str, Any]:
     from gtsam_dvl.sim.stream import ChunkedSimulation
 
     sc = scenario_from_dict(scenario_hours(hours), f"survey-24h-cut-{hours:g}h", str(SCENARIO))
-    res = write_log_stream(out, ChunkedSimulation(sc, SEED))  # simulation and writing interleave, chunk by chunk
-    return {"simulate_s": res["seconds"] - res["write_seconds"], "write_s": res["write_seconds"],
-            "peak_rss_gib": peak_rss_gib(), "imu": res["imu"], "pings": res["dvl"], "mb": out.stat().st_size / 1e6}
+    res = write_log_stream(
+        out, ChunkedSimulation(sc, SEED)
+    )  # simulation and writing interleave, chunk by chunk
+    return {
+        "simulate_s": res["seconds"] - res["write_seconds"],
+        "write_s": res["write_seconds"],
+        "peak_rss_gib": peak_rss_gib(),
+        "imu": res["imu"],
+        "pings": res["dvl"],
+        "mb": out.stat().st_size / 1e6,
+    }
 
 
 def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, Any]:
@@ -84,8 +92,8 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     import gtsam
 
     from gtsam_dvl.core.config import EstimatorConfig
-    from gtsam_dvl.estimators import graph as graph_mod
-    from gtsam_dvl.estimators.batch_solve import extract_result, solve_graph
+    from gtsam_dvl.estimators.batch.solve import extract_result, solve_graph
+    from gtsam_dvl.estimators.graph import log_graph as graph_mod
     from gtsam_dvl.io.reader import read_log
 
     stages: dict[str, float] = {}
@@ -100,6 +108,7 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
                 return fn(*a, **k)
             finally:
                 stages[stage] = stages.get(stage, 0.0) + time.perf_counter() - t
+
         setattr(owner, name, wrapper)
 
     timed(graph_mod.LogGraph, "_select_epochs", "epochs")
@@ -109,7 +118,9 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     cfg = EstimatorConfig.named(config)
     if spacing is not None:
         if not hasattr(cfg.solver, "keyframe_spacing_s"):
-            raise SystemExit("--keyframe-spacing: this version's [solver] has no keyframe_spacing_s")
+            raise SystemExit(
+                "--keyframe-spacing: this version's [solver] has no keyframe_spacing_s"
+            )
         cfg.solver.keyframe_spacing_s = spacing
     cfg = cfg.validate()
     t_all = time.perf_counter()
@@ -120,11 +131,15 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     t0 = time.perf_counter()
     builder = graph_mod.LogGraph(log, cfg)
     t_graph = time.perf_counter() - t0
-    stages["epochs, other"] = t_graph - stages.get("epochs", 0.0) - stages.get("preintegration", 0.0) - stages.get(
-        "factors", 0.0)
+    stages["epochs, other"] = (
+        t_graph
+        - stages.get("epochs", 0.0)
+        - stages.get("preintegration", 0.0)
+        - stages.get("factors", 0.0)
+    )
     rss["preintegration"] = peak_rss_gib()
     t0 = time.perf_counter()
-    # as smooth_batch: the DVL factors in bulk where the configuration allows (estimators/bulk.py)
+    # as smooth_batch: the DVL factors in bulk where the configuration allows (estimators/graph/bulk.py)
     graph, values = builder.build_bulk()
     ordering = builder.elimination_ordering()
     stages["factors"] = stages.get("factors", 0.0) + time.perf_counter() - t0
@@ -137,26 +152,40 @@ def child_smooth(path: Path, config: str, spacing: float | None) -> dict[str, An
     stages["solve"] = time.perf_counter() - t0
     rss["solve"] = peak_rss_gib()
     t0 = time.perf_counter()
-    result = extract_result(builder, graph, values, ordering,
-                            bayes_net=report.bayes_net if report.converged else None)
+    result = extract_result(
+        builder, graph, values, ordering, bayes_net=report.bayes_net if report.converged else None
+    )
     stages["marginals"] = time.perf_counter() - t0
     total = time.perf_counter() - t_all
     duration = float(log.imu.t[-1] - log.imu.t[0])
     del gtsam
     return {
-        "stages_s": stages, "linearize_s": lin, "eliminate_s": elim, "iterations": iterations, "total_s": total,
-        "rss_gib": rss, "peak_rss_gib": peak_rss_gib(), "duration_s": duration, "imu": len(log.imu),
-        "pings": len(log.dvl), "states": len(builder.epochs),
+        "stages_s": stages,
+        "linearize_s": lin,
+        "eliminate_s": elim,
+        "iterations": iterations,
+        "total_s": total,
+        "rss_gib": rss,
+        "peak_rss_gib": peak_rss_gib(),
+        "duration_s": duration,
+        "imu": len(log.imu),
+        "pings": len(log.dvl),
+        "states": len(builder.epochs),
         "pings_used": int(sum(e.dvl_index >= 0 for e in builder.epochs)),
-        "scale": result.scale, "scale_sigma": result.scale_sigma,
+        "scale": result.scale,
+        "scale_sigma": result.scale_sigma,
         "misalignment_deg": list(map(float, result.misalignment_deg)),
         "misalignment_sigma_deg": list(map(float, result.misalignment_sigma_deg)),
     }
 
 
 def run_child(args: list[str]) -> dict[str, Any]:
-    proc = subprocess.run([sys.executable, __file__, *args], capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    proc = subprocess.run(
+        [sys.executable, __file__, *args],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     if proc.returncode != 0:
         raise SystemExit(f"child {' '.join(args)} failed:\n{proc.stderr.strip()[-2000:]}")
     out: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
@@ -169,15 +198,34 @@ STAGES = ["read", "epochs", "preintegration", "factors", "solve", "marginals"]
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--hours", type=float, nargs="+", default=[1, 3, 6, 12, 24], help="mission lengths (h)")
-    ap.add_argument("--cache", type=Path, default=Path.home() / ".cache" / "gtsam_dvl" / "bench_long",
-                    help="folder of the simulated logs (reused when present)")
-    ap.add_argument("--config", default="default", help="named estimator configuration (default, paper)")
-    ap.add_argument("--keyframe-spacing", type=float, default=None,
-                    help="[solver] keyframe_spacing_s (s) instead of the configuration's default")
-    ap.add_argument("--per-ping-hours", type=float, nargs="*", default=[6],
-                    help="lengths also run with a state per ping (keyframe_spacing_s = 0), if the solver has it")
-    ap.add_argument("--sim-memory-gb", type=float, default=8.0, help="skip simulations expected to need more")
+    ap.add_argument(
+        "--hours", type=float, nargs="+", default=[1, 3, 6, 12, 24], help="mission lengths (h)"
+    )
+    ap.add_argument(
+        "--cache",
+        type=Path,
+        default=Path.home() / ".cache" / "gtsam_dvl" / "bench_long",
+        help="folder of the simulated logs (reused when present)",
+    )
+    ap.add_argument(
+        "--config", default="default", help="named estimator configuration (default, paper)"
+    )
+    ap.add_argument(
+        "--keyframe-spacing",
+        type=float,
+        default=None,
+        help="[solver] keyframe_spacing_s (s) instead of the configuration's default",
+    )
+    ap.add_argument(
+        "--per-ping-hours",
+        type=float,
+        nargs="*",
+        default=[6],
+        help="lengths also run with a state per ping (keyframe_spacing_s = 0), if the solver has it",
+    )
+    ap.add_argument(
+        "--sim-memory-gb", type=float, default=8.0, help="skip simulations expected to need more"
+    )
     ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
@@ -185,7 +233,9 @@ def main() -> None:
         if kind == "simulate":
             res = child_simulate(float(rest[0]), Path(rest[1]))
         else:
-            res = child_smooth(Path(rest[0]), rest[1], None if rest[2] == "none" else float(rest[2]))
+            res = child_smooth(
+                Path(rest[0]), rest[1], None if rest[2] == "none" else float(rest[2])
+            )
         print(json.dumps(res))
         return
 
@@ -197,56 +247,89 @@ def main() -> None:
         if not path.exists():
             need = SIM_GB_FIXED + SIM_GB_PER_H * hours
             if need > args.sim_memory_gb:
-                print(f"{hours:g} h: skipped, its simulation would need about {need:.1f} GB (> --sim-memory-gb "
-                      f"{args.sim_memory_gb:g})")
+                print(
+                    f"{hours:g} h: skipped, its simulation would need about {need:.1f} GB (> --sim-memory-gb "
+                    f"{args.sim_memory_gb:g})"
+                )
                 continue
             tmp = path.with_suffix(".partial.mcap")
             sim = run_child(["--child", "simulate", str(hours), str(tmp)])
             tmp.replace(path)
-            print(f"{hours:g} h: simulated {sim['imu']:,} IMU samples, {sim['pings']:,} pings in "
-                  f"{sim['simulate_s']:.1f} s, written in {sim['write_s']:.1f} s ({sim['mb']:.0f} MB, peak RSS "
-                  f"{sim['peak_rss_gib']:.2f} GiB) to {path}")
+            print(
+                f"{hours:g} h: simulated {sim['imu']:,} IMU samples, {sim['pings']:,} pings in "
+                f"{sim['simulate_s']:.1f} s, written in {sim['write_s']:.1f} s ({sim['mb']:.0f} MB, peak RSS "
+                f"{sim['peak_rss_gib']:.2f} GiB) to {path}"
+            )
         res = run_child(["--child", "smooth", str(path), args.config, spacing])
         rows.append((hours, res))
-        print(f"{hours:g} h: {res['total_s']:.1f} s, peak RSS {res['peak_rss_gib']:.2f} GiB", flush=True)
+        print(
+            f"{hours:g} h: {res['total_s']:.1f} s, peak RSS {res['peak_rss_gib']:.2f} GiB",
+            flush=True,
+        )
     if not rows:
         return
 
-    print(f"\nbatch smoother, configuration '{args.config}', keyframe spacing "
-          f"{'default' if args.keyframe_spacing is None else args.keyframe_spacing}; seconds per stage")
-    head = f"{'hours':>6}{'IMU':>11}{'pings':>9}{'states':>9}" + "".join(f"{s[:9]:>10}" for s in STAGES)
+    print(
+        f"\nbatch smoother, configuration '{args.config}', keyframe spacing "
+        f"{'default' if args.keyframe_spacing is None else args.keyframe_spacing}; seconds per stage"
+    )
+    head = f"{'hours':>6}{'IMU':>11}{'pings':>9}{'states':>9}" + "".join(
+        f"{s[:9]:>10}" for s in STAGES
+    )
     print(head + f"{'(lin)':>8}{'(elim)':>8}{'total':>9}{'RSS GiB':>9}{'RT factor':>10}")
     for hours, r in rows:
         st = r["stages_s"]
         cells = "".join(f"{st.get(s, 0.0):>10.2f}" for s in STAGES)
-        print(f"{hours:>6g}{r['imu']:>11,}{r['pings']:>9,}{r['states']:>9,}{cells}{r['linearize_s']:>8.2f}"
-              f"{r['eliminate_s']:>8.2f}{r['total_s']:>9.1f}{r['peak_rss_gib']:>9.2f}"
-              f"{r['duration_s'] / r['total_s']:>10.0f}")
-    print("peak RSS after each stage (GiB): " + "; ".join(
-        f"{h:g} h: " + ", ".join(f"{k} {v:.2f}" for k, v in r["rss_gib"].items()) for h, r in rows))
+        print(
+            f"{hours:>6g}{r['imu']:>11,}{r['pings']:>9,}{r['states']:>9,}{cells}{r['linearize_s']:>8.2f}"
+            f"{r['eliminate_s']:>8.2f}{r['total_s']:>9.1f}{r['peak_rss_gib']:>9.2f}"
+            f"{r['duration_s'] / r['total_s']:>10.0f}"
+        )
+    print(
+        "peak RSS after each stage (GiB): "
+        + "; ".join(
+            f"{h:g} h: " + ", ".join(f"{k} {v:.2f}" for k, v in r["rss_gib"].items())
+            for h, r in rows
+        )
+    )
     if len(rows) >= 2:
         h0, r0 = rows[0]
-        print("cost per hour of mission relative to the shortest run (1.00 = linear): " + ", ".join(
-            f"{h:g} h: time {r['total_s'] / h / (r0['total_s'] / h0):.2f}, RSS "
-            f"{r['peak_rss_gib'] / h / (r0['peak_rss_gib'] / h0):.2f}" for h, r in rows[1:]))
+        print(
+            "cost per hour of mission relative to the shortest run (1.00 = linear): "
+            + ", ".join(
+                f"{h:g} h: time {r['total_s'] / h / (r0['total_s'] / h0):.2f}, RSS "
+                f"{r['peak_rss_gib'] / h / (r0['peak_rss_gib'] / h0):.2f}"
+                for h, r in rows[1:]
+            )
+        )
     for hours in args.per_ping_hours or []:
         match = [r for h, r in rows if h == hours]
         if not match:
             continue
         try:
-            pp = run_child(["--child", "smooth", str(cached_log(args.cache, hours)), args.config, "0"])
+            pp = run_child(
+                ["--child", "smooth", str(cached_log(args.cache, hours)), args.config, "0"]
+            )
         except SystemExit as e:
             print(f"state per ping at {hours:g} h: not run ({str(e).splitlines()[-1]})")
             continue
         kf = match[0]
-        print(f"\n{hours:g} h, state per ping against the default: {pp['states']:,} vs {kf['states']:,} states, "
-              f"{pp['total_s']:.1f} s vs {kf['total_s']:.1f} s ({pp['total_s'] / kf['total_s']:.1f}x), "
-              f"peak RSS {pp['peak_rss_gib']:.2f} vs {kf['peak_rss_gib']:.2f} GiB")
-        print(f"  scale sigma {pp['scale_sigma']:.3e} vs {kf['scale_sigma']:.3e} "
-              f"(ratio {kf['scale_sigma'] / pp['scale_sigma']:.3f}); misalignment sigma (deg) "
-              + ", ".join(f"{a:.4f} vs {b:.4f}" for a, b in zip(pp["misalignment_sigma_deg"],
-                                                              kf["misalignment_sigma_deg"], strict=True))
-              + f"; scale difference {(kf['scale'] - pp['scale']) / pp['scale_sigma']:+.2f} sigma")
+        print(
+            f"\n{hours:g} h, state per ping against the default: {pp['states']:,} vs {kf['states']:,} states, "
+            f"{pp['total_s']:.1f} s vs {kf['total_s']:.1f} s ({pp['total_s'] / kf['total_s']:.1f}x), "
+            f"peak RSS {pp['peak_rss_gib']:.2f} vs {kf['peak_rss_gib']:.2f} GiB"
+        )
+        print(
+            f"  scale sigma {pp['scale_sigma']:.3e} vs {kf['scale_sigma']:.3e} "
+            f"(ratio {kf['scale_sigma'] / pp['scale_sigma']:.3f}); misalignment sigma (deg) "
+            + ", ".join(
+                f"{a:.4f} vs {b:.4f}"
+                for a, b in zip(
+                    pp["misalignment_sigma_deg"], kf["misalignment_sigma_deg"], strict=True
+                )
+            )
+            + f"; scale difference {(kf['scale'] - pp['scale']) / pp['scale_sigma']:+.2f} sigma"
+        )
 
 
 if __name__ == "__main__":

@@ -16,13 +16,17 @@ from pathlib import Path
 from gtsam_dvl.app.campaign.runner import run_campaign
 
 
-def campaign(scenario: str, runs: int, estimators: list[str], workers: int, folder: Path) -> tuple[float, float]:
+def campaign(
+    scenario: str, runs: int, estimators: list[str], workers: int, folder: Path
+) -> tuple[float, float]:
     """(wall time of the campaign, sum of the estimators' own wall times over its runs), seconds."""
     t0 = time.perf_counter()
     run_campaign(scenario, runs, estimators, folder, workers=workers, show_progress=False)
     wall = time.perf_counter() - t0
-    own = sum(sum(e["wall_s"] for e in json.loads(p.read_text())["estimators"].values())
-              for p in (folder / "runs").glob("seed_*.json"))
+    own = sum(
+        sum(e["wall_s"] for e in json.loads(p.read_text())["estimators"].values())
+        for p in (folder / "runs").glob("seed_*.json")
+    )
     return wall, own
 
 
@@ -36,7 +40,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         results = {}
         for workers in (1, 2):
-            results[workers] = campaign(args.scenario, args.runs, estimators, workers, Path(tmp) / f"w{workers}")
+            results[workers] = campaign(
+                args.scenario, args.runs, estimators, workers, Path(tmp) / f"w{workers}"
+            )
     print(f"campaign: {args.runs} runs of {args.scenario}, estimators {args.estimators}")
     print("workers | wall (s) | estimators' own time (s) | overhead per task (s) | overhead share")
     for workers, (wall, own) in results.items():

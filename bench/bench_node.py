@@ -42,9 +42,12 @@ from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
-SEGMENTS = [{"kind": "static", "duration_s": 45.0}, {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
-            {"kind": "level", "duration_s": 45.0, "speed_bump_m_s": 0.5},
-            {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8}]
+SEGMENTS = [
+    {"kind": "static", "duration_s": 45.0},
+    {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
+    {"kind": "level", "duration_s": 45.0, "speed_bump_m_s": 0.5},
+    {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+]
 PLAYER = """
 import json, sys
 from gtsam_dvl.app.node.player import play_log
@@ -72,22 +75,35 @@ def run(tmp: Path, mcap: Path, rate: float, env: dict[str, str]) -> dict[str, np
 
     stats_file, played = tmp / f"stats_{rate:g}.json", tmp / f"played_{rate:g}.json"
     params = tmp / "params.yaml"
-    params.write_text("/**:\n  ros__parameters:\n    imu_topic: /imu/data_raw\n    dvl_topic: /dvl/twist\n"
-                      '    pressure_topic: ""\n    gnss_topic: ""\n    path_period_s: 1.0\n'
-                      f'    stats_file: "{stats_file}"\n    qos_inputs:\n      reliability: reliable\n'
-                      "      depth: 100000\n")
+    params.write_text(
+        "/**:\n  ros__parameters:\n    imu_topic: /imu/data_raw\n    dvl_topic: /dvl/twist\n"
+        '    pressure_topic: ""\n    gnss_topic: ""\n    path_period_s: 1.0\n'
+        f'    stats_file: "{stats_file}"\n    qos_inputs:\n      reliability: reliable\n'
+        "      depth: 100000\n"
+    )
     received: list[tuple[int, float]] = []
     decode = MessageDecoder("/gtsam_dvl/odometry", "nav_msgs/msg/Odometry")
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=int(env["ROS_DOMAIN_ID"]))
     sub = Node("bench_subscriber", context=context)
-    sub.create_subscription(Odometry, "/gtsam_dvl/odometry",
-                            lambda b: received.append((time.monotonic(), b)), 10000, raw=True)
+    sub.create_subscription(
+        Odometry,
+        "/gtsam_dvl/odometry",
+        lambda b: received.append((time.monotonic(), b)),
+        10000,
+        raw=True,
+    )
     executor = new_executor(context)
     executor.add_node(sub)
-    node = subprocess.Popen(cli("node", "-c", tmp / "cfg.toml", "--params", params), env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    player = subprocess.Popen([sys.executable, "-c", PLAYER, str(mcap), str(rate), str(played)], env=env)
+    node = subprocess.Popen(
+        cli("node", "-c", tmp / "cfg.toml", "--params", params),
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    player = subprocess.Popen(
+        [sys.executable, "-c", PLAYER, str(mcap), str(rate), str(played)], env=env
+    )
     while player.poll() is None:
         executor.spin_once(timeout_sec=0.05)
     node.send_signal(2)  # SIGINT: the node finishes and writes its stats
@@ -97,18 +113,32 @@ def run(tmp: Path, mcap: Path, rate: float, env: dict[str, str]) -> dict[str, np
     rclpy.shutdown(context=context)
     timings = json.loads(stats_file.read_text())["timings"]
     play = json.loads(played.read_text())
-    pub_wall = {(t, ns): w for ns, t, w in zip(play["log_ns"], play["topics"], play["wall"], strict=True)}
+    pub_wall = {
+        (t, ns): w for ns, t, w in zip(play["log_ns"], play["topics"], play["wall"], strict=True)
+    }
     recv = {int(stamps_ns(decode(b))[0]): w for w, b in received}
     topics = {"imu": "/imu/data_raw", "dvl": "/dvl/twist"}
     rows = []
     for r in timings:
-        got, pub = recv.get(r["stamp_ns"]), pub_wall.get((topics.get(r["trigger_kind"], ""), r["trigger_ns"]))
+        got, pub = (
+            recv.get(r["stamp_ns"]),
+            pub_wall.get((topics.get(r["trigger_kind"], ""), r["trigger_ns"])),
+        )
         if got is None or pub is None or not np.isfinite(r["published"]):
             continue
-        rows.append((got - r["done"], got - pub, r["processing_s"], r["arrived"] - pub, got - r["arrived"]))
+        rows.append(
+            (got - r["done"], got - pub, r["processing_s"], r["arrived"] - pub, got - r["arrived"])
+        )
     a = np.array(rows)
-    return {"after_processing": a[:, 0], "end_to_end": a[:, 1], "processing": a[:, 2], "dds": a[:, 3],
-            "node": a[:, 4], "matched": np.array([len(rows), len(timings)]), "wall_s": np.array([play["wall_s"]])}
+    return {
+        "after_processing": a[:, 0],
+        "end_to_end": a[:, 1],
+        "processing": a[:, 2],
+        "dds": a[:, 3],
+        "node": a[:, 4],
+        "matched": np.array([len(rows), len(timings)]),
+        "wall_s": np.array([play["wall_s"]]),
+    }
 
 
 def main() -> None:
@@ -123,9 +153,15 @@ def main() -> None:
     raw["rates"] = {**raw["rates"], "imu_hz": args.imu_hz, "dvl_hz": args.dvl_hz}
     log = simulate(scenario_from_dict(raw, name="bench-node"), args.seed)
     assert log.origin is not None
-    env = dict(os.environ, ROS_DOMAIN_ID=str(random.randint(1, 100)), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
-    print(f"log: {log.imu.t[-1] - log.imu.t[0]:.0f} s, IMU {args.imu_hz:g} Hz, DVL {args.dvl_hz:g} Hz; load "
-          f"{os.getloadavg()[0]:.2f}; p50 / p99 / max")
+    env = dict(
+        os.environ,
+        ROS_DOMAIN_ID=str(random.randint(1, 100)),
+        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+    )
+    print(
+        f"log: {log.imu.t[-1] - log.imu.t[0]:.0f} s, IMU {args.imu_hz:g} Hz, DVL {args.dvl_hz:g} Hz; load "
+        f"{os.getloadavg()[0]:.2f}; p50 / p99 / max"
+    )
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         mcap = tmp / "bench.mcap"
@@ -134,15 +170,20 @@ def main() -> None:
         (tmp / "cfg.toml").write_text(
             f'preset = "paper"\n[alignment]\norigin_lat_deg = {o.lat_deg!r}\norigin_lon_deg = {o.lon_deg!r}\n'
             f'origin_height_m = {o.height_m!r}\n[online]\nalign_s = 35.0\n[current]\nwater_track = "refuse"\n'
-            "[dvl]\nestimate_time_offset = true\n")
+            "[dvl]\nestimate_time_offset = true\n"
+        )
         for rate in args.rates:
             r = run(tmp, mcap, rate, env)
             n, total = r["matched"]
             base = np.percentile(r["dds"], 99)
             ratio = {k: np.percentile(r[k], 99) / base for k in ("after_processing", "end_to_end")}
-            print(f"replay {rate:g}x real time ({r['wall_s'][0]:.1f} s wall), {n} of {total} Odometry matched:")
-            print(f"  after processing  {stats(r['after_processing'])}  (p99 {ratio['after_processing']:.2f}x the "
-                  "baseline's)")
+            print(
+                f"replay {rate:g}x real time ({r['wall_s'][0]:.1f} s wall), {n} of {total} Odometry matched:"
+            )
+            print(
+                f"  after processing  {stats(r['after_processing'])}  (p99 {ratio['after_processing']:.2f}x the "
+                "baseline's)"
+            )
             print(f"  end to end        {stats(r['end_to_end'])}  (p99 {ratio['end_to_end']:.2f}x)")
             print(f"  processing        {stats(r['processing'])}")
             print(f"  node: releasing message's arrival -> Odometry received  {stats(r['node'])}")

@@ -52,9 +52,18 @@ def run(name: str, seed: int, mode: str) -> dict:
     result.timing_s = {"total": wall}
     errors = summary(result, log)["errors"]
     return {
-        "name": name, "mode": mode, "duration_h": duration / HOUR, "epochs": len(t), "sim_s": sim_s, "wall_s": wall,
-        "rtf": duration / wall, "all": latency_stats(lat), "first": latency_stats(first), "last": latency_stats(last),
-        "rebases": result.info["isam2"]["rebases"], "variables": result.info["isam2"]["variables"],
+        "name": name,
+        "mode": mode,
+        "duration_h": duration / HOUR,
+        "epochs": len(t),
+        "sim_s": sim_s,
+        "wall_s": wall,
+        "rtf": duration / wall,
+        "all": latency_stats(lat),
+        "first": latency_stats(first),
+        "last": latency_stats(last),
+        "rebases": result.info["isam2"]["rebases"],
+        "variables": result.info["isam2"]["variables"],
         "errors": errors,
     }
 
@@ -63,7 +72,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--scenarios", nargs="+", default=["paper-3d", "survey-6h"])
-    parser.add_argument("--no-full", action="store_true", help="skip the full-history contrast run on paper-3d")
+    parser.add_argument(
+        "--no-full", action="store_true", help="skip the full-history contrast run on paper-3d"
+    )
     args = parser.parse_args()
 
     rows = [run(name, args.seed, "fixed_lag") for name in args.scenarios]
@@ -71,30 +82,38 @@ def main() -> None:
         rows.append(run("paper-3d", args.seed, "full"))
 
     print(f"\nonline estimator, seed {args.seed}; latency per DVL epoch in ms")
-    head = (f"{'scenario':10s} {'mode':9s} {'hours':>5s} {'epochs':>6s} {'p50':>6s} {'p99':>7s} {'max':>8s} "
-            f"{'p99 1st h':>9s} {'p99 last h':>10s} {'last/1st':>8s} {'RTF':>6s} {'wall s':>7s} {'rebases':>7s} "
-            f"{'window vars':>11s}")
+    head = (
+        f"{'scenario':10s} {'mode':9s} {'hours':>5s} {'epochs':>6s} {'p50':>6s} {'p99':>7s} {'max':>8s} "
+        f"{'p99 1st h':>9s} {'p99 last h':>10s} {'last/1st':>8s} {'RTF':>6s} {'wall s':>7s} {'rebases':>7s} "
+        f"{'window vars':>11s}"
+    )
     print(head)
     print("-" * len(head))
     for r in rows:
         a, f, la = r["all"], r["first"], r["last"]
-        print(f"{r['name']:10s} {r['mode']:9s} {r['duration_h']:5.2f} {r['epochs']:6d} {a['p50']:6.2f} {a['p99']:7.2f} "
-              f"{a['max']:8.1f} {f['p99']:9.2f} {la['p99']:10.2f} {la['p99'] / f['p99']:8.2f} {r['rtf']:6.0f} "
-              f"{r['wall_s']:7.1f} {r['rebases']:7d} {r['variables']:11d}")
+        print(
+            f"{r['name']:10s} {r['mode']:9s} {r['duration_h']:5.2f} {r['epochs']:6d} {a['p50']:6.2f} {a['p99']:7.2f} "
+            f"{a['max']:8.1f} {f['p99']:9.2f} {la['p99']:10.2f} {la['p99'] / f['p99']:8.2f} {r['rtf']:6.0f} "
+            f"{r['wall_s']:7.1f} {r['rebases']:7d} {r['variables']:11d}"
+        )
     print("\nfinal estimates against the simulated truth, in the estimator's own sigmas:")
     for r in rows:
         e = r["errors"]
-        print(f"  {r['name']:10s} {r['mode']:9s} scale {e['scale_nsigma']:+.2f}, misalignment "
-              f"{np.round(e['misalignment_nsigma'], 2)}, gyro bias {np.round(e['gyro_bias_nsigma'], 2)}, accel bias "
-              f"{np.round(e['accel_bias_nsigma'], 2)}; final horizontal position error "
-              f"{e['final_horizontal_position_m']:.2f} m ({e['final_horizontal_position_pct_distance']:.3f} % of "
-              f"distance)")
+        print(
+            f"  {r['name']:10s} {r['mode']:9s} scale {e['scale_nsigma']:+.2f}, misalignment "
+            f"{np.round(e['misalignment_nsigma'], 2)}, gyro bias {np.round(e['gyro_bias_nsigma'], 2)}, accel bias "
+            f"{np.round(e['accel_bias_nsigma'], 2)}; final horizontal position error "
+            f"{e['final_horizontal_position_m']:.2f} m ({e['final_horizontal_position_pct_distance']:.3f} % of "
+            f"distance)"
+        )
     lag = [r for r in rows if r["mode"] == "fixed_lag"]
     ok_p99 = all(r["all"]["p99"] < 10 for r in lag)
     ok_flat = all(r["last"]["p99"] <= 1.5 * r["first"]["p99"] for r in lag)
     ok_rtf = all(r["rtf"] > 300 for r in lag)
-    print(f"\ntargets (fixed lag): p99 < 10 ms {'met' if ok_p99 else 'MISSED'}; last-hour p99 <= 1.5x first "
-          f"{'met' if ok_flat else 'MISSED'}; real-time factor > 300 {'met' if ok_rtf else 'MISSED'}")
+    print(
+        f"\ntargets (fixed lag): p99 < 10 ms {'met' if ok_p99 else 'MISSED'}; last-hour p99 <= 1.5x first "
+        f"{'met' if ok_flat else 'MISSED'}; real-time factor > 300 {'met' if ok_rtf else 'MISSED'}"
+    )
     sims = ", ".join(f"{r['name']} {r['sim_s']:.0f} s" for r in lag)
     print(f"(simulation, not timed: {sims})")
 

@@ -93,7 +93,9 @@ def scenario_dict(hours: float, imu_hz: float, dvl_hz: float) -> dict[str, Any]:
     return raw
 
 
-def cached_log(hours: float, imu_hz: float, dvl_hz: float, seed: int, cache: Path) -> tuple[LogData, float]:
+def cached_log(
+    hours: float, imu_hz: float, dvl_hz: float, seed: int, cache: Path
+) -> tuple[LogData, float]:
     """The mission's log, simulated and written once, read back from the cache (returns it and the seconds
     the simulation took, 0 when cached)."""
     cache.mkdir(parents=True, exist_ok=True)
@@ -117,20 +119,31 @@ def cached_log(hours: float, imu_hz: float, dvl_hz: float, seed: int, cache: Pat
 class Run:
     label: str
     hours: float
-    epochs: int = 0  # DVL epochs processed: states (keyframes, states without a ping) and pings between them
+    epochs: int = (
+        0  # DVL epochs processed: states (keyframes, states without a ping) and pings between them
+    )
     states: int = 0
     wall_s: float = 0.0
-    cpu_s: float = 0.0  # this process's CPU time over the same span (less affected by a loaded machine)
+    cpu_s: float = (
+        0.0  # this process's CPU time over the same span (less affected by a loaded machine)
+    )
     rtf: float = 0.0
     lat_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cpu_lat_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # CPU time per epoch
     t_epoch: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    is_state: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # per epoch: a state was made
+    is_state: np.ndarray = field(
+        default_factory=lambda: np.zeros(0, bool)
+    )  # per epoch: a state was made
     samples: list[dict[str, float]] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
 
-    def stats(self, t_from: float = -np.inf, t_to: float = np.inf, states_only: bool = False,
-              cpu: bool = False) -> dict[str, float]:
+    def stats(
+        self,
+        t_from: float = -np.inf,
+        t_to: float = np.inf,
+        states_only: bool = False,
+        cpu: bool = False,
+    ) -> dict[str, float]:
         sel = (self.t_epoch >= t_from) & (self.t_epoch < t_to)
         if states_only:
             sel &= self.is_state
@@ -141,8 +154,14 @@ def live_imu_factors() -> int:
     return sum(isinstance(o, EarthImuFactor) for o in gc.get_objects())
 
 
-def run(label: str, log: LogData, config: EstimatorConfig, until_h: float | None = None,
-        sample_memory: bool = True, defer: bool = True) -> Run:
+def run(
+    label: str,
+    log: LogData,
+    config: EstimatorConfig,
+    until_h: float | None = None,
+    sample_memory: bool = True,
+    defer: bool = True,
+) -> Run:
     """Feed the log (up to until_h hours) to a fixed-lag OnlineEstimator, sampling memory every SAMPLE_S;
     defer: OnlineEstimator.defer_between_pings."""
     imu, dvl = log.imu, log.dvl
@@ -168,11 +187,16 @@ def run(label: str, log: LogData, config: EstimatorConfig, until_h: float | None
             lat = np.asarray(est.latencies_s[k_lat:])
             lat_cpu = np.asarray(est.latencies_cpu_s[k_lat:])
             k_lat = len(est.latencies_s)
-            out.samples.append({"t_h": (dvl.t[j] - t_first) / HOUR, "rss_mb": rss_mb(),
-                                "imu_factors": live_imu_factors(),
-                                "variables": sm.isam.getLinearizationPoint().size() if sm is not None else 0,
-                                "p99_ms": latency_stats(lat)["p99"] if lat.size else float("nan"),
-                                "p99_cpu_ms": latency_stats(lat_cpu)["p99"] if lat.size else float("nan")})
+            out.samples.append(
+                {
+                    "t_h": (dvl.t[j] - t_first) / HOUR,
+                    "rss_mb": rss_mb(),
+                    "imu_factors": live_imu_factors(),
+                    "variables": sm.isam.getLinearizationPoint().size() if sm is not None else 0,
+                    "p99_ms": latency_stats(lat)["p99"] if lat.size else float("nan"),
+                    "p99_cpu_ms": latency_stats(lat_cpu)["p99"] if lat.size else float("nan"),
+                }
+            )
             next_sample += SAMPLE_S
             t0 += time.perf_counter() - paused  # sampling is not the estimator's time
             c0 += time.process_time() - c_paused
@@ -190,11 +214,18 @@ def run(label: str, log: LogData, config: EstimatorConfig, until_h: float | None
     out.is_state = np.isin(t_lat, result.t)
     out.epochs = len(out.lat_s)
     out.states = len(result.t)
-    out.info = {"rebases": result.info["isam2"]["rebases"], "variables": result.info["isam2"]["variables"],
-                "factors": result.info["isam2"]["factors"], "scale": result.scale, "scale_sigma": result.scale_sigma,
-                "history_bytes": sum(b.nbytes for blk in est._history._blocks for b in blk.values())}
+    out.info = {
+        "rebases": result.info["isam2"]["rebases"],
+        "variables": result.info["isam2"]["variables"],
+        "factors": result.info["isam2"]["factors"],
+        "scale": result.scale,
+        "scale_sigma": result.scale_sigma,
+        "history_bytes": sum(b.nbytes for blk in est._history._blocks for b in blk.values()),
+    }
     if log.true_calibration is not None:
-        out.info["scale_err_sigma"] = (result.scale - log.true_calibration.scale) / result.scale_sigma
+        out.info["scale_err_sigma"] = (
+            result.scale - log.true_calibration.scale
+        ) / result.scale_sigma
     return out
 
 
@@ -211,22 +242,41 @@ def slope_mb_per_h(samples: list[dict[str, float]]) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--hours", type=float, default=6.0, help="mission length (cut from survey-6h), h")
+    ap.add_argument(
+        "--hours", type=float, default=6.0, help="mission length (cut from survey-6h), h"
+    )
     ap.add_argument("--imu-hz", type=float, default=200.0)
     ap.add_argument("--dvl-hz", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--config", choices=["default", "paper"], default="default",
-                    help="default EstimatorConfig (time offset estimated) or EstimatorConfig.paper()")
+    ap.add_argument(
+        "--config",
+        choices=["default", "paper"],
+        default="default",
+        help="default EstimatorConfig (time offset estimated) or EstimatorConfig.paper()",
+    )
     ap.add_argument("--cache-dir", type=Path, default=ROOT / "bench" / ".cache")
-    ap.add_argument("--baseline-hours", type=float, default=1.0, help="baseline: this long at 100 Hz IMU / 1 Hz DVL")
+    ap.add_argument(
+        "--baseline-hours",
+        type=float,
+        default=1.0,
+        help="baseline: this long at 100 Hz IMU / 1 Hz DVL",
+    )
     ap.add_argument("--no-baseline", action="store_true")
     ap.add_argument("--plot", type=Path, help="PNG of RSS and per-epoch time against mission time")
     ap.add_argument("--profile", type=Path, help="cProfile of the high-rate run to this file")
-    ap.add_argument("--between", choices=["deferred", "immediate"], default="deferred",
-                    help="pings between keyframes: their factors in the next state's iSAM2 update (default) or each "
-                         "in an update of its own (OnlineEstimator.defer_between_pings)")
-    ap.add_argument("--keyframe-spacing", type=float, default=None,
-                    help="[solver] keyframe_spacing_s, s (default: the config's; 0: a state per ping)")
+    ap.add_argument(
+        "--between",
+        choices=["deferred", "immediate"],
+        default="deferred",
+        help="pings between keyframes: their factors in the next state's iSAM2 update (default) or each "
+        "in an update of its own (OnlineEstimator.defer_between_pings)",
+    )
+    ap.add_argument(
+        "--keyframe-spacing",
+        type=float,
+        default=None,
+        help="[solver] keyframe_spacing_s, s (default: the config's; 0: a state per ping)",
+    )
     args = ap.parse_args()
     config = EstimatorConfig() if args.config == "default" else EstimatorConfig.paper()
     if args.keyframe_spacing is not None:
@@ -234,12 +284,15 @@ def main() -> None:
     defer = args.between == "deferred"
 
     log, sim_s = cached_log(args.hours, args.imu_hz, args.dvl_hz, args.seed, args.cache_dir)
-    print(f"mission: survey-6h cut to {args.hours:g} h, IMU {args.imu_hz:g} Hz ({len(log.imu):,} samples), DVL "
-          f"{args.dvl_hz:g} Hz ({len(log.dvl):,} pings), config {args.config!r}"
-          + (f"; simulated and cached in {sim_s:.0f} s" if sim_s else "; from the cache"))
+    print(
+        f"mission: survey-6h cut to {args.hours:g} h, IMU {args.imu_hz:g} Hz ({len(log.imu):,} samples), DVL "
+        f"{args.dvl_hz:g} Hz ({len(log.dvl):,} pings), config {args.config!r}"
+        + (f"; simulated and cached in {sim_s:.0f} s" if sim_s else "; from the cache")
+    )
     label = f"{args.imu_hz:g} Hz / {args.dvl_hz:g} Hz"
     if args.profile is not None:
         import cProfile
+
         prof = cProfile.Profile()
         prof.enable()
         main_run = run(label, log, config, sample_memory=False, defer=defer)
@@ -254,67 +307,109 @@ def main() -> None:
     base = None
     if not args.no_baseline:
         blog, _ = cached_log(max(args.baseline_hours, 0.5), 100.0, 1.0, args.seed, args.cache_dir)
-        base = run(f"100 Hz / 1 Hz, first {args.baseline_hours:g} h", blog, config, until_h=args.baseline_hours,
-                   sample_memory=False, defer=defer)
+        base = run(
+            f"100 Hz / 1 Hz, first {args.baseline_hours:g} h",
+            blog,
+            config,
+            until_h=args.baseline_hours,
+            sample_memory=False,
+            defer=defer,
+        )
         del blog
 
     H = main_run.hours
     first, last = main_run.stats(0.0, 1.0), main_run.stats(H - 1.0)
-    rows = [(f"{label}, all {H:.2f} h", main_run.stats(), main_run.rtf, main_run.epochs, main_run.wall_s),
-            (f"{label}, first hour", first, None, None, None),
-            (f"{label}, last hour", last, None, None, None)]
+    rows = [
+        (
+            f"{label}, all {H:.2f} h",
+            main_run.stats(),
+            main_run.rtf,
+            main_run.epochs,
+            main_run.wall_s,
+        ),
+        (f"{label}, first hour", first, None, None, None),
+        (f"{label}, last hour", last, None, None, None),
+    ]
     if base is not None:
         rows.append((base.label, base.stats(), base.rtf, base.epochs, base.wall_s))
-    print(f"\nwall time per DVL epoch, ms (fixed lag, window {config.online.window_s:g} s; keyframes "
-          f"{config.solver.keyframe_spacing_s:g} s apart, the pings between them {args.between}; "
-          f"load average {os.getloadavg()[0]:.2f} at the end)")
-    head = f"{'run':34s} {'p50':>6s} {'p99':>6s} {'max':>7s} {'epochs':>7s} {'wall s':>7s} {'RTF':>6s}"
+    print(
+        f"\nwall time per DVL epoch, ms (fixed lag, window {config.online.window_s:g} s; keyframes "
+        f"{config.solver.keyframe_spacing_s:g} s apart, the pings between them {args.between}; "
+        f"load average {os.getloadavg()[0]:.2f} at the end)"
+    )
+    head = (
+        f"{'run':34s} {'p50':>6s} {'p99':>6s} {'max':>7s} {'epochs':>7s} {'wall s':>7s} {'RTF':>6s}"
+    )
     print(head)
     print("-" * len(head))
     for name, s, rtf, n, wall in rows:
         extra = f" {n:7d} {wall:7.1f} {rtf:6.0f}" if rtf is not None else ""
         print(f"{name:34s} {s['p50']:6.2f} {s['p99']:6.2f} {s['max']:7.1f}{extra}")
-    print("CPU time per DVL epoch, ms (the process's, over the same spans: less affected by other processes)")
-    cpu_rows = [(f"{label}, all", main_run.stats(cpu=True)),
-                (f"{label}, first hour", main_run.stats(0.0, 1.0, cpu=True)),
-                (f"{label}, last hour", main_run.stats(H - 1.0, cpu=True))]
+    print(
+        "CPU time per DVL epoch, ms (the process's, over the same spans: less affected by other processes)"
+    )
+    cpu_rows = [
+        (f"{label}, all", main_run.stats(cpu=True)),
+        (f"{label}, first hour", main_run.stats(0.0, 1.0, cpu=True)),
+        (f"{label}, last hour", main_run.stats(H - 1.0, cpu=True)),
+    ]
     if base is not None:
         cpu_rows.append((base.label, base.stats(cpu=True)))
     for name, s in cpu_rows:
         print(f"{name:34s} {s['p50']:6.2f} {s['p99']:6.2f} {s['max']:7.1f}")
-    print(f"real-time factor on CPU time (less affected by other processes): {H * HOUR / main_run.cpu_s:.0f} "
-          f"({main_run.cpu_s:.1f} s CPU, {main_run.wall_s:.1f} s wall)")
-    print(f"last hour / first hour: p50 {last['p50'] / first['p50']:.2f}, p99 {last['p99'] / first['p99']:.2f}")
+    print(
+        f"real-time factor on CPU time (less affected by other processes): {H * HOUR / main_run.cpu_s:.0f} "
+        f"({main_run.cpu_s:.1f} s CPU, {main_run.wall_s:.1f} s wall)"
+    )
+    print(
+        f"last hour / first hour: p50 {last['p50'] / first['p50']:.2f}, p99 {last['p99'] / first['p99']:.2f}"
+    )
     ks = main_run.stats(states_only=True)
-    print(f"{label}: {main_run.states} states for {main_run.epochs} epochs; the epochs that make a state: p50 "
-          f"{ks['p50']:.2f}, p99 {ks['p99']:.2f}, max {ks['max']:.1f} ms")
+    print(
+        f"{label}: {main_run.states} states for {main_run.epochs} epochs; the epochs that make a state: p50 "
+        f"{ks['p50']:.2f}, p99 {ks['p99']:.2f}, max {ks['max']:.1f} ms"
+    )
     if base is not None:
         b = base.stats()
-        print(f"{label} / baseline: p50 {main_run.stats()['p50'] / b['p50']:.2f}, p99 "
-              f"{main_run.stats()['p99'] / b['p99']:.2f}, RTF {main_run.rtf / base.rtf:.2f} (epochs per hour "
-              f"{main_run.epochs / H / (base.epochs / base.hours):.1f}x)")
+        print(
+            f"{label} / baseline: p50 {main_run.stats()['p50'] / b['p50']:.2f}, p99 "
+            f"{main_run.stats()['p99'] / b['p99']:.2f}, RTF {main_run.rtf / base.rtf:.2f} (epochs per hour "
+            f"{main_run.epochs / H / (base.epochs / base.hours):.1f}x)"
+        )
     info = main_run.info
-    print(f"iSAM2: {info['rebases']} rebases, {info['variables']} variables and {info['factors']} factors held at "
-          f"the end; history kept for the result {info['history_bytes'] / 1e6:.1f} MB "
-          f"({info['history_bytes'] / max(main_run.states, 1):.0f} B per state)")
+    print(
+        f"iSAM2: {info['rebases']} rebases, {info['variables']} variables and {info['factors']} factors held at "
+        f"the end; history kept for the result {info['history_bytes'] / 1e6:.1f} MB "
+        f"({info['history_bytes'] / max(main_run.states, 1):.0f} B per state)"
+    )
     if "scale_err_sigma" in info:
-        print(f"final scale {info['scale']:.6f} +- {info['scale_sigma']:.2e} ({info['scale_err_sigma']:+.2f} sigma "
-              "from the truth)")
+        print(
+            f"final scale {info['scale']:.6f} +- {info['scale_sigma']:.2e} ({info['scale_err_sigma']:+.2f} sigma "
+            "from the truth)"
+        )
 
     if main_run.samples:
         print("\nmemory every 10 simulated minutes")
-        print(f"{'t h':>6s} {'RSS MB':>8s} {'live IMU factors':>16s} {'iSAM2 vars':>10s} {'p99 ms (10 min)':>15s} "
-              f"{'CPU p99 ms':>10s}")
+        print(
+            f"{'t h':>6s} {'RSS MB':>8s} {'live IMU factors':>16s} {'iSAM2 vars':>10s} {'p99 ms (10 min)':>15s} "
+            f"{'CPU p99 ms':>10s}"
+        )
         for s in main_run.samples:
-            print(f"{s['t_h']:6.2f} {s['rss_mb']:8.1f} {s['imu_factors']:16d} {s['variables']:10d} {s['p99_ms']:15.2f} "
-                  f"{s['p99_cpu_ms']:10.2f}")
-        hist_mb_h = info['history_bytes'] / 1e6 / H
-        print(f"RSS slope after the first hour: {slope_mb_per_h(main_run.samples):+.1f} MB/h, of which the history "
-              f"kept for the result {hist_mb_h:.1f} MB/h")
+            print(
+                f"{s['t_h']:6.2f} {s['rss_mb']:8.1f} {s['imu_factors']:16d} {s['variables']:10d} {s['p99_ms']:15.2f} "
+                f"{s['p99_cpu_ms']:10.2f}"
+            )
+        hist_mb_h = info["history_bytes"] / 1e6 / H
+        print(
+            f"RSS slope after the first hour: {slope_mb_per_h(main_run.samples):+.1f} MB/h, of which the history "
+            f"kept for the result {hist_mb_h:.1f} MB/h"
+        )
 
     ok = (main_run.stats()["p99"] < 10.0, main_run.rtf > 100.0)
-    print(f"\ntargets: p99 < 10 ms {'met' if ok[0] else 'MISSED'}; real-time factor > 100 "
-          f"{'met' if ok[1] else 'MISSED'}")
+    print(
+        f"\ntargets: p99 < 10 ms {'met' if ok[0] else 'MISSED'}; real-time factor > 100 "
+        f"{'met' if ok[1] else 'MISSED'}"
+    )
     if args.plot is not None and main_run.samples:
         plot(main_run, args.plot)
         print(f"plot written to {args.plot}")
@@ -322,12 +417,19 @@ def main() -> None:
 
 def plot(r: Run, path: Path) -> None:
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     t = [s["t_h"] for s in r.samples]
     rss = [s["rss_mb"] for s in r.samples]
-    a1.plot(t, rss, "o-", label=f"RSS (slope after the first hour {slope_mb_per_h(r.samples):+.1f} MB/h)")
+    a1.plot(
+        t,
+        rss,
+        "o-",
+        label=f"RSS (slope after the first hour {slope_mb_per_h(r.samples):+.1f} MB/h)",
+    )
     a1.set_ylim(0.0, 1.25 * max(rss))  # from zero: flat reads as flat
     a1.set_ylabel("RSS (MB)")
     a1.legend(loc="lower right")

@@ -4,7 +4,7 @@ wall time on Dask with 1 and 2 workers.
     .venv/bin/python bench/calibrate_workers.py [--scenario paper-3d] [--dives 4] [--repeats 2]
 
 Simulates the dives (seeds 1..N, the same truth calibration) as MCAP logs, then
-1. in this process: each dive prepared once (smoothed alone), the joint calibration (estimators/multi_dive.py,
+1. in this process: each dive prepared once (smoothed alone), the joint calibration (estimators/batch/multi_dive.py,
    the per-dive reduction) and, on the same prepared dives, the one-graph solve (every dive's linearised factors
    in ONE graph, solved at once): joint sigma / (mean one-dive sigma) against 1/sqrt(N), the distance between
    the two solutions in joint sigmas, and the joint calibration's error against the truth in sigmas;
@@ -14,7 +14,8 @@ Simulates the dives (seeds 1..N, the same truth calibration) as MCAP logs, then
    and their ratio, and how long the preparation takes against a joint iteration (what keeping each dive's state
    on its worker saves per iteration: a dive rebuilt from its log would cost its preparation again);
 3. pieces: a dive (seed 3) with its IMU samples of 30 s in a turn removed (paper-3d: 1070-1100 s), smoothed
-   (estimators/pieces.py: two pieces sharing the calibration) against the truth, and the same dive without the gap.
+   (estimators/batch/pieces.py: two pieces sharing the calibration) against the truth, and the same dive without the
+   gap.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ from gtsam_dvl.app.campaign.calibrate import calibrate_logs
 from gtsam_dvl.app.campaign.cluster import dask_client
 from gtsam_dvl.app.commands import simulate_to_file
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_log
-from gtsam_dvl.estimators import multi_dive as md
+from gtsam_dvl.estimators.batch import multi_dive as md
 from gtsam_dvl.io.reader import read_log
 
 
@@ -49,40 +50,66 @@ def accuracy(paths: list[Path]) -> None:
     joint = md.calibrate_in_process(dives)
     t3 = time.perf_counter()
     n = len(dives)
-    print(f"in this process: {n} dives prepared in {t1 - t0:.1f} s, one-graph solve {t2 - t1:.1f} s "
-          f"({one.iterations} iterations), calibrate's joint iterations {t3 - t2:.1f} s ({joint.iterations})")
+    print(
+        f"in this process: {n} dives prepared in {t1 - t0:.1f} s, one-graph solve {t2 - t1:.1f} s "
+        f"({one.iterations} iterations), calibrate's joint iterations {t3 - t2:.1f} s ({joint.iterations})"
+    )
     sig = np.sqrt(np.diag(joint.cov))
-    alone = np.array([np.concatenate([d.alone.calibration[s].sigma for s in joint.states]) for d in dives])
+    alone = np.array(
+        [np.concatenate([d.alone.calibration[s].sigma for s in joint.states]) for d in dives]
+    )
     cols = [c for s in joint.states for c in md.BY_NAME[s].component_names()]
     ratio = sig / alone.mean(axis=0)
-    print(f"sigma joint / mean sigma of one dive (1/sqrt({n}) = {1 / np.sqrt(n):.3f}; within 15 %: "
-          f"{np.all(np.abs(ratio * np.sqrt(n) - 1) <= 0.15)}):")
+    print(
+        f"sigma joint / mean sigma of one dive (1/sqrt({n}) = {1 / np.sqrt(n):.3f}; within 15 %: "
+        f"{np.all(np.abs(ratio * np.sqrt(n) - 1) <= 0.15)}):"
+    )
     for c, r, s in zip(cols, ratio, sig, strict=True):
         print(f"  {c:20s} {r:.3f}  ({(r * np.sqrt(n) - 1) * 100:+.1f} %), joint sigma {s:.3g}")
     sl = md.state_slices(joint.states)
-    d_one = np.concatenate([joint.values["scale"] - one.values["scale"],
-                            so3_log(one.values["misalignment"].T @ joint.values["misalignment"])]) / sig[:4]
-    print(f"calibrate - one graph, in joint sigmas: {np.array2string(d_one, precision=2)} (max |.| "
-          f"{np.max(np.abs(d_one)):.2g}); sigma ratio calibrate / one graph "
-          f"{np.array2string(sig / np.sqrt(np.diag(one.cov)), precision=6)}")
+    d_one = (
+        np.concatenate(
+            [
+                joint.values["scale"] - one.values["scale"],
+                so3_log(one.values["misalignment"].T @ joint.values["misalignment"]),
+            ]
+        )
+        / sig[:4]
+    )
+    print(
+        f"calibrate - one graph, in joint sigmas: {np.array2string(d_one, precision=2)} (max |.| "
+        f"{np.max(np.abs(d_one)):.2g}); sigma ratio calibrate / one graph "
+        f"{np.array2string(sig / np.sqrt(np.diag(one.cov)), precision=6)}"
+    )
     truth = logs[0].true_calibration
     if truth is not None:
         b_R_d = rpy_deg_to_matrix(truth.misalignment_deg) @ np.asarray(logs[0].mounting.b_R_d0)
-        err = np.concatenate([joint.values["scale"] - truth.scale,
-                              so3_log(b_R_d.T @ joint.values["misalignment"])]) / sig[sl["scale"].start:4]
-        print(f"joint calibration - truth, in joint sigmas: {np.array2string(err, precision=2)} (within 3: "
-              f"{np.all(np.abs(err) <= 3)})")
+        err = (
+            np.concatenate(
+                [
+                    joint.values["scale"] - truth.scale,
+                    so3_log(b_R_d.T @ joint.values["misalignment"]),
+                ]
+            )
+            / sig[sl["scale"].start : 4]
+        )
+        print(
+            f"joint calibration - truth, in joint sigmas: {np.array2string(err, precision=2)} (within 3: "
+            f"{np.all(np.abs(err) <= 3)})"
+        )
 
 
 def pieces(scenario: str) -> None:
     import dataclasses
 
-    from gtsam_dvl.estimators.batch import smooth_batch
-    from gtsam_dvl.estimators.pieces import _take
+    from gtsam_dvl.estimators.batch.pieces import _take
+    from gtsam_dvl.estimators.batch.smoother import smooth_batch
     from gtsam_dvl.sim import simulate
     from gtsam_dvl.sim.scenario import load_scenario
 
-    gap = (1070.0, 1100.0) if scenario == "paper-3d" else (285.0, 315.0)  # in the second (short: first) turn
+    gap = (
+        (1070.0, 1100.0) if scenario == "paper-3d" else (285.0, 315.0)
+    )  # in the second (short: first) turn
     whole = simulate(load_scenario(scenario), seed=3)
     keep = (whole.imu.t <= gap[0]) | (whole.imu.t > gap[1])
     log = dataclasses.replace(whole, imu=_take(whole.imu, keep))
@@ -94,15 +121,19 @@ def pieces(scenario: str) -> None:
     assert truth is not None and log.truth is not None
     b_R_d = rpy_deg_to_matrix(truth.misalignment_deg) @ np.asarray(log.mounting.b_R_d0)
     mis = r.calibration["misalignment"]
-    z = np.concatenate([[(r.scale - truth.scale) / r.scale_sigma], so3_log(b_R_d.T @ mis.value) / mis.sigma])
+    z = np.concatenate(
+        [[(r.scale - truth.scale) / r.scale_sigma], so3_log(b_R_d.T @ mis.value) / mis.sigma]
+    )
     j = np.searchsorted(log.truth.t, r.t[-1])
     err = float(np.linalg.norm(r.n_p[-1, :2] - log.truth.n_p[j, :2]))
     alone = [p["alone"]["scale"]["sigma"][0] * 1e6 for p in r.info["pieces"]]
-    print(f"pieces: {scenario} seed 3 with a {gap[1] - gap[0]:.0f} s IMU gap at {gap[0]:.0f} s: "
-          f"{len(r.info['pieces'])} pieces in {dt:.1f} s; scale, misalignment r/p/y - truth in sigmas "
-          f"{np.array2string(z, precision=2)} (within 3: {np.all(np.abs(z) < 3)}); scale sigma "
-          f"{r.scale_sigma * 1e6:.0f} ppm (pieces alone {', '.join(f'{a:.0f}' for a in alone)}; the log without "
-          f"the gap {ref.scale_sigma * 1e6:.0f}); final horizontal position error {err:.1f} m")
+    print(
+        f"pieces: {scenario} seed 3 with a {gap[1] - gap[0]:.0f} s IMU gap at {gap[0]:.0f} s: "
+        f"{len(r.info['pieces'])} pieces in {dt:.1f} s; scale, misalignment r/p/y - truth in sigmas "
+        f"{np.array2string(z, precision=2)} (within 3: {np.all(np.abs(z) < 3)}); scale sigma "
+        f"{r.scale_sigma * 1e6:.0f} ppm (pieces alone {', '.join(f'{a:.0f}' for a in alone)}; the log without "
+        f"the gap {ref.scale_sigma * 1e6:.0f}); final horizontal position error {err:.1f} m"
+    )
 
 
 def _burn(n: int = 20_000_000) -> float:
@@ -151,7 +182,9 @@ def timed(paths: list[Path], repeats: int) -> dict[int, tuple[float, dict[str, f
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--scenario", default="paper-3d")
     ap.add_argument("--dives", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=2)
@@ -170,11 +203,15 @@ def main() -> None:
         (t1, timing1), (t2, timing2) = best[1], best[2]
         for w, t, timing in ((1, t1, timing1), (2, t2, timing2)):
             per_it = timing["joint"] / max(timing["iterations"], 1.0)
-            print(f"Dask, {w} worker{'s' if w > 1 else ''}: {t:.2f} s (read and smooth alone {timing['prepare']:.2f} "
-                  f"s, joint {timing['joint']:.2f} s = {timing['iterations']:.0f} iterations, {per_it:.2f} s each)")
-        print(f"speed-up 2 workers / 1 worker: {t1 / t2:.2f}x (best of {args.repeats} runs each, alternated; "
-              f"load average {os.getloadavg()[0]:.1f} at the end); two pure-Python processes got {ceiling:.2f}x "
-              "(the machine's ceiling now, the lower of before and after)")
+            print(
+                f"Dask, {w} worker{'s' if w > 1 else ''}: {t:.2f} s (read and smooth alone {timing['prepare']:.2f} "
+                f"s, joint {timing['joint']:.2f} s = {timing['iterations']:.0f} iterations, {per_it:.2f} s each)"
+            )
+        print(
+            f"speed-up 2 workers / 1 worker: {t1 / t2:.2f}x (best of {args.repeats} runs each, alternated; "
+            f"load average {os.getloadavg()[0]:.1f} at the end); two pure-Python processes got {ceiling:.2f}x "
+            "(the machine's ceiling now, the lower of before and after)"
+        )
     pieces(args.scenario)
 
 

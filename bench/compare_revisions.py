@@ -28,8 +28,14 @@ BATCH_TOTAL = re.compile(r"^total \(read to marginals\)\s+([0-9.]+)", re.M)
 
 def run(tree: Path, script: str, *args: str) -> str:
     env = dict(os.environ, PYTHONPATH=str(tree))
-    out = subprocess.run([sys.executable, str(tree / "bench" / script), *args], cwd=tree, env=env,
-                         capture_output=True, text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, str(tree / "bench" / script), *args],
+        cwd=tree,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     return out.stdout
 
 
@@ -47,28 +53,46 @@ def figures(tree: Path) -> dict[str, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--base", default="HEAD~1", help="the git revision to compare against (default HEAD~1)")
-    ap.add_argument("--rounds", type=int, default=3, help="rounds of both trees, alternating (default 3)")
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    ap.add_argument(
+        "--base", default="HEAD~1", help="the git revision to compare against (default HEAD~1)"
+    )
+    ap.add_argument(
+        "--rounds", type=int, default=3, help="rounds of both trees, alternating (default 3)"
+    )
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         base = Path(tmp) / "base"
-        subprocess.run(["git", "worktree", "add", "-q", "--detach", str(base), args.base], cwd=ROOT, check=True)
+        subprocess.run(
+            ["git", "worktree", "add", "-q", "--detach", str(base), args.base], cwd=ROOT, check=True
+        )
         try:
             seen: dict[str, dict[str, list[float]]] = {"this": {}, "base": {}}
             for r in range(args.rounds):
-                for name, tree in (("base", base), ("this", ROOT)) if r % 2 == 0 else (("this", ROOT), ("base", base)):
+                for name, tree in (
+                    (("base", base), ("this", ROOT))
+                    if r % 2 == 0
+                    else (("this", ROOT), ("base", base))
+                ):
                     for k, v in figures(tree).items():
                         seen[name].setdefault(k, []).append(v)
                 print(f"round {r + 1}/{args.rounds} done", file=sys.stderr)
         finally:
-            subprocess.run(["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, check=False)
+            subprocess.run(
+                ["git", "worktree", "remove", "--force", str(base)], cwd=ROOT, check=False
+            )
     print(f"{args.rounds} rounds; base {args.base}; best (min) and median of the rounds")
-    print(f"{'figure':<40}{'this best':>10}{'base best':>10}{'ratio':>7}{'this med':>10}{'base med':>10}{'ratio':>7}")
+    print(
+        f"{'figure':<40}{'this best':>10}{'base best':>10}{'ratio':>7}{'this med':>10}{'base med':>10}{'ratio':>7}"
+    )
     for k, this in seen["this"].items():
         old = seen["base"][k]
         b_t, b_o, m_t, m_o = min(this), min(old), statistics.median(this), statistics.median(old)
-        print(f"{k:<40}{b_t:>10.3f}{b_o:>10.3f}{b_t / b_o:>7.2f}{m_t:>10.3f}{m_o:>10.3f}{m_t / m_o:>7.2f}")
+        print(
+            f"{k:<40}{b_t:>10.3f}{b_o:>10.3f}{b_t / b_o:>7.2f}{m_t:>10.3f}{m_o:>10.3f}{m_t / m_o:>7.2f}"
+        )
 
 
 if __name__ == "__main__":

@@ -21,9 +21,14 @@ from typing import Any
 
 import numpy as np
 
-VARIANTS: dict[str, tuple[float, bool]] = {"configured": (0.002, False), "fit": (0.002, True),
-                                           "low": (0.0005, False), "fit-low": (0.0005, True),
-                                           "high": (0.01, False), "fit-high": (0.01, True)}
+VARIANTS: dict[str, tuple[float, bool]] = {
+    "configured": (0.002, False),
+    "fit": (0.002, True),
+    "low": (0.0005, False),
+    "fit-low": (0.0005, True),
+    "high": (0.01, False),
+    "fit-high": (0.01, True),
+}
 
 
 def run_one(scenario_name: str, seed: int) -> dict[str, Any]:
@@ -39,8 +44,11 @@ def run_one(scenario_name: str, seed: int) -> dict[str, Any]:
     base = sc.estimator_configuration().to_dict()
     out: dict[str, Any] = {"scenario": scenario_name, "seed": seed, "variants": {}}
     for name, (level, fit) in VARIANTS.items():
-        d = {**base, "dvl": {**base["dvl"], "correlated_sigma_m_s": level, "correlated_tau_s": 60.0},
-             "noise": {**base["noise"], "fit_correlated": fit}}
+        d = {
+            **base,
+            "dvl": {**base["dvl"], "correlated_sigma_m_s": level, "correlated_tau_s": 60.0},
+            "noise": {**base["noise"], "fit_correlated": fit},
+        }
         t0 = time.perf_counter()
         res = run_trajectory_estimator(log, "batch", EstimatorConfig.from_dict(d), timeline=False)
         n_p_true = np.array([np.interp(res.t[-1], truth.t, truth.n_p[:, k]) for k in range(2)])
@@ -48,13 +56,17 @@ def run_one(scenario_name: str, seed: int) -> dict[str, Any]:
         used = res.info.get("dvl_correlated_error", {})
         entry = res.info["noise"].get("dvl_correlated", {})
         out["variants"][name] = {
-            "sigma_m_s": used.get("sigma_m_s"), "tau_s": used.get("tau_s"),
-            "significant": entry.get("significant"), "passes": entry.get("passes"),
+            "sigma_m_s": used.get("sigma_m_s"),
+            "tau_s": used.get("tau_s"),
+            "significant": entry.get("significant"),
+            "passes": entry.get("passes"),
             "last_fit": entry.get("fit"),
             "horizontal_z": (e_h / res.position_sigma_m[-1, :2]).tolist(),
             "horizontal_sigma_m": float(np.hypot(*res.position_sigma_m[-1, :2])),
             "horizontal_error_m": float(np.linalg.norm(e_h)),
-            "scale_z": float((res.scale - cal.scale) / res.scale_sigma), "wall_s": time.perf_counter() - t0}
+            "scale_z": float((res.scale - cal.scale) / res.scale_sigma),
+            "wall_s": time.perf_counter() - t0,
+        }
     return out
 
 
@@ -68,19 +80,26 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
             s = np.array([x["sigma_m_s"] for x in rows]) * 1e3
             t = np.array([x["tau_s"] for x in rows])
             z = np.array([x["horizontal_z"] for x in rows]).reshape(-1)
-            table[name] = {"runs": len(rows), "sigma_mm_s": [float(s.mean()), float(s.std(ddof=1))],
-                           "tau_s": [float(t.mean()), float(t.std(ddof=1))],
-                           "significant": sum(bool(x["significant"]) for x in rows),
-                           "horizontal_z_std": float(np.std(z, ddof=1)),
-                           "scale_z_std": float(np.std([x["scale_z"] for x in rows], ddof=1)),
-                           "horizontal_sigma_m": float(np.mean([x["horizontal_sigma_m"] for x in rows])),
-                           "horizontal_rms_m": float(np.sqrt(np.mean([x["horizontal_error_m"]**2 for x in rows])))}
+            table[name] = {
+                "runs": len(rows),
+                "sigma_mm_s": [float(s.mean()), float(s.std(ddof=1))],
+                "tau_s": [float(t.mean()), float(t.std(ddof=1))],
+                "significant": sum(bool(x["significant"]) for x in rows),
+                "horizontal_z_std": float(np.std(z, ddof=1)),
+                "scale_z_std": float(np.std([x["scale_z"] for x in rows], ddof=1)),
+                "horizontal_sigma_m": float(np.mean([x["horizontal_sigma_m"] for x in rows])),
+                "horizontal_rms_m": float(
+                    np.sqrt(np.mean([x["horizontal_error_m"] ** 2 for x in rows]))
+                ),
+            }
         out[scenario] = table
     return out
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--runs", type=int, default=10)
     ap.add_argument("--seed-start", type=int, default=1)
     ap.add_argument("--scenarios", default="straight-transect,steady-turn")
@@ -95,13 +114,17 @@ def main() -> None:
             args.out.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
     print()
     for scenario, table in summarise(runs).items():
-        print(f"{scenario}: level used mm/s (mean, std), tau s, fits significant, final horizontal and scale "
-              "error/sigma std, horizontal sigma and RMS error m")
+        print(
+            f"{scenario}: level used mm/s (mean, std), tau s, fits significant, final horizontal and scale "
+            "error/sigma std, horizontal sigma and RMS error m"
+        )
         for name, row in table.items():
-            print(f"  {name:10s} {row['sigma_mm_s'][0]:5.2f} {row['sigma_mm_s'][1]:5.2f}  {row['tau_s'][0]:6.1f} "
-                  f"{row['tau_s'][1]:6.1f}  {row['significant']:2d}/{row['runs']}  z_h {row['horizontal_z_std']:5.2f}"
-                  f"  z_k {row['scale_z_std']:5.2f}  sigma_h {row['horizontal_sigma_m']:6.2f} rms_h "
-                  f"{row['horizontal_rms_m']:6.2f}")
+            print(
+                f"  {name:10s} {row['sigma_mm_s'][0]:5.2f} {row['sigma_mm_s'][1]:5.2f}  {row['tau_s'][0]:6.1f} "
+                f"{row['tau_s'][1]:6.1f}  {row['significant']:2d}/{row['runs']}  z_h {row['horizontal_z_std']:5.2f}"
+                f"  z_k {row['scale_z_std']:5.2f}  sigma_h {row['horizontal_sigma_m']:6.2f} rms_h "
+                f"{row['horizontal_rms_m']:6.2f}"
+            )
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.io.reader import read_log
@@ -40,7 +40,10 @@ from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
 MODES: dict[str, Callable[[LogData, EstimatorConfig], object]] = {
-    "batch": smooth_batch, "online": smooth_online, "ekf": run_ekf}
+    "batch": smooth_batch,
+    "online": smooth_online,
+    "ekf": run_ekf,
+}
 SEED = 11
 
 
@@ -50,7 +53,9 @@ def _replace_dvl(log: LogData, **kw: object) -> LogData:
 
 def _without_imu(log: LogData, t0: float, t1: float) -> LogData:
     keep = (log.imu.t <= t0) | (log.imu.t > t1)
-    imu = dataclasses.replace(log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep])
+    imu = dataclasses.replace(
+        log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep]
+    )
     return dataclasses.replace(log, imu=imu)
 
 
@@ -59,7 +64,11 @@ def _outliers(log: LogData, fraction: float) -> LogData:
     d_v = log.dvl.d_v.copy()
     hit = np.flatnonzero((rng.random(len(d_v)) < fraction) & (log.dvl.t > 610.0))
     direction = rng.normal(size=(len(hit), 3))
-    d_v[hit] += direction / np.linalg.norm(direction, axis=1)[:, None] * rng.uniform(0.5, 2.0, (len(hit), 1))
+    d_v[hit] += (
+        direction
+        / np.linalg.norm(direction, axis=1)[:, None]
+        * rng.uniform(0.5, 2.0, (len(hit), 1))
+    )
     return _replace_dvl(log, d_v=d_v)
 
 
@@ -76,7 +85,9 @@ def _dropout(log: LogData, t0: float, t1: float) -> LogData:
 def _rolled_imu(log: LogData) -> LogData:
     b_R_imu = rpy_deg_to_matrix([180.0, 0.0, 0.0])
     imu = dataclasses.replace(log.imu, b_omega=log.imu.b_omega @ b_R_imu, b_f=log.imu.b_f @ b_R_imu)
-    return dataclasses.replace(log, imu=imu, mounting=dataclasses.replace(log.mounting, b_R_imu=b_R_imu))
+    return dataclasses.replace(
+        log, imu=imu, mounting=dataclasses.replace(log.mounting, b_R_imu=b_R_imu)
+    )
 
 
 def _fast_static_ping(log: LogData, t: float) -> LogData:
@@ -140,7 +151,7 @@ def _duplicates(log: LogData) -> LogData:
 def _clock_step(log: LogData, t: float, step_s: float) -> LogData:
     """The IMU's stamps step_s ahead from t on, the samples running on (the IMU's clock jumped)."""
     stamps = log.imu.t.copy()
-    stamps[int(np.searchsorted(stamps, t)):] += step_s
+    stamps[int(np.searchsorted(stamps, t)) :] += step_s
     return dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=stamps))
 
 
@@ -187,8 +198,6 @@ def _dvl_rate(base: LogData, hz: float) -> LogData:
     return simulate(scenario_from_dict(raw), SEED)
 
 
-
-
 def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
     """The faults, placed by the run's own segments: the middle of the first turn of the square, the straight
     leg after it, the static phase's middle."""
@@ -215,19 +224,32 @@ def cases(base: LogData) -> dict[str, Callable[[], LogData]]:
         "corrupt_chunk_not_salvaged": lambda: _through_file(base, _flip_in_chunk),
         "nan_inf_repaired": lambda: _through_file(_nan_samples(base), lambda p: None, repair=True),
         "nan_inf_not_repaired": lambda: _through_file(_nan_samples(base), lambda p: None),
-        "time_backwards_repaired": lambda: _through_file(_backwards(base), lambda p: None, repair=True),
-        "duplicate_stamps_repaired": lambda: _through_file(_duplicates(base), lambda p: None, repair=True),
-        "missing_dvl_topic": lambda: _through_file(base, lambda p: None, dvl_topic="/no/such/topic"),
+        "time_backwards_repaired": lambda: _through_file(
+            _backwards(base), lambda p: None, repair=True
+        ),
+        "duplicate_stamps_repaired": lambda: _through_file(
+            _duplicates(base), lambda p: None, repair=True
+        ),
+        "missing_dvl_topic": lambda: _through_file(
+            base, lambda p: None, dvl_topic="/no/such/topic"
+        ),
         "static_only": lambda: _static_only(base),
         "dvl_5hz": lambda: _dvl_rate(base, 5.0),
         # read through the file: the reader finds the IMU's faults (core/imu_faults.py)
-        "imu_clock_step_5s_turn_repaired": lambda: _through_file(_clock_step(base, turn - 15.0, 5.0),
-                                                                 lambda p: None, repair=True),
-        "imu_clock_step_5s_turn": lambda: _through_file(_clock_step(base, turn - 15.0, 5.0), lambda p: None),
-        "gyro_saturated_in_turns": lambda: _through_file(_saturated_gyro(base, 0.055), lambda p: None),
+        "imu_clock_step_5s_turn_repaired": lambda: _through_file(
+            _clock_step(base, turn - 15.0, 5.0), lambda p: None, repair=True
+        ),
+        "imu_clock_step_5s_turn": lambda: _through_file(
+            _clock_step(base, turn - 15.0, 5.0), lambda p: None
+        ),
+        "gyro_saturated_in_turns": lambda: _through_file(
+            _saturated_gyro(base, 0.055), lambda p: None
+        ),
         "gyro_saturated_long": lambda: _through_file(_saturated_gyro(base, 0.05), lambda p: None),
         "dvl_frozen_40s_turn": lambda: _frozen_dvl(base, turn - 20.0, turn + 20.0),
-        "dvl_water_track_20s": lambda: _through_file(_water_track(base, leg + 20.0, leg + 40.0), lambda p: None),
+        "dvl_water_track_20s": lambda: _through_file(
+            _water_track(base, leg + 20.0, leg + 40.0), lambda p: None
+        ),
         "tf_static_yaw_off_25deg": lambda: _mounting_off(base, 25.0),
         "dvl_stamps_late_2s": lambda: _dvl_late(base, 2.0),
     }
@@ -238,13 +260,22 @@ def evaluate(log: LogData, mode: str, config: str = "paper") -> dict[str, object
     health = assess_health(res, log)  # type: ignore[arg-type]
     s = summary(res, log)  # type: ignore[arg-type]
     e = s.get("errors") or {}
-    nsig = [abs(e.get("scale_nsigma", 0.0)), *np.abs(e.get("misalignment_nsigma", [0.0])),
-            *np.abs(e.get("gyro_bias_nsigma", [0.0])), *np.abs(e.get("accel_bias_nsigma", [0.0]))]
+    nsig = [
+        abs(e.get("scale_nsigma", 0.0)),
+        *np.abs(e.get("misalignment_nsigma", [0.0])),
+        *np.abs(e.get("gyro_bias_nsigma", [0.0])),
+        *np.abs(e.get("accel_bias_nsigma", [0.0])),
+    ]
     pos = e.get("final_horizontal_position_m")
     pos_sig = s["final_horizontal_position_sigma_m"]
-    return {"outcome": "ok", "health": health.status, "worst_nsigma": float(np.nanmax(nsig)) if e else float("nan"),
-            "final_m": pos, "final_nsigma": (pos / pos_sig) if pos is not None and pos_sig else float("nan"),
-            "warnings": len(health.warnings)}
+    return {
+        "outcome": "ok",
+        "health": health.status,
+        "worst_nsigma": float(np.nanmax(nsig)) if e else float("nan"),
+        "final_m": pos,
+        "final_nsigma": (pos / pos_sig) if pos is not None and pos_sig else float("nan"),
+        "warnings": len(health.warnings),
+    }
 
 
 def main() -> int:
@@ -252,14 +283,20 @@ def main() -> int:
     ap.add_argument("--cases", default="")
     ap.add_argument("--modes", default="batch,online,ekf")
     ap.add_argument("--scenario", default="paper-3d")
-    ap.add_argument("--config", default="paper", help="the named configuration of the estimators (paper, default)")
+    ap.add_argument(
+        "--config",
+        default="paper",
+        help="the named configuration of the estimators (paper, default)",
+    )
     args = ap.parse_args()
     t0 = time.perf_counter()
     base = simulate(load_scenario(args.scenario), SEED)
     todo = cases(base)
     names = args.cases.split(",") if args.cases else list(todo)
     modes = args.modes.split(",")
-    print(f"{'case':28s} {'mode':7s} {'outcome':8s} {'health':9s} {'max|err/sig|':>12s} {'final pos':>14s}  note")
+    print(
+        f"{'case':28s} {'mode':7s} {'outcome':8s} {'health':9s} {'max|err/sig|':>12s} {'final pos':>14s}  note"
+    )
     silent = crashes = 0
     for name in names:
         try:
@@ -273,25 +310,35 @@ def main() -> int:
             if log is None:
                 outcome = "CRASH" if load_error and load_error.startswith("CRASH") else "error"
                 crashes += outcome == "CRASH"
-                print(f"{name:28s} {mode:7s} {outcome:8s} {'-':9s} {'-':>12s} {'-':>14s}  {load_error[:90]}")
+                print(
+                    f"{name:28s} {mode:7s} {outcome:8s} {'-':9s} {'-':>12s} {'-':>14s}  {load_error[:90]}"
+                )
                 continue
             try:
                 r = evaluate(log, mode, args.config)
             except GtsamDvlError as exc:
-                print(f"{name:28s} {mode:7s} {'error':8s} {'-':9s} {'-':>12s} {'-':>14s}  {str(exc)[:90]}")
+                print(
+                    f"{name:28s} {mode:7s} {'error':8s} {'-':9s} {'-':>12s} {'-':>14s}  {str(exc)[:90]}"
+                )
                 continue
             except Exception as exc:
                 crashes += 1
-                print(f"{name:28s} {mode:7s} {'CRASH':8s} {'-':9s} {'-':>12s} {'-':>14s}  {type(exc).__name__}: {exc}")
+                print(
+                    f"{name:28s} {mode:7s} {'CRASH':8s} {'-':9s} {'-':>12s} {'-':>14s}  {type(exc).__name__}: {exc}"
+                )
                 traceback.print_exc(limit=3)
                 continue
             wrong = r["health"] == "ok" and (r["worst_nsigma"] > 3 or r["final_nsigma"] > 3)  # type: ignore[operator]
             silent += bool(wrong)
             pos = "-" if r["final_m"] is None else f"{r['final_m']:.1f} m {r['final_nsigma']:.1f}s"
-            print(f"{name:28s} {mode:7s} {'ok':8s} {r['health']!s:9s} {r['worst_nsigma']:12.2f} {pos:>14s}  "
-                  f"{'SILENT WRONG ANSWER' if wrong else ''}{r['warnings']} warning(s)")
-    print(f"\n{len(names)} cases x {len(modes)} modes in {time.perf_counter() - t0:.0f} s: {silent} silent wrong "
-          f"answer(s), {crashes} crash(es)")
+            print(
+                f"{name:28s} {mode:7s} {'ok':8s} {r['health']!s:9s} {r['worst_nsigma']:12.2f} {pos:>14s}  "
+                f"{'SILENT WRONG ANSWER' if wrong else ''}{r['warnings']} warning(s)"
+            )
+    print(
+        f"\n{len(names)} cases x {len(modes)} modes in {time.perf_counter() - t0:.0f} s: {silent} silent wrong "
+        f"answer(s), {crashes} crash(es)"
+    )
     return 1 if silent or crashes else 0
 
 

@@ -52,29 +52,53 @@ def _with(config: Any, section: str, **values: Any) -> Any:
 def variant_runs(log: Any, base: Any) -> dict[str, tuple[Any, Any]]:
     """(log, configuration) of each variant: the truth variant's log has the true b_R_d as its nominal mounting."""
     cal = log.true_calibration
-    fixed = {"scale_sigma": FIXED_SCALE_SIGMA, "misalignment_sigma_deg": (FIXED_MISALIGNMENT_SIGMA_DEG,) * 3}
+    fixed = {
+        "scale_sigma": FIXED_SCALE_SIGMA,
+        "misalignment_sigma_deg": (FIXED_MISALIGNMENT_SIGMA_DEG,) * 3,
+    }
     nominal = _with(base, "priors", scale_initial=1.0, **fixed)
-    nominal = _with(nominal, "dvl", estimate_time_offset=False, time_offset_prior_s=0.0, correlated_sigma_m_s=0.0)
+    nominal = _with(
+        nominal,
+        "dvl",
+        estimate_time_offset=False,
+        time_offset_prior_s=0.0,
+        correlated_sigma_m_s=0.0,
+    )
     nominal = _with(nominal, "noise", fit_dvl=False)
     truth = _with(base, "priors", scale_initial=cal.scale, **fixed)
-    truth = _with(truth, "dvl", time_offset_prior_s=cal.time_offset_s, time_offset_sigma_s=FIXED_TIME_OFFSET_SIGMA_S)
+    truth = _with(
+        truth,
+        "dvl",
+        time_offset_prior_s=cal.time_offset_s,
+        time_offset_sigma_s=FIXED_TIME_OFFSET_SIGMA_S,
+    )
     true_mounting = dataclasses.replace(log.mounting, b_R_d0=cal.b_R_d(log.mounting.b_R_d0))
-    return {"defaults": (log, base), "nominal": (log, nominal),
-            "truth": (dataclasses.replace(log, mounting=true_mounting), truth)}
+    return {
+        "defaults": (log, base),
+        "nominal": (log, nominal),
+        "truth": (dataclasses.replace(log, mounting=true_mounting), truth),
+    }
 
 
 def calibration_z(res: Any, log: Any) -> dict[str, float]:
     """(estimate - truth) / sigma of the scale, the misalignment's roll, pitch, yaw (ZYX angles of R_c, as
     app/campaign/montecarlo.py run_errors) and the time offset (NaN where not estimated)."""
     cal = log.true_calibration
-    err = [res.scale - cal.scale, *(res.misalignment_deg - np.array(cal.misalignment_deg)),
-           res.time_offset_s - cal.time_offset_s]
+    err = [
+        res.scale - cal.scale,
+        *(res.misalignment_deg - np.array(cal.misalignment_deg)),
+        res.time_offset_s - cal.time_offset_s,
+    ]
     sig = [res.scale_sigma, *res.misalignment_sigma_deg, res.time_offset_sigma_s]
-    return {k: float(e / s) if np.isfinite(s) and s > 0 else math.nan for k, e, s in zip(CALIBRATION, err, sig,
-                                                                                           strict=True)}
+    return {
+        k: float(e / s) if np.isfinite(s) and s > 0 else math.nan
+        for k, e, s in zip(CALIBRATION, err, sig, strict=True)
+    }
 
 
-def evaluate(res: Any, run_log: Any, log: Any, distance_m: float, estimated: tuple[str, ...]) -> dict[str, Any]:
+def evaluate(
+    res: Any, run_log: Any, log: Any, distance_m: float, estimated: tuple[str, ...]
+) -> dict[str, Any]:
     """One estimator's row: final horizontal error, error/sigma of the estimated calibration states, time offset,
     health verdict."""
     from gtsam_dvl.analysis.health import assess_health
@@ -84,12 +108,19 @@ def evaluate(res: Any, run_log: Any, log: Any, distance_m: float, estimated: tup
     e_h = res.n_p[-1, :2] - n_p_true
     z = {k: v if k in estimated else math.nan for k, v in calibration_z(res, log).items()}
     health = assess_health(res, run_log)
-    return {"horizontal_error_pct": float(100.0 * np.linalg.norm(e_h) / distance_m), "z": z,
-            "time_offset_s": float(res.time_offset_s), "time_offset_sigma_s": float(res.time_offset_sigma_s),
-            "offset_within": bool(abs(z["time_offset"]) <= OFFSET_NSIGMA) if math.isfinite(z["time_offset"])
-            else None,
-            "scale": float(res.scale), "misalignment_deg": [float(a) for a in res.misalignment_deg],
-            "health": health.status, "warnings": list(health.warnings)[:3]}
+    return {
+        "horizontal_error_pct": float(100.0 * np.linalg.norm(e_h) / distance_m),
+        "z": z,
+        "time_offset_s": float(res.time_offset_s),
+        "time_offset_sigma_s": float(res.time_offset_sigma_s),
+        "offset_within": bool(abs(z["time_offset"]) <= OFFSET_NSIGMA)
+        if math.isfinite(z["time_offset"])
+        else None,
+        "scale": float(res.scale),
+        "misalignment_deg": [float(a) for a in res.misalignment_deg],
+        "health": health.status,
+        "warnings": list(health.warnings)[:3],
+    }
 
 
 def run_one(scenario_name: str, seed: int) -> dict[str, Any]:
@@ -103,9 +134,17 @@ def run_one(scenario_name: str, seed: int) -> dict[str, Any]:
     assert log.truth is not None and log.true_calibration is not None
     distance_m = float(np.sum(np.linalg.norm(np.diff(log.truth.n_p[:, :2], axis=0), axis=1)))
     cal = log.true_calibration
-    out: dict[str, Any] = {"scenario": scenario_name, "seed": seed, "distance_m": distance_m,
-                           "true_calibration": {"scale": cal.scale, "misalignment_deg": list(cal.misalignment_deg),
-                                                "time_offset_s": cal.time_offset_s}, "variants": {}}
+    out: dict[str, Any] = {
+        "scenario": scenario_name,
+        "seed": seed,
+        "distance_m": distance_m,
+        "true_calibration": {
+            "scale": cal.scale,
+            "misalignment_deg": list(cal.misalignment_deg),
+            "time_offset_s": cal.time_offset_s,
+        },
+        "variants": {},
+    }
     for variant, (run_log, cfg) in variant_runs(log, sc.estimator_configuration()).items():
         rows: dict[str, Any] = {}
         for name in VARIANTS[variant]:
@@ -126,13 +165,19 @@ def _stats(rows: list[dict[str, Any]]) -> dict[str, Any]:
     z_std = {}
     for k in CALIBRATION:
         z = np.array([x["z"][k] for x in ok if math.isfinite(x["z"][k])])
-        z_std[k] = float(np.sqrt(np.mean(z**2))) if len(z) else math.nan  # about 0: the truth is the mean
+        z_std[k] = (
+            float(np.sqrt(np.mean(z**2))) if len(z) else math.nan
+        )  # about 0: the truth is the mean
     within = [x["offset_within"] for x in ok if x["offset_within"] is not None]
-    return {"runs": len(ok), "errors": len(rows) - len(ok),
-            "rms_pct": float(np.sqrt(np.mean(pct**2))) if len(pct) else math.nan,
-            "z_std": z_std, "offset_within_fraction": float(np.mean(within)) if within else math.nan,
-            "health_failed": sum(x["health"] == "failed" for x in ok),
-            "wall_s": float(np.mean([x["wall_s"] for x in rows])) if rows else math.nan}
+    return {
+        "runs": len(ok),
+        "errors": len(rows) - len(ok),
+        "rms_pct": float(np.sqrt(np.mean(pct**2))) if len(pct) else math.nan,
+        "z_std": z_std,
+        "offset_within_fraction": float(np.mean(within)) if within else math.nan,
+        "health_failed": sum(x["health"] == "failed" for x in ok),
+        "wall_s": float(np.mean([x["wall_s"] for x in rows])) if rows else math.nan,
+    }
 
 
 def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -140,7 +185,11 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for scenario in sorted({r["scenario"] for r in runs}):
         mine = [r for r in runs if r["scenario"] == scenario]
-        table = {f"{v}/{n}": _stats([r["variants"][v][n] for r in mine]) for v in VARIANTS for n in VARIANTS[v]}
+        table = {
+            f"{v}/{n}": _stats([r["variants"][v][n] for r in mine])
+            for v in VARIANTS
+            for n in VARIANTS[v]
+        }
         peer = table["nominal/ekf"]["rms_pct"]
         for row in table.values():
             row["ratio_to_peer"] = row["rms_pct"] / peer if peer > 0 else math.nan
@@ -151,20 +200,34 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 def print_summary(summary: dict[str, Any], n_runs: int) -> None:
     z_head = " ".join(f"{k[:6]:>6s}" for k in CALIBRATION)
     for scenario, table in summary.items():
-        print(f"\n{scenario} ({n_runs} runs): final horizontal error RMS (% of distance), ratio to the nominal peer, "
-              "calibration error/sigma std (RMS of z), time offset within 3 sigma, health 'failed'")
-        print(f"  {'variant/estimator':18s} {'RMS %':>7s} {'ratio':>6s}  {z_head}  {'off3s':>5s} {'failed':>6s}"
-              f" {'errors':>6s} {'wall s':>6s}")
+        print(
+            f"\n{scenario} ({n_runs} runs): final horizontal error RMS (% of distance), ratio to the nominal peer, "
+            "calibration error/sigma std (RMS of z), time offset within 3 sigma, health 'failed'"
+        )
+        print(
+            f"  {'variant/estimator':18s} {'RMS %':>7s} {'ratio':>6s}  {z_head}  {'off3s':>5s} {'failed':>6s}"
+            f" {'errors':>6s} {'wall s':>6s}"
+        )
         for key, s in table.items():
-            z = " ".join(f"{s['z_std'][k]:6.2f}" if math.isfinite(s["z_std"][k]) else f"{'-':>6s}"
-                         for k in CALIBRATION)
-            within = f"{s['offset_within_fraction']:5.2f}" if math.isfinite(s["offset_within_fraction"]) else "    -"
-            print(f"  {key:18s} {s['rms_pct']:7.3f} {s['ratio_to_peer']:6.2f}  {z}  {within} {s['health_failed']:6d}"
-                  f" {s['errors']:6d} {s['wall_s']:6.1f}")
+            z = " ".join(
+                f"{s['z_std'][k]:6.2f}" if math.isfinite(s["z_std"][k]) else f"{'-':>6s}"
+                for k in CALIBRATION
+            )
+            within = (
+                f"{s['offset_within_fraction']:5.2f}"
+                if math.isfinite(s["offset_within_fraction"])
+                else "    -"
+            )
+            print(
+                f"  {key:18s} {s['rms_pct']:7.3f} {s['ratio_to_peer']:6.2f}  {z}  {within} {s['health_failed']:6d}"
+                f" {s['errors']:6d} {s['wall_s']:6.1f}"
+            )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--runs", type=int, default=50)
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--workers", type=int, default=2)
@@ -175,8 +238,11 @@ def main() -> None:
 
     from gtsam_dvl.app.campaign.cluster import dask_client
 
-    tasks = [(s, seed) for s in args.scenarios.split(",") for seed in range(args.seed_start,
-                                                                            args.seed_start + args.runs)]
+    tasks = [
+        (s, seed)
+        for s in args.scenarios.split(",")
+        for seed in range(args.seed_start, args.seed_start + args.runs)
+    ]
     t0 = time.perf_counter()
     runs: list[dict[str, Any]] = []
     with dask_client(None, args.workers) as client:
@@ -188,7 +254,9 @@ def main() -> None:
                 tmp = args.out.with_suffix(".tmp")
                 tmp.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
                 tmp.replace(args.out)
-    print(f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}")
+    print(
+        f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}"
+    )
     print_summary(summarise(runs), args.runs)
 
 

@@ -5,11 +5,12 @@ Per scenario (default: straight-transect and steady-turn) and seed, one simulate
   error/sigma of every calibration and bias state and of the final position, and the block NEES
   (app/campaign/montecarlo.py run_errors and campaign_statistics);
 - "white": the defaults with the DVL's error taken as white ([dvl] correlated_sigma_m_s = 0; the defaults model a
-  correlated error of 2 mm/s over 60 s, estimators/correlated.py, which is the scenarios' own), batch, online and EKF;
+  correlated error of 2 mm/s over 60 s, estimators/models/correlated.py, which is the scenarios' own), batch, online
+  and EKF;
 - "presets": batch, online and EKF with the sensor presets of the scenario's units (--imu-model, --dvl-model;
   a DVL preset brings its correlated error, so these model it too);
 - "presets_free": the same, batch and online, with every calibration direction estimated ([priors]
-  hold_weak_information = 0: the weakly determined ones not held, estimators/weak_hold.py);
+  hold_weak_information = 0: the weakly determined ones not held, estimators/models/weak_hold.py);
 - "truth": the same estimators with the calibration fixed at the truth (the nominal mounting replaced by the true
   b_R_d, the scale prior at the true scale, both with negligible sigmas);
 - "nominal": the calibration fixed at nominal (scale 1, the nominal mounting): what a plain INS/DVL filter assumes.
@@ -35,19 +36,34 @@ import numpy as np
 FIXED_SCALE_SIGMA = 1e-7  # "fixed": a prior sigma far below anything the data can resolve (0.1 ppm)
 FIXED_MISALIGNMENT_SIGMA_DEG = 1e-5
 ALL3 = ("batch", "online", "ekf")
-VARIANTS: dict[str, tuple[str, ...]] = {"defaults": ALL3, "white": ALL3, "presets": ALL3,
-                                        "presets_free": ("batch", "online"),
-                                        "truth": ("batch", "online"), "nominal": ("batch", "online")}
-CAMPAIGN_VARIANTS = ("defaults", "white", "presets", "presets_free")  # those whose error/sigma statistics are recorded
+VARIANTS: dict[str, tuple[str, ...]] = {
+    "defaults": ALL3,
+    "white": ALL3,
+    "presets": ALL3,
+    "presets_free": ("batch", "online"),
+    "truth": ("batch", "online"),
+    "nominal": ("batch", "online"),
+}
+CAMPAIGN_VARIANTS = (
+    "defaults",
+    "white",
+    "presets",
+    "presets_free",
+)  # those whose error/sigma statistics are recorded
 
 
 def _with(config: Any, section: str, **values: Any) -> Any:
     return config.model_copy(update={section: getattr(config, section).model_copy(update=values)})
 
 
-def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str | None,
-            mounting_tolerance_deg: float | None = None, variants: tuple[str, ...] = tuple(VARIANTS)
-            ) -> dict[str, Any]:
+def run_one(
+    scenario_name: str,
+    seed: int,
+    imu_model: str | None,
+    dvl_model: str | None,
+    mounting_tolerance_deg: float | None = None,
+    variants: tuple[str, ...] = tuple(VARIANTS),
+) -> dict[str, Any]:
     """Every variant on one simulated log: per variant and estimator the final horizontal error (m, % of the
     distance), its sigma, and for "defaults" the campaign's error/sigma record (run_errors)."""
     from gtsam_dvl.app.campaign.montecarlo import run_errors
@@ -72,11 +88,23 @@ def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str
         # a preset fills only the fields the configuration does not set itself, and to_dict() lists every field:
         # take out those the presets fill (else the "presets" variant would be the defaults with another tolerance)
         if imu_model:
-            d["imu"] = {**{k: v for k, v in d["imu"].items() if k not in IMU_PRESETS[imu_model].config_values()},
-                        "model": imu_model}
+            d["imu"] = {
+                **{
+                    k: v
+                    for k, v in d["imu"].items()
+                    if k not in IMU_PRESETS[imu_model].config_values()
+                },
+                "model": imu_model,
+            }
         if dvl_model:
-            d["dvl"] = {**{k: v for k, v in d["dvl"].items() if k not in DVL_PRESETS[dvl_model].config_values()},
-                        "model": dvl_model}
+            d["dvl"] = {
+                **{
+                    k: v
+                    for k, v in d["dvl"].items()
+                    if k not in DVL_PRESETS[dvl_model].config_values()
+                },
+                "model": dvl_model,
+            }
             d["priors"] = {k: v for k, v in d["priors"].items() if k != "scale_sigma"}
         preset = EstimatorConfig.from_dict(d)
         if dvl_model:
@@ -86,19 +114,31 @@ def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str
         "truth": (dataclasses.replace(log, mounting=true_mounting), cal.scale),
         "nominal": (log, 1.0),
     }
-    out: dict[str, Any] = {"scenario": scenario_name, "seed": seed, "distance_m": distance_m, "variants": {}}
+    out: dict[str, Any] = {
+        "scenario": scenario_name,
+        "seed": seed,
+        "distance_m": distance_m,
+        "variants": {},
+    }
     for variant, estimators in VARIANTS.items():
         if variant not in variants or (variant.startswith("presets") and preset is base):
             continue
         run_log, cfg = log, preset if variant.startswith("presets") else base
-        if variant == "presets_free":  # every calibration direction estimated, however little the run informs it
+        if (
+            variant == "presets_free"
+        ):  # every calibration direction estimated, however little the run informs it
             cfg = _with(cfg, "priors", hold_weak_information=0.0)
         if variant == "white":
             cfg = _with(base, "dvl", correlated_sigma_m_s=0.0)
         if variant in fixed_at:
             run_log, scale = fixed_at[variant]
-            cfg = _with(cfg, "priors", scale_initial=scale, scale_sigma=FIXED_SCALE_SIGMA,
-                        misalignment_sigma_deg=(FIXED_MISALIGNMENT_SIGMA_DEG,) * 3)
+            cfg = _with(
+                cfg,
+                "priors",
+                scale_initial=scale,
+                scale_sigma=FIXED_SCALE_SIGMA,
+                misalignment_sigma_deg=(FIXED_MISALIGNMENT_SIGMA_DEG,) * 3,
+            )
         rows: dict[str, Any] = {}
         for name in estimators:
             t0 = time.perf_counter()
@@ -109,14 +149,18 @@ def run_one(scenario_name: str, seed: int, imu_model: str | None, dvl_model: str
                 continue
             n_p_true = np.array([np.interp(res.t[-1], truth.t, truth.n_p[:, k]) for k in range(2)])
             e_h = res.n_p[-1, :2] - n_p_true
-            row: dict[str, Any] = {"horizontal_error_m": float(np.linalg.norm(e_h)),
-                                   "horizontal_error_pct": float(100.0 * np.linalg.norm(e_h) / distance_m),
-                                   "horizontal_z": (e_h / res.position_sigma_m[-1, :2]).tolist(),
-                                   "wall_s": time.perf_counter() - t0}
+            row: dict[str, Any] = {
+                "horizontal_error_m": float(np.linalg.norm(e_h)),
+                "horizontal_error_pct": float(100.0 * np.linalg.norm(e_h) / distance_m),
+                "horizontal_z": (e_h / res.position_sigma_m[-1, :2]).tolist(),
+                "wall_s": time.perf_counter() - t0,
+            }
             if variant in CAMPAIGN_VARIANTS:
                 row["campaign"] = {**run_errors(res, log), "wall_s": row["wall_s"]}
             solver, ekf = res.info.get("solver") or {}, res.info.get("filter") or {}
-            if solver.get("dof"):  # the batch smoother's chi^2/dof after the noise fit, the EKF's NIS/dof
+            if solver.get(
+                "dof"
+            ):  # the batch smoother's chi^2/dof after the noise fit, the EKF's NIS/dof
                 row["chi2_dof"] = 2.0 * float(solver["final_error"]) / float(solver["dof"])
             if "mean_nis_per_dof" in ekf:
                 row["nis_dof"] = float(ekf["mean_nis_per_dof"])
@@ -136,75 +180,134 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
         table: dict[str, Any] = {}
         for variant in VARIANTS:
             for name in VARIANTS[variant]:
-                rows = [r["variants"][variant][name] for r in mine if variant in r["variants"]
-                        and name in r["variants"][variant]]
+                rows = [
+                    r["variants"][variant][name]
+                    for r in mine
+                    if variant in r["variants"] and name in r["variants"][variant]
+                ]
                 ok = [x for x in rows if "failed" not in x]
                 if not rows:
                     continue
                 pct = np.array([x["horizontal_error_pct"] for x in ok])
                 z = np.array([x["horizontal_z"] for x in ok]).reshape(-1)
                 table[f"{variant}/{name}"] = {
-                    "runs": len(ok), "failed": len(rows) - len(ok),
+                    "runs": len(ok),
+                    "failed": len(rows) - len(ok),
                     "rms_pct": float(np.sqrt(np.mean(pct**2))) if len(pct) else math.nan,
                     "median_pct": float(np.median(pct)) if len(pct) else math.nan,
                     "horizontal_z_std": float(np.std(z, ddof=1)) if len(z) > 1 else math.nan,
-                    **{k: float(np.mean([x[k] for x in ok])) for k in ("chi2_dof", "nis_dof")
-                       if ok and all(k in x for x in ok)}}
+                    **{
+                        k: float(np.mean([x[k] for x in ok]))
+                        for k in ("chi2_dof", "nis_dof")
+                        if ok and all(k in x for x in ok)
+                    },
+                }
         out[scenario] = {"errors": table}
         for variant in CAMPAIGN_VARIANTS:
-            campaign = [{"estimators": {n: x["campaign"] for n, x in r["variants"][variant].items()
-                                        if "campaign" in x}} for r in mine if variant in r["variants"]]
+            campaign = [
+                {
+                    "estimators": {
+                        n: x["campaign"]
+                        for n, x in r["variants"][variant].items()
+                        if "campaign" in x
+                    }
+                }
+                for r in mine
+                if variant in r["variants"]
+            ]
             out[scenario][variant] = campaign_statistics(campaign) if campaign else {}
     return out
 
 
 def print_summary(summary: dict[str, Any]) -> None:
     for scenario, s in summary.items():
-        print(f"\n{scenario}: final horizontal error, % of distance (RMS over runs; horizontal error/sigma std)")
+        print(
+            f"\n{scenario}: final horizontal error, % of distance (RMS over runs; horizontal error/sigma std)"
+        )
         for key, row in s["errors"].items():
-            fit = "".join(f"  mean {k.replace('_dof', '')}/dof {row[k]:.3f}"
-                          for k in ("chi2_dof", "nis_dof") if k in row)
-            print(f"  {key:18s} {row['rms_pct']:7.3f} %  median {row['median_pct']:6.3f} %  z std "
-                  f"{row['horizontal_z_std']:5.2f}  ({row['runs']} runs, {row['failed']} failed){fit}")
-        for variant, est in (("batch", "truth"), ("online", "truth"), ("batch", "nominal"), ("online", "nominal")):
+            fit = "".join(
+                f"  mean {k.replace('_dof', '')}/dof {row[k]:.3f}"
+                for k in ("chi2_dof", "nis_dof")
+                if k in row
+            )
+            print(
+                f"  {key:18s} {row['rms_pct']:7.3f} %  median {row['median_pct']:6.3f} %  z std "
+                f"{row['horizontal_z_std']:5.2f}  ({row['runs']} runs, {row['failed']} failed){fit}"
+            )
+        for variant, est in (
+            ("batch", "truth"),
+            ("online", "truth"),
+            ("batch", "nominal"),
+            ("online", "nominal"),
+        ):
             for pre in ("presets", "presets_free"):
                 p, f = s["errors"].get(f"{pre}/{variant}"), s["errors"].get(f"{est}/{variant}")
                 if p and f:
-                    print(f"  {pre}/{variant} over {est}/{variant}: {p['rms_pct'] / f['rms_pct']:.2f}x")
+                    print(
+                        f"  {pre}/{variant} over {est}/{variant}: {p['rms_pct'] / f['rms_pct']:.2f}x"
+                    )
         for variant in CAMPAIGN_VARIANTS:
             for name, est in s.get(variant, {}).get("estimators", {}).items():
                 worst = max(est["states"].items(), key=lambda kv: kv[1]["z_std"])
                 nees = est["nees_block"]
-                print(f"  {variant}/{name}: largest error/sigma std {worst[1]['z_std']:.2f} ({worst[0]}); block NEES "
-                      f"{nees['mean']:.2f} in [{nees['band_95'][0]:.2f}, {nees['band_95'][1]:.2f}]: "
-                      f"{'inside' if nees['inside_band'] else 'OUTSIDE'}")
+                print(
+                    f"  {variant}/{name}: largest error/sigma std {worst[1]['z_std']:.2f} ({worst[0]}); block NEES "
+                    f"{nees['mean']:.2f} in [{nees['band_95'][0]:.2f}, {nees['band_95'][1]:.2f}]: "
+                    f"{'inside' if nees['inside_band'] else 'OUTSIDE'}"
+                )
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("--runs", type=int, default=50)
     ap.add_argument("--scenarios", default="straight-transect,steady-turn")
     # the scenarios' sensors: the paper's navigation-grade IMU (0.1 deg/h/sqrt(Hz), 0.01 deg/h, 10 micro-g/sqrt(Hz),
     # 50 micro-g: the PHINS preset's class) and a 7 mm/s bottom-track DVL (a Pathfinder's class, 0.4 % scale)
-    ap.add_argument("--imu-model", default="ixblue-phins", help="[imu] model of the 'presets' variant")
-    ap.add_argument("--dvl-model", default="teledyne-pathfinder", help="[dvl] model of the 'presets' variant")
-    ap.add_argument("--mounting-tolerance-deg", type=float, default=0.5,
-                    help="[priors] mounting_tolerance_deg of the 'presets' variant")
+    ap.add_argument(
+        "--imu-model", default="ixblue-phins", help="[imu] model of the 'presets' variant"
+    )
+    ap.add_argument(
+        "--dvl-model", default="teledyne-pathfinder", help="[dvl] model of the 'presets' variant"
+    )
+    ap.add_argument(
+        "--mounting-tolerance-deg",
+        type=float,
+        default=0.5,
+        help="[priors] mounting_tolerance_deg of the 'presets' variant",
+    )
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--variants", default=",".join(VARIANTS), help="the variants to run (default: all)")
+    ap.add_argument(
+        "--variants", default=",".join(VARIANTS), help="the variants to run (default: all)"
+    )
     ap.add_argument("--seed-start", type=int, default=1)
     ap.add_argument("--out", type=Path, default=Path("underway_calibration.json"))
     args = ap.parse_args()
     from gtsam_dvl.app.campaign.cluster import dask_client
 
-    tasks = [(s, seed) for s in args.scenarios.split(",") for seed in range(args.seed_start,
-                                                                            args.seed_start + args.runs)]
+    tasks = [
+        (s, seed)
+        for s in args.scenarios.split(",")
+        for seed in range(args.seed_start, args.seed_start + args.runs)
+    ]
     t0 = time.perf_counter()
     runs: list[dict[str, Any]] = []
     with dask_client(None, args.workers) as client:
         variants = tuple(args.variants.split(","))
-        futures = [client.submit(run_one, s, seed, args.imu_model, args.dvl_model,
-                                 args.mounting_tolerance_deg, variants, pure=False) for s, seed in tasks]
+        futures = [
+            client.submit(
+                run_one,
+                s,
+                seed,
+                args.imu_model,
+                args.dvl_model,
+                args.mounting_tolerance_deg,
+                variants,
+                pure=False,
+            )
+            for s, seed in tasks
+        ]
         from dask.distributed import as_completed
 
         for k, fut in enumerate(as_completed(futures), 1):
@@ -214,7 +317,9 @@ def main() -> None:
                 tmp = args.out.with_suffix(".tmp")
                 tmp.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
                 tmp.replace(args.out)
-    print(f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}")
+    print(
+        f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}"
+    )
     print_summary(summarise(runs))
 
 

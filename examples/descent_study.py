@@ -41,7 +41,9 @@ def scenario_with(descent_s: float, dvl_hz: float) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     ap.add_argument("-o", "--output", type=Path, default=Path("descent-study"))
     ap.add_argument("--quick", action="store_true", help="a 2 x 2 grid (for tests)")
     args = ap.parse_args()
@@ -50,10 +52,15 @@ def main() -> None:
     sigma = np.zeros((len(rates), len(durations)))
     for i, hz in enumerate(rates):
         for j, dur in enumerate(durations):
-            plan = plan_mission(scenario_from_dict(scenario_with(dur, hz), f"descent-{dur:.0f}s-{hz:g}Hz"))
+            plan = plan_mission(
+                scenario_from_dict(scenario_with(dur, hz), f"descent-{dur:.0f}s-{hz:g}Hz")
+            )
             sigma[i, j] = plan.report.state("misalignment_roll").posterior_sigma
-            print(f"DVL {hz:>4.1f} Hz, descent {dur:>5.0f} s: roll misalignment sigma {sigma[i, j]:.3f} deg "
-                  f"({plan.report.state('misalignment_roll').verdict})", flush=True)
+            print(
+                f"DVL {hz:>4.1f} Hz, descent {dur:>5.0f} s: roll misalignment sigma {sigma[i, j]:.3f} deg "
+                f"({plan.report.state('misalignment_roll').verdict})",
+                flush=True,
+            )
     args.output.mkdir(parents=True, exist_ok=True)
     with open(args.output / "descent_study.csv", "w") as fh:
         fh.write("dvl_hz,descent_s,roll_sigma_deg\n")

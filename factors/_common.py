@@ -12,6 +12,7 @@ import numpy as np
 # A 3-vector given by the caller: an array or a sequence of numbers (not Any, so that mypy checks every call)
 Vector3Like = np.ndarray | Sequence[float]
 
+
 class JacobianSlots(Protocol):
     """What a Jacobian output list must support: a Python list or GTSAM's opaque JacobianVector."""
 
@@ -20,7 +21,6 @@ class JacobianSlots(Protocol):
     def __getitem__(self, index: int, /) -> Any: ...
 
     def __setitem__(self, index: int, value: np.ndarray, /) -> None: ...
-
 
 
 def fill_slots(H: JacobianSlots, computed: list[np.ndarray]) -> None:
@@ -46,7 +46,9 @@ def as_scale(k: float | np.ndarray) -> float:
 
 def as_vector3(name: str, x: Any) -> np.ndarray:
     """A finite float64 3-vector, or ValueError naming the argument."""
-    arr = np.array(x, dtype=float)  # a copy: the factor must not see later changes to the caller's array
+    arr = np.array(
+        x, dtype=float
+    )  # a copy: the factor must not see later changes to the caller's array
     if arr.shape != (3,):
         raise ValueError(f"{name} must be a 3-vector, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):

@@ -20,14 +20,26 @@ from typing import Any
 import gtsam
 import numpy as np
 
-from ._common import JacobianSlots, Vector3Like, as_finite_float, as_vector3, check_noise, fill_slots
+from ._common import (
+    JacobianSlots,
+    Vector3Like,
+    as_finite_float,
+    as_vector3,
+    check_noise,
+    fill_slots,
+)
 from .so3 import skew
 
 _E3 = np.array([0.0, 0.0, 1.0])
 
 
-def predict_height(n_R_b: np.ndarray, n_p: np.ndarray, b_p_s: np.ndarray, radius_m: float,
-                   H: list[np.ndarray] | None = None) -> float:
+def predict_height(
+    n_R_b: np.ndarray,
+    n_p: np.ndarray,
+    b_p_s: np.ndarray,
+    radius_m: float,
+    H: list[np.ndarray] | None = None,
+) -> float:
     """Height of the sensor above the map origin's height (m), and with H its Jacobian w.r.t. the pose
     (1x6, right perturbation) in H[0]."""
     inv_r = 0.0 if math.isinf(radius_m) else 1.0 / radius_m
@@ -41,12 +53,24 @@ def predict_height(n_R_b: np.ndarray, n_p: np.ndarray, b_p_s: np.ndarray, radius
     return h
 
 
-def depth_error(n_T_b: gtsam.Pose3, z_meas: float, b_p_s: np.ndarray, radius_m: float = math.inf,
-                n_v: np.ndarray | None = None, dt: float = 0.0, H: JacobianSlots | None = None) -> np.ndarray:
+def depth_error(
+    n_T_b: gtsam.Pose3,
+    z_meas: float,
+    b_p_s: np.ndarray,
+    radius_m: float = math.inf,
+    n_v: np.ndarray | None = None,
+    dt: float = 0.0,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
     """e = h_s - z_meas (1,), see the module doc. H: one slot (pose, 1x6), or two with n_v (velocity, 1x3)."""
     computed: list[np.ndarray] = [np.empty(0)]
-    h = predict_height(n_T_b.rotation().matrix(), n_T_b.translation(), np.asarray(b_p_s, dtype=float), radius_m,
-                       computed if H is not None else None)
+    h = predict_height(
+        n_T_b.rotation().matrix(),
+        n_T_b.translation(),
+        np.asarray(b_p_s, dtype=float),
+        radius_m,
+        computed if H is not None else None,
+    )
     if n_v is not None:
         h += dt * float(np.asarray(n_v)[2])
         computed.append((dt * _E3).reshape(1, 3))
@@ -55,8 +79,15 @@ def depth_error(n_T_b: gtsam.Pose3, z_meas: float, b_p_s: np.ndarray, radius_m: 
     return np.array([h - z_meas])
 
 
-def make_depth_factor(noise: gtsam.noiseModel.Base, pose_key: int, z_meas: float, b_p_s: Vector3Like,
-                      radius_m: float = math.inf, vel_key: int | None = None, dt: float = 0.0) -> gtsam.CustomFactor:
+def make_depth_factor(
+    noise: gtsam.noiseModel.Base,
+    pose_key: int,
+    z_meas: float,
+    b_p_s: Vector3Like,
+    radius_m: float = math.inf,
+    vel_key: int | None = None,
+    dt: float = 0.0,
+) -> gtsam.CustomFactor:
     """DepthFactor on [pose] (or [pose, velocity] with vel_key, the sample dt seconds after the state):
     the sensor's height above the map origin's height against z_meas = -depth - h0 (m, up). noise: a GTSAM
     noise model of dimension 1. Raises ValueError on a non-finite z_meas, dt, b_p_s or a bad radius."""

@@ -58,9 +58,15 @@ class DvlOptions:
     current_variable: bool = False
 
     def key_names(self) -> list[str]:
-        return (["pose", "vel"] + ["bias"] * (self.motion is not None) + ["scale", "b_R_d"]
-                + ["offset"] * (self.offset is not None) + ["lever"] * self.lever_variable
-                + ["error"] * self.error_variable + ["current"] * self.current_variable)
+        return (
+            ["pose", "vel"]
+            + ["bias"] * (self.motion is not None)
+            + ["scale", "b_R_d"]
+            + ["offset"] * (self.offset is not None)
+            + ["lever"] * self.lever_variable
+            + ["error"] * self.error_variable
+            + ["current"] * self.current_variable
+        )
 
     @property
     def dim(self) -> int:
@@ -77,8 +83,13 @@ class DvlOptions:
             offset = OffsetInput(as_vector3("b_a", offset.b_a), as_vector3("n_g", offset.n_g), G)
         if self.motion is not None and self.motion.checked().n_G is None:
             raise ValueError("the factor's PingMotion needs its Earth model (PingMotion.motion)")
-        return replace(self, b_omega=as_vector3("b_omega", self.b_omega), b_l=as_vector3("b_l", self.b_l),
-                       d_u=None if self.d_u is None else as_unit_vector3("d_u", self.d_u), offset=offset)
+        return replace(
+            self,
+            b_omega=as_vector3("b_omega", self.b_omega),
+            b_l=as_vector3("b_l", self.b_l),
+            d_u=None if self.d_u is None else as_unit_vector3("d_u", self.d_u),
+            offset=offset,
+        )
 
     def jacobians(self, J: DvlJacobians) -> list[np.ndarray]:
         """The Jacobians per key (those of the scale and misalignment zero when considered)."""
@@ -106,34 +117,69 @@ def _water_relative(n_v: np.ndarray, current: np.ndarray) -> np.ndarray:
     return np.asarray(n_v, dtype=float) - np.array([c[0], c[1], 0.0])
 
 
-def _evaluate(o: DvlOptions, pose: gtsam.Pose3, n_v: np.ndarray, bias: gtsam.imuBias.ConstantBias | None, k: float,
-              b_R_d: np.ndarray, dt_d: float | None, b_l: np.ndarray | None, jacobians: bool,
-              lever_v: np.ndarray | None = None) -> tuple[np.ndarray, DvlJacobians | None]:
+def _evaluate(
+    o: DvlOptions,
+    pose: gtsam.Pose3,
+    n_v: np.ndarray,
+    bias: gtsam.imuBias.ConstantBias | None,
+    k: float,
+    b_R_d: np.ndarray,
+    dt_d: float | None,
+    b_l: np.ndarray | None,
+    jacobians: bool,
+    lever_v: np.ndarray | None = None,
+) -> tuple[np.ndarray, DvlJacobians | None]:
     """dvl_model on the variables' values (bias: with o.motion; b_l None: the known o.b_l, whose b_omega x b_l is
     lever_v if given)."""
     n_p = bias_a = bias_g = None
     if bias is not None:
         n_p, bias_a, bias_g = pose.translation(), bias.accelerometer(), bias.gyroscope()
-    return dvl_model(pose.rotation().matrix(), n_v, k, b_R_d, o.b_omega, o.b_l if b_l is None else b_l, d_u=o.d_u,
-                     dt_d=dt_d, offset=o.offset, motion=o.motion, n_p=n_p, bias_a=bias_a, bias_g=bias_g,
-                     jacobians=jacobians, lever=o.lever_variable, lever_v=None if b_l is not None else lever_v)
+    return dvl_model(
+        pose.rotation().matrix(),
+        n_v,
+        k,
+        b_R_d,
+        o.b_omega,
+        o.b_l if b_l is None else b_l,
+        d_u=o.d_u,
+        dt_d=dt_d,
+        offset=o.offset,
+        motion=o.motion,
+        n_p=n_p,
+        bias_a=bias_a,
+        bias_g=bias_g,
+        jacobians=jacobians,
+        lever=o.lever_variable,
+        lever_v=None if b_l is not None else lever_v,
+    )
 
 
-def dvl_error(x: Sequence[Any], y: np.ndarray | float, options: DvlOptions,
-              H: JacobianSlots | None = None) -> np.ndarray:
+def dvl_error(
+    x: Sequence[Any], y: np.ndarray | float, options: DvlOptions, H: JacobianSlots | None = None
+) -> np.ndarray:
     """e = h(x) - y, (3,) or (1,) for a beam; x the variables in the keys' order (options.key_names(): Pose3,
     3-vector, [ConstantBias], scale (float or 1-vector), Rot3, [time offset], [lever arm]). With H (a list of one
     slot per key, None or preallocated arrays), the Jacobians are written into it."""
     names = options.key_names()
     if len(x) != len(names):
-        raise ValueError(f"the DVL factor with these options has {len(names)} variables {names}, got {len(x)}")
+        raise ValueError(
+            f"the DVL factor with these options has {len(names)} variables {names}, got {len(x)}"
+        )
     v = dict(zip(names, x, strict=True))
     n_v = np.asarray(v["vel"], dtype=float)
     if "current" in v:  # a water-track ping: the velocity relative to the water
         n_v = _water_relative(n_v, v["current"])
-    h, J = _evaluate(options, v["pose"], n_v, v.get("bias"), as_scale(v["scale"]),
-                     v["b_R_d"].matrix(), as_scale(v["offset"]) if "offset" in v else None,
-                     np.asarray(v["lever"], dtype=float).reshape(3) if "lever" in v else None, H is not None)
+    h, J = _evaluate(
+        options,
+        v["pose"],
+        n_v,
+        v.get("bias"),
+        as_scale(v["scale"]),
+        v["b_R_d"].matrix(),
+        as_scale(v["offset"]) if "offset" in v else None,
+        np.asarray(v["lever"], dtype=float).reshape(3) if "lever" in v else None,
+        H is not None,
+    )
     if "error" in v:
         e = np.asarray(v["error"], dtype=float).reshape(3)
         h = h + (e if options.d_u is None else np.asarray(options.d_u, dtype=float) @ e)
@@ -142,8 +188,9 @@ def dvl_error(x: Sequence[Any], y: np.ndarray | float, options: DvlOptions,
     return h - np.asarray(y, dtype=float).reshape(-1)
 
 
-def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector3Like | float,
-                    options: DvlOptions) -> gtsam.CustomFactor:
+def make_dvl_factor(
+    noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector3Like | float, options: DvlOptions
+) -> gtsam.CustomFactor:
     """The DVL factor on keys (in options.key_names()' order, module doc) of a ping's velocity y (m/s, dvl_link), or
     a beam's velocity (a float) with options.d_u. noise: a GTSAM noise model of the factor's dimension (3, or 1 for
     a beam; possibly robust). Values must hold a Pose3, a 3-vector, [a ConstantBias], a 1-vector, a Rot3, [a
@@ -153,33 +200,60 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
     check_noise(noise, o.dim)
     names = o.key_names()
     if len(keys) != len(names):
-        raise ValueError(f"the DVL factor with these options takes {len(names)} keys {names}, got {len(keys)}")
+        raise ValueError(
+            f"the DVL factor with these options takes {len(names)} keys {names}, got {len(keys)}"
+        )
     y_c = as_vector3("d_y", y) if o.d_u is None else np.array([as_finite_float("y_j", y)])
     at = dict(zip(names, keys, strict=True))
     pose_k, vel_k, scale_k, rot_k = at["pose"], at["vel"], at["scale"], at["b_R_d"]
-    bias_k, offset_k, lever_k, error_k = at.get("bias"), at.get("offset"), at.get("lever"), at.get("error")
+    bias_k, offset_k, lever_k, error_k = (
+        at.get("bias"),
+        at.get("offset"),
+        at.get("lever"),
+        at.get("error"),
+    )
     current_k = at.get("current")
     J_error = o.error_jacobian() if error_k is not None else None
     lever_v = cross(o.b_omega, o.b_l)  # a known lever arm's velocity, once (not per linearisation)
     # the keys' Jacobians in DvlJacobians (-1: the correlated error's, J_error; -2: the current's)
-    fields = [-1 if name == "error" else -2 if name == "current" else DvlJacobians._fields.index(name)
-              for name in names]
+    fields = [
+        -1 if name == "error" else -2 if name == "current" else DvlJacobians._fields.index(name)
+        for name in names
+    ]
 
     def error_func(this: gtsam.CustomFactor, values: gtsam.Values, H: Any) -> np.ndarray:
         n_v = values.atPoint3(vel_k)  # (a Vector or a Point3 entry)
         if current_k is not None:  # a water-track ping: the velocity relative to the water
             n_v = _water_relative(n_v, values.atVector(current_k))
-        if bias_k is None and lever_k is None and offset_k is None:  # (the per-ping path: no second call layer)
-            h, J = dvl_model(values.atPose3(pose_k).rotation().matrix(), n_v,
-                             values.atVector(scale_k).item(), values.atRot3(rot_k).matrix(), o.b_omega, o.b_l,
-                             d_u=o.d_u, jacobians=H is not None, lever_v=lever_v)
+        if (
+            bias_k is None and lever_k is None and offset_k is None
+        ):  # (the per-ping path: no second call layer)
+            h, J = dvl_model(
+                values.atPose3(pose_k).rotation().matrix(),
+                n_v,
+                values.atVector(scale_k).item(),
+                values.atRot3(rot_k).matrix(),
+                o.b_omega,
+                o.b_l,
+                d_u=o.d_u,
+                jacobians=H is not None,
+                lever_v=lever_v,
+            )
         else:
-            h, J = _evaluate(o, values.atPose3(pose_k), n_v,
-                             None if bias_k is None else values.atConstantBias(bias_k),
-                             values.atVector(scale_k).item(),  # a Python float: cheaper arithmetic than np.float64
-                             values.atRot3(rot_k).matrix(),
-                             None if offset_k is None else values.atVector(offset_k).item(),
-                             None if lever_k is None else values.atPoint3(lever_k), H is not None, lever_v)
+            h, J = _evaluate(
+                o,
+                values.atPose3(pose_k),
+                n_v,
+                None if bias_k is None else values.atConstantBias(bias_k),
+                values.atVector(
+                    scale_k
+                ).item(),  # a Python float: cheaper arithmetic than np.float64
+                values.atRot3(rot_k).matrix(),
+                None if offset_k is None else values.atVector(offset_k).item(),
+                None if lever_k is None else values.atPoint3(lever_k),
+                H is not None,
+                lever_v,
+            )
         if error_k is not None:
             e = values.atVector(error_k)
             h = h + (e if o.d_u is None else o.d_u @ e)
@@ -189,50 +263,111 @@ def make_dvl_factor(noise: gtsam.noiseModel.Base, keys: Sequence[int], y: Vector
                     H[i] = Jk
             else:  # (J's fields of the keys, found once)
                 for i, field in enumerate(fields):
-                    H[i] = J[field] if field >= 0 else J_error if field == -1 else current_jacobian(J.vel)
+                    H[i] = (
+                        J[field]
+                        if field >= 0
+                        else J_error
+                        if field == -1
+                        else current_jacobian(J.vel)
+                    )
         return h - y_c
 
     return gtsam.CustomFactor(noise, list(keys), error_func)
 
 
 # ----- the signatures the online estimator (estimators/online/estimator.py) and bench/bench_factors.py call -------
-def _at_state(b_omega: Any, b_l: Any, d_u: Any = None, offset: OffsetInput | None = None) -> DvlOptions:
+def _at_state(
+    b_omega: Any, b_l: Any, d_u: Any = None, offset: OffsetInput | None = None
+) -> DvlOptions:
     """DvlOptions of a ping at a state with a known lever arm."""
-    return DvlOptions(np.asarray(b_omega, dtype=float), np.asarray(b_l, dtype=float),
-                      None if d_u is None else np.asarray(d_u, dtype=float), offset)
+    return DvlOptions(
+        np.asarray(b_omega, dtype=float),
+        np.asarray(b_l, dtype=float),
+        None if d_u is None else np.asarray(d_u, dtype=float),
+        offset,
+    )
 
 
-def dvl_velocity_error(n_T_b: gtsam.Pose3, n_v: np.ndarray, k: float | np.ndarray, b_R_d: gtsam.Rot3,
-                       d_y: np.ndarray, b_omega: np.ndarray, b_l: np.ndarray,
-                       H: JacobianSlots | None = None) -> np.ndarray:
+def dvl_velocity_error(
+    n_T_b: gtsam.Pose3,
+    n_v: np.ndarray,
+    k: float | np.ndarray,
+    b_R_d: gtsam.Rot3,
+    d_y: np.ndarray,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
     """dvl_error of the 3-D velocity at a state: keys [pose, velocity, scale, b_R_d]."""
     return dvl_error([n_T_b, n_v, k, b_R_d], d_y, _at_state(b_omega, b_l), H)
 
 
-def dvl_beam_error(n_T_b: gtsam.Pose3, n_v: np.ndarray, k: float | np.ndarray, b_R_d: gtsam.Rot3, d_u: np.ndarray,
-                   y_j: float, b_omega: np.ndarray, b_l: np.ndarray, H: JacobianSlots | None = None) -> np.ndarray:
+def dvl_beam_error(
+    n_T_b: gtsam.Pose3,
+    n_v: np.ndarray,
+    k: float | np.ndarray,
+    b_R_d: gtsam.Rot3,
+    d_u: np.ndarray,
+    y_j: float,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
     """dvl_error of one beam (unit vector d_u, velocity y_j) at a state: keys [pose, velocity, scale, b_R_d]."""
     return dvl_error([n_T_b, n_v, k, b_R_d], y_j, _at_state(b_omega, b_l, d_u), H)
 
 
-def dvl_velocity_offset_error(n_T_b: gtsam.Pose3, n_v: np.ndarray, k: float | np.ndarray, b_R_d: gtsam.Rot3,
-                              dt: float | np.ndarray, d_y: np.ndarray, b_omega: np.ndarray, b_l: np.ndarray,
-                              b_a: np.ndarray, n_g: np.ndarray, G: np.ndarray | None = None,
-                              H: JacobianSlots | None = None) -> np.ndarray:
+def dvl_velocity_offset_error(
+    n_T_b: gtsam.Pose3,
+    n_v: np.ndarray,
+    k: float | np.ndarray,
+    b_R_d: gtsam.Rot3,
+    dt: float | np.ndarray,
+    d_y: np.ndarray,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    b_a: np.ndarray,
+    n_g: np.ndarray,
+    G: np.ndarray | None = None,
+    H: JacobianSlots | None = None,
+) -> np.ndarray:
     """dvl_error of the 3-D velocity with the time offset dt (s): keys [pose, velocity, scale, b_R_d, offset]."""
-    offset = OffsetInput(np.asarray(b_a, dtype=float), np.asarray(n_g, dtype=float),
-                         np.eye(3) if G is None else np.asarray(G, dtype=float))
+    offset = OffsetInput(
+        np.asarray(b_a, dtype=float),
+        np.asarray(n_g, dtype=float),
+        np.eye(3) if G is None else np.asarray(G, dtype=float),
+    )
     return dvl_error([n_T_b, n_v, k, b_R_d, dt], d_y, _at_state(b_omega, b_l, offset=offset), H)
 
 
-def make_dvl_velocity_factor(noise: gtsam.noiseModel.Base, pose_key: int, vel_key: int, scale_key: int,
-                             b_R_d_key: int, d_y: Vector3Like, b_omega: Vector3Like,
-                             b_l: Vector3Like) -> gtsam.CustomFactor:
+def make_dvl_velocity_factor(
+    noise: gtsam.noiseModel.Base,
+    pose_key: int,
+    vel_key: int,
+    scale_key: int,
+    b_R_d_key: int,
+    d_y: Vector3Like,
+    b_omega: Vector3Like,
+    b_l: Vector3Like,
+) -> gtsam.CustomFactor:
     """make_dvl_factor of the 3-D velocity d_y at a state, lever arm b_l known."""
-    return make_dvl_factor(noise, [pose_key, vel_key, scale_key, b_R_d_key], d_y, _at_state(b_omega, b_l))
+    return make_dvl_factor(
+        noise, [pose_key, vel_key, scale_key, b_R_d_key], d_y, _at_state(b_omega, b_l)
+    )
 
 
-def make_dvl_beam_factor(noise: gtsam.noiseModel.Base, pose_key: int, vel_key: int, scale_key: int, b_R_d_key: int,
-                         d_u: Vector3Like, y_j: float, b_omega: Vector3Like, b_l: Vector3Like) -> gtsam.CustomFactor:
+def make_dvl_beam_factor(
+    noise: gtsam.noiseModel.Base,
+    pose_key: int,
+    vel_key: int,
+    scale_key: int,
+    b_R_d_key: int,
+    d_u: Vector3Like,
+    y_j: float,
+    b_omega: Vector3Like,
+    b_l: Vector3Like,
+) -> gtsam.CustomFactor:
     """make_dvl_factor of one beam (unit vector d_u, velocity y_j) at a state, lever arm b_l known."""
-    return make_dvl_factor(noise, [pose_key, vel_key, scale_key, b_R_d_key], y_j, _at_state(b_omega, b_l, d_u))
+    return make_dvl_factor(
+        noise, [pose_key, vel_key, scale_key, b_R_d_key], y_j, _at_state(b_omega, b_l, d_u)
+    )

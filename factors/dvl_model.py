@@ -50,7 +50,9 @@ from .so3 import cross, rotate, skew, unrotate
 
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
-_Z33 = np.zeros((3, 3))  # (the translation block of a ping's pose Jacobian: np.concatenate copies it)
+_Z33 = np.zeros(
+    (3, 3)
+)  # (the translation block of a ping's pose Jacobian: np.concatenate copies it)
 _Z33.setflags(write=False)
 
 
@@ -86,11 +88,26 @@ def _t(R: np.ndarray) -> np.ndarray:
     return R.T if R.ndim == 2 else np.swapaxes(R, -1, -2)
 
 
-def dvl_model(n_R_b: np.ndarray, n_v: np.ndarray, k: float, b_R_d: np.ndarray, b_omega: np.ndarray,
-              b_l: np.ndarray, *, d_u: np.ndarray | None = None, dt_d: float | None = None,
-              offset: OffsetInput | None = None, motion: PingMotion | None = None, n_p: Any = None,
-              bias_a: Any = None, bias_g: Any = None, jacobians: bool = True, lever: bool = False,
-              inputs: bool = False, lever_v: np.ndarray | None = None) -> tuple[np.ndarray, DvlJacobians | None]:
+def dvl_model(
+    n_R_b: np.ndarray,
+    n_v: np.ndarray,
+    k: float,
+    b_R_d: np.ndarray,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    *,
+    d_u: np.ndarray | None = None,
+    dt_d: float | None = None,
+    offset: OffsetInput | None = None,
+    motion: PingMotion | None = None,
+    n_p: Any = None,
+    bias_a: Any = None,
+    bias_g: Any = None,
+    jacobians: bool = True,
+    lever: bool = False,
+    inputs: bool = False,
+    lever_v: np.ndarray | None = None,
+) -> tuple[np.ndarray, DvlJacobians | None]:
     """The predicted measurement h (..., 3), or (..., 1) for a beam, and its Jacobians (module doc).
 
     n_R_b (..., 3, 3), n_v (..., 3) m/s: the ping's attitude and velocity in map, or with motion keyframe i's, with
@@ -115,7 +132,11 @@ def dvl_model(n_R_b: np.ndarray, n_v: np.ndarray, k: float, b_R_d: np.ndarray, b
     if d_u is None:
         h = kd_v
     else:
-        h = (d_u @ kd_v if d_u.ndim == 1 and kd_v.ndim == 1 else np.einsum("...i,...i->...", d_u, kd_v))[..., None]
+        h = (
+            d_u @ kd_v
+            if d_u.ndim == 1 and kd_v.ndim == 1
+            else np.einsum("...i,...i->...", d_u, kd_v)
+        )[..., None]
     if not jacobians:
         return h, None
     A = k * _t(b_R_d)  # k d_R_b
@@ -141,8 +162,19 @@ def dvl_model(n_R_b: np.ndarray, n_v: np.ndarray, k: float, b_R_d: np.ndarray, b
         J_omega = -(A @ b_l_x) if dt_d is None else A @ (dt_d * skew(b_v) - b_l_x)
         J_acc = None if dt_d is None else dt_d * A
     if A_motion is None:
-        J_pose = np.concatenate((h_R, _Z33[:len(h_R)] if h_R.ndim == 2 else np.zeros(h_R.shape)), axis=-1)
+        J_pose = np.concatenate(
+            (h_R, _Z33[: len(h_R)] if h_R.ndim == 2 else np.zeros(h_R.shape)), axis=-1
+        )
         return h, DvlJacobians(J_pose, h_v, None, J_scale, J_rot, J_offset, J_lever, J_omega, J_acc)
     A_R_pose, A_R_bias, A_v_pose, A_v_vel, A_v_bias = A_motion
-    return h, DvlJacobians(h_R @ A_R_pose + h_v @ A_v_pose, h_v @ A_v_vel, h_R @ A_R_bias + h_v @ A_v_bias, J_scale,
-                           J_rot, J_offset, J_lever, J_omega, J_acc)
+    return h, DvlJacobians(
+        h_R @ A_R_pose + h_v @ A_v_pose,
+        h_v @ A_v_vel,
+        h_R @ A_R_bias + h_v @ A_v_bias,
+        J_scale,
+        J_rot,
+        J_offset,
+        J_lever,
+        J_omega,
+        J_acc,
+    )

@@ -3,7 +3,7 @@
 Why: through GTSAM's CustomFactor each IMU factor of the batch smoother costs a Python call per linearisation
 and per error evaluation (factors/imu_earth.py), and a day of 1 s keyframes has 86,400 of them (the timings:
 docs/results.md, Speed). The batch smoother owns its Gauss-Newton loop, so it evaluates them all in a few
-vectorised operations instead (estimators/bulk_imu.py). The model is GTSAM's, written for stacks of factors; it is
+vectorised operations instead (estimators/graph/bulk_imu.py). The model is GTSAM's, written for stacks of factors; it is
 checked against gtsam.ImuFactor.evaluateError (errors and Jacobians to 1e-9) and against numerical derivatives
 in tests/factors/test_imu_bulk.py.
 
@@ -39,7 +39,9 @@ import numpy as np
 
 from .so3 import exp, inv_right_jacobian, log, right_jacobian, skew
 
-_SMALL = 0.1  # rad: below, the rotation functions' coefficients from their series (closed forms cancel)
+_SMALL = (
+    0.1  # rad: below, the rotation functions' coefficients from their series (closed forms cancel)
+)
 
 
 def _theta2(phi: np.ndarray) -> np.ndarray:
@@ -57,16 +59,28 @@ def _left_jacobian_apply_derivative(phi: np.ndarray, rho: np.ndarray) -> np.ndar
     s, c = np.sin(ts), np.cos(ts)
     B = np.where(small, 0.5 - t2 / 24.0 + t2 * t2 / 720.0, (1.0 - c) / ts**2)
     C = np.where(small, 1.0 / 6.0 - t2 / 120.0 + t2 * t2 / 5040.0, (ts - s) / ts**3)
-    dB = np.where(small, -1.0 / 12.0 + t2 / 180.0 - t2 * t2 / 6720.0, (ts * s - 2.0 * (1.0 - c)) / ts**4)
-    dC = np.where(small, -1.0 / 60.0 + t2 / 1260.0 - t2 * t2 / 60480.0,
-                  (1.0 - c) / ts**4 - 3.0 * (ts - s) / ts**5)
+    dB = np.where(
+        small, -1.0 / 12.0 + t2 / 180.0 - t2 * t2 / 6720.0, (ts * s - 2.0 * (1.0 - c)) / ts**4
+    )
+    dC = np.where(
+        small,
+        -1.0 / 60.0 + t2 / 1260.0 - t2 * t2 / 60480.0,
+        (1.0 - c) / ts**4 - 3.0 * (ts - s) / ts**5,
+    )
     phi_x_rho = np.cross(phi, rho)
     phi_x2_rho = np.cross(phi, phi_x_rho)
     phi_dot_rho = np.einsum("ni,ni->n", phi, rho)
-    D = (phi_dot_rho[:, None, None] * np.eye(3) + phi[:, :, None] * rho[:, None, :]
-         - 2.0 * rho[:, :, None] * phi[:, None, :])  # d(phi x (phi x rho)) / d phi
-    return (-B[:, None, None] * skew(rho) + dB[:, None, None] * phi_x_rho[:, :, None] * phi[:, None, :]
-            + C[:, None, None] * D + dC[:, None, None] * phi_x2_rho[:, :, None] * phi[:, None, :])
+    D = (
+        phi_dot_rho[:, None, None] * np.eye(3)
+        + phi[:, :, None] * rho[:, None, :]
+        - 2.0 * rho[:, :, None] * phi[:, None, :]
+    )  # d(phi x (phi x rho)) / d phi
+    return (
+        -B[:, None, None] * skew(rho)
+        + dB[:, None, None] * phi_x_rho[:, :, None] * phi[:, None, :]
+        + C[:, None, None] * D
+        + dC[:, None, None] * phi_x2_rho[:, :, None] * phi[:, None, :]
+    )
 
 
 def se23_log_n(R: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -86,7 +100,9 @@ def se23_log_n(R: np.ndarray, p: np.ndarray, v: np.ndarray) -> tuple[np.ndarray,
     return np.concatenate([phi, rho, nu], axis=1), J
 
 
-def earth_increment(n_omega: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def earth_increment(
+    n_omega: np.ndarray, dt: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A = Exp(-Omega dt), Gv = J_l(-Omega dt), Gp = Gv - Gamma_2(-Omega dt) (N, 3, 3) for dt (N,), as GTSAM's
     rotating-frame prediction forms them. |Omega dt| is the Earth's turn over an IMU interval (7.3e-5 rad per
     second): the series to the fourth power are exact to rounding for intervals up to hours."""
@@ -106,7 +122,10 @@ def gravity_maps(n_omega: np.ndarray, dt: np.ndarray) -> np.ndarray:
     (the EarthImuFactor measures the same by probing its pim: factors/imu_earth.py)."""
     _, Gv, Gp = earth_increment(n_omega, dt)
     Mp = Gp * (dt * dt)[:, None, None]
-    Mv = Gv * dt[:, None, None] - skew(np.broadcast_to(np.asarray(n_omega, dtype=float), (len(dt), 3))) @ Mp
+    Mv = (
+        Gv * dt[:, None, None]
+        - skew(np.broadcast_to(np.asarray(n_omega, dtype=float), (len(dt), 3))) @ Mp
+    )
     return np.concatenate([Mp, Mv], axis=1)
 
 
@@ -133,7 +152,13 @@ class ImuArrays:
     def part(self, sl: slice) -> ImuArrays:
         """Factors sl (views, the Earth increments not computed again)."""
         out = ImuArrays.__new__(ImuArrays)
-        out.x, out.H, out.dt, out.n_omega, out.M = self.x[sl], self.H[sl], self.dt[sl], self.n_omega, self.M[sl]
+        out.x, out.H, out.dt, out.n_omega, out.M = (
+            self.x[sl],
+            self.H[sl],
+            self.dt[sl],
+            self.n_omega,
+            self.M[sl],
+        )
         out.A, out.Gv, out.Gp = self.A[sl], self.Gv[sl], self.Gp[sl]
         return out
 
@@ -149,25 +174,43 @@ class ImuJacobians:
     bias: np.ndarray
 
 
-def imu_errors(f: ImuArrays, n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.ndarray, n_R_j: np.ndarray,
-               n_p_j: np.ndarray, n_v_j: np.ndarray, bias: np.ndarray, n_g: np.ndarray,
-               MG2: np.ndarray | None = None, jacobians: bool = False) -> tuple[np.ndarray, ImuJacobians | None]:
+def imu_errors(
+    f: ImuArrays,
+    n_R_i: np.ndarray,
+    n_p_i: np.ndarray,
+    n_v_i: np.ndarray,
+    n_R_j: np.ndarray,
+    n_p_j: np.ndarray,
+    n_v_j: np.ndarray,
+    bias: np.ndarray,
+    n_g: np.ndarray,
+    MG2: np.ndarray | None = None,
+    jacobians: bool = False,
+) -> tuple[np.ndarray, ImuJacobians | None]:
     """Errors (N, 9) of N IMU factors (module doc) at states i and j (n_R (N, 3, 3), n_p (N, 3) m, n_v (N, 3)
     m/s), bias (N, 6) [b_a m/s^2, b_g rad/s] and gravity n_g (N, 3) m/s^2; with jacobians, the blocks too, and
     with MG2 (N, 2, 3, 3) = [M_p G; M_v G] / 2 the gravity-gradient term in the translation blocks."""
     dt = f.dt
     x_c = f.x + np.einsum("nij,nj->ni", f.H, bias)
     theta_c, dp_c, dv_c = x_c[:, 0:3], x_c[:, 3:6], x_c[:, 6:9]
-    n_omega_ie = np.broadcast_to(np.asarray(f.n_omega, dtype=float), n_p_i.shape)  # Earth rate in map, rad/s
+    n_omega_ie = np.broadcast_to(
+        np.asarray(f.n_omega, dtype=float), n_p_i.shape
+    )  # Earth rate in map, rad/s
     R_U = exp(theta_c)
     AR_i = f.A @ n_R_i
     R_P = AR_i @ R_U
     vbar = n_v_i + np.cross(n_omega_ie, n_p_i)
-    p_P = (np.einsum("nij,nj->ni", f.Gp, n_g) * (dt * dt)[:, None]
-           + np.einsum("nij,nj->ni", f.A, n_p_i + vbar * dt[:, None])
-           + np.einsum("nij,nj->ni", AR_i, dp_c))
-    v_P = (np.einsum("nij,nj->ni", f.Gv, n_g) * dt[:, None] + np.einsum("nij,nj->ni", f.A, vbar)
-           + np.einsum("nij,nj->ni", AR_i, dv_c) - np.cross(n_omega_ie, p_P))
+    p_P = (
+        np.einsum("nij,nj->ni", f.Gp, n_g) * (dt * dt)[:, None]
+        + np.einsum("nij,nj->ni", f.A, n_p_i + vbar * dt[:, None])
+        + np.einsum("nij,nj->ni", AR_i, dp_c)
+    )
+    v_P = (
+        np.einsum("nij,nj->ni", f.Gv, n_g) * dt[:, None]
+        + np.einsum("nij,nj->ni", f.A, vbar)
+        + np.einsum("nij,nj->ni", AR_i, dv_c)
+        - np.cross(n_omega_ie, p_P)
+    )
     R_jt = np.swapaxes(n_R_j, 1, 2)
     R_E = R_jt @ R_P
     p_E = np.einsum("nij,nj->ni", R_jt, p_P - n_p_j)
@@ -230,7 +273,9 @@ _BIAS0 = gtsam.imuBias.ConstantBias()
 _POSE0 = gtsam.Pose3()
 
 
-def bias_jacobians(pims: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def bias_jacobians(
+    pims: list[Any], n_omega: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x (N, 9), H (N, 9, 6), dt (N,)) of N gtsam.PreintegratedImuMeasurements: preintegrated(), its Jacobian
     d x / d[b_a, b_g] at the bias estimate (zero), which GTSAM's Python wrapper does not expose, and deltaTij().
     GTSAM's ImuFactor on each is evaluated once with its Jacobians at X_i = identity, v_i = 0, bias zero and X_j =
@@ -255,8 +300,10 @@ def bias_jacobians(pims: list[Any], n_omega: np.ndarray) -> tuple[np.ndarray, np
         R_P[k] = pred.attitude().matrix()
     turn = np.sqrt(_theta2(x[:, 0:3]))
     if n and turn.max() > 2.0 * np.pi - 0.5:  # J_r(theta) is singular at a whole turn
-        raise ValueError(f"an IMU interval turns by {np.degrees(turn.max()):.0f} deg: more than the bias Jacobian's "
-                         "inversion takes (shorten the state spacing)")
+        raise ValueError(
+            f"an IMU interval turns by {np.degrees(turn.max()):.0f} deg: more than the bias Jacobian's "
+            "inversion takes (shorten the state spacing)"
+        )
     A, _, _ = earth_increment(n_omega, dt)
     At = np.swapaxes(A, 1, 2)
     H = np.empty((n, 9, 6))

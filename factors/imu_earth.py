@@ -54,7 +54,9 @@ from typing import Any, Generic, TypeVar, cast
 import gtsam
 import numpy as np
 
-GravityModel = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # n_p (3,) -> (g (3,), G (3, 3))
+GravityModel = Callable[
+    [np.ndarray], tuple[np.ndarray, np.ndarray]
+]  # n_p (3,) -> (g (3,), G (3, 3))
 REFRESH_M = 100.0
 _DIMS = (6, 3, 6, 3, 6)
 
@@ -66,14 +68,18 @@ _PROBES = _PROBE_DG * np.eye(3)
 _ORIGIN, _NO_BIAS = gtsam.NavState(), gtsam.imuBias.ConstantBias()
 
 
-def _gravity_map(pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams) -> np.ndarray:
+def _gravity_map(
+    pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams
+) -> np.ndarray:
     """M (6, 3) = d(n_p, n_v of the prediction) / d n_g, by changing params' gravity (restored after).
 
     GTSAM's prediction is affine in gravity, so the differences are exact (to rounding); they also prove that
     params is the pim's parameters object: otherwise the prediction would not move (ValueError). Once per
     factor."""
     g0 = np.array(params.n_gravity, dtype=float)
-    Y = np.empty((4, 6))  # predicted (n_p, n_v) from the origin at rest, at g0 and at g0 + each probe
+    Y = np.empty(
+        (4, 6)
+    )  # predicted (n_p, n_v) from the origin at rest, at g0 and at g0 + each probe
     try:
         for k, g in enumerate((g0, *(g0 + _PROBES))):
             params.n_gravity = g
@@ -83,10 +89,13 @@ def _gravity_map(pim: gtsam.PreintegratedImuMeasurements, params: gtsam.Preinteg
         params.n_gravity = g0
     M = (Y[1:] - Y[0]).T / _PROBE_DG
     dt = pim.deltaTij()
-    if dt > 0.0 and not np.abs(M[3:]).max() > 0.5 * dt:  # (no time integrated: gravity has no effect)
+    if (
+        dt > 0.0 and not np.abs(M[3:]).max() > 0.5 * dt
+    ):  # (no time integrated: gravity has no effect)
         raise ValueError(
             "params is not the parameters object the pim was made with: the factor's gravity would not reach "
-            "the prediction; pass the PreintegrationParams given to PreintegratedImuMeasurements")
+            "the prediction; pass the PreintegrationParams given to PreintegratedImuMeasurements"
+        )
     return M
 
 
@@ -96,7 +105,8 @@ def _check_free(params: gtsam.PreintegrationParams) -> None:
         raise ValueError(
             "these PreintegrationParams already serve another EarthImuFactor: each factor writes its gravity "
             "into its parameters, which would change the other factor's prediction; preintegrate each interval "
-            "with its own PreintegrationParams")
+            "with its own PreintegrationParams"
+        )
 
 
 T = TypeVar("T")
@@ -117,14 +127,23 @@ class _EarthImuModel:
     gravity model and reference, M. It holds no reference to its CustomFactor or to the EarthImuFactor, so
     that no reference cycle runs through C++ (module doc, "Memory")."""
 
-    def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
-                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int], M: np.ndarray) -> None:
+    def __init__(
+        self,
+        imu: gtsam.ImuFactor,
+        params: gtsam.PreintegrationParams,
+        dt: float,
+        gravity: GravityModel | None,
+        keys: tuple[int, int, int, int, int],
+        M: np.ndarray,
+    ) -> None:
         self.imu, self.params, self.dt, self.gravity, self.keys = imu, params, dt, gravity, keys
         self.M = M  # d(prediction's n_p, n_v) / d n_g
         self.MG: np.ndarray = np.zeros((6, 3))  # M @ ref_G, computed once per reference
         self.MG_of: np.ndarray | None = None  # the ref_G it is of
         self.ref_p: np.ndarray | None = None
-        self.ref_g = np.array(params.n_gravity, dtype=float)  # a copy: the property is a view of the C++ vector
+        self.ref_g = np.array(
+            params.n_gravity, dtype=float
+        )  # a copy: the property is a view of the C++ vector
         self.ref_G = np.zeros((3, 3))
         self._MG2: np.ndarray = np.zeros((2, 3, 3))
         self._Hs = [np.zeros((9, d), order="F") for d in _DIMS]
@@ -171,11 +190,19 @@ class EarthImuFactor:
     callback is a separate model object, `.model` (module doc, "Memory"): the factor stays valid in a graph after
     this object is gone, and both are freed as soon as neither is held."""
 
-    def __init__(self, imu: gtsam.ImuFactor, params: gtsam.PreintegrationParams, dt: float,
-                 gravity: GravityModel | None, keys: tuple[int, int, int, int, int],
-                 extra_cov: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        imu: gtsam.ImuFactor,
+        params: gtsam.PreintegrationParams,
+        dt: float,
+        gravity: GravityModel | None,
+        keys: tuple[int, int, int, int, int],
+        extra_cov: np.ndarray | None = None,
+    ) -> None:
         _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
-        pim = imu.preintegratedMeasurements()  # a copy, sharing the parameters object with the ImuFactor's
+        pim = (
+            imu.preintegratedMeasurements()
+        )  # a copy, sharing the parameters object with the ImuFactor's
         self.model = _EarthImuModel(imu, params, dt, gravity, keys, _gravity_map(pim, params))
         cov = pim.preintMeasCov() if extra_cov is None else pim.preintMeasCov() + extra_cov
         noise = gtsam.noiseModel.Gaussian.Covariance(cov)
@@ -188,7 +215,9 @@ class EarthImuFactor:
     dt = _ModelData[float]("dt")
     gravity = _ModelData["GravityModel | None"]("gravity")
     keys = _ModelData[tuple[int, int, int, int, int]]("keys")
-    gravity_map = _ModelData[np.ndarray]("M")  # M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)
+    gravity_map = _ModelData[np.ndarray](
+        "M"
+    )  # M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)
     ref_p = _ModelData["np.ndarray | None"]("ref_p")
     ref_g = _ModelData[np.ndarray]("ref_g")
     ref_G = _ModelData[np.ndarray]("ref_G")
@@ -200,7 +229,9 @@ class EarthImuFactor:
 
     def needs_reference(self, n_p_mid: np.ndarray) -> bool:
         m = self.model
-        return m.gravity is not None and (m.ref_p is None or np.abs(n_p_mid - m.ref_p).max() > REFRESH_M)
+        return m.gravity is not None and (
+            m.ref_p is None or np.abs(n_p_mid - m.ref_p).max() > REFRESH_M
+        )
 
     def set_gravity(self, n_p_mid: np.ndarray) -> np.ndarray:
         """Gravity at n_p_mid from the reference, written into this factor's parameters (and so its pim's)."""

@@ -3,7 +3,7 @@
 With states only at keyframes ([solver] keyframe_spacing_s), a ping at t_p between keyframes i and i+1 sees keyframe
 i's attitude n_R_i, position n_p_i, velocity n_v_i and the IMU bias (b_a, b_g) through the preintegrated IMU motion
 over [t_i, t_p] (dt = t_p - t_i; PingMotion: zero-bias deltas dR, dv, dp and their bias Jacobians, from GTSAM's
-preintegration, estimators/keyframes.py):
+preintegration, estimators/graph/keyframes.py):
 
     n_R_b(t_p) = Exp(-[n_omega_ie] dt) n_R_i dR(b_g),          dR(b_g) = dR Exp(dR_dbg b_g)
     n_v(t_p)   = n_v_i + n_g(n_p_i) dt - 2 n_omega_ie x n_v_i dt + n_R_i dv(b_a, b_g)
@@ -37,8 +37,19 @@ from . import so3
 from .so3 import rotate
 
 _FIELDS = ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg")
-_TAIL = {"dt": (), "dR": (3, 3), "dv": (3,), "dp": (3,), "dR_dbg": (3, 3), "dv_dba": (3, 3), "dv_dbg": (3, 3),
-         "cov": (9, 9), "n_g0": (3,), "n_p0": (3,), "n_G": (3, 3)}
+_TAIL = {
+    "dt": (),
+    "dR": (3, 3),
+    "dv": (3,),
+    "dp": (3,),
+    "dR_dbg": (3, 3),
+    "dv_dba": (3, 3),
+    "dv_dbg": (3, 3),
+    "cov": (9, 9),
+    "n_g0": (3,),
+    "n_p0": (3,),
+    "n_G": (3, 3),
+}
 
 
 class EarthTerms(NamedTuple):
@@ -89,9 +100,13 @@ class PingMotion:
             raise ValueError(f"PingMotion.dt must be finite, got {self.dt}")
         for name in _FIELDS[1:] + ("cov", "n_g0", "n_p0", "n_G"):
             value = getattr(self, name)
-            if value is not None and (np.shape(value) != lead + _TAIL[name] or not np.all(np.isfinite(value))):
-                raise ValueError(f"PingMotion.{name} must be a finite array of shape {lead + _TAIL[name]}, "
-                                 f"got {value!r}")
+            if value is not None and (
+                np.shape(value) != lead + _TAIL[name] or not np.all(np.isfinite(value))
+            ):
+                raise ValueError(
+                    f"PingMotion.{name} must be a finite array of shape {lead + _TAIL[name]}, "
+                    f"got {value!r}"
+                )
         if not np.all(np.isfinite(self.n_omega_ie)):
             raise ValueError(f"PingMotion.n_omega_ie must be finite, got {self.n_omega_ie}")
         return self
@@ -101,10 +116,20 @@ class PingMotion:
         """No motion (dt = 0, dR = I, zero deltas): a ping at its own state; n pings, or one if n is None."""
         lead = () if n is None else (n,)
         z33 = np.zeros(lead + (3, 3))
-        return cls(0.0 if n is None else np.zeros(n), np.broadcast_to(np.eye(3), lead + (3, 3)).copy(),
-                   np.zeros(lead + (3,)), np.zeros(lead + (3,)), z33, z33.copy(), z33.copy(), np.zeros(lead + (9, 9)))
+        return cls(
+            0.0 if n is None else np.zeros(n),
+            np.broadcast_to(np.eye(3), lead + (3, 3)).copy(),
+            np.zeros(lead + (3,)),
+            np.zeros(lead + (3,)),
+            z33,
+            z33.copy(),
+            z33.copy(),
+            np.zeros(lead + (9, 9)),
+        )
 
-    def motion(self, n_omega_ie: np.ndarray, n_g0: np.ndarray, n_p0: np.ndarray, n_G: np.ndarray) -> PingMotion:
+    def motion(
+        self, n_omega_ie: np.ndarray, n_g0: np.ndarray, n_p0: np.ndarray, n_G: np.ndarray
+    ) -> PingMotion:
         """These deltas with the Earth model at the keyframe (Earth rate rad/s and gravity m/s^2 in map, at n_p0 m,
         its gradient 1/s^2)."""
         return dataclasses.replace(self, n_omega_ie=n_omega_ie, n_g0=n_g0, n_p0=n_p0, n_G=n_G)
@@ -144,48 +169,73 @@ class PingMotion:
     def earth(self) -> EarthTerms:
         """The terms of ping_state that depend on the motion and the Earth rate only."""
         if self.n_G is None:
-            raise ValueError("PingMotion without the Earth model: motion(n_omega_ie, n_g0, n_p0, n_G) first")
+            raise ValueError(
+                "PingMotion without the Earth model: motion(n_omega_ie, n_g0, n_p0, n_G) first"
+            )
         w = self.n_omega_ie
         w_x = so3.skew(w)
         single = isinstance(self.dt, float)
         dt = self.dt if single else self.dt[..., None]
         dt3 = dt if single else dt[..., None]
         c = dt * self.dv + self.dp
-        return EarthTerms(dt, so3.exp(-w * dt), np.eye(3) - 2.0 * dt3 * w_x, w_x, c, so3.skew(c),
-                          (dt3 * np.eye(3) - dt3**2 * w_x) @ self.n_G)
+        return EarthTerms(
+            dt,
+            so3.exp(-w * dt),
+            np.eye(3) - 2.0 * dt3 * w_x,
+            w_x,
+            c,
+            so3.skew(c),
+            (dt3 * np.eye(3) - dt3**2 * w_x) @ self.n_G,
+        )
 
 
 PingStateJacobians = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
-def ping_state(n_R_i: np.ndarray, n_p_i: np.ndarray, n_v_i: np.ndarray, b_a: np.ndarray, b_g: np.ndarray,
-               m: PingMotion, with_jacobians: bool = True) -> tuple[np.ndarray, np.ndarray, PingStateJacobians | None]:
+def ping_state(
+    n_R_i: np.ndarray,
+    n_p_i: np.ndarray,
+    n_v_i: np.ndarray,
+    b_a: np.ndarray,
+    b_g: np.ndarray,
+    m: PingMotion,
+    with_jacobians: bool = True,
+) -> tuple[np.ndarray, np.ndarray, PingStateJacobians | None]:
     """(n_R_b at the ping (..., 3, 3), n_v at the ping (..., 3), Jacobians) from keyframe i's attitude, position,
     velocity and the bias (b_a m/s^2, b_g rad/s) through m (module doc). Jacobians (A_R_pose (..., 3, 6), A_R_bias
     (..., 3, 6), A_v_pose (..., 3, 6), A_v_vel (..., 3, 3), A_v_bias (..., 3, 6)): A_R_* the right tangent of the
     ping's attitude, A_v_* its velocity, per the pose's right tangent [rotation, translation], the velocity and the
     bias tangent [accelerometer, gyroscope]; None without with_jacobians."""
     e = m.earth
-    assert m.n_g0 is not None and m.n_p0 is not None and m.n_G is not None  # (m.earth checked the Earth model)
+    assert (
+        m.n_g0 is not None and m.n_p0 is not None and m.n_G is not None
+    )  # (m.earth checked the Earth model)
     phi = rotate(m.dR_dbg, b_g)
     dR_c = m.dR @ so3.exp(phi)
     dv_c = m.dv + rotate(m.dv_dba, b_a) + rotate(m.dv_dbg, b_g)
     n_g = m.n_g0 + rotate(m.n_G, n_p_i - m.n_p0)
     n_R_p = e.earth_turn @ n_R_i @ dR_c
-    n_v_p = (rotate(e.v_v, n_v_i) + n_g * e.dt + rotate(n_R_i, dv_c)
-             - rotate(e.w_x, rotate(n_R_i, e.c) + n_g * e.dt**2))
+    n_v_p = (
+        rotate(e.v_v, n_v_i)
+        + n_g * e.dt
+        + rotate(n_R_i, dv_c)
+        - rotate(e.w_x, rotate(n_R_i, e.c) + n_g * e.dt**2)
+    )
     if not with_jacobians:
         return n_R_p, n_v_p, None
     z33 = np.zeros(np.shape(dR_c))
     A_R_pose = np.concatenate((np.swapaxes(dR_c, -1, -2), z33), axis=-1)
     A_R_bias = np.concatenate((z33, so3.right_jacobian(phi) @ m.dR_dbg), axis=-1)
-    A_v_pose = np.concatenate((-n_R_i @ so3.skew(dv_c) + e.w_x @ n_R_i @ e.c_x, e.trans_G @ n_R_i), axis=-1)
+    A_v_pose = np.concatenate(
+        (-n_R_i @ so3.skew(dv_c) + e.w_x @ n_R_i @ e.c_x, e.trans_G @ n_R_i), axis=-1
+    )
     A_v_bias = np.concatenate((n_R_i @ m.dv_dba, n_R_i @ m.dv_dbg), axis=-1)
     return n_R_p, n_v_p, (A_R_pose, A_R_bias, A_v_pose, e.v_v, A_v_bias)
 
 
-def keyframe_ping_covariance(cov_pim: np.ndarray, dR: np.ndarray, d_R_b: np.ndarray, b_v: np.ndarray,
-                             k: float = 1.0) -> np.ndarray:
+def keyframe_ping_covariance(
+    cov_pim: np.ndarray, dR: np.ndarray, d_R_b: np.ndarray, b_v: np.ndarray, k: float = 1.0
+) -> np.ndarray:
     """The preintegration noise over [t_i, t_p] mapped into the ping's 3-D velocity (..., 3, 3), m^2/s^2:
     J cov_pim J^T with J = k d_R_b [[b_v]_x, 0, dR^T] over GTSAM's preintegration error [rotation, position,
     velocity] (cov_pim (..., 9, 9)): a right rotation of the ping's attitude and a velocity increment in the

@@ -16,7 +16,9 @@ import numpy as np
 
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
-_SMALL = 0.1  # rad: below, inv_right_jacobian's coefficient from its series (the closed form cancels)
+_SMALL = (
+    0.1  # rad: below, inv_right_jacobian's coefficient from its series (the closed form cancels)
+)
 
 
 def skew(a: np.ndarray) -> np.ndarray:
@@ -109,8 +111,11 @@ def inv_right_jacobian(phi: np.ndarray) -> np.ndarray:
     t = np.sqrt(t2)
     small = t < _SMALL
     ts = np.where(small, 1.0, t)
-    d = np.where(small, 1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0,
-                 1.0 / ts**2 - (1.0 + np.cos(ts)) / (2.0 * ts * np.sin(ts)))
+    d = np.where(
+        small,
+        1.0 / 12.0 + t2 / 720.0 + t2 * t2 / 30240.0,
+        1.0 / ts**2 - (1.0 + np.cos(ts)) / (2.0 * ts * np.sin(ts)),
+    )
     K = skew(phi)
     return _EYE3 + 0.5 * K + np.asarray(d)[..., None, None] * (K @ K)
 
@@ -120,7 +125,9 @@ def log(R: np.ndarray) -> np.ndarray:
     R = np.asarray(R, dtype=float)
     lead = R.shape[:-2]
     R = R.reshape(-1, 3, 3)
-    w = 0.5 * np.stack([R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1)
+    w = 0.5 * np.stack(
+        [R[:, 2, 1] - R[:, 1, 2], R[:, 0, 2] - R[:, 2, 0], R[:, 1, 0] - R[:, 0, 1]], axis=1
+    )
     s = np.sqrt(_theta2(w))
     c = 0.5 * (np.trace(R, axis1=1, axis2=2) - 1.0)
     theta = np.arctan2(s, c)
@@ -129,7 +136,9 @@ def log(R: np.ndarray) -> np.ndarray:
     out = w * scale[:, None]
     near_pi = c < -0.99  # sin(theta) small beside pi: the axis from the symmetric part
     for n in np.flatnonzero(near_pi).tolist():
-        uu = (0.5 * (R[n] + R[n].T) - c[n] * _EYE3) / (1.0 - c[n])  # symmetric part: cos I + (1 - cos) u u^T
+        uu = (0.5 * (R[n] + R[n].T) - c[n] * _EYE3) / (
+            1.0 - c[n]
+        )  # symmetric part: cos I + (1 - cos) u u^T
         k = int(np.argmax(np.diag(uu)))
         u = uu[:, k] / np.sqrt(uu[k, k])
         u /= np.linalg.norm(u)

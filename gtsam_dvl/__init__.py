@@ -15,7 +15,15 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.types import BeamData, DvlCalibration, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.types import (
+    BeamData,
+    DvlCalibration,
+    DvlData,
+    ImuData,
+    LogData,
+    Mounting,
+    TruthData,
+)
 
 if TYPE_CHECKING:  # the lazy names' types, for mypy and editors
     from gtsam_dvl.analysis.evaluate import evaluate_result as evaluate

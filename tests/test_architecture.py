@@ -15,7 +15,9 @@ PKG = Path(__file__).resolve().parents[1] / "gtsam_dvl"
 
 # what each layer may import from the package (besides itself)
 ALLOWED = {
-    "core": {"factors"},  # core.rotations: the SO(3) helpers of factors/so3.py (factors imports no gtsam_dvl)
+    "core": {
+        "factors"
+    },  # core.rotations: the SO(3) helpers of factors/so3.py (factors imports no gtsam_dvl)
     "factors": set(),
     "sim": {"core"},
     "estimators": {"core", "factors"},
@@ -23,9 +25,13 @@ ALLOWED = {
     "io": {"core"},
     "app": {"core", "factors", "estimators", "analysis", "sim", "io"},
 }
-FORBIDDEN_THIRD_PARTY = {"core": {"matplotlib", "typer", "rich"}, "factors": {"matplotlib", "typer", "rich"},
-                         "sim": {"matplotlib", "typer", "rich"}, "estimators": {"matplotlib", "typer", "rich"},
-                         "analysis": {"matplotlib", "typer", "rich"}}
+FORBIDDEN_THIRD_PARTY = {
+    "core": {"matplotlib", "typer", "rich"},
+    "factors": {"matplotlib", "typer", "rich"},
+    "sim": {"matplotlib", "typer", "rich"},
+    "estimators": {"matplotlib", "typer", "rich"},
+    "analysis": {"matplotlib", "typer", "rich"},
+}
 
 
 def _imports(path: Path) -> list[tuple[int, str]]:
@@ -39,7 +45,9 @@ def _imports(path: Path) -> list[tuple[int, str]]:
             if node.module == "gtsam_dvl":  # from gtsam_dvl import core, io, ...
                 out += [(node.lineno, f"gtsam_dvl.{a.name}") for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level > 0:
-            raise AssertionError(f"{path}:{node.lineno}: relative import outside factors/")  # pragma: no cover
+            raise AssertionError(
+                f"{path}:{node.lineno}: relative import outside factors/"
+            )  # pragma: no cover
     return out
 
 
@@ -66,9 +74,17 @@ def test_layer_imports_only_the_layers_below(layer: str) -> None:
         if layer == "factors":  # factors use relative imports among themselves
             source = path.read_text()
             tree = ast.parse(source)
-            mods = [(n.lineno, n.module or "") for n in ast.walk(tree)
-                    if isinstance(n, ast.ImportFrom) and n.level == 0]
-            mods += [(n.lineno, a.name) for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+            mods = [
+                (n.lineno, n.module or "")
+                for n in ast.walk(tree)
+                if isinstance(n, ast.ImportFrom) and n.level == 0
+            ]
+            mods += [
+                (n.lineno, a.name)
+                for n in ast.walk(tree)
+                if isinstance(n, ast.Import)
+                for a in n.names
+            ]
         else:
             mods = _imports(path)
         for line, mod in mods:
@@ -84,7 +100,9 @@ def test_layer_imports_only_the_layers_below(layer: str) -> None:
 def test_the_check_sees_a_violation(tmp_path: Path) -> None:
     """The parser finds lazy imports inside functions (what a layering violation usually looks like)."""
     src = tmp_path / "m.py"
-    src.write_text("def f():\n    from gtsam_dvl.io.reader import read_log\n    import matplotlib.pyplot\n")
+    src.write_text(
+        "def f():\n    from gtsam_dvl.io.reader import read_log\n    import matplotlib.pyplot\n"
+    )
     assert [m for _, m in _imports(src)] == ["gtsam_dvl.io.reader", "matplotlib.pyplot"]
 
 
@@ -100,7 +118,11 @@ def _runtime_imports(path: Path) -> list[str]:
     tree = ast.parse(path.read_text(), str(path))
     skip: set[int] = set()
     for node in ast.walk(tree):
-        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
+        if (
+            isinstance(node, ast.If)
+            and isinstance(node.test, ast.Name)
+            and node.test.id == "TYPE_CHECKING"
+        ):
             skip |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
     out = []
     for node in ast.walk(tree):
@@ -116,14 +138,21 @@ def _runtime_imports(path: Path) -> list[str]:
 def import_cycles(files: dict[str, Path]) -> list[list[str]]:
     """The import cycles among the modules (name -> file): the strongly connected components of more than one
     module of the import graph (Tarjan's algorithm, by hand: a dozen lines, no graph library in the test set)."""
+
     def resolve(name: str) -> str | None:
         while name and name not in files:
             name = name.rpartition(".")[0]
         return name or None
 
-    edges = {m: {t for imp in _runtime_imports(p) if (t := resolve(imp)) and t != m} for m, p in files.items()}
+    edges = {
+        m: {t for imp in _runtime_imports(p) if (t := resolve(imp)) and t != m}
+        for m, p in files.items()
+    }
     # a module importing its own package's __init__ (or a package its submodule) is not a cycle of design
-    edges = {m: {t for t in ts if not m.startswith(t + ".") and not t.startswith(m + ".")} for m, ts in edges.items()}
+    edges = {
+        m: {t for t in ts if not m.startswith(t + ".") and not t.startswith(m + ".")}
+        for m, ts in edges.items()
+    }
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -156,9 +185,13 @@ def import_cycles(files: dict[str, Path]) -> list[list[str]]:
 
 def _package_files() -> dict[str, Path]:
     files = {_module_name(p): p for p in PKG.rglob("*.py")}
-    factors = PKG / "factors"  # a symlink to the top-level factors/ (pyproject.toml), which rglob does not follow
-    files |= {"gtsam_dvl.factors." + p.stem if p.stem != "__init__" else "gtsam_dvl.factors": p
-              for p in sorted(factors.resolve().glob("*.py"))}
+    factors = (
+        PKG / "factors"
+    )  # a symlink to the top-level factors/ (pyproject.toml), which rglob does not follow
+    files |= {
+        "gtsam_dvl.factors." + p.stem if p.stem != "__init__" else "gtsam_dvl.factors": p
+        for p in sorted(factors.resolve().glob("*.py"))
+    }
     return files
 
 
@@ -174,7 +207,9 @@ def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
     root.mkdir()
     (root / "a.py").write_text("def f():\n    from gtsam_dvl.b import g\n")
     (root / "b.py").write_text("from gtsam_dvl.a import f\n")
-    (root / "c.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from gtsam_dvl.a import f\n")
+    (root / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from gtsam_dvl.a import f\n"
+    )
     (root / "d.py").write_text("from gtsam_dvl.c import x\n")
     files = {"gtsam_dvl." + p.stem: p for p in root.glob("*.py")}
     assert import_cycles(files) == [["gtsam_dvl.a", "gtsam_dvl.b"]]

@@ -40,20 +40,28 @@ def test_architecture_names_every_module() -> None:
     modules = _modules()
     assert len(modules) > 50, modules  # the walk found the package
     missing = [m for m in modules if f"`{m}`" not in text]
-    assert not missing, "docs/architecture.md does not name these modules (add a row with their path): " + ", ".join(
-        missing)
+    assert not missing, (
+        "docs/architecture.md does not name these modules (add a row with their path): "
+        + ", ".join(missing)
+    )
 
 
 def test_readme_is_a_front_page() -> None:
     lines = (ROOT / "README.md").read_text().splitlines()
-    assert len(lines) <= README_MAX_LINES, f"README.md has {len(lines)} lines; move details to docs/"
+    assert len(lines) <= README_MAX_LINES, (
+        f"README.md has {len(lines)} lines; move details to docs/"
+    )
 
 
-@pytest.mark.parametrize("doc", [ROOT / "README.md", *DOCS], ids=lambda p: p.relative_to(ROOT).as_posix())
+@pytest.mark.parametrize(
+    "doc", [ROOT / "README.md", *DOCS], ids=lambda p: p.relative_to(ROOT).as_posix()
+)
 def test_relative_links_resolve(doc: Path) -> None:
     broken = []
     for target in LINK.findall(doc.read_text()):
-        if re.match(r"[a-z][a-z0-9+.-]*:", target) or target.startswith("#"):  # URL, mail, in-page anchor
+        if re.match(r"[a-z][a-z0-9+.-]*:", target) or target.startswith(
+            "#"
+        ):  # URL, mail, in-page anchor
             continue
         path = target.split("#", 1)[0]
         if not (doc.parent / path).exists():
@@ -61,16 +69,31 @@ def test_relative_links_resolve(doc: Path) -> None:
     assert not broken, f"{doc.relative_to(ROOT)}: links to missing files: {broken}"
 
 
-@pytest.mark.parametrize("doc", [ROOT / "README.md", *DOCS], ids=lambda p: p.relative_to(ROOT).as_posix())
+@pytest.mark.parametrize(
+    "doc", [ROOT / "README.md", *DOCS], ids=lambda p: p.relative_to(ROOT).as_posix()
+)
 def test_no_process_history(doc: Path) -> None:
-    hits = [f"{i}: {line.strip()}" for i, line in enumerate(doc.read_text().splitlines(), 1)
-            if HISTORY.search(line)]
-    assert not hits, f"{doc.relative_to(ROOT)} tells how the project got here, not what it is:\n" + "\n".join(hits)
+    hits = [
+        f"{i}: {line.strip()}"
+        for i, line in enumerate(doc.read_text().splitlines(), 1)
+        if HISTORY.search(line)
+    ]
+    assert not hits, (
+        f"{doc.relative_to(ROOT)} tells how the project got here, not what it is:\n"
+        + "\n".join(hits)
+    )
 
 
 def test_history_pattern_catches_the_usual_phrases() -> None:
-    for phrase in ("a session ago", "issue 12", "the previous session", "was 5 ms, now 20 ms", "(was 5 ms: ...)",
-                   "it is no longer needed", "previously computed"):
+    for phrase in (
+        "a session ago",
+        "issue 12",
+        "the previous session",
+        "was 5 ms, now 20 ms",
+        "(was 5 ms: ...)",
+        "it is no longer needed",
+        "previously computed",
+    ):
         assert HISTORY.search(phrase), phrase
     for phrase in ("what was lost", "the issue of noise", "before the gap", "now and then"):
         assert not HISTORY.search(phrase), phrase

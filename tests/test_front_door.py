@@ -13,9 +13,13 @@ import gtsam_dvl
 
 
 def test_import_is_light() -> None:
-    code = ("import sys, gtsam_dvl; heavy = [m for m in ('matplotlib', 'scipy', 'gtsam_dvl.sim.simulate', "
-            "'gtsam_dvl.io.reader') if m in sys.modules]; print(heavy)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    code = (
+        "import sys, gtsam_dvl; heavy = [m for m in ('matplotlib', 'scipy', 'gtsam_dvl.sim.simulate', "
+        "'gtsam_dvl.io.reader') if m in sys.modules]; print(heavy)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"
 
 

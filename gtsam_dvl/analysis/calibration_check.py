@@ -38,7 +38,10 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.special import gammaincc, gammainccinv  # chi^2(k) tails (scipy.stats costs a second to import)
+from scipy.special import (  # chi^2(k) tails (scipy.stats costs a second to import)
+    gammaincc,
+    gammainccinv,
+)
 
 from gtsam_dvl.core.calibration import config_hash
 from gtsam_dvl.core.config import EstimatorConfig
@@ -78,8 +81,13 @@ class ComponentShift:
     informed: float
 
     def as_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "shift": self.shift_display, "unit": self.unit, "nsigma": self.z,
-                "information_added": self.informed}
+        return {
+            "name": self.name,
+            "shift": self.shift_display,
+            "unit": self.unit,
+            "nsigma": self.z,
+            "information_added": self.informed,
+        }
 
 
 @dataclass
@@ -98,10 +106,17 @@ class CalibrationCheck:
     findings: list[tuple[str, str]] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
-        return {"vehicle": self.vehicle, "date": self.date, "chi2": self.chi2, "dof": self.dof,
-                "threshold": self.threshold, "p_value": self.p_value, "moved": self.moved,
-                "components": [c.as_dict() for c in self.components],
-                "verdict": self.findings[0][1] if self.findings else ""}
+        return {
+            "vehicle": self.vehicle,
+            "date": self.date,
+            "chi2": self.chi2,
+            "dof": self.dof,
+            "threshold": self.threshold,
+            "p_value": self.p_value,
+            "moved": self.moved,
+            "components": [c.as_dict() for c in self.components],
+            "verdict": self.findings[0][1] if self.findings else "",
+        }
 
 
 class Findings(Protocol):
@@ -127,7 +142,9 @@ def tail_probability(nsigma: float) -> float:
     return math.erfc(nsigma / math.sqrt(2.0))
 
 
-def check_calibration(result: NavResult, config: EstimatorConfig | None = None) -> CalibrationCheck | None:
+def check_calibration(
+    result: NavResult, config: EstimatorConfig | None = None
+) -> CalibrationCheck | None:
     """The verdict on a run that took its prior from a calibration file (module doc); None for a run that did
     not. config: the run's (default: the one the result records)."""
     prior = result.info.get("calibration_prior")
@@ -139,20 +156,45 @@ def check_calibration(result: NavResult, config: EstimatorConfig | None = None) 
         return None
     P0 = _block(np.asarray(prior["cov"], dtype=float), list(prior["states"]), names)
     P1 = _posterior(result, config, names)
-    d = np.concatenate([_shift(n, np.asarray(prior["values"][n], dtype=float),
-                               np.asarray(result.calibration[n].value, dtype=float)) for n in names])
+    d = np.concatenate(
+        [
+            _shift(
+                n,
+                np.asarray(prior["values"][n], dtype=float),
+                np.asarray(result.calibration[n].value, dtype=float),
+            )
+            for n in names
+        ]
+    )
     chi2, dof = _chi2(d, P0, P1)
     nsigma = config.calibration.moved_sigmas
     alpha = tail_probability(nsigma)
-    threshold = 2.0 * float(gammainccinv(0.5 * dof, alpha)) if dof else math.inf  # chi^2(dof)'s upper alpha point
+    threshold = (
+        2.0 * float(gammainccinv(0.5 * dof, alpha)) if dof else math.inf
+    )  # chi^2(dof)'s upper alpha point
     p_value = float(gammaincc(0.5 * dof, 0.5 * chi2)) if dof else 1.0  # P(chi^2(dof) > chi2)
-    check = CalibrationCheck(str(prior.get("vehicle", "")), str(prior.get("date", "")), chi2, dof, threshold,
-                             p_value, bool(dof and chi2 > threshold), _components(names, d, P0, P1))
+    check = CalibrationCheck(
+        str(prior.get("vehicle", "")),
+        str(prior.get("date", "")),
+        chi2,
+        dof,
+        threshold,
+        p_value,
+        bool(dof and chi2 > threshold),
+        _components(names, d, P0, P1),
+    )
     check.findings = _findings(check, nsigma)
     theirs, ours = prior.get("config_hash"), config_hash(getattr(result, "config", None) or {})
-    if theirs and getattr(result, "config", None) and theirs != ours:  # another model: a cause of a move
-        check.findings.append(("note", f"the calibration was made with another configuration (hash {theirs}; this "
-                                       f"run's {ours}): a different noise or error model moves estimates too"))
+    if (
+        theirs and getattr(result, "config", None) and theirs != ours
+    ):  # another model: a cause of a move
+        check.findings.append(
+            (
+                "note",
+                f"the calibration was made with another configuration (hash {theirs}; this "
+                f"run's {ours}): a different noise or error model moves estimates too",
+            )
+        )
     return check
 
 
@@ -177,13 +219,15 @@ def _posterior(result: NavResult, config: EstimatorConfig, names: list[str]) -> 
     out = np.zeros((sum(dims), sum(dims)))
     col = 0
     for n, dim in zip(names, dims, strict=True):
-        out[col:col + dim, col:col + dim] = np.asarray(result.calibration[n].cov, dtype=float)
+        out[col : col + dim, col : col + dim] = np.asarray(result.calibration[n].cov, dtype=float)
         col += dim
     if result.calib_joint_cov is not None:
         order = [s.name for s in block_states()]
         shared = [n for n in names if n in order]
         idx = np.concatenate([_columns(names)[n] for n in shared])
-        out[np.ix_(idx, idx)] = _block(np.asarray(result.calib_joint_cov, dtype=float), order, shared)
+        out[np.ix_(idx, idx)] = _block(
+            np.asarray(result.calib_joint_cov, dtype=float), order, shared
+        )
     return out
 
 
@@ -207,14 +251,18 @@ def _chi2(d: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> tuple[float, int]:
     """d^T (P0 - P1)^+ d over the directions the dive informed (module doc), and their number."""
     L = np.linalg.cholesky(P0)
     Li = np.linalg.inv(L)
-    W = Li @ (P0 - P1) @ Li.T  # P0 - P1 in P0's metric: eigenvalues = fraction of the variance removed
+    W = (
+        Li @ (P0 - P1) @ Li.T
+    )  # P0 - P1 in P0's metric: eigenvalues = fraction of the variance removed
     lam, U = np.linalg.eigh(0.5 * (W + W.T))
     keep = lam > INFORMED_FRACTION
     y = U[:, keep].T @ (Li @ d)
     return float(np.sum(y**2 / lam[keep])), int(keep.sum())
 
 
-def _components(names: list[str], d: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> list[ComponentShift]:
+def _components(
+    names: list[str], d: np.ndarray, P0: np.ndarray, P1: np.ndarray
+) -> list[ComponentShift]:
     out = []
     col = 0
     for n in names:
@@ -224,8 +272,19 @@ def _components(names: list[str], d: np.ndarray, P0: np.ndarray, P1: np.ndarray)
             sigma = math.sqrt(removed)
             informed = removed / float(P0[col, col])
             z = float(d[col] / sigma) if informed > INFORMED_FRACTION else 0.0
-            out.append(ComponentShift(n, name, text, float(d[col]), float(d[col] * s.to_display), s.display_unit,
-                                      sigma, z, informed))
+            out.append(
+                ComponentShift(
+                    n,
+                    name,
+                    text,
+                    float(d[col]),
+                    float(d[col] * s.to_display),
+                    s.display_unit,
+                    sigma,
+                    z,
+                    informed,
+                )
+            )
             col += 1
     return out
 
@@ -245,21 +304,41 @@ def _findings(check: CalibrationCheck, nsigma: float) -> list[tuple[str, str]]:
     joint = f"chi^2 {check.chi2:.1f} over {check.dof} informed directions, threshold {check.threshold:.1f}"
     out: list[tuple[str, str]] = []
     for c in moved:
-        out.append(("warn", f"{c.text} moved {abs(c.z):.1f} sigma {since} ({_amount(c)}): {CAUSES.get(c.state, '')}"
-                            + ("" if check.moved else f" (the joint test does not reject the file: {joint})")))
+        out.append(
+            (
+                "warn",
+                f"{c.text} moved {abs(c.z):.1f} sigma {since} ({_amount(c)}): {CAUSES.get(c.state, '')}"
+                + ("" if check.moved else f" (the joint test does not reject the file: {joint})"),
+            )
+        )
     if check.moved and not moved:
-        out.append(("warn", f"the calibration moved {since} ({joint}), no single state beyond {nsigma:g} sigma"))
+        out.append(
+            (
+                "warn",
+                f"the calibration moved {since} ({joint}), no single state beyond {nsigma:g} sigma",
+            )
+        )
     if check.moved:
-        out.insert(0, ("degraded", f"{whose} no longer fits this dive (chi^2 {check.chi2:.1f}, {check.dof} dof, "
-                                   f"p = {check.p_value:.2g}): this result leans on it; if the change is real, "
-                                   "smooth again without --calibration (and write the new one with "
-                                   "--calibration-out)"))
+        out.insert(
+            0,
+            (
+                "degraded",
+                f"{whose} no longer fits this dive (chi^2 {check.chi2:.1f}, {check.dof} dof, "
+                f"p = {check.p_value:.2g}): this result leans on it; if the change is real, "
+                "smooth again without --calibration (and write the new one with "
+                "--calibration-out)",
+            ),
+        )
     if out:
         return out
     held = [c.text for c in check.components if c.informed < LITTLE_FRACTION]
-    note = (f"consistent with {whose} of {check.date[:10] or 'unknown date'} (chi^2 {check.chi2:.1f}, "
-            f"{check.dof} dof, p = {check.p_value:.2g})")
+    note = (
+        f"consistent with {whose} of {check.date[:10] or 'unknown date'} (chi^2 {check.chi2:.1f}, "
+        f"{check.dof} dof, p = {check.p_value:.2g})"
+    )
     if held:
-        note += (f"; from the calibration (this dive removed under {LITTLE_FRACTION:.0%} of its variance): "
-                 + ", ".join(held))
+        note += (
+            f"; from the calibration (this dive removed under {LITTLE_FRACTION:.0%} of its variance): "
+            + ", ".join(held)
+        )
     return [("note", note)]

@@ -50,8 +50,12 @@ class Evaluation:
     segments: list[Segment] = field(default_factory=list)
     shares: dict[str, list[tuple[str, float]]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
-    gnss: SurfacingReport | None = None  # held-out GNSS fixes and the surfacing error (log with fixes)
-    determined_at_s: dict[str, float | None] = field(default_factory=dict)  # from the filtering timeline
+    gnss: SurfacingReport | None = (
+        None  # held-out GNSS fixes and the surfacing error (log with fixes)
+    )
+    determined_at_s: dict[str, float | None] = field(
+        default_factory=dict
+    )  # from the filtering timeline
     truth_errors: dict[str, Any] | None = None  # metrics.truth_errors against the log's truth
     notes: list[str] = field(default_factory=list)  # printed after the verdict
 
@@ -61,7 +65,10 @@ class Evaluation:
         if self.report is None:
             out = ["no calibration covariance in this result"]
         else:
-            out = calibration_answer(self.report, self.determined_at_s, "log") + self.report.direction_lines()
+            out = (
+                calibration_answer(self.report, self.determined_at_s, "log")
+                + self.report.direction_lines()
+            )
         return out + truth_error_lines(self.truth_errors or {}) + self.notes
 
 
@@ -73,10 +80,12 @@ def _finite(*values: Any) -> bool:
 
 
 def _with_sigmas(values: Any, nsigma: Any, fmt: str, unit: str) -> str:
-    """"+0.010, -0.020 deg (+0.3, -0.5 sigma)"; the sigmas left out when not finite."""
+    """ "+0.010, -0.020 deg (+0.3, -0.5 sigma)"; the sigmas left out when not finite."""
     vals = ", ".join(format(float(v), fmt) for v in np.atleast_1d(values))
     if nsigma is not None and _finite(nsigma):
-        return f"{vals} {unit} ({', '.join(f'{float(n):+.1f}' for n in np.atleast_1d(nsigma))} sigma)"
+        return (
+            f"{vals} {unit} ({', '.join(f'{float(n):+.1f}' for n in np.atleast_1d(nsigma))} sigma)"
+        )
     return f"{vals} {unit}"
 
 
@@ -86,33 +95,50 @@ def truth_error_lines(errors: dict[str, Any]) -> list[str]:
     out = []
     if _finite(errors.get("final_horizontal_position_m")):
         pct = errors.get("final_horizontal_position_pct_distance")
-        line = (f"vs truth: final horizontal position error {errors['final_horizontal_position_m']:.2f} m"
-                + (f" ({pct:.3f} % of distance)" if _finite(pct) else ""))
+        line = (
+            f"vs truth: final horizontal position error {errors['final_horizontal_position_m']:.2f} m"
+            + (f" ({pct:.3f} % of distance)" if _finite(pct) else "")
+        )
         if _finite(errors.get("position_rmse_m")):
             line += f", position rms {errors['position_rmse_m']:.2f} m"
         if _finite(errors.get("attitude_rmse_deg")) and errors.get("attitude_rmse_deg"):
-            line += (", attitude rms about east/north/up "
-                     + ", ".join(f"{v:.3g}" for v in errors["attitude_rmse_deg"]) + " deg")
+            line += (
+                ", attitude rms about east/north/up "
+                + ", ".join(f"{v:.3g}" for v in errors["attitude_rmse_deg"])
+                + " deg"
+            )
         out.append(line)
     parts = []
     for key, nsigma_key, name, fmt, unit, to_display in (
-            ("scale_ppm", "scale_nsigma", "scale", "+.0f", "ppm", 1.0),
-            ("misalignment_deg", "misalignment_nsigma", "misalignment roll/pitch/yaw", "+.3f", "deg", 1.0),
-            ("dvl_time_offset_s", "dvl_time_offset_nsigma", "time offset", "+.1f", "ms", 1e3),
-            ("dvl_lever_arm_m", "dvl_lever_arm_nsigma", "lever arm x/y/z", "+.3f", "m", 1.0),
-            ("gyro_bias_deg_per_h", "gyro_bias_nsigma", "gyro bias x/y/z", "+.4f", "deg/h", 1.0),
-            ("accel_bias_ug", "accel_bias_nsigma", "accel bias x/y/z", "+.1f", "micro-g", 1.0)):
+        ("scale_ppm", "scale_nsigma", "scale", "+.0f", "ppm", 1.0),
+        (
+            "misalignment_deg",
+            "misalignment_nsigma",
+            "misalignment roll/pitch/yaw",
+            "+.3f",
+            "deg",
+            1.0,
+        ),
+        ("dvl_time_offset_s", "dvl_time_offset_nsigma", "time offset", "+.1f", "ms", 1e3),
+        ("dvl_lever_arm_m", "dvl_lever_arm_nsigma", "lever arm x/y/z", "+.3f", "m", 1.0),
+        ("gyro_bias_deg_per_h", "gyro_bias_nsigma", "gyro bias x/y/z", "+.4f", "deg/h", 1.0),
+        ("accel_bias_ug", "accel_bias_nsigma", "accel bias x/y/z", "+.1f", "micro-g", 1.0),
+    ):
         value = errors.get(key)
         if value is None or not np.size(value) or not _finite(value):
             continue
-        shown = _with_sigmas(np.asarray(value, dtype=float) * to_display, errors.get(nsigma_key), fmt, unit)
+        shown = _with_sigmas(
+            np.asarray(value, dtype=float) * to_display, errors.get(nsigma_key), fmt, unit
+        )
         parts.append(f"{name} {shown}")
     if parts:
         out.append("vs truth: " + "; ".join(parts))
     return out
 
 
-SOURCE_ORIGIN_M = 1000.0  # a truth log's map origin farther than this from the source's: another dive
+SOURCE_ORIGIN_M = (
+    1000.0  # a truth log's map origin farther than this from the source's: another dive
+)
 
 
 def _utc(t_ns: float) -> str:
@@ -122,8 +148,10 @@ def _utc(t_ns: float) -> str:
 def origin_distance_m(a: GeoOrigin, b: GeoOrigin) -> float:
     """Horizontal distance between two map origins on a sphere of the Earth's mean radius (haversine), m."""
     lat1, lat2 = np.radians(a.lat_deg), np.radians(b.lat_deg)
-    h = (np.sin((lat2 - lat1) / 2) ** 2
-         + np.cos(lat1) * np.cos(lat2) * np.sin(np.radians(b.lon_deg - a.lon_deg) / 2) ** 2)
+    h = (
+        np.sin((lat2 - lat1) / 2) ** 2
+        + np.cos(lat1) * np.cos(lat2) * np.sin(np.radians(b.lon_deg - a.lon_deg) / 2) ** 2
+    )
     return float(2 * 6_371_000.0 * np.arcsin(np.sqrt(min(h, 1.0))))
 
 
@@ -136,8 +164,10 @@ def source_mismatch(stored: StoredResult, log: LogData, log_sha256: str) -> str:
         return ""
     reasons = []
     if stored.source_sha256 and log_sha256:
-        reasons.append(f"its content differs from that of the source {stored.source_log or 'log'} (SHA-256 "
-                       f"{log_sha256[:12]}... against {stored.source_sha256[:12]}...)")
+        reasons.append(
+            f"its content differs from that of the source {stored.source_log or 'log'} (SHA-256 "
+            f"{log_sha256[:12]}... against {stored.source_sha256[:12]}...)"
+        )
     res = stored.result
     starts = [float(x.t[0]) for x in (log.imu, log.dvl) if len(x.t)]
     ends = [float(x.t[-1]) for x in (log.imu, log.dvl) if len(x.t)]
@@ -145,13 +175,17 @@ def source_mismatch(stored: StoredResult, log: LogData, log_sha256: str) -> str:
         log_span = (log.t0_ns + min(starts) * 1e9, log.t0_ns + max(ends) * 1e9)
         res_span = (res.t0_ns + float(res.t[0]) * 1e9, res.t0_ns + float(res.t[-1]) * 1e9)
         if log_span[1] < res_span[0] or res_span[1] < log_span[0]:
-            reasons.append(f"its stamps ({_utc(log_span[0])} to {_utc(log_span[1])}) do not overlap the result's "
-                           f"({_utc(res_span[0])} to {_utc(res_span[1])})")
+            reasons.append(
+                f"its stamps ({_utc(log_span[0])} to {_utc(log_span[1])}) do not overlap the result's "
+                f"({_utc(res_span[0])} to {_utc(res_span[1])})"
+            )
     if stored.source_origin and log.origin is not None:
         d = origin_distance_m(GeoOrigin.from_dict(stored.source_origin), log.origin)
         if d > SOURCE_ORIGIN_M:
-            reasons.append(f"its map origin is {d / 1000:.1f} km from the source's (more than "
-                           f"{SOURCE_ORIGIN_M / 1000:.0f} km)")
+            reasons.append(
+                f"its map origin is {d / 1000:.1f} km from the source's (more than "
+                f"{SOURCE_ORIGIN_M / 1000:.0f} km)"
+            )
     return "; ".join(reasons)
 
 
@@ -163,13 +197,23 @@ def _within_3_sigma(err: np.ndarray, sig: np.ndarray) -> list[float]:
 def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
     """Errors against the log's truth (if any), observability verdict, segments credited."""
     res = stored.result
-    ev = Evaluation(res.estimator, res.t, res.attitude_sigma_deg, res.position_sigma_m, res.velocity_sigma_m_s)
-    m: dict[str, Any] = {"estimator": res.estimator, "result": stored.path, "states": len(res.t),
-                         "final": {k: stored.summary.get(k) for k in ("scale", "misalignment_deg",
-                                                                      "gyro_bias_deg_per_h", "accel_bias_ug")}}
+    ev = Evaluation(
+        res.estimator, res.t, res.attitude_sigma_deg, res.position_sigma_m, res.velocity_sigma_m_s
+    )
+    m: dict[str, Any] = {
+        "estimator": res.estimator,
+        "result": stored.path,
+        "states": len(res.t),
+        "final": {
+            k: stored.summary.get(k)
+            for k in ("scale", "misalignment_deg", "gyro_bias_deg_per_h", "accel_bias_ug")
+        },
+    }
     if log is not None and not stored.source_sha256:
-        ev.notes.append(f"the result records no content hash of its source log (written by an older gtsam_dvl): "
-                        f"{log.source or 'the log'} is taken as its source on its stamps and origin alone")
+        ev.notes.append(
+            f"the result records no content hash of its source log (written by an older gtsam_dvl): "
+            f"{log.source or 'the log'} is taken as its source on its stamps and origin alone"
+        )
     if log is not None:
         ev.segments = log.segments or classify_log(log)
         m["segments_from"] = "simulation" if log.segments else "classified from IMU"
@@ -177,12 +221,19 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
         ev.truth_errors = truth_errors(res, log)
         errors = trajectory_errors(res, log.truth)
         ev.attitude_error_deg, ev.position_error_m, ev.velocity_error_m_s = (
-            errors.attitude_deg, errors.position_m, errors.velocity_m_s)
+            errors.attitude_deg,
+            errors.position_m,
+            errors.velocity_m_s,
+        )
         m["truth"] = {
             **errors.metrics(),
-            "attitude_within_3_sigma": _within_3_sigma(ev.attitude_error_deg, ev.attitude_sigma_deg),
+            "attitude_within_3_sigma": _within_3_sigma(
+                ev.attitude_error_deg, ev.attitude_sigma_deg
+            ),
             "position_within_3_sigma": _within_3_sigma(ev.position_error_m, ev.position_sigma_m),
-            "velocity_within_3_sigma": _within_3_sigma(ev.velocity_error_m_s, ev.velocity_sigma_m_s),
+            "velocity_within_3_sigma": _within_3_sigma(
+                ev.velocity_error_m_s, ev.velocity_sigma_m_s
+            ),
             "calibration_errors": ev.truth_errors,
         }
     config = result_config(res)
@@ -191,18 +242,32 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
         if ev.gnss is not None:
             m["gnss"] = ev.gnss.as_dict()
     if res.calib_joint_cov is not None:
-        ev.report = analyse_block(res.calib_joint_cov, res.b_R_d, float(res.t[-1] - res.t[0]), config,
-                                  lever_arm_cov=res.lever_arm_cov,
-                                  time_offset_sigma_s=estimated_time_offset_sigma(res))
+        ev.report = analyse_block(
+            res.calib_joint_cov,
+            res.b_R_d,
+            float(res.t[-1] - res.t[0]),
+            config,
+            lever_arm_cov=res.lever_arm_cov,
+            time_offset_sigma_s=estimated_time_offset_sigma(res),
+        )
         if res.timeline is not None:
             ev.determined_at_s = determined_at(ev.report, res.timeline)
             if ev.segments:
                 ev.shares = attribute_segments(ev.report, res.timeline, ev.segments)
-        m["observability"] = [{"key": s.key, "verdict": s.verdict, "prior_sigma": s.prior_sigma,
-                               "posterior_sigma": s.posterior_sigma, "ratio": s.ratio, "unit": s.unit,
-                               "determined_at_s": ev.determined_at_s.get(s.key),
-                               "credited_segments": s.credited_segments, "hours_to_halve": s.hours_to_halve}
-                              for s in ev.report.all_states()]
+        m["observability"] = [
+            {
+                "key": s.key,
+                "verdict": s.verdict,
+                "prior_sigma": s.prior_sigma,
+                "posterior_sigma": s.posterior_sigma,
+                "ratio": s.ratio,
+                "unit": s.unit,
+                "determined_at_s": ev.determined_at_s.get(s.key),
+                "credited_segments": s.credited_segments,
+                "hours_to_halve": s.hours_to_halve,
+            }
+            for s in ev.report.all_states()
+        ]
         m["answer"] = calibration_answer(ev.report, ev.determined_at_s, "log")[0]
         m["verdict"] = ev.lines()
     ev.metrics = m

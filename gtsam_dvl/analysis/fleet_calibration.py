@@ -89,8 +89,9 @@ def _chi2(r: np.ndarray, D: np.ndarray, Sd: np.ndarray) -> tuple[float, int]:
     return float(np.sum(proj**2 / w[keep])), int(keep.sum())
 
 
-def block_residual(states: Sequence[str], alone: dict[str, Estimate], joint: dict[str, Estimate]
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def block_residual(
+    states: Sequence[str], alone: dict[str, Estimate], joint: dict[str, Estimate]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """r = x_d - x_J over the states (the misalignment's in b_R_d,J's right tangent), S_d and S_J from the
     per-state marginals (block-diagonal)."""
     parts, Sd, Sj = [], [], []
@@ -110,13 +111,19 @@ def _block_diag(blocks: list[np.ndarray]) -> np.ndarray:
     out = np.zeros((n, n))
     col = 0
     for b in blocks:
-        out[col:col + b.shape[0], col:col + b.shape[0]] = b
+        out[col : col + b.shape[0], col : col + b.shape[0]] = b
         col += b.shape[0]
     return out
 
 
-def dive_vs_joint(name: str, states: Sequence[str], alone: dict[str, Estimate], joint: dict[str, Estimate],
-                  alone_cov: np.ndarray | None = None, joint_cov: np.ndarray | None = None) -> DiveVsJoint:
+def dive_vs_joint(
+    name: str,
+    states: Sequence[str],
+    alone: dict[str, Estimate],
+    joint: dict[str, Estimate],
+    alone_cov: np.ndarray | None = None,
+    joint_cov: np.ndarray | None = None,
+) -> DiveVsJoint:
     """The comparison of one dive with the joint calibration (module doc). alone_cov / joint_cov: the joint
     covariances over the block (else the per-state marginals, block-diagonal)."""
     r, Sd, Sj = block_residual(states, alone, joint)
@@ -130,6 +137,8 @@ def dive_vs_joint(name: str, states: Sequence[str], alone: dict[str, Estimate], 
         sl = slice(col, col + st.dim)
         col += st.dim
         c, k = _chi2(r[sl], (Sd - Sj)[sl, sl], Sd[sl, sl])
-        display = st.to_display * (np.asarray(joint[n].value) @ r[sl] if st.kind == "rot3" else r[sl])
+        display = st.to_display * (
+            np.asarray(joint[n].value) @ r[sl] if st.kind == "rot3" else r[sl]
+        )
         out.states[n] = StateMove(n, c, k, _n_sigma(c, k), np.asarray(display, dtype=float))
     return out

@@ -115,8 +115,12 @@ class MotionSummary:
     def during(self, depth: bool = False) -> str:
         """The motion in words, for a sentence: "during a steady turn", "on a straight track"; depth: say "with no
         depth change" when level."""
-        text = {"straight": "on a straight track", "steady turn": "during a steady turn",
-                "varied": "in this log's manoeuvres", "static": "on a static log"}[self.kind]
+        text = {
+            "straight": "on a straight track",
+            "steady turn": "during a steady turn",
+            "varied": "in this log's manoeuvres",
+            "static": "on a static log",
+        }[self.kind]
         if depth and self.level and self.kind != "static":
             text += " with no depth change"
         return text
@@ -125,24 +129,38 @@ class MotionSummary:
         """One console line."""
         if self.kind == "static":
             return "motion: static"
-        return (f"motion: {self.kind}{', level' if self.level else ''} ({self.heading_change_deg:.0f} deg of heading, "
-                f"turn rate {self.turn_rate_deg_s:+.2f} deg/s; speed {self.speed_m_s:.2f} m/s +- "
-                f"{100 * self.speed_spread / 2:.0f} %; depth span {self.depth_change_m:.1f} m; "
-                f"{self.distance_m:.0f} m travelled)")
+        return (
+            f"motion: {self.kind}{', level' if self.level else ''} ({self.heading_change_deg:.0f} deg of heading, "
+            f"turn rate {self.turn_rate_deg_s:+.2f} deg/s; speed {self.speed_m_s:.2f} m/s +- "
+            f"{100 * self.speed_spread / 2:.0f} %; depth span {self.depth_change_m:.1f} m; "
+            f"{self.distance_m:.0f} m travelled)"
+        )
 
 
-def classify_motion(t: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray, n_p: np.ndarray) -> MotionSummary:
+def classify_motion(
+    t: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray, n_p: np.ndarray
+) -> MotionSummary:
     """The motion of a trajectory (map frame ENU; module constants): straight (heading span below
     STRAIGHT_HEADING_DEG, speed nearly constant), steady turn (turn rate nearly constant, speed nearly constant),
     varied (anything else), static (never faster than MOVING_SPEED_M_S)."""
-    t, n_v, n_p = np.asarray(t, dtype=float), np.asarray(n_v, dtype=float), np.asarray(n_p, dtype=float)
+    t, n_v, n_p = (
+        np.asarray(t, dtype=float),
+        np.asarray(n_v, dtype=float),
+        np.asarray(n_p, dtype=float),
+    )
     speed = np.linalg.norm(n_v, axis=1)
     moving = speed > MOVING_SPEED_M_S
-    distance = float(np.linalg.norm(np.diff(n_p[:, :2], axis=0), axis=1).sum()) if len(n_p) > 1 else 0.0
+    distance = (
+        float(np.linalg.norm(np.diff(n_p[:, :2], axis=0), axis=1).sum()) if len(n_p) > 1 else 0.0
+    )
     if moving.sum() < 3:
         return MotionSummary("static", True, distance_m=distance)
     heading = np.degrees(np.unwrap(np.arctan2(n_R_b[moving, 1, 0], n_R_b[moving, 0, 0])))
-    rate = np.gradient(heading, t[moving]) if np.all(np.diff(t[moving]) > 0) else np.zeros(int(moving.sum()))
+    rate = (
+        np.gradient(heading, t[moving])
+        if np.all(np.diff(t[moving]) > 0)
+        else np.zeros(int(moving.sum()))
+    )
     s5, s50, s95 = np.percentile(speed[moving], [5, 50, 95])
     r5, r50, r95 = np.percentile(rate, [5, 50, 95])
     span = float(heading.max() - heading.min())
@@ -150,13 +168,21 @@ def classify_motion(t: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray, n_p: np.n
     steady_speed = (s95 - s5) <= STEADY_SPEED_SPREAD * s50
     if span < STRAIGHT_HEADING_DEG and steady_speed:
         kind = "straight"
-    elif (steady_speed and abs(r50) >= MIN_TURN_RATE_DEG_S and (r95 - r5) <= STEADY_TURN_SPREAD * abs(r50)):
+    elif (
+        steady_speed
+        and abs(r50) >= MIN_TURN_RATE_DEG_S
+        and (r95 - r5) <= STEADY_TURN_SPREAD * abs(r50)
+    ):
         kind = "steady turn"
     else:
         kind = "varied"
-    level = depth < DEPTH_CHANGE_M or float(np.percentile(np.abs(n_v[moving, 2]), 99)) < LEVEL_VERTICAL_SPEED_M_S
-    return MotionSummary(kind, level, span, float(s50), float((s95 - s5) / s50), float(r50), depth,
-                         distance)
+    level = (
+        depth < DEPTH_CHANGE_M
+        or float(np.percentile(np.abs(n_v[moving, 2]), 99)) < LEVEL_VERTICAL_SPEED_M_S
+    )
+    return MotionSummary(
+        kind, level, span, float(s50), float((s95 - s5) / s50), float(r50), depth, distance
+    )
 
 
 def motion_of(result: NavResult) -> MotionSummary:
@@ -192,7 +218,9 @@ class GeometryReport:
         return {"motion": asdict(self.motion), "findings": [asdict(f) for f in self.findings]}
 
 
-def _covariance(result: NavResult, config: EstimatorConfig) -> tuple[np.ndarray, list[SharedState]] | None:
+def _covariance(
+    result: NavResult, config: EstimatorConfig
+) -> tuple[np.ndarray, list[SharedState]] | None:
     """The joint covariance and its states: shared_joint_cov (with or without the states the EKF does not carry),
     else the calibration block; None when the result has neither."""
     if result.shared_joint_cov is not None:
@@ -227,7 +255,9 @@ def _track_shift(result: NavResult, state: SharedState) -> np.ndarray:
     else:
         return np.zeros(state.dim)
     dt = np.diff(t)[:, None, None]
-    shift = np.concatenate([np.zeros((1,) + g.shape[1:]), np.cumsum(0.5 * (g[1:] + g[:-1]) * dt, axis=0)])
+    shift = np.concatenate(
+        [np.zeros((1,) + g.shape[1:]), np.cumsum(0.5 * (g[1:] + g[:-1]) * dt, axis=0)]
+    )
     return np.linalg.norm(shift[:, :, :2], axis=2).max(axis=0) / state.to_display
 
 
@@ -235,8 +265,9 @@ def _words(state: SharedState, suffix: str) -> str:
     return f"{state.description} {suffix}".strip()
 
 
-def assess_geometry(result: NavResult, motion: MotionSummary | None = None,
-                    config: EstimatorConfig | None = None) -> GeometryReport:
+def assess_geometry(
+    result: NavResult, motion: MotionSummary | None = None, config: EstimatorConfig | None = None
+) -> GeometryReport:
     """The weak calibration directions of a result (module doc). motion: the log's (default: classify_motion on
     the result's trajectory); config: the priors (default: the result's configuration)."""
     motion = motion if motion is not None else motion_of(result)
@@ -247,14 +278,21 @@ def assess_geometry(result: NavResult, motion: MotionSummary | None = None,
         return report
     cov, states = found
     # display units, the misalignment about body axes (its right tangent turned by b_R_d)
-    J = block_diag(*[s.display_jacobian(np.asarray(result.b_R_d) if s.kind == "rot3" else np.zeros(s.dim))
-                     for s in states])
+    J = block_diag(
+        *[
+            s.display_jacobian(np.asarray(result.b_R_d) if s.kind == "rot3" else np.zeros(s.dim))
+            for s in states
+        ]
+    )
     cov = J @ cov @ J.T
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     prior = np.concatenate([s.prior_display_sigma(config) for s in states])
     corr = cov / np.outer(np.where(sigma > 0, sigma, 1.0), np.where(sigma > 0, sigma, 1.0))
-    columns = [(s, suffix, f"{s.name.replace('_', ' ')} {suffix}".strip()) for s in states
-               for suffix, _ in s.components]
+    columns = [
+        (s, suffix, f"{s.name.replace('_', ' ')} {suffix}".strip())
+        for s in states
+        for suffix, _ in s.components
+    ]
     shifts = np.concatenate([_track_shift(result, s) for s in states])
     # a state whose prior is a vehicle's calibration file leans on it by design (analysis/calibration_check.py)
     from_file = (result.info.get("calibration_prior") or {}).get("states", [])
@@ -270,37 +308,77 @@ def assess_geometry(result: NavResult, motion: MotionSummary | None = None,
             continue
         # a sigma the motion cannot support is judged at the prior's
         s_c = float(prior[c]) if claimed else float(sigma[c])
-        report.findings.append(_finding(name, ratio, columns[j] if abs(rho) > CORRELATED else None, rho,
-                                        motion, s_c * float(shifts[c]), state, float(sigma[c]), claimed))
+        report.findings.append(
+            _finding(
+                name,
+                ratio,
+                columns[j] if abs(rho) > CORRELATED else None,
+                rho,
+                motion,
+                s_c * float(shifts[c]),
+                state,
+                float(sigma[c]),
+                claimed,
+            )
+        )
     return report
 
 
-def _finding(name: str, ratio: float, partner: tuple[SharedState, str, str] | None, rho: float,
-             motion: MotionSummary, shift_m: float, state: SharedState, sigma: float, claimed: bool = False
-             ) -> Finding:
+def _finding(
+    name: str,
+    ratio: float,
+    partner: tuple[SharedState, str, str] | None,
+    rho: float,
+    motion: MotionSummary,
+    shift_m: float,
+    state: SharedState,
+    sigma: float,
+    claimed: bool = False,
+) -> Finding:
     kind = "level" if name == "misalignment roll" and motion.level else motion.kind
     manoeuvre = MANOEUVRES.get((name, kind)) or MANOEUVRES.get((name, ""), "more varied motion")
-    head = f"{name} leans on its prior" if ratio > LEANS_ON_PRIOR else f"{name} is tied to another state"
+    head = (
+        f"{name} leans on its prior"
+        if ratio > LEANS_ON_PRIOR
+        else f"{name} is tied to another state"
+    )
     if claimed:
         head = f"{name} cannot be determined"
     during = motion.during(depth=name in DEPTH_COLUMNS)
     verb = "separates" if manoeuvre.startswith(("a ", "an ")) else "separate"
     if partner is not None:
-        text = f"{head}: correlated {rho:.2f} with {_words(partner[0], partner[1])} {during}; " \
-               f"{manoeuvre} {verb} them"
+        text = (
+            f"{head}: correlated {rho:.2f} with {_words(partner[0], partner[1])} {during}; "
+            f"{manoeuvre} {verb} them"
+        )
     else:
         text = f"{head} {during}; {manoeuvre} {verb} it" + (
-            " from the heading" if name == "misalignment yaw" and motion.kind == "straight" else "")
+            " from the heading" if name == "misalignment yaw" and motion.kind == "straight" else ""
+        )
     pct = 100.0 * shift_m / motion.distance_m if motion.distance_m > 0 else 0.0
     matters = motion.distance_m > 0 and shift_m > MATTERS_FRACTION * motion.distance_m
     if claimed:
-        text += (f" (its sigma, {number_text(sigma)} {state.display_unit}, {fraction_text(ratio)} of the prior's, "
-                 f"claims information this motion does not hold: a filter's linearisation gains it spuriously; one "
-                 f"prior sigma moves the track by up to {shift_m:.2g} m, {pct:.2g} % of the {motion.distance_m:.0f} m "
-                 f"travelled)")
+        text += (
+            f" (its sigma, {number_text(sigma)} {state.display_unit}, {fraction_text(ratio)} of the prior's, "
+            f"claims information this motion does not hold: a filter's linearisation gains it spuriously; one "
+            f"prior sigma moves the track by up to {shift_m:.2g} m, {pct:.2g} % of the {motion.distance_m:.0f} m "
+            f"travelled)"
+        )
     else:
-        text += (f" (sigma {number_text(sigma)} {state.display_unit}, {fraction_text(ratio)} of the prior's; one "
-                 f"sigma moves the track by up to {shift_m:.2g} m, {pct:.2g} % of the {motion.distance_m:.0f} m "
-                 f"travelled" + ("" if matters else ": little for this log") + ")")
-    return Finding(name, ratio, "" if partner is None else partner[2], rho if partner is not None else 0.0,
-                   motion.kind, manoeuvre, shift_m, pct, "warn" if matters else "note", text)
+        text += (
+            f" (sigma {number_text(sigma)} {state.display_unit}, {fraction_text(ratio)} of the prior's; one "
+            f"sigma moves the track by up to {shift_m:.2g} m, {pct:.2g} % of the {motion.distance_m:.0f} m "
+            f"travelled" + ("" if matters else ": little for this log") + ")"
+        )
+    return Finding(
+        name,
+        ratio,
+        "" if partner is None else partner[2],
+        rho if partner is not None else 0.0,
+        motion.kind,
+        manoeuvre,
+        shift_m,
+        pct,
+        "warn" if matters else "note",
+        text,
+    )

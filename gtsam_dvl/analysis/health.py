@@ -41,8 +41,8 @@ from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp, so3_log
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.ping_screen import frozen_runs
-from gtsam_dvl.estimators.selection import ping_covariance, usable_pings
+from gtsam_dvl.estimators.inputs.ping_screen import frozen_runs
+from gtsam_dvl.estimators.inputs.selection import ping_covariance, usable_pings
 from gtsam_dvl.factors.dvl_model import dvl_model
 
 # in order of severity: "warn" is an honest result that leans on its prior somewhere (weak geometry); --strict
@@ -75,7 +75,7 @@ REJECTED_PINGS_DEGRADED = 0.05
 # More than this share of a topic's messages dropped by --repair: the log is damaged, not just untidy.
 REPAIRED_DEGRADED = 0.01
 # IMU gaps are crossed by holding the last sample before them, with the motion model's uncertainty added
-# (estimators/gaps.py): honest, but the trajectory across a gap longer than this is a guess the user should
+# (estimators/inputs/gaps.py): honest, but the trajectory across a gap longer than this is a guess the user should
 # know about (a 100 Hz IMU dropping a few samples is harmless).
 IMU_GAP_DEGRADED_S = 0.5
 # The DVL may fall silent for a while (turns, bottom out of range); longer than this the trajectory is dead
@@ -84,8 +84,15 @@ DVL_GAP_DEGRADED_S = 60.0
 
 # Counters that are not rejections (the EKF's slow pings still update the navigation; keyframe thinning is
 # by design).
-_NOT_REJECTIONS = ("dvl_not_keyframe", "dvl_slow", "dvl_updates", "dvl_downweighted", "dvl_water_track",
-                   "dvl_before_imu", "dvl_after_imu")
+_NOT_REJECTIONS = (
+    "dvl_not_keyframe",
+    "dvl_slow",
+    "dvl_updates",
+    "dvl_downweighted",
+    "dvl_water_track",
+    "dvl_before_imu",
+    "dvl_after_imu",
+)
 
 
 @dataclass
@@ -108,13 +115,20 @@ class Health:
             self.status = severity
 
     def as_dict(self) -> dict[str, Any]:
-        return {"status": self.status, "warnings": list(self.warnings), "notes": list(self.notes),
-                "figures": self.figures}
+        return {
+            "status": self.status,
+            "warnings": list(self.warnings),
+            "notes": list(self.notes),
+            "figures": self.figures,
+        }
 
     def lines(self) -> list[str]:
         """One line per warning and note, for a console."""
-        return [f"health: {self.status}"] + [f"  warning: {w}" for w in self.warnings] + [
-            f"  note: {n}" for n in self.notes]
+        return (
+            [f"health: {self.status}"]
+            + [f"  warning: {w}" for w in self.warnings]
+            + [f"  note: {n}" for n in self.notes]
+        )
 
 
 def assess_health(result: NavResult, log: LogData) -> Health:
@@ -140,7 +154,9 @@ def assess_health(result: NavResult, log: LogData) -> Health:
         health.figures["geometry"] = geometry.as_dict()
         for finding in geometry.findings:
             health.flag(finding.severity, finding.message)
-    judge_calibration(result, health)  # against a calibration file's prior (analysis/calibration_check.py)
+    judge_calibration(
+        result, health
+    )  # against a calibration file's prior (analysis/calibration_check.py)
     return health
 
 
@@ -148,8 +164,12 @@ def _check_noise_fit(result: NavResult, health: Health) -> None:
     """A DVL noise fit that ended at a bound of [noise] is no fit: the DVL model does not fit its data at any
     noise level within ten times the stated one (a wrong mounting, a wrong topic, water track)."""
     noise = result.info.get("noise")
-    for entry in (noise.get(s) for s in ("dvl", "depth", "gnss")) if isinstance(noise, dict) else ():
-        if isinstance(entry, dict) and entry.get("at_bound"):  # (the depth's and the fixes' fits likewise)
+    for entry in (
+        (noise.get(s) for s in ("dvl", "depth", "gnss")) if isinstance(noise, dict) else ()
+    ):
+        if isinstance(entry, dict) and entry.get(
+            "at_bound"
+        ):  # (the depth's and the fixes' fits likewise)
             health.flag("degraded", str(entry.get("why")))
 
 
@@ -165,18 +185,33 @@ def assess_log_health(log: LogData, screened: dict[str, Any] | None = None) -> H
 
 # ----- checks ----------------------------------------------------------------------------------------------
 
+
 def _check_finite(result: NavResult, health: Health) -> None:
-    arrays = {"position": result.n_p, "velocity": result.n_v, "attitude": result.n_R_b,
-              "position covariance": result.pose_cov, "calibration": np.r_[result.scale, result.scale_sigma],
-              "misalignment covariance": result.b_R_d_cov, "bias covariance": result.bias_cov}
-    bad = [name for name, a in arrays.items() if not np.all(np.isfinite(np.asarray(a, dtype=float)))]
+    arrays = {
+        "position": result.n_p,
+        "velocity": result.n_v,
+        "attitude": result.n_R_b,
+        "position covariance": result.pose_cov,
+        "calibration": np.r_[result.scale, result.scale_sigma],
+        "misalignment covariance": result.b_R_d_cov,
+        "bias covariance": result.bias_cov,
+    }
+    bad = [
+        name for name, a in arrays.items() if not np.all(np.isfinite(np.asarray(a, dtype=float)))
+    ]
     health.figures["non_finite"] = bad
     if not len(result.t):
-        health.flag("failed", "the estimator produced no state: check that the log has usable DVL pings during "
-                              "the IMU's time span")
+        health.flag(
+            "failed",
+            "the estimator produced no state: check that the log has usable DVL pings during "
+            "the IMU's time span",
+        )
     elif bad:
-        health.flag("failed", f"the estimate contains NaN or infinity ({', '.join(bad)}): do not use it; rerun "
-                              "with --debug and report the log")
+        health.flag(
+            "failed",
+            f"the estimate contains NaN or infinity ({', '.join(bad)}): do not use it; rerun "
+            "with --debug and report the log",
+        )
 
 
 def _check_solver(result: NavResult, health: Health) -> None:
@@ -187,9 +222,12 @@ def _check_solver(result: NavResult, health: Health) -> None:
         figures["converged"] = bool(solver.get("converged", True))
         figures["iterations"] = solver.get("iterations")
         if not figures["converged"]:
-            health.flag("degraded", f"the solver did not converge in {solver.get('iterations')} iterations: the "
-                                    "estimate may not be the optimum; raise [solver] max_iterations or check the "
-                                    "alignment and the DVL data")
+            health.flag(
+                "degraded",
+                f"the solver did not converge in {solver.get('iterations')} iterations: the "
+                "estimate may not be the optimum; raise [solver] max_iterations or check the "
+                "alignment and the DVL data",
+            )
         final_error, dof = solver.get("final_error"), solver.get("dof")
         if final_error is not None and dof:
             figures["chi2"] = 2.0 * float(final_error)
@@ -206,14 +244,23 @@ def _check_solver(result: NavResult, health: Health) -> None:
         return
     what = "normalised chi^2" if "chi2_kind" not in figures else "normalised innovation squared"
     if not np.isfinite(ratio) or ratio > CHI2_PER_DOF_FAILED:
-        health.flag("failed", f"{what} is {ratio:.3g} (expected 1): the model does not fit the data at all; do not "
-                              "use this result; check the topics, the mounting (/tf_static) and the DVL noise")
+        health.flag(
+            "failed",
+            f"{what} is {ratio:.3g} (expected 1): the model does not fit the data at all; do not "
+            "use this result; check the topics, the mounting (/tf_static) and the DVL noise",
+        )
     elif ratio > CHI2_PER_DOF_DEGRADED:
-        health.flag("degraded", f"{what} is {ratio:.2f} (expected 1): the noise model does not fit; look at the DVL "
-                                "residual windows below, or set [dvl] noise_m_s to the DVL's real noise")
+        health.flag(
+            "degraded",
+            f"{what} is {ratio:.2f} (expected 1): the noise model does not fit; look at the DVL "
+            "residual windows below, or set [dvl] noise_m_s to the DVL's real noise",
+        )
     elif ratio < CHI2_PER_DOF_LOW:
-        health.flag("note", f"{what} is {ratio:.2f} (expected 1): the stated noise is larger than the data's; the "
-                            "sigmas are pessimistic")
+        health.flag(
+            "note",
+            f"{what} is {ratio:.2f} (expected 1): the stated noise is larger than the data's; the "
+            "sigmas are pessimistic",
+        )
 
 
 @dataclass
@@ -262,9 +309,13 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     k, b_R_d, dt_d, b_l = state_calibration(result, log)
     n_R_b, n_v = result.n_R_b, result.n_v
     if np.any(dt_d != 0.0) and n > 1:
-        n_v = np.stack([np.interp(result.t + dt_d, result.t, result.n_v[:, i]) for i in range(3)], axis=1)
+        n_v = np.stack(
+            [np.interp(result.t + dt_d, result.t, result.n_v[:, i]) for i in range(3)], axis=1
+        )
         n_R_b = attitude_at(result.t, result.n_R_b, b_omega, result.t + dt_d)
-        b_omega = np.stack([np.interp(result.t + dt_d, result.t, b_omega[:, i]) for i in range(3)], axis=1)
+        b_omega = np.stack(
+            [np.interp(result.t + dt_d, result.t, b_omega[:, i]) for i in range(3)], axis=1
+        )
     # the DVL model at each state (factors/dvl_model.py), for all states at once (h is linear in the scale)
     y_unit, _ = dvl_model(n_R_b, n_v, 1.0, b_R_d, b_omega, b_l, jacobians=False)
     y_state = k[:, None] * y_unit
@@ -276,20 +327,28 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         selected_again = len(pings)
     j = pings[(dvl.t[pings] >= t0 - 1e-6) & (dvl.t[pings] <= t1 + 1e-6)]
     t_p = np.clip(dvl.t[j], t0, t1)
-    y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(-1, 3)
+    y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(
+        -1, 3
+    )
     matched = np.ones(len(j), dtype=bool)
     n = len(j)
-    gm_var = config.correlated_sigma_m_s**2  # the DVL's correlated error's variance (estimators/correlated.py)
+    gm_var = (
+        config.correlated_sigma_m_s**2
+    )  # the DVL's correlated error's variance (estimators/models/correlated.py)
     chi2, dof = np.zeros(n), np.zeros(n)
     if config.use_beams and dvl.beams is not None:
         d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
         ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2) & matched[:, None]
         r = np.where(ok, v - np.einsum("nbi,ni->nb", np.where(ok[..., None], d_u, 0.0), y_hat), 0.0)
-        chi2 = (r**2).sum(axis=1) / (config.beam_sigma_m_s()**2 + gm_var)
+        chi2 = (r**2).sum(axis=1) / (config.beam_sigma_m_s() ** 2 + gm_var)
         dof = ok.sum(axis=1).astype(float)
     else:
         d_y = dvl.d_v[j]
-        water = np.zeros(len(j), bool) if dvl.water_track is None else np.asarray(dvl.water_track, bool)[j]
+        water = (
+            np.zeros(len(j), bool)
+            if dvl.water_track is None
+            else np.asarray(dvl.water_track, bool)[j]
+        )
         seen = matched & (dvl.valid[j] | water) & np.isfinite(d_y).all(axis=1)
         ok = seen & ~water  # water-track pings: judged with the current (analysis/water_track.py)
         r = np.where(ok[:, None], d_y - y_hat, 0.0)
@@ -297,14 +356,26 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         # estimate is not in the result: the residual holds it)
         cov = ping_covariance(config, dvl.d_cov[j]) + gm_var * np.eye(3)
         cov[~ok] = np.eye(3)
-        chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
+        chi2 = np.where(
+            ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0
+        )
         dof = 3.0 * ok
-        return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again,
-                            np.where(seen[:, None], d_y - y_hat, np.nan), j, water)
+        return DvlResiduals(
+            np.asarray(dvl.t[j], dtype=float),
+            chi2,
+            dof,
+            unmatched,
+            selected_again,
+            np.where(seen[:, None], d_y - y_hat, np.nan),
+            j,
+            water,
+        )
     return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
 
 
-def attitude_at(t: np.ndarray, n_R_b: np.ndarray, b_omega: np.ndarray, t_q: np.ndarray) -> np.ndarray:
+def attitude_at(
+    t: np.ndarray, n_R_b: np.ndarray, b_omega: np.ndarray, t_q: np.ndarray
+) -> np.ndarray:
     """The attitude n_R_b (Q, 3, 3) at the times t_q from the states' (t (N,) sorted, n_R_b (N, 3, 3)): along the
     geodesic between the two states around each time (their relative rotation, scaled by the fraction of the
     interval), and beyond the first or last state turned by that state's body rate b_omega (N, 3) rad/s. The
@@ -329,10 +400,14 @@ def attitude_at(t: np.ndarray, n_R_b: np.ndarray, b_omega: np.ndarray, t_q: np.n
 def is_filtered(result: NavResult) -> bool:
     """Whether the trajectory is a filter's (the EKF's, the online estimator's): each state as estimated when its
     ping was processed, with the calibration of that time (its timeline), not the final one."""
-    return result.estimator == "ekf" or str(result.info.get("trajectory", "")).startswith("filtered")
+    return result.estimator == "ekf" or str(result.info.get("trajectory", "")).startswith(
+        "filtered"
+    )
 
 
-def state_calibration(result: NavResult, log: LogData) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def state_calibration(
+    result: NavResult, log: LogData
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per state: the scale (N,), b_R_d (N, 3, 3), the time offset dt_d (N,) s and the lever arm b_l (N, 3) m of
     the model the state was estimated with. A smoother's states share the final calibration; a filter's (is_filtered)
     were estimated with the calibration of their time, which its timeline records: judged with the final one, a
@@ -342,15 +417,21 @@ def state_calibration(result: NavResult, log: LogData) -> tuple[np.ndarray, np.n
     k = np.full(n, float(result.scale))
     b_R_d = np.broadcast_to(np.asarray(result.b_R_d, dtype=float), (n, 3, 3)).copy()
     dt_d = np.full(n, float(result.time_offset_s) if np.isfinite(result.time_offset_s) else 0.0)
-    b_l = np.broadcast_to(np.asarray(result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l,
-                                     dtype=float), (n, 3)).copy()
+    b_l = np.broadcast_to(
+        np.asarray(
+            result.lever_arm_m if result.lever_arm_m is not None else log.mounting.b_l, dtype=float
+        ),
+        (n, 3),
+    ).copy()
     tl = result.timeline
     if tl is None or not is_filtered(result) or not len(tl.t) or not n:
         return k, b_R_d, dt_d, b_l
     # the timeline's entry at or before each state (a state before the first entry: the first)
     i = np.clip(np.searchsorted(tl.t, result.t + 1e-9, side="right") - 1, 0, len(tl.t) - 1)
     k = np.asarray(tl.scale, dtype=float)[i]
-    R_c = np.stack([rpy_deg_to_matrix(rpy) for rpy in np.asarray(tl.misalignment_deg, dtype=float)[i]])
+    R_c = np.stack(
+        [rpy_deg_to_matrix(rpy) for rpy in np.asarray(tl.misalignment_deg, dtype=float)[i]]
+    )
     b_R_d = R_c @ np.asarray(result.b_R_d0, dtype=float)
     if tl.time_offset_s is not None:
         dt_d = np.asarray(tl.time_offset_s, dtype=float)[i]
@@ -359,22 +440,36 @@ def state_calibration(result: NavResult, log: LogData) -> tuple[np.ndarray, np.n
     return k, b_R_d, dt_d, b_l
 
 
-def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfig, health: Health) -> None:
+def _check_dvl_residuals(
+    result: NavResult, log: LogData, config: EstimatorConfig, health: Health
+) -> None:
     res = dvl_residuals(result, log, config.dvl)
-    check_water_track(result, log, config, res, health.figures, health.flag)  # (analysis/water_track.py)
+    check_water_track(
+        result, log, config, res, health.figures, health.flag
+    )  # (analysis/water_track.py)
     used = res.dof > 0
-    figures: dict[str, Any] = {"pings": int(used.sum()), "states_without_ping": res.unmatched,
-                               "whitened_rms": res.rms() if used.any() else None,
-                               "window_s": RESIDUAL_WINDOW_S, "windows": []}
+    figures: dict[str, Any] = {
+        "pings": int(used.sum()),
+        "states_without_ping": res.unmatched,
+        "whitened_rms": res.rms() if used.any() else None,
+        "window_s": RESIDUAL_WINDOW_S,
+        "windows": [],
+    }
     health.figures["dvl_residuals"] = figures
     if res.selected_again:
         figures["pings_selected_again"] = res.selected_again
-        health.flag("note", f"the result does not record which DVL pings its estimator used (a result file without "
-                            f"them): the residuals are of the {res.selected_again} pings selected again with its "
-                            "configuration")
+        health.flag(
+            "note",
+            f"the result does not record which DVL pings its estimator used (a result file without "
+            f"them): the residuals are of the {res.selected_again} pings selected again with its "
+            "configuration",
+        )
     if not used.any():
-        health.flag("degraded", "no DVL ping could be compared with the estimate: check the DVL topic and its "
-                                "valid flags")
+        health.flag(
+            "degraded",
+            "no DVL ping could be compared with the estimate: check the DVL topic and its "
+            "valid flags",
+        )
         return
     start = np.floor(res.t[used][0] / RESIDUAL_WINDOW_S) * RESIDUAL_WINDOW_S
     index = np.floor((res.t - start) / RESIDUAL_WINDOW_S).astype(int)
@@ -383,43 +478,67 @@ def _check_dvl_residuals(result: NavResult, log: LogData, config: EstimatorConfi
         mask = used & (index == k)
         a = float(start + k * RESIDUAL_WINDOW_S)
         rms = res.rms(mask)
-        figures["windows"].append({"start_s": a, "end_s": a + RESIDUAL_WINDOW_S, "pings": int(mask.sum()),
-                                   "whitened_rms": rms})
+        figures["windows"].append(
+            {
+                "start_s": a,
+                "end_s": a + RESIDUAL_WINDOW_S,
+                "pings": int(mask.sum()),
+                "whitened_rms": rms,
+            }
+        )
         if mask.sum() >= RESIDUAL_WINDOW_MIN_PINGS and rms > RESIDUAL_WINDOW_DEGRADED:
             bad.append((a, a + RESIDUAL_WINDOW_S, rms))
     spans = _merge_windows(bad, res)
-    figures["bad_windows"] = [{"start_s": a, "end_s": b, "whitened_rms": rms} for a, b, rms in spans]
+    figures["bad_windows"] = [
+        {"start_s": a, "end_s": b, "whitened_rms": rms} for a, b, rms in spans
+    ]
     advice = _kernel_advice(config.dvl.robust)
     for a, b, rms in spans[:MAX_WINDOW_WARNINGS]:
-        health.flag("degraded", f"DVL residuals {rms:.1f}x their stated noise between {a:.0f} and {b:.0f} s: "
-                                "bottom lock lost? Check the DVL's bottom-track status and valid flags there"
-                                + advice)
+        health.flag(
+            "degraded",
+            f"DVL residuals {rms:.1f}x their stated noise between {a:.0f} and {b:.0f} s: "
+            "bottom lock lost? Check the DVL's bottom-track status and valid flags there" + advice,
+        )
     if len(spans) > MAX_WINDOW_WARNINGS:
         rest = spans[MAX_WINDOW_WARNINGS:]
-        health.flag("degraded", f"and {len(rest)} more stretches of DVL residuals above "
-                                f"{RESIDUAL_WINDOW_DEGRADED:g}x their noise ({rest[0][0]:.0f} to {rest[-1][1]:.0f} s)")
+        health.flag(
+            "degraded",
+            f"and {len(rest)} more stretches of DVL residuals above "
+            f"{RESIDUAL_WINDOW_DEGRADED:g}x their noise ({rest[0][0]:.0f} to {rest[-1][1]:.0f} s)",
+        )
     overall = figures["whitened_rms"]
-    if health.figures.get("solver", {}).get("chi2_per_dof") is None and overall**2 > CHI2_PER_DOF_FAILED:
+    if (
+        health.figures.get("solver", {}).get("chi2_per_dof") is None
+        and overall**2 > CHI2_PER_DOF_FAILED
+    ):
         # no chi^2 from the solver (online): the residuals' mean square is its chi^2 / dof, judged alike
-        health.flag("failed", f"DVL residuals are {overall:.1f}x their stated noise over the whole log (chi^2 / dof "
-                              f"{overall**2:.3g}, expected 1): the model does not fit the data at all; do not use this "
-                              "result; check the topics, the mounting (/tf_static) and the DVL noise")
+        health.flag(
+            "failed",
+            f"DVL residuals are {overall:.1f}x their stated noise over the whole log (chi^2 / dof "
+            f"{overall**2:.3g}, expected 1): the model does not fit the data at all; do not use this "
+            "result; check the topics, the mounting (/tf_static) and the DVL noise",
+        )
     elif overall > RESIDUAL_OVERALL_DEGRADED and not spans:
-        health.flag("degraded", f"DVL residuals are {overall:.1f}x their stated noise over the whole log: the DVL "
-                                "noise is understated (set [dvl] noise_m_s), or the mounting or lever arm is wrong")
+        health.flag(
+            "degraded",
+            f"DVL residuals are {overall:.1f}x their stated noise over the whole log: the DVL "
+            "noise is understated (set [dvl] noise_m_s), or the mounting or lever arm is wrong",
+        )
 
 
 def _kernel_advice(robust: str) -> str:
     """What a stronger robust kernel would do for a bad stretch, naming the next one of [dvl] robust ("" when the
     strongest, cauchy, is on already)."""
     if robust == "none":
-        return "; or rerun with [dvl] robust = \"huber\" (the default) to down-weight such pings"
+        return '; or rerun with [dvl] robust = "huber" (the default) to down-weight such pings'
     if robust == "huber":
-        return "; or rerun with [dvl] robust = \"cauchy\", which gives gross outliers less weight than huber"
+        return '; or rerun with [dvl] robust = "cauchy", which gives gross outliers less weight than huber'
     return ""
 
 
-def _merge_windows(bad: list[tuple[float, float, float]], res: DvlResiduals) -> list[tuple[float, float, float]]:
+def _merge_windows(
+    bad: list[tuple[float, float, float]], res: DvlResiduals
+) -> list[tuple[float, float, float]]:
     """Adjacent bad windows as one span, with the RMS over the span's pings."""
     spans: list[tuple[float, float, float]] = []
     for a, b, _ in bad:
@@ -437,61 +556,104 @@ def _check_motion(log: LogData, health: Health) -> None:
     speed = float(np.percentile(np.linalg.norm(dvl.d_v[ok], axis=1), 95)) if ok.any() else 0.0
     health.figures["dvl_speed_p95_m_s"] = speed
     if speed < NEVER_MOVES_SPEED_M_S:
-        health.flag("degraded", f"nothing calibratable: the log never moves (95 % of the DVL speeds are below "
-                                f"{NEVER_MOVES_SPEED_M_S:g} m/s), so the DVL scale and misalignment keep their priors; "
-                                "calibrate on a log with motion (see `gtsam-dvl plan`)")
+        health.flag(
+            "degraded",
+            f"nothing calibratable: the log never moves (95 % of the DVL speeds are below "
+            f"{NEVER_MOVES_SPEED_M_S:g} m/s), so the DVL scale and misalignment keep their priors; "
+            "calibrate on a log with motion (see `gtsam-dvl plan`)",
+        )
 
 
 def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
-    counters = {k: int(v) for k, v in result.info.get("counters", {}).items() if isinstance(v, (int, np.integer))}
-    rejected = {k: v for k, v in counters.items() if k.startswith("dvl_") and k not in _NOT_REJECTIONS and v}
+    counters = {
+        k: int(v)
+        for k, v in result.info.get("counters", {}).items()
+        if isinstance(v, (int, np.integer))
+    }
+    rejected = {
+        k: v for k, v in counters.items() if k.startswith("dvl_") and k not in _NOT_REJECTIONS and v
+    }
     dropped = {k: v for k, v in counters.items() if k.startswith("imu_") and k != "imu_gaps" and v}
     n_pings = max(len(log.dvl), 1)
     share = sum(rejected.values()) / n_pings
-    health.figures["counters"] = {"dvl_rejected": rejected, "dvl_rejected_share": share, "imu_dropped": dropped,
-                                  "dvl_downweighted": counters.get("dvl_downweighted", 0)}
+    health.figures["counters"] = {
+        "dvl_rejected": rejected,
+        "dvl_rejected_share": share,
+        "imu_dropped": dropped,
+        "dvl_downweighted": counters.get("dvl_downweighted", 0),
+    }
     if rejected:
-        why = ", ".join(f"{v} {k.removeprefix('dvl_').replace('_', ' ')}" for k, v in sorted(rejected.items()))
+        why = ", ".join(
+            f"{v} {k.removeprefix('dvl_').replace('_', ' ')}" for k, v in sorted(rejected.items())
+        )
         text = f"{sum(rejected.values())} of {len(log.dvl)} DVL pings rejected ({why})"
         if share > REJECTED_PINGS_DEGRADED:
-            health.flag("degraded", f"{text}: a good part of the log was not used; check the DVL's valid flags and "
-                                    "[dvl] max_speed_m_s")
+            health.flag(
+                "degraded",
+                f"{text}: a good part of the log was not used; check the DVL's valid flags and "
+                "[dvl] max_speed_m_s",
+            )
         else:
             health.flag("note", text)
     _check_unused_pings(counters, log, health)
     if dropped:
-        why = ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items()))
-        health.flag("degraded", f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
-                                "stream has holes; read the log with --repair to see where")
+        why = ", ".join(
+            f"{v} {k.removeprefix('imu_').replace('_', ' ')}" for k, v in sorted(dropped.items())
+        )
+        health.flag(
+            "degraded",
+            f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
+            "stream has holes; read the log with --repair to see where",
+        )
     clipped = counters.get("time_offset_window_clipped", 0)
     health.figures["counters"]["time_offset_window_clipped"] = clipped
     if clipped:
         _check_offset_clip(result, clipped, health)
     centring = result.info.get("time_offset_centring") or {}
-    if centring.get("consistent") is False:  # the batch smoother's windows never agreed with its solution
-        health.flag("degraded", f"the DVL time offset's IMU windows did not settle on the estimate (centred at "
-                                f"{centring['centre_s']:+.3f} s, estimate {centring['estimate_s']:+.3f} s, sigma "
-                                f"{centring['sigma_s']:.3f} s) after {centring['recentred']} re-centrings: the offset "
-                                "model is approximate here (sharp turns with a large offset)")
-    if bounded := counters.get("time_offset_bounded", 0):  # the EKF held its offset state at the bound
+    if (
+        centring.get("consistent") is False
+    ):  # the batch smoother's windows never agreed with its solution
+        health.flag(
+            "degraded",
+            f"the DVL time offset's IMU windows did not settle on the estimate (centred at "
+            f"{centring['centre_s']:+.3f} s, estimate {centring['estimate_s']:+.3f} s, sigma "
+            f"{centring['sigma_s']:.3f} s) after {centring['recentred']} re-centrings: the offset "
+            "model is approximate here (sharp turns with a large offset)",
+        )
+    if bounded := counters.get(
+        "time_offset_bounded", 0
+    ):  # the EKF held its offset state at the bound
         health.figures["counters"]["time_offset_bounded"] = bounded
         _check_offset_bound(result, bounded, health)
-    if breaks := result.info.get("breaks"):  # estimators/pieces.py
-        health.flag("degraded", f"smoothed as {len(breaks) + 1} pieces, cut at IMU gaps longer than imu.max_gap_s ("
-                    + ", ".join(f"{b['gap_start_s']:.1f}-{b['gap_end_s']:.1f} s" for b in breaks)
-                    + "): the DVL calibration is the pieces' joint one; each later piece is aligned in motion and "
-                    "its position placed by dead reckoning across the gap; check the IMU driver"
-                    + "".join(f"; piece {p['piece']} left out: {p['error']}"
-                              for p in result.info.get("pieces_left_out") or []))
+    if breaks := result.info.get("breaks"):  # estimators/batch/pieces.py
+        health.flag(
+            "degraded",
+            f"smoothed as {len(breaks) + 1} pieces, cut at IMU gaps longer than imu.max_gap_s ("
+            + ", ".join(f"{b['gap_start_s']:.1f}-{b['gap_end_s']:.1f} s" for b in breaks)
+            + "): the DVL calibration is the pieces' joint one; each later piece is aligned in motion and "
+            "its position placed by dead reckoning across the gap; check the IMU driver"
+            + "".join(
+                f"; piece {p['piece']} left out: {p['error']}"
+                for p in result.info.get("pieces_left_out") or []
+            ),
+        )
     gaps = result.info.get("imu_gaps") or {}
     losses = log.metadata.get("reader_losses") or result.info.get("screened_losses") or {}
     # the reader's record says where the IMU data are missing, and its saturation record the gaps it made
-    reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(losses.get("saturation"))
-    if gaps.get("count") and not reader_saw:  # an in-memory log: the reader's gap record is not there
-        text = (f"{gaps['count']} IMU gap(s), {gaps['total_s']:.2f} s in all, the longest {gaps['longest_s']:.2f} s, "
-                "crossed by holding the last sample (the sigmas grow there)")
-        health.flag("degraded" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else "note",
-                    text + ("; check the IMU driver" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else ""))
+    reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(
+        losses.get("saturation")
+    )
+    if (
+        gaps.get("count") and not reader_saw
+    ):  # an in-memory log: the reader's gap record is not there
+        text = (
+            f"{gaps['count']} IMU gap(s), {gaps['total_s']:.2f} s in all, the longest {gaps['longest_s']:.2f} s, "
+            "crossed by holding the last sample (the sigmas grow there)"
+        )
+        health.flag(
+            "degraded" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else "note",
+            text + ("; check the IMU driver" if gaps["longest_s"] > IMU_GAP_DEGRADED_S else ""),
+        )
 
 
 def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
@@ -500,18 +662,31 @@ def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
     final estimate is beyond it (the late pings' model is approximate), a note when the estimate came back within
     (a transient: the bound held a filter that was still converging)."""
     config = result.estimator_config or EstimatorConfig()
-    recentred = result.info.get("time_offset_prior")  # the EKF's warm-up may move the prior's centre
-    centre = float(recentred["centre_s"]) if isinstance(recentred, dict) and "centre_s" in recentred else (
-        config.dvl.time_offset_prior_s)
+    recentred = result.info.get(
+        "time_offset_prior"
+    )  # the EKF's warm-up may move the prior's centre
+    centre = (
+        float(recentred["centre_s"])
+        if isinstance(recentred, dict) and "centre_s" in recentred
+        else (config.dvl.time_offset_prior_s)
+    )
     bound = 3.0 * config.dvl.time_offset_sigma_s
-    text = (f"the DVL time offset's estimate went beyond its prior +- 3 sigma ({centre:+.3f} +- {bound:.3f} s): the "
-            f"IMU windows of its offset model were held at that bound for {clipped} ping(s)")
+    text = (
+        f"the DVL time offset's estimate went beyond its prior +- 3 sigma ({centre:+.3f} +- {bound:.3f} s): the "
+        f"IMU windows of its offset model were held at that bound for {clipped} ping(s)"
+    )
     if abs(result.time_offset_s - centre) > bound:
-        health.flag("degraded", f"{text}, to the end ({result.time_offset_s:+.3f} s), so the offset model is "
-                                "approximate; set [dvl] time_offset_prior_s near the estimate or widen [dvl] "
-                                "time_offset_sigma_s")
+        health.flag(
+            "degraded",
+            f"{text}, to the end ({result.time_offset_s:+.3f} s), so the offset model is "
+            "approximate; set [dvl] time_offset_prior_s near the estimate or widen [dvl] "
+            "time_offset_sigma_s",
+        )
     else:
-        health.flag("note", f"{text}, while the filter converged (it ended within, at {result.time_offset_s:+.3f} s)")
+        health.flag(
+            "note",
+            f"{text}, while the filter converged (it ended within, at {result.time_offset_s:+.3f} s)",
+        )
 
 
 def _check_offset_bound(result: NavResult, bounded: int, health: Health) -> None:
@@ -520,18 +695,27 @@ def _check_offset_bound(result: NavResult, bounded: int, health: Health) -> None
     an unbounded estimate that far."""
     config = result.estimator_config or EstimatorConfig()
     recentred = result.info.get("time_offset_prior")
-    centre = float(recentred["centre_s"]) if isinstance(recentred, dict) and "centre_s" in recentred else (
-        config.dvl.time_offset_prior_s)
+    centre = (
+        float(recentred["centre_s"])
+        if isinstance(recentred, dict) and "centre_s" in recentred
+        else (config.dvl.time_offset_prior_s)
+    )
     bound = 3.0 * config.dvl.time_offset_sigma_s
     # at the bound: within a tenth of a prior sigma of it (an update after the last hold moves it a little inward)
     if abs(result.time_offset_s - centre) >= bound - 0.1 * config.dvl.time_offset_sigma_s:
-        health.flag("failed", f"DVL-IMU time offset is held at its bound ({result.time_offset_s:+.3f} s, the prior "
-                              f"{centre:+.3f} +- 3 x {config.dvl.time_offset_sigma_s:g} s) to the end, after "
-                              f"{bounded} ping(s) pushed it beyond its prior: set [dvl] time_offset_prior_s near the "
-                              "DVL's real offset or widen [dvl] time_offset_sigma_s; do not use this result")
+        health.flag(
+            "failed",
+            f"DVL-IMU time offset is held at its bound ({result.time_offset_s:+.3f} s, the prior "
+            f"{centre:+.3f} +- 3 x {config.dvl.time_offset_sigma_s:g} s) to the end, after "
+            f"{bounded} ping(s) pushed it beyond its prior: set [dvl] time_offset_prior_s near the "
+            "DVL's real offset or widen [dvl] time_offset_sigma_s; do not use this result",
+        )
     else:
-        health.flag("note", f"the EKF held its DVL time offset at its prior's bound (+- 3 sigma) for {bounded} "
-                            f"update(s) while it converged (it ended within, at {result.time_offset_s:+.3f} s)")
+        health.flag(
+            "note",
+            f"the EKF held its DVL time offset at its prior's bound (+- 3 sigma) for {bounded} "
+            f"update(s) while it converged (it ended within, at {result.time_offset_s:+.3f} s)",
+        )
 
 
 def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) -> None:
@@ -539,29 +723,51 @@ def _check_unused_pings(counters: dict[str, int], log: LogData, health: Health) 
     output (ping_screen.frozen_runs), each in its own words."""
     n_pings = max(len(log.dvl), 1)
     if water := counters.get("dvl_water_track", 0):
-        text = (f"{water} of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over "
-                "ground): refused ([current] water_track = \"refuse\"; \"auto\" uses them with the current as a state)")
+        text = (
+            f"{water} of {len(log.dvl)} DVL pings are water track (velocity relative to the water, not over "
+            'ground): refused ([current] water_track = "refuse"; "auto" uses them with the current as a state)'
+        )
         many = water / n_pings > REJECTED_PINGS_DEGRADED
-        health.flag("degraded" if many else "note", text + ("; the DVL had no bottom lock there, so the "
-                                                            "trajectory is dead reckoned on the IMU" if many else ""))
+        health.flag(
+            "degraded" if many else "note",
+            text
+            + (
+                "; the DVL had no bottom lock there, so the trajectory is dead reckoned on the IMU"
+                if many
+                else ""
+            ),
+        )
     before, after = counters.get("dvl_before_imu", 0), counters.get("dvl_after_imu", 0)
     if before + after > 1:  # one ping at the IMU's first stamp: the sensors started together
-        health.flag("note", f"{before + after} DVL pings outside the IMU's time span ({before} at or before its "
-                            f"first sample, {after} after its last): not used")
+        health.flag(
+            "note",
+            f"{before + after} DVL pings outside the IMU's time span ({before} at or before its "
+            f"first sample, {after} after its last): not used",
+        )
     if repeated := counters.get("dvl_repeated", 0):
         runs = frozen_runs(log.dvl)
         longest = max(runs, key=lambda r: r[2]) if runs else None
-        text = (f"DVL output frozen: {longest[2]} pings repeated bit for bit between {longest[0]:.0f} and "
-                f"{longest[1]:.0f} s" + (f" ({repeated} in {len(runs)} stretches)" if len(runs) > 1 else "")
-                + ", dropped; check the DVL") if longest else (
-                f"DVL output frozen: {repeated} pings repeated bit for bit while the IMU showed motion, dropped")
+        text = (
+            (
+                f"DVL output frozen: {longest[2]} pings repeated bit for bit between {longest[0]:.0f} and "
+                f"{longest[1]:.0f} s"
+                + (f" ({repeated} in {len(runs)} stretches)" if len(runs) > 1 else "")
+                + ", dropped; check the DVL"
+            )
+            if longest
+            else (
+                f"DVL output frozen: {repeated} pings repeated bit for bit while the IMU showed motion, dropped"
+            )
+        )
         long = longest is not None and longest[1] - longest[0] > DVL_GAP_DEGRADED_S
-        health.flag("degraded" if long or repeated / n_pings > REJECTED_PINGS_DEGRADED else "warn", text)
+        health.flag(
+            "degraded" if long or repeated / n_pings > REJECTED_PINGS_DEGRADED else "warn", text
+        )
 
 
 def _check_losses(log: LogData, health: Health, screened: dict[str, Any] | None = None) -> None:
     """The reader's losses, or for a log that did not come through it those the estimator's own screen found
-    (estimators/gaps.py screened_in_memory: result.info["screened_losses"])."""
+    (estimators/inputs/gaps.py screened_in_memory: result.info["screened_losses"])."""
     losses = log.metadata.get("reader_losses") or screened or {}
     health.figures["losses"] = loss_figures(losses)
     for severity, text in loss_findings(losses):
@@ -581,8 +787,10 @@ def loss_figures(losses: dict[str, Any]) -> dict[str, Any]:
         "seconds_missing": {t: g["seconds"] for t, g in (losses.get("gaps") or {}).items()},
         "chunks_lost": salv.get("chunks_lost", 0),
         "truncated": bool(salv.get("truncated")),
-        "data_end_s": min((c["data_end_s"] for c in salv.get("truncated", []) if c["data_end_s"] is not None),
-                          default=None),
+        "data_end_s": min(
+            (c["data_end_s"] for c in salv.get("truncated", []) if c["data_end_s"] is not None),
+            default=None,
+        ),
     }
 
 
@@ -597,56 +805,113 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     out: list[tuple[str, str]] = []
     salv = losses.get("salvage") or {}
     if salv.get("chunks_lost"):
-        per = ", ".join(f"{t} {n}" for t, n in sorted(salv.get("messages_lost_per_topic", {}).items()))
+        per = ", ".join(
+            f"{t} {n}" for t, n in sorted(salv.get("messages_lost_per_topic", {}).items())
+        )
         spans = salv.get("lost_spans_s", [])
-        when = (f", log time {min(s[0] for s in spans):.1f} to {max(s[1] for s in spans):.1f} s "
-                f"({salv.get('seconds_lost', 0.0):.1f} s of data)") if spans else ""
+        when = (
+            (
+                f", log time {min(s[0] for s in spans):.1f} to {max(s[1] for s in spans):.1f} s "
+                f"({salv.get('seconds_lost', 0.0):.1f} s of data)"
+            )
+            if spans
+            else ""
+        )
         at_least = "" if salv.get("messages_lost_exact") else "at least "
-        out.append(("degraded", f"--salvage dropped {salv['chunks_lost']} damaged chunk(s) with {at_least}"
-                                f"{salv.get('messages_lost', 0)} message(s)" + (f" ({per})" if per else "") + when
-                    + ": the result has no data there"))
+        out.append(
+            (
+                "degraded",
+                f"--salvage dropped {salv['chunks_lost']} damaged chunk(s) with {at_least}"
+                f"{salv.get('messages_lost', 0)} message(s)"
+                + (f" ({per})" if per else "")
+                + when
+                + ": the result has no data there",
+            )
+        )
     for cut in salv.get("truncated", []):
         end = cut.get("data_end_s")
-        out.append(("degraded", f"the log file is cut short at byte {cut['at_byte']}: nothing after "
-                    + (f"{end:.1f} s" if end is not None else "its start")
-                    + " could be read and how much more it held is unknown; the result ends there"))
+        out.append(
+            (
+                "degraded",
+                f"the log file is cut short at byte {cut['at_byte']}: nothing after "
+                + (f"{end:.1f} s" if end is not None else "its start")
+                + " could be read and how much more it held is unknown; the result ends there",
+            )
+        )
     for topic, d in sorted((losses.get("repair") or {}).items()):
         if d.get("of") and d["dropped"] / d["of"] > REPAIRED_DEGRADED:
-            out.append(("degraded", _repair_line(topic, d) + ": the log is damaged, check the recording"))
+            out.append(
+                ("degraded", _repair_line(topic, d) + ": the log is damaged, check the recording")
+            )
         else:
             out.append(("note", _repair_line(topic, d)))
     for topic, g in sorted((losses.get("gaps") or {}).items()):
         imu = "imu" in topic.lower()
         if imu and g["longest_s"] > IMU_GAP_DEGRADED_S:
-            out.append(("degraded", _gap_line(topic, g) + ": the IMU has holes, crossed by holding the last "
-                                                          "sample (the sigmas grow there); check the IMU driver"))
+            out.append(
+                (
+                    "degraded",
+                    _gap_line(topic, g) + ": the IMU has holes, crossed by holding the last "
+                    "sample (the sigmas grow there); check the IMU driver",
+                )
+            )
         elif not imu and g["longest_s"] > DVL_GAP_DEGRADED_S:
-            out.append(("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there"))
+            out.append(
+                ("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there")
+            )
         else:
             out.append(("note", _gap_line(topic, g)))
     for topic, report in sorted((losses.get("saturation") or {}).items()):
-        axes = ", ".join(f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} "
-                         f"{'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}" for a in report["axes"])
-        a, b = max(report["spans_s"], key=lambda s: s[1] - s[0]) if report["spans_s"] else (float("nan"),) * 2
-        out.append(("degraded", f"{topic}: the IMU saturated ({axes}): {report['samples']} samples at the range "
-                                f"limit in {report['stretches']} stretch(es), the longest {a:.2f} to {b:.2f} s, "
-                                "dropped and crossed as IMU gaps, holding the last sample before (the sigmas grow "
-                                "there); an IMU with a larger range avoids it"))
+        axes = ", ".join(
+            f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} "
+            f"{'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}"
+            for a in report["axes"]
+        )
+        a, b = (
+            max(report["spans_s"], key=lambda s: s[1] - s[0])
+            if report["spans_s"]
+            else (float("nan"),) * 2
+        )
+        out.append(
+            (
+                "degraded",
+                f"{topic}: the IMU saturated ({axes}): {report['samples']} samples at the range "
+                f"limit in {report['stretches']} stretch(es), the longest {a:.2f} to {b:.2f} s, "
+                "dropped and crossed as IMU gaps, holding the last sample before (the sigmas grow "
+                "there); an IMU with a larger range avoids it",
+            )
+        )
     for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
         for c in steps:
             back = c["jump_s"] < 0
-            out.append(("note", f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump {'back ' * back}by "
-                                f"{abs(c['jump_s']):.3f} s while the samples run on): --repair shifted the later "
-                                f"stamps {'forward' if back else 'back'} by {abs(c['step_s']):.3f} s"))
+            out.append(
+                (
+                    "note",
+                    f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump {'back ' * back}by "
+                    f"{abs(c['jump_s']):.3f} s while the samples run on): --repair shifted the later "
+                    f"stamps {'forward' if back else 'back'} by {abs(c['step_s']):.3f} s",
+                )
+            )
     return out
 
 
 def _repair_line(topic: str, d: dict[str, int]) -> str:
-    why = ", ".join(f"{d[k]} {name}" for k, name in (("nan", "with NaN"), ("duplicate", "duplicate stamp(s)"),
-                                                   ("backwards", "going back in time")) if d.get(k))
+    why = ", ".join(
+        f"{d[k]} {name}"
+        for k, name in (
+            ("nan", "with NaN"),
+            ("duplicate", "duplicate stamp(s)"),
+            ("backwards", "going back in time"),
+        )
+        if d.get(k)
+    )
     return f"--repair dropped {d['dropped']} of {d.get('of', '?')} {topic} message(s) ({why})"
 
 
 def _gap_line(topic: str, g: dict[str, Any]) -> str:
-    a, b = max(g["spans_s"], key=lambda s: s[1] - s[0]) if g.get("spans_s") else (float("nan"), float("nan"))
-    return (f"{topic}: {g['seconds']:.1f} s of data missing in {g['count']} gap(s) (longest {a:.1f} to {b:.1f} s)")
+    a, b = (
+        max(g["spans_s"], key=lambda s: s[1] - s[0])
+        if g.get("spans_s")
+        else (float("nan"), float("nan"))
+    )
+    return f"{topic}: {g['seconds']:.1f} s of data missing in {g['count']} gap(s) (longest {a:.1f} to {b:.1f} s)"

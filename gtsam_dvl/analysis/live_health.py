@@ -75,58 +75,117 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
     """The verdict on a running estimator (module doc); figures: the numbers behind it."""
     lim = limits or LiveThresholds()
     h = Health()
-    h.figures = {"phase": state.phase, "epochs": state.epochs, "t_s": state.t,
-                 "imu_wall_silent_s": state.imu_wall_silent_s, "no_lock_s": state.no_lock_s}
+    h.figures = {
+        "phase": state.phase,
+        "epochs": state.epochs,
+        "t_s": state.t,
+        "imu_wall_silent_s": state.imu_wall_silent_s,
+        "no_lock_s": state.no_lock_s,
+    }
     if state.stop_error:
-        h.flag("failed", f"the estimator stopped {state.since_stop_s:.1f} s ago ({state.stop_error}): no estimate "
-                         "from here on; restart the node (and report the error with its log)")
+        h.flag(
+            "failed",
+            f"the estimator stopped {state.since_stop_s:.1f} s ago ({state.stop_error}): no estimate "
+            "from here on; restart the node (and report the error with its log)",
+        )
     imu = state.streams.get("imu")
     if imu is not None and (imu.received == 0 or state.imu_wall_silent_s > lim.imu_silent_s):
-        what = "no IMU message yet" if imu.received == 0 else f"silent for {state.imu_wall_silent_s:.1f} s"
-        h.flag("failed", f"IMU topic {imu.topic}: {what}: no estimate without it; check the IMU driver and the "
-                         "topic name and QoS (imu_topic, qos_inputs)")
+        what = (
+            "no IMU message yet"
+            if imu.received == 0
+            else f"silent for {state.imu_wall_silent_s:.1f} s"
+        )
+        h.flag(
+            "failed",
+            f"IMU topic {imu.topic}: {what}: no estimate without it; check the IMU driver and the "
+            "topic name and QoS (imu_topic, qos_inputs)",
+        )
     if state.phase == "waiting_origin":
-        h.flag("warn", "waiting for the map origin: no GNSS fix yet and no estimator.alignment.origin_lat_deg "
-                       "(and lon, height) in the parameters; Earth rate and gravity need the latitude")
+        h.flag(
+            "warn",
+            "waiting for the map origin: no GNSS fix yet and no estimator.alignment.origin_lat_deg "
+            "(and lon, height) in the parameters; Earth rate and gravity need the latitude",
+        )
     elif state.phase == "aligning":
-        h.flag("note", "aligning: the first estimate comes after [online] align_s of static IMU data (or at once "
-                       "with alignment.initial_attitude_deg)")
+        h.flag(
+            "note",
+            "aligning: the first estimate comes after [online] align_s of static IMU data (or at once "
+            "with alignment.initial_attitude_deg)",
+        )
     dvl = state.streams.get("dvl")
     if dvl is not None and imu is not None and imu.received:
         silent = dvl.silent_s if dvl.received else math.inf
         where = f"DVL topic {dvl.topic}"
         if silent >= lim.dvl_silent_degraded_s:
-            h.flag("degraded", f"{where} silent for {_s(silent)} (sensor time): dead reckoning on the IMU (and depth) "
-                               "since, the position sigma growing; check the DVL driver")
+            h.flag(
+                "degraded",
+                f"{where} silent for {_s(silent)} (sensor time): dead reckoning on the IMU (and depth) "
+                "since, the position sigma growing; check the DVL driver",
+            )
         elif silent >= lim.dvl_silent_warn_s:
-            h.flag("warn", f"{where} silent for {_s(silent)} (sensor time): dead reckoning on the IMU meanwhile")
+            h.flag(
+                "warn",
+                f"{where} silent for {_s(silent)} (sensor time): dead reckoning on the IMU meanwhile",
+            )
         if state.no_lock_s >= lim.bottom_lock_degraded_s:
-            h.flag("degraded", f"no bottom lock for {state.no_lock_s:.1f} s (pings without a valid velocity): dead "
-                               "reckoning on the IMU (and depth) for long; the position sigma grows")
+            h.flag(
+                "degraded",
+                f"no bottom lock for {state.no_lock_s:.1f} s (pings without a valid velocity): dead "
+                "reckoning on the IMU (and depth) for long; the position sigma grows",
+            )
         elif state.no_lock_s >= lim.dvl_silent_warn_s:
-            h.flag("warn", f"no bottom lock for {state.no_lock_s:.1f} s (pings without a valid velocity): dead "
-                           "reckoning on the IMU (and depth) until the DVL finds the bottom")
+            h.flag(
+                "warn",
+                f"no bottom lock for {state.no_lock_s:.1f} s (pings without a valid velocity): dead "
+                "reckoning on the IMU (and depth) until the DVL finds the bottom",
+            )
     for s in state.streams.values():
         if s.jumps and s.since_jump_s < RECENT_S:
-            h.flag("warn", f"{s.topic}: stamp jump of {s.largest_jump_s:.3f} s {s.since_jump_s:.1f} s ago "
-                           f"({s.jumps} in all): a clock step or a gap in the driver's stamps")
+            h.flag(
+                "warn",
+                f"{s.topic}: stamp jump of {s.largest_jump_s:.3f} s {s.since_jump_s:.1f} s ago "
+                f"({s.jumps} in all): a clock step or a gap in the driver's stamps",
+            )
         if s.off_clock:
-            h.flag("warn", f"{s.topic}: {s.off_clock} message(s) stamped far from the IMU's clock, dropped: stamp "
-                           "every sensor on one clock (or raise clock_skew_s)")
+            h.flag(
+                "warn",
+                f"{s.topic}: {s.off_clock} message(s) stamped far from the IMU's clock, dropped: stamp "
+                "every sensor on one clock (or raise clock_skew_s)",
+            )
         if s.late or s.duplicates:
-            h.flag("note", f"{s.topic}: {s.late} message(s) later than the reorder window and {s.duplicates} "
-                           "duplicate(s), dropped")
+            h.flag(
+                "note",
+                f"{s.topic}: {s.late} message(s) later than the reorder window and {s.duplicates} "
+                "duplicate(s), dropped",
+            )
     # the pings the estimator could not use, counted as assess_health counts them (keyframe thinning and slow
     # pings are not rejections); the ones without a valid velocity are the bottom lock's, said above
-    rejected = {k: v for k, v in state.counters.items()
-                if k.startswith("dvl_") and v and k not in _NOT_REJECTIONS and k != "dvl_unusable"}
+    rejected = {
+        k: v
+        for k, v in state.counters.items()
+        if k.startswith("dvl_") and v and k not in _NOT_REJECTIONS and k != "dvl_unusable"
+    }
     if rejected:
-        h.flag("note", "DVL pings rejected: " + ", ".join(f"{v} {k.removeprefix('dvl_').replace('_', ' ')}"
-                                                          for k, v in sorted(rejected.items())))
-    dropped = {k: v for k, v in state.counters.items() if k.startswith("imu_") and k != "imu_gaps" and v}
+        h.flag(
+            "note",
+            "DVL pings rejected: "
+            + ", ".join(
+                f"{v} {k.removeprefix('dvl_').replace('_', ' ')}"
+                for k, v in sorted(rejected.items())
+            ),
+        )
+    dropped = {
+        k: v for k, v in state.counters.items() if k.startswith("imu_") and k != "imu_gaps" and v
+    }
     if dropped:
-        h.flag("note", "IMU samples dropped: " + ", ".join(f"{v} {k.removeprefix('imu_').replace('_', ' ')}"
-                                                           for k, v in sorted(dropped.items())))
+        h.flag(
+            "note",
+            "IMU samples dropped: "
+            + ", ".join(
+                f"{v} {k.removeprefix('imu_').replace('_', ' ')}"
+                for k, v in sorted(dropped.items())
+            ),
+        )
     return h
 
 

@@ -31,7 +31,9 @@ def path_length(n_p: np.ndarray) -> float:
 
 def attitude_errors_deg(n_R_b_est: np.ndarray, n_R_b_true: np.ndarray) -> np.ndarray:
     """(N, 3) attitude error about map axes (east, north, up) in degrees: log(R_est R_true^T)."""
-    return np.degrees(Rotation.from_matrix(n_R_b_est @ np.transpose(n_R_b_true, (0, 2, 1))).as_rotvec())
+    return np.degrees(
+        Rotation.from_matrix(n_R_b_est @ np.transpose(n_R_b_true, (0, 2, 1))).as_rotvec()
+    )
 
 
 @dataclass
@@ -52,7 +54,8 @@ class TrajectoryErrors:
         final_h = float(np.linalg.norm(self.position_m[-1, :2]))
         return {
             "final_horizontal_position_m": final_h,
-            "final_horizontal_position_pct_distance": 100.0 * final_h / self.distance_m if self.distance_m > 0
+            "final_horizontal_position_pct_distance": 100.0 * final_h / self.distance_m
+            if self.distance_m > 0
             else None,
             "position_rmse_m": float(np.sqrt(np.mean(np.sum(self.position_m**2, axis=1)))),
             "position_rmse_axes_m": np.sqrt(np.mean(self.position_m**2, axis=0)).tolist(),
@@ -66,8 +69,13 @@ class TrajectoryErrors:
 def trajectory_errors(result: NavResult, truth: TruthData) -> TrajectoryErrors:
     """Errors of result's states against the truth interpolated at their times."""
     n_p_true, n_R_b_true, n_v_true = truth_at(truth, result.t)
-    return TrajectoryErrors(result.t, attitude_errors_deg(result.n_R_b, n_R_b_true), result.n_p - n_p_true,
-                            result.n_v - n_v_true, path_length(truth.n_p))
+    return TrajectoryErrors(
+        result.t,
+        attitude_errors_deg(result.n_R_b, n_R_b_true),
+        result.n_p - n_p_true,
+        result.n_v - n_v_true,
+        path_length(truth.n_p),
+    )
 
 
 def truth_in_user_units(log: LogData) -> dict[str, Any]:
@@ -80,7 +88,10 @@ def truth_in_user_units(log: LogData) -> dict[str, Any]:
         out["misalignment"] = np.array(cal.misalignment_deg)
         out["time_offset"] = cal.time_offset_s
     truth_md = log.metadata.get("truth")
-    if isinstance(truth_md, dict) and (lever := (truth_md.get("dvl") or {}).get("b_lever_arm_m")) is not None:
+    if (
+        isinstance(truth_md, dict)
+        and (lever := (truth_md.get("dvl") or {}).get("b_lever_arm_m")) is not None
+    ):
         out["lever_arm"] = np.asarray(lever, dtype=float)
     if (bias := log.true_imu_bias) is not None:
         out["gyro_bias"] = np.array(bias.gyro_rad_s) / DEG_PER_H
@@ -98,27 +109,44 @@ def current_summary(wc: dict[str, Any], log: LogData) -> dict[str, Any]:
     det = np.asarray(wc["determined"], dtype=bool)
     depth = np.asarray(wc["depth_m"], dtype=float)
     water = log.dvl.water_track
-    out: dict[str, Any] = {"verdict": wc.get("verdict", ""), "states": len(t), "determined_share": float(det.mean())
-                           if len(det) else 0.0,
-                           "water_track_pings": int(np.sum(water)) if water is not None else 0}
+    out: dict[str, Any] = {
+        "verdict": wc.get("verdict", ""),
+        "states": len(t),
+        "determined_share": float(det.mean()) if len(det) else 0.0,
+        "water_track_pings": int(np.sum(water)) if water is not None else 0,
+    }
     layers = []
     for top in np.arange(0.0, float(depth.max()) + 50.0, 50.0) if len(depth) else []:
         m = (depth >= top) & (depth < top + 50.0) & det
         if m.any():
             mean = c[m].mean(axis=0)
-            layers.append({"depth_m": [float(top), float(top + 50.0)], "east_m_s": float(mean[0]),
-                           "north_m_s": float(mean[1]), "sigma_m_s": float(sig[m].mean()),
-                           "speed_m_s": float(np.hypot(*mean)), "states": int(m.sum())})
+            layers.append(
+                {
+                    "depth_m": [float(top), float(top + 50.0)],
+                    "east_m_s": float(mean[0]),
+                    "north_m_s": float(mean[1]),
+                    "sigma_m_s": float(sig[m].mean()),
+                    "speed_m_s": float(np.hypot(*mean)),
+                    "states": int(m.sum()),
+                }
+            )
     out["by_depth"] = layers
-    if "layer_thickness_m" in wc:  # the current per depth layer: each boundary crossed, the change across it
-        out["layers"] = {"thickness_m": wc["layer_thickness_m"], "boundaries": len(wc.get("layer_boundaries", [])),
-                         "shear": wc.get("layer_shear", [])}
+    if (
+        "layer_thickness_m" in wc
+    ):  # the current per depth layer: each boundary crossed, the change across it
+        out["layers"] = {
+            "thickness_m": wc["layer_thickness_m"],
+            "boundaries": len(wc.get("layer_boundaries", [])),
+            "shear": wc.get("layer_shear", []),
+        }
     truth = log.truth
     if truth is not None and truth.n_c is not None and det.any():
         k = np.clip(np.searchsorted(truth.t, t[det]), 0, len(truth.t) - 1)
         err = c[det] - truth.n_c[k, :2]
-        out["errors"] = {"rms_m_s": float(np.sqrt(np.mean(err**2))),
-                         "max_abs_z": float(np.max(np.abs(err / sig[det])))}
+        out["errors"] = {
+            "rms_m_s": float(np.sqrt(np.mean(err**2))),
+            "max_abs_z": float(np.max(np.abs(err / sig[det]))),
+        }
     return out
 
 
@@ -139,10 +167,20 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
         out["scale_nsigma"] = (result.scale - cal.scale) / result.scale_sigma
         if np.isfinite(result.time_offset_sigma_s):  # the DVL time offset was estimated
             out["dvl_time_offset_s"] = result.time_offset_s - cal.time_offset_s
-            out["dvl_time_offset_nsigma"] = (result.time_offset_s - cal.time_offset_s) / result.time_offset_sigma_s
-    truth_md = log.metadata.get("truth")  # a simulated log's true lever arm (its /tf_static may be wrong)
-    true_lever = truth_md.get("dvl", {}).get("b_lever_arm_m") if isinstance(truth_md, dict) else None
-    if result.lever_arm_m is not None and result.lever_arm_sigma_m is not None and true_lever is not None:
+            out["dvl_time_offset_nsigma"] = (
+                result.time_offset_s - cal.time_offset_s
+            ) / result.time_offset_sigma_s
+    truth_md = log.metadata.get(
+        "truth"
+    )  # a simulated log's true lever arm (its /tf_static may be wrong)
+    true_lever = (
+        truth_md.get("dvl", {}).get("b_lever_arm_m") if isinstance(truth_md, dict) else None
+    )
+    if (
+        result.lever_arm_m is not None
+        and result.lever_arm_sigma_m is not None
+        and true_lever is not None
+    ):
         err = result.lever_arm_m - np.asarray(true_lever, dtype=float)  # m, base_link
         out["dvl_lever_arm_m"] = err.tolist()
         out["dvl_lever_arm_nsigma"] = (err / result.lever_arm_sigma_m).tolist()
@@ -159,14 +197,24 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
 
 def noise_lines(noise: Any) -> list[str]:
     """The noise levels an estimator took from the data, one line each (result.info["noise"],
-    estimators/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor or to the static
+    estimators/models/noise_levels.py NoiseReport): the IMU densities raised to their quantisation floor or to the
+    static
     segment's measured density, the DVL fit, the depth and GNSS fits, the DVL's correlated error's."""
     if not isinstance(noise, dict):
         return []
     imu = [v for v in (noise.get("imu") or {}).values() if isinstance(v, dict)]
-    parts = imu + [v["static"] for v in imu if isinstance(v.get("static"), dict)] + [noise.get("dvl") or {}]
-    parts += [noise.get("depth") or {}, noise.get("gnss") or {}]  # the batch smoother's depth and GNSS fits
-    parts += [noise.get("dvl_correlated") or {}]  # the DVL's correlated error: fitted (batch) or held
+    parts = (
+        imu
+        + [v["static"] for v in imu if isinstance(v.get("static"), dict)]
+        + [noise.get("dvl") or {}]
+    )
+    parts += [
+        noise.get("depth") or {},
+        noise.get("gnss") or {},
+    ]  # the batch smoother's depth and GNSS fits
+    parts += [
+        noise.get("dvl_correlated") or {}
+    ]  # the DVL's correlated error: fitted (batch) or held
     return [str(p["why"]) for p in parts if isinstance(p, dict) and p.get("why")]
 
 
@@ -179,41 +227,58 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         "estimator": result.estimator,
         "log": log.source,
         "scale": {"value": result.scale, "sigma": result.scale_sigma},
-        "misalignment_deg": {"value": result.misalignment_deg.tolist(), "sigma": result.misalignment_sigma_deg.tolist(),
-                             "convention": "R_c = Rz(yaw) Ry(pitch) Rx(roll) in body FLU axes, b_R_d = R_c b_R_d0"},
-        "gyro_bias_deg_per_h": {"value": result.gyro_bias_deg_per_h.tolist(),
-                                "sigma": result.gyro_bias_sigma_deg_per_h.tolist()},
-        "accel_bias_ug": {"value": result.accel_bias_ug.tolist(), "sigma": result.accel_bias_sigma_ug.tolist()},
+        "misalignment_deg": {
+            "value": result.misalignment_deg.tolist(),
+            "sigma": result.misalignment_sigma_deg.tolist(),
+            "convention": "R_c = Rz(yaw) Ry(pitch) Rx(roll) in body FLU axes, b_R_d = R_c b_R_d0",
+        },
+        "gyro_bias_deg_per_h": {
+            "value": result.gyro_bias_deg_per_h.tolist(),
+            "sigma": result.gyro_bias_sigma_deg_per_h.tolist(),
+        },
+        "accel_bias_ug": {
+            "value": result.accel_bias_ug.tolist(),
+            "sigma": result.accel_bias_sigma_ug.tolist(),
+        },
         "distance_travelled_m": truth_dist,
         "final_horizontal_position_sigma_m": float(np.hypot(*result.position_sigma_m[-1, :2])),
         "duration_s": float(result.t[-1] - result.t[0]),
         "states": len(result.t),
         "timing_s": result.timing_s,
         "real_time_factor": float((result.t[-1] - result.t[0]) / result.timing_s["total"])
-        if result.timing_s.get("total") else None,
+        if result.timing_s.get("total")
+        else None,
         "info": result.info,
     }
     out["noise_levels"] = noise_lines(result.info.get("noise"))
     if isinstance(recentred := result.info.get("time_offset_prior"), dict) and recentred.get("why"):
-        out["noise_levels"].append(str(recentred["why"]))  # the EKF's warm-up: where its offset prior was centred
+        out["noise_levels"].append(
+            str(recentred["why"])
+        )  # the EKF's warm-up: where its offset prior was centred
     if np.isfinite(result.time_offset_sigma_s):
         out["dvl_time_offset_s"] = time_offset_verdict(result)
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:
         out["dvl_lever_arm_m"] = lever_arm_verdict(result, log)
-    if isinstance(hold := result.info.get("calibration_hold"), dict):  # (estimators/weak_hold.py)
+    if isinstance(
+        hold := result.info.get("calibration_hold"), dict
+    ):  # (estimators/models/weak_hold.py)
         out["calibration_hold"] = hold
     if isinstance(wc := result.info.get("water_current"), dict):
         out["water_current"] = current_summary(wc, log)
     errors = truth_errors(result, log)
     if errors is not None:
         out["errors"] = errors
-    from gtsam_dvl.analysis.health import assess_health  # health reads the config, which metrics does not need
+    from gtsam_dvl.analysis.health import (
+        assess_health,  # health reads the config, which metrics does not need
+    )
 
     out["health"] = assess_health(result, log).as_dict()
     # the motion and the weak calibration directions (analysis/geometry.py; their sentences are health warnings
     # or notes)
     out["geometry"] = out["health"]["figures"].get("geometry")
-    if "calibration_check" in out["health"]["figures"]:  # against a calibration file (analysis/calibration_check.py)
+    if (
+        "calibration_check" in out["health"]["figures"]
+    ):  # against a calibration file (analysis/calibration_check.py)
         out["calibration_check"] = out["health"]["figures"]["calibration_check"]
     out["losses"] = log.metadata.get("reader_losses", {})
     return out

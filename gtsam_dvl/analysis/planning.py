@@ -24,7 +24,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.types import Segment
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario
 
@@ -45,19 +45,30 @@ class PlanResult:
         return "\n".join(calibration_answer(self.report, self.determined_at_s, "plan"))
 
 
-def plan_mission(scenario: Scenario, config: EstimatorConfig | None = None, seed: int = 0,
-                 progress: ProgressFn | None = None) -> PlanResult:
+def plan_mission(
+    scenario: Scenario,
+    config: EstimatorConfig | None = None,
+    seed: int = 0,
+    progress: ProgressFn | None = None,
+) -> PlanResult:
     """Covariance analysis of a scenario (see module doc); takes seconds."""
     start = time.perf_counter()
     config = config or scenario.estimator_configuration()
     if config.imu.bias_model != "constant":
-        raise GtsamDvlError("planning needs imu.bias_model = 'constant' (the filtering timeline of a random-walk "
-                            "bias is not implemented)")
+        raise GtsamDvlError(
+            "planning needs imu.bias_model = 'constant' (the filtering timeline of a random-walk "
+            "bias is not implemented)"
+        )
     log = simulate(scenario, seed, white_noise=False)
     if progress:
         progress(0.2)
-    result = smooth_batch(log, config, timeline=True, estimator="plan",
-                          progress=(lambda f: progress(0.2 + 0.7 * f)) if progress else None)
+    result = smooth_batch(
+        log,
+        config,
+        timeline=True,
+        estimator="plan",
+        progress=(lambda f: progress(0.2 + 0.7 * f)) if progress else None,
+    )
     assert result.timeline is not None  # asked for, with a constant bias
     timeline = result.timeline
     obs = analyse(result, config).for_plan()
@@ -65,5 +76,13 @@ def plan_mission(scenario: Scenario, config: EstimatorConfig | None = None, seed
     shares = attribute_segments(obs, timeline, segments)
     if progress:
         progress(1.0)
-    return PlanResult(scenario.name, result, timeline, obs, determined_at(obs, timeline), segments, shares,
-                      time.perf_counter() - start)
+    return PlanResult(
+        scenario.name,
+        result,
+        timeline,
+        obs,
+        determined_at(obs, timeline),
+        segments,
+        shares,
+        time.perf_counter() - start,
+    )

@@ -50,8 +50,12 @@ class PriorDistance:
         return int(np.argmax(np.abs(self.z)))
 
     def as_dict(self) -> dict[str, Any]:
-        return {"components": self.state.component_names(), "nsigma": self.z.tolist(),
-                "offset": self.offset_display.tolist(), "unit": self.state.display_unit}
+        return {
+            "components": self.state.component_names(),
+            "nsigma": self.z.tolist(),
+            "offset": self.offset_display.tolist(),
+            "unit": self.state.display_unit,
+        }
 
 
 @dataclass
@@ -65,19 +69,27 @@ class PriorReport:
         return {name: d.as_dict() for name, d in self.distances.items()}
 
 
-def prior_distances(result: NavResult, log: LogData, config: EstimatorConfig) -> dict[str, PriorDistance]:
+def prior_distances(
+    result: NavResult, log: LogData, config: EstimatorConfig
+) -> dict[str, PriorDistance]:
     """The distance of each estimated shared state from its prior (module doc). The prior is the configuration's,
     around the mounting the result was made with (its b_R_d0 from /tf_static, the log's lever arm)."""
     mounting = dataclasses.replace(log.mounting, b_R_d0=np.asarray(result.b_R_d0, dtype=float))
     out: dict[str, PriorDistance] = {}
-    from_file = (result.info.get("calibration_prior") or {}).get("states", [])  # judged by calibration_check.py
+    from_file = (result.info.get("calibration_prior") or {}).get(
+        "states", []
+    )  # judged by calibration_check.py
     for s in STATES:
         est = result.calibration.get(s.name)
         if est is None or not s.enabled(config) or s.per_state(config) or s.name in from_file:
             continue
         prior = s.prior(config, mounting)
-        if s.kind == "rot3":  # R_c's rotation vector about body axes (the prior's sigmas are about them)
-            offset = so3_log(np.asarray(est.value, dtype=float) @ np.asarray(prior.value, dtype=float).T)
+        if (
+            s.kind == "rot3"
+        ):  # R_c's rotation vector about body axes (the prior's sigmas are about them)
+            offset = so3_log(
+                np.asarray(est.value, dtype=float) @ np.asarray(prior.value, dtype=float).T
+            )
         else:
             offset = np.asarray(est.value, dtype=float) - np.asarray(prior.value, dtype=float)
         offset = np.asarray(offset, dtype=float).reshape(s.dim)
@@ -96,12 +108,16 @@ def check_priors(result: NavResult, log: LogData, config: EstimatorConfig) -> Pr
             continue
         s = d.state
         what = s.component_texts()[k]
-        if straight and s.name == "accel_bias" and k == 0:  # the forward axis on one heading: the pitch coupling
+        if (
+            straight and s.name == "accel_bias" and k == 0
+        ):  # the forward axis on one heading: the pitch coupling
             report.findings.append(("degraded", _pitch_coupling(what, d, s)))
             continue
-        text = (f"{what} is {abs(d.z[k]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[k])} off; "
-                f"the prior allows {PRIOR_NSIGMA_FAILED:g} sigmas): {_cause(s, d, config, peak_rate_deg_s)}; do not "
-                "use this result")
+        text = (
+            f"{what} is {abs(d.z[k]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[k])} off; "
+            f"the prior allows {PRIOR_NSIGMA_FAILED:g} sigmas): {_cause(s, d, config, peak_rate_deg_s)}; do not "
+            "use this result"
+        )
         report.findings.append(("failed", text))
     return report
 
@@ -123,11 +139,15 @@ def heading_span_deg(result: NavResult) -> float:
 
 def _pitch_coupling(what: str, d: PriorDistance, s: SharedState) -> str:
     """The warning for a forward accelerometer bias far from its prior on a straight run (STRAIGHT_SPAN_DEG)."""
-    pitch_deg = float(np.degrees(d.offset_display[0] * 1e-6))  # a bias of 1 micro-g is a pitch of 1e-6 rad
-    return (f"{what} is {abs(d.z[0]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[0])} off) on a "
-            f"straight run: on one heading the forward accelerometer bias trades against the pitch (a pitch or DVL "
-            f"pitch-misalignment error of {pitch_deg:+.3f} deg reads as this bias); not determined by this run, "
-            "treat the along-track bias and the pitch with caution (a turn or a depth change separates them)")
+    pitch_deg = float(
+        np.degrees(d.offset_display[0] * 1e-6)
+    )  # a bias of 1 micro-g is a pitch of 1e-6 rad
+    return (
+        f"{what} is {abs(d.z[0]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[0])} off) on a "
+        f"straight run: on one heading the forward accelerometer bias trades against the pitch (a pitch or DVL "
+        f"pitch-misalignment error of {pitch_deg:+.3f} deg reads as this bias); not determined by this run, "
+        "treat the along-track bias and the pitch with caution (a turn or a depth change separates them)"
+    )
 
 
 def _amount(s: SharedState, value: float) -> str:
@@ -145,28 +165,42 @@ def _peak_rate_deg_s(log: LogData) -> float:
     return float(np.degrees(np.nanmax(np.linalg.norm(w, axis=1))))
 
 
-def _cause(s: SharedState, d: PriorDistance, config: EstimatorConfig, peak_rate_deg_s: float) -> str:
+def _cause(
+    s: SharedState, d: PriorDistance, config: EstimatorConfig, peak_rate_deg_s: float
+) -> str:
     """The likely cause of a state far from its prior, and what to do, in words that name existing settings."""
-    saturation = (f"IMU saturation? (an IMU axis clipping at its range, the gyro in fast turns, reads as a wrong "
-                  f"bias or scale; the peak body rate in this log is {peak_rate_deg_s:.1f} deg/s)")
+    saturation = (
+        f"IMU saturation? (an IMU axis clipping at its range, the gyro in fast turns, reads as a wrong "
+        f"bias or scale; the peak body rate in this log is {peak_rate_deg_s:.1f} deg/s)"
+    )
     if s.name == "misalignment":
         angle = float(np.linalg.norm(d.offset_display))
-        return (f"the DVL mounting in /tf_static (base_link -> dvl_link) is off by {angle:.1f} deg; correct the "
-                "mounting, or widen [priors] misalignment_sigma_deg if the DVL is mounted that loosely")
+        return (
+            f"the DVL mounting in /tf_static (base_link -> dvl_link) is off by {angle:.1f} deg; correct the "
+            "mounting, or widen [priors] misalignment_sigma_deg if the DVL is mounted that loosely"
+        )
     if s.name == "scale":
-        return ("check the DVL's scale or its sound-speed setting (a speed of sound set wrong scales every "
-                f"velocity), or widen [priors] scale_sigma; or {saturation}")
+        return (
+            "check the DVL's scale or its sound-speed setting (a speed of sound set wrong scales every "
+            f"velocity), or widen [priors] scale_sigma; or {saturation}"
+        )
     if s.name == "gyro_bias":
         return f"{saturation}; or a gyro bias beyond [imu] gyro_bias_sigma_deg_per_h"
     if s.name == "accel_bias":
-        return (f"an accelerometer bias beyond [imu] accel_bias_sigma_ug, or a wrong IMU mounting in /tf_static; "
-                f"or {saturation}")
+        return (
+            f"an accelerometer bias beyond [imu] accel_bias_sigma_ug, or a wrong IMU mounting in /tf_static; "
+            f"or {saturation}"
+        )
     if s.name == "time_offset":
         dt = float(d.offset_display[0]) / 1e3 + config.dvl.time_offset_prior_s
         sign = "early" if dt > 0 else "late"
-        return (f"the time offset is beyond its prior (the DVL stamps {sign} by {abs(dt):.3f} s); set "
-                "[dvl] time_offset_prior_s near it or widen [dvl] time_offset_sigma_s")
+        return (
+            f"the time offset is beyond its prior (the DVL stamps {sign} by {abs(dt):.3f} s); set "
+            "[dvl] time_offset_prior_s near it or widen [dvl] time_offset_sigma_s"
+        )
     if s.name == "lever_arm":
-        return (f"the DVL lever arm in /tf_static is off by {float(np.linalg.norm(d.offset_display)):.2f} m; "
-                "correct the mounting, or widen [dvl] lever_arm_sigma_m")
+        return (
+            f"the DVL lever arm in /tf_static is off by {float(np.linalg.norm(d.offset_display)):.2f} m; "
+            "correct the mounting, or widen [dvl] lever_arm_sigma_m"
+        )
     return f"the prior of the {s.description} does not fit this log"

@@ -13,9 +13,9 @@ import numpy as np
 
 from gtsam_dvl.core.config import AlignmentConfig
 from gtsam_dvl.core.types import LogData, Segment
-from gtsam_dvl.estimators.alignment import detect_static_end, window_means
+from gtsam_dvl.estimators.inputs.alignment import detect_static_end, window_means
+from gtsam_dvl.estimators.inputs.mounting import imu_in_base_link
 from gtsam_dvl.estimators.iodvlc import detect_type1_segments
-from gtsam_dvl.estimators.mounting import imu_in_base_link
 
 TURN_RATE_DEG_S = 0.3
 MIN_SEGMENT_S = 5.0
@@ -26,13 +26,17 @@ def classify_log(log: LogData) -> list[Segment]:
     imu = imu_in_base_link(log.imu, log.mounting)
     ends, w_mean = window_means(imu.t, imu.b_omega)
     starts = ends - 1.0
-    labels = np.where(np.degrees(np.linalg.norm(w_mean, axis=1)) > TURN_RATE_DEG_S, "turn", "cruise").astype(object)
+    labels = np.where(
+        np.degrees(np.linalg.norm(w_mean, axis=1)) > TURN_RATE_DEG_S, "turn", "cruise"
+    ).astype(object)
     t_static = detect_static_end(imu, log.dvl, AlignmentConfig())
     labels[ends <= t_static] = "static"
     for k, seg in enumerate(detect_type1_segments(imu)):
         sel = (starts >= seg.start_s - 0.5) & (ends <= seg.end_s + 0.5) & (labels != "static")
         axis = "xyz"[int(np.argmax(np.abs(seg.axis)))]
-        labels[sel] = f"type1 (specific-force rate along body {axis})#{k}"  # '#k' keeps neighbours apart
+        labels[sel] = (
+            f"type1 (specific-force rate along body {axis})#{k}"  # '#k' keeps neighbours apart
+        )
     rows: list[dict[str, Any]] = []
     for s, e, lab in zip(starts, ends, labels, strict=True):
         if rows and rows[-1]["kind"] == lab:
@@ -49,5 +53,7 @@ def classify_log(log: LogData) -> list[Segment]:
             merged.append(row)
     for row in merged:
         row["kind"] = row["kind"].split("#")[0]
-        row["type"] = "I" if row["kind"].startswith("type1") else "II" if row["kind"] == "turn" else "-"
+        row["type"] = (
+            "I" if row["kind"].startswith("type1") else "II" if row["kind"] == "turn" else "-"
+        )
     return [Segment.from_dict(row) for row in merged]

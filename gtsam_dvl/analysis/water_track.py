@@ -1,7 +1,7 @@
 """Water-track pings in the health check: the stretches, their residuals against the estimated current, and false
 bottom lock.
 
-A water-track ping measures the velocity relative to the water (estimators/current.py): its residual is the
+A water-track ping measures the velocity relative to the water (estimators/models/current.py): its residual is the
 bottom-track residual (analysis/health.py dvl_residuals, against the velocity over ground) plus the current seen in
 dvl_link, k d_R_b n_R_b^T [c_east, c_north, 0]. This module
 
@@ -27,10 +27,14 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.selection import ping_covariance, water_covariance
+from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 
-WATER_RMS_WARN = 2.0  # whitened RMS of the water-track residuals above which the current model does not fit
-FALSE_LOCK_CHI2 = 16.27  # chi^2 (3 dof) 0.999 quantile: a bottom-track ping that disagrees with the ground
+WATER_RMS_WARN = (
+    2.0  # whitened RMS of the water-track residuals above which the current model does not fit
+)
+FALSE_LOCK_CHI2 = (
+    16.27  # chi^2 (3 dof) 0.999 quantile: a bottom-track ping that disagrees with the ground
+)
 WATER_AGREES_CHI2 = 7.81  # chi^2 (3 dof) 0.95 quantile: ...and agrees with the water track
 STRETCH_GAP_S = 5.0  # water-track pings further apart than this are two stretches
 
@@ -64,8 +68,14 @@ def _current_at(profile: dict[str, Any], t: np.ndarray) -> tuple[np.ndarray, np.
     return c, var
 
 
-def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, res: Any,
-                      figures: dict[str, Any], flag: Callable[[str, str], None]) -> None:
+def check_water_track(
+    result: NavResult,
+    log: LogData,
+    config: EstimatorConfig,
+    res: Any,
+    figures: dict[str, Any],
+    flag: Callable[[str, str], None],
+) -> None:
     """The water-track findings of a run (module doc) into the health's figures ("water_track") and flags. res:
     analysis/health.py DvlResiduals of the run (its raw residuals, ping indices and water-track mask)."""
     dvl = log.dvl
@@ -74,14 +84,24 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     water = np.asarray(dvl.water_track, dtype=bool)
     runs = stretches(np.asarray(dvl.t, dtype=float), water)
     profile = result.info.get("water_current")
-    span = ", ".join(f"{a:.0f}-{b:.0f} s ({n})" for a, b, n in runs[:5]) + (" ..." if len(runs) > 5 else "")
-    fig: dict[str, Any] = {"pings": int(water.sum()), "stretches": [list(r) for r in runs],
-                           "used": isinstance(profile, dict)}
+    span = ", ".join(f"{a:.0f}-{b:.0f} s ({n})" for a, b, n in runs[:5]) + (
+        " ..." if len(runs) > 5 else ""
+    )
+    fig: dict[str, Any] = {
+        "pings": int(water.sum()),
+        "stretches": [list(r) for r in runs],
+        "used": isinstance(profile, dict),
+    }
     figures["water_track"] = fig
-    if not isinstance(profile, dict):  # refused: counted and judged by analysis/health.py (dvl_water_track)
+    if not isinstance(
+        profile, dict
+    ):  # refused: counted and judged by analysis/health.py (dvl_water_track)
         return
-    flag("note", f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
-                 f"current as a state; the current: {profile.get('verdict', '')}")
+    flag(
+        "note",
+        f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
+        f"current as a state; the current: {profile.get('verdict', '')}",
+    )
     r, idx, on_water = res.residual_m_s, res.index, res.water
     if r is None or idx is None or on_water is None or not len(idx):
         return
@@ -90,8 +110,11 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     # the current seen in dvl_link at each ping: k d_R_b n_R_b^T c, with the nearest state's attitude
     state = np.clip(np.searchsorted(result.t, t_p), 0, len(result.t) - 1)
     n_R_b = np.asarray(result.n_R_b)[state]
-    d_R_n = np.einsum("ij,njk->nik", float(result.scale) * np.asarray(result.b_R_d).T,
-                      np.transpose(n_R_b, (0, 2, 1)))
+    d_R_n = np.einsum(
+        "ij,njk->nik",
+        float(result.scale) * np.asarray(result.b_R_d).T,
+        np.transpose(n_R_b, (0, 2, 1)),
+    )
     c_d = np.einsum("nij,nj->ni", d_R_n, c)
     # its covariance from the current's (east, north)
     cov_c = np.einsum("nia,na,nja->nij", d_R_n[:, :, :2], var_c, d_R_n[:, :, :2])
@@ -99,7 +122,9 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
     wt = on_water & seen
     if wt.any():
         r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
-        if (k_w := result.calibration.get("water_scale")) is not None:  # their own scale: y - (k_w / k) h_water
+        if (
+            k_w := result.calibration.get("water_scale")
+        ) is not None:  # their own scale: y - (k_w / k) h_water
             y = np.asarray(dvl.d_v[idx[wt]], dtype=float)
             r_w = y - (y - r_w) * float(k_w.value[0]) / float(result.scale)
         cov = water_covariance(config, dvl.d_cov[idx[wt]]) + cov_c[wt]
@@ -107,10 +132,13 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
         rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))
         fig["whitened_rms"] = rms
         if rms > WATER_RMS_WARN:
-            flag("warn", f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
-                         "water_track_sigma_m_s) with the estimated current: the current "
-                         "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
-                         "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger")
+            flag(
+                "warn",
+                f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
+                "water_track_sigma_m_s) with the estimated current: the current "
+                "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
+                "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger",
+            )
     bt = ~on_water & seen
     determined = np.sqrt(var_c.max(axis=1)) < 0.5 * config.current.prior_sigma_m_s
     if bt.any():
@@ -118,13 +146,22 @@ def check_water_track(result: NavResult, log: LogData, config: EstimatorConfig, 
         r_g = r[bt]
         chi2_g = np.einsum("ni,ni->n", r_g, np.linalg.solve(cov_g, r_g[..., None])[..., 0])
         r_w = r_g + c_d[bt]
-        chi2_w = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov_g + cov_c[bt], r_w[..., None])[..., 0])
-        big = np.linalg.norm(c[bt, :2], axis=1) > 3.0 * np.sqrt(np.trace(cov_g, axis1=1, axis2=2) / 3.0)
-        false_lock = (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]
+        chi2_w = np.einsum(
+            "ni,ni->n", r_w, np.linalg.solve(cov_g + cov_c[bt], r_w[..., None])[..., 0]
+        )
+        big = np.linalg.norm(c[bt, :2], axis=1) > 3.0 * np.sqrt(
+            np.trace(cov_g, axis1=1, axis2=2) / 3.0
+        )
+        false_lock = (
+            (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]
+        )
         fig["false_lock_pings"] = int(false_lock.sum())
         if false_lock.any():
             times = t_p[bt][false_lock]
-            flag("warn", f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) disagree "
-                         "with the velocity over ground and agree with the water track (velocity relative to the "
-                         "water): a false bottom lock (a scattering layer, or the water near the DVL's range limit); "
-                         "their factors were down-weighted by the robust kernel, check the DVL's altitude there")
+            flag(
+                "warn",
+                f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) disagree "
+                "with the velocity over ground and agree with the water track (velocity relative to the "
+                "water): a false bottom lock (a scattering layer, or the water near the DVL's range limit); "
+                "their factors were down-weighted by the robust kernel, check the DVL's altitude there",
+            )

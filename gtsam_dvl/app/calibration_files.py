@@ -30,7 +30,9 @@ from gtsam_dvl.io.calibration_file import read_calibration
 from gtsam_dvl.io.result_writer import file_sha256
 
 
-def vehicle_name(log_path: Path | str, vehicle: str | None, prior: VehicleCalibration | None = None) -> str:
+def vehicle_name(
+    log_path: Path | str, vehicle: str | None, prior: VehicleCalibration | None = None
+) -> str:
     """--vehicle, else the prior's vehicle, else the log's folder name (module doc)."""
     if vehicle:
         return vehicle
@@ -39,31 +41,39 @@ def vehicle_name(log_path: Path | str, vehicle: str | None, prior: VehicleCalibr
     return Path(log_path).absolute().parent.name or "vehicle"
 
 
-def calibration_prior(path: Path | str, log: LogData, config: EstimatorConfig, vehicle: str | None = None
-                      ) -> tuple[VehicleCalibration, dict[str, Any]]:
+def calibration_prior(
+    path: Path | str, log: LogData, config: EstimatorConfig, vehicle: str | None = None
+) -> tuple[VehicleCalibration, dict[str, Any]]:
     """The file's calibration inflated for the days from its date to the log's start (module doc), and what to
     record of it (file, days, per_day, the variances' factor)."""
     cal = read_calibration(path)
     if vehicle and cal.vehicle and vehicle != cal.vehicle:
-        raise GtsamDvlError(f"{path}: a calibration of vehicle {cal.vehicle!r}, not of {vehicle!r} (--vehicle)")
+        raise GtsamDvlError(
+            f"{path}: a calibration of vehicle {cal.vehicle!r}, not of {vehicle!r} (--vehicle)"
+        )
     inflated, inflation = inflated_for(cal, log, config)
     return inflated, {"file": str(path), **inflation}
 
 
-def inflated_for(cal: VehicleCalibration, log: LogData, config: EstimatorConfig
-                 ) -> tuple[VehicleCalibration, dict[str, Any]]:
+def inflated_for(
+    cal: VehicleCalibration, log: LogData, config: EstimatorConfig
+) -> tuple[VehicleCalibration, dict[str, Any]]:
     """A calibration inflated for the days from its date to the log's start ([calibration] inflation_per_day),
     and the inflation (days, per_day, the variances' factor)."""
     return inflated_at(cal, log.t0_ns, config)
 
 
-def inflated_at(cal: VehicleCalibration, t0_ns: int, config: EstimatorConfig
-                ) -> tuple[VehicleCalibration, dict[str, Any]]:
+def inflated_at(
+    cal: VehicleCalibration, t0_ns: int, config: EstimatorConfig
+) -> tuple[VehicleCalibration, dict[str, Any]]:
     """inflated_for a dive that starts at t0_ns (ns since the Unix epoch): the ROS 2 node's start."""
     days = cal.days_before(iso_date(t0_ns))
     per_day = config.calibration.inflation_per_day
-    return cal.inflated(days, per_day), {"days": days, "per_day": per_day,
-                                         "variance_factor": 1.0 + per_day * max(days, 0.0)}
+    return cal.inflated(days, per_day), {
+        "days": days,
+        "per_day": per_day,
+        "variance_factor": 1.0 + per_day * max(days, 0.0),
+    }
 
 
 def calibration_data(path: Path | str) -> dict[str, Any]:
@@ -80,12 +90,19 @@ def record_prior(result: NavResult, inflation: dict[str, Any]) -> None:
         prior["inflation"] = inflation
 
 
-def calibration_of_run(result: NavResult, log_path: Path | str, config: EstimatorConfig, vehicle: str,
-                       prior: VehicleCalibration | None = None) -> VehicleCalibration:
+def calibration_of_run(
+    result: NavResult,
+    log_path: Path | str,
+    config: EstimatorConfig,
+    vehicle: str,
+    prior: VehicleCalibration | None = None,
+) -> VehicleCalibration:
     """The run's posterior of the vehicle's states as a calibration (module doc)."""
     source = SourceLog(str(log_path), file_sha256(log_path))
     earlier = prior.sources if prior is not None else ()
-    return from_result(result, config, vehicle, sources=(*earlier, source), ekf=result.estimator == "ekf")
+    return from_result(
+        result, config, vehicle, sources=(*earlier, source), ekf=result.estimator == "ekf"
+    )
 
 
 def prior_line(summary: dict[str, Any]) -> str | None:
@@ -94,8 +111,13 @@ def prior_line(summary: dict[str, Any]) -> str | None:
     if not isinstance(prior, dict):
         return None
     infl = prior.get("inflation") or {}
-    age = (f", {infl['days']:.0f} days before this dive: variances x{infl['variance_factor']:.3g}"
-           if infl.get("days", 0) > 0 else "")
+    age = (
+        f", {infl['days']:.0f} days before this dive: variances x{infl['variance_factor']:.3g}"
+        if infl.get("days", 0) > 0
+        else ""
+    )
     where = f" ({infl['file']})" if infl.get("file") else ""
-    return (f"  prior of {', '.join(prior.get('states', []))}: {prior.get('vehicle') or 'the vehicle'}'s calibration "
-            f"of {str(prior.get('date', ''))[:10]}{where}{age}")
+    return (
+        f"  prior of {', '.join(prior.get('states', []))}: {prior.get('vehicle') or 'the vehicle'}'s calibration "
+        f"of {str(prior.get('date', ''))[:10]}{where}{age}"
+    )

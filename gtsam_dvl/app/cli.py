@@ -55,21 +55,35 @@ def _print_version(value: bool) -> None:
 
 
 @app.callback()
-def _root(debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
-          version: Annotated[bool, typer.Option("--version", help="Print the version and exit.", is_eager=True,
-                                                callback=_print_version)] = False) -> None:
+def _root(
+    debug: Annotated[bool, typer.Option("--debug", help="Show tracebacks.")] = False,
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", help="Print the version and exit.", is_eager=True, callback=_print_version
+        ),
+    ] = False,
+) -> None:
     _state["debug"] = debug
 
 
 @app.command()
 @_user_errors
 def simulate(
-    scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a TOML file.")],
+    scenario: Annotated[
+        str,
+        typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a TOML file."),
+    ],
     output: Annotated[Path, typer.Option("-o", "--output", help="MCAP file to write.")],
     seed: Annotated[int, typer.Option(help="Random seed: same seed, same bytes.")] = 7,
-    no_noise: Annotated[bool, typer.Option("--no-noise", help="No white noise, correlated DVL error, dropouts or "
-                                                           "outliers (biases, quantisation and calibration kept).")
-                        ] = False,
+    no_noise: Annotated[
+        bool,
+        typer.Option(
+            "--no-noise",
+            help="No white noise, correlated DVL error, dropouts or "
+            "outliers (biases, quantisation and calibration kept).",
+        ),
+    ] = False,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
@@ -77,9 +91,13 @@ def simulate(
     from gtsam_dvl.app.commands import check_folders, check_outputs, simulate_to_file
 
     check_folders({"-o": output})
-    check_outputs({"the scenario": Path(scenario) if Path(scenario).exists() else None}, {"-o": output})
+    check_outputs(
+        {"the scenario": Path(scenario) if Path(scenario).exists() else None}, {"-o": output}
+    )
 
-    result = simulate_to_file(scenario, output, seed=seed, white_noise=not no_noise, show_progress=not quiet)
+    result = simulate_to_file(
+        scenario, output, seed=seed, white_noise=not no_noise, show_progress=not quiet
+    )
     typer.echo(result.describe())
 
 
@@ -88,18 +106,36 @@ def simulate(
 def plot_log(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
+    imu_topic: ImuTopic = "/imu/data_raw",
+    dvl_topic: DvlTopic = None,
+    salvage: Salvage = False,
+    repair: Repair = False,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
+    dvl_water_topic: DvlWaterTopic = None,
     debug: Debug = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
     from gtsam_dvl.app.commands import check_folders, plot_log_to_dir
 
     check_folders({}, {"-o": output})
-    for path in plot_log_to_dir(log, output, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
-                                                                   gnss_topic, attitude_topic, truth_topic,
-                                                                   dvl_water_topic)):
+    for path in plot_log_to_dir(
+        log,
+        output,
+        **_read_options(
+            imu_topic,
+            dvl_topic,
+            salvage,
+            repair,
+            depth_topic,
+            gnss_topic,
+            attitude_topic,
+            truth_topic,
+            dvl_water_topic,
+        ),
+    ):
         typer.echo(str(path))
 
 
@@ -107,9 +143,15 @@ def plot_log(
 @_user_errors
 def info(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
+    imu_topic: ImuTopic = "/imu/data_raw",
+    dvl_topic: DvlTopic = None,
+    salvage: Salvage = False,
+    repair: Repair = False,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
+    dvl_water_topic: DvlWaterTopic = None,
     debug: Debug = False,
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration; of a result of `smooth -o`,
@@ -120,8 +162,22 @@ def info(
     if as_result is not None:
         typer.echo(as_result)
         return
-    typer.echo(describe_log(log, **_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
-                                                     attitude_topic, truth_topic, dvl_water_topic)))
+    typer.echo(
+        describe_log(
+            log,
+            **_read_options(
+                imu_topic,
+                dvl_topic,
+                salvage,
+                repair,
+                depth_topic,
+                gnss_topic,
+                attitude_topic,
+                truth_topic,
+                dvl_water_topic,
+            ),
+        )
+    )
 
 
 SMOOTH_HELP = (
@@ -142,73 +198,170 @@ SMOOTH_HELP = (
 @app.command(help=SMOOTH_HELP)
 @_user_errors
 def smooth(
-    logs: Annotated[list[Path], typer.Argument(help="MCAP log (or rosbag2 directory); several with --out-dir.",
-                                               metavar="LOG...")],
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")] = None,
-    mode: Annotated[str, typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc.")
-                    ] = "batch",
+    logs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="MCAP log (or rosbag2 directory); several with --out-dir.", metavar="LOG..."
+        ),
+    ],
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")
+    ] = None,
+    mode: Annotated[
+        str,
+        typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc."),
+    ] = "batch",
     summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
-    tum: Annotated[Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")] = None,
+    tum: Annotated[
+        Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")
+    ] = None,
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
-    timeline: Annotated[bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")] = True,
-    timeline_npz: Annotated[Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
-                            ] = None,
+    imu_topic: ImuTopic = "/imu/data_raw",
+    dvl_topic: DvlTopic = None,
+    salvage: Salvage = False,
+    repair: Repair = False,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
+    dvl_water_topic: DvlWaterTopic = None,
+    timeline: Annotated[
+        bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")
+    ] = True,
+    timeline_npz: Annotated[
+        Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
+    ] = None,
     quiet: Quiet = False,
-    strict: Annotated[bool, typer.Option("--strict", help="Exit with code 3 when the run's health is degraded or "
-                                                          "failed (the outputs are still written).")] = False,
-    out_dir: Annotated[Path | None, typer.Option("--out-dir", help="Fleet processing: smooth every LOG in parallel "
-                                                                   "(Dask) into DIR/<log name>/, with a table of all "
-                                                                   "runs in DIR/fleet.md.")] = None,
-    scheduler: Annotated[str | None, typer.Option("--scheduler", help="With --out-dir: a running Dask scheduler "
-                                                                      "(default: a LocalCluster here).")] = None,
-    workers: Annotated[int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")] = None,
+    strict: Annotated[
+        bool,
+        typer.Option(
+            "--strict",
+            help="Exit with code 3 when the run's health is degraded or "
+            "failed (the outputs are still written).",
+        ),
+    ] = False,
+    out_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--out-dir",
+            help="Fleet processing: smooth every LOG in parallel "
+            "(Dask) into DIR/<log name>/, with a table of all "
+            "runs in DIR/fleet.md.",
+        ),
+    ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="With --out-dir: a running Dask scheduler (default: a LocalCluster here).",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")
+    ] = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
-    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior of its states "
-                                                     "(inflated by [calibration] inflation_per_day for its age).")
-                           ] = None,
-    calibration_out: Annotated[Path | None, typer.Option(help="Write this run's calibration file (TOML).")] = None,
-    vehicle: Annotated[str | None, typer.Option(help="Vehicle name (default: --calibration's, else the log's "
-                                                     "folder name).")] = None,
+    calibration: Annotated[
+        Path | None,
+        typer.Option(
+            help="A vehicle's calibration file as the prior of its states "
+            "(inflated by [calibration] inflation_per_day for its age)."
+        ),
+    ] = None,
+    calibration_out: Annotated[
+        Path | None, typer.Option(help="Write this run's calibration file (TOML).")
+    ] = None,
+    vehicle: Annotated[
+        str | None,
+        typer.Option(help="Vehicle name (default: --calibration's, else the log's folder name)."),
+    ] = None,
     debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
     from gtsam_dvl.app.commands import check_folders, smooth_file
 
-    check_folders({"-o": output, "--summary": summary, "--tum": tum, "--timeline-npz": timeline_npz,
-                   "--calibration-out": calibration_out}, {"--out-dir": out_dir})
-    read_options = _read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic, attitude_topic,
-                                 truth_topic, dvl_water_topic)
+    check_folders(
+        {
+            "-o": output,
+            "--summary": summary,
+            "--tum": tum,
+            "--timeline-npz": timeline_npz,
+            "--calibration-out": calibration_out,
+        },
+        {"--out-dir": out_dir},
+    )
+    read_options = _read_options(
+        imu_topic,
+        dvl_topic,
+        salvage,
+        repair,
+        depth_topic,
+        gnss_topic,
+        attitude_topic,
+        truth_topic,
+        dvl_water_topic,
+    )
     if out_dir is not None or len(logs) > 1:
-        if (out_dir is None or output is not None or summary is not None or tum is not None or timeline_npz
-                or calibration or calibration_out):
-            raise GtsamDvlError("several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
-                                "--summary, --tum, --timeline-npz, --calibration and --calibration-out take one log")
+        if (
+            out_dir is None
+            or output is not None
+            or summary is not None
+            or tum is not None
+            or timeline_npz
+            or calibration
+            or calibration_out
+        ):
+            raise GtsamDvlError(
+                "several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
+                "--summary, --tum, --timeline-npz, --calibration and --calibration-out take one log"
+            )
         from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
 
-        rows, written = smooth_fleet(logs, out_dir, mode=mode, config_path=config, read_options=read_options,
-                                     scheduler=scheduler, workers=workers, show_progress=not quiet,
-                                     scheduler_timeout_s=scheduler_timeout)
+        rows, written = smooth_fleet(
+            logs,
+            out_dir,
+            mode=mode,
+            config_path=config,
+            read_options=read_options,
+            scheduler=scheduler,
+            workers=workers,
+            show_progress=not quiet,
+            scheduler_timeout_s=scheduler_timeout,
+        )
         typer.echo("\n".join(fleet_table(rows)))
         for path in written:
             typer.echo(f"wrote {path}")
         bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] in UNHEALTHY)]
         if any(r["status"] == "error" for r in rows):
-            typer.echo(f"gtsam-dvl: error: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed; "
-                       "their errors are in the table", err=True)
+            typer.echo(
+                f"gtsam-dvl: error: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed; "
+                "their errors are in the table",
+                err=True,
+            )
         if bad:
             raise typer.Exit(EXIT_UNHEALTHY)
         return
     log = logs[0]
-    outcome = smooth_file(log, output, mode=mode, summary_path=summary, tum_path=tum, config_path=config,
-                          show_progress=not quiet, read_options=read_options, timeline=timeline,
-                          timeline_path=timeline_npz, calibration_path=calibration, calibration_out=calibration_out,
-                          vehicle=vehicle)
+    outcome = smooth_file(
+        log,
+        output,
+        mode=mode,
+        summary_path=summary,
+        tum_path=tum,
+        config_path=config,
+        show_progress=not quiet,
+        read_options=read_options,
+        timeline=timeline,
+        timeline_path=timeline_npz,
+        calibration_path=calibration,
+        calibration_out=calibration_out,
+        vehicle=vehicle,
+    )
     typer.echo(outcome.describe())
     if strict and outcome.status in UNHEALTHY:
-        typer.echo(f"gtsam-dvl: error: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}", err=True)
+        typer.echo(
+            f"gtsam-dvl: error: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}",
+            err=True,
+        )
         raise typer.Exit(EXIT_UNHEALTHY)
 
 
@@ -227,14 +380,28 @@ CHARACTERISE_HELP = (
 @_user_errors
 def characterise(
     log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for characterise.json, allan.png and "
-                                                                "recommended.toml.")],
+    output: Annotated[
+        Path,
+        typer.Option(
+            "-o", "--output", help="Folder for characterise.json, allan.png and recommended.toml."
+        ),
+    ],
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    force: Annotated[bool, typer.Option("--force", help="Write into a folder that is not empty (the three files "
-                                                        "are replaced).")] = False,
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force", help="Write into a folder that is not empty (the three files are replaced)."
+        ),
+    ] = False,
+    imu_topic: ImuTopic = "/imu/data_raw",
+    dvl_topic: DvlTopic = None,
+    salvage: Salvage = False,
+    repair: Repair = False,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
+    dvl_water_topic: DvlWaterTopic = None,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
@@ -244,9 +411,24 @@ def characterise(
     from gtsam_dvl.app.commands import check_folders
 
     check_folders({}, {"-o": output})
-    ch = characterise_to_dir(log, output, config_path=config, force=force, show_progress=not quiet,
-                             read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
-                                                        gnss_topic, attitude_topic, truth_topic, dvl_water_topic))
+    ch = characterise_to_dir(
+        log,
+        output,
+        config_path=config,
+        force=force,
+        show_progress=not quiet,
+        read_options=_read_options(
+            imu_topic,
+            dvl_topic,
+            salvage,
+            repair,
+            depth_topic,
+            gnss_topic,
+            attitude_topic,
+            truth_topic,
+            dvl_water_topic,
+        ),
+    )
     typer.echo(ch.describe())
 
 
@@ -254,22 +436,53 @@ def characterise(
 @_user_errors
 def evaluate(
     result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for metrics.json and figures.")],
-    truth: Annotated[Path | None, typer.Option(help="Log with truth (default: the result's source log, found "
-                                                    "relative to the result file, else at its absolute path).")
-                     ] = None,
-    imu_topic: Annotated[str | None, typer.Option("--imu-topic", help="IMU topic (default: as smooth read the "
-                                                                      "source log, else /imu/data_raw).")] = None,
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Folder for metrics.json and figures.")
+    ],
+    truth: Annotated[
+        Path | None,
+        typer.Option(
+            help="Log with truth (default: the result's source log, found "
+            "relative to the result file, else at its absolute path)."
+        ),
+    ] = None,
+    imu_topic: Annotated[
+        str | None,
+        typer.Option(
+            "--imu-topic",
+            help="IMU topic (default: as smooth read the source log, else /imu/data_raw).",
+        ),
+    ] = None,
     dvl_topic: DvlTopic = None,
-    salvage: Annotated[bool | None, typer.Option("--salvage/--no-salvage", help="Recover the intact chunks of a "
-                                                 "damaged log (default: as smooth read the source log).")] = None,
-    repair: Annotated[bool | None, typer.Option("--repair/--no-repair", help="Drop (and count) NaN, duplicate or "
-                                                "backwards messages (default: as smooth read the source log).")
-                      ] = None,
-    depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None, attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
-    force: Annotated[bool, typer.Option("--force", help="Judge the result against a --truth log that is not its "
-                                                        "source (another content, stamps or origin).")] = False,
+    salvage: Annotated[
+        bool | None,
+        typer.Option(
+            "--salvage/--no-salvage",
+            help="Recover the intact chunks of a "
+            "damaged log (default: as smooth read the source log).",
+        ),
+    ] = None,
+    repair: Annotated[
+        bool | None,
+        typer.Option(
+            "--repair/--no-repair",
+            help="Drop (and count) NaN, duplicate or "
+            "backwards messages (default: as smooth read the source log).",
+        ),
+    ] = None,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
+    dvl_water_topic: DvlWaterTopic = None,
+    force: Annotated[
+        bool,
+        typer.Option(
+            "--force",
+            help="Judge the result against a --truth log that is not its "
+            "source (another content, stamps or origin).",
+        ),
+    ] = False,
     debug: Debug = False,
 ) -> None:
     """Errors against the truth over time, observability verdict and the segments that made it; the run's health
@@ -279,10 +492,23 @@ def evaluate(
     from gtsam_dvl.app.commands import check_folders, evaluate_to_dir
 
     check_folders({}, {"-o": output})
-    lines, written = evaluate_to_dir(result, output, truth_path=truth,
-                                     read_options=_read_options(imu_topic, dvl_topic, salvage, repair,
-                                                                depth_topic, gnss_topic, attitude_topic,
-                                                                truth_topic, dvl_water_topic), force=force)
+    lines, written = evaluate_to_dir(
+        result,
+        output,
+        truth_path=truth,
+        read_options=_read_options(
+            imu_topic,
+            dvl_topic,
+            salvage,
+            repair,
+            depth_topic,
+            gnss_topic,
+            attitude_topic,
+            truth_topic,
+            dvl_water_topic,
+        ),
+        force=force,
+    )
     typer.echo("\n".join(lines))
     for path in written:
         typer.echo(f"wrote {path}")
@@ -291,9 +517,15 @@ def evaluate(
 @app.command()
 @_user_errors
 def plan(
-    scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario "
-                                                 "TOML file.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")],
+    scenario: Annotated[
+        str,
+        typer.Argument(
+            help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario TOML file."
+        ),
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")
+    ],
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     quiet: Quiet = False,
     debug: Debug = False,
@@ -315,8 +547,12 @@ from gtsam_dvl.app import cli_campaign as _cli_campaign  # noqa: E402, F401
 @app.command()
 @_user_errors
 def presets(
-    name: Annotated[str | None, typer.Argument(help="A preset's name: its values, their sources and the TOML block "
-                                                    "to use it.")] = None,
+    name: Annotated[
+        str | None,
+        typer.Argument(
+            help="A preset's name: its values, their sources and the TOML block to use it."
+        ),
+    ] = None,
     debug: Debug = False,
 ) -> None:
     """The sensor presets ([imu] model, [dvl] model): every one in a table, or one with its sources."""
@@ -328,11 +564,22 @@ def presets(
 @app.command("config")
 @_user_errors
 def config_command(
-    default: Annotated[bool, typer.Option("--default", help="The default configuration (what smooth uses when "
-                                                            "neither -c nor the log names one).")] = False,
-    config: Annotated[Path | None, typer.Option("-c", "--config", help="A TOML file, a result's config.json or a "
-                                                                       "named configuration (default, paper).")
-                      ] = None,
+    default: Annotated[
+        bool,
+        typer.Option(
+            "--default",
+            help="The default configuration (what smooth uses when "
+            "neither -c nor the log names one).",
+        ),
+    ] = False,
+    config: Annotated[
+        Path | None,
+        typer.Option(
+            "-c",
+            "--config",
+            help="A TOML file, a result's config.json or a named configuration (default, paper).",
+        ),
+    ] = None,
     debug: Debug = False,
 ) -> None:
     """Print the effective estimator configuration as TOML: every key with its value, presets filled in (save it
@@ -343,15 +590,18 @@ def config_command(
         raise GtsamDvlError("give --default or -c FILE, not both")
     cfg = EstimatorConfig.load(config) if config is not None else EstimatorConfig.named("default")
     source = f"from {config}" if config is not None else "'default'"
-    typer.echo(f"# estimator configuration {source}, every key; use it with: gtsam-dvl smooth LOG -c FILE\n\n"
-               f"{cfg.to_toml()}")
+    typer.echo(
+        f"# estimator configuration {source}, every key; use it with: gtsam-dvl smooth LOG -c FILE\n\n"
+        f"{cfg.to_toml()}"
+    )
 
 
 @app.command()
 @_user_errors
 def demo(
-    output: Annotated[Path, typer.Option("-o", "--output", help="Folder for everything the demo writes.")] = Path(
-        "demo-output"),
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Folder for everything the demo writes.")
+    ] = Path("demo-output"),
     seed: Annotated[int, typer.Option(help="Random seed of the simulated runs.")] = 7,
     debug: Debug = False,
 ) -> None:
@@ -378,23 +628,51 @@ LIVE_HELP = (
 @app.command(help=LIVE_HELP)
 @_user_errors
 def live(
-    log: Annotated[Path | None, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")] = None,
-    layout: Annotated[Path | None, typer.Option("--layout", help="Write the Foxglove layout of the live view to "
-                                                "this file (not overwritten; its folder must exist); without a "
-                                                "LOG, only that.")] = None,
-    speed: Annotated[str, typer.Option(help="Times real time (e.g. 1, 10); 0 or 'max': as fast as possible.")
-                     ] = "1",
+    log: Annotated[
+        Path | None, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")
+    ] = None,
+    layout: Annotated[
+        Path | None,
+        typer.Option(
+            "--layout",
+            help="Write the Foxglove layout of the live view to "
+            "this file (not overwritten; its folder must exist); without a "
+            "LOG, only that.",
+        ),
+    ] = None,
+    speed: Annotated[
+        str, typer.Option(help="Times real time (e.g. 1, 10); 0 or 'max': as fast as possible.")
+    ] = "1",
     port: Annotated[int, typer.Option(help="WebSocket port (0: any free port, printed).")] = 8765,
-    host: Annotated[str, typer.Option(help="Address to serve on (127.0.0.1: this machine only; 0.0.0.0: every "
-                                           "interface).")] = "127.0.0.1",
+    host: Annotated[
+        str,
+        typer.Option(
+            help="Address to serve on (127.0.0.1: this machine only; 0.0.0.0: every interface)."
+        ),
+    ] = "127.0.0.1",
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    wait: Annotated[bool, typer.Option("--wait", help="Start the replay only once a client subscribes.")] = False,
-    exit_when_done: Annotated[bool, typer.Option("--exit-when-done", help="Stop serving when the replay ends "
-                                                                          "(default: serve until Ctrl-C).")] = False,
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None, truth_topic: TruthTopic = None, dvl_water_topic: DvlWaterTopic = None,
-    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior.")] = None,
+    wait: Annotated[
+        bool, typer.Option("--wait", help="Start the replay only once a client subscribes.")
+    ] = False,
+    exit_when_done: Annotated[
+        bool,
+        typer.Option(
+            "--exit-when-done",
+            help="Stop serving when the replay ends (default: serve until Ctrl-C).",
+        ),
+    ] = False,
+    imu_topic: ImuTopic = "/imu/data_raw",
+    dvl_topic: DvlTopic = None,
+    salvage: Salvage = False,
+    repair: Repair = False,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    attitude_topic: AttitudeTopic = None,
+    truth_topic: TruthTopic = None,
+    dvl_water_topic: DvlWaterTopic = None,
+    calibration: Annotated[
+        Path | None, typer.Option(help="A vehicle's calibration file as the prior.")
+    ] = None,
     debug: Debug = False,
 ) -> None:
     """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
@@ -404,12 +682,33 @@ def live(
         typer.echo(f"wrote {copy_layout(layout)}: in Foxglove, Layouts > Import from file")
     if log is None:
         if layout is None:
-            raise GtsamDvlError("live: give a LOG to replay (or --layout PATH to write the Foxglove layout)")
+            raise GtsamDvlError(
+                "live: give a LOG to replay (or --layout PATH to write the Foxglove layout)"
+            )
         return
-    serve_log(log, speed=speed, port=port, host=host, config_path=config, wait=wait, linger=not exit_when_done,
-              layout_path=layout, calibration_path=calibration,
-              read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic,
-                                         attitude_topic, truth_topic, dvl_water_topic), echo=typer.echo)
+    serve_log(
+        log,
+        speed=speed,
+        port=port,
+        host=host,
+        config_path=config,
+        wait=wait,
+        linger=not exit_when_done,
+        layout_path=layout,
+        calibration_path=calibration,
+        read_options=_read_options(
+            imu_topic,
+            dvl_topic,
+            salvage,
+            repair,
+            depth_topic,
+            gnss_topic,
+            attitude_topic,
+            truth_topic,
+            dvl_water_topic,
+        ),
+        echo=typer.echo,
+    )
 
 
 NODE_HELP = (
@@ -423,16 +722,32 @@ NODE_HELP = (
 )
 
 
-@app.command(help=NODE_HELP, context_settings={"allow_extra_args": True, "ignore_unknown_options": True})
+@app.command(
+    help=NODE_HELP, context_settings={"allow_extra_args": True, "ignore_unknown_options": True}
+)
 @_user_errors
 def node(
     ctx: typer.Context,
-    config: Annotated[Path | None, typer.Option("-c", "--config", help="Estimator configuration (TOML, with an "
-                                                "optional [node] table of the node's settings) or its name.")
-                      ] = None,
-    params: Annotated[Path | None, typer.Option("--params", help="ROS parameter file (YAML) with the node's "
-                                                "settings and estimator.* configuration keys.")] = None,
-    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as the prior.")] = None,
+    config: Annotated[
+        Path | None,
+        typer.Option(
+            "-c",
+            "--config",
+            help="Estimator configuration (TOML, with an "
+            "optional [node] table of the node's settings) or its name.",
+        ),
+    ] = None,
+    params: Annotated[
+        Path | None,
+        typer.Option(
+            "--params",
+            help="ROS parameter file (YAML) with the node's "
+            "settings and estimator.* configuration keys.",
+        ),
+    ] = None,
+    calibration: Annotated[
+        Path | None, typer.Option(help="A vehicle's calibration file as the prior.")
+    ] = None,
     name: Annotated[str | None, typer.Option(help="The node's name (default gtsam_dvl).")] = None,
     debug: Debug = False,
 ) -> None:
@@ -446,17 +761,25 @@ def node(
 @_user_errors
 def play(
     log: Annotated[Path, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")],
-    rate: Annotated[str, typer.Option(help="Times real time (e.g. 1, 10); 'max': as fast as possible.")] = "1",
-    topic: Annotated[list[str] | None, typer.Option("--topic", help="A topic to play (repeat; default: every "
-                                                    "sensor topic).")] = None,
-    wait: Annotated[float, typer.Option(help="Wait up to this long (s) for a subscriber on every topic.")] = 0.0,
+    rate: Annotated[
+        str, typer.Option(help="Times real time (e.g. 1, 10); 'max': as fast as possible.")
+    ] = "1",
+    topic: Annotated[
+        list[str] | None,
+        typer.Option("--topic", help="A topic to play (repeat; default: every sensor topic)."),
+    ] = None,
+    wait: Annotated[
+        float, typer.Option(help="Wait up to this long (s) for a subscriber on every topic.")
+    ] = 0.0,
     debug: Debug = False,
 ) -> None:
     """Publish a recorded log's messages on their ROS 2 topics, as recorded (needs the ros2 extra)."""
     from gtsam_dvl.app.live.replay import parse_speed
     from gtsam_dvl.app.node.player import play_log
 
-    outcome = play_log(log, rate=parse_speed(rate), topics=topic or None, wait_for_subscribers_s=wait)
+    outcome = play_log(
+        log, rate=parse_speed(rate), topics=topic or None, wait_for_subscribers_s=wait
+    )
     typer.echo(outcome.describe())
 
 
@@ -478,7 +801,9 @@ def _run_app() -> Any:
         return exc.exit_code
     except cx.UsageError as exc:
         where = exc.ctx.command_path if exc.ctx is not None else "gtsam-dvl"
-        sys.stderr.write(f"gtsam-dvl: error: {exc.format_message().rstrip('.')}; `{where} -h` lists the options\n")
+        sys.stderr.write(
+            f"gtsam-dvl: error: {exc.format_message().rstrip('.')}; `{where} -h` lists the options\n"
+        )
         return exc.exit_code
     except cx.ClickException as exc:
         sys.stderr.write(f"gtsam-dvl: error: {exc.format_message()}\n")

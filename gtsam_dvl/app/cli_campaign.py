@@ -41,22 +41,36 @@ MONTECARLO_HELP = (
 @app.command(help=MONTECARLO_HELP)
 @_user_errors
 def montecarlo(
-    scenario: Annotated[str, typer.Argument(help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario "
-                                                 "TOML file.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Campaign folder (created; reused to resume).")],
+    scenario: Annotated[
+        str,
+        typer.Argument(
+            help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario TOML file."
+        ),
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Campaign folder (created; reused to resume).")
+    ],
     runs: Annotated[int, typer.Option("--runs", help="Number of seeds.")] = 20,
-    estimators: Annotated[str, typer.Option("--estimators", help="Comma-separated: batch, online, ekf, "
-                                                                 "online-full.")] = "batch,online,ekf",
+    estimators: Annotated[
+        str, typer.Option("--estimators", help="Comma-separated: batch, online, ekf, online-full.")
+    ] = "batch,online,ekf",
     seed_start: Annotated[int, typer.Option("--seed-start", help="First seed.")] = 1,
-    scheduler: Annotated[str | None, typer.Option("--scheduler", help="Address of a running Dask scheduler "
-                                                                      "(default: a LocalCluster here).")] = None,
-    workers: Annotated[int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores).")
-                       ] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler",
+            help="Address of a running Dask scheduler (default: a LocalCluster here).",
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores).")
+    ] = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     quiet: Quiet = False,
-    calibration: Annotated[Path | None, typer.Option(help="A vehicle's calibration file as every run's prior.")
-                           ] = None,
+    calibration: Annotated[
+        Path | None, typer.Option(help="A vehicle's calibration file as every run's prior.")
+    ] = None,
     debug: Debug = False,
 ) -> None:
     """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
@@ -64,18 +78,36 @@ def montecarlo(
     from gtsam_dvl.app.commands import check_folders
 
     check_folders({}, {"-o": output})
-    res = run_campaign(scenario, runs, [e.strip() for e in estimators.split(",") if e.strip()], output,
-                       seed_start=seed_start, scheduler=scheduler, workers=workers, config_path=config,
-                       show_progress=not quiet, scheduler_timeout_s=scheduler_timeout, calibration_path=calibration)
+    res = run_campaign(
+        scenario,
+        runs,
+        [e.strip() for e in estimators.split(",") if e.strip()],
+        output,
+        seed_start=seed_start,
+        scheduler=scheduler,
+        workers=workers,
+        config_path=config,
+        show_progress=not quiet,
+        scheduler_timeout_s=scheduler_timeout,
+        calibration_path=calibration,
+    )
     for name, est in res.statistics["estimators"].items():
-        z = ", ".join(f"{k} {v['z_std']:.2f}" for k, v in est["states"].items() if not k.startswith("final"))
+        z = ", ".join(
+            f"{k} {v['z_std']:.2f}" for k, v in est["states"].items() if not k.startswith("final")
+        )
         nb = est["nees_block"]
-        typer.echo(f"{name}: error/sigma std {z}; block NEES {nb['mean']:.2f} (95 % band "
-                   f"{nb['band_95'][0]:.2f}-{nb['band_95'][1]:.2f}, {'inside' if nb['inside_band'] else 'OUTSIDE'})")
+        typer.echo(
+            f"{name}: error/sigma std {z}; block NEES {nb['mean']:.2f} (95 % band "
+            f"{nb['band_95'][0]:.2f}-{nb['band_95'][1]:.2f}, {'inside' if nb['inside_band'] else 'OUTSIDE'})"
+        )
     typer.echo(f"{res.runs_done} runs ({res.runs_new} new) in {res.out_dir}")
     for f in res.failures:
-        typer.echo(f"gtsam-dvl: error: seed {f['seed']} failed: {f['error']}" if f["seed"] is not None
-                   else f"gtsam-dvl: error: {f['error']}", err=True)
+        typer.echo(
+            f"gtsam-dvl: error: seed {f['seed']} failed: {f['error']}"
+            if f["seed"] is not None
+            else f"gtsam-dvl: error: {f['error']}",
+            err=True,
+        )
     for path in res.written[:2]:
         typer.echo(f"wrote {path}")
     if res.failures:
@@ -99,19 +131,39 @@ CALIBRATE_HELP = (
 @app.command(help=CALIBRATE_HELP)
 @_user_errors
 def calibrate(
-    logs: Annotated[list[Path], typer.Argument(help="The dives' logs (MCAP or rosbag2 directories).",
-                                               metavar="LOG...")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Calibration file to write (TOML).")],
-    out_dir: Annotated[Path | None, typer.Option("--out-dir", help="Folder for calibration-fleet.md, .json and "
-                                                                   ".png.")] = None,
-    vehicle: Annotated[str, typer.Option("--vehicle", help="The vehicle's name in the file.")] = "vehicle",
+    logs: Annotated[
+        list[Path],
+        typer.Argument(help="The dives' logs (MCAP or rosbag2 directories).", metavar="LOG..."),
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--output", help="Calibration file to write (TOML).")
+    ],
+    out_dir: Annotated[
+        Path | None,
+        typer.Option("--out-dir", help="Folder for calibration-fleet.md, .json and .png."),
+    ] = None,
+    vehicle: Annotated[
+        str, typer.Option("--vehicle", help="The vehicle's name in the file.")
+    ] = "vehicle",
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    imu_topic: ImuTopic = "/imu/data_raw", dvl_topic: DvlTopic = None, salvage: Salvage = False,
-    repair: Repair = False, depth_topic: DepthTopic = None, gnss_topic: GnssTopic = None,
-    scheduler: Annotated[str | None, typer.Option("--scheduler", help="A running Dask scheduler (default: a "
-                                                                      "LocalCluster here).")] = None,
-    workers: Annotated[int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores; "
-                                                                  "1: in this process).")] = None,
+    imu_topic: ImuTopic = "/imu/data_raw",
+    dvl_topic: DvlTopic = None,
+    salvage: Salvage = False,
+    repair: Repair = False,
+    depth_topic: DepthTopic = None,
+    gnss_topic: GnssTopic = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option(
+            "--scheduler", help="A running Dask scheduler (default: a LocalCluster here)."
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            "--workers", help="LocalCluster processes (default: the cores; 1: in this process)."
+        ),
+    ] = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
     quiet: Quiet = False,
     debug: Debug = False,
@@ -121,15 +173,25 @@ def calibrate(
     from gtsam_dvl.app.commands import check_folders
 
     check_folders({"-o": output}, {"--out-dir": out_dir})
-    outcome = calibrate_logs(logs, output, config_path=config,
-                             read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic,
-                                                        gnss_topic),
-                             scheduler=scheduler, workers=workers, vehicle=vehicle, out_dir=out_dir,
-                             show_progress=not quiet, scheduler_timeout_s=scheduler_timeout)
+    outcome = calibrate_logs(
+        logs,
+        output,
+        config_path=config,
+        read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic),
+        scheduler=scheduler,
+        workers=workers,
+        vehicle=vehicle,
+        out_dir=out_dir,
+        show_progress=not quiet,
+        scheduler_timeout_s=scheduler_timeout,
+    )
     typer.echo(outcome.describe())
     if outcome.calibration is None:
         raise GtsamDvlError("calibrate: no dive could be smoothed; their errors are above")
     if outcome.failures:
-        typer.echo(f"gtsam-dvl: error: {len(outcome.failures)} of {len(logs)} dives left out; their errors are "
-                   "above", err=True)
+        typer.echo(
+            f"gtsam-dvl: error: {len(outcome.failures)} of {len(logs)} dives left out; their errors are "
+            "above",
+            err=True,
+        )
         raise typer.Exit(EXIT_UNHEALTHY)

@@ -17,13 +17,21 @@ from gtsam_dvl.core.errors import GtsamDvlError
 # rich help prints "<bool>" after every flag, as if it took a value
 # add_completion: typer's --install-completion / --show-completion (bash, zsh, fish, PowerShell); -h as well as
 # --help on every command (click passes help_option_names down to the subcommands)
-app = typer.Typer(add_completion=True, no_args_is_help=True, pretty_exceptions_enable=False, rich_markup_mode=None,
-                  context_settings={"help_option_names": ["-h", "--help"]},
-                  help="Self-calibrating IMU + DVL navigation on GTSAM.")
+app = typer.Typer(
+    add_completion=True,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
+    help="Self-calibrating IMU + DVL navigation on GTSAM.",
+)
 _state = {"debug": False}
 F = TypeVar("F", bound=Callable[..., Any])
 EXIT_UNHEALTHY = 3  # smooth --strict: the run's health is "degraded" or "failed"
-UNHEALTHY = ("degraded", "failed")  # --strict fails on these; "warn" (weak geometry) is an honest result
+UNHEALTHY = (
+    "degraded",
+    "failed",
+)  # --strict fails on these; "warn" (weak geometry) is an honest result
 EXIT_SIGTERM = 128 + signal.SIGTERM  # the shell's convention for a process ended by SIGTERM
 
 
@@ -71,42 +79,102 @@ def _user_errors(func: F) -> F:
 
 
 ImuTopic = Annotated[str, typer.Option("--imu-topic", help="IMU topic (sensor_msgs/msg/Imu).")]
-Debug = Annotated[bool, typer.Option("--debug", help="Show tracebacks (also accepted before the command).")]
+Debug = Annotated[
+    bool, typer.Option("--debug", help="Show tracebacks (also accepted before the command).")
+]
 Quiet = Annotated[bool, typer.Option("-q", "--quiet", help="No progress bars.")]
-DvlTopic = Annotated[str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")]
-Salvage = Annotated[bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")]
-Repair = Annotated[bool, typer.Option("--repair", help="Drop (and count) NaN, duplicate or backwards messages; "
-                                                      "shift the IMU stamps back across a clock step.")]
-SchedulerTimeout = Annotated[float, typer.Option("--scheduler-timeout", metavar="SECONDS",
-                                                 help="How long to try to reach --scheduler before giving up.")]
+DvlTopic = Annotated[
+    str | None, typer.Option("--dvl-topic", help="DVL topic (default /dvl/data, else /dvl/twist).")
+]
+Salvage = Annotated[
+    bool, typer.Option("--salvage", help="Recover the intact chunks of a damaged log.")
+]
+Repair = Annotated[
+    bool,
+    typer.Option(
+        "--repair",
+        help="Drop (and count) NaN, duplicate or backwards messages; "
+        "shift the IMU stamps back across a clock step.",
+    ),
+]
+SchedulerTimeout = Annotated[
+    float,
+    typer.Option(
+        "--scheduler-timeout",
+        metavar="SECONDS",
+        help="How long to try to reach --scheduler before giving up.",
+    ),
+]
 
 
-DepthTopic = Annotated[str | None, typer.Option(
-    "--depth-topic", help="Depth topic: sensor_msgs/msg/FluidPressure, or a PoseWithCovarianceStamped / Odometry "
-    "whose z is -depth (default /depth/pressure if the log has it; 'none': no depth).")]
+DepthTopic = Annotated[
+    str | None,
+    typer.Option(
+        "--depth-topic",
+        help="Depth topic: sensor_msgs/msg/FluidPressure, or a PoseWithCovarianceStamped / Odometry "
+        "whose z is -depth (default /depth/pressure if the log has it; 'none': no depth).",
+    ),
+]
 
 
-GnssTopic = Annotated[str | None, typer.Option(
-    "--gnss-topic", help="GNSS topic (sensor_msgs/msg/NavSatFix; default /gnss/fix if the log has it; 'none': no "
-    "GNSS). The first good fix gives the map origin when the log has none.")]
-AttitudeTopic = Annotated[str | None, typer.Option(
-    "--attitude-topic", help="Attitude topic for the initial attitude (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry "
-    "or PoseWithCovarianceStamped; default: the IMU topic's orientation when its covariance is valid; 'none').")]
-DvlWaterTopic = Annotated[str | None, typer.Option(
-    "--dvl-water-topic", help="A separate water-track topic (TwistWithCovarianceStamped or TwistStamped: velocity "
-    "relative to the water), merged with the DVL's pings in stamp order.")]
-TruthTopic = Annotated[str | None, typer.Option(
-    "--truth-topic", help="Ground-truth odometry topic (nav_msgs/msg/Odometry; default /ground_truth/odometry).")]
+GnssTopic = Annotated[
+    str | None,
+    typer.Option(
+        "--gnss-topic",
+        help="GNSS topic (sensor_msgs/msg/NavSatFix; default /gnss/fix if the log has it; 'none': no "
+        "GNSS). The first good fix gives the map origin when the log has none.",
+    ),
+]
+AttitudeTopic = Annotated[
+    str | None,
+    typer.Option(
+        "--attitude-topic",
+        help="Attitude topic for the initial attitude (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry "
+        "or PoseWithCovarianceStamped; default: the IMU topic's orientation when its covariance is valid; 'none').",
+    ),
+]
+DvlWaterTopic = Annotated[
+    str | None,
+    typer.Option(
+        "--dvl-water-topic",
+        help="A separate water-track topic (TwistWithCovarianceStamped or TwistStamped: velocity "
+        "relative to the water), merged with the DVL's pings in stamp order.",
+    ),
+]
+TruthTopic = Annotated[
+    str | None,
+    typer.Option(
+        "--truth-topic",
+        help="Ground-truth odometry topic (nav_msgs/msg/Odometry; default /ground_truth/odometry).",
+    ),
+]
 
 
-def _read_options(imu_topic: str | None, dvl_topic: str | None, salvage: bool | None, repair: bool | None,
-                  depth_topic: str | None = None, gnss_topic: str | None = None,
-                  attitude_topic: str | None = None, truth_topic: str | None = None,
-                  dvl_water_topic: str | None = None) -> dict[str, Any]:
+def _read_options(
+    imu_topic: str | None,
+    dvl_topic: str | None,
+    salvage: bool | None,
+    repair: bool | None,
+    depth_topic: str | None = None,
+    gnss_topic: str | None = None,
+    attitude_topic: str | None = None,
+    truth_topic: str | None = None,
+    dvl_water_topic: str | None = None,
+) -> dict[str, Any]:
     """The reading options given on the command line (the topics left out when not given)."""
-    options: dict[str, Any] = {"imu_topic": imu_topic, "dvl_topic": dvl_topic, "salvage": salvage, "repair": repair}
-    extra = {"depth_topic": depth_topic, "gnss_topic": gnss_topic, "attitude_topic": attitude_topic,
-             "truth_topic": truth_topic, "dvl_water_topic": dvl_water_topic}
+    options: dict[str, Any] = {
+        "imu_topic": imu_topic,
+        "dvl_topic": dvl_topic,
+        "salvage": salvage,
+        "repair": repair,
+    }
+    extra = {
+        "depth_topic": depth_topic,
+        "gnss_topic": gnss_topic,
+        "attitude_topic": attitude_topic,
+        "truth_topic": truth_topic,
+        "dvl_water_topic": dvl_water_topic,
+    }
     return {**options, **{k: v for k, v in extra.items() if v is not None}}
 
 
@@ -118,6 +186,8 @@ def _builtin_scenarios() -> list[str]:
     return sorted(p.name[: -len(".toml")] for p in files.iterdir() if p.name.endswith(".toml"))
 
 
-CONFIG_HELP = ("Estimator configuration: a TOML file, a result's config.json, or a named configuration ('default': "
-               "a real DVL, scale prior 1 +- 1 %; 'paper': Pan & Wu's priors, scale 0.8 +- 0.5). Default: the one "
-               "the log's (or scenario's) estimator_config names, else 'default'.")
+CONFIG_HELP = (
+    "Estimator configuration: a TOML file, a result's config.json, or a named configuration ('default': "
+    "a real DVL, scale prior 1 +- 1 %; 'paper': Pan & Wu's priors, scale 0.8 +- 0.5). Default: the one "
+    "the log's (or scenario's) estimator_config names, else 'default'."
+)

@@ -36,8 +36,10 @@ class SimulateResult:
     wall_s: float
 
     def describe(self) -> str:
-        return (f"{self.path}: {self.scenario} seed {self.seed}, {self.duration_s:.0f} s, {self.n_imu} IMU and "
-                f"{self.n_dvl} DVL messages, {self.distance_m / 1000:.2f} km travelled ({self.wall_s:.1f} s)")
+        return (
+            f"{self.path}: {self.scenario} seed {self.seed}, {self.duration_s:.0f} s, {self.n_imu} IMU and "
+            f"{self.n_dvl} DVL messages, {self.distance_m / 1000:.2f} km travelled ({self.wall_s:.1f} s)"
+        )
 
 
 # IMU samples above which simulate_to_file simulates in chunks (sim/stream.py: the same file, in a memory that does
@@ -45,8 +47,13 @@ class SimulateResult:
 STREAM_ABOVE_SAMPLES = 720_000
 
 
-def simulate_to_file(scenario: str | Path, output: Path, seed: int = 7, white_noise: bool = True,
-                     show_progress: bool = True) -> SimulateResult:
+def simulate_to_file(
+    scenario: str | Path,
+    output: Path,
+    seed: int = 7,
+    white_noise: bool = True,
+    show_progress: bool = True,
+) -> SimulateResult:
     """Simulate a built-in or TOML scenario and write it as a ROS 2 MCAP log (long ones chunk by chunk)."""
     from gtsam_dvl.io.writer import write_log
     from gtsam_dvl.sim import simulate
@@ -61,14 +68,30 @@ def simulate_to_file(scenario: str | Path, output: Path, seed: int = 7, white_no
         sim = ChunkedSimulation(scen, seed, white_noise=white_noise)
         with progress_bar(f"simulating {scen.name}", enabled=show_progress) as progress:
             res = write_log_stream(output, sim, progress=progress)
-        return SimulateResult(Path(output), scen.name, seed, sim.duration_s, res["imu"], res["dvl"], sim.distance_m,
-                              time.perf_counter() - start)
+        return SimulateResult(
+            Path(output),
+            scen.name,
+            seed,
+            sim.duration_s,
+            res["imu"],
+            res["dvl"],
+            sim.distance_m,
+            time.perf_counter() - start,
+        )
     with progress_bar(f"simulating {scen.name}", enabled=show_progress) as progress:
         log = simulate(scen, seed, white_noise=white_noise, progress=progress)
     write_log(output, log)
     truth_p = log.truth.n_p if log.truth is not None else np.zeros((0, 3))
-    return SimulateResult(Path(output), scen.name, seed, float(log.imu.t[-1]), len(log.imu), len(log.dvl),
-                          path_length(truth_p), time.perf_counter() - start)
+    return SimulateResult(
+        Path(output),
+        scen.name,
+        seed,
+        float(log.imu.t[-1]),
+        len(log.imu),
+        len(log.dvl),
+        path_length(truth_p),
+        time.perf_counter() - start,
+    )
 
 
 def load_log(path: Path | str, **options: Any) -> LogData:
@@ -92,52 +115,84 @@ def describe_log(log_path: Path, **read_options: Any) -> str:
     log = load_log(log_path, **read_options)
     imu, dvl = log.imu, log.dvl
     imu_hz = 1.0 / np.median(np.diff(imu.t))
-    lines = [f"{log_path}",
-             f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({imu_hz:.1f} Hz), "
-             f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)"]
+    lines = [
+        f"{log_path}",
+        f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({imu_hz:.1f} Hz), "
+        f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)",
+    ]
     if dvl.beams is not None:
-        lines.append(f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}")
+        lines.append(
+            f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}"
+        )
     if dvl.water_track is not None and dvl.water_track.any():
-        lines.append(f"  DVL water track (velocity relative to the water): {int(dvl.water_track.sum())} pings")
+        lines.append(
+            f"  DVL water track (velocity relative to the water): {int(dvl.water_track.sum())} pings"
+        )
     if dvl.altitude is not None and np.isfinite(dvl.altitude).any():
         alt = dvl.altitude[np.isfinite(dvl.altitude)]
-        lines.append(f"  DVL altitude {alt.min():.1f}-{alt.max():.1f} m ({len(alt)} pings with one)")
+        lines.append(
+            f"  DVL altitude {alt.min():.1f}-{alt.max():.1f} m ({len(alt)} pings with one)"
+        )
     from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 
     dvl_hz = 1.0 / np.median(np.diff(dvl.t)) if len(dvl) > 1 else float("nan")
-    lines.append(f"  rates: IMU {imu_hz:.1f} Hz, DVL {dvl_hz:.2f} Hz"
-                 + (f", depth {1.0 / np.median(np.diff(log.depth.t)):.2f} Hz ({len(log.depth)} msgs)"
-                    if log.depth is not None and len(log.depth) > 1 else ", no depth")
-                 + (f", GNSS {len(log.gnss)} msgs" if log.gnss is not None else ", no GNSS"))
+    lines.append(
+        f"  rates: IMU {imu_hz:.1f} Hz, DVL {dvl_hz:.2f} Hz"
+        + (
+            f", depth {1.0 / np.median(np.diff(log.depth.t)):.2f} Hz ({len(log.depth)} msgs)"
+            if log.depth is not None and len(log.depth) > 1
+            else ", no depth"
+        )
+        + (f", GNSS {len(log.gnss)} msgs" if log.gnss is not None else ", no GNSS")
+    )
     o = log.origin
-    lines.append(f"  map origin: lat {o.lat_deg:.7f} deg, lon {o.lon_deg:.7f} deg, height {o.height_m:.2f} m"
-                 if o is not None else "  map origin: none in the log (give --gnss-topic or alignment.origin_lat_deg)")
+    lines.append(
+        f"  map origin: lat {o.lat_deg:.7f} deg, lon {o.lon_deg:.7f} deg, height {o.height_m:.2f} m"
+        if o is not None
+        else "  map origin: none in the log (give --gnss-topic or alignment.origin_lat_deg)"
+    )
     m = log.mounting
-    lines.append("  mounting (base_link <- sensor, roll/pitch/yaw deg): IMU "
-                 + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_imu)) + ", DVL "
-                 + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_d0))
-                 + f"; lever arm IMU->DVL {np.round(m.b_l, 4).tolist()} m")
+    lines.append(
+        "  mounting (base_link <- sensor, roll/pitch/yaw deg): IMU "
+        + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_imu))
+        + ", DVL "
+        + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_d0))
+        + f"; lever arm IMU->DVL {np.round(m.b_l, 4).tolist()} m"
+    )
     # stamps: where the DVL's fall between IMU samples, and the first stamps' offset (a hint of unsynchronised
     # clocks; the DVL-IMU time offset itself is only seen by the estimator, from the motion)
     if len(dvl) and len(imu) > 1:
         period = float(np.median(np.diff(imu.t)))
         phase = np.mod(dvl.t - imu.t[0], period) / period
-        lines.append(f"  stamps: first DVL {dvl.t[0] - imu.t[0]:+.3f} s after the first IMU sample; DVL stamps fall "
-                     f"at {np.median(phase):.2f} of an IMU period (median)")
+        lines.append(
+            f"  stamps: first DVL {dvl.t[0] - imu.t[0]:+.3f} s after the first IMU sample; DVL stamps fall "
+            f"at {np.median(phase):.2f} of an IMU period (median)"
+        )
     gaps = log.metadata.get("reader_losses", {}).get("gaps", {})
-    lines.append("  gaps: none" if not gaps else "  gaps: " + "; ".join(
-        f"{topic} {g['count']} ({g['seconds']:.1f} s, longest {g['longest_s']:.2f} s)" for topic, g in gaps.items()))
+    lines.append(
+        "  gaps: none"
+        if not gaps
+        else "  gaps: "
+        + "; ".join(
+            f"{topic} {g['count']} ({g['seconds']:.1f} s, longest {g['longest_s']:.2f} s)"
+            for topic, g in gaps.items()
+        )
+    )
     cal = log.true_calibration
     if cal is not None:
-        lines.append(f"  truth: scale {cal.scale}, misalignment [roll, pitch, yaw] {list(cal.misalignment_deg)} deg")
+        lines.append(
+            f"  truth: scale {cal.scale}, misalignment [roll, pitch, yaw] {list(cal.misalignment_deg)} deg"
+        )
     if log.truth is not None and len(log.truth) > 1:
         tr = log.truth
         path_m = float(np.sum(np.linalg.norm(np.diff(tr.n_p, axis=0), axis=1)))
         up = tr.n_p[:, 2]
-        lines.append(f"  truth: {path_m / 1000:.3f} km travelled in {tr.t[-1] - tr.t[0]:.0f} s; height in map from "
-                     f"{up.min():+.2f} to {up.max():+.2f} m (start {up[0]:+.2f} m); peak sink "
-                     f"{max(0.0, -float(tr.n_v[:, 2].min())):.2f} m/s, "
-                     f"peak rise {max(0.0, float(tr.n_v[:, 2].max())):.2f} m/s")
+        lines.append(
+            f"  truth: {path_m / 1000:.3f} km travelled in {tr.t[-1] - tr.t[0]:.0f} s; height in map from "
+            f"{up.min():+.2f} to {up.max():+.2f} m (start {up[0]:+.2f} m); peak sink "
+            f"{max(0.0, -float(tr.n_v[:, 2].min())):.2f} m/s, "
+            f"peak rise {max(0.0, float(tr.n_v[:, 2].max())):.2f} m/s"
+        )
     for warning in log.metadata.get("reader_warnings", []):
         lines.append(f"  warning: {warning}")
     return "\n".join(lines)
@@ -164,11 +219,16 @@ def describe_result(path: Path) -> str | None:
         given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
         body = SmoothOutcome(summary, []).describe().splitlines()
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise GtsamDvlError(f"{path}: a gtsam_dvl result whose summary cannot be read ({type(exc).__name__}: "
-                            f"{exc}); smooth the log again") from None
-    lines = [f"{path}: a gtsam_dvl result ({summary.get('estimator', '?')}); `gtsam-dvl evaluate {path} -o DIR` "
-             "evaluates it",
-             f"  source log: {record.get('source_log') or 'not recorded'}" + (f" (read with {given})" if given else "")]
+        raise GtsamDvlError(
+            f"{path}: a gtsam_dvl result whose summary cannot be read ({type(exc).__name__}: "
+            f"{exc}); smooth the log again"
+        ) from None
+    lines = [
+        f"{path}: a gtsam_dvl result ({summary.get('estimator', '?')}); `gtsam-dvl evaluate {path} -o DIR` "
+        "evaluates it",
+        f"  source log: {record.get('source_log') or 'not recorded'}"
+        + (f" (read with {given})" if given else ""),
+    ]
     return "\n".join(lines + [line for line in body if line != NOTHING_WRITTEN])
 
 
@@ -188,19 +248,28 @@ class SmoothOutcome:
     def describe(self) -> str:
         s = self.summary
         if "states" not in s:  # io-dvlc: calibration only
-            return "\n".join([f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
-                              f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"]
-                             + health_lines(s.get("health"))
-                             + ([f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]))
+            return "\n".join(
+                [
+                    f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
+                    f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"
+                ]
+                + health_lines(s.get("health"))
+                + ([f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN])
+            )
         mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
         lines = [
             f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
             f"{s['timing_s'].get('total', float('nan')):.2f} s wall",
             f"  scale        {s['scale']['value']:.6f} +- {s['scale']['sigma']:.6f}",
             "  misalignment roll/pitch/yaw "
-            + ", ".join(f"{v:+.3f} +- {e:.3f}" for v, e in zip(mis, mis_sig, strict=True)) + " deg",
-            "  gyro bias    " + ", ".join(f"{v:+.4f}" for v in s["gyro_bias_deg_per_h"]["value"]) + " deg/h",
-            "  accel bias   " + ", ".join(f"{v:+.1f}" for v in s["accel_bias_ug"]["value"]) + " micro-g",
+            + ", ".join(f"{v:+.3f} +- {e:.3f}" for v, e in zip(mis, mis_sig, strict=True))
+            + " deg",
+            "  gyro bias    "
+            + ", ".join(f"{v:+.4f}" for v in s["gyro_bias_deg_per_h"]["value"])
+            + " deg/h",
+            "  accel bias   "
+            + ", ".join(f"{v:+.1f}" for v in s["accel_bias_ug"]["value"])
+            + " micro-g",
         ]
         err = s.get("errors")
         if err:
@@ -208,31 +277,61 @@ class SmoothOutcome:
             of_distance = f"{pct:.3f} % of distance" if pct is not None else "no distance travelled"
             calibration = ([f"scale {err['scale_ppm']:+.0f} ppm"] if "scale_ppm" in err else []) + (
                 ["misalignment " + ", ".join(f"{v:+.3f}" for v in err["misalignment_deg"]) + " deg"]
-                if err.get("misalignment_deg") else [])  # a truth without calibration: left out, not NaN
-            lines.append("  vs truth: " + ", ".join(calibration + [f"final horizontal position "
-                                                                   f"{err['final_horizontal_position_m']:.2f} m "
-                                                                   f"({of_distance})"]))
+                if err.get("misalignment_deg")
+                else []
+            )  # a truth without calibration: left out, not NaN
+            lines.append(
+                "  vs truth: "
+                + ", ".join(
+                    calibration
+                    + [
+                        f"final horizontal position "
+                        f"{err['final_horizontal_position_m']:.2f} m "
+                        f"({of_distance})"
+                    ]
+                )
+            )
         off = s.get("dvl_time_offset_s")
         if off:
             from gtsam_dvl.analysis.observability import time_offset_words
 
-            lines.insert(3, f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
-                            f"({'determined' if off.get('determined') else 'not determined'}): "
-                            f"{off.get('words') or time_offset_words(off['value'])}")
+            lines.insert(
+                3,
+                f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
+                f"({'determined' if off.get('determined') else 'not determined'}): "
+                f"{off.get('words') or time_offset_words(off['value'])}",
+            )
         lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
         from gtsam_dvl.app.calibration_files import prior_line
 
         lines += [line] if (line := prior_line(s)) else []
-        if held := (s.get("calibration_hold") or {}).get("held"):  # (estimators/weak_hold.py)
-            lines.append("  held at the prior (the run informs them little): " + ", ".join(
-                f"{h['mostly']} ({h['information']:.2f} of the prior's information)" for h in held))
-        if wc := s.get("water_current"):  # water-track pings used, the current a state (estimators/current.py)
-            layers = "; ".join(f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
-                               f"{a['sigma_m_s']:.2f} m/s" for a in wc.get("by_depth", [])[:6])
-            per = (f" per {wc['layers']['thickness_m']:g} m layer ({wc['layers']['boundaries']} boundaries crossed)"
-                   if wc.get("layers") else "")
-            lines.append(f"  water current{per} ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
-                         + (f"; {layers}" if layers else ""))
+        if held := (s.get("calibration_hold") or {}).get(
+            "held"
+        ):  # (estimators/models/weak_hold.py)
+            lines.append(
+                "  held at the prior (the run informs them little): "
+                + ", ".join(
+                    f"{h['mostly']} ({h['information']:.2f} of the prior's information)"
+                    for h in held
+                )
+            )
+        if wc := s.get(
+            "water_current"
+        ):  # water-track pings used, the current a state (estimators/models/current.py)
+            layers = "; ".join(
+                f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
+                f"{a['sigma_m_s']:.2f} m/s"
+                for a in wc.get("by_depth", [])[:6]
+            )
+            per = (
+                f" per {wc['layers']['thickness_m']:g} m layer ({wc['layers']['boundaries']} boundaries crossed)"
+                if wc.get("layers")
+                else ""
+            )
+            lines.append(
+                f"  water current{per} ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
+                + (f"; {layers}" if layers else "")
+            )
         motion = (s.get("geometry") or {}).get("motion")
         if motion:
             lines.append(f"  {MotionSummary(**motion).line()}")
@@ -246,9 +345,11 @@ def health_lines(health: dict[str, Any] | None, indent: str = "  ") -> list[str]
     the reader lost is among them)."""
     if not health:
         return []
-    return ([f"{indent}health: {health.get('status', '?')}"]
-            + [f"{indent}  warning: {w}" for w in health.get("warnings", [])]
-            + [f"{indent}  note: {n}" for n in health.get("notes", [])])
+    return (
+        [f"{indent}health: {health.get('status', '?')}"]
+        + [f"{indent}  warning: {w}" for w in health.get("warnings", [])]
+        + [f"{indent}  note: {n}" for n in health.get("notes", [])]
+    )
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -272,47 +373,69 @@ def check_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None
     for name, out in outs.items():
         for in_name, inp in ins.items():
             if _same_file(out, inp):
-                raise GtsamDvlError(f"{out}: {name} is {in_name} ({inp}); writing it would destroy the input, "
-                                    "choose another output path")
+                raise GtsamDvlError(
+                    f"{out}: {name} is {in_name} ({inp}); writing it would destroy the input, "
+                    "choose another output path"
+                )
             if inp.is_dir() and out.resolve().is_relative_to(inp.resolve()):
-                raise GtsamDvlError(f"{out}: {name} lies inside {in_name}, the bag folder {inp}; write outputs "
-                                    "elsewhere")
+                raise GtsamDvlError(
+                    f"{out}: {name} lies inside {in_name}, the bag folder {inp}; write outputs "
+                    "elsewhere"
+                )
     items = list(outs.items())
     for i, (name, out) in enumerate(items):
-        for other, path in items[i + 1:]:
+        for other, path in items[i + 1 :]:
             if _same_file(out, path):
-                raise GtsamDvlError(f"{out}: given as both {name} and {other}; each output needs its own path")
+                raise GtsamDvlError(
+                    f"{out}: given as both {name} and {other}; each output needs its own path"
+                )
     for out in outs.values():
         check_writable(out)
 
 
-
-
-def check_folders(files: dict[str, Path | None], folders: dict[str, Path | None] | None = None) -> None:
+def check_folders(
+    files: dict[str, Path | None], folders: dict[str, Path | None] | None = None
+) -> None:
     """The command line's rule for output paths (docs/command-line.md): the folder of an output file must exist
     (no folder tree is created for it, a mistyped path is refused); an output folder is created if missing, but
     only inside a folder that exists, and must not be a file. files / folders map the option's name to its path
     (None: not given). A one-line GtsamDvlError before any work."""
     for name, path in files.items():
         if path is not None and not Path(path).absolute().parent.exists():
-            raise GtsamDvlError(f"{path}: no folder {Path(path).parent} for {name}; create it first (outputs "
-                                "never create folder trees)")
+            raise GtsamDvlError(
+                f"{path}: no folder {Path(path).parent} for {name}; create it first (outputs "
+                "never create folder trees)"
+            )
     for name, path in (folders or {}).items():
         if path is None:
             continue
         path = Path(path)
         if path.exists() and not path.is_dir():
-            raise GtsamDvlError(f"{path}: is a file, and {name} takes a folder; choose another path")
+            raise GtsamDvlError(
+                f"{path}: is a file, and {name} takes a folder; choose another path"
+            )
         if not path.absolute().parent.exists():
-            raise GtsamDvlError(f"{path}: no folder {path.parent} to create it in for {name}; create it first "
-                                "(outputs never create folder trees)")
+            raise GtsamDvlError(
+                f"{path}: no folder {path.parent} to create it in for {name}; create it first "
+                "(outputs never create folder trees)"
+            )
 
 
-def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch", summary_path: Path | None = None,
-                tum_path: Path | None = None, config_path: Path | None = None, show_progress: bool = True,
-                read_options: dict[str, Any] | None = None, timeline: bool = True,
-                timeline_path: Path | None = None, calibration_path: Path | None = None,
-                calibration_out: Path | None = None, vehicle: str | None = None) -> SmoothOutcome:
+def smooth_file(
+    log_path: Path,
+    output: Path | None = None,
+    mode: str = "batch",
+    summary_path: Path | None = None,
+    tum_path: Path | None = None,
+    config_path: Path | None = None,
+    show_progress: bool = True,
+    read_options: dict[str, Any] | None = None,
+    timeline: bool = True,
+    timeline_path: Path | None = None,
+    calibration_path: Path | None = None,
+    calibration_out: Path | None = None,
+    vehicle: str | None = None,
+) -> SmoothOutcome:
     """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
     The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz.
 
@@ -325,7 +448,12 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     file is read first and replaced whole); vehicle: its name (vehicle_name)."""
     from gtsam_dvl.analysis.health import assess_log_health
     from gtsam_dvl.analysis.metrics import summary
-    from gtsam_dvl.app.calibration_files import calibration_of_run, calibration_prior, record_prior, vehicle_name
+    from gtsam_dvl.app.calibration_files import (
+        calibration_of_run,
+        calibration_prior,
+        record_prior,
+        vehicle_name,
+    )
     from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
     from gtsam_dvl.core.result import NavResult
     from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
@@ -334,32 +462,56 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
 
     get_estimator(mode)  # an unknown mode: a one-line error before the log is read
-    if mode == "io-dvlc" and (output is not None or tum_path is not None or timeline_path is not None):
-        raise GtsamDvlError("--mode io-dvlc estimates the calibration only (no trajectory): it writes --summary, "
-                            "not -o, --tum or --timeline-npz; run another mode for a result MCAP")
-    default_timeline = (Path(output).with_suffix(".timeline.npz") if output is not None and timeline
-                        and timeline_path is None and mode != "io-dvlc" else None)
+    if mode == "io-dvlc" and (
+        output is not None or tum_path is not None or timeline_path is not None
+    ):
+        raise GtsamDvlError(
+            "--mode io-dvlc estimates the calibration only (no trajectory): it writes --summary, "
+            "not -o, --tum or --timeline-npz; run another mode for a result MCAP"
+        )
+    default_timeline = (
+        Path(output).with_suffix(".timeline.npz")
+        if output is not None and timeline and timeline_path is None and mode != "io-dvlc"
+        else None
+    )
     if mode == "io-dvlc" and (calibration_path is not None or calibration_out is not None):
-        raise GtsamDvlError("--mode io-dvlc takes no --calibration and writes no --calibration-out (it estimates "
-                            "from the Type-I segments alone); run another mode")
-    check_outputs({"the input log": Path(log_path), "the configuration": config_path},
-                  {"-o": output, "--summary": summary_path, "--tum": tum_path if mode != "io-dvlc" else None,
-                   "--timeline-npz": timeline_path, "the timeline file next to -o": default_timeline,
-                   "--calibration-out": calibration_out})
+        raise GtsamDvlError(
+            "--mode io-dvlc takes no --calibration and writes no --calibration-out (it estimates "
+            "from the Type-I segments alone); run another mode"
+        )
+    check_outputs(
+        {"the input log": Path(log_path), "the configuration": config_path},
+        {
+            "-o": output,
+            "--summary": summary_path,
+            "--tum": tum_path if mode != "io-dvlc" else None,
+            "--timeline-npz": timeline_path,
+            "the timeline file next to -o": default_timeline,
+            "--calibration-out": calibration_out,
+        },
+    )
     config = EstimatorConfig.load(config_path) if config_path else None
     t_read = time.perf_counter()
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
-        log = load_log(log_path, progress=read_progress, **(read_options or {}))  # (a day: docs/results.md, Speed)
+        log = load_log(
+            log_path, progress=read_progress, **(read_options or {})
+        )  # (a day: docs/results.md, Speed)
     read_s = time.perf_counter() - t_read
     if config_path:  # the log's scenario's [estimator] table (e.g. its initial attitude) below the -c configuration
         config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
-    if config is None:  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
+    if (
+        config is None
+    ):  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
         config = EstimatorConfig.for_log(log.metadata)
     prior = inflation = None
-    if calibration_path is not None:  # the vehicle's calibration as the prior (app/calibration_files.py)
+    if (
+        calibration_path is not None
+    ):  # the vehicle's calibration as the prior (app/calibration_files.py)
         prior, inflation = calibration_prior(calibration_path, log, config, vehicle)
     with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
-        result = run_estimator(log, mode, config, progress=progress, timeline=timeline, calibration=prior)
+        result = run_estimator(
+            log, mode, config, progress=progress, timeline=timeline, calibration=prior
+        )
     if inflation is not None and isinstance(result, NavResult):
         record_prior(result, inflation)
     outputs = OutputSet()
@@ -372,8 +524,11 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
             summ = iodvlc_summary(result, log)
             health = assess_log_health(log)
             if not np.isfinite(summ["scale"]["value"]):
-                health.flag("failed", "IO-DVLC computed no scale: the log has no Type-I segment (an acceleration at "
-                                      "constant attitude) it could use; run another estimator, or log such a segment")
+                health.flag(
+                    "failed",
+                    "IO-DVLC computed no scale: the log has no Type-I segment (an acceleration at "
+                    "constant attitude) it could use; run another estimator, or log such a segment",
+                )
             summ["health"] = health.as_dict()
             summ["losses"] = log.metadata.get("reader_losses", {})
             if summary_path is not None:
@@ -383,7 +538,9 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
             summ = summary(result, log)
             if output is not None:
                 with outputs.staged(output) as tmp:
-                    write_result_log(tmp, result, log, summ, read_options=read_options, result_path=output)
+                    write_result_log(
+                        tmp, result, log, summ, read_options=read_options, result_path=output
+                    )
                 if result.timeline is not None and timeline_path is None:
                     timeline_path = default_timeline
             if timeline_path is not None and result.timeline is not None:
@@ -391,10 +548,16 @@ def smooth_file(log_path: Path, output: Path | None = None, mode: str = "batch",
             if summary_path is not None:
                 outputs.write_json(summary_path, summ)
             if tum_path is not None:
-                outputs.write_text(tum_path, tum_text(log.t0_ns * 1e-9 + result.t, result.n_p,
-                                                      matrix_to_quat_xyzw(result.n_R_b)))
+                outputs.write_text(
+                    tum_path,
+                    tum_text(
+                        log.t0_ns * 1e-9 + result.t, result.n_p, matrix_to_quat_xyzw(result.n_R_b)
+                    ),
+                )
             if calibration_out is not None:
-                cal = calibration_of_run(result, log_path, config, vehicle_name(log_path, vehicle, prior), prior)
+                cal = calibration_of_run(
+                    result, log_path, config, vehicle_name(log_path, vehicle, prior), prior
+                )
                 outputs.write_text(calibration_out, calibration_text(cal))
     return SmoothOutcome(summ, outputs.committed)
 
@@ -404,22 +567,32 @@ def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
     from gtsam_dvl.core.config import EstimatorConfig
 
     cfg = EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
-    return {"scale": cfg.priors.scale_sigma, "misalignment_deg": np.array(cfg.priors.misalignment_sigma_deg),
-            "gyro_bias_deg_per_h": np.full(3, cfg.imu.gyro_bias_sigma_deg_per_h),
-            "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug)}
+    return {
+        "scale": cfg.priors.scale_sigma,
+        "misalignment_deg": np.array(cfg.priors.misalignment_sigma_deg),
+        "gyro_bias_deg_per_h": np.full(3, cfg.imu.gyro_bias_sigma_deg_per_h),
+        "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug),
+    }
 
 
 def targets_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
     """The [observability] accuracy targets in the units and keys of priors_for_plots (the scale as a fraction)."""
     from gtsam_dvl.core.config import EstimatorConfig
 
-    obs = (EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()).observability
-    return {"scale": obs.scale_ppm * 1e-6, "misalignment_deg": obs.misalignment_deg,
-            "gyro_bias_deg_per_h": obs.gyro_bias_deg_per_h, "accel_bias_ug": obs.accel_bias_ug}
+    obs = (
+        EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
+    ).observability
+    return {
+        "scale": obs.scale_ppm * 1e-6,
+        "misalignment_deg": obs.misalignment_deg,
+        "gyro_bias_deg_per_h": obs.gyro_bias_deg_per_h,
+        "accel_bias_ug": obs.accel_bias_ug,
+    }
 
 
-def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = None,
-                show_progress: bool = True) -> tuple[str, list[Path]]:
+def plan_to_dir(
+    scenario: str | Path, out_dir: Path, config_path: Path | None = None, show_progress: bool = True
+) -> tuple[str, list[Path]]:
     """`gtsam-dvl plan`: covariance analysis of a scenario; writes plan.json, plan.md, timeline.npz and
     figures, returns the answer text and the files written."""
     from gtsam_dvl.analysis.planning import plan_mission
@@ -430,37 +603,75 @@ def plan_to_dir(scenario: str | Path, out_dir: Path, config_path: Path | None = 
     from gtsam_dvl.sim.scenario import load_scenario
 
     scen = load_scenario(scenario)
-    config = (EstimatorConfig.load(config_path, under=scen.estimator) if config_path
-              else scen.estimator_configuration())
+    config = (
+        EstimatorConfig.load(config_path, under=scen.estimator)
+        if config_path
+        else scen.estimator_configuration()
+    )
     with progress_bar(f"planning {scen.name}", enabled=show_progress) as progress:
         plan = plan_mission(scen, config, progress=progress)
     out_dir = Path(out_dir)
     answer = plan.answer()
     data = {
-        "scenario": scen.name, "answer": answer.splitlines()[0], "wall_s": plan.wall_s,
-        "states": [{"key": s.key, "description": s.description, "unit": s.unit, "prior_sigma": s.prior_sigma,
-                    "final_sigma": s.posterior_sigma, "ratio": s.ratio, "verdict": s.verdict,
-                    "determined_at_s": plan.determined_at_s.get(s.key), "credited_segments": s.credited_segments,
-                    "segment_shares": plan.shares.get(s.key, []), "hours_to_halve": s.hours_to_halve}
-                   for s in plan.report.all_states()],
-        "directions": [{"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights} for d in plan.report.directions],
-        "segments": [s.as_dict() for s in plan.segments], "config": config.to_dict(),
+        "scenario": scen.name,
+        "answer": answer.splitlines()[0],
+        "wall_s": plan.wall_s,
+        "states": [
+            {
+                "key": s.key,
+                "description": s.description,
+                "unit": s.unit,
+                "prior_sigma": s.prior_sigma,
+                "final_sigma": s.posterior_sigma,
+                "ratio": s.ratio,
+                "verdict": s.verdict,
+                "determined_at_s": plan.determined_at_s.get(s.key),
+                "credited_segments": s.credited_segments,
+                "segment_shares": plan.shares.get(s.key, []),
+                "hours_to_halve": s.hours_to_halve,
+            }
+            for s in plan.report.all_states()
+        ],
+        "directions": [
+            {"ratio": d.ratio, "verdict": d.verdict, "weights": d.weights}
+            for d in plan.report.directions
+        ],
+        "segments": [s.as_dict() for s in plan.segments],
+        "config": config.to_dict(),
     }
     written = [
         atomic_write_json(out_dir / "plan.json", data),
-        atomic_write_text(out_dir / "plan.md", f"# Mission plan: {scen.name}\n\n" + answer.replace("\n  ", "\n- ")
-                          + "\n\n![normalised sigmas](normalised_sigmas.png)\n"),
+        atomic_write_text(
+            out_dir / "plan.md",
+            f"# Mission plan: {scen.name}\n\n"
+            + answer.replace("\n  ", "\n- ")
+            + "\n\n![normalised sigmas](normalised_sigmas.png)\n",
+        ),
         atomic_write_bytes(out_dir / "timeline.npz", timeline_npz_bytes(plan.timeline)),
-        plot_normalised_sigmas(plan.timeline, out_dir / "normalised_sigmas.png", priors_for_plots(config.to_dict()),
-                               plan.segments, title=f"Predicted normalised sigmas, {scen.name} (plan, no noise; "
-                               "dashed: the targets)", targets=targets_for_plots(config.to_dict())),
+        plot_normalised_sigmas(
+            plan.timeline,
+            out_dir / "normalised_sigmas.png",
+            priors_for_plots(config.to_dict()),
+            plan.segments,
+            title=f"Predicted normalised sigmas, {scen.name} (plan, no noise; dashed: the targets)",
+            targets=targets_for_plots(config.to_dict()),
+        ),
     ]
     return answer, written
 
 
 # what smooth records of how it read the log
-READ_OPTIONS = ("imu_topic", "dvl_topic", "salvage", "repair", "depth_topic", "gnss_topic", "attitude_topic",
-                "truth_topic", "dvl_water_topic")
+READ_OPTIONS = (
+    "imu_topic",
+    "dvl_topic",
+    "salvage",
+    "repair",
+    "depth_topic",
+    "gnss_topic",
+    "attitude_topic",
+    "truth_topic",
+    "dvl_water_topic",
+)
 
 
 def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
@@ -468,7 +679,10 @@ def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
     together), else at its absolute path. Returns (path, "") or (None, the line saying why there is none)."""
     recorded = stored.source_log or stored.source_log_relative
     if not recorded:
-        return None, "the result names no source log: errors against the truth not computed; give --truth LOG"
+        return (
+            None,
+            "the result names no source log: errors against the truth not computed; give --truth LOG",
+        )
     candidates = []
     if stored.source_log_relative:
         candidates.append(Path(stored.path).resolve().parent / stored.source_log_relative)
@@ -477,11 +691,19 @@ def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
     for candidate in candidates:
         if candidate.exists():
             return candidate, ""
-    return None, f"source log {recorded} not found: errors against the truth not computed; give --truth LOG"
+    return (
+        None,
+        f"source log {recorded} not found: errors against the truth not computed; give --truth LOG",
+    )
 
 
-def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = None,
-                    read_options: dict[str, Any] | None = None, force: bool = False) -> tuple[list[str], list[Path]]:
+def evaluate_to_dir(
+    result_path: Path,
+    out_dir: Path,
+    truth_path: Path | None = None,
+    read_options: dict[str, Any] | None = None,
+    force: bool = False,
+) -> tuple[list[str], list[Path]]:
     """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
     result's source log has one), observability verdict with the segments credited, figures and
     metrics.json (with the run's health and what reading the truth log lost). Returns the verdict lines, then the
@@ -499,7 +721,10 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
     from gtsam_dvl.io.result_reader import read_result
 
     out_dir = Path(out_dir)
-    check_outputs({"the result": Path(result_path), "the truth log": truth_path}, {"-o": out_dir / "metrics.json"})
+    check_outputs(
+        {"the result": Path(result_path), "the truth log": truth_path},
+        {"-o": out_dir / "metrics.json"},
+    )
     stored = read_result(result_path)
     res = stored.result
     given = {k: v for k, v in (read_options or {}).items() if v is not None}
@@ -518,8 +743,10 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
 
         if why := source_mismatch(stored, log, file_sha256(log_path)):
             if not force:
-                raise GtsamDvlError(f"{log_path} is not the source of {result_path}: {why}; give the log it was "
-                                    "smoothed from, or --force to judge it against this one")
+                raise GtsamDvlError(
+                    f"{log_path} is not the source of {result_path}: {why}; give the log it was "
+                    "smoothed from, or --force to judge it against this one"
+                )
             forced = f"--force: judged against {log_path}, which is not the result's source: {why}"
     ev = evaluate_result(stored, log)
     ev.metrics["truth_log_not_source"] = forced or None
@@ -533,40 +760,92 @@ def evaluate_to_dir(result_path: Path, out_dir: Path, truth_path: Path | None = 
     written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
     label = res.estimator
     if ev.attitude_error_deg is not None and ev.position_error_m is not None:
-        written.append(plot_errors([(label, ev.t, ev.attitude_error_deg, ev.attitude_sigma_deg)],
-                                   out_dir / "attitude_error.png", "attitude", ev.segments))
-        written.append(plot_errors([(label, ev.t, ev.position_error_m, ev.position_sigma_m)],
-                                   out_dir / "position_error.png", "position", ev.segments))
+        written.append(
+            plot_errors(
+                [(label, ev.t, ev.attitude_error_deg, ev.attitude_sigma_deg)],
+                out_dir / "attitude_error.png",
+                "attitude",
+                ev.segments,
+            )
+        )
+        written.append(
+            plot_errors(
+                [(label, ev.t, ev.position_error_m, ev.position_sigma_m)],
+                out_dir / "position_error.png",
+                "position",
+                ev.segments,
+            )
+        )
         if ev.velocity_error_m_s is not None:
-            written.append(plot_errors([(label, ev.t, ev.velocity_error_m_s, ev.velocity_sigma_m_s)],
-                                       out_dir / "velocity_error.png", "velocity", ev.segments))
+            written.append(
+                plot_errors(
+                    [(label, ev.t, ev.velocity_error_m_s, ev.velocity_sigma_m_s)],
+                    out_dir / "velocity_error.png",
+                    "velocity",
+                    ev.segments,
+                )
+            )
     if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
         from gtsam_dvl.app.plots.current_plots import plot_current
+
         truth = log.truth if log is not None else None
-        written.append(plot_current(wc, out_dir / "water_current.png", None if truth is None else truth.t,
-                                    None if truth is None else truth.n_c, label))
+        written.append(
+            plot_current(
+                wc,
+                out_dir / "water_current.png",
+                None if truth is None else truth.t,
+                None if truth is None else truth.n_c,
+                label,
+            )
+        )
     if res.timeline is not None:
         from gtsam_dvl.analysis.metrics import truth_in_user_units
 
         truths: dict[str, Any] = truth_in_user_units(log) if log is not None else {}
-        estimated = [q for q, sigma in (("time_offset", res.timeline.time_offset_sigma_s),
-                                        ("lever_arm", res.timeline.lever_arm_sigma_m)) if sigma is not None]
+        estimated = [
+            q
+            for q, sigma in (
+                ("time_offset", res.timeline.time_offset_sigma_s),
+                ("lever_arm", res.timeline.lever_arm_sigma_m),
+            )
+            if sigma is not None
+        ]
         for q in ("scale", "misalignment", "gyro_bias", "accel_bias", *estimated):
-            written.append(plot_estimates([(label, res.timeline)], out_dir / f"{q}.png", q, truths.get(q),
-                                          ev.segments, t_min=0.0))
-        written.append(plot_normalised_sigmas(res.timeline, out_dir / "normalised_sigmas.png",
-                                              priors_for_plots(res.config), ev.segments,
-                                              title=f"Normalised sigmas, {label}"))
+            written.append(
+                plot_estimates(
+                    [(label, res.timeline)],
+                    out_dir / f"{q}.png",
+                    q,
+                    truths.get(q),
+                    ev.segments,
+                    t_min=0.0,
+                )
+            )
+        written.append(
+            plot_normalised_sigmas(
+                res.timeline,
+                out_dir / "normalised_sigmas.png",
+                priors_for_plots(res.config),
+                ev.segments,
+                title=f"Normalised sigmas, {label}",
+            )
+        )
     lines = ([forced] if forced else []) + ev.lines()
     written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
     from gtsam_dvl.app.report import gnss_lines
 
-    lines = lines + gnss_lines(ev.metrics.get("gnss"))  # the surfacing error (analysis/surfacing.py)
+    lines = lines + gnss_lines(
+        ev.metrics.get("gnss")
+    )  # the surfacing error (analysis/surfacing.py)
     if health:
-        lines = lines + [f"result {line.strip()}" if i == 0 else line
-                         for i, line in enumerate(health_lines(health, indent=""))]
+        lines = lines + [
+            f"result {line.strip()}" if i == 0 else line
+            for i, line in enumerate(health_lines(health, indent=""))
+        ]
     else:
-        lines = lines + ["result health: not recorded (a result written before health checks existed)"]
+        lines = lines + [
+            "result health: not recorded (a result written before health checks existed)"
+        ]
     from gtsam_dvl.analysis.health import loss_lines
 
     lines += [f"  reading {log_path}: {line}" for line in loss_lines(truth_losses)]

@@ -19,8 +19,12 @@ def progress_bar(description: str, enabled: bool = True) -> Iterator[ProgressFn]
 
     # stderr: stdout carries the results only, so that a redirected run's output holds no progress bars
     with Progress(
-        TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
-        TimeElapsedColumn(), transient=False, console=Console(stderr=True),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TextColumn("{task.percentage:>3.0f}%"),
+        TimeElapsedColumn(),
+        transient=False,
+        console=Console(stderr=True),
     ) as bar:
         task = bar.add_task(description, total=1.0)
         yield lambda fraction: bar.update(task, completed=min(max(fraction, 0.0), 1.0))

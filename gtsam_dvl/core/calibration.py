@@ -49,13 +49,19 @@ class VehicleCalibration:
         n = sum(_dim(name) for name in self.states)
         cov = np.asarray(self.cov, dtype=float)
         if cov.shape != (n, n):
-            raise GtsamDvlError(f"calibration of {self.vehicle!r}: covariance is {cov.shape}, its states "
-                                f"{', '.join(self.states)} need ({n}, {n})")
+            raise GtsamDvlError(
+                f"calibration of {self.vehicle!r}: covariance is {cov.shape}, its states "
+                f"{', '.join(self.states)} need ({n}, {n})"
+            )
         if not np.all(np.isfinite(cov)) or np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-            raise GtsamDvlError(f"calibration of {self.vehicle!r}: covariance is not positive definite")
+            raise GtsamDvlError(
+                f"calibration of {self.vehicle!r}: covariance is not positive definite"
+            )
         missing = [s for s in self.states if s not in self.values]
         if missing:
-            raise GtsamDvlError(f"calibration of {self.vehicle!r}: no value for {', '.join(missing)}")
+            raise GtsamDvlError(
+                f"calibration of {self.vehicle!r}: no value for {', '.join(missing)}"
+            )
 
     def slices(self) -> dict[str, slice]:
         """Each state's columns in cov."""
@@ -73,7 +79,11 @@ class VehicleCalibration:
     def block(self, names: list[str] | tuple[str, ...]) -> np.ndarray:
         """The joint covariance of some of its states, in the order given."""
         sl = self.slices()
-        idx = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in names]) if names else np.zeros(0, int)
+        idx = (
+            np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in names])
+            if names
+            else np.zeros(0, int)
+        )
         return np.asarray(self.cov)[np.ix_(idx, idx)]
 
     def days_before(self, when: str | dt.datetime) -> float:
@@ -91,6 +101,7 @@ class VehicleCalibration:
 def _dim(name: str) -> int:
     # lazy: core/states.py imports GTSAM, which a file reader does not need
     from gtsam_dvl.core.states import BY_NAME
+
     if name not in BY_NAME:
         raise GtsamDvlError(f"calibration: unknown state {name!r} (known: {', '.join(BY_NAME)})")
     return BY_NAME[name].dim
@@ -102,7 +113,9 @@ def _parse_date(when: str | dt.datetime) -> dt.datetime:
     try:
         parsed = dt.datetime.fromisoformat(str(when).replace("Z", "+00:00"))
     except ValueError:
-        raise GtsamDvlError(f"calibration: date {when!r} is not ISO 8601 (e.g. 2026-11-02T10:15:00Z)") from None
+        raise GtsamDvlError(
+            f"calibration: date {when!r} is not ISO 8601 (e.g. 2026-11-02T10:15:00Z)"
+        ) from None
     return parsed if parsed.tzinfo else parsed.replace(tzinfo=dt.UTC)
 
 
@@ -121,19 +134,24 @@ def config_hash(config: dict[str, Any]) -> str:
 def vehicle_state_names(config: Any) -> list[str]:
     """The vehicle's calibration states that a configuration (EstimatorConfig) estimates, in joint order."""
     from gtsam_dvl.core.states import joint_states
+
     return [s.name for s in joint_states(config) if s.vehicle]
 
 
-def from_result(result: Any, config: Any, vehicle: str, sources: tuple[SourceLog, ...] = (),
-                ekf: bool = False) -> VehicleCalibration:
+def from_result(
+    result: Any, config: Any, vehicle: str, sources: tuple[SourceLog, ...] = (), ekf: bool = False
+) -> VehicleCalibration:
     """The vehicle calibration of one result (NavResult): its vehicle states' values and their joint covariance
     from result.shared_joint_cov (or, when it has none, the marginals with the calibration block's joint over the
     scale and misalignment, without the other correlations). ekf: the
     result's joint covariance has the EKF's columns (states.joint_states(config, ekf=True))."""
     from gtsam_dvl.core.states import joint_slices
+
     names = [n for n in vehicle_state_names(config) if n in result.calibration]
     if not names:
-        raise GtsamDvlError("calibration: the result estimates none of the vehicle's calibration states")
+        raise GtsamDvlError(
+            "calibration: the result estimates none of the vehicle's calibration states"
+        )
     joint = result.shared_joint_cov
     sl = joint_slices(config, ekf)
     if joint is not None and all(n in sl for n in names):
@@ -144,18 +162,35 @@ def from_result(result: Any, config: Any, vehicle: str, sources: tuple[SourceLog
         cov = np.zeros((sum(b.shape[0] for b in blocks),) * 2)
         col = 0
         for b in blocks:
-            cov[col:col + b.shape[0], col:col + b.shape[0]] = b
+            cov[col : col + b.shape[0], col : col + b.shape[0]] = b
             col += b.shape[0]
-        if getattr(result, "calib_joint_cov", None) is not None:  # the online estimator's: scale and misalignment
-            from gtsam_dvl.core.states import BY_NAME, block_states  # jointly from the calibration block
+        if (
+            getattr(result, "calib_joint_cov", None) is not None
+        ):  # the online estimator's: scale and misalignment
+            from gtsam_dvl.core.states import (  # jointly from the calibration block
+                BY_NAME,
+                block_states,
+            )
+
             order = [s.name for s in block_states()]
             own = [n for n in names if n in order]
             at = np.cumsum([0] + [BY_NAME[n].dim for n in order])
             here = np.cumsum([0] + [BY_NAME[n].dim for n in names])
-            src = np.concatenate([np.arange(at[order.index(n)], at[order.index(n) + 1]) for n in own])
-            dst = np.concatenate([np.arange(here[names.index(n)], here[names.index(n) + 1]) for n in own])
+            src = np.concatenate(
+                [np.arange(at[order.index(n)], at[order.index(n) + 1]) for n in own]
+            )
+            dst = np.concatenate(
+                [np.arange(here[names.index(n)], here[names.index(n) + 1]) for n in own]
+            )
             cov[np.ix_(dst, dst)] = np.asarray(result.calib_joint_cov)[np.ix_(src, src)]
     values = {n: np.array(result.calibration[n].value, dtype=float) for n in names}
-    return VehicleCalibration(vehicle=vehicle, date=iso_date(int(result.t0_ns)), states=tuple(names),
-                              values=values, cov=0.5 * (cov + cov.T), sources=sources,
-                              config_hash=config_hash(result.config), method="smooth")
+    return VehicleCalibration(
+        vehicle=vehicle,
+        date=iso_date(int(result.t0_ns)),
+        states=tuple(names),
+        values=values,
+        cov=0.5 * (cov + cov.T),
+        sources=sources,
+        config_hash=config_hash(result.config),
+        method="smooth",
+    )

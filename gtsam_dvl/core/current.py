@@ -53,14 +53,20 @@ def truth_current(metadata: dict[str, Any], t: np.ndarray, n_p: np.ndarray) -> n
     truth = metadata.get("truth") or {}
     if not isinstance(truth, dict) or not truth.get("current"):
         return None
-    values: dict[str, Any] = {k: tuple(v) if isinstance(v, list) else v for k, v in truth["current"].items()}
+    values: dict[str, Any] = {
+        k: tuple(v) if isinstance(v, list) else v for k, v in truth["current"].items()
+    }
     spec = CurrentSpec(**values)
     o = (metadata.get("scenario") or {}).get("origin") or metadata.get("origin")
     if not o:
         return None
     frame = LocalFrame(float(o["lat_deg"]), float(o["lon_deg"]), float(o.get("height_m", 0.0)))
     m = truth.get("map_origin")
-    truth_frame = frame if not m else LocalFrame(float(m["lat_deg"]), float(m["lon_deg"]), float(m["height_m"]))
+    truth_frame = (
+        frame
+        if not m
+        else LocalFrame(float(m["lat_deg"]), float(m["lon_deg"]), float(m["height_m"]))
+    )
     _, _, h = truth_frame.map_to_geodetic(n_p)
     n_c = spec.at(-np.asarray(h), t)
     return n_c if not m else n_c @ (truth_frame.e_R_n.T @ frame.e_R_n).T

@@ -43,11 +43,17 @@ def normal_gravity(lat: np.ndarray | float, h: np.ndarray | float) -> np.ndarray
     s2 = np.sin(lat) ** 2
     g0 = GAMMA_E * (1.0 + SOMIGLIANA_K * s2) / np.sqrt(1.0 - WGS84_E2 * s2)
     h = np.asarray(h, dtype=float)
-    corr = 1.0 - 2.0 / WGS84_A * (1.0 + WGS84_F + M_RATIO - 2.0 * WGS84_F * s2) * h + 3.0 * h**2 / WGS84_A**2
+    corr = (
+        1.0
+        - 2.0 / WGS84_A * (1.0 + WGS84_F + M_RATIO - 2.0 * WGS84_F * s2) * h
+        + 3.0 * h**2 / WGS84_A**2
+    )
     return np.asarray(g0 * corr)
 
 
-def geodetic_to_ecef(lat: np.ndarray | float, lon: np.ndarray | float, h: np.ndarray | float) -> np.ndarray:
+def geodetic_to_ecef(
+    lat: np.ndarray | float, lon: np.ndarray | float, h: np.ndarray | float
+) -> np.ndarray:
     """ECEF position (..., 3) in metres of geodetic lat, lon (rad) and ellipsoidal height h (m)."""
     _, r_e = radii_of_curvature(lat)
     cl, sl = np.cos(lat), np.sin(lat)
@@ -77,7 +83,9 @@ def _height_above(rho: np.ndarray, z: np.ndarray, lat: np.ndarray) -> np.ndarray
     rho cos(lat) + z sin(lat) - a sqrt(1 - e^2 sin^2 lat) holds at every latitude; the textbook
     rho / cos(lat) - R_E loses precision near the poles and divides by zero on the polar axis.
     """
-    return rho * np.cos(lat) + z * np.sin(lat) - WGS84_A * np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+    return (
+        rho * np.cos(lat) + z * np.sin(lat) - WGS84_A * np.sqrt(1.0 - WGS84_E2 * np.sin(lat) ** 2)
+    )
 
 
 def e_R_l(lat: np.ndarray | float, lon: np.ndarray | float) -> np.ndarray:
@@ -153,15 +161,23 @@ def column_gravity(lat: np.ndarray | float, depth_m: np.ndarray | float) -> np.n
     return normal_gravity(lat, -0.5 * np.asarray(depth_m, dtype=float))
 
 
-def depth_to_pressure(depth_m: np.ndarray | float, lat: float, density_kg_m3: float = WATER_DENSITY_KG_M3,
-                      atmospheric_pa: float = ATMOSPHERIC_PA) -> np.ndarray:
+def depth_to_pressure(
+    depth_m: np.ndarray | float,
+    lat: float,
+    density_kg_m3: float = WATER_DENSITY_KG_M3,
+    atmospheric_pa: float = ATMOSPHERIC_PA,
+) -> np.ndarray:
     """Absolute pressure (Pa) at depth_m below the surface: p_atm + rho g_column d."""
     d = np.asarray(depth_m, dtype=float)
     return np.asarray(atmospheric_pa + density_kg_m3 * column_gravity(lat, d) * d)
 
 
-def pressure_to_depth(pressure_pa: np.ndarray | float, lat: float, density_kg_m3: float = WATER_DENSITY_KG_M3,
-                      atmospheric_pa: float = ATMOSPHERIC_PA) -> tuple[np.ndarray, np.ndarray]:
+def pressure_to_depth(
+    pressure_pa: np.ndarray | float,
+    lat: float,
+    density_kg_m3: float = WATER_DENSITY_KG_M3,
+    atmospheric_pa: float = ATMOSPHERIC_PA,
+) -> tuple[np.ndarray, np.ndarray]:
     """Depth below the surface (m) of absolute pressure, the inverse of depth_to_pressure (fixed point on
     the column's gravity, exact to 1e-9 m after three passes), and dd/dp (m/Pa) for the variance."""
     dp = np.asarray(pressure_pa, dtype=float) - atmospheric_pa

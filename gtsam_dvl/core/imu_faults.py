@@ -10,7 +10,7 @@ samples, about N p^(n - 1); a run of at least SATURATION_MIN_RUN samples at the 
 the axis's floor (SATURATION_FLOOR: not a dead axis or the Earth rate), whose chance is below
 SATURATION_CHANCE, is saturation. A quantised or noise-free stream, which repeats its values everywhere, shows
 no saturation this way (its runs are its own); neither does a steady turn on a noisy gyro. The saturated
-samples are dropped, so that every estimator crosses them as an IMU gap (estimators/gaps.py: the last sample
+samples are dropped, so that every estimator crosses them as an IMU gap (estimators/inputs/gaps.py: the last sample
 before is held, the motion model's uncertainty added; longer than imu.max_gap_s the run stops naming it).
 
 Clock steps. A stamp step of more than STEP_FACTOR nominal periods is either missing data (a gap; back in
@@ -41,7 +41,10 @@ from gtsam_dvl.core.types import ImuData
 
 SATURATION_MIN_RUN = 5  # samples at the extreme in a row
 SATURATION_CHANCE = 1e-3  # a run less likely than this over the whole log is no chance
-SATURATION_FLOOR = (1e-3, 0.5)  # rad/s (14x the Earth rate), m/s^2: smaller extremes are not a range limit
+SATURATION_FLOOR = (
+    1e-3,
+    0.5,
+)  # rad/s (14x the Earth rate), m/s^2: smaller extremes are not a range limit
 STEP_FACTOR = 5.0  # a stamp step this many nominal periods long is a gap or a clock step (io/stamps.py's gaps)
 WINDOW = 50  # samples on each side of a step
 MIN_WINDOW = 10  # fewer on a side: undecided (a gap)
@@ -63,7 +66,10 @@ class SaturatedRun:
 def saturated_runs(b_omega: np.ndarray, b_f: np.ndarray) -> list[SaturatedRun]:
     """The saturated runs of an IMU stream (module doc), per sensor and axis, in sample order."""
     runs: list[SaturatedRun] = []
-    for sensor, data, floor in (("gyro", b_omega, SATURATION_FLOOR[0]), ("accel", b_f, SATURATION_FLOOR[1])):
+    for sensor, data, floor in (
+        ("gyro", b_omega, SATURATION_FLOOR[0]),
+        ("accel", b_f, SATURATION_FLOOR[1]),
+    ):
         x = np.asarray(data, dtype=float)
         for axis in range(3):
             runs += _axis_runs(sensor, axis, x[:, axis], floor)
@@ -90,8 +96,11 @@ def _axis_runs(sensor: str, axis: int, x: np.ndarray, floor: float) -> list[Satu
         p = (int((same & away).sum()) + 1) / (int(away.sum()) + 1)
         n = stops - starts
         chance = len(x) * np.exp((n - 1) * np.log(p))
-        for a, b in zip(starts[long & (chance < SATURATION_CHANCE)].tolist(),
-                        stops[long & (chance < SATURATION_CHANCE)].tolist(), strict=True):
+        for a, b in zip(
+            starts[long & (chance < SATURATION_CHANCE)].tolist(),
+            stops[long & (chance < SATURATION_CHANCE)].tolist(),
+            strict=True,
+        ):
             out.append(SaturatedRun(sensor, axis, limit, int(a), int(b)))
     return out
 
@@ -102,16 +111,20 @@ def saturation_report(t: np.ndarray, runs: list[SaturatedRun]) -> dict[str, Any]
     mask = saturated_mask(len(t), runs)
     axes = sorted({(r.sensor, "xyz"[r.axis], r.value) for r in runs})
     spans = _spans(t, mask)
-    return {"samples": int(mask.sum()), "stretches": len(spans),
-            "axes": [{"sensor": s, "axis": a, "limit": v} for s, a, v in axes],
-            "longest_s": max((b - a for a, b in spans), default=0.0), "spans_s": [list(s) for s in spans[:20]]}
+    return {
+        "samples": int(mask.sum()),
+        "stretches": len(spans),
+        "axes": [{"sensor": s, "axis": a, "limit": v} for s, a, v in axes],
+        "longest_s": max((b - a for a, b in spans), default=0.0),
+        "spans_s": [list(s) for s in spans[:20]],
+    }
 
 
 def saturated_mask(n: int, runs: list[SaturatedRun]) -> np.ndarray:
     """(n,) True for the samples of any saturated run (on any axis): those dropped."""
     mask = np.zeros(n, dtype=bool)
     for r in runs:
-        mask[r.start:r.stop] = True
+        mask[r.start : r.stop] = True
     return mask
 
 
@@ -132,8 +145,10 @@ class ClockStep:
 
     def words(self) -> str:
         jump = self.t_after - self.t_before
-        return (f"clock step at {self.t_before:.3f} s: the stamps jump {'back ' if jump < 0 else ''}by "
-                f"{abs(jump):.3f} s while the samples run on without a break")
+        return (
+            f"clock step at {self.t_before:.3f} s: the stamps jump {'back ' if jump < 0 else ''}by "
+            f"{abs(jump):.3f} s while the samples run on without a break"
+        )
 
     def shift_words(self) -> str:
         """How the later stamps are corrected."""
@@ -154,13 +169,17 @@ def clock_steps(t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray) -> list[Clo
     for j, k in enumerate(steps):  # the windows stop at the neighbouring steps
         lo = max(k - WINDOW, steps[j - 1] if j else 0)
         hi = min(k + WINDOW, steps[j + 1] if j + 1 < len(steps) else len(t))
-        x = np.concatenate([np.asarray(b_omega[lo:hi], dtype=float), np.asarray(b_f[lo:hi], dtype=float)], axis=1)
-        if _continuous(x[:k - lo], x[k - lo:], (t[k] - t[k - 1]) / period - 1.0):
+        x = np.concatenate(
+            [np.asarray(b_omega[lo:hi], dtype=float), np.asarray(b_f[lo:hi], dtype=float)], axis=1
+        )
+        if _continuous(x[: k - lo], x[k - lo :], (t[k] - t[k - 1]) / period - 1.0):
             out.append(ClockStep(k, float(t[k - 1]), float(t[k]), float(t[k] - t[k - 1] - period)))
     return out
 
 
-def _line(y: np.ndarray, i: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _line(
+    y: np.ndarray, i: np.ndarray, at: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Least-squares lines y = a + b i per column: (value at `at`, its variance, slope, slope variance)."""
     n = len(i)
     ibar = float(i.mean())
@@ -183,12 +202,21 @@ def _continuous(before: np.ndarray, after: np.ndarray, n_missing: float) -> bool
     y_a, var_a, slope_a, svar_a = _line(after, np.arange(len(after), dtype=float), 0.0)
     join = np.abs(y_a - y_b) / np.sqrt(var_a + var_b)
     slope = 0.5 * (slope_a + slope_b)
-    shown = np.abs(y_a - y_b - slope * n_missing) / np.sqrt(var_a + var_b + 0.25 * (svar_a + svar_b) * n_missing**2)
+    shown = np.abs(y_a - y_b - slope * n_missing) / np.sqrt(
+        var_a + var_b + 0.25 * (svar_a + svar_b) * n_missing**2
+    )
     return bool(np.all(join < STEP_JOIN_SIGMAS) and np.any(shown > GAP_SHOW_SIGMAS))
 
 
-def undo_clock_steps(ns: np.ndarray, t0_ns: int, b_omega: np.ndarray, b_f: np.ndarray, topic: str, repair: bool,
-                     warnings: list[str]) -> tuple[np.ndarray, list[dict[str, float]]]:
+def undo_clock_steps(
+    ns: np.ndarray,
+    t0_ns: int,
+    b_omega: np.ndarray,
+    b_f: np.ndarray,
+    topic: str,
+    repair: bool,
+    warnings: list[str],
+) -> tuple[np.ndarray, list[dict[str, float]]]:
     """The IMU's stamps (ns, as logged; t0_ns the log's time base) with its clock steps undone (module doc;
     samples with a non-finite value are left out of the test and shifted with their neighbours), and the steps
     found ([{"at_s", "jump_s", "step_s"}], one warning each). Without repair a clock step is a GtsamDvlError
@@ -199,21 +227,31 @@ def undo_clock_steps(ns: np.ndarray, t0_ns: int, b_omega: np.ndarray, b_f: np.nd
         steps = clock_steps((np.asarray(ns, dtype=np.int64) - t0_ns) / 1e9, b_omega, b_f)
     else:
         rows = np.flatnonzero(finite)
-        steps = clock_steps((np.asarray(ns, dtype=np.int64)[rows] - t0_ns) / 1e9, b_omega[rows], b_f[rows])
+        steps = clock_steps(
+            (np.asarray(ns, dtype=np.int64)[rows] - t0_ns) / 1e9, b_omega[rows], b_f[rows]
+        )
     if steps and not repair:
         s = steps[0]
-        raise GtsamDvlError(f"{topic}: {s.words()}{f' (and {len(steps) - 1} more)' if len(steps) > 1 else ''}; "
-                            f"rerun with --repair to shift the later stamps {s.shift_words()}")
+        raise GtsamDvlError(
+            f"{topic}: {s.words()}{f' (and {len(steps) - 1} more)' if len(steps) > 1 else ''}; "
+            f"rerun with --repair to shift the later stamps {s.shift_words()}"
+        )
     if not steps:
         return ns, []
     out = np.array(ns, dtype=np.int64)
     for s in steps:
-        out[s.index if rows is None else rows[s.index]:] -= int(round(s.step_s * 1e9))
-    warnings.extend(f"{topic}: {s.words()}; the later stamps shifted {s.shift_words()}" for s in steps)
-    return out, [{"at_s": s.t_before, "jump_s": s.t_after - s.t_before, "step_s": s.step_s} for s in steps]
+        out[s.index if rows is None else rows[s.index] :] -= int(round(s.step_s * 1e9))
+    warnings.extend(
+        f"{topic}: {s.words()}; the later stamps shifted {s.shift_words()}" for s in steps
+    )
+    return out, [
+        {"at_s": s.t_before, "jump_s": s.t_after - s.t_before, "step_s": s.step_s} for s in steps
+    ]
 
 
-def drop_saturated(imu: ImuData, topic: str, warnings: list[str]) -> tuple[ImuData, dict[str, Any] | None]:
+def drop_saturated(
+    imu: ImuData, topic: str, warnings: list[str]
+) -> tuple[ImuData, dict[str, Any] | None]:
     """The IMU stream without its saturated samples (module doc) and their saturation_report (None: none), with
     a warning."""
     runs = saturated_runs(imu.b_omega, imu.b_f)
@@ -222,13 +260,23 @@ def drop_saturated(imu: ImuData, topic: str, warnings: list[str]) -> tuple[ImuDa
     report = saturation_report(imu.t, runs)
     keep = ~saturated_mask(len(imu), runs)
     warnings.append(f"{topic}: {saturation_words(report)}: dropped, crossed as IMU gaps")
-    return dataclasses.replace(imu, t=imu.t[keep], b_omega=imu.b_omega[keep], b_f=imu.b_f[keep]), report
+    return dataclasses.replace(
+        imu, t=imu.t[keep], b_omega=imu.b_omega[keep], b_f=imu.b_f[keep]
+    ), report
 
 
 def saturation_words(report: dict[str, Any]) -> str:
     """The saturation of saturation_report in words: which axes at which limits, how many samples, where."""
-    axes = ", ".join(f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} {'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}"
-                     for a in report["axes"])
-    a, b = max(report["spans_s"], key=lambda s: s[1] - s[0]) if report["spans_s"] else (float("nan"),) * 2
-    return (f"the IMU saturated ({axes}): {report['samples']} samples at the range limit in {report['stretches']} "
-            f"stretch(es), the longest {a:.2f} to {b:.2f} s")
+    axes = ", ".join(
+        f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} {'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}"
+        for a in report["axes"]
+    )
+    a, b = (
+        max(report["spans_s"], key=lambda s: s[1] - s[0])
+        if report["spans_s"]
+        else (float("nan"),) * 2
+    )
+    return (
+        f"the IMU saturated ({axes}): {report['samples']} samples at the range limit in {report['stretches']} "
+        f"stretch(es), the longest {a:.2f} to {b:.2f} s"
+    )

@@ -15,8 +15,9 @@ from gtsam_dvl.core.states import Estimate, required_states
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
 
-def misalignment_rpy_and_cov(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
-                                                                                                        np.ndarray]:
+def misalignment_rpy_and_cov(
+    b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """[roll, pitch, yaw] (deg) of R_c = b_R_d b_R_d0^T and their covariance (deg^2), from the covariance of
     b_R_d in GTSAM's right tangent (rad^2). R_c's perturbation in body axes is b_R_d times the right one;
     with R_c = Rz(y) Ry(p) Rx(r), a body-axes perturbation Exp(e) R_c moves the angles by E^-1 e,
@@ -49,6 +50,7 @@ class CalibrationUnits:
 
     b_R_d0: np.ndarray
     if TYPE_CHECKING:  # read-only here: NavResult reads them from its calibration
+
         @property
         def b_R_d(self) -> np.ndarray: ...
 
@@ -70,7 +72,9 @@ class CalibrationUnits:
 
     @property
     def misalignment_sigma_deg(self) -> np.ndarray:
-        return np.sqrt(np.diag(misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[1]))
+        return np.sqrt(
+            np.diag(misalignment_rpy_and_cov(self.b_R_d, self.b_R_d0, self.b_R_d_cov)[1])
+        )
 
     @property
     def gyro_bias_deg_per_h(self) -> np.ndarray:
@@ -106,10 +110,14 @@ class NavResult(CalibrationUnits):
     n_v: np.ndarray  # (N, 3) m/s
     pose_cov: np.ndarray  # (N, 6, 6) GTSAM Pose3 tangent [rotation (body), translation (body)]
     vel_cov: np.ndarray  # (N, 3, 3) m^2/s^2, map frame
-    calibration: dict[str, Estimate]  # the estimated shared states by name (final; or the constants)
+    calibration: dict[
+        str, Estimate
+    ]  # the estimated shared states by name (final; or the constants)
     b_R_d0: np.ndarray  # nominal mounting
     t0_ns: int
-    b_omega: np.ndarray | None  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
+    b_omega: (
+        np.ndarray | None
+    )  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
     pose_vel_cross: np.ndarray | None  # (N, 6, 3) cross-covariance of pose tangent and n_v
     # (10, 10) joint of the calibration block (states.block_states): [accel, gyro] bias, scale, b_R_d right tangent
     calib_joint_cov: np.ndarray | None
@@ -124,27 +132,54 @@ class NavResult(CalibrationUnits):
     # with its sigmas, in info["alignment"])
     alignment_method: str
     config: dict[str, Any]  # the effective configuration (EstimatorConfig.to_dict)
-    # the indices of the DVL pings the estimator found usable (estimators/selection.py: before keyframe thinning),
+    # the indices of the DVL pings the estimator found usable (estimators/inputs/selection.py: before keyframe
+    # thinning),
     # in the log's DVL data (online: in the order pushed); None: not recorded (a result read from an older file)
     dvl_pings: np.ndarray | None
 
-    def __init__(self, estimator: str, t: np.ndarray, n_p: np.ndarray, n_R_b: np.ndarray, n_v: np.ndarray,
-                 pose_cov: np.ndarray, vel_cov: np.ndarray, *, b_R_d0: np.ndarray,
-                 calibration: dict[str, Estimate] | None = None, t0_ns: int = 0, b_omega: np.ndarray | None = None,
-                 pose_vel_cross: np.ndarray | None = None, calib_joint_cov: np.ndarray | None = None,
-                 shared_joint_cov: np.ndarray | None = None, timeline: Timeline | None = None,
-                 timing_s: dict[str, float] | None = None,
-                 info: dict[str, Any] | None = None, alignment_method: str = "", config: dict[str, Any] | None = None,
-                 dvl_pings: np.ndarray | None = None,
-                 accel_bias: np.ndarray | None = None, gyro_bias: np.ndarray | None = None,
-                 bias_cov: np.ndarray | None = None, scale: float | None = None, scale_sigma: float | None = None,
-                 b_R_d: np.ndarray | None = None, b_R_d_cov: np.ndarray | None = None, time_offset_s: float = 0.0,
-                 time_offset_sigma_s: float = float("nan"), lever_arm_m: np.ndarray | None = None,
-                 lever_arm_cov: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        estimator: str,
+        t: np.ndarray,
+        n_p: np.ndarray,
+        n_R_b: np.ndarray,
+        n_v: np.ndarray,
+        pose_cov: np.ndarray,
+        vel_cov: np.ndarray,
+        *,
+        b_R_d0: np.ndarray,
+        calibration: dict[str, Estimate] | None = None,
+        t0_ns: int = 0,
+        b_omega: np.ndarray | None = None,
+        pose_vel_cross: np.ndarray | None = None,
+        calib_joint_cov: np.ndarray | None = None,
+        shared_joint_cov: np.ndarray | None = None,
+        timeline: Timeline | None = None,
+        timing_s: dict[str, float] | None = None,
+        info: dict[str, Any] | None = None,
+        alignment_method: str = "",
+        config: dict[str, Any] | None = None,
+        dvl_pings: np.ndarray | None = None,
+        accel_bias: np.ndarray | None = None,
+        gyro_bias: np.ndarray | None = None,
+        bias_cov: np.ndarray | None = None,
+        scale: float | None = None,
+        scale_sigma: float | None = None,
+        b_R_d: np.ndarray | None = None,
+        b_R_d_cov: np.ndarray | None = None,
+        time_offset_s: float = 0.0,
+        time_offset_sigma_s: float = float("nan"),
+        lever_arm_m: np.ndarray | None = None,
+        lever_arm_cov: np.ndarray | None = None,
+    ) -> None:
         self.estimator, self.t, self.n_p, self.n_R_b, self.n_v = estimator, t, n_p, n_R_b, n_v
         self.pose_cov, self.vel_cov, self.b_R_d0, self.t0_ns = pose_cov, vel_cov, b_R_d0, t0_ns
-        self.b_omega, self.pose_vel_cross, self.calib_joint_cov, self.timeline = (b_omega, pose_vel_cross,
-                                                                                 calib_joint_cov, timeline)
+        self.b_omega, self.pose_vel_cross, self.calib_joint_cov, self.timeline = (
+            b_omega,
+            pose_vel_cross,
+            calib_joint_cov,
+            timeline,
+        )
         self.shared_joint_cov = shared_joint_cov
         self.timing_s = {} if timing_s is None else timing_s
         self.info = {} if info is None else info
@@ -158,16 +193,23 @@ class NavResult(CalibrationUnits):
         given: dict[str, tuple[Any, Any]] = {
             "accel_bias": (accel_bias, None if bias_cov is None else bias_cov[:3, :3]),
             "gyro_bias": (gyro_bias, None if bias_cov is None else bias_cov[3:, 3:]),
-            "scale": (None if scale is None else [scale],
-                      None if scale_sigma is None else [[float(scale_sigma) ** 2]]),
+            "scale": (
+                None if scale is None else [scale],
+                None if scale_sigma is None else [[float(scale_sigma) ** 2]],
+            ),
             "misalignment": (b_R_d, b_R_d_cov),
-            "time_offset": (([time_offset_s], [[float(time_offset_sigma_s) ** 2]])
-                            if math.isfinite(time_offset_sigma_s) or time_offset_s != 0.0 else (None, None)),
+            "time_offset": (
+                ([time_offset_s], [[float(time_offset_sigma_s) ** 2]])
+                if math.isfinite(time_offset_sigma_s) or time_offset_s != 0.0
+                else (None, None)
+            ),
             "lever_arm": (lever_arm_m, lever_arm_cov),
         }
         for name, (value, cov) in given.items():
             if value is not None and cov is not None:
-                self.calibration[name] = Estimate(np.asarray(value, dtype=float), np.asarray(cov, dtype=float))
+                self.calibration[name] = Estimate(
+                    np.asarray(value, dtype=float), np.asarray(cov, dtype=float)
+                )
             elif value is not None or cov is not None:
                 raise ValueError(f"NavResult: {name} needs both its value and its covariance")
         missing = [s.name for s in required_states() if s.name not in self.calibration]
@@ -189,7 +231,10 @@ class NavResult(CalibrationUnits):
         if self.calib_joint_cov is not None:
             return np.asarray(self.calib_joint_cov)[:6, :6]
         out = np.zeros((6, 6))
-        out[:3, :3], out[3:, 3:] = self.calibration["accel_bias"].cov, self.calibration["gyro_bias"].cov
+        out[:3, :3], out[3:, 3:] = (
+            self.calibration["accel_bias"].cov,
+            self.calibration["gyro_bias"].cov,
+        )
         return out
 
     @property
@@ -246,16 +291,23 @@ class NavResult(CalibrationUnits):
     def noise_config(self) -> EstimatorConfig | None:
         """The configuration with the noise levels the estimator used: `config` holds the configuration as given
         (reading it back with -c reproduces the run), info["noise"] the levels taken from the data
-        (estimators/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL, depth and
+        (estimators/models/noise_levels.py: the IMU white noise raised to its quantisation floor, the fitted DVL, depth
+        and
         GNSS noise factors, the DVL's fitted correlated error). What the residuals are judged against. None: the
         configuration does not read."""
         config = self.estimator_config
         noise = self.info.get("noise") if isinstance(self.info, dict) else None
         if config is None or not isinstance(noise, dict):
             return config
-        imu_update = {key: float(entry["used"]) for name, key in (("gyro", "gyro_noise_deg_per_h_rthz"),
-                                                                  ("accel", "accel_noise_ug_rthz"))
-                      if isinstance(entry := noise.get("imu", {}).get(name), dict) and entry.get("used") is not None}
+        imu_update = {
+            key: float(entry["used"])
+            for name, key in (
+                ("gyro", "gyro_noise_deg_per_h_rthz"),
+                ("accel", "accel_noise_ug_rthz"),
+            )
+            if isinstance(entry := noise.get("imu", {}).get(name), dict)
+            and entry.get("used") is not None
+        }
         multiplier = noise.get("dvl", {}).get("multiplier")
         update: dict[str, Any] = {}
         if imu_update:
@@ -263,18 +315,26 @@ class NavResult(CalibrationUnits):
         dvl_update: dict[str, float] = {}
         if multiplier is not None and math.isfinite(float(multiplier)):
             dvl_update["noise_multiplier"] = float(multiplier)
-        gm = noise.get("dvl_correlated")  # the batch smoother's fitted correlated error (estimators/correlated_fit.py)
-        if isinstance(gm, dict) and all(isinstance(gm.get(k), float) and math.isfinite(gm[k]) and gm[k] > 0
-                                        for k in ("sigma_m_s", "tau_s")):
+        gm = noise.get(
+            "dvl_correlated"
+        )  # the batch smoother's fitted correlated error (estimators/models/correlated_fit.py)
+        if isinstance(gm, dict) and all(
+            isinstance(gm.get(k), float) and math.isfinite(gm[k]) and gm[k] > 0
+            for k in ("sigma_m_s", "tau_s")
+        ):
             dvl_update.update(correlated_sigma_m_s=gm["sigma_m_s"], correlated_tau_s=gm["tau_s"])
         if dvl_update:
             update["dvl"] = config.dvl.model_copy(update=dvl_update)
         for sensor in ("depth", "gnss"):  # the batch smoother's fitted depth and GNSS factors
             entry = noise.get(sensor)
-            if isinstance(entry, dict) and entry.get("multiplier") is not None \
-                    and math.isfinite(float(entry["multiplier"])):
+            if (
+                isinstance(entry, dict)
+                and entry.get("multiplier") is not None
+                and math.isfinite(float(entry["multiplier"]))
+            ):
                 update[sensor] = getattr(config, sensor).model_copy(
-                    update={"noise_multiplier": float(entry["multiplier"])})
+                    update={"noise_multiplier": float(entry["multiplier"])}
+                )
         return config.model_copy(update=update) if update else config
 
     @property
@@ -340,16 +400,34 @@ class Timeline:
     lever_arm_m: np.ndarray | None = None  # (N, 3)
     lever_arm_sigma_m: np.ndarray | None = None  # (N, 3)
 
-    FIELDS = ("t", "scale", "scale_sigma", "misalignment_deg", "misalignment_sigma_deg", "gyro_bias_deg_per_h",
-              "gyro_bias_sigma_deg_per_h", "accel_bias_ug", "accel_bias_sigma_ug", "attitude_sigma_deg")
+    FIELDS = (
+        "t",
+        "scale",
+        "scale_sigma",
+        "misalignment_deg",
+        "misalignment_sigma_deg",
+        "gyro_bias_deg_per_h",
+        "gyro_bias_sigma_deg_per_h",
+        "accel_bias_ug",
+        "accel_bias_sigma_ug",
+        "attitude_sigma_deg",
+    )
     OPTIONAL = ("time_offset_s", "time_offset_sigma_s", "lever_arm_m", "lever_arm_sigma_m")
 
     def as_arrays(self) -> dict[str, np.ndarray]:
         out = {name: np.asarray(getattr(self, name)) for name in self.FIELDS}
-        out.update({name: np.asarray(getattr(self, name)) for name in self.OPTIONAL if getattr(self, name) is not None})
+        out.update(
+            {
+                name: np.asarray(getattr(self, name))
+                for name in self.OPTIONAL
+                if getattr(self, name) is not None
+            }
+        )
         return out
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray]) -> Timeline:
-        return cls(**{name: np.asarray(arrays[name]) for name in cls.FIELDS},
-                   **{name: np.asarray(arrays[name]) for name in cls.OPTIONAL if name in arrays})
+        return cls(
+            **{name: np.asarray(arrays[name]) for name in cls.FIELDS},
+            **{name: np.asarray(arrays[name]) for name in cls.OPTIONAL if name in arrays},
+        )

@@ -24,8 +24,17 @@ def _rotation() -> Any:
     return Rotation
 
 
-__all__ = ["matrix_to_quat_xyzw", "matrix_to_rpy", "matrix_to_rpy_deg", "quat_xyzw_to_matrix", "rpy_deg_to_matrix",
-           "rpy_to_matrix", "skew", "so3_exp", "so3_log"]
+__all__ = [
+    "matrix_to_quat_xyzw",
+    "matrix_to_rpy",
+    "matrix_to_rpy_deg",
+    "quat_xyzw_to_matrix",
+    "rpy_deg_to_matrix",
+    "rpy_to_matrix",
+    "skew",
+    "so3_exp",
+    "so3_log",
+]
 
 
 def rpy_to_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:

@@ -27,12 +27,18 @@ import numpy as np
 
 from gtsam_dvl.core.errors import GtsamDvlError
 
-ON_GRID_FRACTION = 0.99  # a series is quantised when at least this fraction of its values lies on the grid
-GRID_TOLERANCE = 1e-3  # of the step: a value within this of a grid point lies on it (plus its storage rounding)
+ON_GRID_FRACTION = (
+    0.99  # a series is quantised when at least this fraction of its values lies on the grid
+)
+GRID_TOLERANCE = (
+    1e-3  # of the step: a value within this of a grid point lies on it (plus its storage rounding)
+)
 # a step is told from the storage format's own rounding only when it spans this many units in the last place
 # of the series' largest value (float32 stores 9.8 m/s^2 to 9.5e-7: a 1e-4 step is 105 of them)
 MIN_STEP_ULPS = 16.0
-CANDIDATE_CLUSTERS = 4  # the most frequent spacings between levels tried as steps, each divided by 1..MAX_DIVISOR
+CANDIDATE_CLUSTERS = (
+    4  # the most frequent spacings between levels tried as steps, each divided by 1..MAX_DIVISOR
+)
 MAX_DIVISOR = 6
 # the refinement's passes use the levels within these many steps of the reference level: each pass makes the step
 # precise enough for the next window (a step off by 1e-3 assigns k correctly up to a few hundred steps)
@@ -59,8 +65,9 @@ def _clusters(d: np.ndarray, tol: float) -> list[tuple[int, float]]:
     return sorted(((len(g), float(np.mean(g))) for g in groups), key=lambda c: -c[0])
 
 
-def _fit_grid(levels: np.ndarray, counts: np.ndarray, ulp: np.ndarray, step: float, ref: float
-              ) -> tuple[float, float, np.ndarray]:
+def _fit_grid(
+    levels: np.ndarray, counts: np.ndarray, ulp: np.ndarray, step: float, ref: float
+) -> tuple[float, float, np.ndarray]:
     """Least squares of levels = a + k q over the integer multiples k, refined from step in passes over the
     levels within REFINE_WINDOWS steps of ref and a quarter step of the previous grid, weighted by how many samples
     sit on each level. Returns (q, a, k of each level with -1 where a level is off the grid: farther than
@@ -135,12 +142,21 @@ def quantisation_step(x: np.ndarray) -> float | None:
     min_step = MIN_STEP_ULPS * float(np.max(ulp))
     # the spacings between the levels that repeat, when they hold the samples (values off the grid rarely repeat)
     repeated = counts >= 2
-    populated = levels[repeated] if (repeated.sum() >= 2 and counts[repeated].sum() >= ON_GRID_FRACTION
-                                     * counts.sum()) else levels
+    populated = (
+        levels[repeated]
+        if (repeated.sum() >= 2 and counts[repeated].sum() >= ON_GRID_FRACTION * counts.sum())
+        else levels
+    )
     spacings = np.sort(np.diff(populated))
     ref = float(levels[np.argmax(counts)])  # the most populated level: on the grid
-    candidates = sorted({c / m for _, c in _clusters(spacings, 2.0 * float(np.max(ulp)))[:CANDIDATE_CLUSTERS]
-                         for m in range(1, MAX_DIVISOR + 1)}, reverse=True)
+    candidates = sorted(
+        {
+            c / m
+            for _, c in _clusters(spacings, 2.0 * float(np.max(ulp)))[:CANDIDATE_CLUSTERS]
+            for m in range(1, MAX_DIVISOR + 1)
+        },
+        reverse=True,
+    )
     needed = ON_GRID_FRACTION * counts.sum()
     for c in candidates:
         if c < min_step:
@@ -159,8 +175,11 @@ def quantisation_step(x: np.ndarray) -> float | None:
 def imu_quantisation(b_omega: np.ndarray, b_f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The quantisation step of every gyro axis (rad/s, (3,)) and accelerometer axis (m/s^2, (3,)) of the IMU
     samples b_omega, b_f (N, 3) as logged; nan where an axis is not quantised (quantisation_step)."""
+
     def steps(x: np.ndarray) -> np.ndarray:
-        return np.array([np.nan if (s := quantisation_step(x[:, k])) is None else s for k in range(3)])
+        return np.array(
+            [np.nan if (s := quantisation_step(x[:, k])) is None else s for k in range(3)]
+        )
 
     return steps(np.asarray(b_omega, dtype=float)), steps(np.asarray(b_f, dtype=float))
 
@@ -175,30 +194,37 @@ def default_taus(n: int, rate_hz: float, per_decade: int = 10) -> np.ndarray:
     """Log-spaced averaging times m / rate_hz, m = 1 .. n // 4 (longer ones average fewer than n/2 independent
     differences), per_decade per decade, distinct integers m."""
     m_max = max(1, n // 4)
-    m = np.unique(np.round(np.logspace(0.0, np.log10(m_max), max(2, int(per_decade * np.log10(m_max)) + 1))))
+    m = np.unique(
+        np.round(np.logspace(0.0, np.log10(m_max), max(2, int(per_decade * np.log10(m_max)) + 1)))
+    )
     return m.astype(int) / rate_hz
 
 
-def allan_deviation(x: np.ndarray, rate_hz: float, taus: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def allan_deviation(
+    x: np.ndarray, rate_hz: float, taus: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Overlapping Allan deviation of the rate series x (N,) sampled at rate_hz (module doc), at taus (s; each
     rounded to a whole number of samples; default_taus when None). Returns (taus used, adev) in x's unit."""
     x = np.asarray(x, dtype=float).ravel()
     n = len(x)
     if n < 3 or not np.isfinite(x).all():
-        raise GtsamDvlError(f"Allan deviation: need at least 3 finite samples, got {n} (finite: "
-                            f"{int(np.isfinite(x).sum())})")
+        raise GtsamDvlError(
+            f"Allan deviation: need at least 3 finite samples, got {n} (finite: "
+            f"{int(np.isfinite(x).sum())})"
+        )
     tau0 = 1.0 / rate_hz
     taus = default_taus(n, rate_hz) if taus is None else np.asarray(taus, dtype=float)
     m = np.round(taus / tau0).astype(int)
     if (m < 1).any() or (2 * m > n).any():
-        raise GtsamDvlError(f"Allan deviation: taus must lie in [{tau0:g}, {n // 2 * tau0:g}] s for {n} samples at "
-                            f"{rate_hz:g} Hz")
+        raise GtsamDvlError(
+            f"Allan deviation: taus must lie in [{tau0:g}, {n // 2 * tau0:g}] s for {n} samples at "
+            f"{rate_hz:g} Hz"
+        )
     # the integral, centred so that the cumulative sum keeps its precision on a large mean (Earth rate, gravity)
     theta = np.concatenate([[0.0], np.cumsum(x - x.mean())]) * tau0
     adev = np.empty(len(m))
     for i, mi in enumerate(m):
-        d2 = theta[2 * mi:] - 2.0 * theta[mi:-mi] + theta[:-2 * mi]
+        d2 = theta[2 * mi :] - 2.0 * theta[mi:-mi] + theta[: -2 * mi]
         adev[i] = np.sqrt(np.mean(d2**2) / (2.0 * (mi * tau0) ** 2))
     return m * tau0, adev
 
@@ -230,7 +256,9 @@ def allan_fit(taus: np.ndarray, adev: np.ndarray) -> AllanFit:
     white = (slopes >= WHITE_SLOPE_RANGE[0]) & (slopes <= WHITE_SLOPE_RANGE[1])
     # the first run of white slopes; point i and i + 1 belong to the line when slope i does
     start = int(np.argmax(white)) if white.any() else 0
-    stop = start + (int(np.argmin(white[start:])) if not white[start:].all() else len(white) - start)
+    stop = start + (
+        int(np.argmin(white[start:])) if not white[start:].all() else len(white) - start
+    )
     last = min(stop, i_min) if white.any() else 0
     on_line = slice(start, max(last, start) + 1)
     density = float(np.exp(np.mean(log_a[on_line] + 0.5 * log_t[on_line])))
@@ -247,20 +275,27 @@ class GaussMarkovFit:
     gm_tau_s: float
     significant: bool
     samples: int
-    gm_sigma_noise: float  # the sampling std of sg^2 under white noise, as a sigma (sqrt of it): for reports
+    gm_sigma_noise: (
+        float  # the sampling std of sg^2 under white noise, as a sigma (sqrt of it): for reports
+    )
 
 
-LAG_TOLERANCE = 0.25  # of the nominal spacing: a pair whose stamp difference is this close to k dt is at lag k
+LAG_TOLERANCE = (
+    0.25  # of the nominal spacing: a pair whose stamp difference is this close to k dt is at lag k
+)
 SIGNIFICANCE_SIGMAS = 3.0
 
 
-def autocovariance(t: np.ndarray, r: np.ndarray, dt_nominal: float, max_lag: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def autocovariance(
+    t: np.ndarray, r: np.ndarray, dt_nominal: float, max_lag: int
+) -> tuple[np.ndarray, np.ndarray]:
     """The empirical autocovariance of the mean-removed columns of r (N, K) at lags 0..max_lag samples, pooled
     over the columns: at lag k the mean product of the pairs whose stamps differ by k dt_nominal within
     LAG_TOLERANCE dt_nominal (gaps in the stamps leave pairs out). Returns (C (max_lag + 1,), pairs per lag)."""
     c, n = np.zeros(max_lag + 1), np.zeros(max_lag + 1, dtype=int)
-    chunk = max(1, 2_000_000 // max(len(t), 1))  # lags at once: the pair search in bulk, bounded memory
+    chunk = max(
+        1, 2_000_000 // max(len(t), 1)
+    )  # lags at once: the pair search in bulk, bounded memory
     for k0 in range(0, max_lag + 1, chunk):
         lags = np.arange(k0, min(k0 + chunk, max_lag + 1))
         target = t[None, :] + lags[:, None] * dt_nominal  # (lags, N)
@@ -283,15 +318,16 @@ def mean_variance_factor(n: int, dt: float, tau: np.ndarray) -> np.ndarray:
     return ((1.0 + phi) / (1.0 - phi) - 2.0 * phi * (1.0 - phi**n) / (n * (1.0 - phi) ** 2)) / n
 
 
-def _exponential_fit(c: np.ndarray, pairs: np.ndarray, dt: float, lags: int, n_mean: int = 0
-                     ) -> tuple[float, float, float]:
+def _exponential_fit(
+    c: np.ndarray, pairs: np.ndarray, dt: float, lags: int, n_mean: int = 0
+) -> tuple[float, float, float]:
     """Weighted least squares of sg^2 exp(-k dt / tau) to c[1..lags], weights pairs[1..lags]: tau on a log grid of
     TAU_GRID points from dt to 10 lags dt, sg^2 in closed form for each (sg^2 = sum_k a_k C(k)); the tau of the
     smallest weighted residual. n_mean > 0: the model is sg^2 (exp(-k dt / tau) - mean_variance_factor(n_mean)),
     the autocovariance of a series of n_mean samples whose mean was removed. Returns (sg^2, tau, std of that sg^2
     under white noise: sqrt(sum_k a_k^2 C(0)^2 / n_k))."""
     k = np.arange(1, lags + 1, dtype=float)
-    w, ck = pairs[1:lags + 1].astype(float), c[1:lags + 1]
+    w, ck = pairs[1 : lags + 1].astype(float), c[1 : lags + 1]
     taus = np.geomspace(dt, 10.0 * lags * dt, TAU_GRID)
     e = np.exp(-np.outer(1.0 / taus, k) * dt)  # (taus, lags)
     if n_mean > 0:
@@ -307,8 +343,13 @@ TAU_GRID = 200
 MIN_LAGS = 10
 
 
-def gauss_markov_fit(t: np.ndarray, r: np.ndarray, dt_nominal: float, max_lag: int | None = None,
-                     mean_corrected: bool = False) -> GaussMarkovFit:
+def gauss_markov_fit(
+    t: np.ndarray,
+    r: np.ndarray,
+    dt_nominal: float,
+    max_lag: int | None = None,
+    mean_corrected: bool = False,
+) -> GaussMarkovFit:
     """Fit of sw, sg and tau to a residual series r (N,) or (N, K) (K axes pooled, each mean-removed) stamped
     t (N,) s, nominally dt_nominal apart (module doc). The autocovariance C at lags 0..L samples (autocovariance;
     L = max_lag, default min(N // 10, 600)), then a weighted least-squares fit of sg^2 exp(-k dt / tau) to
@@ -328,7 +369,9 @@ def gauss_markov_fit(t: np.ndarray, r: np.ndarray, dt_nominal: float, max_lag: i
     t, r = t[ok], r[ok]
     n = len(t)
     if n < 2 * MIN_LAGS:
-        raise GtsamDvlError(f"Gauss-Markov fit: need at least {2 * MIN_LAGS} finite residuals, got {n}")
+        raise GtsamDvlError(
+            f"Gauss-Markov fit: need at least {2 * MIN_LAGS} finite residuals, got {n}"
+        )
     order = np.argsort(t, kind="stable")
     t, r = t[order], r[order] - r.mean(axis=0)
     lags = max(MIN_LAGS, min(n // 10, 600)) if max_lag is None else int(max_lag)
@@ -336,12 +379,19 @@ def gauss_markov_fit(t: np.ndarray, r: np.ndarray, dt_nominal: float, max_lag: i
     n_mean = n if mean_corrected else 0
     sg2, tau, noise = _exponential_fit(c, pairs, dt_nominal, lags, n_mean)
     for _ in range(2 if max_lag is None else 0):
-        sg2, tau, noise = _exponential_fit(c, pairs, dt_nominal,
-                                           int(np.clip(round(tau / dt_nominal), MIN_LAGS, lags)), n_mean)
+        sg2, tau, noise = _exponential_fit(
+            c, pairs, dt_nominal, int(np.clip(round(tau / dt_nominal), MIN_LAGS, lags)), n_mean
+        )
     c0 = c[0]
     sg2 = min(max(sg2, 0.0), c0)
-    return GaussMarkovFit(float(np.sqrt(c0 - sg2)), float(np.sqrt(sg2)), tau,
-                          bool(sg2 > SIGNIFICANCE_SIGMAS * noise), n * r.shape[1], float(np.sqrt(noise)))
+    return GaussMarkovFit(
+        float(np.sqrt(c0 - sg2)),
+        float(np.sqrt(sg2)),
+        tau,
+        bool(sg2 > SIGNIFICANCE_SIGMAS * noise),
+        n * r.shape[1],
+        float(np.sqrt(noise)),
+    )
 
 
 @dataclass
@@ -358,6 +408,11 @@ class AllanCurve:
     bias_bound: bool
 
     def as_dict(self) -> dict[str, Any]:
-        return {"axis": self.axis, "white_density": self.white_density, "bias_instability": self.bias_instability,
-                "bias_instability_is_upper_bound": self.bias_bound, "tau_s": self.taus.tolist(),
-                "adev": self.adev.tolist()}
+        return {
+            "axis": self.axis,
+            "white_density": self.white_density,
+            "bias_instability": self.bias_instability,
+            "bias_instability_is_upper_bound": self.bias_bound,
+            "tau_s": self.taus.tolist(),
+            "adev": self.adev.tolist(),
+        }

@@ -11,8 +11,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def pose_velocity_covariance(pose_cov: np.ndarray, vel_cov: np.ndarray,
-                             pose_vel_cross: np.ndarray | None = None) -> np.ndarray:
+def pose_velocity_covariance(
+    pose_cov: np.ndarray, vel_cov: np.ndarray, pose_vel_cross: np.ndarray | None = None
+) -> np.ndarray:
     """(..., 9, 9) covariance of [rot_body, trans_body, n_v] from pose_cov (..., 6, 6), vel_cov (..., 3, 3) and
     pose_vel_cross (..., 6, 3) (None: zero, pose and velocity taken as uncorrelated)."""
     pose_cov, vel_cov = np.asarray(pose_cov, dtype=float), np.asarray(vel_cov, dtype=float)

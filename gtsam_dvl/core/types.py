@@ -61,7 +61,7 @@ class DvlData:
     # as velocity over ground; their d_v (and beam velocities) are kept, finite where measured; None: none
     water_track: np.ndarray | None = None
     # a simulation without white noise: its velocity repeats bit for bit at constant velocity, which a real
-    # DVL's never does (estimators/ping_screen.py drops such repeats as frozen output unless this is set)
+    # DVL's never does (estimators/inputs/ping_screen.py drops such repeats as frozen output unless this is set)
     noise_free: bool = False
     # (M,) m: the DVL's range to the seafloor along the vertical (the message's altitude), NaN where not known or
     # out of bottom-track range; None: the log has none
@@ -109,7 +109,9 @@ class DvlCalibration:
 
     scale: float
     misalignment_deg: tuple[float, float, float]
-    time_offset_s: float = 0.0  # DVL-IMU time offset dt_d: the ping stamped t measures the velocity at t + dt_d
+    time_offset_s: float = (
+        0.0  # DVL-IMU time offset dt_d: the ping stamped t measures the velocity at t + dt_d
+    )
 
     @property
     def R_c(self) -> np.ndarray:
@@ -145,7 +147,17 @@ class ImuBiases:
     gyro_rad_s: tuple[float, float, float]
 
 
-SEGMENT_KINDS = ("static", "level", "descent", "ascent", "straight", "turn", "square", "type1", "motion")
+SEGMENT_KINDS = (
+    "static",
+    "level",
+    "descent",
+    "ascent",
+    "straight",
+    "turn",
+    "square",
+    "type1",
+    "motion",
+)
 
 
 @dataclass(frozen=True)
@@ -240,7 +252,9 @@ class LogData:
     mounting: Mounting = field(default_factory=Mounting)
     truth: TruthData | None = None
     t0_ns: int = 0  # ROS time of t = 0
-    metadata: dict[str, Any] = field(default_factory=dict)  # scenario, seed, sensor spec, reader warnings
+    metadata: dict[str, Any] = field(
+        default_factory=dict
+    )  # scenario, seed, sensor spec, reader warnings
     source: str = ""  # file the data came from, for messages
     origin: GeoOrigin | None = None  # map origin, when the log records one
     true_calibration: DvlCalibration | None = None  # simulated logs
@@ -248,4 +262,6 @@ class LogData:
     segments: list[Segment] = field(default_factory=list)  # simulated logs: the scenario's segments
     depth: DepthData | None = None  # pressure sensor or depth topic, when the log has one
     gnss: GnssData | None = None  # GNSS fixes (at the surface), when the log has them
-    attitude: AttitudeData | None = None  # an attitude sensor (IMU orientation, AHRS, INS), when read
+    attitude: AttitudeData | None = (
+        None  # an attitude sensor (IMU orientation, AHRS, INS), when read
+    )

@@ -50,7 +50,7 @@ from gtsam_dvl.core.result import misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
 from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.types import ImuData, LogData
-from gtsam_dvl.estimators.mounting import log_in_base_link
+from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
 
 MAX_SIGMA_RAD = np.pi  # sigma reported for a misalignment axis that no segment has excited
 MAX_SCALE_SIGMA = 0.1  # timeline scale and misalignment are NaN until the scale is known this well
@@ -71,8 +71,12 @@ class Type1Segment:
     reference: tuple[float, float] | None  # quiet stretch giving b_f0; None: affine detrend
 
     def as_dict(self) -> dict[str, Any]:
-        return {"start_s": self.start_s, "end_s": self.end_s, "axis": np.round(self.axis, 3).tolist(),
-                "reference_s": list(self.reference) if self.reference else None}
+        return {
+            "start_s": self.start_s,
+            "end_s": self.end_s,
+            "axis": np.round(self.axis, 3).tolist(),
+            "reference_s": list(self.reference) if self.reference else None,
+        }
 
 
 @dataclass
@@ -121,6 +125,7 @@ class IoDvlcResult:
 
 # ----- segment detection -----------------------------------------------------------------------------
 
+
 @dataclass
 class _Windows:
     center: np.ndarray  # (W,) s
@@ -136,7 +141,10 @@ def _window_stats(imu: ImuData, opt: IoDvlcOptions) -> _Windows:
     counts = np.bincount(idx, minlength=n).astype(float)
 
     def bin_means(x: np.ndarray) -> np.ndarray:  # 1 s means
-        return np.stack([np.bincount(idx, x[:, i], n) for i in range(3)], axis=1) / np.maximum(counts, 1)[:, None]
+        return (
+            np.stack([np.bincount(idx, x[:, i], n) for i in range(3)], axis=1)
+            / np.maximum(counts, 1)[:, None]
+        )
 
     f_mean, w_mean = bin_means(imu.b_f), bin_means(imu.b_omega)
     m = max(int(round(opt.window_s)), 2)
@@ -149,7 +157,10 @@ def _window_stats(imu: ImuData, opt: IoDvlcOptions) -> _Windows:
     w_avg = w_win.mean(axis=2)
     centre = t0 + np.arange(len(rate)) + 0.5 * m
     full = np.lib.stride_tricks.sliding_window_view(counts, m).min(axis=1) > 0
-    const = (np.abs(np.linalg.norm(w_avg, axis=1) - OMEGA_IE) < np.radians(opt.gyro_threshold_deg_h) / 3600.0) & full
+    const = (
+        np.abs(np.linalg.norm(w_avg, axis=1) - OMEGA_IE)
+        < np.radians(opt.gyro_threshold_deg_h) / 3600.0
+    ) & full
     return _Windows(centre, const, rate)
 
 
@@ -167,12 +178,18 @@ def detect_type1_segments(imu: ImuData, options: IoDvlcOptions | None = None) ->
         return []
     active = win.const_att & (np.linalg.norm(win.rate, axis=1) > opt.sf_rate_threshold_m_s3)
     cos_max = np.cos(np.radians(opt.axis_change_deg))
-    intervals = [(float(win.center[a] - 0.5), float(win.center[b] + 0.5)) for a, b in _runs(win.const_att)]
-    quiet_runs = [(float(win.center[a] - 0.5), float(win.center[b] + 0.5))
-                  for a, b in _runs(win.const_att & ~active)]
+    intervals = [
+        (float(win.center[a] - 0.5), float(win.center[b] + 0.5)) for a, b in _runs(win.const_att)
+    ]
+    quiet_runs = [
+        (float(win.center[a] - 0.5), float(win.center[b] + 0.5))
+        for a, b in _runs(win.const_att & ~active)
+    ]
     quiet_runs = [(a, b) for a, b in quiet_runs if b - a >= opt.min_quiet_s + opt.window_s]
 
-    raw: list[tuple[int, int, np.ndarray]] = []  # (first window, last window, scatter matrix of the rate)
+    raw: list[
+        tuple[int, int, np.ndarray]
+    ] = []  # (first window, last window, scatter matrix of the rate)
     cur: list[Any] | None = None
     for i in range(len(win.center)):
         if not win.const_att[i]:
@@ -185,7 +202,9 @@ def detect_type1_segments(imu: ImuData, options: IoDvlcOptions | None = None) ->
         r = win.rate[i]
         if cur is not None:
             axis = np.linalg.eigh(cur[2])[1][:, -1]
-            if win.center[i] - win.center[cur[1]] > opt.max_gap_s or abs(axis @ r) < cos_max * np.linalg.norm(r):
+            if win.center[i] - win.center[cur[1]] > opt.max_gap_s or abs(
+                axis @ r
+            ) < cos_max * np.linalg.norm(r):
                 raw.append((cur[0], cur[1], cur[2]))
                 cur = None
         if cur is None:
@@ -206,13 +225,16 @@ def detect_type1_segments(imu: ImuData, options: IoDvlcOptions | None = None) ->
         ref = None
         for qa, qb in quiet_runs:
             if interval[0] <= qa and qb <= start + 0.5:
-                ref = (max(qa + 0.5 * opt.window_s, qb - 0.5 * opt.window_s - opt.reference_s),
-                       qb - 0.5 * opt.window_s)
+                ref = (
+                    max(qa + 0.5 * opt.window_s, qb - 0.5 * opt.window_s - opt.reference_s),
+                    qb - 0.5 * opt.window_s,
+                )
         segments.append(Type1Segment(start, end, np.linalg.eigh(scatter)[1][:, -1], interval, ref))
     return segments
 
 
 # ----- the observer ----------------------------------------------------------------------------------
+
 
 class _Integrals:
     """Cumulative integrals of the IMU (exact for interval-average samples) and the DVL velocity."""
@@ -251,8 +273,12 @@ class _Integrals:
         """Rotation of the body relative to the local level (rad, first order) from the anchor to t: the gyro
         minus the reference rate (Earth rate and bias) minus the change of transport rate u x v / r."""
         dp = self.b_p(t) - self.b_p(np.array([ref.anchor]))[0] - np.outer(t - ref.anchor, ref.b_v)
-        return (self._interp(self.W, t) - self._interp(self.W, np.array([ref.anchor]))[0]
-                - np.outer(t - ref.anchor, ref.b_omega) - np.cross(ref.up, dp) / ref.radius)
+        return (
+            self._interp(self.W, t)
+            - self._interp(self.W, np.array([ref.anchor]))[0]
+            - np.outer(t - ref.anchor, ref.b_omega)
+            - np.cross(ref.up, dp) / ref.radius
+        )
 
     def rotated_f_integral(self, ts: float, t: np.ndarray, ref: _Reference) -> np.ndarray:
         """int_ts^t (b_f + theta x b_f) dtau at times t (>= ts): the specific force in the anchor's body axes."""
@@ -262,9 +288,11 @@ class _Integrals:
         i = np.arange(lo, hi + 1)
         th = self.theta(imu.t[i] - 0.5 * self.dt[i], ref)
         inc = (imu.b_f[i] + np.cross(th, imu.b_f[i])) * self.dt[i][:, None]
-        knots = self.t_knots[lo:hi + 2]
+        knots = self.t_knots[lo : hi + 2]
         cum = np.concatenate([np.zeros((1, 3)), np.cumsum(inc, axis=0)])
-        at = np.stack([np.interp(np.concatenate([[ts], t]), knots, cum[:, j]) for j in range(3)], axis=-1)
+        at = np.stack(
+            [np.interp(np.concatenate([[ts], t]), knots, cum[:, j]) for j in range(3)], axis=-1
+        )
         return at[1:] - at[0]
 
 
@@ -304,11 +332,20 @@ def _segment_data(seg: Type1Segment, ints: _Integrals, opt: IoDvlcOptions) -> _S
     ra, rb = seg.reference if seg.reference is not None else (seg.start_s, seg.end_s)
     ref_rows = np.flatnonzero((t >= ra) & (t <= rb))
     b_f = ints.mean_f(ra, rb)
-    ref = _Reference(0.5 * (ra + rb), b_f, ints.mean_omega(ra, rb), ints.b_v[ref_rows].mean(axis=0),
-                     ints.b_p_dvl[ref_rows].mean(axis=0), b_f / np.linalg.norm(b_f), WGS84_A)
+    ref = _Reference(
+        0.5 * (ra + rb),
+        b_f,
+        ints.mean_omega(ra, rb),
+        ints.b_v[ref_rows].mean(axis=0),
+        ints.b_p_dvl[ref_rows].mean(axis=0),
+        b_f / np.linalg.norm(b_f),
+        WGS84_A,
+    )
     if not opt.earth_terms:
         beta = ints.f_integral(te) - ints.f_integral(np.array([ts]))[0] - np.outer(tau, ref.b_f)
-        return _SegmentData(seg, rows, tau, beta, ints.y[rows] - ints.y[rows[0]], seg.reference is None)
+        return _SegmentData(
+            seg, rows, tau, beta, ints.y[rows] - ints.y[rows[0]], seg.reference is None
+        )
     th = ints.theta(te, ref) if opt.track_attitude else np.zeros((len(te), 3))
     y = ints.y[rows] + np.cross(th @ ints.b_R_d0, ints.y[rows])  # DVL velocity in the anchor's axes
     if opt.track_attitude:
@@ -318,7 +355,9 @@ def _segment_data(seg: Type1Segment, ints: _Integrals, opt: IoDvlcOptions) -> _S
     b_v = y @ ints.b_R_d0.T
     dh = (ints.b_p_dvl[rows] - ref.b_p) @ ref.up
     g = np.linalg.norm(ref.b_f)
-    accel = -2.0 * np.cross(ref.b_omega, b_v - ref.b_v) + np.outer(2.0 * g / ref.radius * dh, ref.up)
+    accel = -2.0 * np.cross(ref.b_omega, b_v - ref.b_v) + np.outer(
+        2.0 * g / ref.radius * dh, ref.up
+    )
     steps = 0.5 * (accel[1:] + accel[:-1]) * np.diff(tau)[:, None]
     beta = beta + np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
     return _SegmentData(seg, rows, tau, beta, y - y[0], seg.reference is None)
@@ -340,12 +379,17 @@ class _Sums:
     dof: float = 0.0  # epochs minus fitted constants: the noise's share of Sgg
 
     def plus(self, beta: np.ndarray, gamma: np.ndarray, dof: float) -> _Sums:
-        return _Sums(self.H + beta.T @ gamma, self.Sbb + float(np.sum(beta**2)), self.Sgg + gamma.T @ gamma,
-                     self.dof + dof)
+        return _Sums(
+            self.H + beta.T @ gamma,
+            self.Sbb + float(np.sum(beta**2)),
+            self.Sgg + gamma.T @ gamma,
+            self.dof + dof,
+        )
 
 
-def _solve(s: _Sums, sigma: float, b_R_d0: np.ndarray,
-           prior_sigma: float | None) -> tuple[float, float, np.ndarray, np.ndarray]:
+def _solve(
+    s: _Sums, sigma: float, b_R_d0: np.ndarray, prior_sigma: float | None
+) -> tuple[float, float, np.ndarray, np.ndarray]:
     """(k, sigma_k, b_R_d, body-axis covariance of b_R_d) from the sums: the Wahba problem by SVD, with the
     weak prior |Log(b_R_d b_R_d0^T)|^2 / prior_sigma^2 = (3 - tr(b_R_d^T b_R_d0)) / prior_sigma^2 when given
     (it adds b_R_d0 s^2 / (2 prior_sigma^2) to H, taking k = 1 in its weight)."""
@@ -359,29 +403,42 @@ def _solve(s: _Sums, sigma: float, b_R_d0: np.ndarray,
     Sgg = s.Sgg - s.dof * sigma**2 * np.eye(3)  # remove the noise's expected share
     info = (np.trace(Sgg) * np.eye(3) - R @ Sgg @ R.T) / sigma**2
     lam, V = np.linalg.eigh(0.5 * (info + info.T))
-    lam = np.maximum(lam, 0.0)  # the noise subtraction can overshoot on an axis that holds no signal
+    lam = np.maximum(
+        lam, 0.0
+    )  # the noise subtraction can overshoot on an axis that holds no signal
     if prior_sigma is not None:
         lam = lam + 1.0 / prior_sigma**2
     cov = V @ np.diag(1.0 / np.maximum(lam, 1.0 / MAX_SIGMA_RAD**2)) @ V.T
     return k, sigma / np.sqrt(s.Sbb), R, cov
 
 
-def _misalignment(R: np.ndarray, cov_body: np.ndarray, b_R_d0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _misalignment(
+    R: np.ndarray, cov_body: np.ndarray, b_R_d0: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     rpy, cov = misalignment_rpy_and_cov(R, b_R_d0, R.T @ cov_body @ R)
     return rpy, np.sqrt(np.diag(cov))
 
 
-def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = None) -> IoDvlcResult:
+def run_iodvlc(
+    log: LogData, options: IoDvlcOptions | EstimatorConfig | None = None
+) -> IoDvlcResult:
     """Detect the Type-I segments and estimate the DVL scale and misalignment from them (IO-DVLC). options:
     IoDvlcOptions, or an EstimatorConfig (its [iodvlc] section); None: the defaults."""
     opt = options.iodvlc if isinstance(options, EstimatorConfig) else options or IoDvlcOptions()
     opt.validate()
-    log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
+    log = log_in_base_link(log)  # IMU samples in base_link (estimators/inputs/mounting.py)
     t_start = time.perf_counter()
     dvl, b_R_d0 = log.dvl, log.mounting.b_R_d0
-    ok = dvl.valid & np.all(np.isfinite(dvl.d_v), axis=1) & (dvl.t >= log.imu.t[0]) & (dvl.t <= log.imu.t[-1])
+    ok = (
+        dvl.valid
+        & np.all(np.isfinite(dvl.d_v), axis=1)
+        & (dvl.t >= log.imu.t[0])
+        & (dvl.t <= log.imu.t[-1])
+    )
     t, y = dvl.t[ok], dvl.d_v[ok]
-    sigma = opt.noise_m_s or float(np.sqrt(np.median(np.trace(dvl.d_cov[ok], axis1=1, axis2=2)) / 3.0))
+    sigma = opt.noise_m_s or float(
+        np.sqrt(np.median(np.trace(dvl.d_cov[ok], axis1=1, axis2=2)) / 3.0)
+    )
     segments = detect_type1_segments(log.imu, opt)
     prior = None if opt.prior_sigma_deg is None else float(np.radians(opt.prior_sigma_deg))
     ints = _Integrals(log.imu, t, y, b_R_d0)
@@ -390,7 +447,11 @@ def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = N
     n = len(t)
     scale, scale_sig = np.full(n, np.nan), np.full(n, np.nan)
     mis, mis_sig = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-    pointwise, beta_all, gamma_all = np.full(n, np.nan), np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    pointwise, beta_all, gamma_all = (
+        np.full(n, np.nan),
+        np.full((n, 3), np.nan),
+        np.full((n, 3), np.nan),
+    )
     done = _Sums()
     per_segment = []
     last: tuple[float, float, np.ndarray, np.ndarray] | None = None
@@ -402,16 +463,27 @@ def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = N
         for m in range(n_fit + 2, len(d.rows) + 1):
             b, g = _processed(d, m)
             last = _solve(done.plus(b, g, m - n_fit), sigma, b_R_d0, prior)
-            _fill(last, slice(d.rows[m - 1], d.rows[m - 1] + 1), scale, scale_sig, mis, mis_sig, b_R_d0)
+            _fill(
+                last,
+                slice(d.rows[m - 1], d.rows[m - 1] + 1),
+                scale,
+                scale_sig,
+                mis,
+                mis_sig,
+                b_R_d0,
+            )
         b, g = _processed(d, len(d.rows))
         done = done.plus(b, g, len(d.rows) - n_fit)
         beta_all[d.rows], gamma_all[d.rows] = b, g
         nb = np.linalg.norm(b, axis=1)
-        pointwise[d.rows] = np.where(nb > opt.min_beta_m_s, np.linalg.norm(g, axis=1) / np.maximum(nb, 1e-12),
-                                     np.nan)
+        pointwise[d.rows] = np.where(
+            nb > opt.min_beta_m_s, np.linalg.norm(g, axis=1) / np.maximum(nb, 1e-12), np.nan
+        )
         alone = _solve(_Sums().plus(b, g, len(d.rows) - n_fit), sigma, b_R_d0, prior)
         rpy, rpy_sig = _misalignment(alone[2], alone[3], b_R_d0)
-        per_segment.append(SegmentEstimate(d.seg.start_s, d.seg.end_s, alone[0], alone[1], rpy, rpy_sig))
+        per_segment.append(
+            SegmentEstimate(d.seg.start_s, d.seg.end_s, alone[0], alone[1], rpy, rpy_sig)
+        )
         next_row = d.rows[-1] + 1
     if last is None:
         final = (np.nan, np.nan, b_R_d0.copy(), np.eye(3) * MAX_SIGMA_RAD**2)
@@ -420,18 +492,42 @@ def run_iodvlc(log: LogData, options: IoDvlcOptions | EstimatorConfig | None = N
         final = last
     rpy, rpy_sig = _misalignment(final[2], final[3], b_R_d0)
     b_R_d, cov_body = final[2], final[3]
-    calibration = {"scale": Estimate(np.array([final[0]]), np.array([[final[1] ** 2]])),
-                   "misalignment": Estimate(b_R_d.copy(), b_R_d.T @ cov_body @ b_R_d)}
+    calibration = {
+        "scale": Estimate(np.array([final[0]]), np.array([[final[1] ** 2]])),
+        "misalignment": Estimate(b_R_d.copy(), b_R_d.T @ cov_body @ b_R_d),
+    }
     return IoDvlcResult(
-        t=t, scale=scale, scale_sigma=scale_sig, misalignment_deg=mis, misalignment_sigma_deg=mis_sig,
-        scale_pointwise=pointwise, beta=beta_all, gamma=gamma_all, segments=segments, per_segment=per_segment,
-        final_scale=float(final[0]), final_scale_sigma=float(final[1]), b_R_d=final[2], b_R_d0=b_R_d0,
-        final_misalignment_deg=rpy, final_misalignment_sigma_deg=rpy_sig, noise_m_s=sigma,
-        timing_s={"total": time.perf_counter() - t_start}, calibration=calibration)
+        t=t,
+        scale=scale,
+        scale_sigma=scale_sig,
+        misalignment_deg=mis,
+        misalignment_sigma_deg=mis_sig,
+        scale_pointwise=pointwise,
+        beta=beta_all,
+        gamma=gamma_all,
+        segments=segments,
+        per_segment=per_segment,
+        final_scale=float(final[0]),
+        final_scale_sigma=float(final[1]),
+        b_R_d=final[2],
+        b_R_d0=b_R_d0,
+        final_misalignment_deg=rpy,
+        final_misalignment_sigma_deg=rpy_sig,
+        noise_m_s=sigma,
+        timing_s={"total": time.perf_counter() - t_start},
+        calibration=calibration,
+    )
 
 
-def _fill(est: tuple[float, float, np.ndarray, np.ndarray], rows: slice, scale: np.ndarray, scale_sig: np.ndarray,
-          mis: np.ndarray, mis_sig: np.ndarray, b_R_d0: np.ndarray) -> None:
+def _fill(
+    est: tuple[float, float, np.ndarray, np.ndarray],
+    rows: slice,
+    scale: np.ndarray,
+    scale_sig: np.ndarray,
+    mis: np.ndarray,
+    mis_sig: np.ndarray,
+    b_R_d0: np.ndarray,
+) -> None:
     if not est[1] < MAX_SCALE_SIGMA:  # the first epochs of the first segment: nothing is known yet
         return
     rpy, rpy_sig = _misalignment(est[2], est[3], b_R_d0)
@@ -445,19 +541,31 @@ def iodvlc_summary(result: IoDvlcResult, log: LogData) -> dict[str, Any]:
         "estimator": "io-dvlc",
         "log": log.source,
         "scale": {"value": result.final_scale, "sigma": result.final_scale_sigma},
-        "misalignment_deg": {"value": result.final_misalignment_deg.tolist(),
-                             "sigma": result.final_misalignment_sigma_deg.tolist(),
-                             "convention": "R_c = Rz(yaw) Ry(pitch) Rx(roll) in body FLU axes, b_R_d = R_c b_R_d0"},
+        "misalignment_deg": {
+            "value": result.final_misalignment_deg.tolist(),
+            "sigma": result.final_misalignment_sigma_deg.tolist(),
+            "convention": "R_c = Rz(yaw) Ry(pitch) Rx(roll) in body FLU axes, b_R_d = R_c b_R_d0",
+        },
         "segments": [s.as_dict() for s in result.segments],
-        "per_segment": [{"start_s": p.start_s, "end_s": p.end_s, "scale": p.scale, "scale_sigma": p.scale_sigma,
-                         "misalignment_deg": p.misalignment_deg.tolist(),
-                         "misalignment_sigma_deg": p.misalignment_sigma_deg.tolist()} for p in result.per_segment],
+        "per_segment": [
+            {
+                "start_s": p.start_s,
+                "end_s": p.end_s,
+                "scale": p.scale,
+                "scale_sigma": p.scale_sigma,
+                "misalignment_deg": p.misalignment_deg.tolist(),
+                "misalignment_sigma_deg": p.misalignment_sigma_deg.tolist(),
+            }
+            for p in result.per_segment
+        ],
         "dvl_noise_m_s": result.noise_m_s,
         "timing_s": result.timing_s,
     }
     cal = log.true_calibration
     if cal is not None and np.isfinite(result.final_scale):
-        err_rpy = matrix_to_rpy_deg(result.b_R_d @ result.b_R_d0.T @ rpy_deg_to_matrix(cal.misalignment_deg).T)
+        err_rpy = matrix_to_rpy_deg(
+            result.b_R_d @ result.b_R_d0.T @ rpy_deg_to_matrix(cal.misalignment_deg).T
+        )
         out["errors"] = {
             "scale_ppm": (result.final_scale - cal.scale) / cal.scale * 1e6,
             "scale_nsigma": (result.final_scale - cal.scale) / result.final_scale_sigma,

@@ -43,12 +43,20 @@ class Estimator(Protocol):
     @property
     def description(self) -> str: ...
 
-    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult: ...
+    def run(
+        self,
+        log: LogData,
+        config: EstimatorConfig | None,
+        progress: ProgressFn | None = None,
+        timeline: bool = True,
+        calibration: VehicleCalibration | None = None,
+    ) -> EstimatorResult: ...
 
 
-RunFn = Callable[[LogData, EstimatorConfig | None, ProgressFn | None, bool, VehicleCalibration | None],
-                 EstimatorResult]
+RunFn = Callable[
+    [LogData, EstimatorConfig | None, ProgressFn | None, bool, VehicleCalibration | None],
+    EstimatorResult,
+]
 
 
 @dataclass(frozen=True)
@@ -60,48 +68,98 @@ class RegisteredEstimator:
     description: str
     runner: RunFn
 
-    def run(self, log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-            timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult:
+    def run(
+        self,
+        log: LogData,
+        config: EstimatorConfig | None,
+        progress: ProgressFn | None = None,
+        timeline: bool = True,
+        calibration: VehicleCalibration | None = None,
+    ) -> EstimatorResult:
         return self.runner(log, config, progress, timeline, calibration)
 
 
-def _batch(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool,
-           calibration: VehicleCalibration | None) -> NavResult:
-    from gtsam_dvl.estimators.batch import smooth_batch
+def _batch(
+    log: LogData,
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None,
+    timeline: bool,
+    calibration: VehicleCalibration | None,
+) -> NavResult:
+    from gtsam_dvl.estimators.batch.smoother import smooth_batch
+
     return smooth_batch(log, config, progress=progress, timeline=timeline, calibration=calibration)
 
 
 def _online(mode: Literal["fixed_lag", "full"]) -> RunFn:
-    def run(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool,
-            calibration: VehicleCalibration | None) -> NavResult:
+    def run(
+        log: LogData,
+        config: EstimatorConfig | None,
+        progress: ProgressFn | None,
+        timeline: bool,
+        calibration: VehicleCalibration | None,
+    ) -> NavResult:
         from gtsam_dvl.estimators.online import smooth_online
+
         return smooth_online(log, config, mode=mode, progress=progress, calibration=calibration)
+
     return run
 
 
-def _ekf(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None, timeline: bool,
-         calibration: VehicleCalibration | None) -> NavResult:
+def _ekf(
+    log: LogData,
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None,
+    timeline: bool,
+    calibration: VehicleCalibration | None,
+) -> NavResult:
     from gtsam_dvl.estimators.ekf import run_ekf
+
     return run_ekf(log, config, progress=progress, calibration=calibration)
 
 
-def _iodvlc(log: LogData, config: EstimatorConfig | None, progress: ProgressFn | None,
-            timeline: bool, calibration: VehicleCalibration | None) -> IoDvlcResult:
+def _iodvlc(
+    log: LogData,
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None,
+    timeline: bool,
+    calibration: VehicleCalibration | None,
+) -> IoDvlcResult:
     from gtsam_dvl.estimators.iodvlc import run_iodvlc
+
     if calibration is not None:
-        raise GtsamDvlError("--mode io-dvlc takes no calibration prior (it estimates from the Type-I segments alone)")
+        raise GtsamDvlError(
+            "--mode io-dvlc takes no calibration prior (it estimates from the Type-I segments alone)"
+        )
     return run_iodvlc(log, config)
 
 
-ESTIMATORS: dict[str, Estimator] = {e.name: e for e in (
-    RegisteredEstimator("batch", "batch smoother: the whole log in one factor graph (Gauss-Newton)", _batch),
-    RegisteredEstimator("online", "online iSAM2 smoother, fixed lag (bounded cost per ping)", _online("fixed_lag")),
-    RegisteredEstimator("online-full", "online iSAM2 smoother keeping every state", _online("full")),
-    RegisteredEstimator("ekf", "error-state EKF over the same pings", _ekf),
-    RegisteredEstimator("io-dvlc", "the paper's ideal observer: DVL scale and misalignment from the Type-I "
-                                   "segments (no trajectory)", _iodvlc),
-)}
-MODES: tuple[str, ...] = tuple(ESTIMATORS)  # the estimators' names, the command line's --mode values
+ESTIMATORS: dict[str, Estimator] = {
+    e.name: e
+    for e in (
+        RegisteredEstimator(
+            "batch", "batch smoother: the whole log in one factor graph (Gauss-Newton)", _batch
+        ),
+        RegisteredEstimator(
+            "online",
+            "online iSAM2 smoother, fixed lag (bounded cost per ping)",
+            _online("fixed_lag"),
+        ),
+        RegisteredEstimator(
+            "online-full", "online iSAM2 smoother keeping every state", _online("full")
+        ),
+        RegisteredEstimator("ekf", "error-state EKF over the same pings", _ekf),
+        RegisteredEstimator(
+            "io-dvlc",
+            "the paper's ideal observer: DVL scale and misalignment from the Type-I "
+            "segments (no trajectory)",
+            _iodvlc,
+        ),
+    )
+}
+MODES: tuple[str, ...] = tuple(
+    ESTIMATORS
+)  # the estimators' names, the command line's --mode values
 
 
 def get_estimator(mode: str) -> Estimator:
@@ -113,24 +171,46 @@ def get_estimator(mode: str) -> Estimator:
 
 
 @overload
-def run_estimator(log: LogData, mode: Literal["io-dvlc"], config: EstimatorConfig | None,
-                  progress: ProgressFn | None = None, timeline: bool = True,
-                  calibration: VehicleCalibration | None = None) -> IoDvlcResult: ...
+def run_estimator(
+    log: LogData,
+    mode: Literal["io-dvlc"],
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None = None,
+    timeline: bool = True,
+    calibration: VehicleCalibration | None = None,
+) -> IoDvlcResult: ...
 
 
 @overload
-def run_estimator(log: LogData, mode: Literal["batch", "online", "online-full", "ekf"],
-                  config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True, calibration: VehicleCalibration | None = None) -> NavResult: ...
+def run_estimator(
+    log: LogData,
+    mode: Literal["batch", "online", "online-full", "ekf"],
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None = None,
+    timeline: bool = True,
+    calibration: VehicleCalibration | None = None,
+) -> NavResult: ...
 
 
 @overload
-def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult: ...
+def run_estimator(
+    log: LogData,
+    mode: str,
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None = None,
+    timeline: bool = True,
+    calibration: VehicleCalibration | None = None,
+) -> EstimatorResult: ...
 
 
-def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progress: ProgressFn | None = None,
-                  timeline: bool = True, calibration: VehicleCalibration | None = None) -> EstimatorResult:
+def run_estimator(
+    log: LogData,
+    mode: str,
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None = None,
+    timeline: bool = True,
+    calibration: VehicleCalibration | None = None,
+) -> EstimatorResult:
     """Run the estimator named mode (ESTIMATORS) on a log: a NavResult, or an IoDvlcResult for io-dvlc (module
     doc). config: an EstimatorConfig (None: the one the log's scenario names, else the defaults), checked by value
     here; each estimator reads its own section of it. timeline: the batch smoother's filtering timeline (the
@@ -141,9 +221,14 @@ def run_estimator(log: LogData, mode: str, config: EstimatorConfig | None, progr
     return get_estimator(mode).run(log, config, progress, timeline, calibration)
 
 
-def run_trajectory_estimator(log: LogData, mode: str, config: EstimatorConfig | None,
-                             progress: ProgressFn | None = None, timeline: bool = True,
-                             calibration: VehicleCalibration | None = None) -> NavResult:
+def run_trajectory_estimator(
+    log: LogData,
+    mode: str,
+    config: EstimatorConfig | None,
+    progress: ProgressFn | None = None,
+    timeline: bool = True,
+    calibration: VehicleCalibration | None = None,
+) -> NavResult:
     """run_estimator for a mode that estimates a trajectory (a NavResult: every mode but io-dvlc), else a one-line
     GtsamDvlError."""
     result = run_estimator(log, mode, config, progress, timeline, calibration)

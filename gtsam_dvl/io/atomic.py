@@ -61,7 +61,9 @@ def _mkdir(path: Path) -> None:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise GtsamDvlError(f"{path}: cannot create its folder {path.parent} ({e.strerror or e})") from None
+        raise GtsamDvlError(
+            f"{path}: cannot create its folder {path.parent} ({e.strerror or e})"
+        ) from None
 
 
 def temp_path(path: Path) -> Path:
@@ -74,7 +76,9 @@ def _create_temp(path: Path) -> tuple[int, Path]:
     for _ in range(100):
         tmp = temp_path(path)
         try:
-            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666), tmp
+            return os.open(
+                tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666
+            ), tmp
         except FileExistsError:
             continue
         except OSError as e:
@@ -140,10 +144,17 @@ def atomic_write_json(path: Path | str, data: Any) -> Path:
 def tum_text(t_abs_s: np.ndarray, n_p: np.ndarray, n_q_b_xyzw: np.ndarray) -> str:
     """TUM trajectory text (t x y z qx qy qz qw per line), as evo reads it."""
     rows = np.column_stack([t_abs_s, n_p, n_q_b_xyzw])
-    return "\n".join(" ".join(f"{v:.9f}" if j == 0 else f"{v:.9g}" for j, v in enumerate(r)) for r in rows) + "\n"
+    return (
+        "\n".join(
+            " ".join(f"{v:.9f}" if j == 0 else f"{v:.9g}" for j, v in enumerate(r)) for r in rows
+        )
+        + "\n"
+    )
 
 
-def write_tum(path: Path | str, t_abs_s: np.ndarray, n_p: np.ndarray, n_q_b_xyzw: np.ndarray) -> Path:
+def write_tum(
+    path: Path | str, t_abs_s: np.ndarray, n_p: np.ndarray, n_q_b_xyzw: np.ndarray
+) -> Path:
     """TUM trajectory file (t x y z qx qy qz qw per line), as evo reads it."""
     return atomic_write_text(path, tum_text(t_abs_s, n_p, n_q_b_xyzw))
 
@@ -169,8 +180,12 @@ class AtomicWriter(abc.ABC):
     def __enter__(self) -> Self:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         if exc_type is None:
             self.close()
         else:

@@ -47,9 +47,19 @@ def to_enu_flu(ref_R_s: np.ndarray, frame: str) -> np.ndarray:
     return ENU_R_NED @ ref_R_s @ FRD_R_FLU
 
 
-def read_attitude(src: Source, topic: str | None, imu_topic: str, raw: dict[str, Any], imu_arr: np.ndarray,
-                  t0: int, mounting: Mounting, repair: bool, warnings: list[str],
-                  dropped: dict[str, dict[str, int]], frame: str = "enu") -> AttitudeData | None:
+def read_attitude(
+    src: Source,
+    topic: str | None,
+    imu_topic: str,
+    raw: dict[str, Any],
+    imu_arr: np.ndarray,
+    t0: int,
+    mounting: Mounting,
+    repair: bool,
+    warnings: list[str],
+    dropped: dict[str, dict[str, int]],
+    frame: str = "enu",
+) -> AttitudeData | None:
     """The attitude of base_link in map (ENU). topic None: the IMU topic's own orientation (imu_arr, decoded
     sensor_msgs/msg/Imu messages) when its covariance says it is valid, else None; "" or "none": None; a topic
     name: that topic (its bodies in raw[topic]). t0: the log's time base (ns). frame: "enu" or "ned", the
@@ -59,28 +69,62 @@ def read_attitude(src: Source, topic: str | None, imu_topic: str, raw: dict[str,
     if topic == "" or topic == "none":
         return None
     if topic is None:
-        return _from_arrays(imu_arr, IMU_TYPE, imu_topic, t0, mounting, frame, first_string(imu_arr) or "imu_link",
-                            required=False, warnings=warnings)
+        return _from_arrays(
+            imu_arr,
+            IMU_TYPE,
+            imu_topic,
+            t0,
+            mounting,
+            frame,
+            first_string(imu_arr) or "imu_link",
+            required=False,
+            warnings=warnings,
+        )
     type_name = normalize_type(src.topics[topic].type_name)
     if type_name not in ATTITUDE_TYPES:
-        raise GtsamDvlError(f"{src.path}: {topic} is {type_name}; attitude topics must be one of "
-                            f"{', '.join(ATTITUDE_TYPES)}")
+        raise GtsamDvlError(
+            f"{src.path}: {topic} is {type_name}; attitude topics must be one of "
+            f"{', '.join(ATTITUDE_TYPES)}"
+        )
     arr = decode(src.path, topic, type_name, raw[topic])
     if not len(arr):
         raise GtsamDvlError(f"{src.path}: {topic} has no messages")
     q = arr["orientation"].astype(float)
-    keep = check_stamps(src.path, topic, stamps_ns(arr), t0, ~np.isfinite(q).all(axis=1), repair, warnings, dropped)
+    keep = check_stamps(
+        src.path, topic, stamps_ns(arr), t0, ~np.isfinite(q).all(axis=1), repair, warnings, dropped
+    )
     sensor = first_string(arr) or "imu_link"
     if type_name == ODOM_TYPE:
         sensor = first_string(arr, "child_frame_id") or "base_link"
     elif type_name == POSE_COV_TYPE:
         sensor = "base_link"
-    return _from_arrays(arr[keep], type_name, topic, t0, mounting, frame, sensor, required=True, warnings=warnings,
-                        path=str(src.path))
+    return _from_arrays(
+        arr[keep],
+        type_name,
+        topic,
+        t0,
+        mounting,
+        frame,
+        sensor,
+        required=True,
+        warnings=warnings,
+        path=str(src.path),
+    )
 
 
-def _from_arrays(arr: np.ndarray, type_name: str, topic: str, t0: int, mounting: Mounting, frame: str,
-                 sensor_frame: str, *, required: bool, warnings: list[str], path: str = "") -> AttitudeData | None:
+def _from_arrays(
+    arr: np.ndarray,
+    type_name: str,
+    topic: str,
+    t0: int,
+    mounting: Mounting,
+    frame: str,
+    sensor_frame: str,
+    *,
+    required: bool,
+    warnings: list[str],
+    path: str = "",
+) -> AttitudeData | None:
     """AttitudeData from decoded messages of type_name; sensor_frame: the frame whose orientation they give
     (imu_link: turned with mounting.b_R_imu; base_link or another name: taken as base_link)."""
     q = arr["orientation"].astype(float).reshape(-1, 4)
@@ -95,11 +139,15 @@ def _from_arrays(arr: np.ndarray, type_name: str, topic: str, t0: int, mounting:
     has &= np.isfinite(q).all(axis=1) & (norm > 0.5)  # a zero quaternion is no orientation
     if not has.any():
         if required:
-            raise GtsamDvlError(f"{path}: {topic}: no message has an orientation (zero quaternion or "
-                                "orientation_covariance[0] = -1)")
+            raise GtsamDvlError(
+                f"{path}: {topic}: no message has an orientation (zero quaternion or "
+                "orientation_covariance[0] = -1)"
+            )
         return None
     if not has.all():
-        warnings.append(f"{topic}: {int((~has).sum())} message(s) without orientation ignored for the attitude")
+        warnings.append(
+            f"{topic}: {int((~has).sum())} message(s) without orientation ignored for the attitude"
+        )
     q, cov, norm = q[has], cov[has], norm[has]
     t = (stamps_ns(arr)[has] - t0) / 1e9
     ref_R_s = quat_xyzw_to_matrix(q / norm[:, None])

@@ -34,8 +34,12 @@ from gtsam_dvl.io.atomic import atomic_write_text, check_writable
 FORMAT = 1
 
 # the columns of each state's tangent, for the file's reader (core/states.py names them the same way)
-_COMPONENTS = {"scale": [""], "misalignment": ["roll", "pitch", "yaw"], "time_offset": [""],
-               "lever_arm": ["x", "y", "z"]}
+_COMPONENTS = {
+    "scale": [""],
+    "misalignment": ["roll", "pitch", "yaw"],
+    "time_offset": [""],
+    "lever_arm": ["x", "y", "z"],
+}
 
 
 def _num(x: float) -> str:
@@ -68,14 +72,20 @@ def _summary(cal: VehicleCalibration) -> list[str]:
     for name in cal.states:
         value, sigma = np.asarray(cal.values[name], dtype=float), cal.sigma(name)
         if name == "scale":
-            lines += [f"scale_ppm = {_rounded((value[0] - 1.0) * 1e6, 2)}",
-                      f"scale_sigma_ppm = {_rounded(sigma[0] * 1e6, 2)}"]
+            lines += [
+                f"scale_ppm = {_rounded((value[0] - 1.0) * 1e6, 2)}",
+                f"scale_sigma_ppm = {_rounded(sigma[0] * 1e6, 2)}",
+            ]
         elif name == "misalignment":
-            lines += [f"misalignment_rpy_deg = {_rounded(matrix_to_rpy_deg(value), 4)}",
-                      f"misalignment_sigma_deg = {_rounded(np.degrees(sigma), 4)}"]
+            lines += [
+                f"misalignment_rpy_deg = {_rounded(matrix_to_rpy_deg(value), 4)}",
+                f"misalignment_sigma_deg = {_rounded(np.degrees(sigma), 4)}",
+            ]
         elif name == "time_offset":
-            lines += [f"time_offset_ms = {_rounded(value[0] * 1e3, 4)}",
-                      f"time_offset_sigma_ms = {_rounded(sigma[0] * 1e3, 4)}"]
+            lines += [
+                f"time_offset_ms = {_rounded(value[0] * 1e3, 4)}",
+                f"time_offset_sigma_ms = {_rounded(sigma[0] * 1e3, 4)}",
+            ]
         else:
             lines += [f"{name}_m = {_rounded(value, 4)}", f"{name}_sigma_m = {_rounded(sigma, 4)}"]
     return lines
@@ -83,19 +93,38 @@ def _summary(cal: VehicleCalibration) -> list[str]:
 
 def calibration_text(cal: VehicleCalibration) -> str:
     """The TOML text of a calibration (module doc)."""
-    columns = [f"{n} {c}".strip() for n in cal.states for c in _COMPONENTS.get(n, [str(i) for i in range(3)])]
-    lines = ["# gtsam_dvl vehicle calibration: the posterior of the vehicle's DVL calibration states.",
-             "# [summary] is for reading; the estimators use [values] and [covariance] (SI; the misalignment",
-             "# is b_R_d, dvl_link -> base_link, its covariance about b_R_d's own axes, perturbed on the right).",
-             f"format = {FORMAT}", f"vehicle = {_string(cal.vehicle)}", f"date = {_string(cal.date)}",
-             f"method = {_string(cal.method)}", f"config_hash = {_string(cal.config_hash)}",
-             "states = [" + ", ".join(_string(s) for s in cal.states) + "]", ""]
+    columns = [
+        f"{n} {c}".strip()
+        for n in cal.states
+        for c in _COMPONENTS.get(n, [str(i) for i in range(3)])
+    ]
+    lines = [
+        "# gtsam_dvl vehicle calibration: the posterior of the vehicle's DVL calibration states.",
+        "# [summary] is for reading; the estimators use [values] and [covariance] (SI; the misalignment",
+        "# is b_R_d, dvl_link -> base_link, its covariance about b_R_d's own axes, perturbed on the right).",
+        f"format = {FORMAT}",
+        f"vehicle = {_string(cal.vehicle)}",
+        f"date = {_string(cal.date)}",
+        f"method = {_string(cal.method)}",
+        f"config_hash = {_string(cal.config_hash)}",
+        "states = [" + ", ".join(_string(s) for s in cal.states) + "]",
+        "",
+    ]
     for src in cal.sources:
-        lines += ["[[source]]", f"path = {_string(src.path)}", f"sha256 = {_string(src.sha256)}", ""]
+        lines += [
+            "[[source]]",
+            f"path = {_string(src.path)}",
+            f"sha256 = {_string(src.sha256)}",
+            "",
+        ]
     lines += ["[summary]"] + _summary(cal) + [""]
     lines += ["[values]"] + [f"{n} = {_array(cal.values[n])}" for n in cal.states] + [""]
-    lines += ["[covariance]", "columns = [" + ", ".join(_string(c) for c in columns) + "]",
-              f"matrix = {_array(cal.cov)}", ""]
+    lines += [
+        "[covariance]",
+        "columns = [" + ", ".join(_string(c) for c in columns) + "]",
+        f"matrix = {_array(cal.cov)}",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -121,13 +150,17 @@ def read_calibration(path: Path | str) -> VehicleCalibration:
 def calibration_from_dict(raw: dict[str, Any], source: str = "<dict>") -> VehicleCalibration:
     """A calibration from the parsed TOML (read_calibration), every key checked."""
     if raw.get("format") != FORMAT:
-        raise GtsamDvlError(f"{source}: not a gtsam_dvl calibration file (format = {raw.get('format')!r}, "
-                            f"expected {FORMAT})")
+        raise GtsamDvlError(
+            f"{source}: not a gtsam_dvl calibration file (format = {raw.get('format')!r}, "
+            f"expected {FORMAT})"
+        )
     try:
         states = tuple(str(s) for s in raw["states"])
         values = {n: np.asarray(raw["values"][n], dtype=float) for n in states}
         cov = np.asarray(raw["covariance"]["matrix"], dtype=float)
-        sources = tuple(SourceLog(str(s["path"]), str(s.get("sha256", ""))) for s in raw.get("source", []))
+        sources = tuple(
+            SourceLog(str(s["path"]), str(s.get("sha256", ""))) for s in raw.get("source", [])
+        )
         for n, v in values.items():
             want = (3, 3) if n == "misalignment" else (len(_COMPONENTS.get(n, [0, 0, 0])),)
             if v.shape != want:
@@ -136,9 +169,16 @@ def calibration_from_dict(raw: dict[str, Any], source: str = "<dict>") -> Vehicl
             R = values["misalignment"]
             if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
                 raise GtsamDvlError(f"{source}: [values] misalignment is not a rotation matrix")
-        return VehicleCalibration(vehicle=str(raw.get("vehicle", "")), date=str(raw["date"]), states=states,
-                                  values=values, cov=cov, sources=sources,
-                                  config_hash=str(raw.get("config_hash", "")), method=str(raw.get("method", "")))
+        return VehicleCalibration(
+            vehicle=str(raw.get("vehicle", "")),
+            date=str(raw["date"]),
+            states=states,
+            values=values,
+            cov=cov,
+            sources=sources,
+            config_hash=str(raw.get("config_hash", "")),
+            method=str(raw.get("method", "")),
+        )
     except KeyError as exc:
         raise GtsamDvlError(f"{source}: calibration file has no {exc.args[0]!r}") from None
     except (TypeError, ValueError) as exc:

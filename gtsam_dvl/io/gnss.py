@@ -3,7 +3,7 @@
 A fix's status and covariance are kept as the message has them: status < 0 (STATUS_NO_FIX) or a non-finite
 latitude/longitude marks a message that is not a fix; position_covariance_type 0 (unknown) gives a NaN
 covariance. Which fixes are used, and how (map origin, position aiding at the surface, held out for the
-surfacing error), is decided by estimators/gnss.py, not here.
+surfacing error), is decided by estimators/inputs/gnss.py, not here.
 """
 
 from __future__ import annotations
@@ -24,8 +24,15 @@ GNSS_TOPIC = "/gnss/fix"
 STATUS_NO_FIX = -1
 
 
-def read_gnss(src: Source, topic: str, bodies: Any, t0: int, repair: bool, warnings: list[str],
-              dropped: dict[str, dict[str, int]]) -> GnssData:
+def read_gnss(
+    src: Source,
+    topic: str,
+    bodies: Any,
+    t0: int,
+    repair: bool,
+    warnings: list[str],
+    dropped: dict[str, dict[str, int]],
+) -> GnssData:
     """GnssData of a NavSatFix topic. Stamps are checked like every topic's (duplicates and backwards
     stamps raise, or are dropped with ``repair``); messages that are not fixes are kept with their status
     (the estimators skip them and count them)."""
@@ -43,14 +50,25 @@ def gnss_from_messages(arr: np.ndarray, ns: np.ndarray, t0: int) -> GnssData:
     status = arr["status"].astype(int)
     lat, lon = arr["latitude"].astype(float), arr["longitude"].astype(float)
     status = np.where(np.isfinite(lat) & np.isfinite(lon), status, STATUS_NO_FIX)
-    return GnssData((ns - t0) / 1e9, lat, lon, arr["altitude"].astype(float), cov, status,
-                    first_string(arr) or "gnss_link")
+    return GnssData(
+        (ns - t0) / 1e9,
+        lat,
+        lon,
+        arr["altitude"].astype(float),
+        cov,
+        status,
+        first_string(arr) or "gnss_link",
+    )
 
 
 def good_fixes(gnss: GnssData) -> np.ndarray:
     """Mask of the messages that are fixes: status >= 0 and a finite latitude, longitude and height."""
-    return np.asarray((gnss.status >= 0) & np.isfinite(gnss.lat_deg) & np.isfinite(gnss.lon_deg)
-                      & np.isfinite(gnss.height_m))
+    return np.asarray(
+        (gnss.status >= 0)
+        & np.isfinite(gnss.lat_deg)
+        & np.isfinite(gnss.lon_deg)
+        & np.isfinite(gnss.height_m)
+    )
 
 
 def first_fix_time(gnss: GnssData) -> float:
@@ -61,7 +79,7 @@ def first_fix_time(gnss: GnssData) -> float:
 
 def first_fix_origin(gnss: GnssData) -> GeoOrigin | None:
     """The first good fix as a map origin (None without one). The origin is the antenna's position at that
-    fix; the estimators place the first state relative to it (estimators/gnss.py)."""
+    fix; the estimators place the first state relative to it (estimators/inputs/gnss.py)."""
     good = np.flatnonzero(good_fixes(gnss))
     if not len(good):
         return None

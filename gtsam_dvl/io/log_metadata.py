@@ -18,13 +18,19 @@ def metadata_record(log: LogData) -> dict[str, Any]:
     truth = dict(meta.get("truth") or {})
     if log.true_calibration is not None:
         cal = log.true_calibration
-        truth["dvl"] = {**(truth.get("dvl") or {}), "scale": float(cal.scale),
-                        "misalignment_deg": [float(a) for a in cal.misalignment_deg],
-                        "time_offset_s": float(cal.time_offset_s)}
+        truth["dvl"] = {
+            **(truth.get("dvl") or {}),
+            "scale": float(cal.scale),
+            "misalignment_deg": [float(a) for a in cal.misalignment_deg],
+            "time_offset_s": float(cal.time_offset_s),
+        }
     if log.true_imu_bias is not None:
         b = log.true_imu_bias
-        truth["imu"] = {**(truth.get("imu") or {}), "gyro_bias_rad_s": list(b.gyro_rad_s),
-                        "accel_bias_m_s2": list(b.accel_m_s2)}
+        truth["imu"] = {
+            **(truth.get("imu") or {}),
+            "gyro_bias_rad_s": list(b.gyro_rad_s),
+            "accel_bias_m_s2": list(b.accel_m_s2),
+        }
     if log.segments:
         truth["segments"] = [s.as_dict() for s in log.segments]
     if truth:
@@ -40,7 +46,12 @@ def _vec3(x: Any) -> tuple[float, float, float]:
 def typed_fields(meta: dict[str, Any], source: str) -> dict[str, Any]:
     """The LogData keyword arguments origin, true_calibration, true_imu_bias and segments read from a log's
     metadata (absent ones are None or empty). A record that is there but malformed is an error."""
-    out: dict[str, Any] = {"origin": None, "true_calibration": None, "true_imu_bias": None, "segments": []}
+    out: dict[str, Any] = {
+        "origin": None,
+        "true_calibration": None,
+        "true_imu_bias": None,
+        "segments": [],
+    }
     try:
         if meta.get("origin"):
             out["origin"] = GeoOrigin.from_dict(meta["origin"])
@@ -48,12 +59,19 @@ def typed_fields(meta: dict[str, Any], source: str) -> dict[str, Any]:
         if not isinstance(truth, dict):
             raise TypeError("the truth record is not a table")
         if cal := truth.get("dvl"):
-            out["true_calibration"] = DvlCalibration(float(cal["scale"]), _vec3(cal["misalignment_deg"]),
-                                                     float(cal.get("time_offset_s", 0.0)))
+            out["true_calibration"] = DvlCalibration(
+                float(cal["scale"]),
+                _vec3(cal["misalignment_deg"]),
+                float(cal.get("time_offset_s", 0.0)),
+            )
         imu = truth.get("imu") or {}
         if "gyro_bias_rad_s" in imu:
-            out["true_imu_bias"] = ImuBiases(_vec3(imu["accel_bias_m_s2"]), _vec3(imu["gyro_bias_rad_s"]))
+            out["true_imu_bias"] = ImuBiases(
+                _vec3(imu["accel_bias_m_s2"]), _vec3(imu["gyro_bias_rad_s"])
+            )
         out["segments"] = [Segment.from_dict(s) for s in truth.get("segments") or []]
     except (KeyError, TypeError, ValueError) as exc:
-        raise GtsamDvlError(f"{source}: malformed origin or truth metadata ({type(exc).__name__}: {exc})") from None
+        raise GtsamDvlError(
+            f"{source}: malformed origin or truth metadata ({type(exc).__name__}: {exc})"
+        ) from None
     return out

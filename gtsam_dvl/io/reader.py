@@ -30,7 +30,13 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.imu_faults import drop_saturated, undo_clock_steps
 from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
 from gtsam_dvl.io.attitude import read_attitude
-from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, first_fix_origin, first_fix_time, read_gnss
+from gtsam_dvl.io.gnss import (
+    GNSS_TOPIC,
+    NAVSATFIX_TYPE,
+    first_fix_origin,
+    first_fix_time,
+    read_gnss,
+)
 from gtsam_dvl.io.log_metadata import typed_fields
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
@@ -64,12 +70,17 @@ def _missing(src: Source, what: str, topic: str, option: str) -> GtsamDvlError:
     )
 
 
-def _optional_topic(src: Source, given: str | None, default: str, what: str, types: tuple[str, ...],
-                    rule: str) -> str:
+def _optional_topic(
+    src: Source, given: str | None, default: str, what: str, types: tuple[str, ...], rule: str
+) -> str:
     """The topic of an optional sensor ("" for none): given None takes default when the log has it, "none" takes
     none; a named topic must be in the log (else the error names the option --<what>-topic) and of one of types
     (else the error states rule)."""
-    topic = (default if default in src.topics else "") if given is None else ("" if given == "none" else given)
+    topic = (
+        (default if default in src.topics else "")
+        if given is None
+        else ("" if given == "none" else given)
+    )
     if topic and topic not in src.topics:
         raise _missing(src, what, topic, f"--{what.lower()}-topic")
     if topic and (kind := _type(src, topic)) not in types:
@@ -82,7 +93,9 @@ def _dvl_data(src: Source, topic: str, arr: np.ndarray) -> DvlData:
     return dvl_from_messages(_type(src, topic), arr, src.metadata.get("gtsam_dvl", {}))
 
 
-def dvl_from_messages(type_name: str, arr: np.ndarray, ours: dict[str, Any] | None = None) -> DvlData:
+def dvl_from_messages(
+    type_name: str, arr: np.ndarray, ours: dict[str, Any] | None = None
+) -> DvlData:
     """DvlData (t left zero) from decoded messages of a DVL type (DVL_TYPES): the one mapping of a DVL message to
     a ping, for the reader and the ROS 2 node (app/node). ours: the log's gtsam_dvl metadata record ({} for
     another tool's log or a live topic): whether beam_quality holds our writer's per-beam validity."""
@@ -101,7 +114,9 @@ def dvl_from_messages(type_name: str, arr: np.ndarray, ours: dict[str, Any] | No
             ok = arr["beam_quality"][:, :nb] > 0 if "dvl_beam_quality" in ours else np.isfinite(v)
             beams = BeamData(
                 d_u=arr["beam_unit_vec"].astype(float).reshape(m, 4, 3)[:, :nb].copy(),
-                v=v, range=arr["range"].astype(float)[:, :nb].copy(), valid=ok & bvv[:, None],
+                v=v,
+                range=arr["range"].astype(float)[:, :nb].copy(),
+                valid=ok & bvv[:, None],
             )
     else:
         d_v = arr["linear"].astype(float)
@@ -114,7 +129,9 @@ def dvl_from_messages(type_name: str, arr: np.ndarray, ours: dict[str, Any] | No
     water, altitude = None, None
     if type_name == "marine_acoustic_msgs/msg/Dvl":
         altitude = arr["altitude"].astype(float)
-        altitude[~(altitude > 0)] = np.nan  # the mean altitude of the good beams: none (NaN, 0 or negative): unknown
+        altitude[~(altitude > 0)] = (
+            np.nan
+        )  # the mean altitude of the good beams: none (NaN, 0 or negative): unknown
         # the message's own velocity mode: only bottom track is velocity over ground. A driver that fills the
         # field marks other pings 0 (invalid) or 2 (water track); one that never fills it leaves every ping 0,
         # and then only water-track pings are refused. Water-track pings are kept apart (DvlData.water_track)
@@ -125,8 +142,16 @@ def dvl_from_messages(type_name: str, arr: np.ndarray, ours: dict[str, Any] | No
         if beams is not None:
             beams.valid &= mode_ok[:, None]
         water = np.asarray(mode == 2) if (mode == 2).any() else None
-    return DvlData(t=np.zeros(m), d_v=d_v, d_cov=d_cov, valid=valid, beams=beams,
-                   frame_id=first_string(arr) or "dvl_link", water_track=water, altitude=altitude)
+    return DvlData(
+        t=np.zeros(m),
+        d_v=d_v,
+        d_cov=d_cov,
+        valid=valid,
+        beams=beams,
+        frame_id=first_string(arr) or "dvl_link",
+        water_track=water,
+        altitude=altitude,
+    )
 
 
 def _select(dvl: DvlData, keep: np.ndarray, t: np.ndarray) -> DvlData:
@@ -134,14 +159,25 @@ def _select(dvl: DvlData, keep: np.ndarray, t: np.ndarray) -> DvlData:
     beams = None if b is None else BeamData(b.d_u[keep], b.v[keep], b.range[keep], b.valid[keep])
     water = None if dvl.water_track is None else dvl.water_track[keep]
     altitude = None if dvl.altitude is None else dvl.altitude[keep]
-    return DvlData(t, dvl.d_v[keep], dvl.d_cov[keep], dvl.valid[keep], beams, dvl.frame_id, water, altitude=altitude)
+    return DvlData(
+        t,
+        dvl.d_v[keep],
+        dvl.d_cov[keep],
+        dvl.valid[keep],
+        beams,
+        dvl.frame_id,
+        water,
+        altitude=altitude,
+    )
 
 
 def _metadata(src: Source) -> dict[str, Any]:
     meta: dict[str, Any] = {}
     rec = src.metadata.get("gtsam_dvl", {})
     if rec.get("scenario"):
-        meta["scenario_name"] = rec["scenario"]  # the simulator's spelling; "scenario" is its settings
+        meta["scenario_name"] = rec[
+            "scenario"
+        ]  # the simulator's spelling; "scenario" is its settings
     if rec.get("generator"):
         meta["generator"] = rec["generator"]
     if rec.get("seed"):
@@ -175,8 +211,15 @@ class _Stream:
     (IMU only): the orientation and its covariance too, but stored only from the first piece in which some
     message has one (orientation_covariance[0] != -1); earlier rows get "no orientation"."""
 
-    def __init__(self, path: Path, topic: str, type_name: str, fields: tuple[str, ...], capacity: int,
-                 orientation: bool = False) -> None:
+    def __init__(
+        self,
+        path: Path,
+        topic: str,
+        type_name: str,
+        fields: tuple[str, ...],
+        capacity: int,
+        orientation: bool = False,
+    ) -> None:
         self.path, self.topic, self.type_name, self.fields = path, topic, type_name, fields
         self.capacity, self.n, self.frame_id = max(capacity, 1), 0, ""
         self.orientation = orientation
@@ -214,8 +257,10 @@ class _Stream:
         if self.orient is None:
             if not (arr["orientation_covariance"][:, 0] != -1.0).any():
                 return
-            self.orient = np.zeros(len(self.out) if self.out is not None else k,
-                                   [("orientation", "<f8", (4,)), ("orientation_covariance", "<f8", (9,))])
+            self.orient = np.zeros(
+                len(self.out) if self.out is not None else k,
+                [("orientation", "<f8", (4,)), ("orientation_covariance", "<f8", (9,))],
+            )
             self.orient["orientation_covariance"][: self.n] = -1.0
         if self.n + k > len(self.orient):
             self.orient = self._grow(self.orient, self.n + k)
@@ -234,8 +279,13 @@ class _Stream:
         """What io/attitude.read_attitude needs of the IMU's own orientation, for the messages kept: a
         one-message array with "no orientation" when none had one (read_attitude then returns None)."""
         stamps = self.array()
-        dt = [("sec", "<i4"), ("nanosec", "<u4"), ("orientation", "<f8", (4,)),
-              ("orientation_covariance", "<f8", (9,)), ("frame_id", "O")]
+        dt = [
+            ("sec", "<i4"),
+            ("nanosec", "<u4"),
+            ("orientation", "<f8", (4,)),
+            ("orientation_covariance", "<f8", (9,)),
+            ("frame_id", "O"),
+        ]
         if self.orient is None:
             out = np.zeros(1, dt)
             out["orientation_covariance"] = -1.0
@@ -249,18 +299,29 @@ class _Stream:
         return out
 
 
-def _read_streaming(src: Source, topics: list[str], streams: dict[str, _Stream], keep_bodies: set[str],
-                    progress: Callable[[float], None] | None) -> dict[str, Any]:
+def _read_streaming(
+    src: Source,
+    topics: list[str],
+    streams: dict[str, _Stream],
+    keep_bodies: set[str],
+    progress: Callable[[float], None] | None,
+) -> dict[str, Any]:
     """One pass over the log: streamed topics into their _Stream, the others' bodies (and those of streamed
     topics in keep_bodies, which another part of the reader decodes itself) collected as src.read would."""
-    pieces: dict[str, list[Bodies]] = {t: [] for t in topics if t not in streams or t in keep_bodies}
+    pieces: dict[str, list[Bodies]] = {
+        t: [] for t in topics if t not in streams or t in keep_bodies
+    }
     for got in src.iter_read(topics, progress):
         for topic, bodies in got.items():
             if topic in streams:
                 streams[topic].add(bodies)
             if topic in pieces:
                 pieces[topic].append(bodies)
-    return {t: p[0] if len(p) == 1 else Bodies.concat(p) for t, p in pieces.items() if p or t in src.topics}
+    return {
+        t: p[0] if len(p) == 1 else Bodies.concat(p)
+        for t, p in pieces.items()
+        if p or t in src.topics
+    }
 
 
 def read_log(
@@ -299,7 +360,7 @@ def read_log(
 
     GNSS (LogData.gnss): gnss_topic None reads /gnss/fix if the log has it; "" or "none" reads none; the topic
     must be sensor_msgs/msg/NavSatFix (io/gnss.py). When the log records no map origin, LogData.origin is the
-    first good fix (estimators/gnss.py decides which fixes are good and how they are used).
+    first good fix (estimators/inputs/gnss.py decides which fixes are good and how they are used).
 
     Attitude (LogData.attitude, io/attitude.py): attitude_topic None takes the IMU topic's own orientation when
     its covariance says it is valid; "" or "none" reads none; else the named topic (sensor_msgs/msg/Imu,
@@ -320,23 +381,41 @@ def read_log(
     if (kind := _type(src, imu_topic)) != IMU_TYPE:
         raise GtsamDvlError(f"{path}: {imu_topic} is {kind}, expected {IMU_TYPE}")
     if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
-        raise GtsamDvlError(f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}")
+        raise GtsamDvlError(
+            f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}"
+        )
     if dvl_water_topic and dvl_water_topic not in src.topics:
         raise _missing(src, "DVL water-track", dvl_water_topic, "--dvl-water-topic")
     if dvl_water_topic and (kind := _type(src, dvl_water_topic)) not in WATER_TOPIC_TYPES:
-        raise GtsamDvlError(f"{path}: {dvl_water_topic} is {kind}; water-track topics must be one of "
-                            f"{', '.join(WATER_TOPIC_TYPES)}")
-    depth_topic = _optional_topic(src, depth_topic, DEPTH_TOPIC, "depth", DEPTH_TYPES,
-                                  f"depth topics must be one of {', '.join(DEPTH_TYPES)}")
+        raise GtsamDvlError(
+            f"{path}: {dvl_water_topic} is {kind}; water-track topics must be one of "
+            f"{', '.join(WATER_TOPIC_TYPES)}"
+        )
+    depth_topic = _optional_topic(
+        src,
+        depth_topic,
+        DEPTH_TOPIC,
+        "depth",
+        DEPTH_TYPES,
+        f"depth topics must be one of {', '.join(DEPTH_TYPES)}",
+    )
     warnings = list(src.warnings)
     dropped: dict[str, dict[str, int]] = {}
     has_truth = truth_topic in src.topics and _type(src, truth_topic) == ODOM_TYPE
     if truth_topic in src.topics and not has_truth:
         warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
-    topics = [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
+    topics = (
+        [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
+    )
     topics += [depth_topic] * bool(depth_topic) + ([dvl_water_topic] if dvl_water_topic else [])
-    gnss_topic = _optional_topic(src, gnss_topic, GNSS_TOPIC, "GNSS", (NAVSATFIX_TYPE,),
-                                 f"the GNSS topic must be {NAVSATFIX_TYPE}")
+    gnss_topic = _optional_topic(
+        src,
+        gnss_topic,
+        GNSS_TOPIC,
+        "GNSS",
+        (NAVSATFIX_TYPE,),
+        f"the GNSS topic must be {NAVSATFIX_TYPE}",
+    )
     topics += [gnss_topic] * bool(gnss_topic)
     if attitude_topic == "none":
         attitude_topic = ""
@@ -345,11 +424,19 @@ def read_log(
     if attitude_topic and attitude_topic not in topics:
         topics.append(attitude_topic)
     counts = src.message_counts()
-    imu_stream = _Stream(path, imu_topic, IMU_TYPE, IMU_FIELDS, counts.get(imu_topic, 0),
-                         orientation=attitude_topic is None)
+    imu_stream = _Stream(
+        path,
+        imu_topic,
+        IMU_TYPE,
+        IMU_FIELDS,
+        counts.get(imu_topic, 0),
+        orientation=attitude_topic is None,
+    )
     streams = {imu_topic: imu_stream}
     if has_truth:
-        streams[truth_topic] = _Stream(path, truth_topic, ODOM_TYPE, TRUTH_FIELDS, counts.get(truth_topic, 0))
+        streams[truth_topic] = _Stream(
+            path, truth_topic, ODOM_TYPE, TRUTH_FIELDS, counts.get(truth_topic, 0)
+        )
     others = {depth_topic, gnss_topic, attitude_topic, tf_topic, dvl_topic, dvl_water_topic}
     raw = _read_streaming(src, topics, streams, {t for t in streams if t in others}, progress)
 
@@ -358,8 +445,10 @@ def read_log(
         raise GtsamDvlError(f"{path}: {imu_topic} has no messages")
     imu_ns = stamps_ns(imu)
     # views of the decoded messages, not copies (two fewer arrays over every IMU sample at the reader's peak)
-    b_omega, b_f = (imu[f] if imu.dtype[f].base == np.float64 else imu[f].astype(float)
-                    for f in ("angular_velocity", "linear_acceleration"))
+    b_omega, b_f = (
+        imu[f] if imu.dtype[f].base == np.float64 else imu[f].astype(float)
+        for f in ("angular_velocity", "linear_acceleration")
+    )
     t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
     nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
     # a clock step (core/imu_faults.py) is undone with repair, else named in an error
@@ -397,8 +486,10 @@ def read_log(
         keep = check_stamps(path, dvl_water_topic, w_ns, t0, None, repair, warnings, dropped)
         water = _select(_dvl_data(src, dvl_water_topic, w_arr), keep, (w_ns[keep] - t0) / 1e9)
         if water.frame_id != dvl.frame_id:
-            warnings.append(f"{dvl_water_topic} is in frame {water.frame_id}, {dvl_topic} in {dvl.frame_id}: its "
-                            f"velocity taken in {dvl.frame_id}")
+            warnings.append(
+                f"{dvl_water_topic} is in frame {water.frame_id}, {dvl_topic} in {dvl.frame_id}: its "
+                f"velocity taken in {dvl.frame_id}"
+            )
         dvl = merge_pings(dvl, as_water_track(water))
 
     truth = None
@@ -407,42 +498,88 @@ def read_log(
         ns = stamps_ns(od)
         keep = check_stamps(path, truth_topic, ns, t0, None, repair, warnings, dropped)
         q = od["orientation"].astype(float)[keep]
-        n_v = Rotation.from_quat(q).apply(od["linear"].astype(float)[keep]) if keep.any() else np.zeros((0, 3))
+        n_v = (
+            Rotation.from_quat(q).apply(od["linear"].astype(float)[keep])
+            if keep.any()
+            else np.zeros((0, 3))
+        )
         n_p, t_truth = od["position"].astype(float)[keep], (ns[keep] - t0) / 1e9
-        truth = TruthData(t_truth, n_p, q, n_v, od["angular"].astype(float)[keep],
-                          truth_current(meta, t_truth, n_p))
+        truth = TruthData(
+            t_truth,
+            n_p,
+            q,
+            n_v,
+            od["angular"].astype(float)[keep],
+            truth_current(meta, t_truth, n_p),
+        )
 
     mounting = Mounting()
     if tf_topic not in src.topics:
-        warnings.append(f"no {tf_topic} in the log: identity mounting assumed (IMU and DVL frames = base_link)")
+        warnings.append(
+            f"no {tf_topic} in the log: identity mounting assumed (IMU and DVL frames = base_link)"
+        )
     else:
         tfs = decode_tf(path, tf_topic, raw[tf_topic])
-        for frame, attrs in ((imu_data.frame_id, ("b_R_imu", "b_p_imu")), (dvl.frame_id, ("b_R_d0", "b_p_dvl"))):
+        for frame, attrs in (
+            (imu_data.frame_id, ("b_R_imu", "b_p_imu")),
+            (dvl.frame_id, ("b_R_d0", "b_p_dvl")),
+        ):
             if (pose := to_base(tfs, frame)) is None:
-                warnings.append(f"{tf_topic} has no transform base_link -> {frame}: identity assumed")
+                warnings.append(
+                    f"{tf_topic} has no transform base_link -> {frame}: identity assumed"
+                )
             else:
                 setattr(mounting, attrs[0], pose[0])
                 setattr(mounting, attrs[1], pose[1])
 
-    dvl.noise_free = meta.get("white_noise") is False  # a simulation without noise (DvlData.noise_free)
+    dvl.noise_free = (
+        meta.get("white_noise") is False
+    )  # a simulation without noise (DvlData.noise_free)
     depth = None
     if depth_topic:
-        depth = _depth_data(src, depth_topic, raw[depth_topic], t0, repair, warnings, dropped, depth_z_down,
-                            meta.get("origin"))
-        if tf_topic in src.topics and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]),
-                                                       depth.frame_id)) is not None:
+        depth = _depth_data(
+            src,
+            depth_topic,
+            raw[depth_topic],
+            t0,
+            repair,
+            warnings,
+            dropped,
+            depth_z_down,
+            meta.get("origin"),
+        )
+        if (
+            tf_topic in src.topics
+            and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]), depth.frame_id))
+            is not None
+        ):
             depth.b_p_sensor = pose[1]
     gnss = None
     if gnss_topic:
         gnss = read_gnss(src, gnss_topic, raw[gnss_topic], t0, repair, warnings, dropped)
-        if tf_topic in src.topics and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]),
-                                                       gnss.frame_id)) is not None:
+        if (
+            tf_topic in src.topics
+            and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]), gnss.frame_id))
+            is not None
+        ):
             gnss.b_p_antenna = pose[1]
-    attitude = read_attitude(src, attitude_topic, imu_topic, raw,
-                             imu_attitude, t0,
-                             mounting, repair, warnings, dropped, attitude_frame)
+    attitude = read_attitude(
+        src,
+        attitude_topic,
+        imu_topic,
+        raw,
+        imu_attitude,
+        t0,
+        mounting,
+        repair,
+        warnings,
+        dropped,
+        attitude_frame,
+    )
     gaps: dict[str, dict[str, Any]] = {}
-    for topic, t in ((imu_topic, imu_logged_t), (dvl_topic, dvl.t)) + (((truth_topic, truth.t),) if truth else ()):
+    for topic, t in ((imu_topic, imu_logged_t), (dvl_topic, dvl.t)) + (
+        ((truth_topic, truth.t),) if truth else ()
+    ):
         if (gap := stamp_gaps(t)) is not None:
             gaps[topic] = gap
             warnings.append(gap_warning(topic, gap))
@@ -461,14 +598,36 @@ def read_log(
     if typed.get("origin") is None and gnss is not None:
         typed["origin"] = first_fix_origin(gnss)
         if typed["origin"] is not None:
-            warnings.append(f"map origin from the first good GNSS fix on {gnss_topic} (t = "
-                            f"{first_fix_time(gnss):.1f} s)")
-    return LogData(imu_data, dvl, mounting, truth, t0, meta, str(path), **typed, depth=depth, gnss=gnss,
-                   attitude=attitude)
+            warnings.append(
+                f"map origin from the first good GNSS fix on {gnss_topic} (t = "
+                f"{first_fix_time(gnss):.1f} s)"
+            )
+    return LogData(
+        imu_data,
+        dvl,
+        mounting,
+        truth,
+        t0,
+        meta,
+        str(path),
+        **typed,
+        depth=depth,
+        gnss=gnss,
+        attitude=attitude,
+    )
 
 
-def _depth_data(src: Source, topic: str, bodies: Any, t0: int, repair: bool, warnings: list[str],
-                dropped: dict[str, dict[str, int]], z_down: bool, origin: Any) -> DepthData:
+def _depth_data(
+    src: Source,
+    topic: str,
+    bodies: Any,
+    t0: int,
+    repair: bool,
+    warnings: list[str],
+    dropped: dict[str, dict[str, int]],
+    z_down: bool,
+    origin: Any,
+) -> DepthData:
     """DepthData from a FluidPressure, PoseWithCovarianceStamped or Odometry topic (read_log's doc)."""
     type_name = _type(src, topic)
     arr = decode(src.path, topic, type_name, bodies)
@@ -478,14 +637,20 @@ def _depth_data(src: Source, topic: str, bodies: Any, t0: int, repair: bool, war
         p, var = pressure_from_messages(arr)
         keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(p), repair, warnings, dropped)
         p, var = p[keep], var[keep]
-        lat_deg = float(origin["lat_deg"]) if isinstance(origin, dict) and "lat_deg" in origin else 45.0
+        lat_deg = (
+            float(origin["lat_deg"]) if isinstance(origin, dict) and "lat_deg" in origin else 45.0
+        )
         d, dd_dp = pressure_to_depth(p, float(np.radians(lat_deg)))
         return DepthData((ns[keep] - t0) / 1e9, d, var * dd_dp**2, p, var, frame_id)
     z = arr["position"].astype(float)[:, 2]
-    cov = arr["covariance" if type_name == POSE_COV_TYPE else "pose_covariance"].astype(float)[:, 14]
+    cov = arr["covariance" if type_name == POSE_COV_TYPE else "pose_covariance"].astype(float)[
+        :, 14
+    ]
     keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(z), repair, warnings, dropped)
     d = z[keep] if z_down else -z[keep]
-    return DepthData((ns[keep] - t0) / 1e9, d, np.where(cov[keep] > 0, cov[keep], np.nan), frame_id=frame_id)
+    return DepthData(
+        (ns[keep] - t0) / 1e9, d, np.where(cov[keep] > 0, cov[keep], np.nan), frame_id=frame_id
+    )
 
 
 def pressure_from_messages(arr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -518,13 +683,18 @@ def read_odometry(
     ns = stamps_ns(od)
     if t0_ns is None:
         rec = src.metadata.get("gtsam_dvl_time", {}).get("t0_ns", "")
-        t0_ns = int(rec) if rec.lstrip("-").isdigit() else int(ns[0] // 10**9 * 10**9) if len(ns) else 0
+        t0_ns = (
+            int(rec) if rec.lstrip("-").isdigit() else int(ns[0] // 10**9 * 10**9) if len(ns) else 0
+        )
     k = len(od)
     return (
         (ns - t0_ns) / 1e9,
-        od["position"].astype(float), od["orientation"].astype(float),
-        od["linear"].astype(float), od["angular"].astype(float),
-        od["pose_covariance"].astype(float).reshape(k, 6, 6), od["twist_covariance"].astype(float).reshape(k, 6, 6),
+        od["position"].astype(float),
+        od["orientation"].astype(float),
+        od["linear"].astype(float),
+        od["angular"].astype(float),
+        od["pose_covariance"].astype(float).reshape(k, 6, 6),
+        od["twist_covariance"].astype(float).reshape(k, 6, 6),
     )
 
 

@@ -23,13 +23,21 @@ def read_result(path: Path | str) -> StoredResult:
         raise GtsamDvlError(f"{path}: no such file")
     src = open_source(path)
     if TOPICS["odometry"] not in src.topics or "summary.json" not in src.attachments:
-        raise GtsamDvlError(f"{path}: not a gtsam_dvl result (no {TOPICS['odometry']} or summary.json); "
-                            "write one with `gtsam-dvl smooth LOG -o RESULT.mcap`")
+        raise GtsamDvlError(
+            f"{path}: not a gtsam_dvl result (no {TOPICS['odometry']} or summary.json); "
+            "write one with `gtsam-dvl smooth LOG -o RESULT.mcap`"
+        )
     if "states.npz" not in src.attachments:
-        raise GtsamDvlError(f"{path}: a result of an older gtsam_dvl (no states.npz attachment); smooth the log again")
+        raise GtsamDvlError(
+            f"{path}: a result of an older gtsam_dvl (no states.npz attachment); smooth the log again"
+        )
     try:
         summary = json.loads(src.attachments["summary.json"][1])
-        meta = json.loads(src.attachments["result.json"][1]) if "result.json" in src.attachments else {}
+        meta = (
+            json.loads(src.attachments["result.json"][1])
+            if "result.json" in src.attachments
+            else {}
+        )
         with np.load(io.BytesIO(src.attachments["states.npz"][1])) as npz:
             arrays = {k: npz[k] for k in npz.files}
         timeline = None
@@ -42,19 +50,35 @@ def read_result(path: Path | str) -> StoredResult:
             stored_arrays["time_offset_s"] = float(arrays["time_offset_s"][0])
             stored_arrays["time_offset_sigma_s"] = float(arrays["time_offset_s"][1])
         result = NavResult(
-            estimator=str(meta.get("estimator", summary.get("estimator", "?"))), **stored_arrays,
-            scale=float(arrays["scale"][0]), scale_sigma=float(arrays["scale"][1]), t0_ns=int(arrays["t0_ns"][0]),
-            timeline=timeline, timing_s=dict(meta.get("timing_s") or {}), info=dict(meta.get("info") or {}),
-            config=dict(meta.get("config") or {}))
+            estimator=str(meta.get("estimator", summary.get("estimator", "?"))),
+            **stored_arrays,
+            scale=float(arrays["scale"][0]),
+            scale_sigma=float(arrays["scale"][1]),
+            t0_ns=int(arrays["t0_ns"][0]),
+            timeline=timeline,
+            timing_s=dict(meta.get("timing_s") or {}),
+            info=dict(meta.get("info") or {}),
+            config=dict(meta.get("config") or {}),
+        )
     except (KeyError, ValueError, json.JSONDecodeError, OSError) as exc:
-        raise GtsamDvlError(f"{path}: damaged result attachments ({type(exc).__name__}: {exc})") from None
+        raise GtsamDvlError(
+            f"{path}: damaged result attachments ({type(exc).__name__}: {exc})"
+        ) from None
     record = src.metadata.get("gtsam_dvl_result", {})
     try:
         read_options = json.loads(record["read_options"]) if record.get("read_options") else {}
         origin = json.loads(record["source_origin"]) if record.get("source_origin") else None
     except json.JSONDecodeError:
-        raise GtsamDvlError(f"{path}: damaged result metadata (read_options or source_origin is not JSON)") from None
-    return StoredResult(result, summary, str(path), str(record.get("source_log", "")),
-                        str(record.get("source_log_relative", "")),
-                        dict(read_options) if isinstance(read_options, dict) else {},
-                        str(record.get("source_sha256", "")), origin if isinstance(origin, dict) else None)
+        raise GtsamDvlError(
+            f"{path}: damaged result metadata (read_options or source_origin is not JSON)"
+        ) from None
+    return StoredResult(
+        result,
+        summary,
+        str(path),
+        str(record.get("source_log", "")),
+        str(record.get("source_log_relative", "")),
+        dict(read_options) if isinstance(read_options, dict) else {},
+        str(record.get("source_sha256", "")),
+        origin if isinstance(origin, dict) else None,
+    )

@@ -22,7 +22,13 @@ MAX_GAP_SPANS = 20  # spans listed per topic (the count and the seconds cover al
 
 
 def check_stamps(
-    path: Path, topic: str, ns: np.ndarray, t0: int, bad: np.ndarray | None, repair: bool, warnings: list[str],
+    path: Path,
+    topic: str,
+    ns: np.ndarray,
+    t0: int,
+    bad: np.ndarray | None,
+    repair: bool,
+    warnings: list[str],
     dropped: dict[str, dict[str, int]] | None = None,
 ) -> np.ndarray:
     """Keep-mask of messages: raise on NaN (``bad``), duplicate or backwards stamps, or with ``repair``
@@ -35,13 +41,17 @@ def check_stamps(
     if not repair:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise GtsamDvlError(f"{path}: {topic}: NaN in message {i} (t = {t(i):.6f} s); {REPAIR_HINT}")
+            raise GtsamDvlError(
+                f"{path}: {topic}: NaN in message {i} (t = {t(i):.6f} s); {REPAIR_HINT}"
+            )
         d = np.diff(ns)
         if (d <= 0).any():
             i = int(np.flatnonzero(d <= 0)[0]) + 1
             what = "duplicate stamp" if d[i - 1] == 0 else "time goes backwards"
             after = "" if d[i - 1] == 0 else f" after {t(i - 1):.9f} s"
-            raise GtsamDvlError(f"{path}: {topic}: {what} at message {i} (t = {t(i):.9f} s{after}); {REPAIR_HINT}")
+            raise GtsamDvlError(
+                f"{path}: {topic}: {what} at message {i} (t = {t(i):.9f} s{after}); {REPAIR_HINT}"
+            )
         return np.ones(len(ns), bool)
     keep = ~bad
     idx = np.flatnonzero(keep)
@@ -55,8 +65,13 @@ def check_stamps(
             f"{n_drop - int(bad.sum()) - dup} going back in time"
         )
         if dropped is not None:
-            dropped[topic] = {"dropped": n_drop, "nan": int(bad.sum()), "duplicate": dup,
-                              "backwards": n_drop - int(bad.sum()) - dup, "of": len(ns)}
+            dropped[topic] = {
+                "dropped": n_drop,
+                "nan": int(bad.sum()),
+                "duplicate": dup,
+                "backwards": n_drop - int(bad.sum()) - dup,
+                "of": len(ns),
+            }
     return keep
 
 
@@ -70,13 +85,19 @@ def stamp_gaps(t: np.ndarray) -> dict[str, Any] | None:
     big = np.flatnonzero(d > GAP_FACTOR * period)
     if period <= 0 or not len(big):
         return None
-    return {"count": len(big), "seconds": float((d[big] - period).sum()), "period_s": period,
-            "longest_s": float(d[big].max()),
-            "spans_s": [[float(t[i]), float(t[i + 1])] for i in big[:MAX_GAP_SPANS].tolist()]}
+    return {
+        "count": len(big),
+        "seconds": float((d[big] - period).sum()),
+        "period_s": period,
+        "longest_s": float(d[big].max()),
+        "spans_s": [[float(t[i]), float(t[i + 1])] for i in big[:MAX_GAP_SPANS].tolist()],
+    }
 
 
 def gap_warning(topic: str, gap: dict[str, Any]) -> str:
     """The warning line of a topic's gaps (stamp_gaps): how many, the seconds missing, the longest span."""
     a, b = max(gap["spans_s"], key=lambda s: s[1] - s[0])
-    return (f"{topic}: {gap['count']} gap(s) in the data, {gap['seconds']:.1f} s missing in all "
-            f"(longest {a:.2f} s to {b:.2f} s)")
+    return (
+        f"{topic}: {gap['count']} gap(s) in the data, {gap['seconds']:.1f} s missing in all "
+        f"(longest {a:.2f} s to {b:.2f} s)"
+    )

@@ -53,8 +53,16 @@ from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap.writer import McapLogWriter, McapStreamWriter
 from gtsam_dvl.io.ros2 import cdr
 
-__all__ = ["McapLogWriter", "write_log", "LogStreamWriter", "LogSource", "write_log_stream", "imu_rate_hz",
-           "UNMEASURED_VARIANCE", "BEAM_QUALITY_NOTE"]
+__all__ = [
+    "McapLogWriter",
+    "write_log",
+    "LogStreamWriter",
+    "LogSource",
+    "write_log_stream",
+    "imu_rate_hz",
+    "UNMEASURED_VARIANCE",
+    "BEAM_QUALITY_NOTE",
+]
 
 UNMEASURED_VARIANCE = 1e6  # (rad/s)^2 on the angular diagonal of /dvl/twist
 BEAM_QUALITY_NOTE = "1 = beam valid, 0 = beam invalid"
@@ -75,12 +83,17 @@ def json_default(o: Any) -> Any:
 # Spellings of the IMU white-noise densities in metadata["sensors"]["imu"] -> factor to SI per sqrt(Hz):
 # the simulator's scenario units (deg/h/sqrt(Hz), micro-g/sqrt(Hz)) and plain SI.
 _NOISE_KEYS = {
-    "gyro": (("gyro_noise_deg_per_h_per_sqrt_hz", np.pi / 180.0 / 3600.0), ("gyro_noise_density", 1.0)),
+    "gyro": (
+        ("gyro_noise_deg_per_h_per_sqrt_hz", np.pi / 180.0 / 3600.0),
+        ("gyro_noise_density", 1.0),
+    ),
     "accel": (("accel_noise_micro_g_per_sqrt_hz", 1e-6 * 9.80665), ("accel_noise_density", 1.0)),
 }
 
 
-def _imu_variances(meta: dict[str, Any], t: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _imu_variances(
+    meta: dict[str, Any], t: np.ndarray
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """Per-sample variances (diagonal) of gyro and accelerometer white noise: density^2 * rate."""
     return _imu_variances_at(meta, 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0)
 
@@ -112,7 +125,9 @@ def imu_rate_hz(t_parts: Iterable[np.ndarray]) -> float:
     return 1.0 / float(median)
 
 
-def _imu_variances_at(meta: dict[str, Any], rate: float) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _imu_variances_at(
+    meta: dict[str, Any], rate: float
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """_imu_variances at a given IMU rate (Hz)."""
     imu = (meta.get("sensors") or {}).get("imu") or {}
     out: list[np.ndarray | None] = []
@@ -138,16 +153,22 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     cdr.set_stamps(arr, stamps)
     finite = np.isfinite(dvl.d_v).all(axis=1)
     valid = np.asarray(dvl.valid, bool) & finite
-    water = np.zeros(m, bool) if dvl.water_track is None else np.asarray(dvl.water_track, dtype=bool)
+    water = (
+        np.zeros(m, bool) if dvl.water_track is None else np.asarray(dvl.water_track, dtype=bool)
+    )
     v = np.where(valid[:, None], dvl.d_v, np.nan)  # over ground
     cov = np.asarray(dvl.d_cov, dtype=float).reshape(m, 9)
     arr["velocity_mode"], arr["dvl_type"] = 1, 0  # DVL_MODE_BOTTOM, DVL_TYPE_PISTON
     arr["velocity_mode"][water] = 2  # DVL_MODE_WATER
-    arr["velocity"] = np.where((valid | water & finite)[:, None], dvl.d_v, np.nan)  # water track: through the water
+    arr["velocity"] = np.where(
+        (valid | water & finite)[:, None], dvl.d_v, np.nan
+    )  # water track: through the water
     arr["velocity_covar"] = np.where(np.isnan(cov).all(axis=1, keepdims=True), -1.0, cov)
     arr["course_gnd"] = np.arctan2(v[:, 1], v[:, 0])
     arr["speed_gnd"] = np.hypot(v[:, 0], v[:, 1])
-    arr["sound_speed"] = float(((meta.get("sensors") or {}).get("dvl") or {}).get("sound_speed", 1500.0))
+    arr["sound_speed"] = float(
+        ((meta.get("sensors") or {}).get("dvl") or {}).get("sound_speed", 1500.0)
+    )
     arr["range_covar"] = arr["beam_velocity_covar"] = -1.0
     b = dvl.beams
     if b is None:
@@ -155,12 +176,16 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
         return arr
     nb = b.d_u.shape[1]
     if nb > MAX_BEAMS:
-        raise GtsamDvlError(f"{path}: marine_acoustic_msgs/msg/Dvl holds {MAX_BEAMS} beams, the log has {nb}")
+        raise GtsamDvlError(
+            f"{path}: marine_acoustic_msgs/msg/Dvl holds {MAX_BEAMS} beams, the log has {nb}"
+        )
 
     def pad(a: np.ndarray, fill: float) -> np.ndarray:
         out = np.full((m, MAX_BEAMS, *a.shape[2:]), fill)
         out[:, :nb] = a
-        return out.reshape(m, MAX_BEAMS * int(np.prod(a.shape[2:])))  # (m, -1) is ambiguous for m = 0
+        return out.reshape(
+            m, MAX_BEAMS * int(np.prod(a.shape[2:]))
+        )  # (m, -1) is ambiguous for m = 0
 
     bvalid = np.asarray(b.valid, bool)
     if water.any():  # a water-track ping's beams measured the water where they have a velocity
@@ -187,8 +212,11 @@ def _pressure_messages(log: LogData, w: McapLogWriter) -> np.ndarray:
     assert dep is not None
     if dep.pressure_pa is not None:
         p = np.asarray(dep.pressure_pa, dtype=float)
-        var = (np.full(len(p), np.nan) if dep.pressure_variance_pa2 is None
-               else np.asarray(dep.pressure_variance_pa2, dtype=float))
+        var = (
+            np.full(len(p), np.nan)
+            if dep.pressure_variance_pa2 is None
+            else np.asarray(dep.pressure_variance_pa2, dtype=float)
+        )
     else:
         lat = np.radians(log.origin.lat_deg if log.origin is not None else 45.0)
         p = depth_to_pressure(dep.depth_m, float(lat))
@@ -201,9 +229,14 @@ def _pressure_messages(log: LogData, w: McapLogWriter) -> np.ndarray:
     return arr
 
 
-def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, Any] | None = None,
-              imu_orientation: tuple[np.ndarray, np.ndarray | None] | None = None,
-              dvl_water_topic: str | None = None) -> None:
+def write_log(
+    path: str | os.PathLike[str],
+    log: LogData,
+    *,
+    config: dict[str, Any] | None = None,
+    imu_orientation: tuple[np.ndarray, np.ndarray | None] | None = None,
+    dvl_water_topic: str | None = None,
+) -> None:
     """Write ``log`` to ``path`` as a ROS 2 MCAP per docs/conventions.md (atomically: temporary file, then
     rename). Metadata record "gtsam_dvl" holds scenario, seed, generator and JSON strings of the truth
     and the sensor spec; attachment "config.json" holds log.metadata with ``config`` under "config".
@@ -213,37 +246,69 @@ def write_log(path: str | os.PathLike[str], log: LogData, *, config: dict[str, A
     of /dvl/data, as drivers that publish water track apart do."""
     path = Path(path)
     meta = metadata_record(log)
-    times = [a for a in (log.imu.t, log.dvl.t, log.truth.t if log.truth else None) if a is not None and len(a)]
+    times = [
+        a
+        for a in (log.imu.t, log.dvl.t, log.truth.t if log.truth else None)
+        if a is not None and len(a)
+    ]
     t_first = float(min(a[0] for a in times)) if times else 0.0
     with McapLogWriter(path, t0_ns=log.t0_ns) as w:
         _write_head(w, path, log, meta, config, t_first)
         gyro_var, accel_var = _imu_variances(meta, log.imu.t)
         if dvl_water_topic and log.dvl.water_track is not None:
             wt = np.asarray(log.dvl.water_track, dtype=bool)
-            _write_data(w, path, dataclasses.replace(log, dvl=_dvl_rows(log.dvl, ~wt)), meta, gyro_var, accel_var,
-                        imu_orientation, gnss_channel=False)
+            _write_data(
+                w,
+                path,
+                dataclasses.replace(log, dvl=_dvl_rows(log.dvl, ~wt)),
+                meta,
+                gyro_var,
+                accel_var,
+                imu_orientation,
+                gnss_channel=False,
+            )
             water = _dvl_rows(log.dvl, wt)
             cov = np.zeros((len(water), 6, 6))
             cov[:, :3, :3] = np.nan_to_num(water.d_cov, nan=0.0)
             cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
-            w.add_twist_with_covariance(dvl_water_topic, water.t, water.d_v, None, cov, water.frame_id)
+            w.add_twist_with_covariance(
+                dvl_water_topic, water.t, water.d_v, None, cov, water.frame_id
+            )
         else:
-            _write_data(w, path, log, meta, gyro_var, accel_var, imu_orientation, gnss_channel=False)
+            _write_data(
+                w, path, log, meta, gyro_var, accel_var, imu_orientation, gnss_channel=False
+            )
 
 
 def _dvl_rows(dvl: DvlData, keep: np.ndarray) -> DvlData:
     """The pings keep of dvl."""
+
     def rows(obj: Any) -> Any:
-        return dataclasses.replace(obj, **{f.name: getattr(obj, f.name)[keep] for f in dataclasses.fields(obj)
-                                           if isinstance(getattr(obj, f.name), np.ndarray)})
+        return dataclasses.replace(
+            obj,
+            **{
+                f.name: getattr(obj, f.name)[keep]
+                for f in dataclasses.fields(obj)
+                if isinstance(getattr(obj, f.name), np.ndarray)
+            },
+        )
+
     return dataclasses.replace(rows(dvl), beams=None if dvl.beams is None else rows(dvl.beams))
 
 
-def _write_head(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any], config: dict[str, Any] | None,
-                t_first: float) -> None:
+def _write_head(
+    w: McapLogWriter,
+    path: Path,
+    log: LogData,
+    meta: dict[str, Any],
+    config: dict[str, Any] | None,
+    t_first: float,
+) -> None:
     """The metadata records, the config.json attachment and /tf_static (stamped t_first)."""
     try:
-        attachment = json.dumps({**meta, "config": config} if config is not None else meta, default=json_default)
+        attachment = json.dumps(
+            {**meta, "config": config} if config is not None else meta, default=json_default
+        )
         truth_json = json.dumps(meta.get("truth", {}), default=json_default)
         sensors_json = json.dumps(meta.get("sensors", {}), default=json_default)
     except (TypeError, ValueError) as e:
@@ -269,21 +334,44 @@ def _write_head(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any]
         [
             ("base_link", log.imu.frame_id, mnt.b_R_imu, mnt.b_p_imu),
             ("base_link", log.dvl.frame_id, mnt.b_R_d0, mnt.b_p_dvl),
-        ] + ([] if log.depth is None or log.depth.b_p_sensor is None else
-             [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)])
-          + ([] if log.gnss is None or log.gnss.b_p_antenna is None else
-             [("base_link", log.gnss.frame_id, np.eye(3), log.gnss.b_p_antenna)]),
+        ]
+        + (
+            []
+            if log.depth is None or log.depth.b_p_sensor is None
+            else [("base_link", log.depth.frame_id, np.eye(3), log.depth.b_p_sensor)]
+        )
+        + (
+            []
+            if log.gnss is None or log.gnss.b_p_antenna is None
+            else [("base_link", log.gnss.frame_id, np.eye(3), log.gnss.b_p_antenna)]
+        ),
     )
 
 
-def _write_data(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any], gyro_var: np.ndarray | None,
-                accel_var: np.ndarray | None, imu_orientation: tuple[np.ndarray, np.ndarray | None] | None,
-                gnss_channel: bool) -> None:
+def _write_data(
+    w: McapLogWriter,
+    path: Path,
+    log: LogData,
+    meta: dict[str, Any],
+    gyro_var: np.ndarray | None,
+    accel_var: np.ndarray | None,
+    imu_orientation: tuple[np.ndarray, np.ndarray | None] | None,
+    gnss_channel: bool,
+) -> None:
     """The messages of log's sensor data and truth, one batch per topic in the conventions' order (so channel
     ids follow it). gnss_channel: write /gnss/fix even without fixes (its channel exists from here on)."""
     q_imu, cov_imu = imu_orientation if imu_orientation is not None else (None, None)
-    w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, log.imu.frame_id, gyro_var, accel_var,
-              q_imu, cov_imu)
+    w.add_imu(
+        "/imu/data_raw",
+        log.imu.t,
+        log.imu.b_omega,
+        log.imu.b_f,
+        log.imu.frame_id,
+        gyro_var,
+        accel_var,
+        q_imu,
+        cov_imu,
+    )
 
     dvl = log.dvl
     ok = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
@@ -295,16 +383,28 @@ def _write_data(w: McapLogWriter, path: Path, log: LogData, meta: dict[str, Any]
     w.add_structured("/dvl/data", "marine_acoustic_msgs/msg/Dvl", dvl_arr)
 
     if log.depth is not None:
-        w.add_structured("/depth/pressure", "sensor_msgs/msg/FluidPressure", _pressure_messages(log, w))
+        w.add_structured(
+            "/depth/pressure", "sensor_msgs/msg/FluidPressure", _pressure_messages(log, w)
+        )
 
     if log.gnss is not None and (len(log.gnss) or gnss_channel):
-        w.add_structured(GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages(log.gnss, w.stamps_ns(log.gnss.t)))
+        w.add_structured(
+            GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages(log.gnss, w.stamps_ns(log.gnss.t))
+        )
 
     if log.truth is not None:
         tr = log.truth
         b_v = Rotation.from_quat(tr.n_q_b).inv().apply(tr.n_v) if len(tr) else np.zeros((0, 3))
-        w.add_odometry("/ground_truth/odometry", tr.t, tr.n_p, tr.n_q_b, b_v, tr.b_omega,
-                       frame_id="map", child_frame_id="base_link")
+        w.add_odometry(
+            "/ground_truth/odometry",
+            tr.t,
+            tr.n_p,
+            tr.n_q_b,
+            b_v,
+            tr.b_omega,
+            frame_id="map",
+            child_frame_id="base_link",
+        )
 
 
 class LogStreamWriter(AtomicWriter):
@@ -319,8 +419,16 @@ class LogStreamWriter(AtomicWriter):
     (None: this was the last part). Parts that together are a LogData give the file write_log writes of it,
     byte for byte (McapStreamWriter), so read_log reads both alike."""
 
-    def __init__(self, path: str | os.PathLike[str], head: LogData, *, t_first: float, imu_rate_hz: float,
-                 gnss_fixes: bool = True, config: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike[str],
+        head: LogData,
+        *,
+        t_first: float,
+        imu_rate_hz: float,
+        gnss_fixes: bool = True,
+        config: dict[str, Any] | None = None,
+    ) -> None:
         self.path = Path(path)
         self.head = head
         self._gnss = head.gnss is not None and gnss_fixes
@@ -341,25 +449,53 @@ class LogStreamWriter(AtomicWriter):
         head = self.head
         for name in ("truth", "depth"):
             if (getattr(part, name) is None) != (getattr(head, name) is None):
-                raise GtsamDvlError(f"{self.path}: a part {'lacks' if getattr(head, name) is not None else 'has'} "
-                                    f"the log's {name}")
+                raise GtsamDvlError(
+                    f"{self.path}: a part {'lacks' if getattr(head, name) is not None else 'has'} "
+                    f"the log's {name}"
+                )
         if not self._gnss and part.gnss is not None and len(part.gnss):
-            raise GtsamDvlError(f"{self.path}: a part has GNSS fixes, the log was opened without them")
-        firsts = [float(a[0]) for a in (part.imu.t, part.dvl.t, part.truth.t if part.truth is not None else None,
-                                         part.depth.t if part.depth is not None else None,
-                                         part.gnss.t if part.gnss is not None else None) if a is not None and len(a)]
+            raise GtsamDvlError(
+                f"{self.path}: a part has GNSS fixes, the log was opened without them"
+            )
+        firsts = [
+            float(a[0])
+            for a in (
+                part.imu.t,
+                part.dvl.t,
+                part.truth.t if part.truth is not None else None,
+                part.depth.t if part.depth is not None else None,
+                part.gnss.t if part.gnss is not None else None,
+            )
+            if a is not None and len(a)
+        ]
         if firsts and min(firsts) < self._bound:
-            raise GtsamDvlError(f"{self.path}: a part starts at t = {min(firsts):.9g} s, before the previous "
-                                f"part's next_t {self._bound:.9g} s")
+            raise GtsamDvlError(
+                f"{self.path}: a part starts at t = {min(firsts):.9g} s, before the previous "
+                f"part's next_t {self._bound:.9g} s"
+            )
         gnss = part.gnss
         if self._gnss and gnss is None:
             assert head.gnss is not None
-            gnss = dataclasses.replace(head.gnss, t=np.zeros(0), lat_deg=np.zeros(0), lon_deg=np.zeros(0),
-                                       height_m=np.zeros(0), cov_enu_m2=np.zeros((0, 3, 3)),
-                                       status=np.zeros(0, dtype=int))
+            gnss = dataclasses.replace(
+                head.gnss,
+                t=np.zeros(0),
+                lat_deg=np.zeros(0),
+                lon_deg=np.zeros(0),
+                height_m=np.zeros(0),
+                cov_enu_m2=np.zeros((0, 3, 3)),
+                status=np.zeros(0, dtype=int),
+            )
         part = dataclasses.replace(part, origin=head.origin, gnss=gnss if self._gnss else None)
-        _write_data(self._w, self.path, part, self._meta, self._gyro_var, self._accel_var, None,
-                    gnss_channel=self._gnss)
+        _write_data(
+            self._w,
+            self.path,
+            part,
+            self._meta,
+            self._gyro_var,
+            self._accel_var,
+            None,
+            gnss_channel=self._gnss,
+        )
         for name in self.counts:
             data = getattr(part, name)
             self.counts[name] += 0 if data is None else len(data)
@@ -376,7 +512,6 @@ class LogStreamWriter(AtomicWriter):
         self._w.abort()
 
 
-
 class LogSource(Protocol):
     """A log given in parts (sim/stream.py's ChunkedSimulation is one): head, t_first and gnss_fixes as
     LogStreamWriter takes them, imu_stamps() the IMU stamps in consecutive parts, parts() (part, next_t) pairs
@@ -388,19 +523,32 @@ class LogSource(Protocol):
 
     def imu_stamps(self) -> Iterator[np.ndarray]: ...
 
-    def parts(self, progress: Callable[[float], None] | None = None) -> Iterator[tuple[LogData, float | None]]: ...
+    def parts(
+        self, progress: Callable[[float], None] | None = None
+    ) -> Iterator[tuple[LogData, float | None]]: ...
 
 
-def write_log_stream(path: str | os.PathLike[str], source: LogSource, *, config: dict[str, Any] | None = None,
-                     progress: Callable[[float], None] | None = None) -> dict[str, Any]:
+def write_log_stream(
+    path: str | os.PathLike[str],
+    source: LogSource,
+    *,
+    config: dict[str, Any] | None = None,
+    progress: Callable[[float], None] | None = None,
+) -> dict[str, Any]:
     """Write a log given in parts to ``path`` (atomically) with LogStreamWriter, in memory bounded by a part:
     write_log's file of the log the parts make. Returns the message counts per sensor ("imu", "dvl" pings,
     "truth", "depth", "gnss"), "seconds" (wall time) and "write_seconds" (of it, in the writer: encoding,
     compression, file; the rest is the source's)."""
     start = time.perf_counter()
     t_write = 0.0
-    with LogStreamWriter(path, source.head, t_first=source.t_first, imu_rate_hz=imu_rate_hz(source.imu_stamps()),
-                         gnss_fixes=source.gnss_fixes, config=config) as w:
+    with LogStreamWriter(
+        path,
+        source.head,
+        t_first=source.t_first,
+        imu_rate_hz=imu_rate_hz(source.imu_stamps()),
+        gnss_fixes=source.gnss_fixes,
+        config=config,
+    ) as w:
         for part, next_t in source.parts(progress):
             t1 = time.perf_counter()
             w.write(part, next_t)

@@ -62,4 +62,3 @@ def seafloor_spec(r: Reader) -> SeafloorSpec:
     spec = SeafloorSpec(**r.table("seafloor", {"depth_m": None}))
     r.require(spec.depth_m > 0, "seafloor.depth_m", "must be positive (metres below the surface)")
     return spec
-

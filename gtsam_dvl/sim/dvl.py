@@ -71,8 +71,14 @@ class WaterPings:
 
 
 def dvl_true(
-    spec: DvlSpec, b_R_d0: np.ndarray, b_l: np.ndarray, motion: MotionProfile, track: PositionTrack,
-    t: np.ndarray, floor_h: float, water: Water | None = None,
+    spec: DvlSpec,
+    b_R_d0: np.ndarray,
+    b_l: np.ndarray,
+    motion: MotionProfile,
+    track: PositionTrack,
+    t: np.ndarray,
+    floor_h: float,
+    water: Water | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, WaterPings | None]:
     """Error-free y (M, 3) m/s, beam unit vectors d_u (4, 3), slant ranges (M, 4) m (inf: no bottom) and, with
     water (floor_h then ignored: the seafloor is water.seafloor), the water-track pings: their y is relative to
@@ -108,9 +114,15 @@ def dvl_true(
 
 
 def dvl_measure(
-    spec: DvlSpec, t: np.ndarray, y_true: np.ndarray, d_u: np.ndarray, ranges: np.ndarray,
-    noise_rng: np.random.Generator | None, event_rng: np.random.Generator | None,
-    water: WaterPings | None = None, water_rng: np.random.Generator | None = None,
+    spec: DvlSpec,
+    t: np.ndarray,
+    y_true: np.ndarray,
+    d_u: np.ndarray,
+    ranges: np.ndarray,
+    noise_rng: np.random.Generator | None,
+    event_rng: np.random.Generator | None,
+    water: WaterPings | None = None,
+    water_rng: np.random.Generator | None = None,
 ) -> DvlData:
     """Add noise, dropouts and outliers (None generators: none of them) and build DvlData. The event
     generator's draws come in the order event_blocks gives (sim/stream.py positions a generator at each).
@@ -120,7 +132,9 @@ def dvl_measure(
     measures."""
     M, B = ranges.shape
     wt = None if water is None else np.asarray(water.water_track, dtype=bool)
-    beam_ok: np.ndarray = np.asarray(ranges <= spec.max_range_m) if wt is None else np.isfinite(ranges) | wt[:, None]
+    beam_ok: np.ndarray = (
+        np.asarray(ranges <= spec.max_range_m) if wt is None else np.isfinite(ranges) | wt[:, None]
+    )
     if event_rng is not None:
         ping_lost: np.ndarray = event_rng.random((M,)) < spec.dropout_ping_prob
         beam_lost: np.ndarray = event_rng.random((M, B)) < spec.dropout_beam_prob
@@ -132,7 +146,9 @@ def dvl_measure(
         if noise_rng is not None:
             y += noise_rng.normal(0.0, sigma, (M, 3))
         if wt is not None and water_rng is not None:
-            y = np.where(wt[:, None], y_true + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y)
+            y = np.where(
+                wt[:, None], y_true + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y
+            )
         if event_rng is not None:
             ping_out: np.ndarray = event_rng.random((M,)) < spec.outlier_prob
             direction = event_rng.normal(size=(M, 3))
@@ -151,7 +167,9 @@ def dvl_measure(
             v_beam = np.where(wt[:, None], v_water, v_beam)
         if event_rng is not None:
             beam_out: np.ndarray = event_rng.random((M, B)) < spec.outlier_prob
-            v_beam += np.where(beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0)
+            v_beam += np.where(
+                beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0
+            )
         w = beam_ok.astype(float)
         normal = np.einsum("kb,bi,bj->kij", w, d_u, d_u)
         rhs = np.einsum("kb,bi,kb->ki", w, d_u, np.where(beam_ok, v_beam, 0.0))
@@ -174,8 +192,15 @@ def dvl_measure(
     if wt is None:
         return DvlData(t=t, d_v=y, d_cov=cov, valid=valid, beams=beams)
     beams.valid = beam_ok & ~wt[:, None]  # valid: usable as velocity over ground (core/types.py)
-    return DvlData(t=t, d_v=y, d_cov=cov, valid=valid & ~wt, beams=beams, water_track=wt.copy(),
-                   altitude=np.asarray(water.altitude, dtype=float).copy())  # type: ignore[union-attr]
+    return DvlData(
+        t=t,
+        d_v=y,
+        d_cov=cov,
+        valid=valid & ~wt,
+        beams=beams,
+        water_track=wt.copy(),
+        altitude=np.asarray(water.altitude, dtype=float).copy(),  # type: ignore[union-attr]
+    )
 
 
 def event_blocks(spec: DvlSpec, n_pings: int, n_beams: int) -> list[tuple[str, int]]:
@@ -195,7 +220,9 @@ WATER_STREAM = 7  # index of the water-track noise's child of SeedSequence(seed)
 def water_noise_rng(seed: int) -> np.random.Generator:
     """The water-track noise generator of a run: its own child of SeedSequence(seed), drawn only by a scenario with
     a [seafloor], so that every other stream's numbers are those of a scenario without it."""
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(WATER_STREAM + 1)[WATER_STREAM]))
+    return np.random.Generator(
+        np.random.PCG64(np.random.SeedSequence(seed).spawn(WATER_STREAM + 1)[WATER_STREAM])
+    )
 
 
 def water_model(scenario: Scenario) -> Water | None:
@@ -205,7 +232,9 @@ def water_model(scenario: Scenario) -> Water | None:
     return Water(scenario.local_frame(), scenario.current, scenario.seafloor)
 
 
-CORRELATED_STREAM = 6  # index of the correlated error's child of SeedSequence(seed) (sim/simulate.py)
+CORRELATED_STREAM = (
+    6  # index of the correlated error's child of SeedSequence(seed) (sim/simulate.py)
+)
 
 
 def correlated_error(spec: DvlSpec, dvl_hz: float, seed: int) -> GaussMarkov | None:
@@ -215,8 +244,12 @@ def correlated_error(spec: DvlSpec, dvl_hz: float, seed: int) -> GaussMarkov | N
     if spec.correlated_sigma_m_s <= 0:
         return None
     ss = np.random.SeedSequence(seed).spawn(CORRELATED_STREAM + 1)[CORRELATED_STREAM]
-    return GaussMarkov(spec.correlated_sigma_m_s, spec.correlated_tau_s, 1.0 / dvl_hz,
-                       np.random.Generator(np.random.PCG64(ss)))
+    return GaussMarkov(
+        spec.correlated_sigma_m_s,
+        spec.correlated_tau_s,
+        1.0 / dvl_hz,
+        np.random.Generator(np.random.PCG64(ss)),
+    )
 
 
 class GaussMarkov:
@@ -226,7 +259,9 @@ class GaussMarkov:
     first ping's x_0 = sigma w_0 (the stationary distribution), so the std is sigma at every ping and the
     correlation at lag L is exp(-L / tau)."""
 
-    def __init__(self, sigma_m_s: float, tau_s: float, dt_s: float, rng: np.random.Generator) -> None:
+    def __init__(
+        self, sigma_m_s: float, tau_s: float, dt_s: float, rng: np.random.Generator
+    ) -> None:
         self.sigma, self.rng = sigma_m_s, rng
         self.phi = float(np.exp(-dt_s / tau_s))
         self.drive = sigma_m_s * float(np.sqrt(1.0 - self.phi**2))
@@ -244,18 +279,24 @@ class GaussMarkov:
         return out
 
 
-CALIBRATION_STREAM = 8  # index of the drawn calibration's child of SeedSequence(seed) (sim/simulate.py)
+CALIBRATION_STREAM = (
+    8  # index of the drawn calibration's child of SeedSequence(seed) (sim/simulate.py)
+)
 CONSTANT_STREAM = 9  # index of the per-run constant error's child
 
 
 def _child_rng(seed: int, index: int) -> np.random.Generator:
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(index + 1)[index]))
+    return np.random.Generator(
+        np.random.PCG64(np.random.SeedSequence(seed).spawn(index + 1)[index])
+    )
 
 
 def draw_calibration(spec: DvlSpec) -> bool:
     """Whether the scenario draws its truth calibration per seed (DvlSpec.draw_scale_sigma and
     draw_misalignment_sigma_deg)."""
-    return bool(spec.draw_scale_sigma > 0 or np.any(np.asarray(spec.draw_misalignment_sigma_deg) > 0))
+    return bool(
+        spec.draw_scale_sigma > 0 or np.any(np.asarray(spec.draw_misalignment_sigma_deg) > 0)
+    )
 
 
 def drawn_calibration(spec: DvlSpec, seed: int) -> DvlSpec:
@@ -267,11 +308,17 @@ def drawn_calibration(spec: DvlSpec, seed: int) -> DvlSpec:
     if not draw_calibration(spec):
         return spec
     z = _child_rng(seed, CALIBRATION_STREAM).standard_normal(4)
-    r_rad = np.radians(np.broadcast_to(np.asarray(spec.draw_misalignment_sigma_deg, dtype=float), (3,))) * z[1:]
+    r_rad = (
+        np.radians(np.broadcast_to(np.asarray(spec.draw_misalignment_sigma_deg, dtype=float), (3,)))
+        * z[1:]
+    )
     R_c = so3_exp(r_rad) @ rpy_deg_to_matrix(spec.misalignment_deg)
     rpy = matrix_to_rpy_deg(R_c)
-    return dataclasses.replace(spec, scale=float(spec.scale + spec.draw_scale_sigma * z[0]),
-                               misalignment_deg=(float(rpy[0]), float(rpy[1]), float(rpy[2])))
+    return dataclasses.replace(
+        spec,
+        scale=float(spec.scale + spec.draw_scale_sigma * z[0]),
+        misalignment_deg=(float(rpy[0]), float(rpy[1]), float(rpy[2])),
+    )
 
 
 def constant_error(spec: DvlSpec, seed: int) -> np.ndarray | None:

@@ -35,8 +35,15 @@ if TYPE_CHECKING:
 GNSS_STREAM = 5  # index of the GNSS child of SeedSequence(seed)
 
 
-def simulate_gnss(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, imu_hz: float, n: int, seed: int,
-                  white_noise: bool) -> GnssData:
+def simulate_gnss(
+    spec: GnssSpec,
+    motion: MotionProfile,
+    track: PositionTrack,
+    imu_hz: float,
+    n: int,
+    seed: int,
+    white_noise: bool,
+) -> GnssData:
     """The fixes of GnssSpec over IMU samples 0..n-1 (module doc)."""
     k = np.arange(0, n, int(round(imu_hz / spec.rate_hz)))
     return gnss_fixes(spec, motion, track, k, gnss_rng(seed) if white_noise else None)
@@ -44,11 +51,18 @@ def simulate_gnss(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, i
 
 def gnss_rng(seed: int) -> np.random.Generator:
     """The GNSS noise generator: SeedSequence(seed)'s sixth child, one (3,) draw per candidate stamp."""
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(GNSS_STREAM + 1)[GNSS_STREAM]))
+    return np.random.Generator(
+        np.random.PCG64(np.random.SeedSequence(seed).spawn(GNSS_STREAM + 1)[GNSS_STREAM])
+    )
 
 
-def gnss_fixes(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, k: np.ndarray,
-               rng: np.random.Generator | None) -> GnssData:
+def gnss_fixes(
+    spec: GnssSpec,
+    motion: MotionProfile,
+    track: PositionTrack,
+    k: np.ndarray,
+    rng: np.random.Generator | None,
+) -> GnssData:
     """The fixes among the candidate stamps k / rate (IMU sample indices), noise from rng (None: none)."""
     t = k / track.rate
     lat, lon, h = track.at_samples(k)
@@ -67,9 +81,15 @@ def gnss_fixes(spec: GnssSpec, motion: MotionProfile, track: PositionTrack, k: n
         keep &= t <= spec.end_s + 1e-9
     lat_f, lon_f, h_f = ecef_to_geodetic(e_p[keep])
     m = int(keep.sum())
-    return GnssData(t=t[keep], lat_deg=np.degrees(lat_f), lon_deg=np.degrees(lon_f), height_m=np.asarray(h_f),
-                    cov_enu_m2=np.broadcast_to(np.diag(sig**2), (m, 3, 3)).copy(), status=np.zeros(m, dtype=int),
-                    b_p_antenna=lever.copy())
+    return GnssData(
+        t=t[keep],
+        lat_deg=np.degrees(lat_f),
+        lon_deg=np.degrees(lon_f),
+        height_m=np.asarray(h_f),
+        cov_enu_m2=np.broadcast_to(np.diag(sig**2), (m, 3, 3)).copy(),
+        status=np.zeros(m, dtype=int),
+        b_p_antenna=lever.copy(),
+    )
 
 
 def first_fix_frame(gnss: GnssData) -> LocalFrame | None:
@@ -84,6 +104,11 @@ def reframe_truth(truth: TruthData, frame: LocalFrame, new: LocalFrame) -> Truth
     m_R_n = new.e_R_n.T @ frame.e_R_n
     lat, lon, h = frame.map_to_geodetic(truth.n_p)
     n_R_b = quat_xyzw_to_matrix(truth.n_q_b)
-    return TruthData(t=truth.t.copy(), n_p=new.geodetic_to_map(lat, lon, h),
-                     n_q_b=matrix_to_quat_xyzw(m_R_n @ n_R_b), n_v=truth.n_v @ m_R_n.T,
-                     b_omega=truth.b_omega.copy(), n_c=None if truth.n_c is None else truth.n_c @ m_R_n.T)
+    return TruthData(
+        t=truth.t.copy(),
+        n_p=new.geodetic_to_map(lat, lon, h),
+        n_q_b=matrix_to_quat_xyzw(m_R_n @ n_R_b),
+        n_v=truth.n_v @ m_R_n.T,
+        b_omega=truth.b_omega.copy(),
+        n_c=None if truth.n_c is None else truth.n_c @ m_R_n.T,
+    )

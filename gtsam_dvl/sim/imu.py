@@ -42,7 +42,9 @@ def true_imu(
     return b_omega, b_f
 
 
-def true_imu_range(motion: MotionProfile, track: PositionTrack, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+def true_imu_range(
+    motion: MotionProfile, track: PositionTrack, a: int, b: int
+) -> tuple[np.ndarray, np.ndarray]:
     """true_imu's outputs of samples a..b-1 only (track: any PositionTrack holding their grid points), in the
     same blocks of CHUNK samples as true_imu, so the values are true_imu's bit for bit (sim/stream.py)."""
     b_omega = np.empty((b - a, 3))
@@ -55,15 +57,19 @@ def true_imu_range(motion: MotionProfile, track: PositionTrack, a: int, b: int) 
     return b_omega, b_f
 
 
-def _true_imu_block(motion: MotionProfile, track: PositionTrack, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
+def _true_imu_block(
+    motion: MotionProfile, track: PositionTrack, a: int, b: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Averaged rate and specific force of samples a..b-1."""
     avg_w = 0.5 * GL_W  # interval average = (1/dt) int = sum_i (w_i / 2) f(node_i)
     k = np.arange(a, b)
     t = node_times(k, track.rate).ravel()
     lat, h = (x.ravel() for x in track.at_nodes(a, b))
     w_ib, f, _, _ = imu_truth(motion.evaluate(t), lat, h)
-    return (np.einsum("kni,n->ki", w_ib.reshape(len(k), -1, 3), avg_w),
-            np.einsum("kni,n->ki", f.reshape(len(k), -1, 3), avg_w))
+    return (
+        np.einsum("kni,n->ki", w_ib.reshape(len(k), -1, 3), avg_w),
+        np.einsum("kni,n->ki", f.reshape(len(k), -1, 3), avg_w),
+    )
 
 
 @dataclass
@@ -120,7 +126,9 @@ def white_noise_sigmas(spec: ImuSpec, rate: float) -> tuple[float, float]:
     return sg, sa
 
 
-def white_noise(spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def white_noise(
+    spec: ImuSpec, n_samples: int, rate: float, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
     """Gyro and accelerometer white noise of the averaged outputs: sigma = density * sqrt(rate). All the gyro
     draws come first, then the accelerometer's (sim/stream.py relies on this order)."""
     sg, sa = white_noise_sigmas(spec, rate)

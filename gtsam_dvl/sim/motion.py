@@ -36,8 +36,22 @@ from gtsam_dvl.sim.blends import bump6, step5, step7
 if TYPE_CHECKING:
     from gtsam_dvl.sim.scenario import Scenario
 
-_FIELDS = ("t_start", "duration", "s0", "ds", "bump", "w_peak", "yaw0", "dyaw", "roll0", "bank", "pitch0",
-           "yaw_rate", "arc_lo", "arc_hi")
+_FIELDS = (
+    "t_start",
+    "duration",
+    "s0",
+    "ds",
+    "bump",
+    "w_peak",
+    "yaw0",
+    "dyaw",
+    "roll0",
+    "bank",
+    "pitch0",
+    "yaw_rate",
+    "arc_lo",
+    "arc_hi",
+)
 
 
 @dataclass(frozen=True)
@@ -73,7 +87,11 @@ class MotionState:
         """Time derivative of the local-level components of l_v, (K, 3) m/s^2."""
         c, s = np.cos(self.yaw), np.sin(self.yaw)
         return np.stack(
-            [self.s_dot * c - self.s * self.yaw_dot * s, self.s_dot * s + self.s * self.yaw_dot * c, self.w_dot],
+            [
+                self.s_dot * c - self.s * self.yaw_dot * s,
+                self.s_dot * s + self.s * self.yaw_dot * c,
+                self.w_dot,
+            ],
             axis=-1,
         )
 
@@ -111,7 +129,9 @@ class MotionState:
 class MotionProfile:
     """The scenario's motion as elementary pieces, evaluated vectorised at any times."""
 
-    def __init__(self, pieces: list[dict[str, float]], oscillation: Oscillation | None = None) -> None:
+    def __init__(
+        self, pieces: list[dict[str, float]], oscillation: Oscillation | None = None
+    ) -> None:
         self.p = {k: np.array([pc[k] for pc in pieces], dtype=float) for k in _FIELDS}
         self.oscillation = oscillation
 
@@ -119,14 +139,39 @@ class MotionProfile:
     def from_scenario(cls, scenario: Scenario) -> MotionProfile:
         """Expand the scenario's segments (a square becomes legs and turns) into elementary pieces."""
         ini = scenario.initial
-        state = {"s0": ini.speed_m_s, "yaw0": np.radians(ini.yaw_deg), "roll0": np.radians(ini.roll_deg),
-                 "pitch0": np.radians(ini.pitch_deg)}
+        state = {
+            "s0": ini.speed_m_s,
+            "yaw0": np.radians(ini.yaw_deg),
+            "roll0": np.radians(ini.roll_deg),
+            "pitch0": np.radians(ini.pitch_deg),
+        }
         pieces: list[dict[str, float]] = []
 
-        def add(t0: float, T: float, ds: float = 0.0, bump: float = 0.0, w_peak: float = 0.0,
-                dyaw: float = 0.0, bank: float = 0.0, yaw_rate: float = 0.0) -> None:
-            pieces.append({"t_start": t0, "duration": T, "ds": ds, "bump": bump, "w_peak": w_peak,
-                           "dyaw": dyaw, "bank": bank, "yaw_rate": yaw_rate, "arc_lo": 0.0, "arc_hi": T, **state})
+        def add(
+            t0: float,
+            T: float,
+            ds: float = 0.0,
+            bump: float = 0.0,
+            w_peak: float = 0.0,
+            dyaw: float = 0.0,
+            bank: float = 0.0,
+            yaw_rate: float = 0.0,
+        ) -> None:
+            pieces.append(
+                {
+                    "t_start": t0,
+                    "duration": T,
+                    "ds": ds,
+                    "bump": bump,
+                    "w_peak": w_peak,
+                    "dyaw": dyaw,
+                    "bank": bank,
+                    "yaw_rate": yaw_rate,
+                    "arc_lo": 0.0,
+                    "arc_hi": T,
+                    **state,
+                }
+            )
             state["s0"] += ds
             state["yaw0"] += dyaw + yaw_rate * T
 
@@ -148,13 +193,17 @@ class MotionProfile:
                 sign = 1.0 if seg.direction == "left" else -1.0
                 t = seg.start_s
                 for _ in range(seg.sides):
-                    for part in (("turn", "leg") if seg.turn_first else ("leg", "turn")):
+                    for part in ("turn", "leg") if seg.turn_first else ("leg", "turn"):
                         if part == "leg":
                             add(t, seg.leg_duration_s)
                             t += seg.leg_duration_s
                         else:
-                            add(t, seg.turn_duration_s, dyaw=sign * 2.0 * np.pi / seg.sides,
-                                bank=-sign * np.radians(seg.bank_deg))
+                            add(
+                                t,
+                                seg.turn_duration_s,
+                                dyaw=sign * 2.0 * np.pi / seg.sides,
+                                bank=-sign * np.radians(seg.bank_deg),
+                            )
                             t += seg.turn_duration_s
             elif seg.kind == "arc":
                 add(seg.start_s, T, yaw_rate=np.radians(seg.turn_rate_deg_s))
@@ -174,7 +223,9 @@ class MotionProfile:
         n_pieces = len(p["t_start"])
         if flat.size > 1 and np.all(flat[1:] >= flat[:-1]):
             # sorted times (the usual case): each piece is a slice, no gathers of its parameters
-            bounds = np.concatenate([[0], np.searchsorted(flat, p["t_start"][1:], side="right"), [flat.size]])
+            bounds = np.concatenate(
+                [[0], np.searchsorted(flat, p["t_start"][1:], side="right"), [flat.size]]
+            )
             out = {f: np.empty(flat.size) for f in _STATE}
             for j in range(n_pieces):
                 sl = slice(bounds[j], bounds[j + 1])
@@ -197,7 +248,11 @@ def _oscillation(scenario: Scenario) -> Oscillation | None:
     terms = []
     for channel, amplitudes, periods in spec.channels():
         scale = 1.0 if channel == "heave" else np.pi / 180.0
-        terms += [(channel, a * scale, 2.0 * np.pi / p) for a, p in zip(amplitudes, periods, strict=True) if a != 0.0]
+        terms += [
+            (channel, a * scale, 2.0 * np.pi / p)
+            for a, p in zip(amplitudes, periods, strict=True)
+            if a != 0.0
+        ]
     return Oscillation(tuple(terms))
 
 

@@ -21,15 +21,26 @@ from gtsam_dvl.sim.motion import MotionProfile
 
 GL_X, GL_W = np.polynomial.legendre.leggauss(4)  # nodes and weights on [-1, 1]
 GL_U = 0.5 * (GL_X + 1.0)  # node positions as fractions of an interval
-_H = np.array([2 * GL_U**3 - 3 * GL_U**2 + 1, GL_U**3 - 2 * GL_U**2 + GL_U, 3 * GL_U**2 - 2 * GL_U**3,
-               GL_U**3 - GL_U**2])  # cubic Hermite basis at the nodes
+_H = np.array(
+    [
+        2 * GL_U**3 - 3 * GL_U**2 + 1,
+        GL_U**3 - 2 * GL_U**2 + GL_U,
+        3 * GL_U**2 - 2 * GL_U**3,
+        GL_U**3 - GL_U**2,
+    ]
+)  # cubic Hermite basis at the nodes
 
 
-def hermite(u: np.ndarray, y0: np.ndarray, d0: np.ndarray, y1: np.ndarray, d1: np.ndarray, dt: float) -> np.ndarray:
+def hermite(
+    u: np.ndarray, y0: np.ndarray, d0: np.ndarray, y1: np.ndarray, d1: np.ndarray, dt: float
+) -> np.ndarray:
     """Cubic Hermite interpolation at fraction u of an interval of length dt (values y, derivatives d)."""
     u2, u3 = u * u, u * u * u
     return (
-        (2 * u3 - 3 * u2 + 1) * y0 + (u3 - 2 * u2 + u) * dt * d0 + (3 * u2 - 2 * u3) * y1 + (u3 - u2) * dt * d1
+        (2 * u3 - 3 * u2 + 1) * y0
+        + (u3 - 2 * u2 + u) * dt * d0
+        + (3 * u2 - 2 * u3) * y1
+        + (u3 - u2) * dt * d1
     )
 
 
@@ -41,8 +52,16 @@ def node_times(k: np.ndarray, rate: float) -> np.ndarray:
 class PositionTrack:
     """lat, lon (rad) and h (m) on the grid, with their time derivatives, interpolable anywhere."""
 
-    def __init__(self, rate: float, lat: np.ndarray, lon: np.ndarray, h: np.ndarray,
-                 d_lat: np.ndarray, d_lon: np.ndarray, d_h: np.ndarray) -> None:
+    def __init__(
+        self,
+        rate: float,
+        lat: np.ndarray,
+        lon: np.ndarray,
+        h: np.ndarray,
+        d_lat: np.ndarray,
+        d_lon: np.ndarray,
+        d_h: np.ndarray,
+    ) -> None:
         self.rate = rate
         self.grid = (lat, lon, h)
         self.deriv = (d_lat, d_lon, d_h)
@@ -69,17 +88,31 @@ class PositionTrack:
         for i in (0, 2):
             y, d = self.grid[i], self.deriv[i]
             y0, y1 = y[a:b, None], y[a + 1 : b + 1, None]
-            out.append(y0 * _H[0] + (dt * d[a:b, None]) * _H[1] + y1 * _H[2] + (dt * d[a + 1 : b + 1, None]) * _H[3])
+            out.append(
+                y0 * _H[0]
+                + (dt * d[a:b, None]) * _H[1]
+                + y1 * _H[2]
+                + (dt * d[a + 1 : b + 1, None]) * _H[3]
+            )
         return out[0], out[1]
 
     def _interp(self, g: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         dt = 1.0 / self.rate
-        out = [hermite(u, y[g], d[g], y[g + 1], d[g + 1], dt) for y, d in zip(self.grid, self.deriv, strict=True)]
+        out = [
+            hermite(u, y[g], d[g], y[g + 1], d[g + 1], dt)
+            for y, d in zip(self.grid, self.deriv, strict=True)
+        ]
         return out[0], out[1], out[2]
 
 
 def integrate_position(
-    motion: MotionProfile, lat0: float, lon0: float, h0: float, rate: float, n_samples: int, passes: int = 4
+    motion: MotionProfile,
+    lat0: float,
+    lon0: float,
+    h0: float,
+    rate: float,
+    n_samples: int,
+    passes: int = 4,
 ) -> PositionTrack:
     """Integrate the geodetic position on the grid of IMU samples 0..n_samples-1 (stamps k / rate).
 

@@ -25,7 +25,9 @@ from gtsam_dvl.core.units import DEG_PER_H, MICRO_G
 from gtsam_dvl.sim.current import CurrentSpec, SeafloorSpec, current_spec, seafloor_spec
 from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, check_dvl_draws, parse_segments
 
-DEFAULT_T0_S = 1_700_000_000  # ROS time of t = 0 when the file gives none: fixed so logs are reproducible
+DEFAULT_T0_S = (
+    1_700_000_000  # ROS time of t = 0 when the file gives none: fixed so logs are reproducible
+)
 
 __all__ = [
     "DEG_PER_H",
@@ -141,7 +143,9 @@ class DvlSpec:
 
     scale: float = 1.0
     misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw of R_c (FLU)
-    noise_model: str = "velocity"  # "velocity": 3-D white noise; "beam": per-beam noise + least squares
+    noise_model: str = (
+        "velocity"  # "velocity": 3-D white noise; "beam": per-beam noise + least squares
+    )
     noise_m_s: float = 0.0  # 1 sigma, per axis ("velocity") or per beam ("beam")
     beam_angle_deg: float = 30.0  # from the face axis
     face_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)  # in dvl_link, towards the bottom
@@ -183,9 +187,13 @@ def dvl_preset_values(model: str, noise_model: str) -> dict[str, float]:
     from gtsam_dvl.core.config.presets import DVL_PRESETS
 
     p = DVL_PRESETS[model]
-    return {"noise_m_s": p.beam_noise_m_s() if noise_model == "beam" else p.ping_noise_m_s,
-            "correlated_sigma_m_s": p.correlated_sigma_m_s, "correlated_tau_s": p.correlated_tau_s,
-            "max_range_m": p.max_altitude_m, "beam_angle_deg": p.beam_angle_deg}
+    return {
+        "noise_m_s": p.beam_noise_m_s() if noise_model == "beam" else p.ping_noise_m_s,
+        "correlated_sigma_m_s": p.correlated_sigma_m_s,
+        "correlated_tau_s": p.correlated_tau_s,
+        "max_range_m": p.max_altitude_m,
+        "beam_angle_deg": p.beam_angle_deg,
+    }
 
 
 @dataclass(frozen=True)
@@ -207,8 +215,14 @@ class OscillationSpec:
 
     def channels(self) -> list[tuple[str, tuple[float, ...], tuple[float, ...]]]:
         """(channel, amplitudes, periods) of roll, pitch, yaw (deg) and heave (m)."""
-        return [(c, getattr(self, f"{c}_{'m' if c == 'heave' else 'deg'}"), getattr(self, f"{c}_period_s"))
-                for c in ("roll", "pitch", "yaw", "heave")]
+        return [
+            (
+                c,
+                getattr(self, f"{c}_{'m' if c == 'heave' else 'deg'}"),
+                getattr(self, f"{c}_period_s"),
+            )
+            for c in ("roll", "pitch", "yaw", "heave")
+        ]
 
 
 @dataclass(frozen=True)
@@ -280,8 +294,12 @@ class Scenario:
     # the [estimator] table: a partial estimator configuration (EstimatorConfig's tables) applied over the named
     # one, e.g. what is known about this log (its initial attitude); empty: none
     estimator: dict[str, Any] = field(default_factory=dict)
-    current: CurrentSpec | None = None  # the [current] table, if the scenario has one (sim/current.py)
-    seafloor: SeafloorSpec | None = None  # the [seafloor] table: bottom lock by altitude and water track
+    current: CurrentSpec | None = (
+        None  # the [current] table, if the scenario has one (sim/current.py)
+    )
+    seafloor: SeafloorSpec | None = (
+        None  # the [seafloor] table: bottom lock by altitude and water track
+    )
 
     def estimator_configuration(self) -> EstimatorConfig:
         """The configuration this scenario's runs are meant for: estimator_config's named configuration with the
@@ -306,10 +324,17 @@ class Scenario:
         paper's table counts segments by motion."""
         rows: list[dict[str, Any]] = []
         for s in self.segments:
-            if rows and rows[-1]["kind"] == s.kind and rows[-1]["type"] == s.paper_type and s.kind != "static":
+            if (
+                rows
+                and rows[-1]["kind"] == s.kind
+                and rows[-1]["type"] == s.paper_type
+                and s.kind != "static"
+            ):
                 rows[-1]["end_s"] = s.end_s
             else:
-                rows.append({"start_s": s.start_s, "end_s": s.end_s, "kind": s.kind, "type": s.paper_type})
+                rows.append(
+                    {"start_s": s.start_s, "end_s": s.end_s, "kind": s.kind, "type": s.paper_type}
+                )
         return rows
 
 
@@ -340,16 +365,39 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return scenario_from_dict(raw, name=stem, source=source)
 
 
-def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = "<dict>") -> Scenario:
+def scenario_from_dict(
+    raw: dict[str, Any], name: str = "custom", source: str = "<dict>"
+) -> Scenario:
     """Build a Scenario from a dict shaped like a scenario file (tests and scripts use this)."""
     r = Reader(raw, source)
     r.check_keys(
-        "", ["name", "description", "t0_s", "origin", "rates", "initial", "imu", "dvl", "mounting", "segments",
-             "depth", "gnss", "estimator_config", "oscillation", "estimator", "current", "seafloor"]
+        "",
+        [
+            "name",
+            "description",
+            "t0_s",
+            "origin",
+            "rates",
+            "initial",
+            "imu",
+            "dvl",
+            "mounting",
+            "segments",
+            "depth",
+            "gnss",
+            "estimator_config",
+            "oscillation",
+            "estimator",
+            "current",
+            "seafloor",
+        ],
     )
     estimator_config = raw.get("estimator_config", "default")
-    r.require(isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS, "estimator_config",
-              f"must be the name of a built-in configuration ({', '.join(NAMED_CONFIGS)})")
+    r.require(
+        isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS,
+        "estimator_config",
+        f"must be the name of a built-in configuration ({', '.join(NAMED_CONFIGS)})",
+    )
     origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
     r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
     rates = Rates(**r.table("rates", _defaults(Rates)))
@@ -359,28 +407,55 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r.require(abs(ratio - round(ratio)) < 1e-9, "rates.truth_hz", "must divide rates.imu_hz")
     initial = InitialState(**r.table("initial", _defaults(InitialState)))
     r.require(initial.speed_m_s >= 0, "initial.speed_m_s", "must be >= 0")
-    imu = ImuSpec(**r.table("imu", _defaults(ImuSpec), vectors=("gyro_bias_values_deg_per_h",
-                                                                   "accel_bias_values_micro_g"),
-                            per_axis=("quantisation_gyro_rad_s", "quantisation_accel_m_s2")))
-    dvl_table = r.table("dvl", _defaults(DvlSpec), vectors=("misalignment_deg", "face_axis"),
-                        strings=("noise_model", "model"), per_axis=("draw_misalignment_sigma_deg",))
+    imu = ImuSpec(
+        **r.table(
+            "imu",
+            _defaults(ImuSpec),
+            vectors=("gyro_bias_values_deg_per_h", "accel_bias_values_micro_g"),
+            per_axis=("quantisation_gyro_rad_s", "quantisation_accel_m_s2"),
+        )
+    )
+    dvl_table = r.table(
+        "dvl",
+        _defaults(DvlSpec),
+        vectors=("misalignment_deg", "face_axis"),
+        strings=("noise_model", "model"),
+        per_axis=("draw_misalignment_sigma_deg",),
+    )
     if dvl_table["model"]:
         from gtsam_dvl.core.config.presets import DVL_PRESETS
 
-        r.require(dvl_table["model"] in DVL_PRESETS, "dvl.model",
-                  f"{dvl_table['model']!r} is not one of {', '.join(DVL_PRESETS)}")
+        r.require(
+            dvl_table["model"] in DVL_PRESETS,
+            "dvl.model",
+            f"{dvl_table['model']!r} is not one of {', '.join(DVL_PRESETS)}",
+        )
         given = raw.get("dvl", {})
-        dvl_table.update({k: v for k, v in dvl_preset_values(dvl_table["model"], dvl_table["noise_model"]).items()
-                          if k not in given})
+        dvl_table.update(
+            {
+                k: v
+                for k, v in dvl_preset_values(dvl_table["model"], dvl_table["noise_model"]).items()
+                if k not in given
+            }
+        )
     if not dvl_table["bottom_range_m"]:
         dvl_table["bottom_range_m"] = dvl_table["max_range_m"]
     dvl = DvlSpec(**dvl_table)
-    for key in ("gyro_bias_deg_per_h", "accel_bias_micro_g", "gyro_noise_deg_per_h_per_sqrt_hz",
-                "accel_noise_micro_g_per_sqrt_hz", "gyro_bias_walk_deg_per_h_per_sqrt_h",
-                "accel_bias_walk_micro_g_per_sqrt_h"):
+    for key in (
+        "gyro_bias_deg_per_h",
+        "accel_bias_micro_g",
+        "gyro_noise_deg_per_h_per_sqrt_hz",
+        "accel_noise_micro_g_per_sqrt_hz",
+        "gyro_bias_walk_deg_per_h_per_sqrt_h",
+        "accel_bias_walk_micro_g_per_sqrt_h",
+    ):
         r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
     for key in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2"):
-        r.require(min(np.atleast_1d(getattr(imu, key))) >= 0, f"imu.{key}", "must be >= 0 (0: not quantised)")
+        r.require(
+            min(np.atleast_1d(getattr(imu, key))) >= 0,
+            f"imu.{key}",
+            "must be >= 0 (0: not quantised)",
+        )
     for key in ("saturation_gyro_rad_s", "saturation_accel_m_s2"):
         r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (0: no saturation)")
     for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
@@ -388,16 +463,23 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
     r.require(dvl.water_track_noise_m_s >= 0, "dvl.water_track_noise_m_s", "must be >= 0")
     r.require(dvl.bottom_range_m > 0, "dvl.bottom_range_m", "must be positive (0: max_range_m)")
-    r.require(dvl.correlated_sigma_m_s >= 0, "dvl.correlated_sigma_m_s", "must be >= 0 (0: no correlated error)")
+    r.require(
+        dvl.correlated_sigma_m_s >= 0,
+        "dvl.correlated_sigma_m_s",
+        "must be >= 0 (0: no correlated error)",
+    )
     r.require(dvl.correlated_tau_s > 0, "dvl.correlated_tau_s", "must be positive")
     check_dvl_draws(r, dvl)
-    r.require(dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'")
+    r.require(
+        dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'"
+    )
     r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
     r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")
     for key in ("dropout_ping_prob", "dropout_beam_prob", "outlier_prob"):
         r.require(0.0 <= getattr(dvl, key) <= 1.0, f"dvl.{key}", "must be in [0, 1]")
-    mounting = MountingSpec(**r.table("mounting", _defaults(MountingSpec),
-                                      vectors=("dvl_rpy_deg", "dvl_lever_arm_m")))
+    mounting = MountingSpec(
+        **r.table("mounting", _defaults(MountingSpec), vectors=("dvl_rpy_deg", "dvl_lever_arm_m"))
+    )
     segments = tuple(MotionSegment(**row) for row in parse_segments(r, initial.speed_m_s))
     depth = None
     if "depth" in raw:
@@ -411,8 +493,14 @@ def scenario_from_dict(raw: dict[str, Any], name: str = "custom", source: str = 
     gnss = _gnss_spec(r, rates.imu_hz) if "gnss" in raw else None
     oscillation = _oscillation_spec(r, rates.imu_hz) if "oscillation" in raw else None
     estimator = raw.get("estimator", {})
-    r.require(isinstance(estimator, dict), "estimator", "expected a table of estimator configuration tables")
-    EstimatorConfig.for_scenario(raw, source=f"{source}: [estimator]")  # checked now: a bad key fails at load
+    r.require(
+        isinstance(estimator, dict),
+        "estimator",
+        "expected a table of estimator configuration tables",
+    )
+    EstimatorConfig.for_scenario(
+        raw, source=f"{source}: [estimator]"
+    )  # checked now: a bad key fails at load
     t0 = raw.get("t0_s", DEFAULT_T0_S)
     r.number("t0_s", t0)
     t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact
@@ -456,11 +544,22 @@ def _oscillation_spec(r: Reader, imu_hz: float) -> OscillationSpec:
     spec = OscillationSpec(**values)
     for channel, amplitudes, periods in spec.channels():
         key = f"oscillation.{channel}_period_s"
-        r.require(len(periods) == len(amplitudes), key, f"give one period per amplitude ({len(amplitudes)})")
-        r.require(min(periods) >= 4.0 / imu_hz, key, f"must be at least 4 IMU samples ({4.0 / imu_hz:g} s)")
+        r.require(
+            len(periods) == len(amplitudes),
+            key,
+            f"give one period per amplitude ({len(amplitudes)})",
+        )
+        r.require(
+            min(periods) >= 4.0 / imu_hz,
+            key,
+            f"must be at least 4 IMU samples ({4.0 / imu_hz:g} s)",
+        )
         if channel != "heave":
-            r.require(max(abs(a) for a in amplitudes) <= 10.0, f"oscillation.{channel}_deg",
-                      "must be within +-10 deg (a small oscillation)")
+            r.require(
+                max(abs(a) for a in amplitudes) <= 10.0,
+                f"oscillation.{channel}_deg",
+                "must be within +-10 deg (a small oscillation)",
+            )
     return spec
 
 
@@ -475,12 +574,20 @@ def _gnss_spec(r: Reader, imu_hz: float) -> GnssSpec:
         if key in d:
             extra[key] = r.number(f"gnss.{key}", d[key])
     if "origin_in_log" in d:
-        r.require(isinstance(d["origin_in_log"], bool), "gnss.origin_in_log", "must be true or false")
+        r.require(
+            isinstance(d["origin_in_log"], bool), "gnss.origin_in_log", "must be true or false"
+        )
         extra["origin_in_log"] = d["origin_in_log"]
-    numbers = {k: v for k, v in _defaults(GnssSpec).items() if k not in ("start_s", "end_s", "origin_in_log")}
+    numbers = {
+        k: v
+        for k, v in _defaults(GnssSpec).items()
+        if k not in ("start_s", "end_s", "origin_in_log")
+    }
     rest = {k: v for k, v in d.items() if k in numbers}
-    spec = GnssSpec(**Reader({"gnss": rest}, r.source).table("gnss", numbers, vectors=("antenna_lever_arm_m",)),
-                    **extra)
+    spec = GnssSpec(
+        **Reader({"gnss": rest}, r.source).table("gnss", numbers, vectors=("antenna_lever_arm_m",)),
+        **extra,
+    )
     r.require(spec.rate_hz > 0, "gnss.rate_hz", "must be positive")
     ratio = imu_hz / spec.rate_hz
     r.require(abs(ratio - round(ratio)) < 1e-9, "gnss.rate_hz", "must divide rates.imu_hz")

@@ -58,7 +58,9 @@ class Reader:
         if not ok:
             raise self.fail(key, message)
 
-    def check_keys(self, prefix: str, allowed: list[str] | tuple[str, ...], d: dict[str, Any] | None = None) -> None:
+    def check_keys(
+        self, prefix: str, allowed: list[str] | tuple[str, ...], d: dict[str, Any] | None = None
+    ) -> None:
         d = self.raw if d is None else d
         for key in d:
             if key not in allowed:
@@ -128,7 +130,9 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
             raise r.fail(pre, "expected a table")
         kind = d.get("kind")
         if kind not in SEGMENT_KEYS:
-            raise r.fail(f"{pre}.kind", f"unknown segment kind {kind!r} (known: {', '.join(SEGMENT_KINDS)})")
+            raise r.fail(
+                f"{pre}.kind", f"unknown segment kind {kind!r} (known: {', '.join(SEGMENT_KINDS)})"
+            )
         allowed = SEGMENT_KEYS[kind]
         r.check_keys(pre, ("kind", *allowed), d)
         for key in _REQUIRED.get(kind, ("duration_s",)):
@@ -146,8 +150,11 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
                 r.require(isinstance(d[key], bool), full, "must be true or false")
                 row[key] = d[key]
             elif key == "sides":
-                r.require(isinstance(d[key], int) and not isinstance(d[key], bool) and d[key] >= 1,
-                          full, "must be a positive integer")
+                r.require(
+                    isinstance(d[key], int) and not isinstance(d[key], bool) and d[key] >= 1,
+                    full,
+                    "must be a positive integer",
+                )
                 row[key] = d[key]
             else:
                 row[key] = r.number(full, d[key])
@@ -156,17 +163,35 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
                 r.require(row[key] > 0, f"{pre}.{key}", "must be positive")
         for key in ("peak_vertical_speed_m_s", "bank_deg"):
             if key in row:
-                r.require(0 <= row[key] < 90, f"{pre}.{key}", "must be >= 0 (the kind gives the sign)")
-        paper_type = {"static": "-", "straight": "-", "descent": "I", "ascent": "I", "turn": "II", "arc": "II",
-                      "square": "I+II"}.get(kind, "-")
+                r.require(
+                    0 <= row[key] < 90, f"{pre}.{key}", "must be >= 0 (the kind gives the sign)"
+                )
+        paper_type = {
+            "static": "-",
+            "straight": "-",
+            "descent": "I",
+            "ascent": "I",
+            "turn": "II",
+            "arc": "II",
+            "square": "I+II",
+        }.get(kind, "-")
         if kind == "static":
-            r.require(speed == 0.0, pre, f"a static segment needs the vehicle at rest, speed is {speed} m/s")
+            r.require(
+                speed == 0.0,
+                pre,
+                f"a static segment needs the vehicle at rest, speed is {speed} m/s",
+            )
         elif kind == "level":
-            r.require("speed_end_m_s" in row or "speed_bump_m_s" in row, pre,
-                      "a level segment needs speed_end_m_s and/or speed_bump_m_s")
+            r.require(
+                "speed_end_m_s" in row or "speed_bump_m_s" in row,
+                pre,
+                "a level segment needs speed_end_m_s and/or speed_bump_m_s",
+            )
             new_speed = row.get("speed_end_m_s", speed)
             r.require(new_speed >= 0, f"{pre}.speed_end_m_s", "must be >= 0")
-            paper_type = "I" if (new_speed != speed or row.get("speed_bump_m_s", 0.0) != 0.0) else "-"
+            paper_type = (
+                "I" if (new_speed != speed or row.get("speed_bump_m_s", 0.0) != 0.0) else "-"
+            )
             speed = new_speed
         if kind == "square":
             duration = row.get("sides", 4) * (row["leg_duration_s"] + row["turn_duration_s"])
@@ -183,10 +208,18 @@ def check_dvl_draws(r: Reader, dvl: Any) -> None:
     """The [dvl] keys of the stated noise, the per-run constant error and the drawn calibration (a DvlSpec): each
     bad one a GtsamDvlError naming it."""
     r.require(dvl.stated_noise_m_s >= 0, "dvl.stated_noise_m_s", "must be >= 0 (0: noise_m_s)")
-    r.require(dvl.constant_error_sigma_m_s >= 0, "dvl.constant_error_sigma_m_s", "must be >= 0 (0: none)")
+    r.require(
+        dvl.constant_error_sigma_m_s >= 0, "dvl.constant_error_sigma_m_s", "must be >= 0 (0: none)"
+    )
     # 5 sigma below the mean must stay a positive scale
-    r.require(0 <= dvl.draw_scale_sigma < dvl.scale / 5.0, "dvl.draw_scale_sigma",
-              f"must be in [0, scale / 5 = {dvl.scale / 5.0:g}) (0: the scale as given)")
+    r.require(
+        0 <= dvl.draw_scale_sigma < dvl.scale / 5.0,
+        "dvl.draw_scale_sigma",
+        f"must be in [0, scale / 5 = {dvl.scale / 5.0:g}) (0: the scale as given)",
+    )
     sigmas = dvl.draw_misalignment_sigma_deg
-    r.require(all(0 <= s <= 10.0 for s in (sigmas if isinstance(sigmas, tuple) else (sigmas,))),
-              "dvl.draw_misalignment_sigma_deg", "must be in [0, 10] deg (0: the misalignment as given)")
+    r.require(
+        all(0 <= s <= 10.0 for s in (sigmas if isinstance(sigmas, tuple) else (sigmas,))),
+        "dvl.draw_misalignment_sigma_deg",
+        "must be in [0, 10] deg (0: the misalignment as given)",
+    )

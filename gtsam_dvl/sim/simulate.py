@@ -83,25 +83,35 @@ def simulate(
     b_omega += errors.gyro_bias
     b_f += errors.accel_bias
     if white_noise:
-        ng, na = sim_imu.white_noise(scenario.imu, n, rate, np.random.Generator(np.random.PCG64(imu_ss)))
+        ng, na = sim_imu.white_noise(
+            scenario.imu, n, rate, np.random.Generator(np.random.PCG64(imu_ss))
+        )
         b_omega += ng
         b_f += na
-    imu = ImuData(t=np.arange(n) / rate,
-                  b_omega=saturate(quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
-                                   scenario.imu.saturation_gyro_rad_s),
-                  b_f=saturate(quantise(b_f, scenario.imu.quantisation_accel_m_s2),
-                               scenario.imu.saturation_accel_m_s2))
+    imu = ImuData(
+        t=np.arange(n) / rate,
+        b_omega=saturate(
+            quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
+            scenario.imu.saturation_gyro_rad_s,
+        ),
+        b_f=saturate(
+            quantise(b_f, scenario.imu.quantisation_accel_m_s2), scenario.imu.saturation_accel_m_s2
+        ),
+    )
 
     truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)), scenario)
 
     mount = scenario.mounting
-    mounting = Mounting(b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
-                        b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float))
+    mounting = Mounting(
+        b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
+        b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float),
+    )
     t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float(imu.t[-1]))
     floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
     water = water_model(scenario)
-    y, d_u, ranges, water_pings = dvl_true(scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas,
-                                           floor_h, water)
+    y, d_u, ranges, water_pings = dvl_true(
+        scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas, floor_h, water
+    )
     correlated = correlated_error(scenario.dvl, rates.dvl_hz, seed) if white_noise else None
     if correlated is not None:
         y = y + correlated.take(len(t_meas))
@@ -109,14 +119,30 @@ def simulate(
     if constant is not None:
         y = y + constant
     dvl = dvl_measure(
-        scenario.dvl, t_dvl, y, d_u, ranges,
+        scenario.dvl,
+        t_dvl,
+        y,
+        d_u,
+        ranges,
         np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
         np.random.Generator(np.random.PCG64(event_ss)) if white_noise else None,
-        water_pings, water_noise_rng(seed) if white_noise and water is not None else None,
+        water_pings,
+        water_noise_rng(seed) if white_noise and water is not None else None,
     )
-    depth = None if scenario.depth is None else _depth(scenario, motion, track, frame, n, seed, white_noise)
-    metadata = _metadata(scenario, seed, white_noise, mounting, errors.gyro_bias0, errors.accel_bias0,
-                         _bias_series(scenario, errors, rate))
+    depth = (
+        None
+        if scenario.depth is None
+        else _depth(scenario, motion, track, frame, n, seed, white_noise)
+    )
+    metadata = _metadata(
+        scenario,
+        seed,
+        white_noise,
+        mounting,
+        errors.gyro_bias0,
+        errors.accel_bias0,
+        _bias_series(scenario, errors, rate),
+    )
     _sensor_metadata(scenario, metadata)
     drawn_metadata(metadata, given_dvl, constant)
     gnss = None
@@ -129,27 +155,59 @@ def simulate(
             origin = None
     if progress is not None:
         progress(1.0)
-    return _log_data(scenario, seed, errors.gyro_bias0, errors.accel_bias0, metadata, origin,
-                     imu=imu, dvl=dvl, mounting=mounting, truth=truth, depth=depth, gnss=gnss)
+    return _log_data(
+        scenario,
+        seed,
+        errors.gyro_bias0,
+        errors.accel_bias0,
+        metadata,
+        origin,
+        imu=imu,
+        dvl=dvl,
+        mounting=mounting,
+        truth=truth,
+        depth=depth,
+        gnss=gnss,
+    )
 
 
-def _log_data(scenario: Scenario, seed: int, gyro_bias0: np.ndarray, accel_bias0: np.ndarray,
-              metadata: dict[str, Any], origin: GeoOrigin | None, **data: Any) -> LogData:
+def _log_data(
+    scenario: Scenario,
+    seed: int,
+    gyro_bias0: np.ndarray,
+    accel_bias0: np.ndarray,
+    metadata: dict[str, Any],
+    origin: GeoOrigin | None,
+    **data: Any,
+) -> LogData:
     """The LogData of a simulation: its sensor data and truth (data) with the typed fields of the scenario."""
-    if "dvl" in data:  # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
+    if (
+        "dvl" in data
+    ):  # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
         data["dvl"].noise_free = not metadata.get("white_noise", True)
-    return LogData(t0_ns=scenario.t0_ns, metadata=metadata,
-                   source=f"simulated:{scenario.name}:seed={seed}",
-                   origin=origin,
-                   true_calibration=DvlCalibration(float(scenario.dvl.scale),
-                                                   tuple(float(a) for a in scenario.dvl.misalignment_deg),  # type: ignore[arg-type]
-                                                   float(scenario.rates.dvl_time_offset_s)),
-                   true_imu_bias=ImuBiases(tuple(accel_bias0.tolist()), tuple(gyro_bias0.tolist())),  # type: ignore[arg-type]
-                   segments=scenario.segments_typed(), **data)
+    return LogData(
+        t0_ns=scenario.t0_ns,
+        metadata=metadata,
+        source=f"simulated:{scenario.name}:seed={seed}",
+        origin=origin,
+        true_calibration=DvlCalibration(
+            float(scenario.dvl.scale),
+            tuple(float(a) for a in scenario.dvl.misalignment_deg),  # type: ignore[arg-type]
+            float(scenario.rates.dvl_time_offset_s),
+        ),
+        true_imu_bias=ImuBiases(tuple(accel_bias0.tolist()), tuple(gyro_bias0.tolist())),  # type: ignore[arg-type]
+        segments=scenario.segments_typed(),
+        **data,
+    )
 
 
 # the DvlSpec keys whose error is off at 0: left out of the metadata then (an older scenario's stays as it was)
-_DVL_OPTIONAL = ("stated_noise_m_s", "constant_error_sigma_m_s", "draw_scale_sigma", "draw_misalignment_sigma_deg")
+_DVL_OPTIONAL = (
+    "stated_noise_m_s",
+    "constant_error_sigma_m_s",
+    "draw_scale_sigma",
+    "draw_misalignment_sigma_deg",
+)
 
 
 def with_drawn_calibration(scenario: Scenario, seed: int) -> Scenario:
@@ -165,13 +223,20 @@ def drawn_metadata(metadata: dict[str, Any], given: DvlSpec, constant: np.ndarra
     dvl_link). Nothing changes for a scenario without them."""
     sensors, truth = metadata["sensors"]["dvl"], metadata["truth"]["dvl"]
     if sensors.get("draw_scale_sigma") or sensors.get("draw_misalignment_sigma_deg"):
-        sensors["scale"], sensors["misalignment_deg"] = float(given.scale), list(given.misalignment_deg)
+        sensors["scale"], sensors["misalignment_deg"] = (
+            float(given.scale),
+            list(given.misalignment_deg),
+        )
     if constant is not None:
         truth["constant_error_m_s"] = constant.tolist()
 
 
 def _origin(scenario: Scenario) -> GeoOrigin:
-    return GeoOrigin(float(scenario.origin.lat_deg), float(scenario.origin.lon_deg), float(scenario.origin.height_m))
+    return GeoOrigin(
+        float(scenario.origin.lat_deg),
+        float(scenario.origin.lon_deg),
+        float(scenario.origin.height_m),
+    )
 
 
 def _sensor_metadata(scenario: Scenario, metadata: dict[str, Any]) -> None:
@@ -182,15 +247,23 @@ def _sensor_metadata(scenario: Scenario, metadata: dict[str, Any]) -> None:
         metadata["sensors"]["gnss"] = _listify_spec(asdict(scenario.gnss))
 
 
-def _fix_frame(scenario: Scenario, fix_frame: LocalFrame | None, metadata: dict[str, Any]) -> LocalFrame:
+def _fix_frame(
+    scenario: Scenario, fix_frame: LocalFrame | None, metadata: dict[str, Any]
+) -> LocalFrame:
     """gnss.origin_in_log = false: the first fix's frame becomes the map (metadata without "origin", the truth's
     map origin recorded); an error without any fix."""
     if fix_frame is None:
-        raise GtsamDvlError(f"{scenario.source}: key 'gnss.origin_in_log': false needs at least one fix, "
-                            "and the vehicle never surfaces while the receiver records")
+        raise GtsamDvlError(
+            f"{scenario.source}: key 'gnss.origin_in_log': false needs at least one fix, "
+            "and the vehicle never surfaces while the receiver records"
+        )
     metadata.pop("origin", None)
-    metadata["truth"]["map_origin"] = {"lat_deg": fix_frame.lat_deg, "lon_deg": fix_frame.lon_deg,
-                                       "height_m": fix_frame.height_m, "from": "first GNSS fix"}
+    metadata["truth"]["map_origin"] = {
+        "lat_deg": fix_frame.lat_deg,
+        "lon_deg": fix_frame.lon_deg,
+        "height_m": fix_frame.height_m,
+        "from": "first GNSS fix",
+    }
     return fix_frame
 
 
@@ -218,8 +291,15 @@ def depth_rng(seed: int) -> np.random.Generator:
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed).spawn(5)[4]))
 
 
-def _depth(scenario: Scenario, motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, seed: int,
-           white_noise: bool) -> DepthData:
+def _depth(
+    scenario: Scenario,
+    motion: MotionProfile,
+    track: PositionTrack,
+    frame: LocalFrame,
+    n: int,
+    seed: int,
+    white_noise: bool,
+) -> DepthData:
     """The pressure sensor (DepthSpec): depth of the sensor below the surface at h = 0, with bias and noise,
     as absolute pressure. Its random stream is SeedSequence(seed)'s fifth child: the other four, and so every
     other sensor's bytes, are those of a scenario without [depth]."""
@@ -229,8 +309,14 @@ def _depth(scenario: Scenario, motion: MotionProfile, track: PositionTrack, fram
     return _depth_at(scenario, motion, track, frame, k, depth_rng(seed) if white_noise else None)
 
 
-def _depth_at(scenario: Scenario, motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k: np.ndarray,
-              rng: np.random.Generator | None) -> DepthData:
+def _depth_at(
+    scenario: Scenario,
+    motion: MotionProfile,
+    track: PositionTrack,
+    frame: LocalFrame,
+    k: np.ndarray,
+    rng: np.random.Generator | None,
+) -> DepthData:
     """The depth samples at the stamps k / rate (IMU sample indices), noise from rng (None: none)."""
     spec = scenario.depth
     assert spec is not None
@@ -245,8 +331,14 @@ def _depth_at(scenario: Scenario, motion: MotionProfile, track: PositionTrack, f
     p = depth_to_pressure(d, frame.lat0, spec.water_density_kg_m3, spec.atmospheric_pa)
     _, dd_dp = pressure_to_depth(p, frame.lat0, spec.water_density_kg_m3, spec.atmospheric_pa)
     var_pa = np.full(len(t), (spec.noise_m / dd_dp) ** 2 if spec.noise_m > 0 else 0.0)
-    return DepthData(t=t, depth_m=d, variance_m2=np.full(len(t), spec.noise_m**2), pressure_pa=p,
-                     pressure_variance_pa2=var_pa, b_p_sensor=lever.copy())
+    return DepthData(
+        t=t,
+        depth_m=d,
+        variance_m2=np.full(len(t), spec.noise_m**2),
+        pressure_pa=p,
+        pressure_variance_pa2=var_pa,
+        b_p_sensor=lever.copy(),
+    )
 
 
 def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarray, np.ndarray]:
@@ -259,14 +351,25 @@ def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarra
     return t_meas, t_meas - offset_s
 
 
-def _truth(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, n: int, step: int,
-           scenario: Scenario) -> TruthData:
+def _truth(
+    motion: MotionProfile,
+    track: PositionTrack,
+    frame: LocalFrame,
+    n: int,
+    step: int,
+    scenario: Scenario,
+) -> TruthData:
     """Truth of base_link in the map frame at every step-th IMU stamp."""
     return _truth_at(motion, track, frame, np.arange(0, n, step), scenario)
 
 
-def _truth_at(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k: np.ndarray,
-              scenario: Scenario) -> TruthData:
+def _truth_at(
+    motion: MotionProfile,
+    track: PositionTrack,
+    frame: LocalFrame,
+    k: np.ndarray,
+    scenario: Scenario,
+) -> TruthData:
     """Truth of base_link in the map frame at the stamps k / rate (IMU sample indices), with the current at its
     depth when the scenario has one."""
     t = k / track.rate
@@ -278,8 +381,14 @@ def _truth_at(motion: MotionProfile, track: PositionTrack, frame: LocalFrame, k:
     n_v = np.einsum("kij,kj->ki", n_R_l, m.l_v())
     b_omega = b_omega_ib - np.einsum("kji,j->ki", n_R_b, frame.n_omega_ie)  # relative to map
     n_c = None if scenario.current is None else scenario.current.at(-h, t)
-    return TruthData(t=t, n_p=frame.geodetic_to_map(lat, lon, h), n_q_b=matrix_to_quat_xyzw(n_R_b),
-                     n_v=n_v, b_omega=b_omega, n_c=n_c)
+    return TruthData(
+        t=t,
+        n_p=frame.geodetic_to_map(lat, lon, h),
+        n_q_b=matrix_to_quat_xyzw(n_R_b),
+        n_v=n_v,
+        b_omega=b_omega,
+        n_c=n_c,
+    )
 
 
 def _bias_series(scenario: Scenario, errors: ImuErrors, rate: float) -> dict[str, Any] | None:
@@ -296,8 +405,13 @@ def _bias_series(scenario: Scenario, errors: ImuErrors, rate: float) -> dict[str
 
 
 def _metadata(
-    scenario: Scenario, seed: int, white: bool, mounting: Mounting, gyro_bias0: np.ndarray,
-    accel_bias0: np.ndarray, bias_series: dict[str, Any] | None,
+    scenario: Scenario,
+    seed: int,
+    white: bool,
+    mounting: Mounting,
+    gyro_bias0: np.ndarray,
+    accel_bias0: np.ndarray,
+    bias_series: dict[str, Any] | None,
 ) -> dict[str, Any]:
     from gtsam_dvl import __version__
 
@@ -316,7 +430,11 @@ def _metadata(
         "scenario": copy.deepcopy(scenario.raw),
         "seed": int(seed),
         "white_noise": bool(white),
-        "origin": {"lat_deg": float(o.lat_deg), "lon_deg": float(o.lon_deg), "height_m": float(o.height_m)},
+        "origin": {
+            "lat_deg": float(o.lat_deg),
+            "lon_deg": float(o.lon_deg),
+            "height_m": float(o.height_m),
+        },
         "truth": {
             "dvl": {
                 "scale": float(scenario.dvl.scale),
@@ -330,14 +448,29 @@ def _metadata(
             **_water_truth(scenario),
         },
         "sensors": {  # the optional errors only when on (the metadata of a scenario without them stays as it was)
-            "imu": _without(listify(asdict(scenario.imu)), tuple(
-                k for k in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2", "saturation_gyro_rad_s",
-                            "saturation_accel_m_s2")
-                if not np.any(getattr(scenario.imu, k)))),
-            "dvl": _without(listify(asdict(scenario.dvl)), (("correlated_sigma_m_s", "correlated_tau_s")
-                            if scenario.dvl.correlated_sigma_m_s == 0 else ())
-                            + (("bottom_range_m", "water_track_noise_m_s") if scenario.seafloor is None else ())
-                            + tuple(k for k in _DVL_OPTIONAL if not np.any(getattr(scenario.dvl, k)))),
+            "imu": _without(
+                listify(asdict(scenario.imu)),
+                tuple(
+                    k
+                    for k in (
+                        "quantisation_gyro_rad_s",
+                        "quantisation_accel_m_s2",
+                        "saturation_gyro_rad_s",
+                        "saturation_accel_m_s2",
+                    )
+                    if not np.any(getattr(scenario.imu, k))
+                ),
+            ),
+            "dvl": _without(
+                listify(asdict(scenario.dvl)),
+                (
+                    ("correlated_sigma_m_s", "correlated_tau_s")
+                    if scenario.dvl.correlated_sigma_m_s == 0
+                    else ()
+                )
+                + (("bottom_range_m", "water_track_noise_m_s") if scenario.seafloor is None else ())
+                + tuple(k for k in _DVL_OPTIONAL if not np.any(getattr(scenario.dvl, k))),
+            ),
             "rates": asdict(scenario.rates),
             "mounting": listify(asdict(scenario.mounting)),
         },

@@ -55,7 +55,14 @@ from gtsam_dvl.core.types import (
     TruthData,
 )
 from gtsam_dvl.sim import dvl as sim_dvl
-from gtsam_dvl.sim.dvl import GaussMarkov, correlated_error, dvl_measure, dvl_true, event_blocks, janus_beams
+from gtsam_dvl.sim.dvl import (
+    GaussMarkov,
+    correlated_error,
+    dvl_measure,
+    dvl_true,
+    event_blocks,
+    janus_beams,
+)
 from gtsam_dvl.sim.gnss import first_fix_frame, gnss_fixes, gnss_rng, reframe_truth
 from gtsam_dvl.sim.imu import (
     initial_biases,
@@ -95,8 +102,18 @@ class TrackWindow(PositionTrack):
     """The PositionTrack of grid points g0..g0 + len - 1 of a run whose grid has n_grid points, indexed by the
     run's sample and grid numbers (what simulate()'s functions pass)."""
 
-    def __init__(self, rate: float, g0: int, n_grid: int, lat: np.ndarray, lon: np.ndarray, h: np.ndarray,
-                 d_lat: np.ndarray, d_lon: np.ndarray, d_h: np.ndarray) -> None:
+    def __init__(
+        self,
+        rate: float,
+        g0: int,
+        n_grid: int,
+        lat: np.ndarray,
+        lon: np.ndarray,
+        h: np.ndarray,
+        d_lat: np.ndarray,
+        d_lon: np.ndarray,
+        d_h: np.ndarray,
+    ) -> None:
         super().__init__(rate, lat, lon, h, d_lat, d_lon, d_h)
         self.g0 = g0
         self.n_grid = n_grid
@@ -145,13 +162,23 @@ class PositionStream:
     """integrate_position over samples 0..n_samples-1 in consecutive windows [a, b): window(a, b) returns the
     TrackWindow of grid points a..b, the values integrate_position has there."""
 
-    def __init__(self, motion: MotionProfile, lat0: float, lon0: float, h0: float, rate: float, n_samples: int,
-                 passes: int = PASSES) -> None:
+    def __init__(
+        self,
+        motion: MotionProfile,
+        lat0: float,
+        lon0: float,
+        h0: float,
+        rate: float,
+        n_samples: int,
+        passes: int = PASSES,
+    ) -> None:
         self.motion, self.lat0, self.rate, self.n = motion, lat0, rate, n_samples
         half_dt = 0.5 / rate
         self._h = _RunningSum(h0, half_dt)
         self._lat = [_RunningSum(lat0, half_dt) for _ in range(passes)]
-        self._lon = _RunningSum(lon0, half_dt)  # the last pass's: the earlier passes' longitudes are dropped
+        self._lon = _RunningSum(
+            lon0, half_dt
+        )  # the last pass's: the earlier passes' longitudes are dropped
         self._next = 0
 
     def window(self, a: int, b: int) -> TrackWindow:
@@ -304,8 +331,14 @@ class ChunkedSimulation:
     ``write_log_stream(path, ChunkedSimulation(scenario, seed))`` writes write_log's file of simulate()'s log.
     n_samples, n_pings, duration_s: the log's sizes; distance_m: travelled along the truth of the parts so far."""
 
-    def __init__(self, scenario: Scenario, seed: int, *, white_noise: bool = True,
-                 chunk_s: float = DEFAULT_CHUNK_S) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        seed: int,
+        *,
+        white_noise: bool = True,
+        chunk_s: float = DEFAULT_CHUNK_S,
+    ) -> None:
         if not np.isfinite(chunk_s) or chunk_s <= 0:
             raise GtsamDvlError(f"chunk length {chunk_s!r} s: must be a positive number of seconds")
         given_dvl = scenario.dvl
@@ -319,18 +352,26 @@ class ChunkedSimulation:
         self.frame = scenario.local_frame()
         self.motion = MotionProfile.from_scenario(scenario)
         mount = scenario.mounting
-        self.mounting = Mounting(b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
-                                 b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float))
-        self.t_meas, self.t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float((n - 1) / rate))
+        self.mounting = Mounting(
+            b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
+            b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float),
+        )
+        self.t_meas, self.t_dvl = _dvl_stamps(
+            rates.dvl_hz, rates.dvl_time_offset_s, float((n - 1) / rate)
+        )
         self.n_pings = len(self.t_meas)
         # the grid interval each ping's time falls in (TrackWindow.grid_index_of_time): the chunk that has it
         self._ping_g = np.clip(np.floor(self.t_meas * rate + 1.0).astype(np.int64), 0, n - 1)
         self.floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
         self.water = sim_dvl.water_model(scenario)
         self.truth_step = int(round(rate / rates.truth_hz))
-        self.n_beams = janus_beams(scenario.dvl.beam_angle_deg, np.asarray(scenario.dvl.face_axis)).shape[0]
+        self.n_beams = janus_beams(
+            scenario.dvl.beam_angle_deg, np.asarray(scenario.dvl.face_axis)
+        ).shape[0]
 
-        self._ss = np.random.SeedSequence(seed).spawn(4)  # bias, imu, dvl, event: simulate()'s children
+        self._ss = np.random.SeedSequence(seed).spawn(
+            4
+        )  # bias, imu, dvl, event: simulate()'s children
         bias_rng = np.random.Generator(np.random.PCG64(self._ss[0]))
         self.gyro_bias0, self.accel_bias0 = initial_biases(scenario.imu, bias_rng)
         self._walk_sigmas = walk_step_sigmas(scenario.imu, rate)
@@ -343,8 +384,15 @@ class ChunkedSimulation:
             _skip_normals(imu_rng, 3 * n)
             self._accel_noise_state = copy.deepcopy(imu_rng.bit_generator.state)
 
-        metadata = _metadata(scenario, seed, white_noise, self.mounting, self.gyro_bias0, self.accel_bias0,
-                             bias_series)
+        metadata = _metadata(
+            scenario,
+            seed,
+            white_noise,
+            self.mounting,
+            self.gyro_bias0,
+            self.accel_bias0,
+            bias_series,
+        )
         _sensor_metadata(scenario, metadata)
         drawn_metadata(metadata, given_dvl, self.constant)
         origin: GeoOrigin | None = _origin(scenario)
@@ -357,7 +405,9 @@ class ChunkedSimulation:
                 self.fix_frame = _fix_frame(scenario, first, metadata)
                 origin = None
         self.head = self._head(metadata, origin)
-        self.t_first = min(0.0, float(self.t_dvl[0])) if self.n_pings else 0.0  # IMU and truth start at 0
+        self.t_first = (
+            min(0.0, float(self.t_dvl[0])) if self.n_pings else 0.0
+        )  # IMU and truth start at 0
         self.duration_s = (n - 1) / rate  # the last IMU stamp
         self.distance_m = 0.0  # travelled along the truth of the parts yielded so far
 
@@ -372,7 +422,10 @@ class ChunkedSimulation:
             return None
         step = int(round(self.rate))
         series: dict[str, list[Any]] = {"t": [], "gyro_rad_s": [], "accel_m_s2": []}
-        for key, b0, sigma in (("gyro_rad_s", self.gyro_bias0, g_sigma), ("accel_m_s2", self.accel_bias0, a_sigma)):
+        for key, b0, sigma in (
+            ("gyro_rad_s", self.gyro_bias0, g_sigma),
+            ("accel_m_s2", self.accel_bias0, a_sigma),
+        ):
             if key == "accel_m_s2":
                 self._accel_walk_state = copy.deepcopy(rng.bit_generator.state)
             walk = _BiasWalk(b0, sigma, rng)
@@ -399,7 +452,9 @@ class ChunkedSimulation:
 
     def _position(self) -> PositionStream:
         f = self.frame
-        return PositionStream(self.motion, f.lat0, f.lon0, self.scenario.origin.height_m, self.rate, self.n_samples)
+        return PositionStream(
+            self.motion, f.lat0, f.lon0, self.scenario.origin.height_m, self.rate, self.n_samples
+        )
 
     def _ranges(self) -> Iterator[tuple[int, int]]:
         """The chunks [a, b) of samples; a last chunk of one sample joins the one before (a product of one row
@@ -418,21 +473,67 @@ class ChunkedSimulation:
         B = self.n_beams
         z3, z1 = np.zeros((0, 3)), np.zeros(0)
         water = sc.seafloor is not None
-        dvl = DvlData(t=z1, d_v=z3, d_cov=np.zeros((0, 3, 3)), valid=np.zeros(0, bool),
-                      beams=BeamData(d_u=np.zeros((0, B, 3)), v=np.zeros((0, B)), range=np.zeros((0, B)),
-                                     valid=np.zeros((0, B), bool)),
-                      water_track=np.zeros(0, bool) if water else None, altitude=z1 if water else None)
-        truth = TruthData(t=z1, n_p=z3, n_q_b=np.zeros((0, 4)), n_v=z3, b_omega=z3,
-                          n_c=None if sc.current is None else z3)
-        depth = None if sc.depth is None else DepthData(
-            t=z1, depth_m=z1, variance_m2=z1, pressure_pa=z1, pressure_variance_pa2=z1,
-            b_p_sensor=np.asarray(sc.depth.lever_arm_m, dtype=float))
-        gnss = None if sc.gnss is None else GnssData(
-            t=z1, lat_deg=z1, lon_deg=z1, height_m=z1, cov_enu_m2=np.zeros((0, 3, 3)), status=np.zeros(0, int),
-            b_p_antenna=np.asarray(sc.gnss.antenna_lever_arm_m, dtype=float))
-        return _log_data(sc, self.seed, self.gyro_bias0, self.accel_bias0, metadata, origin,
-                         imu=ImuData(t=z1, b_omega=z3, b_f=z3), dvl=dvl, mounting=self.mounting, truth=truth,
-                         depth=depth, gnss=gnss)
+        dvl = DvlData(
+            t=z1,
+            d_v=z3,
+            d_cov=np.zeros((0, 3, 3)),
+            valid=np.zeros(0, bool),
+            beams=BeamData(
+                d_u=np.zeros((0, B, 3)),
+                v=np.zeros((0, B)),
+                range=np.zeros((0, B)),
+                valid=np.zeros((0, B), bool),
+            ),
+            water_track=np.zeros(0, bool) if water else None,
+            altitude=z1 if water else None,
+        )
+        truth = TruthData(
+            t=z1,
+            n_p=z3,
+            n_q_b=np.zeros((0, 4)),
+            n_v=z3,
+            b_omega=z3,
+            n_c=None if sc.current is None else z3,
+        )
+        depth = (
+            None
+            if sc.depth is None
+            else DepthData(
+                t=z1,
+                depth_m=z1,
+                variance_m2=z1,
+                pressure_pa=z1,
+                pressure_variance_pa2=z1,
+                b_p_sensor=np.asarray(sc.depth.lever_arm_m, dtype=float),
+            )
+        )
+        gnss = (
+            None
+            if sc.gnss is None
+            else GnssData(
+                t=z1,
+                lat_deg=z1,
+                lon_deg=z1,
+                height_m=z1,
+                cov_enu_m2=np.zeros((0, 3, 3)),
+                status=np.zeros(0, int),
+                b_p_antenna=np.asarray(sc.gnss.antenna_lever_arm_m, dtype=float),
+            )
+        )
+        return _log_data(
+            sc,
+            self.seed,
+            self.gyro_bias0,
+            self.accel_bias0,
+            metadata,
+            origin,
+            imu=ImuData(t=z1, b_omega=z3, b_f=z3),
+            dvl=dvl,
+            mounting=self.mounting,
+            truth=truth,
+            depth=depth,
+            gnss=gnss,
+        )
 
     def _streams(self) -> _Streams:
         g_sigma, a_sigma = self._walk_sigmas
@@ -443,7 +544,9 @@ class ChunkedSimulation:
             gens, offset = [], 0
             for i, (_, count) in enumerate(blocks):
                 # a uniform draw is one raw 64-bit number (advance), a normal draw a variable count
-                assert all(kind == "uniform" for kind, _ in blocks[:i]), "dvl.event_blocks: normals before a block"
+                assert all(kind == "uniform" for kind, _ in blocks[:i]), (
+                    "dvl.event_blocks: normals before a block"
+                )
                 bg = np.random.PCG64(self._ss[3])
                 bg.advance(offset)
                 gens.append(np.random.Generator(bg))
@@ -453,17 +556,25 @@ class ChunkedSimulation:
             gyro_walk=_BiasWalk(self.gyro_bias0, g_sigma, _generator(self._gyro_walk_state)),
             accel_walk=_BiasWalk(self.accel_bias0, a_sigma, _generator(self._accel_walk_state)),
             gyro_noise=np.random.Generator(np.random.PCG64(self._ss[1])) if white else None,
-            accel_noise=_generator(self._accel_noise_state) if self._accel_noise_state is not None else None,
-            dvl_noise=_Draws([np.random.Generator(np.random.PCG64(self._ss[2]))]) if white else None,
+            accel_noise=_generator(self._accel_noise_state)
+            if self._accel_noise_state is not None
+            else None,
+            dvl_noise=_Draws([np.random.Generator(np.random.PCG64(self._ss[2]))])
+            if white
+            else None,
             dvl_events=events,
             depth=depth_rng(self.seed) if white and self.scenario.depth is not None else None,
             gnss=gnss_rng(self.seed) if white and self.scenario.gnss is not None else None,
             dvl_correlated=correlated_error(sc.dvl, sc.rates.dvl_hz, self.seed) if white else None,
-            dvl_water=_Draws([sim_dvl.water_noise_rng(self.seed)]) if white and self.water is not None else None,
+            dvl_water=_Draws([sim_dvl.water_noise_rng(self.seed)])
+            if white and self.water is not None
+            else None,
         )
 
     # -- the parts ----------------------------------------------------------------------------------
-    def parts(self, progress: Callable[[float], None] | None = None) -> Iterator[tuple[LogData, float | None]]:
+    def parts(
+        self, progress: Callable[[float], None] | None = None
+    ) -> Iterator[tuple[LogData, float | None]]:
         """(part, next_t) per chunk, in time order (class doc)."""
         sc, rate, n = self.scenario, self.rate, self.n_samples
         streams = self._streams()
@@ -479,10 +590,15 @@ class ChunkedSimulation:
             if streams.gyro_noise is not None and streams.accel_noise is not None:
                 b_omega += streams.gyro_noise.normal(0.0, sg, (b - a, 3))
                 b_f += streams.accel_noise.normal(0.0, sa, (b - a, 3))
-            imu = ImuData(t=np.arange(a, b) / rate,
-                          b_omega=saturate(quantise(b_omega, sc.imu.quantisation_gyro_rad_s),
-                                           sc.imu.saturation_gyro_rad_s),
-                          b_f=saturate(quantise(b_f, sc.imu.quantisation_accel_m_s2), sc.imu.saturation_accel_m_s2))
+            imu = ImuData(
+                t=np.arange(a, b) / rate,
+                b_omega=saturate(
+                    quantise(b_omega, sc.imu.quantisation_gyro_rad_s), sc.imu.saturation_gyro_rad_s
+                ),
+                b_f=saturate(
+                    quantise(b_f, sc.imu.quantisation_accel_m_s2), sc.imu.saturation_accel_m_s2
+                ),
+            )
 
             truth = self._truth(win, self._stamps(a, b, self.truth_step))
             n_p = np.concatenate([last_p, truth.n_p])
@@ -500,9 +616,18 @@ class ChunkedSimulation:
             if sc.gnss is not None and self.gnss_fixes:
                 k = self._stamps(a, b, int(round(rate / sc.gnss.rate_hz)))
                 gnss = _gnss(sc.gnss, self.motion, win, k, streams.gnss)
-            part = LogData(imu=imu, dvl=dvl, mounting=self.mounting, truth=truth, t0_ns=sc.t0_ns,
-                           metadata=self.head.metadata, source=self.head.source, origin=self.head.origin,
-                           depth=depth, gnss=gnss)
+            part = LogData(
+                imu=imu,
+                dvl=dvl,
+                mounting=self.mounting,
+                truth=truth,
+                t0_ns=sc.t0_ns,
+                metadata=self.head.metadata,
+                source=self.head.source,
+                origin=self.head.origin,
+                depth=depth,
+                gnss=gnss,
+            )
             next_t: float | None = None
             if b < n:
                 next_t = b / rate
@@ -537,11 +662,21 @@ class ChunkedSimulation:
         m = j1 - j0
         water = None
         if m:
-            y, d_u, ranges, water = dvl_true(sc.dvl, self.mounting.b_R_d0, self.mounting.b_l, self.motion, win,
-                                             _padded(self.t_meas[j0:j1]), self.floor_h, self.water)
+            y, d_u, ranges, water = dvl_true(
+                sc.dvl,
+                self.mounting.b_R_d0,
+                self.mounting.b_l,
+                self.motion,
+                win,
+                _padded(self.t_meas[j0:j1]),
+                self.floor_h,
+                self.water,
+            )
             if streams.dvl_correlated is not None:
                 e = streams.dvl_correlated.take(m)
-                y = y + (np.concatenate([e, e]) if m == 1 else e)  # the padded copy's: the real ping's
+                y = y + (
+                    np.concatenate([e, e]) if m == 1 else e
+                )  # the padded copy's: the real ping's
             if self.constant is not None:
                 y = y + self.constant
         else:
@@ -549,16 +684,35 @@ class ChunkedSimulation:
             d_u = janus_beams(sc.dvl.beam_angle_deg, np.asarray(sc.dvl.face_axis))
             if self.water is not None:
                 water = sim_dvl.WaterPings(np.zeros(0, bool), np.zeros(0))
-        noise, events, water_noise = (None if d is None else d.start(m == 1)
-                                      for d in (streams.dvl_noise, streams.dvl_events, streams.dvl_water))
-        dvl = dvl_measure(sc.dvl, _padded(self.t_dvl[j0:j1]), y, d_u, ranges,
-                          noise, events, water, water_noise)  # type: ignore[arg-type]  # _Draws: the draws dvl_measure takes
+        noise, events, water_noise = (
+            None if d is None else d.start(m == 1)
+            for d in (streams.dvl_noise, streams.dvl_events, streams.dvl_water)
+        )
+        # _Draws: the draws dvl_measure takes
+        dvl = dvl_measure(
+            sc.dvl,
+            _padded(self.t_dvl[j0:j1]),
+            y,
+            d_u,
+            ranges,
+            noise,  # type: ignore[arg-type]
+            events,  # type: ignore[arg-type]
+            water,
+            water_noise,  # type: ignore[arg-type]
+        )
         dvl.noise_free = not self.white_noise  # as simulate's (sim/simulate.py _log_data)
         return _rows(dvl, m) if m == 1 else dvl
 
 
-def _depth(scenario: Scenario, motion: MotionProfile, win: TrackWindow, frame: LocalFrame, k: np.ndarray,
-           rng: np.random.Generator | None, head: LogData) -> DepthData:
+def _depth(
+    scenario: Scenario,
+    motion: MotionProfile,
+    win: TrackWindow,
+    frame: LocalFrame,
+    k: np.ndarray,
+    rng: np.random.Generator | None,
+    head: LogData,
+) -> DepthData:
     """_depth_at for any number of stamps (one: evaluated doubled, _padded), the noise drawn as _depth_at draws it."""
     spec = scenario.depth
     assert spec is not None and head.depth is not None
@@ -568,8 +722,13 @@ def _depth(scenario: Scenario, motion: MotionProfile, win: TrackWindow, frame: L
     return _rows(_depth_at(scenario, motion, win, frame, _padded(k), fixed), 1)  # type: ignore[arg-type]
 
 
-def _gnss(spec: GnssSpec, motion: MotionProfile, win: TrackWindow, k: np.ndarray,
-          rng: np.random.Generator | None) -> GnssData:
+def _gnss(
+    spec: GnssSpec,
+    motion: MotionProfile,
+    win: TrackWindow,
+    k: np.ndarray,
+    rng: np.random.Generator | None,
+) -> GnssData:
     """gnss_fixes for any number of candidate stamps (one: evaluated doubled, _padded)."""
     if len(k) != 1:
         return gnss_fixes(spec, motion, win, k, rng)
@@ -594,8 +753,9 @@ def _concat(objs: list[Any]) -> Any:
     return dataclasses.replace(first, **kw)
 
 
-def simulate_chunked(scenario: Scenario, seed: int, *, white_noise: bool = True,
-                     chunk_s: float = DEFAULT_CHUNK_S) -> LogData:
+def simulate_chunked(
+    scenario: Scenario, seed: int, *, white_noise: bool = True, chunk_s: float = DEFAULT_CHUNK_S
+) -> LogData:
     """simulate()'s LogData assembled from ChunkedSimulation's parts (the whole log in memory: for checks and
     short runs; write_log_stream(path, ChunkedSimulation(...)) is the bounded-memory path)."""
     sim = ChunkedSimulation(scenario, seed, white_noise=white_noise, chunk_s=chunk_s)

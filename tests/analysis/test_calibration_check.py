@@ -27,7 +27,7 @@ MU0 = np.array([1.002, 0.0, 0.0, 0.0, -0.05])  # scale, misalignment tangent (at
 P0 = np.diag([5e-4, *np.radians([0.05, 0.05, 0.1]), 5e-3]) ** 2
 P0[0, 3] = P0[3, 0] = 0.5 * np.sqrt(P0[0, 0] * P0[3, 3])  # scale and yaw correlated
 # the dive's information: sigmas 1e-3, 0.1 deg, 0.1 deg, 10 ms on scale, roll, pitch, time offset, none on yaw
-INFO = np.diag([1e-3 ** -2, np.radians(0.1) ** -2, np.radians(0.1) ** -2, 0.0, 0.01 ** -2])
+INFO = np.diag([1e-3**-2, np.radians(0.1) ** -2, np.radians(0.1) ** -2, 0.0, 0.01**-2])
 
 
 def _result(delta1: np.ndarray, P1: np.ndarray) -> Any:
@@ -37,16 +37,34 @@ def _result(delta1: np.ndarray, P1: np.ndarray) -> Any:
     joint = np.eye(sum(s.stop - s.start for s in sl.values())) * 1e-10
     idx = np.r_[sl["scale"], sl["misalignment"], sl["time_offset"]]
     joint[np.ix_(idx, idx)] = P1
-    values = {"scale": MU0[:1] + delta1[:1], "misalignment": R0 @ so3_exp(delta1[1:4]),
-              "time_offset": MU0[4:] + delta1[4:]}
-    calibration = {"scale": Estimate(values["scale"], P1[:1, :1]),
-                   "misalignment": Estimate(values["misalignment"], P1[1:4, 1:4]),
-                   "time_offset": Estimate(values["time_offset"], P1[4:, 4:])}
-    prior = {"vehicle": "auv-7", "date": "2026-11-02T10:15:00Z", "states": NAMES,
-             "values": {"scale": MU0[:1].tolist(), "misalignment": R0.tolist(), "time_offset": MU0[4:].tolist()},
-             "cov": P0.tolist()}
-    return SimpleNamespace(info={"calibration_prior": prior}, calibration=calibration, shared_joint_cov=joint,
-                           calib_joint_cov=None, estimator_config=CONFIG)
+    values = {
+        "scale": MU0[:1] + delta1[:1],
+        "misalignment": R0 @ so3_exp(delta1[1:4]),
+        "time_offset": MU0[4:] + delta1[4:],
+    }
+    calibration = {
+        "scale": Estimate(values["scale"], P1[:1, :1]),
+        "misalignment": Estimate(values["misalignment"], P1[1:4, 1:4]),
+        "time_offset": Estimate(values["time_offset"], P1[4:, 4:]),
+    }
+    prior = {
+        "vehicle": "auv-7",
+        "date": "2026-11-02T10:15:00Z",
+        "states": NAMES,
+        "values": {
+            "scale": MU0[:1].tolist(),
+            "misalignment": R0.tolist(),
+            "time_offset": MU0[4:].tolist(),
+        },
+        "cov": P0.tolist(),
+    }
+    return SimpleNamespace(
+        info={"calibration_prior": prior},
+        calibration=calibration,
+        shared_joint_cov=joint,
+        calib_joint_cov=None,
+        estimator_config=CONFIG,
+    )
 
 
 def _dive(rng: np.random.Generator, true_shift: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -78,18 +96,25 @@ def test_chi2_follows_its_distribution_when_the_vehicle_did_not_change() -> None
 
 def test_a_moved_scale_is_flagged_in_words_and_the_uninformed_yaw_left_to_the_file() -> None:
     rng = np.random.default_rng(1)
-    moved = check_calibration(_result(*_dive(rng, np.array([0.01, 0, 0, 0, 0]))))  # the scale 1 % off the file
+    moved = check_calibration(
+        _result(*_dive(rng, np.array([0.01, 0, 0, 0, 0])))
+    )  # the scale 1 % off the file
     assert moved is not None and moved.moved
     scale = moved.components[0]
     assert scale.name == "scale" and scale.z > 5
     texts = [t for _, t in moved.findings]
-    assert any(t.startswith(f"DVL scale factor moved {scale.z:.1f} sigma since 2026-11-02") and "sound-speed" in t
-               for t in texts), texts
+    assert any(
+        t.startswith(f"DVL scale factor moved {scale.z:.1f} sigma since 2026-11-02")
+        and "sound-speed" in t
+        for t in texts
+    ), texts
     assert [sev for sev, _ in moved.findings] == ["degraded", "warn"]
     same = check_calibration(_result(*_dive(rng, np.zeros(5))))
     assert same is not None and not same.moved and same.findings[0][0] == "note"
     assert "consistent with auv-7's calibration of 2026-11-02" in same.findings[0][1]
-    assert "about body z (yaw)" in same.findings[0][1]  # from the calibration: the dive did not inform it
+    assert (
+        "about body z (yaw)" in same.findings[0][1]
+    )  # from the calibration: the dive did not inform it
     yaw = same.components[3]
     assert yaw.informed < 0.1 and same.components[1].informed > 0.15  # yaw only through the scale
 
@@ -128,8 +153,11 @@ def test_a_calibration_of_another_configuration_is_noted() -> None:
     result.config = CONFIG.to_dict()
     check = check_calibration(result)
     assert check is not None
-    assert any(s == "note" and t.startswith("the calibration was made with another configuration (hash 0123")
-               for s, t in check.findings)
+    assert any(
+        s == "note"
+        and t.startswith("the calibration was made with another configuration (hash 0123")
+        for s, t in check.findings
+    )
 
 
 def test_no_verdict_without_a_calibration_prior() -> None:
@@ -140,14 +168,22 @@ def test_no_verdict_without_a_calibration_prior() -> None:
 def test_end_to_end_a_one_percent_scale_change_is_flagged(sim_paper3d_short: LogData) -> None:
     """paper-3d-short (seed 11) smoothed with a calibration at its truth: consistent; with one whose scale is 1 %
     off the truth (a dive whose true scale moved 1 % since the file): flagged by the health, in words."""
-    consistent = run_estimator(sim_paper3d_short, "batch", CONFIG, calibration=calibration_at_truth(sim_paper3d_short))
+    consistent = run_estimator(
+        sim_paper3d_short, "batch", CONFIG, calibration=calibration_at_truth(sim_paper3d_short)
+    )
     check = check_calibration(consistent)
     assert check is not None and not check.moved, check.findings
     health = assess_health(consistent, sim_paper3d_short)
     assert health.figures["calibration_check"]["moved"] is False
-    assert any(n.startswith("consistent with auv-7's calibration") for n in health.notes), health.notes
-    off = run_estimator(sim_paper3d_short, "batch", CONFIG,
-                        calibration=calibration_at_truth(sim_paper3d_short, scale_off=0.01))
+    assert any(n.startswith("consistent with auv-7's calibration") for n in health.notes), (
+        health.notes
+    )
+    off = run_estimator(
+        sim_paper3d_short,
+        "batch",
+        CONFIG,
+        calibration=calibration_at_truth(sim_paper3d_short, scale_off=0.01),
+    )
     health = assess_health(off, sim_paper3d_short)
     assert health.figures["calibration_check"]["moved"] is True
     assert any(w.startswith("DVL scale factor moved") for w in health.warnings), health.warnings
@@ -169,14 +205,26 @@ def test_a_straight_transect_takes_its_yaw_from_the_file() -> None:
     truth = log.true_calibration
     assert truth is not None
     sig = np.array([8.9e-4, *np.radians([0.27, 0.045, 0.052]), 0.027])
-    cal = VehicleCalibration("auv-7", "2023-11-14T00:00:00Z", tuple(NAMES),
-                             {"scale": np.array([truth.scale]), "misalignment": truth.b_R_d(log.mounting.b_R_d0),
-                              "time_offset": np.array([truth.time_offset_s])}, np.diag(sig**2))
-    result = run_estimator(log, "batch", EstimatorConfig.for_log(log.metadata), calibration=cal, timeline=False)
+    cal = VehicleCalibration(
+        "auv-7",
+        "2023-11-14T00:00:00Z",
+        tuple(NAMES),
+        {
+            "scale": np.array([truth.scale]),
+            "misalignment": truth.b_R_d(log.mounting.b_R_d0),
+            "time_offset": np.array([truth.time_offset_s]),
+        },
+        np.diag(sig**2),
+    )
+    result = run_estimator(
+        log, "batch", EstimatorConfig.for_log(log.metadata), calibration=cal, timeline=False
+    )
     s = summary(result, log)
     yaw_err, yaw_sigma = s["errors"]["misalignment_deg"][2], result.misalignment_sigma_deg[2]
     assert abs(yaw_err) < 3 * yaw_sigma and yaw_sigma == pytest.approx(0.052, rel=0.05)
     assert s["errors"]["final_horizontal_position_m"] < 3 * s["final_horizontal_position_sigma_m"]
     assert s["calibration_check"]["moved"] is False
     assert "about body z (yaw)" in s["calibration_check"]["verdict"]
-    assert not any("misalignment yaw" in w or "scale leans" in w for w in s["health"]["warnings"]), s["health"]
+    assert not any(
+        "misalignment yaw" in w or "scale leans" in w for w in s["health"]["warnings"]
+    ), s["health"]

@@ -32,18 +32,39 @@ def test_evaluate_with_truth(smoothed: tuple[Path, Path], tmp_path: Path) -> Non
     lines, written = evaluate_to_dir(result, tmp_path, truth_path=log)
     m = json.loads((tmp_path / "metrics.json").read_text())
     truth = m["truth"]
-    print(json.dumps({k: truth[k] for k in ("attitude_within_3_sigma", "position_within_3_sigma",
-                                            "velocity_within_3_sigma",
-                                            "final_horizontal_position_pct_distance")}))
+    print(
+        json.dumps(
+            {
+                k: truth[k]
+                for k in (
+                    "attitude_within_3_sigma",
+                    "position_within_3_sigma",
+                    "velocity_within_3_sigma",
+                    "final_horizontal_position_pct_distance",
+                )
+            }
+        )
+    )
     # a consistent smoother keeps its errors inside 3 sigma nearly all the time
-    assert min(truth["attitude_within_3_sigma"]) > 0.9 and min(truth["position_within_3_sigma"]) > 0.9
+    assert (
+        min(truth["attitude_within_3_sigma"]) > 0.9 and min(truth["position_within_3_sigma"]) > 0.9
+    )
     assert min(truth["velocity_within_3_sigma"]) > 0.9
     obs = {s["key"]: s for s in m["observability"]}
-    assert any(c.startswith("descent 660-720") for c in obs["misalignment_roll"]["credited_segments"])
+    assert any(
+        c.startswith("descent 660-720") for c in obs["misalignment_roll"]["credited_segments"]
+    )
     assert any(c.startswith("square") for c in obs["accel_bias_x"]["credited_segments"])
     names = {p.name for p in written}
-    assert {"attitude_error.png", "position_error.png", "scale.png", "misalignment.png", "normalised_sigmas.png",
-            "metrics.json", "observability.txt"} <= names
+    assert {
+        "attitude_error.png",
+        "position_error.png",
+        "scale.png",
+        "misalignment.png",
+        "normalised_sigmas.png",
+        "metrics.json",
+        "observability.txt",
+    } <= names
 
 
 def test_evaluate_log_without_truth(smoothed: tuple[Path, Path], tmp_path: Path) -> None:
@@ -53,7 +74,9 @@ def test_evaluate_log_without_truth(smoothed: tuple[Path, Path], tmp_path: Path)
 
     log = read_log(log_path)
     meta = {k: v for k, v in log.metadata.items() if k not in ("truth",)}
-    real = dataclasses.replace(log, truth=None, metadata=meta, true_calibration=None, true_imu_bias=None, segments=[])
+    real = dataclasses.replace(
+        log, truth=None, metadata=meta, true_calibration=None, true_imu_bias=None, segments=[]
+    )
     real_path = tmp_path / "real.mcap"
     write_log(real_path, real)
     result = tmp_path / "real-result.mcap"
@@ -63,5 +86,9 @@ def test_evaluate_log_without_truth(smoothed: tuple[Path, Path], tmp_path: Path)
     assert "truth" not in m and m["segments_from"] == "classified from IMU"
     roll = next(s for s in m["observability"] if s["key"] == "misalignment_roll")
     print(roll)
-    assert roll["verdict"] == "weakly determined" and roll["ratio"] < 0.5  # informed, not to 0.1 deg
-    assert any("along body z" in c for c in roll["credited_segments"])  # the descent, found from the IMU
+    assert (
+        roll["verdict"] == "weakly determined" and roll["ratio"] < 0.5
+    )  # informed, not to 0.1 deg
+    assert any(
+        "along body z" in c for c in roll["credited_segments"]
+    )  # the descent, found from the IMU

@@ -14,11 +14,15 @@ STATES = ["scale", "misalignment"]
 
 def _estimates(x: np.ndarray, cov: np.ndarray) -> dict[str, Estimate]:
     """[scale, misalignment tangent] as Estimates (the misalignment as b_R_d = Exp(x[1:]), right tangent)."""
-    return {"scale": Estimate(np.array([x[0]]), cov[:1, :1]), "misalignment": Estimate(so3_exp(x[1:]), cov[1:, 1:])}
+    return {
+        "scale": Estimate(np.array([x[0]]), cov[:1, :1]),
+        "misalignment": Estimate(so3_exp(x[1:]), cov[1:, 1:]),
+    }
 
 
-def _fleet(rng: np.random.Generator, infos: list[np.ndarray], shift: np.ndarray | None = None
-           ) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[np.ndarray, np.ndarray]]:
+def _fleet(
+    rng: np.random.Generator, infos: list[np.ndarray], shift: np.ndarray | None = None
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], tuple[np.ndarray, np.ndarray]]:
     """Dives with informations infos about a true x (scale 1, misalignment 1e-3 rad), a shared prior; the last dive
     measures x + shift. Returns each dive alone (x_d, S_d) and the joint (x_J, S_J), information-weighted."""
     x_true = np.array([1.0, 1e-3, -2e-3, 5e-3])
@@ -39,7 +43,9 @@ def _fleet(rng: np.random.Generator, infos: list[np.ndarray], shift: np.ndarray 
 def _infos(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     out = []
     for _ in range(n):
-        A = rng.normal(size=(6, 4)) * np.array([1e3, 1e3, 5e3, 5e3])  # scale ~1e-3, angles ~2e-4 rad
+        A = rng.normal(size=(6, 4)) * np.array(
+            [1e3, 1e3, 5e3, 5e3]
+        )  # scale ~1e-3, angles ~2e-4 rad
         out.append(A.T @ A)
     return out
 
@@ -69,7 +75,10 @@ def test_a_dive_whose_scale_moved_is_named() -> None:
     shift = 8 * np.sqrt(np.linalg.inv(infos[-1])[0, 0])  # 8 sigma of the last dive's scale
     alone, (xJ, SJ) = _fleet(rng, infos, shift=np.array([shift, 0.0, 0.0, 0.0]))
     joint = _estimates(xJ, SJ)
-    comps = [dive_vs_joint(f"d{k}", STATES, _estimates(x, S), joint, S, SJ) for k, (x, S) in enumerate(alone)]
+    comps = [
+        dive_vs_joint(f"d{k}", STATES, _estimates(x, S), joint, S, SJ)
+        for k, (x, S) in enumerate(alone)
+    ]
     assert comps[-1].moved_states() == ["scale"]
     assert comps[-1].states["scale"].n_sigma > 4
     # in the display unit (ppm): most of the shift (the joint moved by a part of it)

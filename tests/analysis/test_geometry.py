@@ -26,7 +26,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.states import Estimate, joint_columns, joint_slices, joint_states
 from gtsam_dvl.core.types import Mounting
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.io.result_reader import read_result
 from gtsam_dvl.io.result_writer import write_result_log
@@ -35,8 +35,9 @@ from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.scenarios import scenario_raw
 
 
-def _trajectory(speed: np.ndarray, rate_deg_s: np.ndarray, t: np.ndarray, climb_m_s: float = 0.0
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _trajectory(
+    speed: np.ndarray, rate_deg_s: np.ndarray, t: np.ndarray, climb_m_s: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """n_R_b, n_v, n_p of a vehicle moving along its heading (ENU) at the given speed and turn rate."""
     dt = np.diff(t, prepend=t[0])
     yaw = np.radians(10.0) + np.cumsum(np.radians(rate_deg_s) * dt)
@@ -47,7 +48,9 @@ def _trajectory(speed: np.ndarray, rate_deg_s: np.ndarray, t: np.ndarray, climb_
 
 
 T = np.arange(0.0, 400.0, 1.0)
-STEADY_TURN = _trajectory(np.full_like(T, 1.86), np.full_like(T, 0.57), T)  # the issue's steady-turn: 228 deg
+STEADY_TURN = _trajectory(
+    np.full_like(T, 1.86), np.full_like(T, 0.57), T
+)  # the issue's steady-turn: 228 deg
 STRAIGHT = _trajectory(np.full_like(T, 1.9), np.zeros_like(T), T)
 S_TURN = _trajectory(np.full_like(T, 1.9), 0.57 * np.sign(np.sin(2 * np.pi * T / 200.0)), T)
 SPEED_CHANGE = _trajectory(1.2 + 0.7 * (T > 200.0), np.zeros_like(T), T)
@@ -56,19 +59,30 @@ SPEED_CHANGE = _trajectory(1.2 + 0.7 * (T > 200.0), np.zeros_like(T), T)
 def test_motion_classes() -> None:
     m = classify_motion(T, *STEADY_TURN)
     print(m.line())
-    assert m.kind == "steady turn" and m.level and m.turn_rate_deg_s == pytest.approx(0.57, rel=1e-3)
+    assert (
+        m.kind == "steady turn" and m.level and m.turn_rate_deg_s == pytest.approx(0.57, rel=1e-3)
+    )
     assert m.heading_change_deg == pytest.approx(0.57 * 399, rel=1e-3)
     assert classify_motion(T, *STRAIGHT).kind == "straight"
     assert classify_motion(T, *S_TURN).kind == "varied"
     assert classify_motion(T, *SPEED_CHANGE).kind == "varied"  # straight, but the speed changes
-    diving = classify_motion(T, *_trajectory(np.full_like(T, 1.9), np.zeros_like(T), T, climb_m_s=-0.1))
-    assert diving.kind == "straight" and not diving.level and diving.depth_change_m == pytest.approx(39.9)
+    diving = classify_motion(
+        T, *_trajectory(np.full_like(T, 1.9), np.zeros_like(T), T, climb_m_s=-0.1)
+    )
+    assert (
+        diving.kind == "straight"
+        and not diving.level
+        and diving.depth_change_m == pytest.approx(39.9)
+    )
     still = classify_motion(T, *_trajectory(np.zeros_like(T), np.zeros_like(T), T))
     assert still.kind == "static"
 
 
-def _result(trajectory: tuple[np.ndarray, np.ndarray, np.ndarray], ratios: dict[str, float],
-            correlations: dict[tuple[str, str], float]) -> NavResult:
+def _result(
+    trajectory: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ratios: dict[str, float],
+    correlations: dict[tuple[str, str], float],
+) -> NavResult:
     """A NavResult on the trajectory whose shared joint covariance has, in display units, the given posterior /
     prior sigma ratio per column (0.1 for the others) and correlations (0 for the others)."""
     config = EstimatorConfig()
@@ -83,12 +97,28 @@ def _result(trajectory: tuple[np.ndarray, np.ndarray, np.ndarray], ratios: dict[
     cov = np.outer(sigma * to_si, sigma * to_si) * corr
     n_R_b, n_v, n_p = trajectory
     sl = joint_slices(config)
-    calibration = {s.name: Estimate(np.eye(3) if s.kind == "rot3" else s.prior(config, Mounting()).value,
-                                    cov[sl[s.name], sl[s.name]]) for s in states}
+    calibration = {
+        s.name: Estimate(
+            np.eye(3) if s.kind == "rot3" else s.prior(config, Mounting()).value,
+            cov[sl[s.name], sl[s.name]],
+        )
+        for s in states
+    }
     n = len(T)
-    return NavResult("batch", T, n_p, n_R_b, n_v, np.tile(np.eye(6), (n, 1, 1)), np.tile(np.eye(3), (n, 1, 1)),
-                     b_R_d0=np.eye(3), calibration=calibration, shared_joint_cov=cov, config=config.to_dict(),
-                     b_omega=np.zeros((n, 3)))
+    return NavResult(
+        "batch",
+        T,
+        n_p,
+        n_R_b,
+        n_v,
+        np.tile(np.eye(6), (n, 1, 1)),
+        np.tile(np.eye(3), (n, 1, 1)),
+        b_R_d0=np.eye(3),
+        calibration=calibration,
+        shared_joint_cov=cov,
+        config=config.to_dict(),
+        b_omega=np.zeros((n, 3)),
+    )
 
 
 def test_scale_tied_to_accel_bias_in_a_steady_turn_is_said() -> None:
@@ -98,8 +128,10 @@ def test_scale_tied_to_accel_bias_in_a_steady_turn_is_said() -> None:
         print(f.severity, f.message)
     assert [f.column for f in report.findings] == ["scale"]
     f = report.findings[0]
-    assert f.message.startswith("scale leans on its prior: correlated -0.97 with accelerometer bias y during a "
-                                "steady turn; a speed change or an S-turn separates them")
+    assert f.message.startswith(
+        "scale leans on its prior: correlated -0.97 with accelerometer bias y during a "
+        "steady turn; a speed change or an S-turn separates them"
+    )
     assert f.partner == "accel bias y" and f.correlation == pytest.approx(-0.97)
     assert f.ratio == pytest.approx(0.96)
     # one sigma of the scale (0.96 % here) shifts the track by that fraction of the turn's widest chord (its
@@ -111,8 +143,11 @@ def test_scale_tied_to_accel_bias_in_a_steady_turn_is_said() -> None:
 
 def test_a_well_excited_calibration_gives_no_finding() -> None:
     # below the thresholds: every ratio 0.1 but the scale's (just under LEANS_ON_PRIOR), correlations up to 0.85
-    res = _result(S_TURN, {"scale": LEANS_ON_PRIOR - 0.05}, {("scale", "accel bias y"): -(CORRELATED - 0.05),
-                                                             ("misalignment yaw", "gyro bias z"): 0.8})
+    res = _result(
+        S_TURN,
+        {"scale": LEANS_ON_PRIOR - 0.05},
+        {("scale", "accel bias y"): -(CORRELATED - 0.05), ("misalignment yaw", "gyro bias z"): 0.8},
+    )
     report = assess_geometry(res)
     assert report.motion.kind == "varied" and report.findings == []
 
@@ -123,14 +158,18 @@ def test_yaw_misalignment_on_a_straight_track_and_the_thrust_axis_when_level() -
     assert set(by_column) == {"misalignment roll", "misalignment yaw"}
     yaw, roll = by_column["misalignment yaw"], by_column["misalignment roll"]
     print(yaw.message, roll.message, sep="\n")
-    assert yaw.message.startswith("misalignment yaw leans on its prior on a straight track; a turn separates it "
-                                  "from the heading")
+    assert yaw.message.startswith(
+        "misalignment yaw leans on its prior on a straight track; a turn separates it "
+        "from the heading"
+    )
     # one sigma (0.99 deg) of yaw turns the whole track: the shift is that angle times the distance
     assert yaw.track_shift_m == pytest.approx(np.radians(0.99) * 1.9 * 399, rel=0.01)
     assert yaw.severity == "warn"
     # the DVL velocity has no component across the thrust axis: the roll moves nothing, a note
-    assert roll.message.startswith("misalignment roll leans on its prior on a straight track with no depth change; "
-                                   "a depth change (a descent or an ascent) separates it")
+    assert roll.message.startswith(
+        "misalignment roll leans on its prior on a straight track with no depth change; "
+        "a depth change (a descent or an ascent) separates it"
+    )
     assert roll.severity == "note" and roll.track_shift_m < 1e-9
 
 
@@ -138,7 +177,9 @@ def test_yaw_misalignment_on_a_straight_track_and_the_thrust_axis_when_level() -
 def test_straight_run_warns_of_the_yaw_misalignment(tmp_path: Path) -> None:
     """A 300 s straight run at 1.9 m/s, underway from the start with the initial attitude given (the default
     configuration: scale prior 1 %, misalignment 1 deg, the time offset estimated)."""
-    raw = scenario_raw(initial={"speed_m_s": 1.9}, segments=[{"kind": "straight", "duration_s": 300.0}])
+    raw = scenario_raw(
+        initial={"speed_m_s": 1.9}, segments=[{"kind": "straight", "duration_s": 300.0}]
+    )
     raw.pop("estimator_config", None)
     log = simulate(scenario_from_dict(raw, name="straight"), 3)
     config = EstimatorConfig()
@@ -147,14 +188,24 @@ def test_straight_run_warns_of_the_yaw_misalignment(tmp_path: Path) -> None:
     assert res.shared_joint_cov is not None and res.calib_joint_cov is not None
     # the shared joint holds the calibration block (the same marginal) and the time offset
     assert joint_columns(config)[-1] == "time offset" and res.shared_joint_cov.shape == (11, 11)
-    np.testing.assert_allclose(res.shared_joint_cov[:10, :10], res.calib_joint_cov, rtol=1e-6, atol=1e-15)
+    np.testing.assert_allclose(
+        res.shared_joint_cov[:10, :10], res.calib_joint_cov, rtol=1e-6, atol=1e-15
+    )
     health = assess_health(res, log)
     print(motion_of(res).line(), health.status, *health.warnings, *health.notes, sep="\n")
     assert health.status == "warn"
-    yaw = [w for w in health.warnings if w.startswith("misalignment yaw leans on its prior on a straight track; "
-                                                      "a turn separates it from the heading")]
+    yaw = [
+        w
+        for w in health.warnings
+        if w.startswith(
+            "misalignment yaw leans on its prior on a straight track; "
+            "a turn separates it from the heading"
+        )
+    ]
     assert len(yaw) == 1
-    finding = next(f for f in health.figures["geometry"]["findings"] if f["column"] == "misalignment yaw")
+    finding = next(
+        f for f in health.figures["geometry"]["findings"] if f["column"] == "misalignment yaw"
+    )
     assert finding["ratio"] > 0.9 and health.figures["geometry"]["motion"]["kind"] == "straight"
     # honest: the yaw misalignment's error within its sigma's reach
     assert log.true_calibration is not None
@@ -165,7 +216,8 @@ def test_straight_run_warns_of_the_yaw_misalignment(tmp_path: Path) -> None:
     assert back.shared_joint_cov is not None
     np.testing.assert_array_equal(back.shared_joint_cov, res.shared_joint_cov)
     assert [f.message for f in assess_geometry(back).findings] == [
-        f["message"] for f in health.figures["geometry"]["findings"]]
+        f["message"] for f in health.figures["geometry"]["findings"]
+    ]
 
 
 @pytest.mark.slow
@@ -178,7 +230,9 @@ def test_paper_3d_short_has_no_calibration_finding(estimator: str) -> None:
     assert res.shared_joint_cov.shape == (len(joint_columns(config, ekf=estimator == "ekf")),) * 2
     # its leading block is the calibration block, the same numbers (batch: the same marginal; EKF: its covariance)
     assert res.calib_joint_cov is not None
-    np.testing.assert_allclose(res.shared_joint_cov[:10, :10], res.calib_joint_cov, rtol=1e-9, atol=0.0)
+    np.testing.assert_allclose(
+        res.shared_joint_cov[:10, :10], res.calib_joint_cov, rtol=1e-9, atol=0.0
+    )
     report = assess_geometry(res)
     print(report.motion.line(), [f.message for f in report.findings])
     assert report.motion.kind == "varied" and not report.motion.level
@@ -202,11 +256,22 @@ def test_ekf_sigma_on_a_straight_track_is_not_taken_as_information() -> None:
     config = EstimatorConfig.from_dict(d)
     ekf, batch = run_ekf(log, config), smooth_batch(log, config)
     prior = config.priors.misalignment_sigma_deg[2]
-    print("yaw sigma: EKF", ekf.misalignment_sigma_deg[2], "batch", batch.misalignment_sigma_deg[2], "prior", prior)
+    print(
+        "yaw sigma: EKF",
+        ekf.misalignment_sigma_deg[2],
+        "batch",
+        batch.misalignment_sigma_deg[2],
+        "prior",
+        prior,
+    )
     assert ekf.misalignment_sigma_deg[2] == pytest.approx(batch.misalignment_sigma_deg[2], rel=0.1)
     assert LEANS_ON_PRIOR * prior < ekf.misalignment_sigma_deg[2]
     health = assess_health(ekf, log)
-    yaw = [w for w in health.warnings if w.startswith("misalignment yaw leans on its prior on a straight track")]
+    yaw = [
+        w
+        for w in health.warnings
+        if w.startswith("misalignment yaw leans on its prior on a straight track")
+    ]
     assert len(yaw) == 1, health.warnings
     # an over-confident filter: the misalignment's rows and columns scaled by 1/5 (its sigmas a fifth)
     over = copy.deepcopy(ekf)
@@ -219,7 +284,11 @@ def test_ekf_sigma_on_a_straight_track_is_not_taken_as_information() -> None:
             f[7:10] = 0.2  # [accel, gyro] bias, scale, misalignment (core/states.py joint_states)
             setattr(over, name, np.asarray(joint) * np.outer(f, f))
     claimed = assess_health(over, log)
-    yaw = [w for w in claimed.warnings if w.startswith("misalignment yaw cannot be determined on a straight track")]
+    yaw = [
+        w
+        for w in claimed.warnings
+        if w.startswith("misalignment yaw cannot be determined on a straight track")
+    ]
     print(*claimed.warnings, sep="\n")
     assert len(yaw) == 1 and "claims information this motion does not hold" in yaw[0]
     assert claimed.status in ("warn", "degraded", "failed")

@@ -22,11 +22,21 @@ SOURCES = [Path(health.__file__), Path(prior_check.__file__)]
 def _messages(path: Path) -> str:
     """The string literals of a module (f-strings' text parts included), docstrings left out: its messages."""
     tree = ast.parse(path.read_text())
-    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
-                  if isinstance(node, (ast.Module, ast.FunctionDef, ast.ClassDef)) and node.body
-                  and isinstance(node.body[0], ast.Expr) and isinstance(node.body[0].value, ast.Constant)}
-    return "\n".join(node.value for node in ast.walk(tree) if isinstance(node, ast.Constant)
-                     and isinstance(node.value, str) and id(node) not in docstrings)
+    docstrings = {
+        id(node.body[0].value)
+        for node in ast.walk(tree)
+        if isinstance(node, (ast.Module, ast.FunctionDef, ast.ClassDef))
+        and node.body
+        and isinstance(node.body[0], ast.Expr)
+        and isinstance(node.body[0].value, ast.Constant)
+    }
+    return "\n".join(
+        node.value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Constant)
+        and isinstance(node.value, str)
+        and id(node) not in docstrings
+    )
 
 
 def _named(pattern: str) -> set[tuple[str, ...]]:
@@ -48,12 +58,17 @@ def test_named_settings_exist() -> None:
 def test_named_options_exist() -> None:
     options = {o for (o,) in _named(r"(--[a-z][a-z-]+)")}
     assert "--repair" in options
-    cli = "".join((PACKAGE / "app" / name).read_text() for name in ("cli.py", "cli_options.py", "cli_campaign.py"))
+    cli = "".join(
+        (PACKAGE / "app" / name).read_text()
+        for name in ("cli.py", "cli_options.py", "cli_campaign.py")
+    )
     for option in options:
         assert f'"{option}"' in cli, option
 
 
-@pytest.mark.parametrize(("robust", "named"), [("none", "huber"), ("huber", "cauchy"), ("cauchy", None)])
+@pytest.mark.parametrize(
+    ("robust", "named"), [("none", "huber"), ("huber", "cauchy"), ("cauchy", None)]
+)
 def test_kernel_advice_names_a_stronger_kernel(robust: str, named: str | None) -> None:
     advice = health._kernel_advice(robust)
     if named is None:

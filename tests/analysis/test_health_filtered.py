@@ -27,33 +27,64 @@ def _filtered(estimator: str) -> tuple[NavResult, LogData]:
     eye = np.tile(np.eye(3), (N, 1, 1))
     d_v = np.stack([k_t[i] * rpy_deg_to_matrix([0.0, 0.0, yaw_t[i]]).T @ n_v[i] for i in range(N)])
     zeros3 = np.zeros((N, 3))
-    timeline = Timeline(t=t, scale=k_t, scale_sigma=np.full(N, 0.01),
-                        misalignment_deg=np.stack([np.zeros(N), np.zeros(N), yaw_t], axis=1),
-                        misalignment_sigma_deg=np.ones((N, 3)), gyro_bias_deg_per_h=zeros3,
-                        gyro_bias_sigma_deg_per_h=zeros3, accel_bias_ug=zeros3, accel_bias_sigma_ug=zeros3,
-                        attitude_sigma_deg=zeros3)
-    result = NavResult(estimator, t, np.cumsum(n_v, axis=0), eye, n_v, np.tile(np.eye(6), (N, 1, 1)) * 1e-6,
-                       eye * 1e-6, b_R_d0=np.eye(3), b_omega=zeros3, timeline=timeline, dvl_pings=np.arange(N),
-                       accel_bias=np.zeros(3), gyro_bias=np.zeros(3), bias_cov=np.eye(6) * 1e-12, scale=1.0,
-                       scale_sigma=1e-4, b_R_d=np.eye(3), b_R_d_cov=np.eye(3) * 1e-8)
-    log = LogData(imu=ImuData(t=t, b_omega=zeros3, b_f=zeros3),
-                  dvl=DvlData(t, d_v, np.tile(np.eye(3) * SIGMA_M_S**2, (N, 1, 1)), np.ones(N, dtype=bool)))
+    timeline = Timeline(
+        t=t,
+        scale=k_t,
+        scale_sigma=np.full(N, 0.01),
+        misalignment_deg=np.stack([np.zeros(N), np.zeros(N), yaw_t], axis=1),
+        misalignment_sigma_deg=np.ones((N, 3)),
+        gyro_bias_deg_per_h=zeros3,
+        gyro_bias_sigma_deg_per_h=zeros3,
+        accel_bias_ug=zeros3,
+        accel_bias_sigma_ug=zeros3,
+        attitude_sigma_deg=zeros3,
+    )
+    result = NavResult(
+        estimator,
+        t,
+        np.cumsum(n_v, axis=0),
+        eye,
+        n_v,
+        np.tile(np.eye(6), (N, 1, 1)) * 1e-6,
+        eye * 1e-6,
+        b_R_d0=np.eye(3),
+        b_omega=zeros3,
+        timeline=timeline,
+        dvl_pings=np.arange(N),
+        accel_bias=np.zeros(3),
+        gyro_bias=np.zeros(3),
+        bias_cov=np.eye(6) * 1e-12,
+        scale=1.0,
+        scale_sigma=1e-4,
+        b_R_d=np.eye(3),
+        b_R_d_cov=np.eye(3) * 1e-8,
+    )
+    log = LogData(
+        imu=ImuData(t=t, b_omega=zeros3, b_f=zeros3),
+        dvl=DvlData(t, d_v, np.tile(np.eye(3) * SIGMA_M_S**2, (N, 1, 1)), np.ones(N, dtype=bool)),
+    )
     return result, log
 
 
 @pytest.mark.parametrize("estimator", ["ekf", "batch"])
 def test_a_filter_is_judged_with_the_calibration_of_its_time(estimator: str) -> None:
     result, log = _filtered(estimator)
-    res = dvl_residuals(result, log, DvlConfig(correlated_sigma_m_s=0.0))  # (white: chi2 against SIGMA_M_S alone)
+    res = dvl_residuals(
+        result, log, DvlConfig(correlated_sigma_m_s=0.0)
+    )  # (white: chi2 against SIGMA_M_S alone)
     k, b_R_d, _, _ = state_calibration(result, log)
-    if estimator == "ekf":  # each state with the scale and misalignment the filter held then: the pings fit
+    if (
+        estimator == "ekf"
+    ):  # each state with the scale and misalignment the filter held then: the pings fit
         assert is_filtered(result)
         assert k[0] == pytest.approx(0.95) and k[-1] == pytest.approx(1.0)
         np.testing.assert_allclose(b_R_d[0], rpy_deg_to_matrix([0.0, 0.0, 2.0]), atol=1e-12)
         assert res.rms() < 1e-9
     else:  # a smoother's states share the final calibration: the same data misfit by the early scale's 5 %
         assert not is_filtered(result) and np.all(k == 1.0)
-        first = log.dvl.d_v[0] - np.array([2.0, 0.0, 0.0])  # 5 % of 2 m/s along x, 2 deg of it across
+        first = log.dvl.d_v[0] - np.array(
+            [2.0, 0.0, 0.0]
+        )  # 5 % of 2 m/s along x, 2 deg of it across
         assert np.linalg.norm(first) > 0.1
         assert res.chi2[0] == pytest.approx(float(first @ first) / SIGMA_M_S**2, rel=1e-9)
         assert res.rms() > 1.5  # 2.0: the misfit falls linearly to 0 at the end
@@ -69,12 +100,22 @@ def test_attitude_at_a_shifted_time_follows_the_states_geodesic() -> None:
 
     t = np.arange(6.0)
     yaw = np.radians([0.0, 0.0, 30.0, 65.0, 90.0, 90.0])  # a turn starting after t = 1
-    rot = Rotation.from_euler("zyx", np.c_[yaw, np.radians(np.full(6, 3.0)), np.radians(np.arange(6.0))])
+    rot = Rotation.from_euler(
+        "zyx", np.c_[yaw, np.radians(np.full(6, 3.0)), np.radians(np.arange(6.0))]
+    )
     b_omega = np.tile([0.0, 0.0, 0.2], (6, 1))
     t_q = np.array([0.3, 1.0, 1.5, 2.25, 4.9, 5.0])
     got = attitude_at(t, rot.as_matrix(), b_omega, t_q)
     want = Slerp(t, rot)(t_q).as_matrix()
     assert np.abs(got - want).max() < 1e-12
     beyond = attitude_at(t, rot.as_matrix(), b_omega, np.array([5.5, -0.5]))
-    assert np.abs(beyond[0] - rot[5].as_matrix() @ Rotation.from_rotvec([0, 0, 0.1]).as_matrix()).max() < 1e-12
-    assert np.abs(beyond[1] - rot[0].as_matrix() @ Rotation.from_rotvec([0, 0, -0.1]).as_matrix()).max() < 1e-12
+    assert (
+        np.abs(beyond[0] - rot[5].as_matrix() @ Rotation.from_rotvec([0, 0, 0.1]).as_matrix()).max()
+        < 1e-12
+    )
+    assert (
+        np.abs(
+            beyond[1] - rot[0].as_matrix() @ Rotation.from_rotvec([0, 0, -0.1]).as_matrix()
+        ).max()
+        < 1e-12
+    )

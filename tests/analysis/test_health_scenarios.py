@@ -33,7 +33,9 @@ def shortened(name: str) -> dict[str, Any]:
     few minutes of data."""
     raw = copy.deepcopy(load_scenario(name).raw)
     segments, total = [], 0.0
-    longest = MAX_SEGMENT_S if len(raw["segments"]) > 1 else MAX_DURATION_S  # a one-segment scenario: cut to length
+    longest = (
+        MAX_SEGMENT_S if len(raw["segments"]) > 1 else MAX_DURATION_S
+    )  # a one-segment scenario: cut to length
     for seg in raw["segments"]:
         if total >= MAX_DURATION_S:
             break
@@ -46,9 +48,17 @@ def shortened(name: str) -> dict[str, Any]:
             total += seg["sides"] * (seg["leg_duration_s"] + seg["turn_duration_s"])
         segments.append(seg)
     raw["segments"] = segments
-    if "seafloor" in raw:  # a dive cut short stays shallow: the seafloor brought up so that lock comes halfway down
-        down = sum(s["peak_vertical_speed_m_s"] * s["duration_s"] * 64 / 140  # the bump's integral (sim/blends.py)
-                   for s in segments if s["kind"] == "descent")
+    if (
+        "seafloor" in raw
+    ):  # a dive cut short stays shallow: the seafloor brought up so that lock comes halfway down
+        down = sum(
+            s["peak_vertical_speed_m_s"]
+            * s["duration_s"]
+            * 64
+            / 140  # the bump's integral (sim/blends.py)
+            for s in segments
+            if s["kind"] == "descent"
+        )
         dvl = raw["dvl"]
         bottom_range_m = dvl.get("bottom_range_m") or dvl.get("max_range_m", 200.0)
         raw["seafloor"]["depth_m"] = -raw["origin"].get("height_m", 0.0) + down / 2 + bottom_range_m
@@ -60,7 +70,9 @@ def logs() -> dict[str, LogData]:
     out = {}
     for name in list_builtin_scenarios():
         log = simulate(scenario_from_dict(shortened(name), name=name), 5)
-        if log.origin is None and log.gnss is not None:  # the origin in the first fix, as the reader finds it
+        if (
+            log.origin is None and log.gnss is not None
+        ):  # the origin in the first fix, as the reader finds it
             log = dataclasses.replace(log, origin=first_fix_origin(log.gnss))
         out[name] = log
     return out
@@ -71,14 +83,20 @@ def logs() -> dict[str, LogData]:
 def test_clean_scenario_is_not_degraded(scenario: str, mode: str, logs: dict[str, LogData]) -> None:
     log = logs[scenario]
     try:
-        result = run_estimator(log, mode, None)  # the configuration the scenario names, with its [estimator]
-    except GtsamDvlError as exc:  # online needs a static start or an attitude source (field-survey has neither)
+        result = run_estimator(
+            log, mode, None
+        )  # the configuration the scenario names, with its [estimator]
+    except (
+        GtsamDvlError
+    ) as exc:  # online needs a static start or an attitude source (field-survey has neither)
         assert mode == "online" and "alignment" in str(exc) and "\n" not in str(exc), exc
         return
     health = assess_health(result, log)
     windows = health.figures["dvl_residuals"]["windows"]
-    print(f"{scenario} {mode} ({log.imu.t[-1]:.0f} s): {health.status}; worst 30 s window "
-          f"{max(w['whitened_rms'] for w in windows):.2f}; {health.warnings}")
+    print(
+        f"{scenario} {mode} ({log.imu.t[-1]:.0f} s): {health.status}; worst 30 s window "
+        f"{max(w['whitened_rms'] for w in windows):.2f}; {health.warnings}"
+    )
     assert health.status in ("ok", "warn"), health.warnings
     # "warn" only for weak geometry (analysis/geometry.py), whose warnings name the manoeuvre that separates it
     geometry = {f["message"] for f in health.figures["geometry"].get("findings", [])}

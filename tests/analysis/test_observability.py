@@ -12,14 +12,22 @@ import pytest
 from gtsam_dvl.analysis.observability import STATES, analyse, prior_sigmas
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
 pytestmark = pytest.mark.slow
 
-CALIBRATION = ["scale", "misalignment_pitch", "misalignment_yaw", "accel_bias_x", "accel_bias_y", "accel_bias_z",
-               "gyro_bias_x", "gyro_bias_y"]
+CALIBRATION = [
+    "scale",
+    "misalignment_pitch",
+    "misalignment_yaw",
+    "accel_bias_x",
+    "accel_bias_y",
+    "accel_bias_z",
+    "gyro_bias_x",
+    "gyro_bias_y",
+]
 
 
 @functools.cache
@@ -60,7 +68,10 @@ def test_direction_analysis_on_a_hand_made_covariance() -> None:
     base = _result("paper-3d")
     # build the covariance in user units, then map back to the tangent units the result stores
     v = np.zeros(10)
-    v[7], v[5] = 1 / np.sqrt(2), 1 / np.sqrt(2)  # roll and vertical gyro bias, equal weight when whitened
+    v[7], v[5] = (
+        1 / np.sqrt(2),
+        1 / np.sqrt(2),
+    )  # roll and vertical gyro bias, equal weight when whitened
     # ratio 0.6 along v (sigma 0.6 of the prior: weakly determined; 0.5 would sit exactly on the DETERMINED
     # boundary, where rounding decides)
     white = np.eye(10) - 0.64 * np.outer(v, v)

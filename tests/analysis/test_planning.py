@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from gtsam_dvl.analysis.planning import PlanResult, plan_mission
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
@@ -27,14 +27,23 @@ def test_plan_paper_3d_credits_the_descent_and_the_turns() -> None:
     print(p.answer())
     assert p.answer().startswith("No") and "thrust axis" in p.answer().splitlines()[0]
     roll = p.report.state("misalignment_roll")
-    assert roll.verdict == "weakly determined" and 0.2 < roll.posterior_sigma < 0.3 and roll.target_sigma == 0.1
+    assert (
+        roll.verdict == "weakly determined"
+        and 0.2 < roll.posterior_sigma < 0.3
+        and roll.target_sigma == 0.1
+    )
     assert any(c.startswith("descent 660-720") for c in roll.credited_segments)
     assert p.determined_at_s["misalignment_roll"] is None
     for axis in ("x", "y"):
         acc = p.report.state(f"accel_bias_{axis}")
         assert any(c.startswith("square 750-1970") for c in acc.credited_segments)
-        assert p.determined_at_s[f"accel_bias_{axis}"] is not None and p.determined_at_s[f"accel_bias_{axis}"] > 750
-    assert (p.determined_at_s["scale"] or 0) > 660  # 1000 ppm is reached in the square, not at 600 s
+        assert (
+            p.determined_at_s[f"accel_bias_{axis}"] is not None
+            and p.determined_at_s[f"accel_bias_{axis}"] > 750
+        )
+    assert (
+        p.determined_at_s["scale"] or 0
+    ) > 660  # 1000 ppm is reached in the square, not at 600 s
     assert "this plan's rate" in p.answer() and "this log" not in p.answer()
 
 
@@ -69,10 +78,22 @@ def test_predicted_final_sigmas_match_batch_on_noisy_logs(name: str) -> None:
     """Sigmas of the plan (no noise) against the batch smoother on a noisy log: within 10 %."""
     p = _plan(name)
     res = smooth_batch(simulate(load_scenario(name), 13))
-    pred = np.concatenate([[p.result.scale_sigma], p.result.misalignment_sigma_deg, p.result.accel_bias_sigma_ug,
-                           p.result.gyro_bias_sigma_deg_per_h])
-    got = np.concatenate([[res.scale_sigma], res.misalignment_sigma_deg, res.accel_bias_sigma_ug,
-                          res.gyro_bias_sigma_deg_per_h])
+    pred = np.concatenate(
+        [
+            [p.result.scale_sigma],
+            p.result.misalignment_sigma_deg,
+            p.result.accel_bias_sigma_ug,
+            p.result.gyro_bias_sigma_deg_per_h,
+        ]
+    )
+    got = np.concatenate(
+        [
+            [res.scale_sigma],
+            res.misalignment_sigma_deg,
+            res.accel_bias_sigma_ug,
+            res.gyro_bias_sigma_deg_per_h,
+        ]
+    )
     ratio = pred / got
     print(f"{name}: predicted / batch sigma = {np.round(ratio, 3)}; plan took {p.wall_s:.1f} s")
     assert np.all(np.abs(ratio - 1) < 0.10)

@@ -60,7 +60,9 @@ def test_wrong_mounting_fails_naming_the_misalignment(mode: str, mounted_wrong: 
     named = [w for w in health.warnings if w.startswith("DVL misalignment about body z (yaw) is ")]
     assert len(named) == 1 and "the DVL mounting in /tf_static" in named[0]
     off = float(re.search(r"is off by ([0-9.]+) deg", named[0]).group(1))  # type: ignore[union-attr]
-    assert abs(off - WRONG_YAW_DEG) < 1.5  # the true misalignment (0.5 deg in yaw) on top of the wrong mounting
+    assert (
+        abs(off - WRONG_YAW_DEG) < 1.5
+    )  # the true misalignment (0.5 deg in yaw) on top of the wrong mounting
     nsigma = health.figures["prior_nsigma"]["misalignment"]["nsigma"]
     assert abs(nsigma[2]) > 20 and max(abs(nsigma[0]), abs(nsigma[1])) < PRIOR_NSIGMA_FAILED
 
@@ -78,29 +80,44 @@ def test_clean_log_stays_ok(mode: str, clean: LogData) -> None:
 def _tiny(calibration: dict[str, Estimate]) -> tuple[NavResult, LogData]:
     """A two-state result with the given shared states, and a log whose IMU turned at 40 deg/s at most."""
     n = 2
-    result = NavResult("batch", np.arange(n, dtype=float), np.zeros((n, 3)), np.tile(np.eye(3), (n, 1, 1)),
-                       np.zeros((n, 3)), np.tile(np.eye(6), (n, 1, 1)), np.tile(np.eye(3), (n, 1, 1)),
-                       b_R_d0=np.eye(3), calibration=calibration)
+    result = NavResult(
+        "batch",
+        np.arange(n, dtype=float),
+        np.zeros((n, 3)),
+        np.tile(np.eye(3), (n, 1, 1)),
+        np.zeros((n, 3)),
+        np.tile(np.eye(6), (n, 1, 1)),
+        np.tile(np.eye(3), (n, 1, 1)),
+        b_R_d0=np.eye(3),
+        calibration=calibration,
+    )
     w = np.zeros((3, 3))
     w[1, 2] = np.radians(40.0)
-    log = LogData(imu=ImuData(t=np.arange(3.0), b_omega=w, b_f=np.zeros((3, 3))),
-                  dvl=DvlData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, bool)),
-                  mounting=Mounting())
+    log = LogData(
+        imu=ImuData(t=np.arange(3.0), b_omega=w, b_f=np.zeros((3, 3))),
+        dvl=DvlData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, bool)),
+        mounting=Mounting(),
+    )
     return result, log
 
 
 def test_each_state_far_from_its_prior_names_its_cause() -> None:
     """Per state: within 4 prior sigmas nothing; beyond, "failed" with the distance and the cause."""
-    config = EstimatorConfig()  # scale 1 +- 1 %, misalignment 1 deg, gyro bias 0.01 deg/h, offset 0 +- 0.5 s
+    config = (
+        EstimatorConfig()
+    )  # scale 1 +- 1 %, misalignment 1 deg, gyro bias 0.01 deg/h, offset 0 +- 0.5 s
     small = 1e-12 * np.eye(3)
 
-    def states(scale: float = 1.0, gyro_z_deg_h: float = 0.0, offset_s: float = 0.0,
-               yaw_deg: float = 0.0) -> dict[str, Estimate]:
-        return {"accel_bias": Estimate(np.zeros(3), small),
-                "gyro_bias": Estimate(np.array([0.0, 0.0, gyro_z_deg_h * DEG_PER_H]), small),
-                "scale": Estimate(np.array([scale]), small[:1, :1]),
-                "misalignment": Estimate(rpy_deg_to_matrix([0.0, 0.0, yaw_deg]), small),
-                "time_offset": Estimate(np.array([offset_s]), small[:1, :1])}
+    def states(
+        scale: float = 1.0, gyro_z_deg_h: float = 0.0, offset_s: float = 0.0, yaw_deg: float = 0.0
+    ) -> dict[str, Estimate]:
+        return {
+            "accel_bias": Estimate(np.zeros(3), small),
+            "gyro_bias": Estimate(np.array([0.0, 0.0, gyro_z_deg_h * DEG_PER_H]), small),
+            "scale": Estimate(np.array([scale]), small[:1, :1]),
+            "misalignment": Estimate(rpy_deg_to_matrix([0.0, 0.0, yaw_deg]), small),
+            "time_offset": Estimate(np.array([offset_s]), small[:1, :1]),
+        }
 
     near = check_priors(*_tiny(states(1.035, 0.035, -1.7, 3.5)), config)
     assert near.findings == []
@@ -110,14 +127,22 @@ def test_each_state_far_from_its_prior_names_its_cause() -> None:
     far = check_priors(*_tiny(states(1.05, -0.06, 2.5, -30.0)), config)
     text = {t.split(" is ")[0]: t for _, t in far.findings}
     assert all(severity == "failed" for severity, _ in far.findings) and len(far.findings) == 4
-    assert "5.0 prior sigmas" in text["DVL scale factor"] and "sound-speed" in text["DVL scale factor"]
+    assert (
+        "5.0 prior sigmas" in text["DVL scale factor"] and "sound-speed" in text["DVL scale factor"]
+    )
     assert "IMU saturation?" in text["DVL scale factor"]
     gyro = text["gyro bias about body z (up, vertical)"]
     assert "6.0 prior sigmas" in gyro and "IMU saturation?" in gyro
     assert "peak body rate in this log is 40.0 deg/s" in gyro
-    assert "time offset is beyond its prior (the DVL stamps early by 2.500 s)" in text["DVL-IMU time offset"]
+    assert (
+        "time offset is beyond its prior (the DVL stamps early by 2.500 s)"
+        in text["DVL-IMU time offset"]
+    )
     yaw = text["DVL misalignment about body z (yaw)"]
-    assert "30.0 prior sigmas" in yaw and "/tf_static (base_link -> dvl_link) is off by 30.0 deg" in yaw
+    assert (
+        "30.0 prior sigmas" in yaw
+        and "/tf_static (base_link -> dvl_link) is off by 30.0 deg" in yaw
+    )
 
 
 @pytest.mark.slow
@@ -134,19 +159,28 @@ def test_time_offset_beyond_its_prior_is_reported(mode: str) -> None:
     health = assess_health(result, log)
     print(mode, result.time_offset_s, result.info["counters"], health.lines())
     assert health.status == "failed"
-    assert any(w.startswith("DVL-IMU time offset is ") and "beyond its prior" in w for w in health.warnings)
+    assert any(
+        w.startswith("DVL-IMU time offset is ") and "beyond its prior" in w for w in health.warnings
+    )
     clipped = result.info["counters"].get("time_offset_window_clipped", 0)
     assert health.figures["counters"]["time_offset_window_clipped"] == clipped
     if mode == "batch":  # its windows are centred on its first estimate, unbounded
         assert clipped == 0
-    elif mode == "ekf":  # the EKF holds the offset state itself at the bound: its windows never pass it
+    elif (
+        mode == "ekf"
+    ):  # the EKF holds the offset state itself at the bound: its windows never pass it
         bounded = result.info["counters"]["time_offset_bounded"]
         assert bounded > 0 and clipped == 0
-        assert any(w.startswith("DVL-IMU time offset is held at its bound") and f"after {bounded} ping(s)" in w
-                   for w in health.warnings)
+        assert any(
+            w.startswith("DVL-IMU time offset is held at its bound")
+            and f"after {bounded} ping(s)" in w
+            for w in health.warnings
+        )
     else:
         assert clipped > 0
-        assert any(f"held at that bound for {clipped} ping(s), to the end" in w for w in health.warnings)
+        assert any(
+            f"held at that bound for {clipped} ping(s), to the end" in w for w in health.warnings
+        )
 
 
 def test_forward_accel_bias_on_a_straight_run_names_the_pitch_coupling() -> None:
@@ -162,11 +196,19 @@ def test_forward_accel_bias_on_a_straight_run_names_the_pitch_coupling() -> None
     def result(axis: int, heading_deg: float) -> tuple[NavResult, LogData]:
         b = np.zeros(3)
         b[axis] = 5.0 * sigma_ug * UG
-        r, log = _tiny({"accel_bias": Estimate(b, small), "gyro_bias": Estimate(np.zeros(3), small),
-                        "scale": Estimate(np.ones(1), small[:1, :1]), "misalignment": Estimate(np.eye(3), small),
-                        "time_offset": Estimate(np.zeros(1), small[:1, :1])})
+        r, log = _tiny(
+            {
+                "accel_bias": Estimate(b, small),
+                "gyro_bias": Estimate(np.zeros(3), small),
+                "scale": Estimate(np.ones(1), small[:1, :1]),
+                "misalignment": Estimate(np.eye(3), small),
+                "time_offset": Estimate(np.zeros(1), small[:1, :1]),
+            }
+        )
         a = np.radians(heading_deg)
-        r.n_R_b[1] = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
+        r.n_R_b[1] = np.array(
+            [[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]]
+        )
         return r, log
 
     straight = check_priors(*result(0, 0.0), config).findings

@@ -24,8 +24,13 @@ Row = tuple[float, float, str, str]
 
 # paper-3d (data/scenarios/paper-3d.toml): its Type-I segments with the body axis of their specific-force rate
 # (level: surge along body x; descent and ascent by ballast: vertical, i.e. body z at roll 3 deg, pitch 0)
-PAPER3D_TYPE1 = [(600.0, 660.0, "x"), (660.0, 720.0, "z"), (720.0, 750.0, "x"), (1970.0, 2000.0, "x"),
-                 (2000.0, 2060.0, "z")]
+PAPER3D_TYPE1 = [
+    (600.0, 660.0, "x"),
+    (660.0, 720.0, "z"),
+    (720.0, 750.0, "x"),
+    (1970.0, 2000.0, "x"),
+    (2000.0, 2060.0, "z"),
+]
 # Type-I boundaries: the detector slides 5 s windows over 1 s means, and the C2 blends at a segment's ends keep
 # the specific-force rate below its threshold for a moment: measured within 2 s (paper-3d: 1 s)
 TYPE1_TOL_S = 2.0
@@ -47,25 +52,35 @@ def _rows(segments: list[Any]) -> list[Row]:
 
 def _scenario(segments: list[dict[str, Any]], speed0: float = 0.0) -> Scenario:
     """Paper sensors (Table 1), latitude 30 deg, a flat seafloor 60 m below the start."""
-    return scenario_from_dict({
-        "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
-        "initial": {"roll_deg": 3.0, "yaw_deg": 10.0, "speed_m_s": speed0},
-        "imu": {"gyro_bias_deg_per_h": 0.01, "accel_bias_micro_g": 50.0, "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
-                "accel_noise_micro_g_per_sqrt_hz": 10.0},
-        "dvl": {"noise_m_s": 0.02, "altitude_m": 60.0},
-        "segments": segments}, name="segments-test")
+    return scenario_from_dict(
+        {
+            "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
+            "initial": {"roll_deg": 3.0, "yaw_deg": 10.0, "speed_m_s": speed0},
+            "imu": {
+                "gyro_bias_deg_per_h": 0.01,
+                "accel_bias_micro_g": 50.0,
+                "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
+                "accel_noise_micro_g_per_sqrt_hz": 10.0,
+            },
+            "dvl": {"noise_m_s": 0.02, "altitude_m": 60.0},
+            "segments": segments,
+        },
+        name="segments-test",
+    )
 
 
 # 0-120 static, 120-140 level acceleration to 2 m/s (Type I, x), 140-180 straight, 180-220 a 90 deg right turn,
 # 220-250 straight, 250-253 a 2 deg heading blip, 253-283 straight, 283-323 ascent (Type I, z)
-SHORT = [{"kind": "static", "duration_s": 120.0},
-         {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
-         {"kind": "straight", "duration_s": 40.0},
-         {"kind": "turn", "duration_s": 40.0, "heading_change_deg": -90.0},
-         {"kind": "straight", "duration_s": 30.0},
-         {"kind": "turn", "duration_s": 3.0, "heading_change_deg": 2.0},
-         {"kind": "straight", "duration_s": 30.0},
-         {"kind": "ascent", "duration_s": 40.0, "peak_vertical_speed_m_s": 0.5}]
+SHORT = [
+    {"kind": "static", "duration_s": 120.0},
+    {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
+    {"kind": "straight", "duration_s": 40.0},
+    {"kind": "turn", "duration_s": 40.0, "heading_change_deg": -90.0},
+    {"kind": "straight", "duration_s": 30.0},
+    {"kind": "turn", "duration_s": 3.0, "heading_change_deg": 2.0},
+    {"kind": "straight", "duration_s": 30.0},
+    {"kind": "ascent", "duration_s": 40.0, "peak_vertical_speed_m_s": 0.5},
+]
 
 
 @functools.cache
@@ -101,7 +116,7 @@ def _square_turns(sc: Scenario) -> list[tuple[float, float]]:
             continue
         t = seg.start_s
         for _ in range(seg.sides):
-            for part in (("turn", "leg") if seg.turn_first else ("leg", "turn")):
+            for part in ("turn", "leg") if seg.turn_first else ("leg", "turn"):
                 d = seg.turn_duration_s if part == "turn" else seg.leg_duration_s
                 if part == "turn":
                     turns.append((t, t + d))
@@ -120,7 +135,9 @@ def _check_covering(rows: list[Row], log: LogData) -> None:
         assert e - s >= MIN_SEGMENT_S, (s, e, kind)
         expected = "I" if kind.startswith("type1") else "II" if kind == "turn" else "-"
         assert typ == expected, (kind, typ)
-        assert kind in ("static", "turn", "cruise") or kind.startswith("type1 (specific-force rate along body ")
+        assert kind in ("static", "turn", "cruise") or kind.startswith(
+            "type1 (specific-force rate along body "
+        )
 
 
 def _print(tag: str, rows: list[Row]) -> None:
@@ -128,6 +145,7 @@ def _print(tag: str, rows: list[Row]) -> None:
 
 
 # ----- paper-3d ---------------------------------------------------------------------------------------
+
 
 @pytest.fixture(params=["clean", "noisy"])
 def paper3d(request: pytest.FixtureRequest, sim_paper3d_clean: LogData) -> LogData:
@@ -160,7 +178,9 @@ def test_paper3d_turns_are_the_square_turns(paper3d: LogData, sim_paper3d: Scena
     turns = [(s, e) for s, e, kind, _ in rows if kind == "turn"]
     truth_turns = _square_turns(sim_paper3d)
     fast = _truth_turning(paper3d)
-    print(f"\npaper-3d turns detected {turns}; scenario {truth_turns}; true rate > {TURN_RATE_DEG_S} deg/s {fast}")
+    print(
+        f"\npaper-3d turns detected {turns}; scenario {truth_turns}; true rate > {TURN_RATE_DEG_S} deg/s {fast}"
+    )
     assert len(turns) == len(truth_turns) == len(fast) == 4
     for (s, e), (ts, te), (fs, fe) in zip(turns, truth_turns, fast, strict=True):
         assert ts <= s < e <= te
@@ -172,6 +192,7 @@ def test_paper3d_turns_are_the_square_turns(paper3d: LogData, sim_paper3d: Scena
 
 # ----- small scenarios --------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_short_log_classified_as_simulated(seed: int) -> None:
     """static 0-120, Type I (x) 120-140, straight, a 90 deg right turn 180-220, straight with a 3 s heading blip,
@@ -182,8 +203,14 @@ def test_short_log_classified_as_simulated(seed: int) -> None:
     _print(f"short seed {seed}", rows)
     _check_covering(rows, log)
     kinds = [k for _, _, k, _ in rows]
-    assert kinds == ["static", "type1 (specific-force rate along body x)", "cruise", "turn", "cruise",
-                     "type1 (specific-force rate along body z)"]
+    assert kinds == [
+        "static",
+        "type1 (specific-force rate along body x)",
+        "cruise",
+        "turn",
+        "cruise",
+        "type1 (specific-force rate along body z)",
+    ]
     (_, e_static, _, _), t1, _, turn, cruise, t2 = rows
     assert 115.0 <= e_static <= 120.0
     assert abs(t1[0] - 120.0) <= TYPE1_TOL_S and abs(t1[1] - 140.0) <= TYPE1_TOL_S
@@ -202,25 +229,42 @@ def test_classification_uses_the_imu_alone_and_any_time_base() -> None:
     log = _short_log(1)
     ref = _rows(classify_log(log))
     dt = 1000.3
-    real = dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=log.imu.t + dt),
-                               dvl=dataclasses.replace(log.dvl, t=log.dvl.t + dt), truth=None, metadata={})
+    real = dataclasses.replace(
+        log,
+        imu=dataclasses.replace(log.imu, t=log.imu.t + dt),
+        dvl=dataclasses.replace(log.dvl, t=log.dvl.t + dt),
+        truth=None,
+        metadata={},
+    )
     rows = _rows(classify_log(real))
     assert [r[2:] for r in rows] == [r[2:] for r in ref]
-    np.testing.assert_allclose([r[:2] for r in rows], np.array([r[:2] for r in ref]) + dt, atol=1e-6)
+    np.testing.assert_allclose(
+        [r[:2] for r in rows], np.array([r[:2] for r in ref]) + dt, atol=1e-6
+    )
 
 
 def test_log_starting_in_motion_has_no_static_segment() -> None:
     """At 1.5 m/s from the first sample (straight 0-60, 90 deg left turn 60-100, deceleration 100-130): no static
     row; measured cruise 0-64, turn 64-96, cruise 96-101, type1 x 101-131."""
-    sc = _scenario([{"kind": "straight", "duration_s": 60.0},
-                    {"kind": "turn", "duration_s": 40.0, "heading_change_deg": 90.0},
-                    {"kind": "level", "duration_s": 30.0, "speed_end_m_s": 1.0}], speed0=1.5)
+    sc = _scenario(
+        [
+            {"kind": "straight", "duration_s": 60.0},
+            {"kind": "turn", "duration_s": 40.0, "heading_change_deg": 90.0},
+            {"kind": "level", "duration_s": 30.0, "speed_end_m_s": 1.0},
+        ],
+        speed0=1.5,
+    )
     log = simulate(sc, 1)
     rows = _rows(classify_log(log))
     _print("moving from the start", rows)
     _check_covering(rows, log)
     assert "static" not in [k for _, _, k, _ in rows]
-    assert [k for _, _, k, _ in rows] == ["cruise", "turn", "cruise", "type1 (specific-force rate along body x)"]
+    assert [k for _, _, k, _ in rows] == [
+        "cruise",
+        "turn",
+        "cruise",
+        "type1 (specific-force rate along body x)",
+    ]
     turn = rows[1]
     assert 60.0 <= turn[0] < turn[1] <= 100.0
     assert abs(rows[3][0] - 100.0) <= TYPE1_TOL_S

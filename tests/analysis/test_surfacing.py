@@ -18,7 +18,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.result import NavResult, StoredResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
@@ -30,15 +30,18 @@ LEVER = [0.2, 0.0, 0.6]
 
 def _raw() -> dict[str, Any]:
     """60 s static at the surface, away, a 24 m dive with one banked turn, up and 40 s on at the surface."""
-    return surface_dive_raw([
-        {"kind": "static", "duration_s": 60.0},
-        {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
-        {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-        {"kind": "turn", "duration_s": 60.0, "heading_change_deg": 120.0, "bank_deg": 15.0},
-        {"kind": "straight", "duration_s": 60.0},
-        {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-        {"kind": "straight", "duration_s": 40.0},
-    ], gnss={"rate_hz": 1.0, "antenna_lever_arm_m": LEVER, "origin_in_log": False})
+    return surface_dive_raw(
+        [
+            {"kind": "static", "duration_s": 60.0},
+            {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
+            {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+            {"kind": "turn", "duration_s": 60.0, "heading_change_deg": 120.0, "bank_deg": 15.0},
+            {"kind": "straight", "duration_s": 60.0},
+            {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+            {"kind": "straight", "duration_s": 40.0},
+        ],
+        gnss={"rate_hz": 1.0, "antenna_lever_arm_m": LEVER, "origin_in_log": False},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -74,15 +77,19 @@ def test_surfacing_error_equals_an_independent_computation(real_log: LogData) ->
     e = antenna - fix
     travelled = float(np.sum(np.linalg.norm(np.diff(res.n_p[: i + 1], axis=0), axis=1)))
     h = float(np.hypot(e[0], e[1]))
-    print(f"\nsurfacing at {g.t[k]:.0f} s: horizontal {h:.3f} m, {100 * h / travelled:.4f} % of {travelled:.1f} m, "
-          f"vertical {e[2]:+.3f} m; reported {s['horizontal_error_m']:.3f} m, {s['horizontal_error_pct']:.4f} %, "
-          f"{s['vertical_error_m']:+.3f} m; estimate sigma {s['estimate_sigma_h_m']:.3f} m, nis {s['nis']:.2f}")
+    print(
+        f"\nsurfacing at {g.t[k]:.0f} s: horizontal {h:.3f} m, {100 * h / travelled:.4f} % of {travelled:.1f} m, "
+        f"vertical {e[2]:+.3f} m; reported {s['horizontal_error_m']:.3f} m, {s['horizontal_error_pct']:.4f} %, "
+        f"{s['vertical_error_m']:+.3f} m; estimate sigma {s['estimate_sigma_h_m']:.3f} m, nis {s['nis']:.2f}"
+    )
     assert s["t_s"] == pytest.approx(g.t[k])
     assert s["horizontal_error_m"] == pytest.approx(h, rel=1e-9, abs=1e-9)
     assert s["vertical_error_m"] == pytest.approx(e[2], rel=1e-9, abs=1e-9)
     assert s["distance_m"] == pytest.approx(travelled, rel=1e-9)
     assert s["horizontal_error_pct"] == pytest.approx(100 * h / travelled, rel=1e-9)
-    assert s["fix_sigma_h_m"] == pytest.approx(np.sqrt(8.0), rel=1e-6) and s["fix_sigma_v_m"] == pytest.approx(4.0)
+    assert s["fix_sigma_h_m"] == pytest.approx(np.sqrt(8.0), rel=1e-6) and s[
+        "fix_sigma_v_m"
+    ] == pytest.approx(4.0)
     # the estimate's sigma from the marginal covariance: between the start's fixes' 0.25 m and the fix's 2.8 m
     assert 0.2 < s["estimate_sigma_h_m"] < 2.0
     # the error is the fix's noise and the drift: consistent with both sigmas (chi^2, 3 dof, 99.9 %: 16.3)
@@ -91,20 +98,29 @@ def test_surfacing_error_equals_an_independent_computation(real_log: LogData) ->
     assert m["counters"]["gnss_used"] >= 60 and m["surface_intervals"] == 2
     lines = gnss_lines(m)
     print("\n".join(lines))
-    assert any(f"{s['horizontal_error_m']:.2f} m = {s['horizontal_error_pct']:.3f} %" in line for line in lines)
+    assert any(
+        f"{s['horizontal_error_m']:.2f} m = {s['horizontal_error_pct']:.3f} %" in line
+        for line in lines
+    )
     assert "truth" not in ev.metrics
     # the mean over the last surfacing's fixes: every fix from k on, each against the antenna at its own state
     errs = []
     for kk in range(k, len(g.t)):
-        fk = frame.geodetic_to_map(np.radians(g.lat_deg[kk]), np.radians(g.lon_deg[kk]), g.height_m[kk])
+        fk = frame.geodetic_to_map(
+            np.radians(g.lat_deg[kk]), np.radians(g.lon_deg[kk]), g.height_m[kk]
+        )
         ik = int(np.argmin(np.abs(res.t - g.t[kk])))
         errs.append(res.n_p[ik] + res.n_R_b[ik] @ np.asarray(LEVER) - fk)
     e_mean = np.mean(errs, axis=0)
     mm = m["surfacing_error_mean"]
-    print(f"mean over {len(errs)} fixes: horizontal {np.hypot(*e_mean[:2]):.3f} m; reported "
-          f"{mm['horizontal_error_m']:.3f} m +- {mm['fix_sigma_h_m']:.3f} m (fixes' mean), nis {mm['nis']:.2f}")
+    print(
+        f"mean over {len(errs)} fixes: horizontal {np.hypot(*e_mean[:2]):.3f} m; reported "
+        f"{mm['horizontal_error_m']:.3f} m +- {mm['fix_sigma_h_m']:.3f} m (fixes' mean), nis {mm['nis']:.2f}"
+    )
     assert m["surfacing_fixes"] == len(errs) >= 40
-    assert mm["horizontal_error_m"] == pytest.approx(np.hypot(e_mean[0], e_mean[1]), rel=1e-9, abs=1e-9)
+    assert mm["horizontal_error_m"] == pytest.approx(
+        np.hypot(e_mean[0], e_mean[1]), rel=1e-9, abs=1e-9
+    )
     assert mm["fix_sigma_h_m"] == pytest.approx(np.sqrt(8.0 / len(errs)), rel=1e-6)
     assert mm["nis"] < 16.3
     assert any("mean over the" in line for line in lines)

@@ -33,23 +33,44 @@ def dives(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return {"dir": d, "logs": logs, "bad": bad}
 
 
-def test_calibrate_writes_the_file_reports_the_bad_dive_and_the_moved_scale(dives: dict[str, Any]) -> None:
+def test_calibrate_writes_the_file_reports_the_bad_dive_and_the_moved_scale(
+    dives: dict[str, Any],
+) -> None:
     d = dives["dir"]
     out = d / "calib.toml"
-    res = CliRunner().invoke(app, ["calibrate", str(dives["logs"][0]), str(dives["bad"]), str(dives["logs"][1]),
-                                   "-o", str(out), "--out-dir", str(d / "fleet"), "--workers", "1", "-q",
-                                   "--vehicle", "auv-7"])
+    res = CliRunner().invoke(
+        app,
+        [
+            "calibrate",
+            str(dives["logs"][0]),
+            str(dives["bad"]),
+            str(dives["logs"][1]),
+            "-o",
+            str(out),
+            "--out-dir",
+            str(d / "fleet"),
+            "--workers",
+            "1",
+            "-q",
+            "--vehicle",
+            "auv-7",
+        ],
+    )
     assert res.exit_code == 3, res.output  # one dive left out
     assert "1 of 3 dives left out" in res.output
     assert "broken.mcap: neither an MCAP nor a rosbag2" in res.output
     cal = read_calibration(out)
-    assert cal.method == "calibrate" and cal.vehicle == "auv-7" and cal.states == ("scale", "misalignment")
+    assert (
+        cal.method == "calibrate"
+        and cal.vehicle == "auv-7"
+        and cal.states == ("scale", "misalignment")
+    )
     assert [Path(s.path).name for s in cal.sources] == ["dive1.mcap", "dive2.mcap"]
     assert all(len(s.sha256) == 64 for s in cal.sources)
     # the hash of the configuration as smooth records it (so that `smooth --calibration` recognises it)
     from gtsam_dvl.core.calibration import config_hash
     from gtsam_dvl.core.config import EstimatorConfig
-    from gtsam_dvl.estimators.current import resolve_water_track
+    from gtsam_dvl.estimators.models.current import resolve_water_track
     from gtsam_dvl.io.reader import read_log
 
     log = read_log(dives["logs"][0])
@@ -67,7 +88,11 @@ def test_calibrate_writes_the_file_reports_the_bad_dive_and_the_moved_scale(dive
         assert rows[name]["vs_joint"]["scale"]["n_sigma"] > 3
     assert fleet["failures"][0]["log"].endswith("broken.mcap")
     table = (d / "fleet" / "calibration-fleet.md").read_text()
-    assert "MOVED: scale" in table and "**joint (2 dives)**" in table and "| broken.mcap | error |" in table
+    assert (
+        "MOVED: scale" in table
+        and "**joint (2 dives)**" in table
+        and "| broken.mcap | error |" in table
+    )
     assert (d / "fleet" / "calibration-fleet.png").stat().st_size > 10_000
     dives["in_process"] = cal
 
@@ -76,12 +101,25 @@ def test_calibrate_on_dask_gives_the_same_calibration(dives: dict[str, Any]) -> 
     pytest.importorskip("distributed")
     from dask.distributed import Client
 
-    with Client(processes=False, n_workers=2, threads_per_worker=1, dashboard_address=None) as client:
+    with Client(
+        processes=False, n_workers=2, threads_per_worker=1, dashboard_address=None
+    ) as client:
         outcome = calibrate_logs(dives["logs"] + [dives["bad"]], show_progress=False, client=client)
     assert [Path(f.log).name for f in outcome.failures] == ["broken.mcap"]
-    assert outcome.calibration is not None and outcome.solution is not None and outcome.solution.converged
-    here = dives.get("in_process") or calibrate_logs(dives["logs"], workers=1, show_progress=False).calibration
+    assert (
+        outcome.calibration is not None
+        and outcome.solution is not None
+        and outcome.solution.converged
+    )
+    here = (
+        dives.get("in_process")
+        or calibrate_logs(dives["logs"], workers=1, show_progress=False).calibration
+    )
     assert here is not None
-    np.testing.assert_allclose(outcome.calibration.values["scale"], here.values["scale"], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(outcome.calibration.values["misalignment"], here.values["misalignment"], atol=1e-12)
+    np.testing.assert_allclose(
+        outcome.calibration.values["scale"], here.values["scale"], rtol=0, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        outcome.calibration.values["misalignment"], here.values["misalignment"], atol=1e-12
+    )
     np.testing.assert_allclose(outcome.calibration.cov, here.cov, rtol=1e-9)

@@ -48,37 +48,71 @@ def test_round_trip_out_then_in(dives: tuple[Path, Path], tmp_path: Path) -> Non
     c1 = read_calibration(cal1)
     assert c1.vehicle == "auv-3" and c1.method == "smooth" and c1.date == iso_date(T0_S * 10**9)
     assert [(s.path, s.sha256) for s in c1.sources] == [(str(first), file_sha256(first))]
-    assert set(c1.states) == {"scale", "misalignment"}  # the log's configuration ("paper") has no time offset
+    assert set(c1.states) == {
+        "scale",
+        "misalignment",
+    }  # the log's configuration ("paper") has no time offset
 
     # the second dive with the first's calibration as its prior, written back in place (read first, then replaced)
     summary = tmp_path / "s.json"
-    out = cli("smooth", second, "--mode", "ekf", "--calibration", cal1, "--calibration-out", cal1, "--summary", summary,
-              "-q")
+    out = cli(
+        "smooth",
+        second,
+        "--mode",
+        "ekf",
+        "--calibration",
+        cal1,
+        "--calibration-out",
+        cal1,
+        "--summary",
+        summary,
+        "-q",
+    )
     assert out.exit_code == 0, out.stderr
     assert "prior of scale, misalignment: auv-3's calibration of 2026-09-21" in out.stdout
     s = json.loads(summary.read_text())
     infl = s["info"]["calibration_prior"]["inflation"]
     assert infl["days"] == pytest.approx(10.0, abs=0.01)
-    assert infl["variance_factor"] == pytest.approx(1.0 + 0.01 * infl["days"])  # the default inflation_per_day
-    np.testing.assert_allclose(s["info"]["calibration_prior"]["cov"], c1.block(["scale", "misalignment"]) *
-                               infl["variance_factor"], rtol=1e-12)
+    assert infl["variance_factor"] == pytest.approx(
+        1.0 + 0.01 * infl["days"]
+    )  # the default inflation_per_day
+    np.testing.assert_allclose(
+        s["info"]["calibration_prior"]["cov"],
+        c1.block(["scale", "misalignment"]) * infl["variance_factor"],
+        rtol=1e-12,
+    )
     check = s["calibration_check"]
-    assert check["moved"] is False and check["verdict"].startswith("consistent with auv-3's calibration")
-    assert not any("another configuration" in n for n in s["health"]["notes"])  # both dives: the log's "paper"
+    assert check["moved"] is False and check["verdict"].startswith(
+        "consistent with auv-3's calibration"
+    )
+    assert not any(
+        "another configuration" in n for n in s["health"]["notes"]
+    )  # both dives: the log's "paper"
     c2 = read_calibration(cal1)
     assert [src.path for src in c2.sources] == [str(first), str(second)]
     assert c2.date == iso_date((T0_S + 10 * DAY_S) * 10**9)
-    for name in ("scale", "misalignment"):  # two dives know more than one, even after ten days' inflation
+    for name in (
+        "scale",
+        "misalignment",
+    ):  # two dives know more than one, even after ten days' inflation
         assert np.all(c2.sigma(name) < c1.sigma(name)), name
 
 
 def test_refused_in_one_line(dives: tuple[Path, Path], tmp_path: Path) -> None:
     first, _ = dives
     out = cli("smooth", first, "--calibration-out", tmp_path / "missing" / "auv.toml")
-    assert out.exit_code == 1 and "no folder" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    assert (
+        out.exit_code == 1
+        and "no folder" in out.stderr
+        and len(out.stderr.strip().splitlines()) == 1
+    )
     other = tmp_path / "other.toml"
-    assert cli("smooth", first, "--mode", "ekf", "--calibration-out", other, "--vehicle", "auv-9", "-q"
-               ).exit_code == 0
+    assert (
+        cli(
+            "smooth", first, "--mode", "ekf", "--calibration-out", other, "--vehicle", "auv-9", "-q"
+        ).exit_code
+        == 0
+    )
     out = cli("smooth", first, "--calibration", other, "--vehicle", "auv-3", "-q")
     assert out.exit_code == 1 and "a calibration of vehicle 'auv-9', not of 'auv-3'" in out.stderr
     out = cli("smooth", first, "--mode", "io-dvlc", "--calibration", other, "-q")
@@ -95,7 +129,9 @@ def test_live_takes_the_calibration(dives: tuple[Path, Path], tmp_path: Path) ->
 
     first, _ = dives
     path = write_calibration(tmp_path / "auv.toml", calibration_at_truth(read_log(first)))
-    out = cli("live", first, "--speed", "max", "--port", "0", "--exit-when-done", "--calibration", path)
+    out = cli(
+        "live", first, "--speed", "max", "--port", "0", "--exit-when-done", "--calibration", path
+    )
     assert out.exit_code == 0, out.output
     assert "consistent with auv-7's calibration of 2023-11-01" in out.output
 

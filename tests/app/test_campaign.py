@@ -34,7 +34,10 @@ def scenario_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _seed_files(out: Path) -> dict[int, dict]:
-    return {int(p.stem.split("_")[1]): json.loads(p.read_text()) for p in sorted((out / "runs").glob("seed_*.json"))}
+    return {
+        int(p.stem.split("_")[1]): json.loads(p.read_text())
+        for p in sorted((out / "runs").glob("seed_*.json"))
+    }
 
 
 @pytest.fixture(scope="module")
@@ -50,21 +53,39 @@ def local_campaign(scenario_file: Path, tmp_path_factory: pytest.TempPathFactory
     return out
 
 
-def test_campaign_reports_failures_and_statistics(local_campaign: Path, scenario_file: Path) -> None:
+def test_campaign_reports_failures_and_statistics(
+    local_campaign: Path, scenario_file: Path
+) -> None:
     out = local_campaign
     failures = json.loads((out / "failures.json").read_text())
-    assert failures == [{"seed": FAIL_SEED, "error": f"RuntimeError: {FAIL_SEED_ENV}={FAIL_SEED}: this run fails on "
-                                                     "purpose"}]
+    assert failures == [
+        {
+            "seed": FAIL_SEED,
+            "error": f"RuntimeError: {FAIL_SEED_ENV}={FAIL_SEED}: this run fails on purpose",
+        }
+    ]
     stats = json.loads((out / "montecarlo.json").read_text())
-    assert stats["runs"] == RUNS - 1 and stats["seeds"] == [s for s in range(1, RUNS + 1) if s != FAIL_SEED]
+    assert stats["runs"] == RUNS - 1 and stats["seeds"] == [
+        s for s in range(1, RUNS + 1) if s != FAIL_SEED
+    ]
     report = (out / "report.md").read_text()
-    assert f"seed {FAIL_SEED}: RuntimeError" in report and "## batch" in report and "## ekf" in report
-    assert (out / "figures" / "z_histograms_batch.png").exists() and (out / "figures" / "nees_time_ekf.png").exists()
+    assert (
+        f"seed {FAIL_SEED}: RuntimeError" in report and "## batch" in report and "## ekf" in report
+    )
+    assert (out / "figures" / "z_histograms_batch.png").exists() and (
+        out / "figures" / "nees_time_ekf.png"
+    ).exists()
     # the statistics are those of the runs' files: recompute one number independently
     runs = _seed_files(out)
-    z = np.array([np.array(r["estimators"]["batch"]["error"][0]) / r["estimators"]["batch"]["sigma"][0]
-                  for r in runs.values()])
-    assert stats["estimators"]["batch"]["states"]["scale"]["z_std"] == pytest.approx(np.std(z, ddof=1), rel=1e-12)
+    z = np.array(
+        [
+            np.array(r["estimators"]["batch"]["error"][0]) / r["estimators"]["batch"]["sigma"][0]
+            for r in runs.values()
+        ]
+    )
+    assert stats["estimators"]["batch"]["states"]["scale"]["z_std"] == pytest.approx(
+        np.std(z, ddof=1), rel=1e-12
+    )
     lo, hi = nees_band(RUNS - 1)
     assert stats["estimators"]["ekf"]["nees_block"]["band_95"] == pytest.approx([lo, hi])
     # a worker's run is the same as one here: seeds decide everything
@@ -72,11 +93,15 @@ def test_campaign_reports_failures_and_statistics(local_campaign: Path, scenario
     for name in ESTIMATORS:
         assert here["estimators"][name]["error"] == runs[2]["estimators"][name]["error"]
         assert here["estimators"][name]["sigma"] == runs[2]["estimators"][name]["sigma"]
-    print("\nbatch z std:", {k: round(v["z_std"], 2) for k, v in stats["estimators"]["batch"]["states"].items()})
+    print(
+        "\nbatch z std:",
+        {k: round(v["z_std"], 2) for k, v in stats["estimators"]["batch"]["states"].items()},
+    )
 
 
-def test_campaign_resumes_without_redoing_finished_seeds(local_campaign: Path, scenario_file: Path,
-                                                         tmp_path: Path) -> None:
+def test_campaign_resumes_without_redoing_finished_seeds(
+    local_campaign: Path, scenario_file: Path, tmp_path: Path
+) -> None:
     out = tmp_path / "resumed"
     shutil.copytree(local_campaign, out)
     (out / "runs" / "seed_000002.json").unlink()  # as if interrupted before seed 2 was written
@@ -84,7 +109,9 @@ def test_campaign_resumes_without_redoing_finished_seeds(local_campaign: Path, s
     stamps = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("seed_*.json")}
     res = run_campaign(scenario_file, RUNS, ESTIMATORS, out, workers=1, show_progress=False)
     assert res.runs_new == 2 and res.runs_done == RUNS and not res.failures  # seeds 2 and FAIL_SEED
-    assert {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("seed_*.json") if p.name in stamps} == stamps
+    assert {
+        p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("seed_*.json") if p.name in stamps
+    } == stamps
     after = _seed_files(out)
     assert all(after[s] == before[s] for s in before)
     # another campaign's settings in the same folder are refused
@@ -95,12 +122,29 @@ def test_campaign_resumes_without_redoing_finished_seeds(local_campaign: Path, s
 
 
 def test_campaign_on_a_scheduler_and_two_worker_processes_gives_identical_numbers(
-        local_campaign: Path, scenario_file: Path, tmp_path: Path) -> None:
+    local_campaign: Path, scenario_file: Path, tmp_path: Path
+) -> None:
     sched_file = tmp_path / "scheduler.json"
     env = {k: v for k, v in os.environ.items() if k != FAIL_SEED_ENV}
-    procs = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                               "--port", "0", "--no-dashboard", "--scheduler-file", str(sched_file)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)]
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "distributed.cli.dask_scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                "0",
+                "--no-dashboard",
+                "--scheduler-file",
+                str(sched_file),
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=env,
+        )
+    ]
     try:
         # the scheduler creates its file, then writes it: wait until it reads as JSON with the address
         deadline, address = time.monotonic() + 60, None
@@ -111,15 +155,30 @@ def test_campaign_on_a_scheduler_and_two_worker_processes_gives_identical_number
                 time.sleep(0.2)
         assert address is not None, "the Dask scheduler wrote no address within 60 s"
         for _ in range(2):
-            procs.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
-                                           "--nthreads", "1", "--no-dashboard"],
-                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env))
+            procs.append(
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        "-m",
+                        "distributed.cli.dask_worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--no-dashboard",
+                    ],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                    env=env,
+                )
+            )
         from dask.distributed import Client
 
         with Client(address, timeout="30s") as client:
             client.wait_for_workers(2, timeout=60)
         out = tmp_path / "remote"
-        res = run_campaign(scenario_file, RUNS, ESTIMATORS, out, scheduler=address, show_progress=False)
+        res = run_campaign(
+            scenario_file, RUNS, ESTIMATORS, out, scheduler=address, show_progress=False
+        )
     finally:
         for p in procs[::-1]:
             p.terminate()
@@ -132,4 +191,5 @@ def test_campaign_on_a_scheduler_and_two_worker_processes_gives_identical_number
             assert remote[seed]["estimators"][name]["error"] == run["estimators"][name]["error"]
             assert remote[seed]["estimators"][name]["sigma"] == run["estimators"][name]["sigma"]
     assert json.loads((out / "cramer_rao.json").read_text()) == json.loads(
-        (local_campaign / "cramer_rao.json").read_text())
+        (local_campaign / "cramer_rao.json").read_text()
+    )

@@ -32,7 +32,9 @@ from tests.support.scenarios import scenario_raw
 Q_GYRO_RAD_S = 1e-5
 Q_ACCEL_M_S2 = 1e-4
 STATIC_S = 70.0
-STATED_DVL_NOISE_M_S = 0.05  # the configuration's DVL noise, 2.5 times the simulated: the fit has to find it
+STATED_DVL_NOISE_M_S = (
+    0.05  # the configuration's DVL noise, 2.5 times the simulated: the fit has to find it
+)
 
 
 def cli(*args: str | Path) -> Any:
@@ -47,8 +49,11 @@ def quantised(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     segments[0]["duration_s"] = STATIC_S
     raw = scenario_raw(segments=segments)
     log = simulate(scenario_from_dict(raw, "paper-3d-quantised"), 11)
-    imu = dataclasses.replace(log.imu, b_omega=np.round(log.imu.b_omega / Q_GYRO_RAD_S) * Q_GYRO_RAD_S,
-                              b_f=np.round(log.imu.b_f / Q_ACCEL_M_S2) * Q_ACCEL_M_S2)
+    imu = dataclasses.replace(
+        log.imu,
+        b_omega=np.round(log.imu.b_omega / Q_GYRO_RAD_S) * Q_GYRO_RAD_S,
+        b_f=np.round(log.imu.b_f / Q_ACCEL_M_S2) * Q_ACCEL_M_S2,
+    )
     tmp = tmp_path_factory.mktemp("characterise")
     path = tmp / "quantised.mcap"
     write_log(path, dataclasses.replace(log, imu=imu))
@@ -58,7 +63,9 @@ def quantised(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     stated = tmp / "stated.toml"
     stated.write_text(f'preset = "paper"\n[dvl]\nnoise_m_s = {STATED_DVL_NOISE_M_S}\n')
     out.mkdir()
-    (out / "notes.txt").write_text("mine\n")  # a folder in use: written into with --force, this file kept
+    (out / "notes.txt").write_text(
+        "mine\n"
+    )  # a folder in use: written into with --force, this file kept
     run = cli("characterise", path, "-o", out, "-c", stated, "-q", "--force")
     assert run.exit_code == 0, run.output
     data = json.loads((out / "characterise.json").read_text())
@@ -74,7 +81,9 @@ def test_quantisation_steps_found_within_one_percent(quantised: dict[str, Any]) 
         np.testing.assert_allclose(steps, q, rtol=0.01, err_msg=name)
         rate = quantised["data"]["streams"]["imu"]["rate_hz"]
         per = DEG_PER_H if name == "gyro" else UG
-        np.testing.assert_allclose(imu[name]["floor_density"], q / math.sqrt(12.0 * rate) / per, rtol=0.011)
+        np.testing.assert_allclose(
+            imu[name]["floor_density"], q / math.sqrt(12.0 * rate) / per, rtol=0.011
+        )
     assert "gyro quantised at" in quantised["console"]
 
 
@@ -94,8 +103,10 @@ def test_streams_static_stretch_and_allan(quantised: dict[str, Any]) -> None:
     # (the fit's spread over 70 s: a few %), per axis
     sim = quantised["raw"]["imu"]
     rate = imu_stream["rate_hz"]
-    for name, density, q, per in (("gyro", sim["gyro_noise_deg_per_h_per_sqrt_hz"], Q_GYRO_RAD_S, DEG_PER_H),
-                                  ("accel", sim["accel_noise_micro_g_per_sqrt_hz"], Q_ACCEL_M_S2, UG)):
+    for name, density, q, per in (
+        ("gyro", sim["gyro_noise_deg_per_h_per_sqrt_hz"], Q_GYRO_RAD_S, DEG_PER_H),
+        ("accel", sim["accel_noise_micro_g_per_sqrt_hz"], Q_ACCEL_M_S2, UG),
+    ):
         expected = math.hypot(density, quantisation_density(q, rate) / per)
         for axis in allan[name]:
             assert axis["white_density"] == pytest.approx(expected, rel=0.25), (name, axis["axis"])
@@ -127,7 +138,9 @@ def test_recommended_toml_loads_and_smooths(quantised: dict[str, Any]) -> None:
     toml = quantised["out"] / "recommended.toml"
     config = EstimatorConfig.load(toml)
     rate = quantised["data"]["streams"]["imu"]["rate_hz"]
-    assert config.imu.gyro_noise_deg_per_h_rthz >= quantisation_density(Q_GYRO_RAD_S, rate) / DEG_PER_H
+    assert (
+        config.imu.gyro_noise_deg_per_h_rthz >= quantisation_density(Q_GYRO_RAD_S, rate) / DEG_PER_H
+    )
     assert config.imu.accel_noise_ug_rthz >= quantisation_density(Q_ACCEL_M_S2, rate) / UG
     assert config.dvl.noise_m_s == pytest.approx(quantised["raw"]["dvl"]["noise_m_s"], rel=0.15)
     assert config.noise.imu_quantisation is False  # the floor is in [imu] already
@@ -136,9 +149,13 @@ def test_recommended_toml_loads_and_smooths(quantised: dict[str, Any]) -> None:
     assert run.exit_code == 0, run.output
     used = json.loads(summary.read_text())
     imu_used = used["info"]["noise"]["imu"]
-    assert all("floor" not in entry for entry in imu_used.values()), imu_used  # no floor added a second time
+    assert all("floor" not in entry for entry in imu_used.values()), (
+        imu_used
+    )  # no floor added a second time
     dvl_fit = used["info"]["noise"]["dvl"]
-    assert dvl_fit["multiplier"] == pytest.approx(1.0, abs=0.1)  # the recommended DVL noise fits the residuals
+    assert dvl_fit["multiplier"] == pytest.approx(
+        1.0, abs=0.1
+    )  # the recommended DVL noise fits the residuals
 
 
 def test_refuses_a_folder_that_is_not_empty(tmp_path: Path) -> None:
@@ -169,11 +186,20 @@ def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
     """A DVL fitted with beam factors recommends a beam sigma with the beam factors (and no time offset, which
     they do not take); an IMU that is not quantised keeps its configured densities and the [noise] defaults."""
     config = EstimatorConfig()
-    allan = {"on": "whole log", "gyro": [{"white_density": 0.5}] * 3, "accel": [{"white_density": 30.0}] * 3}
-    imu = {name: {"configured_density": dens, "floor_density": [None] * 3}
-           for name, dens in (("gyro", 0.1), ("accel", 10.0))}
-    rec = recommend(config, {**imu, "allan": allan},
-                    {"fitted_sigma_m_s": 0.0071, "multiplier": 0.355, "at_bound": False, "use_beams": True})
+    allan = {
+        "on": "whole log",
+        "gyro": [{"white_density": 0.5}] * 3,
+        "accel": [{"white_density": 30.0}] * 3,
+    }
+    imu = {
+        name: {"configured_density": dens, "floor_density": [None] * 3}
+        for name, dens in (("gyro", 0.1), ("accel", 10.0))
+    }
+    rec = recommend(
+        config,
+        {**imu, "allan": allan},
+        {"fitted_sigma_m_s": 0.0071, "multiplier": 0.355, "at_bound": False, "use_beams": True},
+    )
     path = tmp_path / "recommended.toml"
     path.write_text(recommended_toml(rec, "dive.mcap"))
     loaded = EstimatorConfig.load(path)
@@ -187,13 +213,24 @@ def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
 
 def test_recommendation_models_a_significant_correlated_error(tmp_path: Path) -> None:
     """Residuals with a significant Gauss-Markov part: the recommended [dvl] carries its level and time constant
-    (which the estimators then model, estimators/correlated.py), each line with its reason; a non-significant fit
+    (which the estimators then model, estimators/models/correlated.py), each line with its reason; a non-significant fit
     adds nothing."""
-    allan = {"on": "whole log", "gyro": [{"white_density": 0.5}] * 3, "accel": [{"white_density": 30.0}] * 3}
-    imu = {name: {"configured_density": dens, "floor_density": [None] * 3}
-           for name, dens in (("gyro", 0.1), ("accel", 10.0))}
+    allan = {
+        "on": "whole log",
+        "gyro": [{"white_density": 0.5}] * 3,
+        "accel": [{"white_density": 30.0}] * 3,
+    }
+    imu = {
+        name: {"configured_density": dens, "floor_density": [None] * 3}
+        for name, dens in (("gyro", 0.1), ("accel", 10.0))
+    }
     gm = {"white_sigma_m_s": 0.007, "gm_sigma_m_s": 0.0031, "gm_tau_s": 42.0, "significant": True}
-    dvl = {"fitted_sigma_m_s": 0.0072, "multiplier": 0.36, "at_bound": False, "residuals": {"gauss_markov": gm}}
+    dvl = {
+        "fitted_sigma_m_s": 0.0072,
+        "multiplier": 0.36,
+        "at_bound": False,
+        "residuals": {"gauss_markov": gm},
+    }
     text = recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap")
     path = tmp_path / "recommended.toml"
     path.write_text(text)
@@ -203,5 +240,10 @@ def test_recommendation_models_a_significant_correlated_error(tmp_path: Path) ->
     assert loaded.dvl.noise_m_s == pytest.approx(0.0072)
     assert "# its time constant, 42 s\ncorrelated_tau_s = 42.0" in text
     dvl["residuals"] = {"gauss_markov": {**gm, "significant": False}}
-    path.write_text(recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap"))
-    assert EstimatorConfig.load(path).dvl.correlated_sigma_m_s == EstimatorConfig().dvl.correlated_sigma_m_s
+    path.write_text(
+        recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap")
+    )
+    assert (
+        EstimatorConfig.load(path).dvl.correlated_sigma_m_s
+        == EstimatorConfig().dvl.correlated_sigma_m_s
+    )

@@ -43,13 +43,31 @@ def test_simulate_is_deterministic_byte_for_byte(sim_log: Path, tmp_path: Path) 
 @pytest.mark.slow
 def test_smooth_writes_result_summary_and_tum(sim_log: Path, tmp_path: Path) -> None:
     out, summ, tum = tmp_path / "result.mcap", tmp_path / "summary.json", tmp_path / "traj.tum"
-    proc = run("smooth", str(sim_log), "-o", str(out), "--mode", "batch", "--summary", str(summ), "--tum", str(tum),
-               "-q")
+    proc = run(
+        "smooth",
+        str(sim_log),
+        "-o",
+        str(out),
+        "--mode",
+        "batch",
+        "--summary",
+        str(summ),
+        "--tum",
+        str(tum),
+        "-q",
+    )
     assert "scale" in proc.stdout
     s = json.loads(summ.read_text())
     assert s["estimator"] == "batch"
-    for key in ("scale", "misalignment_deg", "gyro_bias_deg_per_h", "accel_bias_ug", "distance_travelled_m",
-                "timing_s", "errors"):
+    for key in (
+        "scale",
+        "misalignment_deg",
+        "gyro_bias_deg_per_h",
+        "accel_bias_ug",
+        "distance_travelled_m",
+        "timing_s",
+        "errors",
+    ):
         assert key in s
     assert len(s["misalignment_deg"]["value"]) == 3 and len(s["misalignment_deg"]["sigma"]) == 3
     # the result log decodes to the estimates: the last odometry position equals the TUM file's last row
@@ -108,8 +126,14 @@ def test_truncated_log_salvage_recovers(fraction: float, sim_log: Path, tmp_path
     bad.write_bytes(sim_log.read_bytes()[:size])
     proc = run("info", str(bad), "--salvage")
     print(proc.stdout)
-    assert "salvage" in proc.stdout and "lost 0 chunk" not in proc.stdout and "nothing lost" not in proc.stdout
-    assert f"the file is cut short at byte {size} (no footer): nothing after log time" in proc.stdout
+    assert (
+        "salvage" in proc.stdout
+        and "lost 0 chunk" not in proc.stdout
+        and "nothing lost" not in proc.stdout
+    )
+    assert (
+        f"the file is cut short at byte {size} (no footer): nothing after log time" in proc.stdout
+    )
 
 
 @pytest.mark.slow
@@ -120,35 +144,85 @@ def test_smooth_and_evaluate_report_losses(sim_log: Path, tmp_path: Path) -> Non
     bad = tmp_path / "cut.mcap"
     bad.write_bytes(sim_log.read_bytes()[: sim_log.stat().st_size // 2])
     out, summ = tmp_path / "r.mcap", tmp_path / "s.json"
-    proc = run("smooth", str(bad), "--salvage", "-o", str(out), "--summary", str(summ), "-q", "--no-timeline")
-    assert "  health: degraded" in proc.stdout and "warning: the log file is cut short at byte" in proc.stdout
+    proc = run(
+        "smooth",
+        str(bad),
+        "--salvage",
+        "-o",
+        str(out),
+        "--summary",
+        str(summ),
+        "-q",
+        "--no-timeline",
+    )
+    assert (
+        "  health: degraded" in proc.stdout
+        and "warning: the log file is cut short at byte" in proc.stdout
+    )
     s = json.loads(summ.read_text())
-    assert s["health"]["status"] == "degraded" and s["losses"]["salvage"]["truncated"][0]["at_byte"] == bad.stat(
-        ).st_size
+    assert (
+        s["health"]["status"] == "degraded"
+        and s["losses"]["salvage"]["truncated"][0]["at_byte"] == bad.stat().st_size
+    )
     assert json.loads(open_source(out).metadata["gtsam_dvl_health"]["losses"]) == s["losses"]
-    strict = run("smooth", str(bad), "--salvage", "--summary", str(tmp_path / "s2.json"), "-q", "--no-timeline",
-                 "--strict", check=False)
+    strict = run(
+        "smooth",
+        str(bad),
+        "--salvage",
+        "--summary",
+        str(tmp_path / "s2.json"),
+        "-q",
+        "--no-timeline",
+        "--strict",
+        check=False,
+    )
     assert strict.returncode == 3
     proc = run("evaluate", str(out), "-o", str(tmp_path / "eval"), "--truth", str(bad), "--salvage")
     assert "result health: degraded" in proc.stdout
     assert f"reading {bad}: the log file is cut short" in proc.stdout
     metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())
-    assert metrics["health"]["status"] == "degraded" and metrics["truth_log_losses"]["salvage"]["truncated"]
+    assert (
+        metrics["health"]["status"] == "degraded"
+        and metrics["truth_log_losses"]["salvage"]["truncated"]
+    )
 
 
 # ----- configuration checked by value, the effective configuration read back with -c ------------------
 
-@pytest.mark.parametrize(("name", "text", "expected"), [
-    ("cfg.toml", '[imu]\nbias_model = "walk"\n', "[imu] bias_model = 'walk' is not one of 'constant', 'random_walk'"),
-    ("cfg.toml", '[dvl]\nnoise_m_s = "abc"\n', "[dvl] noise_m_s must be a number >= 0, got 'abc'"),
-    ("cfg.toml", "[online]\nwindow_s = -5.0\n", "[online] window_s must be a number > 0, got -5.0"),
-    ("cfg.toml", '[ekf]\nmin_calibration_speed_m_s = "fast"\n',
-     "[ekf] min_calibration_speed_m_s must be a number >= 0, got 'fast'"),
-    ("cfg.json", '{"estimator": "batch", "config": {"solver": {"earth_model": "round"}}}',
-     "[solver] earth_model = 'round' is not one of 'wgs84', 'flat'"),
-])
-def test_bad_config_value_gives_one_line_and_exit_1(name: str, text: str, expected: str, sim_log: Path,
-                                                     tmp_path: Path) -> None:
+
+@pytest.mark.parametrize(
+    ("name", "text", "expected"),
+    [
+        (
+            "cfg.toml",
+            '[imu]\nbias_model = "walk"\n',
+            "[imu] bias_model = 'walk' is not one of 'constant', 'random_walk'",
+        ),
+        (
+            "cfg.toml",
+            '[dvl]\nnoise_m_s = "abc"\n',
+            "[dvl] noise_m_s must be a number >= 0, got 'abc'",
+        ),
+        (
+            "cfg.toml",
+            "[online]\nwindow_s = -5.0\n",
+            "[online] window_s must be a number > 0, got -5.0",
+        ),
+        (
+            "cfg.toml",
+            '[ekf]\nmin_calibration_speed_m_s = "fast"\n',
+            "[ekf] min_calibration_speed_m_s must be a number >= 0, got 'fast'",
+        ),
+        (
+            "cfg.json",
+            '{"estimator": "batch", "config": {"solver": {"earth_model": "round"}}}',
+            "[solver] earth_model = 'round' is not one of 'wgs84', 'flat'",
+        ),
+    ],
+)
+def test_bad_config_value_gives_one_line_and_exit_1(
+    name: str, text: str, expected: str, sim_log: Path, tmp_path: Path
+) -> None:
     cfg = tmp_path / name
     cfg.write_text(text)
     proc = run("smooth", str(sim_log), "-c", str(cfg), "-q", check=False)
@@ -183,32 +257,66 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
     from gtsam_dvl.io.storage.sources import open_source
 
     toml = tmp_path / "cfg.toml"
-    toml.write_text('[dvl]\nmodel = "teledyne-pathfinder"\nrobust = "huber"\nhuber_k = 2.0\n'
-                    '[priors]\nscale_sigma = 0.3\nmounting_tolerance_deg = 0.8\n'
-                    "[online]\nwindow_s = 8.0\n[online.relinearization]\nscale = 0.01\n"
-                    "[ekf]\nmin_calibration_speed_m_s = 0.3\ncalibration_speed_sigmas = 4.0\n")
+    toml.write_text(
+        '[dvl]\nmodel = "teledyne-pathfinder"\nrobust = "huber"\nhuber_k = 2.0\n'
+        "[priors]\nscale_sigma = 0.3\nmounting_tolerance_deg = 0.8\n"
+        "[online]\nwindow_s = 8.0\n[online.relinearization]\nscale = 0.01\n"
+        "[ekf]\nmin_calibration_speed_m_s = 0.3\ncalibration_speed_sigmas = 4.0\n"
+    )
     first, again = tmp_path / "first.mcap", tmp_path / "again.mcap"
-    run("smooth", str(short_log), "--mode", mode, "-c", str(toml), "-o", str(first), "--summary",
-        str(tmp_path / "first.json"), "-q")
+    run(
+        "smooth",
+        str(short_log),
+        "--mode",
+        mode,
+        "-c",
+        str(toml),
+        "-o",
+        str(first),
+        "--summary",
+        str(tmp_path / "first.json"),
+        "-q",
+    )
     effective = tmp_path / "config.json"
     effective.write_bytes(open_source(first).attachments["config.json"][1])
     written = json.loads(effective.read_text())
-    assert written["config"]["dvl"]["huber_k"] == 2.0 and written["config"]["ekf"]["calibration_speed_sigmas"] == 4.0
+    assert (
+        written["config"]["dvl"]["huber_k"] == 2.0
+        and written["config"]["ekf"]["calibration_speed_sigmas"] == 4.0
+    )
     assert written["config"]["online"]["window_s"] == 8.0
     assert written["config"]["online"]["relinearization"]["scale"] == 0.01
-    assert written["config"]["alignment"]["initial_attitude_deg"] is None  # null in JSON, read back as None
+    assert (
+        written["config"]["alignment"]["initial_attitude_deg"] is None
+    )  # null in JSON, read back as None
     # the DVL preset's values, the explicit scale sigma over its scale accuracy, the mounting tolerance
     assert written["config"]["dvl"]["model"] == "teledyne-pathfinder"
-    assert written["config"]["dvl"]["default_noise_m_s"] == 0.008 and written["config"]["priors"]["scale_sigma"] == 0.3
+    assert (
+        written["config"]["dvl"]["default_noise_m_s"] == 0.008
+        and written["config"]["priors"]["scale_sigma"] == 0.3
+    )
     assert written["config"]["priors"]["misalignment_sigma_deg"] == [0.8, 0.8, 0.8]
-    run("smooth", str(short_log), "--mode", mode, "-c", str(effective), "-o", str(again), "--summary",
-        str(tmp_path / "again.json"), "-q")
+    run(
+        "smooth",
+        str(short_log),
+        "--mode",
+        mode,
+        "-c",
+        str(effective),
+        "-o",
+        str(again),
+        "--summary",
+        str(tmp_path / "again.json"),
+        "-q",
+    )
     assert json.loads(open_source(again).attachments["config.json"][1]) == written
     s1, s2 = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("first", "again"))
     for key in ("scale", "misalignment_deg", "gyro_bias_deg_per_h", "accel_bias_ug"):
         assert s1[key] == s2[key], key
-    np.testing.assert_array_equal(read_odometry(first, "/gtsam_dvl/odometry")[1],
-                                  read_odometry(again, "/gtsam_dvl/odometry")[1])
+    np.testing.assert_array_equal(
+        read_odometry(first, "/gtsam_dvl/odometry")[1],
+        read_odometry(again, "/gtsam_dvl/odometry")[1],
+    )
     # and the non-default values took effect: the defaults give another estimate
     run("smooth", str(short_log), "--mode", mode, "--summary", str(tmp_path / "default.json"), "-q")
     assert json.loads((tmp_path / "default.json").read_text())["scale"] != s1["scale"]
@@ -220,7 +328,9 @@ def test_help_shows_flags_as_flags_and_lists_the_scenarios() -> None:
 
     text = run("smooth", "--help").stdout
     assert "<bool>" not in text
-    assert re.search(r"^\s+--salvage\s+Recover", text, re.M) and re.search(r"^\s+--strict\s+Exit", text, re.M)
+    assert re.search(r"^\s+--salvage\s+Recover", text, re.M) and re.search(
+        r"^\s+--strict\s+Exit", text, re.M
+    )
     assert re.search(r"^\s+-q, --quiet\s+No progress bars", text, re.M)
     # the help wraps at hyphens ("straight-" at a line's end, "transect" on the next): joined back
     sim_help = " ".join(re.sub(r"-\n\s*", "-", run("simulate", "--help").stdout).split())
@@ -234,14 +344,25 @@ def test_debug_is_accepted_after_the_command(tmp_path: Path) -> None:
     after = run("info", str(tmp_path / "missing.mcap"), "--debug", check=False)
     before = run("--debug", "info", str(tmp_path / "missing.mcap"), check=False)
     for proc in (after, before):
-        assert proc.returncode == 1 and "Traceback" in proc.stderr and "no such file or directory" in proc.stderr
+        assert (
+            proc.returncode == 1
+            and "Traceback" in proc.stderr
+            and "no such file or directory" in proc.stderr
+        )
 
 
 @pytest.mark.slow
-def test_io_dvlc_refuses_outputs_it_cannot_write_and_smooth_says_what_it_wrote(sim_log: Path, tmp_path: Path) -> None:
-    proc = run("smooth", str(sim_log), "--mode", "io-dvlc", "-o", str(tmp_path / "r.mcap"), check=False)
+def test_io_dvlc_refuses_outputs_it_cannot_write_and_smooth_says_what_it_wrote(
+    sim_log: Path, tmp_path: Path
+) -> None:
+    proc = run(
+        "smooth", str(sim_log), "--mode", "io-dvlc", "-o", str(tmp_path / "r.mcap"), check=False
+    )
     assert proc.returncode == 1 and proc.stderr.count("\n") == 1
-    assert "--mode io-dvlc estimates the calibration only" in proc.stderr and not (tmp_path / "r.mcap").exists()
+    assert (
+        "--mode io-dvlc estimates the calibration only" in proc.stderr
+        and not (tmp_path / "r.mcap").exists()
+    )
     out = run("smooth", str(sim_log), "--mode", "ekf", "-q").stdout
     assert "wrote nothing (give -o RESULT.mcap" in out
 
@@ -249,6 +370,13 @@ def test_io_dvlc_refuses_outputs_it_cannot_write_and_smooth_says_what_it_wrote(s
 def test_info_prints_origin_mounting_rates_and_gaps(sim_log: Path) -> None:
     out = run("info", str(sim_log)).stdout
     assert "map origin: lat 30.0000000 deg, lon 114.0000000 deg, height -100.00 m" in out
-    assert "mounting (base_link <- sensor, roll/pitch/yaw deg): IMU +0.00 +0.00 +0.00, DVL +0.00 +0.00 +0.00" in out
-    assert "rates: IMU 100.0 Hz, DVL 1.00 Hz" in out and "gaps: none" in out and "stamps: first DVL" in out
+    assert (
+        "mounting (base_link <- sensor, roll/pitch/yaw deg): IMU +0.00 +0.00 +0.00, DVL +0.00 +0.00 +0.00"
+        in out
+    )
+    assert (
+        "rates: IMU 100.0 Hz, DVL 1.00 Hz" in out
+        and "gaps: none" in out
+        and "stamps: first DVL" in out
+    )
     assert re.search(r"truth: \d\.\d{3} km travelled in 2040 s; height in map from [-+]\d", out)

@@ -49,8 +49,9 @@ def _scenario_raw() -> dict[str, Any]:
 
 
 def _header(T: Any, ns: int, frame: str) -> Any:
-    return T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
-                                    frame_id=frame)
+    return T["std_msgs/msg/Header"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame
+    )
 
 
 def _write_bag(folder: Path, log: LogData, rng: np.random.Generator) -> None:
@@ -65,33 +66,48 @@ def _write_bag(folder: Path, log: LogData, rng: np.random.Generator) -> None:
 
     with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as w:
         c_tf = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
-        c_imu = w.add_connection("/vectornav/imu_uncompensated", "sensor_msgs/msg/Imu", typestore=ts)
-        c_dvl = w.add_connection("/nortek/dvl/twist", "geometry_msgs/msg/TwistWithCovarianceStamped", typestore=ts)
+        c_imu = w.add_connection(
+            "/vectornav/imu_uncompensated", "sensor_msgs/msg/Imu", typestore=ts
+        )
+        c_dvl = w.add_connection(
+            "/nortek/dvl/twist", "geometry_msgs/msg/TwistWithCovarianceStamped", typestore=ts
+        )
         c_p = w.add_connection("/bar30/pressure", "sensor_msgs/msg/FluidPressure", typestore=ts)
         c_fix = w.add_connection("/ublox/fix", "sensor_msgs/msg/NavSatFix", typestore=ts)
 
         def transform(child: str, b_R: np.ndarray, b_p: np.ndarray) -> Any:
             q = matrix_to_quat_xyzw(b_R)
             return T["geometry_msgs/msg/TransformStamped"](
-                header=_header(T, t0, "base_link"), child_frame_id=child,
+                header=_header(T, t0, "base_link"),
+                child_frame_id=child,
                 transform=T["geometry_msgs/msg/Transform"](
                     translation=V3(x=float(b_p[0]), y=float(b_p[1]), z=float(b_p[2])),
-                    rotation=Q(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))))
+                    rotation=Q(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+                ),
+            )
 
         m = log.mounting
-        tf = T["tf2_msgs/msg/TFMessage"](transforms=[
-            transform("vn100", np.eye(3), np.zeros(3)), transform("dvl_frame", m.b_R_d0, m.b_p_dvl),
-            transform("bar30", np.eye(3), np.zeros(3))])
+        tf = T["tf2_msgs/msg/TFMessage"](
+            transforms=[
+                transform("vn100", np.eye(3), np.zeros(3)),
+                transform("dvl_frame", m.b_R_d0, m.b_p_dvl),
+                transform("bar30", np.eye(3), np.zeros(3)),
+            ]
+        )
         w.write(c_tf, t0, ts.serialize_cdr(tf, "tf2_msgs/msg/TFMessage"))
         zeros9 = np.zeros(9)
         no_orientation = np.array([-1.0] + [0.0] * 8)
         imu = log.imu
         for t, w_b, f_b in zip(imu.t.tolist(), imu.b_omega.tolist(), imu.b_f.tolist(), strict=True):
             msg = T["sensor_msgs/msg/Imu"](
-                header=_header(T, ns(t), "vn100"), orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
-                orientation_covariance=no_orientation, angular_velocity=V3(x=w_b[0], y=w_b[1], z=w_b[2]),
-                angular_velocity_covariance=zeros9, linear_acceleration=V3(x=f_b[0], y=f_b[1], z=f_b[2]),
-                linear_acceleration_covariance=zeros9)
+                header=_header(T, ns(t), "vn100"),
+                orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=no_orientation,
+                angular_velocity=V3(x=w_b[0], y=w_b[1], z=w_b[2]),
+                angular_velocity_covariance=zeros9,
+                linear_acceleration=V3(x=f_b[0], y=f_b[1], z=f_b[2]),
+                linear_acceleration_covariance=zeros9,
+            )
             w.write(c_imu, ns(t), ts.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
         dvl = log.dvl
         for i in np.flatnonzero(dvl.valid).tolist():
@@ -100,16 +116,30 @@ def _write_bag(folder: Path, log: LogData, rng: np.random.Generator) -> None:
             cov[3:, 3:] = -np.eye(3)  # angular part not measured
             v = dvl.d_v[i]
             twc = T["geometry_msgs/msg/TwistWithCovariance"](
-                twist=T["geometry_msgs/msg/Twist"](linear=V3(x=v[0], y=v[1], z=v[2]), angular=V3(x=0.0, y=0.0, z=0.0)),
-                covariance=cov.ravel())
-            msg = T["geometry_msgs/msg/TwistWithCovarianceStamped"](header=_header(T, ns(dvl.t[i]), "dvl_frame"),
-                                                                    twist=twc)
-            w.write(c_dvl, ns(dvl.t[i]), ts.serialize_cdr(msg, "geometry_msgs/msg/TwistWithCovarianceStamped"))
+                twist=T["geometry_msgs/msg/Twist"](
+                    linear=V3(x=v[0], y=v[1], z=v[2]), angular=V3(x=0.0, y=0.0, z=0.0)
+                ),
+                covariance=cov.ravel(),
+            )
+            msg = T["geometry_msgs/msg/TwistWithCovarianceStamped"](
+                header=_header(T, ns(dvl.t[i]), "dvl_frame"), twist=twc
+            )
+            w.write(
+                c_dvl,
+                ns(dvl.t[i]),
+                ts.serialize_cdr(msg, "geometry_msgs/msg/TwistWithCovarianceStamped"),
+            )
         dep = log.depth
         assert dep is not None and dep.pressure_pa is not None
         for t, p in zip(dep.t.tolist(), dep.pressure_pa.tolist(), strict=True):
-            var = float(np.mean(dep.pressure_variance_pa2)) if dep.pressure_variance_pa2 is not None else 0.0
-            msg = T["sensor_msgs/msg/FluidPressure"](header=_header(T, ns(t), "bar30"), fluid_pressure=p, variance=var)
+            var = (
+                float(np.mean(dep.pressure_variance_pa2))
+                if dep.pressure_variance_pa2 is not None
+                else 0.0
+            )
+            msg = T["sensor_msgs/msg/FluidPressure"](
+                header=_header(T, ns(t), "bar30"), fluid_pressure=p, variance=var
+            )
             w.write(c_p, ns(t), ts.serialize_cdr(msg, "sensor_msgs/msg/FluidPressure"))
         # fixes at 1 Hz while at the surface before the dive (the first 80 s), 1.5 m horizontal noise
         frame = LocalFrame(*ORIGIN)
@@ -118,11 +148,21 @@ def _write_bag(folder: Path, log: LogData, rng: np.random.Generator) -> None:
             n_p = np.array([np.interp(t, log.truth.t, log.truth.n_p[:, k]) for k in range(3)])
             n_p = n_p + rng.normal(0.0, [1.5, 1.5, 3.0])
             lat_rad, lon_rad, h_m = frame.map_to_geodetic(n_p[None, :])
-            lat, lon, h = float(np.degrees(lat_rad[0])), float(np.degrees(lon_rad[0])), float(h_m[0])
+            lat, lon, h = (
+                float(np.degrees(lat_rad[0])),
+                float(np.degrees(lon_rad[0])),
+                float(h_m[0]),
+            )
             status = T["sensor_msgs/msg/NavSatStatus"](status=0, service=1)
             msg = T["sensor_msgs/msg/NavSatFix"](
-                header=_header(T, ns(float(t)), "gps"), status=status, latitude=lat, longitude=lon, altitude=h,
-                position_covariance=np.diag([2.25, 2.25, 9.0]).ravel(), position_covariance_type=2)
+                header=_header(T, ns(float(t)), "gps"),
+                status=status,
+                latitude=lat,
+                longitude=lon,
+                altitude=h,
+                position_covariance=np.diag([2.25, 2.25, 9.0]).ravel(),
+                position_covariance_type=2,
+            )
             w.write(c_fix, ns(float(t)), ts.serialize_cdr(msg, "sensor_msgs/msg/NavSatFix"))
 
 
@@ -134,26 +174,51 @@ def field_bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, LogData]:
     return folder, log
 
 
-def test_field_bag_smoothed_with_topic_options_only(field_bag: tuple[Path, LogData], tmp_path: Path) -> None:
+def test_field_bag_smoothed_with_topic_options_only(
+    field_bag: tuple[Path, LogData], tmp_path: Path
+) -> None:
     folder, log = field_bag
     summary_path = tmp_path / "summary.json"
-    cmd = [sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", str(folder), "-q", "--summary", str(summary_path),
-           "--imu-topic", "/vectornav/imu_uncompensated", "--dvl-topic", "/nortek/dvl/twist",
-           "--depth-topic", "/bar30/pressure", "--gnss-topic", "/ublox/fix", "-o", str(tmp_path / "result.mcap")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "gtsam_dvl.app.cli",
+        "smooth",
+        str(folder),
+        "-q",
+        "--summary",
+        str(summary_path),
+        "--imu-topic",
+        "/vectornav/imu_uncompensated",
+        "--dvl-topic",
+        "/nortek/dvl/twist",
+        "--depth-topic",
+        "/bar30/pressure",
+        "--gnss-topic",
+        "/ublox/fix",
+        "-o",
+        str(tmp_path / "result.mcap"),
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     s = json.loads(summary_path.read_text())
     cal = log.true_calibration
     assert cal is not None
     scale_z = (s["scale"]["value"] - cal.scale) / s["scale"]["sigma"]
-    mis_z = (np.array(s["misalignment_deg"]["value"]) - cal.misalignment_deg) / np.array(s["misalignment_deg"]["sigma"])
-    print(f"\nscale {s['scale']['value']:.6f} +- {s['scale']['sigma']:.6f} (truth {cal.scale}), z {scale_z:+.2f}; "
-          f"misalignment {np.round(s['misalignment_deg']['value'], 4)} +- {np.round(s['misalignment_deg']['sigma'], 4)}"
-          f" deg, z {np.round(mis_z, 2)}; states {s['states']}, {s['timing_s'].get('total', 0):.1f} s")
+    mis_z = (np.array(s["misalignment_deg"]["value"]) - cal.misalignment_deg) / np.array(
+        s["misalignment_deg"]["sigma"]
+    )
+    print(
+        f"\nscale {s['scale']['value']:.6f} +- {s['scale']['sigma']:.6f} (truth {cal.scale}), z {scale_z:+.2f}; "
+        f"misalignment {np.round(s['misalignment_deg']['value'], 4)} +- {np.round(s['misalignment_deg']['sigma'], 4)}"
+        f" deg, z {np.round(mis_z, 2)}; states {s['states']}, {s['timing_s'].get('total', 0):.1f} s"
+    )
     assert abs(scale_z) < 3 and np.all(np.abs(mis_z) < 3)
     # determined, not just held by the priors (1 %, 1 deg): the roll (about the thrust axis) only by the descent;
     # the scale's sigma above the run-constant DVL error's share (2 mm/s over the speed, constant_error.py: 1.2e-3
     # measured), five times below its prior
     assert s["scale"]["sigma"] < 2e-3 and np.all(np.array(s["misalignment_deg"]["sigma"]) < 0.2)
     # the map origin came from the first fix, and the reader said so
-    assert any("map origin from the first good GNSS fix on /ublox/fix" in w for w in s["health"]["notes"])
+    assert any(
+        "map origin from the first good GNSS fix on /ublox/fix" in w for w in s["health"]["notes"]
+    )

@@ -29,16 +29,37 @@ def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None
     bad = tmp_path / "broken.mcap"
     bad.write_bytes(b"not a log")
     out = tmp_path / "fleet"
-    proc = subprocess.run([sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", str(logs[0]), str(bad), str(logs[1]),
-                           "--out-dir", str(out), "--workers", "2", "-q"], capture_output=True, text=True, timeout=600)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gtsam_dvl.app.cli",
+            "smooth",
+            str(logs[0]),
+            str(bad),
+            str(logs[1]),
+            "--out-dir",
+            str(out),
+            "--workers",
+            "2",
+            "-q",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     print(proc.stdout)
     assert proc.returncode == 3, proc.stderr  # one log failed
     assert "gtsam-dvl: error: 1 of 3 logs failed" in proc.stderr
     # where it runs, with the dashboard's address when bokeh is there to serve it
-    dashboard = "dashboard http://" if importlib.util.find_spec("bokeh") is not None else "no dashboard"
+    dashboard = (
+        "dashboard http://" if importlib.util.find_spec("bokeh") is not None else "no dashboard"
+    )
     assert f"Dask LocalCluster: 2 worker processes, {dashboard}" in proc.stderr
     rows = json.loads((out / "fleet.json").read_text())
-    assert [Path(r["log"]).resolve() for r in rows] == [p.resolve() for p in (logs[0], bad, logs[1])]  # as given
+    assert [Path(r["log"]).resolve() for r in rows] == [
+        p.resolve() for p in (logs[0], bad, logs[1])
+    ]  # as given
     assert [Path(r["dir"]).name for r in rows] == ["dive1_dive", "broken", "dive2_dive"]
     assert [r["status"] for r in rows] == ["ok", "error", "ok"]
     assert "neither an MCAP nor a rosbag2" in rows[1]["error"]
@@ -50,6 +71,19 @@ def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None
     assert "| broken | error |" in table and table.count("| ok |") == 2
     assert "| dive1_dive | ok |" in table and "| dive2_dive | ok |" in table
     # several logs need --out-dir; -o is for one log
-    proc = subprocess.run([sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", str(logs[0]), str(logs[1]), "-o",
-                           str(tmp_path / "r.mcap")], capture_output=True, text=True, timeout=60)
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "gtsam_dvl.app.cli",
+            "smooth",
+            str(logs[0]),
+            str(logs[1]),
+            "-o",
+            str(tmp_path / "r.mcap"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert proc.returncode == 1 and "several logs are smoothed with --out-dir" in proc.stderr

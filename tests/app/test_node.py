@@ -36,7 +36,15 @@ from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import MessageDecoder
 from gtsam_dvl.io.writer import write_log
-from tests.support.node import GAP_S, cli, config_toml, gap_log, params_yaml, ros_env, sigma_distance
+from tests.support.node import (
+    GAP_S,
+    cli,
+    config_toml,
+    gap_log,
+    params_yaml,
+    ros_env,
+    sigma_distance,
+)
 
 # one worker runs the module's tests: its fixture (a simulated log, the processes) is made once
 pytestmark = pytest.mark.xdist_group(name="ros2_node")
@@ -55,10 +63,19 @@ def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     mcap = tmp / "gap.mcap"
     write_log(mcap, log)
     (tmp / "cfg.toml").write_text(config_toml(log))
-    (tmp / "params.yaml").write_text(params_yaml(
-        imu_topic="/imu/data_raw", dvl_topic="/dvl/twist", pressure_topic="", gnss_topic="",
-        diagnostics_period_s=0.2, calibration_out=str(tmp / "vehicle.toml"), vehicle="auv-test",
-        stats_file=str(tmp / "stats.json"), qos_inputs={"reliability": "reliable", "depth": 100000}))
+    (tmp / "params.yaml").write_text(
+        params_yaml(
+            imu_topic="/imu/data_raw",
+            dvl_topic="/dvl/twist",
+            pressure_topic="",
+            gnss_topic="",
+            diagnostics_period_s=0.2,
+            calibration_out=str(tmp / "vehicle.toml"),
+            vehicle="auv-test",
+            stats_file=str(tmp / "stats.json"),
+            qos_inputs={"reliability": "reliable", "depth": 100000},
+        )
+    )
     env = ros_env()
     odometry: list[tuple[float, bytes]] = []
     diagnostics: list[tuple[float, Any]] = []
@@ -67,20 +84,50 @@ def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     rclpy.init(context=context, domain_id=int(env["ROS_DOMAIN_ID"]))
     try:
         sub = Node("gtsam_dvl_test_subscriber", context=context)
-        sub.create_subscription(Odometry, "/gtsam_dvl/odometry", lambda b: odometry.append((time.monotonic(), b)),
-                                1000, raw=True)
-        sub.create_subscription(DiagnosticArray, "/diagnostics",
-                                lambda m: diagnostics.append((time.monotonic(), m)), 1000)
-        sub.create_subscription(Float64MultiArray, "/gtsam_dvl/calibration", calibration.append, 1000)
+        sub.create_subscription(
+            Odometry,
+            "/gtsam_dvl/odometry",
+            lambda b: odometry.append((time.monotonic(), b)),
+            1000,
+            raw=True,
+        )
+        sub.create_subscription(
+            DiagnosticArray,
+            "/diagnostics",
+            lambda m: diagnostics.append((time.monotonic(), m)),
+            1000,
+        )
+        sub.create_subscription(
+            Float64MultiArray, "/gtsam_dvl/calibration", calibration.append, 1000
+        )
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(sub)
         with open(tmp / "node.log", "w") as out:
-            node = subprocess.Popen(cli("node", "-c", tmp / "cfg.toml", "--params", tmp / "params.yaml"), env=env,
-                                    stdout=out, stderr=subprocess.STDOUT)
+            node = subprocess.Popen(
+                cli("node", "-c", tmp / "cfg.toml", "--params", tmp / "params.yaml"),
+                env=env,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+            )
             try:
-                player = subprocess.Popen(cli("play", mcap, "--rate", str(RATE), "--wait", "60", "--topic",
-                                              "/imu/data_raw", "--topic", "/dvl/twist"), env=env,
-                                          stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                player = subprocess.Popen(
+                    cli(
+                        "play",
+                        mcap,
+                        "--rate",
+                        str(RATE),
+                        "--wait",
+                        "60",
+                        "--topic",
+                        "/imu/data_raw",
+                        "--topic",
+                        "/dvl/twist",
+                    ),
+                    env=env,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.STDOUT,
+                    text=True,
+                )
                 deadline = time.monotonic() + 120
                 while player.poll() is None and time.monotonic() < deadline:
                     executor.spin_once(timeout_sec=0.05)
@@ -100,9 +147,17 @@ def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         rclpy.shutdown(context=context)
     cfg = EstimatorConfig.load(tmp / "cfg.toml")
     reference = run_estimator(read_log(mcap, dvl_topic="/dvl/twist"), "online", cfg)
-    return {"tmp": tmp, "log": log, "odometry": odometry, "diagnostics": diagnostics, "calibration": calibration,
-            "reference": reference, "played": played, "node_log": (tmp / "node.log").read_text(),
-            "node_code": node.returncode}
+    return {
+        "tmp": tmp,
+        "log": log,
+        "odometry": odometry,
+        "diagnostics": diagnostics,
+        "calibration": calibration,
+        "reference": reference,
+        "played": played,
+        "node_log": (tmp / "node.log").read_text(),
+        "node_code": node.returncode,
+    }
 
 
 def test_node_odometry_agrees_with_smooth_online(node_run: dict[str, Any]) -> None:
@@ -111,7 +166,9 @@ def test_node_odometry_agrees_with_smooth_online(node_run: dict[str, Any]) -> No
     assert node_run["node_code"] == 0, node_run["node_log"]
     rows = [_odometry(b) for _, b in node_run["odometry"]]
     stamps = np.array([int(stamps_ns(r)[0]) for r in rows])
-    t = (stamps - int(ref.t0_ns)) / 1e9  # the reader's time origin, which the node takes the same way
+    t = (
+        stamps - int(ref.t0_ns)
+    ) / 1e9  # the reader's time origin, which the node takes the same way
     final = rows[-1]
     # the node's final estimate: the last state's
     assert abs(t[-1] - ref.t[-1]) < 1e-6, (t[-1], ref.t[-1], node_run["node_log"])
@@ -119,11 +176,17 @@ def test_node_odometry_agrees_with_smooth_online(node_run: dict[str, Any]) -> No
     # every Odometry of a state (the others are predictions at pings between keyframes) against the reference's
     # filtering estimate of that state
     k = np.searchsorted(ref.t, t)
-    matched = [(i, int(j)) for i, j in enumerate(k) if j < len(ref.t) and abs(ref.t[j] - t[i]) < 1e-6]
-    worst = max(sigma_distance(rows[i]["position"][0], ref.n_p[j], ref.n_R_b[j], ref.pose_cov[j])
-                for i, j in matched)
-    print(f"\nnode vs smooth --mode online: final position {d_final:.2e} sigma, worst of {len(matched)} states "
-          f"{worst:.2e} sigma; {len(rows)} Odometry messages")
+    matched = [
+        (i, int(j)) for i, j in enumerate(k) if j < len(ref.t) and abs(ref.t[j] - t[i]) < 1e-6
+    ]
+    worst = max(
+        sigma_distance(rows[i]["position"][0], ref.n_p[j], ref.n_R_b[j], ref.pose_cov[j])
+        for i, j in matched
+    )
+    print(
+        f"\nnode vs smooth --mode online: final position {d_final:.2e} sigma, worst of {len(matched)} states "
+        f"{worst:.2e} sigma; {len(rows)} Odometry messages"
+    )
     assert d_final < 0.1
     # the states made at the alignment come at once (one Odometry, the newest); after it, one per state but where
     # one message completes two epochs (a state without a ping and the next ping's)
@@ -132,8 +195,13 @@ def test_node_odometry_agrees_with_smooth_online(node_run: dict[str, Any]) -> No
     # covariances in ROS order (io/ros2/covariance.py): the final pose's position sigmas are the reference's
     pose_cov = final["pose_covariance"][0].reshape(6, 6)
     assert np.all(np.diag(pose_cov)[:3] > 0)
-    np.testing.assert_allclose(final["position"][0], ref.n_p[-1], atol=0.1 * np.sqrt(np.diag(pose_cov)[:3]).min())
-    assert final["frame_id"][0] in ("map", b"map") and final["child_frame_id"][0] in ("base_link", b"base_link")
+    np.testing.assert_allclose(
+        final["position"][0], ref.n_p[-1], atol=0.1 * np.sqrt(np.diag(pose_cov)[:3]).min()
+    )
+    assert final["frame_id"][0] in ("map", b"map") and final["child_frame_id"][0] in (
+        "base_link",
+        b"base_link",
+    )
 
 
 def test_node_diagnostics_turn_degraded_when_the_dvl_stops(node_run: dict[str, Any]) -> None:
@@ -142,7 +210,9 @@ def test_node_diagnostics_turn_degraded_when_the_dvl_stops(node_run: dict[str, A
         (status,) = msg.status
         values = {kv.key: kv.value for kv in status.values}
         if "t_s" in values:  # (after the first estimate)
-            seen.append((float(values["sensor_t_s"]), values["status"], status.message, status.level))
+            seen.append(
+                (float(values["sensor_t_s"]), values["status"], status.message, status.level)
+            )
     assert seen, node_run["node_log"]
     start, stop = GAP_S
     dvl_t = node_run["log"].dvl.t
@@ -168,8 +238,12 @@ def test_node_calibration_topic_and_file(node_run: dict[str, Any]) -> None:
     assert dims[0].label.split(",") == list(CALIBRATION_ROWS) and dims[1].label == "value,sigma"
     rows = np.asarray(last.data).reshape(dims[0].size, dims[1].size)
     scale, scale_sigma = rows[CALIBRATION_ROWS.index("scale")]
-    assert abs(scale - ref.scale) < 0.1 * ref.scale_sigma and scale_sigma == pytest.approx(ref.scale_sigma, rel=1e-3)
-    cal = read_calibration(node_run["tmp"] / "vehicle.toml")  # written at shutdown (calibration_out)
+    assert abs(scale - ref.scale) < 0.1 * ref.scale_sigma and scale_sigma == pytest.approx(
+        ref.scale_sigma, rel=1e-3
+    )
+    cal = read_calibration(
+        node_run["tmp"] / "vehicle.toml"
+    )  # written at shutdown (calibration_out)
     assert cal.vehicle == "auv-test" and "scale" in cal.states
     assert abs(float(cal.values["scale"][0]) - ref.scale) < 0.1 * ref.scale_sigma
     stats = json.loads((node_run["tmp"] / "stats.json").read_text())

@@ -33,7 +33,15 @@ MS = 1_000_000
 def test_reorder_puts_messages_in_stamp_order_within_the_window() -> None:
     buf = ReorderBuffer(window_ns=50 * MS, jump_ns=1000 * MS)
     out: list[tuple[str, int]] = []
-    arrivals = [("imu", 10), ("imu", 30), ("imu", 20), ("dvl", 30), ("imu", 40), ("imu", 100), ("imu", 120)]
+    arrivals = [
+        ("imu", 10),
+        ("imu", 30),
+        ("imu", 20),
+        ("dvl", 30),
+        ("imu", 40),
+        ("imu", 100),
+        ("imu", 120),
+    ]
     for k, (kind, ms) in enumerate(arrivals):
         buf.push(kind, ms * MS, None, wall=k * 0.01)
         out += [(m.kind, m.stamp_ns // MS) for m in buf.ready()]
@@ -46,27 +54,46 @@ def test_reorder_puts_messages_in_stamp_order_within_the_window() -> None:
 
 def test_a_silent_stream_that_comes_back_is_no_stamp_jump_but_a_clock_step_is() -> None:
     buf = ReorderBuffer(window_ns=0, jump_ns=1000 * MS)
-    for k in range(301):  # 3 s of 100 Hz IMU, a ping at 0 and one at 2.5 s (silent in between); 10x real time
+    for k in range(
+        301
+    ):  # 3 s of 100 Hz IMU, a ping at 0 and one at 2.5 s (silent in between); 10x real time
         buf.push("imu", k * 10 * MS, None, wall=k * 0.001)
         if k in (0, 250):
             buf.push("dvl", k * 10 * MS, None, wall=k * 0.001)
     assert buf.streams["dvl"].jumps == 0 and buf.streams["imu"].jumps == 0
-    buf.push("dvl", 9000 * MS, None, wall=0.301)  # 6.5 s after its last, while the IMU's stamps moved 0.5 s
+    buf.push(
+        "dvl", 9000 * MS, None, wall=0.301
+    )  # 6.5 s after its last, while the IMU's stamps moved 0.5 s
     buf.push("imu", 5000 * MS, None, wall=0.302)  # the IMU's 2 s ahead of the wall clock
-    assert buf.streams["dvl"].jumps == 1 and buf.streams["dvl"].largest_jump_s == pytest.approx(6.0, abs=0.01)
+    assert buf.streams["dvl"].jumps == 1 and buf.streams["dvl"].largest_jump_s == pytest.approx(
+        6.0, abs=0.01
+    )
     assert buf.streams["imu"].jumps == 1
 
 
 def test_settings_from_toml_and_parameters(tmp_path: Path) -> None:
     cfg = tmp_path / "cfg.toml"
-    cfg.write_text('preset = "paper"\n[online]\nalign_s = 35.0\n[node]\nimu_topic = "/imu/raw"\nreorder_window_s = '
-                   "0.1\n")
-    params = {"reorder_window_s": 0.02, "qos_inputs.reliability": "reliable", "estimator.dvl.noise_m_s": 0.03,
-              "use_sim_time": False, "start_type_description_service": True}
+    cfg.write_text(
+        'preset = "paper"\n[online]\nalign_s = 35.0\n[node]\nimu_topic = "/imu/raw"\nreorder_window_s = '
+        "0.1\n"
+    )
+    params = {
+        "reorder_window_s": 0.02,
+        "qos_inputs.reliability": "reliable",
+        "estimator.dvl.noise_m_s": 0.03,
+        "use_sim_time": False,
+        "start_type_description_service": True,
+    }
     settings, config = load_settings(cfg, params)
-    assert settings.imu_topic == "/imu/raw" and settings.reorder_window_s == 0.02  # the parameter wins
+    assert (
+        settings.imu_topic == "/imu/raw" and settings.reorder_window_s == 0.02
+    )  # the parameter wins
     assert settings.qos_inputs.reliability == "reliable" and settings.qos_inputs.depth == 1000
-    assert config.online.align_s == 35.0 and config.dvl.noise_m_s == 0.03 and config.priors.scale_initial == 0.8
+    assert (
+        config.online.align_s == 35.0
+        and config.dvl.noise_m_s == 0.03
+        and config.priors.scale_initial == 0.8
+    )
     with pytest.raises(GtsamDvlError, match=r"reorder_window_s must be a number >= 0, got -1"):
         load_settings(cfg, {"reorder_window_s": -1.0}, source="node.yaml")
     with pytest.raises(GtsamDvlError, match="unknown key 'imu_topik'"):
@@ -74,12 +101,18 @@ def test_settings_from_toml_and_parameters(tmp_path: Path) -> None:
 
 
 def test_live_verdict_follows_the_dvl() -> None:
-    lim = LiveThresholds(dvl_silent_warn_s=2.0, dvl_silent_degraded_s=10.0, bottom_lock_degraded_s=60.0)
+    lim = LiveThresholds(
+        dvl_silent_warn_s=2.0, dvl_silent_degraded_s=10.0, bottom_lock_degraded_s=60.0
+    )
 
     def verdict(silent_s: float, no_lock_s: float = 0.0, **state: Any) -> str:
-        streams = {"imu": StreamState("/imu", received=100, silent_s=0.0),
-                   "dvl": StreamState("/dvl", received=10, silent_s=silent_s)}
-        return assess_live(LiveState(phase="running", streams=streams, no_lock_s=no_lock_s, **state), lim).status
+        streams = {
+            "imu": StreamState("/imu", received=100, silent_s=0.0),
+            "dvl": StreamState("/dvl", received=10, silent_s=silent_s),
+        }
+        return assess_live(
+            LiveState(phase="running", streams=streams, no_lock_s=no_lock_s, **state), lim
+        ).status
 
     assert [verdict(s) for s in (0.5, 3.0, 12.0)] == ["ok", "warn", "degraded"]
     assert [verdict(0.2, n) for n in (1.0, 5.0, 61.0)] == ["ok", "warn", "degraded"]
@@ -96,20 +129,32 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     src = open_source(tmp / "gap.mcap")
     kinds = {"/imu/data_raw": "imu", "/dvl/twist": "dvl"}
     raw = src.read(list(kinds))
-    msgs = sorted(((int(ns), kinds[t], b) for t in kinds for ns, b in zip(raw[t].log_time, raw[t].items(),
-                                                                          strict=True)), key=lambda m: m[0])
+    msgs = sorted(
+        (
+            (int(ns), kinds[t], b)
+            for t in kinds
+            for ns, b in zip(raw[t].log_time, raw[t].items(), strict=True)
+        ),
+        key=lambda m: m[0],
+    )
     return {"tmp": tmp, "msgs": msgs}
 
 
-def test_node_core_on_a_logs_messages_out_of_order_equals_smooth_online(recorded: dict[str, Any]) -> None:
+def test_node_core_on_a_logs_messages_out_of_order_equals_smooth_online(
+    recorded: dict[str, Any],
+) -> None:
     tmp, msgs = recorded["tmp"], list(recorded["msgs"])
     rng = np.random.default_rng(5)
     # arrival order: each message up to 20 ms late (the window is 50 ms), so that stamps cross within and across
     # topics; the wall clock is the log's
     late = rng.uniform(0.0, 0.02, len(msgs))
-    order = np.argsort([ns * 1e-9 + d for (ns, _, _), d in zip(msgs, late, strict=True)], kind="stable")
+    order = np.argsort(
+        [ns * 1e-9 + d for (ns, _, _), d in zip(msgs, late, strict=True)], kind="stable"
+    )
     assert (np.diff(order) < 0).sum() > 1000  # really out of order
-    settings, config = load_settings(tmp / "cfg.toml", {"imu_topic": "/imu/data_raw", "reorder_window_s": 0.05})
+    settings, config = load_settings(
+        tmp / "cfg.toml", {"imu_topic": "/imu/data_raw", "reorder_window_s": 0.05}
+    )
     core = NodeCore(settings, config)
     states = {}
     for i in order:
@@ -118,8 +163,11 @@ def test_node_core_on_a_logs_messages_out_of_order_equals_smooth_online(recorded
             if np.isnan(e.predicted_from_t):
                 states[round(e.t, 9)] = e
     final = core.finish()
-    ref = run_estimator(read_log(tmp / "gap.mcap", dvl_topic="/dvl/twist"), "online",
-                        EstimatorConfig.load(tmp / "cfg.toml"))
+    ref = run_estimator(
+        read_log(tmp / "gap.mcap", dvl_topic="/dvl/twist"),
+        "online",
+        EstimatorConfig.load(tmp / "cfg.toml"),
+    )
     assert final is not None and final.t == ref.t[-1]
     np.testing.assert_array_equal(final.n_p, ref.n_p[-1])
     matched = [k for k, t in enumerate(ref.t) if round(t, 9) in states]
@@ -129,7 +177,9 @@ def test_node_core_on_a_logs_messages_out_of_order_equals_smooth_online(recorded
     assert core.buffer.streams["imu"].late == 0 and core.buffer.streams["dvl"].late == 0
     last_wall = msgs[int(np.argmax([m[0] for m in msgs]))][0] * 1e-9 + 0.02
     assert core.health(wall=last_wall + 0.1).status == "ok"
-    assert core.health(wall=last_wall + 5.0).status == "failed"  # the IMU silent in wall time: no estimate
+    assert (
+        core.health(wall=last_wall + 5.0).status == "failed"
+    )  # the IMU silent in wall time: no estimate
     rows = core.calibration_rows(final)
     assert rows[1, 0] == ref.scale and rows[1, 1] == pytest.approx(ref.scale_sigma, rel=1e-12)
 
@@ -142,8 +192,10 @@ def test_an_exception_in_the_estimator_is_one_line_and_a_stop(recorded: dict[str
     n = len(msgs)
     for k, (ns, kind, body) in enumerate(msgs):
         if k == n // 2:  # a fault inside the estimator, halfway
+
             def boom(*args: Any, **kwargs: Any) -> int:
                 raise RuntimeError("injected fault")
+
             assert core.estimator is not None
             core.estimator.push_dvl = boom  # type: ignore[method-assign]
         core.receive(kind, body, wall=ns * 1e-9)
@@ -156,13 +208,16 @@ def test_an_exception_in_the_estimator_is_one_line_and_a_stop(recorded: dict[str
 
 
 def test_node_without_the_extra_is_one_line_and_exit_code_1() -> None:
-    code = ("import sys; sys.modules['rclpy'] = None\n"  # as if the ros2 extra were not installed
-            "from gtsam_dvl.app.cli import main; sys.argv = ['gtsam-dvl', 'node']; main()")
+    code = (
+        "import sys; sys.modules['rclpy'] = None\n"  # as if the ros2 extra were not installed
+        "from gtsam_dvl.app.cli import main; sys.argv = ['gtsam-dvl', 'node']; main()"
+    )
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert run.returncode == 1, run.stderr
     assert run.stderr.strip().splitlines() == [
         "gtsam-dvl: error: gtsam-dvl node needs ROS 2's rclpy and message packages (wheels from PyPI, no system "
-        "ROS): pip install 'gtsam-dvl[ros2]' (rclpy is missing)"]
+        "ROS): pip install 'gtsam-dvl[ros2]' (rclpy is missing)"
+    ]
 
 
 def test_the_example_parameter_file_loads() -> None:

@@ -49,8 +49,16 @@ def moved(tmp_path_factory: pytest.TempPathFactory) -> Path:
     write_log(root / "base" / "logs" / "short.mcap", log)
     no_repair = run("info", "base/logs/short.mcap", cwd=root, check=False)
     assert no_repair.returncode == 1 and "--repair" in no_repair.stderr  # the log needs --repair
-    run("smooth", "base/logs/short.mcap", "--repair", "-o", "base/results/result.mcap", "-q", "--no-timeline",
-        cwd=root)
+    run(
+        "smooth",
+        "base/logs/short.mcap",
+        "--repair",
+        "-o",
+        "base/results/result.mcap",
+        "-q",
+        "--no-timeline",
+        cwd=root,
+    )
     shutil.move(root / "base", root / "moved")
     return root / "moved"
 
@@ -60,17 +68,27 @@ def test_result_records_source_log_and_read_options(moved: Path) -> None:
 
     stored = read_result(moved / "results" / "result.mcap")
     assert stored.source_log_relative == str(Path("..") / "logs" / "short.mcap")
-    assert Path(stored.source_log).is_absolute() and not Path(stored.source_log).exists()  # base was moved
+    assert (
+        Path(stored.source_log).is_absolute() and not Path(stored.source_log).exists()
+    )  # base was moved
     assert stored.source_log == str((moved.parent / "base" / "logs" / "short.mcap").resolve())
-    assert stored.read_options == {"imu_topic": "/imu/data_raw", "dvl_topic": None, "salvage": False,
-                                   "repair": True}
+    assert stored.read_options == {
+        "imu_topic": "/imu/data_raw",
+        "dvl_topic": None,
+        "salvage": False,
+        "repair": True,
+    }
 
 
-def test_evaluate_finds_moved_log_from_any_directory_and_reuses_repair(moved: Path, tmp_path: Path) -> None:
+def test_evaluate_finds_moved_log_from_any_directory_and_reuses_repair(
+    moved: Path, tmp_path: Path
+) -> None:
     elsewhere = tmp_path / "cwd"
     elsewhere.mkdir()
     result, out = moved / "results" / "result.mcap", tmp_path / "eval"
-    proc = run("evaluate", str(result), "-o", str(out), cwd=elsewhere)  # no --repair given: the recorded one
+    proc = run(
+        "evaluate", str(result), "-o", str(out), cwd=elsewhere
+    )  # no --repair given: the recorded one
     assert NOT_FOUND not in proc.stdout
     metrics = json.loads((out / "metrics.json").read_text())
     assert "truth" in metrics and metrics["truth"]["calibration_errors"]
@@ -78,7 +96,15 @@ def test_evaluate_finds_moved_log_from_any_directory_and_reuses_repair(moved: Pa
     assert metrics["truth_log_read_options"]["repair"] is True
     assert metrics["truth_log_losses"]["repair"]  # the duplicated stamp dropped again, and counted
     # an option given to evaluate overrides the recorded one: without repair the log cannot be read
-    proc = run("evaluate", str(result), "-o", str(tmp_path / "eval2"), "--no-repair", cwd=elsewhere, check=False)
+    proc = run(
+        "evaluate",
+        str(result),
+        "-o",
+        str(tmp_path / "eval2"),
+        "--no-repair",
+        cwd=elsewhere,
+        check=False,
+    )
     assert proc.returncode == 1 and "--repair" in proc.stderr
 
 
@@ -89,7 +115,9 @@ def test_evaluate_says_when_source_log_is_gone(moved: Path, tmp_path: Path) -> N
     out = tmp_path / "eval"
     proc = run("evaluate", str(gone / "results" / "result.mcap"), "-o", str(out), cwd=tmp_path)
     lines = [line for line in proc.stdout.splitlines() if NOT_FOUND in line]
-    assert lines == [f"source log {(moved.parent / 'base' / 'logs' / 'short.mcap').resolve()} {NOT_FOUND}"]
+    assert lines == [
+        f"source log {(moved.parent / 'base' / 'logs' / 'short.mcap').resolve()} {NOT_FOUND}"
+    ]
     metrics = json.loads((out / "metrics.json").read_text())
     assert "truth" not in metrics and metrics["truth_log"] is None
     assert metrics["verdict"]  # the rest of the evaluation is still there

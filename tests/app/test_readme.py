@@ -16,7 +16,9 @@ def test_readme_python_blocks_run(tmp_path: Path) -> None:
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.S)
     assert blocks, "no Python example in the README"
     simulate_to_file("paper-2d", tmp_path / "run.mcap", seed=3, show_progress=False)
-    smooth_file(tmp_path / "run.mcap", tmp_path / "result.mcap", show_progress=False, timeline=False)
+    smooth_file(
+        tmp_path / "run.mcap", tmp_path / "result.mcap", show_progress=False, timeline=False
+    )
     cwd = os.getcwd()
     os.chdir(tmp_path)
     namespaces: list[dict[str, Any]] = []

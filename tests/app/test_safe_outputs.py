@@ -50,8 +50,11 @@ def short_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="module")
 def static_log(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return _scenario_log(tmp_path_factory.mktemp("static") / "static.mcap",
-                         [{"kind": "static", "duration_s": 60.0}], "static")
+    return _scenario_log(
+        tmp_path_factory.mktemp("static") / "static.mcap",
+        [{"kind": "static", "duration_s": 60.0}],
+        "static",
+    )
 
 
 def cli(*args: str | Path) -> Any:
@@ -60,7 +63,11 @@ def cli(*args: str | Path) -> Any:
 
 def one_error_line(result: Any) -> str:
     lines = result.stderr.strip().splitlines()
-    assert result.exit_code == 1 and len(lines) == 1, (result.exit_code, result.stderr, result.stdout)
+    assert result.exit_code == 1 and len(lines) == 1, (
+        result.exit_code,
+        result.stderr,
+        result.stdout,
+    )
     assert lines[0].startswith("gtsam-dvl: error: ") and "Traceback" not in result.stderr
     return str(lines[0])
 
@@ -69,7 +76,9 @@ def visible_and_hidden(folder: Path) -> set[str]:
     return {p.name for p in folder.iterdir()}
 
 
-@pytest.mark.parametrize("option", ["-o", "--summary", "--tum", "--timeline-npz", "link", "spelling"])
+@pytest.mark.parametrize(
+    "option", ["-o", "--summary", "--tum", "--timeline-npz", "link", "spelling"]
+)
 def test_output_that_is_the_input_is_refused(option: str, short_log: Path, tmp_path: Path) -> None:
     log = tmp_path / "log.mcap"
     log.write_bytes(short_log.read_bytes())
@@ -94,25 +103,33 @@ def test_output_that_is_the_input_is_refused(option: str, short_log: Path, tmp_p
 
 
 def test_same_output_twice_and_config_as_output(short_log: Path, tmp_path: Path) -> None:
-    line = one_error_line(cli("smooth", short_log, "-o", tmp_path / "a.mcap", "--summary", tmp_path / "a.mcap", "-q"))
+    line = one_error_line(
+        cli("smooth", short_log, "-o", tmp_path / "a.mcap", "--summary", tmp_path / "a.mcap", "-q")
+    )
     assert "given as both -o and --summary" in line
     cfg = tmp_path / "cfg.toml"
-    cfg.write_text("[dvl]\nrobust = \"huber\"\n")
+    cfg.write_text('[dvl]\nrobust = "huber"\n')
     line = one_error_line(cli("smooth", short_log, "-c", cfg, "--summary", cfg, "-q"))
-    assert "--summary is the configuration" in line and cfg.read_text() == "[dvl]\nrobust = \"huber\"\n"
+    assert (
+        "--summary is the configuration" in line and cfg.read_text() == '[dvl]\nrobust = "huber"\n'
+    )
 
 
 def test_unwritable_output_is_refused_before_the_run(short_log: Path, tmp_path: Path) -> None:
     blocker = tmp_path / "not-a-folder"
     blocker.write_text("x")
-    line = one_error_line(cli("smooth", short_log, "-o", tmp_path / "r.mcap", "--summary", blocker / "s.json", "-q"))
+    line = one_error_line(
+        cli("smooth", short_log, "-o", tmp_path / "r.mcap", "--summary", blocker / "s.json", "-q")
+    )
     assert f"{blocker / 's.json'}: cannot create its folder ({blocker} is a file)" in line
     assert visible_and_hidden(tmp_path) == {"not-a-folder"}  # no MCAP left behind
     line = one_error_line(cli("smooth", short_log, "-o", tmp_path, "-q"))
     assert "is a folder" in line
 
 
-def test_failing_summary_leaves_no_mcap(short_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_failing_summary_leaves_no_mcap(
+    short_log: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A write that fails during the run (disk full on the summary) removes the outputs already staged."""
     real = OutputSet.write_json
 
@@ -123,8 +140,13 @@ def test_failing_summary_leaves_no_mcap(short_log: Path, tmp_path: Path, monkeyp
 
     monkeypatch.setattr(OutputSet, "write_json", full)
     with pytest.raises(GtsamDvlError, match="s.json: cannot write"):
-        smooth_file(short_log, tmp_path / "r.mcap", summary_path=tmp_path / "s.json", tum_path=tmp_path / "t.tum",
-                    show_progress=False)
+        smooth_file(
+            short_log,
+            tmp_path / "r.mcap",
+            summary_path=tmp_path / "s.json",
+            tum_path=tmp_path / "t.tum",
+            show_progress=False,
+        )
     assert visible_and_hidden(tmp_path) == set()
 
 
@@ -143,7 +165,11 @@ def test_output_set_all_or_none(tmp_path: Path) -> None:
     assert str(e.value).startswith(f"{tmp_path / 'c'}: cannot write")
     assert visible_and_hidden(tmp_path) == {"c"} and (tmp_path / "c").is_dir()
     # a writer's error names the user's path, not the temporary one
-    with pytest.raises(GtsamDvlError) as e, OutputSet() as out, out.staged(tmp_path / "r.mcap") as tmp:
+    with (
+        pytest.raises(GtsamDvlError) as e,
+        OutputSet() as out,
+        out.staged(tmp_path / "r.mcap") as tmp,
+    ):
         raise GtsamDvlError(f"{tmp}: cannot write (No space left on device)")
     assert str(e.value) == f"{tmp_path / 'r.mcap'}: cannot write (No space left on device)"
     assert visible_and_hidden(tmp_path) == {"c"}
@@ -185,8 +211,13 @@ def test_signal_during_commit_is_deferred(tmp_path: Path) -> None:
 def test_outputs_respect_the_umask(umask: int, short_log: Path, tmp_path: Path) -> None:
     old = os.umask(umask)
     try:
-        outcome = smooth_file(short_log, tmp_path / "r.mcap", summary_path=tmp_path / "s.json",
-                              tum_path=tmp_path / "t.tum", show_progress=False)
+        outcome = smooth_file(
+            short_log,
+            tmp_path / "r.mcap",
+            summary_path=tmp_path / "s.json",
+            tum_path=tmp_path / "t.tum",
+            show_progress=False,
+        )
     finally:
         os.umask(old)
     modes = {p.name: stat.S_IMODE(p.stat().st_mode) for p in outcome.written}
@@ -195,7 +226,16 @@ def test_outputs_respect_the_umask(umask: int, short_log: Path, tmp_path: Path) 
 
 
 def test_health_in_summary_console_and_result_metadata(short_log: Path, tmp_path: Path) -> None:
-    result = cli("smooth", short_log, "-o", tmp_path / "r.mcap", "--summary", tmp_path / "s.json", "-q", "--strict")
+    result = cli(
+        "smooth",
+        short_log,
+        "-o",
+        tmp_path / "r.mcap",
+        "--summary",
+        tmp_path / "s.json",
+        "-q",
+        "--strict",
+    )
     assert result.exit_code == 0, result.stderr
     assert "  health: ok" in result.stdout
     summ = json.loads((tmp_path / "s.json").read_text())
@@ -203,22 +243,31 @@ def test_health_in_summary_console_and_result_metadata(short_log: Path, tmp_path
     rec = open_source(tmp_path / "r.mcap").metadata["gtsam_dvl_health"]
     assert rec["status"] == "ok" and json.loads(rec["warnings"]) == []
     assert json.loads(rec["figures"])["dvl_residuals"]["whitened_rms"] == pytest.approx(
-        summ["health"]["figures"]["dvl_residuals"]["whitened_rms"])
+        summ["health"]["figures"]["dvl_residuals"]["whitened_rms"]
+    )
     attached = json.loads(open_source(tmp_path / "r.mcap").attachments["summary.json"][1])
     assert attached["health"]["status"] == "ok"
 
 
 def test_static_log_exits_cleanly_and_strict_gives_3(static_log: Path, tmp_path: Path) -> None:
-    result = cli("smooth", static_log, "-o", tmp_path / "r.mcap", "--summary", tmp_path / "s.json", "-q")
+    result = cli(
+        "smooth", static_log, "-o", tmp_path / "r.mcap", "--summary", tmp_path / "s.json", "-q"
+    )
     assert result.exit_code == 0, result.stderr
     assert "Traceback" not in result.stdout + result.stderr
-    warning = [ln for ln in result.stdout.splitlines() if "warning: nothing calibratable: the log never moves" in ln]
+    warning = [
+        ln
+        for ln in result.stdout.splitlines()
+        if "warning: nothing calibratable: the log never moves" in ln
+    ]
     assert len(warning) == 1
     assert "no distance travelled" in result.stdout
     assert json.loads((tmp_path / "s.json").read_text())["health"]["status"] == "degraded"
     strict = cli("smooth", static_log, "--summary", tmp_path / "s2.json", "-q", "--strict")
     assert strict.exit_code == 3
-    assert strict.stderr.strip().splitlines() == ["gtsam-dvl: error: health degraded (--strict): exit code 3"]
+    assert strict.stderr.strip().splitlines() == [
+        "gtsam-dvl: error: health degraded (--strict): exit code 3"
+    ]
     assert (tmp_path / "s2.json").exists()  # the outputs are still written
 
 
@@ -230,9 +279,23 @@ def test_sigterm_leaves_no_stray_files(phase: str, short_log: Path, tmp_path: Pa
     all or none, with no temporary file."""
     out = tmp_path / "out"
     out.mkdir()
-    proc = subprocess.Popen([*CLI, "smooth", str(short_log), "-o", str(out / "r.mcap"), "--summary",
-                             str(out / "s.json"), "--tum", str(out / "t.tum"), "-q"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            *CLI,
+            "smooth",
+            str(short_log),
+            "-o",
+            str(out / "r.mcap"),
+            "--summary",
+            str(out / "s.json"),
+            "--tum",
+            str(out / "t.tum"),
+            "-q",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.monotonic() + 120
 
     def seen() -> bool:
@@ -245,12 +308,16 @@ def test_sigterm_leaves_no_stray_files(phase: str, short_log: Path, tmp_path: Pa
     proc.send_signal(signal.SIGTERM)
     _, stderr = proc.communicate(timeout=120)
     names = visible_and_hidden(out)
-    print(f"caught writing: {caught}, exit {proc.returncode}, left {sorted(names)}, stderr {stderr.strip()!r}")
+    print(
+        f"caught writing: {caught}, exit {proc.returncode}, left {sorted(names)}, stderr {stderr.strip()!r}"
+    )
     assert not [n for n in names if n.startswith(".")], names  # no temporary file
     assert names in (set(), {"r.mcap", "r.timeline.npz", "s.json", "t.tum"})
     if caught:
         assert proc.returncode == 143
-        assert stderr.strip().splitlines() == ["gtsam-dvl: error: terminated by SIGTERM; no partial output left behind"]
+        assert stderr.strip().splitlines() == [
+            "gtsam-dvl: error: terminated by SIGTERM; no partial output left behind"
+        ]
 
 
 @pytest.mark.slow
@@ -259,12 +326,28 @@ def test_sigterm_mid_run(tmp_path_factory: pytest.TempPathFactory, tmp_path: Pat
     of estimation; the batch smoother's 1.4 s would be over before the signal)."""
     log = tmp_path_factory.mktemp("full") / "paper-2d.mcap"
     write_log(log, simulate(load_scenario("paper-2d"), 5))
-    proc = subprocess.Popen([*CLI, "smooth", str(log), "--mode", "online-full", "-o", str(tmp_path / "r.mcap"),
-                             "--summary", str(tmp_path / "s.json"), "-q"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            *CLI,
+            "smooth",
+            str(log),
+            "--mode",
+            "online-full",
+            "-o",
+            str(tmp_path / "r.mcap"),
+            "--summary",
+            str(tmp_path / "s.json"),
+            "-q",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(2.5)
     proc.send_signal(signal.SIGTERM)
     _, stderr = proc.communicate(timeout=120)
     assert proc.returncode == 143, stderr
-    assert stderr.strip().splitlines() == ["gtsam-dvl: error: terminated by SIGTERM; no partial output left behind"]
+    assert stderr.strip().splitlines() == [
+        "gtsam-dvl: error: terminated by SIGTERM; no partial output left behind"
+    ]
     assert visible_and_hidden(tmp_path) == set()

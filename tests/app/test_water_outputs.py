@@ -15,7 +15,7 @@ from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.app.plots.current_plots import plot_current
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.io.result_writer import TOPICS, write_result_log
 from tests.support.water import N_C, with_water_track
 from tests.support.water import water_config as _config
@@ -40,19 +40,28 @@ def test_summary_and_result_topics(water_run: tuple[LogData, NavResult], tmp_pat
     # determined states' current against the (constant) truth: within its sigmas
     assert wc["errors"]["rms_m_s"] < 0.05 and wc["errors"]["max_abs_z"] < 5.0
     path = write_result_log(tmp_path / "result.mcap", res, log, s)
-    got: dict[str, list[list[float]]] = {TOPICS["water_current"]: [], TOPICS["water_current_sigma"]: []}
+    got: dict[str, list[list[float]]] = {
+        TOPICS["water_current"]: [],
+        TOPICS["water_current_sigma"]: [],
+    }
     with path.open("rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         for _, channel, _, msg in reader.iter_decoded_messages(topics=list(got)):
             got[channel.topic].append([msg.vector.x, msg.vector.y, msg.vector.z])
     profile = res.info["water_current"]
-    np.testing.assert_array_equal(np.array(got[TOPICS["water_current"]])[:, :2],
-                                  np.stack([profile["east_m_s"], profile["north_m_s"]], axis=1))
-    np.testing.assert_array_equal(np.array(got[TOPICS["water_current_sigma"]])[:, 1], profile["north_sigma_m_s"])
+    np.testing.assert_array_equal(
+        np.array(got[TOPICS["water_current"]])[:, :2],
+        np.stack([profile["east_m_s"], profile["north_m_s"]], axis=1),
+    )
+    np.testing.assert_array_equal(
+        np.array(got[TOPICS["water_current_sigma"]])[:, 1], profile["north_sigma_m_s"]
+    )
 
 
 def test_current_figure(water_run: tuple[LogData, NavResult], tmp_path: Path) -> None:
     log, res = water_run
     assert log.truth is not None
-    png = plot_current(res.info["water_current"], tmp_path / "water_current.png", log.truth.t, log.truth.n_c)
+    png = plot_current(
+        res.info["water_current"], tmp_path / "water_current.png", log.truth.t, log.truth.n_c
+    )
     assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

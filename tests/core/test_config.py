@@ -27,9 +27,13 @@ from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.logs import cut_log
 
-ENUMS = [("imu", "bias_model", "'constant', 'random_walk'"), ("dvl", "robust", "'none', 'huber', 'cauchy'"),
-         ("solver", "earth_model", "'wgs84', 'flat'"), ("online", "mode", "'fixed_lag', 'full'"),
-         ("online", "bad_messages", "'raise', 'drop'")]
+ENUMS = [
+    ("imu", "bias_model", "'constant', 'random_walk'"),
+    ("dvl", "robust", "'none', 'huber', 'cauchy'"),
+    ("solver", "earth_model", "'wgs84', 'flat'"),
+    ("online", "mode", "'fixed_lag', 'full'"),
+    ("online", "bad_messages", "'raise', 'drop'"),
+]
 
 
 @functools.cache
@@ -95,12 +99,23 @@ def _numeric_fields() -> list[tuple[str, str]]:
 
 # ----- checked by value --------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize(("section", "key", "allowed"), ENUMS)
-def test_bad_enum_lists_the_allowed_values(section: str, key: str, allowed: str, tmp_path: Path) -> None:
-    assert _error(tmp_path, f'[{section}]\n{key} = "bogus"\n') == f"[{section}] {key} = 'bogus' is not one of {allowed}"
-    assert _error(tmp_path, f"[{section}]\n{key} = 3\n") == f"[{section}] {key} = 3 is not one of {allowed}"
+def test_bad_enum_lists_the_allowed_values(
+    section: str, key: str, allowed: str, tmp_path: Path
+) -> None:
+    assert (
+        _error(tmp_path, f'[{section}]\n{key} = "bogus"\n')
+        == f"[{section}] {key} = 'bogus' is not one of {allowed}"
+    )
+    assert (
+        _error(tmp_path, f"[{section}]\n{key} = 3\n")
+        == f"[{section}] {key} = 3 is not one of {allowed}"
+    )
     for value in allowed.split(", "):  # each allowed value loads
-        assert getattr(getattr(_load(tmp_path, f"[{section}]\n{key} = {value}\n"), section), key) == value.strip("'")
+        assert getattr(
+            getattr(_load(tmp_path, f"[{section}]\n{key} = {value}\n"), section), key
+        ) == value.strip("'")
 
 
 def test_every_enum_field_is_a_literal() -> None:
@@ -114,7 +129,9 @@ def test_every_enum_field_is_a_literal() -> None:
 @pytest.mark.parametrize(("section", "key"), _numeric_fields())
 def test_string_where_a_number_belongs(section: str, key: str, tmp_path: Path) -> None:
     message = _error(tmp_path, f'[{section}]\n{key} = "abc"\n')
-    assert message.startswith(f"[{section}] {key} must be a number") and message.endswith(", got 'abc'")
+    assert message.startswith(f"[{section}] {key} must be a number") and message.endswith(
+        ", got 'abc'"
+    )
 
 
 def test_numeric_section_list_covers_every_new_section() -> None:
@@ -122,56 +139,106 @@ def test_numeric_section_list_covers_every_new_section() -> None:
     assert {"online", "online.relinearization", "ekf", "iodvlc"} <= sections
 
 
-@pytest.mark.parametrize(("text", "expected"), [
-    ('[dvl]\nnoise_m_s = "abc"\n', "[dvl] noise_m_s must be a number >= 0, got 'abc'"),
-    ("[dvl]\nnoise_m_s = -0.1\n", "[dvl] noise_m_s must be a number >= 0, got -0.1"),
-    ("[priors]\nscale_sigma = 0.0\n", "[priors] scale_sigma must be a number > 0, got 0.0"),
-    ("[priors]\nscale_sigma = nan\n", "[priors] scale_sigma must be a number > 0, got nan"),
-    ("[priors]\nmisalignment_sigma_deg = [1.0, 1.0]\n",
-     "[priors] misalignment_sigma_deg must be a list of 3 numbers > 0, got [1.0, 1.0]"),
-    ("[priors]\nmisalignment_sigma_deg = [1.0, -1.0, 1.0]\n",
-     "[priors] misalignment_sigma_deg must be a list of 3 numbers > 0, got [1.0, -1.0, 1.0]"),
-    ("[alignment]\norigin_lat_deg = 91.0\n",
-     "[alignment] origin_lat_deg must be a number in [-90, 90] or 'none', got 91.0"),
-    ('[alignment]\ninitial_attitude_deg = "level"\n',
-     "[alignment] initial_attitude_deg must be a list of 3 numbers or 'none', got 'level'"),
-    ("[solver]\nmax_iterations = 0\n", "[solver] max_iterations must be an integer >= 1, got 0"),
-    ("[solver]\nmax_iterations = 10.5\n", "[solver] max_iterations must be an integer >= 1, got 10.5"),
-    ('[imu]\nrotation_compensation = "yes"\n', "[imu] rotation_compensation must be true or false, got 'yes'"),
-    ("[imu]\nrotation_compensation = 1\n", "[imu] rotation_compensation must be true or false, got 1"),
-    ("[online]\nwindow_s = 0\n", "[online] window_s must be a number > 0, got 0"),
-    ("[online]\nfinal_updates = -1\n", "[online] final_updates must be an integer >= 0, got -1"),
-    ("[online]\nrelinearization = 1.0\n",
-     "[online] relinearization must be a table [online.relinearization], got 1.0"),
-    ("[online.relinearization]\npose = [1.0, 1.0, 1.0]\n",
-     "[online.relinearization] pose must be a list of 6 numbers > 0, got [1.0, 1.0, 1.0]"),
-    ("[ekf]\nmin_calibration_speed_m_s = -1.0\n", "[ekf] min_calibration_speed_m_s must be a number >= 0, got -1.0"),
-    ('[ekf]\ncalibration_speed_sigmas = "5"\n', "[ekf] calibration_speed_sigmas must be a number >= 0, got '5'"),
-    ("[iodvlc]\naxis_change_deg = 200.0\n", "[iodvlc] axis_change_deg must be a number in (0, 180], got 200.0"),
-    ("[iodvlc]\nnoise_m_s = 0.0\n", "[iodvlc] noise_m_s must be a number > 0 or 'none', got 0.0"),
-    ("[iodvlc]\nearth_terms = 0\n", "[iodvlc] earth_terms must be true or false, got 0"),
-])
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ('[dvl]\nnoise_m_s = "abc"\n', "[dvl] noise_m_s must be a number >= 0, got 'abc'"),
+        ("[dvl]\nnoise_m_s = -0.1\n", "[dvl] noise_m_s must be a number >= 0, got -0.1"),
+        ("[priors]\nscale_sigma = 0.0\n", "[priors] scale_sigma must be a number > 0, got 0.0"),
+        ("[priors]\nscale_sigma = nan\n", "[priors] scale_sigma must be a number > 0, got nan"),
+        (
+            "[priors]\nmisalignment_sigma_deg = [1.0, 1.0]\n",
+            "[priors] misalignment_sigma_deg must be a list of 3 numbers > 0, got [1.0, 1.0]",
+        ),
+        (
+            "[priors]\nmisalignment_sigma_deg = [1.0, -1.0, 1.0]\n",
+            "[priors] misalignment_sigma_deg must be a list of 3 numbers > 0, got [1.0, -1.0, 1.0]",
+        ),
+        (
+            "[alignment]\norigin_lat_deg = 91.0\n",
+            "[alignment] origin_lat_deg must be a number in [-90, 90] or 'none', got 91.0",
+        ),
+        (
+            '[alignment]\ninitial_attitude_deg = "level"\n',
+            "[alignment] initial_attitude_deg must be a list of 3 numbers or 'none', got 'level'",
+        ),
+        (
+            "[solver]\nmax_iterations = 0\n",
+            "[solver] max_iterations must be an integer >= 1, got 0",
+        ),
+        (
+            "[solver]\nmax_iterations = 10.5\n",
+            "[solver] max_iterations must be an integer >= 1, got 10.5",
+        ),
+        (
+            '[imu]\nrotation_compensation = "yes"\n',
+            "[imu] rotation_compensation must be true or false, got 'yes'",
+        ),
+        (
+            "[imu]\nrotation_compensation = 1\n",
+            "[imu] rotation_compensation must be true or false, got 1",
+        ),
+        ("[online]\nwindow_s = 0\n", "[online] window_s must be a number > 0, got 0"),
+        (
+            "[online]\nfinal_updates = -1\n",
+            "[online] final_updates must be an integer >= 0, got -1",
+        ),
+        (
+            "[online]\nrelinearization = 1.0\n",
+            "[online] relinearization must be a table [online.relinearization], got 1.0",
+        ),
+        (
+            "[online.relinearization]\npose = [1.0, 1.0, 1.0]\n",
+            "[online.relinearization] pose must be a list of 6 numbers > 0, got [1.0, 1.0, 1.0]",
+        ),
+        (
+            "[ekf]\nmin_calibration_speed_m_s = -1.0\n",
+            "[ekf] min_calibration_speed_m_s must be a number >= 0, got -1.0",
+        ),
+        (
+            '[ekf]\ncalibration_speed_sigmas = "5"\n',
+            "[ekf] calibration_speed_sigmas must be a number >= 0, got '5'",
+        ),
+        (
+            "[iodvlc]\naxis_change_deg = 200.0\n",
+            "[iodvlc] axis_change_deg must be a number in (0, 180], got 200.0",
+        ),
+        (
+            "[iodvlc]\nnoise_m_s = 0.0\n",
+            "[iodvlc] noise_m_s must be a number > 0 or 'none', got 0.0",
+        ),
+        ("[iodvlc]\nearth_terms = 0\n", "[iodvlc] earth_terms must be true or false, got 0"),
+    ],
+)
 def test_wrong_type_or_range_is_one_clear_line(text: str, expected: str, tmp_path: Path) -> None:
     assert _error(tmp_path, text) == expected
 
 
 def test_unknown_sections_and_keys_still_rejected(tmp_path: Path) -> None:
     assert _error(tmp_path, "[priors]\nscale_sigmaa = 1.0\n").startswith(
-        "unknown key 'scale_sigmaa' in [priors] (known: scale_initial, scale_sigma, ")
+        "unknown key 'scale_sigmaa' in [priors] (known: scale_initial, scale_sigma, "
+    )
     assert _error(tmp_path, "[onlin]\nwindow_s = 1.0\n") == (
         "unknown section [onlin] (known: alignment, calibration, current, depth, dvl, ekf, gnss, imu, iodvlc, noise, "
-        "observability, online, priors, solver)")
+        "observability, online, priors, solver)"
+    )
     assert _error(tmp_path, "[online.relinearization]\nscales = 1.0\n").startswith(
-        "unknown key 'scales' in [online.relinearization] (known: pose, velocity, bias, scale, misalignment_rad)")
-    assert _error(tmp_path, "[ekf]\nmin_speed = 1.0\n").startswith("unknown key 'min_speed' in [ekf]")
+        "unknown key 'scales' in [online.relinearization] (known: pose, velocity, bias, scale, misalignment_rad)"
+    )
+    assert _error(tmp_path, "[ekf]\nmin_speed = 1.0\n").startswith(
+        "unknown key 'min_speed' in [ekf]"
+    )
     assert _error(tmp_path, "bias_model = 'walk'\n").startswith("unknown section [bias_model]")
     assert _error(tmp_path, "imu = 3\n") == "[imu] must be a table of keys, got 3"
 
 
 def test_values_are_normalised_on_load(tmp_path: Path) -> None:
     """An int where a float belongs is that float; lists are tuples; optional fields accept a value."""
-    cfg = _load(tmp_path, "[dvl]\nnoise_m_s = 1\n[alignment]\ninitial_attitude_deg = [3, 0, 10]\n"
-                          "[online.relinearization]\nvelocity = [1, 2, 3]\n[iodvlc]\nnoise_m_s = 0.05\n")
+    cfg = _load(
+        tmp_path,
+        "[dvl]\nnoise_m_s = 1\n[alignment]\ninitial_attitude_deg = [3, 0, 10]\n"
+        "[online.relinearization]\nvelocity = [1, 2, 3]\n[iodvlc]\nnoise_m_s = 0.05\n",
+    )
     assert cfg.dvl.noise_m_s == 1.0 and isinstance(cfg.dvl.noise_m_s, float)
     assert cfg.alignment.initial_attitude_deg == (3.0, 0.0, 10.0)
     assert cfg.online.relinearization.velocity == (1.0, 2.0, 3.0)
@@ -180,18 +247,25 @@ def test_values_are_normalised_on_load(tmp_path: Path) -> None:
     assert _load(tmp_path, '[iodvlc]\nprior_sigma_deg = "none"\n').iodvlc.prior_sigma_deg is None
     assert 'prior_sigma_deg = "none"' in _non_default().to_toml()
     # the rest keeps its defaults
-    assert cfg.online.relinearization.pose == RelinearizationThresholds().pose and cfg.ekf == EkfConfig()
+    assert (
+        cfg.online.relinearization.pose == RelinearizationThresholds().pose
+        and cfg.ekf == EkfConfig()
+    )
 
 
 def test_config_built_in_python_is_validated() -> None:
     cfg = EstimatorConfig()
     cfg.validate()
     cfg.imu.bias_model = "walk"  # type: ignore[assignment]
-    with pytest.raises(GtsamDvlError, match=r"^config: \[imu\] bias_model = 'walk' is not one of 'constant', "):
+    with pytest.raises(
+        GtsamDvlError, match=r"^config: \[imu\] bias_model = 'walk' is not one of 'constant', "
+    ):
         cfg.validate()
     with pytest.raises(GtsamDvlError, match=r"\[online\] window_s must be a number > 0, got -1"):
         OnlineConfig(window_s=-1.0).check()
-    with pytest.raises(GtsamDvlError, match=r"\[iodvlc\] min_beta_m_s must be a number >= 0, got 'x'"):
+    with pytest.raises(
+        GtsamDvlError, match=r"\[iodvlc\] min_beta_m_s must be a number >= 0, got 'x'"
+    ):
         IodvlcConfig(min_beta_m_s="x").validate()  # type: ignore[arg-type]
 
 
@@ -224,6 +298,7 @@ def test_estimators_check_the_config_when_they_start(estimator: str) -> None:
 
 # ----- round trip --------------------------------------------------------------------------------
 
+
 def test_round_trip_through_dict_json_and_toml(tmp_path: Path) -> None:
     for cfg in (EstimatorConfig(), _non_default()):
         d = cfg.to_dict()
@@ -242,7 +317,9 @@ def test_json_of_a_result_reads_back(tmp_path: Path) -> None:
     """`-c` takes the config.json written with a result ({"estimator", "config"}) or a bare config dict."""
     cfg = _non_default()
     wrapped, bare = tmp_path / "config.json", tmp_path / "bare.json"
-    wrapped.write_text(json.dumps({"estimator": "ekf", "config": cfg.to_dict()}, default=str, indent=2))
+    wrapped.write_text(
+        json.dumps({"estimator": "ekf", "config": cfg.to_dict()}, default=str, indent=2)
+    )
     bare.write_text(json.dumps(cfg.to_dict()))
     assert EstimatorConfig.from_toml(wrapped) == cfg == EstimatorConfig.from_toml(bare)
     bad = tmp_path / "bad.json"
@@ -270,6 +347,7 @@ def test_old_names_are_the_config_sections() -> None:
 
 # ----- every option reaches its estimator ----------------------------------------------------------
 
+
 def test_ekf_section_reaches_the_filter() -> None:
     from gtsam_dvl.estimators.ekf import run_ekf
 
@@ -279,18 +357,29 @@ def test_ekf_section_reaches_the_filter() -> None:
     cfg.ekf.min_calibration_speed_m_s = 0.0
     cfg.ekf.calibration_speed_sigmas = 0.0
     never_slow = run_ekf(log, cfg)
-    cfg.ekf.min_calibration_speed_m_s = 10.0  # faster than the vehicle ever goes (or is estimated to go)
+    cfg.ekf.min_calibration_speed_m_s = (
+        10.0  # faster than the vehicle ever goes (or is estimated to go)
+    )
     always_slow = run_ekf(log, cfg)
     counts = [r.info["counters"]["dvl_slow"] for r in (never_slow, base, always_slow)]
-    print("slow pings (never, default, always):", counts, "of", base.info["counters"]["dvl_updates"])
+    print(
+        "slow pings (never, default, always):", counts, "of", base.info["counters"]["dvl_updates"]
+    )
     assert counts[0] < counts[1] < counts[2] == always_slow.info["counters"]["dvl_updates"]
     assert always_slow.scale == cfg.priors.scale_initial  # never updated from its prior
-    assert always_slow.config["ekf"] == {"min_calibration_speed_m_s": 10.0, "calibration_speed_sigmas": 0.0,
-                                         "gate_probability": 0.99999, "gate_reopen_after": 10,
-                                         "recentre_time_offset": True}
+    assert always_slow.config["ekf"] == {
+        "min_calibration_speed_m_s": 10.0,
+        "calibration_speed_sigmas": 0.0,
+        "gate_probability": 0.99999,
+        "gate_reopen_after": 10,
+        "recentre_time_offset": True,
+    }
     # the keyword still works, overrides the config and is written to the effective configuration
     kw = run_ekf(log, cfg, min_calibration_speed_m_s=0.0)
-    assert kw.info["counters"]["dvl_slow"] == counts[0] and kw.config["ekf"]["min_calibration_speed_m_s"] == 0.0
+    assert (
+        kw.info["counters"]["dvl_slow"] == counts[0]
+        and kw.config["ekf"]["min_calibration_speed_m_s"] == 0.0
+    )
     assert cfg.ekf.min_calibration_speed_m_s == 10.0  # the caller's config is not changed
 
 
@@ -299,10 +388,16 @@ def test_online_section_reaches_the_estimator() -> None:
 
     log = _short_log()
     base = smooth_online(log)
-    cfg = EstimatorConfig.paper()  # the log's configuration (its scenario names "paper"), with a shorter window
+    cfg = (
+        EstimatorConfig.paper()
+    )  # the log's configuration (its scenario names "paper"), with a shorter window
     cfg.online.window_s = 5.0
     short = smooth_online(log, cfg)
-    print("window 20 s / 5 s: variables", base.info["isam2"]["variables"], short.info["isam2"]["variables"])
+    print(
+        "window 20 s / 5 s: variables",
+        base.info["isam2"]["variables"],
+        short.info["isam2"]["variables"],
+    )
     assert base.info["window_s"] == 20.0 and short.info["window_s"] == 5.0
     assert short.info["isam2"]["variables"] < base.info["isam2"]["variables"]
     assert short.config["online"]["window_s"] == 5.0
@@ -321,11 +416,17 @@ def test_online_relinearization_section_reaches_isam2(tmp_path: Path) -> None:
 
     log = _short_log()
     base = smooth_online(log)
-    cfg = _load(tmp_path, "preset = \"paper\"\n[online.relinearization]\nscale = 10.0\nmisalignment_rad = 10.0\n"
-                          "velocity = [100.0, 100.0, 100.0]\npose = [10.0, 10.0, 10.0, 1e3, 1e3, 1e3]\n")
+    cfg = _load(
+        tmp_path,
+        'preset = "paper"\n[online.relinearization]\nscale = 10.0\nmisalignment_rad = 10.0\n'
+        "velocity = [100.0, 100.0, 100.0]\npose = [10.0, 10.0, 10.0, 1e3, 1e3, 1e3]\n",
+    )
     loose = smooth_online(log, cfg)
-    print("rebases with the default / loose thresholds:", base.info["isam2"]["rebases"],
-          loose.info["isam2"]["rebases"])
+    print(
+        "rebases with the default / loose thresholds:",
+        base.info["isam2"]["rebases"],
+        loose.info["isam2"]["rebases"],
+    )
     assert loose.info["isam2"]["rebases"] < base.info["isam2"]["rebases"]
     assert loose.config["online"]["relinearization"]["scale"] == 10.0
 
@@ -338,7 +439,9 @@ def test_iodvlc_section_reaches_the_observer(tmp_path: Path) -> None:
     base = run_iodvlc(log)
     cfg = _load(tmp_path, "[iodvlc]\nnoise_m_s = 0.05\n")
     noisy = run_estimator(log, "io-dvlc", cfg)  # what `smooth --mode io-dvlc -c` runs
-    print(f"segments {len(base.segments)}, scale sigma {base.final_scale_sigma:.5f} -> {noisy.final_scale_sigma:.5f}")
+    print(
+        f"segments {len(base.segments)}, scale sigma {base.final_scale_sigma:.5f} -> {noisy.final_scale_sigma:.5f}"
+    )
     assert base.noise_m_s == pytest.approx(0.02, rel=0.05) and noisy.noise_m_s == 0.05
     assert noisy.final_scale_sigma > 2 * base.final_scale_sigma
     cfg.iodvlc.min_segment_s = 1000.0  # longer than the log: no segment
@@ -353,13 +456,18 @@ def test_defaults_are_a_real_dvls_priors_and_paper_is_named() -> None:
     assert cfg.priors.misalignment_sigma_deg == (1.0, 1.0, 1.0)
     assert (paper.priors.scale_initial, paper.priors.scale_sigma) == (0.8, 0.5)
     assert not paper.dvl.estimate_time_offset and cfg.dvl.estimate_time_offset
-    assert paper.model_copy(update={"priors": cfg.priors, "dvl": cfg.dvl, "noise": cfg.noise}) == cfg
+    assert (
+        paper.model_copy(update={"priors": cfg.priors, "dvl": cfg.dvl, "noise": cfg.noise}) == cfg
+    )
     assert not paper.noise.from_data and cfg.noise.from_data
     assert EstimatorConfig.named("default") == cfg
 
 
 def test_unknown_named_configuration_is_one_line() -> None:
-    with pytest.raises(GtsamDvlError, match=r"no configuration named 'papr' \(named configurations: default, paper\)"):
+    with pytest.raises(
+        GtsamDvlError,
+        match=r"no configuration named 'papr' \(named configurations: default, paper\)",
+    ):
         EstimatorConfig.named("papr")
     with pytest.raises(GtsamDvlError, match="not a named configuration"):
         EstimatorConfig.load("papr")
@@ -383,7 +491,10 @@ def test_a_log_names_its_configuration() -> None:
     assert load_scenario("paper-3d").estimator_config == "paper"
     assert load_scenario("paper-2d").estimator_config == "paper"
     assert load_scenario("straight-20km").estimator_config == "default"
-    assert EstimatorConfig.for_log({"scenario": {"estimator_config": "paper"}}) == EstimatorConfig.paper()
+    assert (
+        EstimatorConfig.for_log({"scenario": {"estimator_config": "paper"}})
+        == EstimatorConfig.paper()
+    )
     assert EstimatorConfig.for_log({}) == EstimatorConfig()
     assert EstimatorConfig.for_log({"scenario": "not a table"}) == EstimatorConfig()
 
@@ -398,11 +509,23 @@ FIXTURES = Path(__file__).parent / "config_fixtures"
 # noise_multiplier), the sensor presets ([imu] / [dvl] model), the DVL's correlated error and the mounting
 # tolerance. A file without them takes their defaults (the fit on, no preset), also a paper configuration's; but a
 # result's config.json without the correlated error takes it as white, as the runs that wrote it did (test below)
-ADDED = {"noise": None, "current": None, "calibration": None, "imu": {"model"},
-         "dvl": {"noise_multiplier", "model", "correlated_sigma_m_s", "correlated_tau_s", "constant_error_sigma_m_s"},
-         "priors": {"mounting_tolerance_deg", "hold_weak_information", "nominal_check"},
-         "ekf": {"recentre_time_offset"},
-         "depth": {"noise_multiplier"}, "gnss": {"noise_multiplier"}}
+ADDED = {
+    "noise": None,
+    "current": None,
+    "calibration": None,
+    "imu": {"model"},
+    "dvl": {
+        "noise_multiplier",
+        "model",
+        "correlated_sigma_m_s",
+        "correlated_tau_s",
+        "constant_error_sigma_m_s",
+    },
+    "priors": {"mounting_tolerance_deg", "hold_weak_information", "nominal_check"},
+    "ekf": {"recentre_time_offset"},
+    "depth": {"noise_multiplier"},
+    "gnss": {"noise_multiplier"},
+}
 
 
 def _without_added(d: dict) -> dict:  # type: ignore[type-arg]
@@ -438,11 +561,15 @@ def test_defaults_are_those_written_before() -> None:
 def test_result_config_json_written_before_loads() -> None:
     path = FIXTURES / "result_config_paper.json"
     cfg = EstimatorConfig.load(path)
-    assert cfg.current.water_track == "refuse"  # written before water-track pings were used: its runs refused them
+    assert (
+        cfg.current.water_track == "refuse"
+    )  # written before water-track pings were used: its runs refused them
     paper = EstimatorConfig.paper()
     assert cfg.priors.hold_weak_information == 0.0  # written before the hold: its runs held nothing
     assert not cfg.priors.nominal_check  # nor checked the nominal calibration
-    assert cfg.dvl.constant_error_sigma_m_s == 0.0  # nor gave the calibration a constant DVL error's share
+    assert (
+        cfg.dvl.constant_error_sigma_m_s == 0.0
+    )  # nor gave the calibration a constant DVL error's share
     assert cfg.model_copy(update={"noise": paper.noise, "current": paper.current}) == paper
     assert _without_added(cfg.to_dict()) == _tuples(json.loads(path.read_text())["config"])
 
@@ -457,34 +584,49 @@ def test_config_json_without_the_correlated_error_repeats_a_white_dvl(tmp_path: 
     assert EstimatorConfig.load(old).dvl.correlated_sigma_m_s == 0.0
     toml = tmp_path / "mine.toml"
     toml.write_text("[dvl]\nnoise_m_s = 0.007\n")
-    assert EstimatorConfig.load(toml).dvl.correlated_sigma_m_s == EstimatorConfig().dvl.correlated_sigma_m_s > 0
+    assert (
+        EstimatorConfig.load(toml).dvl.correlated_sigma_m_s
+        == EstimatorConfig().dvl.correlated_sigma_m_s
+        > 0
+    )
 
 
 def test_toml_written_before_loads_and_writes_back_the_same_text() -> None:
     text = (FIXTURES / "paper_modified.toml").read_text()
     cfg = EstimatorConfig.load(FIXTURES / "paper_modified.toml")
     assert cfg == EstimatorConfig.from_json(FIXTURES / "paper_modified.json")
-    assert (cfg.alignment.initial_attitude_deg, cfg.iodvlc.noise_m_s, cfg.iodvlc.prior_sigma_deg) == (
-        (1.0, 2.0, 3.0), None, None)
+    assert (
+        cfg.alignment.initial_attitude_deg,
+        cfg.iodvlc.noise_m_s,
+        cfg.iodvlc.prior_sigma_deg,
+    ) == ((1.0, 2.0, 3.0), None, None)
     assert _lines_in_order(text, cfg.to_toml())
     assert EstimatorConfig.from_dict(tomllib.loads(cfg.to_toml())) == cfg
 
 
-@pytest.mark.parametrize("path", sorted((Path(__file__).parents[2] / "data" / "scenarios").glob("*.toml")),
-                         ids=lambda p: p.stem)
+@pytest.mark.parametrize(
+    "path",
+    sorted((Path(__file__).parents[2] / "data" / "scenarios").glob("*.toml")),
+    ids=lambda p: p.stem,
+)
 def test_every_scenarios_configuration_loads(path: Path) -> None:
     scenario = load_scenario(path.stem)
-    assert EstimatorConfig.for_log({"scenario": {"estimator_config": scenario.estimator_config}}) == (
-        EstimatorConfig.named(scenario.estimator_config))
+    assert EstimatorConfig.for_log(
+        {"scenario": {"estimator_config": scenario.estimator_config}}
+    ) == (EstimatorConfig.named(scenario.estimator_config))
 
 
 def test_error_names_the_bad_table_of_a_section(tmp_path: Path) -> None:
     """A section's constructor, and validate() after an assignment, give the same one line as a file."""
-    with pytest.raises(GtsamDvlError, match=r"^config: \[priors\] scale_sigma must be a number > 0, got -1.0$"):
+    with pytest.raises(
+        GtsamDvlError, match=r"^config: \[priors\] scale_sigma must be a number > 0, got -1.0$"
+    ):
         EstimatorConfig(priors={"scale_sigma": -1.0})
     cfg = EstimatorConfig()
     cfg.online.relinearization.velocity = [0.1, 0.1]  # type: ignore[assignment]
-    with pytest.raises(GtsamDvlError, match=r"^config: \[online.relinearization\] velocity must be a list of 3 "):
+    with pytest.raises(
+        GtsamDvlError, match=r"^config: \[online.relinearization\] velocity must be a list of 3 "
+    ):
         cfg.validate()
     cfg.online.relinearization.velocity = [1, 2, 3]  # type: ignore[assignment]
     assert cfg.validate().online.relinearization.velocity == (1.0, 2.0, 3.0)  # normalised in place

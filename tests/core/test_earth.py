@@ -16,7 +16,9 @@ def test_normal_gravity_matches_wgs84_published_values() -> None:
     g_eq = float(earth.normal_gravity(0.0, 0.0))
     g_pole = float(earth.normal_gravity(np.pi / 2, 0.0))
     g_south = float(earth.normal_gravity(-np.pi / 2, 0.0))
-    print(f"gamma_e error {g_eq - 9.7803253359:.3e}, gamma_p error {g_pole - 9.8321849378:.3e} m/s^2")
+    print(
+        f"gamma_e error {g_eq - 9.7803253359:.3e}, gamma_p error {g_pole - 9.8321849378:.3e} m/s^2"
+    )
     assert abs(g_eq - 9.7803253359) < 1e-9
     assert abs(g_pole - 9.8321849378) < 1e-9
     assert abs(g_south - g_pole) < 1e-12
@@ -40,7 +42,9 @@ def test_radii_of_curvature_closed_forms() -> None:
 
 def test_ecef_geodetic_round_trip_including_poles() -> None:
     rng = np.random.default_rng(1)
-    lat = np.concatenate([rng.uniform(-np.pi / 2, np.pi / 2, 2000), [np.pi / 2, -np.pi / 2, 0.0, 1e-9]])
+    lat = np.concatenate(
+        [rng.uniform(-np.pi / 2, np.pi / 2, 2000), [np.pi / 2, -np.pi / 2, 0.0, 1e-9]]
+    )
     lon = rng.uniform(-np.pi, np.pi, lat.size)
     h = rng.uniform(-6000.0, 20000.0, lat.size)
     e_p = earth.geodetic_to_ecef(lat, lon, h)
@@ -70,7 +74,9 @@ def test_map_geodetic_round_trip_and_axes() -> None:
     r_n, r_e = earth.radii_of_curvature(frame.lat0)
     d = 1e-7
     north = frame.geodetic_to_map(frame.lat0 + d, frame.lon0, -100.0) / (d * (r_n - 100.0))
-    east = frame.geodetic_to_map(frame.lat0, frame.lon0 + d, -100.0) / (d * (r_e - 100.0) * np.cos(frame.lat0))
+    east = frame.geodetic_to_map(frame.lat0, frame.lon0 + d, -100.0) / (
+        d * (r_e - 100.0) * np.cos(frame.lat0)
+    )
     up = frame.geodetic_to_map(frame.lat0, frame.lon0, -99.0)
     print(f"north {north}, east {east}, up {up}")
     np.testing.assert_allclose(north, [0, 1, 0], atol=1e-6)

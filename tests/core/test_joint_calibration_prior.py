@@ -23,27 +23,41 @@ NAMES = ("scale", "misalignment", "time_offset", "lever_arm")
 def _calibration(names: tuple[str, ...] = NAMES, seed: int = 0) -> VehicleCalibration:
     """Values near the mounting and a covariance with strong correlations (SI; the misalignment's right tangent)."""
     rng = np.random.default_rng(seed)
-    values = {"scale": np.array([1.0021]), "misalignment": MOUNTING.b_R_d0 @ rpy_deg_to_matrix([0.3, -0.2, 0.7]),
-              "time_offset": np.array([-0.12]), "lever_arm": np.array([0.4, -0.1, 0.2])}
-    sig = {"scale": [3e-4], "misalignment": np.radians([0.05, 0.08, 0.3]), "time_offset": [0.01],
-           "lever_arm": [0.05, 0.05, 0.08]}
+    values = {
+        "scale": np.array([1.0021]),
+        "misalignment": MOUNTING.b_R_d0 @ rpy_deg_to_matrix([0.3, -0.2, 0.7]),
+        "time_offset": np.array([-0.12]),
+        "lever_arm": np.array([0.4, -0.1, 0.2]),
+    }
+    sig = {
+        "scale": [3e-4],
+        "misalignment": np.radians([0.05, 0.08, 0.3]),
+        "time_offset": [0.01],
+        "lever_arm": [0.05, 0.05, 0.08],
+    }
     s = np.concatenate([sig[n] for n in names])
     corr = rng.normal(size=(len(s), len(s)))
     corr = corr @ corr.T + len(s) * np.eye(len(s))
     d = np.sqrt(np.diag(corr))
     cov = np.diag(s) @ (corr / np.outer(d, d)) @ np.diag(s)
-    return VehicleCalibration("auv-1", "2026-11-02T10:15:00Z", names, {n: values[n] for n in names}, cov)
+    return VehicleCalibration(
+        "auv-1", "2026-11-02T10:15:00Z", names, {n: values[n] for n in names}, cov
+    )
 
 
 def _config(offset: bool = True, lever: bool = True) -> EstimatorConfig:
-    return EstimatorConfig.from_dict({"dvl": {"estimate_time_offset": offset, "estimate_lever_arm": lever}})
+    return EstimatorConfig.from_dict(
+        {"dvl": {"estimate_time_offset": offset, "estimate_lever_arm": lever}}
+    )
 
 
 def _perturbed(values: gtsam.Values, d: dict[str, np.ndarray]) -> gtsam.Values:
     """values with each state moved by d (a vector's difference; the rotation on the right, b_R_d Exp(d))."""
     out = gtsam.Values(values)
     out.update(K_SCALE, values.atVector(K_SCALE) + d["scale"])
-    out.update(C_MISALIGN, gtsam.Rot3(values.atRot3(C_MISALIGN).matrix() @ so3_exp(d["misalignment"])))
+    out.update(
+        C_MISALIGN, gtsam.Rot3(values.atRot3(C_MISALIGN).matrix() @ so3_exp(d["misalignment"]))
+    )
     out.update(T_OFFSET, values.atVector(T_OFFSET) + d["time_offset"])
     out.update(L_LEVER, values.atVector(L_LEVER) + d["lever_arm"])
     return out
@@ -58,7 +72,9 @@ def test_one_joint_prior_replaces_the_configured_ones_and_starts_at_the_file() -
     read = states.read_values(values, cfg)
     for n in NAMES:
         np.testing.assert_array_equal(read[n], cal.values[n])
-    np.testing.assert_array_equal(read["accel_bias"], np.zeros(3))  # the others at their configured priors
+    np.testing.assert_array_equal(
+        read["accel_bias"], np.zeros(3)
+    )  # the others at their configured priors
     # without a calibration: the configuration's, one prior per key
     assert len(states.prior_factors(cfg, MOUNTING)) == 5
 
@@ -73,8 +89,10 @@ def test_joint_prior_is_the_exact_gaussian_about_the_file_values() -> None:
     assert factor.error(values) == pytest.approx(0.0, abs=1e-18)
     rng = np.random.default_rng(3)
     for scale in (1.0, 30.0):  # within the sigmas, and far out (0.2 rad of rotation)
-        d = {n: scale * rng.normal(size=sl.stop - sl.start) * np.sqrt(np.diag(cal.cov)[sl])
-             for n, sl in cal.slices().items()}
+        d = {
+            n: scale * rng.normal(size=sl.stop - sl.start) * np.sqrt(np.diag(cal.cov)[sl])
+            for n, sl in cal.slices().items()
+        }
         moved = _perturbed(values, d)
         delta = np.concatenate([d[n] for n in NAMES])
         expected = 0.5 * delta @ np.linalg.solve(cal.cov, delta)
@@ -120,13 +138,19 @@ def test_states_not_estimated_leave_their_marginal_block() -> None:
     only_scale = _calibration(("scale",))
     keys = sorted(tuple(f.keys()) for f in states.prior_factors(cfg, MOUNTING, only_scale))
     assert keys == sorted([(B(0),), (K_SCALE,), (C_MISALIGN,)])
-    assert states.read_values(states.initial_values(cfg, MOUNTING, only_scale), cfg)["misalignment"] == \
-        pytest.approx(MOUNTING.b_R_d0)
+    assert states.read_values(states.initial_values(cfg, MOUNTING, only_scale), cfg)[
+        "misalignment"
+    ] == pytest.approx(MOUNTING.b_R_d0)
 
 
 def test_a_key_held_in_part_is_refused() -> None:
-    cal = VehicleCalibration("auv-1", "2026-11-02T10:15:00Z", ("accel_bias",), {"accel_bias": np.zeros(3)},
-                             np.eye(3) * 1e-8)
+    cal = VehicleCalibration(
+        "auv-1",
+        "2026-11-02T10:15:00Z",
+        ("accel_bias",),
+        {"accel_bias": np.zeros(3)},
+        np.eye(3) * 1e-8,
+    )
     with pytest.raises(GtsamDvlError, match="holds part of the gyro bias's variable"):
         states.prior_factors(_config(), MOUNTING, cal)
 
@@ -143,10 +167,17 @@ def test_from_result_without_the_shared_joint_keeps_the_calibration_block() -> N
     cal = _calibration(("scale", "misalignment", "time_offset"))
     block = np.eye(10) * 1e-9
     block[6:, 6:] = cal.block(["scale", "misalignment"])
-    result = SimpleNamespace(calibration={n: Estimate(cal.values[n], cal.block([n])) for n in cal.states},
-                             shared_joint_cov=None, calib_joint_cov=block, t0_ns=0, config={})
+    result = SimpleNamespace(
+        calibration={n: Estimate(cal.values[n], cal.block([n])) for n in cal.states},
+        shared_joint_cov=None,
+        calib_joint_cov=block,
+        t0_ns=0,
+        config={},
+    )
     out = from_result(result, cfg, "auv-1")
     assert out.states == cal.states
-    np.testing.assert_allclose(out.block(["scale", "misalignment"]), cal.block(["scale", "misalignment"]))
+    np.testing.assert_allclose(
+        out.block(["scale", "misalignment"]), cal.block(["scale", "misalignment"])
+    )
     np.testing.assert_allclose(out.block(["time_offset"]), cal.block(["time_offset"]))
     assert np.all(out.cov[:4, 4] == 0.0)

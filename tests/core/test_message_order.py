@@ -11,7 +11,11 @@ from gtsam_dvl.core.types import LogData
 def _stamps(log: LogData) -> list[tuple[float, str, int]]:
     out: list[tuple[float, str, int]] = []
     for m in log_messages(log):
-        t = {"imu": log.imu.t, "dvl": log.dvl.t, "depth": log.depth.t if log.depth is not None else None}[m.kind]
+        t = {
+            "imu": log.imu.t,
+            "dvl": log.dvl.t,
+            "depth": log.depth.t if log.depth is not None else None,
+        }[m.kind]
         assert t is not None
         assert m.stop > m.start
         out.extend((float(t[i]), m.kind, i) for i in range(m.start, m.stop))
@@ -38,4 +42,4 @@ def test_sample_stamped_like_a_ping_comes_first(sim_paper3d_clean: LogData) -> N
         assert at_ping.index("imu") < at_ping.index("dvl")
     # every IMU sample stamped at or before the ping is delivered before it
     pos_ping = next(n for n, s in enumerate(seen) if s[1] == "dvl" and s[2] == 3)
-    assert all(s[0] > t_ping for s in seen[pos_ping + 1:] if s[1] == "imu")
+    assert all(s[0] > t_ping for s in seen[pos_ping + 1 :] if s[1] == "imu")

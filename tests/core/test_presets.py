@@ -49,7 +49,9 @@ def test_every_dvl_preset_loads_and_fills_the_dvl_section_and_the_scale_prior(na
     assert cfg.dvl.correlated_tau_s == preset.correlated_tau_s
     # one beam of a four-beam Janus: a horizontal axis is (b1 - b2) / (2 sin(angle))
     sin = math.sin(math.radians(preset.beam_angle_deg))
-    assert cfg.dvl.beam_noise_m_s * math.sqrt(2 * (2 * sin) ** -2) == pytest.approx(preset.ping_noise_m_s, rel=1e-5)
+    assert cfg.dvl.beam_noise_m_s * math.sqrt(2 * (2 * sin) ** -2) == pytest.approx(
+        preset.ping_noise_m_s, rel=1e-5
+    )
     assert 0 < preset.min_altitude_m < preset.max_altitude_m
     assert 0 < preset.scale_accuracy < 0.05 and 0.001 <= preset.ping_noise_m_s <= 0.05
     assert cfg.imu == EstimatorConfig().imu
@@ -60,23 +62,31 @@ def test_unit_conversions_of_datasheet_figures() -> None:
     # 0.125 deg/sqrt(h) = 0.125 deg / sqrt(3600 s) per sqrt(s) = 7.5 deg/h/sqrt(Hz)
     assert arw_to_density(0.125) == pytest.approx(0.125 / math.sqrt(3600.0) * 3600.0)
     # 0.065 ft/s/sqrt(h) (the HG1700's VRW): 3.302e-4 m/s^2/sqrt(Hz) = 33.67 micro-g/sqrt(Hz)
-    assert vrw_to_density(0.065 * 0.3048) == pytest.approx(0.065 * 0.3048 / 60.0 / 9.80665 * 1e6, rel=1e-5)
+    assert vrw_to_density(0.065 * 0.3048) == pytest.approx(
+        0.065 * 0.3048 / 60.0 / 9.80665 * 1e6, rel=1e-5
+    )
     assert vrw_to_density(0.065 * 0.3048) == pytest.approx(33.67, abs=0.01)
 
 
 def test_explicit_values_win_over_the_preset() -> None:
-    cfg = EstimatorConfig.from_dict({
-        "imu": {"model": "honeywell-hg1700", "gyro_noise_deg_per_h_rthz": 2.5},
-        "dvl": {"model": "teledyne-pathfinder", "default_noise_m_s": 0.015},
-        "priors": {"scale_sigma": 0.02},
-    })
+    cfg = EstimatorConfig.from_dict(
+        {
+            "imu": {"model": "honeywell-hg1700", "gyro_noise_deg_per_h_rthz": 2.5},
+            "dvl": {"model": "teledyne-pathfinder", "default_noise_m_s": 0.015},
+            "priors": {"scale_sigma": 0.02},
+        }
+    )
     assert cfg.imu.gyro_noise_deg_per_h_rthz == 2.5  # explicit
-    assert cfg.imu.accel_bias_sigma_ug == IMU_PRESETS["honeywell-hg1700"].accel_bias_stability_ug  # from the preset
+    assert (
+        cfg.imu.accel_bias_sigma_ug == IMU_PRESETS["honeywell-hg1700"].accel_bias_stability_ug
+    )  # from the preset
     assert cfg.dvl.default_noise_m_s == 0.015
     assert cfg.priors.scale_sigma == 0.02
     # an explicit value equal to the default is explicit too
     default_sigma = EstimatorConfig().priors.scale_sigma
-    cfg = EstimatorConfig.from_dict({"dvl": {"model": "teledyne-tasman"}, "priors": {"scale_sigma": default_sigma}})
+    cfg = EstimatorConfig.from_dict(
+        {"dvl": {"model": "teledyne-tasman"}, "priors": {"scale_sigma": default_sigma}}
+    )
     assert cfg.priors.scale_sigma == default_sigma != DVL_PRESETS["teledyne-tasman"].scale_accuracy
 
 
@@ -94,29 +104,44 @@ def test_unknown_model_is_one_line_naming_the_known_ones() -> None:
     assert "\n" not in text and text.startswith("cfg.toml: [imu] model")
     assert "'kvh-9999'" in text and all(f"'{n}'" in text for n in IMU_PRESETS)
     with pytest.raises(GtsamDvlError) as err:
-        EstimatorConfig.from_dict({"dvl": {"model": "kvh-1750"}}, source="cfg.toml")  # an IMU is no DVL
+        EstimatorConfig.from_dict(
+            {"dvl": {"model": "kvh-1750"}}, source="cfg.toml"
+        )  # an IMU is no DVL
     assert "\n" not in str(err.value) and all(f"'{n}'" in str(err.value) for n in DVL_PRESETS)
-    with pytest.raises(GtsamDvlError, match=r"^no preset 'nope' \(known: ixblue-phins, .*sonardyne-syrinx\)$"):
+    with pytest.raises(
+        GtsamDvlError, match=r"^no preset 'nope' \(known: ixblue-phins, .*sonardyne-syrinx\)$"
+    ):
         describe_preset("nope")
 
 
 def test_mounting_tolerance_is_the_misalignment_prior_unless_that_is_set() -> None:
     cfg = EstimatorConfig.from_dict({"priors": {"mounting_tolerance_deg": 0.5}})
     assert cfg.priors.misalignment_sigma_deg == (0.5, 0.5, 0.5)
-    cfg = EstimatorConfig.from_dict({"priors": {"mounting_tolerance_deg": 0.5,
-                                                "misalignment_sigma_deg": [0.2, 0.3, 2.0]}})
+    cfg = EstimatorConfig.from_dict(
+        {"priors": {"mounting_tolerance_deg": 0.5, "misalignment_sigma_deg": [0.2, 0.3, 2.0]}}
+    )
     assert cfg.priors.misalignment_sigma_deg == (0.2, 0.3, 2.0)
-    assert EstimatorConfig().priors.misalignment_sigma_deg == (1.0, 1.0, 1.0)  # none set: the default
-    with pytest.raises(GtsamDvlError, match=r"\[priors\] mounting_tolerance_deg must be a number > 0"):
+    assert EstimatorConfig().priors.misalignment_sigma_deg == (
+        1.0,
+        1.0,
+        1.0,
+    )  # none set: the default
+    with pytest.raises(
+        GtsamDvlError, match=r"\[priors\] mounting_tolerance_deg must be a number > 0"
+    ):
         EstimatorConfig.from_dict({"priors": {"mounting_tolerance_deg": -1.0}})
 
 
-def test_a_model_set_in_python_takes_effect_on_validate_and_unsetting_it_restores_the_defaults() -> None:
+def test_a_model_set_in_python_takes_effect_on_validate_and_unsetting_it_restores_the_defaults() -> (
+    None
+):
     cfg, default = EstimatorConfig(), EstimatorConfig()
     cfg.imu.model, cfg.dvl.model = "adis16495", "teledyne-tasman"
     cfg.priors.mounting_tolerance_deg = 0.3
     cfg.validate()
-    assert cfg.imu.gyro_bias_sigma_deg_per_h == IMU_PRESETS["adis16495"].gyro_bias_stability_deg_per_h
+    assert (
+        cfg.imu.gyro_bias_sigma_deg_per_h == IMU_PRESETS["adis16495"].gyro_bias_stability_deg_per_h
+    )
     assert cfg.priors.scale_sigma == DVL_PRESETS["teledyne-tasman"].scale_accuracy
     assert cfg.priors.misalignment_sigma_deg == (0.3, 0.3, 0.3)
     cfg.imu.model = cfg.dvl.model = cfg.priors.mounting_tolerance_deg = None
@@ -126,11 +151,13 @@ def test_a_model_set_in_python_takes_effect_on_validate_and_unsetting_it_restore
 
 @pytest.mark.parametrize("via", ["toml", "json"])
 def test_configuration_with_presets_reads_back_to_the_same_values(via: str, tmp_path: Path) -> None:
-    cfg = EstimatorConfig.from_dict({
-        "imu": {"model": "kvh-1775", "accel_bias_sigma_ug": 77.0},
-        "dvl": {"model": "teledyne-workhorse-navigator-600"},
-        "priors": {"mounting_tolerance_deg": 0.5},
-    })
+    cfg = EstimatorConfig.from_dict(
+        {
+            "imu": {"model": "kvh-1775", "accel_bias_sigma_ug": 77.0},
+            "dvl": {"model": "teledyne-workhorse-navigator-600"},
+            "priors": {"mounting_tolerance_deg": 0.5},
+        }
+    )
     if via == "toml":
         text = cfg.to_toml()
         assert 'model = "kvh-1775"' in text and "mounting_tolerance_deg = 0.5" in text
@@ -141,7 +168,9 @@ def test_configuration_with_presets_reads_back_to_the_same_values(via: str, tmp_
         again = EstimatorConfig.load(path)
     assert again == cfg
     assert again.to_toml() == cfg.to_toml()
-    assert again.priors.scale_sigma == DVL_PRESETS["teledyne-workhorse-navigator-600"].scale_accuracy
+    assert (
+        again.priors.scale_sigma == DVL_PRESETS["teledyne-workhorse-navigator-600"].scale_accuracy
+    )
     assert again.imu.accel_bias_sigma_ug == 77.0
 
 
@@ -164,11 +193,21 @@ def test_presets_command_lists_every_preset_and_describes_one() -> None:
 
 def test_docs_table_has_every_preset_with_its_values() -> None:
     text = (Path(__file__).resolve().parents[2] / "docs" / "sensors.md").read_text()
-    rows = {line.split("|")[1].strip().strip("`"): [c.strip() for c in line.split("|")[3:-2]]
-            for line in text.splitlines() if line.startswith("| `")}
+    rows = {
+        line.split("|")[1].strip().strip("`"): [c.strip() for c in line.split("|")[3:-2]]
+        for line in text.splitlines()
+        if line.startswith("| `")
+    }
     for name, p in IMU_PRESETS.items():
-        assert rows[name] == [f"{p.gyro_noise_deg_per_h_rthz:g}", f"{p.accel_noise_ug_rthz:g}",
-                              f"{p.gyro_bias_stability_deg_per_h:g}", f"{p.accel_bias_stability_ug:g}"], name
+        assert rows[name] == [
+            f"{p.gyro_noise_deg_per_h_rthz:g}",
+            f"{p.accel_noise_ug_rthz:g}",
+            f"{p.gyro_bias_stability_deg_per_h:g}",
+            f"{p.accel_bias_stability_ug:g}",
+        ], name
     for name, d in DVL_PRESETS.items():
-        assert rows[name][:3] == [f"{d.ping_noise_m_s * 1000:g}", f"{d.scale_accuracy * 100:g}",
-                                  f"{d.min_altitude_m:g}-{d.max_altitude_m:g}"], name
+        assert rows[name][:3] == [
+            f"{d.ping_noise_m_s * 1000:g}",
+            f"{d.scale_accuracy * 100:g}",
+            f"{d.min_altitude_m:g}-{d.max_altitude_m:g}",
+        ], name

@@ -48,7 +48,11 @@ def test_step_of_a_quantised_gyro_within_1e_6(seed: int, q: float) -> None:
 def test_step_of_an_accelerometer_stored_as_float32(seed: int, q: float) -> None:
     """float32 stores 9.8 to 9.5e-7: k q is off its grid by up to 0.5 % of a 1e-4 step, and the spacings between
     levels are 104 or 105 float32 units."""
-    x = quantised(accelerometer_z(np.random.default_rng(seed)), q).astype(np.float32).astype(np.float64)
+    x = (
+        quantised(accelerometer_z(np.random.default_rng(seed)), q)
+        .astype(np.float32)
+        .astype(np.float64)
+    )
     step = quantisation_step(x)
     assert step is not None and step == pytest.approx(q, rel=1e-6)
 
@@ -97,9 +101,16 @@ def test_static_gyro_with_noise_below_the_step() -> None:
 
 def test_imu_quantisation_per_axis() -> None:
     rng = np.random.default_rng(6)
-    b_omega = np.column_stack([quantised(moving_gyro(rng), 1e-4), moving_gyro(rng), quantised(moving_gyro(rng), 1e-5)])
-    b_f = np.column_stack([quantised(accelerometer_z(rng) - 9.8, 1e-4), accelerometer_z(rng),
-                           quantised(accelerometer_z(rng), 1e-4)])
+    b_omega = np.column_stack(
+        [quantised(moving_gyro(rng), 1e-4), moving_gyro(rng), quantised(moving_gyro(rng), 1e-5)]
+    )
+    b_f = np.column_stack(
+        [
+            quantised(accelerometer_z(rng) - 9.8, 1e-4),
+            accelerometer_z(rng),
+            quantised(accelerometer_z(rng), 1e-4),
+        ]
+    )
     gyro, accel = imu_quantisation(b_omega, b_f)
     np.testing.assert_allclose(gyro[[0, 2]], [1e-4, 1e-5], rtol=1e-6)
     np.testing.assert_allclose(accel[[0, 2]], [1e-4, 1e-4], rtol=1e-6)
@@ -113,7 +124,9 @@ def test_quantisation_density() -> None:
     assert quantisation_density(1e-4, 100.0) / DEG_PER_H == pytest.approx(0.5955, abs=5e-4)
     x = accelerometer_z(np.random.default_rng(7))
     error = quantised(x, 1e-4) - x
-    assert np.std(error) / np.sqrt(RATE_HZ) == pytest.approx(quantisation_density(1e-4, RATE_HZ), rel=0.02)
+    assert np.std(error) / np.sqrt(RATE_HZ) == pytest.approx(
+        quantisation_density(1e-4, RATE_HZ), rel=0.02
+    )
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -123,7 +136,9 @@ def test_allan_deviation_of_white_noise(seed: int) -> None:
     1.5 N / sqrt(longest tau) / 0.664 (white noise has no floor: the curve falls to the longest tau)."""
     rng = np.random.default_rng(seed)
     density = 2e-3
-    x = 5.0 + rng.normal(0.0, density * np.sqrt(RATE_HZ), N)  # a constant offset (Earth rate, gravity) is removed
+    x = 5.0 + rng.normal(
+        0.0, density * np.sqrt(RATE_HZ), N
+    )  # a constant offset (Earth rate, gravity) is removed
     taus, adev = allan_deviation(x, RATE_HZ)
     short = taus <= 0.1
     np.testing.assert_allclose(adev[short], density / np.sqrt(taus[short]), rtol=0.03)
@@ -153,7 +168,9 @@ def test_gauss_markov_fit_over_seeds() -> None:
     for seed in seeds:
         rng = np.random.default_rng(seed)
         t = np.arange(3600.0)
-        fit = gauss_markov_fit(t, rng.normal(0.0, 0.007, 3600) + gauss_markov(3600, 1.0, 0.003, 60.0, rng), 1.0)
+        fit = gauss_markov_fit(
+            t, rng.normal(0.0, 0.007, 3600) + gauss_markov(3600, 1.0, 0.003, 60.0, rng), 1.0
+        )
         sg_ok += abs(fit.gm_sigma / 0.003 - 1.0) < 0.3
         tau_ok += 0.5 < fit.gm_tau_s / 60.0 < 2.0
         sw_ok += abs(fit.white_sigma / 0.007 - 1.0) < 0.05
@@ -170,7 +187,9 @@ def test_gauss_markov_fit_with_gaps_and_pooled_axes() -> None:
     and tau within a factor 2 (seed 3), sw within 5 %."""
     rng = np.random.default_rng(3)
     n = 3600
-    r = np.column_stack([rng.normal(0.0, 0.007, n) + gauss_markov(n, 1.0, 0.003, 60.0, rng) for _ in range(3)])
+    r = np.column_stack(
+        [rng.normal(0.0, 0.007, n) + gauss_markov(n, 1.0, 0.003, 60.0, rng) for _ in range(3)]
+    )
     keep = rng.random(n) > 0.1
     t = np.arange(n, dtype=float) + rng.normal(0.0, 0.02, n)
     fit = gauss_markov_fit(t[keep], r[keep], 1.0)
@@ -189,8 +208,12 @@ def test_gauss_markov_fit_on_a_short_record_with_the_mean_allowed_for() -> None:
     plain, corrected, taus = [], [], []
     for seed in range(20):
         rng = np.random.default_rng(seed)
-        r = np.column_stack([rng.normal(0.0, 0.007, 400) + gauss_markov(400, 1.0, 0.002, 60.0, rng)
-                             for _ in range(3)])
+        r = np.column_stack(
+            [
+                rng.normal(0.0, 0.007, 400) + gauss_markov(400, 1.0, 0.002, 60.0, rng)
+                for _ in range(3)
+            ]
+        )
         t = np.arange(400.0)
         plain.append(gauss_markov_fit(t, r, 1.0).gm_sigma)
         fit = gauss_markov_fit(t, r, 1.0, mean_corrected=True)

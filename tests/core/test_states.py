@@ -17,11 +17,11 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, K_WATER, L_LEVER, T_OFFSET,
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import Alignment
 from gtsam_dvl.estimators.ekf import strapdown
 from gtsam_dvl.estimators.ekf.filter import initial_state
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.graph import LogGraph
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.inputs.alignment import Alignment
 from gtsam_dvl.estimators.online.window import IncrementalSmoother
 
 EXPECTED = {  # name: key, dimension, unit, display unit, display per unit, vehicle property
@@ -36,37 +36,71 @@ EXPECTED = {  # name: key, dimension, unit, display unit, display per unit, vehi
 
 
 def _config(offset: bool, lever: bool, random_walk: bool = False) -> EstimatorConfig:
-    cfg = EstimatorConfig.from_dict({
-        "imu": {"gyro_bias_sigma_deg_per_h": 0.03, "accel_bias_sigma_ug": 70.0,
-                "bias_model": "random_walk" if random_walk else "constant"},
-        "priors": {"scale_initial": 0.9, "scale_sigma": 0.2, "misalignment_sigma_deg": [1.0, 2.0, 3.0]},
-        "dvl": {"estimate_time_offset": offset, "estimate_lever_arm": lever, "time_offset_prior_s": 0.3,
-                "time_offset_sigma_s": 0.7, "lever_arm_sigma_m": 0.4},
-        "observability": {"scale_ppm": 500.0, "misalignment_deg": 0.2, "accel_bias_ug": 11.0,
-                          "gyro_bias_deg_per_h": 0.002}})
+    cfg = EstimatorConfig.from_dict(
+        {
+            "imu": {
+                "gyro_bias_sigma_deg_per_h": 0.03,
+                "accel_bias_sigma_ug": 70.0,
+                "bias_model": "random_walk" if random_walk else "constant",
+            },
+            "priors": {
+                "scale_initial": 0.9,
+                "scale_sigma": 0.2,
+                "misalignment_sigma_deg": [1.0, 2.0, 3.0],
+            },
+            "dvl": {
+                "estimate_time_offset": offset,
+                "estimate_lever_arm": lever,
+                "time_offset_prior_s": 0.3,
+                "time_offset_sigma_s": 0.7,
+                "lever_arm_sigma_m": 0.4,
+            },
+            "observability": {
+                "scale_ppm": 500.0,
+                "misalignment_deg": 0.2,
+                "accel_bias_ug": 11.0,
+                "gyro_bias_deg_per_h": 0.002,
+            },
+        }
+    )
     return cfg
 
 
-MOUNTING = Mounting(b_R_d0=rpy_deg_to_matrix([180.0, 0.0, 45.0]), b_p_dvl=np.array([0.5, -0.1, -0.3]))
+MOUNTING = Mounting(
+    b_R_d0=rpy_deg_to_matrix([180.0, 0.0, 45.0]), b_p_dvl=np.array([0.5, -0.1, -0.3])
+)
 CONFIGS = [(o, lv) for o in (False, True) for lv in (False, True)]
 
 
 def _names(cfg: EstimatorConfig) -> list[str]:
-    return [n for n in EXPECTED if n not in ("time_offset", "lever_arm", "water_scale")
-            or (n == "time_offset" and cfg.dvl.estimate_time_offset)
-            or (n == "lever_arm" and cfg.dvl.estimate_lever_arm)]  # (water_scale: test_water_track_scale_link)
+    return [
+        n
+        for n in EXPECTED
+        if n not in ("time_offset", "lever_arm", "water_scale")
+        or (n == "time_offset" and cfg.dvl.estimate_time_offset)
+        or (n == "lever_arm" and cfg.dvl.estimate_lever_arm)
+    ]  # (water_scale: test_water_track_scale_link)
 
 
 def _keys(cfg: EstimatorConfig) -> list[int]:
-    return [B(0), K_SCALE, C_MISALIGN] + [T_OFFSET] * cfg.dvl.estimate_time_offset \
+    return (
+        [B(0), K_SCALE, C_MISALIGN]
+        + [T_OFFSET] * cfg.dvl.estimate_time_offset
         + [L_LEVER] * cfg.dvl.estimate_lever_arm
+    )
 
 
 def test_entries_key_dimension_units_scope() -> None:
     assert [s.name for s in states.STATES] == list(EXPECTED)
     for s in states.STATES:
         key, dim, unit, display, factor, vehicle = EXPECTED[s.name]
-        assert (s.key, s.dim, s.unit, s.display_unit, s.vehicle) == (key, dim, unit, display, vehicle), s.name
+        assert (s.key, s.dim, s.unit, s.display_unit, s.vehicle) == (
+            key,
+            dim,
+            unit,
+            display,
+            vehicle,
+        ), s.name
         assert s.to_display == pytest.approx(factor, rel=1e-15)
         assert len(s.components) == s.dim
     # the states on a key fill its tangent exactly: the bias key B holds [accel, gyro]
@@ -74,8 +108,18 @@ def test_entries_key_dimension_units_scope() -> None:
         on_key = sorted((s for s in states.STATES if s.key == key), key=lambda s: s.offset)
         assert [s.offset for s in on_key] == list(np.cumsum([0] + [s.dim for s in on_key])[:-1])
         assert sum(s.dim for s in on_key) == key_dim(key)
-    assert [s.name for s in states.block_states()] == ["accel_bias", "gyro_bias", "scale", "misalignment"]
-    assert [s.name for s in states.required_states()] == ["gyro_bias", "accel_bias", "scale", "misalignment"]
+    assert [s.name for s in states.block_states()] == [
+        "accel_bias",
+        "gyro_bias",
+        "scale",
+        "misalignment",
+    ]
+    assert [s.name for s in states.required_states()] == [
+        "gyro_bias",
+        "accel_bias",
+        "scale",
+        "misalignment",
+    ]
 
 
 def test_priors_and_targets_from_the_configuration() -> None:
@@ -87,15 +131,23 @@ def test_priors_and_targets_from_the_configuration() -> None:
     np.testing.assert_array_equal(p["scale"].cov, [[0.2**2]])
     np.testing.assert_array_equal(p["misalignment"].value, MOUNTING.b_R_d0)
     mis = np.radians([1.0, 2.0, 3.0])
-    np.testing.assert_allclose(p["misalignment"].cov, MOUNTING.b_R_d0.T @ np.diag(mis**2) @ MOUNTING.b_R_d0)
+    np.testing.assert_allclose(
+        p["misalignment"].cov, MOUNTING.b_R_d0.T @ np.diag(mis**2) @ MOUNTING.b_R_d0
+    )
     np.testing.assert_array_equal(p["time_offset"].value, [0.3])
     np.testing.assert_array_equal(p["time_offset"].cov, [[0.7**2]])
     np.testing.assert_array_equal(p["lever_arm"].value, MOUNTING.b_l)
     np.testing.assert_array_equal(p["lever_arm"].cov, np.eye(3) * 0.4**2)
     shown = {s.name: s.prior_display_sigma(cfg).tolist() for s in states.STATES}
-    assert shown == {"gyro_bias": [0.03] * 3, "accel_bias": [70.0] * 3, "scale": [0.2e6],
-                     "misalignment": [1.0, 2.0, 3.0], "time_offset": [700.0], "lever_arm": [0.4] * 3,
-                     "water_scale": [1e6]}  # its information is the link to the scale (test_water_track_scale_link)
+    assert shown == {
+        "gyro_bias": [0.03] * 3,
+        "accel_bias": [70.0] * 3,
+        "scale": [0.2e6],
+        "misalignment": [1.0, 2.0, 3.0],
+        "time_offset": [700.0],
+        "lever_arm": [0.4] * 3,
+        "water_scale": [1e6],
+    }  # its information is the link to the scale (test_water_track_scale_link)
     targets = {s.name: s.target(cfg.observability) for s in states.STATES if s.target is not None}
     assert targets == {"gyro_bias": 0.002, "accel_bias": 11.0, "scale": 500.0, "misalignment": 0.2}
 
@@ -121,9 +173,13 @@ def test_enabled_states_their_keys_priors_and_initial_values(offset: bool, lever
 def test_priors_are_those_of_the_factor_maker() -> None:
     """The registry's priors, factor by factor, against FactorMaker.prior_factors (the shared states' keys)."""
     cfg = _config(True, True)
-    maker = FactorMaker(cfg, LocalFrame(45.0, 10.0), Alignment(np.eye(3), 0.0, "configured"), MOUNTING)
+    maker = FactorMaker(
+        cfg, LocalFrame(45.0, 10.0), Alignment(np.eye(3), 0.0, "configured"), MOUNTING
+    )
     values = maker.first_state_values(np.array([1.0, 0.0, 0.0]))
-    theirs = {f.keys()[0]: f for f in maker.prior_factors(values) if f.keys()[0] not in (X(0), V(0))}
+    theirs = {
+        f.keys()[0]: f for f in maker.prior_factors(values) if f.keys()[0] not in (X(0), V(0))
+    }
     ours = states.prior_factors(cfg, MOUNTING)
     assert [f.keys()[0] for f in ours] == list(theirs)
     for f in ours:
@@ -137,16 +193,23 @@ def test_priors_are_those_of_the_factor_maker() -> None:
         np.testing.assert_array_equal(value, theirs_values[name])
 
 
-@pytest.mark.parametrize(("offset", "lever", "random_walk"), [(o, lv, False) for o, lv in CONFIGS]
-                         + [(True, False, True)])
-def test_elimination_ordering_lists_the_enabled_states(offset: bool, lever: bool, random_walk: bool) -> None:
+@pytest.mark.parametrize(
+    ("offset", "lever", "random_walk"),
+    [(o, lv, False) for o, lv in CONFIGS] + [(True, False, True)],
+)
+def test_elimination_ordering_lists_the_enabled_states(
+    offset: bool, lever: bool, random_walk: bool
+) -> None:
     cfg = _config(offset, lever, random_walk)
-    graph = SimpleNamespace(config=cfg, epochs=[None] * 3, shear=[])  # (no water-current layer boundaries)
+    graph = SimpleNamespace(
+        config=cfg, epochs=[None] * 3, shear=[]
+    )  # (no water-current layer boundaries)
     ordering = LogGraph.elimination_ordering(graph, chunk_states=2)  # type: ignore[arg-type]
     shared = _keys(cfg)[1:] if random_walk else _keys(cfg)
     assert ordering.rest == shared
-    assert [k for ks in ordering.chunks for k in ks] == [k for i in range(3)
-                                                         for k in [X(i), V(i)] + [B(i)] * random_walk + [E(i)]]
+    assert [k for ks in ordering.chunks for k in ks] == [
+        k for i in range(3) for k in [X(i), V(i)] + [B(i)] * random_walk + [E(i)]
+    ]
 
 
 @pytest.mark.parametrize(("offset", "random_walk"), [(False, False), (True, False), (True, True)])
@@ -155,7 +218,7 @@ def test_window_shares_the_enabled_states(offset: bool, random_walk: bool) -> No
     maker = SimpleNamespace(config=cfg, bias_key=lambda i: B(i) if random_walk else B(0))
     smoother = IncrementalSmoother(maker, 10.0, cfg.online.relinearization)  # type: ignore[arg-type]
     assert smoother.shared_keys(4) == [B(4) if random_walk else B(0)] + _keys(cfg)[1:]
-    # (e: the DVL's correlated error, modelled by default: estimators/correlated.py)
+    # (e: the DVL's correlated error, modelled by default: estimators/models/correlated.py)
     assert set(smoother._threshold) == {"x", "v", "b", "k", "c", "e"} | ({"t"} if offset else set())
     assert smoother._state_keys(4)[-1] == E(4)
 
@@ -173,7 +236,10 @@ def test_timeline_and_ekf_layouts_list_the_enabled_states(offset: bool, lever: b
     layout = states.ekf_layout(cfg, strapdown.PHI.stop + 6)
     assert list(layout) == [n for n in _names(cfg) if n != "lever_arm"]
     assert (layout["gyro_bias"], layout["accel_bias"]) == (strapdown.BG, strapdown.BA)
-    assert (layout["scale"], layout["misalignment"]) == (slice(strapdown.SCALE, strapdown.SCALE + 1), strapdown.MIS)
+    assert (layout["scale"], layout["misalignment"]) == (
+        slice(strapdown.SCALE, strapdown.SCALE + 1),
+        strapdown.MIS,
+    )
     log = SimpleNamespace(mounting=MOUNTING, dvl=SimpleNamespace(d_v=np.array([[1.0, 0.0, 0.0]])))
     fs = initial_state(log, cfg, np.eye(3), 0)  # type: ignore[arg-type]
     assert fs.P.shape == (strapdown.N_ERR + offset + 3,) * 2  # the correlated DVL error last
@@ -186,7 +252,9 @@ def test_timeline_and_ekf_layouts_list_the_enabled_states(offset: bool, lever: b
 def test_values_read_back_by_state() -> None:
     cfg = _config(True, True)
     values = gtsam.Values()
-    values.insert(B(0), gtsam.imuBias.ConstantBias(np.array([1.0, 2.0, 3.0]), np.array([4.0, 5.0, 6.0])))
+    values.insert(
+        B(0), gtsam.imuBias.ConstantBias(np.array([1.0, 2.0, 3.0]), np.array([4.0, 5.0, 6.0]))
+    )
     values.insert(K_SCALE, np.array([1.01]))
     values.insert(C_MISALIGN, gtsam.Rot3(MOUNTING.b_R_d0))
     values.insert(T_OFFSET, np.array([0.25]))
@@ -203,10 +271,19 @@ def test_values_read_back_by_state() -> None:
 def test_water_track_scale_link() -> None:
     """[current] water_track_scale: the water-track scale K_WATER a state (only with water-track pings used), its
     prior the scale's and a link k_w - k ~ N(0, (sigma k_0)^2) among the priors: 0.5 ((k_w - k) / (sigma k_0))^2."""
-    cfg = EstimatorConfig.from_dict({"priors": {"scale_initial": 0.9, "scale_sigma": 0.2},
-                                     "current": {"water_track": "use", "water_track_scale": True,
-                                                 "water_track_scale_sigma": 0.02}})
-    assert states.enabled(cfg, "water_scale") and not states.enabled(EstimatorConfig(), "water_scale")
+    cfg = EstimatorConfig.from_dict(
+        {
+            "priors": {"scale_initial": 0.9, "scale_sigma": 0.2},
+            "current": {
+                "water_track": "use",
+                "water_track_scale": True,
+                "water_track_scale_sigma": 0.02,
+            },
+        }
+    )
+    assert states.enabled(cfg, "water_scale") and not states.enabled(
+        EstimatorConfig(), "water_scale"
+    )
     factors = states.prior_factors(cfg, MOUNTING)
     links = [f for f in factors if set(f.keys()) == {K_WATER, K_SCALE}]
     assert len(links) == 1

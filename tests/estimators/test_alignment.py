@@ -1,4 +1,4 @@
-"""Coarse alignment on the initial static segment (gtsam_dvl/estimators/alignment.py): gravity levelling and
+"""Coarse alignment on the initial static segment (gtsam_dvl/estimators/inputs/alignment.py): gravity levelling and
 gyrocompassing against the simulated truth attitude, static-segment detection, window means, the configured
 attitude, and the errors.
 
@@ -29,7 +29,7 @@ from gtsam_dvl.core.earth import OMEGA_IE, LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import quat_xyzw_to_matrix, so3_log
 from gtsam_dvl.core.types import DvlData, ImuData, LogData
-from gtsam_dvl.estimators.alignment import (
+from gtsam_dvl.estimators.inputs.alignment import (
     STATIC_MARGIN_S,
     align,
     coarse_alignment,
@@ -51,21 +51,34 @@ ACCEL_NOISE = 10.0  # micro-g/sqrt(Hz), Table 1
 GYRO_NOISE = 0.1  # deg/h/sqrt(Hz), Table 1
 
 
-def _scenario(rpy: tuple[float, float, float] = (3.0, 0.0, 10.0), gyro_bias: tuple[float, ...] = (0.0, 0.0, 0.0),
-              accel_bias: tuple[float, ...] = (0.0, 0.0, 0.0), noise: bool = False, lat: float = LAT,
-              static_s: float = 120.0, moving: bool = True) -> Scenario:
+def _scenario(
+    rpy: tuple[float, float, float] = (3.0, 0.0, 10.0),
+    gyro_bias: tuple[float, ...] = (0.0, 0.0, 0.0),
+    accel_bias: tuple[float, ...] = (0.0, 0.0, 0.0),
+    noise: bool = False,
+    lat: float = LAT,
+    static_s: float = 120.0,
+    moving: bool = True,
+) -> Scenario:
     """static_s seconds at rest, then (moving) a 15 s level acceleration to 2 m/s."""
     segments: list[dict[str, Any]] = [{"kind": "static", "duration_s": static_s}]
     if moving:
         segments.append({"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0})
-    return scenario_from_dict({
-        "origin": {"lat_deg": lat, "lon_deg": 114.0, "height_m": -100.0},
-        "initial": {"roll_deg": rpy[0], "pitch_deg": rpy[1], "yaw_deg": rpy[2]},
-        "imu": {"gyro_bias_values_deg_per_h": list(gyro_bias), "accel_bias_values_micro_g": list(accel_bias),
+    return scenario_from_dict(
+        {
+            "origin": {"lat_deg": lat, "lon_deg": 114.0, "height_m": -100.0},
+            "initial": {"roll_deg": rpy[0], "pitch_deg": rpy[1], "yaw_deg": rpy[2]},
+            "imu": {
+                "gyro_bias_values_deg_per_h": list(gyro_bias),
+                "accel_bias_values_micro_g": list(accel_bias),
                 "gyro_noise_deg_per_h_per_sqrt_hz": GYRO_NOISE if noise else 0.0,
-                "accel_noise_micro_g_per_sqrt_hz": ACCEL_NOISE if noise else 0.0},
-        "dvl": {"noise_m_s": 0.02},
-        "segments": segments}, name="alignment-test")
+                "accel_noise_micro_g_per_sqrt_hz": ACCEL_NOISE if noise else 0.0,
+            },
+            "dvl": {"noise_m_s": 0.02},
+            "segments": segments,
+        },
+        name="alignment-test",
+    )
 
 
 @functools.cache
@@ -92,6 +105,7 @@ def _predicted_error(n_R_b: np.ndarray, g: float, lat_deg: float) -> np.ndarray:
 
 # ----- window_means -----------------------------------------------------------------------------------
 
+
 def test_window_means_against_hand_computed_means() -> None:
     """100 Hz samples of x = t: window k holds t = k, k + 0.01, ..., k + 0.99, mean k + 0.495, end k + 1 (relative
     to the first sample), except the last, which ends with the data (9.99 s); windows without samples are left
@@ -117,13 +131,16 @@ def test_window_means_against_hand_computed_means() -> None:
 
 # ----- static-segment detection -----------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_static_end_found_just_before_the_motion(seed: int) -> None:
     """600 s at rest, then a level acceleration, with the paper's noise: the first 1 s window seen moving is
     [600, 601) (the acceleration exceeds the 2 mm/s^2 threshold 0.3 s after 600 s; noise in a 1 s mean is 0.1
     mm/s^2), so the static segment ends STATIC_MARGIN_S before 601 s: never after the true 600 s (a static segment
     holding motion would tilt the levelling), at most 6 s before it. Measured 596 s for every seed."""
-    log, _ = _log(seed, gyro_bias=GYRO_BIAS_DEG_H, accel_bias=ACCEL_BIAS_UG, noise=True, static_s=600.0)
+    log, _ = _log(
+        seed, gyro_bias=GYRO_BIAS_DEG_H, accel_bias=ACCEL_BIAS_UG, noise=True, static_s=600.0
+    )
     t_end = detect_static_end(log.imu, log.dvl, AlignmentConfig())
     print(f"\nseed {seed}: static segment ends at {t_end} s (motion from 600 s)")
     assert 600.0 - STATIC_MARGIN_S - 1.0 <= t_end <= 600.0
@@ -148,8 +165,12 @@ def test_static_end_from_the_dvl_and_the_cap() -> None:
     dvl = dataclasses.replace(log.dvl, d_v=d_v, valid=valid)
     cfg = AlignmentConfig()
     assert detect_static_end(log.imu, dvl, cfg) == pytest.approx(50.0 - STATIC_MARGIN_S, abs=1e-9)
-    assert detect_static_end(log.imu, log.dvl, cfg.model_copy(update={"max_static_s": 40.0})) == pytest.approx(40.0)
-    assert detect_static_end(log.imu, dvl, cfg.model_copy(update={"max_static_s": 40.0})) == pytest.approx(40.0)
+    assert detect_static_end(
+        log.imu, log.dvl, cfg.model_copy(update={"max_static_s": 40.0})
+    ) == pytest.approx(40.0)
+    assert detect_static_end(
+        log.imu, dvl, cfg.model_copy(update={"max_static_s": 40.0})
+    ) == pytest.approx(40.0)
 
 
 def test_single_fast_pings_neither_end_nor_abort_the_static_segment() -> None:
@@ -165,9 +186,13 @@ def test_single_fast_pings_neither_end_nor_abort_the_static_segment() -> None:
         d_v[int(np.argmin(np.abs(log.dvl.t - t_out)))] = [speed, 0.0, 0.0]
     outliers = dataclasses.replace(log.dvl, d_v=d_v)
     t_end = detect_static_end(log.imu, outliers, cfg)
-    print(f"\nstatic segment without outliers ends at {t_ref} s, with three single fast pings at {t_end} s")
+    print(
+        f"\nstatic segment without outliers ends at {t_ref} s, with three single fast pings at {t_end} s"
+    )
     assert t_end == t_ref == float(log.imu.t[-1])
-    np.testing.assert_array_equal(align(log.imu, outliers, frame, cfg).n_R_b, align(log.imu, log.dvl, frame, cfg).n_R_b)
+    np.testing.assert_array_equal(
+        align(log.imu, outliers, frame, cfg).n_R_b, align(log.imu, log.dvl, frame, cfg).n_R_b
+    )
     rng = np.random.default_rng(5)
     d_v5 = log.dvl.d_v.copy()
     k = rng.choice(len(d_v5), len(d_v5) // 20, replace=False)
@@ -177,8 +202,12 @@ def test_single_fast_pings_neither_end_nor_abort_the_static_segment() -> None:
     moving = log.dvl.t >= 50.0
     run[moving] = [0.5, 0.0, 0.0]
     run[np.flatnonzero(moving)[[3, 7]]] = 0.0  # two slow pings inside the run: 8 of 10 are fast
-    assert dvl_motion_start(dataclasses.replace(log.dvl, d_v=run), cfg.dvl_speed_threshold_m_s) == pytest.approx(50.0)
-    assert detect_static_end(log.imu, dataclasses.replace(log.dvl, d_v=run), cfg) == pytest.approx(45.0)
+    assert dvl_motion_start(
+        dataclasses.replace(log.dvl, d_v=run), cfg.dvl_speed_threshold_m_s
+    ) == pytest.approx(50.0)
+    assert detect_static_end(log.imu, dataclasses.replace(log.dvl, d_v=run), cfg) == pytest.approx(
+        45.0
+    )
 
 
 def test_static_end_of_a_log_that_never_moves_is_its_last_sample() -> None:
@@ -189,6 +218,7 @@ def test_static_end_of_a_log_that_never_moves_is_its_last_sample() -> None:
 
 
 # ----- coarse alignment against the truth -------------------------------------------------------------
+
 
 @pytest.mark.parametrize("rpy", [(3.0, 0.0, 10.0), (-5.0, 8.0, 200.0), (0.0, -20.0, -90.0)])
 def test_alignment_without_sensor_errors_is_exact(rpy: tuple[float, float, float]) -> None:
@@ -214,16 +244,22 @@ def test_alignment_error_is_the_bias_error_model(rpy: tuple[float, float, float]
     err = _attitude_error(a.n_R_b, log, a.t_static_end)
     assert a.b_f_mean is not None
     g = float(np.linalg.norm(a.b_f_mean))
-    R = a.n_R_b  # the bias's map components need the attitude only to zeroth order: the estimate will do
+    R = (
+        a.n_R_b
+    )  # the bias's map components need the attitude only to zeroth order: the estimate will do
     pred = _predicted_error(R, g, LAT)
-    print(f"\nrpy {rpy}: error {err} rad, predicted {pred} rad (levelling {np.degrees(np.hypot(*err[:2])):.5f} deg, "
-          f"heading {np.degrees(err[2]):.4f} deg)")
+    print(
+        f"\nrpy {rpy}: error {err} rad, predicted {pred} rad (levelling {np.degrees(np.hypot(*err[:2])):.5f} deg, "
+        f"heading {np.degrees(err[2]):.4f} deg)"
+    )
     assert np.all(np.abs(err - pred) < 0.01 * np.linalg.norm(pred))
     n_ba = R @ (np.array(ACCEL_BIAS_UG) * UG)
     n_bg = R @ (np.array(GYRO_BIAS_DEG_H) * DEG_PER_H)
     tilt = float(np.hypot(err[0], err[1]))
     assert tilt <= 1.01 * np.hypot(n_ba[0], n_ba[1]) / g
-    assert abs(err[2]) <= 1.01 * (abs(n_bg[0]) / (OMEGA_IE * np.cos(np.radians(LAT))) + np.tan(np.radians(LAT)) * tilt)
+    assert abs(err[2]) <= 1.01 * (
+        abs(n_bg[0]) / (OMEGA_IE * np.cos(np.radians(LAT))) + np.tan(np.radians(LAT)) * tilt
+    )
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -232,7 +268,9 @@ def test_alignment_with_the_paper_sensors_within_the_noise_bound(seed: int) -> N
     averaged over the segment (T = 596 s: tilt sigma 10 micro-g/sqrt(T)/g = 4e-7 rad, heading sigma
     0.1 deg/h/sqrt(T)/(Omega cos 30) = 3.1e-4 rad); overall the heading is within 0.1 deg and the levelling within
     0.005 deg of the truth (the paper's IMU)."""
-    log, frame = _log(seed, gyro_bias=GYRO_BIAS_DEG_H, accel_bias=ACCEL_BIAS_UG, noise=True, static_s=600.0)
+    log, frame = _log(
+        seed, gyro_bias=GYRO_BIAS_DEG_H, accel_bias=ACCEL_BIAS_UG, noise=True, static_s=600.0
+    )
     a = align(log.imu, log.dvl, frame, AlignmentConfig())
     err = _attitude_error(a.n_R_b, log, a.t_static_end)
     assert a.b_f_mean is not None
@@ -243,13 +281,16 @@ def test_alignment_with_the_paper_sensors_within_the_noise_bound(seed: int) -> N
     sigma_heading = GYRO_NOISE * DEG_PER_H / np.sqrt(T) / (OMEGA_IE * np.cos(np.radians(LAT)))
     sigma_heading = float(np.hypot(sigma_heading, np.tan(np.radians(LAT)) * sigma_tilt))
     z = (err - pred) / np.array([sigma_tilt, sigma_tilt, sigma_heading])
-    print(f"\nseed {seed}: error {np.degrees(err)} deg, bias model {np.degrees(pred)} deg; (error - model) / noise "
-          f"sigma {np.round(z, 2)}")
+    print(
+        f"\nseed {seed}: error {np.degrees(err)} deg, bias model {np.degrees(pred)} deg; (error - model) / noise "
+        f"sigma {np.round(z, 2)}"
+    )
     assert np.all(np.abs(z) < 4.0)
     assert np.degrees(abs(err[2])) < 0.1 and np.degrees(np.hypot(err[0], err[1])) < 0.005
 
 
 # ----- configured attitude ----------------------------------------------------------------------------
+
 
 def test_configured_attitude_skips_the_static_segment() -> None:
     """alignment.initial_attitude_deg = [roll, pitch, yaw] (the paper's 3, 0, 10 deg, yaw ENU): no data needed
@@ -263,7 +304,12 @@ def test_configured_attitude_skips_the_static_segment() -> None:
     r, y = np.radians(3.0), np.radians(10.0)
     Rz = np.array([[np.cos(y), -np.sin(y), 0.0], [np.sin(y), np.cos(y), 0.0], [0.0, 0.0, 1.0]])
     Rx = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(r), -np.sin(r)], [0.0, np.sin(r), np.cos(r)]])
-    assert a.method == "configured" and a.t_static_end == 0.0 and a.b_f_mean is None and a.b_omega_mean is None
+    assert (
+        a.method == "configured"
+        and a.t_static_end == 0.0
+        and a.b_f_mean is None
+        and a.b_omega_mean is None
+    )
     np.testing.assert_allclose(a.n_R_b, Rz @ Rx, atol=1e-15)
     assert np.all(np.abs(_attitude_error(a.n_R_b, log, 0.0)) < 1e-12)
     # the configured attitude wins even on a log that could be aligned (and on one that could not)
@@ -272,25 +318,38 @@ def test_configured_attitude_skips_the_static_segment() -> None:
 
 # ----- errors -----------------------------------------------------------------------------------------
 
+
 def test_too_short_static_segment_is_a_clear_error() -> None:
     """20 s at rest, then motion: the first window seen moving is [20, 21), so the static segment is 16 s, shorter
     than alignment.min_static_s (30 s): an error with method = "static" (method "auto" aligns in motion then:
     tests/estimators/test_alignment_motion.py)."""
     log, frame = _log(static_s=20.0)
-    with pytest.raises(GtsamDvlError, match=r"no static segment of at least 30 s .*found 16 s.*initial_attitude_deg"):
+    with pytest.raises(
+        GtsamDvlError,
+        match=r"no static segment of at least 30 s .*found 16 s.*initial_attitude_deg",
+    ):
         align(log.imu, log.dvl, frame, AlignmentConfig(method="static"))
     # a lower minimum accepts it, and the attitude is still the truth (noise-free, no biases)
     a = align(log.imu, log.dvl, frame, AlignmentConfig(min_static_s=10.0))
-    assert a.t_static_end == pytest.approx(16.0) and np.all(np.abs(_attitude_error(a.n_R_b, log, 0.0)) < 1e-10)
+    assert a.t_static_end == pytest.approx(16.0) and np.all(
+        np.abs(_attitude_error(a.n_R_b, log, 0.0)) < 1e-10
+    )
 
 
 def test_log_starting_in_motion_is_a_clear_error() -> None:
     """A log that starts at 1.5 m/s (DVL faster than dvl_speed_threshold_m_s from the first ping): no static
     segment at all: an error with method = "static"."""
-    sc = scenario_from_dict({"origin": {"lat_deg": LAT, "lon_deg": 114.0}, "initial": {"speed_m_s": 1.5},
-                             "dvl": {"noise_m_s": 0.02},
-                             "segments": [{"kind": "straight", "duration_s": 60.0},
-                                          {"kind": "turn", "duration_s": 30.0, "heading_change_deg": 45.0}]})
+    sc = scenario_from_dict(
+        {
+            "origin": {"lat_deg": LAT, "lon_deg": 114.0},
+            "initial": {"speed_m_s": 1.5},
+            "dvl": {"noise_m_s": 0.02},
+            "segments": [
+                {"kind": "straight", "duration_s": 60.0},
+                {"kind": "turn", "duration_s": 30.0, "heading_change_deg": 45.0},
+            ],
+        }
+    )
     log = simulate(sc, 1, white_noise=False)
     assert detect_static_end(log.imu, log.dvl, AlignmentConfig()) == log.imu.t[0]
     with pytest.raises(GtsamDvlError, match=r"no static segment of at least 30 s .*found 0 s"):
@@ -306,7 +365,9 @@ def test_gyrocompassing_fails_clearly_when_the_earth_rate_is_hidden() -> None:
     bias = np.array([0.0, -0.9 * w_earth[1], 0.0])
     with pytest.raises(GtsamDvlError, match="gyrocompassing failed.*initial_attitude_deg"):
         coarse_alignment(np.array([0.0, 0.0, g]), w_earth + bias, frame)
-    np.testing.assert_allclose(coarse_alignment(np.array([0.0, 0.0, g]), w_earth, frame), np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(
+        coarse_alignment(np.array([0.0, 0.0, g]), w_earth, frame), np.eye(3), atol=1e-12
+    )
 
 
 def test_gyrocompassing_near_a_pole_raises_rather_than_return_the_bias_direction() -> None:
@@ -317,5 +378,7 @@ def test_gyrocompassing_near_a_pole_raises_rather_than_return_the_bias_direction
         assert "gyrocompassing failed" in str(exc)
         return
     err = _attitude_error(a.n_R_b, log, a.t_static_end)
-    print(f"\nlatitude 89.99 deg, gyro bias 0.01 deg/h: heading error {np.degrees(err[2]):.1f} deg, no error raised")
+    print(
+        f"\nlatitude 89.99 deg, gyro bias 0.01 deg/h: heading error {np.degrees(err[2]):.1f} deg, no error raised"
+    )
     assert abs(np.degrees(err[2])) < 1.0

@@ -1,4 +1,4 @@
-"""The initial attitude without a static start (estimators/alignment.py): in-motion alignment with DVL aiding,
+"""The initial attitude without a static start (estimators/inputs/alignment.py): in-motion alignment with DVL aiding,
 and an attitude sensor (the IMU messages' own orientation), on a simulated paper-3d-short run that starts at
 2 m/s (no static segment, no acceleration from rest: level surge, descent, surge, the square's turns, ascent).
 
@@ -26,8 +26,8 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, so3_exp
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.alignment import align, in_motion_alignment, map_frame_of
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.inputs.alignment import align, in_motion_alignment, map_frame_of
 from gtsam_dvl.estimators.online.estimator import smooth_online
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
@@ -42,8 +42,11 @@ def moving_raw() -> dict:
     """paper-3d-short without its static start and its 0 -> 2 m/s acceleration: it starts at 2 m/s."""
     raw = dict(load_scenario("paper-3d-short").raw)
     raw["initial"] = {**raw["initial"], "speed_m_s": 2.0}
-    raw["segments"] = [s for s in raw["segments"]
-                       if s["kind"] != "static" and not (s["kind"] == "level" and s.get("speed_end_m_s") == 2.0)]
+    raw["segments"] = [
+        s
+        for s in raw["segments"]
+        if s["kind"] != "static" and not (s["kind"] == "level" and s.get("speed_end_m_s") == 2.0)
+    ]
     return raw
 
 
@@ -66,15 +69,27 @@ def _true_R(log: LogData, t: float) -> np.ndarray:
 def test_in_motion_alignment_within_3_sigma(moving_log: LogData, window_s: float) -> None:
     """The in-motion alignment's attitude at the first IMU sample against the truth, within 3 of its sigmas."""
     log = moving_log
-    assert log.truth is not None and np.linalg.norm(log.truth.n_v[0]) == pytest.approx(2.0, abs=0.01)
+    assert log.truth is not None and np.linalg.norm(log.truth.n_v[0]) == pytest.approx(
+        2.0, abs=0.01
+    )
     frame = map_frame_of(log, EstimatorConfig.paper())
-    a = in_motion_alignment(log.imu, log.dvl, frame, log.mounting, window_s, EstimatorConfig.paper().imu)
+    a = in_motion_alignment(
+        log.imu, log.dvl, frame, log.mounting, window_s, EstimatorConfig.paper().imu
+    )
     err = attitude_errors_deg(a.n_R_b[None], _true_R(log, float(log.imu.t[0]))[None])[0]
-    assert a.method == "in_motion" and a.t_ref == log.imu.t[0] and a.window_s == pytest.approx(window_s)
+    assert (
+        a.method == "in_motion"
+        and a.t_ref == log.imu.t[0]
+        and a.window_s == pytest.approx(window_s)
+    )
     assert a.sigma_rpy_deg is not None
-    print(f"window {window_s:.0f} s: error {np.round(err, 4)} deg, sigma {np.round(a.sigma_rpy_deg, 4)} deg")
+    print(
+        f"window {window_s:.0f} s: error {np.round(err, 4)} deg, sigma {np.round(a.sigma_rpy_deg, 4)} deg"
+    )
     assert np.all(np.abs(err) < 3.0 * a.sigma_rpy_deg)
-    assert np.all(a.sigma_rpy_deg[:2] < 0.05) and a.sigma_rpy_deg[2] < 2.0  # a few degrees is all the graph needs
+    assert (
+        np.all(a.sigma_rpy_deg[:2] < 0.05) and a.sigma_rpy_deg[2] < 2.0
+    )  # a few degrees is all the graph needs
 
 
 def test_alignment_carried_to_the_first_state(moving_log: LogData) -> None:
@@ -89,7 +104,9 @@ def test_alignment_carried_to_the_first_state(moving_log: LogData) -> None:
         moved = attitude_errors_deg(b.n_R_b[None], _true_R(log, t)[None])[0]
         start = attitude_errors_deg(a.n_R_b[None], R0[None])[0]
         assert b.t_ref == t and np.all(np.abs(moved - start) < 0.01)
-    assert np.allclose(a.at(100.0, log.imu, frame).at(0.0, log.imu, frame).n_R_b, a.n_R_b, atol=1e-12)
+    assert np.allclose(
+        a.at(100.0, log.imu, frame).at(0.0, log.imu, frame).n_R_b, a.n_R_b, atol=1e-12
+    )
 
 
 def _check_run(r: NavResult, log: LogData) -> None:
@@ -99,8 +116,10 @@ def _check_run(r: NavResult, log: LogData) -> None:
     scale = (r.scale - tc.scale) / r.scale_sigma
     j = int(np.argmin(np.abs(log.truth.t - r.t[-1])))
     pos = (r.n_p[-1] - log.truth.n_p[j]) / np.sqrt(np.diag(r.pose_cov[-1][3:, 3:]))
-    print(f"{r.alignment_method}: scale {scale:+.2f} sigma, misalignment {np.round(mis, 2)} sigma, "
-          f"final position {np.round(r.n_p[-1] - log.truth.n_p[j], 3)} m ({np.round(pos, 2)} sigma)")
+    print(
+        f"{r.alignment_method}: scale {scale:+.2f} sigma, misalignment {np.round(mis, 2)} sigma, "
+        f"final position {np.round(r.n_p[-1] - log.truth.n_p[j], 3)} m ({np.round(pos, 2)} sigma)"
+    )
     assert abs(scale) < 3.0 and np.all(np.abs(mis) < 3.0) and np.all(np.abs(pos) < 3.0)
 
 
@@ -127,7 +146,9 @@ def _with_imu_orientation(log: LogData, path: Path, ned: bool) -> None:
     noise = so3_exp(np.radians(ATT_SIGMA_DEG) * rng.standard_normal((len(log.imu.t), 3)))
     n_R_imu = n_R_b @ noise @ log.mounting.b_R_imu
     if ned:  # NED orientation of the FRD body, built from the axes' components (not the reader's formula)
-        ax = np.stack([n_R_imu[:, :, 0], -n_R_imu[:, :, 1], -n_R_imu[:, :, 2]], axis=2)  # FRD axes in ENU
+        ax = np.stack(
+            [n_R_imu[:, :, 0], -n_R_imu[:, :, 1], -n_R_imu[:, :, 2]], axis=2
+        )  # FRD axes in ENU
         n_R_imu = np.stack([ax[:, 1], ax[:, 0], -ax[:, 2]], axis=1)  # rows: north, east, down
     cov = np.eye(3) * np.radians(ATT_SIGMA_DEG) ** 2
     write_log(path, log, imu_orientation=(matrix_to_quat_xyzw(n_R_imu), cov))
@@ -141,7 +162,13 @@ def test_batch_with_imu_orientation(moving_log: LogData, tmp_path: Path, ned: bo
     _with_imu_orientation(moving_log, path, ned)
     log = read_log(path, attitude_frame="ned" if ned else "enu")
     assert log.attitude is not None and len(log.attitude) == len(log.imu)
-    a = align(log.imu, log.dvl, map_frame_of(log, EstimatorConfig.paper()), AlignmentConfig(), attitude=log.attitude)
+    a = align(
+        log.imu,
+        log.dvl,
+        map_frame_of(log, EstimatorConfig.paper()),
+        AlignmentConfig(),
+        attitude=log.attitude,
+    )
     assert a.method == "attitude_topic" and a.sigma_rpy_deg is not None
     np.testing.assert_allclose(a.sigma_rpy_deg, ATT_SIGMA_DEG, rtol=1e-9)
     err = attitude_errors_deg(a.n_R_b[None], _true_R(moving_log, float(a.t_ref or 0.0))[None])[0]
@@ -154,15 +181,20 @@ def test_batch_with_imu_orientation(moving_log: LogData, tmp_path: Path, ned: bo
 
 def test_forced_static_and_online_need_an_attitude_source(moving_log: LogData) -> None:
     frame = map_frame_of(moving_log, EstimatorConfig.paper())
-    with pytest.raises(GtsamDvlError, match=r"no static segment.*attitude topic.*initial_attitude_deg"):
+    with pytest.raises(
+        GtsamDvlError, match=r"no static segment.*attitude topic.*initial_attitude_deg"
+    ):
         align(moving_log.imu, moving_log.dvl, frame, AlignmentConfig(method="static"))
     with pytest.raises(GtsamDvlError, match=r"has no attitude.*--attitude-topic"):
         align(moving_log.imu, moving_log.dvl, frame, AlignmentConfig(method="attitude_topic"))
-    short = dataclasses.replace(moving_log, imu=dataclasses.replace(
-        moving_log.imu, b_omega=moving_log.imu.b_omega + 1e-3))  # a gyro bias of 200 deg/h: no gyrocompassing
+    short = dataclasses.replace(
+        moving_log, imu=dataclasses.replace(moving_log.imu, b_omega=moving_log.imu.b_omega + 1e-3)
+    )  # a gyro bias of 200 deg/h: no gyrocompassing
     with pytest.raises(GtsamDvlError, match=r"heading only to .* deg.*attitude topic"):
         align(short.imu, short.dvl, frame, AlignmentConfig(), mounting=short.mounting)
-    with pytest.raises(GtsamDvlError, match=r"online alignment: no static segment.*online needs an attitude source"):
+    with pytest.raises(
+        GtsamDvlError, match=r"online alignment: no static segment.*online needs an attitude source"
+    ):
         smooth_online(moving_log, _config())
 
 

@@ -14,7 +14,7 @@ import pytest
 from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.paper_runs import GROUP, paper_batch, paper_log
@@ -38,7 +38,9 @@ def _run(name: str, seed: int, white_noise: bool = True, weak_priors: bool = Fal
         cfg.imu.gyro_bias_sigma_deg_per_h = 10.0
         cfg.imu.accel_bias_sigma_ug = 50000.0
     log = _log(name, seed, white_noise)
-    if white_noise and not weak_priors:  # the paper configuration's run, shared with test_online.py, test_robust.py
+    if (
+        white_noise and not weak_priors
+    ):  # the paper configuration's run, shared with test_online.py, test_robust.py
         return summary(paper_batch(name, seed), log)
     return summary(smooth_batch(log, cfg), log)
 
@@ -49,11 +51,13 @@ def _print(tag: str, s: dict) -> None:
     def pair(name: str, digits: int) -> str:
         return f"err {np.round(e[name], digits)} sigma {np.round(s[name]['sigma'], digits)}"
 
-    print(f"\n{tag}: scale {e['scale_ppm']:+.1f} ppm (sigma {s['scale']['sigma'] * 1e6:.0f} ppm); "
-          f"misalignment {pair('misalignment_deg', 4)} deg; gyro bias {pair('gyro_bias_deg_per_h', 5)} deg/h; "
-          f"accel bias {pair('accel_bias_ug', 3)} ug; final horizontal {e['final_horizontal_position_m']:.3f} m = "
-          f"{e['final_horizontal_position_pct_distance']:.4f} % of {s['distance_travelled_m']:.0f} m; "
-          f"{s['timing_s']['total']:.2f} s")
+    print(
+        f"\n{tag}: scale {e['scale_ppm']:+.1f} ppm (sigma {s['scale']['sigma'] * 1e6:.0f} ppm); "
+        f"misalignment {pair('misalignment_deg', 4)} deg; gyro bias {pair('gyro_bias_deg_per_h', 5)} deg/h; "
+        f"accel bias {pair('accel_bias_ug', 3)} ug; final horizontal {e['final_horizontal_position_m']:.3f} m = "
+        f"{e['final_horizontal_position_pct_distance']:.4f} % of {s['distance_travelled_m']:.0f} m; "
+        f"{s['timing_s']['total']:.2f} s"
+    )
 
 
 def _noise_free_ratios(clean: dict, noisy: dict) -> dict[str, float]:
@@ -61,10 +65,17 @@ def _noise_free_ratios(clean: dict, noisy: dict) -> dict[str, float]:
     e = clean["errors"]
     return {
         "scale": abs(e["scale_ppm"]) * 1e-6 / noisy["scale"]["sigma"],
-        "misalignment": np.max(np.abs(e["misalignment_deg"]) / np.array(noisy["misalignment_deg"]["sigma"])),
-        "gyro bias": np.max(np.abs(e["gyro_bias_deg_per_h"]) / np.array(noisy["gyro_bias_deg_per_h"]["sigma"])),
-        "accel bias": np.max(np.abs(e["accel_bias_ug"]) / np.array(noisy["accel_bias_ug"]["sigma"])),
-        "final position": e["final_horizontal_position_m"] / noisy["final_horizontal_position_sigma_m"],
+        "misalignment": np.max(
+            np.abs(e["misalignment_deg"]) / np.array(noisy["misalignment_deg"]["sigma"])
+        ),
+        "gyro bias": np.max(
+            np.abs(e["gyro_bias_deg_per_h"]) / np.array(noisy["gyro_bias_deg_per_h"]["sigma"])
+        ),
+        "accel bias": np.max(
+            np.abs(e["accel_bias_ug"]) / np.array(noisy["accel_bias_ug"]["sigma"])
+        ),
+        "final position": e["final_horizontal_position_m"]
+        / noisy["final_horizontal_position_sigma_m"],
     }
 
 
@@ -112,8 +123,13 @@ def test_noisy_paper_3d_errors_inside_3_sigma(seed: int) -> None:
 
 
 def test_noisy_paper_3d_final_position_median() -> None:
-    pct = [_run("paper-3d", seed)["errors"]["final_horizontal_position_pct_distance"] for seed in SEEDS_3D]
-    print(f"\nfinal horizontal position error, % of distance: {np.round(pct, 4)}; median {np.median(pct):.4f}")
+    pct = [
+        _run("paper-3d", seed)["errors"]["final_horizontal_position_pct_distance"]
+        for seed in SEEDS_3D
+    ]
+    print(
+        f"\nfinal horizontal position error, % of distance: {np.round(pct, 4)}; median {np.median(pct):.4f}"
+    )
     assert np.median(pct) < 0.15
 
 

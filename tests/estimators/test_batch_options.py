@@ -16,7 +16,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, quat_xyzw_to_matrix
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.logs import cut_log
@@ -31,8 +31,17 @@ def _paper3d(seed: int = 5) -> LogData:
 
 def _assert_within_3_sigma(s: dict) -> None:
     e = s["errors"]
-    print({k: np.round(e[k], 2).tolist() for k in ("scale_nsigma", "misalignment_nsigma", "gyro_bias_nsigma",
-                                                   "accel_bias_nsigma")})
+    print(
+        {
+            k: np.round(e[k], 2).tolist()
+            for k in (
+                "scale_nsigma",
+                "misalignment_nsigma",
+                "gyro_bias_nsigma",
+                "accel_bias_nsigma",
+            )
+        }
+    )
     assert abs(e["scale_nsigma"]) < 3
     for key in ("misalignment_nsigma", "gyro_bias_nsigma", "accel_bias_nsigma"):
         assert np.all(np.abs(e[key]) < 3), key
@@ -47,7 +56,9 @@ def test_random_walk_bias_model() -> None:
     rw = summary(smooth_batch(log, cfg), log)
     const = summary(smooth_batch(log, EstimatorConfig.paper()), log)
     _assert_within_3_sigma(rw)
-    assert np.all(np.array(rw["accel_bias_ug"]["sigma"]) >= 0.99 * np.array(const["accel_bias_ug"]["sigma"]))
+    assert np.all(
+        np.array(rw["accel_bias_ug"]["sigma"]) >= 0.99 * np.array(const["accel_bias_ug"]["sigma"])
+    )
     assert rw["scale"]["sigma"] < 1500e-6
 
 
@@ -55,7 +66,9 @@ def _cut(log: LogData, t_start: float) -> LogData:
     """The log from t_start on (no static start), times kept, truth positions from the first kept one."""
     cut = cut_log(log, t_start=t_start)
     assert cut.truth is not None
-    return dataclasses.replace(cut, truth=dataclasses.replace(cut.truth, n_p=cut.truth.n_p - cut.truth.n_p[0]))
+    return dataclasses.replace(
+        cut, truth=dataclasses.replace(cut.truth, n_p=cut.truth.n_p - cut.truth.n_p[0])
+    )
 
 
 def test_log_without_static_start_needs_and_uses_a_configured_attitude() -> None:
@@ -69,7 +82,9 @@ def test_log_without_static_start_needs_and_uses_a_configured_attitude() -> None
     assert log.truth is not None
     rpy_true = matrix_to_rpy_deg(quat_xyzw_to_matrix(log.truth.n_q_b[0]))
     cfg = EstimatorConfig.paper()
-    cfg.alignment.initial_attitude_deg = tuple(rpy_true + np.array([0.02, -0.02, 0.5]))  # a compass-grade guess
+    cfg.alignment.initial_attitude_deg = tuple(
+        rpy_true + np.array([0.02, -0.02, 0.5])
+    )  # a compass-grade guess
     s = summary(smooth_batch(log, cfg), log)
     print("initial attitude given, no static start:", np.round(rpy_true, 3))
     _assert_within_3_sigma(s)

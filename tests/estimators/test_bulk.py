@@ -1,4 +1,5 @@
-"""estimators/bulk.py and bulk_imu.py: the batch smoother's DVL and IMU factors in bulk give the per-factor graph's
+"""estimators/graph/bulk.py and bulk_imu.py: the batch smoother's DVL and IMU factors in bulk give the per-factor
+graph's
 objective and linear systems (error to 1e-12 relative, information matrix and vector to 1e-9), robust kernels
 included, beams and the lever arm as a variable included, and the same solution.
 
@@ -18,10 +19,10 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, K_WATER, L_LEVER, T_OFFSET, E, W, key_dim
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
-from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.solver import gauss_newton_qr
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.graph.bulk import BulkGraph, graph_rows
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.graph.solver import gauss_newton_qr
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
@@ -37,7 +38,11 @@ def run_log() -> LogData:
     raw["segments"] = segments
     log = simulate(scenario_from_dict(raw), 7)
     d_v = log.dvl.d_v.copy()
-    d_v[len(d_v) // 2] += [0.12, -0.06, 0.0]  # an outlier (7 sigma) mid-log, below the screen's jump margin
+    d_v[len(d_v) // 2] += [
+        0.12,
+        -0.06,
+        0.0,
+    ]  # an outlier (7 sigma) mid-log, below the screen's jump margin
     return dataclasses.replace(log, dvl=dataclasses.replace(log.dvl, d_v=d_v))
 
 
@@ -46,22 +51,40 @@ def configs() -> dict[str, EstimatorConfig]:
     return {
         "paper": paper,  # random-constant bias, Huber, no time offset
         "default": default,  # time offset estimated, real-DVL priors
-        "random-walk-cauchy": paper.model_copy(update={
-            "imu": paper.imu.model_copy(update={"bias_model": "random_walk"}),
-            "dvl": paper.dvl.model_copy(update={"robust": "cauchy"})}),
-        "no-robust-flat": default.model_copy(update={
-            "dvl": default.dvl.model_copy(update={"robust": "none"}),
-            "solver": default.solver.model_copy(update={"earth_model": "flat"})}),
+        "random-walk-cauchy": paper.model_copy(
+            update={
+                "imu": paper.imu.model_copy(update={"bias_model": "random_walk"}),
+                "dvl": paper.dvl.model_copy(update={"robust": "cauchy"}),
+            }
+        ),
+        "no-robust-flat": default.model_copy(
+            update={
+                "dvl": default.dvl.model_copy(update={"robust": "none"}),
+                "solver": default.solver.model_copy(update={"earth_model": "flat"}),
+            }
+        ),
         # one row per valid beam, each with its own Huber kernel; the lever arm a variable
-        "beams-lever": paper.model_copy(update={
-            "dvl": paper.dvl.model_copy(update={"use_beams": True, "estimate_lever_arm": True})}),
-        "offset-lever": default.model_copy(update={"dvl": default.dvl.model_copy(update={"estimate_lever_arm": True})}),
-        # the DVL's correlated error E(i) a variable of every DVL factor (estimators/correlated.py; with beams:
+        "beams-lever": paper.model_copy(
+            update={
+                "dvl": paper.dvl.model_copy(update={"use_beams": True, "estimate_lever_arm": True})
+            }
+        ),
+        "offset-lever": default.model_copy(
+            update={"dvl": default.dvl.model_copy(update={"estimate_lever_arm": True})}
+        ),
+        # the DVL's correlated error E(i) a variable of every DVL factor (estimators/models/correlated.py; with beams:
         # its Jacobian d_u^T, tests/factors/test_dvl.py); with water-track pings (run on water_log): the current
-        # W(i) and the water-track scale K_WATER (estimators/current.py)
-        "correlated-water-scale": default.model_copy(update={
-            "dvl": default.dvl.model_copy(update={"correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0}),
-            "current": default.current.model_copy(update={"water_track": "use", "water_track_scale": True})}),
+        # W(i) and the water-track scale K_WATER (estimators/models/current.py)
+        "correlated-water-scale": default.model_copy(
+            update={
+                "dvl": default.dvl.model_copy(
+                    update={"correlated_sigma_m_s": 0.002, "correlated_tau_s": 60.0}
+                ),
+                "current": default.current.model_copy(
+                    update={"water_track": "use", "water_track_scale": True}
+                ),
+            }
+        ),
     }
 
 
@@ -137,7 +160,11 @@ def hessians(*linear: gtsam.GaussianFactorGraph) -> list[tuple[np.ndarray, np.nd
     for lin in linear:
         missing = set(keys) - {k for i in range(lin.size()) for k in lin.at(i).keys()}
         for k in missing:  # an all-zero row block, so that hessian() knows the key
-            lin.add(gtsam.JacobianFactor(k, np.zeros((1, key_dim(k))), np.zeros(1), gtsam.noiseModel.Unit.Create(1)))
+            lin.add(
+                gtsam.JacobianFactor(
+                    k, np.zeros((1, key_dim(k))), np.zeros(1), gtsam.noiseModel.Unit.Create(1)
+                )
+            )
         out.append(lin.hessian(ordering))
     return out
 
@@ -162,7 +189,9 @@ def test_same_objective_and_linear_system(name: str) -> None:
         assert np.abs(g1 - g2).max() <= 1e-9 * np.abs(g1).max()
         # the IMU factors alone (GTSAM's ImuFactor through the EarthImuFactor against factors/imu_bulk.py), then
         # the whole graphs
-        (H1, g1), (H2, g2) = hessians(imu_graph(builder).linearize(vals), bulk_imu_linear(bulk, vals))
+        (H1, g1), (H2, g2) = hessians(
+            imu_graph(builder).linearize(vals), bulk_imu_linear(bulk, vals)
+        )
         assert np.abs(H1 - H2).max() <= 1e-9 * np.abs(H1).max()
         assert np.abs(g1 - g2).max() <= 1e-9 * np.abs(g1).max()
         # (the whole systems by their Gauss-Newton steps: a random-walk graph has a constrained factor, which
@@ -194,7 +223,9 @@ def test_bulk_imu_arrays_are_the_earth_imu_factors() -> None:
     refs = builder.gravity_refs
     assert not np.isnan(refs.n_p).any()
     for i in (0, len(fs) // 2, len(fs) - 1):
-        assert np.array_equal(fs[i].model.ref_p, refs.n_p[i]) and np.array_equal(fs[i].model.ref_G, refs.G[i])
+        assert np.array_equal(fs[i].model.ref_p, refs.n_p[i]) and np.array_equal(
+            fs[i].model.ref_G, refs.G[i]
+        )
 
 
 @pytest.mark.slow
@@ -203,8 +234,12 @@ def test_bulk_imu_factors_across_an_imu_gap() -> None:
     between keyframes too): the bulk IMU factors' objective and linear system are still the EarthImuFactors'."""
     log = run_log()
     keep = (log.imu.t <= 300.0) | (log.imu.t > 301.3)
-    log = dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep],
-                                                            b_f=log.imu.b_f[keep]))
+    log = dataclasses.replace(
+        log,
+        imu=dataclasses.replace(
+            log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep]
+        ),
+    )
     builder = LogGraph(log, configs()["default"])
     assert builder.counters["imu_gaps"] == 1 and sum(bool(h) for h in builder.imu_held) >= 2
     per_factor, values = builder.build()
@@ -225,8 +260,12 @@ def test_same_solution_with_the_robust_kernel_active() -> None:
     bulk, _ = builder.build_bulk(values)
     ordering = builder.elimination_ordering()
     s = cfg.solver
-    kw = dict(max_iterations=s.max_iterations, relative_tol=s.relative_error_tol, absolute_tol=s.absolute_error_tol,
-              before_iteration=builder.refresh_gravity)
+    kw = dict(
+        max_iterations=s.max_iterations,
+        relative_tol=s.relative_error_tol,
+        absolute_tol=s.absolute_error_tol,
+        before_iteration=builder.refresh_gravity,
+    )
     v1, r1 = gauss_newton_qr(per_factor, values, ordering, **kw)
     v2, r2 = gauss_newton_qr(bulk, values, ordering, **kw)
     assert r1.iterations == r2.iterations and r1.converged and r2.converged
@@ -260,9 +299,15 @@ def test_smooth_batch_unchanged_by_bulk() -> None:
     graph, values = builder.build()
     ordering = builder.elimination_ordering()
     s = cfg.solver
-    ref, _ = gauss_newton_qr(graph, values, ordering, max_iterations=s.max_iterations,
-                             relative_tol=s.relative_error_tol, absolute_tol=s.absolute_error_tol,
-                             before_iteration=builder.refresh_gravity)
+    ref, _ = gauss_newton_qr(
+        graph,
+        values,
+        ordering,
+        max_iterations=s.max_iterations,
+        relative_tol=s.relative_error_tol,
+        absolute_tol=s.absolute_error_tol,
+        before_iteration=builder.refresh_gravity,
+    )
     assert abs(r.scale - ref.atVector(K_SCALE)[0]) < 1e-6 * r.scale_sigma
     assert r.info["solver"]["dof"] == graph_rows(graph) - values.dim()
 

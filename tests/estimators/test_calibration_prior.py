@@ -14,7 +14,9 @@ from gtsam_dvl.estimators.run import run_estimator
 from tests.support.calibration import MOVING, STATIC, calibration_at_truth
 from tests.support.scenarios import simulate_variant
 
-CONFIG = EstimatorConfig()  # the default: scale 1 +- 1 %, misalignment +- 1 deg, the time offset estimated
+CONFIG = (
+    EstimatorConfig()
+)  # the default: scale 1 +- 1 %, misalignment +- 1 deg, the time offset estimated
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +42,9 @@ def test_batch_posterior_is_tighter_with_the_file_and_within_it(moving_log: LogD
     scale = with_file.calibration["scale"]
     assert abs(scale.value[0] - truth.scale) < 3 * scale.sigma[0]
     prior = with_file.info["calibration_prior"]
-    assert prior["states"] == ["scale", "misalignment", "time_offset"] and prior["vehicle"] == "auv-7"
+    assert (
+        prior["states"] == ["scale", "misalignment", "time_offset"] and prior["vehicle"] == "auv-7"
+    )
     np.testing.assert_allclose(prior["cov"], cal.cov)
 
 
@@ -52,7 +56,9 @@ def test_batch_on_a_static_log_keeps_the_file(static_log: LogData) -> None:
     assert abs(scale.value[0] - cal.values["scale"][0]) < 0.01 * cal.sigma("scale")[0]
     np.testing.assert_allclose(scale.sigma, cal.sigma("scale"), rtol=0.01)
     mis = result.calibration["misalignment"]
-    np.testing.assert_allclose(mis.value, cal.values["misalignment"], atol=0.01 * cal.sigma("misalignment").min())
+    np.testing.assert_allclose(
+        mis.value, cal.values["misalignment"], atol=0.01 * cal.sigma("misalignment").min()
+    )
     np.testing.assert_allclose(mis.sigma, cal.sigma("misalignment"), rtol=0.01)
 
 
@@ -60,16 +66,26 @@ def test_batch_on_a_static_log_keeps_the_file(static_log: LogData) -> None:
 def test_filters_start_at_the_inflated_file(mode: str, static_log: LogData) -> None:
     """The EKF's initial mean and covariance, the online estimator's prior: the file's values and its inflated
     sigmas at the first state (a static log adds nothing there)."""
-    cal = calibration_at_truth(static_log, scale_off=0.003).inflated(days=50.0, per_day=0.02)  # variances x2
+    cal = calibration_at_truth(static_log, scale_off=0.003).inflated(
+        days=50.0, per_day=0.02
+    )  # variances x2
     result = run_estimator(static_log, mode, CONFIG, calibration=cal)
     tl = result.timeline
     assert tl is not None
     np.testing.assert_allclose(tl.scale_sigma[0], cal.sigma("scale")[0], rtol=0.01)
-    np.testing.assert_allclose(tl.misalignment_sigma_deg[0], np.degrees(cal.sigma("misalignment")), rtol=0.01)
-    offset = result.calibration["time_offset"]  # (not in the filters' timelines) at rest: the file's to the end
+    np.testing.assert_allclose(
+        tl.misalignment_sigma_deg[0], np.degrees(cal.sigma("misalignment")), rtol=0.01
+    )
+    offset = result.calibration[
+        "time_offset"
+    ]  # (not in the filters' timelines) at rest: the file's to the end
     np.testing.assert_allclose(offset.sigma, cal.sigma("time_offset"), rtol=0.01)
-    np.testing.assert_allclose(offset.value, cal.values["time_offset"], atol=0.05 * cal.sigma("time_offset")[0])
-    np.testing.assert_allclose(tl.scale[0], cal.values["scale"][0], atol=0.01 * cal.sigma("scale")[0])
+    np.testing.assert_allclose(
+        offset.value, cal.values["time_offset"], atol=0.05 * cal.sigma("time_offset")[0]
+    )
+    np.testing.assert_allclose(
+        tl.scale[0], cal.values["scale"][0], atol=0.01 * cal.sigma("scale")[0]
+    )
     assert result.info["calibration_prior"]["states"] == ["scale", "misalignment", "time_offset"]
 
 

@@ -13,8 +13,8 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.solver import bayes_net_marginals, eliminate_chunked
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.graph.solver import bayes_net_marginals, eliminate_chunked
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
@@ -31,8 +31,12 @@ def short_log() -> LogData:
 
 def configs() -> dict[str, EstimatorConfig]:
     paper = EstimatorConfig.paper()
-    return {"default": EstimatorConfig(),
-            "random-walk": paper.model_copy(update={"imu": paper.imu.model_copy(update={"bias_model": "random_walk"})})}
+    return {
+        "default": EstimatorConfig(),
+        "random-walk": paper.model_copy(
+            update={"imu": paper.imu.model_copy(update={"bias_model": "random_walk"})}
+        ),
+    }
 
 
 @pytest.mark.parametrize("name", list(configs()))
@@ -43,8 +47,12 @@ def test_same_bayes_net_as_one_sequential_elimination(name: str, chunk_states: i
     linear = graph.linearize(values)
     plan = builder.elimination_ordering(chunk_states)
     assert len(plan.chunks) == -(-len(builder.epochs) // chunk_states)
-    full = linear.eliminateSequential(plan.ordering(), gtsam.EliminateQR)  # GTSAM's, solved by GTSAM
-    chunked = eliminate_chunked(linear, plan)  # CompactBayesNet, solved by its own back-substitution
+    full = linear.eliminateSequential(
+        plan.ordering(), gtsam.EliminateQR
+    )  # GTSAM's, solved by GTSAM
+    chunked = eliminate_chunked(
+        linear, plan
+    )  # CompactBayesNet, solved by its own back-substitution
     assert chunked.size() == full.size()
     d_full, d_chunked = full.optimize(), chunked.optimize()
     for key in [k for ks in plan.chunks[:2] for k in ks] + plan.rest:
@@ -59,8 +67,8 @@ def test_smooth_batch_through_the_chunked_path(monkeypatch: pytest.MonkeyPatch) 
     """smooth_batch with the chunked elimination forced (as on logs of more than 8000 states) gives the plain
     elimination's estimates and marginal covariances (to 1e-9 of a sigma, covariances to 1e-9 in correlation
     units)."""
-    from gtsam_dvl.estimators import solver
-    from gtsam_dvl.estimators.batch import smooth_batch
+    from gtsam_dvl.estimators.batch.smoother import smooth_batch
+    from gtsam_dvl.estimators.graph import solver
 
     plain = smooth_batch(short_log(), EstimatorConfig())
     monkeypatch.setattr(solver, "CHUNKED_FROM_STATES", 10)
@@ -71,4 +79,7 @@ def test_smooth_batch_through_the_chunked_path(monkeypatch: pytest.MonkeyPatch) 
     assert np.allclose(chunked.n_p, plain.n_p, rtol=0, atol=1e-9)
     # covariances compared in correlation units: each entry over the product of its two sigmas
     sig = np.sqrt(np.einsum("nii->ni", plain.pose_cov))
-    assert np.abs((chunked.pose_cov - plain.pose_cov) / (sig[:, :, None] * sig[:, None, :])).max() < 1e-9
+    assert (
+        np.abs((chunked.pose_cov - plain.pose_cov) / (sig[:, :, None] * sig[:, None, :])).max()
+        < 1e-9
+    )

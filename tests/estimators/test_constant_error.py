@@ -1,4 +1,4 @@
-"""The DVL's constant error as a consider term of the calibration's covariance (estimators/constant_error.py):
+"""The DVL's constant error as a consider term of the calibration's covariance (estimators/models/constant_error.py):
 its response against the model's own first-order algebra and scipy's rotations, the covariance it adds, none along
 held directions; over seeds of realistic-turns the calibration's error/sigma with it (a slow test)."""
 
@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.estimators.constant_error import consider_constant_error, response
+from gtsam_dvl.estimators.models.constant_error import consider_constant_error, response
 
 WIDE = np.diag([1.0, 1.0, 1.0, 1.0])  # a prior that takes nothing: the data's response alone
 
@@ -36,13 +36,17 @@ def test_response_moves_the_model_by_the_constant_error() -> None:
     b = np.array([0.003, -0.002, 0.004])
     S = response(b_v, k, b_R_d, 0.02, WIDE)
     dx = S @ b
-    moved = (k + dx[0]) * b_v @ (b_R_d @ Rotation.from_rotvec(dx[1:]).as_matrix())  # (b_R_d exp(dtheta))^T u
+    moved = (
+        (k + dx[0]) * b_v @ (b_R_d @ Rotation.from_rotvec(dx[1:]).as_matrix())
+    )  # (b_R_d exp(dtheta))^T u
     pings = k * b_v @ b_R_d + b
     left = k * b_v @ b_R_d
     r_moved, r_left = np.linalg.norm(pings - moved), np.linalg.norm(pings - left)
     # the linear least-squares residual of b on the model's columns, computed apart with lstsq
     w = b_v @ b_R_d
-    A = np.concatenate([w[:, :, None], np.stack([k * np.cross(w, e) for e in np.eye(3)], axis=2)], axis=2)
+    A = np.concatenate(
+        [w[:, :, None], np.stack([k * np.cross(w, e) for e in np.eye(3)], axis=2)], axis=2
+    )
     x, *_ = np.linalg.lstsq(A.reshape(-1, 4), np.tile(b, len(w)), rcond=None)
     np.testing.assert_allclose(dx, x, rtol=1e-3, atol=1e-9)
     r_linear = np.linalg.norm(np.tile(b, len(w)) - A.reshape(-1, 4) @ x)
@@ -56,10 +60,25 @@ def _result(held: object = None) -> NavResult:
     n_v = np.tile([1.5, 0.0, 0.0], (n, 1))
     cov = np.zeros((n, 6, 6)) + np.eye(6) * 1e-4
     joint = np.eye(10) * 1e-8
-    r = NavResult("batch", t, np.zeros((n, 3)), n_R_b, n_v, cov, np.repeat(np.eye(3)[None] * 1e-4, n, axis=0),
-                  b_R_d0=np.eye(3), accel_bias=np.zeros(3), gyro_bias=np.zeros(3), bias_cov=np.eye(6) * 1e-8,
-                  scale=1.0, scale_sigma=1e-4, b_R_d=np.eye(3), b_R_d_cov=np.eye(3) * 1e-8,
-                  calib_joint_cov=joint.copy(), shared_joint_cov=joint.copy())
+    r = NavResult(
+        "batch",
+        t,
+        np.zeros((n, 3)),
+        n_R_b,
+        n_v,
+        cov,
+        np.repeat(np.eye(3)[None] * 1e-4, n, axis=0),
+        b_R_d0=np.eye(3),
+        accel_bias=np.zeros(3),
+        gyro_bias=np.zeros(3),
+        bias_cov=np.eye(6) * 1e-8,
+        scale=1.0,
+        scale_sigma=1e-4,
+        b_R_d=np.eye(3),
+        b_R_d_cov=np.eye(3) * 1e-8,
+        calib_joint_cov=joint.copy(),
+        shared_joint_cov=joint.copy(),
+    )
     if held is not None:
         r.info["calibration_hold"] = held
     return r
@@ -80,7 +99,9 @@ def test_added_covariance_and_held_directions() -> None:
     want = np.sqrt(1e-8 + added(config.priors.scale_sigma) ** 2)
     want_yaw = np.sqrt(1e-8 + added(np.radians(config.priors.misalignment_sigma_deg[2])) ** 2)
     assert r.scale_sigma == pytest.approx(want, rel=1e-3)
-    assert r.misalignment_sigma_deg[0] == pytest.approx(np.degrees(1e-4), rel=1e-3)  # roll: not excited
+    assert r.misalignment_sigma_deg[0] == pytest.approx(
+        np.degrees(1e-4), rel=1e-3
+    )  # roll: not excited
     assert np.sqrt(r.b_R_d_cov[2, 2]) == pytest.approx(want_yaw, rel=1e-3)
     assert r.calib_joint_cov[6, 6] == pytest.approx(want**2, rel=1e-3)
     assert r.shared_joint_cov[8, 8] == pytest.approx(r.b_R_d_cov[1, 1])
@@ -90,8 +111,20 @@ def test_added_covariance_and_held_directions() -> None:
     consider_constant_error(nominal, config)
     assert nominal.scale_sigma == pytest.approx(1e-4)
     # the yaw held (a weak direction): the scale takes its share, the yaw none
-    yaw = _result({"held": [{"direction": {"scale": 0.0, "misalignment roll": 0.0, "misalignment pitch": 0.0,
-                                            "misalignment yaw": 1.0}}]})
+    yaw = _result(
+        {
+            "held": [
+                {
+                    "direction": {
+                        "scale": 0.0,
+                        "misalignment roll": 0.0,
+                        "misalignment pitch": 0.0,
+                        "misalignment yaw": 1.0,
+                    }
+                }
+            ]
+        }
+    )
     consider_constant_error(yaw, config)
     assert yaw.scale_sigma == pytest.approx(want, rel=1e-3)
     assert np.sqrt(yaw.b_R_d_cov[2, 2]) == pytest.approx(1e-4, rel=1e-6)

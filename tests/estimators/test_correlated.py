@@ -1,4 +1,4 @@
-"""estimators/correlated.py: the DVL's correlated (Gauss-Markov) velocity error as a state of each epoch.
+"""estimators/models/correlated.py: the DVL's correlated (Gauss-Markov) velocity error as a state of each epoch.
 
 The link and prior factors against the process's own discretisation (an independent formula); the EKF's propagation
 keeps the stationary covariance; and on a simulated log whose DVL carries a strong correlated error (6 mm/s, 30 s,
@@ -15,9 +15,9 @@ import pytest
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import E
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated
-from gtsam_dvl.estimators.batch import smooth_batch, solve_graph
-from gtsam_dvl.estimators.graph import LogGraph
+from gtsam_dvl.estimators.batch.smoother import smooth_batch, solve_graph
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.models import correlated
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.dvl import correlated_error
 from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
@@ -26,8 +26,11 @@ SIGMA, TAU = 0.006, 30.0  # m/s, s
 
 
 def _with_gm(c: EstimatorConfig) -> EstimatorConfig:
-    return c.model_copy(update={"dvl": c.dvl.model_copy(update={"correlated_sigma_m_s": SIGMA,
-                                                                "correlated_tau_s": TAU})})
+    return c.model_copy(
+        update={
+            "dvl": c.dvl.model_copy(update={"correlated_sigma_m_s": SIGMA, "correlated_tau_s": TAU})
+        }
+    )
 
 
 def _config() -> EstimatorConfig:
@@ -45,8 +48,11 @@ def test_link_and_prior_are_the_discrete_process() -> None:
     phi = np.exp(-dt / TAU)
     q = SIGMA**2 * (1 - phi**2)
     assert correlated.link_factor(cfg, 3, 4, dt).error(values) == pytest.approx(
-        0.5 * np.sum((e_j - phi * e_i) ** 2) / q, rel=1e-12)
-    assert correlated.prior_factor(cfg, 3).error(values) == pytest.approx(0.5 * np.sum(e_i**2) / SIGMA**2, rel=1e-12)
+        0.5 * np.sum((e_j - phi * e_i) ** 2) / q, rel=1e-12
+    )
+    assert correlated.prior_factor(cfg, 3).error(values) == pytest.approx(
+        0.5 * np.sum(e_i**2) / SIGMA**2, rel=1e-12
+    )
 
 
 def test_ekf_propagation_keeps_the_stationary_covariance() -> None:
@@ -68,7 +74,12 @@ def test_ekf_propagation_keeps_the_stationary_covariance() -> None:
 @cache
 def _scenario() -> Scenario:
     raw = dict(load_scenario("steady-turn").raw)
-    raw["dvl"] = {**raw["dvl"], "correlated_sigma_m_s": SIGMA, "correlated_tau_s": TAU, "noise_m_s": 0.005}
+    raw["dvl"] = {
+        **raw["dvl"],
+        "correlated_sigma_m_s": SIGMA,
+        "correlated_tau_s": TAU,
+        "noise_m_s": 0.005,
+    }
     raw["segments"] = [{**raw["segments"][0], "duration_s": 200.0}]
     return scenario_from_dict(raw)
 
@@ -107,8 +118,10 @@ def test_result_reports_the_model() -> None:
     error is white."""
     sc, log = _scenario(), _log(1)
     base = sc.estimator_configuration()
-    white = smooth_batch(log, base.model_copy(update={"dvl": base.dvl.model_copy(update={
-        "correlated_sigma_m_s": 0.0})}))
+    white = smooth_batch(
+        log,
+        base.model_copy(update={"dvl": base.dvl.model_copy(update={"correlated_sigma_m_s": 0.0})}),
+    )
     with_gm = smooth_batch(log, _with_gm(base))
     info = with_gm.info["dvl_correlated_error"]
     assert info["sigma_m_s"] == SIGMA and info["tau_s"] == TAU

@@ -1,4 +1,4 @@
-"""estimators/correlated_fit.py: the DVL's correlated error fitted in the batch smoother's noise loop.
+"""estimators/models/correlated_fit.py: the DVL's correlated error fitted in the batch smoother's noise loop.
 
 The fit's bounds and significance rule on synthetic residual series; the loop on a short simulated log whose DVL
 carries a strong correlated error; with the fit off, or with nothing significant to fit, the results of the
@@ -14,8 +14,8 @@ import pytest
 from gtsam_dvl.analysis.metrics import noise_lines
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.correlated_fit import fit_enabled, fit_level, held_correlated_level
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.models.correlated_fit import fit_enabled, fit_level, held_correlated_level
 from gtsam_dvl.estimators.run import run_trajectory_estimator
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
@@ -25,8 +25,12 @@ from tests.support.numerical import gauss_markov
 def _series(seed: int, sigma: float, n: int = 1200) -> tuple[np.ndarray, np.ndarray]:
     """n pings at 1 Hz of 3 axes: 7 mm/s white plus sigma over 60 s."""
     rng = np.random.default_rng(seed)
-    r = np.column_stack([rng.normal(0.0, 0.007, n) + (gauss_markov(n, 1.0, sigma, 60.0, rng) if sigma else 0.0)
-                         for _ in range(3)])
+    r = np.column_stack(
+        [
+            rng.normal(0.0, 0.007, n) + (gauss_markov(n, 1.0, sigma, 60.0, rng) if sigma else 0.0)
+            for _ in range(3)
+        ]
+    )
     return np.arange(n, dtype=float), r
 
 
@@ -43,7 +47,9 @@ def test_fit_takes_a_significant_level_within_the_bounds() -> None:
     assert fit.significant and not fit.at_bound and fit.rows == 3 * len(t)
     assert fit.sigma_m_s == pytest.approx(0.004, rel=0.35)
     assert 24.0 < fit.tau_s < 150.0
-    clipped = fit_level(t, r, _fit_config(correlated_max_sigma_m_s=0.002, correlated_min_tau_s=100.0))
+    clipped = fit_level(
+        t, r, _fit_config(correlated_max_sigma_m_s=0.002, correlated_min_tau_s=100.0)
+    )
     assert clipped.at_bound and clipped.sigma_m_s == 0.002 and clipped.tau_s >= 100.0
 
 
@@ -55,14 +61,21 @@ def test_white_residuals_keep_the_configured_level() -> None:
     fit = fit_level(t, r, cfg)
     assert not fit.significant
     assert (fit.sigma_m_s, fit.tau_s) == (cfg.dvl.correlated_sigma_m_s, cfg.dvl.correlated_tau_s)
-    assert not fit.moves(cfg.dvl.correlated_sigma_m_s, cfg.dvl.correlated_tau_s, cfg.noise.correlated_tolerance)
+    assert not fit.moves(
+        cfg.dvl.correlated_sigma_m_s, cfg.dvl.correlated_tau_s, cfg.noise.correlated_tolerance
+    )
 
 
 @cache
 def _scenario(sigma: float, duration_s: float) -> Scenario:
     """steady-turn shortened, its DVL's correlated error sigma over 30 s beside 5 mm/s white."""
     raw = dict(load_scenario("steady-turn").raw)
-    raw["dvl"] = {**raw["dvl"], "correlated_sigma_m_s": sigma, "correlated_tau_s": 30.0, "noise_m_s": 0.005}
+    raw["dvl"] = {
+        **raw["dvl"],
+        "correlated_sigma_m_s": sigma,
+        "correlated_tau_s": 30.0,
+        "noise_m_s": 0.005,
+    }
     raw["segments"] = [{**raw["segments"][0], "duration_s": duration_s}]
     return scenario_from_dict(raw)
 
@@ -93,9 +106,13 @@ def test_batch_loop_finds_the_part_of_a_strong_error_the_imu_separates() -> None
     assert res.info["dvl_correlated_error"]["sigma_m_s"] == entry["sigma_m_s"]
     used = res.noise_config
     assert used is not None and used.dvl.correlated_sigma_m_s == entry["sigma_m_s"]
-    assert res.estimator_config is not None and res.estimator_config.dvl.correlated_sigma_m_s == 0.002
+    assert (
+        res.estimator_config is not None and res.estimator_config.dvl.correlated_sigma_m_s == 0.002
+    )
     assert entry["why"].startswith("DVL correlated error fitted from")
-    assert entry["why"] in noise_lines(res.info["noise"])  # (the summary's and the console's noise lines)
+    assert entry["why"] in noise_lines(
+        res.info["noise"]
+    )  # (the summary's and the console's noise lines)
 
 
 def test_nothing_to_fit_gives_the_configured_results() -> None:
@@ -122,7 +139,9 @@ def test_held_by_the_online_estimator_and_the_ekf() -> None:
     on = held_correlated_level(_fit_config(), "EKF")
     assert on["held"] and on["sigma_m_s"] == 0.002 and "the EKF holds it" in on["why"]
     assert held_correlated_level(EstimatorConfig(), "EKF") == {}
-    white = EstimatorConfig.from_dict({"noise": {"fit_correlated": True}, "dvl": {"correlated_sigma_m_s": 0.0}})
+    white = EstimatorConfig.from_dict(
+        {"noise": {"fit_correlated": True}, "dvl": {"correlated_sigma_m_s": 0.0}}
+    )
     assert held_correlated_level(white, "EKF") == {}
 
 

@@ -1,4 +1,4 @@
-"""Depth in the batch smoother (estimators/depth.py, factors/depth.py): on a level run (paper-2d to 800 s:
+"""Depth in the batch smoother (estimators/inputs/depth.py, factors/depth.py): on a level run (paper-2d to 800 s:
 static, then a level Type-I segment) with a simulated pressure sensor, the vertical position stays within its
 sigma and its sigma drops from metres to centimetres, and the pitch misalignment's sigma improves. Each test
 prints the numbers it measured."""
@@ -15,8 +15,8 @@ from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.depth import nearest_states
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.inputs.depth import nearest_states
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
@@ -50,10 +50,12 @@ def test_depth_bounds_vertical_position_and_improves_pitch_misalignment(seed: in
         err, sig = _vertical(res, log)
         s = summary(res, log)
         out[use] = (err, sig, s, res.info["counters"])
-        print(f"\nseed {seed} depth {use}: final vertical error {err[-1]:+.3f} m sigma {sig[-1]:.3f} m; "
-              f"max |err|/sigma {np.max(np.abs(err) / sig):.2f}, rms {np.sqrt(np.mean((err / sig) ** 2)):.2f}; "
-              f"misalignment err {np.round(s['errors']['misalignment_deg'], 4)} "
-              f"sigma {np.round(s['misalignment_deg']['sigma'], 4)} deg")
+        print(
+            f"\nseed {seed} depth {use}: final vertical error {err[-1]:+.3f} m sigma {sig[-1]:.3f} m; "
+            f"max |err|/sigma {np.max(np.abs(err) / sig):.2f}, rms {np.sqrt(np.mean((err / sig) ** 2)):.2f}; "
+            f"misalignment err {np.round(s['errors']['misalignment_deg'], 4)} "
+            f"sigma {np.round(s['misalignment_deg']['sigma'], 4)} deg"
+        )
     err, sig, s, counters = out[True]
     err0, sig0, s0, counters0 = out[False]
     assert counters["depth_used"] >= 799 and "depth_used" not in counters0
@@ -81,9 +83,13 @@ def test_noise_free_depth_is_exact() -> None:
     log = simulate(scenario_from_dict(raw), 1, white_noise=False)
     res = smooth_batch(log, EstimatorConfig.paper())
     err, _ = _vertical(res, log)
-    print(f"\nnoise-free: max |vertical error| {np.max(np.abs(err)) * 1e3:.2f} mm; {res.info['counters']}")
+    print(
+        f"\nnoise-free: max |vertical error| {np.max(np.abs(err)) * 1e3:.2f} mm; {res.info['counters']}"
+    )
     assert np.max(np.abs(err)) < 3e-3
-    assert res.info["counters"]["depth_used"] >= 1599  # 2 Hz: half the samples bridged by the vertical velocity
+    assert (
+        res.info["counters"]["depth_used"] >= 1599
+    )  # 2 Hz: half the samples bridged by the vertical velocity
 
 
 @pytest.mark.slow
@@ -93,11 +99,15 @@ def test_samples_far_from_states_are_not_used() -> None:
     res = smooth_batch(_log(2, rate_hz=2.0), cfg)
     c = res.info["counters"]
     print(c)
-    assert c["depth_used"] == pytest.approx(800, abs=2) and c["depth_too_far"] == pytest.approx(800, abs=2)
+    assert c["depth_used"] == pytest.approx(800, abs=2) and c["depth_too_far"] == pytest.approx(
+        800, abs=2
+    )
 
 
 def test_nearest_states_and_pressure_conversion() -> None:
-    near, dt = nearest_states(np.array([0.0, 1.0, 2.0]), np.array([-0.6, 0.4, 0.6, 1.5, 2.2, 3.0]), 0.5)
+    near, dt = nearest_states(
+        np.array([0.0, 1.0, 2.0]), np.array([-0.6, 0.4, 0.6, 1.5, 2.2, 3.0]), 0.5
+    )
     assert near.tolist() == [-1, 0, 1, 1, 2, -1]
     np.testing.assert_allclose(dt[[1, 2, 4]], [0.4, -0.4, 0.2])
     d = np.array([0.0, 10.0, 100.0, 3000.0])

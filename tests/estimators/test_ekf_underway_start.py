@@ -20,7 +20,11 @@ def test_a_straight_underway_start_does_not_inform_the_misalignment() -> None:
     sc = load_scenario("realistic-straight")
     log = simulate(sc, 2)
     d = sc.estimator_configuration().to_dict()
-    d["priors"] = {**d["priors"], "nominal_check": False, "hold_weak_information": 0.0}  # the filtered sigmas
+    d["priors"] = {
+        **d["priors"],
+        "nominal_check": False,
+        "hold_weak_information": 0.0,
+    }  # the filtered sigmas
     config = EstimatorConfig.from_dict(d)
     result = run_ekf(log, config)
     tl = result.timeline
@@ -29,6 +33,8 @@ def test_a_straight_underway_start_does_not_inform_the_misalignment() -> None:
     early = (t > t[0] + 1.5) & (t < t[0] + 30.0)
     sigma = np.asarray(tl.misalignment_sigma_deg)[early]
     prior = np.asarray(config.priors.misalignment_sigma_deg)
-    print("pitch, yaw sigma / prior over the first 30 s: min", (sigma[:, 1:] / prior[1:]).min(axis=0))
+    print(
+        "pitch, yaw sigma / prior over the first 30 s: min", (sigma[:, 1:] / prior[1:]).min(axis=0)
+    )
     assert early.sum() >= 20
     assert np.all(sigma[:, 1:] >= 0.98 * prior[1:])

@@ -19,7 +19,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.io.reader import read_log
@@ -30,10 +30,15 @@ from gtsam_dvl.sim.scenario import scenario_from_dict
 pytestmark = pytest.mark.slow
 
 MODES: dict[str, Callable[[LogData, EstimatorConfig], NavResult]] = {
-    "batch": smooth_batch, "online": smooth_online, "ekf": run_ekf}
+    "batch": smooth_batch,
+    "online": smooth_online,
+    "ekf": run_ekf,
+}
 
 
-END_S = 460.0  # paper-3d-short up to the end of its second turn: static, the Type-I segments, two turns
+END_S = (
+    460.0  # paper-3d-short up to the end of its second turn: static, the Type-I segments, two turns
+)
 
 
 def _through_file(log: LogData, tmp: Path, **read: bool) -> LogData:
@@ -42,11 +47,26 @@ def _through_file(log: LogData, tmp: Path, **read: bool) -> LogData:
     assert truth is not None
     ki, kd, kt = imu.t <= END_S, dvl.t <= END_S, truth.t <= END_S
     log = dataclasses.replace(
-        log, imu=dataclasses.replace(imu, t=imu.t[ki], b_omega=imu.b_omega[ki], b_f=imu.b_f[ki]),
-        dvl=dataclasses.replace(dvl, t=dvl.t[kd], d_v=dvl.d_v[kd], d_cov=dvl.d_cov[kd], valid=dvl.valid[kd],
-                                beams=None, water_track=None if dvl.water_track is None else dvl.water_track[kd]),
-        truth=dataclasses.replace(truth, t=truth.t[kt], n_p=truth.n_p[kt], n_q_b=truth.n_q_b[kt], n_v=truth.n_v[kt],
-                                  b_omega=truth.b_omega[kt]))
+        log,
+        imu=dataclasses.replace(imu, t=imu.t[ki], b_omega=imu.b_omega[ki], b_f=imu.b_f[ki]),
+        dvl=dataclasses.replace(
+            dvl,
+            t=dvl.t[kd],
+            d_v=dvl.d_v[kd],
+            d_cov=dvl.d_cov[kd],
+            valid=dvl.valid[kd],
+            beams=None,
+            water_track=None if dvl.water_track is None else dvl.water_track[kd],
+        ),
+        truth=dataclasses.replace(
+            truth,
+            t=truth.t[kt],
+            n_p=truth.n_p[kt],
+            n_q_b=truth.n_q_b[kt],
+            n_v=truth.n_v[kt],
+            b_omega=truth.b_omega[kt],
+        ),
+    )
     path = tmp / "log.mcap"
     write_log(path, log)
     return read_log(path, **read)
@@ -56,8 +76,12 @@ def _worst_nsigma(result: NavResult, log: LogData) -> tuple[float, float]:
     """The largest |error / sigma| of the scale, misalignment and time offset, and the final horizontal position's."""
     s = summary(result, log)
     e = s["errors"]
-    calib = [e["scale_nsigma"], *e["misalignment_nsigma"]] + [e.get("dvl_time_offset_nsigma") or 0.0]
-    return float(np.max(np.abs(calib))), e["final_horizontal_position_m"] / s["final_horizontal_position_sigma_m"]
+    calib = [e["scale_nsigma"], *e["misalignment_nsigma"]] + [
+        e.get("dvl_time_offset_nsigma") or 0.0
+    ]
+    return float(np.max(np.abs(calib))), e["final_horizontal_position_m"] / s[
+        "final_horizontal_position_sigma_m"
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -65,9 +89,12 @@ def clock_step_log(sim_paper3d_short: LogData, tmp_path_factory: pytest.TempPath
     """The IMU's stamps 5 s ahead from 285 s on (entering the first turn), read with --repair."""
     log = sim_paper3d_short
     t = log.imu.t.copy()
-    t[int(np.searchsorted(t, 285.0)):] += 5.0
-    return _through_file(dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=t)),
-                         tmp_path_factory.mktemp("clock"), repair=True)
+    t[int(np.searchsorted(t, 285.0)) :] += 5.0
+    return _through_file(
+        dataclasses.replace(log, imu=dataclasses.replace(log.imu, t=t)),
+        tmp_path_factory.mktemp("clock"),
+        repair=True,
+    )
 
 
 @pytest.mark.parametrize("mode", MODES)
@@ -78,7 +105,9 @@ def test_clock_step_undone_in_every_mode(clock_step_log: LogData, mode: str) -> 
     res = MODES[mode](clock_step_log, EstimatorConfig())
     worst, final = _worst_nsigma(res, clock_step_log)
     health = assess_health(res, clock_step_log)
-    print(f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}")
+    print(
+        f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}"
+    )
     assert worst < 3.0 and final < 3.0
     assert any("clock step at 284.990 s" in n and "back by 5.000 s" in n for n in health.notes)
 
@@ -98,11 +127,18 @@ def test_saturated_gyro_crossed_as_gaps_in_every_mode(saturated_log: LogData, mo
     res = MODES[mode](saturated_log, EstimatorConfig.paper())
     worst, final = _worst_nsigma(res, saturated_log)
     health = assess_health(res, saturated_log)
-    print(f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}")
+    print(
+        f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}"
+    )
     assert worst < 3.0 and final < 3.0
     assert health.status == "degraded"
-    assert any("the IMU saturated (gyro z at +0.055 rad/s)" in w and "2 stretch(es)" in w for w in health.warnings)
-    assert not any("check the IMU driver" in w for w in health.warnings)  # no gap in the log: the sensor's range
+    assert any(
+        "the IMU saturated (gyro z at +0.055 rad/s)" in w and "2 stretch(es)" in w
+        for w in health.warnings
+    )
+    assert not any(
+        "check the IMU driver" in w for w in health.warnings
+    )  # no gap in the log: the sensor's range
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +150,9 @@ def frozen_log(sim_paper3d_short: LogData, tmp_path_factory: pytest.TempPathFact
     water = (t >= 340.0) & (t < 360.0)
     valid[water] = False
     d_v[(t > 400.0) & (t <= 440.0)] = d_v[int(np.searchsorted(t, 400.0))]
-    log = dataclasses.replace(sim_paper3d_short, dvl=dataclasses.replace(d, d_v=d_v, valid=valid, water_track=water))
+    log = dataclasses.replace(
+        sim_paper3d_short, dvl=dataclasses.replace(d, d_v=d_v, valid=valid, water_track=water)
+    )
     return _through_file(log, tmp_path_factory.mktemp("frozen"))
 
 
@@ -124,24 +162,34 @@ def test_frozen_dvl_and_water_track_in_every_mode(frozen_log: LogData, mode: str
     anyway, counted alike by every mode and named; the water-track pings are counted as such; the ping at the
     first IMU stamp is no rejection. (Water track refused here; used, it is test_water_current.py's.)"""
     paper = EstimatorConfig.paper()
-    res = MODES[mode](frozen_log, paper.model_copy(update={"current": paper.current.model_copy(
-        update={"water_track": "refuse"})}))
+    res = MODES[mode](
+        frozen_log,
+        paper.model_copy(
+            update={"current": paper.current.model_copy(update={"water_track": "refuse"})}
+        ),
+    )
     worst, final = _worst_nsigma(res, frozen_log)
     health = assess_health(res, frozen_log)
-    print(f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}")
+    print(
+        f"{mode}: health {health.status}, worst calibration |err/sigma| {worst:.2f}, final position {final:.2f}"
+    )
     assert worst < 3.0 and final < 3.0
     c = res.info["counters"]
     assert (c.get("dvl_repeated"), c.get("dvl_water_track"), c.get("dvl_before_imu")) == (40, 20, 1)
     assert c.get("dvl_unusable", 0) == 0
-    assert "DVL output frozen: 40 pings repeated bit for bit between 401 and 440 s, dropped; check the DVL" in (
-        health.warnings)
+    assert (
+        "DVL output frozen: 40 pings repeated bit for bit between 401 and 440 s, dropped; check the DVL"
+        in (health.warnings)
+    )
     assert any(n.startswith("20 of 461 DVL pings are water track") for n in health.notes)
     assert any(n.startswith("40 of 461 DVL pings rejected (40 repeated)") for n in health.warnings)
 
 
-def test_a_log_built_in_memory_is_screened_as_the_reader_screens(sim_paper3d_short: LogData) -> None:
+def test_a_log_built_in_memory_is_screened_as_the_reader_screens(
+    sim_paper3d_short: LogData,
+) -> None:
     """A log handed straight to an estimator (not read from a file) is screened as the reader screens one
-    (estimators/gaps.py screened_in_memory): the saturated gyro samples dropped and said (before, the batch
+    (estimators/inputs/gaps.py screened_in_memory): the saturated gyro samples dropped and said (before, the batch
     smoother said "ok" with a calibration state 177 sigma off, measured), a clock step an error naming it."""
     raw = copy.deepcopy(sim_paper3d_short.metadata["scenario"])
     raw.setdefault("imu", {})["saturation_gyro_rad_s"] = 0.055
@@ -154,7 +202,9 @@ def test_a_log_built_in_memory_is_screened_as_the_reader_screens(sim_paper3d_sho
     assert health.status == "degraded"
     assert any("the IMU saturated (gyro z at +0.055 rad/s)" in w for w in health.warnings)
     t = sim_paper3d_short.imu.t.copy()
-    t[int(np.searchsorted(t, 285.0)):] += 5.0
-    stepped = dataclasses.replace(sim_paper3d_short, imu=dataclasses.replace(sim_paper3d_short.imu, t=t))
+    t[int(np.searchsorted(t, 285.0)) :] += 5.0
+    stepped = dataclasses.replace(
+        sim_paper3d_short, imu=dataclasses.replace(sim_paper3d_short.imu, t=t)
+    )
     with pytest.raises(GtsamDvlError, match=r"IMU clock step at 284\.990 s.*--repair"):
         run_ekf(stepped, EstimatorConfig())

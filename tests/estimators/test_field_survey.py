@@ -19,7 +19,7 @@ from gtsam_dvl.analysis.health import assess_health
 from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.result import NavResult, StoredResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
@@ -42,7 +42,9 @@ def test_field_survey_meets_issue_11(run: tuple[LogData, NavResult]) -> None:
     log, res = run
     s = summary(res, log)
     e = s["errors"]
-    assert log.metadata.get("origin") is None and log.origin is not None  # the origin came from the first fix
+    assert (
+        log.metadata.get("origin") is None and log.origin is not None
+    )  # the origin came from the first fix
     assert res.info["alignment"]["method"] == "in_motion"
     z = np.array([e["scale_nsigma"], *e["misalignment_nsigma"], e["dvl_time_offset_nsigma"]])
     # vertical error and sigma at the last state (the depth sensor holds it)
@@ -51,10 +53,12 @@ def test_field_survey_meets_issue_11(run: tuple[LogData, NavResult]) -> None:
     R = res.n_R_b[-1]
     sig_up = float(np.sqrt((R @ res.pose_cov[-1, 3:, 3:] @ R.T)[2, 2]))
     up_err = float(res.n_p[-1, 2] - z_true)
-    print(f"\nfield-survey seed {SEED}: scale/misalignment/offset errors {np.round(z, 2)} sigma; offset "
-          f"{res.time_offset_s:.4f} +- {res.time_offset_sigma_s:.4f} s; final horizontal "
-          f"{e['final_horizontal_position_m']:.2f} m ({e['final_horizontal_position_pct_distance']:.3f} %); "
-          f"vertical {up_err:+.3f} m +- {sig_up:.3f} m; {len(res.t)} states, counters {res.info['counters']}")
+    print(
+        f"\nfield-survey seed {SEED}: scale/misalignment/offset errors {np.round(z, 2)} sigma; offset "
+        f"{res.time_offset_s:.4f} +- {res.time_offset_sigma_s:.4f} s; final horizontal "
+        f"{e['final_horizontal_position_m']:.2f} m ({e['final_horizontal_position_pct_distance']:.3f} %); "
+        f"vertical {up_err:+.3f} m +- {sig_up:.3f} m; {len(res.t)} states, counters {res.info['counters']}"
+    )
     assert np.all(np.abs(z) < 3)
     assert e["final_horizontal_position_pct_distance"] < 0.1
     assert abs(up_err) < 3 * sig_up
@@ -71,9 +75,15 @@ def test_field_survey_surfacing_error(run: tuple[LogData, NavResult]) -> None:
     log, res = run
     metrics = evaluate_result(StoredResult(res, {}, "memory"), log).metrics["gnss"]
     first, mean = metrics["surfacing_error"], metrics["surfacing_error_mean"]
-    print(f"\nsurfacing: first fix {first['horizontal_error_m']:.2f} m ({first['horizontal_error_pct']:.3f} %), "
-          f"mean of {metrics['surfacing_fixes']} fixes {mean['horizontal_error_m']:.2f} m "
-          f"({mean['horizontal_error_pct']:.3f} %) +- {mean['fix_sigma_h_m']:.2f} m, nis {mean['nis']:.2f}")
+    print(
+        f"\nsurfacing: first fix {first['horizontal_error_m']:.2f} m ({first['horizontal_error_pct']:.3f} %), "
+        f"mean of {metrics['surfacing_fixes']} fixes {mean['horizontal_error_m']:.2f} m "
+        f"({mean['horizontal_error_pct']:.3f} %) +- {mean['fix_sigma_h_m']:.2f} m, nis {mean['nis']:.2f}"
+    )
     assert metrics["surfacing_fixes"] > 50
-    assert mean["horizontal_error_pct"] < 0.1  # 1.8 km: under 1.8 m, fix noise averaged down to 0.33 m
-    assert mean["nis"] < 16.3  # chi^2 3 dof, 99.9 %: consistent with the sigmas of the fixes and the estimate
+    assert (
+        mean["horizontal_error_pct"] < 0.1
+    )  # 1.8 km: under 1.8 m, fix noise averaged down to 0.33 m
+    assert (
+        mean["nis"] < 16.3
+    )  # chi^2 3 dof, 99.9 %: consistent with the sigmas of the fixes and the estimate

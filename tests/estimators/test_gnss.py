@@ -1,4 +1,4 @@
-"""GNSS fixes in the batch smoother (estimators/gnss.py): the roles of the fixes (status, depth gate, surface
+"""GNSS fixes in the batch smoother (estimators/inputs/gnss.py): the roles of the fixes (status, depth gate, surface
 intervals, use modes, time to a state), and a dive that starts and ends at the surface, written to MCAP without
 an origin and read back (origin from the first fix): the estimated antenna at the held-out final fixes within
 3 sigma of the truth, in "start" and "origin" mode. Each test prints the numbers it measured."""
@@ -16,8 +16,8 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import quat_xyzw_to_matrix
 from gtsam_dvl.core.types import DepthData, GeoOrigin, GnssData, LogData
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.gnss import plan_fixes
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.inputs.gnss import plan_fixes
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
@@ -31,18 +31,31 @@ def dive_raw(origin_in_log: bool = False) -> dict[str, Any]:
     """90 s static at the surface, away at 2 m/s, a dive to about 24 m, a square of four banked turns, up
     again and 60 s on at the surface (585 s, about 850 m); 1 Hz fixes at the surface (2 m horizontal, 4 m
     vertical), a pressure sensor."""
-    return surface_dive_raw([
-        {"kind": "static", "duration_s": 90.0},
-        {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
-        {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.5},
-        {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-        {"kind": "square", "leg_duration_s": 30.0, "turn_duration_s": 30.0, "bank_deg": 15.0, "sides": 4,
-         "turn_first": True},
-        {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.4},
-        {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-        {"kind": "straight", "duration_s": 60.0},
-    ], depth={"rate_hz": 1.0, "noise_m": 0.05},
-        gnss={"rate_hz": 1.0, "antenna_lever_arm_m": LEVER.tolist(), "origin_in_log": origin_in_log})
+    return surface_dive_raw(
+        [
+            {"kind": "static", "duration_s": 90.0},
+            {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
+            {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.5},
+            {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+            {
+                "kind": "square",
+                "leg_duration_s": 30.0,
+                "turn_duration_s": 30.0,
+                "bank_deg": 15.0,
+                "sides": 4,
+                "turn_first": True,
+            },
+            {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.4},
+            {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+            {"kind": "straight", "duration_s": 60.0},
+        ],
+        depth={"rate_hz": 1.0, "noise_m": 0.05},
+        gnss={
+            "rate_hz": 1.0,
+            "antenna_lever_arm_m": LEVER.tolist(),
+            "origin_in_log": origin_in_log,
+        },
+    )
 
 
 @pytest.fixture(scope="module")
@@ -78,27 +91,38 @@ def _antenna_errors(res: NavResult, log: LogData, t: np.ndarray) -> tuple[np.nda
 
 
 @pytest.mark.slow
-def test_dive_held_out_final_fixes_within_3_sigma(dive_log: LogData, smoothed: dict[str, NavResult]) -> None:
+def test_dive_held_out_final_fixes_within_3_sigma(
+    dive_log: LogData, smoothed: dict[str, NavResult]
+) -> None:
     log = dive_log
     g = log.gnss
     assert g is not None and log.origin is not None
-    assert (log.origin.lat_deg, log.origin.lon_deg, log.origin.height_m) == (g.lat_deg[0], g.lon_deg[0],
-                                                                             g.height_m[0])
+    assert (log.origin.lat_deg, log.origin.lon_deg, log.origin.height_m) == (
+        g.lat_deg[0],
+        g.lon_deg[0],
+        g.height_m[0],
+    )
     out = {}
     for use in ("start", "origin"):
         res = smoothed[use]
         c = res.info["counters"]
-        plan = plan_fixes(log, EstimatorConfig.from_dict(res.config),
-                          LocalFrame(log.origin.lat_deg, log.origin.lon_deg, log.origin.height_m), res.t)
+        plan = plan_fixes(
+            log,
+            EstimatorConfig.from_dict(res.config),
+            LocalFrame(log.origin.lat_deg, log.origin.lon_deg, log.origin.height_m),
+            res.t,
+        )
         assert plan is not None
         held = plan.mask("held_out") & (plan.interval == plan.n_intervals - 1)
         err, sig = _antenna_errors(res, log, plan.t[held])
         z = np.abs(err) / sig
         e0, s0 = _antenna_errors(res, log, res.t[:1])
-        print(f"\n{use}: counters used {c['gnss_used']} held out {c['gnss_held_out']} rejected {c['gnss_rejected']}; "
-              f"first state error {np.round(e0[0], 3)} sigma {np.round(s0[0], 3)} m; at the {held.sum()} final "
-              f"fixes max |err|/sigma {np.round(z.max(axis=0), 2)}, sigma {np.round(sig[0], 3)} m, error "
-              f"{np.round(err[0], 3)} m; {res.info['solver']['iterations']} iterations")
+        print(
+            f"\n{use}: counters used {c['gnss_used']} held out {c['gnss_held_out']} rejected {c['gnss_rejected']}; "
+            f"first state error {np.round(e0[0], 3)} sigma {np.round(s0[0], 3)} m; at the {held.sum()} final "
+            f"fixes max |err|/sigma {np.round(z.max(axis=0), 2)}, sigma {np.round(sig[0], 3)} m, error "
+            f"{np.round(err[0], 3)} m; {res.info['solver']['iterations']} iterations"
+        )
         assert held.sum() >= 60 and res.info["solver"]["converged"]
         assert np.all(z < 3.0)
         assert np.all(np.abs(e0[0]) < 3 * s0[0])
@@ -107,7 +131,11 @@ def test_dive_held_out_final_fixes_within_3_sigma(dive_log: LogData, smoothed: d
     c_origin, sig_origin = out["origin"]
     # start: the first surface interval (0 to about 145 s) aids; origin: only the origin fix, as X(0)'s prior
     # here (the fix at t = 0 is before the first state: counted too far)
-    assert c_start["gnss_used"] > 130 and c_start["gnss_held_out"] >= 60 and c_start["gnss_surface_intervals"] == 2
+    assert (
+        c_start["gnss_used"] > 130
+        and c_start["gnss_held_out"] >= 60
+        and c_start["gnss_surface_intervals"] == 2
+    )
     assert c_origin["gnss_used"] + c_origin["gnss_too_far"] >= 1 and c_origin["gnss_used"] <= 1
     assert c_origin["gnss_held_out"] >= c_start["gnss_held_out"] + 130
     # 145 fixes of 2 m place the start to about 0.2 m, the origin fix alone to its 2 m
@@ -139,8 +167,14 @@ def test_log_with_its_own_origin_keeps_the_pinned_first_state() -> None:
 def _gnss(t: np.ndarray, status: np.ndarray | None = None) -> GnssData:
     k = len(t)
     cov = np.broadcast_to(np.diag([4.0, 4.0, 16.0]), (k, 3, 3)).copy()
-    return GnssData(t, np.full(k, 30.0), np.full(k, 114.0), np.zeros(k), cov,
-                    np.zeros(k, dtype=int) if status is None else status)
+    return GnssData(
+        t,
+        np.full(k, 30.0),
+        np.full(k, 114.0),
+        np.zeros(k),
+        cov,
+        np.zeros(k, dtype=int) if status is None else status,
+    )
 
 
 def test_roles_of_fixes() -> None:
@@ -149,11 +183,17 @@ def test_roles_of_fixes() -> None:
 
     t = np.array([0.0, 1.0, 2.0, 3.0, 50.0, 51.0, 52.0, 100.0, 101.5])
     status = np.array([0, -1, 0, 0, 0, 0, 0, 0, 0])
-    empty = LogData(ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))),
-                    DvlData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, bool)),
-                    origin=GeoOrigin(30.0, 114.0, 0.0), gnss=_gnss(t, status),
-                    depth=DepthData(np.array([0.0, 40.0, 50.5, 51.5, 60.0]), np.array([0.0, 3.0, 3.0, 0.2, 0.1]),
-                                    np.full(5, 0.01)))
+    empty = LogData(
+        ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))),
+        DvlData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0, bool)),
+        origin=GeoOrigin(30.0, 114.0, 0.0),
+        gnss=_gnss(t, status),
+        depth=DepthData(
+            np.array([0.0, 40.0, 50.5, 51.5, 60.0]),
+            np.array([0.0, 3.0, 3.0, 0.2, 0.1]),
+            np.full(5, 0.01),
+        ),
+    )
     frame = LocalFrame(30.0, 114.0, 0.0)
     states = np.arange(0.0, 102.0)
     roles = {}
@@ -166,12 +206,26 @@ def test_roles_of_fixes() -> None:
         assert plan.origin_from_gnss and plan.origin_index == 0
     # fix 1: no fix; fixes 4, 5: at 3 m and 1.6 m depth (interpolated); 101.5 s: 0.5 s from a state, within
     # max_time_to_state_s; three surface intervals (0-3 s, 52 s, 100-101.5 s)
-    assert roles["all"] == ["used", "rejected_status", "used", "used", "rejected_depth", "rejected_depth", "used",
-                            "used", "used"]
+    assert roles["all"] == [
+        "used",
+        "rejected_status",
+        "used",
+        "used",
+        "rejected_depth",
+        "rejected_depth",
+        "used",
+        "used",
+        "used",
+    ]
     assert roles["start"][:4] == ["used", "rejected_status", "used", "used"]
     assert roles["start"][6:] == ["held_out"] * 3
-    assert roles["origin"] == ["used", "rejected_status"] + ["held_out"] * 2 + ["rejected_depth"] * 2 + \
-        ["held_out"] * 3
+    assert (
+        roles["origin"]
+        == ["used", "rejected_status"]
+        + ["held_out"] * 2
+        + ["rejected_depth"] * 2
+        + ["held_out"] * 3
+    )
     cfg = EstimatorConfig()
     cfg.gnss.max_time_to_state_s = 0.2
     plan = plan_fixes(empty, cfg, frame, states)

@@ -1,4 +1,5 @@
-"""The given initial attitude and map origin mean the log's first IMU stamp (estimators/alignment.py first_state).
+"""The given initial attitude and map origin mean the log's first IMU stamp (estimators/inputs/alignment.py
+first_state).
 
 A simulated run that starts underway at 2 m/s in a banked 60 deg turn; its first FIRST_PINGS_DROPPED DVL pings
 are unusable, so the first state is 15 s after the first IMU sample. The configuration gives the true attitude
@@ -27,9 +28,15 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, so3_log
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.alignment import Alignment, align, first_state, given_covariance, map_frame_of
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import run_ekf
+from gtsam_dvl.estimators.inputs.alignment import (
+    Alignment,
+    align,
+    first_state,
+    given_covariance,
+    map_frame_of,
+)
 from gtsam_dvl.estimators.online.estimator import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
@@ -58,7 +65,9 @@ def late_log() -> LogData:
     """The run with its first FIRST_PINGS_DROPPED pings marked invalid."""
     log = simulate(scenario_from_dict(_raw()), SEED)
     first_ok = log.dvl.t >= log.dvl.t[FIRST_PINGS_DROPPED]
-    return dataclasses.replace(log, dvl=dataclasses.replace(log.dvl, valid=log.dvl.valid & first_ok))
+    return dataclasses.replace(
+        log, dvl=dataclasses.replace(log.dvl, valid=log.dvl.valid & first_ok)
+    )
 
 
 def _truth(log: LogData, t: float) -> tuple[np.ndarray, np.ndarray]:
@@ -72,9 +81,16 @@ def config(late_log: LogData) -> EstimatorConfig:
     """The defaults, with the true attitude at the first IMU stamp given (a surface INS's, 0.2 / 1 deg)."""
     rpy = matrix_to_rpy_deg(_truth(late_log, float(late_log.imu.t[0]))[1])
     cfg = EstimatorConfig()
-    return cfg.model_copy(update={
-        "alignment": cfg.alignment.model_copy(update={"initial_attitude_deg": tuple(float(v) for v in rpy)}),
-        "priors": cfg.priors.model_copy(update={"roll_pitch_sigma_deg": 0.2, "yaw_sigma_deg": 1.0})})
+    return cfg.model_copy(
+        update={
+            "alignment": cfg.alignment.model_copy(
+                update={"initial_attitude_deg": tuple(float(v) for v in rpy)}
+            ),
+            "priors": cfg.priors.model_copy(
+                update={"roll_pitch_sigma_deg": 0.2, "yaw_sigma_deg": 1.0}
+            ),
+        }
+    )
 
 
 def test_first_state_is_the_given_state_carried(late_log: LogData, config: EstimatorConfig) -> None:
@@ -100,16 +116,25 @@ def test_first_state_is_the_given_state_carried(late_log: LogData, config: Estim
     sig_pos = np.sqrt(np.diag(first.cov)[3:])
     # the given attitude was exact at t0: what remains at t1 is the gyros' error, inside the propagated part
     err = np.degrees(so3_log(first.alignment.n_R_b @ R1.T))
-    print(f"attitude error {np.round(err, 5)} deg, propagated sigma {np.round(np.degrees(sig_gyro), 5)} deg; "
-          f"position error {np.round(first.n_p - p1, 3)} m, sigma {np.round(sig_pos, 3)} m")
+    print(
+        f"attitude error {np.round(err, 5)} deg, propagated sigma {np.round(np.degrees(sig_gyro), 5)} deg; "
+        f"position error {np.round(first.n_p - p1, 3)} m, sigma {np.round(sig_pos, 3)} m"
+    )
     assert np.all(np.abs(err) < 3.0 * np.degrees(sig_gyro))
     assert np.all(np.abs(first.n_p - p1) < 3.0 * sig_pos)
     # the test is not trivial: the old behaviour (the given state at t1) is off by many of these sigmas
     turned = np.abs(np.degrees(so3_log(R0 @ R1.T)))
-    assert turned[2] > 10.0 * np.degrees(sig_att[2]) and np.linalg.norm(p1 - p0) > 10.0 * sig_pos.max()
+    assert (
+        turned[2] > 10.0 * np.degrees(sig_att[2]) and np.linalg.norm(p1 - p0) > 10.0 * sig_pos.max()
+    )
     # nothing is carried when the first state is at the first IMU stamp, or inside a static segment
     same = first_state(a, log.imu, frame, t0, b_v, config, sigma_v)
-    assert not same.carried and same.alignment is a and np.array_equal(same.cov, cov0) and not same.n_p.any()
+    assert (
+        not same.carried
+        and same.alignment is a
+        and np.array_equal(same.cov, cov0)
+        and not same.n_p.any()
+    )
     static = Alignment(np.eye(3), 50.0, "static")
     assert not first_state(static, log.imu, frame, 20.0, b_v, config, sigma_v).carried
     assert first_state(static, log.imu, frame, 60.0, b_v, config, sigma_v).t_from == 50.0
@@ -123,9 +148,11 @@ def _check(r: NavResult, log: LogData) -> None:
         p, R = _truth(log, float(r.t[i]))
         att = np.degrees(so3_log(r.n_R_b[i] @ R.T))  # about map axes
         pos = r.n_p[i] - p
-        print(f"{r.estimator} state {i}: t {r.t[i]:.0f} s, attitude error {np.round(att, 4)} deg "
-              f"({np.round(att / sig_att[i], 2)} sigma), position error {np.round(pos, 3)} m "
-              f"({np.round(pos / sig_pos[i], 2)} sigma)")
+        print(
+            f"{r.estimator} state {i}: t {r.t[i]:.0f} s, attitude error {np.round(att, 4)} deg "
+            f"({np.round(att / sig_att[i], 2)} sigma), position error {np.round(pos, 3)} m "
+            f"({np.round(pos / sig_pos[i], 2)} sigma)"
+        )
         assert np.all(np.abs(pos) < 3.0 * sig_pos[i]) and np.all(np.abs(att) < 3.0 * sig_att[i])
     assert r.t[0] == pytest.approx(FIRST_PINGS_DROPPED, abs=0.01)
 
@@ -153,6 +180,10 @@ def test_origin_at_a_later_fix(late_log: LogData, config: EstimatorConfig) -> No
     first = first_state(a, log.imu, frame, t1, log.dvl.d_v[k], config, sigma_v, t_origin=t_fix)
     want = _truth(log, t1)[0] - _truth(log, t_fix)[0]
     sig_pos = np.sqrt(np.diag(first.cov)[3:])
-    print(f"origin 5 s after the first state: position {np.round(first.n_p, 3)} m, truth {np.round(want, 3)} m")
+    print(
+        f"origin 5 s after the first state: position {np.round(first.n_p, 3)} m, truth {np.round(want, 3)} m"
+    )
     assert first.carried and np.all(np.abs(first.n_p - want) < 3.0 * sig_pos)
-    assert np.linalg.norm(want) > 5.0 * sig_pos.max()  # the origin at the first state would be far off
+    assert (
+        np.linalg.norm(want) > 5.0 * sig_pos.max()
+    )  # the origin at the first state would be far off

@@ -1,4 +1,4 @@
-"""Keyframes that keep every ping's information ([solver] keyframe_spacing_s; estimators/keyframes.py,
+"""Keyframes that keep every ping's information ([solver] keyframe_spacing_s; estimators/graph/keyframes.py,
 factors/ping_motion.py): on a 5 Hz DVL version of paper-3d-short, the batch smoother with 1 s keyframes (a
 fifth of the states, the other pings as factors on the keyframe before them through the IMU motion) against a
 state per ping:
@@ -28,12 +28,17 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators import keyframes
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
-from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.keyframes import ANALYTIC_MAX_ANGLE, ping_snapshots, snapshot, snapshot_params
-from gtsam_dvl.estimators.selection import sample_starts
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.graph import keyframes
+from gtsam_dvl.estimators.graph.keyframes import (
+    ANALYTIC_MAX_ANGLE,
+    ping_snapshots,
+    snapshot,
+    snapshot_params,
+)
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.inputs.gaps import find_gaps, sample_starts_with_gaps
+from gtsam_dvl.estimators.inputs.selection import sample_starts
 from gtsam_dvl.factors import PingMotion
 from tests.support.numerical import numerical_jacobian
 from tests.support.scenarios import simulate_variant
@@ -49,7 +54,9 @@ def run_log(dvl_hz: float) -> LogData:
 
 def config(spacing_s: float) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"keyframe_spacing_s": spacing_s})})
+    return cfg.model_copy(
+        update={"solver": cfg.solver.model_copy(update={"keyframe_spacing_s": spacing_s})}
+    )
 
 
 @cache
@@ -63,12 +70,27 @@ def estimates(r: NavResult) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(values, sigmas, names): scale, misalignment (deg), accelerometer bias (micro-g), gyro bias (deg/h), final
     position (m, map axes)."""
     n_R_b = r.n_R_b[-1]
-    pos_sigma = np.sqrt(np.diag(n_R_b @ r.pose_cov[-1][3:, 3:] @ n_R_b.T))  # translation tangent in body axes
-    values = np.concatenate([[r.scale], r.misalignment_deg, r.accel_bias / UG, r.gyro_bias / DEG_PER_H, r.n_p[-1]])
-    sigmas = np.concatenate([[r.scale_sigma], r.misalignment_sigma_deg, r.accel_bias_sigma_ug,
-                             r.gyro_bias_sigma_deg_per_h, pos_sigma])
-    names = (["scale", "mis_roll", "mis_pitch", "mis_yaw"] + [f"b_a_{a}" for a in "xyz"]
-             + [f"b_g_{a}" for a in "xyz"] + [f"p_{a}" for a in "xyz"])
+    pos_sigma = np.sqrt(
+        np.diag(n_R_b @ r.pose_cov[-1][3:, 3:] @ n_R_b.T)
+    )  # translation tangent in body axes
+    values = np.concatenate(
+        [[r.scale], r.misalignment_deg, r.accel_bias / UG, r.gyro_bias / DEG_PER_H, r.n_p[-1]]
+    )
+    sigmas = np.concatenate(
+        [
+            [r.scale_sigma],
+            r.misalignment_sigma_deg,
+            r.accel_bias_sigma_ug,
+            r.gyro_bias_sigma_deg_per_h,
+            pos_sigma,
+        ]
+    )
+    names = (
+        ["scale", "mis_roll", "mis_pitch", "mis_yaw"]
+        + [f"b_a_{a}" for a in "xyz"]
+        + [f"b_g_{a}" for a in "xyz"]
+        + [f"p_{a}" for a in "xyz"]
+    )
     return values, sigmas, names
 
 
@@ -76,8 +98,15 @@ def truth(log: LogData, r: NavResult) -> np.ndarray:
     tc, tb, tr = log.true_calibration, log.true_imu_bias, log.truth
     assert tc is not None and tb is not None and tr is not None
     j = int(np.argmin(np.abs(tr.t - r.t[-1])))
-    return np.concatenate([[tc.scale], tc.misalignment_deg, np.array(tb.accel_m_s2) / UG,
-                           np.array(tb.gyro_rad_s) / DEG_PER_H, tr.n_p[j]])
+    return np.concatenate(
+        [
+            [tc.scale],
+            tc.misalignment_deg,
+            np.array(tb.accel_m_s2) / UG,
+            np.array(tb.gyro_rad_s) / DEG_PER_H,
+            tr.n_p[j],
+        ]
+    )
 
 
 @pytest.mark.slow
@@ -86,10 +115,12 @@ def test_one_second_keyframes_match_a_state_per_ping_on_a_5_hz_dvl() -> None:
     (per_ping, wall_ping), (keyed, wall_key) = solve(0.0), solve(1.0)
     c = keyed.info["counters"]
     usable = per_ping.info["counters"]["keyframes"]
-    print(f"\n5 Hz DVL, {len(log.dvl)} pings: state per ping {len(per_ping.t)} states in {wall_ping:.1f} s; "
-          f"1 s keyframes {len(keyed.t)} states ({c['keyframes']} keyframes + {c['states_without_ping']} without "
-          f"ping, {c['pings_between_keyframes']} pings between) in {wall_key:.1f} s "
-          "(wall times on a shared machine)")
+    print(
+        f"\n5 Hz DVL, {len(log.dvl)} pings: state per ping {len(per_ping.t)} states in {wall_ping:.1f} s; "
+        f"1 s keyframes {len(keyed.t)} states ({c['keyframes']} keyframes + {c['states_without_ping']} without "
+        f"ping, {c['pings_between_keyframes']} pings between) in {wall_key:.1f} s "
+        "(wall times on a shared machine)"
+    )
     assert c["keyframes"] + c["pings_between_keyframes"] == usable  # every usable ping is used
     assert len(keyed.t) < 0.25 * len(per_ping.t)
     assert np.all(np.diff(keyed.t)[:-1] > 0.9)  # the last usable ping is a keyframe too
@@ -99,9 +130,11 @@ def test_one_second_keyframes_match_a_state_per_ping_on_a_5_hz_dvl() -> None:
     sigma_ratio = s1 / s0 - 1.0
     shift = (v1 - v0) / s0
     for k, name in enumerate(names):
-        print(f"  {name:10s} per ping {v0[k]:+.6g} +- {s0[k]:.3g}, keyframes {v1[k]:+.6g} +- {s1[k]:.3g}: "
-              f"sigma {100 * sigma_ratio[k]:+.3f} %, shift {shift[k]:+.4f} sigma; truth {true[k]:+.6g} "
-              f"({(v0[k] - true[k]) / s0[k]:+.2f} / {(v1[k] - true[k]) / s1[k]:+.2f} sigma)")
+        print(
+            f"  {name:10s} per ping {v0[k]:+.6g} +- {s0[k]:.3g}, keyframes {v1[k]:+.6g} +- {s1[k]:.3g}: "
+            f"sigma {100 * sigma_ratio[k]:+.3f} %, shift {shift[k]:+.4f} sigma; truth {true[k]:+.6g} "
+            f"({(v0[k] - true[k]) / s0[k]:+.2f} / {(v1[k] - true[k]) / s1[k]:+.2f} sigma)"
+        )
     calibration = slice(0, 10)  # scale, misalignment, biases
     assert np.all(np.abs(sigma_ratio[calibration]) < 0.05)
     assert np.all(np.abs(shift) < 0.2)
@@ -120,7 +153,9 @@ def test_health_checks_every_ping_with_keyframes() -> None:
     r0 = dvl_residuals(per_ping, log, config(0.0).dvl)
     r1 = dvl_residuals(keyed, log, config(1.0).dvl)
     n0, n1 = int((r0.dof > 0).sum()), int((r1.dof > 0).sum())
-    print(f"\nhealth residuals: per ping {n0} pings, rms {r0.rms():.3f}; keyframes {n1} pings, rms {r1.rms():.3f}")
+    print(
+        f"\nhealth residuals: per ping {n0} pings, rms {r0.rms():.3f}; keyframes {n1} pings, rms {r1.rms():.3f}"
+    )
     assert n1 == n0 == per_ping.info["counters"]["keyframes"]
     assert abs(r1.rms() - r0.rms()) < 0.02 * r0.rms()
     assert 0.8 < r0.rms() < 1.2
@@ -140,10 +175,14 @@ def test_spacing_beyond_the_state_spacing_is_refused() -> None:
         LogGraph(run_log(1.0), cfg)
 
 
-# ----- snapshots (estimators/keyframes.py) ----------------------------------------------------------------
+# ----- snapshots (estimators/graph/keyframes.py) ----------------------------------------------------------------
 
-def reference_snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None,
-                       n_omega: np.ndarray | None = None) -> PingMotion:
+
+def reference_snapshot(
+    pim: gtsam.PreintegratedImuMeasurements,
+    extra_cov: np.ndarray | None = None,
+    n_omega: np.ndarray | None = None,
+) -> PingMotion:
     """keyframes.snapshot before the tangent's Jacobians: central differences of pim.predict over the bias
     [accelerometer, gyroscope] (steps 1e-2 m/s^2 and 1e-4 rad/s), 12 predictions; for parameters without Earth
     rate."""
@@ -154,15 +193,21 @@ def reference_snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.nd
 
     def rotation_and_velocity(bias: gtsam.imuBias.ConstantBias) -> np.ndarray:
         s = pim.predict(state0, bias)
-        return np.concatenate([gtsam.Rot3.Logmap(dR.between(s.attitude())), np.asarray(s.velocity(), dtype=float)])
+        return np.concatenate(
+            [gtsam.Rot3.Logmap(dR.between(s.attitude())), np.asarray(s.velocity(), dtype=float)]
+        )
 
-    J = numerical_jacobian(rotation_and_velocity, [gtsam.imuBias.ConstantBias()], 0, delta=[1e-2] * 3 + [1e-4] * 3)
+    J = numerical_jacobian(
+        rotation_and_velocity, [gtsam.imuBias.ConstantBias()], 0, delta=[1e-2] * 3 + [1e-4] * 3
+    )
     dR_dbg, dv_dba, dv_dbg = J[:3, 3:], J[3:, :3], J[3:, 3:]
     cov = np.asarray(pim.preintMeasCov(), dtype=float)
     if extra_cov is not None:
         cov = cov + extra_cov
     dt = float(pim.deltaTij())
-    return PingMotion(dt, dR.matrix(), dv, np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
+    return PingMotion(
+        dt, dR.matrix(), dv, np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov
+    )
 
 
 def _params() -> gtsam.PreintegrationParams:
@@ -179,7 +224,9 @@ def _assert_same(new: PingMotion, ref: PingMotion, worst: dict[str, float]) -> N
         assert np.array_equal(getattr(new, name), getattr(ref, name)), name
     for name in ("dR_dbg", "dv_dba", "dv_dbg"):
         a, b = getattr(new, name), getattr(ref, name)
-        rel = float(np.linalg.norm(a - b) / max(float(np.linalg.norm(b)), 1e-300))  # dv_dbg is 0 after one sample
+        rel = float(
+            np.linalg.norm(a - b) / max(float(np.linalg.norm(b)), 1e-300)
+        )  # dv_dbg is 0 after one sample
         worst[name] = max(worst.get(name, 0.0), rel)
         assert rel < 1e-9, f"{name}: {rel:.2e} relative at dt {ref.dt:.4f} s"
 
@@ -195,16 +242,24 @@ def test_snapshot_jacobians_match_the_central_differences() -> None:
         pim = gtsam.PreintegratedImuMeasurements(_params(), gtsam.imuBias.ConstantBias())
         hz = float(rng.choice([50.0, 100.0, 200.0, 400.0]))
         # about z up to 4.5 rad/s in every third trial: |theta| beyond a whole turn's ANALYTIC_MAX_ANGLE
-        rate = np.full(3, 1e-7) if trial == 0 else rng.normal(0.0, [0.3, 0.3, 4.5 if trial % 3 == 0 else 1.2])
+        rate = (
+            np.full(3, 1e-7)
+            if trial == 0
+            else rng.normal(0.0, [0.3, 0.3, 4.5 if trial % 3 == 0 else 1.2])
+        )
         rate_noise = 0.0 if trial == 0 else 0.05
         b_f = np.array([0.3, -0.2, 9.8]) + rng.normal(0.0, 0.5, 3)
         for i in range(int(1.5 * hz)):
-            pim.integrateMeasurement(b_f + rng.normal(0.0, 0.2, 3), rate + rng.normal(0.0, rate_noise, 3), 1.0 / hz)
+            pim.integrateMeasurement(
+                b_f + rng.normal(0.0, 0.2, 3), rate + rng.normal(0.0, rate_noise, 3), 1.0 / hz
+            )
             if i % 9 == 0:
                 _assert_same(snapshot(pim), reference_snapshot(pim), worst)
                 angles.append(float(np.linalg.norm(np.asarray(pim.preintegrated())[:3])))
-    print(f"{len(angles)} snapshots, |theta| {min(angles):.1e} to {max(angles):.2f} rad; worst relative "
-          f"difference {worst}")
+    print(
+        f"{len(angles)} snapshots, |theta| {min(angles):.1e} to {max(angles):.2f} rad; worst relative "
+        f"difference {worst}"
+    )
     assert min(angles) < 1e-6 and max(angles) > ANALYTIC_MAX_ANGLE
 
 
@@ -224,11 +279,21 @@ def test_interval_pieces_found_once_are_the_cut_by_cut_ones(gap: bool) -> None:
     assert len(gaps) == gap
     starts = sample_starts_with_gaps(t, gaps)
     t_state, t_end = 0.0115, 1.7
-    pings = [0.0131, 0.3, float(t[100]), 0.7777, 1.05, 1.3, 1.69]  # (0.0131: before the first stamp after t_state)
+    pings = [
+        0.0131,
+        0.3,
+        float(t[100]),
+        0.7777,
+        1.05,
+        1.3,
+        1.69,
+    ]  # (0.0131: before the first stamp after t_state)
     params = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
-    for setter, getter in ((params.setGyroscopeCovariance, _params().getGyroscopeCovariance),
-                           (params.setAccelerometerCovariance, _params().getAccelerometerCovariance),
-                           (params.setIntegrationCovariance, _params().getIntegrationCovariance)):
+    for setter, getter in (
+        (params.setGyroscopeCovariance, _params().getGyroscopeCovariance),
+        (params.setAccelerometerCovariance, _params().getAccelerometerCovariance),
+        (params.setIntegrationCovariance, _params().getIntegrationCovariance),
+    ):
         setter(getter())
     params.setOmegaCoriolis(np.array([0.0, 6.3e-5, 3.6e-5]))
     args = (t_state, t_end, pings, params, t, starts, b_f, b_omega, gaps, ImuConfig())
@@ -240,8 +305,9 @@ def test_interval_pieces_found_once_are_the_cut_by_cut_ones(gap: bool) -> None:
     for sa, sb in zip(snaps_a, snaps_b, strict=True):
         for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg", "cov"):
             assert np.array_equal(getattr(sa, name), getattr(sb, name)), name
-    assert snaps_a[0].dt == pytest.approx(pings[0] - t_state, abs=1e-12) and pim_a.deltaTij() == pytest.approx(
-        t_end - t_state, abs=1e-12)
+    assert snaps_a[0].dt == pytest.approx(
+        pings[0] - t_state, abs=1e-12
+    ) and pim_a.deltaTij() == pytest.approx(t_end - t_state, abs=1e-12)
 
 
 def test_snapshot_does_not_depend_on_the_parameters_earth_rate_or_gravity() -> None:
@@ -250,16 +316,23 @@ def test_snapshot_does_not_depend_on_the_parameters_earth_rate_or_gravity() -> N
     preintegration's own; snapshot undoes the rotating-frame prediction it evaluates through)."""
     rng = np.random.default_rng(8)
     earth = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
-    for setter, getter in ((earth.setGyroscopeCovariance, _params().getGyroscopeCovariance),
-                           (earth.setAccelerometerCovariance, _params().getAccelerometerCovariance),
-                           (earth.setIntegrationCovariance, _params().getIntegrationCovariance)):
+    for setter, getter in (
+        (earth.setGyroscopeCovariance, _params().getGyroscopeCovariance),
+        (earth.setAccelerometerCovariance, _params().getAccelerometerCovariance),
+        (earth.setIntegrationCovariance, _params().getIntegrationCovariance),
+    ):
         setter(getter())
-    w_ie = np.array([0.0, 6.3e-5, 3.6e-5]) * 50  # 50 times the Earth's rate, so that a wrong term would show
+    w_ie = (
+        np.array([0.0, 6.3e-5, 3.6e-5]) * 50
+    )  # 50 times the Earth's rate, so that a wrong term would show
     earth.setOmegaCoriolis(w_ie)
     a = gtsam.PreintegratedImuMeasurements(earth, gtsam.imuBias.ConstantBias())
     b = gtsam.PreintegratedImuMeasurements(_params(), gtsam.imuBias.ConstantBias())
     for _ in range(180):
-        f, w = np.array([0.4, 0.1, 9.8]) + rng.normal(0.0, 0.3, 3), np.array([0.1, -0.2, 0.6]) + rng.normal(0, 0.05, 3)
+        f, w = (
+            np.array([0.4, 0.1, 9.8]) + rng.normal(0.0, 0.3, 3),
+            np.array([0.1, -0.2, 0.6]) + rng.normal(0, 0.05, 3),
+        )
         a.integrateMeasurement(f, w, 0.005)
         b.integrateMeasurement(f, w, 0.005)
     sa, sb = snapshot(a, None, w_ie), snapshot(b)
@@ -274,13 +347,20 @@ def test_snapshot_velocity_is_affine_in_the_bias() -> None:
     rng = np.random.default_rng(2)
     pim = gtsam.PreintegratedImuMeasurements(_params(), gtsam.imuBias.ConstantBias())
     for _ in range(100):
-        pim.integrateMeasurement(np.array([0.4, 0.1, 9.8]) + rng.normal(0.0, 0.3, 3),
-                                 np.array([0.1, -0.2, 0.6]) + rng.normal(0.0, 0.05, 3), 0.01)
+        pim.integrateMeasurement(
+            np.array([0.4, 0.1, 9.8]) + rng.normal(0.0, 0.3, 3),
+            np.array([0.1, -0.2, 0.6]) + rng.normal(0.0, 0.05, 3),
+            0.01,
+        )
     s = snapshot(pim)
-    for b_a, b_g in ((np.array([3e-3, -2e-3, 1e-3]), np.array([1e-4, 2e-4, -3e-4])),
-                     (np.array([0.5, 0.2, -0.3]), np.array([0.02, -0.01, 0.03]))):
+    for b_a, b_g in (
+        (np.array([3e-3, -2e-3, 1e-3]), np.array([1e-4, 2e-4, -3e-4])),
+        (np.array([0.5, 0.2, -0.3]), np.array([0.02, -0.01, 0.03])),
+    ):
         pred = pim.predict(gtsam.NavState(), gtsam.imuBias.ConstantBias(b_a, b_g))
-        np.testing.assert_allclose(pred.velocity(), s.dv + s.dv_dba @ b_a + s.dv_dbg @ b_g, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            pred.velocity(), s.dv + s.dv_dba @ b_a + s.dv_dbg @ b_g, rtol=0, atol=1e-12
+        )
         first_order = gtsam.Rot3(s.dR) * gtsam.Rot3.Expmap(s.dR_dbg @ b_g)
         angle = float(np.linalg.norm(gtsam.Rot3.Logmap(pred.attitude().between(first_order))))
         assert angle < float(np.linalg.norm(b_g)) ** 2

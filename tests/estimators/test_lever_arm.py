@@ -24,7 +24,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import run_ekf
 from gtsam_dvl.estimators.online.estimator import smooth_online
 from gtsam_dvl.sim import simulate
@@ -34,14 +34,25 @@ pytestmark = pytest.mark.slow
 
 TRUE_LEVER_M = np.array([0.8, 0.3, -0.5])  # base_link
 SEED = 3
-START = [{"kind": "static", "duration_s": 60.0},
-         {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
-         {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.5}]
+START = [
+    {"kind": "static", "duration_s": 60.0},
+    {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
+    {"kind": "level", "duration_s": 30.0, "speed_bump_m_s": 0.5},
+]
 
 
 def _square(bank_deg: float) -> list[dict[str, Any]]:
-    return [{"kind": "square", "leg_duration_s": 20.0, "turn_duration_s": 40.0, "bank_deg": bank_deg,
-             "direction": "left", "sides": 4, "turn_first": True}]
+    return [
+        {
+            "kind": "square",
+            "leg_duration_s": 20.0,
+            "turn_duration_s": 40.0,
+            "bank_deg": bank_deg,
+            "direction": "left",
+            "sides": 4,
+            "turn_first": True,
+        }
+    ]
 
 
 MOTIONS = {
@@ -68,12 +79,16 @@ def wrong_tf_log(motion: str) -> LogData:
 
 def config(estimate: bool, **dvl: Any) -> EstimatorConfig:
     cfg = EstimatorConfig()
-    return cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"estimate_lever_arm": estimate, **dvl})})
+    return cfg.model_copy(
+        update={"dvl": cfg.dvl.model_copy(update={"estimate_lever_arm": estimate, **dvl})}
+    )
 
 
 @cache
 def solve(motion: str, estimate: bool, beams: bool = False, offset: bool = False) -> NavResult:
-    return smooth_batch(wrong_tf_log(motion), config(estimate, use_beams=beams, estimate_time_offset=offset))
+    return smooth_batch(
+        wrong_tf_log(motion), config(estimate, use_beams=beams, estimate_time_offset=offset)
+    )
 
 
 def calibration_nsigma(r: NavResult, log: LogData) -> np.ndarray:
@@ -111,7 +126,9 @@ def test_simulated_dvl_measures_the_velocity_of_its_origin() -> None:
     d_y = tc.scale * np.einsum("ji,nj->ni", b_R_d, np.einsum("nji,nj->ni", n_R_b[k], n_v_dvl[k]))
     err = np.max(np.abs(log.dvl.d_v[inner] - d_y))
     lever_effect = np.max(np.linalg.norm(np.cross(truth.b_omega[k], TRUE_LEVER_M), axis=1))
-    print(f"DVL vs finite differences of the DVL origin: {err:.1e} m/s (lever-arm term up to {lever_effect:.3f} m/s)")
+    print(
+        f"DVL vs finite differences of the DVL origin: {err:.1e} m/s (lever-arm term up to {lever_effect:.3f} m/s)"
+    )
     assert lever_effect > 0.03
     assert err < 1e-3 * lever_effect
 
@@ -120,8 +137,10 @@ def test_lever_arm_recovered_from_turns() -> None:
     log, r = wrong_tf_log("turns"), solve("turns", True)
     assert r.lever_arm_m is not None and r.lever_arm_sigma_m is not None
     n = (r.lever_arm_m - TRUE_LEVER_M) / r.lever_arm_sigma_m
-    print(f"lever arm {np.round(r.lever_arm_m, 3)} +- {np.round(r.lever_arm_sigma_m, 3)} m "
-          f"(truth {TRUE_LEVER_M}, /tf_static 0): {np.round(n, 2)} sigma")
+    print(
+        f"lever arm {np.round(r.lever_arm_m, 3)} +- {np.round(r.lever_arm_sigma_m, 3)} m "
+        f"(truth {TRUE_LEVER_M}, /tf_static 0): {np.round(n, 2)} sigma"
+    )
     assert np.all(np.abs(n) < 3.0)
     assert np.all(r.lever_arm_sigma_m[:2] < 0.1)  # the yaw turns' axes
     assert r.lever_arm_sigma_m[2] < 0.5 / 3  # the banking's roll rate, weaker
@@ -137,13 +156,17 @@ def test_ignoring_a_wrong_lever_arm_is_measurably_worse() -> None:
     log = wrong_tf_log("turns")
     assert log.truth is not None
     r_est, r_off = solve("turns", True), solve("turns", False)
-    v_est, v_off = (trajectory_errors(r, log.truth).metrics()["velocity_rmse_m_s"] for r in (r_est, r_off))
+    v_est, v_off = (
+        trajectory_errors(r, log.truth).metrics()["velocity_rmse_m_s"] for r in (r_est, r_off)
+    )
     chi_est, chi_off = (2 * r.info["solver"]["final_error"] for r in (r_est, r_off))
     m_est, m_off = (r.info["noise"]["dvl"]["multiplier"] for r in (r_est, r_off))
     cal_est, cal_off = calibration_nsigma(r_est, log), calibration_nsigma(r_off, log)
-    print(f"velocity RMSE {v_est * 100:.2f} vs {v_off * 100:.2f} cm/s; chi^2 {chi_est:.0f} vs {chi_off:.0f} at "
-          f"fitted DVL noise x {m_est:.3f} vs x {m_off:.3f}; "
-          f"calibration errors {np.round(cal_est, 2)} vs {np.round(cal_off, 2)} sigma")
+    print(
+        f"velocity RMSE {v_est * 100:.2f} vs {v_off * 100:.2f} cm/s; chi^2 {chi_est:.0f} vs {chi_off:.0f} at "
+        f"fitted DVL noise x {m_est:.3f} vs x {m_off:.3f}; "
+        f"calibration errors {np.round(cal_est, 2)} vs {np.round(cal_off, 2)} sigma"
+    )
     assert v_off > 2.0 * v_est
     # the unmodelled lever arm's error follows the turns: its 30-60 s means raise the level used (measured 1.95 vs
     # 1.00; the white fit alone gave 1.14), so the calibration's sigmas grow with it and its error, 3.05 sigma
@@ -158,16 +181,24 @@ def test_beams_and_time_offset_variants_recover_it_too() -> None:
         r = solve("turns", True, beams, offset)
         assert r.lever_arm_m is not None and r.lever_arm_sigma_m is not None
         n = (r.lever_arm_m - TRUE_LEVER_M) / r.lever_arm_sigma_m
-        print(f"beams={beams} time offset={offset}: {np.round(r.lever_arm_m, 3)} +- "
-              f"{np.round(r.lever_arm_sigma_m, 3)} m, {np.round(n, 2)} sigma")
+        print(
+            f"beams={beams} time offset={offset}: {np.round(r.lever_arm_m, 3)} +- "
+            f"{np.round(r.lever_arm_sigma_m, 3)} m, {np.round(n, 2)} sigma"
+        )
         assert np.all(np.abs(n) < 3.0) and np.all(r.lever_arm_sigma_m[:2] < 0.1)
         if offset:
-            assert abs(r.time_offset_s) < 3.0 * r.time_offset_sigma_s  # the simulated offset is zero
+            assert (
+                abs(r.time_offset_s) < 3.0 * r.time_offset_sigma_s
+            )  # the simulated offset is zero
 
 
 def test_verdicts_say_which_axes_the_log_determined() -> None:
     """Banked turns: all three axes determined; flat turns: z (along every yaw axis) not; straight: none."""
-    expected = {"turns": [True, True, True], "flat_turns": [True, True, False], "straight": [False, False, False]}
+    expected = {
+        "turns": [True, True, True],
+        "flat_turns": [True, True, False],
+        "straight": [False, False, False],
+    }
     for motion, determined in expected.items():
         r = solve(motion, True)
         v = lever_arm_verdict(r, wrong_tf_log(motion))
@@ -180,7 +211,9 @@ def test_verdicts_say_which_axes_the_log_determined() -> None:
             assert any("rotation axis of every turn" in line for line in report.lines())
             assert "not determined" in " ".join(v["verdict"])
     r = solve("straight", True)
-    assert r.lever_arm_sigma_m is not None and np.all(r.lever_arm_sigma_m > 0.95 * 0.5)  # the prior's
+    assert r.lever_arm_sigma_m is not None and np.all(
+        r.lever_arm_sigma_m > 0.95 * 0.5
+    )  # the prior's
 
 
 def test_lever_arm_in_summary_and_result_log(tmp_path) -> None:  # type: ignore[no-untyped-def]
@@ -198,7 +231,11 @@ def test_lever_arm_in_summary_and_result_log(tmp_path) -> None:  # type: ignore[
     np.testing.assert_allclose(s["errors"]["dvl_lever_arm_nsigma"], err / r.lever_arm_sigma_m)
     path = write_result_log(tmp_path / "r.mcap", r, log, s)
     back = read_result(path).result
-    assert back.lever_arm_m is not None and back.lever_arm_cov is not None and r.lever_arm_cov is not None
+    assert (
+        back.lever_arm_m is not None
+        and back.lever_arm_cov is not None
+        and r.lever_arm_cov is not None
+    )
     np.testing.assert_array_equal(back.lever_arm_m, r.lever_arm_m)
     np.testing.assert_array_equal(back.lever_arm_cov, r.lever_arm_cov)
     assert TOPICS["lever_arm"] in open_source(path).topics

@@ -1,4 +1,4 @@
-"""Noise levels from the data (estimators/noise_levels.py): the DVL's variance component fitted by the batch
+"""Noise levels from the data (estimators/models/noise_levels.py): the DVL's variance component fitted by the batch
 smoother, the EKF and the online estimator against the simulated noise, and the robust ratio on its own."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import run_ekf
-from gtsam_dvl.estimators.noise_levels import truncated_chi2_mean, variance_ratio
+from gtsam_dvl.estimators.models.noise_levels import truncated_chi2_mean, variance_ratio
 from gtsam_dvl.estimators.online.estimator import smooth_online
 from tests.support.scenarios import simulate_variant
 
@@ -58,17 +58,25 @@ def test_batch_fits_the_dvl_noise(log: LogData) -> None:
     fitted = smooth_batch(log, _stated())
     dvl = fitted.info["noise"]["dvl"]
     assert dvl["white_sigma"] == pytest.approx(TRUE_NOISE_M_S, rel=0.05)
-    assert dvl["stated_sigma"] == pytest.approx(STATED_M_S) and dvl["sigma_m_s"] == pytest.approx(STATED_M_S)
+    assert dvl["stated_sigma"] == pytest.approx(STATED_M_S) and dvl["sigma_m_s"] == pytest.approx(
+        STATED_M_S
+    )
     assert dvl["multiplier"] == 1.0 and "held at the stated level" in dvl["why"]
-    long = dvl["long"]  # white noise: the 30-60 s means show no more than the scatter (the states absorb a part)
+    long = dvl[
+        "long"
+    ]  # white noise: the 30-60 s means show no more than the scatter (the states absorb a part)
     assert long["sigma_lo"] < dvl["white_sigma"]
     assert fitted.config["dvl"]["noise_multiplier"] == 1.0
     plain = smooth_batch(log, _stated(from_data=False))
     for r in (fitted, plain):
         s = r.info["solver"]
-        assert 2 * s["final_error"] / s["dof"] == pytest.approx((TRUE_NOISE_M_S / STATED_M_S) ** 2, rel=0.15)
+        assert 2 * s["final_error"] / s["dof"] == pytest.approx(
+            (TRUE_NOISE_M_S / STATED_M_S) ** 2, rel=0.15
+        )
     assert plain.info["noise"]["dvl"] == {}
-    assert fitted.calibration["scale"].sigma[0] == pytest.approx(plain.calibration["scale"].sigma[0], rel=0.02)
+    assert fitted.calibration["scale"].sigma[0] == pytest.approx(
+        plain.calibration["scale"].sigma[0], rel=0.02
+    )
     assert log.true_calibration is not None
     k, sk = fitted.calibration["scale"].value[0], fitted.calibration["scale"].sigma[0]
     assert abs(k - log.true_calibration.scale) < 3 * sk
@@ -91,13 +99,19 @@ def test_batch_raises_the_dvl_to_its_slow_error() -> None:
     raises the level to what the 30-60 s means show (more than 1.5 times the scatter, its interval's lower end
     above the white fit), says so, and the scale's truth is within 3 of the sigmas it then reports. The model here
     has no correlated-error state ([dvl] correlated_sigma_m_s = 0), so nothing else absorbs the slow error."""
-    slow = simulate_variant(4, dvl={"noise_m_s": 0.005, "correlated_sigma_m_s": 0.006, "correlated_tau_s": 60.0})
-    r = smooth_batch(slow, EstimatorConfig.from_dict({"dvl": {"noise_m_s": 0.005, "correlated_sigma_m_s": 0.0}}))
+    slow = simulate_variant(
+        4, dvl={"noise_m_s": 0.005, "correlated_sigma_m_s": 0.006, "correlated_tau_s": 60.0}
+    )
+    r = smooth_batch(
+        slow, EstimatorConfig.from_dict({"dvl": {"noise_m_s": 0.005, "correlated_sigma_m_s": 0.0}})
+    )
     dvl = r.info["noise"]["dvl"]
     print(dvl)
     # the scatter holds the white noise and the slow error's fast part: between the two, below their sum's
     assert 0.005 < dvl["white_sigma"] < math.hypot(0.005, 0.006)
-    assert dvl["sigma_m_s"] > 1.5 * dvl["white_sigma"] and dvl["long"]["sigma_lo"] > dvl["white_sigma"]
+    assert (
+        dvl["sigma_m_s"] > 1.5 * dvl["white_sigma"] and dvl["long"]["sigma_lo"] > dvl["white_sigma"]
+    )
     assert "raised to what its" in dvl["why"]
     assert slow.true_calibration is not None
     k, sk = r.calibration["scale"].value[0], r.calibration["scale"].sigma[0]
@@ -113,7 +127,9 @@ def test_ekf_fits_the_dvl_noise(log: LogData) -> None:
     dvl = r.info["noise"]["dvl"]
     assert dvl["multiplier"] == 1.0
     assert r.info["filter"]["mean_nis_per_dof"] < 0.5
-    low = run_ekf(log, EstimatorConfig.from_dict({"dvl": {"noise_m_s": 0.003}, "noise": {"warmup_s": 300.0}}))
+    low = run_ekf(
+        log, EstimatorConfig.from_dict({"dvl": {"noise_m_s": 0.003}, "noise": {"warmup_s": 300.0}})
+    )
     dvl = low.info["noise"]["dvl"]
     assert dvl["sigma_m_s"] == pytest.approx(TRUE_NOISE_M_S, rel=0.08)
     assert dvl["settled"]
@@ -128,7 +144,9 @@ def test_online_fits_the_dvl_noise_on_its_warmup(log: LogData) -> None:
     dvl = r.info["noise"]["dvl"]
     assert dvl["white_sigma"] == pytest.approx(TRUE_NOISE_M_S, rel=0.08)
     assert dvl["multiplier"] == 1.0 and "held at the stated level" in dvl["why"]
-    assert r.noise_config is not None and r.noise_config.dvl.noise_multiplier == pytest.approx(dvl["multiplier"])
+    assert r.noise_config is not None and r.noise_config.dvl.noise_multiplier == pytest.approx(
+        dvl["multiplier"]
+    )
     assert r.config["dvl"]["noise_multiplier"] == 1.0
 
 
@@ -145,7 +163,7 @@ def test_static_segment_measures_the_imu_white_noise() -> None:
     the density used is the simulated 0.5 within 15 % (Allan deviation of 120 s at taus up to 12 s: about 10 %
     sampling error), and the accelerometer, simulated at its configured 10 micro-g/sqrt(Hz), is left as
     configured (its measured density, within 15 % of 10, is reported)."""
-    from gtsam_dvl.estimators.noise_levels import NoiseReport, imu_levels
+    from gtsam_dvl.estimators.models.noise_levels import NoiseReport, imu_levels
 
     noisy = simulate_variant(3, imu={"gyro_noise_deg_per_h_per_sqrt_hz": 0.5})
     report = NoiseReport()
@@ -158,20 +176,27 @@ def test_static_segment_measures_the_imu_white_noise() -> None:
     assert accel["density"] == pytest.approx(10.0, rel=0.15) and "why" not in accel
     assert used.imu.accel_noise_ug_rthz == EstimatorConfig().imu.accel_noise_ug_rthz
     # off: as configured
-    off = imu_levels(noisy, EstimatorConfig.from_dict({"noise": {"static_allan": False}}), NoiseReport())
+    off = imu_levels(
+        noisy, EstimatorConfig.from_dict({"noise": {"static_allan": False}}), NoiseReport()
+    )
     assert off.imu.gyro_noise_deg_per_h_rthz == EstimatorConfig().imu.gyro_noise_deg_per_h_rthz
 
 
 def test_static_segment_of_a_quantised_imu_at_rest_is_not_read() -> None:
     """A FOG at rest under a 1e-4 rad/s step sits on one or two steps: its gyro axes are skipped (the rounding
     error is not white there), the quantisation floor alone applies."""
-    from gtsam_dvl.estimators.noise_levels import NoiseReport, imu_levels
+    from gtsam_dvl.estimators.models.noise_levels import NoiseReport, imu_levels
 
     log = simulate_variant(3)
     q = 1e-4
     imu = log.imu
-    quantised = type(imu)(**{**imu.__dict__, "b_omega": np.round(np.asarray(imu.b_omega) / q) * q,
-                             "b_f": np.round(np.asarray(imu.b_f) / q) * q})
+    quantised = type(imu)(
+        **{
+            **imu.__dict__,
+            "b_omega": np.round(np.asarray(imu.b_omega) / q) * q,
+            "b_f": np.round(np.asarray(imu.b_f) / q) * q,
+        }
+    )
     log = type(log)(**{**log.__dict__, "imu": quantised})
     report = NoiseReport()
     imu_levels(log, EstimatorConfig(), report)

@@ -1,4 +1,5 @@
-"""The nominal calibration's check (estimators/batch.py _hold_calibration, estimators/weak_hold.py nominal_check):
+"""The nominal calibration's check (estimators/batch/smoother.py _hold_calibration, estimators/models/weak_hold.py
+nominal_check):
 where estimating the DVL scale and misalignment does not pay for its four states, the calibration is held at the
 nominal with its prior's sigma; where it does, it is estimated. And the EKF's divergence watch."""
 
@@ -10,9 +11,9 @@ from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import weak_hold
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import DIVERGENCE_NIS, DIVERGENCE_PINGS, DivergenceWatch
+from gtsam_dvl.estimators.models import weak_hold
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
@@ -22,7 +23,9 @@ def test_nominal_check_is_the_likelihood_ratio() -> None:
     P = np.diag([1e-4, 4e-4, 1e-6, 9e-6])
     d = np.array([1e-2, 2e-2, 0.0, 0.0])  # 1 and 1 sigma: chi^2 2
     c = weak_hold.nominal_check(d, P)
-    assert c["chi2_gain"] == pytest.approx(2.0) and c["chi2_limit"] == pytest.approx(chi2.ppf(0.95, 4))
+    assert c["chi2_gain"] == pytest.approx(2.0) and c["chi2_limit"] == pytest.approx(
+        chi2.ppf(0.95, 4)
+    )
     assert not c["pays"]
     assert weak_hold.nominal_check(3 * d, P)["pays"]  # chi^2 18
 

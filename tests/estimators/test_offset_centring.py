@@ -1,4 +1,5 @@
-"""The DVL time offset's IMU windows (estimators/batch.py solve_centred, estimators/offset_guess.py): re-centred on
+"""The DVL time offset's IMU windows (estimators/batch/smoother.py solve_centred, estimators/inputs/offset_guess.py):
+re-centred on
 the solution until consistent, the IMU biases and each ping's attitude in the offset term, and the first guess."""
 
 from __future__ import annotations
@@ -8,8 +9,8 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import RECENTRE_FRACTION, smooth_batch
-from gtsam_dvl.estimators.graph import LogGraph
+from gtsam_dvl.estimators.batch.smoother import RECENTRE_FRACTION, smooth_batch
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
@@ -43,7 +44,7 @@ def test_a_bad_start_converges_to_the_same_answer(turn: tuple[LogData, Estimator
     """Without the first guess (the windows start at the prior's 0 s, a full second off), the re-centring still
     ends where a start from the guess ends: the offset within a tenth of its sigma, the scale within a tenth of
     its."""
-    from gtsam_dvl.estimators import offset_guess
+    from gtsam_dvl.estimators.inputs import offset_guess
 
     log, cfg = turn
     good = smooth_batch(log, cfg)
@@ -64,7 +65,7 @@ def test_first_guess_finds_the_offset(turn: tuple[LogData, EstimatorConfig]) -> 
     """The cross-correlation of the DVL's velocity changes with the IMU's integrated acceleration: 1.0 s within
     0.1 s (well inside the 0.5 s the windows span: the solve refines it), with strong evidence; on a log with the
     stamps right, 0 within 0.1 s."""
-    from gtsam_dvl.estimators.offset_guess import MIN_EVIDENCE
+    from gtsam_dvl.estimators.inputs.offset_guess import MIN_EVIDENCE
 
     log, cfg = turn
     g = LogGraph(log, cfg).offset_guess()
@@ -80,7 +81,9 @@ def test_first_guess_finds_the_offset(turn: tuple[LogData, EstimatorConfig]) -> 
     assert g0.dt_s == pytest.approx(0.0, abs=0.1)
 
 
-def test_offset_term_takes_the_biases_and_the_ping_attitude(turn: tuple[LogData, EstimatorConfig]) -> None:
+def test_offset_term_takes_the_biases_and_the_ping_attitude(
+    turn: tuple[LogData, EstimatorConfig],
+) -> None:
     """velocity_rate_inputs with biases and attitudes equals, independently, the inputs of samples with the bias
     taken off by hand (specific force minus the accelerometer bias, rate minus the gyro bias) and the Earth rate at
     each ping's own attitude taken off by hand."""
@@ -91,8 +94,12 @@ def test_offset_term_takes_the_biases_and_the_ping_attitude(turn: tuple[LogData,
     rng = np.random.default_rng(0)
     acc_b, gyro_b = rng.normal(0, 3e-3, 3), rng.normal(0, 1e-5, 3)
     yaw = rng.uniform(-np.pi, np.pi, len(t))
-    n_R_b = np.array([[[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]] for a in yaw])
-    b_a, w, G = maker.velocity_rate_inputs(t, imu.t, imu.b_f, imu.b_omega, 1.0, bias=(acc_b, gyro_b), n_R_b=n_R_b)
+    n_R_b = np.array(
+        [[[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]] for a in yaw]
+    )
+    b_a, w, G = maker.velocity_rate_inputs(
+        t, imu.t, imu.b_f, imu.b_omega, 1.0, bias=(acc_b, gyro_b), n_R_b=n_R_b
+    )
     n_omega = maker.n_omega_ie()
     for k, tk in enumerate(t):
         # by hand: the samples with this ping's Earth rate and the gyro bias taken off, Earth-free attitude

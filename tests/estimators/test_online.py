@@ -19,15 +19,23 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix, so3_exp
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.online import MessageDropped, OnlineConfig, OnlineEstimator, feed_log, smooth_online
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.online import (
+    MessageDropped,
+    OnlineConfig,
+    OnlineEstimator,
+    feed_log,
+    smooth_online,
+)
 from gtsam_dvl.estimators.online.types import misalignment_deg_and_cov
 from tests.support.logs import cut_log
 from tests.support.paper_runs import GROUP, paper_batch, paper_log, paper_online
 from tests.support.results import changes_in_sigmas
 
 PRIOR = EstimatorConfig.paper().priors
-pytestmark = pytest.mark.xdist_group(GROUP)  # the paper runs shared with test_batch.py, test_robust.py
+pytestmark = pytest.mark.xdist_group(
+    GROUP
+)  # the paper runs shared with test_batch.py, test_robust.py
 
 
 @functools.cache
@@ -37,7 +45,9 @@ def _log(name: str, seed: int, t_end: float | None = None) -> LogData:
 
 
 @functools.cache
-def _batch(name: str, seed: int, t_end: float | None = None, bias_model: str = "constant") -> NavResult:
+def _batch(
+    name: str, seed: int, t_end: float | None = None, bias_model: str = "constant"
+) -> NavResult:
     if t_end is None and bias_model == "constant":
         return paper_batch(name, seed)
     cfg = EstimatorConfig.paper()
@@ -46,8 +56,13 @@ def _batch(name: str, seed: int, t_end: float | None = None, bias_model: str = "
 
 
 @functools.cache
-def _online(name: str, seed: int, mode: str = "fixed_lag", t_end: float | None = None,
-            bias_model: str = "constant") -> NavResult:
+def _online(
+    name: str,
+    seed: int,
+    mode: str = "fixed_lag",
+    t_end: float | None = None,
+    bias_model: str = "constant",
+) -> NavResult:
     if t_end is None and mode == "fixed_lag" and bias_model == "constant":
         return paper_online(name, seed)
     cfg = EstimatorConfig.paper()
@@ -56,25 +71,37 @@ def _online(name: str, seed: int, mode: str = "fixed_lag", t_end: float | None =
 
 
 def _sigma_ratio(online: NavResult, batch: NavResult) -> np.ndarray:
-    return np.concatenate([[online.scale_sigma / batch.scale_sigma],
-                           online.misalignment_sigma_deg / batch.misalignment_sigma_deg,
-                           online.gyro_bias_sigma_deg_per_h / batch.gyro_bias_sigma_deg_per_h,
-                           online.accel_bias_sigma_ug / batch.accel_bias_sigma_ug])
+    return np.concatenate(
+        [
+            [online.scale_sigma / batch.scale_sigma],
+            online.misalignment_sigma_deg / batch.misalignment_sigma_deg,
+            online.gyro_bias_sigma_deg_per_h / batch.gyro_bias_sigma_deg_per_h,
+            online.accel_bias_sigma_ug / batch.accel_bias_sigma_ug,
+        ]
+    )
 
 
 def _report(tag: str, online: NavResult, batch: NavResult) -> dict[str, np.ndarray]:
     d = changes_in_sigmas(online, batch)  # online minus batch final estimates, in batch sigmas
-    print(f"\n{tag}: online - batch in batch sigmas: " + "; ".join(f"{k} {np.round(v, 3)}" for k, v in d.items()))
-    print(f"{tag}: sigma online / batch {np.round(_sigma_ratio(online, batch), 3)}; latency ms "
-          f"{ {k: round(v, 2) for k, v in online.info['latency_ms'].items()} }; iSAM2 {online.info['isam2']}; "
-          f"{online.timing_s['total']:.1f} s for {online.t[-1] - online.t[0]:.0f} s of data")
+    print(
+        f"\n{tag}: online - batch in batch sigmas: "
+        + "; ".join(f"{k} {np.round(v, 3)}" for k, v in d.items())
+    )
+    print(
+        f"{tag}: sigma online / batch {np.round(_sigma_ratio(online, batch), 3)}; latency ms "
+        f"{ {k: round(v, 2) for k, v in online.info['latency_ms'].items()} }; iSAM2 {online.info['isam2']}; "
+        f"{online.timing_s['total']:.1f} s for {online.t[-1] - online.t[0]:.0f} s of data"
+    )
     return d
 
 
 # ----- agreement with the batch smoother -----------------------------------------------------------
 
+
 @pytest.mark.slow
-@pytest.mark.parametrize(("name", "seed"), [("paper-3d", 1), ("paper-3d", 2), ("paper-2d", 1), ("paper-2d", 2)])
+@pytest.mark.parametrize(
+    ("name", "seed"), [("paper-3d", 1), ("paper-3d", 2), ("paper-2d", 1), ("paper-2d", 2)]
+)
 def test_fixed_lag_agrees_with_batch(name: str, seed: int) -> None:
     """Final scale, misalignment and biases within 1 batch sigma (measured: below 0.2), with the same sigmas
     within 3 %, except the vertical accelerometer bias's, 10 % larger: the static phase's zero-velocity pings left
@@ -95,7 +122,9 @@ def test_usable_pings_are_the_batch_smoothers() -> None:
     """The usable pings the online estimator records (NavResult.dvl_pings, numbered as pushed: the log's by
     feed_log) are the batch smoother's, ping for ping."""
     online, batch = _online("paper-2d", 1), _batch("paper-2d", 1)
-    assert online.dvl_pings is not None and batch.dvl_pings is not None and len(batch.dvl_pings) > 1000
+    assert (
+        online.dvl_pings is not None and batch.dvl_pings is not None and len(batch.dvl_pings) > 1000
+    )
     np.testing.assert_array_equal(online.dvl_pings, batch.dvl_pings)
 
 
@@ -108,7 +137,10 @@ def test_full_history_agrees_with_batch() -> None:
     for key, v in d.items():
         assert np.all(np.abs(v) < 0.1), key
     assert np.all(np.abs(_sigma_ratio(online, batch) - 1) < 0.01)
-    assert online.info["isam2"]["states_marginalized"] == 0 and online.info["isam2"]["variables"] > 2000
+    assert (
+        online.info["isam2"]["states_marginalized"] == 0
+        and online.info["isam2"]["variables"] > 2000
+    )
 
 
 @pytest.mark.slow
@@ -124,12 +156,19 @@ def test_fixed_lag_timeline_matches_full_history() -> None:
     assert a is not None and b is not None
     np.testing.assert_array_equal(a.t, b.t)
     worst = {}
-    for name in ("scale_sigma", "misalignment_sigma_deg", "gyro_bias_sigma_deg_per_h", "accel_bias_sigma_ug",
-                 "attitude_sigma_deg"):
+    for name in (
+        "scale_sigma",
+        "misalignment_sigma_deg",
+        "gyro_bias_sigma_deg_per_h",
+        "accel_bias_sigma_ug",
+        "attitude_sigma_deg",
+    ):
         ratio = getattr(a, name) / getattr(b, name)
         worst[name] = float(np.max(np.abs(ratio - 1)))
-    print(f"\nfixed-lag / full-history filtering sigmas, worst |ratio - 1| over 1000 epochs: "
-          f"{ {k: round(v, 4) for k, v in worst.items()} }; fixed-lag iSAM2 {lag.info['isam2']}")
+    print(
+        f"\nfixed-lag / full-history filtering sigmas, worst |ratio - 1| over 1000 epochs: "
+        f"{ {k: round(v, 4) for k, v in worst.items()} }; fixed-lag iSAM2 {lag.info['isam2']}"
+    )
     assert max(worst.values()) < 0.10
     window = lag.info["window_s"]
     assert lag.info["isam2"]["variables"] <= 2 * (window + 2) + 3
@@ -146,6 +185,7 @@ def test_random_walk_bias_fixed_lag_agrees_with_batch() -> None:
 
 
 # ----- the sigma timeline (the paper's observability story) ---------------------------------------
+
 
 def _at(t: np.ndarray, x: np.ndarray, when: float) -> np.ndarray:
     return np.asarray(x[int(np.searchsorted(t, when))])
@@ -169,12 +209,16 @@ def test_sigma_timeline_paper_3d() -> None:
     s600, s660, s720 = (_at(t, tl.scale_sigma, x) for x in (600, 660, 720))
     m = {x: _at(t, tl.misalignment_sigma_deg, x) for x in (600, 660, 720, 900)}
     a = {x: _at(t, tl.accel_bias_sigma_ug, x) for x in (600, 750, 900)}
-    print(f"\nscale sigma 600/660/720 s: {s600:.4f} {s660:.5f} {s720:.5f} (/{s600 / s660:.0f} by 660 s)")
+    print(
+        f"\nscale sigma 600/660/720 s: {s600:.4f} {s660:.5f} {s720:.5f} (/{s600 / s660:.0f} by 660 s)"
+    )
     for x, v in m.items():
         print(f"misalignment sigma [roll, pitch, yaw] at {x} s: {np.round(v, 4)} deg")
     yaw_10x = t[np.argmax(tl.misalignment_sigma_deg[:, 2] < 0.1 * m[600][2])]
-    print(f"fall by 660 s: pitch /{m[600][1] / m[660][1]:.1f}, yaw /{m[600][2] / m[660][2]:.1f} (10x at {yaw_10x:.0f} "
-          f"s); roll 660 -> 720 s: /{m[660][0] / m[720][0]:.2f}")
+    print(
+        f"fall by 660 s: pitch /{m[600][1] / m[660][1]:.1f}, yaw /{m[600][2] / m[660][2]:.1f} (10x at {yaw_10x:.0f} "
+        f"s); roll 660 -> 720 s: /{m[660][0] / m[720][0]:.2f}"
+    )
     for x, v in a.items():
         print(f"accelerometer bias sigma at {x} s: {np.round(v, 2)} micro-g")
     assert s600 > 0.9 * PRIOR.scale_sigma and s660 < s600 / 10
@@ -195,12 +239,15 @@ def test_sigma_timeline_paper_2d_roll_unobservable() -> None:
         tl = _online("paper-2d", seed).timeline
         assert tl is not None
         roll = tl.misalignment_sigma_deg[:, 0]
-        print(f"\npaper-2d seed {seed}: roll sigma min {roll.min():.4f} deg (prior {PRIOR.misalignment_sigma_deg[0]}); "
-              f"pitch, yaw sigma at the end {np.round(tl.misalignment_sigma_deg[-1, 1:], 4)}")
+        print(
+            f"\npaper-2d seed {seed}: roll sigma min {roll.min():.4f} deg (prior {PRIOR.misalignment_sigma_deg[0]}); "
+            f"pitch, yaw sigma at the end {np.round(tl.misalignment_sigma_deg[-1, 1:], 4)}"
+        )
         assert np.all(roll > 0.9 * PRIOR.misalignment_sigma_deg[0])
 
 
 # ----- messages -----------------------------------------------------------------------------------
+
 
 def _short() -> LogData:
     return _log("paper-3d", 4, 700.0)
@@ -232,12 +279,16 @@ def test_estimate_after_each_epoch() -> None:
     ends = np.searchsorted(imu.t, dvl.t, side="right")
     start = 0
     for j in range(200):
-        done = est.push_imu_batch(imu.t[start:ends[j]], imu.b_omega[start:ends[j]], imu.b_f[start:ends[j]])
+        done = est.push_imu_batch(
+            imu.t[start : ends[j]], imu.b_omega[start : ends[j]], imu.b_f[start : ends[j]]
+        )
         start = int(ends[j])
         done += est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j])
         if done and t_first is None:
             t_first = dvl.t[j]
-            print(f"\nfirst estimate after the ping at {t_first:.0f} s: {done} epochs processed at once")
+            print(
+                f"\nfirst estimate after the ping at {t_first:.0f} s: {done} epochs processed at once"
+            )
             assert done > 60
         if t_first is None:
             assert est.estimate() is None
@@ -245,7 +296,9 @@ def test_estimate_after_each_epoch() -> None:
     assert e is not None and e.t == dvl.t[199]
     for cov in (e.pose_cov, e.vel_cov, e.bias_cov, e.b_R_d_cov, e.calib_cov):
         assert np.all(np.linalg.eigvalsh(cov) > 0)
-    assert e.scale_sigma == pytest.approx(PRIOR.scale_sigma, rel=1e-3)  # static: slow pings tell nothing
+    assert e.scale_sigma == pytest.approx(
+        PRIOR.scale_sigma, rel=1e-3
+    )  # static: slow pings tell nothing
     assert np.all(e.attitude_sigma_deg < [0.01, 0.01, 1.0])
 
 
@@ -267,8 +320,10 @@ def test_per_message_and_late_pings_give_the_batch_feed_result() -> None:
         est.push_dvl(dvl.t[k], dvl.d_v[k], dvl.d_cov[k], bool(dvl.valid[k]))
     est.finish()
     diff = np.abs(_final(est) - _final(ref))
-    print(f"\nper-message, late pings vs batches: {est.epochs} vs {ref.epochs} epochs, "
-          f"max |difference| {diff.max():.2e}")
+    print(
+        f"\nper-message, late pings vs batches: {est.epochs} vs {ref.epochs} epochs, "
+        f"max |difference| {diff.max():.2e}"
+    )
     assert est.epochs == ref.epochs
     np.testing.assert_allclose(_final(est), _final(ref), rtol=1e-9, atol=1e-9)
 
@@ -279,20 +334,30 @@ def test_bad_messages_rejected_with_a_clear_error() -> None:
     est = OnlineEstimator.for_log(log)
     est.push_imu_batch(imu.t[:100], imu.b_omega[:100], imu.b_f[:100])
     cases = [
-        (lambda: est.push_imu(imu.t[99], imu.b_omega[99], imu.b_f[99]), "repeats the previous stamp"),
+        (
+            lambda: est.push_imu(imu.t[99], imu.b_omega[99], imu.b_f[99]),
+            "repeats the previous stamp",
+        ),
         (lambda: est.push_imu(imu.t[50], imu.b_omega[50], imu.b_f[50]), "older than the previous"),
         (lambda: est.push_imu(imu.t[100], [np.nan, 0, 0], imu.b_f[100]), "non-finite value"),
         (lambda: est.push_imu(np.nan, imu.b_omega[100], imu.b_f[100]), "non-finite stamp"),
-        (lambda: est.push_imu_batch(imu.t[[100, 102, 101]], imu.b_omega[100:103], imu.b_f[100:103]), "older"),
+        (
+            lambda: est.push_imu_batch(
+                imu.t[[100, 102, 101]], imu.b_omega[100:103], imu.b_f[100:103]
+            ),
+            "older",
+        ),
         (lambda: est.push_imu(imu.t[100], imu.b_omega[100, :2], imu.b_f[100]), "3-vector"),
     ]
     for call, message in cases:
         with pytest.raises(GtsamDvlError, match=message):
             call()
     est.push_dvl(0.5, [0.0, 0.0, 0.0])
-    for call, message in [(lambda: est.push_dvl(0.5, [0.0, 0.0, 0.0]), "repeats the previous ping"),
-                          (lambda: est.push_dvl(0.4, [0.0, 0.0, 0.0]), "older than the previous ping"),
-                          (lambda: est.push_dvl(np.inf, [0.0, 0.0, 0.0]), "non-finite stamp")]:
+    for call, message in [
+        (lambda: est.push_dvl(0.5, [0.0, 0.0, 0.0]), "repeats the previous ping"),
+        (lambda: est.push_dvl(0.4, [0.0, 0.0, 0.0]), "older than the previous ping"),
+        (lambda: est.push_dvl(np.inf, [0.0, 0.0, 0.0]), "non-finite stamp"),
+    ]:
         with pytest.raises(GtsamDvlError, match=message):
             call()
     # a ping without bottom lock (NaN velocity) is data, not an error: counted and skipped
@@ -314,7 +379,9 @@ def test_bad_messages_dropped_and_counted() -> None:
         for j in range(len(dvl)):
             end = int(ends[j])
             t, w, f = imu.t[start:end], imu.b_omega[start:end], imu.b_f[start:end]
-            if j % 50 == 7 and len(t) > 3:  # a duplicated and a stale sample, and a NaN sample, in the batch
+            if (
+                j % 50 == 7 and len(t) > 3
+            ):  # a duplicated and a stale sample, and a NaN sample, in the batch
                 bad_w = w[1].copy()
                 bad_w[0] = np.nan
                 t = np.concatenate([t[:2], t[1:2], t[:1], [0.5 * (t[1] + t[2])], t[2:]])
@@ -330,10 +397,20 @@ def test_bad_messages_dropped_and_counted() -> None:
         est.finish()
     kinds = [str(w.message) for w in caught if issubclass(w.category, MessageDropped)]
     print(f"\ncounters {est.counters}; {len(kinds)} warnings")
-    for k in ("imu_duplicate", "imu_out_of_order", "imu_not_finite", "dvl_duplicate", "dvl_out_of_order"):
+    for k in (
+        "imu_duplicate",
+        "imu_out_of_order",
+        "imu_not_finite",
+        "dvl_duplicate",
+        "dvl_out_of_order",
+    ):
         assert est.counters.get(k, 0) > 0, k
     assert len(kinds) == 5
-    assert est.counters["dvl_duplicate"] == est.counters["dvl_out_of_order"] == len(range(11, len(dvl), 60))
+    assert (
+        est.counters["dvl_duplicate"]
+        == est.counters["dvl_out_of_order"]
+        == len(range(11, len(dvl), 60))
+    )
     np.testing.assert_allclose(_final(est), _final(ref), rtol=1e-9, atol=1e-9)
 
 
@@ -352,6 +429,7 @@ def test_options_checked() -> None:
 
 
 # ----- helpers ------------------------------------------------------------------------------------
+
 
 def test_misalignment_closed_form_matches_result_module() -> None:
     """online_types.misalignment_deg_and_cov (closed form) against result.misalignment_rpy_and_cov (numerical),

@@ -26,7 +26,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, T_OFFSET, V, X
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import (
     OFFSET,
     FilterState,
@@ -36,7 +36,9 @@ from gtsam_dvl.estimators.ekf.filter import (
 )
 from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, POS, SCALE, VEL, NavState
 from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
-from gtsam_dvl.estimators.online.dvl_factors import considered_calibration_factor as _considered_calibration_factor
+from gtsam_dvl.estimators.online.dvl_factors import (
+    considered_calibration_factor as _considered_calibration_factor,
+)
 from tests.support.numerical import numerical_jacobian, numerical_jacobians
 from tests.support.scenarios import simulate_variant
 
@@ -51,8 +53,11 @@ def offset_log(dt: float) -> LogData:
 
 @cache
 def depth_log() -> LogData:
-    return simulate_variant(SEED, name="paper-3d-short-depth",
-                            depth={"rate_hz": 1.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]})
+    return simulate_variant(
+        SEED,
+        name="paper-3d-short-depth",
+        depth={"rate_hz": 1.0, "noise_m": 0.05, "lever_arm_m": [0.4, -0.2, 0.3]},
+    )
 
 
 def offset_config() -> EstimatorConfig:
@@ -108,9 +113,11 @@ def test_offset_recovered_with_the_batch_sigma(estimator: str) -> None:
     r, rb = offset_run(estimator, dt), offset_run("batch", dt)
     n = (r.time_offset_s - dt) / r.time_offset_sigma_s
     ratio = r.time_offset_sigma_s / rb.time_offset_sigma_s
-    print(f"\n{estimator}: dt_d {r.time_offset_s:.4f} +- {r.time_offset_sigma_s * 1e3:.1f} ms ({n:+.2f} sigma), "
-          f"sigma / batch's {ratio:.3f}; batch {rb.time_offset_s:.4f} +- {rb.time_offset_sigma_s * 1e3:.1f} ms; "
-          f"scale {scale_nsigma(r, log):+.2f} sigma (batch {scale_nsigma(rb, log):+.2f})")
+    print(
+        f"\n{estimator}: dt_d {r.time_offset_s:.4f} +- {r.time_offset_sigma_s * 1e3:.1f} ms ({n:+.2f} sigma), "
+        f"sigma / batch's {ratio:.3f}; batch {rb.time_offset_s:.4f} +- {rb.time_offset_sigma_s * 1e3:.1f} ms; "
+        f"scale {scale_nsigma(r, log):+.2f} sigma (batch {scale_nsigma(rb, log):+.2f})"
+    )
     assert abs(n) < 3.0
     assert 0.9 < ratio < 1.1
     assert abs(scale_nsigma(r, log)) < 3.0
@@ -134,8 +141,10 @@ def test_recentred_windows_matter_at_1_5_s() -> None:
     r, r0 = offset_run("online", dt, True), offset_run("online", dt, False)
     n, n0 = ((x.time_offset_s - dt) / x.time_offset_sigma_s for x in (r, r0))
     s, s0 = scale_nsigma(r, log), scale_nsigma(r0, log)
-    print(f"\nre-centred: {r.time_offset_s:.4f} s ({n:+.2f} sigma), scale {s:+.2f} sigma; at the prior: "
-          f"{r0.time_offset_s:.4f} s ({n0:+.2f} sigma), scale {s0:+.2f} sigma")
+    print(
+        f"\nre-centred: {r.time_offset_s:.4f} s ({n:+.2f} sigma), scale {s:+.2f} sigma; at the prior: "
+        f"{r0.time_offset_s:.4f} s ({n0:+.2f} sigma), scale {s0:+.2f} sigma"
+    )
     assert abs(n) < 3.0 and abs(s) < 3.0
     assert abs(n) < abs(n0) - 0.5 and abs(s) < abs(s0) - 0.5
 
@@ -158,10 +167,12 @@ def test_depth_bounds_the_vertical_position(estimator: str) -> None:
     (e, s), (e0, s0) = vertical(r, log), vertical(r0, log)
     rms, rms0 = float(np.sqrt(np.mean(e**2))), float(np.sqrt(np.mean(e0**2)))
     c = r.info["counters"]
-    print(f"\n{estimator}: vertical error rms {rms * 100:.2f} cm (without depth {rms0 * 100:.1f} cm), final "
-          f"{e[-1]:+.3f} +- {s[-1]:.3f} m (without {e0[-1]:+.3f} +- {s0[-1]:.3f} m), max |e| / sigma "
-          f"{np.max(np.abs(e) / s):.2f}, rms(e / sigma) {np.sqrt(np.mean((e / s) ** 2)):.2f}; counters "
-          f"{ {k: v for k, v in c.items() if k.startswith('depth')} }")
+    print(
+        f"\n{estimator}: vertical error rms {rms * 100:.2f} cm (without depth {rms0 * 100:.1f} cm), final "
+        f"{e[-1]:+.3f} +- {s[-1]:.3f} m (without {e0[-1]:+.3f} +- {s0[-1]:.3f} m), max |e| / sigma "
+        f"{np.max(np.abs(e) / s):.2f}, rms(e / sigma) {np.sqrt(np.mean((e / s) ** 2)):.2f}; counters "
+        f"{ {k: v for k, v in c.items() if k.startswith('depth')} }"
+    )
     assert "depth_ignored" not in c and "depth_used" not in r0.info["counters"]
     bc = rb.info["counters"]
     assert c["depth_used"] == bc["depth_used"] and c["depth_too_far"] == bc["depth_too_far"]
@@ -190,17 +201,29 @@ def test_online_depth_waits_for_its_state_and_rejects_disorder() -> None:
 # ----- Jacobians -----------------------------------------------------------------------------------------------
 def _filter_state(rng: np.random.Generator, offset: bool) -> FilterState:
     n = 20 if offset else 19
-    return FilterState(NavState(so3_exp(rng.normal(size=3)), rng.normal(size=3) * 2, rng.normal(size=3) * 300),
-                       rng.normal(size=3) * 1e-4, rng.normal(size=3) * 1e-3, 0.98, so3_exp(rng.normal(size=3) * 0.1),
-                       np.eye(n), 0.4 if offset else 0.0)
+    return FilterState(
+        NavState(so3_exp(rng.normal(size=3)), rng.normal(size=3) * 2, rng.normal(size=3) * 300),
+        rng.normal(size=3) * 1e-4,
+        rng.normal(size=3) * 1e-3,
+        0.98,
+        so3_exp(rng.normal(size=3) * 0.1),
+        np.eye(n),
+        0.4 if offset else 0.0,
+    )
 
 
 def _inject(fs: FilterState, dx: np.ndarray) -> FilterState:
     """The EKF's error injection (filter.update): true = estimate (+) error."""
     nav = fs.nav
-    return FilterState(NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS]),
-                       fs.gyro_bias + dx[BG], fs.accel_bias + dx[BA], fs.scale + dx[SCALE],
-                       fs.b_R_d @ so3_exp(dx[MIS]), fs.P, fs.time_offset + (dx[OFFSET] if len(dx) > OFFSET else 0.0))
+    return FilterState(
+        NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS]),
+        fs.gyro_bias + dx[BG],
+        fs.accel_bias + dx[BA],
+        fs.scale + dx[SCALE],
+        fs.b_R_d @ so3_exp(dx[MIS]),
+        fs.P,
+        fs.time_offset + (dx[OFFSET] if len(dx) > OFFSET else 0.0),
+    )
 
 
 def _numerical(f, fs: FilterState, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]
@@ -211,7 +234,11 @@ def test_ekf_offset_and_depth_jacobians_match_finite_differences() -> None:
     rng = np.random.default_rng(3)
     fs = _filter_state(rng, True)
     b_l, n_g = np.array([0.5, -0.2, 0.3]), np.array([0.0, 0.0, -9.79])
-    rate = (rng.normal(size=3) * 0.1 + [0.0, 0.0, 9.79], rng.normal(size=3) * 0.05, so3_exp(rng.normal(size=3) * 0.01))
+    rate = (
+        rng.normal(size=3) * 0.1 + [0.0, 0.0, 9.79],
+        rng.normal(size=3) * 0.05,
+        so3_exp(rng.normal(size=3) * 0.01),
+    )
     _, H = offset_measurement_model(fs, b_l, rate, n_g)
     H_num = _numerical(lambda s: offset_measurement_model(s, b_l, rate, n_g)[0], fs, 20)
     np.testing.assert_allclose(H, H_num, atol=1e-6)
@@ -226,12 +253,21 @@ def test_considered_offset_factor_jacobians() -> None:
     """The online estimator's DVL factor for a slow ping with the time offset: the offset model's error, its
     Jacobians for pose, velocity and offset (numerical derivatives), none for scale and misalignment."""
     rng = np.random.default_rng(5)
-    rate = (rng.normal(size=3) * 0.1 + [0.0, 0.0, 9.79], rng.normal(size=3) * 0.05, so3_exp(rng.normal(size=3) * 0.01))
+    rate = (
+        rng.normal(size=3) * 0.1 + [0.0, 0.0, 9.79],
+        rng.normal(size=3) * 0.05,
+        so3_exp(rng.normal(size=3) * 0.01),
+    )
     n_g = np.array([0.0, 0.0, -9.79])
-    f = _considered_calibration_factor(gtsam.noiseModel.Isotropic.Sigma(3, 0.02), 2, np.zeros(3),
-                                       np.array([0.5, -0.2, 0.3]), d_y=np.array([0.05, 0.01, -0.02]),
-                                       offset=(rate, n_g), config=EstimatorConfig(dvl=DvlConfig(
-                                           estimate_time_offset=True, correlated_sigma_m_s=0.0)))  # (E: test_dvl.py)
+    f = _considered_calibration_factor(
+        gtsam.noiseModel.Isotropic.Sigma(3, 0.02),
+        2,
+        np.zeros(3),
+        np.array([0.5, -0.2, 0.3]),
+        d_y=np.array([0.05, 0.01, -0.02]),
+        offset=(rate, n_g),
+        config=EstimatorConfig(dvl=DvlConfig(estimate_time_offset=True, correlated_sigma_m_s=0.0)),
+    )  # (E: test_dvl.py)
     values = gtsam.Values()
     values.insert(X(2), gtsam.Pose3(gtsam.Rot3(so3_exp(rng.normal(size=3))), rng.normal(size=3)))
     values.insert(V(2), rng.normal(size=3) * 0.05)
@@ -246,18 +282,27 @@ def test_considered_offset_factor_jacobians() -> None:
     H = A * sigma
     dims = dict(zip(keys, (6, 3, 1, 3, 1), strict=True))
 
-    def error(pose: gtsam.Pose3, n_v: np.ndarray, scale: np.ndarray, b_R_d: gtsam.Rot3, offset: np.ndarray
-              ) -> np.ndarray:
+    def error(
+        pose: gtsam.Pose3, n_v: np.ndarray, scale: np.ndarray, b_R_d: gtsam.Rot3, offset: np.ndarray
+    ) -> np.ndarray:
         moved = gtsam.Values()
         for key, value in zip(keys, (pose, n_v, scale, b_R_d, offset), strict=True):
             moved.insert(key, value)
         return f.unwhitenedError(moved)
 
-    numerical = numerical_jacobians(error, [values.atPose3(X(2)), values.atVector(V(2)), values.atVector(K_SCALE),
-                                            values.atRot3(C_MISALIGN), values.atVector(T_OFFSET)])
+    numerical = numerical_jacobians(
+        error,
+        [
+            values.atPose3(X(2)),
+            values.atVector(V(2)),
+            values.atVector(K_SCALE),
+            values.atRot3(C_MISALIGN),
+            values.atVector(T_OFFSET),
+        ],
+    )
     col = 0
     for (key, d), num in zip(dims.items(), numerical, strict=True):
-        block = H[:, col:col + d]
+        block = H[:, col : col + d]
         if key in (K_SCALE, C_MISALIGN):
             assert np.all(block == 0.0)
         else:

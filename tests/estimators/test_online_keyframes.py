@@ -28,11 +28,11 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import map_frame_of
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import find_gaps, sample_starts_with_gaps
-from gtsam_dvl.estimators.keyframes import interval_with_snapshots, snapshot_params
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.keyframes import interval_with_snapshots, snapshot_params
+from gtsam_dvl.estimators.inputs.alignment import map_frame_of
+from gtsam_dvl.estimators.inputs.gaps import find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.between_pings import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
@@ -59,17 +59,23 @@ def run_log(dvl_hz: float, t_end: float = T_END_S) -> LogData:
 
 def config(spacing_s: float) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return cfg.model_copy(update={"solver": cfg.solver.model_copy(update={"keyframe_spacing_s": spacing_s})})
+    return cfg.model_copy(
+        update={"solver": cfg.solver.model_copy(update={"keyframe_spacing_s": spacing_s})}
+    )
 
 
 @dataclasses.dataclass
 class OnlineRun:
     result: NavResult
-    between: list[tuple[float, OnlineEstimate]]  # (ping time, estimate()) after each ping between keyframes
+    between: list[
+        tuple[float, OnlineEstimate]
+    ]  # (ping time, estimate()) after each ping between keyframes
 
 
 @cache
-def online(spacing_s: float, dvl_hz: float = 5.0, t_end: float = T_END_S, defer: bool = True) -> OnlineRun:
+def online(
+    spacing_s: float, dvl_hz: float = 5.0, t_end: float = T_END_S, defer: bool = True
+) -> OnlineRun:
     """The fixed-lag online estimator fed message by message, estimate() read after each ping between keyframes
     (defer: OnlineEstimator.defer_between_pings)."""
     log = run_log(dvl_hz, t_end)
@@ -80,7 +86,9 @@ def online(spacing_s: float, dvl_hz: float = 5.0, t_end: float = T_END_S, defer:
     start, between = 0, []
     for j in range(len(dvl)):
         if ends[j] > start:
-            est.push_imu_batch(imu.t[start:ends[j]], imu.b_omega[start:ends[j]], imu.b_f[start:ends[j]])
+            est.push_imu_batch(
+                imu.t[start : ends[j]], imu.b_omega[start : ends[j]], imu.b_f[start : ends[j]]
+            )
             start = int(ends[j])
         if est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j])):
             e = est.estimate()
@@ -98,12 +106,31 @@ def batch(spacing_s: float) -> NavResult:
 
 def calibration(r: NavResult) -> tuple[np.ndarray, np.ndarray]:
     """(values, sigmas): scale, misalignment (deg), accelerometer bias (micro-g), gyro bias (deg/h)."""
-    return (np.concatenate([[r.scale], r.misalignment_deg, r.accel_bias / UG, r.gyro_bias / DEG_PER_H]),
-            np.concatenate([[r.scale_sigma], r.misalignment_sigma_deg, r.accel_bias_sigma_ug,
-                            r.gyro_bias_sigma_deg_per_h]))
+    return (
+        np.concatenate([[r.scale], r.misalignment_deg, r.accel_bias / UG, r.gyro_bias / DEG_PER_H]),
+        np.concatenate(
+            [
+                [r.scale_sigma],
+                r.misalignment_sigma_deg,
+                r.accel_bias_sigma_ug,
+                r.gyro_bias_sigma_deg_per_h,
+            ]
+        ),
+    )
 
 
-NAMES = ["scale", "mis_roll", "mis_pitch", "mis_yaw", "b_a_x", "b_a_y", "b_a_z", "b_g_x", "b_g_y", "b_g_z"]
+NAMES = [
+    "scale",
+    "mis_roll",
+    "mis_pitch",
+    "mis_yaw",
+    "b_a_x",
+    "b_a_y",
+    "b_a_z",
+    "b_g_x",
+    "b_g_y",
+    "b_g_z",
+]
 
 
 def _compare(label: str, a: NavResult, b: NavResult) -> tuple[np.ndarray, np.ndarray]:
@@ -113,8 +140,10 @@ def _compare(label: str, a: NavResult, b: NavResult) -> tuple[np.ndarray, np.nda
     shift, ratio = (va - vb) / sb, sa / sb - 1.0
     print(f"\n{label}:")
     for k, name in enumerate(NAMES):
-        print(f"  {name:9s} {va[k]:+.6g} +- {sa[k]:.3g} vs {vb[k]:+.6g} +- {sb[k]:.3g}: shift {shift[k]:+.4f} sigma, "
-              f"sigma {100 * ratio[k]:+.2f} %")
+        print(
+            f"  {name:9s} {va[k]:+.6g} +- {sa[k]:.3g} vs {vb[k]:+.6g} +- {sb[k]:.3g}: shift {shift[k]:+.4f} sigma, "
+            f"sigma {100 * ratio[k]:+.2f} %"
+        )
     return shift, ratio
 
 
@@ -122,11 +151,16 @@ def _compare(label: str, a: NavResult, b: NavResult) -> tuple[np.ndarray, np.nda
 def test_online_keyframes_are_the_batch_smoothers() -> None:
     on, ba = online(1.0).result, batch(1.0)
     c_on, c_ba = on.info["counters"], ba.info["counters"]
-    print(f"\n{len(run_log(5.0).dvl)} pings: online {len(on.t)} states ({c_on['keyframes']} keyframes, "
-          f"{c_on['pings_between_keyframes']} pings between), batch {len(ba.t)} ({c_ba['keyframes']}, "
-          f"{c_ba['pings_between_keyframes']})")
+    print(
+        f"\n{len(run_log(5.0).dvl)} pings: online {len(on.t)} states ({c_on['keyframes']} keyframes, "
+        f"{c_on['pings_between_keyframes']} pings between), batch {len(ba.t)} ({c_ba['keyframes']}, "
+        f"{c_ba['pings_between_keyframes']})"
+    )
     np.testing.assert_array_equal(on.t, ba.t)  # the same keyframes, the last ping one of them
-    assert c_on["keyframes"] == c_ba["keyframes"] and c_on["pings_between_keyframes"] == c_ba["pings_between_keyframes"]
+    assert (
+        c_on["keyframes"] == c_ba["keyframes"]
+        and c_on["pings_between_keyframes"] == c_ba["pings_between_keyframes"]
+    )
     assert len(on.t) < 0.25 * len(run_log(5.0).dvl)
     assert on.timeline is not None and len(on.timeline.t) == len(on.t)  # the timeline at the states
     shift, ratio = _compare("online (1 s keyframes) vs batch (1 s keyframes)", on, ba)
@@ -141,9 +175,15 @@ def test_online_keyframes_are_the_batch_smoothers() -> None:
 @pytest.mark.slow
 def test_online_keyframes_match_a_state_per_ping() -> None:
     keyed, per_ping = online(1.0).result, online(0.0).result
-    print(f"\nonline: {len(keyed.t)} states with 1 s keyframes, {len(per_ping.t)} with a state per ping")
+    print(
+        f"\nonline: {len(keyed.t)} states with 1 s keyframes, {len(per_ping.t)} with a state per ping"
+    )
     c = keyed.info["counters"]
-    assert per_ping.info["counters"]["keyframes"] == len(per_ping.t) == c["keyframes"] + c["pings_between_keyframes"]
+    assert (
+        per_ping.info["counters"]["keyframes"]
+        == len(per_ping.t)
+        == c["keyframes"] + c["pings_between_keyframes"]
+    )
     shift, ratio = _compare("online, 1 s keyframes vs a state per ping", keyed, per_ping)
     assert np.all(np.abs(shift) < 0.05)
     assert np.all(np.abs(ratio) < 0.01)
@@ -168,9 +208,12 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
     t_state, pings, t_next = 250.0, [250.2, 250.4, 250.6, 250.8], 251.0
     starts = sample_starts_with_gaps(t, gaps)
     b_f = f + 0.5 * (t - starts)[:, None] * np.cross(w, f)
-    batch_pim, batch_held, expected = interval_with_snapshots(t_state, t_next, pings, maker.make_params(), t, starts,
-                                                              b_f, w, gaps, cfg.imu)
-    lo = int(np.searchsorted(t, t_state, side="right")) - 1  # the online buffer: from the last sample <= the state
+    batch_pim, batch_held, expected = interval_with_snapshots(
+        t_state, t_next, pings, maker.make_params(), t, starts, b_f, w, gaps, cfg.imu
+    )
+    lo = (
+        int(np.searchsorted(t, t_state, side="right")) - 1
+    )  # the online buffer: from the last sample <= the state
     T, W, F = t[lo:], w[lo:], f[lo:]
     g_buf = find_gaps(T, cfg.imu.gap_samples, gaps.period_s)
     s_buf = sample_starts_with_gaps(T, g_buf)
@@ -180,9 +223,13 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
     for t_p, e in zip(pings, expected, strict=True):
         got = interval.snapshot_at(t_p, T, s_buf, bf_buf, W, g_buf)
         for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg", "cov"):
-            np.testing.assert_array_equal(getattr(got, name), getattr(e, name), err_msg=f"{name} at {t_p}")
+            np.testing.assert_array_equal(
+                getattr(got, name), getattr(e, name), err_msg=f"{name} at {t_p}"
+            )
     if gap:
-        assert expected[-1].cov[8, 8] > 10 * expected[0].cov[8, 8]  # the hold's motion-model covariance is in
+        assert (
+            expected[-1].cov[8, 8] > 10 * expected[0].cov[8, 8]
+        )  # the hold's motion-model covariance is in
     # the next IMU factor's preintegration, cut at the last stamp before each ping, then closed at the state: the
     # batch smoother's, and preintegrate_interval's in one go
     ref, _, ref_held = maker.preintegrate_interval(t_state, t_next, T, s_buf, bf_buf, W, g_buf)
@@ -195,18 +242,25 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
             np.testing.assert_array_equal(a, b, err_msg=name)
 
 
-def _turn_motion() -> tuple[PingMotion, PingMotion, gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams]:
+def _turn_motion() -> tuple[
+    PingMotion, PingMotion, gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams
+]:
     """0.8 s of a 0.2 rad/s turn while accelerating, preintegrated with gravity (GTSAM's prediction) and as a
     keyframe snapshot (zero gravity) in a flat model: no Earth rate, constant gravity."""
-    from gtsam_dvl.estimators.keyframes import snapshot
+    from gtsam_dvl.estimators.graph.keyframes import snapshot
 
     g = np.array([0.0, 0.0, -9.8])
     params = gtsam.PreintegrationParams(g)
-    for setter in (params.setGyroscopeCovariance, params.setAccelerometerCovariance,
-                   params.setIntegrationCovariance):
+    for setter in (
+        params.setGyroscopeCovariance,
+        params.setAccelerometerCovariance,
+        params.setIntegrationCovariance,
+    ):
         setter(1e-10 * np.eye(3))
     pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
-    snap_pim = gtsam.PreintegratedImuMeasurements(snapshot_params(params), gtsam.imuBias.ConstantBias())
+    snap_pim = gtsam.PreintegratedImuMeasurements(
+        snapshot_params(params), gtsam.imuBias.ConstantBias()
+    )
     for k in range(160):
         b_omega = np.array([0.01, -0.02, 0.2 + 0.05 * np.sin(0.1 * k)])
         b_f = np.array([0.4, 0.2 * np.cos(0.05 * k), 9.8])
@@ -220,8 +274,16 @@ def _turn_motion() -> tuple[PingMotion, PingMotion, gtsam.PreintegratedImuMeasur
 def _state(cov: np.ndarray) -> StateEstimate:
     pose = gtsam.Pose3(gtsam.Rot3.RzRyRx(0.05, -0.03, 1.2), np.array([10.0, -5.0, -20.0]))
     bias = gtsam.imuBias.ConstantBias(np.array([2e-3, -1e-3, 3e-3]), np.array([1e-5, -2e-5, 3e-5]))
-    return StateEstimate(index=3, t=100.0, pose=pose, n_v=np.array([1.5, 0.4, -0.1]), bias=bias, scale=1.01,
-                         b_R_d=np.eye(3), cov=cov)
+    return StateEstimate(
+        index=3,
+        t=100.0,
+        pose=pose,
+        n_v=np.array([1.5, 0.4, -0.1]),
+        bias=bias,
+        scale=1.01,
+        b_R_d=np.eye(3),
+        cov=cov,
+    )
 
 
 def test_prediction_at_a_ping_is_gtsams() -> None:
@@ -232,8 +294,10 @@ def test_prediction_at_a_ping_is_gtsams() -> None:
     d_rot = gtsam.Rot3.Logmap(ref.attitude().between(p.pose.rotation()))
     d_pos = np.asarray(p.pose.translation()) - np.asarray(ref.position())
     d_vel = p.n_v - np.asarray(ref.velocity())
-    print(f"\npredicted vs GTSAM over {snap.dt:.2f} s: attitude {np.abs(d_rot).max():.1e} rad, velocity "
-          f"{np.abs(d_vel).max():.1e} m/s, position {np.abs(d_pos).max():.1e} m")
+    print(
+        f"\npredicted vs GTSAM over {snap.dt:.2f} s: attitude {np.abs(d_rot).max():.1e} rad, velocity "
+        f"{np.abs(d_vel).max():.1e} m/s, position {np.abs(d_pos).max():.1e} m"
+    )
     assert p.t == s.t + snap.dt and p.predicted_from_t == s.t and p.index == s.index
     assert np.abs(d_rot).max() < 1e-9 and np.abs(d_vel).max() < 1e-8
     # dp's accelerometer-bias correction is dt / 2 times dv's, off by |b_a| w dt^3 / 12 in a turn at w rad/s
@@ -241,26 +305,43 @@ def test_prediction_at_a_ping_is_gtsams() -> None:
     bound = np.linalg.norm(s.bias.accelerometer()) * 0.2 * snap.dt**3 / 12
     assert np.abs(d_pos).max() < 1.5 * bound
     zero = dataclasses.replace(s, bias=gtsam.imuBias.ConstantBias())
-    p0, ref0 = predict_at_ping(zero, s.t + snap.dt, snap, motion), pim.predict(gtsam.NavState(s.pose, s.n_v),
-                                                                              zero.bias)
-    assert np.abs(np.asarray(p0.pose.translation()) - np.asarray(ref0.position())).max() < 1e-9  # exact at zero bias
+    p0, ref0 = (
+        predict_at_ping(zero, s.t + snap.dt, snap, motion),
+        pim.predict(gtsam.NavState(s.pose, s.n_v), zero.bias),
+    )
+    assert (
+        np.abs(np.asarray(p0.pose.translation()) - np.asarray(ref0.position())).max() < 1e-9
+    )  # exact at zero bias
     assert np.all(np.isnan(p.cov))  # no covariance in, none out
 
 
 def _retract(s: StateEstimate, d: np.ndarray) -> StateEstimate:
     pose = s.pose.retract(d[0:6])
-    bias = gtsam.imuBias.ConstantBias(np.asarray(s.bias.accelerometer()) + d[9:12],
-                                      np.asarray(s.bias.gyroscope()) + d[12:15])
-    return dataclasses.replace(s, pose=pose, n_v=s.n_v + d[6:9], bias=bias, scale=s.scale + d[15],
-                               b_R_d=s.b_R_d @ gtsam.Rot3.Expmap(d[16:19]).matrix())
+    bias = gtsam.imuBias.ConstantBias(
+        np.asarray(s.bias.accelerometer()) + d[9:12], np.asarray(s.bias.gyroscope()) + d[12:15]
+    )
+    return dataclasses.replace(
+        s,
+        pose=pose,
+        n_v=s.n_v + d[6:9],
+        bias=bias,
+        scale=s.scale + d[15],
+        b_R_d=s.b_R_d @ gtsam.Rot3.Expmap(d[16:19]).matrix(),
+    )
 
 
 def _local(a: StateEstimate, b: StateEstimate) -> np.ndarray:
     """b - a in the tangent of a's pose, velocity, bias, scale, misalignment."""
-    return np.concatenate([a.pose.localCoordinates(b.pose), b.n_v - a.n_v,
-                           np.asarray(b.bias.accelerometer()) - np.asarray(a.bias.accelerometer()),
-                           np.asarray(b.bias.gyroscope()) - np.asarray(a.bias.gyroscope()), [b.scale - a.scale],
-                           gtsam.Rot3.Logmap(gtsam.Rot3(a.b_R_d).between(gtsam.Rot3(b.b_R_d)))])
+    return np.concatenate(
+        [
+            a.pose.localCoordinates(b.pose),
+            b.n_v - a.n_v,
+            np.asarray(b.bias.accelerometer()) - np.asarray(a.bias.accelerometer()),
+            np.asarray(b.bias.gyroscope()) - np.asarray(a.bias.gyroscope()),
+            [b.scale - a.scale],
+            gtsam.Rot3.Logmap(gtsam.Rot3(a.b_R_d).between(gtsam.Rot3(b.b_R_d))),
+        ]
+    )
 
 
 def test_predicted_covariance_is_the_first_order_propagation() -> None:
@@ -268,7 +349,9 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
     the preintegration's noise mapped into the state at the ping."""
     snap, motion, _, _ = _turn_motion()
     rng = np.random.default_rng(3)
-    sig = np.array([1e-3] * 3 + [0.5] * 3 + [0.02] * 3 + [1e-3] * 3 + [1e-5] * 3 + [1e-3] + [1e-3] * 3)
+    sig = np.array(
+        [1e-3] * 3 + [0.5] * 3 + [0.02] * 3 + [1e-3] * 3 + [1e-5] * 3 + [1e-3] + [1e-3] * 3
+    )
     C = rng.normal(size=(19, 19))
     corr = np.corrcoef(C @ C.T + 19 * np.eye(19))
     cov = corr * np.outer(sig, sig)
@@ -276,13 +359,19 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
     t_p = s.t + snap.dt
     quiet = dataclasses.replace(snap, cov=np.zeros((9, 9)))
     p = predict_at_ping(s, t_p, quiet, motion)
-    J = numerical_jacobian(lambda e: _local(p, predict_at_ping(_retract(s, e), t_p, quiet, motion)), [np.zeros(19)], 0)
+    J = numerical_jacobian(
+        lambda e: _local(p, predict_at_ping(_retract(s, e), t_p, quiet, motion)), [np.zeros(19)], 0
+    )
     expected = J @ cov @ J.T
     d = np.sqrt(np.diag(expected))
     rel = np.abs(p.cov - expected) / np.outer(d, d)
-    print(f"\npropagated covariance vs numerical Jacobians: worst {rel.max():.1e} of the sigmas' product")
+    print(
+        f"\npropagated covariance vs numerical Jacobians: worst {rel.max():.1e} of the sigmas' product"
+    )
     assert rel.max() < 1e-5
-    noisy = predict_at_ping(s, t_p, snap, motion)  # the preintegration's noise adds to the pose and velocity only
+    noisy = predict_at_ping(
+        s, t_p, snap, motion
+    )  # the preintegration's noise adds to the pose and velocity only
     added = noisy.cov - p.cov
     assert np.all(np.linalg.eigvalsh(added[:9, :9]) > -1e-18) and np.abs(added[9:, :]).max() == 0.0
     np.testing.assert_allclose(np.trace(added[6:9, 6:9]), np.trace(snap.cov[6:9, 6:9]), rtol=1e-9)
@@ -304,11 +393,15 @@ def test_estimate_between_keyframes_is_consistent_with_the_truth() -> None:
         z_p.append((e.n_p - tr.n_p[k]) / np.sqrt(np.diag(P_p)))
         q = tr.n_q_b[k]  # [x, y, z, w]
         R_true = gtsam.Rot3.Quaternion(q[3], q[0], q[1], q[2]).matrix()
-        z_att.append(gtsam.Rot3.Logmap(gtsam.Rot3(R_true.T @ e.n_R_b)) / np.sqrt(np.diag(e.pose_cov[:3, :3])))
+        z_att.append(
+            gtsam.Rot3.Logmap(gtsam.Rot3(R_true.T @ e.n_R_b)) / np.sqrt(np.diag(e.pose_cov[:3, :3]))
+        )
     zv, zp, za = np.array(z_v), np.array(z_p), np.array(z_att)
-    print(f"\n{len(run.between)} estimates between keyframes: error / sigma rms velocity {np.sqrt((zv**2).mean()):.2f}"
-          f", position {np.sqrt((zp**2).mean()):.2f}, attitude {np.sqrt((za**2).mean()):.2f}; max "
-          f"{np.abs(zv).max():.1f} / {np.abs(zp).max():.1f} / {np.abs(za).max():.1f}")
+    print(
+        f"\n{len(run.between)} estimates between keyframes: error / sigma rms velocity {np.sqrt((zv**2).mean()):.2f}"
+        f", position {np.sqrt((zp**2).mean()):.2f}, attitude {np.sqrt((za**2).mean()):.2f}; max "
+        f"{np.abs(zv).max():.1f} / {np.abs(zp).max():.1f} / {np.abs(za).max():.1f}"
+    )
     # every ping between keyframes after the alignment (before it, the buffered pings are processed in one call, and
     # the estimate read after it is the last one's), the last ping too: a state only at finish()
     t_between = log.dvl.t[(log.dvl.t >= run.between[0][0]) & ~np.isin(log.dvl.t, states)]
@@ -332,8 +425,10 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
     assert est.smoother is not None
     in_window = len(est.smoother.times)
     alive, alive_imu = made.alive(), imus.alive()
-    print(f"\n{len(made)} keyframe factors made, {alive} alive after the run; {len(imus)} IMU factors, {alive_imu} "
-          f"alive; {in_window} states in the window")
+    print(
+        f"\n{len(made)} keyframe factors made, {alive} alive after the run; {len(imus)} IMU factors, {alive_imu} "
+        f"alive; {in_window} states in the window"
+    )
     assert len(made) > 30 * in_window and len(imus) > 8 * in_window
     assert alive <= 4 * in_window
     assert alive_imu <= in_window
@@ -360,19 +455,30 @@ def test_pings_between_keyframes_added_at_once_give_the_deferred_estimates() -> 
     deferred, at_once = online(1.0, 5.0, 200.0, True), online(1.0, 5.0, 200.0, False)
     a, b = at_once.result, deferred.result
     np.testing.assert_array_equal(a.t, b.t[:-1])
-    assert a.info["counters"]["pings_between_keyframes"] == b.info["counters"]["pings_between_keyframes"] + 1
+    assert (
+        a.info["counters"]["pings_between_keyframes"]
+        == b.info["counters"]["pings_between_keyframes"] + 1
+    )
     shift, _ = _compare("online, pings between keyframes added at once vs deferred", a, b)
     assert np.all(np.abs(shift) < 0.05)
+
     # at once, each ping's information is in the estimate right after it: moving, the scale sigma shrinks from one
     # ping to the next on the same state; deferred, it is the state's until the next state
     def steps(run: OnlineRun) -> np.ndarray:
         e = [x for t, x in run.between if t > 130.0]
-        return np.array([b.scale_sigma / a.scale_sigma for a, b in zip(e[:-1], e[1:], strict=True)
-                         if a.predicted_from_t == b.predicted_from_t])
+        return np.array(
+            [
+                b.scale_sigma / a.scale_sigma
+                for a, b in zip(e[:-1], e[1:], strict=True)
+                if a.predicted_from_t == b.predicted_from_t
+            ]
+        )
 
     s_at_once, s_deferred = steps(at_once), steps(deferred)
-    print(f"scale sigma from one ping to the next on the same state: at once {np.mean(s_at_once < 1):.0%} smaller; "
-          f"deferred {np.mean(s_deferred == 1):.0%} the same")
+    print(
+        f"scale sigma from one ping to the next on the same state: at once {np.mean(s_at_once < 1):.0%} smaller; "
+        f"deferred {np.mean(s_deferred == 1):.0%} the same"
+    )
     assert np.all(s_deferred == 1.0)
     assert np.mean(s_at_once < 1.0) > 0.9
 

@@ -19,7 +19,7 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
 from gtsam_dvl.factors import EarthImuFactor, imu_earth, make_earth_imu_factor
 from gtsam_dvl.sim import simulate
@@ -32,11 +32,14 @@ T_END_S = 400.0  # paper-3d-short: 120 s static, then the Type-I manoeuvres and 
 
 @pytest.fixture(scope="module")
 def log() -> LogData:
-    return replace(cut_log(simulate(load_scenario("paper-3d-short"), 5), T_END_S, beams=False), truth=None)
+    return replace(
+        cut_log(simulate(load_scenario("paper-3d-short"), 5), T_END_S, beams=False), truth=None
+    )
 
 
-def _tracked_run(log: LogData, monkeypatch: pytest.MonkeyPatch, config: EstimatorConfig
-                 ) -> tuple[OnlineEstimator, Made, Made]:
+def _tracked_run(
+    log: LogData, monkeypatch: pytest.MonkeyPatch, config: EstimatorConfig
+) -> tuple[OnlineEstimator, Made, Made]:
     """Run the fixed-lag estimator over the log with a weak reference to every IMU factor it made (the
     EarthImuFactor and its gtsam.CustomFactor)."""
     made = track_returns(monkeypatch, FactorMaker, "new_imu_factor")
@@ -48,14 +51,18 @@ def _tracked_run(log: LogData, monkeypatch: pytest.MonkeyPatch, config: Estimato
 
 @pytest.mark.slow
 @pytest.mark.parametrize("preset", ["default", "paper"])
-def test_dropped_imu_factors_are_freed(log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str) -> None:
+def test_dropped_imu_factors_are_freed(
+    log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str
+) -> None:
     config = EstimatorConfig() if preset == "default" else EstimatorConfig.paper()
     est, made, custom = _tracked_run(log, monkeypatch, config)
     assert est.smoother is not None
     in_window = len(est.smoother.imus)
     alive, alive_custom = made.alive(), custom.alive()
-    print(f"{preset}: {len(made)} IMU factors made, {alive} alive after the run ({alive_custom} CustomFactors), "
-          f"{in_window} in the window, {est.smoother.rebases} rebases")
+    print(
+        f"{preset}: {len(made)} IMU factors made, {alive} alive after the run ({alive_custom} CustomFactors), "
+        f"{in_window} in the window, {est.smoother.rebases} rebases"
+    )
     assert len(made) > 5 * in_window  # the window dropped most of them
     # alive: those of the window (the estimator's dict) and the newest (its gravity reference), nothing else
     assert alive <= in_window + 1
@@ -76,7 +83,9 @@ def test_parameters_claims_are_released(log: LogData) -> None:
     gc.collect()
     assert est.smoother is not None
     during = len(imu_earth._CLAIMED) - before
-    print(f"claims held after {est.epochs} epochs: {during} (window: {len(est.smoother.imus)} IMU factors)")
+    print(
+        f"claims held after {est.epochs} epochs: {during} (window: {len(est.smoother.imus)} IMU factors)"
+    )
     assert during <= len(est.smoother.imus) + 1
     del est
     gc.collect()
@@ -91,8 +100,13 @@ def _one_factor() -> tuple[EarthImuFactor, gtsam.Values]:
     pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
     for _ in range(100):
         pim.integrateMeasurement(np.array([0.1, 0.0, 9.81]), np.array([0.0, 0.0, 0.01]), 0.01)
-    keys = (gtsam.symbol("x", 0), gtsam.symbol("v", 0), gtsam.symbol("x", 1), gtsam.symbol("v", 1),
-            gtsam.symbol("b", 0))
+    keys = (
+        gtsam.symbol("x", 0),
+        gtsam.symbol("v", 0),
+        gtsam.symbol("x", 1),
+        gtsam.symbol("v", 1),
+        gtsam.symbol("b", 0),
+    )
 
     def gravity(n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # a made-up gradient, 1e-6 s^-2
         G = 1e-6 * np.diag([-1.0, -1.0, 2.0])

@@ -11,8 +11,8 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.rotations import so3_exp
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.graph import LogGraph
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 
@@ -25,11 +25,14 @@ def maker_and_imu() -> tuple[FactorMaker, np.ndarray, np.ndarray, np.ndarray]:
     return builder.maker, imu.t, imu.b_f, imu.b_omega
 
 
-def reference(maker: FactorMaker, t: float, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-              dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def reference(
+    maker: FactorMaker, t: float, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, dt: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """velocity_rate_input written per ping, one window at a time: the reference for the vectorised one."""
     w = maker.config.dvl.time_offset_window_s
-    start, end = (t, t + dt) if dt >= 0 else (t + dt, t)  # [t, t + dt], widened to 2 w about its middle
+    start, end = (
+        (t, t + dt) if dt >= 0 else (t + dt, t)
+    )  # [t, t + dt], widened to 2 w about its middle
     if end - start < 2 * w:
         mid = 0.5 * (start + end)
         start, end = mid - w, mid + w
@@ -51,7 +54,11 @@ def reference(maker: FactorMaker, t: float, imu_t: np.ndarray, b_f: np.ndarray, 
 def test_equal_to_one_at_a_time(dt: float) -> None:
     maker, imu_t, b_f, b_omega = maker_and_imu()
     rng = np.random.default_rng(1)
-    t = np.sort(np.concatenate([rng.uniform(imu_t[0], imu_t[-1], 40), [imu_t[0], imu_t[-1], imu_t[-1] + 5.0]]))
+    t = np.sort(
+        np.concatenate(
+            [rng.uniform(imu_t[0], imu_t[-1], 40), [imu_t[0], imu_t[-1], imu_t[-1] + 5.0]]
+        )
+    )
     for chunk in (2_000_000, 50):  # one block, and blocks of a single ping
         b_a, w_mean, G = maker.velocity_rate_inputs(t, imu_t, b_f, b_omega, dt, chunk_samples=chunk)
         for q, tq in enumerate(t):

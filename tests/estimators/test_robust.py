@@ -1,6 +1,6 @@
 """Never silently wrong: gross DVL outliers and a DVL reporting exact zeros while the vehicle moves,
 injected into a simulated paper-3d run, against the batch smoother, the online estimator and the EKF with their
-defaults (robust Huber kernel on every DVL factor, the screen for bogus pings of estimators/selection.py, the
+defaults (robust Huber kernel on every DVL factor, the screen for bogus pings of estimators/inputs/selection.py, the
 EKF's chi^2 gate), and the same defaults on the clean log against everything off.
 
 The outliers: 1 % or 5 % of the pings (seeded, anywhere in the log, the static phase included) get 0.5 to 2 m/s
@@ -21,7 +21,7 @@ from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.online import smooth_online
 from tests.support.paper_runs import GROUP, paper_batch, paper_log, paper_online
@@ -44,7 +44,9 @@ def _clean(seed: int = SEED) -> LogData:
 def with_outliers(log: LogData, fraction: float, seed: int) -> tuple[LogData, np.ndarray]:
     """fraction of the valid pings with 0.5-2 m/s added in a random direction; returns the log and the pings."""
     rng = np.random.default_rng(seed)
-    k = rng.choice(np.flatnonzero(log.dvl.valid), int(round(fraction * len(log.dvl))), replace=False)
+    k = rng.choice(
+        np.flatnonzero(log.dvl.valid), int(round(fraction * len(log.dvl))), replace=False
+    )
     d_v = log.dvl.d_v.copy()
     direction = rng.normal(size=(len(k), 3))
     direction /= np.linalg.norm(direction, axis=1)[:, None]
@@ -74,7 +76,9 @@ def _off() -> EstimatorConfig:
 
 @functools.cache
 def _run(mode: str, case: str, defaults: bool = True) -> NavResult:
-    if case == "clean" and defaults and mode in ("batch", "online"):  # the runs test_batch.py, test_online.py use
+    if (
+        case == "clean" and defaults and mode in ("batch", "online")
+    ):  # the runs test_batch.py, test_online.py use
         return {"batch": paper_batch, "online": paper_online}[mode]("paper-3d", SEED)
     log = _clean() if case == "clean" else _bogus(case)[0]
     return RUNS[mode](log, EstimatorConfig.paper() if defaults else _off())
@@ -89,9 +93,11 @@ def test_clean_log_unchanged_by_the_robust_defaults(mode: str) -> None:
     default, off = _run(mode, "clean"), _run(mode, "clean", defaults=False)
     changes = changes_in_sigmas(default, off, final_position=True)
     worst = max(float(np.max(np.abs(v))) for v in changes.values())
-    print(f"\n{mode}, clean log, defaults - everything off (sigmas): "
-          + ", ".join(f"{k} {np.round(v, 3).tolist()}" for k, v in changes.items())
-          + f"; largest {worst:.3f}; counters {default.info['counters']}")
+    print(
+        f"\n{mode}, clean log, defaults - everything off (sigmas): "
+        + ", ".join(f"{k} {np.round(v, 3).tolist()}" for k, v in changes.items())
+        + f"; largest {worst:.3f}; counters {default.info['counters']}"
+    )
     assert worst < 0.1
     assert all(default.info["counters"].get(k, 0) == 0 for k in SCREEN_REASONS)
     assert default.info["counters"].get("dvl_gated", 0) == 0
@@ -111,8 +117,10 @@ def test_calibration_survives_gross_outliers_and_zero_dvl(mode: str) -> None:
         e = summary(res, log)["errors"]
         calib = np.array([e["scale_nsigma"], *e["misalignment_nsigma"]])
         counters = res.info["counters"]
-        print(f"\n{mode}, {case} ({n_bogus} bogus pings): calibration error (scale, roll, pitch, yaw) "
-              f"{np.round(calib, 2).tolist()} sigma; counters {counters}")
+        print(
+            f"\n{mode}, {case} ({n_bogus} bogus pings): calibration error (scale, roll, pitch, yaw) "
+            f"{np.round(calib, 2).tolist()} sigma; counters {counters}"
+        )
         assert np.all(np.abs(calib) < 3.0)
         if case == "zeros":
             assert counters["dvl_zero_while_moving"] == n_bogus
@@ -123,7 +131,9 @@ def test_calibration_survives_gross_outliers_and_zero_dvl(mode: str) -> None:
         log, _ = _bogus("5%")
         e = summary(_run(mode, "5%", defaults=False), log)["errors"]
         calib = np.array([e["scale_nsigma"], *e["misalignment_nsigma"]])
-        print(f"batch, 5 % outliers, everything off: calibration error {np.round(calib, 2).tolist()} sigma")
+        print(
+            f"batch, 5 % outliers, everything off: calibration error {np.round(calib, 2).tolist()} sigma"
+        )
         assert np.max(np.abs(calib)) > 3.0
 
 
@@ -134,6 +144,10 @@ def test_online_survives_outliers_without_the_kernel() -> None:
     no screen it runs to the end (its estimates are off: that is what the defaults are for)."""
     log, _ = with_outliers(_clean(4), 0.01, 104)
     res = smooth_online(log, _off())
-    print(f"\nonline, no kernel, 1 % outliers: {len(res.t)} epochs, scale {res.scale:.5f}, "
-          f"{res.info['isam2']['rebases']} rebases")
-    assert len(res.t) == int(log.dvl.valid.sum()) - 1  # every ping but the one at the first IMU stamp
+    print(
+        f"\nonline, no kernel, 1 % outliers: {len(res.t)} epochs, scale {res.scale:.5f}, "
+        f"{res.info['isam2']['rebases']} rebases"
+    )
+    assert (
+        len(res.t) == int(log.dvl.valid.sum()) - 1
+    )  # every ping but the one at the first IMU stamp

@@ -47,7 +47,11 @@ def test_every_estimator_reports_its_calibration_by_state_name(mode: str) -> Non
     cal = log.true_calibration
     assert cal is not None
     # the scale within 4 sigma of the truth
-    assert abs(scale.value[0] - cal.scale) < 4.0 * scale.sigma[0], (scale.value, scale.sigma, cal.scale)
+    assert abs(scale.value[0] - cal.scale) < 4.0 * scale.sigma[0], (
+        scale.value,
+        scale.sigma,
+        cal.scale,
+    )
     # the misalignment: the error in GTSAM's right tangent of b_R_d, whitened by its covariance
     b_R_d_true = cal.b_R_d(log.mounting.b_R_d0)
     err = so3_log(b_R_d_true.T @ mis.value)
@@ -55,6 +59,9 @@ def test_every_estimator_reports_its_calibration_by_state_name(mode: str) -> Non
     assert chi2 < CHI2_3_1E4, (mode, np.degrees(err), np.degrees(mis.sigma))
     # the same covariance read in the user's angles is what the result reports in degrees
     _, cov_deg = misalignment_rpy_and_cov(mis.value, log.mounting.b_R_d0, mis.cov)
-    reported = result.final_misalignment_sigma_deg if isinstance(result, IoDvlcResult) \
+    reported = (
+        result.final_misalignment_sigma_deg
+        if isinstance(result, IoDvlcResult)
         else result.misalignment_sigma_deg
+    )
     np.testing.assert_allclose(np.sqrt(np.diag(cov_deg)), reported, rtol=1e-9)

@@ -17,8 +17,8 @@ import pytest
 
 from gtsam_dvl.core.config import DvlConfig
 from gtsam_dvl.core.types import DvlData, ImuData, LogData
-from gtsam_dvl.estimators import ping_screen
-from gtsam_dvl.estimators.selection import (
+from gtsam_dvl.estimators.inputs import ping_screen
+from gtsam_dvl.estimators.inputs.selection import (
     IMPLAUSIBLE_ACCEL,
     REPEATED,
     SCREEN_WINDOW_S,
@@ -43,7 +43,9 @@ def sequential_codes(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig
     b = dvl.beams
     for n, j in enumerate(idx.tolist()):
         beams = None if b is None else (b.d_u[j], b.v[j], b.valid[j])
-        code[n] = screen.check(float(dvl.t[j]), screened_value(dvl.d_v[j], beams, cfg), imu.t, imu.b_omega, imu.b_f)
+        code[n] = screen.check(
+            float(dvl.t[j]), screened_value(dvl.d_v[j], beams, cfg), imu.t, imu.b_omega, imu.b_f
+        )
     return code
 
 
@@ -88,7 +90,12 @@ def repeated_messages(log: LogData) -> LogData:
     assert log.dvl.beams is not None
     v, valid = log.dvl.beams.v.copy(), log.dvl.beams.valid.copy()
     again = np.arange(130, len(t), 97)
-    t[again], d_v[again], v[again], valid[again] = t[again - 1], d_v[again - 1], v[again - 1], valid[again - 1]
+    t[again], d_v[again], v[again], valid[again] = (
+        t[again - 1],
+        d_v[again - 1],
+        v[again - 1],
+        valid[again - 1],
+    )
     same = np.arange(150, len(t), 89)
     d_v[same], v[same], valid[same] = d_v[same - 1], v[same - 1], valid[same - 1]
     return _beams(_dvl(log, t=t, d_v=d_v), v=v, valid=valid)
@@ -118,7 +125,9 @@ def long_dropout(log: LogData) -> LogData:
 def imu_gap(log: LogData) -> LogData:
     """5 s without IMU samples in the square (windows without a sample)."""
     keep = (log.imu.t <= 600.0) | (log.imu.t > 605.0)
-    imu = dataclasses.replace(log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep])
+    imu = dataclasses.replace(
+        log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep]
+    )
     return dataclasses.replace(log, imu=imu)
 
 
@@ -134,7 +143,10 @@ def beams_on_off(log: LogData) -> LogData:
     t = log.dvl.t
     v[(t > 300.0) & (t < 310.0)] = 0.0
     still = (t > 140.0) & (t < 160.0)
-    v[still], valid[still] = v[int(np.searchsorted(t, 140.0))], valid[int(np.searchsorted(t, 140.0))]
+    v[still], valid[still] = (
+        v[int(np.searchsorted(t, 140.0))],
+        valid[int(np.searchsorted(t, 140.0))],
+    )
     off = (rng.random(v.shape) < 0.01) & (t[:, None] > 130.0)
     v[off] += 3.0
     # meanwhile the IMU's specific force steps by 1 m/s^2 every second, between pings: the beams compare no
@@ -153,15 +165,33 @@ def everything(log: LogData) -> LogData:
 
 
 FAULTS: dict[str, Callable[[LogData], LogData]] = {
-    "clean": lambda log: log, "zeros_moving": zeros_moving, "frozen": frozen, "repeated_messages": repeated_messages,
-    "outliers": outliers, "long_dropout": long_dropout, "imu_gap": imu_gap, "everything": everything}
+    "clean": lambda log: log,
+    "zeros_moving": zeros_moving,
+    "frozen": frozen,
+    "repeated_messages": repeated_messages,
+    "outliers": outliers,
+    "long_dropout": long_dropout,
+    "imu_gap": imu_gap,
+    "everything": everything,
+}
 # reasons each fault must produce with the default thresholds (so that a comparison cannot pass vacuously)
-MUST_REJECT = {"zeros_moving": [ZERO_WHILE_MOVING], "frozen": [REPEATED], "repeated_messages": [REPEATED],
-               "outliers": [IMPLAUSIBLE_ACCEL], "long_dropout": [ZERO_WHILE_MOVING, IMPLAUSIBLE_ACCEL],
-               "everything": [ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL]}
-CONFIGS = {"default": DvlConfig(), "beams": DvlConfig(use_beams=True), "off": DvlConfig(screen=False),
-           # tight enough to reject most pings: long runs of rejections, references far back
-           "tight": DvlConfig(max_accel_m_s2=0.05, accel_imu_factor=1.0, jump_margin_m_s=0.01, motion_dv_m_s=0.005)}
+MUST_REJECT = {
+    "zeros_moving": [ZERO_WHILE_MOVING],
+    "frozen": [REPEATED],
+    "repeated_messages": [REPEATED],
+    "outliers": [IMPLAUSIBLE_ACCEL],
+    "long_dropout": [ZERO_WHILE_MOVING, IMPLAUSIBLE_ACCEL],
+    "everything": [ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL],
+}
+CONFIGS = {
+    "default": DvlConfig(),
+    "beams": DvlConfig(use_beams=True),
+    "off": DvlConfig(screen=False),
+    # tight enough to reject most pings: long runs of rejections, references far back
+    "tight": DvlConfig(
+        max_accel_m_s2=0.05, accel_imu_factor=1.0, jump_margin_m_s=0.01, motion_dv_m_s=0.005
+    ),
+}
 
 
 @cache
@@ -175,19 +205,32 @@ def usable(fault: str, cfg_name: str, white_noise: bool = True, beams: bool = Fa
     """The pings classify_pings finds usable (those usable_pings screens)."""
     log, cfg = case(fault, white_noise, beams), CONFIGS[cfg_name]
     beam_valid, beam_finite = beam_arrays(log.dvl)
-    first = classify_pings(log.dvl.t, log.dvl.d_v, log.dvl.valid, beam_valid, beam_finite, cfg,
-                           float(log.imu.t[0]), float(log.imu.t[-1]))
+    first = classify_pings(
+        log.dvl.t,
+        log.dvl.d_v,
+        log.dvl.valid,
+        beam_valid,
+        beam_finite,
+        cfg,
+        float(log.imu.t[0]),
+        float(log.imu.t[-1]),
+    )
     return np.flatnonzero(first == USABLE)
 
 
 @cache
-def reference(fault: str, cfg_name: str, white_noise: bool = True, beams: bool = False) -> np.ndarray:
+def reference(
+    fault: str, cfg_name: str, white_noise: bool = True, beams: bool = False
+) -> np.ndarray:
     log = case(fault, white_noise, beams)
-    return sequential_codes(log.dvl, usable(fault, cfg_name, white_noise, beams), log.imu, CONFIGS[cfg_name])
+    return sequential_codes(
+        log.dvl, usable(fault, cfg_name, white_noise, beams), log.imu, CONFIGS[cfg_name]
+    )
 
 
-def screened(fault: str, cfg_name: str, white_noise: bool = True,
-             beams: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def screened(
+    fault: str, cfg_name: str, white_noise: bool = True, beams: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(idx, bulk codes, sequential codes) of the usable pings of a case."""
     log, idx = case(fault, white_noise, beams), usable(fault, cfg_name, white_noise, beams)
     bulk = screen_pings(log.dvl, idx, log.imu, CONFIGS[cfg_name])
@@ -195,7 +238,9 @@ def screened(fault: str, cfg_name: str, white_noise: bool = True,
 
 
 def _report(name: str, bulk: np.ndarray, seq: np.ndarray) -> str:
-    counts = {c: int((seq == c).sum()) for c in (USABLE, ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL)}
+    counts = {
+        c: int((seq == c).sum()) for c in (USABLE, ZERO_WHILE_MOVING, REPEATED, IMPLAUSIBLE_ACCEL)
+    }
     return f"{name}: {len(seq)} pings, codes {counts}, {int((bulk != seq).sum())} differ"
 
 
@@ -206,7 +251,9 @@ def test_bulk_screen_makes_the_sequential_decisions(fault: str) -> None:
     np.testing.assert_array_equal(bulk, seq)
     for reason in MUST_REJECT.get(fault, []):
         assert (seq == reason).sum() > 0, reason
-    if fault == "long_dropout":  # the ping after the dropout compares a window capped at SCREEN_WINDOW_S
+    if (
+        fault == "long_dropout"
+    ):  # the ping after the dropout compares a window capped at SCREEN_WINDOW_S
         assert np.diff(case(fault).dvl.t[idx]).max() > SCREEN_WINDOW_S
 
 
@@ -246,10 +293,21 @@ def test_beam_rules_on_a_log_without_beams() -> None:
     largest component as the speed, no jump rule), and so does the bulk."""
     log = _dvl(case("everything"), beams=None)
     cfg = CONFIGS["beams"]
-    first = classify_pings(log.dvl.t, log.dvl.d_v, log.dvl.valid, None, None, cfg, float(log.imu.t[0]),
-                           float(log.imu.t[-1]))
+    first = classify_pings(
+        log.dvl.t,
+        log.dvl.d_v,
+        log.dvl.valid,
+        None,
+        None,
+        cfg,
+        float(log.imu.t[0]),
+        float(log.imu.t[-1]),
+    )
     idx = np.flatnonzero(first == USABLE)
-    bulk, seq = screen_pings(log.dvl, idx, log.imu, cfg), sequential_codes(log.dvl, idx, log.imu, cfg)
+    bulk, seq = (
+        screen_pings(log.dvl, idx, log.imu, cfg),
+        sequential_codes(log.dvl, idx, log.imu, cfg),
+    )
     print(_report("beam rules, no beams", bulk, seq))
     np.testing.assert_array_equal(bulk, seq)
     assert (seq == ZERO_WHILE_MOVING).sum() > 0 and (seq == IMPLAUSIBLE_ACCEL).sum() == 0
@@ -266,7 +324,9 @@ def test_band_zero_and_infinite(band: float, monkeypatch: pytest.MonkeyPatch) ->
         np.testing.assert_array_equal(bulk, seq)
 
 
-def test_the_bulk_decides_all_but_the_pings_after_a_rejection(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_bulk_decides_all_but_the_pings_after_a_rejection(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """PingScreen runs only where the bulk's assumption fails: the pings after a rejection up to two after the
     next accepted one (reference, then last_rate) and windows capped at SCREEN_WINDOW_S."""
     calls = []
@@ -281,7 +341,9 @@ def test_the_bulk_decides_all_but_the_pings_after_a_rejection(monkeypatch: pytes
     code = screen_pings(log.dvl, idx, log.imu, CONFIGS["default"])
     rejected = int((code != USABLE).sum())
     capped = int((np.diff(log.dvl.t[idx]) > SCREEN_WINDOW_S).sum())
-    print(f"{len(idx)} pings, {rejected} rejected, {capped} capped windows: PingScreen ran {len(calls)} times")
+    print(
+        f"{len(idx)} pings, {rejected} rejected, {capped} capped windows: PingScreen ran {len(calls)} times"
+    )
     assert rejected > 250
     assert len(calls) <= 2 * rejected + 2 * capped
 
@@ -291,8 +353,16 @@ def test_usable_pings_on_imu_stamps_only() -> None:
     log, cfg = case("everything"), CONFIGS["default"]
     counters: dict[str, int] = {}
     got = usable_pings(log.dvl, log.imu.t, cfg, counters)
-    first = classify_pings(log.dvl.t, log.dvl.d_v, log.dvl.valid, None, None, cfg, float(log.imu.t[0]),
-                           float(log.imu.t[-1]))
+    first = classify_pings(
+        log.dvl.t,
+        log.dvl.d_v,
+        log.dvl.valid,
+        None,
+        None,
+        cfg,
+        float(log.imu.t[0]),
+        float(log.imu.t[-1]),
+    )
     idx = np.flatnonzero(first == USABLE)
     none = ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
     seq = sequential_codes(log.dvl, idx, none, cfg)

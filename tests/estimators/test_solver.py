@@ -4,7 +4,7 @@ import gtsam
 import numpy as np
 import pytest
 
-from gtsam_dvl.estimators.solver import bayes_net_marginals, gauss_newton_qr
+from gtsam_dvl.estimators.graph.solver import bayes_net_marginals, gauss_newton_qr
 
 
 def _chain_problem(rng: np.random.Generator, n: int = 12, dim: int = 3, scales: float = 1.0):
@@ -13,15 +13,34 @@ def _chain_problem(rng: np.random.Generator, n: int = 12, dim: int = 3, scales: 
     shared = [gtsam.symbol("c", 0), gtsam.symbol("c", 1)]
     states = [gtsam.symbol("x", i) for i in range(n)]
     unit = gtsam.noiseModel.Unit.Create(dim)
-    gfg.add(gtsam.JacobianFactor(states[0], rng.normal(size=(dim, dim)) * 1e3, rng.normal(size=dim), unit))
+    gfg.add(
+        gtsam.JacobianFactor(
+            states[0], rng.normal(size=(dim, dim)) * 1e3, rng.normal(size=dim), unit
+        )
+    )
     for i in range(n - 1):
-        gfg.add(gtsam.JacobianFactor(states[i], rng.normal(size=(dim, dim)) * 1e6 * scales,
-                                     states[i + 1], rng.normal(size=(dim, dim)) * 1e6 * scales,
-                                     rng.normal(size=dim), unit))
+        gfg.add(
+            gtsam.JacobianFactor(
+                states[i],
+                rng.normal(size=(dim, dim)) * 1e6 * scales,
+                states[i + 1],
+                rng.normal(size=(dim, dim)) * 1e6 * scales,
+                rng.normal(size=dim),
+                unit,
+            )
+        )
     for i in range(n):
         keys = [states[i], shared[i % 2]]
-        gfg.add(gtsam.JacobianFactor(keys[0], rng.normal(size=(dim, dim)), keys[1], rng.normal(size=(dim, dim)),
-                                     rng.normal(size=dim), unit))
+        gfg.add(
+            gtsam.JacobianFactor(
+                keys[0],
+                rng.normal(size=(dim, dim)),
+                keys[1],
+                rng.normal(size=(dim, dim)),
+                rng.normal(size=dim),
+                unit,
+            )
+        )
     for c in shared:
         gfg.add(gtsam.JacobianFactor(c, np.eye(dim) * 1e-2, np.zeros(dim), unit))
     ordering = gtsam.Ordering()
@@ -48,12 +67,18 @@ def test_bayes_net_marginals_match_dense_inverse(seed: int, scales: float, rtol:
     dim = 3
     keys = states + shared
     for j, k in enumerate(keys):
-        block = cov[j * dim:(j + 1) * dim, j * dim:(j + 1) * dim]
-        np.testing.assert_allclose(marg.covariances[k], block, rtol=rtol, atol=rtol * np.abs(block).max())
+        block = cov[j * dim : (j + 1) * dim, j * dim : (j + 1) * dim]
+        np.testing.assert_allclose(
+            marg.covariances[k], block, rtol=rtol, atol=rtol * np.abs(block).max()
+        )
     j3 = slice(3 * dim, 5 * dim)
-    np.testing.assert_allclose(marg.joints[groups[0]], cov[j3, j3], rtol=rtol, atol=rtol * np.abs(cov[j3, j3]).max())
+    np.testing.assert_allclose(
+        marg.joints[groups[0]], cov[j3, j3], rtol=rtol, atol=rtol * np.abs(cov[j3, j3]).max()
+    )
     js = slice(len(states) * dim, (len(states) + 2) * dim)
-    np.testing.assert_allclose(marg.joints[groups[1]], cov[js, js], rtol=rtol, atol=rtol * np.abs(cov[js, js]).max())
+    np.testing.assert_allclose(
+        marg.joints[groups[1]], cov[js, js], rtol=rtol, atol=rtol * np.abs(cov[js, js]).max()
+    )
 
 
 def test_gauss_newton_qr_solves_nonlinear_problem() -> None:
@@ -67,7 +92,11 @@ def test_gauss_newton_qr_solves_nonlinear_problem() -> None:
         step = gtsam.Pose3(gtsam.Rot3.Expmap(rng.normal(size=3) * 0.3), rng.normal(size=3))
         truth.append(truth[-1].compose(step))
         graph.add(gtsam.BetweenFactorPose3(i - 1, i, step, noise))
-    graph.add(gtsam.BetweenFactorPose3(0, 7, truth[0].between(truth[7]).retract(rng.normal(size=6) * 0.05), noise))
+    graph.add(
+        gtsam.BetweenFactorPose3(
+            0, 7, truth[0].between(truth[7]).retract(rng.normal(size=6) * 0.05), noise
+        )
+    )
     init = gtsam.Values()
     for i, p in enumerate(truth):
         init.insert(i, p.retract(rng.normal(size=6) * 0.2))

@@ -18,7 +18,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.scenarios import simulate_variant
@@ -35,7 +35,9 @@ def short_run(dt: float, noise_m_s: float = 0.02) -> LogData:
 
 def config(estimate: bool) -> EstimatorConfig:
     cfg = EstimatorConfig.paper()
-    return cfg.model_copy(update={"dvl": cfg.dvl.model_copy(update={"estimate_time_offset": estimate})})
+    return cfg.model_copy(
+        update={"dvl": cfg.dvl.model_copy(update={"estimate_time_offset": estimate})}
+    )
 
 
 @cache
@@ -69,9 +71,11 @@ def test_offset_recovered_with_paper_noise(dt: float) -> None:
     n = (r.time_offset_s - dt) / r.time_offset_sigma_s
     cal, cal0 = calibration_nsigma(r, log), calibration_nsigma(r0, short_run(0.0))
     pe, pe0 = final_position_error(r, log), final_position_error(r0, short_run(0.0))
-    print(f"dt_d {dt}: {r.time_offset_s:.4f} +- {r.time_offset_sigma_s * 1e3:.1f} ms ({n:+.2f} sigma); "
-          f"calibration errors {np.round(cal, 2)} sigma (no offset {np.round(cal0, 2)}); "
-          f"final position {pe:.2f} m (no offset {pe0:.2f} m)")
+    print(
+        f"dt_d {dt}: {r.time_offset_s:.4f} +- {r.time_offset_sigma_s * 1e3:.1f} ms ({n:+.2f} sigma); "
+        f"calibration errors {np.round(cal, 2)} sigma (no offset {np.round(cal0, 2)}); "
+        f"final position {pe:.2f} m (no offset {pe0:.2f} m)"
+    )
     assert abs(n) < 3.0
     assert r.time_offset_sigma_s < 0.04
     assert np.all(np.abs(cal) < 3.0)
@@ -85,8 +89,10 @@ def test_offset_sigma_below_5_ms_with_a_precise_dvl(dt: float) -> None:
     log, r = short_run(dt, 0.002), solve(dt, 0.002, True)
     n = (r.time_offset_s - dt) / r.time_offset_sigma_s
     cal = calibration_nsigma(r, log)
-    print(f"2 mm/s DVL, dt_d {dt}: {r.time_offset_s:.4f} +- {r.time_offset_sigma_s * 1e3:.2f} ms ({n:+.2f} sigma), "
-          f"calibration {np.round(cal, 2)} sigma")
+    print(
+        f"2 mm/s DVL, dt_d {dt}: {r.time_offset_s:.4f} +- {r.time_offset_sigma_s * 1e3:.2f} ms ({n:+.2f} sigma), "
+        f"calibration {np.round(cal, 2)} sigma"
+    )
     assert abs(n) < 3.0 and r.time_offset_sigma_s < 0.005
     assert np.all(np.abs(cal) < 3.0)
 
@@ -97,7 +103,9 @@ def test_ignoring_the_offset_is_measurably_worse() -> None:
     r_est, r_ign = solve(0.6, 0.002, True), solve(0.6, 0.002, False)
     chi_est, chi_ign = (2 * r.info["solver"]["final_error"] for r in (r_est, r_ign))
     s_est, s_ign = calibration_nsigma(r_est, log)[0], calibration_nsigma(r_ign, log)[0]
-    print(f"chi^2 {chi_est:.0f} estimated, {chi_ign:.0f} ignored; scale error {s_est:+.2f} vs {s_ign:+.2f} sigma")
+    print(
+        f"chi^2 {chi_est:.0f} estimated, {chi_ign:.0f} ignored; scale error {s_est:+.2f} vs {s_ign:+.2f} sigma"
+    )
     assert chi_ign > 3.0 * chi_est
     assert abs(s_ign) > abs(s_est) + 1.0
 
@@ -118,13 +126,19 @@ def test_offset_reported_in_summary_and_result_log(tmp_path) -> None:  # type: i
 
     log, r = short_run(0.6), solve(0.6, 0.02, True)
     s = summary(r, log)
-    assert s["dvl_time_offset_s"]["value"] == r.time_offset_s and s["dvl_time_offset_s"]["determined"]
+    assert (
+        s["dvl_time_offset_s"]["value"] == r.time_offset_s and s["dvl_time_offset_s"]["determined"]
+    )
     assert "determined" in s["dvl_time_offset_s"]["verdict"]
     assert abs(s["errors"]["dvl_time_offset_nsigma"]) < 3.0
     path = write_result_log(tmp_path / "r.mcap", r, log, s)
     back = read_result(path).result
-    assert back.time_offset_s == r.time_offset_s and back.time_offset_sigma_s == r.time_offset_sigma_s
-    assert back.dvl_pings is not None and r.dvl_pings is not None  # the usable pings too (health reads them)
+    assert (
+        back.time_offset_s == r.time_offset_s and back.time_offset_sigma_s == r.time_offset_sigma_s
+    )
+    assert (
+        back.dvl_pings is not None and r.dvl_pings is not None
+    )  # the usable pings too (health reads them)
     np.testing.assert_array_equal(back.dvl_pings, r.dvl_pings)
     assert TOPICS["time_offset"] == "/gtsam_dvl/dvl_time_offset"
     # not estimated: no offset in the summary
@@ -156,8 +170,10 @@ def test_filtering_timeline_carries_the_offset_and_ends_at_the_smoother() -> Non
     tl = r.timeline
     assert tl is not None and tl.time_offset_sigma_s is not None and tl.time_offset_s is not None
     static = tl.t < 100.0
-    print(f"\noffset sigma: static {tl.time_offset_sigma_s[static][-1]:.3f} s, last {tl.time_offset_sigma_s[-1]:.4f} "
-          f"s (smoother {r.time_offset_sigma_s:.4f} s)")
+    print(
+        f"\noffset sigma: static {tl.time_offset_sigma_s[static][-1]:.3f} s, last {tl.time_offset_sigma_s[-1]:.4f} "
+        f"s (smoother {r.time_offset_sigma_s:.4f} s)"
+    )
     assert tl.time_offset_sigma_s[static][-1] > 0.45
     np.testing.assert_allclose(tl.time_offset_sigma_s[-1], r.time_offset_sigma_s, rtol=1e-6)
     np.testing.assert_allclose(tl.scale_sigma[-1], r.scale_sigma, rtol=1e-6)

@@ -1,4 +1,4 @@
-"""Water-track pings and the water current (estimators/current.py): a stretch of a simulated log's pings turned
+"""Water-track pings and the water current (estimators/models/current.py): a stretch of a simulated log's pings turned
 into water-track pings (the velocity relative to a known current, through the true attitude and calibration) is
 used with the current as a state; the current comes back within its sigmas, the calibration within its sigmas."""
 
@@ -13,8 +13,8 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import quat_xyzw_to_matrix
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
-from gtsam_dvl.estimators.current import resolve_water_track, step_variance
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
+from gtsam_dvl.estimators.models.current import resolve_water_track, step_variance
 from tests.support.water import N_C, T_WATER, with_water_track
 from tests.support.water import water_config as _config
 
@@ -26,29 +26,44 @@ def water_log(sim_paper3d_short: LogData) -> LogData:
 
 def test_auto_resolves_by_the_log(water_log: LogData, sim_paper3d_short: LogData) -> None:
     assert resolve_water_track(_config(water_log, "auto"), water_log).current.water_track == "use"
-    assert resolve_water_track(_config(water_log, "auto"), sim_paper3d_short).current.water_track == "refuse"
-    assert resolve_water_track(_config(water_log, "refuse"), water_log).current.water_track == "refuse"
+    assert (
+        resolve_water_track(_config(water_log, "auto"), sim_paper3d_short).current.water_track
+        == "refuse"
+    )
+    assert (
+        resolve_water_track(_config(water_log, "refuse"), water_log).current.water_track == "refuse"
+    )
 
 
 def test_random_walk_variance() -> None:
     cfg = EstimatorConfig()
     c = cfg.current
-    assert step_variance(cfg, 10.0, -30.0) == pytest.approx(c.time_rw_m_s_per_sqrt_s**2 * 10
-                                                            + c.depth_rw_m_s_per_sqrt_m**2 * 30)
+    assert step_variance(cfg, 10.0, -30.0) == pytest.approx(
+        c.time_rw_m_s_per_sqrt_s**2 * 10 + c.depth_rw_m_s_per_sqrt_m**2 * 30
+    )
 
 
 def test_batch_recovers_the_current(water_log: LogData) -> None:
     used = smooth_batch(water_log, _config(water_log, "auto"), timeline=True)
     assert used.config["current"]["water_track"] == "use"
-    assert used.timeline is not None  # the filtering timeline carries W(i) too: its last sigma is the smoother's
-    assert used.timeline.scale_sigma[-1] == pytest.approx(used.calibration["scale"].sigma[0], rel=1e-6)
+    assert (
+        used.timeline is not None
+    )  # the filtering timeline carries W(i) too: its last sigma is the smoother's
+    assert used.timeline.scale_sigma[-1] == pytest.approx(
+        used.calibration["scale"].sigma[0], rel=1e-6
+    )
     wc = used.info["water_current"]
     t = np.asarray(wc["t_s"])
     inside = (t > T_WATER[0] + 5) & (t < T_WATER[1] - 5)
     assert inside.sum() > 50 and wc["water_track_states"] >= inside.sum()
     for axis, truth in (("east", N_C[0]), ("north", N_C[1])):
-        est, sig = np.asarray(wc[f"{axis}_m_s"])[inside], np.asarray(wc[f"{axis}_sigma_m_s"])[inside]
-        assert np.all(sig < 0.02), sig.max()  # determined: bottom track on both sides ties the velocity
+        est, sig = (
+            np.asarray(wc[f"{axis}_m_s"])[inside],
+            np.asarray(wc[f"{axis}_sigma_m_s"])[inside],
+        )
+        assert np.all(sig < 0.02), (
+            sig.max()
+        )  # determined: bottom track on both sides ties the velocity
         assert abs(est.mean() - truth) < 3 * sig.mean(), (axis, est.mean(), sig.mean())
     assert wc["determined_during_water_track"]
     assert used.info["counters"]["dvl_water_track"] == 0  # used, not refused
@@ -82,6 +97,7 @@ def test_ekf_recovers_the_current(water_log: LogData) -> None:
     """The EKF carries the current as two more error-state components: at the end of the water-track stretch its
     filtered current is within 3 sigma of the truth; refusing the pings counts them."""
     from gtsam_dvl.estimators.ekf import run_ekf
+
     _assert_filtered_current(run_ekf(water_log, _config(water_log, "auto")), water_log)
 
 
@@ -90,7 +106,10 @@ def test_online_recovers_the_current(water_log: LogData) -> None:
     water-track stretch within 3 sigma of the truth, and the calibration within its sigmas."""
     from gtsam_dvl.estimators.online import smooth_online
     from tests.support.logs import cut_log
-    used = smooth_online(cut_log(water_log, T_WATER[1] + 20.0), _config(water_log, "auto"))  # (its first 180 s)
+
+    used = smooth_online(
+        cut_log(water_log, T_WATER[1] + 20.0), _config(water_log, "auto")
+    )  # (its first 180 s)
     assert used.config["current"]["water_track"] == "use"
     _assert_filtered_current(used, water_log)
 
@@ -100,10 +119,15 @@ def test_health_counts_water_track_and_flags_false_lock(water_log: LogData) -> N
     consistent log); bottom-track pings that report the velocity relative to the water (a false lock, 200-210 s)
     are flagged as such."""
     from gtsam_dvl.analysis.health import assess_health
+
     clean = smooth_batch(water_log, _config(water_log, "auto"))
     health = assess_health(clean, water_log)
     fig = health.figures["water_track"]
-    assert fig["used"] and fig["pings"] == int(water_log.dvl.water_track.sum()) and len(fig["stretches"]) == 1
+    assert (
+        fig["used"]
+        and fig["pings"] == int(water_log.dvl.water_track.sum())
+        and len(fig["stretches"]) == 1
+    )
     assert fig["whitened_rms"] < 1.5 and fig["false_lock_pings"] == 0
     assert any("water-track pings in 1 stretch" in n for n in health.notes)
     assert not any("water" in w for w in health.warnings), health.warnings
@@ -131,6 +155,7 @@ def test_water_track_scale(water_log: LogData) -> None:
     from gtsam_dvl.estimators.ekf import run_ekf
     from gtsam_dvl.estimators.online import smooth_online
     from tests.support.logs import cut_log
+
     truth = water_log.true_calibration
     assert truth is not None and water_log.dvl.water_track is not None
     water = water_log.dvl.water_track
@@ -138,11 +163,16 @@ def test_water_track_scale(water_log: LogData) -> None:
     d_v[water] *= 1.01  # the water-track pings at scale 1.01 k
     log = dataclasses.replace(water_log, dvl=dataclasses.replace(water_log.dvl, d_v=d_v))
     cfg = _config(log, "auto")
-    cfg = cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track_scale": True})})
+    cfg = cfg.model_copy(
+        update={"current": cfg.current.model_copy(update={"water_track_scale": True})}
+    )
     for res in (smooth_batch(log, cfg), smooth_online(cut_log(log, T_WATER[1] + 20.0), cfg)):
         k, k_w = res.calibration["scale"], res.calibration["water_scale"]
         # within 3 sigma, and informed by the 100 s of water track (its prior: 0.01 about the scale)
-        assert abs(k_w.value[0] - 1.01 * truth.scale) < 3 * k_w.sigma[0] and k_w.sigma[0] < 0.007, (res.estimator, k_w)
+        assert abs(k_w.value[0] - 1.01 * truth.scale) < 3 * k_w.sigma[0] and k_w.sigma[0] < 0.007, (
+            res.estimator,
+            k_w,
+        )
         assert abs(k.value[0] - truth.scale) < 3 * k.sigma[0], (res.estimator, k)
     with pytest.raises(GtsamDvlError, match="water_track_scale is batch and online only"):
         run_ekf(log, cfg)
@@ -152,10 +182,15 @@ def test_water_track_scale_without_water_track_pings(sim_paper3d_short: LogData)
     """water_track "use" with water_track_scale on a log without water-track pings: the water-track scale stays at
     its link to the scale (its sigma the link's 1 % and the scale's combined), nothing fails."""
     from tests.support.logs import cut_log
+
     log = cut_log(sim_paper3d_short, 200.0)
     cfg = _config(log, "use")
-    cfg = cfg.model_copy(update={"current": cfg.current.model_copy(update={"water_track_scale": True})})
+    cfg = cfg.model_copy(
+        update={"current": cfg.current.model_copy(update={"water_track_scale": True})}
+    )
     res = smooth_batch(log, cfg)
     k, k_w = res.calibration["scale"], res.calibration["water_scale"]
     assert abs(k_w.value[0] - k.value[0]) < 0.01 * k_w.sigma[0]  # (within the solver's tolerance)
-    assert k_w.sigma[0] == pytest.approx(np.hypot(k.sigma[0], 0.01 * cfg.priors.scale_initial), rel=0.02)
+    assert k_w.sigma[0] == pytest.approx(
+        np.hypot(k.sigma[0], 0.01 * cfg.priors.scale_initial), rel=0.02
+    )

@@ -20,7 +20,12 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X, key_dim
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.online import OnlineConfig, OnlineEstimator, RelinearizationThresholds, feed_log
+from gtsam_dvl.estimators.online import (
+    OnlineConfig,
+    OnlineEstimator,
+    RelinearizationThresholds,
+    feed_log,
+)
 from gtsam_dvl.estimators.online.window import IncrementalSmoother, bayes_net_covariance
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import scenario_from_dict
@@ -34,14 +39,25 @@ SHORT = {
     "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
     "rates": {"imu_hz": 100.0, "dvl_hz": DVL_HZ},
     "initial": {"roll_deg": 3.0, "yaw_deg": 10.0},
-    "imu": {"gyro_bias_deg_per_h": 0.01, "accel_bias_micro_g": 50.0, "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
-            "accel_noise_micro_g_per_sqrt_hz": 10.0},
-    "dvl": {"scale": 0.9998, "misalignment_deg": [-0.1, 0.2, -0.5], "noise_m_s": 0.02, "altitude_m": 40.0},
-    "segments": [{"kind": "static", "duration_s": 80.0},
-                 {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
-                 {"kind": "level", "duration_s": 20.0, "speed_bump_m_s": 0.5},
-                 {"kind": "descent", "duration_s": 30.0, "peak_vertical_speed_m_s": 0.8},
-                 {"kind": "turn", "duration_s": 30.0, "heading_change_deg": 90.0, "bank_deg": 15.0}],
+    "imu": {
+        "gyro_bias_deg_per_h": 0.01,
+        "accel_bias_micro_g": 50.0,
+        "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
+        "accel_noise_micro_g_per_sqrt_hz": 10.0,
+    },
+    "dvl": {
+        "scale": 0.9998,
+        "misalignment_deg": [-0.1, 0.2, -0.5],
+        "noise_m_s": 0.02,
+        "altitude_m": 40.0,
+    },
+    "segments": [
+        {"kind": "static", "duration_s": 80.0},
+        {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
+        {"kind": "level", "duration_s": 20.0, "speed_bump_m_s": 0.5},
+        {"kind": "descent", "duration_s": 30.0, "peak_vertical_speed_m_s": 0.8},
+        {"kind": "turn", "duration_s": 30.0, "heading_change_deg": 90.0, "bank_deg": 15.0},
+    ],
 }
 
 
@@ -114,7 +130,9 @@ def _dense_covariance(sm: IncrementalSmoother, keys: list[int]) -> np.ndarray:
     _, R = np.linalg.qr(A / scale)
     Rinv = np.linalg.inv(R)
     cov = (Rinv @ Rinv.T) / np.outer(scale, scale)
-    idx = np.concatenate([np.arange(offsets[all_keys.index(k)], offsets[all_keys.index(k) + 1]) for k in keys])
+    idx = np.concatenate(
+        [np.arange(offsets[all_keys.index(k)], offsets[all_keys.index(k) + 1]) for k in keys]
+    )
     return cov[np.ix_(idx, idx)]
 
 
@@ -124,6 +142,7 @@ def _corr(c: np.ndarray) -> np.ndarray:
 
 
 # ----- the window -------------------------------------------------------------------------------------
+
 
 def test_fixed_lag_window_is_bounded_and_marginalises_what_is_older_than_window_s() -> None:
     """After every epoch once the window is full: the states kept are exactly those at most window_s behind the
@@ -152,13 +171,15 @@ def test_fixed_lag_window_is_bounded_and_marginalises_what_is_older_than_window_
     sm = _smoother(est)
     full = [r for r in rows if r[0] - rows[0][0] >= WINDOW_S + 1.0 and r[2] > 0]
     factors = [r[4] for r in full]
-    print(f"\n{len(rows)} epochs ({rows[0][1]} processed at the alignment, t = {rows[0][0]:.0f} s); window full from "
-          f"t = {full[0][0]:.0f} s: variables {sorted({r[3] for r in full})}, factors {min(factors)}-{max(factors)}; "
-          f"{sm.marginalised} states marginalised, {sm.rebases} rebases")
+    print(
+        f"\n{len(rows)} epochs ({rows[0][1]} processed at the alignment, t = {rows[0][0]:.0f} s); window full from "
+        f"t = {full[0][0]:.0f} s: variables {sorted({r[3] for r in full})}, factors {min(factors)}-{max(factors)}; "
+        f"{sm.marginalised} states marginalised, {sm.rebases} rebases"
+    )
     assert len(full) > 90
     assert {r[3] for r in full} == {2 * STATES_IN_WINDOW + 3}
     assert {r[1] - r[2] for r in full} == {STATES_IN_WINDOW}
-    assert max(factors[len(factors) // 2:]) <= max(factors[:10])
+    assert max(factors[len(factors) // 2 :]) <= max(factors[:10])
     assert sm.marginalised == sm.first == sm.n - STATES_IN_WINDOW
 
 
@@ -186,19 +207,28 @@ def test_fixed_lag_estimate_close_to_full_history() -> None:
     6 %)."""
     lag, full = _run("fixed_lag").estimate(), _run("full").estimate()
     assert lag is not None and full is not None
-    d = np.concatenate([[lag.scale - full.scale], lag.accel_bias - full.accel_bias, lag.gyro_bias - full.gyro_bias,
-                        (full.b_R_d.T @ lag.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]]])
+    d = np.concatenate(
+        [
+            [lag.scale - full.scale],
+            lag.accel_bias - full.accel_bias,
+            lag.gyro_bias - full.gyro_bias,
+            (full.b_R_d.T @ lag.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]],
+        ]
+    )
     s_full = np.sqrt(np.diag(full.calib_cov))  # [accel, gyro] bias, scale, b_R_d
     s_full = np.concatenate([s_full[6:7], s_full[:6], s_full[7:]])
     s_lag = np.sqrt(np.diag(lag.calib_cov))
     s_lag = np.concatenate([s_lag[6:7], s_lag[:6], s_lag[7:]])
-    print(f"\nfixed lag - full history, in full-history sigmas (scale, accel bias, gyro bias, misalignment): "
-          f"{np.round(d / s_full, 3)}; sigma ratio {np.round(s_lag / s_full, 3)}")
+    print(
+        f"\nfixed lag - full history, in full-history sigmas (scale, accel bias, gyro bias, misalignment): "
+        f"{np.round(d / s_full, 3)}; sigma ratio {np.round(s_lag / s_full, 3)}"
+    )
     assert np.all(np.abs(d / s_full) < 0.5)
     assert np.all(np.abs(s_lag / s_full - 1.0) < 0.10)
 
 
 # ----- covariances ------------------------------------------------------------------------------------
+
 
 @pytest.mark.slow
 @pytest.mark.parametrize("mode", ["fixed_lag", "full"])
@@ -214,7 +244,9 @@ def test_joint_covariance_matches_a_dense_inversion(mode: str) -> None:
     dense = _dense_covariance(sm, keys)
     rel = np.max(np.abs(np.sqrt(np.diag(cov)) / np.sqrt(np.diag(dense)) - 1.0))
     dcorr = np.max(np.abs(_corr(cov) - _corr(dense)))
-    print(f"\n{mode}: {cov.shape[0]}-dim joint; sigma rel. difference {rel:.1e}, correlation difference {dcorr:.1e}")
+    print(
+        f"\n{mode}: {cov.shape[0]}-dim joint; sigma rel. difference {rel:.1e}, correlation difference {dcorr:.1e}"
+    )
     assert cov.shape == (19, 19)
     np.testing.assert_allclose(cov, cov.T, rtol=0, atol=0)
     assert np.all(np.linalg.eigvalsh(_corr(cov)) > 0)
@@ -227,24 +259,40 @@ def test_bayes_net_covariance_of_a_known_net() -> None:
     rng = np.random.default_rng(1)
     R = np.triu(rng.normal(size=(13, 13))) + 3.0 * np.diag(rng.uniform(1.0, 3.0, 13))
     sig = rng.uniform(0.1, 2.0, 13)
-    c1 = gtsam.GaussianConditional([(X(0), R[:9, :6]), (V(0), R[:9, 6:9]), (K_SCALE, R[:9, 9:10]),
-                                    (C_MISALIGN, R[:9, 10:])], 2, np.zeros(9),
-                                   gtsam.noiseModel.Diagonal.Sigmas(sig[:9]))
-    c2 = gtsam.GaussianConditional([(K_SCALE, R[9:, 9:10]), (C_MISALIGN, R[9:, 10:])], 2, np.zeros(4),
-                                   gtsam.noiseModel.Diagonal.Sigmas(sig[9:]))
+    c1 = gtsam.GaussianConditional(
+        [(X(0), R[:9, :6]), (V(0), R[:9, 6:9]), (K_SCALE, R[:9, 9:10]), (C_MISALIGN, R[:9, 10:])],
+        2,
+        np.zeros(9),
+        gtsam.noiseModel.Diagonal.Sigmas(sig[:9]),
+    )
+    c2 = gtsam.GaussianConditional(
+        [(K_SCALE, R[9:, 9:10]), (C_MISALIGN, R[9:, 10:])],
+        2,
+        np.zeros(4),
+        gtsam.noiseModel.Diagonal.Sigmas(sig[9:]),
+    )
     bn = gtsam.GaussianBayesNet()
     bn.push_back(c1)
     bn.push_back(c2)
     A = R / sig[:, None]
     expected = np.linalg.inv(A.T @ A)
-    np.testing.assert_allclose(bayes_net_covariance(bn, [X(0), V(0), K_SCALE, C_MISALIGN]), expected,
-                               rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    np.testing.assert_allclose(
+        bayes_net_covariance(bn, [X(0), V(0), K_SCALE, C_MISALIGN]),
+        expected,
+        rtol=1e-12,
+        atol=1e-12 * np.abs(expected).max(),
+    )
     idx = np.r_[10:13, 0:6]  # C, then X
-    np.testing.assert_allclose(bayes_net_covariance(bn, [C_MISALIGN, X(0)]), expected[np.ix_(idx, idx)],
-                               rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    np.testing.assert_allclose(
+        bayes_net_covariance(bn, [C_MISALIGN, X(0)]),
+        expected[np.ix_(idx, idx)],
+        rtol=1e-12,
+        atol=1e-12 * np.abs(expected).max(),
+    )
     # a conditional with fewer rows than its frontal's dimension (rank-deficient): refused, not inverted
-    short = gtsam.GaussianConditional([(X(0), R[:5, :6]), (K_SCALE, R[:5, 9:10])], 1, np.zeros(5),
-                                      gtsam.noiseModel.Unit.Create(5))
+    short = gtsam.GaussianConditional(
+        [(X(0), R[:5, :6]), (K_SCALE, R[:5, 9:10])], 1, np.zeros(5), gtsam.noiseModel.Unit.Create(5)
+    )
     root = gtsam.GaussianConditional(K_SCALE, np.zeros(1), R[9:10, 9:10])
     bad = gtsam.GaussianBayesNet()
     bad.push_back(short)
@@ -264,11 +312,15 @@ def test_state_estimate_blocks_are_the_joint_covariances_of_their_keys() -> None
     np.testing.assert_allclose(e.pose_cov, sm.joint_covariance([X(i)]), **tol)
     np.testing.assert_allclose(e.vel_cov, sm.joint_covariance([V(i)]), **tol)
     xv = sm.joint_covariance([X(i), V(i)])
-    np.testing.assert_allclose(e.pose_vel_cross, xv[:6, 6:], rtol=1e-9, atol=1e-12 * np.abs(xv).max())
+    np.testing.assert_allclose(
+        e.pose_vel_cross, xv[:6, 6:], rtol=1e-9, atol=1e-12 * np.abs(xv).max()
+    )
     np.testing.assert_allclose(e.calib_cov, sm.joint_covariance([B(0), K_SCALE, C_MISALIGN]), **tol)
     cx = sm.joint_covariance([C_MISALIGN, X(i)])
     np.testing.assert_allclose(cx[:3, :3], e.cov[16:19, 16:19], **tol)
-    np.testing.assert_allclose(cx[3:, :3], e.cov[:6, 16:19], rtol=1e-9, atol=1e-12 * np.abs(cx).max())
+    np.testing.assert_allclose(
+        cx[3:, :3], e.cov[:6, 16:19], rtol=1e-9, atol=1e-12 * np.abs(cx).max()
+    )
     v = sm.isam.calculateEstimate()
     assert e.pose.equals(v.atPose3(X(i)), 1e-12) and e.scale == v.atVector(K_SCALE)[0]
     np.testing.assert_array_equal(e.b_R_d, v.atRot3(C_MISALIGN).matrix())
@@ -282,19 +334,24 @@ def test_estimate_without_covariance_has_the_shapes_of_one_with() -> None:
     ends = np.searchsorted(imu.t, dvl.t, side="right")
     start = 0
     for j in range(100):  # to 100 s, before finish() (which computes the final covariance anyway)
-        est.push_imu_batch(imu.t[start:ends[j]], imu.b_omega[start:ends[j]], imu.b_f[start:ends[j]])
+        est.push_imu_batch(
+            imu.t[start : ends[j]], imu.b_omega[start : ends[j]], imu.b_f[start : ends[j]]
+        )
         start = int(ends[j])
         est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
     e = est.estimate()
     sm = _smoother(est)
     assert e is not None and np.all(np.isnan(e.calib_cov)) and np.all(np.isnan(e.pose_cov))
-    print(f"\ncovariances off: StateEstimate.cov {sm.estimate(with_covariance=False).cov.shape} (with: "
-          f"{sm.estimate().cov.shape}); OnlineEstimate.calib_cov {e.calib_cov.shape}")
+    print(
+        f"\ncovariances off: StateEstimate.cov {sm.estimate(with_covariance=False).cov.shape} (with: "
+        f"{sm.estimate().cov.shape}); OnlineEstimate.calib_cov {e.calib_cov.shape}"
+    )
     assert sm.estimate(with_covariance=False).cov.shape == sm.estimate().cov.shape
     assert e.calib_cov.shape == (10, 10)
 
 
 # ----- rebase -----------------------------------------------------------------------------------------
+
 
 def test_rebase_changes_the_linearisation_point_not_the_estimate() -> None:
     """rebase() rebuilds iSAM2 from the same factors at the current estimate: a Gauss-Newton relinearisation. At the
@@ -310,7 +367,9 @@ def test_rebase_changes_the_linearisation_point_not_the_estimate() -> None:
     feed_log(est, _log())
     sm = _smoother(est)
     size0, rebases0 = sm.size(), sm.rebases
-    sigma = {k: np.sqrt(np.diag(sm.joint_covariance([k]))) for k in sm.isam.calculateEstimate().keys()}
+    sigma = {
+        k: np.sqrt(np.diag(sm.joint_covariance([k]))) for k in sm.isam.calculateEstimate().keys()
+    }
     cov0 = sm.estimate().cov
     moves = []
     for _ in range(2):
@@ -320,8 +379,10 @@ def test_rebase_changes_the_linearisation_point_not_the_estimate() -> None:
         moves.append(max(float(np.max(np.abs(d) / sigma[k])) for k, d in change.items()))
     cov1 = sm.estimate().cov
     dsig = float(np.max(np.abs(np.sqrt(np.diag(cov1) / np.diag(cov0)) - 1.0)))
-    print(f"\nrebase: largest move {moves[0]:.2e} sigma, then {moves[1]:.2e} sigma; newest joint sigmas change "
-          f"{dsig:.1e}; {rebases0} rebases during the run")
+    print(
+        f"\nrebase: largest move {moves[0]:.2e} sigma, then {moves[1]:.2e} sigma; newest joint sigmas change "
+        f"{dsig:.1e}; {rebases0} rebases during the run"
+    )
     assert rebases0 > 0 and sm.rebases == rebases0 + 2
     assert moves[0] < 0.02 and moves[1] < 1e-3 and moves[1] < moves[0]
     assert dsig < 5e-3
@@ -343,8 +404,14 @@ def test_rebase_mid_run_does_not_change_the_result() -> None:
     _feed(est, log, rebase_often)
     a, b = est.estimate(), _run().estimate()
     assert a is not None and b is not None
-    d = np.concatenate([[a.scale - b.scale], a.accel_bias - b.accel_bias, a.gyro_bias - b.gyro_bias,
-                        (b.b_R_d.T @ a.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]]])
+    d = np.concatenate(
+        [
+            [a.scale - b.scale],
+            a.accel_bias - b.accel_bias,
+            a.gyro_bias - b.gyro_bias,
+            (b.b_R_d.T @ a.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]],
+        ]
+    )
     s = np.sqrt(np.diag(b.calib_cov))
     s = np.concatenate([s[6:7], s[:6], s[7:]])
     print(f"\n{len(extra)} extra rebases: final difference in sigmas {np.round(d / s, 4)}")
@@ -353,6 +420,7 @@ def test_rebase_mid_run_does_not_change_the_result() -> None:
 
 
 # ----- relinearisation thresholds ---------------------------------------------------------------------
+
 
 def _relinearised(th: RelinearizationThresholds, offsets: dict[str, np.ndarray]) -> int:
     """Variables iSAM2 relinearises at its second update: priors at zero on one variable of each type, initial
@@ -369,8 +437,10 @@ def _relinearised(th: RelinearizationThresholds, offsets: dict[str, np.ndarray])
     graph.add(gtsam.PriorFactorConstantBias(B(0), gtsam.imuBias.ConstantBias(), unit(6)))
     graph.add(gtsam.PriorFactorVector(K_SCALE, np.array([1.0]), unit(1)))
     graph.add(gtsam.PriorFactorRot3(C_MISALIGN, gtsam.Rot3(), unit(3)))
-    o = {k: np.asarray(offsets.get(k, np.zeros(n)), dtype=float) for k, n in (("x", 6), ("v", 3), ("b", 6),
-                                                                            ("k", 1), ("c", 3))}
+    o = {
+        k: np.asarray(offsets.get(k, np.zeros(n)), dtype=float)
+        for k, n in (("x", 6), ("v", 3), ("b", 6), ("k", 1), ("c", 3))
+    }
     values.insert(X(0), gtsam.Pose3.Expmap(o["x"]))
     values.insert(V(0), o["v"])
     values.insert(B(0), gtsam.imuBias.ConstantBias(o["b"][:3], o["b"][3:]))
@@ -386,18 +456,29 @@ def _e(n: int, j: int, v: float) -> np.ndarray:
     return x
 
 
-@pytest.mark.parametrize(("offsets", "expected"), [
-    ({}, 0),
-    ({"k": _e(1, 0, 0.03)}, 1), ({"k": _e(1, 0, 0.01)}, 0),  # scale: 0.02
-    ({"c": _e(3, 2, 6e-3)}, 1), ({"c": _e(3, 2, 4e-3)}, 0),  # misalignment: 5e-3 rad
-    ({"x": _e(6, 0, 6e-4)}, 1), ({"x": _e(6, 2, 4e-3)}, 0),  # attitude: 5e-4 rad about x, y; 5e-3 about z
-    ({"x": _e(6, 5, 9.0)}, 0), ({"x": _e(6, 5, 11.0)}, 1),  # position: 10 m
-    ({"v": _e(3, 1, 0.02)}, 1), ({"v": _e(3, 1, 0.005)}, 0),  # velocity: 0.01 m/s
-    ({"b": _e(6, 1, 2e-3)}, 1), ({"b": _e(6, 4, 2e-5)}, 1), ({"b": _e(6, 4, 5e-6)}, 0),  # bias: 1e-3, 1e-5
-    ({"k": _e(1, 0, 0.03), "c": _e(3, 0, 6e-3), "v": _e(3, 0, 0.02)}, 3),
-])
-def test_threshold_map_relinearises_each_variable_type_at_its_threshold(offsets: dict[str, np.ndarray],
-                                                                        expected: int) -> None:
+@pytest.mark.parametrize(
+    ("offsets", "expected"),
+    [
+        ({}, 0),
+        ({"k": _e(1, 0, 0.03)}, 1),
+        ({"k": _e(1, 0, 0.01)}, 0),  # scale: 0.02
+        ({"c": _e(3, 2, 6e-3)}, 1),
+        ({"c": _e(3, 2, 4e-3)}, 0),  # misalignment: 5e-3 rad
+        ({"x": _e(6, 0, 6e-4)}, 1),
+        ({"x": _e(6, 2, 4e-3)}, 0),  # attitude: 5e-4 rad about x, y; 5e-3 about z
+        ({"x": _e(6, 5, 9.0)}, 0),
+        ({"x": _e(6, 5, 11.0)}, 1),  # position: 10 m
+        ({"v": _e(3, 1, 0.02)}, 1),
+        ({"v": _e(3, 1, 0.005)}, 0),  # velocity: 0.01 m/s
+        ({"b": _e(6, 1, 2e-3)}, 1),
+        ({"b": _e(6, 4, 2e-5)}, 1),
+        ({"b": _e(6, 4, 5e-6)}, 0),  # bias: 1e-3, 1e-5
+        ({"k": _e(1, 0, 0.03), "c": _e(3, 0, 6e-3), "v": _e(3, 0, 0.02)}, 3),
+    ],
+)
+def test_threshold_map_relinearises_each_variable_type_at_its_threshold(
+    offsets: dict[str, np.ndarray], expected: int
+) -> None:
     """A variable is relinearised exactly when a component of its update exceeds its type's default threshold."""
     assert _relinearised(RelinearizationThresholds(), offsets) == expected
 
@@ -406,22 +487,35 @@ def test_threshold_map_custom_values_and_dimensions() -> None:
     """Custom thresholds reach iSAM2 (a scale threshold of 0.05 lets a 0.03 update pass); each vector has its
     variable's tangent dimension (keys.key_dim), which iSAM2 checks: a wrong one is refused."""
     th = RelinearizationThresholds()
-    assert len(th.pose) == key_dim(X(0)) and len(th.velocity) == key_dim(V(0)) and len(th.bias) == key_dim(B(0))
+    assert (
+        len(th.pose) == key_dim(X(0))
+        and len(th.velocity) == key_dim(V(0))
+        and len(th.bias) == key_dim(B(0))
+    )
     assert th.threshold_map().size() == 5
     loose = RelinearizationThresholds(scale=0.05)
     assert _relinearised(loose, {"k": _e(1, 0, 0.03)}) == 0
-    assert _relinearised(RelinearizationThresholds(misalignment_rad=1e-3), {"c": _e(3, 1, 2e-3)}) == 1
-    bad = RelinearizationThresholds.model_construct(velocity=(0.01, 0.01))  # unchecked: iSAM2 refuses it
+    assert (
+        _relinearised(RelinearizationThresholds(misalignment_rad=1e-3), {"c": _e(3, 1, 2e-3)}) == 1
+    )
+    bad = RelinearizationThresholds.model_construct(
+        velocity=(0.01, 0.01)
+    )  # unchecked: iSAM2 refuses it
     with pytest.raises(ValueError, match="dimensionality for 'v'"):
         _relinearised(bad, {})
 
 
 # ----- errors -----------------------------------------------------------------------------------------
 
+
 def test_add_epoch_without_its_inputs_is_a_clear_error() -> None:
     """The first epoch needs its initial values, a later one its preintegration."""
     cfg = EstimatorConfig.paper()
-    cfg.alignment.initial_attitude_deg = (3.0, 0.0, 10.0)  # starts the smoother at once, no data needed
+    cfg.alignment.initial_attitude_deg = (
+        3.0,
+        0.0,
+        10.0,
+    )  # starts the smoother at once, no data needed
     est = OnlineEstimator.for_log(_log(), cfg)
     sm = _smoother(est)
     assert sm.n == 0

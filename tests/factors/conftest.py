@@ -14,17 +14,28 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.factors import PingMotion
 from tests.support.numerical import numerical_jacobian
 
-W_IE = 7.292115e-5 * np.array([0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])  # map ENU at 30 deg, rad/s
+W_IE = 7.292115e-5 * np.array(
+    [0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))]
+)  # map ENU at 30 deg, rad/s
 N_G0 = np.array([1e-5, -2e-5, -9.79])  # gravity in map, m/s^2
 
 
 def _random_motion(seed: int, dt: float = 0.6) -> PingMotion:
     rng = np.random.default_rng(seed)
-    return PingMotion(dt, Rotation.from_rotvec(0.05 * rng.normal(size=3)).as_matrix(), rng.normal(size=3),
-                      rng.normal(size=3), dt * np.eye(3) + 0.01 * rng.normal(size=(3, 3)),
-                      -dt * np.eye(3) + 0.01 * rng.normal(size=(3, 3)), 0.3 * rng.normal(size=(3, 3)),
-                      np.eye(9) * 1e-6, W_IE, N_G0, rng.normal(size=3) * 100,
-                      1.5e-6 * np.diag([-1.0, -1.0, 2.0]) + 1e-7 * rng.normal(size=(3, 3)))
+    return PingMotion(
+        dt,
+        Rotation.from_rotvec(0.05 * rng.normal(size=3)).as_matrix(),
+        rng.normal(size=3),
+        rng.normal(size=3),
+        dt * np.eye(3) + 0.01 * rng.normal(size=(3, 3)),
+        -dt * np.eye(3) + 0.01 * rng.normal(size=(3, 3)),
+        0.3 * rng.normal(size=(3, 3)),
+        np.eye(9) * 1e-6,
+        W_IE,
+        N_G0,
+        rng.normal(size=3) * 100,
+        1.5e-6 * np.diag([-1.0, -1.0, 2.0]) + 1e-7 * rng.normal(size=(3, 3)),
+    )
 
 
 @pytest.fixture
@@ -55,8 +66,13 @@ def attitude() -> Callable[[str, np.random.Generator], np.ndarray]:
     return _attitude
 
 
-def _assert_linearization(factor: gtsam.CustomFactor, pose: gtsam.Pose3, n_v: np.ndarray, b_expected: np.ndarray,
-                          with_velocity: bool) -> None:
+def _assert_linearization(
+    factor: gtsam.CustomFactor,
+    pose: gtsam.Pose3,
+    n_v: np.ndarray,
+    b_expected: np.ndarray,
+    with_velocity: bool,
+) -> None:
     """factor on [X(0)] or [X(0), V(0)] linearised at (pose, n_v): b as expected, A against numerical derivatives
     of its unwhitened error (unit noise)."""
 

@@ -18,20 +18,33 @@ from tests.support.numerical import numerical_jacobian
 R_EARTH = 6.37e6
 Attitude = Callable[[str, np.random.Generator], np.ndarray]  # the attitude fixture (conftest.py)
 Check = Callable[..., None]  # the assert_linearization fixture (conftest.py)
-CASES = [(kind, seed) for kind in ("random", "near_identity", "large", "no_lever", "flat") for seed in range(4)]
+CASES = [
+    (kind, seed)
+    for kind in ("random", "near_identity", "large", "no_lever", "flat")
+    for seed in range(4)
+]
 
 
-def _state(kind: str, seed: int, attitude: Attitude) -> tuple[gtsam.Pose3, np.ndarray, np.ndarray, float,
-                                                              float]:
+def _state(
+    kind: str, seed: int, attitude: Attitude
+) -> tuple[gtsam.Pose3, np.ndarray, np.ndarray, float, float]:
     rng = np.random.default_rng(seed)
     R = attitude(kind, rng)
     n_p = rng.normal(scale=2000.0, size=3)
     lever = np.zeros(3) if kind == "no_lever" else rng.normal(scale=0.8, size=3)
     radius = math.inf if kind == "flat" else R_EARTH
-    return gtsam.Pose3(gtsam.Rot3(R), n_p), rng.normal(scale=1.0, size=3), lever, radius, float(rng.uniform(-0.5, 0.5))
+    return (
+        gtsam.Pose3(gtsam.Rot3(R), n_p),
+        rng.normal(scale=1.0, size=3),
+        lever,
+        radius,
+        float(rng.uniform(-0.5, 0.5)),
+    )
 
 
-def _height(pose: gtsam.Pose3, lever: np.ndarray, radius: float, n_v: np.ndarray, dt: float) -> float:
+def _height(
+    pose: gtsam.Pose3, lever: np.ndarray, radius: float, n_v: np.ndarray, dt: float
+) -> float:
     """The model, plain numpy: sensor height above the origin's height."""
     p = pose.translation()
     curv = 0.0 if math.isinf(radius) else (p[0] ** 2 + p[1] ** 2) / (2 * radius)
@@ -54,17 +67,27 @@ def test_depth_zero_error_at_truth_and_jacobians(kind: str, seed: int, attitude:
     for i in range(2):
         J_num = numerical_jacobian(h, [pose, n_v], i)
         assert H[i] is not None and H[i].shape == J_num.shape
-        np.testing.assert_allclose(H[i], J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]")
+        np.testing.assert_allclose(
+            H[i], J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]"
+        )
 
 
 @pytest.mark.parametrize("kind, seed", CASES[::3])
 @pytest.mark.parametrize("with_velocity", [False, True])
-def test_depth_factor_linearize_matches_numerical(kind: str, seed: int, with_velocity: bool,
-                                                  attitude: Attitude, assert_linearization: Check) -> None:
+def test_depth_factor_linearize_matches_numerical(
+    kind: str, seed: int, with_velocity: bool, attitude: Attitude, assert_linearization: Check
+) -> None:
     pose, n_v, lever, radius, dt = _state(kind, seed, attitude)
     z_meas = _height(pose, lever, radius, n_v, dt if with_velocity else 0.0) + 0.2
-    factor = make_depth_factor(gtsam.noiseModel.Unit.Create(1), X(0), z_meas, lever, radius,
-                               V(0) if with_velocity else None, dt if with_velocity else 0.0)
+    factor = make_depth_factor(
+        gtsam.noiseModel.Unit.Create(1),
+        X(0),
+        z_meas,
+        lever,
+        radius,
+        V(0) if with_velocity else None,
+        dt if with_velocity else 0.0,
+    )
     values = gtsam.Values()
     values.insert(X(0), pose)
     values.insert(V(0), n_v)

@@ -85,7 +85,9 @@ class State:
         return make_values(self.pose, self.n_v, self.k, self.rot)
 
 
-def make_values(pose: gtsam.Pose3, n_v: np.ndarray, k: float | np.ndarray, rot: gtsam.Rot3) -> gtsam.Values:
+def make_values(
+    pose: gtsam.Pose3, n_v: np.ndarray, k: float | np.ndarray, rot: gtsam.Rot3
+) -> gtsam.Values:
     values = gtsam.Values()
     values.insert(KEYS[0], pose)
     values.insert(KEYS[1], np.asarray(n_v, dtype=float))
@@ -133,8 +135,11 @@ KINDS = {
     "roll_180_exact": 2,
     "zero_lever": 2,
 }
-CASES = [pytest.param(kind, 1000 * i + seed, id=f"{kind}-{seed}") for i, (kind, n) in enumerate(KINDS.items())
-         for seed in range(n)]
+CASES = [
+    pytest.param(kind, 1000 * i + seed, id=f"{kind}-{seed}")
+    for i, (kind, n) in enumerate(KINDS.items())
+    for seed in range(n)
+]
 
 
 def assert_jacobian_close(actual: np.ndarray, numerical: np.ndarray, what: str) -> None:
@@ -265,7 +270,9 @@ def test_beam_jacobians_numerical(kind: str, seed: int) -> None:
         assert J is not None
         assert_jacobian_close(J, numerical[i], f"pure H[{i}]")
 
-    factor = make_dvl_beam_factor(gtsam.noiseModel.Unit.Create(1), *KEYS, d_u, y_j, s.b_omega, s.b_l)
+    factor = make_dvl_beam_factor(
+        gtsam.noiseModel.Unit.Create(1), *KEYS, d_u, y_j, s.b_omega, s.b_l
+    )
     jv = gtsam.JacobianVector([np.empty((0, 0))] * 4)
     e = factor.unwhitenedError(s.values(), jv)
     np.testing.assert_allclose(e, [-d_u @ s.residual], atol=ZERO_TOL)
@@ -283,7 +290,8 @@ def test_factor_error_and_dimension() -> None:
     s = make_state("random", 3)
     cov = np.diag([4e-4, 9e-4, 1.6e-3])
     factor = make_dvl_velocity_factor(
-        gtsam.noiseModel.Gaussian.Covariance(cov), *KEYS, s.y_measured(), s.b_omega, s.b_l)
+        gtsam.noiseModel.Gaussian.Covariance(cov), *KEYS, s.y_measured(), s.b_omega, s.b_l
+    )
     assert factor.dim() == 3
     assert factor.size() == 4
     assert list(factor.keys()) == list(KEYS)
@@ -293,7 +301,13 @@ def test_factor_error_and_dimension() -> None:
     sigma = 0.02
     d_u = JANUS[2]
     beam = make_dvl_beam_factor(
-        gtsam.noiseModel.Isotropic.Sigma(1, sigma), *KEYS, d_u, d_u @ s.y_measured(), s.b_omega, s.b_l)
+        gtsam.noiseModel.Isotropic.Sigma(1, sigma),
+        *KEYS,
+        d_u,
+        d_u @ s.y_measured(),
+        s.b_omega,
+        s.b_l,
+    )
     assert beam.dim() == 1
     assert beam.size() == 4
     assert beam.error(s.values()) == pytest.approx(0.5 * (d_u @ e / sigma) ** 2, rel=1e-12)
@@ -302,11 +316,14 @@ def test_factor_error_and_dimension() -> None:
 def test_robust_noise_and_point3_velocity_accepted() -> None:
     s = make_state("random", 4)
     huber = gtsam.noiseModel.Robust.Create(
-        gtsam.noiseModel.mEstimator.Huber.Create(1.345), gtsam.noiseModel.Isotropic.Sigma(3, 0.02))
+        gtsam.noiseModel.mEstimator.Huber.Create(1.345), gtsam.noiseModel.Isotropic.Sigma(3, 0.02)
+    )
     factor = make_dvl_velocity_factor(huber, *KEYS, s.y_measured(), s.b_omega, s.b_l)
     values = gtsam.Values()
     values.insert(KEYS[0], s.pose)
-    values.insertPoint3(KEYS[1], s.n_v)  # a fixed-size Vector3 entry, as a C++ factor would store it
+    values.insertPoint3(
+        KEYS[1], s.n_v
+    )  # a fixed-size Vector3 entry, as a C++ factor would store it
     values.insert(KEYS[2], np.array([s.k]))
     values.insert(KEYS[3], s.rot)
     np.testing.assert_allclose(factor.unwhitenedError(values), -s.residual, atol=ZERO_TOL)
@@ -332,8 +349,14 @@ GOOD = {"d_y": [1.0, 0.1, -0.2], "b_omega": [0.0, 0.0, 0.1], "b_l": [0.5, 0.0, -
 
 @pytest.mark.parametrize(
     "field, bad",
-    [("d_y", [1.0, 0.1]), ("d_y", [1.0, np.nan, 0.0]), ("d_y", [[1.0, 0.1, 0.0]]),
-     ("b_omega", [0.0, np.inf, 0.0]), ("b_l", [0.5, 0.0]), ("b_l", [np.nan, 0.0, 0.0])],
+    [
+        ("d_y", [1.0, 0.1]),
+        ("d_y", [1.0, np.nan, 0.0]),
+        ("d_y", [[1.0, 0.1, 0.0]]),
+        ("b_omega", [0.0, np.inf, 0.0]),
+        ("b_l", [0.5, 0.0]),
+        ("b_l", [np.nan, 0.0, 0.0]),
+    ],
 )
 def test_velocity_factor_rejects_bad_input(field: str, bad: list[float]) -> None:
     args = {**GOOD, field: bad}
@@ -344,11 +367,24 @@ def test_velocity_factor_rejects_bad_input(field: str, bad: list[float]) -> None
 
 @pytest.mark.parametrize(
     "field, bad",
-    [("d_u", [0.0, 0.0, 1.1]), ("d_u", [0.0, 0.5, 0.5]), ("d_u", [np.nan, 0.0, 1.0]), ("d_u", [0.0, 1.0]),
-     ("y_j", np.nan), ("y_j", [0.1, 0.2]), ("b_omega", [np.nan, 0.0, 0.0]), ("b_l", [0.0, 0.0])],
+    [
+        ("d_u", [0.0, 0.0, 1.1]),
+        ("d_u", [0.0, 0.5, 0.5]),
+        ("d_u", [np.nan, 0.0, 1.0]),
+        ("d_u", [0.0, 1.0]),
+        ("y_j", np.nan),
+        ("y_j", [0.1, 0.2]),
+        ("b_omega", [np.nan, 0.0, 0.0]),
+        ("b_l", [0.0, 0.0]),
+    ],
 )
 def test_beam_factor_rejects_bad_input(field: str, bad: object) -> None:
-    args: dict[str, object] = {"d_u": JANUS[0], "y_j": 0.3, "b_omega": GOOD["b_omega"], "b_l": GOOD["b_l"]}
+    args: dict[str, object] = {
+        "d_u": JANUS[0],
+        "y_j": 0.3,
+        "b_omega": GOOD["b_omega"],
+        "b_l": GOOD["b_l"],
+    }
     args[field] = bad
     noise = gtsam.noiseModel.Unit.Create(1)
     with pytest.raises(ValueError, match=field):
@@ -385,8 +421,9 @@ class Calibration:
     b_R_d: np.ndarray
 
 
-def solve_calibration(truth: Calibration, b_R_d0: np.ndarray, beams: list[list[int]] | None,
-                      n_epochs: int, seed: int) -> tuple[float, gtsam.Rot3]:
+def solve_calibration(
+    truth: Calibration, b_R_d0: np.ndarray, beams: list[list[int]] | None, n_epochs: int, seed: int
+) -> tuple[float, gtsam.Rot3]:
     """Noise-free DVL data from `truth` at n_epochs states (poses and velocities fixed by tight priors,
     velocity directions and attitudes varying); scale and b_R_d free with weak priors at the nominal values,
     started from k = 0.8 and the nominal mounting b_R_d0. beams None: 3-D factors; else beams[i] lists the
@@ -397,7 +434,9 @@ def solve_calibration(truth: Calibration, b_R_d0: np.ndarray, beams: list[list[i
     tight = 1e-6
     b_l = np.array([0.6, -0.1, -0.4])  # DVL forward, right, below the IMU
     for i in range(n_epochs):
-        n_R_b = rotvec(np.array([0.1, 0.1, np.pi]) * rng.uniform(-1.0, 1.0, size=3))  # tilts and headings
+        n_R_b = rotvec(
+            np.array([0.1, 0.1, np.pi]) * rng.uniform(-1.0, 1.0, size=3)
+        )  # tilts and headings
         speed = rng.uniform(0.5, 3.0)
         n_v = speed * unit(rng)
         b_omega = rng.normal(scale=0.05, size=3)
@@ -413,19 +452,33 @@ def solve_calibration(truth: Calibration, b_R_d0: np.ndarray, beams: list[list[i
             graph.add(make_dvl_velocity_factor(noise, *keys, y, b_omega, b_l))
         else:
             for j in beams[i % len(beams)]:
-                graph.add(make_dvl_beam_factor(gtsam.noiseModel.Isotropic.Sigma(1, 0.02), *keys, JANUS[j],
-                                               JANUS[j] @ y, b_omega, b_l))
+                graph.add(
+                    make_dvl_beam_factor(
+                        gtsam.noiseModel.Isotropic.Sigma(1, 0.02),
+                        *keys,
+                        JANUS[j],
+                        JANUS[j] @ y,
+                        b_omega,
+                        b_l,
+                    )
+                )
     # Weak priors only make the problem well posed before the data do. Their pull on the optimum is about
     # (prior information / data information) * offset, 1e-6 / (1e3..1e4) * 0.1 rad: ~1e-11 here, 100x
     # inside CAL_TOL (sigma 100 would pull ~1e-9).
     weak = 1000.0
-    graph.add(gtsam.PriorFactorVector(K(0), np.array([1.0]), gtsam.noiseModel.Isotropic.Sigma(1, weak)))
-    graph.add(gtsam.PriorFactorRot3(B(0), gtsam.Rot3(b_R_d0), gtsam.noiseModel.Isotropic.Sigma(3, weak)))
+    graph.add(
+        gtsam.PriorFactorVector(K(0), np.array([1.0]), gtsam.noiseModel.Isotropic.Sigma(1, weak))
+    )
+    graph.add(
+        gtsam.PriorFactorRot3(B(0), gtsam.Rot3(b_R_d0), gtsam.noiseModel.Isotropic.Sigma(3, weak))
+    )
     initial.insert(K(0), np.array([0.8]))
     initial.insert(B(0), gtsam.Rot3(b_R_d0))
 
     params = gtsam.LevenbergMarquardtParams()
-    params.setLinearSolverType("MULTIFRONTAL_QR")  # the tight priors make normal equations ill-conditioned
+    params.setLinearSolverType(
+        "MULTIFRONTAL_QR"
+    )  # the tight priors make normal equations ill-conditioned
     params.setRelativeErrorTol(1e-15)
     params.setAbsoluteErrorTol(1e-20)
     params.setMaxIterations(100)
@@ -433,7 +486,9 @@ def solve_calibration(truth: Calibration, b_R_d0: np.ndarray, beams: list[list[i
     return float(result.atVector(K(0))[0]), result.atRot3(B(0))
 
 
-PAPER = Calibration(0.9998, rotvec(np.radians([-0.1, 0.2, -0.5])))  # FLU roll, pitch, yaw of R_c (small)
+PAPER = Calibration(
+    0.9998, rotvec(np.radians([-0.1, 0.2, -0.5]))
+)  # FLU roll, pitch, yaw of R_c (small)
 LARGE = Calibration(1.05, rotvec(np.radians([2.0, -3.0, 5.0])) @ ROLL_180)
 
 
@@ -448,8 +503,9 @@ LARGE = Calibration(1.05, rotvec(np.radians([2.0, -3.0, 5.0])) @ ROLL_180)
         pytest.param(LARGE, ROLL_180, [[0], [1], [2], [3]], id="1-beam-rotating-roll180-large"),
     ],
 )
-def test_end_to_end_recovers_calibration(truth: Calibration, b_R_d0: np.ndarray, beams: list[list[int]] | None
-                                         ) -> None:
+def test_end_to_end_recovers_calibration(
+    truth: Calibration, b_R_d0: np.ndarray, beams: list[list[int]] | None
+) -> None:
     n_epochs = 8 if beams is None or len(beams[0]) >= 3 else 24
     k, b_R_d = solve_calibration(truth, b_R_d0, beams, n_epochs, seed=11)
     assert abs(k - truth.k) < CAL_TOL
@@ -460,11 +516,22 @@ def test_end_to_end_recovers_calibration(truth: Calibration, b_R_d0: np.ndarray,
 # ------------------------------------------------------------------ options: time offset, lever arm, motion, beam
 
 N_G = np.array([0.0, 0.0, -9.79])
-OPTION_SETS = [pytest.param(offset, lever, beam, motion, id=f"offset{offset:d}-lever{lever:d}-beam{beam:d}-"
-                            f"motion{motion:d}")
-               for offset in (False, True) for lever in (False, True) for beam in (False, True)
-               for motion in (False, True)]
-OPTION_CASES = [(kind, seed) for kind in ("random", "near_identity", "roll_180") for seed in range(2)]
+OPTION_SETS = [
+    pytest.param(
+        offset,
+        lever,
+        beam,
+        motion,
+        id=f"offset{offset:d}-lever{lever:d}-beam{beam:d}-motion{motion:d}",
+    )
+    for offset in (False, True)
+    for lever in (False, True)
+    for beam in (False, True)
+    for motion in (False, True)
+]
+OPTION_CASES = [
+    (kind, seed) for kind in ("random", "near_identity", "roll_180") for seed in range(2)
+]
 
 
 def option_state(kind: str, seed: int, random_motion: Callable[..., PingMotion]) -> dict[str, Any]:
@@ -479,26 +546,49 @@ def option_state(kind: str, seed: int, random_motion: Callable[..., PingMotion])
     if kind == "roll_180":
         b_R_d = b_R_d @ ROLL_180
     d_u = rng.normal(size=3)
-    return {"pose": gtsam.Pose3(gtsam.Rot3(n_R_b), rng.normal(size=3) * 200), "n_v": rng.normal(size=3) * 2,
-            "bias": gtsam.imuBias.ConstantBias(0.05 * rng.normal(size=3), 0.02 * rng.normal(size=3)),
-            "k": np.array([1.0 + 0.01 * rng.normal()]), "rot": gtsam.Rot3(b_R_d),
-            "dt": np.array([rng.uniform(-1.0, 1.0)]), "b_l": rng.normal(size=3),
-            "b_omega": 0.1 * rng.normal(size=3), "b_a": 0.2 * rng.normal(size=3) + n_R_b.T @ -N_G,
-            "G": Rotation.from_rotvec(0.02 * rng.normal(size=3)).as_matrix() + 1e-4 * rng.normal(size=(3, 3)),
-            "d_u": d_u / np.linalg.norm(d_u), "motion": random_motion(seed)}
+    return {
+        "pose": gtsam.Pose3(gtsam.Rot3(n_R_b), rng.normal(size=3) * 200),
+        "n_v": rng.normal(size=3) * 2,
+        "bias": gtsam.imuBias.ConstantBias(0.05 * rng.normal(size=3), 0.02 * rng.normal(size=3)),
+        "k": np.array([1.0 + 0.01 * rng.normal()]),
+        "rot": gtsam.Rot3(b_R_d),
+        "dt": np.array([rng.uniform(-1.0, 1.0)]),
+        "b_l": rng.normal(size=3),
+        "b_omega": 0.1 * rng.normal(size=3),
+        "b_a": 0.2 * rng.normal(size=3) + n_R_b.T @ -N_G,
+        "G": Rotation.from_rotvec(0.02 * rng.normal(size=3)).as_matrix()
+        + 1e-4 * rng.normal(size=(3, 3)),
+        "d_u": d_u / np.linalg.norm(d_u),
+        "motion": random_motion(seed),
+    }
 
 
-def options_of(s: dict[str, Any], offset: bool, lever: bool, beam: bool, motion: bool,
-               considered: bool = False) -> tuple[DvlOptions, list[Any]]:
+def options_of(
+    s: dict[str, Any], offset: bool, lever: bool, beam: bool, motion: bool, considered: bool = False
+) -> tuple[DvlOptions, list[Any]]:
     """The options and the variables in their keys' order."""
-    o = DvlOptions(s["b_omega"], s["b_l"], s["d_u"] if beam else None,
-                   OffsetInput(s["b_a"], N_G, s["G"]) if offset else None, s["motion"] if motion else None, lever,
-                   considered)
-    x = [s["pose"], s["n_v"]] + [s["bias"]] * motion + [s["k"], s["rot"]] + [s["dt"]] * offset + [s["b_l"]] * lever
+    o = DvlOptions(
+        s["b_omega"],
+        s["b_l"],
+        s["d_u"] if beam else None,
+        OffsetInput(s["b_a"], N_G, s["G"]) if offset else None,
+        s["motion"] if motion else None,
+        lever,
+        considered,
+    )
+    x = (
+        [s["pose"], s["n_v"]]
+        + [s["bias"]] * motion
+        + [s["k"], s["rot"]]
+        + [s["dt"]] * offset
+        + [s["b_l"]] * lever
+    )
     return o, x
 
 
-def linearized(factor: gtsam.CustomFactor, x: list[Any], dims: list[int]) -> tuple[np.ndarray, list[np.ndarray]]:
+def linearized(
+    factor: gtsam.CustomFactor, x: list[Any], dims: list[int]
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """b and the Jacobian blocks (of dims columns) of factor linearised at the variables x (in its keys' order)."""
     values = gtsam.Values()
     for key, value in zip(factor.keys(), x, strict=True):
@@ -509,8 +599,15 @@ def linearized(factor: gtsam.CustomFactor, x: list[Any], dims: list[int]) -> tup
 
 @pytest.mark.parametrize("offset, lever, beam, motion", OPTION_SETS)
 @pytest.mark.parametrize("kind, seed", OPTION_CASES)
-def test_every_option_against_numerical_derivatives(kind: str, seed: int, offset: bool, lever: bool, beam: bool,
-                                                    motion: bool, random_motion: Callable[..., PingMotion]) -> None:
+def test_every_option_against_numerical_derivatives(
+    kind: str,
+    seed: int,
+    offset: bool,
+    lever: bool,
+    beam: bool,
+    motion: bool,
+    random_motion: Callable[..., PingMotion],
+) -> None:
     """dvl_error's Jacobians against numerical derivatives on the manifold for every combination of options; the
     factor's linearisation equals them (unit noise); a lever arm as a variable gives the known-lever-arm error."""
     s = option_state(kind, seed, random_motion)
@@ -519,10 +616,13 @@ def test_every_option_against_numerical_derivatives(kind: str, seed: int, offset
     H: list[Any] = [None] * len(x)
     e = dvl_error(x, y, o, H)
     assert e.shape == ((1,) if beam else (3,))
-    for i, (J, Jn) in enumerate(zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)):
+    for i, (J, Jn) in enumerate(
+        zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)
+    ):
         assert J.shape == Jn.shape, f"block {i}"
-        np.testing.assert_allclose(J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())),
-                                   err_msg=f"block {i}")
+        np.testing.assert_allclose(
+            J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())), err_msg=f"block {i}"
+        )
     if lever:
         o_known, x_known = options_of(s, offset, False, beam, motion)
         np.testing.assert_allclose(dvl_error(x_known, y, o_known), e, atol=1e-14)
@@ -534,8 +634,9 @@ def test_every_option_against_numerical_derivatives(kind: str, seed: int, offset
         np.testing.assert_allclose(J, H[i], atol=1e-12, err_msg=f"linearize block {i}")
 
 
-def test_options_reduce_to_the_base_case(random_motion: Callable[..., PingMotion],
-                                         earth: tuple[np.ndarray, np.ndarray]) -> None:
+def test_options_reduce_to_the_base_case(
+    random_motion: Callable[..., PingMotion], earth: tuple[np.ndarray, np.ndarray]
+) -> None:
     """dt_d = 0 is the model without offset; no motion (PingMotion.none with the Earth model) is the ping at its
     state (zero bias columns); a considered factor keeps the error and zeroes the scale's and misalignment's
     Jacobians."""
@@ -553,12 +654,17 @@ def test_options_reduce_to_the_base_case(random_motion: Callable[..., PingMotion
     assert np.array_equal(H[2], np.zeros((3, 6)))
     o_c, x_c = options_of(s, True, False, False, True, considered=True)
     Hc: list[Any] = [None] * 6
-    np.testing.assert_allclose(dvl_error(x_c, d_y, o_c, Hc), dvl_error(x_c, d_y, options_of(s, True, False, False,
-                                                                                            True)[0]), atol=0)
+    np.testing.assert_allclose(
+        dvl_error(x_c, d_y, o_c, Hc),
+        dvl_error(x_c, d_y, options_of(s, True, False, False, True)[0]),
+        atol=0,
+    )
     assert not Hc[3].any() and not Hc[4].any() and Hc[5].any()
 
 
-def test_lever_arm_along_the_rotation_axis_is_invisible(random_motion: Callable[..., PingMotion]) -> None:
+def test_lever_arm_along_the_rotation_axis_is_invisible(
+    random_motion: Callable[..., PingMotion],
+) -> None:
     """h depends on b_l only through b_omega x b_l: the Jacobian's null space is the rotation axis; its closed form
     is k b_R_d^T [b_omega]_x."""
     s = option_state("random", 0, random_motion)
@@ -569,7 +675,9 @@ def test_lever_arm_along_the_rotation_axis_is_invisible(random_motion: Callable[
     assert np.linalg.norm(H[4] @ axis) < 1e-14
     assert np.linalg.matrix_rank(H[4], tol=1e-10) == 2
     k_d_R_b = s["k"][0] * s["rot"].matrix().T
-    np.testing.assert_allclose(H[4], k_d_R_b @ np.cross(s["b_omega"], np.eye(3), axisb=0, axisc=0), atol=1e-14)
+    np.testing.assert_allclose(
+        H[4], k_d_R_b @ np.cross(s["b_omega"], np.eye(3), axisb=0, axisc=0), atol=1e-14
+    )
 
 
 def test_option_factors_reject_bad_input(random_motion: Callable[..., PingMotion]) -> None:
@@ -578,22 +686,31 @@ def test_option_factors_reject_bad_input(random_motion: Callable[..., PingMotion
     o, _ = options_of(s, True, True, False, True)
     keys = [X(0), V(0), B(1), K(0), B(0), T(0), L(0)]
     with pytest.raises(ValueError, match="b_a"):
-        make_dvl_factor(unit3, keys, np.zeros(3), replace(o, offset=OffsetInput(np.array([np.inf, 0, 0]), N_G,
-                                                                                 s["G"])))
+        make_dvl_factor(
+            unit3,
+            keys,
+            np.zeros(3),
+            replace(o, offset=OffsetInput(np.array([np.inf, 0, 0]), N_G, s["G"])),
+        )
     with pytest.raises(ValueError, match="G must be"):
-        make_dvl_factor(unit3, keys, np.zeros(3), replace(o, offset=OffsetInput(s["b_a"], N_G, np.eye(2))))
+        make_dvl_factor(
+            unit3, keys, np.zeros(3), replace(o, offset=OffsetInput(s["b_a"], N_G, np.eye(2)))
+        )
     with pytest.raises(ValueError, match="7 keys"):
         make_dvl_factor(unit3, keys[:-1], np.zeros(3), o)
     with pytest.raises(ValueError, match="Earth model"):
         make_dvl_factor(unit3, keys, np.zeros(3), replace(o, motion=replace(s["motion"], n_G=None)))
     with pytest.raises(ValueError, match="unit vector"):
-        make_dvl_factor(gtsam.noiseModel.Unit.Create(1), keys, 0.1, replace(o, d_u=np.array([1.0, 1.0, 0.0])))
+        make_dvl_factor(
+            gtsam.noiseModel.Unit.Create(1), keys, 0.1, replace(o, d_u=np.array([1.0, 1.0, 0.0]))
+        )
 
 
 @pytest.mark.parametrize("beam", [False, True])
 @pytest.mark.parametrize("offset, motion", [(False, False), (True, True)])
-def test_correlated_error_variable(beam: bool, offset: bool, motion: bool,
-                                   random_motion: Callable[..., PingMotion]) -> None:
+def test_correlated_error_variable(
+    beam: bool, offset: bool, motion: bool, random_motion: Callable[..., PingMotion]
+) -> None:
     """The DVL's correlated error E (error_variable, last key): h + E (a beam: d_u . E), its Jacobian and every
     other's against numerical derivatives, the factor's linearisation equal to them; E = 0 is the model without it."""
     s = option_state("random", 1, random_motion)
@@ -607,9 +724,12 @@ def test_correlated_error_variable(beam: bool, offset: bool, motion: bool,
     expected = dvl_error(x0, y, o0) + (s["d_u"] @ d_e if beam else d_e)  # an independent sum
     np.testing.assert_allclose(e, expected, atol=1e-15)
     np.testing.assert_allclose(dvl_error([*x0, np.zeros(3)], y, o), dvl_error(x0, y, o0), atol=0)
-    for i, (J, Jn) in enumerate(zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)):
-        np.testing.assert_allclose(J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())),
-                                   err_msg=f"block {i}")
+    for i, (J, Jn) in enumerate(
+        zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)
+    ):
+        np.testing.assert_allclose(
+            J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())), err_msg=f"block {i}"
+        )
     keys = [X(0), V(0)] + [B(1)] * motion + [K(0), B(0)] + [T(0)] * offset + [L(0)]
     factor = make_dvl_factor(gtsam.noiseModel.Unit.Create(len(e)), keys, y, o)
     b, blocks = linearized(factor, x, [J.shape[1] for J in H])
@@ -620,8 +740,9 @@ def test_correlated_error_variable(beam: bool, offset: bool, motion: bool,
 
 @pytest.mark.parametrize("beam", [False, True])
 @pytest.mark.parametrize("offset, motion, error", [(False, False, False), (True, True, True)])
-def test_water_current_variable(beam: bool, offset: bool, motion: bool, error: bool,
-                                random_motion: Callable[..., PingMotion]) -> None:
+def test_water_current_variable(
+    beam: bool, offset: bool, motion: bool, error: bool, random_motion: Callable[..., PingMotion]
+) -> None:
     """A water-track ping (current_variable, last key W = [c_east, c_north]): the model of the velocity relative to
     the water, i.e. the bottom-track factor at n_v - [W, 0] (an independent evaluation), its Jacobian and every
     other's against numerical derivatives, the factor's linearisation equal to them; W = 0 is bottom track."""
@@ -636,15 +757,26 @@ def test_water_current_variable(beam: bool, offset: bool, motion: bool, error: b
     H: list[Any] = [None] * len(x)
     e = dvl_error(x, y, o, H)
     x_water = list(x0)
-    x_water[1] = np.asarray(x0[1]) - np.array([n_c[0], n_c[1], 0.0])  # the velocity relative to the water
+    x_water[1] = np.asarray(x0[1]) - np.array(
+        [n_c[0], n_c[1], 0.0]
+    )  # the velocity relative to the water
     np.testing.assert_allclose(e, dvl_error(x_water, y, o0), atol=1e-15)
     np.testing.assert_allclose(dvl_error([*x0, np.zeros(2)], y, o), dvl_error(x0, y, o0), atol=0)
     assert np.abs(e - dvl_error(x0, y, o0)).max() > 0.1  # the current matters
-    for i, (J, Jn) in enumerate(zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)):
-        np.testing.assert_allclose(J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())),
-                                   err_msg=f"block {i}")
-    keys = ([X(0), V(0)] + [B(1)] * motion + [K(0), B(0)] + [T(0)] * offset + [L(0)] * error
-            + [gtsam.symbol("w", 0)])
+    for i, (J, Jn) in enumerate(
+        zip(H, numerical_jacobians(lambda *v: dvl_error(list(v), y, o), x), strict=True)
+    ):
+        np.testing.assert_allclose(
+            J, Jn, rtol=0.0, atol=1e-7 * max(1.0, float(np.abs(Jn).max())), err_msg=f"block {i}"
+        )
+    keys = (
+        [X(0), V(0)]
+        + [B(1)] * motion
+        + [K(0), B(0)]
+        + [T(0)] * offset
+        + [L(0)] * error
+        + [gtsam.symbol("w", 0)]
+    )
     factor = make_dvl_factor(gtsam.noiseModel.Unit.Create(len(e)), keys, y, o)
     b, blocks = linearized(factor, x, [J.shape[1] for J in H])
     np.testing.assert_allclose(b, -e, atol=1e-12)

@@ -22,11 +22,18 @@ def pings(seed: int) -> dict[str, Any]:
     """N pings' states and inputs, and the calibration."""
     rng = np.random.default_rng(seed)
     d_u = rng.normal(size=(N, 3))
-    return {"n_R_b": Rotation.random(N, random_state=rng), "n_v": rng.normal(0, 1.5, (N, 3)), "k": 1.013,
-            "b_R_d": Rotation.from_rotvec(rng.normal(0, 0.05, 3)) * Rotation.from_rotvec([np.pi, 0, 0]),
-            "b_omega": rng.normal(0, 0.2, (N, 3)), "b_l": rng.normal(0, 0.6, 3), "dt_d": 0.21,
-            "b_a": rng.normal(0, 0.3, (N, 3)) + [0, 0, 9.79], "G": Rotation.from_rotvec(rng.normal(0, 0.02, (N, 3))),
-            "d_u": d_u / np.linalg.norm(d_u, axis=1, keepdims=True)}
+    return {
+        "n_R_b": Rotation.random(N, random_state=rng),
+        "n_v": rng.normal(0, 1.5, (N, 3)),
+        "k": 1.013,
+        "b_R_d": Rotation.from_rotvec(rng.normal(0, 0.05, 3)) * Rotation.from_rotvec([np.pi, 0, 0]),
+        "b_omega": rng.normal(0, 0.2, (N, 3)),
+        "b_l": rng.normal(0, 0.6, 3),
+        "dt_d": 0.21,
+        "b_a": rng.normal(0, 0.3, (N, 3)) + [0, 0, 9.79],
+        "G": Rotation.from_rotvec(rng.normal(0, 0.02, (N, 3))),
+        "d_u": d_u / np.linalg.norm(d_u, axis=1, keepdims=True),
+    }
 
 
 def reference(p: dict[str, Any], offset: bool) -> np.ndarray:
@@ -40,9 +47,18 @@ def reference(p: dict[str, Any], offset: bool) -> np.ndarray:
 
 
 def model(p: dict[str, Any], offset: bool, beam: bool, q: Any = slice(None), **kw: Any) -> Any:
-    return dvl_model(p["n_R_b"].as_matrix()[q], p["n_v"][q], p["k"], p["b_R_d"].as_matrix(), p["b_omega"][q],
-                     p["b_l"], d_u=p["d_u"][q] if beam else None, dt_d=p["dt_d"] if offset else None,
-                     offset=OffsetInput(p["b_a"][q], N_G, p["G"].as_matrix()[q]) if offset else None, **kw)
+    return dvl_model(
+        p["n_R_b"].as_matrix()[q],
+        p["n_v"][q],
+        p["k"],
+        p["b_R_d"].as_matrix(),
+        p["b_omega"][q],
+        p["b_l"],
+        d_u=p["d_u"][q] if beam else None,
+        dt_d=p["dt_d"] if offset else None,
+        offset=OffsetInput(p["b_a"][q], N_G, p["G"].as_matrix()[q]) if offset else None,
+        **kw,
+    )
 
 
 @pytest.mark.parametrize("offset", [False, True])
@@ -68,7 +84,9 @@ def test_the_model_is_the_formula_for_one_ping_or_n(offset: bool, beam: bool) ->
 
 def test_a_zero_offset_is_the_base_model() -> None:
     p = dict(pings(2), dt_d=0.0)
-    np.testing.assert_allclose(model(p, True, False)[0], model(p, False, False)[0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        model(p, True, False)[0], model(p, False, False)[0], rtol=0, atol=1e-15
+    )
 
 
 @pytest.mark.parametrize("offset", [False, True])

@@ -16,15 +16,23 @@ from tests.support.numerical import numerical_jacobian
 
 Attitude = Callable[[str, np.random.Generator], np.ndarray]  # the attitude fixture (conftest.py)
 Check = Callable[..., None]  # the assert_linearization fixture (conftest.py)
-CASES = [(kind, seed) for kind in ("random", "near_identity", "large", "no_lever") for seed in range(4)]
+CASES = [
+    (kind, seed) for kind in ("random", "near_identity", "large", "no_lever") for seed in range(4)
+]
 
 
-def _state(kind: str, seed: int, attitude: Attitude) -> tuple[gtsam.Pose3, np.ndarray, np.ndarray, float]:
+def _state(
+    kind: str, seed: int, attitude: Attitude
+) -> tuple[gtsam.Pose3, np.ndarray, np.ndarray, float]:
     rng = np.random.default_rng(seed)
     R = attitude(kind, rng)
     lever = np.zeros(3) if kind == "no_lever" else rng.normal(scale=0.8, size=3)
-    return (gtsam.Pose3(gtsam.Rot3(R), rng.normal(scale=2000.0, size=3)), rng.normal(scale=1.5, size=3), lever,
-            float(rng.uniform(-0.5, 0.5)))
+    return (
+        gtsam.Pose3(gtsam.Rot3(R), rng.normal(scale=2000.0, size=3)),
+        rng.normal(scale=1.5, size=3),
+        lever,
+        float(rng.uniform(-0.5, 0.5)),
+    )
 
 
 def _antenna(pose: gtsam.Pose3, lever: np.ndarray, n_v: np.ndarray, dt: float) -> np.ndarray:
@@ -47,18 +55,22 @@ def test_gnss_error_zero_at_truth_and_jacobians(kind: str, seed: int, attitude: 
     for i in range(2):
         J_num = numerical_jacobian(h, [pose, n_v], i)
         assert H[i] is not None and H[i].shape == J_num.shape == (3, 6 if i == 0 else 3)
-        np.testing.assert_allclose(H[i], J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]")
+        np.testing.assert_allclose(
+            H[i], J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]"
+        )
 
 
 @pytest.mark.parametrize("kind, seed", CASES[::2])
 @pytest.mark.parametrize("with_velocity", [False, True])
-def test_gnss_factor_linearize_matches_numerical(kind: str, seed: int, with_velocity: bool,
-                                                 attitude: Attitude, assert_linearization: Check) -> None:
+def test_gnss_factor_linearize_matches_numerical(
+    kind: str, seed: int, with_velocity: bool, attitude: Attitude, assert_linearization: Check
+) -> None:
     pose, n_v, lever, dt = _state(kind, seed, attitude)
     dt_used = dt if with_velocity else 0.0
     z = _antenna(pose, lever, n_v, dt_used) + np.array([0.2, 0.1, -0.4])
-    factor = make_gnss_factor(gtsam.noiseModel.Unit.Create(3), X(0), z, lever, V(0) if with_velocity else None,
-                              dt_used)
+    factor = make_gnss_factor(
+        gtsam.noiseModel.Unit.Create(3), X(0), z, lever, V(0) if with_velocity else None, dt_used
+    )
     values = gtsam.Values()
     values.insert(X(0), pose)
     values.insert(V(0), n_v)
@@ -70,8 +82,9 @@ def test_gnss_factor_whitens_with_the_fix_covariance(attitude: Attitude) -> None
     pose, n_v, lever, _ = _state("random", 9, attitude)
     cov = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 0.0, 16.0]])
     e = np.array([1.0, -2.0, 3.0])
-    factor = make_gnss_factor(gtsam.noiseModel.Gaussian.Covariance(cov), X(0), _antenna(pose, lever, n_v, 0) - e,
-                              lever)
+    factor = make_gnss_factor(
+        gtsam.noiseModel.Gaussian.Covariance(cov), X(0), _antenna(pose, lever, n_v, 0) - e, lever
+    )
     values = gtsam.Values()
     values.insert(X(0), pose)
     assert factor.error(values) == pytest.approx(0.5 * e @ np.linalg.solve(cov, e), rel=1e-9)

@@ -39,11 +39,16 @@ def factors(earth: bool) -> tuple[list[gtsam.ImuFactor], list[gtsam.Preintegrati
         pim = gtsam.PreintegratedImuMeasurements(p, gtsam.imuBias.ConstantBias())
         steps = int(rng.integers(20, 300))
         rate = rng.normal(0, 0.3, 3)
-        if n >= N - 3:  # a turn of 3.3 to 5 rad over the interval: beyond pi (a Logmap would wrap), short of 2 pi
+        if (
+            n >= N - 3
+        ):  # a turn of 3.3 to 5 rad over the interval: beyond pi (a Logmap would wrap), short of 2 pi
             rate *= rng.uniform(3.3, 5.0) / (np.linalg.norm(rate) * steps * 0.005)
         for _ in range(steps):
-            pim.integrateMeasurement(np.array([0.3, 0.1, 9.8]) + 0.3 * rng.standard_normal(3),
-                                     rate + 0.05 * rng.standard_normal(3), 0.005)
+            pim.integrateMeasurement(
+                np.array([0.3, 0.1, 9.8]) + 0.3 * rng.standard_normal(3),
+                rate + 0.05 * rng.standard_normal(3),
+                0.005,
+            )
         out.append(gtsam.ImuFactor(1, 2, 3, 4, 5, pim))
         params.append(p)
     return out, params
@@ -51,11 +56,16 @@ def factors(earth: bool) -> tuple[list[gtsam.ImuFactor], list[gtsam.Preintegrati
 
 def states(rng: np.random.Generator, near: bool) -> dict[str, np.ndarray]:
     """Random states i, biases, and states j: far from the prediction, or (near) within 1e-7 rad of it."""
-    s = {"R_i": np.array([gtsam.Rot3.Expmap(rng.normal(0, 1.0, 3)).matrix() for _ in range(N)]),
-         "p_i": rng.normal(0, 1000, (N, 3)), "v_i": rng.normal(0, 2, (N, 3)),
-         "b": np.concatenate([rng.normal(0, 1e-2, (N, 3)), rng.normal(0, 1e-3, (N, 3))], axis=1)}
+    s = {
+        "R_i": np.array([gtsam.Rot3.Expmap(rng.normal(0, 1.0, 3)).matrix() for _ in range(N)]),
+        "p_i": rng.normal(0, 1000, (N, 3)),
+        "v_i": rng.normal(0, 2, (N, 3)),
+        "b": np.concatenate([rng.normal(0, 1e-2, (N, 3)), rng.normal(0, 1e-3, (N, 3))], axis=1),
+    }
     rot_sigma, pos_sigma = (1e-7, 1e-6) if near else (0.3, 3.0)
-    s["R_j"] = np.array([R @ gtsam.Rot3.Expmap(rng.normal(0, rot_sigma, 3)).matrix() for R in s["R_i"]])
+    s["R_j"] = np.array(
+        [R @ gtsam.Rot3.Expmap(rng.normal(0, rot_sigma, 3)).matrix() for R in s["R_i"]]
+    )
     s["p_j"] = s["p_i"] + rng.normal(0, pos_sigma, (N, 3))
     s["v_j"] = s["v_i"] + rng.normal(0, pos_sigma, (N, 3))
     return s
@@ -68,11 +78,18 @@ def arrays(earth: bool) -> ImuArrays:
     return ImuArrays(x, H, dt, w, np.zeros((N, 6, 3)))
 
 
-def gtsam_eval(f: gtsam.ImuFactor, s: dict[str, np.ndarray], n: int) -> tuple[np.ndarray, list[np.ndarray]]:
+def gtsam_eval(
+    f: gtsam.ImuFactor, s: dict[str, np.ndarray], n: int
+) -> tuple[np.ndarray, list[np.ndarray]]:
     Hs = [np.zeros((9, d), order="F") for d in (6, 3, 6, 3, 6)]
-    e = f.evaluateError(gtsam.Pose3(gtsam.Rot3(s["R_i"][n]), s["p_i"][n]), s["v_i"][n],
-                        gtsam.Pose3(gtsam.Rot3(s["R_j"][n]), s["p_j"][n]), s["v_j"][n],
-                        gtsam.imuBias.ConstantBias(s["b"][n, :3], s["b"][n, 3:]), *Hs)
+    e = f.evaluateError(
+        gtsam.Pose3(gtsam.Rot3(s["R_i"][n]), s["p_i"][n]),
+        s["v_i"][n],
+        gtsam.Pose3(gtsam.Rot3(s["R_j"][n]), s["p_j"][n]),
+        s["v_j"][n],
+        gtsam.imuBias.ConstantBias(s["b"][n, :3], s["b"][n, 3:]),
+        *Hs,
+    )
     return np.asarray(e), Hs
 
 
@@ -85,14 +102,33 @@ def test_errors_and_jacobians_are_gtsams(earth: bool, near: bool) -> None:
     s = states(np.random.default_rng(10 + 2 * earth + near), near)
     a = arrays(earth)
     if near:  # state j: GTSAM's prediction moved by the small perturbation above
-        pred = [factors(earth)[0][n].preintegratedMeasurements().predict(
-            gtsam.NavState(gtsam.Rot3(s["R_i"][n]), s["p_i"][n], s["v_i"][n]),
-            gtsam.imuBias.ConstantBias(s["b"][n, :3], s["b"][n, 3:])) for n in range(N)]
-        s["R_j"] = np.array([p.attitude().matrix() @ (s["R_i"][n].T @ s["R_j"][n]) for n, p in enumerate(pred)])
+        pred = [
+            factors(earth)[0][n]
+            .preintegratedMeasurements()
+            .predict(
+                gtsam.NavState(gtsam.Rot3(s["R_i"][n]), s["p_i"][n], s["v_i"][n]),
+                gtsam.imuBias.ConstantBias(s["b"][n, :3], s["b"][n, 3:]),
+            )
+            for n in range(N)
+        ]
+        s["R_j"] = np.array(
+            [p.attitude().matrix() @ (s["R_i"][n].T @ s["R_j"][n]) for n, p in enumerate(pred)]
+        )
         s["p_j"] = np.array([p.position() for p in pred]) + (s["p_j"] - s["p_i"])
         s["v_j"] = np.array([p.velocity() for p in pred]) + (s["v_j"] - s["v_i"])
-    e, J = imu_errors(a, s["R_i"], s["p_i"], s["v_i"], s["R_j"], s["p_j"], s["v_j"], s["b"],
-                      np.tile(N_G, (N, 1)), None, True)
+    e, J = imu_errors(
+        a,
+        s["R_i"],
+        s["p_i"],
+        s["v_i"],
+        s["R_j"],
+        s["p_j"],
+        s["v_j"],
+        s["b"],
+        np.tile(N_G, (N, 1)),
+        None,
+        True,
+    )
     assert J is not None
     for n, f in enumerate(factors(earth)[0]):
         e_ref, H_ref = gtsam_eval(f, s, n)
@@ -109,21 +145,46 @@ def test_jacobians_against_numerical_derivatives(near: bool) -> None:
     s = states(np.random.default_rng(20 + near), near)
     a = arrays(True)
     g = np.tile(N_G, (N, 1))
-    _, J = imu_errors(a, s["R_i"], s["p_i"], s["v_i"], s["R_j"], s["p_j"], s["v_j"], s["b"], g, None, True)
+    _, J = imu_errors(
+        a, s["R_i"], s["p_i"], s["v_i"], s["R_j"], s["p_j"], s["v_j"], s["b"], g, None, True
+    )
     assert J is not None
     for n in range(0, N, 5):
-        def err(pose_i: gtsam.Pose3, v_i: np.ndarray, pose_j: gtsam.Pose3, v_j: np.ndarray, b: np.ndarray,
-                n: int = n) -> np.ndarray:
-            st = {k: v.copy() for k, v in s.items()}
-            st["R_i"][n], st["p_i"][n], st["v_i"][n] = pose_i.rotation().matrix(), pose_i.translation(), v_i
-            st["R_j"][n], st["p_j"][n], st["v_j"][n], st["b"][n] = pose_j.rotation().matrix(), pose_j.translation(), \
-                v_j, b
-            return imu_errors(a, st["R_i"], st["p_i"], st["v_i"], st["R_j"], st["p_j"], st["v_j"], st["b"], g)[0][n]
 
-        x = [gtsam.Pose3(gtsam.Rot3(s["R_i"][n]), s["p_i"][n]), s["v_i"][n],
-             gtsam.Pose3(gtsam.Rot3(s["R_j"][n]), s["p_j"][n]), s["v_j"][n], s["b"][n]]
-        for key, num in zip(("pose_i", "vel_i", "pose_j", "vel_j", "bias"), numerical_jacobians(err, x),
-                            strict=True):
+        def err(
+            pose_i: gtsam.Pose3,
+            v_i: np.ndarray,
+            pose_j: gtsam.Pose3,
+            v_j: np.ndarray,
+            b: np.ndarray,
+            n: int = n,
+        ) -> np.ndarray:
+            st = {k: v.copy() for k, v in s.items()}
+            st["R_i"][n], st["p_i"][n], st["v_i"][n] = (
+                pose_i.rotation().matrix(),
+                pose_i.translation(),
+                v_i,
+            )
+            st["R_j"][n], st["p_j"][n], st["v_j"][n], st["b"][n] = (
+                pose_j.rotation().matrix(),
+                pose_j.translation(),
+                v_j,
+                b,
+            )
+            return imu_errors(
+                a, st["R_i"], st["p_i"], st["v_i"], st["R_j"], st["p_j"], st["v_j"], st["b"], g
+            )[0][n]
+
+        x = [
+            gtsam.Pose3(gtsam.Rot3(s["R_i"][n]), s["p_i"][n]),
+            s["v_i"][n],
+            gtsam.Pose3(gtsam.Rot3(s["R_j"][n]), s["p_j"][n]),
+            s["v_j"][n],
+            s["b"][n],
+        ]
+        for key, num in zip(
+            ("pose_i", "vel_i", "pose_j", "vel_j", "bias"), numerical_jacobians(err, x), strict=True
+        ):
             block = getattr(J, key)[n]
             assert np.abs(num - block).max() <= 1e-5 * np.abs(block).max(), (key, n)
 
@@ -141,12 +202,18 @@ def test_bias_jacobian_against_independent_probes() -> None:
             continue
         A = gtsam.Rot3.Expmap(-W_IE * dt[n]).matrix()
 
-        def probe(b: np.ndarray, pim: gtsam.PreintegratedImuMeasurements = pim,
-                  A: np.ndarray = A) -> np.ndarray:
+        def probe(
+            b: np.ndarray, pim: gtsam.PreintegratedImuMeasurements = pim, A: np.ndarray = A
+        ) -> np.ndarray:
             s = pim.predict(gtsam.NavState(), gtsam.imuBias.ConstantBias(b[:3], b[3:]))
             v_lifted = s.velocity() + np.cross(W_IE, s.position())
-            return np.concatenate([gtsam.Rot3.Logmap(gtsam.Rot3(A.T @ s.attitude().matrix())), A.T @ s.position(),
-                                   A.T @ v_lifted])
+            return np.concatenate(
+                [
+                    gtsam.Rot3.Logmap(gtsam.Rot3(A.T @ s.attitude().matrix())),
+                    A.T @ s.position(),
+                    A.T @ v_lifted,
+                ]
+            )
 
         y0 = probe(np.zeros(6))
         assert np.abs(y0[:3] - x[n, :3]).max() < 1e-12

@@ -22,8 +22,8 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame, normal_gravity
 from gtsam_dvl.core.types import Mounting
-from gtsam_dvl.estimators.alignment import Alignment
-from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.inputs.alignment import Alignment
 from gtsam_dvl.factors import EarthImuFactor, GravityModel, imu_earth, make_earth_imu_factor
 from tests.support.numerical import numerical_jacobians
 
@@ -32,7 +32,9 @@ KEYS = (X(0), V(0), X(1), V(1), B(0))
 DIMS = (6, 3, 6, 3, 6)
 FAR = np.array([20000.0, -3000.0, -150.0])  # m from the map origin: gravity has turned by 3 mrad
 TINY = 1e-7  # rad: the small-angle paths of retract, Logmap and the Jacobians
-ZERO_TOL = 1e-9  # error at the predicted state (rad, m, m/s); positions of 2e4 m have an ulp of 4e-12 m
+ZERO_TOL = (
+    1e-9  # error at the predicted state (rad, m, m/s); positions of 2e4 m have an ulp of 4e-12 m
+)
 # Analytic vs numerical Jacobian: each group of 3 columns (rotation, translation, velocity, accelerometer,
 # gyroscope; their scales differ by 1e3) to JAC_RTOL of its largest entry. Central differences of step STEP
 # (1e-4, not GTSAM's default 1e-5): rounding is the floor at 20 km, where positions carry 4e-12 m, i.e.
@@ -48,7 +50,9 @@ DT = {"earth": 10.0, "analytic": 2.0, "none": 1.0}  # s of preintegration per gr
 
 def earth_gravity() -> GravityModel:
     """The estimators' model (WGS-84 normal gravity plus the centrifugal fix, and its gradient)."""
-    maker = FactorMaker(EstimatorConfig.paper(), FRAME, Alignment(np.eye(3), 0.0, "configured"), Mounting())
+    maker = FactorMaker(
+        EstimatorConfig.paper(), FRAME, Alignment(np.eye(3), 0.0, "configured"), Mounting()
+    )
     return maker.gravity_model
 
 
@@ -78,7 +82,9 @@ def rot(v: np.ndarray) -> gtsam.Rot3:
 
 
 def make_params() -> gtsam.PreintegrationParams:
-    params = gtsam.PreintegrationParams(np.array([0.0, 0.0, -normal_gravity(FRAME.lat0, FRAME.height_m)]))
+    params = gtsam.PreintegrationParams(
+        np.array([0.0, 0.0, -normal_gravity(FRAME.lat0, FRAME.height_m)])
+    )
     params.setAccelerometerCovariance(np.eye(3) * 1e-6)
     params.setGyroscopeCovariance(np.eye(3) * 1e-8)
     params.setIntegrationCovariance(np.eye(3) * 1e-10)
@@ -86,8 +92,14 @@ def make_params() -> gtsam.PreintegrationParams:
     return params
 
 
-def preintegrate(rng: np.random.Generator, params: gtsam.PreintegrationParams, dt: float, n_R_b: gtsam.Rot3,
-                 near_identity: bool, bias_hat: gtsam.imuBias.ConstantBias) -> gtsam.PreintegratedImuMeasurements:
+def preintegrate(
+    rng: np.random.Generator,
+    params: gtsam.PreintegrationParams,
+    dt: float,
+    n_R_b: gtsam.Rot3,
+    near_identity: bool,
+    bias_hat: gtsam.imuBias.ConstantBias,
+) -> gtsam.PreintegratedImuMeasurements:
     """n samples over dt: a manoeuvring vehicle, or (near_identity) one that keeps its attitude (the gyro
     sees Earth rate, and a 1e-7 rad turn)."""
     pim = gtsam.PreintegratedImuMeasurements(params, bias_hat)
@@ -116,12 +128,20 @@ class Case:
     def values(self) -> gtsam.Values:
         return make_values(self.pose_i, self.v_i, self.pose_j, self.v_j, self.bias)
 
-    def args(self) -> tuple[gtsam.Pose3, np.ndarray, gtsam.Pose3, np.ndarray, gtsam.imuBias.ConstantBias]:
+    def args(
+        self,
+    ) -> tuple[gtsam.Pose3, np.ndarray, gtsam.Pose3, np.ndarray, gtsam.imuBias.ConstantBias]:
         return self.pose_i, self.v_i, self.pose_j, self.v_j, self.bias
 
 
-def make_values(pose_i: gtsam.Pose3, v_i: np.ndarray, pose_j: gtsam.Pose3, v_j: np.ndarray,
-                bias: gtsam.imuBias.ConstantBias, keys: tuple[int, ...] = KEYS) -> gtsam.Values:
+def make_values(
+    pose_i: gtsam.Pose3,
+    v_i: np.ndarray,
+    pose_j: gtsam.Pose3,
+    v_j: np.ndarray,
+    bias: gtsam.imuBias.ConstantBias,
+    keys: tuple[int, ...] = KEYS,
+) -> gtsam.Values:
     values = gtsam.Values()
     values.insert(keys[0], pose_i)
     values.insert(keys[1], np.asarray(v_i, dtype=float))
@@ -131,8 +151,13 @@ def make_values(pose_i: gtsam.Pose3, v_i: np.ndarray, pose_j: gtsam.Pose3, v_j: 
     return values
 
 
-def make_case(gravity_kind: str, kind: str, seed: int, residual: str = "none",
-              keys: tuple[int, int, int, int, int] = KEYS) -> Case:
+def make_case(
+    gravity_kind: str,
+    kind: str,
+    seed: int,
+    residual: str = "none",
+    keys: tuple[int, int, int, int, int] = KEYS,
+) -> Case:
     """State i at random (or near-identity attitude, or FAR away), a preintegration from it, the reference
     at 30 m from the mid position, and state j predicted with the factor's own gravity (fixed point in the
     mid position), so the error is zero; residual "pv" then moves positions, velocities and the accelerometer
@@ -140,17 +165,28 @@ def make_case(gravity_kind: str, kind: str, seed: int, residual: str = "none",
     rng = np.random.default_rng(seed)
     near_identity = kind in ("near_identity", "far_near_identity")
     n_p_i = rng.normal(scale=100.0, size=3) + (FAR if kind.startswith("far") else 0.0)
-    n_R_b = rot(TINY * unit(rng)) if near_identity else gtsam.Rot3(Rotation.random(random_state=rng).as_matrix())
+    n_R_b = (
+        rot(TINY * unit(rng))
+        if near_identity
+        else gtsam.Rot3(Rotation.random(random_state=rng).as_matrix())
+    )
     pose_i, v_i = gtsam.Pose3(n_R_b, n_p_i), rng.normal(scale=1.5, size=3)
     gyro = 0.0 if near_identity else 1.0
-    bias_hat = gtsam.imuBias.ConstantBias(rng.normal(scale=1e-3, size=3), gyro * rng.normal(scale=1e-4, size=3))
-    bias = gtsam.imuBias.ConstantBias(bias_hat.accelerometer() + rng.normal(scale=1e-3, size=3),
-                                      bias_hat.gyroscope() + gyro * rng.normal(scale=1e-4, size=3))
+    bias_hat = gtsam.imuBias.ConstantBias(
+        rng.normal(scale=1e-3, size=3), gyro * rng.normal(scale=1e-4, size=3)
+    )
+    bias = gtsam.imuBias.ConstantBias(
+        bias_hat.accelerometer() + rng.normal(scale=1e-3, size=3),
+        bias_hat.gyroscope() + gyro * rng.normal(scale=1e-4, size=3),
+    )
     dt = DT[gravity_kind]
     params = make_params()
     pim = preintegrate(rng, params, dt, n_R_b, near_identity, bias_hat)
-    model = {"earth": earth_gravity, "analytic": lambda: analytic_gravity(rng, n_p_i), "none": lambda: None}[
-        gravity_kind]()
+    model = {
+        "earth": earth_gravity,
+        "analytic": lambda: analytic_gravity(rng, n_p_i),
+        "none": lambda: None,
+    }[gravity_kind]()
     factor = make_earth_imu_factor(pim, params, keys, dt, model)
     state = pim.predict(gtsam.NavState(pose_i, v_i), bias)
     if model is not None:
@@ -165,14 +201,26 @@ def make_case(gravity_kind: str, kind: str, seed: int, residual: str = "none",
                 break
     pose_j, v_j = state.pose(), state.velocity()
     if residual in ("pv", "rot"):
-        pose_i = gtsam.Pose3(pose_i.rotation(), pose_i.translation() + rng.normal(scale=0.5, size=3))
-        pose_j = gtsam.Pose3(pose_j.rotation(), pose_j.translation() + rng.normal(scale=0.5, size=3))
+        pose_i = gtsam.Pose3(
+            pose_i.rotation(), pose_i.translation() + rng.normal(scale=0.5, size=3)
+        )
+        pose_j = gtsam.Pose3(
+            pose_j.rotation(), pose_j.translation() + rng.normal(scale=0.5, size=3)
+        )
         v_i, v_j = v_i + rng.normal(scale=0.1, size=3), v_j + rng.normal(scale=0.1, size=3)
-        bias = gtsam.imuBias.ConstantBias(bias.accelerometer() + rng.normal(scale=1e-2, size=3), bias.gyroscope())
+        bias = gtsam.imuBias.ConstantBias(
+            bias.accelerometer() + rng.normal(scale=1e-2, size=3), bias.gyroscope()
+        )
     if residual == "rot":
-        pose_i = gtsam.Pose3(pose_i.rotation().retract(rng.normal(scale=1e-2, size=3)), pose_i.translation())
-        pose_j = gtsam.Pose3(pose_j.rotation().retract(rng.normal(scale=1e-2, size=3)), pose_j.translation())
-        bias = gtsam.imuBias.ConstantBias(bias.accelerometer(), bias.gyroscope() + rng.normal(scale=1e-3, size=3))
+        pose_i = gtsam.Pose3(
+            pose_i.rotation().retract(rng.normal(scale=1e-2, size=3)), pose_i.translation()
+        )
+        pose_j = gtsam.Pose3(
+            pose_j.rotation().retract(rng.normal(scale=1e-2, size=3)), pose_j.translation()
+        )
+        bias = gtsam.imuBias.ConstantBias(
+            bias.accelerometer(), bias.gyroscope() + rng.normal(scale=1e-3, size=3)
+        )
     return Case(factor, pim, pose_i, v_i, pose_j, v_j, bias)
 
 
@@ -184,8 +232,13 @@ def analytic(case: Case) -> tuple[np.ndarray, list[np.ndarray]]:
 
 
 def numerical(case: Case) -> list[np.ndarray]:
-    def h(pose_i: gtsam.Pose3, v_i: np.ndarray, pose_j: gtsam.Pose3, v_j: np.ndarray,
-          bias: gtsam.imuBias.ConstantBias) -> np.ndarray:
+    def h(
+        pose_i: gtsam.Pose3,
+        v_i: np.ndarray,
+        pose_j: gtsam.Pose3,
+        v_j: np.ndarray,
+        bias: gtsam.imuBias.ConstantBias,
+    ) -> np.ndarray:
         return case.factor(None, make_values(pose_i, v_i, pose_j, v_j, bias), None)
 
     return numerical_jacobians(h, case.args(), delta=STEP)
@@ -210,14 +263,23 @@ def assert_jacobian_close(J: np.ndarray, J_num: np.ndarray, what: str, extra: fl
     assert J.shape == J_num.shape, what
     for c in column_groups(J_num):
         scale = float(np.abs(J_num[:, c]).max()) or 1.0
-        np.testing.assert_allclose(J[:, c], J_num[:, c], rtol=0.0, atol=JAC_RTOL * scale + extra,
-                                   err_msg=f"{what}, columns {c.start}:{c.stop}")
+        np.testing.assert_allclose(
+            J[:, c],
+            J_num[:, c],
+            rtol=0.0,
+            atol=JAC_RTOL * scale + extra,
+            err_msg=f"{what}, columns {c.start}:{c.stop}",
+        )
 
 
 GRAVITY_KINDS = ("earth", "analytic", "none")
 STATE_KINDS = {"random": 3, "near_identity": 2, "far": 3, "far_near_identity": 2}
-CASES = [pytest.param(g, kind, 100 * i + s, id=f"{g}-{kind}-{s}") for g in GRAVITY_KINDS
-         for i, (kind, n) in enumerate(STATE_KINDS.items()) for s in range(n)]
+CASES = [
+    pytest.param(g, kind, 100 * i + s, id=f"{g}-{kind}-{s}")
+    for g in GRAVITY_KINDS
+    for i, (kind, n) in enumerate(STATE_KINDS.items())
+    for s in range(n)
+]
 
 
 # ---------------------------------------------------------------------------------------- one factor
@@ -239,13 +301,17 @@ def test_jacobians_match_numerical(gravity: str, kind: str, seed: int, residual:
     case = make_case(gravity, kind, seed, residual)
     e, H = analytic(case)
     if residual == "pv":
-        assert np.abs(e[3:]).max() > 0.1 and np.abs(e[:3]).max() < ZERO_TOL  # a real residual, no rotation
+        assert (
+            np.abs(e[3:]).max() > 0.1 and np.abs(e[:3]).max() < ZERO_TOL
+        )  # a real residual, no rotation
     for k, (J, J_num) in enumerate(zip(H, numerical(case), strict=True)):
         assert J.shape == (9, DIMS[k])
         assert_jacobian_close(J, J_num, f"H[{k}]")
 
 
-@pytest.mark.parametrize("gravity, kind, seed", [c for c in CASES if "near_identity" not in c.values[1]])
+@pytest.mark.parametrize(
+    "gravity, kind, seed", [c for c in CASES if "near_identity" not in c.values[1]]
+)
 def test_jacobians_with_rotation_residual(gravity: str, kind: str, seed: int) -> None:
     """With a rotation error phi the gravity-gradient term (translation columns of X_i and X_j) is off by a
     relative O(|phi|) (module doc); every other column is exact, and without a gravity model all are."""
@@ -276,7 +342,10 @@ def test_gradient_term_is_visible(gravity: str, margin: float) -> None:
     num = numerical(case)
     for k in (0, 2):
         t = slice(3, 6)
-        assert np.abs(raw[k][:, t] - num[k][:, t]).max() > margin * JAC_RTOL * np.abs(num[k][:, t]).max()
+        assert (
+            np.abs(raw[k][:, t] - num[k][:, t]).max()
+            > margin * JAC_RTOL * np.abs(num[k][:, t]).max()
+        )
         assert_jacobian_close(H[k], num[k], f"H[{k}]")
 
 
@@ -304,13 +373,24 @@ def test_jacobian_uses_the_preintegrated_time() -> None:
     pim2 = gtsam.PreintegratedImuMeasurements(params, pim.biasHat())
     rng = np.random.default_rng(11)
     for _ in range(20):
-        pim2.integrateMeasurement(rng.normal(size=3) + [0.0, 0.0, 9.8], rng.normal(scale=0.1, size=3), 0.1)
+        pim2.integrateMeasurement(
+            rng.normal(size=3) + [0.0, 0.0, 9.8], rng.normal(scale=0.1, size=3), 0.1
+        )
     short = make_earth_imu_factor(pim2, params, KEYS, 2.5, f.model.gravity)  # 2 s integrated
     short.set_reference(f.model.ref_p, f.model.ref_g, f.model.ref_G)
-    state = pim2.predict(gtsam.NavState(case.pose_i, case.v_i), case.bias)  # for a zero rotation error
+    state = pim2.predict(
+        gtsam.NavState(case.pose_i, case.v_i), case.bias
+    )  # for a zero rotation error
     pose_j = gtsam.Pose3(state.attitude(), state.position() + rng.normal(scale=0.5, size=3))
-    gapped = Case(short, pim2, case.pose_i, case.v_i, pose_j, state.velocity() + rng.normal(scale=0.1, size=3),
-                  case.bias)
+    gapped = Case(
+        short,
+        pim2,
+        case.pose_i,
+        case.v_i,
+        pose_j,
+        state.velocity() + rng.normal(scale=0.1, size=3),
+        case.bias,
+    )
     _, H = analytic(gapped)
     for k, (J, J_num) in enumerate(zip(H, numerical(gapped), strict=True)):
         assert_jacobian_close(J, J_num, f"H[{k}]")
@@ -322,7 +402,9 @@ def test_first_evaluation_takes_the_reference() -> None:
     model = case.factor.model.gravity
     assert model is not None
     params = make_params()
-    pim = preintegrate(np.random.default_rng(3), params, 10.0, case.pose_i.rotation(), False, case.pim.biasHat())
+    pim = preintegrate(
+        np.random.default_rng(3), params, 10.0, case.pose_i.rotation(), False, case.pim.biasHat()
+    )
     lazy = make_earth_imu_factor(pim, params, KEYS, 10.0, model)
     assert lazy.model.ref_p is None and lazy.needs_reference(np.zeros(3))
     e_lazy = lazy(None, case.values(), None)
@@ -350,13 +432,17 @@ def chain(n: int, seed: int) -> tuple[list[EarthImuFactor], gtsam.Values, gtsam.
         case = make_case(kinds[k % 3], "far", seed + k, "rot", keys)
         factors.append(case.factor)
         for key, value in zip(keys, case.args(), strict=True):
-            if values.exists(key):  # consecutive factors share a state: keep the first's (a residual)
+            if values.exists(
+                key
+            ):  # consecutive factors share a state: keep the first's (a residual)
                 continue
             values.insert(key, value)
             moved: object
             if isinstance(value, gtsam.Pose3):
-                moved = gtsam.Pose3(value.rotation().retract(rng.normal(scale=1e-2, size=3)),
-                                    value.translation() + rng.normal(scale=500.0, size=3))
+                moved = gtsam.Pose3(
+                    value.rotation().retract(rng.normal(scale=1e-2, size=3)),
+                    value.translation() + rng.normal(scale=500.0, size=3),
+                )
             elif isinstance(value, gtsam.imuBias.ConstantBias):
                 moved = value.retract(rng.normal(scale=1e-3, size=6))
             else:
@@ -399,7 +485,10 @@ def test_shared_params_would_give_wrong_errors(monkeypatch: pytest.MonkeyPatch) 
     monkeypatch.setattr(imu_earth, "_check_free", lambda params: None)
     rng = np.random.default_rng(5)
     params = make_params()
-    pims = [preintegrate(rng, params, 1.0, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias()) for _ in range(3)]
+    pims = [
+        preintegrate(rng, params, 1.0, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias())
+        for _ in range(3)
+    ]
     model = earth_gravity()
     keys = [(X(2 * k), V(2 * k), X(2 * k + 1), V(2 * k + 1), B(k)) for k in range(3)]
     b = make_earth_imu_factor(pims[1], params, keys[1], 1.0, None)  # constant: the origin's gravity
@@ -415,8 +504,12 @@ def test_shared_params_would_give_wrong_errors(monkeypatch: pytest.MonkeyPatch) 
     e_b = b(None, values_b, None)
     a(None, at(FAR, keys[0]), None)  # writes a's gravity, 20 km away, into the shared object
     e_b_after = b(None, values_b, None)
-    print(f"constant-gravity factor's error moved by {np.abs(e_b_after - e_b).max():.2e} (rad, m, m/s)")
-    assert np.abs(e_b_after - e_b).max() > 1e-2  # b's error depends on whether a was evaluated before it
+    print(
+        f"constant-gravity factor's error moved by {np.abs(e_b_after - e_b).max():.2e} (rad, m, m/s)"
+    )
+    assert (
+        np.abs(e_b_after - e_b).max() > 1e-2
+    )  # b's error depends on whether a was evaluated before it
     # The pims predict with whichever factor was set last: the builder sets all, then predicts each
     a.set_gravity(FAR)
     own = pims[0].predict(state, zero_bias).velocity()
@@ -431,13 +524,17 @@ def test_shared_params_are_rejected() -> None:
     a = case.factor
     before = np.array(a.model.params.n_gravity)
     rng = np.random.default_rng(5)
-    pim_b = preintegrate(rng, a.model.params, 1.0, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias())
+    pim_b = preintegrate(
+        rng, a.model.params, 1.0, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias()
+    )
     keys_b = (X(5), V(5), X(6), V(6), B(5))
     for gravity in (None, a.model.gravity):
         with pytest.raises(ValueError, match="already serve another EarthImuFactor"):
             make_earth_imu_factor(pim_b, a.model.params, keys_b, 1.0, gravity)
         with pytest.raises(ValueError, match="already serve another EarthImuFactor"):
-            make_earth_imu_factor(case.pim, a.model.params, keys_b, 1.0, gravity)  # the same pim twice
+            make_earth_imu_factor(
+                case.pim, a.model.params, keys_b, 1.0, gravity
+            )  # the same pim twice
     np.testing.assert_array_equal(a.model.params.n_gravity, before)
 
 
@@ -453,9 +550,13 @@ def test_params_not_the_pims_are_rejected() -> None:
     values = make_values(pose, np.zeros(3), pose, np.zeros(3), gtsam.imuBias.ConstantBias())
     imu = gtsam.ImuFactor(*KEYS, pim)
     constant = imu.evaluateError(pose, np.zeros(3), pose, np.zeros(3), gtsam.imuBias.ConstantBias())
-    stranger.n_gravity = model(FAR)[0]  # why: what the factor would write never reaches the prediction
-    np.testing.assert_array_equal(imu.evaluateError(pose, np.zeros(3), pose, np.zeros(3),
-                                                    gtsam.imuBias.ConstantBias()), constant)
+    stranger.n_gravity = model(FAR)[
+        0
+    ]  # why: what the factor would write never reaches the prediction
+    np.testing.assert_array_equal(
+        imu.evaluateError(pose, np.zeros(3), pose, np.zeros(3), gtsam.imuBias.ConstantBias()),
+        constant,
+    )
     f = make_earth_imu_factor(pim, params, KEYS, 1.0, model)  # the rejection did not claim params
     assert np.abs(f(None, values, None) - constant).max() > 1e-2  # its own params do reach it
 
@@ -469,6 +570,8 @@ def test_one_params_per_factor_is_accepted_and_untouched() -> None:
         params = make_params()
         g = np.array(params.n_gravity)
         pim = preintegrate(rng, params, 0.5, gtsam.Rot3(), False, gtsam.imuBias.ConstantBias())
-        f = make_earth_imu_factor(pim, params, (X(i), V(i), X(i + 1), V(i + 1), B(0)), 0.5, model if i % 2 else None)
+        f = make_earth_imu_factor(
+            pim, params, (X(i), V(i), X(i + 1), V(i + 1), B(0)), 0.5, model if i % 2 else None
+        )
         np.testing.assert_array_equal(params.n_gravity, g)
         np.testing.assert_array_equal(f.model.ref_g, g)

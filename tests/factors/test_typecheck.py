@@ -13,7 +13,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
-CALL = '''
+CALL = """
 import gtsam
 import numpy as np
 
@@ -23,24 +23,40 @@ from gtsam_dvl.factors import make_dvl_velocity_factor
 noise = gtsam.noiseModel.Isotropic.Sigma(3, 0.02)
 factor = make_dvl_velocity_factor(noise, X(0), V(0), K_SCALE, C_MISALIGN, {d_y}, np.zeros(3), np.zeros(3))
 reveal_type(make_dvl_velocity_factor)
-'''
+"""
 
 
 def _mypy(tmp_path: Path, d_y: str) -> subprocess.CompletedProcess[str]:
     src = tmp_path / "call_site.py"
     src.write_text(CALL.format(d_y=d_y))
-    return subprocess.run([sys.executable, "-m", "mypy", "--no-incremental", "--config-file",
-                           str(ROOT / "pyproject.toml"), str(src)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mypy",
+            "--no-incremental",
+            "--config-file",
+            str(ROOT / "pyproject.toml"),
+            str(src),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
 
 
-@pytest.mark.skipif(shutil.which("mypy") is None and not (Path(sys.executable).parent / "mypy").exists(),
-                    reason="mypy not installed")
+@pytest.mark.skipif(
+    shutil.which("mypy") is None and not (Path(sys.executable).parent / "mypy").exists(),
+    reason="mypy not installed",
+)
 def test_wrong_argument_type_at_a_factor_call_fails_mypy(tmp_path: Path) -> None:
     good = _mypy(tmp_path, "np.array([1.0, 0.0, 0.0])")
     print(good.stdout)
     revealed = good.stdout.split("Revealed type is")[1].split("\n")[0]
-    assert revealed.startswith(' "def (noise: gtsam') and "d_y: numpy.ndarray" in revealed  # not Any
+    assert (
+        revealed.startswith(' "def (noise: gtsam') and "d_y: numpy.ndarray" in revealed
+    )  # not Any
     assert good.returncode == 0, good.stdout
     bad = _mypy(tmp_path, '"fast"')  # a string where the DVL velocity (ndarray) belongs
     print(bad.stdout)

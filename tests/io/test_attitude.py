@@ -30,7 +30,9 @@ def log() -> LogData:
     orientation is read here)."""
     raw = dict(load_scenario("paper-3d-short").raw)
     raw["initial"] = {**raw["initial"], "speed_m_s": 2.0}
-    raw["segments"] = [{"kind": "turn", "duration_s": 40.0, "heading_change_deg": 60.0, "bank_deg": 10.0}]
+    raw["segments"] = [
+        {"kind": "turn", "duration_s": 40.0, "heading_change_deg": 60.0, "bank_deg": 10.0}
+    ]
     out = simulate(scenario_from_dict(raw), 1)
     return dataclasses.replace(out, mounting=dataclasses.replace(out.mounting, b_R_imu=B_R_IMU))
 
@@ -50,10 +52,19 @@ def _ned_frd(n_R_s: np.ndarray) -> np.ndarray:
 def test_ned_conversion_formula() -> None:
     """ENU_R_flu = ENU_R_NED NED_R_frd frd_R_flu against the construction by components, and a known case:
     level, heading north in NED (yaw 0) is yaw 90 deg in ENU."""
-    R = np.stack([rpy_deg_to_matrix(a) for a in ([3.0, -20.0, 10.0], [170.0, 45.0, -100.0], [0.0, 89.0, 30.0])])
+    R = np.stack(
+        [
+            rpy_deg_to_matrix(a)
+            for a in ([3.0, -20.0, 10.0], [170.0, 45.0, -100.0], [0.0, 89.0, 30.0])
+        ]
+    )
     np.testing.assert_allclose(to_enu_flu(_ned_frd(R), "ned"), R, atol=1e-12)
-    np.testing.assert_allclose(to_enu_flu(np.eye(3)[None], "ned")[0], rpy_deg_to_matrix([0.0, 0.0, 90.0]), atol=1e-12)
-    assert np.allclose(ENU_R_NED @ ENU_R_NED, np.eye(3)) and np.allclose(FRD_R_FLU @ FRD_R_FLU, np.eye(3))
+    np.testing.assert_allclose(
+        to_enu_flu(np.eye(3)[None], "ned")[0], rpy_deg_to_matrix([0.0, 0.0, 90.0]), atol=1e-12
+    )
+    assert np.allclose(ENU_R_NED @ ENU_R_NED, np.eye(3)) and np.allclose(
+        FRD_R_FLU @ FRD_R_FLU, np.eye(3)
+    )
 
 
 @pytest.mark.parametrize("frame", ["enu", "ned"])
@@ -71,7 +82,10 @@ def test_imu_orientation_to_base_link(log: LogData, tmp_path: Path, frame: str) 
     np.testing.assert_allclose(att.cov_rad2[0], B_R_IMU @ COV_IMU @ B_R_IMU.T, atol=1e-15)
     # the same messages read with the wrong convention are far off (the option matters)
     wrong = read_log(path, attitude_frame="enu" if frame == "ned" else "ned").attitude
-    assert wrong is not None and np.linalg.norm(quat_xyzw_to_matrix(wrong.n_q_b[0]) - _truth(log, att.t[:1])[0]) > 0.5
+    assert (
+        wrong is not None
+        and np.linalg.norm(quat_xyzw_to_matrix(wrong.n_q_b[0]) - _truth(log, att.t[:1])[0]) > 0.5
+    )
 
 
 def test_no_orientation(log: LogData, tmp_path: Path) -> None:

@@ -15,10 +15,21 @@ def _calibration() -> VehicleCalibration:
     rng = np.random.default_rng(3)
     A = rng.normal(size=(5, 5)) * np.array([2e-4, 1e-3, 1e-3, 3e-3, 1e-2])
     cov = A @ A.T + np.diag([1e-8, 1e-7, 1e-7, 1e-6, 1e-4])
-    values = {"scale": np.array([1.0009]), "misalignment": rpy_deg_to_matrix([0.1, -0.2, 0.5]),
-              "time_offset": np.array([0.012])}
-    return VehicleCalibration("auv-1", "2026-11-02T10:15:00Z", ("scale", "misalignment", "time_offset"), values,
-                              cov, (SourceLog("dive 1.mcap", "ab" * 32),), "0123456789abcdef", "smooth")
+    values = {
+        "scale": np.array([1.0009]),
+        "misalignment": rpy_deg_to_matrix([0.1, -0.2, 0.5]),
+        "time_offset": np.array([0.012]),
+    }
+    return VehicleCalibration(
+        "auv-1",
+        "2026-11-02T10:15:00Z",
+        ("scale", "misalignment", "time_offset"),
+        values,
+        cov,
+        (SourceLog("dive 1.mcap", "ab" * 32),),
+        "0123456789abcdef",
+        "smooth",
+    )
 
 
 def test_round_trip_is_exact(tmp_path):
@@ -41,15 +52,20 @@ def test_inflation_and_days():
     assert cal.days_before("2026-11-12T10:15:00Z") == pytest.approx(10.0)
     grown = cal.inflated(10.0, 0.05)
     np.testing.assert_allclose(grown.cov, cal.cov * 1.5)
-    np.testing.assert_array_equal(cal.inflated(-3.0, 0.05).cov, cal.cov)  # dated after the dive: unchanged
+    np.testing.assert_array_equal(
+        cal.inflated(-3.0, 0.05).cov, cal.cov
+    )  # dated after the dive: unchanged
 
 
-@pytest.mark.parametrize("edit, words", [
-    (lambda t: t.replace("format = 1", "format = 7"), "not a gtsam_dvl calibration file"),
-    (lambda t: t.replace("[covariance]", "[other]"), "has no 'covariance'"),
-    (lambda t: t.replace("date =", "dated ="), "has no 'date'"),
-    (lambda t: t + "\n[[[", "not a calibration file"),
-])
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (lambda t: t.replace("format = 1", "format = 7"), "not a gtsam_dvl calibration file"),
+        (lambda t: t.replace("[covariance]", "[other]"), "has no 'covariance'"),
+        (lambda t: t.replace("date =", "dated ="), "has no 'date'"),
+        (lambda t: t + "\n[[[", "not a calibration file"),
+    ],
+)
 def test_bad_files_are_one_line_errors(tmp_path, edit, words):
     path = write_calibration(tmp_path / "calib.toml", _calibration())
     path.write_text(edit(path.read_text()))

@@ -20,7 +20,9 @@ from gtsam_dvl.io.writer import write_log
 HZ = 100.0
 
 
-def _turning_imu(seconds: float, seed: int = 1, gyro_sigma: float = 1e-3, accel_sigma: float = 2e-3) -> ImuData:
+def _turning_imu(
+    seconds: float, seed: int = 1, gyro_sigma: float = 1e-3, accel_sigma: float = 2e-3
+) -> ImuData:
     """A noisy IMU turning back and forth (yaw rate 0.1 sin(2 pi t / 20) rad/s) with a surge (2 cos(2 pi t / 15)
     m/s^2):
     outputs that change all the time, as in a manoeuvre."""
@@ -31,12 +33,16 @@ def _turning_imu(seconds: float, seed: int = 1, gyro_sigma: float = 1e-3, accel_
     f = np.zeros((len(t), 3))
     f[:, 0] = 2.0 * np.cos(2 * np.pi * t / 15.0)
     f[:, 2] = 9.81
-    return ImuData(t, w + rng.normal(0.0, gyro_sigma, w.shape), f + rng.normal(0.0, accel_sigma, f.shape))
+    return ImuData(
+        t, w + rng.normal(0.0, gyro_sigma, w.shape), f + rng.normal(0.0, accel_sigma, f.shape)
+    )
 
 
 def test_a_clipped_axis_is_saturation_and_nothing_else_is() -> None:
     imu = _turning_imu(60.0)
-    assert saturated_runs(imu.b_omega, imu.b_f) == []  # noisy manoeuvres: never a run at the extreme
+    assert (
+        saturated_runs(imu.b_omega, imu.b_f) == []
+    )  # noisy manoeuvres: never a run at the extreme
     clipped = np.clip(imu.b_omega, -0.08, 0.08)
     runs = saturated_runs(clipped, imu.b_f)
     hit = np.abs(imu.b_omega[:, 2]) >= 0.08
@@ -61,7 +67,9 @@ def test_a_clipped_axis_is_saturation_and_nothing_else_is() -> None:
     # an accelerometer clipped at its range
     f = imu.b_f.copy()
     f[:, 0] = np.minimum(f[:, 0], 1.5)
-    assert {(r.sensor, r.axis, r.value) for r in saturated_runs(imu.b_omega, f)} == {("accel", 0, 1.5)}
+    assert {(r.sensor, r.axis, r.value) for r in saturated_runs(imu.b_omega, f)} == {
+        ("accel", 0, 1.5)
+    }
 
 
 @pytest.mark.parametrize("at_s", [12.0, 31.5, 47.0])
@@ -72,14 +80,18 @@ def test_a_clock_step_is_told_from_a_gap(at_s: float) -> None:
     stepped[k:] += 3.0
     found = clock_steps(stepped, imu.b_omega, imu.b_f)
     assert len(found) == 1 and found[0].index == k
-    assert found[0].step_s == pytest.approx(3.0, abs=1e-9) and found[0].t_before == pytest.approx(imu.t[k - 1])
+    assert found[0].step_s == pytest.approx(3.0, abs=1e-9) and found[0].t_before == pytest.approx(
+        imu.t[k - 1]
+    )
     keep = (imu.t <= at_s) | (imu.t > at_s + 3.0)  # 3 s of samples missing: a gap
     assert clock_steps(imu.t[keep], imu.b_omega[keep], imu.b_f[keep]) == []
     # the clock stepping back by 3 s, the samples running on
     back = imu.t.copy()
     back[k:] -= 3.0
     found = clock_steps(back, imu.b_omega, imu.b_f)
-    assert len(found) == 1 and found[0].index == k and found[0].step_s == pytest.approx(-3.0, abs=1e-9)
+    assert (
+        len(found) == 1 and found[0].index == k and found[0].step_s == pytest.approx(-3.0, abs=1e-9)
+    )
     # samples logged late (1 s of older samples again after the newest): no clock step
     late = np.r_[np.arange(k), np.arange(k - 100, len(imu))]
     assert clock_steps(imu.t[late], imu.b_omega[late], imu.b_f[late]) == []
@@ -99,10 +111,13 @@ def _short_log(sim_paper3d_short: LogData, seconds: float = 330.0) -> LogData:
     imu, dvl = sim_paper3d_short.imu, sim_paper3d_short.dvl
     ki, kd = imu.t <= seconds, dvl.t <= seconds
     return dataclasses.replace(
-        sim_paper3d_short, truth=None,
+        sim_paper3d_short,
+        truth=None,
         imu=dataclasses.replace(imu, t=imu.t[ki], b_omega=imu.b_omega[ki], b_f=imu.b_f[ki]),
-        dvl=dataclasses.replace(dvl, t=dvl.t[kd], d_v=dvl.d_v[kd], d_cov=dvl.d_cov[kd], valid=dvl.valid[kd],
-                                beams=None))
+        dvl=dataclasses.replace(
+            dvl, t=dvl.t[kd], d_v=dvl.d_v[kd], d_cov=dvl.d_cov[kd], valid=dvl.valid[kd], beams=None
+        ),
+    )
 
 
 def test_reader_names_a_clock_step_or_undoes_it(sim_paper3d_short: LogData, tmp_path: Path) -> None:
@@ -118,37 +133,58 @@ def test_reader_names_a_clock_step_or_undoes_it(sim_paper3d_short: LogData, tmp_
     assert "\n" not in msg and "clock step at 284.990 s" in msg and "jump by 4.010 s" in msg
     assert "--repair" in msg and "back by 4.000 s" in msg
     fixed = read_log(path, repair=True)
-    np.testing.assert_allclose(fixed.imu.t, log.imu.t, atol=1e-8)  # the stamps as they were before the step
+    np.testing.assert_allclose(
+        fixed.imu.t, log.imu.t, atol=1e-8
+    )  # the stamps as they were before the step
     losses = fixed.metadata["reader_losses"]
     assert losses["clock_steps"]["/imu/data_raw"][0]["step_s"] == pytest.approx(4.0, abs=1e-6)
     assert "/imu/data_raw" not in losses["gaps"]
     notes = assess_log_health(fixed).notes
-    assert any("clock step at 284.990 s" in n and "shifted the later stamps back by 4.000 s" in n for n in notes)
+    assert any(
+        "clock step at 284.990 s" in n and "shifted the later stamps back by 4.000 s" in n
+        for n in notes
+    )
     # the clock stepping back by 4 s (on the stamps as the reader gets them: the file's messages in the order a
     # recorder logged them, which our writer, ordering by stamp, cannot make): without the repair the stamps would
     # go back (an error), with it the samples would be dropped until the stamps pass the newest one
     ns = 1_700_000_000 * 10**9 + np.round(log.imu.t * 1e9).astype(np.int64)
     back = ns.copy()
     back[k:] -= 4_000_000_000
-    with pytest.raises(GtsamDvlError, match=r"clock step at 284\.990 s: the stamps jump back by 3\.990 s .*"
-                                            r"forward by 4\.000 s$"):
-        undo_clock_steps(back, 1_700_000_000 * 10**9, log.imu.b_omega, log.imu.b_f, "/imu", False, [])
+    with pytest.raises(
+        GtsamDvlError,
+        match=r"clock step at 284\.990 s: the stamps jump back by 3\.990 s .*"
+        r"forward by 4\.000 s$",
+    ):
+        undo_clock_steps(
+            back, 1_700_000_000 * 10**9, log.imu.b_omega, log.imu.b_f, "/imu", False, []
+        )
     warnings: list[str] = []
-    fixed_ns, found = undo_clock_steps(back, 1_700_000_000 * 10**9, log.imu.b_omega, log.imu.b_f, "/imu", True,
-                                       warnings)
+    fixed_ns, found = undo_clock_steps(
+        back, 1_700_000_000 * 10**9, log.imu.b_omega, log.imu.b_f, "/imu", True, warnings
+    )
     np.testing.assert_array_equal(fixed_ns, ns)
-    assert found[0]["step_s"] == pytest.approx(-4.0, abs=1e-6) and "forward by 4.000 s" in warnings[0]
-    notes = assess_log_health(dataclasses.replace(log, metadata={"reader_losses": {"clock_steps": {"/imu": found}}}))
-    assert any("jump back by 3.990 s" in n and "shifted the later stamps forward by 4.000 s" in n
-               for n in notes.notes)
+    assert (
+        found[0]["step_s"] == pytest.approx(-4.0, abs=1e-6) and "forward by 4.000 s" in warnings[0]
+    )
+    notes = assess_log_health(
+        dataclasses.replace(log, metadata={"reader_losses": {"clock_steps": {"/imu": found}}})
+    )
+    assert any(
+        "jump back by 3.990 s" in n and "shifted the later stamps forward by 4.000 s" in n
+        for n in notes.notes
+    )
 
 
 def test_reader_drops_saturated_samples_as_gaps(sim_paper3d_short: LogData, tmp_path: Path) -> None:
     log = _short_log(sim_paper3d_short)
     limit = 0.055  # the first turn peaks at 0.0576 rad/s
     path = tmp_path / "clipped.mcap"
-    write_log(path, dataclasses.replace(log, imu=dataclasses.replace(log.imu, b_omega=np.clip(log.imu.b_omega,
-                                                                                               -limit, limit))))
+    write_log(
+        path,
+        dataclasses.replace(
+            log, imu=dataclasses.replace(log.imu, b_omega=np.clip(log.imu.b_omega, -limit, limit))
+        ),
+    )
     read = read_log(path)
     hit = np.abs(log.imu.b_omega[:, 2]) >= limit
     report = read.metadata["reader_losses"]["saturation"]["/imu/data_raw"]
@@ -157,8 +193,12 @@ def test_reader_drops_saturated_samples_as_gaps(sim_paper3d_short: LogData, tmp_
     assert report["samples"] > 0.95 * hit.sum() and report["samples"] > 300
     a, b = report["spans_s"][0]
     assert 296.0 < a < 300.0 < b < 304.0
-    assert "/imu/data_raw" not in read.metadata["reader_losses"]["gaps"]  # no data missing from the log
+    assert (
+        "/imu/data_raw" not in read.metadata["reader_losses"]["gaps"]
+    )  # no data missing from the log
     health = assess_log_health(read)
     assert health.status == "degraded"
-    assert any("the IMU saturated (gyro z at +0.055 rad/s)" in w and "crossed as IMU gaps" in w
-               for w in health.warnings)
+    assert any(
+        "the IMU saturated (gyro z at +0.055 rad/s)" in w and "crossed as IMU gaps" in w
+        for w in health.warnings
+    )

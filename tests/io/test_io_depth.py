@@ -30,7 +30,9 @@ def _with_depth(seed: int = 0) -> DepthData:
     p = 101325.0 + 1.0e4 * rng.uniform(5, 50, len(t))
     var = np.full(len(t), 2500.0)
     var[::7] = np.nan  # unknown: written 0, read back NaN
-    return DepthData(t, (p - 101325.0) / 1.0e4, var / 1e8, p, var, "pressure_link", np.array([0.2, -0.1, 0.4]))
+    return DepthData(
+        t, (p - 101325.0) / 1.0e4, var / 1e8, p, var, "pressure_link", np.array([0.2, -0.1, 0.4])
+    )
 
 
 def test_pressure_round_trip_is_exact(tmp_path: Path) -> None:
@@ -45,10 +47,14 @@ def test_pressure_round_trip_is_exact(tmp_path: Path) -> None:
     assert d is not None and want is not None and want.pressure_pa is not None
     np.testing.assert_array_equal(d.t, want.t)
     np.testing.assert_array_equal(d.pressure_pa, want.pressure_pa)
-    np.testing.assert_array_equal(d.pressure_variance_pa2, want.pressure_variance_pa2)  # NaN where unknown
+    np.testing.assert_array_equal(
+        d.pressure_variance_pa2, want.pressure_variance_pa2
+    )  # NaN where unknown
     np.testing.assert_array_equal(d.b_p_sensor, want.b_p_sensor)
     assert d.frame_id == "pressure_link"
-    assert np.all(np.abs(d.depth_m - want.depth_m) < 0.02 * want.depth_m)  # defaults: rho 1025, g(45 deg)
+    assert np.all(
+        np.abs(d.depth_m - want.depth_m) < 0.02 * want.depth_m
+    )  # defaults: rho 1025, g(45 deg)
     # other tools decode it with the definition the log carries
     msgs = read_topic(path, "/depth/pressure")
     assert len(msgs) == len(want) and msgs[3][1].fluid_pressure == want.pressure_pa[3]
@@ -72,15 +78,29 @@ def test_depth_from_a_pose_topic(tmp_path: Path, z_down: bool) -> None:
     # a second file with the pose topic added (the writer is generic)
     with McapLogWriter(tmp_path / "with_pose.mcap", t0_ns=log.t0_ns) as w:
         w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, "imu_link")
-        w.add_twist_with_covariance("/dvl/twist", log.dvl.t[log.dvl.valid], log.dvl.d_v[log.dvl.valid], None,
-                                    np.zeros((int(log.dvl.valid.sum()), 6, 6)), "dvl_link")
-        w.add_pose_with_covariance("/depth/pose", t, np.c_[np.zeros((len(t), 2)), z],
-                                   np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)), cov, "depth_link")
+        w.add_twist_with_covariance(
+            "/dvl/twist",
+            log.dvl.t[log.dvl.valid],
+            log.dvl.d_v[log.dvl.valid],
+            None,
+            np.zeros((int(log.dvl.valid.sum()), 6, 6)),
+            "dvl_link",
+        )
+        w.add_pose_with_covariance(
+            "/depth/pose",
+            t,
+            np.c_[np.zeros((len(t), 2)), z],
+            np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)),
+            cov,
+            "depth_link",
+        )
     got = read_log(tmp_path / "with_pose.mcap", depth_topic="/depth/pose", depth_z_down=z_down)
     assert got.depth is not None and got.depth.pressure_pa is None
     np.testing.assert_array_equal(got.depth.depth_m, z if z_down else -z)
     assert np.isnan(got.depth.variance_m2[0]) and np.all(got.depth.variance_m2[1:] == 0.01)
-    assert read_log(tmp_path / "with_pose.mcap").depth is None  # no /depth/pressure: no depth by default
+    assert (
+        read_log(tmp_path / "with_pose.mcap").depth is None
+    )  # no /depth/pressure: no depth by default
 
 
 def test_logs_without_depth_have_no_pressure_topic(tmp_path: Path) -> None:
@@ -99,15 +119,21 @@ def test_logs_without_depth_have_no_pressure_topic(tmp_path: Path) -> None:
     assert "/depth/pressure" not in topics
     d = with_depth.depth
     assert d is not None and with_depth.truth is not None
-    h = with_depth.truth.n_p[::10, 2] - 100.0  # map z + origin height (the curvature is negligible at rest)
-    np.testing.assert_allclose(np.mean(d.depth_m[:600] + h[:600]), 0.3, atol=0.02)  # the bias, the noise averaged
+    h = (
+        with_depth.truth.n_p[::10, 2] - 100.0
+    )  # map z + origin height (the curvature is negligible at rest)
+    np.testing.assert_allclose(
+        np.mean(d.depth_m[:600] + h[:600]), 0.3, atol=0.02
+    )  # the bias, the noise averaged
 
 
 def test_cli_depth_topic(tmp_path: Path) -> None:
     log = dataclasses.replace(make_log(30.0), depth=_with_depth())
     write_log(tmp_path / "log.mcap", log)
     runner = CliRunner()
-    ok = runner.invoke(app, ["info", str(tmp_path / "log.mcap"), "--depth-topic", "/depth/pressure"])
+    ok = runner.invoke(
+        app, ["info", str(tmp_path / "log.mcap"), "--depth-topic", "/depth/pressure"]
+    )
     assert ok.exit_code == 0, ok.output
     bad = runner.invoke(app, ["info", str(tmp_path / "log.mcap"), "--depth-topic", "/nope"])
     assert bad.exit_code == 1 and "no depth topic /nope" in bad.output

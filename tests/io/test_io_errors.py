@@ -55,8 +55,14 @@ def test_truncated_file_and_salvage(long_log: tuple[LogData, bytes], tmp_path: P
     np.testing.assert_array_equal(got.imu.b_omega, log.imu.b_omega[:n])  # the kept prefix is intact
     np.testing.assert_array_equal(got.dvl.d_v, log.dvl.d_v[: len(got.dvl)])
     (report,) = [w for w in got.metadata["reader_warnings"] if w.startswith("salvage")]
-    kept, total, lost, at_least = map(int, re.search(r"kept (\d+) of (\d+) chunks; lost (\d+) chunk\(s\) "
-                                                     r"with at least (\d+) message", report).groups())
+    kept, total, lost, at_least = map(
+        int,
+        re.search(
+            r"kept (\d+) of (\d+) chunks; lost (\d+) chunk\(s\) "
+            r"with at least (\d+) message",
+            report,
+        ).groups(),
+    )
     assert lost == 1 and kept == total - 1 and at_least > 0
     start, end = map(float, re.search(r"log time ([\d.]+) s to ([\d.]+) s", report).groups())
     assert start == pytest.approx(got.imu.t[-1] + 0.01, abs=0.011) and end > start
@@ -71,16 +77,22 @@ def test_corrupt_chunk_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Pa
     got = read_log(path, salvage=True)
     (report,) = [w for w in got.metadata["reader_warnings"] if w.startswith("salvage")]
     lost_msgs = int(re.search(r"lost 1 chunk\(s\) with (\d+) message", report).group(1))
-    expected = len(log.imu) + len(log.dvl) + int(log.dvl.valid.sum()) + len(log.truth) + 1  # +1: /tf_static
+    expected = (
+        len(log.imu) + len(log.dvl) + int(log.dvl.valid.sum()) + len(log.truth) + 1
+    )  # +1: /tf_static
     found = len(got.imu) + len(got.dvl) + len(got.truth)
     twist = read_log(path, salvage=True, dvl_topic="/dvl/twist")
-    assert found + len(twist.dvl) + 1 + lost_msgs == expected  # exact: from the chunk's message indexes
+    assert (
+        found + len(twist.dvl) + 1 + lost_msgs == expected
+    )  # exact: from the chunk's message indexes
     gap = np.diff(got.imu.t).max()
     start, end = map(float, re.search(r"log time ([\d.]+) s to ([\d.]+) s", report).groups())
     assert gap == pytest.approx(end - start + 0.02, abs=0.011)
 
 
-def test_intact_file_with_salvage_reports_nothing_lost(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+def test_intact_file_with_salvage_reports_nothing_lost(
+    long_log: tuple[LogData, bytes], tmp_path: Path
+) -> None:
     path = tmp_path / "ok.mcap"
     path.write_bytes(long_log[1])
     got = read_log(path, salvage=True)
@@ -92,9 +104,16 @@ def test_missing_topics_list_what_is_there(tmp_path: Path) -> None:
     path = tmp_path / "log.mcap"
     write_log(path, make_log(3.0))
     msg = one_line_error(path, imu_topic="/imu")
-    assert "no IMU topic /imu" in msg and "/imu/data_raw [sensor_msgs/msg/Imu]" in msg and "/dvl/data" in msg
+    assert (
+        "no IMU topic /imu" in msg
+        and "/imu/data_raw [sensor_msgs/msg/Imu]" in msg
+        and "/dvl/data" in msg
+    )
     msg = one_line_error(path, dvl_topic="/dvl/velocity")
-    assert "no DVL topic /dvl/velocity" in msg and "/dvl/twist [geometry_msgs/msg/TwistWithCovarianceStamped]" in msg
+    assert (
+        "no DVL topic /dvl/velocity" in msg
+        and "/dvl/twist [geometry_msgs/msg/TwistWithCovarianceStamped]" in msg
+    )
     msg = one_line_error(path, dvl_topic="/ground_truth/odometry")
     assert "nav_msgs/msg/Odometry" in msg
 
@@ -116,7 +135,9 @@ def test_duplicate_stamps_and_repair(tmp_path: Path) -> None:
     log.imu.t[50] = log.imu.t[49]
     path = tmp_path / "dup.mcap"
     write_log(path, log)
-    assert "/imu/data_raw: duplicate stamp at message 50 (t = 0.500000000 s)" in one_line_error(path)
+    assert "/imu/data_raw: duplicate stamp at message 50 (t = 0.500000000 s)" in one_line_error(
+        path
+    )
     got = read_log(path, repair=True)
     assert len(got.imu) == len(log.imu) - 1 and (np.diff(got.imu.t) > 0).all()
 
@@ -132,10 +153,19 @@ def test_backwards_time_and_repair(tmp_path: Path) -> None:
         cdr.set_stamps(arr, w.stamps_ns(t))
         arr["angular_velocity"], arr["linear_acceleration"] = log.imu.b_omega, log.imu.b_f
         w.add_encoded("/imu/data_raw", "sensor_msgs/msg/Imu", w.stamps_ns(log.imu.t), arr)
-        w.add_twist_with_covariance("/dvl/twist", log.dvl.t[log.dvl.valid], log.dvl.d_v[log.dvl.valid], None,
-                                    None, "dvl_link")
+        w.add_twist_with_covariance(
+            "/dvl/twist",
+            log.dvl.t[log.dvl.valid],
+            log.dvl.d_v[log.dvl.valid],
+            None,
+            None,
+            "dvl_link",
+        )
     msg = one_line_error(path)
-    assert "/imu/data_raw: time goes backwards at message 200 (t = 1.500000000 s after 2.000000000 s)" in msg
+    assert (
+        "/imu/data_raw: time goes backwards at message 200 (t = 1.500000000 s after 2.000000000 s)"
+        in msg
+    )
     got = read_log(path, repair=True)
     assert len(got.imu) == len(t) - 1 and (np.diff(got.imu.t) > 0).all()
     assert any("1 going back in time" in w for w in got.metadata["reader_warnings"])
@@ -154,26 +184,35 @@ def test_not_a_log(tmp_path: Path) -> None:
 
 # ----- what was lost, structured (metadata["reader_losses"]) ----------------------------------------------
 
+
 def _chunks(data: bytes, tmp_path: Path) -> list[tuple[int, int, int]]:
     """(record start, end of the chunk's data, end log time ns) of each chunk of an intact file."""
     from gtsam_dvl.io.mcap.scan import McapScan, _Chunk
 
     path = tmp_path / "intact.mcap"
     path.write_bytes(data)
-    return [(s.pos, s.data.stop, s.end_ns) for s in McapScan(path).segments if isinstance(s, _Chunk)]
+    return [
+        (s.pos, s.data.stop, s.end_ns) for s in McapScan(path).segments if isinstance(s, _Chunk)
+    ]
 
 
-@pytest.mark.parametrize("where", ["inside a chunk", "inside the message indexes", "between two chunks"])
-def test_truncation_is_reported_wherever_the_cut_falls(where: str, long_log: tuple[LogData, bytes],
-                                                       tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "where", ["inside a chunk", "inside the message indexes", "between two chunks"]
+)
+def test_truncation_is_reported_wherever_the_cut_falls(
+    where: str, long_log: tuple[LogData, bytes], tmp_path: Path
+) -> None:
     """A file cut short lost the rest of the recording, however little of the cut-off record was there: the
     report says so (not "lost 0 chunk(s)", nor "nothing lost" for a cut between records)."""
     log, data = long_log
     chunks = _chunks(data, tmp_path)
     k = len(chunks) // 2
     pos, stop, end_ns = chunks[k]
-    cut = {"inside a chunk": (pos + stop) // 2, "inside the message indexes": stop + 20,
-           "between two chunks": chunks[k + 1][0]}[where]
+    cut = {
+        "inside a chunk": (pos + stop) // 2,
+        "inside the message indexes": stop + 20,
+        "between two chunks": chunks[k + 1][0],
+    }[where]
     path = tmp_path / "cut.mcap"
     path.write_bytes(data[:cut])
     got = read_log(path, salvage=True)
@@ -183,10 +222,19 @@ def test_truncation_is_reported_wherever_the_cut_falls(where: str, long_log: tup
     assert losses["anything_lost"] and "nothing lost" not in report and "lost 0 chunk" not in report
     (truncated,) = losses["truncated"]
     assert truncated["file"] == str(path) and truncated["at_byte"] == cut
-    assert truncated["data_end_s"] == pytest.approx(got.imu.t[-1], abs=0.011)  # the end of the last chunk read
-    assert f"the file is cut short at byte {cut} (no footer)" in report and "how long it went on" in report
+    assert truncated["data_end_s"] == pytest.approx(
+        got.imu.t[-1], abs=0.011
+    )  # the end of the last chunk read
+    assert (
+        f"the file is cut short at byte {cut} (no footer)" in report
+        and "how long it went on" in report
+    )
     if where == "inside a chunk":
-        assert losses["chunks_lost"] == 1 and losses["messages_lost"] > 0 and not losses["messages_lost_exact"]
+        assert (
+            losses["chunks_lost"] == 1
+            and losses["messages_lost"] > 0
+            and not losses["messages_lost_exact"]
+        )
         assert losses["messages_lost_per_topic"]["/imu/data_raw"] > 0
         assert sum(losses["messages_lost_per_topic"].values()) == losses["messages_lost"]
         assert got.metadata["reader_losses"]["messages_lost"] == losses["messages_lost_per_topic"]
@@ -195,7 +243,9 @@ def test_truncation_is_reported_wherever_the_cut_falls(where: str, long_log: tup
         assert got.imu.t[-1] == pytest.approx((end_ns - got.t0_ns) / 1e9, abs=0.011)
 
 
-def test_corrupt_chunk_losses_per_topic_and_gap(long_log: tuple[LogData, bytes], tmp_path: Path) -> None:
+def test_corrupt_chunk_losses_per_topic_and_gap(
+    long_log: tuple[LogData, bytes], tmp_path: Path
+) -> None:
     from gtsam_dvl.analysis.health import assess_log_health
 
     log, data = long_log
@@ -206,12 +256,17 @@ def test_corrupt_chunk_losses_per_topic_and_gap(long_log: tuple[LogData, bytes],
     assert salv["chunks_lost"] == 1 and salv["messages_lost_exact"] and salv["truncated"] == []
     per = salv["messages_lost_per_topic"]
     assert per["/imu/data_raw"] == len(log.imu) - len(got.imu)
-    assert per["/dvl/data"] == len(log.dvl) - len(got.dvl) and per["/ground_truth/odometry"] == len(log.truth) - len(
-        got.truth)
+    assert per["/dvl/data"] == len(log.dvl) - len(got.dvl) and per["/ground_truth/odometry"] == len(
+        log.truth
+    ) - len(got.truth)
     (span,) = salv["lost_spans_s"]
     gap = losses["gaps"]["/imu/data_raw"]
-    assert gap["count"] == 1 and gap["seconds"] == pytest.approx(span[1] - span[0] + 0.01, abs=0.011)
-    assert any(w.startswith("/imu/data_raw: 1 gap(s) in the data") for w in got.metadata["reader_warnings"])
+    assert gap["count"] == 1 and gap["seconds"] == pytest.approx(
+        span[1] - span[0] + 0.01, abs=0.011
+    )
+    assert any(
+        w.startswith("/imu/data_raw: 1 gap(s) in the data") for w in got.metadata["reader_warnings"]
+    )
     health = assess_log_health(got)
     assert health.status == "degraded"
     assert any(w.startswith("--salvage dropped 1 damaged chunk(s) with ") for w in health.warnings)
@@ -226,32 +281,48 @@ def test_repair_losses_are_recorded_by_reason(tmp_path: Path) -> None:
     write_log(path, log)
     got = read_log(path, repair=True)
     losses = got.metadata["reader_losses"]
-    assert losses["repair"] == {"/imu/data_raw": {"dropped": 2, "nan": 1, "duplicate": 1, "backwards": 0,
-                                                  "of": len(log.imu)}}
+    assert losses["repair"] == {
+        "/imu/data_raw": {
+            "dropped": 2,
+            "nan": 1,
+            "duplicate": 1,
+            "backwards": 0,
+            "of": len(log.imu),
+        }
+    }
     assert losses["messages_lost"] == {"/imu/data_raw": 2} and "salvage" not in losses
     assert losses["gaps"] == {}  # two samples missing at 100 Hz is no gap
     clean = tmp_path / "clean.mcap"
     write_log(clean, make_log(3.0))
-    assert read_log(clean).metadata["reader_losses"] == {"repair": {}, "gaps": {}, "messages_lost": {}}
+    assert read_log(clean).metadata["reader_losses"] == {
+        "repair": {},
+        "gaps": {},
+        "messages_lost": {},
+    }
 
 
 def test_gaps_in_an_intact_log(tmp_path: Path) -> None:
     """Stamps that skip 5 s of IMU data: not an error, but recorded and warned."""
     log = make_log(30.0, truth=False)
     keep = (log.imu.t < 10.0) | (log.imu.t >= 15.0)
-    log.imu = dataclasses.replace(log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep])
+    log.imu = dataclasses.replace(
+        log.imu, t=log.imu.t[keep], b_omega=log.imu.b_omega[keep], b_f=log.imu.b_f[keep]
+    )
     path = tmp_path / "gap.mcap"
     write_log(path, log)
     got = read_log(path)
     gap = got.metadata["reader_losses"]["gaps"]["/imu/data_raw"]
     assert gap["count"] == 1 and gap["seconds"] == pytest.approx(5.0, abs=1e-6)
     assert gap["spans_s"] == [[pytest.approx(9.99), pytest.approx(15.0)]]
-    assert "/imu/data_raw: 1 gap(s) in the data, 5.0 s missing in all (longest 9.99 s to 15.00 s)" in got.metadata[
-        "reader_warnings"]
+    assert (
+        "/imu/data_raw: 1 gap(s) in the data, 5.0 s missing in all (longest 9.99 s to 15.00 s)"
+        in got.metadata["reader_warnings"]
+    )
 
 
-def test_damaged_message_index_falls_back_to_the_intact_chunk(long_log: tuple[LogData, bytes],
-                                                              tmp_path: Path) -> None:
+def test_damaged_message_index_falls_back_to_the_intact_chunk(
+    long_log: tuple[LogData, bytes], tmp_path: Path
+) -> None:
     """A flipped byte in a MessageIndex record (outside the chunks, no CRC) made an offset negative and the
     reader died with an IndexError; the chunk itself is intact (its CRC holds), so its records are walked and
     every message is read exactly."""

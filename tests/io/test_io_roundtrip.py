@@ -39,7 +39,9 @@ def test_round_trip_is_exact(written: tuple[LogData, Path]) -> None:
     assert got.t0_ns == T0_NS  # first IMU stamp (t0 + 0.01 s) rounded down to the second
     assert got.metadata["reader_warnings"] == []
     for a, b in ((got.imu.t, log.imu.t), (got.dvl.t, log.dvl.t), (got.truth.t, log.truth.t)):
-        np.testing.assert_array_equal(ns(a, got.t0_ns), ns(b, log.t0_ns))  # stamps to the nanosecond
+        np.testing.assert_array_equal(
+            ns(a, got.t0_ns), ns(b, log.t0_ns)
+        )  # stamps to the nanosecond
     np.testing.assert_array_equal(got.imu.b_omega, log.imu.b_omega)
     np.testing.assert_array_equal(got.imu.b_f, log.imu.b_f)
     assert got.imu.frame_id == "imu_link" and got.dvl.frame_id == "dvl_link"
@@ -50,7 +52,9 @@ def test_round_trip_is_exact(written: tuple[LogData, Path]) -> None:
     np.testing.assert_array_equal(b.d_u, wb.d_u)
     np.testing.assert_array_equal(b.range, wb.range)
     np.testing.assert_array_equal(b.valid, wb.valid)
-    np.testing.assert_array_equal(b.v, wb.v.astype(np.float32))  # float32 in marine_acoustic_msgs/Dvl
+    np.testing.assert_array_equal(
+        b.v, wb.v.astype(np.float32)
+    )  # float32 in marine_acoustic_msgs/Dvl
     tr, wt = got.truth, log.truth
     np.testing.assert_array_equal(tr.n_p, wt.n_p)
     np.testing.assert_array_equal(tr.n_q_b, wt.n_q_b)
@@ -93,11 +97,19 @@ def test_file_structure(written: tuple[LogData, Path]) -> None:
         assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
         assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == {"zstd"}
         topics = {c.topic: c for c in summary.channels.values()}
-        assert set(topics) == {"/tf_static", "/imu/data_raw", "/dvl/twist", "/dvl/data", "/ground_truth/odometry"}
+        assert set(topics) == {
+            "/tf_static",
+            "/imu/data_raw",
+            "/dvl/twist",
+            "/dvl/data",
+            "/ground_truth/odometry",
+        }
         for topic, ch in topics.items():
             (qos,) = parse_qos(ch.metadata["offered_qos_profiles"])
             assert qos.reliability.name == "RELIABLE"
-            assert qos.durability.name == ("TRANSIENT_LOCAL" if topic == "/tf_static" else "VOLATILE")
+            assert qos.durability.name == (
+                "TRANSIENT_LOCAL" if topic == "/tf_static" else "VOLATILE"
+            )
         schema = summary.schemas[topics["/imu/data_raw"].schema_id]
         assert schema.name == "sensor_msgs/msg/Imu"
         assert ("\n" + "=" * 80 + "\nMSG: std_msgs/msg/Header\n") in schema.data.decode()
@@ -115,7 +127,9 @@ def test_file_structure(written: tuple[LogData, Path]) -> None:
         first = {}
         seqs: dict[str, list[int]] = {}
         for _, channel, message in reader.iter_messages(log_time_order=False):
-            at = 8 if channel.topic == "/tf_static" else 4  # header.stamp after the CDR header (and count)
+            at = (
+                8 if channel.topic == "/tf_static" else 4
+            )  # header.stamp after the CDR header (and count)
             sec, nsec = struct.unpack_from("<iI", message.data, at)
             assert message.log_time == message.publish_time == sec * 10**9 + nsec
             first.setdefault(channel.topic, message.log_time)
@@ -133,11 +147,13 @@ def test_file_structure(written: tuple[LogData, Path]) -> None:
 
 def test_imu_and_twist_covariances(written: tuple[LogData, Path]) -> None:
     log, path = written
-    (_, imu), = read_topic(path, "/imu/data_raw")[:1]
+    ((_, imu),) = read_topic(path, "/imu/data_raw")[:1]
     rate_var = np.square(log.metadata["sensors"]["imu"]["gyro_noise_density"]) * 100.0
-    np.testing.assert_allclose(np.asarray(imu.angular_velocity_covariance)[[0, 4, 8]], rate_var, rtol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(imu.angular_velocity_covariance)[[0, 4, 8]], rate_var, rtol=1e-6
+    )
     assert imu.orientation_covariance[0] == -1.0
-    (_, tw), = read_topic(path, "/dvl/twist")[:1]
+    ((_, tw),) = read_topic(path, "/dvl/twist")[:1]
     cov = np.asarray(tw.twist.covariance).reshape(6, 6)
     np.testing.assert_array_equal(np.diag(cov)[3:], UNMEASURED_VARIANCE)
     np.testing.assert_array_equal(cov[:3, 3:], 0.0)
@@ -163,7 +179,12 @@ def test_generic_writer_round_trip(tmp_path: Path) -> None:
     t = np.arange(k) * 0.1
     q = rng.normal(size=(k, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
-    p, v, w, cov = rng.normal(size=(k, 3)), rng.normal(size=(k, 3)), rng.normal(size=(k, 3)), rng.normal(size=(k, 6, 6))
+    p, v, w, cov = (
+        rng.normal(size=(k, 3)),
+        rng.normal(size=(k, 3)),
+        rng.normal(size=(k, 3)),
+        rng.normal(size=(k, 6, 6)),
+    )
     path = tmp_path / "result.mcap"
     with McapLogWriter(path, t0_ns=T0_NS) as out:
         out.add_odometry("/gtsam_dvl/odometry", t, p, q, v, w, cov, 2 * cov)
@@ -178,11 +199,16 @@ def test_generic_writer_round_trip(tmp_path: Path) -> None:
     np.testing.assert_array_equal(ns(got[0], T0_NS), ns(t, T0_NS))
     for a, b in zip(got[1:], (p, q, v, w, cov, 2 * cov), strict=True):
         np.testing.assert_array_equal(a, b)
-    (_, path_msg), = read_topic(path, "/gtsam_dvl/path")
+    ((_, path_msg),) = read_topic(path, "/gtsam_dvl/path")
     assert len(path_msg.poses) == k and path_msg.header.frame_id == "map"
-    assert path_msg.poses[7].pose.position.y == p[7, 1] and path_msg.poses[7].pose.orientation.w == q[7, 3]
+    assert (
+        path_msg.poses[7].pose.position.y == p[7, 1]
+        and path_msg.poses[7].pose.orientation.w == q[7, 3]
+    )
     bias = read_topic(path, "/gtsam_dvl/imu_bias")
-    assert bias[3][1].accel.accel.linear.z == v[3, 2] and bias[3][1].accel.accel.angular.x == w[3, 0]
+    assert (
+        bias[3][1].accel.accel.linear.z == v[3, 2] and bias[3][1].accel.accel.angular.x == w[3, 0]
+    )
     assert list(bias[3][1].accel.covariance) == cov[3].ravel().tolist()
     pose = read_topic(path, "/gtsam_dvl/pose")
     assert pose[-1][1].pose.pose.position.x == p[-1, 0]

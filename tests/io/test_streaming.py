@@ -52,12 +52,14 @@ def test_pieces_are_the_chunks_and_add_up_to_the_bulk_read(written: tuple[LogDat
     imu = [p["/imu/data_raw"] for p in pieces if "/imu/data_raw" in p]
     assert sum(len(b) for b in imu) == len(bulk["/imu/data_raw"]) == 15_000
     assert bulk["/imu/data_raw"].fixed is not None
-    np.testing.assert_array_equal(np.concatenate([b.fixed for b in imu if b.fixed is not None]),
-                                  bulk["/imu/data_raw"].fixed)
+    np.testing.assert_array_equal(
+        np.concatenate([b.fixed for b in imu if b.fixed is not None]), bulk["/imu/data_raw"].fixed
+    )
 
 
-def test_streamed_read_decodes_what_was_written(written: tuple[LogData, Path], monkeypatch: pytest.MonkeyPatch
-                                                ) -> None:
+def test_streamed_read_decodes_what_was_written(
+    written: tuple[LogData, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     log, path = written
     got = read_log(path)
     np.testing.assert_array_equal(got.imu.t, log.imu.t)
@@ -73,10 +75,13 @@ def test_streamed_read_decodes_what_was_written(written: tuple[LogData, Path], m
     _same(read_log(path), got)
 
 
-def test_streamed_read_peak_memory_is_below_the_imu_bodies(written: tuple[LogData, Path],
-                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+def test_streamed_read_peak_memory_is_below_the_imu_bodies(
+    written: tuple[LogData, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     log, path = written
-    monkeypatch.setattr(scan, "MMAP_MIN_BYTES", 0)  # as for a large log: the file itself is mapped, not read
+    monkeypatch.setattr(
+        scan, "MMAP_MIN_BYTES", 0
+    )  # as for a large log: the file itself is mapped, not read
     src = open_source(path)
     bodies = src.read(["/imu/data_raw"])["/imu/data_raw"]
     assert bodies.fixed is not None
@@ -88,28 +93,41 @@ def test_streamed_read_peak_memory_is_below_the_imu_bodies(written: tuple[LogDat
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    out_bytes = got.imu.t.nbytes + got.imu.b_omega.nbytes + got.imu.b_f.nbytes  # 56 bytes per sample
+    out_bytes = (
+        got.imu.t.nbytes + got.imu.b_omega.nbytes + got.imu.b_f.nbytes
+    )  # 56 bytes per sample
     assert len(got.imu) == len(log.imu)
     # measured on this 150 s log: 4.4 MB, 0.9 x the IMU bodies (the output arrays, their decoded copies, one
     # 1 MiB chunk, the low-rate topics); the bulk read peaked at 16.0 MB, 3.3 x, and grew with the bodies
     assert peak < 1.5 * body_bytes, (peak, body_bytes, out_bytes)
 
 
-def test_db3_read_in_pages(tmp_path: Path, written: tuple[LogData, Path], monkeypatch: pytest.MonkeyPatch) -> None:
+def test_db3_read_in_pages(
+    tmp_path: Path, written: tuple[LogData, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A .db3 copy of the log (rosbag2's schema) read in pages of 1000 rows gives the MCAP's result."""
     _, path = written
     src = open_source(path)
     db = tmp_path / "log.db3"
     con = sqlite3.connect(db)
-    con.execute("CREATE TABLE topics (id INTEGER PRIMARY KEY, name TEXT, type TEXT, serialization_format TEXT, "
-                "offered_qos_profiles TEXT)")
-    con.execute("CREATE TABLE messages (id INTEGER PRIMARY KEY, topic_id INTEGER, timestamp INTEGER, data BLOB)")
+    con.execute(
+        "CREATE TABLE topics (id INTEGER PRIMARY KEY, name TEXT, type TEXT, serialization_format TEXT, "
+        "offered_qos_profiles TEXT)"
+    )
+    con.execute(
+        "CREATE TABLE messages (id INTEGER PRIMARY KEY, topic_id INTEGER, timestamp INTEGER, data BLOB)"
+    )
     bulk = src.read(TOPICS)
     for tid, topic in enumerate(TOPICS, 1):
-        con.execute("INSERT INTO topics VALUES (?, ?, ?, 'cdr', '')", (tid, topic, src.topics[topic].type_name))
+        con.execute(
+            "INSERT INTO topics VALUES (?, ?, ?, 'cdr', '')",
+            (tid, topic, src.topics[topic].type_name),
+        )
         b = bulk[topic]
-        con.executemany("INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)",
-                        [(tid, int(t), body) for t, body in zip(b.log_time.tolist(), b.items(), strict=True)])
+        con.executemany(
+            "INSERT INTO messages (topic_id, timestamp, data) VALUES (?, ?, ?)",
+            [(tid, int(t), body) for t, body in zip(b.log_time.tolist(), b.items(), strict=True)],
+        )
     con.commit()
     con.close()
     want = read_log(path)

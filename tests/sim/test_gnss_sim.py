@@ -25,20 +25,31 @@ LEVER = [0.3, -0.2, 0.6]
 def _raw(gnss: dict[str, Any] | None = None) -> dict[str, Any]:
     """At the surface (origin height 0) 60 s static, then away at 2 m/s, a dive to about 24 m, up again and on
     at the surface: 360 s."""
-    return scenario_raw(origin={"height_m": 0.0}, gnss=gnss, segments=[
-        {"kind": "static", "duration_s": 60.0},
-        {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
-        {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-        {"kind": "turn", "duration_s": 60.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
-        {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-        {"kind": "straight", "duration_s": 100.0},
-    ])
+    return scenario_raw(
+        origin={"height_m": 0.0},
+        gnss=gnss,
+        segments=[
+            {"kind": "static", "duration_s": 60.0},
+            {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 2.0},
+            {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+            {"kind": "turn", "duration_s": 60.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
+            {"kind": "ascent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
+            {"kind": "straight", "duration_s": 100.0},
+        ],
+    )
 
 
 @functools.cache
-def _log(seed: int, rate_hz: float = 10.0, origin_in_log: bool = True, white_noise: bool = True) -> LogData:
-    gnss = {"rate_hz": rate_hz, "horizontal_sigma_m": 1.5, "vertical_sigma_m": 3.0, "antenna_lever_arm_m": LEVER,
-            "origin_in_log": origin_in_log}
+def _log(
+    seed: int, rate_hz: float = 10.0, origin_in_log: bool = True, white_noise: bool = True
+) -> LogData:
+    gnss = {
+        "rate_hz": rate_hz,
+        "horizontal_sigma_m": 1.5,
+        "vertical_sigma_m": 3.0,
+        "antenna_lever_arm_m": LEVER,
+        "origin_in_log": origin_in_log,
+    }
     return simulate(scenario_from_dict(_raw(gnss), name="gnss-sim"), seed, white_noise=white_noise)
 
 
@@ -54,7 +65,9 @@ def _truth_antenna(log: LogData, t: np.ndarray) -> np.ndarray:
 def _fixes_in_map(log: LogData, frame: LocalFrame) -> np.ndarray:
     g = log.gnss
     assert g is not None
-    return np.asarray(frame.geodetic_to_map(np.radians(g.lat_deg), np.radians(g.lon_deg), g.height_m))
+    return np.asarray(
+        frame.geodetic_to_map(np.radians(g.lat_deg), np.radians(g.lon_deg), g.height_m)
+    )
 
 
 def test_fixes_match_the_antenna_within_the_stated_sigmas() -> None:
@@ -65,7 +78,9 @@ def test_fixes_match_the_antenna_within_the_stated_sigmas() -> None:
     err = _fixes_in_map(log, frame) - _truth_antenna(log, g.t)
     n = len(g)
     mean, std = err.mean(axis=0), err.std(axis=0, ddof=1)
-    print(f"\n{n} fixes; error mean {np.round(mean, 3)} m, std {np.round(std, 3)} m (stated 1.5, 1.5, 3.0)")
+    print(
+        f"\n{n} fixes; error mean {np.round(mean, 3)} m, std {np.round(std, 3)} m (stated 1.5, 1.5, 3.0)"
+    )
     sig = np.array([1.5, 1.5, 3.0])
     assert n > 1500
     assert np.all(np.abs(mean) < 4 * sig / np.sqrt(n))
@@ -89,10 +104,14 @@ def test_no_fixes_while_submerged() -> None:
     depth = -tr.n_p[:, 2]  # base_link below the surface (origin at height 0)
     at_fix = np.interp(g.t, tr.t, depth)
     surfaced = tr.t[depth < 0.5 - 1e-6]
-    print(f"\nfixes {len(g)} at depths up to {at_fix.max():.3f} m; truth deepest {depth.max():.1f} m; "
-          f"fix times {g.t[0]:.1f}-{g.t[-1]:.1f} s")
+    print(
+        f"\nfixes {len(g)} at depths up to {at_fix.max():.3f} m; truth deepest {depth.max():.1f} m; "
+        f"fix times {g.t[0]:.1f}-{g.t[-1]:.1f} s"
+    )
     assert at_fix.max() < 0.5 and depth.max() > 20.0
-    assert np.isin(np.round(surfaced * 10), np.round(g.t * 10)).all()  # every surfaced 0.1 s has its fix
+    assert np.isin(
+        np.round(surfaced * 10), np.round(g.t * 10)
+    ).all()  # every surfaced 0.1 s has its fix
     gap = np.diff(g.t).max()
     assert gap > 100.0  # the dive
     # a window: only fixes in [start_s, end_s]
@@ -102,8 +121,22 @@ def test_no_fixes_while_submerged() -> None:
 
 
 def test_same_seed_same_fixes_and_other_sensors_unchanged() -> None:
-    a, b = _log(5), simulate(scenario_from_dict(_raw({"rate_hz": 10.0, "horizontal_sigma_m": 1.5,
-                                                        "vertical_sigma_m": 3.0, "antenna_lever_arm_m": LEVER})), 5)
+    a, b = (
+        _log(5),
+        simulate(
+            scenario_from_dict(
+                _raw(
+                    {
+                        "rate_hz": 10.0,
+                        "horizontal_sigma_m": 1.5,
+                        "vertical_sigma_m": 3.0,
+                        "antenna_lever_arm_m": LEVER,
+                    }
+                )
+            ),
+            5,
+        ),
+    )
     assert a.gnss is not None and b.gnss is not None
     for name in ("t", "lat_deg", "lon_deg", "height_m", "cov_enu_m2", "status"):
         np.testing.assert_array_equal(getattr(a.gnss, name), getattr(b.gnss, name))
@@ -119,12 +152,18 @@ def test_same_seed_same_fixes_and_other_sensors_unchanged() -> None:
 def test_log_without_origin_has_its_truth_in_the_first_fix_frame() -> None:
     with_origin, without = _log(3), _log(3, origin_in_log=False)
     assert without.origin is None and "origin" not in without.metadata
-    assert with_origin.origin is not None and without.gnss is not None and with_origin.truth is not None
+    assert (
+        with_origin.origin is not None
+        and without.gnss is not None
+        and with_origin.truth is not None
+    )
     assert without.truth is not None
     g = without.gnss
     fix_frame = LocalFrame(float(g.lat_deg[0]), float(g.lon_deg[0]), float(g.height_m[0]))
     assert without.metadata["truth"]["map_origin"]["lat_deg"] == fix_frame.lat_deg
-    sc_frame = LocalFrame(with_origin.origin.lat_deg, with_origin.origin.lon_deg, with_origin.origin.height_m)
+    sc_frame = LocalFrame(
+        with_origin.origin.lat_deg, with_origin.origin.lon_deg, with_origin.origin.height_m
+    )
     # the same geodetic truth in both frames
     lat0, lon0, h0 = sc_frame.map_to_geodetic(with_origin.truth.n_p)
     lat1, lon1, h1 = fix_frame.map_to_geodetic(without.truth.n_p)
@@ -142,15 +181,18 @@ def test_log_without_origin_has_its_truth_in_the_first_fix_frame() -> None:
     np.testing.assert_allclose(without.truth.n_v, with_origin.truth.n_v, atol=1e-5)
 
 
-@pytest.mark.parametrize("table, key", [
-    ({"rate_hz": 3.0}, "gnss.rate_hz"),
-    ({"rate_hz": 0.0}, "gnss.rate_hz"),
-    ({"sigma_m": 1.0}, "gnss.sigma_m"),
-    ({"origin_in_log": "no"}, "gnss.origin_in_log"),
-    ({"antenna_lever_arm_m": [0, 1]}, "gnss.antenna_lever_arm_m"),
-    ({"start_s": 10.0, "end_s": 5.0}, "gnss.end_s"),
-    ({"vertical_sigma_m": -1.0}, "gnss.vertical_sigma_m"),
-])
+@pytest.mark.parametrize(
+    "table, key",
+    [
+        ({"rate_hz": 3.0}, "gnss.rate_hz"),
+        ({"rate_hz": 0.0}, "gnss.rate_hz"),
+        ({"sigma_m": 1.0}, "gnss.sigma_m"),
+        ({"origin_in_log": "no"}, "gnss.origin_in_log"),
+        ({"antenna_lever_arm_m": [0, 1]}, "gnss.antenna_lever_arm_m"),
+        ({"start_s": 10.0, "end_s": 5.0}, "gnss.end_s"),
+        ({"vertical_sigma_m": -1.0}, "gnss.vertical_sigma_m"),
+    ],
+)
 def test_bad_gnss_table_names_the_key(table: dict[str, Any], key: str) -> None:
     with pytest.raises(GtsamDvlError, match=key.replace(".", r"\.")):
         scenario_from_dict(_raw(table))

@@ -44,12 +44,19 @@ def golden_log(case: str) -> LogData:
     """60 s of the two underway scenarios (seed 3), and 45 s of paper-3d-short with the per-beam noise model,
     dropouts, outliers, depth and GNSS (seed 11): every random stream simulate() had."""
     if case == "beams-depth-gnss":
-        raw = scenario_raw(rates={"dvl_hz": 2.0}, segments=[
-            {"kind": "static", "duration_s": 5.0}, {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 1.5},
-            {"kind": "turn", "duration_s": 20.0, "heading_change_deg": 90.0, "bank_deg": 10.0}],
+        raw = scenario_raw(
+            rates={"dvl_hz": 2.0},
+            segments=[
+                {"kind": "static", "duration_s": 5.0},
+                {"kind": "level", "duration_s": 20.0, "speed_end_m_s": 1.5},
+                {"kind": "turn", "duration_s": 20.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
+            ],
             depth={"rate_hz": 5.0, "noise_m": 0.05, "bias_m": 0.1},
-            gnss={"rate_hz": 1.0, "max_depth_m": 1000.0})
-        raw["dvl"].update(noise_model="beam", dropout_ping_prob=0.05, dropout_beam_prob=0.1, outlier_prob=0.05)
+            gnss={"rate_hz": 1.0, "max_depth_m": 1000.0},
+        )
+        raw["dvl"].update(
+            noise_model="beam", dropout_ping_prob=0.05, dropout_beam_prob=0.1, outlier_prob=0.05
+        )
         return simulate(scenario_from_dict(raw, case), 11)
     raw = copy.deepcopy(load_scenario(case).raw)
     raw["segments"] = [{**raw["segments"][0], "duration_s": 60.0}]
@@ -79,8 +86,12 @@ def log_digest(log: LogData) -> str:
     h.update(repr(log.true_calibration).encode())
     return h.hexdigest()[:16]
 
-GOLDEN = {"straight-transect": "d31830f66eadbb4b", "steady-turn": "819fd22ad5684185",
-          "beams-depth-gnss": "932b6faea398b107"}
+
+GOLDEN = {
+    "straight-transect": "d31830f66eadbb4b",
+    "steady-turn": "819fd22ad5684185",
+    "beams-depth-gnss": "932b6faea398b107",
+}
 
 
 @pytest.mark.parametrize("case", GOLDEN_CASES)
@@ -120,22 +131,41 @@ def test_scenario_states_the_issues_settings(name: str) -> None:
     assert (sc.rates.imu_hz, sc.rates.dvl_hz, sc.rates.dvl_time_offset_s) == (100.0, 1.0, 1.0)
     assert sc.imu.quantisation_gyro_rad_s == 1e-4 and sc.imu.quantisation_accel_m_s2 == 1e-4
     d = sc.dvl
-    assert (d.noise_m_s, d.stated_noise_m_s, d.constant_error_sigma_m_s) == (WHITE_M_S, STATED_M_S, CONSTANT_M_S)
+    assert (d.noise_m_s, d.stated_noise_m_s, d.constant_error_sigma_m_s) == (
+        WHITE_M_S,
+        STATED_M_S,
+        CONSTANT_M_S,
+    )
     assert d.correlated_sigma_m_s == GM_M_S and 30.0 <= d.correlated_tau_s <= 120.0
     # drawn from the estimators' default prior: mean scale 1 and the nominal mounting, the default sigmas
     prior = PriorConfig()
-    assert (d.scale, d.misalignment_deg, sc.mounting.dvl_rpy_deg) == (1.0, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert (d.scale, d.misalignment_deg, sc.mounting.dvl_rpy_deg) == (
+        1.0,
+        (0.0, 0.0, 0.0),
+        (0.0, 0.0, 0.0),
+    )
     assert d.draw_scale_sigma == prior.scale_sigma
     assert tuple(d.draw_misalignment_sigma_deg) == tuple(prior.misalignment_sigma_deg)  # type: ignore[arg-type]
     cfg, defaults = sc.estimator_configuration(), EstimatorConfig()
-    assert cfg.alignment.initial_attitude_deg == (0.0, 0.0, sc.initial.yaw_deg) and sc.oscillation is not None
-    assert cfg.dvl == defaults.dvl and cfg.priors.scale_sigma == prior.scale_sigma  # the 0 +- 0.5 s offset prior
-    assert (cfg.dvl.estimate_time_offset, cfg.dvl.time_offset_prior_s, cfg.dvl.time_offset_sigma_s) == (True, 0, 0.5)
+    assert (
+        cfg.alignment.initial_attitude_deg == (0.0, 0.0, sc.initial.yaw_deg)
+        and sc.oscillation is not None
+    )
+    assert (
+        cfg.dvl == defaults.dvl and cfg.priors.scale_sigma == prior.scale_sigma
+    )  # the 0 +- 0.5 s offset prior
+    assert (
+        cfg.dvl.estimate_time_offset,
+        cfg.dvl.time_offset_prior_s,
+        cfg.dvl.time_offset_sigma_s,
+    ) == (True, 0, 0.5)
 
 
 def test_messages_state_20_mm_s_and_survive_the_mcap(tmp_path: Path) -> None:
     log = simulate(_shortened("realistic-straight", 30.0), 2)
-    assert np.array_equal(log.dvl.d_cov, np.broadcast_to(STATED_M_S**2 * np.eye(3), log.dvl.d_cov.shape))
+    assert np.array_equal(
+        log.dvl.d_cov, np.broadcast_to(STATED_M_S**2 * np.eye(3), log.dvl.d_cov.shape)
+    )
     write_log(tmp_path / "log.mcap", log)
     back = read_log(tmp_path / "log.mcap")
     np.testing.assert_allclose(back.dvl.d_cov, log.dvl.d_cov, rtol=1e-12)
@@ -174,7 +204,9 @@ def test_error_averaged_over_30_to_60_s_is_a_few_mm_s(block_s: int) -> None:
     rms = float(np.sqrt(np.mean(np.concatenate(means) ** 2)))
     model = np.sqrt(CONSTANT_M_S**2 + _mean_var(GM_M_S, GM_TAU_S, block_s) + WHITE_M_S**2 / block_s)
     white = WHITE_M_S / np.sqrt(block_s)
-    print(f"{block_s} s means: RMS {1e3 * rms:.2f} mm/s, model {1e3 * model:.2f}, white alone {1e3 * white:.2f}")
+    print(
+        f"{block_s} s means: RMS {1e3 * rms:.2f} mm/s, model {1e3 * model:.2f}, white alone {1e3 * white:.2f}"
+    )
     assert abs(rms / model - 1.0) < 0.2 and rms > 3.0 * white
 
 
@@ -189,8 +221,12 @@ def test_drawn_calibrations_have_the_default_priors_mean_and_spread() -> None:
         c = log.true_calibration
         assert c is not None and log.metadata["truth"]["dvl"]["scale"] == c.scale
         assert log.metadata["sensors"]["dvl"]["scale"] == 1.0  # the draw's mean
-        cal.append([(c.scale - 1.0) / prior.scale_sigma,
-                    *(np.degrees(so3_log(c.R_c)) / np.asarray(prior.misalignment_sigma_deg))])
+        cal.append(
+            [
+                (c.scale - 1.0) / prior.scale_sigma,
+                *(np.degrees(so3_log(c.R_c)) / np.asarray(prior.misalignment_sigma_deg)),
+            ]
+        )
     z = np.array(cal)
     print("mean", z.mean(axis=0), "std", z.std(axis=0, ddof=1))
     assert np.all(np.abs(z.mean(axis=0)) < 3.5 / np.sqrt(len(z)))
@@ -222,9 +258,16 @@ def test_chunked_simulation_is_simulate_bit_for_bit() -> None:
     assert log_digest(simulate_chunked(sc, 5, chunk_s=7.7)) == log_digest(simulate(sc, 5))
 
 
-@pytest.mark.parametrize(("key", "value"), [
-    ("stated_noise_m_s", -0.01), ("constant_error_sigma_m_s", -1.0), ("draw_scale_sigma", 0.5),
-    ("draw_misalignment_sigma_deg", [1.0, -1.0, 1.0]), ("draw_misalignment_sigma_deg", "1 deg")])
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [
+        ("stated_noise_m_s", -0.01),
+        ("constant_error_sigma_m_s", -1.0),
+        ("draw_scale_sigma", 0.5),
+        ("draw_misalignment_sigma_deg", [1.0, -1.0, 1.0]),
+        ("draw_misalignment_sigma_deg", "1 deg"),
+    ],
+)
 def test_bad_dvl_keys_raise_one_line_naming_the_key(key: str, value: Any) -> None:
     raw = copy.deepcopy(load_scenario("realistic-straight").raw)
     raw["dvl"][key] = value

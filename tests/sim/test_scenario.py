@@ -9,8 +9,15 @@ import pytest
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.sim.scenario import list_builtin_scenarios, load_scenario, scenario_from_dict
 
-TABLE1_3D = [(0, 600, "-"), (600, 660, "I"), (660, 720, "I"), (720, 750, "I"), (750, 1970, "I+II"),
-             (1970, 2000, "I"), (2000, 2060, "I")]
+TABLE1_3D = [
+    (0, 600, "-"),
+    (600, 660, "I"),
+    (660, 720, "I"),
+    (720, 750, "I"),
+    (750, 1970, "I+II"),
+    (1970, 2000, "I"),
+    (2000, 2060, "I"),
+]
 TABLE1_2D = [(0, 600, "-"), (600, 800, "I"), (800, 2040, "I+II")]
 DATA = Path(__file__).resolve().parents[2] / "data" / "scenarios"
 
@@ -78,13 +85,21 @@ def _write(tmp_path: Path, text: str) -> Path:
         (lambda s: s + "\n[dvl]\nnoise_sigma = 0.02\n", "dvl.noise_sigma"),
         (lambda s: s.replace('kind = "static"', 'kind = "loop"'), "segments[0].kind"),
         (lambda s: s.replace("duration_s = 10.0", "duration_s = -1.0"), "segments[0].duration_s"),
-        (lambda s: s + '\n[[segments]]\nkind = "turn"\nduration_s = 5.0\n', "segments[1].heading_change_deg"),
+        (
+            lambda s: s + '\n[[segments]]\nkind = "turn"\nduration_s = 5.0\n',
+            "segments[1].heading_change_deg",
+        ),
         (lambda s: s + "\n[rates]\ntruth_hz = 7.0\n", "rates.truth_hz"),
         (lambda s: s + '\n[dvl]\nnoise_model = "magic"\n', "dvl.noise_model"),
         (lambda s: s + "\n[mounting]\ndvl_rpy_deg = [0.0, 180.0]\n", "mounting.dvl_rpy_deg"),
         (lambda s: s.split("[[segments]]")[0], "segments"),
-        (lambda s: s + '\n[[segments]]\nkind = "level"\nduration_s = 5.0\nspeed_end_m_s = 1.0\n'
-                       '\n[[segments]]\nkind = "static"\nduration_s = 5.0\n', "segments[2]"),
+        (
+            lambda s: (
+                s + '\n[[segments]]\nkind = "level"\nduration_s = 5.0\nspeed_end_m_s = 1.0\n'
+                '\n[[segments]]\nkind = "static"\nduration_s = 5.0\n'
+            ),
+            "segments[2]",
+        ),
     ],
 )
 def test_bad_files_raise_one_line_naming_file_and_key(tmp_path: Path, edit, key: str) -> None:  # noqa: ANN001
@@ -107,13 +122,28 @@ def test_invalid_toml_and_missing_file(tmp_path: Path) -> None:
 def test_minimal_file_defaults(tmp_path: Path) -> None:
     sc = load_scenario(_write(tmp_path, MINIMAL))
     assert sc.name == "bad" and sc.duration_s == 10.0
-    assert sc.rates.imu_hz == 100.0 and sc.dvl.scale == 1.0 and sc.mounting.dvl_rpy_deg == (0.0, 0.0, 0.0)
+    assert (
+        sc.rates.imu_hz == 100.0
+        and sc.dvl.scale == 1.0
+        and sc.mounting.dvl_rpy_deg == (0.0, 0.0, 0.0)
+    )
     assert sc.t0_ns == 1_700_000_000 * 10**9
 
 
 def test_square_expands_to_its_duration() -> None:
-    raw = {"origin": {"lat_deg": 0.0, "lon_deg": 0.0}, "initial": {"speed_m_s": 1.0},
-           "segments": [{"kind": "square", "leg_duration_s": 10.0, "turn_duration_s": 5.0, "sides": 3,
-                         "direction": "right", "bank_deg": 10.0}]}
+    raw = {
+        "origin": {"lat_deg": 0.0, "lon_deg": 0.0},
+        "initial": {"speed_m_s": 1.0},
+        "segments": [
+            {
+                "kind": "square",
+                "leg_duration_s": 10.0,
+                "turn_duration_s": 5.0,
+                "sides": 3,
+                "direction": "right",
+                "bank_deg": 10.0,
+            }
+        ],
+    }
     sc = scenario_from_dict(raw)
     assert sc.segment_table() == [{"start_s": 0.0, "end_s": 45.0, "kind": "square", "type": "I+II"}]

@@ -30,7 +30,9 @@ Q_ACCEL = 1e-4  # m/s^2, one step for all three
 
 def _raw(duration_s: float = 200.0, **tables: Any) -> dict[str, Any]:
     """straight-transect (oscillating, quantised, correlated DVL error) shortened to duration_s, tables updated."""
-    raw = scenario_raw("straight-transect", segments=[{"kind": "straight", "duration_s": duration_s}])
+    raw = scenario_raw(
+        "straight-transect", segments=[{"kind": "straight", "duration_s": duration_s}]
+    )
     raw["imu"].update(quantisation_gyro_rad_s=list(Q_GYRO), quantisation_accel_m_s2=Q_ACCEL)
     for key, value in tables.items():
         if value is None:
@@ -41,7 +43,9 @@ def _raw(duration_s: float = 200.0, **tables: Any) -> dict[str, Any]:
 
 
 def _sim(raw: dict[str, Any], seed: int = 4, white_noise: bool = True) -> LogData:
-    return simulate(scenario_from_dict(copy.deepcopy(raw), name="errors"), seed, white_noise=white_noise)
+    return simulate(
+        scenario_from_dict(copy.deepcopy(raw), name="errors"), seed, white_noise=white_noise
+    )
 
 
 def _unquantised(raw: dict[str, Any]) -> dict[str, Any]:
@@ -62,10 +66,14 @@ def test_logged_imu_samples_are_multiples_of_the_step_of_each_axis() -> None:
     for x, q in ((log.imu.b_omega, np.array(Q_GYRO)), (log.imu.b_f, np.full(3, Q_ACCEL))):
         steps = x / q
         off = np.abs(steps - np.round(steps)).max(axis=0)
-        print(f"steps {q}: largest distance from a multiple {off} steps; distinct values per axis "
-              f"{[len(np.unique(x[:, i])) for i in range(3)]}")
+        print(
+            f"steps {q}: largest distance from a multiple {off} steps; distinct values per axis "
+            f"{[len(np.unique(x[:, i])) for i in range(3)]}"
+        )
         assert np.all(off < 1e-6)
-        assert all(len(np.unique(x[:, i])) > 20 for i in range(3))  # the outputs move across many steps
+        assert all(
+            len(np.unique(x[:, i])) > 20 for i in range(3)
+        )  # the outputs move across many steps
     raw = _raw(60.0)
     raw["imu"]["quantisation_accel_m_s2"] = [Q_ACCEL, 0.0, Q_ACCEL]  # 0: that axis is not quantised
     y = _sim(raw).imu.b_f[:, 1]
@@ -74,7 +82,9 @@ def test_logged_imu_samples_are_multiples_of_the_step_of_each_axis() -> None:
 
 def test_quantise_rounds_to_the_nearest_multiple() -> None:
     x = np.array([[0.24e-4, -0.56e-4, 1.0], [1.49e-4, 2.51e-4, -3.0]])
-    np.testing.assert_allclose(quantise(x, (1e-4, 1e-4, 0.0)), [[0.0, -1e-4, 1.0], [1e-4, 3e-4, -3.0]], atol=1e-18)
+    np.testing.assert_allclose(
+        quantise(x, (1e-4, 1e-4, 0.0)), [[0.0, -1e-4, 1.0], [1e-4, 3e-4, -3.0]], atol=1e-18
+    )
     assert quantise(x, 0.0) is x
 
 
@@ -98,14 +108,25 @@ def test_rounding_error_is_white_while_oscillating_and_not_at_a_constant_rate() 
     ratio = err.std(axis=0) / (q / np.sqrt(12.0))
     lag1 = _lag_corr(err, 1)
     mean_ratio = _mean_rms_ratio(err, q)
-    print(f"oscillating: std / (q/sqrt(12)) gyro {np.round(ratio[:3], 3)} accel {np.round(ratio[3:], 3)}; lag-1 "
-          f"correlation {np.round(lag1, 3)}; 1 s means / white {np.round(mean_ratio, 2)}")
+    print(
+        f"oscillating: std / (q/sqrt(12)) gyro {np.round(ratio[:3], 3)} accel {np.round(ratio[3:], 3)}; lag-1 "
+        f"correlation {np.round(lag1, 3)}; 1 s means / white {np.round(mean_ratio, 2)}"
+    )
     assert np.all(np.abs(ratio - 1.0) < 0.05)
     assert np.all(np.abs(lag1) < 0.15)
     assert np.all((mean_ratio > 0.7) & (mean_ratio < 1.3))  # 200 means: +-5 % sampling (1 sigma)
 
-    slow = _raw(200.0)  # the slow motions without the vibration: pitch and yaw rates move 0.1-0.2 steps a sample
-    for key in ("roll_deg", "roll_period_s", "pitch_deg", "pitch_period_s", "yaw_deg", "yaw_period_s"):
+    slow = _raw(
+        200.0
+    )  # the slow motions without the vibration: pitch and yaw rates move 0.1-0.2 steps a sample
+    for key in (
+        "roll_deg",
+        "roll_period_s",
+        "pitch_deg",
+        "pitch_period_s",
+        "yaw_deg",
+        "yaw_period_s",
+    ):
         slow["oscillation"][key] = slow["oscillation"][key][0]
     e, f = _sim(slow), _sim(_unquantised(slow))
     lag1_slow = _lag_corr(e.imu.b_omega - f.imu.b_omega, 1)
@@ -116,8 +137,10 @@ def test_rounding_error_is_white_while_oscillating_and_not_at_a_constant_rate() 
     c, d = _sim(still), _sim(_unquantised(still))
     err_still = c.imu.b_omega - d.imu.b_omega
     mean_still = _mean_rms_ratio(err_still, np.array(Q_GYRO))
-    print(f"constant rate: gyro rounding error mean {np.round(err_still.mean(axis=0) / np.array(Q_GYRO), 2)} steps "
-          f"({np.round(err_still.mean(axis=0) / DEG_PER_H, 1)} deg/h), 1 s means / white {np.round(mean_still, 1)}")
+    print(
+        f"constant rate: gyro rounding error mean {np.round(err_still.mean(axis=0) / np.array(Q_GYRO), 2)} steps "
+        f"({np.round(err_still.mean(axis=0) / DEG_PER_H, 1)} deg/h), 1 s means / white {np.round(mean_still, 1)}"
+    )
     assert np.sum(mean_still > 3.0) >= 2  # the error does not average out
 
 
@@ -127,8 +150,10 @@ def test_gauss_markov_std_and_autocorrelation_over_a_long_series() -> None:
     x = GaussMarkov(sigma, tau, dt, np.random.default_rng(3)).take(n)
     lag = int(tau / dt)
     rho = _lag_corr(x, lag)
-    print(f"std {x.std(axis=0) * 1e3} mm/s (sigma {sigma * 1e3}); correlation at lag tau {np.round(rho, 4)} "
-          f"(exp(-1) = {np.exp(-1):.4f}); at 5 tau {np.round(_lag_corr(x, 5 * lag), 4)}")
+    print(
+        f"std {x.std(axis=0) * 1e3} mm/s (sigma {sigma * 1e3}); correlation at lag tau {np.round(rho, 4)} "
+        f"(exp(-1) = {np.exp(-1):.4f}); at 5 tau {np.round(_lag_corr(x, 5 * lag), 4)}"
+    )
     assert np.all(np.abs(x.std(axis=0) / sigma - 1.0) < 0.10)
     assert np.all(np.abs(rho - np.exp(-1.0)) < 0.03)  # the estimate's sampling sigma is 0.008
     assert np.all(np.abs(_lag_corr(x, 5 * lag)) < 0.05)  # exp(-5) = 0.007
@@ -136,9 +161,13 @@ def test_gauss_markov_std_and_autocorrelation_over_a_long_series() -> None:
 
 def test_gauss_markov_starts_stationary_and_continues_across_calls() -> None:
     sigma = 0.002
-    first = np.array([GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(s)).take(1)[0] for s in range(3000)])
+    first = np.array(
+        [GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(s)).take(1)[0] for s in range(3000)]
+    )
     print(f"first-ping std over 3000 runs {first.std(axis=0) * 1e3} mm/s")
-    assert np.all(np.abs(first.std(axis=0) / sigma - 1.0) < 0.05)  # 9000 draws: 0.75 % sampling sigma
+    assert np.all(
+        np.abs(first.std(axis=0) / sigma - 1.0) < 0.05
+    )  # 9000 draws: 0.75 % sampling sigma
     whole = GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(9)).take(50)
     gm = GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(9))
     parts = np.vstack([gm.take(1), gm.take(0), gm.take(20), gm.take(29)])
@@ -155,17 +184,23 @@ def test_correlated_error_is_its_own_stream_and_only_moves_the_dvl_velocity() ->
     sc = scenario_from_dict(copy.deepcopy(raw))
     gm = correlated_error(sc.dvl, sc.rates.dvl_hz, 8)
     assert gm is not None
-    np.testing.assert_allclose(on_log.dvl.d_v - off_log.dvl.d_v, gm.take(len(on_log.dvl)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        on_log.dvl.d_v - off_log.dvl.d_v, gm.take(len(on_log.dvl)), rtol=0, atol=1e-15
+    )
     for name in ("b_omega", "b_f"):
         assert np.array_equal(getattr(on_log.imu, name), getattr(off_log.imu, name))
     assert on_log.truth is not None and off_log.truth is not None
     assert np.array_equal(on_log.truth.n_p, off_log.truth.n_p)
     assert np.array_equal(on_log.dvl.valid, off_log.dvl.valid)
     assert on_log.metadata["sensors"]["dvl"]["correlated_sigma_m_s"] == 0.002
-    assert "correlated_sigma_m_s" not in off_log.metadata["sensors"]["dvl"]  # off: the metadata of before
+    assert (
+        "correlated_sigma_m_s" not in off_log.metadata["sensors"]["dvl"]
+    )  # off: the metadata of before
     clean = _sim(raw, seed=8, white_noise=False)  # white_noise=False: no random error at all
     assert clean.truth is not None
-    np.testing.assert_allclose(np.linalg.norm(clean.dvl.d_v, axis=1), 1.9, atol=0.03)  # the truth's speed
+    np.testing.assert_allclose(
+        np.linalg.norm(clean.dvl.d_v, axis=1), 1.9, atol=0.03
+    )  # the truth's speed
 
 
 @pytest.mark.parametrize("name", ["paper-3d-short", "field-survey"])
@@ -180,8 +215,11 @@ def test_scenarios_without_the_new_errors_keep_their_numbers(name: str) -> None:
     for part in ("imu", "dvl", "truth"):
         for f in ("t", "b_omega", "b_f", "d_v", "n_p", "n_q_b"):
             if hasattr(getattr(base, part), f):
-                assert np.array_equal(getattr(getattr(base, part), f), getattr(getattr(again, part), f),
-                                      equal_nan=True), (part, f)
+                assert np.array_equal(
+                    getattr(getattr(base, part), f),
+                    getattr(getattr(again, part), f),
+                    equal_nan=True,
+                ), (part, f)
     assert base.metadata["sensors"] == again.metadata["sensors"]
 
 
@@ -189,8 +227,10 @@ def test_chunked_simulation_matches_with_the_new_errors() -> None:
     """sim/stream.py continues the quantisation, the Gauss-Markov error, the oscillation and an arc chunk by chunk:
     its log is simulate()'s bit for bit, with chunks of one ping."""
     raw = _raw(30.0)
-    raw["segments"] = [{"kind": "arc", "duration_s": 15.0, "turn_rate_deg_s": 2.0},
-                       {"kind": "straight", "duration_s": 15.0}]
+    raw["segments"] = [
+        {"kind": "arc", "duration_s": 15.0, "turn_rate_deg_s": 2.0},
+        {"kind": "straight", "duration_s": 15.0},
+    ]
     sc = scenario_from_dict(raw, name="errors")
     ref = simulate(sc, 2)
     for chunk_s in (0.7, 11.0):
@@ -203,14 +243,20 @@ def test_chunked_simulation_matches_with_the_new_errors() -> None:
 
 
 # ----- oscillation and arc: one trajectory for the truth and the sensors ---------------------------------------
-@pytest.mark.parametrize(("label", "t_start"), [("oscillating arc", 5.0), ("arc end to straight", 30.0)])
-def test_strapdown_reproduces_the_truth_through_oscillation_and_arcs(label: str, t_start: float) -> None:
+@pytest.mark.parametrize(
+    ("label", "t_start"), [("oscillating arc", 5.0), ("arc end to straight", 30.0)]
+)
+def test_strapdown_reproduces_the_truth_through_oscillation_and_arcs(
+    label: str, t_start: float
+) -> None:
     """An independent strapdown integration of the noise-free, unquantised IMU follows the truth through the
     oscillation, a steady turn and its end (the turn rate steps at an IMU stamp): the truth includes the motion
     the IMU measures (test_sim_physics.py's bounds: 1 % of the white-noise drift)."""
     raw = _unquantised(_raw())
-    raw["segments"] = [{"kind": "arc", "duration_s": 60.0, "turn_rate_deg_s": 0.57},
-                       {"kind": "straight", "duration_s": 40.0}]
+    raw["segments"] = [
+        {"kind": "arc", "duration_s": 60.0, "turn_rate_deg_s": 0.57},
+        {"kind": "straight", "duration_s": 40.0},
+    ]
     sc = scenario_from_dict(raw, name="osc-arc")
     log = simulate(sc, 1, white_noise=False)
     _check_window(log, sc.local_frame(), label, t_start, T=45.0)
@@ -230,7 +276,9 @@ def test_bad_error_and_oscillation_keys_are_one_line_errors() -> None:
     ):
         raw = _raw(10.0)
         raw[table][key] = value
-        with pytest.raises(GtsamDvlError, match=re.escape(f"key '{table}.{key}'") + ".*" + re.escape(text)) as exc:
+        with pytest.raises(
+            GtsamDvlError, match=re.escape(f"key '{table}.{key}'") + ".*" + re.escape(text)
+        ) as exc:
             scenario_from_dict(raw, source="x.toml")
         assert "\n" not in str(exc.value)
 
@@ -250,8 +298,12 @@ def test_dvl_preset_fills_what_the_scenario_does_not_set() -> None:
     spec = scenario_from_dict(raw).dvl
     assert spec.noise_m_s == p.ping_noise_m_s and spec.max_range_m == p.max_altitude_m
     assert spec.correlated_sigma_m_s == p.correlated_sigma_m_s > 0 and spec.scale == 1.003
-    explicit = scenario_from_dict(scenario_raw(dvl={"model": "teledyne-pathfinder", "noise_m_s": 0.004})).dvl
+    explicit = scenario_from_dict(
+        scenario_raw(dvl={"model": "teledyne-pathfinder", "noise_m_s": 0.004})
+    ).dvl
     assert explicit.noise_m_s == 0.004
-    with pytest.raises(GtsamDvlError, match="'nortek-x' is not one of .*teledyne-pathfinder") as err:
+    with pytest.raises(
+        GtsamDvlError, match="'nortek-x' is not one of .*teledyne-pathfinder"
+    ) as err:
         scenario_from_dict(scenario_raw(dvl={"model": "nortek-x"}))
     assert "\n" not in str(err.value)

@@ -30,16 +30,24 @@ def _small(variant: str) -> Scenario:
     the map origin from the first fix (origin_in_log = false);
     "water": "field" in a sheared, varying current over a seafloor that the descent brings into bottom-track range
     and the ascent takes out of it (water-track pings before and after)."""
-    raw = scenario_raw(rates={"dvl_hz": 2.0}, segments=[
-        {"kind": "static", "duration_s": 5.0},
-        {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
-        {"kind": "descent", "duration_s": 10.0, "peak_vertical_speed_m_s": 0.3},
-        {"kind": "turn", "duration_s": 10.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
-        {"kind": "ascent", "duration_s": 10.0, "peak_vertical_speed_m_s": 0.3},
-    ], depth={"rate_hz": 5.0, "noise_m": 0.05, "bias_m": 0.1, "lever_arm_m": [0.1, 0.0, 0.2]})
+    raw = scenario_raw(
+        rates={"dvl_hz": 2.0},
+        segments=[
+            {"kind": "static", "duration_s": 5.0},
+            {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
+            {"kind": "descent", "duration_s": 10.0, "peak_vertical_speed_m_s": 0.3},
+            {"kind": "turn", "duration_s": 10.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
+            {"kind": "ascent", "duration_s": 10.0, "peak_vertical_speed_m_s": 0.3},
+        ],
+        depth={"rate_hz": 5.0, "noise_m": 0.05, "bias_m": 0.1, "lever_arm_m": [0.1, 0.0, 0.2]},
+    )
     if variant == "beam":
-        raw["dvl"].update(noise_model="beam", dropout_ping_prob=0.05, dropout_beam_prob=0.1, outlier_prob=0.05)
-        raw["imu"].update(gyro_bias_walk_deg_per_h_per_sqrt_h=0.01, accel_bias_walk_micro_g_per_sqrt_h=20.0)
+        raw["dvl"].update(
+            noise_model="beam", dropout_ping_prob=0.05, dropout_beam_prob=0.1, outlier_prob=0.05
+        )
+        raw["imu"].update(
+            gyro_bias_walk_deg_per_h_per_sqrt_h=0.01, accel_bias_walk_micro_g_per_sqrt_h=20.0
+        )
         raw["rates"]["dvl_time_offset_s"] = -0.25
         raw["gnss"] = {"rate_hz": 1.0, "max_depth_m": 1000.0, "start_s": 3.0}
     else:
@@ -48,11 +56,18 @@ def _small(variant: str) -> Scenario:
         raw["mounting"] = {"dvl_rpy_deg": [180.0, 0.0, 0.0], "dvl_lever_arm_m": [0.5, 0.0, -0.2]}
         raw["dvl"]["face_axis"] = [0.0, 0.0, 1.0]
         raw["gnss"] = {"rate_hz": 1.0, "max_depth_m": 1000.0, "origin_in_log": False}
-    if variant == "water":  # the start 100 m down, the descent 1.4 m: lock from its middle to the ascent's middle
+    if (
+        variant == "water"
+    ):  # the start 100 m down, the descent 1.4 m: lock from its middle to the ascent's middle
         raw["dvl"]["bottom_range_m"] = 20.0
         raw["seafloor"] = {"depth_m": 100.0 + 20.0 + 0.7}
-        raw["current"] = {"surface_m_s": [0.4, 0.2], "reference_m_s": [0.1, -0.2], "reference_depth_m": 200.0,
-                          "variation_m_s": [0.05, 0.05], "variation_period_s": 30.0}
+        raw["current"] = {
+            "surface_m_s": [0.4, 0.2],
+            "reference_m_s": [0.1, -0.2],
+            "reference_depth_m": 200.0,
+            "variation_m_s": [0.05, 0.05],
+            "variation_period_s": 30.0,
+        }
     return scenario_from_dict(raw, f"small-{variant}")
 
 
@@ -85,25 +100,41 @@ def _assert_same_log(a: LogData, b: LogData, fields: tuple[str, ...] = ("source"
         assert getattr(a, f) == getattr(b, f), f
 
 
-@pytest.mark.parametrize(("variant", "chunk_s"), [("beam", 7.7), pytest.param("beam", 0.13, marks=pytest.mark.slow),
-                                                  pytest.param("field", 0.37, marks=pytest.mark.slow), ("field", 60.0),
-                                                  ("water", 0.37), ("water", 7.7)])
+@pytest.mark.parametrize(
+    ("variant", "chunk_s"),
+    [
+        ("beam", 7.7),
+        pytest.param("beam", 0.13, marks=pytest.mark.slow),
+        pytest.param("field", 0.37, marks=pytest.mark.slow),
+        ("field", 60.0),
+        ("water", 0.37),
+        ("water", 7.7),
+    ],
+)
 def test_chunked_log_is_simulate_bit_for_bit(variant: str, chunk_s: float) -> None:
     """0.13 s and 0.37 s chunks hold zero or one ping, depth sample and candidate fix, and one or a few truth
     stamps (the single-row paths); 60 s is one chunk for the whole run."""
     sc = _small(variant)
     ref = simulate(sc, 11)
     assert ref.gnss is not None and ref.dvl.beams is not None
-    assert len(ref.gnss) > 10 and np.any(~ref.dvl.valid) and np.any(~ref.dvl.beams.valid)  # the streams are there
+    assert (
+        len(ref.gnss) > 10 and np.any(~ref.dvl.valid) and np.any(~ref.dvl.beams.valid)
+    )  # the streams are there
     if variant == "water":
-        assert ref.dvl.water_track is not None and ref.truth is not None and ref.truth.n_c is not None
+        assert (
+            ref.dvl.water_track is not None and ref.truth is not None and ref.truth.n_c is not None
+        )
         assert 0 < ref.dvl.water_track.sum() < len(ref.dvl) - 10
     _assert_same_log(simulate_chunked(sc, 11, chunk_s=chunk_s), ref)
 
 
 @pytest.mark.slow
-def test_chunked_paper3d_without_white_noise(sim_paper3d: Scenario, sim_paper3d_clean: LogData) -> None:
-    _assert_same_log(simulate_chunked(sim_paper3d, 7, white_noise=False, chunk_s=600.0), sim_paper3d_clean)
+def test_chunked_paper3d_without_white_noise(
+    sim_paper3d: Scenario, sim_paper3d_clean: LogData
+) -> None:
+    _assert_same_log(
+        simulate_chunked(sim_paper3d, 7, white_noise=False, chunk_s=600.0), sim_paper3d_clean
+    )
 
 
 @pytest.mark.slow
@@ -130,7 +161,11 @@ def test_streamed_file_is_write_log_file(tmp_path: Path) -> None:
         _assert_same_log(b, a, ())  # all but the source: the file names differ
         assert a.depth is not None and a.gnss is not None and a.truth is not None
         assert len(a.depth) == counts["depth"] and len(a.gnss) == counts["gnss"] > 0
-        assert (len(a.imu), len(a.dvl), len(a.truth)) == (counts["imu"], counts["dvl"], counts["truth"])
+        assert (len(a.imu), len(a.dvl), len(a.truth)) == (
+            counts["imu"],
+            counts["dvl"],
+            counts["truth"],
+        )
         assert len(a.imu) == 4501 and len(a.truth) == 451
     again = tmp_path / "again.mcap"
     write_log_stream(again, ChunkedSimulation(sc, 5, chunk_s=10.0))
@@ -147,7 +182,9 @@ def test_streamed_water_log_is_write_log_file(tmp_path: Path) -> None:
     write_log_stream(path, ChunkedSimulation(sc, 5, chunk_s=7.7))
     assert path.read_bytes() == ref_path.read_bytes()
     back = read_log(path)
-    assert back.dvl.water_track is not None and back.truth is not None and back.truth.n_c is not None
+    assert (
+        back.dvl.water_track is not None and back.truth is not None and back.truth.n_c is not None
+    )
 
 
 def test_parts_are_chunks() -> None:
@@ -178,7 +215,9 @@ def test_stream_writer_refuses_a_part_before_next_t(tmp_path: Path) -> None:
     (p0, next_t), (p1, _) = list(sim.parts())[:2]
     path = tmp_path / "x.mcap"
     with pytest.raises(GtsamDvlError, match="before the previous part's next_t"):
-        with LogStreamWriter(path, sim.head, t_first=sim.t_first, imu_rate_hz=imu_rate_hz(sim.imu_stamps())) as w:
+        with LogStreamWriter(
+            path, sim.head, t_first=sim.t_first, imu_rate_hz=imu_rate_hz(sim.imu_stamps())
+        ) as w:
             w.write(p0, next_t)
             w.write(p0, next_t)
     assert not path.exists() and not list(tmp_path.iterdir())  # nothing left behind
@@ -197,7 +236,9 @@ def test_bad_chunk_and_no_fix() -> None:
     assert str(chunked.value) == str(whole.value)
 
 
-def test_cli_simulate_streams_long_scenarios(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_cli_simulate_streams_long_scenarios(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """`gtsam-dvl simulate` (commands.simulate_to_file) chunks runs above STREAM_ABOVE_SAMPLES: the same file and
     the same summary as the in-memory path."""
     from gtsam_dvl.app import commands
@@ -206,8 +247,14 @@ def test_cli_simulate_streams_long_scenarios(tmp_path: Path, monkeypatch: pytest
     results = []
     for limit, name in ((10**12, "whole.mcap"), (0, "chunked.mcap")):
         monkeypatch.setattr(commands, "STREAM_ABOVE_SAMPLES", limit)
-        results.append(commands.simulate_to_file("small", tmp_path / name, seed=4, show_progress=False))
+        results.append(
+            commands.simulate_to_file("small", tmp_path / name, seed=4, show_progress=False)
+        )
     whole, chunked = results
     assert chunked.path.read_bytes() == whole.path.read_bytes()
-    assert (chunked.duration_s, chunked.n_imu, chunked.n_dvl) == (whole.duration_s, whole.n_imu, whole.n_dvl)
+    assert (chunked.duration_s, chunked.n_imu, chunked.n_dvl) == (
+        whole.duration_s,
+        whole.n_imu,
+        whole.n_dvl,
+    )
     assert chunked.distance_m == pytest.approx(whole.distance_m, rel=1e-12)

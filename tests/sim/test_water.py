@@ -18,8 +18,10 @@ from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 from tests.support.scenarios import WATER_DIVE, water_dive_raw
 
-CURRENT, LEVER_M, MIS_DEG, RANGE_M, SCALE, SEAFLOOR_M = (WATER_DIVE[k] for k in (
-    "current", "lever_m", "misalignment_deg", "bottom_range_m", "scale", "seafloor_m"))
+CURRENT, LEVER_M, MIS_DEG, RANGE_M, SCALE, SEAFLOOR_M = (
+    WATER_DIVE[k]
+    for k in ("current", "lever_m", "misalignment_deg", "bottom_range_m", "scale", "seafloor_m")
+)
 
 
 @pytest.fixture(scope="module")
@@ -33,8 +35,14 @@ def _at_pings(log: LogData) -> dict[str, np.ndarray]:
     i = np.searchsorted(log.truth.t, log.dvl.t - 1e-9)
     assert np.allclose(log.truth.t[i], log.dvl.t, atol=1e-9)
     t = log.truth
-    return {"n_p": t.n_p[i], "n_R_b": Rotation.from_quat(t.n_q_b[i]).as_matrix(), "n_v": t.n_v[i],
-            "n_c": t.n_c[i], "b_omega": t.b_omega[i], "t": t.t[i]}
+    return {
+        "n_p": t.n_p[i],
+        "n_R_b": Rotation.from_quat(t.n_q_b[i]).as_matrix(),
+        "n_v": t.n_v[i],
+        "n_c": t.n_c[i],
+        "b_omega": t.b_omega[i],
+        "t": t.t[i],
+    }
 
 
 def _model(log: LogData, water: bool) -> np.ndarray:
@@ -56,16 +64,24 @@ def _dvl_depth(log: LogData) -> np.ndarray:
 def test_current_truth_is_the_profile(clean: LogData) -> None:
     truth = clean.truth
     assert truth is not None and truth.n_c is not None
-    assert clean.origin is not None and clean.origin.height_m == 0.0  # the map's origin at the surface
-    depth = -LocalFrame(clean.origin.lat_deg, clean.origin.lon_deg, 0.0).map_to_geodetic(truth.n_p)[2]
+    assert (
+        clean.origin is not None and clean.origin.height_m == 0.0
+    )  # the map's origin at the surface
+    depth = -LocalFrame(clean.origin.lat_deg, clean.origin.lon_deg, 0.0).map_to_geodetic(truth.n_p)[
+        2
+    ]
     assert depth.max() > 18.0
     s, r = np.array(CURRENT["surface_m_s"]), np.array(CURRENT["reference_m_s"])
     w = np.minimum(np.maximum(depth, 0.0) / CURRENT["reference_depth_m"], 1.0)
-    tide = np.outer(np.sin(2 * np.pi * truth.t / CURRENT["variation_period_s"]), CURRENT["variation_m_s"])
+    tide = np.outer(
+        np.sin(2 * np.pi * truth.t / CURRENT["variation_period_s"]), CURRENT["variation_m_s"]
+    )
     expected = (1 - w)[:, None] * s + w[:, None] * r + tide
     assert np.abs(truth.n_c[:, :2] - expected).max() < 1e-9  # the geodetic round trip's nanometres
     assert np.all(truth.n_c[:, 2] == 0.0)
-    deep = depth > CURRENT["reference_depth_m"] + 0.01  # constant in depth below the reference depth
+    deep = (
+        depth > CURRENT["reference_depth_m"] + 0.01
+    )  # constant in depth below the reference depth
     assert deep.sum() > 50 and np.allclose(truth.n_c[deep, :2] - tide[deep], r, atol=1e-12)
 
 
@@ -114,7 +130,13 @@ def test_water_track_noise_is_its_own(noise_model: str) -> None:
         # the per-axis sigma the covariance states, whitened: unit variance within the sample's spread
         z = err / np.sqrt(np.einsum("kii->ki", log.dvl.d_cov[mask]))
         n = z.size
-        print(noise_model, water, n, z.std(), np.sqrt(np.einsum("kii->ki", log.dvl.d_cov[mask])).mean())
+        print(
+            noise_model,
+            water,
+            n,
+            z.std(),
+            np.sqrt(np.einsum("kii->ki", log.dvl.d_cov[mask])).mean(),
+        )
         assert abs(z.std() - 1.0) < 4.0 / np.sqrt(2 * n) and abs(z.mean()) < 4.0 / np.sqrt(n)
         if noise_model == "velocity":
             assert np.allclose(log.dvl.d_cov[mask], sigma**2 * np.eye(3))
@@ -136,13 +158,16 @@ def test_without_seafloor_the_dvl_is_as_before() -> None:
     assert "bottom_range_m" not in plain.metadata["sensors"]["dvl"]
 
 
-@pytest.mark.parametrize(("table", "value", "key"), [
-    ("current", {"surface_m_s": [0.1, 0.2, 0.0]}, "current.surface_m_s"),
-    ("current", {"reference_depth_m": 0.0}, "current.reference_depth_m"),
-    ("current", {"speed": 1.0}, "current.speed"),
-    ("seafloor", {}, "seafloor.depth_m"),
-    ("seafloor", {"depth_m": -5.0}, "seafloor.depth_m"),
-])
+@pytest.mark.parametrize(
+    ("table", "value", "key"),
+    [
+        ("current", {"surface_m_s": [0.1, 0.2, 0.0]}, "current.surface_m_s"),
+        ("current", {"reference_depth_m": 0.0}, "current.reference_depth_m"),
+        ("current", {"speed": 1.0}, "current.speed"),
+        ("seafloor", {}, "seafloor.depth_m"),
+        ("seafloor", {"depth_m": -5.0}, "seafloor.depth_m"),
+    ],
+)
 def test_bad_tables_fail_in_one_line(table: str, value: dict[str, Any], key: str) -> None:
     raw = water_dive_raw()
     raw[table] = value
@@ -159,7 +184,11 @@ def test_bottom_range_defaults_to_the_presets_altitude() -> None:
     sc = scenario_from_dict(raw)
     from gtsam_dvl.core.config.presets import DVL_PRESETS
 
-    assert sc.dvl.bottom_range_m == DVL_PRESETS["teledyne-workhorse-navigator-300"].max_altitude_m == sc.dvl.max_range_m
+    assert (
+        sc.dvl.bottom_range_m
+        == DVL_PRESETS["teledyne-workhorse-navigator-300"].max_altitude_m
+        == sc.dvl.max_range_m
+    )
 
 
 def test_deep_descent_timeline() -> None:
@@ -169,7 +198,12 @@ def test_deep_descent_timeline() -> None:
     assert 25 * 60 <= sc.duration_s <= 35 * 60 and sc.origin.height_m == 0.0 and sc.gnss is not None
     log = simulate(sc, 1, white_noise=False)
     truth, dvl, gnss = log.truth, log.dvl, log.gnss
-    assert truth is not None and truth.n_c is not None and dvl.water_track is not None and gnss is not None
+    assert (
+        truth is not None
+        and truth.n_c is not None
+        and dvl.water_track is not None
+        and gnss is not None
+    )
     depth_m = -truth.n_p[:, 2]  # within 0.4 m of the depth (the map's curvature over 2 km)
     assert abs(depth_m[0]) < 1e-9 and abs(depth_m[-1]) < 0.5 and 299.5 < depth_m.max() < 300.5
     speed = np.linalg.norm(truth.n_c, axis=1)
@@ -177,8 +211,16 @@ def test_deep_descent_timeline() -> None:
     changes = dvl.t[1:][np.diff(dvl.water_track.astype(int)) != 0]
     assert len(changes) == 2 and dvl.water_track[0] and dvl.water_track[-1]
     descent, ascent = (s for s in sc.segments if s.kind in ("descent", "ascent"))
-    assert descent.start_s < changes[0] < descent.end_s and ascent.start_s < changes[1] < ascent.end_s
+    assert (
+        descent.start_s < changes[0] < descent.end_s and ascent.start_s < changes[1] < ascent.end_s
+    )
     depth = np.interp(changes, truth.t, depth_m)
     assert np.all(np.abs(depth - (sc.seafloor.depth_m - sc.dvl.bottom_range_m)) < 1.0)  # type: ignore[union-attr]
-    assert gnss.t[0] == 0.0 and gnss.t[-1] == sc.duration_s and not np.any((gnss.t > 300) & (gnss.t < 1800))
-    print(f"lock {changes[0]:.0f}-{changes[1]:.0f} s at {depth.round(1)} m; {dvl.water_track.sum()} water pings")
+    assert (
+        gnss.t[0] == 0.0
+        and gnss.t[-1] == sc.duration_s
+        and not np.any((gnss.t > 300) & (gnss.t < 1800))
+    )
+    print(
+        f"lock {changes[0]:.0f}-{changes[1]:.0f} s at {depth.round(1)} m; {dvl.water_track.sum()} water pings"
+    )

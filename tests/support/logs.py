@@ -25,8 +25,14 @@ def rows(data: Samples, keep: np.ndarray) -> Samples:
     return dataclasses.replace(data, **changes)
 
 
-def cut_log(log: LogData, t_end: float = np.inf, *, t_start: float = -np.inf, beams: bool = True,
-            cut_truth: bool = True) -> LogData:
+def cut_log(
+    log: LogData,
+    t_end: float = np.inf,
+    *,
+    t_start: float = -np.inf,
+    beams: bool = True,
+    cut_truth: bool = True,
+) -> LogData:
     """The log's IMU, DVL and truth samples stamped in [t_start, t_end] (times kept): the DVL without its beams
     unless beams, the truth whole unless cut_truth; the other streams (depth, GNSS, attitude) as they are."""
 

@@ -26,8 +26,12 @@ class Made:
         return sum(r() is not None for r in self.refs)
 
 
-def track_returns(monkeypatch: pytest.MonkeyPatch, owner: type, name: str,
-                  part: Callable[[Any], Any] = lambda out: out) -> Made:
+def track_returns(
+    monkeypatch: pytest.MonkeyPatch,
+    owner: type,
+    name: str,
+    part: Callable[[Any], Any] = lambda out: out,
+) -> Made:
     """Patch the method owner.name (for the test's duration) to keep a weak reference to part(what it returns)."""
     made = Made()
     original = getattr(owner, name)

@@ -31,10 +31,15 @@ def without_pings(log: LogData, start: float, stop: float) -> LogData:
     d, b = log.dvl, log.dvl.beams
     keep = ~((d.t >= start) & (d.t < stop))
     log.dvl = dataclasses.replace(
-        d, t=d.t[keep], d_v=d.d_v[keep], d_cov=d.d_cov[keep], valid=d.valid[keep],
+        d,
+        t=d.t[keep],
+        d_v=d.d_v[keep],
+        d_cov=d.d_cov[keep],
+        valid=d.valid[keep],
         beams=None if b is None else BeamData(b.d_u[keep], b.v[keep], b.range[keep], b.valid[keep]),
         water_track=None if d.water_track is None else d.water_track[keep],
-        altitude=None if d.altitude is None else d.altitude[keep])
+        altitude=None if d.altitude is None else d.altitude[keep],
+    )
     return log
 
 
@@ -48,22 +53,32 @@ def config_toml(log: LogData, extra: str = "") -> str:
     """The estimator configuration of the node and of the reference run: the paper's (noise as stated: a node has
     no whole log to take it from), the log's origin, water track refused (a node's "auto" uses it)."""
     assert log.origin is not None
-    return (f'preset = "paper"\n[alignment]\norigin_lat_deg = {log.origin.lat_deg!r}\n'
-            f"origin_lon_deg = {log.origin.lon_deg!r}\norigin_height_m = {log.origin.height_m!r}\n"
-            f'[online]\nalign_s = 35.0\n[current]\nwater_track = "refuse"\n{extra}')
+    return (
+        f'preset = "paper"\n[alignment]\norigin_lat_deg = {log.origin.lat_deg!r}\n'
+        f"origin_lon_deg = {log.origin.lon_deg!r}\norigin_height_m = {log.origin.height_m!r}\n"
+        f'[online]\nalign_s = 35.0\n[current]\nwater_track = "refuse"\n{extra}'
+    )
 
 
 def params_yaml(**settings: Any) -> str:
     """A ROS parameter file for every node (/**) with these settings (nested dicts: sub-tables)."""
+
     def lines(d: dict[str, Any], indent: int) -> list[str]:
         out = []
         for k, v in d.items():
             if isinstance(v, dict):
                 out += [" " * indent + f"{k}:", *lines(v, indent + 2)]
             else:
-                value = f'"{v}"' if isinstance(v, str) else str(v).lower() if isinstance(v, bool) else repr(v)
+                value = (
+                    f'"{v}"'
+                    if isinstance(v, str)
+                    else str(v).lower()
+                    if isinstance(v, bool)
+                    else repr(v)
+                )
                 out.append(" " * indent + f"{k}: {value}")
         return out
+
     return "\n".join(["/**:", "  ros__parameters:", *lines(settings, 4)]) + "\n"
 
 
@@ -82,7 +97,9 @@ def cli(*args: str | Path) -> list[str]:
     return [sys.executable, "-c", "from gtsam_dvl.app.cli import main; main()", *map(str, args)]
 
 
-def sigma_distance(p: np.ndarray, ref: np.ndarray, n_R_b: np.ndarray, pose_cov: np.ndarray) -> float:
+def sigma_distance(
+    p: np.ndarray, ref: np.ndarray, n_R_b: np.ndarray, pose_cov: np.ndarray
+) -> float:
     """The largest per-axis difference (map axes) of position p from the reference ref, in the reference's sigmas
     (its GTSAM pose covariance turned into map axes: io/ros2/covariance.py)."""
     sig = np.sqrt(np.diag(ros_pose_covariance(n_R_b, pose_cov))[:3])

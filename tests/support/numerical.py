@@ -36,8 +36,12 @@ def perturb(x: Any, d: np.ndarray) -> Any:
     return arr + d.reshape(arr.shape)
 
 
-def numerical_jacobian(f: Callable[..., Any], args: Sequence[Any], index: int,
-                       delta: float | Sequence[float] | np.ndarray = 1e-6) -> np.ndarray:
+def numerical_jacobian(
+    f: Callable[..., Any],
+    args: Sequence[Any],
+    index: int,
+    delta: float | Sequence[float] | np.ndarray = 1e-6,
+) -> np.ndarray:
     """d f(args) / d args[index] (rows: f's output, columns: the argument's tangent), central differences with
     step delta: one for every tangent component, or one per component (states of different units)."""
     args = list(args)
@@ -58,12 +62,16 @@ def numerical_jacobian(f: Callable[..., Any], args: Sequence[Any], index: int,
     return np.stack(columns, axis=1)
 
 
-def numerical_jacobians(f: Callable[..., Any], args: Sequence[Any], delta: float = 1e-6) -> list[np.ndarray]:
+def numerical_jacobians(
+    f: Callable[..., Any], args: Sequence[Any], delta: float = 1e-6
+) -> list[np.ndarray]:
     """[d f / d args[i] for every i]: one block per argument, in order."""
     return [numerical_jacobian(f, args, i, delta) for i in range(len(args))]
 
 
-def gauss_markov(n: int, dt: float, sigma: float, tau: float, rng: np.random.Generator) -> np.ndarray:
+def gauss_markov(
+    n: int, dt: float, sigma: float, tau: float, rng: np.random.Generator
+) -> np.ndarray:
     """n samples at dt of a stationary first-order Gauss-Markov process (sigma, time constant tau), exactly
     discretised."""
     phi = np.exp(-dt / tau)

@@ -11,7 +11,7 @@ import functools
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch import smooth_batch
+from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario

@@ -7,7 +7,9 @@ import numpy as np
 from gtsam_dvl.core.result import NavResult
 
 
-def changes_in_sigmas(a: NavResult, b: NavResult, *, final_position: bool = False) -> dict[str, np.ndarray]:
+def changes_in_sigmas(
+    a: NavResult, b: NavResult, *, final_position: bool = False
+) -> dict[str, np.ndarray]:
     """(a - b) / b's sigma for the final calibration: scale, misalignment (deg), accelerometer bias (micro-g),
     gyro bias (deg/h), and with final_position the final position (m, map axes)."""
     out = {

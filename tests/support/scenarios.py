@@ -24,14 +24,21 @@ def scenario_raw(base: str = SHORT, **tables: Any) -> dict[str, Any]:
     for key, value in tables.items():
         if value is None:
             continue
-        raw[key] = {**raw[key], **value} if isinstance(value, dict) and key in raw else copy.deepcopy(value)
+        raw[key] = (
+            {**raw[key], **value}
+            if isinstance(value, dict) and key in raw
+            else copy.deepcopy(value)
+        )
     return raw
 
 
-def simulate_variant(seed: int, base: str = SHORT, *, name: str = "custom", white_noise: bool = True,
-                     **tables: Any) -> LogData:
+def simulate_variant(
+    seed: int, base: str = SHORT, *, name: str = "custom", white_noise: bool = True, **tables: Any
+) -> LogData:
     """scenario_raw(base, **tables) simulated with seed (the scenario named name)."""
-    return simulate(scenario_from_dict(scenario_raw(base, **tables), name=name), seed, white_noise=white_noise)
+    return simulate(
+        scenario_from_dict(scenario_raw(base, **tables), name=name), seed, white_noise=white_noise
+    )
 
 
 def surface_dive_raw(segments: list[dict[str, Any]], **tables: Any) -> dict[str, Any]:
@@ -45,9 +52,15 @@ def surface_dive_raw(segments: list[dict[str, Any]], **tables: Any) -> dict[str,
 
 # the water dive's settings, for tests that check its pings against the model
 WATER_DIVE: dict[str, Any] = {
-    "seafloor_m": 30.0, "bottom_range_m": 20.0,  # lock from 10 m down
-    "current": {"surface_m_s": [0.45, 0.1], "reference_m_s": [-0.1, 0.2], "reference_depth_m": 15.0,
-                "variation_m_s": [0.05, -0.03], "variation_period_s": 80.0},
+    "seafloor_m": 30.0,
+    "bottom_range_m": 20.0,  # lock from 10 m down
+    "current": {
+        "surface_m_s": [0.45, 0.1],
+        "reference_m_s": [-0.1, 0.2],
+        "reference_depth_m": 15.0,
+        "variation_m_s": [0.05, -0.03],
+        "variation_period_s": 80.0,
+    },
     "lever_m": np.array([0.6, 0.1, -0.3]),
     "misalignment_deg": (0.3, -0.2, 0.5),  # roll, pitch, yaw of R_c
     "scale": 1.002,
@@ -59,15 +72,25 @@ def water_dive_raw(noise_model: str = "velocity", **dvl: Any) -> dict[str, Any]:
     in a sheared, varying current over a seafloor 30 m down: water track to 10 m, bottom lock below, water track
     again. dvl: [dvl] keys set over these."""
     w = WATER_DIVE
-    raw = surface_dive_raw([
-        {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
-        {"kind": "descent", "duration_s": 40.0, "peak_vertical_speed_m_s": 1.0},
-        {"kind": "turn", "duration_s": 20.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
-        {"kind": "ascent", "duration_s": 40.0, "peak_vertical_speed_m_s": 1.0},
-    ], rates={"dvl_hz": 2.0}, mounting={"dvl_rpy_deg": [180.0, 0.0, 0.0], "dvl_lever_arm_m": w["lever_m"].tolist()})
+    raw = surface_dive_raw(
+        [
+            {"kind": "level", "duration_s": 10.0, "speed_end_m_s": 1.5},
+            {"kind": "descent", "duration_s": 40.0, "peak_vertical_speed_m_s": 1.0},
+            {"kind": "turn", "duration_s": 20.0, "heading_change_deg": 90.0, "bank_deg": 10.0},
+            {"kind": "ascent", "duration_s": 40.0, "peak_vertical_speed_m_s": 1.0},
+        ],
+        rates={"dvl_hz": 2.0},
+        mounting={"dvl_rpy_deg": [180.0, 0.0, 0.0], "dvl_lever_arm_m": w["lever_m"].tolist()},
+    )
     raw["initial"]["speed_m_s"] = 0.5
-    raw["dvl"].update(face_axis=[0.0, 0.0, 1.0], scale=w["scale"], misalignment_deg=list(w["misalignment_deg"]),
-                      bottom_range_m=w["bottom_range_m"], noise_model=noise_model, **dvl)
+    raw["dvl"].update(
+        face_axis=[0.0, 0.0, 1.0],
+        scale=w["scale"],
+        misalignment_deg=list(w["misalignment_deg"]),
+        bottom_range_m=w["bottom_range_m"],
+        noise_model=noise_model,
+        **dvl,
+    )
     raw["seafloor"] = {"depth_m": w["seafloor_m"]}
     raw["current"] = copy.deepcopy(w["current"])
     return raw

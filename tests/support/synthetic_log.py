@@ -25,7 +25,9 @@ from gtsam_dvl.core.types import (
 T0_NS = 1_700_000_123_000_000_000
 
 
-def make_log(duration: float = 60.0, seed: int = 0, beams: bool = True, truth: bool = True) -> LogData:
+def make_log(
+    duration: float = 60.0, seed: int = 0, beams: bool = True, truth: bool = True
+) -> LogData:
     """Random but realistic: 100 Hz IMU, 1 Hz DVL with 4 beams (some invalid pings/beams), 10 Hz truth."""
     rng = np.random.default_rng(seed)
     n, m, k = int(round(duration * 100)), int(duration), int(duration * 10)
@@ -50,19 +52,34 @@ def make_log(duration: float = 60.0, seed: int = 0, beams: bool = True, truth: b
     truth_data = None
     if truth:
         q = Rotation.from_rotvec(rng.normal(0, 0.3, (k, 3))).as_quat()
-        truth_data = TruthData(np.arange(k) / 10.0, rng.normal(0, 100, (k, 3)), q, rng.normal(0, 2, (k, 3)),
-                               rng.normal(0, 0.05, (k, 3)))
-    mounting = Mounting(b_R_d0=rpy_deg_to_matrix([180.0, 0.0, 45.0]), b_p_dvl=np.array([0.5, 0.0, -0.3]))
+        truth_data = TruthData(
+            np.arange(k) / 10.0,
+            rng.normal(0, 100, (k, 3)),
+            q,
+            rng.normal(0, 2, (k, 3)),
+            rng.normal(0, 0.05, (k, 3)),
+        )
+    mounting = Mounting(
+        b_R_d0=rpy_deg_to_matrix([180.0, 0.0, 45.0]), b_p_dvl=np.array([0.5, 0.0, -0.3])
+    )
     meta = {
         "scenario": "unit-test",
         "seed": seed,
-        "sensors": {"imu": {"gyro_noise_density": 4.8e-7, "accel_noise_density": 9.8e-5}, "dvl": {"sigma": 0.02}},
+        "sensors": {
+            "imu": {"gyro_noise_density": 4.8e-7, "accel_noise_density": 9.8e-5},
+            "dvl": {"sigma": 0.02},
+        },
     }
     typed: dict[str, Any] = {}
     if truth:
-        typed = {"origin": GeoOrigin(30.0, 114.0, -100.0),
-                 "true_calibration": DvlCalibration(0.9998, (-0.1, 0.2, -0.5)),
-                 "true_imu_bias": ImuBiases((4e-4, -3e-4, 2e-4), (5e-8, -4e-8, 3e-8)),
-                 "segments": [Segment(0.0, 10.0, "static"), Segment(10.0, 40.0, "level", "I"),
-                              Segment(40.0, 60.0, "turn", "II")]}
+        typed = {
+            "origin": GeoOrigin(30.0, 114.0, -100.0),
+            "true_calibration": DvlCalibration(0.9998, (-0.1, 0.2, -0.5)),
+            "true_imu_bias": ImuBiases((4e-4, -3e-4, 2e-4), (5e-8, -4e-8, 3e-8)),
+            "segments": [
+                Segment(0.0, 10.0, "static"),
+                Segment(10.0, 40.0, "level", "I"),
+                Segment(40.0, 60.0, "turn", "II"),
+            ],
+        }
     return LogData(imu, dvl, mounting, truth_data, t0_ns=T0_NS, metadata=meta, **typed)

@@ -1,6 +1,7 @@
 """`gtsam-dvl calibrate LOG... -o calib.toml`: one vehicle calibration from several dives, on Dask.
 
-Each dive is a chain of Dask tasks on one worker (estimators/multi_dive.py has the method): the first reads the log
+Each dive is a chain of Dask tasks on one worker (estimators/batch/multi_dive.py has the method): the first reads the
+log
 and smooths it alone (prepare_dive) and returns the dive's DiveState, which stays in that worker's memory; every
 joint iteration then submits, per dive, a task on that future that linearises the dive and eliminates its own
 variables (reduce_dive: only the small reduction comes back) and, once the client has solved for the shared step,
@@ -29,7 +30,7 @@ from gtsam_dvl.core.calibration import SourceLog, VehicleCalibration, config_has
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import misalignment_rpy_and_cov
-from gtsam_dvl.estimators.multi_dive import (
+from gtsam_dvl.estimators.batch.multi_dive import (
     TOL,
     DiveState,
     DiveSummary,
@@ -51,15 +52,19 @@ def _error_text(exc: BaseException) -> str:
 
 # ----- the tasks (module level: Dask ships them by reference) -------------------------------------------------
 
+
 def prepare_task(log_path: str, config_path: str | None, read_options: dict[str, Any]) -> DiveState:
-    """Read a log and prepare its dive (estimators/multi_dive.py prepare_dive) with the configuration given, or
+    """Read a log and prepare its dive (estimators/batch/multi_dive.py prepare_dive) with the configuration given, or
     the one the log's scenario names, as `smooth` chooses it."""
     from gtsam_dvl.app.commands import load_log
     from gtsam_dvl.core.config import estimator_overrides
 
     log = load_log(log_path, **read_options)
-    config = (EstimatorConfig.load(Path(config_path), under=estimator_overrides(log.metadata)) if config_path
-              else EstimatorConfig.for_log(log.metadata))
+    config = (
+        EstimatorConfig.load(Path(config_path), under=estimator_overrides(log.metadata))
+        if config_path
+        else EstimatorConfig.for_log(log.metadata)
+    )
     return prepare_dive(log, config, name=log_path)
 
 
@@ -83,6 +88,7 @@ def advance_task(dive: DiveState, ds: np.ndarray, values: dict[str, np.ndarray])
 
 # ----- where the dives run ----------------------------------------------------------------------------------
 
+
 @dataclass
 class DiveFailure:
     """A dive left out: its log and its error line."""
@@ -94,8 +100,13 @@ class DiveFailure:
 class LocalDives:
     """The dives in this process."""
 
-    def __init__(self, logs: list[str], config_path: str | None, read_options: dict[str, Any],
-                 failures: list[DiveFailure]) -> None:
+    def __init__(
+        self,
+        logs: list[str],
+        config_path: str | None,
+        read_options: dict[str, Any],
+        failures: list[DiveFailure],
+    ) -> None:
         self.failures = failures
         self.dives: list[DiveState] = []
         for p in logs:
@@ -139,12 +150,21 @@ class LocalDives:
 class DaskDives:
     """The dives as Dask futures, each pinned to the worker that holds its DiveState (module doc)."""
 
-    def __init__(self, client: Any, logs: list[str], config_path: str | None, read_options: dict[str, Any],
-                 failures: list[DiveFailure], progress: Any = None) -> None:
+    def __init__(
+        self,
+        client: Any,
+        logs: list[str],
+        config_path: str | None,
+        read_options: dict[str, Any],
+        failures: list[DiveFailure],
+        progress: Any = None,
+    ) -> None:
         from dask.distributed import as_completed
 
         self.client, self.failures = client, failures
-        futures = {client.submit(prepare_task, p, config_path, read_options, pure=False): p for p in logs}
+        futures = {
+            client.submit(prepare_task, p, config_path, read_options, pure=False): p for p in logs
+        }
         done: dict[str, Any] = {}
         for k, fut in enumerate(as_completed(list(futures)), start=1):
             if fut.status == "error":
@@ -155,10 +175,14 @@ class DaskDives:
                 progress(k / len(futures))
         where = client.who_has(list(done.values()))
         # (log, future, worker) in the order the logs were given
-        self.entries: list[tuple[str, Any, str]] = [(p, done[p], where[done[p].key][0]) for p in logs if p in done]
+        self.entries: list[tuple[str, Any, str]] = [
+            (p, done[p], where[done[p].key][0]) for p in logs if p in done
+        ]
 
     def _submit(self, func: Any, fut: Any, worker: str, *args: Any) -> Any:
-        return self.client.submit(func, fut, *args, workers=[worker], allow_other_workers=False, pure=False)
+        return self.client.submit(
+            func, fut, *args, workers=[worker], allow_other_workers=False, pure=False
+        )
 
     def summaries(self) -> list[DiveSummary]:
         return self.client.gather([self._submit(summary_task, f, w) for _, f, w in self.entries])
@@ -182,13 +206,16 @@ class DaskDives:
         return out
 
     def advance_all(self, ds: np.ndarray, values: dict[str, np.ndarray]) -> None:
-        self.entries = [(p, self._submit(advance_task, f, w, ds, values), w) for p, f, w in self.entries]
+        self.entries = [
+            (p, self._submit(advance_task, f, w, ds, values), w) for p, f, w in self.entries
+        ]
 
     def names(self) -> list[str]:
         return [p for p, _, _ in self.entries]
 
 
 # ----- the command ------------------------------------------------------------------------------------------
+
 
 @dataclass
 class CalibrateOutcome:
@@ -208,17 +235,22 @@ class CalibrateOutcome:
         lines = fleet_table(self)
         if self.solution is not None:
             h = self.solution.history
-            lines.append(f"\n{len(self.dives)} dives, {self.solution.iterations} joint iterations "
-                         f"({'converged' if self.solution.converged else 'NOT converged'}: last step "
-                         f"{h[-1]['step_sigma']:.2g} sigma), {self.engine}, {self.timing_s.get('total', 0):.1f} s")
+            lines.append(
+                f"\n{len(self.dives)} dives, {self.solution.iterations} joint iterations "
+                f"({'converged' if self.solution.converged else 'NOT converged'}: last step "
+                f"{h[-1]['step_sigma']:.2g} sigma), {self.engine}, {self.timing_s.get('total', 0):.1f} s"
+            )
         for f in self.failures:
-            lines.append(f"left out: {f.error if f.error.startswith(f.log) else f'{f.log}: {f.error}'}")
+            lines.append(
+                f"left out: {f.error if f.error.startswith(f.log) else f'{f.log}: {f.error}'}"
+            )
         lines += [f"wrote {p}" for p in self.written]
         return "\n".join(lines)
 
 
-def run_dives(dives: LocalDives | DaskDives, tol: float = TOL
-              ) -> tuple[JointSolution | None, list[DiveSummary], dict[str, float]]:
+def run_dives(
+    dives: LocalDives | DaskDives, tol: float = TOL
+) -> tuple[JointSolution | None, list[DiveSummary], dict[str, float]]:
     """The joint iterations over prepared dives (in-process or on Dask)."""
     t0 = time.perf_counter()
     summaries = dives.summaries()
@@ -231,11 +263,20 @@ def run_dives(dives: LocalDives | DaskDives, tol: float = TOL
     return solution, [s for s in summaries if s.name in kept], {"joint": time.perf_counter() - t0}
 
 
-def calibrate_logs(logs: list[Path], output: Path | None = None, config_path: Path | None = None,
-                   read_options: dict[str, Any] | None = None, scheduler: str | None = None,
-                   workers: int | None = None, vehicle: str = "vehicle", out_dir: Path | None = None,
-                   tol: float = TOL, show_progress: bool = True, client: Any = None,
-                   scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S) -> CalibrateOutcome:
+def calibrate_logs(
+    logs: list[Path],
+    output: Path | None = None,
+    config_path: Path | None = None,
+    read_options: dict[str, Any] | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    vehicle: str = "vehicle",
+    out_dir: Path | None = None,
+    tol: float = TOL,
+    show_progress: bool = True,
+    client: Any = None,
+    scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
+) -> CalibrateOutcome:
     """`gtsam-dvl calibrate`: the dives' joint calibration written to `output` (io/calibration_file.py), the
     per-dive table and figure to out_dir (calibration-fleet.md, .json, .png). On Dask (a LocalCluster of
     `workers`, a scheduler, or a client given), in this process with workers == 1 and no scheduler, or when
@@ -265,26 +306,39 @@ def calibrate_logs(logs: list[Path], output: Path | None = None, config_path: Pa
 
         if client is not None:
             engine = "Dask"
-            solution, summaries, timing, prepared = _on_client(client, paths, cfg, options, failures, tol,
-                                                               show_progress)
+            solution, summaries, timing, prepared = _on_client(
+                client, paths, cfg, options, failures, tol, show_progress
+            )
         else:
             with dask_client(scheduler, workers, scheduler_timeout_s) as c:
                 engine = f"Dask ({len(c.scheduler_info().get('workers', {}))} workers)"
-                solution, summaries, timing, prepared = _on_client(c, paths, cfg, options, failures, tol,
-                                                                   show_progress)
+                solution, summaries, timing, prepared = _on_client(
+                    c, paths, cfg, options, failures, tol, show_progress
+                )
     timing = {"prepare": prepared, **timing, "total": time.perf_counter() - t0}
     outcome = CalibrateOutcome(None, solution, summaries, [], failures, engine, timing)
     if solution is None:
         return outcome
     joint = solution.estimates()
-    outcome.comparisons = [dive_vs_joint(s.name, solution.states, s.alone, joint, s.alone_cov, solution.cov)
-                           for s in summaries]
+    outcome.comparisons = [
+        dive_vs_joint(s.name, solution.states, s.alone, joint, s.alone_cov, solution.cov)
+        for s in summaries
+    ]
     outcome.calibration = VehicleCalibration(
-        vehicle=vehicle, date=iso_date(max(s.t0_ns for s in summaries)), states=tuple(solution.states),
-        values={n: np.asarray(v, dtype=float) for n, v in solution.values.items()}, cov=solution.cov,
+        vehicle=vehicle,
+        date=iso_date(max(s.t0_ns for s in summaries)),
+        states=tuple(solution.states),
+        values={n: np.asarray(v, dtype=float) for n, v in solution.values.items()},
+        cov=solution.cov,
         sources=tuple(SourceLog(s.name, _sha256(s.name)) for s in summaries),
-        config_hash=config_hash(summaries[0].stated_config or summaries[0].config.to_dict()), method="calibrate",
-        notes={"dives": len(summaries), "iterations": solution.iterations, "converged": solution.converged})
+        config_hash=config_hash(summaries[0].stated_config or summaries[0].config.to_dict()),
+        method="calibrate",
+        notes={
+            "dives": len(summaries),
+            "iterations": solution.iterations,
+            "converged": solution.converged,
+        },
+    )
     if output is not None:
         from gtsam_dvl.io.calibration_file import write_calibration
 
@@ -297,7 +351,10 @@ def calibrate_logs(logs: list[Path], output: Path | None = None, config_path: Pa
 def _has_dask() -> bool:
     import importlib.util
 
-    return importlib.util.find_spec("dask") is not None and importlib.util.find_spec("distributed") is not None
+    return (
+        importlib.util.find_spec("dask") is not None
+        and importlib.util.find_spec("distributed") is not None
+    )
 
 
 def _sha256(path: str) -> str:
@@ -306,9 +363,15 @@ def _sha256(path: str) -> str:
     return file_sha256(path)
 
 
-def _on_client(client: Any, paths: list[str], cfg: str | None, options: dict[str, Any],
-               failures: list[DiveFailure], tol: float, show_progress: bool
-               ) -> tuple[JointSolution | None, list[DiveSummary], dict[str, float], float]:
+def _on_client(
+    client: Any,
+    paths: list[str],
+    cfg: str | None,
+    options: dict[str, Any],
+    failures: list[DiveFailure],
+    tol: float,
+    show_progress: bool,
+) -> tuple[JointSolution | None, list[DiveSummary], dict[str, float], float]:
     from gtsam_dvl.app.progress import progress_bar
 
     t0 = time.perf_counter()
@@ -323,6 +386,7 @@ def _on_client(client: Any, paths: list[str], cfg: str | None, options: dict[str
 
 # ----- the fleet table and figure ---------------------------------------------------------------------------
 
+
 def fleet_rows(outcome: CalibrateOutcome) -> list[dict[str, Any]]:
     """One row per dive (and one for the joint calibration): scale, misalignment (deg, R_c's roll, pitch, yaw),
     time offset with sigmas, and the comparison with the joint (per state chi^2, dof, sigmas, moved; the block's
@@ -330,50 +394,103 @@ def fleet_rows(outcome: CalibrateOutcome) -> list[dict[str, Any]]:
     rows: list[dict[str, Any]] = []
     for s, c in zip(outcome.dives, outcome.comparisons, strict=True):
         b_R_d0 = np.asarray(s.mounting.b_R_d0)
-        rpy, cov = misalignment_rpy_and_cov(np.asarray(s.alone["misalignment"].value), b_R_d0,
-                                            np.asarray(s.alone["misalignment"].cov))
+        rpy, cov = misalignment_rpy_and_cov(
+            np.asarray(s.alone["misalignment"].value),
+            b_R_d0,
+            np.asarray(s.alone["misalignment"].cov),
+        )
         off = s.alone.get("time_offset")
-        rows.append({"log": s.name, "scale": float(s.alone["scale"].value[0]),
-                     "scale_sigma": float(s.alone["scale"].sigma[0]), "misalignment_deg": rpy.tolist(),
-                     "misalignment_sigma_deg": np.sqrt(np.diag(cov)).tolist(),
-                     "time_offset_s": None if off is None else float(off.value[0]),
-                     "time_offset_sigma_s": None if off is None else float(off.sigma[0]),
-                     "chi2": c.chi2, "dof": c.dof, "n_sigma": c.n_sigma, "moved": c.moved,
-                     "moved_states": c.moved_states(),
-                     "vs_joint": {n: {"chi2": m.chi2, "dof": m.dof, "n_sigma": m.n_sigma, "moved": m.moved,
-                                      "residual_display": m.residual_display.tolist()}
-                                  for n, m in c.states.items()}})
+        rows.append(
+            {
+                "log": s.name,
+                "scale": float(s.alone["scale"].value[0]),
+                "scale_sigma": float(s.alone["scale"].sigma[0]),
+                "misalignment_deg": rpy.tolist(),
+                "misalignment_sigma_deg": np.sqrt(np.diag(cov)).tolist(),
+                "time_offset_s": None if off is None else float(off.value[0]),
+                "time_offset_sigma_s": None if off is None else float(off.sigma[0]),
+                "chi2": c.chi2,
+                "dof": c.dof,
+                "n_sigma": c.n_sigma,
+                "moved": c.moved,
+                "moved_states": c.moved_states(),
+                "vs_joint": {
+                    n: {
+                        "chi2": m.chi2,
+                        "dof": m.dof,
+                        "n_sigma": m.n_sigma,
+                        "moved": m.moved,
+                        "residual_display": m.residual_display.tolist(),
+                    }
+                    for n, m in c.states.items()
+                },
+            }
+        )
     if outcome.solution is not None and outcome.dives:
         j = outcome.solution.estimates()
-        rpy, cov = misalignment_rpy_and_cov(np.asarray(j["misalignment"].value),
-                                            np.asarray(outcome.dives[0].mounting.b_R_d0),
-                                            np.asarray(j["misalignment"].cov))
-        rows.append({"log": "joint", "scale": float(j["scale"].value[0]), "scale_sigma": float(j["scale"].sigma[0]),
-                     "misalignment_deg": rpy.tolist(), "misalignment_sigma_deg": np.sqrt(np.diag(cov)).tolist(),
-                     "time_offset_s": None, "time_offset_sigma_s": None, "dives": len(outcome.dives)})
+        rpy, cov = misalignment_rpy_and_cov(
+            np.asarray(j["misalignment"].value),
+            np.asarray(outcome.dives[0].mounting.b_R_d0),
+            np.asarray(j["misalignment"].cov),
+        )
+        rows.append(
+            {
+                "log": "joint",
+                "scale": float(j["scale"].value[0]),
+                "scale_sigma": float(j["scale"].sigma[0]),
+                "misalignment_deg": rpy.tolist(),
+                "misalignment_sigma_deg": np.sqrt(np.diag(cov)).tolist(),
+                "time_offset_s": None,
+                "time_offset_sigma_s": None,
+                "dives": len(outcome.dives),
+            }
+        )
     return rows
 
 
 def fleet_table(outcome: CalibrateOutcome) -> list[str]:
     """The per-dive table in Markdown (the fleet table's columns, app/campaign/fleet.py, plus each dive against
     the joint calibration), the joint calibration last, the dives left out with their errors."""
-    lines = ["| dive | scale | misalignment r/p/y (deg) | time offset (ms, + = stamps early) | "
-             "vs joint (sigmas, per state) | moved beyond 3 sigma |",
-             "| --- | --- | --- | --- | --- | --- |"]
+    lines = [
+        "| dive | scale | misalignment r/p/y (deg) | time offset (ms, + = stamps early) | "
+        "vs joint (sigmas, per state) | moved beyond 3 sigma |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
     for r in fleet_rows(outcome):
-        mis = (" ".join(f"{v:+.3f}" for v in r["misalignment_deg"]) + " +- "
-               + " ".join(f"{v:.3f}" for v in r["misalignment_sigma_deg"]))
-        off = ("-" if r["time_offset_s"] is None
-               else f"{r['time_offset_s'] * 1e3:+.1f} +- {r['time_offset_sigma_s'] * 1e3:.1f}")
+        mis = (
+            " ".join(f"{v:+.3f}" for v in r["misalignment_deg"])
+            + " +- "
+            + " ".join(f"{v:.3f}" for v in r["misalignment_sigma_deg"])
+        )
+        off = (
+            "-"
+            if r["time_offset_s"] is None
+            else f"{r['time_offset_s'] * 1e3:+.1f} +- {r['time_offset_sigma_s'] * 1e3:.1f}"
+        )
         if r["log"] == "joint":
-            lines.append(f"| **joint ({r['dives']} dives)** | {r['scale']:.5f} +- {r['scale_sigma']:.5f} | {mis} | "
-                         "per dive | | |")
+            lines.append(
+                f"| **joint ({r['dives']} dives)** | {r['scale']:.5f} +- {r['scale_sigma']:.5f} | {mis} | "
+                "per dive | | |"
+            )
             continue
-        vs = ", ".join(f"{n.replace('_', ' ')} {m['n_sigma']:.1f}" for n, m in r["vs_joint"].items())
-        moved = ("MOVED: " + ", ".join(f"{n.replace('_', ' ')} {r['vs_joint'][n]['n_sigma']:.1f} sigma"
-                                       for n in r["moved_states"])) if r["moved"] else "no"
-        lines.append(f"| {Path(r['log']).name} | {r['scale']:.5f} +- {r['scale_sigma']:.5f} | {mis} | {off} | "
-                     f"{vs} | {moved} |")
+        vs = ", ".join(
+            f"{n.replace('_', ' ')} {m['n_sigma']:.1f}" for n, m in r["vs_joint"].items()
+        )
+        moved = (
+            (
+                "MOVED: "
+                + ", ".join(
+                    f"{n.replace('_', ' ')} {r['vs_joint'][n]['n_sigma']:.1f} sigma"
+                    for n in r["moved_states"]
+                )
+            )
+            if r["moved"]
+            else "no"
+        )
+        lines.append(
+            f"| {Path(r['log']).name} | {r['scale']:.5f} +- {r['scale_sigma']:.5f} | {mis} | {off} | "
+            f"{vs} | {moved} |"
+        )
     for f in outcome.failures:
         lines.append(f"| {Path(f.log).name} | error | {f.error} | | | |")
     return lines
@@ -401,11 +518,16 @@ def plot_fleet(outcome: CalibrateOutcome, path: Path) -> Path:
         ax.axhline(jv, color="k", lw=1)
         for k, r in zip(x, dives, strict=True):
             v, s = get(r, panel)
-            ax.errorbar(k, v, yerr=3 * s, fmt="o", capsize=3, color="tab:red" if r["moved"] else "tab:blue")
+            ax.errorbar(
+                k, v, yerr=3 * s, fmt="o", capsize=3, color="tab:red" if r["moved"] else "tab:blue"
+            )
         ax.set_xticks(x, [Path(r["log"]).stem for r in dives], rotation=45, ha="right", fontsize=7)
         ax.set_title(title, fontsize=9)
     axes[0].legend(fontsize=7)
-    fig.suptitle("Each dive alone (3 sigma) against the joint calibration; red: moved beyond 3 sigma", fontsize=10)
+    fig.suptitle(
+        "Each dive alone (3 sigma) against the joint calibration; red: moved beyond 3 sigma",
+        fontsize=10,
+    )
     fig.tight_layout()
     return save_figure(fig, path)
 
@@ -415,10 +537,17 @@ def write_fleet(outcome: CalibrateOutcome, out_dir: Path) -> list[Path]:
     from gtsam_dvl.io.atomic import atomic_write_json, atomic_write_text
 
     out_dir.mkdir(exist_ok=True)
-    written = [atomic_write_text(out_dir / "calibration-fleet.md", "\n".join(fleet_table(outcome)) + "\n"),
-               atomic_write_json(out_dir / "calibration-fleet.json",
-                                 {"dives": fleet_rows(outcome), "failures": [f.__dict__ for f in outcome.failures],
-                                  "iterations": outcome.solution.history if outcome.solution else []})]
+    written = [
+        atomic_write_text(out_dir / "calibration-fleet.md", "\n".join(fleet_table(outcome)) + "\n"),
+        atomic_write_json(
+            out_dir / "calibration-fleet.json",
+            {
+                "dives": fleet_rows(outcome),
+                "failures": [f.__dict__ for f in outcome.failures],
+                "iterations": outcome.solution.history if outcome.solution else [],
+            },
+        ),
+    ]
     if outcome.dives:
         written.append(plot_fleet(outcome, out_dir / "calibration-fleet.png"))
     return written

@@ -16,7 +16,9 @@ from typing import Any
 from gtsam_dvl.core.errors import GtsamDvlError
 
 INSTALL_HINT = "Dask is not installed: pip install 'gtsam-dvl[distributed]' (make test and make demo install it)"
-SCHEDULER_TIMEOUT_S = 10.0  # how long to try to reach a --scheduler before giving up (--scheduler-timeout)
+SCHEDULER_TIMEOUT_S = (
+    10.0  # how long to try to reach a --scheduler before giving up (--scheduler-timeout)
+)
 
 
 def require_dask() -> None:
@@ -28,7 +30,9 @@ def require_dask() -> None:
         raise GtsamDvlError(INSTALL_HINT) from None
 
 
-def open_client(scheduler: str | None, workers: int | None, timeout_s: float = SCHEDULER_TIMEOUT_S) -> Any:
+def open_client(
+    scheduler: str | None, workers: int | None, timeout_s: float = SCHEDULER_TIMEOUT_S
+) -> Any:
     """A dask.distributed Client: to the scheduler at `scheduler` (given up after timeout_s), else on a
     LocalCluster of `workers` processes (default: the machine's cores) with one thread each. Says on stderr
     where it runs (the LocalCluster's dashboard address when bokeh is installed)."""
@@ -37,29 +41,50 @@ def open_client(scheduler: str | None, workers: int | None, timeout_s: float = S
 
     if scheduler:
         if not timeout_s > 0:
-            raise GtsamDvlError(f"--scheduler-timeout must be a positive number of seconds, got {timeout_s}")
+            raise GtsamDvlError(
+                f"--scheduler-timeout must be a positive number of seconds, got {timeout_s}"
+            )
         try:
             client = Client(scheduler, timeout=f"{timeout_s}s")
-        except (OSError, ValueError, TypeError) as exc:  # TimeoutError is an OSError; a bad address a ValueError
-            raise GtsamDvlError(f"{scheduler}: cannot reach the Dask scheduler ({str(exc).splitlines()[0]}); "
-                                "start it with `dask scheduler`, or leave --scheduler out for a LocalCluster"
-                                ) from None
-        sys.stderr.write(f"Dask scheduler {scheduler}: {len(client.scheduler_info().get('workers', {}))} "
-                         "workers\n")
+        except (
+            OSError,
+            ValueError,
+            TypeError,
+        ) as exc:  # TimeoutError is an OSError; a bad address a ValueError
+            raise GtsamDvlError(
+                f"{scheduler}: cannot reach the Dask scheduler ({str(exc).splitlines()[0]}); "
+                "start it with `dask scheduler`, or leave --scheduler out for a LocalCluster"
+            ) from None
+        sys.stderr.write(
+            f"Dask scheduler {scheduler}: {len(client.scheduler_info().get('workers', {}))} "
+            "workers\n"
+        )
         return client
     n = workers or os.cpu_count() or 1
     has_bokeh = importlib.util.find_spec("bokeh") is not None  # the dashboard needs it
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=":0" if has_bokeh else None, silence_logs=logging.ERROR)
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=":0" if has_bokeh else None,
+        silence_logs=logging.ERROR,
+    )
     client = Client(cluster)
-    dashboard = (f"dashboard {client.dashboard_link}" if has_bokeh and client.dashboard_link
-                 else "no dashboard (it needs bokeh: pip install 'gtsam-dvl[distributed]')")
-    sys.stderr.write(f"Dask LocalCluster: {n} worker process{'es' if n != 1 else ''}, {dashboard}\n")
+    dashboard = (
+        f"dashboard {client.dashboard_link}"
+        if has_bokeh and client.dashboard_link
+        else "no dashboard (it needs bokeh: pip install 'gtsam-dvl[distributed]')"
+    )
+    sys.stderr.write(
+        f"Dask LocalCluster: {n} worker process{'es' if n != 1 else ''}, {dashboard}\n"
+    )
     return client
 
 
 @contextmanager
-def dask_client(scheduler: str | None, workers: int | None, timeout_s: float = SCHEDULER_TIMEOUT_S) -> Iterator[Any]:
+def dask_client(
+    scheduler: str | None, workers: int | None, timeout_s: float = SCHEDULER_TIMEOUT_S
+) -> Iterator[Any]:
     """open_client's client, closed on exit with the LocalCluster it started (a scheduler's cluster stays)."""
     client = open_client(scheduler, workers, timeout_s)
     try:

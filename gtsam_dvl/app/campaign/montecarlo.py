@@ -36,18 +36,29 @@ from gtsam_dvl.estimators.run import run_trajectory_estimator
 # the states of a campaign, in the order of their vectors, with units: the registry's (core/states.py) components
 # in their display units, then the final position
 STATES: list[tuple[str, str]] = [
-    (name, BY_NAME[state].display_unit) for state in ("scale", "misalignment", "accel_bias", "gyro_bias")
+    (name, BY_NAME[state].display_unit)
+    for state in ("scale", "misalignment", "accel_bias", "gyro_bias")
     for name in BY_NAME[state].component_names()
 ] + [("final_position_east", "m"), ("final_position_north", "m"), ("final_position_up", "m")]
-TIME_OFFSET_STATE = (BY_NAME["time_offset"].name, BY_NAME["time_offset"].unit)  # in s (the registry shows ms)
+TIME_OFFSET_STATE = (
+    BY_NAME["time_offset"].name,
+    BY_NAME["time_offset"].unit,
+)  # in s (the registry shows ms)
 ESTIMATORS = ("batch", "online", "ekf")
-BLOCK_DOF = 10  # [accel bias, gyro bias, scale, misalignment]: the joint covariance every estimator reports
+BLOCK_DOF = (
+    10  # [accel bias, gyro bias, scale, misalignment]: the joint covariance every estimator reports
+)
 NEES_EVERY_S = 60.0  # the filters' NEES over time, sampled this often
 
 
-def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tuple[str, ...],
-             config: Mapping[str, Any] | None = None, scenario_name: str = "scenario",
-             calibration: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def run_seed(
+    scenario: Mapping[str, Any],
+    seed: int,
+    estimators: list[str] | tuple[str, ...],
+    config: Mapping[str, Any] | None = None,
+    scenario_name: str = "scenario",
+    calibration: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
     """One Monte Carlo run (module doc). scenario: a scenario dict (the TOML's tables); config: an
     EstimatorConfig as a dict (None: the configuration the scenario names); calibration: a vehicle's calibration
     file's data (app/calibration_files.py calibration_data), every estimator's prior, inflated for the days to the
@@ -55,7 +66,9 @@ def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tup
     from gtsam_dvl.sim import simulate
     from gtsam_dvl.sim.scenario import scenario_from_dict
 
-    sc = scenario_from_dict(dict(scenario), name=scenario_name, source=f"{scenario_name} (seed {seed})")
+    sc = scenario_from_dict(
+        dict(scenario), name=scenario_name, source=f"{scenario_name} (seed {seed})"
+    )
     log = simulate(sc, int(seed))
     cfg = EstimatorConfig.from_dict(config) if config else sc.estimator_configuration()
     prior = None
@@ -63,7 +76,9 @@ def run_seed(scenario: Mapping[str, Any], seed: int, estimators: list[str] | tup
         from gtsam_dvl.app.calibration_files import inflated_for
         from gtsam_dvl.io.calibration_file import calibration_from_dict
 
-        prior, _ = inflated_for(calibration_from_dict(dict(calibration), "the campaign's calibration"), log, cfg)
+        prior, _ = inflated_for(
+            calibration_from_dict(dict(calibration), "the campaign's calibration"), log, cfg
+        )
     out: dict[str, Any] = {"seed": int(seed), "estimators": {}}
     for name in estimators:
         t0 = time.perf_counter()
@@ -78,19 +93,39 @@ def run_errors(res: NavResult, log: LogData) -> dict[str, Any]:
     of the calibration and bias block; the filters' NEES over time."""
     cal, bias, truth = log.true_calibration, log.true_imu_bias, log.truth
     if cal is None or bias is None or truth is None:
-        raise ValueError("a Monte Carlo run needs a simulated log (true calibration, biases and trajectory)")
+        raise ValueError(
+            "a Monte Carlo run needs a simulated log (true calibration, biases and trajectory)"
+        )
     acc_true, gyro_true = np.array(bias.accel_m_s2), np.array(bias.gyro_rad_s)
     n_p_true = np.array([np.interp(res.t[-1], truth.t, truth.n_p[:, k]) for k in range(3)])
-    err = np.concatenate([
-        [(res.scale - cal.scale) * 1e6], res.misalignment_deg - np.array(cal.misalignment_deg),
-        res.accel_bias_ug - acc_true / UG, res.gyro_bias_deg_per_h - gyro_true / DEG_PER_H,
-        res.n_p[-1] - n_p_true])
-    sig = np.concatenate([[res.scale_sigma * 1e6], res.misalignment_sigma_deg, res.accel_bias_sigma_ug,
-                          res.gyro_bias_sigma_deg_per_h, res.position_sigma_m[-1]])
-    out: dict[str, Any] = {"error": err.tolist(), "sigma": sig.tolist(), "nees_block": block_nees(res, log)}
+    err = np.concatenate(
+        [
+            [(res.scale - cal.scale) * 1e6],
+            res.misalignment_deg - np.array(cal.misalignment_deg),
+            res.accel_bias_ug - acc_true / UG,
+            res.gyro_bias_deg_per_h - gyro_true / DEG_PER_H,
+            res.n_p[-1] - n_p_true,
+        ]
+    )
+    sig = np.concatenate(
+        [
+            [res.scale_sigma * 1e6],
+            res.misalignment_sigma_deg,
+            res.accel_bias_sigma_ug,
+            res.gyro_bias_sigma_deg_per_h,
+            res.position_sigma_m[-1],
+        ]
+    )
+    out: dict[str, Any] = {
+        "error": err.tolist(),
+        "sigma": sig.tolist(),
+        "nees_block": block_nees(res, log),
+    }
     if np.isfinite(res.time_offset_sigma_s):
-        out["time_offset"] = {"error": float(res.time_offset_s - cal.time_offset_s),
-                              "sigma": float(res.time_offset_sigma_s)}
+        out["time_offset"] = {
+            "error": float(res.time_offset_s - cal.time_offset_s),
+            "sigma": float(res.time_offset_sigma_s),
+        }
     if res.timeline is not None and res.estimator != "batch":
         out["nees_time"] = timeline_nees(res, log)
     return out
@@ -103,8 +138,14 @@ def block_nees(res: NavResult, log: LogData) -> float | None:
     if res.calib_joint_cov is None or cal is None or bias is None:
         return None
     b_R_d_true = cal.b_R_d(log.mounting.b_R_d0)
-    e = np.concatenate([res.accel_bias - np.array(bias.accel_m_s2), res.gyro_bias - np.array(bias.gyro_rad_s),
-                        [res.scale - cal.scale], so3_log(b_R_d_true.T @ res.b_R_d)])
+    e = np.concatenate(
+        [
+            res.accel_bias - np.array(bias.accel_m_s2),
+            res.gyro_bias - np.array(bias.gyro_rad_s),
+            [res.scale - cal.scale],
+            so3_log(b_R_d_true.T @ res.b_R_d),
+        ]
+    )
     P = np.asarray(res.calib_joint_cov, dtype=float)
     return float(e @ np.linalg.solve(P, e))
 
@@ -114,18 +155,25 @@ def timeline_nees(res: NavResult, log: LogData) -> dict[str, list[float]]:
     normalised errors of its timeline (diagonal: the timeline keeps marginal sigmas only)."""
     tl, cal, bias = res.timeline, log.true_calibration, log.true_imu_bias
     assert tl is not None and cal is not None and bias is not None
-    z = np.column_stack([
-        (tl.scale - cal.scale) / tl.scale_sigma,
-        (tl.misalignment_deg - np.array(cal.misalignment_deg)) / tl.misalignment_sigma_deg,
-        (tl.accel_bias_ug - np.array(bias.accel_m_s2) / UG) / tl.accel_bias_sigma_ug,
-        (tl.gyro_bias_deg_per_h - np.array(bias.gyro_rad_s) / DEG_PER_H) / tl.gyro_bias_sigma_deg_per_h])
+    z = np.column_stack(
+        [
+            (tl.scale - cal.scale) / tl.scale_sigma,
+            (tl.misalignment_deg - np.array(cal.misalignment_deg)) / tl.misalignment_sigma_deg,
+            (tl.accel_bias_ug - np.array(bias.accel_m_s2) / UG) / tl.accel_bias_sigma_ug,
+            (tl.gyro_bias_deg_per_h - np.array(bias.gyro_rad_s) / DEG_PER_H)
+            / tl.gyro_bias_sigma_deg_per_h,
+        ]
+    )
     grid = np.arange(tl.t[0], tl.t[-1] + 1e-9, NEES_EVERY_S)
     idx = np.clip(np.searchsorted(tl.t, grid), 0, len(tl.t) - 1)
     return {"t": tl.t[idx].tolist(), "nees": np.sum(z[idx] ** 2, axis=1).tolist()}
 
 
-def cramer_rao_sigmas(scenario: Mapping[str, Any], config: Mapping[str, Any] | None = None,
-                      scenario_name: str = "scenario") -> list[float]:
+def cramer_rao_sigmas(
+    scenario: Mapping[str, Any],
+    config: Mapping[str, Any] | None = None,
+    scenario_name: str = "scenario",
+) -> list[float]:
     """The Cramer-Rao bound of STATES: the sigmas of the noise-free batch solution at the truth (the mission
     planner's covariance), user units."""
     from gtsam_dvl.analysis.planning import plan_mission
@@ -134,22 +182,35 @@ def cramer_rao_sigmas(scenario: Mapping[str, Any], config: Mapping[str, Any] | N
     sc = scenario_from_dict(dict(scenario), name=scenario_name)
     cfg = EstimatorConfig.from_dict(config) if config else None
     r = plan_mission(sc, cfg).result
-    return np.concatenate([[r.scale_sigma * 1e6], r.misalignment_sigma_deg, r.accel_bias_sigma_ug,
-                           r.gyro_bias_sigma_deg_per_h, r.position_sigma_m[-1]]).tolist()
+    return np.concatenate(
+        [
+            [r.scale_sigma * 1e6],
+            r.misalignment_sigma_deg,
+            r.accel_bias_sigma_ug,
+            r.gyro_bias_sigma_deg_per_h,
+            r.position_sigma_m[-1],
+        ]
+    ).tolist()
 
 
 def nees_band(n_runs: int, dof: int = BLOCK_DOF, level: float = 0.95) -> tuple[float, float]:
     """The two-sided band of the mean NEES over n_runs runs of dof each: chi2(dof n) / n."""
     a = (1.0 - level) / 2.0
-    return float(chi2.ppf(a, dof * n_runs) / n_runs), float(chi2.ppf(1.0 - a, dof * n_runs) / n_runs)
+    return float(chi2.ppf(a, dof * n_runs) / n_runs), float(
+        chi2.ppf(1.0 - a, dof * n_runs) / n_runs
+    )
 
 
-def campaign_statistics(runs: list[dict[str, Any]], crb: list[float] | None = None) -> dict[str, Any]:
+def campaign_statistics(
+    runs: list[dict[str, Any]], crb: list[float] | None = None
+) -> dict[str, Any]:
     """Per estimator and state: mean and std of error/sigma, fraction within 3 sigma, RMSE, mean sigma,
     RMSE / mean sigma, RMSE / Cramer-Rao bound; the block NEES mean with its 95 % band and the runs outside it;
     the filters' mean NEES over time. runs: the outputs of run_seed."""
     out: dict[str, Any] = {"runs": len(runs), "estimators": {}}
-    names = sorted({e for r in runs for e in r["estimators"]}, key=lambda e: (ESTIMATORS + (e,)).index(e))
+    names = sorted(
+        {e for r in runs for e in r["estimators"]}, key=lambda e: (ESTIMATORS + (e,)).index(e)
+    )
     for name in names:
         rows = [r["estimators"][name] for r in runs if name in r["estimators"]]
         err, sig = np.array([x["error"] for x in rows]), np.array([x["sigma"] for x in rows])
@@ -164,26 +225,43 @@ def campaign_statistics(runs: list[dict[str, Any]], crb: list[float] | None = No
         rmse = np.sqrt(np.mean(err**2, axis=0))
         per_state = {}
         for j, (state, unit) in enumerate(zip(states, units, strict=True)):
-            row = {"unit": unit, "z_mean": float(np.mean(z[:, j])), "z_std": float(np.std(z[:, j], ddof=1))
-                   if len(z) > 1 else float("nan"), "within_3_sigma": float(np.mean(np.abs(z[:, j]) <= 3.0)),
-                   "rmse": float(rmse[j]), "mean_sigma": float(np.mean(sig[:, j])),
-                   "rmse_over_sigma": float(rmse[j] / np.mean(sig[:, j]))}
+            row = {
+                "unit": unit,
+                "z_mean": float(np.mean(z[:, j])),
+                "z_std": float(np.std(z[:, j], ddof=1)) if len(z) > 1 else float("nan"),
+                "within_3_sigma": float(np.mean(np.abs(z[:, j]) <= 3.0)),
+                "rmse": float(rmse[j]),
+                "mean_sigma": float(np.mean(sig[:, j])),
+                "rmse_over_sigma": float(rmse[j] / np.mean(sig[:, j])),
+            }
             if crb is not None and j < len(crb):
                 row["crb"] = float(crb[j])
                 row["rmse_over_crb"] = float(rmse[j] / crb[j]) if crb[j] > 0 else float("nan")
             per_state[state] = row
-        nees = np.array([x["nees_block"] for x in rows if x.get("nees_block") is not None], dtype=float)
+        nees = np.array(
+            [x["nees_block"] for x in rows if x.get("nees_block") is not None], dtype=float
+        )
         lo, hi = nees_band(len(nees)) if len(nees) else (float("nan"), float("nan"))
-        est: dict[str, Any] = {"states": per_state, "wall_s_mean": float(np.mean([x["wall_s"] for x in rows])),
-                               "nees_block": {"mean": float(np.mean(nees)) if len(nees) else float("nan"),
-                                              "dof": BLOCK_DOF, "band_95": [lo, hi],
-                                              "inside_band": bool(lo <= np.mean(nees) <= hi) if len(nees) else False}}
+        est: dict[str, Any] = {
+            "states": per_state,
+            "wall_s_mean": float(np.mean([x["wall_s"] for x in rows])),
+            "nees_block": {
+                "mean": float(np.mean(nees)) if len(nees) else float("nan"),
+                "dof": BLOCK_DOF,
+                "band_95": [lo, hi],
+                "inside_band": bool(lo <= np.mean(nees) <= hi) if len(nees) else False,
+            },
+        }
         times = [x["nees_time"] for x in rows if "nees_time" in x]
         if times:
             n = min(len(x["t"]) for x in times)
             mean_t = np.mean([x["nees"][:n] for x in times], axis=0)
             band = nees_band(len(times))
-            est["nees_time"] = {"t": times[0]["t"][:n], "mean": mean_t.tolist(), "band_95": list(band),
-                                "fraction_inside": float(np.mean((mean_t >= band[0]) & (mean_t <= band[1])))}
+            est["nees_time"] = {
+                "t": times[0]["t"][:n],
+                "mean": mean_t.tolist(),
+                "band_95": list(band),
+                "fraction_inside": float(np.mean((mean_t >= band[0]) & (mean_t <= band[1]))),
+            }
         out["estimators"][name] = est
     return out

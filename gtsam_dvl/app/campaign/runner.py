@@ -21,7 +21,12 @@ from typing import Any
 
 from gtsam_dvl.app.calibration_files import calibration_data
 from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
-from gtsam_dvl.app.campaign.montecarlo import ESTIMATORS, campaign_statistics, cramer_rao_sigmas, run_seed
+from gtsam_dvl.app.campaign.montecarlo import (
+    ESTIMATORS,
+    campaign_statistics,
+    cramer_rao_sigmas,
+    run_seed,
+)
 from gtsam_dvl.app.campaign.report import write_report
 from gtsam_dvl.core.errors import GtsamDvlError
 
@@ -29,8 +34,14 @@ from gtsam_dvl.core.errors import GtsamDvlError
 FAIL_SEED_ENV = "GTSAM_DVL_MONTECARLO_FAIL_SEED"
 
 
-def _run_task(scenario: dict[str, Any], seed: int, estimators: list[str], config: dict[str, Any] | None,
-              name: str, calibration: dict[str, Any] | None = None) -> dict[str, Any]:
+def _run_task(
+    scenario: dict[str, Any],
+    seed: int,
+    estimators: list[str],
+    config: dict[str, Any] | None,
+    name: str,
+    calibration: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """The worker's task: one seed (campaign/montecarlo.run_seed)."""
     if os.environ.get(FAIL_SEED_ENV) == str(seed):
         raise RuntimeError(f"{FAIL_SEED_ENV}={seed}: this run fails on purpose")
@@ -47,15 +58,33 @@ class CampaignResult:
     written: list[Path] = field(default_factory=list)
 
 
-def _campaign_record(scenario_name: str, scenario: dict[str, Any], estimators: list[str],
-                     config: dict[str, Any] | None) -> dict[str, Any]:
-    return {"scenario_name": scenario_name, "scenario": scenario, "estimators": list(estimators), "config": config}
+def _campaign_record(
+    scenario_name: str,
+    scenario: dict[str, Any],
+    estimators: list[str],
+    config: dict[str, Any] | None,
+) -> dict[str, Any]:
+    return {
+        "scenario_name": scenario_name,
+        "scenario": scenario,
+        "estimators": list(estimators),
+        "config": config,
+    }
 
 
-def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir: Path, seed_start: int = 1,
-                 scheduler: str | None = None, workers: int | None = None, config_path: Path | None = None,
-                 show_progress: bool = True, scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
-                 calibration_path: Path | None = None) -> CampaignResult:
+def run_campaign(
+    scenario: str | Path,
+    runs: int,
+    estimators: list[str],
+    out_dir: Path,
+    seed_start: int = 1,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    config_path: Path | None = None,
+    show_progress: bool = True,
+    scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
+    calibration_path: Path | None = None,
+) -> CampaignResult:
     """Run (or resume) a campaign of seeds seed_start .. seed_start + runs - 1 (module doc). Nothing is written
     before the Dask client is up: without Dask, or with a scheduler out of reach, a one-line GtsamDvlError and an
     untouched folder. calibration_path: a vehicle's calibration file, the prior of every run (shipped as data,
@@ -67,16 +96,22 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
 
     unknown = [e for e in estimators if e not in ESTIMATORS + ("online-full",)]
     if unknown or not estimators:
-        raise GtsamDvlError(f"unknown estimator(s) {', '.join(unknown) or '(none given)'} "
-                            f"(known: {', '.join(ESTIMATORS)}, online-full)")
+        raise GtsamDvlError(
+            f"unknown estimator(s) {', '.join(unknown) or '(none given)'} "
+            f"(known: {', '.join(ESTIMATORS)}, online-full)"
+        )
     if runs < 1:
         raise GtsamDvlError(f"--runs must be at least 1, got {runs}")
     require_dask()
     sc = load_scenario(scenario)
     # -c: the scenario's [estimator] table below it (None: the scenario's own configuration, in run_seed)
-    config = EstimatorConfig.load(config_path, under=sc.estimator).to_dict() if config_path else None
+    config = (
+        EstimatorConfig.load(config_path, under=sc.estimator).to_dict() if config_path else None
+    )
     calibration = calibration_data(calibration_path) if calibration_path else None
-    record = json.loads(json.dumps(_campaign_record(sc.name, sc.raw, estimators, config), default=str))
+    record = json.loads(
+        json.dumps(_campaign_record(sc.name, sc.raw, estimators, config), default=str)
+    )
     if calibration is not None:  # only then: the records of campaigns without one stay as they were
         record["calibration"] = json.loads(json.dumps(calibration, default=str))
     out_dir = Path(out_dir)
@@ -85,8 +120,10 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
     if meta_path.exists():
         old = json.loads(meta_path.read_text())
         if old != record:
-            raise GtsamDvlError(f"{out_dir}: holds a campaign with other settings (scenario, estimators or "
-                                "configuration); choose another folder")
+            raise GtsamDvlError(
+                f"{out_dir}: holds a campaign with other settings (scenario, estimators or "
+                "configuration); choose another folder"
+            )
     seeds = list(range(seed_start, seed_start + runs))
     done = {s for s in seeds if (runs_dir / f"seed_{s:06d}.json").exists()}
     todo = [s for s in seeds if s not in done]
@@ -99,12 +136,29 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
 
             if not meta_path.exists():  # the client is up: the campaign starts, its record first
                 atomic_write_json(meta_path, record)
-            futures = {client.submit(_run_task, record["scenario"], s, list(estimators), config, sc.name,
-                                     calibration, key=f"gtsam-dvl-seed-{sc.name}-{s}", pure=False,
-                                     retries=1): s for s in todo}
-            crb_future = (client.submit(cramer_rao_sigmas, record["scenario"], config, sc.name, pure=False)
-                          if not crb_path.exists() else None)
-            with progress_bar(f"montecarlo {sc.name}: {len(todo)} runs", enabled=show_progress) as progress:
+            futures = {
+                client.submit(
+                    _run_task,
+                    record["scenario"],
+                    s,
+                    list(estimators),
+                    config,
+                    sc.name,
+                    calibration,
+                    key=f"gtsam-dvl-seed-{sc.name}-{s}",
+                    pure=False,
+                    retries=1,
+                ): s
+                for s in todo
+            }
+            crb_future = (
+                client.submit(cramer_rao_sigmas, record["scenario"], config, sc.name, pure=False)
+                if not crb_path.exists()
+                else None
+            )
+            with progress_bar(
+                f"montecarlo {sc.name}: {len(todo)} runs", enabled=show_progress
+            ) as progress:
                 for k, fut in enumerate(as_completed(list(futures)), start=1):
                     seed = futures[fut]
                     if fut.status == "error":
@@ -117,17 +171,27 @@ def run_campaign(scenario: str | Path, runs: int, estimators: list[str], out_dir
                 try:
                     atomic_write_json(crb_path, crb_future.result())
                 except Exception as exc:  # noqa: BLE001 - the bound is optional: say why it is missing
-                    failures.append({"seed": None, "error": f"Cramer-Rao bound: {type(exc).__name__}: {exc}"})
+                    failures.append(
+                        {"seed": None, "error": f"Cramer-Rao bound: {type(exc).__name__}: {exc}"}
+                    )
     if crb_path.exists():
         crb = json.loads(crb_path.read_text())
-    results = [json.loads((runs_dir / f"seed_{s:06d}.json").read_text()) for s in seeds
-               if (runs_dir / f"seed_{s:06d}.json").exists()]
+    results = [
+        json.loads((runs_dir / f"seed_{s:06d}.json").read_text())
+        for s in seeds
+        if (runs_dir / f"seed_{s:06d}.json").exists()
+    ]
     atomic_write_json(out_dir / "failures.json", failures)
     if not results:
-        raise GtsamDvlError(f"{out_dir}: every run failed; see failures.json (first: {failures[0]['error']})"
-                            if failures else f"{out_dir}: no runs")
+        raise GtsamDvlError(
+            f"{out_dir}: every run failed; see failures.json (first: {failures[0]['error']})"
+            if failures
+            else f"{out_dir}: no runs"
+        )
     stats = campaign_statistics(results, crb)
     stats.update(scenario=sc.name, seeds=[r["seed"] for r in results], failures=failures)
     written = [atomic_write_json(out_dir / "montecarlo.json", stats)]
     written += write_report(out_dir, stats)
-    return CampaignResult(out_dir, stats, len(results), len(todo) - len(failures), failures, written)
+    return CampaignResult(
+        out_dir, stats, len(results), len(todo) - len(failures), failures, written
+    )

@@ -53,6 +53,22 @@ from gtsam_dvl.app.live.server import (
     import_foxglove,
 )
 
-__all__ = ["BACKLOG_MESSAGES", "DEFAULT_PORT", "INSTALL_HINT", "MAX_PATH_POSES", "SCHEMAS", "TOPICS", "LiveView",
-           "ReplayOutcome", "band", "copy_layout", "import_foxglove", "installed_layout", "layout", "layout_json",
-           "parse_speed", "replay_log", "serve_log"]
+__all__ = [
+    "BACKLOG_MESSAGES",
+    "DEFAULT_PORT",
+    "INSTALL_HINT",
+    "MAX_PATH_POSES",
+    "SCHEMAS",
+    "TOPICS",
+    "LiveView",
+    "ReplayOutcome",
+    "band",
+    "copy_layout",
+    "import_foxglove",
+    "installed_layout",
+    "layout",
+    "layout_json",
+    "parse_speed",
+    "replay_log",
+    "serve_log",
+]

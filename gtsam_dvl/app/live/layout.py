@@ -18,27 +18,48 @@ from gtsam_dvl.app.live.schemas import TOPICS
 from gtsam_dvl.core.errors import GtsamDvlError
 
 LAYOUT_NAME = "layout.json"  # package data of gtsam_dvl.app.live (pyproject.toml)
-LAYOUT_FILE = Path(__file__).resolve().with_name(LAYOUT_NAME)  # in the source tree, for write_layout
+LAYOUT_FILE = (
+    Path(__file__).resolve().with_name(LAYOUT_NAME)
+)  # in the source tree, for write_layout
 
 
-def _series(topic: str, field_path: str, label: str, color: str, dashed: bool = False) -> dict[str, Any]:
-    s: dict[str, Any] = {"value": f"{topic}.{field_path}", "enabled": True, "timestampMethod": "receiveTime",
-                         "label": label, "color": color, "showLine": True}
+def _series(
+    topic: str, field_path: str, label: str, color: str, dashed: bool = False
+) -> dict[str, Any]:
+    s: dict[str, Any] = {
+        "value": f"{topic}.{field_path}",
+        "enabled": True,
+        "timestampMethod": "receiveTime",
+        "label": label,
+        "color": color,
+        "showLine": True,
+    }
     if dashed:
         s["lineSize"] = 0.75
     return s
 
 
 def _band_series(topic: str, path: str, label: str, color: str) -> list[dict[str, Any]]:
-    return [_series(topic, f"{path}value", label, color),
-            _series(topic, f"{path}lower", f"{label} - sigma", color, dashed=True),
-            _series(topic, f"{path}upper", f"{label} + sigma", color, dashed=True)]
+    return [
+        _series(topic, f"{path}value", label, color),
+        _series(topic, f"{path}lower", f"{label} - sigma", color, dashed=True),
+        _series(topic, f"{path}upper", f"{label} + sigma", color, dashed=True),
+    ]
 
 
 def _plot(title: str, y_label: str, paths: list[dict[str, Any]]) -> dict[str, Any]:
-    return {"paths": paths, "title": title, "yAxisLabel": y_label, "showLegend": True, "legendDisplay": "floating",
-            "showXAxisLabels": True, "showYAxisLabels": True, "isSynced": True, "xAxisVal": "timestamp",
-            "sidebarDimension": 240}
+    return {
+        "paths": paths,
+        "title": title,
+        "yAxisLabel": y_label,
+        "showLegend": True,
+        "legendDisplay": "floating",
+        "showXAxisLabels": True,
+        "showYAxisLabels": True,
+        "isSynced": True,
+        "xAxisVal": "timestamp",
+        "sidebarDimension": 240,
+    }
 
 
 AXIS_COLORS = ("#e6194b", "#3cb44b", "#4363d8")
@@ -51,60 +72,167 @@ def layout() -> dict[str, Any]:
     panel of the health and a Raw Messages panel of the status."""
     T = TOPICS
     three_d = {
-        "followTf": "base_link", "followMode": "follow-position",
-        "cameraState": {"distance": 80, "perspective": True, "phi": 55, "thetaOffset": 30, "target": [0, 0, 0],
-                        "targetOffset": [0, 0, 0], "targetOrientation": [0, 0, 0, 1], "fovy": 45, "near": 0.5,
-                        "far": 20000},
+        "followTf": "base_link",
+        "followMode": "follow-position",
+        "cameraState": {
+            "distance": 80,
+            "perspective": True,
+            "phi": 55,
+            "thetaOffset": 30,
+            "target": [0, 0, 0],
+            "targetOffset": [0, 0, 0],
+            "targetOrientation": [0, 0, 0, 1],
+            "fovy": 45,
+            "near": 0.5,
+            "far": 20000,
+        },
         "scene": {"enableStats": False, "transforms": {"showLabel": True, "axisScale": 2}},
         "transforms": {"frame:map": {"visible": True}, "frame:base_link": {"visible": True}},
         "topics": {
-            T["odometry"]: {"visible": True, "type": "arrow", "showCovariance": True, "covarianceColor": "#ff8c0055",
-                            "color": "#ff8c00ff", "arrowScale": [4, 0.6, 0.6]},
-            T["path"]: {"visible": True, "type": "line", "lineWidth": 0.4, "gradient": ["#ff8c00ff", "#ff8c00ff"]},
-            T["truth"]: {"visible": True, "type": "arrow", "color": "#00b4ffff", "arrowScale": [4, 0.6, 0.6]},
-            T["truth_path"]: {"visible": True, "type": "line", "lineWidth": 0.3,
-                              "gradient": ["#00b4ffff", "#00b4ffff"]},
+            T["odometry"]: {
+                "visible": True,
+                "type": "arrow",
+                "showCovariance": True,
+                "covarianceColor": "#ff8c0055",
+                "color": "#ff8c00ff",
+                "arrowScale": [4, 0.6, 0.6],
+            },
+            T["path"]: {
+                "visible": True,
+                "type": "line",
+                "lineWidth": 0.4,
+                "gradient": ["#ff8c00ff", "#ff8c00ff"],
+            },
+            T["truth"]: {
+                "visible": True,
+                "type": "arrow",
+                "color": "#00b4ffff",
+                "arrowScale": [4, 0.6, 0.6],
+            },
+            T["truth_path"]: {
+                "visible": True,
+                "type": "line",
+                "lineWidth": 0.3,
+                "gradient": ["#00b4ffff", "#00b4ffff"],
+            },
         },
-        "layers": {"grid": {"visible": True, "frameLocked": False, "label": "Grid (10 m)", "instanceId": "grid",
-                            "layerId": "foxglove.Grid", "frameId": "map", "size": 2000, "divisions": 200,
-                            "lineWidth": 1, "color": "#248eff40", "position": [0, 0, 0], "rotation": [0, 0, 0],
-                            "order": 1}},
-        "publish": {"type": "point", "poseTopic": "/move_base_simple/goal", "pointTopic": "/clicked_point",
-                    "poseEstimateTopic": "/initialpose", "poseEstimateXDeviation": 0.5,
-                    "poseEstimateYDeviation": 0.5, "poseEstimateThetaDeviation": 0.26179939},
+        "layers": {
+            "grid": {
+                "visible": True,
+                "frameLocked": False,
+                "label": "Grid (10 m)",
+                "instanceId": "grid",
+                "layerId": "foxglove.Grid",
+                "frameId": "map",
+                "size": 2000,
+                "divisions": 200,
+                "lineWidth": 1,
+                "color": "#248eff40",
+                "position": [0, 0, 0],
+                "rotation": [0, 0, 0],
+                "order": 1,
+            }
+        },
+        "publish": {
+            "type": "point",
+            "poseTopic": "/move_base_simple/goal",
+            "pointTopic": "/clicked_point",
+            "poseEstimateTopic": "/initialpose",
+            "poseEstimateXDeviation": 0.5,
+            "poseEstimateYDeviation": 0.5,
+            "poseEstimateThetaDeviation": 0.26179939,
+        },
         "imageMode": {},
     }
     axes = ("x", "y", "z")
     config_by_id: dict[str, Any] = {
         "3D!live": three_d,
-        "Plot!scale": _plot("DVL scale (+- 1 sigma)", "scale factor (1 = perfect)",
-                            _band_series(T["scale"], "", "scale", "#ff8c00")),
-        "Plot!misalignment": _plot("DVL misalignment (+- 1 sigma)", "angle (deg)", [
-            s for name, c in zip(("roll", "pitch", "yaw"), AXIS_COLORS, strict=True)
-            for s in _band_series(T["misalignment"], f"{name}.", name, c)]),
-        "Plot!time_offset": _plot("DVL time offset (+- 1 sigma)", "dt_d (s)",
-                                  _band_series(T["time_offset"], "", "time offset", "#911eb4")),
-        "Plot!accel_bias": _plot("Accelerometer bias (+- 1 sigma)", "bias (micro-g)", [
-            s for a, c in zip(axes, AXIS_COLORS, strict=True) for s in _band_series(T["imu_bias"], f"accel_ug.{a}.",
-                                                                                     a, c)]),
-        "Plot!gyro_bias": _plot("Gyro bias (+- 1 sigma)", "bias (deg/h)", [
-            s for a, c in zip(axes, AXIS_COLORS, strict=True)
-            for s in _band_series(T["imu_bias"], f"gyro_deg_per_h.{a}.", a, c)]),
+        "Plot!scale": _plot(
+            "DVL scale (+- 1 sigma)",
+            "scale factor (1 = perfect)",
+            _band_series(T["scale"], "", "scale", "#ff8c00"),
+        ),
+        "Plot!misalignment": _plot(
+            "DVL misalignment (+- 1 sigma)",
+            "angle (deg)",
+            [
+                s
+                for name, c in zip(("roll", "pitch", "yaw"), AXIS_COLORS, strict=True)
+                for s in _band_series(T["misalignment"], f"{name}.", name, c)
+            ],
+        ),
+        "Plot!time_offset": _plot(
+            "DVL time offset (+- 1 sigma)",
+            "dt_d (s)",
+            _band_series(T["time_offset"], "", "time offset", "#911eb4"),
+        ),
+        "Plot!accel_bias": _plot(
+            "Accelerometer bias (+- 1 sigma)",
+            "bias (micro-g)",
+            [
+                s
+                for a, c in zip(axes, AXIS_COLORS, strict=True)
+                for s in _band_series(T["imu_bias"], f"accel_ug.{a}.", a, c)
+            ],
+        ),
+        "Plot!gyro_bias": _plot(
+            "Gyro bias (+- 1 sigma)",
+            "bias (deg/h)",
+            [
+                s
+                for a, c in zip(axes, AXIS_COLORS, strict=True)
+                for s in _band_series(T["imu_bias"], f"gyro_deg_per_h.{a}.", a, c)
+            ],
+        ),
         "RosOut!health": {"searchTerms": [], "minLogLevel": 1, "topicToRender": T["log"]},
-        "RawMessages!status": {"topicPath": T["status"], "diffEnabled": False, "diffMethod": "custom",
-                               "diffTopicPath": "", "showFullMessageForDiff": False, "expansion": "all"},
+        "RawMessages!status": {
+            "topicPath": T["status"],
+            "diffEnabled": False,
+            "diffMethod": "custom",
+            "diffTopicPath": "",
+            "showFullMessageForDiff": False,
+            "expansion": "all",
+        },
     }
-    plots = {"first": {"first": "Plot!scale", "second": "Plot!misalignment", "direction": "column",
-                       "splitPercentage": 50},
-             "second": {"first": {"first": "Plot!time_offset", "second": "Plot!accel_bias", "direction": "column",
-                                  "splitPercentage": 50},
-                        "second": "Plot!gyro_bias", "direction": "column", "splitPercentage": 66},
-             "direction": "column", "splitPercentage": 40}
-    left = {"first": "3D!live", "second": {"first": "RosOut!health", "second": "RawMessages!status",
-                                           "direction": "row", "splitPercentage": 60},
-            "direction": "column", "splitPercentage": 70}
-    return {"configById": config_by_id, "globalVariables": {}, "userNodes": {}, "playbackConfig": {"speed": 1},
-            "layout": {"first": left, "second": plots, "direction": "row", "splitPercentage": 55}}
+    plots = {
+        "first": {
+            "first": "Plot!scale",
+            "second": "Plot!misalignment",
+            "direction": "column",
+            "splitPercentage": 50,
+        },
+        "second": {
+            "first": {
+                "first": "Plot!time_offset",
+                "second": "Plot!accel_bias",
+                "direction": "column",
+                "splitPercentage": 50,
+            },
+            "second": "Plot!gyro_bias",
+            "direction": "column",
+            "splitPercentage": 66,
+        },
+        "direction": "column",
+        "splitPercentage": 40,
+    }
+    left = {
+        "first": "3D!live",
+        "second": {
+            "first": "RosOut!health",
+            "second": "RawMessages!status",
+            "direction": "row",
+            "splitPercentage": 60,
+        },
+        "direction": "column",
+        "splitPercentage": 70,
+    }
+    return {
+        "configById": config_by_id,
+        "globalVariables": {},
+        "userNodes": {},
+        "playbackConfig": {"speed": 1},
+        "layout": {"first": left, "second": plots, "direction": "row", "splitPercentage": 55},
+    }
 
 
 def layout_json() -> str:
@@ -136,7 +264,11 @@ def copy_layout(path: Path) -> Path:
         with path.open("x", encoding="utf-8") as f:  # exclusive creation: never overwrites
             f.write(text)
     except FileExistsError:
-        raise GtsamDvlError(f"{path}: exists; --layout does not overwrite a file, choose another path") from None
+        raise GtsamDvlError(
+            f"{path}: exists; --layout does not overwrite a file, choose another path"
+        ) from None
     except IsADirectoryError:
-        raise GtsamDvlError(f"{path}: is a folder; --layout takes a file path (e.g. gtsam_dvl_live.json)") from None
+        raise GtsamDvlError(
+            f"{path}: is a folder; --layout takes a file path (e.g. gtsam_dvl_live.json)"
+        ) from None
     return path

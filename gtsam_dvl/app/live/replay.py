@@ -33,7 +33,9 @@ def parse_speed(text: str | float) -> float:
     try:
         speed = float(text)
     except ValueError:
-        raise GtsamDvlError(f"--speed must be a number (times real time) or 'max', got {text!r}") from None
+        raise GtsamDvlError(
+            f"--speed must be a number (times real time) or 'max', got {text!r}"
+        ) from None
     if speed == 0 or speed == math.inf:
         return math.inf
     if not speed > 0:
@@ -50,19 +52,33 @@ class ReplayOutcome:
     epochs_published: int
     wall_s: float
     log_s: float
-    health: Any = None  # analysis.health.Health of the run (replay_log with health=True and an epoch)
+    health: Any = (
+        None  # analysis.health.Health of the run (replay_log with health=True and an epoch)
+    )
     real_time_factor: float | None = None  # log_s / wall_s (None: not both positive)
 
     def describe(self) -> str:
-        rate = f"{self.real_time_factor:.1f}x real time" if self.real_time_factor is not None else "-"
-        return (f"replayed {self.log_s:.0f} s of log in {self.wall_s:.1f} s ({rate}), {self.epochs_published} "
-                f"epochs published, {self.estimator.epochs} states")
+        rate = (
+            f"{self.real_time_factor:.1f}x real time" if self.real_time_factor is not None else "-"
+        )
+        return (
+            f"replayed {self.log_s:.0f} s of log in {self.wall_s:.1f} s ({rate}), {self.epochs_published} "
+            f"epochs published, {self.estimator.epochs} states"
+        )
 
 
-def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None = None, *, speed: float = math.inf,
-               step_s: float = 0.1, health: bool = True, stop: threading.Event | None = None,
-               clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-               ) -> ReplayOutcome:
+def replay_log(
+    log: LogData,
+    view: LiveView,
+    estimator: OnlineEstimator | None = None,
+    *,
+    speed: float = math.inf,
+    step_s: float = 0.1,
+    health: bool = True,
+    stop: threading.Event | None = None,
+    clock: Callable[[], float] = time.monotonic,
+    sleep: Callable[[float], None] = time.sleep,
+) -> ReplayOutcome:
     """Push a log's messages through the online estimator in delivery order (core/message_order.log_messages:
     the IMU samples up to each ping, then the depth samples up to it, then the ping; the rest; finish()),
     publishing each message as it is pushed and each epoch as it is completed (the estimate after the push, the
@@ -77,7 +93,9 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
     from gtsam_dvl.estimators.online.feed import push_depth_sample
 
     if not (speed > 0):
-        raise GtsamDvlError(f"replay speed must be > 0 (math.inf: as fast as possible), got {speed}")
+        raise GtsamDvlError(
+            f"replay speed must be > 0 (math.inf: as fast as possible), got {speed}"
+        )
     est = estimator if estimator is not None else OnlineEstimator.for_log(log)
     imu, dvl, depth, truth = log.imu, log.dvl, log.depth, log.truth
     if len(imu) == 0:
@@ -87,7 +105,9 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
 
         view.publish_health(assess_log_health(log), float(imu.t[0]))
     t_first = float(min(imu.t[0], dvl.t[0] if len(dvl) else imu.t[0]))
-    progress = view.progress  # the epochs, log and wall time of the status messages and of the outcome
+    progress = (
+        view.progress
+    )  # the epochs, log and wall time of the status messages and of the outcome
     wall0 = progress.start(t_first, clock)
     run_health = None
 
@@ -100,15 +120,23 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
     def epoch_done(n: int) -> None:
         e = est.estimate()
         if n and e is not None:
-            view.publish_epoch(e, counters=est.counters, latency_s=est.latencies_s[-1] if est.latencies_s else None)
+            view.publish_epoch(
+                e, counters=est.counters, latency_s=est.latencies_s[-1] if est.latencies_s else None
+            )
             if truth is not None and len(truth):
                 k = min(int(np.searchsorted(truth.t, e.t)), len(truth) - 1)
                 if k > 0 and abs(truth.t[k - 1] - e.t) < abs(truth.t[k] - e.t):
                     k -= 1
-                view.publish_truth(float(truth.t[k]), truth.n_p[k], truth.n_q_b[k], truth.n_v[k], truth.b_omega[k])
+                view.publish_truth(
+                    float(truth.t[k]), truth.n_p[k], truth.n_q_b[k], truth.n_v[k], truth.b_omega[k]
+                )
 
     def push_imu(a: int, b: int) -> None:
-        step = len(imu) if not math.isfinite(speed) else max(1, int(np.searchsorted(imu.t, imu.t[a] + step_s) - a))
+        step = (
+            len(imu)
+            if not math.isfinite(speed)
+            else max(1, int(np.searchsorted(imu.t, imu.t[a] + step_s) - a))
+        )
         for s in range(a, b, step):
             e = min(b, s + step)
             pace(float(imu.t[e - 1]))
@@ -124,10 +152,18 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
         view.publish_depth(float(depth.t[k]), float(depth.depth_m[k]), pa)
 
     def push_dvl(j: int) -> None:
-        beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+        beams = (
+            None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+        )
         pace(float(dvl.t[j]))
-        n = est.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams,
-                         water_track=dvl.water_track is not None and bool(dvl.water_track[j]))
+        n = est.push_dvl(
+            dvl.t[j],
+            dvl.d_v[j],
+            dvl.d_cov[j],
+            bool(dvl.valid[j]),
+            beams,
+            water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
+        )
         view.publish_dvl(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
         epoch_done(n)
 
@@ -136,7 +172,9 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
         seen = 0
         group_opens = True  # the next message opens a ping's group (IMU block, depth samples, ping) or the tail
         for m in log_messages(log):
-            if group_opens:  # stop is honoured between groups: a ping always goes in with the IMU before it
+            if (
+                group_opens
+            ):  # stop is honoured between groups: a ping always goes in with the IMU before it
                 if stop is not None and stop.is_set():
                     break
                 group_opens = False
@@ -154,22 +192,38 @@ def replay_log(log: LogData, view: LiveView, estimator: OnlineEstimator | None =
         for w in caught[seen:]:
             view.log("warning", str(w.message))
     if final is not None:
-        view.publish_epoch(final, counters=est.counters, final=True)  # freezes the progress's wall time
+        view.publish_epoch(
+            final, counters=est.counters, final=True
+        )  # freezes the progress's wall time
         if health:
             from gtsam_dvl.analysis.health import assess_health
 
             run_health = assess_health(est.result(log.t0_ns), log)
             view.publish_health(run_health, final.t)
     elif health:
-        view.log("error", f"{log.source or 'log'}: no DVL epoch was processed (nothing to estimate)")
+        view.log(
+            "error", f"{log.source or 'log'}: no DVL epoch was processed (nothing to estimate)"
+        )
     progress.finish()
-    return ReplayOutcome(est, progress.epochs, progress.wall_s, progress.log_s, run_health, progress.real_time_factor)
+    return ReplayOutcome(
+        est, progress.epochs, progress.wall_s, progress.log_s, run_health, progress.real_time_factor
+    )
 
 
-def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_PORT, host: str = "127.0.0.1",
-              config_path: Path | None = None, read_options: dict[str, Any] | None = None, wait: bool = False,
-              linger: bool = True, echo: Callable[[str], None] = print, layout_path: Path | None = None,
-              calibration_path: Path | None = None) -> ReplayOutcome:
+def serve_log(
+    log_path: Path,
+    *,
+    speed: str | float = 1.0,
+    port: int = DEFAULT_PORT,
+    host: str = "127.0.0.1",
+    config_path: Path | None = None,
+    read_options: dict[str, Any] | None = None,
+    wait: bool = False,
+    linger: bool = True,
+    echo: Callable[[str], None] = print,
+    layout_path: Path | None = None,
+    calibration_path: Path | None = None,
+) -> ReplayOutcome:
     """`gtsam-dvl live`: read the log, serve the view on host:port, replay the log through the online estimator at
     speed (parse_speed), print the outcome and the run's health; then, with linger, keep serving until Ctrl-C.
     wait: start the replay only once a client subscribes. layout_path: the layout file written for this run (the
@@ -181,7 +235,9 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
     from gtsam_dvl.estimators.online import OnlineEstimator
 
-    config = EstimatorConfig.load(config_path) if config_path else None  # a bad -c fails before the log is read
+    config = (
+        EstimatorConfig.load(config_path) if config_path else None
+    )  # a bad -c fails before the log is read
     log = load_log(log_path, **(read_options or {}))
     if config_path:  # the log's scenario's [estimator] table below the -c configuration
         config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
@@ -195,8 +251,10 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
     with LiveView(port, host=host, t0_ns=log.t0_ns, mounting=log.mounting) as view:
         layout = layout_path or "the file that `gtsam-dvl live --layout gtsam_dvl_live.json` writes"
         others = f" (from other machines: {', '.join(view.urls[1:])})" if len(view.urls) > 1 else ""
-        echo(f"live view on {view.url}{others}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, "
-             f"and Layouts > Import from file > {layout}")
+        echo(
+            f"live view on {view.url}{others}: in Foxglove, Open connection > Foxglove WebSocket > {view.url}, "
+            f"and Layouts > Import from file > {layout}"
+        )
         outcome: ReplayOutcome | None = None
         try:
             if wait:
@@ -204,8 +262,10 @@ def serve_log(log_path: Path, *, speed: str | float = 1.0, port: int = DEFAULT_P
                 while not view.wait_for_subscribers(timeout_s=1.0):
                     pass
             pace = "as fast as possible" if math.isinf(factor) else f"at {factor:g}x real time"
-            echo(f"replaying {Path(log_path).name} {pace} through the online estimator "
-                 f"({estimator.options.mode.replace('_', '-')})")
+            echo(
+                f"replaying {Path(log_path).name} {pace} through the online estimator "
+                f"({estimator.options.mode.replace('_', '-')})"
+            )
             outcome = replay_log(log, view, estimator, speed=factor)
             echo(outcome.describe())
             if outcome.health is not None:

@@ -50,12 +50,25 @@ def import_foxglove() -> Any:
     return foxglove
 
 
-def _odometry(stamp_ns: int, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.ndarray, b_omega: np.ndarray,
-              pose_cov: np.ndarray, twist_cov: np.ndarray) -> bytes:
+def _odometry(
+    stamp_ns: int,
+    n_p: np.ndarray,
+    n_q_b: np.ndarray,
+    b_v: np.ndarray,
+    b_omega: np.ndarray,
+    pose_cov: np.ndarray,
+    twist_cov: np.ndarray,
+) -> bytes:
     """The CDR body of one nav_msgs/msg/Odometry of base_link in map (io/ros2/messages.odometry)."""
-    return messages.odometry(np.array([stamp_ns]), np.reshape(n_p, (1, 3)), np.reshape(n_q_b, (1, 4)),
-                             np.reshape(b_v, (1, 3)), np.reshape(b_omega, (1, 3)), np.reshape(pose_cov, (1, 6, 6)),
-                             np.reshape(twist_cov, (1, 6, 6))).tobytes()
+    return messages.odometry(
+        np.array([stamp_ns]),
+        np.reshape(n_p, (1, 3)),
+        np.reshape(n_q_b, (1, 4)),
+        np.reshape(b_v, (1, 3)),
+        np.reshape(b_omega, (1, 3)),
+        np.reshape(pose_cov, (1, 6, 6)),
+        np.reshape(twist_cov, (1, 6, 6)),
+    ).tobytes()
 
 
 WILDCARD_HOSTS = ("0.0.0.0", "::", "")  # serve on every interface: not an address a client can open
@@ -144,9 +157,17 @@ class PosePath:
 
     def payload(self, stamp_ns: int) -> bytes:
         n = len(self.stamps_ns)
-        keep: Any = np.unique(np.append(np.arange(0, n, max(1, math.ceil(n / MAX_PATH_POSES))), n - 1)) if n else []
-        return messages.path(stamp_ns, np.asarray(self.stamps_ns)[keep], np.asarray(self.n_p)[keep],
-                             np.asarray(self.n_q_b)[keep])
+        keep: Any = (
+            np.unique(np.append(np.arange(0, n, max(1, math.ceil(n / MAX_PATH_POSES))), n - 1))
+            if n
+            else []
+        )
+        return messages.path(
+            stamp_ns,
+            np.asarray(self.stamps_ns)[keep],
+            np.asarray(self.n_p)[keep],
+            np.asarray(self.n_q_b)[keep],
+        )
 
 
 @dataclass
@@ -210,9 +231,18 @@ class LiveView:
     context). t0_ns: the ROS time of t = 0 (LogData.t0_ns). mounting: the nominal mounting, sent on /tf_static
     and used for the misalignment angles. path_period_s: the least wall time between two path messages."""
 
-    def __init__(self, port: int | None = DEFAULT_PORT, *, host: str = "127.0.0.1", server: Any = None,
-                 context: Any = None, t0_ns: int = 0, mounting: Mounting | None = None,
-                 path_period_s: float = 1.0, name: str = "gtsam-dvl") -> None:
+    def __init__(
+        self,
+        port: int | None = DEFAULT_PORT,
+        *,
+        host: str = "127.0.0.1",
+        server: Any = None,
+        context: Any = None,
+        t0_ns: int = 0,
+        mounting: Mounting | None = None,
+        path_period_s: float = 1.0,
+        name: str = "gtsam-dvl",
+    ) -> None:
         fg = import_foxglove()
         from foxglove.channels import LogChannel
         from foxglove.websocket import Capability
@@ -225,13 +255,23 @@ class LiveView:
         self._owns_server = server is None
         if server is None:
             if port is None or not 0 <= int(port) <= 65535:
-                raise GtsamDvlError(f"live view: port must be 0-65535 (0: any free port), got {port}")
+                raise GtsamDvlError(
+                    f"live view: port must be 0-65535 (0: any free port), got {port}"
+                )
             context = fg.Context()
             try:
-                server = fg.start_server(name=name, host=host, port=int(port), context=context,
-                                         capabilities=[Capability.Time], server_listener=self._listener,
-                                         message_backlog_size=BACKLOG_MESSAGES)
-            except Exception as exc:  # the SDK raises its own error types (address in use, bad host)
+                server = fg.start_server(
+                    name=name,
+                    host=host,
+                    port=int(port),
+                    context=context,
+                    capabilities=[Capability.Time],
+                    server_listener=self._listener,
+                    message_backlog_size=BACKLOG_MESSAGES,
+                )
+            except (
+                Exception
+            ) as exc:  # the SDK raises its own error types (address in use, bad host)
                 raise GtsamDvlError(f"live view: cannot serve on {host}:{port} ({exc})") from None
         self.server = server
         self.host = host
@@ -244,11 +284,18 @@ class LiveView:
         self._path, self._truth_path = PosePath(), PosePath()
         ch: dict[str, Any] = {}
         self._channels = ch
-        for keys, type_name in ((("tf", "tf_static"), messages.TF), (("odometry", "truth"), messages.ODOMETRY),
-                                (("path", "truth_path"), messages.PATH)):
-            schema = fg.Schema(name=type_name, encoding="ros2msg", data=full_definition(type_name).encode())
+        for keys, type_name in (
+            (("tf", "tf_static"), messages.TF),
+            (("odometry", "truth"), messages.ODOMETRY),
+            (("path", "truth_path"), messages.PATH),
+        ):
+            schema = fg.Schema(
+                name=type_name, encoding="ros2msg", data=full_definition(type_name).encode()
+            )
             for key in keys:
-                ch[key] = fg.Channel(TOPICS[key], schema=schema, message_encoding="cdr", context=context)
+                ch[key] = fg.Channel(
+                    TOPICS[key], schema=schema, message_encoding="cdr", context=context
+                )
         for key, schema in SCHEMAS.items():
             ch[key] = fg.Channel(TOPICS[key], schema=schema, context=context)
         self._log = LogChannel(TOPICS["log"], context=context)
@@ -270,7 +317,9 @@ class LiveView:
         (reachable_urls)."""
         return reachable_urls(self.host, self.port)
 
-    def wait_for_subscribers(self, topics: list[str] | None = None, timeout_s: float = 10.0) -> bool:
+    def wait_for_subscribers(
+        self, topics: list[str] | None = None, timeout_s: float = 10.0
+    ) -> bool:
         """Block until a client subscribes to every topic of topics (None: to any topic), at most timeout_s.
         Returns whether it did (a replay started before would be missed by the client). Only for a server this
         view started (the subscriptions are seen through its listener): with server= it returns False."""
@@ -278,7 +327,7 @@ class LiveView:
         with self._listener.cond:
             while True:
                 subs = self._listener.topics
-                if (all(subs.get(t, 0) > 0 for t in topics) if topics else any(subs.values())):
+                if all(subs.get(t, 0) > 0 for t in topics) if topics else any(subs.values()):
                     return True
                 left = deadline - time.monotonic()
                 if left <= 0:
@@ -323,8 +372,14 @@ class LiveView:
         self.progress.tick(t)
         return ns
 
-    def publish_epoch(self, estimate: OnlineEstimate, *, counters: dict[str, int] | None = None,
-                      latency_s: float | None = None, final: bool = False) -> None:
+    def publish_epoch(
+        self,
+        estimate: OnlineEstimate,
+        *,
+        counters: dict[str, int] | None = None,
+        latency_s: float | None = None,
+        final: bool = False,
+    ) -> None:
         """One epoch's estimate (OnlineEstimator.estimate()): tf, odometry with covariance, the path, scale,
         misalignment, time offset and biases with their sigmas, and the status with the estimator's counters
         (new counters also go to the log channel). final: the estimate after finish()."""
@@ -334,32 +389,63 @@ class LiveView:
         ch = self._channels
         ch["tf"].log(messages.tf_message([(ns, "map", "base_link", estimate.n_p, q)]), log_time=ns)
         pose_ros = ros_pose_covariance(estimate.n_R_b, estimate.pose_cov)
-        b_v, twist_ros = ros_twist_covariance(estimate.n_R_b, estimate.n_v, estimate.pose_cov, estimate.vel_cov,
-                                              estimate.pose_vel_cross)
-        ch["odometry"].log(_odometry(ns, estimate.n_p, q, b_v, np.zeros(3), pose_ros, twist_ros), log_time=ns)
+        b_v, twist_ros = ros_twist_covariance(
+            estimate.n_R_b,
+            estimate.n_v,
+            estimate.pose_cov,
+            estimate.vel_cov,
+            estimate.pose_vel_cross,
+        )
+        ch["odometry"].log(
+            _odometry(ns, estimate.n_p, q, b_v, np.zeros(3), pose_ros, twist_ros), log_time=ns
+        )
         if not final:
             self._path.add(ns, estimate.n_p, q)
         self._send_paths(ns, force=final)
         head = {"t_s": t, "final": final}
         ch["scale"].log({**head, **band(estimate.scale, estimate.scale_sigma)}, log_time=ns)
-        rpy, cov = misalignment_rpy_and_cov(estimate.b_R_d, self.mounting.b_R_d0, estimate.b_R_d_cov)
-        ch["misalignment"].log({**head, **xyz(rpy, sqrt_diag(cov), ("roll", "pitch", "yaw"))}, log_time=ns)
+        rpy, cov = misalignment_rpy_and_cov(
+            estimate.b_R_d, self.mounting.b_R_d0, estimate.b_R_d_cov
+        )
+        ch["misalignment"].log(
+            {**head, **xyz(rpy, sqrt_diag(cov), ("roll", "pitch", "yaw"))}, log_time=ns
+        )
         estimated = math.isfinite(estimate.time_offset_sigma_s)
-        ch["time_offset"].log({**head, **band(estimate.time_offset_s, estimate.time_offset_sigma_s),
-                               "estimated": estimated}, log_time=ns)
+        ch["time_offset"].log(
+            {
+                **head,
+                **band(estimate.time_offset_s, estimate.time_offset_sigma_s),
+                "estimated": estimated,
+            },
+            log_time=ns,
+        )
         sig = sqrt_diag(estimate.bias_cov)
-        ch["imu_bias"].log({**head, "accel_ug": xyz(estimate.accel_bias / UG, sig[:3] / UG),
-                            "gyro_deg_per_h": xyz(estimate.gyro_bias / DEG_PER_H, sig[3:] / DEG_PER_H)}, log_time=ns)
+        ch["imu_bias"].log(
+            {
+                **head,
+                "accel_ug": xyz(estimate.accel_bias / UG, sig[:3] / UG),
+                "gyro_deg_per_h": xyz(estimate.gyro_bias / DEG_PER_H, sig[3:] / DEG_PER_H),
+            },
+            log_time=ns,
+        )
         if counters is not None:
             self._publish_counters(t, ns, counters)
         progress = self.progress
         progress.epochs += 1
         if final:
             progress.finish()
-        ch["status"].log({**head, "epochs": progress.epochs, "counters": dict(self._counters),
-                          "latency_ms": None if latency_s is None else num(latency_s * 1e3),
-                          "wall_s": progress.wall_s, "log_s": progress.log_s,
-                          "real_time_factor": progress.real_time_factor}, log_time=ns)
+        ch["status"].log(
+            {
+                **head,
+                "epochs": progress.epochs,
+                "counters": dict(self._counters),
+                "latency_ms": None if latency_s is None else num(latency_s * 1e3),
+                "wall_s": progress.wall_s,
+                "log_s": progress.log_s,
+                "real_time_factor": progress.real_time_factor,
+            },
+            log_time=ns,
+        )
 
     def _publish_counters(self, t: float, ns: int, counters: dict[str, int]) -> None:
         for name, n in counters.items():
@@ -377,9 +463,15 @@ class LiveView:
         if self._truth_path.stamps_ns:
             self._channels["truth_path"].log(self._truth_path.payload(ns), log_time=ns)
         m = self.mounting
-        self._channels["tf_static"].log(messages.tf_message([
-            (ns, "base_link", "imu_link", m.b_p_imu, matrix_to_quat_xyzw(m.b_R_imu)),
-            (ns, "base_link", "dvl_link", m.b_p_dvl, matrix_to_quat_xyzw(m.b_R_d0))]), log_time=ns)
+        self._channels["tf_static"].log(
+            messages.tf_message(
+                [
+                    (ns, "base_link", "imu_link", m.b_p_imu, matrix_to_quat_xyzw(m.b_R_imu)),
+                    (ns, "base_link", "dvl_link", m.b_p_dvl, matrix_to_quat_xyzw(m.b_R_d0)),
+                ]
+            ),
+            log_time=ns,
+        )
 
     def log(self, level: str, message: str, t: float | None = None) -> None:
         """A line on the log channel; level "debug", "info", "warning", "error" or "fatal"."""
@@ -387,15 +479,28 @@ class LiveView:
 
         t = self._last_t if t is None else t
         ns = self.stamp_ns(t) if t is not None else time.time_ns()
-        levels = {"debug": LogLevel.Debug, "info": LogLevel.Info, "warning": LogLevel.Warning,
-                  "error": LogLevel.Error, "fatal": LogLevel.Fatal}
-        self._log.log(Log(timestamp=Timestamp(ns // 1_000_000_000, ns % 1_000_000_000), level=levels[level],
-                          message=message, name="gtsam-dvl"), log_time=ns)
+        levels = {
+            "debug": LogLevel.Debug,
+            "info": LogLevel.Info,
+            "warning": LogLevel.Warning,
+            "error": LogLevel.Error,
+            "fatal": LogLevel.Fatal,
+        }
+        self._log.log(
+            Log(
+                timestamp=Timestamp(ns // 1_000_000_000, ns % 1_000_000_000),
+                level=levels[level],
+                message=message,
+                name="gtsam-dvl",
+            ),
+            log_time=ns,
+        )
 
     def publish_health(self, health: Any, t: float | None = None) -> None:
         """An analysis.health.Health: its status, each warning (level warning) and note (level info)."""
-        level = {"ok": "info", "warn": "warning", "degraded": "warning", "failed": "error"}.get(health.status,
-                                                                                              "warning")
+        level = {"ok": "info", "warn": "warning", "degraded": "warning", "failed": "error"}.get(
+            health.status, "warning"
+        )
         self.log(level, f"health: {health.status}", t)
         for w in health.warnings:
             self.log("warning", w, t)
@@ -413,10 +518,14 @@ class LiveView:
             return
         w, f = np.reshape(b_omega, (-1, 3)), np.reshape(b_f, (-1, 3))
         for k in range(len(t)):
-            channel.log({"t_s": float(t[k]), "b_omega_rad_s": xyz(w[k]), "b_f_m_s2": xyz(f[k])},
-                        log_time=self.stamp_ns(t[k]))
+            channel.log(
+                {"t_s": float(t[k]), "b_omega_rad_s": xyz(w[k]), "b_f_m_s2": xyz(f[k])},
+                log_time=self.stamp_ns(t[k]),
+            )
 
-    def publish_dvl(self, t: float, d_v: np.ndarray, d_cov: np.ndarray | None = None, valid: bool = True) -> None:
+    def publish_dvl(
+        self, t: float, d_v: np.ndarray, d_cov: np.ndarray | None = None, valid: bool = True
+    ) -> None:
         """A DVL ping: d_v (m/s, dvl_link), its covariance (3, 3) or None, valid flag."""
         ns = self._tick(t)
         channel = self._channels["dvl"]
@@ -424,23 +533,44 @@ class LiveView:
             return
         d_v = np.asarray(d_v, dtype=float)
         sigma = sqrt_diag(d_cov) if d_cov is not None else np.full(3, np.nan)
-        channel.log({"t_s": float(t), "valid": bool(valid), "d_v_m_s": xyz(d_v), "sigma_m_s": xyz(sigma),
-                     "speed_m_s": num(float(np.linalg.norm(d_v)))}, log_time=ns)
+        channel.log(
+            {
+                "t_s": float(t),
+                "valid": bool(valid),
+                "d_v_m_s": xyz(d_v),
+                "sigma_m_s": xyz(sigma),
+                "speed_m_s": num(float(np.linalg.norm(d_v))),
+            },
+            log_time=ns,
+        )
 
     def publish_depth(self, t: float, depth_m: float, pressure_pa: float | None = None) -> None:
         """A depth sample: m below the surface (positive down) and the absolute pressure (Pa) if measured."""
         ns = self._tick(t)
         channel = self._channels["depth"]
         if channel.has_sinks():
-            channel.log({"t_s": float(t), "depth_m": num(depth_m),
-                         "pressure_pa": None if pressure_pa is None else num(pressure_pa)}, log_time=ns)
+            channel.log(
+                {
+                    "t_s": float(t),
+                    "depth_m": num(depth_m),
+                    "pressure_pa": None if pressure_pa is None else num(pressure_pa),
+                },
+                log_time=ns,
+            )
 
-    def publish_truth(self, t: float, n_p: np.ndarray, n_q_b: np.ndarray, n_v: np.ndarray,
-                      b_omega: np.ndarray | None = None) -> None:
+    def publish_truth(
+        self,
+        t: float,
+        n_p: np.ndarray,
+        n_q_b: np.ndarray,
+        n_v: np.ndarray,
+        b_omega: np.ndarray | None = None,
+    ) -> None:
         """The true pose of base_link in map (quaternion [x, y, z, w]) and velocity (m/s, map) at t."""
         ns = self._tick(t)
         b_v = quat_xyzw_to_matrix(np.asarray(n_q_b, dtype=float)).T @ np.asarray(n_v, dtype=float)
         w = np.zeros(3) if b_omega is None else np.asarray(b_omega, dtype=float)
-        self._channels["truth"].log(_odometry(ns, n_p, n_q_b, b_v, w, np.zeros((6, 6)), np.zeros((6, 6))),
-                                    log_time=ns)
+        self._channels["truth"].log(
+            _odometry(ns, n_p, n_q_b, b_v, w, np.zeros((6, 6)), np.zeros((6, 6))), log_time=ns
+        )
         self._truth_path.add(ns, n_p, n_q_b)

@@ -12,7 +12,7 @@ Times given to the estimator are seconds since t0_ns, the first IMU stamp rounde
 makes them: a node fed a log's messages and `smooth --mode online` on that log give the same estimates.
 
 The estimator starts when the map origin is known (the configuration's alignment.origin_*, else the first good GNSS
-fix, which is then the origin and its time origin_t, as estimators/gnss.py makes it for a log) and the first IMU
+fix, which is then the origin and its time origin_t, as estimators/inputs/gnss.py makes it for a log) and the first IMU
 sample is released; the mounting is /tf_static's when it was received, else the settings'. An exception inside the
 estimator never reaches ROS: one log line, the error kept for the diagnostics ("failed: the estimator stopped"),
 and nothing more fed to it; the node itself goes on (diagnostics, services) until it is restarted. A new estimator
@@ -58,9 +58,20 @@ if TYPE_CHECKING:
     from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator
 
 # the rows of the calibration message (Float64MultiArray, rows x [value, sigma]; docs/ros2.md): name with unit
-CALIBRATION_ROWS = ("stamp_s", "scale", "misalignment_roll_deg", "misalignment_pitch_deg", "misalignment_yaw_deg",
-                    "time_offset_s", "accel_bias_x_ug", "accel_bias_y_ug", "accel_bias_z_ug",
-                    "gyro_bias_x_deg_per_h", "gyro_bias_y_deg_per_h", "gyro_bias_z_deg_per_h")
+CALIBRATION_ROWS = (
+    "stamp_s",
+    "scale",
+    "misalignment_roll_deg",
+    "misalignment_pitch_deg",
+    "misalignment_yaw_deg",
+    "time_offset_s",
+    "accel_bias_x_ug",
+    "accel_bias_y_ug",
+    "accel_bias_z_ug",
+    "gyro_bias_x_deg_per_h",
+    "gyro_bias_y_deg_per_h",
+    "gyro_bias_z_deg_per_h",
+)
 TIMINGS_KEPT = 200_000  # per-epoch timing records kept for stats_file (about 40 h of 1 Hz states)
 
 
@@ -75,7 +86,10 @@ class EpochTiming:
     done: float
     processing_s: float
     published: float = math.nan
-    trigger: tuple[str, int] = ("", 0)  # the message that released it: input kind and header stamp (ns)
+    trigger: tuple[str, int] = (
+        "",
+        0,
+    )  # the message that released it: input kind and header stamp (ns)
 
 
 class NodeCore:
@@ -83,18 +97,36 @@ class NodeCore:
     tick() is called on a wall-time timer (flush, stalls); odometry(), calibration_rows(), health() and path() make
     what is published. log(level, text): the node's logger ("info", "warn", "error")."""
 
-    def __init__(self, settings: NodeSettings, config: EstimatorConfig, *,
-                 calibration: VehicleCalibration | None = None, clock: Callable[[], float] = time.monotonic,
-                 log: Callable[[str, str], None] | None = None) -> None:
+    def __init__(
+        self,
+        settings: NodeSettings,
+        config: EstimatorConfig,
+        *,
+        calibration: VehicleCalibration | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        log: Callable[[str, str], None] | None = None,
+    ) -> None:
         self.settings = settings
         # a message the estimator refuses is dropped and counted, never raised (a node does not stop on one)
-        self.config = config.model_copy(update={"online": config.online.model_copy(update={"bad_messages": "drop"})})
+        self.config = config.model_copy(
+            update={"online": config.online.model_copy(update={"bad_messages": "drop"})}
+        )
         self.calibration_file = calibration
         self.clock = clock
         self.log: Callable[[str, str], None] = log or (lambda level, text: None)
         s = settings
-        self.topics = {"imu": s.imu_topic, "dvl": s.dvl_topic, "pressure": s.pressure_topic, "gnss": s.gnss_topic}
-        self.types = {"imu": IMU_TYPE, "dvl": s.dvl_type, "pressure": PRESSURE_TYPE, "gnss": NAVSATFIX_TYPE}
+        self.topics = {
+            "imu": s.imu_topic,
+            "dvl": s.dvl_topic,
+            "pressure": s.pressure_topic,
+            "gnss": s.gnss_topic,
+        }
+        self.types = {
+            "imu": IMU_TYPE,
+            "dvl": s.dvl_type,
+            "pressure": PRESSURE_TYPE,
+            "gnss": NAVSATFIX_TYPE,
+        }
         self.decoders = {k: MessageDecoder(self.topics[k] or k, self.types[k]) for k in self.topics}
         self.buffer = ReorderBuffer(round(s.reorder_window_s * 1e9), round(s.stamp_jump_s * 1e9))
         self.off_clock = {k: 0 for k in self.topics}
@@ -102,8 +134,11 @@ class NodeCore:
         self.frames = {"imu": "imu_link", "dvl": "dvl_link", "pressure": "pressure_link"}
         self.tf: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         a = self.config.alignment
-        self.frame = (LocalFrame(a.origin_lat_deg, a.origin_lon_deg or 0.0, a.origin_height_m or 0.0)
-                      if a.origin_lat_deg is not None else None)
+        self.frame = (
+            LocalFrame(a.origin_lat_deg, a.origin_lon_deg or 0.0, a.origin_height_m or 0.0)
+            if a.origin_lat_deg is not None
+            else None
+        )
         self.origin_t: float | None = None
         self.t0_ns: int | None = None
         self.estimator: OnlineEstimator | None = None
@@ -141,17 +176,26 @@ class NodeCore:
         if frame and kind in self.frames:
             self.frames[kind] = frame
         imu_newest = self.buffer.streams["imu"].newest_ns
-        if kind != "imu" and imu_newest is not None and abs(ns - imu_newest) > self.settings.clock_skew_s * 1e9:
+        if (
+            kind != "imu"
+            and imu_newest is not None
+            and abs(ns - imu_newest) > self.settings.clock_skew_s * 1e9
+        ):
             self.off_clock[kind] += 1
             if self.off_clock[kind] == 1:
                 skew = (ns - imu_newest) * 1e-9
-                self._say("warn", f"{self.topics[kind]}: stamp {skew:+.3f} s from the IMU's newest: not on the IMU's "
-                                  "clock, dropped (further ones are counted)")
+                self._say(
+                    "warn",
+                    f"{self.topics[kind]}: stamp {skew:+.3f} s from the IMU's newest: not on the IMU's "
+                    "clock, dropped (further ones are counted)",
+                )
             return []
         if kind == "imu" and self.t0_ns is None:
             self.t0_ns = ns // 1_000_000_000 * 1_000_000_000
         self.buffer.push(kind, ns, arr, wall)
-        if self.t0_ns is None:  # nothing is released before the first IMU sample sets the time origin
+        if (
+            self.t0_ns is None
+        ):  # nothing is released before the first IMU sample sets the time origin
             return []
         self._trigger = (kind, ns)
         return self._release(self.buffer.ready(), wall)
@@ -160,15 +204,24 @@ class NodeCore:
         """A tf2_msgs/msg/TFMessage of /tf_static: its transforms kept for the mounting (read when the estimator
         starts)."""
         try:
-            self.tf.update(decode_tf(Path(self.settings.tf_static_topic), self.settings.tf_static_topic,
-                                     Bodies(np.zeros(1, np.int64), var=[body])))
+            self.tf.update(
+                decode_tf(
+                    Path(self.settings.tf_static_topic),
+                    self.settings.tf_static_topic,
+                    Bodies(np.zeros(1, np.int64), var=[body]),
+                )
+            )
         except GtsamDvlError as exc:
             self._say("warn", str(exc))
 
     def tick(self, wall: float | None = None) -> list[OnlineEstimate]:
         """The wall-time timer: with no message for flush_after_s, every held message is released."""
         wall = self.clock() if wall is None else wall
-        if len(self.buffer) and self.t0_ns is not None and wall - self.last_wall > self.settings.flush_after_s:
+        if (
+            len(self.buffer)
+            and self.t0_ns is not None
+            and wall - self.last_wall > self.settings.flush_after_s
+        ):
             return self._release(self.buffer.flush(), wall)
         return []
 
@@ -207,7 +260,11 @@ class NodeCore:
                 except Exception as exc:  # noqa: BLE001  (module doc: the node goes on)
                     self._stopped(exc)
                     done = 0
-                if done and self.estimator is not None and (e := self.estimator.estimate()) is not None:
+                if (
+                    done
+                    and self.estimator is not None
+                    and (e := self.estimator.estimate()) is not None
+                ):
                     self._published(e, arrived)
                     out.append(e)
                 i = j
@@ -239,25 +296,44 @@ class NodeCore:
         self.last_ping_t = t
         if dvl.valid[0]:
             self.last_valid_ping_t = t
-        beams = None if dvl.beams is None else (dvl.beams.d_u[0], dvl.beams.v[0], dvl.beams.valid[0])
-        return est.push_dvl(t, dvl.d_v[0], dvl.d_cov[0], bool(dvl.valid[0]), beams,
-                            water_track=dvl.water_track is not None and bool(dvl.water_track[0]))
+        beams = (
+            None if dvl.beams is None else (dvl.beams.d_u[0], dvl.beams.v[0], dvl.beams.valid[0])
+        )
+        return est.push_dvl(
+            t,
+            dvl.d_v[0],
+            dvl.d_cov[0],
+            bool(dvl.valid[0]),
+            beams,
+            water_track=dvl.water_track is not None and bool(dvl.water_track[0]),
+        )
 
     def _take_fix(self, m: Held) -> None:
-        """A GNSS fix: the map origin when none is configured and none was taken (estimators/gnss.py: the first good
+        """A GNSS fix: the map origin when none is configured and none was taken (estimators/inputs/gnss.py: the first
+        good
         fix is the origin, at its time). The online estimator does not use fixes otherwise."""
         if self.frame is not None or self.t0_ns is None:
             return
         gnss = gnss_from_messages(m.payload, np.array([m.stamp_ns]), self.t0_ns)
         if good_fixes(gnss)[0]:
-            self.frame = LocalFrame(float(gnss.lat_deg[0]), float(gnss.lon_deg[0]), float(gnss.height_m[0]))
+            self.frame = LocalFrame(
+                float(gnss.lat_deg[0]), float(gnss.lon_deg[0]), float(gnss.height_m[0])
+            )
             self.origin_t = float(gnss.t[0])
             o = self.frame
-            self._say("info", f"map origin from the GNSS fix at t = {self.origin_t:.1f} s: lat {o.lat_deg:.7f}, "
-                             f"lon {o.lon_deg:.7f}, height {o.height_m:.2f} m")
+            self._say(
+                "info",
+                f"map origin from the GNSS fix at t = {self.origin_t:.1f} s: lat {o.lat_deg:.7f}, "
+                f"lon {o.lon_deg:.7f}, height {o.height_m:.2f} m",
+            )
 
     def _ensure_estimator(self) -> OnlineEstimator | None:
-        if self.estimator is not None or self.frame is None or self.t0_ns is None or self.stop_error:
+        if (
+            self.estimator is not None
+            or self.frame is None
+            or self.t0_ns is None
+            or self.stop_error
+        ):
             return self.estimator
         from gtsam_dvl.estimators.online import OnlineEstimator
 
@@ -266,8 +342,14 @@ class NodeCore:
 
             self.prior, _ = inflated_at(self.calibration_file, self.t0_ns, self.config)
         mounting, depth_sensor = self.mounting()
-        est = OnlineEstimator(self.config, frame=self.frame, mounting=mounting, source=self.settings.node_name,
-                              depth_sensor=depth_sensor, calibration=self.prior)
+        est = OnlineEstimator(
+            self.config,
+            frame=self.frame,
+            mounting=mounting,
+            source=self.settings.node_name,
+            depth_sensor=depth_sensor,
+            calibration=self.prior,
+        )
         est.origin_t = self.origin_t
         self.estimator = est
         return est
@@ -278,10 +360,15 @@ class NodeCore:
         s = self.settings
         m = Mounting()
         chosen = {}
-        for kind, rpy, xyz in (("imu", s.imu_rpy_deg, s.imu_xyz_m), ("dvl", s.dvl_rpy_deg, s.dvl_xyz_m),
-                               ("pressure", (0.0, 0.0, 0.0), s.pressure_xyz_m)):
+        for kind, rpy, xyz in (
+            ("imu", s.imu_rpy_deg, s.imu_xyz_m),
+            ("dvl", s.dvl_rpy_deg, s.dvl_xyz_m),
+            ("pressure", (0.0, 0.0, 0.0), s.pressure_xyz_m),
+        ):
             pose = to_base(self.tf, self.frames[kind], s.base_frame) if self.tf else None
-            chosen[kind] = pose if pose is not None else (rpy_deg_to_matrix(rpy), np.asarray(xyz, dtype=float))
+            chosen[kind] = (
+                pose if pose is not None else (rpy_deg_to_matrix(rpy), np.asarray(xyz, dtype=float))
+            )
         m.b_R_imu, m.b_p_imu = chosen["imu"]
         m.b_R_d0, m.b_p_dvl = chosen["dvl"]
         return m, np.asarray(chosen["pressure"][1], dtype=float)
@@ -293,15 +380,20 @@ class NodeCore:
         self.stop_error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
         self.stop_t = self._newest_t()
         self.stops += 1
-        self._say("error", f"estimator stopped at t = {t:.2f} s ({self.stop_error}): no estimate from here on; "
-                           "the node goes on (diagnostics, services) until it is restarted")
+        self._say(
+            "error",
+            f"estimator stopped at t = {t:.2f} s ({self.stop_error}): no estimate from here on; "
+            "the node goes on (diagnostics, services) until it is restarted",
+        )
         self.estimator = None
 
     def _published(self, e: OnlineEstimate, arrived: float) -> None:
         self.latest = e
         est = self.estimator
         processing = est.latencies_s[-1] if est is not None and len(est.latencies_s) else math.nan
-        self.timings.append(EpochTiming(float(e.t), arrived, self.clock(), processing, trigger=self._trigger))
+        self.timings.append(
+            EpochTiming(float(e.t), arrived, self.clock(), processing, trigger=self._trigger)
+        )
         if math.isnan(e.predicted_from_t):  # a state (not a ping between keyframes): on the path
             self.path.add(self.stamp_ns(e.t), e.n_p, matrix_to_quat_xyzw(e.n_R_b))
 
@@ -317,10 +409,17 @@ class NodeCore:
         s = self.settings
         q = matrix_to_quat_xyzw(e.n_R_b)
         b_v, twist = ros_twist_covariance(e.n_R_b, e.n_v, e.pose_cov, e.vel_cov, e.pose_vel_cross)
-        return messages.odometry(np.array([self.stamp_ns(e.t)]), np.reshape(e.n_p, (1, 3)), q.reshape(1, 4),
-                                 b_v.reshape(1, 3), np.zeros((1, 3)),
-                                 ros_pose_covariance(e.n_R_b, e.pose_cov).reshape(1, 6, 6), twist.reshape(1, 6, 6),
-                                 frame_id=s.map_frame, child_frame_id=s.base_frame).tobytes()
+        return messages.odometry(
+            np.array([self.stamp_ns(e.t)]),
+            np.reshape(e.n_p, (1, 3)),
+            q.reshape(1, 4),
+            b_v.reshape(1, 3),
+            np.zeros((1, 3)),
+            ros_pose_covariance(e.n_R_b, e.pose_cov).reshape(1, 6, 6),
+            twist.reshape(1, 6, 6),
+            frame_id=s.map_frame,
+            child_frame_id=s.base_frame,
+        ).tobytes()
 
     def calibration_rows(self, e: OnlineEstimate) -> np.ndarray:
         """(len(CALIBRATION_ROWS), 2) [value, sigma] in the rows' units: the stamp (s since the Unix epoch, sigma 0),
@@ -329,10 +428,22 @@ class NodeCore:
         assert e.b_R_d0 is not None
         rpy, cov = misalignment_rpy_and_cov(e.b_R_d, e.b_R_d0, e.b_R_d_cov)
         sig = np.sqrt(np.clip(np.diag(e.bias_cov), 0.0, None))
-        values = np.r_[self.stamp_ns(e.t) * 1e-9, e.scale, rpy, e.time_offset_s, e.accel_bias / UG,
-                       e.gyro_bias / DEG_PER_H]
-        sigmas = np.r_[0.0, e.scale_sigma, np.sqrt(np.clip(np.diag(cov), 0.0, None)), e.time_offset_sigma_s,
-                       sig[:3] / UG, sig[3:] / DEG_PER_H]
+        values = np.r_[
+            self.stamp_ns(e.t) * 1e-9,
+            e.scale,
+            rpy,
+            e.time_offset_s,
+            e.accel_bias / UG,
+            e.gyro_bias / DEG_PER_H,
+        ]
+        sigmas = np.r_[
+            0.0,
+            e.scale_sigma,
+            np.sqrt(np.clip(np.diag(cov), 0.0, None)),
+            e.time_offset_sigma_s,
+            sig[:3] / UG,
+            sig[3:] / DEG_PER_H,
+        ]
         return np.column_stack([values, sigmas])
 
     def path_message(self) -> bytes | None:
@@ -361,47 +472,84 @@ class NodeCore:
             last = math.nan if st.newest_ns is None or self.t0_ns is None else self._t(st.newest_ns)
             jump = st.last_jump_ns
             since_jump = math.inf if jump is None or self.t0_ns is None else newest - self._t(jump)
-            streams[kind] = StreamState(topic, st.received, newest - last, st.late, st.duplicates,
-                                        self.off_clock[kind], st.jumps, st.largest_jump_s, since_jump)
+            streams[kind] = StreamState(
+                topic,
+                st.received,
+                newest - last,
+                st.late,
+                st.duplicates,
+                self.off_clock[kind],
+                st.jumps,
+                st.largest_jump_s,
+                since_jump,
+            )
         imu = self.buffer.streams["imu"]
         est = self.estimator
-        phase = ("waiting_origin" if self.frame is None else
-                 "running" if est is not None and est.epochs > 0 else "aligning")
+        phase = (
+            "waiting_origin"
+            if self.frame is None
+            else "running"
+            if est is not None and est.epochs > 0
+            else "aligning"
+        )
         no_lock = 0.0
         if math.isfinite(self.last_ping_t) and not self.last_ping_t == self.last_valid_ping_t:
             since = self.last_valid_ping_t if math.isfinite(self.last_valid_ping_t) else 0.0
             no_lock = self.last_ping_t - since
         imu_silent = max(0.0, wall - imu.last_wall) if imu.received else math.inf
-        return LiveState(phase="stopped" if self.stop_error else phase, streams=streams, imu_wall_silent_s=imu_silent,
-                         no_lock_s=no_lock, stop_error=self.stop_error,
-                         since_stop_s=newest - self.stop_t if self.stop_error else math.inf,
-                         counters=dict(est.counters) if est is not None else {},
-                         epochs=est.epochs if est is not None else 0, t=newest)
+        return LiveState(
+            phase="stopped" if self.stop_error else phase,
+            streams=streams,
+            imu_wall_silent_s=imu_silent,
+            no_lock_s=no_lock,
+            stop_error=self.stop_error,
+            since_stop_s=newest - self.stop_t if self.stop_error else math.inf,
+            counters=dict(est.counters) if est is not None else {},
+            epochs=est.epochs if est is not None else 0,
+            t=newest,
+        )
 
     def health(self, wall: float | None = None) -> Health:
         """The verdict now (analysis/live_health.py assess_live) with the settings' thresholds."""
         s = self.settings
-        return assess_live(self.live_state(wall), LiveThresholds(s.dvl_silent_warn_s, s.dvl_silent_degraded_s,
-                                                                 s.bottom_lock_degraded_s, s.imu_silent_s))
+        return assess_live(
+            self.live_state(wall),
+            LiveThresholds(
+                s.dvl_silent_warn_s,
+                s.dvl_silent_degraded_s,
+                s.bottom_lock_degraded_s,
+                s.imu_silent_s,
+            ),
+        )
 
     def key_values(self) -> dict[str, str]:
         """The figures beside the verdict in the diagnostics: its sensor time (sensor_t_s), the latest estimate
         (t_s, its time, and its values with sigmas) and each input's counts."""
-        out: dict[str, str] = {"sensor_t_s": f"{self._newest_t():.3f}"}  # the verdict's time (the IMU's newest)
+        out: dict[str, str] = {
+            "sensor_t_s": f"{self._newest_t():.3f}"
+        }  # the verdict's time (the IMU's newest)
         e = self.latest
         if e is not None:
             rows = self.calibration_rows(e)
             out["t_s"] = f"{e.t:.3f}"
             for name, (v, sg) in zip(CALIBRATION_ROWS[1:], rows[1:], strict=True):
                 out[name] = f"{v:.6g} +- {sg:.3g}"
-            out["position_sigma_m"] = " ".join(f"{x:.3g}" for x in np.sqrt(np.clip(np.diag(e.pose_cov)[3:], 0, None)))
+            out["position_sigma_m"] = " ".join(
+                f"{x:.3g}" for x in np.sqrt(np.clip(np.diag(e.pose_cov)[3:], 0, None))
+            )
         if self.estimator is not None:
             out["epochs"] = str(self.estimator.epochs)
-            out.update({f"counter {k}": str(v) for k, v in sorted(self.estimator.counters.items()) if v})
+            out.update(
+                {f"counter {k}": str(v) for k, v in sorted(self.estimator.counters.items()) if v}
+            )
         for kind, topic in self.topics.items():
             if topic:
-                out[f"input {topic}"] = ", ".join(f"{k} {v}" for k, v in self.buffer.streams[kind].as_dict().items()
-                                                  if v) or "nothing received"
+                out[f"input {topic}"] = (
+                    ", ".join(
+                        f"{k} {v}" for k, v in self.buffer.streams[kind].as_dict().items() if v
+                    )
+                    or "nothing received"
+                )
         return out
 
     def save_calibration(self, path: Path | str) -> VehicleCalibration:
@@ -412,10 +560,15 @@ class NodeCore:
 
         est = self.estimator
         if est is None or est.epochs == 0 or self.t0_ns is None:
-            raise GtsamDvlError("no estimate yet: the calibration is saved once the estimator has made a state")
+            raise GtsamDvlError(
+                "no estimate yet: the calibration is saved once the estimator has made a state"
+            )
         result = run_result(est, self.config, self.t0_ns)
-        vehicle = self.settings.vehicle or (self.prior.vehicle if self.prior is not None else "") or \
-            self.settings.node_name
+        vehicle = (
+            self.settings.vehicle
+            or (self.prior.vehicle if self.prior is not None else "")
+            or self.settings.node_name
+        )
         earlier = self.prior.sources if self.prior is not None else ()
         source = SourceLog(f"ros2 node {self.settings.node_name} from {iso_date(self.t0_ns)}", "")
         cal = from_result(result, self.config, vehicle, sources=(*earlier, source))
@@ -424,6 +577,16 @@ class NodeCore:
 
     def timing_records(self) -> list[dict[str, Any]]:
         """The per-epoch timings (EpochTiming) as dicts, for stats_file."""
-        return [{"t": r.t, "stamp_ns": self.stamp_ns(r.t), "arrived": r.arrived, "done": r.done,
-                 "processing_s": r.processing_s, "published": r.published, "trigger_kind": r.trigger[0],
-                 "trigger_ns": r.trigger[1]} for r in self.timings]
+        return [
+            {
+                "t": r.t,
+                "stamp_ns": self.stamp_ns(r.t),
+                "arrived": r.arrived,
+                "done": r.done,
+                "processing_s": r.processing_s,
+                "published": r.published,
+                "trigger_kind": r.trigger[0],
+                "trigger_ns": r.trigger[1],
+            }
+            for r in self.timings
+        ]

@@ -37,14 +37,27 @@ class PlayOutcome:
 
     def describe(self) -> str:
         n = sum(self.published.values())
-        skipped = f"; skipped {', '.join(self.skipped)} (no Python message package)" if self.skipped else ""
+        skipped = (
+            f"; skipped {', '.join(self.skipped)} (no Python message package)"
+            if self.skipped
+            else ""
+        )
         return f"published {n} messages on {len(self.published)} topics in {self.wall_s:.1f} s{skipped}"
 
 
-def play_log(path: Path | str, *, rate: float = 1.0, topics: Sequence[str] | None = None,
-             remap: dict[str, str] | None = None, wait_for_subscribers_s: float = 0.0, reliable_depth: int = 1000,
-             domain_id: int | None = None, record: bool = False, start: Callable[[], None] | None = None,
-             skip: Callable[[str, int], bool] | None = None) -> PlayOutcome:
+def play_log(
+    path: Path | str,
+    *,
+    rate: float = 1.0,
+    topics: Sequence[str] | None = None,
+    remap: dict[str, str] | None = None,
+    wait_for_subscribers_s: float = 0.0,
+    reliable_depth: int = 1000,
+    domain_id: int | None = None,
+    record: bool = False,
+    start: Callable[[], None] | None = None,
+    skip: Callable[[str, int], bool] | None = None,
+) -> PlayOutcome:
     """Publish a log's messages (module doc) at rate times real time (math.inf: as fast as possible). topics: those
     to play (None: every topic but the truth's and our results'); remap: topic -> published name;
     wait_for_subscribers_s: wait up to this long for each topic to have a subscriber before starting (a late
@@ -54,10 +67,16 @@ def play_log(path: Path | str, *, rate: float = 1.0, topics: Sequence[str] | Non
         raise GtsamDvlError(f"--rate must be > 0 (times real time), got {rate}")
     rclpy = import_ros()
     src = open_source(path)
-    chosen = list(topics) if topics else [t for t in src.topics if not t.startswith(("/gtsam_dvl", "/ground_truth"))]
+    chosen = (
+        list(topics)
+        if topics
+        else [t for t in src.topics if not t.startswith(("/gtsam_dvl", "/ground_truth"))]
+    )
     missing = [t for t in chosen if t not in src.topics]
     if missing:
-        raise GtsamDvlError(f"{src.path}: no topic {', '.join(missing)}; topics in the log: {src.describe_topics()}")
+        raise GtsamDvlError(
+            f"{src.path}: no topic {', '.join(missing)}; topics in the log: {src.describe_topics()}"
+        )
     out = PlayOutcome()
     classes: dict[str, Any] = {}
     for t in chosen:
@@ -78,12 +97,23 @@ def play_log(path: Path | str, *, rate: float = 1.0, topics: Sequence[str] | Non
         from rclpy.node import Node
 
         node = Node("gtsam_dvl_player", context=context)
-        pubs = {t: node.create_publisher(cls, remap.get(t, t), qos("reliable", 100 if t == "/tf_static" else
-                                                                     reliable_depth, latched=t == "/tf_static"))
-                for t, cls in classes.items()}
+        pubs = {
+            t: node.create_publisher(
+                cls,
+                remap.get(t, t),
+                qos(
+                    "reliable",
+                    100 if t == "/tf_static" else reliable_depth,
+                    latched=t == "/tf_static",
+                ),
+            )
+            for t, cls in classes.items()
+        }
         if wait_for_subscribers_s > 0:
             deadline = time.monotonic() + wait_for_subscribers_s
-            while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs.values()):
+            while time.monotonic() < deadline and not all(
+                p.get_subscription_count() for p in pubs.values()
+            ):
                 time.sleep(0.02)
         if start is not None:
             start()

@@ -40,15 +40,23 @@ class StreamStats:
     newest_ns: int | None = None
     released_ns: int | None = None
     last_wall: float = -math.inf
-    ref_ns: int | None = None  # its clock at its last arrival: wall time for the IMU, the IMU's stamps for others
+    ref_ns: int | None = (
+        None  # its clock at its last arrival: wall time for the IMU, the IMU's stamps for others
+    )
     jumps: int = 0
     largest_jump_s: float = 0.0
     last_jump_ns: int | None = None
     frame_id: str = ""
 
     def as_dict(self) -> dict[str, Any]:
-        return {"received": self.received, "released": self.released, "late": self.late,
-                "duplicates": self.duplicates, "jumps": self.jumps, "largest_jump_s": self.largest_jump_s}
+        return {
+            "received": self.received,
+            "released": self.released,
+            "late": self.late,
+            "duplicates": self.duplicates,
+            "jumps": self.jumps,
+            "largest_jump_s": self.largest_jump_s,
+        }
 
 
 @dataclass(order=True)
@@ -89,7 +97,9 @@ class ReorderBuffer:
             if step > self.jump_ns or stamp_ns - s.newest_ns < -self.jump_ns:
                 s.jumps += 1
                 jump_s = (stamp_ns - s.newest_ns) * 1e-9 if step <= self.jump_ns else step * 1e-9
-                s.largest_jump_s = jump_s if abs(jump_s) > abs(s.largest_jump_s) else s.largest_jump_s
+                s.largest_jump_s = (
+                    jump_s if abs(jump_s) > abs(s.largest_jump_s) else s.largest_jump_s
+                )
                 s.last_jump_ns = max(stamp_ns, s.newest_ns)
         s.last_wall, s.ref_ns = wall, ref
         if s.released_ns is not None and stamp_ns <= s.released_ns:
@@ -99,7 +109,9 @@ class ReorderBuffer:
                 s.late += 1
             return False
         s.newest_ns = stamp_ns if s.newest_ns is None else max(s.newest_ns, stamp_ns)
-        if kind == "imu":  # the IMU is the clock: a ping stamped ahead of it (another clock) releases nothing
+        if (
+            kind == "imu"
+        ):  # the IMU is the clock: a ping stamped ahead of it (another clock) releases nothing
             self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
         heapq.heappush(self._heap, Held(stamp_ns, RANK[kind], next(self._seq), kind, payload))
         return True

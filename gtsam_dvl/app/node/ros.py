@@ -23,8 +23,10 @@ from typing import Any
 from gtsam_dvl.app.node.core import CALIBRATION_ROWS, NodeCore
 from gtsam_dvl.core.errors import GtsamDvlError
 
-INSTALL_HINT = ("gtsam-dvl node needs ROS 2's rclpy and message packages (wheels from PyPI, no system ROS): "
-                "pip install 'gtsam-dvl[ros2]'")
+INSTALL_HINT = (
+    "gtsam-dvl node needs ROS 2's rclpy and message packages (wheels from PyPI, no system ROS): "
+    "pip install 'gtsam-dvl[ros2]'"
+)
 # diagnostic_msgs/DiagnosticStatus levels of the health verdicts: OK, WARN, ERROR (degraded: the estimate goes on
 # but is not to be trusted at its stated accuracy; failed: no estimate or a stopped estimator)
 LEVELS = {"ok": 0, "warn": 1, "degraded": 2, "failed": 2}
@@ -38,6 +40,7 @@ def import_ros() -> Any:
     """rclpy, or GtsamDvlError with how to install it (the message packages are checked with it)."""
     try:
         import rclpy
+
         importlib.import_module("sensor_msgs.msg")
         importlib.import_module("nav_msgs.msg")
         importlib.import_module("diagnostic_msgs.msg")
@@ -59,10 +62,14 @@ def message_class(type_name: str) -> Any:
 def qos(reliability: str, depth: int, latched: bool = False) -> Any:
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE if reliability == "reliable" else
-                      ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE
+        if reliability == "reliable"
+        else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+    )
 
 
 class RosNode:
@@ -90,29 +97,60 @@ class RosNode:
                 continue
             cls = message_class(core.types[kind])
             if cls is None:
-                raise GtsamDvlError(f"{topic}: {core.types[kind]} has no Python package here (marine_acoustic_msgs "
-                                    "has no wheel on PyPI): choose dvl_type TwistWithCovarianceStamped or "
-                                    "TwistStamped, or install the package")
-            self.subscriptions.append(node.create_subscription(cls, topic, self._callback(kind), inputs, raw=True))
+                raise GtsamDvlError(
+                    f"{topic}: {core.types[kind]} has no Python package here (marine_acoustic_msgs "
+                    "has no wheel on PyPI): choose dvl_type TwistWithCovarianceStamped or "
+                    "TwistStamped, or install the package"
+                )
+            self.subscriptions.append(
+                node.create_subscription(cls, topic, self._callback(kind), inputs, raw=True)
+            )
         tf = message_class("tf2_msgs/msg/TFMessage") if s.tf_static_topic else None
         if tf is not None:
-            self.subscriptions.append(node.create_subscription(
-                tf, s.tf_static_topic, self._guard("tf_static", core.receive_tf), qos("reliable", 100, latched=True),
-                raw=True))
+            self.subscriptions.append(
+                node.create_subscription(
+                    tf,
+                    s.tf_static_topic,
+                    self._guard("tf_static", core.receive_tf),
+                    qos("reliable", 100, latched=True),
+                    raw=True,
+                )
+            )
         else:
-            core.log("info", "tf2_msgs is not importable (no wheel on PyPI): the mounting comes from the parameters "
-                             "(imu_rpy_deg, dvl_rpy_deg, ...), not /tf_static")
+            core.log(
+                "info",
+                "tf2_msgs is not importable (no wheel on PyPI): the mounting comes from the parameters "
+                "(imu_rpy_deg, dvl_rpy_deg, ...), not /tf_static",
+            )
         out = qos(s.qos_outputs.reliability, s.qos_outputs.depth)
         self.odometry = node.create_publisher(Odometry, s.odometry_topic, out)
-        self.calibration = (node.create_publisher(Float64MultiArray, s.calibration_topic,
-                                                  qos(s.qos_outputs.reliability, 1, latched=True))
-                            if s.calibration_topic else None)
-        self.diagnostics = node.create_publisher(DiagnosticArray, s.diagnostics_topic, out) \
-            if s.diagnostics_topic else None
-        self.path = node.create_publisher(PathMsg, s.path_topic, out) if s.path_topic and s.path_period_s else None
-        self.save_service = node.create_service(Trigger, "~/save_calibration", self._guard("save", self._save))
-        self.timer = node.create_timer(s.diagnostics_period_s, self._guard("timer", self._tick),
-                                       clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.calibration = (
+            node.create_publisher(
+                Float64MultiArray,
+                s.calibration_topic,
+                qos(s.qos_outputs.reliability, 1, latched=True),
+            )
+            if s.calibration_topic
+            else None
+        )
+        self.diagnostics = (
+            node.create_publisher(DiagnosticArray, s.diagnostics_topic, out)
+            if s.diagnostics_topic
+            else None
+        )
+        self.path = (
+            node.create_publisher(PathMsg, s.path_topic, out)
+            if s.path_topic and s.path_period_s
+            else None
+        )
+        self.save_service = node.create_service(
+            Trigger, "~/save_calibration", self._guard("save", self._save)
+        )
+        self.timer = node.create_timer(
+            s.diagnostics_period_s,
+            self._guard("timer", self._tick),
+            clock=Clock(clock_type=ClockType.STEADY_TIME),
+        )
 
     def say(self, level: str, text: str) -> None:
         """A line on the node's logger at level "info", "warn" or "error" (rclpy wants one severity per call site:
@@ -128,6 +166,7 @@ class RosNode:
     # ----- callbacks -----------------------------------------------------------------------------------------
     def _guard(self, what: str, fn: Callable[..., Any]) -> Callable[..., Any]:
         """fn with every exception made one log line (the first of each kind in full, then counted)."""
+
         def call(*args: Any) -> Any:
             try:
                 return fn(*args)
@@ -135,9 +174,15 @@ class RosNode:
                 key = f"{what}: {type(exc).__name__}"
                 n = self._errors[key] = self._errors.get(key, 0) + 1
                 if n == 1 or n % 1000 == 0:
-                    self.say("error", f"{what}: {type(exc).__name__}: {exc}".splitlines()[0]
-                             + (f" ({n} times)" if n > 1 else ""))
-                return args[-1] if what == "save" else None  # a service callback returns its response
+                    self.say(
+                        "error",
+                        f"{what}: {type(exc).__name__}: {exc}".splitlines()[0]
+                        + (f" ({n} times)" if n > 1 else ""),
+                    )
+                return (
+                    args[-1] if what == "save" else None
+                )  # a service callback returns its response
+
         return call
 
     def _callback(self, kind: str) -> Callable[[bytes], None]:
@@ -146,16 +191,24 @@ class RosNode:
         def take(body: bytes) -> None:
             for e in core.receive(kind, body, time.monotonic()):
                 self.publish(e)
-            if kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S:  # (nan: never checked)
+            if (
+                kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S
+            ):  # (nan: never checked)
                 self._checked_t = core.newest_t()
                 self.publish_diagnostics()
+
         return self._guard(kind, take)
 
-    def _tick(self, *_: Any) -> None:  # (rclpy passes a TimerInfo to a callback that takes arguments)
+    def _tick(
+        self, *_: Any
+    ) -> None:  # (rclpy passes a TimerInfo to a callback that takes arguments)
         for e in self.core.tick(time.monotonic()):
             self.publish(e)
         self.publish_diagnostics(force=True)
-        if self.path is not None and time.monotonic() - self._path_wall >= self.core.settings.path_period_s:
+        if (
+            self.path is not None
+            and time.monotonic() - self._path_wall >= self.core.settings.path_period_s
+        ):
             self._path_wall = time.monotonic()
             if (body := self.core.path_message()) is not None:
                 self.path.publish(body)
@@ -163,7 +216,10 @@ class RosNode:
     def _save(self, request: Any, response: Any) -> Any:
         path = self.core.settings.calibration_out
         if not path:
-            response.success, response.message = False, "no calibration_out parameter: set the file to write"
+            response.success, response.message = (
+                False,
+                "no calibration_out parameter: set the file to write",
+            )
             return response
         try:
             cal = self.core.save_calibration(path)
@@ -180,7 +236,11 @@ class RosNode:
         """One estimate: Odometry first (the latency that counts), then the calibration and, on a change of
         verdict, the diagnostics."""
         self.odometry.publish(self.core.odometry(e))
-        if self.core.timings and self.core.timings[-1].t == float(e.t) and math.isnan(self.core.timings[-1].published):
+        if (
+            self.core.timings
+            and self.core.timings[-1].t == float(e.t)
+            and math.isnan(self.core.timings[-1].published)
+        ):
             self.core.timings[-1].published = time.monotonic()
         if self.calibration is not None:
             self.calibration.publish(self.calibration_message(e))
@@ -193,9 +253,15 @@ class RosNode:
 
         rows = self.core.calibration_rows(e)
         msg = Float64MultiArray()
-        msg.layout = MultiArrayLayout(dim=[
-            MultiArrayDimension(label=",".join(CALIBRATION_ROWS), size=rows.shape[0], stride=rows.size),
-            MultiArrayDimension(label="value,sigma", size=2, stride=2)], data_offset=0)
+        msg.layout = MultiArrayLayout(
+            dim=[
+                MultiArrayDimension(
+                    label=",".join(CALIBRATION_ROWS), size=rows.shape[0], stride=rows.size
+                ),
+                MultiArrayDimension(label="value,sigma", size=2, stride=2),
+            ],
+            data_offset=0,
+        )
         msg.data = [float(x) for x in rows.ravel()]
         return msg
 
@@ -215,10 +281,13 @@ class RosNode:
         values.update({f"warning {i + 1}": w for i, w in enumerate(health.warnings)})
         values.update({f"note {i + 1}": n for i, n in enumerate(health.notes)})
         values.update(self.core.key_values())
-        status = DiagnosticStatus(level=bytes([LEVELS[health.status]]), name=DIAGNOSTIC_NAME,
-                                  message=f"{health.status}: {first}" if first else health.status,
-                                  hardware_id=self.core.settings.node_name,
-                                  values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        status = DiagnosticStatus(
+            level=bytes([LEVELS[health.status]]),
+            name=DIAGNOSTIC_NAME,
+            message=f"{health.status}: {first}" if first else health.status,
+            hardware_id=self.core.settings.node_name,
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.node.get_clock().now().to_msg()
         self.diagnostics.publish(msg)
@@ -239,11 +308,16 @@ class RosNode:
             if s.calibration_out:
                 try:
                     cal = core.save_calibration(s.calibration_out)
-                    core.log("info", f"wrote {s.calibration_out}: {', '.join(cal.states)} of {cal.vehicle}")
+                    core.log(
+                        "info",
+                        f"wrote {s.calibration_out}: {', '.join(cal.states)} of {cal.vehicle}",
+                    )
                 except (GtsamDvlError, OSError) as exc:
                     core.log("error", f"calibration_out: {exc}")
         if s.stats_file:
             try:
-                Path(s.stats_file).write_text(json.dumps({"node": s.node_name, "timings": core.timing_records()}))
+                Path(s.stats_file).write_text(
+                    json.dumps({"node": s.node_name, "timings": core.timing_records()})
+                )
             except OSError as exc:
                 core.log("error", f"stats_file: {exc}")

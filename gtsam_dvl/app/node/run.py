@@ -18,8 +18,12 @@ from gtsam_dvl.app.node.ros import RosNode, import_ros
 from gtsam_dvl.app.node.settings import load_settings
 from gtsam_dvl.core.errors import GtsamDvlError
 
-DELIVER_S = 0.3  # after the final messages, before the context closes: reliable delivery to the subscribers
-DRAIN_QUIET_S = 0.3  # at a stop, the messages already received are processed until none came for this long
+DELIVER_S = (
+    0.3  # after the final messages, before the context closes: reliable delivery to the subscribers
+)
+DRAIN_QUIET_S = (
+    0.3  # at a stop, the messages already received are processed until none came for this long
+)
 DRAIN_MAX_S = 10.0
 
 
@@ -49,7 +53,9 @@ def new_executor(context: Any) -> Any:
         return SingleThreadedExecutor(context=context)
 
 
-def ros_arguments(params_file: Path | None, ros_args: Sequence[str] = (), name: str | None = None) -> list[str]:
+def ros_arguments(
+    params_file: Path | None, ros_args: Sequence[str] = (), name: str | None = None
+) -> list[str]:
     """The arguments rclpy.init takes: --ros-args with the parameter file, the node's name and the caller's own
     ROS arguments (remappings, -p name:=value)."""
     args = ["--ros-args"]
@@ -65,9 +71,16 @@ def ros_arguments(params_file: Path | None, ros_args: Sequence[str] = (), name: 
     return args + extra
 
 
-def run_node(config: Path | str | None = None, params_file: Path | None = None, ros_args: Sequence[str] = (),
-             calibration: Path | None = None, name: str | None = None, domain_id: int | None = None,
-             echo: Callable[[str], None] = print, until: Callable[[], bool] | None = None) -> None:
+def run_node(
+    config: Path | str | None = None,
+    params_file: Path | None = None,
+    ros_args: Sequence[str] = (),
+    calibration: Path | None = None,
+    name: str | None = None,
+    domain_id: int | None = None,
+    echo: Callable[[str], None] = print,
+    until: Callable[[], bool] | None = None,
+) -> None:
     """Run the node (module doc). config: -c (TOML with [node], a configuration's name); params_file: a ROS
     parameter file (YAML); ros_args: further ROS arguments; calibration: a vehicle's calibration file as the prior
     (the parameter `calibration` otherwise); until: stop when it returns True (tests)."""
@@ -77,14 +90,23 @@ def run_node(config: Path | str | None = None, params_file: Path | None = None, 
 
     args = ros_arguments(params_file, ros_args, name)
     context = rclpy.Context()
-    rclpy.init(args=args, context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+    rclpy.init(
+        args=args,
+        context=context,
+        domain_id=domain_id,
+        signal_handler_options=SignalHandlerOptions.NO,
+    )
     node: Any = None
     ros: RosNode | None = None
     try:
         from rclpy.node import Node
 
-        node = Node(name or "gtsam_dvl", context=context, allow_undeclared_parameters=True,
-                    automatically_declare_parameters_from_overrides=True)
+        node = Node(
+            name or "gtsam_dvl",
+            context=context,
+            allow_undeclared_parameters=True,
+            automatically_declare_parameters_from_overrides=True,
+        )
         params = {k: p.value for k, p in node.get_parameters_by_prefix("").items()}
         source = str(params_file) if params_file is not None else "parameters"
         settings, cfg = load_settings(config, params, source=source)
@@ -96,13 +118,17 @@ def run_node(config: Path | str | None = None, params_file: Path | None = None, 
 
             prior = read_calibration(path)
             if settings.vehicle and prior.vehicle and settings.vehicle != prior.vehicle:
-                raise GtsamDvlError(f"{path}: a calibration of vehicle {prior.vehicle!r}, not of {settings.vehicle!r}")
+                raise GtsamDvlError(
+                    f"{path}: a calibration of vehicle {prior.vehicle!r}, not of {settings.vehicle!r}"
+                )
         from gtsam_dvl.app.node.core import NodeCore
 
         ros = RosNode(node, NodeCore(settings, cfg, calibration=prior))
-        echo(f"gtsam-dvl node {node.get_fully_qualified_name()}: IMU {settings.imu_topic}, DVL {settings.dvl_topic} "
-             f"({settings.dvl_type.rsplit('/', 1)[-1]}), odometry on {settings.odometry_topic} "
-             f"({settings.map_frame} -> {settings.base_frame}); Ctrl-C to stop")
+        echo(
+            f"gtsam-dvl node {node.get_fully_qualified_name()}: IMU {settings.imu_topic}, DVL {settings.dvl_topic} "
+            f"({settings.dvl_type.rsplit('/', 1)[-1]}), odometry on {settings.odometry_topic} "
+            f"({settings.map_frame} -> {settings.base_frame}); Ctrl-C to stop"
+        )
         executor = new_executor(context)
         executor.add_node(node)
         try:

@@ -25,8 +25,11 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.config.base import ConfigModel, Flag, Integer, NonNegative, Positive
 from gtsam_dvl.core.errors import GtsamDvlError
 
-DVL_TYPES = ("geometry_msgs/msg/TwistWithCovarianceStamped", "geometry_msgs/msg/TwistStamped",
-             "marine_acoustic_msgs/msg/Dvl")
+DVL_TYPES = (
+    "geometry_msgs/msg/TwistWithCovarianceStamped",
+    "geometry_msgs/msg/TwistStamped",
+    "marine_acoustic_msgs/msg/Dvl",
+)
 Reliability = Literal["best_effort", "reliable"]
 # the parameters every rclpy node declares itself
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
@@ -39,7 +42,9 @@ class QosSettings(ConfigModel):
     SECTION: ClassVar[str] = "node.qos"
 
     reliability: Reliability = "best_effort"
-    depth: Integer = Field(default=1000, ge=1)  # messages queued per topic (1000: 5 s of a 200 Hz IMU)
+    depth: Integer = Field(
+        default=1000, ge=1
+    )  # messages queued per topic (1000: 5 s of a 200 Hz IMU)
 
 
 class NodeSettings(ConfigModel):
@@ -52,10 +57,15 @@ class NodeSettings(ConfigModel):
     # inputs; "" turns an optional input off
     imu_topic: str = "/imu/data"
     dvl_topic: str = "/dvl/twist"
-    dvl_type: Literal["geometry_msgs/msg/TwistWithCovarianceStamped", "geometry_msgs/msg/TwistStamped",
-                      "marine_acoustic_msgs/msg/Dvl"] = "geometry_msgs/msg/TwistWithCovarianceStamped"
+    dvl_type: Literal[
+        "geometry_msgs/msg/TwistWithCovarianceStamped",
+        "geometry_msgs/msg/TwistStamped",
+        "marine_acoustic_msgs/msg/Dvl",
+    ] = "geometry_msgs/msg/TwistWithCovarianceStamped"
     pressure_topic: str = "/depth/pressure"  # sensor_msgs/msg/FluidPressure
-    gnss_topic: str = "/gnss/fix"  # sensor_msgs/msg/NavSatFix: the map origin when the configuration has none
+    gnss_topic: str = (
+        "/gnss/fix"  # sensor_msgs/msg/NavSatFix: the map origin when the configuration has none
+    )
     tf_static_topic: str = "/tf_static"  # read when tf2_msgs is importable (docs/ros2.md)
     # outputs; "" turns an optional output off
     odometry_topic: str = "/gtsam_dvl/odometry"
@@ -66,7 +76,9 @@ class NodeSettings(ConfigModel):
     map_frame: str = "map"
     base_frame: str = "base_link"
     qos_inputs: QosSettings = Field(default_factory=QosSettings)
-    qos_outputs: QosSettings = Field(default_factory=lambda: QosSettings(reliability="reliable", depth=50))
+    qos_outputs: QosSettings = Field(
+        default_factory=lambda: QosSettings(reliability="reliable", depth=50)
+    )
     # the nominal mounting when /tf_static does not give it: rotations (roll, pitch, yaw in deg, ZYX, of the sensor
     # frame in base_link) and positions in base_link (m)
     imu_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -98,17 +110,23 @@ class NodeSettings(ConfigModel):
     # a vehicle calibration file as the prior (as smooth --calibration) and where the save service writes one
     calibration: str = ""
     calibration_out: str = ""
-    vehicle: str = ""  # the vehicle's name in the file written (else the prior's, else the node's name)
+    vehicle: str = (
+        ""  # the vehicle's name in the file written (else the prior's, else the node's name)
+    )
     # at shutdown: finish() and publish the final estimate (and write calibration_out when set)
     finish_on_shutdown: Flag = True
     stats_file: str = ""  # JSON of per-epoch timings written at shutdown (bench/bench_node.py)
 
     def check(self) -> NodeSettings:
         if self.dvl_silent_degraded_s < self.dvl_silent_warn_s:
-            raise GtsamDvlError(f"[node] dvl_silent_degraded_s ({self.dvl_silent_degraded_s:g}) must be >= "
-                                f"dvl_silent_warn_s ({self.dvl_silent_warn_s:g})")
+            raise GtsamDvlError(
+                f"[node] dvl_silent_degraded_s ({self.dvl_silent_degraded_s:g}) must be >= "
+                f"dvl_silent_warn_s ({self.dvl_silent_warn_s:g})"
+            )
         if not self.imu_topic or not self.dvl_topic:
-            raise GtsamDvlError("[node] imu_topic and dvl_topic are needed (the estimator runs on IMU and DVL)")
+            raise GtsamDvlError(
+                "[node] imu_topic and dvl_topic are needed (the estimator runs on IMU and DVL)"
+            )
         return self
 
 
@@ -129,12 +147,17 @@ def nested(flat: Mapping[str, Any]) -> dict[str, Any]:
 def _merged(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     out = dict(base)
     for k, v in over.items():
-        out[k] = _merged(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) else v
+        out[k] = (
+            _merged(out[k], v) if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) else v
+        )
     return out
 
 
-def load_settings(config: Path | str | None = None, parameters: Mapping[str, Any] | None = None,
-                  source: str = "parameters") -> tuple[NodeSettings, EstimatorConfig]:
+def load_settings(
+    config: Path | str | None = None,
+    parameters: Mapping[str, Any] | None = None,
+    source: str = "parameters",
+) -> tuple[NodeSettings, EstimatorConfig]:
     """The node's settings and the estimator's configuration from `-c` (a TOML file with an optional [node]
     table, a result's config.json or a configuration's name; None: the defaults) and the node's ROS parameters
     (flat, "estimator.<table>.<key>" for the configuration; they override the file's). One-line errors."""
@@ -154,8 +177,13 @@ def load_settings(config: Path | str | None = None, parameters: Mapping[str, Any
             estimator = data
         else:
             base = EstimatorConfig.load(config)
-    params = nested({k: v for k, v in (parameters or {}).items()
-                     if k not in RCLPY_PARAMETERS and not k.startswith("qos_overrides.")})
+    params = nested(
+        {
+            k: v
+            for k, v in (parameters or {}).items()
+            if k not in RCLPY_PARAMETERS and not k.startswith("qos_overrides.")
+        }
+    )
     over = params.pop("estimator", {})
     if not isinstance(over, dict):
         raise GtsamDvlError(f"{source}: estimator must be a table of configuration sections")

@@ -23,8 +23,13 @@ SEGMENT_STYLE: dict[str, dict[str, Any]] = {
 }
 
 
-def shade_segments(ax: Any, segments: list[Segment], label: bool = False, t_min: float | None = None,
-                   t_max: float | None = None) -> None:
+def shade_segments(
+    ax: Any,
+    segments: list[Segment],
+    label: bool = False,
+    t_min: float | None = None,
+    t_max: float | None = None,
+) -> None:
     """Shade the paper's Type-I / Type-II segments behind a time plot (segment_legend explains the shading)
     and mark every boundary inside [t_min, t_max] with a line; with label, each boundary's time is written
     vertically at the top inside the axes (clear of titles; vertical, so that boundaries 30 s apart do not
@@ -32,10 +37,23 @@ def shade_segments(ax: Any, segments: list[Segment], label: bool = False, t_min:
     for seg in segments:
         style = SEGMENT_STYLE.get(seg.type)
         if style is not None:
-            ax.axvspan(seg.start_s, seg.end_s, facecolor=style["facecolor"], hatch=style["hatch"],
-                       edgecolor="0.75", lw=0, zorder=0)
-    bounds = sorted({seg.start_s for seg in segments} | ({segments[-1].end_s} if segments else set()))
-    shown = [b for b in bounds if not ((t_min is not None and b < t_min) or (t_max is not None and b > t_max))]
+            ax.axvspan(
+                seg.start_s,
+                seg.end_s,
+                facecolor=style["facecolor"],
+                hatch=style["hatch"],
+                edgecolor="0.75",
+                lw=0,
+                zorder=0,
+            )
+    bounds = sorted(
+        {seg.start_s for seg in segments} | ({segments[-1].end_s} if segments else set())
+    )
+    shown = [
+        b
+        for b in bounds
+        if not ((t_min is not None and b < t_min) or (t_max is not None and b > t_max))
+    ]
     span = (shown[-1] - shown[0]) if len(shown) > 1 else 1.0
     previous, level = -float("inf"), 0
     for b in shown:
@@ -44,8 +62,18 @@ def shade_segments(ax: Any, segments: list[Segment], label: bool = False, t_min:
             # a boundary within 2.5 % of the span of the previous one is written lower, so the two do not touch
             level = (level + 1) % 3 if b - previous < 0.025 * span else 0
             previous = b
-            ax.text(b, 0.98 - 0.17 * level, f"{b:.0f} ", transform=ax.get_xaxis_transform(), rotation=90,
-                    fontsize=7, va="top", ha="right", color="0.3", zorder=5)
+            ax.text(
+                b,
+                0.98 - 0.17 * level,
+                f"{b:.0f} ",
+                transform=ax.get_xaxis_transform(),
+                rotation=90,
+                fontsize=7,
+                va="top",
+                ha="right",
+                color="0.3",
+                zorder=5,
+            )
 
 
 def segment_legend(ax: Any, segments: list[Segment], **kwargs: Any) -> None:
@@ -56,7 +84,11 @@ def segment_legend(ax: Any, segments: list[Segment], **kwargs: Any) -> None:
     for kind in ("I", "II", "I+II"):
         if any(seg.type == kind for seg in segments):
             st = SEGMENT_STYLE[kind]
-            handles.append(Patch(facecolor=st["facecolor"], hatch=st["hatch"], edgecolor="0.6", label=st["label"]))
+            handles.append(
+                Patch(
+                    facecolor=st["facecolor"], hatch=st["hatch"], edgecolor="0.6", label=st["label"]
+                )
+            )
             labels.append(st["label"])
     ax.legend(handles, labels, **kwargs)
 

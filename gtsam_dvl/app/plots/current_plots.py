@@ -1,4 +1,4 @@
-"""The water current over time and depth (NavResult.info["water_current"], estimators/current.py), with its
+"""The water current over time and depth (NavResult.info["water_current"], estimators/models/current.py), with its
 3-sigma band and, for a simulated log, the truth."""
 
 from __future__ import annotations
@@ -12,8 +12,13 @@ import numpy as np
 from gtsam_dvl.app.plots.common import save_figure
 
 
-def plot_current(profile: dict[str, Any], path: Path, truth_t: np.ndarray | None = None,
-                 truth_n_c: np.ndarray | None = None, label: str = "estimate") -> Path:
+def plot_current(
+    profile: dict[str, Any],
+    path: Path,
+    truth_t: np.ndarray | None = None,
+    truth_n_c: np.ndarray | None = None,
+    label: str = "estimate",
+) -> Path:
     """Three panels: east and north current (m/s) over time with +-3 sigma, the water-track states shaded where
     known, and the current against depth (determined states only, speed and direction as east/north)."""
     t = np.asarray(profile["t_s"], dtype=float)
@@ -24,13 +29,22 @@ def plot_current(profile: dict[str, Any], path: Path, truth_t: np.ndarray | None
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5), gridspec_kw={"width_ratios": [2, 2, 1.2]})
     for a, (ax, name) in enumerate(zip(axes[:2], ("east", "north"), strict=True)):
         ax.plot(t, c[:, a], lw=1.1, color="C0", label=label)
-        ax.fill_between(t, c[:, a] - 3 * sig[:, a], c[:, a] + 3 * sig[:, a], color="C0", alpha=0.15, lw=0,
-                        label="+-3 sigma")
+        ax.fill_between(
+            t,
+            c[:, a] - 3 * sig[:, a],
+            c[:, a] + 3 * sig[:, a],
+            color="C0",
+            alpha=0.15,
+            lw=0,
+            label="+-3 sigma",
+        )
         if truth_t is not None and truth_n_c is not None:
             ax.plot(truth_t, truth_n_c[:, a], lw=1.0, color="k", ls="--", label="truth")
         ax.set_xlabel("time (s)")
         ax.set_ylabel(f"current {name} (m/s, map)")
-        band = 3 * np.minimum(sig[:, a], 0.3)  # (an undetermined stretch's band would flatten the rest)
+        band = 3 * np.minimum(
+            sig[:, a], 0.3
+        )  # (an undetermined stretch's band would flatten the rest)
         ax.set_ylim(np.nanmin(c[:, a] - band) - 0.05, np.nanmax(c[:, a] + band) + 0.05)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)

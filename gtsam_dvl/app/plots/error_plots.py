@@ -12,12 +12,19 @@ from gtsam_dvl.app.plots.common import save_figure, segment_legend, shade_segmen
 from gtsam_dvl.core.types import Segment
 
 
-def plot_errors(runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], path: Path, what: str,
-                segments: list[Segment] | None = None) -> Path:
+def plot_errors(
+    runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]],
+    path: Path,
+    what: str,
+    segments: list[Segment] | None = None,
+) -> Path:
     """runs: (label, t, error (N,3), sigma (N,3)); what: "attitude" (deg, about east/north/up), "velocity"
     (m/s) or "position" (m, east/north/up)."""
-    names = ["about east (roll-like)", "about north (pitch-like)", "about up (heading)"] if what == "attitude" \
+    names = (
+        ["about east (roll-like)", "about north (pitch-like)", "about up (heading)"]
+        if what == "attitude"
         else ["east", "north", "up"]
+    )
     unit = {"attitude": "deg", "velocity": "m/s", "position": "m"}[what]
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -34,9 +41,15 @@ def plot_errors(runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], path
             if t_conv is not None:
                 sel = t >= t_conv
                 if sel.any():
-                    top = max(top, float(np.nanmax(np.abs(err[sel, j]))), float(np.nanmax(3 * sig[sel, j])))
+                    top = max(
+                        top,
+                        float(np.nanmax(np.abs(err[sel, j]))),
+                        float(np.nanmax(3 * sig[sel, j])),
+                    )
         if t_conv is not None and top > 0:
-            ax.set_ylim(-1.25 * top, 1.25 * top)  # the converged errors visible; the first minutes go off scale
+            ax.set_ylim(
+                -1.25 * top, 1.25 * top
+            )  # the converged errors visible; the first minutes go off scale
         ax.set_ylabel(f"{names[j]} ({unit})")
         ax.grid(alpha=0.3)
     if segments:
@@ -44,9 +57,15 @@ def plot_errors(runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]], path
     else:
         axes[0].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     axes[-1].set_xlabel("time (s)")
-    zoom = (f"\n(y zoomed on the errors from {t_conv:.0f} s on; the alignment transient before it is off scale)"
-            if t_conv is not None else "")
-    fig.suptitle(f"{what.capitalize()} error against the truth, with the estimator's 3 sigma{zoom}", fontsize=11)
+    zoom = (
+        f"\n(y zoomed on the errors from {t_conv:.0f} s on; the alignment transient before it is off scale)"
+        if t_conv is not None
+        else ""
+    )
+    fig.suptitle(
+        f"{what.capitalize()} error against the truth, with the estimator's 3 sigma{zoom}",
+        fontsize=11,
+    )
     return save_figure(fig, path)
 
 
@@ -60,5 +79,7 @@ def converged_from(runs: list[tuple[str, np.ndarray, np.ndarray, np.ndarray]]) -
             continue
         start = np.maximum(sig[0], 1e-12)
         done = np.all(sig <= 0.25 * start, axis=1)
-        t_from = max(t_from, float(t[np.argmax(done)]) if done.any() else float(t[0] + 0.1 * (t[-1] - t[0])))
+        t_from = max(
+            t_from, float(t[np.argmax(done)]) if done.any() else float(t[0] + 0.1 * (t[-1] - t[0]))
+        )
     return t_from

@@ -11,7 +11,9 @@ from gtsam_dvl.app.plots.common import save_figure, segment_legend, shade_segmen
 from gtsam_dvl.core.types import LogData
 
 
-def plot_trajectory(log: LogData, path: Path, n_p: np.ndarray | None = None, label: str = "truth") -> Path:
+def plot_trajectory(
+    log: LogData, path: Path, n_p: np.ndarray | None = None, label: str = "truth"
+) -> Path:
     """Figure 1: the trajectory in the map frame (truth, or a given estimate): a plan view with equal axes and
     the 3-D view, whose vertical axis is stretched at most 5 times the horizontal (a planar run stays flat)."""
     if n_p is None:
@@ -50,10 +52,18 @@ def plot_trajectory(log: LogData, path: Path, n_p: np.ndarray | None = None, lab
         ax.set_box_aspect((float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, 0.1 * horizontal))
         ax.set_title("3-D view (true scale; the run is level)")
     else:
-        ax.set_box_aspect((float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, min(vertical * 5.0, horizontal)))
+        ax.set_box_aspect(
+            (float(ranges[0]) or 1.0, float(ranges[1]) or 1.0, min(vertical * 5.0, horizontal))
+        )
         stretch = min(vertical * 5.0, horizontal) / vertical
-        ax.set_title(f"3-D view (vertical stretched x{stretch:.1f})" if stretch > 1.01 else "3-D view (true scale)")
-    fig.suptitle(f"Trajectory in map ({log.metadata.get('scenario_name', Path(log.source).name)}), {label}")
+        ax.set_title(
+            f"3-D view (vertical stretched x{stretch:.1f})"
+            if stretch > 1.01
+            else "3-D view (true scale)"
+        )
+    fig.suptitle(
+        f"Trajectory in map ({log.metadata.get('scenario_name', Path(log.source).name)}), {label}"
+    )
     return save_figure(fig, path)
 
 
@@ -82,10 +92,12 @@ def plot_imu(log: LogData, path: Path, decimate_to_hz: float = 10.0) -> Path:
     segments = log.segments
     fig, axes = plt.subplots(3, 2, figsize=(12, 6.5), sharex=True)
     for i, name in enumerate("xyz"):
-        for j, (data, unit, title) in enumerate([
-            (np.degrees(imu.b_omega[::step, i]), "deg/s", "gyro"),
-            (imu.b_f[::step, i], "m/s^2", "accelerometer"),
-        ]):
+        for j, (data, unit, title) in enumerate(
+            [
+                (np.degrees(imu.b_omega[::step, i]), "deg/s", "gyro"),
+                (imu.b_f[::step, i], "m/s^2", "accelerometer"),
+            ]
+        ):
             ax = axes[i, j]
             shade_segments(ax, segments, label=(i == 0))
             ax.plot(t, data, lw=0.8)

@@ -15,8 +15,12 @@ AXIS_COLOURS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 UNITS = {"gyro": ("deg/h", "deg/h/sqrt(Hz)"), "accel": ("micro-g", "micro-g/sqrt(Hz)")}
 
 
-def allan_png(curves: Sequence[AllanCurve], configured: Mapping[str, float],
-              floors: Mapping[str, Sequence[float | None]], title: str) -> bytes:
+def allan_png(
+    curves: Sequence[AllanCurve],
+    configured: Mapping[str, float],
+    floors: Mapping[str, Sequence[float | None]],
+    title: str,
+) -> bytes:
     """The figure as PNG bytes (written with the command's other outputs, all or none): one panel per sensor
     (gyro in deg/h, accelerometer in micro-g), log-log; configured: the configured white density per sensor
     (dashed black line); floors: the quantisation floor's density per axis (dotted: in the axis' colour, grey for
@@ -29,10 +33,26 @@ def allan_png(curves: Sequence[AllanCurve], configured: Mapping[str, float],
         span = np.geomspace(max(float(taus.min()), 1e-6), max(float(taus.max()), 1e-5), 50)
         for c in mine:
             pos = c.adev > 0
-            label = f"{c.axis}" + (f" (white {c.white_density:.3g})" if c.white_density is not None else " (zero)")
-            ax.loglog(c.taus[pos], c.adev[pos], "o-", ms=2.5, lw=1.2, color=AXIS_COLOURS[c.axis], label=label)
+            label = f"{c.axis}" + (
+                f" (white {c.white_density:.3g})" if c.white_density is not None else " (zero)"
+            )
+            ax.loglog(
+                c.taus[pos],
+                c.adev[pos],
+                "o-",
+                ms=2.5,
+                lw=1.2,
+                color=AXIS_COLOURS[c.axis],
+                label=label,
+            )
         n_cfg = float(configured[sensor])
-        ax.loglog(span, n_cfg / np.sqrt(span), "k--", lw=1.0, label=f"configured {n_cfg:.3g} {density_unit}")
+        ax.loglog(
+            span,
+            n_cfg / np.sqrt(span),
+            "k--",
+            lw=1.0,
+            label=f"configured {n_cfg:.3g} {density_unit}",
+        )
         # one line per distinct floor (the axes of one sensor usually share their step), in the axis' colour
         drawn: list[tuple[float, list[str]]] = []
         for axis, floor in zip(("x", "y", "z"), floors[sensor], strict=True):
@@ -44,8 +64,14 @@ def allan_png(curves: Sequence[AllanCurve], configured: Mapping[str, float],
             else:
                 same[1].append(axis)
         for floor, named in drawn:
-            ax.loglog(span, floor / np.sqrt(span), ":", lw=1.5, color=AXIS_COLOURS[named[0]] if len(named) == 1
-                      else "0.4", label=f"{', '.join(named)} quantisation floor {floor:.3g}")
+            ax.loglog(
+                span,
+                floor / np.sqrt(span),
+                ":",
+                lw=1.5,
+                color=AXIS_COLOURS[named[0]] if len(named) == 1 else "0.4",
+                label=f"{', '.join(named)} quantisation floor {floor:.3g}",
+            )
         ax.set_xlabel("averaging time tau, s")
         ax.set_ylabel(f"Allan deviation, {unit}")
         ax.set_title("gyro" if sensor == "gyro" else "accelerometer")

@@ -17,22 +17,39 @@ AXES3 = ("x", "y", "z")
 MIS_AXES = ("roll (about x)", "pitch (about y)", "yaw (about z)")
 
 
-def _band(ax: Any, t: np.ndarray, value: np.ndarray, sigma: np.ndarray, label: str, colour: str) -> None:
+def _band(
+    ax: Any, t: np.ndarray, value: np.ndarray, sigma: np.ndarray, label: str, colour: str
+) -> None:
     ax.plot(t, value, color=colour, lw=1.1, label=label)
     ax.fill_between(t, value - 3 * sigma, value + 3 * sigma, color=colour, alpha=0.15, lw=0)
 
 
-def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: str,
-                   truth: np.ndarray | float | None = None, segments: list[Segment] | None = None,
-                   t_min: float = 0.0) -> Path:
+def plot_estimates(
+    timelines: list[tuple[str, Timeline]],
+    path: Path,
+    quantity: str,
+    truth: np.ndarray | float | None = None,
+    segments: list[Segment] | None = None,
+    t_min: float = 0.0,
+) -> Path:
     """One figure per quantity: "scale", "misalignment", "gyro_bias", "accel_bias", and when the timelines hold
     them "time_offset" (shown in ms; the truth given in s, as the Timeline holds it) and "lever_arm" (m);
     estimate +- 3 sigma."""
     spec = {
         "scale": ("scale", "scale_sigma", ["DVL scale factor k"], "dimensionless"),
         "misalignment": ("misalignment_deg", "misalignment_sigma_deg", list(MIS_AXES), "deg"),
-        "gyro_bias": ("gyro_bias_deg_per_h", "gyro_bias_sigma_deg_per_h", [f"gyro bias {a}" for a in AXES3], "deg/h"),
-        "accel_bias": ("accel_bias_ug", "accel_bias_sigma_ug", [f"accel bias {a}" for a in AXES3], "micro-g"),
+        "gyro_bias": (
+            "gyro_bias_deg_per_h",
+            "gyro_bias_sigma_deg_per_h",
+            [f"gyro bias {a}" for a in AXES3],
+            "deg/h",
+        ),
+        "accel_bias": (
+            "accel_bias_ug",
+            "accel_bias_sigma_ug",
+            [f"accel bias {a}" for a in AXES3],
+            "micro-g",
+        ),
         "time_offset": ("time_offset_s", "time_offset_sigma_s", ["DVL time offset dt_d"], "ms"),
         "lever_arm": ("lever_arm_m", "lever_arm_sigma_m", [f"lever arm {a}" for a in AXES3], "m"),
     }[quantity]
@@ -58,14 +75,30 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
                 # t), and the final estimate with its smoothed sigma is a marker at the end
                 t_sel = tl.t[sel]
                 ax.plot(t_sel, value, color=colour, lw=0.9, ls="--")
-                ax.fill_between(t_sel, value - 3 * sigma, value + 3 * sigma, color=colour, alpha=0.15, lw=0,
-                                label=f"{label}: filtering +-3 sigma (data up to t) about the final estimate")
-                ax.errorbar([t_sel[-1]], [value[-1]], yerr=[3 * sigma[-1]], fmt="D", color=colour, ms=5,
-                            capsize=4, label=f"{label}: final estimate +-3 sigma", zorder=4)
-                tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
+                ax.fill_between(
+                    t_sel,
+                    value - 3 * sigma,
+                    value + 3 * sigma,
+                    color=colour,
+                    alpha=0.15,
+                    lw=0,
+                    label=f"{label}: filtering +-3 sigma (data up to t) about the final estimate",
+                )
+                ax.errorbar(
+                    [t_sel[-1]],
+                    [value[-1]],
+                    yerr=[3 * sigma[-1]],
+                    fmt="D",
+                    color=colour,
+                    ms=5,
+                    capsize=4,
+                    label=f"{label}: final estimate +-3 sigma",
+                    zorder=4,
+                )
+                tail = value[len(value) // 2 :], sigma[len(sigma) // 2 :]
             else:
                 _band(ax, tl.t[sel], value, sigma, f"{label} (+-3 sigma)", colour)
-                tail = value[len(value) // 2:], sigma[len(sigma) // 2:]
+                tail = value[len(value) // 2 :], sigma[len(sigma) // 2 :]
             # zoom on the converged part: the band at the end, not the prior's width
             lo = min(lo, float(np.min(tail[0] - 4 * tail[1])))
             hi = max(hi, float(np.max(tail[0] + 4 * tail[1])))
@@ -81,53 +114,109 @@ def plot_estimates(timelines: list[tuple[str, Timeline]], path: Path, quantity: 
     if t_min > 0:
         axes[-1, 0].set_xlim(left=t_min)
     if segments:
-        segment_legend(axes[0, 0], segments, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        segment_legend(
+            axes[0, 0], segments, fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0)
+        )
     else:
         axes[0, 0].legend(fontsize=8, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
-    smoothed = all(len(tl.t) and np.ptp(np.asarray(getattr(tl, value_name))) == 0.0 for _, tl in timelines)
-    what = "final estimate and filtering 3-sigma band" if timelines and smoothed else "estimate and 3-sigma band"
-    fig.suptitle(f"{quantity.replace('_', ' ')} {what} over time\n(y zoomed on the converged part)", fontsize=11)
+    smoothed = all(
+        len(tl.t) and np.ptp(np.asarray(getattr(tl, value_name))) == 0.0 for _, tl in timelines
+    )
+    what = (
+        "final estimate and filtering 3-sigma band"
+        if timelines and smoothed
+        else "estimate and 3-sigma band"
+    )
+    fig.suptitle(
+        f"{quantity.replace('_', ' ')} {what} over time\n(y zoomed on the converged part)",
+        fontsize=11,
+    )
     return save_figure(fig, path)
 
 
-def plot_normalised_sigmas(timeline: Timeline, path: Path, priors: dict[str, np.ndarray | float],
-                           segments: list[Segment] | None = None, title: str = "",
-                           targets: dict[str, np.ndarray | float] | None = None) -> Path:
+def plot_normalised_sigmas(
+    timeline: Timeline,
+    path: Path,
+    priors: dict[str, np.ndarray | float],
+    segments: list[Segment] | None = None,
+    title: str = "",
+    targets: dict[str, np.ndarray | float] | None = None,
+) -> Path:
     """Figure 12: sigma(t) / sigma(prior) of attitude, biases, scale and misalignment, log scale. targets (the
     units and keys of priors): the accuracy each state is judged against, drawn as a dashed line of its curve's
     colour at target / prior (below it: "determined")."""
     fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex=True)
     groups = [
-        (axes[0, 0], "attitude (east, north, up)", timeline.attitude_sigma_deg, timeline.attitude_sigma_deg[0],
-         ["east", "north", "up"]),
-        (axes[0, 1], "DVL scale and misalignment",
-         np.column_stack([timeline.scale_sigma, timeline.misalignment_sigma_deg]),
-         np.concatenate([[priors["scale"]], np.atleast_1d(priors["misalignment_deg"])]),
-         ["scale", *MIS_AXES]),
-        (axes[1, 0], "gyro bias", timeline.gyro_bias_sigma_deg_per_h, priors["gyro_bias_deg_per_h"],
-         list(AXES3)),
-        (axes[1, 1], "accelerometer bias", timeline.accel_bias_sigma_ug, priors["accel_bias_ug"], list(AXES3)),
+        (
+            axes[0, 0],
+            "attitude (east, north, up)",
+            timeline.attitude_sigma_deg,
+            timeline.attitude_sigma_deg[0],
+            ["east", "north", "up"],
+        ),
+        (
+            axes[0, 1],
+            "DVL scale and misalignment",
+            np.column_stack([timeline.scale_sigma, timeline.misalignment_sigma_deg]),
+            np.concatenate([[priors["scale"]], np.atleast_1d(priors["misalignment_deg"])]),
+            ["scale", *MIS_AXES],
+        ),
+        (
+            axes[1, 0],
+            "gyro bias",
+            timeline.gyro_bias_sigma_deg_per_h,
+            priors["gyro_bias_deg_per_h"],
+            list(AXES3),
+        ),
+        (
+            axes[1, 1],
+            "accelerometer bias",
+            timeline.accel_bias_sigma_ug,
+            priors["accel_bias_ug"],
+            list(AXES3),
+        ),
     ]
-    target_of: list[np.ndarray | None] = [None, None, None, None]  # per group; the attitude has none
+    target_of: list[np.ndarray | None] = [
+        None,
+        None,
+        None,
+        None,
+    ]  # per group; the attitude has none
     if targets is not None:
-        target_of[1:] = [np.concatenate([[targets["scale"]], np.broadcast_to(targets["misalignment_deg"], 3)]),
-                         np.broadcast_to(targets["gyro_bias_deg_per_h"], 3),
-                         np.broadcast_to(targets["accel_bias_ug"], 3)]
+        target_of[1:] = [
+            np.concatenate([[targets["scale"]], np.broadcast_to(targets["misalignment_deg"], 3)]),
+            np.broadcast_to(targets["gyro_bias_deg_per_h"], 3),
+            np.broadcast_to(targets["accel_bias_ug"], 3),
+        ]
     for k, (ax, name, sig, p0, labels) in enumerate(groups):
         if segments:
             shade_segments(ax, segments, label=(k < 2))
         ratio = np.asarray(sig) / np.asarray(p0, dtype=float)
         target = target_of[k]
-        target_ratio = (np.asarray(target, dtype=float) / np.broadcast_to(np.asarray(p0, dtype=float), len(labels))
-                        if target is not None else None)
-        curves = [ax.semilogy(timeline.t, ratio[:, j], lw=1.2, label=lab)[0] for j, lab in enumerate(labels)]
-        if target_ratio is not None and np.allclose(target_ratio, target_ratio[0]):  # one target for the group
+        target_ratio = (
+            np.asarray(target, dtype=float)
+            / np.broadcast_to(np.asarray(p0, dtype=float), len(labels))
+            if target is not None
+            else None
+        )
+        curves = [
+            ax.semilogy(timeline.t, ratio[:, j], lw=1.2, label=lab)[0]
+            for j, lab in enumerate(labels)
+        ]
+        if target_ratio is not None and np.allclose(
+            target_ratio, target_ratio[0]
+        ):  # one target for the group
             ax.axhline(target_ratio[0], color="0.2", ls="--", lw=0.9, label="target")
         elif target_ratio is not None:
             for j, curve in enumerate(curves):
-                ax.axhline(target_ratio[j], color=curve.get_color(), ls="--", lw=0.9,
-                           label="targets (dashed)" if j == len(curves) - 1 else None)
+                ax.axhline(
+                    target_ratio[j],
+                    color=curve.get_color(),
+                    ls="--",
+                    lw=0.9,
+                    label="targets (dashed)" if j == len(curves) - 1 else None,
+                )
         ax.set_title(name, fontsize=10)
         ax.set_ylabel("sigma / initial sigma (ratio)")
         ax.grid(alpha=0.3, which="both")

@@ -61,8 +61,15 @@ class ConfigModel(BaseModel):
         """TOML has no null: "none" is None in an optional field."""
         if not isinstance(data, Mapping):
             return data
-        optional = {name for name, f in cls.model_fields.items() if type(None) in typing.get_args(f.annotation)}
-        return {k: None if k in optional and isinstance(v, str) and v == "none" else v for k, v in data.items()}
+        optional = {
+            name
+            for name, f in cls.model_fields.items()
+            if type(None) in typing.get_args(f.annotation)
+        }
+        return {
+            k: None if k in optional and isinstance(v, str) and v == "none" else v
+            for k, v in data.items()
+        }
 
     @classmethod
     def checked(cls, data: Any, source: str = "config") -> Self:
@@ -95,8 +102,11 @@ def _raw(model: ConfigModel) -> dict[str, Any]:
     """The fields set on construction or by assignment as they are (unchecked values included), and every section
     as a dict. The others hold their defaults, or a preset's values, which the check fills again (from the preset
     the configuration names now: a sensor model changed in Python takes effect on validate())."""
-    return {name: _raw(v) if isinstance(v, ConfigModel) else v for name, v in model.__dict__.items()
-            if isinstance(v, ConfigModel) or name in model.model_fields_set}
+    return {
+        name: _raw(v) if isinstance(v, ConfigModel) else v
+        for name, v in model.__dict__.items()
+        if isinstance(v, ConfigModel) or name in model.model_fields_set
+    }
 
 
 def _sub_model(f: FieldInfo) -> type[ConfigModel] | None:
@@ -111,6 +121,7 @@ def _item(data: Any, key: Any) -> Any:
 
 
 # ----- one-line errors ----------------------------------------------------------------------------------------
+
 
 def one_line(exc: ValidationError, data: Any, model: type[ConfigModel], source: str) -> str:
     """The first error of exc (an unknown key first, as a typo explains the rest) as one line:
@@ -149,7 +160,9 @@ def _allowed(f: FieldInfo, value: Any) -> str:
     """What field f allows, as the end of "[section] key ...", with the value given."""
     constraints = list(f.metadata)
     tp, or_none = f.annotation, ""
-    if typing.get_origin(tp) in (types.UnionType, typing.Union) and type(None) in typing.get_args(tp):
+    if typing.get_origin(tp) in (types.UnionType, typing.Union) and type(None) in typing.get_args(
+        tp
+    ):
         (tp,) = [a for a in typing.get_args(tp) if a is not type(None)]
         or_none = " or 'none'"
     tp = _unannotated(tp, constraints)
@@ -171,8 +184,10 @@ def _allowed(f: FieldInfo, value: Any) -> str:
 
 
 def _range_text(constraints: list[Any]) -> str:
-    """" > 0", " in [-90, 90]", ... from the Gt/Ge/Lt/Le constraints."""
-    bound = {k: getattr(c, k) for c in constraints for k in ("gt", "ge", "lt", "le") if hasattr(c, k)}
+    """ " > 0", " in [-90, 90]", ... from the Gt/Ge/Lt/Le constraints."""
+    bound = {
+        k: getattr(c, k) for c in constraints for k in ("gt", "ge", "lt", "le") if hasattr(c, k)
+    }
     lo = ("[", bound["ge"]) if "ge" in bound else ("(", bound["gt"]) if "gt" in bound else None
     hi = ("]", bound["le"]) if "le" in bound else (")", bound["lt"]) if "lt" in bound else None
     if lo and hi:
@@ -187,6 +202,7 @@ def _range_text(constraints: list[Any]) -> str:
 # ----- TOML writing ---------------------------------------------------------------------------------------------
 # Hand-written: tomllib only reads, and no TOML writer (tomli-w, tomlkit) is among the dependencies; the
 # configuration needs tables, sub-tables, numbers, booleans, strings and flat lists only.
+
 
 def toml_text(tables: ConfigModel) -> str:
     """TOML text of a model whose fields are tables (sections). TOML has no null: None is written "none", or
@@ -206,7 +222,9 @@ def _toml_table(section: ConfigModel, name: str, lines: list[str]) -> None:
             nested.append((f"{name}.{key}", value))
         elif value is not None:
             lines.append(f"{key} = {_toml_value(value)}")
-        elif f.default is not None:  # TOML has no null: "none" (a field whose default is None is left out)
+        elif (
+            f.default is not None
+        ):  # TOML has no null: "none" (a field whose default is None is left out)
             lines.append(f'{key} = "none"')
     lines.append("")
     for sub_name, sub in nested:
@@ -220,7 +238,11 @@ def _toml_value(value: Any) -> str:
         return str(int(value))
     if isinstance(value, numbers.Real):
         x = float(value)
-        return repr(x) if math.isfinite(x) else ("nan" if math.isnan(x) else "inf" if x > 0 else "-inf")
+        return (
+            repr(x)
+            if math.isfinite(x)
+            else ("nan" if math.isnan(x) else "inf" if x > 0 else "-inf")
+        )
     if isinstance(value, str):
         return json.dumps(value)  # a JSON string is a TOML basic string
     if isinstance(value, list | tuple | np.ndarray):

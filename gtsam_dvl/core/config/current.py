@@ -1,4 +1,4 @@
-"""[current]: water-track pings and the water current they need (estimators/current.py).
+"""[current]: water-track pings and the water current they need (estimators/models/current.py).
 
 A DVL that loses the seafloor (out of range on a descent, over steep terrain, in mid-water) measures its velocity
 relative to a water layer instead: a water-track ping (velocity_mode 2 of marine_acoustic_msgs/msg/Dvl, or a
@@ -56,6 +56,6 @@ class CurrentConfig(ConfigModel):
     water_track_scale: Flag = False
     water_track_scale_sigma: Positive = 0.01
     # > 0: the current per depth layer of this thickness (m, from the water surface down) plus one random walk in
-    # time shared by every layer, instead of the random walk in depth per state (estimators/current.py,
+    # time shared by every layer, instead of the random walk in depth per state (estimators/models/current.py,
     # "Layers"): a layer crossed on the descent and again on the ascent is one unknown, not two
     layer_thickness_m: NonNegative = 0.0

@@ -40,10 +40,20 @@ NAMED_CONFIGS: dict[str, dict[str, dict[str, Any]]] = {
     # Pan & Wu's runs: the scale starts at 0.8 with a 0.5 sigma so that its convergence can be watched
     # and their logs' stamps agree (no DVL time offset estimated); the noise is the paper's Table 1, as stated, and
     # its DVL error white; every calibration direction estimated, as theirs (the thrust axis's too on a level run)
-    "paper": {"priors": {"scale_initial": 0.8, "scale_sigma": 0.5, "hold_weak_information": 0.0,
-                         "nominal_check": False},
-              "dvl": {"estimate_time_offset": False, "correlated_sigma_m_s": 0.0, "constant_error_sigma_m_s": 0.0},
-              "noise": {"from_data": False}},
+    "paper": {
+        "priors": {
+            "scale_initial": 0.8,
+            "scale_sigma": 0.5,
+            "hold_weak_information": 0.0,
+            "nominal_check": False,
+        },
+        "dvl": {
+            "estimate_time_offset": False,
+            "correlated_sigma_m_s": 0.0,
+            "constant_error_sigma_m_s": 0.0,
+        },
+        "noise": {"from_data": False},
+    },
 }
 
 
@@ -51,7 +61,9 @@ def recommended_config_name(metadata: Mapping[str, Any]) -> str:
     """The named configuration a log's metadata recommends: its scenario's estimator_config if that is a known
     name, else "default" (real logs)."""
     scenario = metadata.get("scenario")
-    name = scenario.get("estimator_config", "default") if isinstance(scenario, Mapping) else "default"
+    name = (
+        scenario.get("estimator_config", "default") if isinstance(scenario, Mapping) else "default"
+    )
     return name if isinstance(name, str) and name in NAMED_CONFIGS else "default"
 
 
@@ -88,7 +100,9 @@ class EstimatorConfig(ConfigModel):
         """A DVL preset's scale accuracy is the scale prior's sigma unless [priors] scale_sigma is set (the
         presets' other values are filled by their own sections)."""
         if self.dvl.model is not None and "scale_sigma" not in self.priors.model_fields_set:
-            self.priors.__dict__["scale_sigma"] = DVL_PRESETS[self.dvl.model].scale_accuracy  # not counted as set
+            self.priors.__dict__["scale_sigma"] = DVL_PRESETS[
+                self.dvl.model
+            ].scale_accuracy  # not counted as set
         return self
 
     def to_dict(self) -> dict[str, Any]:
@@ -103,7 +117,9 @@ class EstimatorConfig(ConfigModel):
     def named(cls, name: str) -> EstimatorConfig:
         """A named configuration (NAMED_CONFIGS: "default", "paper")."""
         if name not in NAMED_CONFIGS:
-            raise GtsamDvlError(f"no configuration named '{name}' (named configurations: {', '.join(NAMED_CONFIGS)})")
+            raise GtsamDvlError(
+                f"no configuration named '{name}' (named configurations: {', '.join(NAMED_CONFIGS)})"
+            )
         return cls.from_dict(NAMED_CONFIGS[name], source=f"configuration '{name}'")
 
     @classmethod
@@ -126,8 +142,10 @@ class EstimatorConfig(ConfigModel):
         raw = scenario if isinstance(scenario, Mapping) else {}
         overrides = raw.get("estimator", {})
         if not isinstance(overrides, Mapping) or "preset" in overrides:
-            raise GtsamDvlError(f"{source}: expected tables of estimator configuration keys (the named "
-                                "configuration is the scenario's estimator_config key, not a preset)")
+            raise GtsamDvlError(
+                f"{source}: expected tables of estimator configuration keys (the named "
+                "configuration is the scenario's estimator_config key, not a preset)"
+            )
         name = recommended_config_name({"scenario": raw})
         return cls.from_dict(_merged(NAMED_CONFIGS[name], overrides), source=source)
 
@@ -137,15 +155,20 @@ class EstimatorConfig(ConfigModel):
         name of a named configuration. under: keys the configuration's own keys override (a scenario's [estimator]
         table, estimator_overrides): applied below the -c configuration, above the defaults."""
         if not Path(spec).exists() and str(spec) in NAMED_CONFIGS:
-            return cls.from_dict({"preset": str(spec)}, source=f"configuration '{spec}'", under=under)
+            return cls.from_dict(
+                {"preset": str(spec)}, source=f"configuration '{spec}'", under=under
+            )
         if not Path(spec).exists():
-            raise GtsamDvlError(f"{spec}: no such configuration file, and not a named configuration "
-                                f"({', '.join(NAMED_CONFIGS)})")
+            raise GtsamDvlError(
+                f"{spec}: no such configuration file, and not a named configuration "
+                f"({', '.join(NAMED_CONFIGS)})"
+            )
         return cls.from_toml(spec, under=under)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], source: str = "config",
-                  under: Mapping[str, Any] | None = None) -> EstimatorConfig:
+    def from_dict(
+        cls, data: Mapping[str, Any], source: str = "config", under: Mapping[str, Any] | None = None
+    ) -> EstimatorConfig:
         """Sections from a dict shaped like the TOML file. A top-level key preset = "NAME" starts from that
         named configuration instead of the defaults. under: keys below data's (and its preset's), above the
         defaults."""
@@ -154,8 +177,10 @@ class EstimatorConfig(ConfigModel):
         if "preset" in data:
             preset = data["preset"]
             if not isinstance(preset, str) or preset not in NAMED_CONFIGS:
-                raise GtsamDvlError(f"{source}: preset must be the name of a named configuration "
-                                    f"({', '.join(NAMED_CONFIGS)}), got {preset!r}")
+                raise GtsamDvlError(
+                    f"{source}: preset must be the name of a named configuration "
+                    f"({', '.join(NAMED_CONFIGS)}), got {preset!r}"
+                )
             data = _merged(NAMED_CONFIGS[preset], {k: v for k, v in data.items() if k != "preset"})
         if under:
             data = _merged(under, data)
@@ -206,19 +231,31 @@ def _white_dvl_if_written_before(data: Any) -> Any:
         # written before [current] existed: its runs refused water-track pings
         data = {**data, "current": {"water_track": "refuse"}}
     priors = data.get("priors") if isinstance(data, dict) else None
-    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and isinstance(priors, dict) and (
-            "hold_weak_information" not in priors):  # its runs estimated every calibration direction
+    if (
+        isinstance(dvl, dict)
+        and DUMP_KEYS <= set(dvl)
+        and isinstance(priors, dict)
+        and ("hold_weak_information" not in priors)
+    ):  # its runs estimated every calibration direction
         data = {**data, "priors": {**priors, "hold_weak_information": 0.0}}
         priors = data["priors"]
-    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and isinstance(priors, dict) and (
-            "nominal_check" not in priors):  # its runs did not check the nominal calibration
+    if (
+        isinstance(dvl, dict)
+        and DUMP_KEYS <= set(dvl)
+        and isinstance(priors, dict)
+        and ("nominal_check" not in priors)
+    ):  # its runs did not check the nominal calibration
         data = {**data, "priors": {**priors, "nominal_check": False}}
     if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "constant_error_sigma_m_s" not in dvl:
         # its runs gave the calibration's covariance no share of a constant DVL error
         dvl = {**dvl, "constant_error_sigma_m_s": 0.0}
         data = {**data, "dvl": dvl}
-    if (isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "correlated_sigma_m_s" not in dvl
-            and dvl.get("model") is None):
+    if (
+        isinstance(dvl, dict)
+        and DUMP_KEYS <= set(dvl)
+        and "correlated_sigma_m_s" not in dvl
+        and dvl.get("model") is None
+    ):
         return {**data, "dvl": {**dvl, "correlated_sigma_m_s": 0.0}}
     return data
 
@@ -228,5 +265,9 @@ def _merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, A
     out = dict(base)
     for key, value in override.items():
         old = out.get(key)
-        out[key] = _merged(old, value) if isinstance(old, Mapping) and isinstance(value, Mapping) else value
+        out[key] = (
+            _merged(old, value)
+            if isinstance(old, Mapping) and isinstance(value, Mapping)
+            else value
+        )
     return out

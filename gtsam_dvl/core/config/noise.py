@@ -1,4 +1,4 @@
-"""[noise]: the noise levels the estimators take from the data (estimators/noise_levels.py).
+"""[noise]: the noise levels the estimators take from the data (estimators/models/noise_levels.py).
 
 Datasheet densities and a DVL's stated noise describe the sensor, not the log: an IMU whose samples were
 quantised by its driver or an export (steps of 1e-4 rad/s and 1e-4 m/s^2 are common) carries white noise of
@@ -22,7 +22,7 @@ Nortek-class units) is rarely what its messages' covariance or the configured de
   take no GNSS fixes);
 - with fit_correlated (off by default), fits the DVL's correlated error's level and time constant ([dvl]
   correlated_sigma_m_s, correlated_tau_s) in the batch smoother's loop, within their bounds
-  (estimators/correlated_fit.py: why it is off).
+  (estimators/models/correlated_fit.py: why it is off).
 
 The fitted factor is clipped to [dvl_min_multiplier, dvl_max_multiplier] (a fit at a bound is reported: the
 model does not fit, whatever the factor), the depth's to [depth_min_multiplier, depth_max_multiplier] and the
@@ -66,7 +66,7 @@ class NoiseConfig(ConfigModel):
     # batch: fit the DVL's correlated error ([dvl] correlated_sigma_m_s, correlated_tau_s: a first-order Gauss-Markov
     # process) from the DVL residuals with the estimated error added back, within the bounds below; off by default:
     # on IMU + DVL logs the navigation solution absorbs the slow part of the DVL's error, the residuals do not show
-    # it and the configured (or preset) level holds (estimators/correlated_fit.py)
+    # it and the configured (or preset) level holds (estimators/models/correlated_fit.py)
     fit_correlated: Flag = False
     correlated_min_sigma_m_s: NonNegative = 0.0
     correlated_max_sigma_m_s: Positive = 0.05

@@ -54,8 +54,10 @@ class ImuConfig(ConfigModel):
     accel_bias_rw_ug_per_rth: Positive = 1.0  # micro-g/sqrt(h), random_walk only
     # position integration noise of the preintegration, m/sqrt(s)
     integration_sigma_m_rts: NonNegative = 1e-5
-    rotation_compensation: Flag = True  # rotate each delta-v to its interval start (see factor_maker.py)
-    # IMU gaps (estimators/gaps.py): a spacing longer than this many nominal periods is a gap, crossed by
+    rotation_compensation: Flag = (
+        True  # rotate each delta-v to its interval start (see factor_maker.py)
+    )
+    # IMU gaps (estimators/inputs/gaps.py): a spacing longer than this many nominal periods is a gap, crossed by
     # holding the last sample with the motion-model uncertainty below added to the covariance
     gap_samples: Number = Field(default=3.0, gt=1.0)
     gap_accel_sigma_m_s2: Positive = 0.2  # change of acceleration over a gap
@@ -78,7 +80,7 @@ class DvlConfig(ConfigModel):
     robust_k is the kernel's threshold in sigmas of the whitened error (the norm of the 3-D error, or one
     beam's). huber_k is an alias of robust_k (a TOML file may set either): when set it overrides robust_k.
 
-    Screening (estimators/ping_screen.py, PingScreen; the same causal rule in batch, online and EKF, against
+    Screening (estimators/inputs/ping_screen.py, PingScreen; the same causal rule in batch, online and EKF, against
     the previous accepted ping and the IMU samples stamped since it), on when screen is true:
     - an exact zero velocity (all three components 0.0) while moving, i.e. the IMU shows motion since the
       previous accepted ping (the body's velocity changed by more than motion_dv_m_s by the specific force,
@@ -110,7 +112,9 @@ class DvlConfig(ConfigModel):
     robust_k: Positive = 4.0
     huber_k: Positive | None = None  # alias of robust_k (overrides it if set)
     max_speed_m_s: Positive = 10.0  # faster pings are outliers: dropped, counted
-    screen: Flag = True  # drop bogus pings (zero while moving, repeated, implausible acceleration): see above
+    screen: Flag = (
+        True  # drop bogus pings (zero while moving, repeated, implausible acceleration): see above
+    )
     # no vehicle this package navigates accelerates this hard over a ping interval, m/s^2
     max_accel_m_s2: Positive = 2.0
     # multiple of the velocity change the IMU allows (specific-force change, gravity turned by the gyro)
@@ -139,14 +143,15 @@ class DvlConfig(ConfigModel):
     # estimators fit from the residuals ([noise] fit_dvl, core/config/noise.py); set here, it pins the factor
     noise_multiplier: Positive = 1.0
     # a first-order Gauss-Markov velocity error (per dvl_link axis, m/s) and its time constant (s), from a preset
-    # or set here: when > 0 every estimator carries it as a state of each epoch (estimators/correlated.py), so that
+    # or set here: when > 0 every estimator carries it as a state of each epoch (estimators/models/correlated.py), so
+    # that
     # the position sigma grows as the error's, and the calibration does not over-trust pings whose errors are
     # correlated; 0: the DVL's error is white (the paper's). The default, 2 mm/s over 60 s, is the offset term of
     # a 300-600 kHz bottom-track DVL's long-term accuracy, typical of the class (presets.py)
     correlated_sigma_m_s: NonNegative = 0.002
     correlated_tau_s: Positive = 60.0
     # the DVL's velocity error that stays constant over a run (per dvl_link axis, m/s): no estimator can tell it
-    # from the scale and misalignment, so their covariance takes its share (estimators/constant_error.py); the
+    # from the scale and misalignment, so their covariance takes its share (estimators/models/constant_error.py); the
     # default, 2 mm/s, is the offset term of a bottom-track DVL's long-term accuracy (+-0.1 cm/s on the Teledyne
     # Workhorse Navigator and Nortek DVL1000 sheets) doubled for what a run's bottom and sound speed add (issue 31
     # measured a few mm/s at 30-60 s averaging on real logs); 0: the calibration's sigmas from the data alone
@@ -187,11 +192,11 @@ class PriorConfig(ConfigModel):
     mounting_tolerance_deg: Positive | None = None
     # the batch smoother holds a direction of the DVL scale and misalignment at the prior's mean when the data's
     # information along it is below this fraction of the prior's, with the prior's uncertainty carried into every
-    # sigma (estimators/weak_hold.py); 0: every direction estimated, however little the run informs it
+    # sigma (estimators/models/weak_hold.py); 0: every direction estimated, however little the run informs it
     hold_weak_information: NonNegative = 0.25
     # with the hold on: the nominal calibration's check (scale 1, the mounting's misalignment) in every run; where
     # estimating the scale and misalignment does not lower the chi^2 by more than the 95 % quantile of chi^2(4), the
-    # calibration is held at the nominal with its prior's sigma (estimators/weak_hold.py nominal_check)
+    # calibration is held at the nominal with its prior's sigma (estimators/models/weak_hold.py nominal_check)
     nominal_check: Flag = True
 
     @model_validator(mode="after")
@@ -203,7 +208,7 @@ class PriorConfig(ConfigModel):
 
 
 class AlignmentConfig(ConfigModel):
-    """The initial attitude (estimators/alignment.py align): method "auto" takes, in this order, an attitude
+    """The initial attitude (estimators/inputs/alignment.py align): method "auto" takes, in this order, an attitude
     sensor in the log (LogData.attitude), initial_attitude_deg, coarse alignment on an initial static segment
     of at least min_static_s, else in-motion alignment with DVL aiding over the first in_motion_window_s.
     "attitude_topic", "static" and "in_motion" force one method (an error if it cannot be done).
@@ -240,7 +245,9 @@ class SolverConfig(ConfigModel):
     relative_error_tol: NonNegative = 1e-7
     # error = chi^2 / 2: a decrease this small moves no estimate by 0.1 sigma
     absolute_error_tol: NonNegative = 0.01
-    earth_model: EarthModel = "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
+    earth_model: EarthModel = (
+        "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
+    )
     # 0: a state per DVL ping; >0: only pings at least this far apart (the others are dropped: decimation)
     keyframe_interval_s: NonNegative = 0.0
     # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping
@@ -276,10 +283,24 @@ class RelinearizationThresholds(ConfigModel):
     SECTION: ClassVar[str] = "online.relinearization"
 
     # rad (body x, y, z), m (body axes)
-    pose: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = (5e-4, 5e-4, 5e-3, 10.0, 10.0, 10.0)
+    pose: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = (
+        5e-4,
+        5e-4,
+        5e-3,
+        10.0,
+        10.0,
+        10.0,
+    )
     velocity: tuple[Positive, Positive, Positive] = (0.01, 0.01, 0.01)  # m/s, map
     # accel m/s^2, gyro rad/s
-    bias: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = (1e-3, 1e-3, 1e-3, 1e-5, 1e-5, 1e-5)
+    bias: tuple[Positive, Positive, Positive, Positive, Positive, Positive] = (
+        1e-3,
+        1e-3,
+        1e-3,
+        1e-5,
+        1e-5,
+        1e-5,
+    )
     scale: Positive = 0.02
     misalignment_rad: Positive = 5e-3
 
@@ -302,14 +323,18 @@ class OnlineConfig(ConfigModel):
 
     SECTION: ClassVar[str] = "online"
 
-    mode: OnlineMode = "fixed_lag"  # "fixed_lag" (bounded cost) or "full" (every state kept; see the module doc)
+    mode: OnlineMode = (
+        "fixed_lag"  # "fixed_lag" (bounded cost) or "full" (every state kept; see the module doc)
+    )
     # fixed_lag: states this far behind the newest are marginalised, s
     window_s: Positive = 20.0
     # seconds of the initial static segment to align on before the first estimate
     align_s: Positive = 60.0
     # slower pings do not inform scale and misalignment (online/dvl_factors.py module doc)
     calibration_min_speed_m_s: NonNegative = 0.1
-    bad_messages: BadMessages = "raise"  # "raise" (GtsamDvlError) or "drop" (counted, warned once per kind)
+    bad_messages: BadMessages = (
+        "raise"  # "raise" (GtsamDvlError) or "drop" (counted, warned once per kind)
+    )
     covariances: Flag = True  # marginal covariances after every epoch (the timeline needs them)
     record_history: Flag = True  # keep every epoch's estimate for timeline() and result()
     # iSAM2 updates without new data at finish(), until nothing is relinearised
@@ -376,7 +401,9 @@ class IodvlcConfig(ConfigModel):
     # the last this many seconds of the quiet stretch form the reference
     reference_s: Positive = 60.0
     earth_terms: Flag = True
-    track_attitude: Flag = True  # integrate the gyro's residual rotation theta (part of the earth terms)
+    track_attitude: Flag = (
+        True  # integrate the gyro's residual rotation theta (part of the earth terms)
+    )
     # DVL noise (1 sigma per axis); None: the median of the log's covariances
     noise_m_s: Positive | None = None
     # the pointwise k = |gamma| / |beta| is reported only where |beta| exceeds this
@@ -386,7 +413,7 @@ class IodvlcConfig(ConfigModel):
 
 
 class DepthConfig(ConfigModel):
-    """Depth sensor (TOML section [depth]; every estimator, see estimators/depth.py). With use (the
+    """Depth sensor (TOML section [depth]; every estimator, see estimators/inputs/depth.py). With use (the
     default) a log that has depth (LogData.depth) gets one factor per depth sample on the vertical position of
     its nearest state, the time between them bridged by that state's vertical velocity; a sample farther than
     max_time_to_state_s from every state is not used (counted). A pressure is converted to depth with
@@ -410,7 +437,7 @@ class DepthConfig(ConfigModel):
 
 
 class GnssConfig(ConfigModel):
-    """GNSS fixes at the surface (TOML section [gnss]; batch smoother only, see estimators/gnss.py). A good fix
+    """GNSS fixes at the surface (TOML section [gnss]; batch smoother only, see estimators/inputs/gnss.py). A good fix
     has status >= 0 and, when the log has depth, the depth sensor no deeper than max_depth_m at its time;
     consecutive good fixes closer than surface_gap_s apart form one surface interval. use: "origin" (only the
     map origin comes from the first fix: that fix is the one position factor when the log records no origin),

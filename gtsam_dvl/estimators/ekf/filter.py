@@ -10,13 +10,14 @@ interval's closed-form transition matrix. Each valid ping is a measurement updat
 
     y = k * d_R_b * ( n_R_b^T n_v + b_omega x b_l ) + noise,     d_R_b = b_R_d^T      (docs/conventions.md)
 
-Same Earth model, initialisation, priors and noise as the smoother (estimators/graph.py, core/config/): coarse alignment
+Same Earth model, initialisation, priors and noise as the smoother (estimators/graph/log_graph.py, core/config/):
+coarse alignment
 on the static segment, scale 0.8, misalignment at the nominal mounting, the first ping's velocity at that
 calibration, position 0 at the first ping. The error is injected after every update (no reset Jacobian:
 its effect is second order in the correction). Every ping is used: solver.keyframe_interval_s only thins
 the smoother's states.
 
-Depth ([depth], LogData.depth, converted by estimators/depth.py depth_samples as the batch smoother converts
+Depth ([depth], LogData.depth, converted by estimators/inputs/depth.py depth_samples as the batch smoother converts
 it): a scalar update of the vertical position at the sample's own time (the propagation stops there), with the
 model of factors/depth.py, h = z + (x^2 + y^2) / (2 R) + (n_R_b b_p_s)_z, the sensor's lever arm b_p_s and the
 Earth's curvature; a sample before the first state or after the last one is bridged to it by the velocity,
@@ -68,13 +69,6 @@ from gtsam_dvl.core.rotations import skew, so3_log
 from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators import current, weak_hold
-from gtsam_dvl.estimators.alignment import FirstState, align, given_covariance, map_frame_of
-from gtsam_dvl.estimators.constant_error import consider_constant_error
-from gtsam_dvl.estimators.correlated import ekf_propagate
-from gtsam_dvl.estimators.correlated import info as correlated_info
-from gtsam_dvl.estimators.current import resolve_water_track, water_pings
-from gtsam_dvl.estimators.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
 from gtsam_dvl.estimators.ekf.kalman import (
     OFFSET,
@@ -95,8 +89,10 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     NavState,
     propagate_interval,
 )
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import (
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.inputs.alignment import FirstState, align, given_covariance, map_frame_of
+from gtsam_dvl.estimators.inputs.depth import DepthSamples, depth_samples
+from gtsam_dvl.estimators.inputs.gaps import (
     check_gaps,
     find_gaps,
     gaps_within,
@@ -107,9 +103,20 @@ from gtsam_dvl.estimators.gaps import (
     screened_losses,
     with_fillers,
 )
-from gtsam_dvl.estimators.gnss import origin_fix_time
-from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.noise_levels import (
+from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
+from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
+from gtsam_dvl.estimators.inputs.selection import (
+    covering_sample,
+    ping_covariance,
+    usable_pings,
+    water_covariance,
+)
+from gtsam_dvl.estimators.models import current, weak_hold
+from gtsam_dvl.estimators.models.constant_error import consider_constant_error
+from gtsam_dvl.estimators.models.correlated import ekf_propagate
+from gtsam_dvl.estimators.models.correlated import info as correlated_info
+from gtsam_dvl.estimators.models.current import resolve_water_track, water_pings
+from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     WarmupFit,
     dvl_fit_enabled,
@@ -118,7 +125,6 @@ from gtsam_dvl.estimators.noise_levels import (
     median_ping_sigma,
     with_multiplier,
 )
-from gtsam_dvl.estimators.selection import covering_sample, ping_covariance, usable_pings, water_covariance
 from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity estimate that
@@ -139,10 +145,16 @@ CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 # the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
 # (core/states.py ekf_layout: gyro and accelerometer bias, scale, misalignment, and the time offset when estimated)
 LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
-CALIBRATION = np.r_[LAYOUT["scale"], LAYOUT["misalignment"]]  # error-state indices of the DVL scale and misalignment
-MAX_STEP_S = 1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
+CALIBRATION = np.r_[
+    LAYOUT["scale"], LAYOUT["misalignment"]
+]  # error-state indices of the DVL scale and misalignment
+MAX_STEP_S = (
+    1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
+)
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
-RateInput = tuple[np.ndarray, np.ndarray, np.ndarray]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
+RateInput = tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
 
 class _Earth:
@@ -167,13 +179,21 @@ class _Earth:
         return self._g + self._G @ (n_p - self._at), self._G
 
 
-def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping: int,
-                  first: FirstState | None = None, calibration: VehicleCalibration | None = None) -> FilterState:
+def initial_state(
+    log: LogData,
+    config: EstimatorConfig,
+    n_R_b: np.ndarray,
+    ping: int,
+    first: FirstState | None = None,
+    calibration: VehicleCalibration | None = None,
+) -> FilterState:
     """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance; first: the given
     attitude and origin carried to the first ping (alignment.first_state), its position and covariance;
     calibration: the states it holds (states.calibration_states) at its values with its joint covariance."""
     pri = config.priors
-    file, held, held_cov = states.calibration_in_layout(config, calibration, ekf_layout(config, N_NAV))
+    file, held, held_cov = states.calibration_in_layout(
+        config, calibration, ekf_layout(config, N_NAV)
+    )
     b_R_d0 = file.get("misalignment", log.mounting.b_R_d0)
     k0 = float(file.get("scale", [pri.scale_initial])[0])
     d_y = log.dvl.d_v[ping]
@@ -191,10 +211,15 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
         n_p = first.n_p.copy()
         for r, rows in ((0, PHI), (3, POS)):
             for c, cols in ((0, PHI), (3, POS)):
-                P[rows, cols] = first.cov[r:r + 3, c:c + 3]
-    for name, sl in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
+                P[rows, cols] = first.cov[r : r + 3, c : c + 3]
+    for (
+        name,
+        sl,
+    ) in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
         P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
-    P[np.ix_(held, held)] = held_cov  # a calibration's joint covariance over the states it holds, in their place
+    P[np.ix_(held, held)] = (
+        held_cov  # a calibration's joint covariance over the states it holds, in their place
+    )
     d_e = None
     if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
         P = np.pad(P, ((0, 3), (0, 3)))
@@ -206,8 +231,17 @@ def initial_state(log: LogData, config: EstimatorConfig, n_R_b: np.ndarray, ping
         P = np.pad(P, ((0, 2), (0, 2)))
         P[m:, m:] = np.eye(2) * config.current.prior_sigma_m_s**2
         n_c = np.zeros(2)
-    return FilterState(NavState(n_R_b.copy(), n_v, n_p), np.zeros(3), np.zeros(3), k0, b_R_d0.copy(), P,
-                       file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0, d_e, n_c)
+    return FilterState(
+        NavState(n_R_b.copy(), n_v, n_p),
+        np.zeros(3),
+        np.zeros(3),
+        k0,
+        b_R_d0.copy(),
+        P,
+        file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0,
+        d_e,
+        n_c,
+    )
 
 
 def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
@@ -224,42 +258,71 @@ def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndar
     return 0.5 * T * (Phi @ Qc @ Phi.T + Qc)
 
 
-def measurement_model(fs: FilterState, b_omega_m: np.ndarray, b_l: np.ndarray, n_omega_ie: np.ndarray,
-                      n_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def measurement_model(
+    fs: FilterState,
+    b_omega_m: np.ndarray,
+    b_l: np.ndarray,
+    n_omega_ie: np.ndarray,
+    n_v: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Predicted DVL velocity y (3,) (factors/dvl_model.py), its Jacobian H (3, n) w.r.t. the error state, and the
     body rate relative to map used for the lever arm, b_omega = b_omega_m - b_g - n_R_b^T n_omega_ie (its attitude
     dependence -n_R_b^T [n_omega_ie]x phi enters H through the model's b_omega Jacobian). n_v (m/s, map): the
     velocity the DVL sees, fs.nav.n_v unless given (a water-track ping's: relative to the water)."""
     R = fs.nav.n_R_b
     b_omega = b_omega_m - fs.gyro_bias - R.T @ n_omega_ie
-    y, J = dvl_model(R, fs.nav.n_v if n_v is None else n_v, fs.scale, fs.b_R_d, b_omega,
-                     np.asarray(b_l, dtype=float), inputs=True)
+    y, J = dvl_model(
+        R,
+        fs.nav.n_v if n_v is None else n_v,
+        fs.scale,
+        fs.b_R_d,
+        b_omega,
+        np.asarray(b_l, dtype=float),
+        inputs=True,
+    )
     assert J is not None
     return y, _error_state_jacobian(fs, J, -R.T @ skew(n_omega_ie)), b_omega
 
 
-def offset_measurement_model(fs: FilterState, b_l: np.ndarray, rate_input: RateInput, n_g: np.ndarray,
-                             n_v: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def offset_measurement_model(
+    fs: FilterState,
+    b_l: np.ndarray,
+    rate_input: RateInput,
+    n_g: np.ndarray,
+    n_v: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """The DVL velocity with the time offset (module doc; factors/dvl_model.py), y (3,), and its Jacobian H (3, n)
     w.r.t. the error state. rate_input = (b_a, b_omega, G): FactorMaker.velocity_rate_input of the ping (body rate
     relative to map, gyro bias not removed); n_g gravity in map. The model's inputs b_a - accelerometer bias and
     b_omega - gyro bias give the bias columns. n_v: as in measurement_model."""
     b_a, b_omega_mean, G = rate_input
-    y, J = dvl_model(fs.nav.n_R_b, fs.nav.n_v if n_v is None else n_v, fs.scale, fs.b_R_d, b_omega_mean - fs.gyro_bias,
-                     np.asarray(b_l, dtype=float), dt_d=fs.time_offset,
-                     offset=OffsetInput(b_a - fs.accel_bias, np.asarray(n_g, dtype=float), G), inputs=True)
+    y, J = dvl_model(
+        fs.nav.n_R_b,
+        fs.nav.n_v if n_v is None else n_v,
+        fs.scale,
+        fs.b_R_d,
+        b_omega_mean - fs.gyro_bias,
+        np.asarray(b_l, dtype=float),
+        dt_d=fs.time_offset,
+        offset=OffsetInput(b_a - fs.accel_bias, np.asarray(n_g, dtype=float), G),
+        inputs=True,
+    )
     assert J is not None
     return y, _error_state_jacobian(fs, J, None)
 
 
-def _error_state_jacobian(fs: FilterState, J: DvlJacobians, d_omega_d_phi: np.ndarray | None) -> np.ndarray:
+def _error_state_jacobian(
+    fs: FilterState, J: DvlJacobians, d_omega_d_phi: np.ndarray | None
+) -> np.ndarray:
     """The model's Jacobians (factors/dvl_model.py) on the error state (strapdown.py): phi is a left perturbation in
     map axes (n_R_b Exp(theta) = Exp(n_R_b theta) n_R_b: theta = n_R_b^T phi), the biases enter through the inputs
     b_omega and b_a with a minus sign, psi is b_R_d's right tangent as in the model; d_omega_d_phi: the body rate's
     dependence on phi, if any."""
     H = np.zeros((3, len(fs.P)))
     assert J.b_omega is not None
-    H[:, PHI] = J.pose[:, :3] @ fs.nav.n_R_b.T + (0.0 if d_omega_d_phi is None else J.b_omega @ d_omega_d_phi)
+    H[:, PHI] = J.pose[:, :3] @ fs.nav.n_R_b.T + (
+        0.0 if d_omega_d_phi is None else J.b_omega @ d_omega_d_phi
+    )
     H[:, VEL] = J.vel
     H[:, BG] = -J.b_omega
     if J.b_a is not None:
@@ -271,8 +334,9 @@ def _error_state_jacobian(fs: FilterState, J: DvlJacobians, d_omega_d_phi: np.nd
     return H
 
 
-def depth_measurement_model(fs: FilterState, b_p_s: np.ndarray, radius_m: float,
-                            dt: float = 0.0) -> tuple[float, np.ndarray]:
+def depth_measurement_model(
+    fs: FilterState, b_p_s: np.ndarray, radius_m: float, dt: float = 0.0
+) -> tuple[float, np.ndarray]:
     """Predicted height of the depth sensor above the map origin's height (m, up; factors/depth.py), dt seconds
     after the filter's time (bridged by the vertical velocity), and its Jacobian (1, n) w.r.t. the error state:
     phi (map axes, left) moves the lever arm a = n_R_b b_p_s by phi x a, whose z is phi_x a_y - phi_y a_x."""
@@ -286,8 +350,9 @@ def depth_measurement_model(fs: FilterState, b_p_s: np.ndarray, radius_m: float,
     return h, H
 
 
-def _ping_measurement(log: LogData, config: EstimatorConfig, j: int, water: bool = False
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _ping_measurement(
+    log: LogData, config: EstimatorConfig, j: int, water: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(A, z, Rm): the measurement A y = z with noise covariance Rm: the 3-D velocity (A = I) or the valid
     beams (rows of A the beam unit vectors); a water-track ping (water): its 3-D velocity, its own noise."""
     cfg, dvl = config.dvl, log.dvl
@@ -296,7 +361,7 @@ def _ping_measurement(log: LogData, config: EstimatorConfig, j: int, water: bool
     if cfg.use_beams and dvl.beams is not None:
         ok = dvl.beams.valid[j]
         A = dvl.beams.d_u[j][ok]
-        return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_sigma_m_s()**2
+        return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_sigma_m_s() ** 2
     return np.eye(3), dvl.d_v[j], ping_covariance(cfg, dvl.d_cov[j])
 
 
@@ -315,10 +380,15 @@ class _DepthUpdates:
 
     def due(self, t: float) -> float | None:
         """The next sample's time if it is before t (the propagation stops there), else None."""
-        return float(self.samples.t[self.next]) if self.next < len(self.samples.t) and \
-            self.samples.t[self.next] < t - 1e-9 else None
+        return (
+            float(self.samples.t[self.next])
+            if self.next < len(self.samples.t) and self.samples.t[self.next] < t - 1e-9
+            else None
+        )
 
-    def apply(self, fs: FilterState, t: float, until: float, bridge_to: float | None = None) -> None:
+    def apply(
+        self, fs: FilterState, t: float, until: float, bridge_to: float | None = None
+    ) -> None:
         """Update with the samples stamped up to `until`, the filter at t; a sample more than 1e-9 s from t is
         bridged by the velocity if within max_dt (bridge_to: also those after t up to it, the last state)."""
         s, c = self.samples, self.counters
@@ -332,15 +402,26 @@ class _DepthUpdates:
             else:
                 h, H = depth_measurement_model(fs, s.b_p_sensor, self.radius_m, dt)
                 gate = self.gate_nis if self.gated_run < self.reopen_after else math.inf
-                _, _, gated = update(fs, H, np.array([s.z_meas[self.next] - h]),
-                                     np.array([[float(s.sigma[self.next]) ** 2]]), gate_nis=gate)
+                _, _, gated = update(
+                    fs,
+                    H,
+                    np.array([s.z_meas[self.next] - h]),
+                    np.array([[float(s.sigma[self.next]) ** 2]]),
+                    gate_nis=gate,
+                )
                 self.gated_run = self.gated_run + 1 if gated else 0
                 c["depth_gated" if gated else "depth_used"] += 1
             self.next += 1
 
 
-def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: ProgressFn | None = None, *,
-            min_calibration_speed_m_s: float | None = None, calibration: VehicleCalibration | None = None) -> NavResult:
+def run_ekf(
+    log: LogData,
+    config: EstimatorConfig | None = None,
+    progress: ProgressFn | None = None,
+    *,
+    min_calibration_speed_m_s: float | None = None,
+    calibration: VehicleCalibration | None = None,
+) -> NavResult:
     """Filter a whole log: trajectory and calibration at every usable DVL ping, with the filtering history.
 
     Below config.ekf.min_calibration_speed_m_s (or the keyword, which overrides it) or
@@ -348,7 +429,7 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
     misalignment (see MIN_CALIBRATION_SPEED_M_S). config None: the one the log's scenario names, else the
     defaults (EstimatorConfig.for_log).
 
-    Noise levels from the data ([noise], estimators/noise_levels.py): the IMU's quantisation floor; the DVL's
+    Noise levels from the data ([noise], estimators/models/noise_levels.py): the IMU's quantisation floor; the DVL's
     variance component by covariance matching of the innovations over the warm-up window ([noise] warmup_s), the
     window filtered again with each new fit until it changes by at most [noise] fit_tolerance (a covariance
     matching is only unbiased with the P of the right R: P is computed with the R assumed), at most fit_passes
@@ -360,12 +441,21 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
         config = config.model_copy(update={"ekf": ekf})
     config.validate()
     noise = NoiseReport()
-    stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
+    stated = (
+        config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    )
+    log = screened_in_memory(
+        log
+    )  # saturation and clock steps, when the reader did not screen it (gaps.py)
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
-    held_levels(log, config, "EKF", noise)  # (the depth and the DVL's correlated error: the batch smoother fits them)
-    recentre = (enabled(config, "time_offset") and config.ekf.recentre_time_offset
-                and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0])
+    held_levels(
+        log, config, "EKF", noise
+    )  # (the depth and the DVL's correlated error: the batch smoother fits them)
+    recentre = (
+        enabled(config, "time_offset")
+        and config.ekf.recentre_time_offset
+        and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0]
+    )
     offset_info: dict[str, Any] = {}
     if dvl_fit_enabled(config) or recentre:
         n = config.noise
@@ -386,18 +476,28 @@ def run_ekf(log: LogData, config: EstimatorConfig | None = None, progress: Progr
                 break
     result = _filter(log, config, progress, calibration=calibration)
     check = result.info["filter"].pop("nominal", None)
-    if check is not None and not check["pays"]:  # held at nominal: filtered again with it as a consider state
+    if (
+        check is not None and not check["pays"]
+    ):  # held at nominal: filtered again with it as a consider state
         result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
         result.info["filter"].pop("nominal", None)
-        result.info["calibration_hold"] = {"nominal": check, "held": ["scale", "misalignment"], "why": (
-            f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
-            f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} of chi^2 with "
-            "4 dof); filtered again with the scale and misalignment as consider states (their prior's sigma)")}
+        result.info["calibration_hold"] = {
+            "nominal": check,
+            "held": ["scale", "misalignment"],
+            "why": (
+                f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
+                f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} "
+                "of chi^2 with 4 dof); filtered again with the scale and misalignment as consider states "
+                "(their prior's sigma)"
+            ),
+        }
     elif check is not None:
         result.info["calibration_hold"] = {"nominal": check, "held": []}
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
-    if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
+    if (
+        screened := screened_losses(log)
+    ) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
     if offset_info:
         result.info["time_offset_prior"] = offset_info
@@ -424,7 +524,9 @@ RECENTRE_DETERMINED = 0.5
 DIVERGENCE_PINGS = 30
 DIVERGENCE_NIS = 6.0
 # (and the time offset, OFFSET, when estimated: its slot exists only then)
-FROZEN_ON_DIVERGENCE = np.r_[np.arange(BG.start, BG.stop), np.arange(BA.start, BA.stop), CALIBRATION]
+FROZEN_ON_DIVERGENCE = np.r_[
+    np.arange(BG.start, BG.stop), np.arange(BA.start, BA.stop), CALIBRATION
+]
 
 
 @dataclass
@@ -443,80 +545,130 @@ class DivergenceWatch:
         """One update's NIS per dof at t (s); True when this one is where the filter is found diverged: the mean of
         the last DIVERGENCE_PINGS above DIVERGENCE_NIS and above the mean of the DIVERGENCE_PINGS before them (a
         filter converging from a wrong prior, a mounting tens of degrees off, has a large but falling NIS)."""
-        self.recent = (self.recent + [nis_per_dof])[-2 * DIVERGENCE_PINGS:]
+        self.recent = (self.recent + [nis_per_dof])[-2 * DIVERGENCE_PINGS :]
         if self.diverged or len(self.recent) < 2 * DIVERGENCE_PINGS:
             return False
-        before, last = (float(np.mean(self.recent[:DIVERGENCE_PINGS])), float(np.mean(self.recent[DIVERGENCE_PINGS:])))
+        before, last = (
+            float(np.mean(self.recent[:DIVERGENCE_PINGS])),
+            float(np.mean(self.recent[DIVERGENCE_PINGS:])),
+        )
         if last > DIVERGENCE_NIS and last > before:
             self.diverged_at_s = t
             return True
         return False
 
     def info(self) -> dict[str, Any]:
-        return {} if self.diverged_at_s is None else {
-            "diverged_at_s": self.diverged_at_s,
-            "why": f"the EKF diverged at {self.diverged_at_s:.1f} s (mean NIS per dof over {DIVERGENCE_PINGS} "
-                   f"pings above {DIVERGENCE_NIS:g}): its biases, calibration and time offset were frozen there"}
+        return (
+            {}
+            if self.diverged_at_s is None
+            else {
+                "diverged_at_s": self.diverged_at_s,
+                "why": f"the EKF diverged at {self.diverged_at_s:.1f} s (mean NIS per dof over {DIVERGENCE_PINGS} "
+                f"pings above {DIVERGENCE_NIS:g}): its biases, calibration and time offset were frozen there",
+            }
+        )
 
 
-def _recentred_offset(config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
-                      ) -> tuple[EstimatorConfig, bool]:
+def _recentred_offset(
+    config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
+) -> tuple[EstimatorConfig, bool]:
     """config with the time offset's prior centred at the warm-up window's estimate ([ekf] recentre_time_offset),
     and whether that moved it by more than RECENTRE_TOLERANCE prior sigmas; info says where from."""
     dvl = config.dvl
     dt, sigma = float(window.time_offset_s), float(window.time_offset_sigma_s)
-    if not (np.isfinite(dt) and np.isfinite(sigma)) or sigma > RECENTRE_DETERMINED * dvl.time_offset_sigma_s:
-        info.update(window_sigma_s=sigma, passes=passes,
-                    why=f"time offset prior kept at {dvl.time_offset_prior_s:+.3f} s: the warm-up window did not "
-                        f"determine the offset (sigma {sigma:.3g} s of the prior's {dvl.time_offset_sigma_s:g} s)")
+    if (
+        not (np.isfinite(dt) and np.isfinite(sigma))
+        or sigma > RECENTRE_DETERMINED * dvl.time_offset_sigma_s
+    ):
+        info.update(
+            window_sigma_s=sigma,
+            passes=passes,
+            why=f"time offset prior kept at {dvl.time_offset_prior_s:+.3f} s: the warm-up window did not "
+            f"determine the offset (sigma {sigma:.3g} s of the prior's {dvl.time_offset_sigma_s:g} s)",
+        )
         return config, False
     moved = abs(dt - dvl.time_offset_prior_s) > RECENTRE_TOLERANCE * dvl.time_offset_sigma_s
     info.setdefault("configured_s", dvl.time_offset_prior_s)
-    info.update(centre_s=dt, window_sigma_s=sigma, passes=passes,
-                why=f"time offset prior centred at {dt:+.3f} s, the warm-up window's estimate (configured "
-                    f"{info['configured_s']:+.3f} s, sigma {dvl.time_offset_sigma_s:g} s kept)")
-    return config.model_copy(update={"dvl": dvl.model_copy(update={"time_offset_prior_s": dt})}), moved
+    info.update(
+        centre_s=dt,
+        window_sigma_s=sigma,
+        passes=passes,
+        why=f"time offset prior centred at {dt:+.3f} s, the warm-up window's estimate (configured "
+        f"{info['configured_s']:+.3f} s, sigma {dvl.time_offset_sigma_s:g} s kept)",
+    )
+    return config.model_copy(
+        update={"dvl": dvl.model_copy(update={"time_offset_prior_s": dt})}
+    ), moved
 
 
-def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, fit: WarmupFit | None = None,
-            calibration: VehicleCalibration | None = None, consider_calibration: bool = False) -> NavResult:
+def _filter(
+    log: LogData,
+    config: EstimatorConfig,
+    progress: ProgressFn | None,
+    fit: WarmupFit | None = None,
+    calibration: VehicleCalibration | None = None,
+    consider_calibration: bool = False,
+) -> NavResult:
     """run_ekf at config's noise levels; with fit, only up to its warm-up window's end, the innovations there
     collected into it (the NavResult then holds the window's states). consider_calibration: the DVL scale and
     misalignment held at their start as consider states (kalman.update). Without a calibration file and with
     [priors] nominal_check (and the hold on), info["filter"]["nominal"] has the final calibration's nominal check
-    (estimators/weak_hold.py nominal_check)."""
+    (estimators/models/weak_hold.py nominal_check)."""
     ekf_cfg = config.ekf
     offset = enabled(config, "time_offset")
     if offset and config.dvl.use_beams:
-        raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
-    log = log_in_base_link(log)  # IMU samples in base_link (estimators/mounting.py)
+        raise GtsamDvlError(
+            "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
+        )
+    log = log_in_base_link(log)  # IMU samples in base_link (estimators/inputs/mounting.py)
     t_start = time.perf_counter()
     counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
-    alignment = align(log.imu, log.dvl, frame, config.alignment, attitude=log.attitude, mounting=log.mounting,
-                      imu_cfg=config.imu)
-    config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
-    for name, what in (("lever_arm", "[dvl] estimate_lever_arm is batch only (the batch smoother)"),
-                       ("water_scale", "[current] water_track_scale is batch and online only")):
+    alignment = align(
+        log.imu,
+        log.dvl,
+        frame,
+        config.alignment,
+        attitude=log.attitude,
+        mounting=log.mounting,
+        imu_cfg=config.imu,
+    )
+    config = resolve_water_track(
+        config, log
+    )  # [current] water_track "auto": "use" when the log has water track
+    for name, what in (
+        ("lever_arm", "[dvl] estimate_lever_arm is batch only (the batch smoother)"),
+        ("water_scale", "[current] water_track_scale is batch and online only"),
+    ):
         if enabled(config, name):  # (not in the EKF's error state: core/states.py ekf=False)
             raise GtsamDvlError(f"{what}, not the EKF")
     wc_on = water_current(config)
     water = water_pings(log) if wc_on else np.zeros(len(log.dvl), dtype=bool)
     if wc_on and config.dvl.use_beams and water.any():
-        raise GtsamDvlError("[dvl] use_beams with water-track pings: not supported in the EKF; set [current] "
-                            "water_track = \"refuse\" or use_beams = false")
-    pings = usable_pings(log.dvl, log.imu, config.dvl, counters, wc_on)  # every usable ping: no keyframe thinning
+        raise GtsamDvlError(
+            "[dvl] use_beams with water-track pings: not supported in the EKF; set [current] "
+            'water_track = "refuse" or use_beams = false'
+        )
+    pings = usable_pings(
+        log.dvl, log.imu, config.dvl, counters, wc_on
+    )  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
     # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own time):
     # carry them to the first ping (alignment.first_state; the filter's initial covariance starts from the [priors]
     # attitude sigmas, wider than the alignment's)
-    maker = FactorMaker(config, frame, alignment, log.mounting, log.source)  # the time offset's IMU constants
+    maker = FactorMaker(
+        config, frame, alignment, log.mounting, log.source
+    )  # the time offset's IMU constants
     p0 = int(pings[0])
-    first = maker.carry_to_first(log.imu, float(log.dvl.t[p0]),
-                                 log.dvl.d_v[p0] if log.dvl.valid[p0] and not water[p0] else None,
-                                 log.dvl.d_cov[p0], given_covariance(alignment, config, alignment_sigmas=False),
-                                 origin_fix_time(log, config))
+    first = maker.carry_to_first(
+        log.imu,
+        float(log.dvl.t[p0]),
+        log.dvl.d_v[p0] if log.dvl.valid[p0] and not water[p0] else None,
+        log.dvl.d_cov[p0],
+        given_covariance(alignment, config, alignment_sigmas=False),
+        origin_fix_time(log, config),
+    )
     alignment = maker.alignment
     earth = _Earth(frame, config.solver.earth_model == "flat")
     imu, dvl = log.imu, log.dvl
@@ -534,23 +686,32 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     if log.depth is not None and config.depth.use and len(log.depth):
         dcounters = {"depth_used": 0, "depth_gated": 0, "depth_too_far": 0}
         samples = depth_samples(log.depth, config.depth, frame, dcounters)
-        depth = _DepthUpdates(samples, gaussian_radius(frame.lat0), config.depth.max_time_to_state_s,
-                              gate_threshold(ekf_cfg.gate_probability, 1), ekf_cfg.gate_reopen_after,
-                              counters=dcounters)
+        depth = _DepthUpdates(
+            samples,
+            gaussian_radius(frame.lat0),
+            config.depth.max_time_to_state_s,
+            gate_threshold(ekf_cfg.gate_probability, 1),
+            ekf_cfg.gate_reopen_after,
+            counters=dcounters,
+        )
     fs = initial_state(log, config, alignment.n_R_b, p0, first, calibration)
     current.ekf_start(config, fs, frame.height_m)
-    offset_centre = fs.time_offset  # the time offset prior's centre (the configured one, or the calibration's)
+    offset_centre = (
+        fs.time_offset
+    )  # the time offset prior's centre (the configured one, or the calibration's)
     watch = DivergenceWatch()
     t_first = float(dvl.t[pings[0]])
     hist = History()
-    currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = []  # (t, z, W, its covariance, water)
+    currents: list[
+        tuple[float, float, np.ndarray, np.ndarray, bool]
+    ] = []  # (t, z, W, its covariance, water)
     nis_sum, nis_dof, downweighted = 0.0, 0, 0
     if fit is not None:
         fit.start(float(dvl.t[pings[0]]), median_ping_sigma(config, dvl.d_cov[pings]))
     timing = {"propagate": 0.0, "update": 0.0}
     t_prev = float(dvl.t[pings[0]])
     # the states of the factor-graph estimators: every usable ping, and states without a ping across DVL
-    # dropouts (estimators/gaps.py); the filter updates at the pings and records at both
+    # dropouts (estimators/inputs/gaps.py); the filter updates at the pings and records at both
     state_t, is_filler = with_fillers(dvl.t[pings], float(t[-1]), config.solver.max_state_spacing_s)
     ping_at = np.full(len(state_t), -1)
     ping_at[~is_filler] = pings
@@ -562,23 +723,40 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         depth.apply(fs, t_prev, t_prev)
     for count, (t_j, j) in enumerate(zip(state_t.tolist(), ping_at.tolist(), strict=True)):
         t0 = time.perf_counter()
-        while t_prev < t_j - 1e-9:  # propagate (in steps of at most MAX_STEP_S, stopping at depth samples)
+        while (
+            t_prev < t_j - 1e-9
+        ):  # propagate (in steps of at most MAX_STEP_S, stopping at depth samples)
             t_next = min(t_j, t_prev + MAX_STEP_S)
             if depth is not None and (t_d := depth.due(t_next)) is not None and t_d > t_prev:
                 t_next = t_d
             idx, dt, held = pieces_with_holds(t, starts, gaps, t_prev, t_next)
             if len(idx):
                 n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
-                step = propagate_interval(fs.nav, imu.b_omega[idx] - fs.gyro_bias, imu.b_f[idx] - fs.accel_bias,
-                                          dt, earth.n_omega_ie, n_g, G)
+                step = propagate_interval(
+                    fs.nav,
+                    imu.b_omega[idx] - fs.gyro_bias,
+                    imu.b_f[idx] - fs.accel_bias,
+                    dt,
+                    earth.n_omega_ie,
+                    n_g,
+                    G,
+                )
                 fs.nav = step.state
-                fs.P = propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
-                if (gm := fs.error_slice()) is not None:  # the correlated DVL error decays (correlated.py)
+                fs.P = propagate_covariance(
+                    fs.P, step.Phi, process_noise(config, step.Phi, step.duration)
+                )
+                if (
+                    gm := fs.error_slice()
+                ) is not None:  # the correlated DVL error decays (correlated.py)
                     assert fs.dvl_error is not None
-                    fs.P, fs.dvl_error = ekf_propagate(config, fs.P, fs.dvl_error, gm, t_next - t_prev)
+                    fs.P, fs.dvl_error = ekf_propagate(
+                        config, fs.P, fs.dvl_error, gm, t_next - t_prev
+                    )
                 # the current's random walk in time and depth, or across the layer boundaries (current.py)
                 current.ekf_propagate(config, fs, t_next - t_prev, frame.height_m)
-                if held:  # the motion model's uncertainty across an IMU gap, as in the factor graphs
+                if (
+                    held
+                ):  # the motion model's uncertainty across an IMU gap, as in the factor graphs
                     q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
                     fs.P[PHI, PHI] += np.diag(q[0:3])
                     fs.P[POS, POS] += np.diag(q[3:6])
@@ -587,42 +765,66 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
             if depth is not None:
                 depth.apply(fs, t_prev, t_prev)
         t1 = time.perf_counter()
-        if depth is not None and count == len(state_t) - 1:  # samples after the last state: bridged to it
+        if (
+            depth is not None and count == len(state_t) - 1
+        ):  # samples after the last state: bridged to it
             depth.apply(fs, t_j, t_j, bridge_to=math.inf)
         if j < 0:  # a state without a ping: recorded, not updated
             g_j = int(covering_sample(t, t_j))
-            hist.record(fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie)
+            hist.record(
+                fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie
+            )
             timing["propagate"] += t1 - t0
             continue
         if fit is not None and t_j > fit.t_end:
             break
         on_water = bool(water[j])
         A, z, Rm = _ping_measurement(log, config, int(j), on_water)
-        n_v = current.seen_velocity(fs, on_water)  # (m/s, map): over ground, or relative to the water
-        y_hat, H, b_omega = measurement_model(fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie, n_v)
-        if offset:  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
-            dt_c = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
-            if dt_c != fs.time_offset:  # the window held at the bound: counted, reported (analysis/health.py)
-                counters["time_offset_window_clipped"] = counters.get("time_offset_window_clipped", 0) + 1
+        n_v = current.seen_velocity(
+            fs, on_water
+        )  # (m/s, map): over ground, or relative to the water
+        y_hat, H, b_omega = measurement_model(
+            fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie, n_v
+        )
+        if (
+            offset
+        ):  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
+            dt_c = float(
+                np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound)
+            )
+            if (
+                dt_c != fs.time_offset
+            ):  # the window held at the bound: counted, reported (analysis/health.py)
+                counters["time_offset_window_clipped"] = (
+                    counters.get("time_offset_window_clipped", 0) + 1
+                )
             rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c, n_R_b=fs.nav.n_R_b)
             y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity(), n_v)
-        if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/correlated.py)
+        if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/models/correlated.py)
             assert fs.dvl_error is not None
             y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
-        if (wc := fs.current_slice()) is not None:  # dh/dW: minus the velocity's east and north columns
+        if (
+            wc := fs.current_slice()
+        ) is not None:  # dh/dW: minus the velocity's east and north columns
             H[:, wc] = -H[:, VEL][:, :2] if on_water else 0.0
         speed = np.linalg.norm(y_hat) / fs.scale
         slow = speed < ekf_cfg.min_calibration_speed_m_s
-        unsure = not slow and speed < ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(fs.P[VEL, VEL]))
+        unsure = not slow and speed < ekf_cfg.calibration_speed_sigmas * np.sqrt(
+            np.trace(fs.P[VEL, VEL])
+        )
         # the ping itself moving beyond its noise (an underway start's first ping), while the filter's velocity
         # is still uncertain: the calibration as consider states (see the comment at MIN_CALIBRATION_SPEED_M_S);
         # a still vehicle whose filtered velocity wanders above the speed keeps the columns zero
-        moving = (len(z) == 3 and np.linalg.norm(z) / fs.scale > max(
-            ekf_cfg.min_calibration_speed_m_s, ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(Rm))))
+        moving = len(z) == 3 and np.linalg.norm(z) / fs.scale > max(
+            ekf_cfg.min_calibration_speed_m_s,
+            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(Rm)),
+        )
         if slow or (unsure and not moving):
             H[:, CALIBRATION] = 0.0
         unsure = unsure and moving
-        if watch.diverged:  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter from here on
+        if (
+            watch.diverged
+        ):  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter from here on
             H[:, FROZEN_ON_DIVERGENCE] = 0.0
             if offset:
                 H[:, OFFSET] = 0.0
@@ -636,10 +838,22 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         if fit is not None:
             AH = A @ H
             hph = AH @ fs.P @ AH.T
-        nis, down, was_gated = update(fs, A @ H, z - A @ y_hat, Rm, kernel, k_robust, gate_nis,
-                                      CALIBRATION if consider_calibration or unsure else None)
-        if offset and abs(fs.time_offset - offset_centre) > offset_bound:  # held within its window's bound
-            fs.time_offset = float(np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound))
+        nis, down, was_gated = update(
+            fs,
+            A @ H,
+            z - A @ y_hat,
+            Rm,
+            kernel,
+            k_robust,
+            gate_nis,
+            CALIBRATION if consider_calibration or unsure else None,
+        )
+        if (
+            offset and abs(fs.time_offset - offset_centre) > offset_bound
+        ):  # held within its window's bound
+            fs.time_offset = float(
+                np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound)
+            )
             counters["time_offset_bounded"] = counters.get("time_offset_bounded", 0) + 1
         # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
         # has a large and growing NIS while the vehicle gathers speed)
@@ -650,13 +864,19 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
         counters["dvl_slow"] += int(slow)
         gated, gated_run = gated + int(was_gated), gated_run + 1 if was_gated else 0
         if not was_gated:
-            nis_sum, nis_dof, downweighted = nis_sum + nis, nis_dof + len(z), downweighted + int(down)
+            nis_sum, nis_dof, downweighted = (
+                nis_sum + nis,
+                nis_dof + len(z),
+                downweighted + int(down),
+            )
         timing["propagate"] += t1 - t0
         timing["update"] += time.perf_counter() - t1
         hist.record(fs, t_j, b_omega)
         if (wc := fs.current_slice()) is not None:
             assert fs.current is not None
-            currents.append((t_j, float(fs.nav.n_p[2]), fs.current.copy(), fs.P[wc, wc].copy(), on_water))
+            currents.append(
+                (t_j, float(fs.nav.n_p[2]), fs.current.copy(), fs.P[wc, wc].copy(), on_water)
+            )
         if progress and count % 100 == 0:
             progress(count / len(state_t))
     counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
@@ -667,22 +887,43 @@ def _filter(log: LogData, config: EstimatorConfig, progress: ProgressFn | None, 
     result = history_result(hist, log, config)
     result.dvl_pings = pings
     result.timing_s = {**timing, "total": time.perf_counter() - t_start}
-    result.info = {"alignment": maker.alignment_info(),
-                   "counters": counters, "epochs": len(state_t), "imu_gaps": gaps.summary(),
-                   "filter": {"mean_nis_per_dof": nis_sum / max(nis_dof, 1), "nis_dof": nis_dof,
-                              "error_state": len(fs.P), **watch.info()}}
+    result.info = {
+        "alignment": maker.alignment_info(),
+        "counters": counters,
+        "epochs": len(state_t),
+        "imu_gaps": gaps.summary(),
+        "filter": {
+            "mean_nis_per_dof": nis_sum / max(nis_dof, 1),
+            "nis_dof": nis_dof,
+            "error_state": len(fs.P),
+            **watch.info(),
+        },
+    }
     if fs.dvl_error is not None:
         result.info["dvl_correlated_error"] = correlated_info(config)
-    if (calibration is None and fit is None and config.priors.nominal_check
-            and config.priors.hold_weak_information > 0):
+    if (
+        calibration is None
+        and fit is None
+        and config.priors.nominal_check
+        and config.priors.hold_weak_information > 0
+    ):
         k0, b_R_d0, _ = weak_hold.calibration_prior(config, log.mounting)
         d = np.r_[fs.scale - k0, so3_log(np.asarray(b_R_d0).T @ fs.b_R_d)]
-        result.info["filter"]["nominal"] = weak_hold.nominal_check(d, fs.P[np.ix_(CALIBRATION, CALIBRATION)])
-    if currents:  # the current at each update, its filtered sigmas (estimators/current.py profile)
+        result.info["filter"]["nominal"] = weak_hold.nominal_check(
+            d, fs.P[np.ix_(CALIBRATION, CALIBRATION)]
+        )
+    if (
+        currents
+    ):  # the current at each update, its filtered sigmas (estimators/models/current.py profile)
         result.info["water_current"] = current.profile(
-            np.array([c[0] for c in currents]), np.array([c[1] for c in currents]),
-            np.array([c[2] for c in currents]), np.array([c[3] for c in currents]), config,
-            np.array([c[4] for c in currents], dtype=bool), current.ekf_shear(fs))
+            np.array([c[0] for c in currents]),
+            np.array([c[1] for c in currents]),
+            np.array([c[2] for c in currents]),
+            np.array([c[3] for c in currents]),
+            config,
+            np.array([c[4] for c in currents], dtype=bool),
+            current.ekf_shear(fs),
+        )
     if progress:
         progress(1.0)
     return result

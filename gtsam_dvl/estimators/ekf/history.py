@@ -43,8 +43,12 @@ class History:
         self.n_p.append(fs.nav.n_p.copy())
         self.n_R_b.append(fs.nav.n_R_b.copy())
         self.n_v.append(fs.nav.n_v.copy())
-        m = len(fs.P) - fs.extra_states()  # the navigation, calibration and time offset block (the results read
-        self.P.append(fs.P[:m, :m].copy())  # only these; the current's layer boundaries grow the rest)
+        m = (
+            len(fs.P) - fs.extra_states()
+        )  # the navigation, calibration and time offset block (the results read
+        self.P.append(
+            fs.P[:m, :m].copy()
+        )  # only these; the current's layer boundaries grow the rest)
         self.b_omega.append(b_omega)
         self.gyro_bias.append(fs.gyro_bias.copy())
         self.accel_bias.append(fs.accel_bias.copy())
@@ -53,8 +57,9 @@ class History:
         self.time_offset.append(fs.time_offset)
 
 
-def misalignment_timeline(b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray) -> tuple[np.ndarray,
-                                                                                                  np.ndarray]:
+def misalignment_timeline(
+    b_R_d: np.ndarray, b_R_d0: np.ndarray, cov_right: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """result.misalignment_rpy_and_cov over (N, 3, 3) stacks, vectorised: [roll, pitch, yaw] of
     R_c = b_R_d b_R_d0^T (deg) and their covariance (deg^2), from the covariance in b_R_d's right tangent."""
     R_c = b_R_d @ b_R_d0.T
@@ -85,9 +90,13 @@ def history_result(hist: History, log: LogData, config: EstimatorConfig) -> NavR
     pose_cov = J @ P_pose @ np.transpose(J, (0, 2, 1))
     pose_vel_cross = J @ P[:, pose_idx, 3:6]
     layout = ekf_layout(config, N_NAV)
-    calib_idx = np.r_[tuple(layout[s.name] for s in block_states())]  # [accel, gyro] bias, scale, b_R_d tangent
+    calib_idx = np.r_[
+        tuple(layout[s.name] for s in block_states())
+    ]  # [accel, gyro] bias, scale, b_R_d tangent
     calib = P[-1][np.ix_(calib_idx, calib_idx)]
-    shared_idx = np.r_[tuple(layout[s.name] for s in joint_states(config, ekf=True))]  # NavResult.shared_joint_cov
+    shared_idx = np.r_[
+        tuple(layout[s.name] for s in joint_states(config, ekf=True))
+    ]  # NavResult.shared_joint_cov
     shared = P[-1][np.ix_(shared_idx, shared_idx)]
     b_R_d0 = log.mounting.b_R_d0
     mis_deg, mis_cov = misalignment_timeline(np.array(hist.b_R_d), b_R_d0, P[:, MIS, MIS])
@@ -104,15 +113,31 @@ def history_result(hist: History, log: LogData, config: EstimatorConfig) -> NavR
         accel_bias_sigma_ug=np.sqrt(diag[:, BA]) / UG,
         attitude_sigma_deg=np.degrees(np.sqrt(diag[:, PHI])),
     )
-    final = {"gyro_bias": hist.gyro_bias[-1], "accel_bias": hist.accel_bias[-1], "scale": [hist.scale[-1]],
-             "misalignment": hist.b_R_d[-1], "time_offset": [hist.time_offset[-1]]}
+    final = {
+        "gyro_bias": hist.gyro_bias[-1],
+        "accel_bias": hist.accel_bias[-1],
+        "scale": [hist.scale[-1]],
+        "misalignment": hist.b_R_d[-1],
+        "time_offset": [hist.time_offset[-1]],
+    }
     return NavResult(
         estimator="ekf",
-        t=np.array(hist.t), n_p=np.array(hist.n_p), n_R_b=n_R_b, n_v=np.array(hist.n_v),
-        pose_cov=pose_cov, vel_cov=P[:, 3:6, 3:6].copy(),
-        calibration={name: Estimate(np.asarray(final[name], dtype=float), P[-1][sl, sl].copy())
-                     for name, sl in layout.items()},
-        b_R_d0=b_R_d0, t0_ns=log.t0_ns,
-        b_omega=np.array(hist.b_omega), pose_vel_cross=pose_vel_cross, calib_joint_cov=calib,
-        shared_joint_cov=shared, timeline=timeline, config=config.to_dict(),
+        t=np.array(hist.t),
+        n_p=np.array(hist.n_p),
+        n_R_b=n_R_b,
+        n_v=np.array(hist.n_v),
+        pose_cov=pose_cov,
+        vel_cov=P[:, 3:6, 3:6].copy(),
+        calibration={
+            name: Estimate(np.asarray(final[name], dtype=float), P[-1][sl, sl].copy())
+            for name, sl in layout.items()
+        },
+        b_R_d0=b_R_d0,
+        t0_ns=log.t0_ns,
+        b_omega=np.array(hist.b_omega),
+        pose_vel_cross=pose_vel_cross,
+        calib_joint_cov=calib,
+        shared_joint_cov=shared,
+        timeline=timeline,
+        config=config.to_dict(),
     )

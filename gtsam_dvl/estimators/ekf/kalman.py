@@ -4,8 +4,8 @@ through an interval's transition.
 
 The error state is strapdown.py's navigation and calibration error (N_ERR), then the time offset when estimated
 (core/states.py ekf_layout), then the DVL's correlated error when modelled (FilterState.error_slice,
-estimators/correlated.py), then the water current when water-track pings are used (FilterState.current_slice,
-estimators/current.py).
+estimators/models/correlated.py), then the water current when water-track pings are used (FilterState.current_slice,
+estimators/models/current.py).
 """
 
 from __future__ import annotations
@@ -18,9 +18,22 @@ from scipy.stats import chi2
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.states import ekf_layout
 from gtsam_dvl.estimators.ekf.history import N_NAV
-from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_ERR, PHI, POS, SCALE, VEL, FilterState, NavState
+from gtsam_dvl.estimators.ekf.strapdown import (
+    BA,
+    BG,
+    MIS,
+    N_ERR,
+    PHI,
+    POS,
+    SCALE,
+    VEL,
+    FilterState,
+    NavState,
+)
 
-OFFSET = ekf_layout(None, N_NAV)["time_offset"].start  # error-state index of the DVL time offset dt_d (s)
+OFFSET = ekf_layout(None, N_NAV)[
+    "time_offset"
+].start  # error-state index of the DVL time offset dt_d (s)
 
 
 def robust_weight(kernel: str, k: float, r: float) -> float:
@@ -40,9 +53,16 @@ def gate_threshold(probability: float, dof: int) -> float:
     return math.inf if probability >= 1.0 else float(chi2.ppf(probability, dof))
 
 
-def update(fs: FilterState, H: np.ndarray, innovation: np.ndarray, Rm: np.ndarray, kernel: str = "none",
-           k: float = 3.0, gate_nis: float = math.inf, consider: np.ndarray | None = None
-           ) -> tuple[float, bool, bool]:
+def update(
+    fs: FilterState,
+    H: np.ndarray,
+    innovation: np.ndarray,
+    Rm: np.ndarray,
+    kernel: str = "none",
+    k: float = 3.0,
+    gate_nis: float = math.inf,
+    consider: np.ndarray | None = None,
+) -> tuple[float, bool, bool]:
     """Kalman update (Joseph form) and injection of the error into the nominal state, unless the normalised
     innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's weight
     (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.

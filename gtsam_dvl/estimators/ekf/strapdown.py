@@ -15,7 +15,7 @@ increments Exp(dtheta_j), computed here as a prefix product of quaternions (log2
 
 IMU samples are interval averages (types.ImuData): sample j gives dtheta_j = omega_j dt_j and dv_j = f_j dt_j
 accumulated while the body turns, so each delta-v is rotated back to the sample's start, dv_j + 1/2
-dtheta_j x dv_j, as the graph builder does before preintegration (graph.py). The velocity is integrated
+dtheta_j x dv_j, as the graph builder does before preintegration (graph/log_graph.py). The velocity is integrated
 in the map frame, so the turn that matters is the one relative to the map: the gyro's increment minus
 the Earth rate, dtheta_j - n_R_b^T w_ie dt_j (with the raw increment a static IMU would see a spurious
 0.4 micro-g, 2 mm/s after ten minutes; GTSAM's preintegration works in a non-rotating frame, where the
@@ -44,8 +44,15 @@ import numpy as np
 from gtsam_dvl.core.rotations import skew, so3_exp
 
 N_ERR = 19
-PHI, VEL, POS, BG, BA, SCALE, MIS = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15), 15, slice(
-    16, 19)
+PHI, VEL, POS, BG, BA, SCALE, MIS = (
+    slice(0, 3),
+    slice(3, 6),
+    slice(6, 9),
+    slice(9, 12),
+    slice(12, 15),
+    15,
+    slice(16, 19),
+)
 
 
 @dataclass
@@ -69,13 +76,13 @@ class FilterState:
     P: np.ndarray  # (19, 19), or (20, 20) with the time offset (filter.py OFFSET)
     time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
     # the DVL's correlated velocity error E (3,) m/s in dvl_link, the last 3 error-state components (with [dvl]
-    # correlated_sigma_m_s > 0: estimators/correlated.py)
+    # correlated_sigma_m_s > 0: estimators/models/correlated.py)
     dvl_error: np.ndarray | None = None
     # the water current [c_east, c_north] (2,) m/s in map, the last 2 error-state components (when water-track
-    # pings are used: estimators/current.py)
+    # pings are used: estimators/models/current.py)
     current: np.ndarray | None = None
     # with [current] layer_thickness_m > 0: the current's change across each layer boundary crossed so far
-    # (estimators/current.py, "Layers"), (n, 2) m/s in map, boundary shear_ids[r] in row r; their error-state
+    # (estimators/models/current.py, "Layers"), (n, 2) m/s in map, boundary shear_ids[r] in row r; their error-state
     # components sit before the correlated error's and the current's, two per boundary
     shear: np.ndarray | None = None
     shear_ids: list[int] = field(default_factory=list)
@@ -92,7 +99,9 @@ class FilterState:
         without layers."""
         if self.shear is None:
             return None
-        end = len(self.P) - (0 if self.current is None else 2) - (0 if self.dvl_error is None else 3)
+        end = (
+            len(self.P) - (0 if self.current is None else 2) - (0 if self.dvl_error is None else 3)
+        )
         return slice(end - 2 * len(self.shear_ids), end)
 
     def current_slice(self) -> slice | None:
@@ -102,8 +111,11 @@ class FilterState:
     def extra_states(self) -> int:
         """How many error-state components follow the time offset's place: the layer boundaries', the correlated
         error's and the current's."""
-        return ((0 if self.dvl_error is None else 3) + (0 if self.current is None else 2)
-                + 2 * len(self.shear_ids))
+        return (
+            (0 if self.dvl_error is None else 3)
+            + (0 if self.current is None else 2)
+            + 2 * len(self.shear_ids)
+        )
 
 
 @dataclass
@@ -130,10 +142,15 @@ def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton products a (x) b of quaternion arrays (..., 4) [w, x, y, z]."""
     aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
     bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
@@ -172,8 +189,15 @@ def small_rotation(phi: np.ndarray) -> np.ndarray:
     return np.eye(3) + S + 0.5 * S @ S
 
 
-def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt: np.ndarray,
-                       n_omega_ie: np.ndarray, n_g: np.ndarray, G: np.ndarray) -> IntervalResult:
+def propagate_interval(
+    state: NavState,
+    b_omega: np.ndarray,
+    b_f: np.ndarray,
+    dt: np.ndarray,
+    n_omega_ie: np.ndarray,
+    n_g: np.ndarray,
+    G: np.ndarray,
+) -> IntervalResult:
     """Integrate bias-corrected IMU pieces (b_omega, b_f (m, 3); durations dt (m,)) from `state`.
 
     n_g is gravity at the interval's mid position and G its gradient (the interval is short: gravity
@@ -187,7 +211,9 @@ def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt
     R0B = state.n_R_b @ B  # (m + 1, 3, 3) = R0 B_j
     W = skew(n_omega_ie)
     R = so3_exp(-np.outer(tau, n_omega_ie)) @ R0B  # Exp(-w tau) R0 B_j
-    dtheta_nb = dtheta - np.einsum("jba,b->ja", R[:-1], n_omega_ie) * dt[:, None]  # turn relative to map
+    dtheta_nb = (
+        dtheta - np.einsum("jba,b->ja", R[:-1], n_omega_ie) * dt[:, None]
+    )  # turn relative to map
     dv_start = dv + 0.5 * _cross_rows(dtheta_nb, dv)  # delta-v in the body at the sample's start
     dv_n = np.einsum("jab,jb->ja", R[:-1], dv_start)  # specific-force velocity increments in map
     sum_dv = np.concatenate([np.zeros((1, 3)), np.cumsum(dv_n, axis=0)])  # (m + 1, 3)
@@ -210,18 +236,27 @@ def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt
     zero = np.zeros((1, 3, 3))
     # velocity error at each piece boundary per unit initial phi, dbg, dba (without Coriolis), (m + 1, 3, 9):
     # phi(tau) = phi - tau w x phi - int n_R_b dbg enters through -[a]x; dba through -n_R_b
-    V = np.concatenate([
-        -skew(sum_dv) + np.concatenate([zero, np.cumsum(dv_skew * tau_mid[:, None, None], axis=0)]) @ W,
-        np.concatenate([zero, np.cumsum(dv_skew @ S_R_mid, axis=0)]),
-        -S_R], axis=2)
-    P = np.concatenate([np.zeros((1, 3, 9)), np.cumsum(0.5 * (V[:-1] + V[1:]) * dt[:, None, None], axis=0)])
+    V = np.concatenate(
+        [
+            -skew(sum_dv)
+            + np.concatenate([zero, np.cumsum(dv_skew * tau_mid[:, None, None], axis=0)]) @ W,
+            np.concatenate([zero, np.cumsum(dv_skew @ S_R_mid, axis=0)]),
+            -S_R,
+        ],
+        axis=2,
+    )
+    P = np.concatenate(
+        [np.zeros((1, 3, 9)), np.cumsum(0.5 * (V[:-1] + V[1:]) * dt[:, None, None], axis=0)]
+    )
     Q = np.sum(0.5 * (P[:-1] + P[1:]) * dt[:, None, None], axis=0)
     cols = np.r_[0:3, 9:15]  # phi, dbg, dba
     Phi = np.eye(N_ERR)
     Phi[PHI, PHI] = small_rotation(-n_omega_ie * T)
     # a gyro bias error at tau turns with the Earth rate until T: -int (I - (T - tau) [w]x) n_R_b dtau
     Phi[PHI, BG] = -S_R[-1] + W @ np.sum(R_dt * (T - tau_mid)[:, None, None], axis=0)
-    Phi[VEL, cols] = V[-1] - 2.0 * W @ P[-1]  # Coriolis on the velocity error built up in the interval
+    Phi[VEL, cols] = (
+        V[-1] - 2.0 * W @ P[-1]
+    )  # Coriolis on the velocity error built up in the interval
     Phi[POS, cols] = P[-1] - 2.0 * W @ Q
     Phi[VEL, VEL] = np.eye(3) - 2.0 * W * T
     Phi[VEL, POS] = G * T
@@ -232,5 +267,11 @@ def propagate_interval(state: NavState, b_omega: np.ndarray, b_f: np.ndarray, dt
 
 def _cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise a x b of (m, 3) arrays (np.cross's axis handling costs more than the product here)."""
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )

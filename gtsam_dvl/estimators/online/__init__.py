@@ -12,5 +12,15 @@ from gtsam_dvl.estimators.online.types import (
 )
 from gtsam_dvl.estimators.online.window import RelinearizationThresholds
 
-__all__ = ["ONLINE_MODES", "MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator",
-           "RelinearizationThresholds", "feed_log", "latency_stats", "run_result", "smooth_online"]
+__all__ = [
+    "ONLINE_MODES",
+    "MessageDropped",
+    "OnlineConfig",
+    "OnlineEstimate",
+    "OnlineEstimator",
+    "RelinearizationThresholds",
+    "feed_log",
+    "latency_stats",
+    "run_result",
+    "smooth_online",
+]

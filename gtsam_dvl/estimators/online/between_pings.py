@@ -31,13 +31,15 @@ import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.core.keys import E, W
-from gtsam_dvl.estimators.gaps import Gaps, Holds
-from gtsam_dvl.estimators.keyframes import integrate, last_stamp_at_or_before, snapshot_at
+from gtsam_dvl.estimators.graph.keyframes import integrate, last_stamp_at_or_before, snapshot_at
+from gtsam_dvl.estimators.inputs.gaps import Gaps, Holds
 from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
 from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor, ping_state
 from gtsam_dvl.factors.so3 import skew
 
-GRAVITY_REUSE_M = 100.0  # KeyframeGravity: distance from the reference within which it is reused (module doc)
+GRAVITY_REUSE_M = (
+    100.0  # KeyframeGravity: distance from the reference within which it is reused (module doc)
+)
 
 
 class StatePreintegration:
@@ -51,7 +53,9 @@ class StatePreintegration:
     test_online_keyframes.py), most of the work done before the state's epoch."""
 
     def __init__(self, make_params: Any, imu_cfg: ImuConfig) -> None:
-        self._make_params = make_params  # FactorMaker.make_params: a new PreintegrationParams per IMU factor
+        self._make_params = (
+            make_params  # FactorMaker.make_params: a new PreintegrationParams per IMU factor
+        )
         self.imu_cfg = imu_cfg
         self.t_state = -np.inf
         self._a = -np.inf
@@ -60,35 +64,82 @@ class StatePreintegration:
         self._spans: list[tuple[float, float]] = []
 
     def reset(self, t_state: float) -> None:
-        self.t_state, self._a, self._pim, self._params, self._spans = t_state, t_state, None, None, []
+        self.t_state, self._a, self._pim, self._params, self._spans = (
+            t_state,
+            t_state,
+            None,
+            None,
+            [],
+        )
 
-    def snapshot_at(self, t_p: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
-                    gaps: Gaps) -> PingMotion:
+    def snapshot_at(
+        self,
+        t_p: float,
+        T: np.ndarray,
+        starts: np.ndarray,
+        b_f: np.ndarray,
+        W: np.ndarray,
+        gaps: Gaps,
+    ) -> PingMotion:
         """The IMU motion from the state to the ping at t_p (samples buffered since before the state: T, starts,
         b_f rotation compensated, W, and the buffer's gaps)."""
         self.advance(last_stamp_at_or_before(T, t_p), T, starts, b_f, W, gaps)
-        if self._pim is None or self._params is None:  # no sample stamp yet between the state and the ping
+        if (
+            self._pim is None or self._params is None
+        ):  # no sample stamp yet between the state and the ping
             self._params = self._make_params()
-            self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
-        return snapshot_at(self._pim, self._a, t_p, self._spans, self.t_state, T, starts, b_f, W, gaps, self.imu_cfg,
-                           self._params.getOmegaCoriolis())
+            self._pim = gtsam.PreintegratedImuMeasurements(
+                self._params, gtsam.imuBias.ConstantBias()
+            )
+        return snapshot_at(
+            self._pim,
+            self._a,
+            t_p,
+            self._spans,
+            self.t_state,
+            T,
+            starts,
+            b_f,
+            W,
+            gaps,
+            self.imu_cfg,
+            self._params.getOmegaCoriolis(),
+        )
 
-    def advance(self, t_cut: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
-                gaps: Gaps) -> None:
+    def advance(
+        self,
+        t_cut: float,
+        T: np.ndarray,
+        starts: np.ndarray,
+        b_f: np.ndarray,
+        W: np.ndarray,
+        gaps: Gaps,
+    ) -> None:
         if t_cut <= self._a:
             return
         if self._pim is None:
             self._params = self._make_params()
-            self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
+            self._pim = gtsam.PreintegratedImuMeasurements(
+                self._params, gtsam.imuBias.ConstantBias()
+            )
         self._spans += list(integrate(self._pim, T, starts, b_f, W, gaps, self._a, t_cut).spans)
         self._a = t_cut
 
-    def close(self, t_b: float, T: np.ndarray, starts: np.ndarray, b_f: np.ndarray, W: np.ndarray,
-              gaps: Gaps) -> tuple[gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
+    def close(
+        self,
+        t_b: float,
+        T: np.ndarray,
+        starts: np.ndarray,
+        b_f: np.ndarray,
+        W: np.ndarray,
+        gaps: Gaps,
+    ) -> tuple[gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
         self.advance(t_b, T, starts, b_f, W, gaps)
         if self._pim is None or self._params is None:  # t_b at the state: an empty interval
             self._params = self._make_params()
-            self._pim = gtsam.PreintegratedImuMeasurements(self._params, gtsam.imuBias.ConstantBias())
+            self._pim = gtsam.PreintegratedImuMeasurements(
+                self._params, gtsam.imuBias.ConstantBias()
+            )
         return self._pim, self._params, Holds(tuple(self._spans))
 
 
@@ -107,15 +158,24 @@ class KeyframeGravity:
         ref = self._ref
         if ref is None or float(np.sum((n_p - ref[0]) ** 2)) > GRAVITY_REUSE_M**2:
             g, G = self._evaluate(n_p[None, :])
-            ref = self._ref = (n_p.copy(), np.asarray(g[0], dtype=float), np.asarray(G[0], dtype=float))
+            ref = self._ref = (
+                n_p.copy(),
+                np.asarray(g[0], dtype=float),
+                np.asarray(G[0], dtype=float),
+            )
             self.evaluations += 1
         return ref
 
 
-def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float, b_omega: np.ndarray,
-                               b_l: np.ndarray, motion: PingMotion, d_u: np.ndarray | None = None,
-                               offset_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-                               ) -> gtsam.CustomFactor:
+def considered_keyframe_factor(
+    f: gtsam.NonlinearFactor,
+    d_y: np.ndarray | float,
+    b_omega: np.ndarray,
+    b_l: np.ndarray,
+    motion: PingMotion,
+    d_u: np.ndarray | None = None,
+    offset_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> gtsam.CustomFactor:
     """The keyframe factor f (FactorMaker.dvl_keyframe_factors_for: keys [X_i, V_i, B, K, C] + [T_OFFSET] with
     offset_input) of a ping too slow to inform the calibration: the same noise, error and Jacobians for pose,
     velocity, bias (and time offset), none for the scale and misalignment (online/dvl_factors.py module doc; DvlOptions
@@ -128,8 +188,16 @@ def considered_keyframe_factor(f: gtsam.NonlinearFactor, d_y: np.ndarray | float
     # the correlated DVL error E(i) and a water-track ping's current W(i), when modelled, are the factor's last
     # keys (states.dvl_factor_keys)
     chars = [k >> 56 for k in keys]
-    options = DvlOptions(b_omega, b_l, d_u, offset, motion, considered=True,
-                         error_variable=E(0) >> 56 in chars, current_variable=W(0) >> 56 in chars)
+    options = DvlOptions(
+        b_omega,
+        b_l,
+        d_u,
+        offset,
+        motion,
+        considered=True,
+        error_variable=E(0) >> 56 in chars,
+        current_variable=W(0) >> 56 in chars,
+    )
     return make_dvl_factor(f.noiseModel(), keys, d_y, options)
 
 
@@ -172,13 +240,26 @@ def predict_at_ping(s: StateEstimate, t: float, snap: PingMotion, m: PingMotion)
         J[6:9, 0:6] = A_v_pose
         J[6:9, 6:9] = A_v_vel
         J[6:9, 9:15] = A_v_bias
-        Jq = np.zeros((9, 9))  # the preintegration's error [rotation, position, velocity] into [rot, trans, n_v]
+        Jq = np.zeros(
+            (9, 9)
+        )  # the preintegration's error [rotation, position, velocity] into [rot, trans, n_v]
         Jq[0:3, 0:3] = np.eye(3)
         Jq[3:6, 3:6] = R_pT @ R_i
         Jq[6:9, 6:9] = R_i
         cov = J @ cov @ J.T
         cov[0:9, 0:9] += Jq @ snap.cov @ Jq.T
         cov = 0.5 * (cov + cov.T)
-    return StateEstimate(index=s.index, t=t, pose=gtsam.Pose3(gtsam.Rot3(R_p), p_p), n_v=v_p, bias=s.bias,
-                         scale=s.scale, b_R_d=s.b_R_d, cov=cov, time_offset_s=s.time_offset_s,
-                         time_offset_sigma_s=s.time_offset_sigma_s, predicted_from_t=s.t, calibration=s.calibration)
+    return StateEstimate(
+        index=s.index,
+        t=t,
+        pose=gtsam.Pose3(gtsam.Rot3(R_p), p_p),
+        n_v=v_p,
+        bias=s.bias,
+        scale=s.scale,
+        b_R_d=s.b_R_d,
+        cov=cov,
+        time_offset_s=s.time_offset_s,
+        time_offset_sigma_s=s.time_offset_sigma_s,
+        predicted_from_t=s.t,
+        calibration=s.calibration,
+    )

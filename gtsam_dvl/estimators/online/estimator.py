@@ -54,10 +54,10 @@ Design (the modules of this package):
   imu_buffer.py; the time offset's IMU windows: offset_windows.py; the depth samples: depth_queue.py; the start
   (the alignment wait): alignment_wait.py; the checks of the messages pushed: messages.py; replaying a log:
   feed.py; the options and estimate types: types.py.
-- The FactorMaker the batch smoother's whole-log graph uses (estimators/factor_maker.py) makes every factor,
+- The FactorMaker the batch smoother's whole-log graph uses (estimators/graph/factor_maker.py) makes every factor,
   prior and initial guess from explicit measurements; pings are classified, screened and made epochs by
   selection.EpochScheduler, ping by ping, with the rules the batch smoother and the EKF apply to the whole log
-  (selection.KeyframeRule); IMU intervals are split by the rules of estimators/selection.py.
+  (selection.KeyframeRule); IMU intervals are split by the rules of estimators/inputs/selection.py.
 - IMU samples are kept raw since the newest state and preintegrated up to the next one as its pings come and
   when the state is made, exactly as the batch smoother does (a sample straddling the state's ping is split;
   online/between_pings.StatePreintegration: the same pieces in the same order), so a ping that arrives after IMU samples
@@ -89,15 +89,21 @@ from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
-from gtsam_dvl.estimators import correlated, current, weak_hold
-from gtsam_dvl.estimators.alignment import Alignment, map_frame_of
-from gtsam_dvl.estimators.constant_error import consider_constant_error
-from gtsam_dvl.estimators.current import resolve_water_track
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import check_spacing, filler_due, screened_in_memory, screened_losses
-from gtsam_dvl.estimators.gnss import origin_fix_time
-from gtsam_dvl.estimators.mounting import imu_is_rotated, rotate_imu_samples
-from gtsam_dvl.estimators.noise_levels import (
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.inputs.alignment import Alignment, map_frame_of
+from gtsam_dvl.estimators.inputs.gaps import (
+    check_spacing,
+    filler_due,
+    screened_in_memory,
+    screened_losses,
+)
+from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
+from gtsam_dvl.estimators.inputs.mounting import imu_is_rotated, rotate_imu_samples
+from gtsam_dvl.estimators.inputs.selection import EpochScheduler, Ping
+from gtsam_dvl.estimators.models import correlated, current, weak_hold
+from gtsam_dvl.estimators.models.constant_error import consider_constant_error
+from gtsam_dvl.estimators.models.current import resolve_water_track
+from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     dvl_fit_enabled,
     held_levels,
@@ -106,9 +112,17 @@ from gtsam_dvl.estimators.noise_levels import (
     with_multiplier,
 )
 from gtsam_dvl.estimators.online.alignment_wait import AlignmentWait, given_attitude
-from gtsam_dvl.estimators.online.between_pings import KeyframeGravity, StatePreintegration, predict_at_ping
+from gtsam_dvl.estimators.online.between_pings import (
+    KeyframeGravity,
+    StatePreintegration,
+    predict_at_ping,
+)
 from gtsam_dvl.estimators.online.depth_queue import DepthQueue
-from gtsam_dvl.estimators.online.dvl_factors import RateInput, keyframe_dvl_factors, state_dvl_factors
+from gtsam_dvl.estimators.online.dvl_factors import (
+    RateInput,
+    keyframe_dvl_factors,
+    state_dvl_factors,
+)
 from gtsam_dvl.estimators.online.feed import feed_log
 from gtsam_dvl.estimators.online.imu_buffer import ImuBuffer
 from gtsam_dvl.estimators.online.messages import MessageChecks, vector3
@@ -121,44 +135,78 @@ from gtsam_dvl.estimators.online.types import (
     OnlineEstimate,
     latency_stats,
 )
-from gtsam_dvl.estimators.online.window import IncrementalSmoother, RelinearizationThresholds, StateEstimate
-from gtsam_dvl.estimators.selection import EpochScheduler, Ping
+from gtsam_dvl.estimators.online.window import (
+    IncrementalSmoother,
+    RelinearizationThresholds,
+    StateEstimate,
+)
 
-__all__ = ["MessageDropped", "OnlineConfig", "OnlineEstimate", "OnlineEstimator", "RelinearizationThresholds",
-           "feed_log", "latency_stats", "run_result", "smooth_online"]
+__all__ = [
+    "MessageDropped",
+    "OnlineConfig",
+    "OnlineEstimate",
+    "OnlineEstimator",
+    "RelinearizationThresholds",
+    "feed_log",
+    "latency_stats",
+    "run_result",
+    "smooth_online",
+]
 
 
 class OnlineEstimator:
     """Incremental estimator fed message by message (module doc). Times are seconds on the caller's clock,
     the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention). IMU samples are
-    given in imu_link and rotated into base_link with mounting.b_R_imu (estimators/mounting.py). depth_sensor:
+    given in imu_link and rotated into base_link with mounting.b_R_imu (estimators/inputs/mounting.py). depth_sensor:
     the pressure sensor's position in base_link (m, from /tf_static; [depth] lever_arm_m overrides it).
     recentre_offset_window (attribute, default True): the time offset's IMU windows centred on the current
     estimate (online/offset_windows.py); False keeps them at the prior (to measure what the re-centring gives)."""
 
-    def __init__(self, config: EstimatorConfig | None = None, *, frame: LocalFrame, mounting: Mounting | None = None,
-                 options: OnlineConfig | None = None, source: str = "", depth_sensor: Any = None,
-                 calibration: VehicleCalibration | None = None) -> None:
+    def __init__(
+        self,
+        config: EstimatorConfig | None = None,
+        *,
+        frame: LocalFrame,
+        mounting: Mounting | None = None,
+        options: OnlineConfig | None = None,
+        source: str = "",
+        depth_sensor: Any = None,
+        calibration: VehicleCalibration | None = None,
+    ) -> None:
         config = config or EstimatorConfig()
         # a vehicle's calibration (inflated for its age): the joint prior of the states it holds (FactorMaker)
         self.calibration = calibration
-        if config.current.water_track == "auto":  # live: water-track pings may come (for_log resolves by the log)
-            config = config.model_copy(update={"current": config.current.model_copy(update={"water_track": "use"})})
+        if (
+            config.current.water_track == "auto"
+        ):  # live: water-track pings may come (for_log resolves by the log)
+            config = config.model_copy(
+                update={"current": config.current.model_copy(update={"water_track": "use"})}
+            )
         self.options = options or config.online  # options=: overrides config.online
-        self.config = config.model_copy(update={"online": self.options}).validate()  # the effective config
+        self.config = config.model_copy(
+            update={"online": self.options}
+        ).validate()  # the effective config
         # what result.config records: the configuration as given, before the levels taken from the data
         # (noise_levels.py; those are in info["noise"]), so that reading it back with -c reproduces the run
         self.stated_config = self.config
         solver, dvl = self.config.solver, self.config.dvl
         check_spacing(solver)
         spacing = solver.keyframe_spacing_s
-        if spacing > solver.max_state_spacing_s:  # the batch smoother's rule (estimators/graph.py)
-            raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
-                                f"{spacing:g} s: states without a ping would take the places of the keyframes")
+        if (
+            spacing > solver.max_state_spacing_s
+        ):  # the batch smoother's rule (estimators/graph/log_graph.py)
+            raise GtsamDvlError(
+                f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
+                f"{spacing:g} s: states without a ping would take the places of the keyframes"
+            )
         if enabled(self.config, "time_offset") and dvl.use_beams:
-            raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
+            raise GtsamDvlError(
+                "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
+            )
         if enabled(self.config, "lever_arm"):
-            raise GtsamDvlError("[dvl] estimate_lever_arm is batch only (the batch smoother), not online")
+            raise GtsamDvlError(
+                "[dvl] estimate_lever_arm is batch only (the batch smoother), not online"
+            )
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self._imu_rotated = imu_is_rotated(self.mounting)
         self.counters: dict[str, int] = {}
@@ -173,22 +221,35 @@ class OnlineEstimator:
         self.smoother: IncrementalSmoother | None = None
         self._checks = MessageChecks(self.options.bad_messages, source, self.counters)
         # classification, screen and keyframes (selection.EpochScheduler: the batch smoother's decisions)
-        self._scheduler = EpochScheduler(dvl, solver.keyframe_interval_s, spacing, self.counters,
-                                         keep_usable=self.options.record_history,
-                                         water_usable=water_current(self.config))
+        self._scheduler = EpochScheduler(
+            dvl,
+            solver.keyframe_interval_s,
+            spacing,
+            self.counters,
+            keep_usable=self.options.record_history,
+            water_usable=water_current(self.config),
+        )
         # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
         # at once (False; module doc, "Keyframes")
         self.defer_between_pings = True
-        self._interval: StatePreintegration | None = None  # the next IMU factor's, integrated at the pings between
+        self._interval: StatePreintegration | None = (
+            None  # the next IMU factor's, integrated at the pings between
+        )
         self._gravity: KeyframeGravity | None = None
         self._deferred: list[tuple[Ping, list[gtsam.NonlinearFactor]]] = []
-        self._state: StateEstimate | None = None  # the newest state's estimate (after its update, or the last)
+        self._state: StateEstimate | None = (
+            None  # the newest state's estimate (after its update, or the last)
+        )
         self._first_imu_t: float | None = None
         # the time the map origin refers to (s): None, the first IMU stamp; a GNSS fix's when it is the origin
         # (for_log); the first state's position is the origin carried from it (alignment.first_state)
         self.origin_t: float | None = None
-        self._wait = AlignmentWait(frame, self.config.alignment, self.options.align_s, source)  # before alignment
-        self._imu = ImuBuffer(self.config.imu, source, self._count)  # after it: the IMU since the newest state
+        self._wait = AlignmentWait(
+            frame, self.config.alignment, self.options.align_s, source
+        )  # before alignment
+        self._imu = ImuBuffer(
+            self.config.imu, source, self._count
+        )  # after it: the IMU since the newest state
         self._replaying = False  # replaying the messages buffered before the alignment
         self._pending: deque[Ping] = deque()  # pings decided, waiting for their epoch
         self._pings_pushed = 0  # push_dvl's calls (Ping.index)
@@ -197,12 +258,22 @@ class OnlineEstimator:
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         self._offset = enabled(self.config, "time_offset")
-        held = calibration.values.get("time_offset") if calibration is not None else None  # centres the windows
-        self._offset_windows = OffsetWindows(dvl if held is None else dvl.model_copy(
-            update={"time_offset_prior_s": float(np.ravel(held)[0])}), self.counters)
+        held = (
+            calibration.values.get("time_offset") if calibration is not None else None
+        )  # centres the windows
+        self._offset_windows = OffsetWindows(
+            dvl
+            if held is None
+            else dvl.model_copy(update={"time_offset_prior_s": float(np.ravel(held)[0])}),
+            self.counters,
+        )
         self._flushing = False
-        self._depth = DepthQueue(self.config.depth, frame,
-                                 None if depth_sensor is None else vector3("depth_sensor", depth_sensor), self._count)
+        self._depth = DepthQueue(
+            self.config.depth,
+            frame,
+            None if depth_sensor is None else vector3("depth_sensor", depth_sensor),
+            self._count,
+        )
         # the DVL noise fitted on the warm-up window (online/noise_fit.py); noise: the levels used and why
         lag = min(10.0, 0.5 * self.options.window_s) if self.options.mode == "fixed_lag" else 10.0
         self._noise_fit = OnlineNoiseFit(self.config, lag) if dvl_fit_enabled(self.config) else None
@@ -211,22 +282,36 @@ class OnlineEstimator:
             self._start(given_attitude(frame, self.config.alignment))
 
     @classmethod
-    def for_log(cls, log: LogData, config: EstimatorConfig | None = None,
-                options: OnlineConfig | None = None, calibration: VehicleCalibration | None = None
-                ) -> OnlineEstimator:
+    def for_log(
+        cls,
+        log: LogData,
+        config: EstimatorConfig | None = None,
+        options: OnlineConfig | None = None,
+        calibration: VehicleCalibration | None = None,
+    ) -> OnlineEstimator:
         """An estimator with the map origin and mounting of a log (to replay it). config None: the one the
         log's scenario names, else the defaults (EstimatorConfig.for_log). calibration: as in __init__."""
         config = resolve_water_track(config or EstimatorConfig.for_log(log.metadata), log)
         noise = NoiseReport()
         stated = config
         config = imu_levels(log, config, noise)  # the IMU's white noise from the log ([noise])
-        est = cls(config, frame=map_frame_of(log, config), mounting=log.mounting, options=options,
-                  source=log.source, depth_sensor=None if log.depth is None else log.depth.b_p_sensor,
-                  calibration=calibration)
+        est = cls(
+            config,
+            frame=map_frame_of(log, config),
+            mounting=log.mounting,
+            options=options,
+            source=log.source,
+            depth_sensor=None if log.depth is None else log.depth.b_p_sensor,
+            calibration=calibration,
+        )
         est.noise.imu = noise.imu
-        held_levels(log, config, "online estimator", est.noise)  # (depth, correlated DVL error: the batch fits them)
+        held_levels(
+            log, config, "online estimator", est.noise
+        )  # (depth, correlated DVL error: the batch fits them)
         est.origin_t = origin_fix_time(log, config)
-        est._scheduler.screen.repeats_need_motion = log.dvl.noise_free  # a noise-free simulation's repeats
+        est._scheduler.screen.repeats_need_motion = (
+            log.dvl.noise_free
+        )  # a noise-free simulation's repeats
         est._scheduler.water_screen.repeats_need_motion = log.dvl.noise_free
         est.stated_config = stated.model_copy(update={"online": est.options}).validate()
         return est
@@ -251,8 +336,15 @@ class OnlineEstimator:
         chunk = self._checks.imu_batch(t, b_omega, b_f)
         return 0 if chunk is None else self._take_imu(*chunk)
 
-    def push_dvl(self, t: float, d_v: Any, d_cov: Any = None, valid: bool = True,
-                 beams: tuple[Any, Any, Any] | None = None, water_track: bool = False) -> int:
+    def push_dvl(
+        self,
+        t: float,
+        d_v: Any,
+        d_cov: Any = None,
+        valid: bool = True,
+        beams: tuple[Any, Any, Any] | None = None,
+        water_track: bool = False,
+    ) -> int:
         """One DVL ping at t: velocity d_v (m/s, dvl_link) with covariance d_cov (3x3, None: the configured
         default), valid flag, and optionally beams = (d_u (B, 3), v (B,), valid (B,)). A ping without a valid
         velocity (NaN) is counted, not an error, and so is a water-track ping (water_track). Returns the number
@@ -268,17 +360,29 @@ class OnlineEstimator:
             return 0
         return self._take_ping(ping)
 
-    def push_depth(self, t: float, depth_m: float = math.nan, variance_m2: float = math.nan, *,
-                   pressure_pa: float | None = None, pressure_variance_pa2: float = math.nan) -> None:
+    def push_depth(
+        self,
+        t: float,
+        depth_m: float = math.nan,
+        variance_m2: float = math.nan,
+        *,
+        pressure_pa: float | None = None,
+        pressure_variance_pa2: float = math.nan,
+    ) -> None:
         """One depth sample at t: the pressure sensor's depth (m below the surface, positive down) and its
         variance (m^2, NaN: unknown), or with pressure_pa its absolute pressure (Pa) and variance (Pa^2),
-        converted with [depth] (estimators/depth.py depth_samples). Its factor is added with the first state at or
+        converted with [depth] (estimators/inputs/depth.py depth_samples). Its factor is added with the first state at
+        or
         after t (online/depth_queue.py). A non-finite value is counted ("depth_invalid"), not an error; nothing is
         done with [depth] use = false."""
         t = float(t)
         if not self._checks.depth_stamp(t) or not self.config.depth.use:
             return
-        for name in ("depth_used", "depth_too_far", "depth_invalid"):  # reported even when zero, as by the batch
+        for name in (
+            "depth_used",
+            "depth_too_far",
+            "depth_invalid",
+        ):  # reported even when zero, as by the batch
             self.counters.setdefault(name, 0)
         self._depth.push(t, depth_m, variance_m2, pressure_pa, pressure_variance_pa2)
 
@@ -302,26 +406,45 @@ class OnlineEstimator:
         if self.smoother is not None and self.smoother.n > 0:
             sm = self.smoother
             assert self.builder is not None
-            sm.add_factors(self._depth.factors(self.builder, sm.times, sm.n - 1, sm.t_last, final=True))
+            sm.add_factors(
+                self._depth.factors(self.builder, sm.times, sm.n - 1, sm.t_last, final=True)
+            )
             sm.refresh_gravity()
             sm.refine(self.options.final_updates)
             self._latest = self._read_estimate(with_covariance=True)
         if self._noise_fit is not None and not self._noise_fit.done:
-            self.noise.dvl = {"multiplier": self.config.dvl.noise_multiplier,
-                              "why": "DVL noise not fitted: the log ends within the warm-up window ([noise] warmup_s) "
-                                     "and the residuals' lag"}
+            self.noise.dvl = {
+                "multiplier": self.config.dvl.noise_multiplier,
+                "why": "DVL noise not fitted: the log ends within the warm-up window ([noise] warmup_s) "
+                "and the residuals' lag",
+            }
         return self._latest
 
     # ----- output --------------------------------------------------------------------------------
     def current_profile(self) -> dict[str, Any]:
-        """NavResult.info["water_current"]: the filtered current at each state (estimators/current.py profile)."""
+        """NavResult.info["water_current"]: the filtered current at each state (estimators/models/current.py
+        profile)."""
         h, sm = self.current_history, self.smoother
-        shear = {} if sm is None else {  # with layers, each boundary crossed (never marginalised)
-            b: (sm.isam.calculateEstimate([S_KEY(b)]).atVector(S_KEY(b)), sm.joint_covariance([S_KEY(b)]))
-            for b in sm.shear}
-        return current.profile(np.array([c[0] for c in h]), np.array([c[1] for c in h]),
-                               np.array([c[2] for c in h]), np.array([c[3] for c in h]), self.config,
-                               np.array([c[4] for c in h], dtype=bool), shear)
+        shear = (
+            {}
+            if sm is None
+            else {  # with layers, each boundary crossed (never marginalised)
+                b: (
+                    sm.isam.calculateEstimate([S_KEY(b)]).atVector(S_KEY(b)),
+                    sm.joint_covariance([S_KEY(b)]),
+                )
+                for b in sm.shear
+            }
+        )
+        return current.profile(
+            np.array([c[0] for c in h]),
+            np.array([c[1] for c in h]),
+            np.array([c[2] for c in h]),
+            np.array([c[3] for c in h]),
+            self.config,
+            np.array([c[4] for c in h], dtype=bool),
+            shear,
+        )
 
     def estimate(self) -> OnlineEstimate | None:
         """The estimate after the latest epoch (None before the first): the newest state's, or after a ping between
@@ -342,31 +465,50 @@ class OnlineEstimator:
         filtering covariance), the bias and calibration after finish(), and the timeline."""
         h, final = self._history, self._latest
         if len(h) == 0 or final is None or self.builder is None or self.smoother is None:
-            raise GtsamDvlError(f"{self.source or 'online estimator'}: no DVL epoch was processed (or "
-                                "options.record_history is off)")
+            raise GtsamDvlError(
+                f"{self.source or 'online estimator'}: no DVL epoch was processed (or "
+                "options.record_history is off)"
+            )
         n_vars, n_factors = self.smoother.size()
         info: dict[str, Any] = {
-            "mode": self.options.mode, "window_s": self.options.window_s if self.options.mode == "fixed_lag" else None,
+            "mode": self.options.mode,
+            "window_s": self.options.window_s if self.options.mode == "fixed_lag" else None,
             "trajectory": "filtered: each state as estimated when its DVL ping was processed",
-            "counters": dict(self.counters), "epochs": len(h),
+            "counters": dict(self.counters),
+            "epochs": len(h),
             "keyframe_spacing_s": self.config.solver.keyframe_spacing_s,
             "imu_gaps": self._imu.gaps_info(),
             "alignment": self.builder.alignment_info(),
             "noise": self.noise.as_dict(),
             "latency_ms": latency_stats(self.latencies_s),
-            "isam2": {"rebases": self.smoother.rebases, "states_marginalized": self.smoother.marginalised,
-                      "variables": n_vars, "factors": n_factors},
+            "isam2": {
+                "rebases": self.smoother.rebases,
+                "states_marginalized": self.smoother.marginalised,
+                "variables": n_vars,
+                "factors": n_factors,
+            },
         }
         if self.calibration is not None:
             info["calibration_prior"] = calibration_info(self.config, self.calibration)
         return NavResult(
             estimator=f"online-{self.options.mode.replace('_', '-')}",
-            t=h["t"].copy(), n_p=h["n_p"].copy(), n_R_b=h["n_R_b"].copy(), n_v=h["n_v"].copy(),
-            pose_cov=h["pose_cov"].copy(), vel_cov=h["vel_cov"].copy(), pose_vel_cross=h["pose_vel_cross"].copy(),
-            calibration=final.calibration, b_R_d0=self.mounting.b_R_d0, t0_ns=t0_ns,
-            b_omega=h["b_omega"] - final.gyro_bias, calib_joint_cov=final.calib_cov, timeline=self.timeline(),
-            info=info, config=self.stated_config.to_dict(),
-            dvl_pings=np.asarray(self._scheduler.usable, dtype=np.int64))
+            t=h["t"].copy(),
+            n_p=h["n_p"].copy(),
+            n_R_b=h["n_R_b"].copy(),
+            n_v=h["n_v"].copy(),
+            pose_cov=h["pose_cov"].copy(),
+            vel_cov=h["vel_cov"].copy(),
+            pose_vel_cross=h["pose_vel_cross"].copy(),
+            calibration=final.calibration,
+            b_R_d0=self.mounting.b_R_d0,
+            t0_ns=t0_ns,
+            b_omega=h["b_omega"] - final.gyro_bias,
+            calib_joint_cov=final.calib_cov,
+            timeline=self.timeline(),
+            info=info,
+            config=self.stated_config.to_dict(),
+            dvl_pings=np.asarray(self._scheduler.usable, dtype=np.int64),
+        )
 
     # ----- internals -----------------------------------------------------------------------------
     def _count(self, kind: str, n: int = 1) -> None:
@@ -374,7 +516,7 @@ class OnlineEstimator:
             self.counters[kind] = self.counters.get(kind, 0) + n
 
     def _take_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> int:
-        if self._imu_rotated:  # samples in imu_link -> base_link (estimators/mounting.py)
+        if self._imu_rotated:  # samples in imu_link -> base_link (estimators/inputs/mounting.py)
             w, f = rotate_imu_samples(self.mounting.b_R_imu, w, f)
         if self._first_imu_t is None:
             self._first_imu_t = float(t[0])
@@ -404,8 +546,14 @@ class OnlineEstimator:
         return self._close_ready()
 
     def _start(self, alignment: Alignment) -> None:
-        self.builder = FactorMaker(self.config, self.frame, alignment, self.mounting, self.source,
-                                   calibration=self.calibration)
+        self.builder = FactorMaker(
+            self.config,
+            self.frame,
+            alignment,
+            self.mounting,
+            self.source,
+            calibration=self.calibration,
+        )
         window = self.options.window_s if self.options.mode == "fixed_lag" else None
         self.smoother = IncrementalSmoother(self.builder, window, self.options.relinearization)
         self._interval = StatePreintegration(self.builder.make_params, self.config.imu)
@@ -424,7 +572,7 @@ class OnlineEstimator:
 
     def _close_ready(self) -> int:
         """Make the epochs the IMU samples now reach: pings, and states without a ping where pings are missing
-        (estimators/gaps.py, filler_due: the batch smoother's rule)."""
+        (estimators/inputs/gaps.py, filler_due: the batch smoother's rule)."""
         if self._replaying:
             return 0
         done = 0
@@ -439,16 +587,24 @@ class OnlineEstimator:
                 self._count("dvl_late")
                 continue
             nxt = self._pending[0].t if self._pending else None
-            if self.smoother.n > 0 and (t_f := filler_due(self.smoother.t_last, nxt, t_end, spacing)) is not None:
+            if (
+                self.smoother.n > 0
+                and (t_f := filler_due(self.smoother.t_last, nxt, t_end, spacing)) is not None
+            ):
                 self._close(None, t_f)
-            elif self._pending and self._pending[0].t <= t_end and (self._flushing
-                                                                     or self._pending[0].t + ahead <= t_end):
+            elif (
+                self._pending
+                and self._pending[0].t <= t_end
+                and (self._flushing or self._pending[0].t + ahead <= t_end)
+            ):
                 p = self._pending.popleft()
                 if p.key or self.smoother.n == 0:
                     self._close(p)
                 else:
                     self._between_ping(p)
-                ahead = self._offset_windows.wait_s(self._offset_estimate()) if self._offset else 0.0
+                ahead = (
+                    self._offset_windows.wait_s(self._offset_estimate()) if self._offset else 0.0
+                )
             else:
                 break
             done += 1
@@ -460,8 +616,9 @@ class OnlineEstimator:
         assert self.builder is not None
         est = self._latest
         bias = None if est is None else (est.accel_bias, est.gyro_bias)
-        return self._offset_windows.rate_input(self.builder, t, self._offset_estimate(), bias,
-                                               None if est is None else est.n_R_b)
+        return self._offset_windows.rate_input(
+            self.builder, t, self._offset_estimate(), bias, None if est is None else est.n_R_b
+        )
 
     def _close(self, p: Ping | None, t_state: float | None = None) -> None:
         """Make the epoch of ping p (or, p None, a state without a ping at t_state): preintegrate since the
@@ -472,30 +629,45 @@ class OnlineEstimator:
         t_epoch = p.t if p is not None else float(t_state)  # type: ignore[arg-type]
         T, W, F = self._imu.samples()
         i = sm.n
-        if i == 0 and p is not None:  # the given attitude and origin (at the first IMU stamp) carried to the epoch
-            b.carry_to_first(ImuData(T, W, F), t_epoch, p.d_v if p.valid else None, p.d_cov, None, self.origin_t)
+        if (
+            i == 0 and p is not None
+        ):  # the given attitude and origin (at the first IMU stamp) carried to the epoch
+            b.carry_to_first(
+                ImuData(T, W, F), t_epoch, p.d_v if p.valid else None, p.d_cov, None, self.origin_t
+            )
         gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
         min_speed = self.options.calibration_min_speed_m_s
         dvl = state_dvl_factors(b, i, p, b_omega, min_speed, rate_input) if p is not None else []
-        if self._noise_fit is not None:  # the pings of this epoch (those between keyframes, then its own)
+        if (
+            self._noise_fit is not None
+        ):  # the pings of this epoch (those between keyframes, then its own)
             for q, fs in [*self._deferred, *(((p, dvl),) if p is not None else ())]:
                 self._noise_fit.record(q.t, list(fs), median_ping_sigma(self.config, q.d_cov))
         self._count("states_without_ping" if p is None else "keyframes")
         dvl += self._depth.factors(b, sm.times, i, t_epoch)
         if i == 0:
             assert p is not None  # the first epoch is a ping (_close_ready)
-            sm.add_epoch(t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None))
+            sm.add_epoch(
+                t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None)
+            )
         else:
             starts, b_f, gaps = self._imu.pieces(b, T, W, F, final=True)
             # FactorMaker.preintegrate_interval(sm.t_last, t_epoch, ...), the part up to the last ping done then
             pim, params, held = self._interval.close(t_epoch, T, starts, b_f, W, gaps)
-            between = [f for _, fs in self._deferred for f in fs]  # the pings since the previous state (on it)
+            between = [
+                f for _, fs in self._deferred for f in fs
+            ]  # the pings since the previous state (on it)
             sm.add_epoch(t_epoch, between + dvl, pim, params, held=held)
-        epoch_water = (p is not None and p.water_track) or any(q.water_track for q, _ in self._deferred)
+        epoch_water = (p is not None and p.water_track) or any(
+            q.water_track for q, _ in self._deferred
+        )
         self._deferred = []
-        if self._noise_fit is not None and (new := self._noise_fit.after_epoch(t_epoch, sm.isam)) is not None:
+        if (
+            self._noise_fit is not None
+            and (new := self._noise_fit.after_epoch(t_epoch, sm.isam)) is not None
+        ):
             self.noise.dvl = self._noise_fit.report  # held from now on: the next factors take it
             self.config = with_multiplier(self.config, new)
             b.config = self.config
@@ -508,9 +680,15 @@ class OnlineEstimator:
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
             if sm.wc:  # the newest state's current, filtered (as the EKF's), for current_profile
-                self.current_history.append((t_epoch, float(self._state.pose.translation()[2]),
-                                             sm.isam.calculateEstimate([W_KEY(i)]).atVector(W_KEY(i)).copy(),
-                                             sm.joint_covariance([W_KEY(i)]), epoch_water))
+                self.current_history.append(
+                    (
+                        t_epoch,
+                        float(self._state.pose.translation()[2]),
+                        sm.isam.calculateEstimate([W_KEY(i)]).atVector(W_KEY(i)).copy(),
+                        sm.joint_covariance([W_KEY(i)]),
+                        epoch_water,
+                    )
+                )
         self._record(t0, c0, t_epoch)
 
     def _between_ping(self, p: Ping) -> None:
@@ -529,16 +707,25 @@ class OnlineEstimator:
         motion = snap.motion(b.n_omega_ie(), n_g0, n_p0, n_G)
         b_omega = b.body_rate(W[int(np.searchsorted(T, p.t, side="left"))])
         rate_input = self._rate_input(p.t) if self._offset else None
-        factors = keyframe_dvl_factors(b, sm.n - 1, p, b_omega, snap, motion, self.options.calibration_min_speed_m_s,
-                                       rate_input)
+        factors = keyframe_dvl_factors(
+            b,
+            sm.n - 1,
+            p,
+            b_omega,
+            snap,
+            motion,
+            self.options.calibration_min_speed_m_s,
+            rate_input,
+        )
         self._count("pings_between_keyframes")
         if self.defer_between_pings:
             self._deferred.append((p, factors))
         else:
             sm.add_factors(factors)
             self._state = self._read_state()
-        self._latest = OnlineEstimate.from_state(predict_at_ping(self._state, p.t, snap, motion),
-                                                 self.mounting.b_R_d0)
+        self._latest = OnlineEstimate.from_state(
+            predict_at_ping(self._state, p.t, snap, motion), self.mounting.b_R_d0
+        )
         self._record(t0, c0, p.t)
 
     def _record(self, t0: float, c0: float, t: float) -> None:
@@ -567,21 +754,32 @@ def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int =
         result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
     # (constant_error.py; none with a vehicle calibration file as prior)
     consider_constant_error(result, config, estimator.calibration is not None)
-    if estimator.current_history:  # the water current at each state as it left the window (or at the end)
+    if (
+        estimator.current_history
+    ):  # the water current at each state as it left the window (or at the end)
         result.info["water_current"] = estimator.current_profile()
     return result
 
 
-def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: str | None = None,
-                  window_s: float | None = None, progress: ProgressFn | None = None,
-                  options: OnlineConfig | None = None, calibration: VehicleCalibration | None = None) -> NavResult:
+def smooth_online(
+    log: LogData,
+    config: EstimatorConfig | None = None,
+    *,
+    mode: str | None = None,
+    window_s: float | None = None,
+    progress: ProgressFn | None = None,
+    options: OnlineConfig | None = None,
+    calibration: VehicleCalibration | None = None,
+) -> NavResult:
     """Run the online estimator over a whole log, message by message, and return its NavResult with the
     timeline of filtering sigmas at every epoch. options (default: config.online, TOML section [online]);
     mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
     scenario names, else the defaults (EstimatorConfig.for_log). calibration: a vehicle's calibration, inflated
     for its age, as the joint prior of the states it holds (core/states.py calibration_prior)."""
     config = config or EstimatorConfig.for_log(log.metadata)
-    log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
+    log = screened_in_memory(
+        log
+    )  # saturation and clock steps, when the reader did not screen it (gaps.py)
     options = (options if options is not None else config.online).model_copy()
     if mode is not None:
         options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
@@ -593,8 +791,12 @@ def smooth_online(log: LogData, config: EstimatorConfig | None = None, *, mode: 
     result = run_result(estimator, config, log.t0_ns)
     total = time.perf_counter() - t_start
     result.timing_s = {"updates": float(np.sum(estimator.latencies_s)), "total": total}
-    result.info["real_time_factor"] = float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
-    if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
+    result.info["real_time_factor"] = (
+        float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
+    )
+    if (
+        screened := screened_losses(log)
+    ) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
     if progress is not None:
         progress(1.0)

@@ -16,11 +16,25 @@ class MessageSink(Protocol):
 
     def push_imu_batch(self, t: Any, b_omega: Any, b_f: Any) -> int: ...
 
-    def push_dvl(self, t: float, d_v: Any, d_cov: Any = None, valid: bool = True,
-                 beams: tuple[Any, Any, Any] | None = None, water_track: bool = False) -> int: ...
+    def push_dvl(
+        self,
+        t: float,
+        d_v: Any,
+        d_cov: Any = None,
+        valid: bool = True,
+        beams: tuple[Any, Any, Any] | None = None,
+        water_track: bool = False,
+    ) -> int: ...
 
-    def push_depth(self, t: float, depth_m: float = math.nan, variance_m2: float = math.nan, *,
-                   pressure_pa: float | None = None, pressure_variance_pa2: float = math.nan) -> None: ...
+    def push_depth(
+        self,
+        t: float,
+        depth_m: float = math.nan,
+        variance_m2: float = math.nan,
+        *,
+        pressure_pa: float | None = None,
+        pressure_variance_pa2: float = math.nan,
+    ) -> None: ...
 
     def finish(self) -> Any: ...
 
@@ -28,8 +42,14 @@ class MessageSink(Protocol):
 def push_depth_sample(sink: MessageSink, depth: DepthData, k: int) -> None:
     """Depth sample k of a log: its pressure and variance when the log has them, else its depth."""
     if depth.pressure_pa is not None:
-        var = math.nan if depth.pressure_variance_pa2 is None else float(depth.pressure_variance_pa2[k])
-        sink.push_depth(float(depth.t[k]), pressure_pa=float(depth.pressure_pa[k]), pressure_variance_pa2=var)
+        var = (
+            math.nan
+            if depth.pressure_variance_pa2 is None
+            else float(depth.pressure_variance_pa2[k])
+        )
+        sink.push_depth(
+            float(depth.t[k]), pressure_pa=float(depth.pressure_pa[k]), pressure_variance_pa2=var
+        )
     else:
         sink.push_depth(float(depth.t[k]), float(depth.depth_m[k]), float(depth.variance_m2[k]))
 
@@ -43,16 +63,27 @@ def feed_log(estimator: MessageSink, log: LogData, progress: ProgressFn | None =
     step = max(1, n // 100)
     for m in log_messages(log):
         if m.kind == "imu":
-            estimator.push_imu_batch(imu.t[m.start:m.stop], imu.b_omega[m.start:m.stop], imu.b_f[m.start:m.stop])
+            estimator.push_imu_batch(
+                imu.t[m.start : m.stop], imu.b_omega[m.start : m.stop], imu.b_f[m.start : m.stop]
+            )
         elif m.kind == "depth":
             assert depth is not None  # log_messages yields depth samples of a log that has them
             push_depth_sample(estimator, depth, m.start)
         else:
             j = m.start
-            beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-            estimator.push_dvl(dvl.t[j], dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), beams,
-                               water_track=dvl.water_track is not None and bool(dvl.water_track[j]))
+            beams = (
+                None
+                if dvl.beams is None
+                else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+            )
+            estimator.push_dvl(
+                dvl.t[j],
+                dvl.d_v[j],
+                dvl.d_cov[j],
+                bool(dvl.valid[j]),
+                beams,
+                water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
+            )
             if progress is not None and j % step == 0:
                 progress(0.95 * j / n)
     estimator.finish()
-

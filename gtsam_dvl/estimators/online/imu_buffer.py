@@ -1,7 +1,7 @@
 """The online estimator's IMU samples since the newest state: held raw until the next state's IMU factor is made.
 
 The buffer keeps, first, the last sample at or before the newest state (the sample held across a gap that starts
-there, estimators/gaps.py), then every sample since. Each interval's sample starts, gaps and rotation-compensated
+there, estimators/inputs/gaps.py), then every sample since. Each interval's sample starts, gaps and rotation-compensated
 specific forces are made as the batch smoother makes them for the whole log (gaps.find_gaps with the nominal
 period measured on the first PERIOD_SAMPLES stamps, sample_starts_with_gaps, FactorMaker.compensate_rotation).
 """
@@ -13,12 +13,20 @@ from collections.abc import Callable
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import Gaps, check_gaps, find_gaps, nominal_period, sample_starts_with_gaps
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.inputs.gaps import (
+    Gaps,
+    check_gaps,
+    find_gaps,
+    nominal_period,
+    sample_starts_with_gaps,
+)
 
 PERIOD_SAMPLES = 64  # IMU stamps that measure the nominal period (the median spacing)
 
-ImuChunk = tuple[np.ndarray, np.ndarray, np.ndarray]  # stamps (s), gyro (rad/s), specific force (m/s^2)
+ImuChunk = tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]  # stamps (s), gyro (rad/s), specific force (m/s^2)
 
 
 class ImuBuffer:
@@ -34,8 +42,12 @@ class ImuBuffer:
 
     def push(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """IMU samples in time order, after every earlier one."""
-        if self._period is None:  # the nominal period, for the gap rule (estimators/gaps.py): from the first
-            self._period_t.extend(t[:PERIOD_SAMPLES].tolist())  # PERIOD_SAMPLES stamps, across chunks
+        if (
+            self._period is None
+        ):  # the nominal period, for the gap rule (estimators/inputs/gaps.py): from the first
+            self._period_t.extend(
+                t[:PERIOD_SAMPLES].tolist()
+            )  # PERIOD_SAMPLES stamps, across chunks
             if len(self._period_t) >= PERIOD_SAMPLES:
                 self._period = nominal_period(np.asarray(self._period_t[:PERIOD_SAMPLES]))
         if len(t):
@@ -51,12 +63,15 @@ class ImuBuffer:
             self._chunks = [tuple(np.concatenate(c) for c in zip(*self._chunks, strict=True))]  # type: ignore[list-item]
         return self._chunks[0]
 
-    def pieces(self, maker: FactorMaker, T: np.ndarray, W: np.ndarray, F: np.ndarray,
-               final: bool) -> tuple[np.ndarray, np.ndarray, Gaps]:
+    def pieces(
+        self, maker: FactorMaker, T: np.ndarray, W: np.ndarray, F: np.ndarray, final: bool
+    ) -> tuple[np.ndarray, np.ndarray, Gaps]:
         """The sample starts (s), rotation-compensated specific forces (m/s^2) and gaps of samples T, W, F (the
         buffer's); final: the buffer of a new state's interval, whose gaps are checked and counted."""
         # until PERIOD_SAMPLES stamps have come, the median of those seen (an epoch's buffer may hold a gap)
-        period = self._period or nominal_period(np.asarray(self._period_t) if len(self._period_t) > 2 else T)
+        period = self._period or nominal_period(
+            np.asarray(self._period_t) if len(self._period_t) > 2 else T
+        )
         gaps = find_gaps(T, self.cfg.gap_samples, period)
         if final:
             check_gaps(gaps, self.cfg, self.source)
@@ -75,5 +90,8 @@ class ImuBuffer:
 
     def gaps_info(self) -> dict[str, float]:
         """The gaps crossed: count, total and longest (s), for NavResult.info["imu_gaps"]."""
-        return {"count": len(self.gaps_seen), "total_s": float(sum(self.gaps_seen.values())),
-                "longest_s": float(max(self.gaps_seen.values(), default=0.0))}
+        return {
+            "count": len(self.gaps_seen),
+            "total_s": float(sum(self.gaps_seen.values())),
+            "longest_s": float(max(self.gaps_seen.values(), default=0.0)),
+        }

@@ -16,10 +16,12 @@ from typing import Any, Literal
 import numpy as np
 
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.estimators.inputs.selection import Ping
 from gtsam_dvl.estimators.online.types import MessageDropped
-from gtsam_dvl.estimators.selection import Ping
 
-ImuChunk = tuple[np.ndarray, np.ndarray, np.ndarray]  # stamps (s), gyro (rad/s), specific force (m/s^2)
+ImuChunk = tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]  # stamps (s), gyro (rad/s), specific force (m/s^2)
 
 
 def vector3(name: str, x: Any) -> np.ndarray:
@@ -34,7 +36,9 @@ class MessageChecks:
     """Stamp order and finiteness of the IMU samples, pings and depth samples of one estimator (module doc).
     counters: the estimator's, where dropped messages are counted by kind."""
 
-    def __init__(self, bad_messages: Literal["raise", "drop"], source: str, counters: dict[str, int]) -> None:
+    def __init__(
+        self, bad_messages: Literal["raise", "drop"], source: str, counters: dict[str, int]
+    ) -> None:
         self.bad_messages, self.source, self.counters = bad_messages, source, counters
         self.last_imu_t = -math.inf
         self.last_dvl_t = -math.inf
@@ -49,8 +53,11 @@ class MessageChecks:
         self.counters[kind] = self.counters.get(kind, 0) + n
         if kind not in self._warned:
             self._warned.add(kind)
-            warnings.warn(f"{message}: dropped (further ones are counted in counters['{kind}'])", MessageDropped,
-                          stacklevel=stacklevel)
+            warnings.warn(
+                f"{message}: dropped (further ones are counted in counters['{kind}'])",
+                MessageDropped,
+                stacklevel=stacklevel,
+            )
 
     def imu_sample(self, t: float, b_omega: Any, b_f: Any) -> ImuChunk | None:
         """One IMU sample as a chunk of one, or None when dropped."""
@@ -61,8 +68,11 @@ class MessageChecks:
             elif t == self.last_imu_t:
                 self.bad("imu_duplicate", f"IMU sample at t = {t:.6f} s repeats the previous stamp")
             else:
-                self.bad("imu_out_of_order", f"IMU sample at t = {t:.6f} s is older than the previous one "
-                                             f"({self.last_imu_t:.6f} s)")
+                self.bad(
+                    "imu_out_of_order",
+                    f"IMU sample at t = {t:.6f} s is older than the previous one "
+                    f"({self.last_imu_t:.6f} s)",
+                )
             return None
         if not (np.isfinite(w).all() and np.isfinite(f).all()):
             self.bad("imu_not_finite", f"IMU sample at t = {t:.6f} s has a non-finite value")
@@ -75,20 +85,26 @@ class MessageChecks:
         t = np.asarray(t, dtype=float).reshape(-1)
         w, f = np.asarray(b_omega, dtype=float), np.asarray(b_f, dtype=float)
         if w.shape != (len(t), 3) or f.shape != (len(t), 3):
-            raise GtsamDvlError(f"IMU batch: {len(t)} stamps need gyro and accelerometer arrays of shape "
-                                f"({len(t)}, 3), got {w.shape} and {f.shape}")
+            raise GtsamDvlError(
+                f"IMU batch: {len(t)} stamps need gyro and accelerometer arrays of shape "
+                f"({len(t)}, 3), got {w.shape} and {f.shape}"
+            )
         if len(t) == 0:
             return None
         stamped = np.isfinite(t)
-        prev = np.maximum.accumulate(np.concatenate([[self.last_imu_t], np.where(stamped, t, -np.inf)]))[:-1]
+        prev = np.maximum.accumulate(
+            np.concatenate([[self.last_imu_t], np.where(stamped, t, -np.inf)])
+        )[:-1]
         in_order = stamped & (t > prev)
         finite = np.isfinite(w).all(axis=1) & np.isfinite(f).all(axis=1)
         keep = in_order & finite
         if not keep.all():
-            for mask, kind, what in ((~stamped, "imu_bad_time", "has a non-finite stamp"),
-                                     (stamped & (t == prev), "imu_duplicate", "repeats the previous stamp"),
-                                     (stamped & (t < prev), "imu_out_of_order", "is older than the previous one"),
-                                     (in_order & ~finite, "imu_not_finite", "has a non-finite value")):
+            for mask, kind, what in (
+                (~stamped, "imu_bad_time", "has a non-finite stamp"),
+                (stamped & (t == prev), "imu_duplicate", "repeats the previous stamp"),
+                (stamped & (t < prev), "imu_out_of_order", "is older than the previous one"),
+                (in_order & ~finite, "imu_not_finite", "has a non-finite value"),
+            ):
                 n_bad = int(mask.sum())
                 if n_bad:
                     j = int(np.argmax(mask))
@@ -99,10 +115,18 @@ class MessageChecks:
         self.last_imu_t = float(t[-1])
         return t, w, f
 
-    def ping(self, t: float, d_v: Any, d_cov: Any, valid: bool, beams: tuple[Any, Any, Any] | None) -> Ping | None:
+    def ping(
+        self, t: float, d_v: Any, d_cov: Any, valid: bool, beams: tuple[Any, Any, Any] | None
+    ) -> Ping | None:
         """One ping (OnlineEstimator.push_dvl's arguments) as a Ping, or None when dropped."""
-        if not self._in_order("dvl", "DVL ping", t, self.last_dvl_t, "repeats the previous ping's stamp",
-                              "is older than the previous ping"):
+        if not self._in_order(
+            "dvl",
+            "DVL ping",
+            t,
+            self.last_dvl_t,
+            "repeats the previous ping's stamp",
+            "is older than the previous ping",
+        ):
             return None
         self.last_dvl_t = t
         d_v = vector3("DVL d_v", d_v)
@@ -110,17 +134,28 @@ class MessageChecks:
         if d_cov.shape != (3, 3):
             raise GtsamDvlError(f"DVL d_cov must be 3x3, got shape {d_cov.shape}")
         if beams is not None:
-            d_u, v, ok = (np.asarray(beams[0], dtype=float), np.asarray(beams[1], dtype=float),
-                          np.asarray(beams[2], dtype=bool))
+            d_u, v, ok = (
+                np.asarray(beams[0], dtype=float),
+                np.asarray(beams[1], dtype=float),
+                np.asarray(beams[2], dtype=bool),
+            )
             if d_u.shape != (len(v), 3) or ok.shape != v.shape:
-                raise GtsamDvlError(f"DVL beams: d_u {d_u.shape}, v {v.shape}, valid {ok.shape} do not match")
+                raise GtsamDvlError(
+                    f"DVL beams: d_u {d_u.shape}, v {v.shape}, valid {ok.shape} do not match"
+                )
             beams = (d_u, v, ok)
         return Ping(t, d_v, d_cov, bool(valid), beams)
 
     def depth_stamp(self, t: float) -> bool:
         """Whether a depth sample at t (s) is in order (else dropped)."""
-        if not self._in_order("depth", "depth sample", t, self.last_depth_t, "repeats the previous stamp",
-                              "is older than the previous one"):
+        if not self._in_order(
+            "depth",
+            "depth sample",
+            t,
+            self.last_depth_t,
+            "repeats the previous stamp",
+            "is older than the previous one",
+        ):
             return False
         self.last_depth_t = t
         return True
@@ -133,7 +168,10 @@ class MessageChecks:
             return False
         if t <= last:
             dup = t == last
-            self.bad(f"{kind}_duplicate" if dup else f"{kind}_out_of_order",
-                     f"{noun} at t = {t:.6f} s {same if dup else older} ({last:.6f} s)", stacklevel=5)
+            self.bad(
+                f"{kind}_duplicate" if dup else f"{kind}_out_of_order",
+                f"{noun} at t = {t:.6f} s {same if dup else older} ({last:.6f} s)",
+                stacklevel=5,
+            )
             return False
         return True

@@ -1,4 +1,4 @@
-"""The online estimator's fit of the DVL noise ([noise] fit_dvl, estimators/noise_levels.py): the whitened
+"""The online estimator's fit of the DVL noise ([noise] fit_dvl, estimators/models/noise_levels.py): the whitened
 residuals of the DVL factors of the pings in the warm-up window ([noise] warmup_s from the first ping), each
 evaluated lag_s after its ping, at iSAM2's estimate then (the smoother's residual: the states around the ping
 updated by the lag_s of pings that followed, as the batch smoother's are by the whole log), fitted once the
@@ -14,7 +14,7 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.estimators.noise_levels import WarmupFit
+from gtsam_dvl.estimators.models.noise_levels import WarmupFit
 
 
 class OnlineNoiseFit:
@@ -54,7 +54,9 @@ class OnlineNoiseFit:
     def finish(self) -> float:
         self.done = True
         self._pending.clear()
-        return self.fit.finish(f"the online smoother's residuals, {self.lag_s:g} s after each ping,")
+        return self.fit.finish(
+            f"the online smoother's residuals, {self.lag_s:g} s after each ping,"
+        )
 
     @property
     def report(self) -> dict[str, Any]:

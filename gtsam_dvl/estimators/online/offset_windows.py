@@ -17,10 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from gtsam_dvl.core.config import DvlConfig
-from gtsam_dvl.estimators.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.online.dvl_factors import RateInput
 
-ImuChunk = tuple[np.ndarray, np.ndarray, np.ndarray]  # stamps (s), gyro (rad/s), specific force (m/s^2)
+ImuChunk = tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]  # stamps (s), gyro (rad/s), specific force (m/s^2)
 
 
 class OffsetWindows:
@@ -56,10 +58,18 @@ class OffsetWindows:
         """The IMU samples kept, as one chunk."""
         if len(self._recent) > 1:
             self._recent = [tuple(np.concatenate(c) for c in zip(*self._recent, strict=True))]  # type: ignore[list-item]
-        return self._recent[0] if self._recent else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        return (
+            self._recent[0] if self._recent else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        )
 
-    def rate_input(self, maker: FactorMaker, t: float, estimate_s: float | None,
-                   bias: tuple[np.ndarray, np.ndarray] | None = None, n_R_b: np.ndarray | None = None) -> RateInput:
+    def rate_input(
+        self,
+        maker: FactorMaker,
+        t: float,
+        estimate_s: float | None,
+        bias: tuple[np.ndarray, np.ndarray] | None = None,
+        n_R_b: np.ndarray | None = None,
+    ) -> RateInput:
         """The time-offset model's IMU constants of a ping at t (FactorMaker.velocity_rate_input) over the samples
         kept, the window centred on centre(estimate_s), the current IMU bias estimate (accelerometer m/s^2, gyro
         rad/s) taken off the samples and the Earth rate removed at the current attitude n_R_b (None before the first
@@ -67,15 +77,21 @@ class OffsetWindows:
         counters["time_offset_window_clipped"]."""
         T, W, F = self.samples()
         centre = self.centre(estimate_s)
-        if estimate_s is not None and self.recentre and centre != estimate_s:  # reported (analysis/health.py)
-            self.counters["time_offset_window_clipped"] = self.counters.get("time_offset_window_clipped", 0) + 1
+        if (
+            estimate_s is not None and self.recentre and centre != estimate_s
+        ):  # reported (analysis/health.py)
+            self.counters["time_offset_window_clipped"] = (
+                self.counters.get("time_offset_window_clipped", 0) + 1
+            )
         return maker.velocity_rate_input(t, T, F, W, centre, bias=bias, n_R_b=n_R_b)
 
     def trim(self, t_epoch: float) -> None:
         """Keep what the windows of the epochs after t_epoch (s) can reach: the prior's offset, 3 prior sigmas
         and the window, and a second more."""
         cfg = self.cfg
-        reach = abs(cfg.time_offset_prior_s) + 3.0 * cfg.time_offset_sigma_s + cfg.time_offset_window_s
+        reach = (
+            abs(cfg.time_offset_prior_s) + 3.0 * cfg.time_offset_sigma_s + cfg.time_offset_window_s
+        )
         T, W, F = self.samples()
         k0 = int(np.searchsorted(T, t_epoch - reach - 1.0))
         self._recent = [(T[k0:], W[k0:], F[k0:])]

@@ -16,8 +16,15 @@ from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.online.window import StateEstimate
 
-__all__ = ["ONLINE_MODES", "EpochHistory", "MessageDropped", "OnlineConfig", "OnlineEstimate", "latency_stats",
-           "misalignment_deg_and_cov"]
+__all__ = [
+    "ONLINE_MODES",
+    "EpochHistory",
+    "MessageDropped",
+    "OnlineConfig",
+    "OnlineEstimate",
+    "latency_stats",
+    "misalignment_deg_and_cov",
+]
 
 ONLINE_MODES: tuple[str, ...] = get_args(OnlineMode)  # OnlineConfig.mode's values
 
@@ -57,17 +64,34 @@ class OnlineEstimate(CalibrationUnits):
     # nan: the estimate of the newest state, at its time t; else the estimate at a ping at t between keyframes,
     # predicted from the newest state (at predicted_from_t, s) through the IMU motion (online/between_pings.py)
     predicted_from_t: float = float("nan")
-    calibration: dict[str, Estimate] = field(default_factory=dict)  # the shared states by name (core/states.py)
+    calibration: dict[str, Estimate] = field(
+        default_factory=dict
+    )  # the shared states by name (core/states.py)
 
     @classmethod
     def from_state(cls, s: StateEstimate, b_R_d0: np.ndarray) -> OnlineEstimate:
-        return cls(t=s.t, n_p=np.asarray(s.pose.translation()), n_R_b=s.pose.rotation().matrix(), n_v=s.n_v,
-                   pose_cov=s.pose_cov, vel_cov=s.vel_cov, pose_vel_cross=s.pose_vel_cross,
-                   accel_bias=np.asarray(s.bias.accelerometer()), gyro_bias=np.asarray(s.bias.gyroscope()),
-                   bias_cov=s.cov[9:15, 9:15], scale=s.scale, scale_sigma=float(np.sqrt(s.cov[15, 15])),
-                   b_R_d=s.b_R_d, b_R_d_cov=s.cov[16:19, 16:19], b_R_d0=b_R_d0, calib_cov=s.calib_cov,
-                   time_offset_s=s.time_offset_s, time_offset_sigma_s=s.time_offset_sigma_s,
-                   predicted_from_t=s.predicted_from_t, calibration=s.calibration)
+        return cls(
+            t=s.t,
+            n_p=np.asarray(s.pose.translation()),
+            n_R_b=s.pose.rotation().matrix(),
+            n_v=s.n_v,
+            pose_cov=s.pose_cov,
+            vel_cov=s.vel_cov,
+            pose_vel_cross=s.pose_vel_cross,
+            accel_bias=np.asarray(s.bias.accelerometer()),
+            gyro_bias=np.asarray(s.bias.gyroscope()),
+            bias_cov=s.cov[9:15, 9:15],
+            scale=s.scale,
+            scale_sigma=float(np.sqrt(s.cov[15, 15])),
+            b_R_d=s.b_R_d,
+            b_R_d_cov=s.cov[16:19, 16:19],
+            b_R_d0=b_R_d0,
+            calib_cov=s.calib_cov,
+            time_offset_s=s.time_offset_s,
+            time_offset_sigma_s=s.time_offset_sigma_s,
+            predicted_from_t=s.predicted_from_t,
+            calibration=s.calibration,
+        )
 
     @property
     def attitude_sigma_deg(self) -> np.ndarray:
@@ -84,7 +108,11 @@ def latency_stats(latencies_s: Sequence[float] | np.ndarray) -> dict[str, float]
     lat = np.asarray(latencies_s, dtype=float) * 1e3
     if lat.size == 0:
         return {"p50": math.nan, "p99": math.nan, "max": math.nan}
-    return {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)), "max": float(lat.max())}
+    return {
+        "p50": float(np.percentile(lat, 50)),
+        "p99": float(np.percentile(lat, 99)),
+        "max": float(lat.max()),
+    }
 
 
 class EpochHistory:
@@ -95,9 +123,22 @@ class EpochHistory:
 
     BLOCK = 4096
     SHAPES: dict[str, tuple[int, ...]] = {
-        "t": (), "n_p": (3,), "n_R_b": (3, 3), "n_v": (3,), "pose_cov": (6, 6), "vel_cov": (3, 3),
-        "pose_vel_cross": (6, 3), "accel_bias": (3,), "gyro_bias": (3,), "bias_cov": (6, 6), "scale": (),
-        "scale_sigma": (), "b_R_d": (3, 3), "b_R_d_cov": (3, 3), "b_omega": (3,)}
+        "t": (),
+        "n_p": (3,),
+        "n_R_b": (3, 3),
+        "n_v": (3,),
+        "pose_cov": (6, 6),
+        "vel_cov": (3, 3),
+        "pose_vel_cross": (6, 3),
+        "accel_bias": (3,),
+        "gyro_bias": (3,),
+        "bias_cov": (6, 6),
+        "scale": (),
+        "scale_sigma": (),
+        "b_R_d": (3, 3),
+        "b_R_d_cov": (3, 3),
+        "b_omega": (3,),
+    }
 
     def __init__(self) -> None:
         self.n = 0
@@ -110,7 +151,9 @@ class EpochHistory:
         """Add an epoch's estimate and its body rate (gyro minus Earth rate, rad/s)."""
         row = self.n % self.BLOCK
         if row == 0:
-            self._blocks.append({name: np.empty((self.BLOCK, *shape)) for name, shape in self.SHAPES.items()})
+            self._blocks.append(
+                {name: np.empty((self.BLOCK, *shape)) for name, shape in self.SHAPES.items()}
+            )
         for name, a in self._blocks[-1].items():
             a[row] = b_omega if name == "b_omega" else getattr(estimate, name)
         self.n += 1
@@ -118,19 +161,26 @@ class EpochHistory:
     def __getitem__(self, name: str) -> np.ndarray:
         if not self._blocks:
             return np.empty((0, *self.SHAPES[name]))
-        return np.concatenate([b[name] for b in self._blocks])[:self.n]
+        return np.concatenate([b[name] for b in self._blocks])[: self.n]
 
     def timeline(self, b_R_d0: np.ndarray) -> Timeline:
         """The estimates and sigmas of every epoch, in NavResult's units (b_R_d0: the nominal mounting)."""
-        mis = [misalignment_rpy_and_cov(R, b_R_d0, P) for R, P in zip(self["b_R_d"], self["b_R_d_cov"], strict=True)]
+        mis = [
+            misalignment_rpy_and_cov(R, b_R_d0, P)
+            for R, P in zip(self["b_R_d"], self["b_R_d_cov"], strict=True)
+        ]
         n_R_b = self["n_R_b"]
         att_cov = n_R_b @ self["pose_cov"][:, :3, :3] @ np.transpose(n_R_b, (0, 2, 1))
         bias_var = np.einsum("nii->ni", self["bias_cov"])
         return Timeline(
-            t=self["t"].copy(), scale=self["scale"].copy(), scale_sigma=self["scale_sigma"].copy(),
+            t=self["t"].copy(),
+            scale=self["scale"].copy(),
+            scale_sigma=self["scale_sigma"].copy(),
             misalignment_deg=np.array([m[0] for m in mis]).reshape(-1, 3),
             misalignment_sigma_deg=np.sqrt(np.array([np.diag(m[1]) for m in mis]).reshape(-1, 3)),
             gyro_bias_deg_per_h=self["gyro_bias"] / DEG_PER_H,
             gyro_bias_sigma_deg_per_h=np.sqrt(bias_var[:, 3:]) / DEG_PER_H,
-            accel_bias_ug=self["accel_bias"] / UG, accel_bias_sigma_ug=np.sqrt(bias_var[:, :3]) / UG,
-            attitude_sigma_deg=np.degrees(np.sqrt(np.einsum("nii->ni", att_cov))))
+            accel_bias_ug=self["accel_bias"] / UG,
+            accel_bias_sigma_ug=np.sqrt(bias_var[:, :3]) / UG,
+            attitude_sigma_deg=np.degrees(np.sqrt(np.einsum("nii->ni", att_cov))),
+        )

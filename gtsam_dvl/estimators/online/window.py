@@ -74,9 +74,9 @@ from gtsam_dvl.core.states import (
     shared_keys,
     water_current,
 )
-from gtsam_dvl.estimators import correlated, current, weak_hold
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import Holds
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.inputs.gaps import Holds
+from gtsam_dvl.estimators.models import correlated, current, weak_hold
 from gtsam_dvl.factors import EarthImuFactor
 
 # the joint of StateEstimate: pose, velocity and the calibration block (core/states.py: bias, scale, misalignment)
@@ -105,7 +105,9 @@ class StateEstimate:
     # nan: the estimate of state `index` at its time t; else the estimate at a ping at t between states, predicted
     # from state `index` at predicted_from_t (online/between_pings.py predict_at_ping)
     predicted_from_t: float = float("nan")
-    calibration: dict[str, Estimate] = field(default_factory=dict)  # the shared states by name (core/states.py)
+    calibration: dict[str, Estimate] = field(
+        default_factory=dict
+    )  # the shared states by name (core/states.py)
 
     @property
     def pose_cov(self) -> np.ndarray:
@@ -130,31 +132,47 @@ class IncrementalSmoother:
     keeps every state (full history); otherwise states older than window_s seconds behind the newest are
     marginalised (at least two states stay)."""
 
-    def __init__(self, builder: FactorMaker, window_s: float | None, thresholds: RelinearizationThresholds,
-                 relinearize_skip: int = 1) -> None:
+    def __init__(
+        self,
+        builder: FactorMaker,
+        window_s: float | None,
+        thresholds: RelinearizationThresholds,
+        relinearize_skip: int = 1,
+    ) -> None:
         self.builder = builder
         self.window_s = window_s
         self.thresholds = thresholds
         self.rw_bias = builder.config.imu.bias_model == "random_walk"
-        self.gm = correlated_error(builder.config)  # the DVL's correlated error E(i) a state (correlated.py)
+        self.gm = correlated_error(
+            builder.config
+        )  # the DVL's correlated error E(i) a state (correlated.py)
         self.wc = water_current(builder.config)  # the water current W(i) a state (current.py)
-        self.hold: dict[str, Any] | None = None  # the newest estimate's held calibration directions (weak_hold.py)
+        self.hold: dict[str, Any] | None = (
+            None  # the newest estimate's held calibration directions (weak_hold.py)
+        )
         # with layers: the boundaries S(b) crossed so far (shared keys, never marginalised) and the newest layer
         self.layers = self.wc and current.layered(builder.config)
         self.shear: list[int] = []
         self.layer = 0
         # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py);
         # every factor is linear in E (the DVL's, the links), so its threshold is a formality: a tenth of its sigma
-        self._threshold = {"x": np.asarray(thresholds.pose, dtype=float),
-                           "v": np.asarray(thresholds.velocity, dtype=float),
-                           **relinearization(builder.config, thresholds),
-                           **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {}),
-                           # the water current enters the DVL factor linearly but for its cross terms with the
-                           # attitude and scale ((k dtheta + dk) dW: 2e-4 m/s at 1e-2 and 0.02 m/s, 2 % of a
-                           # water-track ping's sigma): twice that sigma
-                           **({"w": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s),
-                               "s": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s)}
-                              if self.wc else {})}
+        self._threshold = {
+            "x": np.asarray(thresholds.pose, dtype=float),
+            "v": np.asarray(thresholds.velocity, dtype=float),
+            **relinearization(builder.config, thresholds),
+            **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {}),
+            # the water current enters the DVL factor linearly but for its cross terms with the
+            # attitude and scale ((k dtheta + dk) dW: 2e-4 m/s at 1e-2 and 0.02 m/s, 2 % of a
+            # water-track ping's sigma): twice that sigma
+            **(
+                {
+                    "w": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s),
+                    "s": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s),
+                }
+                if self.wc
+                else {}
+            ),
+        }
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
         threshold_map = gtsam.ISAM2ThresholdMap()
@@ -174,7 +192,9 @@ class IncrementalSmoother:
         self.t_last = -np.inf
         self.marginalised = 0
         self.rebases = 0
-        self._frozen = gtsam.KeyList()  # keys of the states older than the RECENT newest, oldest first
+        self._frozen = (
+            gtsam.KeyList()
+        )  # keys of the states older than the RECENT newest, oldest first
         self._frozen_until = 0  # states below this index are in _frozen (or marginalised)
         self._limits: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._last_imu: EarthImuFactor | None = None
@@ -183,10 +203,15 @@ class IncrementalSmoother:
         self._order_suspect = False
 
     # ----- updates -------------------------------------------------------------------------------
-    def add_epoch(self, t: float, dvl_factors: list[gtsam.NonlinearFactor],
-                  pim: gtsam.PreintegratedImuMeasurements | None = None,
-                  params: gtsam.PreintegrationParams | None = None, first_values: gtsam.Values | None = None,
-                  held: Holds | None = None) -> None:
+    def add_epoch(
+        self,
+        t: float,
+        dvl_factors: list[gtsam.NonlinearFactor],
+        pim: gtsam.PreintegratedImuMeasurements | None = None,
+        params: gtsam.PreintegrationParams | None = None,
+        first_values: gtsam.Values | None = None,
+        held: Holds | None = None,
+    ) -> None:
         """Add state n at time t with its DVL factors (built by the caller with builder.dvl_factors_for(n, ...),
         and any other factors on the states held: the keyframe factors of the pings since the previous state) and,
         for n > 0, the preintegration since the previous epoch; for n == 0, first_values (builder.
@@ -205,16 +230,26 @@ class IncrementalSmoother:
             if self.wc:
                 values.insert(W(0), np.zeros(2))
                 factors.append(current.prior_factor(b.config))
-                self.layer = int(current.layer_index(b.config, values.atPose3(X(0)).translation()[2],
-                                                     b.frame.height_m)) if self.layers else 0
+                self.layer = (
+                    int(
+                        current.layer_index(
+                            b.config, values.atPose3(X(0)).translation()[2], b.frame.height_m
+                        )
+                    )
+                    if self.layers
+                    else 0
+                )
         else:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
             dt = t - self.t_last
             imu = b.new_imu_factor(i - 1, pim, params, dt, held)
             factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
-            prev = self.isam.calculateEstimate([X(i - 1), V(i - 1), b.bias_key(i - 1)] + [E(i - 1)] * self.gm
-                                               + [W(i - 1)] * self.wc)
+            prev = self.isam.calculateEstimate(
+                [X(i - 1), V(i - 1), b.bias_key(i - 1)]
+                + [E(i - 1)] * self.gm
+                + [W(i - 1)] * self.wc
+            )
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
             bias = prev.atConstantBias(b.bias_key(i - 1))
             self._reference_gravity(imu, pose.translation() + 0.5 * dt * n_v)
@@ -231,7 +266,9 @@ class IncrementalSmoother:
             if self.wc:  # W's prediction: the previous state's; its random walk over dt and the predicted depth change
                 values.insert(W(i), prev.atVector(W(i - 1)))
                 if self.layers:  # or across the layer boundaries crossed, each new one with its prior (current.py)
-                    factors += self._cross_layers(i, dt, float(state.pose().translation()[2]), values)
+                    factors += self._cross_layers(
+                        i, dt, float(state.pose().translation()[2]), values
+                    )
                 else:
                     dz = float(state.pose().translation()[2] - pose.translation()[2])
                     factors.append(current.link_factor(b.config, i - 1, i, dt, dz))
@@ -244,7 +281,9 @@ class IncrementalSmoother:
         if self.window_s is not None:
             self._slide(t - self.window_s)
 
-    def _cross_layers(self, i: int, dt: float, z: float, values: gtsam.Values) -> list[gtsam.NonlinearFactor]:
+    def _cross_layers(
+        self, i: int, dt: float, z: float, values: gtsam.Values
+    ) -> list[gtsam.NonlinearFactor]:
         """The current's link from state i - 1 to state i at height z (m, map): the random walk in time, plus the
         layer boundaries crossed; a boundary met for the first time gets its variable (inserted into values,
         predicted by the previous value: zero) and prior, and joins the shared keys' elimination group."""
@@ -269,7 +308,9 @@ class IncrementalSmoother:
             graph.add(f)
         self._update(graph, gtsam.Values())
 
-    def _update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, rebase: bool = False) -> None:
+    def _update(
+        self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, rebase: bool = False
+    ) -> None:
         try:
             if self.window_s is None:
                 self.isam.update(graph, values)
@@ -281,8 +322,10 @@ class IncrementalSmoother:
                 # reaching old states, as after a gross DVL outlier), the oldest state may share a clique with
                 # newer ones, and marginalizeLeaves would split it: iSAM2 corrupted (GTSAM issue #1101), an
                 # IndexError from getDelta a few epochs later. A rebase restores the time order.
-                if not rebase and (result.getBatchReorderTriggered() or result.getVariablesReeliminated()
-                                   > groups.size() + len(self._state_keys(0))):
+                if not rebase and (
+                    result.getBatchReorderTriggered()
+                    or result.getVariablesReeliminated() > groups.size() + len(self._state_keys(0))
+                ):
                     self._order_suspect = True
         except RuntimeError as exc:
             raise GtsamDvlError(f"iSAM2 update at t = {self.t_last:.3f} s failed ({exc})") from None
@@ -312,7 +355,9 @@ class IncrementalSmoother:
         for i in range(recent_from, self.n):
             for k in self._state_keys(i):
                 groups.insert2(k, i - recent_from)
-        for k in self.shared_keys(self.n - 1) + [S(b) for b in self.shear]:  # (the current's layer boundaries too)
+        for k in self.shared_keys(self.n - 1) + [
+            S(b) for b in self.shear
+        ]:  # (the current's layer boundaries too)
             groups.insert2(k, self.n - recent_from)
         return groups, (gtsam.KeyList() if rebase else self._frozen)
 
@@ -347,7 +392,9 @@ class IncrementalSmoother:
         """Whether the shared keys or a state older than the RECENT newest moved from its linearisation point by
         more than its relinearisation threshold (the shared keys are frozen by marginalizeLeaves, the old
         states by _ordering)."""
-        delta = self.isam.getDelta().vector()  # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
+        delta = (
+            self.isam.getDelta().vector()
+        )  # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
         if (n_states, old, len(self.shear)) not in self._limits:
@@ -357,12 +404,20 @@ class IncrementalSmoother:
             held += [(S(b), True) for b in self.shear]
             held.sort()
             limits = [self._threshold[chr(k >> 56)] for k, _ in held]
-            self._limits[(n_states, old, len(self.shear))] = (np.concatenate(limits),
-                                             np.concatenate([np.full(len(lim), frozen)
-                                                             for lim, (_, frozen) in zip(limits, held, strict=True)]))
+            self._limits[(n_states, old, len(self.shear))] = (
+                np.concatenate(limits),
+                np.concatenate(
+                    [
+                        np.full(len(lim), frozen)
+                        for lim, (_, frozen) in zip(limits, held, strict=True)
+                    ]
+                ),
+            )
         lim, msk = self._limits[(n_states, old, len(self.shear))]
         if lim.shape != delta.shape:
-            raise GtsamDvlError(f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}")
+            raise GtsamDvlError(
+                f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}"
+            )
         return bool(((np.abs(delta) > lim) & msk).any())
 
     def rebase(self) -> None:
@@ -441,34 +496,59 @@ class IncrementalSmoother:
         dim = 9 + sum(key_dim(k) for k in shared)
         cov = self.joint_covariance(keys) if with_covariance else np.full((dim, dim), np.nan)
         self.hold = None
-        if self.builder.calibration is None and (held := weak_hold.hold_joint(
-                self.builder.config, self.builder.mounting, values, keys, cov)) is not None:
-            values, cov, self.hold = held  # weakly determined calibration directions held (weak_hold.py)
+        if (
+            self.builder.calibration is None
+            and (
+                held := weak_hold.hold_joint(
+                    self.builder.config, self.builder.mounting, values, keys, cov
+                )
+            )
+            is not None
+        ):
+            values, cov, self.hold = (
+                held  # weakly determined calibration directions held (weak_hold.py)
+            )
         key_cols, col = {}, 9
         for k in shared:
             key_cols[k] = slice(col, col + key_dim(k))
             col += key_dim(k)
-        est = read_estimates(values, {k: cov[c, c] for k, c in key_cols.items()}, self.builder.config, i)
+        est = read_estimates(
+            values, {k: cov[c, c] for k, c in key_cols.items()}, self.builder.config, i
+        )
         offset = est.get("time_offset")
         return StateEstimate(
-            index=i, t=self.t_last, pose=values.atPose3(X(i)), n_v=values.atVector(V(i)),
-            bias=values.atConstantBias(self.builder.bias_key(i)), scale=float(est["scale"].value[0]),
-            b_R_d=est["misalignment"].value, cov=cov[:STATE_DIM, :STATE_DIM],
+            index=i,
+            t=self.t_last,
+            pose=values.atPose3(X(i)),
+            n_v=values.atVector(V(i)),
+            bias=values.atConstantBias(self.builder.bias_key(i)),
+            scale=float(est["scale"].value[0]),
+            b_R_d=est["misalignment"].value,
+            cov=cov[:STATE_DIM, :STATE_DIM],
             time_offset_s=0.0 if offset is None else float(offset.value[0]),
-            time_offset_sigma_s=float("nan") if offset is None else float(offset.sigma[0]), calibration=est)
+            time_offset_sigma_s=float("nan") if offset is None else float(offset.sigma[0]),
+            calibration=est,
+        )
 
     def joint_covariance(self, keys: list[int]) -> np.ndarray:
         """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""
         try:
             bn = self.isam.jointBayesNet(keys, gtsam.EliminateQR)
-        except (RuntimeError, IndexError) as exc:  # IndexError: a key no longer in iSAM2 (left the window)
-            raise GtsamDvlError(f"marginal covariance failed ({type(exc).__name__}: {exc})") from None
+        except (
+            RuntimeError,
+            IndexError,
+        ) as exc:  # IndexError: a key no longer in iSAM2 (left the window)
+            raise GtsamDvlError(
+                f"marginal covariance failed ({type(exc).__name__}: {exc})"
+            ) from None
         return bayes_net_covariance(bn, keys)
 
     def size(self) -> tuple[int, int]:
         """(variables, factors) iSAM2 holds now: bounded in the fixed-lag mode."""
         factors = self.isam.getFactorsUnsafe()
-        return self.isam.getLinearizationPoint().size(), sum(factors.at(j) is not None for j in range(factors.size()))
+        return self.isam.getLinearizationPoint().size(), sum(
+            factors.at(j) is not None for j in range(factors.size())
+        )
 
 
 def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndarray:
@@ -478,7 +558,7 @@ def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndar
     conds = [bn.at(j) for j in range(bn.size())]
     for c in conds:
         ks = list(c.keys())
-        order.extend(ks[:_frontal_count(c, ks)])
+        order.extend(ks[: _frontal_count(c, ks)])
     offsets, off = {}, 0
     for k in order:
         offsets[k] = off
@@ -491,12 +571,16 @@ def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndar
         col = 0
         for k in c.keys():
             d = key_dim(k)
-            R[row:row + n_rows, offsets[k]:offsets[k] + d] = A[:, col:col + d]
+            R[row : row + n_rows, offsets[k] : offsets[k] + d] = A[:, col : col + d]
             col += d
         row += n_rows
     if row != off:
-        raise GtsamDvlError("marginal covariance: the Bayes net is not square (rank-deficient problem)")
-    Rinv = np.linalg.inv(R)  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular costs more a call
+        raise GtsamDvlError(
+            "marginal covariance: the Bayes net is not square (rank-deficient problem)"
+        )
+    Rinv = np.linalg.inv(
+        R
+    )  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular costs more a call
     cov_elim = Rinv @ Rinv.T
     idx = np.concatenate([np.arange(offsets[k], offsets[k] + key_dim(k)) for k in keys])
     cov = cov_elim[np.ix_(idx, idx)]

@@ -17,7 +17,15 @@ import numpy as np
 import zstandard
 
 MAGIC = b"\x89MCAP0\r\n"
-OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = 1, 2, 3, 4, 5, 6, 7
+OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK, OP_MESSAGE_INDEX = (
+    1,
+    2,
+    3,
+    4,
+    5,
+    6,
+    7,
+)
 OP_CHUNK_INDEX, OP_ATTACHMENT, OP_ATTACHMENT_INDEX, OP_STATISTICS = 8, 9, 10, 11
 OP_METADATA, OP_METADATA_INDEX, OP_SUMMARY_OFFSET, OP_DATA_END = 12, 13, 14, 15
 
@@ -84,9 +92,13 @@ class McapContainer:
         self._write(rec)
         return sid
 
-    def add_channel(self, topic: str, schema_id: int, encoding: str, metadata: dict[str, str]) -> int:
+    def add_channel(
+        self, topic: str, schema_id: int, encoding: str, metadata: dict[str, str]
+    ) -> int:
         cid = len(self.channels) + 1
-        content = struct.pack("<HH", cid, schema_id) + mstr(topic) + mstr(encoding) + mmap_str(metadata)
+        content = (
+            struct.pack("<HH", cid, schema_id) + mstr(topic) + mstr(encoding) + mmap_str(metadata)
+        )
         rec = record(OP_CHANNEL, content)
         self.channels.append(rec)
         self.counts[cid] = 0
@@ -95,10 +107,14 @@ class McapContainer:
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         rec = record(OP_METADATA, mstr(name) + mmap_str(data))
-        self.meta_indexes.append(record(OP_METADATA_INDEX, struct.pack("<QQ", self.pos, len(rec)) + mstr(name)))
+        self.meta_indexes.append(
+            record(OP_METADATA_INDEX, struct.pack("<QQ", self.pos, len(rec)) + mstr(name))
+        )
         self._write(rec)
 
-    def add_attachment(self, name: str, media_type: str, data: bytes, log_time: int, create_time: int) -> None:
+    def add_attachment(
+        self, name: str, media_type: str, data: bytes, log_time: int, create_time: int
+    ) -> None:
         content = struct.pack("<QQ", log_time, create_time) + mstr(name) + mstr(media_type)
         content += struct.pack("<Q", len(data)) + data
         rec = record(OP_ATTACHMENT, content + struct.pack("<I", zlib.crc32(content)))
@@ -118,14 +134,21 @@ class McapContainer:
         """Write K messages in the given order into chunks of about ``chunk_size`` bytes. Message k's
         CDR body is ``pool[start[k] : start[k] + length[k]]`` (pool: flat uint8); publish time = log time."""
         rec_len = 31 + length.astype(np.int64)
-        chunk_no = (np.cumsum(rec_len) - 1) // self.chunk_size  # a chunk closes once it passes chunk_size
+        chunk_no = (
+            np.cumsum(rec_len) - 1
+        ) // self.chunk_size  # a chunk closes once it passes chunk_size
         bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [len(rec_len)]])
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             if b > a:
                 self._chunk(channel[a:b], seq[a:b], log_time[a:b], pool, start[a:b], length[a:b])
 
     def write_chunk(
-        self, channel: np.ndarray, seq: np.ndarray, log_time: np.ndarray, pool: np.ndarray, start: np.ndarray,
+        self,
+        channel: np.ndarray,
+        seq: np.ndarray,
+        log_time: np.ndarray,
+        pool: np.ndarray,
+        start: np.ndarray,
         length: np.ndarray,
     ) -> None:
         """One chunk record holding exactly these K messages (arguments as write_messages'), for callers that
@@ -133,7 +156,12 @@ class McapContainer:
         self._chunk(channel, seq, log_time, pool, start, length)
 
     def _chunk(
-        self, channel: np.ndarray, seq: np.ndarray, log_time: np.ndarray, pool: np.ndarray, start: np.ndarray,
+        self,
+        channel: np.ndarray,
+        seq: np.ndarray,
+        log_time: np.ndarray,
+        pool: np.ndarray,
+        start: np.ndarray,
         length: np.ndarray,
     ) -> None:
         k = len(channel)
@@ -149,7 +177,9 @@ class McapContainer:
         for n in np.unique(length):
             sel = np.flatnonzero(length == n)
             if n > 0:
-                win(out, int(n), writeable=True)[rec_start[sel] + 31] = win(pool, int(n))[start[sel]]
+                win(out, int(n), writeable=True)[rec_start[sel] + 31] = win(pool, int(n))[
+                    start[sel]
+                ]
         data = out.tobytes()
         comp = self.cctx.compress(data)
         t0, t1 = int(log_time.min()), int(log_time.max())
@@ -173,9 +203,11 @@ class McapContainer:
             record(
                 OP_CHUNK_INDEX,
                 struct.pack("<QQQQ", t0, t1, chunk_start, chunk_len)
-                + struct.pack("<I", len(offsets)) + offsets
+                + struct.pack("<I", len(offsets))
+                + offsets
                 + struct.pack("<Q", self.pos - chunk_start - chunk_len)
-                + mstr("zstd") + struct.pack("<QQ", len(comp), len(data)),
+                + mstr("zstd")
+                + struct.pack("<QQ", len(comp), len(data)),
             )
         )
         self.t_min, self.t_max = min(self.t_min, t0), max(self.t_max, t1)
@@ -186,13 +218,27 @@ class McapContainer:
         summary_start = self.pos
         counts = b"".join(struct.pack("<HQ", c, n) for c, n in self.counts.items())
         n_msg = sum(self.counts.values())
-        stats = struct.pack(
-            "<QHIIIIQQ", n_msg, len(self.schemas), len(self.channels), len(self.attach_indexes),
-            len(self.meta_indexes), len(self.chunk_indexes), self.t_min if n_msg else 0, self.t_max,
-        ) + struct.pack("<I", len(counts)) + counts
+        stats = (
+            struct.pack(
+                "<QHIIIIQQ",
+                n_msg,
+                len(self.schemas),
+                len(self.channels),
+                len(self.attach_indexes),
+                len(self.meta_indexes),
+                len(self.chunk_indexes),
+                self.t_min if n_msg else 0,
+                self.t_max,
+            )
+            + struct.pack("<I", len(counts))
+            + counts
+        )
         groups = [
-            (OP_SCHEMA, self.schemas), (OP_CHANNEL, self.channels), (OP_STATISTICS, [record(OP_STATISTICS, stats)]),
-            (OP_CHUNK_INDEX, self.chunk_indexes), (OP_ATTACHMENT_INDEX, self.attach_indexes),
+            (OP_SCHEMA, self.schemas),
+            (OP_CHANNEL, self.channels),
+            (OP_STATISTICS, [record(OP_STATISTICS, stats)]),
+            (OP_CHUNK_INDEX, self.chunk_indexes),
+            (OP_ATTACHMENT_INDEX, self.attach_indexes),
             (OP_METADATA_INDEX, self.meta_indexes),
         ]
         summary, offsets, pos = b"", b"", summary_start

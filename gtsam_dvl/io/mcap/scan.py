@@ -30,7 +30,9 @@ from gtsam_dvl.io.storage.raw import Bodies, Loss, TopicInfo
 
 _win = np.lib.stride_tricks.sliding_window_view
 SALVAGE_HINT = "rerun with --salvage to recover the intact chunks"
-MMAP_MIN_BYTES = 16 << 20  # files this large are memory-mapped (smaller ones are read: no difference then)
+MMAP_MIN_BYTES = (
+    16 << 20
+)  # files this large are memory-mapped (smaller ones are read: no difference then)
 Buf = bytes | mmap.mmap  # the file: read, or memory-mapped
 
 
@@ -128,7 +130,9 @@ class McapScan:
         complete = n >= 45 and buf[-8:] == mc.MAGIC and buf[n - 37] == mc.OP_FOOTER
         self.complete = complete
         if not complete and not self.salvage:
-            raise GtsamDvlError(f"{self.path}: truncated at byte {n} (footer missing); {SALVAGE_HINT}")
+            raise GtsamDvlError(
+                f"{self.path}: truncated at byte {n} (footer missing); {SALVAGE_HINT}"
+            )
         pos = 8
         while pos + 9 <= n:
             op, ln = struct.unpack_from("<BQ", buf, pos)
@@ -205,7 +209,9 @@ class McapScan:
             enc, p = _str(buf, p)
             meta, _ = _map(buf, p)
             name, senc, text = self.schemas.get(sid, ("", "", ""))
-            self.channels[cid] = TopicInfo(topic, name, text if senc == "ros2msg" else None, enc, meta)
+            self.channels[cid] = TopicInfo(
+                topic, name, text if senc == "ros2msg" else None, enc, meta
+            )
 
     def _lost_tail(self, pos: int, op: int, c: int) -> None:
         """Salvage: the file ends (or turns to garbage) inside the record at ``pos``."""
@@ -248,7 +254,9 @@ class McapScan:
                 try:
                     import lz4.frame  # type: ignore[import-not-found]
                 except ImportError:
-                    raise GtsamDvlError(f"{self.path}: lz4-compressed chunks need the lz4 package") from None
+                    raise GtsamDvlError(
+                        f"{self.path}: lz4-compressed chunks need the lz4 package"
+                    ) from None
                 data = lz4.frame.decompress(raw)
             else:
                 raise GtsamDvlError(f"{self.path}: unknown chunk compression '{ch.compression}'")
@@ -262,8 +270,12 @@ class McapScan:
         per_topic: dict[str, int] = {}
         for cid, p in ch.index.items():
             topic = self._topic_of(cid)
-            per_topic[topic] = per_topic.get(topic, 0) + struct.unpack_from("<I", self.buf, p + 11)[0] // 16
-        self.losses.append(Loss(ch.pos, ch.start_ns, ch.end_ns, sum(per_topic.values()), bool(ch.index), per_topic))
+            per_topic[topic] = (
+                per_topic.get(topic, 0) + struct.unpack_from("<I", self.buf, p + 11)[0] // 16
+            )
+        self.losses.append(
+            Loss(ch.pos, ch.start_ns, ch.end_ns, sum(per_topic.values()), bool(ch.index), per_topic)
+        )
         ch.lost = True
         return None
 
@@ -279,17 +291,22 @@ class McapScan:
         """Chunks in the file, including a cut-off last one."""
         return sum(isinstance(s, _Chunk) for s in self.segments) + int(self.tail_chunk_lost)
 
-    def read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None) -> dict[str, Bodies]:
+    def read(
+        self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+    ) -> dict[str, Bodies]:
         """Bodies of every message on ``topics`` (present ones), in file order."""
         topics = set(topics)
-        pieces: dict[str, list[Bodies]] = {info.topic: [] for info in self.channels.values() if info.topic in topics}
+        pieces: dict[str, list[Bodies]] = {
+            info.topic: [] for info in self.channels.values() if info.topic in topics
+        }
         for got in self.iter_read(topics, progress):
             for t, b in got.items():
                 pieces[t].append(b)
         return {t: Bodies.concat(p) for t, p in pieces.items()}
 
-    def iter_read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None
-                  ) -> Iterator[dict[str, Bodies]]:
+    def iter_read(
+        self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+    ) -> Iterator[dict[str, Bodies]]:
         """The bodies of ``topics`` one chunk (or run of messages outside chunks) at a time, in file order;
         topics without messages in a chunk are left out of its dict. The compressed chunk is dropped from
         memory once decompressed (a memory-mapped file's pages are given back)."""
@@ -332,27 +349,41 @@ class McapScan:
 
     def _walk(self, seg: _Chunk, data: bytes, definitions: bool = False) -> np.ndarray:
         try:
-            return np.array(_walk_records(data, other=self._definition if definitions else None), np.int64)
+            return np.array(
+                _walk_records(data, other=self._definition if definitions else None), np.int64
+            )
         except (ValueError, struct.error, UnicodeDecodeError):
             raise self._fail(seg.pos, "malformed chunk records") from None
 
     def _index_offsets(self, pos: int) -> np.ndarray:
         (nbytes,) = struct.unpack_from("<I", self.buf, pos + 11)
-        entries = np.frombuffer(self.buf, dtype=[("t", "<u8"), ("o", "<u8")], count=nbytes // 16, offset=pos + 15)
+        entries = np.frombuffer(
+            self.buf, dtype=[("t", "<u8"), ("o", "<u8")], count=nbytes // 16, offset=pos + 15
+        )
         return entries["o"].astype(np.int64)
 
     def _extract(
-        self, u8: np.ndarray, offsets: np.ndarray, want: dict[int, str], pieces: dict[str, list[Bodies]],
+        self,
+        u8: np.ndarray,
+        offsets: np.ndarray,
+        want: dict[int, str],
+        pieces: dict[str, list[Bodies]],
         seg: _Chunk | None,
     ) -> None:
         if not len(offsets):
             return
         offs = np.sort(offsets)
         if offs[0] < 0 or offs[-1] + 31 > len(u8):
-            raise self._fail(seg.pos if seg else int(offs[-1]), "message index points outside the chunk")
+            raise self._fail(
+                seg.pos if seg else int(offs[-1]), "message index points outside the chunk"
+            )
         hdr = _win(u8, 31)[offs].view(mc.MESSAGE_HEADER)[:, 0]
         lens = hdr["len"].astype(np.int64) - 22
-        if (hdr["op"] != mc.OP_MESSAGE).any() or (offs + 31 + lens > len(u8)).any() or (lens < 0).any():
+        if (
+            (hdr["op"] != mc.OP_MESSAGE).any()
+            or (offs + 31 + lens > len(u8)).any()
+            or (lens < 0).any()
+        ):
             raise self._fail(seg.pos if seg else int(offs[0]), "malformed message records")
         for cid, topic in want.items():
             sel = np.flatnonzero(hdr["channel"] == cid)
@@ -364,12 +395,16 @@ class McapScan:
                 rows = _win(u8, int(n[0]))[o] if n[0] > 0 else np.zeros((len(o), 0), np.uint8)
                 pieces[topic].append(Bodies(t, fixed=rows))
             else:
-                pieces[topic].append(Bodies(t, var=[u8[a : a + b].tobytes() for a, b in zip(o, n, strict=True)]))
+                pieces[topic].append(
+                    Bodies(t, var=[u8[a : a + b].tobytes() for a, b in zip(o, n, strict=True)])
+                )
 
     def time_range(self) -> tuple[int, int]:
         """(first, last) log time over the chunks, ns; (0, 0) without chunks."""
         chunks = [s for s in self.segments if isinstance(s, _Chunk)]
-        return (min(c.start_ns for c in chunks), max(c.end_ns for c in chunks)) if chunks else (0, 0)
+        return (
+            (min(c.start_ns for c in chunks), max(c.end_ns for c in chunks)) if chunks else (0, 0)
+        )
 
     def message_counts(self) -> dict[str, int]:
         """Messages per topic from the MessageIndex records (chunks without them are not counted)."""
@@ -378,5 +413,7 @@ class McapScan:
             if isinstance(seg, _Chunk):
                 for cid, p in seg.index.items():
                     topic = self.channels[cid].topic
-                    counts[topic] = counts.get(topic, 0) + struct.unpack_from("<I", self.buf, p + 11)[0] // 16
+                    counts[topic] = (
+                        counts.get(topic, 0) + struct.unpack_from("<I", self.buf, p + 11)[0] // 16
+                    )
         return counts

@@ -21,7 +21,9 @@ from gtsam_dvl.io.mcap.container import McapContainer
 from gtsam_dvl.io.ros2 import cdr, messages
 from gtsam_dvl.io.ros2.msgdefs import full_definition
 
-_INFINITE = "    sec: 9223372036\n    nsec: 854775807\n"  # rmw's infinite duration, as rosbag2 writes it
+_INFINITE = (
+    "    sec: 9223372036\n    nsec: 854775807\n"  # rmw's infinite duration, as rosbag2 writes it
+)
 
 
 def qos_yaml(reliability: str, durability: str, depth: int) -> str:
@@ -40,7 +42,9 @@ QOS_STREAM = qos_yaml("reliable", "volatile", 10)  # sensors and results
 class McapLogWriter(AtomicWriter):
     """Context manager writing a ROS 2 MCAP (profile ros2, CDR, ros2msg schemas, zstd chunks)."""
 
-    def __init__(self, path: str | os.PathLike[str], *, t0_ns: int = 0, chunk_size: int = 1 << 20) -> None:
+    def __init__(
+        self, path: str | os.PathLike[str], *, t0_ns: int = 0, chunk_size: int = 1 << 20
+    ) -> None:
         self.path = Path(path)
         self.t0_ns = int(t0_ns)
         folder = self.path.parent
@@ -55,7 +59,9 @@ class McapLogWriter(AtomicWriter):
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[str, int]] = {}
         self._seq: dict[int, int] = {}
-        self._batches: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []  # channel, stamps, pool, len
+        self._batches: list[
+            tuple[int, np.ndarray, np.ndarray, np.ndarray]
+        ] = []  # channel, stamps, pool, len
         self.add_metadata("gtsam_dvl_time", {"t0_ns": str(self.t0_ns)})
 
     # -- plumbing -------------------------------------------------------------------------------
@@ -74,14 +80,22 @@ class McapLogWriter(AtomicWriter):
                 raise ValueError(f"{topic}: already written as {known}, not {type_name}")
             return cid
         if type_name not in self._schemas:
-            self._schemas[type_name] = self._mcap.add_schema(type_name, "ros2msg", full_definition(type_name))
-        cid = self._mcap.add_channel(topic, self._schemas[type_name], "cdr", {"offered_qos_profiles": qos})
+            self._schemas[type_name] = self._mcap.add_schema(
+                type_name, "ros2msg", full_definition(type_name)
+            )
+        cid = self._mcap.add_channel(
+            topic, self._schemas[type_name], "cdr", {"offered_qos_profiles": qos}
+        )
         self._channels[topic] = (type_name, cid)
         self._seq[cid] = 0
         return cid
 
     def add_encoded(
-        self, topic: str, type_name: str, stamps_ns: np.ndarray, bodies: np.ndarray | list[bytes],
+        self,
+        topic: str,
+        type_name: str,
+        stamps_ns: np.ndarray,
+        bodies: np.ndarray | list[bytes],
         qos: str = QOS_STREAM,
     ) -> None:
         """Low level: serialized CDR bodies, either a structured/uint8 array of equal-size messages
@@ -98,93 +112,175 @@ class McapLogWriter(AtomicWriter):
             raise ValueError(f"{topic}: {len(lens)} bodies for {len(stamps)} stamps")
         self._batches.append((cid, stamps, pool, lens))
 
-    def add_structured(self, topic: str, type_name: str, arr: np.ndarray, qos: str = QOS_STREAM) -> None:
+    def add_structured(
+        self, topic: str, type_name: str, arr: np.ndarray, qos: str = QOS_STREAM
+    ) -> None:
         """Messages filled by ``cdr.new_messages``; stamps are read back from their headers."""
         self.add_encoded(topic, type_name, cdr.stamps_ns(arr), arr, qos)
 
     # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns) ------------------------------
     def add_imu(
-        self, topic: str, t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, frame_id: str = "imu_link",
-        gyro_var: np.ndarray | None = None, accel_var: np.ndarray | None = None,
-        orientation: np.ndarray | None = None, orientation_cov: np.ndarray | None = None,
+        self,
+        topic: str,
+        t: np.ndarray,
+        b_omega: np.ndarray,
+        b_f: np.ndarray,
+        frame_id: str = "imu_link",
+        gyro_var: np.ndarray | None = None,
+        accel_var: np.ndarray | None = None,
+        orientation: np.ndarray | None = None,
+        orientation_cov: np.ndarray | None = None,
     ) -> None:
         """sensor_msgs/msg/Imu (messages.imu)."""
-        self.add_structured(topic, messages.IMU, messages.imu(self.stamps_ns(np.atleast_1d(t)), b_omega, b_f,
-                                                              frame_id, gyro_var, accel_var, orientation,
-                                                              orientation_cov))
+        self.add_structured(
+            topic,
+            messages.IMU,
+            messages.imu(
+                self.stamps_ns(np.atleast_1d(t)),
+                b_omega,
+                b_f,
+                frame_id,
+                gyro_var,
+                accel_var,
+                orientation,
+                orientation_cov,
+            ),
+        )
 
     def add_twist_with_covariance(
-        self, topic: str, t: np.ndarray, linear: np.ndarray, angular: np.ndarray | None,
-        cov: np.ndarray | None, frame_id: str,
+        self,
+        topic: str,
+        t: np.ndarray,
+        linear: np.ndarray,
+        angular: np.ndarray | None,
+        cov: np.ndarray | None,
+        frame_id: str,
     ) -> None:
         """geometry_msgs/msg/TwistWithCovarianceStamped; cov (K,6,6), None = zeros (ROS: unknown)."""
-        arr = messages.six_dof_with_covariance(messages.TWIST_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular,
-                                               cov, frame_id)
+        arr = messages.six_dof_with_covariance(
+            messages.TWIST_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular, cov, frame_id
+        )
         self.add_structured(topic, messages.TWIST_COV, arr)
 
     def add_accel_with_covariance(
-        self, topic: str, t: np.ndarray, linear: np.ndarray, angular: np.ndarray, cov: np.ndarray | None,
+        self,
+        topic: str,
+        t: np.ndarray,
+        linear: np.ndarray,
+        angular: np.ndarray,
+        cov: np.ndarray | None,
         frame_id: str,
     ) -> None:
         """geometry_msgs/msg/AccelWithCovarianceStamped. For IMU biases: linear = accelerometer bias
         (m/s^2), angular = gyro bias (rad/s), cov (K,6,6) in that order."""
-        arr = messages.six_dof_with_covariance(messages.ACCEL_COV, self.stamps_ns(np.atleast_1d(t)), linear,
-                                               angular, cov, frame_id)
+        arr = messages.six_dof_with_covariance(
+            messages.ACCEL_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular, cov, frame_id
+        )
         self.add_structured(topic, messages.ACCEL_COV, arr)
 
     def add_pose_with_covariance(
-        self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q: np.ndarray, cov: np.ndarray | None, frame_id: str
+        self,
+        topic: str,
+        t: np.ndarray,
+        n_p: np.ndarray,
+        n_q: np.ndarray,
+        cov: np.ndarray | None,
+        frame_id: str,
     ) -> None:
         """geometry_msgs/msg/PoseWithCovarianceStamped; n_q [x, y, z, w]; cov (K,6,6) over
         (position, rotation vector)."""
-        arr = messages.pose_with_covariance(self.stamps_ns(np.atleast_1d(t)), n_p, n_q, cov, frame_id)
+        arr = messages.pose_with_covariance(
+            self.stamps_ns(np.atleast_1d(t)), n_p, n_q, cov, frame_id
+        )
         self.add_structured(topic, messages.POSE_COV, arr)
 
-    def add_vector3_stamped(self, topic: str, t: np.ndarray, vec: np.ndarray, frame_id: str) -> None:
+    def add_vector3_stamped(
+        self, topic: str, t: np.ndarray, vec: np.ndarray, frame_id: str
+    ) -> None:
         """geometry_msgs/msg/Vector3Stamped."""
-        self.add_structured(topic, messages.VECTOR3,
-                            messages.vector3_stamped(self.stamps_ns(np.atleast_1d(t)), vec, frame_id))
+        self.add_structured(
+            topic,
+            messages.VECTOR3,
+            messages.vector3_stamped(self.stamps_ns(np.atleast_1d(t)), vec, frame_id),
+        )
 
     def add_scalar_with_variance(
-        self, topic: str, t: np.ndarray, value: np.ndarray, variance: np.ndarray | None, frame_id: str = ""
+        self,
+        topic: str,
+        t: np.ndarray,
+        value: np.ndarray,
+        variance: np.ndarray | None,
+        frame_id: str = "",
     ) -> None:
         """A stamped scalar and its variance as sensor_msgs/msg/Temperature (messages.scalar_with_variance); the
         topic name says what it is (e.g. /gtsam_dvl/scale)."""
-        arr = messages.scalar_with_variance(self.stamps_ns(np.atleast_1d(t)), value, variance, frame_id)
+        arr = messages.scalar_with_variance(
+            self.stamps_ns(np.atleast_1d(t)), value, variance, frame_id
+        )
         self.add_structured(topic, messages.TEMPERATURE, arr)
 
     def add_odometry(
-        self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.ndarray,
-        b_omega: np.ndarray, pose_cov: np.ndarray | None = None, twist_cov: np.ndarray | None = None,
-        frame_id: str = "map", child_frame_id: str = "base_link",
+        self,
+        topic: str,
+        t: np.ndarray,
+        n_p: np.ndarray,
+        n_q_b: np.ndarray,
+        b_v: np.ndarray,
+        b_omega: np.ndarray,
+        pose_cov: np.ndarray | None = None,
+        twist_cov: np.ndarray | None = None,
+        frame_id: str = "map",
+        child_frame_id: str = "base_link",
     ) -> None:
         """nav_msgs/msg/Odometry: pose of child in frame_id, twist (b_v, b_omega) in the child frame;
         covariances (K,6,6) or None (zeros)."""
-        arr = messages.odometry(self.stamps_ns(np.atleast_1d(t)), n_p, n_q_b, b_v, b_omega, pose_cov, twist_cov,
-                                frame_id, child_frame_id)
+        arr = messages.odometry(
+            self.stamps_ns(np.atleast_1d(t)),
+            n_p,
+            n_q_b,
+            b_v,
+            b_omega,
+            pose_cov,
+            twist_cov,
+            frame_id,
+            child_frame_id,
+        )
         self.add_structured(topic, messages.ODOMETRY, arr)
 
-    def add_path(self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map") -> None:
+    def add_path(
+        self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map"
+    ) -> None:
         """nav_msgs/msg/Path: one message, stamped at t[-1] (t0 without poses), holding every pose (PoseStamped
         at t[k])."""
         stamps = self.stamps_ns(t)
         stamp = stamps[-1:] if len(stamps) else np.array([self.t0_ns])
-        self.add_encoded(topic, messages.PATH, stamp, [messages.path(int(stamp[0]), stamps, n_p, n_q_b, frame_id)])
+        self.add_encoded(
+            topic,
+            messages.PATH,
+            stamp,
+            [messages.path(int(stamp[0]), stamps, n_p, n_q_b, frame_id)],
+        )
 
     def add_tf_static(
         self, topic: str, t: float, transforms: list[tuple[str, str, np.ndarray, np.ndarray]]
     ) -> None:
         """tf2_msgs/msg/TFMessage, latched QoS: (parent, child, parent_R_child, parent_p_child) each."""
         ns = int(self.stamps_ns([t])[0])
-        body = messages.tf_message([(ns, parent, child, p, matrix_to_quat_xyzw(np.asarray(R, dtype=float)))
-                                    for parent, child, R, p in transforms])
+        body = messages.tf_message(
+            [
+                (ns, parent, child, p, matrix_to_quat_xyzw(np.asarray(R, dtype=float)))
+                for parent, child, R, p in transforms
+            ]
+        )
         self.add_encoded(topic, messages.TF, np.array([ns]), [body], QOS_LATCHED)
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         """An MCAP Metadata record (string -> string)."""
         self._mcap.add_metadata(name, {str(k): str(v) for k, v in data.items()})
 
-    def add_attachment(self, name: str, data: bytes, media_type: str = "application/octet-stream") -> None:
+    def add_attachment(
+        self, name: str, data: bytes, media_type: str = "application/octet-stream"
+    ) -> None:
         """An MCAP Attachment record, stamped at t0."""
         self._mcap.add_attachment(name, media_type, data, self.t0_ns, self.t0_ns)
 
@@ -212,9 +308,13 @@ class McapLogWriter(AtomicWriter):
         if self._batches:
             chan, seq, stamps, pool, start, lens = self._take_batches()
             order = np.argsort(stamps, kind="stable")  # ties keep the order topics were added
-            self._mcap.write_messages(chan[order], seq[order], stamps[order], pool, start[order], lens[order])
+            self._mcap.write_messages(
+                chan[order], seq[order], stamps[order], pool, start[order], lens[order]
+            )
 
-    def _take_batches(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    def _take_batches(
+        self,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The messages added since the last call, concatenated in the order added, with their sequence numbers
         (channel, seq, stamps, pool, start, length); the list of batches is emptied."""
         batches, self._batches = self._batches, []
@@ -238,7 +338,6 @@ class McapLogWriter(AtomicWriter):
         self._tmp.unlink(missing_ok=True)
 
 
-
 class McapStreamWriter(McapLogWriter):
     """McapLogWriter for logs too long to hold: ``flush(before_ns)`` writes the messages added so far whose
     stamps are before ``before_ns`` (the caller promises that no later message is stamped earlier), so memory
@@ -247,12 +346,19 @@ class McapStreamWriter(McapLogWriter):
     sequence: McapLogWriter's order when each topic was one batch) and the same chunks, which are cut on
     the running byte count of the message records from the first message."""
 
-    def __init__(self, path: str | os.PathLike[str], *, t0_ns: int = 0, chunk_size: int = 1 << 20) -> None:
+    def __init__(
+        self, path: str | os.PathLike[str], *, t0_ns: int = 0, chunk_size: int = 1 << 20
+    ) -> None:
         super().__init__(path, t0_ns=t0_ns, chunk_size=chunk_size)
         empty = np.zeros(0, np.int64)
         # messages added and not yet in a chunk: channel, seq, stamp, body length, bodies back to back
-        self._pending: tuple[np.ndarray, ...] = (np.zeros(0, np.uint16), np.zeros(0, np.uint32), empty, empty,
-                                                 np.zeros(0, np.uint8))
+        self._pending: tuple[np.ndarray, ...] = (
+            np.zeros(0, np.uint16),
+            np.zeros(0, np.uint32),
+            empty,
+            empty,
+            np.zeros(0, np.uint8),
+        )
         self._bytes_written = 0  # message record bytes in the chunks written so far
 
     def flush(self, before_ns: int | None = None) -> None:
@@ -267,26 +373,50 @@ class McapStreamWriter(McapLogWriter):
         chan, seq, stamps, lens, pool = self._pending
         if self._batches:
             c2, s2, t2, p2, _, n2 = self._take_batches()
-            chan, seq, stamps = np.concatenate([chan, c2]), np.concatenate([seq, s2]), np.concatenate([stamps, t2])
+            chan, seq, stamps = (
+                np.concatenate([chan, c2]),
+                np.concatenate([seq, s2]),
+                np.concatenate([stamps, t2]),
+            )
             lens, pool = np.concatenate([lens, n2]), np.concatenate([pool, p2])
         if not len(stamps):
             return
         start = np.concatenate([[0], np.cumsum(lens)[:-1]])
         order = np.lexsort((seq, chan, stamps))
-        chan, seq, stamps, lens, start = chan[order], seq[order], stamps[order], lens[order], start[order]
-        ready = len(stamps) if before_ns is None else int(np.searchsorted(stamps, before_ns, side="left"))
+        chan, seq, stamps, lens, start = (
+            chan[order],
+            seq[order],
+            stamps[order],
+            lens[order],
+            start[order],
+        )
+        ready = (
+            len(stamps)
+            if before_ns is None
+            else int(np.searchsorted(stamps, before_ns, side="left"))
+        )
         rec_end = self._bytes_written + np.cumsum(31 + lens[:ready])
-        chunk_no = (rec_end - 1) // self._mcap.chunk_size  # as McapContainer.write_messages, from the first message
+        chunk_no = (
+            rec_end - 1
+        ) // self._mcap.chunk_size  # as McapContainer.write_messages, from the first message
         bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [ready]])
         done = len(bounds) - 1 if final else len(bounds) - 2  # the last chunk may still grow
         for a, b in zip(bounds[:done], bounds[1 : done + 1], strict=True):
             if b > a:
-                self._mcap.write_chunk(chan[a:b], seq[a:b], stamps[a:b], pool, start[a:b], lens[a:b])
+                self._mcap.write_chunk(
+                    chan[a:b], seq[a:b], stamps[a:b], pool, start[a:b], lens[a:b]
+                )
         cut = int(bounds[done]) if done > 0 else 0
         if cut:
             self._bytes_written = int(rec_end[cut - 1])
         keep = slice(cut, None)
-        self._pending = (chan[keep], seq[keep], stamps[keep], lens[keep], _gather(pool, start[keep], lens[keep]))
+        self._pending = (
+            chan[keep],
+            seq[keep],
+            stamps[keep],
+            lens[keep],
+            _gather(pool, start[keep], lens[keep]),
+        )
 
 
 def _gather(pool: np.ndarray, start: np.ndarray, lens: np.ndarray) -> np.ndarray:

@@ -36,9 +36,22 @@ class Field:
 Spec = tuple[Field, ...]
 
 # numpy scalar code of each ROS primitive ('str': a CDR string)
-CODES = {"bool": "?", "byte": "u1", "char": "u1", "int8": "i1", "uint8": "u1", "int16": "i2", "uint16": "u2",
-         "int32": "i4", "uint32": "u4", "int64": "i8", "uint64": "u8", "float32": "f4", "float64": "f8",
-         "string": "str"}
+CODES = {
+    "bool": "?",
+    "byte": "u1",
+    "char": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "i2",
+    "uint16": "u2",
+    "int32": "i4",
+    "uint32": "u4",
+    "int64": "i8",
+    "uint64": "u8",
+    "float32": "f4",
+    "float64": "f8",
+    "string": "str",
+}
 
 
 def _leaves(type_name: str) -> list[tuple[tuple[str, ...], str, int]]:
@@ -47,7 +60,9 @@ def _leaves(type_name: str) -> list[tuple[tuple[str, ...], str, int]]:
     out: list[tuple[tuple[str, ...], str, int]] = []
     for f in fields(type_name):
         if f.length is None:
-            raise ValueError(f"{type_name}.{f.name}: a sequence has no fixed layout (CdrWriter/CdrReader)")
+            raise ValueError(
+                f"{type_name}.{f.name}: a sequence has no fixed layout (CdrWriter/CdrReader)"
+            )
         if f.type in CODES:
             out.append(((f.name,), CODES[f.type], f.length))
             continue
@@ -68,17 +83,30 @@ def flat_spec(type_name: str) -> Spec:
     twist_covariance); Vector3, Point and Quaternion fields are float64 arrays (module doc for the byte layout)."""
     leaves = _leaves(type_name)
     names = [path[-1] for path, _, _ in leaves]
-    return tuple(Field(path[-1] if names.count(path[-1]) == 1 else f"{path[0]}_{path[-1]}", code, n)
-                 for path, code, n in leaves)
+    return tuple(
+        Field(path[-1] if names.count(path[-1]) == 1 else f"{path[0]}_{path[-1]}", code, n)
+        for path, code, n in leaves
+    )
 
 
 # the fixed-layout types gtsam_dvl reads and writes in bulk (TwistWithCovarianceStamped and
 # AccelWithCovarianceStamped share one layout)
-SPECS: dict[str, Spec] = {name: flat_spec(name) for name in (
-    "sensor_msgs/msg/Imu", "geometry_msgs/msg/TwistStamped", "geometry_msgs/msg/TwistWithCovarianceStamped",
-    "geometry_msgs/msg/AccelWithCovarianceStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-    "geometry_msgs/msg/Vector3Stamped", "sensor_msgs/msg/Temperature", "sensor_msgs/msg/FluidPressure",
-    "nav_msgs/msg/Odometry", "sensor_msgs/msg/NavSatFix", "marine_acoustic_msgs/msg/Dvl")}
+SPECS: dict[str, Spec] = {
+    name: flat_spec(name)
+    for name in (
+        "sensor_msgs/msg/Imu",
+        "geometry_msgs/msg/TwistStamped",
+        "geometry_msgs/msg/TwistWithCovarianceStamped",
+        "geometry_msgs/msg/AccelWithCovarianceStamped",
+        "geometry_msgs/msg/PoseWithCovarianceStamped",
+        "geometry_msgs/msg/Vector3Stamped",
+        "sensor_msgs/msg/Temperature",
+        "sensor_msgs/msg/FluidPressure",
+        "nav_msgs/msg/Odometry",
+        "sensor_msgs/msg/NavSatFix",
+        "marine_acoustic_msgs/msg/Dvl",
+    )
+}
 IMU = SPECS["sensor_msgs/msg/Imu"]
 FLUID_PRESSURE = SPECS["sensor_msgs/msg/FluidPressure"]
 NAVSATFIX = SPECS["sensor_msgs/msg/NavSatFix"]

@@ -25,8 +25,13 @@ def ros_pose_covariance(n_R_b: np.ndarray, pose_cov: np.ndarray) -> np.ndarray:
     return P @ pose_cov @ np.swapaxes(P, -1, -2)
 
 
-def ros_twist_covariance(n_R_b: np.ndarray, n_v: np.ndarray, pose_cov: np.ndarray, vel_cov: np.ndarray,
-                         pose_vel_cross: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def ros_twist_covariance(
+    n_R_b: np.ndarray,
+    n_v: np.ndarray,
+    pose_cov: np.ndarray,
+    vel_cov: np.ndarray,
+    pose_vel_cross: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """(b_v (..., 3) m/s, twist covariance (..., 6, 6) of (b_v, b_omega) in base_link) from the state's n_R_b
     (..., 3, 3), n_v (..., 3) and its covariance blocks (core/state_covariance.py). The angular block is left
     zero: the estimators do not estimate b_omega (ROS: unknown).
@@ -35,7 +40,9 @@ def ros_twist_covariance(n_R_b: np.ndarray, n_v: np.ndarray, pose_cov: np.ndarra
     n_R_b = np.asarray(n_R_b, dtype=float)
     R_T = np.swapaxes(n_R_b, -1, -2)
     b_v = (R_T @ np.asarray(n_v, dtype=float)[..., None])[..., 0]
-    skew_b_v = np.swapaxes(np.cross(b_v[..., None, :], np.eye(3)), -1, -2)  # column j: b_v x e_j, i.e. [b_v]x
+    skew_b_v = np.swapaxes(
+        np.cross(b_v[..., None, :], np.eye(3)), -1, -2
+    )  # column j: b_v x e_j, i.e. [b_v]x
     J = np.concatenate([skew_b_v, np.zeros_like(R_T), R_T], axis=-1)  # (..., 3, 9)
     joint = pose_velocity_covariance(pose_cov, vel_cov, pose_vel_cross)
     twist = np.zeros((*b_v.shape[:-1], 6, 6))

@@ -20,8 +20,14 @@ from gtsam_dvl.io.storage.raw import Bodies
 
 def _plain_dtype(spec: Spec) -> np.dtype:
     return np.dtype(
-        [(f.name, "O") if f.code == "str" else (f.name, f.code, (f.count,)) if f.count > 1 else (f.name, f.code)
-         for f in spec]
+        [
+            (f.name, "O")
+            if f.code == "str"
+            else (f.name, f.code, (f.count,))
+            if f.count > 1
+            else (f.name, f.code)
+            for f in spec
+        ]
     )
 
 
@@ -77,18 +83,32 @@ class MessageDecoder:
         self.topic, self.type_name, self.spec = topic, type_name, SPECS[type_name]
         self._dtype: np.dtype | None = None
         self._size = -1
-        self._fixed: list[tuple[int, int, bytes]] = []  # (start, stop, bytes) that must match to reuse the layout
+        self._fixed: list[
+            tuple[int, int, bytes]
+        ] = []  # (start, stop, bytes) that must match to reuse the layout
 
     def __call__(self, body: bytes) -> np.ndarray:
         """A one-row structured array of the message (decode()'s fields)."""
         dt = self._dtype
-        if dt is not None and len(body) == self._size and all(body[a:b] == v for a, b, v in self._fixed):
+        if (
+            dt is not None
+            and len(body) == self._size
+            and all(body[a:b] == v for a, b, v in self._fixed)
+        ):
             return np.frombuffer(body, dt, count=1)
-        arr = decode(Path(self.topic), self.topic, self.type_name,
-                     Bodies(np.zeros(1, np.int64), fixed=np.frombuffer(body, np.uint8)[None, :]))
-        if arr.dtype.names is not None and "encap" in arr.dtype.names:  # decode()'s fast path: its layout fits
+        arr = decode(
+            Path(self.topic),
+            self.topic,
+            self.type_name,
+            Bodies(np.zeros(1, np.int64), fixed=np.frombuffer(body, np.uint8)[None, :]),
+        )
+        if (
+            arr.dtype.names is not None and "encap" in arr.dtype.names
+        ):  # decode()'s fast path: its layout fits
             self._dtype, self._size = arr.dtype, len(body)
-            self._fixed = [(a, b, body[a:b]) for a, b in [(0, 4), *string_ranges(arr.dtype, self.spec)]]
+            self._fixed = [
+                (a, b, body[a:b]) for a, b in [(0, 4), *string_ranges(arr.dtype, self.spec)]
+            ]
         return arr
 
 
@@ -100,7 +120,9 @@ def first_string(arr: np.ndarray, name: str = "frame_id") -> str:
     return v.decode() if isinstance(v, bytes) else str(v)
 
 
-def decode_tf(path: Path, topic: str, bodies: Bodies) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
+def decode_tf(
+    path: Path, topic: str, bodies: Bodies
+) -> dict[str, tuple[str, np.ndarray, np.ndarray]]:
     """tf2_msgs/msg/TFMessage: child frame -> (parent, parent_R_child, parent_p_child); later wins."""
     out: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
     for body in bodies.items():

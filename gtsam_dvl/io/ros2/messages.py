@@ -29,7 +29,9 @@ TF = "tf2_msgs/msg/TFMessage"
 Transform = tuple[int, str, str, np.ndarray, np.ndarray]
 
 
-def rows(a: np.ndarray | None, k: int, shape: tuple[int, ...], name: str, fill: float = 0.0) -> np.ndarray:
+def rows(
+    a: np.ndarray | None, k: int, shape: tuple[int, ...], name: str, fill: float = 0.0
+) -> np.ndarray:
     """a as float (k, *shape), or filled with fill when None; ValueError naming the argument for another shape."""
     if a is None:
         return np.full((k, *shape), fill)
@@ -46,9 +48,16 @@ def _new(type_name: str, stamps_ns: np.ndarray, strings: dict[str, str]) -> np.n
     return arr
 
 
-def imu(stamps_ns: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, frame_id: str = "imu_link",
-        gyro_var: np.ndarray | None = None, accel_var: np.ndarray | None = None,
-        orientation: np.ndarray | None = None, orientation_cov: np.ndarray | None = None) -> np.ndarray:
+def imu(
+    stamps_ns: np.ndarray,
+    b_omega: np.ndarray,
+    b_f: np.ndarray,
+    frame_id: str = "imu_link",
+    gyro_var: np.ndarray | None = None,
+    accel_var: np.ndarray | None = None,
+    orientation: np.ndarray | None = None,
+    orientation_cov: np.ndarray | None = None,
+) -> np.ndarray:
     """sensor_msgs/msg/Imu: rate b_omega (K, 3) rad/s and specific force b_f (K, 3) m/s^2 in frame_id, their
     covariances diag(gyro_var), diag(accel_var) (None: zeros = unknown). Without orientation (K, 4) [x, y, z, w]
     orientation_covariance[0] = -1 (ROS: no orientation); with it, orientation_cov (3, 3) or (K, 3, 3) rad^2."""
@@ -71,8 +80,14 @@ def imu(stamps_ns: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, frame_id: s
     return arr
 
 
-def six_dof_with_covariance(type_name: str, stamps_ns: np.ndarray, linear: np.ndarray, angular: np.ndarray | None,
-                            cov: np.ndarray | None, frame_id: str) -> np.ndarray:
+def six_dof_with_covariance(
+    type_name: str,
+    stamps_ns: np.ndarray,
+    linear: np.ndarray,
+    angular: np.ndarray | None,
+    cov: np.ndarray | None,
+    frame_id: str,
+) -> np.ndarray:
     """TwistWithCovarianceStamped or AccelWithCovarianceStamped (type_name, one layout): linear (K, 3), angular
     (K, 3) (None: zeros), covariance (K, 6, 6) over (linear, angular)."""
     arr = _new(type_name, stamps_ns, {"frame_id": frame_id})
@@ -83,8 +98,9 @@ def six_dof_with_covariance(type_name: str, stamps_ns: np.ndarray, linear: np.nd
     return arr
 
 
-def pose_with_covariance(stamps_ns: np.ndarray, n_p: np.ndarray, n_q: np.ndarray, cov: np.ndarray | None,
-                         frame_id: str) -> np.ndarray:
+def pose_with_covariance(
+    stamps_ns: np.ndarray, n_p: np.ndarray, n_q: np.ndarray, cov: np.ndarray | None, frame_id: str
+) -> np.ndarray:
     """geometry_msgs/msg/PoseWithCovarianceStamped: position (K, 3) m and orientation (K, 4) [x, y, z, w] in
     frame_id, covariance (K, 6, 6) over (position, rotation vector)."""
     arr = _new(POSE_COV, stamps_ns, {"frame_id": frame_id})
@@ -101,8 +117,9 @@ def vector3_stamped(stamps_ns: np.ndarray, vec: np.ndarray, frame_id: str) -> np
     return arr
 
 
-def scalar_with_variance(stamps_ns: np.ndarray, value: np.ndarray, variance: np.ndarray | None,
-                         frame_id: str = "") -> np.ndarray:
+def scalar_with_variance(
+    stamps_ns: np.ndarray, value: np.ndarray, variance: np.ndarray | None, frame_id: str = ""
+) -> np.ndarray:
     """A stamped scalar (K,) and its variance (K,) as sensor_msgs/msg/Temperature (fields ``temperature``,
     ``variance``): the one standard ROS 2 message that is exactly (header, float64 value, float64 variance), so
     ros2 bag, Foxglove and rosbags plot it without custom definitions. The topic name says what the value is."""
@@ -112,9 +129,17 @@ def scalar_with_variance(stamps_ns: np.ndarray, value: np.ndarray, variance: np.
     return arr
 
 
-def odometry(stamps_ns: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.ndarray, b_omega: np.ndarray,
-             pose_cov: np.ndarray | None = None, twist_cov: np.ndarray | None = None, frame_id: str = "map",
-             child_frame_id: str = "base_link") -> np.ndarray:
+def odometry(
+    stamps_ns: np.ndarray,
+    n_p: np.ndarray,
+    n_q_b: np.ndarray,
+    b_v: np.ndarray,
+    b_omega: np.ndarray,
+    pose_cov: np.ndarray | None = None,
+    twist_cov: np.ndarray | None = None,
+    frame_id: str = "map",
+    child_frame_id: str = "base_link",
+) -> np.ndarray:
     """nav_msgs/msg/Odometry: pose of child_frame_id in frame_id (n_p (K, 3) m, n_q_b (K, 4) [x, y, z, w]), twist
     (b_v (K, 3) m/s, b_omega (K, 3) rad/s) in child_frame_id; covariances (K, 6, 6) in ROS order
     (io/ros2/covariance.py)."""
@@ -127,7 +152,9 @@ def odometry(stamps_ns: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, b_v: np.
     return arr
 
 
-def path(stamp_ns: int, stamps_ns: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map") -> bytes:
+def path(
+    stamp_ns: int, stamps_ns: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map"
+) -> bytes:
     """One nav_msgs/msg/Path stamped stamp_ns holding K poses: PoseStamped at stamps_ns[k] (ns), position n_p[k]
     (m) and orientation n_q_b[k] [x, y, z, w] in frame_id."""
     k = len(stamps_ns)
@@ -151,5 +178,9 @@ def tf_message(transforms: Sequence[Transform]) -> bytes:
         w.stamp(ns)
         w.string(parent)
         w.string(child)
-        w.f64(np.concatenate([np.asarray(p, dtype=float).reshape(3), np.asarray(q, dtype=float).reshape(4)]))
+        w.f64(
+            np.concatenate(
+                [np.asarray(p, dtype=float).reshape(3), np.asarray(q, dtype=float).reshape(4)]
+            )
+        )
     return bytes(w.buf)

@@ -28,7 +28,9 @@ def normalize_type(name: str) -> str:
 def message_text(type_name: str) -> str:
     """The .msg text of one type (no dependencies), e.g. 'sensor_msgs/msg/Imu'."""
     pkg, _, msg = normalize_type(type_name).split("/")
-    path = resources.files("gtsam_dvl.io.ros2").joinpath("msg-definitions", f"{pkg}__msg__{msg}.msg")
+    path = resources.files("gtsam_dvl.io.ros2").joinpath(
+        "msg-definitions", f"{pkg}__msg__{msg}.msg"
+    )
     try:
         return path.read_text(encoding="utf-8").rstrip("\n")
     except FileNotFoundError:

@@ -36,21 +36,23 @@ def bag_metadata_yaml(mcap_path: Path, relative_name: str) -> str:
             f"        serialization_format: {info.message_encoding}\n        offered_qos_profiles:{qos_yaml}\n"
             f"      message_count: {counts.get(info.topic, 0)}"
         )
-    period = (
-        f"  starting_time:\n    nanoseconds_since_epoch: {start}\n  duration:\n    nanoseconds: {end - start}\n"
-    )
+    period = f"  starting_time:\n    nanoseconds_since_epoch: {start}\n  duration:\n    nanoseconds: {end - start}\n"
     return (
         "rosbag2_bagfile_information:\n  version: 9\n  storage_identifier: mcap\n"
         f"  duration:\n    nanoseconds: {end - start}\n  starting_time:\n    nanoseconds_since_epoch: {start}\n"
         f"  message_count: {total}\n  topics_with_message_count:\n" + "\n".join(topics) + "\n"
         '  compression_format: ""\n  compression_mode: ""\n'
         f"  relative_file_paths:\n    - {relative_name}\n"
-        f"  files:\n    - path: {relative_name}\n" + _indent(period, 4) + f"\n      message_count: {total}\n"
+        f"  files:\n    - path: {relative_name}\n"
+        + _indent(period, 4)
+        + f"\n      message_count: {total}\n"
         "  custom_data: ~\n  ros_distro: gtsam_dvl\n"
     )
 
 
-def make_bag_dir(mcap_path: str | os.PathLike[str], folder: str | os.PathLike[str] | None = None) -> Path:
+def make_bag_dir(
+    mcap_path: str | os.PathLike[str], folder: str | os.PathLike[str] | None = None
+) -> Path:
     """Create ``folder`` (default: the .mcap's name without suffix) holding the .mcap (hard link, or a
     copy across file systems) and its metadata.yaml. Returns the folder."""
     src = Path(mcap_path)

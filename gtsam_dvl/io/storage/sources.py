@@ -37,7 +37,9 @@ class Db3Source:
         self.topics: dict[str, TopicInfo] = {}
         try:
             self.con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-            tables = {r[0] for r in self.con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+            tables = {
+                r[0] for r in self.con.execute("SELECT name FROM sqlite_master WHERE type='table'")
+            }
             defs: dict[str, str] = {}
             if "message_definitions" in tables:
                 for tname, enc, text in self.con.execute(
@@ -57,17 +59,22 @@ class Db3Source:
         return 0
 
     def message_counts(self) -> dict[str, int]:
-        rows = self.con.execute("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id").fetchall()
+        rows = self.con.execute(
+            "SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id"
+        ).fetchall()
         names = {v: k for k, v in self._ids.items()}
         return {names[t]: n for t, n in rows if t in names}
 
-    def read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None) -> dict[str, Bodies]:
+    def read(
+        self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+    ) -> dict[str, Bodies]:
         out: dict[str, Bodies] = {}
         wanted = [t for t in topics if t in self._ids]
         for i, topic in enumerate(wanted):
             try:
                 rows = self.con.execute(
-                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id", (self._ids[topic],)
+                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id",
+                    (self._ids[topic],),
                 ).fetchall()
             except sqlite3.Error as e:
                 raise GtsamDvlError(f"{self.path}: cannot read {topic} ({e})") from None
@@ -76,14 +83,17 @@ class Db3Source:
                 progress((i + 1) / len(wanted))
         return out
 
-    def iter_read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None
-                  ) -> Iterator[dict[str, Bodies]]:
+    def iter_read(
+        self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+    ) -> Iterator[dict[str, Bodies]]:
         """``read``'s bodies in pages of DB3_PAGE rows, topic after topic (each topic's in order)."""
         wanted = [t for t in topics if t in self._ids]
         for i, topic in enumerate(wanted):
             try:
                 cur = self.con.execute(
-                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id", (self._ids[topic],))
+                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id",
+                    (self._ids[topic],),
+                )
                 while rows := cur.fetchmany(DB3_PAGE):
                     yield {topic: _bodies(rows)}
             except sqlite3.Error as e:
@@ -136,7 +146,9 @@ class Source:
                 out[k] = out.get(k, 0) + n
         return out
 
-    def read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None) -> dict[str, Bodies]:
+    def read(
+        self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+    ) -> dict[str, Bodies]:
         topics = list(topics)
         got: dict[str, list[Bodies]] = {}
         for i, p in enumerate(self.parts):
@@ -145,8 +157,9 @@ class Source:
                 got.setdefault(k, []).append(b)
         return {k: v[0] if len(v) == 1 else Bodies.concat(v) for k, v in got.items()}
 
-    def iter_read(self, topics: Iterable[str], progress: Callable[[float], None] | None = None
-                  ) -> Iterator[dict[str, Bodies]]:
+    def iter_read(
+        self, topics: Iterable[str], progress: Callable[[float], None] | None = None
+    ) -> Iterator[dict[str, Bodies]]:
         """``read``'s bodies piece by piece (the storage's chunks or pages), parts in order, each topic's
         bodies in file order."""
         topics = list(topics)
@@ -162,16 +175,28 @@ def _bag_files(folder: Path) -> list[Path]:
     names: list[str] = []
     meta = folder / "metadata.yaml"
     if meta.is_file():
-        m = re.search(r"relative_file_paths:[ \t]*\n((?:[ \t]*-[^\n]*\n?)+)", meta.read_text(errors="replace"))
+        m = re.search(
+            r"relative_file_paths:[ \t]*\n((?:[ \t]*-[^\n]*\n?)+)", meta.read_text(errors="replace")
+        )
         if m:
-            names = [ln.split("-", 1)[1].strip().strip("'\"") for ln in m.group(1).splitlines() if ln.strip()]
-    files = [folder / Path(n).name for n in names] or sorted([*folder.glob("*.mcap"), *folder.glob("*.db3")])
+            names = [
+                ln.split("-", 1)[1].strip().strip("'\"")
+                for ln in m.group(1).splitlines()
+                if ln.strip()
+            ]
+    files = [folder / Path(n).name for n in names] or sorted(
+        [*folder.glob("*.mcap"), *folder.glob("*.db3")]
+    )
     if not files:
         raise GtsamDvlError(f"{folder}: a folder without .mcap or .db3 files (not a rosbag2 bag)")
     if missing := [f.name for f in files if not f.exists()]:
-        raise GtsamDvlError(f"{folder}: storage files listed in metadata.yaml are missing: {', '.join(missing)}")
+        raise GtsamDvlError(
+            f"{folder}: storage files listed in metadata.yaml are missing: {', '.join(missing)}"
+        )
     if packed := [f.name for f in files if f.suffix in (".zstd", ".zst")]:
-        raise GtsamDvlError(f"{folder}: file-compressed bag ({packed[0]}); run `ros2 bag decompress` first")
+        raise GtsamDvlError(
+            f"{folder}: file-compressed bag ({packed[0]}); run `ros2 bag decompress` first"
+        )
     return files
 
 

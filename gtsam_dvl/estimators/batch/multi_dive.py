@@ -6,7 +6,8 @@ its own variables x_d (trajectory, IMU biases, time offset, the DVL's correlated
 
     min over s, x_1..x_D of  sum_d || f_d(x_d, s) ||^2  +  || prior(s) ||^2
 
-with f_d the batch smoother's whitened factors of dive d (estimators/graph.py LogGraph, estimators/batch.py)
+with f_d the batch smoother's whitened factors of dive d (estimators/graph/log_graph.py LogGraph,
+estimators/batch/smoother.py)
 WITHOUT the priors of s, which the joint problem holds once. One Gauss-Newton iteration, exact for the linearised
 problem:
 
@@ -55,19 +56,19 @@ from gtsam_dvl.core.states import (
 )
 from gtsam_dvl.core.states import calibration_states as states_held
 from gtsam_dvl.core.types import LogData, Mounting
-from gtsam_dvl.estimators.batch_solve import extract_result, solve_log
-from gtsam_dvl.estimators.bulk import BulkGraph
-from gtsam_dvl.estimators.current import resolve_water_track
-from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
-from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.noise_levels import NoiseReport
-from gtsam_dvl.estimators.solver import (
+from gtsam_dvl.estimators.batch.solve import extract_result, solve_log
+from gtsam_dvl.estimators.graph.bulk import BulkGraph
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.graph.solver import (
     CHUNKED_FROM_STATES,
     ChunkedOrdering,
     CompactBayesNet,
     bayes_net_marginals,
     eliminate_chunks,
 )
+from gtsam_dvl.estimators.inputs.gaps import screened_in_memory, screened_losses
+from gtsam_dvl.estimators.models.current import resolve_water_track
+from gtsam_dvl.estimators.models.noise_levels import NoiseReport
 
 # states that stay per dive although core/states.py marks them as the vehicle's: a dive's own clocks
 PER_DIVE = ("time_offset",)
@@ -75,12 +76,18 @@ TOL = 1e-2  # stop when every |ds_i| < TOL sigma_i
 MAX_ITERATIONS = 20
 
 
-def calibration_states(config: EstimatorConfig, calibration: VehicleCalibration | None = None) -> list[str]:
+def calibration_states(
+    config: EstimatorConfig, calibration: VehicleCalibration | None = None
+) -> list[str]:
     """The vehicle's calibration states the dives share, in registry (= key, = covariance) order: the vehicle's
     states the configuration estimates but the time offset, and with a vehicle's calibration as the prior
     (core/states.py calibration_states) every state it holds, the time offset too (one joint prior)."""
     held = {s.name for s in states_held(config, calibration)}
-    return [s.name for s in enabled_states(config) if (s.vehicle and s.name not in PER_DIVE) or s.name in held]
+    return [
+        s.name
+        for s in enabled_states(config)
+        if (s.vehicle and s.name not in PER_DIVE) or s.name in held
+    ]
 
 
 def state_keys(names: Sequence[str]) -> list[int]:
@@ -119,10 +126,13 @@ class DiveState:
     own: gtsam.Ordering  # the dive's own keys, eliminated in this order
     shared: gtsam.Ordering  # the shared keys, in `states` order
     alone: NavResult  # the dive smoothed alone, with the priors
-    # the states' keys in chunks (estimators/graph.py elimination_ordering) and the dive's own shared keys after
+    # the states' keys in chunks (estimators/graph/log_graph.py elimination_ordering) and the dive's own shared keys
+    # after
     plan: ChunkedOrdering = field(default_factory=lambda: ChunkedOrdering([], []), repr=False)
     bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = field(default=None, repr=False)
-    calibration: VehicleCalibration | None = field(default=None, repr=False)  # the prior (prepare_dive)
+    calibration: VehicleCalibration | None = field(
+        default=None, repr=False
+    )  # the prior (prepare_dive)
 
     @property
     def config(self) -> EstimatorConfig:
@@ -133,9 +143,14 @@ class DiveState:
         return self.builder.maker.mounting
 
 
-def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str = "",
-                 calibration: VehicleCalibration | None = None) -> DiveState:
-    """A dive smoothed alone as the batch smoother does (its passes and DVL noise fit, estimators/batch.py), then
+def prepare_dive(
+    log: LogData,
+    config: EstimatorConfig | None = None,
+    name: str = "",
+    calibration: VehicleCalibration | None = None,
+) -> DiveState:
+    """A dive smoothed alone as the batch smoother does (its passes and DVL noise fit, estimators/batch/smoother.py),
+    then
     its graph without the priors of the shared states, ready for the joint iterations. calibration: a vehicle's
     calibration as the joint prior of the states it holds (batch.smooth_batch's), counted once by the caller."""
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
@@ -144,8 +159,9 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
     noise = NoiseReport()
     log = screened_in_memory(log)
     builder, graph, values, ordering, report, _, _ = solve_log(log, config, noise, {}, calibration)
-    alone = extract_result(builder, graph, values, ordering,
-                           bayes_net=report.bayes_net if report.converged else None)
+    alone = extract_result(
+        builder, graph, values, ordering, bayes_net=report.bayes_net if report.converged else None
+    )
     alone.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:
         alone.info["screened_losses"] = screened
@@ -154,21 +170,34 @@ def prepare_dive(log: LogData, config: EstimatorConfig | None = None, name: str 
         alone.info["calibration_prior"] = calibration_info(builder.config, calibration)
     names = calibration_states(builder.config, calibration)
     keys = state_keys(names)
-    without = gtsam.NonlinearFactorGraph()  # the graph without the shared states' priors (the joint holds them)
+    without = (
+        gtsam.NonlinearFactorGraph()
+    )  # the graph without the shared states' priors (the joint holds them)
     for i in range(graph.graph.size()):
         if graph.graph.exists(i):
             f = graph.graph.at(i)
             if not all(k in keys for k in f.keys()):  # (a factor on shared keys alone: their prior)
                 without.add(f)
     own = gtsam.Ordering()
-    for k in [k for chunk in ordering.chunks for k in chunk] + [k for k in ordering.rest if k not in keys]:
+    for k in [k for chunk in ordering.chunks for k in chunk] + [
+        k for k in ordering.rest if k not in keys
+    ]:
         own.push_back(k)
     shared = gtsam.Ordering()
     for k in keys:
         shared.push_back(k)
-    return DiveState(name or log.source, builder, BulkGraph(without, graph.bulk, graph.imu), values, names, own,
-                     shared, alone, ChunkedOrdering(ordering.chunks, [k for k in ordering.rest if k not in keys]),
-                     calibration=calibration)
+    return DiveState(
+        name or log.source,
+        builder,
+        BulkGraph(without, graph.bulk, graph.imu),
+        values,
+        names,
+        own,
+        shared,
+        alone,
+        ChunkedOrdering(ordering.chunks, [k for k in ordering.rest if k not in keys]),
+        calibration=calibration,
+    )
 
 
 def own_keys(dive: DiveState) -> list[int]:
@@ -201,8 +230,9 @@ def _square_root(A: np.ndarray, b: np.ndarray, n: int) -> tuple[np.ndarray, np.n
     return out[:, :n], out[:, n]
 
 
-def eliminate_own(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering, own: gtsam.Ordering
-                  ) -> tuple[gtsam.GaussianBayesNet | CompactBayesNet, gtsam.GaussianFactorGraph]:
+def eliminate_own(
+    linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering, own: gtsam.Ordering
+) -> tuple[gtsam.GaussianBayesNet | CompactBayesNet, gtsam.GaussianFactorGraph]:
     """QR elimination of a dive's own variables (plan: its states' chunks, then its own shared keys in plan.rest),
     leaving the factor graph on the shared keys: GTSAM's one partial elimination (`own`, the same order), or above
     solver.CHUNKED_FROM_STATES states a chunk at a time, as solver.eliminate_chunked does (GTSAM's one elimination
@@ -218,8 +248,9 @@ def eliminate_own(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering, own:
     return bn, rest
 
 
-def back_substitute(bn: gtsam.GaussianBayesNet | CompactBayesNet, given: dict[int, np.ndarray]
-                    ) -> gtsam.VectorValues:
+def back_substitute(
+    bn: gtsam.GaussianBayesNet | CompactBayesNet, given: dict[int, np.ndarray]
+) -> gtsam.VectorValues:
     """x_F = R^-1 (d - S x_P) from the last conditional to the first, the shared keys' values given."""
     if isinstance(bn, gtsam.GaussianBayesNet):
         vv = gtsam.VectorValues()
@@ -237,7 +268,9 @@ def reduce_dive(dive: DiveState) -> Reduction:
     try:
         bn, rest = eliminate_own(linear, dive.plan, dive.own)
     except RuntimeError as exc:
-        raise GtsamDvlError(f"{dive.name}: its own variables could not be eliminated ({exc})") from None
+        raise GtsamDvlError(
+            f"{dive.name}: its own variables could not be eliminated ({exc})"
+        ) from None
     dive.bayes_net = bn
     A, b = rest.jacobian(dive.shared)
     n = sum(BY_NAME[s].dim for s in dive.states)
@@ -250,7 +283,10 @@ def advance_dive(dive: DiveState, ds: np.ndarray, new_shared: dict[str, np.ndarr
     dive's own step, retract, and set the shared states to new_shared (the caller's retraction of ds)."""
     if dive.bayes_net is None:
         raise GtsamDvlError(f"{dive.name}: advance_dive before reduce_dive")
-    given = {BY_NAME[n].key: np.asarray(ds[sl], dtype=float) for n, sl in state_slices(dive.states).items()}
+    given = {
+        BY_NAME[n].key: np.asarray(ds[sl], dtype=float)
+        for n, sl in state_slices(dive.states).items()
+    }
     dx = back_substitute(dive.bayes_net, given)
     for n, sl in state_slices(dive.states).items():
         if not dx.exists(BY_NAME[n].key):
@@ -262,8 +298,13 @@ def advance_dive(dive: DiveState, ds: np.ndarray, new_shared: dict[str, np.ndarr
 
 # ----- the caller's side: the shared priors, the joint solve, the iterations -----------------------------------
 
-def shared_prior_graph(config: EstimatorConfig, mounting: Mounting, names: Sequence[str],
-                       calibration: VehicleCalibration | None = None) -> gtsam.NonlinearFactorGraph:
+
+def shared_prior_graph(
+    config: EstimatorConfig,
+    mounting: Mounting,
+    names: Sequence[str],
+    calibration: VehicleCalibration | None = None,
+) -> gtsam.NonlinearFactorGraph:
     """The priors of the shared states (core/states.py prior_factors: with a vehicle's calibration, its one joint
     prior), once for all dives."""
     keys = set(state_keys(names))
@@ -286,11 +327,19 @@ def _values_of(names: Sequence[str], values: dict[str, np.ndarray]) -> gtsam.Val
 
 
 def _dict_of(names: Sequence[str], values: gtsam.Values) -> dict[str, np.ndarray]:
-    return {n: (np.asarray(values.atRot3(BY_NAME[n].key).matrix()) if BY_NAME[n].kind == "rot3"
-                else np.asarray(values.atVector(BY_NAME[n].key), dtype=float)) for n in names}
+    return {
+        n: (
+            np.asarray(values.atRot3(BY_NAME[n].key).matrix())
+            if BY_NAME[n].kind == "rot3"
+            else np.asarray(values.atVector(BY_NAME[n].key), dtype=float)
+        )
+        for n in names
+    }
 
 
-def retract_shared(names: Sequence[str], values: dict[str, np.ndarray], ds: np.ndarray) -> dict[str, np.ndarray]:
+def retract_shared(
+    names: Sequence[str], values: dict[str, np.ndarray], ds: np.ndarray
+) -> dict[str, np.ndarray]:
     """The shared states moved by ds (tangent, GTSAM's retraction: b_R_d perturbed on the right)."""
     delta = gtsam.VectorValues()
     for n, sl in state_slices(names).items():
@@ -298,7 +347,9 @@ def retract_shared(names: Sequence[str], values: dict[str, np.ndarray], ds: np.n
     return _dict_of(names, _values_of(names, values).retract(delta))
 
 
-def prior_rows(prior: gtsam.NonlinearFactorGraph, names: Sequence[str], values: dict[str, np.ndarray]) -> Reduction:
+def prior_rows(
+    prior: gtsam.NonlinearFactorGraph, names: Sequence[str], values: dict[str, np.ndarray]
+) -> Reduction:
     """The shared priors linearised at values, as square-root rows."""
     at = _values_of(names, values)
     order = gtsam.Ordering()
@@ -316,7 +367,9 @@ def solve_shared(parts: Sequence[Reduction]) -> tuple[np.ndarray, np.ndarray]:
     b = np.concatenate([p.d for p in parts])
     R, d = _square_root(A, b, A.shape[1])
     if np.any(np.abs(np.diag(R)) <= 1e-12 * max(1.0, float(np.abs(R).max()))):
-        raise GtsamDvlError("the shared calibration states are not determined by the dives and their priors")
+        raise GtsamDvlError(
+            "the shared calibration states are not determined by the dives and their priors"
+        )
     ds = solve_triangular(R, d)
     Rinv = solve_triangular(R, np.eye(len(d)))
     return ds, Rinv @ Rinv.T
@@ -348,9 +401,15 @@ ReduceAll = Callable[[], list[Reduction]]
 AdvanceAll = Callable[[np.ndarray, dict[str, np.ndarray]], None]
 
 
-def iterate_joint(names: list[str], start: dict[str, np.ndarray], prior: gtsam.NonlinearFactorGraph,
-                  reduce_all: ReduceAll, advance_all: AdvanceAll, tol: float = TOL,
-                  max_iterations: int = MAX_ITERATIONS) -> JointSolution:
+def iterate_joint(
+    names: list[str],
+    start: dict[str, np.ndarray],
+    prior: gtsam.NonlinearFactorGraph,
+    reduce_all: ReduceAll,
+    advance_all: AdvanceAll,
+    tol: float = TOL,
+    max_iterations: int = MAX_ITERATIONS,
+) -> JointSolution:
     """The joint Gauss-Newton iterations (module doc) over dives that the callbacks reach: reduce_all linearises
     and reduces every dive at the current shared values (which advance_all set), advance_all back-substitutes ds.
     The callbacks leave out a dive that failed (and report it), so that the others finish."""
@@ -366,7 +425,13 @@ def iterate_joint(names: list[str], start: dict[str, np.ndarray], prior: gtsam.N
         p = prior_rows(prior, names, values)
         ds, cov = solve_shared(parts + [p])
         step = float(np.max(np.abs(ds) / np.sqrt(np.diag(cov))))
-        history.append({"error": sum(r.error for r in parts) + p.error, "step_sigma": step, "dives": len(parts)})
+        history.append(
+            {
+                "error": sum(r.error for r in parts) + p.error,
+                "step_sigma": step,
+                "dives": len(parts),
+            }
+        )
         values = retract_shared(names, values, ds)
         advance_all(ds, values)
         if step < tol:
@@ -374,8 +439,9 @@ def iterate_joint(names: list[str], start: dict[str, np.ndarray], prior: gtsam.N
     return JointSolution(names, values, cov, max_iterations, False, history, parts, [p])
 
 
-def calibrate_in_process(dives: list[DiveState], tol: float = TOL,
-                         max_iterations: int = MAX_ITERATIONS) -> JointSolution:
+def calibrate_in_process(
+    dives: list[DiveState], tol: float = TOL, max_iterations: int = MAX_ITERATIONS
+) -> JointSolution:
     """The joint calibration of prepared dives in this process (no Dask): iterate_joint over the list."""
     names, start, prior = joint_setup(dives)
     for d in dives:
@@ -391,24 +457,36 @@ def calibrate_in_process(dives: list[DiveState], tol: float = TOL,
     return iterate_joint(names, start, prior, reduce_all, advance_all, tol, max_iterations)
 
 
-def joint_setup(dives: Sequence[DiveState] | Sequence[DiveSummary]
-                ) -> tuple[list[str], dict[str, np.ndarray], gtsam.NonlinearFactorGraph]:
+def joint_setup(
+    dives: Sequence[DiveState] | Sequence[DiveSummary],
+) -> tuple[list[str], dict[str, np.ndarray], gtsam.NonlinearFactorGraph]:
     """The shared states, the starting values (the dive with the smallest scale sigma alone: the best
     determined) and the shared priors, checked for one vehicle: the same states and the same nominal mounting."""
     summaries = [d if isinstance(d, DiveSummary) else summarise(d) for d in dives]
     first = summaries[0]
     for s in summaries[1:]:
         if s.states != first.states:
-            raise GtsamDvlError(f"{s.name}: estimates {', '.join(s.states)}, {first.name} "
-                                f"{', '.join(first.states)}: one configuration for every dive")
-        if not (np.allclose(s.mounting.b_R_d0, first.mounting.b_R_d0, atol=1e-9)
-                and np.allclose(s.mounting.b_l, first.mounting.b_l, atol=1e-9)):
-            raise GtsamDvlError(f"{s.name}: its nominal DVL mounting (/tf_static) differs from {first.name}'s: "
-                                "one vehicle's dives share one mounting")
-    best = min(summaries, key=lambda s: float(s.alone["scale"].sigma[0]) if "scale" in s.alone else 0.0)
+            raise GtsamDvlError(
+                f"{s.name}: estimates {', '.join(s.states)}, {first.name} "
+                f"{', '.join(first.states)}: one configuration for every dive"
+            )
+        if not (
+            np.allclose(s.mounting.b_R_d0, first.mounting.b_R_d0, atol=1e-9)
+            and np.allclose(s.mounting.b_l, first.mounting.b_l, atol=1e-9)
+        ):
+            raise GtsamDvlError(
+                f"{s.name}: its nominal DVL mounting (/tf_static) differs from {first.name}'s: "
+                "one vehicle's dives share one mounting"
+            )
+    best = min(
+        summaries, key=lambda s: float(s.alone["scale"].sigma[0]) if "scale" in s.alone else 0.0
+    )
     start = {n: np.asarray(best.alone[n].value, dtype=float) for n in first.states}
-    return list(first.states), start, shared_prior_graph(first.config, first.mounting, first.states,
-                                                         first.calibration)
+    return (
+        list(first.states),
+        start,
+        shared_prior_graph(first.config, first.mounting, first.states, first.calibration),
+    )
 
 
 @dataclass
@@ -424,8 +502,12 @@ class DiveSummary:
     alone_cov: np.ndarray  # the joint covariance of `states` alone (SI, `states` order)
     t0_ns: int
     info: dict[str, Any]
-    stated_config: dict[str, Any] = field(default_factory=dict)  # the configuration as given (NavResult.config)
-    calibration: VehicleCalibration | None = None  # a vehicle's calibration as the prior (prepare_dive)
+    stated_config: dict[str, Any] = field(
+        default_factory=dict
+    )  # the configuration as given (NavResult.config)
+    calibration: VehicleCalibration | None = (
+        None  # a vehicle's calibration as the prior (prepare_dive)
+    )
 
 
 def summarise(dive: DiveState) -> DiveSummary:
@@ -434,13 +516,26 @@ def summarise(dive: DiveState) -> DiveSummary:
     sl = joint_slices(dive.config)
     idx = np.concatenate([np.arange(sl[n].start, sl[n].stop) for n in dive.states])
     cov = np.asarray(result.shared_joint_cov)[np.ix_(idx, idx)]
-    return DiveSummary(dive.name, list(dive.states), dive.config, dive.mounting, dict(result.calibration), cov,
-                       int(result.t0_ns), {"epochs": result.info.get("epochs"), "noise": result.info.get("noise"),
-                                           "solver": result.info.get("solver")}, dict(result.config),
-                       dive.calibration)
+    return DiveSummary(
+        dive.name,
+        list(dive.states),
+        dive.config,
+        dive.mounting,
+        dict(result.calibration),
+        cov,
+        int(result.t0_ns),
+        {
+            "epochs": result.info.get("epochs"),
+            "noise": result.info.get("noise"),
+            "solver": result.info.get("solver"),
+        },
+        dict(result.config),
+        dive.calibration,
+    )
 
 
 # ----- the independent check: every dive in one graph ---------------------------------------------------------
+
 
 class Rows:
     """Fixed whitened rows A dx - b as a CustomFactor serves them: a linear factor on any number of keys (GTSAM's
@@ -458,8 +553,9 @@ class Rows:
         return self.e
 
 
-def renamed(linear: gtsam.GaussianFactorGraph, rename: Callable[[int], int]
-            ) -> tuple[gtsam.GaussianFactorGraph, set[int]]:
+def renamed(
+    linear: gtsam.GaussianFactorGraph, rename: Callable[[int], int]
+) -> tuple[gtsam.GaussianFactorGraph, set[int]]:
     """A linear graph with its keys renamed (GTSAM's Python JacobianFactor takes at most three keys, so each
     factor's whitened rows go through a CustomFactor on the new keys, linearised once); and the new keys."""
     carriers = gtsam.NonlinearFactorGraph()
@@ -473,8 +569,13 @@ def renamed(linear: gtsam.GaussianFactorGraph, rename: Callable[[int], int]
         cols = np.cumsum([0] + [key_dim(k) for k in old])
         new = [rename(k) for k in old]
         keys.update(new)
-        carriers.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(A.shape[0]), new,
-                                        Rows([A[:, cols[j]:cols[j + 1]] for j in range(len(old))], np.ravel(b))))
+        carriers.add(
+            gtsam.CustomFactor(
+                gtsam.noiseModel.Unit.Create(A.shape[0]),
+                new,
+                Rows([A[:, cols[j] : cols[j + 1]] for j in range(len(old))], np.ravel(b)),
+            )
+        )
     at = gtsam.Values()
     for k in keys:
         at.insert(k, np.zeros(key_dim(k)))
@@ -484,11 +585,13 @@ def renamed(linear: gtsam.GaussianFactorGraph, rename: Callable[[int], int]
 def _renaming(shared: set[int], offset: int) -> Callable[[int], int]:
     def rename(k: int) -> int:
         return k if k in shared else k + offset
+
     return rename
 
 
-def solve_one_graph(dives: Sequence[DiveState], tol: float = TOL,
-                    max_iterations: int = MAX_ITERATIONS) -> JointSolution:
+def solve_one_graph(
+    dives: Sequence[DiveState], tol: float = TOL, max_iterations: int = MAX_ITERATIONS
+) -> JointSolution:
     """The independent check of calibrate: the dives' linearised graphs, each dive's own keys renamed (the symbol
     index moved by (d + 1) * 2^40), with the shared keys and their priors in ONE factor graph, eliminated at once
     (QR, the shared keys last) and iterated by Gauss-Newton as one problem. Works on copies: the dives' values
@@ -499,7 +602,9 @@ def solve_one_graph(dives: Sequence[DiveState], tol: float = TOL,
     values = [gtsam.Values(d.values) for d in dives]
     for v in values:
         for n in names:
-            v.update(BY_NAME[n].key, gtsam.Rot3(start[n]) if BY_NAME[n].kind == "rot3" else start[n])
+            v.update(
+                BY_NAME[n].key, gtsam.Rot3(start[n]) if BY_NAME[n].kind == "rot3" else start[n]
+            )
     s = dict(start)
     history: list[dict[str, float]] = []
     for it in range(1, max_iterations + 1):
@@ -537,4 +642,3 @@ def solve_one_graph(dives: Sequence[DiveState], tol: float = TOL,
         if step < tol:
             return JointSolution(names, s, cov, it, True, history)
     return JointSolution(names, s, cov, max_iterations, False, history)
-

@@ -39,7 +39,7 @@ class SolveReport:
 
 
 class Objective(Protocol):
-    """What the solver needs of a graph: a NonlinearFactorGraph, or estimators/bulk.py's BulkGraph."""
+    """What the solver needs of a graph: a NonlinearFactorGraph, or estimators/graph/bulk.py's BulkGraph."""
 
     def error(self, values: gtsam.Values) -> float: ...
 
@@ -101,8 +101,10 @@ class CompactBayesNet:
             # keyframes has 170,000 conditionals; docs/results.md, Speed)
             sol, info = _trtrs(c._R, rhs)
             if info != 0 or not np.isfinite(sol).all():
-                raise GtsamDvlError("the linear system is indeterminate at variable "
-                                    f"{gtsam.DefaultKeyFormatter(keys[0])}")
+                raise GtsamDvlError(
+                    "the linear system is indeterminate at variable "
+                    f"{gtsam.DefaultKeyFormatter(keys[0])}"
+                )
             x[keys[0]] = sol
             out.insert(keys[0], sol)
         return out
@@ -139,8 +141,9 @@ def eliminate_chunked(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering) 
     return bn
 
 
-def eliminate_chunks(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering
-                     ) -> tuple[CompactBayesNet, gtsam.GaussianFactorGraph]:
+def eliminate_chunks(
+    linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering
+) -> tuple[CompactBayesNet, gtsam.GaussianFactorGraph]:
     """plan's chunks eliminated one at a time (eliminate_chunked's method): their Bayes net, and the factor graph
     left on the other keys (plan.rest and any key in no chunk)."""
     chunk_of = {k: c for c, ks in enumerate(plan.chunks) for k in ks}
@@ -158,7 +161,9 @@ def eliminate_chunks(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering
         g = gtsam.GaussianFactorGraph()
         for f in factors:
             g.push_back(f)
-        g.push_back(carry)  # after the chunk's own factors, as sequential elimination appends what it creates
+        g.push_back(
+            carry
+        )  # after the chunk's own factors, as sequential elimination appends what it creates
         order = gtsam.Ordering()
         for k in ks:
             order.push_back(k)
@@ -174,13 +179,16 @@ def eliminate_chunks(linear: gtsam.GaussianFactorGraph, plan: ChunkedOrdering
 CHUNKED_FROM_STATES = 8000  # below, one GTSAM elimination is faster (docs/results.md, Speed)
 
 
-def eliminate(linear: gtsam.GaussianFactorGraph,
-              ordering: gtsam.Ordering | ChunkedOrdering) -> gtsam.GaussianBayesNet | CompactBayesNet:
+def eliminate(
+    linear: gtsam.GaussianFactorGraph, ordering: gtsam.Ordering | ChunkedOrdering
+) -> gtsam.GaussianBayesNet | CompactBayesNet:
     """QR elimination in the given order: chunk by chunk (a CompactBayesNet) for a ChunkedOrdering of more than
     CHUNKED_FROM_STATES states' chunks, else GTSAM's one sequential elimination (its Bayes net: its quadratic
     cost and its memory only tell beyond a few hours of 1 s states)."""
     if isinstance(ordering, ChunkedOrdering):
-        if sum(len(ks) for ks in ordering.chunks) > 2 * CHUNKED_FROM_STATES:  # two or three keys a state
+        if (
+            sum(len(ks) for ks in ordering.chunks) > 2 * CHUNKED_FROM_STATES
+        ):  # two or three keys a state
             return eliminate_chunked(linear, ordering)
         ordering = ordering.ordering()
     return linear.eliminateSequential(ordering, gtsam.EliminateQR)
@@ -219,7 +227,9 @@ def gauss_newton_qr(
             bn = eliminate(linear, ordering)
             delta = bn.optimize()
         except RuntimeError as exc:
-            raise GtsamDvlError(f"the linear system could not be solved ({exc}); check priors and data") from None
+            raise GtsamDvlError(
+                f"the linear system could not be solved ({exc}); check priors and data"
+            ) from None
         t_lin += t1 - t0
         t_elim += time.perf_counter() - t1
         step, new_error, new_values = 1.0, np.inf, values
@@ -233,7 +243,9 @@ def gauss_newton_qr(
         report.iterations = it + 1
         report.bayes_net = bn
         del linear  # before the next linearisation: two of a day's linear systems at once cost a GB
-        if new_values is values:  # no step decreased the error: at the minimum to numerical precision
+        if (
+            new_values is values
+        ):  # no step decreased the error: at the minimum to numerical precision
             report.converged = not changed
             if not changed:
                 break
@@ -251,7 +263,9 @@ def gauss_newton_qr(
     return values, report
 
 
-def tail_covariance(bn: gtsam.GaussianBayesNet | CompactBayesNet, keys: Iterable[int]) -> np.ndarray:
+def tail_covariance(
+    bn: gtsam.GaussianBayesNet | CompactBayesNet, keys: Iterable[int]
+) -> np.ndarray:
     """The joint marginal covariance of keys that a QR Bayes net eliminated last (the shared states: every
     ordering of the estimators puts them there), from the last conditionals alone: the tail from the first of
     keys to the end conditions only on itself, so its R gives the block's covariance without a pass over the
@@ -278,13 +292,13 @@ def tail_covariance(bn: gtsam.GaussianBayesNet | CompactBayesNet, keys: Iterable
     for c in tail:
         a = starts[c.keys()[0]]
         d = c.R().shape[0]
-        R[a:a + d, a:a + d] = c.R()
+        R[a : a + d, a : a + d] = c.R()
         S, j = c.S(), 0
         for k in c.keys()[1:]:
             if k not in starts:
                 raise GtsamDvlError("tail_covariance: the keys were not eliminated last")
             dk = S.shape[1] if len(c.keys()) == 2 else _parent_dim(tail, k)
-            R[a:a + d, starts[k]:starts[k] + dk] = S[:, j:j + dk]
+            R[a : a + d, starts[k] : starts[k] + dk] = S[:, j : j + dk]
             j += dk
     R_inv = np.linalg.inv(R)
     cov = R_inv @ R_inv.T
@@ -356,7 +370,9 @@ def bayes_net_marginals(
             col += dims[k]
 
     def index_of(ks: list[int] | tuple[int, ...]) -> np.ndarray:
-        return np.array([c for k in ks for c in range(starts[k], starts[k] + dims[k])], dtype=np.intp)
+        return np.array(
+            [c for k in ks for c in range(starts[k], starts[k] + dims[k])], dtype=np.intp
+        )
 
     for i in range(n - 1, -1, -1):
         c, ks = conds[i], keys[i]

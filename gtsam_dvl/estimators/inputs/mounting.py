@@ -15,22 +15,27 @@ import numpy as np
 
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 
-_IDENTITY_TOL = 1e-12  # a mounting this close to identity leaves the samples untouched (bit for bit)
+_IDENTITY_TOL = (
+    1e-12  # a mounting this close to identity leaves the samples untouched (bit for bit)
+)
 
 
 def imu_is_rotated(mounting: Mounting) -> bool:
     return not np.allclose(mounting.b_R_imu, np.eye(3), rtol=0.0, atol=_IDENTITY_TOL)
 
 
-def rotate_imu_samples(b_R_imu: np.ndarray, imu_omega: np.ndarray, imu_f: np.ndarray) -> tuple[np.ndarray,
-                                                                                                 np.ndarray]:
+def rotate_imu_samples(
+    b_R_imu: np.ndarray, imu_omega: np.ndarray, imu_f: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) gyro (rad/s) and specific force (m/s^2) from imu_link into base_link."""
     return np.asarray(imu_omega @ b_R_imu.T), np.asarray(imu_f @ b_R_imu.T)
 
 
 def imu_in_base_link(imu: ImuData, mounting: Mounting) -> ImuData:
     """The samples in base_link (the same object when the IMU is mounted with base_link's axes)."""
-    if not imu_is_rotated(mounting) or imu.frame_id == "base_link":  # nothing to rotate, or rotated already
+    if (
+        not imu_is_rotated(mounting) or imu.frame_id == "base_link"
+    ):  # nothing to rotate, or rotated already
         return imu
     b_omega, b_f = rotate_imu_samples(mounting.b_R_imu, imu.b_omega, imu.b_f)
     return dataclasses.replace(imu, b_omega=b_omega, b_f=b_f, frame_id="base_link")

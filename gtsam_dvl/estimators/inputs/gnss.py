@@ -35,10 +35,12 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.types import GnssData, LogData
-from gtsam_dvl.estimators.depth import depth_samples, nearest_states
+from gtsam_dvl.estimators.inputs.depth import depth_samples, nearest_states
 
 LOOSE_POSITION_SIGMA_M = 100.0  # first state's position prior when the fixes place it (m, per axis)
-ORIGIN_TOL_DEG = 1e-9  # the log's origin is the first fix when they agree this closely (and 1e-6 m in height)
+ORIGIN_TOL_DEG = (
+    1e-9  # the log's origin is the first fix when they agree this closely (and 1e-6 m in height)
+)
 ROLES = ("used", "held_out", "rejected_status", "rejected_depth", "too_far")
 
 
@@ -68,17 +70,26 @@ class GnssFixes:
         """gnss_used, gnss_held_out, gnss_rejected (status, depth gate, too far) and each reason, and the
         number of surface intervals."""
         n = {r: int(self.mask(r).sum()) for r in ROLES}
-        return {"gnss_used": n["used"], "gnss_held_out": n["held_out"],
-                "gnss_rejected": n["rejected_status"] + n["rejected_depth"] + n["too_far"],
-                "gnss_rejected_status": n["rejected_status"], "gnss_rejected_depth": n["rejected_depth"],
-                "gnss_too_far": n["too_far"], "gnss_surface_intervals": self.n_intervals}
+        return {
+            "gnss_used": n["used"],
+            "gnss_held_out": n["held_out"],
+            "gnss_rejected": n["rejected_status"] + n["rejected_depth"] + n["too_far"],
+            "gnss_rejected_status": n["rejected_status"],
+            "gnss_rejected_depth": n["rejected_depth"],
+            "gnss_too_far": n["too_far"],
+            "gnss_surface_intervals": self.n_intervals,
+        }
 
 
 def valid_fixes(gnss: GnssData) -> np.ndarray:
     """Mask of the messages that are fixes: status >= 0 and finite coordinates (io/gnss.py good_fixes: the same
     rule, which this layer cannot import)."""
-    return np.asarray((gnss.status >= 0) & np.isfinite(gnss.lat_deg) & np.isfinite(gnss.lon_deg)
-                      & np.isfinite(gnss.height_m))
+    return np.asarray(
+        (gnss.status >= 0)
+        & np.isfinite(gnss.lat_deg)
+        & np.isfinite(gnss.lon_deg)
+        & np.isfinite(gnss.height_m)
+    )
 
 
 def origin_is_first_fix(log: LogData, config: EstimatorConfig) -> bool:
@@ -91,8 +102,11 @@ def origin_is_first_fix(log: LogData, config: EstimatorConfig) -> bool:
     if not len(good):
         return False
     i = int(good[0])
-    return bool(abs(gnss.lat_deg[i] - o.lat_deg) < ORIGIN_TOL_DEG and abs(gnss.lon_deg[i] - o.lon_deg) < ORIGIN_TOL_DEG
-                and abs(gnss.height_m[i] - o.height_m) < 1e-6)
+    return bool(
+        abs(gnss.lat_deg[i] - o.lat_deg) < ORIGIN_TOL_DEG
+        and abs(gnss.lon_deg[i] - o.lon_deg) < ORIGIN_TOL_DEG
+        and abs(gnss.height_m[i] - o.height_m) < 1e-6
+    )
 
 
 def origin_fix_time(log: LogData, config: EstimatorConfig) -> float | None:
@@ -120,7 +134,9 @@ def fix_covariances(gnss: GnssData, config: EstimatorConfig, frame: LocalFrame) 
     cfg = config.gnss
     k = len(gnss)
     if cfg.noise_m > 0:
-        return np.broadcast_to(np.eye(3) * (cfg.noise_m * cfg.noise_multiplier)**2, (k, 3, 3)).copy()
+        return np.broadcast_to(
+            np.eye(3) * (cfg.noise_m * cfg.noise_multiplier) ** 2, (k, 3, 3)
+        ).copy()
     cov = np.asarray(gnss.cov_enu_m2, dtype=float).copy()
     ok = np.isfinite(cov).all(axis=(1, 2))
     for i in np.flatnonzero(ok).tolist():
@@ -139,8 +155,9 @@ def fixes_in_map(gnss: GnssData, frame: LocalFrame) -> np.ndarray:
     good = valid_fixes(gnss)
     out = np.full((len(gnss), 3), np.nan)
     if good.any():
-        out[good] = frame.geodetic_to_map(np.radians(gnss.lat_deg[good]), np.radians(gnss.lon_deg[good]),
-                                          gnss.height_m[good]).reshape(-1, 3)
+        out[good] = frame.geodetic_to_map(
+            np.radians(gnss.lat_deg[good]), np.radians(gnss.lon_deg[good]), gnss.height_m[good]
+        ).reshape(-1, 3)
     return out
 
 
@@ -153,7 +170,9 @@ def surface_intervals(t: np.ndarray, good: np.ndarray, gap_s: float) -> np.ndarr
     return out
 
 
-def plan_fixes(log: LogData, config: EstimatorConfig, frame: LocalFrame, t_states: np.ndarray) -> GnssFixes | None:
+def plan_fixes(
+    log: LogData, config: EstimatorConfig, frame: LocalFrame, t_states: np.ndarray
+) -> GnssFixes | None:
     """The role of every GNSS message of the log (module doc); None without GNSS data."""
     gnss = log.gnss
     if gnss is None or not len(gnss):
@@ -189,11 +208,23 @@ def plan_fixes(log: LogData, config: EstimatorConfig, frame: LocalFrame, t_state
     state, dt = nearest_states(t_states, t, cfg.max_time_to_state_s)
     role[aid] = "used"
     role[(good | aid) & (state < 0)] = "too_far"
-    return GnssFixes(t, fixes_in_map(gnss, frame), fix_covariances(gnss, config, frame), role, interval,
-                     np.asarray(state), np.asarray(dt), antenna_lever(gnss, config), from_gnss, origin_index)
+    return GnssFixes(
+        t,
+        fixes_in_map(gnss, frame),
+        fix_covariances(gnss, config, frame),
+        role,
+        interval,
+        np.asarray(state),
+        np.asarray(dt),
+        antenna_lever(gnss, config),
+        from_gnss,
+        origin_index,
+    )
 
 
-def first_position(fixes: GnssFixes | None, n_R_b: np.ndarray, n_p_origin: np.ndarray | None = None) -> np.ndarray:
+def first_position(
+    fixes: GnssFixes | None, n_R_b: np.ndarray, n_p_origin: np.ndarray | None = None
+) -> np.ndarray:
     """Initial guess of the first state's position (m, map): n_p_origin (the map origin carried to the first
     state: alignment.first_state; None: the origin), or, when the origin is the first fix, that fix minus the
     antenna's offset n_R_b b_p_antenna."""

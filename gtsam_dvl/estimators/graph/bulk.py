@@ -4,7 +4,7 @@ per factor.
 Why: GTSAM calls a Python CustomFactor once per factor per linearisation and per error evaluation. On a 5 Hz log
 with 1 s keyframes that is 18,000 DVL factors per hour of log, ten evaluations per solve, each a Python call:
 most of the per-factor graph's solve (docs/results.md, Speed). The batch smoother owns its Gauss-Newton loop
-(estimators/solver.py), so here the pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
+(estimators/graph/solver.py), so here the pings' errors and Jacobians come from factors/dvl_bulk.py, all at once:
 
 - `BulkDvl.error(values)`: the sum of the pings' losses, as GTSAM's factors would return it (Gaussian:
   half the squared whitened error; robust: the kernel's loss of the whitened error's norm);
@@ -49,9 +49,9 @@ from gtsam_dvl.core.states import (
     water_scale_key,
 )
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.bulk_imu import BulkImu, StateArrays, state_arrays
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.selection import ping_covariance, water_covariance
+from gtsam_dvl.estimators.graph.bulk_imu import BulkImu, StateArrays, state_arrays
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 from gtsam_dvl.factors.dvl_bulk import BulkPings, dvl_ping_errors
 from gtsam_dvl.factors.ping_motion import PingMotion, keyframe_ping_covariance
 
@@ -59,7 +59,8 @@ CHUNK = 20_000  # rows evaluated at once (about 50 MB of temporaries)
 
 
 class BulkSource(Protocol):
-    """What bulk_dvl reads of a LogGraph (estimators/graph.py): its factor maker, configuration, log, epochs (each
+    """What bulk_dvl reads of a LogGraph (estimators/graph/log_graph.py): its factor maker, configuration, log, epochs
+    (each
     with dvl_index, t, b_omega, rate_input and the pings between it and the next state), the states' gravity
     reference positions and the IMU motion to each ping between keyframes."""
 
@@ -89,7 +90,9 @@ class BulkSource(Protocol):
 class _Served:
     """The rows of the last linearisation, per state: what the carriers hand to GTSAM."""
 
-    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # whitened, reweighted error (N, m)
+    e: np.ndarray = field(
+        default_factory=lambda: np.zeros((0, 3))
+    )  # whitened, reweighted error (N, m)
     blocks: list[np.ndarray] = field(default_factory=list)  # per key (N, m, d)
     ready: bool = False
 
@@ -127,7 +130,9 @@ class BulkDvl:
     robust_k: float
     offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
     b_l: np.ndarray  # the known lever arm (m, base_link); with lever, L_LEVER's value is used
-    t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the rows' ping stamps (s), in their order
+    t_ping: np.ndarray = field(
+        default_factory=lambda: np.zeros(0)
+    )  # the rows' ping stamps (s), in their order
     # (N,) bool: the water-track rows (velocity relative to the water, on W(state)); None: none used
     water: np.ndarray | None = None
     _served: _Served = field(init=False, default_factory=_Served)
@@ -135,13 +140,17 @@ class BulkDvl:
     _states_with_rows: list[int] = field(init=False)
 
     def __post_init__(self) -> None:
-        _ = self.pings.motion.earth  # the motion's Earth terms, once (each chunk takes its part of them)
+        _ = (
+            self.pings.motion.earth
+        )  # the motion's Earth terms, once (each chunk takes its part of them)
         state = self.pings.state
         if len(state) and np.any(np.diff(state) < 0):
             raise ValueError("BulkDvl: pings must be sorted by state")
         self._bounds = np.searchsorted(state, np.arange(self.n_states + 1), side="left")
         self._bias_random_walk = len(set(self.bias_keys)) > 1
-        self._states_with_rows = np.unique(state).tolist()  # (found once: read per evaluation, _correlated_errors)
+        self._states_with_rows = np.unique(
+            state
+        ).tolist()  # (found once: read per evaluation, _correlated_errors)
 
     @property
     def offset(self) -> bool:
@@ -160,8 +169,19 @@ class BulkDvl:
         """The states' arrays at values (bulk_imu.state_arrays)."""
         return state_arrays(values, self.n_states, self.bias_keys)
 
-    def _ping_states(self, values: gtsam.Values, st: StateArrays) -> tuple[
-            np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, float | None, np.ndarray]:
+    def _ping_states(
+        self, values: gtsam.Values, st: StateArrays
+    ) -> tuple[
+        np.ndarray,
+        np.ndarray,
+        np.ndarray,
+        np.ndarray,
+        np.ndarray,
+        float,
+        np.ndarray,
+        float | None,
+        np.ndarray,
+    ]:
         """Each row's state: n_R_i (N, 3, 3), n_p_i, n_v_i, b_a, b_g (N, 3); k, b_R_d, dt_d, b_l."""
         s = self.pings.state
         bias = st.bias[s] if self._bias_random_walk else np.broadcast_to(st.bias[0], (len(s), 6))
@@ -172,13 +192,21 @@ class BulkDvl:
         b_l = shared.get("lever_arm", self.b_l)
         return st.n_R[s], st.n_p[s], st.n_v[s], bias[:, :3], bias[:, 3:], k, b_R_d, dt_d, b_l
 
-    def _evaluate(self, values: gtsam.Values, jacobians: bool, out: list[np.ndarray] | None = None,
-                  states: StateArrays | None = None) -> np.ndarray:
+    def _evaluate(
+        self,
+        values: gtsam.Values,
+        jacobians: bool,
+        out: list[np.ndarray] | None = None,
+        states: StateArrays | None = None,
+    ) -> np.ndarray:
         """Whitened errors (N, m); with jacobians, the whitened Jacobian blocks per key written into out (N, m, d)
         each, unweighted. Evaluated CHUNK rows at a time: the temporaries of a whole day's pings would take GBs."""
         n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d, b_l = self._ping_states(
-            values, self.states(values) if states is None else states)
-        d_e = self._correlated_errors(values)  # (N, 3) the rows' correlated DVL error E(state), or None
+            values, self.states(values) if states is None else states
+        )
+        d_e = self._correlated_errors(
+            values
+        )  # (N, 3) the rows' correlated DVL error E(state), or None
         # the water-track rows' own scale (water_scale): h and every Jacobian but the scale's are linear in k, so
         # those rows are evaluated at k and taken times k_w / k; their scale Jacobian goes to K_WATER
         k_water = water_scale_key(self.config)
@@ -186,21 +214,40 @@ class BulkDvl:
         water_rows = self.water if self.water is not None else np.zeros(len(self), dtype=bool)
         if k_water is not None:
             ratio = float(values.atVector(k_water)[0]) / k
-        n_c = self._currents(values)  # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
+        n_c = self._currents(
+            values
+        )  # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
         if n_c is not None:  # the velocity relative to the water (factors/dvl.py current_variable)
             n_v_i = n_v_i - n_c
         d_u = self.pings.d_u
         ew = np.empty((len(self), self.pings.dim))
         for a in range(0, len(self), CHUNK):
             sl = slice(a, a + CHUNK)
-            e, J = dvl_ping_errors(self.pings.part(sl), n_R_i[sl], n_p_i[sl], n_v_i[sl], b_a[sl], b_g[sl], k, b_R_d,
-                                   b_l, dt_d, self.offset_n_g, self.lever, jacobians)
+            e, J = dvl_ping_errors(
+                self.pings.part(sl),
+                n_R_i[sl],
+                n_p_i[sl],
+                n_v_i[sl],
+                b_a[sl],
+                b_g[sl],
+                k,
+                b_R_d,
+                b_l,
+                dt_d,
+                self.offset_n_g,
+                self.lever,
+                jacobians,
+            )
             on_water = None
             if ratio is not None:
                 on_water = water_rows[sl]
-                e = np.where(on_water[:, None], (e + self.pings.y[sl]) * ratio - self.pings.y[sl], e)
+                e = np.where(
+                    on_water[:, None], (e + self.pings.y[sl]) * ratio - self.pings.y[sl], e
+                )
             if d_e is not None:  # h + E (a beam: d_u . E)
-                e = e + (d_e[sl] if d_u is None else np.einsum("ni,ni->n", d_u[sl], d_e[sl])[:, None])
+                e = e + (
+                    d_e[sl] if d_u is None else np.einsum("ni,ni->n", d_u[sl], d_e[sl])[:, None]
+                )
             W = self.whiten[sl]
             ew[sl] = np.einsum("nij,nj->ni", W, e)
             if jacobians:
@@ -209,16 +256,31 @@ class BulkDvl:
                 if on_water is not None:
                     w3 = on_water[:, None, None]
                     i_scale = next(n for n, B in enumerate(blocks) if B is J.scale)
-                    blocks = [B if n == i_scale else np.where(w3, B * ratio, B) for n, B in enumerate(blocks)]
+                    blocks = [
+                        B if n == i_scale else np.where(w3, B * ratio, B)
+                        for n, B in enumerate(blocks)
+                    ]
                     scale_block = blocks[i_scale]
                     blocks[i_scale] = np.where(w3, 0.0, scale_block)
                 if d_e is not None:  # dh/dE: I, or a beam's d_u^T
-                    blocks = [*blocks, np.broadcast_to(np.eye(3), (len(e), 3, 3)) if d_u is None
-                              else d_u[sl][:, None, :]]
-                if n_c is not None:  # dh/dW: minus the velocity's east and north columns, on water-track rows
+                    blocks = [
+                        *blocks,
+                        np.broadcast_to(np.eye(3), (len(e), 3, 3))
+                        if d_u is None
+                        else d_u[sl][:, None, :],
+                    ]
+                if (
+                    n_c is not None
+                ):  # dh/dW: minus the velocity's east and north columns, on water-track rows
                     on = np.zeros(len(e), dtype=bool) if self.water is None else self.water[sl]
-                    blocks = [*blocks, np.where(on[:, None, None], -J.vel[:, :, :2] * (1.0 if ratio is None
-                                                                                      else ratio), 0.0)]
+                    blocks = [
+                        *blocks,
+                        np.where(
+                            on[:, None, None],
+                            -J.vel[:, :, :2] * (1.0 if ratio is None else ratio),
+                            0.0,
+                        ),
+                    ]
                 if on_water is not None:  # dh/dk_w on the water-track rows
                     blocks = [*blocks, np.where(on_water[:, None, None], scale_block, 0.0)]
                 for dst, B in zip(out, blocks, strict=True):
@@ -289,8 +351,13 @@ class BulkDvl:
             lo, hi = int(self._bounds[s]), int(self._bounds[s + 1])
             if hi > lo:
                 keys = self._keys(s)
-                graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(self.pings.dim * (hi - lo)), keys,
-                                             _Carrier(self._served, lo, hi)))
+                graph.add(
+                    gtsam.CustomFactor(
+                        gtsam.noiseModel.Unit.Create(self.pings.dim * (hi - lo)),
+                        keys,
+                        _Carrier(self._served, lo, hi),
+                    )
+                )
         return graph
 
     def prepare(self, values: gtsam.Values, states: StateArrays | None = None) -> None:
@@ -299,7 +366,9 @@ class BulkDvl:
         n = len(self)
         dims = [key_dim(k) for k in self._keys(0)]
         served = self._served
-        if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:  # (released after each linearisation)
+        if (
+            len(served.blocks) != len(dims) or len(served.blocks[0]) != n
+        ):  # (released after each linearisation)
             served.blocks = [np.empty((n, self.pings.dim, d)) for d in dims]
         ew = self._evaluate(values, True, served.blocks, states)
         w, _ = self._weights_and_losses(ew)
@@ -318,12 +387,18 @@ class BulkDvl:
         carriers; the next prepare() makes them again."""
         self._served.blocks, self._served.e, self._served.ready = [], np.zeros((0, 3)), False
 
-    def set_offset_inputs(self, b_omega: np.ndarray, b_a: np.ndarray, G: np.ndarray, b_l: np.ndarray) -> None:
+    def set_offset_inputs(
+        self, b_omega: np.ndarray, b_a: np.ndarray, G: np.ndarray, b_l: np.ndarray
+    ) -> None:
         """New time-offset IMU constants of the rows (mean body rate, b_a, G at t_ping, in their order:
         LogGraph.recentre_time_offset) and the known lever arm b_l (m); the rest of the model is unchanged."""
         p = self.pings
-        if not self.offset or b_omega.shape != p.b_omega.shape:  # (the offset model has offset_b_a and G)
-            raise ValueError("BulkDvl.set_offset_inputs: not a time-offset model, or not the same pings")
+        if (
+            not self.offset or b_omega.shape != p.b_omega.shape
+        ):  # (the offset model has offset_b_a and G)
+            raise ValueError(
+                "BulkDvl.set_offset_inputs: not a time-offset model, or not the same pings"
+            )
         p.b_omega, p.offset_b_a, p.offset_G = b_omega, b_a, G
         self.b_l = np.asarray(b_l, dtype=float)
 
@@ -332,7 +407,9 @@ class BulkGraph:
     """A NonlinearFactorGraph of GTSAM factors plus the bulk DVL factors (module doc): error and linearize as
     the per-factor graph's, for gauss_newton_qr, the marginals and the filtering timeline."""
 
-    def __init__(self, graph: gtsam.NonlinearFactorGraph, bulk: BulkDvl, imu: BulkImu | None = None) -> None:
+    def __init__(
+        self, graph: gtsam.NonlinearFactorGraph, bulk: BulkDvl, imu: BulkImu | None = None
+    ) -> None:
         self.graph, self.bulk, self.imu = graph, bulk, imu
         self._carriers = bulk.carriers()
         self._imu_carriers = imu.carriers() if imu is not None else None
@@ -357,7 +434,11 @@ class BulkGraph:
 
     def rows(self) -> int:
         """Measurement rows (for the chi^2's degrees of freedom)."""
-        return graph_rows(self.graph) + self.bulk.rows() + (self.imu.rows() if self.imu is not None else 0)
+        return (
+            graph_rows(self.graph)
+            + self.bulk.rows()
+            + (self.imu.rows() if self.imu is not None else 0)
+        )
 
 
 def graph_rows(graph: gtsam.NonlinearFactorGraph | BulkGraph) -> int:
@@ -427,7 +508,9 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
     if moving.any():
         snaps = builder.snapshots
         if snaps is None:
-            raise ValueError("bulk_dvl: the LogGraph's snapshots were let go (build_bulk); make a new LogGraph")
+            raise ValueError(
+                "bulk_dvl: the LogGraph's snapshots were let go (build_bulk); make a new LogGraph"
+            )
         m = qs[moving]
         for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg"):
             getattr(motion, name)[moving] = getattr(snaps, name)[m]
@@ -436,19 +519,31 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
         finite = np.isfinite(d_y_m).all(axis=1)
         b_v = np.where(finite[:, None], np.where(finite[:, None], d_y_m, 0.0) @ b_R_d0.T / k0, 0.0)
         extra[moving] = keyframe_ping_covariance(snaps.cov[m], motion.dR[moving], b_R_d0.T, b_v, k0)
-    motion = motion.motion(np.asarray(maker.n_omega_ie(), dtype=float),
-                           np.asarray(g_states, dtype=float).reshape(-1, 3)[st],
-                           np.asarray(builder.gravity_positions, dtype=float)[st],
-                           np.asarray(G_states, dtype=float).reshape(-1, 3, 3)[st])
+    motion = motion.motion(
+        np.asarray(maker.n_omega_ie(), dtype=float),
+        np.asarray(g_states, dtype=float).reshape(-1, 3)[st],
+        np.asarray(builder.gravity_positions, dtype=float)[st],
+        np.asarray(G_states, dtype=float).reshape(-1, 3, 3)[st],
+    )
     om = np.asarray(b_omega, dtype=float).reshape(n, 3)
     t_rows = np.asarray(t_ping, dtype=float)
-    rate = (np.asarray(rate_b_a, dtype=float).reshape(n, 3), np.asarray(rate_G, dtype=float).reshape(n, 3, 3)) \
-        if offset else None
+    rate = (
+        (
+            np.asarray(rate_b_a, dtype=float).reshape(n, 3),
+            np.asarray(rate_G, dtype=float).reshape(n, 3, 3),
+        )
+        if offset
+        else None
+    )
     beams = dvl.beams if cfg.dvl.use_beams else None
-    water = builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)  # (water track: 3-D, own noise)
+    water = (
+        builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)
+    )  # (water track: 3-D, own noise)
     if beams is not None and water.any():
-        raise GtsamDvlError("[dvl] use_beams with water-track pings: not supported; set [current] water_track = "
-                            "\"refuse\" or use_beams = false")
+        raise GtsamDvlError(
+            "[dvl] use_beams with water-track pings: not supported; set [current] water_track = "
+            '"refuse" or use_beams = false'
+        )
     if beams is None:
         rows: np.ndarray | slice = slice(None)
         y, d_u = d_y, None
@@ -459,15 +554,28 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
         rows, b = np.nonzero(beams.valid[jj])
         d_u = np.asarray(beams.d_u[jj][rows, b], dtype=float)
         y = np.asarray(beams.v[jj][rows, b], dtype=float)[:, None]
-        var = cfg.dvl.beam_sigma_m_s()**2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
+        var = cfg.dvl.beam_sigma_m_s() ** 2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
         whiten = (1.0 / np.sqrt(var))[:, None, None]
-    pings = BulkPings(state=st[rows], y=y, b_omega=om[rows], motion=motion[rows], d_u=d_u,
-                      offset_b_a=None if rate is None else rate[0][rows],
-                      offset_G=None if rate is None else rate[1][rows])
+    pings = BulkPings(
+        state=st[rows],
+        y=y,
+        b_omega=om[rows],
+        motion=motion[rows],
+        d_u=d_u,
+        offset_b_a=None if rate is None else rate[0][rows],
+        offset_G=None if rate is None else rate[1][rows],
+    )
     robust = cfg.dvl.robust if cfg.dvl.robust in ("huber", "cauchy") else "none"
-    return BulkDvl(pings=pings, whiten=whiten, n_states=n_states, config=cfg,
-                   bias_keys=[maker.bias_key(i) for i in range(n_states)], robust=robust,
-                   robust_k=float(cfg.dvl.robust_threshold()),
-                   offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
-                   b_l=np.asarray(maker.mounting.b_l, dtype=float), t_ping=t_rows[rows],
-                   water=water[rows] if water.any() else None)
+    return BulkDvl(
+        pings=pings,
+        whiten=whiten,
+        n_states=n_states,
+        config=cfg,
+        bias_keys=[maker.bias_key(i) for i in range(n_states)],
+        robust=robust,
+        robust_k=float(cfg.dvl.robust_threshold()),
+        offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
+        b_l=np.asarray(maker.mounting.b_l, dtype=float),
+        t_ping=t_rows[rows],
+        water=water[rows] if water.any() else None,
+    )

@@ -29,7 +29,7 @@ from gtsam_dvl.core.config import ImuConfig, SolverConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.imu_faults import clock_steps, drop_saturated
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.selection import imu_pieces
+from gtsam_dvl.estimators.inputs.selection import imu_pieces
 
 G0 = 9.80665  # m/s^2: how much specific force an attitude error of 1 rad turns into acceleration
 
@@ -53,8 +53,11 @@ class Gaps:
 
     def summary(self) -> dict[str, float | int]:
         """Count, total and longest gap (s): what the summary and the health report show."""
-        return {"count": len(self), "total_s": self.total_s,
-                "longest_s": float(np.max(self.end - self.start)) if len(self) else 0.0}
+        return {
+            "count": len(self),
+            "total_s": self.total_s,
+            "longest_s": float(np.max(self.end - self.start)) if len(self) else 0.0,
+        }
 
 
 def gaps_within(gaps: Gaps, t0: float, t1: float) -> Gaps:
@@ -80,9 +83,11 @@ def check_spacing(cfg: SolverConfig) -> None:
     """Keyframe thinning and the maximum state spacing must agree: with keyframes farther apart than 1.5 spacings,
     states without a ping would take the places of the pings skipped (more states, fewer pings)."""
     if cfg.keyframe_interval_s > 1.5 * cfg.max_state_spacing_s:
-        raise GtsamDvlError(f"solver.keyframe_interval_s = {cfg.keyframe_interval_s:g} s needs "
-                            f"solver.max_state_spacing_s >= {cfg.keyframe_interval_s / 1.5:g} s: states without a "
-                            "ping would take the places of the pings skipped")
+        raise GtsamDvlError(
+            f"solver.keyframe_interval_s = {cfg.keyframe_interval_s:g} s needs "
+            f"solver.max_state_spacing_s >= {cfg.keyframe_interval_s / 1.5:g} s: states without a "
+            "ping would take the places of the pings skipped"
+        )
 
 
 def check_gaps(gaps: Gaps, cfg: ImuConfig, source: str = "") -> None:
@@ -94,7 +99,8 @@ def check_gaps(gaps: Gaps, cfg: ImuConfig, source: str = "") -> None:
         raise GtsamDvlError(
             f"{source + ': ' if source else ''}IMU gap of {gaps.end[j] - gaps.start[j]:.1f} s at "
             f"{gaps.start[j]:.2f}-{gaps.end[j]:.2f} s ({len(long)} gap(s) longer than imu.max_gap_s = "
-            f"{cfg.max_gap_s:g} s): cut the log there and process the pieces, or raise imu.max_gap_s")
+            f"{cfg.max_gap_s:g} s): cut the log there and process the pieces, or raise imu.max_gap_s"
+        )
 
 
 def sample_starts_with_gaps(t: np.ndarray, gaps: Gaps) -> np.ndarray:
@@ -123,8 +129,9 @@ class Holds:
         return float(sum(b - a for a, b in self.spans))
 
 
-def pieces_with_holds(t: np.ndarray, starts: np.ndarray, gaps: Gaps, a: float,
-                      b: float) -> tuple[np.ndarray, np.ndarray, Holds]:
+def pieces_with_holds(
+    t: np.ndarray, starts: np.ndarray, gaps: Gaps, a: float, b: float
+) -> tuple[np.ndarray, np.ndarray, Holds]:
     """The pieces of (a, b] in time order: (sample index, duration s) of the samples covering it, with each
     gap's overlap as pieces of the sample held across it, one nominal period long (so that preintegration and
     the strapdown turn the attitude through the hold as they do through samples: one piece of several seconds
@@ -141,7 +148,9 @@ def pieces_with_holds(t: np.ndarray, starts: np.ndarray, gaps: Gaps, a: float,
     for g in inside.tolist():
         T = float(hi[g] - lo[g])
         n = max(1, int(np.ceil(T / gaps.period_s - 1e-9)))
-        at = int(np.searchsorted(idx, gaps.index[g], side="right"))  # after its sample, before the next one's
+        at = int(
+            np.searchsorted(idx, gaps.index[g], side="right")
+        )  # after its sample, before the next one's
         idx = np.insert(idx, at, np.full(n, gaps.index[g]))
         dt = np.insert(dt, at, np.full(n, T / n))
         spans.append((float(lo[g] - gaps.start[g]), float(hi[g] - gaps.start[g])))
@@ -171,10 +180,14 @@ def hold_covariance(cfg: ImuConfig, holds: Holds, interval_s: float) -> np.ndarr
     return np.diag(np.repeat(var, 3)) if holds else np.zeros((9, 9))
 
 
-FILLER_MARGIN_S = 2.0  # the online estimator waits this long for a late ping before adding a state without one
+FILLER_MARGIN_S = (
+    2.0  # the online estimator waits this long for a late ping before adding a state without one
+)
 
 
-def filler_due(t_last: float, t_next_ping: float | None, t_imu_end: float, max_spacing_s: float) -> float | None:
+def filler_due(
+    t_last: float, t_next_ping: float | None, t_imu_end: float, max_spacing_s: float
+) -> float | None:
     """The time of the state to add after the state at t_last (None: none), given the next usable ping known
     (None: none known yet) and how far the IMU reaches: due when the next ping is later than 1.5 max_spacing_s
     after t_last, or, with no next ping known, when the IMU reaches FILLER_MARGIN_S past that."""
@@ -185,7 +198,9 @@ def filler_due(t_last: float, t_next_ping: float | None, t_imu_end: float, max_s
     return t_filler if t_imu_end >= limit + FILLER_MARGIN_S else None
 
 
-def with_fillers(ping_t: np.ndarray, t_imu_end: float, max_spacing_s: float) -> tuple[np.ndarray, np.ndarray]:
+def with_fillers(
+    ping_t: np.ndarray, t_imu_end: float, max_spacing_s: float
+) -> tuple[np.ndarray, np.ndarray]:
     """State times: the ping epochs ping_t (sorted) with the fillers of filler_due between and after them;
     returns (times, is_filler)."""
     times: list[float] = []
@@ -211,14 +226,20 @@ def screened_in_memory(log: LogData) -> LogData:
         return log
     steps = clock_steps(np.asarray(log.imu.t, dtype=float), log.imu.b_omega, log.imu.b_f)
     if steps:
-        raise GtsamDvlError(f"{log.source or 'log'}: IMU {steps[0].words()}; shift the later stamps "
-                            f"{steps[0].shift_words()}, or read the log from its file with --repair")
+        raise GtsamDvlError(
+            f"{log.source or 'log'}: IMU {steps[0].words()}; shift the later stamps "
+            f"{steps[0].shift_words()}, or read the log from its file with --repair"
+        )
     warnings: list[str] = []
     imu, report = drop_saturated(log.imu, "IMU", warnings)
     if report is None:
         return log
-    meta = {**log.metadata, "reader_losses": {"saturation": {"IMU": report}}, "screened_in_memory": True,
-            "reader_warnings": [*log.metadata.get("reader_warnings", []), *warnings]}
+    meta = {
+        **log.metadata,
+        "reader_losses": {"saturation": {"IMU": report}},
+        "screened_in_memory": True,
+        "reader_warnings": [*log.metadata.get("reader_warnings", []), *warnings],
+    }
     return dataclasses.replace(log, imu=imu, metadata=meta)
 
 

@@ -1,6 +1,6 @@
 """Pings between keyframes: the IMU motion from the keyframe before each ping up to the ping.
 
-With `[solver] keyframe_spacing_s` > 0 the batch smoother (estimators/graph.py) makes states only at keyframes
+With `[solver] keyframe_spacing_s` > 0 the batch smoother (estimators/graph/log_graph.py) makes states only at keyframes
 (selection.keyframe_mask) and DVL-dropout fillers; each other usable ping becomes a DVL factor on the state
 before it (factors/dvl.py with a PingMotion) through the preintegrated IMU motion over [t_i, t_ping]. This
 module integrates each keyframe interval's samples once, in time order, for the IMU factor (cut at the last sample
@@ -8,7 +8,7 @@ stamp at or before each ping, which splits no sample: the pieces of one integrat
 takes a snapshot at each ping (a PingMotion, factors/ping_motion.py) from a copy of that preintegration with the
 rest of the sample straddling the ping: the zero-bias deltas dR, dv, their bias Jacobians and the covariance of
 the preintegration error [rotation, position, velocity] (plus the motion-model covariance of any IMU gap held:
-estimators/gaps.py). GTSAM 4.3's Python wrapper exposes deltaRij, deltaVij, preintMeasCov and the tangent
+estimators/inputs/gaps.py). GTSAM 4.3's Python wrapper exposes deltaRij, deltaVij, preintMeasCov and the tangent
 preintegrated() = [theta, p, v] but not the bias Jacobians. GTSAM's ImuFactor on the pim, evaluated with its
 Jacobians at the identity state and its own prediction there (zero error, so the Logmap's derivative is the
 identity), has the bias Jacobian [J_r(theta) H_theta; R_P^T A H_p; R_P^T (A H_v - Omega x A H_p)], R_P = A dR,
@@ -26,16 +26,24 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
-from gtsam_dvl.estimators.factor_maker import integrate_pieces
-from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
+from gtsam_dvl.estimators.graph.factor_maker import integrate_pieces
+from gtsam_dvl.estimators.inputs.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
 from gtsam_dvl.factors import PingMotion
 from gtsam_dvl.factors.so3 import skew
 
-BIAS_STEP_ACC = 1e-2  # m/s^2, central-difference step of the accelerometer bias (beyond ANALYTIC_MAX_ANGLE)
+BIAS_STEP_ACC = (
+    1e-2  # m/s^2, central-difference step of the accelerometer bias (beyond ANALYTIC_MAX_ANGLE)
+)
 BIAS_STEP_GYRO = 1e-4  # rad/s, central-difference step of the gyro bias (beyond ANALYTIC_MAX_ANGLE)
-ANALYTIC_MAX_ANGLE = 5.5  # rad, the largest |theta| whose Jacobians come from the factor's (J_r singular at 2 pi)
-_STATE0, _BIAS0, _POSE0, _Z3 = gtsam.NavState(), gtsam.imuBias.ConstantBias(), gtsam.Pose3(), np.zeros(3)
-
+ANALYTIC_MAX_ANGLE = (
+    5.5  # rad, the largest |theta| whose Jacobians come from the factor's (J_r singular at 2 pi)
+)
+_STATE0, _BIAS0, _POSE0, _Z3 = (
+    gtsam.NavState(),
+    gtsam.imuBias.ConstantBias(),
+    gtsam.Pose3(),
+    np.zeros(3),
+)
 
 
 def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationParams:
@@ -47,8 +55,11 @@ def snapshot_params(params: gtsam.PreintegrationParams) -> gtsam.PreintegrationP
     return out
 
 
-def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | None = None,
-             n_omega: np.ndarray | None = None) -> PingMotion:
+def snapshot(
+    pim: gtsam.PreintegratedImuMeasurements,
+    extra_cov: np.ndarray | None = None,
+    n_omega: np.ndarray | None = None,
+) -> PingMotion:
     """The snapshot of pim now (bias estimate zero; module doc). n_omega: the Earth rate (rad/s, map) its
     parameters hold, None or zeros for none (their gravity does not matter)."""
     theta = np.asarray(pim.preintegrated(), dtype=float)[:3]
@@ -63,7 +74,9 @@ def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | No
         # instead of six predictions (docs/results.md, Speed).
         pred = pim.predict(_STATE0, _BIAS0)
         Hs = [np.empty((9, d), order="F") for d in (6, 3, 6, 3, 6)]
-        gtsam.ImuFactor(0, 1, 2, 3, 4, pim).evaluateError(_POSE0, _Z3, pred.pose(), pred.velocity(), _BIAS0, *Hs)
+        gtsam.ImuFactor(0, 1, 2, 3, 4, pim).evaluateError(
+            _POSE0, _Z3, pred.pose(), pred.velocity(), _BIAS0, *Hs
+        )
         H5 = Hs[4]
         dR_dbg = H5[0:3, 3:6].copy()
         dv_db = dR @ H5[6:9]
@@ -75,12 +88,21 @@ def snapshot(pim: gtsam.PreintegratedImuMeasurements, extra_cov: np.ndarray | No
     cov = np.asarray(pim.preintMeasCov(), dtype=float)
     if extra_cov is not None:
         cov = cov + extra_cov
-    return PingMotion(float(pim.deltaTij()), dR, np.asarray(pim.deltaVij(), dtype=float),
-                      np.asarray(pim.deltaPij(), dtype=float), dR_dbg, dv_dba, dv_dbg, cov)
+    return PingMotion(
+        float(pim.deltaTij()),
+        dR,
+        np.asarray(pim.deltaVij(), dtype=float),
+        np.asarray(pim.deltaPij(), dtype=float),
+        dR_dbg,
+        dv_dba,
+        dv_dbg,
+        cov,
+    )
 
 
-def _central_differences(pim: gtsam.PreintegratedImuMeasurements,
-                         n_omega: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _central_differences(
+    pim: gtsam.PreintegratedImuMeasurements, n_omega: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(dR_dbg, dv_dba, dv_dbg) by central differences of pim.predict from the identity at rest (the relative
     rotation dR^T R(b): no wrap at pi), the prediction's Earth rate undone: R_P = A Exp(theta_c) and
     v_P = gravity terms + A dv_c - Omega x p_P, A = Exp(-Omega dt)."""
@@ -89,7 +111,9 @@ def _central_differences(pim: gtsam.PreintegratedImuMeasurements,
 
     def predict(b_a: np.ndarray, b_g: np.ndarray) -> tuple[gtsam.Rot3, np.ndarray]:
         s = pim.predict(_STATE0, gtsam.imuBias.ConstantBias(b_a, b_g))
-        v = np.asarray(s.velocity(), dtype=float) + np.cross(n_omega, np.asarray(s.position(), dtype=float))
+        v = np.asarray(s.velocity(), dtype=float) + np.cross(
+            n_omega, np.asarray(s.position(), dtype=float)
+        )
         return A.inverse() * s.attitude(), A.unrotate(v)
 
     dR = pim.deltaRij()
@@ -101,7 +125,9 @@ def _central_differences(pim: gtsam.PreintegratedImuMeasurements,
         e[k] = BIAS_STEP_GYRO
         (R_p, v_p), (R_m, v_m) = predict(zero, e), predict(zero, -e)
         dv_dbg[:, k] = (v_p - v_m) / (2 * BIAS_STEP_GYRO)
-        dR_dbg[:, k] = (gtsam.Rot3.Logmap(dR.between(R_p)) - gtsam.Rot3.Logmap(dR.between(R_m))) / (2 * BIAS_STEP_GYRO)
+        dR_dbg[:, k] = (gtsam.Rot3.Logmap(dR.between(R_p)) - gtsam.Rot3.Logmap(dR.between(R_m))) / (
+            2 * BIAS_STEP_GYRO
+        )
     return dR_dbg, dv_dba, dv_dbg
 
 
@@ -110,8 +136,16 @@ def clone(pim: gtsam.PreintegratedImuMeasurements) -> gtsam.PreintegratedImuMeas
     return gtsam.ImuFactor(0, 1, 2, 3, 4, pim).preintegratedMeasurements()
 
 
-def integrate(pim: gtsam.PreintegratedImuMeasurements, imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray,
-              b_omega: np.ndarray, gaps: Gaps, a: float, b: float) -> Holds:
+def integrate(
+    pim: gtsam.PreintegratedImuMeasurements,
+    imu_t: np.ndarray,
+    starts: np.ndarray,
+    b_f: np.ndarray,
+    b_omega: np.ndarray,
+    gaps: Gaps,
+    a: float,
+    b: float,
+) -> Holds:
     """Integrate the pieces of (a, b] (pieces_with_holds) into pim; returns what was held."""
     idx, dt, held = pieces_with_holds(imu_t, starts, gaps, a, b)
     integrate_pieces(pim, b_f[idx], b_omega[idx], dt.tolist())
@@ -126,9 +160,20 @@ def last_stamp_at_or_before(imu_t: np.ndarray, t: float) -> float:
     return float(imu_t[k]) if k >= 0 else -np.inf
 
 
-def snapshot_at(pim: gtsam.PreintegratedImuMeasurements, a: float, t_p: float, spans: list[tuple[float, float]],
-                t_state: float, imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-                gaps: Gaps, imu_cfg: ImuConfig, n_omega: np.ndarray | None) -> PingMotion:
+def snapshot_at(
+    pim: gtsam.PreintegratedImuMeasurements,
+    a: float,
+    t_p: float,
+    spans: list[tuple[float, float]],
+    t_state: float,
+    imu_t: np.ndarray,
+    starts: np.ndarray,
+    b_f: np.ndarray,
+    b_omega: np.ndarray,
+    gaps: Gaps,
+    imu_cfg: ImuConfig,
+    n_omega: np.ndarray | None,
+) -> PingMotion:
     """The snapshot at ping t_p of an interval's preintegration from t_state that has integrated (t_state, a] (a, the
     interval's cut at or before t_p, last_stamp_at_or_before) and held spans: a copy of it with (a, t_p] added, the
     hold covariance of everything held up to t_p (module doc)."""
@@ -139,10 +184,18 @@ def snapshot_at(pim: gtsam.PreintegratedImuMeasurements, a: float, t_p: float, s
     return snapshot(part, extra, n_omega)
 
 
-def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], params: gtsam.PreintegrationParams,
-                            imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
-                            imu_cfg: ImuConfig) -> tuple[gtsam.PreintegratedImuMeasurements, Holds,
-                                                         list[PingMotion]]:
+def interval_with_snapshots(
+    t_state: float,
+    t_end: float,
+    t_pings: list[float],
+    params: gtsam.PreintegrationParams,
+    imu_t: np.ndarray,
+    starts: np.ndarray,
+    b_f: np.ndarray,
+    b_omega: np.ndarray,
+    gaps: Gaps,
+    imu_cfg: ImuConfig,
+) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PingMotion]]:
     """The IMU factor's preintegration over (t_state, t_end] (with params, a new PreintegrationParams of its own),
     what it held, and the snapshots at the pings t_pings (sorted, inside the interval) taken on the way: the
     interval is integrated once, cut at the last sample stamp at or before each ping, and each ping's snapshot is
@@ -155,7 +208,9 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
     against 1)."""
     idx, dt, held = pieces_with_holds(imu_t, starts, gaps, t_state, t_end)
     if held:
-        return interval_cut_by_cut(t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg)
+        return interval_cut_by_cut(
+            t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg
+        )
     pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
     n_omega = params.getOmegaCoriolis()
     out: list[PingMotion] = []
@@ -163,7 +218,9 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
     rows_f, rows_w, dts = b_f[idx], b_omega[idx], dt.tolist()
     done, a = 0, t_state
     for t_p in t_pings:
-        k = int(np.searchsorted(ends, t_p, side="right"))  # the pieces up to the last stamp at or before t_p
+        k = int(
+            np.searchsorted(ends, t_p, side="right")
+        )  # the pieces up to the last stamp at or before t_p
         if k > done:
             integrate_pieces(pim, rows_f[done:k], rows_w[done:k], dts[done:k])
             done, a = k, float(ends[k - 1])
@@ -178,9 +235,18 @@ def interval_with_snapshots(t_state: float, t_end: float, t_pings: list[float], 
     return pim, Holds(), out
 
 
-def interval_cut_by_cut(t_state: float, t_end: float, t_pings: list[float], params: gtsam.PreintegrationParams,
-                        imu_t: np.ndarray, starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
-                        imu_cfg: ImuConfig) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PingMotion]]:
+def interval_cut_by_cut(
+    t_state: float,
+    t_end: float,
+    t_pings: list[float],
+    params: gtsam.PreintegrationParams,
+    imu_t: np.ndarray,
+    starts: np.ndarray,
+    b_f: np.ndarray,
+    b_omega: np.ndarray,
+    gaps: Gaps,
+    imu_cfg: ImuConfig,
+) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PingMotion]]:
     """interval_with_snapshots with the pieces of each cut found on their own (pieces_with_holds), across IMU gaps
     too (their holds' pieces, and the hold covariance of everything held up to each ping in its snapshot)."""
     pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
@@ -193,15 +259,29 @@ def interval_cut_by_cut(t_state: float, t_end: float, t_pings: list[float], para
         if t_cut > a:
             spans += list(integrate(pim, imu_t, starts, b_f, b_omega, gaps, a, t_cut).spans)
             a = t_cut
-        out.append(snapshot_at(pim, a, t_p, spans, t_state, imu_t, starts, b_f, b_omega, gaps, imu_cfg, n_omega))
+        out.append(
+            snapshot_at(
+                pim, a, t_p, spans, t_state, imu_t, starts, b_f, b_omega, gaps, imu_cfg, n_omega
+            )
+        )
     spans += list(integrate(pim, imu_t, starts, b_f, b_omega, gaps, a, t_end).spans)
     return pim, Holds(tuple(spans)), out
 
 
-def ping_snapshots(t_state: float, t_pings: list[float], params: gtsam.PreintegrationParams, imu_t: np.ndarray,
-                   starts: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray, gaps: Gaps,
-                   imu_cfg: ImuConfig) -> list[PingMotion]:
+def ping_snapshots(
+    t_state: float,
+    t_pings: list[float],
+    params: gtsam.PreintegrationParams,
+    imu_t: np.ndarray,
+    starts: np.ndarray,
+    b_f: np.ndarray,
+    b_omega: np.ndarray,
+    gaps: Gaps,
+    imu_cfg: ImuConfig,
+) -> list[PingMotion]:
     """The snapshots at the pings t_pings (sorted, after t_state) of interval_with_snapshots from t_state up to
     the last ping (params: as the IMU factors')."""
     t_end = t_pings[-1] if t_pings else t_state
-    return interval_with_snapshots(t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg)[2]
+    return interval_with_snapshots(
+        t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg
+    )[2]

@@ -54,14 +54,23 @@ import numpy as np
 from gtsam_dvl.core.config import AlignmentConfig, EstimatorConfig, ImuConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.rotations import quat_xyzw_to_matrix, rpy_deg_to_matrix, rpy_to_matrix, skew, so3_exp, so3_log
+from gtsam_dvl.core.rotations import (
+    quat_xyzw_to_matrix,
+    rpy_deg_to_matrix,
+    rpy_to_matrix,
+    skew,
+    so3_exp,
+    so3_log,
+)
 from gtsam_dvl.core.types import AttitudeData, DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
 METHODS = ("attitude_topic", "configured", "static", "in_motion")
-ATTITUDE_SOURCES = ("an attitude topic (--attitude-topic: sensor_msgs/msg/Imu, nav_msgs/msg/Odometry or "
-                    "geometry_msgs/msg/PoseWithCovarianceStamped; or the IMU's own orientation), "
-                    "alignment.initial_attitude_deg, or a static start")
+ATTITUDE_SOURCES = (
+    "an attitude topic (--attitude-topic: sensor_msgs/msg/Imu, nav_msgs/msg/Odometry or "
+    "geometry_msgs/msg/PoseWithCovarianceStamped; or the IMU's own orientation), "
+    "alignment.initial_attitude_deg, or a static start"
+)
 
 
 @dataclass
@@ -83,9 +92,15 @@ class Alignment:
 
     def info(self) -> dict[str, Any]:
         """What the results report (NavResult.info["alignment"], the summary)."""
-        return {"method": self.method, "t_static_end": self.t_static_end,
-                "sigma_rpy_deg": None if self.sigma_rpy_deg is None else [float(v) for v in self.sigma_rpy_deg],
-                "t_ref": self.t_ref, "window_s": self.window_s}
+        return {
+            "method": self.method,
+            "t_static_end": self.t_static_end,
+            "sigma_rpy_deg": None
+            if self.sigma_rpy_deg is None
+            else [float(v) for v in self.sigma_rpy_deg],
+            "t_ref": self.t_ref,
+            "window_s": self.window_s,
+        }
 
     def at(self, t: float, imu: ImuData, frame: LocalFrame) -> Alignment:
         """This alignment carried to time t (s) with the gyros (imu in base_link); itself when it has no
@@ -107,8 +122,10 @@ def map_frame_of(log: LogData, config: EstimatorConfig) -> LocalFrame:
     if a.origin_lat_deg is not None:
         return LocalFrame(a.origin_lat_deg, a.origin_lon_deg or 0.0, a.origin_height_m or 0.0)
     if log.origin is None:
-        raise GtsamDvlError(f"{log.source or 'log'}: no map origin in the log; set alignment.origin_lat_deg "
-                            "(and lon, height) in the configuration: Earth rate and gravity need the latitude")
+        raise GtsamDvlError(
+            f"{log.source or 'log'}: no map origin in the log; set alignment.origin_lat_deg "
+            "(and lon, height) in the configuration: Earth rate and gravity need the latitude"
+        )
     return LocalFrame(log.origin.lat_deg, log.origin.lon_deg, log.origin.height_m)
 
 
@@ -122,7 +139,9 @@ DVL_MOTION_FRACTION = 0.8
 DVL_MOTION_MIN_PINGS = 3
 
 
-def window_means(t: np.ndarray, x: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+def window_means(
+    t: np.ndarray, x: np.ndarray, window_s: float = 1.0
+) -> tuple[np.ndarray, np.ndarray]:
     """Means of x over consecutive windows of window_s seconds; returns (window end times, means). A window's
     end is its nominal end, or the last sample's time for the last window (the data end there)."""
     idx = np.floor((t - t[0]) / window_s).astype(int)
@@ -148,7 +167,11 @@ def dvl_motion_start(dvl: DvlData, speed_threshold_m_s: float) -> float | None:
     start = np.arange(n)
     stop = np.minimum(start + DVL_MOTION_PINGS, n)
     size = stop - start
-    moving = fast & (size >= DVL_MOTION_MIN_PINGS) & (counts[stop] - counts[start] >= DVL_MOTION_FRACTION * size)
+    moving = (
+        fast
+        & (size >= DVL_MOTION_MIN_PINGS)
+        & (counts[stop] - counts[start] >= DVL_MOTION_FRACTION * size)
+    )
     return float(t[np.argmax(moving)]) if moving.any() else None
 
 
@@ -162,7 +185,8 @@ def detect_static_end(imu: ImuData, dvl: DvlData, cfg: AlignmentConfig) -> float
     n_ref = max(1, min(10, len(ends)))
     f_ref, w_ref = f_means[:n_ref].mean(axis=0), w_means[:n_ref].mean(axis=0)
     moving = (np.linalg.norm(f_means - f_ref, axis=1) > cfg.accel_threshold_m_s2) | (
-        np.degrees(np.linalg.norm(w_means - w_ref, axis=1)) > cfg.gyro_threshold_deg_s)
+        np.degrees(np.linalg.norm(w_means - w_ref, axis=1)) > cfg.gyro_threshold_deg_s
+    )
     t_end = float(ends[np.argmax(moving)] - STATIC_MARGIN_S) if moving.any() else float(ends[-1])
     t_dvl = dvl_motion_start(dvl, cfg.dvl_speed_threshold_m_s)
     if t_dvl is not None:
@@ -186,16 +210,20 @@ def coarse_alignment(b_f: np.ndarray, b_omega: np.ndarray, frame: LocalFrame) ->
     w_level = l_R_b_level @ b_omega  # = Rz(yaw)^T n_omega_ie
     yaw = np.arctan2(w_level[0], w_level[1])
     horizontal_rate = float(np.linalg.norm(frame.n_omega_ie[:2]))
-    if (np.hypot(w_level[0], w_level[1]) < 0.2 * horizontal_rate
-            or horizontal_rate < GYROCOMPASS_MIN_HORIZONTAL_RATE_RAD_S):
-        raise GtsamDvlError("gyrocompassing failed: the horizontal Earth rate is not visible in the gyros "
-                            "(IMU too noisy, or latitude near a pole); give alignment.initial_attitude_deg")
+    if (
+        np.hypot(w_level[0], w_level[1]) < 0.2 * horizontal_rate
+        or horizontal_rate < GYROCOMPASS_MIN_HORIZONTAL_RATE_RAD_S
+    ):
+        raise GtsamDvlError(
+            "gyrocompassing failed: the horizontal Earth rate is not visible in the gyros "
+            "(IMU too noisy, or latitude near a pole); give alignment.initial_attitude_deg"
+        )
     return rpy_to_matrix(float(roll), float(pitch), float(yaw))
 
 
 def _pieces(imu: ImuData, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
     """IMU samples covering (a, b] and the seconds of each inside it (sample k covers (t[k-1], t[k]])."""
-    from gtsam_dvl.estimators.selection import imu_pieces, sample_starts
+    from gtsam_dvl.estimators.inputs.selection import imu_pieces, sample_starts
 
     return imu_pieces(imu.t, sample_starts(imu.t), a, b)
 
@@ -238,8 +266,15 @@ IN_MOTION_MAX_YAW_SIGMA_DEG = 5.0
 IN_MOTION_PASSES = 3
 
 
-def _body_integrals(imu: ImuData, sel: np.ndarray, tk: np.ndarray, j: np.ndarray, s: np.ndarray,
-                    d_omega: np.ndarray, d_f: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _body_integrals(
+    imu: ImuData,
+    sel: np.ndarray,
+    tk: np.ndarray,
+    j: np.ndarray,
+    s: np.ndarray,
+    d_omega: np.ndarray,
+    d_f: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """b0_R_b on the grid tk, and b0_R_b and int b0_R_b b_f dt at the pings (in grid step j, s seconds into
     it), from the samples sel with the gyro and the accelerometer offset by d_omega (rad/s) and d_f (m/s^2)
     (zero, or a bias to see what it does)."""
@@ -250,14 +285,22 @@ def _body_integrals(imu: ImuData, sel: np.ndarray, tk: np.ndarray, j: np.ndarray
     R[0] = np.eye(3)
     for i in range(len(sel)):
         R[i + 1] = R[i] @ D[i]
-    V = np.vstack([np.zeros(3), np.cumsum(np.einsum("kij,kjl,kl->ki", R[:-1], half, f) * dt[:, None], axis=0)])
+    V = np.vstack(
+        [np.zeros(3), np.cumsum(np.einsum("kij,kjl,kl->ki", R[:-1], half, f) * dt[:, None], axis=0)]
+    )
     Rp = R[j - 1] @ so3_exp(w[j - 1] * s[:, None])
     Vp = V[j - 1] + (V[j] - V[j - 1]) * (s / dt[j - 1])[:, None]
     return R, Rp, Vp
 
 
-def in_motion_alignment(imu: ImuData, dvl: DvlData, frame: LocalFrame, mounting: Mounting, window_s: float,
-                        imu_cfg: ImuConfig | None = None) -> Alignment:
+def in_motion_alignment(
+    imu: ImuData,
+    dvl: DvlData,
+    frame: LocalFrame,
+    mounting: Mounting,
+    window_s: float,
+    imu_cfg: ImuConfig | None = None,
+) -> Alignment:
     """n_R_b at the first IMU sample from the IMU (in base_link) and the DVL over the first window_s seconds
     while moving (module doc: velocity integration in inertial frames, a centred Wahba problem solved by
     SVD). Accuracy in Alignment.sigma_rpy_deg: the fit's covariance plus what a 1-sigma bias of imu_cfg
@@ -272,47 +315,66 @@ def in_motion_alignment(imu: ImuData, dvl: DvlData, frame: LocalFrame, mounting:
     ok = dvl.valid & np.isfinite(dvl.d_v).all(axis=1) & (dvl.t >= t_ref) & (dvl.t <= t_end)
     pings = np.flatnonzero(ok)
     if len(pings) < IN_MOTION_MIN_PINGS:
-        raise GtsamDvlError(f"in-motion alignment: only {len(pings)} valid DVL pings in the first "
-                            f"{t_end - t_ref:.0f} s (needs {IN_MOTION_MIN_PINGS}); give {ATTITUDE_SOURCES}")
+        raise GtsamDvlError(
+            f"in-motion alignment: only {len(pings)} valid DVL pings in the first "
+            f"{t_end - t_ref:.0f} s (needs {IN_MOTION_MIN_PINGS}); give {ATTITUDE_SOURCES}"
+        )
     tp = dvl.t[pings]
-    j = np.clip(np.searchsorted(tk, tp, side="left"), 1, len(tk) - 1)  # grid step (tk[j-1], tk[j]] holding tp
+    j = np.clip(
+        np.searchsorted(tk, tp, side="left"), 1, len(tk) - 1
+    )  # grid step (tk[j-1], tk[j]] holding tp
     s = tp - tk[j - 1]
     zero = np.zeros(3)
     _, Rp, Vp = _body_integrals(imu, sel, tk, j, s, zero, zero)
     w = imu.b_omega[sel[j - 1]]
-    b_v = dvl.d_v[pings] @ mounting.b_R_d0.T - np.cross(w, mounting.b_l)  # at the IMU (w ~ rate vs map)
+    b_v = dvl.d_v[pings] @ mounting.b_R_d0.T - np.cross(
+        w, mounting.b_l
+    )  # at the IMU (w ~ rate vs map)
     q = np.einsum("kij,kj->ki", Rp, b_v)  # body velocity in b0 at the pings
     alpha = Vp - q
     # body velocity in b0 on the grid (linear between pings, held outside) and its integral
     q_grid = np.column_stack([np.interp(tk, tp, q[:, a]) for a in range(3)])
-    P = np.vstack([np.zeros(3), np.cumsum(0.5 * (q_grid[1:] + q_grid[:-1]) * np.diff(tk)[:, None], axis=0)])
+    P = np.vstack(
+        [np.zeros(3), np.cumsum(0.5 * (q_grid[1:] + q_grid[:-1]) * np.diff(tk)[:, None], axis=0)]
+    )
     Pp = np.column_stack([np.interp(tp, tk, P[:, a]) for a in range(3)])
     w_ie = frame.n_omega_ie
     n0_R_n = so3_exp(w_ie[None, :] * (tk - t_ref)[:, None])
-    step = max(1, len(tk) // 2000)  # gravity along the track, on a coarser grid (it changes by 1e-4 per km)
+    step = max(
+        1, len(tk) // 2000
+    )  # gravity along the track, on a coarser grid (it changes by 1e-4 per km)
     coarse = np.r_[np.arange(0, len(tk), step), len(tk) - 1]
     C = np.eye(3)
     use = np.ones(len(pings), bool)
     for n_pass in range(IN_MOTION_PASSES):
-        n_p = P[coarse] @ C.T if n_pass else np.zeros((len(coarse), 3))  # map position (n_R_n0 ~ I: 2e-2 rad)
+        n_p = (
+            P[coarse] @ C.T if n_pass else np.zeros((len(coarse), 3))
+        )  # map position (n_R_n0 ~ I: 2e-2 rad)
         g_c = frame.n_gravity(n_p)
         n_g = np.column_stack([np.interp(tk, tk[coarse], g_c[:, a]) for a in range(3)])
         g0 = np.einsum("kij,kj->ki", n0_R_n, n_g)
-        G = np.vstack([np.zeros(3), np.cumsum(0.5 * (g0[1:] + g0[:-1]) * np.diff(tk)[:, None], axis=0)])
+        G = np.vstack(
+            [np.zeros(3), np.cumsum(0.5 * (g0[1:] + g0[:-1]) * np.diff(tk)[:, None], axis=0)]
+        )
         Gp = np.column_stack([np.interp(tp, tk, G[:, a]) for a in range(3)])
         beta = -Gp + (np.cross(w_ie, Pp @ C.T) if n_pass else 0.0)
         C, sigma2 = _centred_wahba(alpha[use], beta[use])
         full = beta - (alpha - alpha[use].mean(axis=0)) @ C.T - beta[use].mean(axis=0)
         use = np.linalg.norm(full, axis=1) <= IN_MOTION_OUTLIER_SIGMAS * np.sqrt(3.0 * sigma2)
         if use.sum() < IN_MOTION_MIN_PINGS:
-            raise GtsamDvlError("in-motion alignment: the DVL and the IMU disagree (most pings are outliers); "
-                                f"give {ATTITUDE_SOURCES}")
+            raise GtsamDvlError(
+                "in-motion alignment: the DVL and the IMU disagree (most pings are outliers); "
+                f"give {ATTITUDE_SOURCES}"
+            )
     C, sigma2 = _centred_wahba(alpha[use], beta[use])
     bt = beta[use] - beta[use].mean(axis=0)
-    cov = np.linalg.inv((np.einsum("ki,ki->", bt, bt) * np.eye(3) - bt.T @ bt) / sigma2)  # map axes (n0 at t_ref)
+    cov = np.linalg.inv(
+        (np.einsum("ki,ki->", bt, bt) * np.eye(3) - bt.T @ bt) / sigma2
+    )  # map axes (n0 at t_ref)
     # what a 1-sigma bias on each axis does (the biases are unknown constants, not noise: they add in full)
-    for k, sig in [(k, imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H) for k in range(3)] + \
-                  [(k + 3, imu_cfg.accel_bias_sigma_ug * UG) for k in range(3)]:
+    for k, sig in [(k, imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H) for k in range(3)] + [
+        (k + 3, imu_cfg.accel_bias_sigma_ug * UG) for k in range(3)
+    ]:
         d = np.zeros(6)
         d[k] = sig
         _, Rp_b, Vp_b = _body_integrals(imu, sel, tk, j, s, d[:3], d[3:])
@@ -322,9 +384,11 @@ def in_motion_alignment(imu: ImuData, dvl: DvlData, frame: LocalFrame, mounting:
         cov = cov + np.outer(dth, dth)
     sigma = np.degrees(np.sqrt(np.diag(cov)))
     if not sigma[2] <= IN_MOTION_MAX_YAW_SIGMA_DEG:
-        raise GtsamDvlError(f"in-motion alignment over {t_end - t_ref:.0f} s gives the heading only to "
-                            f"{sigma[2]:.1f} deg (1 sigma; gyrocompassing needs the Earth rate well above the gyro "
-                            f"bias and the DVL noise); give {ATTITUDE_SOURCES}")
+        raise GtsamDvlError(
+            f"in-motion alignment over {t_end - t_ref:.0f} s gives the heading only to "
+            f"{sigma[2]:.1f} deg (1 sigma; gyrocompassing needs the Earth rate well above the gyro "
+            f"bias and the DVL noise); give {ATTITUDE_SOURCES}"
+        )
     return Alignment(C, 0.0, "in_motion", sigma_rpy_deg=sigma, t_ref=t_ref, window_s=t_end - t_ref)
 
 
@@ -338,33 +402,47 @@ def _centred_wahba(alpha: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, flo
     return C, float(np.einsum("ki,ki->", r, r) / max(3 * len(a) - 6, 1))
 
 
-def align(imu: ImuData, dvl: DvlData, frame: LocalFrame, cfg: AlignmentConfig, *,
-          attitude: AttitudeData | None = None, mounting: Mounting | None = None,
-          imu_cfg: ImuConfig | None = None) -> Alignment:
+def align(
+    imu: ImuData,
+    dvl: DvlData,
+    frame: LocalFrame,
+    cfg: AlignmentConfig,
+    *,
+    attitude: AttitudeData | None = None,
+    mounting: Mounting | None = None,
+    imu_cfg: ImuConfig | None = None,
+) -> Alignment:
     """Initial attitude by cfg.method (module doc). "auto": the attitude sensor (attitude), else the
     configured attitude, else coarse alignment on the initial static segment (heading by gyrocompassing,
     refused when the gyro bias would set it: see coarse_alignment), else in-motion alignment with the DVL
     (mounting: the DVL's nominal mounting, identity if None). A forced method that cannot be done is an error.
-    imu is in base_link (estimators/mounting.py)."""
+    imu is in base_link (estimators/inputs/mounting.py)."""
     method = cfg.method
     if method in ("auto", "attitude_topic") and attitude is not None and len(attitude):
         return _attitude_alignment(attitude, imu, cfg)
     if method == "attitude_topic":
-        raise GtsamDvlError("alignment.method = \"attitude_topic\" but the log has no attitude: name one with "
-                            "--attitude-topic (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry or "
-                            "geometry_msgs/msg/PoseWithCovarianceStamped), or give the IMU messages an orientation")
+        raise GtsamDvlError(
+            'alignment.method = "attitude_topic" but the log has no attitude: name one with '
+            "--attitude-topic (sensor_msgs/msg/Imu, nav_msgs/msg/Odometry or "
+            "geometry_msgs/msg/PoseWithCovarianceStamped), or give the IMU messages an orientation"
+        )
     if method == "auto" and cfg.initial_attitude_deg is not None:
         return Alignment(rpy_deg_to_matrix(cfg.initial_attitude_deg), 0.0, "configured")
     if method == "in_motion":
-        return in_motion_alignment(imu, dvl, frame, mounting or Mounting(), cfg.in_motion_window_s, imu_cfg)
+        return in_motion_alignment(
+            imu, dvl, frame, mounting or Mounting(), cfg.in_motion_window_s, imu_cfg
+        )
     t_end = detect_static_end(imu, dvl, cfg)
     if t_end - imu.t[0] < cfg.min_static_s:
         if method == "auto":
-            return in_motion_alignment(imu, dvl, frame, mounting or Mounting(), cfg.in_motion_window_s, imu_cfg)
+            return in_motion_alignment(
+                imu, dvl, frame, mounting or Mounting(), cfg.in_motion_window_s, imu_cfg
+            )
         raise GtsamDvlError(
             f"no static segment of at least {cfg.min_static_s:.0f} s at the start of the log (found "
-            f"{max(t_end - imu.t[0], 0.0):.0f} s); set alignment.method = \"auto\" or \"in_motion\", or give "
-            f"{ATTITUDE_SOURCES}")
+            f'{max(t_end - imu.t[0], 0.0):.0f} s); set alignment.method = "auto" or "in_motion", or give '
+            f"{ATTITUDE_SOURCES}"
+        )
     sel = imu.t <= t_end
     b_f, b_omega = imu.b_f[sel].mean(axis=0), imu.b_omega[sel].mean(axis=0)
     return Alignment(coarse_alignment(b_f, b_omega, frame), t_end, "static", b_f, b_omega)
@@ -387,12 +465,19 @@ class FirstState:
     def info(self) -> dict[str, Any]:
         """What the results report (NavResult.info["alignment"]["first_state"])."""
         sig = np.sqrt(np.diag(self.cov))
-        return {"carried": self.carried, "t_from": self.t_from, "t1": self.t1,
-                "n_p": [float(v) for v in self.n_p], "sigma_rpy_deg": [float(v) for v in np.degrees(sig[:3])],
-                "position_sigma_m": [float(v) for v in sig[3:]]}
+        return {
+            "carried": self.carried,
+            "t_from": self.t_from,
+            "t1": self.t1,
+            "n_p": [float(v) for v in self.n_p],
+            "sigma_rpy_deg": [float(v) for v in np.degrees(sig[:3])],
+            "position_sigma_m": [float(v) for v in sig[3:]],
+        }
 
 
-def given_covariance(alignment: Alignment, config: EstimatorConfig, *, alignment_sigmas: bool = True) -> np.ndarray:
+def given_covariance(
+    alignment: Alignment, config: EstimatorConfig, *, alignment_sigmas: bool = True
+) -> np.ndarray:
     """The prior covariance (6x6, map axes: attitude rad, position m) of the given initial state at its own time:
     the alignment's attitude sigmas when it has them (alignment_sigmas; the EKF keeps [priors]'), else [priors]
     roll_pitch_sigma_deg / yaw_sigma_deg, and [priors] position_sigma_m about the map origin."""
@@ -400,13 +485,23 @@ def given_covariance(alignment: Alignment, config: EstimatorConfig, *, alignment
     if alignment_sigmas and alignment.sigma_rpy_deg is not None:
         sig_att = np.radians(np.asarray(alignment.sigma_rpy_deg, dtype=float))
     else:
-        sig_att = np.radians([pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg])
+        sig_att = np.radians(
+            [pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg]
+        )
     return np.diag(np.concatenate([sig_att**2, np.full(3, pri.position_sigma_m**2)]))
 
 
-def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float, b_v: np.ndarray | None,
-                config: EstimatorConfig, velocity_sigma_m_s: float, cov0: np.ndarray | None = None,
-                t_origin: float | None = None) -> FirstState:
+def first_state(
+    alignment: Alignment,
+    imu: ImuData,
+    frame: LocalFrame,
+    t1: float,
+    b_v: np.ndarray | None,
+    config: EstimatorConfig,
+    velocity_sigma_m_s: float,
+    cov0: np.ndarray | None = None,
+    t_origin: float | None = None,
+) -> FirstState:
     """The given initial attitude and map origin carried to the first state's time t1 (s). They refer to the
     log's first IMU stamp (configured attitude, in-motion alignment; the map origin is where the vehicle is
     then, or at t_origin when given: the first GNSS fix's time when the origin is that fix), to the attitude
@@ -439,12 +534,17 @@ def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float
         att_moves, pos_moves = t1 != t_att, t1 != t_pos
     if not (att_moves or pos_moves):
         return FirstState(alignment, np.zeros(3), cov0, False, min(t_att, t_pos), t1)
-    at1 = replace(alignment, t_ref=t_att).at(t1, imu, frame) if att_moves else replace(alignment, t_ref=t1)
+    at1 = (
+        replace(alignment, t_ref=t_att).at(t1, imu, frame)
+        if att_moves
+        else replace(alignment, t_ref=t1)
+    )
     imu_cfg, pri = config.imu, config.priors
     dt_att = abs(t1 - t_att) if att_moves else 0.0
     dt_pos = abs(t1 - t_pos) if pos_moves else 0.0
     var_gyro = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2 * dt_att + (
-        imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H * dt_att) ** 2
+        imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H * dt_att
+    ) ** 2
     d = np.zeros(3)
     speed = 0.0
     if b_v is not None and np.all(np.isfinite(b_v)) and dt_pos > 0:
@@ -454,8 +554,13 @@ def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float
         else:  # the origin refers to a later time (a GNSS fix after the first ping): back from it
             d = -_displacement(at1.at(t_pos, imu, frame).n_R_b, imu, frame, t1, t_pos, b_v)
         speed = float(np.linalg.norm(b_v))
-    sig_v = float(np.sqrt(velocity_sigma_m_s**2 + (pri.scale_sigma * speed) ** 2
-                          + (np.radians(max(pri.misalignment_sigma_deg)) * speed) ** 2))
+    sig_v = float(
+        np.sqrt(
+            velocity_sigma_m_s**2
+            + (pri.scale_sigma * speed) ** 2
+            + (np.radians(max(pri.misalignment_sigma_deg)) * speed) ** 2
+        )
+    )
     J = np.eye(6)
     J[3:, :3] = -skew(d)
     cov = J @ cov0 @ J.T
@@ -464,8 +569,9 @@ def first_state(alignment: Alignment, imu: ImuData, frame: LocalFrame, t1: float
     return FirstState(at1, d, 0.5 * (cov + cov.T), True, min(t_att, t_pos), t1)
 
 
-def _displacement(n_R_b1: np.ndarray, imu: ImuData, frame: LocalFrame, a: float, b: float,
-                  b_v: np.ndarray) -> np.ndarray:
+def _displacement(
+    n_R_b1: np.ndarray, imu: ImuData, frame: LocalFrame, a: float, b: float, b_v: np.ndarray
+) -> np.ndarray:
     """Map displacement (m) from a to b (s) at the constant body velocity b_v (m/s), the attitude n_R_b1 at b
     carried back with the gyros and the Earth rate: n_R_b(t) = Exp(-n_omega_ie (t - b)) n_R_b1 b(a)_R_b(b)^T
     b(a)_R_b(t); each sample's piece at the mean of its ends' attitudes' velocities."""

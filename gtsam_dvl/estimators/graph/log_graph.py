@@ -1,12 +1,12 @@
 """The whole-log graph: the batch smoother's and the planner's factor graph over every epoch of a log.
 
-States (pose X_i = n_T_b, velocity V_i = n_v) at the DVL epochs chosen by estimators/selection.py (every
+States (pose X_i = n_T_b, velocity V_i = n_v) at the DVL epochs chosen by estimators/inputs/selection.py (every
 usable ping, or with [solver] keyframe_spacing_s the keyframes) and at DVL-dropout fillers; preintegrated IMU
 factors between consecutive states, integrated exactly to the DVL stamps; DVL velocity (or beam) factors on
 (X_i, V_i, scale K, misalignment C = b_R_d); the pings between keyframes as DVL factors on the state before
-them through the IMU motion up to the ping (estimators/keyframes.py, factors/dvl.py with a PingMotion, also on the
+them through the IMU motion up to the ping (estimators/graph/keyframes.py, factors/dvl.py with a PingMotion, also on the
 bias); IMU bias B (one random constant, or B_i as a random walk). Every factor comes from the FactorMaker
-(estimators/factor_maker.py: the Earth model and why it
+(estimators/graph/factor_maker.py: the Earth model and why it
 is exact), which the online estimator shares; this module owns the epochs, their preintegrations and the
 initial guess of the whole trajectory.
 """
@@ -28,13 +28,14 @@ from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.states import correlated_error, enabled, shared_keys, water_current
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated, current
-from gtsam_dvl.estimators.alignment import Alignment, align, map_frame_of
-from gtsam_dvl.estimators.bulk import BulkGraph, bulk_dvl
-from gtsam_dvl.estimators.bulk_imu import BulkImu, GravityRefs
-from gtsam_dvl.estimators.depth import depth_samples, nearest_states
-from gtsam_dvl.estimators.factor_maker import FactorMaker
-from gtsam_dvl.estimators.gaps import (
+from gtsam_dvl.estimators.graph.bulk import BulkGraph, bulk_dvl
+from gtsam_dvl.estimators.graph.bulk_imu import BulkImu, GravityRefs
+from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
+from gtsam_dvl.estimators.graph.keyframes import interval_with_snapshots
+from gtsam_dvl.estimators.graph.solver import ChunkedOrdering
+from gtsam_dvl.estimators.inputs.alignment import Alignment, align, map_frame_of
+from gtsam_dvl.estimators.inputs.depth import depth_samples, nearest_states
+from gtsam_dvl.estimators.inputs.gaps import (
     Gaps,
     Holds,
     check_gaps,
@@ -44,12 +45,16 @@ from gtsam_dvl.estimators.gaps import (
     sample_starts_with_gaps,
     with_fillers,
 )
-from gtsam_dvl.estimators.gnss import GnssFixes, first_position, first_position_cov, plan_fixes
-from gtsam_dvl.estimators.keyframes import interval_with_snapshots
-from gtsam_dvl.estimators.mounting import log_in_base_link
-from gtsam_dvl.estimators.offset_guess import OffsetGuess, guess_offset
-from gtsam_dvl.estimators.selection import covering_sample, decide_epochs
-from gtsam_dvl.estimators.solver import ChunkedOrdering
+from gtsam_dvl.estimators.inputs.gnss import (
+    GnssFixes,
+    first_position,
+    first_position_cov,
+    plan_fixes,
+)
+from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
+from gtsam_dvl.estimators.inputs.offset_guess import OffsetGuess, guess_offset
+from gtsam_dvl.estimators.inputs.selection import covering_sample, decide_epochs
+from gtsam_dvl.estimators.models import correlated, current
 from gtsam_dvl.factors import EarthImuFactor
 from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians, gravity_maps
 from gtsam_dvl.factors.imu_earth import REFRESH_M
@@ -66,7 +71,9 @@ class BetweenPing:
     dvl_index: int
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # as Epoch.rate_input, at t
-    snap: int = -1  # its IMU motion from the state before: row of LogGraph.snapshots (LogGraph.ping_snapshot)
+    snap: int = (
+        -1
+    )  # its IMU motion from the state before: row of LogGraph.snapshots (LogGraph.ping_snapshot)
 
 
 @dataclass
@@ -74,11 +81,13 @@ class Epoch:
     """One state of the graph: a DVL ping used as keyframe."""
 
     t: float
-    dvl_index: int  # -1: a state without a ping (a DVL dropout: estimators/gaps.py)
+    dvl_index: int  # -1: a state without a ping (a DVL dropout: estimators/inputs/gaps.py)
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
     # with dvl.estimate_time_offset: (mean specific force, mean body rate) around t (FactorMaker.velocity_rate_input)
     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-    between: list[BetweenPing] = field(default_factory=list)  # the pings up to the next state (keyframes)
+    between: list[BetweenPing] = field(
+        default_factory=list
+    )  # the pings up to the next state (keyframes)
 
 
 @dataclass
@@ -96,18 +105,23 @@ class LogGraph:
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
     imu_params: list[gtsam.PreintegrationParams] = field(init=False)
     imu_held: list[Holds] = field(init=False)  # what each IMU interval held across IMU gaps
-    _imu_factors: list[EarthImuFactor] | None = field(default=None, init=False, repr=False)  # (imu_factors)
+    _imu_factors: list[EarthImuFactor] | None = field(
+        default=None, init=False, repr=False
+    )  # (imu_factors)
     # the IMU factors' gravity references, shared by the EarthImuFactors' copies and the bulk IMU factors
     gravity_refs: GravityRefs = field(init=False, repr=False)
     gaps: Gaps = field(init=False)
     counters: dict[str, int] = field(default_factory=dict)
     # map positions (N, 3) of the states at which the keyframe factors' gravity is referenced (initial_values)
     gravity_positions: np.ndarray | None = field(default=None, init=False, repr=False)
-    _keyframe_gravity: tuple[np.ndarray | None, np.ndarray, np.ndarray] | None = field(default=None, init=False,
-                                                                                     repr=False)
+    _keyframe_gravity: tuple[np.ndarray | None, np.ndarray, np.ndarray] | None = field(
+        default=None, init=False, repr=False
+    )
     # the IMU motion to each ping between keyframes (BetweenPing.snap: its row); None once build_bulk let it go
     snapshots: PingMotion | None = field(default=None, init=False, repr=False)
-    usable: np.ndarray = field(init=False, repr=False)  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
+    usable: np.ndarray = field(
+        init=False, repr=False
+    )  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
     water: np.ndarray = field(init=False, repr=False)  # (M,) bool: log.dvl's water-track pings
     # the water current's layer boundaries S(b) the states cross ([current] layer_thickness_m > 0), and the states'
     # heights (m above the map origin) that place them in the layers (layer_heights; initial_values)
@@ -119,20 +133,37 @@ class LogGraph:
     # the time offset's IMU windows as last set (set_time_offset_window, recentre_time_offset): the offset (s) they
     # are centred on and the accelerometer bias (m/s^2, per ping row of the bulk or (3,)) taken off their samples
     offset_centre: float = field(default=0.0, init=False, repr=False)
-    offset_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int), init=False, repr=False)
-    offset_accel_bias: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)), init=False, repr=False)
+    offset_rows: np.ndarray = field(
+        default_factory=lambda: np.zeros(0, dtype=int), init=False, repr=False
+    )
+    offset_accel_bias: np.ndarray = field(
+        default_factory=lambda: np.zeros((0, 3)), init=False, repr=False
+    )
     # the batch smoother's last check of the windows against its solution (batch.solve_centred)
     offset_centring: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.log = log_in_base_link(self.log)  # IMU samples in base_link (estimators/mounting.py)
+        self.log = log_in_base_link(
+            self.log
+        )  # IMU samples in base_link (estimators/inputs/mounting.py)
         cfg, log = self.config, self.log
         frame = map_frame_of(log, cfg)
-        alignment = align(log.imu, log.dvl, frame, cfg.alignment, attitude=log.attitude, mounting=log.mounting,
-                          imu_cfg=cfg.imu)
-        self.maker = FactorMaker(cfg, frame, alignment, log.mounting, log.source, calibration=self.calibration)
+        alignment = align(
+            log.imu,
+            log.dvl,
+            frame,
+            cfg.alignment,
+            attitude=log.attitude,
+            mounting=log.mounting,
+            imu_cfg=cfg.imu,
+        )
+        self.maker = FactorMaker(
+            cfg, frame, alignment, log.mounting, log.source, calibration=self.calibration
+        )
         if enabled(cfg, "time_offset") and cfg.dvl.use_beams:
-            raise GtsamDvlError("[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams")
+            raise GtsamDvlError(
+                "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
+            )
         if len(log.imu) < 2:
             raise GtsamDvlError(f"{log.source or 'log'}: fewer than two IMU samples")
         check_spacing(cfg.solver)
@@ -143,10 +174,14 @@ class LogGraph:
         # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own
         # time): carry them to the first state (alignment.first_state)
         j0 = self.epochs[0].dvl_index
-        self.water = current.water_pings(log)  # (M,) the water-track pings (used when water_current(cfg))
+        self.water = current.water_pings(
+            log
+        )  # (M,) the water-track pings (used when water_current(cfg))
         d_y0 = log.dvl.d_v[j0] if log.dvl.valid[j0] and not self.water[j0] else None
         self.maker.carry_to_first(log.imu, self.epochs[0].t, d_y0, log.dvl.d_cov[j0])
-        self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)  # the gaps the states cross
+        self.gaps = gaps_within(
+            self.gaps, self.epochs[0].t, self.epochs[-1].t
+        )  # the gaps the states cross
         self.counters["imu_gaps"] = len(self.gaps)
         check_gaps(self.gaps, cfg.imu, log.source)
         # the samples' intervals and rotation-compensated specific force, made once for both integrations (each
@@ -158,8 +193,11 @@ class LogGraph:
         del starts, b_f
         n_f = len(self.pims)
         self.gravity_refs = GravityRefs(
-            np.full((n_f, 3), np.nan), np.array([p.n_gravity for p in self.imu_params], dtype=float).reshape(n_f, 3),
-            np.zeros((n_f, 3, 3)), None if cfg.solver.earth_model == "flat" else self.maker.gravity_model)
+            np.full((n_f, 3), np.nan),
+            np.array([p.n_gravity for p in self.imu_params], dtype=float).reshape(n_f, 3),
+            np.zeros((n_f, 3, 3)),
+            None if cfg.solver.earth_model == "flat" else self.maker.gravity_model,
+        )
         self._per_factor_built = False
 
     @property
@@ -169,10 +207,17 @@ class LogGraph:
         docs/results.md, Speed); empty once build_bulk let the preintegrations go."""
         if self._imu_factors is None:
             if len(self.pims) + 1 != len(self.epochs):
-                raise GtsamDvlError("the IMU factors: build_bulk let the preintegrations go; make a new LogGraph")
+                raise GtsamDvlError(
+                    "the IMU factors: build_bulk let the preintegrations go; make a new LogGraph"
+                )
             self._imu_factors = [
-                self.maker.new_imu_factor(i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h)
-                for i, (pim, params, h) in enumerate(zip(self.pims, self.imu_params, self.imu_held, strict=True))]
+                self.maker.new_imu_factor(
+                    i, pim, params, self.epochs[i + 1].t - self.epochs[i].t, h
+                )
+                for i, (pim, params, h) in enumerate(
+                    zip(self.pims, self.imu_params, self.imu_held, strict=True)
+                )
+            ]
             refs = self.gravity_refs
             for i in np.flatnonzero(~np.isnan(refs.n_p[:, 0])).tolist():
                 f = self._imu_factors[i]
@@ -195,33 +240,53 @@ class LogGraph:
         dvl, imu, cfg = self.log.dvl, self.log.imu, self.config
         spacing = cfg.solver.keyframe_spacing_s
         if spacing > cfg.solver.max_state_spacing_s:
-            raise GtsamDvlError(f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
-                                f"{spacing:g} s: states without a ping would take the places of the keyframes")
-        self.usable, all_idx, key = decide_epochs(dvl, imu, cfg.dvl, cfg.solver.keyframe_interval_s, spacing,
-                                                  self.counters, water_current(cfg))
-        key[-1:] = True  # the last ping too: every other ping lies between two states (and the gaps they cross)
+            raise GtsamDvlError(
+                f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
+                f"{spacing:g} s: states without a ping would take the places of the keyframes"
+            )
+        self.usable, all_idx, key = decide_epochs(
+            dvl,
+            imu,
+            cfg.dvl,
+            cfg.solver.keyframe_interval_s,
+            spacing,
+            self.counters,
+            water_current(cfg),
+        )
+        key[-1:] = (
+            True  # the last ping too: every other ping lies between two states (and the gaps they cross)
+        )
         idx = all_idx[key]
-        times, is_filler = with_fillers(dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s)
+        times, is_filler = with_fillers(
+            dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s
+        )
         self.counters["states_without_ping"] = int(is_filler.sum())
         self.counters["keyframes"] = int(key.sum())
         self.counters["pings_between_keyframes"] = int((~key).sum())
         dvl_index = np.full(len(times), -1)
         dvl_index[~is_filler] = idx
         gyro = covering_sample(imu.t, times)
-        epochs = [Epoch(float(t), int(j), self.maker.body_rate(imu.b_omega[g]))
-                  for t, j, g in zip(times.tolist(), dvl_index.tolist(), gyro.tolist(), strict=True)]
+        epochs = [
+            Epoch(float(t), int(j), self.maker.body_rate(imu.b_omega[g]))
+            for t, j, g in zip(times.tolist(), dvl_index.tolist(), gyro.tolist(), strict=True)
+        ]
         rest = all_idx[~key]
         if len(rest):
-            state = np.searchsorted(times, dvl.t[rest], side="left") - 1  # the latest state before each ping
+            state = (
+                np.searchsorted(times, dvl.t[rest], side="left") - 1
+            )  # the latest state before each ping
             gyro_p = covering_sample(imu.t, dvl.t[rest])
             for j, i, g in zip(rest.tolist(), state.tolist(), gyro_p.tolist(), strict=True):
-                epochs[i].between.append(BetweenPing(float(dvl.t[j]), int(j), self.maker.body_rate(imu.b_omega[g])))
+                epochs[i].between.append(
+                    BetweenPing(float(dvl.t[j]), int(j), self.maker.body_rate(imu.b_omega[g]))
+                )
         if enabled(cfg, "time_offset"):
             self.set_time_offset_window(cfg.dvl.time_offset_prior_s, epochs)
         return epochs
 
-    def set_time_offset_window(self, dt: float, epochs: list[Epoch] | None = None,
-                               values: gtsam.Values | None = None) -> None:
+    def set_time_offset_window(
+        self, dt: float, epochs: list[Epoch] | None = None, values: gtsam.Values | None = None
+    ) -> None:
         """The epochs' IMU constants of the time-offset model, averaged around t + dt / 2 (dt: the current
         estimate of the offset; FactorMaker.velocity_rate_input). Factors built afterwards use them. values: the
         current estimate, whose IMU biases are taken off the samples and whose attitudes remove the Earth rate
@@ -238,32 +303,44 @@ class LogGraph:
         if not owners:
             return
         bias, n_R_b = self.offset_state(np.array(state), values)
-        b_a, w_mean, G = self.maker.velocity_rate_inputs(np.array([o.t for o in owners]), imu.t, imu.b_f,
-                                                         imu.b_omega, dt, bias=bias, n_R_b=n_R_b)
+        b_a, w_mean, G = self.maker.velocity_rate_inputs(
+            np.array([o.t for o in owners]), imu.t, imu.b_f, imu.b_omega, dt, bias=bias, n_R_b=n_R_b
+        )
         for o, a, m, g in zip(owners, b_a, w_mean, G, strict=True):
             o.rate_input = (a, m, g)
         self._windows_set(dt, np.array(state), bias)
 
-    def _windows_set(self, dt: float, state: np.ndarray, bias: tuple[np.ndarray, np.ndarray] | None) -> None:
+    def _windows_set(
+        self, dt: float, state: np.ndarray, bias: tuple[np.ndarray, np.ndarray] | None
+    ) -> None:
         """Records what the time offset's windows were last set at: their centre, states and accelerometer bias."""
         self.offset_centre = float(dt)
         self.offset_rows = np.asarray(state, dtype=int)
         self.offset_accel_bias = np.zeros((len(state), 3)) if bias is None else np.asarray(bias[0])
 
     def offset_guess(self) -> OffsetGuess:
-        """The time offset's first guess from the data (estimators/offset_guess.py) on the usable bottom-track
+        """The time offset's first guess from the data (estimators/inputs/offset_guess.py) on the usable bottom-track
         pings, from the alignment's attitude."""
         log, cfg = self.log, self.config
         idx = self.usable[~self.water[self.usable]] if len(self.water) else self.usable
         t_ref = float(log.imu.t[0]) if self.alignment.t_ref is None else float(self.alignment.t_ref)
-        return guess_offset(np.asarray(log.imu.t, dtype=float), np.asarray(log.imu.b_omega, dtype=float),
-                            np.asarray(log.imu.b_f, dtype=float), self.alignment.n_R_b, t_ref,
-                            np.asarray(log.dvl.t, dtype=float)[idx], np.asarray(log.dvl.d_v, dtype=float)[idx],
-                            log.mounting.b_R_d0, self.maker.offset_gravity(), self.maker.n_omega_ie(),
-                            cfg.dvl.time_offset_prior_s)
+        return guess_offset(
+            np.asarray(log.imu.t, dtype=float),
+            np.asarray(log.imu.b_omega, dtype=float),
+            np.asarray(log.imu.b_f, dtype=float),
+            self.alignment.n_R_b,
+            t_ref,
+            np.asarray(log.dvl.t, dtype=float)[idx],
+            np.asarray(log.dvl.d_v, dtype=float)[idx],
+            log.mounting.b_R_d0,
+            self.maker.offset_gravity(),
+            self.maker.n_omega_ie(),
+            cfg.dvl.time_offset_prior_s,
+        )
 
-    def offset_state(self, state: np.ndarray, values: gtsam.Values | None, attitude: bool = True
-                     ) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray | None]:
+    def offset_state(
+        self, state: np.ndarray, values: gtsam.Values | None, attitude: bool = True
+    ) -> tuple[tuple[np.ndarray, np.ndarray] | None, np.ndarray | None]:
         """The IMU biases (accelerometer m/s^2, gyro rad/s; each (P, 3)) and, with attitude, the attitudes n_R_b
         (P, 3, 3) of the states `state` (indices) in values, for the time offset's IMU windows; (None, None) without
         values."""
@@ -280,10 +357,12 @@ class LogGraph:
         return (acc, gyro), np.array([rot[int(i)] for i in state]).reshape(-1, 3, 3)
 
     def ping_snapshot(self, p: BetweenPing) -> PingMotion:
-        """The IMU motion from the state before a ping between keyframes up to it (estimators/keyframes.py)."""
+        """The IMU motion from the state before a ping between keyframes up to it (estimators/graph/keyframes.py)."""
         if self.snapshots is None or p.snap < 0:
-            raise GtsamDvlError("between_factors: build_bulk let the pings' IMU snapshots go; build the per-factor "
-                                "graph first, or make a new LogGraph")
+            raise GtsamDvlError(
+                "between_factors: build_bulk let the pings' IMU snapshots go; build the per-factor "
+                "graph first, or make a new LogGraph"
+            )
         return self.snapshots.get(p.snap)
 
     def _preintegrate(self, starts: np.ndarray, b_f: np.ndarray) -> list[Holds]:
@@ -302,15 +381,26 @@ class LogGraph:
                 self.progress(i / n)
             if a.between:
                 params = self.maker.make_params()
-                pim, h, snaps = interval_with_snapshots(a.t, b.t, [p.t for p in a.between], params, imu.t, starts,
-                                                        b_f, imu.b_omega, self.gaps, self.config.imu)
+                pim, h, snaps = interval_with_snapshots(
+                    a.t,
+                    b.t,
+                    [p.t for p in a.between],
+                    params,
+                    imu.t,
+                    starts,
+                    b_f,
+                    imu.b_omega,
+                    self.gaps,
+                    self.config.imu,
+                )
                 for p, snap in zip(a.between, snaps, strict=True):
                     self.snapshots.put(q, snap)
                     p.snap = q
                     q += 1
             else:
-                pim, params, h = self.maker.preintegrate_interval(a.t, b.t, imu.t, starts, b_f, imu.b_omega,
-                                                                  self.gaps)
+                pim, params, h = self.maker.preintegrate_interval(
+                    a.t, b.t, imu.t, starts, b_f, imu.b_omega, self.gaps
+                )
             self.pims.append(pim)
             self.imu_params.append(params)
             held.append(h)
@@ -337,7 +427,9 @@ class LogGraph:
                 for k, i in enumerate(idx.tolist()):
                     self._imu_factors[i].set_reference(mid[i], g[k], G[k])
                     self._imu_factors[i].set_gravity(mid[i])
-            elif self.imu_params:  # what EarthImuFactor.set_gravity writes: the gravity pim.predict uses
+            elif (
+                self.imu_params
+            ):  # what EarthImuFactor.set_gravity writes: the gravity pim.predict uses
                 for k, i in enumerate(idx.tolist()):
                     self.imu_params[i].n_gravity = g[k]
         return len(idx)
@@ -345,7 +437,9 @@ class LogGraph:
     def refresh_gravity(self, values: gtsam.Values) -> bool:
         """Between solver iterations: re-reference the factors that moved far (see factors/imu_earth.py).
         The objective changes by less than 1e-8 m/s^2 of gravity, so this reports no change."""
-        poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
+        poses = gtsam.utilities.extractPose3(
+            values
+        )  # every Pose3 in key order: the states X(0..n-1)
         if poses.shape[0] == len(self.epochs):
             n_p = poses[:, 9:]
         else:
@@ -368,9 +462,12 @@ class LogGraph:
         j = ep.dvl_index
         if j < 0:
             return []
-        beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-        return self.maker.dvl_factors_for(i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input,
-                                          bool(self.water[j]))
+        beams = (
+            None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+        )
+        return self.maker.dvl_factors_for(
+            i, dvl.d_v[j], dvl.d_cov[j], ep.b_omega, beams, ep.rate_input, bool(self.water[j])
+        )
 
     def between_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
         """DVL factors of the pings between state i and the next (keyframes, factors/dvl.py with a PingMotion), with
@@ -382,24 +479,44 @@ class LogGraph:
             return []
         dvl = self.log.dvl
         n_p0 = np.zeros(3) if self.gravity_positions is None else self.gravity_positions[i]
-        if self._keyframe_gravity is None or self._keyframe_gravity[0] is not self.gravity_positions:
+        if (
+            self._keyframe_gravity is None
+            or self._keyframe_gravity[0] is not self.gravity_positions
+        ):
             # every state's at once, in one vectorised call
-            n_p = np.zeros((len(self.epochs), 3)) if self.gravity_positions is None else self.gravity_positions
+            n_p = (
+                np.zeros((len(self.epochs), 3))
+                if self.gravity_positions is None
+                else self.gravity_positions
+            )
             self._keyframe_gravity = (self.gravity_positions, *self.maker.keyframe_gravity(n_p))
-        g, G = self._keyframe_gravity[1][i:i + 1], self._keyframe_gravity[2][i:i + 1]
+        g, G = self._keyframe_gravity[1][i : i + 1], self._keyframe_gravity[2][i : i + 1]
         w = self.maker.n_omega_ie()
         out: list[gtsam.NonlinearFactor] = []
         for p in ep.between:
             s, j = self.ping_snapshot(p), p.dvl_index
             motion = s.motion(w, g[0], n_p0, G[0])
-            beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-            out += self.maker.dvl_keyframe_factors_for(i, dvl.d_v[j], dvl.d_cov[j], p.b_omega, motion, s.cov, beams,
-                                                       p.rate_input, bool(self.water[j]))
+            beams = (
+                None
+                if dvl.beams is None
+                else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+            )
+            out += self.maker.dvl_keyframe_factors_for(
+                i,
+                dvl.d_v[j],
+                dvl.d_cov[j],
+                p.b_omega,
+                motion,
+                s.cov,
+                beams,
+                p.rate_input,
+                bool(self.water[j]),
+            )
         return out
 
     def layer_heights(self, z_guess: np.ndarray) -> np.ndarray:
         """The states' heights (m above the map origin) that place them in the water current's depth layers
-        (estimators/current.py, "Layers"): the depth sensor's, interpolated at the states' stamps, when the log
+        (estimators/models/current.py, "Layers"): the depth sensor's, interpolated at the states' stamps, when the log
         has one in use (the initial guess's height drifts with the misalignment's error: 1.7 cm/s at 2 m/s and
         0.5 deg), else the initial guess's z_guess."""
         depth = self.log.depth
@@ -411,7 +528,7 @@ class LogGraph:
         return np.interp(np.array([ep.t for ep in self.epochs]), samples.t, samples.z_meas)
 
     def depth_factors(self) -> list[gtsam.NonlinearFactor]:
-        """Depth factors of the log's depth samples (estimators/depth.py), each on its nearest state; none
+        """Depth factors of the log's depth samples (estimators/inputs/depth.py), each on its nearest state; none
         without depth data or with [depth] use = false. Counts "depth_used" and "depth_too_far"."""
         depth = self.log.depth
         if depth is None or not self.config.depth.use or not len(depth):
@@ -423,12 +540,17 @@ class LogGraph:
         self.counters["depth_too_far"] = int((near < 0).sum())
         out: list[gtsam.NonlinearFactor] = []
         for k in np.flatnonzero(near >= 0).tolist():
-            out += self.maker.depth_factors_for(int(near[k]), float(samples.z_meas[k]), float(samples.sigma[k]),
-                                                samples.b_p_sensor, float(dt[k]))
+            out += self.maker.depth_factors_for(
+                int(near[k]),
+                float(samples.z_meas[k]),
+                float(samples.sigma[k]),
+                samples.b_p_sensor,
+                float(dt[k]),
+            )
         return out
 
     def gnss_plan(self) -> GnssFixes | None:
-        """The role of every GNSS message (estimators/gnss.py: used, held out, rejected); None without fixes."""
+        """The role of every GNSS message (estimators/inputs/gnss.py: used, held out, rejected); None without fixes."""
         return plan_fixes(self.log, self.config, self.frame, np.array([ep.t for ep in self.epochs]))
 
     def gnss_factors(self, plan: GnssFixes | None = None) -> list[gtsam.NonlinearFactor]:
@@ -440,8 +562,9 @@ class LogGraph:
         self.counters.update(plan.counters())
         out: list[gtsam.NonlinearFactor] = []
         for k in np.flatnonzero(plan.mask("used")).tolist():
-            out += self.maker.gnss_factors_for(int(plan.state[k]), plan.n_p[k], plan.cov[k], plan.b_p_antenna,
-                                               float(plan.dt[k]))
+            out += self.maker.gnss_factors_for(
+                int(plan.state[k]), plan.n_p[k], plan.cov[k], plan.b_p_antenna, float(plan.dt[k])
+            )
         return out
 
     # ----- initial guess -------------------------------------------------------------------------
@@ -449,21 +572,32 @@ class LogGraph:
         """Dead reckoning: attitude from the gyros (from the alignment), velocity from the DVL at the
         initial scale and nominal mounting, position by integrating that velocity."""
         if len(self.pims) + 1 != len(self.epochs):
-            raise GtsamDvlError("initial_values: build_bulk let the preintegrations go; make a new LogGraph")
-        values = initial_shared_values(self.config, self.maker.mounting, self.calibration)  # at their priors
+            raise GtsamDvlError(
+                "initial_values: build_bulk let the preintegrations go; make a new LogGraph"
+            )
+        values = initial_shared_values(
+            self.config, self.maker.mounting, self.calibration
+        )  # at their priors
         dvl = self.log.dvl
         zero_bias = gtsam.imuBias.ConstantBias()
         n_p_all = np.zeros((len(self.epochs), 3))
         self.set_gravity_from_positions(n_p_all)
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
-        n_p0 = None if self.maker.first is None else self.maker.first.n_p  # the origin carried to the first state
-        n_p, n_v = first_position(self.gnss_plan(), n_R_b.matrix(), n_p0), np.zeros(3)  # that unless GNSS
+        n_p0 = (
+            None if self.maker.first is None else self.maker.first.n_p
+        )  # the origin carried to the first state
+        n_p, n_v = (
+            first_position(self.gnss_plan(), n_R_b.matrix(), n_p0),
+            np.zeros(3),
+        )  # that unless GNSS
         for i, ep in enumerate(self.epochs):
             if i > 0:
                 state = self.pims[i - 1].predict(gtsam.NavState(n_R_b, n_p, n_v), zero_bias)
                 n_R_b = state.attitude()
             j = ep.dvl_index
-            usable = j >= 0 and (dvl.valid[j] or self.water[j])  # (water track: relative to the water, W = 0)
+            usable = j >= 0 and (
+                dvl.valid[j] or self.water[j]
+            )  # (water track: relative to the water, W = 0)
             n_v_ping = self.maker.velocity_from_ping(n_R_b.matrix(), dvl.d_v[j] if usable else None)
             n_v_new = n_v if n_v_ping is None else n_v_ping
             if i > 0:
@@ -487,23 +621,31 @@ class LogGraph:
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The whole graph and its initial guess (batch smoothing, covariance analysis)."""
         if self._imu_factors == []:
-            raise GtsamDvlError("build: build_bulk let the IMU factors go (their numbers are in the bulk graph); "
-                                "make a new LogGraph")
+            raise GtsamDvlError(
+                "build: build_bulk let the IMU factors go (their numbers are in the bulk graph); "
+                "make a new LogGraph"
+            )
         values = self.initial_values()
         graph = self._factors_but_dvl(values)
-        self._per_factor_built = True  # its IMU factors follow the gravity references too (build_bulk keeps them)
+        self._per_factor_built = (
+            True  # its IMU factors follow the gravity references too (build_bulk keeps them)
+        )
         for i in range(len(self.epochs)):
             for f in self.dvl_factors(i) + self.between_factors(i):
                 graph.add(f)
         return graph, values
 
-    def _factors_but_dvl(self, values: gtsam.Values, imu: bool = True) -> gtsam.NonlinearFactorGraph:
+    def _factors_but_dvl(
+        self, values: gtsam.Values, imu: bool = True
+    ) -> gtsam.NonlinearFactorGraph:
         """The priors, IMU (imu=False: not them) and bias-link factors, depth and GNSS factors: all but the
         DVL's."""
         graph = gtsam.NonlinearFactorGraph()
         self.factor_slots = {}
 
-        def add(name: str, factors: list[gtsam.NonlinearFactor]) -> None:  # (their slots: factor_slots[name])
+        def add(
+            name: str, factors: list[gtsam.NonlinearFactor]
+        ) -> None:  # (their slots: factor_slots[name])
             start = graph.size()
             for f in factors:
                 graph.add(f)
@@ -517,24 +659,37 @@ class LogGraph:
                 graph.add(self.imu_factor(i))
             for f in self.bias_factors(i):
                 graph.add(f)
-        if correlated_error(self.config):  # the DVL's correlated error: prior and Gauss-Markov links
-            add("correlated", correlated.factors(self.config, np.array([ep.t for ep in self.epochs])))
+        if correlated_error(
+            self.config
+        ):  # the DVL's correlated error: prior and Gauss-Markov links
+            add(
+                "correlated",
+                correlated.factors(self.config, np.array([ep.t for ep in self.epochs])),
+            )
         if water_current(self.config):  # the water current: prior and random walk in time and depth
-            z = np.zeros(len(self.epochs)) if self.gravity_positions is None else self.gravity_positions[:, 2]
+            z = (
+                np.zeros(len(self.epochs))
+                if self.gravity_positions is None
+                else self.gravity_positions[:, 2]
+            )
             z = self.layer_z if current.layered(self.config) and self.layer_z is not None else z
-            for f in current.factors(self.config, np.array([ep.t for ep in self.epochs]), z, self.frame.height_m):
+            for f in current.factors(
+                self.config, np.array([ep.t for ep in self.epochs]), z, self.frame.height_m
+            ):
                 graph.add(f)
         add("depth", self.depth_factors())
         add("gnss", self.gnss_factors(gnss))
         return graph
 
     def build_bulk(self, values: gtsam.Values | None = None) -> tuple[BulkGraph, gtsam.Values]:
-        """build() with the DVL velocity factors evaluated in bulk (estimators/bulk.py): the same objective and
+        """build() with the DVL velocity factors evaluated in bulk (estimators/graph/bulk.py): the same objective and
         linear systems, several times faster to evaluate. values: an initial guess already made (a second
         build after set_time_offset_window keeps the first's gravity references)."""
         if self.snapshots is None:
-            raise GtsamDvlError("build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (1 kB a "
-                                "ping); make a new LogGraph for another graph")
+            raise GtsamDvlError(
+                "build_bulk: the pings' IMU snapshots were let go by an earlier build_bulk (1 kB a "
+                "ping); make a new LogGraph for another graph"
+            )
         values = self.initial_values() if values is None else values
         graph = self._factors_but_dvl(values, imu=False)
         bulk = BulkGraph(graph, bulk_dvl(self), self.bulk_imu())
@@ -551,11 +706,14 @@ class LogGraph:
         return bulk, values
 
     def bulk_imu(self) -> BulkImu:
-        """The IMU factors as arrays (estimators/bulk_imu.py): each interval's preintegration, bias Jacobian, gravity
+        """The IMU factors as arrays (estimators/graph/bulk_imu.py): each interval's preintegration, bias Jacobian,
+        gravity
         map and whitening (GTSAM's, of the covariance the EarthImuFactor gets: FactorMaker.new_imu_factor), with
         the gravity references this LogGraph keeps."""
         if len(self.pims) + 1 != len(self.epochs):
-            raise GtsamDvlError("bulk_imu: build_bulk let the preintegrations go; make a new LogGraph")
+            raise GtsamDvlError(
+                "bulk_imu: build_bulk let the preintegrations go; make a new LogGraph"
+            )
         n_omega = np.asarray(self.maker.n_omega_ie(), dtype=float)
         x, H, dt = bias_jacobians(self.pims, n_omega)
         arrays = ImuArrays(x=x, H=H, dt=dt, n_omega=n_omega, M=gravity_maps(n_omega, dt))
@@ -572,17 +730,24 @@ class LogGraph:
         state_bias_keys = [self.maker.bias_key(i) for i in range(len(self.epochs))]
         return BulkImu(arrays, whiten, keys, self.gravity_refs, state_bias_keys)
 
-    def recentre_time_offset(self, graph: gtsam.NonlinearFactorGraph | BulkGraph, dt: float,
-                             values: gtsam.Values | None = None) -> gtsam.NonlinearFactorGraph | BulkGraph:
+    def recentre_time_offset(
+        self,
+        graph: gtsam.NonlinearFactorGraph | BulkGraph,
+        dt: float,
+        values: gtsam.Values | None = None,
+    ) -> gtsam.NonlinearFactorGraph | BulkGraph:
         """The graph with the time-offset windows centred on the offset estimate dt (set_time_offset_window),
         the IMU biases of values taken off their samples and each ping's attitude in values removing the Earth
         rate: a BulkGraph is updated in place (only the pings' IMU constants change), a per-factor graph built
         again."""
-        if isinstance(graph, BulkGraph):  # straight into the bulk factors (the epochs' own let go by build_bulk)
+        if isinstance(
+            graph, BulkGraph
+        ):  # straight into the bulk factors (the epochs' own let go by build_bulk)
             imu = self.log.imu
             bias, n_R_b = self.offset_state(graph.bulk.pings.state, values)
-            b_a, w_mean, G = self.maker.velocity_rate_inputs(graph.bulk.t_ping, imu.t, imu.b_f, imu.b_omega, dt,
-                                                             bias=bias, n_R_b=n_R_b)
+            b_a, w_mean, G = self.maker.velocity_rate_inputs(
+                graph.bulk.t_ping, imu.t, imu.b_f, imu.b_omega, dt, bias=bias, n_R_b=n_R_b
+            )
             graph.bulk.set_offset_inputs(w_mean, b_a, G, self.maker.mounting.b_l)
             self._windows_set(dt, graph.bulk.pings.state, bias)
             return graph
@@ -601,9 +766,16 @@ class LogGraph:
         keys: list[int] = []
         chunks: list[list[int]] = []
         for i in range(len(self.epochs)):
-            keys += [X(i), V(i)] + ([B(i)] if rw else []) + ([E(i)] if gm else []) + ([W(i)] if wc else [])
+            keys += (
+                [X(i), V(i)]
+                + ([B(i)] if rw else [])
+                + ([E(i)] if gm else [])
+                + ([W(i)] if wc else [])
+            )
             if (i + 1) % chunk_states == 0 or i + 1 == len(self.epochs):
                 chunks.append(keys)
                 keys = []
         # (the water current's layer boundaries S(b) with the shared states: every state may cross them)
-        return ChunkedOrdering(chunks, shared_keys(self.config, per_state=False) + [S(b) for b in self.shear])
+        return ChunkedOrdering(
+            chunks, shared_keys(self.config, per_state=False) + [S(b) for b in self.shear]
+        )

@@ -30,7 +30,7 @@ the fixes of one surface interval give the interval's position (3 of their rows;
 Neither factor is robust: the fit leaves out the rows beyond SCREEN_K sigma at a median-based scale and corrects for
 the truncation as the DVL's. The online estimator and the EKF hold the configured depth level and say so
 (held_depth_level; neither takes GNSS fixes), and the DVL's correlated error's level, which the batch smoother
-fits with [noise] fit_correlated (estimators/correlated_fit.py; held_levels).
+fits with [noise] fit_correlated (estimators/models/correlated_fit.py; held_levels).
 
 Honest level. A real DVL's error is not white: its ping-to-ping scatter is 3-9 mm/s while its 30-60 s means stay
 at a few mm/s (bottom type, attitude-dependent beam errors, the speed of sound), and those slow errors are what the
@@ -69,8 +69,8 @@ from gtsam_dvl.core.sensor_noise import (
 )
 from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import detect_static_end
-from gtsam_dvl.estimators.correlated_fit import held_correlated_level
+from gtsam_dvl.estimators.inputs.alignment import detect_static_end
+from gtsam_dvl.estimators.models.correlated_fit import held_correlated_level
 
 
 @dataclass
@@ -79,8 +79,12 @@ class NoiseReport:
 
     imu: dict[str, Any] = field(default_factory=dict)
     dvl: dict[str, Any] = field(default_factory=dict)
-    depth: dict[str, Any] = field(default_factory=dict)  # only for a log with depth factors (the batch smoother)
-    gnss: dict[str, Any] = field(default_factory=dict)  # only for a log with aiding fixes (the batch smoother)
+    depth: dict[str, Any] = field(
+        default_factory=dict
+    )  # only for a log with depth factors (the batch smoother)
+    gnss: dict[str, Any] = field(
+        default_factory=dict
+    )  # only for a log with aiding fixes (the batch smoother)
     # the DVL's correlated error's level and time constant: fitted (batch) or held; only with [noise] fit_correlated
     dvl_correlated: dict[str, Any] = field(default_factory=dict)
 
@@ -109,11 +113,16 @@ def apply_imu_floor(imu: ImuData, config: EstimatorConfig, report: NoiseReport) 
     gyro_q, accel_q = imu_quantisation(np.asarray(imu.b_omega), np.asarray(imu.b_f))
     rate = imu_rate_hz(imu)
     update: dict[str, float] = {}
-    for name, steps, unit, key, per in (("gyro", gyro_q, "rad/s", "gyro_noise_deg_per_h_rthz", DEG_PER_H),
-                                        ("accel", accel_q, "m/s^2", "accel_noise_ug_rthz", UG)):
+    for name, steps, unit, key, per in (
+        ("gyro", gyro_q, "rad/s", "gyro_noise_deg_per_h_rthz", DEG_PER_H),
+        ("accel", accel_q, "m/s^2", "accel_noise_ug_rthz", UG),
+    ):
         configured = float(getattr(config.imu, key))
-        entry: dict[str, Any] = {"step": [None if not np.isfinite(s) else float(s) for s in steps],
-                                 "configured": configured, "used": configured}
+        entry: dict[str, Any] = {
+            "step": [None if not np.isfinite(s) else float(s) for s in steps],
+            "configured": configured,
+            "used": configured,
+        }
         finite = steps[np.isfinite(steps)]
         if len(finite) and np.isfinite(rate):
             q = float(finite.max())
@@ -123,11 +132,15 @@ def apply_imu_floor(imu: ImuData, config: EstimatorConfig, report: NoiseReport) 
             update[key] = used
             unit_cfg = "deg/h/sqrt(Hz)" if name == "gyro" else "micro-g/sqrt(Hz)"
             if used > 1.01 * configured:
-                entry["why"] = (f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): white noise {used:.3g} "
-                                f"{unit_cfg} instead of {configured:.3g} (floor q/sqrt(12 f) = {floor:.3g})")
+                entry["why"] = (
+                    f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): white noise {used:.3g} "
+                    f"{unit_cfg} instead of {configured:.3g} (floor q/sqrt(12 f) = {floor:.3g})"
+                )
             else:  # a floor far below the sensor's own noise changes nothing worth a line of its own
-                entry["why"] = (f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): its floor q/sqrt(12 f) = "
-                                f"{floor:.3g} {unit_cfg} is below the configured {configured:.3g}, which stands")
+                entry["why"] = (
+                    f"{name} quantised at {q:.2g} {unit} ({rate:.0f} Hz): its floor q/sqrt(12 f) = "
+                    f"{floor:.3g} {unit_cfg} is below the configured {configured:.3g}, which stands"
+                )
         report.imu[name] = entry
     if not update:
         return config
@@ -146,10 +159,11 @@ STATIC_MIN_STEPS = 2.0
 STATIC_RAISE_FACTOR = 1.2
 
 
-def apply_static_noise(imu: ImuData, static_end_s: float, config: EstimatorConfig, report: NoiseReport
-                       ) -> EstimatorConfig:
+def apply_static_noise(
+    imu: ImuData, static_end_s: float, config: EstimatorConfig, report: NoiseReport
+) -> EstimatorConfig:
     """config with each IMU white-noise density raised to the one measured on the log's initial static segment
-    (imu.t[0] to static_end_s, estimators/alignment.py detect_static_end), when the segment is at least
+    (imu.t[0] to static_end_s, estimators/inputs/alignment.py detect_static_end), when the segment is at least
     STATIC_MIN_S long: the overlapping Allan deviation of every axis not dominated by its quantisation
     (STATIC_MIN_STEPS), its tau^-1/2 line's density and its bias instability (core/sensor_noise.py allan_fit),
     the largest over the axes. Raised only (STATIC_RAISE_FACTOR): a short segment cannot show that a sensor is
@@ -163,10 +177,16 @@ def apply_static_noise(imu: ImuData, static_end_s: float, config: EstimatorConfi
     rate = imu_rate_hz(imu)
     duration = float(static_end_s - t[0])
     update: dict[str, float] = {}
-    for name, x, key, per, unit in (("gyro", np.asarray(imu.b_omega)[sel], "gyro_noise_deg_per_h_rthz", DEG_PER_H,
-                                     "deg/h/sqrt(Hz)"),
-                                    ("accel", np.asarray(imu.b_f)[sel], "accel_noise_ug_rthz", UG,
-                                     "micro-g/sqrt(Hz)")):
+    for name, x, key, per, unit in (
+        (
+            "gyro",
+            np.asarray(imu.b_omega)[sel],
+            "gyro_noise_deg_per_h_rthz",
+            DEG_PER_H,
+            "deg/h/sqrt(Hz)",
+        ),
+        ("accel", np.asarray(imu.b_f)[sel], "accel_noise_ug_rthz", UG, "micro-g/sqrt(Hz)"),
+    ):
         entry = report.imu.setdefault(name, {})
         steps = entry.get("step") or [None, None, None]
         taus = default_taus(len(x), rate)
@@ -187,13 +207,18 @@ def apply_static_noise(imu: ImuData, static_end_s: float, config: EstimatorConfi
         static: dict[str, Any] = {"segment_s": duration, "axes_skipped_quantised": skipped}
         if densities:
             measured = max(densities)
-            static.update(density=measured, density_per_axis=densities,
-                          bias_instability=max(instabilities))
+            static.update(
+                density=measured, density_per_axis=densities, bias_instability=max(instabilities)
+            )
             if measured > STATIC_RAISE_FACTOR * current:
                 update[key] = measured
-                entry.update(used=measured, configured=entry.get("configured", getattr(config.imu, key)))
-                static["why"] = (f"{name} white noise {measured:.3g} {unit} measured on the first {duration:.0f} s "
-                                 f"(static, Allan deviation) instead of {current:.3g}")
+                entry.update(
+                    used=measured, configured=entry.get("configured", getattr(config.imu, key))
+                )
+                static["why"] = (
+                    f"{name} white noise {measured:.3g} {unit} measured on the first {duration:.0f} s "
+                    f"(static, Allan deviation) instead of {current:.3g}"
+                )
         entry["static"] = static
     if not update:
         return config
@@ -207,7 +232,9 @@ def imu_levels(log: LogData, config: EstimatorConfig, report: NoiseReport) -> Es
     n = config.noise
     if not (n.from_data and n.static_allan) or len(log.imu.t) < 100:
         return config
-    return apply_static_noise(log.imu, detect_static_end(log.imu, log.dvl, config.alignment), config, report)
+    return apply_static_noise(
+        log.imu, detect_static_end(log.imu, log.dvl, config.alignment), config, report
+    )
 
 
 def dvl_fit_enabled(config: EstimatorConfig) -> bool:
@@ -237,29 +264,45 @@ def sensor_multiplier(config: EstimatorConfig, sensor: str) -> float:
     return float(getattr(config, sensor).noise_multiplier)
 
 
-def with_sensor_multiplier(config: EstimatorConfig, sensor: str, multiplier: float) -> EstimatorConfig:
+def with_sensor_multiplier(
+    config: EstimatorConfig, sensor: str, multiplier: float
+) -> EstimatorConfig:
     """config with [<sensor>] noise_multiplier set."""
     section = getattr(config, sensor)
-    return config.model_copy(update={sensor: section.model_copy(update={"noise_multiplier": multiplier})})
+    return config.model_copy(
+        update={sensor: section.model_copy(update={"noise_multiplier": multiplier})}
+    )
 
 
 def held_depth_level(log: LogData, config: EstimatorConfig, estimator: str) -> dict[str, Any]:
     """report.depth of an estimator that holds the configured depth level (the online estimator, the EKF): said
     when the log has depth samples that it uses and [noise] would fit them in the batch smoother; else {}."""
     depth = log.depth
-    if depth is None or not len(depth) or not config.depth.use or not sensor_fit_enabled(config, "depth"):
+    if (
+        depth is None
+        or not len(depth)
+        or not config.depth.use
+        or not sensor_fit_enabled(config, "depth")
+    ):
         return {}
     m = config.depth.noise_multiplier
-    stated = (f"noise_m = {config.depth.noise_m:g} m" if config.depth.noise_m > 0
-              else f"the messages' variance, default_noise_m = {config.depth.default_noise_m:g} m without one")
-    return {"configured": m, "multiplier": m, "held": True,
-            "why": f"depth noise as configured ({stated}, x {m:.3g}): the {estimator} holds it (the batch smoother "
-                   "fits it from the residuals)"}
+    stated = (
+        f"noise_m = {config.depth.noise_m:g} m"
+        if config.depth.noise_m > 0
+        else f"the messages' variance, default_noise_m = {config.depth.default_noise_m:g} m without one"
+    )
+    return {
+        "configured": m,
+        "multiplier": m,
+        "held": True,
+        "why": f"depth noise as configured ({stated}, x {m:.3g}): the {estimator} holds it (the batch smoother "
+        "fits it from the residuals)",
+    }
 
 
 def held_levels(log: LogData, config: EstimatorConfig, estimator: str, report: NoiseReport) -> None:
     """report.depth and report.dvl_correlated of an estimator that holds the configured levels (held_depth_level,
-    estimators/correlated_fit.py held_correlated_level)."""
+    estimators/models/correlated_fit.py held_correlated_level)."""
     report.depth = held_depth_level(log, config, estimator)
     report.dvl_correlated = held_correlated_level(config, estimator)
 
@@ -323,12 +366,21 @@ class LongLevel:
 
     def as_dict(self, sigma_m_s: float) -> dict[str, float]:
         """The level as an equivalent white sigma (m/s or m: sigma_m_s is the current level's) with its interval."""
-        return {"window_s": self.window_s, "blocks": self.blocks, "sigma": sigma_m_s * math.sqrt(self.ratio),
-                "sigma_lo": sigma_m_s * math.sqrt(self.lo), "sigma_hi": sigma_m_s * math.sqrt(self.hi)}
+        return {
+            "window_s": self.window_s,
+            "blocks": self.blocks,
+            "sigma": sigma_m_s * math.sqrt(self.ratio),
+            "sigma_lo": sigma_m_s * math.sqrt(self.lo),
+            "sigma_hi": sigma_m_s * math.sqrt(self.hi),
+        }
 
 
-def long_level(t: np.ndarray, ew: np.ndarray, excess: np.ndarray | None = None,
-               windows: tuple[float, ...] = LONG_WINDOWS_S) -> LongLevel | None:
+def long_level(
+    t: np.ndarray,
+    ew: np.ndarray,
+    excess: np.ndarray | None = None,
+    windows: tuple[float, ...] = LONG_WINDOWS_S,
+) -> LongLevel | None:
     """The LongLevel of whitened errors ew (N, m) at times t (N,) s, the window of LONG_WINDOWS_S whose ratio is the
     largest (the slow error's time scale is not known); excess (N,): each row's expected variance beyond the noise's
     (a filter's innovation carries its prediction's, tr HPH / tr R), taken off. None when no window has
@@ -344,23 +396,43 @@ def long_level(t: np.ndarray, ew: np.ndarray, excess: np.ndarray | None = None,
         full = np.flatnonzero(counts >= LONG_MIN_ROWS)
         if len(full) < LONG_MIN_BLOCKS:
             continue
-        sums = np.stack([np.bincount(block, weights=ew[:, a], minlength=len(counts)) for a in range(ew.shape[1])], 1)
+        sums = np.stack(
+            [
+                np.bincount(block, weights=ew[:, a], minlength=len(counts))
+                for a in range(ew.shape[1])
+            ],
+            1,
+        )
         n_b = counts[full].astype(float)
         stat = (sums[full] ** 2 / n_b[:, None]).mean()  # n_b mean_b^2 = sum_b^2 / n_b
         if excess is not None:
-            stat -= float(np.bincount(block, weights=excess, minlength=len(counts))[full].sum() / n_b.sum())
+            stat -= float(
+                np.bincount(block, weights=excess, minlength=len(counts))[full].sum() / n_b.sum()
+            )
         ratio = max(float(stat), 0.0)
         dof = len(full) * ew.shape[1]
         a = 0.5 * (1.0 - LONG_CONFIDENCE)
-        level = LongLevel(ratio, ratio * dof / chi2.ppf(1.0 - a, dof), ratio * dof / chi2.ppf(a, dof), T, len(full),
-                          dof)
+        level = LongLevel(
+            ratio,
+            ratio * dof / chi2.ppf(1.0 - a, dof),
+            ratio * dof / chi2.ppf(a, dof),
+            T,
+            len(full),
+            dof,
+        )
         if best is None or level.ratio > best.ratio:
             best = level
     return best
 
 
-def honest_multiplier(white: float, current: float, stated: float, long: LongLevel | None,
-                      bounds: tuple[float, float], can_lower: bool) -> tuple[float, str]:
+def honest_multiplier(
+    white: float,
+    current: float,
+    stated: float,
+    long: LongLevel | None,
+    bounds: tuple[float, float],
+    can_lower: bool,
+) -> tuple[float, str]:
     """The multiplier a sensor's factors take (module doc, "Honest level"): the white fit `white`, raised to the
     long-window level when that is significantly above it (its interval's lower end above white); never below the
     stated multiplier unless can_lower (an independent absolute reference observes the sensor's slow errors) and
@@ -371,27 +443,45 @@ def honest_multiplier(white: float, current: float, stated: float, long: LongLev
     if long is not None:
         m_long, m_lo, m_hi = (current * math.sqrt(r) for r in (long.ratio, long.lo, long.hi))
         if m_lo > white:
-            used, why = m_long, (f"raised to what its {long.window_s:g} s means show (x {m_long:.3g}, "
-                                 f"{LONG_CONFIDENCE:.0%} interval x {m_lo:.3g}-{m_hi:.3g}; white x {white:.3g})")
+            used, why = (
+                m_long,
+                (
+                    f"raised to what its {long.window_s:g} s means show (x {m_long:.3g}, "
+                    f"{LONG_CONFIDENCE:.0%} interval x {m_lo:.3g}-{m_hi:.3g}; white x {white:.3g})"
+                ),
+            )
     if used < stated:
         if not can_lower:
-            used, why = stated, (f"held at the stated level (x {stated:.3g}; white x {white:.3g}): the scatter does "
-                                 "not show the slow errors the calibration sees, and no absolute reference in the "
-                                 "log observes them")
+            used, why = (
+                stated,
+                (
+                    f"held at the stated level (x {stated:.3g}; white x {white:.3g}): the scatter does "
+                    "not show the slow errors the calibration sees, and no absolute reference in the "
+                    "log observes them"
+                ),
+            )
         elif long is None or m_hi >= stated:
-            used, why = stated, (f"held at the stated level (x {stated:.3g}; white x {white:.3g}): its "
-                                 f"{LONG_WINDOWS_S[0]:g}-{LONG_WINDOWS_S[-1]:g} s means do not show it better")
+            used, why = (
+                stated,
+                (
+                    f"held at the stated level (x {stated:.3g}; white x {white:.3g}): its "
+                    f"{LONG_WINDOWS_S[0]:g}-{LONG_WINDOWS_S[-1]:g} s means do not show it better"
+                ),
+            )
     return min(max(used, bounds[0]), bounds[1]), why
 
 
 def multiplier_bounds(config: EstimatorConfig, sensor: str = "dvl") -> tuple[float, float]:
     """[noise] <sensor>_min_multiplier and <sensor>_max_multiplier."""
     n = config.noise
-    return float(getattr(n, f"{sensor}_min_multiplier")), float(getattr(n, f"{sensor}_max_multiplier"))
+    return float(getattr(n, f"{sensor}_min_multiplier")), float(
+        getattr(n, f"{sensor}_max_multiplier")
+    )
 
 
-def fitted_multiplier(current: float, ratio: float, config: EstimatorConfig, sensor: str = "dvl"
-                      ) -> tuple[float, bool]:
+def fitted_multiplier(
+    current: float, ratio: float, config: EstimatorConfig, sensor: str = "dvl"
+) -> tuple[float, bool]:
     """The new multiplier current * sqrt(ratio), clipped to sensor's [noise] bounds; and whether it hit one."""
     lo, hi = multiplier_bounds(config, sensor)
     raw = current * math.sqrt(ratio)
@@ -399,17 +489,35 @@ def fitted_multiplier(current: float, ratio: float, config: EstimatorConfig, sen
     return clipped, clipped != raw
 
 
-def dvl_fit_report(config: EstimatorConfig, multiplier: float, rows: int, passes: int, at_bound: bool,
-                   sigma_m_s: float, how: str) -> dict[str, Any]:
+def dvl_fit_report(
+    config: EstimatorConfig,
+    multiplier: float,
+    rows: int,
+    passes: int,
+    at_bound: bool,
+    sigma_m_s: float,
+    how: str,
+) -> dict[str, Any]:
     """report.dvl of a fit: the factor, the median ping sigma it gives, the rows and passes, and the line."""
     n = config.noise
-    why = (f"DVL noise fitted from {rows} residual rows ({how}): sigma x {multiplier:.3g} = {sigma_m_s * 1e3:.2g} "
-           f"mm/s per axis")
+    why = (
+        f"DVL noise fitted from {rows} residual rows ({how}): sigma x {multiplier:.3g} = {sigma_m_s * 1e3:.2g} "
+        f"mm/s per axis"
+    )
     if at_bound:
-        why += (f", at the bound [{n.dvl_min_multiplier:g}, {n.dvl_max_multiplier:g}] of [noise]: the DVL model "
-                "does not fit its data whatever the noise level")
-    return {"multiplier": multiplier, "sigma_m_s": sigma_m_s, "rows": rows, "passes": passes,
-            "at_bound": at_bound, "how": how, "why": why}
+        why += (
+            f", at the bound [{n.dvl_min_multiplier:g}, {n.dvl_max_multiplier:g}] of [noise]: the DVL model "
+            "does not fit its data whatever the noise level"
+        )
+    return {
+        "multiplier": multiplier,
+        "sigma_m_s": sigma_m_s,
+        "rows": rows,
+        "passes": passes,
+        "at_bound": at_bound,
+        "how": how,
+        "why": why,
+    }
 
 
 def with_levels(entry: dict[str, Any], levels: dict[str, Any], used: float) -> None:
@@ -422,48 +530,81 @@ def with_levels(entry: dict[str, Any], levels: dict[str, Any], used: float) -> N
     entry["white_sigma"] = per * levels["white_multiplier"]
     entry["stated_sigma"] = per * levels["stated_multiplier"]
     long = levels["long"]
-    if long is not None:  # as_dict at the multiplier the residuals were whitened at: scale to m/s or m
+    if (
+        long is not None
+    ):  # as_dict at the multiplier the residuals were whitened at: scale to m/s or m
         entry["long"] = {k: (v * per if k.startswith("sigma") else v) for k, v in long.items()}
     if levels["honest_why"]:
         entry["why"] += "; " + levels["honest_why"]
 
 
-def sensor_fit_report(config: EstimatorConfig, sensor: str, configured: float, configured_sigma_m: float,
-                      multiplier: float, rows: int, passes: int, at_bound: bool, how: str) -> dict[str, Any]:
+def sensor_fit_report(
+    config: EstimatorConfig,
+    sensor: str,
+    configured: float,
+    configured_sigma_m: float,
+    multiplier: float,
+    rows: int,
+    passes: int,
+    at_bound: bool,
+    how: str,
+) -> dict[str, Any]:
     """report.depth or report.gnss of a batch fit: the factor configured and fitted, the median sigma each gives
     (m; a fix's per axis), the rows and passes, whether the factor is at a bound, and the line."""
     lo, hi = multiplier_bounds(config, sensor)
     label = SENSOR_LABEL[sensor]
     sigma_m = configured_sigma_m * multiplier / configured
-    why = (f"{label} noise fitted from {rows} residual rows ({how}): sigma x {multiplier:.3g} = {sigma_m:.3g} m"
-           f"{' per axis' if sensor == 'gnss' else ''} (configured x {configured:.3g} = {configured_sigma_m:.3g} m)")
+    why = (
+        f"{label} noise fitted from {rows} residual rows ({how}): sigma x {multiplier:.3g} = {sigma_m:.3g} m"
+        f"{' per axis' if sensor == 'gnss' else ''} (configured x {configured:.3g} = {configured_sigma_m:.3g} m)"
+    )
     if at_bound:
-        why += (f", at the bound [{lo:g}, {hi:g}] of [noise]: the {label} model does not fit its data whatever "
-                "the noise level")
-    return {"configured": configured, "configured_sigma_m": configured_sigma_m, "multiplier": multiplier,
-            "sigma_m": sigma_m, "rows": rows, "passes": passes, "at_bound": at_bound, "how": how, "why": why}
+        why += (
+            f", at the bound [{lo:g}, {hi:g}] of [noise]: the {label} model does not fit its data whatever "
+            "the noise level"
+        )
+    return {
+        "configured": configured,
+        "configured_sigma_m": configured_sigma_m,
+        "multiplier": multiplier,
+        "sigma_m": sigma_m,
+        "rows": rows,
+        "passes": passes,
+        "at_bound": at_bound,
+        "how": how,
+        "why": why,
+    }
 
 
 def sensor_not_fitted(sensor: str, multiplier: float, rows: int, min_rows: int) -> dict[str, Any]:
     """report.<sensor> when its rows are too few for a fit: the factor stays as configured."""
-    return {"configured": multiplier, "multiplier": multiplier, "rows": rows, "at_bound": False,
-            "why": f"{SENSOR_LABEL[sensor]} noise not fitted: {rows} usable residual rows, fewer than [noise] "
-                   f"min_rows = {min_rows}; its configured level (x {multiplier:.3g}) holds"}
+    return {
+        "configured": multiplier,
+        "multiplier": multiplier,
+        "rows": rows,
+        "at_bound": False,
+        "why": f"{SENSOR_LABEL[sensor]} noise not fitted: {rows} usable residual rows, fewer than [noise] "
+        f"min_rows = {min_rows}; its configured level (x {multiplier:.3g}) holds",
+    }
 
 
 def median_ping_sigma(config: EstimatorConfig, d_cov: np.ndarray) -> float:
     """The median over pings of the per-axis sigma a ping is given (ping_covariance, with the multiplier), m/s."""
-    from gtsam_dvl.estimators.selection import ping_covariance
+    from gtsam_dvl.estimators.inputs.selection import ping_covariance
 
     if config.dvl.use_beams:
         return config.dvl.beam_sigma_m_s()
     cov = ping_covariance(config.dvl, np.asarray(d_cov, dtype=float).reshape(-1, 3, 3))
-    return float(np.median(np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0))) if len(cov) else math.nan
+    return (
+        float(np.median(np.sqrt(np.trace(cov, axis1=1, axis2=2) / 3.0))) if len(cov) else math.nan
+    )
 
 
 def with_multiplier(config: EstimatorConfig, multiplier: float) -> EstimatorConfig:
     """config with [dvl] noise_multiplier set."""
-    return config.model_copy(update={"dvl": config.dvl.model_copy(update={"noise_multiplier": multiplier})})
+    return config.model_copy(
+        update={"dvl": config.dvl.model_copy(update={"noise_multiplier": multiplier})}
+    )
 
 
 @dataclass
@@ -519,27 +660,51 @@ class WarmupFit:
             a = np.array(self._innov)
             m = int(np.median(a[:, 4]))
             s0 = float(np.median(a[:, 3]) / chi2.median(m))
-            c = self.config.dvl.robust_threshold()**2
+            c = self.config.dvl.robust_threshold() ** 2
             keep = a[:, 3] <= c * max(s0, 1e-300)
             rows = int(a[keep, 4].sum())
             if keep.any():
-                ratio = float((a[keep, 0] - a[keep, 1]).sum() / a[keep, 2].sum()) * m / truncated_chi2_mean(m, c)
+                ratio = (
+                    float((a[keep, 0] - a[keep, 1]).sum() / a[keep, 2].sum())
+                    * m
+                    / truncated_chi2_mean(m, c)
+                )
         self._ew, self._innov = [], []
         if rows < n.min_rows or not np.isfinite(ratio) or ratio <= 0:
-            self.report = {"multiplier": current, "rows": rows,
-                           "why": f"DVL noise not fitted: {rows} usable rows in the first {n.warmup_s:g} s "
-                                  f"(fewer than [noise] min_rows = {n.min_rows}, or no positive variance left)"}
+            self.report = {
+                "multiplier": current,
+                "rows": rows,
+                "why": f"DVL noise not fitted: {rows} usable rows in the first {n.warmup_s:g} s "
+                f"(fewer than [noise] min_rows = {n.min_rows}, or no positive variance left)",
+            }
             return current
         white, at_bound = fitted_multiplier(current, ratio, self.config)
         stated = current if self.stated is None else self.stated
-        new, why = honest_multiplier(white, current, stated, None, multiplier_bounds(self.config), False)
+        new, why = honest_multiplier(
+            white, current, stated, None, multiplier_bounds(self.config), False
+        )
         at_bound = at_bound and new == white
         if abs(new / current - 1.0) <= n.fit_tolerance:
             # within the tolerance the factor the window was processed with is kept, as the batch fit does: a
             # result's configuration, reloaded, then reproduces its estimates instead of moving by the fit's scatter
             new = current
-        self.report = dvl_fit_report(self.config, new, rows, 1, at_bound, self.sigma_m_s * new / current,
-                                     f"{how} over the first {n.warmup_s:g} s, then held")
-        with_levels(self.report, {"white_multiplier": white, "stated_multiplier": stated, "honest_why": why,
-                                  "long": None}, new)
+        self.report = dvl_fit_report(
+            self.config,
+            new,
+            rows,
+            1,
+            at_bound,
+            self.sigma_m_s * new / current,
+            f"{how} over the first {n.warmup_s:g} s, then held",
+        )
+        with_levels(
+            self.report,
+            {
+                "white_multiplier": white,
+                "stated_multiplier": stated,
+                "honest_why": why,
+                "long": None,
+            },
+            new,
+        )
         return new

@@ -1,5 +1,5 @@
 """Which measurements an estimator uses, and how IMU samples are split between epochs: the one copy of these
-rules, shared by the batch smoother (estimators/graph.py), the online estimator (estimators/online/) and the
+rules, shared by the batch smoother (estimators/graph/log_graph.py), the online estimator (estimators/online/) and the
 EKF (estimators/ekf/), so that all three see the same epochs on the same log.
 
 Pings. A DVL ping is usable when it lies after the first IMU sample (nothing before it can be propagated) and
@@ -7,7 +7,7 @@ not after the last one (counted apart: "dvl_before_imu", "dvl_after_imu", where 
 stop together leave pings), it is not a water-track ping ("dvl_water_track": velocity relative to the water),
 it has a valid velocity (or, with `dvl.use_beams`, at least one valid beam with finite values), it is not
 faster than `dvl.max_speed_m_s` (a bottom-track outlier) (classify_pings), and when it is not bogus
-(estimators/ping_screen.py, with `dvl.screen`): an exact zero velocity while moving, a velocity repeated bit
+(estimators/inputs/ping_screen.py, with `dvl.screen`): an exact zero velocity while moving, a velocity repeated bit
 for bit (a frozen output), or a velocity change the IMU cannot explain. Every rejection is counted by reason.
 
 Epochs. One causal rule, KeyframeRule, decides which of the usable pings become epochs: keyframe thinning
@@ -30,20 +30,20 @@ import numpy as np
 
 from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.types import DvlData, ImuData
-from gtsam_dvl.estimators.ping_screen import AFTER_IMU as AFTER_IMU
-from gtsam_dvl.estimators.ping_screen import BEFORE_IMU as BEFORE_IMU
-from gtsam_dvl.estimators.ping_screen import IMPLAUSIBLE_ACCEL as IMPLAUSIBLE_ACCEL
-from gtsam_dvl.estimators.ping_screen import REASONS as REASONS
-from gtsam_dvl.estimators.ping_screen import REPEATED as REPEATED
-from gtsam_dvl.estimators.ping_screen import SCREEN_WINDOW_S as SCREEN_WINDOW_S
-from gtsam_dvl.estimators.ping_screen import TOO_FAST as TOO_FAST
-from gtsam_dvl.estimators.ping_screen import UNUSABLE as UNUSABLE
-from gtsam_dvl.estimators.ping_screen import USABLE as USABLE
-from gtsam_dvl.estimators.ping_screen import WATER_TRACK as WATER_TRACK
-from gtsam_dvl.estimators.ping_screen import ZERO_WHILE_MOVING as ZERO_WHILE_MOVING
-from gtsam_dvl.estimators.ping_screen import PingScreen as PingScreen
-from gtsam_dvl.estimators.ping_screen import screen_pings as screen_pings
-from gtsam_dvl.estimators.ping_screen import screened_value as screened_value
+from gtsam_dvl.estimators.inputs.ping_screen import AFTER_IMU as AFTER_IMU
+from gtsam_dvl.estimators.inputs.ping_screen import BEFORE_IMU as BEFORE_IMU
+from gtsam_dvl.estimators.inputs.ping_screen import IMPLAUSIBLE_ACCEL as IMPLAUSIBLE_ACCEL
+from gtsam_dvl.estimators.inputs.ping_screen import REASONS as REASONS
+from gtsam_dvl.estimators.inputs.ping_screen import REPEATED as REPEATED
+from gtsam_dvl.estimators.inputs.ping_screen import SCREEN_WINDOW_S as SCREEN_WINDOW_S
+from gtsam_dvl.estimators.inputs.ping_screen import TOO_FAST as TOO_FAST
+from gtsam_dvl.estimators.inputs.ping_screen import UNUSABLE as UNUSABLE
+from gtsam_dvl.estimators.inputs.ping_screen import USABLE as USABLE
+from gtsam_dvl.estimators.inputs.ping_screen import WATER_TRACK as WATER_TRACK
+from gtsam_dvl.estimators.inputs.ping_screen import ZERO_WHILE_MOVING as ZERO_WHILE_MOVING
+from gtsam_dvl.estimators.inputs.ping_screen import PingScreen as PingScreen
+from gtsam_dvl.estimators.inputs.ping_screen import screen_pings as screen_pings
+from gtsam_dvl.estimators.inputs.ping_screen import screened_value as screened_value
 
 
 def ping_covariance(cfg: DvlConfig, d_cov: np.ndarray) -> np.ndarray:
@@ -70,9 +70,14 @@ def water_covariance(config: EstimatorConfig, d_cov: np.ndarray) -> np.ndarray:
     [current] water_track_default_sigma_m_s; times [dvl] noise_multiplier^2 (ping_covariance's rule with the
     water-track settings)."""
     cur = config.current
-    dvl = config.dvl.model_copy(update={"noise_m_s": cur.water_track_sigma_m_s,
-                                        "default_noise_m_s": cur.water_track_default_sigma_m_s})
-    # with the current per depth layer, plus the current's spread within a layer (estimators/current.py, "Layers")
+    dvl = config.dvl.model_copy(
+        update={
+            "noise_m_s": cur.water_track_sigma_m_s,
+            "default_noise_m_s": cur.water_track_default_sigma_m_s,
+        }
+    )
+    # with the current per depth layer, plus the current's spread within a layer (estimators/models/current.py,
+    # "Layers")
     return ping_covariance(dvl, d_cov) + within_layer_variance(config) * np.eye(3)
 
 
@@ -84,17 +89,25 @@ def within_layer_variance(config: EstimatorConfig) -> float:
     return cur.depth_rw_m_s_per_sqrt_m**2 * cur.layer_thickness_m / 6.0
 
 
-def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid: np.ndarray | None,
-                   beam_finite: np.ndarray | None, cfg: DvlConfig, t_imu_first: float,
-                   t_imu_last: float = np.inf, water_track: np.ndarray | None = None,
-                   water_usable: bool = False) -> np.ndarray:
+def classify_pings(
+    t: np.ndarray,
+    d_v: np.ndarray,
+    valid: np.ndarray,
+    beam_valid: np.ndarray | None,
+    beam_finite: np.ndarray | None,
+    cfg: DvlConfig,
+    t_imu_first: float,
+    t_imu_last: float = np.inf,
+    water_track: np.ndarray | None = None,
+    water_usable: bool = False,
+) -> np.ndarray:
     """Reason code per ping (USABLE, BEFORE_IMU, AFTER_IMU, WATER_TRACK, UNUSABLE, TOO_FAST, in this order of
     precedence), vectorised over M pings.
 
     t (M,) s; d_v (M, 3) m/s in dvl_link; valid (M,) the 3-D velocity's flag; beam_valid (M, B) and
     beam_finite (M,) (all valid beams finite) when the log has beams; water_track (M,) the water-track pings
     (None: none), usable as such when water_usable (the estimators then carry the water current,
-    estimators/current.py) if their velocity is finite, whatever the message's bottom-track validity says.
+    estimators/models/current.py) if their velocity is finite, whatever the message's bottom-track validity says.
     t_imu_last: inf for an online estimator, which waits for the IMU samples that reach a ping.
     """
     t = np.asarray(t, dtype=float)
@@ -116,8 +129,11 @@ def classify_pings(t: np.ndarray, d_v: np.ndarray, valid: np.ndarray, beam_valid
         if water_usable:
             finite = np.isfinite(d_v).all(axis=1)
             code[water] = np.where(finite[water], USABLE, UNUSABLE)
-            code[water & finite & (np.linalg.norm(np.where(finite[:, None], d_v, 0.0), axis=1)
-                                   > cfg.max_speed_m_s)] = TOO_FAST
+            code[
+                water
+                & finite
+                & (np.linalg.norm(np.where(finite[:, None], d_v, 0.0), axis=1) > cfg.max_speed_m_s)
+            ] = TOO_FAST
         else:
             code[water] = WATER_TRACK
     code[t <= t_imu_first] = BEFORE_IMU
@@ -140,13 +156,19 @@ def beam_arrays(dvl: DvlData) -> tuple[np.ndarray | None, np.ndarray | None]:
         return None, None
     b = dvl.beams
     ok = b.valid
-    finite = np.where(ok, np.isfinite(b.v), True).all(axis=1) & np.where(ok[..., None], np.isfinite(b.d_u),
-                                                                        True).all(axis=(1, 2))
+    finite = np.where(ok, np.isfinite(b.v), True).all(axis=1) & np.where(
+        ok[..., None], np.isfinite(b.d_u), True
+    ).all(axis=(1, 2))
     return np.asarray(ok), np.asarray(finite)
 
 
-def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counters: dict[str, int],
-                 water_usable: bool = False) -> np.ndarray:
+def usable_pings(
+    dvl: DvlData,
+    imu: ImuData | np.ndarray,
+    cfg: DvlConfig,
+    counters: dict[str, int],
+    water_usable: bool = False,
+) -> np.ndarray:
     """Indices of the usable pings of a whole log (module doc), counting the others. imu: the log's IMU
     samples; its stamps alone (an array) skip the screen's IMU evidence (no motion seen, no velocity change
     allowed beyond dvl.max_accel_m_s2). water_usable: water-track pings are used (classify_pings); the screen then
@@ -155,11 +177,29 @@ def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counte
     beam_valid, beam_finite = beam_arrays(dvl)
     t_first = float(imu_t[0]) if len(imu_t) else np.inf
     t_last = float(imu_t[-1]) if len(imu_t) else -np.inf
-    code = classify_pings(dvl.t, dvl.d_v, dvl.valid, beam_valid, beam_finite, cfg, t_first, t_last, dvl.water_track,
-                          water_usable)
+    code = classify_pings(
+        dvl.t,
+        dvl.d_v,
+        dvl.valid,
+        beam_valid,
+        beam_finite,
+        cfg,
+        t_first,
+        t_last,
+        dvl.water_track,
+        water_usable,
+    )
     if cfg.screen:
-        samples = imu if isinstance(imu, ImuData) else ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
-        water = np.zeros(len(code), dtype=bool) if dvl.water_track is None else np.asarray(dvl.water_track, bool)
+        samples = (
+            imu
+            if isinstance(imu, ImuData)
+            else ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        )
+        water = (
+            np.zeros(len(code), dtype=bool)
+            if dvl.water_track is None
+            else np.asarray(dvl.water_track, bool)
+        )
         for mode in (~water, water):
             idx = np.flatnonzero((code == USABLE) & mode)
             code[idx] = screen_pings(dvl, idx, samples, cfg)
@@ -167,7 +207,9 @@ def usable_pings(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, counte
     return np.flatnonzero(code == USABLE)
 
 
-KEYFRAME_TOLERANCE = 0.02  # share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
+KEYFRAME_TOLERANCE = (
+    0.02  # share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
+)
 
 # KeyframeRule's decision for a screened ping
 THINNED = 0  # dropped: within solver.keyframe_interval_s of the previous kept ping (counter "dvl_not_keyframe")
@@ -198,7 +240,9 @@ class KeyframeRule:
         if t - self.last_kept_t < self.interval_s:
             return THINNED
         self.last_kept_t = t
-        if t - self.last_key_t < self._key_interval_s:  # never with spacing_s <= 0: the pings are in time order
+        if (
+            t - self.last_key_t < self._key_interval_s
+        ):  # never with spacing_s <= 0: the pings are in time order
             return BETWEEN
         self.last_key_t = t
         return KEYFRAME
@@ -207,13 +251,20 @@ class KeyframeRule:
         """decide() on each of the pings t (sorted, s) in turn: (M,) int8. A loop over the pings: each decision
         depends on the kept pings before it."""
         decide = self.decide
-        return np.fromiter((decide(x) for x in np.asarray(t, dtype=float).tolist()), dtype=np.int8,
-                           count=len(t))
+        return np.fromiter(
+            (decide(x) for x in np.asarray(t, dtype=float).tolist()), dtype=np.int8, count=len(t)
+        )
 
 
-def decide_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
-                  keyframe_spacing_s: float, counters: dict[str, int], water_usable: bool = False
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def decide_epochs(
+    dvl: DvlData,
+    imu: ImuData | np.ndarray,
+    cfg: DvlConfig,
+    keyframe_interval_s: float,
+    keyframe_spacing_s: float,
+    counters: dict[str, int],
+    water_usable: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The whole log's decisions of KeyframeRule(keyframe_interval_s, keyframe_spacing_s): (usable, epochs, key):
     the usable pings' indices, those of the pings kept after thinning (counter "dvl_not_keyframe"), and which of
     those are keyframes. imu, water_usable: as in usable_pings."""
@@ -225,8 +276,13 @@ def decide_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyfr
     return usable, usable[kept], decision[kept] == KEYFRAME
 
 
-def select_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyframe_interval_s: float,
-                  counters: dict[str, int]) -> np.ndarray:
+def select_epochs(
+    dvl: DvlData,
+    imu: ImuData | np.ndarray,
+    cfg: DvlConfig,
+    keyframe_interval_s: float,
+    counters: dict[str, int],
+) -> np.ndarray:
     """Indices of the pings that become epochs: usable, then thinned to keyframe_interval_s (decide_epochs)."""
     return decide_epochs(dvl, imu, cfg, keyframe_interval_s, 0.0, counters)[1]
 
@@ -234,7 +290,7 @@ def select_epochs(dvl: DvlData, imu: ImuData | np.ndarray, cfg: DvlConfig, keyfr
 def keyframe_mask(t: np.ndarray, spacing_s: float) -> np.ndarray:
     """Which of the epoch pings t (sorted, s; select_epochs' pings) are keyframes under KeyframeRule with
     spacing_s: the batch smoother puts states at the keyframes and the other pings on the keyframe before them
-    (estimators/keyframes.py)."""
+    (estimators/graph/keyframes.py)."""
     if spacing_s <= 0 or len(t) == 0:
         return np.ones(len(t), dtype=bool)
     return KeyframeRule(0.0, spacing_s).decide_all(t) == KEYFRAME
@@ -253,7 +309,9 @@ class Ping:
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     key: bool = True
     index: int = -1  # its place among the pings pushed (OnlineEstimator.push_dvl's calls, from 0)
-    water_track: bool = False  # measured relative to the water (used with the current, else counted)
+    water_track: bool = (
+        False  # measured relative to the water (used with the current, else counted)
+    )
 
 
 class EpochScheduler:
@@ -266,9 +324,16 @@ class EpochScheduler:
     by reason, as the whole-log functions count them. noise_free: the pings come from a noise-free simulation
     (DvlData.noise_free: repeats are frozen output only while the IMU shows motion)."""
 
-    def __init__(self, cfg: DvlConfig, keyframe_interval_s: float, keyframe_spacing_s: float,
-                 counters: dict[str, int], keep_usable: bool = True, noise_free: bool = False,
-                 water_usable: bool = False) -> None:
+    def __init__(
+        self,
+        cfg: DvlConfig,
+        keyframe_interval_s: float,
+        keyframe_spacing_s: float,
+        counters: dict[str, int],
+        keep_usable: bool = True,
+        noise_free: bool = False,
+        water_usable: bool = False,
+    ) -> None:
         self.cfg, self.counters = cfg, counters
         self.rule = KeyframeRule(keyframe_interval_s, keyframe_spacing_s)
         self.screen = PingScreen(cfg, repeats_need_motion=noise_free)
@@ -295,9 +360,17 @@ class EpochScheduler:
             d_u, v, ok = p.beams
             beam_valid = ok[None, :]
             beam_finite = np.array([bool(np.isfinite(v[ok]).all() and np.isfinite(d_u[ok]).all())])
-        code = classify_pings(np.array([p.t]), p.d_v[None, :], np.array([p.valid]), beam_valid, beam_finite,
-                              self.cfg, t_imu_first, water_track=np.array([p.water_track]),
-                              water_usable=self.water_usable)
+        code = classify_pings(
+            np.array([p.t]),
+            p.d_v[None, :],
+            np.array([p.valid]),
+            beam_valid,
+            beam_finite,
+            self.cfg,
+            t_imu_first,
+            water_track=np.array([p.water_track]),
+            water_usable=self.water_usable,
+        )
         if code[0] != USABLE:
             count_reasons(code, self.counters, keep_zero=False)
             return False
@@ -340,7 +413,9 @@ def sample_starts(t: np.ndarray) -> np.ndarray:
     return np.concatenate([[t[0] - first_dt], t[:-1]])
 
 
-def imu_pieces(t: np.ndarray, starts: np.ndarray, a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
+def imu_pieces(
+    t: np.ndarray, starts: np.ndarray, a: float, b: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Samples covering (a, b] and the part of each inside it (s): interval averages are split exactly."""
     lo = int(np.searchsorted(t, a, side="right"))  # first sample ending after a
     hi = min(int(np.searchsorted(t, b, side="left")), len(t) - 1)  # last sample that reaches b

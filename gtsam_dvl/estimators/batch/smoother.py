@@ -15,28 +15,33 @@ from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.states import calibration_info, correlated_error
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated, weak_hold
-from gtsam_dvl.estimators.batch_solve import (  # noqa: F401  (re-exported: the solve's names of old)
+from gtsam_dvl.estimators.batch.pieces import long_gaps, smooth_pieces
+from gtsam_dvl.estimators.batch.solve import (  # noqa: F401  (re-exported: the solve's names of old)
     RECENTRE_FRACTION,
     extract_result,
     solve_centred,
     solve_graph,
     solve_log,
 )
-from gtsam_dvl.estimators.bulk import BulkGraph
-from gtsam_dvl.estimators.constant_error import consider_constant_error
-from gtsam_dvl.estimators.current import resolve_water_track
-from gtsam_dvl.estimators.gaps import screened_in_memory, screened_losses
-from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.noise_levels import NoiseReport
-from gtsam_dvl.estimators.pieces import long_gaps, smooth_pieces
-from gtsam_dvl.estimators.solver import ChunkedOrdering
-from gtsam_dvl.estimators.timeline import filtering_timeline
+from gtsam_dvl.estimators.batch.timeline import filtering_timeline
+from gtsam_dvl.estimators.graph.bulk import BulkGraph
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.graph.solver import ChunkedOrdering
+from gtsam_dvl.estimators.inputs.gaps import screened_in_memory, screened_losses
+from gtsam_dvl.estimators.models import correlated, weak_hold
+from gtsam_dvl.estimators.models.constant_error import consider_constant_error
+from gtsam_dvl.estimators.models.current import resolve_water_track
+from gtsam_dvl.estimators.models.noise_levels import NoiseReport
 
 
-def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
-                 progress: ProgressFn | None = None, timeline: bool = False, estimator: str = "batch",
-                 calibration: VehicleCalibration | None = None) -> NavResult:
+def smooth_batch(
+    log: LogData,
+    config: EstimatorConfig | None = None,
+    progress: ProgressFn | None = None,
+    timeline: bool = False,
+    estimator: str = "batch",
+    calibration: VehicleCalibration | None = None,
+) -> NavResult:
     """Estimate trajectory, IMU biases, DVL scale factor and misalignment from a whole log. timeline: also
     the filtering sigma timeline over the same linearisation (how the log's information accrued; one more
     pass over the states). estimator: the name the result carries (the planner's is "plan"). calibration: a
@@ -46,26 +51,50 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     noise = NoiseReport()
-    config = resolve_water_track(config, log)  # [current] water_track "auto": "use" when the log has water track
-    stated = config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    log = screened_in_memory(log)  # saturation and clock steps, when the reader did not screen it (gaps.py)
-    if gaps := long_gaps(log, config):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
+    config = resolve_water_track(
+        config, log
+    )  # [current] water_track "auto": "use" when the log has water track
+    stated = (
+        config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    )
+    log = screened_in_memory(
+        log
+    )  # saturation and clock steps, when the reader did not screen it (gaps.py)
+    if gaps := long_gaps(
+        log, config
+    ):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
         pieces = smooth_pieces(log, stated, gaps, progress, estimator, calibration)
         consider_constant_error(pieces, config, calibration is not None)
         return pieces
-    builder, graph, values, ordering, report, passes, dof = solve_log(log, config, noise, timing, calibration,
-                                                                      progress, t0)
+    builder, graph, values, ordering, report, passes, dof = solve_log(
+        log, config, noise, timing, calibration, progress, t0
+    )
     config = builder.config  # (at the levels taken from the data)
 
     t3 = time.perf_counter()
     # the converged iteration's Bayes net serves the marginals when its step was tiny (every GN
     # iteration's stop rule makes the last step change the error by < 0.01, i.e. far below one sigma)
-    result = extract_result(builder, graph, values, ordering, estimator=estimator,
-                            bayes_net=report.bayes_net if report.converged else None)
-    hold = None if calibration is not None or result.calib_joint_cov is None else weak_hold.plan(
-        config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1)
-    if hold is not None:  # the nominal calibration's check, then weakly determined directions held (weak_hold.py)
-        graph, values, result = _hold_calibration(builder, graph, values, ordering, hold, estimator, result)
+    result = extract_result(
+        builder,
+        graph,
+        values,
+        ordering,
+        estimator=estimator,
+        bayes_net=report.bayes_net if report.converged else None,
+    )
+    hold = (
+        None
+        if calibration is not None or result.calib_joint_cov is None
+        else weak_hold.plan(
+            config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1
+        )
+    )
+    if (
+        hold is not None
+    ):  # the nominal calibration's check, then weakly determined directions held (weak_hold.py)
+        graph, values, result = _hold_calibration(
+            builder, graph, values, ordering, hold, estimator, result
+        )
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
@@ -75,7 +104,9 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["noise"] = noise.as_dict()
-    if (screened := screened_losses(log)) is not None:  # what the screen of an in-memory log found (gaps.py)
+    if (
+        screened := screened_losses(log)
+    ) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
     if correlated_error(config):
         result.info["dvl_correlated_error"] = correlated.info(config, values, len(builder.epochs))
@@ -84,18 +115,30 @@ def smooth_batch(log: LogData, config: EstimatorConfig | None = None,
         result.info["calibration_prior"] = calibration_info(config, calibration)
     if builder.offset_centring:  # the time offset's windows against the solution (solve_centred)
         result.info["time_offset_centring"] = builder.offset_centring
-    result.info["solver"] = {"iterations": report.iterations, "converged": report.converged,
-                             "initial_error": report.initial_error, "final_error": report.final_error, "dof": dof,
-                             "passes": passes, **{f"{k}_s": v for k, v in report.timing_s.items()}}
+    result.info["solver"] = {
+        "iterations": report.iterations,
+        "converged": report.converged,
+        "initial_error": report.initial_error,
+        "final_error": report.final_error,
+        "dof": dof,
+        "passes": passes,
+        **{f"{k}_s": v for k, v in report.timing_s.items()},
+    }
     if progress:
         progress(1.0)
     return result
 
 
-def _hold_calibration(builder: LogGraph, graph: BulkGraph, values: gtsam.Values,
-                      ordering: gtsam.Ordering | ChunkedOrdering, hold: dict[str, Any], estimator: str,
-                      free: NavResult) -> tuple[BulkGraph, gtsam.Values, NavResult]:
-    """The nominal-calibration check and the weak-direction hold (estimators/weak_hold.py): the log solved again
+def _hold_calibration(
+    builder: LogGraph,
+    graph: BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    hold: dict[str, Any],
+    estimator: str,
+    free: NavResult,
+) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+    """The nominal-calibration check and the weak-direction hold (estimators/models/weak_hold.py): the log solved again
     with the scale and misalignment pinned at the prior's mean (the nominal); when the free estimate does not lower
     the chi^2 by more than NOMINAL_LEVEL's quantile of chi^2(4), the calibration is held at the nominal with the
     consider covariance (its prior's sigma) and the result says so; else the weak directions alone are held (when
@@ -105,21 +148,40 @@ def _hold_calibration(builder: LogGraph, graph: BulkGraph, values: gtsam.Values,
     everything = {**hold, "weak": np.ones_like(hold["weak"])}
     nominal_values, gain, nominal_graph = _pinned(builder, graph, values, ordering, everything)
     limit = float(chi2.ppf(weak_hold.NOMINAL_LEVEL, len(hold["weak"])))
-    check = {"chi2_gain": gain, "chi2_limit": limit, "level": weak_hold.NOMINAL_LEVEL, "pays": bool(gain > limit)}
+    check = {
+        "chi2_gain": gain,
+        "chi2_limit": limit,
+        "level": weak_hold.NOMINAL_LEVEL,
+        "pays": bool(gain > limit),
+    }
     if not check["pays"]:
-        result = extract_result(builder, nominal_graph, nominal_values, ordering, estimator=estimator)
-        result.info["calibration_hold"] = {**weak_hold.report(everything, gain), "consistent": True,
-                                           "nominal": check, "why": (
-            f"held at the nominal calibration: estimating the DVL scale and misalignment lowers chi^2 by "
-            f"{gain:.1f}, not more than {limit:.1f} ({weak_hold.NOMINAL_LEVEL:.0%} of chi^2 with 4 dof): it does not "
-            "pay for its four states; the nominal's sigmas are its prior's")}
+        result = extract_result(
+            builder, nominal_graph, nominal_values, ordering, estimator=estimator
+        )
+        result.info["calibration_hold"] = {
+            **weak_hold.report(everything, gain),
+            "consistent": True,
+            "nominal": check,
+            "why": (
+                f"held at the nominal calibration: estimating the DVL scale and misalignment lowers chi^2 by "
+                f"{gain:.1f}, not more than {limit:.1f} ({weak_hold.NOMINAL_LEVEL:.0%} of chi^2 with 4 dof): "
+                "it does not pay for its four states; the nominal's sigmas are its prior's"
+            ),
+        }
         return nominal_graph, nominal_values, result
     return _hold_weak(builder, graph, values, ordering, hold, estimator, free, check)
 
 
-def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: gtsam.Ordering | ChunkedOrdering,
-               hold: dict[str, Any], estimator: str, free: NavResult, check: dict[str, Any] | None
-               ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+def _hold_weak(
+    builder: LogGraph,
+    graph: BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    hold: dict[str, Any],
+    estimator: str,
+    free: NavResult,
+    check: dict[str, Any] | None,
+) -> tuple[BulkGraph, gtsam.Values, NavResult]:
     """The weak directions held (weak_hold.py) when any, the result with its consider covariance; the free one when
     pinning costs more chi^2 than its 99 % limit. check: the nominal calibration's, reported beside."""
     nominal = {} if check is None else {"nominal": check}
@@ -129,20 +191,31 @@ def _hold_weak(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, orderi
     held, increase, cov_graph = _pinned(builder, graph, values, ordering, hold)
     info = {**weak_hold.report(hold, increase), **nominal}
     if not info["consistent"]:
-        free.info["calibration_hold"] = {**info, "held": [], "released": info["held"], "why": (
-            f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "
-            "data disagree with the prior along directions they inform little")}
+        free.info["calibration_hold"] = {
+            **info,
+            "held": [],
+            "released": info["held"],
+            "why": (
+                f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "
+                "data disagree with the prior along directions they inform little"
+            ),
+        }
         return graph, values, free
     result = extract_result(builder, cov_graph, held, ordering, estimator=estimator)
     result.info["calibration_hold"] = info
     return cov_graph, held, result
 
 
-def _pinned(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: gtsam.Ordering | ChunkedOrdering,
-            hold: dict[str, Any]) -> tuple[gtsam.Values, float, BulkGraph]:
+def _pinned(
+    builder: LogGraph,
+    graph: BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    hold: dict[str, Any],
+) -> tuple[gtsam.Values, float, BulkGraph]:
     """The estimate with hold's weak directions pinned at the prior's mean (the rest solved again, the offset's
     windows re-centred), its chi^2 increase over values', and the graph of its consider covariance (the prior's
-    precision taken off along the pinned directions: estimators/weak_hold.py)."""
+    precision taken off along the pinned directions: estimators/models/weak_hold.py)."""
     pinned, consider = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
     slots = set(weak_hold.prior_slots(graph.graph))
     for j in range(graph.graph.size()):
@@ -152,6 +225,8 @@ def _pinned(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering:
     pinned.add(weak_hold.hold_factor(hold))
     consider.add(weak_hold.consider_prior(hold))
     free_error = graph.error(values)
-    _, held, _ = solve_centred(builder, BulkGraph(pinned, graph.bulk, graph.imu), values, ordering, [])
+    _, held, _ = solve_centred(
+        builder, BulkGraph(pinned, graph.bulk, graph.imu), values, ordering, []
+    )
     increase = 2.0 * (graph.error(held) - free_error)
     return held, increase, BulkGraph(consider, graph.bulk, graph.imu)

@@ -44,16 +44,23 @@ from gtsam_dvl.core.types import Mounting
 HOLD_SIGMA = 1e-4  # the pinned directions' sigma, in prior sigmas (a constraint, to within 1e-4 of a prior sigma)
 
 
-def calibration_prior(config: EstimatorConfig, mounting: Mounting) -> tuple[float, np.ndarray, np.ndarray]:
+def calibration_prior(
+    config: EstimatorConfig, mounting: Mounting
+) -> tuple[float, np.ndarray, np.ndarray]:
     """(k0, b_R_d0, P0): the scale's and misalignment's prior means and their joint covariance (4, 4) over
     [scale, misalignment right tangent] (the registry's priors, core/states.py)."""
-    ks, mis = BY_NAME["scale"].prior(config, mounting), BY_NAME["misalignment"].prior(config, mounting)
+    ks, mis = (
+        BY_NAME["scale"].prior(config, mounting),
+        BY_NAME["misalignment"].prior(config, mounting),
+    )
     P0 = np.zeros((4, 4))
     P0[:1, :1], P0[1:, 1:] = ks.cov, mis.cov
     return float(np.asarray(ks.value).reshape(-1)[0]), np.asarray(mis.value, dtype=float), P0
 
 
-def weak_directions(P0: np.ndarray, P1: np.ndarray, below: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def weak_directions(
+    P0: np.ndarray, P1: np.ndarray, below: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(lambda (n,), V (n, n) columns v_k, weak (n,) bool) of the posterior P1 against the prior P0 (module doc)."""
     L0 = np.linalg.cholesky(P0)
     Li = np.linalg.inv(L0)
@@ -75,14 +82,18 @@ def _tangent(values: gtsam.Values, k0: float, b_R_d0: np.ndarray) -> tuple[np.nd
 def _linear_factor(A: np.ndarray, k0: float, b_R_d0: np.ndarray) -> gtsam.CustomFactor:
     """A factor on [K_SCALE, C_MISALIGN] of whitened residual A (theta - theta0) (A: (m, 4))."""
 
-    def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+    def error(
+        _: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None
+    ) -> np.ndarray:
         d, J = _tangent(values, k0, b_R_d0)
         if H is not None:
             AJ = A @ J
             H[0], H[1] = AJ[:, :1].copy(), AJ[:, 1:].copy()
         return A @ d
 
-    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(A.shape[0]), [K_SCALE, C_MISALIGN], error)
+    return gtsam.CustomFactor(
+        gtsam.noiseModel.Unit.Create(A.shape[0]), [K_SCALE, C_MISALIGN], error
+    )
 
 
 def prior_slots(graph: gtsam.NonlinearFactorGraph) -> list[int]:
@@ -95,8 +106,9 @@ def prior_slots(graph: gtsam.NonlinearFactorGraph) -> list[int]:
     return out
 
 
-def _directions(config: EstimatorConfig, mounting: Mounting, keys: list[int], cov: np.ndarray
-                ) -> dict[str, Any] | None:
+def _directions(
+    config: EstimatorConfig, mounting: Mounting, keys: list[int], cov: np.ndarray
+) -> dict[str, Any] | None:
     """The plan of a joint covariance cov over the stacked tangents of keys (the prior, the whitened eigen-
     directions and which are weak, the threshold, the scale's and misalignment's columns idx in cov): None when
     holding does not apply (off, or the scale or misalignment not among keys)."""
@@ -104,15 +116,30 @@ def _directions(config: EstimatorConfig, mounting: Mounting, keys: list[int], co
     cols = columns(keys, config)
     if below <= 0 or "scale" not in cols or "misalignment" not in cols:
         return None
-    idx = np.r_[np.arange(cols["scale"].start, cols["scale"].stop),
-                np.arange(cols["misalignment"].start, cols["misalignment"].stop)]
+    idx = np.r_[
+        np.arange(cols["scale"].start, cols["scale"].stop),
+        np.arange(cols["misalignment"].start, cols["misalignment"].stop),
+    ]
     k0, b_R_d0, P0 = calibration_prior(config, mounting)
     lam, V, weak = weak_directions(P0, cov[np.ix_(idx, idx)], below)
-    return {"k0": k0, "b_R_d0": b_R_d0, "P0": P0, "lambda": lam, "V": V, "weak": weak, "below": below, "idx": idx}
+    return {
+        "k0": k0,
+        "b_R_d0": b_R_d0,
+        "P0": P0,
+        "lambda": lam,
+        "V": V,
+        "weak": weak,
+        "below": below,
+        "idx": idx,
+    }
 
 
-def plan(config: EstimatorConfig, mounting: Mounting, calib_joint_cov: np.ndarray, n_last: int,
-         ) -> dict[str, Any] | None:
+def plan(
+    config: EstimatorConfig,
+    mounting: Mounting,
+    calib_joint_cov: np.ndarray,
+    n_last: int,
+) -> dict[str, Any] | None:
     """The weak directions of a batch result (its calibration block's joint covariance at the last state n_last):
     None when holding does not apply."""
     return _directions(config, mounting, shared_keys(config, n_last, block=True), calib_joint_cov)
@@ -140,18 +167,38 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
     names = ["scale", "misalignment roll", "misalignment pitch", "misalignment yaw"]
     held = []
     for k in np.flatnonzero(p["weak"]):
-        v = np.linalg.cholesky(p["P0"]) @ p["V"][:, k]  # one prior sigma along v_k, in [scale, rad] units
-        main = names[int(np.argmax(np.abs(p["V"][:, k])))]  # (its largest component in prior sigmas)
-        held.append({"information": float(p["lambda"][k]), "mostly": main,
-                     "direction": {n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)}})
+        v = (
+            np.linalg.cholesky(p["P0"]) @ p["V"][:, k]
+        )  # one prior sigma along v_k, in [scale, rad] units
+        main = names[
+            int(np.argmax(np.abs(p["V"][:, k])))
+        ]  # (its largest component in prior sigmas)
+        held.append(
+            {
+                "information": float(p["lambda"][k]),
+                "mostly": main,
+                "direction": {
+                    n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)
+                },
+            }
+        )
     m = int(p["weak"].sum())
     limit = float(chi2.ppf(0.99, m)) if m else 0.0
-    out: dict[str, Any] = {"threshold": float(p["below"]), "information": p["lambda"].tolist(),
-                           "held": held}
+    out: dict[str, Any] = {
+        "threshold": float(p["below"]),
+        "information": p["lambda"].tolist(),
+        "held": held,
+    }
     if "nominal" in p:  # the nominal calibration's check (nominal_check), a filter's
         out["nominal"] = p["nominal"]
-    if np.isfinite(chi2_increase):  # (the batch smoother's: a filter holds its reported estimate only)
-        out.update(chi2_increase=chi2_increase, chi2_limit_99=limit, consistent=bool(chi2_increase <= limit))
+    if np.isfinite(
+        chi2_increase
+    ):  # (the batch smoother's: a filter holds its reported estimate only)
+        out.update(
+            chi2_increase=chi2_increase,
+            chi2_limit_99=limit,
+            consistent=bool(chi2_increase <= limit),
+        )
     return out
 
 
@@ -168,11 +215,21 @@ def nominal_check(d: np.ndarray, P: np.ndarray) -> dict[str, Any]:
     of chi^2 with len(d) degrees of freedom."""
     gain = float(d @ np.linalg.solve(P, d))
     limit = float(chi2.ppf(NOMINAL_LEVEL, len(d)))
-    return {"chi2_gain": gain, "chi2_limit": limit, "level": NOMINAL_LEVEL, "pays": bool(gain > limit)}
+    return {
+        "chi2_gain": gain,
+        "chi2_limit": limit,
+        "level": NOMINAL_LEVEL,
+        "pays": bool(gain > limit),
+    }
 
 
-def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values, keys: list[int],
-               cov: np.ndarray) -> tuple[gtsam.Values, np.ndarray, dict[str, Any]] | None:
+def hold_joint(
+    config: EstimatorConfig,
+    mounting: Mounting,
+    values: gtsam.Values,
+    keys: list[int],
+    cov: np.ndarray,
+) -> tuple[gtsam.Values, np.ndarray, dict[str, Any]] | None:
     """The weak directions held in one joint estimate (a filter's newest state with the shared states: values
     over keys, cov their stacked tangents' joint covariance), to first order: the calibration moved to its held
     value theta_h, every other component by its regression on the calibration (K = P_x,theta P_theta^-1), and the
@@ -193,7 +250,9 @@ def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values
     lam, V, weak = p["lambda"], p["V"], p["weak"]
     L0 = np.linalg.cholesky(p["P0"])
     u = np.linalg.solve(L0, d)
-    d_theta = L0 @ (-V[:, weak] @ (V[:, weak].T @ u))  # to the prior's mean along the weak directions
+    d_theta = L0 @ (
+        -V[:, weak] @ (V[:, weak].T @ u)
+    )  # to the prior's mean along the weak directions
     K = np.linalg.solve(P_tt, cov[idx, :]).T  # (n, 4)
     c = np.where(weak, 1.0, 1.0 / (1.0 + lam))  # the held calibration's whitened variances
     C = L0 @ V @ np.diag(c) @ V.T @ L0.T
@@ -203,7 +262,6 @@ def hold_joint(config: EstimatorConfig, mounting: Mounting, values: gtsam.Values
     col = 0
     for k in keys:
         n = key_dim(k)
-        delta.insert(k, dx[col:col + n])
+        delta.insert(k, dx[col : col + n])
         col += n
     return values.retract(delta), 0.5 * (cov_h + cov_h.T), p
-

@@ -1,7 +1,7 @@
 """The factor maker: explicit measurements in, GTSAM factors, priors and initial guesses out.
 
 Every estimator on a factor graph makes its factors here: the whole-log graph of the batch smoother and the
-planner (estimators/graph.py) and the online iSAM2 estimator (estimators/online/), which feeds it one epoch
+planner (estimators/graph/log_graph.py) and the online iSAM2 estimator (estimators/online/), which feeds it one epoch
 at a time. It holds no log and no epoch list, only what the factors depend on: the configuration, the map
 frame (Earth model), the alignment (initial attitude) and the sensor mounting.
 
@@ -36,10 +36,10 @@ from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.states import prior_factors as shared_prior_factors
 from gtsam_dvl.core.types import ImuData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.alignment import Alignment, FirstState, first_state
-from gtsam_dvl.estimators.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
-from gtsam_dvl.estimators.noise_levels import median_ping_sigma
-from gtsam_dvl.estimators.selection import imu_pieces, ping_covariance, water_covariance
+from gtsam_dvl.estimators.inputs.alignment import Alignment, FirstState, first_state
+from gtsam_dvl.estimators.inputs.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
+from gtsam_dvl.estimators.inputs.selection import imu_pieces, ping_covariance, water_covariance
+from gtsam_dvl.estimators.models.noise_levels import median_ping_sigma
 from gtsam_dvl.factors import (
     DvlOptions,
     EarthImuFactor,
@@ -52,7 +52,9 @@ from gtsam_dvl.factors import (
     make_gnss_factor,
 )
 
-Beams = tuple[np.ndarray, np.ndarray, np.ndarray]  # d_u (B, 3) unit vectors in dvl_link, v (B,) m/s, valid (B,)
+Beams = tuple[
+    np.ndarray, np.ndarray, np.ndarray
+]  # d_u (B, 3) unit vectors in dvl_link, v (B,) m/s, valid (B,)
 
 
 def _mean_exp(phi: np.ndarray, wgt: np.ndarray) -> np.ndarray:
@@ -64,7 +66,11 @@ def _mean_exp(phi: np.ndarray, wgt: np.ndarray) -> np.ndarray:
     small = t2 < 1e-4
     ts = np.sqrt(np.where(small, 1.0, t2))
     s = np.where(small, 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0)), np.sin(ts) / ts)
-    c = np.where(small, 0.5 * (1.0 - t2 / 12.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0))), (1.0 - np.cos(ts)) / ts**2)
+    c = np.where(
+        small,
+        0.5 * (1.0 - t2 / 12.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0))),
+        (1.0 - np.cos(ts)) / ts**2,
+    )
     w = wgt[:, 0, :]
     sum_s_phi = np.einsum("pw,pwi->pi", w * s, phi)
     out = np.swapaxes(phi * (w * c)[..., None], 1, 2) @ phi  # sum_k wgt c phi phi^T
@@ -82,8 +88,9 @@ def _mean_exp(phi: np.ndarray, wgt: np.ndarray) -> np.ndarray:
     return out
 
 
-def integrate_pieces(pim: gtsam.PreintegratedImuMeasurements, b_f: np.ndarray, b_omega: np.ndarray,
-                     dt: list[float]) -> None:
+def integrate_pieces(
+    pim: gtsam.PreintegratedImuMeasurements, b_f: np.ndarray, b_omega: np.ndarray, dt: list[float]
+) -> None:
     """Integrate the pieces (rows of b_f m/s^2 and b_omega rad/s, durations dt s as Python floats: numpy scalars
     cost more than the integration itself) into pim, in order."""
     for f_i, w_i, dt_i in zip(b_f, b_omega, dt, strict=True):
@@ -104,7 +111,9 @@ class FactorMaker:
     # a vehicle's calibration (already inflated for its age): the joint prior of the states it holds
     # (core/states.py calibration_prior) and their initial values; None: the configuration's priors
     calibration: VehicleCalibration | None = None
-    _offset_gravity: np.ndarray | None = field(default=None, init=False, repr=False)  # offset_gravity()'s cache
+    _offset_gravity: np.ndarray | None = field(
+        default=None, init=False, repr=False
+    )  # offset_gravity()'s cache
 
     # ----- keys and rates ------------------------------------------------------------------------
     def bias_key(self, i: int) -> int:
@@ -116,9 +125,16 @@ class FactorMaker:
         is 7e-5 m/s, so attitude errors do not matter)."""
         return np.asarray(b_omega_gyro - self.alignment.n_R_b.T @ self.n_omega_ie(), dtype=float)
 
-    def velocity_rate_input(self, t: float, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-                            dt: float = 0.0, bias: tuple[np.ndarray, np.ndarray] | None = None,
-                            n_R_b: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def velocity_rate_input(
+        self,
+        t: float,
+        imu_t: np.ndarray,
+        b_f: np.ndarray,
+        b_omega: np.ndarray,
+        dt: float = 0.0,
+        bias: tuple[np.ndarray, np.ndarray] | None = None,
+        n_R_b: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The IMU constants of the DVL time-offset model at an epoch t: the mean specific force b_a and the
         mean body rate relative to map (base_link) over the samples of a window centred on t + dt / 2, of length
         max(|dt|, 2 w), w = [dvl] time_offset_window_s. dt is the current offset estimate: dt times the mean rate
@@ -130,14 +146,28 @@ class FactorMaker:
         2 m/s) is left out. bias = (accelerometer m/s^2, gyro rad/s): the current estimate of the IMU biases,
         taken off the samples (a 280 micro-g accelerometer bias over a 1 s offset is a 3 mm/s phantom velocity);
         n_R_b: the body's attitude at the ping for the Earth rate's removal (default: the alignment's)."""
-        b_a, w_mean, G = self.velocity_rate_inputs(np.array([t], dtype=float), imu_t, b_f, b_omega, dt, bias=bias,
-                                                   n_R_b=None if n_R_b is None else np.asarray(n_R_b)[None])
+        b_a, w_mean, G = self.velocity_rate_inputs(
+            np.array([t], dtype=float),
+            imu_t,
+            b_f,
+            b_omega,
+            dt,
+            bias=bias,
+            n_R_b=None if n_R_b is None else np.asarray(n_R_b)[None],
+        )
         return b_a[0], w_mean[0], G[0]
 
-    def velocity_rate_inputs(self, t: np.ndarray, imu_t: np.ndarray, b_f: np.ndarray, b_omega: np.ndarray,
-                             dt: float = 0.0, chunk_samples: int = 500_000,
-                             bias: tuple[np.ndarray, np.ndarray] | None = None, n_R_b: np.ndarray | None = None
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def velocity_rate_inputs(
+        self,
+        t: np.ndarray,
+        imu_t: np.ndarray,
+        b_f: np.ndarray,
+        b_omega: np.ndarray,
+        dt: float = 0.0,
+        chunk_samples: int = 500_000,
+        bias: tuple[np.ndarray, np.ndarray] | None = None,
+        n_R_b: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """velocity_rate_input at the epochs t (P,) at once: b_a (P, 3), the mean body rate (P, 3), G (P, 3, 3).
         Vectorised over the pings (a Python call per ping would cost 18,000 calls per hour of a 5 Hz log): each
         window's samples are gathered into a padded block, chunk_samples (ping, sample) pairs at a time, and the
@@ -160,8 +190,12 @@ class FactorMaker:
         # Earth rate in each ping's body (the same for every sample of its window: the body turns by at most a few
         # degrees in one) plus the gyro bias: what each sample's rate loses to be relative to map
         n_omega = self.n_omega_ie()
-        w_off = np.broadcast_to(self.alignment.n_R_b.T @ n_omega if n_R_b is None
-                                else np.einsum("pji,j->pi", np.asarray(n_R_b, dtype=float), n_omega), (len(t), 3))
+        w_off = np.broadcast_to(
+            self.alignment.n_R_b.T @ n_omega
+            if n_R_b is None
+            else np.einsum("pji,j->pi", np.asarray(n_R_b, dtype=float), n_omega),
+            (len(t), 3),
+        )
         a_off = np.zeros((len(t), 3))
         if bias is not None:
             a_off = np.broadcast_to(np.asarray(bias[0], dtype=float), (len(t), 3))
@@ -174,7 +208,9 @@ class FactorMaker:
             sl = slice(a, a + step_p)
             n_in = (hi[sl] - lo[sl])[:, None]
             inside = col[None, :] < n_in
-            wgt = (inside / n_in)[:, None, :]  # (P, 1, W): the mean over the window's samples as a product
+            wgt = (inside / n_in)[
+                :, None, :
+            ]  # (P, 1, W): the mean over the window's samples as a product
             idx = np.minimum(lo[sl][:, None] + col[None, :], n_imu - 1)
             ts = imu_t[idx]
             b_a[sl] = (wgt @ b_f[idx])[:, 0] - a_off[sl]
@@ -196,7 +232,9 @@ class FactorMaker:
             if self.config.solver.earth_model == "flat":
                 self._offset_gravity = np.array([0.0, 0.0, -float(g0)])
             else:
-                self._offset_gravity = np.asarray(self.frame.n_gravity(np.zeros((1, 3)))[0], dtype=float)
+                self._offset_gravity = np.asarray(
+                    self.frame.n_gravity(np.zeros((1, 3)))[0], dtype=float
+                )
         return self._offset_gravity
 
     def n_omega_ie(self) -> np.ndarray:
@@ -217,7 +255,9 @@ class FactorMaker:
         params.setOmegaCoriolis(self.n_omega_ie())
         return params
 
-    def compensate_rotation(self, b_f: np.ndarray, b_omega: np.ndarray, dt_sample: np.ndarray) -> np.ndarray:
+    def compensate_rotation(
+        self, b_f: np.ndarray, b_omega: np.ndarray, dt_sample: np.ndarray
+    ) -> np.ndarray:
         """Each delta-v rotated back to its sample's start (see module doc), if the configuration asks."""
         if not self.config.imu.rotation_compensation:
             return b_f
@@ -226,12 +266,19 @@ class FactorMaker:
         out += b_f
         return np.asarray(out)
 
-    def preintegrate_interval(self, t_a: float, t_b: float, t: np.ndarray, starts: np.ndarray, b_f: np.ndarray,
-                              b_omega: np.ndarray, gaps: Gaps | None = None) -> tuple[
-                                  gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
+    def preintegrate_interval(
+        self,
+        t_a: float,
+        t_b: float,
+        t: np.ndarray,
+        starts: np.ndarray,
+        b_f: np.ndarray,
+        b_omega: np.ndarray,
+        gaps: Gaps | None = None,
+    ) -> tuple[gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
         """Preintegration over (t_a, t_b] of samples i covering (starts[i], t[i]] (b_f already compensated);
         a sample straddling t_a or t_b contributes its overlap (selection.imu_pieces), a gap the sample held
-        across it (estimators/gaps.py). Returns the pim, its own parameters and what was held (Holds)."""
+        across it (estimators/inputs/gaps.py). Returns the pim, its own parameters and what was held (Holds)."""
         params = self.make_params()
         pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
         if gaps is None:
@@ -261,12 +308,20 @@ class FactorMaker:
         model: gaps.hold_covariance); None if nothing was held."""
         return hold_covariance(self.config.imu, held, dt) if held else None
 
-    def new_imu_factor(self, i: int, pim: gtsam.PreintegratedImuMeasurements, params: gtsam.PreintegrationParams,
-                       dt: float, held: Holds | None = None) -> EarthImuFactor:
+    def new_imu_factor(
+        self,
+        i: int,
+        pim: gtsam.PreintegratedImuMeasurements,
+        params: gtsam.PreintegrationParams,
+        dt: float,
+        held: Holds | None = None,
+    ) -> EarthImuFactor:
         """The IMU factor between states i and i+1 from its preintegration (constant gravity if flat); held_s
         seconds of it crossed an IMU gap (their motion-model covariance is added: imu_hold_cov)."""
         gravity = None if self.config.solver.earth_model == "flat" else self.gravity_model
-        return make_earth_imu_factor(pim, params, self.imu_keys(i), dt, gravity, self.imu_hold_cov(held, dt))
+        return make_earth_imu_factor(
+            pim, params, self.imu_keys(i), dt, gravity, self.imu_hold_cov(held, dt)
+        )
 
     def bias_link_factors(self, i: int, dt: float) -> list[gtsam.NonlinearFactor]:
         """Random-walk bias link B_i -> B_i+1 over dt seconds (none for a random-constant bias)."""
@@ -276,18 +331,26 @@ class FactorMaker:
         sig_a = imu_cfg.accel_bias_rw_ug_per_rth * UG / 60.0 * np.sqrt(dt)
         sig_g = imu_cfg.gyro_bias_rw_deg_per_h_per_rth * DEG_PER_H / 60.0 * np.sqrt(dt)
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sig_a] * 3 + [sig_g] * 3))
-        return [gtsam.BetweenFactorConstantBias(B(i), B(i + 1), gtsam.imuBias.ConstantBias(), noise)]
+        return [
+            gtsam.BetweenFactorConstantBias(B(i), B(i + 1), gtsam.imuBias.ConstantBias(), noise)
+        ]
 
-    def dvl_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
-                        beams: Beams | None = None,
-                        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None, water: bool = False
-                        ) -> list[gtsam.NonlinearFactor]:
+    def dvl_factors_for(
+        self,
+        i: int,
+        d_y: np.ndarray,
+        cov: np.ndarray,
+        b_omega: np.ndarray,
+        beams: Beams | None = None,
+        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        water: bool = False,
+    ) -> list[gtsam.NonlinearFactor]:
         """DVL factors of state i from one ping: velocity d_y (m/s, dvl_link) with covariance cov, or, with
         dvl.use_beams, beams = (d_u (B, 3), v (B,), valid (B,)); b_omega the epoch's body_rate(). With
         dvl.estimate_time_offset, rate_input = velocity_rate_input() of the epoch gives the time-offset
         model on T_OFFSET too. With dvl.estimate_lever_arm the lever arm is the variable L_LEVER, else the constant
         mounting.b_l (factors/dvl.py make_dvl_factor). water: a water-track ping (the 3-D velocity relative to the
-        water, on the current W(i) too: estimators/current.py; its noise [current] water_track_sigma_m_s)."""
+        water, on the current W(i) too: estimators/models/current.py; its noise [current] water_track_sigma_m_s)."""
         return self._dvl_factors(i, d_y, cov, b_omega, beams, rate_input, water=water)
 
     def keyframe_gravity(self, n_p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -298,13 +361,23 @@ class FactorMaker:
         if self.config.solver.earth_model == "flat":
             g0 = normal_gravity(self.frame.lat0, self.frame.height_m)
             return np.tile([0.0, 0.0, -float(g0)], (len(n_p), 1)), np.zeros((len(n_p), 3, 3))
-        return (np.asarray(self.frame.n_gravity(n_p), dtype=float).reshape(-1, 3),
-                np.asarray(gravity_gradient(self.frame, n_p), dtype=float).reshape(-1, 3, 3))
+        return (
+            np.asarray(self.frame.n_gravity(n_p), dtype=float).reshape(-1, 3),
+            np.asarray(gravity_gradient(self.frame, n_p), dtype=float).reshape(-1, 3, 3),
+        )
 
-    def dvl_keyframe_factors_for(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray,
-                                 motion: PingMotion, pim_cov: np.ndarray, beams: Beams | None = None,
-                                 rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
-                                 water: bool = False) -> list[gtsam.NonlinearFactor]:
+    def dvl_keyframe_factors_for(
+        self,
+        i: int,
+        d_y: np.ndarray,
+        cov: np.ndarray,
+        b_omega: np.ndarray,
+        motion: PingMotion,
+        pim_cov: np.ndarray,
+        beams: Beams | None = None,
+        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+        water: bool = False,
+    ) -> list[gtsam.NonlinearFactor]:
         """DVL factors of a ping between keyframes on state i (X(i), V(i), the bias, K_SCALE, C_MISALIGN, and
         T_OFFSET / L_LEVER when estimated): the ping seen through the IMU motion from state i (motion, with its
         Earth model: factors/ping_motion.py), as dvl_factors_for does for a ping at a state. pim_cov (9x9, [rotation,
@@ -322,37 +395,76 @@ class FactorMaker:
         water-track ping)."""
         return dvl_factor_keys(self.config, i, motion, water)
 
-    def _dvl_factors(self, i: int, d_y: np.ndarray, cov: np.ndarray, b_omega: np.ndarray, beams: Beams | None,
-                     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None, motion: PingMotion | None = None,
-                     extra: np.ndarray | None = None, water: bool = False) -> list[gtsam.NonlinearFactor]:
+    def _dvl_factors(
+        self,
+        i: int,
+        d_y: np.ndarray,
+        cov: np.ndarray,
+        b_omega: np.ndarray,
+        beams: Beams | None,
+        rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+        motion: PingMotion | None = None,
+        extra: np.ndarray | None = None,
+        water: bool = False,
+    ) -> list[gtsam.NonlinearFactor]:
         """dvl_factors_for, or with motion and extra (the preintegration's noise in the ping, 3x3 m^2/s^2)
         dvl_keyframe_factors_for."""
         cfg = self.config.dvl
         b_l, lever = self.mounting.b_l, enabled(self.config, "lever_arm")
         water = water and water_current(self.config)
         keys = self.dvl_keys(i, motion is not None, water)
-        gm = correlated_error(self.config)  # the correlated error E(i) a variable of every DVL factor
+        gm = correlated_error(
+            self.config
+        )  # the correlated error E(i) a variable of every DVL factor
         if enabled(self.config, "time_offset"):
             if rate_input is None:
-                raise ValueError("a DVL factor with the time offset needs its IMU constants (rate_input)")
+                raise ValueError(
+                    "a DVL factor with the time offset needs its IMU constants (rate_input)"
+                )
             b_a, b_omega_mean, G = rate_input
-            o = DvlOptions(b_omega_mean, b_l, offset=OffsetInput(b_a, self.offset_gravity(), G), motion=motion,
-                           lever_variable=lever, error_variable=gm, current_variable=water)
+            o = DvlOptions(
+                b_omega_mean,
+                b_l,
+                offset=OffsetInput(b_a, self.offset_gravity(), G),
+                motion=motion,
+                lever_variable=lever,
+                error_variable=gm,
+                current_variable=water,
+            )
             return [make_dvl_factor(self.dvl_noise(cov, extra, water), keys, d_y, o)]
-        if cfg.use_beams and beams is not None and not water:  # (a water-track ping: its 3-D velocity)
+        if (
+            cfg.use_beams and beams is not None and not water
+        ):  # (a water-track ping: its 3-D velocity)
             d_u, v, valid = beams
             out: list[gtsam.NonlinearFactor] = []
             for b in np.flatnonzero(valid).tolist():
-                o = DvlOptions(b_omega, b_l, d_u[b], motion=motion, lever_variable=lever, error_variable=gm)
-                noise = self.beam_noise() if extra is None else self._robust(gtsam.noiseModel.Isotropic.Sigma(
-                    1, float(np.sqrt(cfg.beam_sigma_m_s()**2 + d_u[b] @ extra @ d_u[b]))))
+                o = DvlOptions(
+                    b_omega, b_l, d_u[b], motion=motion, lever_variable=lever, error_variable=gm
+                )
+                noise = (
+                    self.beam_noise()
+                    if extra is None
+                    else self._robust(
+                        gtsam.noiseModel.Isotropic.Sigma(
+                            1, float(np.sqrt(cfg.beam_sigma_m_s() ** 2 + d_u[b] @ extra @ d_u[b]))
+                        )
+                    )
+                )
                 out.append(make_dvl_factor(noise, keys, float(v[b]), o))
             return out
-        o = DvlOptions(b_omega, b_l, motion=motion, lever_variable=lever, error_variable=gm, current_variable=water)
+        o = DvlOptions(
+            b_omega,
+            b_l,
+            motion=motion,
+            lever_variable=lever,
+            error_variable=gm,
+            current_variable=water,
+        )
         return [make_dvl_factor(self.dvl_noise(cov, extra, water), keys, d_y, o)]
 
-    def dvl_noise(self, cov: np.ndarray, extra: np.ndarray | None = None, water: bool = False
-                  ) -> gtsam.noiseModel.Base:
+    def dvl_noise(
+        self, cov: np.ndarray, extra: np.ndarray | None = None, water: bool = False
+    ) -> gtsam.noiseModel.Base:
         """Noise model of a ping's 3-D velocity: the configured sigma, else its covariance if positive
         definite, else the default sigma (a water-track ping: [current] water_track_sigma_m_s), plus extra (3x3,
         m^2/s^2: a keyframe ping's preintegration noise) when given; in the robust kernel if configured (_robust)."""
@@ -363,10 +475,11 @@ class FactorMaker:
         """Noise model of one beam velocity (robust if configured)."""
         return self._robust(gtsam.noiseModel.Isotropic.Sigma(1, self.config.dvl.beam_sigma_m_s()))
 
-    def depth_factors_for(self, i: int, z_meas: float, sigma: float, lever: np.ndarray,
-                          dt: float = 0.0) -> list[gtsam.NonlinearFactor]:
+    def depth_factors_for(
+        self, i: int, z_meas: float, sigma: float, lever: np.ndarray, dt: float = 0.0
+    ) -> list[gtsam.NonlinearFactor]:
         """The depth factor of state i from one sample: the sensor's height above the origin's height z_meas
-        (m, up; estimators/depth.py), its sigma (m), the sensor's lever arm in base_link and the time from the
+        (m, up; estimators/inputs/depth.py), its sigma (m), the sensor's lever arm in base_link and the time from the
         state to the sample dt (s; bridged by V(i) when non-zero). Not robust: a depth sensor has no outliers
         of the DVL's kind. The map's z axis leaves the ellipsoid with the Earth's curvature (factors/depth.py)."""
         noise = gtsam.noiseModel.Isotropic.Sigma(1, float(sigma))
@@ -374,14 +487,23 @@ class FactorMaker:
         vel_key = V(i) if dt != 0.0 else None
         return [make_depth_factor(noise, X(i), z_meas, lever, radius, vel_key, dt)]
 
-    def gnss_factors_for(self, i: int, z: np.ndarray, cov: np.ndarray, lever: np.ndarray,
-                         dt: float = 0.0) -> list[gtsam.NonlinearFactor]:
-        """The GNSS factor of state i from one fix: the antenna's position in map z (m; estimators/gnss.py),
+    def gnss_factors_for(
+        self, i: int, z: np.ndarray, cov: np.ndarray, lever: np.ndarray, dt: float = 0.0
+    ) -> list[gtsam.NonlinearFactor]:
+        """The GNSS factor of state i from one fix: the antenna's position in map z (m; estimators/inputs/gnss.py),
         its covariance cov (3x3, map axes, m^2), the antenna in base_link and the time from the state to the
         fix dt (s; bridged by V(i) when non-zero). Not robust: the fixes come with their own covariance."""
         vel_key = V(i) if dt != 0.0 else None
-        return [make_gnss_factor(gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=float)), X(i), z,
-                                 lever, vel_key, dt)]
+        return [
+            make_gnss_factor(
+                gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=float)),
+                X(i),
+                z,
+                lever,
+                vel_key,
+                dt,
+            )
+        ]
 
     def _robust(self, noise: gtsam.noiseModel.Base) -> gtsam.noiseModel.Base:
         """noise wrapped in the configured robust kernel ([dvl] robust, threshold robust_k in sigmas of the
@@ -389,16 +511,22 @@ class FactorMaker:
         cfg = self.config.dvl
         k = cfg.robust_threshold()
         if cfg.robust == "huber":
-            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(k), noise)
+            return gtsam.noiseModel.Robust.Create(
+                gtsam.noiseModel.mEstimator.Huber.Create(k), noise
+            )
         if cfg.robust == "cauchy":
-            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(k), noise)
+            return gtsam.noiseModel.Robust.Create(
+                gtsam.noiseModel.mEstimator.Cauchy.Create(k), noise
+            )
         return noise
 
-    def prior_factors(self, values: gtsam.Values, position_cov: np.ndarray | None = None
-                      ) -> list[gtsam.NonlinearFactor]:
+    def prior_factors(
+        self, values: gtsam.Values, position_cov: np.ndarray | None = None
+    ) -> list[gtsam.NonlinearFactor]:
         """Priors on the first state and on the shared states (core/states.py: the bias, the scale and the
         misalignment, and the time offset and lever arm when estimated). position_cov: the first position's prior
-        covariance in map axes (m^2) instead of priors.position_sigma_m (estimators/gnss.py: when the map origin is
+        covariance in map axes (m^2) instead of priors.position_sigma_m (estimators/inputs/gnss.py: when the map origin
+        is
         a GNSS fix)."""
         pri = self.config.priors
         n_R_b = self.alignment.n_R_b
@@ -414,16 +542,28 @@ class FactorMaker:
             if self.alignment.sigma_rpy_deg is not None:
                 sig_att = np.radians(np.asarray(self.alignment.sigma_rpy_deg, dtype=float))
             else:
-                sig_att = np.radians([pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg])
+                sig_att = np.radians(
+                    [pri.roll_pitch_sigma_deg, pri.roll_pitch_sigma_deg, pri.yaw_sigma_deg]
+                )
             cov_pose = np.zeros((6, 6))
             cov_pose[:3, :3] = n_R_b.T @ np.diag(sig_att**2) @ n_R_b
-            cov_pose[3:, 3:] = (np.eye(3) * pri.position_sigma_m**2 if position_cov is None
-                                else n_R_b.T @ position_cov @ n_R_b)  # translation tangent in body axes
+            cov_pose[3:, 3:] = (
+                np.eye(3) * pri.position_sigma_m**2
+                if position_cov is None
+                else n_R_b.T @ position_cov @ n_R_b
+            )  # translation tangent in body axes
         return [
-            gtsam.PriorFactorPose3(X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)),
-            gtsam.PriorFactorVector(V(0), values.atVector(V(0)),
-                                    gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s)),
-        ] + shared_prior_factors(self.config, self.mounting, self.calibration)  # the shared states' (core/states.py)
+            gtsam.PriorFactorPose3(
+                X(0), values.atPose3(X(0)), gtsam.noiseModel.Gaussian.Covariance(cov_pose)
+            ),
+            gtsam.PriorFactorVector(
+                V(0),
+                values.atVector(V(0)),
+                gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s),
+            ),
+        ] + shared_prior_factors(
+            self.config, self.mounting, self.calibration
+        )  # the shared states' (core/states.py)
 
     # ----- initial guesses -----------------------------------------------------------------------
     def alignment_info(self) -> dict[str, Any]:
@@ -433,8 +573,15 @@ class FactorMaker:
             out["first_state"] = self.first.info()
         return out
 
-    def carry_to_first(self, imu: ImuData, t1: float, d_y: np.ndarray | None, d_cov: np.ndarray,
-                       cov0: np.ndarray | None = None, t_origin: float | None = None) -> FirstState:
+    def carry_to_first(
+        self,
+        imu: ImuData,
+        t1: float,
+        d_y: np.ndarray | None,
+        d_cov: np.ndarray,
+        cov0: np.ndarray | None = None,
+        t_origin: float | None = None,
+    ) -> FirstState:
         """The given initial attitude and map origin (at the log's first IMU stamp, imu's first sample, or the
         origin at t_origin: see alignment.first_state) carried to the first state's time t1 (s) with imu
         (base_link) and the first ping (d_y m/s in dvl_link, d_cov its covariance); sets self.first and
@@ -443,7 +590,9 @@ class FactorMaker:
         sigma = median_ping_sigma(self.config, np.asarray(d_cov, dtype=float).reshape(1, 3, 3))
         if not np.isfinite(sigma) or b_v is None:
             sigma = self.config.priors.velocity_sigma_m_s
-        self.first = first_state(self.alignment, imu, self.frame, t1, b_v, self.config, sigma, cov0, t_origin)
+        self.first = first_state(
+            self.alignment, imu, self.frame, t1, b_v, self.config, sigma, cov0, t_origin
+        )
         self.alignment = self.first.alignment
         return self.first
 
@@ -461,7 +610,9 @@ class FactorMaker:
         values = gtsam.Values()
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
         n_v = self.velocity_from_ping(n_R_b.matrix(), d_y)
-        n_p = np.zeros(3) if self.first is None else self.first.n_p  # the map origin carried to the first state
+        n_p = (
+            np.zeros(3) if self.first is None else self.first.n_p
+        )  # the map origin carried to the first state
         values.insert(X(0), gtsam.Pose3(n_R_b, n_p))
         values.insert(V(0), np.zeros(3) if n_v is None else n_v)
         values.insert(initial_shared_values(self.config, self.mounting, self.calibration))

@@ -36,10 +36,14 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew
 from gtsam_dvl.core.states import Estimate
 
-CALIBRATION = slice(6, 10)  # [scale, b_R_d right tangent] in calib_joint_cov and shared_joint_cov (states.py)
+CALIBRATION = slice(
+    6, 10
+)  # [scale, b_R_d right tangent] in calib_joint_cov and shared_joint_cov (states.py)
 
 
-def response(b_v: np.ndarray, k: float, b_R_d: np.ndarray, sigma_w: float, P0: np.ndarray) -> np.ndarray:
+def response(
+    b_v: np.ndarray, k: float, b_R_d: np.ndarray, sigma_w: float, P0: np.ndarray
+) -> np.ndarray:
     """S (4, 3): the [scale, b_R_d right tangent (rad)] that a constant velocity error (dvl_link, m/s) moves the
     calibration by, from the body velocities b_v (N, 3) m/s (module doc); P0 (4, 4) the calibration's prior."""
     w = np.asarray(b_v, dtype=float) @ np.asarray(b_R_d, dtype=float)  # (d_R_b u)^T = u^T b_R_d
@@ -61,8 +65,14 @@ def _held_directions(result: NavResult, P0: np.ndarray) -> np.ndarray:
     for h in held:
         if isinstance(h, dict) and isinstance(h.get("direction"), dict):
             d = h["direction"]
-            v = np.array([d["scale"], *np.radians([d["misalignment roll"], d["misalignment pitch"],
-                                                   d["misalignment yaw"]])])
+            v = np.array(
+                [
+                    d["scale"],
+                    *np.radians(
+                        [d["misalignment roll"], d["misalignment pitch"], d["misalignment yaw"]]
+                    ),
+                ]
+            )
             cols.append(np.linalg.solve(L, v))
     if not cols:
         return np.zeros((4, 0))
@@ -70,7 +80,9 @@ def _held_directions(result: NavResult, P0: np.ndarray) -> np.ndarray:
     return q
 
 
-def consider_constant_error(result: NavResult, config: EstimatorConfig, file_prior: bool = False) -> None:
+def consider_constant_error(
+    result: NavResult, config: EstimatorConfig, file_prior: bool = False
+) -> None:
     """Add the constant DVL error's share (module doc) to the result's scale and misalignment covariance (their
     Estimates, calib_joint_cov and shared_joint_cov), outside the held directions; recorded in
     info["dvl_constant_error"]. Nothing when [dvl] constant_error_sigma_m_s is 0, the result has no states, or
@@ -94,7 +106,9 @@ def consider_constant_error(result: NavResult, config: EstimatorConfig, file_pri
     added = 0.5 * (added + added.T)
     cal = result.calibration
     cal["scale"] = Estimate(cal["scale"].value, cal["scale"].cov + added[:1, :1])
-    cal["misalignment"] = Estimate(cal["misalignment"].value, cal["misalignment"].cov + added[1:, 1:])
+    cal["misalignment"] = Estimate(
+        cal["misalignment"].value, cal["misalignment"].cov + added[1:, 1:]
+    )
     for name in ("calib_joint_cov", "shared_joint_cov"):
         joint = getattr(result, name)
         if joint is not None and np.shape(joint)[0] >= CALIBRATION.stop:
@@ -102,7 +116,9 @@ def consider_constant_error(result: NavResult, config: EstimatorConfig, file_pri
             joint[CALIBRATION, CALIBRATION] += added
             setattr(result, name, joint)
     report: dict[str, Any] = {
-        "sigma_m_s": sigma_b, "scale_sigma_added": float(np.sqrt(added[0, 0])),
+        "sigma_m_s": sigma_b,
+        "scale_sigma_added": float(np.sqrt(added[0, 0])),
         "misalignment_sigma_added_deg": np.degrees(np.sqrt(np.diag(added)[1:])).tolist(),
-        "held_directions": int(Q.shape[1])}
+        "held_directions": int(Q.shape[1]),
+    }
     result.info["dvl_constant_error"] = report

@@ -33,7 +33,9 @@ from gtsam_dvl.factors.so3 import exp as so3_exp
 
 SEARCH_S = 2.0  # the guess is searched within +- this of the prior's mean (DVL clocks seen 1 s off, ROS stamps 0.3 s)
 GRID_STEP_S = 0.02  # one IMU sample at 50 Hz; the solve refines it
-MAX_SPAN_S = 600.0  # the first minutes of the log: enough pairs, and the attitude integration stays cheap
+MAX_SPAN_S = (
+    600.0  # the first minutes of the log: enough pairs, and the attitude integration stays cheap
+)
 # J must drop by this many residual variances from the prior's mean to the best dt (a 3-sigma likelihood ratio)
 MIN_EVIDENCE = 9.0
 MIN_PAIRS = 30
@@ -51,11 +53,18 @@ class OffsetGuess:
     why: str
 
     def as_dict(self) -> dict[str, object]:
-        return {"guess_s": self.dt_s, "used": self.used, "evidence": self.evidence, "pairs": self.pairs,
-                "why": self.why}
+        return {
+            "guess_s": self.dt_s,
+            "used": self.used,
+            "evidence": self.evidence,
+            "pairs": self.pairs,
+            "why": self.why,
+        }
 
 
-def _attitudes(t: np.ndarray, b_omega: np.ndarray, n_R_b0: np.ndarray, n_omega_ie: np.ndarray) -> np.ndarray:
+def _attitudes(
+    t: np.ndarray, b_omega: np.ndarray, n_R_b0: np.ndarray, n_omega_ie: np.ndarray
+) -> np.ndarray:
     """n_R_b (K, 3, 3) at the samples t (K,) by the gyros b_omega (K, 3) rad/s from n_R_b0 at t[0], in the
     Earth-fixed map frame (n_R_b(t + h) = Exp(-n_omega_ie h) n_R_b(t) Exp(b_omega h))."""
     h = np.diff(t, prepend=t[0])
@@ -69,9 +78,19 @@ def _attitudes(t: np.ndarray, b_omega: np.ndarray, n_R_b0: np.ndarray, n_omega_i
     return out
 
 
-def guess_offset(imu_t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, n_R_b0: np.ndarray, t_ref: float,
-                 dvl_t: np.ndarray, d_v: np.ndarray, b_R_d0: np.ndarray, n_g: np.ndarray, n_omega_ie: np.ndarray,
-                 prior_s: float) -> OffsetGuess:
+def guess_offset(
+    imu_t: np.ndarray,
+    b_omega: np.ndarray,
+    b_f: np.ndarray,
+    n_R_b0: np.ndarray,
+    t_ref: float,
+    dvl_t: np.ndarray,
+    d_v: np.ndarray,
+    b_R_d0: np.ndarray,
+    n_g: np.ndarray,
+    n_omega_ie: np.ndarray,
+    prior_s: float,
+) -> OffsetGuess:
     """The first guess of dt_d (module doc) from IMU samples (base_link: stamps s, gyro rad/s, specific force
     m/s^2), the attitude n_R_b0 at t_ref (s), bottom-track pings (stamps s, velocity in dvl_link m/s; usable ones
     only), the nominal mounting b_R_d0, gravity n_g (m/s^2, map) and Earth rate (rad/s, map); prior_s the offset
@@ -89,11 +108,15 @@ def guess_offset(imu_t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, n_R_b0
     n_R_b = _attitudes(t, w, n_R_b0, n_omega_ie)
     n_a = np.einsum("kij,kj->ki", n_R_b, f) + n_g
     # the velocity change from t[0] at every sample (trapezoid), interpolated at any time
-    V = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (n_a[1:] + n_a[:-1]) * np.diff(t)[:, None], axis=0)])
+    V = np.concatenate(
+        [np.zeros((1, 3)), np.cumsum(0.5 * (n_a[1:] + n_a[:-1]) * np.diff(t)[:, None], axis=0)]
+    )
     gap = np.diff(dvl_t)
     pair = gap < 1.5 * float(np.median(gap))  # consecutive pings only
     if pair.sum() < MIN_PAIRS:
-        return OffsetGuess(prior_s, False, 0.0, int(pair.sum()), "too few consecutive pings for a first guess")
+        return OffsetGuess(
+            prior_s, False, 0.0, int(pair.sum()), "too few consecutive pings for a first guess"
+        )
     b_v = d_v @ np.asarray(b_R_d0, dtype=float).T
     grid = prior_s + np.arange(-SEARCH_S, SEARCH_S + 0.5 * GRID_STEP_S, GRID_STEP_S)
     cost = np.array([_misfit(dt, t, n_R_b, V, dvl_t, b_v, pair) for dt in grid])
@@ -104,25 +127,51 @@ def guess_offset(imu_t: np.ndarray, b_omega: np.ndarray, b_f: np.ndarray, n_R_b0
     evidence = float((cost[at_prior] - cost[best]) / var) if var > 0 else 0.0
     dt = float(grid[best])
     if best in (0, len(grid) - 1):
-        return OffsetGuess(prior_s, False, evidence, int(pair.sum()),
-                           f"the misfit is least at the search's edge ({dt:+.2f} s): the prior's mean stands")
+        return OffsetGuess(
+            prior_s,
+            False,
+            evidence,
+            int(pair.sum()),
+            f"the misfit is least at the search's edge ({dt:+.2f} s): the prior's mean stands",
+        )
     if not evidence > MIN_EVIDENCE:
-        return OffsetGuess(prior_s, False, evidence, int(pair.sum()),
-                           f"the data barely prefer {dt:+.2f} s (evidence {evidence:.1f} < {MIN_EVIDENCE:g}): "
-                           "the prior's mean stands")
-    return OffsetGuess(dt, True, evidence, int(pair.sum()),
-                       f"DVL velocity changes match the IMU's best {dt:+.2f} s later (evidence {evidence:.0f})")
+        return OffsetGuess(
+            prior_s,
+            False,
+            evidence,
+            int(pair.sum()),
+            f"the data barely prefer {dt:+.2f} s (evidence {evidence:.1f} < {MIN_EVIDENCE:g}): "
+            "the prior's mean stands",
+        )
+    return OffsetGuess(
+        dt,
+        True,
+        evidence,
+        int(pair.sum()),
+        f"DVL velocity changes match the IMU's best {dt:+.2f} s later (evidence {evidence:.0f})",
+    )
 
 
-def _misfit(dt: float, t: np.ndarray, n_R_b: np.ndarray, V: np.ndarray, dvl_t: np.ndarray, b_v: np.ndarray,
-            pair: np.ndarray) -> float:
+def _misfit(
+    dt: float,
+    t: np.ndarray,
+    n_R_b: np.ndarray,
+    V: np.ndarray,
+    dvl_t: np.ndarray,
+    b_v: np.ndarray,
+    pair: np.ndarray,
+) -> float:
     """J(dt) of the module doc."""
     ts = dvl_t + dt
     k = np.clip(np.searchsorted(t, ts), 1, len(t) - 1)
-    k = np.where(np.abs(t[k - 1] - ts) < np.abs(t[k] - ts), k - 1, k)  # the nearest sample's attitude
+    k = np.where(
+        np.abs(t[k - 1] - ts) < np.abs(t[k] - ts), k - 1, k
+    )  # the nearest sample's attitude
     n_v = np.einsum("kij,kj->ki", n_R_b[k], b_v)
     v_imu = np.stack([np.interp(ts, t, V[:, a]) for a in range(3)], axis=1)
     r = (n_v[1:] - n_v[:-1]) - (v_imu[1:] - v_imu[:-1])
     r = r[pair]
-    r = r - r.mean(axis=0)  # a constant shift (bias, gravity leak of the attitude error) tells nothing of dt
+    r = r - r.mean(
+        axis=0
+    )  # a constant shift (bias, gravity leak of the attitude error) tells nothing of dt
     return float(np.sum(r * r)) if math.isfinite(float(np.sum(r * r))) else math.inf

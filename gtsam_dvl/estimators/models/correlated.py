@@ -51,21 +51,25 @@ def link_factor(config: EstimatorConfig, i: int, j: int, dt: float) -> gtsam.Non
     phi, q = transition(config, dt)
     # q has a floor: two states at the same stamp (dt = 0) would make an infinitely stiff link
     s = float(np.sqrt(max(q, 1e-12 * config.dvl.correlated_sigma_m_s**2)))
-    jf = gtsam.JacobianFactor(E(i), -phi * _EYE3 / s, E(j), _EYE3 / s, np.zeros(3),
-                              gtsam.noiseModel.Unit.Create(3))
+    jf = gtsam.JacobianFactor(
+        E(i), -phi * _EYE3 / s, E(j), _EYE3 / s, np.zeros(3), gtsam.noiseModel.Unit.Create(3)
+    )
     return gtsam.LinearContainerFactor(jf, _zeros(E(i), E(j)))
 
 
 def prior_factor(config: EstimatorConfig, i: int = 0) -> gtsam.NonlinearFactor:
     """E_i ~ N(0, sigma^2 I): the stationary distribution, at the first state."""
-    return gtsam.PriorFactorVector(E(i), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(
-        3, config.dvl.correlated_sigma_m_s))
+    return gtsam.PriorFactorVector(
+        E(i), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, config.dvl.correlated_sigma_m_s)
+    )
 
 
 def factors(config: EstimatorConfig, t_states: np.ndarray) -> list[gtsam.NonlinearFactor]:
     """The prior on E(0) and the links of the states at stamps t_states (s)."""
     dt = np.diff(np.asarray(t_states, dtype=float))
-    return [prior_factor(config)] + [link_factor(config, i, i + 1, float(d)) for i, d in enumerate(dt)]
+    return [prior_factor(config)] + [
+        link_factor(config, i, i + 1, float(d)) for i, d in enumerate(dt)
+    ]
 
 
 def initial_values(values: gtsam.Values, n_states: int) -> None:
@@ -74,8 +78,9 @@ def initial_values(values: gtsam.Values, n_states: int) -> None:
         values.insert(E(i), np.zeros(3))
 
 
-def ekf_propagate(config: EstimatorConfig, P: np.ndarray, d_e: np.ndarray, cols: slice, dt: float
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def ekf_propagate(
+    config: EstimatorConfig, P: np.ndarray, d_e: np.ndarray, cols: slice, dt: float
+) -> tuple[np.ndarray, np.ndarray]:
     """The EKF's covariance P and correlated-error estimate d_e (3,) m/s propagated over dt seconds: E's rows and
     columns of P times phi, q I added to its block, d_e times phi (module doc; the rest of P is propagated
     before, by the navigation error's transition)."""
@@ -87,10 +92,15 @@ def ekf_propagate(config: EstimatorConfig, P: np.ndarray, d_e: np.ndarray, cols:
     return out, phi * d_e
 
 
-def info(config: EstimatorConfig, values: gtsam.Values | None = None, n_states: int = 0) -> dict[str, object]:
+def info(
+    config: EstimatorConfig, values: gtsam.Values | None = None, n_states: int = 0
+) -> dict[str, object]:
     """NavResult.info["dvl_correlated_error"]: the model's level and time constant and, from a solution's values,
     the RMS of the estimated error per dvl_link axis (m/s) over the states."""
-    out: dict[str, object] = {"sigma_m_s": config.dvl.correlated_sigma_m_s, "tau_s": config.dvl.correlated_tau_s}
+    out: dict[str, object] = {
+        "sigma_m_s": config.dvl.correlated_sigma_m_s,
+        "tau_s": config.dvl.correlated_tau_s,
+    }
     if values is not None and n_states:
         d_e = np.array([values.atVector(E(i)) for i in range(n_states)])
         out["estimate_rms_m_s"] = np.sqrt(np.mean(d_e**2, axis=0)).tolist()

@@ -16,7 +16,7 @@ linearised at zero: exact), evaluated in C++ in the batch smoother and iSAM2 ali
 
 Layers ([current] layer_thickness_m = h > 0). The water column is cut into layers of thickness h from the surface
 down (layer j: depths [j h, (j + 1) h), depth = -(z + h0) with h0 the map origin's height, as the depth sensor's,
-estimators/depth.py), and the current is
+estimators/inputs/depth.py), and the current is
 
     c(t, depth) = c_0 + sum of S(b) over the boundaries b between the first state's layer and depth's + D(t)
 
@@ -48,7 +48,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import S, W
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.selection import within_layer_variance
+from gtsam_dvl.estimators.inputs.selection import within_layer_variance
 
 if TYPE_CHECKING:
     from gtsam_dvl.estimators.ekf.strapdown import FilterState
@@ -62,7 +62,9 @@ def resolve_water_track(config: EstimatorConfig, log: LogData) -> EstimatorConfi
     if config.current.water_track != "auto":
         return config
     water = log.dvl.water_track
-    use = water is not None and bool(np.any(np.asarray(water, dtype=bool) & np.isfinite(log.dvl.d_v).all(axis=1)))
+    use = water is not None and bool(
+        np.any(np.asarray(water, dtype=bool) & np.isfinite(log.dvl.d_v).all(axis=1))
+    )
     current = config.current.model_copy(update={"water_track": "use" if use else "refuse"})
     return config.model_copy(update={"current": current})
 
@@ -74,12 +76,18 @@ def water_pings(log: LogData) -> np.ndarray:
 
 
 def epochs_with_water(builder: Any) -> np.ndarray:
-    """(N,) bool: the states of a LogGraph (estimators/graph.py) whose own ping or a ping between it and the next
+    """(N,) bool: the states of a LogGraph (estimators/graph/log_graph.py) whose own ping or a ping between it and the
+    next
     is a water-track ping."""
     water = builder.water
-    return np.array([(ep.dvl_index >= 0 and bool(water[ep.dvl_index])) or any(bool(water[p.dvl_index])
-                                                                               for p in ep.between)
-                     for ep in builder.epochs], dtype=bool)
+    return np.array(
+        [
+            (ep.dvl_index >= 0 and bool(water[ep.dvl_index]))
+            or any(bool(water[p.dvl_index]) for p in ep.between)
+            for ep in builder.epochs
+        ],
+        dtype=bool,
+    )
 
 
 def step_variance(config: EstimatorConfig, dt: float, dz: float) -> float:
@@ -95,19 +103,24 @@ def _zeros(*keys: int) -> gtsam.Values:
     return values
 
 
-def link_factor(config: EstimatorConfig, i: int, j: int, dt: float, dz: float) -> gtsam.NonlinearFactor:
+def link_factor(
+    config: EstimatorConfig, i: int, j: int, dt: float, dz: float
+) -> gtsam.NonlinearFactor:
     """W_j - W_i ~ N(0, q I2) between states i and j (module doc)."""
     # a floor: two states at one stamp and depth (dt = dz = 0) would make an infinitely stiff link
-    q = max(step_variance(config, dt, dz), (1e-6 * config.current.prior_sigma_m_s)**2)
+    q = max(step_variance(config, dt, dz), (1e-6 * config.current.prior_sigma_m_s) ** 2)
     s = float(np.sqrt(q))
-    jf = gtsam.JacobianFactor(W(i), -_EYE2 / s, W(j), _EYE2 / s, np.zeros(2), gtsam.noiseModel.Unit.Create(2))
+    jf = gtsam.JacobianFactor(
+        W(i), -_EYE2 / s, W(j), _EYE2 / s, np.zeros(2), gtsam.noiseModel.Unit.Create(2)
+    )
     return gtsam.LinearContainerFactor(jf, _zeros(W(i), W(j)))
 
 
 def prior_factor(config: EstimatorConfig, i: int = 0) -> gtsam.NonlinearFactor:
     """W_i ~ N(0, sigma_0^2 I2) at the first state."""
-    return gtsam.PriorFactorVector(W(i), np.zeros(2), gtsam.noiseModel.Isotropic.Sigma(
-        2, config.current.prior_sigma_m_s))
+    return gtsam.PriorFactorVector(
+        W(i), np.zeros(2), gtsam.noiseModel.Isotropic.Sigma(2, config.current.prior_sigma_m_s)
+    )
 
 
 def layered(config: EstimatorConfig) -> bool:
@@ -140,54 +153,87 @@ def boundaries(config: EstimatorConfig, z_states: np.ndarray, height0: float = 0
 def shear_prior(config: EstimatorConfig, b: int) -> gtsam.NonlinearFactor:
     """S(b) ~ N(0, q_z^2 h I2): the change of the current across one layer boundary (module doc)."""
     c = config.current
-    return gtsam.PriorFactorVector(S(b), np.zeros(2), gtsam.noiseModel.Isotropic.Sigma(
-        2, c.depth_rw_m_s_per_sqrt_m * float(np.sqrt(c.layer_thickness_m))))
+    return gtsam.PriorFactorVector(
+        S(b),
+        np.zeros(2),
+        gtsam.noiseModel.Isotropic.Sigma(
+            2, c.depth_rw_m_s_per_sqrt_m * float(np.sqrt(c.layer_thickness_m))
+        ),
+    )
 
 
 def _linear_custom(keys: list[int], signs: list[float], s: float) -> gtsam.NonlinearFactor:
     """sum_k signs_k x_k ~ N(0, s^2 I2) over 2-vectors, any number of keys (a CustomFactor: module doc)."""
     blocks = [sign / s * _EYE2 for sign in signs]
 
-    def error(_: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None) -> np.ndarray:
+    def error(
+        _: gtsam.CustomFactor, values: gtsam.Values, H: list[np.ndarray] | None
+    ) -> np.ndarray:
         if H is not None:
             for k, block in enumerate(blocks):
                 H[k] = block.copy()
-        return sum((block @ values.atVector(k) for k, block in zip(keys, blocks, strict=True)), np.zeros(2))
+        return sum(
+            (block @ values.atVector(k) for k, block in zip(keys, blocks, strict=True)), np.zeros(2)
+        )
 
     return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(2), keys, error)
 
 
-def crossing_link(config: EstimatorConfig, i: int, j: int, dt: float, j_from: int, j_to: int
-                  ) -> gtsam.NonlinearFactor:
+def crossing_link(
+    config: EstimatorConfig, i: int, j: int, dt: float, j_from: int, j_to: int
+) -> gtsam.NonlinearFactor:
     """W_j - W_i - sum_b s_b S(b) ~ N(0, q_t^2 dt I2) between states i and j in layers j_from and j_to (module
     doc, "Layers"); the random walk in time alone within one layer."""
     cross = crossings(j_from, j_to)
     if len(cross) == 0:
         return link_factor(config, i, j, dt, 0.0)
-    s = float(np.sqrt(max(step_variance(config, dt, 0.0), (1e-6 * config.current.prior_sigma_m_s)**2)))
+    s = float(
+        np.sqrt(max(step_variance(config, dt, 0.0), (1e-6 * config.current.prior_sigma_m_s) ** 2))
+    )
     if len(cross) == 1:
-        (b, sign), = cross
-        jf = gtsam.JacobianFactor(W(i), -_EYE2 / s, W(j), _EYE2 / s, S(b), -sign * _EYE2 / s, np.zeros(2),
-                                  gtsam.noiseModel.Unit.Create(2))
+        ((b, sign),) = cross
+        jf = gtsam.JacobianFactor(
+            W(i),
+            -_EYE2 / s,
+            W(j),
+            _EYE2 / s,
+            S(b),
+            -sign * _EYE2 / s,
+            np.zeros(2),
+            gtsam.noiseModel.Unit.Create(2),
+        )
         return gtsam.LinearContainerFactor(jf, _zeros(W(i), W(j), S(b)))
-    return _linear_custom([W(i), W(j)] + [S(b) for b, _ in cross], [-1.0, 1.0] + [-sign for _, sign in cross], s)
+    return _linear_custom(
+        [W(i), W(j)] + [S(b) for b, _ in cross], [-1.0, 1.0] + [-sign for _, sign in cross], s
+    )
 
 
-def factors(config: EstimatorConfig, t_states: np.ndarray, z_states: np.ndarray, height0: float = 0.0
-            ) -> list[gtsam.NonlinearFactor]:
+def factors(
+    config: EstimatorConfig, t_states: np.ndarray, z_states: np.ndarray, height0: float = 0.0
+) -> list[gtsam.NonlinearFactor]:
     """The prior on W(0) and the links of the states at stamps t_states (s) and heights z_states (m, map up; the
     map origin at height0 m); with layers, the priors of the boundaries crossed (module doc)."""
     dt = np.diff(np.asarray(t_states, dtype=float))
     z = np.asarray(z_states, dtype=float)
     if not layered(config):
-        return [prior_factor(config)] + [link_factor(config, i, i + 1, float(a), float(b))
-                                         for i, (a, b) in enumerate(zip(dt, np.diff(z), strict=True))]
+        return [prior_factor(config)] + [
+            link_factor(config, i, i + 1, float(a), float(b))
+            for i, (a, b) in enumerate(zip(dt, np.diff(z), strict=True))
+        ]
     j = layer_index(config, z, height0)
-    return ([prior_factor(config)] + [shear_prior(config, b) for b in boundaries(config, z, height0)]
-            + [crossing_link(config, i, i + 1, float(dt[i]), int(j[i]), int(j[i + 1])) for i in range(len(dt))])
+    return (
+        [prior_factor(config)]
+        + [shear_prior(config, b) for b in boundaries(config, z, height0)]
+        + [
+            crossing_link(config, i, i + 1, float(dt[i]), int(j[i]), int(j[i + 1]))
+            for i in range(len(dt))
+        ]
+    )
 
 
-def initial_values(values: gtsam.Values, n_states: int, shear: list[int] | tuple[int, ...] = ()) -> None:
+def initial_values(
+    values: gtsam.Values, n_states: int, shear: list[int] | tuple[int, ...] = ()
+) -> None:
     """W(i) = 0 for states 0..n_states-1 and S(b) = 0 for the boundaries shear (the priors' means), into values."""
     for i in range(n_states):
         values.insert(W(i), np.zeros(2))
@@ -218,16 +264,24 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
     j = int(layer_index(config, float(fs.nav.n_p[2]), height0))
     for b, sign in crossings(fs.layer, j):
         if b not in fs.shear_ids:
-            at = len(fs.P) - 2 - (0 if fs.dvl_error is None else 3)  # the end of the boundaries' block
+            at = (
+                len(fs.P) - 2 - (0 if fs.dvl_error is None else 3)
+            )  # the end of the boundaries' block
             P = np.insert(np.insert(fs.P, [at, at], 0.0, axis=0), [at, at], 0.0, axis=1)
             c = config.current
-            P[at:at + 2, at:at + 2] = c.depth_rw_m_s_per_sqrt_m**2 * c.layer_thickness_m * _EYE2
-            fs.P, fs.shear, fs.shear_ids = P, np.vstack([fs.shear, np.zeros((1, 2))]), [*fs.shear_ids, b]
+            P[at : at + 2, at : at + 2] = c.depth_rw_m_s_per_sqrt_m**2 * c.layer_thickness_m * _EYE2
+            fs.P, fs.shear, fs.shear_ids = (
+                P,
+                np.vstack([fs.shear, np.zeros((1, 2))]),
+                [*fs.shear_ids, b],
+            )
         sh, wc = fs.shear_slice(), fs.current_slice()
         assert sh is not None and wc is not None
         r = fs.shear_ids.index(b)
         cols = slice(sh.start + 2 * r, sh.start + 2 * r + 2)
-        fs.P[wc, :] += sign * fs.P[cols, :]  # T P T^T with T = I + sign E(wc, cols): rows, then columns
+        fs.P[wc, :] += (
+            sign * fs.P[cols, :]
+        )  # T P T^T with T = I + sign E(wc, cols): rows, then columns
         fs.P[:, wc] += sign * fs.P[:, cols]
         fs.current = fs.current + sign * fs.shear[r]
     fs.layer = j
@@ -247,29 +301,46 @@ def ekf_shear(fs: FilterState) -> dict[int, tuple[np.ndarray, np.ndarray]]:
     sh = fs.shear_slice()
     if sh is None or fs.shear is None:
         return {}
-    return {b: (fs.shear[r], fs.P[sh.start + 2 * r:sh.start + 2 * r + 2, sh.start + 2 * r:sh.start + 2 * r + 2])
-            for r, b in enumerate(fs.shear_ids)}
+    return {
+        b: (
+            fs.shear[r],
+            fs.P[sh.start + 2 * r : sh.start + 2 * r + 2, sh.start + 2 * r : sh.start + 2 * r + 2],
+        )
+        for r, b in enumerate(fs.shear_ids)
+    }
 
 
-def profile(t: np.ndarray, z: np.ndarray, n_c: np.ndarray, cov: np.ndarray, config: EstimatorConfig,
-            water: np.ndarray | None = None,
-            shear: dict[int, tuple[np.ndarray, np.ndarray]] | None = None) -> dict[str, Any]:
+def profile(
+    t: np.ndarray,
+    z: np.ndarray,
+    n_c: np.ndarray,
+    cov: np.ndarray,
+    config: EstimatorConfig,
+    water: np.ndarray | None = None,
+    shear: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
+) -> dict[str, Any]:
     """NavResult.info["water_current"]: the current per state (t s, depth m = -z, east and north m/s, their
     sigmas) and the verdict: determined where its sigma is below half the prior's (something tied the velocity
     over ground), with the stretches that are not. water (N,) bool: the states with water-track pings. shear:
     with layers, each boundary crossed, b -> (S(b), its covariance): the change of the current across it (deeper
     minus shallower)."""
     # (with layers, the current at a state's depth: its layer's and the spread within the layer, selection.py)
-    sig = np.sqrt(np.maximum(np.einsum("nii->ni", np.asarray(cov)), 0.0) + within_layer_variance(config))
+    sig = np.sqrt(
+        np.maximum(np.einsum("nii->ni", np.asarray(cov)), 0.0) + within_layer_variance(config)
+    )
     prior = config.current.prior_sigma_m_s
     determined = sig.max(axis=1) < 0.5 * prior
     speed = np.hypot(n_c[:, 0], n_c[:, 1])
     out: dict[str, Any] = {
-        "t_s": np.asarray(t, dtype=float).tolist(), "depth_m": (-np.asarray(z, dtype=float)).tolist(),
-        "east_m_s": n_c[:, 0].tolist(), "north_m_s": n_c[:, 1].tolist(),
-        "east_sigma_m_s": sig[:, 0].tolist(), "north_sigma_m_s": sig[:, 1].tolist(),
+        "t_s": np.asarray(t, dtype=float).tolist(),
+        "depth_m": (-np.asarray(z, dtype=float)).tolist(),
+        "east_m_s": n_c[:, 0].tolist(),
+        "north_m_s": n_c[:, 1].tolist(),
+        "east_sigma_m_s": sig[:, 0].tolist(),
+        "north_sigma_m_s": sig[:, 1].tolist(),
         "determined": determined.tolist(),
-        "prior_sigma_m_s": prior, "time_rw_m_s_per_sqrt_s": config.current.time_rw_m_s_per_sqrt_s,
+        "prior_sigma_m_s": prior,
+        "time_rw_m_s_per_sqrt_s": config.current.time_rw_m_s_per_sqrt_s,
         "depth_rw_m_s_per_sqrt_m": config.current.depth_rw_m_s_per_sqrt_m,
         "water_track_sigma_m_s": config.current.water_track_sigma_m_s or "from the messages",
     }
@@ -283,11 +354,18 @@ def profile(t: np.ndarray, z: np.ndarray, n_c: np.ndarray, cov: np.ndarray, conf
         bs = sorted(shear or {})
         out["layer_thickness_m"] = h
         out["layer_boundaries"] = bs
-        out["layer_shear"] = [{"boundary": b, "depth_m": (b + 1) * h, "east_m_s": float(shear[b][0][0]),
-                               "north_m_s": float(shear[b][0][1]),
-                               "east_sigma_m_s": float(np.sqrt(max(shear[b][1][0, 0], 0.0))),
-                               "north_sigma_m_s": float(np.sqrt(max(shear[b][1][1, 1], 0.0)))}
-                              for b in bs if shear is not None]
+        out["layer_shear"] = [
+            {
+                "boundary": b,
+                "depth_m": (b + 1) * h,
+                "east_m_s": float(shear[b][0][0]),
+                "north_m_s": float(shear[b][0][1]),
+                "east_sigma_m_s": float(np.sqrt(max(shear[b][1][0, 0], 0.0))),
+                "north_sigma_m_s": float(np.sqrt(max(shear[b][1][1, 1], 0.0))),
+            }
+            for b in bs
+            if shear is not None
+        ]
     out["verdict"] = verdict(determined, water)
     return out
 
@@ -300,6 +378,8 @@ def verdict(determined: np.ndarray, water: np.ndarray | None) -> str:
     frac = float(determined[w].mean())
     if frac == 1.0:
         return "determined over every water-track stretch (bottom track or GNSS tied the velocity over ground)"
-    return (f"determined over {100 * frac:.0f} % of the water-track states; elsewhere the current and the "
-            "vehicle's velocity are not separable (no bottom track or GNSS near enough): the position there "
-            "leans on the IMU alone")
+    return (
+        f"determined over {100 * frac:.0f} % of the water-track states; elsewhere the current and the "
+        "vehicle's velocity are not separable (no bottom track or GNSS near enough): the position there "
+        "leans on the IMU alone"
+    )

@@ -1,5 +1,5 @@
-"""The DVL's correlated error (estimators/correlated.py) fitted from the data in the batch smoother's noise loop
-([noise] fit_correlated; estimators/batch.py fit_dvl_noise).
+"""The DVL's correlated error (estimators/models/correlated.py) fitted from the data in the batch smoother's noise loop
+([noise] fit_correlated; estimators/batch/smoother.py fit_dvl_noise).
 
 At a solution, each bottom-track ping's residual in dvl_link axes with the estimated correlated error added back,
 y - h(x) = (y - h(x) - E(i)) + E(i), is what a model without E would see: the white ping noise plus the part of
@@ -39,29 +39,39 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.sensor_noise import MIN_LAGS, GaussMarkovFit, gauss_markov_fit
 from gtsam_dvl.core.states import correlated_error
-from gtsam_dvl.estimators import correlated
+from gtsam_dvl.estimators.models import correlated
 
 
 def fit_enabled(config: EstimatorConfig) -> bool:
     """Whether the batch smoother fits the correlated error: [noise] from_data and fit_correlated, the error
     modelled ([dvl] correlated_sigma_m_s > 0: its states exist) and the pings' 3-D velocity factors (not beams)."""
     n = config.noise
-    return n.from_data and n.fit_correlated and correlated_error(config) and not config.dvl.use_beams
+    return (
+        n.from_data and n.fit_correlated and correlated_error(config) and not config.dvl.use_beams
+    )
 
 
 def with_level(config: EstimatorConfig, sigma_m_s: float, tau_s: float) -> EstimatorConfig:
     """config with [dvl] correlated_sigma_m_s and correlated_tau_s set."""
-    return config.model_copy(update={"dvl": config.dvl.model_copy(
-        update={"correlated_sigma_m_s": float(sigma_m_s), "correlated_tau_s": float(tau_s)})})
+    return config.model_copy(
+        update={
+            "dvl": config.dvl.model_copy(
+                update={"correlated_sigma_m_s": float(sigma_m_s), "correlated_tau_s": float(tau_s)}
+            )
+        }
+    )
 
 
-def replace_factors(graph: gtsam.NonlinearFactorGraph, slots: range, config: EstimatorConfig,
-                    t_states: np.ndarray) -> None:
+def replace_factors(
+    graph: gtsam.NonlinearFactorGraph, slots: range, config: EstimatorConfig, t_states: np.ndarray
+) -> None:
     """The prior and links of E made again at config's level and time constant, into their slots
     (LogGraph.factor_slots["correlated"]: the prior first, then the links in state order)."""
     factors = correlated.factors(config, t_states)
     if len(factors) != len(slots):
-        raise GtsamDvlError(f"correlated error fit: {len(factors)} factors made again for {len(slots)} slots")
+        raise GtsamDvlError(
+            f"correlated error fit: {len(factors)} factors made again for {len(slots)} slots"
+        )
     for i, f in zip(slots, factors, strict=True):
         graph.replace(i, f)
 
@@ -69,7 +79,7 @@ def replace_factors(graph: gtsam.NonlinearFactorGraph, slots: range, config: Est
 def residual_series(bulk: Any, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
     """The bottom-track rows' ping stamps (N,) s and their residuals h(x) - y with the estimated E taken out of h
     (N, 3) m/s, dvl_link (module doc); nan on the rows beyond the robust kernel's threshold at a median-based
-    scale. bulk: the graph's BulkDvl (estimators/bulk.py), 3-D rows."""
+    scale. bulk: the graph's BulkDvl (estimators/graph/bulk.py), 3-D rows."""
     ew = bulk.whitened_errors(values)
     e = np.linalg.solve(bulk.whiten, ew[..., None])[..., 0]  # the unwhitened error h + E - y
     d_e = bulk._correlated_errors(values)
@@ -97,7 +107,10 @@ class LevelFit:
 
     def moves(self, sigma_m_s: float, tau_s: float, tolerance: float) -> bool:
         """Whether the model at (sigma_m_s, tau_s) needs another solve at this fit's values."""
-        return abs(self.sigma_m_s / sigma_m_s - 1.0) > tolerance or abs(self.tau_s / tau_s - 1.0) > tolerance
+        return (
+            abs(self.sigma_m_s / sigma_m_s - 1.0) > tolerance
+            or abs(self.tau_s / tau_s - 1.0) > tolerance
+        )
 
 
 def fit_level(t: np.ndarray, r: np.ndarray, config: EstimatorConfig) -> LevelFit:
@@ -122,38 +135,61 @@ def fit_level(t: np.ndarray, r: np.ndarray, config: EstimatorConfig) -> LevelFit
     return LevelFit(sigma, tau, sigma != fit.gm_sigma or tau != fit.gm_tau_s, True, fit, rows)
 
 
-def fit_report(configured: EstimatorConfig, used: EstimatorConfig, last: LevelFit, passes: int, how: str
-               ) -> dict[str, Any]:
+def fit_report(
+    configured: EstimatorConfig, used: EstimatorConfig, last: LevelFit, passes: int, how: str
+) -> dict[str, Any]:
     """report.dvl_correlated of the batch fit: the level and time constant configured and used, the last fit's
     figures, the passes, whether at a bound, and the line."""
     c, u, n, rows = configured.dvl, used.dvl, used.noise, last.rows
-    out: dict[str, Any] = {"configured": {"sigma_m_s": c.correlated_sigma_m_s, "tau_s": c.correlated_tau_s},
-                           "sigma_m_s": u.correlated_sigma_m_s, "tau_s": u.correlated_tau_s, "rows": rows,
-                           "passes": passes, "at_bound": last.at_bound, "significant": last.significant,
-                           "how": how}
+    out: dict[str, Any] = {
+        "configured": {"sigma_m_s": c.correlated_sigma_m_s, "tau_s": c.correlated_tau_s},
+        "sigma_m_s": u.correlated_sigma_m_s,
+        "tau_s": u.correlated_tau_s,
+        "rows": rows,
+        "passes": passes,
+        "at_bound": last.at_bound,
+        "significant": last.significant,
+        "how": how,
+    }
     f = last.fit
     if f is not None:
-        out["fit"] = {"gm_sigma_m_s": f.gm_sigma, "gm_tau_s": f.gm_tau_s, "white_sigma_m_s": f.white_sigma,
-                      "gm_sigma_noise_m_s": f.gm_sigma_noise, "samples": f.samples}
+        out["fit"] = {
+            "gm_sigma_m_s": f.gm_sigma,
+            "gm_tau_s": f.gm_tau_s,
+            "white_sigma_m_s": f.white_sigma,
+            "gm_sigma_noise_m_s": f.gm_sigma_noise,
+            "samples": f.samples,
+        }
     level = f"{u.correlated_sigma_m_s * 1e3:.3g} mm/s over {u.correlated_tau_s:.3g} s"
     if f is None:
-        out["why"] = (f"DVL correlated error not fitted: {rows} usable residual rows; the configured {level} "
-                      "holds")
-    elif u.correlated_sigma_m_s == c.correlated_sigma_m_s and u.correlated_tau_s == c.correlated_tau_s \
-            and not last.significant:
-        out["why"] = (f"DVL correlated error as configured ({level}): the residuals show no significant "
-                      f"correlated part ({f.gm_sigma * 1e3:.2g} +- {f.gm_sigma_noise * 1e3:.2g} mm/s, {rows} rows, "
-                      "the estimated error added back); the navigation solution follows a slow DVL error, so "
-                      "that is not its absence")
+        out["why"] = (
+            f"DVL correlated error not fitted: {rows} usable residual rows; the configured {level} "
+            "holds"
+        )
+    elif (
+        u.correlated_sigma_m_s == c.correlated_sigma_m_s
+        and u.correlated_tau_s == c.correlated_tau_s
+        and not last.significant
+    ):
+        out["why"] = (
+            f"DVL correlated error as configured ({level}): the residuals show no significant "
+            f"correlated part ({f.gm_sigma * 1e3:.2g} +- {f.gm_sigma_noise * 1e3:.2g} mm/s, {rows} rows, "
+            "the estimated error added back); the navigation solution follows a slow DVL error, so "
+            "that is not its absence"
+        )
     else:
-        out["why"] = (f"DVL correlated error fitted from {rows} residual rows ({how}): {level} (configured "
-                      f"{c.correlated_sigma_m_s * 1e3:.3g} mm/s over {c.correlated_tau_s:.3g} s)")
+        out["why"] = (
+            f"DVL correlated error fitted from {rows} residual rows ({how}): {level} (configured "
+            f"{c.correlated_sigma_m_s * 1e3:.3g} mm/s over {c.correlated_tau_s:.3g} s)"
+        )
         if not last.significant:
             out["why"] += "; the last fit was not significant: the level before it holds"
         if last.at_bound:
-            out["why"] += (f", at a bound of [noise] (level {n.correlated_min_sigma_m_s * 1e3:g}-"
-                           f"{n.correlated_max_sigma_m_s * 1e3:g} mm/s, tau {n.correlated_min_tau_s:g}-"
-                           f"{n.correlated_max_tau_s:g} s)")
+            out["why"] += (
+                f", at a bound of [noise] (level {n.correlated_min_sigma_m_s * 1e3:g}-"
+                f"{n.correlated_max_sigma_m_s * 1e3:g} mm/s, tau {n.correlated_min_tau_s:g}-"
+                f"{n.correlated_max_tau_s:g} s)"
+            )
     return out
 
 
@@ -163,9 +199,12 @@ def held_correlated_level(config: EstimatorConfig, estimator: str) -> dict[str, 
     if not fit_enabled(config):
         return {}
     d = config.dvl
-    return {"configured": {"sigma_m_s": d.correlated_sigma_m_s, "tau_s": d.correlated_tau_s},
-            "sigma_m_s": d.correlated_sigma_m_s, "tau_s": d.correlated_tau_s, "held": True,
-            "why": f"DVL correlated error as configured ({d.correlated_sigma_m_s * 1e3:.3g} mm/s over "
-                   f"{d.correlated_tau_s:.3g} s): the {estimator} holds it (the batch smoother fits it from the "
-                   "residuals)"}
-
+    return {
+        "configured": {"sigma_m_s": d.correlated_sigma_m_s, "tau_s": d.correlated_tau_s},
+        "sigma_m_s": d.correlated_sigma_m_s,
+        "tau_s": d.correlated_tau_s,
+        "held": True,
+        "why": f"DVL correlated error as configured ({d.correlated_sigma_m_s * 1e3:.3g} mm/s over "
+        f"{d.correlated_tau_s:.3g} s): the {estimator} holds it (the batch smoother fits it from the "
+        "residuals)",
+    }

@@ -26,11 +26,20 @@ from gtsam_dvl.core.states import (
     water_current,
 )
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators import correlated_fit, current
-from gtsam_dvl.estimators.bulk import BulkGraph, graph_rows
-from gtsam_dvl.estimators.depth import depth_samples
-from gtsam_dvl.estimators.graph import LogGraph
-from gtsam_dvl.estimators.noise_levels import (
+from gtsam_dvl.estimators.graph.bulk import BulkGraph, graph_rows
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.graph.solver import (
+    ChunkedOrdering,
+    CompactBayesNet,
+    SolveReport,
+    bayes_net_marginals,
+    eliminate,
+    gauss_newton_qr,
+    tail_covariance,
+)
+from gtsam_dvl.estimators.inputs.depth import depth_samples
+from gtsam_dvl.estimators.models import correlated_fit, current
+from gtsam_dvl.estimators.models.noise_levels import (
     SCREEN_K,
     SENSOR_GROUPS,
     LongLevel,
@@ -52,37 +61,43 @@ from gtsam_dvl.estimators.noise_levels import (
     with_levels,
     with_sensor_multiplier,
 )
-from gtsam_dvl.estimators.solver import (
-    ChunkedOrdering,
-    CompactBayesNet,
-    SolveReport,
-    bayes_net_marginals,
-    eliminate,
-    gauss_newton_qr,
-    tail_covariance,
-)
 
 
-def solve_log(log: LogData, config: EstimatorConfig, noise: NoiseReport, timing: dict[str, float],
-              calibration: VehicleCalibration | None = None, progress: ProgressFn | None = None,
-              t0: float | None = None) -> tuple[LogGraph, BulkGraph, gtsam.Values, ChunkedOrdering, SolveReport,
-                                                list[dict[str, float]], int]:
+def solve_log(
+    log: LogData,
+    config: EstimatorConfig,
+    noise: NoiseReport,
+    timing: dict[str, float],
+    calibration: VehicleCalibration | None = None,
+    progress: ProgressFn | None = None,
+    t0: float | None = None,
+) -> tuple[
+    LogGraph, BulkGraph, gtsam.Values, ChunkedOrdering, SolveReport, list[dict[str, float]], int
+]:
     """The batch smoother's solve of a screened log (config with "auto" resolved): the IMU levels from the data,
     the graph in bulk, Gauss-Newton (both passes with the time offset) and the DVL noise fit. Returns the LogGraph,
     the graph, the solution, the ordering, the last pass's report, each pass's figures and the chi^2's degrees of
     freedom; noise records the levels used, timing the phases' seconds (t0: when the run began)."""
     t0 = time.perf_counter() if t0 is None else t0
-    config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise], noise_levels.py)
-    builder = LogGraph(log, config, progress=(lambda f: progress(0.15 * f)) if progress else None,
-                       calibration=calibration)
+    config = imu_levels(
+        log, config, noise
+    )  # the IMU's white noise from the data ([noise], noise_levels.py)
+    builder = LogGraph(
+        log,
+        config,
+        progress=(lambda f: progress(0.15 * f)) if progress else None,
+        calibration=calibration,
+    )
     timing["preintegrate"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    # the DVL and IMU factors evaluated in bulk (estimators/bulk.py: the same objective as builder.build())
+    # the DVL and IMU factors evaluated in bulk (estimators/graph/bulk.py: the same objective as builder.build())
     bulk, values = builder.build_bulk()
     ordering = builder.elimination_ordering()
     # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
     dof = graph_rows(bulk) - values.dim()
-    if enabled(builder.config, "time_offset"):  # the offset's first guess (estimators/offset_guess.py)
+    if enabled(
+        builder.config, "time_offset"
+    ):  # the offset's first guess (estimators/inputs/offset_guess.py)
         guess = builder.offset_guess()
         builder.offset_centring = {"guess": guess.as_dict()}
         if guess.used:
@@ -93,11 +108,20 @@ def solve_log(log: LogData, config: EstimatorConfig, noise: NoiseReport, timing:
         progress(0.2)
 
     t2 = time.perf_counter()
-    graph, values, report, passes = solve_graph(builder, bulk, values, ordering,
-                                                progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None)
+    graph, values, report, passes = solve_graph(
+        builder,
+        bulk,
+        values,
+        ordering,
+        progress=(lambda f: progress(0.2 + 0.6 * f)) if progress else None,
+    )
     if not isinstance(graph, BulkGraph):  # (solve_graph keeps a BulkGraph a BulkGraph)
         raise GtsamDvlError("solve_log: the batch smoother's bulk graph expected")
-    if dvl_fit_enabled(builder.config) or fitted_sensors(builder) or correlated_fit.fit_enabled(builder.config):
+    if (
+        dvl_fit_enabled(builder.config)
+        or fitted_sensors(builder)
+        or correlated_fit.fit_enabled(builder.config)
+    ):
         values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
     timing["solve"] = time.perf_counter() - t2
     return builder, graph, values, ordering, report, passes, dof
@@ -119,21 +143,34 @@ RECENTRE_BIAS_M_S = 1e-4
 MAX_RECENTRES = 6
 
 
-def solve_graph(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                ordering: gtsam.Ordering | ChunkedOrdering, progress: ProgressFn | None = None
-                ) -> tuple[gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport, list[dict[str, float]]]:
+def solve_graph(
+    builder: LogGraph,
+    graph: gtsam.NonlinearFactorGraph | BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    progress: ProgressFn | None = None,
+) -> tuple[
+    gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport, list[dict[str, float]]
+]:
     """Gauss-Newton (QR) on a LogGraph's graph, with [dvl] estimate_time_offset the offset's windows re-centred
     until they agree with the solution (solve_centred). Returns the graph (the recentred one), the solution, the
     last pass's report (its Bayes net serves the marginals) and each pass's iterations and seconds."""
     passes: list[dict[str, float]] = []
-    graph, values, report = solve_centred(builder, graph, values, ordering, passes, progress=progress, first=True)
+    graph, values, report = solve_centred(
+        builder, graph, values, ordering, passes, progress=progress, first=True
+    )
     return graph, values, report, passes
 
 
-def solve_centred(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                  ordering: gtsam.Ordering | ChunkedOrdering, passes: list[dict[str, float]],
-                  progress: ProgressFn | None = None, first: bool = False
-                  ) -> tuple[gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport]:
+def solve_centred(
+    builder: LogGraph,
+    graph: gtsam.NonlinearFactorGraph | BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    passes: list[dict[str, float]],
+    progress: ProgressFn | None = None,
+    first: bool = False,
+) -> tuple[gtsam.NonlinearFactorGraph | BulkGraph, gtsam.Values, SolveReport]:
     """Gauss-Newton, and with the time offset: while the offset's IMU windows disagree with the solution (their
     centre more than RECENTRE_FRACTION of the offset's sigma from its estimate, or the accelerometer bias taken off
     their samples more than RECENTRE_BIAS_M_S / |dt| from the estimate's), the windows re-centred on the solution
@@ -147,9 +184,13 @@ def solve_centred(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGra
     kw = _solver_options(builder)
     offset = enabled(builder.config, "time_offset")
     loose = offset and first
-    values, report = gauss_newton_qr(graph, values, ordering, progress=progress,  # type: ignore[arg-type]
-                                     **({**kw, "absolute_tol": max(kw["absolute_tol"], FIRST_PASS_TOL)} if loose
-                                        else kw))
+    values, report = gauss_newton_qr(
+        graph,
+        values,
+        ordering,
+        progress=progress,  # type: ignore[arg-type]
+        **({**kw, "absolute_tol": max(kw["absolute_tol"], FIRST_PASS_TOL)} if loose else kw),
+    )
     passes.append({"iterations": report.iterations, **report.timing_s})
     recentres = 0
     while offset:
@@ -180,25 +221,45 @@ def offset_check(builder: LogGraph, values: gtsam.Values, report: SolveReport) -
     step = np.abs(builder.offset_accel_bias - bias_now[0])
     bias_step = float(step.max()) * abs(dt_hat) if step.size else 0.0
     centre_ok = abs(dt_hat - builder.offset_centre) <= RECENTRE_FRACTION * sigma
-    return {"estimate_s": dt_hat, "sigma_s": sigma, "centre_s": builder.offset_centre,
-            "bias_step_m_s": bias_step, "consistent": bool(centre_ok and bias_step <= RECENTRE_BIAS_M_S)}
+    return {
+        "estimate_s": dt_hat,
+        "sigma_s": sigma,
+        "centre_s": builder.offset_centre,
+        "bias_step_m_s": bias_step,
+        "consistent": bool(centre_ok and bias_step <= RECENTRE_BIAS_M_S),
+    }
 
 
 def _solver_options(builder: LogGraph) -> dict[str, Any]:
     """gauss_newton_qr's options from the [solver] section, gravity following the positions."""
     s = builder.config.solver
-    return dict(max_iterations=s.max_iterations, relative_tol=s.relative_error_tol,
-                absolute_tol=s.absolute_error_tol, before_iteration=builder.refresh_gravity)
+    return dict(
+        max_iterations=s.max_iterations,
+        relative_tol=s.relative_error_tol,
+        absolute_tol=s.absolute_error_tol,
+        before_iteration=builder.refresh_gravity,
+    )
 
 
 def fitted_sensors(builder: LogGraph) -> list[str]:
     """The sensor groups besides the DVL whose noise factor the batch fit takes (SENSOR_GROUPS): fitting
     enabled ([noise] fit_depth, fit_gnss) and factors in the graph."""
-    return [s for s in SENSOR_GROUPS if sensor_fit_enabled(builder.config, s) and len(builder.factor_slots.get(s, ()))]
+    return [
+        s
+        for s in SENSOR_GROUPS
+        if sensor_fit_enabled(builder.config, s) and len(builder.factor_slots.get(s, ()))
+    ]
 
 
-def _long_level(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values, t_rows: np.ndarray,
-                ew: np.ndarray, robust_k: float) -> LongLevel | None:
+def _long_level(
+    builder: LogGraph,
+    graph: BulkGraph,
+    sensor: str,
+    values: gtsam.Values,
+    t_rows: np.ndarray,
+    ew: np.ndarray,
+    robust_k: float,
+) -> LongLevel | None:
     """The long-window level (noise_levels.long_level) of sensor's rows within the robust screen: the DVL's
     bottom-track rows with the estimated correlated error E added back (correlated_fit.residual_series: what the
     DVL's slow error is, not what E left of it), whitened at the current level."""
@@ -212,8 +273,9 @@ def _long_level(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.
     return long_level(t_rows[inside], ew[inside])
 
 
-def _fit_rows(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values
-              ) -> tuple[np.ndarray, np.ndarray]:
+def _fit_rows(
+    builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Values
+) -> tuple[np.ndarray, np.ndarray]:
     """The times (N,) s and whitened errors (N, m) at values of sensor's rows that its noise fit takes: the DVL's
     bulk rows (before the robust kernel), or the (non-robust) depth or GNSS factors at their slots (each at its
     state's time)."""
@@ -222,8 +284,13 @@ def _fit_rows(builder: LogGraph, graph: BulkGraph, sensor: str, values: gtsam.Va
     t_states = np.array([ep.t for ep in builder.epochs])
     factors = [graph.graph.at(i) for i in builder.factor_slots[sensor]]
     dim = 3 if sensor == "gnss" else 1
-    ew = np.array([np.asarray(f.whitenedError(values))  # type: ignore[attr-defined,type-var]
-                   for f in factors], dtype=float).reshape(-1, dim)
+    ew = np.array(
+        [
+            np.asarray(f.whitenedError(values))  # type: ignore[attr-defined,type-var]
+            for f in factors
+        ],
+        dtype=float,
+    ).reshape(-1, dim)
     t = np.array([t_states[gtsam.Symbol(f.keys()[0]).index()] for f in factors], dtype=float)
     return t, ew
 
@@ -246,20 +313,28 @@ def _replace_sensor_factors(builder: LogGraph, graph: BulkGraph, sensor: str) ->
     factors = builder.depth_factors() if sensor == "depth" else builder.gnss_factors()
     slots = builder.factor_slots[sensor]
     if len(factors) != len(slots):
-        raise GtsamDvlError(f"fit_dvl_noise: {len(factors)} {sensor} factors made again for {len(slots)} slots")
+        raise GtsamDvlError(
+            f"fit_dvl_noise: {len(factors)} {sensor} factors made again for {len(slots)} slots"
+        )
     for i, f in zip(slots, factors, strict=True):
         graph.graph.replace(i, f)
 
 
-def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ordering: ChunkedOrdering,
-                  report: SolveReport, passes: list[dict[str, float]], noise: NoiseReport
-                  ) -> tuple[gtsam.Values, SolveReport]:
-    """The variance components (estimators/noise_levels.py) of the DVL and of the depth and GNSS factors
+def fit_dvl_noise(
+    builder: LogGraph,
+    graph: BulkGraph,
+    values: gtsam.Values,
+    ordering: ChunkedOrdering,
+    report: SolveReport,
+    passes: list[dict[str, float]],
+    noise: NoiseReport,
+) -> tuple[gtsam.Values, SolveReport]:
+    """The variance components (estimators/models/noise_levels.py) of the DVL and of the depth and GNSS factors
     (fitted_sensors), each fitted on the solution from its own whitened residuals, and re-solved with until none
     changes by more than [noise] fit_tolerance, in at most fit_passes solves (the first included). A factor is
     applied only with a re-solve, so the solution and its Bayes net are always at the weights reported; a
     sensor with fewer than min_rows rows keeps its configured factor. With [noise] fit_correlated, the DVL's
-    correlated error's level and time constant too (estimators/correlated_fit.py; settled within
+    correlated error's level and time constant too (estimators/models/correlated_fit.py; settled within
     correlated_tolerance). builder.config takes the factors used ([dvl], [depth], [gnss] noise_multiplier, [dvl]
     correlated_sigma_m_s and correlated_tau_s), noise.dvl, noise.depth, noise.gnss and noise.dvl_correlated say
     how they came."""
@@ -271,10 +346,18 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
     configured = {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"}
     rows: dict[str, int] = {}
     fits: dict[str, tuple[float, bool]] = {}
-    stated = dict(used)  # the levels given (configured, preset, message covariances): the honest level's floor
-    levels: dict[str, dict[str, Any]] = {}  # the white fit and the long-window level behind each fit
+    stated = dict(
+        used
+    )  # the levels given (configured, preset, message covariances): the honest level's floor
+    levels: dict[
+        str, dict[str, Any]
+    ] = {}  # the white fit and the long-window level behind each fit
     gm_configured = builder.config
-    gm_slots = builder.factor_slots.get("correlated", range(0)) if correlated_fit.fit_enabled(cfg) else range(0)
+    gm_slots = (
+        builder.factor_slots.get("correlated", range(0))
+        if correlated_fit.fit_enabled(cfg)
+        else range(0)
+    )
     t_states = np.array([ep.t for ep in builder.epochs])
     gm_fit: correlated_fit.LevelFit | None = None
     settled, solves = False, 1
@@ -289,8 +372,12 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
                 sensors.remove(s)  # keeps the factor it has
                 fits.pop(s, None)
                 if s == "dvl":
-                    noise.dvl = {"multiplier": used[s], "rows": used_rows, "why": f"DVL noise not fitted: "
-                                 f"{used_rows} usable residual rows, fewer than [noise] min_rows = {n.min_rows}"}
+                    noise.dvl = {
+                        "multiplier": used[s],
+                        "rows": used_rows,
+                        "why": f"DVL noise not fitted: "
+                        f"{used_rows} usable residual rows, fewer than [noise] min_rows = {n.min_rows}",
+                    }
                 else:
                     setattr(noise, s, sensor_not_fitted(s, used[s], rows[s], n.min_rows))
                 continue
@@ -299,14 +386,22 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
             # only GNSS fixes observe the DVL's slow error (the IMU cannot, at 30-60 s); nothing in these logs
             # observes the depth sensor's or the fixes' own
             can_lower = s == "dvl" and len(builder.factor_slots.get("gnss", ())) > 0
-            honest, why = honest_multiplier(white, used[s], stated[s], long, multiplier_bounds(cfg, s), can_lower)
+            honest, why = honest_multiplier(
+                white, used[s], stated[s], long, multiplier_bounds(cfg, s), can_lower
+            )
             fits[s] = honest, at_bound and honest == white
-            levels[s] = {"white_multiplier": white, "stated_multiplier": stated[s], "honest_why": why,
-                         "long": None if long is None else long.as_dict(used[s])}
+            levels[s] = {
+                "white_multiplier": white,
+                "stated_multiplier": stated[s],
+                "honest_why": why,
+                "long": None if long is None else long.as_dict(used[s]),
+            }
         moving = [s for s in sensors if abs(fits[s][0] / used[s] - 1.0) > n.fit_tolerance]
         if gm_slots:  # the correlated error's level and time constant (correlated_fit.py)
             d = builder.config.dvl
-            gm_fit = correlated_fit.fit_level(*correlated_fit.residual_series(bulk, values), builder.config)
+            gm_fit = correlated_fit.fit_level(
+                *correlated_fit.residual_series(bulk, values), builder.config
+            )
             if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
                 moving.append("dvl_correlated")
         if not moving:
@@ -317,7 +412,9 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
         for s in moving:
             if s == "dvl_correlated":
                 assert gm_fit is not None
-                builder.config = correlated_fit.with_level(builder.config, gm_fit.sigma_m_s, gm_fit.tau_s)
+                builder.config = correlated_fit.with_level(
+                    builder.config, gm_fit.sigma_m_s, gm_fit.tau_s
+                )
                 bulk.config = correlated_fit.with_level(bulk.config, gm_fit.sigma_m_s, gm_fit.tau_s)
                 correlated_fit.replace_factors(graph.graph, gm_slots, builder.config, t_states)
                 continue
@@ -335,9 +432,13 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
         d = builder.config.dvl
         how = f"{solves} solve" + ("s" if solves > 1 else "")
         if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
-            how += (f", not settled: the last fit asked for {gm_fit.sigma_m_s * 1e3:.3g} mm/s over "
-                    f"{gm_fit.tau_s:.3g} s")
-        noise.dvl_correlated = correlated_fit.fit_report(gm_configured, builder.config, gm_fit, solves, how)
+            how += (
+                f", not settled: the last fit asked for {gm_fit.sigma_m_s * 1e3:.3g} mm/s over "
+                f"{gm_fit.tau_s:.3g} s"
+            )
+        noise.dvl_correlated = correlated_fit.fit_report(
+            gm_configured, builder.config, gm_fit, solves, how
+        )
     for s in sensors:
         builder.config = with_sensor_multiplier(builder.config, s, used[s])
         how = f"{solves} solve" + ("s" if solves > 1 else "")
@@ -345,18 +446,35 @@ def fit_dvl_noise(builder: LogGraph, graph: BulkGraph, values: gtsam.Values, ord
         if not settled and abs(new / used[s] - 1.0) > n.fit_tolerance:
             how += f", not settled: the last fit asked for x {new / used[s]:.3g}"
         if s == "dvl":
-            noise.dvl = dvl_fit_report(builder.config, used[s], rows[s], solves, at_bound,
-                                       median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]), how)
+            noise.dvl = dvl_fit_report(
+                builder.config,
+                used[s],
+                rows[s],
+                solves,
+                at_bound,
+                median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]),
+                how,
+            )
         else:
-            setattr(noise, s, sensor_fit_report(builder.config, s, *configured[s], used[s], rows[s], solves,
-                                                at_bound, how))
+            setattr(
+                noise,
+                s,
+                sensor_fit_report(
+                    builder.config, s, *configured[s], used[s], rows[s], solves, at_bound, how
+                ),
+            )
         with_levels(getattr(noise, s), levels[s], used[s])
     return values, report
 
 
-def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values,
-                   ordering: gtsam.Ordering | ChunkedOrdering, estimator: str = "batch",
-                   bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None) -> NavResult:
+def extract_result(
+    builder: LogGraph,
+    graph: gtsam.NonlinearFactorGraph | BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    estimator: str = "batch",
+    bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = None,
+) -> NavResult:
     """Estimates and marginal covariances at `values` (QR elimination, backward pass); bayes_net: reuse
     the solver's last elimination instead of linearising again. The shared states (core/states.py) at the last
     state: the calibration block's keys jointly (calib_joint_cov), each other state's key on its own, and all of
@@ -367,7 +485,9 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
     calib_group = tuple(shared_keys(cfg, n - 1, block=True))
     groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
     groups += [(k,) for k in last if k not in calib_group]
-    shared_group = tuple(last)  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
+    shared_group = tuple(
+        last
+    )  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
     if shared_group != calib_group:
         groups.append(shared_group)
     bn = bayes_net or eliminate(graph.linearize(values), ordering)
@@ -384,21 +504,41 @@ def extract_result(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGr
     calibration = read_estimates(values, marg.covariances, cfg, n - 1)
     # epochs' body rates already exclude Earth rate; remove the estimated gyro bias too
     b_omega = np.array([e.b_omega for e in builder.epochs]) - calibration["gyro_bias"].value
-    info: dict[str, Any] = {"alignment": builder.maker.alignment_info(), "counters": dict(builder.counters),
-                            "epochs": n, "imu_gaps": builder.gaps.summary()}
-    if water_current(cfg):  # the water current per state with its marginal sigmas (estimators/current.py)
+    info: dict[str, Any] = {
+        "alignment": builder.maker.alignment_info(),
+        "counters": dict(builder.counters),
+        "epochs": n,
+        "imu_gaps": builder.gaps.summary(),
+    }
+    if water_current(
+        cfg
+    ):  # the water current per state with its marginal sigmas (estimators/models/current.py)
         info["water_current"] = current.profile(
-            np.array([e.t for e in builder.epochs]), n_p[:, 2], np.array([values.atVector(W(i)) for i in range(n)]),
-            np.array([marg.covariances[W(i)] for i in range(n)]), cfg, current.epochs_with_water(builder),
-            {b: (values.atVector(S(b)), marg.covariances[S(b)]) for b in builder.shear})
+            np.array([e.t for e in builder.epochs]),
+            n_p[:, 2],
+            np.array([values.atVector(W(i)) for i in range(n)]),
+            np.array([marg.covariances[W(i)] for i in range(n)]),
+            cfg,
+            current.epochs_with_water(builder),
+            {b: (values.atVector(S(b)), marg.covariances[S(b)]) for b in builder.shear},
+        )
     return NavResult(
         estimator=estimator,
         t=np.array([e.t for e in builder.epochs]),
-        n_p=n_p, n_R_b=n_R_b, n_v=n_v, pose_cov=pose_cov, vel_cov=vel_cov,
-        calibration=calibration, b_R_d0=builder.log.mounting.b_R_d0, t0_ns=builder.log.t0_ns,
-        b_omega=b_omega, pose_vel_cross=pose_vel_cross,
-        calib_joint_cov=marg.joints[calib_group], shared_joint_cov=marg.joints[shared_group],
-        info=info, config=cfg.to_dict(),
+        n_p=n_p,
+        n_R_b=n_R_b,
+        n_v=n_v,
+        pose_cov=pose_cov,
+        vel_cov=vel_cov,
+        calibration=calibration,
+        b_R_d0=builder.log.mounting.b_R_d0,
+        t0_ns=builder.log.t0_ns,
+        b_omega=b_omega,
+        pose_vel_cross=pose_vel_cross,
+        calib_joint_cov=marg.joints[calib_group],
+        shared_joint_cov=marg.joints[shared_group],
+        info=info,
+        config=cfg.to_dict(),
         alignment_method=builder.alignment.method,
         dvl_pings=builder.usable,
     )

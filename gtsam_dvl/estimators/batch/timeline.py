@@ -23,8 +23,8 @@ from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
 from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys, water_current
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.bulk import BulkGraph
-from gtsam_dvl.estimators.graph import LogGraph
+from gtsam_dvl.estimators.graph.bulk import BulkGraph
+from gtsam_dvl.estimators.graph.log_graph import LogGraph
 
 
 def _epoch_of(keys: list[int]) -> int:
@@ -41,7 +41,7 @@ def _rows(factor: gtsam.GaussianFactor, columns: dict[int, slice], width: int) -
     col = 0
     for k in jf.keys():
         d = key_dim(k)
-        out[:, columns[k]] = A[:, col:col + d]
+        out[:, columns[k]] = A[:, col : col + d]
         col += d
     out[:, -1] = b
     return out
@@ -52,8 +52,9 @@ def _qr_r(a: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.qr(a, mode="r"))
 
 
-def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph,
-                       values: gtsam.Values) -> Timeline:
+def filtering_timeline(
+    builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values
+) -> Timeline:
     """Filtering estimates are those of `values` (the smoother's); the sigmas are the filtering marginals
     at each epoch. Only the random-constant bias model (the paper's) is supported."""
     if builder.config.imu.bias_model != "constant":
@@ -68,8 +69,9 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
 
     # filter layout at epoch i: [X_i, V_i, (E_i), (W_i), shared]; transition layout adds X_{i+1}, V_{i+1}, (E_{i+1}),
     # (W_{i+1}) after X_i, V_i, (E_i), (W_i). shared: the keys of the shared states the configuration estimates
-    # (core/states.py: B, K, C, and T, L); E_i the DVL's correlated error when modelled (estimators/correlated.py),
-    # W_i the water current when water-track pings are used (estimators/current.py)
+    # (core/states.py: B, K, C, and T, L); E_i the DVL's correlated error when modelled
+    # (estimators/models/correlated.py),
+    # W_i the water current when water-track pings are used (estimators/models/current.py)
     cfg = builder.config
     gm, wc = correlated_error(cfg), water_current(cfg)
     d = 9 + 3 * gm + 2 * wc  # the epoch's own state
@@ -82,7 +84,9 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
             out[W(i)] = slice(at + d - 2, at + d)
         return out
 
-    shared = shared_keys(cfg) + [S(b) for b in builder.shear]  # (the water current's layer boundaries: current.py)
+    shared = shared_keys(cfg) + [
+        S(b) for b in builder.shear
+    ]  # (the water current's layer boundaries: current.py)
     shared_cols: dict[int, slice] = {}
     start = 0
     for k in shared:
@@ -90,24 +94,34 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
         start += key_dim(k)
     m = d + start  # filter state size
     state_cols = columns(shared, cfg, start=d)  # each shared state's columns in the filter state
-    blocks: dict[str, list[np.ndarray]] = {name: [] for name in state_cols}  # its covariance at each epoch
+    blocks: dict[str, list[np.ndarray]] = {
+        name: [] for name in state_cols
+    }  # its covariance at each epoch
     R = np.zeros((0, m + 1))  # square-root information rows over [X_i, V_i, shared] + rhs
     sig_att = []
     for i in range(n):
         if i == 0:
-            cols = {**own(0, 0), **{k: slice(d + s.start, d + s.stop) for k, s in shared_cols.items()}}
+            cols = {
+                **own(0, 0),
+                **{k: slice(d + s.start, d + s.stop) for k, s in shared_cols.items()},
+            }
             stack = np.vstack([_rows(f, cols, m) for f in by_epoch[0]])
             R = _qr_r(stack)[:m]
         else:
-            cols = {**own(i - 1, 0), **own(i, d),
-                    **{k: slice(2 * d + s.start, 2 * d + s.stop) for k, s in shared_cols.items()}}
+            cols = {
+                **own(i - 1, 0),
+                **own(i, d),
+                **{k: slice(2 * d + s.start, 2 * d + s.stop) for k, s in shared_cols.items()},
+            }
             prev = np.zeros((R.shape[0], m + d + 1))
             prev[:, 0:d] = R[:, 0:d]
-            prev[:, 2 * d:m + d] = R[:, d:m]
+            prev[:, 2 * d : m + d] = R[:, d:m]
             prev[:, m + d] = R[:, m]
             stack = np.vstack([prev] + [_rows(f, cols, m + d) for f in by_epoch[i]])
             full = _qr_r(stack)
-            R = full[d:m + d, d:]  # marginal information of [X_i, V_i, (E_i), shared] after eliminating epoch i-1's
+            R = full[
+                d : m + d, d:
+            ]  # marginal information of [X_i, V_i, (E_i), shared] after eliminating epoch i-1's
         Rinv = np.linalg.inv(R[:, :m])
         cov = Rinv @ Rinv.T
         for name, c in state_cols.items():
@@ -118,18 +132,23 @@ def filtering_timeline(builder: LogGraph, graph: gtsam.NonlinearFactorGraph | Bu
     est = read_values(values, cfg)
     sig = {name: np.sqrt(np.einsum("nii->ni", np.array(b))) for name, b in blocks.items()}
     b_R_d0 = builder.log.mounting.b_R_d0
-    sig_mis = [np.sqrt(np.diag(misalignment_rpy_and_cov(est["misalignment"], b_R_d0, c)[1]))
-               for c in blocks["misalignment"]]
+    sig_mis = [
+        np.sqrt(np.diag(misalignment_rpy_and_cov(est["misalignment"], b_R_d0, c)[1]))
+        for c in blocks["misalignment"]
+    ]
     mis = matrix_to_rpy_deg(est["misalignment"] @ b_R_d0.T)
     ones = np.ones((n, 1))
     offset, lever = "time_offset" in est, "lever_arm" in est
     return Timeline(
         t=np.array([e.t for e in builder.epochs]),
-        scale=np.full(n, float(est["scale"][0])), scale_sigma=sig["scale"][:, 0],
-        misalignment_deg=ones * mis, misalignment_sigma_deg=np.array(sig_mis),
+        scale=np.full(n, float(est["scale"][0])),
+        scale_sigma=sig["scale"][:, 0],
+        misalignment_deg=ones * mis,
+        misalignment_sigma_deg=np.array(sig_mis),
         gyro_bias_deg_per_h=ones * (est["gyro_bias"] / DEG_PER_H),
         gyro_bias_sigma_deg_per_h=sig["gyro_bias"] / DEG_PER_H,
-        accel_bias_ug=ones * (est["accel_bias"] / UG), accel_bias_sigma_ug=sig["accel_bias"] / UG,
+        accel_bias_ug=ones * (est["accel_bias"] / UG),
+        accel_bias_sigma_ug=sig["accel_bias"] / UG,
         attitude_sigma_deg=np.array(sig_att),
         time_offset_s=np.full(n, float(est["time_offset"][0])) if offset else None,
         time_offset_sigma_s=sig["time_offset"][:, 0] if offset else None,

@@ -1,5 +1,5 @@
 """The batch smoother's IMU factors evaluated in bulk: GTSAM's ImuFactor with the Earth model, for every interval at
-once (factors/imu_bulk.py), served to GTSAM by carrier factors (estimators/bulk.py explains carriers).
+once (factors/imu_bulk.py), served to GTSAM by carrier factors (estimators/graph/bulk.py explains carriers).
 
 Why: each EarthImuFactor (factors/imu_earth.py) is a Python CustomFactor; GTSAM calls it once per factor per
 linearisation and per error evaluation, and a day of 1 s keyframes has 86,400 of them. Here one
@@ -56,7 +56,7 @@ class GravityRefs:
 class StateArrays:
     """Every state's variables at a linearisation point, in state order: n_R (S, 3, 3) base_link -> map, n_p (S, 3)
     m and n_v (S, 3) m/s in map, bias (S, 6) [b_a m/s^2, b_g rad/s] of each state's bias key. Extracted once per
-    evaluation and shared by the bulk IMU and DVL factors (estimators/bulk.py)."""
+    evaluation and shared by the bulk IMU and DVL factors (estimators/graph/bulk.py)."""
 
     n_R: np.ndarray
     n_p: np.ndarray
@@ -70,8 +70,10 @@ def state_arrays(values: gtsam.Values, n_states: int, bias_keys: list[int]) -> S
     poses = gtsam.utilities.extractPose3(values)  # every Pose3 in key order: the states X(0..n-1)
     vels = gtsam.utilities.extractVectors(values, "v")  # every V(i), in order
     if poses.shape[0] != n_states or vels.shape[0] != n_states:
-        raise ValueError(f"values hold {poses.shape[0]} poses and {vels.shape[0]} velocities, the graph {n_states} "
-                         "states")
+        raise ValueError(
+            f"values hold {poses.shape[0]} poses and {vels.shape[0]} velocities, the graph {n_states} "
+            "states"
+        )
     if len(set(bias_keys)) > 1:
         bias = np.array([values.atConstantBias(k).vector() for k in bias_keys])
     else:
@@ -122,8 +124,9 @@ class BulkImu:
         """The states' arrays at values (state_arrays)."""
         return state_arrays(values, len(self) + 1, self.state_bias_keys)
 
-    def _evaluate(self, values: gtsam.Values, out: list[np.ndarray] | None,
-                  states: StateArrays | None = None) -> np.ndarray:
+    def _evaluate(
+        self, values: gtsam.Values, out: list[np.ndarray] | None, states: StateArrays | None = None
+    ) -> np.ndarray:
         """Whitened errors (N, 9); with out, the whitened Jacobian blocks written into it."""
         st = self.states(values) if states is None else states
         n_R, n_p, n_v, b = st.n_R, st.n_p, st.n_v, st.bias[:-1]  # (bias: state i's, of factor i)
@@ -132,13 +135,27 @@ class BulkImu:
         ew = np.empty((len(self), 9))
         for lo in range(0, len(self), CHUNK):
             hi = min(lo + CHUNK, len(self))
-            sl, sl_j = slice(lo, hi), slice(lo + 1, hi + 1)  # states i and j = i + 1 of factors lo:hi
+            sl, sl_j = (
+                slice(lo, hi),
+                slice(lo + 1, hi + 1),
+            )  # states i and j = i + 1 of factors lo:hi
             part = a.part(sl)
             MG2 = None
             if out is not None and gr.model is not None:
                 MG2 = 0.5 * (part.M @ gr.G[sl]).reshape(-1, 2, 3, 3)
-            e, J = imu_errors(part, n_R[sl], n_p[sl], n_v[sl], n_R[sl_j], n_p[sl_j], n_v[sl_j], b[sl], n_g[sl],
-                              MG2, out is not None)
+            e, J = imu_errors(
+                part,
+                n_R[sl],
+                n_p[sl],
+                n_v[sl],
+                n_R[sl_j],
+                n_p[sl_j],
+                n_v[sl_j],
+                b[sl],
+                n_g[sl],
+                MG2,
+                out is not None,
+            )
             W = self.whiten[sl]
             ew[sl] = np.einsum("nij,nj->ni", W, e)
             if out is not None:

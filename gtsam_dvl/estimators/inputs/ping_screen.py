@@ -1,5 +1,5 @@
 """The screen for bogus DVL pings (PingScreen, screen_pings) and the reason codes of every ping rejection, for
-estimators/selection.py, which applies them for the batch smoother, the online estimator and the EKF.
+estimators/inputs/selection.py, which applies them for the batch smoother, the online estimator and the EKF.
 
 A ping is bogus (with `dvl.screen`) when it is an exact zero velocity while moving, a velocity repeated bit for bit
 (a frozen output), or a velocity change the IMU cannot explain. A real DVL's velocity is noisy: a stationary
@@ -31,11 +31,20 @@ ZERO_WHILE_MOVING = 3  # exactly 0.0 in every component while moving (PingScreen
 REPEATED = 4  # bit-identical to the previous accepted ping, not zero: a frozen output (PingScreen)
 IMPLAUSIBLE_ACCEL = 5  # a velocity change the IMU cannot explain (PingScreen)
 WATER_TRACK = 6  # the DVL measured relative to the water (DvlData.water_track), not over ground
-BEFORE_IMU = 7  # at or before the first IMU sample: nothing to propagate from (not a fault of the ping)
+BEFORE_IMU = (
+    7  # at or before the first IMU sample: nothing to propagate from (not a fault of the ping)
+)
 AFTER_IMU = 8  # after the last IMU sample (not a fault of the ping)
-REASONS = {UNUSABLE: "dvl_unusable", TOO_FAST: "dvl_too_fast", ZERO_WHILE_MOVING: "dvl_zero_while_moving",
-           REPEATED: "dvl_repeated", IMPLAUSIBLE_ACCEL: "dvl_implausible_accel", WATER_TRACK: "dvl_water_track",
-           BEFORE_IMU: "dvl_before_imu", AFTER_IMU: "dvl_after_imu"}
+REASONS = {
+    UNUSABLE: "dvl_unusable",
+    TOO_FAST: "dvl_too_fast",
+    ZERO_WHILE_MOVING: "dvl_zero_while_moving",
+    REPEATED: "dvl_repeated",
+    IMPLAUSIBLE_ACCEL: "dvl_implausible_accel",
+    WATER_TRACK: "dvl_water_track",
+    BEFORE_IMU: "dvl_before_imu",
+    AFTER_IMU: "dvl_after_imu",
+}
 SCREEN_WINDOW_S = 60.0  # the screen looks at most this far back in the IMU
 
 
@@ -49,8 +58,9 @@ def _turned_back(theta: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.asarray(v * c - np.cross(k, v) * s + k * (k @ v)[:, None] * (1.0 - c))
 
 
-def screened_value(d_v: np.ndarray, beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-                   cfg: DvlConfig) -> np.ndarray:
+def screened_value(
+    d_v: np.ndarray, beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None, cfg: DvlConfig
+) -> np.ndarray:
     """What PingScreen compares of a ping: the 3-D velocity (3,), or with dvl.use_beams and beams
     (d_u, v, valid) the beam velocities (B,), NaN where invalid."""
     if cfg.use_beams and beams is not None:
@@ -89,7 +99,9 @@ class PingScreen:
     _w: list[np.ndarray] = field(default_factory=list)
     _f: list[np.ndarray] = field(default_factory=list)
 
-    def check(self, t: float, y: np.ndarray, imu_t: np.ndarray, imu_w: np.ndarray, imu_f: np.ndarray) -> int:
+    def check(
+        self, t: float, y: np.ndarray, imu_t: np.ndarray, imu_w: np.ndarray, imu_f: np.ndarray
+    ) -> int:
         """Reason code of ping t with value y (screened_value), given IMU stamps imu_t (sorted) with gyro
         imu_w (rad/s) and specific force imu_f (m/s^2) holding at least the window's samples; an accepted
         ping becomes the reference."""
@@ -103,13 +115,20 @@ class PingScreen:
             self.last_t, self.last_y = t, np.array(y, dtype=float)
         return code
 
-    def _classify(self, t: float, y: np.ndarray, imu_t: np.ndarray, imu_w: np.ndarray, imu_f: np.ndarray) -> int:
+    def _classify(
+        self, t: float, y: np.ndarray, imu_t: np.ndarray, imu_w: np.ndarray, imu_f: np.ndarray
+    ) -> int:
         cfg, last = self.cfg, self.last_y
         assert last is not None
         t_from = max(self.last_t, t - SCREEN_WINDOW_S)
-        lo, hi = int(np.searchsorted(imu_t, t_from, side="right")), int(np.searchsorted(imu_t, t, side="right"))
+        lo, hi = (
+            int(np.searchsorted(imu_t, t_from, side="right")),
+            int(np.searchsorted(imu_t, t, side="right")),
+        )
         # with beams, the largest beam velocity: a lower bound of the speed
-        prev_speed = float(np.nanmax(np.abs(last))) if cfg.use_beams else float(np.linalg.norm(last))
+        prev_speed = (
+            float(np.nanmax(np.abs(last))) if cfg.use_beams else float(np.linalg.norm(last))
+        )
         imu_motion, dv_imu = False, 0.0
         if hi - lo >= 1:
             tw, w, f = imu_t[lo:hi], imu_w[lo:hi], imu_f[lo:hi]
@@ -121,18 +140,29 @@ class PingScreen:
             dw_v = np.linalg.norm(w - w[0], axis=1) * prev_speed
             # the acceleration at the window's start is the DVL's between the previous two pings; whatever its
             # direction, |a_0 dt + sum df dt| >= | |a_0| dt - |sum df dt| |
-            dv_low = abs(float(np.linalg.norm(dt @ df)) - self.last_rate * (t - t_from)) - float(dt @ dw_v)
+            dv_low = abs(float(np.linalg.norm(dt @ df)) - self.last_rate * (t - t_from)) - float(
+                dt @ dw_v
+            )
             imu_motion = dv_low > cfg.motion_dv_m_s
             dv_imu = float(dt @ (np.linalg.norm(df, axis=1) + dw_v))
         valid = np.isfinite(y)
         zero = valid.any() and bool(np.all(y[valid] == 0.0))
         if zero and (imu_motion or prev_speed > cfg.moving_speed_m_s):
             return ZERO_WHILE_MOVING
-        if ((imu_motion or not self.repeats_need_motion) and valid.any() and not zero and y.shape == last.shape
-                and np.array_equal(y, last, equal_nan=True)):
+        if (
+            (imu_motion or not self.repeats_need_motion)
+            and valid.any()
+            and not zero
+            and y.shape == last.shape
+            and np.array_equal(y, last, equal_nan=True)
+        ):
             return REPEATED  # a frozen output
         if not cfg.use_beams:  # the 3-D velocity only: beams may change validity from ping to ping
-            allowed = cfg.max_accel_m_s2 * (t - self.last_t) + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+            allowed = (
+                cfg.max_accel_m_s2 * (t - self.last_t)
+                + cfg.accel_imu_factor * dv_imu
+                + cfg.jump_margin_m_s
+            )
             if float(np.linalg.norm(y - last)) > allowed:
                 return IMPLAUSIBLE_ACCEL
         return USABLE
@@ -144,7 +174,9 @@ class PingScreen:
             self._t.append(np.asarray(t, dtype=float))
             self._w.append(np.asarray(w, dtype=float))
             self._f.append(np.asarray(f, dtype=float))
-            if self._t[0][0] < self._t[-1][-1] - 3 * SCREEN_WINDOW_S:  # no ping for long: bounded memory
+            if (
+                self._t[0][0] < self._t[-1][-1] - 3 * SCREEN_WINDOW_S
+            ):  # no ping for long: bounded memory
                 T, W, F = np.concatenate(self._t), np.concatenate(self._w), np.concatenate(self._f)
                 keep = int(np.searchsorted(T, T[-1] - 2 * SCREEN_WINDOW_S, side="right"))
                 self._t, self._w, self._f = [T[keep:]], [W[keep:]], [F[keep:]]
@@ -156,13 +188,22 @@ class PingScreen:
     def check_buffered(self, t: float, y: np.ndarray) -> int:
         """check() on the buffered samples (reaches(t) must hold), then drop the samples no later ping needs."""
         if len(self._t) > 1:
-            self._t, self._w, self._f = [np.concatenate(self._t)], [np.concatenate(self._w)], [np.concatenate(self._f)]
-        T, W, F = (self._t[0], self._w[0], self._f[0]) if self._t else (np.zeros(0), np.zeros((0, 3)),
-                                                                         np.zeros((0, 3)))
+            self._t, self._w, self._f = (
+                [np.concatenate(self._t)],
+                [np.concatenate(self._w)],
+                [np.concatenate(self._f)],
+            )
+        T, W, F = (
+            (self._t[0], self._w[0], self._f[0])
+            if self._t
+            else (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
+        )
         code = self.check(t, y, T, W, F)
         keep = int(np.searchsorted(T, max(self.last_t, t - SCREEN_WINDOW_S), side="right"))
         if keep:
-            self._t, self._w, self._f = ([T[keep:]], [W[keep:]], [F[keep:]]) if keep < len(T) else ([], [], [])
+            self._t, self._w, self._f = (
+                ([T[keep:]], [W[keep:]], [F[keep:]]) if keep < len(T) else ([], [], [])
+            )
         return code
 
 
@@ -185,14 +226,18 @@ def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) ->
     t = np.asarray(dvl.t, dtype=float)[idx]
     b = dvl.beams
     if cfg.use_beams and b is not None:  # screened_value's choice
-        y = np.where(np.asarray(b.valid[idx], dtype=bool), np.asarray(b.v[idx], dtype=float), np.nan)
+        y = np.where(
+            np.asarray(b.valid[idx], dtype=bool), np.asarray(b.v[idx], dtype=float), np.nan
+        )
     else:
         y = np.asarray(dvl.d_v, dtype=float)[idx]
     bulk, sure = _bulk_screen(t, y, imu, cfg, dvl.noise_free)
     screen = PingScreen(cfg, repeats_need_motion=dvl.noise_free)
     t_list, bulk_list, sure_list = t.tolist(), bulk.tolist(), sure.tolist()
     last = -1  # the reference: the last accepted ping
-    rate_of: tuple[int, int] | None = None  # the pings whose velocity change last_rate is (None: 0.0)
+    rate_of: tuple[int, int] | None = (
+        None  # the pings whose velocity change last_rate is (None: 0.0)
+    )
     for n in range(m):
         # the pair the bulk assumed for last_rate: none for the first reference, and never with beams
         assumed = None if cfg.use_beams or n < 2 else (n - 2, n - 1)
@@ -202,12 +247,20 @@ def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) ->
             c = bulk_list[n]
         else:
             screen.last_t, screen.last_y = t_list[last], np.array(y[last], dtype=float)
-            screen.last_rate = 0.0 if rate_of is None else (
-                float(np.linalg.norm(y[rate_of[1]] - y[rate_of[0]])) / (t_list[rate_of[1]] - t_list[rate_of[0]]))
+            screen.last_rate = (
+                0.0
+                if rate_of is None
+                else (
+                    float(np.linalg.norm(y[rate_of[1]] - y[rate_of[0]]))
+                    / (t_list[rate_of[1]] - t_list[rate_of[0]])
+                )
+            )
             c = screen._classify(t_list[n], y[n], imu.t, imu.b_omega, imu.b_f)
         code[n] = c
         if c == USABLE:
-            if last >= 0 and not cfg.use_beams and t_list[n] > t_list[last]:  # check()'s update of last_rate
+            if (
+                last >= 0 and not cfg.use_beams and t_list[n] > t_list[last]
+            ):  # check()'s update of last_rate
                 rate_of = (last, n)
             last = n
     return code
@@ -217,7 +270,9 @@ def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) ->
 # evaluates PingScreen's formulas on the same samples, differing only in the order of the window sums and in
 # dot products (a few ulps, 1e-16 relative, times the window's samples), far inside this.
 _BAND = 1e-9
-_BULK_MAX_SAMPLES = 1 << 14  # IMU samples per block of the bulk screen (bounded memory on long logs)
+_BULK_MAX_SAMPLES = (
+    1 << 14
+)  # IMU samples per block of the bulk screen (bounded memory on long logs)
 
 
 def _window_sums(imu: ImuData, t_from: np.ndarray, lo: np.ndarray, cnt: np.ndarray) -> np.ndarray:
@@ -225,7 +280,10 @@ def _window_sums(imu: ImuData, t_from: np.ndarray, lo: np.ndarray, cnt: np.ndarr
     columns sum dt df (3, m/s), sum dt |df| (m/s), sum dt |omega - omega_0| (rad), sum dt |f| (m/s, for the
     band). Blocks of windows padded to the longest (padding has dt = 0), one array per axis (contiguous)."""
     out = np.zeros((len(lo), 6))
-    b_omega, b_f = np.ascontiguousarray(imu.b_omega.T), np.ascontiguousarray(imu.b_f.T)  # (3, samples)
+    b_omega, b_f = (
+        np.ascontiguousarray(imu.b_omega.T),
+        np.ascontiguousarray(imu.b_f.T),
+    )  # (3, samples)
     per_block = max(1, _BULK_MAX_SAMPLES // int(cnt.max()))
     for start in range(0, len(lo), per_block):
         stop = min(start + per_block, len(lo))
@@ -246,23 +304,32 @@ def _window_sums(imu: ImuData, t_from: np.ndarray, lo: np.ndarray, cnt: np.ndarr
         c, s = np.cos(angle), np.sin(angle)
         v = f[:, :, :1]
         k_v = k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
-        k_x_v = np.stack([k[1] * v[2] - k[2] * v[1], k[2] * v[0] - k[0] * v[2], k[0] * v[1] - k[1] * v[0]])
+        k_x_v = np.stack(
+            [k[1] * v[2] - k[2] * v[1], k[2] * v[0] - k[0] * v[2], k[0] * v[1] - k[1] * v[0]]
+        )
         df = f - (v * c - k_x_v * s + k * (k_v * (1.0 - c)))
         dw = w - w[:, :, :1]
         out[start:stop, :3] = np.sum(df * dt, axis=2).T
-        out[start:stop, 3] = np.sum(np.sqrt(df[0] * df[0] + df[1] * df[1] + df[2] * df[2]) * dt, axis=1)
-        out[start:stop, 4] = np.sum(np.sqrt(dw[0] * dw[0] + dw[1] * dw[1] + dw[2] * dw[2]) * dt, axis=1)
+        out[start:stop, 3] = np.sum(
+            np.sqrt(df[0] * df[0] + df[1] * df[1] + df[2] * df[2]) * dt, axis=1
+        )
+        out[start:stop, 4] = np.sum(
+            np.sqrt(dw[0] * dw[0] + dw[1] * dw[1] + dw[2] * dw[2]) * dt, axis=1
+        )
         out[start:stop, 5] = np.sum(np.sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]) * dt, axis=1)
     return out
 
 
-def _bulk_screen(t: np.ndarray, y: np.ndarray, imu: ImuData, cfg: DvlConfig,
-                 repeats_need_motion: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def _bulk_screen(
+    t: np.ndarray, y: np.ndarray, imu: ImuData, cfg: DvlConfig, repeats_need_motion: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """(code, sure) of each ping n >= 1 (ping 0: USABLE, sure) with screened values y (M, K) under the assumption
     that ping n - 1 is the reference and ping n - 2 was its reference (last_rate from the two; 0 for ping 1 and
     with dvl.use_beams): PingScreen's rules on the samples in (t[n-1], t[n]]. sure: the assumption's code is
     PingScreen's (no capped window, every value finite and clear of the thresholds by _BAND)."""
-    beams = cfg.use_beams  # PingScreen's beam rules (even on a 3-D velocity when the log has no beams)
+    beams = (
+        cfg.use_beams
+    )  # PingScreen's beam rules (even on a 3-D velocity when the log has no beams)
     m = len(t)
     code = np.zeros(m, dtype=np.int8)
     sure = np.ones(m, dtype=bool)
@@ -274,7 +341,9 @@ def _bulk_screen(t: np.ndarray, y: np.ndarray, imu: ImuData, cfg: DvlConfig,
         if beams:
             beam_prev = ~np.isnan(y_prev)
             prev_speed = np.max(np.where(beam_prev, np.abs(y_prev), -np.inf), axis=1)  # nanmax
-            prev_speed[~beam_prev.any(axis=1)] = np.nan  # nanmax of no beam: NaN (left to PingScreen)
+            prev_speed[~beam_prev.any(axis=1)] = (
+                np.nan
+            )  # nanmax of no beam: NaN (left to PingScreen)
             rate = np.zeros(m - 1)
         else:
             prev_speed = np.linalg.norm(y_prev, axis=1)
@@ -290,7 +359,12 @@ def _bulk_screen(t: np.ndarray, y: np.ndarray, imu: ImuData, cfg: DvlConfig,
         sums = np.zeros((m - 1, 6))
         if has.any():
             sums[has] = _window_sums(imu, t_prev[has], lo[has], cnt[has])
-        s_df, s_adf, s_dw, s_af = np.linalg.norm(sums[:, :3], axis=1), sums[:, 3], sums[:, 4], sums[:, 5]
+        s_df, s_adf, s_dw, s_af = (
+            np.linalg.norm(sums[:, :3], axis=1),
+            sums[:, 3],
+            sums[:, 4],
+            sums[:, 5],
+        )
         dv_low = np.abs(s_df - rate * span) - s_dw * prev_speed
         motion = has & (dv_low > cfg.motion_dv_m_s)
         dv_imu = np.where(has, s_adf + s_dw * prev_speed, 0.0)
@@ -309,14 +383,24 @@ def _bulk_screen(t: np.ndarray, y: np.ndarray, imu: ImuData, cfg: DvlConfig,
         implausible = np.zeros(m - 1, dtype=bool)
         if not beams:
             jump = np.linalg.norm(y_now - y_prev, axis=1)
-            allowed = cfg.max_accel_m_s2 * span + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+            allowed = (
+                cfg.max_accel_m_s2 * span + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+            )
             implausible = jump > allowed
-            band = _BAND * (jump + allowed + np.linalg.norm(y_now, axis=1) + prev_speed
-                            + cfg.accel_imu_factor * scale)
+            band = _BAND * (
+                jump
+                + allowed
+                + np.linalg.norm(y_now, axis=1)
+                + prev_speed
+                + cfg.accel_imu_factor * scale
+            )
             clear &= np.abs(jump - allowed) > band
             ok &= np.isfinite(y_now).all(axis=1) & np.isfinite(jump) & np.isfinite(allowed)
-    code[1:] = np.where(zero, ZERO_WHILE_MOVING, np.where(repeated, REPEATED,
-                                                          np.where(implausible, IMPLAUSIBLE_ACCEL, USABLE)))
+    code[1:] = np.where(
+        zero,
+        ZERO_WHILE_MOVING,
+        np.where(repeated, REPEATED, np.where(implausible, IMPLAUSIBLE_ACCEL, USABLE)),
+    )
     sure[1:] = ok & clear
     return code, sure
 
@@ -334,4 +418,7 @@ def frozen_runs(dvl: DvlData) -> list[tuple[float, float, int]]:
     rep[1:] = ok[1:] & ok[:-1] & (v[1:] == v[:-1]).all(axis=1)
     edges = np.flatnonzero(np.diff(np.r_[0, rep.astype(np.int8), 0]))
     t = np.asarray(dvl.t, dtype=float)
-    return [(float(t[a]), float(t[b - 1]), int(b - a)) for a, b in zip(edges[::2], edges[1::2], strict=True)]
+    return [
+        (float(t[a]), float(t[b - 1]), int(b - a))
+        for a, b in zip(edges[::2], edges[1::2], strict=True)
+    ]

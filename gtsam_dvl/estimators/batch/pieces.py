@@ -1,12 +1,12 @@
 """A log cut at its long IMU gaps: the pieces smoothed with one shared calibration, one result with marked breaks.
 
-An IMU gap longer than [imu] max_gap_s cannot be crossed by holding the last sample (estimators/gaps.py): over a
+An IMU gap longer than [imu] max_gap_s cannot be crossed by holding the last sample (estimators/inputs/gaps.py): over a
 30 s gap in a turn that motion model is wrong, not just uncertain. The batch smoother then cuts the log at each such
 gap into pieces (cut_log: the IMU samples, pings, depth, GNSS and truth of each piece's time span; what falls in a
-gap is left out) and smooths them as the dives of one vehicle (estimators/multi_dive.py): each piece has its own
+gap is left out) and smooths them as the dives of one vehicle (estimators/batch/multi_dive.py): each piece has its own
 trajectory, IMU biases and time offset, and the pieces share the DVL calibration (scale, misalignment, lever arm
 when estimated), solved jointly. Each piece after the first starts in motion: it is aligned in motion
-(estimators/alignment.py, the DVL-aided alignment) and its position, which no measurement ties to the piece
+(estimators/inputs/alignment.py, the DVL-aided alignment) and its position, which no measurement ties to the piece
 before, is placed by dead reckoning across the gap (across_gap: a constant-rate turn between the velocities on
 either side) with its first position's prior sigma DEAD_RECKONING_M plus DEAD_RECKONING_FRACTION of the distance
 crossed: a marked break, not a measurement.
@@ -33,10 +33,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch_solve import extract_result
-from gtsam_dvl.estimators.bulk import BulkGraph
-from gtsam_dvl.estimators.gaps import find_gaps
-from gtsam_dvl.estimators.multi_dive import (
+from gtsam_dvl.estimators.batch.multi_dive import (
     DiveState,
     JointSolution,
     Reduction,
@@ -46,6 +43,9 @@ from gtsam_dvl.estimators.multi_dive import (
     state_keys,
     state_slices,
 )
+from gtsam_dvl.estimators.batch.solve import extract_result
+from gtsam_dvl.estimators.graph.bulk import BulkGraph
+from gtsam_dvl.estimators.inputs.gaps import find_gaps
 
 # the first position of a piece after a gap: its prior sigma (m), a floor plus a fraction of the distance crossed
 # (the path across the gap is a constant-rate turn between the velocities on either side: across_gap; a vehicle
@@ -63,7 +63,12 @@ def across_gap(n_v0: np.ndarray, n_v1: np.ndarray, dt: float) -> np.ndarray:
     mean = 0.5 * (n_v0 + n_v1) * dt
     h0, h1 = np.arctan2(n_v0[1], n_v0[0]), np.arctan2(n_v1[1], n_v1[0])
     a = 0.5 * float(np.angle(np.exp(1j * (h1 - h0))))
-    if abs(a) > 1e-6 and np.hypot(*n_v0[:2]) > 0.1 and np.hypot(*n_v1[:2]) > 0.1 and abs(a) < 0.45 * np.pi:
+    if (
+        abs(a) > 1e-6
+        and np.hypot(*n_v0[:2]) > 0.1
+        and np.hypot(*n_v1[:2]) > 0.1
+        and abs(a) < 0.45 * np.pi
+    ):
         mean[:2] *= np.sin(a) / a / np.cos(a)
     return mean
 
@@ -121,7 +126,9 @@ def cut_log(log: LogData, gaps: list[tuple[float, float]]) -> list[LogData]:
             t = getattr(data, "t", None)
             if dataclasses.is_dataclass(data) and isinstance(t, np.ndarray):
                 streams[f.name] = _take(data, (t >= lo) & (t <= hi))
-        out.append(dataclasses.replace(log, **streams, source=f"{log.source or 'log'} (piece {k + 1})"))
+        out.append(
+            dataclasses.replace(log, **streams, source=f"{log.source or 'log'} (piece {k + 1})")
+        )
     return out
 
 
@@ -130,7 +137,9 @@ def _piece_config(config: EstimatorConfig, sigma_m: float) -> EstimatorConfig:
     d = config.to_dict()
     d.setdefault("alignment", {})["method"] = "in_motion"
     d["alignment"]["initial_attitude_deg"] = None
-    d.setdefault("priors", {})["position_sigma_m"] = max(float(config.priors.position_sigma_m), sigma_m)
+    d.setdefault("priors", {})["position_sigma_m"] = max(
+        float(config.priors.position_sigma_m), sigma_m
+    )
     return EstimatorConfig.from_dict(d)
 
 
@@ -141,8 +150,11 @@ def _linear_prior(parts: list[Reduction], names: list[str]) -> gtsam.NonlinearFa
     R = np.vstack([p.R for p in parts])
     d = np.concatenate([p.d for p in parts])
     sl = state_slices(names)
-    return gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(R.shape[0]), state_keys(names),
-                              Rows([R[:, sl[n]] for n in names], d))
+    return gtsam.CustomFactor(
+        gtsam.noiseModel.Unit.Create(R.shape[0]),
+        state_keys(names),
+        Rows([R[:, sl[n]] for n in names], d),
+    )
 
 
 def _piece_result(dive: DiveState, others: list[Reduction]) -> NavResult:
@@ -155,9 +167,14 @@ def _piece_result(dive: DiveState, others: list[Reduction]) -> NavResult:
     return result
 
 
-def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float, float]],
-                  progress: ProgressFn | None = None, estimator: str = "batch",
-                  calibration: VehicleCalibration | None = None) -> NavResult:
+def smooth_pieces(
+    log: LogData,
+    config: EstimatorConfig,
+    gaps: list[tuple[float, float]],
+    progress: ProgressFn | None = None,
+    estimator: str = "batch",
+    calibration: VehicleCalibration | None = None,
+) -> NavResult:
     """Smooth a log cut at its long IMU gaps (module doc). calibration: a vehicle's calibration as the joint prior
     of the states it holds (batch.smooth_batch's), which the pieces then share."""
     t0 = time.perf_counter()
@@ -169,20 +186,33 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
         cfg = config
         if dives:
             prev = dives[-1].alone
-            distance = float(np.linalg.norm(prev.n_v[-1])) * float(piece.imu.t[0] - prev.t[-1]) if len(
-                piece.imu) else 0.0
+            distance = (
+                float(np.linalg.norm(prev.n_v[-1])) * float(piece.imu.t[0] - prev.t[-1])
+                if len(piece.imu)
+                else 0.0
+            )
             cfg = _piece_config(config, DEAD_RECKONING_M + DEAD_RECKONING_FRACTION * distance)
         try:
             dives.append(prepare_dive(piece, cfg, name=piece.source, calibration=calibration))
             kept.append(k)
         except GtsamDvlError as exc:
-            if k == 0:  # the piece that holds the log's start (its map origin and alignment): no result without it
-                raise GtsamDvlError(f"{log.source or 'log'}: cut at {len(gaps)} IMU gap(s) longer than "
-                                    f"imu.max_gap_s ({gaps[0][0]:.2f}-{gaps[0][1]:.2f} s first): the first piece "
-                                    f"cannot be smoothed: {exc}") from None
+            if (
+                k == 0
+            ):  # the piece that holds the log's start (its map origin and alignment): no result without it
+                raise GtsamDvlError(
+                    f"{log.source or 'log'}: cut at {len(gaps)} IMU gap(s) longer than "
+                    f"imu.max_gap_s ({gaps[0][0]:.2f}-{gaps[0][1]:.2f} s first): the first piece "
+                    f"cannot be smoothed: {exc}"
+                ) from None
             t = piece.imu.t
-            left_out.append({"piece": k + 1, "t_start_s": float(t[0]) if len(t) else None,
-                             "t_end_s": float(t[-1]) if len(t) else None, "error": str(exc)})
+            left_out.append(
+                {
+                    "piece": k + 1,
+                    "t_start_s": float(t[0]) if len(t) else None,
+                    "t_end_s": float(t[-1]) if len(t) else None,
+                    "error": str(exc),
+                }
+            )
         if progress:
             progress(0.6 * (k + 1) / len(pieces))
     solution = calibrate_in_process(dives)
@@ -193,10 +223,15 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
         others = [r for j, r in enumerate(solution.reductions) if j != k] + solution.prior_rows
         result = _piece_result(dive, others)
         if result.dvl_pings is not None:  # the piece's ping indices in the log's
-            result.dvl_pings = result.dvl_pings + int(np.searchsorted(log.dvl.t, pieces[kept[k]].dvl.t[0]))
+            result.dvl_pings = result.dvl_pings + int(
+                np.searchsorted(log.dvl.t, pieces[kept[k]].dvl.t[0])
+            )
         results.append(result)
     # the breaks between the pieces kept: from the last IMU sample of one to the first of the next
-    breaks = [(float(pieces[a].imu.t[-1]), float(pieces[b].imu.t[0])) for a, b in zip(kept, kept[1:], strict=False)]
+    breaks = [
+        (float(pieces[a].imu.t[-1]), float(pieces[b].imu.t[0]))
+        for a, b in zip(kept, kept[1:], strict=False)
+    ]
     out = _joined(results, dives, solution, breaks, estimator)
     if calibration is not None:
         out.info["calibration_prior"] = dives[0].alone.info.get("calibration_prior")
@@ -208,14 +243,25 @@ def smooth_pieces(log: LogData, config: EstimatorConfig, gaps: list[tuple[float,
     return out
 
 
-def _joined(results: list[NavResult], dives: list[DiveState], solution: JointSolution,
-            gaps: list[tuple[float, float]], estimator: str) -> NavResult:
+def _joined(
+    results: list[NavResult],
+    dives: list[DiveState],
+    solution: JointSolution,
+    gaps: list[tuple[float, float]],
+    estimator: str,
+) -> NavResult:
     """The pieces' results as one, each later piece's positions placed by dead reckoning across its gap."""
     n_p = [results[0].n_p]
     for k in range(1, len(results)):
         prev, cur = results[k - 1], results[k]
-        n_p.append(cur.n_p + (n_p[-1][-1] + across_gap(prev.n_v[-1], cur.n_v[0], float(cur.t[0] - prev.t[-1]))
-                              - cur.n_p[0]))
+        n_p.append(
+            cur.n_p
+            + (
+                n_p[-1][-1]
+                + across_gap(prev.n_v[-1], cur.n_v[0], float(cur.t[0] - prev.t[-1]))
+                - cur.n_p[0]
+            )
+        )
     first = results[0]
 
     def cat(name: str) -> Any:
@@ -223,21 +269,51 @@ def _joined(results: list[NavResult], dives: list[DiveState], solution: JointSol
         return None if any(p is None for p in parts) else np.concatenate(parts)
 
     starts = np.cumsum([0] + [len(r.t) for r in results[:-1]]).tolist()
-    pieces = [{"start_index": int(s), "t_start_s": float(r.t[0]), "t_end_s": float(r.t[-1]), "states": len(r.t),
-               "alone": {name: {"value": np.asarray(e.value).tolist(), "sigma": e.sigma.tolist()}
-                         for name, e in d.alone.calibration.items()}}
-              for s, r, d in zip(starts, results, dives, strict=True)]
+    pieces = [
+        {
+            "start_index": int(s),
+            "t_start_s": float(r.t[0]),
+            "t_end_s": float(r.t[-1]),
+            "states": len(r.t),
+            "alone": {
+                name: {"value": np.asarray(e.value).tolist(), "sigma": e.sigma.tolist()}
+                for name, e in d.alone.calibration.items()
+            },
+        }
+        for s, r, d in zip(starts, results, dives, strict=True)
+    ]
     info = dict(first.info)
-    info.update(epochs=int(sum(len(r.t) for r in results)), pieces=pieces,
-                breaks=[{"after_index": int(s) - 1, "gap_start_s": g[0], "gap_end_s": g[1]}
-                        for s, g in zip(starts[1:], gaps, strict=True)],
-                joint={"iterations": solution.iterations, "converged": solution.converged,
-                       "history": solution.history})
+    info.update(
+        epochs=int(sum(len(r.t) for r in results)),
+        pieces=pieces,
+        breaks=[
+            {"after_index": int(s) - 1, "gap_start_s": g[0], "gap_end_s": g[1]}
+            for s, g in zip(starts[1:], gaps, strict=True)
+        ],
+        joint={
+            "iterations": solution.iterations,
+            "converged": solution.converged,
+            "history": solution.history,
+        },
+    )
     pings = [r.dvl_pings for r in results if r.dvl_pings is not None]
     return NavResult(
-        estimator=estimator, t=cat("t"), n_p=np.concatenate(n_p), n_R_b=cat("n_R_b"), n_v=cat("n_v"),
-        pose_cov=cat("pose_cov"), vel_cov=cat("vel_cov"), calibration=dict(first.calibration),
-        b_R_d0=first.b_R_d0, t0_ns=first.t0_ns, b_omega=cat("b_omega"), pose_vel_cross=cat("pose_vel_cross"),
-        calib_joint_cov=first.calib_joint_cov, shared_joint_cov=first.shared_joint_cov, info=info,
-        config=first.config, alignment_method=first.alignment_method,
-        dvl_pings=np.concatenate(pings) if len(pings) == len(results) else None)
+        estimator=estimator,
+        t=cat("t"),
+        n_p=np.concatenate(n_p),
+        n_R_b=cat("n_R_b"),
+        n_v=cat("n_v"),
+        pose_cov=cat("pose_cov"),
+        vel_cov=cat("vel_cov"),
+        calibration=dict(first.calibration),
+        b_R_d0=first.b_R_d0,
+        t0_ns=first.t0_ns,
+        b_omega=cat("b_omega"),
+        pose_vel_cross=cat("pose_vel_cross"),
+        calib_joint_cov=first.calib_joint_cov,
+        shared_joint_cov=first.shared_joint_cov,
+        info=info,
+        config=first.config,
+        alignment_method=first.alignment_method,
+        dvl_pings=np.concatenate(pings) if len(pings) == len(results) else None,
+    )
