@@ -1,4 +1,5 @@
-"""Shared simulator fixtures (sim_ prefix): simulated once per test session and worker."""
+"""Shared simulator fixtures (sim_ prefix): simulated once per test session and worker; and the xdist grouping
+of the modules that share a fixture between their tests."""
 
 from __future__ import annotations
 
@@ -29,3 +30,18 @@ def sim_paper2d_clean() -> LogData:
 def sim_paper3d_short() -> LogData:
     """paper-3d-short with noise (seed 11, as the fault matrix's): 840 s, the paper's manoeuvres shortened."""
     return simulate(load_scenario("paper-3d-short"), seed=11)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under `--dist loadgroup` (make test), the tests of a module that share a module- or class-scoped fixture
+    run on one xdist worker: spread over two, each worker would compute the fixture (a simulated log, an
+    estimator's run) again. A test already in a group keeps it. Runs before xdist's own hook, which reads the
+    marks."""
+    for item in items:
+        if item.get_closest_marker("xdist_group") is not None:
+            continue
+        info = getattr(item, "_fixtureinfo", None)
+        defs = info.name2fixturedefs.values() if info is not None else ()
+        if any(d and d[-1].scope in ("module", "class") for d in defs):
+            item.add_marker(pytest.mark.xdist_group(name=item.nodeid.split("::")[0]))

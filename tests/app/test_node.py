@@ -132,6 +132,14 @@ def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
                 while player.poll() is None and time.monotonic() < deadline:
                     executor.spin_once(timeout_sec=0.05)
                 played = player.communicate(timeout=10)[0]
+                # the node may still be working through its queue (a loaded machine runs it slower than RATE):
+                # interrupted only once its odometry has gone quiet
+                quiet = time.monotonic()
+                while time.monotonic() < min(deadline, quiet + 3.0):
+                    n = len(odometry)
+                    executor.spin_once(timeout_sec=0.05)
+                    if len(odometry) != n:
+                        quiet = time.monotonic()
                 node.send_signal(signal.SIGINT)
                 while node.poll() is None and time.monotonic() < deadline:
                     executor.spin_once(timeout_sec=0.05)
