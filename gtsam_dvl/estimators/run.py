@@ -28,6 +28,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import EstimatorResult, NavResult
 from gtsam_dvl.core.types import LogData
+from gtsam_dvl.estimators.inputs.prepare import refuse_unsupported
 from gtsam_dvl.estimators.iodvlc import IoDvlcResult
 
 
@@ -127,11 +128,7 @@ def _iodvlc(
 ) -> IoDvlcResult:
     from gtsam_dvl.estimators.iodvlc import run_iodvlc
 
-    if calibration is not None:
-        raise GtsamDvlError(
-            "--mode io-dvlc takes no calibration prior (it estimates from the Type-I segments alone)"
-        )
-    return run_iodvlc(log, config)
+    return run_iodvlc(log, config)  # (no calibration prior: run_estimator refused one)
 
 
 ESTIMATORS: dict[str, Estimator] = {
@@ -216,9 +213,12 @@ def run_estimator(
     here; each estimator reads its own section of it. timeline: the batch smoother's filtering timeline (the
     filters always keep theirs). calibration: a vehicle's calibration, inflated for its age, as the prior of the
     states it holds (module doc)."""
-    if config is not None:
-        config.validate()
-    return get_estimator(mode).run(log, config, progress, timeline, calibration)
+    estimator = get_estimator(mode)
+    # what the estimator does not do, refused once, here, before any work (estimators/inputs/prepare.py)
+    refuse_unsupported(
+        mode, (config or EstimatorConfig.for_log(log.metadata)).validate(), calibration
+    )
+    return estimator.run(log, config, progress, timeline, calibration)
 
 
 def run_trajectory_estimator(

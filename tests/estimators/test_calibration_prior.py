@@ -90,5 +90,7 @@ def test_filters_start_at_the_inflated_file(mode: str, static_log: LogData) -> N
 
 
 def test_io_dvlc_takes_no_calibration(static_log: LogData) -> None:
-    with pytest.raises(GtsamDvlError, match="io-dvlc takes no calibration prior"):
+    with pytest.raises(
+        GtsamDvlError, match="calibration as the prior is batch, online and ekf only"
+    ):
         run_estimator(static_log, "io-dvlc", CONFIG, calibration=calibration_at_truth(static_log))
