@@ -20,6 +20,7 @@ from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.atomic import to_json
 from gtsam_dvl.io.mcap.writer import McapLogWriter
+from gtsam_dvl.io.read_options import ReadOptions
 from gtsam_dvl.io.ros2.covariance import ros_pose_covariance, ros_twist_covariance
 
 TOPICS = {
@@ -177,27 +178,14 @@ def file_sha256(path: Path | str) -> str:
 
 
 def source_record(
-    log: LogData, result_path: Path | str, read_options: dict[str, Any] | None
+    log: LogData, result_path: Path | str, read_options: ReadOptions | None
 ) -> dict[str, str]:
     """Where the result came from, for the metadata record "gtsam_dvl_result": the source log's absolute path,
     its path relative to the folder of the result file (so that the two can move together), the SHA-256 of its
     content (file_sha256: `evaluate --truth` checks that it is given the source), the map origin it read (JSON,
-    "" when the log records none) and the reading options (JSON: imu_topic, dvl_topic, salvage, repair and, when
-    given, depth_topic, gnss_topic, attitude_topic, truth_topic and dvl_water_topic)."""
-    options: dict[str, Any] = {
-        "imu_topic": "/imu/data_raw",
-        "dvl_topic": None,
-        "salvage": False,
-        "repair": False,
-    }
-    topics = ("depth_topic", "gnss_topic", "attitude_topic", "truth_topic", "dvl_water_topic")
-    options.update(
-        {
-            k: v
-            for k, v in (read_options or {}).items()
-            if k in options or (k in topics and v is not None)
-        }
-    )
+    "" when the log records none) and the reading options (JSON, ReadOptions.record(): imu_topic, dvl_topic,
+    salvage, repair and the others that differ from their defaults; None: the defaults)."""
+    options = (read_options or ReadOptions()).record()
     origin = to_json(log.origin.as_dict()) if log.origin is not None else ""
     if not log.source:
         return {
@@ -226,7 +214,7 @@ def write_result_log(
     result: NavResult,
     log: LogData,
     summary: dict[str, Any],
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     result_path: Path | str | None = None,
 ) -> Path:
     """Estimates with marginal covariances, path, biases and calibration, plus the summary and the
