@@ -71,6 +71,10 @@ class ReadOptions(BaseModel):
         except ValidationError as exc:
             raise GtsamDvlError(_one_line(exc, data, "read options")) from None
 
+    # marked as pydantic's own __init__ (as core/config/base.py ConfigModel): model_validate (from_record) then
+    # validates without it and names its own source
+    __init__.__pydantic_base_init__ = True  # type: ignore[attr-defined]
+
     @field_validator("attitude_frame")
     @classmethod
     def _known_frame(cls, frame: str) -> str:
