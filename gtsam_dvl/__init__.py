@@ -5,6 +5,7 @@ the simulator, scipy and matplotlib load with the first name that needs them).
 
     import gtsam_dvl as gd
     log = gd.read_log("dive.mcap")                      # or gd.simulate(gd.load_scenario("paper-3d"), seed=1)
+    # other topics, damage: gd.read_log("dive.mcap", gd.ReadOptions(dvl_topic="/dvl/twist", repair=True))
     result = gd.smooth(log, "batch", gd.EstimatorConfig())
     print(result.scale, result.misalignment_deg)
 """
@@ -33,6 +34,7 @@ if TYPE_CHECKING:  # the lazy names' types, for mypy and editors
     from gtsam_dvl.estimators.online import OnlineEstimator
     from gtsam_dvl.estimators.run import run_estimator
     from gtsam_dvl.estimators.run import run_estimator as smooth
+    from gtsam_dvl.io.read_options import ReadOptions
     from gtsam_dvl.io.reader import read_log
     from gtsam_dvl.sim.scenario import load_scenario
     from gtsam_dvl.sim.simulate import simulate
@@ -42,6 +44,7 @@ __version__ = "0.1.0"
 # name -> (module, attribute): imported on first access (PEP 562 module __getattr__)
 _LAZY = {
     "read_log": ("gtsam_dvl.io.reader", "read_log"),
+    "ReadOptions": ("gtsam_dvl.io.read_options", "ReadOptions"),
     "smooth": ("gtsam_dvl.estimators.run", "run_estimator"),
     "run_estimator": ("gtsam_dvl.estimators.run", "run_estimator"),
     "simulate": ("gtsam_dvl.sim.simulate", "simulate"),
@@ -78,6 +81,7 @@ __all__ = [
     "Mounting",
     "NavResult",
     "OnlineEstimator",
+    "ReadOptions",
     "TruthData",
     "__version__",
     "evaluate",

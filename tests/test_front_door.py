@@ -30,6 +30,7 @@ def test_front_door_names_are_the_library_objects() -> None:
     from gtsam_dvl.core.result import NavResult
     from gtsam_dvl.estimators.online import OnlineEstimator
     from gtsam_dvl.estimators.run import run_estimator
+    from gtsam_dvl.io.read_options import ReadOptions
     from gtsam_dvl.io.reader import read_log
     from gtsam_dvl.sim.scenario import load_scenario
     from gtsam_dvl.sim.simulate import simulate
@@ -39,6 +40,7 @@ def test_front_door_names_are_the_library_objects() -> None:
     assert gtsam_dvl.load_scenario is load_scenario and gtsam_dvl.plan_mission is plan_mission
     assert gtsam_dvl.evaluate is evaluate_result and gtsam_dvl.EstimatorConfig is EstimatorConfig
     assert gtsam_dvl.NavResult is NavResult and gtsam_dvl.OnlineEstimator is OnlineEstimator
+    assert gtsam_dvl.ReadOptions is ReadOptions
     assert set(gtsam_dvl.__all__) <= set(dir(gtsam_dvl))
     for name in gtsam_dvl.__all__:
         assert getattr(gtsam_dvl, name) is not None

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -47,6 +47,9 @@ from gtsam_dvl.core.sensor_noise import (
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.models.noise_levels import STATIC_MIN_STEPS, STATIC_RAISE_FACTOR
+
+if TYPE_CHECKING:
+    from gtsam_dvl.io.read_options import ReadOptions
 
 GAP_PERIODS = 2.0  # a stamp spacing longer than this many nominal periods is a gap
 # static stretches: 1 s blocks of IMU samples whose mean turn rate is below STATIC_RATE_DEG_S (Earth rate is
@@ -579,7 +582,7 @@ def characterise_to_dir(
     config_path: Path | None = None,
     force: bool = False,
     show_progress: bool = True,
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
 ) -> Characterisation:
     """`gtsam-dvl characterise`: read the log, characterise it, write DIR/characterise.json, allan.png and
     recommended.toml all together (or none). A DIR that exists and holds files is refused unless force; an
@@ -603,7 +606,7 @@ def characterise_to_dir(
     )
     config = EstimatorConfig.load(config_path) if config_path else None
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
-        log = load_log(log_path, progress=read_progress, **(read_options or {}))
+        log = load_log(log_path, read_options, progress=read_progress)
     if config is None:
         config = EstimatorConfig.for_log(log.metadata)
     with progress_bar(f"characterising {Path(log_path).name}", enabled=show_progress) as progress:

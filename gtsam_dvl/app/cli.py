@@ -124,7 +124,7 @@ def plot_log(
     for path in plot_log_to_dir(
         log,
         output,
-        **_read_options(
+        _read_options(
             imu_topic,
             dvl_topic,
             salvage,
@@ -165,7 +165,7 @@ def info(
     typer.echo(
         describe_log(
             log,
-            **_read_options(
+            _read_options(
                 imu_topic,
                 dvl_topic,
                 salvage,

@@ -7,11 +7,14 @@ from __future__ import annotations
 import functools
 import signal
 from collections.abc import Callable
-from typing import Annotated, Any, TypeVar
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar
 
 import typer
 
 from gtsam_dvl.core.errors import GtsamDvlError
+
+if TYPE_CHECKING:
+    from gtsam_dvl.io.read_options import ReadOptions
 
 # rich_markup_mode=None: click's plain help, where a boolean flag reads as a flag ("--salvage"); typer 0.29's
 # rich help prints "<bool>" after every flag, as if it took a value
@@ -160,22 +163,23 @@ def _read_options(
     attitude_topic: str | None = None,
     truth_topic: str | None = None,
     dvl_water_topic: str | None = None,
-) -> dict[str, Any]:
-    """The reading options given on the command line (the topics left out when not given)."""
-    options: dict[str, Any] = {
+) -> ReadOptions:
+    """The reading options given on the command line (io/read_options.py; None: not given, the option's default,
+    and not in the result's model_fields_set: `evaluate` takes the recorded one)."""
+    from gtsam_dvl.io.read_options import ReadOptions
+
+    given = {
         "imu_topic": imu_topic,
         "dvl_topic": dvl_topic,
         "salvage": salvage,
         "repair": repair,
-    }
-    extra = {
         "depth_topic": depth_topic,
         "gnss_topic": gnss_topic,
         "attitude_topic": attitude_topic,
         "truth_topic": truth_topic,
         "dvl_water_topic": dvl_water_topic,
     }
-    return {**options, **{k: v for k, v in extra.items() if v is not None}}
+    return ReadOptions(**{k: v for k, v in given.items() if v is not None})
 
 
 def _builtin_scenarios() -> list[str]:

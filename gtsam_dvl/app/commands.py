@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from gtsam_dvl.estimators.run import (  # noqa: F401 - re-exported for the demo,
     run_estimator,
     run_trajectory_estimator,
 )
+
+if TYPE_CHECKING:
+    from gtsam_dvl.io.read_options import ReadOptions
 
 
 @dataclass
@@ -94,25 +98,32 @@ def simulate_to_file(
     )
 
 
-def load_log(path: Path | str, **options: Any) -> LogData:
-    """Read a log (MCAP file or rosbag2 directory) with the project reader."""
+def load_log(
+    path: Path | str,
+    options: ReadOptions | None = None,
+    *,
+    progress: Callable[[float], None] | None = None,
+) -> LogData:
+    """Read a log (MCAP file or rosbag2 directory) with the project reader (options None: the defaults)."""
     from gtsam_dvl.io.reader import read_log
 
     if not Path(path).exists():
         raise GtsamDvlError(f"{path}: no such file or directory")
-    return read_log(path, **options)
+    return read_log(path, options, progress=progress)
 
 
-def plot_log_to_dir(log_path: Path, out_dir: Path, **read_options: Any) -> list[Path]:
+def plot_log_to_dir(
+    log_path: Path, out_dir: Path, read_options: ReadOptions | None = None
+) -> list[Path]:
     """Figures 1-3 of a log."""
     from gtsam_dvl.app.plots.log_plots import plot_log
 
-    return plot_log(load_log(log_path, **read_options), Path(out_dir))
+    return plot_log(load_log(log_path, read_options), Path(out_dir))
 
 
-def describe_log(log_path: Path, **read_options: Any) -> str:
+def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str:
     """A few lines about a log: what a navigator wants to know before processing it."""
-    log = load_log(log_path, **read_options)
+    log = load_log(log_path, read_options)
     imu, dvl = log.imu, log.dvl
     imu_hz = 1.0 / np.median(np.diff(imu.t))
     lines = [
@@ -429,7 +440,7 @@ def smooth_file(
     tum_path: Path | None = None,
     config_path: Path | None = None,
     show_progress: bool = True,
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     timeline: bool = True,
     timeline_path: Path | None = None,
     calibration_path: Path | None = None,
@@ -494,7 +505,7 @@ def smooth_file(
     t_read = time.perf_counter()
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
         log = load_log(
-            log_path, progress=read_progress, **(read_options or {})
+            log_path, read_options, progress=read_progress
         )  # (a day: docs/results.md, Speed)
     read_s = time.perf_counter() - t_read
     if config_path:  # the log's scenario's [estimator] table (e.g. its initial attitude) below the -c configuration
@@ -660,20 +671,6 @@ def plan_to_dir(
     return answer, written
 
 
-# what smooth records of how it read the log
-READ_OPTIONS = (
-    "imu_topic",
-    "dvl_topic",
-    "salvage",
-    "repair",
-    "depth_topic",
-    "gnss_topic",
-    "attitude_topic",
-    "truth_topic",
-    "dvl_water_topic",
-)
-
-
 def find_source_log(stored: StoredResult) -> tuple[Path | None, str]:
     """The source log a StoredResult names: at its path relative to the result file's folder (the two moved
     together), else at its absolute path. Returns (path, "") or (None, the line saying why there is none)."""
@@ -701,7 +698,7 @@ def evaluate_to_dir(
     result_path: Path,
     out_dir: Path,
     truth_path: Path | None = None,
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     force: bool = False,
 ) -> tuple[list[str], list[Path]]:
     """`gtsam-dvl evaluate`: errors over time against the truth (when a log with truth is given, or the
@@ -710,7 +707,7 @@ def evaluate_to_dir(
     health and loss lines, and the files written.
 
     Without truth_path the source log is looked for where the result records it (find_source_log) and read with
-    the options smooth used; read_options given here (None values: not given) override them. When it is not
+    the options smooth used; the read_options given here (their model_fields_set) override them. When it is not
     found, a line says so and the errors against the truth are left out. A log that is not the result's source
     (analysis/evaluate.py source_mismatch: its content hash, stamps, origin) is refused with one line unless
     force, and then a line says so."""
@@ -727,15 +724,17 @@ def evaluate_to_dir(
     )
     stored = read_result(result_path)
     res = stored.result
-    given = {k: v for k, v in (read_options or {}).items() if v is not None}
+    from gtsam_dvl.io.read_options import ReadOptions
+
+    options = read_options or ReadOptions()
     missing = ""
     if truth_path is not None:
         log_path: Path | None = Path(truth_path)
-        options = given
     else:
         log_path, missing = find_source_log(stored)
-        options = {**{k: v for k, v in stored.read_options.items() if k in READ_OPTIONS}, **given}
-    log = load_log(log_path, **options) if log_path is not None else None
+        recorded = ReadOptions.from_record(stored.read_options, f"{result_path}: read_options")
+        options = options.over(recorded)
+    log = load_log(log_path, options) if log_path is not None else None
     forced = ""
     if log is not None and log_path is not None:
         from gtsam_dvl.analysis.evaluate import source_mismatch
@@ -756,7 +755,7 @@ def evaluate_to_dir(
     ev.metrics["health"] = health
     ev.metrics["truth_log_losses"] = truth_losses
     ev.metrics["truth_log"] = str(log_path) if log_path is not None else None
-    ev.metrics["truth_log_read_options"] = options if log_path is not None else None
+    ev.metrics["truth_log_read_options"] = options.record() if log_path is not None else None
     written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
     label = res.estimator
     if ev.attitude_error_deg is not None and ev.position_error_m is not None:

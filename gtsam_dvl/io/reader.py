@@ -9,8 +9,9 @@ come from the header stamps (log times are not used).
 
 Streaming: the log is read in one pass, piece by piece (an MCAP's chunks, pages of a .db3), and the
 high-rate topics (the IMU, the truth odometry) are decoded piece by piece into arrays of the fields the
-reader uses (``_Stream``: about 56 bytes per IMU sample, plus the orientation only if some message has one),
-so that reading holds those arrays and one chunk, not every message body (docs/results.md, "Log reader").
+reader uses (``TopicStream``, io/topic_stream.py: about 56 bytes per IMU sample, plus the orientation only if
+some message has one), so that reading holds those arrays and one chunk, not every message body
+(docs/results.md, "Log reader").
 The other topics are low-rate and decoded in bulk. Errors are raised in the order of a bulk read.
 """
 
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +30,17 @@ from gtsam_dvl.core.current import truth_current
 from gtsam_dvl.core.earth import pressure_to_depth
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.imu_faults import drop_saturated, undo_clock_steps
-from gtsam_dvl.core.types import BeamData, DepthData, DvlData, ImuData, LogData, Mounting, TruthData
+from gtsam_dvl.core.types import (
+    AttitudeData,
+    BeamData,
+    DepthData,
+    DvlData,
+    GnssData,
+    ImuData,
+    LogData,
+    Mounting,
+    TruthData,
+)
 from gtsam_dvl.io.attitude import read_attitude
 from gtsam_dvl.io.gnss import (
     GNSS_TOPIC,
@@ -38,13 +50,14 @@ from gtsam_dvl.io.gnss import (
     read_gnss,
 )
 from gtsam_dvl.io.log_metadata import typed_fields
+from gtsam_dvl.io.read_options import ReadOptions
 from gtsam_dvl.io.ros2.cdr import stamps_ns
 from gtsam_dvl.io.ros2.decode import decode, decode_tf, first_string, to_base
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
 from gtsam_dvl.io.stamps import check_stamps, gap_warning, stamp_gaps
-from gtsam_dvl.io.storage.raw import Bodies
 from gtsam_dvl.io.storage.salvage import salvage_losses, salvage_report
 from gtsam_dvl.io.storage.sources import Source, open_source
+from gtsam_dvl.io.topic_stream import IMU_FIELDS, TRUTH_FIELDS, TopicStream, read_streaming
 from gtsam_dvl.io.water_track import WATER_TOPIC_TYPES, as_water_track, merge_pings
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -199,417 +212,133 @@ def _metadata(src: Source) -> dict[str, Any]:
     return meta
 
 
-IMU_FIELDS = ("sec", "nanosec", "angular_velocity", "linear_acceleration")
-IMU_ORIENTATION_FIELDS = ("orientation", "orientation_covariance", "frame_id")
-TRUTH_FIELDS = ("sec", "nanosec", "position", "orientation", "linear", "angular")
+@dataclass(frozen=True)
+class _Topics:
+    """The topics read_log reads, checked against the log: "" for a sensor it does not read; attitude None for
+    the IMU topic's own orientation."""
+
+    imu: str
+    dvl: str
+    dvl_type: str
+    water: str
+    truth: str
+    tf: str
+    depth: str
+    gnss: str
+    attitude: str | None
+
+    def to_read(self, src: Source) -> list[str]:
+        """The topics to read, in the order the storage is asked for them."""
+        topics = [self.imu, self.dvl] + [self.truth] * bool(self.truth)
+        topics += [self.tf] * (self.tf in src.topics) + [self.depth] * bool(self.depth)
+        topics += ([self.water] if self.water else []) + [self.gnss] * bool(self.gnss)
+        if self.attitude and self.attitude not in topics:
+            topics.append(self.attitude)
+        return topics
 
 
-class _Stream:
-    """One topic decoded piece by piece into preallocated arrays of some of its fields (grown by doubling
-    when the storage's message count was missing or short). Decoding errors are kept, not raised, so that
-    the caller raises them where a bulk read would (after the storage's own errors). With ``orientation``
-    (IMU only): the orientation and its covariance too, but stored only from the first piece in which some
-    message has one (orientation_covariance[0] != -1); earlier rows get "no orientation"."""
+@dataclass
+class _Reading:
+    """What the steps of read_log share: the log, the options, the warnings so far, the messages dropped by
+    --repair (per topic, by reason) and the time base t0 (ns, once the IMU is read)."""
 
-    def __init__(
-        self,
-        path: Path,
-        topic: str,
-        type_name: str,
-        fields: tuple[str, ...],
-        capacity: int,
-        orientation: bool = False,
-    ) -> None:
-        self.path, self.topic, self.type_name, self.fields = path, topic, type_name, fields
-        self.capacity, self.n, self.frame_id = max(capacity, 1), 0, ""
-        self.orientation = orientation
-        self.out: np.ndarray | None = None
-        self.orient: np.ndarray | None = None
-        self.error: GtsamDvlError | None = None
+    src: Source
+    options: ReadOptions
+    warnings: list[str]
+    dropped: dict[str, dict[str, int]] = field(default_factory=dict)
+    t0: int = 0
 
-    def add(self, bodies: Any) -> None:
-        if self.error is not None or not len(bodies):
-            return
-        try:
-            arr = decode(self.path, self.topic, self.type_name, bodies)
-        except GtsamDvlError as e:
-            self.error = e
-            return
-        if self.out is None:
-            self.frame_id = first_string(arr)
-            self.out = np.empty(self.capacity, np.dtype([(f, arr.dtype[f]) for f in self.fields]))
-        k = len(arr)
-        if self.n + k > len(self.out):
-            self.out = self._grow(self.out, self.n + k)
-        for f in self.fields:
-            self.out[f][self.n : self.n + k] = arr[f]
-        if self.orientation:
-            self._add_orientation(arr)
-        self.n += k
+    def keep(self, topic: str, ns: np.ndarray, bad: np.ndarray | None = None) -> np.ndarray:
+        """The keep-mask of a topic's messages (io/stamps.py check_stamps: raises, or drops with repair)."""
+        o = self.options
+        return check_stamps(
+            self.src.path, topic, ns, self.t0, bad, o.repair, self.warnings, self.dropped
+        )
 
-    def _grow(self, a: np.ndarray, need: int) -> np.ndarray:
-        b = np.empty(max(need, 2 * len(a)), a.dtype)
-        b[: self.n] = a[: self.n]
-        return b
-
-    def _add_orientation(self, arr: np.ndarray) -> None:
-        k = len(arr)
-        if self.orient is None:
-            if not (arr["orientation_covariance"][:, 0] != -1.0).any():
-                return
-            self.orient = np.zeros(
-                len(self.out) if self.out is not None else k,
-                [("orientation", "<f8", (4,)), ("orientation_covariance", "<f8", (9,))],
-            )
-            self.orient["orientation_covariance"][: self.n] = -1.0
-        if self.n + k > len(self.orient):
-            self.orient = self._grow(self.orient, self.n + k)
-        self.orient["orientation"][self.n : self.n + k] = arr["orientation"]
-        self.orient["orientation_covariance"][self.n : self.n + k] = arr["orientation_covariance"]
-
-    def array(self) -> np.ndarray:
-        """The decoded fields of every message (raises a decoding error first)."""
-        if self.error is not None:
-            raise self.error
-        if self.out is None:
-            return np.zeros(0, [(f, "<f8") for f in self.fields])
-        return self.out[: self.n]
-
-    def attitude_array(self, keep: np.ndarray) -> np.ndarray:
-        """What io/attitude.read_attitude needs of the IMU's own orientation, for the messages kept: a
-        one-message array with "no orientation" when none had one (read_attitude then returns None)."""
-        stamps = self.array()
-        dt = [
-            ("sec", "<i4"),
-            ("nanosec", "<u4"),
-            ("orientation", "<f8", (4,)),
-            ("orientation_covariance", "<f8", (9,)),
-            ("frame_id", "O"),
-        ]
-        if self.orient is None:
-            out = np.zeros(1, dt)
-            out["orientation_covariance"] = -1.0
-            return out
-        out = np.zeros(int(keep.sum()), dt)
-        for f in ("sec", "nanosec"):
-            out[f] = stamps[f][keep]
-        for f in ("orientation", "orientation_covariance"):
-            out[f] = self.orient[f][: self.n][keep]
-        out["frame_id"] = self.frame_id
-        return out
+    def seconds(self, ns: np.ndarray) -> np.ndarray:
+        """Stamps (ns) as seconds since t0."""
+        return (ns - self.t0) / 1e9
 
 
-def _read_streaming(
-    src: Source,
-    topics: list[str],
-    streams: dict[str, _Stream],
-    keep_bodies: set[str],
-    progress: Callable[[float], None] | None,
-) -> dict[str, Any]:
-    """One pass over the log: streamed topics into their _Stream, the others' bodies (and those of streamed
-    topics in keep_bodies, which another part of the reader decodes itself) collected as src.read would."""
-    pieces: dict[str, list[Bodies]] = {
-        t: [] for t in topics if t not in streams or t in keep_bodies
-    }
-    for got in src.iter_read(topics, progress):
-        for topic, bodies in got.items():
-            if topic in streams:
-                streams[topic].add(bodies)
-            if topic in pieces:
-                pieces[topic].append(bodies)
-    return {
-        t: p[0] if len(p) == 1 else Bodies.concat(p)
-        for t, p in pieces.items()
-        if p or t in src.topics
-    }
+@dataclass
+class _Imu:
+    """The IMU as read: its data, the stamps logged (s, before saturated samples were dropped: the gap record is
+    of the data missing from the log), its own orientation for io/attitude.py, the clock steps undone and the
+    saturated samples dropped (their reports, None: none)."""
+
+    data: ImuData
+    logged_t: np.ndarray
+    attitude: np.ndarray
+    clock: list[dict[str, float]]
+    saturation: dict[str, Any] | None = None
 
 
 def read_log(
     path: str | Path,
+    options: ReadOptions | None = None,
     *,
-    imu_topic: str = "/imu/data_raw",
-    dvl_topic: str | None = None,
-    dvl_water_topic: str | None = None,
-    truth_topic: str = "/ground_truth/odometry",
-    tf_topic: str = "/tf_static",
-    depth_topic: str | None = None,
-    depth_z_down: bool = False,
-    gnss_topic: str | None = None,
-    attitude_topic: str | None = None,
-    attitude_frame: str = "enu",
-    salvage: bool = False,
-    repair: bool = False,
     progress: Callable[[float], None] | None = None,
+    **option_values: Any,
 ) -> LogData:
-    """Read an IMU+DVL log. dvl_topic None: /dvl/data if present, else /dvl/twist. Without tf_topic the
-    mounting is identity (warned). NaN IMU data, duplicate or backwards stamps raise GtsamDvlError, or
-    with ``repair`` are dropped and counted. ``salvage`` recovers the intact chunks of a damaged MCAP.
+    """Read an IMU+DVL log as options say (ReadOptions, io/read_options.py: the topics, frames, salvage and
+    repair; None: the defaults). option_values: ReadOptions' fields by name, over options' (``read_log(path,
+    dvl_topic="/dvl/twist")``); a bad one is one GtsamDvlError line. progress(fraction) is called while reading.
+
+    NaN IMU data, duplicate or backwards stamps raise GtsamDvlError, or with ``repair`` are dropped and counted.
     Warnings go to metadata["reader_warnings"], and what was lost, structured, to metadata["reader_losses"]:
     "repair" (per topic: messages dropped by reason), "gaps" (per topic: missing stretches, see stamp_gaps),
     "clock_steps" (the IMU's, undone with ``repair``, else an error) and "saturation" (the IMU samples at their
-    range limit, dropped: core/imu_faults.py),
-    "salvage" (with ``salvage``: io.storage.salvage.salvage_losses) and "messages_lost" (per topic).
-    progress(fraction) is called while reading.
+    range limit, dropped: core/imu_faults.py), "salvage" (with ``salvage``: io.storage.salvage.salvage_losses)
+    and "messages_lost" (per topic).
 
-    Depth (LogData.depth): depth_topic None reads /depth/pressure if the log has it; "" or "none" reads no
-    depth. A sensor_msgs/msg/FluidPressure topic keeps the pressure (the estimators convert it with their
-    [depth] settings) and fills depth_m with the defaults of core/earth.py at the origin's latitude (45 deg
-    without one); a geometry_msgs/msg/PoseWithCovarianceStamped or nav_msgs/msg/Odometry topic gives depth
-    = -z (z up, the ROS convention), or +z with depth_z_down, and its variance from the zz covariance (0 or
-    negative: unknown).
-
-    GNSS (LogData.gnss): gnss_topic None reads /gnss/fix if the log has it; "" or "none" reads none; the topic
-    must be sensor_msgs/msg/NavSatFix (io/gnss.py). When the log records no map origin, LogData.origin is the
-    first good fix (estimators/inputs/gnss.py decides which fixes are good and how they are used).
-
-    Attitude (LogData.attitude, io/attitude.py): attitude_topic None takes the IMU topic's own orientation when
-    its covariance says it is valid; "" or "none" reads none; else the named topic (sensor_msgs/msg/Imu,
-    nav_msgs/msg/Odometry or geometry_msgs/msg/PoseWithCovarianceStamped). attitude_frame: "enu" (REP-103) or
-    "ned" (an AHRS publishing NED orientation of an FRD body), turned into base_link in ENU.
-
-    Water track on a topic of its own (dvl_water_topic, a twist: io/water_track.py): its pings join the DVL's in
-    stamp order, marked DvlData.water_track. Simulated truth gets the current the metadata records
-    (TruthData.n_c, core/current.py truth_current)."""
-    src = open_source(path, salvage=salvage)
-    path = src.path
-    if imu_topic not in src.topics:
-        raise _missing(src, "IMU", imu_topic, "--imu-topic")
-    if dvl_topic is None:
-        dvl_topic = "/dvl/data" if "/dvl/data" in src.topics else "/dvl/twist"
-    if dvl_topic not in src.topics:
-        raise _missing(src, "DVL", dvl_topic, "--dvl-topic")
-    if (kind := _type(src, imu_topic)) != IMU_TYPE:
-        raise GtsamDvlError(f"{path}: {imu_topic} is {kind}, expected {IMU_TYPE}")
-    if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
-        raise GtsamDvlError(
-            f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}"
-        )
-    if dvl_water_topic and dvl_water_topic not in src.topics:
-        raise _missing(src, "DVL water-track", dvl_water_topic, "--dvl-water-topic")
-    if dvl_water_topic and (kind := _type(src, dvl_water_topic)) not in WATER_TOPIC_TYPES:
-        raise GtsamDvlError(
-            f"{path}: {dvl_water_topic} is {kind}; water-track topics must be one of "
-            f"{', '.join(WATER_TOPIC_TYPES)}"
-        )
-    depth_topic = _optional_topic(
-        src,
-        depth_topic,
-        DEPTH_TOPIC,
-        "depth",
-        DEPTH_TYPES,
-        f"depth topics must be one of {', '.join(DEPTH_TYPES)}",
-    )
-    warnings = list(src.warnings)
-    dropped: dict[str, dict[str, int]] = {}
-    has_truth = truth_topic in src.topics and _type(src, truth_topic) == ODOM_TYPE
-    if truth_topic in src.topics and not has_truth:
-        warnings.append(f"{truth_topic} is not {ODOM_TYPE}; truth ignored")
-    topics = (
-        [imu_topic, dvl_topic] + [truth_topic] * has_truth + [tf_topic] * (tf_topic in src.topics)
-    )
-    topics += [depth_topic] * bool(depth_topic) + ([dvl_water_topic] if dvl_water_topic else [])
-    gnss_topic = _optional_topic(
-        src,
-        gnss_topic,
-        GNSS_TOPIC,
-        "GNSS",
-        (NAVSATFIX_TYPE,),
-        f"the GNSS topic must be {NAVSATFIX_TYPE}",
-    )
-    topics += [gnss_topic] * bool(gnss_topic)
-    if attitude_topic == "none":
-        attitude_topic = ""
-    if attitude_topic and attitude_topic not in src.topics:
-        raise _missing(src, "attitude", attitude_topic, "--attitude-topic")
-    if attitude_topic and attitude_topic not in topics:
-        topics.append(attitude_topic)
-    counts = src.message_counts()
-    imu_stream = _Stream(
-        path,
-        imu_topic,
-        IMU_TYPE,
-        IMU_FIELDS,
-        counts.get(imu_topic, 0),
-        orientation=attitude_topic is None,
-    )
-    streams = {imu_topic: imu_stream}
-    if has_truth:
-        streams[truth_topic] = _Stream(
-            path, truth_topic, ODOM_TYPE, TRUTH_FIELDS, counts.get(truth_topic, 0)
-        )
-    others = {depth_topic, gnss_topic, attitude_topic, tf_topic, dvl_topic, dvl_water_topic}
-    raw = _read_streaming(src, topics, streams, {t for t in streams if t in others}, progress)
-
-    imu = imu_stream.array()
-    if not len(imu):
-        raise GtsamDvlError(f"{path}: {imu_topic} has no messages")
-    imu_ns = stamps_ns(imu)
-    # views of the decoded messages, not copies (two fewer arrays over every IMU sample at the reader's peak)
-    b_omega, b_f = (
-        imu[f] if imu.dtype[f].base == np.float64 else imu[f].astype(float)
-        for f in ("angular_velocity", "linear_acceleration")
-    )
-    t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
-    nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
-    # a clock step (core/imu_faults.py) is undone with repair, else named in an error
-    try:
-        imu_ns, clock = undo_clock_steps(imu_ns, t0, b_omega, b_f, imu_topic, repair, warnings)
-    except GtsamDvlError as exc:
-        raise GtsamDvlError(f"{path}: {exc}") from None
-    keep = check_stamps(path, imu_topic, imu_ns, t0, nan, repair, warnings, dropped)
-    # the IMU's own orientation (when no attitude topic) now, then the stream's references let go (b_omega and
-    # b_f keep the decoded messages' buffer, of which they are views)
-    imu_attitude = imu_stream.attitude_array(keep) if attitude_topic is None else imu[:0].copy()
-    imu_stream.out, imu_stream.orient, imu = None, None, imu[:0].copy()
-    if not keep.all():
-        imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
-    t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
-    imu_data = ImuData((imu_ns - t0) / 1e9, b_omega, b_f, imu_stream.frame_id or "imu_link")
-    del imu_ns
-    # saturated samples dropped (core/imu_faults.py; not in a noise-free simulation, whose values repeat by
-    # design); the gap record below is of the data missing from the log
+    Depth (LogData.depth): a sensor_msgs/msg/FluidPressure topic keeps the pressure (the estimators convert it
+    with their [depth] settings) and fills depth_m with the defaults of core/earth.py at the origin's latitude
+    (45 deg without one); a geometry_msgs/msg/PoseWithCovarianceStamped or nav_msgs/msg/Odometry topic gives
+    depth = -z (z up, the ROS convention), or +z with depth_z_down, and its variance from the zz covariance (0
+    or negative: unknown). GNSS (LogData.gnss, io/gnss.py): when the log records no map origin, LogData.origin is
+    the first good fix (estimators/inputs/gnss.py decides which fixes are good and how they are used). Attitude
+    (LogData.attitude, io/attitude.py): turned into base_link in ENU. Water track on a topic of its own (a twist:
+    io/water_track.py): its pings join the DVL's in stamp order, marked DvlData.water_track. Simulated truth gets
+    the current the metadata records (TruthData.n_c, core/current.py truth_current)."""
+    o = options or ReadOptions()
+    if option_values:
+        o = o.replace(**option_values)
+    src = open_source(path, salvage=o.salvage)
+    r = _Reading(src, o, [])
+    topics = _choose_topics(src, o)
+    r.warnings.extend(src.warnings)
+    if o.truth_topic in src.topics and not topics.truth:
+        r.warnings.append(f"{o.truth_topic} is not {ODOM_TYPE}; truth ignored")
+    imu_stream, truth_stream, raw = _read_pieces(src, topics, progress)
+    imu = _read_imu(r, topics, imu_stream)
     meta = _metadata(src)
-    imu_logged_t = imu_data.t
-    saturation = None
     if meta.get("white_noise") is not False:
-        imu_data, saturation = drop_saturated(imu_data, imu_topic, warnings)
-
-    dvl_arr = decode(path, dvl_topic, dvl_type, raw[dvl_topic])
-    if not len(dvl_arr):
-        raise GtsamDvlError(f"{path}: {dvl_topic} has no messages")
-    dvl, dvl_ns = _dvl_data(src, dvl_topic, dvl_arr), stamps_ns(dvl_arr)
-    keep = check_stamps(path, dvl_topic, dvl_ns, t0, None, repair, warnings, dropped)
-    dvl = _select(dvl, keep, (dvl_ns[keep] - t0) / 1e9)
-    if dvl_water_topic:
-        w_arr = decode(path, dvl_water_topic, _type(src, dvl_water_topic), raw[dvl_water_topic])
-        w_ns = stamps_ns(w_arr)
-        keep = check_stamps(path, dvl_water_topic, w_ns, t0, None, repair, warnings, dropped)
-        water = _select(_dvl_data(src, dvl_water_topic, w_arr), keep, (w_ns[keep] - t0) / 1e9)
-        if water.frame_id != dvl.frame_id:
-            warnings.append(
-                f"{dvl_water_topic} is in frame {water.frame_id}, {dvl_topic} in {dvl.frame_id}: its "
-                f"velocity taken in {dvl.frame_id}"
-            )
-        dvl = merge_pings(dvl, as_water_track(water))
-
-    truth = None
-    if has_truth:
-        od = streams[truth_topic].array()
-        ns = stamps_ns(od)
-        keep = check_stamps(path, truth_topic, ns, t0, None, repair, warnings, dropped)
-        q = od["orientation"].astype(float)[keep]
-        n_v = (
-            Rotation.from_quat(q).apply(od["linear"].astype(float)[keep])
-            if keep.any()
-            else np.zeros((0, 3))
-        )
-        n_p, t_truth = od["position"].astype(float)[keep], (ns[keep] - t0) / 1e9
-        truth = TruthData(
-            t_truth,
-            n_p,
-            q,
-            n_v,
-            od["angular"].astype(float)[keep],
-            truth_current(meta, t_truth, n_p),
-        )
-
-    mounting = Mounting()
-    if tf_topic not in src.topics:
-        warnings.append(
-            f"no {tf_topic} in the log: identity mounting assumed (IMU and DVL frames = base_link)"
-        )
-    else:
-        tfs = decode_tf(path, tf_topic, raw[tf_topic])
-        for frame, attrs in (
-            (imu_data.frame_id, ("b_R_imu", "b_p_imu")),
-            (dvl.frame_id, ("b_R_d0", "b_p_dvl")),
-        ):
-            if (pose := to_base(tfs, frame)) is None:
-                warnings.append(
-                    f"{tf_topic} has no transform base_link -> {frame}: identity assumed"
-                )
-            else:
-                setattr(mounting, attrs[0], pose[0])
-                setattr(mounting, attrs[1], pose[1])
-
+        imu.data, imu.saturation = drop_saturated(imu.data, topics.imu, r.warnings)
+    dvl = _read_dvl(r, topics, raw)
+    truth = _read_truth(r, topics.truth, truth_stream, meta)
+    mounting = _read_mounting(r, raw, imu.data.frame_id, dvl.frame_id)
     dvl.noise_free = (
         meta.get("white_noise") is False
     )  # a simulation without noise (DvlData.noise_free)
-    depth = None
-    if depth_topic:
-        depth = _depth_data(
-            src,
-            depth_topic,
-            raw[depth_topic],
-            t0,
-            repair,
-            warnings,
-            dropped,
-            depth_z_down,
-            meta.get("origin"),
-        )
-        if (
-            tf_topic in src.topics
-            and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]), depth.frame_id))
-            is not None
-        ):
-            depth.b_p_sensor = pose[1]
-    gnss = None
-    if gnss_topic:
-        gnss = read_gnss(src, gnss_topic, raw[gnss_topic], t0, repair, warnings, dropped)
-        if (
-            tf_topic in src.topics
-            and (pose := to_base(decode_tf(path, tf_topic, raw[tf_topic]), gnss.frame_id))
-            is not None
-        ):
-            gnss.b_p_antenna = pose[1]
-    attitude = read_attitude(
-        src,
-        attitude_topic,
-        imu_topic,
-        raw,
-        imu_attitude,
-        t0,
-        mounting,
-        repair,
-        warnings,
-        dropped,
-        attitude_frame,
-    )
-    gaps: dict[str, dict[str, Any]] = {}
-    for topic, t in ((imu_topic, imu_logged_t), (dvl_topic, dvl.t)) + (
-        ((truth_topic, truth.t),) if truth else ()
-    ):
-        if (gap := stamp_gaps(t)) is not None:
-            gaps[topic] = gap
-            warnings.append(gap_warning(topic, gap))
-    losses: dict[str, Any] = {"repair": dropped, "gaps": gaps}
-    if clock:
-        losses["clock_steps"] = {imu_topic: clock}
-    if saturation:
-        losses["saturation"] = {imu_topic: saturation}
-    if salvage:
-        losses["salvage"] = salvage_losses(src, t0)
-        warnings.append(salvage_report(losses["salvage"], src.path))
-    losses["messages_lost"] = _messages_lost(losses)
-    meta["reader_warnings"] = warnings
-    meta["reader_losses"] = losses
-    typed = typed_fields(meta, str(path))
+    depth, gnss, attitude = _read_aiding(r, topics, raw, imu, mounting, meta)
+    meta["reader_warnings"] = r.warnings
+    meta["reader_losses"] = _losses(r, topics, imu, dvl, truth)
+    typed = typed_fields(meta, str(src.path))
     if typed.get("origin") is None and gnss is not None:
         typed["origin"] = first_fix_origin(gnss)
         if typed["origin"] is not None:
-            warnings.append(
-                f"map origin from the first good GNSS fix on {gnss_topic} (t = "
+            r.warnings.append(
+                f"map origin from the first good GNSS fix on {topics.gnss} (t = "
                 f"{first_fix_time(gnss):.1f} s)"
             )
     return LogData(
-        imu_data,
+        imu.data,
         dvl,
         mounting,
         truth,
-        t0,
+        r.t0,
         meta,
-        str(path),
+        str(src.path),
         **typed,
         depth=depth,
         gnss=gnss,
@@ -617,39 +346,293 @@ def read_log(
     )
 
 
-def _depth_data(
-    src: Source,
-    topic: str,
-    bodies: Any,
-    t0: int,
-    repair: bool,
-    warnings: list[str],
-    dropped: dict[str, dict[str, int]],
-    z_down: bool,
-    origin: Any,
-) -> DepthData:
+def _read_aiding(
+    r: _Reading,
+    topics: _Topics,
+    raw: dict[str, Any],
+    imu: _Imu,
+    mounting: Mounting,
+    meta: dict[str, Any],
+) -> tuple[DepthData | None, GnssData | None, AttitudeData | None]:
+    """The aiding sensors the topics name (None each without): depth and GNSS with their positions in base_link
+    from the tf topic, attitude (io/attitude.py; the IMU's own orientation when no attitude topic is named)."""
+    o = r.options
+    depth = None
+    if topics.depth:
+        depth = _depth_data(r, topics.depth, raw[topics.depth], meta.get("origin"))
+        if (b_p := _sensor_position(r, raw, depth.frame_id)) is not None:
+            depth.b_p_sensor = b_p
+    gnss = None
+    if topics.gnss:
+        gnss = read_gnss(
+            r.src, topics.gnss, raw[topics.gnss], r.t0, o.repair, r.warnings, r.dropped
+        )
+        if (b_p := _sensor_position(r, raw, gnss.frame_id)) is not None:
+            gnss.b_p_antenna = b_p
+    attitude = read_attitude(
+        r.src,
+        topics.attitude,
+        topics.imu,
+        raw,
+        imu.attitude,
+        r.t0,
+        mounting,
+        o.repair,
+        r.warnings,
+        r.dropped,
+        o.attitude_frame,
+    )
+    return depth, gnss, attitude
+
+
+def _choose_topics(src: Source, o: ReadOptions) -> _Topics:
+    """The topics to read, checked: the IMU and DVL (present, of their types), the optional ones (present when
+    named, of their types); the truth when the log has it as nav_msgs/msg/Odometry. One GtsamDvlError line naming
+    the option to choose with, else."""
+    path = src.path
+    if o.imu_topic not in src.topics:
+        raise _missing(src, "IMU", o.imu_topic, "--imu-topic")
+    dvl_topic = o.dvl_topic
+    if dvl_topic is None:
+        dvl_topic = "/dvl/data" if "/dvl/data" in src.topics else "/dvl/twist"
+    if dvl_topic not in src.topics:
+        raise _missing(src, "DVL", dvl_topic, "--dvl-topic")
+    if (kind := _type(src, o.imu_topic)) != IMU_TYPE:
+        raise GtsamDvlError(f"{path}: {o.imu_topic} is {kind}, expected {IMU_TYPE}")
+    if (dvl_type := _type(src, dvl_topic)) not in DVL_TYPES:
+        raise GtsamDvlError(
+            f"{path}: {dvl_topic} is {dvl_type}; DVL topics must be one of {', '.join(DVL_TYPES)}"
+        )
+    water = o.dvl_water_topic or ""
+    if water and water not in src.topics:
+        raise _missing(src, "DVL water-track", water, "--dvl-water-topic")
+    if water and (kind := _type(src, water)) not in WATER_TOPIC_TYPES:
+        raise GtsamDvlError(
+            f"{path}: {water} is {kind}; water-track topics must be one of "
+            f"{', '.join(WATER_TOPIC_TYPES)}"
+        )
+    depth = _optional_topic(
+        src,
+        o.depth_topic,
+        DEPTH_TOPIC,
+        "depth",
+        DEPTH_TYPES,
+        f"depth topics must be one of {', '.join(DEPTH_TYPES)}",
+    )
+    has_truth = o.truth_topic in src.topics and _type(src, o.truth_topic) == ODOM_TYPE
+    gnss = _optional_topic(
+        src,
+        o.gnss_topic,
+        GNSS_TOPIC,
+        "GNSS",
+        (NAVSATFIX_TYPE,),
+        f"the GNSS topic must be {NAVSATFIX_TYPE}",
+    )
+    attitude = "" if o.attitude_topic == "none" else o.attitude_topic
+    if attitude and attitude not in src.topics:
+        raise _missing(src, "attitude", attitude, "--attitude-topic")
+    return _Topics(
+        o.imu_topic,
+        dvl_topic,
+        dvl_type,
+        water,
+        o.truth_topic if has_truth else "",
+        o.tf_topic,
+        depth,
+        gnss,
+        attitude,
+    )
+
+
+def _read_pieces(
+    src: Source, topics: _Topics, progress: Callable[[float], None] | None
+) -> tuple[TopicStream, TopicStream | None, dict[str, Any]]:
+    """The one pass over the log: the IMU (with its own orientation when no attitude topic is named) and the
+    truth decoded piece by piece into their TopicStream, the other topics' bodies collected (module doc)."""
+    counts = src.message_counts()
+    imu_stream = TopicStream(
+        src.path,
+        topics.imu,
+        IMU_TYPE,
+        IMU_FIELDS,
+        counts.get(topics.imu, 0),
+        orientation=topics.attitude is None,
+    )
+    streams = {topics.imu: imu_stream}
+    truth_stream = None
+    if topics.truth:
+        truth_stream = TopicStream(
+            src.path, topics.truth, ODOM_TYPE, TRUTH_FIELDS, counts.get(topics.truth, 0)
+        )
+        streams[topics.truth] = truth_stream
+    # streamed topics another step decodes itself (e.g. the truth as the attitude topic) keep their bodies too
+    others = {topics.depth, topics.gnss, topics.attitude, topics.tf, topics.dvl, topics.water}
+    keep_bodies = {t for t in streams if t in others}
+    raw = read_streaming(src, topics.to_read(src), streams, keep_bodies, progress)
+    return imu_stream, truth_stream, raw
+
+
+def _read_imu(r: _Reading, topics: _Topics, imu_stream: TopicStream) -> _Imu:
+    """The IMU's samples checked (NaN, stamps, a clock step: core/imu_faults.py), the time base r.t0 set (the first
+    kept stamp rounded down to the second), and the IMU's own orientation taken before the stream lets go of it."""
+    path, topic = r.src.path, topics.imu
+    imu = imu_stream.array()
+    if not len(imu):
+        raise GtsamDvlError(f"{path}: {topic} has no messages")
+    imu_ns = stamps_ns(imu)
+    # views of the decoded messages, not copies (two fewer arrays over every IMU sample at the reader's peak)
+    b_omega, b_f = (
+        imu[f] if imu.dtype[f].base == np.float64 else imu[f].astype(float)
+        for f in ("angular_velocity", "linear_acceleration")
+    )
+    r.t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
+    nan = ~(np.isfinite(b_omega).all(axis=1) & np.isfinite(b_f).all(axis=1))
+    # a clock step (core/imu_faults.py) is undone with repair, else named in an error
+    try:
+        imu_ns, clock = undo_clock_steps(
+            imu_ns, r.t0, b_omega, b_f, topic, r.options.repair, r.warnings
+        )
+    except GtsamDvlError as exc:
+        raise GtsamDvlError(f"{path}: {exc}") from None
+    keep = r.keep(topic, imu_ns, nan)
+    # the IMU's own orientation (when no attitude topic) now, then the stream's references let go (b_omega and
+    # b_f keep the decoded messages' buffer, of which they are views)
+    attitude = imu_stream.attitude_array(keep) if topics.attitude is None else imu[:0].copy()
+    imu_stream.out, imu_stream.orient, imu = None, None, imu[:0].copy()
+    if not keep.all():
+        imu_ns, b_omega, b_f = imu_ns[keep], b_omega[keep], b_f[keep]
+    r.t0 = int(imu_ns[0] // 1_000_000_000) * 1_000_000_000
+    data = ImuData(r.seconds(imu_ns), b_omega, b_f, imu_stream.frame_id or "imu_link")
+    return _Imu(data, data.t, attitude, clock)
+
+
+def _read_dvl(r: _Reading, topics: _Topics, raw: dict[str, Any]) -> DvlData:
+    """The DVL's pings (stamps checked), with the pings of a separate water-track topic merged in stamp order."""
+    path = r.src.path
+    dvl_arr = decode(path, topics.dvl, topics.dvl_type, raw[topics.dvl])
+    if not len(dvl_arr):
+        raise GtsamDvlError(f"{path}: {topics.dvl} has no messages")
+    dvl, dvl_ns = _dvl_data(r.src, topics.dvl, dvl_arr), stamps_ns(dvl_arr)
+    keep = r.keep(topics.dvl, dvl_ns)
+    dvl = _select(dvl, keep, r.seconds(dvl_ns[keep]))
+    if not topics.water:
+        return dvl
+    w_arr = decode(path, topics.water, _type(r.src, topics.water), raw[topics.water])
+    w_ns = stamps_ns(w_arr)
+    keep = r.keep(topics.water, w_ns)
+    water = _select(_dvl_data(r.src, topics.water, w_arr), keep, r.seconds(w_ns[keep]))
+    if water.frame_id != dvl.frame_id:
+        r.warnings.append(
+            f"{topics.water} is in frame {water.frame_id}, {topics.dvl} in {dvl.frame_id}: its "
+            f"velocity taken in {dvl.frame_id}"
+        )
+    return merge_pings(dvl, as_water_track(water))
+
+
+def _read_truth(
+    r: _Reading, topic: str, stream: TopicStream | None, meta: dict[str, Any]
+) -> TruthData | None:
+    """The ground truth (None without a truth topic): velocity turned into the map frame, and the water current
+    a simulation's metadata records."""
+    if stream is None:
+        return None
+    od = stream.array()
+    ns = stamps_ns(od)
+    keep = r.keep(topic, ns)
+    q = od["orientation"].astype(float)[keep]
+    n_v = (
+        Rotation.from_quat(q).apply(od["linear"].astype(float)[keep])
+        if keep.any()
+        else np.zeros((0, 3))
+    )
+    n_p, t_truth = od["position"].astype(float)[keep], r.seconds(ns[keep])
+    return TruthData(
+        t_truth,
+        n_p,
+        q,
+        n_v,
+        od["angular"].astype(float)[keep],
+        truth_current(meta, t_truth, n_p),
+    )
+
+
+def _read_mounting(r: _Reading, raw: dict[str, Any], imu_frame: str, dvl_frame: str) -> Mounting:
+    """The IMU's and the DVL's poses in base_link from the tf topic; identity (warned) where it has none."""
+    mounting = Mounting()
+    tf_topic = r.options.tf_topic
+    if tf_topic not in r.src.topics:
+        r.warnings.append(
+            f"no {tf_topic} in the log: identity mounting assumed (IMU and DVL frames = base_link)"
+        )
+        return mounting
+    tfs = decode_tf(r.src.path, tf_topic, raw[tf_topic])
+    for frame, attrs in (
+        (imu_frame, ("b_R_imu", "b_p_imu")),
+        (dvl_frame, ("b_R_d0", "b_p_dvl")),
+    ):
+        if (pose := to_base(tfs, frame)) is None:
+            r.warnings.append(f"{tf_topic} has no transform base_link -> {frame}: identity assumed")
+        else:
+            setattr(mounting, attrs[0], pose[0])
+            setattr(mounting, attrs[1], pose[1])
+    return mounting
+
+
+def _sensor_position(r: _Reading, raw: dict[str, Any], frame: str) -> np.ndarray | None:
+    """A sensor's position in base_link (m) from the tf topic, None when the log has no such transform."""
+    tf_topic = r.options.tf_topic
+    if tf_topic not in r.src.topics:
+        return None
+    pose = to_base(decode_tf(r.src.path, tf_topic, raw[tf_topic]), frame)
+    return None if pose is None else pose[1]
+
+
+def _losses(
+    r: _Reading, topics: _Topics, imu: _Imu, dvl: DvlData, truth: TruthData | None
+) -> dict[str, Any]:
+    """metadata["reader_losses"] (read_log's doc), the gaps and salvage report also among the warnings."""
+    gaps: dict[str, dict[str, Any]] = {}
+    for topic, t in ((topics.imu, imu.logged_t), (topics.dvl, dvl.t)) + (
+        ((topics.truth, truth.t),) if truth else ()
+    ):
+        if (gap := stamp_gaps(t)) is not None:
+            gaps[topic] = gap
+            r.warnings.append(gap_warning(topic, gap))
+    losses: dict[str, Any] = {"repair": r.dropped, "gaps": gaps}
+    if imu.clock:
+        losses["clock_steps"] = {topics.imu: imu.clock}
+    if imu.saturation:
+        losses["saturation"] = {topics.imu: imu.saturation}
+    if r.options.salvage:
+        losses["salvage"] = salvage_losses(r.src, r.t0)
+        r.warnings.append(salvage_report(losses["salvage"], r.src.path))
+    losses["messages_lost"] = _messages_lost(losses)
+    return losses
+
+
+def _depth_data(r: _Reading, topic: str, bodies: Any, origin: Any) -> DepthData:
     """DepthData from a FluidPressure, PoseWithCovarianceStamped or Odometry topic (read_log's doc)."""
-    type_name = _type(src, topic)
-    arr = decode(src.path, topic, type_name, bodies)
+    type_name = _type(r.src, topic)
+    arr = decode(r.src.path, topic, type_name, bodies)
     ns = stamps_ns(arr)
     frame_id = first_string(arr) or "pressure_link"
     if type_name == PRESSURE_TYPE:
         p, var = pressure_from_messages(arr)
-        keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(p), repair, warnings, dropped)
+        keep = r.keep(topic, ns, ~np.isfinite(p))
         p, var = p[keep], var[keep]
         lat_deg = (
             float(origin["lat_deg"]) if isinstance(origin, dict) and "lat_deg" in origin else 45.0
         )
         d, dd_dp = pressure_to_depth(p, float(np.radians(lat_deg)))
-        return DepthData((ns[keep] - t0) / 1e9, d, var * dd_dp**2, p, var, frame_id)
+        return DepthData(r.seconds(ns[keep]), d, var * dd_dp**2, p, var, frame_id)
     z = arr["position"].astype(float)[:, 2]
     cov = arr["covariance" if type_name == POSE_COV_TYPE else "pose_covariance"].astype(float)[
         :, 14
     ]
-    keep = check_stamps(src.path, topic, ns, t0, ~np.isfinite(z), repair, warnings, dropped)
-    d = z[keep] if z_down else -z[keep]
+    keep = r.keep(topic, ns, ~np.isfinite(z))
+    d = z[keep] if r.options.depth_z_down else -z[keep]
     return DepthData(
-        (ns[keep] - t0) / 1e9, d, np.where(cov[keep] > 0, cov[keep], np.nan), frame_id=frame_id
+        r.seconds(ns[keep]), d, np.where(cov[keep] > 0, cov[keep], np.nan), frame_id=frame_id
     )
 
 

@@ -1,5 +1,6 @@
 """Read a result log written by gtsam_dvl.io.result_writer back into the NavResult that was written, with its
-summary (for `evaluate` and scripts)."""
+summary (for `evaluate` and scripts). A result of an older version (no schema_version: core/config/schema.py)
+reads as it was written; one of a newer version than this code knows is refused with one line."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.core.config.schema import checked_version
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult, StoredResult, Timeline
 from gtsam_dvl.io.result_writer import OPTIONAL_STATE_ARRAYS, STATE_ARRAYS, TOPICS
@@ -65,6 +67,7 @@ def read_result(path: Path | str) -> StoredResult:
             f"{path}: damaged result attachments ({type(exc).__name__}: {exc})"
         ) from None
     record = src.metadata.get("gtsam_dvl_result", {})
+    _check_version(record, path)
     try:
         read_options = json.loads(record["read_options"]) if record.get("read_options") else {}
         origin = json.loads(record["source_origin"]) if record.get("source_origin") else None
@@ -82,3 +85,13 @@ def read_result(path: Path | str) -> StoredResult:
         str(record.get("source_sha256", "")),
         origin if isinstance(origin, dict) else None,
     )
+
+
+def _check_version(record: dict[str, str], path: Path) -> None:
+    """The result's schema_version (a string in the metadata record; none before it was written) is one this code
+    reads, else one GtsamDvlError line."""
+    text = record.get("schema_version")
+    if text is None:
+        return
+    version: object = int(text) if text.strip().isdigit() else text
+    checked_version(version, f"{path}: result")

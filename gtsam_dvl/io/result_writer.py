@@ -15,11 +15,13 @@ from typing import Any
 
 import numpy as np
 
+from gtsam_dvl.core.config.schema import SCHEMA_VERSION
 from gtsam_dvl.core.result import NavResult, Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.atomic import to_json
 from gtsam_dvl.io.mcap.writer import McapLogWriter
+from gtsam_dvl.io.read_options import ReadOptions
 from gtsam_dvl.io.ros2.covariance import ros_pose_covariance, ros_twist_covariance
 
 TOPICS = {
@@ -177,27 +179,14 @@ def file_sha256(path: Path | str) -> str:
 
 
 def source_record(
-    log: LogData, result_path: Path | str, read_options: dict[str, Any] | None
+    log: LogData, result_path: Path | str, read_options: ReadOptions | None
 ) -> dict[str, str]:
     """Where the result came from, for the metadata record "gtsam_dvl_result": the source log's absolute path,
     its path relative to the folder of the result file (so that the two can move together), the SHA-256 of its
     content (file_sha256: `evaluate --truth` checks that it is given the source), the map origin it read (JSON,
-    "" when the log records none) and the reading options (JSON: imu_topic, dvl_topic, salvage, repair and, when
-    given, depth_topic, gnss_topic, attitude_topic, truth_topic and dvl_water_topic)."""
-    options: dict[str, Any] = {
-        "imu_topic": "/imu/data_raw",
-        "dvl_topic": None,
-        "salvage": False,
-        "repair": False,
-    }
-    topics = ("depth_topic", "gnss_topic", "attitude_topic", "truth_topic", "dvl_water_topic")
-    options.update(
-        {
-            k: v
-            for k, v in (read_options or {}).items()
-            if k in options or (k in topics and v is not None)
-        }
-    )
+    "" when the log records none) and the reading options (JSON, ReadOptions.record(): imu_topic, dvl_topic,
+    salvage, repair and the others that differ from their defaults; None: the defaults)."""
+    options = (read_options or ReadOptions()).record()
     origin = to_json(log.origin.as_dict()) if log.origin is not None else ""
     if not log.source:
         return {
@@ -226,87 +215,21 @@ def write_result_log(
     result: NavResult,
     log: LogData,
     summary: dict[str, Any],
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     result_path: Path | str | None = None,
 ) -> Path:
     """Estimates with marginal covariances, path, biases and calibration, plus the summary and the
     effective configuration (metadata record and config.json attachment) and the run's health (metadata
     record "gtsam_dvl_health", and in summary.json). The record "gtsam_dvl_result" also names the source log
-    (absolute, and relative to result_path's folder: the final name when path is a temporary file) and the
-    options it was read with. Written atomically."""
+    (absolute, and relative to result_path's folder: the final name when path is a temporary file), the
+    options it was read with and the schema_version (core/config/schema.py). Written atomically."""
     path = Path(path)
     t = result.t
-    n = len(t)
-    n_q_b = matrix_to_quat_xyzw(result.n_R_b)
-    b_v, twist_cov = ros_twist_covariance(
-        result.n_R_b, result.n_v, result.pose_cov, result.vel_cov, result.pose_vel_cross
-    )
-    b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
     mis_rpy, mis_cov = misalignment_rpy_and_cov(result.b_R_d, result.b_R_d0, result.b_R_d_cov)
     R_c = result.b_R_d @ result.b_R_d0.T
-    ones = np.ones(n)
     with McapLogWriter(path, t0_ns=result.t0_ns) as w:
-        m = log.mounting
-        w.add_tf_static(
-            "/tf_static",
-            float(t[0]),
-            [
-                ("base_link", "imu_link", m.b_R_imu, m.b_p_imu),
-                ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl),
-            ],
-        )
-        w.add_odometry(
-            TOPICS["odometry"],
-            t,
-            result.n_p,
-            n_q_b,
-            b_v,
-            b_omega,
-            ros_pose_covariance(result.n_R_b, result.pose_cov),
-            twist_cov,
-        )
-        # one Path message per piece of a log smoothed at its long IMU gaps (estimators/batch/pieces.py), so that no
-        # line crosses a break; else one of the whole trajectory
-        starts = [int(p["start_index"]) for p in result.info.get("pieces") or []] or [0]
-        for a, b in zip(starts, starts[1:] + [n], strict=True):
-            w.add_path(TOPICS["path"], t[a:b], result.n_p[a:b], n_q_b[a:b])
-        bias_cov = np.broadcast_to(result.bias_cov, (n, 6, 6))
-        w.add_accel_with_covariance(
-            TOPICS["imu_bias"],
-            t,
-            np.outer(ones, result.accel_bias),
-            np.outer(ones, result.gyro_bias),
-            bias_cov,
-            "imu_link",
-        )
-        w.add_scalar_with_variance(
-            TOPICS["scale"],
-            t[-1:],
-            np.array([result.scale]),
-            np.array([result.scale_sigma**2]),
-            "dvl_link",
-        )
-        if np.isfinite(result.time_offset_sigma_s):
-            w.add_scalar_with_variance(
-                TOPICS["time_offset"],
-                t[-1:],
-                np.array([result.time_offset_s]),
-                np.array([result.time_offset_sigma_s**2]),
-                "dvl_link",
-            )
-        if result.lever_arm_m is not None and result.lever_arm_cov is not None:
-            cov_l = np.zeros((6, 6))
-            cov_l[:3, :3] = (
-                result.lever_arm_cov
-            )  # m^2, base_link; the rotation block is not estimated
-            w.add_pose_with_covariance(
-                TOPICS["lever_arm"],
-                t[-1:],
-                result.lever_arm_m[None],
-                np.array([[0.0, 0.0, 0.0, 1.0]]),
-                cov_l[None],
-                "base_link",
-            )
+        _write_trajectory(w, result, log)
+        _write_calibration_topics(w, result)
         cov_c = np.zeros((6, 6))
         cov_c[3:, 3:] = result.b_R_d @ result.b_R_d_cov @ result.b_R_d.T  # body axes, rad^2
         w.add_pose_with_covariance(
@@ -341,38 +264,131 @@ def write_result_log(
             w.add_attachment(
                 "timeline.npz", timeline_npz_bytes(result.timeline), "application/x-npz"
             )
-        w.add_attachment(
-            "calibration.json", to_json(calibration_record(result)).encode(), "application/json"
+        _write_records(w, result, summary, source_record(log, result_path or path, read_options))
+    return path
+
+
+def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None:
+    """The mounting (/tf_static), the odometry with its covariances (ROS conventions), the path (one message per
+    piece of a log smoothed in pieces) and the IMU biases."""
+    t = result.t
+    n = len(t)
+    n_q_b = matrix_to_quat_xyzw(result.n_R_b)
+    b_v, twist_cov = ros_twist_covariance(
+        result.n_R_b, result.n_v, result.pose_cov, result.vel_cov, result.pose_vel_cross
+    )
+    b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
+    m = log.mounting
+    w.add_tf_static(
+        "/tf_static",
+        float(t[0]),
+        [
+            ("base_link", "imu_link", m.b_R_imu, m.b_p_imu),
+            ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl),
+        ],
+    )
+    w.add_odometry(
+        TOPICS["odometry"],
+        t,
+        result.n_p,
+        n_q_b,
+        b_v,
+        b_omega,
+        ros_pose_covariance(result.n_R_b, result.pose_cov),
+        twist_cov,
+    )
+    # one Path message per piece of a log smoothed at its long IMU gaps (estimators/batch/pieces.py), so that no
+    # line crosses a break; else one of the whole trajectory
+    starts = [int(p["start_index"]) for p in result.info.get("pieces") or []] or [0]
+    for a, b in zip(starts, starts[1:] + [n], strict=True):
+        w.add_path(TOPICS["path"], t[a:b], result.n_p[a:b], n_q_b[a:b])
+    ones = np.ones(n)
+    bias_cov = np.broadcast_to(result.bias_cov, (n, 6, 6))
+    w.add_accel_with_covariance(
+        TOPICS["imu_bias"],
+        t,
+        np.outer(ones, result.accel_bias),
+        np.outer(ones, result.gyro_bias),
+        bias_cov,
+        "imu_link",
+    )
+
+
+def _write_calibration_topics(w: McapLogWriter, result: NavResult) -> None:
+    """The DVL scale, and when estimated its time offset and lever arm, each one message at the last state."""
+    t = result.t
+    w.add_scalar_with_variance(
+        TOPICS["scale"],
+        t[-1:],
+        np.array([result.scale]),
+        np.array([result.scale_sigma**2]),
+        "dvl_link",
+    )
+    if np.isfinite(result.time_offset_sigma_s):
+        w.add_scalar_with_variance(
+            TOPICS["time_offset"],
+            t[-1:],
+            np.array([result.time_offset_s]),
+            np.array([result.time_offset_sigma_s**2]),
+            "dvl_link",
         )
-        w.add_metadata(
-            "gtsam_dvl_result",
+    if result.lever_arm_m is not None and result.lever_arm_cov is not None:
+        cov_l = np.zeros((6, 6))
+        cov_l[:3, :3] = result.lever_arm_cov  # m^2, base_link; the rotation block is not estimated
+        w.add_pose_with_covariance(
+            TOPICS["lever_arm"],
+            t[-1:],
+            result.lever_arm_m[None],
+            np.array([[0.0, 0.0, 0.0, 1.0]]),
+            cov_l[None],
+            "base_link",
+        )
+
+
+def _write_records(
+    w: McapLogWriter, result: NavResult, summary: dict[str, Any], source: dict[str, str]
+) -> None:
+    """The metadata records ("gtsam_dvl_result" with the source record and the schema_version,
+    "gtsam_dvl_health") and the attachments read_result reads back: calibration.json, config.json (the effective
+    configuration), summary.json, states.npz and result.json."""
+    w.add_attachment(
+        "calibration.json", to_json(calibration_record(result)).encode(), "application/json"
+    )
+    w.add_metadata(
+        "gtsam_dvl_result",
+        {
+            "estimator": result.estimator,
+            "summary": to_json(summary),
+            **source,
+            "schema_version": str(SCHEMA_VERSION),
+        },
+    )
+    if (health := summary.get("health")) is not None:
+        w.add_metadata("gtsam_dvl_health", health_record(health, summary.get("losses", {})))
+    w.add_attachment(
+        "config.json",
+        json.dumps(
+            {
+                "schema_version": SCHEMA_VERSION,
+                "estimator": result.estimator,
+                "config": result.config,
+            },
+            default=str,
+            indent=2,
+        ).encode(),
+        "application/json",
+    )
+    w.add_attachment("summary.json", to_json(summary).encode(), "application/json")
+    w.add_attachment("states.npz", states_npz_bytes(result), "application/x-npz")
+    w.add_attachment(
+        "result.json",
+        to_json(
             {
                 "estimator": result.estimator,
-                "summary": to_json(summary),
-                **source_record(log, result_path or path, read_options),
-            },
-        )
-        if (health := summary.get("health")) is not None:
-            w.add_metadata("gtsam_dvl_health", health_record(health, summary.get("losses", {})))
-        w.add_attachment(
-            "config.json",
-            json.dumps(
-                {"estimator": result.estimator, "config": result.config}, default=str, indent=2
-            ).encode(),
-            "application/json",
-        )
-        w.add_attachment("summary.json", to_json(summary).encode(), "application/json")
-        w.add_attachment("states.npz", states_npz_bytes(result), "application/x-npz")
-        w.add_attachment(
-            "result.json",
-            to_json(
-                {
-                    "estimator": result.estimator,
-                    "info": result.info,
-                    "timing_s": result.timing_s,
-                    "config": result.config,
-                }
-            ).encode(),
-            "application/json",
-        )
-    return path
+                "info": result.info,
+                "timing_s": result.timing_s,
+                "config": result.config,
+            }
+        ).encode(),
+        "application/json",
+    )

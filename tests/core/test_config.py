@@ -630,3 +630,97 @@ def test_error_names_the_bad_table_of_a_section(tmp_path: Path) -> None:
         cfg.validate()
     cfg.online.relinearization.velocity = [1, 2, 3]  # type: ignore[assignment]
     assert cfg.validate().online.relinearization.velocity == (1.0, 2.0, 3.0)  # normalised in place
+
+
+# ----- schema_version and the migration table (core/config/schema.py) ----------------------------------------
+# what each older version's runs did about the keys added after it: a whole written configuration of version v
+# (without schema_version) lacks the keys of the steps after v and loads with these values for them
+OLD_RUNS = {
+    2: ("dvl", "correlated_sigma_m_s", 0.0),
+    3: ("current", "water_track", "refuse"),
+    4: ("priors", "hold_weak_information", 0.0),
+    5: ("priors", "nominal_check", False),
+    6: ("dvl", "constant_error_sigma_m_s", 0.0),
+}
+
+
+def _written_at(version: int) -> dict:  # type: ignore[type-arg]
+    """The default configuration as a version's writer wrote it: without the keys later versions added."""
+    d = EstimatorConfig().to_dict()
+    for v, (section, key, _) in OLD_RUNS.items():
+        if v > version:
+            if section == "current":
+                d.pop("current")
+            else:
+                d[section].pop(key)
+    return d
+
+
+def test_migration_table_is_ordered_and_ends_at_the_schema_version() -> None:
+    from gtsam_dvl.core.config.schema import MIGRATIONS, SCHEMA_VERSION
+
+    assert [m.version for m in MIGRATIONS] == list(range(2, SCHEMA_VERSION + 1))
+    assert all(m.change for m in MIGRATIONS)
+    assert set(OLD_RUNS) == {m.version for m in MIGRATIONS if m.added is not None}
+
+
+@pytest.mark.parametrize("version", [1, 2, 3, 4, 5, 6])
+def test_a_file_of_each_old_version_migrates(version: int, tmp_path: Path) -> None:
+    """A result's config.json of each older version (no schema_version) is detected by its keys and loads with
+    the later keys as its runs had them; the same file stating its schema_version loads the same."""
+    from gtsam_dvl.core.config.schema import SCHEMA_VERSION, detected_version
+
+    d = _written_at(version)
+    assert detected_version(d) == version
+    old = tmp_path / "config.json"
+    old.write_text(json.dumps({"estimator": "batch", "config": d}))
+    cfg = EstimatorConfig.load(old)
+    default = EstimatorConfig()
+    for v, (section, key, value) in OLD_RUNS.items():
+        expected = value if v > version else getattr(getattr(default, section), key)
+        assert getattr(getattr(cfg, section), key) == expected, (v, section, key)
+    stated = tmp_path / "stated.json"
+    stated.write_text(json.dumps({"schema_version": version, "estimator": "batch", "config": d}))
+    assert EstimatorConfig.load(stated) == cfg
+    # a user's partial file is current: the keys it leaves out take their defaults
+    assert detected_version({"dvl": {"noise_m_s": 0.007}}) == SCHEMA_VERSION
+
+
+def test_written_configurations_state_their_schema_version(tmp_path: Path) -> None:
+    from gtsam_dvl.core.config.schema import SCHEMA_VERSION
+
+    cfg = _non_default()
+    text = cfg.to_toml()
+    assert text.startswith(f"schema_version = {SCHEMA_VERSION}\n")
+    assert tomllib.loads(text)["schema_version"] == SCHEMA_VERSION
+    path = tmp_path / "written.toml"
+    path.write_text(text)
+    assert EstimatorConfig.load(path) == cfg
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (
+            99,
+            "schema_version 99 is newer than this gtsam_dvl reads (at most {v}): written by a newer version",
+        ),
+        ('"7"', "schema_version must be an integer from 1 to {v}, got '7'"),
+        (0, "schema_version must be an integer from 1 to {v}, got 0"),
+    ],
+)
+def test_a_bad_or_newer_schema_version_is_one_line(
+    value: object, message: str, tmp_path: Path
+) -> None:
+    from gtsam_dvl.core.config.schema import SCHEMA_VERSION
+
+    path = tmp_path / "new.toml"
+    path.write_text(f"schema_version = {value}\n\n[dvl]\nnoise_m_s = 0.007\n")
+    with pytest.raises(GtsamDvlError) as err:
+        EstimatorConfig.load(path)
+    assert str(err.value).startswith(f"{path}: {message.format(v=SCHEMA_VERSION)}")
+    assert "\n" not in str(err.value)
+    wrapped = tmp_path / "config.json"
+    wrapped.write_text(json.dumps({"schema_version": 99, "estimator": "ekf", "config": {}}))
+    with pytest.raises(GtsamDvlError, match=rf"^{wrapped}: schema_version 99 is newer"):
+        EstimatorConfig.load(wrapped)

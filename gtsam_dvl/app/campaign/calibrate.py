@@ -20,7 +20,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -45,6 +45,9 @@ from gtsam_dvl.estimators.batch.multi_dive import (
     summarise,
 )
 
+if TYPE_CHECKING:
+    from gtsam_dvl.io.read_options import ReadOptions
+
 
 def _error_text(exc: BaseException) -> str:
     return str(exc) if isinstance(exc, GtsamDvlError) else f"{type(exc).__name__}: {exc}"
@@ -53,13 +56,15 @@ def _error_text(exc: BaseException) -> str:
 # ----- the tasks (module level: Dask ships them by reference) -------------------------------------------------
 
 
-def prepare_task(log_path: str, config_path: str | None, read_options: dict[str, Any]) -> DiveState:
+def prepare_task(
+    log_path: str, config_path: str | None, read_options: ReadOptions | None
+) -> DiveState:
     """Read a log and prepare its dive (estimators/batch/multi_dive.py prepare_dive) with the configuration given, or
     the one the log's scenario names, as `smooth` chooses it."""
     from gtsam_dvl.app.commands import load_log
     from gtsam_dvl.core.config import estimator_overrides
 
-    log = load_log(log_path, **read_options)
+    log = load_log(log_path, read_options)
     config = (
         EstimatorConfig.load(Path(config_path), under=estimator_overrides(log.metadata))
         if config_path
@@ -104,7 +109,7 @@ class LocalDives:
         self,
         logs: list[str],
         config_path: str | None,
-        read_options: dict[str, Any],
+        read_options: ReadOptions | None,
         failures: list[DiveFailure],
     ) -> None:
         self.failures = failures
@@ -155,7 +160,7 @@ class DaskDives:
         client: Any,
         logs: list[str],
         config_path: str | None,
-        read_options: dict[str, Any],
+        read_options: ReadOptions | None,
         failures: list[DiveFailure],
         progress: Any = None,
     ) -> None:
@@ -267,7 +272,7 @@ def calibrate_logs(
     logs: list[Path],
     output: Path | None = None,
     config_path: Path | None = None,
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
     vehicle: str = "vehicle",
@@ -290,7 +295,7 @@ def calibrate_logs(
             raise GtsamDvlError(f"{p}: no such file or directory")
     paths = [str(Path(p).resolve()) for p in logs]
     cfg = str(Path(config_path).resolve()) if config_path else None
-    options = dict(read_options or {})
+    options = read_options
     failures: list[DiveFailure] = []
     t0 = time.perf_counter()
     here = client is None and scheduler is None and (workers == 1 or not _has_dask())
@@ -367,7 +372,7 @@ def _on_client(
     client: Any,
     paths: list[str],
     cfg: str | None,
-    options: dict[str, Any],
+    options: ReadOptions | None,
     failures: list[DiveFailure],
     tol: float,
     show_progress: bool,

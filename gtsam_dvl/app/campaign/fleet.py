@@ -5,14 +5,21 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
 from gtsam_dvl.core.errors import GtsamDvlError
 
+if TYPE_CHECKING:
+    from gtsam_dvl.io.read_options import ReadOptions
+
 
 def _smooth_task(
-    log_path: str, run_dir: str, mode: str, config_path: str | None, read_options: dict[str, Any]
+    log_path: str,
+    run_dir: str,
+    mode: str,
+    config_path: str | None,
+    read_options: ReadOptions | None,
 ) -> dict[str, Any]:
     """The worker's task: `smooth` one log into run_dir (result.mcap, summary.json) and, for a result MCAP,
     `evaluate` it (the surfacing error against held-out GNSS fixes, errors against the truth when the log has
@@ -43,7 +50,7 @@ def _smooth_task(
             wall_s=s.get("timing_s", {}).get("total"),
         )
         if result is not None:
-            evaluate_to_dir(result, out / "evaluation", read_options={})
+            evaluate_to_dir(result, out / "evaluation")
             metrics = json.loads((out / "evaluation" / "metrics.json").read_text())
             gnss = metrics.get("gnss") or {}
             mean, first = gnss.get("surfacing_error_mean"), gnss.get("surfacing_error")
@@ -94,7 +101,7 @@ def smooth_fleet(
     out_dir: Path,
     mode: str = "batch",
     config_path: Path | None = None,
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     scheduler: str | None = None,
     workers: int | None = None,
     show_progress: bool = True,
@@ -126,7 +133,7 @@ def smooth_fleet(
                 str((out_dir / n).resolve()),
                 mode,
                 str(config_path.resolve()) if config_path else None,
-                dict(read_options or {}),
+                read_options,
                 pure=False,
                 retries=1,
             ): i

@@ -24,6 +24,7 @@ from gtsam_dvl.core.types import LogData
 
 if TYPE_CHECKING:
     from gtsam_dvl.estimators.online import OnlineEstimator
+    from gtsam_dvl.io.read_options import ReadOptions
 
 
 def parse_speed(text: str | float) -> float:
@@ -217,7 +218,7 @@ def serve_log(
     port: int = DEFAULT_PORT,
     host: str = "127.0.0.1",
     config_path: Path | None = None,
-    read_options: dict[str, Any] | None = None,
+    read_options: ReadOptions | None = None,
     wait: bool = False,
     linger: bool = True,
     echo: Callable[[str], None] = print,
@@ -238,7 +239,7 @@ def serve_log(
     config = (
         EstimatorConfig.load(config_path) if config_path else None
     )  # a bad -c fails before the log is read
-    log = load_log(log_path, **(read_options or {}))
+    log = load_log(log_path, read_options)
     if config_path:  # the log's scenario's [estimator] table below the -c configuration
         config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
     config = config or EstimatorConfig.for_log(log.metadata)

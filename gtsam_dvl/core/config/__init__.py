@@ -20,7 +20,8 @@ win. `[priors] mounting_tolerance_deg` likewise sets the misalignment prior.
 
 Modules: base.py (the checked model, one-line errors, TOML writing), sections.py (one model per TOML table),
 presets.py (the sensor presets and their sources), noise.py ([noise]), estimator.py (EstimatorConfig, the named
-configurations, loading).
+configurations, loading), schema.py (the schema_version written files state and the one migration table that
+brings an older configuration to this version).
 """
 
 from gtsam_dvl.core.config.base import ConfigModel

@@ -139,7 +139,7 @@ def one_line(exc: ValidationError, data: Any, model: type[ConfigModel], source: 
         data = _item(data, part)
         sub = _sub_model(fields[str(part)])
         if sub is None:
-            return f"{source}: {where} {part} {_allowed(fields[str(part)], data)}"
+            return f"{source}: {where} {part} {allowed_text(fields[str(part)], data)}"
         if depth == len(err["loc"]) - 1:  # the section itself is not a table
             if not path:
                 return f"{source}: [{part}] must be a table of keys, got {data!r}"
@@ -156,7 +156,7 @@ def _unannotated(tp: Any, constraints: list[Any]) -> Any:
     return tp
 
 
-def _allowed(f: FieldInfo, value: Any) -> str:
+def allowed_text(f: FieldInfo, value: Any) -> str:
     """What field f allows, as the end of "[section] key ...", with the value given."""
     constraints = list(f.metadata)
     tp, or_none = f.annotation, ""

@@ -15,6 +15,7 @@ from gtsam_dvl.core.config.base import ConfigModel, toml_text
 from gtsam_dvl.core.config.current import CurrentConfig
 from gtsam_dvl.core.config.noise import NoiseConfig
 from gtsam_dvl.core.config.presets import DVL_PRESETS
+from gtsam_dvl.core.config.schema import SCHEMA_VERSION, migrated
 from gtsam_dvl.core.config.sections import (
     AlignmentConfig,
     CalibrationConfig,
@@ -55,6 +56,10 @@ NAMED_CONFIGS: dict[str, dict[str, dict[str, Any]]] = {
         "noise": {"from_data": False},
     },
 }
+
+
+# the keys of a result's config.json ({"schema_version", "estimator", "config"}; without schema_version before it)
+RESULT_CONFIG_KEYS = {"schema_version", "estimator", "config"}
 
 
 def recommended_config_name(metadata: Mapping[str, Any]) -> str:
@@ -110,8 +115,9 @@ class EstimatorConfig(ConfigModel):
         return self.model_dump()
 
     def to_toml(self) -> str:
-        """The configuration as TOML text (from_toml reads it back to an equal configuration)."""
-        return toml_text(self)
+        """The configuration as TOML text, schema_version first (from_toml reads it back to an equal
+        configuration)."""
+        return f"schema_version = {SCHEMA_VERSION}\n\n{toml_text(self)}"
 
     @classmethod
     def named(cls, name: str) -> EstimatorConfig:
@@ -171,9 +177,10 @@ class EstimatorConfig(ConfigModel):
     ) -> EstimatorConfig:
         """Sections from a dict shaped like the TOML file. A top-level key preset = "NAME" starts from that
         named configuration instead of the defaults. under: keys below data's (and its preset's), above the
-        defaults."""
+        defaults. A top-level schema_version brings data from that version to this one (schema.py)."""
         if not isinstance(data, Mapping):
             raise GtsamDvlError(f"{source}: a configuration is a table of sections, got {data!r}")
+        data = migrated(dict(data), source, detect=False)
         if "preset" in data:
             preset = data["preset"]
             if not isinstance(preset, str) or preset not in NAMED_CONFIGS:
@@ -198,7 +205,7 @@ class EstimatorConfig(ConfigModel):
             raise GtsamDvlError(f"{path}: no such configuration file") from None
         except tomllib.TOMLDecodeError as exc:
             raise GtsamDvlError(f"{path}: not valid TOML ({exc})") from None
-        return cls.from_dict(_white_dvl_if_written_before(data), source=str(path), under=under)
+        return cls.from_dict(migrated(data, str(path)), source=str(path), under=under)
 
     @classmethod
     def from_json(cls, path: Path | str, under: Mapping[str, Any] | None = None) -> EstimatorConfig:
@@ -210,54 +217,14 @@ class EstimatorConfig(ConfigModel):
             raise GtsamDvlError(f"{path}: no such configuration file") from None
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise GtsamDvlError(f"{path}: not valid JSON ({exc})") from None
-        if isinstance(data, dict) and "config" in data and set(data) <= {"estimator", "config"}:
-            data = data["config"]
-        return cls.from_dict(_white_dvl_if_written_before(data), source=str(path), under=under)
-
-
-# keys of [dvl] that only a whole written configuration (a result's config.json, to_toml) lists, not a user's
-DUMP_KEYS = {"time_offset_window_s", "jump_margin_m_s", "motion_dv_m_s", "accel_imu_factor"}
-
-
-def _white_dvl_if_written_before(data: Any) -> Any:
-    """A whole configuration written before [dvl] correlated_sigma_m_s existed (its [dvl] lists DUMP_KEYS, not
-    correlated_sigma_m_s, no preset) with the DVL's error white, as the runs that wrote it took it, and one written
-    before [current] existed with water-track pings refused, one written before [priors] hold_weak_information
-    existed with every calibration direction estimated, one written before [priors] nominal_check existed without
-    it, one written before [dvl] constant_error_sigma_m_s existed without it; a user's file that leaves the keys
-    out takes the defaults."""
-    dvl = data.get("dvl") if isinstance(data, dict) else None
-    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "current" not in data:
-        # written before [current] existed: its runs refused water-track pings
-        data = {**data, "current": {"water_track": "refuse"}}
-    priors = data.get("priors") if isinstance(data, dict) else None
-    if (
-        isinstance(dvl, dict)
-        and DUMP_KEYS <= set(dvl)
-        and isinstance(priors, dict)
-        and ("hold_weak_information" not in priors)
-    ):  # its runs estimated every calibration direction
-        data = {**data, "priors": {**priors, "hold_weak_information": 0.0}}
-        priors = data["priors"]
-    if (
-        isinstance(dvl, dict)
-        and DUMP_KEYS <= set(dvl)
-        and isinstance(priors, dict)
-        and ("nominal_check" not in priors)
-    ):  # its runs did not check the nominal calibration
-        data = {**data, "priors": {**priors, "nominal_check": False}}
-    if isinstance(dvl, dict) and DUMP_KEYS <= set(dvl) and "constant_error_sigma_m_s" not in dvl:
-        # its runs gave the calibration's covariance no share of a constant DVL error
-        dvl = {**dvl, "constant_error_sigma_m_s": 0.0}
-        data = {**data, "dvl": dvl}
-    if (
-        isinstance(dvl, dict)
-        and DUMP_KEYS <= set(dvl)
-        and "correlated_sigma_m_s" not in dvl
-        and dvl.get("model") is None
-    ):
-        return {**data, "dvl": {**dvl, "correlated_sigma_m_s": 0.0}}
-    return data
+        if isinstance(data, dict) and "config" in data and set(data) <= RESULT_CONFIG_KEYS:
+            version = {"schema_version": data["schema_version"]} if "schema_version" in data else {}
+            data = (
+                {**data["config"], **version}
+                if isinstance(data["config"], dict)
+                else data["config"]
+            )
+        return cls.from_dict(migrated(data, str(path)), source=str(path), under=under)
 
 
 def _merged(base: Mapping[str, Any], override: Mapping[str, Any]) -> dict[str, Any]:

@@ -124,6 +124,9 @@ class McapScan:
         return GtsamDvlError(f"{self.path}: {what} at byte {pos}; {SALVAGE_HINT}")
 
     def _scan(self) -> None:
+        """Find the records: the data section's (chunks, messages outside chunks, metadata, attachments,
+        definitions), then the summary section's definitions, then the channels inside the chunks when the
+        summary gave none."""
         buf, n = self.buf, len(self.buf)
         if buf[:8] != mc.MAGIC:
             raise GtsamDvlError(f"{self.path}: not an MCAP file (no MCAP magic at the start)")
@@ -133,6 +136,20 @@ class McapScan:
             raise GtsamDvlError(
                 f"{self.path}: truncated at byte {n} (footer missing); {SALVAGE_HINT}"
             )
+        self._scan_data_section()
+        if complete:
+            self._scan_summary()
+        if not self.channels or not complete:
+            # Channel records may sit inside chunks (rosbag2, rosbags); without a summary, walk them.
+            for seg in self.segments:
+                if isinstance(seg, _Chunk) and (data := self._records(seg)) is not None:
+                    seg.records = data
+                    seg.offsets = self._walk(seg, data, definitions=True)
+
+    def _scan_data_section(self) -> None:
+        """The records after the magic up to the data end (or the footer): each read by _top_record; with salvage,
+        a malformed record or a file cut inside one ends the scan with a loss recorded, else it is an error."""
+        buf, n = self.buf, len(self.buf)
         pos = 8
         while pos + 9 <= n:
             op, ln = struct.unpack_from("<BQ", buf, pos)
@@ -152,20 +169,18 @@ class McapScan:
         else:
             if self.salvage and pos < n:
                 self._lost_tail(pos, -1, pos + 9)
-        if complete:
-            (summary_start,) = struct.unpack_from("<Q", buf, n - 28)
-            try:
-                if summary_start:
-                    _walk_records(buf[summary_start : n - 37], other=self._definition)
-            except (ValueError, struct.error, UnicodeDecodeError):
-                if not self.salvage:
-                    raise self._fail(summary_start, "malformed summary section") from None
-        if not self.channels or not complete:
-            # Channel records may sit inside chunks (rosbag2, rosbags); without a summary, walk them.
-            for seg in self.segments:
-                if isinstance(seg, _Chunk) and (data := self._records(seg)) is not None:
-                    seg.records = data
-                    seg.offsets = self._walk(seg, data, definitions=True)
+
+    def _scan_summary(self) -> None:
+        """The schema and channel records of a complete file's summary section (a malformed one is an error
+        unless salvage, which then goes without it)."""
+        buf, n = self.buf, len(self.buf)
+        (summary_start,) = struct.unpack_from("<Q", buf, n - 28)
+        try:
+            if summary_start:
+                _walk_records(buf[summary_start : n - 37], other=self._definition)
+        except (ValueError, struct.error, UnicodeDecodeError):
+            if not self.salvage:
+                raise self._fail(summary_start, "malformed summary section") from None
 
     def _top_record(self, op: int, pos: int) -> None:
         buf, c = self.buf, pos + 9
