@@ -302,6 +302,35 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     prev = np.clip(j - 1, 0, len(dvl) - 1)
     j = np.where(np.abs(dvl.t[prev] - result.t) < np.abs(dvl.t[j] - result.t), prev, j)
     unmatched = int((np.abs(dvl.t[j] - result.t) >= 1e-6).sum())
+    y_state = _state_predictions(result, log)
+    t0, t1 = float(result.t[0]), float(result.t[-1])
+    pings = result.dvl_pings
+    selected_again = 0
+    if pings is None or (len(pings) and int(pings.max()) >= len(dvl)):
+        pings = usable_pings(dvl, log.imu, config, {})
+        selected_again = len(pings)
+    j = pings[(dvl.t[pings] >= t0 - 1e-6) & (dvl.t[pings] <= t1 + 1e-6)]
+    t_p = np.clip(dvl.t[j], t0, t1)
+    y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(
+        -1, 3
+    )
+    gm_var = (
+        config.correlated_sigma_m_s**2
+    )  # the DVL's correlated error's variance (estimators/models/correlated.py)
+    if config.use_beams and dvl.beams is not None:
+        d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
+        ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2)
+        r = np.where(ok, v - np.einsum("nbi,ni->nb", np.where(ok[..., None], d_u, 0.0), y_hat), 0.0)
+        chi2 = (r**2).sum(axis=1) / (config.beam_sigma_m_s() ** 2 + gm_var)
+        dof = ok.sum(axis=1).astype(float)
+        return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
+    return _velocity_residuals(log, config, j, y_hat, gm_var, unmatched, selected_again)
+
+
+def _state_predictions(result: NavResult, log: LogData) -> np.ndarray:
+    """The DVL velocity (N, 3) m/s in dvl_link the model predicts at each state (factors/dvl_model.py), with the
+    calibration the estimator fitted (state_calibration)."""
+    n = len(result.t)
     b_omega = result.b_omega if result.b_omega is not None else np.zeros((n, 3))
     # the model the estimator fitted: its lever arm when estimated, and the ping stamped t seen at t + dt_d (the
     # state's velocity interpolated there, its attitude turned by the body rate over dt_d); a filter's states with
@@ -316,61 +345,46 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         b_omega = np.stack(
             [np.interp(result.t + dt_d, result.t, b_omega[:, i]) for i in range(3)], axis=1
         )
-    # the DVL model at each state (factors/dvl_model.py), for all states at once (h is linear in the scale)
+    # for all states at once (h is linear in the scale)
     y_unit, _ = dvl_model(n_R_b, n_v, 1.0, b_R_d, b_omega, b_l, jacobians=False)
-    y_state = k[:, None] * y_unit
-    t0, t1 = float(result.t[0]), float(result.t[-1])
-    pings = result.dvl_pings
-    selected_again = 0
-    if pings is None or (len(pings) and int(pings.max()) >= len(dvl)):
-        pings = usable_pings(dvl, log.imu, config, {})
-        selected_again = len(pings)
-    j = pings[(dvl.t[pings] >= t0 - 1e-6) & (dvl.t[pings] <= t1 + 1e-6)]
-    t_p = np.clip(dvl.t[j], t0, t1)
-    y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(
-        -1, 3
+    return k[:, None] * y_unit
+
+
+def _velocity_residuals(
+    log: LogData,
+    config: DvlConfig,
+    j: np.ndarray,
+    y_hat: np.ndarray,
+    gm_var: float,
+    unmatched: int,
+    selected_again: int,
+) -> DvlResiduals:
+    """The residuals of the pings j on their 3-D velocities (predicted y_hat (len(j), 3)), whitened by the
+    covariance each ping was given plus the correlated error's variance gm_var; the water-track pings kept aside,
+    unjudged here (analysis/water_track.py judges them with the current)."""
+    dvl = log.dvl
+    d_y = dvl.d_v[j]
+    water = (
+        np.zeros(len(j), bool) if dvl.water_track is None else np.asarray(dvl.water_track, bool)[j]
     )
-    matched = np.ones(len(j), dtype=bool)
-    n = len(j)
-    gm_var = (
-        config.correlated_sigma_m_s**2
-    )  # the DVL's correlated error's variance (estimators/models/correlated.py)
-    chi2, dof = np.zeros(n), np.zeros(n)
-    if config.use_beams and dvl.beams is not None:
-        d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
-        ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2) & matched[:, None]
-        r = np.where(ok, v - np.einsum("nbi,ni->nb", np.where(ok[..., None], d_u, 0.0), y_hat), 0.0)
-        chi2 = (r**2).sum(axis=1) / (config.beam_sigma_m_s() ** 2 + gm_var)
-        dof = ok.sum(axis=1).astype(float)
-    else:
-        d_y = dvl.d_v[j]
-        water = (
-            np.zeros(len(j), bool)
-            if dvl.water_track is None
-            else np.asarray(dvl.water_track, bool)[j]
-        )
-        seen = matched & (dvl.valid[j] | water) & np.isfinite(d_y).all(axis=1)
-        ok = seen & ~water  # water-track pings: judged with the current (analysis/water_track.py)
-        r = np.where(ok[:, None], d_y - y_hat, 0.0)
-        # the noise each ping was given by the estimators, and the correlated error they modelled beside it (its
-        # estimate is not in the result: the residual holds it)
-        cov = ping_covariance(config, dvl.d_cov[j]) + gm_var * np.eye(3)
-        cov[~ok] = np.eye(3)
-        chi2 = np.where(
-            ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0
-        )
-        dof = 3.0 * ok
-        return DvlResiduals(
-            np.asarray(dvl.t[j], dtype=float),
-            chi2,
-            dof,
-            unmatched,
-            selected_again,
-            np.where(seen[:, None], d_y - y_hat, np.nan),
-            j,
-            water,
-        )
-    return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
+    seen = (dvl.valid[j] | water) & np.isfinite(d_y).all(axis=1)
+    ok = seen & ~water
+    r = np.where(ok[:, None], d_y - y_hat, 0.0)
+    # the noise each ping was given by the estimators, and the correlated error they modelled beside it (its
+    # estimate is not in the result: the residual holds it)
+    cov = ping_covariance(config, dvl.d_cov[j]) + gm_var * np.eye(3)
+    cov[~ok] = np.eye(3)
+    chi2 = np.where(ok, np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0]), 0.0)
+    return DvlResiduals(
+        np.asarray(dvl.t[j], dtype=float),
+        chi2,
+        3.0 * ok,
+        unmatched,
+        selected_again,
+        np.where(seen[:, None], d_y - y_hat, np.nan),
+        j,
+        water,
+    )
 
 
 def attitude_at(
@@ -443,6 +457,8 @@ def state_calibration(
 def _check_dvl_residuals(
     result: NavResult, log: LogData, config: EstimatorConfig, health: Health
 ) -> None:
+    """The DVL residuals of the run (dvl_residuals) into figures "dvl_residuals" and flags: windows and stretches
+    above their noise, the whole log's fit; the water-track pings judged apart (analysis/water_track.py)."""
     res = dvl_residuals(result, log, config.dvl)
     check_water_track(
         result, log, config, res, health.figures, health.flag
@@ -471,6 +487,15 @@ def _check_dvl_residuals(
             "valid flags",
         )
         return
+    spans = _bad_spans(res, figures)
+    _flag_bad_spans(spans, config.dvl.robust, health)
+    _judge_overall_residuals(figures["whitened_rms"], spans, health)
+
+
+def _bad_spans(res: DvlResiduals, figures: dict[str, Any]) -> list[tuple[float, float, float]]:
+    """The residuals' whitened RMS per RESIDUAL_WINDOW_S window (into figures "windows"), and the stretches of
+    adjacent windows above RESIDUAL_WINDOW_DEGRADED (into figures "bad_windows"): (start s, end s, RMS) each."""
+    used = res.dof > 0
     start = np.floor(res.t[used][0] / RESIDUAL_WINDOW_S) * RESIDUAL_WINDOW_S
     index = np.floor((res.t - start) / RESIDUAL_WINDOW_S).astype(int)
     bad: list[tuple[float, float, float]] = []
@@ -492,7 +517,12 @@ def _check_dvl_residuals(
     figures["bad_windows"] = [
         {"start_s": a, "end_s": b, "whitened_rms": rms} for a, b, rms in spans
     ]
-    advice = _kernel_advice(config.dvl.robust)
+    return spans
+
+
+def _flag_bad_spans(spans: list[tuple[float, float, float]], robust: str, health: Health) -> None:
+    """One "degraded" flag per bad stretch, the first MAX_WINDOW_WARNINGS by name and the rest in one line."""
+    advice = _kernel_advice(robust)
     for a, b, rms in spans[:MAX_WINDOW_WARNINGS]:
         health.flag(
             "degraded",
@@ -506,7 +536,13 @@ def _check_dvl_residuals(
             f"and {len(rest)} more stretches of DVL residuals above "
             f"{RESIDUAL_WINDOW_DEGRADED:g}x their noise ({rest[0][0]:.0f} to {rest[-1][1]:.0f} s)",
         )
-    overall = figures["whitened_rms"]
+
+
+def _judge_overall_residuals(
+    overall: float, spans: list[tuple[float, float, float]], health: Health
+) -> None:
+    """The whole log's whitened RMS: "failed" when its square is beyond CHI2_PER_DOF_FAILED and the solver gave
+    no chi^2 of its own, "degraded" when above RESIDUAL_OVERALL_DEGRADED with no bad stretch to explain it."""
     if (
         health.figures.get("solver", {}).get("chi2_per_dof") is None
         and overall**2 > CHI2_PER_DOF_FAILED
@@ -565,11 +601,20 @@ def _check_motion(log: LogData, health: Health) -> None:
 
 
 def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
+    """The estimator's counters (NavResult.info "counters") and records into figures "counters" and flags:
+    rejected pings and dropped IMU samples, the time offset's windows and bound, the pieces and IMU gaps."""
     counters = {
         k: int(v)
         for k, v in result.info.get("counters", {}).items()
         if isinstance(v, (int, np.integer))
     }
+    _check_rejections(counters, log, health)
+    _check_time_offset(result, counters, health)
+    _check_imu_gaps(result, log, health)
+
+
+def _check_rejections(counters: dict[str, int], log: LogData, health: Health) -> None:
+    """The DVL pings rejected and the IMU samples dropped (figures "counters"), a note or "degraded" flag each."""
     rejected = {
         k: v for k, v in counters.items() if k.startswith("dvl_") and k not in _NOT_REJECTIONS and v
     }
@@ -605,6 +650,11 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
             f"the estimator dropped {sum(dropped.values())} IMU sample(s) ({why}): the IMU "
             "stream has holes; read the log with --repair to see where",
         )
+
+
+def _check_time_offset(result: NavResult, counters: dict[str, int], health: Health) -> None:
+    """The time offset's IMU windows: held at the filters' bound (clipped), never settled on the batch solution
+    (centring), the EKF's offset state held at its bound (bounded)."""
     clipped = counters.get("time_offset_window_clipped", 0)
     health.figures["counters"]["time_offset_window_clipped"] = clipped
     if clipped:
@@ -625,6 +675,11 @@ def _check_counters(result: NavResult, log: LogData, health: Health) -> None:
     ):  # the EKF held its offset state at the bound
         health.figures["counters"]["time_offset_bounded"] = bounded
         _check_offset_bound(result, bounded, health)
+
+
+def _check_imu_gaps(result: NavResult, log: LogData, health: Health) -> None:
+    """The log smoothed in pieces cut at IMU gaps, or gaps crossed by holding the last sample (those the reader
+    did not record already)."""
     if breaks := result.info.get("breaks"):  # estimators/batch/pieces.py
         health.flag(
             "degraded",
@@ -801,7 +856,19 @@ def loss_lines(losses: dict[str, Any]) -> list[str]:
 
 def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     """(severity, text) per loss: salvaged chunks, a cut-off file, messages dropped by --repair per topic, gaps
-    in a topic's stamps. Severity "degraded" when the loss harms the result, else "note"."""
+    in a topic's stamps, IMU saturation, clock steps. Severity "degraded" when the loss harms the result, else
+    "note"."""
+    return [
+        *_salvage_findings(losses),
+        *_repair_findings(losses),
+        *_gap_findings(losses),
+        *_saturation_findings(losses),
+        *_clock_step_findings(losses),
+    ]
+
+
+def _salvage_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The chunks --salvage dropped and a file cut short: both degrade the result."""
     out: list[tuple[str, str]] = []
     salv = losses.get("salvage") or {}
     if salv.get("chunks_lost"):
@@ -838,6 +905,12 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
                 + " could be read and how much more it held is unknown; the result ends there",
             )
         )
+    return out
+
+
+def _repair_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The messages --repair dropped per topic: "degraded" beyond REPAIRED_DEGRADED of the topic."""
+    out: list[tuple[str, str]] = []
     for topic, d in sorted((losses.get("repair") or {}).items()):
         if d.get("of") and d["dropped"] / d["of"] > REPAIRED_DEGRADED:
             out.append(
@@ -845,6 +918,12 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
             )
         else:
             out.append(("note", _repair_line(topic, d)))
+    return out
+
+
+def _gap_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The gaps in each topic's stamps: "degraded" when the longest is beyond the IMU's or the DVL's limit."""
+    out: list[tuple[str, str]] = []
     for topic, g in sorted((losses.get("gaps") or {}).items()):
         imu = "imu" in topic.lower()
         if imu and g["longest_s"] > IMU_GAP_DEGRADED_S:
@@ -861,6 +940,12 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
             )
         else:
             out.append(("note", _gap_line(topic, g)))
+    return out
+
+
+def _saturation_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The IMU's saturated stretches per topic (dropped and crossed as gaps): each degrades the result."""
+    out: list[tuple[str, str]] = []
     for topic, report in sorted((losses.get("saturation") or {}).items()):
         axes = ", ".join(
             f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} "
@@ -881,6 +966,12 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
                 "there); an IMU with a larger range avoids it",
             )
         )
+    return out
+
+
+def _clock_step_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The clock steps --repair shifted the stamps across: notes."""
+    out: list[tuple[str, str]] = []
     for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
         for c in steps:
             back = c["jump_s"] < 0

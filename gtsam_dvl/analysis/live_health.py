@@ -82,6 +82,16 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
         "imu_wall_silent_s": state.imu_wall_silent_s,
         "no_lock_s": state.no_lock_s,
     }
+    _check_stop_and_imu(state, lim, h)
+    _check_phase(state, h)
+    _check_dvl(state, lim, h)
+    _check_streams(state, h)
+    _check_counters(state, h)
+    return h
+
+
+def _check_stop_and_imu(state: LiveState, lim: LiveThresholds, h: Health) -> None:
+    """The estimator stopped, or the IMU silent in wall time (the IMU is the clock): "failed" either way."""
     if state.stop_error:
         h.flag(
             "failed",
@@ -100,6 +110,10 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
             f"IMU topic {imu.topic}: {what}: no estimate without it; check the IMU driver and the "
             "topic name and QoS (imu_topic, qos_inputs)",
         )
+
+
+def _check_phase(state: LiveState, h: Health) -> None:
+    """Waiting for the map origin ("warn") or aligning (a note)."""
     if state.phase == "waiting_origin":
         h.flag(
             "warn",
@@ -112,6 +126,11 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
             "aligning: the first estimate comes after [online] align_s of static IMU data (or at once "
             "with alignment.initial_attitude_deg)",
         )
+
+
+def _check_dvl(state: LiveState, lim: LiveThresholds, h: Health) -> None:
+    """The DVL silent or without bottom lock (sensor time, once the IMU runs): "warn", then "degraded"."""
+    imu = state.streams.get("imu")
     dvl = state.streams.get("dvl")
     if dvl is not None and imu is not None and imu.received:
         silent = dvl.silent_s if dvl.received else math.inf
@@ -139,6 +158,10 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
                 f"no bottom lock for {state.no_lock_s:.1f} s (pings without a valid velocity): dead "
                 "reckoning on the IMU (and depth) until the DVL finds the bottom",
             )
+
+
+def _check_streams(state: LiveState, h: Health) -> None:
+    """Each stream's recent stamp jumps and off-clock messages ("warn"), late and duplicate ones (a note)."""
     for s in state.streams.values():
         if s.jumps and s.since_jump_s < RECENT_S:
             h.flag(
@@ -158,6 +181,10 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
                 f"{s.topic}: {s.late} message(s) later than the reorder window and {s.duplicates} "
                 "duplicate(s), dropped",
             )
+
+
+def _check_counters(state: LiveState, h: Health) -> None:
+    """The estimator's counters: rejected pings and dropped IMU samples, a note each."""
     # the pings the estimator could not use, counted as assess_health counts them (keyframe thinning and slow
     # pings are not rejections); the ones without a valid velocity are the bottom lock's, said above
     rejected = {
@@ -186,7 +213,6 @@ def assess_live(state: LiveState, limits: LiveThresholds | None = None) -> Healt
                 for k, v in sorted(dropped.items())
             ),
         )
-    return h
 
 
 def _s(x: float) -> str:

@@ -107,6 +107,22 @@ def check_water_track(
         return
     t_p = np.asarray(dvl.t[idx], dtype=float)
     c, var_c = _current_at(profile, t_p)
+    c_d, cov_c = _current_seen(result, t_p, c, var_c)
+    seen = np.isfinite(r).all(axis=1)
+    wt = on_water & seen
+    if wt.any():
+        _judge_water_pings(result, log, config, res, c_d, cov_c, wt, fig, flag)
+    bt = ~on_water & seen
+    if bt.any():
+        determined = np.sqrt(var_c.max(axis=1)) < 0.5 * config.current.prior_sigma_m_s
+        _find_false_lock(log, config, res, t_p, c, c_d, cov_c, bt, determined, fig, flag)
+
+
+def _current_seen(
+    result: NavResult, t_p: np.ndarray, c: np.ndarray, var_c: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The current c (N, 3) m/s in the map frame, variance var_c (N, 2) (east, north), as the DVL sees it at the
+    pings' times t_p: in dvl_link (N, 3) and its covariance (N, 3, 3)."""
     # the current seen in dvl_link at each ping: k d_R_b n_R_b^T c, with the nearest state's attitude
     state = np.clip(np.searchsorted(result.t, t_p), 0, len(result.t) - 1)
     n_R_b = np.asarray(result.n_R_b)[state]
@@ -118,50 +134,73 @@ def check_water_track(
     c_d = np.einsum("nij,nj->ni", d_R_n, c)
     # its covariance from the current's (east, north)
     cov_c = np.einsum("nia,na,nja->nij", d_R_n[:, :, :2], var_c, d_R_n[:, :, :2])
-    seen = np.isfinite(r).all(axis=1)
-    wt = on_water & seen
-    if wt.any():
-        r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
-        if (
-            k_w := result.calibration.get("water_scale")
-        ) is not None:  # their own scale: y - (k_w / k) h_water
-            y = np.asarray(dvl.d_v[idx[wt]], dtype=float)
-            r_w = y - (y - r_w) * float(k_w.value[0]) / float(result.scale)
-        cov = water_covariance(config, dvl.d_cov[idx[wt]]) + cov_c[wt]
-        chi2 = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov, r_w[..., None])[..., 0])
-        rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))
-        fig["whitened_rms"] = rms
-        if rms > WATER_RMS_WARN:
-            flag(
-                "warn",
-                f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
-                "water_track_sigma_m_s) with the estimated current: the current "
-                "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
-                "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger",
-            )
-    bt = ~on_water & seen
-    determined = np.sqrt(var_c.max(axis=1)) < 0.5 * config.current.prior_sigma_m_s
-    if bt.any():
-        cov_g = ping_covariance(config.dvl, dvl.d_cov[idx[bt]])
-        r_g = r[bt]
-        chi2_g = np.einsum("ni,ni->n", r_g, np.linalg.solve(cov_g, r_g[..., None])[..., 0])
-        r_w = r_g + c_d[bt]
-        chi2_w = np.einsum(
-            "ni,ni->n", r_w, np.linalg.solve(cov_g + cov_c[bt], r_w[..., None])[..., 0]
+    return c_d, cov_c
+
+
+def _judge_water_pings(
+    result: NavResult,
+    log: LogData,
+    config: EstimatorConfig,
+    res: Any,
+    c_d: np.ndarray,
+    cov_c: np.ndarray,
+    wt: np.ndarray,
+    fig: dict[str, Any],
+    flag: Callable[[str, str], None],
+) -> None:
+    """The water-track pings' (mask wt of res's pings) residuals under the water-track model, whitened by their
+    noise and the current's (figure "whitened_rms"): a warning beyond WATER_RMS_WARN."""
+    dvl, r, idx = log.dvl, res.residual_m_s, res.index
+    r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
+    if (
+        k_w := result.calibration.get("water_scale")
+    ) is not None:  # their own scale: y - (k_w / k) h_water
+        y = np.asarray(dvl.d_v[idx[wt]], dtype=float)
+        r_w = y - (y - r_w) * float(k_w.value[0]) / float(result.scale)
+    cov = water_covariance(config, dvl.d_cov[idx[wt]]) + cov_c[wt]
+    chi2 = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov, r_w[..., None])[..., 0])
+    rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))
+    fig["whitened_rms"] = rms
+    if rms > WATER_RMS_WARN:
+        flag(
+            "warn",
+            f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
+            "water_track_sigma_m_s) with the estimated current: the current "
+            "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
+            "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger",
         )
-        big = np.linalg.norm(c[bt, :2], axis=1) > 3.0 * np.sqrt(
-            np.trace(cov_g, axis1=1, axis2=2) / 3.0
+
+
+def _find_false_lock(
+    log: LogData,
+    config: EstimatorConfig,
+    res: Any,
+    t_p: np.ndarray,
+    c: np.ndarray,
+    c_d: np.ndarray,
+    cov_c: np.ndarray,
+    bt: np.ndarray,
+    determined: np.ndarray,
+    fig: dict[str, Any],
+    flag: Callable[[str, str], None],
+) -> None:
+    """The bottom-track pings (mask bt) that disagree with the velocity over ground and agree with the water
+    track, where the current is large and determined: a false bottom lock (figure "false_lock_pings")."""
+    dvl, r, idx = log.dvl, res.residual_m_s, res.index
+    cov_g = ping_covariance(config.dvl, dvl.d_cov[idx[bt]])
+    r_g = r[bt]
+    chi2_g = np.einsum("ni,ni->n", r_g, np.linalg.solve(cov_g, r_g[..., None])[..., 0])
+    r_w = r_g + c_d[bt]
+    chi2_w = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov_g + cov_c[bt], r_w[..., None])[..., 0])
+    big = np.linalg.norm(c[bt, :2], axis=1) > 3.0 * np.sqrt(np.trace(cov_g, axis1=1, axis2=2) / 3.0)
+    false_lock = (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]
+    fig["false_lock_pings"] = int(false_lock.sum())
+    if false_lock.any():
+        times = t_p[bt][false_lock]
+        flag(
+            "warn",
+            f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) disagree "
+            "with the velocity over ground and agree with the water track (velocity relative to the "
+            "water): a false bottom lock (a scattering layer, or the water near the DVL's range limit); "
+            "their factors were down-weighted by the robust kernel, check the DVL's altitude there",
         )
-        false_lock = (
-            (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]
-        )
-        fig["false_lock_pings"] = int(false_lock.sum())
-        if false_lock.any():
-            times = t_p[bt][false_lock]
-            flag(
-                "warn",
-                f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) disagree "
-                "with the velocity over ground and agree with the water track (velocity relative to the "
-                "water): a false bottom lock (a scattering layer, or the water near the DVL's range limit); "
-                "their factors were down-weighted by the robust kernel, check the DVL's altitude there",
-            )

@@ -443,53 +443,8 @@ def run_iodvlc(
     prior = None if opt.prior_sigma_deg is None else float(np.radians(opt.prior_sigma_deg))
     ints = _Integrals(log.imu, t, y, b_R_d0)
     data = [d for d in (_segment_data(s, ints, opt) for s in segments) if d is not None]
-
-    n = len(t)
-    scale, scale_sig = np.full(n, np.nan), np.full(n, np.nan)
-    mis, mis_sig = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
-    pointwise, beta_all, gamma_all = (
-        np.full(n, np.nan),
-        np.full((n, 3), np.nan),
-        np.full((n, 3), np.nan),
-    )
-    done = _Sums()
-    per_segment = []
-    last: tuple[float, float, np.ndarray, np.ndarray] | None = None
-    next_row = 0
-    for d in data:
-        n_fit = 2 if d.affine else 1
-        if last is not None:  # epochs up to the segment's first estimate keep the last one
-            _fill(last, slice(next_row, d.rows[n_fit + 1]), scale, scale_sig, mis, mis_sig, b_R_d0)
-        for m in range(n_fit + 2, len(d.rows) + 1):
-            b, g = _processed(d, m)
-            last = _solve(done.plus(b, g, m - n_fit), sigma, b_R_d0, prior)
-            _fill(
-                last,
-                slice(d.rows[m - 1], d.rows[m - 1] + 1),
-                scale,
-                scale_sig,
-                mis,
-                mis_sig,
-                b_R_d0,
-            )
-        b, g = _processed(d, len(d.rows))
-        done = done.plus(b, g, len(d.rows) - n_fit)
-        beta_all[d.rows], gamma_all[d.rows] = b, g
-        nb = np.linalg.norm(b, axis=1)
-        pointwise[d.rows] = np.where(
-            nb > opt.min_beta_m_s, np.linalg.norm(g, axis=1) / np.maximum(nb, 1e-12), np.nan
-        )
-        alone = _solve(_Sums().plus(b, g, len(d.rows) - n_fit), sigma, b_R_d0, prior)
-        rpy, rpy_sig = _misalignment(alone[2], alone[3], b_R_d0)
-        per_segment.append(
-            SegmentEstimate(d.seg.start_s, d.seg.end_s, alone[0], alone[1], rpy, rpy_sig)
-        )
-        next_row = d.rows[-1] + 1
-    if last is None:
-        final = (np.nan, np.nan, b_R_d0.copy(), np.eye(3) * MAX_SIGMA_RAD**2)
-    else:
-        _fill(last, slice(next_row, n), scale, scale_sig, mis, mis_sig, b_R_d0)
-        final = last
+    series = _Series.empty(len(t))
+    per_segment, final = _sweep(data, series, sigma, b_R_d0, prior, opt.min_beta_m_s)
     rpy, rpy_sig = _misalignment(final[2], final[3], b_R_d0)
     b_R_d, cov_body = final[2], final[3]
     calibration = {
@@ -498,13 +453,13 @@ def run_iodvlc(
     }
     return IoDvlcResult(
         t=t,
-        scale=scale,
-        scale_sigma=scale_sig,
-        misalignment_deg=mis,
-        misalignment_sigma_deg=mis_sig,
-        scale_pointwise=pointwise,
-        beta=beta_all,
-        gamma=gamma_all,
+        scale=series.scale,
+        scale_sigma=series.scale_sig,
+        misalignment_deg=series.mis,
+        misalignment_sigma_deg=series.mis_sig,
+        scale_pointwise=series.pointwise,
+        beta=series.beta,
+        gamma=series.gamma,
         segments=segments,
         per_segment=per_segment,
         final_scale=float(final[0]),
@@ -517,6 +472,81 @@ def run_iodvlc(
         timing_s={"total": time.perf_counter() - t_start},
         calibration=calibration,
     )
+
+
+@dataclass
+class _Series:
+    """The per-epoch figures of the sweep at the n DVL epochs (NaN where nothing is known): the scale and the
+    misalignment (deg) with their sigmas, the pointwise scale |gamma| / |beta|, beta and gamma."""
+
+    scale: np.ndarray
+    scale_sig: np.ndarray
+    mis: np.ndarray
+    mis_sig: np.ndarray
+    pointwise: np.ndarray
+    beta: np.ndarray
+    gamma: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> _Series:
+        return cls(
+            np.full(n, np.nan),
+            np.full(n, np.nan),
+            np.full((n, 3), np.nan),
+            np.full((n, 3), np.nan),
+            np.full(n, np.nan),
+            np.full((n, 3), np.nan),
+            np.full((n, 3), np.nan),
+        )
+
+    def fill(
+        self, est: tuple[float, float, np.ndarray, np.ndarray], rows: slice, b_R_d0: np.ndarray
+    ) -> None:
+        """The estimate est at the epochs rows (_fill)."""
+        _fill(est, rows, self.scale, self.scale_sig, self.mis, self.mis_sig, b_R_d0)
+
+
+def _sweep(
+    data: list[_SegmentData],
+    series: _Series,
+    sigma: float,
+    b_R_d0: np.ndarray,
+    prior: float | None,
+    min_beta_m_s: float,
+) -> tuple[list[SegmentEstimate], tuple[float, float, np.ndarray, np.ndarray]]:
+    """The segments in time order, each epoch's estimate from every segment so far (into series; the epochs
+    between segments keep the last one). Returns each segment's estimate alone and the final estimate (scale,
+    its sigma, b_R_d, its covariance; the nominal calibration, NaN scale, when no segment gives one)."""
+    n = len(series.scale)
+    done = _Sums()
+    per_segment = []
+    last: tuple[float, float, np.ndarray, np.ndarray] | None = None
+    next_row = 0
+    for d in data:
+        n_fit = 2 if d.affine else 1
+        if last is not None:  # epochs up to the segment's first estimate keep the last one
+            series.fill(last, slice(next_row, d.rows[n_fit + 1]), b_R_d0)
+        for m in range(n_fit + 2, len(d.rows) + 1):
+            b, g = _processed(d, m)
+            last = _solve(done.plus(b, g, m - n_fit), sigma, b_R_d0, prior)
+            series.fill(last, slice(d.rows[m - 1], d.rows[m - 1] + 1), b_R_d0)
+        b, g = _processed(d, len(d.rows))
+        done = done.plus(b, g, len(d.rows) - n_fit)
+        series.beta[d.rows], series.gamma[d.rows] = b, g
+        nb = np.linalg.norm(b, axis=1)
+        series.pointwise[d.rows] = np.where(
+            nb > min_beta_m_s, np.linalg.norm(g, axis=1) / np.maximum(nb, 1e-12), np.nan
+        )
+        alone = _solve(_Sums().plus(b, g, len(d.rows) - n_fit), sigma, b_R_d0, prior)
+        rpy, rpy_sig = _misalignment(alone[2], alone[3], b_R_d0)
+        per_segment.append(
+            SegmentEstimate(d.seg.start_s, d.seg.end_s, alone[0], alone[1], rpy, rpy_sig)
+        )
+        next_row = d.rows[-1] + 1
+    if last is None:
+        return per_segment, (np.nan, np.nan, b_R_d0.copy(), np.eye(3) * MAX_SIGMA_RAD**2)
+    series.fill(last, slice(next_row, n), b_R_d0)
+    return per_segment, last
 
 
 def _fill(

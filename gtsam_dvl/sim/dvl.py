@@ -139,47 +139,104 @@ def dvl_measure(
         ping_lost: np.ndarray = event_rng.random((M,)) < spec.dropout_ping_prob
         beam_lost: np.ndarray = event_rng.random((M, B)) < spec.dropout_beam_prob
         beam_ok &= ~ping_lost[:, None] & ~beam_lost
-    sigma = spec.noise_m_s
-    stated = spec.stated_noise_m_s or sigma  # what the covariance says, not what the noise is
     if spec.noise_model == "velocity":
-        y = y_true.copy()
-        if noise_rng is not None:
-            y += noise_rng.normal(0.0, sigma, (M, 3))
-        if wt is not None and water_rng is not None:
-            y = np.where(
-                wt[:, None], y_true + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y
-            )
-        if event_rng is not None:
-            ping_out: np.ndarray = event_rng.random((M,)) < spec.outlier_prob
-            direction = event_rng.normal(size=(M, 3))
-            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-            y[ping_out] += spec.outlier_m_s * direction[ping_out]
-        v_beam = y @ d_u.T
-        cov = np.broadcast_to(stated**2 * np.eye(3), (M, 3, 3)).copy()
-        if wt is not None:
-            cov[wt] = spec.water_track_noise_m_s**2 * np.eye(3)
+        y, v_beam, cov = _velocity_noise(spec, y_true, d_u, wt, noise_rng, event_rng, water_rng)
     else:
-        v_beam = y_true @ d_u.T
-        if noise_rng is not None:
-            v_beam += noise_rng.normal(0.0, sigma, (M, B))
-        if wt is not None and water_rng is not None:
-            v_water = y_true @ d_u.T + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, B))
-            v_beam = np.where(wt[:, None], v_water, v_beam)
-        if event_rng is not None:
-            beam_out: np.ndarray = event_rng.random((M, B)) < spec.outlier_prob
-            v_beam += np.where(
-                beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0
-            )
-        w = beam_ok.astype(float)
-        normal = np.einsum("kb,bi,bj->kij", w, d_u, d_u)
-        rhs = np.einsum("kb,bi,kb->ki", w, d_u, np.where(beam_ok, v_beam, 0.0))
-        enough = beam_ok.sum(axis=1) >= 3
-        normal[~enough] = np.eye(3)  # placeholder, overwritten with NaN below
-        y = np.linalg.solve(normal, rhs[..., None])[..., 0]
-        inv_normal = np.linalg.inv(normal)
-        cov = stated**2 * inv_normal
-        if wt is not None:
-            cov[wt] = spec.water_track_noise_m_s**2 * inv_normal[wt]
+        y, v_beam, cov = _beam_noise(
+            spec, y_true, d_u, beam_ok, wt, noise_rng, event_rng, water_rng
+        )
+    return _dvl_data(t, y, cov, v_beam, beam_ok, d_u, ranges, wt, water)
+
+
+def _velocity_noise(
+    spec: DvlSpec,
+    y_true: np.ndarray,
+    d_u: np.ndarray,
+    wt: np.ndarray | None,
+    noise_rng: np.random.Generator | None,
+    event_rng: np.random.Generator | None,
+    water_rng: np.random.Generator | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The velocity noise model: noise and outliers on the 3-D velocity, the beams its projections. Returns the
+    velocity (M, 3), the beam velocities (M, B) and the stated covariance (M, 3, 3)."""
+    M = len(y_true)
+    stated = (
+        spec.stated_noise_m_s or spec.noise_m_s
+    )  # what the covariance says, not what the noise is
+    y = y_true.copy()
+    if noise_rng is not None:
+        y += noise_rng.normal(0.0, spec.noise_m_s, (M, 3))
+    if wt is not None and water_rng is not None:
+        y = np.where(
+            wt[:, None], y_true + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y
+        )
+    if event_rng is not None:
+        ping_out: np.ndarray = event_rng.random((M,)) < spec.outlier_prob
+        direction = event_rng.normal(size=(M, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        y[ping_out] += spec.outlier_m_s * direction[ping_out]
+    v_beam = y @ d_u.T
+    cov = np.broadcast_to(stated**2 * np.eye(3), (M, 3, 3)).copy()
+    if wt is not None:
+        cov[wt] = spec.water_track_noise_m_s**2 * np.eye(3)
+    return y, v_beam, cov
+
+
+def _beam_noise(
+    spec: DvlSpec,
+    y_true: np.ndarray,
+    d_u: np.ndarray,
+    beam_ok: np.ndarray,
+    wt: np.ndarray | None,
+    noise_rng: np.random.Generator | None,
+    event_rng: np.random.Generator | None,
+    water_rng: np.random.Generator | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The beam noise model: noise and outliers on each beam, the velocity their least-squares solution over the
+    valid beams. Returns the velocity (M, 3), the beam velocities (M, B) and the stated covariance (M, 3, 3);
+    a ping of fewer than 3 valid beams gets placeholders (NaN in _dvl_data)."""
+    M, B = beam_ok.shape
+    stated = (
+        spec.stated_noise_m_s or spec.noise_m_s
+    )  # what the covariance says, not what the noise is
+    v_beam = y_true @ d_u.T
+    if noise_rng is not None:
+        v_beam += noise_rng.normal(0.0, spec.noise_m_s, (M, B))
+    if wt is not None and water_rng is not None:
+        v_water = y_true @ d_u.T + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, B))
+        v_beam = np.where(wt[:, None], v_water, v_beam)
+    if event_rng is not None:
+        beam_out: np.ndarray = event_rng.random((M, B)) < spec.outlier_prob
+        v_beam += np.where(
+            beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0
+        )
+    w = beam_ok.astype(float)
+    normal = np.einsum("kb,bi,bj->kij", w, d_u, d_u)
+    rhs = np.einsum("kb,bi,kb->ki", w, d_u, np.where(beam_ok, v_beam, 0.0))
+    enough = beam_ok.sum(axis=1) >= 3
+    normal[~enough] = np.eye(3)  # placeholder, overwritten with NaN below
+    y = np.linalg.solve(normal, rhs[..., None])[..., 0]
+    inv_normal = np.linalg.inv(normal)
+    cov = stated**2 * inv_normal
+    if wt is not None:
+        cov[wt] = spec.water_track_noise_m_s**2 * inv_normal[wt]
+    return y, v_beam, cov
+
+
+def _dvl_data(
+    t: np.ndarray,
+    y: np.ndarray,
+    cov: np.ndarray,
+    v_beam: np.ndarray,
+    beam_ok: np.ndarray,
+    d_u: np.ndarray,
+    ranges: np.ndarray,
+    wt: np.ndarray | None,
+    water: WaterPings | None,
+) -> DvlData:
+    """The DvlData of the pings: a ping of fewer than 3 valid beams NaN; a water-track ping not valid as a
+    velocity over ground, its altitude kept."""
+    M, B = beam_ok.shape
     valid = beam_ok.sum(axis=1) >= 3
     y[~valid] = np.nan
     cov[~valid] = np.nan

@@ -365,48 +365,42 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return scenario_from_dict(raw, name=stem, source=source)
 
 
+# the top-level keys of a scenario file (tables and values)
+_TOP_KEYS = (
+    "name",
+    "description",
+    "t0_s",
+    "origin",
+    "rates",
+    "initial",
+    "imu",
+    "dvl",
+    "mounting",
+    "segments",
+    "depth",
+    "gnss",
+    "estimator_config",
+    "oscillation",
+    "estimator",
+    "current",
+    "seafloor",
+)
+
+
 def scenario_from_dict(
     raw: dict[str, Any], name: str = "custom", source: str = "<dict>"
 ) -> Scenario:
-    """Build a Scenario from a dict shaped like a scenario file (tests and scripts use this)."""
+    """Build a Scenario from a dict shaped like a scenario file (tests and scripts use this). Each table is read,
+    then checked, in the order of the file's layout: the first error found is the one raised."""
     r = Reader(raw, source)
-    r.check_keys(
-        "",
-        [
-            "name",
-            "description",
-            "t0_s",
-            "origin",
-            "rates",
-            "initial",
-            "imu",
-            "dvl",
-            "mounting",
-            "segments",
-            "depth",
-            "gnss",
-            "estimator_config",
-            "oscillation",
-            "estimator",
-            "current",
-            "seafloor",
-        ],
-    )
+    r.check_keys("", list(_TOP_KEYS))
     estimator_config = raw.get("estimator_config", "default")
     r.require(
         isinstance(estimator_config, str) and estimator_config in NAMED_CONFIGS,
         "estimator_config",
         f"must be the name of a built-in configuration ({', '.join(NAMED_CONFIGS)})",
     )
-    origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
-    r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
-    rates = Rates(**r.table("rates", _defaults(Rates)))
-    for key in ("imu_hz", "dvl_hz", "truth_hz"):
-        r.require(getattr(rates, key) > 0, f"rates.{key}", "must be positive")
-    ratio = rates.imu_hz / rates.truth_hz
-    r.require(abs(ratio - round(ratio)) < 1e-9, "rates.truth_hz", "must divide rates.imu_hz")
-    initial = InitialState(**r.table("initial", _defaults(InitialState)))
-    r.require(initial.speed_m_s >= 0, "initial.speed_m_s", "must be >= 0")
+    origin, rates, initial = _origin_rates_initial(r)
     imu = ImuSpec(
         **r.table(
             "imu",
@@ -415,81 +409,14 @@ def scenario_from_dict(
             per_axis=("quantisation_gyro_rad_s", "quantisation_accel_m_s2"),
         )
     )
-    dvl_table = r.table(
-        "dvl",
-        _defaults(DvlSpec),
-        vectors=("misalignment_deg", "face_axis"),
-        strings=("noise_model", "model"),
-        per_axis=("draw_misalignment_sigma_deg",),
-    )
-    if dvl_table["model"]:
-        from gtsam_dvl.core.config.presets import DVL_PRESETS
-
-        r.require(
-            dvl_table["model"] in DVL_PRESETS,
-            "dvl.model",
-            f"{dvl_table['model']!r} is not one of {', '.join(DVL_PRESETS)}",
-        )
-        given = raw.get("dvl", {})
-        dvl_table.update(
-            {
-                k: v
-                for k, v in dvl_preset_values(dvl_table["model"], dvl_table["noise_model"]).items()
-                if k not in given
-            }
-        )
-    if not dvl_table["bottom_range_m"]:
-        dvl_table["bottom_range_m"] = dvl_table["max_range_m"]
-    dvl = DvlSpec(**dvl_table)
-    for key in (
-        "gyro_bias_deg_per_h",
-        "accel_bias_micro_g",
-        "gyro_noise_deg_per_h_per_sqrt_hz",
-        "accel_noise_micro_g_per_sqrt_hz",
-        "gyro_bias_walk_deg_per_h_per_sqrt_h",
-        "accel_bias_walk_micro_g_per_sqrt_h",
-    ):
-        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
-    for key in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2"):
-        r.require(
-            min(np.atleast_1d(getattr(imu, key))) >= 0,
-            f"imu.{key}",
-            "must be >= 0 (0: not quantised)",
-        )
-    for key in ("saturation_gyro_rad_s", "saturation_accel_m_s2"):
-        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (0: no saturation)")
-    for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
-        r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
-    r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
-    r.require(dvl.water_track_noise_m_s >= 0, "dvl.water_track_noise_m_s", "must be >= 0")
-    r.require(dvl.bottom_range_m > 0, "dvl.bottom_range_m", "must be positive (0: max_range_m)")
-    r.require(
-        dvl.correlated_sigma_m_s >= 0,
-        "dvl.correlated_sigma_m_s",
-        "must be >= 0 (0: no correlated error)",
-    )
-    r.require(dvl.correlated_tau_s > 0, "dvl.correlated_tau_s", "must be positive")
-    check_dvl_draws(r, dvl)
-    r.require(
-        dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'"
-    )
-    r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
-    r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")
-    for key in ("dropout_ping_prob", "dropout_beam_prob", "outlier_prob"):
-        r.require(0.0 <= getattr(dvl, key) <= 1.0, f"dvl.{key}", "must be in [0, 1]")
+    dvl = _dvl_spec(r)
+    _check_imu(r, imu)
+    _check_dvl(r, dvl)
     mounting = MountingSpec(
         **r.table("mounting", _defaults(MountingSpec), vectors=("dvl_rpy_deg", "dvl_lever_arm_m"))
     )
     segments = tuple(MotionSegment(**row) for row in parse_segments(r, initial.speed_m_s))
-    depth = None
-    if "depth" in raw:
-        depth = DepthSpec(**r.table("depth", _defaults(DepthSpec), vectors=("lever_arm_m",)))
-        for key in ("rate_hz", "water_density_kg_m3"):
-            r.require(getattr(depth, key) > 0, f"depth.{key}", "must be positive")
-        r.require(depth.noise_m >= 0, "depth.noise_m", "must be >= 0")
-        r.require(depth.atmospheric_pa >= 0, "depth.atmospheric_pa", "must be >= 0")
-        dr = rates.imu_hz / depth.rate_hz
-        r.require(abs(dr - round(dr)) < 1e-9, "depth.rate_hz", "must divide rates.imu_hz")
+    depth = _depth_spec(r, rates.imu_hz) if "depth" in raw else None
     gnss = _gnss_spec(r, rates.imu_hz) if "gnss" in raw else None
     oscillation = _oscillation_spec(r, rates.imu_hz) if "oscillation" in raw else None
     estimator = raw.get("estimator", {})
@@ -525,6 +452,108 @@ def scenario_from_dict(
         current=current_spec(r) if "current" in raw else None,
         seafloor=seafloor_spec(r) if "seafloor" in raw else None,
     )
+
+
+def _origin_rates_initial(r: Reader) -> tuple[Origin, Rates, InitialState]:
+    """The [origin], [rates] and [initial] tables, checked (the truth rate divides the IMU rate)."""
+    origin = Origin(**r.table("origin", {"lat_deg": None, "lon_deg": None, "height_m": 0.0}))
+    r.require(abs(origin.lat_deg) < 90.0, "origin.lat_deg", "must be in (-90, 90)")
+    rates = Rates(**r.table("rates", _defaults(Rates)))
+    for key in ("imu_hz", "dvl_hz", "truth_hz"):
+        r.require(getattr(rates, key) > 0, f"rates.{key}", "must be positive")
+    ratio = rates.imu_hz / rates.truth_hz
+    r.require(abs(ratio - round(ratio)) < 1e-9, "rates.truth_hz", "must divide rates.imu_hz")
+    initial = InitialState(**r.table("initial", _defaults(InitialState)))
+    r.require(initial.speed_m_s >= 0, "initial.speed_m_s", "must be >= 0")
+    return origin, rates, initial
+
+
+def _dvl_spec(r: Reader) -> DvlSpec:
+    """The [dvl] table, its values not yet checked (_check_dvl): a named model's preset fills the keys the table
+    does not give; bottom_range_m 0 means max_range_m."""
+    dvl_table = r.table(
+        "dvl",
+        _defaults(DvlSpec),
+        vectors=("misalignment_deg", "face_axis"),
+        strings=("noise_model", "model"),
+        per_axis=("draw_misalignment_sigma_deg",),
+    )
+    if dvl_table["model"]:
+        from gtsam_dvl.core.config.presets import DVL_PRESETS
+
+        r.require(
+            dvl_table["model"] in DVL_PRESETS,
+            "dvl.model",
+            f"{dvl_table['model']!r} is not one of {', '.join(DVL_PRESETS)}",
+        )
+        given = r.raw.get("dvl", {})
+        dvl_table.update(
+            {
+                k: v
+                for k, v in dvl_preset_values(dvl_table["model"], dvl_table["noise_model"]).items()
+                if k not in given
+            }
+        )
+    if not dvl_table["bottom_range_m"]:
+        dvl_table["bottom_range_m"] = dvl_table["max_range_m"]
+    return DvlSpec(**dvl_table)
+
+
+def _check_imu(r: Reader, imu: ImuSpec) -> None:
+    """The [imu] values in range: 1-sigma values, quantisation steps and saturation limits >= 0."""
+    for key in (
+        "gyro_bias_deg_per_h",
+        "accel_bias_micro_g",
+        "gyro_noise_deg_per_h_per_sqrt_hz",
+        "accel_noise_micro_g_per_sqrt_hz",
+        "gyro_bias_walk_deg_per_h_per_sqrt_h",
+        "accel_bias_walk_micro_g_per_sqrt_h",
+    ):
+        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (a 1-sigma value)")
+    for key in ("quantisation_gyro_rad_s", "quantisation_accel_m_s2"):
+        r.require(
+            min(np.atleast_1d(getattr(imu, key))) >= 0,
+            f"imu.{key}",
+            "must be >= 0 (0: not quantised)",
+        )
+    for key in ("saturation_gyro_rad_s", "saturation_accel_m_s2"):
+        r.require(getattr(imu, key) >= 0, f"imu.{key}", "must be >= 0 (0: no saturation)")
+
+
+def _check_dvl(r: Reader, dvl: DvlSpec) -> None:
+    """The [dvl] values in range: scale, ranges and noises, the drawn calibration, the beam geometry and the
+    probabilities of dropouts and outliers."""
+    for key in ("scale", "altitude_m", "max_range_m", "outlier_m_s"):
+        r.require(getattr(dvl, key) > 0, f"dvl.{key}", "must be positive")
+    r.require(dvl.noise_m_s >= 0, "dvl.noise_m_s", "must be >= 0")
+    r.require(dvl.water_track_noise_m_s >= 0, "dvl.water_track_noise_m_s", "must be >= 0")
+    r.require(dvl.bottom_range_m > 0, "dvl.bottom_range_m", "must be positive (0: max_range_m)")
+    r.require(
+        dvl.correlated_sigma_m_s >= 0,
+        "dvl.correlated_sigma_m_s",
+        "must be >= 0 (0: no correlated error)",
+    )
+    r.require(dvl.correlated_tau_s > 0, "dvl.correlated_tau_s", "must be positive")
+    check_dvl_draws(r, dvl)
+    r.require(
+        dvl.noise_model in ("velocity", "beam"), "dvl.noise_model", "must be 'velocity' or 'beam'"
+    )
+    r.require(0.0 < dvl.beam_angle_deg < 90.0, "dvl.beam_angle_deg", "must be in (0, 90)")
+    r.require(sum(c * c for c in dvl.face_axis) > 0, "dvl.face_axis", "must be non-zero")
+    for key in ("dropout_ping_prob", "dropout_beam_prob", "outlier_prob"):
+        r.require(0.0 <= getattr(dvl, key) <= 1.0, f"dvl.{key}", "must be in [0, 1]")
+
+
+def _depth_spec(r: Reader, imu_hz: float) -> DepthSpec:
+    """The [depth] table, checked (its rate divides the IMU rate)."""
+    depth = DepthSpec(**r.table("depth", _defaults(DepthSpec), vectors=("lever_arm_m",)))
+    for key in ("rate_hz", "water_density_kg_m3"):
+        r.require(getattr(depth, key) > 0, f"depth.{key}", "must be positive")
+    r.require(depth.noise_m >= 0, "depth.noise_m", "must be >= 0")
+    r.require(depth.atmospheric_pa >= 0, "depth.atmospheric_pa", "must be >= 0")
+    dr = imu_hz / depth.rate_hz
+    r.require(abs(dr - round(dr)) < 1e-9, "depth.rate_hz", "must divide rates.imu_hz")
+    return depth
 
 
 def _oscillation_spec(r: Reader, imu_hz: float) -> OscillationSpec:

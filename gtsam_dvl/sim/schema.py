@@ -116,6 +116,18 @@ class Reader:
         return out
 
 
+# the paper's motion type of each segment kind; a level segment's depends on its speeds (_paper_type)
+_PAPER_TYPE = {
+    "static": "-",
+    "straight": "-",
+    "descent": "I",
+    "ascent": "I",
+    "turn": "II",
+    "arc": "II",
+    "square": "I+II",
+}
+
+
 def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
     """Rows for MotionSegment: times accumulated from the durations, paper type per kind."""
     rows_in = r.raw.get("segments")
@@ -126,73 +138,9 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
     speed = speed0_m_s
     for i, d in enumerate(rows_in):
         pre = f"segments[{i}]"
-        if not isinstance(d, dict):
-            raise r.fail(pre, "expected a table")
-        kind = d.get("kind")
-        if kind not in SEGMENT_KEYS:
-            raise r.fail(
-                f"{pre}.kind", f"unknown segment kind {kind!r} (known: {', '.join(SEGMENT_KINDS)})"
-            )
-        allowed = SEGMENT_KEYS[kind]
-        r.check_keys(pre, ("kind", *allowed), d)
-        for key in _REQUIRED.get(kind, ("duration_s",)):
-            if key not in d:
-                raise r.fail(f"{pre}.{key}", f"missing (needed by a {kind} segment)")
-        row: dict[str, Any] = {"kind": kind}
-        for key in allowed:
-            if key not in d:
-                continue
-            full = f"{pre}.{key}"
-            if key == "direction":
-                r.require(d[key] in ("left", "right"), full, "must be 'left' or 'right'")
-                row[key] = d[key]
-            elif key == "turn_first":
-                r.require(isinstance(d[key], bool), full, "must be true or false")
-                row[key] = d[key]
-            elif key == "sides":
-                r.require(
-                    isinstance(d[key], int) and not isinstance(d[key], bool) and d[key] >= 1,
-                    full,
-                    "must be a positive integer",
-                )
-                row[key] = d[key]
-            else:
-                row[key] = r.number(full, d[key])
-        for key in ("duration_s", "leg_duration_s", "turn_duration_s"):
-            if key in row:
-                r.require(row[key] > 0, f"{pre}.{key}", "must be positive")
-        for key in ("peak_vertical_speed_m_s", "bank_deg"):
-            if key in row:
-                r.require(
-                    0 <= row[key] < 90, f"{pre}.{key}", "must be >= 0 (the kind gives the sign)"
-                )
-        paper_type = {
-            "static": "-",
-            "straight": "-",
-            "descent": "I",
-            "ascent": "I",
-            "turn": "II",
-            "arc": "II",
-            "square": "I+II",
-        }.get(kind, "-")
-        if kind == "static":
-            r.require(
-                speed == 0.0,
-                pre,
-                f"a static segment needs the vehicle at rest, speed is {speed} m/s",
-            )
-        elif kind == "level":
-            r.require(
-                "speed_end_m_s" in row or "speed_bump_m_s" in row,
-                pre,
-                "a level segment needs speed_end_m_s and/or speed_bump_m_s",
-            )
-            new_speed = row.get("speed_end_m_s", speed)
-            r.require(new_speed >= 0, f"{pre}.speed_end_m_s", "must be >= 0")
-            paper_type = (
-                "I" if (new_speed != speed or row.get("speed_bump_m_s", 0.0) != 0.0) else "-"
-            )
-            speed = new_speed
+        row = _segment_values(r, pre, d)
+        kind = row["kind"]
+        paper_type, speed = _paper_type(r, pre, row, speed)
         if kind == "square":
             duration = row.get("sides", 4) * (row["leg_duration_s"] + row["turn_duration_s"])
         else:
@@ -202,6 +150,76 @@ def parse_segments(r: Reader, speed0_m_s: float) -> list[dict[str, Any]]:
         rows.append(row)
         t += duration
     return rows
+
+
+def _segment_values(r: Reader, pre: str, d: Any) -> dict[str, Any]:
+    """One [[segments]] table (key prefix pre) as a row of checked values: a known kind, its required keys
+    present, no others, each value of its type and in range."""
+    if not isinstance(d, dict):
+        raise r.fail(pre, "expected a table")
+    kind = d.get("kind")
+    if kind not in SEGMENT_KEYS:
+        raise r.fail(
+            f"{pre}.kind", f"unknown segment kind {kind!r} (known: {', '.join(SEGMENT_KINDS)})"
+        )
+    allowed = SEGMENT_KEYS[kind]
+    r.check_keys(pre, ("kind", *allowed), d)
+    for key in _REQUIRED.get(kind, ("duration_s",)):
+        if key not in d:
+            raise r.fail(f"{pre}.{key}", f"missing (needed by a {kind} segment)")
+    row: dict[str, Any] = {"kind": kind}
+    for key in allowed:
+        if key in d:
+            row[key] = _segment_value(r, f"{pre}.{key}", key, d[key])
+    for key in ("duration_s", "leg_duration_s", "turn_duration_s"):
+        if key in row:
+            r.require(row[key] > 0, f"{pre}.{key}", "must be positive")
+    for key in ("peak_vertical_speed_m_s", "bank_deg"):
+        if key in row:
+            r.require(0 <= row[key] < 90, f"{pre}.{key}", "must be >= 0 (the kind gives the sign)")
+    return row
+
+
+def _segment_value(r: Reader, full: str, key: str, value: Any) -> Any:
+    """A segment's value: a square's direction, turn order and number of sides as given, every other a number."""
+    if key == "direction":
+        r.require(value in ("left", "right"), full, "must be 'left' or 'right'")
+        return value
+    if key == "turn_first":
+        r.require(isinstance(value, bool), full, "must be true or false")
+        return value
+    if key == "sides":
+        r.require(
+            isinstance(value, int) and not isinstance(value, bool) and value >= 1,
+            full,
+            "must be a positive integer",
+        )
+        return value
+    return r.number(full, value)
+
+
+def _paper_type(r: Reader, pre: str, row: dict[str, Any], speed: float) -> tuple[str, float]:
+    """The segment's paper motion type and the speed (m/s) at its end, given the speed at its start: a static
+    segment needs the vehicle at rest; a level one changes the speed (type I) or only holds it (-)."""
+    kind = row["kind"]
+    paper_type = _PAPER_TYPE.get(kind, "-")
+    if kind == "static":
+        r.require(
+            speed == 0.0,
+            pre,
+            f"a static segment needs the vehicle at rest, speed is {speed} m/s",
+        )
+    elif kind == "level":
+        r.require(
+            "speed_end_m_s" in row or "speed_bump_m_s" in row,
+            pre,
+            "a level segment needs speed_end_m_s and/or speed_bump_m_s",
+        )
+        new_speed = row.get("speed_end_m_s", speed)
+        r.require(new_speed >= 0, f"{pre}.speed_end_m_s", "must be >= 0")
+        paper_type = "I" if (new_speed != speed or row.get("speed_bump_m_s", 0.0) != 0.0) else "-"
+        speed = new_speed
+    return paper_type, speed
 
 
 def check_dvl_draws(r: Reader, dvl: Any) -> None:

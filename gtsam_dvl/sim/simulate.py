@@ -25,6 +25,7 @@ from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
 from gtsam_dvl.core.types import (
     DepthData,
     DvlCalibration,
+    DvlData,
     GeoOrigin,
     ImuBiases,
     ImuData,
@@ -77,57 +78,16 @@ def simulate(
     track = integrate_position(motion, frame.lat0, frame.lon0, scenario.origin.height_m, rate, n)
     if progress is not None:
         progress(0.1)
-    b_omega, b_f = true_imu(motion, track, n, progress)
     bias_ss, imu_ss, dvl_ss, event_ss = np.random.SeedSequence(seed).spawn(4)
-    errors = draw_biases(scenario.imu, n, rate, np.random.Generator(np.random.PCG64(bias_ss)))
-    b_omega += errors.gyro_bias
-    b_f += errors.accel_bias
-    if white_noise:
-        ng, na = sim_imu.white_noise(
-            scenario.imu, n, rate, np.random.Generator(np.random.PCG64(imu_ss))
-        )
-        b_omega += ng
-        b_f += na
-    imu = ImuData(
-        t=np.arange(n) / rate,
-        b_omega=saturate(
-            quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
-            scenario.imu.saturation_gyro_rad_s,
-        ),
-        b_f=saturate(
-            quantise(b_f, scenario.imu.quantisation_accel_m_s2), scenario.imu.saturation_accel_m_s2
-        ),
-    )
-
+    imu, errors = _imu(scenario, motion, track, n, bias_ss, imu_ss, white_noise, progress)
     truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)), scenario)
-
     mount = scenario.mounting
     mounting = Mounting(
         b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
         b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float),
     )
-    t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, float(imu.t[-1]))
-    floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
-    water = water_model(scenario)
-    y, d_u, ranges, water_pings = dvl_true(
-        scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas, floor_h, water
-    )
-    correlated = correlated_error(scenario.dvl, rates.dvl_hz, seed) if white_noise else None
-    if correlated is not None:
-        y = y + correlated.take(len(t_meas))
-    constant = constant_error(scenario.dvl, seed) if white_noise else None
-    if constant is not None:
-        y = y + constant
-    dvl = dvl_measure(
-        scenario.dvl,
-        t_dvl,
-        y,
-        d_u,
-        ranges,
-        np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
-        np.random.Generator(np.random.PCG64(event_ss)) if white_noise else None,
-        water_pings,
-        water_noise_rng(seed) if white_noise and water is not None else None,
+    dvl, constant = _dvl(
+        scenario, seed, white_noise, mounting, motion, track, float(imu.t[-1]), dvl_ss, event_ss
     )
     depth = (
         None
@@ -169,6 +129,83 @@ def simulate(
         depth=depth,
         gnss=gnss,
     )
+
+
+def _imu(
+    scenario: Scenario,
+    motion: MotionProfile,
+    track: PositionTrack,
+    n: int,
+    bias_ss: np.random.SeedSequence,
+    imu_ss: np.random.SeedSequence,
+    white_noise: bool,
+    progress: Callable[[float], None] | None,
+) -> tuple[ImuData, ImuErrors]:
+    """The n IMU samples: the true increments, the biases (stream bias_ss), the white noise (stream imu_ss,
+    when white_noise), then quantised and saturated. Returns them with the drawn biases."""
+    rate = scenario.rates.imu_hz
+    b_omega, b_f = true_imu(motion, track, n, progress)
+    errors = draw_biases(scenario.imu, n, rate, np.random.Generator(np.random.PCG64(bias_ss)))
+    b_omega += errors.gyro_bias
+    b_f += errors.accel_bias
+    if white_noise:
+        ng, na = sim_imu.white_noise(
+            scenario.imu, n, rate, np.random.Generator(np.random.PCG64(imu_ss))
+        )
+        b_omega += ng
+        b_f += na
+    imu = ImuData(
+        t=np.arange(n) / rate,
+        b_omega=saturate(
+            quantise(b_omega, scenario.imu.quantisation_gyro_rad_s),
+            scenario.imu.saturation_gyro_rad_s,
+        ),
+        b_f=saturate(
+            quantise(b_f, scenario.imu.quantisation_accel_m_s2), scenario.imu.saturation_accel_m_s2
+        ),
+    )
+    return imu, errors
+
+
+def _dvl(
+    scenario: Scenario,
+    seed: int,
+    white_noise: bool,
+    mounting: Mounting,
+    motion: MotionProfile,
+    track: PositionTrack,
+    t_end: float,
+    dvl_ss: np.random.SeedSequence,
+    event_ss: np.random.SeedSequence,
+) -> tuple[DvlData, np.ndarray | None]:
+    """The DVL pings up to t_end (s): the true velocity (bottom or water track), its correlated and per-run
+    constant errors, then the white noise (stream dvl_ss), dropouts and outliers (stream event_ss), all only
+    when white_noise. Returns the pings with the constant error drawn (None: none)."""
+    rates = scenario.rates
+    t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, t_end)
+    floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
+    water = water_model(scenario)
+    y, d_u, ranges, water_pings = dvl_true(
+        scenario.dvl, mounting.b_R_d0, mounting.b_l, motion, track, t_meas, floor_h, water
+    )
+    correlated = correlated_error(scenario.dvl, rates.dvl_hz, seed) if white_noise else None
+    if correlated is not None:
+        y = y + correlated.take(len(t_meas))
+    constant = constant_error(scenario.dvl, seed) if white_noise else None
+    if constant is not None:
+        y = y + constant
+    dvl = dvl_measure(
+        scenario.dvl,
+        t_dvl,
+        y,
+        d_u,
+        ranges,
+        np.random.Generator(np.random.PCG64(dvl_ss)) if white_noise else None,
+        np.random.Generator(np.random.PCG64(event_ss)) if white_noise else None,
+        water_pings,
+        water_noise_rng(seed) if white_noise and water is not None else None,
+    )
+    return dvl, constant
 
 
 def _log_data(

@@ -331,35 +331,13 @@ def bayes_net_marginals(
     n = bn.size()
     conds = [bn.at(i) for i in range(n)]
     keys = [list(c.keys()) for c in conds]
-    eliminated_at = {ks[0]: i for i, ks in enumerate(keys)}
-    # keep_until[k]: the smallest conditional index that still needs k (as a parent, or to read a joint);
-    # after processing conditional i, every key with keep_until >= i can be dropped
-    keep_until: dict[int, float] = {}
-    for i, ks in enumerate(keys):
-        for k in ks[1:]:
-            keep_until[k] = min(keep_until.get(k, np.inf), i)
-    groups_at: dict[int, list[tuple[int, ...]]] = {}
-    for group in joint_groups:
-        g = tuple(group)
-        first = min(eliminated_at[k] for k in g)
-        groups_at.setdefault(first, []).append(g)
-        for k in g:
-            keep_until[k] = min(keep_until.get(k, np.inf), first)
-
+    keep_until, groups_at = _sweep_plan(keys, joint_groups)
     active: list[int] = []
     dims: dict[int, int] = {}
     sigma = np.zeros((0, 0))
     covs: dict[int, np.ndarray] = {}
     joints: dict[tuple[int, ...], np.ndarray] = {}
-
-    # the inverses of the conditionals' R (tiny, <= 6x6), by stacks of equal size: one numpy call per size, not
-    # one per conditional (scipy's solve_triangular and np.linalg.inv cost more per call than these blocks' arithmetic)
-    Rs = [c.R() for c in conds]
-    Rinvs: list[np.ndarray] = [np.empty((0, 0))] * n
-    for d in {R.shape[0] for R in Rs}:
-        at = [i for i, R in enumerate(Rs) if R.shape[0] == d]
-        for i, inv in zip(at, np.linalg.inv(np.array([Rs[i] for i in at])), strict=True):
-            Rinvs[i] = inv
+    Rinvs = _inverse_rs(conds)
     starts: dict[int, int] = {}  # column of each active key in sigma, kept in step with active
 
     def restart() -> None:
@@ -375,19 +353,10 @@ def bayes_net_marginals(
         )
 
     for i in range(n - 1, -1, -1):
-        c, ks = conds[i], keys[i]
-        frontal, parents = ks[0], ks[1:]
+        frontal, parents = keys[i][0], keys[i][1:]
         Rinv = Rinvs[i]
         dim_f = Rinv.shape[0]
-        if parents:
-            idx_p = index_of(parents)
-            G = Rinv @ c.S()  # x_F = R^-1 d - G x_P
-            cross = -G @ sigma[idx_p, :]  # Sigma_{F, active}
-            s_ff = Rinv @ Rinv.T - cross[:, idx_p] @ G.T
-        else:
-            cross = np.zeros((dim_f, sigma.shape[0]))
-            s_ff = Rinv @ Rinv.T
-        s_ff = 0.5 * (s_ff + s_ff.T)
+        s_ff, cross = _frontal_blocks(conds[i], Rinv, sigma, index_of(parents) if parents else None)
         m = sigma.shape[0]
         grown = np.empty((dim_f + m, dim_f + m))
         grown[:dim_f, :dim_f] = s_ff
@@ -409,3 +378,54 @@ def bayes_net_marginals(
             active = keep
             restart()
     return MarginalResult(covs, joints)
+
+
+def _sweep_plan(
+    keys: list[list[int]], joint_groups: Iterable[tuple[int, ...]]
+) -> tuple[dict[int, float], dict[int, list[tuple[int, ...]]]]:
+    """For the sweep from the last conditional to the first: keep_until[k], the smallest conditional index that
+    still needs k (as a parent, or to read a joint), so that after processing conditional i every key with
+    keep_until >= i can be dropped; and the joint groups to read at each conditional index (where the group's
+    first key is eliminated)."""
+    eliminated_at = {ks[0]: i for i, ks in enumerate(keys)}
+    keep_until: dict[int, float] = {}
+    for i, ks in enumerate(keys):
+        for k in ks[1:]:
+            keep_until[k] = min(keep_until.get(k, np.inf), i)
+    groups_at: dict[int, list[tuple[int, ...]]] = {}
+    for group in joint_groups:
+        g = tuple(group)
+        first = min(eliminated_at[k] for k in g)
+        groups_at.setdefault(first, []).append(g)
+        for k in g:
+            keep_until[k] = min(keep_until.get(k, np.inf), first)
+    return keep_until, groups_at
+
+
+def _inverse_rs(conds: list[Any]) -> list[np.ndarray]:
+    """The inverses of the conditionals' R (tiny, <= 6x6), by stacks of equal size: one numpy call per size, not
+    one per conditional (scipy's solve_triangular and np.linalg.inv cost more per call than these blocks'
+    arithmetic)."""
+    Rs = [c.R() for c in conds]
+    Rinvs: list[np.ndarray] = [np.empty((0, 0))] * len(conds)
+    for d in {R.shape[0] for R in Rs}:
+        at = [i for i, R in enumerate(Rs) if R.shape[0] == d]
+        for i, inv in zip(at, np.linalg.inv(np.array([Rs[i] for i in at])), strict=True):
+            Rinvs[i] = inv
+    return Rinvs
+
+
+def _frontal_blocks(
+    c: Any, Rinv: np.ndarray, sigma: np.ndarray, idx_p: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray]:
+    """A conditional's frontal variable F given the joint covariance sigma of the active keys (its parents at
+    the rows idx_p; None: no parent): Sigma_FF (symmetrised) and Sigma_{F, active}."""
+    dim_f = Rinv.shape[0]
+    if idx_p is not None:
+        G = Rinv @ c.S()  # x_F = R^-1 d - G x_P
+        cross = -G @ sigma[idx_p, :]  # Sigma_{F, active}
+        s_ff = Rinv @ Rinv.T - cross[:, idx_p] @ G.T
+    else:
+        cross = np.zeros((dim_f, sigma.shape[0]))
+        s_ff = Rinv @ Rinv.T
+    return 0.5 * (s_ff + s_ff.T), cross

@@ -306,19 +306,8 @@ def in_motion_alignment(
     SVD). Accuracy in Alignment.sigma_rpy_deg: the fit's covariance plus what a 1-sigma bias of imu_cfg
     (defaults if None) on each gyro and accelerometer axis does to the solution."""
     imu_cfg = imu_cfg or ImuConfig()
-    t_ref = float(imu.t[0])
-    t_end = min(t_ref + window_s, float(imu.t[-1]))
-    sel = np.flatnonzero((imu.t > t_ref) & (imu.t <= t_end))
-    if len(sel) < 2 or np.any(np.diff(imu.t[sel]) <= 0):
-        raise GtsamDvlError("in-motion alignment: too few IMU samples, or stamps not increasing")
+    t_ref, t_end, sel, pings = _alignment_window(imu, dvl, window_s)
     tk = np.concatenate([[t_ref], imu.t[sel]])  # grid: the first sample, then each sample's end
-    ok = dvl.valid & np.isfinite(dvl.d_v).all(axis=1) & (dvl.t >= t_ref) & (dvl.t <= t_end)
-    pings = np.flatnonzero(ok)
-    if len(pings) < IN_MOTION_MIN_PINGS:
-        raise GtsamDvlError(
-            f"in-motion alignment: only {len(pings)} valid DVL pings in the first "
-            f"{t_end - t_ref:.0f} s (needs {IN_MOTION_MIN_PINGS}); give {ATTITUDE_SOURCES}"
-        )
     tp = dvl.t[pings]
     j = np.clip(
         np.searchsorted(tk, tp, side="left"), 1, len(tk) - 1
@@ -337,6 +326,48 @@ def in_motion_alignment(
     P = np.vstack(
         [np.zeros(3), np.cumsum(0.5 * (q_grid[1:] + q_grid[:-1]) * np.diff(tk)[:, None], axis=0)]
     )
+    beta, use = _gravity_passes(frame, tk, tp, P, alpha)
+    C, sigma2 = _centred_wahba(alpha[use], beta[use])
+    cov = _alignment_covariance(
+        imu, imu_cfg, _BiasedIntegrals(sel, tk, j, s, b_v), beta[use], use, C, sigma2
+    )
+    sigma = np.degrees(np.sqrt(np.diag(cov)))
+    if not sigma[2] <= IN_MOTION_MAX_YAW_SIGMA_DEG:
+        raise GtsamDvlError(
+            f"in-motion alignment over {t_end - t_ref:.0f} s gives the heading only to "
+            f"{sigma[2]:.1f} deg (1 sigma; gyrocompassing needs the Earth rate well above the gyro "
+            f"bias and the DVL noise); give {ATTITUDE_SOURCES}"
+        )
+    return Alignment(C, 0.0, "in_motion", sigma_rpy_deg=sigma, t_ref=t_ref, window_s=t_end - t_ref)
+
+
+def _alignment_window(
+    imu: ImuData, dvl: DvlData, window_s: float
+) -> tuple[float, float, np.ndarray, np.ndarray]:
+    """The in-motion alignment's window from the first IMU sample: its start and end (s), the IMU samples after
+    the start and the valid DVL pings in it; a GtsamDvlError when either is too few."""
+    t_ref = float(imu.t[0])
+    t_end = min(t_ref + window_s, float(imu.t[-1]))
+    sel = np.flatnonzero((imu.t > t_ref) & (imu.t <= t_end))
+    if len(sel) < 2 or np.any(np.diff(imu.t[sel]) <= 0):
+        raise GtsamDvlError("in-motion alignment: too few IMU samples, or stamps not increasing")
+    ok = dvl.valid & np.isfinite(dvl.d_v).all(axis=1) & (dvl.t >= t_ref) & (dvl.t <= t_end)
+    pings = np.flatnonzero(ok)
+    if len(pings) < IN_MOTION_MIN_PINGS:
+        raise GtsamDvlError(
+            f"in-motion alignment: only {len(pings)} valid DVL pings in the first "
+            f"{t_end - t_ref:.0f} s (needs {IN_MOTION_MIN_PINGS}); give {ATTITUDE_SOURCES}"
+        )
+    return t_ref, t_end, sel, pings
+
+
+def _gravity_passes(
+    frame: LocalFrame, tk: np.ndarray, tp: np.ndarray, P: np.ndarray, alpha: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The inertial-frame vectors beta (gravity's integral, and the Earth rate's effect on the track) at the
+    pings' times tp, refined over IN_MOTION_PASSES passes as the attitude places the track (gravity along it),
+    and the pings kept (outliers of the fit dropped). tk: the IMU grid, P: the track's integral in b0 on it."""
+    t_ref = tk[0]
     Pp = np.column_stack([np.interp(tp, tk, P[:, a]) for a in range(3)])
     w_ie = frame.n_omega_ie
     n0_R_n = so3_exp(w_ie[None, :] * (tk - t_ref)[:, None])
@@ -345,7 +376,7 @@ def in_motion_alignment(
     )  # gravity along the track, on a coarser grid (it changes by 1e-4 per km)
     coarse = np.r_[np.arange(0, len(tk), step), len(tk) - 1]
     C = np.eye(3)
-    use = np.ones(len(pings), bool)
+    use = np.ones(len(tp), bool)
     for n_pass in range(IN_MOTION_PASSES):
         n_p = (
             P[coarse] @ C.T if n_pass else np.zeros((len(coarse), 3))
@@ -366,8 +397,33 @@ def in_motion_alignment(
                 "in-motion alignment: the DVL and the IMU disagree (most pings are outliers); "
                 f"give {ATTITUDE_SOURCES}"
             )
-    C, sigma2 = _centred_wahba(alpha[use], beta[use])
-    bt = beta[use] - beta[use].mean(axis=0)
+    return beta, use
+
+
+@dataclass
+class _BiasedIntegrals:
+    """What _body_integrals needs to integrate the IMU again with a bias: the samples, the grid, each ping's
+    grid step and time into it, and the pings' body velocities b_v (m/s, base_link)."""
+
+    sel: np.ndarray
+    tk: np.ndarray
+    j: np.ndarray
+    s: np.ndarray
+    b_v: np.ndarray
+
+
+def _alignment_covariance(
+    imu: ImuData,
+    imu_cfg: ImuConfig,
+    grid: _BiasedIntegrals,
+    beta_used: np.ndarray,
+    use: np.ndarray,
+    C: np.ndarray,
+    sigma2: float,
+) -> np.ndarray:
+    """The attitude's covariance (rad^2, map axes n0 at t_ref): the Wahba fit's, plus the rotation a 1-sigma
+    bias of imu_cfg on each gyro and accelerometer axis gives the solution."""
+    bt = beta_used - beta_used.mean(axis=0)
     cov = np.linalg.inv(
         (np.einsum("ki,ki->", bt, bt) * np.eye(3) - bt.T @ bt) / sigma2
     )  # map axes (n0 at t_ref)
@@ -377,19 +433,12 @@ def in_motion_alignment(
     ]:
         d = np.zeros(6)
         d[k] = sig
-        _, Rp_b, Vp_b = _body_integrals(imu, sel, tk, j, s, d[:3], d[3:])
-        alpha_b = Vp_b - np.einsum("kij,kj->ki", Rp_b, b_v)
-        C_b, _ = _centred_wahba(alpha_b[use], beta[use])
+        _, Rp_b, Vp_b = _body_integrals(imu, grid.sel, grid.tk, grid.j, grid.s, d[:3], d[3:])
+        alpha_b = Vp_b - np.einsum("kij,kj->ki", Rp_b, grid.b_v)
+        C_b, _ = _centred_wahba(alpha_b[use], beta_used)
         dth = so3_log(C_b @ C.T)
         cov = cov + np.outer(dth, dth)
-    sigma = np.degrees(np.sqrt(np.diag(cov)))
-    if not sigma[2] <= IN_MOTION_MAX_YAW_SIGMA_DEG:
-        raise GtsamDvlError(
-            f"in-motion alignment over {t_end - t_ref:.0f} s gives the heading only to "
-            f"{sigma[2]:.1f} deg (1 sigma; gyrocompassing needs the Earth rate well above the gyro "
-            f"bias and the DVL noise); give {ATTITUDE_SOURCES}"
-        )
-    return Alignment(C, 0.0, "in_motion", sigma_rpy_deg=sigma, t_ref=t_ref, window_s=t_end - t_ref)
+    return cov
 
 
 def _centred_wahba(alpha: np.ndarray, beta: np.ndarray) -> tuple[np.ndarray, float]:

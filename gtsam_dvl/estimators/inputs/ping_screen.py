@@ -338,27 +338,8 @@ def _bulk_screen(
     t_prev, t_now, y_prev, y_now = t[:-1], t[1:], y[:-1], y[1:]
     span = t_now - t_prev  # t - last_t
     with np.errstate(all="ignore"):
-        if beams:
-            beam_prev = ~np.isnan(y_prev)
-            prev_speed = np.max(np.where(beam_prev, np.abs(y_prev), -np.inf), axis=1)  # nanmax
-            prev_speed[~beam_prev.any(axis=1)] = (
-                np.nan
-            )  # nanmax of no beam: NaN (left to PingScreen)
-            rate = np.zeros(m - 1)
-        else:
-            prev_speed = np.linalg.norm(y_prev, axis=1)
-            rate = np.zeros(m - 1)
-            rate[1:] = np.linalg.norm(y[1:-1] - y[:-2], axis=1) / (t[1:-1] - t[:-2])
-        lo = np.searchsorted(imu.t, t_prev, side="right")
-        cnt = np.searchsorted(imu.t, t_now, side="right") - lo
-        uncapped = t_now - SCREEN_WINDOW_S <= t_prev  # t_from = last_t
-        # a window far longer than the typical one (after a dropout) is left to PingScreen: it would widen the
-        # padding of its block
-        short = cnt <= 8 * int(np.median(cnt)) + 64
-        has = uncapped & short & (cnt >= 1)
-        sums = np.zeros((m - 1, 6))
-        if has.any():
-            sums[has] = _window_sums(imu, t_prev[has], lo[has], cnt[has])
+        prev_speed, rate = _reference_speed_and_rate(t, y, beams)
+        windowed, has, sums = _window_evidence(imu, t_prev, t_now)
         s_df, s_adf, s_dw, s_af = (
             np.linalg.norm(sums[:, :3], axis=1),
             sums[:, 3],
@@ -371,31 +352,18 @@ def _bulk_screen(
         scale = s_adf + s_af + rate * span + s_dw * prev_speed
         clear = ~has | (np.abs(dv_low - cfg.motion_dv_m_s) > _BAND * (scale + cfg.motion_dv_m_s))
         clear &= np.abs(prev_speed - cfg.moving_speed_m_s) > _BAND * cfg.moving_speed_m_s
-        finite_now = np.isfinite(y_now)
-        all_zero = finite_now.any(axis=1) & np.where(finite_now, y_now == 0.0, True).all(axis=1)
-        zero = all_zero & (motion | (prev_speed > cfg.moving_speed_m_s))
-        repeated = finite_now.any(axis=1) & ~all_zero
-        repeated &= ((y_now == y_prev) | (np.isnan(y_now) & np.isnan(y_prev))).all(axis=1)
+        zero, repeated = _zero_and_repeated(y_prev, y_now, motion, prev_speed, cfg)
         if repeats_need_motion:
             repeated &= motion
-        ok = uncapped & short & (span >= 0) & np.isfinite(prev_speed) & np.isfinite(rate)
+        ok = windowed & (span >= 0) & np.isfinite(prev_speed) & np.isfinite(rate)
         ok &= np.isfinite(sums).all(axis=1)
         implausible = np.zeros(m - 1, dtype=bool)
         if not beams:
-            jump = np.linalg.norm(y_now - y_prev, axis=1)
-            allowed = (
-                cfg.max_accel_m_s2 * span + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+            implausible, jump_clear, jump_finite = _implausible_jumps(
+                y_prev, y_now, span, dv_imu, prev_speed, scale, cfg
             )
-            implausible = jump > allowed
-            band = _BAND * (
-                jump
-                + allowed
-                + np.linalg.norm(y_now, axis=1)
-                + prev_speed
-                + cfg.accel_imu_factor * scale
-            )
-            clear &= np.abs(jump - allowed) > band
-            ok &= np.isfinite(y_now).all(axis=1) & np.isfinite(jump) & np.isfinite(allowed)
+            clear &= jump_clear
+            ok &= jump_finite
     code[1:] = np.where(
         zero,
         ZERO_WHILE_MOVING,
@@ -403,6 +371,82 @@ def _bulk_screen(
     )
     sure[1:] = ok & clear
     return code, sure
+
+
+def _reference_speed_and_rate(
+    t: np.ndarray, y: np.ndarray, beams: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Of each ping n >= 1 under _bulk_screen's assumption: the reference's speed (m/s; with beams the largest
+    beam velocity, NaN without a beam) and last_rate (m/s^2, the velocity change from ping n - 2 to n - 1; 0
+    for ping 1 and with beams)."""
+    m = len(t)
+    y_prev = y[:-1]
+    if beams:
+        beam_prev = ~np.isnan(y_prev)
+        prev_speed = np.max(np.where(beam_prev, np.abs(y_prev), -np.inf), axis=1)  # nanmax
+        prev_speed[~beam_prev.any(axis=1)] = np.nan  # nanmax of no beam: NaN (left to PingScreen)
+        rate = np.zeros(m - 1)
+    else:
+        prev_speed = np.linalg.norm(y_prev, axis=1)
+        rate = np.zeros(m - 1)
+        rate[1:] = np.linalg.norm(y[1:-1] - y[:-2], axis=1) / (t[1:-1] - t[:-2])
+    return prev_speed, rate
+
+
+def _window_evidence(
+    imu: ImuData, t_prev: np.ndarray, t_now: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The IMU window (t_prev, t_now] of each ping: whether the bulk handles it (not capped at SCREEN_WINDOW_S,
+    not far longer than the typical one), whether it also holds a sample, and its sums (_window_sums; 0 where
+    none)."""
+    lo = np.searchsorted(imu.t, t_prev, side="right")
+    cnt = np.searchsorted(imu.t, t_now, side="right") - lo
+    uncapped = t_now - SCREEN_WINDOW_S <= t_prev  # t_from = last_t
+    # a window far longer than the typical one (after a dropout) is left to PingScreen: it would widen the
+    # padding of its block
+    short = cnt <= 8 * int(np.median(cnt)) + 64
+    has = uncapped & short & (cnt >= 1)
+    sums = np.zeros((len(t_prev), 6))
+    if has.any():
+        sums[has] = _window_sums(imu, t_prev[has], lo[has], cnt[has])
+    return uncapped & short, has, sums
+
+
+def _zero_and_repeated(
+    y_prev: np.ndarray,
+    y_now: np.ndarray,
+    motion: np.ndarray,
+    prev_speed: np.ndarray,
+    cfg: DvlConfig,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pings that read zero while the vehicle moves (ZERO_WHILE_MOVING) and those that repeat the previous
+    ping's values bit for bit (REPEATED)."""
+    finite_now = np.isfinite(y_now)
+    all_zero = finite_now.any(axis=1) & np.where(finite_now, y_now == 0.0, True).all(axis=1)
+    zero = all_zero & (motion | (prev_speed > cfg.moving_speed_m_s))
+    repeated = finite_now.any(axis=1) & ~all_zero
+    repeated &= ((y_now == y_prev) | (np.isnan(y_now) & np.isnan(y_prev))).all(axis=1)
+    return zero, repeated
+
+
+def _implausible_jumps(
+    y_prev: np.ndarray,
+    y_now: np.ndarray,
+    span: np.ndarray,
+    dv_imu: np.ndarray,
+    prev_speed: np.ndarray,
+    scale: np.ndarray,
+    cfg: DvlConfig,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 3-D velocity's jump from the reference against what the time and the IMU allow: the implausible ones
+    (IMPLAUSIBLE_ACCEL), those clear of the limit by _BAND, those with every value finite."""
+    jump = np.linalg.norm(y_now - y_prev, axis=1)
+    allowed = cfg.max_accel_m_s2 * span + cfg.accel_imu_factor * dv_imu + cfg.jump_margin_m_s
+    band = _BAND * (
+        jump + allowed + np.linalg.norm(y_now, axis=1) + prev_speed + cfg.accel_imu_factor * scale
+    )
+    finite = np.isfinite(y_now).all(axis=1) & np.isfinite(jump) & np.isfinite(allowed)
+    return jump > allowed, np.abs(jump - allowed) > band, finite
 
 
 def frozen_runs(dvl: DvlData) -> list[tuple[float, float, int]]:
