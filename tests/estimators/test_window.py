@@ -29,36 +29,25 @@ from gtsam_dvl.estimators.online import (
 from gtsam_dvl.estimators.online.window import IncrementalSmoother, bayes_net_covariance
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.scenarios import PAPER_SENSORS, with_tables
 
 WINDOW_S = 10.0
 DVL_HZ = 1.0
 STATES_IN_WINDOW = int(WINDOW_S * DVL_HZ) + 1  # the newest and every state at most window_s older
-SHORT = {
-    "name": "window-test",
-    "estimator_config": "paper",  # the paper's sensors and priors, no time offset: a ping is an epoch at once
-    "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
-    "rates": {"imu_hz": 100.0, "dvl_hz": DVL_HZ},
-    "initial": {"roll_deg": 3.0, "yaw_deg": 10.0},
-    "imu": {
-        "gyro_bias_deg_per_h": 0.01,
-        "accel_bias_micro_g": 50.0,
-        "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
-        "accel_noise_micro_g_per_sqrt_hz": 10.0,
-    },
-    "dvl": {
-        "scale": 0.9998,
-        "misalignment_deg": [-0.1, 0.2, -0.5],
-        "noise_m_s": 0.02,
-        "altitude_m": 40.0,
-    },
-    "segments": [
+SHORT = with_tables(
+    PAPER_SENSORS,
+    name="window-test",
+    estimator_config="paper",  # the paper's sensors and priors, no time offset: a ping is an epoch at once
+    rates={"imu_hz": 100.0, "dvl_hz": DVL_HZ},
+    dvl={"altitude_m": 40.0},
+    segments=[
         {"kind": "static", "duration_s": 80.0},
         {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
         {"kind": "level", "duration_s": 20.0, "speed_bump_m_s": 0.5},
         {"kind": "descent", "duration_s": 30.0, "peak_vertical_speed_m_s": 0.8},
         {"kind": "turn", "duration_s": 30.0, "heading_change_deg": 90.0, "bank_deg": 15.0},
     ],
-}
+)
 
 
 @functools.cache
