@@ -18,9 +18,8 @@ import gtsam
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.estimators.batch.solve import extract_result
+from gtsam_dvl.estimators.batch.solve import extract_result, solve_graph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
-from gtsam_dvl.estimators.graph.solver import gauss_newton_qr
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
@@ -39,16 +38,7 @@ def run(log: LogData, cfg: EstimatorConfig, bulk: bool) -> dict[str, Any]:
     ordering = builder.elimination_ordering()
     out["build graph"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    s = cfg.solver
-    values, report = gauss_newton_qr(
-        graph,
-        init,
-        ordering,
-        max_iterations=s.max_iterations,
-        relative_tol=s.relative_error_tol,
-        absolute_tol=s.absolute_error_tol,
-        before_iteration=builder.refresh_gravity,
-    )
+    graph, values, report, _ = solve_graph(builder, graph, init, ordering)  # as smooth_batch
     out["solve"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     result = extract_result(builder, graph, values, ordering, bayes_net=report.bayes_net)

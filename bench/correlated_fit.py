@@ -13,13 +13,11 @@ runs of the final horizontal error/sigma (east and north pooled) and of the scal
 
 from __future__ import annotations
 
-import argparse
-import json
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from campaign_loop import campaign_parser, seeds, write_runs
 
 VARIANTS: dict[str, tuple[float, bool]] = {
     "configured": (0.002, False),
@@ -97,21 +95,16 @@ def summarise(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    ap.add_argument("--runs", type=int, default=10)
-    ap.add_argument("--seed-start", type=int, default=1)
+    ap = campaign_parser(__doc__, runs=10, out="correlated_fit.json")
     ap.add_argument("--scenarios", default="straight-transect,steady-turn")
-    ap.add_argument("--out", type=Path, default=Path("correlated_fit.json"))
     args = ap.parse_args()
     runs = []
     t0 = time.perf_counter()
     for scenario in args.scenarios.split(","):
-        for seed in range(args.seed_start, args.seed_start + args.runs):
+        for seed in seeds(args):
             runs.append(run_one(scenario, seed))
             print(f"\r{len(runs)} runs, {time.perf_counter() - t0:.0f} s", end="", flush=True)
-            args.out.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
+            write_runs(args.out, runs, summarise)
     print()
     for scenario, table in summarise(runs).items():
         print(

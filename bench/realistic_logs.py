@@ -23,15 +23,13 @@ LocalCluster of --workers processes).
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import math
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from campaign_loop import campaign_parser, run_on_dask, seeds
 
 SCENARIOS = ("realistic-straight", "realistic-turn", "realistic-turns")
 FIXED_SCALE_SIGMA = 1e-7  # "fixed": a prior sigma far below anything the data can resolve (0.1 ppm)
@@ -225,38 +223,12 @@ def print_summary(summary: dict[str, Any], n_runs: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    ap.add_argument("--runs", type=int, default=50)
+    ap = campaign_parser(__doc__, runs=50, out="realistic_logs.json")
     ap.add_argument("--scenarios", default=",".join(SCENARIOS))
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--seed-start", type=int, default=1)
-    ap.add_argument("--out", type=Path, default=Path("realistic_logs.json"))
     args = ap.parse_args()
-    from dask.distributed import as_completed
-
-    from gtsam_dvl.app.campaign.cluster import dask_client
-
-    tasks = [
-        (s, seed)
-        for s in args.scenarios.split(",")
-        for seed in range(args.seed_start, args.seed_start + args.runs)
-    ]
-    t0 = time.perf_counter()
-    runs: list[dict[str, Any]] = []
-    with dask_client(None, args.workers) as client:
-        futures = [client.submit(run_one, s, seed, pure=False) for s, seed in tasks]
-        for k, fut in enumerate(as_completed(futures), 1):
-            runs.append(fut.result())
-            print(f"\r{k}/{len(tasks)} runs, {time.perf_counter() - t0:.0f} s", end="", flush=True)
-            if k % 10 == 0 or k == len(tasks):  # partial results survive an interrupted campaign
-                tmp = args.out.with_suffix(".tmp")
-                tmp.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
-                tmp.replace(args.out)
-    print(
-        f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}"
-    )
+    tasks = [(s, seed) for s in args.scenarios.split(",") for seed in seeds(args)]
+    runs = run_on_dask(run_one, tasks, args.workers, args.out, summarise, every=10)
     print_summary(summarise(runs), args.runs)
 
 

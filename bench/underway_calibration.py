@@ -23,15 +23,13 @@ compare run for run. The runs are Dask tasks (app/campaign/cluster.py: a LocalCl
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import json
 import math
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from campaign_loop import campaign_parser, run_on_dask, seeds
 
 FIXED_SCALE_SIGMA = 1e-7  # "fixed": a prior sigma far below anything the data can resolve (0.1 ppm)
 FIXED_MISALIGNMENT_SIGMA_DEG = 1e-5
@@ -54,6 +52,12 @@ CAMPAIGN_VARIANTS = (
 
 def _with(config: Any, section: str, **values: Any) -> Any:
     return config.model_copy(update={section: getattr(config, section).model_copy(update=values)})
+
+
+def _selecting(section: dict[str, Any], model: str, filled: dict[str, float]) -> dict[str, Any]:
+    """A configuration section (as to_dict() writes it) that selects the preset `model`: the fields the preset
+    fills (`filled`) taken out, so that the preset's values apply."""
+    return {**{k: v for k, v in section.items() if k not in filled}, "model": model}
 
 
 def run_one(
@@ -88,23 +92,9 @@ def run_one(
         # a preset fills only the fields the configuration does not set itself, and to_dict() lists every field:
         # take out those the presets fill (else the "presets" variant would be the defaults with another tolerance)
         if imu_model:
-            d["imu"] = {
-                **{
-                    k: v
-                    for k, v in d["imu"].items()
-                    if k not in IMU_PRESETS[imu_model].config_values()
-                },
-                "model": imu_model,
-            }
+            d["imu"] = _selecting(d["imu"], imu_model, IMU_PRESETS[imu_model].config_values())
         if dvl_model:
-            d["dvl"] = {
-                **{
-                    k: v
-                    for k, v in d["dvl"].items()
-                    if k not in DVL_PRESETS[dvl_model].config_values()
-                },
-                "model": dvl_model,
-            }
+            d["dvl"] = _selecting(d["dvl"], dvl_model, DVL_PRESETS[dvl_model].config_values())
             d["priors"] = {k: v for k, v in d["priors"].items() if k != "scale_sigma"}
         preset = EstimatorConfig.from_dict(d)
         if dvl_model:
@@ -258,10 +248,7 @@ def print_summary(summary: dict[str, Any]) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    ap.add_argument("--runs", type=int, default=50)
+    ap = campaign_parser(__doc__, runs=50, out="underway_calibration.json")
     ap.add_argument("--scenarios", default="straight-transect,steady-turn")
     # the scenarios' sensors: the paper's navigation-grade IMU (0.1 deg/h/sqrt(Hz), 0.01 deg/h, 10 micro-g/sqrt(Hz),
     # 50 micro-g: the PHINS preset's class) and a 7 mm/s bottom-track DVL (a Pathfinder's class, 0.4 % scale)
@@ -281,45 +268,11 @@ def main() -> None:
     ap.add_argument(
         "--variants", default=",".join(VARIANTS), help="the variants to run (default: all)"
     )
-    ap.add_argument("--seed-start", type=int, default=1)
-    ap.add_argument("--out", type=Path, default=Path("underway_calibration.json"))
     args = ap.parse_args()
-    from gtsam_dvl.app.campaign.cluster import dask_client
-
-    tasks = [
-        (s, seed)
-        for s in args.scenarios.split(",")
-        for seed in range(args.seed_start, args.seed_start + args.runs)
-    ]
-    t0 = time.perf_counter()
-    runs: list[dict[str, Any]] = []
-    with dask_client(None, args.workers) as client:
-        variants = tuple(args.variants.split(","))
-        futures = [
-            client.submit(
-                run_one,
-                s,
-                seed,
-                args.imu_model,
-                args.dvl_model,
-                args.mounting_tolerance_deg,
-                variants,
-                pure=False,
-            )
-            for s, seed in tasks
-        ]
-        from dask.distributed import as_completed
-
-        for k, fut in enumerate(as_completed(futures), 1):
-            runs.append(fut.result())
-            print(f"\r{k}/{len(tasks)} runs, {time.perf_counter() - t0:.0f} s", end="", flush=True)
-            if k % 10 == 0 or k == len(tasks):  # partial results survive an interrupted campaign
-                tmp = args.out.with_suffix(".tmp")
-                tmp.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
-                tmp.replace(args.out)
-    print(
-        f"\n{len(tasks)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}"
-    )
+    variants = tuple(args.variants.split(","))
+    sensors = (args.imu_model, args.dvl_model, args.mounting_tolerance_deg, variants)
+    tasks = [(s, seed, *sensors) for s in args.scenarios.split(",") for seed in seeds(args)]
+    runs = run_on_dask(run_one, tasks, args.workers, args.out, summarise, every=10)
     print_summary(summarise(runs))
 
 

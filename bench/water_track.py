@@ -21,14 +21,12 @@ estimators' agreement (the differences of their final calibration in the sigmas 
 
 from __future__ import annotations
 
-import argparse
-import json
 import math
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
+from campaign_loop import campaign_parser, run_on_dask, seeds
 
 STATE_NAMES = [
     "scale_ppm",
@@ -236,14 +234,9 @@ def print_summary(s: dict[str, Any]) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    ap.add_argument("--runs", type=int, default=30)
-    ap.add_argument("--seed-start", type=int, default=1)
+    ap = campaign_parser(__doc__, runs=30, out="water_track.json")
     ap.add_argument("--estimators", default="batch,online,ekf")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--out", type=Path, default=Path("water_track.json"))
     ap.add_argument(
         "--layers",
         type=float,
@@ -251,29 +244,10 @@ def main() -> None:
         help="> 0: also run each estimator with the current per depth layer of this thickness (m)",
     )
     args = ap.parse_args()
-    from gtsam_dvl.app.campaign.cluster import dask_client
-
     estimators = tuple(args.estimators.split(","))
-    seeds = list(range(args.seed_start, args.seed_start + args.runs))
-    t0 = time.perf_counter()
-    runs: list[dict[str, Any]] = []
-    with dask_client(None, args.workers) as client:
-        from dask.distributed import as_completed
-
-        futures = [
-            client.submit(run_one, seed, estimators, layers_m=args.layers, pure=False)
-            for seed in seeds
-        ]
-        for k, fut in enumerate(as_completed(futures), 1):
-            runs.append(fut.result())
-            print(f"\r{k}/{len(seeds)} runs, {time.perf_counter() - t0:.0f} s", end="", flush=True)
-            if k % 5 == 0 or k == len(seeds):  # partial results survive an interrupted campaign
-                args.out.parent.mkdir(parents=True, exist_ok=True)
-                tmp = args.out.with_suffix(".tmp")
-                tmp.write_text(json.dumps({"runs": runs, "summary": summarise(runs)}, indent=1))
-                tmp.replace(args.out)
-    print(
-        f"\n{len(seeds)} runs on {args.workers} workers in {time.perf_counter() - t0:.0f} s; {args.out}"
+    tasks = [(seed, estimators) for seed in seeds(args)]
+    runs = run_on_dask(
+        run_one, tasks, args.workers, args.out, summarise, every=5, layers_m=args.layers
     )
     print_summary(summarise(runs))
 

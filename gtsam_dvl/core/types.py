@@ -19,8 +19,18 @@ import numpy as np
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 
 
+class Stamped:
+    """Samples stamped in time (the data classes below declare t and their per-sample arrays): len() is the
+    number of samples."""
+
+    t: np.ndarray  # (N,) s
+
+    def __len__(self) -> int:
+        return int(self.t.shape[0])
+
+
 @dataclass
-class ImuData:
+class ImuData(Stamped):
     """IMU samples. Sample i integrates the interval (t[i-1], t[i]]: its stamp is the interval's end.
 
     b_omega: gyro output, rate averaged over the interval (delta-theta / dt), rad/s, in imu_link.
@@ -31,9 +41,6 @@ class ImuData:
     b_omega: np.ndarray  # (N, 3) rad/s
     b_f: np.ndarray  # (N, 3) m/s^2
     frame_id: str = "imu_link"
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
 
 
 @dataclass
@@ -48,7 +55,7 @@ class BeamData:
 
 
 @dataclass
-class DvlData:
+class DvlData(Stamped):
     """DVL bottom-track velocity y in dvl_link at each stamp (instantaneous), with its 3x3 covariance."""
 
     t: np.ndarray  # (M,)
@@ -67,12 +74,9 @@ class DvlData:
     # out of bottom-track range; None: the log has none
     altitude: np.ndarray | None = None
 
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
 
 @dataclass
-class TruthData:
+class TruthData(Stamped):
     """Simulated truth of base_link in the map frame."""
 
     t: np.ndarray  # (K,)
@@ -82,9 +86,6 @@ class TruthData:
     b_omega: np.ndarray  # (K, 3) rad/s, body rate relative to map, in base_link
     # (K, 3) m/s: the water current in map at base_link's depth and time (vertical component 0); None: no current
     n_c: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
 
 
 @dataclass
@@ -182,7 +183,7 @@ class Segment:
 
 
 @dataclass
-class DepthData:
+class DepthData(Stamped):
     """Depth of the pressure sensor (positive down, metres below the water surface) at each stamp.
 
     From a pressure topic (sensor_msgs/msg/FluidPressure) pressure_pa and pressure_variance_pa2 hold the
@@ -201,12 +202,9 @@ class DepthData:
     frame_id: str = "pressure_link"
     b_p_sensor: np.ndarray | None = None
 
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
 
 @dataclass
-class GnssData:
+class GnssData(Stamped):
     """GNSS fixes of the antenna (sensor_msgs/msg/NavSatFix), geodetic on WGS84, taken at the surface.
 
     status: the message's NavSatStatus.status (-1 no fix, 0 fix, 1 SBAS, 2 GBAS/RTK); a fix with status < 0
@@ -224,12 +222,9 @@ class GnssData:
     frame_id: str = "gnss_link"
     b_p_antenna: np.ndarray | None = None
 
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
-
 
 @dataclass
-class AttitudeData:
+class AttitudeData(Stamped):
     """Attitude of base_link in map from a sensor (an IMU's or AHRS's orientation, an INS pose), already
     turned into base_link and ENU by the reader. cov_rad2: covariance of the attitude error in body axes
     (rad^2), NaN where unknown. source: the topic it came from, for messages."""
@@ -238,9 +233,6 @@ class AttitudeData:
     n_q_b: np.ndarray  # (K, 4) [x, y, z, w], rotates base_link vectors into map (ENU)
     cov_rad2: np.ndarray  # (K, 3, 3) rad^2
     source: str = ""
-
-    def __len__(self) -> int:
-        return int(self.t.shape[0])
 
 
 @dataclass

@@ -32,11 +32,23 @@ from gtsam_dvl.estimators.inputs.prepare import refuse_unsupported
 from gtsam_dvl.estimators.iodvlc import IoDvlcResult
 
 
+@dataclass(frozen=True)
+class RunRequest:
+    """What run_estimator hands an estimator: the log and run_estimator's arguments (its docstring). config: an
+    EstimatorConfig, already checked (None: the one the log's scenario names, else the defaults); each estimator
+    reads its own sections of it. progress: called with the fraction done, 0 to 1. timeline: keep the filtering
+    timeline where it costs extra (the batch smoother's; the filters always keep theirs). calibration: a vehicle's
+    calibration as the prior (module doc)."""
+
+    log: LogData
+    config: EstimatorConfig | None
+    progress: ProgressFn | None = None
+    timeline: bool = True
+    calibration: VehicleCalibration | None = None
+
+
 class Estimator(Protocol):
-    """An estimator run on a whole log. config: an EstimatorConfig, already checked (None: the one the log's
-    scenario names, else the defaults); each estimator reads its own sections of it. progress: called with the
-    fraction done, 0 to 1. timeline: keep the filtering timeline where it costs extra (the batch smoother's; the
-    filters always keep theirs). calibration: a vehicle's calibration as the prior (module doc)."""
+    """An estimator run on a whole log (RunRequest)."""
 
     @property
     def name(self) -> str: ...
@@ -44,20 +56,10 @@ class Estimator(Protocol):
     @property
     def description(self) -> str: ...
 
-    def run(
-        self,
-        log: LogData,
-        config: EstimatorConfig | None,
-        progress: ProgressFn | None = None,
-        timeline: bool = True,
-        calibration: VehicleCalibration | None = None,
-    ) -> EstimatorResult: ...
+    def run(self, request: RunRequest) -> EstimatorResult: ...
 
 
-RunFn = Callable[
-    [LogData, EstimatorConfig | None, ProgressFn | None, bool, VehicleCalibration | None],
-    EstimatorResult,
-]
+RunFn = Callable[[RunRequest], EstimatorResult]
 
 
 @dataclass(frozen=True)
@@ -69,66 +71,39 @@ class RegisteredEstimator:
     description: str
     runner: RunFn
 
-    def run(
-        self,
-        log: LogData,
-        config: EstimatorConfig | None,
-        progress: ProgressFn | None = None,
-        timeline: bool = True,
-        calibration: VehicleCalibration | None = None,
-    ) -> EstimatorResult:
-        return self.runner(log, config, progress, timeline, calibration)
+    def run(self, request: RunRequest) -> EstimatorResult:
+        return self.runner(request)
 
 
-def _batch(
-    log: LogData,
-    config: EstimatorConfig | None,
-    progress: ProgressFn | None,
-    timeline: bool,
-    calibration: VehicleCalibration | None,
-) -> NavResult:
+def _batch(r: RunRequest) -> NavResult:
     from gtsam_dvl.estimators.batch.smoother import smooth_batch
 
-    return smooth_batch(log, config, progress=progress, timeline=timeline, calibration=calibration)
+    return smooth_batch(
+        r.log, r.config, progress=r.progress, timeline=r.timeline, calibration=r.calibration
+    )
 
 
 def _online(mode: Literal["fixed_lag", "full"]) -> RunFn:
-    def run(
-        log: LogData,
-        config: EstimatorConfig | None,
-        progress: ProgressFn | None,
-        timeline: bool,
-        calibration: VehicleCalibration | None,
-    ) -> NavResult:
+    def run(r: RunRequest) -> NavResult:
         from gtsam_dvl.estimators.online import smooth_online
 
-        return smooth_online(log, config, mode=mode, progress=progress, calibration=calibration)
+        return smooth_online(
+            r.log, r.config, mode=mode, progress=r.progress, calibration=r.calibration
+        )
 
     return run
 
 
-def _ekf(
-    log: LogData,
-    config: EstimatorConfig | None,
-    progress: ProgressFn | None,
-    timeline: bool,
-    calibration: VehicleCalibration | None,
-) -> NavResult:
+def _ekf(r: RunRequest) -> NavResult:
     from gtsam_dvl.estimators.ekf import run_ekf
 
-    return run_ekf(log, config, progress=progress, calibration=calibration)
+    return run_ekf(r.log, r.config, progress=r.progress, calibration=r.calibration)
 
 
-def _iodvlc(
-    log: LogData,
-    config: EstimatorConfig | None,
-    progress: ProgressFn | None,
-    timeline: bool,
-    calibration: VehicleCalibration | None,
-) -> IoDvlcResult:
+def _iodvlc(r: RunRequest) -> IoDvlcResult:
     from gtsam_dvl.estimators.iodvlc import run_iodvlc
 
-    return run_iodvlc(log, config)  # (no calibration prior: run_estimator refused one)
+    return run_iodvlc(r.log, r.config)  # (no calibration prior: run_estimator refused one)
 
 
 ESTIMATORS: dict[str, Estimator] = {
@@ -218,7 +193,7 @@ def run_estimator(
     refuse_unsupported(
         mode, (config or EstimatorConfig.for_log(log.metadata)).validate(), calibration
     )
-    return estimator.run(log, config, progress, timeline, calibration)
+    return estimator.run(RunRequest(log, config, progress, timeline, calibration))
 
 
 def run_trajectory_estimator(

@@ -236,23 +236,32 @@ def test_headline_no_with_advice() -> None:
     assert lines[3] == f"  {LEVER_ARM_NOTE[0].upper()}{LEVER_ARM_NOTE[1:]}."
 
 
-def test_determined_at_reads_the_time_offset_timeline() -> None:
-    n = 5
-    t = np.arange(n) * 100.0
-    ones3 = np.ones((n, 3))
-    tl = Timeline(
+def _offset_timeline(
+    t: np.ndarray, scale_sigma: float, offset_s: np.ndarray, offset_sigma_s: np.ndarray
+) -> Timeline:
+    """A timeline at times t (s) with the time offset estimated (its values and sigmas in s), the scale 1 with a
+    constant sigma, the misalignment and the biases zero with unit sigmas, unit attitude sigmas."""
+    n = len(t)
+    zeros3, ones3 = np.zeros((n, 3)), np.ones((n, 3))
+    return Timeline(
         t,
         np.ones(n),
-        np.full(n, 1e-2),
-        0 * ones3,
+        np.full(n, scale_sigma),
+        zeros3,
         ones3,
-        0 * ones3,
+        zeros3,
         ones3,
-        0 * ones3,
+        zeros3,
         ones3,
         ones3,
-        time_offset_s=np.zeros(n),
-        time_offset_sigma_s=np.array([0.1, 0.05, 0.02, 0.009, 0.004]),
+        time_offset_s=offset_s,
+        time_offset_sigma_s=offset_sigma_s,
+    )
+
+
+def test_determined_at_reads_the_time_offset_timeline() -> None:
+    tl = _offset_timeline(
+        np.arange(5) * 100.0, 1e-2, np.zeros(5), np.array([0.1, 0.05, 0.02, 0.009, 0.004])
     )
     rep = ObservabilityReport(
         [],
@@ -338,22 +347,8 @@ def test_smoother_figures_draw_the_filtering_band_over_time(
     )
     n = 50
     t = np.linspace(0.0, 490.0, n)
-    ones3 = np.ones((n, 3))
     shrinking = np.linspace(0.5, 0.02, n)  # s
-    tl = Timeline(
-        t,
-        np.ones(n),
-        np.full(n, 1e-3),
-        0 * ones3,
-        ones3,
-        0 * ones3,
-        ones3,
-        0 * ones3,
-        ones3,
-        ones3,
-        time_offset_s=np.full(n, 0.3),
-        time_offset_sigma_s=shrinking,
-    )
+    tl = _offset_timeline(t, 1e-3, np.full(n, 0.3), shrinking)
     timeline_plots.plot_estimates(
         [("batch", tl)], tmp_path / "time_offset.png", "time_offset", truth=0.31
     )

@@ -12,6 +12,7 @@ from gtsam_dvl.core.config import DvlConfig
 from gtsam_dvl.core.result import NavResult, Timeline
 from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import DvlData, ImuData, LogData
+from tests.support.results import nominal_estimates
 
 N = 60
 SIGMA_M_S = 0.02
@@ -51,13 +52,7 @@ def _filtered(estimator: str) -> tuple[NavResult, LogData]:
         b_omega=zeros3,
         timeline=timeline,
         dvl_pings=np.arange(N),
-        accel_bias=np.zeros(3),
-        gyro_bias=np.zeros(3),
-        bias_cov=np.eye(6) * 1e-12,
-        scale=1.0,
-        scale_sigma=1e-4,
-        b_R_d=np.eye(3),
-        b_R_d_cov=np.eye(3) * 1e-8,
+        **nominal_estimates(bias_var=1e-12),
     )
     log = LogData(
         imu=ImuData(t=t, b_omega=zeros3, b_f=zeros3),

@@ -22,6 +22,7 @@ from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.types import DvlData, ImuData, LogData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H
 from gtsam_dvl.estimators.run import run_estimator
+from tests.support.results import resting_result
 from tests.support.scenarios import scenario_raw, simulate_variant
 
 MODES = ("batch", "online", "ekf")
@@ -80,17 +81,7 @@ def test_clean_log_stays_ok(mode: str, clean: LogData) -> None:
 def _tiny(calibration: dict[str, Estimate]) -> tuple[NavResult, LogData]:
     """A two-state result with the given shared states, and a log whose IMU turned at 40 deg/s at most."""
     n = 2
-    result = NavResult(
-        "batch",
-        np.arange(n, dtype=float),
-        np.zeros((n, 3)),
-        np.tile(np.eye(3), (n, 1, 1)),
-        np.zeros((n, 3)),
-        np.tile(np.eye(6), (n, 1, 1)),
-        np.tile(np.eye(3), (n, 1, 1)),
-        b_R_d0=np.eye(3),
-        calibration=calibration,
-    )
+    result = resting_result(np.arange(n, dtype=float), calibration=calibration)
     w = np.zeros((3, 3))
     w[1, 2] = np.radians(40.0)
     log = LogData(

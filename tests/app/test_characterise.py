@@ -182,10 +182,9 @@ def test_stream_timing_rate_jitter_and_gaps() -> None:
     assert s["gap_lost_s"] == pytest.approx(300 * period, abs=5 * jitter)
 
 
-def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
-    """A DVL fitted with beam factors recommends a beam sigma with the beam factors (and no time offset, which
-    they do not take); an IMU that is not quantised keeps its configured densities and the [noise] defaults."""
-    config = EstimatorConfig()
+def _unquantised_imu() -> dict[str, Any]:
+    """The IMU part of a characterisation: not quantised (no floor density), configured 0.1 deg/h/rtHz and 10
+    ug/rtHz, and the Allan deviation of the whole (moving) log."""
     allan = {
         "on": "whole log",
         "gyro": [{"white_density": 0.5}] * 3,
@@ -195,9 +194,16 @@ def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
         name: {"configured_density": dens, "floor_density": [None] * 3}
         for name, dens in (("gyro", 0.1), ("accel", 10.0))
     }
+    return {**imu, "allan": allan}
+
+
+def test_recommendation_for_beam_factors_loads(tmp_path: Path) -> None:
+    """A DVL fitted with beam factors recommends a beam sigma with the beam factors (and no time offset, which
+    they do not take); an IMU that is not quantised keeps its configured densities and the [noise] defaults."""
+    config = EstimatorConfig()
     rec = recommend(
         config,
-        {**imu, "allan": allan},
+        _unquantised_imu(),
         {"fitted_sigma_m_s": 0.0071, "multiplier": 0.355, "at_bound": False, "use_beams": True},
     )
     path = tmp_path / "recommended.toml"
@@ -215,15 +221,6 @@ def test_recommendation_models_a_significant_correlated_error(tmp_path: Path) ->
     """Residuals with a significant Gauss-Markov part: the recommended [dvl] carries its level and time constant
     (which the estimators then model, estimators/models/correlated.py), each line with its reason; a non-significant fit
     adds nothing."""
-    allan = {
-        "on": "whole log",
-        "gyro": [{"white_density": 0.5}] * 3,
-        "accel": [{"white_density": 30.0}] * 3,
-    }
-    imu = {
-        name: {"configured_density": dens, "floor_density": [None] * 3}
-        for name, dens in (("gyro", 0.1), ("accel", 10.0))
-    }
     gm = {"white_sigma_m_s": 0.007, "gm_sigma_m_s": 0.0031, "gm_tau_s": 42.0, "significant": True}
     dvl = {
         "fitted_sigma_m_s": 0.0072,
@@ -231,7 +228,7 @@ def test_recommendation_models_a_significant_correlated_error(tmp_path: Path) ->
         "at_bound": False,
         "residuals": {"gauss_markov": gm},
     }
-    text = recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap")
+    text = recommended_toml(recommend(EstimatorConfig(), _unquantised_imu(), dvl), "dive.mcap")
     path = tmp_path / "recommended.toml"
     path.write_text(text)
     loaded = EstimatorConfig.load(path)
@@ -241,7 +238,7 @@ def test_recommendation_models_a_significant_correlated_error(tmp_path: Path) ->
     assert "# its time constant, 42 s\ncorrelated_tau_s = 42.0" in text
     dvl["residuals"] = {"gauss_markov": {**gm, "significant": False}}
     path.write_text(
-        recommended_toml(recommend(EstimatorConfig(), {**imu, "allan": allan}, dvl), "dive.mcap")
+        recommended_toml(recommend(EstimatorConfig(), _unquantised_imu(), dvl), "dive.mcap")
     )
     assert (
         EstimatorConfig.load(path).dvl.correlated_sigma_m_s

@@ -263,20 +263,28 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
         "[online]\nwindow_s = 8.0\n[online.relinearization]\nscale = 0.01\n"
         "[ekf]\nmin_calibration_speed_m_s = 0.3\ncalibration_speed_sigmas = 4.0\n"
     )
-    first, again = tmp_path / "first.mcap", tmp_path / "again.mcap"
-    run(
-        "smooth",
-        str(short_log),
-        "--mode",
-        mode,
-        "-c",
-        str(toml),
-        "-o",
-        str(first),
-        "--summary",
-        str(tmp_path / "first.json"),
-        "-q",
-    )
+
+    def smooth_with(config: Path, name: str) -> Path:
+        """The log smoothed in this mode with the configuration file config: the result name.mcap (returned)
+        and the summary name.json in tmp_path."""
+        result = tmp_path / f"{name}.mcap"
+        summary = tmp_path / f"{name}.json"
+        run(
+            "smooth",
+            str(short_log),
+            "--mode",
+            mode,
+            "-c",
+            str(config),
+            "-o",
+            str(result),
+            "--summary",
+            str(summary),
+            "-q",
+        )
+        return result
+
+    first = smooth_with(toml, "first")
     effective = tmp_path / "config.json"
     effective.write_bytes(open_source(first).attachments["config.json"][1])
     written = json.loads(effective.read_text())
@@ -296,19 +304,7 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
         and written["config"]["priors"]["scale_sigma"] == 0.3
     )
     assert written["config"]["priors"]["misalignment_sigma_deg"] == [0.8, 0.8, 0.8]
-    run(
-        "smooth",
-        str(short_log),
-        "--mode",
-        mode,
-        "-c",
-        str(effective),
-        "-o",
-        str(again),
-        "--summary",
-        str(tmp_path / "again.json"),
-        "-q",
-    )
+    again = smooth_with(effective, "again")
     assert json.loads(open_source(again).attachments["config.json"][1]) == written
     s1, s2 = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("first", "again"))
     for key in ("scale", "misalignment_deg", "gyro_bias_deg_per_h", "accel_bias_ug"):

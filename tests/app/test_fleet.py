@@ -18,6 +18,16 @@ from tests.support.campaign import SCENARIO
 pytest.importorskip("distributed")
 
 
+def _smooth(*args: str | Path, timeout_s: float) -> subprocess.CompletedProcess[str]:
+    """`gtsam-dvl smooth ARGS` in another interpreter, its output captured as text."""
+    return subprocess.run(
+        [sys.executable, "-m", "gtsam_dvl.app.cli", "smooth", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )
+
+
 def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None:
     scenario = tmp_path / "mc-tiny.toml"
     scenario.write_text(SCENARIO)
@@ -29,25 +39,7 @@ def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None
     bad = tmp_path / "broken.mcap"
     bad.write_bytes(b"not a log")
     out = tmp_path / "fleet"
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "gtsam_dvl.app.cli",
-            "smooth",
-            str(logs[0]),
-            str(bad),
-            str(logs[1]),
-            "--out-dir",
-            str(out),
-            "--workers",
-            "2",
-            "-q",
-        ],
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
+    proc = _smooth(logs[0], bad, logs[1], "--out-dir", out, "--workers", "2", "-q", timeout_s=600)
     print(proc.stdout)
     assert proc.returncode == 3, proc.stderr  # one log failed
     assert "gtsam-dvl: error: 1 of 3 logs failed" in proc.stderr
@@ -71,19 +63,5 @@ def test_fleet_smooths_every_log_and_reports_the_bad_one(tmp_path: Path) -> None
     assert "| broken | error |" in table and table.count("| ok |") == 2
     assert "| dive1_dive | ok |" in table and "| dive2_dive | ok |" in table
     # several logs need --out-dir; -o is for one log
-    proc = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "gtsam_dvl.app.cli",
-            "smooth",
-            str(logs[0]),
-            str(logs[1]),
-            "-o",
-            str(tmp_path / "r.mcap"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    proc = _smooth(logs[0], logs[1], "-o", tmp_path / "r.mcap", timeout_s=60)
     assert proc.returncode == 1 and "several logs are smoothed with --out-dir" in proc.stderr

@@ -61,6 +61,16 @@ def cli(*args: str | Path) -> Any:
     return CliRunner().invoke(app, [str(a) for a in args])
 
 
+def _smooth_started(*args: str | Path) -> subprocess.Popen[str]:
+    """`gtsam-dvl smooth ARGS -q` started in another process (to be signalled), its output piped as text."""
+    return subprocess.Popen(
+        [*CLI, "smooth", *map(str, args), "-q"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
 def one_error_line(result: Any) -> str:
     lines = result.stderr.strip().splitlines()
     assert result.exit_code == 1 and len(lines) == 1, (
@@ -279,22 +289,8 @@ def test_sigterm_leaves_no_stray_files(phase: str, short_log: Path, tmp_path: Pa
     all or none, with no temporary file."""
     out = tmp_path / "out"
     out.mkdir()
-    proc = subprocess.Popen(
-        [
-            *CLI,
-            "smooth",
-            str(short_log),
-            "-o",
-            str(out / "r.mcap"),
-            "--summary",
-            str(out / "s.json"),
-            "--tum",
-            str(out / "t.tum"),
-            "-q",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = _smooth_started(
+        short_log, "-o", out / "r.mcap", "--summary", out / "s.json", "--tum", out / "t.tum"
     )
     deadline = time.monotonic() + 120
 
@@ -326,22 +322,8 @@ def test_sigterm_mid_run(tmp_path_factory: pytest.TempPathFactory, tmp_path: Pat
     of estimation; the batch smoother's 1.4 s would be over before the signal)."""
     log = tmp_path_factory.mktemp("full") / "paper-2d.mcap"
     write_log(log, simulate(load_scenario("paper-2d"), 5))
-    proc = subprocess.Popen(
-        [
-            *CLI,
-            "smooth",
-            str(log),
-            "--mode",
-            "online-full",
-            "-o",
-            str(tmp_path / "r.mcap"),
-            "--summary",
-            str(tmp_path / "s.json"),
-            "-q",
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
+    proc = _smooth_started(
+        log, "--mode", "online-full", "-o", tmp_path / "r.mcap", "--summary", tmp_path / "s.json"
     )
     time.sleep(2.5)
     proc.send_signal(signal.SIGTERM)

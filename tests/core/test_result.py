@@ -12,6 +12,7 @@ from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, misalignment_rpy_and_cov
 from gtsam_dvl.core.states import Estimate
 from tests.support.numerical import numerical_jacobian
+from tests.support.results import resting_result
 
 
 def _rpy(R: np.ndarray) -> np.ndarray:
@@ -38,18 +39,7 @@ def test_closed_form_matches_numerical_derivative(seed: int) -> None:
 
 
 def _result(**calibration: Any) -> NavResult:
-    n = 2
-    return NavResult(
-        "batch",
-        np.zeros(n),
-        np.zeros((n, 3)),
-        np.tile(np.eye(3), (n, 1, 1)),
-        np.zeros((n, 3)),
-        np.tile(np.eye(6), (n, 1, 1)),
-        np.tile(np.eye(3), (n, 1, 1)),
-        b_R_d0=np.eye(3),
-        **calibration,
-    )
+    return resting_result(np.zeros(2), **calibration)
 
 
 def test_calibration_is_a_mapping_of_the_states_and_the_old_attributes_read_it() -> None:

@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error, response
+from tests.support.results import nominal_estimates
 
 WIDE = np.diag([1.0, 1.0, 1.0, 1.0])  # a prior that takes nothing: the data's response alone
 
@@ -69,13 +70,7 @@ def _result(held: object = None) -> NavResult:
         cov,
         np.repeat(np.eye(3)[None] * 1e-4, n, axis=0),
         b_R_d0=np.eye(3),
-        accel_bias=np.zeros(3),
-        gyro_bias=np.zeros(3),
-        bias_cov=np.eye(6) * 1e-8,
-        scale=1.0,
-        scale_sigma=1e-4,
-        b_R_d=np.eye(3),
-        b_R_d_cov=np.eye(3) * 1e-8,
+        **nominal_estimates(bias_var=1e-8),
         calib_joint_cov=joint.copy(),
         shared_joint_cov=joint.copy(),
     )

@@ -26,6 +26,7 @@ from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.logs import cut_log
 
 pytestmark = pytest.mark.slow
 
@@ -43,30 +44,8 @@ END_S = (
 
 def _through_file(log: LogData, tmp: Path, **read: bool) -> LogData:
     """The log's first END_S seconds written and read back."""
-    imu, dvl, truth = log.imu, log.dvl, log.truth
-    assert truth is not None
-    ki, kd, kt = imu.t <= END_S, dvl.t <= END_S, truth.t <= END_S
-    log = dataclasses.replace(
-        log,
-        imu=dataclasses.replace(imu, t=imu.t[ki], b_omega=imu.b_omega[ki], b_f=imu.b_f[ki]),
-        dvl=dataclasses.replace(
-            dvl,
-            t=dvl.t[kd],
-            d_v=dvl.d_v[kd],
-            d_cov=dvl.d_cov[kd],
-            valid=dvl.valid[kd],
-            beams=None,
-            water_track=None if dvl.water_track is None else dvl.water_track[kd],
-        ),
-        truth=dataclasses.replace(
-            truth,
-            t=truth.t[kt],
-            n_p=truth.n_p[kt],
-            n_q_b=truth.n_q_b[kt],
-            n_v=truth.n_v[kt],
-            b_omega=truth.b_omega[kt],
-        ),
-    )
+    assert log.truth is not None
+    log = cut_log(log, END_S, beams=False)
     path = tmp / "log.mcap"
     write_log(path, log)
     return read_log(path, **read)

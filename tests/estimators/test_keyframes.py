@@ -219,6 +219,18 @@ def _params() -> gtsam.PreintegrationParams:
     return snapshot_params(params)
 
 
+def _rotating_params(n_omega_ie: np.ndarray) -> gtsam.PreintegrationParams:
+    """_params()'s noise with gravity (9.79 m/s^2 down) and the Earth rate n_omega_ie (rad/s, map axes): the
+    parameters of an IMU factor, whose snapshots must not depend on either."""
+    params = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
+    noise = _params()
+    params.setGyroscopeCovariance(noise.getGyroscopeCovariance())
+    params.setAccelerometerCovariance(noise.getAccelerometerCovariance())
+    params.setIntegrationCovariance(noise.getIntegrationCovariance())
+    params.setOmegaCoriolis(n_omega_ie)
+    return params
+
+
 def _assert_same(new: PingMotion, ref: PingMotion, worst: dict[str, float]) -> None:
     for name in ("dt", "dR", "dv", "dp", "cov"):
         assert np.array_equal(getattr(new, name), getattr(ref, name)), name
@@ -288,14 +300,7 @@ def test_interval_pieces_found_once_are_the_cut_by_cut_ones(gap: bool) -> None:
         1.3,
         1.69,
     ]  # (0.0131: before the first stamp after t_state)
-    params = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
-    for setter, getter in (
-        (params.setGyroscopeCovariance, _params().getGyroscopeCovariance),
-        (params.setAccelerometerCovariance, _params().getAccelerometerCovariance),
-        (params.setIntegrationCovariance, _params().getIntegrationCovariance),
-    ):
-        setter(getter())
-    params.setOmegaCoriolis(np.array([0.0, 6.3e-5, 3.6e-5]))
+    params = _rotating_params(np.array([0.0, 6.3e-5, 3.6e-5]))
     args = (t_state, t_end, pings, params, t, starts, b_f, b_omega, gaps, ImuConfig())
     pim_a, held_a, snaps_a = keyframes.interval_with_snapshots(*args)
     pim_b, held_b, snaps_b = keyframes.interval_cut_by_cut(*args)
@@ -315,17 +320,10 @@ def test_snapshot_does_not_depend_on_the_parameters_earth_rate_or_gravity() -> N
     from its preintegration) and with neither: the same snapshot (the increments and their bias Jacobians are the
     preintegration's own; snapshot undoes the rotating-frame prediction it evaluates through)."""
     rng = np.random.default_rng(8)
-    earth = gtsam.PreintegrationParams(np.array([0.0, 0.0, -9.79]))
-    for setter, getter in (
-        (earth.setGyroscopeCovariance, _params().getGyroscopeCovariance),
-        (earth.setAccelerometerCovariance, _params().getAccelerometerCovariance),
-        (earth.setIntegrationCovariance, _params().getIntegrationCovariance),
-    ):
-        setter(getter())
     w_ie = (
         np.array([0.0, 6.3e-5, 3.6e-5]) * 50
     )  # 50 times the Earth's rate, so that a wrong term would show
-    earth.setOmegaCoriolis(w_ie)
+    earth = _rotating_params(w_ie)
     a = gtsam.PreintegratedImuMeasurements(earth, gtsam.imuBias.ConstantBias())
     b = gtsam.PreintegratedImuMeasurements(_params(), gtsam.imuBias.ConstantBias())
     for _ in range(180):

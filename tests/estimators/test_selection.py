@@ -34,6 +34,7 @@ from gtsam_dvl.estimators.inputs.selection import (
     select_epochs,
 )
 from gtsam_dvl.estimators.online import OnlineEstimator, smooth_online
+from tests.support.pings import first_pass_usable
 
 
 def _with_dropouts(log: LogData, t_end: float = 800.0) -> tuple[LogData, np.ndarray]:
@@ -343,17 +344,7 @@ def test_ping_screen_online_matches_the_whole_log(
     log, _, counts = _with_bogus(sim_paper3d_clean)
     log = dataclasses.replace(log, dvl=dataclasses.replace(log.dvl, noise_free=noise_free))
     cfg = DvlConfig()
-    code = classify_pings(
-        log.dvl.t,
-        log.dvl.d_v,
-        log.dvl.valid,
-        None,
-        None,
-        cfg,
-        float(log.imu.t[0]),
-        float(log.imu.t[-1]),
-    )
-    idx = np.flatnonzero(code == USABLE)
+    idx = first_pass_usable(log, cfg, beams=False)
     whole = screen_pings(log.dvl, idx, log.imu, cfg)
     screen = PingScreen(cfg, repeats_need_motion=noise_free)
     imu, online = log.imu, []

@@ -25,12 +25,11 @@ from gtsam_dvl.estimators.inputs.selection import (
     USABLE,
     ZERO_WHILE_MOVING,
     PingScreen,
-    beam_arrays,
-    classify_pings,
     screen_pings,
     screened_value,
     usable_pings,
 )
+from tests.support.pings import first_pass_usable
 from tests.support.scenarios import simulate_variant
 
 SEED = 7
@@ -203,19 +202,7 @@ def case(fault: str, white_noise: bool = True, beams: bool = False) -> LogData:
 @cache
 def usable(fault: str, cfg_name: str, white_noise: bool = True, beams: bool = False) -> np.ndarray:
     """The pings classify_pings finds usable (those usable_pings screens)."""
-    log, cfg = case(fault, white_noise, beams), CONFIGS[cfg_name]
-    beam_valid, beam_finite = beam_arrays(log.dvl)
-    first = classify_pings(
-        log.dvl.t,
-        log.dvl.d_v,
-        log.dvl.valid,
-        beam_valid,
-        beam_finite,
-        cfg,
-        float(log.imu.t[0]),
-        float(log.imu.t[-1]),
-    )
-    return np.flatnonzero(first == USABLE)
+    return first_pass_usable(case(fault, white_noise, beams), CONFIGS[cfg_name], beams=True)
 
 
 @cache
@@ -293,17 +280,7 @@ def test_beam_rules_on_a_log_without_beams() -> None:
     largest component as the speed, no jump rule), and so does the bulk."""
     log = _dvl(case("everything"), beams=None)
     cfg = CONFIGS["beams"]
-    first = classify_pings(
-        log.dvl.t,
-        log.dvl.d_v,
-        log.dvl.valid,
-        None,
-        None,
-        cfg,
-        float(log.imu.t[0]),
-        float(log.imu.t[-1]),
-    )
-    idx = np.flatnonzero(first == USABLE)
+    idx = first_pass_usable(log, cfg, beams=False)
     bulk, seq = (
         screen_pings(log.dvl, idx, log.imu, cfg),
         sequential_codes(log.dvl, idx, log.imu, cfg),
@@ -353,17 +330,7 @@ def test_usable_pings_on_imu_stamps_only() -> None:
     log, cfg = case("everything"), CONFIGS["default"]
     counters: dict[str, int] = {}
     got = usable_pings(log.dvl, log.imu.t, cfg, counters)
-    first = classify_pings(
-        log.dvl.t,
-        log.dvl.d_v,
-        log.dvl.valid,
-        None,
-        None,
-        cfg,
-        float(log.imu.t[0]),
-        float(log.imu.t[-1]),
-    )
-    idx = np.flatnonzero(first == USABLE)
+    idx = first_pass_usable(log, cfg, beams=False)
     none = ImuData(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
     seq = sequential_codes(log.dvl, idx, none, cfg)
     np.testing.assert_array_equal(got, idx[seq == USABLE])

@@ -22,6 +22,7 @@ from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, B, V, X, key_dim
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.online import (
     OnlineConfig,
+    OnlineEstimate,
     OnlineEstimator,
     RelinearizationThresholds,
     feed_log,
@@ -29,36 +30,25 @@ from gtsam_dvl.estimators.online import (
 from gtsam_dvl.estimators.online.window import IncrementalSmoother, bayes_net_covariance
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.scenarios import PAPER_SENSORS, with_tables
 
 WINDOW_S = 10.0
 DVL_HZ = 1.0
 STATES_IN_WINDOW = int(WINDOW_S * DVL_HZ) + 1  # the newest and every state at most window_s older
-SHORT = {
-    "name": "window-test",
-    "estimator_config": "paper",  # the paper's sensors and priors, no time offset: a ping is an epoch at once
-    "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
-    "rates": {"imu_hz": 100.0, "dvl_hz": DVL_HZ},
-    "initial": {"roll_deg": 3.0, "yaw_deg": 10.0},
-    "imu": {
-        "gyro_bias_deg_per_h": 0.01,
-        "accel_bias_micro_g": 50.0,
-        "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
-        "accel_noise_micro_g_per_sqrt_hz": 10.0,
-    },
-    "dvl": {
-        "scale": 0.9998,
-        "misalignment_deg": [-0.1, 0.2, -0.5],
-        "noise_m_s": 0.02,
-        "altitude_m": 40.0,
-    },
-    "segments": [
+SHORT = with_tables(
+    PAPER_SENSORS,
+    name="window-test",
+    estimator_config="paper",  # the paper's sensors and priors, no time offset: a ping is an epoch at once
+    rates={"imu_hz": 100.0, "dvl_hz": DVL_HZ},
+    dvl={"altitude_m": 40.0},
+    segments=[
         {"kind": "static", "duration_s": 80.0},
         {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
         {"kind": "level", "duration_s": 20.0, "speed_bump_m_s": 0.5},
         {"kind": "descent", "duration_s": 30.0, "peak_vertical_speed_m_s": 0.8},
         {"kind": "turn", "duration_s": 30.0, "heading_change_deg": 90.0, "bank_deg": 15.0},
     ],
-}
+)
 
 
 @functools.cache
@@ -199,6 +189,25 @@ def test_window_keeps_two_states_at_least() -> None:
     assert sm.n - sm.first == 2 and sm.size()[0] == 2 * 2 + 3
 
 
+def _calibration_difference(a: OnlineEstimate, b: OnlineEstimate) -> np.ndarray:
+    """a's final calibration and biases minus b's: scale, accelerometer bias, gyro bias, misalignment (the small
+    angles of b_R_d^T a_R_d, rad)."""
+    return np.concatenate(
+        [
+            [a.scale - b.scale],
+            a.accel_bias - b.accel_bias,
+            a.gyro_bias - b.gyro_bias,
+            (b.b_R_d.T @ a.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]],
+        ]
+    )
+
+
+def _calibration_sigmas(r: OnlineEstimate) -> np.ndarray:
+    """The sigmas of _calibration_difference's entries, from calib_cov (ordered [accel, gyro] bias, scale, b_R_d)."""
+    s = np.sqrt(np.diag(r.calib_cov))
+    return np.concatenate([s[6:7], s[:6], s[7:]])
+
+
 def test_fixed_lag_estimate_close_to_full_history() -> None:
     """What left the window stays linearised where it was when it left, nothing else differs: on this log the final
     scale, misalignment and biases agree with the full-history smoother's within 0.5 of its sigma, and the sigmas
@@ -207,18 +216,11 @@ def test_fixed_lag_estimate_close_to_full_history() -> None:
     6 %)."""
     lag, full = _run("fixed_lag").estimate(), _run("full").estimate()
     assert lag is not None and full is not None
-    d = np.concatenate(
-        [
-            [lag.scale - full.scale],
-            lag.accel_bias - full.accel_bias,
-            lag.gyro_bias - full.gyro_bias,
-            (full.b_R_d.T @ lag.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]],
-        ]
+    d, s_full, s_lag = (
+        _calibration_difference(lag, full),
+        _calibration_sigmas(full),
+        _calibration_sigmas(lag),
     )
-    s_full = np.sqrt(np.diag(full.calib_cov))  # [accel, gyro] bias, scale, b_R_d
-    s_full = np.concatenate([s_full[6:7], s_full[:6], s_full[7:]])
-    s_lag = np.sqrt(np.diag(lag.calib_cov))
-    s_lag = np.concatenate([s_lag[6:7], s_lag[:6], s_lag[7:]])
     print(
         f"\nfixed lag - full history, in full-history sigmas (scale, accel bias, gyro bias, misalignment): "
         f"{np.round(d / s_full, 3)}; sigma ratio {np.round(s_lag / s_full, 3)}"
@@ -404,16 +406,7 @@ def test_rebase_mid_run_does_not_change_the_result() -> None:
     _feed(est, log, rebase_often)
     a, b = est.estimate(), _run().estimate()
     assert a is not None and b is not None
-    d = np.concatenate(
-        [
-            [a.scale - b.scale],
-            a.accel_bias - b.accel_bias,
-            a.gyro_bias - b.gyro_bias,
-            (b.b_R_d.T @ a.b_R_d - np.eye(3))[[2, 0, 1], [1, 2, 0]],
-        ]
-    )
-    s = np.sqrt(np.diag(b.calib_cov))
-    s = np.concatenate([s[6:7], s[:6], s[7:]])
+    d, s = _calibration_difference(a, b), _calibration_sigmas(b)
     print(f"\n{len(extra)} extra rebases: final difference in sigmas {np.round(d / s, 4)}")
     assert len(extra) > 10
     assert np.all(np.abs(d / s) < 0.05)

@@ -7,7 +7,6 @@ drawn over seeds have the estimators' default prior's mean and spread; the IMU i
 from __future__ import annotations
 
 import copy
-import dataclasses
 import functools
 import hashlib
 import json
@@ -27,6 +26,7 @@ from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import list_builtin_scenarios, load_scenario, scenario_from_dict
 from gtsam_dvl.sim.stream import simulate_chunked
+from tests.support.logs import log_arrays
 from tests.support.scenarios import scenario_raw
 
 NAMES = ("realistic-straight", "realistic-turn", "realistic-turns")
@@ -64,19 +64,7 @@ def golden_log(case: str) -> LogData:
 
 
 def log_digest(log: LogData) -> str:
-    arrays: dict[str, np.ndarray] = {}
-
-    def put(prefix: str, obj: object) -> None:
-        for f in dataclasses.fields(obj):  # type: ignore[arg-type]
-            v = getattr(obj, f.name)
-            if isinstance(v, np.ndarray):
-                arrays[f"{prefix}.{f.name}"] = v
-            elif dataclasses.is_dataclass(v):
-                put(f"{prefix}.{f.name}", v)
-
-    for name in ("imu", "dvl", "truth", "depth", "gnss", "mounting"):
-        if getattr(log, name) is not None:
-            put(name, getattr(log, name))
+    arrays = log_arrays(log)
     h = hashlib.sha256()
     for key in sorted(arrays):
         h.update(key.encode())

@@ -3,7 +3,6 @@ seeding, dropouts and outliers, and the LogData contract."""
 
 from __future__ import annotations
 
-import copy
 import json
 from typing import Any
 
@@ -14,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, scenario_from_dict
+from tests.support.scenarios import PAPER_SENSORS, with_tables
 
 MOTION = [
     {"kind": "static", "duration_s": 20.0},
@@ -31,26 +31,14 @@ def _scenario(
     imu: dict[str, Any] | None = None,
     rates: dict[str, Any] | None = None,
 ) -> Scenario:
-    raw = {
-        "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
-        "rates": {"imu_hz": 100.0, "dvl_hz": 5.0, "truth_hz": 10.0, **(rates or {})},
-        "initial": {"roll_deg": 3.0, "yaw_deg": 10.0},
-        "imu": {
-            "gyro_bias_deg_per_h": 0.01,
-            "accel_bias_micro_g": 50.0,
-            "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
-            "accel_noise_micro_g_per_sqrt_hz": 10.0,
-            **(imu or {}),
-        },
-        "dvl": {
-            "scale": 0.9998,
-            "misalignment_deg": [-0.1, 0.2, -0.5],
-            "noise_m_s": 0.02,
-            **(dvl or {}),
-        },
-        "mounting": mounting or {},
-        "segments": copy.deepcopy(MOTION),
-    }
+    raw = with_tables(
+        PAPER_SENSORS,
+        rates={"imu_hz": 100.0, "dvl_hz": 5.0, "truth_hz": 10.0, **(rates or {})},
+        imu=imu,
+        dvl=dvl,
+        mounting=mounting or {},
+        segments=MOTION,
+    )
     return scenario_from_dict(raw, name="sensor-test")
 
 

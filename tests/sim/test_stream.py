@@ -3,10 +3,8 @@ chunked log is simulate()'s bit for bit, whatever the chunk length, and its file
 
 from __future__ import annotations
 
-import dataclasses
 import tomllib
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -18,6 +16,7 @@ from gtsam_dvl.io.writer import LogStreamWriter, imu_rate_hz, write_log, write_l
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import Scenario, scenario_from_dict
 from gtsam_dvl.sim.stream import ChunkedSimulation, simulate_chunked
+from tests.support.logs import log_arrays
 from tests.support.scenarios import scenario_raw
 
 SCENARIOS = Path(__file__).resolve().parents[2] / "data" / "scenarios"
@@ -71,26 +70,8 @@ def _small(variant: str) -> Scenario:
     return scenario_from_dict(raw, f"small-{variant}")
 
 
-def _arrays(log: LogData) -> dict[str, np.ndarray]:
-    """Every array of the log's data classes by dotted name (imu.b_f, dvl.beams.v, truth.n_p, ...)."""
-    out: dict[str, np.ndarray] = {}
-
-    def put(prefix: str, obj: Any) -> None:
-        for f in dataclasses.fields(obj):
-            v = getattr(obj, f.name)
-            if isinstance(v, np.ndarray):
-                out[f"{prefix}.{f.name}"] = v
-            elif dataclasses.is_dataclass(v):
-                put(f"{prefix}.{f.name}", v)
-
-    for name in ("imu", "dvl", "truth", "depth", "gnss", "mounting"):
-        if getattr(log, name) is not None:
-            put(name, getattr(log, name))
-    return out
-
-
 def _assert_same_log(a: LogData, b: LogData, fields: tuple[str, ...] = ("source",)) -> None:
-    arr_a, arr_b = _arrays(a), _arrays(b)
+    arr_a, arr_b = log_arrays(a), log_arrays(b)
     assert arr_a.keys() == arr_b.keys()
     for k, v in arr_a.items():
         assert v.shape == arr_b[k].shape and v.dtype == arr_b[k].dtype, k

@@ -1,9 +1,10 @@
-"""Logs cut in time for the tests: the IMU, DVL and truth samples of a time window, the other streams kept."""
+"""Logs for the tests: cut in time (the IMU, DVL and truth samples of a time window, the other streams kept), and
+every array of a log by name (log_arrays, for comparing or digesting logs)."""
 
 from __future__ import annotations
 
 import dataclasses
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -46,3 +47,21 @@ def cut_log(
     if truth is not None and cut_truth:
         truth = rows(truth, window(truth.t))
     return dataclasses.replace(log, imu=rows(log.imu, window(log.imu.t)), dvl=dvl, truth=truth)
+
+
+def log_arrays(log: LogData) -> dict[str, np.ndarray]:
+    """Every array of the log's data classes by dotted name (imu.b_f, dvl.beams.v, truth.n_p, ...)."""
+    out: dict[str, np.ndarray] = {}
+
+    def put(prefix: str, obj: Any) -> None:
+        for f in dataclasses.fields(obj):
+            v = getattr(obj, f.name)
+            if isinstance(v, np.ndarray):
+                out[f"{prefix}.{f.name}"] = v
+            elif dataclasses.is_dataclass(v):
+                put(f"{prefix}.{f.name}", v)
+
+    for name in ("imu", "dvl", "truth", "depth", "gnss", "mounting"):
+        if getattr(log, name) is not None:
+            put(name, getattr(log, name))
+    return out

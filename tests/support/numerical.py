@@ -69,6 +69,26 @@ def numerical_jacobians(
     return [numerical_jacobian(f, args, i, delta) for i in range(len(args))]
 
 
+def assert_jacobians_match(
+    f: Callable[..., Any],
+    args: Sequence[Any],
+    H: Sequence[np.ndarray | None],
+    shapes: Sequence[tuple[int, int]] | None = None,
+) -> None:
+    """Each H[i], an analytical d f(args) / d args[i], equals the numerical one (numerical_jacobian) to 1e-6 of
+    its largest entry (1e-6 absolute where that is below 1); shapes: the (rows, columns) each must have, besides
+    the numerical one's."""
+    for i in range(len(args)):
+        J_num = numerical_jacobian(f, args, i)
+        H_i = H[i]
+        assert H_i is not None and H_i.shape == J_num.shape
+        if shapes is not None:
+            assert H_i.shape == shapes[i]
+        np.testing.assert_allclose(
+            H_i, J_num, rtol=0, atol=1e-6 * max(1.0, np.abs(J_num).max()), err_msg=f"H[{i}]"
+        )
+
+
 def gauss_markov(
     n: int, dt: float, sigma: float, tau: float, rng: np.random.Generator
 ) -> np.ndarray:

@@ -16,11 +16,31 @@ from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 SHORT = "paper-3d-short"
 
 
+# the paper's sensors (Table 1) at latitude 30 deg, 100 m below the ellipsoid: the tables a test's own scenario
+# starts from (with_tables), the rates, the segments and the rest its own
+PAPER_SENSORS: dict[str, Any] = {
+    "origin": {"lat_deg": 30.0, "lon_deg": 114.0, "height_m": -100.0},
+    "initial": {"roll_deg": 3.0, "yaw_deg": 10.0},
+    "imu": {
+        "gyro_bias_deg_per_h": 0.01,
+        "accel_bias_micro_g": 50.0,
+        "gyro_noise_deg_per_h_per_sqrt_hz": 0.1,
+        "accel_noise_micro_g_per_sqrt_hz": 10.0,
+    },
+    "dvl": {"scale": 0.9998, "misalignment_deg": [-0.1, 0.2, -0.5], "noise_m_s": 0.02},
+}
+
+
 def scenario_raw(base: str = SHORT, **tables: Any) -> dict[str, Any]:
-    """A copy of the built-in scenario base's TOML dict with each keyword's table updated by its dict
-    (rates={"dvl_hz": 5.0}); a list (segments=[...]), a value, or a table the base lacks is set as given; None
-    leaves the base's as it is."""
-    raw = copy.deepcopy(load_scenario(base).raw)
+    """A copy of the built-in scenario base's TOML dict with the tables changed (with_tables)."""
+    return with_tables(load_scenario(base).raw, **tables)
+
+
+def with_tables(base: dict[str, Any], **tables: Any) -> dict[str, Any]:
+    """A copy of a scenario's TOML dict base with each keyword's table updated by its dict (rates={"dvl_hz":
+    5.0}); a list (segments=[...]), a value, or a table the base lacks is set as given; None leaves the base's as
+    it is."""
+    raw = copy.deepcopy(base)
     for key, value in tables.items():
         if value is None:
             continue
