@@ -263,16 +263,7 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
     # (estimators/models/noise_levels.py honest_multiplier), and this command measures what the data show, not what was
     # stated (the multiplier reported is still on the stated level)
     start = config.noise.dvl_min_multiplier
-    fit_config = config.model_copy(
-        update={
-            "noise": config.noise.model_copy(
-                update={"from_data": True, "fit_dvl": True, "imu_quantisation": True}
-            ),
-            "dvl": config.dvl.model_copy(
-                update={"noise_multiplier": start * config.dvl.noise_multiplier}
-            ),
-        }
-    )
+    fit_config = _noise_fit_config(config, start)
     result = run_trajectory_estimator(log, "batch", fit_config, progress=progress, timeline=False)
     noise = result.info.get("noise", {}).get("dvl", {})
     solver = result.info.get("solver", {})
@@ -313,31 +304,56 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
         "rms_m_s": np.sqrt(np.mean(r**2, axis=0)).tolist(),
     }
     if len(t) >= 20 and np.isfinite(period):
-        lags = min(max(AUTOCORR_LAGS, int(round(AUTOCORR_SPAN_S / period))), len(t) // 4)
-        c, pairs = autocovariance(t, r - r.mean(axis=0), period, lags)
-        residuals["autocorrelation"] = {
-            "lag_s": (np.arange(lags + 1) * period).tolist(),
-            "rho": (c / c[0]).tolist() if c[0] > 0 else None,
-            "pairs": pairs.tolist(),
-        }
-        gm = gauss_markov_fit(t, r, period)
-        residuals["gauss_markov"] = {
-            "white_sigma_m_s": gm.white_sigma,
-            "gm_sigma_m_s": gm.gm_sigma,
-            "gm_tau_s": gm.gm_tau_s,
-            "significant": gm.significant,
-            "gm_sigma_noise_m_s": gm.gm_sigma_noise,
-            "samples": gm.samples,
-        }
-        if gm.significant and gm.gm_sigma > gm.white_sigma:
-            out["warnings"] = [
-                f"the DVL residuals are mostly a correlated error ({gm.gm_sigma * 1e3:.3g} mm/s over "
-                f"{gm.gm_tau_s:.3g} s against {gm.white_sigma * 1e3:.3g} mm/s white): a bottom-track error of the "
-                "DVL, or a model error of the smoother (a wrong initial attitude or mounting, a gyro whose "
-                "quantisation acts as a bias); the fitted noise then measures that error too"
-            ]
+        residuals.update(_residual_correlation(t, r, period, out))
     out["residuals"] = residuals
     return out
+
+
+def _noise_fit_config(config: EstimatorConfig, start: float) -> EstimatorConfig:
+    """The configuration of dvl_section's run: the noise fitted from the data (the DVL's among it, the IMU's
+    quantisation modelled), the DVL's level started at `start` times the stated one."""
+    return config.model_copy(
+        update={
+            "noise": config.noise.model_copy(
+                update={"from_data": True, "fit_dvl": True, "imu_quantisation": True}
+            ),
+            "dvl": config.dvl.model_copy(
+                update={"noise_multiplier": start * config.dvl.noise_multiplier}
+            ),
+        }
+    )
+
+
+def _residual_correlation(
+    t: np.ndarray, r: np.ndarray, period: float, out: dict[str, Any]
+) -> dict[str, Any]:
+    """The DVL residuals' autocorrelation and their white plus Gauss-Markov fit (period: the DVL's, s); a
+    warning into out["warnings"] when a correlated error dominates."""
+    lags = min(max(AUTOCORR_LAGS, int(round(AUTOCORR_SPAN_S / period))), len(t) // 4)
+    c, pairs = autocovariance(t, r - r.mean(axis=0), period, lags)
+    residuals: dict[str, Any] = {}
+    residuals["autocorrelation"] = {
+        "lag_s": (np.arange(lags + 1) * period).tolist(),
+        "rho": (c / c[0]).tolist() if c[0] > 0 else None,
+        "pairs": pairs.tolist(),
+    }
+    gm = gauss_markov_fit(t, r, period)
+    residuals["gauss_markov"] = {
+        "white_sigma_m_s": gm.white_sigma,
+        "gm_sigma_m_s": gm.gm_sigma,
+        "gm_tau_s": gm.gm_tau_s,
+        "significant": gm.significant,
+        "gm_sigma_noise_m_s": gm.gm_sigma_noise,
+        "samples": gm.samples,
+    }
+    if gm.significant and gm.gm_sigma > gm.white_sigma:
+        out["warnings"] = [
+            f"the DVL residuals are mostly a correlated error ({gm.gm_sigma * 1e3:.3g} mm/s over "
+            f"{gm.gm_tau_s:.3g} s against {gm.white_sigma * 1e3:.3g} mm/s white): a bottom-track error of the "
+            "DVL, or a model error of the smoother (a wrong initial attitude or mounting, a gyro whose "
+            "quantisation acts as a bias); the fitted noise then measures that error too"
+        ]
+    return residuals
 
 
 def _sig(v: float, digits: int = 3) -> float:
@@ -449,89 +465,9 @@ class Characterisation:
         """The console report."""
         d = self.data
         out = [f"{d['log']}: {d['streams']['imu'].get('duration_s', 0.0):.0f} s"]
-        for name, s in d["streams"].items():
-            if "rate_hz" not in s:
-                out.append(f"  {name:<5} {s['messages']} messages")
-                continue
-            gaps = (
-                f"{s['gaps']} gap{'s' if s['gaps'] > 1 else ''} ({s['gap_lost_s']:.1f} s lost, longest "
-                f"{s['longest_gap_s']:.2f} s)"
-                if s["gaps"]
-                else "no gaps"
-            )
-            out.append(
-                f"  {name:<5} {s['rate_hz']:.2f} Hz, {s['messages']} messages, stamp jitter "
-                f"{s['jitter_std_s'] * 1e3:.2f} ms std (max {s['jitter_max_s'] * 1e3:.2f} ms), {gaps}"
-            )
-        imu = d["imu"]
-        for name in ("gyro", "accel"):
-            e = imu[name]
-            if all(q is None for q in e["step"]):
-                out.append(
-                    f"  {name}: not quantised (configured {e['configured_density']:.3g} {e['density_unit']})"
-                )
-                continue
-            steps = ", ".join("-" if q is None else f"{q:.3g}" for q in e["step"])
-            floors = ", ".join("-" if f is None else f"{f:.3g}" for f in e["floor_density"])
-            out.append(
-                f"  {name} quantised at {steps} {e['step_unit']} (x, y, z): white-noise floor {floors} "
-                f"{e['density_unit']} against the configured {e['configured_density']:.3g}"
-            )
-        out += [f"  warning: {w}" for w in imu.get("warnings", [])]
-        allan = imu["allan"]
-        where = (
-            f"on the static stretch {allan['span_s'][0]:.0f}-{allan['span_s'][1]:.0f} s"
-            if allan["span_s"]
-            else "on the whole log"
-        )
-        for name, unit in (("gyro", "deg/h"), ("accel", "micro-g")):
-            white = ", ".join(
-                "-" if a["white_density"] is None else f"{a['white_density']:.3g}"
-                for a in allan[name]
-            )
-            bias = ", ".join(
-                "-"
-                if a["bias_instability"] is None
-                else f"{'<' if a['bias_instability_is_upper_bound'] else ''}{a['bias_instability']:.3g}"
-                for a in allan[name]
-            )
-            out.append(
-                f"  Allan {name} {where}: white {white} {unit}/sqrt(Hz), bias instability {bias} {unit}"
-            )
-        out += [f"  warning: {allan['warning']}"] if "warning" in allan else []
-        out += [f"  note: {n}" for n in allan.get("notes", [])]
-        dvl = d["dvl"]
-        if dvl.get("fitted_sigma_m_s") is not None:
-            chi = dvl.get("chi2_per_dof")
-            out.append(
-                f"  DVL noise fitted: {dvl['fitted_sigma_m_s'] * 1e3:.3g} mm/s (factor "
-                f"{dvl['multiplier']:.3g} on the stated); chi^2/dof "
-                f"{'-' if chi is None else f'{chi:.2f}'} (DVL rows {dvl['dvl_chi2_per_dof']:.2f})"
-            )
-        else:
-            out.append(f"  DVL: {dvl['fit'].get('why', 'no noise fit')}")
-        res = dvl.get("residuals", {})
-        auto = res.get("autocorrelation", {})
-        rho, lag_s = auto.get("rho"), auto.get("lag_s")
-        if rho:
-            shown = sorted({k for k in (1, 5, 10, 30) if k < len(rho)} | {len(rho) - 1})
-            out.append(
-                "  DVL residual autocorrelation at lag "
-                + ", ".join(f"{lag_s[k]:.3g} s: {rho[k]:+.2f}" for k in shown)
-            )
-        gm = res.get("gauss_markov")
-        if gm:
-            out.append(
-                f"  DVL residuals: white {gm['white_sigma_m_s'] * 1e3:.3g} mm/s + Gauss-Markov "
-                f"{gm['gm_sigma_m_s'] * 1e3:.3g} mm/s, time constant {gm['gm_tau_s']:.3g} s ("
-                + (
-                    "significant"
-                    if gm["significant"]
-                    else "not significant: white noise explains them"
-                )
-                + ")"
-            )
-        out += [f"  warning: {w}" for w in dvl.get("warnings", [])]
+        out += _stream_lines(d["streams"])
+        out += _imu_lines(d["imu"])
+        out += _dvl_lines(d["dvl"])
         rec = d["recommended"]
         out.append(
             "  recommended: "
@@ -547,6 +483,107 @@ class Characterisation:
 
     def describe(self) -> str:
         return "\n".join(self.lines())
+
+
+def _stream_lines(streams: dict[str, Any]) -> list[str]:
+    """characterise's lines per sensor stream: its rate, stamp jitter and gaps."""
+    out: list[str] = []
+    for name, s in streams.items():
+        if "rate_hz" not in s:
+            out.append(f"  {name:<5} {s['messages']} messages")
+            continue
+        gaps = (
+            f"{s['gaps']} gap{'s' if s['gaps'] > 1 else ''} ({s['gap_lost_s']:.1f} s lost, longest "
+            f"{s['longest_gap_s']:.2f} s)"
+            if s["gaps"]
+            else "no gaps"
+        )
+        out.append(
+            f"  {name:<5} {s['rate_hz']:.2f} Hz, {s['messages']} messages, stamp jitter "
+            f"{s['jitter_std_s'] * 1e3:.2f} ms std (max {s['jitter_max_s'] * 1e3:.2f} ms), {gaps}"
+        )
+    return out
+
+
+def _imu_lines(imu: dict[str, Any]) -> list[str]:
+    """characterise's lines on the IMU: each sensor's quantisation and the white-noise floor it sets, the
+    warnings, then the Allan deviation's white noise and bias instability per axis."""
+    out: list[str] = []
+    for name in ("gyro", "accel"):
+        e = imu[name]
+        if all(q is None for q in e["step"]):
+            out.append(
+                f"  {name}: not quantised (configured {e['configured_density']:.3g} {e['density_unit']})"
+            )
+            continue
+        steps = ", ".join("-" if q is None else f"{q:.3g}" for q in e["step"])
+        floors = ", ".join("-" if f is None else f"{f:.3g}" for f in e["floor_density"])
+        out.append(
+            f"  {name} quantised at {steps} {e['step_unit']} (x, y, z): white-noise floor {floors} "
+            f"{e['density_unit']} against the configured {e['configured_density']:.3g}"
+        )
+    out += [f"  warning: {w}" for w in imu.get("warnings", [])]
+    return out + _allan_lines(imu["allan"])
+
+
+def _allan_lines(allan: dict[str, Any]) -> list[str]:
+    """characterise's lines on the Allan deviation: white noise and bias instability per sensor and axis."""
+    out: list[str] = []
+    where = (
+        f"on the static stretch {allan['span_s'][0]:.0f}-{allan['span_s'][1]:.0f} s"
+        if allan["span_s"]
+        else "on the whole log"
+    )
+    for name, unit in (("gyro", "deg/h"), ("accel", "micro-g")):
+        white = ", ".join(
+            "-" if a["white_density"] is None else f"{a['white_density']:.3g}" for a in allan[name]
+        )
+        bias = ", ".join(
+            "-"
+            if a["bias_instability"] is None
+            else f"{'<' if a['bias_instability_is_upper_bound'] else ''}{a['bias_instability']:.3g}"
+            for a in allan[name]
+        )
+        out.append(
+            f"  Allan {name} {where}: white {white} {unit}/sqrt(Hz), bias instability {bias} {unit}"
+        )
+    out += [f"  warning: {allan['warning']}"] if "warning" in allan else []
+    out += [f"  note: {n}" for n in allan.get("notes", [])]
+    return out
+
+
+def _dvl_lines(dvl: dict[str, Any]) -> list[str]:
+    """characterise's lines on the DVL: its fitted noise, chi^2/dof, the residuals' autocorrelation and their
+    white plus Gauss-Markov fit, the warnings."""
+    out: list[str] = []
+    if dvl.get("fitted_sigma_m_s") is not None:
+        chi = dvl.get("chi2_per_dof")
+        out.append(
+            f"  DVL noise fitted: {dvl['fitted_sigma_m_s'] * 1e3:.3g} mm/s (factor "
+            f"{dvl['multiplier']:.3g} on the stated); chi^2/dof "
+            f"{'-' if chi is None else f'{chi:.2f}'} (DVL rows {dvl['dvl_chi2_per_dof']:.2f})"
+        )
+    else:
+        out.append(f"  DVL: {dvl['fit'].get('why', 'no noise fit')}")
+    res = dvl.get("residuals", {})
+    auto = res.get("autocorrelation", {})
+    rho, lag_s = auto.get("rho"), auto.get("lag_s")
+    if rho:
+        shown = sorted({k for k in (1, 5, 10, 30) if k < len(rho)} | {len(rho) - 1})
+        out.append(
+            "  DVL residual autocorrelation at lag "
+            + ", ".join(f"{lag_s[k]:.3g} s: {rho[k]:+.2f}" for k in shown)
+        )
+    gm = res.get("gauss_markov")
+    if gm:
+        out.append(
+            f"  DVL residuals: white {gm['white_sigma_m_s'] * 1e3:.3g} mm/s + Gauss-Markov "
+            f"{gm['gm_sigma_m_s'] * 1e3:.3g} mm/s, time constant {gm['gm_tau_s']:.3g} s ("
+            + ("significant" if gm["significant"] else "not significant: white noise explains them")
+            + ")"
+        )
+    out += [f"  warning: {w}" for w in dvl.get("warnings", [])]
+    return out
 
 
 def characterise_log(

@@ -9,7 +9,7 @@ from __future__ import annotations
 import signal
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -41,6 +41,10 @@ from gtsam_dvl.app.cli_options import (  # noqa: F401  (re-exported: the command
     app,
 )
 from gtsam_dvl.core.errors import GtsamDvlError
+
+if TYPE_CHECKING:
+    from gtsam_dvl.app.commands import SmoothOutcome
+    from gtsam_dvl.io.read_options import ReadOptions
 
 
 def _print_version(value: bool) -> None:
@@ -195,26 +199,78 @@ SMOOTH_HELP = (
 )
 
 
+# smooth's arguments and options whose help runs over a line (the command's parameter list stays readable)
+SmoothLogs = Annotated[
+    list[Path],
+    typer.Argument(
+        help="MCAP log (or rosbag2 directory); several with --out-dir.", metavar="LOG..."
+    ),
+]
+SmoothMode = Annotated[
+    str,
+    typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc."),
+]
+Strict = Annotated[
+    bool,
+    typer.Option(
+        "--strict",
+        help="Exit with code 3 when the run's health is degraded or "
+        "failed (the outputs are still written).",
+    ),
+]
+FleetDir = Annotated[
+    Path | None,
+    typer.Option(
+        "--out-dir",
+        help="Fleet processing: smooth every LOG in parallel "
+        "(Dask) into DIR/<log name>/, with a table of all "
+        "runs in DIR/fleet.md.",
+    ),
+]
+Scheduler = Annotated[
+    str | None,
+    typer.Option(
+        "--scheduler",
+        help="With --out-dir: a running Dask scheduler (default: a LocalCluster here).",
+    ),
+]
+CalibrationPrior = Annotated[
+    Path | None,
+    typer.Option(
+        help="A vehicle's calibration file as the prior of its states "
+        "(inflated by [calibration] inflation_per_day for its age)."
+    ),
+]
+ResultOutput = Annotated[Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")]
+TumOutput = Annotated[
+    Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")
+]
+Timeline = Annotated[
+    bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")
+]
+TimelineNpz = Annotated[
+    Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
+]
+Workers = Annotated[
+    int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")
+]
+CalibrationOut = Annotated[
+    Path | None, typer.Option(help="Write this run's calibration file (TOML).")
+]
+Vehicle = Annotated[
+    str | None,
+    typer.Option(help="Vehicle name (default: --calibration's, else the log's folder name)."),
+]
+
+
 @app.command(help=SMOOTH_HELP)
 @_user_errors
 def smooth(
-    logs: Annotated[
-        list[Path],
-        typer.Argument(
-            help="MCAP log (or rosbag2 directory); several with --out-dir.", metavar="LOG..."
-        ),
-    ],
-    output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Result MCAP to write.")
-    ] = None,
-    mode: Annotated[
-        str,
-        typer.Option(help="Estimator: batch, online (iSAM2 fixed lag), online-full, ekf, io-dvlc."),
-    ] = "batch",
+    logs: SmoothLogs,
+    output: ResultOutput = None,
+    mode: SmoothMode = "batch",
     summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
-    tum: Annotated[
-        Path | None, typer.Option(help="TUM trajectory file to write (opens in evo).")
-    ] = None,
+    tum: TumOutput = None,
     config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
     imu_topic: ImuTopic = "/imu/data_raw",
     dvl_topic: DvlTopic = None,
@@ -225,70 +281,23 @@ def smooth(
     attitude_topic: AttitudeTopic = None,
     truth_topic: TruthTopic = None,
     dvl_water_topic: DvlWaterTopic = None,
-    timeline: Annotated[
-        bool, typer.Option(help="Sigma timeline of the calibration (batch: ~1 s more).")
-    ] = True,
-    timeline_npz: Annotated[
-        Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
-    ] = None,
+    timeline: Timeline = True,
+    timeline_npz: TimelineNpz = None,
     quiet: Quiet = False,
-    strict: Annotated[
-        bool,
-        typer.Option(
-            "--strict",
-            help="Exit with code 3 when the run's health is degraded or "
-            "failed (the outputs are still written).",
-        ),
-    ] = False,
-    out_dir: Annotated[
-        Path | None,
-        typer.Option(
-            "--out-dir",
-            help="Fleet processing: smooth every LOG in parallel "
-            "(Dask) into DIR/<log name>/, with a table of all "
-            "runs in DIR/fleet.md.",
-        ),
-    ] = None,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler",
-            help="With --out-dir: a running Dask scheduler (default: a LocalCluster here).",
-        ),
-    ] = None,
-    workers: Annotated[
-        int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")
-    ] = None,
+    strict: Strict = False,
+    out_dir: FleetDir = None,
+    scheduler: Scheduler = None,
+    workers: Workers = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
-    calibration: Annotated[
-        Path | None,
-        typer.Option(
-            help="A vehicle's calibration file as the prior of its states "
-            "(inflated by [calibration] inflation_per_day for its age)."
-        ),
-    ] = None,
-    calibration_out: Annotated[
-        Path | None, typer.Option(help="Write this run's calibration file (TOML).")
-    ] = None,
-    vehicle: Annotated[
-        str | None,
-        typer.Option(help="Vehicle name (default: --calibration's, else the log's folder name)."),
-    ] = None,
+    calibration: CalibrationPrior = None,
+    calibration_out: CalibrationOut = None,
+    vehicle: Vehicle = None,
     debug: Debug = False,
 ) -> None:
     """Estimate trajectory, IMU biases, DVL scale and misalignment from a log (help: SMOOTH_HELP)."""
-    from gtsam_dvl.app.commands import check_folders, smooth_file
+    from gtsam_dvl.app.commands import smooth_file
 
-    check_folders(
-        {
-            "-o": output,
-            "--summary": summary,
-            "--tum": tum,
-            "--timeline-npz": timeline_npz,
-            "--calibration-out": calibration_out,
-        },
-        {"--out-dir": out_dir},
-    )
+    one_log = _check_smooth_folders(output, summary, tum, timeline_npz, calibration_out, out_dir)
     read_options = _read_options(
         imu_topic,
         dvl_topic,
@@ -301,48 +310,22 @@ def smooth(
         dvl_water_topic,
     )
     if out_dir is not None or len(logs) > 1:
-        if (
-            out_dir is None
-            or output is not None
-            or summary is not None
-            or tum is not None
-            or timeline_npz
-            or calibration
-            or calibration_out
-        ):
-            raise GtsamDvlError(
-                "several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
-                "--summary, --tum, --timeline-npz, --calibration and --calibration-out take one log"
-            )
-        from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
-
-        rows, written = smooth_fleet(
+        _smooth_fleet(
             logs,
             out_dir,
-            mode=mode,
-            config_path=config,
-            read_options=read_options,
-            scheduler=scheduler,
-            workers=workers,
-            show_progress=not quiet,
-            scheduler_timeout_s=scheduler_timeout,
+            [*one_log, calibration],
+            mode,
+            config,
+            read_options,
+            scheduler,
+            workers,
+            scheduler_timeout,
+            quiet,
+            strict,
         )
-        typer.echo("\n".join(fleet_table(rows)))
-        for path in written:
-            typer.echo(f"wrote {path}")
-        bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] in UNHEALTHY)]
-        if any(r["status"] == "error" for r in rows):
-            typer.echo(
-                f"gtsam-dvl: error: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed; "
-                "their errors are in the table",
-                err=True,
-            )
-        if bad:
-            raise typer.Exit(EXIT_UNHEALTHY)
         return
-    log = logs[0]
     outcome = smooth_file(
-        log,
+        logs[0],
         output,
         mode=mode,
         summary_path=summary,
@@ -356,12 +339,89 @@ def smooth(
         calibration_out=calibration_out,
         vehicle=vehicle,
     )
+    _echo_outcome(outcome, strict)
+
+
+def _check_smooth_folders(
+    output: Path | None,
+    summary: Path | None,
+    tum: Path | None,
+    timeline_npz: Path | None,
+    calibration_out: Path | None,
+    out_dir: Path | None,
+) -> list[Path | None]:
+    """smooth's output paths checked before any work (commands.check_folders: an output file's folder must
+    exist, --out-dir's parent too). Returns the output files of one log's run (None: not given)."""
+    from gtsam_dvl.app.commands import check_folders
+
+    one_log = {
+        "-o": output,
+        "--summary": summary,
+        "--tum": tum,
+        "--timeline-npz": timeline_npz,
+        "--calibration-out": calibration_out,
+    }
+    check_folders(one_log, {"--out-dir": out_dir})
+    return list(one_log.values())
+
+
+def _echo_outcome(outcome: SmoothOutcome, strict: bool) -> None:
+    """One log's run printed (commands.SmoothOutcome.describe); with --strict, exit code 3 when unhealthy."""
     typer.echo(outcome.describe())
     if strict and outcome.status in UNHEALTHY:
         typer.echo(
             f"gtsam-dvl: error: health {outcome.status} (--strict): exit code {EXIT_UNHEALTHY}",
             err=True,
         )
+        raise typer.Exit(EXIT_UNHEALTHY)
+
+
+def _smooth_fleet(
+    logs: list[Path],
+    out_dir: Path | None,
+    one_log: list[Path | None],
+    mode: str,
+    config: Path | None,
+    read_options: ReadOptions,
+    scheduler: str | None,
+    workers: int | None,
+    scheduler_timeout: float,
+    quiet: bool,
+    strict: bool,
+) -> None:
+    """`smooth LOG... --out-dir DIR`: the fleet smoothed (app/campaign/fleet.py), its table printed, the logs that
+    failed counted on stderr; exit code 3 when one failed (or, with --strict, is unhealthy). one_log: the options
+    that take one log (-o, --summary, --tum, --timeline-npz, --calibration-out, --calibration), refused here."""
+    from gtsam_dvl.app.campaign.fleet import fleet_table, smooth_fleet
+
+    if out_dir is None or any(p is not None for p in one_log):
+        raise GtsamDvlError(
+            "several logs are smoothed with --out-dir DIR (each into DIR/<log name>/); -o, "
+            "--summary, --tum, --timeline-npz, --calibration and --calibration-out take one log"
+        )
+
+    rows, written = smooth_fleet(
+        logs,
+        out_dir,
+        mode=mode,
+        config_path=config,
+        read_options=read_options,
+        scheduler=scheduler,
+        workers=workers,
+        show_progress=not quiet,
+        scheduler_timeout_s=scheduler_timeout,
+    )
+    typer.echo("\n".join(fleet_table(rows)))
+    for path in written:
+        typer.echo(f"wrote {path}")
+    bad = [r for r in rows if r["status"] == "error" or (strict and r["status"] in UNHEALTHY)]
+    if any(r["status"] == "error" for r in rows):
+        typer.echo(
+            f"gtsam-dvl: error: {sum(r['status'] == 'error' for r in rows)} of {len(rows)} logs failed; "
+            "their errors are in the table",
+            err=True,
+        )
+    if bad:
         raise typer.Exit(EXIT_UNHEALTHY)
 
 
@@ -676,15 +736,10 @@ def live(
     debug: Debug = False,
 ) -> None:
     """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
-    from gtsam_dvl.app.live import copy_layout, serve_log
+    from gtsam_dvl.app.live import serve_log
 
-    if layout is not None:
-        typer.echo(f"wrote {copy_layout(layout)}: in Foxglove, Layouts > Import from file")
-    if log is None:
-        if layout is None:
-            raise GtsamDvlError(
-                "live: give a LOG to replay (or --layout PATH to write the Foxglove layout)"
-            )
+    _write_live_layout(layout, log)
+    if log is None:  # --layout alone
         return
     serve_log(
         log,
@@ -709,6 +764,18 @@ def live(
         ),
         echo=typer.echo,
     )
+
+
+def _write_live_layout(layout: Path | None, log: Path | None) -> None:
+    """live's --layout: the Foxglove layout written when asked; neither a LOG nor --layout: a one-line error."""
+    from gtsam_dvl.app.live import copy_layout
+
+    if layout is not None:
+        typer.echo(f"wrote {copy_layout(layout)}: in Foxglove, Layouts > Import from file")
+    if log is None and layout is None:
+        raise GtsamDvlError(
+            "live: give a LOG to replay (or --layout PATH to write the Foxglove layout)"
+        )
 
 
 NODE_HELP = (

@@ -25,6 +25,11 @@ from gtsam_dvl.estimators.run import (  # noqa: F401 - re-exported for the demo,
 )
 
 if TYPE_CHECKING:
+    from gtsam_dvl.analysis.evaluate import Evaluation
+    from gtsam_dvl.core.calibration import VehicleCalibration
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.core.result import NavResult
+    from gtsam_dvl.io.atomic import OutputSet
     from gtsam_dvl.io.read_options import ReadOptions
 
 
@@ -124,10 +129,23 @@ def plot_log_to_dir(
 def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str:
     """A few lines about a log: what a navigator wants to know before processing it."""
     log = load_log(log_path, read_options)
+    return "\n".join(
+        [
+            f"{log_path}",
+            *_sensor_lines(log),
+            *_frame_lines(log),
+            *_stamp_lines(log),
+            *_truth_lines(log),
+        ]
+        + [f"  warning: {warning}" for warning in log.metadata.get("reader_warnings", [])]
+    )
+
+
+def _sensor_lines(log: LogData) -> list[str]:
+    """describe_log's lines on the sensors: message counts, the DVL's beams, water track and altitude, the rates."""
     imu, dvl = log.imu, log.dvl
     imu_hz = 1.0 / np.median(np.diff(imu.t))
     lines = [
-        f"{log_path}",
         f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({imu_hz:.1f} Hz), "
         f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)",
     ]
@@ -144,8 +162,6 @@ def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str
         lines.append(
             f"  DVL altitude {alt.min():.1f}-{alt.max():.1f} m ({len(alt)} pings with one)"
         )
-    from gtsam_dvl.core.rotations import matrix_to_rpy_deg
-
     dvl_hz = 1.0 / np.median(np.diff(dvl.t)) if len(dvl) > 1 else float("nan")
     lines.append(
         f"  rates: IMU {imu_hz:.1f} Hz, DVL {dvl_hz:.2f} Hz"
@@ -156,6 +172,14 @@ def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str
         )
         + (f", GNSS {len(log.gnss)} msgs" if log.gnss is not None else ", no GNSS")
     )
+    return lines
+
+
+def _frame_lines(log: LogData) -> list[str]:
+    """describe_log's lines on the frames: the map origin and the sensors' mounting."""
+    from gtsam_dvl.core.rotations import matrix_to_rpy_deg
+
+    lines = []
     o = log.origin
     lines.append(
         f"  map origin: lat {o.lat_deg:.7f} deg, lon {o.lon_deg:.7f} deg, height {o.height_m:.2f} m"
@@ -170,6 +194,13 @@ def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str
         + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_d0))
         + f"; lever arm IMU->DVL {np.round(m.b_l, 4).tolist()} m"
     )
+    return lines
+
+
+def _stamp_lines(log: LogData) -> list[str]:
+    """describe_log's lines on the stamps: the DVL's phase against the IMU's, and the gaps the reader found."""
+    imu, dvl = log.imu, log.dvl
+    lines = []
     # stamps: where the DVL's fall between IMU samples, and the first stamps' offset (a hint of unsynchronised
     # clocks; the DVL-IMU time offset itself is only seen by the estimator, from the motion)
     if len(dvl) and len(imu) > 1:
@@ -189,6 +220,12 @@ def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str
             for topic, g in gaps.items()
         )
     )
+    return lines
+
+
+def _truth_lines(log: LogData) -> list[str]:
+    """describe_log's lines on a simulated log's truth: its calibration and its motion."""
+    lines = []
     cal = log.true_calibration
     if cal is not None:
         lines.append(
@@ -204,9 +241,7 @@ def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str
             f"{max(0.0, -float(tr.n_v[:, 2].min())):.2f} m/s, "
             f"peak rise {max(0.0, float(tr.n_v[:, 2].max())):.2f} m/s"
         )
-    for warning in log.metadata.get("reader_warnings", []):
-        lines.append(f"  warning: {warning}")
-    return "\n".join(lines)
+    return lines
 
 
 def describe_result(path: Path) -> str | None:
@@ -282,26 +317,7 @@ class SmoothOutcome:
             + ", ".join(f"{v:+.1f}" for v in s["accel_bias_ug"]["value"])
             + " micro-g",
         ]
-        err = s.get("errors")
-        if err:
-            pct = err.get("final_horizontal_position_pct_distance")
-            of_distance = f"{pct:.3f} % of distance" if pct is not None else "no distance travelled"
-            calibration = ([f"scale {err['scale_ppm']:+.0f} ppm"] if "scale_ppm" in err else []) + (
-                ["misalignment " + ", ".join(f"{v:+.3f}" for v in err["misalignment_deg"]) + " deg"]
-                if err.get("misalignment_deg")
-                else []
-            )  # a truth without calibration: left out, not NaN
-            lines.append(
-                "  vs truth: "
-                + ", ".join(
-                    calibration
-                    + [
-                        f"final horizontal position "
-                        f"{err['final_horizontal_position_m']:.2f} m "
-                        f"({of_distance})"
-                    ]
-                )
-            )
+        lines += _truth_error_lines(s.get("errors"))
         off = s.get("dvl_time_offset_s")
         if off:
             from gtsam_dvl.analysis.observability import time_offset_words
@@ -316,39 +332,67 @@ class SmoothOutcome:
         from gtsam_dvl.app.calibration_files import prior_line
 
         lines += [line] if (line := prior_line(s)) else []
-        if held := (s.get("calibration_hold") or {}).get(
-            "held"
-        ):  # (estimators/models/weak_hold.py)
-            lines.append(
-                "  held at the prior (the run informs them little): "
-                + ", ".join(
-                    f"{h['mostly']} ({h['information']:.2f} of the prior's information)"
-                    for h in held
-                )
-            )
-        if wc := s.get(
-            "water_current"
-        ):  # water-track pings used, the current a state (estimators/models/current.py)
-            layers = "; ".join(
-                f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
-                f"{a['sigma_m_s']:.2f} m/s"
-                for a in wc.get("by_depth", [])[:6]
-            )
-            per = (
-                f" per {wc['layers']['thickness_m']:g} m layer ({wc['layers']['boundaries']} boundaries crossed)"
-                if wc.get("layers")
-                else ""
-            )
-            lines.append(
-                f"  water current{per} ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
-                + (f"; {layers}" if layers else "")
-            )
+        lines += _state_lines(s)
         motion = (s.get("geometry") or {}).get("motion")
         if motion:
             lines.append(f"  {MotionSummary(**motion).line()}")
         lines += health_lines(s.get("health"))
         lines += [f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]
         return "\n".join(lines)
+
+
+def _truth_error_lines(err: dict[str, Any] | None) -> list[str]:
+    """SmoothOutcome.describe's line of the errors against the truth (none without a truth)."""
+    lines: list[str] = []
+    if err:
+        pct = err.get("final_horizontal_position_pct_distance")
+        of_distance = f"{pct:.3f} % of distance" if pct is not None else "no distance travelled"
+        calibration = ([f"scale {err['scale_ppm']:+.0f} ppm"] if "scale_ppm" in err else []) + (
+            ["misalignment " + ", ".join(f"{v:+.3f}" for v in err["misalignment_deg"]) + " deg"]
+            if err.get("misalignment_deg")
+            else []
+        )  # a truth without calibration: left out, not NaN
+        lines.append(
+            "  vs truth: "
+            + ", ".join(
+                calibration
+                + [
+                    f"final horizontal position "
+                    f"{err['final_horizontal_position_m']:.2f} m "
+                    f"({of_distance})"
+                ]
+            )
+        )
+    return lines
+
+
+def _state_lines(s: dict[str, Any]) -> list[str]:
+    """SmoothOutcome.describe's lines on the states held at their prior and on the water current."""
+    lines: list[str] = []
+    if held := (s.get("calibration_hold") or {}).get("held"):  # (estimators/models/weak_hold.py)
+        lines.append(
+            "  held at the prior (the run informs them little): "
+            + ", ".join(
+                f"{h['mostly']} ({h['information']:.2f} of the prior's information)" for h in held
+            )
+        )
+    # water-track pings used, the current a state (estimators/models/current.py)
+    if wc := s.get("water_current"):
+        layers = "; ".join(
+            f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
+            f"{a['sigma_m_s']:.2f} m/s"
+            for a in wc.get("by_depth", [])[:6]
+        )
+        per = (
+            f" per {wc['layers']['thickness_m']:g} m layer ({wc['layers']['boundaries']} boundaries crossed)"
+            if wc.get("layers")
+            else ""
+        )
+        lines.append(
+            f"  water current{per} ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
+            + (f"; {layers}" if layers else "")
+        )
+    return lines
 
 
 def health_lines(health: dict[str, Any] | None, indent: str = "  ") -> list[str]:
@@ -432,46 +476,20 @@ def check_folders(
             )
 
 
-def smooth_file(
+def _check_smooth_request(
     log_path: Path,
-    output: Path | None = None,
-    mode: str = "batch",
-    summary_path: Path | None = None,
-    tum_path: Path | None = None,
-    config_path: Path | None = None,
-    show_progress: bool = True,
-    read_options: ReadOptions | None = None,
-    timeline: bool = True,
-    timeline_path: Path | None = None,
-    calibration_path: Path | None = None,
-    calibration_out: Path | None = None,
-    vehicle: str | None = None,
-) -> SmoothOutcome:
-    """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
-    The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz.
-
-    Safe outputs: before any work, an output that is an input (or another output) or cannot be written is a
-    one-line GtsamDvlError. The outputs are written as a set (io/atomic.py OutputSet): all of them, or none if
-    any fails or the run is interrupted. The summary carries the run's health (analysis/health.py).
-
-    calibration_path: a vehicle's calibration file as the prior (app/calibration_files.py, inflated for its age);
-    calibration_out: the run's calibration written as one (one of the outputs; it may be calibration_path: the
-    file is read first and replaced whole); vehicle: its name (vehicle_name)."""
-    from gtsam_dvl.analysis.health import assess_log_health
-    from gtsam_dvl.analysis.metrics import summary
-    from gtsam_dvl.app.calibration_files import (
-        calibration_of_run,
-        calibration_prior,
-        record_prior,
-        vehicle_name,
-    )
-    from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
-    from gtsam_dvl.core.result import NavResult
-    from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
-    from gtsam_dvl.io.atomic import OutputSet, tum_text
-    from gtsam_dvl.io.calibration_file import calibration_text
-    from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
-
+    output: Path | None,
+    mode: str,
+    summary_path: Path | None,
+    tum_path: Path | None,
+    config_path: Path | None,
+    timeline: bool,
+    timeline_path: Path | None,
+    calibration_path: Path | None,
+    calibration_out: Path | None,
+) -> Path | None:
+    """smooth_file's checks before any work: the mode known, the outputs it can write, every output path
+    writable and none an input (check_outputs). Returns the default timeline file next to -o (None: none)."""
     get_estimator(mode)  # an unknown mode: a one-line error before the log is read
     if mode == "io-dvlc" and (
         output is not None or tum_path is not None or timeline_path is not None
@@ -501,76 +519,196 @@ def smooth_file(
             "--calibration-out": calibration_out,
         },
     )
-    config = EstimatorConfig.load(config_path) if config_path else None
+    return default_timeline
+
+
+def smooth_file(
+    log_path: Path,
+    output: Path | None = None,
+    mode: str = "batch",
+    summary_path: Path | None = None,
+    tum_path: Path | None = None,
+    config_path: Path | None = None,
+    show_progress: bool = True,
+    read_options: ReadOptions | None = None,
+    timeline: bool = True,
+    timeline_path: Path | None = None,
+    calibration_path: Path | None = None,
+    calibration_out: Path | None = None,
+    vehicle: str | None = None,
+) -> SmoothOutcome:
+    """Run one estimator on a log and write its results (MCAP, summary JSON, TUM, timeline arrays).
+    The timeline arrays go to timeline_path, or next to the output MCAP as <output>.timeline.npz.
+
+    Safe outputs: before any work, an output that is an input (or another output) or cannot be written is a
+    one-line GtsamDvlError. The outputs are written as a set (io/atomic.py OutputSet): all of them, or none if
+    any fails or the run is interrupted. The summary carries the run's health (analysis/health.py).
+
+    calibration_path: a vehicle's calibration file as the prior (app/calibration_files.py, inflated for its age);
+    calibration_out: the run's calibration written as one (one of the outputs; it may be calibration_path: the
+    file is read first and replaced whole); vehicle: its name (vehicle_name)."""
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.core.result import NavResult
+    from gtsam_dvl.io.atomic import OutputSet
+
+    default_timeline = _check_smooth_request(
+        log_path,
+        output,
+        mode,
+        summary_path,
+        tum_path,
+        config_path,
+        timeline,
+        timeline_path,
+        calibration_path,
+        calibration_out,
+    )
+    if config_path:  # a configuration that cannot be read: refused before the log is read
+        EstimatorConfig.load(config_path)
     t_read = time.perf_counter()
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
         log = load_log(
             log_path, read_options, progress=read_progress
         )  # (a day: docs/results.md, Speed)
     read_s = time.perf_counter() - t_read
-    if config_path:  # the log's scenario's [estimator] table (e.g. its initial attitude) below the -c configuration
-        config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
-    if (
-        config is None
-    ):  # the configuration the log's scenario names (the paper's runs: "paper"), else defaults
-        config = EstimatorConfig.for_log(log.metadata)
+    config = _configuration(config_path, log)
+    result, prior = _run_with_prior(
+        log, Path(log_path).name, mode, config, calibration_path, vehicle, timeline, show_progress
+    )
+    outputs = OutputSet()
+    with outputs:
+        if not isinstance(result, NavResult):  # io-dvlc: calibration only
+            summ = _write_iodvlc_outputs(outputs, result, log, summary_path)
+        else:
+            result.timing_s["read"] = read_s
+            summ = _write_nav_outputs(
+                outputs,
+                result,
+                log,
+                log_path,
+                config,
+                prior,
+                read_options=read_options,
+                output=output,
+                summary_path=summary_path,
+                tum_path=tum_path,
+                timeline_path=timeline_path,
+                default_timeline=default_timeline,
+                calibration_out=calibration_out,
+                vehicle=vehicle,
+            )
+    return SmoothOutcome(summ, outputs.committed)
+
+
+def _configuration(config_path: Path | None, log: LogData) -> EstimatorConfig:
+    """The run's configuration: -c's, with the log's scenario's [estimator] table (e.g. its initial attitude) below
+    it; without -c, the one the log's scenario names (the paper's runs: "paper"), else the defaults."""
+    from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
+
+    if config_path:
+        return EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))
+    return EstimatorConfig.for_log(log.metadata)
+
+
+def _run_with_prior(
+    log: LogData,
+    name: str,
+    mode: str,
+    config: EstimatorConfig,
+    calibration_path: Path | None,
+    vehicle: str | None,
+    timeline: bool,
+    show_progress: bool,
+) -> tuple[Any, VehicleCalibration | None]:
+    """The estimator's run on the log, with the vehicle's calibration file as the prior when one is given
+    (app/calibration_files.py: inflated for its age, the inflation recorded in a NavResult). Returns the result
+    (NavResult, or IoDvlcResult for io-dvlc) and the prior (None: none)."""
+    from gtsam_dvl.app.calibration_files import calibration_prior, record_prior
+    from gtsam_dvl.core.result import NavResult
+
     prior = inflation = None
-    if (
-        calibration_path is not None
-    ):  # the vehicle's calibration as the prior (app/calibration_files.py)
+    if calibration_path is not None:
         prior, inflation = calibration_prior(calibration_path, log, config, vehicle)
-    with progress_bar(f"{mode} on {Path(log_path).name}", enabled=show_progress) as progress:
+    with progress_bar(f"{mode} on {name}", enabled=show_progress) as progress:
         result = run_estimator(
             log, mode, config, progress=progress, timeline=timeline, calibration=prior
         )
     if inflation is not None and isinstance(result, NavResult):
         record_prior(result, inflation)
-    outputs = OutputSet()
-    with outputs:
-        if not isinstance(result, NavResult):  # io-dvlc: calibration only
-            from gtsam_dvl.estimators.iodvlc import IoDvlcResult, iodvlc_summary
+    return result, prior
 
-            assert isinstance(result, IoDvlcResult), type(result)
 
-            summ = iodvlc_summary(result, log)
-            health = assess_log_health(log)
-            if not np.isfinite(summ["scale"]["value"]):
-                health.flag(
-                    "failed",
-                    "IO-DVLC computed no scale: the log has no Type-I segment (an acceleration at "
-                    "constant attitude) it could use; run another estimator, or log such a segment",
-                )
-            summ["health"] = health.as_dict()
-            summ["losses"] = log.metadata.get("reader_losses", {})
-            if summary_path is not None:
-                outputs.write_json(summary_path, summ)
-        else:
-            result.timing_s["read"] = read_s
-            summ = summary(result, log)
-            if output is not None:
-                with outputs.staged(output) as tmp:
-                    write_result_log(
-                        tmp, result, log, summ, read_options=read_options, result_path=output
-                    )
-                if result.timeline is not None and timeline_path is None:
-                    timeline_path = default_timeline
-            if timeline_path is not None and result.timeline is not None:
-                outputs.write_bytes(timeline_path, timeline_npz_bytes(result.timeline))
-            if summary_path is not None:
-                outputs.write_json(summary_path, summ)
-            if tum_path is not None:
-                outputs.write_text(
-                    tum_path,
-                    tum_text(
-                        log.t0_ns * 1e-9 + result.t, result.n_p, matrix_to_quat_xyzw(result.n_R_b)
-                    ),
-                )
-            if calibration_out is not None:
-                cal = calibration_of_run(
-                    result, log_path, config, vehicle_name(log_path, vehicle, prior), prior
-                )
-                outputs.write_text(calibration_out, calibration_text(cal))
-    return SmoothOutcome(summ, outputs.committed)
+def _write_iodvlc_outputs(
+    outputs: OutputSet, result: Any, log: LogData, summary_path: Path | None
+) -> dict[str, Any]:
+    """io-dvlc's outputs (calibration only): its summary with the log's health (failed without a scale)."""
+    from gtsam_dvl.analysis.health import assess_log_health
+    from gtsam_dvl.estimators.iodvlc import IoDvlcResult, iodvlc_summary
+
+    assert isinstance(result, IoDvlcResult), type(result)
+
+    summ = iodvlc_summary(result, log)
+    health = assess_log_health(log)
+    if not np.isfinite(summ["scale"]["value"]):
+        health.flag(
+            "failed",
+            "IO-DVLC computed no scale: the log has no Type-I segment (an acceleration at "
+            "constant attitude) it could use; run another estimator, or log such a segment",
+        )
+    summ["health"] = health.as_dict()
+    summ["losses"] = log.metadata.get("reader_losses", {})
+    if summary_path is not None:
+        outputs.write_json(summary_path, summ)
+    return summ
+
+
+def _write_nav_outputs(
+    outputs: OutputSet,
+    result: NavResult,
+    log: LogData,
+    log_path: Path,
+    config: EstimatorConfig,
+    prior: VehicleCalibration | None,
+    *,
+    read_options: ReadOptions | None,
+    output: Path | None,
+    summary_path: Path | None,
+    tum_path: Path | None,
+    timeline_path: Path | None,
+    default_timeline: Path | None,
+    calibration_out: Path | None,
+    vehicle: str | None,
+) -> dict[str, Any]:
+    """A trajectory estimator's outputs into the output set: the result MCAP, the timeline arrays (next to it
+    unless timeline_path), the summary, the TUM trajectory, the run's calibration file. Returns the summary."""
+    from gtsam_dvl.analysis.metrics import summary
+    from gtsam_dvl.app.calibration_files import calibration_of_run, vehicle_name
+    from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
+    from gtsam_dvl.io.atomic import tum_text
+    from gtsam_dvl.io.calibration_file import calibration_text
+    from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
+
+    summ = summary(result, log)
+    if output is not None:
+        with outputs.staged(output) as tmp:
+            write_result_log(tmp, result, log, summ, read_options=read_options, result_path=output)
+        if result.timeline is not None and timeline_path is None:
+            timeline_path = default_timeline
+    if timeline_path is not None and result.timeline is not None:
+        outputs.write_bytes(timeline_path, timeline_npz_bytes(result.timeline))
+    if summary_path is not None:
+        outputs.write_json(summary_path, summ)
+    if tum_path is not None:
+        outputs.write_text(
+            tum_path,
+            tum_text(log.t0_ns * 1e-9 + result.t, result.n_p, matrix_to_quat_xyzw(result.n_R_b)),
+        )
+    if calibration_out is not None:
+        cal = calibration_of_run(
+            result, log_path, config, vehicle_name(log_path, vehicle, prior), prior
+        )
+        outputs.write_text(calibration_out, calibration_text(cal))
+    return summ
 
 
 def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
@@ -712,8 +850,6 @@ def evaluate_to_dir(
     (analysis/evaluate.py source_mismatch: its content hash, stamps, origin) is refused with one line unless
     force, and then a line says so."""
     from gtsam_dvl.analysis.evaluate import evaluate_result
-    from gtsam_dvl.app.plots.error_plots import plot_errors
-    from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
     from gtsam_dvl.io.atomic import atomic_write_json, atomic_write_text
     from gtsam_dvl.io.result_reader import read_result
 
@@ -735,6 +871,45 @@ def evaluate_to_dir(
         recorded = ReadOptions.from_record(stored.read_options, f"{result_path}: read_options")
         options = options.over(recorded)
     log = load_log(log_path, options) if log_path is not None else None
+    forced = _check_truth_source(stored, log, log_path, result_path, force)
+    ev = evaluate_result(stored, log)
+    ev.metrics["truth_log_not_source"] = forced or None
+    # the health of the run (from the summary smooth wrote) and what reading the truth log here lost
+    health = stored.summary.get("health")
+    truth_losses = log.metadata.get("reader_losses", {}) if log is not None else {}
+    ev.metrics["health"] = health
+    ev.metrics["truth_log_losses"] = truth_losses
+    ev.metrics["truth_log"] = str(log_path) if log_path is not None else None
+    ev.metrics["truth_log_read_options"] = options.record() if log_path is not None else None
+    written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
+    label = res.estimator
+    written += _error_figures(ev, label, out_dir)
+    if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
+        from gtsam_dvl.app.plots.current_plots import plot_current
+
+        truth = log.truth if log is not None else None
+        written.append(
+            plot_current(
+                wc,
+                out_dir / "water_current.png",
+                None if truth is None else truth.t,
+                None if truth is None else truth.n_c,
+                label,
+            )
+        )
+    if res.timeline is not None:
+        written += _timeline_figures(res, log, ev, label, out_dir)
+    lines = ([forced] if forced else []) + ev.lines()
+    written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
+    lines = _evaluation_lines(lines, ev.metrics, health, log_path, truth_losses, missing)
+    return lines, written
+
+
+def _check_truth_source(
+    stored: StoredResult, log: LogData | None, log_path: Path | None, result_path: Path, force: bool
+) -> str:
+    """A truth log that is not the result's source (analysis/evaluate.py source_mismatch) refused with one line,
+    unless force. Returns the line saying it was judged anyway ("": the log is the source, or none)."""
     forced = ""
     if log is not None and log_path is not None:
         from gtsam_dvl.analysis.evaluate import source_mismatch
@@ -747,17 +922,14 @@ def evaluate_to_dir(
                     "smoothed from, or --force to judge it against this one"
                 )
             forced = f"--force: judged against {log_path}, which is not the result's source: {why}"
-    ev = evaluate_result(stored, log)
-    ev.metrics["truth_log_not_source"] = forced or None
-    # the health of the run (from the summary smooth wrote) and what reading the truth log here lost
-    health = stored.summary.get("health")
-    truth_losses = log.metadata.get("reader_losses", {}) if log is not None else {}
-    ev.metrics["health"] = health
-    ev.metrics["truth_log_losses"] = truth_losses
-    ev.metrics["truth_log"] = str(log_path) if log_path is not None else None
-    ev.metrics["truth_log_read_options"] = options.record() if log_path is not None else None
-    written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
-    label = res.estimator
+    return forced
+
+
+def _error_figures(ev: Evaluation, label: str, out_dir: Path) -> list[Path]:
+    """The attitude, position and velocity errors against the truth over time (none without a truth)."""
+    from gtsam_dvl.app.plots.error_plots import plot_errors
+
+    written: list[Path] = []
     if ev.attitude_error_deg is not None and ev.position_error_m is not None:
         written.append(
             plot_errors(
@@ -784,58 +956,64 @@ def evaluate_to_dir(
                     ev.segments,
                 )
             )
-    if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
-        from gtsam_dvl.app.plots.current_plots import plot_current
+    return written
 
-        truth = log.truth if log is not None else None
-        written.append(
-            plot_current(
-                wc,
-                out_dir / "water_current.png",
-                None if truth is None else truth.t,
-                None if truth is None else truth.n_c,
-                label,
-            )
+
+def _timeline_figures(
+    res: NavResult, log: LogData | None, ev: Evaluation, label: str, out_dir: Path
+) -> list[Path]:
+    """The calibration's and biases' estimates over time with their sigmas (against the truth when the log has
+    it), and the normalised sigmas."""
+    from gtsam_dvl.analysis.metrics import truth_in_user_units
+    from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
+
+    assert res.timeline is not None  # the caller's condition
+    written: list[Path] = []
+    truths: dict[str, Any] = truth_in_user_units(log) if log is not None else {}
+    estimated = [
+        q
+        for q, sigma in (
+            ("time_offset", res.timeline.time_offset_sigma_s),
+            ("lever_arm", res.timeline.lever_arm_sigma_m),
         )
-    if res.timeline is not None:
-        from gtsam_dvl.analysis.metrics import truth_in_user_units
-
-        truths: dict[str, Any] = truth_in_user_units(log) if log is not None else {}
-        estimated = [
-            q
-            for q, sigma in (
-                ("time_offset", res.timeline.time_offset_sigma_s),
-                ("lever_arm", res.timeline.lever_arm_sigma_m),
-            )
-            if sigma is not None
-        ]
-        for q in ("scale", "misalignment", "gyro_bias", "accel_bias", *estimated):
-            written.append(
-                plot_estimates(
-                    [(label, res.timeline)],
-                    out_dir / f"{q}.png",
-                    q,
-                    truths.get(q),
-                    ev.segments,
-                    t_min=0.0,
-                )
-            )
+        if sigma is not None
+    ]
+    for q in ("scale", "misalignment", "gyro_bias", "accel_bias", *estimated):
         written.append(
-            plot_normalised_sigmas(
-                res.timeline,
-                out_dir / "normalised_sigmas.png",
-                priors_for_plots(res.config),
+            plot_estimates(
+                [(label, res.timeline)],
+                out_dir / f"{q}.png",
+                q,
+                truths.get(q),
                 ev.segments,
-                title=f"Normalised sigmas, {label}",
+                t_min=0.0,
             )
         )
-    lines = ([forced] if forced else []) + ev.lines()
-    written.append(atomic_write_text(out_dir / "observability.txt", "\n".join(lines) + "\n"))
+    written.append(
+        plot_normalised_sigmas(
+            res.timeline,
+            out_dir / "normalised_sigmas.png",
+            priors_for_plots(res.config),
+            ev.segments,
+            title=f"Normalised sigmas, {label}",
+        )
+    )
+    return written
+
+
+def _evaluation_lines(
+    lines: list[str],
+    metrics: dict[str, Any],
+    health: dict[str, Any] | None,
+    log_path: Path | None,
+    truth_losses: dict[str, Any],
+    missing: str,
+) -> list[str]:
+    """evaluate_to_dir's printed lines: the verdict lines, then the surfacing error, the run's health, what
+    reading the truth log lost and why there is no truth."""
     from gtsam_dvl.app.report import gnss_lines
 
-    lines = lines + gnss_lines(
-        ev.metrics.get("gnss")
-    )  # the surfacing error (analysis/surfacing.py)
+    lines = lines + gnss_lines(metrics.get("gnss"))  # the surfacing error (analysis/surfacing.py)
     if health:
         lines = lines + [
             f"result {line.strip()}" if i == 0 else line
@@ -850,4 +1028,4 @@ def evaluate_to_dir(
     lines += [f"  reading {log_path}: {line}" for line in loss_lines(truth_losses)]
     if missing:
         lines.append(missing)
-    return lines, written
+    return lines

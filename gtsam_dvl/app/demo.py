@@ -6,7 +6,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,6 +17,13 @@ from gtsam_dvl.app.commands import (
     run_trajectory_estimator,
 )
 from gtsam_dvl.app.progress import progress_bar
+from gtsam_dvl.core.types import LogData
+
+if TYPE_CHECKING:
+    from rich.table import Table
+
+    from gtsam_dvl.core.config import EstimatorConfig
+    from gtsam_dvl.core.result import NavResult
 
 
 def _iodvlc_timeline(res: Any) -> Any:
@@ -39,34 +46,19 @@ def _iodvlc_timeline(res: Any) -> Any:
     )
 
 
-def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any]:
-    """One simulated run through every estimator, with figures named after the paper's and a report."""
-    from gtsam_dvl.analysis.metrics import (
-        attitude_errors_deg,
-        summary,
-        truth_at,
-        truth_in_user_units,
-    )
-    from gtsam_dvl.app.plots.error_plots import plot_errors
-    from gtsam_dvl.app.plots.log_plots import plot_log
-    from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
-    from gtsam_dvl.app.report import paper_findings, write_run_report
+def _run_estimators(
+    log: LogData, name: str, config: EstimatorConfig, run_dir: Path
+) -> tuple[dict[str, NavResult], Any, list[dict[str, Any]]]:
+    """The run's log through the trajectory estimators (batch, online, EKF), each one's result MCAP, summary and
+    timeline written under run_dir/<mode>/, then through IO-DVLC (its summary under run_dir/io-dvlc/). Returns
+    the trajectory estimators' results by mode, IO-DVLC's result and every summary."""
+    from gtsam_dvl.analysis.metrics import summary
+    from gtsam_dvl.estimators.iodvlc import iodvlc_summary
     from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json
     from gtsam_dvl.io.result_writer import timeline_npz_bytes, write_result_log
-    from gtsam_dvl.io.writer import write_log
-    from gtsam_dvl.sim import simulate
-    from gtsam_dvl.sim.scenario import load_scenario
 
-    scen = load_scenario(name)
-    config = scen.estimator_configuration()  # the paper's runs: the paper's priors
-    log = simulate(scen, seed)
-    log_path = run_dir / f"{name}.mcap"
-    write_log(log_path, log)
-    log.source = str(log_path)
-    figs = run_dir / "figures"
-    written = plot_log(log, figs)
-    segments = log.segments
-    results, summaries = {}, []
+    results: dict[str, NavResult] = {}
+    summaries: list[dict[str, Any]] = []
     modes = ["batch", "online", "ekf"]
     for mode in modes:
         t0 = time.perf_counter()
@@ -82,14 +74,26 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
         results[mode] = res
         summaries.append(summ)
     io_res = run_estimator(log, "io-dvlc", config)
-    from gtsam_dvl.estimators.iodvlc import iodvlc_summary
-
     io_summ = iodvlc_summary(io_res, log)
     atomic_write_json(run_dir / "io-dvlc" / "summary.json", io_summ)
     summaries.append(io_summ)
+    return results, io_res, summaries
 
-    truths = {"scale": None, "misalignment": None, **truth_in_user_units(log)}
-    two_d = not any(s.kind in ("descent", "ascent") for s in log.segments)  # the paper's 2-D run
+
+def _calibration_figures(
+    log: LogData,
+    results: dict[str, NavResult],
+    io_res: Any,
+    truths: dict[str, Any],
+    figs: Path,
+    two_d: bool,
+) -> list[Path]:
+    """The paper's figures of the calibration and biases over time: IO-DVLC's scale and misalignment (the 3-D
+    run), then the trajectory estimators', numbered as the paper numbers them."""
+    from gtsam_dvl.app.plots.timeline_plots import plot_estimates
+
+    segments = log.segments
+    written: list[Path] = []
     io_tl = _iodvlc_timeline(io_res)
     if not two_d:
         written.append(
@@ -132,6 +136,18 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
                     t_min=0.0 if "bias" in q else 590.0,
                 )
             )
+    return written
+
+
+def _error_figures(
+    log: LogData, results: dict[str, NavResult], figs: Path, two_d: bool
+) -> list[Path]:
+    """The paper's figures of the trajectory estimators' attitude and position errors against the truth."""
+    from gtsam_dvl.analysis.metrics import attitude_errors_deg, truth_at
+    from gtsam_dvl.app.plots.error_plots import plot_errors
+
+    segments = log.segments
+    written: list[Path] = []
     runs_att, runs_pos = [], []
     assert log.truth is not None  # simulated
     for m, r in results.items():
@@ -154,6 +170,33 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
             segments,
         )
     )
+    return written
+
+
+def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any]:
+    """One simulated run through every estimator, with figures named after the paper's and a report."""
+    from gtsam_dvl.analysis.metrics import truth_in_user_units
+    from gtsam_dvl.app.plots.log_plots import plot_log
+    from gtsam_dvl.app.plots.timeline_plots import plot_normalised_sigmas
+    from gtsam_dvl.app.report import paper_findings, write_run_report
+    from gtsam_dvl.io.writer import write_log
+    from gtsam_dvl.sim import simulate
+    from gtsam_dvl.sim.scenario import load_scenario
+
+    scen = load_scenario(name)
+    config = scen.estimator_configuration()  # the paper's runs: the paper's priors
+    log = simulate(scen, seed)
+    log_path = run_dir / f"{name}.mcap"
+    write_log(log_path, log)
+    log.source = str(log_path)
+    figs = run_dir / "figures"
+    written = plot_log(log, figs)
+    segments = log.segments
+    results, io_res, summaries = _run_estimators(log, name, config, run_dir)
+    truths = {"scale": None, "misalignment": None, **truth_in_user_units(log)}
+    two_d = not any(s.kind in ("descent", "ascent") for s in log.segments)  # the paper's 2-D run
+    written += _calibration_figures(log, results, io_res, truths, figs, two_d)
+    written += _error_figures(log, results, figs, two_d)
     priors = priors_for_plots(config.to_dict())
     ref = "ekf" if "ekf" in results else next(iter(results))
     if (ref_timeline := results[ref].timeline) is not None:
@@ -311,13 +354,74 @@ def _section(console: Any, name: str, headline: str, intro: str, table: list[str
     return [f"## {name}", "", intro, "", *table, ""]
 
 
+def _estimates_table(run: dict[str, Any]) -> Table:
+    """A paper run's table of final estimates against the truth, one row per estimator (rich Table)."""
+    from rich.table import Table
+
+    table = Table(title=f"{run['run']}: final estimates against the truth")
+    for col in (
+        "estimator",
+        "scale err/sigma (ppm)",
+        "misalignment err r/p/y (deg)",
+        "sigma r/p/y (deg)",
+        "final horiz. pos.",
+        "attitude RMSE (deg)",
+        "wall (s)",
+    ):
+        table.add_column(col, justify="right")
+    for s in run["summaries"]:
+        e = s.get("errors", {})
+        pos = (
+            f"{e['final_horizontal_position_m']:.2f} m ({e['final_horizontal_position_pct_distance']:.3f}%)"
+            if "final_horizontal_position_m" in e
+            else "-"
+        )
+        att = (
+            " ".join(f"{v:.4f}" for v in e["attitude_rmse_deg"])
+            if "attitude_rmse_deg" in e
+            else "-"
+        )
+        wall = s.get("timing_s", {}).get("total")
+        table.add_row(
+            s["estimator"],
+            f"{e.get('scale_ppm', float('nan')):+.0f}/{s['scale']['sigma'] * 1e6:.0f}",
+            " ".join(f"{v:+.3f}" for v in e.get("misalignment_deg", [])),
+            " ".join(f"{v:.3f}" for v in s["misalignment_deg"]["sigma"]),
+            pos,
+            att,
+            f"{wall:.1f}" if wall is not None else "-",
+        )
+    return table
+
+
+def _run_section(console: Any, run: dict[str, Any], out_dir: Path) -> list[str]:
+    """A paper run's section of the index report (its calibration table, the paper's findings per estimator),
+    the findings' counts printed."""
+    from gtsam_dvl.app.report import calibration_table
+
+    index = [
+        f"## {run['run']}",
+        "",
+        f"[full report with figures]({Path(run['report']).relative_to(out_dir)})",
+        "",
+        *calibration_table(run["summaries"]),
+        "",
+    ]
+    for est, items in run["findings"].items():
+        held = sum(f.held for f in items)
+        console.print(f"  {run['run']} {est}: {held}/{len(items)} of the paper's findings hold")
+        index.append(
+            f"- {est}: " + "; ".join(f"{'yes' if f.held else 'NO'}: {f.text}" for f in items)
+        )
+    index.append("")
+    return index
+
+
 def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:
     """Simulate paper-3d and paper-2d, run every estimator (batch, online, EKF, IO-DVLC), evaluate, write the
     paper's figures and a report per run plus an index report; print the comparison table."""
     from rich.console import Console
-    from rich.table import Table
 
-    from gtsam_dvl.app.report import calibration_table
     from gtsam_dvl.io.atomic import atomic_write_text
 
     out_dir = Path(out_dir)
@@ -333,55 +437,8 @@ def run_demo(out_dir: Path, seed: int = 7) -> list[dict[str, Any]]:
         "",
     ]
     for run in runs:
-        table = Table(title=f"{run['run']}: final estimates against the truth")
-        for col in (
-            "estimator",
-            "scale err/sigma (ppm)",
-            "misalignment err r/p/y (deg)",
-            "sigma r/p/y (deg)",
-            "final horiz. pos.",
-            "attitude RMSE (deg)",
-            "wall (s)",
-        ):
-            table.add_column(col, justify="right")
-        for s in run["summaries"]:
-            e = s.get("errors", {})
-            pos = (
-                f"{e['final_horizontal_position_m']:.2f} m ({e['final_horizontal_position_pct_distance']:.3f}%)"
-                if "final_horizontal_position_m" in e
-                else "-"
-            )
-            att = (
-                " ".join(f"{v:.4f}" for v in e["attitude_rmse_deg"])
-                if "attitude_rmse_deg" in e
-                else "-"
-            )
-            wall = s.get("timing_s", {}).get("total")
-            table.add_row(
-                s["estimator"],
-                f"{e.get('scale_ppm', float('nan')):+.0f}/{s['scale']['sigma'] * 1e6:.0f}",
-                " ".join(f"{v:+.3f}" for v in e.get("misalignment_deg", [])),
-                " ".join(f"{v:.3f}" for v in s["misalignment_deg"]["sigma"]),
-                pos,
-                att,
-                f"{wall:.1f}" if wall is not None else "-",
-            )
-        console.print(table)
-        index += [
-            f"## {run['run']}",
-            "",
-            f"[full report with figures]({Path(run['report']).relative_to(out_dir)})",
-            "",
-            *calibration_table(run["summaries"]),
-            "",
-        ]
-        for est, items in run["findings"].items():
-            held = sum(f.held for f in items)
-            console.print(f"  {run['run']} {est}: {held}/{len(items)} of the paper's findings hold")
-            index.append(
-                f"- {est}: " + "; ".join(f"{'yes' if f.held else 'NO'}: {f.text}" for f in items)
-            )
-        index.append("")
+        console.print(_estimates_table(run))
+        index += _run_section(console, run, out_dir)
     index += _section(
         console,
         FIELD_SCENARIO,

@@ -38,15 +38,21 @@ def paper_findings(tl: Timeline, priors: dict[str, Any], segments: list[Segment]
     come from the run's segments: motion starts where the first segment that is not static starts, the roll
     finding needs a descent, the accelerometer-bias finding the first turns; a run that never changes depth is
     the paper's 2-D run."""
-    mis_p, acc_p, gyr_p = (
-        priors["misalignment_deg"],
-        priors["accel_bias_ug"],
-        priors["gyro_bias_deg_per_h"],
-    )
     motion_start_s = next((s.start_s for s in segments if s.kind != "static"), 0.0)
     descent_s = _first_start(segments, ("descent",))
     turns_s = _first_start(segments, ("square", "turn"))
     changes_depth = descent_s is not None or _first_start(segments, ("ascent",)) is not None
+    return (
+        _motion_findings(tl, priors, motion_start_s)
+        + _manoeuvre_findings(tl, priors, descent_s, turns_s)
+        + [_gyro_bias_finding(tl, priors)]
+        + ([] if changes_depth else [_two_d_finding(tl, priors)])
+    )
+
+
+def _motion_findings(tl: Timeline, priors: dict[str, Any], motion_start_s: float) -> list[Finding]:
+    """The findings on the start of motion: the scale, then the yaw and pitch misalignment, converge."""
+    mis_p = priors["misalignment_deg"]
     out = []
     before, after = (
         _ratio_at(tl, "scale_sigma", motion_start_s - 1, priors["scale"])[0],
@@ -68,6 +74,16 @@ def paper_findings(tl: Timeline, priors: dict[str, Any], segments: list[Segment]
             f"pitch, yaw sigma/prior at {motion_start_s + 60:.0f} s: {r[1]:.3f}, {r[2]:.3f}",
         )
     )
+    return out
+
+
+def _manoeuvre_findings(
+    tl: Timeline, priors: dict[str, Any], descent_s: float | None, turns_s: float | None
+) -> list[Finding]:
+    """The findings on the manoeuvres, when the run has them: the roll misalignment once the descent starts, the
+    accelerometer bias after the turns start."""
+    mis_p, acc_p = priors["misalignment_deg"], priors["accel_bias_ug"]
+    out = []
     if descent_s is not None:
         pre = _ratio_at(tl, "misalignment_sigma_deg", descent_s - 1, mis_p)[0]
         post = _ratio_at(tl, "misalignment_sigma_deg", descent_s + 60, mis_p)[0]
@@ -90,31 +106,35 @@ def paper_findings(tl: Timeline, priors: dict[str, Any], segments: list[Segment]
                 f"before the turns -> {np.round(a_post, 3)} {350:.0f} s after they start",
             )
         )
-    g = np.asarray(tl.gyro_bias_sigma_deg_per_h)[-1] / np.asarray(gyr_p)
-    out.append(
-        Finding(
-            "the gyro bias converges slowly, the vertical axis slowest",
-            bool(g[2] > max(g[0], g[1])),
-            f"final gyro bias sigma/prior x, y, z: {np.round(g, 3)}",
-        )
-    )
-    if not changes_depth:
-        roll = np.asarray(tl.misalignment_sigma_deg)[:, 0] / np.asarray(mis_p)[0]
-        others = np.concatenate(
-            [
-                [np.asarray(tl.scale_sigma)[-1] / priors["scale"]],
-                np.asarray(tl.misalignment_sigma_deg)[-1, 1:] / np.asarray(mis_p)[1:],
-            ]
-        )
-        out.append(
-            Finding(
-                "2-D run: everything converges except the roll misalignment about the thrust axis",
-                bool(roll.min() > 0.9 and np.all(others < 0.2)),
-                f"roll sigma/prior never below {roll.min():.3f}; scale, pitch, yaw final "
-                f"{np.round(others, 4)}",
-            )
-        )
     return out
+
+
+def _gyro_bias_finding(tl: Timeline, priors: dict[str, Any]) -> Finding:
+    """The finding on the gyro bias: it converges slowly, the vertical axis slowest."""
+    g = np.asarray(tl.gyro_bias_sigma_deg_per_h)[-1] / np.asarray(priors["gyro_bias_deg_per_h"])
+    return Finding(
+        "the gyro bias converges slowly, the vertical axis slowest",
+        bool(g[2] > max(g[0], g[1])),
+        f"final gyro bias sigma/prior x, y, z: {np.round(g, 3)}",
+    )
+
+
+def _two_d_finding(tl: Timeline, priors: dict[str, Any]) -> Finding:
+    """The 2-D run's finding: everything converges except the roll misalignment about the thrust axis."""
+    mis_p = priors["misalignment_deg"]
+    roll = np.asarray(tl.misalignment_sigma_deg)[:, 0] / np.asarray(mis_p)[0]
+    others = np.concatenate(
+        [
+            [np.asarray(tl.scale_sigma)[-1] / priors["scale"]],
+            np.asarray(tl.misalignment_sigma_deg)[-1, 1:] / np.asarray(mis_p)[1:],
+        ]
+    )
+    return Finding(
+        "2-D run: everything converges except the roll misalignment about the thrust axis",
+        bool(roll.min() > 0.9 and np.all(others < 0.2)),
+        f"roll sigma/prior never below {roll.min():.3f}; scale, pitch, yaw final "
+        f"{np.round(others, 4)}",
+    )
 
 
 def _fmt(v: Any, digits: int = 4) -> str:

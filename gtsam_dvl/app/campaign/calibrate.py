@@ -286,8 +286,6 @@ def calibrate_logs(
     per-dive table and figure to out_dir (calibration-fleet.md, .json, .png). On Dask (a LocalCluster of
     `workers`, a scheduler, or a client given), in this process with workers == 1 and no scheduler, or when
     Dask is missing and no scheduler was asked for."""
-    from gtsam_dvl.app.progress import progress_bar
-
     if not logs:
         raise GtsamDvlError("no logs given")
     for p in logs:
@@ -298,10 +296,61 @@ def calibrate_logs(
     options = read_options
     failures: list[DiveFailure] = []
     t0 = time.perf_counter()
+    engine, solution, summaries, timing, prepared = _solve(
+        paths,
+        cfg,
+        options,
+        failures,
+        tol,
+        show_progress,
+        client,
+        scheduler,
+        workers,
+        scheduler_timeout_s,
+        t0,
+    )
+    timing = {"prepare": prepared, **timing, "total": time.perf_counter() - t0}
+    outcome = CalibrateOutcome(None, solution, summaries, [], failures, engine, timing)
+    if solution is None:
+        return outcome
+    joint = solution.estimates()
+    outcome.comparisons = [
+        dive_vs_joint(s.name, solution.states, s.alone, joint, s.alone_cov, solution.cov)
+        for s in summaries
+    ]
+    outcome.calibration = _joint_calibration(solution, summaries, vehicle)
+    if output is not None:
+        from gtsam_dvl.io.calibration_file import write_calibration
+
+        outcome.written.append(write_calibration(output, outcome.calibration))
+    if out_dir is not None:
+        outcome.written += write_fleet(outcome, Path(out_dir))
+    return outcome
+
+
+def _solve(
+    paths: list[str],
+    cfg: str | None,
+    options: ReadOptions | None,
+    failures: list[DiveFailure],
+    tol: float,
+    show_progress: bool,
+    client: Any,
+    scheduler: str | None,
+    workers: int | None,
+    scheduler_timeout_s: float,
+    t0: float,
+) -> tuple[str, JointSolution | None, list[DiveSummary], dict[str, float], float]:
+    """The dives smoothed alone and solved jointly: in this process (no client, no scheduler, and one worker or
+    no Dask), on the client given, or on a Dask cluster (a scheduler's, else a LocalCluster of `workers`).
+    Returns the engine's words, the joint solution (None: no dive left), the dives' summaries, the timing and
+    the seconds from t0 to the dives prepared."""
+    from gtsam_dvl.app.progress import progress_bar
+
     here = client is None and scheduler is None and (workers == 1 or not _has_dask())
     if here:
         engine = "in this process"
-        with progress_bar(f"smoothing {len(logs)} dives alone", enabled=show_progress) as progress:
+        with progress_bar(f"smoothing {len(paths)} dives alone", enabled=show_progress) as progress:
             local = LocalDives(paths, cfg, options, failures)
             progress(1.0)
         prepared = time.perf_counter() - t0
@@ -320,16 +369,14 @@ def calibrate_logs(
                 solution, summaries, timing, prepared = _on_client(
                     c, paths, cfg, options, failures, tol, show_progress
                 )
-    timing = {"prepare": prepared, **timing, "total": time.perf_counter() - t0}
-    outcome = CalibrateOutcome(None, solution, summaries, [], failures, engine, timing)
-    if solution is None:
-        return outcome
-    joint = solution.estimates()
-    outcome.comparisons = [
-        dive_vs_joint(s.name, solution.states, s.alone, joint, s.alone_cov, solution.cov)
-        for s in summaries
-    ]
-    outcome.calibration = VehicleCalibration(
+    return engine, solution, summaries, timing, prepared
+
+
+def _joint_calibration(
+    solution: JointSolution, summaries: list[DiveSummary], vehicle: str
+) -> VehicleCalibration:
+    """The joint solution as the vehicle's calibration: dated by its latest dive, the dives its sources."""
+    return VehicleCalibration(
         vehicle=vehicle,
         date=iso_date(max(s.t0_ns for s in summaries)),
         states=tuple(solution.states),
@@ -344,13 +391,6 @@ def calibrate_logs(
             "converged": solution.converged,
         },
     )
-    if output is not None:
-        from gtsam_dvl.io.calibration_file import write_calibration
-
-        outcome.written.append(write_calibration(output, outcome.calibration))
-    if out_dir is not None:
-        outcome.written += write_fleet(outcome, Path(out_dir))
-    return outcome
 
 
 def _has_dask() -> bool:

@@ -65,13 +65,11 @@ def _plot(title: str, y_label: str, paths: list[dict[str, Any]]) -> dict[str, An
 AXIS_COLORS = ("#e6194b", "#3cb44b", "#4363d8")
 
 
-def layout() -> dict[str, Any]:
-    """The Foxglove layout of the installed layout.json (Layouts > Import from file): a 3-D panel following
-    base_link in map with the estimated path, odometry covariance and truth; Plot panels of scale,
-    misalignment, time offset and biases, each series drawn with its value - sigma and value + sigma; a Log
-    panel of the health and a Raw Messages panel of the status."""
+def _three_d_panel() -> dict[str, Any]:
+    """The 3-D panel: following base_link in map, the estimated pose with its covariance and path, the truth's,
+    a 10 m grid."""
     T = TOPICS
-    three_d = {
+    return {
         "followTf": "base_link",
         "followMode": "follow-position",
         "cameraState": {
@@ -144,9 +142,14 @@ def layout() -> dict[str, Any]:
         },
         "imageMode": {},
     }
+
+
+def _plot_panels() -> dict[str, Any]:
+    """The Plot panels by id: scale, misalignment, time offset, accelerometer and gyro biases, each series with
+    its value - sigma and value + sigma."""
+    T = TOPICS
     axes = ("x", "y", "z")
-    config_by_id: dict[str, Any] = {
-        "3D!live": three_d,
+    return {
         "Plot!scale": _plot(
             "DVL scale (+- 1 sigma)",
             "scale factor (1 = perfect)",
@@ -184,16 +187,12 @@ def layout() -> dict[str, Any]:
                 for s in _band_series(T["imu_bias"], f"gyro_deg_per_h.{a}.", a, c)
             ],
         ),
-        "RosOut!health": {"searchTerms": [], "minLogLevel": 1, "topicToRender": T["log"]},
-        "RawMessages!status": {
-            "topicPath": T["status"],
-            "diffEnabled": False,
-            "diffMethod": "custom",
-            "diffTopicPath": "",
-            "showFullMessageForDiff": False,
-            "expansion": "all",
-        },
     }
+
+
+def _arrangement() -> tuple[dict[str, Any], dict[str, Any]]:
+    """Where the panels sit: the left column (3-D above the health log and the status), the right one (the
+    plots). Returns (left, right)."""
     plots = {
         "first": {
             "first": "Plot!scale",
@@ -226,6 +225,29 @@ def layout() -> dict[str, Any]:
         "direction": "column",
         "splitPercentage": 70,
     }
+    return left, plots
+
+
+def layout() -> dict[str, Any]:
+    """The Foxglove layout of the installed layout.json (Layouts > Import from file): a 3-D panel following
+    base_link in map with the estimated path, odometry covariance and truth; Plot panels of scale,
+    misalignment, time offset and biases, each series drawn with its value - sigma and value + sigma; a Log
+    panel of the health and a Raw Messages panel of the status."""
+    T = TOPICS
+    config_by_id: dict[str, Any] = {
+        "3D!live": _three_d_panel(),
+        **_plot_panels(),
+        "RosOut!health": {"searchTerms": [], "minLogLevel": 1, "topicToRender": T["log"]},
+        "RawMessages!status": {
+            "topicPath": T["status"],
+            "diffEnabled": False,
+            "diffMethod": "custom",
+            "diffTopicPath": "",
+            "showFullMessageForDiff": False,
+            "expansion": "all",
+        },
+    }
+    left, plots = _arrangement()
     return {
         "configById": config_by_id,
         "globalVariables": {},

@@ -23,7 +23,7 @@ from gtsam_dvl.core.message_order import log_messages
 from gtsam_dvl.core.types import LogData
 
 if TYPE_CHECKING:
-    from gtsam_dvl.estimators.online import OnlineEstimator
+    from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator
     from gtsam_dvl.io.read_options import ReadOptions
 
 
@@ -68,6 +68,120 @@ class ReplayOutcome:
         )
 
 
+@dataclass
+class _Replay:
+    """One replay's pushes (replay_log): each message pushed into the estimator when the wall clock reaches its
+    stamp (speed: times real time; math.inf: no waiting), published on the view, and each epoch it completes."""
+
+    log: LogData
+    view: LiveView
+    est: OnlineEstimator
+    speed: float
+    step_s: float
+    clock: Callable[[], float]
+    sleep: Callable[[float], None]
+    t_first: float  # log time of the first message (s)
+    wall0: float  # the clock at t_first (s)
+
+    def pace(self, t: float) -> None:
+        """Wait until the wall clock reaches log time t (s) at the replay's speed."""
+        if math.isfinite(self.speed):
+            wait = self.wall0 + (t - self.t_first) / self.speed - self.clock()
+            if wait > 0:
+                self.sleep(wait)
+
+    def epoch_done(self, n: int) -> None:
+        """After a push that completed n epochs: the latest estimate published, with the truth nearest to it."""
+        est, view, truth = self.est, self.view, self.log.truth
+        e = est.estimate()
+        if n and e is not None:
+            view.publish_epoch(
+                e, counters=est.counters, latency_s=est.latencies_s[-1] if est.latencies_s else None
+            )
+            if truth is not None and len(truth):
+                k = min(int(np.searchsorted(truth.t, e.t)), len(truth) - 1)
+                if k > 0 and abs(truth.t[k - 1] - e.t) < abs(truth.t[k] - e.t):
+                    k -= 1
+                view.publish_truth(
+                    float(truth.t[k]), truth.n_p[k], truth.n_q_b[k], truth.n_v[k], truth.b_omega[k]
+                )
+
+    def push_imu(self, a: int, b: int) -> None:
+        """IMU samples a..b-1, in pieces of step_s log seconds at a finite speed (all at once otherwise)."""
+        imu = self.log.imu
+        step = (
+            len(imu)
+            if not math.isfinite(self.speed)
+            else max(1, int(np.searchsorted(imu.t, imu.t[a] + self.step_s) - a))
+        )
+        for s in range(a, b, step):
+            e = min(b, s + step)
+            self.pace(float(imu.t[e - 1]))
+            n = self.est.push_imu_batch(imu.t[s:e], imu.b_omega[s:e], imu.b_f[s:e])
+            self.view.publish_imu(imu.t[s:e], imu.b_omega[s:e], imu.b_f[s:e])
+            self.epoch_done(n)
+
+    def push_depth(self, k: int) -> None:
+        """Depth sample k."""
+        from gtsam_dvl.estimators.online.feed import push_depth_sample
+
+        depth = self.log.depth
+        assert depth is not None
+        self.pace(float(depth.t[k]))
+        push_depth_sample(self.est, depth, k)
+        pa = None if depth.pressure_pa is None else float(depth.pressure_pa[k])
+        self.view.publish_depth(float(depth.t[k]), float(depth.depth_m[k]), pa)
+
+    def push_dvl(self, j: int) -> None:
+        """DVL ping j."""
+        dvl = self.log.dvl
+        beams = (
+            None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+        )
+        self.pace(float(dvl.t[j]))
+        n = self.est.push_dvl(
+            dvl.t[j],
+            dvl.d_v[j],
+            dvl.d_cov[j],
+            bool(dvl.valid[j]),
+            beams,
+            water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
+        )
+        self.view.publish_dvl(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
+        self.epoch_done(n)
+
+    def push_all(self, stop: threading.Event | None) -> OnlineEstimate | None:
+        """Every message in delivery order, then finish(); the estimator's warnings logged at their group's ping
+        (after finish(): unstamped). stop is honoured between groups. Returns finish()'s final estimate."""
+        from gtsam_dvl.estimators.online import MessageDropped
+
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MessageDropped)
+            seen = 0
+            group_opens = True  # the next message opens a ping's group (IMU block, depth samples, ping) or the tail
+            for m in log_messages(self.log):
+                if (
+                    group_opens
+                ):  # stop is honoured between groups: a ping always goes in with the IMU before it
+                    if stop is not None and stop.is_set():
+                        break
+                    group_opens = False
+                if m.kind == "imu":
+                    self.push_imu(m.start, m.stop)
+                elif m.kind == "depth":
+                    self.push_depth(m.start)
+                else:
+                    self.push_dvl(m.start)
+                    for w in caught[seen:]:  # the group's warnings, stamped at its ping
+                        self.view.log("warning", str(w.message), float(self.log.dvl.t[m.start]))
+                    seen = len(caught)
+                    group_opens = True
+            final = self.est.finish()
+            for w in caught[seen:]:
+                self.view.log("warning", str(w.message))
+        return final
+
+
 def replay_log(
     log: LogData,
     view: LiveView,
@@ -90,15 +204,14 @@ def replay_log(
     group and before the messages after the last ping (finish() is still called). Warnings the estimator raises
     (MessageDropped) go to the log channel, stamped at the ping of their group (after finish(): at the last
     stamp). estimator None: OnlineEstimator.for_log(log)."""
-    from gtsam_dvl.estimators.online import MessageDropped, OnlineEstimator
-    from gtsam_dvl.estimators.online.feed import push_depth_sample
+    from gtsam_dvl.estimators.online import OnlineEstimator
 
     if not (speed > 0):
         raise GtsamDvlError(
             f"replay speed must be > 0 (math.inf: as fast as possible), got {speed}"
         )
     est = estimator if estimator is not None else OnlineEstimator.for_log(log)
-    imu, dvl, depth, truth = log.imu, log.dvl, log.depth, log.truth
+    imu, dvl = log.imu, log.dvl
     if len(imu) == 0:
         raise GtsamDvlError(f"{log.source or 'log'}: no IMU samples to replay")
     if health:
@@ -110,88 +223,9 @@ def replay_log(
         view.progress
     )  # the epochs, log and wall time of the status messages and of the outcome
     wall0 = progress.start(t_first, clock)
+    replay = _Replay(log, view, est, speed, step_s, clock, sleep, t_first, wall0)
+    final = replay.push_all(stop)
     run_health = None
-
-    def pace(t: float) -> None:
-        if math.isfinite(speed):
-            wait = wall0 + (t - t_first) / speed - clock()
-            if wait > 0:
-                sleep(wait)
-
-    def epoch_done(n: int) -> None:
-        e = est.estimate()
-        if n and e is not None:
-            view.publish_epoch(
-                e, counters=est.counters, latency_s=est.latencies_s[-1] if est.latencies_s else None
-            )
-            if truth is not None and len(truth):
-                k = min(int(np.searchsorted(truth.t, e.t)), len(truth) - 1)
-                if k > 0 and abs(truth.t[k - 1] - e.t) < abs(truth.t[k] - e.t):
-                    k -= 1
-                view.publish_truth(
-                    float(truth.t[k]), truth.n_p[k], truth.n_q_b[k], truth.n_v[k], truth.b_omega[k]
-                )
-
-    def push_imu(a: int, b: int) -> None:
-        step = (
-            len(imu)
-            if not math.isfinite(speed)
-            else max(1, int(np.searchsorted(imu.t, imu.t[a] + step_s) - a))
-        )
-        for s in range(a, b, step):
-            e = min(b, s + step)
-            pace(float(imu.t[e - 1]))
-            n = est.push_imu_batch(imu.t[s:e], imu.b_omega[s:e], imu.b_f[s:e])
-            view.publish_imu(imu.t[s:e], imu.b_omega[s:e], imu.b_f[s:e])
-            epoch_done(n)
-
-    def push_depth(k: int) -> None:
-        assert depth is not None
-        pace(float(depth.t[k]))
-        push_depth_sample(est, depth, k)
-        pa = None if depth.pressure_pa is None else float(depth.pressure_pa[k])
-        view.publish_depth(float(depth.t[k]), float(depth.depth_m[k]), pa)
-
-    def push_dvl(j: int) -> None:
-        beams = (
-            None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-        )
-        pace(float(dvl.t[j]))
-        n = est.push_dvl(
-            dvl.t[j],
-            dvl.d_v[j],
-            dvl.d_cov[j],
-            bool(dvl.valid[j]),
-            beams,
-            water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
-        )
-        view.publish_dvl(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
-        epoch_done(n)
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", MessageDropped)
-        seen = 0
-        group_opens = True  # the next message opens a ping's group (IMU block, depth samples, ping) or the tail
-        for m in log_messages(log):
-            if (
-                group_opens
-            ):  # stop is honoured between groups: a ping always goes in with the IMU before it
-                if stop is not None and stop.is_set():
-                    break
-                group_opens = False
-            if m.kind == "imu":
-                push_imu(m.start, m.stop)
-            elif m.kind == "depth":
-                push_depth(m.start)
-            else:
-                push_dvl(m.start)
-                for w in caught[seen:]:  # the group's warnings, stamped at its ping
-                    view.log("warning", str(w.message), float(dvl.t[m.start]))
-                seen = len(caught)
-                group_opens = True
-        final = est.finish()
-        for w in caught[seen:]:
-            view.log("warning", str(w.message))
     if final is not None:
         view.publish_epoch(
             final, counters=est.counters, final=True

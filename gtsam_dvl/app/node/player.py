@@ -20,7 +20,7 @@ from typing import Any
 from gtsam_dvl.app.node.ros import import_ros, message_class, qos
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
-from gtsam_dvl.io.storage.sources import open_source
+from gtsam_dvl.io.storage.sources import Source, open_source
 
 
 @dataclass
@@ -78,18 +78,7 @@ def play_log(
             f"{src.path}: no topic {', '.join(missing)}; topics in the log: {src.describe_topics()}"
         )
     out = PlayOutcome()
-    classes: dict[str, Any] = {}
-    for t in chosen:
-        cls = message_class(normalize_type(src.topics[t].type_name))
-        if cls is None:
-            out.skipped.append(t)
-        else:
-            classes[t] = cls
-    raw = src.read(list(classes))
-    rows: list[tuple[int, str, bytes]] = []
-    for t, bodies in raw.items():
-        rows += [(int(ns), t, b) for ns, b in zip(bodies.log_time, bodies.items(), strict=True)]
-    rows.sort(key=lambda r: r[0])
+    classes, rows = _messages(src, chosen, out.skipped)
     remap = remap or {}
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
@@ -117,24 +106,57 @@ def play_log(
                 time.sleep(0.02)
         if start is not None:
             start()
-        wall0 = time.monotonic()
-        ns0 = rows[0][0] if rows else 0
-        for ns, t, body in rows:
-            if skip is not None and skip(t, ns):
-                continue
-            if math.isfinite(rate):
-                wait = wall0 + (ns - ns0) * 1e-9 / rate - time.monotonic()
-                if wait > 0:
-                    time.sleep(wait)
-            pubs[t].publish(body)
-            out.published[t] = out.published.get(t, 0) + 1
-            if record:
-                out.log_ns.append(ns)
-                out.topics.append(t)
-                out.wall.append(time.monotonic())
-        out.wall_s = time.monotonic() - wall0
+        _publish(rows, pubs, out, rate, skip, record)
         time.sleep(0.2)  # reliable delivery of the last messages before the publishers go
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
     return out
+
+
+def _messages(
+    src: Source, chosen: list[str], skipped: list[str]
+) -> tuple[dict[str, Any], list[tuple[int, str, bytes]]]:
+    """The chosen topics' message classes (a topic whose message package is not importable appended to skipped)
+    and their messages as recorded, (log time ns, topic, bytes) in log-time order."""
+    classes: dict[str, Any] = {}
+    for t in chosen:
+        cls = message_class(normalize_type(src.topics[t].type_name))
+        if cls is None:
+            skipped.append(t)
+        else:
+            classes[t] = cls
+    raw = src.read(list(classes))
+    rows: list[tuple[int, str, bytes]] = []
+    for t, bodies in raw.items():
+        rows += [(int(ns), t, b) for ns, b in zip(bodies.log_time, bodies.items(), strict=True)]
+    rows.sort(key=lambda r: r[0])
+    return classes, rows
+
+
+def _publish(
+    rows: list[tuple[int, str, bytes]],
+    pubs: dict[str, Any],
+    out: PlayOutcome,
+    rate: float,
+    skip: Callable[[str, int], bool] | None,
+    record: bool,
+) -> None:
+    """Each message published at wall0 + (log_time - log_time_0) / rate, counted (and with record, timed) in
+    out; out.wall_s the time it took."""
+    wall0 = time.monotonic()
+    ns0 = rows[0][0] if rows else 0
+    for ns, t, body in rows:
+        if skip is not None and skip(t, ns):
+            continue
+        if math.isfinite(rate):
+            wait = wall0 + (ns - ns0) * 1e-9 / rate - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)
+        pubs[t].publish(body)
+        out.published[t] = out.published.get(t, 0) + 1
+        if record:
+            out.log_ns.append(ns)
+            out.topics.append(t)
+            out.wall.append(time.monotonic())
+    out.wall_s = time.monotonic() - wall0
