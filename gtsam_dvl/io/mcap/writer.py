@@ -17,7 +17,7 @@ import numpy as np
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.io.atomic import AtomicWriter
-from gtsam_dvl.io.mcap.container import McapContainer
+from gtsam_dvl.io.mcap.container import McapContainer, MessageRows
 from gtsam_dvl.io.ros2 import cdr, messages
 from gtsam_dvl.io.ros2.msgdefs import full_definition
 
@@ -306,17 +306,15 @@ class McapLogWriter(AtomicWriter):
     def _write_batches(self) -> None:
         """Every message added, merged in log-time order, into chunks."""
         if self._batches:
-            chan, seq, stamps, pool, start, lens = self._take_batches()
-            order = np.argsort(stamps, kind="stable")  # ties keep the order topics were added
-            self._mcap.write_messages(
-                chan[order], seq[order], stamps[order], pool, start[order], lens[order]
-            )
+            rows = self._take_batches()
+            order = np.argsort(
+                rows.log_time, kind="stable"
+            )  # ties keep the order topics were added
+            self._mcap.write_messages(rows.take(order))
 
-    def _take_batches(
-        self,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The messages added since the last call, concatenated in the order added, with their sequence numbers
-        (channel, seq, stamps, pool, start, length); the list of batches is emptied."""
+    def _take_batches(self) -> MessageRows:
+        """The messages added since the last call, concatenated in the order added, with their sequence numbers;
+        the list of batches is emptied."""
         batches, self._batches = self._batches, []
         chan = np.concatenate([np.full(len(s), c, np.uint16) for c, s, _, _ in batches])
         seq = np.concatenate([self._next_seq(c, len(s)) for c, s, _, _ in batches])
@@ -324,7 +322,7 @@ class McapLogWriter(AtomicWriter):
         lens = np.concatenate([n for _, _, _, n in batches])
         pool = np.concatenate([p for _, _, p, _ in batches])
         start = np.concatenate([[0], np.cumsum(lens)[:-1]])
-        return chan, seq, stamps, pool, start, lens
+        return MessageRows(chan, seq, stamps, pool, start, lens)
 
     def _next_seq(self, cid: int, n: int) -> np.ndarray:
         first = self._seq[cid]
@@ -383,19 +381,13 @@ class McapStreamWriter(McapLogWriter):
             return
         start = np.concatenate([[0], np.cumsum(lens)[:-1]])
         order = np.lexsort((seq, chan, stamps))
-        chan, seq, stamps, lens, start = (
-            chan[order],
-            seq[order],
-            stamps[order],
-            lens[order],
-            start[order],
-        )
+        rows = MessageRows(chan, seq, stamps, pool, start, lens).take(order)
         ready = (
-            len(stamps)
+            len(order)
             if before_ns is None
-            else int(np.searchsorted(stamps, before_ns, side="left"))
+            else int(np.searchsorted(rows.log_time, before_ns, side="left"))
         )
-        rec_end = self._bytes_written + np.cumsum(31 + lens[:ready])
+        rec_end = self._bytes_written + np.cumsum(31 + rows.length[:ready])
         chunk_no = (
             rec_end - 1
         ) // self._mcap.chunk_size  # as McapContainer.write_messages, from the first message
@@ -403,19 +395,17 @@ class McapStreamWriter(McapLogWriter):
         done = len(bounds) - 1 if final else len(bounds) - 2  # the last chunk may still grow
         for a, b in zip(bounds[:done], bounds[1 : done + 1], strict=True):
             if b > a:
-                self._mcap.write_chunk(
-                    chan[a:b], seq[a:b], stamps[a:b], pool, start[a:b], lens[a:b]
-                )
+                self._mcap.write_chunk(rows.take(slice(a, b)))
         cut = int(bounds[done]) if done > 0 else 0
         if cut:
             self._bytes_written = int(rec_end[cut - 1])
-        keep = slice(cut, None)
+        keep = rows.take(slice(cut, None))
         self._pending = (
-            chan[keep],
-            seq[keep],
-            stamps[keep],
-            lens[keep],
-            _gather(pool, start[keep], lens[keep]),
+            keep.channel,
+            keep.seq,
+            keep.log_time,
+            keep.length,
+            _gather(keep.pool, keep.start, keep.length),
         )
 
 
