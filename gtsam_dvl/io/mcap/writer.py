@@ -118,66 +118,8 @@ class McapLogWriter(AtomicWriter):
         """Messages filled by ``cdr.new_messages``; stamps are read back from their headers."""
         self.add_encoded(topic, type_name, cdr.stamps_ns(arr), arr, qos)
 
-    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns) ------------------------------
-    def add_imu(
-        self,
-        topic: str,
-        t: np.ndarray,
-        b_omega: np.ndarray,
-        b_f: np.ndarray,
-        frame_id: str = "imu_link",
-        gyro_var: np.ndarray | None = None,
-        accel_var: np.ndarray | None = None,
-        orientation: np.ndarray | None = None,
-        orientation_cov: np.ndarray | None = None,
-    ) -> None:
-        """sensor_msgs/msg/Imu (messages.imu)."""
-        self.add_structured(
-            topic,
-            messages.IMU,
-            messages.imu(
-                self.stamps_ns(np.atleast_1d(t)),
-                b_omega,
-                b_f,
-                frame_id,
-                gyro_var,
-                accel_var,
-                orientation,
-                orientation_cov,
-            ),
-        )
-
-    def add_twist_with_covariance(
-        self,
-        topic: str,
-        t: np.ndarray,
-        linear: np.ndarray,
-        angular: np.ndarray | None,
-        cov: np.ndarray | None,
-        frame_id: str,
-    ) -> None:
-        """geometry_msgs/msg/TwistWithCovarianceStamped; cov (K,6,6), None = zeros (ROS: unknown)."""
-        arr = messages.six_dof_with_covariance(
-            messages.TWIST_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular, cov, frame_id
-        )
-        self.add_structured(topic, messages.TWIST_COV, arr)
-
-    def add_accel_with_covariance(
-        self,
-        topic: str,
-        t: np.ndarray,
-        linear: np.ndarray,
-        angular: np.ndarray,
-        cov: np.ndarray | None,
-        frame_id: str,
-    ) -> None:
-        """geometry_msgs/msg/AccelWithCovarianceStamped. For IMU biases: linear = accelerometer bias
-        (m/s^2), angular = gyro bias (rad/s), cov (K,6,6) in that order."""
-        arr = messages.six_dof_with_covariance(
-            messages.ACCEL_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular, cov, frame_id
-        )
-        self.add_structured(topic, messages.ACCEL_COV, arr)
-
+    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns); others: add_structured of
+    # an encoder's messages (messages.imu, messages.six_dof_with_covariance) ------------------------------
     def add_pose_with_covariance(
         self,
         topic: str,
