@@ -288,9 +288,8 @@ def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None
             ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl),
         ],
     )
-    w.add_odometry(
-        TOPICS["odometry"],
-        t,
+    odometry = messages.odometry(
+        w.stamps_ns(t),
         result.n_p,
         n_q_b,
         b_v,
@@ -298,6 +297,7 @@ def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None
         ros_pose_covariance(result.n_R_b, result.pose_cov),
         twist_cov,
     )
+    w.add_structured(TOPICS["odometry"], messages.ODOMETRY, odometry)
     # one Path message per piece of a log smoothed at its long IMU gaps (estimators/batch/pieces.py), so that no
     # line crosses a break; else one of the whole trajectory
     starts = [int(p["start_index"]) for p in result.info.get("pieces") or []] or [0]

@@ -399,9 +399,8 @@ def _write_data(
     if log.truth is not None:
         tr = log.truth
         b_v = Rotation.from_quat(tr.n_q_b).inv().apply(tr.n_v) if len(tr) else np.zeros((0, 3))
-        w.add_odometry(
-            "/ground_truth/odometry",
-            tr.t,
+        odometry = messages.odometry(
+            w.stamps_ns(tr.t),
             tr.n_p,
             tr.n_q_b,
             b_v,
@@ -409,6 +408,7 @@ def _write_data(
             frame_id="map",
             child_frame_id="base_link",
         )
+        w.add_structured("/ground_truth/odometry", messages.ODOMETRY, odometry)
 
 
 class LogStreamWriter(AtomicWriter):

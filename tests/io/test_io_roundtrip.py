@@ -188,7 +188,8 @@ def test_generic_writer_round_trip(tmp_path: Path) -> None:
     )
     path = tmp_path / "result.mcap"
     with McapLogWriter(path, t0_ns=T0_NS) as out:
-        out.add_odometry("/gtsam_dvl/odometry", t, p, q, v, w, cov, 2 * cov)
+        odometry = messages.odometry(out.stamps_ns(t), p, q, v, w, cov, 2 * cov)
+        out.add_structured("/gtsam_dvl/odometry", messages.ODOMETRY, odometry)
         out.add_path("/gtsam_dvl/path", t, p, q)
         bias = messages.six_dof_with_covariance(
             messages.ACCEL_COV, out.stamps_ns(t), v, w, cov, "base_link"

@@ -118,8 +118,8 @@ class McapLogWriter(AtomicWriter):
         """Messages filled by ``cdr.new_messages``; stamps are read back from their headers."""
         self.add_encoded(topic, type_name, cdr.stamps_ns(arr), arr, qos)
 
-    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns); others: add_structured of
-    # an encoder's messages (messages.imu, messages.six_dof_with_covariance) ------------------------------
+    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns) -----------------------------
+    # the others: add_structured of an encoder's messages (messages.imu, six_dof_with_covariance, odometry)
     def add_pose_with_covariance(
         self,
         topic: str,
@@ -160,34 +160,6 @@ class McapLogWriter(AtomicWriter):
             self.stamps_ns(np.atleast_1d(t)), value, variance, frame_id
         )
         self.add_structured(topic, messages.TEMPERATURE, arr)
-
-    def add_odometry(
-        self,
-        topic: str,
-        t: np.ndarray,
-        n_p: np.ndarray,
-        n_q_b: np.ndarray,
-        b_v: np.ndarray,
-        b_omega: np.ndarray,
-        pose_cov: np.ndarray | None = None,
-        twist_cov: np.ndarray | None = None,
-        frame_id: str = "map",
-        child_frame_id: str = "base_link",
-    ) -> None:
-        """nav_msgs/msg/Odometry: pose of child in frame_id, twist (b_v, b_omega) in the child frame;
-        covariances (K,6,6) or None (zeros)."""
-        arr = messages.odometry(
-            self.stamps_ns(np.atleast_1d(t)),
-            n_p,
-            n_q_b,
-            b_v,
-            b_omega,
-            pose_cov,
-            twist_cov,
-            frame_id,
-            child_frame_id,
-        )
-        self.add_structured(topic, messages.ODOMETRY, arr)
 
     def add_path(
         self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map"
