@@ -22,6 +22,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.atomic import to_json
 from gtsam_dvl.io.mcap.writer import McapLogWriter
 from gtsam_dvl.io.read_options import ReadOptions
+from gtsam_dvl.io.ros2 import messages
 from gtsam_dvl.io.ros2.covariance import ros_pose_covariance, ros_twist_covariance
 
 TOPICS = {
@@ -287,9 +288,8 @@ def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None
             ("base_link", "dvl_link", m.b_R_d0, m.b_p_dvl),
         ],
     )
-    w.add_odometry(
-        TOPICS["odometry"],
-        t,
+    odometry = messages.odometry(
+        w.stamps_ns(t),
         result.n_p,
         n_q_b,
         b_v,
@@ -297,6 +297,7 @@ def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None
         ros_pose_covariance(result.n_R_b, result.pose_cov),
         twist_cov,
     )
+    w.add_structured(TOPICS["odometry"], messages.ODOMETRY, odometry)
     # one Path message per piece of a log smoothed at its long IMU gaps (estimators/batch/pieces.py), so that no
     # line crosses a break; else one of the whole trajectory
     starts = [int(p["start_index"]) for p in result.info.get("pieces") or []] or [0]
@@ -304,14 +305,15 @@ def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None
         w.add_path(TOPICS["path"], t[a:b], result.n_p[a:b], n_q_b[a:b])
     ones = np.ones(n)
     bias_cov = np.broadcast_to(result.bias_cov, (n, 6, 6))
-    w.add_accel_with_covariance(
-        TOPICS["imu_bias"],
-        t,
+    bias = messages.six_dof_with_covariance(
+        messages.ACCEL_COV,
+        w.stamps_ns(t),
         np.outer(ones, result.accel_bias),
         np.outer(ones, result.gyro_bias),
         bias_cov,
         "imu_link",
     )
+    w.add_structured(TOPICS["imu_bias"], messages.ACCEL_COV, bias)
 
 
 def _write_calibration_topics(w: McapLogWriter, result: NavResult) -> None:

@@ -51,7 +51,7 @@ from gtsam_dvl.io.atomic import AtomicWriter
 from gtsam_dvl.io.gnss import GNSS_TOPIC, NAVSATFIX_TYPE, navsatfix_messages
 from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap.writer import McapLogWriter, McapStreamWriter
-from gtsam_dvl.io.ros2 import cdr
+from gtsam_dvl.io.ros2 import cdr, messages
 
 __all__ = [
     "McapLogWriter",
@@ -271,9 +271,10 @@ def write_log(
             cov = np.zeros((len(water), 6, 6))
             cov[:, :3, :3] = np.nan_to_num(water.d_cov, nan=0.0)
             cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
-            w.add_twist_with_covariance(
-                dvl_water_topic, water.t, water.d_v, None, cov, water.frame_id
+            twist = messages.six_dof_with_covariance(
+                messages.TWIST_COV, w.stamps_ns(water.t), water.d_v, None, cov, water.frame_id
             )
+            w.add_structured(dvl_water_topic, messages.TWIST_COV, twist)
         else:
             _write_data(
                 w, path, log, meta, gyro_var, accel_var, imu_orientation, gnss_channel=False
@@ -361,9 +362,8 @@ def _write_data(
     """The messages of log's sensor data and truth, one batch per topic in the conventions' order (so channel
     ids follow it). gnss_channel: write /gnss/fix even without fixes (its channel exists from here on)."""
     q_imu, cov_imu = imu_orientation if imu_orientation is not None else (None, None)
-    w.add_imu(
-        "/imu/data_raw",
-        log.imu.t,
+    imu = messages.imu(
+        w.stamps_ns(log.imu.t),
         log.imu.b_omega,
         log.imu.b_f,
         log.imu.frame_id,
@@ -372,13 +372,17 @@ def _write_data(
         q_imu,
         cov_imu,
     )
+    w.add_structured("/imu/data_raw", messages.IMU, imu)
 
     dvl = log.dvl
     ok = np.asarray(dvl.valid, bool) & np.isfinite(dvl.d_v).all(axis=1)
     cov = np.zeros((int(ok.sum()), 6, 6))
     cov[:, :3, :3] = np.nan_to_num(np.asarray(dvl.d_cov, dtype=float)[ok], nan=0.0)
     cov[:, [3, 4, 5], [3, 4, 5]] = UNMEASURED_VARIANCE
-    w.add_twist_with_covariance("/dvl/twist", dvl.t[ok], dvl.d_v[ok], None, cov, dvl.frame_id)
+    twist = messages.six_dof_with_covariance(
+        messages.TWIST_COV, w.stamps_ns(dvl.t[ok]), dvl.d_v[ok], None, cov, dvl.frame_id
+    )
+    w.add_structured("/dvl/twist", messages.TWIST_COV, twist)
     dvl_arr = _dvl_messages(dvl, meta, w.stamps_ns(dvl.t), path)
     w.add_structured("/dvl/data", "marine_acoustic_msgs/msg/Dvl", dvl_arr)
 
@@ -395,9 +399,8 @@ def _write_data(
     if log.truth is not None:
         tr = log.truth
         b_v = Rotation.from_quat(tr.n_q_b).inv().apply(tr.n_v) if len(tr) else np.zeros((0, 3))
-        w.add_odometry(
-            "/ground_truth/odometry",
-            tr.t,
+        odometry = messages.odometry(
+            w.stamps_ns(tr.t),
             tr.n_p,
             tr.n_q_b,
             b_v,
@@ -405,6 +408,7 @@ def _write_data(
             frame_id="map",
             child_frame_id="base_link",
         )
+        w.add_structured("/ground_truth/odometry", messages.ODOMETRY, odometry)
 
 
 class LogStreamWriter(AtomicWriter):

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -139,13 +139,21 @@ def dvl_measure(
         ping_lost: np.ndarray = event_rng.random((M,)) < spec.dropout_ping_prob
         beam_lost: np.ndarray = event_rng.random((M, B)) < spec.dropout_beam_prob
         beam_ok &= ~ping_lost[:, None] & ~beam_lost
+    draws = _Draws(noise_rng, event_rng, water_rng)
     if spec.noise_model == "velocity":
-        y, v_beam, cov = _velocity_noise(spec, y_true, d_u, wt, noise_rng, event_rng, water_rng)
+        y, v_beam, cov = _velocity_noise(spec, y_true, d_u, wt, draws)
     else:
-        y, v_beam, cov = _beam_noise(
-            spec, y_true, d_u, beam_ok, wt, noise_rng, event_rng, water_rng
-        )
+        y, v_beam, cov = _beam_noise(spec, y_true, d_u, beam_ok, wt, draws)
     return _dvl_data(t, y, cov, v_beam, beam_ok, d_u, ranges, wt, water)
+
+
+class _Draws(NamedTuple):
+    """The generators of one dvl_measure call (None: none of those draws): the white noise, the events
+    (outliers), the water-track noise."""
+
+    noise: np.random.Generator | None
+    event: np.random.Generator | None
+    water: np.random.Generator | None
 
 
 def _velocity_noise(
@@ -153,9 +161,7 @@ def _velocity_noise(
     y_true: np.ndarray,
     d_u: np.ndarray,
     wt: np.ndarray | None,
-    noise_rng: np.random.Generator | None,
-    event_rng: np.random.Generator | None,
-    water_rng: np.random.Generator | None,
+    draws: _Draws,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The velocity noise model: noise and outliers on the 3-D velocity, the beams its projections. Returns the
     velocity (M, 3), the beam velocities (M, B) and the stated covariance (M, 3, 3)."""
@@ -164,15 +170,15 @@ def _velocity_noise(
         spec.stated_noise_m_s or spec.noise_m_s
     )  # what the covariance says, not what the noise is
     y = y_true.copy()
-    if noise_rng is not None:
-        y += noise_rng.normal(0.0, spec.noise_m_s, (M, 3))
-    if wt is not None and water_rng is not None:
+    if draws.noise is not None:
+        y += draws.noise.normal(0.0, spec.noise_m_s, (M, 3))
+    if wt is not None and draws.water is not None:
         y = np.where(
-            wt[:, None], y_true + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y
+            wt[:, None], y_true + draws.water.normal(0.0, spec.water_track_noise_m_s, (M, 3)), y
         )
-    if event_rng is not None:
-        ping_out: np.ndarray = event_rng.random((M,)) < spec.outlier_prob
-        direction = event_rng.normal(size=(M, 3))
+    if draws.event is not None:
+        ping_out: np.ndarray = draws.event.random((M,)) < spec.outlier_prob
+        direction = draws.event.normal(size=(M, 3))
         direction /= np.linalg.norm(direction, axis=1, keepdims=True)
         y[ping_out] += spec.outlier_m_s * direction[ping_out]
     v_beam = y @ d_u.T
@@ -188,9 +194,7 @@ def _beam_noise(
     d_u: np.ndarray,
     beam_ok: np.ndarray,
     wt: np.ndarray | None,
-    noise_rng: np.random.Generator | None,
-    event_rng: np.random.Generator | None,
-    water_rng: np.random.Generator | None,
+    draws: _Draws,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The beam noise model: noise and outliers on each beam, the velocity their least-squares solution over the
     valid beams. Returns the velocity (M, 3), the beam velocities (M, B) and the stated covariance (M, 3, 3);
@@ -200,15 +204,15 @@ def _beam_noise(
         spec.stated_noise_m_s or spec.noise_m_s
     )  # what the covariance says, not what the noise is
     v_beam = y_true @ d_u.T
-    if noise_rng is not None:
-        v_beam += noise_rng.normal(0.0, spec.noise_m_s, (M, B))
-    if wt is not None and water_rng is not None:
-        v_water = y_true @ d_u.T + water_rng.normal(0.0, spec.water_track_noise_m_s, (M, B))
+    if draws.noise is not None:
+        v_beam += draws.noise.normal(0.0, spec.noise_m_s, (M, B))
+    if wt is not None and draws.water is not None:
+        v_water = y_true @ d_u.T + draws.water.normal(0.0, spec.water_track_noise_m_s, (M, B))
         v_beam = np.where(wt[:, None], v_water, v_beam)
-    if event_rng is not None:
-        beam_out: np.ndarray = event_rng.random((M, B)) < spec.outlier_prob
+    if draws.event is not None:
+        beam_out: np.ndarray = draws.event.random((M, B)) < spec.outlier_prob
         v_beam += np.where(
-            beam_out, spec.outlier_m_s * np.sign(event_rng.random((M, B)) - 0.5), 0.0
+            beam_out, spec.outlier_m_s * np.sign(draws.event.random((M, B)) - 0.5), 0.0
         )
     w = beam_ok.astype(float)
     normal = np.einsum("kb,bi,bj->kij", w, d_u, d_u)

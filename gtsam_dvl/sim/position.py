@@ -53,18 +53,19 @@ class PositionTrack:
     """lat, lon (rad) and h (m) on the grid, with their time derivatives, interpolable anywhere."""
 
     def __init__(
-        self,
-        rate: float,
-        lat: np.ndarray,
-        lon: np.ndarray,
-        h: np.ndarray,
-        d_lat: np.ndarray,
-        d_lon: np.ndarray,
-        d_h: np.ndarray,
+        self, rate: float, grid: tuple[np.ndarray, np.ndarray, np.ndarray], l_v_grid: np.ndarray
     ) -> None:
+        """grid: (lat, lon, h) on the grid; l_v_grid (n, 3): the local-level velocity (east, north, up; m/s) there,
+        of which their time derivatives follow."""
+        lat, _, h = grid
+        r_n, r_e = radii_of_curvature(lat)
         self.rate = rate
-        self.grid = (lat, lon, h)
-        self.deriv = (d_lat, d_lon, d_h)
+        self.grid = grid
+        self.deriv = (
+            l_v_grid[:, 1] / (r_n + h),
+            l_v_grid[:, 0] / ((r_e + h) * np.cos(lat)),
+            l_v_grid[:, 2],
+        )
 
     def grid_index_of_time(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Interval index g (grid points g, g+1) and fraction u in it for times t."""
@@ -141,7 +142,4 @@ def integrate_position(
         lat_new = cumulate(l_v_nodes[..., 1] * at_nodes(1.0 / (r_n + h)), lat0)
         lon = cumulate(l_v_nodes[..., 0] * at_nodes(1.0 / ((r_e + h) * np.cos(lat))), lon0)
         lat = lat_new
-    r_n, r_e = radii_of_curvature(lat)
-    d_lat = l_v_grid[:, 1] / (r_n + h)
-    d_lon = l_v_grid[:, 0] / ((r_e + h) * np.cos(lat))
-    return PositionTrack(rate, lat, lon, h, d_lat, d_lon, l_v_grid[:, 2])
+    return PositionTrack(rate, (lat, lon, h), l_v_grid)

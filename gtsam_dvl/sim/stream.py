@@ -105,16 +105,12 @@ class TrackWindow(PositionTrack):
     def __init__(
         self,
         rate: float,
+        grid: tuple[np.ndarray, np.ndarray, np.ndarray],
+        l_v_grid: np.ndarray,
         g0: int,
         n_grid: int,
-        lat: np.ndarray,
-        lon: np.ndarray,
-        h: np.ndarray,
-        d_lat: np.ndarray,
-        d_lon: np.ndarray,
-        d_h: np.ndarray,
     ) -> None:
-        super().__init__(rate, lat, lon, h, d_lat, d_lon, d_h)
+        super().__init__(rate, grid, l_v_grid)
         self.g0 = g0
         self.n_grid = n_grid
 
@@ -197,10 +193,7 @@ class PositionStream:
             if i == len(self._lat) - 1:
                 lon = self._lon(l_v_nodes[..., 0] * _at_nodes(1.0 / ((r_e + h) * np.cos(lat))))
             lat = lat_new
-        r_n, r_e = radii_of_curvature(lat)
-        d_lat = l_v_grid[:, 1] / (r_n + h)
-        d_lon = l_v_grid[:, 0] / ((r_e + h) * np.cos(lat))
-        return TrackWindow(rate, a, self.n + 1, lat, lon, h, d_lat, d_lon, l_v_grid[:, 2])
+        return TrackWindow(rate, (lat, lon, h), l_v_grid, a, self.n + 1)
 
 
 # ----- random streams -----------------------------------------------------------------------------------

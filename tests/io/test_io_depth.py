@@ -18,6 +18,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import DepthData
 from gtsam_dvl.io.mcap.writer import McapLogWriter
 from gtsam_dvl.io.reader import read_log, read_topic
+from gtsam_dvl.io.ros2 import messages
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
@@ -77,15 +78,17 @@ def test_depth_from_a_pose_topic(tmp_path: Path, z_down: bool) -> None:
     cov[0, 2, 2] = 0.0  # unknown
     # a second file with the pose topic added (the writer is generic)
     with McapLogWriter(tmp_path / "with_pose.mcap", t0_ns=log.t0_ns) as w:
-        w.add_imu("/imu/data_raw", log.imu.t, log.imu.b_omega, log.imu.b_f, "imu_link")
-        w.add_twist_with_covariance(
-            "/dvl/twist",
-            log.dvl.t[log.dvl.valid],
+        imu = messages.imu(w.stamps_ns(log.imu.t), log.imu.b_omega, log.imu.b_f, "imu_link")
+        w.add_structured("/imu/data_raw", messages.IMU, imu)
+        twist = messages.six_dof_with_covariance(
+            messages.TWIST_COV,
+            w.stamps_ns(log.dvl.t[log.dvl.valid]),
             log.dvl.d_v[log.dvl.valid],
             None,
             np.zeros((int(log.dvl.valid.sum()), 6, 6)),
             "dvl_link",
         )
+        w.add_structured("/dvl/twist", messages.TWIST_COV, twist)
         w.add_pose_with_covariance(
             "/depth/pose",
             t,

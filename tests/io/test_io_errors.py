@@ -12,7 +12,7 @@ import pytest
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.reader import read_log
-from gtsam_dvl.io.ros2 import cdr
+from gtsam_dvl.io.ros2 import cdr, messages
 from gtsam_dvl.io.writer import McapLogWriter, write_log
 from tests.support.synthetic_log import T0_NS, make_log
 
@@ -153,14 +153,15 @@ def test_backwards_time_and_repair(tmp_path: Path) -> None:
         cdr.set_stamps(arr, w.stamps_ns(t))
         arr["angular_velocity"], arr["linear_acceleration"] = log.imu.b_omega, log.imu.b_f
         w.add_encoded("/imu/data_raw", "sensor_msgs/msg/Imu", w.stamps_ns(log.imu.t), arr)
-        w.add_twist_with_covariance(
-            "/dvl/twist",
-            log.dvl.t[log.dvl.valid],
+        twist = messages.six_dof_with_covariance(
+            messages.TWIST_COV,
+            w.stamps_ns(log.dvl.t[log.dvl.valid]),
             log.dvl.d_v[log.dvl.valid],
             None,
             None,
             "dvl_link",
         )
+        w.add_structured("/dvl/twist", messages.TWIST_COV, twist)
     msg = one_line_error(path)
     assert (
         "/imu/data_raw: time goes backwards at message 200 (t = 1.500000000 s after 2.000000000 s)"

@@ -17,6 +17,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.log_metadata import metadata_record
 from gtsam_dvl.io.mcap import container as mcap_container
 from gtsam_dvl.io.reader import read_log, read_odometry, read_topic
+from gtsam_dvl.io.ros2 import messages
 from gtsam_dvl.io.writer import UNMEASURED_VARIANCE, McapLogWriter, write_log
 from tests.support.synthetic_log import T0_NS, make_log
 
@@ -187,9 +188,13 @@ def test_generic_writer_round_trip(tmp_path: Path) -> None:
     )
     path = tmp_path / "result.mcap"
     with McapLogWriter(path, t0_ns=T0_NS) as out:
-        out.add_odometry("/gtsam_dvl/odometry", t, p, q, v, w, cov, 2 * cov)
+        odometry = messages.odometry(out.stamps_ns(t), p, q, v, w, cov, 2 * cov)
+        out.add_structured("/gtsam_dvl/odometry", messages.ODOMETRY, odometry)
         out.add_path("/gtsam_dvl/path", t, p, q)
-        out.add_accel_with_covariance("/gtsam_dvl/imu_bias", t, v, w, cov, "base_link")
+        bias = messages.six_dof_with_covariance(
+            messages.ACCEL_COV, out.stamps_ns(t), v, w, cov, "base_link"
+        )
+        out.add_structured("/gtsam_dvl/imu_bias", messages.ACCEL_COV, bias)
         out.add_pose_with_covariance("/gtsam_dvl/pose", t, p, q, cov, "map")
         out.add_vector3_stamped("/gtsam_dvl/misalignment_deg", t, v, "base_link")
         out.add_scalar_with_variance("/gtsam_dvl/scale", t, w[:, 0], w[:, 1] ** 2, "dvl_link")

@@ -2,9 +2,10 @@
 
 A preset fills the noise, bias and scale-prior fields of the configuration that the same configuration does not set
 itself (sections.py: ImuConfig, DvlConfig, PriorConfig; estimator.py: the DVL's scale accuracy becomes
-[priors] scale_sigma). Every value below carries its source in a comment: a datasheet (or a document quoting
-one) found with the search tool, named by its address, or "typical of the class" where no datasheet with the figure
-was found, a class value said so.
+[priors] scale_sigma). The values are a data table, presets.toml beside this module, read and validated once at
+import; every value there carries its source, in a comment and in the preset's sources: a datasheet (or a document
+quoting one) found with the search tool, named by its address, or "typical of the class" where no datasheet with the
+figure was found, a class value said so.
 
 Units as the configuration's: gyro white noise in deg/h/sqrt(Hz) (an angle random walk in deg/sqrt(h) times 60),
 accelerometer white noise in micro-g/sqrt(Hz) (a velocity random walk in m/s/sqrt(h) divided by 60 and by
@@ -25,8 +26,12 @@ cheaper ones.
 
 from __future__ import annotations
 
+import importlib.resources
 import math
+import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from gtsam_dvl.core.errors import GtsamDvlError
 
@@ -121,369 +126,119 @@ class DvlPreset:
         )
 
 
-_CLASS = "typical of the class"
-_HG1700 = (
-    "NavToolkit hg1700_model, quoting Honeywell's HG1700 brochure "
-    "(https://is4s.github.io/NavToolkit/api-exhale/function_namespacenavtk_1_1filtering_1a5594db34b99fcbdec8e44c84"
-    "eeb16646.html)"
-)
-_HG9900 = (
-    "NavToolkit hg9900_model, quoting Honeywell's HG9900 brochure "
-    "(https://is4s.github.io/NavToolkit/api-exhale/function_namespacenavtk_1_1filtering_1ab735c2d307744ef23d9b89"
-    "7bcc2fb9ed.html)"
-)
-_ADIS16495 = "Analog Devices ADIS16495 data sheet Rev. C (https://pdf.datasheet.live/27aa6838/analog.com/ADIS16495-3BMLZ.html)"
-_MTI300 = (
-    "Movella MTi-300 datasheet (https://cdn.shopify.com/s/files/1/0716/3048/7831/files/MTi-300.pdf)"
-)
-_RDI_FAQ = "Teledyne RD Instruments DVL FAQ (http://rdinstruments.com/nav_faq.html): four beams, 30 deg from vertical"
-_WL_A50 = "Water Linked DVL-A50 page (https://waterlinked.github.io/docs/dvl/dvl-a50/)"
-_WL_RANGE = "Water Linked range modes (https://docs.waterlinked.com/dvl/range-mode/): A50/A125 lowest mode from 0.05 m"
-_WL_FORUM = (
-    "Blue Robotics forum 'DVL-A50 Accuracy' (https://discuss.bluerobotics.com/t/dvl-a50-accuracy/14873): "
-    "1 % (standard edition) vs 0.1 % (performance edition)"
-)
-_WAYFINDER = (
-    "Teledyne Wayfinder DVL Guide (https://manualshive.com/ru/manual/teledyne/everywhereyoulook-wayfinder/"
-    "1080623?page=18): Max Range default 60 m"
-)
-
-
-IMU_PRESETS: dict[str, ImuPreset] = {
-    p.name: p
-    for p in (
-        # Navigation-grade FOG INS: no datasheet figure of its IMU found; the class of the paper's sensors
-        ImuPreset(
-            "ixblue-phins",
-            "iXblue PHINS (subsea FOG INS)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.002
-            ),  # ARW 0.002 deg/sqrt(h): typical of the class
-            accel_noise_ug_rthz=10.0,  # typical of the class (navigation-grade servo accelerometers)
-            gyro_bias_stability_deg_per_h=0.01,  # typical of the class
-            accel_bias_stability_ug=50.0,  # typical of the class
-            sources=(f"all values {_CLASS} (navigation-grade FOG INS; no datasheet figure found)",),
-        ),
-        # FOG gyrocompass / attitude reference: a survey-grade class below the PHINS
-        ImuPreset(
-            "ixblue-octans",
-            "iXblue Octans (FOG gyrocompass and motion sensor)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.005
-            ),  # ARW 0.005 deg/sqrt(h): typical of the class
-            accel_noise_ug_rthz=20.0,  # typical of the class
-            gyro_bias_stability_deg_per_h=0.05,  # typical of the class
-            accel_bias_stability_ug=100.0,  # typical of the class
-            sources=(
-                f"all values {_CLASS} (survey-grade FOG gyrocompass; no datasheet figure found)",
-            ),
-        ),
-        # Tactical FOG IMUs with MEMS accelerometers; the KVH manuals found (1775 technical manual) give no figures in
-        # what the search returned
-        ImuPreset(
-            "kvh-1750",
-            "KVH 1750 (FOG IMU)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.012
-            ),  # ARW 0.012 deg/sqrt(h): typical of the class
-            accel_noise_ug_rthz=120.0,  # typical of the class (tactical MEMS accelerometers)
-            gyro_bias_stability_deg_per_h=0.05,  # typical of the class
-            accel_bias_stability_ug=50.0,  # typical of the class
-            sources=(
-                f"all values {_CLASS} (tactical FOG IMU with MEMS accelerometers; no datasheet figure "
-                "found)",
-            ),
-        ),
-        ImuPreset(
-            "kvh-1775",
-            "KVH 1775 (FOG IMU)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.012
-            ),  # ARW 0.012 deg/sqrt(h): typical of the class
-            accel_noise_ug_rthz=25.0,  # typical of the class (low-noise MEMS accelerometers)
-            gyro_bias_stability_deg_per_h=0.05,  # typical of the class
-            accel_bias_stability_ug=10.0,  # typical of the class
-            sources=(
-                f"all values {_CLASS} (tactical FOG IMU with low-noise MEMS accelerometers; no datasheet "
-                "figure found)",
-            ),
-        ),
-        ImuPreset(
-            "honeywell-hg1700",
-            "Honeywell HG1700 class (tactical RLG IMU)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.125
-            ),  # ARW 0.125 deg/sqrt(h) max: HG1700 brochure
-            # VRW 0.065 ft/s/sqrt(h) max = 0.0198 m/s/sqrt(h): HG1700 brochure
-            accel_noise_ug_rthz=vrw_to_density(0.065 * FT_M),
-            gyro_bias_stability_deg_per_h=1.0,  # gyro bias 1 deg/h: HG1700 brochure
-            accel_bias_stability_ug=1000.0,  # accelerometer bias 1 mg: HG1700 brochure
-            sources=(
-                f"ARW 0.125 deg/sqrt(h), VRW 0.065 ft/s/sqrt(h), gyro bias 1 deg/h, accel bias 1 mg: {_HG1700}",
-                "the brochure's bias is the total bias (1 sigma), larger than an in-run stability",
-            ),
-        ),
-        ImuPreset(
-            "honeywell-hg9900",
-            "Honeywell HG9900 class (navigation RLG IMU)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.002
-            ),  # ARW 0.002 deg/sqrt(h) max: HG9900 brochure
-            accel_noise_ug_rthz=10.0,  # the brochure lists no VRW: typical of the class (navigation grade)
-            gyro_bias_stability_deg_per_h=0.0035,  # gyro bias 0.0035 deg/h: HG9900 brochure
-            accel_bias_stability_ug=25.0,  # accelerometer bias 25 micro-g: HG9900 brochure
-            sources=(
-                f"ARW 0.002 deg/sqrt(h), gyro bias 0.0035 deg/h, accel bias 25 ug: {_HG9900}",
-                f"accel white noise {_CLASS} (the brochure lists no VRW)",
-            ),
-        ),
-        # Industrial MEMS: the MTi-680's own datasheet (MTi 600-series) was found without its figures; the same
-        # maker's MTi-300 datasheet gives the class
-        ImuPreset(
-            "xsens-mti-680",
-            "Xsens MTi-680(G) (MEMS GNSS/INS)",
-            gyro_noise_deg_per_h_rthz=deg_s_density_to_deg_h(
-                0.01
-            ),  # 0.01 deg/s/sqrt(Hz): MTi-300 datasheet
-            accel_noise_ug_rthz=60.0,  # 60 micro-g/sqrt(Hz): MTi-300 datasheet
-            gyro_bias_stability_deg_per_h=10.0,  # in-run 10 deg/h: MTi-300 datasheet
-            accel_bias_stability_ug=15.0,  # in-run 15 micro-g: MTi-300 datasheet
-            sources=(
-                f"{_CLASS}: the same maker's {_MTI300} (gyro 10 deg/h, 0.01 deg/s/sqrt(Hz); accel 15 ug, "
-                "60 ug/sqrt(Hz)); the MTi 600-series datasheet was found without its figures",
-            ),
-        ),
-        ImuPreset(
-            "microstrain-3dm-gx5-25",
-            "MicroStrain 3DM-GX5-25 (MEMS AHRS)",
-            gyro_noise_deg_per_h_rthz=deg_s_density_to_deg_h(
-                0.005
-            ),  # 0.005 deg/s/sqrt(Hz): typical of the class
-            accel_noise_ug_rthz=100.0,  # typical of the class
-            gyro_bias_stability_deg_per_h=8.0,  # typical of the class
-            accel_bias_stability_ug=40.0,  # typical of the class
-            sources=(f"all values {_CLASS} (industrial MEMS AHRS; no datasheet figure found)",),
-        ),
-        ImuPreset(
-            "vectornav-vn-100",
-            "VectorNav VN-100 (MEMS IMU/AHRS)",
-            gyro_noise_deg_per_h_rthz=deg_s_density_to_deg_h(
-                0.0035
-            ),  # 0.0035 deg/s/sqrt(Hz): typical of the class
-            accel_noise_ug_rthz=140.0,  # typical of the class
-            gyro_bias_stability_deg_per_h=10.0,  # typical of the class
-            accel_bias_stability_ug=40.0,  # typical of the class
-            sources=(
-                f"all values {_CLASS} (industrial MEMS IMU; the VN-100 user manuals found give no figures "
-                "in what the search returned)",
-            ),
-        ),
-        ImuPreset(
-            "vectornav-vn-300",
-            "VectorNav VN-300 (dual-antenna MEMS GNSS/INS)",
-            gyro_noise_deg_per_h_rthz=deg_s_density_to_deg_h(
-                0.0035
-            ),  # typical of the class (the VN-100's IMU class)
-            accel_noise_ug_rthz=140.0,  # typical of the class
-            gyro_bias_stability_deg_per_h=10.0,  # typical of the class
-            accel_bias_stability_ug=40.0,  # typical of the class
-            sources=(
-                f"all values {_CLASS} (industrial MEMS IMU, the VN-100's class; no datasheet figure found)",
-            ),
-        ),
-        ImuPreset(
-            "adis16495",
-            "Analog Devices ADIS16495-1 (tactical MEMS IMU)",
-            gyro_noise_deg_per_h_rthz=arw_to_density(
-                0.09
-            ),  # ARW 0.09 deg/sqrt(h): ADIS16495 data sheet
-            accel_noise_ug_rthz=15.0,  # not in the excerpt found: typical of the class (tactical MEMS)
-            gyro_bias_stability_deg_per_h=0.8,  # in-run 0.8 deg/h (ADIS16495-1): ADIS16495 data sheet
-            accel_bias_stability_ug=3.2,  # in-run 3.2 micro-g: ADIS16495 data sheet
-            sources=(
-                f"gyro ARW 0.09 deg/sqrt(h) and in-run 0.8 deg/h, accel in-run 3.2 ug: {_ADIS16495}",
-                f"accel white noise {_CLASS}",
-            ),
-        ),
-    )
+_GYRO_NOISE_FORMS: dict[str, Callable[[float], float]] = {
+    # the key a preset states its gyro white noise with -> to deg/h/sqrt(Hz)
+    "gyro_noise_deg_per_h_rthz": float,
+    "gyro_arw_deg_rth": arw_to_density,
+    "gyro_noise_deg_s_rthz": deg_s_density_to_deg_h,
 }
-
-
-DVL_PRESETS: dict[str, DvlPreset] = {
-    p.name: p
-    for p in (
-        # Teledyne Workhorse Navigator: piston Janus, 30 deg beams (RDI FAQ). Lower frequency: longer range, more noise.
-        # Accuracies and ranges: typical of the class (the Workhorse datasheet was not found)
-        DvlPreset(
-            "teledyne-workhorse-navigator-300",
-            "Teledyne RDI Workhorse Navigator 300 kHz",
-            ping_noise_m_s=0.010,
-            ping_noise_speed_m_s=1.0,  # typical of the class (300 kHz)
-            scale_accuracy=0.004,  # +-0.4 %: typical of the class
-            min_altitude_m=1.0,
-            max_altitude_m=200.0,  # typical of the class (300 kHz)
-            beam_angle_deg=30.0,  # RDI DVL FAQ
-            correlated_sigma_m_s=0.002,  # offset term +-2 mm/s of the long-term accuracy: typical of the class
-            sources=(
-                f"beam angle: {_RDI_FAQ}",
-                f"noise, accuracy (+-0.4 % +-2 mm/s), altitudes: {_CLASS}",
-            ),
-        ),
-        DvlPreset(
-            "teledyne-workhorse-navigator-600",
-            "Teledyne RDI Workhorse Navigator 600 kHz",
-            ping_noise_m_s=0.007,
-            ping_noise_speed_m_s=1.0,  # typical of the class (600 kHz)
-            scale_accuracy=0.002,  # +-0.2 %: typical of the class
-            min_altitude_m=0.7,
-            max_altitude_m=90.0,  # typical of the class (600 kHz)
-            beam_angle_deg=30.0,  # RDI DVL FAQ
-            correlated_sigma_m_s=0.001,  # offset term +-1 mm/s: typical of the class
-            sources=(
-                f"beam angle: {_RDI_FAQ}",
-                f"noise, accuracy (+-0.2 % +-1 mm/s), altitudes: {_CLASS}",
-            ),
-        ),
-        DvlPreset(
-            "teledyne-workhorse-navigator-1200",
-            "Teledyne RDI Workhorse Navigator 1200 kHz",
-            ping_noise_m_s=0.005,
-            ping_noise_speed_m_s=1.0,  # typical of the class (1200 kHz)
-            scale_accuracy=0.002,  # +-0.2 %: typical of the class
-            min_altitude_m=0.5,
-            max_altitude_m=30.0,  # typical of the class (1200 kHz)
-            beam_angle_deg=30.0,  # RDI DVL FAQ
-            correlated_sigma_m_s=0.001,  # offset term +-1 mm/s: typical of the class
-            sources=(
-                f"beam angle: {_RDI_FAQ}",
-                f"noise, accuracy (+-0.2 % +-1 mm/s), altitudes: {_CLASS}",
-            ),
-        ),
-        # Teledyne phased-array units (Pathfinder, Tasman): the Pathfinder guide found describes its single-ping
-        # standard deviation output but its specification page was not in what the search returned
-        DvlPreset(
-            "teledyne-pathfinder",
-            "Teledyne RDI Pathfinder 600 kHz (phased array)",
-            ping_noise_m_s=0.008,
-            ping_noise_speed_m_s=1.0,  # typical of the class (600 kHz phased array)
-            scale_accuracy=0.004,  # +-0.4 %: typical of the class
-            min_altitude_m=0.3,
-            max_altitude_m=89.0,  # typical of the class
-            beam_angle_deg=30.0,  # typical of the class (Teledyne's 30 deg Janus)
-            correlated_sigma_m_s=0.002,  # offset term +-2 mm/s: typical of the class
-            sources=(
-                f"all values {_CLASS} (600 kHz phased-array DVL; datasheet figures not found)",
-            ),
-        ),
-        DvlPreset(
-            "teledyne-tasman",
-            "Teledyne RDI Tasman 600 kHz (phased array)",
-            ping_noise_m_s=0.007,
-            ping_noise_speed_m_s=1.0,  # typical of the class
-            scale_accuracy=0.002,  # +-0.2 %: typical of the class
-            min_altitude_m=0.3,
-            max_altitude_m=100.0,  # typical of the class
-            beam_angle_deg=30.0,  # typical of the class
-            correlated_sigma_m_s=0.001,  # offset term +-1 mm/s: typical of the class
-            sources=(
-                f"all values {_CLASS} (600 kHz phased-array navigation DVL; datasheet figures not found)",
-            ),
-        ),
-        DvlPreset(
-            "teledyne-wayfinder",
-            "Teledyne RDI Wayfinder (small 600 kHz DVL)",
-            ping_noise_m_s=0.010,
-            ping_noise_speed_m_s=1.0,  # typical of the class (small, low-cost)
-            scale_accuracy=0.01,  # +-1 %: typical of the class (small, low-cost DVLs)
-            min_altitude_m=0.5,  # typical of the class
-            max_altitude_m=60.0,  # the guide's default Max Range, 60 m
-            beam_angle_deg=30.0,  # typical of the class
-            correlated_sigma_m_s=0.001,  # typical of the class
-            sources=(
-                f"maximum altitude: {_WAYFINDER}",
-                f"the other values {_CLASS} (small low-cost DVL)",
-            ),
-        ),
-        # Nortek: piston Janus with 25 deg beams (typical of the class: Nortek's DVL geometry)
-        DvlPreset(
-            "nortek-dvl500",
-            "Nortek DVL500 (500 kHz)",
-            ping_noise_m_s=0.008,
-            ping_noise_speed_m_s=1.0,  # typical of the class (500 kHz)
-            scale_accuracy=0.002,  # +-0.2 %: typical of the class
-            min_altitude_m=0.3,
-            max_altitude_m=200.0,  # typical of the class (500 kHz)
-            beam_angle_deg=25.0,  # typical of the class
-            correlated_sigma_m_s=0.001,  # offset term +-1 mm/s: typical of the class
-            sources=(
-                f"all values {_CLASS} (500 kHz navigation DVL; the manuals found give no figures in what the "
-                "search returned)",
-            ),
-        ),
-        DvlPreset(
-            "nortek-dvl1000",
-            "Nortek DVL1000 (1 MHz)",
-            ping_noise_m_s=0.006,
-            ping_noise_speed_m_s=1.0,  # typical of the class (1 MHz)
-            scale_accuracy=0.002,  # +-0.2 %: typical of the class
-            min_altitude_m=0.1,
-            max_altitude_m=75.0,  # maximum: VideoRay's Nortek DVL page; minimum: class
-            beam_angle_deg=25.0,  # typical of the class
-            correlated_sigma_m_s=0.001,  # offset term +-1 mm/s: typical of the class
-            sources=(
-                "maximum altitude about 75 m: VideoRay's Nortek DVL page "
-                "(https://download.videoray.com/training/vtl_defender_overview/html/_dvl_nortek_narration.html)",
-                f"the other values {_CLASS} (1 MHz navigation DVL)",
-            ),
-        ),
-        # Water Linked: small 1 MHz units; range and accuracy from their documentation, the noise of the class
-        DvlPreset(
-            "waterlinked-a50",
-            "Water Linked DVL-A50 (1 MHz)",
-            ping_noise_m_s=0.010,
-            ping_noise_speed_m_s=1.0,  # typical of the class (small 1 MHz DVL)
-            scale_accuracy=0.01,  # 1 %, standard edition: Blue Robotics forum thread (0.1 % performance edition)
-            min_altitude_m=0.05,
-            max_altitude_m=50.0,  # 0.05 - 50 m range: Water Linked DVL-A50 page
-            beam_angle_deg=22.5,  # typical of the class
-            correlated_sigma_m_s=0.001,  # "+-0.1 cm/s long term accuracy": Water Linked DVL-A50 page
-            sources=(
-                f"altitude 0.05-50 m, long-term +-0.1 cm/s: {_WL_A50}",
-                f"scale: {_WL_FORUM}",
-                f"ping noise and beam angle {_CLASS}",
-            ),
-        ),
-        DvlPreset(
-            "waterlinked-a125",
-            "Water Linked DVL-A125 (500 kHz)",
-            ping_noise_m_s=0.010,
-            ping_noise_speed_m_s=1.0,  # typical of the class
-            scale_accuracy=0.01,  # typical of the class (the A50's standard edition)
-            min_altitude_m=0.05,  # Water Linked range modes: A50/A125 from 0.05 m
-            max_altitude_m=125.0,  # the model's name (as the A50's 50 m): typical of the class
-            beam_angle_deg=22.5,  # typical of the class
-            correlated_sigma_m_s=0.001,  # typical of the class (the A50's long-term offset)
-            sources=(
-                f"minimum altitude: {_WL_RANGE}",
-                f"the other values {_CLASS} (the A50's, maximum altitude from the model number)",
-            ),
-        ),
-        DvlPreset(
-            "sonardyne-syrinx",
-            "Sonardyne Syrinx (600 kHz)",
-            ping_noise_m_s=0.007,
-            ping_noise_speed_m_s=1.0,  # typical of the class (600 kHz)
-            scale_accuracy=0.002,  # +-0.2 %: typical of the class
-            min_altitude_m=0.4,
-            max_altitude_m=175.0,  # typical of the class
-            beam_angle_deg=30.0,  # typical of the class (piston Janus)
-            correlated_sigma_m_s=0.001,  # typical of the class
-            sources=(
-                f"all values {_CLASS} (600 kHz piston navigation DVL; datasheet figures not found)",
-            ),
-        ),
-    )
+_ACCEL_NOISE_FORMS: dict[str, Callable[[float], float]] = {
+    # the key a preset states its accelerometer white noise with -> to micro-g/sqrt(Hz)
+    "accel_noise_ug_rthz": float,
+    "accel_vrw_ft_s_rth": lambda vrw_ft_s_rth: vrw_to_density(vrw_ft_s_rth * FT_M),
 }
+_IMU_NUMBERS = ("gyro_bias_stability_deg_per_h", "accel_bias_stability_ug")
+_DVL_NUMBERS = (
+    "ping_noise_m_s",
+    "ping_noise_speed_m_s",
+    "scale_accuracy",
+    "min_altitude_m",
+    "max_altitude_m",
+    "beam_angle_deg",
+)
+_DVL_OPTIONAL_NUMBERS = ("correlated_sigma_m_s", "correlated_tau_s")
+
+
+class _PresetEntry:
+    """One [imu.NAME] or [dvl.NAME] table of presets.toml, taken key by key: a missing, unknown or non-numeric key
+    is a GtsamDvlError naming the preset (the file ships with the package: an error here is a packaging bug)."""
+
+    def __init__(self, kind: str, name: str, table: dict[str, Any], references: dict[str, str]):
+        self.where = f"presets.toml [{kind}.{name}]"
+        self.table = dict(table)
+        self.references = references
+
+    def number(self, key: str) -> float:
+        value = self.table.pop(key, None)
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise GtsamDvlError(f"{self.where}: '{key}' must be a number, not {value!r}")
+        return float(value)
+
+    def converted(self, forms: dict[str, Callable[[float], float]]) -> float:
+        """The one value stated in one of these keys, converted to the configuration's unit."""
+        stated = [key for key in forms if key in self.table]
+        if len(stated) != 1:
+            raise GtsamDvlError(
+                f"{self.where}: exactly one of {', '.join(forms)} (got {stated or 'none'})"
+            )
+        return forms[stated[0]](self.number(stated[0]))
+
+    def text(self, key: str) -> str:
+        value = self.table.pop(key, None)
+        if not isinstance(value, str) or not value.strip():
+            raise GtsamDvlError(f"{self.where}: '{key}' must be a non-empty string")
+        return value
+
+    def sources(self) -> tuple[str, ...]:
+        """The sources, each {reference} replaced by its [references] entry."""
+        value = self.table.pop("sources", None)
+        if not isinstance(value, list) or not value or not all(isinstance(s, str) for s in value):
+            raise GtsamDvlError(f"{self.where}: 'sources' must be a non-empty list of strings")
+        try:
+            return tuple(s.format_map(self.references) for s in value)
+        except KeyError as exc:
+            raise GtsamDvlError(f"{self.where}: no reference {exc} in [references]") from None
+
+    def done(self) -> None:
+        if self.table:
+            raise GtsamDvlError(f"{self.where}: unknown keys {', '.join(self.table)}")
+
+
+def _imu_preset(entry: _PresetEntry, name: str) -> ImuPreset:
+    preset = ImuPreset(
+        name,
+        entry.text("title"),
+        gyro_noise_deg_per_h_rthz=entry.converted(_GYRO_NOISE_FORMS),
+        accel_noise_ug_rthz=entry.converted(_ACCEL_NOISE_FORMS),
+        **{key: entry.number(key) for key in _IMU_NUMBERS},
+        sources=entry.sources(),
+    )
+    entry.done()
+    return preset
+
+
+def _dvl_preset(entry: _PresetEntry, name: str) -> DvlPreset:
+    optional = {key: entry.number(key) for key in _DVL_OPTIONAL_NUMBERS if key in entry.table}
+    preset = DvlPreset(
+        name,
+        entry.text("title"),
+        **{key: entry.number(key) for key in _DVL_NUMBERS},
+        sources=entry.sources(),
+        **optional,
+    )
+    entry.done()
+    return preset
+
+
+def _load_presets() -> tuple[dict[str, ImuPreset], dict[str, DvlPreset]]:
+    """presets.toml (shipped beside this module), read and validated once at import."""
+    text = (importlib.resources.files("gtsam_dvl.core.config") / "presets.toml").read_text()
+    data = tomllib.loads(text)
+    references = data.pop("references")
+    imu = {
+        name: _imu_preset(_PresetEntry("imu", name, table, references), name)
+        for name, table in data.pop("imu").items()
+    }
+    dvl = {
+        name: _dvl_preset(_PresetEntry("dvl", name, table, references), name)
+        for name, table in data.pop("dvl").items()
+    }
+    if data:
+        raise GtsamDvlError(f"presets.toml: unknown tables {', '.join(data)}")
+    return imu, dvl
+
+
+IMU_PRESETS, DVL_PRESETS = _load_presets()
 
 
 def imu_preset(name: str) -> ImuPreset:

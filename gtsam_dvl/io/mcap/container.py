@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 import zlib
-from typing import BinaryIO
+from typing import BinaryIO, NamedTuple
 
 import numpy as np
 import zstandard
@@ -52,6 +52,29 @@ def mmap_str(d: dict[str, str]) -> bytes:
 
 def record(op: int, content: bytes) -> bytes:
     return struct.pack("<BQ", op, len(content)) + content
+
+
+class MessageRows(NamedTuple):
+    """K messages to write, in order: message k on channel[k] with sequence number seq[k], stamped log_time[k] (ns,
+    the publish time too), its CDR body ``pool[start[k] : start[k] + length[k]]`` (pool: flat uint8, shared)."""
+
+    channel: np.ndarray
+    seq: np.ndarray
+    log_time: np.ndarray
+    pool: np.ndarray
+    start: np.ndarray
+    length: np.ndarray
+
+    def take(self, rows: slice | np.ndarray) -> MessageRows:
+        """These messages (a slice or an index array), over the same pool."""
+        return MessageRows(
+            self.channel[rows],
+            self.seq[rows],
+            self.log_time[rows],
+            self.pool,
+            self.start[rows],
+            self.length[rows],
+        )
 
 
 class McapContainer:
@@ -122,48 +145,21 @@ class McapContainer:
         self.attach_indexes.append(record(OP_ATTACHMENT_INDEX, idx + mstr(name) + mstr(media_type)))
         self._write(rec)
 
-    def write_messages(
-        self,
-        channel: np.ndarray,
-        seq: np.ndarray,
-        log_time: np.ndarray,
-        pool: np.ndarray,
-        start: np.ndarray,
-        length: np.ndarray,
-    ) -> None:
-        """Write K messages in the given order into chunks of about ``chunk_size`` bytes. Message k's
-        CDR body is ``pool[start[k] : start[k] + length[k]]`` (pool: flat uint8); publish time = log time."""
-        rec_len = 31 + length.astype(np.int64)
+    def write_messages(self, rows: MessageRows) -> None:
+        """Write these K messages in the given order into chunks of about ``chunk_size`` bytes."""
+        rec_len = 31 + rows.length.astype(np.int64)
         chunk_no = (
             np.cumsum(rec_len) - 1
         ) // self.chunk_size  # a chunk closes once it passes chunk_size
         bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [len(rec_len)]])
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             if b > a:
-                self._chunk(channel[a:b], seq[a:b], log_time[a:b], pool, start[a:b], length[a:b])
+                self.write_chunk(rows.take(slice(a, b)))
 
-    def write_chunk(
-        self,
-        channel: np.ndarray,
-        seq: np.ndarray,
-        log_time: np.ndarray,
-        pool: np.ndarray,
-        start: np.ndarray,
-        length: np.ndarray,
-    ) -> None:
-        """One chunk record holding exactly these K messages (arguments as write_messages'), for callers that
+    def write_chunk(self, rows: MessageRows) -> None:
+        """One chunk record holding exactly these K messages: write_messages' chunks, and those of callers that
         choose the chunk boundaries themselves (the streaming writer, mcap/writer.py)."""
-        self._chunk(channel, seq, log_time, pool, start, length)
-
-    def _chunk(
-        self,
-        channel: np.ndarray,
-        seq: np.ndarray,
-        log_time: np.ndarray,
-        pool: np.ndarray,
-        start: np.ndarray,
-        length: np.ndarray,
-    ) -> None:
+        channel, seq, log_time, pool, start, length = rows
         k = len(channel)
         rec_start = np.concatenate([[0], np.cumsum(31 + length.astype(np.int64))])
         out = np.empty(int(rec_start[-1]), np.uint8)

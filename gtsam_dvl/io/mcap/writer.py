@@ -17,7 +17,7 @@ import numpy as np
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.io.atomic import AtomicWriter
-from gtsam_dvl.io.mcap.container import McapContainer
+from gtsam_dvl.io.mcap.container import McapContainer, MessageRows
 from gtsam_dvl.io.ros2 import cdr, messages
 from gtsam_dvl.io.ros2.msgdefs import full_definition
 
@@ -118,66 +118,8 @@ class McapLogWriter(AtomicWriter):
         """Messages filled by ``cdr.new_messages``; stamps are read back from their headers."""
         self.add_encoded(topic, type_name, cdr.stamps_ns(arr), arr, qos)
 
-    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns) ------------------------------
-    def add_imu(
-        self,
-        topic: str,
-        t: np.ndarray,
-        b_omega: np.ndarray,
-        b_f: np.ndarray,
-        frame_id: str = "imu_link",
-        gyro_var: np.ndarray | None = None,
-        accel_var: np.ndarray | None = None,
-        orientation: np.ndarray | None = None,
-        orientation_cov: np.ndarray | None = None,
-    ) -> None:
-        """sensor_msgs/msg/Imu (messages.imu)."""
-        self.add_structured(
-            topic,
-            messages.IMU,
-            messages.imu(
-                self.stamps_ns(np.atleast_1d(t)),
-                b_omega,
-                b_f,
-                frame_id,
-                gyro_var,
-                accel_var,
-                orientation,
-                orientation_cov,
-            ),
-        )
-
-    def add_twist_with_covariance(
-        self,
-        topic: str,
-        t: np.ndarray,
-        linear: np.ndarray,
-        angular: np.ndarray | None,
-        cov: np.ndarray | None,
-        frame_id: str,
-    ) -> None:
-        """geometry_msgs/msg/TwistWithCovarianceStamped; cov (K,6,6), None = zeros (ROS: unknown)."""
-        arr = messages.six_dof_with_covariance(
-            messages.TWIST_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular, cov, frame_id
-        )
-        self.add_structured(topic, messages.TWIST_COV, arr)
-
-    def add_accel_with_covariance(
-        self,
-        topic: str,
-        t: np.ndarray,
-        linear: np.ndarray,
-        angular: np.ndarray,
-        cov: np.ndarray | None,
-        frame_id: str,
-    ) -> None:
-        """geometry_msgs/msg/AccelWithCovarianceStamped. For IMU biases: linear = accelerometer bias
-        (m/s^2), angular = gyro bias (rad/s), cov (K,6,6) in that order."""
-        arr = messages.six_dof_with_covariance(
-            messages.ACCEL_COV, self.stamps_ns(np.atleast_1d(t)), linear, angular, cov, frame_id
-        )
-        self.add_structured(topic, messages.ACCEL_COV, arr)
-
+    # -- typed topics (encoders: io/ros2/messages.py; t (K,) s relative to t0_ns) -----------------------------
+    # the others: add_structured of an encoder's messages (messages.imu, six_dof_with_covariance, odometry)
     def add_pose_with_covariance(
         self,
         topic: str,
@@ -218,34 +160,6 @@ class McapLogWriter(AtomicWriter):
             self.stamps_ns(np.atleast_1d(t)), value, variance, frame_id
         )
         self.add_structured(topic, messages.TEMPERATURE, arr)
-
-    def add_odometry(
-        self,
-        topic: str,
-        t: np.ndarray,
-        n_p: np.ndarray,
-        n_q_b: np.ndarray,
-        b_v: np.ndarray,
-        b_omega: np.ndarray,
-        pose_cov: np.ndarray | None = None,
-        twist_cov: np.ndarray | None = None,
-        frame_id: str = "map",
-        child_frame_id: str = "base_link",
-    ) -> None:
-        """nav_msgs/msg/Odometry: pose of child in frame_id, twist (b_v, b_omega) in the child frame;
-        covariances (K,6,6) or None (zeros)."""
-        arr = messages.odometry(
-            self.stamps_ns(np.atleast_1d(t)),
-            n_p,
-            n_q_b,
-            b_v,
-            b_omega,
-            pose_cov,
-            twist_cov,
-            frame_id,
-            child_frame_id,
-        )
-        self.add_structured(topic, messages.ODOMETRY, arr)
 
     def add_path(
         self, topic: str, t: np.ndarray, n_p: np.ndarray, n_q_b: np.ndarray, frame_id: str = "map"
@@ -306,17 +220,15 @@ class McapLogWriter(AtomicWriter):
     def _write_batches(self) -> None:
         """Every message added, merged in log-time order, into chunks."""
         if self._batches:
-            chan, seq, stamps, pool, start, lens = self._take_batches()
-            order = np.argsort(stamps, kind="stable")  # ties keep the order topics were added
-            self._mcap.write_messages(
-                chan[order], seq[order], stamps[order], pool, start[order], lens[order]
-            )
+            rows = self._take_batches()
+            order = np.argsort(
+                rows.log_time, kind="stable"
+            )  # ties keep the order topics were added
+            self._mcap.write_messages(rows.take(order))
 
-    def _take_batches(
-        self,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The messages added since the last call, concatenated in the order added, with their sequence numbers
-        (channel, seq, stamps, pool, start, length); the list of batches is emptied."""
+    def _take_batches(self) -> MessageRows:
+        """The messages added since the last call, concatenated in the order added, with their sequence numbers;
+        the list of batches is emptied."""
         batches, self._batches = self._batches, []
         chan = np.concatenate([np.full(len(s), c, np.uint16) for c, s, _, _ in batches])
         seq = np.concatenate([self._next_seq(c, len(s)) for c, s, _, _ in batches])
@@ -324,7 +236,7 @@ class McapLogWriter(AtomicWriter):
         lens = np.concatenate([n for _, _, _, n in batches])
         pool = np.concatenate([p for _, _, p, _ in batches])
         start = np.concatenate([[0], np.cumsum(lens)[:-1]])
-        return chan, seq, stamps, pool, start, lens
+        return MessageRows(chan, seq, stamps, pool, start, lens)
 
     def _next_seq(self, cid: int, n: int) -> np.ndarray:
         first = self._seq[cid]
@@ -383,19 +295,13 @@ class McapStreamWriter(McapLogWriter):
             return
         start = np.concatenate([[0], np.cumsum(lens)[:-1]])
         order = np.lexsort((seq, chan, stamps))
-        chan, seq, stamps, lens, start = (
-            chan[order],
-            seq[order],
-            stamps[order],
-            lens[order],
-            start[order],
-        )
+        rows = MessageRows(chan, seq, stamps, pool, start, lens).take(order)
         ready = (
-            len(stamps)
+            len(order)
             if before_ns is None
-            else int(np.searchsorted(stamps, before_ns, side="left"))
+            else int(np.searchsorted(rows.log_time, before_ns, side="left"))
         )
-        rec_end = self._bytes_written + np.cumsum(31 + lens[:ready])
+        rec_end = self._bytes_written + np.cumsum(31 + rows.length[:ready])
         chunk_no = (
             rec_end - 1
         ) // self._mcap.chunk_size  # as McapContainer.write_messages, from the first message
@@ -403,19 +309,17 @@ class McapStreamWriter(McapLogWriter):
         done = len(bounds) - 1 if final else len(bounds) - 2  # the last chunk may still grow
         for a, b in zip(bounds[:done], bounds[1 : done + 1], strict=True):
             if b > a:
-                self._mcap.write_chunk(
-                    chan[a:b], seq[a:b], stamps[a:b], pool, start[a:b], lens[a:b]
-                )
+                self._mcap.write_chunk(rows.take(slice(a, b)))
         cut = int(bounds[done]) if done > 0 else 0
         if cut:
             self._bytes_written = int(rec_end[cut - 1])
-        keep = slice(cut, None)
+        keep = rows.take(slice(cut, None))
         self._pending = (
-            chan[keep],
-            seq[keep],
-            stamps[keep],
-            lens[keep],
-            _gather(pool, start[keep], lens[keep]),
+            keep.channel,
+            keep.seq,
+            keep.log_time,
+            keep.length,
+            _gather(keep.pool, keep.start, keep.length),
         )
 
 
