@@ -21,6 +21,7 @@ from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.campaign import SCENARIO
 
 pytest.importorskip("distributed")
+pytestmark = pytest.mark.slow  # Dask clusters and worker processes: make test runs them, make check does not
 
 RUNS, FAIL_SEED = 6, 4
 ESTIMATORS = ["batch", "ekf"]

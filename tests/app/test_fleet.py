@@ -18,6 +18,9 @@ from tests.support.campaign import SCENARIO
 pytest.importorskip("distributed")
 
 
+pytestmark = pytest.mark.slow  # whole command-line runs on several logs: make test runs them, make check not
+
+
 def _smooth(*args: str | Path, timeout_s: float) -> subprocess.CompletedProcess[str]:
     """`gtsam-dvl smooth ARGS` in another interpreter, its output captured as text."""
     return subprocess.run(
