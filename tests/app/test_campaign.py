@@ -21,7 +21,8 @@ from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.campaign import SCENARIO
 
 pytest.importorskip("distributed")
-pytestmark = pytest.mark.slow  # Dask clusters and worker processes: make test runs them, make check does not
+# Dask clusters and worker processes: make test runs them, make check does not
+pytestmark = pytest.mark.slow
 
 RUNS, FAIL_SEED = 6, 4
 ESTIMATORS = ["batch", "ekf"]

@@ -18,7 +18,8 @@ from tests.support.campaign import SCENARIO
 pytest.importorskip("distributed")
 
 
-pytestmark = pytest.mark.slow  # whole command-line runs on several logs: make test runs them, make check not
+# whole command-line runs on several logs: make test runs them, make check does not
+pytestmark = pytest.mark.slow
 
 
 def _smooth(*args: str | Path, timeout_s: float) -> subprocess.CompletedProcess[str]:
