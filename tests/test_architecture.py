@@ -213,3 +213,59 @@ def test_the_cycle_check_sees_a_lazy_cycle(tmp_path: Path) -> None:
     (root / "d.py").write_text("from gtsam_dvl.c import x\n")
     files = {"gtsam_dvl." + p.stem: p for p in root.glob("*.py")}
     assert import_cycles(files) == [["gtsam_dvl.a", "gtsam_dvl.b"]]
+
+
+ESTIMATOR_STAGES = (
+    "inputs",
+    "models",
+    "graph",
+)  # estimators/ before any estimator (docs/architecture.md)
+ESTIMATOR_FOLDERS = ("batch", "online", "ekf")
+
+
+def _stage_of(module: str) -> str | None:
+    """The folder (or top-level module) of estimators/ a module is in: "inputs", "batch", "run", ..."""
+    parts = module.split(".")
+    return parts[2] if parts[:2] == ["gtsam_dvl", "estimators"] and len(parts) > 2 else None
+
+
+def stage_violations(files: dict[str, Path]) -> list[str]:
+    """Imports across estimators/ against its stages (test below), one line each."""
+    bad = []
+    for name, path in files.items():
+        own = _stage_of(name)
+        for imported in _runtime_imports(path) if own is not None else []:
+            other = _stage_of(imported)
+            if other is None or other == own:
+                continue
+            if own in ESTIMATOR_STAGES and other not in ESTIMATOR_STAGES:
+                bad.append(f"{name} (a stage) imports {imported}")
+            if own in ESTIMATOR_FOLDERS and other in ESTIMATOR_FOLDERS:
+                bad.append(f"{name} imports another estimator's {imported}")
+    return bad
+
+
+def test_estimator_stages_import_no_estimator() -> None:
+    """estimators/ by stage: inputs, models and graph import no estimator (batch, online, ekf, iodvlc, the runner),
+    and no estimator's folder imports another's, lazily or not (type-only imports aside)."""
+    bad = stage_violations(_package_files())
+    assert not bad, "\n".join(bad)
+
+
+def test_the_stage_check_sees_violations(tmp_path: Path) -> None:
+    (tmp_path / "a.py").write_text(
+        "def f():\n    from gtsam_dvl.estimators.batch.smoother import g\n"
+    )
+    (tmp_path / "b.py").write_text("from gtsam_dvl.estimators.online.types import x\n")
+    (tmp_path / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from gtsam_dvl.estimators.ekf import y\n"
+    )
+    files = {
+        "gtsam_dvl.estimators.models.a": tmp_path / "a.py",
+        "gtsam_dvl.estimators.ekf.b": tmp_path / "b.py",
+        "gtsam_dvl.estimators.graph.c": tmp_path / "c.py",
+    }
+    assert stage_violations(files) == [
+        "gtsam_dvl.estimators.models.a (a stage) imports gtsam_dvl.estimators.batch.smoother.g",
+        "gtsam_dvl.estimators.ekf.b imports another estimator's gtsam_dvl.estimators.online.types.x",
+    ]
