@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from gtsam_dvl.core.imu_faults import saturation_words
+
 # More than this share of a topic's messages dropped by --repair: the log is damaged, not just untidy.
 REPAIRED_DEGRADED = 0.01
 # IMU gaps are crossed by holding the last sample before them, with the motion model's uncertainty added
@@ -131,29 +133,16 @@ def _gap_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def _saturation_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
-    """The IMU's saturated stretches per topic (dropped and crossed as gaps): each degrades the result."""
-    out: list[tuple[str, str]] = []
-    for topic, report in sorted((losses.get("saturation") or {}).items()):
-        axes = ", ".join(
-            f"{a['sensor']} {a['axis']} at {a['limit']:+.4g} "
-            f"{'rad/s' if a['sensor'] == 'gyro' else 'm/s^2'}"
-            for a in report["axes"]
+    """The IMU's saturated stretches per topic (dropped and crossed as gaps): each degrades the result. In the
+    reader's words for them (core/imu_faults.py saturation_words), with what it means for the result."""
+    return [
+        (
+            "degraded",
+            f"{topic}: {saturation_words(report)}, dropped and crossed as IMU gaps, holding the last "
+            "sample before (the sigmas grow there); an IMU with a larger range avoids it",
         )
-        a, b = (
-            max(report["spans_s"], key=lambda s: s[1] - s[0])
-            if report["spans_s"]
-            else (float("nan"),) * 2
-        )
-        out.append(
-            (
-                "degraded",
-                f"{topic}: the IMU saturated ({axes}): {report['samples']} samples at the range "
-                f"limit in {report['stretches']} stretch(es), the longest {a:.2f} to {b:.2f} s, "
-                "dropped and crossed as IMU gaps, holding the last sample before (the sigmas grow "
-                "there); an IMU with a larger range avoids it",
-            )
-        )
-    return out
+        for topic, report in sorted((losses.get("saturation") or {}).items())
+    ]
 
 
 def _clock_step_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
