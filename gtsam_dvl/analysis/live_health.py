@@ -6,7 +6,7 @@ that say what to do), judged on the present instead of on a finished run:
 - the IMU silent (wall time: the IMU is the clock, so sensor time stops with it): "failed", no estimate;
 - the DVL topic silent (sensor time, the IMU's newest stamp against the DVL's): "warn", then "degraded" (the
   trajectory is dead reckoned on the IMU and depth, its covariance growing); lost bottom lock (pings coming
-  without a valid velocity) likewise, with its own, longer threshold, as a DVL gap in a log (health.py
+  without a valid velocity) likewise, with its own, longer threshold, as a DVL gap in a log (health_losses.py
   DVL_GAP_DEGRADED_S): a vehicle over deep water loses lock by design, a driver that stops is a fault;
 - stamps: a jump in a stream's stamps in the last RECENT_S, messages on another clock than the IMU's: "warn";
   messages late beyond the reorder window or duplicated, rejected pings and dropped samples: notes with counts;
@@ -21,7 +21,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from gtsam_dvl.analysis.health import _NOT_REJECTIONS, DVL_GAP_DEGRADED_S, Health
+from gtsam_dvl.analysis.health_counters import NOT_REJECTIONS
+from gtsam_dvl.analysis.health_losses import DVL_GAP_DEGRADED_S
+from gtsam_dvl.analysis.health_verdict import Health
 
 RECENT_S = 60.0  # a stamp jump is reported this long (sensor time) after it
 
@@ -190,7 +192,7 @@ def _check_counters(state: LiveState, h: Health) -> None:
     rejected = {
         k: v
         for k, v in state.counters.items()
-        if k.startswith("dvl_") and v and k not in _NOT_REJECTIONS and k != "dvl_unusable"
+        if k.startswith("dvl_") and v and k not in NOT_REJECTIONS and k != "dvl_unusable"
     }
     if rejected:
         h.flag(

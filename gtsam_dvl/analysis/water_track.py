@@ -2,7 +2,7 @@
 bottom lock.
 
 A water-track ping measures the velocity relative to the water (estimators/models/current.py): its residual is the
-bottom-track residual (analysis/health.py dvl_residuals, against the velocity over ground) plus the current seen in
+bottom-track residual (analysis/dvl_residuals.py, against the velocity over ground) plus the current seen in
 dvl_link, k d_R_b n_R_b^T [c_east, c_north, 0]. This module
 
 - counts the water-track pings and their stretches (runs of water-track pings without a bottom-track ping between
@@ -77,7 +77,7 @@ def check_water_track(
     flag: Callable[[str, str], None],
 ) -> None:
     """The water-track findings of a run (module doc) into the health's figures ("water_track") and flags. res:
-    analysis/health.py DvlResiduals of the run (its raw residuals, ping indices and water-track mask)."""
+    analysis/dvl_residuals.py DvlResiduals of the run (its raw residuals, ping indices and water-track mask)."""
     dvl = log.dvl
     if dvl.water_track is None or not np.any(dvl.water_track):
         return
@@ -95,7 +95,7 @@ def check_water_track(
     figures["water_track"] = fig
     if not isinstance(
         profile, dict
-    ):  # refused: counted and judged by analysis/health.py (dvl_water_track)
+    ):  # refused: counted and judged by analysis/health_counters.py (dvl_water_track)
         return
     flag(
         "note",

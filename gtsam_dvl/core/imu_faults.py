@@ -1,6 +1,6 @@
 """IMU faults found from the samples alone, before any estimator sees them: saturation and clock steps. The
 log reader (io/reader.py) applies them to every log it reads and records what it found in
-metadata["reader_losses"] ("saturation", "clock_steps"), which the health report states (analysis/health.py).
+metadata["reader_losses"] ("saturation", "clock_steps"), which the health report states (analysis/health_losses.py).
 
 Saturation. A gyro or accelerometer driven past its range reports the range's limit: a run of samples all
 equal to the axis's largest (or most negative) value in the log. A real sensor's noise makes equal consecutive

@@ -1,7 +1,7 @@
 """The health's advice names only settings and options that exist: every "[section] key" in the messages of
-analysis/health.py and analysis/prior_check.py is a field of that configuration section, every "--option" one of
-the command line's; the robust-kernel advice names a stronger kernel than the one that is on, none when the
-strongest is on."""
+analysis/health.py (with health_counters.py and health_losses.py) and analysis/prior_check.py is a field of that
+configuration section, every "--option" one of the command line's; the robust-kernel advice names a stronger
+kernel than the one that is on, none when the strongest is on."""
 
 from __future__ import annotations
 
@@ -12,11 +12,12 @@ from pathlib import Path
 import pytest
 
 import gtsam_dvl
-from gtsam_dvl.analysis import health, prior_check
+from gtsam_dvl.analysis import health, health_counters, health_losses, prior_check
 from gtsam_dvl.core.config import EstimatorConfig
 
 PACKAGE = Path(gtsam_dvl.__file__).parent
-SOURCES = [Path(health.__file__), Path(prior_check.__file__)]
+# the health's messages are in health.py and the modules it is split into (counters, losses)
+SOURCES = [Path(m.__file__) for m in (health, health_counters, health_losses, prior_check)]
 
 
 def _messages(path: Path) -> str:

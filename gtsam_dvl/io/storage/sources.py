@@ -65,6 +65,14 @@ class Db3Source:
         names = {v: k for k, v in self._ids.items()}
         return {names[t]: n for t, n in rows if t in names}
 
+    def _rows(self, topic: str) -> sqlite3.Cursor:
+        """The topic's (timestamp, data) rows in recording order, as a cursor (read fetches them all, iter_read
+        page by page)."""
+        return self.con.execute(
+            "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id",
+            (self._ids[topic],),
+        )
+
     def read(
         self, topics: Iterable[str], progress: Callable[[float], None] | None = None
     ) -> dict[str, Bodies]:
@@ -72,10 +80,7 @@ class Db3Source:
         wanted = [t for t in topics if t in self._ids]
         for i, topic in enumerate(wanted):
             try:
-                rows = self.con.execute(
-                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id",
-                    (self._ids[topic],),
-                ).fetchall()
+                rows = self._rows(topic).fetchall()
             except sqlite3.Error as e:
                 raise GtsamDvlError(f"{self.path}: cannot read {topic} ({e})") from None
             out[topic] = _bodies(rows)
@@ -90,10 +95,7 @@ class Db3Source:
         wanted = [t for t in topics if t in self._ids]
         for i, topic in enumerate(wanted):
             try:
-                cur = self.con.execute(
-                    "SELECT timestamp, data FROM messages WHERE topic_id = ? ORDER BY id",
-                    (self._ids[topic],),
-                )
+                cur = self._rows(topic)
                 while rows := cur.fetchmany(DB3_PAGE):
                     yield {topic: _bodies(rows)}
             except sqlite3.Error as e:

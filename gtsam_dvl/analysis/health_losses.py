@@ -1,0 +1,184 @@
+"""What the reader lost, in the health check's words (analysis/health.py): LogData.metadata["reader_losses"] (what
+--salvage and --repair dropped, gaps in the stamps, IMU saturation, clock steps) as figures and (severity, text)
+findings.
+
+Pure computation on the losses record: no files (analysis layer).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from gtsam_dvl.core.imu_faults import saturation_words
+
+# More than this share of a topic's messages dropped by --repair: the log is damaged, not just untidy.
+REPAIRED_DEGRADED = 0.01
+# IMU gaps are crossed by holding the last sample before them, with the motion model's uncertainty added
+# (estimators/inputs/gaps.py): honest, but the trajectory across a gap longer than this is a guess the user should
+# know about (a 100 Hz IMU dropping a few samples is harmless).
+IMU_GAP_DEGRADED_S = 0.5
+# The DVL may fall silent for a while (turns, bottom out of range); longer than this the trajectory is dead
+# reckoned for long enough that the user should know where.
+DVL_GAP_DEGRADED_S = 60.0
+
+
+def loss_figures(losses: dict[str, Any]) -> dict[str, Any]:
+    """The numbers of the reader's losses: messages lost per topic, seconds of data missing per topic (gaps in
+    the stamps), chunks lost, whether the file was cut short and where its data end."""
+    salv = losses.get("salvage") or {}
+    return {
+        "messages_lost": dict(losses.get("messages_lost", {})),
+        "seconds_missing": {t: g["seconds"] for t, g in (losses.get("gaps") or {}).items()},
+        "chunks_lost": salv.get("chunks_lost", 0),
+        "truncated": bool(salv.get("truncated")),
+        "data_end_s": min(
+            (c["data_end_s"] for c in salv.get("truncated", []) if c["data_end_s"] is not None),
+            default=None,
+        ),
+    }
+
+
+def loss_lines(losses: dict[str, Any]) -> list[str]:
+    """What the reader lost (LogData.metadata["reader_losses"]), one line per finding; [] if nothing."""
+    return [text for _, text in loss_findings(losses)]
+
+
+def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """(severity, text) per loss: salvaged chunks, a cut-off file, messages dropped by --repair per topic, gaps
+    in a topic's stamps, IMU saturation, clock steps. Severity "degraded" when the loss harms the result, else
+    "note"."""
+    return [
+        *_salvage_findings(losses),
+        *_repair_findings(losses),
+        *_gap_findings(losses),
+        *_saturation_findings(losses),
+        *_clock_step_findings(losses),
+    ]
+
+
+def _salvage_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The chunks --salvage dropped and a file cut short: both degrade the result."""
+    out: list[tuple[str, str]] = []
+    salv = losses.get("salvage") or {}
+    if salv.get("chunks_lost"):
+        per = ", ".join(
+            f"{t} {n}" for t, n in sorted(salv.get("messages_lost_per_topic", {}).items())
+        )
+        spans = salv.get("lost_spans_s", [])
+        when = (
+            (
+                f", log time {min(s[0] for s in spans):.1f} to {max(s[1] for s in spans):.1f} s "
+                f"({salv.get('seconds_lost', 0.0):.1f} s of data)"
+            )
+            if spans
+            else ""
+        )
+        at_least = "" if salv.get("messages_lost_exact") else "at least "
+        out.append(
+            (
+                "degraded",
+                f"--salvage dropped {salv['chunks_lost']} damaged chunk(s) with {at_least}"
+                f"{salv.get('messages_lost', 0)} message(s)"
+                + (f" ({per})" if per else "")
+                + when
+                + ": the result has no data there",
+            )
+        )
+    for cut in salv.get("truncated", []):
+        end = cut.get("data_end_s")
+        out.append(
+            (
+                "degraded",
+                f"the log file is cut short at byte {cut['at_byte']}: nothing after "
+                + (f"{end:.1f} s" if end is not None else "its start")
+                + " could be read and how much more it held is unknown; the result ends there",
+            )
+        )
+    return out
+
+
+def _repair_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The messages --repair dropped per topic: "degraded" beyond REPAIRED_DEGRADED of the topic."""
+    out: list[tuple[str, str]] = []
+    for topic, d in sorted((losses.get("repair") or {}).items()):
+        if d.get("of") and d["dropped"] / d["of"] > REPAIRED_DEGRADED:
+            out.append(
+                ("degraded", _repair_line(topic, d) + ": the log is damaged, check the recording")
+            )
+        else:
+            out.append(("note", _repair_line(topic, d)))
+    return out
+
+
+def _gap_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The gaps in each topic's stamps: "degraded" when the longest is beyond the IMU's or the DVL's limit."""
+    out: list[tuple[str, str]] = []
+    for topic, g in sorted((losses.get("gaps") or {}).items()):
+        imu = "imu" in topic.lower()
+        if imu and g["longest_s"] > IMU_GAP_DEGRADED_S:
+            out.append(
+                (
+                    "degraded",
+                    _gap_line(topic, g) + ": the IMU has holes, crossed by holding the last "
+                    "sample (the sigmas grow there); check the IMU driver",
+                )
+            )
+        elif not imu and g["longest_s"] > DVL_GAP_DEGRADED_S:
+            out.append(
+                ("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there")
+            )
+        else:
+            out.append(("note", _gap_line(topic, g)))
+    return out
+
+
+def _saturation_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The IMU's saturated stretches per topic (dropped and crossed as gaps): each degrades the result. In the
+    reader's words for them (core/imu_faults.py saturation_words), with what it means for the result."""
+    return [
+        (
+            "degraded",
+            f"{topic}: {saturation_words(report)}, dropped and crossed as IMU gaps, holding the last "
+            "sample before (the sigmas grow there); an IMU with a larger range avoids it",
+        )
+        for topic, report in sorted((losses.get("saturation") or {}).items())
+    ]
+
+
+def _clock_step_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The clock steps --repair shifted the stamps across: notes."""
+    out: list[tuple[str, str]] = []
+    for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
+        for c in steps:
+            back = c["jump_s"] < 0
+            out.append(
+                (
+                    "note",
+                    f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump {'back ' * back}by "
+                    f"{abs(c['jump_s']):.3f} s while the samples run on): --repair shifted the later "
+                    f"stamps {'forward' if back else 'back'} by {abs(c['step_s']):.3f} s",
+                )
+            )
+    return out
+
+
+def _repair_line(topic: str, d: dict[str, int]) -> str:
+    why = ", ".join(
+        f"{d[k]} {name}"
+        for k, name in (
+            ("nan", "with NaN"),
+            ("duplicate", "duplicate stamp(s)"),
+            ("backwards", "going back in time"),
+        )
+        if d.get(k)
+    )
+    return f"--repair dropped {d['dropped']} of {d.get('of', '?')} {topic} message(s) ({why})"
+
+
+def _gap_line(topic: str, g: dict[str, Any]) -> str:
+    a, b = (
+        max(g["spans_s"], key=lambda s: s[1] - s[0])
+        if g.get("spans_s")
+        else (float("nan"), float("nan"))
+    )
+    return f"{topic}: {g['seconds']:.1f} s of data missing in {g['count']} gap(s) (longest {a:.1f} to {b:.1f} s)"
