@@ -21,6 +21,7 @@ demo: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check gtsam_dvl factors tests bench examples
+	$(BIN)/ruff format --check -q gtsam_dvl factors tests bench examples
 
 typecheck: $(STAMP)
 	$(BIN)/mypy gtsam_dvl
