@@ -13,7 +13,7 @@ from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import calibration_info, correlated_error
+from gtsam_dvl.core.states import calibration_info
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.pieces import long_gaps, smooth_pieces
 from gtsam_dvl.estimators.batch.solve import (  # noqa: F401  (re-exported: the solve's names of old)
@@ -28,7 +28,7 @@ from gtsam_dvl.estimators.graph.bulk import BulkGraph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
 from gtsam_dvl.estimators.graph.solver import ChunkedOrdering
 from gtsam_dvl.estimators.inputs.gaps import screened_in_memory, screened_losses
-from gtsam_dvl.estimators.models import correlated, weak_hold
+from gtsam_dvl.estimators.models import weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
 from gtsam_dvl.estimators.models.current import resolve_water_track
 from gtsam_dvl.estimators.models.noise_levels import NoiseReport
@@ -108,8 +108,6 @@ def smooth_batch(
         screened := screened_losses(log)
     ) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
-    if correlated_error(config):
-        result.info["dvl_correlated_error"] = correlated.info(config, values, len(builder.epochs))
     result.config = stated.to_dict()
     if calibration is not None:
         result.info["calibration_prior"] = calibration_info(config, calibration)

@@ -39,6 +39,7 @@ from gtsam_dvl.estimators.graph.solver import (
 )
 from gtsam_dvl.estimators.inputs.depth import depth_samples
 from gtsam_dvl.estimators.models import correlated_fit, current
+from gtsam_dvl.estimators.models.epoch_states import graph_estimates, reports
 from gtsam_dvl.estimators.models.noise_levels import (
     SCREEN_K,
     SENSOR_GROUPS,
@@ -354,7 +355,7 @@ def fit_dvl_noise(
     ] = {}  # the white fit and the long-window level behind each fit
     gm_configured = builder.config
     gm_slots = (
-        builder.factor_slots.get("correlated", range(0))
+        builder.factor_slots.get("dvl_error", range(0))
         if correlated_fit.fit_enabled(cfg)
         else range(0)
     )
@@ -510,6 +511,10 @@ def extract_result(
         "epochs": n,
         "imu_gaps": builder.gaps.summary(),
     }
+    t = np.array([e.t for e in builder.epochs])
+    info.update(
+        reports(cfg, graph_estimates(cfg, values, marg.covariances, t))
+    )  # (epoch_states.py)
     if water_current(
         cfg
     ):  # the water current per state with its marginal sigmas (estimators/models/current.py)

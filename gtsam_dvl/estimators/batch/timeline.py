@@ -18,18 +18,19 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import E, S, V, W, X, key_dim
+from gtsam_dvl.core.keys import X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
-from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys, water_current
+from gtsam_dvl.core.states import columns, read_values, shared_keys
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.graph.bulk import BulkGraph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.models.epoch_states import enabled_epoch_states, state_keys
 
 
-def _epoch_of(keys: list[int]) -> int:
-    """The latest state index a factor touches (-1: shared keys only)."""
-    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in "xvew"]
+def _epoch_of(keys: list[int], chars: str) -> int:
+    """The latest state index a factor touches among the per-state keys (symbols chars; -1: shared keys only)."""
+    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in chars]
     return max(idx) if idx else -1
 
 
@@ -59,34 +60,31 @@ def filtering_timeline(
     at each epoch. Only the random-constant bias model (the paper's) is supported."""
     if builder.config.imu.bias_model != "constant":
         raise ValueError("filtering_timeline supports the random-constant bias model only")
+    cfg = builder.config
     linear = graph.linearize(values)
     n = len(builder.epochs)
+    chars = "xv" + "".join(s.char for s in enabled_epoch_states(cfg))
     by_epoch: list[list[gtsam.GaussianFactor]] = [[] for _ in range(n)]
     for i in range(linear.size()):
         f = linear.at(i)
-        e = _epoch_of(list(f.keys()))
+        e = _epoch_of(list(f.keys()), chars)
         by_epoch[max(e, 0)].append(f)
 
-    # filter layout at epoch i: [X_i, V_i, (E_i), (W_i), shared]; transition layout adds X_{i+1}, V_{i+1}, (E_{i+1}),
-    # (W_{i+1}) after X_i, V_i, (E_i), (W_i). shared: the keys of the shared states the configuration estimates
-    # (core/states.py: B, K, C, and T, L); E_i the DVL's correlated error when modelled
-    # (estimators/models/correlated.py),
-    # W_i the water current when water-track pings are used (estimators/models/current.py)
-    cfg = builder.config
-    gm, wc = correlated_error(cfg), water_current(cfg)
-    d = 9 + 3 * gm + 2 * wc  # the epoch's own state
+    # filter layout at epoch i: [X_i, V_i, (per-epoch states of i), shared]; the transition layout adds state i+1's
+    # after state i's. The per-epoch states: those the configuration carries (estimators/models/epoch_states.py: the
+    # DVL's correlated error E_i, the water current W_i, ...); shared: the keys of the shared states the
+    # configuration estimates (core/states.py: B, K, C, and T, L) and the per-epoch states' extra variables (the
+    # water current's layer boundaries)
+    d = sum(key_dim(k) for k in state_keys(cfg, 0))  # the epoch's own state
 
     def own(i: int, at: int) -> dict[int, slice]:
-        out = {X(i): slice(at, at + 6), V(i): slice(at + 6, at + 9)}
-        if gm:
-            out[E(i)] = slice(at + 9, at + 12)
-        if wc:
-            out[W(i)] = slice(at + d - 2, at + d)
+        out: dict[int, slice] = {}
+        for k in state_keys(cfg, i):
+            out[k] = slice(at, at + key_dim(k))
+            at += key_dim(k)
         return out
 
-    shared = shared_keys(cfg) + [
-        S(b) for b in builder.shear
-    ]  # (the water current's layer boundaries: current.py)
+    shared = shared_keys(cfg) + builder.extra_keys
     shared_cols: dict[int, slice] = {}
     start = 0
     for k in shared:

@@ -92,16 +92,14 @@ def ekf_propagate(
     return out, phi * d_e
 
 
-def info(
-    config: EstimatorConfig, values: gtsam.Values | None = None, n_states: int = 0
-) -> dict[str, object]:
-    """NavResult.info["dvl_correlated_error"]: the model's level and time constant and, from a solution's values,
-    the RMS of the estimated error per dvl_link axis (m/s) over the states."""
+def info(config: EstimatorConfig, d_e: np.ndarray | None = None) -> dict[str, object]:
+    """NavResult.info["dvl_correlated_error"]: the model's level and time constant and, from a smoother's estimate
+    d_e (N, 3) of every state (estimators/models/epoch_states.py EpochEstimate), the RMS of the estimated error per
+    dvl_link axis (m/s) over the states."""
     out: dict[str, object] = {
         "sigma_m_s": config.dvl.correlated_sigma_m_s,
         "tau_s": config.dvl.correlated_tau_s,
     }
-    if values is not None and n_states:
-        d_e = np.array([values.atVector(E(i)) for i in range(n_states)])
-        out["estimate_rms_m_s"] = np.sqrt(np.mean(d_e**2, axis=0)).tolist()
+    if d_e is not None and len(d_e):
+        out["estimate_rms_m_s"] = np.sqrt(np.mean(np.asarray(d_e) ** 2, axis=0)).tolist()
     return out

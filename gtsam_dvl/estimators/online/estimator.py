@@ -87,7 +87,7 @@ from gtsam_dvl.core.keys import S as S_KEY  # (the water current's layer boundar
 from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, water_current
+from gtsam_dvl.core.states import calibration_info, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import Alignment, map_frame_of
@@ -100,9 +100,10 @@ from gtsam_dvl.estimators.inputs.gaps import (
 from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
 from gtsam_dvl.estimators.inputs.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.inputs.selection import EpochScheduler, Ping
-from gtsam_dvl.estimators.models import correlated, current, weak_hold
+from gtsam_dvl.estimators.models import current, weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
 from gtsam_dvl.estimators.models.current import resolve_water_track
+from gtsam_dvl.estimators.models.epoch_states import reports
 from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     dvl_fit_enabled,
@@ -679,7 +680,7 @@ class OnlineEstimator:
         self._latest = OnlineEstimate.from_state(self._state, self.mounting.b_R_d0)
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
-            if sm.wc:  # the newest state's current, filtered (as the EKF's), for current_profile
+            if water_current(self.config):  # the newest state's current, filtered (as the EKF's), for current_profile
                 self.current_history.append(
                     (
                         t_epoch,
@@ -748,8 +749,8 @@ def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int =
     water current. smooth_online and the ROS 2 node (app/node: the calibration file it saves) both call it, so a
     live run's calibration is the one `smooth --mode online` gives for the same messages."""
     result = estimator.result(t0_ns)
-    if correlated_error(config):
-        result.info["dvl_correlated_error"] = correlated.info(config)
+    if estimator.smoother is not None:  # the per-epoch states' reports at the newest state (epoch_states.py)
+        result.info.update(reports(config, estimator.smoother.epoch_estimates()))
     if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
         result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
     # (constant_error.py; none with a vehicle calibration file as prior)
