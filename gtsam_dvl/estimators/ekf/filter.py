@@ -66,10 +66,10 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew, so3_log
-from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled, water_current
+from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
+from gtsam_dvl.estimators.ekf.history import History, history_result
 from gtsam_dvl.estimators.ekf.kalman import (
     OFFSET,
     gate_threshold,
@@ -79,8 +79,10 @@ from gtsam_dvl.estimators.ekf.kalman import (
 from gtsam_dvl.estimators.ekf.strapdown import (
     BA,
     BG,
+    LAYOUT,
     MIS,
     N_ERR,
+    N_NAV,
     PHI,
     POS,
     SCALE,
@@ -113,9 +115,13 @@ from gtsam_dvl.estimators.inputs.selection import (
 )
 from gtsam_dvl.estimators.models import current, weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
-from gtsam_dvl.estimators.models.correlated import ekf_propagate
-from gtsam_dvl.estimators.models.correlated import info as correlated_info
 from gtsam_dvl.estimators.models.current import resolve_water_track, water_pings
+from gtsam_dvl.estimators.models.epoch_states import (
+    EpochEstimate,
+    ekf_states,
+    enabled_epoch_states,
+    reports,
+)
 from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     WarmupFit,
@@ -143,8 +149,8 @@ from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 # the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
-# (core/states.py ekf_layout: gyro and accelerometer bias, scale, misalignment, and the time offset when estimated)
-LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
+# (core/states.py ekf_layout, strapdown.LAYOUT: gyro and accelerometer bias, scale, misalignment, and the time offset
+# when estimated)
 CALIBRATION = np.r_[
     LAYOUT["scale"], LAYOUT["misalignment"]
 ]  # error-state indices of the DVL scale and misalignment
@@ -220,17 +226,14 @@ def initial_state(
     P[np.ix_(held, held)] = (
         held_cov  # a calibration's joint covariance over the states it holds, in their place
     )
-    d_e = None
-    if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
-        P = np.pad(P, ((0, 3), (0, 3)))
-        P[n:, n:] = np.eye(3) * config.dvl.correlated_sigma_m_s**2
-        d_e = np.zeros(3)
-    n_c = None
-    if water_current(config):  # the water current, last: its prior
+    epoch: dict[str, np.ndarray] = {}
+    for s in ekf_states(
+        config
+    ):  # the per-epoch states' blocks, last: their priors (epoch_states.py)
         m = len(P)
-        P = np.pad(P, ((0, 2), (0, 2)))
-        P[m:, m:] = np.eye(2) * config.current.prior_sigma_m_s**2
-        n_c = np.zeros(2)
+        P = np.pad(P, ((0, s.dim), (0, s.dim)))
+        P[m:, m:] = s.ekf_prior_cov(config)
+        epoch[s.name] = np.asarray(s.initial(config), dtype=float)
     return FilterState(
         NavState(n_R_b.copy(), n_v, n_p),
         np.zeros(3),
@@ -239,8 +242,7 @@ def initial_state(
         b_R_d0.copy(),
         P,
         file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0,
-        d_e,
-        n_c,
+        epoch=epoch,
     )
 
 
@@ -251,9 +253,11 @@ def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndar
     q[PHI] = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2
     q[VEL] = (imu_cfg.accel_noise_ug_rthz * UG) ** 2
     q[POS] = imu_cfg.integration_sigma_m_rts**2
-    if imu_cfg.bias_model == "random_walk":
-        q[BG] = (imu_cfg.gyro_bias_rw_deg_per_h_per_rth * DEG_PER_H / 60.0) ** 2
-        q[BA] = (imu_cfg.accel_bias_rw_ug_per_rth * UG / 60.0) ** 2
+    for s in enabled_epoch_states(
+        config
+    ):  # the random walk of states in the shared block (the biases)
+        for name, density in s.ekf_noise(config).items():
+            q[LAYOUT[name]] = density
     Qc = np.diag(q)
     return 0.5 * T * (Phi @ Qc @ Phi.T + Qc)
 
@@ -525,7 +529,9 @@ DIVERGENCE_PINGS = 30
 DIVERGENCE_NIS = 6.0
 # (and the time offset, OFFSET, when estimated: its slot exists only then)
 FROZEN_ON_DIVERGENCE = np.r_[
-    np.arange(BG.start, BG.stop), np.arange(BA.start, BA.stop), CALIBRATION
+    np.arange(LAYOUT["gyro_bias"].start, LAYOUT["gyro_bias"].stop),
+    np.arange(LAYOUT["accel_bias"].start, LAYOUT["accel_bias"].stop),
+    CALIBRATION,
 ]
 
 
@@ -745,15 +751,10 @@ def _filter(
                 fs.P = propagate_covariance(
                     fs.P, step.Phi, process_noise(config, step.Phi, step.duration)
                 )
-                if (
-                    gm := fs.error_slice()
-                ) is not None:  # the correlated DVL error decays (correlated.py)
-                    assert fs.dvl_error is not None
-                    fs.P, fs.dvl_error = ekf_propagate(
-                        config, fs.P, fs.dvl_error, gm, t_next - t_prev
-                    )
-                # the current's random walk in time and depth, or across the layer boundaries (current.py)
-                current.ekf_propagate(config, fs, t_next - t_prev, frame.height_m)
+                # the per-epoch states' processes: the correlated DVL error decays, the current's random walk in
+                # time and depth or across the layer boundaries, ... (epoch_states.py)
+                for s in ekf_states(config):
+                    s.ekf_propagate(config, fs, t_next - t_prev, frame.height_m)
                 if (
                     held
                 ):  # the motion model's uncertainty across an IMU gap, as in the factor graphs
@@ -899,8 +900,7 @@ def _filter(
             **watch.info(),
         },
     }
-    if fs.dvl_error is not None:
-        result.info["dvl_correlated_error"] = correlated_info(config)
+    result.info.update(reports(config, ekf_estimates(fs, float(hist.t[-1]) if hist.t else 0.0)))
     if (
         calibration is None
         and fit is None
@@ -927,3 +927,14 @@ def _filter(
     if progress:
         progress(1.0)
     return result
+
+
+def ekf_estimates(fs: FilterState, t: float) -> dict[str, EpochEstimate]:
+    """The per-epoch states' filtered estimates at the filter's last state (stamped t s) and their covariance
+    blocks (estimators/models/epoch_states.py)."""
+    return {
+        name: EpochEstimate(
+            np.array([t]), fs.epoch[name][None, :].copy(), fs.P[cols, cols][None].copy(), False
+        )
+        for name, cols in fs.epoch_slices().items()
+    }

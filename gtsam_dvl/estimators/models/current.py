@@ -264,9 +264,7 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
     j = int(layer_index(config, float(fs.nav.n_p[2]), height0))
     for b, sign in crossings(fs.layer, j):
         if b not in fs.shear_ids:
-            at = (
-                len(fs.P) - 2 - (0 if fs.dvl_error is None else 3)
-            )  # the end of the boundaries' block
+            at = len(fs.P) - fs.epoch_dims()  # the end of the boundaries' block
             P = np.insert(np.insert(fs.P, [at, at], 0.0, axis=0), [at, at], 0.0, axis=1)
             c = config.current
             P[at : at + 2, at : at + 2] = c.depth_rw_m_s_per_sqrt_m**2 * c.layer_thickness_m * _EYE2
@@ -283,7 +281,7 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
             sign * fs.P[cols, :]
         )  # T P T^T with T = I + sign E(wc, cols): rows, then columns
         fs.P[:, wc] += sign * fs.P[:, cols]
-        fs.current = fs.current + sign * fs.shear[r]
+        fs.epoch["water_current"] = fs.current + sign * fs.shear[r]
     fs.layer = j
 
 

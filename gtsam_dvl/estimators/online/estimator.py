@@ -680,7 +680,9 @@ class OnlineEstimator:
         self._latest = OnlineEstimate.from_state(self._state, self.mounting.b_R_d0)
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
-            if water_current(self.config):  # the newest state's current, filtered (as the EKF's), for current_profile
+            if water_current(
+                self.config
+            ):  # the newest state's current, filtered (as the EKF's), for current_profile
                 self.current_history.append(
                     (
                         t_epoch,
@@ -749,7 +751,9 @@ def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int =
     water current. smooth_online and the ROS 2 node (app/node: the calibration file it saves) both call it, so a
     live run's calibration is the one `smooth --mode online` gives for the same messages."""
     result = estimator.result(t0_ns)
-    if estimator.smoother is not None:  # the per-epoch states' reports at the newest state (epoch_states.py)
+    if (
+        estimator.smoother is not None
+    ):  # the per-epoch states' reports at the newest state (epoch_states.py)
         result.info.update(reports(config, estimator.smoother.epoch_estimates()))
     if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
         result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
