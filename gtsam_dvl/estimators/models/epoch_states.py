@@ -438,15 +438,8 @@ for _s in EPOCH_STATES:
     DIMS[_s.char] = _s.dim
 
 
-def register(state: EpochState) -> None:
-    """Record a new state's key dimension (core/keys.py key_dim) once it is in EPOCH_STATES."""
-    DIMS[state.char] = state.dim
-
-
 def enabled_epoch_states(config: EstimatorConfig) -> list[EpochState]:
     """The per-epoch states the configuration carries, in registry order (the order of each state's keys)."""
-    for s in EPOCH_STATES:
-        DIMS.setdefault(s.char, s.dim)
     return [s for s in EPOCH_STATES if s.enabled(config)]
 
 
