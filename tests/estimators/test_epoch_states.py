@@ -62,14 +62,17 @@ def _run(mode: str, toy: bool) -> NavResult:
         if toy:
             mp.setattr(epoch_states, "EPOCH_STATES", [*epoch_states.EPOCH_STATES, ToyWalk()])
             mp.setitem(DIMS, ToyWalk.char, ToyWalk.dim)
-        return run_estimator(log, mode, config, timeline=mode == "batch")
+        result = run_estimator(log, mode, config, timeline=mode == "batch")
+    assert isinstance(result, NavResult)
+    return result
 
 
 @pytest.mark.parametrize("mode", MODES)
 def test_a_toy_state_reaches_every_estimator(mode: str) -> None:
     """The toy state's reported estimate at the last state is the prior's mean (to 1e-9) and its sigma the random
     walk's prediction from the first state to the last (to 1e-6 relative: the smoothers' marginals of a linear
-    chain are exact, the EKF's sum of steps too); the navigation is the run's without it (to 1e-9 m, m/s; its covariance to 1e-6 relative)."""
+    chain are exact, the EKF's sum of steps too); the navigation is the run's without it (to 1e-9 m, m/s; its
+    covariance to 1e-6 relative)."""
     with_toy, without = _run(mode, True), _run(mode, False)
     assert "toy_walk" not in without.info
     report = with_toy.info["toy_walk"]
