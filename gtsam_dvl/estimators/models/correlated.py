@@ -19,6 +19,9 @@ between it and the next state, read E(i) (factors/dvl.py error_variable; a keyfr
 is short against tau). The links are linear in the vectors E, so they are GTSAM's own linear factors
 (LinearContainerFactor of a JacobianFactor, linearised at zero: exact) evaluated in C++, not Python
 CustomFactors (which iSAM2 would call with a copy of the whole Values).
+
+Its entry in the per-epoch registry (estimators/models/epoch_states.py DvlCorrelatedError) declares it to the
+estimators with these functions: the batch graph, the online window, the EKF and the results read the registry.
 """
 
 from __future__ import annotations

@@ -36,6 +36,9 @@ is a CustomFactor of the same residual (GTSAM's Python JacobianFactor takes thre
 The current is determined only where something ties the vehicle's velocity over ground: bottom track, GNSS at the
 surface, or the IMU carrying it from either; a water-track stretch far from both leaves W and the vehicle's
 velocity free together (the verdict, `info`, says where the current's sigma stays near its prior's).
+
+Its entry in the per-epoch registry (estimators/models/epoch_states.py WaterCurrent) declares it to the estimators
+with these functions (the boundaries S(b) as its extra keys); the profile is the result's typed water_current.
 """
 
 from __future__ import annotations
