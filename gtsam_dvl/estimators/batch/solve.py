@@ -515,10 +515,11 @@ def extract_result(
     info.update(
         reports(cfg, graph_estimates(cfg, values, marg.covariances, t))
     )  # (epoch_states.py)
+    profile = None
     if water_current(
         cfg
     ):  # the water current per state with its marginal sigmas (estimators/models/current.py)
-        info["water_current"] = current.profile(
+        profile = current.profile(
             np.array([e.t for e in builder.epochs]),
             n_p[:, 2],
             np.array([values.atVector(W(i)) for i in range(n)]),
@@ -543,6 +544,7 @@ def extract_result(
         calib_joint_cov=marg.joints[calib_group],
         shared_joint_cov=marg.joints[shared_group],
         info=info,
+        water_current=profile,
         config=cfg.to_dict(),
         alignment_method=builder.alignment.method,
         dvl_pings=builder.usable,

@@ -915,7 +915,7 @@ def _filter(
     if (
         currents
     ):  # the current at each update, its filtered sigmas (estimators/models/current.py profile)
-        result.info["water_current"] = current.profile(
+        result.water_current = current.profile(
             np.array([c[0] for c in currents]),
             np.array([c[1] for c in currents]),
             np.array([c[2] for c in currents]),

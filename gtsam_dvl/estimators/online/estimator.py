@@ -86,7 +86,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import S as S_KEY  # (the water current's layer boundaries)
 from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.result import NavResult, Timeline
+from gtsam_dvl.core.result import NavResult, Timeline, WaterCurrentProfile
 from gtsam_dvl.core.states import calibration_info, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
@@ -422,8 +422,8 @@ class OnlineEstimator:
         return self._latest
 
     # ----- output --------------------------------------------------------------------------------
-    def current_profile(self) -> dict[str, Any]:
-        """NavResult.info["water_current"]: the filtered current at each state (estimators/models/current.py
+    def current_profile(self) -> WaterCurrentProfile:
+        """NavResult.water_current: the filtered current at each state (estimators/models/current.py
         profile)."""
         h, sm = self.current_history, self.smoother
         shear = (
@@ -762,7 +762,7 @@ def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int =
     if (
         estimator.current_history
     ):  # the water current at each state as it left the window (or at the end)
-        result.info["water_current"] = estimator.current_profile()
+        result.water_current = estimator.current_profile()
     return result
 
 
