@@ -468,6 +468,22 @@ def fit_dvl_noise(
     return values, report
 
 
+def _marginal_groups(
+    cfg: EstimatorConfig, n: int
+) -> tuple[list[tuple[int, ...]], tuple[int, ...], tuple[int, ...]]:
+    """The joint marginals a result needs (extract_result): each state's (X, V), the calibration block's keys, each
+    other shared key at the last state alone, and every shared state jointly (NavResult.shared_joint_cov,
+    states.joint_states); with the calibration block's and the shared group."""
+    last = shared_keys(cfg, n - 1)
+    calib_group = tuple(shared_keys(cfg, n - 1, block=True))
+    groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
+    groups += [(k,) for k in last if k not in calib_group]
+    shared_group = tuple(last)
+    if shared_group != calib_group:
+        groups.append(shared_group)
+    return groups, calib_group, shared_group
+
+
 def extract_result(
     builder: LogGraph,
     graph: gtsam.NonlinearFactorGraph | BulkGraph,
@@ -482,15 +498,7 @@ def extract_result(
     them jointly (shared_joint_cov)."""
     cfg = builder.config
     n = len(builder.epochs)
-    last = shared_keys(cfg, n - 1)
-    calib_group = tuple(shared_keys(cfg, n - 1, block=True))
-    groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
-    groups += [(k,) for k in last if k not in calib_group]
-    shared_group = tuple(
-        last
-    )  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
-    if shared_group != calib_group:
-        groups.append(shared_group)
+    groups, calib_group, shared_group = _marginal_groups(cfg, n)
     bn = bayes_net or eliminate(graph.linearize(values), ordering)
     marg = bayes_net_marginals(bn, groups)
 

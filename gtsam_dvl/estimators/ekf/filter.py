@@ -462,48 +462,9 @@ def run_ekf(
     held_levels(
         log, config, "EKF", noise
     )  # (the depth and the DVL's correlated error: the batch smoother fits them)
-    recentre = (
-        enabled(config, "time_offset")
-        and config.ekf.recentre_time_offset
-        and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0]
-    )
     offset_info: dict[str, Any] = {}
-    if dvl_fit_enabled(config) or recentre:
-        n = config.noise
-        stated_multiplier = config.dvl.noise_multiplier
-        for k in range(n.fit_passes):
-            fit = WarmupFit(config, stated=stated_multiplier)
-            window = _filter(log, config, None, fit, calibration)
-            settled = True
-            if dvl_fit_enabled(config):
-                new = fit.finish("covariance matching of the EKF's innovations")
-                settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
-                config = with_multiplier(config, new)
-                noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
-            if recentre:
-                config, moved = _recentred_offset(config, window, offset_info, k + 1)
-                settled = settled and not moved
-            if settled:
-                break
-    result = _filter(log, config, progress, calibration=calibration)
-    check = result.info["filter"].pop("nominal", None)
-    if (
-        check is not None and not check["pays"]
-    ):  # held at nominal: filtered again with it as a consider state
-        result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
-        result.info["filter"].pop("nominal", None)
-        result.info["calibration_hold"] = {
-            "nominal": check,
-            "held": ["scale", "misalignment"],
-            "why": (
-                f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
-                f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} "
-                "of chi^2 with 4 dof); filtered again with the scale and misalignment as consider states "
-                "(their prior's sigma)"
-            ),
-        }
-    elif check is not None:
-        result.info["calibration_hold"] = {"nominal": check, "held": []}
+    config = _warm_up(log, config, calibration, noise, offset_info)
+    result = _held_at_nominal(log, config, progress, calibration)
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
     if (
@@ -515,6 +476,72 @@ def run_ekf(
     if calibration is not None:
         result.info["calibration_prior"] = states.calibration_info(config, calibration)
     result.config = stated.to_dict()
+    return result
+
+
+def _warm_up(
+    log: LogData,
+    config: EstimatorConfig,
+    calibration: VehicleCalibration | None,
+    noise: NoiseReport,
+    offset_info: dict[str, Any],
+) -> EstimatorConfig:
+    """The configuration after the warm-up window's passes (run_ekf): the DVL's noise level by covariance matching
+    of the innovations (noise.dvl) and, with [ekf] recentre_time_offset (not from a calibration file), the time
+    offset's prior centred on the window's estimate (offset_info), until both settle or [noise] fit_passes."""
+    recentre = (
+        enabled(config, "time_offset")
+        and config.ekf.recentre_time_offset
+        and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0]
+    )
+    if not (dvl_fit_enabled(config) or recentre):
+        return config
+    n = config.noise
+    stated_multiplier = config.dvl.noise_multiplier
+    for k in range(n.fit_passes):
+        fit = WarmupFit(config, stated=stated_multiplier)
+        window = _filter(log, config, None, fit, calibration)
+        settled = True
+        if dvl_fit_enabled(config):
+            new = fit.finish("covariance matching of the EKF's innovations")
+            settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
+            config = with_multiplier(config, new)
+            noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
+        if recentre:
+            config, moved = _recentred_offset(config, window, offset_info, k + 1)
+            settled = settled and not moved
+        if settled:
+            break
+    return config
+
+
+def _held_at_nominal(
+    log: LogData,
+    config: EstimatorConfig,
+    progress: ProgressFn | None,
+    calibration: VehicleCalibration | None,
+) -> NavResult:
+    """The filtered log; when the filtered calibration does not pay over the nominal (weak_hold.py nominal_check),
+    filtered again with the scale and misalignment as consider states at the nominal (info["calibration_hold"])."""
+    result = _filter(log, config, progress, calibration=calibration)
+    check = result.info["filter"].pop("nominal", None)
+    if check is None:
+        return result
+    if check["pays"]:
+        result.info["calibration_hold"] = {"nominal": check, "held": []}
+        return result
+    result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
+    result.info["filter"].pop("nominal", None)
+    result.info["calibration_hold"] = {
+        "nominal": check,
+        "held": ["scale", "misalignment"],
+        "why": (
+            f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
+            f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} "
+            "of chi^2 with 4 dof); filtered again with the scale and misalignment as consider states "
+            "(their prior's sigma)"
+        ),
+    }
     return result
 
 
