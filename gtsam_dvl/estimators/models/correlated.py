@@ -75,12 +75,6 @@ def factors(config: EstimatorConfig, t_states: np.ndarray) -> list[gtsam.Nonline
     ]
 
 
-def initial_values(values: gtsam.Values, n_states: int) -> None:
-    """E(i) = 0 for states 0..n_states-1 (the process's mean), into values."""
-    for i in range(n_states):
-        values.insert(E(i), np.zeros(3))
-
-
 def ekf_propagate(
     config: EstimatorConfig, P: np.ndarray, d_e: np.ndarray, cols: slice, dt: float
 ) -> tuple[np.ndarray, np.ndarray]:

@@ -235,16 +235,6 @@ def factors(
     )
 
 
-def initial_values(
-    values: gtsam.Values, n_states: int, shear: list[int] | tuple[int, ...] = ()
-) -> None:
-    """W(i) = 0 for states 0..n_states-1 and S(b) = 0 for the boundaries shear (the priors' means), into values."""
-    for i in range(n_states):
-        values.insert(W(i), np.zeros(2))
-    for b in shear:
-        values.insert(S(b), np.zeros(2))
-
-
 def ekf_start(config: EstimatorConfig, fs: FilterState, height0: float) -> None:
     """With layers, the EKF's state starts in the layer of its nominal height and without boundaries."""
     if layered(config) and fs.current is not None:
