@@ -92,8 +92,8 @@ def run_one(
                 "mis_sigma_deg": res.misalignment_sigma_deg.tolist(),
             },
         }
-        wc = res.info.get("water_current")
-        if isinstance(wc, dict):
+        if res.water_current is not None:
+            wc = res.water_current.as_dict()
             t = np.asarray(wc["t_s"], dtype=float)
             k = np.clip(np.searchsorted(truth.t, t), 0, len(truth.t) - 1)
             est = np.stack([wc["east_m_s"], wc["north_m_s"]], axis=1)

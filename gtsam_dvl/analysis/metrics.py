@@ -9,7 +9,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from gtsam_dvl.analysis.observability import lever_arm_verdict, time_offset_verdict
-from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.result import NavResult, WaterCurrentProfile
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
 from gtsam_dvl.core.types import LogData, TruthData
 from gtsam_dvl.core.units import DEG_PER_H, UG
@@ -99,18 +99,18 @@ def truth_in_user_units(log: LogData) -> dict[str, Any]:
     return out
 
 
-def current_summary(wc: dict[str, Any], log: LogData) -> dict[str, Any]:
-    """The water current in the summary (its per-state profile is in info["water_current"]): the verdict, the
+def current_summary(wc: WaterCurrentProfile, log: LogData) -> dict[str, Any]:
+    """The water current in the summary (its per-state profile is NavResult.water_current): the verdict, the
     water-track pings used, the current's range with its sigma where determined, per 50 m of depth, and against the
     simulated truth when the log has it (RMS error and error/sigma over the determined states)."""
-    t = np.asarray(wc["t_s"], dtype=float)
-    c = np.stack([wc["east_m_s"], wc["north_m_s"]], axis=1)
-    sig = np.stack([wc["east_sigma_m_s"], wc["north_sigma_m_s"]], axis=1)
-    det = np.asarray(wc["determined"], dtype=bool)
-    depth = np.asarray(wc["depth_m"], dtype=float)
+    t = np.asarray(wc.t_s, dtype=float)
+    c = np.stack([wc.east_m_s, wc.north_m_s], axis=1)
+    sig = np.stack([wc.east_sigma_m_s, wc.north_sigma_m_s], axis=1)
+    det = np.asarray(wc.determined, dtype=bool)
+    depth = np.asarray(wc.depth_m, dtype=float)
     water = log.dvl.water_track
     out: dict[str, Any] = {
-        "verdict": wc.get("verdict", ""),
+        "verdict": wc.verdict,
         "states": len(t),
         "determined_share": float(det.mean()) if len(det) else 0.0,
         "water_track_pings": int(np.sum(water)) if water is not None else 0,
@@ -132,12 +132,12 @@ def current_summary(wc: dict[str, Any], log: LogData) -> dict[str, Any]:
             )
     out["by_depth"] = layers
     if (
-        "layer_thickness_m" in wc
+        wc.layer_thickness_m is not None
     ):  # the current per depth layer: each boundary crossed, the change across it
         out["layers"] = {
-            "thickness_m": wc["layer_thickness_m"],
-            "boundaries": len(wc.get("layer_boundaries", [])),
-            "shear": wc.get("layer_shear", []),
+            "thickness_m": wc.layer_thickness_m,
+            "boundaries": len(wc.layer_boundaries or []),
+            "shear": wc.layer_shear or [],
         }
     truth = log.truth
     if truth is not None and truth.n_c is not None and det.any():
@@ -263,7 +263,7 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
         hold := result.info.get("calibration_hold"), dict
     ):  # (estimators/models/weak_hold.py)
         out["calibration_hold"] = hold
-    if isinstance(wc := result.info.get("water_current"), dict):
+    if (wc := result.water_current) is not None:
         out["water_current"] = current_summary(wc, log)
     errors = truth_errors(result, log)
     if errors is not None:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.core.result import NavResult, WaterCurrentProfile
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 
@@ -56,15 +56,17 @@ def stretches(t: np.ndarray, water: np.ndarray) -> list[tuple[float, float, int]
     return out
 
 
-def _current_at(profile: dict[str, Any], t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _current_at(profile: WaterCurrentProfile, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The estimated current [c_east, c_north, 0] (N, 3) at times t and its per-axis variance (N, 2), interpolated
     between the profile's states."""
-    ts = np.asarray(profile["t_s"], dtype=float)
+    ts = np.asarray(profile.t_s, dtype=float)
     c = np.zeros((len(t), 3))
     var = np.zeros((len(t), 2))
-    for a, axis in enumerate(("east", "north")):
-        c[:, a] = np.interp(t, ts, np.asarray(profile[f"{axis}_m_s"], dtype=float))
-        var[:, a] = np.interp(t, ts, np.asarray(profile[f"{axis}_sigma_m_s"], dtype=float) ** 2)
+    for a, (value, sigma) in enumerate(
+        ((profile.east_m_s, profile.east_sigma_m_s), (profile.north_m_s, profile.north_sigma_m_s))
+    ):
+        c[:, a] = np.interp(t, ts, np.asarray(value, dtype=float))
+        var[:, a] = np.interp(t, ts, np.asarray(sigma, dtype=float) ** 2)
     return c, var
 
 
@@ -83,24 +85,24 @@ def check_water_track(
         return
     water = np.asarray(dvl.water_track, dtype=bool)
     runs = stretches(np.asarray(dvl.t, dtype=float), water)
-    profile = result.info.get("water_current")
+    profile = result.water_current
     span = ", ".join(f"{a:.0f}-{b:.0f} s ({n})" for a, b, n in runs[:5]) + (
         " ..." if len(runs) > 5 else ""
     )
     fig: dict[str, Any] = {
         "pings": int(water.sum()),
         "stretches": [list(r) for r in runs],
-        "used": isinstance(profile, dict),
+        "used": profile is not None,
     }
     figures["water_track"] = fig
-    if not isinstance(
-        profile, dict
+    if (
+        profile is None
     ):  # refused: counted and judged by analysis/health_counters.py (dvl_water_track)
         return
     flag(
         "note",
         f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
-        f"current as a state; the current: {profile.get('verdict', '')}",
+        f"current as a state; the current: {profile.verdict}",
     )
     r, idx, on_water = res.residual_m_s, res.index, res.water
     if r is None or idx is None or on_water is None or not len(idx):

@@ -884,7 +884,7 @@ def evaluate_to_dir(
     written = [atomic_write_json(out_dir / "metrics.json", ev.metrics)]
     label = res.estimator
     written += _error_figures(ev, label, out_dir)
-    if isinstance(wc := res.info.get("water_current"), dict) and len(wc.get("t_s", [])):
+    if (wc := res.water_current) is not None and len(wc.t_s):
         from gtsam_dvl.app.plots.current_plots import plot_current
 
         truth = log.truth if log is not None else None

@@ -93,6 +93,93 @@ class CalibrationUnits:
         return np.sqrt(np.diag(self.bias_cov)[:3]) / UG
 
 
+@dataclass
+class WaterCurrentProfile:
+    """The water current an estimator carried (estimators/models/current.py profile): per state (or filter update),
+    its time t_s (s), depth_m (m, down), the current east_m_s / north_m_s (m/s, map) with its sigmas (at the state's
+    depth: with layers its layer's and the spread within it) and whether it was determined (sigma below half the
+    prior's); the model's parameters; how many states had water-track pings and whether the current was determined
+    over all of them; the largest speed (m/s); with layers ([current] layer_thickness_m > 0) the thickness, the
+    boundaries crossed and the change of the current across each (layer_shear: boundary, depth_m, east_m_s,
+    north_m_s and their sigmas); the verdict in one sentence. Written to a result file as info["water_current"]
+    (as_dict, from_dict)."""
+
+    t_s: np.ndarray
+    depth_m: np.ndarray
+    east_m_s: np.ndarray
+    north_m_s: np.ndarray
+    east_sigma_m_s: np.ndarray
+    north_sigma_m_s: np.ndarray
+    determined: np.ndarray  # (N,) bool
+    prior_sigma_m_s: float
+    time_rw_m_s_per_sqrt_s: float
+    depth_rw_m_s_per_sqrt_m: float
+    water_track_sigma_m_s: (
+        float | str
+    )  # "from the messages" when the pings' own covariances are used
+    max_speed_m_s: float
+    verdict: str
+    water_track_states: int | None = None
+    determined_during_water_track: bool | None = None
+    layer_thickness_m: float | None = None
+    layer_boundaries: list[int] | None = None
+    layer_shear: list[dict[str, Any]] | None = None
+
+    _SERIES = (
+        "t_s",
+        "depth_m",
+        "east_m_s",
+        "north_m_s",
+        "east_sigma_m_s",
+        "north_sigma_m_s",
+        "determined",
+    )
+
+    def as_dict(self) -> dict[str, Any]:
+        """Plain JSON, the keys in the order of the fields (the optional ones when given, the verdict last)."""
+        out: dict[str, Any] = {
+            name: np.asarray(getattr(self, name)).tolist() for name in self._SERIES
+        }
+        out.update(
+            prior_sigma_m_s=self.prior_sigma_m_s,
+            time_rw_m_s_per_sqrt_s=self.time_rw_m_s_per_sqrt_s,
+            depth_rw_m_s_per_sqrt_m=self.depth_rw_m_s_per_sqrt_m,
+            water_track_sigma_m_s=self.water_track_sigma_m_s,
+        )
+        if self.water_track_states is not None:
+            out["water_track_states"] = self.water_track_states
+            out["determined_during_water_track"] = self.determined_during_water_track
+        out["max_speed_m_s"] = self.max_speed_m_s
+        if self.layer_thickness_m is not None:
+            out["layer_thickness_m"] = self.layer_thickness_m
+            out["layer_boundaries"] = list(self.layer_boundaries or [])
+            out["layer_shear"] = list(self.layer_shear or [])
+        out["verdict"] = self.verdict
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> WaterCurrentProfile:
+        """The profile from its as_dict form (a result file's info["water_current"])."""
+        series = {
+            name: np.asarray(d.get(name, []), dtype=bool if name == "determined" else float)
+            for name in cls._SERIES
+        }
+        return cls(
+            **series,
+            prior_sigma_m_s=float(d.get("prior_sigma_m_s", math.nan)),
+            time_rw_m_s_per_sqrt_s=float(d.get("time_rw_m_s_per_sqrt_s", math.nan)),
+            depth_rw_m_s_per_sqrt_m=float(d.get("depth_rw_m_s_per_sqrt_m", math.nan)),
+            water_track_sigma_m_s=d.get("water_track_sigma_m_s", math.nan),
+            max_speed_m_s=float(d.get("max_speed_m_s", math.nan)),
+            verdict=str(d.get("verdict", "")),
+            water_track_states=d.get("water_track_states"),
+            determined_during_water_track=d.get("determined_during_water_track"),
+            layer_thickness_m=d.get("layer_thickness_m"),
+            layer_boundaries=d.get("layer_boundaries"),
+            layer_shear=d.get("layer_shear"),
+        )
+
+
 @dataclass(init=False)
 class NavResult(CalibrationUnits):
     """Estimates of one estimator on one log. Angles in radians and SI units inside; the accessors and
@@ -136,6 +223,8 @@ class NavResult(CalibrationUnits):
     # thinning),
     # in the log's DVL data (online: in the order pushed); None: not recorded (a result read from an older file)
     dvl_pings: np.ndarray | None
+    # the water current per state when the estimator carried it (water-track pings used), else None
+    water_current: WaterCurrentProfile | None
 
     def __init__(
         self,
@@ -160,6 +249,7 @@ class NavResult(CalibrationUnits):
         alignment_method: str = "",
         config: dict[str, Any] | None = None,
         dvl_pings: np.ndarray | None = None,
+        water_current: WaterCurrentProfile | None = None,
         accel_bias: np.ndarray | None = None,
         gyro_bias: np.ndarray | None = None,
         bias_cov: np.ndarray | None = None,
@@ -186,6 +276,7 @@ class NavResult(CalibrationUnits):
         self.alignment_method = alignment_method
         self.config = {} if config is None else config
         self.dvl_pings = None if dvl_pings is None else np.asarray(dvl_pings, dtype=np.int64)
+        self.water_current = water_current
         self.calibration = dict(calibration or {})
         # the keywords of old: the states they give (a time offset only when estimated, or not zero)
         if bias_cov is not None:

@@ -12,7 +12,9 @@ Everything that lists the shared states reads STATES: the priors and initial val
 initial_values), the elimination orderings and the iSAM2 window's shared keys (shared_keys), the filtering
 timeline and the EKF's error state (columns, ekf_layout), the result's calibration (read_estimates,
 NavResult.calibration) and the verdicts (analysis/observability.py). Adding a state is its key in core/keys.py,
-an entry here and its factor.
+an entry here and its factor. The states with a variable at every epoch (the random-walk bias's B(i) beyond B(0),
+the DVL's correlated error E(i), the water current W(i)) are declared in the per-epoch registry,
+estimators/models/epoch_states.py, which the estimators read beside this one.
 
 STATES is in the order of the EKF's error state after the navigation error (gyro bias, accelerometer bias, scale,
 misalignment, time offset); the keys, in the order of their first state, are B, K_SCALE, C_MISALIGN, T_OFFSET,

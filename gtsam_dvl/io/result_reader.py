@@ -13,7 +13,7 @@ import numpy as np
 
 from gtsam_dvl.core.config.schema import checked_version
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.result import NavResult, StoredResult, Timeline
+from gtsam_dvl.core.result import NavResult, StoredResult, Timeline, WaterCurrentProfile
 from gtsam_dvl.io.result_writer import OPTIONAL_STATE_ARRAYS, STATE_ARRAYS, TOPICS
 from gtsam_dvl.io.storage.sources import open_source
 
@@ -51,6 +51,9 @@ def read_result(path: Path | str) -> StoredResult:
         if "time_offset_s" in arrays:
             stored_arrays["time_offset_s"] = float(arrays["time_offset_s"][0])
             stored_arrays["time_offset_sigma_s"] = float(arrays["time_offset_s"][1])
+        info = dict(meta.get("info") or {})
+        # the water current's profile, in the file's info (io/result_writer.py)
+        profile = info.pop("water_current", None)
         result = NavResult(
             estimator=str(meta.get("estimator", summary.get("estimator", "?"))),
             **stored_arrays,
@@ -59,7 +62,10 @@ def read_result(path: Path | str) -> StoredResult:
             t0_ns=int(arrays["t0_ns"][0]),
             timeline=timeline,
             timing_s=dict(meta.get("timing_s") or {}),
-            info=dict(meta.get("info") or {}),
+            info=info,
+            water_current=None
+            if not isinstance(profile, dict)
+            else WaterCurrentProfile.from_dict(profile),
             config=dict(meta.get("config") or {}),
         )
     except (KeyError, ValueError, json.JSONDecodeError, OSError) as exc:

@@ -38,7 +38,7 @@ TOPICS = {
     # only when estimated ([dvl] estimate_lever_arm)
     "lever_arm": "/gtsam_dvl/dvl_lever_arm",
     # the water current [east, north, 0] (m/s, map) at each state and its sigmas, when water-track pings were used
-    # (estimators/models/current.py; NavResult.info["water_current"])
+    # (estimators/models/current.py; NavResult.water_current)
     "water_current": "/gtsam_dvl/water_current",
     "water_current_sigma": "/gtsam_dvl/water_current_sigma",
 }
@@ -245,19 +245,19 @@ def write_result_log(
         w.add_vector3_stamped(
             TOPICS["misalignment_sigma"], t[-1:], np.sqrt(np.diag(mis_cov))[None], "base_link"
         )
-        if isinstance(wc := result.info.get("water_current"), dict) and len(wc.get("t_s", [])):
-            t_c = np.asarray(wc["t_s"], dtype=float)
+        if (wc := result.water_current) is not None and len(wc.t_s):
+            t_c = np.asarray(wc.t_s, dtype=float)
             zero = np.zeros(len(t_c))
             w.add_vector3_stamped(
                 TOPICS["water_current"],
                 t_c,
-                np.stack([wc["east_m_s"], wc["north_m_s"], zero], axis=1),
+                np.stack([wc.east_m_s, wc.north_m_s, zero], axis=1),
                 "map",
             )
             w.add_vector3_stamped(
                 TOPICS["water_current_sigma"],
                 t_c,
-                np.stack([wc["east_sigma_m_s"], wc["north_sigma_m_s"], zero], axis=1),
+                np.stack([wc.east_sigma_m_s, wc.north_sigma_m_s, zero], axis=1),
                 "map",
             )
         if result.timeline is not None:
@@ -387,7 +387,10 @@ def _write_records(
         to_json(
             {
                 "estimator": result.estimator,
-                "info": result.info,
+                # (the water current's profile in the file's info, as before it was a field: io/result_reader.py)
+                "info": result.info
+                if result.water_current is None
+                else {**result.info, "water_current": result.water_current.as_dict()},
                 "timing_s": result.timing_s,
                 "config": result.config,
             }

@@ -48,7 +48,8 @@ def test_summary_and_result_topics(water_run: tuple[LogData, NavResult], tmp_pat
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         for _, channel, _, msg in reader.iter_decoded_messages(topics=list(got)):
             got[channel.topic].append([msg.vector.x, msg.vector.y, msg.vector.z])
-    profile = res.info["water_current"]
+    assert res.water_current is not None
+    profile = res.water_current.as_dict()
     np.testing.assert_array_equal(
         np.array(got[TOPICS["water_current"]])[:, :2],
         np.stack([profile["east_m_s"], profile["north_m_s"]], axis=1),
@@ -62,6 +63,6 @@ def test_current_figure(water_run: tuple[LogData, NavResult], tmp_path: Path) ->
     log, res = water_run
     assert log.truth is not None
     png = plot_current(
-        res.info["water_current"], tmp_path / "water_current.png", log.truth.t, log.truth.n_c
+        res.water_current, tmp_path / "water_current.png", log.truth.t, log.truth.n_c
     )
     assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -5,6 +5,7 @@ used with the current as a state; the current comes back within its sigmas, the 
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,6 +18,12 @@ from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.models.current import resolve_water_track, step_variance
 from tests.support.water import N_C, T_WATER, with_water_track
 from tests.support.water import water_config as _config
+
+
+def _profile(res: NavResult) -> dict[str, Any]:
+    """The result's water-current profile (NavResult.water_current) in its plain form."""
+    assert res.water_current is not None
+    return res.water_current.as_dict()
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +59,7 @@ def test_batch_recovers_the_current(water_log: LogData) -> None:
     assert used.timeline.scale_sigma[-1] == pytest.approx(
         used.calibration["scale"].sigma[0], rel=1e-6
     )
-    wc = used.info["water_current"]
+    wc = _profile(used)
     t = np.asarray(wc["t_s"])
     inside = (t > T_WATER[0] + 5) & (t < T_WATER[1] - 5)
     assert inside.sum() > 50 and wc["water_track_states"] >= inside.sum()
@@ -74,13 +81,13 @@ def test_batch_recovers_the_current(water_log: LogData) -> None:
 
     refused = smooth_batch(water_log, _config(water_log, "refuse"))
     assert refused.info["counters"]["dvl_water_track"] == int(water_log.dvl.water_track.sum())
-    assert "water_current" not in refused.info
+    assert refused.water_current is None and "water_current" not in refused.info
 
 
 def _assert_filtered_current(used: NavResult, log: LogData) -> None:
     """A filter's current at the end of the water-track stretch within 3 sigma of the truth (its sigma well below
     the prior's 0.5 m/s), no water-track ping refused, the scale within 3 sigma."""
-    wc = used.info["water_current"]
+    wc = _profile(used)
     t = np.asarray(wc["t_s"])
     end = int(np.flatnonzero(t < T_WATER[1] - 1)[-1])
     for axis, truth in (("east", N_C[0]), ("north", N_C[1])):

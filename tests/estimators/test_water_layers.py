@@ -192,7 +192,8 @@ def _assert_current(
 ) -> None:
     """The current in [t_from, t_to] within 3 sigma of the truth at every state there (sigmas below max_sigma),
     the scale within 3 sigma."""
-    wc = res.info["water_current"]
+    assert res.water_current is not None
+    wc = res.water_current.as_dict()
     t = np.asarray(wc["t_s"])
     inside = (t > t_from) & (t < t_to)
     assert inside.sum() > 10
@@ -222,10 +223,11 @@ def test_batch_follows_the_sheared_current_per_layer(layered_log: LogData) -> No
         res.calibration["scale"].sigma[0], rel=1e-5
     )
     layers = np.floor(true_depth(res.t, layered_log) / H).astype(int)
-    assert res.info["water_current"]["layer_boundaries"] == list(range(layers.min(), layers.max()))
+    assert res.water_current is not None
+    assert res.water_current.layer_boundaries == list(range(layers.min(), layers.max()))
     _assert_current(res, layered_log, T_WATER[0] + 5.0, T_WATER[1] - 5.0, 0.03)
     # each boundary's change: the truth's SHEAR * H (a linear profile: the difference of the layers' means)
-    shear = res.info["water_current"]["layer_shear"]
+    shear = res.water_current.layer_shear
     assert len(shear) == layers.max() - layers.min()
     for s in shear:
         for k, axis in enumerate(("east", "north")):

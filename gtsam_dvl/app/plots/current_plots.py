@@ -1,19 +1,19 @@
-"""The water current over time and depth (NavResult.info["water_current"], estimators/models/current.py), with its
+"""The water current over time and depth (NavResult.water_current, estimators/models/current.py), with its
 3-sigma band and, for a simulated log, the truth."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 
 from gtsam_dvl.app.plots.common import save_figure
+from gtsam_dvl.core.result import WaterCurrentProfile
 
 
 def plot_current(
-    profile: dict[str, Any],
+    profile: WaterCurrentProfile,
     path: Path,
     truth_t: np.ndarray | None = None,
     truth_n_c: np.ndarray | None = None,
@@ -21,11 +21,11 @@ def plot_current(
 ) -> Path:
     """Three panels: east and north current (m/s) over time with +-3 sigma, the water-track states shaded where
     known, and the current against depth (determined states only, speed and direction as east/north)."""
-    t = np.asarray(profile["t_s"], dtype=float)
-    c = np.stack([profile["east_m_s"], profile["north_m_s"]], axis=1)
-    sig = np.stack([profile["east_sigma_m_s"], profile["north_sigma_m_s"]], axis=1)
-    depth = np.asarray(profile["depth_m"], dtype=float)
-    det = np.asarray(profile["determined"], dtype=bool)
+    t = np.asarray(profile.t_s, dtype=float)
+    c = np.stack([profile.east_m_s, profile.north_m_s], axis=1)
+    sig = np.stack([profile.east_sigma_m_s, profile.north_sigma_m_s], axis=1)
+    depth = np.asarray(profile.depth_m, dtype=float)
+    det = np.asarray(profile.determined, dtype=bool)
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5), gridspec_kw={"width_ratios": [2, 2, 1.2]})
     for a, (ax, name) in enumerate(zip(axes[:2], ("east", "north"), strict=True)):
         ax.plot(t, c[:, a], lw=1.1, color="C0", label=label)
@@ -61,6 +61,6 @@ def plot_current(
     ax.set_title("where determined", fontsize=9)
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    fig.suptitle(f"Water current: {profile.get('verdict', '')}", fontsize=9)
+    fig.suptitle(f"Water current: {profile.verdict}", fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)

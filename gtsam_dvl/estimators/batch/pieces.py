@@ -313,6 +313,7 @@ def _joined(
         calib_joint_cov=first.calib_joint_cov,
         shared_joint_cov=first.shared_joint_cov,
         info=info,
+        water_current=first.water_current,  # (the first piece's, as its info)
         config=first.config,
         alignment_method=first.alignment_method,
         dvl_pings=np.concatenate(pings) if len(pings) == len(results) else None,

@@ -13,7 +13,7 @@ from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.states import calibration_info, correlated_error
+from gtsam_dvl.core.states import calibration_info
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.pieces import long_gaps, smooth_pieces
 from gtsam_dvl.estimators.batch.solve import (  # noqa: F401  (re-exported: the solve's names of old)
@@ -26,12 +26,59 @@ from gtsam_dvl.estimators.batch.solve import (  # noqa: F401  (re-exported: the 
 from gtsam_dvl.estimators.batch.timeline import filtering_timeline
 from gtsam_dvl.estimators.graph.bulk import BulkGraph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
-from gtsam_dvl.estimators.graph.solver import ChunkedOrdering
+from gtsam_dvl.estimators.graph.solver import ChunkedOrdering, SolveReport
 from gtsam_dvl.estimators.inputs.gaps import screened_in_memory, screened_losses
-from gtsam_dvl.estimators.models import correlated, weak_hold
+from gtsam_dvl.estimators.models import weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
 from gtsam_dvl.estimators.models.current import resolve_water_track
 from gtsam_dvl.estimators.models.noise_levels import NoiseReport
+
+
+def _result_with_hold(
+    builder: LogGraph,
+    graph: BulkGraph,
+    values: gtsam.Values,
+    ordering: gtsam.Ordering | ChunkedOrdering,
+    report: SolveReport,
+    estimator: str,
+    calibration: VehicleCalibration | None,
+) -> tuple[BulkGraph, gtsam.Values, NavResult]:
+    """The solution's result with its marginals, then (without a calibration file) the nominal calibration's check
+    and the weakly determined directions held (weak_hold.py): the graph of the result's covariance, its values and
+    the result."""
+    # the converged iteration's Bayes net serves the marginals when its step was tiny (every GN
+    # iteration's stop rule makes the last step change the error by < 0.01, i.e. far below one sigma)
+    result = extract_result(
+        builder,
+        graph,
+        values,
+        ordering,
+        estimator=estimator,
+        bayes_net=report.bayes_net if report.converged else None,
+    )
+    if calibration is not None or result.calib_joint_cov is None:
+        return graph, values, result
+    config = builder.config
+    hold = weak_hold.plan(
+        config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1
+    )
+    if hold is None:
+        return graph, values, result
+    return _hold_calibration(builder, graph, values, ordering, hold, estimator, result)
+
+
+def _solver_info(report: SolveReport, dof: int, passes: Any) -> dict[str, Any]:
+    """NavResult.info["solver"]: the last solve's iterations, convergence, errors, degrees of freedom, the noise
+    loop's passes and the solver's timings."""
+    return {
+        "iterations": report.iterations,
+        "converged": report.converged,
+        "initial_error": report.initial_error,
+        "final_error": report.final_error,
+        "dof": dof,
+        "passes": passes,
+        **{f"{k}_s": v for k, v in report.timing_s.items()},
+    }
 
 
 def smooth_batch(
@@ -72,29 +119,9 @@ def smooth_batch(
     config = builder.config  # (at the levels taken from the data)
 
     t3 = time.perf_counter()
-    # the converged iteration's Bayes net serves the marginals when its step was tiny (every GN
-    # iteration's stop rule makes the last step change the error by < 0.01, i.e. far below one sigma)
-    result = extract_result(
-        builder,
-        graph,
-        values,
-        ordering,
-        estimator=estimator,
-        bayes_net=report.bayes_net if report.converged else None,
+    graph, values, result = _result_with_hold(
+        builder, graph, values, ordering, report, estimator, calibration
     )
-    hold = (
-        None
-        if calibration is not None or result.calib_joint_cov is None
-        else weak_hold.plan(
-            config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1
-        )
-    )
-    if (
-        hold is not None
-    ):  # the nominal calibration's check, then weakly determined directions held (weak_hold.py)
-        graph, values, result = _hold_calibration(
-            builder, graph, values, ordering, hold, estimator, result
-        )
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
@@ -108,22 +135,12 @@ def smooth_batch(
         screened := screened_losses(log)
     ) is not None:  # what the screen of an in-memory log found (gaps.py)
         result.info["screened_losses"] = screened
-    if correlated_error(config):
-        result.info["dvl_correlated_error"] = correlated.info(config, values, len(builder.epochs))
     result.config = stated.to_dict()
     if calibration is not None:
         result.info["calibration_prior"] = calibration_info(config, calibration)
     if builder.offset_centring:  # the time offset's windows against the solution (solve_centred)
         result.info["time_offset_centring"] = builder.offset_centring
-    result.info["solver"] = {
-        "iterations": report.iterations,
-        "converged": report.converged,
-        "initial_error": report.initial_error,
-        "final_error": report.final_error,
-        "dof": dof,
-        "passes": passes,
-        **{f"{k}_s": v for k, v in report.timing_s.items()},
-    }
+    result.info["solver"] = _solver_info(report, dof, passes)
     if progress:
         progress(1.0)
     return result

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, field
 from typing import Any
 
 import gtsam
@@ -39,6 +40,7 @@ from gtsam_dvl.estimators.graph.solver import (
 )
 from gtsam_dvl.estimators.inputs.depth import depth_samples
 from gtsam_dvl.estimators.models import correlated_fit, current
+from gtsam_dvl.estimators.models.epoch_states import graph_estimates, reports
 from gtsam_dvl.estimators.models.noise_levels import (
     SCREEN_K,
     SENSOR_GROUPS,
@@ -320,6 +322,176 @@ def _replace_sensor_factors(builder: LogGraph, graph: BulkGraph, sensor: str) ->
         graph.graph.replace(i, f)
 
 
+@dataclass
+class _NoiseFit:
+    """The state of fit_dvl_noise's loop: the sensors still fitted, the multiplier each factor uses, the levels
+    given (configured, preset, message covariances: the honest level's floor), each fit's rows and (multiplier, at
+    its bound), the white fit and long-window level behind it; the correlated error's slots and last fit."""
+
+    sensors: list[str]
+    used: dict[str, float]
+    configured: dict[str, tuple[float, float]]
+    stated: dict[str, float]
+    configured0: EstimatorConfig  # builder.config when the fit started (the fits' bounds, [noise])
+    gm_slots: range
+    t_states: np.ndarray
+    rows: dict[str, int] = field(default_factory=dict)
+    fits: dict[str, tuple[float, bool]] = field(default_factory=dict)
+    levels: dict[str, dict[str, Any]] = field(default_factory=dict)
+    gm_fit: correlated_fit.LevelFit | None = None
+
+    @classmethod
+    def start(cls, builder: LogGraph) -> _NoiseFit:
+        cfg = builder.config
+        sensors = (["dvl"] if dvl_fit_enabled(cfg) else []) + fitted_sensors(builder)
+        used = {s: sensor_multiplier(cfg, s) for s in sensors}
+        return cls(
+            sensors,
+            used,
+            {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"},
+            dict(used),
+            builder.config,
+            builder.factor_slots.get("dvl_error", range(0))
+            if correlated_fit.fit_enabled(cfg)
+            else range(0),
+            np.array([ep.t for ep in builder.epochs]),
+        )
+
+    def fit_sensors(
+        self, builder: LogGraph, graph: BulkGraph, values: gtsam.Values, noise: NoiseReport
+    ) -> None:
+        """Each sensor's variance component on the solution values; a sensor with fewer than [noise] min_rows rows
+        leaves the fit (it keeps the factor it has)."""
+        cfg, n = self.configured0, self.configured0.noise
+        for s in list(self.sensors):
+            t_rows, ew = _fit_rows(builder, graph, s, values)
+            dim = ew.shape[1]
+            k = graph.bulk.robust_k if s == "dvl" else SCREEN_K
+            ratio, used_rows = chi2_ratio(np.einsum("ni,ni->n", ew, ew), dim, k)
+            self.rows[s] = used_rows * dim
+            if self.rows[s] < n.min_rows or not np.isfinite(ratio):
+                self._not_fitted(s, used_rows, n.min_rows, noise)
+                continue
+            white, at_bound = fitted_multiplier(self.used[s], ratio, cfg, s)
+            long = _long_level(builder, graph, s, values, t_rows, ew, k)
+            # only GNSS fixes observe the DVL's slow error (the IMU cannot, at 30-60 s); nothing in these logs
+            # observes the depth sensor's or the fixes' own
+            can_lower = s == "dvl" and len(builder.factor_slots.get("gnss", ())) > 0
+            honest, why = honest_multiplier(
+                white, self.used[s], self.stated[s], long, multiplier_bounds(cfg, s), can_lower
+            )
+            self.fits[s] = honest, at_bound and honest == white
+            self.levels[s] = {
+                "white_multiplier": white,
+                "stated_multiplier": self.stated[s],
+                "honest_why": why,
+                "long": None if long is None else long.as_dict(self.used[s]),
+            }
+
+    def _not_fitted(self, s: str, used_rows: int, min_rows: int, noise: NoiseReport) -> None:
+        self.sensors.remove(s)  # keeps the factor it has
+        self.fits.pop(s, None)
+        if s == "dvl":
+            noise.dvl = {
+                "multiplier": self.used[s],
+                "rows": used_rows,
+                "why": f"DVL noise not fitted: "
+                f"{used_rows} usable residual rows, fewer than [noise] min_rows = {min_rows}",
+            }
+        else:
+            setattr(noise, s, sensor_not_fitted(s, self.used[s], self.rows[s], min_rows))
+
+    def moving(self, builder: LogGraph, graph: BulkGraph, values: gtsam.Values) -> list[str]:
+        """The fits that moved beyond their tolerance ("dvl_correlated": the correlated error's level and time
+        constant, correlated_fit.py)."""
+        n = self.configured0.noise
+        out = [
+            s for s in self.sensors if abs(self.fits[s][0] / self.used[s] - 1.0) > n.fit_tolerance
+        ]
+        if self.gm_slots:
+            d = builder.config.dvl
+            self.gm_fit = correlated_fit.fit_level(
+                *correlated_fit.residual_series(graph.bulk, values), builder.config
+            )
+            if self.gm_fit.moves(
+                d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance
+            ):
+                out.append("dvl_correlated")
+        return out
+
+    def apply(self, builder: LogGraph, graph: BulkGraph, moving: list[str]) -> None:
+        """The moved fits into the graph's factors (the DVL's whitening, the depth and GNSS factors made again,
+        the correlated error's prior and links made again)."""
+        bulk = graph.bulk
+        for s in moving:
+            if s == "dvl_correlated":
+                assert self.gm_fit is not None
+                sigma, tau = self.gm_fit.sigma_m_s, self.gm_fit.tau_s
+                builder.config = correlated_fit.with_level(builder.config, sigma, tau)
+                bulk.config = correlated_fit.with_level(bulk.config, sigma, tau)
+                correlated_fit.replace_factors(
+                    graph.graph, self.gm_slots, builder.config, self.t_states
+                )
+                continue
+            new = self.fits[s][0]
+            if s == "dvl":
+                bulk.whiten *= self.used[s] / new  # W ~ 1 / sigma
+            else:
+                builder.config = with_sensor_multiplier(builder.config, s, new)
+                _replace_sensor_factors(builder, graph, s)
+            self.used[s] = new
+
+    def report(self, builder: LogGraph, noise: NoiseReport, solves: int, settled: bool) -> None:
+        """builder.config at the levels used, and noise's reports of each fit."""
+        n = self.configured0.noise
+        if self.gm_fit is not None:
+            d = builder.config.dvl
+            how = f"{solves} solve" + ("s" if solves > 1 else "")
+            if self.gm_fit.moves(
+                d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance
+            ):
+                how += (
+                    f", not settled: the last fit asked for {self.gm_fit.sigma_m_s * 1e3:.3g} mm/s over "
+                    f"{self.gm_fit.tau_s:.3g} s"
+                )
+            noise.dvl_correlated = correlated_fit.fit_report(
+                self.configured0, builder.config, self.gm_fit, solves, how
+            )
+        for s in self.sensors:
+            used = self.used[s]
+            builder.config = with_sensor_multiplier(builder.config, s, used)
+            how = f"{solves} solve" + ("s" if solves > 1 else "")
+            new, at_bound = self.fits[s]
+            if not settled and abs(new / used - 1.0) > n.fit_tolerance:
+                how += f", not settled: the last fit asked for x {new / used:.3g}"
+            if s == "dvl":
+                noise.dvl = dvl_fit_report(
+                    builder.config,
+                    used,
+                    self.rows[s],
+                    solves,
+                    at_bound,
+                    median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]),
+                    how,
+                )
+            else:
+                setattr(
+                    noise,
+                    s,
+                    sensor_fit_report(
+                        builder.config,
+                        s,
+                        *self.configured[s],
+                        used,
+                        self.rows[s],
+                        solves,
+                        at_bound,
+                        how,
+                    ),
+                )
+            with_levels(getattr(noise, s), self.levels[s], used)
+
+
 def fit_dvl_noise(
     builder: LogGraph,
     graph: BulkGraph,
@@ -338,133 +510,38 @@ def fit_dvl_noise(
     correlated_tolerance). builder.config takes the factors used ([dvl], [depth], [gnss] noise_multiplier, [dvl]
     correlated_sigma_m_s and correlated_tau_s), noise.dvl, noise.depth, noise.gnss and noise.dvl_correlated say
     how they came."""
-    cfg = builder.config
-    n = cfg.noise
-    bulk = graph.bulk
-    sensors = (["dvl"] if dvl_fit_enabled(cfg) else []) + fitted_sensors(builder)
-    used = {s: sensor_multiplier(cfg, s) for s in sensors}
-    configured = {s: (used[s], _sensor_sigma(builder, s)) for s in sensors if s != "dvl"}
-    rows: dict[str, int] = {}
-    fits: dict[str, tuple[float, bool]] = {}
-    stated = dict(
-        used
-    )  # the levels given (configured, preset, message covariances): the honest level's floor
-    levels: dict[
-        str, dict[str, Any]
-    ] = {}  # the white fit and the long-window level behind each fit
-    gm_configured = builder.config
-    gm_slots = (
-        builder.factor_slots.get("correlated", range(0))
-        if correlated_fit.fit_enabled(cfg)
-        else range(0)
-    )
-    t_states = np.array([ep.t for ep in builder.epochs])
-    gm_fit: correlated_fit.LevelFit | None = None
+    fit = _NoiseFit.start(builder)
     settled, solves = False, 1
     while True:
-        for s in list(sensors):
-            t_rows, ew = _fit_rows(builder, graph, s, values)
-            dim = ew.shape[1]
-            k = bulk.robust_k if s == "dvl" else SCREEN_K
-            ratio, used_rows = chi2_ratio(np.einsum("ni,ni->n", ew, ew), dim, k)
-            rows[s] = used_rows * dim
-            if rows[s] < n.min_rows or not np.isfinite(ratio):
-                sensors.remove(s)  # keeps the factor it has
-                fits.pop(s, None)
-                if s == "dvl":
-                    noise.dvl = {
-                        "multiplier": used[s],
-                        "rows": used_rows,
-                        "why": f"DVL noise not fitted: "
-                        f"{used_rows} usable residual rows, fewer than [noise] min_rows = {n.min_rows}",
-                    }
-                else:
-                    setattr(noise, s, sensor_not_fitted(s, used[s], rows[s], n.min_rows))
-                continue
-            white, at_bound = fitted_multiplier(used[s], ratio, cfg, s)
-            long = _long_level(builder, graph, s, values, t_rows, ew, k)
-            # only GNSS fixes observe the DVL's slow error (the IMU cannot, at 30-60 s); nothing in these logs
-            # observes the depth sensor's or the fixes' own
-            can_lower = s == "dvl" and len(builder.factor_slots.get("gnss", ())) > 0
-            honest, why = honest_multiplier(
-                white, used[s], stated[s], long, multiplier_bounds(cfg, s), can_lower
-            )
-            fits[s] = honest, at_bound and honest == white
-            levels[s] = {
-                "white_multiplier": white,
-                "stated_multiplier": stated[s],
-                "honest_why": why,
-                "long": None if long is None else long.as_dict(used[s]),
-            }
-        moving = [s for s in sensors if abs(fits[s][0] / used[s] - 1.0) > n.fit_tolerance]
-        if gm_slots:  # the correlated error's level and time constant (correlated_fit.py)
-            d = builder.config.dvl
-            gm_fit = correlated_fit.fit_level(
-                *correlated_fit.residual_series(bulk, values), builder.config
-            )
-            if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
-                moving.append("dvl_correlated")
+        fit.fit_sensors(builder, graph, values, noise)
+        moving = fit.moving(builder, graph, values)
         if not moving:
             settled = True
             break
-        if solves >= n.fit_passes:
+        if solves >= fit.configured0.noise.fit_passes:
             break
-        for s in moving:
-            if s == "dvl_correlated":
-                assert gm_fit is not None
-                builder.config = correlated_fit.with_level(
-                    builder.config, gm_fit.sigma_m_s, gm_fit.tau_s
-                )
-                bulk.config = correlated_fit.with_level(bulk.config, gm_fit.sigma_m_s, gm_fit.tau_s)
-                correlated_fit.replace_factors(graph.graph, gm_slots, builder.config, t_states)
-                continue
-            new = fits[s][0]
-            if s == "dvl":
-                bulk.whiten *= used[s] / new  # W ~ 1 / sigma
-            else:
-                builder.config = with_sensor_multiplier(builder.config, s, new)
-                _replace_sensor_factors(builder, graph, s)
-            used[s] = new
+        fit.apply(builder, graph, moving)
         graph_c, values, report = solve_centred(builder, graph, values, ordering, passes)
         assert isinstance(graph_c, BulkGraph)
         solves += 1
-    if gm_fit is not None:
-        d = builder.config.dvl
-        how = f"{solves} solve" + ("s" if solves > 1 else "")
-        if gm_fit.moves(d.correlated_sigma_m_s, d.correlated_tau_s, n.correlated_tolerance):
-            how += (
-                f", not settled: the last fit asked for {gm_fit.sigma_m_s * 1e3:.3g} mm/s over "
-                f"{gm_fit.tau_s:.3g} s"
-            )
-        noise.dvl_correlated = correlated_fit.fit_report(
-            gm_configured, builder.config, gm_fit, solves, how
-        )
-    for s in sensors:
-        builder.config = with_sensor_multiplier(builder.config, s, used[s])
-        how = f"{solves} solve" + ("s" if solves > 1 else "")
-        new, at_bound = fits[s]
-        if not settled and abs(new / used[s] - 1.0) > n.fit_tolerance:
-            how += f", not settled: the last fit asked for x {new / used[s]:.3g}"
-        if s == "dvl":
-            noise.dvl = dvl_fit_report(
-                builder.config,
-                used[s],
-                rows[s],
-                solves,
-                at_bound,
-                median_ping_sigma(builder.config, builder.log.dvl.d_cov[builder.usable]),
-                how,
-            )
-        else:
-            setattr(
-                noise,
-                s,
-                sensor_fit_report(
-                    builder.config, s, *configured[s], used[s], rows[s], solves, at_bound, how
-                ),
-            )
-        with_levels(getattr(noise, s), levels[s], used[s])
+    fit.report(builder, noise, solves, settled)
     return values, report
+
+
+def _marginal_groups(
+    cfg: EstimatorConfig, n: int
+) -> tuple[list[tuple[int, ...]], tuple[int, ...], tuple[int, ...]]:
+    """The joint marginals a result needs (extract_result): each state's (X, V), the calibration block's keys, each
+    other shared key at the last state alone, and every shared state jointly (NavResult.shared_joint_cov,
+    states.joint_states); with the calibration block's and the shared group."""
+    last = shared_keys(cfg, n - 1)
+    calib_group = tuple(shared_keys(cfg, n - 1, block=True))
+    groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
+    groups += [(k,) for k in last if k not in calib_group]
+    shared_group = tuple(last)
+    if shared_group != calib_group:
+        groups.append(shared_group)
+    return groups, calib_group, shared_group
 
 
 def extract_result(
@@ -481,15 +558,7 @@ def extract_result(
     them jointly (shared_joint_cov)."""
     cfg = builder.config
     n = len(builder.epochs)
-    last = shared_keys(cfg, n - 1)
-    calib_group = tuple(shared_keys(cfg, n - 1, block=True))
-    groups: list[tuple[int, ...]] = [(X(i), V(i)) for i in range(n)] + [calib_group]
-    groups += [(k,) for k in last if k not in calib_group]
-    shared_group = tuple(
-        last
-    )  # every shared state jointly (NavResult.shared_joint_cov, states.joint_states)
-    if shared_group != calib_group:
-        groups.append(shared_group)
+    groups, calib_group, shared_group = _marginal_groups(cfg, n)
     bn = bayes_net or eliminate(graph.linearize(values), ordering)
     marg = bayes_net_marginals(bn, groups)
 
@@ -510,10 +579,15 @@ def extract_result(
         "epochs": n,
         "imu_gaps": builder.gaps.summary(),
     }
+    t = np.array([e.t for e in builder.epochs])
+    info.update(
+        reports(cfg, graph_estimates(cfg, values, marg.covariances, t))
+    )  # (epoch_states.py)
+    profile = None
     if water_current(
         cfg
     ):  # the water current per state with its marginal sigmas (estimators/models/current.py)
-        info["water_current"] = current.profile(
+        profile = current.profile(
             np.array([e.t for e in builder.epochs]),
             n_p[:, 2],
             np.array([values.atVector(W(i)) for i in range(n)]),
@@ -538,6 +612,7 @@ def extract_result(
         calib_joint_cov=marg.joints[calib_group],
         shared_joint_cov=marg.joints[shared_group],
         info=info,
+        water_current=profile,
         config=cfg.to_dict(),
         alignment_method=builder.alignment.method,
         dvl_pings=builder.usable,

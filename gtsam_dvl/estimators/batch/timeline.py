@@ -18,18 +18,19 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from gtsam_dvl.core.keys import E, S, V, W, X, key_dim
+from gtsam_dvl.core.keys import X, key_dim
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg
-from gtsam_dvl.core.states import columns, correlated_error, read_values, shared_keys, water_current
+from gtsam_dvl.core.states import columns, read_values, shared_keys
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.graph.bulk import BulkGraph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
+from gtsam_dvl.estimators.models.epoch_states import enabled_epoch_states, state_keys
 
 
-def _epoch_of(keys: list[int]) -> int:
-    """The latest state index a factor touches (-1: shared keys only)."""
-    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in "xvew"]
+def _epoch_of(keys: list[int], chars: str) -> int:
+    """The latest state index a factor touches among the per-state keys (symbols chars; -1: shared keys only)."""
+    idx = [gtsam.Symbol(k).index() for k in keys if chr(gtsam.Symbol(k).chr()) in chars]
     return max(idx) if idx else -1
 
 
@@ -52,6 +53,87 @@ def _qr_r(a: np.ndarray) -> np.ndarray:
     return np.asarray(np.linalg.qr(a, mode="r"))
 
 
+def _factors_by_epoch(
+    builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values
+) -> list[list[gtsam.GaussianFactor]]:
+    """The graph's linearisation at values, each factor with the latest state it touches (those on the shared
+    keys alone with the first)."""
+    linear = graph.linearize(values)
+    chars = "xv" + "".join(s.char for s in enabled_epoch_states(builder.config))
+    by_epoch: list[list[gtsam.GaussianFactor]] = [[] for _ in range(len(builder.epochs))]
+    for i in range(linear.size()):
+        f = linear.at(i)
+        e = _epoch_of(list(f.keys()), chars)
+        by_epoch[max(e, 0)].append(f)
+    return by_epoch
+
+
+class _Layout:
+    """The filter's columns. At epoch i: [X_i, V_i, (per-epoch states of i), shared]; the transition layout adds
+    state i+1's after state i's. The per-epoch states: those the configuration carries
+    (estimators/models/epoch_states.py: the DVL's correlated error E_i, the water current W_i, ...); shared: the keys
+    of the shared states the configuration estimates (core/states.py: B, K, C, and T, L) and the per-epoch states'
+    extra variables (the water current's layer boundaries)."""
+
+    def __init__(self, builder: LogGraph) -> None:
+        self.cfg = builder.config
+        self.d = sum(key_dim(k) for k in state_keys(self.cfg, 0))  # the epoch's own state
+        shared = shared_keys(self.cfg) + builder.extra_keys
+        self.shared_cols: dict[int, slice] = {}
+        start = 0
+        for k in shared:
+            self.shared_cols[k] = slice(start, start + key_dim(k))
+            start += key_dim(k)
+        self.m = self.d + start  # filter state size
+        self.state_cols = columns(shared, self.cfg, start=self.d)  # each shared state's columns
+
+    def own(self, i: int, at: int) -> dict[int, slice]:
+        """State i's keys' columns from column at."""
+        out: dict[int, slice] = {}
+        for k in state_keys(self.cfg, i):
+            out[k] = slice(at, at + key_dim(k))
+            at += key_dim(k)
+        return out
+
+    def shared(self, at: int) -> dict[int, slice]:
+        """The shared keys' columns from column at."""
+        return {k: slice(at + s.start, at + s.stop) for k, s in self.shared_cols.items()}
+
+
+def _filtering_covariances(
+    builder: LogGraph, by_epoch: list[list[gtsam.GaussianFactor]], values: gtsam.Values
+) -> tuple[dict[str, list[np.ndarray]], list[np.ndarray]]:
+    """The square-root information filter (module doc): each shared state's covariance at each epoch, and the
+    attitude's sigmas (deg, map axes)."""
+    lay = _Layout(builder)
+    d, m = lay.d, lay.m
+    blocks: dict[str, list[np.ndarray]] = {name: [] for name in lay.state_cols}
+    R = np.zeros((0, m + 1))  # square-root information rows over [X_i, V_i, shared] + rhs
+    sig_att = []
+    for i in range(len(builder.epochs)):
+        if i == 0:
+            cols = {**lay.own(0, 0), **lay.shared(d)}
+            stack = np.vstack([_rows(f, cols, m) for f in by_epoch[0]])
+            R = _qr_r(stack)[:m]
+        else:
+            cols = {**lay.own(i - 1, 0), **lay.own(i, d), **lay.shared(2 * d)}
+            prev = np.zeros((R.shape[0], m + d + 1))
+            prev[:, 0:d] = R[:, 0:d]
+            prev[:, 2 * d : m + d] = R[:, d:m]
+            prev[:, m + d] = R[:, m]
+            stack = np.vstack([prev] + [_rows(f, cols, m + d) for f in by_epoch[i]])
+            full = _qr_r(stack)
+            # marginal information of [X_i, V_i, (per-epoch states), shared] after eliminating epoch i-1's
+            R = full[d : m + d, d:]
+        Rinv = np.linalg.inv(R[:, :m])
+        cov = Rinv @ Rinv.T
+        for name, c in lay.state_cols.items():
+            blocks[name].append(cov[c, c])
+        n_R_b = values.atPose3(X(i)).rotation().matrix()
+        sig_att.append(np.degrees(np.sqrt(np.diag(n_R_b @ cov[0:3, 0:3] @ n_R_b.T))))
+    return blocks, sig_att
+
+
 def filtering_timeline(
     builder: LogGraph, graph: gtsam.NonlinearFactorGraph | BulkGraph, values: gtsam.Values
 ) -> Timeline:
@@ -59,76 +141,11 @@ def filtering_timeline(
     at each epoch. Only the random-constant bias model (the paper's) is supported."""
     if builder.config.imu.bias_model != "constant":
         raise ValueError("filtering_timeline supports the random-constant bias model only")
-    linear = graph.linearize(values)
-    n = len(builder.epochs)
-    by_epoch: list[list[gtsam.GaussianFactor]] = [[] for _ in range(n)]
-    for i in range(linear.size()):
-        f = linear.at(i)
-        e = _epoch_of(list(f.keys()))
-        by_epoch[max(e, 0)].append(f)
-
-    # filter layout at epoch i: [X_i, V_i, (E_i), (W_i), shared]; transition layout adds X_{i+1}, V_{i+1}, (E_{i+1}),
-    # (W_{i+1}) after X_i, V_i, (E_i), (W_i). shared: the keys of the shared states the configuration estimates
-    # (core/states.py: B, K, C, and T, L); E_i the DVL's correlated error when modelled
-    # (estimators/models/correlated.py),
-    # W_i the water current when water-track pings are used (estimators/models/current.py)
     cfg = builder.config
-    gm, wc = correlated_error(cfg), water_current(cfg)
-    d = 9 + 3 * gm + 2 * wc  # the epoch's own state
-
-    def own(i: int, at: int) -> dict[int, slice]:
-        out = {X(i): slice(at, at + 6), V(i): slice(at + 6, at + 9)}
-        if gm:
-            out[E(i)] = slice(at + 9, at + 12)
-        if wc:
-            out[W(i)] = slice(at + d - 2, at + d)
-        return out
-
-    shared = shared_keys(cfg) + [
-        S(b) for b in builder.shear
-    ]  # (the water current's layer boundaries: current.py)
-    shared_cols: dict[int, slice] = {}
-    start = 0
-    for k in shared:
-        shared_cols[k] = slice(start, start + key_dim(k))
-        start += key_dim(k)
-    m = d + start  # filter state size
-    state_cols = columns(shared, cfg, start=d)  # each shared state's columns in the filter state
-    blocks: dict[str, list[np.ndarray]] = {
-        name: [] for name in state_cols
-    }  # its covariance at each epoch
-    R = np.zeros((0, m + 1))  # square-root information rows over [X_i, V_i, shared] + rhs
-    sig_att = []
-    for i in range(n):
-        if i == 0:
-            cols = {
-                **own(0, 0),
-                **{k: slice(d + s.start, d + s.stop) for k, s in shared_cols.items()},
-            }
-            stack = np.vstack([_rows(f, cols, m) for f in by_epoch[0]])
-            R = _qr_r(stack)[:m]
-        else:
-            cols = {
-                **own(i - 1, 0),
-                **own(i, d),
-                **{k: slice(2 * d + s.start, 2 * d + s.stop) for k, s in shared_cols.items()},
-            }
-            prev = np.zeros((R.shape[0], m + d + 1))
-            prev[:, 0:d] = R[:, 0:d]
-            prev[:, 2 * d : m + d] = R[:, d:m]
-            prev[:, m + d] = R[:, m]
-            stack = np.vstack([prev] + [_rows(f, cols, m + d) for f in by_epoch[i]])
-            full = _qr_r(stack)
-            R = full[
-                d : m + d, d:
-            ]  # marginal information of [X_i, V_i, (E_i), shared] after eliminating epoch i-1's
-        Rinv = np.linalg.inv(R[:, :m])
-        cov = Rinv @ Rinv.T
-        for name, c in state_cols.items():
-            blocks[name].append(cov[c, c])
-        n_R_b = values.atPose3(X(i)).rotation().matrix()
-        sig_att.append(np.degrees(np.sqrt(np.diag(n_R_b @ cov[0:3, 0:3] @ n_R_b.T))))
-
+    n = len(builder.epochs)
+    blocks, sig_att = _filtering_covariances(
+        builder, _factors_by_epoch(builder, graph, values), values
+    )
     est = read_values(values, cfg)
     sig = {name: np.sqrt(np.einsum("nii->ni", np.array(b))) for name, b in blocks.items()}
     b_R_d0 = builder.log.mounting.b_R_d0

@@ -66,10 +66,10 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew, so3_log
-from gtsam_dvl.core.states import BY_NAME, correlated_error, ekf_layout, enabled, water_current
+from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.ekf.history import N_NAV, History, history_result
+from gtsam_dvl.estimators.ekf.history import History, history_result
 from gtsam_dvl.estimators.ekf.kalman import (
     OFFSET,
     gate_threshold,
@@ -79,8 +79,10 @@ from gtsam_dvl.estimators.ekf.kalman import (
 from gtsam_dvl.estimators.ekf.strapdown import (
     BA,
     BG,
+    LAYOUT,
     MIS,
     N_ERR,
+    N_NAV,
     PHI,
     POS,
     SCALE,
@@ -90,9 +92,16 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     propagate_interval,
 )
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
-from gtsam_dvl.estimators.inputs.alignment import FirstState, align, given_covariance, map_frame_of
+from gtsam_dvl.estimators.inputs.alignment import (
+    Alignment,
+    FirstState,
+    align,
+    given_covariance,
+    map_frame_of,
+)
 from gtsam_dvl.estimators.inputs.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.inputs.gaps import (
+    Gaps,
     check_gaps,
     find_gaps,
     gaps_within,
@@ -113,9 +122,13 @@ from gtsam_dvl.estimators.inputs.selection import (
 )
 from gtsam_dvl.estimators.models import current, weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
-from gtsam_dvl.estimators.models.correlated import ekf_propagate
-from gtsam_dvl.estimators.models.correlated import info as correlated_info
 from gtsam_dvl.estimators.models.current import resolve_water_track, water_pings
+from gtsam_dvl.estimators.models.epoch_states import (
+    EpochEstimate,
+    ekf_states,
+    enabled_epoch_states,
+    reports,
+)
 from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     WarmupFit,
@@ -143,8 +156,8 @@ from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
 # the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
-# (core/states.py ekf_layout: gyro and accelerometer bias, scale, misalignment, and the time offset when estimated)
-LAYOUT = ekf_layout(None, N_NAV)  # with every state the EKF can carry
+# (core/states.py ekf_layout, strapdown.LAYOUT: gyro and accelerometer bias, scale, misalignment, and the time offset
+# when estimated)
 CALIBRATION = np.r_[
     LAYOUT["scale"], LAYOUT["misalignment"]
 ]  # error-state indices of the DVL scale and misalignment
@@ -220,17 +233,14 @@ def initial_state(
     P[np.ix_(held, held)] = (
         held_cov  # a calibration's joint covariance over the states it holds, in their place
     )
-    d_e = None
-    if correlated_error(config):  # the DVL's correlated error, last: its stationary distribution
-        P = np.pad(P, ((0, 3), (0, 3)))
-        P[n:, n:] = np.eye(3) * config.dvl.correlated_sigma_m_s**2
-        d_e = np.zeros(3)
-    n_c = None
-    if water_current(config):  # the water current, last: its prior
+    epoch: dict[str, np.ndarray] = {}
+    for s in ekf_states(
+        config
+    ):  # the per-epoch states' blocks, last: their priors (epoch_states.py)
         m = len(P)
-        P = np.pad(P, ((0, 2), (0, 2)))
-        P[m:, m:] = np.eye(2) * config.current.prior_sigma_m_s**2
-        n_c = np.zeros(2)
+        P = np.pad(P, ((0, s.dim), (0, s.dim)))
+        P[m:, m:] = s.ekf_prior_cov(config)
+        epoch[s.name] = np.asarray(s.initial(config), dtype=float)
     return FilterState(
         NavState(n_R_b.copy(), n_v, n_p),
         np.zeros(3),
@@ -239,8 +249,7 @@ def initial_state(
         b_R_d0.copy(),
         P,
         file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0,
-        d_e,
-        n_c,
+        epoch=epoch,
     )
 
 
@@ -251,9 +260,11 @@ def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndar
     q[PHI] = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2
     q[VEL] = (imu_cfg.accel_noise_ug_rthz * UG) ** 2
     q[POS] = imu_cfg.integration_sigma_m_rts**2
-    if imu_cfg.bias_model == "random_walk":
-        q[BG] = (imu_cfg.gyro_bias_rw_deg_per_h_per_rth * DEG_PER_H / 60.0) ** 2
-        q[BA] = (imu_cfg.accel_bias_rw_ug_per_rth * UG / 60.0) ** 2
+    for s in enabled_epoch_states(
+        config
+    ):  # the random walk of states in the shared block (the biases)
+        for name, density in s.ekf_noise(config).items():
+            q[LAYOUT[name]] = density
     Qc = np.diag(q)
     return 0.5 * T * (Phi @ Qc @ Phi.T + Qc)
 
@@ -451,48 +462,9 @@ def run_ekf(
     held_levels(
         log, config, "EKF", noise
     )  # (the depth and the DVL's correlated error: the batch smoother fits them)
-    recentre = (
-        enabled(config, "time_offset")
-        and config.ekf.recentre_time_offset
-        and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0]
-    )
     offset_info: dict[str, Any] = {}
-    if dvl_fit_enabled(config) or recentre:
-        n = config.noise
-        stated_multiplier = config.dvl.noise_multiplier
-        for k in range(n.fit_passes):
-            fit = WarmupFit(config, stated=stated_multiplier)
-            window = _filter(log, config, None, fit, calibration)
-            settled = True
-            if dvl_fit_enabled(config):
-                new = fit.finish("covariance matching of the EKF's innovations")
-                settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
-                config = with_multiplier(config, new)
-                noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
-            if recentre:
-                config, moved = _recentred_offset(config, window, offset_info, k + 1)
-                settled = settled and not moved
-            if settled:
-                break
-    result = _filter(log, config, progress, calibration=calibration)
-    check = result.info["filter"].pop("nominal", None)
-    if (
-        check is not None and not check["pays"]
-    ):  # held at nominal: filtered again with it as a consider state
-        result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
-        result.info["filter"].pop("nominal", None)
-        result.info["calibration_hold"] = {
-            "nominal": check,
-            "held": ["scale", "misalignment"],
-            "why": (
-                f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
-                f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} "
-                "of chi^2 with 4 dof); filtered again with the scale and misalignment as consider states "
-                "(their prior's sigma)"
-            ),
-        }
-    elif check is not None:
-        result.info["calibration_hold"] = {"nominal": check, "held": []}
+    config = _warm_up(log, config, calibration, noise, offset_info)
+    result = _held_at_nominal(log, config, progress, calibration)
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
     if (
@@ -504,6 +476,72 @@ def run_ekf(
     if calibration is not None:
         result.info["calibration_prior"] = states.calibration_info(config, calibration)
     result.config = stated.to_dict()
+    return result
+
+
+def _warm_up(
+    log: LogData,
+    config: EstimatorConfig,
+    calibration: VehicleCalibration | None,
+    noise: NoiseReport,
+    offset_info: dict[str, Any],
+) -> EstimatorConfig:
+    """The configuration after the warm-up window's passes (run_ekf): the DVL's noise level by covariance matching
+    of the innovations (noise.dvl) and, with [ekf] recentre_time_offset (not from a calibration file), the time
+    offset's prior centred on the window's estimate (offset_info), until both settle or [noise] fit_passes."""
+    recentre = (
+        enabled(config, "time_offset")
+        and config.ekf.recentre_time_offset
+        and "time_offset" not in states.calibration_in_layout(config, calibration, LAYOUT)[0]
+    )
+    if not (dvl_fit_enabled(config) or recentre):
+        return config
+    n = config.noise
+    stated_multiplier = config.dvl.noise_multiplier
+    for k in range(n.fit_passes):
+        fit = WarmupFit(config, stated=stated_multiplier)
+        window = _filter(log, config, None, fit, calibration)
+        settled = True
+        if dvl_fit_enabled(config):
+            new = fit.finish("covariance matching of the EKF's innovations")
+            settled = abs(new / config.dvl.noise_multiplier - 1.0) <= n.fit_tolerance
+            config = with_multiplier(config, new)
+            noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
+        if recentre:
+            config, moved = _recentred_offset(config, window, offset_info, k + 1)
+            settled = settled and not moved
+        if settled:
+            break
+    return config
+
+
+def _held_at_nominal(
+    log: LogData,
+    config: EstimatorConfig,
+    progress: ProgressFn | None,
+    calibration: VehicleCalibration | None,
+) -> NavResult:
+    """The filtered log; when the filtered calibration does not pay over the nominal (weak_hold.py nominal_check),
+    filtered again with the scale and misalignment as consider states at the nominal (info["calibration_hold"])."""
+    result = _filter(log, config, progress, calibration=calibration)
+    check = result.info["filter"].pop("nominal", None)
+    if check is None:
+        return result
+    if check["pays"]:
+        result.info["calibration_hold"] = {"nominal": check, "held": []}
+        return result
+    result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
+    result.info["filter"].pop("nominal", None)
+    result.info["calibration_hold"] = {
+        "nominal": check,
+        "held": ["scale", "misalignment"],
+        "why": (
+            f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
+            f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} "
+            "of chi^2 with 4 dof); filtered again with the scale and misalignment as consider states "
+            "(their prior's sigma)"
+        ),
+    }
     return result
 
 
@@ -525,7 +563,9 @@ DIVERGENCE_PINGS = 30
 DIVERGENCE_NIS = 6.0
 # (and the time offset, OFFSET, when estimated: its slot exists only then)
 FROZEN_ON_DIVERGENCE = np.r_[
-    np.arange(BG.start, BG.stop), np.arange(BA.start, BA.stop), CALIBRATION
+    np.arange(LAYOUT["gyro_bias"].start, LAYOUT["gyro_bias"].stop),
+    np.arange(LAYOUT["accel_bias"].start, LAYOUT["accel_bias"].stop),
+    CALIBRATION,
 ]
 
 
@@ -601,28 +641,17 @@ def _recentred_offset(
     ), moved
 
 
-def _filter(
-    log: LogData,
-    config: EstimatorConfig,
-    progress: ProgressFn | None,
-    fit: WarmupFit | None = None,
-    calibration: VehicleCalibration | None = None,
-    consider_calibration: bool = False,
-) -> NavResult:
-    """run_ekf at config's noise levels; with fit, only up to its warm-up window's end, the innovations there
-    collected into it (the NavResult then holds the window's states). consider_calibration: the DVL scale and
-    misalignment held at their start as consider states (kalman.update). Without a calibration file and with
-    [priors] nominal_check (and the hold on), info["filter"]["nominal"] has the final calibration's nominal check
-    (estimators/models/weak_hold.py nominal_check)."""
-    ekf_cfg = config.ekf
-    offset = enabled(config, "time_offset")
-    if offset and config.dvl.use_beams:
+def _checked_inputs(
+    log: LogData, config: EstimatorConfig, counters: dict[str, int]
+) -> tuple[LogData, EstimatorConfig, LocalFrame, Alignment, np.ndarray, np.ndarray]:
+    """The log in base_link, the configuration with water track resolved, the map frame, the alignment, the
+    water-track pings (M,) bool and the usable pings (no keyframe thinning); GtsamDvlError for what the EKF does
+    not support (the time offset with beams, the lever arm, the water-track scale, beams with water track)."""
+    if enabled(config, "time_offset") and config.dvl.use_beams:
         raise GtsamDvlError(
             "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
         )
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/inputs/mounting.py)
-    t_start = time.perf_counter()
-    counters: dict[str, int] = {"dvl_slow": 0}
     frame = map_frame_of(log, config)
     alignment = align(
         log.imu,
@@ -654,12 +683,335 @@ def _filter(
     )  # every usable ping: no keyframe thinning
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
-    # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own time):
-    # carry them to the first ping (alignment.first_state; the filter's initial covariance starts from the [priors]
-    # attitude sigmas, wider than the alignment's)
-    maker = FactorMaker(
-        config, frame, alignment, log.mounting, log.source
-    )  # the time offset's IMU constants
+    return log, config, frame, alignment, water, pings
+
+
+def _depth_updates(
+    log: LogData, config: EstimatorConfig, frame: LocalFrame
+) -> _DepthUpdates | None:
+    """The depth samples the filter updates with ([depth] use and the log has them), else None."""
+    if log.depth is None or not config.depth.use or not len(log.depth):
+        return None
+    dcounters = {"depth_used": 0, "depth_gated": 0, "depth_too_far": 0}
+    samples = depth_samples(log.depth, config.depth, frame, dcounters)
+    return _DepthUpdates(
+        samples,
+        gaussian_radius(frame.lat0),
+        config.depth.max_time_to_state_s,
+        gate_threshold(config.ekf.gate_probability, 1),
+        config.ekf.gate_reopen_after,
+        counters=dcounters,
+    )
+
+
+@dataclass
+class _Pass:
+    """One pass of the filter over a log (_filter): what its propagation, updates and result share."""
+
+    log: LogData  # in base_link
+    config: EstimatorConfig
+    frame: LocalFrame
+    maker: FactorMaker  # the time offset's IMU constants, the alignment's report
+    fs: FilterState
+    pings: np.ndarray  # the usable pings
+    water: np.ndarray  # (M,) bool: the water-track pings
+    gaps: Gaps  # the IMU's gaps
+    depth: _DepthUpdates | None
+    counters: dict[str, int]
+    fit: WarmupFit | None
+    consider_calibration: bool
+    hist: History = field(default_factory=History)
+    watch: DivergenceWatch = field(default_factory=DivergenceWatch)
+    # the water current at each update: (t, z, W, its covariance, water)
+    currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
+    gates: dict[int, float] = field(
+        default_factory=dict
+    )  # gate_threshold per measurement dimension
+    gated: int = 0  # gated pings
+    gated_run: int = 0  # and how many in a row
+    nis_sum: float = 0.0
+    nis_dof: int = 0
+    downweighted: int = 0
+    timing: dict[str, float] = field(default_factory=lambda: {"propagate": 0.0, "update": 0.0})
+
+    def __post_init__(self) -> None:
+        self.earth = _Earth(self.frame, self.config.solver.earth_model == "flat")
+        t = self.log.imu.t
+        self.starts = sample_starts_with_gaps(t, self.gaps)
+        self.gyro_index = covering_sample(t, self.log.dvl.t)
+        self.offset = enabled(self.config, "time_offset")
+        self.offset_bound = 3.0 * self.config.dvl.time_offset_sigma_s
+        # the time offset prior's centre (the configured one, or the calibration's)
+        self.offset_centre = self.fs.time_offset
+        self.t_first = float(self.log.dvl.t[self.pings[0]])
+
+    def states(self) -> tuple[np.ndarray, np.ndarray]:
+        """The states of the factor-graph estimators: every usable ping, and states without a ping across DVL
+        dropouts (estimators/inputs/gaps.py); the filter updates at the pings and records at both. Their stamps
+        and each one's ping (-1: none); the gaps narrowed to those the states cross."""
+        config = self.config
+        state_t, is_filler = with_fillers(
+            self.log.dvl.t[self.pings], float(self.log.imu.t[-1]), config.solver.max_state_spacing_s
+        )
+        ping_at = np.full(len(state_t), -1)
+        ping_at[~is_filler] = self.pings
+        self.counters["states_without_ping"] = int(is_filler.sum())
+        self.gaps = gaps_within(self.gaps, float(state_t[0]), float(state_t[-1]))
+        check_gaps(self.gaps, config.imu, self.log.source)
+        self.counters["imu_gaps"] = len(self.gaps)
+        return state_t, ping_at
+
+    # ----- propagation ---------------------------------------------------------------------------
+    def propagate(self, t_prev: float, t_j: float) -> float:
+        """From t_prev to t_j in steps of at most MAX_STEP_S, stopping at depth samples (updated there)."""
+        depth = self.depth
+        while t_prev < t_j - 1e-9:
+            t_next = min(t_j, t_prev + MAX_STEP_S)
+            if depth is not None and (t_d := depth.due(t_next)) is not None and t_d > t_prev:
+                t_next = t_d
+            self._step(t_prev, t_next)
+            t_prev = t_next
+            if depth is not None:
+                depth.apply(self.fs, t_prev, t_prev)
+        return t_prev
+
+    def _step(self, t_prev: float, t_next: float) -> None:
+        """The strapdown, the covariance and the per-epoch states' processes over [t_prev, t_next]; across an IMU
+        gap the motion model's uncertainty, as in the factor graphs."""
+        fs, config, imu, earth = self.fs, self.config, self.log.imu, self.earth
+        idx, dt, held = pieces_with_holds(imu.t, self.starts, self.gaps, t_prev, t_next)
+        if not len(idx):
+            return
+        n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
+        step = propagate_interval(
+            fs.nav,
+            imu.b_omega[idx] - fs.gyro_bias,
+            imu.b_f[idx] - fs.accel_bias,
+            dt,
+            earth.n_omega_ie,
+            n_g,
+            G,
+        )
+        fs.nav = step.state
+        fs.P = propagate_covariance(fs.P, step.Phi, process_noise(config, step.Phi, step.duration))
+        # the per-epoch states' processes: the correlated DVL error decays, the current's random walk in time and
+        # depth or across the layer boundaries, ... (epoch_states.py)
+        for s in ekf_states(config):
+            s.ekf_propagate(config, fs, t_next - t_prev, self.frame.height_m)
+        if held:
+            q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
+            fs.P[PHI, PHI] += np.diag(q[0:3])
+            fs.P[POS, POS] += np.diag(q[3:6])
+            fs.P[VEL, VEL] += np.diag(q[6:9])
+
+    # ----- updates -------------------------------------------------------------------------------
+    def record_without_ping(self, t_j: float) -> None:
+        """A state without a ping: recorded, not updated."""
+        fs, imu = self.fs, self.log.imu
+        g_j = int(covering_sample(imu.t, t_j))
+        self.hist.record(
+            fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ self.earth.n_omega_ie
+        )
+
+    def _prediction(
+        self, t_j: float, j: int, on_water: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The ping's predicted velocity y_hat, its Jacobian H on the error state and the body rate: the DVL model,
+        with the time offset its velocity at t + dt_d (module doc, the IMU window centred on the estimate), plus the
+        correlated error, relative to the water for a water-track ping."""
+        fs, imu, maker = self.fs, self.log.imu, self.maker
+        b_l = self.log.mounting.b_l
+        n_v = current.seen_velocity(
+            fs, on_water
+        )  # (m/s, map): over ground, or relative to the water
+        y_hat, H, b_omega = measurement_model(
+            fs, imu.b_omega[self.gyro_index[j]], b_l, self.earth.n_omega_ie, n_v
+        )
+        if self.offset:
+            lo, hi = self.offset_centre - self.offset_bound, self.offset_centre + self.offset_bound
+            dt_c = float(np.clip(fs.time_offset, lo, hi))
+            if (
+                dt_c != fs.time_offset
+            ):  # the window held at the bound: counted, reported (analysis/health.py)
+                self.counters["time_offset_window_clipped"] = (
+                    self.counters.get("time_offset_window_clipped", 0) + 1
+                )
+            rate = maker.velocity_rate_input(
+                t_j, imu.t, imu.b_f, imu.b_omega, dt_c, n_R_b=fs.nav.n_R_b
+            )
+            y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity(), n_v)
+        if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/models/correlated.py)
+            assert fs.dvl_error is not None
+            y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
+        if (
+            wc := fs.current_slice()
+        ) is not None:  # dh/dW: minus the velocity's east and north columns
+            H[:, wc] = -H[:, VEL][:, :2] if on_water else 0.0
+        return y_hat, H, b_omega
+
+    def _calibration_columns(
+        self, y_hat: np.ndarray, H: np.ndarray, z: np.ndarray, Rm: np.ndarray
+    ) -> tuple[bool, bool]:
+        """(slow, unsure): below the calibration speed the scale's and misalignment's columns of H zero, and
+        while the velocity is still uncertain and the ping moving, the calibration a consider state (see the
+        comment at MIN_CALIBRATION_SPEED_M_S); after a divergence the self-calibration's columns zero."""
+        fs, ekf_cfg = self.fs, self.config.ekf
+        speed = np.linalg.norm(y_hat) / fs.scale
+        slow = bool(speed < ekf_cfg.min_calibration_speed_m_s)
+        unsure = not slow and speed < ekf_cfg.calibration_speed_sigmas * np.sqrt(
+            np.trace(fs.P[VEL, VEL])
+        )
+        # the ping itself moving beyond its noise (an underway start's first ping), while the filter's velocity
+        # is still uncertain: the calibration as consider states; a still vehicle whose filtered velocity wanders
+        # above the speed keeps the columns zero
+        moving = len(z) == 3 and np.linalg.norm(z) / fs.scale > max(
+            ekf_cfg.min_calibration_speed_m_s,
+            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(Rm)),
+        )
+        if slow or (unsure and not moving):
+            H[:, CALIBRATION] = 0.0
+        if (
+            self.watch.diverged
+        ):  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter
+            H[:, FROZEN_ON_DIVERGENCE] = 0.0
+            if self.offset:
+                H[:, OFFSET] = 0.0
+        return slow, bool(unsure and moving)
+
+    def _gate(self, dof: int) -> float:
+        """The chi^2 gate, reopened after [ekf] gate_reopen_after gated pings in a row (a filter that lost
+        track)."""
+        ekf_cfg = self.config.ekf
+        if self.gated_run >= ekf_cfg.gate_reopen_after:
+            return math.inf
+        if dof not in self.gates:  # chi2.ppf once per measurement dimension, not once per ping
+            self.gates[dof] = gate_threshold(ekf_cfg.gate_probability, dof)
+        return self.gates[dof]
+
+    def update_at_ping(self, t_j: float, j: int) -> None:
+        """The measurement update of ping j at t_j (gated, robust, the time offset held within its window's bound),
+        the divergence watch, the warm-up fit's innovation, the counters; the state recorded."""
+        fs, config = self.fs, self.config
+        on_water = bool(self.water[j])
+        A, z, Rm = _ping_measurement(self.log, config, j, on_water)
+        y_hat, H, b_omega = self._prediction(t_j, j, on_water)
+        slow, unsure = self._calibration_columns(y_hat, H, z, Rm)
+        gate_nis = self._gate(len(z))
+        if self.fit is not None:
+            AH = A @ H
+            hph = AH @ fs.P @ AH.T
+        nis, down, was_gated = update(
+            fs,
+            A @ H,
+            z - A @ y_hat,
+            Rm,
+            config.dvl.robust,
+            config.dvl.robust_threshold(),
+            gate_nis,
+            CALIBRATION if self.consider_calibration or unsure else None,
+        )
+        if self.offset and abs(fs.time_offset - self.offset_centre) > self.offset_bound:
+            lo, hi = self.offset_centre - self.offset_bound, self.offset_centre + self.offset_bound
+            fs.time_offset = float(
+                np.clip(fs.time_offset, lo, hi)
+            )  # held within its window's bound
+            self.counters["time_offset_bounded"] = self.counters.get("time_offset_bounded", 0) + 1
+        # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
+        # has a large and growing NIS while the vehicle gathers speed)
+        warm = t_j > self.t_first + config.noise.warmup_s
+        if not was_gated and warm and self.watch.add(t_j, nis / len(z)):
+            self.counters["diverged_at_ping"] = int(j)
+        if self.fit is not None and not was_gated:
+            self.fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
+        self.counters["dvl_slow"] += int(slow)
+        self.gated, self.gated_run = (
+            self.gated + int(was_gated),
+            self.gated_run + 1 if was_gated else 0,
+        )
+        if not was_gated:
+            self.nis_sum, self.nis_dof = self.nis_sum + nis, self.nis_dof + len(z)
+            self.downweighted += int(down)
+        self._record(t_j, b_omega, on_water)
+
+    def _record(self, t_j: float, b_omega: np.ndarray, on_water: bool) -> None:
+        """The state after an update, with the water current's when carried."""
+        fs = self.fs
+        self.hist.record(fs, t_j, b_omega)
+        if (wc := fs.current_slice()) is not None:
+            assert fs.current is not None
+            self.currents.append(
+                (t_j, float(fs.nav.n_p[2]), fs.current.copy(), fs.P[wc, wc].copy(), on_water)
+            )
+
+    # ----- the result ----------------------------------------------------------------------------
+    def result(self, n_states: int, calibration: VehicleCalibration | None) -> NavResult:
+        """The NavResult of the pass: the history, the counters, the filter's consistency, the per-epoch states'
+        reports, the nominal calibration's check and the water current."""
+        config, fs, counters = self.config, self.fs, self.counters
+        counters["dvl_updates"] = len(
+            self.pings
+        )  # the pings the filter took, dvl_gated of them not used
+        counters["dvl_downweighted"] = self.downweighted
+        counters["dvl_gated"] = self.gated
+        if self.depth is not None:
+            counters.update(self.depth.counters)
+        result = history_result(self.hist, self.log, config)
+        result.dvl_pings = self.pings
+        result.info = {
+            "alignment": self.maker.alignment_info(),
+            "counters": counters,
+            "epochs": n_states,
+            "imu_gaps": self.gaps.summary(),
+            "filter": {
+                "mean_nis_per_dof": self.nis_sum / max(self.nis_dof, 1),
+                "nis_dof": self.nis_dof,
+                "error_state": len(fs.P),
+                **self.watch.info(),
+            },
+        }
+        t_last = float(self.hist.t[-1]) if self.hist.t else 0.0
+        result.info.update(reports(config, ekf_estimates(fs, t_last)))
+        if (
+            calibration is None
+            and self.fit is None
+            and config.priors.nominal_check
+            and config.priors.hold_weak_information > 0
+        ):
+            k0, b_R_d0, _ = weak_hold.calibration_prior(config, self.log.mounting)
+            d = np.r_[fs.scale - k0, so3_log(np.asarray(b_R_d0).T @ fs.b_R_d)]
+            result.info["filter"]["nominal"] = weak_hold.nominal_check(
+                d, fs.P[np.ix_(CALIBRATION, CALIBRATION)]
+            )
+        if (
+            self.currents
+        ):  # the current at each update, its filtered sigmas (estimators/models/current.py)
+            c = self.currents
+            result.water_current = current.profile(
+                np.array([x[0] for x in c]),
+                np.array([x[1] for x in c]),
+                np.array([x[2] for x in c]),
+                np.array([x[3] for x in c]),
+                config,
+                np.array([x[4] for x in c], dtype=bool),
+                current.ekf_shear(fs),
+            )
+        return result
+
+
+def _start(
+    log: LogData,
+    config: EstimatorConfig,
+    fit: WarmupFit | None,
+    calibration: VehicleCalibration | None,
+    consider_calibration: bool,
+) -> _Pass:
+    """A pass at its first ping: the inputs checked (_checked_inputs), the given attitude and map origin (at the
+    log's first IMU stamp, an attitude sensor's at its own time) carried to the first ping (alignment.first_state;
+    the filter's initial covariance starts from the [priors] attitude sigmas, wider than the alignment's), the
+    filter's initial state (initial_state) and the depth updates."""
+    counters: dict[str, int] = {"dvl_slow": 0}
+    log, config, frame, alignment, water, pings = _checked_inputs(log, config, counters)
+    maker = FactorMaker(config, frame, alignment, log.mounting, log.source)
     p0 = int(pings[0])
     first = maker.carry_to_first(
         log.imu,
@@ -669,261 +1021,80 @@ def _filter(
         given_covariance(alignment, config, alignment_sigmas=False),
         origin_fix_time(log, config),
     )
-    alignment = maker.alignment
-    earth = _Earth(frame, config.solver.earth_model == "flat")
-    imu, dvl = log.imu, log.dvl
-    t = imu.t
-    gaps = find_gaps(t, config.imu.gap_samples)
-    starts = sample_starts_with_gaps(t, gaps)
-    gyro_index = covering_sample(t, dvl.t)
-    b_l = log.mounting.b_l
-    kernel, k_robust = config.dvl.robust, config.dvl.robust_threshold()
-    gates: dict[int, float] = {}  # gate_threshold per measurement dimension
-    gated, gated_run = 0, 0  # gated pings, and how many in a row
-
-    offset_bound = 3.0 * config.dvl.time_offset_sigma_s
-    depth: _DepthUpdates | None = None
-    if log.depth is not None and config.depth.use and len(log.depth):
-        dcounters = {"depth_used": 0, "depth_gated": 0, "depth_too_far": 0}
-        samples = depth_samples(log.depth, config.depth, frame, dcounters)
-        depth = _DepthUpdates(
-            samples,
-            gaussian_radius(frame.lat0),
-            config.depth.max_time_to_state_s,
-            gate_threshold(ekf_cfg.gate_probability, 1),
-            ekf_cfg.gate_reopen_after,
-            counters=dcounters,
-        )
-    fs = initial_state(log, config, alignment.n_R_b, p0, first, calibration)
+    gaps = find_gaps(log.imu.t, config.imu.gap_samples)
+    depth = _depth_updates(log, config, frame)
+    fs = initial_state(log, config, maker.alignment.n_R_b, p0, first, calibration)
     current.ekf_start(config, fs, frame.height_m)
-    offset_centre = (
-        fs.time_offset
-    )  # the time offset prior's centre (the configured one, or the calibration's)
-    watch = DivergenceWatch()
-    t_first = float(dvl.t[pings[0]])
-    hist = History()
-    currents: list[
-        tuple[float, float, np.ndarray, np.ndarray, bool]
-    ] = []  # (t, z, W, its covariance, water)
-    nis_sum, nis_dof, downweighted = 0.0, 0, 0
+    run = _Pass(
+        log,
+        config,
+        frame,
+        maker,
+        fs,
+        pings,
+        water,
+        gaps,
+        depth,
+        counters,
+        fit,
+        consider_calibration,
+    )
     if fit is not None:
-        fit.start(float(dvl.t[pings[0]]), median_ping_sigma(config, dvl.d_cov[pings]))
-    timing = {"propagate": 0.0, "update": 0.0}
-    t_prev = float(dvl.t[pings[0]])
-    # the states of the factor-graph estimators: every usable ping, and states without a ping across DVL
-    # dropouts (estimators/inputs/gaps.py); the filter updates at the pings and records at both
-    state_t, is_filler = with_fillers(dvl.t[pings], float(t[-1]), config.solver.max_state_spacing_s)
-    ping_at = np.full(len(state_t), -1)
-    ping_at[~is_filler] = pings
-    counters["states_without_ping"] = int(is_filler.sum())
-    gaps = gaps_within(gaps, float(state_t[0]), float(state_t[-1]))  # the gaps the states cross
-    check_gaps(gaps, config.imu, log.source)
-    counters["imu_gaps"] = len(gaps)
-    if depth is not None:  # samples before the first state: bridged to it if near enough
-        depth.apply(fs, t_prev, t_prev)
+        fit.start(run.t_first, median_ping_sigma(config, log.dvl.d_cov[pings]))
+    return run
+
+
+def _filter(
+    log: LogData,
+    config: EstimatorConfig,
+    progress: ProgressFn | None,
+    fit: WarmupFit | None = None,
+    calibration: VehicleCalibration | None = None,
+    consider_calibration: bool = False,
+) -> NavResult:
+    """run_ekf at config's noise levels; with fit, only up to its warm-up window's end, the innovations there
+    collected into it (the NavResult then holds the window's states). consider_calibration: the DVL scale and
+    misalignment held at their start as consider states (kalman.update). Without a calibration file and with
+    [priors] nominal_check (and the hold on), info["filter"]["nominal"] has the final calibration's nominal check
+    (estimators/models/weak_hold.py nominal_check)."""
+    t_start = time.perf_counter()
+    run = _start(log, config, fit, calibration, consider_calibration)
+    state_t, ping_at = run.states()
+    t_prev = run.t_first
+    if run.depth is not None:  # samples before the first state: bridged to it if near enough
+        run.depth.apply(run.fs, t_prev, t_prev)
     for count, (t_j, j) in enumerate(zip(state_t.tolist(), ping_at.tolist(), strict=True)):
         t0 = time.perf_counter()
-        while (
-            t_prev < t_j - 1e-9
-        ):  # propagate (in steps of at most MAX_STEP_S, stopping at depth samples)
-            t_next = min(t_j, t_prev + MAX_STEP_S)
-            if depth is not None and (t_d := depth.due(t_next)) is not None and t_d > t_prev:
-                t_next = t_d
-            idx, dt, held = pieces_with_holds(t, starts, gaps, t_prev, t_next)
-            if len(idx):
-                n_g, G = earth.gravity(fs.nav.n_p + 0.5 * (t_next - t_prev) * fs.nav.n_v)
-                step = propagate_interval(
-                    fs.nav,
-                    imu.b_omega[idx] - fs.gyro_bias,
-                    imu.b_f[idx] - fs.accel_bias,
-                    dt,
-                    earth.n_omega_ie,
-                    n_g,
-                    G,
-                )
-                fs.nav = step.state
-                fs.P = propagate_covariance(
-                    fs.P, step.Phi, process_noise(config, step.Phi, step.duration)
-                )
-                if (
-                    gm := fs.error_slice()
-                ) is not None:  # the correlated DVL error decays (correlated.py)
-                    assert fs.dvl_error is not None
-                    fs.P, fs.dvl_error = ekf_propagate(
-                        config, fs.P, fs.dvl_error, gm, t_next - t_prev
-                    )
-                # the current's random walk in time and depth, or across the layer boundaries (current.py)
-                current.ekf_propagate(config, fs, t_next - t_prev, frame.height_m)
-                if (
-                    held
-                ):  # the motion model's uncertainty across an IMU gap, as in the factor graphs
-                    q = np.diag(hold_covariance(config.imu, held, t_next - t_prev))
-                    fs.P[PHI, PHI] += np.diag(q[0:3])
-                    fs.P[POS, POS] += np.diag(q[3:6])
-                    fs.P[VEL, VEL] += np.diag(q[6:9])
-            t_prev = t_next
-            if depth is not None:
-                depth.apply(fs, t_prev, t_prev)
+        t_prev = run.propagate(t_prev, t_j)
         t1 = time.perf_counter()
         if (
-            depth is not None and count == len(state_t) - 1
+            run.depth is not None and count == len(state_t) - 1
         ):  # samples after the last state: bridged to it
-            depth.apply(fs, t_j, t_j, bridge_to=math.inf)
+            run.depth.apply(run.fs, t_j, t_j, bridge_to=math.inf)
+        run.timing["propagate"] += t1 - t0
         if j < 0:  # a state without a ping: recorded, not updated
-            g_j = int(covering_sample(t, t_j))
-            hist.record(
-                fs, t_j, imu.b_omega[g_j] - fs.gyro_bias - fs.nav.n_R_b.T @ earth.n_omega_ie
-            )
-            timing["propagate"] += t1 - t0
+            run.record_without_ping(t_j)
             continue
         if fit is not None and t_j > fit.t_end:
+            run.timing["propagate"] -= t1 - t0  # (not counted: the window ended before it)
             break
-        on_water = bool(water[j])
-        A, z, Rm = _ping_measurement(log, config, int(j), on_water)
-        n_v = current.seen_velocity(
-            fs, on_water
-        )  # (m/s, map): over ground, or relative to the water
-        y_hat, H, b_omega = measurement_model(
-            fs, imu.b_omega[gyro_index[j]], b_l, earth.n_omega_ie, n_v
-        )
-        if (
-            offset
-        ):  # the ping's velocity at t + dt_d (module doc), the IMU window centred on the estimate
-            dt_c = float(
-                np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound)
-            )
-            if (
-                dt_c != fs.time_offset
-            ):  # the window held at the bound: counted, reported (analysis/health.py)
-                counters["time_offset_window_clipped"] = (
-                    counters.get("time_offset_window_clipped", 0) + 1
-                )
-            rate = maker.velocity_rate_input(t_j, t, imu.b_f, imu.b_omega, dt_c, n_R_b=fs.nav.n_R_b)
-            y_hat, H = offset_measurement_model(fs, b_l, rate, maker.offset_gravity(), n_v)
-        if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/models/correlated.py)
-            assert fs.dvl_error is not None
-            y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
-        if (
-            wc := fs.current_slice()
-        ) is not None:  # dh/dW: minus the velocity's east and north columns
-            H[:, wc] = -H[:, VEL][:, :2] if on_water else 0.0
-        speed = np.linalg.norm(y_hat) / fs.scale
-        slow = speed < ekf_cfg.min_calibration_speed_m_s
-        unsure = not slow and speed < ekf_cfg.calibration_speed_sigmas * np.sqrt(
-            np.trace(fs.P[VEL, VEL])
-        )
-        # the ping itself moving beyond its noise (an underway start's first ping), while the filter's velocity
-        # is still uncertain: the calibration as consider states (see the comment at MIN_CALIBRATION_SPEED_M_S);
-        # a still vehicle whose filtered velocity wanders above the speed keeps the columns zero
-        moving = len(z) == 3 and np.linalg.norm(z) / fs.scale > max(
-            ekf_cfg.min_calibration_speed_m_s,
-            ekf_cfg.calibration_speed_sigmas * np.sqrt(np.trace(Rm)),
-        )
-        if slow or (unsure and not moving):
-            H[:, CALIBRATION] = 0.0
-        unsure = unsure and moving
-        if (
-            watch.diverged
-        ):  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter from here on
-            H[:, FROZEN_ON_DIVERGENCE] = 0.0
-            if offset:
-                H[:, OFFSET] = 0.0
-        # the chi^2 gate, reopened after ekf.gate_reopen_after gated pings in a row (a filter that lost track)
-        if gated_run < ekf_cfg.gate_reopen_after:
-            if len(z) not in gates:  # chi2.ppf once per measurement dimension, not once per ping
-                gates[len(z)] = gate_threshold(ekf_cfg.gate_probability, len(z))
-            gate_nis = gates[len(z)]
-        else:
-            gate_nis = math.inf
-        if fit is not None:
-            AH = A @ H
-            hph = AH @ fs.P @ AH.T
-        nis, down, was_gated = update(
-            fs,
-            A @ H,
-            z - A @ y_hat,
-            Rm,
-            kernel,
-            k_robust,
-            gate_nis,
-            CALIBRATION if consider_calibration or unsure else None,
-        )
-        if (
-            offset and abs(fs.time_offset - offset_centre) > offset_bound
-        ):  # held within its window's bound
-            fs.time_offset = float(
-                np.clip(fs.time_offset, offset_centre - offset_bound, offset_centre + offset_bound)
-            )
-            counters["time_offset_bounded"] = counters.get("time_offset_bounded", 0) + 1
-        # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
-        # has a large and growing NIS while the vehicle gathers speed)
-        if not was_gated and t_j > t_first + config.noise.warmup_s and watch.add(t_j, nis / len(z)):
-            counters["diverged_at_ping"] = int(j)
-        if fit is not None and not was_gated:
-            fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
-        counters["dvl_slow"] += int(slow)
-        gated, gated_run = gated + int(was_gated), gated_run + 1 if was_gated else 0
-        if not was_gated:
-            nis_sum, nis_dof, downweighted = (
-                nis_sum + nis,
-                nis_dof + len(z),
-                downweighted + int(down),
-            )
-        timing["propagate"] += t1 - t0
-        timing["update"] += time.perf_counter() - t1
-        hist.record(fs, t_j, b_omega)
-        if (wc := fs.current_slice()) is not None:
-            assert fs.current is not None
-            currents.append(
-                (t_j, float(fs.nav.n_p[2]), fs.current.copy(), fs.P[wc, wc].copy(), on_water)
-            )
+        run.update_at_ping(t_j, int(j))
+        run.timing["update"] += time.perf_counter() - t1
         if progress and count % 100 == 0:
             progress(count / len(state_t))
-    counters["dvl_updates"] = len(pings)  # the pings the filter took, dvl_gated of them not used
-    counters["dvl_downweighted"] = downweighted
-    counters["dvl_gated"] = gated
-    if depth is not None:
-        counters.update(depth.counters)
-    result = history_result(hist, log, config)
-    result.dvl_pings = pings
-    result.timing_s = {**timing, "total": time.perf_counter() - t_start}
-    result.info = {
-        "alignment": maker.alignment_info(),
-        "counters": counters,
-        "epochs": len(state_t),
-        "imu_gaps": gaps.summary(),
-        "filter": {
-            "mean_nis_per_dof": nis_sum / max(nis_dof, 1),
-            "nis_dof": nis_dof,
-            "error_state": len(fs.P),
-            **watch.info(),
-        },
-    }
-    if fs.dvl_error is not None:
-        result.info["dvl_correlated_error"] = correlated_info(config)
-    if (
-        calibration is None
-        and fit is None
-        and config.priors.nominal_check
-        and config.priors.hold_weak_information > 0
-    ):
-        k0, b_R_d0, _ = weak_hold.calibration_prior(config, log.mounting)
-        d = np.r_[fs.scale - k0, so3_log(np.asarray(b_R_d0).T @ fs.b_R_d)]
-        result.info["filter"]["nominal"] = weak_hold.nominal_check(
-            d, fs.P[np.ix_(CALIBRATION, CALIBRATION)]
-        )
-    if (
-        currents
-    ):  # the current at each update, its filtered sigmas (estimators/models/current.py profile)
-        result.info["water_current"] = current.profile(
-            np.array([c[0] for c in currents]),
-            np.array([c[1] for c in currents]),
-            np.array([c[2] for c in currents]),
-            np.array([c[3] for c in currents]),
-            config,
-            np.array([c[4] for c in currents], dtype=bool),
-            current.ekf_shear(fs),
-        )
+    result = run.result(len(state_t), calibration)
+    result.timing_s = {**run.timing, "total": time.perf_counter() - t_start}
     if progress:
         progress(1.0)
     return result
+
+
+def ekf_estimates(fs: FilterState, t: float) -> dict[str, EpochEstimate]:
+    """The per-epoch states' filtered estimates at the filter's last state (stamped t s) and their covariance
+    blocks (estimators/models/epoch_states.py)."""
+    return {
+        name: EpochEstimate(
+            np.array([t]), fs.epoch[name][None, :].copy(), fs.P[cols, cols][None].copy(), False
+        )
+        for name, cols in fs.epoch_slices().items()
+    }

@@ -13,12 +13,12 @@ from gtsam_dvl.core.rotations import matrix_to_rpy, so3_exp
 from gtsam_dvl.core.states import Estimate, block_states, ekf_layout, joint_states
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, SCALE
+from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, N_NAV, PHI, SCALE
 
 if TYPE_CHECKING:
     from gtsam_dvl.estimators.ekf.strapdown import FilterState
 
-N_NAV = 9  # attitude, velocity, position: the error state's navigation part
+__all__ = ["N_NAV", "History", "history_result"]  # (N_NAV: strapdown.py's, read from here too)
 
 
 @dataclass

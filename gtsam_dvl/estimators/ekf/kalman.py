@@ -3,9 +3,8 @@ with the chi^2 gate and the robust kernel, the injection of the error into the n
 through an interval's transition.
 
 The error state is strapdown.py's navigation and calibration error (N_ERR), then the time offset when estimated
-(core/states.py ekf_layout), then the DVL's correlated error when modelled (FilterState.error_slice,
-estimators/models/correlated.py), then the water current when water-track pings are used (FilterState.current_slice,
-estimators/models/current.py).
+(core/states.py ekf_layout), then the water current's layer boundaries, then the blocks of the per-epoch states the
+configuration carries (estimators/models/epoch_states.py; FilterState.epoch_slices).
 """
 
 from __future__ import annotations
@@ -16,11 +15,10 @@ import numpy as np
 from scipy.stats import chi2
 
 from gtsam_dvl.core.rotations import so3_exp
-from gtsam_dvl.core.states import ekf_layout
-from gtsam_dvl.estimators.ekf.history import N_NAV
 from gtsam_dvl.estimators.ekf.strapdown import (
     BA,
     BG,
+    LAYOUT,
     MIS,
     N_ERR,
     PHI,
@@ -31,9 +29,7 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     NavState,
 )
 
-OFFSET = ekf_layout(None, N_NAV)[
-    "time_offset"
-].start  # error-state index of the DVL time offset dt_d (s)
+OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s)
 
 
 def robust_weight(kernel: str, k: float, r: float) -> float:
@@ -97,13 +93,8 @@ def update(
     fs.accel_bias = fs.accel_bias + dx[BA]
     fs.scale = fs.scale + float(dx[SCALE])
     fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
-    gm = fs.error_slice()
-    if gm is not None:
-        assert fs.dvl_error is not None
-        fs.dvl_error = fs.dvl_error + dx[gm]
-    if (wc := fs.current_slice()) is not None:
-        assert fs.current is not None
-        fs.current = fs.current + dx[wc]
+    for name, cols in fs.epoch_slices().items():  # the per-epoch states' (epoch_states.py)
+        fs.epoch[name] = fs.epoch[name] + dx[cols]
     if (sh := fs.shear_slice()) is not None:
         assert fs.shear is not None
         fs.shear = fs.shear + dx[sh].reshape(-1, 2)

@@ -21,12 +21,15 @@ the Earth rate, dtheta_j - n_R_b^T w_ie dt_j (with the raw increment a static IM
 0.4 micro-g, 2 mm/s after ten minutes; GTSAM's preintegration works in a non-rotating frame, where the
 raw increment is the right one).
 
-Error state (19), "true = estimate (+) error":
+Error state, "true = estimate (+) error": the navigation error (N_NAV = 9)
     phi (0:3)   attitude, map axes, left:   n_R_b = Exp(phi) n_R_b_est
     dv  (3:6)   velocity, map             dp (6:9) position, map
-    dbg (9:12)  gyro bias                 dba (12:15) accelerometer bias
-    dk  (15)    DVL scale                 psi (16:19) b_R_d = b_R_d_est Exp(psi) (right, as GTSAM's Rot3)
-with the linearised dynamics
+then the shared states the EKF carries, in the columns of core/states.py ekf_layout (the one source of BG, BA,
+SCALE, MIS and the time offset's column): dbg (9:12) gyro bias, dba (12:15) accelerometer bias, dk (15) DVL
+scale, psi (16:19) b_R_d = b_R_d_est Exp(psi) (right, as GTSAM's Rot3), the time offset (19) when estimated; the
+transition below covers the first N_ERR = 19. After them the water current's layer boundaries, then the blocks of
+the per-epoch states the configuration carries (estimators/models/epoch_states.py, in registry order: the DVL's
+correlated error, the water current; FilterState.epoch_slices). With the linearised dynamics
     phi' = -[w_ie]x phi - n_R_b dbg
     dv'  = -[n_R_b f]x phi - 2 [w_ie]x dv + G dp - n_R_b dba        (G = d n_g / d n_p)
     dp'  = dv
@@ -37,22 +40,19 @@ are below 1e-4 of the ones kept over a one-second interval; tests/estimators/tes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from gtsam_dvl.core.rotations import skew, so3_exp
+from gtsam_dvl.core.states import ekf_layout
 
-N_ERR = 19
-PHI, VEL, POS, BG, BA, SCALE, MIS = (
-    slice(0, 3),
-    slice(3, 6),
-    slice(6, 9),
-    slice(9, 12),
-    slice(12, 15),
-    15,
-    slice(16, 19),
-)
+N_NAV = 9  # attitude, velocity, position: the error state's navigation part
+PHI, VEL, POS = slice(0, 3), slice(3, 6), slice(6, 9)
+LAYOUT = ekf_layout(None, N_NAV)  # the shared states' columns, with every state the EKF can carry
+BG, BA, MIS = LAYOUT["gyro_bias"], LAYOUT["accel_bias"], LAYOUT["misalignment"]
+SCALE = LAYOUT["scale"].start  # (a scalar's column)
+N_ERR = MIS.stop  # the navigation error and the shared states the strapdown's transition covers
 
 
 @dataclass
@@ -64,58 +64,84 @@ class NavState:
     n_p: np.ndarray
 
 
-@dataclass
 class FilterState:
-    """Nominal state and error-state covariance of the filter."""
+    """Nominal state and error-state covariance of the filter (module doc: the error state's layout)."""
 
-    nav: NavState
-    gyro_bias: np.ndarray
-    accel_bias: np.ndarray
-    scale: float
-    b_R_d: np.ndarray
-    P: np.ndarray  # (19, 19), or (20, 20) with the time offset (filter.py OFFSET)
-    time_offset: float = 0.0  # dt_d, s (with [dvl] estimate_time_offset)
-    # the DVL's correlated velocity error E (3,) m/s in dvl_link, the last 3 error-state components (with [dvl]
-    # correlated_sigma_m_s > 0: estimators/models/correlated.py)
-    dvl_error: np.ndarray | None = None
-    # the water current [c_east, c_north] (2,) m/s in map, the last 2 error-state components (when water-track
-    # pings are used: estimators/models/current.py)
-    current: np.ndarray | None = None
-    # with [current] layer_thickness_m > 0: the current's change across each layer boundary crossed so far
-    # (estimators/models/current.py, "Layers"), (n, 2) m/s in map, boundary shear_ids[r] in row r; their error-state
-    # components sit before the correlated error's and the current's, two per boundary
-    shear: np.ndarray | None = None
-    shear_ids: list[int] = field(default_factory=list)
-    layer: int = 0  # the depth layer of the nominal state (with layers)
+    def __init__(
+        self,
+        nav: NavState,
+        gyro_bias: np.ndarray,
+        accel_bias: np.ndarray,
+        scale: float,
+        b_R_d: np.ndarray,
+        P: np.ndarray,
+        time_offset: float = 0.0,
+        dvl_error: np.ndarray | None = None,
+        current: np.ndarray | None = None,
+        epoch: dict[str, np.ndarray] | None = None,
+    ) -> None:
+        self.nav, self.gyro_bias, self.accel_bias = nav, gyro_bias, accel_bias
+        self.scale, self.b_R_d = scale, b_R_d
+        self.P = P  # (19, 19), or (20, 20) with the time offset, then the blocks below
+        self.time_offset = time_offset  # dt_d, s (with [dvl] estimate_time_offset)
+        # the per-epoch states' estimates (estimators/models/epoch_states.py), by name in the order of their blocks,
+        # the last components of the error state: the DVL's correlated error "dvl_error" (3,) m/s in dvl_link
+        # (estimators/models/correlated.py), the water current "water_current" [c_east, c_north] (2,) m/s in map
+        # (estimators/models/current.py), ...
+        self.epoch: dict[str, np.ndarray] = {} if epoch is None else dict(epoch)
+        if dvl_error is not None:
+            self.epoch["dvl_error"] = dvl_error
+        if current is not None:
+            self.epoch["water_current"] = current
+        # with [current] layer_thickness_m > 0: the current's change across each layer boundary crossed so far
+        # (estimators/models/current.py, "Layers"), (n, 2) m/s in map, boundary shear_ids[r] in row r; their
+        # error-state components sit before the per-epoch states' blocks, two per boundary
+        self.shear: np.ndarray | None = None
+        self.shear_ids: list[int] = []
+        self.layer = 0  # the depth layer of the nominal state (with layers)
+
+    @property
+    def dvl_error(self) -> np.ndarray | None:
+        """The DVL's correlated error's estimate (None when not modelled)."""
+        return self.epoch.get("dvl_error")
+
+    @property
+    def current(self) -> np.ndarray | None:
+        """The water current's estimate (None when not modelled)."""
+        return self.epoch.get("water_current")
+
+    def epoch_dims(self) -> int:
+        """The error-state components of the per-epoch states' blocks (the last ones)."""
+        return sum(len(v) for v in self.epoch.values())
+
+    def epoch_slices(self) -> dict[str, slice]:
+        """Each per-epoch state's error-state columns: its block, in the order of `epoch`, at the end."""
+        out: dict[str, slice] = {}
+        start = len(self.P) - self.epoch_dims()
+        for name, value in self.epoch.items():
+            out[name] = slice(start, start + len(value))
+            start += len(value)
+        return out
 
     def error_slice(self) -> slice | None:
-        """The correlated DVL error's error-state columns (the last three before the current's), None when not
-        modelled."""
-        end = len(self.P) - (0 if self.current is None else 2)
-        return None if self.dvl_error is None else slice(end - 3, end)
-
-    def shear_slice(self) -> slice | None:
-        """The layer boundaries' error-state columns (before the correlated error's and the current's), None
-        without layers."""
-        if self.shear is None:
-            return None
-        end = (
-            len(self.P) - (0 if self.current is None else 2) - (0 if self.dvl_error is None else 3)
-        )
-        return slice(end - 2 * len(self.shear_ids), end)
+        """The correlated DVL error's error-state columns, None when not modelled."""
+        return self.epoch_slices().get("dvl_error")
 
     def current_slice(self) -> slice | None:
-        """The water current's error-state columns (the last two), None when not modelled."""
-        return None if self.current is None else slice(len(self.P) - 2, len(self.P))
+        """The water current's error-state columns, None when not modelled."""
+        return self.epoch_slices().get("water_current")
+
+    def shear_slice(self) -> slice | None:
+        """The layer boundaries' error-state columns (before the per-epoch states' blocks), None without layers."""
+        if self.shear is None:
+            return None
+        end = len(self.P) - self.epoch_dims()
+        return slice(end - 2 * len(self.shear_ids), end)
 
     def extra_states(self) -> int:
-        """How many error-state components follow the time offset's place: the layer boundaries', the correlated
-        error's and the current's."""
-        return (
-            (0 if self.dvl_error is None else 3)
-            + (0 if self.current is None else 2)
-            + 2 * len(self.shear_ids)
-        )
+        """How many error-state components follow the time offset's place: the layer boundaries' and the per-epoch
+        states'."""
+        return self.epoch_dims() + 2 * len(self.shear_ids)
 
 
 @dataclass

@@ -53,6 +53,7 @@ from gtsam_dvl.estimators.graph.bulk_imu import BulkImu, StateArrays, state_arra
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 from gtsam_dvl.factors.dvl_bulk import BulkPings, dvl_ping_errors
+from gtsam_dvl.factors.dvl_model import DvlJacobians
 from gtsam_dvl.factors.ping_motion import PingMotion, keyframe_ping_covariance
 
 CHUNK = 20_000  # rows evaluated at once (about 50 MB of temporaries)
@@ -252,40 +253,53 @@ class BulkDvl:
             ew[sl] = np.einsum("nij,nj->ni", W, e)
             if jacobians:
                 assert J is not None and out is not None
-                blocks = J.variables()
-                if on_water is not None:
-                    w3 = on_water[:, None, None]
-                    i_scale = next(n for n, B in enumerate(blocks) if B is J.scale)
-                    blocks = [
-                        B if n == i_scale else np.where(w3, B * ratio, B)
-                        for n, B in enumerate(blocks)
-                    ]
-                    scale_block = blocks[i_scale]
-                    blocks[i_scale] = np.where(w3, 0.0, scale_block)
-                if d_e is not None:  # dh/dE: I, or a beam's d_u^T
-                    blocks = [
-                        *blocks,
-                        np.broadcast_to(np.eye(3), (len(e), 3, 3))
-                        if d_u is None
-                        else d_u[sl][:, None, :],
-                    ]
-                if (
-                    n_c is not None
-                ):  # dh/dW: minus the velocity's east and north columns, on water-track rows
-                    on = np.zeros(len(e), dtype=bool) if self.water is None else self.water[sl]
-                    blocks = [
-                        *blocks,
-                        np.where(
-                            on[:, None, None],
-                            -J.vel[:, :, :2] * (1.0 if ratio is None else ratio),
-                            0.0,
-                        ),
-                    ]
-                if on_water is not None:  # dh/dk_w on the water-track rows
-                    blocks = [*blocks, np.where(on_water[:, None, None], scale_block, 0.0)]
+                blocks = self._blocks(
+                    J, sl, len(e), ratio, on_water, d_e is not None, n_c is not None
+                )
                 for dst, B in zip(out, blocks, strict=True):
                     np.matmul(W, B, out=dst[sl])
         return ew
+
+    def _blocks(
+        self,
+        J: DvlJacobians,
+        sl: slice,
+        n_rows: int,
+        ratio: float | None,
+        on_water: np.ndarray | None,
+        correlated: bool,
+        currents: bool,
+    ) -> list[np.ndarray]:
+        """The Jacobian blocks of a chunk of rows sl (n_rows), per key of the carrier (_evaluate), unwhitened: the
+        DVL model's (J, dvl_ping_errors), on water-track rows with their own scale (ratio = k_w / k, on_water)
+        times the ratio and the scale's moved to K_WATER (last); then dh/dE (correlated) and dh/dW (currents)."""
+        d_u = self.pings.d_u
+        blocks = J.variables()
+        scale_block = None
+        if on_water is not None:
+            w3 = on_water[:, None, None]
+            i_scale = next(n for n, B in enumerate(blocks) if B is J.scale)
+            blocks = [
+                B if n == i_scale else np.where(w3, B * ratio, B) for n, B in enumerate(blocks)
+            ]
+            scale_block = blocks[i_scale]
+            blocks[i_scale] = np.where(w3, 0.0, scale_block)
+        if correlated:  # dh/dE: I, or a beam's d_u^T
+            blocks = [
+                *blocks,
+                np.broadcast_to(np.eye(3), (n_rows, 3, 3)) if d_u is None else d_u[sl][:, None, :],
+            ]
+        if currents:  # dh/dW: minus the velocity's east and north columns, on water-track rows
+            on = np.zeros(n_rows, dtype=bool) if self.water is None else self.water[sl]
+            blocks = [
+                *blocks,
+                np.where(
+                    on[:, None, None], -J.vel[:, :, :2] * (1.0 if ratio is None else ratio), 0.0
+                ),
+            ]
+        if on_water is not None and scale_block is not None:  # dh/dk_w on the water-track rows
+            blocks = [*blocks, np.where(on_water[:, None, None], scale_block, 0.0)]
+        return blocks
 
     def _correlated_errors(self, values: gtsam.Values) -> np.ndarray | None:
         """Each row's correlated DVL error E(state) (N, 3) m/s, dvl_link; None when not modelled."""
@@ -464,20 +478,21 @@ def whitening(cov: np.ndarray) -> np.ndarray:
     return W
 
 
-def bulk_dvl(builder: BulkSource) -> BulkDvl:
-    """The BulkDvl of a LogGraph's pings: each state's own ping, then the pings between it and the next state
-    (their rows: the 3-D velocity, or with [dvl] use_beams each valid beam in its order), with the noise, IMU motion
-    and gravity the per-factor path gives them (LogGraph.dvl_factors, between_factors; FactorMaker.dvl_factors_for,
-    dvl_keyframe_factors_for)."""
-    maker, cfg, dvl = builder.maker, builder.config, builder.log.dvl
-    offset = enabled(cfg, "time_offset")
-    k0 = cfg.priors.scale_initial
-    b_R_d0 = maker.mounting.b_R_d0
-    n_states = len(builder.epochs)
-    if builder.gravity_positions is None:
-        raise ValueError("bulk_dvl needs the initial guess first (LogGraph.initial_values)")
-    g_states, G_states = maker.keyframe_gravity(builder.gravity_positions)
+@dataclass
+class _PingRows:
+    """The pings of a LogGraph in carrier order (bulk_dvl): each one's state, index in log.dvl, snapshot row (-1:
+    the state's own ping), stamp (s) and body rate; with the time offset its IMU constants (b_a, G)."""
 
+    state: np.ndarray
+    dvl_index: np.ndarray
+    snap: np.ndarray
+    t: np.ndarray
+    b_omega: np.ndarray
+    rate: tuple[np.ndarray, np.ndarray] | None
+
+
+def _ping_rows(builder: BulkSource, offset: bool) -> _PingRows:
+    """Each state's own ping, then the pings between it and the next state."""
     state, dvl_idx, b_omega, rate_b_a, rate_G, snap, t_ping = [], [], [], [], [], [], []
     for i, ep in enumerate(builder.epochs):
         of_state: list[tuple[int, Any, int]] = []
@@ -498,12 +513,37 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
             else:
                 b_omega.append(src.b_omega)
     n = len(state)
-    st = np.asarray(state, dtype=int)
-    jj = np.asarray(dvl_idx, dtype=int)
-    d_y = np.asarray(dvl.d_v[jj], dtype=float).reshape(n, 3)
+    rate = (
+        (
+            np.asarray(rate_b_a, dtype=float).reshape(n, 3),
+            np.asarray(rate_G, dtype=float).reshape(n, 3, 3),
+        )
+        if offset
+        else None
+    )
+    return _PingRows(
+        np.asarray(state, dtype=int),
+        np.asarray(dvl_idx, dtype=int),
+        np.asarray(snap, dtype=int),
+        np.asarray(t_ping, dtype=float),
+        np.asarray(b_omega, dtype=float).reshape(n, 3),
+        rate,
+    )
+
+
+def _ping_motion(
+    builder: BulkSource, st: np.ndarray, qs: np.ndarray, d_y: np.ndarray
+) -> tuple[PingMotion, np.ndarray]:
+    """The IMU motion from each ping's state to it (none for a state's own ping) with gravity at the states, and
+    the preintegration's noise in each ping between keyframes (N, 3, 3) (as dvl_keyframe_factors_for)."""
+    maker, cfg = builder.maker, builder.config
+    n = len(st)
+    k0, b_R_d0 = cfg.priors.scale_initial, maker.mounting.b_R_d0
+    if builder.gravity_positions is None:
+        raise ValueError("bulk_dvl needs the initial guess first (LogGraph.initial_values)")
+    g_states, G_states = maker.keyframe_gravity(builder.gravity_positions)
     motion = PingMotion.none(n)
     extra = np.zeros((n, 3, 3))  # the preintegration's noise in each ping between keyframes
-    qs = np.asarray(snap, dtype=int)
     moving = qs >= 0
     if moving.any():
         snaps = builder.snapshots
@@ -525,41 +565,61 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
         np.asarray(builder.gravity_positions, dtype=float)[st],
         np.asarray(G_states, dtype=float).reshape(-1, 3, 3)[st],
     )
-    om = np.asarray(b_omega, dtype=float).reshape(n, 3)
-    t_rows = np.asarray(t_ping, dtype=float)
-    rate = (
-        (
-            np.asarray(rate_b_a, dtype=float).reshape(n, 3),
-            np.asarray(rate_G, dtype=float).reshape(n, 3, 3),
-        )
-        if offset
-        else None
-    )
+    return motion, extra
+
+
+def _measurement_rows(
+    cfg: EstimatorConfig,
+    dvl: Any,
+    jj: np.ndarray,
+    d_y: np.ndarray,
+    extra: np.ndarray,
+    water: np.ndarray,
+) -> tuple[np.ndarray | slice, np.ndarray, np.ndarray | None, np.ndarray]:
+    """The carrier's rows of the pings jj (rows: which ping each row is), their measurements y, beam directions
+    d_u (None: 3-D velocities) and whitening: the 3-D velocity (a water-track ping's with its own noise), or with
+    [dvl] use_beams one row per valid beam, in the beams' order (FactorMaker's beam factors)."""
+    n = len(jj)
     beams = dvl.beams if cfg.dvl.use_beams else None
-    water = (
-        builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)
-    )  # (water track: 3-D, own noise)
     if beams is not None and water.any():
         raise GtsamDvlError(
             "[dvl] use_beams with water-track pings: not supported; set [current] water_track = "
             '"refuse" or use_beams = false'
         )
     if beams is None:
-        rows: np.ndarray | slice = slice(None)
-        y, d_u = d_y, None
         cov = ping_covariance(cfg.dvl, np.asarray(dvl.d_cov[jj], dtype=float).reshape(n, 3, 3))
         cov[water] = water_covariance(cfg, np.asarray(dvl.d_cov[jj[water]], dtype=float))
-        whiten = whitening(cov + extra)
-    else:  # one row per valid beam, in the beams' order (FactorMaker's beam factors)
-        rows, b = np.nonzero(beams.valid[jj])
-        d_u = np.asarray(beams.d_u[jj][rows, b], dtype=float)
-        y = np.asarray(beams.v[jj][rows, b], dtype=float)[:, None]
-        var = cfg.dvl.beam_sigma_m_s() ** 2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
-        whiten = (1.0 / np.sqrt(var))[:, None, None]
+        return slice(None), d_y, None, whitening(cov + extra)
+    rows, b = np.nonzero(beams.valid[jj])
+    d_u = np.asarray(beams.d_u[jj][rows, b], dtype=float)
+    y = np.asarray(beams.v[jj][rows, b], dtype=float)[:, None]
+    var = cfg.dvl.beam_sigma_m_s() ** 2 + np.einsum("ni,nij,nj->n", d_u, extra[rows], d_u)
+    return rows, y, d_u, (1.0 / np.sqrt(var))[:, None, None]
+
+
+def bulk_dvl(builder: BulkSource) -> BulkDvl:
+    """The BulkDvl of a LogGraph's pings: each state's own ping, then the pings between it and the next state
+    (their rows: the 3-D velocity, or with [dvl] use_beams each valid beam in its order), with the noise, IMU motion
+    and gravity the per-factor path gives them (LogGraph.dvl_factors, between_factors; FactorMaker.dvl_factors_for,
+    dvl_keyframe_factors_for)."""
+    maker, cfg, dvl = builder.maker, builder.config, builder.log.dvl
+    offset = enabled(cfg, "time_offset")
+    n_states = len(builder.epochs)
+    if builder.gravity_positions is None:
+        raise ValueError("bulk_dvl needs the initial guess first (LogGraph.initial_values)")
+    p = _ping_rows(builder, offset)
+    n, st, jj = len(p.state), p.state, p.dvl_index
+    d_y = np.asarray(dvl.d_v[jj], dtype=float).reshape(n, 3)
+    motion, extra = _ping_motion(builder, st, p.snap, d_y)
+    water = (
+        builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)
+    )  # (water track: 3-D, own noise)
+    rows, y, d_u, whiten = _measurement_rows(cfg, dvl, jj, d_y, extra, water)
+    rate = p.rate
     pings = BulkPings(
         state=st[rows],
         y=y,
-        b_omega=om[rows],
+        b_omega=p.b_omega[rows],
         motion=motion[rows],
         d_u=d_u,
         offset_b_a=None if rate is None else rate[0][rows],
@@ -576,6 +636,6 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
         robust_k=float(cfg.dvl.robust_threshold()),
         offset_n_g=np.asarray(maker.offset_gravity(), dtype=float) if offset else None,
         b_l=np.asarray(maker.mounting.b_l, dtype=float),
-        t_ping=t_rows[rows],
+        t_ping=p.t[rows],
         water=water[rows] if water.any() else None,
     )

@@ -323,18 +323,6 @@ class FactorMaker:
             pim, params, self.imu_keys(i), dt, gravity, self.imu_hold_cov(held, dt)
         )
 
-    def bias_link_factors(self, i: int, dt: float) -> list[gtsam.NonlinearFactor]:
-        """Random-walk bias link B_i -> B_i+1 over dt seconds (none for a random-constant bias)."""
-        if self.config.imu.bias_model != "random_walk":
-            return []
-        imu_cfg = self.config.imu
-        sig_a = imu_cfg.accel_bias_rw_ug_per_rth * UG / 60.0 * np.sqrt(dt)
-        sig_g = imu_cfg.gyro_bias_rw_deg_per_h_per_rth * DEG_PER_H / 60.0 * np.sqrt(dt)
-        noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([sig_a] * 3 + [sig_g] * 3))
-        return [
-            gtsam.BetweenFactorConstantBias(B(i), B(i + 1), gtsam.imuBias.ConstantBias(), noise)
-        ]
-
     def dvl_factors_for(
         self,
         i: int,

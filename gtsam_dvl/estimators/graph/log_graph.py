@@ -23,9 +23,9 @@ from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import B, E, S, V, W, X
+from gtsam_dvl.core.keys import V, X, key_dim
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.states import correlated_error, enabled, shared_keys, water_current
+from gtsam_dvl.core.states import enabled, shared_keys, water_current
 from gtsam_dvl.core.states import initial_values as initial_shared_values
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.graph.bulk import BulkGraph, bulk_dvl
@@ -54,7 +54,8 @@ from gtsam_dvl.estimators.inputs.gnss import (
 from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
 from gtsam_dvl.estimators.inputs.offset_guess import OffsetGuess, guess_offset
 from gtsam_dvl.estimators.inputs.selection import covering_sample, decide_epochs
-from gtsam_dvl.estimators.models import correlated, current
+from gtsam_dvl.estimators.models import current
+from gtsam_dvl.estimators.models.epoch_states import StatePath, enabled_epoch_states, state_keys
 from gtsam_dvl.factors import EarthImuFactor
 from gtsam_dvl.factors.imu_bulk import ImuArrays, bias_jacobians, gravity_maps
 from gtsam_dvl.factors.imu_earth import REFRESH_M
@@ -123,12 +124,13 @@ class LogGraph:
         init=False, repr=False
     )  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
     water: np.ndarray = field(init=False, repr=False)  # (M,) bool: log.dvl's water-track pings
-    # the water current's layer boundaries S(b) the states cross ([current] layer_thickness_m > 0), and the states'
-    # heights (m above the map origin) that place them in the layers (layer_heights; initial_values)
-    shear: list[int] = field(default_factory=list, init=False, repr=False)
-    layer_z: np.ndarray | None = field(default=None, init=False, repr=False)
-    # where the correlated error's, depth and GNSS factors sit in the graph of _factors_but_dvl (the batch
-    # smoother's noise fit makes them again in place): "correlated", "depth", "gnss" -> slots
+    # the states' stamps and heights as the per-epoch states' processes see them (initial_values), and the variables
+    # of those processes beside the per-state ones (the water current's layer boundaries S(b) the states cross):
+    # estimators/models/epoch_states.py
+    path: StatePath | None = field(default=None, init=False, repr=False)
+    extra_keys: list[int] = field(default_factory=list, init=False, repr=False)
+    # where each per-epoch state's factors (by its registry name: "dvl_error" the correlated error's), the depth and
+    # GNSS factors sit in the graph of _factors_but_dvl (the batch smoother's noise fit makes them again in place)
     factor_slots: dict[str, range] = field(default_factory=dict, init=False, repr=False)
     # the time offset's IMU windows as last set (set_time_offset_window, recentre_time_offset): the offset (s) they
     # are centred on and the accelerometer bias (m/s^2, per ping row of the bulk or (3,)) taken off their samples
@@ -453,8 +455,14 @@ class LogGraph:
         return self.imu_factors[i].factor
 
     def bias_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
-        """Random-walk bias link between states i and i+1 (none for a random-constant bias)."""
-        return self.maker.bias_link_factors(i, self.epochs[i + 1].t - self.epochs[i].t)
+        """The links between states i and i + 1 of the per-epoch states that sit beside the IMU factor (the bias
+        random walk: estimators/models/epoch_states.py)."""
+        dt = self.epochs[i + 1].t - self.epochs[i].t
+        out: list[gtsam.NonlinearFactor] = []
+        for s in enabled_epoch_states(self.config):
+            if s.beside_imu:
+                out += s.link_factors(self.config, i, i + 1, dt)
+        return out
 
     def dvl_factors(self, i: int) -> list[gtsam.NonlinearFactor]:
         """DVL factors of state i: the 3-D velocity, or one per valid beam."""
@@ -606,17 +614,32 @@ class LogGraph:
             n_p_all[i] = n_p
             values.insert(X(i), gtsam.Pose3(n_R_b, n_p))
             values.insert(V(i), n_v)
-            if i > 0 and self.config.imu.bias_model == "random_walk":
-                values.insert(self.maker.bias_key(i), zero_bias)
-        if correlated_error(self.config):
-            correlated.initial_values(values, len(self.epochs))
-        if water_current(self.config):  # (with layers, the boundaries the states cross: current.py)
-            self.layer_z = self.layer_heights(n_p_all[:, 2])
-            self.shear = current.boundaries(self.config, self.layer_z, self.frame.height_m)
-            current.initial_values(values, len(self.epochs), self.shear)
+        self._epoch_initial_values(values, n_p_all[:, 2])
         self.set_gravity_from_positions(n_p_all)
         self.gravity_positions = n_p_all
         return values
+
+    def _epoch_initial_values(self, values: gtsam.Values, z: np.ndarray) -> None:
+        """The per-epoch states' variables at their priors' means (estimators/models/epoch_states.py; state 0's of
+        the bias random walk is the shared state's), and their extra variables (the water current's layer
+        boundaries) at zero; z (N,) m: the states' heights in the initial guess."""
+        t = np.array([ep.t for ep in self.epochs])
+        self.path = StatePath(t, z, self.layer_heights(z), self.frame.height_m)
+        self.extra_keys = []
+        for s in enabled_epoch_states(self.config):
+            for i in range(1 if s.first_shared else 0, len(self.epochs)):
+                s.insert(values, s.key(i), s.initial(self.config))
+            extra = s.extra_keys(self.config, self.path)
+            for k in extra:
+                values.insert(k, np.zeros(key_dim(k)))
+            self.extra_keys += extra
+
+    @property
+    def shear(self) -> list[int]:
+        """The water current's layer boundaries b the states cross (their keys S(b) among extra_keys)."""
+        return [
+            gtsam.Symbol(k).index() for k in self.extra_keys if chr(gtsam.Symbol(k).chr()) == "s"
+        ]
 
     def build(self) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
         """The whole graph and its initial guess (batch smoothing, covariance analysis)."""
@@ -659,24 +682,12 @@ class LogGraph:
                 graph.add(self.imu_factor(i))
             for f in self.bias_factors(i):
                 graph.add(f)
-        if correlated_error(
+        if self.path is None:
+            raise GtsamDvlError("the graph's factors need its initial guess first (initial_values)")
+        for s in enabled_epoch_states(
             self.config
-        ):  # the DVL's correlated error: prior and Gauss-Markov links
-            add(
-                "correlated",
-                correlated.factors(self.config, np.array([ep.t for ep in self.epochs])),
-            )
-        if water_current(self.config):  # the water current: prior and random walk in time and depth
-            z = (
-                np.zeros(len(self.epochs))
-                if self.gravity_positions is None
-                else self.gravity_positions[:, 2]
-            )
-            z = self.layer_z if current.layered(self.config) and self.layer_z is not None else z
-            for f in current.factors(
-                self.config, np.array([ep.t for ep in self.epochs]), z, self.frame.height_m
-            ):
-                graph.add(f)
+        ):  # each per-epoch state's prior and links (epoch_states.py)
+            add(s.name, s.graph_factors(self.config, self.path))
         add("depth", self.depth_factors())
         add("gnss", self.gnss_factors(gnss))
         return graph
@@ -760,22 +771,12 @@ class LogGraph:
         chunk_states states, which the solver eliminates one at a time when there are more than
         solver.CHUNKED_FROM_STATES states (solver.eliminate: the same Bayes net, in time linear in the mission);
         .ordering() is the plain gtsam.Ordering."""
-        rw = self.config.imu.bias_model == "random_walk"
-        gm = correlated_error(self.config)
-        wc = water_current(self.config)
         keys: list[int] = []
         chunks: list[list[int]] = []
         for i in range(len(self.epochs)):
-            keys += (
-                [X(i), V(i)]
-                + ([B(i)] if rw else [])
-                + ([E(i)] if gm else [])
-                + ([W(i)] if wc else [])
-            )
+            keys += state_keys(self.config, i)
             if (i + 1) % chunk_states == 0 or i + 1 == len(self.epochs):
                 chunks.append(keys)
                 keys = []
-        # (the water current's layer boundaries S(b) with the shared states: every state may cross them)
-        return ChunkedOrdering(
-            chunks, shared_keys(self.config, per_state=False) + [S(b) for b in self.shear]
-        )
+        # (the per-epoch states' extra variables with the shared states: every state may reach them)
+        return ChunkedOrdering(chunks, shared_keys(self.config, per_state=False) + self.extra_keys)

@@ -19,6 +19,9 @@ between it and the next state, read E(i) (factors/dvl.py error_variable; a keyfr
 is short against tau). The links are linear in the vectors E, so they are GTSAM's own linear factors
 (LinearContainerFactor of a JacobianFactor, linearised at zero: exact) evaluated in C++, not Python
 CustomFactors (which iSAM2 would call with a copy of the whole Values).
+
+Its entry in the per-epoch registry (estimators/models/epoch_states.py DvlCorrelatedError) declares it to the
+estimators with these functions: the batch graph, the online window, the EKF and the results read the registry.
 """
 
 from __future__ import annotations
@@ -72,12 +75,6 @@ def factors(config: EstimatorConfig, t_states: np.ndarray) -> list[gtsam.Nonline
     ]
 
 
-def initial_values(values: gtsam.Values, n_states: int) -> None:
-    """E(i) = 0 for states 0..n_states-1 (the process's mean), into values."""
-    for i in range(n_states):
-        values.insert(E(i), np.zeros(3))
-
-
 def ekf_propagate(
     config: EstimatorConfig, P: np.ndarray, d_e: np.ndarray, cols: slice, dt: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -92,16 +89,14 @@ def ekf_propagate(
     return out, phi * d_e
 
 
-def info(
-    config: EstimatorConfig, values: gtsam.Values | None = None, n_states: int = 0
-) -> dict[str, object]:
-    """NavResult.info["dvl_correlated_error"]: the model's level and time constant and, from a solution's values,
-    the RMS of the estimated error per dvl_link axis (m/s) over the states."""
+def info(config: EstimatorConfig, d_e: np.ndarray | None = None) -> dict[str, object]:
+    """NavResult.info["dvl_correlated_error"]: the model's level and time constant and, from a smoother's estimate
+    d_e (N, 3) of every state (estimators/models/epoch_states.py EpochEstimate), the RMS of the estimated error per
+    dvl_link axis (m/s) over the states."""
     out: dict[str, object] = {
         "sigma_m_s": config.dvl.correlated_sigma_m_s,
         "tau_s": config.dvl.correlated_tau_s,
     }
-    if values is not None and n_states:
-        d_e = np.array([values.atVector(E(i)) for i in range(n_states)])
-        out["estimate_rms_m_s"] = np.sqrt(np.mean(d_e**2, axis=0)).tolist()
+    if d_e is not None and len(d_e):
+        out["estimate_rms_m_s"] = np.sqrt(np.mean(np.asarray(d_e) ** 2, axis=0)).tolist()
     return out

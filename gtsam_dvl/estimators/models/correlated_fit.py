@@ -66,7 +66,7 @@ def replace_factors(
     graph: gtsam.NonlinearFactorGraph, slots: range, config: EstimatorConfig, t_states: np.ndarray
 ) -> None:
     """The prior and links of E made again at config's level and time constant, into their slots
-    (LogGraph.factor_slots["correlated"]: the prior first, then the links in state order)."""
+    (LogGraph.factor_slots["dvl_error"]: the prior first, then the links in state order)."""
     factors = correlated.factors(config, t_states)
     if len(factors) != len(slots):
         raise GtsamDvlError(

@@ -35,7 +35,10 @@ is a CustomFactor of the same residual (GTSAM's Python JacobianFactor takes thre
 
 The current is determined only where something ties the vehicle's velocity over ground: bottom track, GNSS at the
 surface, or the IMU carrying it from either; a water-track stretch far from both leaves W and the vehicle's
-velocity free together (the verdict, `info`, says where the current's sigma stays near its prior's).
+velocity free together (the verdict, `profile`, says where the current's sigma stays near its prior's).
+
+Its entry in the per-epoch registry (estimators/models/epoch_states.py WaterCurrent) declares it to the estimators
+with these functions (the boundaries S(b) as its extra keys); the profile is the result's typed water_current.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import S, W
+from gtsam_dvl.core.result import WaterCurrentProfile
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.inputs.selection import within_layer_variance
 
@@ -231,16 +235,6 @@ def factors(
     )
 
 
-def initial_values(
-    values: gtsam.Values, n_states: int, shear: list[int] | tuple[int, ...] = ()
-) -> None:
-    """W(i) = 0 for states 0..n_states-1 and S(b) = 0 for the boundaries shear (the priors' means), into values."""
-    for i in range(n_states):
-        values.insert(W(i), np.zeros(2))
-    for b in shear:
-        values.insert(S(b), np.zeros(2))
-
-
 def ekf_start(config: EstimatorConfig, fs: FilterState, height0: float) -> None:
     """With layers, the EKF's state starts in the layer of its nominal height and without boundaries."""
     if layered(config) and fs.current is not None:
@@ -264,9 +258,7 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
     j = int(layer_index(config, float(fs.nav.n_p[2]), height0))
     for b, sign in crossings(fs.layer, j):
         if b not in fs.shear_ids:
-            at = (
-                len(fs.P) - 2 - (0 if fs.dvl_error is None else 3)
-            )  # the end of the boundaries' block
+            at = len(fs.P) - fs.epoch_dims()  # the end of the boundaries' block
             P = np.insert(np.insert(fs.P, [at, at], 0.0, axis=0), [at, at], 0.0, axis=1)
             c = config.current
             P[at : at + 2, at : at + 2] = c.depth_rw_m_s_per_sqrt_m**2 * c.layer_thickness_m * _EYE2
@@ -283,7 +275,7 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
             sign * fs.P[cols, :]
         )  # T P T^T with T = I + sign E(wc, cols): rows, then columns
         fs.P[:, wc] += sign * fs.P[:, cols]
-        fs.current = fs.current + sign * fs.shear[r]
+        fs.epoch["water_current"] = fs.current + sign * fs.shear[r]
     fs.layer = j
 
 
@@ -318,12 +310,12 @@ def profile(
     config: EstimatorConfig,
     water: np.ndarray | None = None,
     shear: dict[int, tuple[np.ndarray, np.ndarray]] | None = None,
-) -> dict[str, Any]:
-    """NavResult.info["water_current"]: the current per state (t s, depth m = -z, east and north m/s, their
-    sigmas) and the verdict: determined where its sigma is below half the prior's (something tied the velocity
-    over ground), with the stretches that are not. water (N,) bool: the states with water-track pings. shear:
-    with layers, each boundary crossed, b -> (S(b), its covariance): the change of the current across it (deeper
-    minus shallower)."""
+) -> WaterCurrentProfile:
+    """NavResult.water_current: the current per state (t s, depth m = -z, east and north m/s, their sigmas) and the
+    verdict: determined where its sigma is below half the prior's (something tied the velocity over ground), with
+    the stretches that are not. water (N,) bool: the states with water-track pings. shear: with layers, each
+    boundary crossed, b -> (S(b), its covariance): the change of the current across it (deeper minus
+    shallower)."""
     # (with layers, the current at a state's depth: its layer's and the spread within the layer, selection.py)
     sig = np.sqrt(
         np.maximum(np.einsum("nii->ni", np.asarray(cov)), 0.0) + within_layer_variance(config)
@@ -331,43 +323,44 @@ def profile(
     prior = config.current.prior_sigma_m_s
     determined = sig.max(axis=1) < 0.5 * prior
     speed = np.hypot(n_c[:, 0], n_c[:, 1])
-    out: dict[str, Any] = {
-        "t_s": np.asarray(t, dtype=float).tolist(),
-        "depth_m": (-np.asarray(z, dtype=float)).tolist(),
-        "east_m_s": n_c[:, 0].tolist(),
-        "north_m_s": n_c[:, 1].tolist(),
-        "east_sigma_m_s": sig[:, 0].tolist(),
-        "north_sigma_m_s": sig[:, 1].tolist(),
-        "determined": determined.tolist(),
-        "prior_sigma_m_s": prior,
-        "time_rw_m_s_per_sqrt_s": config.current.time_rw_m_s_per_sqrt_s,
-        "depth_rw_m_s_per_sqrt_m": config.current.depth_rw_m_s_per_sqrt_m,
-        "water_track_sigma_m_s": config.current.water_track_sigma_m_s or "from the messages",
-    }
+    out = WaterCurrentProfile(
+        t_s=np.asarray(t, dtype=float),
+        depth_m=-np.asarray(z, dtype=float),
+        east_m_s=n_c[:, 0],
+        north_m_s=n_c[:, 1],
+        east_sigma_m_s=sig[:, 0],
+        north_sigma_m_s=sig[:, 1],
+        determined=determined,
+        prior_sigma_m_s=prior,
+        time_rw_m_s_per_sqrt_s=config.current.time_rw_m_s_per_sqrt_s,
+        depth_rw_m_s_per_sqrt_m=config.current.depth_rw_m_s_per_sqrt_m,
+        water_track_sigma_m_s=config.current.water_track_sigma_m_s or "from the messages",
+        max_speed_m_s=float(speed.max()) if len(speed) else 0.0,
+        verdict=verdict(determined, water),
+    )
     if water is not None:
         w = np.asarray(water, dtype=bool)
-        out["water_track_states"] = int(w.sum())
-        out["determined_during_water_track"] = bool(determined[w].all()) if w.any() else True
-    out["max_speed_m_s"] = float(speed.max()) if len(speed) else 0.0
+        out.water_track_states = int(w.sum())
+        out.determined_during_water_track = bool(determined[w].all()) if w.any() else True
     if layered(config):
-        h = config.current.layer_thickness_m
-        bs = sorted(shear or {})
-        out["layer_thickness_m"] = h
-        out["layer_boundaries"] = bs
-        out["layer_shear"] = [
-            {
-                "boundary": b,
-                "depth_m": (b + 1) * h,
-                "east_m_s": float(shear[b][0][0]),
-                "north_m_s": float(shear[b][0][1]),
-                "east_sigma_m_s": float(np.sqrt(max(shear[b][1][0, 0], 0.0))),
-                "north_sigma_m_s": float(np.sqrt(max(shear[b][1][1, 1], 0.0))),
-            }
-            for b in bs
-            if shear is not None
+        out.layer_thickness_m = config.current.layer_thickness_m
+        out.layer_boundaries = sorted(shear or {})
+        out.layer_shear = [
+            layer_shear(b, shear[b], out.layer_thickness_m) for b in out.layer_boundaries if shear
         ]
-    out["verdict"] = verdict(determined, water)
     return out
+
+
+def layer_shear(b: int, s: tuple[np.ndarray, np.ndarray], h: float) -> dict[str, Any]:
+    """The change of the current across boundary b (at depth (b + 1) h m) from S(b) and its covariance."""
+    return {
+        "boundary": b,
+        "depth_m": (b + 1) * h,
+        "east_m_s": float(s[0][0]),
+        "north_m_s": float(s[0][1]),
+        "east_sigma_m_s": float(np.sqrt(max(s[1][0, 0], 0.0))),
+        "north_sigma_m_s": float(np.sqrt(max(s[1][1, 1], 0.0))),
+    }
 
 
 def verdict(determined: np.ndarray, water: np.ndarray | None) -> str:

@@ -80,14 +80,14 @@ import gtsam
 import numpy as np
 
 from gtsam_dvl.core.calibration import VehicleCalibration
-from gtsam_dvl.core.config import EstimatorConfig
+from gtsam_dvl.core.config import DvlConfig, EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import S as S_KEY  # (the water current's layer boundaries)
 from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.result import NavResult, Timeline
-from gtsam_dvl.core.states import calibration_info, correlated_error, enabled, water_current
+from gtsam_dvl.core.result import NavResult, Timeline, WaterCurrentProfile
+from gtsam_dvl.core.states import calibration_info, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import Alignment, map_frame_of
@@ -100,9 +100,10 @@ from gtsam_dvl.estimators.inputs.gaps import (
 from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
 from gtsam_dvl.estimators.inputs.mounting import imu_is_rotated, rotate_imu_samples
 from gtsam_dvl.estimators.inputs.selection import EpochScheduler, Ping
-from gtsam_dvl.estimators.models import correlated, current, weak_hold
+from gtsam_dvl.estimators.models import current, weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
 from gtsam_dvl.estimators.models.current import resolve_water_track
+from gtsam_dvl.estimators.models.epoch_states import reports
 from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     dvl_fit_enabled,
@@ -154,6 +155,75 @@ __all__ = [
 ]
 
 
+def _effective_config(
+    config: EstimatorConfig, options: OnlineConfig | None
+) -> tuple[OnlineConfig, EstimatorConfig]:
+    """The online options (options=: overrides config.online) and the effective configuration, validated, with
+    water track "auto" taken as "use" (live: water-track pings may come; for_log resolves by the log);
+    GtsamDvlError for what the online estimator does not support (keyframe spacing beyond the state spacing, the
+    time offset with beams, the lever arm)."""
+    if config.current.water_track == "auto":
+        config = config.model_copy(
+            update={"current": config.current.model_copy(update={"water_track": "use"})}
+        )
+    options = options or config.online
+    config = config.model_copy(update={"online": options}).validate()
+    solver = config.solver
+    check_spacing(solver)
+    spacing = solver.keyframe_spacing_s
+    if (
+        spacing > solver.max_state_spacing_s
+    ):  # the batch smoother's rule (estimators/graph/log_graph.py)
+        raise GtsamDvlError(
+            f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
+            f"{spacing:g} s: states without a ping would take the places of the keyframes"
+        )
+    if enabled(config, "time_offset") and config.dvl.use_beams:
+        raise GtsamDvlError(
+            "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
+        )
+    if enabled(config, "lever_arm"):
+        raise GtsamDvlError(
+            "[dvl] estimate_lever_arm is batch only (the batch smoother), not online"
+        )
+    return options, config
+
+
+def _epoch_scheduler(config: EstimatorConfig, counters: dict[str, int]) -> EpochScheduler:
+    """Classification, screen and keyframes of the pings (selection.EpochScheduler: the batch smoother's
+    decisions)."""
+    solver, online = config.solver, config.online
+    return EpochScheduler(
+        config.dvl,
+        solver.keyframe_interval_s,
+        solver.keyframe_spacing_s,
+        counters,
+        keep_usable=online.record_history,
+        water_usable=water_current(config),
+    )
+
+
+def _noise_fit(config: EstimatorConfig) -> OnlineNoiseFit | None:
+    """The DVL noise fitted on the warm-up window (online/noise_fit.py) when [noise] fits it, its lag (s) within
+    a fixed-lag window."""
+    online = config.online
+    lag = min(10.0, 0.5 * online.window_s) if online.mode == "fixed_lag" else 10.0
+    return OnlineNoiseFit(config, lag) if dvl_fit_enabled(config) else None
+
+
+def _offset_windows(
+    dvl: DvlConfig, calibration: VehicleCalibration | None, counters: dict[str, int]
+) -> OffsetWindows:
+    """The time offset's IMU windows, centred on a calibration file's offset when it holds one."""
+    held = calibration.values.get("time_offset") if calibration is not None else None
+    return OffsetWindows(
+        dvl
+        if held is None
+        else dvl.model_copy(update={"time_offset_prior_s": float(np.ravel(held)[0])}),
+        counters,
+    )
+
+
 class OnlineEstimator:
     """Incremental estimator fed message by message (module doc). Times are seconds on the caller's clock,
     the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention). IMU samples are
@@ -173,40 +243,13 @@ class OnlineEstimator:
         depth_sensor: Any = None,
         calibration: VehicleCalibration | None = None,
     ) -> None:
-        config = config or EstimatorConfig()
         # a vehicle's calibration (inflated for its age): the joint prior of the states it holds (FactorMaker)
         self.calibration = calibration
-        if (
-            config.current.water_track == "auto"
-        ):  # live: water-track pings may come (for_log resolves by the log)
-            config = config.model_copy(
-                update={"current": config.current.model_copy(update={"water_track": "use"})}
-            )
-        self.options = options or config.online  # options=: overrides config.online
-        self.config = config.model_copy(
-            update={"online": self.options}
-        ).validate()  # the effective config
+        self.options, self.config = _effective_config(config or EstimatorConfig(), options)
         # what result.config records: the configuration as given, before the levels taken from the data
         # (noise_levels.py; those are in info["noise"]), so that reading it back with -c reproduces the run
         self.stated_config = self.config
-        solver, dvl = self.config.solver, self.config.dvl
-        check_spacing(solver)
-        spacing = solver.keyframe_spacing_s
-        if (
-            spacing > solver.max_state_spacing_s
-        ):  # the batch smoother's rule (estimators/graph/log_graph.py)
-            raise GtsamDvlError(
-                f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
-                f"{spacing:g} s: states without a ping would take the places of the keyframes"
-            )
-        if enabled(self.config, "time_offset") and dvl.use_beams:
-            raise GtsamDvlError(
-                "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
-            )
-        if enabled(self.config, "lever_arm"):
-            raise GtsamDvlError(
-                "[dvl] estimate_lever_arm is batch only (the batch smoother), not online"
-            )
+        dvl = self.config.dvl
         self.frame, self.mounting, self.source = frame, mounting or Mounting(), source
         self._imu_rotated = imu_is_rotated(self.mounting)
         self.counters: dict[str, int] = {}
@@ -221,14 +264,7 @@ class OnlineEstimator:
         self.smoother: IncrementalSmoother | None = None
         self._checks = MessageChecks(self.options.bad_messages, source, self.counters)
         # classification, screen and keyframes (selection.EpochScheduler: the batch smoother's decisions)
-        self._scheduler = EpochScheduler(
-            dvl,
-            solver.keyframe_interval_s,
-            spacing,
-            self.counters,
-            keep_usable=self.options.record_history,
-            water_usable=water_current(self.config),
-        )
+        self._scheduler = _epoch_scheduler(self.config, self.counters)
         # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
         # at once (False; module doc, "Keyframes")
         self.defer_between_pings = True
@@ -258,15 +294,7 @@ class OnlineEstimator:
         self._latest: OnlineEstimate | None = None
         self._history = EpochHistory()
         self._offset = enabled(self.config, "time_offset")
-        held = (
-            calibration.values.get("time_offset") if calibration is not None else None
-        )  # centres the windows
-        self._offset_windows = OffsetWindows(
-            dvl
-            if held is None
-            else dvl.model_copy(update={"time_offset_prior_s": float(np.ravel(held)[0])}),
-            self.counters,
-        )
+        self._offset_windows = _offset_windows(dvl, calibration, self.counters)
         self._flushing = False
         self._depth = DepthQueue(
             self.config.depth,
@@ -275,8 +303,7 @@ class OnlineEstimator:
             self._count,
         )
         # the DVL noise fitted on the warm-up window (online/noise_fit.py); noise: the levels used and why
-        lag = min(10.0, 0.5 * self.options.window_s) if self.options.mode == "fixed_lag" else 10.0
-        self._noise_fit = OnlineNoiseFit(self.config, lag) if dvl_fit_enabled(self.config) else None
+        self._noise_fit = _noise_fit(self.config)
         self.noise = NoiseReport()
         if self.config.alignment.initial_attitude_deg is not None:
             self._start(given_attitude(frame, self.config.alignment))
@@ -421,8 +448,8 @@ class OnlineEstimator:
         return self._latest
 
     # ----- output --------------------------------------------------------------------------------
-    def current_profile(self) -> dict[str, Any]:
-        """NavResult.info["water_current"]: the filtered current at each state (estimators/models/current.py
+    def current_profile(self) -> WaterCurrentProfile:
+        """NavResult.water_current: the filtered current at each state (estimators/models/current.py
         profile)."""
         h, sm = self.current_history, self.smoother
         shear = (
@@ -679,7 +706,9 @@ class OnlineEstimator:
         self._latest = OnlineEstimate.from_state(self._state, self.mounting.b_R_d0)
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
-            if sm.wc:  # the newest state's current, filtered (as the EKF's), for current_profile
+            if water_current(
+                self.config
+            ):  # the newest state's current, filtered (as the EKF's), for current_profile
                 self.current_history.append(
                     (
                         t_epoch,
@@ -748,8 +777,10 @@ def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int =
     water current. smooth_online and the ROS 2 node (app/node: the calibration file it saves) both call it, so a
     live run's calibration is the one `smooth --mode online` gives for the same messages."""
     result = estimator.result(t0_ns)
-    if correlated_error(config):
-        result.info["dvl_correlated_error"] = correlated.info(config)
+    if (
+        estimator.smoother is not None
+    ):  # the per-epoch states' reports at the newest state (epoch_states.py)
+        result.info.update(reports(config, estimator.smoother.epoch_estimates()))
     if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
         result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
     # (constant_error.py; none with a vehicle calibration file as prior)
@@ -757,7 +788,7 @@ def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int =
     if (
         estimator.current_history
     ):  # the water current at each state as it left the window (or at the end)
-        result.info["water_current"] = estimator.current_profile()
+        result.water_current = estimator.current_profile()
     return result
 
 

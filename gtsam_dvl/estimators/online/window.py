@@ -64,19 +64,23 @@ import numpy as np
 
 from gtsam_dvl.core.config import RelinearizationThresholds
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.keys import E, S, V, W, X, key_dim
+from gtsam_dvl.core.keys import V, X, key_dim
 from gtsam_dvl.core.states import (
     Estimate,
     block_states,
-    correlated_error,
     read_estimates,
     relinearization,
     shared_keys,
-    water_current,
 )
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.gaps import Holds
-from gtsam_dvl.estimators.models import correlated, current, weak_hold
+from gtsam_dvl.estimators.models import weak_hold
+from gtsam_dvl.estimators.models.epoch_states import (
+    EpochEstimate,
+    WindowMemory,
+    enabled_epoch_states,
+    window_thresholds,
+)
 from gtsam_dvl.factors import EarthImuFactor
 
 # the joint of StateEstimate: pose, velocity and the calibration block (core/states.py: bias, scale, misalignment)
@@ -142,36 +146,21 @@ class IncrementalSmoother:
         self.builder = builder
         self.window_s = window_s
         self.thresholds = thresholds
-        self.rw_bias = builder.config.imu.bias_model == "random_walk"
-        self.gm = correlated_error(
-            builder.config
-        )  # the DVL's correlated error E(i) a state (correlated.py)
-        self.wc = water_current(builder.config)  # the water current W(i) a state (current.py)
+        # the per-epoch states the configuration carries (estimators/models/epoch_states.py: the bias random walk,
+        # the DVL's correlated error, the water current, ...), and what their links remember (the water current's
+        # layer and the boundaries S(b) crossed so far: shared keys, never marginalised)
+        self.epoch_states = enabled_epoch_states(builder.config)
+        self.memory = {s.name: WindowMemory() for s in self.epoch_states}
         self.hold: dict[str, Any] | None = (
             None  # the newest estimate's held calibration directions (weak_hold.py)
         )
-        # with layers: the boundaries S(b) crossed so far (shared keys, never marginalised) and the newest layer
-        self.layers = self.wc and current.layered(builder.config)
-        self.shear: list[int] = []
-        self.layer = 0
-        # relinearisation thresholds by symbol character: the states' and the shared states' (core/states.py);
-        # every factor is linear in E (the DVL's, the links), so its threshold is a formality: a tenth of its sigma
+        # relinearisation thresholds by symbol character: the states', the shared states' (core/states.py) and the
+        # per-epoch states' (their own: epoch_states.py)
         self._threshold = {
             "x": np.asarray(thresholds.pose, dtype=float),
             "v": np.asarray(thresholds.velocity, dtype=float),
             **relinearization(builder.config, thresholds),
-            **({"e": np.full(3, 0.1 * builder.config.dvl.correlated_sigma_m_s)} if self.gm else {}),
-            # the water current enters the DVL factor linearly but for its cross terms with the
-            # attitude and scale ((k dtheta + dk) dW: 2e-4 m/s at 1e-2 and 0.02 m/s, 2 % of a
-            # water-track ping's sigma): twice that sigma
-            **(
-                {
-                    "w": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s),
-                    "s": np.full(2, 2.0 * builder.config.current.water_track_default_sigma_m_s),
-                }
-                if self.wc
-                else {}
-            ),
+            **window_thresholds(builder.config, thresholds),
         }
         self.params = gtsam.ISAM2Params()
         self.params.setFactorization("QR")
@@ -224,31 +213,28 @@ class IncrementalSmoother:
                 raise GtsamDvlError("the first epoch needs its initial values")
             values = first_values
             factors = b.prior_factors(values) + factors
-            if self.gm:
-                values.insert(E(0), np.zeros(3))
-                factors.append(correlated.prior_factor(b.config))
-            if self.wc:
-                values.insert(W(0), np.zeros(2))
-                factors.append(current.prior_factor(b.config))
-                self.layer = (
-                    int(
-                        current.layer_index(
-                            b.config, values.atPose3(X(0)).translation()[2], b.frame.height_m
-                        )
-                    )
-                    if self.layers
-                    else 0
-                )
+            z0 = float(values.atPose3(X(0)).translation()[2])
+            for s in self.epoch_states:  # their priors at the first state (epoch_states.py)
+                if not s.first_shared:
+                    s.insert(values, s.key(0), s.initial(b.config))
+                    factors += s.prior_factors(b.config)
+                s.window_start(b.config, z0, b.frame.height_m, self.memory[s.name])
         else:
             if pim is None or params is None:
                 raise GtsamDvlError("an epoch after the first needs its preintegration")
             dt = t - self.t_last
             imu = b.new_imu_factor(i - 1, pim, params, dt, held)
-            factors = [imu.factor, *b.bias_link_factors(i - 1, dt), *factors]
+            beside = [
+                f
+                for s in self.epoch_states
+                if s.beside_imu
+                for f in s.link_factors(b.config, i - 1, i, dt)
+            ]
+            factors = [imu.factor, *beside, *factors]
             prev = self.isam.calculateEstimate(
-                [X(i - 1), V(i - 1), b.bias_key(i - 1)]
-                + [E(i - 1)] * self.gm
-                + [W(i - 1)] * self.wc
+                list(
+                    dict.fromkeys([X(i - 1), V(i - 1), b.bias_key(i - 1), *self._epoch_keys(i - 1)])
+                )
             )
             pose, n_v = prev.atPose3(X(i - 1)), prev.atVector(V(i - 1))
             bias = prev.atConstantBias(b.bias_key(i - 1))
@@ -257,21 +243,20 @@ class IncrementalSmoother:
             state = pim.predict(gtsam.NavState(pose, n_v), bias)
             values.insert(X(i), state.pose())
             values.insert(V(i), state.velocity())
-            if self.rw_bias:
-                values.insert(b.bias_key(i), bias)
-            if self.gm:  # E's prediction: the previous state's estimate, decayed
-                phi, _ = correlated.transition(b.config, dt)
-                values.insert(E(i), phi * prev.atVector(E(i - 1)))
-                factors.append(correlated.link_factor(b.config, i - 1, i, dt))
-            if self.wc:  # W's prediction: the previous state's; its random walk over dt and the predicted depth change
-                values.insert(W(i), prev.atVector(W(i - 1)))
-                if self.layers:  # or across the layer boundaries crossed, each new one with its prior (current.py)
-                    factors += self._cross_layers(
-                        i, dt, float(state.pose().translation()[2]), values
+            z_prev, z_new = float(pose.translation()[2]), float(state.pose().translation()[2])
+            for s in self.epoch_states:  # each state's prediction and link (epoch_states.py)
+                s.insert(values, s.key(i), s.predict(b.config, prev, i, dt))
+                if not s.beside_imu:
+                    factors += s.window_links(
+                        b.config,
+                        i,
+                        dt,
+                        z_prev,
+                        z_new,
+                        values,
+                        self.memory[s.name],
+                        b.frame.height_m,
                     )
-                else:
-                    dz = float(state.pose().translation()[2] - pose.translation()[2])
-                    factors.append(current.link_factor(b.config, i - 1, i, dt, dz))
         self.n, self.t_last = i + 1, t
         self.times[i] = t
         graph = gtsam.NonlinearFactorGraph()
@@ -281,23 +266,21 @@ class IncrementalSmoother:
         if self.window_s is not None:
             self._slide(t - self.window_s)
 
-    def _cross_layers(
-        self, i: int, dt: float, z: float, values: gtsam.Values
-    ) -> list[gtsam.NonlinearFactor]:
-        """The current's link from state i - 1 to state i at height z (m, map): the random walk in time, plus the
-        layer boundaries crossed; a boundary met for the first time gets its variable (inserted into values,
-        predicted by the previous value: zero) and prior, and joins the shared keys' elimination group."""
-        cfg = self.builder.config
-        j = int(current.layer_index(cfg, z, self.builder.frame.height_m))
-        out: list[gtsam.NonlinearFactor] = []
-        for bnd, _ in current.crossings(self.layer, j):
-            if bnd not in self.shear:
-                self.shear.append(bnd)
-                values.insert(S(bnd), np.zeros(2))
-                out.append(current.shear_prior(cfg, bnd))
-        out.append(current.crossing_link(cfg, i - 1, i, dt, self.layer, j))
-        self.layer = j
-        return out
+    def _epoch_keys(self, i: int) -> list[int]:
+        """The per-epoch states' keys of state i."""
+        return [s.key(i) for s in self.epoch_states]
+
+    def extra_keys(self) -> list[int]:
+        """The per-epoch states' extra variables created so far (the water current's layer boundaries S(b)): kept
+        with the shared keys, never marginalised."""
+        return [k for m in self.memory.values() for k in m.extra]
+
+    @property
+    def shear(self) -> list[int]:
+        """The water current's layer boundaries b crossed so far (their keys S(b) among extra_keys)."""
+        return [
+            gtsam.Symbol(k).index() for k in self.extra_keys() if chr(gtsam.Symbol(k).chr()) == "s"
+        ]
 
     def add_factors(self, factors: list[gtsam.NonlinearFactor]) -> None:
         """Factors on variables already held (a depth sample that came after the newest state): one update."""
@@ -331,9 +314,7 @@ class IncrementalSmoother:
             raise GtsamDvlError(f"iSAM2 update at t = {self.t_last:.3f} s failed ({exc})") from None
 
     def _state_keys(self, i: int) -> tuple[int, ...]:
-        keys = (X(i), V(i), self.builder.bias_key(i)) if self.rw_bias else (X(i), V(i))
-        keys = (*keys, E(i)) if self.gm else keys
-        return (*keys, W(i)) if self.wc else keys
+        return (X(i), V(i), *self._epoch_keys(i))
 
     def _ordering(self, rebase: bool) -> tuple[gtsam.KeyGroupMap, gtsam.KeyList]:
         """Elimination groups (states oldest first, the bias, scale and misalignment last) and the states iSAM2
@@ -355,9 +336,9 @@ class IncrementalSmoother:
         for i in range(recent_from, self.n):
             for k in self._state_keys(i):
                 groups.insert2(k, i - recent_from)
-        for k in self.shared_keys(self.n - 1) + [
-            S(b) for b in self.shear
-        ]:  # (the current's layer boundaries too)
+        for k in (
+            self.shared_keys(self.n - 1) + self.extra_keys()
+        ):  # (the current's layer boundaries too)
             groups.insert2(k, self.n - recent_from)
         return groups, (gtsam.KeyList() if rebase else self._frozen)
 
@@ -397,14 +378,15 @@ class IncrementalSmoother:
         )  # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
-        if (n_states, old, len(self.shear)) not in self._limits:
+        extra = self.extra_keys()
+        if (n_states, old, len(extra)) not in self._limits:
             # (key, whether iSAM2 leaves it alone): the states', old ones only, and the shared keys, always
             held = [(k, j < old) for j in range(n_states) for k in self._state_keys(self.first + j)]
             held += [(k, True) for k in shared_keys(self.builder.config, per_state=False)]
-            held += [(S(b), True) for b in self.shear]
+            held += [(k, True) for k in extra]
             held.sort()
             limits = [self._threshold[chr(k >> 56)] for k, _ in held]
-            self._limits[(n_states, old, len(self.shear))] = (
+            self._limits[(n_states, old, len(extra))] = (
                 np.concatenate(limits),
                 np.concatenate(
                     [
@@ -413,7 +395,7 @@ class IncrementalSmoother:
                     ]
                 ),
             )
-        lim, msk = self._limits[(n_states, old, len(self.shear))]
+        lim, msk = self._limits[(n_states, old, len(extra))]
         if lim.shape != delta.shape:
             raise GtsamDvlError(
                 f"internal: iSAM2 holds {delta.shape[0]} delta components, expected {lim.shape[0]}"
@@ -529,6 +511,18 @@ class IncrementalSmoother:
             time_offset_sigma_s=float("nan") if offset is None else float(offset.sigma[0]),
             calibration=est,
         )
+
+    def epoch_estimates(self) -> dict[str, EpochEstimate]:
+        """The per-epoch states' estimates at the newest state (those that report: epoch_states.py), with their
+        marginal covariances."""
+        i, out = self.n - 1, {}
+        for s in self.epoch_states:
+            if s.info_key is None or i < 0:
+                continue
+            value = s.read(self.isam.calculateEstimate([s.key(i)]), s.key(i))
+            cov = self.joint_covariance([s.key(i)])
+            out[s.name] = EpochEstimate(np.array([self.times[i]]), value[None, :], cov[None], False)
+        return out
 
     def joint_covariance(self, keys: list[int]) -> np.ndarray:
         """Joint marginal covariance of keys (blocks in that order) from iSAM2's Bayes tree, by QR."""
