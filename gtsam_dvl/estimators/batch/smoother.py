@@ -27,10 +27,10 @@ from gtsam_dvl.estimators.batch.timeline import filtering_timeline
 from gtsam_dvl.estimators.graph.bulk import BulkGraph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
 from gtsam_dvl.estimators.graph.solver import ChunkedOrdering, SolveReport
-from gtsam_dvl.estimators.inputs.gaps import screened_in_memory, screened_losses
+from gtsam_dvl.estimators.inputs.gaps import screened_losses
+from gtsam_dvl.estimators.inputs.prepare import prepare
 from gtsam_dvl.estimators.models import weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
-from gtsam_dvl.estimators.models.current import resolve_water_track
 from gtsam_dvl.estimators.models.noise_levels import NoiseReport
 
 
@@ -94,19 +94,15 @@ def smooth_batch(
     pass over the states). estimator: the name the result carries (the planner's is "plan"). calibration: a
     vehicle's calibration, already inflated for its age, as the joint prior of the states it holds
     (core/states.py calibration_prior; recorded in info["calibration_prior"])."""
-    config = (config or EstimatorConfig.for_log(log.metadata)).validate()
+    # the configuration checked, [current] water_track resolved, the combinations no estimator does refused,
+    # the IMU screened when the reader did not (inputs/prepare.py)
+    prepared = prepare(log, config, "batch", calibration)
+    log, config = prepared.log, prepared.config
+    # what result.config records: water_track as resolved (noise_levels.py: the levels used are in info["noise"])
+    stated = config
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     noise = NoiseReport()
-    config = resolve_water_track(
-        config, log
-    )  # [current] water_track "auto": "use" when the log has water track
-    stated = (
-        config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    )
-    log = screened_in_memory(
-        log
-    )  # saturation and clock steps, when the reader did not screen it (gaps.py)
     if gaps := long_gaps(
         log, config
     ):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces

@@ -108,12 +108,12 @@ from gtsam_dvl.estimators.inputs.gaps import (
     hold_covariance,
     pieces_with_holds,
     sample_starts_with_gaps,
-    screened_in_memory,
     screened_losses,
     with_fillers,
 )
 from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
 from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
+from gtsam_dvl.estimators.inputs.prepare import prepare
 from gtsam_dvl.estimators.inputs.selection import (
     covering_sample,
     ping_covariance,
@@ -450,14 +450,13 @@ def run_ekf(
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
         config = config.model_copy(update={"ekf": ekf})
-    config.validate()
+    # the configuration checked, what the EKF does not do refused, the IMU screened when the reader did not
+    # (inputs/prepare.py); [current] water_track is resolved with the filter's inputs (_checked_inputs)
+    prepared = prepare(log, config, "ekf", calibration)
+    log, config = prepared.log, prepared.stated
     noise = NoiseReport()
-    stated = (
-        config  # what result.config records (noise_levels.py: the levels used are in info["noise"])
-    )
-    log = screened_in_memory(
-        log
-    )  # saturation and clock steps, when the reader did not screen it (gaps.py)
+    # what result.config records (noise_levels.py: the levels used are in info["noise"])
+    stated = config
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
     held_levels(
         log, config, "EKF", noise
@@ -645,12 +644,8 @@ def _checked_inputs(
     log: LogData, config: EstimatorConfig, counters: dict[str, int]
 ) -> tuple[LogData, EstimatorConfig, LocalFrame, Alignment, np.ndarray, np.ndarray]:
     """The log in base_link, the configuration with water track resolved, the map frame, the alignment, the
-    water-track pings (M,) bool and the usable pings (no keyframe thinning); GtsamDvlError for what the EKF does
-    not support (the time offset with beams, the lever arm, the water-track scale, beams with water track)."""
-    if enabled(config, "time_offset") and config.dvl.use_beams:
-        raise GtsamDvlError(
-            "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
-        )
+    water-track pings (M,) bool and the usable pings (no keyframe thinning). What the EKF does not support was
+    refused before, once (run_ekf: inputs/prepare.py)."""
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/inputs/mounting.py)
     frame = map_frame_of(log, config)
     alignment = align(
@@ -665,19 +660,8 @@ def _checked_inputs(
     config = resolve_water_track(
         config, log
     )  # [current] water_track "auto": "use" when the log has water track
-    for name, what in (
-        ("lever_arm", "[dvl] estimate_lever_arm is batch only (the batch smoother)"),
-        ("water_scale", "[current] water_track_scale is batch and online only"),
-    ):
-        if enabled(config, name):  # (not in the EKF's error state: core/states.py ekf=False)
-            raise GtsamDvlError(f"{what}, not the EKF")
     wc_on = water_current(config)
     water = water_pings(log) if wc_on else np.zeros(len(log.dvl), dtype=bool)
-    if wc_on and config.dvl.use_beams and water.any():
-        raise GtsamDvlError(
-            "[dvl] use_beams with water-track pings: not supported in the EKF; set [current] "
-            'water_track = "refuse" or use_beams = false'
-        )
     pings = usable_pings(
         log.dvl, log.imu, config.dvl, counters, wc_on
     )  # every usable ping: no keyframe thinning

@@ -94,11 +94,11 @@ from gtsam_dvl.estimators.inputs.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.inputs.gaps import (
     check_spacing,
     filler_due,
-    screened_in_memory,
     screened_losses,
 )
 from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
 from gtsam_dvl.estimators.inputs.mounting import imu_is_rotated, rotate_imu_samples
+from gtsam_dvl.estimators.inputs.prepare import prepare, refuse_combinations, refuse_unsupported
 from gtsam_dvl.estimators.inputs.selection import EpochScheduler, Ping
 from gtsam_dvl.estimators.models import current, weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
@@ -178,14 +178,10 @@ def _effective_config(
             f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
             f"{spacing:g} s: states without a ping would take the places of the keyframes"
         )
-    if enabled(config, "time_offset") and config.dvl.use_beams:
-        raise GtsamDvlError(
-            "[dvl] estimate_time_offset works with the 3-D velocity only, not with use_beams"
-        )
-    if enabled(config, "lever_arm"):
-        raise GtsamDvlError(
-            "[dvl] estimate_lever_arm is batch only (the batch smoother), not online"
-        )
+    # what no estimator does and what the online estimator does not, in the runner's words (inputs/prepare.py):
+    # an estimator made without a log (the ROS 2 node, the live view) is checked here
+    refuse_combinations(config, None)
+    refuse_unsupported("online", config, None)
     return options, config
 
 
@@ -807,10 +803,10 @@ def smooth_online(
     mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
     scenario names, else the defaults (EstimatorConfig.for_log). calibration: a vehicle's calibration, inflated
     for its age, as the joint prior of the states it holds (core/states.py calibration_prior)."""
-    config = config or EstimatorConfig.for_log(log.metadata)
-    log = screened_in_memory(
-        log
-    )  # saturation and clock steps, when the reader did not screen it (gaps.py)
+    # the configuration checked, what the online estimator does not do refused, the IMU screened when the reader
+    # did not (inputs/prepare.py); the estimator resolves [current] water_track itself (OnlineEstimator.for_log)
+    prepared = prepare(log, config, "online", calibration)
+    log, config = prepared.log, prepared.stated
     options = (options if options is not None else config.online).model_copy()
     if mode is not None:
         options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
