@@ -13,32 +13,25 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from gtsam_dvl.app.cli_options import (  # noqa: F401  (re-exported: the commands' shared names)
-    CONFIG_HELP,
+from gtsam_dvl.app.cli_options import (
     EXIT_SIGTERM,
     EXIT_UNHEALTHY,
+    READING,
     UNHEALTHY,
-    AttitudeTopic,
+    ConfigOpt,
     Debug,
-    DepthTopic,
-    DvlTopic,
-    DvlWaterTopic,
-    F,
-    GnssTopic,
-    ImuTopic,
+    LogArg,
     Quiet,
-    Repair,
-    Salvage,
+    ReadOpts,
+    ScenarioArg,
     SchedulerTimeout,
     Terminated,
-    TruthTopic,
     _builtin_scenarios,
-    _error_text,
     _on_sigterm,
-    _read_options,
     _state,
     _user_errors,
     app,
+    reads_log,
 )
 from gtsam_dvl.core.errors import GtsamDvlError
 
@@ -107,18 +100,12 @@ def simulate(
 
 @app.command("plot-log")
 @_user_errors
+@reads_log
 def plot_log(
-    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    log: LogArg,
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
-    imu_topic: ImuTopic = "/imu/data_raw",
-    dvl_topic: DvlTopic = None,
-    salvage: Salvage = False,
-    repair: Repair = False,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
-    dvl_water_topic: DvlWaterTopic = None,
+    *,
+    read_options: ReadOpts,
     debug: Debug = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
@@ -128,34 +115,18 @@ def plot_log(
     for path in plot_log_to_dir(
         log,
         output,
-        _read_options(
-            imu_topic,
-            dvl_topic,
-            salvage,
-            repair,
-            depth_topic,
-            gnss_topic,
-            attitude_topic,
-            truth_topic,
-            dvl_water_topic,
-        ),
+        read_options,
     ):
         typer.echo(str(path))
 
 
 @app.command()
 @_user_errors
+@reads_log
 def info(
-    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
-    imu_topic: ImuTopic = "/imu/data_raw",
-    dvl_topic: DvlTopic = None,
-    salvage: Salvage = False,
-    repair: Repair = False,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
-    dvl_water_topic: DvlWaterTopic = None,
+    log: LogArg,
+    *,
+    read_options: ReadOpts,
     debug: Debug = False,
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration; of a result of `smooth -o`,
@@ -169,17 +140,7 @@ def info(
     typer.echo(
         describe_log(
             log,
-            _read_options(
-                imu_topic,
-                dvl_topic,
-                salvage,
-                repair,
-                depth_topic,
-                gnss_topic,
-                attitude_topic,
-                truth_topic,
-                dvl_water_topic,
-            ),
+            read_options,
         )
     )
 
@@ -265,22 +226,16 @@ Vehicle = Annotated[
 
 @app.command(help=SMOOTH_HELP)
 @_user_errors
+@reads_log
 def smooth(
     logs: SmoothLogs,
     output: ResultOutput = None,
     mode: SmoothMode = "batch",
     summary: Annotated[Path | None, typer.Option(help="Summary JSON to write.")] = None,
     tum: TumOutput = None,
-    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    imu_topic: ImuTopic = "/imu/data_raw",
-    dvl_topic: DvlTopic = None,
-    salvage: Salvage = False,
-    repair: Repair = False,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
-    dvl_water_topic: DvlWaterTopic = None,
+    config: ConfigOpt = None,
+    *,
+    read_options: ReadOpts,
     timeline: Timeline = True,
     timeline_npz: TimelineNpz = None,
     quiet: Quiet = False,
@@ -298,17 +253,6 @@ def smooth(
     from gtsam_dvl.app.commands import smooth_file
 
     one_log = _check_smooth_folders(output, summary, tum, timeline_npz, calibration_out, out_dir)
-    read_options = _read_options(
-        imu_topic,
-        dvl_topic,
-        salvage,
-        repair,
-        depth_topic,
-        gnss_topic,
-        attitude_topic,
-        truth_topic,
-        dvl_water_topic,
-    )
     if out_dir is not None or len(logs) > 1:
         _smooth_fleet(
             logs,
@@ -438,30 +382,24 @@ CHARACTERISE_HELP = (
 
 @app.command(help=CHARACTERISE_HELP)
 @_user_errors
+@reads_log
 def characterise(
-    log: Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")],
+    log: LogArg,
     output: Annotated[
         Path,
         typer.Option(
             "-o", "--output", help="Folder for characterise.json, allan.png and recommended.toml."
         ),
     ],
-    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    config: ConfigOpt = None,
     force: Annotated[
         bool,
         typer.Option(
             "--force", help="Write into a folder that is not empty (the three files are replaced)."
         ),
     ] = False,
-    imu_topic: ImuTopic = "/imu/data_raw",
-    dvl_topic: DvlTopic = None,
-    salvage: Salvage = False,
-    repair: Repair = False,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
-    dvl_water_topic: DvlWaterTopic = None,
+    *,
+    read_options: ReadOpts,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
@@ -477,23 +415,45 @@ def characterise(
         config_path=config,
         force=force,
         show_progress=not quiet,
-        read_options=_read_options(
-            imu_topic,
-            dvl_topic,
-            salvage,
-            repair,
-            depth_topic,
-            gnss_topic,
-            attitude_topic,
-            truth_topic,
-            dvl_water_topic,
-        ),
+        read_options=read_options,
     )
     typer.echo(ch.describe())
 
 
+# evaluate's reading options: the ones not given are as smooth read the source log (its result records them)
+EvaluateReadOpts = Annotated[
+    "ReadOptions",
+    READING.not_given_by_default(
+        imu_topic=Annotated[
+            str | None,
+            typer.Option(
+                "--imu-topic",
+                help="IMU topic (default: as smooth read the source log, else /imu/data_raw).",
+            ),
+        ],
+        salvage=Annotated[
+            bool | None,
+            typer.Option(
+                "--salvage/--no-salvage",
+                help="Recover the intact chunks of a "
+                "damaged log (default: as smooth read the source log).",
+            ),
+        ],
+        repair=Annotated[
+            bool | None,
+            typer.Option(
+                "--repair/--no-repair",
+                help="Drop (and count) NaN, duplicate or "
+                "backwards messages (default: as smooth read the source log).",
+            ),
+        ],
+    ),
+]
+
+
 @app.command()
 @_user_errors
+@reads_log
 def evaluate(
     result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
     output: Annotated[
@@ -506,35 +466,8 @@ def evaluate(
             "relative to the result file, else at its absolute path)."
         ),
     ] = None,
-    imu_topic: Annotated[
-        str | None,
-        typer.Option(
-            "--imu-topic",
-            help="IMU topic (default: as smooth read the source log, else /imu/data_raw).",
-        ),
-    ] = None,
-    dvl_topic: DvlTopic = None,
-    salvage: Annotated[
-        bool | None,
-        typer.Option(
-            "--salvage/--no-salvage",
-            help="Recover the intact chunks of a "
-            "damaged log (default: as smooth read the source log).",
-        ),
-    ] = None,
-    repair: Annotated[
-        bool | None,
-        typer.Option(
-            "--repair/--no-repair",
-            help="Drop (and count) NaN, duplicate or "
-            "backwards messages (default: as smooth read the source log).",
-        ),
-    ] = None,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
-    dvl_water_topic: DvlWaterTopic = None,
+    *,
+    read_options: EvaluateReadOpts,
     force: Annotated[
         bool,
         typer.Option(
@@ -556,17 +489,7 @@ def evaluate(
         result,
         output,
         truth_path=truth,
-        read_options=_read_options(
-            imu_topic,
-            dvl_topic,
-            salvage,
-            repair,
-            depth_topic,
-            gnss_topic,
-            attitude_topic,
-            truth_topic,
-            dvl_water_topic,
-        ),
+        read_options=read_options,
         force=force,
     )
     typer.echo("\n".join(lines))
@@ -577,16 +500,11 @@ def evaluate(
 @app.command()
 @_user_errors
 def plan(
-    scenario: Annotated[
-        str,
-        typer.Argument(
-            help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario TOML file."
-        ),
-    ],
+    scenario: ScenarioArg,
     output: Annotated[
         Path, typer.Option("-o", "--output", help="Folder for plan.json, plan.md and figures.")
     ],
-    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    config: ConfigOpt = None,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
@@ -687,6 +605,7 @@ LIVE_HELP = (
 
 @app.command(help=LIVE_HELP)
 @_user_errors
+@reads_log
 def live(
     log: Annotated[
         Path | None, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")
@@ -710,7 +629,7 @@ def live(
             help="Address to serve on (127.0.0.1: this machine only; 0.0.0.0: every interface)."
         ),
     ] = "127.0.0.1",
-    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    config: ConfigOpt = None,
     wait: Annotated[
         bool, typer.Option("--wait", help="Start the replay only once a client subscribes.")
     ] = False,
@@ -721,15 +640,8 @@ def live(
             help="Stop serving when the replay ends (default: serve until Ctrl-C).",
         ),
     ] = False,
-    imu_topic: ImuTopic = "/imu/data_raw",
-    dvl_topic: DvlTopic = None,
-    salvage: Salvage = False,
-    repair: Repair = False,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
-    attitude_topic: AttitudeTopic = None,
-    truth_topic: TruthTopic = None,
-    dvl_water_topic: DvlWaterTopic = None,
+    *,
+    read_options: ReadOpts,
     calibration: Annotated[
         Path | None, typer.Option(help="A vehicle's calibration file as the prior.")
     ] = None,
@@ -751,17 +663,7 @@ def live(
         linger=not exit_when_done,
         layout_path=layout,
         calibration_path=calibration,
-        read_options=_read_options(
-            imu_topic,
-            dvl_topic,
-            salvage,
-            repair,
-            depth_topic,
-            gnss_topic,
-            attitude_topic,
-            truth_topic,
-            dvl_water_topic,
-        ),
+        read_options=read_options,
         echo=typer.echo,
     )
 

@@ -4,28 +4,26 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from gtsam_dvl.app.cli_options import (
-    CONFIG_HELP,
     EXIT_UNHEALTHY,
+    READING,
+    ConfigOpt,
     Debug,
-    DepthTopic,
-    DvlTopic,
-    GnssTopic,
-    ImuTopic,
     Quiet,
-    Repair,
-    Salvage,
+    ScenarioArg,
     SchedulerTimeout,
-    _builtin_scenarios,
-    _read_options,
     _user_errors,
     app,
+    reads_log,
 )
 from gtsam_dvl.core.errors import GtsamDvlError
+
+if TYPE_CHECKING:
+    from gtsam_dvl.io.read_options import ReadOptions
 
 MONTECARLO_HELP = (
     "Monte Carlo consistency of the estimators on a scenario, on Dask distributed.\n\n"
@@ -41,12 +39,7 @@ MONTECARLO_HELP = (
 @app.command(help=MONTECARLO_HELP)
 @_user_errors
 def montecarlo(
-    scenario: Annotated[
-        str,
-        typer.Argument(
-            help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario TOML file."
-        ),
-    ],
+    scenario: ScenarioArg,
     output: Annotated[
         Path, typer.Option("-o", "--output", help="Campaign folder (created; reused to resume).")
     ],
@@ -66,7 +59,7 @@ def montecarlo(
         int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores).")
     ] = None,
     scheduler_timeout: SchedulerTimeout = 10.0,
-    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
+    config: ConfigOpt = None,
     quiet: Quiet = False,
     calibration: Annotated[
         Path | None, typer.Option(help="A vehicle's calibration file as every run's prior.")
@@ -114,6 +107,13 @@ def montecarlo(
         raise typer.Exit(EXIT_UNHEALTHY)
 
 
+# calibrate reads the IMU, DVL, depth and GNSS (no attitude, truth or water-track topic)
+DiveReadOpts = Annotated[
+    "ReadOptions",
+    READING.only("imu_topic", "dvl_topic", "salvage", "repair", "depth_topic", "gnss_topic"),
+]
+
+
 CALIBRATE_HELP = (
     "One DVL calibration (scale, misalignment; the lever arm when estimated) from several dives of one vehicle, "
     "on Dask.\n\n"
@@ -130,6 +130,7 @@ CALIBRATE_HELP = (
 
 @app.command(help=CALIBRATE_HELP)
 @_user_errors
+@reads_log
 def calibrate(
     logs: Annotated[
         list[Path],
@@ -145,13 +146,9 @@ def calibrate(
     vehicle: Annotated[
         str, typer.Option("--vehicle", help="The vehicle's name in the file.")
     ] = "vehicle",
-    config: Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)] = None,
-    imu_topic: ImuTopic = "/imu/data_raw",
-    dvl_topic: DvlTopic = None,
-    salvage: Salvage = False,
-    repair: Repair = False,
-    depth_topic: DepthTopic = None,
-    gnss_topic: GnssTopic = None,
+    config: ConfigOpt = None,
+    *,
+    read_options: DiveReadOpts,
     scheduler: Annotated[
         str | None,
         typer.Option(
@@ -177,7 +174,7 @@ def calibrate(
         logs,
         output,
         config_path=config,
-        read_options=_read_options(imu_topic, dvl_topic, salvage, repair, depth_topic, gnss_topic),
+        read_options=read_options,
         scheduler=scheduler,
         workers=workers,
         vehicle=vehicle,

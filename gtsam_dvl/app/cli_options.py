@@ -5,9 +5,11 @@ other (no import cycle, tests/test_architecture.py)."""
 from __future__ import annotations
 
 import functools
+import inspect
 import signal
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Annotated, Any, TypeVar
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any, TypeVar, get_args
 
 import typer
 
@@ -153,33 +155,89 @@ TruthTopic = Annotated[
 ]
 
 
-def _read_options(
-    imu_topic: str | None,
-    dvl_topic: str | None,
-    salvage: bool | None,
-    repair: bool | None,
-    depth_topic: str | None = None,
-    gnss_topic: str | None = None,
-    attitude_topic: str | None = None,
-    truth_topic: str | None = None,
-    dvl_water_topic: str | None = None,
-) -> ReadOptions:
+def _read_options(**given: str | bool | None) -> ReadOptions:
     """The reading options given on the command line (io/read_options.py; None: not given, the option's default,
     and not in the result's model_fields_set: `evaluate` takes the recorded one)."""
     from gtsam_dvl.io.read_options import ReadOptions
 
-    given = {
-        "imu_topic": imu_topic,
-        "dvl_topic": dvl_topic,
-        "salvage": salvage,
-        "repair": repair,
-        "depth_topic": depth_topic,
-        "gnss_topic": gnss_topic,
-        "attitude_topic": attitude_topic,
-        "truth_topic": truth_topic,
-        "dvl_water_topic": dvl_water_topic,
-    }
     return ReadOptions(**{k: v for k, v in given.items() if v is not None})
+
+
+class ReadingParameters:
+    """The reading options a command takes, as the command-line parameters that give them (each an
+    inspect.Parameter: name, typer annotation, default), in their order in the command's help. Marks the command's
+    `read_options` parameter (ReadOpts); @reads_log puts these in its place."""
+
+    def __init__(self, *parameters: inspect.Parameter) -> None:
+        self.parameters = parameters
+
+    def only(self, *names: str) -> ReadingParameters:
+        """A command that reads fewer sensors: these options alone."""
+        return ReadingParameters(*(p for p in self.parameters if p.name in names))
+
+    def not_given_by_default(self, **annotations: Any) -> ReadingParameters:
+        """These options declared otherwise (name=typer annotation), with the default None: not given."""
+        return ReadingParameters(
+            *(
+                p.replace(annotation=annotations[p.name], default=None)
+                if p.name in annotations
+                else p
+                for p in self.parameters
+            )
+        )
+
+
+def _reading(name: str, annotation: Any, default: Any) -> inspect.Parameter:
+    return inspect.Parameter(
+        name, inspect.Parameter.KEYWORD_ONLY, annotation=annotation, default=default
+    )
+
+
+# Every reading option, declared once for all the commands that read a log (None: not given, ReadOptions' default)
+READING = ReadingParameters(
+    _reading("imu_topic", ImuTopic, "/imu/data_raw"),
+    _reading("dvl_topic", DvlTopic, None),
+    _reading("salvage", Salvage, False),
+    _reading("repair", Repair, False),
+    _reading("depth_topic", DepthTopic, None),
+    _reading("gnss_topic", GnssTopic, None),
+    _reading("attitude_topic", AttitudeTopic, None),
+    _reading("truth_topic", TruthTopic, None),
+    _reading("dvl_water_topic", DvlWaterTopic, None),
+)
+# a command's `read_options` parameter, which @reads_log replaces by the reading options on the command line
+# ("ReadOptions" stays a forward reference: io/read_options.py is imported only when a command runs)
+ReadOpts = Annotated["ReadOptions", READING]
+
+
+def reads_log(func: F) -> F:
+    """A command that reads a log: the parameter annotated with a ReadingParameters (ReadOpts), keyword-only, is
+    given on the command line as those options, in its place in the command's help, and passed to the command as
+    the ReadOptions they make (_read_options)."""
+    signature = inspect.signature(func, eval_str=True)
+    parameters = list(signature.parameters.values())
+    [(at, reading)] = [
+        (i, marker)
+        for i, p in enumerate(parameters)
+        for marker in get_args(p.annotation)[1:]
+        if isinstance(marker, ReadingParameters)
+    ]
+    placeholder = parameters[at].name
+    names = [p.name for p in reading.parameters]
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        given = {name: kwargs.pop(name) for name in names}
+        return func(*args, **kwargs, **{placeholder: _read_options(**given)})
+
+    # what typer reads (inspect.signature, typing.get_type_hints): the options instead of the placeholder
+    spliced = signature.replace(
+        parameters=[*parameters[:at], *reading.parameters, *parameters[at + 1 :]]
+    )
+    wrapper.__signature__ = spliced  # type: ignore[attr-defined]
+    wrapper.__annotations__ = {p.name: p.annotation for p in spliced.parameters.values()}
+    wrapper.__annotations__["return"] = spliced.return_annotation
+    return wrapper  # type: ignore[return-value]
 
 
 def _builtin_scenarios() -> list[str]:
@@ -195,3 +253,12 @@ CONFIG_HELP = (
     "a real DVL, scale prior 1 +- 1 %; 'paper': Pan & Wu's priors, scale 0.8 +- 0.5). Default: the one "
     "the log's (or scenario's) estimator_config names, else 'default'."
 )
+
+ConfigOpt = Annotated[Path | None, typer.Option("-c", "--config", help=CONFIG_HELP)]
+LogArg = Annotated[Path, typer.Argument(help="MCAP log (or rosbag2 directory).")]
+ScenarioArg = Annotated[
+    str,
+    typer.Argument(
+        help=f"Built-in name ({', '.join(_builtin_scenarios())}) or a scenario TOML file."
+    ),
+]

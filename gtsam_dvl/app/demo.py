@@ -96,26 +96,17 @@ def _calibration_figures(
     written: list[Path] = []
     io_tl = _iodvlc_timeline(io_res)
     if not two_d:
-        written.append(
-            plot_estimates(
-                [("IO-DVLC", io_tl)],
-                figs / "fig04_iodvlc_scale.png",
-                "scale",
-                truths["scale"],
-                segments,
-                t_min=590.0,
+        for state, figure in (("scale", "fig04"), ("misalignment", "fig05")):
+            written.append(
+                plot_estimates(
+                    [("IO-DVLC", io_tl)],
+                    figs / f"{figure}_iodvlc_{state}.png",
+                    state,
+                    truths[state],
+                    segments,
+                    t_min=590.0,
+                )
             )
-        )
-        written.append(
-            plot_estimates(
-                [("IO-DVLC", io_tl)],
-                figs / "fig05_iodvlc_misalignment.png",
-                "misalignment",
-                truths["misalignment"],
-                segments,
-                t_min=590.0,
-            )
-        )
     tls = [(m, r.timeline) for m, r in results.items() if r.timeline is not None]
     numbers = {
         "scale": (13, 6),

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -25,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gtsam_dvl.analysis.fleet_calibration import DiveVsJoint, dive_vs_joint
-from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S
+from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, finished
 from gtsam_dvl.core.calibration import SourceLog, VehicleCalibration, config_hash, iso_date
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -164,20 +166,16 @@ class DaskDives:
         failures: list[DiveFailure],
         progress: Any = None,
     ) -> None:
-        from dask.distributed import as_completed
-
         self.client, self.failures = client, failures
         futures = {
             client.submit(prepare_task, p, config_path, read_options, pure=False): p for p in logs
         }
         done: dict[str, Any] = {}
-        for k, fut in enumerate(as_completed(list(futures)), start=1):
-            if fut.status == "error":
-                failures.append(DiveFailure(futures[fut], _error_text(fut.exception())))
+        for p, fut, exc in finished(futures, progress):
+            if exc is not None:
+                failures.append(DiveFailure(p, _error_text(exc)))
             else:
-                done[futures[fut]] = fut
-            if progress is not None:
-                progress(k / len(futures))
+                done[p] = fut
         where = client.who_has(list(done.values()))
         # (log, future, worker) in the order the logs were given
         self.entries: list[tuple[str, Any, str]] = [
@@ -348,28 +346,35 @@ def _solve(
     from gtsam_dvl.app.progress import progress_bar
 
     here = client is None and scheduler is None and (workers == 1 or not _has_dask())
-    if here:
-        engine = "in this process"
+    with _engine(here, client, scheduler, workers, scheduler_timeout_s) as (engine, on):
+        started = t0 if on is None else time.perf_counter()  # on Dask: from the client up
+        dives: LocalDives | DaskDives
         with progress_bar(f"smoothing {len(paths)} dives alone", enabled=show_progress) as progress:
-            local = LocalDives(paths, cfg, options, failures)
-            progress(1.0)
-        prepared = time.perf_counter() - t0
-        solution, summaries, timing = run_dives(local, tol)
-    else:
-        from gtsam_dvl.app.campaign.cluster import dask_client
-
-        if client is not None:
-            engine = "Dask"
-            solution, summaries, timing, prepared = _on_client(
-                client, paths, cfg, options, failures, tol, show_progress
-            )
-        else:
-            with dask_client(scheduler, workers, scheduler_timeout_s) as c:
-                engine = f"Dask ({len(c.scheduler_info().get('workers', {}))} workers)"
-                solution, summaries, timing, prepared = _on_client(
-                    c, paths, cfg, options, failures, tol, show_progress
-                )
+            if on is None:
+                dives = LocalDives(paths, cfg, options, failures)
+                progress(1.0)
+            else:
+                dives = DaskDives(on, paths, cfg, options, failures, progress)
+        prepared = time.perf_counter() - started
+        solution, summaries, timing = run_dives(dives, tol)
+        if on is not None and show_progress and solution is not None:
+            sys.stderr.write(f"joint: {solution.iterations} iterations\n")
     return engine, solution, summaries, timing, prepared
+
+
+@contextmanager
+def _engine(
+    here: bool, client: Any, scheduler: str | None, workers: int | None, scheduler_timeout_s: float
+) -> Iterator[tuple[str, Any]]:
+    """Where the dives run, in words, and the Dask client they run on (None: in this process): the client
+    given, else one to the scheduler or on a LocalCluster of `workers`, closed on exit."""
+    if here:
+        yield "in this process", None
+    elif client is not None:
+        yield "Dask", client
+    else:
+        with dask_client(scheduler, workers, scheduler_timeout_s) as c:
+            yield f"Dask ({len(c.scheduler_info().get('workers', {}))} workers)", c
 
 
 def _joint_calibration(
@@ -406,27 +411,6 @@ def _sha256(path: str) -> str:
     from gtsam_dvl.io.result_writer import file_sha256
 
     return file_sha256(path)
-
-
-def _on_client(
-    client: Any,
-    paths: list[str],
-    cfg: str | None,
-    options: ReadOptions | None,
-    failures: list[DiveFailure],
-    tol: float,
-    show_progress: bool,
-) -> tuple[JointSolution | None, list[DiveSummary], dict[str, float], float]:
-    from gtsam_dvl.app.progress import progress_bar
-
-    t0 = time.perf_counter()
-    with progress_bar(f"smoothing {len(paths)} dives alone", enabled=show_progress) as progress:
-        dives = DaskDives(client, paths, cfg, options, failures, progress)
-    prepared = time.perf_counter() - t0
-    solution, summaries, timing = run_dives(dives, tol)
-    if show_progress and solution is not None:
-        sys.stderr.write(f"joint: {solution.iterations} iterations\n")
-    return solution, summaries, timing, prepared
 
 
 # ----- the fleet table and figure ---------------------------------------------------------------------------

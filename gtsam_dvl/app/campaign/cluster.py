@@ -9,11 +9,14 @@ import importlib.util
 import logging
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, TypeVar
 
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.progress import ProgressFn
+
+K = TypeVar("K")
 
 INSTALL_HINT = "Dask is not installed: pip install 'gtsam-dvl[distributed]' (make test and make demo install it)"
 SCHEDULER_TIMEOUT_S = (
@@ -94,3 +97,17 @@ def dask_client(
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def finished(
+    futures: Mapping[Any, K], progress: ProgressFn | None = None
+) -> Iterator[tuple[K, Any, BaseException | None]]:
+    """Each task of `futures` (future -> its key) as it finishes, whatever the order: its key, its future and
+    the exception it raised (None: it ran; its result stays on the cluster until asked for). progress, when
+    given, is told the fraction finished after each."""
+    from dask.distributed import as_completed
+
+    for k, fut in enumerate(as_completed(list(futures)), start=1):
+        yield futures[fut], fut, fut.exception() if fut.status == "error" else None
+        if progress is not None:
+            progress(k / len(futures))

@@ -7,7 +7,12 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
+from gtsam_dvl.app.campaign.cluster import (
+    SCHEDULER_TIMEOUT_S,
+    dask_client,
+    finished,
+    require_dask,
+)
 from gtsam_dvl.core.errors import GtsamDvlError
 
 if TYPE_CHECKING:
@@ -124,8 +129,6 @@ def smooth_fleet(
         int, dict[str, Any]
     ] = {}  # rows in the order the logs were given, whatever the completion order
     with dask_client(scheduler, workers, scheduler_timeout_s) as client:
-        from dask.distributed import as_completed
-
         futures = {
             client.submit(
                 _smooth_task,
@@ -142,19 +145,17 @@ def smooth_fleet(
         with progress_bar(
             f"smoothing {len(logs)} logs ({mode})", enabled=show_progress
         ) as progress:
-            for k, fut in enumerate(as_completed(list(futures)), start=1):
-                i = futures[fut]
-                if fut.status == "error":
-                    exc = fut.exception()
-                    by_index[i] = {
+            for i, fut, exc in finished(futures, progress):
+                by_index[i] = (
+                    fut.result()
+                    if exc is None
+                    else {
                         "log": str(logs[i]),
                         "dir": str(out_dir / names[i]),
                         "status": "error",
                         "error": f"{type(exc).__name__}: {exc}",
                     }
-                else:
-                    by_index[i] = fut.result()
-                progress(k / len(futures))
+                )
     rows = [by_index[i] for i in sorted(by_index)]
     table = "\n".join(fleet_table(rows)) + "\n"
     written = [

@@ -20,7 +20,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gtsam_dvl.app.calibration_files import calibration_data
-from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, require_dask
+from gtsam_dvl.app.campaign.cluster import (
+    SCHEDULER_TIMEOUT_S,
+    dask_client,
+    finished,
+    require_dask,
+)
 from gtsam_dvl.app.campaign.montecarlo import (
     ESTIMATORS,
     campaign_statistics,
@@ -146,8 +151,6 @@ def _run_on_dask(
     meta_path = out_dir / "campaign.json"
     crb_path = out_dir / "cramer_rao.json"
     with dask_client(scheduler, workers, scheduler_timeout_s) as client:
-        from dask.distributed import as_completed
-
         if not meta_path.exists():  # the client is up: the campaign starts, its record first
             atomic_write_json(meta_path, record)
         futures = {
@@ -173,14 +176,11 @@ def _run_on_dask(
         with progress_bar(
             f"montecarlo {name}: {len(todo)} runs", enabled=show_progress
         ) as progress:
-            for k, fut in enumerate(as_completed(list(futures)), start=1):
-                seed = futures[fut]
-                if fut.status == "error":
-                    exc = fut.exception()
+            for seed, fut, exc in finished(futures, progress):
+                if exc is not None:
                     failures.append({"seed": seed, "error": f"{type(exc).__name__}: {exc}"})
                 else:
                     atomic_write_json(runs_dir / f"seed_{seed:06d}.json", fut.result())
-                progress(k / max(len(futures), 1))
         if crb_future is not None:
             try:
                 atomic_write_json(crb_path, crb_future.result())

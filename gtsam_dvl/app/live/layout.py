@@ -65,6 +65,28 @@ def _plot(title: str, y_label: str, paths: list[dict[str, Any]]) -> dict[str, An
 AXIS_COLORS = ("#e6194b", "#3cb44b", "#4363d8")
 
 
+ESTIMATE, TRUTH = (
+    "#ff8c00ff",
+    "#00b4ffff",
+)  # the 3-D panel's colours (RGBA): the estimate orange, the truth blue
+
+
+def _arrow(color: str, **covariance: Any) -> dict[str, Any]:
+    """A pose topic in the 3-D panel: an arrow of one colour (and its covariance's settings, when given)."""
+    return {
+        "visible": True,
+        "type": "arrow",
+        **covariance,
+        "color": color,
+        "arrowScale": [4, 0.6, 0.6],
+    }
+
+
+def _line(color: str, width_m: float) -> dict[str, Any]:
+    """A path topic in the 3-D panel: a line of one colour, width_m wide."""
+    return {"visible": True, "type": "line", "lineWidth": width_m, "gradient": [color, color]}
+
+
 def _three_d_panel() -> dict[str, Any]:
     """The 3-D panel: following base_link in map, the estimated pose with its covariance and path, the truth's,
     a 10 m grid."""
@@ -87,32 +109,10 @@ def _three_d_panel() -> dict[str, Any]:
         "scene": {"enableStats": False, "transforms": {"showLabel": True, "axisScale": 2}},
         "transforms": {"frame:map": {"visible": True}, "frame:base_link": {"visible": True}},
         "topics": {
-            T["odometry"]: {
-                "visible": True,
-                "type": "arrow",
-                "showCovariance": True,
-                "covarianceColor": "#ff8c0055",
-                "color": "#ff8c00ff",
-                "arrowScale": [4, 0.6, 0.6],
-            },
-            T["path"]: {
-                "visible": True,
-                "type": "line",
-                "lineWidth": 0.4,
-                "gradient": ["#ff8c00ff", "#ff8c00ff"],
-            },
-            T["truth"]: {
-                "visible": True,
-                "type": "arrow",
-                "color": "#00b4ffff",
-                "arrowScale": [4, 0.6, 0.6],
-            },
-            T["truth_path"]: {
-                "visible": True,
-                "type": "line",
-                "lineWidth": 0.3,
-                "gradient": ["#00b4ffff", "#00b4ffff"],
-            },
+            T["odometry"]: _arrow(ESTIMATE, showCovariance=True, covarianceColor="#ff8c0055"),
+            T["path"]: _line(ESTIMATE, 0.4),
+            T["truth"]: _arrow(TRUTH),
+            T["truth_path"]: _line(TRUTH, 0.3),
         },
         "layers": {
             "grid": {

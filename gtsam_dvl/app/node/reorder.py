@@ -21,7 +21,7 @@ import heapq
 import itertools
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 # release order at equal stamps: IMU first (core/message_order.py), then depth and fixes, then the ping
 RANK = {"imu": 0, "pressure": 1, "gnss": 1, "dvl": 2}
@@ -48,15 +48,18 @@ class StreamStats:
     last_jump_ns: int | None = None
     frame_id: str = ""
 
+    # what the diagnostics report of a stream, by field name
+    REPORTED: ClassVar[tuple[str, ...]] = (
+        "received",
+        "released",
+        "late",
+        "duplicates",
+        "jumps",
+        "largest_jump_s",
+    )
+
     def as_dict(self) -> dict[str, Any]:
-        return {
-            "received": self.received,
-            "released": self.released,
-            "late": self.late,
-            "duplicates": self.duplicates,
-            "jumps": self.jumps,
-            "largest_jump_s": self.largest_jump_s,
-        }
+        return {name: getattr(self, name) for name in self.REPORTED}
 
 
 @dataclass(order=True)
