@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal, Protocol, overload
+from typing import Literal, Protocol, TypedDict, Unpack, overload
 
 from gtsam_dvl.core.calibration import VehicleCalibration
 from gtsam_dvl.core.config import EstimatorConfig
@@ -142,14 +142,20 @@ def get_estimator(mode: str) -> Estimator:
         raise GtsamDvlError(f"unknown mode '{mode}' (available: {', '.join(MODES)})") from None
 
 
+class RunOptions(TypedDict, total=False):
+    """run_estimator's optional keywords, as RunRequest holds them (its docstring)."""
+
+    progress: ProgressFn | None
+    timeline: bool
+    calibration: VehicleCalibration | None
+
+
 @overload
 def run_estimator(
     log: LogData,
     mode: Literal["io-dvlc"],
     config: EstimatorConfig | None,
-    progress: ProgressFn | None = None,
-    timeline: bool = True,
-    calibration: VehicleCalibration | None = None,
+    **options: Unpack[RunOptions],
 ) -> IoDvlcResult: ...
 
 
@@ -158,20 +164,13 @@ def run_estimator(
     log: LogData,
     mode: Literal["batch", "online", "online-full", "ekf"],
     config: EstimatorConfig | None,
-    progress: ProgressFn | None = None,
-    timeline: bool = True,
-    calibration: VehicleCalibration | None = None,
+    **options: Unpack[RunOptions],
 ) -> NavResult: ...
 
 
 @overload
 def run_estimator(
-    log: LogData,
-    mode: str,
-    config: EstimatorConfig | None,
-    progress: ProgressFn | None = None,
-    timeline: bool = True,
-    calibration: VehicleCalibration | None = None,
+    log: LogData, mode: str, config: EstimatorConfig | None, **options: Unpack[RunOptions]
 ) -> EstimatorResult: ...
 
 
@@ -179,6 +178,7 @@ def run_estimator(
     log: LogData,
     mode: str,
     config: EstimatorConfig | None,
+    *,
     progress: ProgressFn | None = None,
     timeline: bool = True,
     calibration: VehicleCalibration | None = None,
@@ -197,16 +197,11 @@ def run_estimator(
 
 
 def run_trajectory_estimator(
-    log: LogData,
-    mode: str,
-    config: EstimatorConfig | None,
-    progress: ProgressFn | None = None,
-    timeline: bool = True,
-    calibration: VehicleCalibration | None = None,
+    log: LogData, mode: str, config: EstimatorConfig | None, **options: Unpack[RunOptions]
 ) -> NavResult:
     """run_estimator for a mode that estimates a trajectory (a NavResult: every mode but io-dvlc), else a one-line
     GtsamDvlError."""
-    result = run_estimator(log, mode, config, progress, timeline, calibration)
+    result = run_estimator(log, mode, config, **options)
     if not isinstance(result, NavResult):
         raise GtsamDvlError(f"--mode {mode} estimates the calibration only, not a trajectory")
     return result

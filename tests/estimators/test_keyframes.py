@@ -37,7 +37,7 @@ from gtsam_dvl.estimators.graph.keyframes import (
     snapshot_params,
 )
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
-from gtsam_dvl.estimators.inputs.gaps import find_gaps, sample_starts_with_gaps
+from gtsam_dvl.estimators.inputs.gaps import ImuPieces, find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.inputs.selection import sample_starts
 from gtsam_dvl.factors import PingMotion
 from tests.support.numerical import numerical_jacobian
@@ -301,7 +301,7 @@ def test_interval_pieces_found_once_are_the_cut_by_cut_ones(gap: bool) -> None:
         1.69,
     ]  # (0.0131: before the first stamp after t_state)
     params = _rotating_params(np.array([0.0, 6.3e-5, 3.6e-5]))
-    args = (t_state, t_end, pings, params, t, starts, b_f, b_omega, gaps, ImuConfig())
+    args = (t_state, t_end, pings, params, ImuPieces(t, starts, b_f, b_omega, gaps), ImuConfig())
     pim_a, held_a, snaps_a = keyframes.interval_with_snapshots(*args)
     pim_b, held_b, snaps_b = keyframes.interval_cut_by_cut(*args)
     assert held_a == held_b and bool(held_a) == gap
@@ -375,7 +375,13 @@ def test_ping_snapshots_across_a_gap_match_the_reference(monkeypatch: pytest.Mon
     gaps = find_gaps(t, 5.0)
     assert len(gaps) == 1
     pings = [0.3, 0.7, 1.05, 1.3, 1.9]
-    args = (0.002, pings, _params(), t, sample_starts(t), b_f, b_omega, gaps, ImuConfig())
+    args = (
+        0.002,
+        pings,
+        _params(),
+        ImuPieces(t, sample_starts(t), b_f, b_omega, gaps),
+        ImuConfig(),
+    )
     new = ping_snapshots(*args)
     monkeypatch.setattr(keyframes, "snapshot", reference_snapshot)
     ref = ping_snapshots(*args)

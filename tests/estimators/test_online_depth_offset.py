@@ -14,6 +14,7 @@ Together about 16 s of CPU.
 
 from __future__ import annotations
 
+import copy
 from functools import cache
 
 import gtsam
@@ -28,13 +29,12 @@ from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import (
-    OFFSET,
     FilterState,
     depth_measurement_model,
     offset_measurement_model,
     run_ekf,
 )
-from gtsam_dvl.estimators.ekf.strapdown import BA, BG, MIS, PHI, POS, SCALE, VEL, NavState
+from gtsam_dvl.estimators.ekf.strapdown import NavState
 from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.dvl_factors import (
     considered_calibration_factor as _considered_calibration_factor,
@@ -213,17 +213,11 @@ def _filter_state(rng: np.random.Generator, offset: bool) -> FilterState:
 
 
 def _inject(fs: FilterState, dx: np.ndarray) -> FilterState:
-    """The EKF's error injection (filter.update): true = estimate (+) error."""
-    nav = fs.nav
-    return FilterState(
-        NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS]),
-        fs.gyro_bias + dx[BG],
-        fs.accel_bias + dx[BA],
-        fs.scale + dx[SCALE],
-        fs.b_R_d @ so3_exp(dx[MIS]),
-        fs.P,
-        fs.time_offset + (dx[OFFSET] if len(dx) > OFFSET else 0.0),
-    )
+    """The EKF's error injection (FilterState.inject, as filter.update applies it) on a copy: true = estimate (+)
+    error."""
+    out = copy.copy(fs)
+    out.inject(dx)
+    return out
 
 
 def _numerical(f, fs: FilterState, n: int) -> np.ndarray:  # type: ignore[no-untyped-def]

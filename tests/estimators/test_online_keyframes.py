@@ -32,7 +32,7 @@ from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.graph.keyframes import interval_with_snapshots, snapshot_params
 from gtsam_dvl.estimators.inputs.alignment import map_frame_of
-from gtsam_dvl.estimators.inputs.gaps import find_gaps, sample_starts_with_gaps
+from gtsam_dvl.estimators.inputs.gaps import ImuPieces, find_gaps, sample_starts_with_gaps
 from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.between_pings import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
@@ -209,7 +209,7 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
     starts = sample_starts_with_gaps(t, gaps)
     b_f = f + 0.5 * (t - starts)[:, None] * np.cross(w, f)
     batch_pim, batch_held, expected = interval_with_snapshots(
-        t_state, t_next, pings, maker.make_params(), t, starts, b_f, w, gaps, cfg.imu
+        t_state, t_next, pings, maker.make_params(), ImuPieces(t, starts, b_f, w, gaps), cfg.imu
     )
     lo = (
         int(np.searchsorted(t, t_state, side="right")) - 1
@@ -218,10 +218,11 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
     g_buf = find_gaps(T, cfg.imu.gap_samples, gaps.period_s)
     s_buf = sample_starts_with_gaps(T, g_buf)
     bf_buf = F + 0.5 * (T - s_buf)[:, None] * np.cross(W, F)
+    buf = ImuPieces(T, s_buf, bf_buf, W, g_buf)
     interval = StatePreintegration(maker.make_params, cfg.imu)
     interval.reset(t_state)
     for t_p, e in zip(pings, expected, strict=True):
-        got = interval.snapshot_at(t_p, T, s_buf, bf_buf, W, g_buf)
+        got = interval.snapshot_at(t_p, buf)
         for name in ("dt", "dR", "dv", "dp", "dR_dbg", "dv_dba", "dv_dbg", "cov"):
             np.testing.assert_array_equal(
                 getattr(got, name), getattr(e, name), err_msg=f"{name} at {t_p}"
@@ -232,8 +233,8 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
         )  # the hold's motion-model covariance is in
     # the next IMU factor's preintegration, cut at the last stamp before each ping, then closed at the state: the
     # batch smoother's, and preintegrate_interval's in one go
-    ref, _, ref_held = maker.preintegrate_interval(t_state, t_next, T, s_buf, bf_buf, W, g_buf)
-    pim, _, held = interval.close(t_next, T, s_buf, bf_buf, W, g_buf)
+    ref, _, ref_held = maker.preintegrate_interval(t_state, t_next, buf)
+    pim, _, held = interval.close(t_next, buf)
     assert held == ref_held == batch_held and (held.total_s > 0.2) == gap
     for name in ("deltaRij", "deltaVij", "deltaPij", "preintMeasCov", "deltaTij"):
         for other in (ref, batch_pim):

@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.estimators.graph.keyframes import ping_snapshots
-from gtsam_dvl.estimators.inputs.gaps import find_gaps
+from gtsam_dvl.estimators.inputs.gaps import ImuPieces, find_gaps
 from gtsam_dvl.estimators.inputs.selection import sample_starts
 from gtsam_dvl.factors import PingMotion, keyframe_ping_covariance, ping_state
 from tests.support.numerical import numerical_jacobians
@@ -42,9 +42,8 @@ def test_ping_state_is_gtsams_prediction() -> None:
     params.setIntegrationCovariance(np.eye(3) * 1e-10)
     params.setOmegaCoriolis(W_IE)
     t_i, pings = 0.005, [0.3, 0.555, 0.8]
-    snaps = ping_snapshots(
-        t_i, pings, params, t, starts, b_f, b_omega, find_gaps(t, 5.0), ImuConfig()
-    )
+    imu = ImuPieces(t, starts, b_f, b_omega, find_gaps(t, 5.0))
+    snaps = ping_snapshots(t_i, pings, params, imu, ImuConfig())
     bias = gtsam.imuBias.ConstantBias(np.array([3e-3, -2e-3, 1e-3]), np.array([1e-4, 2e-4, -3e-4]))
     n_R_i = Rotation.from_rotvec([0.1, -0.2, 1.0]).as_matrix()
     n_p_i, n_v_i = np.array([10.0, 20.0, -5.0]), np.array([1.5, -0.5, 0.1])
@@ -80,9 +79,8 @@ def test_a_static_vehicle_stays_still_under_earth_rate() -> None:
     b_f = b_f + 0.5 * 0.01 * np.cross(
         b_w, b_f
     )  # each delta-v rotated back to its sample's start, as the graph does
-    snap = ping_snapshots(
-        0.0, [1.0], params, t, sample_starts(t), b_f, b_w, find_gaps(t, 5.0), ImuConfig()
-    )[0]
+    imu = ImuPieces(t, sample_starts(t), b_f, b_w, find_gaps(t, 5.0))
+    snap = ping_snapshots(0.0, [1.0], params, imu, ImuConfig())[0]
     m = snap.motion(W_IE, N_G0, np.zeros(3), np.zeros((3, 3)))
     n_R_p, n_v_p, _ = ping_state(n_R_b, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), m)
     angle = np.linalg.norm(Rotation.from_matrix(n_R_b.T @ n_R_p).as_rotvec())
@@ -99,17 +97,10 @@ def test_preintegration_noise_in_the_ping_is_small_at_navigation_grade() -> None
     params.setGyroscopeCovariance(np.eye(3) * (0.1 * np.pi / 180 / 60) ** 2)
     params.setAccelerometerCovariance(np.eye(3) * (10e-6 * 9.80665) ** 2)
     params.setIntegrationCovariance(np.eye(3) * 1e-10)
-    snap = ping_snapshots(
-        0.0,
-        [1.0],
-        params,
-        t,
-        sample_starts(t),
-        np.tile([0, 0, 9.8], (100, 1)),
-        np.zeros((100, 3)),
-        find_gaps(t, 5.0),
-        ImuConfig(),
-    )[0]
+    level = ImuPieces(
+        t, sample_starts(t), np.tile([0, 0, 9.8], (100, 1)), np.zeros((100, 3)), find_gaps(t, 5.0)
+    )
+    snap = ping_snapshots(0.0, [1.0], params, level, ImuConfig())[0]
     cov = keyframe_ping_covariance(snap.cov, snap.dR, np.eye(3), np.array([2.0, 0.0, 0.0]))
     sigma = np.sqrt(np.diag(cov))
     print(f"preintegration noise in a ping 1 s after its keyframe: {sigma} m/s")

@@ -134,19 +134,11 @@ class _Replay:
 
     def push_dvl(self, j: int) -> None:
         """DVL ping j."""
+        from gtsam_dvl.estimators.online.feed import push_dvl_ping
+
         dvl = self.log.dvl
-        beams = (
-            None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-        )
         self.pace(float(dvl.t[j]))
-        n = self.est.push_dvl(
-            dvl.t[j],
-            dvl.d_v[j],
-            dvl.d_cov[j],
-            bool(dvl.valid[j]),
-            beams,
-            water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
-        )
+        n = push_dvl_ping(self.est, dvl, j)
         self.view.publish_dvl(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
         self.epoch_done(n)
 

@@ -56,7 +56,7 @@ from gtsam_dvl.core.states import (
 )
 from gtsam_dvl.core.states import calibration_states as states_held
 from gtsam_dvl.core.types import LogData, Mounting
-from gtsam_dvl.estimators.batch.solve import extract_result, solve_log
+from gtsam_dvl.estimators.batch.solve import solve_log
 from gtsam_dvl.estimators.graph.bulk import BulkGraph
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
 from gtsam_dvl.estimators.graph.solver import (
@@ -150,18 +150,16 @@ def prepare_dive(
     calibration: VehicleCalibration | None = None,
 ) -> DiveState:
     """A dive smoothed alone as the batch smoother does (its passes and DVL noise fit, estimators/batch/smoother.py),
-    then
-    its graph without the priors of the shared states, ready for the joint iterations. calibration: a vehicle's
+    then its graph without the priors of the shared states, ready for the joint iterations. calibration: a vehicle's
     calibration as the joint prior of the states it holds (batch.smooth_batch's), counted once by the caller."""
     config = (config or EstimatorConfig.for_log(log.metadata)).validate()
     config = resolve_water_track(config, log)  # (the steps of batch.smooth_batch, in its order)
     stated = config
     noise = NoiseReport()
     log = screened_in_memory(log)
-    builder, graph, values, ordering, report, _, _ = solve_log(log, config, noise, {}, calibration)
-    alone = extract_result(
-        builder, graph, values, ordering, bayes_net=report.bayes_net if report.converged else None
-    )
+    solved = solve_log(log, config, noise, {}, calibration)
+    builder, graph, values, ordering = solved.builder, solved.graph, solved.values, solved.ordering
+    alone = solved.result()
     alone.info["noise"] = noise.as_dict()
     if (screened := screened_losses(log)) is not None:
         alone.info["screened_losses"] = screened

@@ -18,6 +18,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.pieces import long_gaps, smooth_pieces
 from gtsam_dvl.estimators.batch.solve import (  # noqa: F401  (re-exported: the solve's names of old)
     RECENTRE_FRACTION,
+    SolvedLog,
     extract_result,
     solve_centred,
     solve_graph,
@@ -25,8 +26,7 @@ from gtsam_dvl.estimators.batch.solve import (  # noqa: F401  (re-exported: the 
 )
 from gtsam_dvl.estimators.batch.timeline import filtering_timeline
 from gtsam_dvl.estimators.graph.bulk import BulkGraph
-from gtsam_dvl.estimators.graph.log_graph import LogGraph
-from gtsam_dvl.estimators.graph.solver import ChunkedOrdering, SolveReport
+from gtsam_dvl.estimators.graph.solver import SolveReport
 from gtsam_dvl.estimators.inputs.gaps import screened_losses
 from gtsam_dvl.estimators.inputs.prepare import prepare
 from gtsam_dvl.estimators.models import weak_hold
@@ -35,36 +35,21 @@ from gtsam_dvl.estimators.models.noise_levels import NoiseReport
 
 
 def _result_with_hold(
-    builder: LogGraph,
-    graph: BulkGraph,
-    values: gtsam.Values,
-    ordering: gtsam.Ordering | ChunkedOrdering,
-    report: SolveReport,
-    estimator: str,
-    calibration: VehicleCalibration | None,
+    solved: SolvedLog, estimator: str, calibration: VehicleCalibration | None
 ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
     """The solution's result with its marginals, then (without a calibration file) the nominal calibration's check
     and the weakly determined directions held (weak_hold.py): the graph of the result's covariance, its values and
     the result."""
-    # the converged iteration's Bayes net serves the marginals when its step was tiny (every GN
-    # iteration's stop rule makes the last step change the error by < 0.01, i.e. far below one sigma)
-    result = extract_result(
-        builder,
-        graph,
-        values,
-        ordering,
-        estimator=estimator,
-        bayes_net=report.bayes_net if report.converged else None,
-    )
+    result = solved.result(estimator)
     if calibration is not None or result.calib_joint_cov is None:
-        return graph, values, result
-    config = builder.config
+        return solved.graph, solved.values, result
+    builder = solved.builder
     hold = weak_hold.plan(
-        config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1
+        builder.config, builder.log.mounting, result.calib_joint_cov, len(builder.epochs) - 1
     )
     if hold is None:
-        return graph, values, result
-    return _hold_calibration(builder, graph, values, ordering, hold, estimator, result)
+        return solved.graph, solved.values, result
+    return _hold_calibration(solved, hold, estimator, result)
 
 
 def _solver_info(report: SolveReport, dof: int, passes: Any) -> dict[str, Any]:
@@ -109,15 +94,12 @@ def smooth_batch(
         pieces = smooth_pieces(log, stated, gaps, progress, estimator, calibration)
         consider_constant_error(pieces, config, calibration is not None)
         return pieces
-    builder, graph, values, ordering, report, passes, dof = solve_log(
-        log, config, noise, timing, calibration, progress, t0
-    )
+    solved = solve_log(log, config, noise, timing, calibration, progress, t0)
+    builder = solved.builder
     config = builder.config  # (at the levels taken from the data)
 
     t3 = time.perf_counter()
-    graph, values, result = _result_with_hold(
-        builder, graph, values, ordering, report, estimator, calibration
-    )
+    graph, values, result = _result_with_hold(solved, estimator, calibration)
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     timing["marginals"] = time.perf_counter() - t3
     if timeline and config.imu.bias_model == "constant":
@@ -136,30 +118,24 @@ def smooth_batch(
         result.info["calibration_prior"] = calibration_info(config, calibration)
     if builder.offset_centring:  # the time offset's windows against the solution (solve_centred)
         result.info["time_offset_centring"] = builder.offset_centring
-    result.info["solver"] = _solver_info(report, dof, passes)
+    result.info["solver"] = _solver_info(solved.report, solved.dof, solved.passes)
     if progress:
         progress(1.0)
     return result
 
 
 def _hold_calibration(
-    builder: LogGraph,
-    graph: BulkGraph,
-    values: gtsam.Values,
-    ordering: gtsam.Ordering | ChunkedOrdering,
-    hold: dict[str, Any],
-    estimator: str,
-    free: NavResult,
+    solved: SolvedLog, hold: dict[str, Any], estimator: str, free: NavResult
 ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
     """The nominal-calibration check and the weak-direction hold (estimators/models/weak_hold.py): the log solved again
     with the scale and misalignment pinned at the prior's mean (the nominal); when the free estimate does not lower
     the chi^2 by more than NOMINAL_LEVEL's quantile of chi^2(4), the calibration is held at the nominal with the
     consider covariance (its prior's sigma) and the result says so; else the weak directions alone are held (when
     any). Returns the graph of the result's covariance (for the timeline), its values and the result."""
-    if not builder.config.priors.nominal_check:
-        return _hold_weak(builder, graph, values, ordering, hold, estimator, free, None)
+    if not solved.builder.config.priors.nominal_check:
+        return _hold_weak(solved, hold, estimator, free, None)
     everything = {**hold, "weak": np.ones_like(hold["weak"])}
-    nominal_values, gain, nominal_graph = _pinned(builder, graph, values, ordering, everything)
+    nominal_values, gain, nominal_graph = _pinned(solved, everything)
     limit = float(chi2.ppf(weak_hold.NOMINAL_LEVEL, len(hold["weak"])))
     check = {
         "chi2_gain": gain,
@@ -169,7 +145,7 @@ def _hold_calibration(
     }
     if not check["pays"]:
         result = extract_result(
-            builder, nominal_graph, nominal_values, ordering, estimator=estimator
+            solved.builder, nominal_graph, nominal_values, solved.ordering, estimator=estimator
         )
         result.info["calibration_hold"] = {
             **weak_hold.report(everything, gain),
@@ -182,14 +158,11 @@ def _hold_calibration(
             ),
         }
         return nominal_graph, nominal_values, result
-    return _hold_weak(builder, graph, values, ordering, hold, estimator, free, check)
+    return _hold_weak(solved, hold, estimator, free, check)
 
 
 def _hold_weak(
-    builder: LogGraph,
-    graph: BulkGraph,
-    values: gtsam.Values,
-    ordering: gtsam.Ordering | ChunkedOrdering,
+    solved: SolvedLog,
     hold: dict[str, Any],
     estimator: str,
     free: NavResult,
@@ -200,8 +173,8 @@ def _hold_weak(
     nominal = {} if check is None else {"nominal": check}
     if not hold["weak"].any():
         free.info["calibration_hold"] = {**weak_hold.report(hold, 0.0), **nominal}
-        return graph, values, free
-    held, increase, cov_graph = _pinned(builder, graph, values, ordering, hold)
+        return solved.graph, solved.values, free
+    held, increase, cov_graph = _pinned(solved, hold)
     info = {**weak_hold.report(hold, increase), **nominal}
     if not info["consistent"]:
         free.info["calibration_hold"] = {
@@ -213,22 +186,17 @@ def _hold_weak(
                 "data disagree with the prior along directions they inform little"
             ),
         }
-        return graph, values, free
-    result = extract_result(builder, cov_graph, held, ordering, estimator=estimator)
+        return solved.graph, solved.values, free
+    result = extract_result(solved.builder, cov_graph, held, solved.ordering, estimator=estimator)
     result.info["calibration_hold"] = info
     return cov_graph, held, result
 
 
-def _pinned(
-    builder: LogGraph,
-    graph: BulkGraph,
-    values: gtsam.Values,
-    ordering: gtsam.Ordering | ChunkedOrdering,
-    hold: dict[str, Any],
-) -> tuple[gtsam.Values, float, BulkGraph]:
+def _pinned(solved: SolvedLog, hold: dict[str, Any]) -> tuple[gtsam.Values, float, BulkGraph]:
     """The estimate with hold's weak directions pinned at the prior's mean (the rest solved again, the offset's
     windows re-centred), its chi^2 increase over values', and the graph of its consider covariance (the prior's
     precision taken off along the pinned directions: estimators/models/weak_hold.py)."""
+    graph, values = solved.graph, solved.values
     pinned, consider = gtsam.NonlinearFactorGraph(), gtsam.NonlinearFactorGraph()
     slots = set(weak_hold.prior_slots(graph.graph))
     for j in range(graph.graph.size()):
@@ -239,7 +207,7 @@ def _pinned(
     consider.add(weak_hold.consider_prior(hold))
     free_error = graph.error(values)
     _, held, _ = solve_centred(
-        builder, BulkGraph(pinned, graph.bulk, graph.imu), values, ordering, []
+        solved.builder, BulkGraph(pinned, graph.bulk, graph.imu), values, solved.ordering, []
     )
     increase = 2.0 * (graph.error(held) - free_error)
     return held, increase, BulkGraph(consider, graph.bulk, graph.imu)

@@ -65,6 +65,33 @@ from gtsam_dvl.estimators.models.noise_levels import (
 )
 
 
+@dataclass
+class SolvedLog:
+    """solve_log's solution: the LogGraph, its bulk graph, the estimate and the elimination ordering, with the last
+    pass's report, each pass's figures and the final chi^2's degrees of freedom."""
+
+    builder: LogGraph
+    graph: BulkGraph
+    values: gtsam.Values
+    ordering: ChunkedOrdering
+    report: SolveReport
+    passes: list[dict[str, float]]
+    dof: int
+
+    def result(self, estimator: str = "batch") -> NavResult:
+        """Its estimates and marginals (extract_result), from the converged iteration's Bayes net when the last
+        step was tiny (every GN iteration's stop rule makes the last step change the error by < 0.01, i.e. far
+        below one sigma)."""
+        return extract_result(
+            self.builder,
+            self.graph,
+            self.values,
+            self.ordering,
+            estimator=estimator,
+            bayes_net=self.report.bayes_net if self.report.converged else None,
+        )
+
+
 def solve_log(
     log: LogData,
     config: EstimatorConfig,
@@ -73,13 +100,10 @@ def solve_log(
     calibration: VehicleCalibration | None = None,
     progress: ProgressFn | None = None,
     t0: float | None = None,
-) -> tuple[
-    LogGraph, BulkGraph, gtsam.Values, ChunkedOrdering, SolveReport, list[dict[str, float]], int
-]:
+) -> SolvedLog:
     """The batch smoother's solve of a screened log (config with "auto" resolved): the IMU levels from the data,
-    the graph in bulk, Gauss-Newton (both passes with the time offset) and the DVL noise fit. Returns the LogGraph,
-    the graph, the solution, the ordering, the last pass's report, each pass's figures and the chi^2's degrees of
-    freedom; noise records the levels used, timing the phases' seconds (t0: when the run began)."""
+    the graph in bulk, Gauss-Newton (both passes with the time offset) and the DVL noise fit (SolvedLog); noise
+    records the levels used, timing the phases' seconds (t0: when the run began)."""
     t0 = time.perf_counter() if t0 is None else t0
     config = imu_levels(
         log, config, noise
@@ -126,7 +150,7 @@ def solve_log(
     ):
         values, report = fit_dvl_noise(builder, graph, values, ordering, report, passes, noise)
     timing["solve"] = time.perf_counter() - t2
-    return builder, graph, values, ordering, report, passes, dof
+    return SolvedLog(builder, graph, values, ordering, report, passes, dof)
 
 
 # A first pass that the time offset's re-centring follows stops once an iteration lowers the error by less than

@@ -70,12 +70,7 @@ from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled, water_current
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.ekf.history import History, history_result
-from gtsam_dvl.estimators.ekf.kalman import (
-    OFFSET,
-    gate_threshold,
-    propagate_covariance,
-    update,
-)
+from gtsam_dvl.estimators.ekf.kalman import gate_threshold, propagate_covariance, update
 from gtsam_dvl.estimators.ekf.strapdown import (
     BA,
     BG,
@@ -83,6 +78,7 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     MIS,
     N_ERR,
     N_NAV,
+    OFFSET,
     PHI,
     POS,
     SCALE,

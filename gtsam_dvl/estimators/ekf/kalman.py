@@ -14,22 +14,7 @@ import math
 import numpy as np
 from scipy.stats import chi2
 
-from gtsam_dvl.core.rotations import so3_exp
-from gtsam_dvl.estimators.ekf.strapdown import (
-    BA,
-    BG,
-    LAYOUT,
-    MIS,
-    N_ERR,
-    PHI,
-    POS,
-    SCALE,
-    VEL,
-    FilterState,
-    NavState,
-)
-
-OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s)
+from gtsam_dvl.estimators.ekf.strapdown import N_ERR, FilterState
 
 
 def robust_weight(kernel: str, k: float, r: float) -> float:
@@ -59,9 +44,9 @@ def update(
     gate_nis: float = math.inf,
     consider: np.ndarray | None = None,
 ) -> tuple[float, bool, bool]:
-    """Kalman update (Joseph form) and injection of the error into the nominal state, unless the normalised
-    innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's weight
-    (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.
+    """Kalman update (Joseph form) and injection of the error into the nominal state (FilterState.inject), unless
+    the normalised innovation squared exceeds gate_nis (gate_threshold): then nothing changes. The robust kernel's
+    weight (robust_weight, on the whitened innovation's norm) inflates the measurement noise by 1 / weight.
 
     consider: error-state indices held as "consider" states (a Schmidt-Kalman filter: their gain rows zero, so
     they keep their values while their uncertainty still enters every other state's covariance; the Joseph form
@@ -87,19 +72,7 @@ def update(
     IKH = np.eye(len(P)) - K @ H
     P = IKH @ P @ IKH.T + K @ Rm @ K.T
     fs.P = 0.5 * (P + P.T)
-    nav = fs.nav
-    fs.nav = NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS])
-    fs.gyro_bias = fs.gyro_bias + dx[BG]
-    fs.accel_bias = fs.accel_bias + dx[BA]
-    fs.scale = fs.scale + float(dx[SCALE])
-    fs.b_R_d = fs.b_R_d @ so3_exp(dx[MIS])
-    for name, cols in fs.epoch_slices().items():  # the per-epoch states' (epoch_states.py)
-        fs.epoch[name] = fs.epoch[name] + dx[cols]
-    if (sh := fs.shear_slice()) is not None:
-        assert fs.shear is not None
-        fs.shear = fs.shear + dx[sh].reshape(-1, 2)
-    if len(dx) - fs.extra_states() > OFFSET:
-        fs.time_offset = fs.time_offset + float(dx[OFFSET])
+    fs.inject(dx)
     return nis, down, False
 
 

@@ -53,6 +53,7 @@ LAYOUT = ekf_layout(None, N_NAV)  # the shared states' columns, with every state
 BG, BA, MIS = LAYOUT["gyro_bias"], LAYOUT["accel_bias"], LAYOUT["misalignment"]
 SCALE = LAYOUT["scale"].start  # (a scalar's column)
 N_ERR = MIS.stop  # the navigation error and the shared states the strapdown's transition covers
+OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s)
 
 
 @dataclass
@@ -142,6 +143,24 @@ class FilterState:
         """How many error-state components follow the time offset's place: the layer boundaries' and the per-epoch
         states'."""
         return self.epoch_dims() + 2 * len(self.shear_ids)
+
+    def inject(self, dx: np.ndarray) -> None:
+        """The error dx (the error state's layout, module doc) injected into the nominal state: true = estimate (+)
+        error, the attitude's about map axes (left), the misalignment's in the DVL frame (right). Each attribute
+        is replaced, never changed in place (a shallow copy of the state keeps its own values)."""
+        nav = self.nav
+        self.nav = NavState(so3_exp(dx[PHI]) @ nav.n_R_b, nav.n_v + dx[VEL], nav.n_p + dx[POS])
+        self.gyro_bias = self.gyro_bias + dx[BG]
+        self.accel_bias = self.accel_bias + dx[BA]
+        self.scale = self.scale + float(dx[SCALE])
+        self.b_R_d = self.b_R_d @ so3_exp(dx[MIS])
+        slices = self.epoch_slices()  # the per-epoch states' (epoch_states.py)
+        self.epoch = {name: value + dx[slices[name]] for name, value in self.epoch.items()}
+        if (sh := self.shear_slice()) is not None:
+            assert self.shear is not None
+            self.shear = self.shear + dx[sh].reshape(-1, 2)
+        if len(dx) - self.extra_states() > OFFSET:
+            self.time_offset = self.time_offset + float(dx[OFFSET])
 
 
 @dataclass

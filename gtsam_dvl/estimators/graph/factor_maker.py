@@ -37,8 +37,8 @@ from gtsam_dvl.core.states import prior_factors as shared_prior_factors
 from gtsam_dvl.core.types import ImuData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.inputs.alignment import Alignment, FirstState, first_state
-from gtsam_dvl.estimators.inputs.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
-from gtsam_dvl.estimators.inputs.selection import imu_pieces, ping_covariance, water_covariance
+from gtsam_dvl.estimators.inputs.gaps import Holds, ImuPieces, hold_covariance
+from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 from gtsam_dvl.estimators.models.noise_levels import median_ping_sigma
 from gtsam_dvl.factors import (
     DvlOptions,
@@ -267,26 +267,15 @@ class FactorMaker:
         return np.asarray(out)
 
     def preintegrate_interval(
-        self,
-        t_a: float,
-        t_b: float,
-        t: np.ndarray,
-        starts: np.ndarray,
-        b_f: np.ndarray,
-        b_omega: np.ndarray,
-        gaps: Gaps | None = None,
+        self, t_a: float, t_b: float, imu: ImuPieces
     ) -> tuple[gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
-        """Preintegration over (t_a, t_b] of samples i covering (starts[i], t[i]] (b_f already compensated);
-        a sample straddling t_a or t_b contributes its overlap (selection.imu_pieces), a gap the sample held
-        across it (estimators/inputs/gaps.py). Returns the pim, its own parameters and what was held (Holds)."""
+        """Preintegration over (t_a, t_b] of the samples imu (ImuPieces: b_f already compensated); a sample
+        straddling t_a or t_b contributes its overlap (selection.imu_pieces), a gap the sample held across it
+        (estimators/inputs/gaps.py). Returns the pim, its own parameters and what was held (Holds)."""
         params = self.make_params()
         pim = gtsam.PreintegratedImuMeasurements(params, gtsam.imuBias.ConstantBias())
-        if gaps is None:
-            idx, dt = imu_pieces(t, starts, t_a, t_b)
-            held = Holds()
-        else:
-            idx, dt, held = pieces_with_holds(t, starts, gaps, t_a, t_b)
-        integrate_pieces(pim, b_f[idx], b_omega[idx], dt.tolist())
+        idx, dt, held = imu.pieces(t_a, t_b)
+        integrate_pieces(pim, imu.b_f[idx], imu.b_omega[idx], dt.tolist())
         return pim, params, held
 
     # ----- gravity -------------------------------------------------------------------------------

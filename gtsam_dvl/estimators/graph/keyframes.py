@@ -27,7 +27,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.estimators.graph.factor_maker import integrate_pieces
-from gtsam_dvl.estimators.inputs.gaps import Gaps, Holds, hold_covariance, pieces_with_holds
+from gtsam_dvl.estimators.inputs.gaps import Holds, ImuPieces, hold_covariance
 from gtsam_dvl.factors import PingMotion
 from gtsam_dvl.factors.so3 import skew
 
@@ -136,19 +136,10 @@ def clone(pim: gtsam.PreintegratedImuMeasurements) -> gtsam.PreintegratedImuMeas
     return gtsam.ImuFactor(0, 1, 2, 3, 4, pim).preintegratedMeasurements()
 
 
-def integrate(
-    pim: gtsam.PreintegratedImuMeasurements,
-    imu_t: np.ndarray,
-    starts: np.ndarray,
-    b_f: np.ndarray,
-    b_omega: np.ndarray,
-    gaps: Gaps,
-    a: float,
-    b: float,
-) -> Holds:
-    """Integrate the pieces of (a, b] (pieces_with_holds) into pim; returns what was held."""
-    idx, dt, held = pieces_with_holds(imu_t, starts, gaps, a, b)
-    integrate_pieces(pim, b_f[idx], b_omega[idx], dt.tolist())
+def integrate(pim: gtsam.PreintegratedImuMeasurements, imu: ImuPieces, a: float, b: float) -> Holds:
+    """Integrate the pieces of (a, b] of imu into pim; returns what was held."""
+    idx, dt, held = imu.pieces(a, b)
+    integrate_pieces(pim, imu.b_f[idx], imu.b_omega[idx], dt.tolist())
     return held
 
 
@@ -166,11 +157,7 @@ def snapshot_at(
     t_p: float,
     spans: list[tuple[float, float]],
     t_state: float,
-    imu_t: np.ndarray,
-    starts: np.ndarray,
-    b_f: np.ndarray,
-    b_omega: np.ndarray,
-    gaps: Gaps,
+    imu: ImuPieces,
     imu_cfg: ImuConfig,
     n_omega: np.ndarray | None,
 ) -> PingMotion:
@@ -178,7 +165,7 @@ def snapshot_at(
     interval's cut at or before t_p, last_stamp_at_or_before) and held spans: a copy of it with (a, t_p] added, the
     hold covariance of everything held up to t_p (module doc)."""
     part = clone(pim)
-    held = integrate(part, imu_t, starts, b_f, b_omega, gaps, a, t_p)
+    held = integrate(part, imu, a, t_p)
     all_spans = spans + list(held.spans)
     extra = hold_covariance(imu_cfg, Holds(tuple(all_spans)), t_p - t_state) if all_spans else None
     return snapshot(part, extra, n_omega)
@@ -189,33 +176,26 @@ def interval_with_snapshots(
     t_end: float,
     t_pings: list[float],
     params: gtsam.PreintegrationParams,
-    imu_t: np.ndarray,
-    starts: np.ndarray,
-    b_f: np.ndarray,
-    b_omega: np.ndarray,
-    gaps: Gaps,
+    imu: ImuPieces,
     imu_cfg: ImuConfig,
 ) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PingMotion]]:
     """The IMU factor's preintegration over (t_state, t_end] (with params, a new PreintegrationParams of its own),
     what it held, and the snapshots at the pings t_pings (sorted, inside the interval) taken on the way: the
     interval is integrated once, cut at the last sample stamp at or before each ping, and each ping's snapshot is
-    a copy with the rest up to the ping (snapshot_at). Samples i cover (starts[i], imu_t[i]] (b_f
-    rotation-compensated).
+    a copy with the rest up to the ping (snapshot_at). imu: the samples (ImuPieces).
 
     Without an IMU gap in the interval its pieces are found once and cut at the pings (interval_cut_by_cut does
     the same with the pieces of each cut, as the online estimator does: the same pieces, durations and order, so
     the same bits, tests/estimators/test_keyframes.py; 9 look-ups in the log's sample arrays an interval
     against 1)."""
-    idx, dt, held = pieces_with_holds(imu_t, starts, gaps, t_state, t_end)
+    idx, dt, held = imu.pieces(t_state, t_end)
     if held:
-        return interval_cut_by_cut(
-            t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg
-        )
+        return interval_cut_by_cut(t_state, t_end, t_pings, params, imu, imu_cfg)
     pim = gtsam.PreintegratedImuMeasurements(params, _BIAS0)
     n_omega = params.getOmegaCoriolis()
     out: list[PingMotion] = []
-    ends = imu_t[idx]  # each piece's sample stamp: the cuts
-    rows_f, rows_w, dts = b_f[idx], b_omega[idx], dt.tolist()
+    ends = imu.t[idx]  # each piece's sample stamp: the cuts
+    rows_f, rows_w, dts = imu.b_f[idx], imu.b_omega[idx], dt.tolist()
     done, a = 0, t_state
     for t_p in t_pings:
         k = int(
@@ -227,9 +207,9 @@ def interval_with_snapshots(
         part = clone(pim)
         if done < len(idx):  # the sample straddling the ping, from the cut (imu_pieces' duration)
             j = int(idx[done])
-            d = min(float(imu_t[j]), t_p) - max(float(starts[j]), a)
+            d = min(float(imu.t[j]), t_p) - max(float(imu.starts[j]), a)
             if d > 0.0:
-                part.integrateMeasurement(b_f[j], b_omega[j], d)
+                part.integrateMeasurement(imu.b_f[j], imu.b_omega[j], d)
         out.append(snapshot(part, None, n_omega))
     integrate_pieces(pim, rows_f[done:], rows_w[done:], dts[done:])
     return pim, Holds(), out
@@ -240,11 +220,7 @@ def interval_cut_by_cut(
     t_end: float,
     t_pings: list[float],
     params: gtsam.PreintegrationParams,
-    imu_t: np.ndarray,
-    starts: np.ndarray,
-    b_f: np.ndarray,
-    b_omega: np.ndarray,
-    gaps: Gaps,
+    imu: ImuPieces,
     imu_cfg: ImuConfig,
 ) -> tuple[gtsam.PreintegratedImuMeasurements, Holds, list[PingMotion]]:
     """interval_with_snapshots with the pieces of each cut found on their own (pieces_with_holds), across IMU gaps
@@ -255,16 +231,12 @@ def interval_cut_by_cut(
     a = t_state
     spans: list[tuple[float, float]] = []
     for t_p in t_pings:
-        t_cut = last_stamp_at_or_before(imu_t, t_p)
+        t_cut = last_stamp_at_or_before(imu.t, t_p)
         if t_cut > a:
-            spans += list(integrate(pim, imu_t, starts, b_f, b_omega, gaps, a, t_cut).spans)
+            spans += list(integrate(pim, imu, a, t_cut).spans)
             a = t_cut
-        out.append(
-            snapshot_at(
-                pim, a, t_p, spans, t_state, imu_t, starts, b_f, b_omega, gaps, imu_cfg, n_omega
-            )
-        )
-    spans += list(integrate(pim, imu_t, starts, b_f, b_omega, gaps, a, t_end).spans)
+        out.append(snapshot_at(pim, a, t_p, spans, t_state, imu, imu_cfg, n_omega))
+    spans += list(integrate(pim, imu, a, t_end).spans)
     return pim, Holds(tuple(spans)), out
 
 
@@ -272,16 +244,10 @@ def ping_snapshots(
     t_state: float,
     t_pings: list[float],
     params: gtsam.PreintegrationParams,
-    imu_t: np.ndarray,
-    starts: np.ndarray,
-    b_f: np.ndarray,
-    b_omega: np.ndarray,
-    gaps: Gaps,
+    imu: ImuPieces,
     imu_cfg: ImuConfig,
 ) -> list[PingMotion]:
     """The snapshots at the pings t_pings (sorted, after t_state) of interval_with_snapshots from t_state up to
     the last ping (params: as the IMU factors')."""
     t_end = t_pings[-1] if t_pings else t_state
-    return interval_with_snapshots(
-        t_state, t_end, t_pings, params, imu_t, starts, b_f, b_omega, gaps, imu_cfg
-    )[2]
+    return interval_with_snapshots(t_state, t_end, t_pings, params, imu, imu_cfg)[2]

@@ -38,6 +38,7 @@ from gtsam_dvl.estimators.inputs.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.inputs.gaps import (
     Gaps,
     Holds,
+    ImuPieces,
     check_gaps,
     check_spacing,
     find_gaps,
@@ -191,7 +192,7 @@ class LogGraph:
         imu = log.imu
         starts = sample_starts_with_gaps(imu.t, self.gaps)
         b_f = self.maker.compensate_rotation(imu.b_f, imu.b_omega, imu.t - starts)
-        self.imu_held = self._preintegrate(starts, b_f)
+        self.imu_held = self._preintegrate(ImuPieces(imu.t, starts, b_f, imu.b_omega, self.gaps))
         del starts, b_f
         n_f = len(self.pims)
         self.gravity_refs = GravityRefs(
@@ -367,11 +368,10 @@ class LogGraph:
             )
         return self.snapshots.get(p.snap)
 
-    def _preintegrate(self, starts: np.ndarray, b_f: np.ndarray) -> list[Holds]:
-        """The IMU intervals between the epochs (starts, b_f: each sample's interval start and rotation-compensated
-        specific force), each integrated once, the IMU motion to each ping between keyframes taken on the way
-        (keyframes.interval_with_snapshots); returns what each interval held across IMU gaps."""
-        imu = self.log.imu
+    def _preintegrate(self, imu: ImuPieces) -> list[Holds]:
+        """The IMU intervals between the epochs (imu: the log's samples as ImuPieces), each integrated once, the
+        IMU motion to each ping between keyframes taken on the way (keyframes.interval_with_snapshots); returns
+        what each interval held across IMU gaps."""
         self.pims, self.imu_params = [], []
         self.snapshots = PingMotion.empty(sum(len(ep.between) for ep in self.epochs))
         held: list[Holds] = []
@@ -384,25 +384,14 @@ class LogGraph:
             if a.between:
                 params = self.maker.make_params()
                 pim, h, snaps = interval_with_snapshots(
-                    a.t,
-                    b.t,
-                    [p.t for p in a.between],
-                    params,
-                    imu.t,
-                    starts,
-                    b_f,
-                    imu.b_omega,
-                    self.gaps,
-                    self.config.imu,
+                    a.t, b.t, [p.t for p in a.between], params, imu, self.config.imu
                 )
                 for p, snap in zip(a.between, snaps, strict=True):
                     self.snapshots.put(q, snap)
                     p.snap = q
                     q += 1
             else:
-                pim, params, h = self.maker.preintegrate_interval(
-                    a.t, b.t, imu.t, starts, b_f, imu.b_omega, self.gaps
-                )
+                pim, params, h = self.maker.preintegrate_interval(a.t, b.t, imu)
             self.pims.append(pim)
             self.imu_params.append(params)
             held.append(h)

@@ -157,6 +157,24 @@ def pieces_with_holds(
     return idx, dt, Holds(tuple(spans))
 
 
+@dataclass(frozen=True)
+class ImuPieces:
+    """IMU samples as the preintegrations take them: sample i covers (starts[i], t[i]] (s,
+    sample_starts_with_gaps) with its rotation-compensated specific force b_f[i] (m/s^2) and rate b_omega[i]
+    (rad/s), and the IMU gaps held across. The batch graph makes one for the whole log, the online estimator
+    one for its buffer; the keyframe snapshots and the IMU factors' intervals are cut from it."""
+
+    t: np.ndarray
+    starts: np.ndarray
+    b_f: np.ndarray
+    b_omega: np.ndarray
+    gaps: Gaps
+
+    def pieces(self, a: float, b: float) -> tuple[np.ndarray, np.ndarray, Holds]:
+        """The pieces of (a, b] (pieces_with_holds) and what was held."""
+        return pieces_with_holds(self.t, self.starts, self.gaps, a, b)
+
+
 def _hold_sigmas(cfg: ImuConfig, T: float) -> np.ndarray:
     """[rotation, position, velocity] sigmas after holding for T seconds: w T, a T^2 / 2 + g w T^3 / 6,
     a T + g w T^2 / 2 (the rate may drift by w, the acceleration by a; an attitude error tilts gravity)."""

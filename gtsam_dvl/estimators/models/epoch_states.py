@@ -92,6 +92,18 @@ class WindowMemory:
     extra: list[int] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class WindowStep:
+    """The online window's new state i, dt s after state i - 1, at heights z_prev and z_new (m, map; the new one
+    predicted); height0: the map origin's height (m)."""
+
+    i: int
+    dt: float
+    z_prev: float
+    z_new: float
+    height0: float
+
+
 _EYE = {d: np.eye(d) for d in (1, 2, 3, 6)}
 
 
@@ -200,19 +212,11 @@ class EpochState:
         """The online window's first state at height z0 m."""
 
     def window_links(
-        self,
-        config: EstimatorConfig,
-        i: int,
-        dt: float,
-        z_prev: float,
-        z_new: float,
-        values: gtsam.Values,
-        memory: WindowMemory,
-        height0: float,
+        self, config: EstimatorConfig, step: WindowStep, values: gtsam.Values, memory: WindowMemory
     ) -> list[gtsam.NonlinearFactor]:
-        """The online window's link from state i - 1 to state i (heights z_prev, z_new m: the new one predicted);
-        extra variables it creates go into values and memory.extra."""
-        return self.link_factors(config, i - 1, i, dt, z_new - z_prev)
+        """The online window's link from state step.i - 1 to the new state step.i (WindowStep); extra variables it
+        creates go into values and memory.extra."""
+        return self.link_factors(config, step.i - 1, step.i, step.dt, step.z_new - step.z_prev)
 
     def thresholds(
         self, config: EstimatorConfig, thresholds: RelinearizationThresholds
@@ -391,28 +395,20 @@ class WaterCurrent(EpochState):
         )
 
     def window_links(
-        self,
-        config: EstimatorConfig,
-        i: int,
-        dt: float,
-        z_prev: float,
-        z_new: float,
-        values: gtsam.Values,
-        memory: WindowMemory,
-        height0: float,
+        self, config: EstimatorConfig, step: WindowStep, values: gtsam.Values, memory: WindowMemory
     ) -> list[gtsam.NonlinearFactor]:
         """The random walk in time and depth, or with layers across the boundaries crossed: a boundary met for the
         first time gets its variable (zero: its prior's mean) and prior (current.py, "Layers")."""
         if not current.layered(config):
-            return self.link_factors(config, i - 1, i, dt, z_new - z_prev)
-        j = int(current.layer_index(config, z_new, height0))
+            return super().window_links(config, step, values, memory)
+        i, j = step.i, int(current.layer_index(config, step.z_new, step.height0))
         out: list[gtsam.NonlinearFactor] = []
         for b, _ in current.crossings(memory.layer, j):
             if S(b) not in memory.extra:
                 memory.extra.append(S(b))
                 values.insert(S(b), np.zeros(2))
                 out.append(current.shear_prior(config, b))
-        out.append(current.crossing_link(config, i - 1, i, dt, memory.layer, j))
+        out.append(current.crossing_link(config, i - 1, i, step.dt, memory.layer, j))
         memory.layer = j
         return out
 

@@ -32,7 +32,7 @@ import numpy as np
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.core.keys import E, W
 from gtsam_dvl.estimators.graph.keyframes import integrate, last_stamp_at_or_before, snapshot_at
-from gtsam_dvl.estimators.inputs.gaps import Gaps, Holds
+from gtsam_dvl.estimators.inputs.gaps import Holds, ImuPieces
 from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
 from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor, ping_state
 from gtsam_dvl.factors.so3 import skew
@@ -72,18 +72,10 @@ class StatePreintegration:
             [],
         )
 
-    def snapshot_at(
-        self,
-        t_p: float,
-        T: np.ndarray,
-        starts: np.ndarray,
-        b_f: np.ndarray,
-        W: np.ndarray,
-        gaps: Gaps,
-    ) -> PingMotion:
-        """The IMU motion from the state to the ping at t_p (samples buffered since before the state: T, starts,
-        b_f rotation compensated, W, and the buffer's gaps)."""
-        self.advance(last_stamp_at_or_before(T, t_p), T, starts, b_f, W, gaps)
+    def snapshot_at(self, t_p: float, imu: ImuPieces) -> PingMotion:
+        """The IMU motion from the state to the ping at t_p (imu: the samples buffered since before the state,
+        as ImuPieces, with the buffer's gaps)."""
+        self.advance(last_stamp_at_or_before(imu.t, t_p), imu)
         if (
             self._pim is None or self._params is None
         ):  # no sample stamp yet between the state and the ping
@@ -97,24 +89,12 @@ class StatePreintegration:
             t_p,
             self._spans,
             self.t_state,
-            T,
-            starts,
-            b_f,
-            W,
-            gaps,
+            imu,
             self.imu_cfg,
             self._params.getOmegaCoriolis(),
         )
 
-    def advance(
-        self,
-        t_cut: float,
-        T: np.ndarray,
-        starts: np.ndarray,
-        b_f: np.ndarray,
-        W: np.ndarray,
-        gaps: Gaps,
-    ) -> None:
+    def advance(self, t_cut: float, imu: ImuPieces) -> None:
         if t_cut <= self._a:
             return
         if self._pim is None:
@@ -122,19 +102,13 @@ class StatePreintegration:
             self._pim = gtsam.PreintegratedImuMeasurements(
                 self._params, gtsam.imuBias.ConstantBias()
             )
-        self._spans += list(integrate(self._pim, T, starts, b_f, W, gaps, self._a, t_cut).spans)
+        self._spans += list(integrate(self._pim, imu, self._a, t_cut).spans)
         self._a = t_cut
 
     def close(
-        self,
-        t_b: float,
-        T: np.ndarray,
-        starts: np.ndarray,
-        b_f: np.ndarray,
-        W: np.ndarray,
-        gaps: Gaps,
+        self, t_b: float, imu: ImuPieces
     ) -> tuple[gtsam.PreintegratedImuMeasurements, gtsam.PreintegrationParams, Holds]:
-        self.advance(t_b, T, starts, b_f, W, gaps)
+        self.advance(t_b, imu)
         if self._pim is None or self._params is None:  # t_b at the state: an empty interval
             self._params = self._make_params()
             self._pim = gtsam.PreintegratedImuMeasurements(

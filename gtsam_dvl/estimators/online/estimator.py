@@ -131,28 +131,20 @@ from gtsam_dvl.estimators.online.noise_fit import OnlineNoiseFit
 from gtsam_dvl.estimators.online.offset_windows import OffsetWindows
 from gtsam_dvl.estimators.online.types import (
     EpochHistory,
-    MessageDropped,
     OnlineConfig,
     OnlineEstimate,
     latency_stats,
 )
 from gtsam_dvl.estimators.online.window import (
     IncrementalSmoother,
-    RelinearizationThresholds,
     StateEstimate,
 )
 
 __all__ = [
-    "MessageDropped",
-    "OnlineConfig",
-    "OnlineEstimate",
     "OnlineEstimator",
-    "RelinearizationThresholds",
-    "feed_log",
-    "latency_stats",
     "run_result",
     "smooth_online",
-]
+]  # the package's __init__ exports the rest
 
 
 def _effective_config(
@@ -676,9 +668,9 @@ class OnlineEstimator:
                 t_epoch, dvl, first_values=b.first_state_values(p.d_v if p.valid else None)
             )
         else:
-            starts, b_f, gaps = self._imu.pieces(b, T, W, F, final=True)
+            imu = self._imu.pieces(b, T, W, F, final=True)
             # FactorMaker.preintegrate_interval(sm.t_last, t_epoch, ...), the part up to the last ping done then
-            pim, params, held = self._interval.close(t_epoch, T, starts, b_f, W, gaps)
+            pim, params, held = self._interval.close(t_epoch, imu)
             between = [
                 f for _, fs in self._deferred for f in fs
             ]  # the pings since the previous state (on it)
@@ -725,9 +717,8 @@ class OnlineEstimator:
         t0, c0 = time.perf_counter(), time.process_time()
         b, sm = self.builder, self.smoother
         T, W, F = self._imu.samples()
-        starts, b_f, gaps = self._imu.pieces(b, T, W, F, final=False)
         # the next IMU factor's samples up to the ping, the last stamp <= it
-        snap = self._interval.snapshot_at(p.t, T, starts, b_f, W, gaps)
+        snap = self._interval.snapshot_at(p.t, self._imu.pieces(b, T, W, F, final=False))
         n_p0, n_g0, n_G = self._gravity.at(np.asarray(self._state.pose.translation(), dtype=float))
         motion = snap.motion(b.n_omega_ie(), n_g0, n_p0, n_G)
         b_omega = b.body_rate(W[int(np.searchsorted(T, p.t, side="left"))])

@@ -4,42 +4,17 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Protocol
+from typing import TYPE_CHECKING
 
 from gtsam_dvl.core.message_order import log_messages
 from gtsam_dvl.core.progress import ProgressFn
-from gtsam_dvl.core.types import DepthData, LogData
+from gtsam_dvl.core.types import DepthData, DvlData, LogData
+
+if TYPE_CHECKING:  # (estimator.py imports feed_log from here: the annotations only)
+    from gtsam_dvl.estimators.online.estimator import OnlineEstimator
 
 
-class MessageSink(Protocol):
-    """What feed_log pushes into: OnlineEstimator's input methods."""
-
-    def push_imu_batch(self, t: Any, b_omega: Any, b_f: Any) -> int: ...
-
-    def push_dvl(
-        self,
-        t: float,
-        d_v: Any,
-        d_cov: Any = None,
-        valid: bool = True,
-        beams: tuple[Any, Any, Any] | None = None,
-        water_track: bool = False,
-    ) -> int: ...
-
-    def push_depth(
-        self,
-        t: float,
-        depth_m: float = math.nan,
-        variance_m2: float = math.nan,
-        *,
-        pressure_pa: float | None = None,
-        pressure_variance_pa2: float = math.nan,
-    ) -> None: ...
-
-    def finish(self) -> Any: ...
-
-
-def push_depth_sample(sink: MessageSink, depth: DepthData, k: int) -> None:
+def push_depth_sample(sink: OnlineEstimator, depth: DepthData, k: int) -> None:
     """Depth sample k of a log: its pressure and variance when the log has them, else its depth."""
     if depth.pressure_pa is not None:
         var = (
@@ -54,7 +29,20 @@ def push_depth_sample(sink: MessageSink, depth: DepthData, k: int) -> None:
         sink.push_depth(float(depth.t[k]), float(depth.depth_m[k]), float(depth.variance_m2[k]))
 
 
-def feed_log(estimator: MessageSink, log: LogData, progress: ProgressFn | None = None) -> None:
+def push_dvl_ping(sink: OnlineEstimator, dvl: DvlData, j: int) -> int:
+    """Ping j of a log, with its beams and water-track flag when the log has them; returns the epochs completed."""
+    beams = None if dvl.beams is None else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
+    return sink.push_dvl(
+        dvl.t[j],
+        dvl.d_v[j],
+        dvl.d_cov[j],
+        bool(dvl.valid[j]),
+        beams,
+        water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
+    )
+
+
+def feed_log(estimator: OnlineEstimator, log: LogData, progress: ProgressFn | None = None) -> None:
     """Push a log's messages in delivery order (log_messages: the IMU samples up to each ping's stamp as one
     batch, then the depth samples up to it, then the ping, a sample stamped like the ping first; then the
     rest), then finish(). progress: 0.95 j / M after ping j of M, every M / 100 pings."""
@@ -71,19 +59,7 @@ def feed_log(estimator: MessageSink, log: LogData, progress: ProgressFn | None =
             push_depth_sample(estimator, depth, m.start)
         else:
             j = m.start
-            beams = (
-                None
-                if dvl.beams is None
-                else (dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j])
-            )
-            estimator.push_dvl(
-                dvl.t[j],
-                dvl.d_v[j],
-                dvl.d_cov[j],
-                bool(dvl.valid[j]),
-                beams,
-                water_track=dvl.water_track is not None and bool(dvl.water_track[j]),
-            )
+            push_dvl_ping(estimator, dvl, j)
             if progress is not None and j % step == 0:
                 progress(0.95 * j / n)
     estimator.finish()

@@ -15,7 +15,7 @@ import numpy as np
 from gtsam_dvl.core.config import ImuConfig
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.gaps import (
-    Gaps,
+    ImuPieces,
     check_gaps,
     find_gaps,
     nominal_period,
@@ -65,9 +65,10 @@ class ImuBuffer:
 
     def pieces(
         self, maker: FactorMaker, T: np.ndarray, W: np.ndarray, F: np.ndarray, final: bool
-    ) -> tuple[np.ndarray, np.ndarray, Gaps]:
-        """The sample starts (s), rotation-compensated specific forces (m/s^2) and gaps of samples T, W, F (the
-        buffer's); final: the buffer of a new state's interval, whose gaps are checked and counted."""
+    ) -> ImuPieces:
+        """Samples T, W, F (the buffer's) as the preintegrations take them: their starts (s),
+        rotation-compensated specific forces (m/s^2) and gaps; final: the buffer of a new state's interval, whose
+        gaps are checked and counted."""
         # until PERIOD_SAMPLES stamps have come, the median of those seen (an epoch's buffer may hold a gap)
         period = self._period or nominal_period(
             np.asarray(self._period_t) if len(self._period_t) > 2 else T
@@ -80,7 +81,7 @@ class ImuBuffer:
                     self.gaps_seen[g0] = g1 - g0
                     self._count("imu_gaps", 1)
         starts = sample_starts_with_gaps(T, gaps)
-        return starts, maker.compensate_rotation(F, W, T - starts), gaps
+        return ImuPieces(T, starts, maker.compensate_rotation(F, W, T - starts), W, gaps)
 
     def keep_from(self, t_epoch: float) -> None:
         """A state was made at t_epoch (s): keep the last sample at or before it and those after."""

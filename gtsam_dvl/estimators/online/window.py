@@ -78,6 +78,7 @@ from gtsam_dvl.estimators.models import weak_hold
 from gtsam_dvl.estimators.models.epoch_states import (
     EpochEstimate,
     WindowMemory,
+    WindowStep,
     enabled_epoch_states,
     window_thresholds,
 )
@@ -244,19 +245,11 @@ class IncrementalSmoother:
             values.insert(X(i), state.pose())
             values.insert(V(i), state.velocity())
             z_prev, z_new = float(pose.translation()[2]), float(state.pose().translation()[2])
+            step = WindowStep(i, dt, z_prev, z_new, b.frame.height_m)
             for s in self.epoch_states:  # each state's prediction and link (epoch_states.py)
                 s.insert(values, s.key(i), s.predict(b.config, prev, i, dt))
                 if not s.beside_imu:
-                    factors += s.window_links(
-                        b.config,
-                        i,
-                        dt,
-                        z_prev,
-                        z_new,
-                        values,
-                        self.memory[s.name],
-                        b.frame.height_m,
-                    )
+                    factors += s.window_links(b.config, step, values, self.memory[s.name])
         self.n, self.t_last = i + 1, t
         self.times[i] = t
         graph = gtsam.NonlinearFactorGraph()
