@@ -91,9 +91,8 @@ from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import (
     Alignment,
     FirstState,
-    align,
+    align_log,
     given_covariance,
-    map_frame_of,
 )
 from gtsam_dvl.estimators.inputs.depth import DepthSamples, depth_samples
 from gtsam_dvl.estimators.inputs.gaps import (
@@ -643,16 +642,7 @@ def _checked_inputs(
     water-track pings (M,) bool and the usable pings (no keyframe thinning). What the EKF does not support was
     refused before, once (run_ekf: inputs/prepare.py)."""
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/inputs/mounting.py)
-    frame = map_frame_of(log, config)
-    alignment = align(
-        log.imu,
-        log.dvl,
-        frame,
-        config.alignment,
-        attitude=log.attitude,
-        mounting=log.mounting,
-        imu_cfg=config.imu,
-    )
+    frame, alignment = align_log(log, config)
     config = resolve_water_track(
         config, log
     )  # [current] water_track "auto": "use" when the log has water track

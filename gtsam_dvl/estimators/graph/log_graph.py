@@ -33,7 +33,7 @@ from gtsam_dvl.estimators.graph.bulk_imu import BulkImu, GravityRefs
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.graph.keyframes import interval_with_snapshots
 from gtsam_dvl.estimators.graph.solver import ChunkedOrdering
-from gtsam_dvl.estimators.inputs.alignment import Alignment, align, map_frame_of
+from gtsam_dvl.estimators.inputs.alignment import Alignment, align_log
 from gtsam_dvl.estimators.inputs.depth import depth_samples, nearest_states
 from gtsam_dvl.estimators.inputs.gaps import (
     Gaps,
@@ -150,16 +150,7 @@ class LogGraph:
             self.log
         )  # IMU samples in base_link (estimators/inputs/mounting.py)
         cfg, log = self.config, self.log
-        frame = map_frame_of(log, cfg)
-        alignment = align(
-            log.imu,
-            log.dvl,
-            frame,
-            cfg.alignment,
-            attitude=log.attitude,
-            mounting=log.mounting,
-            imu_cfg=cfg.imu,
-        )
+        frame, alignment = align_log(log, cfg)
         self.maker = FactorMaker(
             cfg, frame, alignment, log.mounting, log.source, calibration=self.calibration
         )

@@ -524,6 +524,22 @@ class FirstState:
         }
 
 
+def align_log(log: LogData, config: EstimatorConfig) -> tuple[LocalFrame, Alignment]:
+    """The map frame of a log in base_link (map_frame_of) and its first state's alignment (align with the log's
+    attitude sensor, mounting and the configured IMU)."""
+    frame = map_frame_of(log, config)
+    alignment = align(
+        log.imu,
+        log.dvl,
+        frame,
+        config.alignment,
+        attitude=log.attitude,
+        mounting=log.mounting,
+        imu_cfg=config.imu,
+    )
+    return frame, alignment
+
+
 def given_covariance(
     alignment: Alignment, config: EstimatorConfig, *, alignment_sigmas: bool = True
 ) -> np.ndarray:

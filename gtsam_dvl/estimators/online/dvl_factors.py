@@ -99,32 +99,8 @@ def state_dvl_factors(
     if ping_speed(p, maker.config.dvl.use_beams) >= min_speed_m_s:
         return maker.dvl_factors_for(i, p.d_v, p.d_cov, b_omega, p.beams, rate_input, water)
     b_l = maker.mounting.b_l
-    if rate_input is not None:  # estimate_time_offset (never with beams)
-        return [
-            considered_calibration_factor(
-                maker.dvl_noise(p.d_cov, water=water),
-                i,
-                b_omega,
-                b_l,
-                d_y=p.d_v,
-                offset=(rate_input, maker.offset_gravity()),
-                config=maker.config,
-                water=water,
-            )
-        ]
-    if water:
-        return [
-            considered_calibration_factor(
-                maker.dvl_noise(p.d_cov, water=True),
-                i,
-                b_omega,
-                b_l,
-                d_y=p.d_v,
-                config=maker.config,
-                water=True,
-            )
-        ]
-    if use_beams and p.beams is not None:
+    # the beams' factors, but never with the time offset (its model is on the 3-D velocity)
+    if use_beams and p.beams is not None and rate_input is None:
         d_u, v, valid = p.beams
         noise1 = maker.beam_noise()
         return [
@@ -133,9 +109,11 @@ def state_dvl_factors(
             )
             for j in np.flatnonzero(valid)
         ]
+    noise = maker.dvl_noise(p.d_cov, water=water)
+    offset = None if rate_input is None else (rate_input, maker.offset_gravity())
     return [
         considered_calibration_factor(
-            maker.dvl_noise(p.d_cov), i, b_omega, b_l, d_y=p.d_v, config=maker.config
+            noise, i, b_omega, b_l, d_y=p.d_v, offset=offset, config=maker.config, water=water
         )
     ]
 
