@@ -18,7 +18,7 @@ from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.ekf import strapdown
-from gtsam_dvl.estimators.ekf.filter import initial_state
+from gtsam_dvl.estimators.ekf.model import initial_state
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.graph.log_graph import LogGraph
 from gtsam_dvl.estimators.inputs.alignment import Alignment

@@ -12,7 +12,7 @@ from scipy.stats import chi2
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
-from gtsam_dvl.estimators.ekf.filter import DIVERGENCE_NIS, DIVERGENCE_PINGS, DivergenceWatch
+from gtsam_dvl.estimators.ekf.divergence import DIVERGENCE_NIS, DIVERGENCE_PINGS, DivergenceWatch
 from gtsam_dvl.estimators.models import weak_hold
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict

@@ -28,13 +28,9 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
-from gtsam_dvl.estimators.ekf.filter import (
-    FilterState,
-    depth_measurement_model,
-    offset_measurement_model,
-    run_ekf,
-)
-from gtsam_dvl.estimators.ekf.strapdown import NavState
+from gtsam_dvl.estimators.ekf.filter import run_ekf
+from gtsam_dvl.estimators.ekf.measurements import depth_measurement_model, offset_measurement_model
+from gtsam_dvl.estimators.ekf.strapdown import FilterState, NavState
 from gtsam_dvl.estimators.online import OnlineEstimator, feed_log
 from gtsam_dvl.estimators.online.dvl_factors import (
     considered_calibration_factor as _considered_calibration_factor,

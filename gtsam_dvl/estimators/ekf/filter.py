@@ -65,36 +65,36 @@ from gtsam_dvl.core.earth import LocalFrame, gaussian_radius, gravity_gradient, 
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult
-from gtsam_dvl.core.rotations import skew, so3_log
-from gtsam_dvl.core.states import BY_NAME, ekf_layout, enabled, water_current
+from gtsam_dvl.core.rotations import so3_log
+from gtsam_dvl.core.states import enabled, water_current
 from gtsam_dvl.core.types import LogData
-from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.ekf.divergence import FROZEN_ON_DIVERGENCE, DivergenceWatch
 from gtsam_dvl.estimators.ekf.history import History, history_result
 from gtsam_dvl.estimators.ekf.kalman import gate_threshold, propagate_covariance, update
+from gtsam_dvl.estimators.ekf.measurements import (
+    DepthUpdates,
+    measurement_model,
+    offset_measurement_model,
+    ping_measurement,
+)
+from gtsam_dvl.estimators.ekf.model import initial_state, process_noise
 from gtsam_dvl.estimators.ekf.strapdown import (
-    BA,
-    BG,
+    CALIBRATION,
     LAYOUT,
-    MIS,
-    N_ERR,
-    N_NAV,
     OFFSET,
     PHI,
     POS,
-    SCALE,
     VEL,
     FilterState,
-    NavState,
     propagate_interval,
 )
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import (
     Alignment,
-    FirstState,
     align_log,
     given_covariance,
 )
-from gtsam_dvl.estimators.inputs.depth import DepthSamples, depth_samples
+from gtsam_dvl.estimators.inputs.depth import depth_samples
 from gtsam_dvl.estimators.inputs.gaps import (
     Gaps,
     check_gaps,
@@ -111,9 +111,7 @@ from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
 from gtsam_dvl.estimators.inputs.prepare import prepare
 from gtsam_dvl.estimators.inputs.selection import (
     covering_sample,
-    ping_covariance,
     usable_pings,
-    water_covariance,
 )
 from gtsam_dvl.estimators.models import current, weak_hold
 from gtsam_dvl.estimators.models.constant_error import consider_constant_error
@@ -121,7 +119,6 @@ from gtsam_dvl.estimators.models.current import resolve_water_track, water_pings
 from gtsam_dvl.estimators.models.epoch_states import (
     EpochEstimate,
     ekf_states,
-    enabled_epoch_states,
     reports,
 )
 from gtsam_dvl.estimators.models.noise_levels import (
@@ -133,7 +130,6 @@ from gtsam_dvl.estimators.models.noise_levels import (
     median_ping_sigma,
     with_multiplier,
 )
-from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 
 # Scale and misalignment enter the measurement multiplied by the velocity. Linearised about a velocity estimate that
 # is only noise (a static vehicle), the filter reads that noise as information: regression on a noisy regressor drags
@@ -150,19 +146,10 @@ from gtsam_dvl.factors.dvl_model import DvlJacobians, OffsetInput, dvl_model
 # configuration's [ekf] section (EkfConfig); these are its defaults.
 MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
-# the error state: the navigation error [phi, dv, dp] (strapdown.py), then the shared states the EKF carries
-# (core/states.py ekf_layout, strapdown.LAYOUT: gyro and accelerometer bias, scale, misalignment, and the time offset
-# when estimated)
-CALIBRATION = np.r_[
-    LAYOUT["scale"], LAYOUT["misalignment"]
-]  # error-state indices of the DVL scale and misalignment
 MAX_STEP_S = (
     1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
 )
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
-RateInput = tuple[
-    np.ndarray, np.ndarray, np.ndarray
-]  # FactorMaker.velocity_rate_input: b_a, mean b_omega, G
 
 
 class _Earth:
@@ -185,239 +172,6 @@ class _Earth:
             self._at = n_p.copy()
             self._g, self._G = self.frame.n_gravity(n_p), gravity_gradient(self.frame, n_p)
         return self._g + self._G @ (n_p - self._at), self._G
-
-
-def initial_state(
-    log: LogData,
-    config: EstimatorConfig,
-    n_R_b: np.ndarray,
-    ping: int,
-    first: FirstState | None = None,
-    calibration: VehicleCalibration | None = None,
-) -> FilterState:
-    """The smoother's priors (graph.prior_factors) as the filter's initial mean and covariance; first: the given
-    attitude and origin carried to the first ping (alignment.first_state), its position and covariance;
-    calibration: the states it holds (states.calibration_states) at its values with its joint covariance."""
-    pri = config.priors
-    file, held, held_cov = states.calibration_in_layout(
-        config, calibration, ekf_layout(config, N_NAV)
-    )
-    b_R_d0 = file.get("misalignment", log.mounting.b_R_d0)
-    k0 = float(file.get("scale", [pri.scale_initial])[0])
-    d_y = log.dvl.d_v[ping]
-    n_v = n_R_b @ (b_R_d0 @ d_y) / k0 if np.all(np.isfinite(d_y)) else np.zeros(3)
-    offset = enabled(config, "time_offset")
-    layout = ekf_layout(config, N_NAV)
-    n = N_NAV + sum(sl.stop - sl.start for sl in layout.values())
-    P = np.zeros((n, n))
-    rp, yaw = np.radians(pri.roll_pitch_sigma_deg), np.radians(pri.yaw_sigma_deg)
-    P[PHI, PHI] = np.diag([rp**2, rp**2, yaw**2])  # map axes: the error phi is about map axes
-    P[VEL, VEL] = np.eye(3) * pri.velocity_sigma_m_s**2
-    P[POS, POS] = np.eye(3) * pri.position_sigma_m**2
-    n_p = np.zeros(3)
-    if first is not None and first.carried:
-        n_p = first.n_p.copy()
-        for r, rows in ((0, PHI), (3, POS)):
-            for c, cols in ((0, PHI), (3, POS)):
-                P[rows, cols] = first.cov[r : r + 3, c : c + 3]
-    for (
-        name,
-        sl,
-    ) in layout.items():  # the shared states' priors (the misalignment's in b_R_d's right tangent)
-        P[sl, sl] = BY_NAME[name].prior(config, log.mounting).cov
-    P[np.ix_(held, held)] = (
-        held_cov  # a calibration's joint covariance over the states it holds, in their place
-    )
-    epoch: dict[str, np.ndarray] = {}
-    for s in ekf_states(
-        config
-    ):  # the per-epoch states' blocks, last: their priors (epoch_states.py)
-        m = len(P)
-        P = np.pad(P, ((0, s.dim), (0, s.dim)))
-        P[m:, m:] = s.ekf_prior_cov(config)
-        epoch[s.name] = np.asarray(s.initial(config), dtype=float)
-    return FilterState(
-        NavState(n_R_b.copy(), n_v, n_p),
-        np.zeros(3),
-        np.zeros(3),
-        k0,
-        b_R_d0.copy(),
-        P,
-        file.get("time_offset", [config.dvl.time_offset_prior_s])[0] if offset else 0.0,
-        epoch=epoch,
-    )
-
-
-def process_noise(config: EstimatorConfig, Phi: np.ndarray, T: float) -> np.ndarray:
-    """Discrete process noise of an interval: trapezoid of the continuous white noise through Phi."""
-    imu_cfg = config.imu
-    q = np.zeros(N_ERR)
-    q[PHI] = (imu_cfg.gyro_noise_deg_per_h_rthz * DEG_PER_H) ** 2
-    q[VEL] = (imu_cfg.accel_noise_ug_rthz * UG) ** 2
-    q[POS] = imu_cfg.integration_sigma_m_rts**2
-    for s in enabled_epoch_states(
-        config
-    ):  # the random walk of states in the shared block (the biases)
-        for name, density in s.ekf_noise(config).items():
-            q[LAYOUT[name]] = density
-    Qc = np.diag(q)
-    return 0.5 * T * (Phi @ Qc @ Phi.T + Qc)
-
-
-def measurement_model(
-    fs: FilterState,
-    b_omega_m: np.ndarray,
-    b_l: np.ndarray,
-    n_omega_ie: np.ndarray,
-    n_v: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Predicted DVL velocity y (3,) (factors/dvl_model.py), its Jacobian H (3, n) w.r.t. the error state, and the
-    body rate relative to map used for the lever arm, b_omega = b_omega_m - b_g - n_R_b^T n_omega_ie (its attitude
-    dependence -n_R_b^T [n_omega_ie]x phi enters H through the model's b_omega Jacobian). n_v (m/s, map): the
-    velocity the DVL sees, fs.nav.n_v unless given (a water-track ping's: relative to the water)."""
-    R = fs.nav.n_R_b
-    b_omega = b_omega_m - fs.gyro_bias - R.T @ n_omega_ie
-    y, J = dvl_model(
-        R,
-        fs.nav.n_v if n_v is None else n_v,
-        fs.scale,
-        fs.b_R_d,
-        b_omega,
-        np.asarray(b_l, dtype=float),
-        inputs=True,
-    )
-    assert J is not None
-    return y, _error_state_jacobian(fs, J, -R.T @ skew(n_omega_ie)), b_omega
-
-
-def offset_measurement_model(
-    fs: FilterState,
-    b_l: np.ndarray,
-    rate_input: RateInput,
-    n_g: np.ndarray,
-    n_v: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """The DVL velocity with the time offset (module doc; factors/dvl_model.py), y (3,), and its Jacobian H (3, n)
-    w.r.t. the error state. rate_input = (b_a, b_omega, G): FactorMaker.velocity_rate_input of the ping (body rate
-    relative to map, gyro bias not removed); n_g gravity in map. The model's inputs b_a - accelerometer bias and
-    b_omega - gyro bias give the bias columns. n_v: as in measurement_model."""
-    b_a, b_omega_mean, G = rate_input
-    y, J = dvl_model(
-        fs.nav.n_R_b,
-        fs.nav.n_v if n_v is None else n_v,
-        fs.scale,
-        fs.b_R_d,
-        b_omega_mean - fs.gyro_bias,
-        np.asarray(b_l, dtype=float),
-        dt_d=fs.time_offset,
-        offset=OffsetInput(b_a - fs.accel_bias, np.asarray(n_g, dtype=float), G),
-        inputs=True,
-    )
-    assert J is not None
-    return y, _error_state_jacobian(fs, J, None)
-
-
-def _error_state_jacobian(
-    fs: FilterState, J: DvlJacobians, d_omega_d_phi: np.ndarray | None
-) -> np.ndarray:
-    """The model's Jacobians (factors/dvl_model.py) on the error state (strapdown.py): phi is a left perturbation in
-    map axes (n_R_b Exp(theta) = Exp(n_R_b theta) n_R_b: theta = n_R_b^T phi), the biases enter through the inputs
-    b_omega and b_a with a minus sign, psi is b_R_d's right tangent as in the model; d_omega_d_phi: the body rate's
-    dependence on phi, if any."""
-    H = np.zeros((3, len(fs.P)))
-    assert J.b_omega is not None
-    H[:, PHI] = J.pose[:, :3] @ fs.nav.n_R_b.T + (
-        0.0 if d_omega_d_phi is None else J.b_omega @ d_omega_d_phi
-    )
-    H[:, VEL] = J.vel
-    H[:, BG] = -J.b_omega
-    if J.b_a is not None:
-        H[:, BA] = -J.b_a
-    H[:, SCALE] = J.scale[:, 0]
-    H[:, MIS] = J.b_R_d
-    if J.offset is not None:
-        H[:, OFFSET] = J.offset[:, 0]
-    return H
-
-
-def depth_measurement_model(
-    fs: FilterState, b_p_s: np.ndarray, radius_m: float, dt: float = 0.0
-) -> tuple[float, np.ndarray]:
-    """Predicted height of the depth sensor above the map origin's height (m, up; factors/depth.py), dt seconds
-    after the filter's time (bridged by the vertical velocity), and its Jacobian (1, n) w.r.t. the error state:
-    phi (map axes, left) moves the lever arm a = n_R_b b_p_s by phi x a, whose z is phi_x a_y - phi_y a_x."""
-    n_p, a = fs.nav.n_p, fs.nav.n_R_b @ b_p_s
-    x, y = float(n_p[0]), float(n_p[1])
-    h = float(n_p[2]) + 0.5 * (x * x + y * y) / radius_m + float(a[2]) + dt * float(fs.nav.n_v[2])
-    H = np.zeros((1, len(fs.P)))
-    H[0, PHI] = [a[1], -a[0], 0.0]
-    H[0, POS] = [x / radius_m, y / radius_m, 1.0]
-    H[0, 5] = dt  # vertical velocity
-    return h, H
-
-
-def _ping_measurement(
-    log: LogData, config: EstimatorConfig, j: int, water: bool = False
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(A, z, Rm): the measurement A y = z with noise covariance Rm: the 3-D velocity (A = I) or the valid
-    beams (rows of A the beam unit vectors); a water-track ping (water): its 3-D velocity, its own noise."""
-    cfg, dvl = config.dvl, log.dvl
-    if water:
-        return np.eye(3), dvl.d_v[j], water_covariance(config, dvl.d_cov[j])
-    if cfg.use_beams and dvl.beams is not None:
-        ok = dvl.beams.valid[j]
-        A = dvl.beams.d_u[j][ok]
-        return A, dvl.beams.v[j][ok], np.eye(int(ok.sum())) * cfg.beam_sigma_m_s() ** 2
-    return np.eye(3), dvl.d_v[j], ping_covariance(cfg, dvl.d_cov[j])
-
-
-@dataclass
-class _DepthUpdates:
-    """The depth samples of a log (depth_samples) and the filter's use of them (module doc)."""
-
-    samples: DepthSamples
-    radius_m: float
-    max_dt: float
-    gate_nis: float
-    reopen_after: int
-    next: int = 0
-    gated_run: int = 0
-    counters: dict[str, int] = field(default_factory=dict)
-
-    def due(self, t: float) -> float | None:
-        """The next sample's time if it is before t (the propagation stops there), else None."""
-        return (
-            float(self.samples.t[self.next])
-            if self.next < len(self.samples.t) and self.samples.t[self.next] < t - 1e-9
-            else None
-        )
-
-    def apply(
-        self, fs: FilterState, t: float, until: float, bridge_to: float | None = None
-    ) -> None:
-        """Update with the samples stamped up to `until`, the filter at t; a sample more than 1e-9 s from t is
-        bridged by the velocity if within max_dt (bridge_to: also those after t up to it, the last state)."""
-        s, c = self.samples, self.counters
-        end = until if bridge_to is None else bridge_to
-        while self.next < len(s.t) and s.t[self.next] <= end + 1e-9:
-            dt = float(s.t[self.next]) - t
-            if abs(dt) <= 1e-9:
-                dt = 0.0
-            if abs(dt) > self.max_dt + 1e-9:
-                c["depth_too_far"] += 1
-            else:
-                h, H = depth_measurement_model(fs, s.b_p_sensor, self.radius_m, dt)
-                gate = self.gate_nis if self.gated_run < self.reopen_after else math.inf
-                _, _, gated = update(
-                    fs,
-                    H,
-                    np.array([s.z_meas[self.next] - h]),
-                    np.array([[float(s.sigma[self.next]) ** 2]]),
-                    gate_nis=gate,
-                )
-                self.gated_run = self.gated_run + 1 if gated else 0
-                c["depth_gated" if gated else "depth_used"] += 1
-            self.next += 1
 
 
 def run_ekf(
@@ -547,62 +301,6 @@ RECENTRE_TOLERANCE = 0.05
 RECENTRE_DETERMINED = 0.5
 
 
-# The filter has diverged when the mean NIS per degree of freedom of its last DIVERGENCE_PINGS updates exceeds
-# DIVERGENCE_NIS and is growing, after the warm-up window (a consistent filter: 1, with a spread of 0.15 over 30
-# three-axis pings; a ping far off is gated or down-weighted, so only a filter whose own state is wrong gets there).
-# From then on its IMU biases, DVL calibration and time offset take no more DVL updates: a filter that chases its own
-# error with them runs them away (seen: a 38 deg/s turn with stamps 1 s early took the offset to -1.84 s and a
-# lateral accelerometer bias to -1372 micro-g).
-DIVERGENCE_PINGS = 30
-DIVERGENCE_NIS = 6.0
-# (and the time offset, OFFSET, when estimated: its slot exists only then)
-FROZEN_ON_DIVERGENCE = np.r_[
-    np.arange(LAYOUT["gyro_bias"].start, LAYOUT["gyro_bias"].stop),
-    np.arange(LAYOUT["accel_bias"].start, LAYOUT["accel_bias"].stop),
-    CALIBRATION,
-]
-
-
-@dataclass
-class DivergenceWatch:
-    """The running mean of the NIS per degree of freedom over the last DIVERGENCE_PINGS updates, and when it first
-    passed DIVERGENCE_NIS."""
-
-    recent: list[float] = field(default_factory=list)
-    diverged_at_s: float | None = None
-
-    @property
-    def diverged(self) -> bool:
-        return self.diverged_at_s is not None
-
-    def add(self, t: float, nis_per_dof: float) -> bool:
-        """One update's NIS per dof at t (s); True when this one is where the filter is found diverged: the mean of
-        the last DIVERGENCE_PINGS above DIVERGENCE_NIS and above the mean of the DIVERGENCE_PINGS before them (a
-        filter converging from a wrong prior, a mounting tens of degrees off, has a large but falling NIS)."""
-        self.recent = (self.recent + [nis_per_dof])[-2 * DIVERGENCE_PINGS :]
-        if self.diverged or len(self.recent) < 2 * DIVERGENCE_PINGS:
-            return False
-        before, last = (
-            float(np.mean(self.recent[:DIVERGENCE_PINGS])),
-            float(np.mean(self.recent[DIVERGENCE_PINGS:])),
-        )
-        if last > DIVERGENCE_NIS and last > before:
-            self.diverged_at_s = t
-            return True
-        return False
-
-    def info(self) -> dict[str, Any]:
-        return (
-            {}
-            if self.diverged_at_s is None
-            else {
-                "diverged_at_s": self.diverged_at_s,
-                "why": f"the EKF diverged at {self.diverged_at_s:.1f} s (mean NIS per dof over {DIVERGENCE_PINGS} "
-                f"pings above {DIVERGENCE_NIS:g}): its biases, calibration and time offset were frozen there",
-            }
-        )
-
-
 def _recentred_offset(
     config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
 ) -> tuple[EstimatorConfig, bool]:
@@ -656,15 +354,13 @@ def _checked_inputs(
     return log, config, frame, alignment, water, pings
 
 
-def _depth_updates(
-    log: LogData, config: EstimatorConfig, frame: LocalFrame
-) -> _DepthUpdates | None:
+def _depth_updates(log: LogData, config: EstimatorConfig, frame: LocalFrame) -> DepthUpdates | None:
     """The depth samples the filter updates with ([depth] use and the log has them), else None."""
     if log.depth is None or not config.depth.use or not len(log.depth):
         return None
     dcounters = {"depth_used": 0, "depth_gated": 0, "depth_too_far": 0}
     samples = depth_samples(log.depth, config.depth, frame, dcounters)
-    return _DepthUpdates(
+    return DepthUpdates(
         samples,
         gaussian_radius(frame.lat0),
         config.depth.max_time_to_state_s,
@@ -686,7 +382,7 @@ class _Pass:
     pings: np.ndarray  # the usable pings
     water: np.ndarray  # (M,) bool: the water-track pings
     gaps: Gaps  # the IMU's gaps
-    depth: _DepthUpdates | None
+    depth: DepthUpdates | None
     counters: dict[str, int]
     fit: WarmupFit | None
     consider_calibration: bool
@@ -863,7 +559,7 @@ class _Pass:
         the divergence watch, the warm-up fit's innovation, the counters; the state recorded."""
         fs, config = self.fs, self.config
         on_water = bool(self.water[j])
-        A, z, Rm = _ping_measurement(self.log, config, j, on_water)
+        A, z, Rm = ping_measurement(self.log, config, j, on_water)
         y_hat, H, b_omega = self._prediction(t_j, j, on_water)
         slow, unsure = self._calibration_columns(y_hat, H, z, Rm)
         gate_nis = self._gate(len(z))

@@ -54,6 +54,9 @@ BG, BA, MIS = LAYOUT["gyro_bias"], LAYOUT["accel_bias"], LAYOUT["misalignment"]
 SCALE = LAYOUT["scale"].start  # (a scalar's column)
 N_ERR = MIS.stop  # the navigation error and the shared states the strapdown's transition covers
 OFFSET = LAYOUT["time_offset"].start  # error-state index of the DVL time offset dt_d (s)
+CALIBRATION = np.r_[
+    LAYOUT["scale"], LAYOUT["misalignment"]
+]  # error-state indices of the DVL scale, misalignment
 
 
 @dataclass
