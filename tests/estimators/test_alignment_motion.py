@@ -28,7 +28,7 @@ from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.inputs.alignment import align, in_motion_alignment, map_frame_of
-from gtsam_dvl.estimators.online.estimator import smooth_online
+from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate

@@ -37,7 +37,7 @@ from gtsam_dvl.estimators.inputs.alignment import (
     given_covariance,
     map_frame_of,
 )
-from gtsam_dvl.estimators.online.estimator import smooth_online
+from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 

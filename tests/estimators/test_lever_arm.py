@@ -26,7 +26,7 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import run_ekf
-from gtsam_dvl.estimators.online.estimator import smooth_online
+from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 

@@ -14,7 +14,7 @@ from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.filter import run_ekf
 from gtsam_dvl.estimators.models.noise_levels import truncated_chi2_mean, variance_ratio
-from gtsam_dvl.estimators.online.estimator import smooth_online
+from gtsam_dvl.estimators.online import smooth_online
 from tests.support.scenarios import simulate_variant
 
 TRUE_NOISE_M_S = 0.007  # the simulated DVL's white noise per axis (a Teledyne/Nortek-class ping)

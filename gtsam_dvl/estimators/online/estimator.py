@@ -3,8 +3,8 @@
 A vehicle or a script creates an `OnlineEstimator`, pushes IMU and DVL messages in time order
 (`push_imu`, `push_imu_batch`, `push_dvl`) and reads `estimate()` after each DVL epoch: pose, velocity,
 biases, scale and misalignment, each with its marginal (filtering) covariance. `smooth_online(log, config)`
-drives it over a whole log and returns the same `NavResult` as the batch smoother, with a `Timeline` of the
-filtering sigmas at every epoch.
+(whole_log.py) drives it over a whole log and returns the same `NavResult` as the batch smoother, with a
+`Timeline` of the filtering sigmas at every epoch.
 
 Which mode:
 - `fixed_lag` (default): states older than `window_s` (20 s) behind the newest are marginalised; the bias,
@@ -85,7 +85,6 @@ from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.keys import S as S_KEY  # (the water current's layer boundaries)
 from gtsam_dvl.core.keys import W as W_KEY  # (W: the IMU gyro samples in this module)
-from gtsam_dvl.core.progress import ProgressFn
 from gtsam_dvl.core.result import NavResult, Timeline, WaterCurrentProfile
 from gtsam_dvl.core.states import calibration_info, enabled, water_current
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
@@ -94,16 +93,13 @@ from gtsam_dvl.estimators.inputs.alignment import Alignment, map_frame_of
 from gtsam_dvl.estimators.inputs.gaps import (
     check_spacing,
     filler_due,
-    screened_losses,
 )
 from gtsam_dvl.estimators.inputs.gnss import origin_fix_time
 from gtsam_dvl.estimators.inputs.mounting import imu_is_rotated, rotate_imu_samples
-from gtsam_dvl.estimators.inputs.prepare import prepare, refuse_combinations, refuse_unsupported
+from gtsam_dvl.estimators.inputs.prepare import refuse_combinations, refuse_unsupported
 from gtsam_dvl.estimators.inputs.selection import EpochScheduler, Ping
-from gtsam_dvl.estimators.models import current, weak_hold
-from gtsam_dvl.estimators.models.constant_error import consider_constant_error
+from gtsam_dvl.estimators.models import current
 from gtsam_dvl.estimators.models.current import resolve_water_track
-from gtsam_dvl.estimators.models.epoch_states import reports
 from gtsam_dvl.estimators.models.noise_levels import (
     NoiseReport,
     dvl_fit_enabled,
@@ -124,7 +120,6 @@ from gtsam_dvl.estimators.online.dvl_factors import (
     keyframe_dvl_factors,
     state_dvl_factors,
 )
-from gtsam_dvl.estimators.online.feed import feed_log
 from gtsam_dvl.estimators.online.imu_buffer import ImuBuffer
 from gtsam_dvl.estimators.online.messages import MessageChecks, vector3
 from gtsam_dvl.estimators.online.noise_fit import OnlineNoiseFit
@@ -140,11 +135,7 @@ from gtsam_dvl.estimators.online.window import (
     StateEstimate,
 )
 
-__all__ = [
-    "OnlineEstimator",
-    "run_result",
-    "smooth_online",
-]  # the package's __init__ exports the rest
+__all__ = ["OnlineEstimator"]  # the package's __init__ exports the rest
 
 
 def _effective_config(
@@ -756,66 +747,3 @@ class OnlineEstimator:
 
     def _read_estimate(self, with_covariance: bool | None = None) -> OnlineEstimate:
         return OnlineEstimate.from_state(self._read_state(with_covariance), self.mounting.b_R_d0)
-
-
-def run_result(estimator: OnlineEstimator, config: EstimatorConfig, t0_ns: int = 0) -> NavResult:
-    """estimator.result(t0_ns) with what every online run reports beside it: the correlated DVL error's settings,
-    the weak directions held, the run-constant DVL error's consider term on the calibration's covariance and the
-    water current. smooth_online and the ROS 2 node (app/node: the calibration file it saves) both call it, so a
-    live run's calibration is the one `smooth --mode online` gives for the same messages."""
-    result = estimator.result(t0_ns)
-    if (
-        estimator.smoother is not None
-    ):  # the per-epoch states' reports at the newest state (epoch_states.py)
-        result.info.update(reports(config, estimator.smoother.epoch_estimates()))
-    if estimator.smoother is not None and estimator.smoother.hold is not None:  # (weak_hold.py)
-        result.info["calibration_hold"] = weak_hold.report(estimator.smoother.hold, math.nan)
-    # (constant_error.py; none with a vehicle calibration file as prior)
-    consider_constant_error(result, config, estimator.calibration is not None)
-    if (
-        estimator.current_history
-    ):  # the water current at each state as it left the window (or at the end)
-        result.water_current = estimator.current_profile()
-    return result
-
-
-def smooth_online(
-    log: LogData,
-    config: EstimatorConfig | None = None,
-    *,
-    mode: str | None = None,
-    window_s: float | None = None,
-    progress: ProgressFn | None = None,
-    options: OnlineConfig | None = None,
-    calibration: VehicleCalibration | None = None,
-) -> NavResult:
-    """Run the online estimator over a whole log, message by message, and return its NavResult with the
-    timeline of filtering sigmas at every epoch. options (default: config.online, TOML section [online]);
-    mode ("fixed_lag" or "full") and window_s override those of options. config None: the one the log's
-    scenario names, else the defaults (EstimatorConfig.for_log). calibration: a vehicle's calibration, inflated
-    for its age, as the joint prior of the states it holds (core/states.py calibration_prior)."""
-    # the configuration checked, what the online estimator does not do refused, the IMU screened when the reader
-    # did not (inputs/prepare.py); the estimator resolves [current] water_track itself (OnlineEstimator.for_log)
-    prepared = prepare(log, config, "online", calibration)
-    log, config = prepared.log, prepared.stated
-    options = (options if options is not None else config.online).model_copy()
-    if mode is not None:
-        options.mode = mode  # type: ignore[assignment]  # any str: checked by value in OnlineEstimator
-    if window_s is not None:
-        options.window_s = window_s
-    t_start = time.perf_counter()
-    estimator = OnlineEstimator.for_log(log, config, options, calibration)
-    feed_log(estimator, log, progress)
-    result = run_result(estimator, config, log.t0_ns)
-    total = time.perf_counter() - t_start
-    result.timing_s = {"updates": float(np.sum(estimator.latencies_s)), "total": total}
-    result.info["real_time_factor"] = (
-        float((log.imu.t[-1] - log.imu.t[0]) / total) if total > 0 else None
-    )
-    if (
-        screened := screened_losses(log)
-    ) is not None:  # what the screen of an in-memory log found (gaps.py)
-        result.info["screened_losses"] = screened
-    if progress is not None:
-        progress(1.0)
-    return result
