@@ -97,39 +97,39 @@ def _salvage_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     return out
 
 
+def _per_topic(losses: dict[str, Any], kind: str) -> list[tuple[str, Any]]:
+    """(topic, record) of one kind of loss (losses[kind], absent or None: none), in the topics' name order."""
+    return sorted((losses.get(kind) or {}).items())
+
+
 def _repair_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     """The messages --repair dropped per topic: "degraded" beyond REPAIRED_DEGRADED of the topic."""
-    out: list[tuple[str, str]] = []
-    for topic, d in sorted((losses.get("repair") or {}).items()):
-        if d.get("of") and d["dropped"] / d["of"] > REPAIRED_DEGRADED:
-            out.append(
-                ("degraded", _repair_line(topic, d) + ": the log is damaged, check the recording")
-            )
-        else:
-            out.append(("note", _repair_line(topic, d)))
-    return out
+    return [_repair_finding(topic, d) for topic, d in _per_topic(losses, "repair")]
+
+
+def _repair_finding(topic: str, d: dict[str, int]) -> tuple[str, str]:
+    line = _repair_line(topic, d)
+    if d.get("of") and d["dropped"] / d["of"] > REPAIRED_DEGRADED:
+        return "degraded", line + ": the log is damaged, check the recording"
+    return "note", line
 
 
 def _gap_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     """The gaps in each topic's stamps: "degraded" when the longest is beyond the IMU's or the DVL's limit."""
-    out: list[tuple[str, str]] = []
-    for topic, g in sorted((losses.get("gaps") or {}).items()):
-        imu = "imu" in topic.lower()
-        if imu and g["longest_s"] > IMU_GAP_DEGRADED_S:
-            out.append(
-                (
-                    "degraded",
-                    _gap_line(topic, g) + ": the IMU has holes, crossed by holding the last "
-                    "sample (the sigmas grow there); check the IMU driver",
-                )
+    return [_gap_finding(topic, g) for topic, g in _per_topic(losses, "gaps")]
+
+
+def _gap_finding(topic: str, g: dict[str, Any]) -> tuple[str, str]:
+    line = _gap_line(topic, g)
+    if "imu" in topic.lower():
+        if g["longest_s"] > IMU_GAP_DEGRADED_S:
+            return "degraded", line + (
+                ": the IMU has holes, crossed by holding the last sample (the sigmas grow there); "
+                "check the IMU driver"
             )
-        elif not imu and g["longest_s"] > DVL_GAP_DEGRADED_S:
-            out.append(
-                ("degraded", _gap_line(topic, g) + ": dead reckoning on the IMU alone there")
-            )
-        else:
-            out.append(("note", _gap_line(topic, g)))
-    return out
+    elif g["longest_s"] > DVL_GAP_DEGRADED_S:
+        return "degraded", line + ": dead reckoning on the IMU alone there"
+    return "note", line
 
 
 def _saturation_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
@@ -141,14 +141,14 @@ def _saturation_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
             f"{topic}: {saturation_words(report)}, dropped and crossed as IMU gaps, holding the last "
             "sample before (the sigmas grow there); an IMU with a larger range avoids it",
         )
-        for topic, report in sorted((losses.get("saturation") or {}).items())
+        for topic, report in _per_topic(losses, "saturation")
     ]
 
 
 def _clock_step_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
     """The clock steps --repair shifted the stamps across: notes."""
     out: list[tuple[str, str]] = []
-    for topic, steps in sorted((losses.get("clock_steps") or {}).items()):
+    for topic, steps in _per_topic(losses, "clock_steps"):
         for c in steps:
             back = c["jump_s"] < 0
             out.append(

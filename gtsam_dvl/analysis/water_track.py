@@ -20,13 +20,14 @@ dvl_link, k d_R_b n_R_b^T [c_east, c_north, 0]. This module
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult, WaterCurrentProfile
-from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.types import DvlData, LogData
 from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 
 WATER_RMS_WARN = (
@@ -104,20 +105,47 @@ def check_water_track(
         f"{int(water.sum())} water-track pings in {len(runs)} stretch(es) ({span}) used with the water "
         f"current as a state; the current: {profile.verdict}",
     )
-    r, idx, on_water = res.residual_m_s, res.index, res.water
-    if r is None or idx is None or on_water is None or not len(idx):
+    if res.residual_m_s is None or res.index is None or res.water is None or not len(res.index):
         return
-    t_p = np.asarray(dvl.t[idx], dtype=float)
-    c, var_c = _current_at(profile, t_p)
-    c_d, cov_c = _current_seen(result, t_p, c, var_c)
-    seen = np.isfinite(r).all(axis=1)
-    wt = on_water & seen
+    figs, warnings = _ping_findings(_PingsInCurrent.of(result, log, res, profile), result, config)
+    fig.update(figs)
+    for text in warnings:
+        flag("warn", text)
+
+
+def _ping_findings(
+    pings: _PingsInCurrent, result: NavResult, config: EstimatorConfig
+) -> tuple[dict[str, Any], list[str]]:
+    """The run's pings against the estimated current: the water-track pings' whitened residuals (figure
+    "whitened_rms", a warning beyond WATER_RMS_WARN) and the bottom-track pings in false lock (figure
+    "false_lock_pings", a warning when any). Returns the figures and the warnings."""
+    figs: dict[str, Any] = {}
+    warnings = []
+    seen = np.isfinite(pings.r).all(axis=1)
+    wt = pings.water & seen
     if wt.any():
-        _judge_water_pings(result, log, config, res, c_d, cov_c, wt, fig, flag)
-    bt = ~on_water & seen
+        figs["whitened_rms"] = rms = pings.water_rms(result, config, wt)
+        if rms > WATER_RMS_WARN:
+            warnings.append(
+                f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
+                "water_track_sigma_m_s) with the estimated current: the current "
+                "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
+                "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger"
+            )
+    bt = ~pings.water & seen
     if bt.any():
-        determined = np.sqrt(var_c.max(axis=1)) < 0.5 * config.current.prior_sigma_m_s
-        _find_false_lock(log, config, res, t_p, c, c_d, cov_c, bt, determined, fig, flag)
+        false_lock = pings.false_lock(config, bt)
+        figs["false_lock_pings"] = int(false_lock.sum())
+        if false_lock.any():
+            times = pings.t_p[bt][false_lock]
+            warnings.append(
+                f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) "
+                "disagree with the velocity over ground and agree with the water track (velocity "
+                "relative to the water): a false bottom lock (a scattering layer, or the water near "
+                "the DVL's range limit); their factors were down-weighted by the robust kernel, check "
+                "the DVL's altitude there"
+            )
+    return figs, warnings
 
 
 def _current_seen(
@@ -139,70 +167,60 @@ def _current_seen(
     return c_d, cov_c
 
 
-def _judge_water_pings(
-    result: NavResult,
-    log: LogData,
-    config: EstimatorConfig,
-    res: Any,
-    c_d: np.ndarray,
-    cov_c: np.ndarray,
-    wt: np.ndarray,
-    fig: dict[str, Any],
-    flag: Callable[[str, str], None],
-) -> None:
-    """The water-track pings' (mask wt of res's pings) residuals under the water-track model, whitened by their
-    noise and the current's (figure "whitened_rms"): a warning beyond WATER_RMS_WARN."""
-    dvl, r, idx = log.dvl, res.residual_m_s, res.index
-    r_w = r[wt] + c_d[wt]  # y - (h_ground - current seen): the water-track model's residual
-    if (
-        k_w := result.calibration.get("water_scale")
-    ) is not None:  # their own scale: y - (k_w / k) h_water
-        y = np.asarray(dvl.d_v[idx[wt]], dtype=float)
-        r_w = y - (y - r_w) * float(k_w.value[0]) / float(result.scale)
-    cov = water_covariance(config, dvl.d_cov[idx[wt]]) + cov_c[wt]
-    chi2 = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov, r_w[..., None])[..., 0])
-    rms = float(np.sqrt(chi2.sum() / (3 * len(chi2))))
-    fig["whitened_rms"] = rms
-    if rms > WATER_RMS_WARN:
-        flag(
-            "warn",
-            f"water-track residuals {rms:.1f}x their noise (the messages' covariance or [current] "
-            "water_track_sigma_m_s) with the estimated current: the current "
-            "changes faster than its random walk allows ([current] time_rw_m_s_per_sqrt_s, "
-            "depth_rw_m_s_per_sqrt_m) or the water-track noise is larger",
-        )
+def _chi2(r: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """r_i^T cov_i^-1 r_i of each residual r (N, 3) with its covariance cov (N, 3, 3)."""
+    return np.einsum("ni,ni->n", r, np.linalg.solve(cov, r[..., None])[..., 0])
 
 
-def _find_false_lock(
-    log: LogData,
-    config: EstimatorConfig,
-    res: Any,
-    t_p: np.ndarray,
-    c: np.ndarray,
-    c_d: np.ndarray,
-    cov_c: np.ndarray,
-    bt: np.ndarray,
-    determined: np.ndarray,
-    fig: dict[str, Any],
-    flag: Callable[[str, str], None],
-) -> None:
-    """The bottom-track pings (mask bt) that disagree with the velocity over ground and agree with the water
-    track, where the current is large and determined: a false bottom lock (figure "false_lock_pings")."""
-    dvl, r, idx = log.dvl, res.residual_m_s, res.index
-    cov_g = ping_covariance(config.dvl, dvl.d_cov[idx[bt]])
-    r_g = r[bt]
-    chi2_g = np.einsum("ni,ni->n", r_g, np.linalg.solve(cov_g, r_g[..., None])[..., 0])
-    r_w = r_g + c_d[bt]
-    chi2_w = np.einsum("ni,ni->n", r_w, np.linalg.solve(cov_g + cov_c[bt], r_w[..., None])[..., 0])
-    big = np.linalg.norm(c[bt, :2], axis=1) > 3.0 * np.sqrt(np.trace(cov_g, axis1=1, axis2=2) / 3.0)
-    false_lock = (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]
-    fig["false_lock_pings"] = int(false_lock.sum())
-    if false_lock.any():
-        times = t_p[bt][false_lock]
-        flag(
-            "warn",
-            f"{int(false_lock.sum())} bottom-track pings ({times[0]:.0f}-{times[-1]:.0f} s) disagree "
-            "with the velocity over ground and agree with the water track (velocity relative to the "
-            "water): a false bottom lock (a scattering layer, or the water near the DVL's range limit); "
-            "their factors were down-weighted by the robust kernel, check the DVL's altitude there",
-        )
+@dataclass
+class _PingsInCurrent:
+    """The run's pings (dvl: the log's; r: their raw residuals (N, 3) m/s, idx: their indices in dvl, water: the
+    water-track ones) at their times t_p (s) with the estimated current: c (N, 3) m/s in the map frame, its
+    variance var_c (N, 2) (east, north), and as the DVL sees it, c_d (N, 3) in dvl_link with covariance cov_c
+    (N, 3, 3)."""
+
+    dvl: DvlData
+    r: np.ndarray
+    idx: np.ndarray
+    water: np.ndarray
+    t_p: np.ndarray
+    c: np.ndarray
+    var_c: np.ndarray
+    c_d: np.ndarray
+    cov_c: np.ndarray
+
+    @classmethod
+    def of(
+        cls, result: NavResult, log: LogData, res: Any, profile: WaterCurrentProfile
+    ) -> _PingsInCurrent:
+        """The pings of res (DvlResiduals) with result's current profile."""
+        t_p = np.asarray(log.dvl.t[res.index], dtype=float)
+        c, var_c = _current_at(profile, t_p)
+        c_d, cov_c = _current_seen(result, t_p, c, var_c)
+        return cls(log.dvl, res.residual_m_s, res.index, res.water, t_p, c, var_c, c_d, cov_c)
+
+    def water_rms(self, result: NavResult, config: EstimatorConfig, wt: np.ndarray) -> float:
+        """The whitened RMS of the water-track pings' (mask wt) residuals under the water-track model, whitened
+        by their noise and the current's."""
+        dvl, idx = self.dvl, self.idx
+        # y - (h_ground - current seen): the water-track model's residual
+        r_w = self.r[wt] + self.c_d[wt]
+        if (k_w := result.calibration.get("water_scale")) is not None:
+            # their own scale: y - (k_w / k) h_water
+            y = np.asarray(dvl.d_v[idx[wt]], dtype=float)
+            r_w = y - (y - r_w) * float(k_w.value[0]) / float(result.scale)
+        chi2 = _chi2(r_w, water_covariance(config, dvl.d_cov[idx[wt]]) + self.cov_c[wt])
+        return float(np.sqrt(chi2.sum() / (3 * len(chi2))))
+
+    def false_lock(self, config: EstimatorConfig, bt: np.ndarray) -> np.ndarray:
+        """Which bottom-track pings (mask bt) disagree with the velocity over ground and agree with the water
+        track, where the current is large (beyond three sigmas of the ping) and determined (its sigma below
+        half its prior's)."""
+        determined = np.sqrt(self.var_c.max(axis=1)) < 0.5 * config.current.prior_sigma_m_s
+        cov_g = ping_covariance(config.dvl, self.dvl.d_cov[self.idx[bt]])
+        r_g = self.r[bt]
+        chi2_g = _chi2(r_g, cov_g)
+        chi2_w = _chi2(r_g + self.c_d[bt], cov_g + self.cov_c[bt])
+        c = self.c[bt, :2]
+        big = np.linalg.norm(c, axis=1) > 3.0 * np.sqrt(np.trace(cov_g, axis1=1, axis2=2) / 3.0)
+        return (chi2_g > FALSE_LOCK_CHI2) & (chi2_w < WATER_AGREES_CHI2) & big & determined[bt]

@@ -319,20 +319,12 @@ def _write_trajectory(w: McapLogWriter, result: NavResult, log: LogData) -> None
 def _write_calibration_topics(w: McapLogWriter, result: NavResult) -> None:
     """The DVL scale, and when estimated its time offset and lever arm, each one message at the last state."""
     t = result.t
-    w.add_scalar_with_variance(
-        TOPICS["scale"],
-        t[-1:],
-        np.array([result.scale]),
-        np.array([result.scale_sigma**2]),
-        "dvl_link",
-    )
+    scalars = [("scale", result.scale, result.scale_sigma)]
     if np.isfinite(result.time_offset_sigma_s):
+        scalars.append(("time_offset", result.time_offset_s, result.time_offset_sigma_s))
+    for topic, value, sigma in scalars:
         w.add_scalar_with_variance(
-            TOPICS["time_offset"],
-            t[-1:],
-            np.array([result.time_offset_s]),
-            np.array([result.time_offset_sigma_s**2]),
-            "dvl_link",
+            TOPICS[topic], t[-1:], np.array([value]), np.array([sigma**2]), "dvl_link"
         )
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:
         cov_l = np.zeros((6, 6))

@@ -11,29 +11,25 @@ sensor or an error to a scenario leaves every other stream's numbers as they wer
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from collections.abc import Callable
-from dataclasses import asdict
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from gtsam_dvl.core.earth import depth_to_pressure, pressure_to_depth
-from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
+from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
 from gtsam_dvl.core.types import (
     DepthData,
-    DvlCalibration,
     DvlData,
     GeoOrigin,
-    ImuBiases,
     ImuData,
     LogData,
     Mounting,
     TruthData,
 )
 from gtsam_dvl.sim import imu as sim_imu
+from gtsam_dvl.sim import record
 from gtsam_dvl.sim.dvl import (
     constant_error,
     correlated_error,
@@ -47,11 +43,11 @@ from gtsam_dvl.sim.gnss import first_fix_frame, reframe_truth, simulate_gnss
 from gtsam_dvl.sim.imu import ImuErrors, draw_biases, quantise, saturate, true_imu
 from gtsam_dvl.sim.local_level import imu_truth
 from gtsam_dvl.sim.motion import MotionProfile
-from gtsam_dvl.sim.position import PositionTrack, integrate_position
+from gtsam_dvl.sim.position import PositionStream, PositionTrack
 
 if TYPE_CHECKING:
     from gtsam_dvl.core.earth import LocalFrame
-    from gtsam_dvl.sim.scenario import DvlSpec, Scenario
+    from gtsam_dvl.sim.scenario import Scenario
 
 
 def simulate(
@@ -75,17 +71,15 @@ def simulate(
     n = int(np.floor(scenario.duration_s * rate + 1e-6)) + 1  # stamps k / rate, k = 0..n-1
     frame = scenario.local_frame()
     motion = MotionProfile.from_scenario(scenario)
-    track = integrate_position(motion, frame.lat0, frame.lon0, scenario.origin.height_m, rate, n)
+    # the whole run as one window of the stream sim/stream.py integrates chunk by chunk (the same bits)
+    positions = PositionStream(motion, frame.lat0, frame.lon0, scenario.origin.height_m, rate, n)
+    track = positions.window(0, n)
     if progress is not None:
         progress(0.1)
     bias_ss, imu_ss, dvl_ss, event_ss = np.random.SeedSequence(seed).spawn(4)
     imu, errors = _imu(scenario, motion, track, n, bias_ss, imu_ss, white_noise, progress)
     truth = _truth(motion, track, frame, n, int(round(rate / rates.truth_hz)), scenario)
-    mount = scenario.mounting
-    mounting = Mounting(
-        b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
-        b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float),
-    )
+    mounting = record.nominal_mounting(scenario)
     dvl, constant = _dvl(
         scenario, seed, white_noise, mounting, motion, track, float(imu.t[-1]), dvl_ss, event_ss
     )
@@ -94,7 +88,7 @@ def simulate(
         if scenario.depth is None
         else _depth(scenario, motion, track, frame, n, seed, white_noise)
     )
-    metadata = _metadata(
+    metadata = record.metadata(
         scenario,
         seed,
         white_noise,
@@ -102,20 +96,20 @@ def simulate(
         errors.gyro_bias0,
         errors.accel_bias0,
         _bias_series(scenario, errors, rate),
+        given_dvl,
+        constant,
     )
-    _sensor_metadata(scenario, metadata)
-    drawn_metadata(metadata, given_dvl, constant)
     gnss = None
-    origin: GeoOrigin | None = _origin(scenario)
+    origin: GeoOrigin | None = record.map_origin(scenario)
     if scenario.gnss is not None:
         gnss = simulate_gnss(scenario.gnss, motion, track, rate, n, seed, white_noise)
         if not scenario.gnss.origin_in_log:  # the origin must come from the fixes (sim/gnss.py)
-            fix_frame = _fix_frame(scenario, first_fix_frame(gnss), metadata)
+            fix_frame = record.map_from_first_fix(scenario, first_fix_frame(gnss), metadata)
             truth = reframe_truth(truth, frame, fix_frame)
             origin = None
     if progress is not None:
         progress(1.0)
-    return _log_data(
+    return record.log_data(
         scenario,
         seed,
         errors.gyro_bias0,
@@ -182,7 +176,7 @@ def _dvl(
     constant errors, then the white noise (stream dvl_ss), dropouts and outliers (stream event_ss), all only
     when white_noise. Returns the pings with the constant error drawn (None: none)."""
     rates = scenario.rates
-    t_meas, t_dvl = _dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, t_end)
+    t_meas, t_dvl = dvl_stamps(rates.dvl_hz, rates.dvl_time_offset_s, t_end)
     floor_h = scenario.origin.height_m - scenario.dvl.altitude_m
     water = water_model(scenario)
     y, d_u, ranges, water_pings = dvl_true(
@@ -208,119 +202,11 @@ def _dvl(
     return dvl, constant
 
 
-def _log_data(
-    scenario: Scenario,
-    seed: int,
-    gyro_bias0: np.ndarray,
-    accel_bias0: np.ndarray,
-    metadata: dict[str, Any],
-    origin: GeoOrigin | None,
-    **data: Any,
-) -> LogData:
-    """The LogData of a simulation: its sensor data and truth (data) with the typed fields of the scenario."""
-    if (
-        "dvl" in data
-    ):  # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
-        data["dvl"].noise_free = not metadata.get("white_noise", True)
-    return LogData(
-        t0_ns=scenario.t0_ns,
-        metadata=metadata,
-        source=f"simulated:{scenario.name}:seed={seed}",
-        origin=origin,
-        true_calibration=DvlCalibration(
-            float(scenario.dvl.scale),
-            tuple(float(a) for a in scenario.dvl.misalignment_deg),  # type: ignore[arg-type]
-            float(scenario.rates.dvl_time_offset_s),
-        ),
-        true_imu_bias=ImuBiases(tuple(accel_bias0.tolist()), tuple(gyro_bias0.tolist())),  # type: ignore[arg-type]
-        segments=scenario.segments_typed(),
-        **data,
-    )
-
-
-# the DvlSpec keys whose error is off at 0: left out of the metadata then (an older scenario's stays as it was)
-_DVL_OPTIONAL = (
-    "stated_noise_m_s",
-    "constant_error_sigma_m_s",
-    "draw_scale_sigma",
-    "draw_misalignment_sigma_deg",
-)
-
-
 def with_drawn_calibration(scenario: Scenario, seed: int) -> Scenario:
     """The scenario with this seed's truth DVL scale and misalignment (sim/dvl.py drawn_calibration; itself when
     its [dvl] table draws none)."""
     dvl = drawn_calibration(scenario.dvl, seed)
     return scenario if dvl is scenario.dvl else dataclasses.replace(scenario, dvl=dvl)
-
-
-def drawn_metadata(metadata: dict[str, Any], given: DvlSpec, constant: np.ndarray | None) -> None:
-    """A drawn calibration and a constant error in the metadata: "sensors" keeps the [dvl] table's scale and
-    misalignment (the draw's mean; "truth" has the drawn ones), "truth" gets the run's constant error (m/s in
-    dvl_link). Nothing changes for a scenario without them."""
-    sensors, truth = metadata["sensors"]["dvl"], metadata["truth"]["dvl"]
-    if sensors.get("draw_scale_sigma") or sensors.get("draw_misalignment_sigma_deg"):
-        sensors["scale"], sensors["misalignment_deg"] = (
-            float(given.scale),
-            list(given.misalignment_deg),
-        )
-    if constant is not None:
-        truth["constant_error_m_s"] = constant.tolist()
-
-
-def _origin(scenario: Scenario) -> GeoOrigin:
-    return GeoOrigin(
-        float(scenario.origin.lat_deg),
-        float(scenario.origin.lon_deg),
-        float(scenario.origin.height_m),
-    )
-
-
-def _sensor_metadata(scenario: Scenario, metadata: dict[str, Any]) -> None:
-    """The [depth] and [gnss] specifications into metadata["sensors"], when the scenario has them."""
-    if scenario.depth is not None:
-        metadata["sensors"]["depth"] = _listify_spec(asdict(scenario.depth))
-    if scenario.gnss is not None:
-        metadata["sensors"]["gnss"] = _listify_spec(asdict(scenario.gnss))
-
-
-def _fix_frame(
-    scenario: Scenario, fix_frame: LocalFrame | None, metadata: dict[str, Any]
-) -> LocalFrame:
-    """gnss.origin_in_log = false: the first fix's frame becomes the map (metadata without "origin", the truth's
-    map origin recorded); an error without any fix."""
-    if fix_frame is None:
-        raise GtsamDvlError(
-            f"{scenario.source}: key 'gnss.origin_in_log': false needs at least one fix, "
-            "and the vehicle never surfaces while the receiver records"
-        )
-    metadata.pop("origin", None)
-    metadata["truth"]["map_origin"] = {
-        "lat_deg": fix_frame.lat_deg,
-        "lon_deg": fix_frame.lon_deg,
-        "height_m": fix_frame.height_m,
-        "from": "first GNSS fix",
-    }
-    return fix_frame
-
-
-def _water_truth(scenario: Scenario) -> dict[str, Any]:
-    """metadata["truth"]'s "current" and "seafloor" (sim/current.py), those the scenario has."""
-    out: dict[str, Any] = {}
-    if scenario.current is not None:
-        out["current"] = _listify_spec(asdict(scenario.current))
-    if scenario.seafloor is not None:
-        out["seafloor"] = asdict(scenario.seafloor)
-    return out
-
-
-def _without(d: dict[str, Any], keys: tuple[str, ...]) -> dict[str, Any]:
-    """d without keys (the settings of an error that is off)."""
-    return {k: v for k, v in d.items() if k not in keys}
-
-
-def _listify_spec(d: dict[str, Any]) -> dict[str, Any]:
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
 
 
 def depth_rng(seed: int) -> np.random.Generator:
@@ -343,10 +229,10 @@ def _depth(
     spec = scenario.depth
     assert spec is not None
     k = np.arange(0, n, int(round(scenario.rates.imu_hz / spec.rate_hz)))
-    return _depth_at(scenario, motion, track, frame, k, depth_rng(seed) if white_noise else None)
+    return depth_at(scenario, motion, track, frame, k, depth_rng(seed) if white_noise else None)
 
 
-def _depth_at(
+def depth_at(
     scenario: Scenario,
     motion: MotionProfile,
     track: PositionTrack,
@@ -378,7 +264,7 @@ def _depth_at(
     )
 
 
-def _dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarray, np.ndarray]:
+def dvl_stamps(dvl_hz: float, offset_s: float, t_end: float) -> tuple[np.ndarray, np.ndarray]:
     """(measurement times, stamps): the DVL measures at k / dvl_hz (integer k keeps them exact multiples) and
     stamps each ping offset_s earlier: dt_d = offset_s, stamps early when > 0 (docs/conventions.md: the ping stamped
     t measures the velocity at t + dt_d). Both within [0, t_end]."""
@@ -397,10 +283,10 @@ def _truth(
     scenario: Scenario,
 ) -> TruthData:
     """Truth of base_link in the map frame at every step-th IMU stamp."""
-    return _truth_at(motion, track, frame, np.arange(0, n, step), scenario)
+    return truth_at(motion, track, frame, np.arange(0, n, step), scenario)
 
 
-def _truth_at(
+def truth_at(
     motion: MotionProfile,
     track: PositionTrack,
     frame: LocalFrame,
@@ -438,78 +324,4 @@ def _bias_series(scenario: Scenario, errors: ImuErrors, rate: float) -> dict[str
         "t": (k / rate).tolist(),
         "gyro_rad_s": errors.gyro_bias[k].tolist(),
         "accel_m_s2": errors.accel_bias[k].tolist(),
-    }
-
-
-def _metadata(
-    scenario: Scenario,
-    seed: int,
-    white: bool,
-    mounting: Mounting,
-    gyro_bias0: np.ndarray,
-    accel_bias0: np.ndarray,
-    bias_series: dict[str, Any] | None,
-) -> dict[str, Any]:
-    from gtsam_dvl import __version__
-
-    def listify(d: dict[str, Any]) -> dict[str, Any]:
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
-
-    o = scenario.origin
-    imu_truth_md: dict[str, Any] = {
-        "gyro_bias_rad_s": gyro_bias0.tolist(),
-        "accel_bias_m_s2": accel_bias0.tolist(),
-    }
-    if bias_series is not None:
-        imu_truth_md["bias_series"] = bias_series
-    return {
-        "scenario_name": scenario.name,
-        "scenario": copy.deepcopy(scenario.raw),
-        "seed": int(seed),
-        "white_noise": bool(white),
-        "origin": {
-            "lat_deg": float(o.lat_deg),
-            "lon_deg": float(o.lon_deg),
-            "height_m": float(o.height_m),
-        },
-        "truth": {
-            "dvl": {
-                "scale": float(scenario.dvl.scale),
-                "misalignment_deg": [float(a) for a in scenario.dvl.misalignment_deg],
-                "b_R_d0": mounting.b_R_d0.tolist(),
-                "b_lever_arm_m": mounting.b_l.tolist(),
-                "time_offset_s": float(scenario.rates.dvl_time_offset_s),
-            },
-            "imu": imu_truth_md,
-            "segments": scenario.segment_table(),
-            **_water_truth(scenario),
-        },
-        "sensors": {  # the optional errors only when on (the metadata of a scenario without them stays as it was)
-            "imu": _without(
-                listify(asdict(scenario.imu)),
-                tuple(
-                    k
-                    for k in (
-                        "quantisation_gyro_rad_s",
-                        "quantisation_accel_m_s2",
-                        "saturation_gyro_rad_s",
-                        "saturation_accel_m_s2",
-                    )
-                    if not np.any(getattr(scenario.imu, k))
-                ),
-            ),
-            "dvl": _without(
-                listify(asdict(scenario.dvl)),
-                (
-                    ("correlated_sigma_m_s", "correlated_tau_s")
-                    if scenario.dvl.correlated_sigma_m_s == 0
-                    else ()
-                )
-                + (("bottom_range_m", "water_track_noise_m_s") if scenario.seafloor is None else ())
-                + tuple(k for k in _DVL_OPTIONAL if not np.any(getattr(scenario.dvl, k))),
-            ),
-            "rates": asdict(scenario.rates),
-            "mounting": listify(asdict(scenario.mounting)),
-        },
-        "generator": f"gtsam_dvl {__version__}",
     }

@@ -40,9 +40,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gtsam_dvl.core.earth import radii_of_curvature
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.rotations import rpy_deg_to_matrix
 from gtsam_dvl.core.types import (
     BeamData,
     DepthData,
@@ -51,10 +49,10 @@ from gtsam_dvl.core.types import (
     GnssData,
     ImuData,
     LogData,
-    Mounting,
     TruthData,
 )
 from gtsam_dvl.sim import dvl as sim_dvl
+from gtsam_dvl.sim import record
 from gtsam_dvl.sim.dvl import (
     GaussMarkov,
     correlated_error,
@@ -73,127 +71,15 @@ from gtsam_dvl.sim.imu import (
     white_noise_sigmas,
 )
 from gtsam_dvl.sim.motion import MotionProfile
-from gtsam_dvl.sim.position import GL_U, GL_W, PositionTrack, node_times
-from gtsam_dvl.sim.simulate import (
-    _depth_at,
-    _dvl_stamps,
-    _fix_frame,
-    _log_data,
-    _metadata,
-    _origin,
-    _sensor_metadata,
-    _truth_at,
-    depth_rng,
-    drawn_metadata,
-    with_drawn_calibration,
-)
+from gtsam_dvl.sim.position import PositionStream, TrackWindow
+from gtsam_dvl.sim.simulate import depth_at, depth_rng, dvl_stamps, truth_at, with_drawn_calibration
 
 if TYPE_CHECKING:
     from gtsam_dvl.core.earth import LocalFrame
     from gtsam_dvl.sim.scenario import GnssSpec, Scenario
 
 DEFAULT_CHUNK_S = 600.0
-PASSES = 4  # latitude passes of the position quadrature, as integrate_position's default
 _SKIP_BLOCK = 1 << 20  # normal draws per call when dropping a block
-
-
-# ----- position: integrate_position, continued chunk by chunk -------------------------------------------
-class TrackWindow(PositionTrack):
-    """The PositionTrack of grid points g0..g0 + len - 1 of a run whose grid has n_grid points, indexed by the
-    run's sample and grid numbers (what simulate()'s functions pass)."""
-
-    def __init__(
-        self,
-        rate: float,
-        grid: tuple[np.ndarray, np.ndarray, np.ndarray],
-        l_v_grid: np.ndarray,
-        g0: int,
-        n_grid: int,
-    ) -> None:
-        super().__init__(rate, grid, l_v_grid)
-        self.g0 = g0
-        self.n_grid = n_grid
-
-    def grid_index_of_time(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        x = np.asarray(t, dtype=float) * self.rate + 1.0
-        g = np.clip(np.floor(x).astype(np.int64), 0, self.n_grid - 2)
-        return g, x - g
-
-    def at(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        g, u = self.grid_index_of_time(t)
-        if len(g) and (g.min() < self.g0 or g.max() + 1 >= self.g0 + len(self.grid[0])):
-            raise ValueError("times outside the window")  # a bug in the chunking, not a user error
-        return self._interp(g - self.g0, u)
-
-    def at_samples(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return super().at_samples(np.asarray(k) - self.g0)
-
-    def at_nodes(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray]:
-        return super().at_nodes(a - self.g0, b - self.g0)
-
-
-class _RunningSum:
-    """integrate_position's cumulate() over consecutive windows: y0 + (y - y[1]), y the running sum of the
-    increments from grid point 0, continued from the previous window's last sum."""
-
-    def __init__(self, y0: float, half_dt: float) -> None:
-        self.y0, self.half_dt = y0, half_dt
-        self.s = 0.0  # the sum up to the window's first grid point
-        self.first: float | None = None  # y[1], the first increment of the run
-
-    def __call__(self, rate_nodes: np.ndarray) -> np.ndarray:
-        incr = self.half_dt * (rate_nodes @ GL_W)
-        y = np.cumsum(np.concatenate([[self.s], incr]))
-        if self.first is None:
-            self.first = float(y[1])
-        self.s = float(y[-1])
-        return self.y0 + (y - self.first)
-
-
-def _at_nodes(grid_values: np.ndarray) -> np.ndarray:
-    return grid_values[:-1, None] * (1.0 - GL_U) + grid_values[1:, None] * GL_U
-
-
-class PositionStream:
-    """integrate_position over samples 0..n_samples-1 in consecutive windows [a, b): window(a, b) returns the
-    TrackWindow of grid points a..b, the values integrate_position has there."""
-
-    def __init__(
-        self,
-        motion: MotionProfile,
-        lat0: float,
-        lon0: float,
-        h0: float,
-        rate: float,
-        n_samples: int,
-        passes: int = PASSES,
-    ) -> None:
-        self.motion, self.lat0, self.rate, self.n = motion, lat0, rate, n_samples
-        half_dt = 0.5 / rate
-        self._h = _RunningSum(h0, half_dt)
-        self._lat = [_RunningSum(lat0, half_dt) for _ in range(passes)]
-        self._lon = _RunningSum(
-            lon0, half_dt
-        )  # the last pass's: the earlier passes' longitudes are dropped
-        self._next = 0
-
-    def window(self, a: int, b: int) -> TrackWindow:
-        if a != self._next or not a < b <= self.n:
-            raise ValueError(f"window [{a}, {b}) after {self._next}")  # a bug in the caller
-        self._next = b
-        rate = self.rate
-        l_v_nodes = self.motion.evaluate(node_times(np.arange(a, b), rate)).l_v()  # (b - a, 4, 3)
-        l_v_grid = self.motion.evaluate((np.arange(a, b + 1) - 1.0) / rate).l_v()
-        h = self._h(l_v_nodes[..., 2])
-        lat = np.full_like(h, self.lat0)
-        lon = h  # replaced in the last pass
-        for i, lat_sum in enumerate(self._lat):
-            r_n, r_e = radii_of_curvature(lat)
-            lat_new = lat_sum(l_v_nodes[..., 1] * _at_nodes(1.0 / (r_n + h)))
-            if i == len(self._lat) - 1:
-                lon = self._lon(l_v_nodes[..., 0] * _at_nodes(1.0 / ((r_e + h) * np.cos(lat))))
-            lat = lat_new
-        return TrackWindow(rate, (lat, lon, h), l_v_grid, a, self.n + 1)
 
 
 # ----- random streams -----------------------------------------------------------------------------------
@@ -344,12 +230,8 @@ class ChunkedSimulation:
         self.chunk_n = max(2, int(round(chunk_s * rate)))  # no one-sample chunk (_ranges)
         self.frame = scenario.local_frame()
         self.motion = MotionProfile.from_scenario(scenario)
-        mount = scenario.mounting
-        self.mounting = Mounting(
-            b_R_d0=rpy_deg_to_matrix(mount.dvl_rpy_deg),
-            b_p_dvl=np.asarray(mount.dvl_lever_arm_m, dtype=float),
-        )
-        self.t_meas, self.t_dvl = _dvl_stamps(
+        self.mounting = record.nominal_mounting(scenario)
+        self.t_meas, self.t_dvl = dvl_stamps(
             rates.dvl_hz, rates.dvl_time_offset_s, float((n - 1) / rate)
         )
         self.n_pings = len(self.t_meas)
@@ -377,7 +259,7 @@ class ChunkedSimulation:
             _skip_normals(imu_rng, 3 * n)
             self._accel_noise_state = copy.deepcopy(imu_rng.bit_generator.state)
 
-        metadata = _metadata(
+        metadata = record.metadata(
             scenario,
             seed,
             white_noise,
@@ -385,17 +267,17 @@ class ChunkedSimulation:
             self.gyro_bias0,
             self.accel_bias0,
             bias_series,
+            given_dvl,
+            self.constant,
         )
-        _sensor_metadata(scenario, metadata)
-        drawn_metadata(metadata, given_dvl, self.constant)
-        origin: GeoOrigin | None = _origin(scenario)
+        origin: GeoOrigin | None = record.map_origin(scenario)
         self.fix_frame: LocalFrame | None = None
         self.gnss_fixes = False  # the log has GNSS fixes
         if scenario.gnss is not None:
             first = self._first_fix()
             self.gnss_fixes = first is not None
             if not scenario.gnss.origin_in_log:
-                self.fix_frame = _fix_frame(scenario, first, metadata)
+                self.fix_frame = record.map_from_first_fix(scenario, first, metadata)
                 origin = None
         self.head = self._head(metadata, origin)
         self.t_first = (
@@ -513,7 +395,7 @@ class ChunkedSimulation:
                 b_p_antenna=np.asarray(sc.gnss.antenna_lever_arm_m, dtype=float),
             )
         )
-        return _log_data(
+        return record.log_data(
             sc,
             self.seed,
             self.gyro_bias0,
@@ -634,7 +516,7 @@ class ChunkedSimulation:
         assert self.head.truth is not None
         if not len(k):
             return _rows(self.head.truth, 0)
-        truth = _truth_at(self.motion, win, self.frame, _padded(k), self.scenario)
+        truth = truth_at(self.motion, win, self.frame, _padded(k), self.scenario)
         if self.fix_frame is not None:
             truth = reframe_truth(truth, self.frame, self.fix_frame)
         return _rows(truth, len(k))  # type: ignore[no-any-return]
@@ -693,7 +575,7 @@ class ChunkedSimulation:
             water,
             water_noise,  # type: ignore[arg-type]
         )
-        dvl.noise_free = not self.white_noise  # as simulate's (sim/simulate.py _log_data)
+        dvl.noise_free = not self.white_noise  # as simulate's (sim/record.py log_data)
         return _rows(dvl, m) if m == 1 else dvl
 
 
@@ -706,13 +588,13 @@ def _depth(
     rng: np.random.Generator | None,
     head: LogData,
 ) -> DepthData:
-    """_depth_at for any number of stamps (one: evaluated doubled, _padded), the noise drawn as _depth_at draws it."""
+    """depth_at for any number of stamps (one: evaluated doubled, _padded), the noise drawn as depth_at draws it."""
     spec = scenario.depth
     assert spec is not None and head.depth is not None
     if len(k) != 1:
-        return _depth_at(scenario, motion, win, frame, k, rng) if len(k) else _rows(head.depth, 0)
+        return depth_at(scenario, motion, win, frame, k, rng) if len(k) else _rows(head.depth, 0)
     fixed = None if rng is None or spec.noise_m <= 0 else _Fixed(rng.standard_normal(1))
-    return _rows(_depth_at(scenario, motion, win, frame, _padded(k), fixed), 1)  # type: ignore[arg-type]
+    return _rows(depth_at(scenario, motion, win, frame, _padded(k), fixed), 1)  # type: ignore[arg-type]
 
 
 def _gnss(

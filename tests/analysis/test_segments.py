@@ -22,15 +22,10 @@ from gtsam_dvl.sim.scenario import Scenario, load_scenario, scenario_from_dict
 
 Row = tuple[float, float, str, str]
 
-# paper-3d (data/scenarios/paper-3d.toml): its Type-I segments with the body axis of their specific-force rate
-# (level: surge along body x; descent and ascent by ballast: vertical, i.e. body z at roll 3 deg, pitch 0)
-PAPER3D_TYPE1 = [
-    (600.0, 660.0, "x"),
-    (660.0, 720.0, "z"),
-    (720.0, 750.0, "x"),
-    (1970.0, 2000.0, "x"),
-    (2000.0, 2060.0, "z"),
-]
+# the body axis of a Type-I segment's specific-force rate by the segment's kind in paper-3d
+# (data/scenarios/paper-3d.toml; its segments, in tests/sim/test_scenario.py's Table 1): level, surge along body x;
+# descent and ascent by ballast, vertical, i.e. body z at roll 3 deg, pitch 0
+TYPE1_AXIS = {"level": "x", "descent": "z", "ascent": "z"}
 # Type-I boundaries: the detector slides 5 s windows over 1 s means, and the C2 blends at a segment's ends keep
 # the specific-force rate below its threshold for a moment: measured within 2 s (paper-3d: 1 s)
 TYPE1_TOL_S = 2.0
@@ -163,10 +158,12 @@ def test_paper3d_static_and_type1_segments_match_the_scenario(paper3d: LogData) 
     s, e, kind, _ = rows[0]
     assert kind == "static" and 595.0 <= e <= 600.0
     type1 = [r for r in rows if r[2].startswith("type1")]
-    assert len(type1) == len(PAPER3D_TYPE1)
-    for (s, e, kind, _), (ts, te, axis) in zip(type1, PAPER3D_TYPE1, strict=True):
+    scenario_type1 = [seg for seg in paper3d.segments if seg.type == "I"]  # the scenario's rows
+    assert len(type1) == len(scenario_type1) == 5
+    for (s, e, kind, _), seg in zip(type1, scenario_type1, strict=True):
+        ts, te = seg.start_s, seg.end_s
         assert abs(s - ts) <= TYPE1_TOL_S and abs(e - te) <= TYPE1_TOL_S, (s, e, ts, te)
-        assert kind == f"type1 (specific-force rate along body {axis})"
+        assert kind == f"type1 (specific-force rate along body {TYPE1_AXIS[seg.kind]})"
 
 
 def test_paper3d_turns_are_the_square_turns(paper3d: LogData, sim_paper3d: Scenario) -> None:

@@ -33,7 +33,7 @@ from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.graph.keyframes import interval_with_snapshots, snapshot_params
 from gtsam_dvl.estimators.inputs.alignment import map_frame_of
 from gtsam_dvl.estimators.inputs.gaps import ImuPieces, find_gaps, sample_starts_with_gaps
-from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator, feed_log
+from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator
 from gtsam_dvl.estimators.online.between_pings import StatePreintegration, predict_at_ping
 from gtsam_dvl.estimators.online.window import StateEstimate
 from gtsam_dvl.factors import PingMotion
@@ -41,6 +41,7 @@ from tests.support.logs import cut_log
 from tests.support.memory import track_returns
 from tests.support.numerical import numerical_jacobian
 from tests.support.scenarios import simulate_variant
+from tests.support.window_memory import run_window
 
 SEED = 7
 T_END_S = 300.0
@@ -418,24 +419,18 @@ def test_keyframe_factors_dropped_by_the_window_are_freed(monkeypatch: pytest.Mo
     """Every PingMotion a keyframe factor holds and every IMU factor is tracked; after the run only those of the
     states still in the window may be alive (and the newest IMU factor, the gravity reference), and none once the
     estimator is gone."""
-    made = track_returns(monkeypatch, PingMotion, "motion")
-    imus = track_returns(monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor)
-    log = run_log(5.0, 200.0)
-    est = OnlineEstimator.for_log(log, config(1.0))
-    feed_log(est, log)
-    assert est.smoother is not None
-    in_window = len(est.smoother.times)
-    alive, alive_imu = made.alive(), imus.alive()
-    print(
-        f"\n{len(made)} keyframe factors made, {alive} alive after the run; {len(imus)} IMU factors, {alive_imu} "
-        f"alive; {in_window} states in the window"
-    )
-    assert len(made) > 30 * in_window and len(imus) > 8 * in_window
-    assert alive <= 4 * in_window
-    assert alive_imu <= in_window
-    del est
-    assert made.alive() == 0
-    assert imus.alive() == 0
+    tracked = {
+        "keyframe factors": track_returns(monkeypatch, PingMotion, "motion"),
+        "IMU factors": track_returns(
+            monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor
+        ),
+    }
+    run = run_window(run_log(5.0, 200.0), config(1.0), tracked, lambda s: len(s.times))
+    made, alive = run.made, run.alive
+    assert made["keyframe factors"] > 30 * run.in_window and made["IMU factors"] > 8 * run.in_window
+    assert alive["keyframe factors"] <= 4 * run.in_window
+    assert alive["IMU factors"] <= run.in_window
+    assert run.alive_after == {"keyframe factors": 0, "IMU factors": 0}
 
 
 @pytest.mark.slow

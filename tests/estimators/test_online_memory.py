@@ -25,7 +25,8 @@ from gtsam_dvl.factors import EarthImuFactor, imu_earth, make_earth_imu_factor
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario
 from tests.support.logs import cut_log
-from tests.support.memory import Made, track_returns
+from tests.support.memory import track_returns
+from tests.support.window_memory import run_window
 
 T_END_S = 400.0  # paper-3d-short: 120 s static, then the Type-I manoeuvres and the first legs
 
@@ -37,39 +38,25 @@ def log() -> LogData:
     )
 
 
-def _tracked_run(
-    log: LogData, monkeypatch: pytest.MonkeyPatch, config: EstimatorConfig
-) -> tuple[OnlineEstimator, Made, Made]:
-    """Run the fixed-lag estimator over the log with a weak reference to every IMU factor it made (the
-    EarthImuFactor and its gtsam.CustomFactor)."""
-    made = track_returns(monkeypatch, FactorMaker, "new_imu_factor")
-    custom = track_returns(monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor)
-    est = OnlineEstimator.for_log(log, config)
-    feed_log(est, log)
-    return est, made, custom
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("preset", ["default", "paper"])
 def test_dropped_imu_factors_are_freed(
     log: LogData, monkeypatch: pytest.MonkeyPatch, preset: str
 ) -> None:
+    """Every IMU factor the estimator made is tracked (the EarthImuFactor and its gtsam.CustomFactor)."""
     config = EstimatorConfig() if preset == "default" else EstimatorConfig.paper()
-    est, made, custom = _tracked_run(log, monkeypatch, config)
-    assert est.smoother is not None
-    in_window = len(est.smoother.imus)
-    alive, alive_custom = made.alive(), custom.alive()
-    print(
-        f"{preset}: {len(made)} IMU factors made, {alive} alive after the run ({alive_custom} CustomFactors), "
-        f"{in_window} in the window, {est.smoother.rebases} rebases"
-    )
-    assert len(made) > 5 * in_window  # the window dropped most of them
+    tracked = {
+        "IMU factors": track_returns(monkeypatch, FactorMaker, "new_imu_factor"),
+        "CustomFactors": track_returns(
+            monkeypatch, FactorMaker, "new_imu_factor", lambda f: f.factor
+        ),
+    }
+    run = run_window(log, config, tracked, lambda smoother: len(smoother.imus))
+    assert run.made["IMU factors"] > 5 * run.in_window  # the window dropped most of them
     # alive: those of the window (the estimator's dict) and the newest (its gravity reference), nothing else
-    assert alive <= in_window + 1
-    assert alive_custom <= in_window + 1
-    del est
-    assert made.alive() == 0
-    assert custom.alive() == 0
+    assert run.alive["IMU factors"] <= run.in_window + 1
+    assert run.alive["CustomFactors"] <= run.in_window + 1
+    assert run.alive_after == {"IMU factors": 0, "CustomFactors": 0}
 
 
 @pytest.mark.slow
