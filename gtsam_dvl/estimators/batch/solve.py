@@ -127,8 +127,8 @@ def solve_log(
         guess = builder.offset_guess()
         builder.offset_centring = {"guess": guess.as_dict()}
         if guess.used:
-            values.update(T_OFFSET, np.array([guess.dt_s]))
-            builder.recentre_time_offset(bulk, guess.dt_s)
+            values.update(T_OFFSET, np.array([guess.guess_s]))
+            builder.recentre_time_offset(bulk, guess.guess_s)
     timing["build"] = time.perf_counter() - t1
     if progress:
         progress(0.2)

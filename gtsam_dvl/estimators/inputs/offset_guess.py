@@ -25,7 +25,7 @@ offset's initial value and the first centre of its IMU windows, never its prior.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -43,23 +43,18 @@ MIN_PAIRS = 30
 
 @dataclass(frozen=True)
 class OffsetGuess:
-    """The first guess dt_s (s), whether the data supported it (used: else dt_s is the prior's mean), the misfit's
-    drop in residual variances (evidence), the pairs of pings used and the reason in words."""
+    """The first guess guess_s (s) of the DVL time offset, whether the data supported it (used: else guess_s is the
+    prior's mean), the misfit's drop in residual variances (evidence), the pairs of pings used and the reason in
+    words (as_dict: info["time_offset_centring"]["guess"], the same names)."""
 
-    dt_s: float
+    guess_s: float
     used: bool
     evidence: float
     pairs: int
     why: str
 
     def as_dict(self) -> dict[str, object]:
-        return {
-            "guess_s": self.dt_s,
-            "used": self.used,
-            "evidence": self.evidence,
-            "pairs": self.pairs,
-            "why": self.why,
-        }
+        return asdict(self)
 
 
 def _attitudes(
