@@ -5,16 +5,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import get_args
 
 import numpy as np
 
 from gtsam_dvl.core.config import OnlineConfig, OnlineMode
 from gtsam_dvl.core.result import CalibrationUnits, Timeline, misalignment_rpy_and_cov
-from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.units import DEG_PER_H, UG
-from gtsam_dvl.estimators.online.window import StateEstimate
+from gtsam_dvl.estimators.online.window import EstimateExtras, StateEstimate
 
 __all__ = [
     "ONLINE_MODES",
@@ -37,10 +36,11 @@ class MessageDropped(UserWarning):
 
 
 @dataclass
-class OnlineEstimate(CalibrationUnits):
+class OnlineEstimate(CalibrationUnits, EstimateExtras):
     """The estimate after one DVL epoch, with marginal covariances given the data so far (SI units, GTSAM
-    tangents: pose [rotation, translation] in body axes, b_R_d perturbed on the right). The properties give
-    the user units of NavResult."""
+    tangents: pose [rotation, translation] in body axes, b_R_d perturbed on the right), and EstimateExtras (the
+    time offset, whether predicted at a ping, the shared states by name). The properties give the user units of
+    NavResult."""
 
     t: float
     n_p: np.ndarray
@@ -58,15 +58,6 @@ class OnlineEstimate(CalibrationUnits):
     b_R_d_cov: np.ndarray  # (3, 3) rad^2
     b_R_d0: np.ndarray
     calib_cov: np.ndarray  # (10, 10) [accel, gyro] bias, scale, b_R_d
-    # the DVL time offset dt_d (s) and its sigma with dvl.estimate_time_offset (else 0 and nan)
-    time_offset_s: float = 0.0
-    time_offset_sigma_s: float = float("nan")
-    # nan: the estimate of the newest state, at its time t; else the estimate at a ping at t between keyframes,
-    # predicted from the newest state (at predicted_from_t, s) through the IMU motion (online/between_pings.py)
-    predicted_from_t: float = float("nan")
-    calibration: dict[str, Estimate] = field(
-        default_factory=dict
-    )  # the shared states by name (core/states.py)
 
     @classmethod
     def from_state(cls, s: StateEstimate, b_R_d0: np.ndarray) -> OnlineEstimate:

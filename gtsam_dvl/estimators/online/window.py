@@ -92,9 +92,24 @@ RECENT = 5  # fixed lag: iSAM2 relinearises the newest RECENT states itself (see
 # RelinearizationThresholds (its threshold_map() gives iSAM2's): gtsam_dvl.core.config, TOML [online.relinearization]
 
 
+@dataclass(kw_only=True)
+class EstimateExtras:
+    """What an online estimate holds beside its state, bias and DVL scale and misalignment (StateEstimate and the
+    user's OnlineEstimate): the DVL time offset dt_d (s) and its marginal sigma with dvl.estimate_time_offset (else
+    0 and nan); predicted_from_t: nan for the estimate of the newest state at its time t, else the estimate at a
+    ping at t between states, predicted from the newest state at predicted_from_t (s: online/between_pings.py
+    predict_at_ping); calibration: the shared states by name (core/states.py)."""
+
+    time_offset_s: float = 0.0
+    time_offset_sigma_s: float = float("nan")
+    predicted_from_t: float = float("nan")
+    calibration: dict[str, Estimate] = field(default_factory=dict)
+
+
 @dataclass
-class StateEstimate:
-    """The newest state, bias and calibration with their joint marginal covariance (SI, GTSAM tangents)."""
+class StateEstimate(EstimateExtras):
+    """The newest state, bias and calibration with their joint marginal covariance (SI, GTSAM tangents), and
+    EstimateExtras."""
 
     index: int
     t: float
@@ -104,15 +119,6 @@ class StateEstimate:
     scale: float
     b_R_d: np.ndarray
     cov: np.ndarray  # (19, 19): pose (6), n_v (3), bias [accel, gyro] (6), scale (1), b_R_d (3)
-    # with dvl.estimate_time_offset: the DVL time offset dt_d (s) and its marginal sigma (nan: not estimated)
-    time_offset_s: float = 0.0
-    time_offset_sigma_s: float = float("nan")
-    # nan: the estimate of state `index` at its time t; else the estimate at a ping at t between states, predicted
-    # from state `index` at predicted_from_t (online/between_pings.py predict_at_ping)
-    predicted_from_t: float = float("nan")
-    calibration: dict[str, Estimate] = field(
-        default_factory=dict
-    )  # the shared states by name (core/states.py)
 
     @property
     def pose_cov(self) -> np.ndarray:
