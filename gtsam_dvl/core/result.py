@@ -220,8 +220,8 @@ class NavResult(CalibrationUnits):
     alignment_method: str
     config: dict[str, Any]  # the effective configuration (EstimatorConfig.to_dict)
     # the indices of the DVL pings the estimator found usable (estimators/inputs/selection.py: before keyframe
-    # thinning),
-    # in the log's DVL data (online: in the order pushed); None: not recorded (a result read from an older file)
+    # thinning), in the log's DVL data (online: in the order pushed); None: not recorded (a result read from an older
+    # file)
     dvl_pings: np.ndarray | None
     # the water current per state when the estimator carried it (water-track pings used), else None
     water_current: WaterCurrentProfile | None

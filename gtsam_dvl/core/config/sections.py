@@ -143,9 +143,8 @@ class DvlConfig(ConfigModel):
     # estimators fit from the residuals ([noise] fit_dvl, core/config/noise.py); set here, it pins the factor
     noise_multiplier: Positive = 1.0
     # a first-order Gauss-Markov velocity error (per dvl_link axis, m/s) and its time constant (s), from a preset
-    # or set here: when > 0 every estimator carries it as a state of each epoch (estimators/models/correlated.py), so
-    # that
-    # the position sigma grows as the error's, and the calibration does not over-trust pings whose errors are
+    # or set here: when > 0 every estimator carries it as a state of each epoch (estimators/models/correlated.py),
+    # so that the position sigma grows as the error's, and the calibration does not over-trust pings whose errors are
     # correlated; 0: the DVL's error is white (the paper's). The default, 2 mm/s over 60 s, is the offset term of
     # a 300-600 kHz bottom-track DVL's long-term accuracy, typical of the class (presets.py)
     correlated_sigma_m_s: NonNegative = 0.002

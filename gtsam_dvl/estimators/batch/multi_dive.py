@@ -126,8 +126,8 @@ class DiveState:
     own: gtsam.Ordering  # the dive's own keys, eliminated in this order
     shared: gtsam.Ordering  # the shared keys, in `states` order
     alone: NavResult  # the dive smoothed alone, with the priors
-    # the states' keys in chunks (estimators/graph/log_graph.py elimination_ordering) and the dive's own shared keys
-    # after
+    # the states' keys in chunks (estimators/graph/log_graph.py elimination_ordering), then the dive's own shared
+    # keys
     plan: ChunkedOrdering = field(default_factory=lambda: ChunkedOrdering([], []), repr=False)
     bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = field(default=None, repr=False)
     calibration: VehicleCalibration | None = field(
