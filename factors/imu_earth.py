@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Generic, TypeVar, cast
 
 import gtsam
@@ -122,28 +123,25 @@ class _ModelData(Generic[T]):
         return cast(T, getattr(obj.model, self.name))
 
 
+@dataclass(eq=False)  # (eq=False: compared and hashed by identity, as the callback object it is)
 class _EarthImuModel:
     """What the CustomFactor's callback needs and nothing else: the wrapped ImuFactor, its parameters, the
     gravity model and reference, M. It holds no reference to its CustomFactor or to the EarthImuFactor, so
     that no reference cycle runs through C++ (module doc, "Memory")."""
 
-    def __init__(
-        self,
-        imu: gtsam.ImuFactor,
-        params: gtsam.PreintegrationParams,
-        dt: float,
-        gravity: GravityModel | None,
-        keys: tuple[int, int, int, int, int],
-        M: np.ndarray,
-    ) -> None:
-        self.imu, self.params, self.dt, self.gravity, self.keys = imu, params, dt, gravity, keys
-        self.M = M  # d(prediction's n_p, n_v) / d n_g
+    imu: gtsam.ImuFactor
+    params: gtsam.PreintegrationParams
+    dt: float
+    gravity: GravityModel | None
+    keys: tuple[int, int, int, int, int]
+    M: np.ndarray  # d(prediction's n_p, n_v) / d n_g
+
+    def __post_init__(self) -> None:
         self.MG: np.ndarray = np.zeros((6, 3))  # M @ ref_G, computed once per reference
         self.MG_of: np.ndarray | None = None  # the ref_G it is of
         self.ref_p: np.ndarray | None = None
-        self.ref_g = np.array(
-            params.n_gravity, dtype=float
-        )  # a copy: the property is a view of the C++ vector
+        # a copy: the property is a view of the C++ vector
+        self.ref_g = np.array(self.params.n_gravity, dtype=float)
         self.ref_G = np.zeros((3, 3))
         self._MG2: np.ndarray = np.zeros((2, 3, 3))
         self._Hs = [np.zeros((9, d), order="F") for d in _DIMS]
