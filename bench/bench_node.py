@@ -27,11 +27,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -42,23 +40,24 @@ from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import load_scenario, scenario_from_dict
 
-SEGMENTS = [
-    {"kind": "static", "duration_s": 45.0},
-    {"kind": "level", "duration_s": 15.0, "speed_end_m_s": 2.0},
-    {"kind": "level", "duration_s": 45.0, "speed_bump_m_s": 0.5},
-    {"kind": "descent", "duration_s": 60.0, "peak_vertical_speed_m_s": 0.8},
-]
+# the node's test harness (its log's segments, files, commands, environment and Listener), shared with its test
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from tests.support.node import (  # noqa: E402
+    SEGMENTS,
+    Listener,
+    cli,
+    config_toml,
+    params_yaml,
+    ros_env,
+)
+
 PLAYER = """
 import json, sys
 from gtsam_dvl.app.node.player import play_log
 out = play_log(sys.argv[1], rate=float(sys.argv[2]), topics=["/imu/data_raw", "/dvl/twist"],
-               wait_for_subscribers_s=60.0, record=True, reliable_depth=100000)
+               wait_for_subscribers_s=60.0, record=True)
 json.dump({"log_ns": out.log_ns, "topics": out.topics, "wall": out.wall, "wall_s": out.wall_s}, open(sys.argv[3], "w"))
 """
-
-
-def cli(*args: object) -> list[str]:
-    return [sys.executable, "-c", "from gtsam_dvl.app.cli import main; main()", *map(str, args)]
 
 
 def stats(x: np.ndarray) -> str:
@@ -67,34 +66,24 @@ def stats(x: np.ndarray) -> str:
 
 
 def run(tmp: Path, mcap: Path, rate: float, env: dict[str, str]) -> dict[str, np.ndarray]:
-    import rclpy
     from nav_msgs.msg import Odometry
-    from rclpy.node import Node
-
-    from gtsam_dvl.app.node.run import new_executor
 
     stats_file, played = tmp / f"stats_{rate:g}.json", tmp / f"played_{rate:g}.json"
     params = tmp / "params.yaml"
     params.write_text(
-        "/**:\n  ros__parameters:\n    imu_topic: /imu/data_raw\n    dvl_topic: /dvl/twist\n"
-        '    pressure_topic: ""\n    gnss_topic: ""\n    path_period_s: 1.0\n'
-        f'    stats_file: "{stats_file}"\n    qos_inputs:\n      reliability: reliable\n'
-        "      depth: 100000\n"
+        params_yaml(
+            imu_topic="/imu/data_raw",
+            dvl_topic="/dvl/twist",
+            pressure_topic="",
+            gnss_topic="",
+            path_period_s=1.0,
+            stats_file=str(stats_file),
+            qos_inputs={"reliability": "reliable", "depth": 100000},
+        )
     )
-    received: list[tuple[int, float]] = []
     decode = MessageDecoder("/gtsam_dvl/odometry", "nav_msgs/msg/Odometry")
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(env["ROS_DOMAIN_ID"]))
-    sub = Node("bench_subscriber", context=context)
-    sub.create_subscription(
-        Odometry,
-        "/gtsam_dvl/odometry",
-        lambda b: received.append((time.monotonic(), b)),
-        10000,
-        raw=True,
-    )
-    executor = new_executor(context)
-    executor.add_node(sub)
+    listener = Listener("bench_subscriber", env)
+    received = listener.record(Odometry, "/gtsam_dvl/odometry", 10000, raw=True)
     node = subprocess.Popen(
         cli("node", "-c", tmp / "cfg.toml", "--params", params),
         env=env,
@@ -104,13 +93,10 @@ def run(tmp: Path, mcap: Path, rate: float, env: dict[str, str]) -> dict[str, np
     player = subprocess.Popen(
         [sys.executable, "-c", PLAYER, str(mcap), str(rate), str(played)], env=env
     )
-    while player.poll() is None:
-        executor.spin_once(timeout_sec=0.05)
+    listener.spin_until(lambda: player.poll() is not None)
     node.send_signal(2)  # SIGINT: the node finishes and writes its stats
-    while node.poll() is None:
-        executor.spin_once(timeout_sec=0.05)
-    sub.destroy_node()
-    rclpy.shutdown(context=context)
+    listener.spin_until(lambda: node.poll() is not None)
+    listener.close()
     timings = json.loads(stats_file.read_text())["timings"]
     play = json.loads(played.read_text())
     pub_wall = {
@@ -153,11 +139,7 @@ def main() -> None:
     raw["rates"] = {**raw["rates"], "imu_hz": args.imu_hz, "dvl_hz": args.dvl_hz}
     log = simulate(scenario_from_dict(raw, name="bench-node"), args.seed)
     assert log.origin is not None
-    env = dict(
-        os.environ,
-        ROS_DOMAIN_ID=str(random.randint(1, 100)),
-        ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-    )
+    env = ros_env()
     print(
         f"log: {log.imu.t[-1] - log.imu.t[0]:.0f} s, IMU {args.imu_hz:g} Hz, DVL {args.dvl_hz:g} Hz; load "
         f"{os.getloadavg()[0]:.2f}; p50 / p99 / max"
@@ -166,12 +148,7 @@ def main() -> None:
         tmp = Path(d)
         mcap = tmp / "bench.mcap"
         write_log(mcap, log)
-        o = log.origin
-        (tmp / "cfg.toml").write_text(
-            f'preset = "paper"\n[alignment]\norigin_lat_deg = {o.lat_deg!r}\norigin_lon_deg = {o.lon_deg!r}\n'
-            f'origin_height_m = {o.height_m!r}\n[online]\nalign_s = 35.0\n[current]\nwater_track = "refuse"\n'
-            "[dvl]\nestimate_time_offset = true\n"
-        )
+        (tmp / "cfg.toml").write_text(config_toml(log, "[dvl]\nestimate_time_offset = true\n"))
         for rate in args.rates:
             r = run(tmp, mcap, rate, env)
             n, total = r["matched"]

@@ -624,7 +624,8 @@ def characterise_to_dir(
     """`gtsam-dvl characterise`: read the log, characterise it, write DIR/characterise.json, allan.png and
     recommended.toml all together (or none). A DIR that exists and holds files is refused unless force; an
     output that is an input is refused before any work."""
-    from gtsam_dvl.app.commands import check_outputs, load_log
+    from gtsam_dvl.app.commands import load_log
+    from gtsam_dvl.app.outputs import check_outputs
     from gtsam_dvl.app.plots.noise_plots import allan_png
     from gtsam_dvl.app.progress import progress_bar
     from gtsam_dvl.io.atomic import OutputSet

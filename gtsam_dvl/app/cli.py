@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from gtsam_dvl.app.cli_options import (
+    ENGINE,
     EXIT_SIGTERM,
     EXIT_UNHEALTHY,
     READING,
@@ -24,18 +25,18 @@ from gtsam_dvl.app.cli_options import (
     Quiet,
     ReadOpts,
     ScenarioArg,
-    SchedulerTimeout,
     Terminated,
     _builtin_scenarios,
     _on_sigterm,
     _state,
     _user_errors,
     app,
-    reads_log,
+    option_groups,
 )
 from gtsam_dvl.core.errors import GtsamDvlError
 
 if TYPE_CHECKING:
+    from gtsam_dvl.app.campaign.cluster import DaskEngine
     from gtsam_dvl.app.commands import SmoothOutcome
     from gtsam_dvl.io.read_options import ReadOptions
 
@@ -85,7 +86,8 @@ def simulate(
     debug: Debug = False,
 ) -> None:
     """Simulate a scenario and write it as a ROS 2 MCAP log with truth."""
-    from gtsam_dvl.app.commands import check_folders, check_outputs, simulate_to_file
+    from gtsam_dvl.app.commands import simulate_to_file
+    from gtsam_dvl.app.outputs import check_folders, check_outputs
 
     check_folders({"-o": output})
     check_outputs(
@@ -100,7 +102,7 @@ def simulate(
 
 @app.command("plot-log")
 @_user_errors
-@reads_log
+@option_groups
 def plot_log(
     log: LogArg,
     output: Annotated[Path, typer.Option("-o", "--output", help="Folder for the PNG figures.")],
@@ -109,7 +111,8 @@ def plot_log(
     debug: Debug = False,
 ) -> None:
     """Write the paper's Figures 1-3 (trajectory, DVL output, IMU output) for a log."""
-    from gtsam_dvl.app.commands import check_folders, plot_log_to_dir
+    from gtsam_dvl.app.commands import plot_log_to_dir
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({}, {"-o": output})
     for path in plot_log_to_dir(
@@ -122,7 +125,7 @@ def plot_log(
 
 @app.command()
 @_user_errors
-@reads_log
+@option_groups
 def info(
     log: LogArg,
     *,
@@ -131,7 +134,7 @@ def info(
 ) -> None:
     """Summarise a log: duration, message counts, rates, mounting, truth calibration; of a result of `smooth -o`,
     its estimator, source log, calibration and health."""
-    from gtsam_dvl.app.commands import describe_log, describe_result
+    from gtsam_dvl.app.info import describe_log, describe_result
 
     as_result = describe_result(log) if log.is_file() else None
     if as_result is not None:
@@ -188,11 +191,12 @@ FleetDir = Annotated[
         "runs in DIR/fleet.md.",
     ),
 ]
-Scheduler = Annotated[
-    str | None,
-    typer.Option(
-        "--scheduler",
-        help="With --out-dir: a running Dask scheduler (default: a LocalCluster here).",
+# with --out-dir, where the logs are smoothed
+FleetEngine = Annotated[
+    "DaskEngine",
+    ENGINE.helped(
+        scheduler="With --out-dir: a running Dask scheduler (default: a LocalCluster here).",
+        workers="With --out-dir: LocalCluster processes.",
     ),
 ]
 CalibrationPrior = Annotated[
@@ -212,9 +216,6 @@ Timeline = Annotated[
 TimelineNpz = Annotated[
     Path | None, typer.Option(help="Timeline arrays file (default <output>.timeline.npz).")
 ]
-Workers = Annotated[
-    int | None, typer.Option("--workers", help="With --out-dir: LocalCluster processes.")
-]
 CalibrationOut = Annotated[
     Path | None, typer.Option(help="Write this run's calibration file (TOML).")
 ]
@@ -226,7 +227,7 @@ Vehicle = Annotated[
 
 @app.command(help=SMOOTH_HELP)
 @_user_errors
-@reads_log
+@option_groups
 def smooth(
     logs: SmoothLogs,
     output: ResultOutput = None,
@@ -241,9 +242,7 @@ def smooth(
     quiet: Quiet = False,
     strict: Strict = False,
     out_dir: FleetDir = None,
-    scheduler: Scheduler = None,
-    workers: Workers = None,
-    scheduler_timeout: SchedulerTimeout = 10.0,
+    engine: FleetEngine,
     calibration: CalibrationPrior = None,
     calibration_out: CalibrationOut = None,
     vehicle: Vehicle = None,
@@ -261,9 +260,7 @@ def smooth(
             mode,
             config,
             read_options,
-            scheduler,
-            workers,
-            scheduler_timeout,
+            engine,
             quiet,
             strict,
         )
@@ -294,9 +291,9 @@ def _check_smooth_folders(
     calibration_out: Path | None,
     out_dir: Path | None,
 ) -> list[Path | None]:
-    """smooth's output paths checked before any work (commands.check_folders: an output file's folder must
+    """smooth's output paths checked before any work (outputs.check_folders: an output file's folder must
     exist, --out-dir's parent too). Returns the output files of one log's run (None: not given)."""
-    from gtsam_dvl.app.commands import check_folders
+    from gtsam_dvl.app.outputs import check_folders
 
     one_log = {
         "-o": output,
@@ -327,9 +324,7 @@ def _smooth_fleet(
     mode: str,
     config: Path | None,
     read_options: ReadOptions,
-    scheduler: str | None,
-    workers: int | None,
-    scheduler_timeout: float,
+    engine: DaskEngine,
     quiet: bool,
     strict: bool,
 ) -> None:
@@ -350,10 +345,8 @@ def _smooth_fleet(
         mode=mode,
         config_path=config,
         read_options=read_options,
-        scheduler=scheduler,
-        workers=workers,
+        engine=engine,
         show_progress=not quiet,
-        scheduler_timeout_s=scheduler_timeout,
     )
     typer.echo("\n".join(fleet_table(rows)))
     for path in written:
@@ -382,7 +375,7 @@ CHARACTERISE_HELP = (
 
 @app.command(help=CHARACTERISE_HELP)
 @_user_errors
-@reads_log
+@option_groups
 def characterise(
     log: LogArg,
     output: Annotated[
@@ -406,7 +399,7 @@ def characterise(
     """Sensor rates, jitter, quantisation, Allan deviation, DVL noise; a recommended configuration (help:
     CHARACTERISE_HELP)."""
     from gtsam_dvl.app.characterise import characterise_to_dir
-    from gtsam_dvl.app.commands import check_folders
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({}, {"-o": output})
     ch = characterise_to_dir(
@@ -453,7 +446,7 @@ EvaluateReadOpts = Annotated[
 
 @app.command()
 @_user_errors
-@reads_log
+@option_groups
 def evaluate(
     result: Annotated[Path, typer.Argument(help="Result MCAP written by `gtsam-dvl smooth -o`.")],
     output: Annotated[
@@ -482,7 +475,8 @@ def evaluate(
     as smooth recorded it, and what reading the truth log lost. Without --truth the source log is read with the
     options smooth recorded (the options given here override them); if it is not found, a line says so and the
     errors against the truth are left out."""
-    from gtsam_dvl.app.commands import check_folders, evaluate_to_dir
+    from gtsam_dvl.app.commands import evaluate_to_dir
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({}, {"-o": output})
     lines, written = evaluate_to_dir(
@@ -509,7 +503,8 @@ def plan(
     debug: Debug = False,
 ) -> None:
     """Will this mission calibrate the DVL, and when? Covariance analysis of a scenario (no noise)."""
-    from gtsam_dvl.app.commands import check_folders, plan_to_dir
+    from gtsam_dvl.app.commands import plan_to_dir
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({}, {"-o": output})
     answer, written = plan_to_dir(scenario, output, config_path=config, show_progress=not quiet)
@@ -584,172 +579,15 @@ def demo(
     debug: Debug = False,
 ) -> None:
     """Simulate the paper's 3-D and 2-D runs, process them and write figures into one folder."""
-    from gtsam_dvl.app.commands import check_folders
     from gtsam_dvl.app.demo import run_demo
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({}, {"-o": output})
     run_demo(output, seed=seed)
 
 
-LIVE_HELP = (
-    "Replay a log through the online estimator and show it live in Foxglove (needs pip install "
-    "'gtsam-dvl[live]').\n\n"
-    "Serves a Foxglove WebSocket on --host:--port and publishes, as they are computed: the estimated pose (/tf "
-    "map -> base_link, /gtsam_dvl/odometry with covariance), the path, DVL scale, misalignment, time offset and "
-    "IMU biases with their sigmas, the estimator's counters and the health warnings, the raw IMU / DVL / depth "
-    "messages and the truth when the log has it. In Foxglove: Open connection > Foxglove WebSocket > "
-    "ws://localhost:8765, then Layouts > Import from file > the layout that `gtsam-dvl live --layout "
-    "gtsam_dvl_live.json` writes (docs/live-view.md)."
-)
-
-
-@app.command(help=LIVE_HELP)
-@_user_errors
-@reads_log
-def live(
-    log: Annotated[
-        Path | None, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")
-    ] = None,
-    layout: Annotated[
-        Path | None,
-        typer.Option(
-            "--layout",
-            help="Write the Foxglove layout of the live view to "
-            "this file (not overwritten; its folder must exist); without a "
-            "LOG, only that.",
-        ),
-    ] = None,
-    speed: Annotated[
-        str, typer.Option(help="Times real time (e.g. 1, 10); 0 or 'max': as fast as possible.")
-    ] = "1",
-    port: Annotated[int, typer.Option(help="WebSocket port (0: any free port, printed).")] = 8765,
-    host: Annotated[
-        str,
-        typer.Option(
-            help="Address to serve on (127.0.0.1: this machine only; 0.0.0.0: every interface)."
-        ),
-    ] = "127.0.0.1",
-    config: ConfigOpt = None,
-    wait: Annotated[
-        bool, typer.Option("--wait", help="Start the replay only once a client subscribes.")
-    ] = False,
-    exit_when_done: Annotated[
-        bool,
-        typer.Option(
-            "--exit-when-done",
-            help="Stop serving when the replay ends (default: serve until Ctrl-C).",
-        ),
-    ] = False,
-    *,
-    read_options: ReadOpts,
-    calibration: Annotated[
-        Path | None, typer.Option(help="A vehicle's calibration file as the prior.")
-    ] = None,
-    debug: Debug = False,
-) -> None:
-    """Replay a log through the online estimator and show it live in Foxglove (help: LIVE_HELP)."""
-    from gtsam_dvl.app.live import serve_log
-
-    _write_live_layout(layout, log)
-    if log is None:  # --layout alone
-        return
-    serve_log(
-        log,
-        speed=speed,
-        port=port,
-        host=host,
-        config_path=config,
-        wait=wait,
-        linger=not exit_when_done,
-        layout_path=layout,
-        calibration_path=calibration,
-        read_options=read_options,
-        echo=typer.echo,
-    )
-
-
-def _write_live_layout(layout: Path | None, log: Path | None) -> None:
-    """live's --layout: the Foxglove layout written when asked; neither a LOG nor --layout: a one-line error."""
-    from gtsam_dvl.app.live import copy_layout
-
-    if layout is not None:
-        typer.echo(f"wrote {copy_layout(layout)}: in Foxglove, Layouts > Import from file")
-    if log is None and layout is None:
-        raise GtsamDvlError(
-            "live: give a LOG to replay (or --layout PATH to write the Foxglove layout)"
-        )
-
-
-NODE_HELP = (
-    "Run the online estimator as a ROS 2 node on live topics (needs pip install 'gtsam-dvl[ros2]').\n\n"
-    "Subscribes the IMU (sensor_msgs/Imu), the DVL (TwistWithCovarianceStamped, TwistStamped or "
-    "marine_acoustic_msgs/Dvl), pressure (FluidPressure) and GNSS (NavSatFix, the map origin); publishes "
-    "nav_msgs/Odometry (map -> base_link with covariances), the calibration with sigmas (Float64MultiArray), "
-    "diagnostics and the path; the service ~/save_calibration writes the vehicle's calibration file. Settings and "
-    "the estimator configuration: -c TOML ([node] table) and/or --params YAML (docs/ros2.md). Arguments after "
-    "--ros-args go to ROS (remappings, -p name:=value)."
-)
-
-
-@app.command(
-    help=NODE_HELP, context_settings={"allow_extra_args": True, "ignore_unknown_options": True}
-)
-@_user_errors
-def node(
-    ctx: typer.Context,
-    config: Annotated[
-        Path | None,
-        typer.Option(
-            "-c",
-            "--config",
-            help="Estimator configuration (TOML, with an "
-            "optional [node] table of the node's settings) or its name.",
-        ),
-    ] = None,
-    params: Annotated[
-        Path | None,
-        typer.Option(
-            "--params",
-            help="ROS parameter file (YAML) with the node's "
-            "settings and estimator.* configuration keys.",
-        ),
-    ] = None,
-    calibration: Annotated[
-        Path | None, typer.Option(help="A vehicle's calibration file as the prior.")
-    ] = None,
-    name: Annotated[str | None, typer.Option(help="The node's name (default gtsam_dvl).")] = None,
-    debug: Debug = False,
-) -> None:
-    """Run the online estimator as a ROS 2 node (help: NODE_HELP)."""
-    from gtsam_dvl.app.node.run import run_node
-
-    run_node(config, params, ctx.args, calibration=calibration, name=name, echo=typer.echo)
-
-
-@app.command()
-@_user_errors
-def play(
-    log: Annotated[Path, typer.Argument(metavar="LOG", help="MCAP log (or rosbag2 directory).")],
-    rate: Annotated[
-        str, typer.Option(help="Times real time (e.g. 1, 10); 'max': as fast as possible.")
-    ] = "1",
-    topic: Annotated[
-        list[str] | None,
-        typer.Option("--topic", help="A topic to play (repeat; default: every sensor topic)."),
-    ] = None,
-    wait: Annotated[
-        float, typer.Option(help="Wait up to this long (s) for a subscriber on every topic.")
-    ] = 0.0,
-    debug: Debug = False,
-) -> None:
-    """Publish a recorded log's messages on their ROS 2 topics, as recorded (needs the ros2 extra)."""
-    from gtsam_dvl.app.live.replay import parse_speed
-    from gtsam_dvl.app.node.player import play_log
-
-    outcome = play_log(
-        log, rate=parse_speed(rate), topics=topic or None, wait_for_subscribers_s=wait
-    )
-    typer.echo(outcome.describe())
+# live, node and play (app/cli_live.py), registered here, at the end of the command list
+from gtsam_dvl.app import cli_live as _cli_live  # noqa: E402, F401
 
 
 def _run_app() -> Any:

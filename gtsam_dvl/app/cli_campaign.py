@@ -9,20 +9,21 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from gtsam_dvl.app.cli_options import (
+    ENGINE,
     EXIT_UNHEALTHY,
     READING,
     ConfigOpt,
     Debug,
     Quiet,
     ScenarioArg,
-    SchedulerTimeout,
     _user_errors,
     app,
-    reads_log,
+    option_groups,
 )
 from gtsam_dvl.core.errors import GtsamDvlError
 
 if TYPE_CHECKING:
+    from gtsam_dvl.app.campaign.cluster import DaskEngine
     from gtsam_dvl.io.read_options import ReadOptions
 
 MONTECARLO_HELP = (
@@ -36,8 +37,18 @@ MONTECARLO_HELP = (
 )
 
 
+CampaignEngine = Annotated[
+    "DaskEngine",
+    ENGINE.helped(
+        scheduler="Address of a running Dask scheduler (default: a LocalCluster here).",
+        workers="LocalCluster processes (default: the cores).",
+    ),
+]
+
+
 @app.command(help=MONTECARLO_HELP)
 @_user_errors
+@option_groups
 def montecarlo(
     scenario: ScenarioArg,
     output: Annotated[
@@ -48,17 +59,8 @@ def montecarlo(
         str, typer.Option("--estimators", help="Comma-separated: batch, online, ekf, online-full.")
     ] = "batch,online,ekf",
     seed_start: Annotated[int, typer.Option("--seed-start", help="First seed.")] = 1,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler",
-            help="Address of a running Dask scheduler (default: a LocalCluster here).",
-        ),
-    ] = None,
-    workers: Annotated[
-        int | None, typer.Option("--workers", help="LocalCluster processes (default: the cores).")
-    ] = None,
-    scheduler_timeout: SchedulerTimeout = 10.0,
+    *,
+    engine: CampaignEngine,
     config: ConfigOpt = None,
     quiet: Quiet = False,
     calibration: Annotated[
@@ -68,7 +70,7 @@ def montecarlo(
 ) -> None:
     """Monte Carlo consistency of the estimators on a scenario (help: MONTECARLO_HELP)."""
     from gtsam_dvl.app.campaign.runner import run_campaign
-    from gtsam_dvl.app.commands import check_folders
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({}, {"-o": output})
     res = run_campaign(
@@ -77,11 +79,9 @@ def montecarlo(
         [e.strip() for e in estimators.split(",") if e.strip()],
         output,
         seed_start=seed_start,
-        scheduler=scheduler,
-        workers=workers,
+        engine=engine,
         config_path=config,
         show_progress=not quiet,
-        scheduler_timeout_s=scheduler_timeout,
         calibration_path=calibration,
     )
     for name, est in res.statistics["estimators"].items():
@@ -114,6 +114,16 @@ DiveReadOpts = Annotated[
 ]
 
 
+# calibrate runs in this process with --workers 1
+DiveEngine = Annotated[
+    "DaskEngine",
+    ENGINE.helped(
+        scheduler="A running Dask scheduler (default: a LocalCluster here).",
+        workers="LocalCluster processes (default: the cores; 1: in this process).",
+    ),
+]
+
+
 CALIBRATE_HELP = (
     "One DVL calibration (scale, misalignment; the lever arm when estimated) from several dives of one vehicle, "
     "on Dask.\n\n"
@@ -130,7 +140,7 @@ CALIBRATE_HELP = (
 
 @app.command(help=CALIBRATE_HELP)
 @_user_errors
-@reads_log
+@option_groups
 def calibrate(
     logs: Annotated[
         list[Path],
@@ -149,25 +159,13 @@ def calibrate(
     config: ConfigOpt = None,
     *,
     read_options: DiveReadOpts,
-    scheduler: Annotated[
-        str | None,
-        typer.Option(
-            "--scheduler", help="A running Dask scheduler (default: a LocalCluster here)."
-        ),
-    ] = None,
-    workers: Annotated[
-        int | None,
-        typer.Option(
-            "--workers", help="LocalCluster processes (default: the cores; 1: in this process)."
-        ),
-    ] = None,
-    scheduler_timeout: SchedulerTimeout = 10.0,
+    engine: DiveEngine,
     quiet: Quiet = False,
     debug: Debug = False,
 ) -> None:
     """One calibration from several dives (help: CALIBRATE_HELP)."""
     from gtsam_dvl.app.campaign.calibrate import calibrate_logs
-    from gtsam_dvl.app.commands import check_folders
+    from gtsam_dvl.app.outputs import check_folders
 
     check_folders({"-o": output}, {"--out-dir": out_dir})
     outcome = calibrate_logs(
@@ -175,12 +173,10 @@ def calibrate(
         output,
         config_path=config,
         read_options=read_options,
-        scheduler=scheduler,
-        workers=workers,
+        engine=engine,
         vehicle=vehicle,
         out_dir=out_dir,
         show_progress=not quiet,
-        scheduler_timeout_s=scheduler_timeout,
     )
     typer.echo(outcome.describe())
     if outcome.calibration is None:

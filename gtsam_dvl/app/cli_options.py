@@ -1,9 +1,10 @@
-"""What the `gtsam-dvl` commands share: the Typer app, the exit codes, the one-line error handling and the reading
-options. Its own module so that app/cli.py and app/cli_campaign.py (the commands) both import it and not each
-other (no import cycle, tests/test_architecture.py)."""
+"""What the `gtsam-dvl` commands share: the Typer app, the exit codes, the one-line error handling and the option
+groups (the reading options, the Dask engine's). Its own module so that the modules of the commands (app/cli.py,
+app/cli_campaign.py, app/cli_live.py) import it and not each other (no import cycle, tests/test_architecture.py)."""
 
 from __future__ import annotations
 
+import copy
 import functools
 import inspect
 import signal
@@ -16,6 +17,7 @@ import typer
 from gtsam_dvl.core.errors import GtsamDvlError
 
 if TYPE_CHECKING:
+    from gtsam_dvl.app.campaign.cluster import DaskEngine
     from gtsam_dvl.io.read_options import ReadOptions
 
 # rich_markup_mode=None: click's plain help, where a boolean flag reads as a flag ("--salvage"); typer 0.29's
@@ -163,76 +165,114 @@ def _read_options(**given: str | bool | None) -> ReadOptions:
     return ReadOptions(**{k: v for k, v in given.items() if v is not None})
 
 
-class ReadingParameters:
-    """The reading options a command takes, as the command-line parameters that give them (each an
-    inspect.Parameter: name, typer annotation, default), in their order in the command's help. Marks the command's
-    `read_options` parameter (ReadOpts); @reads_log puts these in its place."""
+def _dask_engine(
+    scheduler: str | None, workers: int | None, scheduler_timeout: float
+) -> DaskEngine:
+    """Where the Dask tasks run, as --scheduler, --workers and --scheduler-timeout give it."""
+    from gtsam_dvl.app.campaign.cluster import DaskEngine
 
-    def __init__(self, *parameters: inspect.Parameter) -> None:
+    return DaskEngine(scheduler, workers, scheduler_timeout)
+
+
+class OptionGroup:
+    """Options that make one typed value (ReadOptions, DaskEngine) for the commands that take it: each option an
+    inspect.Parameter (name, typer annotation, default), in their order in the command's help, and `make`, which
+    makes the value of them. Marks the command's parameter that takes the value (ReadOpts, Engine);
+    @option_groups puts the options in its place."""
+
+    def __init__(self, make: Callable[..., Any], *parameters: inspect.Parameter) -> None:
+        self.make = make
         self.parameters = parameters
 
-    def only(self, *names: str) -> ReadingParameters:
-        """A command that reads fewer sensors: these options alone."""
-        return ReadingParameters(*(p for p in self.parameters if p.name in names))
+    def only(self, *names: str) -> OptionGroup:
+        """A command that reads fewer sensors: these options alone (the others at their defaults)."""
+        return OptionGroup(self.make, *(p for p in self.parameters if p.name in names))
 
-    def not_given_by_default(self, **annotations: Any) -> ReadingParameters:
+    def not_given_by_default(self, **annotations: Any) -> OptionGroup:
         """These options declared otherwise (name=typer annotation), with the default None: not given."""
-        return ReadingParameters(
+        return OptionGroup(
+            self.make,
             *(
                 p.replace(annotation=annotations[p.name], default=None)
                 if p.name in annotations
                 else p
                 for p in self.parameters
-            )
+            ),
+        )
+
+    def helped(self, **helps: str) -> OptionGroup:
+        """These options with the command's own help (name=text)."""
+        return OptionGroup(
+            self.make,
+            *(_with_help(p, helps[p.name]) if p.name in helps else p for p in self.parameters),
         )
 
 
-def _reading(name: str, annotation: Any, default: Any) -> inspect.Parameter:
+def _with_help(p: inspect.Parameter, text: str) -> inspect.Parameter:
+    """The option p with another help text (a copy of its typer.Option)."""
+    kind, option = get_args(p.annotation)[:2]
+    option = copy.copy(option)
+    option.help = text
+    return p.replace(annotation=Annotated[kind, option])
+
+
+def _option(name: str, annotation: Any, default: Any) -> inspect.Parameter:
     return inspect.Parameter(
         name, inspect.Parameter.KEYWORD_ONLY, annotation=annotation, default=default
     )
 
 
 # Every reading option, declared once for all the commands that read a log (None: not given, ReadOptions' default)
-READING = ReadingParameters(
-    _reading("imu_topic", ImuTopic, "/imu/data_raw"),
-    _reading("dvl_topic", DvlTopic, None),
-    _reading("salvage", Salvage, False),
-    _reading("repair", Repair, False),
-    _reading("depth_topic", DepthTopic, None),
-    _reading("gnss_topic", GnssTopic, None),
-    _reading("attitude_topic", AttitudeTopic, None),
-    _reading("truth_topic", TruthTopic, None),
-    _reading("dvl_water_topic", DvlWaterTopic, None),
+READING = OptionGroup(
+    _read_options,
+    _option("imu_topic", ImuTopic, "/imu/data_raw"),
+    _option("dvl_topic", DvlTopic, None),
+    _option("salvage", Salvage, False),
+    _option("repair", Repair, False),
+    _option("depth_topic", DepthTopic, None),
+    _option("gnss_topic", GnssTopic, None),
+    _option("attitude_topic", AttitudeTopic, None),
+    _option("truth_topic", TruthTopic, None),
+    _option("dvl_water_topic", DvlWaterTopic, None),
 )
-# a command's `read_options` parameter, which @reads_log replaces by the reading options on the command line
+# a command's `read_options` parameter, which @option_groups replaces by the reading options on the command line
 # ("ReadOptions" stays a forward reference: io/read_options.py is imported only when a command runs)
 ReadOpts = Annotated["ReadOptions", READING]
 
+# The Dask engine's options (app/campaign/cluster.py DaskEngine), each command with its own help for the first two
+ENGINE = OptionGroup(
+    _dask_engine,
+    _option("scheduler", Annotated[str | None, typer.Option("--scheduler")], None),
+    _option("workers", Annotated[int | None, typer.Option("--workers")], None),
+    _option("scheduler_timeout", SchedulerTimeout, 10.0),
+)
 
-def reads_log(func: F) -> F:
-    """A command that reads a log: the parameter annotated with a ReadingParameters (ReadOpts), keyword-only, is
-    given on the command line as those options, in its place in the command's help, and passed to the command as
-    the ReadOptions they make (_read_options)."""
+
+def option_groups(func: F) -> F:
+    """A command that takes option groups: each parameter annotated with an OptionGroup (ReadOpts, an ENGINE), keyword
+    only, is given on the command line as the group's options, in its place in the command's help, and passed to
+    the command as the value they make (OptionGroup.make)."""
     signature = inspect.signature(func, eval_str=True)
     parameters = list(signature.parameters.values())
-    [(at, reading)] = [
-        (i, marker)
-        for i, p in enumerate(parameters)
+    groups = {
+        p.name: marker
+        for p in parameters
         for marker in get_args(p.annotation)[1:]
-        if isinstance(marker, ReadingParameters)
-    ]
-    placeholder = parameters[at].name
-    names = [p.name for p in reading.parameters]
+        if isinstance(marker, OptionGroup)
+    }
 
     @functools.wraps(func)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
-        given = {name: kwargs.pop(name) for name in names}
-        return func(*args, **kwargs, **{placeholder: _read_options(**given)})
+        for placeholder, group in groups.items():
+            given = {p.name: kwargs.pop(p.name) for p in group.parameters}
+            kwargs[placeholder] = group.make(**given)
+        return func(*args, **kwargs)
 
-    # what typer reads (inspect.signature, typing.get_type_hints): the options instead of the placeholder
+    # what typer reads (inspect.signature, typing.get_type_hints): the options instead of the placeholders
     spliced = signature.replace(
-        parameters=[*parameters[:at], *reading.parameters, *parameters[at + 1 :]]
+        parameters=[
+            q for p in parameters for q in (groups[p.name].parameters if p.name in groups else [p])
+        ]
     )
     wrapper.__signature__ = spliced  # type: ignore[attr-defined]
     wrapper.__annotations__ = {p.name: p.annotation for p in spliced.parameters.values()}

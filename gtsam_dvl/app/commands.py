@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -13,6 +12,7 @@ import numpy as np
 
 from gtsam_dvl.analysis.geometry import MotionSummary
 from gtsam_dvl.analysis.metrics import path_length
+from gtsam_dvl.app.outputs import check_outputs
 from gtsam_dvl.app.progress import progress_bar
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import StoredResult
@@ -124,158 +124,6 @@ def plot_log_to_dir(
     from gtsam_dvl.app.plots.log_plots import plot_log
 
     return plot_log(load_log(log_path, read_options), Path(out_dir))
-
-
-def describe_log(log_path: Path, read_options: ReadOptions | None = None) -> str:
-    """A few lines about a log: what a navigator wants to know before processing it."""
-    log = load_log(log_path, read_options)
-    return "\n".join(
-        [
-            f"{log_path}",
-            *_sensor_lines(log),
-            *_frame_lines(log),
-            *_stamp_lines(log),
-            *_truth_lines(log),
-        ]
-        + [f"  warning: {warning}" for warning in log.metadata.get("reader_warnings", [])]
-    )
-
-
-def _sensor_lines(log: LogData) -> list[str]:
-    """describe_log's lines on the sensors: message counts, the DVL's beams, water track and altitude, the rates."""
-    imu, dvl = log.imu, log.dvl
-    imu_hz = 1.0 / np.median(np.diff(imu.t))
-    lines = [
-        f"  duration {imu.t[-1] - imu.t[0]:.1f} s, IMU {len(imu)} msgs ({imu_hz:.1f} Hz), "
-        f"DVL {len(dvl)} msgs ({int(dvl.valid.sum())} valid 3-D)",
-    ]
-    if dvl.beams is not None:
-        lines.append(
-            f"  DVL beams: {dvl.beams.v.shape[1]}, valid beam measurements {int(dvl.beams.valid.sum())}"
-        )
-    if dvl.water_track is not None and dvl.water_track.any():
-        lines.append(
-            f"  DVL water track (velocity relative to the water): {int(dvl.water_track.sum())} pings"
-        )
-    if dvl.altitude is not None and np.isfinite(dvl.altitude).any():
-        alt = dvl.altitude[np.isfinite(dvl.altitude)]
-        lines.append(
-            f"  DVL altitude {alt.min():.1f}-{alt.max():.1f} m ({len(alt)} pings with one)"
-        )
-    dvl_hz = 1.0 / np.median(np.diff(dvl.t)) if len(dvl) > 1 else float("nan")
-    lines.append(
-        f"  rates: IMU {imu_hz:.1f} Hz, DVL {dvl_hz:.2f} Hz"
-        + (
-            f", depth {1.0 / np.median(np.diff(log.depth.t)):.2f} Hz ({len(log.depth)} msgs)"
-            if log.depth is not None and len(log.depth) > 1
-            else ", no depth"
-        )
-        + (f", GNSS {len(log.gnss)} msgs" if log.gnss is not None else ", no GNSS")
-    )
-    return lines
-
-
-def _frame_lines(log: LogData) -> list[str]:
-    """describe_log's lines on the frames: the map origin and the sensors' mounting."""
-    from gtsam_dvl.core.rotations import matrix_to_rpy_deg
-
-    lines = []
-    o = log.origin
-    lines.append(
-        f"  map origin: lat {o.lat_deg:.7f} deg, lon {o.lon_deg:.7f} deg, height {o.height_m:.2f} m"
-        if o is not None
-        else "  map origin: none in the log (give --gnss-topic or alignment.origin_lat_deg)"
-    )
-    m = log.mounting
-    lines.append(
-        "  mounting (base_link <- sensor, roll/pitch/yaw deg): IMU "
-        + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_imu))
-        + ", DVL "
-        + " ".join(f"{v:+.2f}" for v in matrix_to_rpy_deg(m.b_R_d0))
-        + f"; lever arm IMU->DVL {np.round(m.b_l, 4).tolist()} m"
-    )
-    return lines
-
-
-def _stamp_lines(log: LogData) -> list[str]:
-    """describe_log's lines on the stamps: the DVL's phase against the IMU's, and the gaps the reader found."""
-    imu, dvl = log.imu, log.dvl
-    lines = []
-    # stamps: where the DVL's fall between IMU samples, and the first stamps' offset (a hint of unsynchronised
-    # clocks; the DVL-IMU time offset itself is only seen by the estimator, from the motion)
-    if len(dvl) and len(imu) > 1:
-        period = float(np.median(np.diff(imu.t)))
-        phase = np.mod(dvl.t - imu.t[0], period) / period
-        lines.append(
-            f"  stamps: first DVL {dvl.t[0] - imu.t[0]:+.3f} s after the first IMU sample; DVL stamps fall "
-            f"at {np.median(phase):.2f} of an IMU period (median)"
-        )
-    gaps = log.metadata.get("reader_losses", {}).get("gaps", {})
-    lines.append(
-        "  gaps: none"
-        if not gaps
-        else "  gaps: "
-        + "; ".join(
-            f"{topic} {g['count']} ({g['seconds']:.1f} s, longest {g['longest_s']:.2f} s)"
-            for topic, g in gaps.items()
-        )
-    )
-    return lines
-
-
-def _truth_lines(log: LogData) -> list[str]:
-    """describe_log's lines on a simulated log's truth: its calibration and its motion."""
-    lines = []
-    cal = log.true_calibration
-    if cal is not None:
-        lines.append(
-            f"  truth: scale {cal.scale}, misalignment [roll, pitch, yaw] {list(cal.misalignment_deg)} deg"
-        )
-    if log.truth is not None and len(log.truth) > 1:
-        tr = log.truth
-        path_m = float(np.sum(np.linalg.norm(np.diff(tr.n_p, axis=0), axis=1)))
-        up = tr.n_p[:, 2]
-        lines.append(
-            f"  truth: {path_m / 1000:.3f} km travelled in {tr.t[-1] - tr.t[0]:.0f} s; height in map from "
-            f"{up.min():+.2f} to {up.max():+.2f} m (start {up[0]:+.2f} m); peak sink "
-            f"{max(0.0, -float(tr.n_v[:, 2].min())):.2f} m/s, "
-            f"peak rise {max(0.0, float(tr.n_v[:, 2].max())):.2f} m/s"
-        )
-    return lines
-
-
-def describe_result(path: Path) -> str | None:
-    """What `info` prints for a result of `smooth -o` (None: the file is not one): that it is a result, its source
-    log and how it was read, then the estimator's summary as smooth printed it (calibration, noise, health)."""
-    import json
-
-    from gtsam_dvl.io.result_writer import TOPICS
-    from gtsam_dvl.io.storage.sources import open_source
-
-    try:
-        src = open_source(Path(path))
-    except (GtsamDvlError, OSError):
-        return None  # not a readable MCAP: describe_log says why
-    if TOPICS["odometry"] not in src.topics or "summary.json" not in src.attachments:
-        return None
-    try:
-        summary = json.loads(src.attachments["summary.json"][1])
-        record = src.metadata.get("gtsam_dvl_result", {})
-        options = json.loads(record["read_options"]) if record.get("read_options") else {}
-        given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
-        body = SmoothOutcome(summary, []).describe().splitlines()
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise GtsamDvlError(
-            f"{path}: a gtsam_dvl result whose summary cannot be read ({type(exc).__name__}: "
-            f"{exc}); smooth the log again"
-        ) from None
-    lines = [
-        f"{path}: a gtsam_dvl result ({summary.get('estimator', '?')}); `gtsam-dvl evaluate {path} -o DIR` "
-        "evaluates it",
-        f"  source log: {record.get('source_log') or 'not recorded'}"
-        + (f" (read with {given})" if given else ""),
-    ]
-    return "\n".join(lines + [line for line in body if line != NOTHING_WRITTEN])
 
 
 NOTHING_WRITTEN = "  wrote nothing (give -o RESULT.mcap, --summary FILE.json or --tum FILE.txt to keep the results)"
@@ -405,75 +253,6 @@ def health_lines(health: dict[str, Any] | None, indent: str = "  ") -> list[str]
         + [f"{indent}  warning: {w}" for w in health.get("warnings", [])]
         + [f"{indent}  note: {n}" for n in health.get("notes", [])]
     )
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    """Same file by inode when both exist (links, other spellings), else by resolved path."""
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-    except OSError:
-        pass
-    return a.resolve() == b.resolve()
-
-
-def check_outputs(inputs: dict[str, Path | None], outputs: dict[str, Path | None]) -> None:
-    """Before any work: refuse an output that is an input (the same file by path, link or inode), lies inside
-    an input bag folder, or is given twice; and check that every output can be written there. inputs and
-    outputs map a name for messages (e.g. "the input log", "--summary") to a path (None: not given)."""
-    from gtsam_dvl.io.atomic import check_writable
-
-    ins = {name: Path(p) for name, p in inputs.items() if p is not None}
-    outs = {name: Path(p) for name, p in outputs.items() if p is not None}
-    for name, out in outs.items():
-        for in_name, inp in ins.items():
-            if _same_file(out, inp):
-                raise GtsamDvlError(
-                    f"{out}: {name} is {in_name} ({inp}); writing it would destroy the input, "
-                    "choose another output path"
-                )
-            if inp.is_dir() and out.resolve().is_relative_to(inp.resolve()):
-                raise GtsamDvlError(
-                    f"{out}: {name} lies inside {in_name}, the bag folder {inp}; write outputs "
-                    "elsewhere"
-                )
-    items = list(outs.items())
-    for i, (name, out) in enumerate(items):
-        for other, path in items[i + 1 :]:
-            if _same_file(out, path):
-                raise GtsamDvlError(
-                    f"{out}: given as both {name} and {other}; each output needs its own path"
-                )
-    for out in outs.values():
-        check_writable(out)
-
-
-def check_folders(
-    files: dict[str, Path | None], folders: dict[str, Path | None] | None = None
-) -> None:
-    """The command line's rule for output paths (docs/command-line.md): the folder of an output file must exist
-    (no folder tree is created for it, a mistyped path is refused); an output folder is created if missing, but
-    only inside a folder that exists, and must not be a file. files / folders map the option's name to its path
-    (None: not given). A one-line GtsamDvlError before any work."""
-    for name, path in files.items():
-        if path is not None and not Path(path).absolute().parent.exists():
-            raise GtsamDvlError(
-                f"{path}: no folder {Path(path).parent} for {name}; create it first (outputs "
-                "never create folder trees)"
-            )
-    for name, path in (folders or {}).items():
-        if path is None:
-            continue
-        path = Path(path)
-        if path.exists() and not path.is_dir():
-            raise GtsamDvlError(
-                f"{path}: is a file, and {name} takes a folder; choose another path"
-            )
-        if not path.absolute().parent.exists():
-            raise GtsamDvlError(
-                f"{path}: no folder {path.parent} to create it in for {name}; create it first "
-                "(outputs never create folder trees)"
-            )
 
 
 def _check_smooth_request(
@@ -711,41 +490,17 @@ def _write_nav_outputs(
     return summ
 
 
-def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
-    """Prior sigmas in the units of Timeline, for normalised-sigma figures."""
-    from gtsam_dvl.core.config import EstimatorConfig
-
-    cfg = EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
-    return {
-        "scale": cfg.priors.scale_sigma,
-        "misalignment_deg": np.array(cfg.priors.misalignment_sigma_deg),
-        "gyro_bias_deg_per_h": np.full(3, cfg.imu.gyro_bias_sigma_deg_per_h),
-        "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug),
-    }
-
-
-def targets_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
-    """The [observability] accuracy targets in the units and keys of priors_for_plots (the scale as a fraction)."""
-    from gtsam_dvl.core.config import EstimatorConfig
-
-    obs = (
-        EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
-    ).observability
-    return {
-        "scale": obs.scale_ppm * 1e-6,
-        "misalignment_deg": obs.misalignment_deg,
-        "gyro_bias_deg_per_h": obs.gyro_bias_deg_per_h,
-        "accel_bias_ug": obs.accel_bias_ug,
-    }
-
-
 def plan_to_dir(
     scenario: str | Path, out_dir: Path, config_path: Path | None = None, show_progress: bool = True
 ) -> tuple[str, list[Path]]:
     """`gtsam-dvl plan`: covariance analysis of a scenario; writes plan.json, plan.md, timeline.npz and
     figures, returns the answer text and the files written."""
     from gtsam_dvl.analysis.planning import plan_mission
-    from gtsam_dvl.app.plots.timeline_plots import plot_normalised_sigmas
+    from gtsam_dvl.app.plots.timeline_plots import (
+        plot_normalised_sigmas,
+        priors_for_plots,
+        targets_for_plots,
+    )
     from gtsam_dvl.core.config import EstimatorConfig
     from gtsam_dvl.io.atomic import atomic_write_bytes, atomic_write_json, atomic_write_text
     from gtsam_dvl.io.result_writer import timeline_npz_bytes
@@ -965,7 +720,11 @@ def _timeline_figures(
     """The calibration's and biases' estimates over time with their sigmas (against the truth when the log has
     it), and the normalised sigmas."""
     from gtsam_dvl.analysis.metrics import truth_in_user_units
-    from gtsam_dvl.app.plots.timeline_plots import plot_estimates, plot_normalised_sigmas
+    from gtsam_dvl.app.plots.timeline_plots import (
+        plot_estimates,
+        plot_normalised_sigmas,
+        priors_for_plots,
+    )
 
     assert res.timeline is not None  # the caller's condition
     written: list[Path] = []

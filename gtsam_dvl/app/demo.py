@@ -10,12 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gtsam_dvl.app.commands import (
-    evaluate_to_dir,
-    priors_for_plots,
-    run_estimator,
-    run_trajectory_estimator,
-)
+from gtsam_dvl.app.commands import evaluate_to_dir, run_estimator, run_trajectory_estimator
 from gtsam_dvl.app.progress import progress_bar
 from gtsam_dvl.core.types import LogData
 
@@ -168,7 +163,7 @@ def demo_run(name: str, run_dir: Path, seed: int, console: Any) -> dict[str, Any
     """One simulated run through every estimator, with figures named after the paper's and a report."""
     from gtsam_dvl.analysis.metrics import truth_in_user_units
     from gtsam_dvl.app.plots.log_plots import plot_log
-    from gtsam_dvl.app.plots.timeline_plots import plot_normalised_sigmas
+    from gtsam_dvl.app.plots.timeline_plots import plot_normalised_sigmas, priors_for_plots
     from gtsam_dvl.app.report import paper_findings, write_run_report
     from gtsam_dvl.io.writer import write_log
     from gtsam_dvl.sim import simulate

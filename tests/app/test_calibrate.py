@@ -12,6 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from gtsam_dvl.app.campaign.calibrate import calibrate_logs
+from gtsam_dvl.app.campaign.cluster import DaskEngine
 from gtsam_dvl.app.cli import app
 from gtsam_dvl.app.commands import simulate_to_file
 from gtsam_dvl.io.calibration_file import read_calibration
@@ -113,7 +114,9 @@ def test_calibrate_on_dask_gives_the_same_calibration(dives: dict[str, Any]) -> 
     )
     here = (
         dives.get("in_process")
-        or calibrate_logs(dives["logs"], workers=1, show_progress=False).calibration
+        or calibrate_logs(
+            dives["logs"], engine=DaskEngine(workers=1), show_progress=False
+        ).calibration
     )
     assert here is not None
     np.testing.assert_allclose(

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gtsam_dvl.app.campaign.cluster import DaskEngine
 from gtsam_dvl.app.campaign.montecarlo import nees_band, run_seed
 from gtsam_dvl.app.campaign.runner import FAIL_SEED_ENV, run_campaign
 from gtsam_dvl.sim.scenario import load_scenario
@@ -48,7 +49,9 @@ def local_campaign(scenario_file: Path, tmp_path_factory: pytest.TempPathFactory
     out = tmp_path_factory.mktemp("mc") / "local"
     os.environ[FAIL_SEED_ENV] = str(FAIL_SEED)  # the workers are spawned now and inherit it
     try:
-        res = run_campaign(scenario_file, RUNS, ESTIMATORS, out, workers=2, show_progress=False)
+        res = run_campaign(
+            scenario_file, RUNS, ESTIMATORS, out, engine=DaskEngine(workers=2), show_progress=False
+        )
     finally:
         del os.environ[FAIL_SEED_ENV]
     assert res.runs_done == RUNS - 1 and [f["seed"] for f in res.failures] == [FAIL_SEED]
@@ -109,7 +112,9 @@ def test_campaign_resumes_without_redoing_finished_seeds(
     (out / "runs" / "seed_000002.json").unlink()  # as if interrupted before seed 2 was written
     before = _seed_files(out)
     stamps = {p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("seed_*.json")}
-    res = run_campaign(scenario_file, RUNS, ESTIMATORS, out, workers=1, show_progress=False)
+    res = run_campaign(
+        scenario_file, RUNS, ESTIMATORS, out, engine=DaskEngine(workers=1), show_progress=False
+    )
     assert res.runs_new == 2 and res.runs_done == RUNS and not res.failures  # seeds 2 and FAIL_SEED
     assert {
         p.name: p.stat().st_mtime_ns for p in (out / "runs").glob("seed_*.json") if p.name in stamps
@@ -120,7 +125,9 @@ def test_campaign_resumes_without_redoing_finished_seeds(
     from gtsam_dvl.core.errors import GtsamDvlError
 
     with pytest.raises(GtsamDvlError, match="holds a campaign with other settings"):
-        run_campaign(scenario_file, RUNS, ["batch"], out, workers=1, show_progress=False)
+        run_campaign(
+            scenario_file, RUNS, ["batch"], out, engine=DaskEngine(workers=1), show_progress=False
+        )
 
 
 def test_campaign_on_a_scheduler_and_two_worker_processes_gives_identical_numbers(
@@ -179,7 +186,7 @@ def test_campaign_on_a_scheduler_and_two_worker_processes_gives_identical_number
             client.wait_for_workers(2, timeout=60)
         out = tmp_path / "remote"
         res = run_campaign(
-            scenario_file, RUNS, ESTIMATORS, out, scheduler=address, show_progress=False
+            scenario_file, RUNS, ESTIMATORS, out, engine=DaskEngine(address), show_progress=False
         )
     finally:
         for p in procs[::-1]:

@@ -340,8 +340,8 @@ def test_fleet_table_says_which_surfacing_figure() -> None:
 def test_normalised_sigma_figure_draws_the_targets(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from gtsam_dvl.app.commands import priors_for_plots, targets_for_plots
     from gtsam_dvl.app.plots import timeline_plots
+    from gtsam_dvl.app.plots.timeline_plots import priors_for_plots, targets_for_plots
     from gtsam_dvl.core.result import Timeline
 
     n = 5
@@ -419,7 +419,7 @@ def test_plan_figure_has_the_target_lines(tmp_path: Path, monkeypatch: pytest.Mo
     commands.plan_to_dir(scenario, tmp_path / "plan", show_progress=False)
     (fig,) = figures
     config = EstimatorConfig.named("default")  # what a scenario without estimator_config plans with
-    obs, priors = config.observability, commands.priors_for_plots(config.to_dict())
+    obs, priors = config.observability, timeline_plots.priors_for_plots(config.to_dict())
     dashed = {
         ax.get_title(): [
             float(line.get_ydata()[0]) for line in ax.get_lines() if line.get_linestyle() == "--"

@@ -6,8 +6,8 @@ the command runs) within 0.1 sigma, and so must every Odometry of a state; the d
 while the DVL is silent and back. SIGINT ends the node: it finishes, publishes its final estimate and writes the
 calibration file and its timings.
 
-rclpy, the message packages and Fast DDS come from the test extra (pyproject.toml): imported here, not skipped,
-so that a missing wheel fails the suite.
+rclpy, the message packages and Fast DDS come from the test extra (pyproject.toml): imported here (rclpy by the
+Listener, tests/support/node.py), not skipped, so that a missing wheel fails the suite.
 """
 
 from __future__ import annotations
@@ -17,15 +17,14 @@ import math
 import signal
 import subprocess
 import time
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from gtsam_dvl.app.node.core import CALIBRATION_ROWS
@@ -38,6 +37,7 @@ from gtsam_dvl.io.ros2.decode import MessageDecoder
 from gtsam_dvl.io.writer import write_log
 from tests.support.node import (
     GAP_S,
+    Listener,
     cli,
     config_toml,
     gap_log,
@@ -50,6 +50,9 @@ from tests.support.node import (
 pytestmark = pytest.mark.xdist_group(name="ros2_node")
 
 RATE = 20.0  # times real time
+# the node's reorder window as long in wall time as its default (0.05 s) at real time: it is there for the delivery's
+# jitter between topics, a wall-time matter, and is given in sensor time, which runs RATE times faster here
+REORDER_WINDOW_S = 0.05 * RATE
 
 
 _odometry = MessageDecoder("/gtsam_dvl/odometry", "nav_msgs/msg/Odometry")
@@ -74,85 +77,18 @@ def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
             vehicle="auv-test",
             stats_file=str(tmp / "stats.json"),
             qos_inputs={"reliability": "reliable", "depth": 100000},
+            reorder_window_s=REORDER_WINDOW_S,
         )
     )
     env = ros_env()
-    odometry: list[tuple[float, bytes]] = []
-    diagnostics: list[tuple[float, Any]] = []
-    calibration: list[Any] = []
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=int(env["ROS_DOMAIN_ID"]))
+    listener = Listener("gtsam_dvl_test_subscriber", env)
     try:
-        sub = Node("gtsam_dvl_test_subscriber", context=context)
-        sub.create_subscription(
-            Odometry,
-            "/gtsam_dvl/odometry",
-            lambda b: odometry.append((time.monotonic(), b)),
-            1000,
-            raw=True,
-        )
-        sub.create_subscription(
-            DiagnosticArray,
-            "/diagnostics",
-            lambda m: diagnostics.append((time.monotonic(), m)),
-            1000,
-        )
-        sub.create_subscription(
-            Float64MultiArray, "/gtsam_dvl/calibration", calibration.append, 1000
-        )
-        executor = SingleThreadedExecutor(context=context)
-        executor.add_node(sub)
-        with open(tmp / "node.log", "w") as out:
-            node = subprocess.Popen(
-                cli("node", "-c", tmp / "cfg.toml", "--params", tmp / "params.yaml"),
-                env=env,
-                stdout=out,
-                stderr=subprocess.STDOUT,
-            )
-            try:
-                player = subprocess.Popen(
-                    cli(
-                        "play",
-                        mcap,
-                        "--rate",
-                        str(RATE),
-                        "--wait",
-                        "60",
-                        "--topic",
-                        "/imu/data_raw",
-                        "--topic",
-                        "/dvl/twist",
-                    ),
-                    env=env,
-                    stdout=subprocess.PIPE,
-                    stderr=subprocess.STDOUT,
-                    text=True,
-                )
-                deadline = time.monotonic() + 120
-                while player.poll() is None and time.monotonic() < deadline:
-                    executor.spin_once(timeout_sec=0.05)
-                played = player.communicate(timeout=10)[0]
-                # the node may still be working through its queue (a loaded machine runs it slower than RATE):
-                # interrupted only once its odometry has gone quiet
-                quiet = time.monotonic()
-                while time.monotonic() < min(deadline, quiet + 3.0):
-                    n = len(odometry)
-                    executor.spin_once(timeout_sec=0.05)
-                    if len(odometry) != n:
-                        quiet = time.monotonic()
-                node.send_signal(signal.SIGINT)
-                while node.poll() is None and time.monotonic() < deadline:
-                    executor.spin_once(timeout_sec=0.05)
-                end = time.monotonic() + 0.5  # the last messages in flight
-                while time.monotonic() < end:
-                    executor.spin_once(timeout_sec=0.05)
-            finally:
-                if node.poll() is None:
-                    node.kill()
-                node.wait(timeout=10)
-        sub.destroy_node()
+        odometry = listener.record(Odometry, "/gtsam_dvl/odometry", raw=True)
+        diagnostics = listener.record(DiagnosticArray, "/diagnostics")
+        calibration = listener.record(Float64MultiArray, "/gtsam_dvl/calibration")
+        node_code, played = _run_node_and_player(listener, odometry, tmp, mcap, env)
     finally:
-        rclpy.shutdown(context=context)
+        listener.close()
     cfg = EstimatorConfig.load(tmp / "cfg.toml")
     reference = run_estimator(read_log(mcap, dvl_topic="/dvl/twist"), "online", cfg)
     return {
@@ -160,12 +96,78 @@ def node_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "log": log,
         "odometry": odometry,
         "diagnostics": diagnostics,
-        "calibration": calibration,
+        "calibration": [m for _, m in calibration],
         "reference": reference,
         "played": played,
         "node_log": (tmp / "node.log").read_text(),
-        "node_code": node.returncode,
+        "node_code": node_code,
     }
+
+
+def _run_node_and_player(
+    listener: Listener,
+    odometry: list[tuple[float, Any]],
+    tmp: Path,
+    mcap: Path,
+    env: dict[str, str],
+) -> tuple[int, str]:
+    """`gtsam-dvl node` and `gtsam-dvl play` in their processes, the listener receiving meanwhile; SIGINT ends the
+    node once its Odometry has gone quiet after the player's end. Returns the node's exit code and what the player
+    printed."""
+    deadline = time.monotonic() + 120
+    with open(tmp / "node.log", "w") as out:
+        node = subprocess.Popen(
+            cli("node", "-c", tmp / "cfg.toml", "--params", tmp / "params.yaml"),
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+        try:
+            player = subprocess.Popen(
+                cli(
+                    "play",
+                    mcap,
+                    "--rate",
+                    str(RATE),
+                    "--wait",
+                    "60",
+                    "--topic",
+                    "/imu/data_raw",
+                    "--topic",
+                    "/dvl/twist",
+                ),
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+            listener.spin_until(lambda: player.poll() is not None, deadline)
+            played = player.communicate(timeout=10)[0]
+            # the node may still be working through its queue (a loaded machine runs it slower than RATE):
+            # interrupted only once its odometry has gone quiet
+            listener.spin_until(_quiet_for(odometry, 3.0), deadline)
+            node.send_signal(signal.SIGINT)
+            listener.spin_until(lambda: node.poll() is not None, deadline)
+            listener.spin_until(
+                lambda: False, time.monotonic() + 0.5
+            )  # the last messages in flight
+        finally:
+            if node.poll() is None:
+                node.kill()
+            node.wait(timeout=10)
+    return node.returncode, played
+
+
+def _quiet_for(received: list[Any], seconds: float) -> Callable[[], bool]:
+    """A done() for Listener.spin_until: True once nothing was appended to received for `seconds`."""
+    seen = {"count": len(received), "at": time.monotonic()}
+
+    def done() -> bool:
+        if len(received) != seen["count"]:
+            seen.update(count=len(received), at=time.monotonic())
+        return time.monotonic() - seen["at"] >= seconds
+
+    return done
 
 
 def test_node_odometry_agrees_with_smooth_online(node_run: dict[str, Any]) -> None:

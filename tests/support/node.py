@@ -1,12 +1,16 @@
-"""The ROS 2 node's tests and benchmark: a short simulated log whose DVL topic stops for a while, its configuration
-and parameter files, the subprocess commands and the environment that keeps DDS on this machine."""
+"""The ROS 2 node's tests and benchmark (bench/bench_node.py): a short simulated log whose DVL topic stops for a
+while, its configuration and parameter files, the subprocess commands, the environment that keeps DDS on this
+machine, and the Listener that receives what the node publishes."""
 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import random
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -104,3 +108,41 @@ def sigma_distance(
     (its GTSAM pose covariance turned into map axes: io/ros2/covariance.py)."""
     sig = np.sqrt(np.diag(ros_pose_covariance(n_R_b, pose_cov))[:3])
     return float(np.max(np.abs(np.asarray(p) - np.asarray(ref)) / sig))
+
+
+class Listener:
+    """An rclpy node of this process in the DDS domain of env (ros_env) whose subscriptions keep what arrives, each
+    with its arrival time (steady clock, s), spun (spin_until) while the node and the player run in theirs."""
+
+    def __init__(self, name: str, env: dict[str, str]) -> None:
+        import rclpy
+        from rclpy.node import Node
+
+        from gtsam_dvl.app.node.run import new_executor
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(env["ROS_DOMAIN_ID"]))
+        self.node = Node(name, context=self.context)
+        self.executor = new_executor(self.context)
+        self.executor.add_node(self.node)
+
+    def record(
+        self, message_type: Any, topic: str, depth: int = 1000, raw: bool = False
+    ) -> list[tuple[float, Any]]:
+        """The list that (arrival time, message) pairs of topic are appended to (raw: the serialized bytes)."""
+        received: list[tuple[float, Any]] = []
+        self.node.create_subscription(
+            message_type, topic, lambda m: received.append((time.monotonic(), m)), depth, raw=raw
+        )
+        return received
+
+    def spin_until(self, done: Callable[[], bool], deadline: float = math.inf) -> None:
+        """Receive until done() or the deadline (steady clock, s)."""
+        while not done() and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        import rclpy
+
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)

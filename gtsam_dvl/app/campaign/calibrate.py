@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gtsam_dvl.analysis.fleet_calibration import DiveVsJoint, dive_vs_joint
-from gtsam_dvl.app.campaign.cluster import SCHEDULER_TIMEOUT_S, dask_client, finished
+from gtsam_dvl.app.campaign.cluster import LOCAL_CLUSTER, DaskEngine, finished
 from gtsam_dvl.core.calibration import SourceLog, VehicleCalibration, config_hash, iso_date
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -271,19 +271,17 @@ def calibrate_logs(
     output: Path | None = None,
     config_path: Path | None = None,
     read_options: ReadOptions | None = None,
-    scheduler: str | None = None,
-    workers: int | None = None,
+    engine: DaskEngine = LOCAL_CLUSTER,
     vehicle: str = "vehicle",
     out_dir: Path | None = None,
     tol: float = TOL,
     show_progress: bool = True,
     client: Any = None,
-    scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
 ) -> CalibrateOutcome:
     """`gtsam-dvl calibrate`: the dives' joint calibration written to `output` (io/calibration_file.py), the
-    per-dive table and figure to out_dir (calibration-fleet.md, .json, .png). On Dask (a LocalCluster of
-    `workers`, a scheduler, or a client given), in this process with workers == 1 and no scheduler, or when
-    Dask is missing and no scheduler was asked for."""
+    per-dive table and figure to out_dir (calibration-fleet.md, .json, .png). On Dask (the engine's LocalCluster
+    or scheduler, or a client given), in this process with engine.workers == 1 and no scheduler, or when Dask is
+    missing and no scheduler was asked for."""
     if not logs:
         raise GtsamDvlError("no logs given")
     for p in logs:
@@ -294,7 +292,7 @@ def calibrate_logs(
     options = read_options
     failures: list[DiveFailure] = []
     t0 = time.perf_counter()
-    engine, solution, summaries, timing, prepared = _solve(
+    where, solution, summaries, timing, prepared = _solve(
         paths,
         cfg,
         options,
@@ -302,13 +300,11 @@ def calibrate_logs(
         tol,
         show_progress,
         client,
-        scheduler,
-        workers,
-        scheduler_timeout_s,
+        engine,
         t0,
     )
     timing = {"prepare": prepared, **timing, "total": time.perf_counter() - t0}
-    outcome = CalibrateOutcome(None, solution, summaries, [], failures, engine, timing)
+    outcome = CalibrateOutcome(None, solution, summaries, [], failures, where, timing)
     if solution is None:
         return outcome
     joint = solution.estimates()
@@ -334,19 +330,17 @@ def _solve(
     tol: float,
     show_progress: bool,
     client: Any,
-    scheduler: str | None,
-    workers: int | None,
-    scheduler_timeout_s: float,
+    engine: DaskEngine,
     t0: float,
 ) -> tuple[str, JointSolution | None, list[DiveSummary], dict[str, float], float]:
     """The dives smoothed alone and solved jointly: in this process (no client, no scheduler, and one worker or
-    no Dask), on the client given, or on a Dask cluster (a scheduler's, else a LocalCluster of `workers`).
-    Returns the engine's words, the joint solution (None: no dive left), the dives' summaries, the timing and
+    no Dask), on the client given, or on the engine's Dask cluster (a scheduler's, else a LocalCluster).
+    Returns where they ran, in words, the joint solution (None: no dive left), the dives' summaries, the timing and
     the seconds from t0 to the dives prepared."""
     from gtsam_dvl.app.progress import progress_bar
 
-    here = client is None and scheduler is None and (workers == 1 or not _has_dask())
-    with _engine(here, client, scheduler, workers, scheduler_timeout_s) as (engine, on):
+    here = client is None and engine.scheduler is None and (engine.workers == 1 or not _has_dask())
+    with _where(here, client, engine) as (where, on):
         started = t0 if on is None else time.perf_counter()  # on Dask: from the client up
         dives: LocalDives | DaskDives
         with progress_bar(f"smoothing {len(paths)} dives alone", enabled=show_progress) as progress:
@@ -359,21 +353,19 @@ def _solve(
         solution, summaries, timing = run_dives(dives, tol)
         if on is not None and show_progress and solution is not None:
             sys.stderr.write(f"joint: {solution.iterations} iterations\n")
-    return engine, solution, summaries, timing, prepared
+    return where, solution, summaries, timing, prepared
 
 
 @contextmanager
-def _engine(
-    here: bool, client: Any, scheduler: str | None, workers: int | None, scheduler_timeout_s: float
-) -> Iterator[tuple[str, Any]]:
+def _where(here: bool, client: Any, engine: DaskEngine) -> Iterator[tuple[str, Any]]:
     """Where the dives run, in words, and the Dask client they run on (None: in this process): the client
-    given, else one to the scheduler or on a LocalCluster of `workers`, closed on exit."""
+    given, else the engine's (a scheduler's, or a LocalCluster), closed on exit."""
     if here:
         yield "in this process", None
     elif client is not None:
         yield "Dask", client
     else:
-        with dask_client(scheduler, workers, scheduler_timeout_s) as c:
+        with engine.client() as c:
             yield f"Dask ({len(c.scheduler_info().get('workers', {}))} workers)", c
 
 

@@ -10,7 +10,8 @@ import logging
 import os
 import sys
 from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass
 from typing import Any, TypeVar
 
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -22,6 +23,24 @@ INSTALL_HINT = "Dask is not installed: pip install 'gtsam-dvl[distributed]' (mak
 SCHEDULER_TIMEOUT_S = (
     10.0  # how long to try to reach a --scheduler before giving up (--scheduler-timeout)
 )
+
+
+@dataclass(frozen=True)
+class DaskEngine:
+    """Where the tasks of a campaign, a fleet or a calibration run (--scheduler, --workers, --scheduler-timeout):
+    a running scheduler at `scheduler` (given up after timeout_s), else a LocalCluster of `workers` processes
+    here (None: the machine's cores)."""
+
+    scheduler: str | None = None
+    workers: int | None = None
+    timeout_s: float = SCHEDULER_TIMEOUT_S
+
+    def client(self) -> AbstractContextManager[Any]:
+        """dask_client on this engine: the Client, closed on exit with the LocalCluster it started."""
+        return dask_client(self.scheduler, self.workers, self.timeout_s)
+
+
+LOCAL_CLUSTER = DaskEngine()  # the default engine: a LocalCluster of the machine's cores
 
 
 def require_dask() -> None:

@@ -7,12 +7,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gtsam_dvl.app.campaign.cluster import (
-    SCHEDULER_TIMEOUT_S,
-    dask_client,
-    finished,
-    require_dask,
-)
+from gtsam_dvl.app.campaign.cluster import LOCAL_CLUSTER, DaskEngine, finished, require_dask
 from gtsam_dvl.core.errors import GtsamDvlError
 
 if TYPE_CHECKING:
@@ -107,10 +102,8 @@ def smooth_fleet(
     mode: str = "batch",
     config_path: Path | None = None,
     read_options: ReadOptions | None = None,
-    scheduler: str | None = None,
-    workers: int | None = None,
+    engine: DaskEngine = LOCAL_CLUSTER,
     show_progress: bool = True,
-    scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
 ) -> tuple[list[dict[str, Any]], list[Path]]:
     """`gtsam-dvl smooth LOG... --out-dir DIR`: every log smoothed in parallel with the same configuration, one
     folder per log (DIR/<log name>/), and a table of all runs (DIR/fleet.json, DIR/fleet.md). Tasks ship the
@@ -128,7 +121,7 @@ def smooth_fleet(
     by_index: dict[
         int, dict[str, Any]
     ] = {}  # rows in the order the logs were given, whatever the completion order
-    with dask_client(scheduler, workers, scheduler_timeout_s) as client:
+    with engine.client() as client:
         futures = {
             client.submit(
                 _smooth_task,

@@ -20,12 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from gtsam_dvl.app.calibration_files import calibration_data
-from gtsam_dvl.app.campaign.cluster import (
-    SCHEDULER_TIMEOUT_S,
-    dask_client,
-    finished,
-    require_dask,
-)
+from gtsam_dvl.app.campaign.cluster import LOCAL_CLUSTER, DaskEngine, finished, require_dask
 from gtsam_dvl.app.campaign.montecarlo import (
     ESTIMATORS,
     campaign_statistics,
@@ -137,9 +132,7 @@ def _run_on_dask(
     calibration: dict[str, Any] | None,
     out_dir: Path,
     failures: list[dict[str, Any]],
-    scheduler: str | None,
-    workers: int | None,
-    scheduler_timeout_s: float,
+    engine: DaskEngine,
     show_progress: bool,
 ) -> None:
     """The seeds still to run and the Cramer-Rao bound (when not written yet) on Dask: campaign.json first once
@@ -150,7 +143,7 @@ def _run_on_dask(
     runs_dir = out_dir / "runs"
     meta_path = out_dir / "campaign.json"
     crb_path = out_dir / "cramer_rao.json"
-    with dask_client(scheduler, workers, scheduler_timeout_s) as client:
+    with engine.client() as client:
         if not meta_path.exists():  # the client is up: the campaign starts, its record first
             atomic_write_json(meta_path, record)
         futures = {
@@ -196,11 +189,9 @@ def run_campaign(
     estimators: list[str],
     out_dir: Path,
     seed_start: int = 1,
-    scheduler: str | None = None,
-    workers: int | None = None,
+    engine: DaskEngine = LOCAL_CLUSTER,
     config_path: Path | None = None,
     show_progress: bool = True,
-    scheduler_timeout_s: float = SCHEDULER_TIMEOUT_S,
     calibration_path: Path | None = None,
 ) -> CampaignResult:
     """Run (or resume) a campaign of seeds seed_start .. seed_start + runs - 1 (module doc). Nothing is written
@@ -234,9 +225,7 @@ def run_campaign(
             calibration,
             out_dir,
             failures,
-            scheduler,
-            workers,
-            scheduler_timeout_s,
+            engine,
             show_progress,
         )
     if crb_path.exists():

@@ -277,7 +277,7 @@ def installed_layout() -> str:
 def copy_layout(path: Path) -> Path:
     """`gtsam-dvl live --layout PATH`: write a copy of the installed layout file to path, for Foxglove's Layouts >
     Import from file. Its folder must exist and an existing file is not overwritten (one-line GtsamDvlError)."""
-    from gtsam_dvl.app.commands import check_folders
+    from gtsam_dvl.app.outputs import check_folders
 
     path = Path(path)
     check_folders({"--layout": path})

@@ -6,21 +6,38 @@ publish): the node receives exactly what `smooth` reads from the log, header sta
 be compared to the last bit. Messages are published in log-time order; message k at wall0 + (log_time_k -
 log_time_0) / rate. Topics whose message package is not importable (tf2_msgs, marine_acoustic_msgs have no wheel)
 are skipped and named.
+
+Every message reaches a reliable subscriber, and soon, also one on a loaded machine. DDS repairs a message a
+subscriber missed (its reception starved of CPU) from the publisher's history once the publisher's heartbeat
+announces it: so each topic's history holds all its messages (they are in memory already; a history of 1000, half
+a second of a 100 Hz IMU at 20x, dropped messages never delivered), and the publishers heartbeat often
+(ros.py fast_repairs). At the end the player waits for every subscriber's acknowledgement (at most ACK_WAIT_S)
+before its publishers go, taking undelivered messages with them.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gtsam_dvl.app.node.ros import import_ros, message_class, qos
+from gtsam_dvl.app.node.ros import (
+    fast_repairs,
+    import_ros,
+    message_class,
+    qos,
+    wait_for_acknowledgements,
+)
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
 from gtsam_dvl.io.storage.sources import Source, open_source
+
+# at the end, how long to wait for the subscribers' acknowledgements
+ACK_WAIT_S = 10.0
 
 
 @dataclass
@@ -52,7 +69,7 @@ def play_log(
     topics: Sequence[str] | None = None,
     remap: dict[str, str] | None = None,
     wait_for_subscribers_s: float = 0.0,
-    reliable_depth: int = 1000,
+    reliable_depth: int | None = None,
     domain_id: int | None = None,
     record: bool = False,
     start: Callable[[], None] | None = None,
@@ -61,8 +78,9 @@ def play_log(
     """Publish a log's messages (module doc) at rate times real time (math.inf: as fast as possible). topics: those
     to play (None: every topic but the truth's and our results'); remap: topic -> published name;
     wait_for_subscribers_s: wait up to this long for each topic to have a subscriber before starting (a late
-    subscriber misses the start); record: keep each publication's time (PlayOutcome); skip(topic, log_ns): leave a
-    message out (a sensor stopping, in a test)."""
+    subscriber misses the start); reliable_depth: each publisher's history (None: the topic's message count, module
+    doc); record: keep each publication's time (PlayOutcome); skip(topic, log_ns): leave a message out (a sensor
+    stopping, in a test)."""
     if not rate > 0:
         raise GtsamDvlError(f"--rate must be > 0 (times real time), got {rate}")
     rclpy = import_ros()
@@ -79,20 +97,22 @@ def play_log(
         )
     out = PlayOutcome()
     classes, rows = _messages(src, chosen, out.skipped)
+    counts = Counter(t for _, t, _ in rows)
     remap = remap or {}
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     try:
         from rclpy.node import Node
 
-        node = Node("gtsam_dvl_player", context=context)
+        with fast_repairs():  # DDS starts with the context's first node
+            node = Node("gtsam_dvl_player", context=context)
         pubs = {
             t: node.create_publisher(
                 cls,
                 remap.get(t, t),
                 qos(
                     "reliable",
-                    100 if t == "/tf_static" else reliable_depth,
+                    100 if t == "/tf_static" else reliable_depth or max(counts[t], 1),
                     latched=t == "/tf_static",
                 ),
             )
@@ -107,7 +127,7 @@ def play_log(
         if start is not None:
             start()
         _publish(rows, pubs, out, rate, skip, record)
-        time.sleep(0.2)  # reliable delivery of the last messages before the publishers go
+        wait_for_acknowledgements(pubs.values(), ACK_WAIT_S)
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)

@@ -15,8 +15,11 @@ from __future__ import annotations
 import importlib
 import json
 import math
+import os
+import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -57,6 +60,55 @@ def message_class(type_name: str) -> Any:
         return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
     except (ImportError, AttributeError):
         return None
+
+
+# Reliable publishers' heartbeat period (Fast DDS's default: 3 s). DDS repairs a message a subscriber missed (its
+# reception starved of CPU on a loaded machine) only once the publisher's heartbeat announces it, and acknowledges
+# only then: with 3 s, a missed DVL ping reached the node seconds after the IMU samples that followed it (20 s of log
+# time at a 20x replay, fed out of order), and waiting for the acknowledgements of the last messages took seconds.
+HEARTBEAT_S = 0.01
+# Fast DDS's default profile for a process's publishers (rmw_fastrtps reads it when DDS starts)
+PROFILES_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"
+PUBLISHER_PROFILE = f"""<?xml version="1.0" encoding="UTF-8" ?>
+<dds xmlns="http://www.eprosima.com">
+  <profiles>
+    <data_writer profile_name="gtsam_dvl_publishers" is_default_profile="true">
+      <times>
+        <heartbeat_period><sec>0</sec><nanosec>{round(HEARTBEAT_S * 1e9)}</nanosec></heartbeat_period>
+      </times>
+    </data_writer>
+  </profiles>
+</dds>
+"""
+
+
+@contextmanager
+def fast_repairs() -> Iterator[None]:
+    """Around the creation of a process's first node (rmw_fastrtps starts DDS then): Fast DDS's publishers with a
+    heartbeat every HEARTBEAT_S, by a default profile it reads then; none when the user gives profiles of their own
+    (PROFILES_VARIABLE, or Fast DDS 2's name), and none in a process whose DDS started before. Other DDS
+    implementations ignore it."""
+    if os.environ.get(PROFILES_VARIABLE) or os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE"):
+        yield
+        return
+    with tempfile.TemporaryDirectory(prefix="gtsam_dvl_dds_") as folder:
+        profile = Path(folder) / "publishers.xml"
+        profile.write_text(PUBLISHER_PROFILE)
+        os.environ[PROFILES_VARIABLE] = str(profile)
+        try:
+            yield
+        finally:
+            del os.environ[PROFILES_VARIABLE]
+
+
+def wait_for_acknowledgements(publishers: Iterable[Any], timeout_s: float) -> None:
+    """Wait until every reliable subscriber acknowledged every message of these publishers, at most timeout_s in all:
+    a publisher destroyed earlier takes the messages a lagging subscriber has not received with it."""
+    from rclpy.duration import Duration
+
+    deadline = time.monotonic() + timeout_s
+    for p in publishers:
+        p.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
 
 
 def qos(reliability: str, depth: int, latched: bool = False) -> Any:
@@ -151,6 +203,14 @@ class RosNode:
             self._guard("timer", self._tick),
             clock=Clock(clock_type=ClockType.STEADY_TIME),
         )
+
+    def publishers(self) -> list[Any]:
+        """The node's output publishers (Odometry, calibration, diagnostics, Path; those turned off left out)."""
+        return [
+            p
+            for p in (self.odometry, self.calibration, self.diagnostics, self.path)
+            if p is not None
+        ]
 
     def say(self, level: str, text: str) -> None:
         """A line on the node's logger at level "info", "warn" or "error" (rclpy wants one severity per call site:

@@ -2,8 +2,8 @@
 
 rclpy's own signal handlers are off (SignalHandlerOptions.NO): they would shut the ROS context down before the node
 could publish its final estimate. Ctrl-C arrives as KeyboardInterrupt and SIGTERM as the command line's Terminated
-(app/cli_options.py), both in the spin loop; the node then finishes (RosNode.shutdown), gives DDS a moment to
-deliver, and closes.
+(app/cli_options.py), both in the spin loop; the node then finishes (RosNode.shutdown), waits until its subscribers
+acknowledged the final messages (ros.py wait_for_acknowledgements), and closes.
 """
 
 from __future__ import annotations
@@ -14,13 +14,12 @@ from pathlib import Path
 from typing import Any
 
 from gtsam_dvl.app.cli_options import Terminated
-from gtsam_dvl.app.node.ros import RosNode, import_ros
+from gtsam_dvl.app.node.ros import RosNode, fast_repairs, import_ros, wait_for_acknowledgements
 from gtsam_dvl.app.node.settings import load_settings
 from gtsam_dvl.core.errors import GtsamDvlError
 
-DELIVER_S = (
-    0.3  # after the final messages, before the context closes: reliable delivery to the subscribers
-)
+# after the final messages, before the context closes: at most this long for the subscribers' acknowledgements
+DELIVER_MAX_S = 5.0
 DRAIN_QUIET_S = (
     0.3  # at a stop, the messages already received are processed until none came for this long
 )
@@ -101,12 +100,13 @@ def run_node(
     try:
         from rclpy.node import Node
 
-        node = Node(
-            name or "gtsam_dvl",
-            context=context,
-            allow_undeclared_parameters=True,
-            automatically_declare_parameters_from_overrides=True,
-        )
+        with fast_repairs():  # DDS starts with the context's first node
+            node = Node(
+                name or "gtsam_dvl",
+                context=context,
+                allow_undeclared_parameters=True,
+                automatically_declare_parameters_from_overrides=True,
+            )
         params = {k: p.value for k, p in node.get_parameters_by_prefix("").items()}
         source = str(params_file) if params_file is not None else "parameters"
         settings, cfg = load_settings(config, params, source=source)
@@ -140,9 +140,7 @@ def run_node(
             if context.ok():
                 drain(executor, ros)
                 ros.shutdown()
-                end = time.monotonic() + DELIVER_S
-                while time.monotonic() < end:
-                    executor.spin_once(timeout_sec=0.05)
+                wait_for_acknowledgements(ros.publishers(), DELIVER_MAX_S)
     finally:
         if node is not None:
             node.destroy_node()

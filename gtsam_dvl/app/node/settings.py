@@ -21,6 +21,7 @@ from typing import Any, ClassVar, Literal
 
 from pydantic import Field
 
+from gtsam_dvl.analysis.live_health import LiveThresholds
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.config.base import ConfigModel, Flag, Integer, NonNegative, Positive
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -33,6 +34,8 @@ DVL_TYPES = (
 Reliability = Literal["best_effort", "reliable"]
 # the parameters every rclpy node declares itself
 RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+# the health verdict's thresholds (analysis/live_health.py), whose defaults are the node's
+HEALTH = LiveThresholds()
 
 
 class QosSettings(ConfigModel):
@@ -100,11 +103,11 @@ class NodeSettings(ConfigModel):
     stamp_jump_s: Positive = 1.0
     # health (diagnostics): the DVL topic silent this long in sensor time: warn, then degraded; the IMU silent this
     # long in wall time: no estimate (stale)
-    dvl_silent_warn_s: Positive = 2.0
-    dvl_silent_degraded_s: Positive = 10.0
+    dvl_silent_warn_s: Positive = HEALTH.dvl_silent_warn_s
+    dvl_silent_degraded_s: Positive = HEALTH.dvl_silent_degraded_s
     # pings arriving but none valid (no bottom lock) this long: warn at once, degraded after this
-    bottom_lock_degraded_s: Positive = 60.0
-    imu_silent_s: Positive = 0.5
+    bottom_lock_degraded_s: Positive = HEALTH.bottom_lock_degraded_s
+    imu_silent_s: Positive = HEALTH.imu_silent_s
     diagnostics_period_s: Positive = 1.0  # wall time; a change of verdict is published at once
     path_period_s: NonNegative = 1.0  # wall time between two Path messages (0: none)
     # a vehicle calibration file as the prior (as smooth --calibration) and where the save service writes one

@@ -1,5 +1,6 @@
 """Calibration and bias estimates with sigmas over time (the paper's Figures 4-9) and normalised sigmas
-(Figure 12), one or several estimators overlaid."""
+(Figure 12), one or several estimators overlaid; the prior sigmas and accuracy targets that normalise them
+(priors_for_plots, targets_for_plots)."""
 
 from __future__ import annotations
 
@@ -267,3 +268,31 @@ def plot_normalised_sigmas(
         ax.set_xlabel("time (s)")
     fig.suptitle(title or "Normalised standard deviations (the paper's Figure 12)")
     return save_figure(fig, path)
+
+
+def priors_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
+    """Prior sigmas in the units of Timeline, for normalised-sigma figures."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    cfg = EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
+    return {
+        "scale": cfg.priors.scale_sigma,
+        "misalignment_deg": np.array(cfg.priors.misalignment_sigma_deg),
+        "gyro_bias_deg_per_h": np.full(3, cfg.imu.gyro_bias_sigma_deg_per_h),
+        "accel_bias_ug": np.full(3, cfg.imu.accel_bias_sigma_ug),
+    }
+
+
+def targets_for_plots(config_dict: dict[str, Any]) -> dict[str, Any]:
+    """The [observability] accuracy targets in the units and keys of priors_for_plots (the scale as a fraction)."""
+    from gtsam_dvl.core.config import EstimatorConfig
+
+    obs = (
+        EstimatorConfig.from_dict(config_dict) if config_dict else EstimatorConfig()
+    ).observability
+    return {
+        "scale": obs.scale_ppm * 1e-6,
+        "misalignment_deg": obs.misalignment_deg,
+        "gyro_bias_deg_per_h": obs.gyro_bias_deg_per_h,
+        "accel_bias_ug": obs.accel_bias_ug,
+    }
