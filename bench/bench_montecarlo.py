@@ -13,6 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from gtsam_dvl.app.campaign.cluster import DaskEngine
 from gtsam_dvl.app.campaign.runner import run_campaign
 
 
@@ -21,7 +22,9 @@ def campaign(
 ) -> tuple[float, float]:
     """(wall time of the campaign, sum of the estimators' own wall times over its runs), seconds."""
     t0 = time.perf_counter()
-    run_campaign(scenario, runs, estimators, folder, workers=workers, show_progress=False)
+    run_campaign(
+        scenario, runs, estimators, folder, engine=DaskEngine(workers=workers), show_progress=False
+    )
     wall = time.perf_counter() - t0
     own = sum(
         sum(e["wall_s"] for e in json.loads(p.read_text())["estimators"].values())
