@@ -74,9 +74,8 @@ def child_simulate(hours: float, out: Path) -> dict[str, Any]:
     from gtsam_dvl.sim.stream import ChunkedSimulation
 
     sc = scenario_from_dict(scenario_hours(hours), f"survey-24h-cut-{hours:g}h", str(SCENARIO))
-    res = write_log_stream(
-        out, ChunkedSimulation(sc, SEED)
-    )  # simulation and writing interleave, chunk by chunk
+    # simulation and writing interleave, chunk by chunk
+    res = write_log_stream(out, ChunkedSimulation(sc, SEED))
     return {
         "simulate_s": res["seconds"] - res["write_seconds"],
         "write_s": res["write_seconds"],

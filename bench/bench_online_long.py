@@ -119,21 +119,18 @@ def cached_log(
 class Run:
     label: str
     hours: float
-    epochs: int = (
-        0  # DVL epochs processed: states (keyframes, states without a ping) and pings between them
-    )
+    # DVL epochs processed: states (keyframes, states without a ping) and pings between them
+    epochs: int = 0
     states: int = 0
     wall_s: float = 0.0
-    cpu_s: float = (
-        0.0  # this process's CPU time over the same span (less affected by a loaded machine)
-    )
+    # this process's CPU time over the same span (less affected by a loaded machine)
+    cpu_s: float = 0.0
     rtf: float = 0.0
     lat_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     cpu_lat_s: np.ndarray = field(default_factory=lambda: np.zeros(0))  # CPU time per epoch
     t_epoch: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    is_state: np.ndarray = field(
-        default_factory=lambda: np.zeros(0, bool)
-    )  # per epoch: a state was made
+    # per epoch: a state was made
+    is_state: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     samples: list[dict[str, float]] = field(default_factory=list)
     info: dict[str, Any] = field(default_factory=dict)
 

@@ -107,9 +107,8 @@ def pieces(scenario: str) -> None:
     from gtsam_dvl.sim import simulate
     from gtsam_dvl.sim.scenario import load_scenario
 
-    gap = (
-        (1070.0, 1100.0) if scenario == "paper-3d" else (285.0, 315.0)
-    )  # in the second (short: first) turn
+    # in the second (short: first) turn
+    gap = (1070.0, 1100.0) if scenario == "paper-3d" else (285.0, 315.0)
     whole = simulate(load_scenario(scenario), seed=3)
     keep = (whole.imu.t <= gap[0]) | (whole.imu.t > gap[1])
     log = dataclasses.replace(whole, imu=_take(whole.imu, keep))

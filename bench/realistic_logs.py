@@ -163,9 +163,8 @@ def _stats(rows: list[dict[str, Any]]) -> dict[str, Any]:
     z_std = {}
     for k in CALIBRATION:
         z = np.array([x["z"][k] for x in ok if math.isfinite(x["z"][k])])
-        z_std[k] = (
-            float(np.sqrt(np.mean(z**2))) if len(z) else math.nan
-        )  # about 0: the truth is the mean
+        # about 0: the truth is the mean
+        z_std[k] = float(np.sqrt(np.mean(z**2))) if len(z) else math.nan
     within = [x["offset_within"] for x in ok if x["offset_within"] is not None]
     return {
         "runs": len(ok),

@@ -114,9 +114,8 @@ def run_one(
         if variant not in variants or (variant.startswith("presets") and preset is base):
             continue
         run_log, cfg = log, preset if variant.startswith("presets") else base
-        if (
-            variant == "presets_free"
-        ):  # every calibration direction estimated, however little the run informs it
+        # every calibration direction estimated, however little the run informs it
+        if variant == "presets_free":
             cfg = _with(cfg, "priors", hold_weak_information=0.0)
         if variant == "white":
             cfg = _with(base, "dvl", correlated_sigma_m_s=0.0)
@@ -148,9 +147,8 @@ def run_one(
             if variant in CAMPAIGN_VARIANTS:
                 row["campaign"] = {**run_errors(res, log), "wall_s": row["wall_s"]}
             solver, ekf = res.info.get("solver") or {}, res.info.get("filter") or {}
-            if solver.get(
-                "dof"
-            ):  # the batch smoother's chi^2/dof after the noise fit, the EKF's NIS/dof
+            # the batch smoother's chi^2/dof after the noise fit, the EKF's NIS/dof
+            if solver.get("dof"):
                 row["chi2_dof"] = 2.0 * float(solver["final_error"]) / float(solver["dof"])
             if "mean_nis_per_dof" in ekf:
                 row["nis_dof"] = float(ekf["mean_nis_per_dof"])

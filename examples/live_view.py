@@ -53,9 +53,8 @@ def main(argv: list[str] | None = None) -> int:
 
     log = simulate(load_scenario(args.scenario), args.seed)  # your drivers instead
     imu, dvl = log.imu, log.dvl
-    estimator = OnlineEstimator.for_log(
-        log
-    )  # map origin and mounting of the log; on a vehicle: from its config
+    # map origin and mounting of the log; on a vehicle: from its config
+    estimator = OnlineEstimator.for_log(log)
     with LiveView(port=args.port, t0_ns=log.t0_ns, mounting=log.mounting) as view:
         print(f"live view on {view.url}", flush=True)
         if args.wait:
@@ -76,9 +75,8 @@ def main(argv: list[str] | None = None) -> int:
             epochs += estimator.push_dvl(t, dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
             view.publish_dvl(t, dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]))
             estimate = estimator.estimate()
-            if (
-                epochs and estimate is not None
-            ):  # a DVL epoch was completed: publish what the estimator knows now
+            # a DVL epoch was completed: publish what the estimator knows now
+            if epochs and estimate is not None:
                 view.publish_epoch(
                     estimate, counters=estimator.counters, latency_s=estimator.latencies_s[-1]
                 )

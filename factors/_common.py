@@ -46,9 +46,8 @@ def as_scale(k: float | np.ndarray) -> float:
 
 def as_vector3(name: str, x: Any) -> np.ndarray:
     """A finite float64 3-vector, or ValueError naming the argument."""
-    arr = np.array(
-        x, dtype=float
-    )  # a copy: the factor must not see later changes to the caller's array
+    # a copy: the factor must not see later changes to the caller's array
+    arr = np.array(x, dtype=float)
     if arr.shape != (3,):
         raise ValueError(f"{name} must be a 3-vector, got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):

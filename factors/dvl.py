@@ -225,9 +225,8 @@ def make_dvl_factor(
         n_v = values.atPoint3(vel_k)  # (a Vector or a Point3 entry)
         if current_k is not None:  # a water-track ping: the velocity relative to the water
             n_v = _water_relative(n_v, values.atVector(current_k))
-        if (
-            bias_k is None and lever_k is None and offset_k is None
-        ):  # (the per-ping path: no second call layer)
+        # (the per-ping path: no second call layer)
+        if bias_k is None and lever_k is None and offset_k is None:
             h, J = dvl_model(
                 values.atPose3(pose_k).rotation().matrix(),
                 n_v,
@@ -245,9 +244,8 @@ def make_dvl_factor(
                 values.atPose3(pose_k),
                 n_v,
                 None if bias_k is None else values.atConstantBias(bias_k),
-                values.atVector(
-                    scale_k
-                ).item(),  # a Python float: cheaper arithmetic than np.float64
+                # a Python float: cheaper arithmetic than np.float64
+                values.atVector(scale_k).item(),
                 values.atRot3(rot_k).matrix(),
                 None if offset_k is None else values.atVector(offset_k).item(),
                 None if lever_k is None else values.atPoint3(lever_k),

@@ -50,9 +50,8 @@ from .so3 import cross, rotate, skew, unrotate
 
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
-_Z33 = np.zeros(
-    (3, 3)
-)  # (the translation block of a ping's pose Jacobian: np.concatenate copies it)
+# (the translation block of a ping's pose Jacobian: np.concatenate copies it)
+_Z33 = np.zeros((3, 3))
 _Z33.setflags(write=False)
 
 

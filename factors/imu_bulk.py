@@ -39,9 +39,8 @@ import numpy as np
 
 from .so3 import exp, inv_right_jacobian, log, right_jacobian, skew
 
-_SMALL = (
-    0.1  # rad: below, the rotation functions' coefficients from their series (closed forms cancel)
-)
+# rad: below, the rotation functions' coefficients from their series (closed forms cancel)
+_SMALL = 0.1
 
 
 def _theta2(phi: np.ndarray) -> np.ndarray:
@@ -193,9 +192,8 @@ def imu_errors(
     dt = f.dt
     x_c = f.x + np.einsum("nij,nj->ni", f.H, bias)
     theta_c, dp_c, dv_c = x_c[:, 0:3], x_c[:, 3:6], x_c[:, 6:9]
-    n_omega_ie = np.broadcast_to(
-        np.asarray(f.n_omega, dtype=float), n_p_i.shape
-    )  # Earth rate in map, rad/s
+    # Earth rate in map, rad/s
+    n_omega_ie = np.broadcast_to(np.asarray(f.n_omega, dtype=float), n_p_i.shape)
     R_U = exp(theta_c)
     AR_i = f.A @ n_R_i
     R_P = AR_i @ R_U

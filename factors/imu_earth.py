@@ -78,9 +78,8 @@ def _gravity_map(
     params is the pim's parameters object: otherwise the prediction would not move (ValueError). Once per
     factor."""
     g0 = np.array(params.n_gravity, dtype=float)
-    Y = np.empty(
-        (4, 6)
-    )  # predicted (n_p, n_v) from the origin at rest, at g0 and at g0 + each probe
+    # predicted (n_p, n_v) from the origin at rest, at g0 and at g0 + each probe
+    Y = np.empty((4, 6))
     try:
         for k, g in enumerate((g0, *(g0 + _PROBES))):
             params.n_gravity = g
@@ -90,9 +89,8 @@ def _gravity_map(
         params.n_gravity = g0
     M = (Y[1:] - Y[0]).T / _PROBE_DG
     dt = pim.deltaTij()
-    if (
-        dt > 0.0 and not np.abs(M[3:]).max() > 0.5 * dt
-    ):  # (no time integrated: gravity has no effect)
+    # (no time integrated: gravity has no effect)
+    if dt > 0.0 and not np.abs(M[3:]).max() > 0.5 * dt:
         raise ValueError(
             "params is not the parameters object the pim was made with: the factor's gravity would not reach "
             "the prediction; pass the PreintegrationParams given to PreintegratedImuMeasurements"
@@ -198,9 +196,8 @@ class EarthImuFactor:
         extra_cov: np.ndarray | None = None,
     ) -> None:
         _check_free(params)  # before the probe, which writes (and restores) the parameters' gravity
-        pim = (
-            imu.preintegratedMeasurements()
-        )  # a copy, sharing the parameters object with the ImuFactor's
+        # a copy, sharing the parameters object with the ImuFactor's
+        pim = imu.preintegratedMeasurements()
         self.model = _EarthImuModel(imu, params, dt, gravity, keys, _gravity_map(pim, params))
         cov = pim.preintMeasCov() if extra_cov is None else pim.preintMeasCov() + extra_cov
         noise = gtsam.noiseModel.Gaussian.Covariance(cov)
@@ -213,9 +210,8 @@ class EarthImuFactor:
     dt = _ModelData[float]("dt")
     gravity = _ModelData["GravityModel | None"]("gravity")
     keys = _ModelData[tuple[int, int, int, int, int]]("keys")
-    gravity_map = _ModelData[np.ndarray](
-        "M"
-    )  # M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)
+    # M (6, 3) = d(predicted n_p, n_v) / d n_g (module doc)
+    gravity_map = _ModelData[np.ndarray]("M")
     ref_p = _ModelData["np.ndarray | None"]("ref_p")
     ref_g = _ModelData[np.ndarray]("ref_g")
     ref_G = _ModelData[np.ndarray]("ref_G")

@@ -207,9 +207,8 @@ def ping_state(
     ping's attitude, A_v_* its velocity, per the pose's right tangent [rotation, translation], the velocity and the
     bias tangent [accelerometer, gyroscope]; None without with_jacobians."""
     e = m.earth
-    assert (
-        m.n_g0 is not None and m.n_p0 is not None and m.n_G is not None
-    )  # (m.earth checked the Earth model)
+    # (m.earth checked the Earth model)
+    assert m.n_g0 is not None and m.n_p0 is not None and m.n_G is not None
     phi = rotate(m.dR_dbg, b_g)
     dR_c = m.dR @ so3.exp(phi)
     dv_c = m.dv + rotate(m.dv_dba, b_a) + rotate(m.dv_dbg, b_g)

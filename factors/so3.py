@@ -16,9 +16,8 @@ import numpy as np
 
 _EYE3 = np.eye(3)
 _EYE3.setflags(write=False)
-_SMALL = (
-    0.1  # rad: below, inv_right_jacobian's coefficient from its series (the closed form cancels)
-)
+# rad: below, inv_right_jacobian's coefficient from its series (the closed form cancels)
+_SMALL = 0.1
 
 
 def skew(a: np.ndarray) -> np.ndarray:
@@ -136,9 +135,8 @@ def log(R: np.ndarray) -> np.ndarray:
     out = w * scale[:, None]
     near_pi = c < -0.99  # sin(theta) small beside pi: the axis from the symmetric part
     for n in np.flatnonzero(near_pi).tolist():
-        uu = (0.5 * (R[n] + R[n].T) - c[n] * _EYE3) / (
-            1.0 - c[n]
-        )  # symmetric part: cos I + (1 - cos) u u^T
+        # symmetric part: cos I + (1 - cos) u u^T
+        uu = (0.5 * (R[n] + R[n].T) - c[n] * _EYE3) / (1.0 - c[n])
         k = int(np.argmax(np.diag(uu)))
         u = uu[:, k] / np.sqrt(uu[k, k])
         u /= np.linalg.norm(u)

@@ -185,9 +185,8 @@ def import_cycles(files: dict[str, Path]) -> list[list[str]]:
 
 def _package_files() -> dict[str, Path]:
     files = {_module_name(p): p for p in PKG.rglob("*.py")}
-    factors = (
-        PKG / "factors"
-    )  # a symlink to the top-level factors/ (pyproject.toml), which rglob does not follow
+    # a symlink to the top-level factors/ (pyproject.toml), which rglob does not follow
+    factors = PKG / "factors"
     files |= {
         "gtsam_dvl.factors." + p.stem if p.stem != "__init__" else "gtsam_dvl.factors": p
         for p in sorted(factors.resolve().glob("*.py"))

@@ -59,9 +59,8 @@ def test_readme_is_a_front_page() -> None:
 def test_relative_links_resolve(doc: Path) -> None:
     broken = []
     for target in LINK.findall(doc.read_text()):
-        if re.match(r"[a-z][a-z0-9+.-]*:", target) or target.startswith(
-            "#"
-        ):  # URL, mail, in-page anchor
+        # URL, mail, in-page anchor
+        if re.match(r"[a-z][a-z0-9+.-]*:", target) or target.startswith("#"):
             continue
         path = target.split("#", 1)[0]
         if not (doc.parent / path).exists():

@@ -169,9 +169,8 @@ def check_calibration(
     chi2, dof = _chi2(d, P0, P1)
     nsigma = config.calibration.moved_sigmas
     alpha = tail_probability(nsigma)
-    threshold = (
-        2.0 * float(gammainccinv(0.5 * dof, alpha)) if dof else math.inf
-    )  # chi^2(dof)'s upper alpha point
+    # chi^2(dof)'s upper alpha point
+    threshold = 2.0 * float(gammainccinv(0.5 * dof, alpha)) if dof else math.inf
     p_value = float(gammaincc(0.5 * dof, 0.5 * chi2)) if dof else 1.0  # P(chi^2(dof) > chi2)
     check = CalibrationCheck(
         str(prior.get("vehicle", "")),
@@ -185,9 +184,8 @@ def check_calibration(
     )
     check.findings = _findings(check, nsigma)
     theirs, ours = prior.get("config_hash"), config_hash(getattr(result, "config", None) or {})
-    if (
-        theirs and getattr(result, "config", None) and theirs != ours
-    ):  # another model: a cause of a move
+    # another model: a cause of a move
+    if theirs and getattr(result, "config", None) and theirs != ours:
         check.findings.append(
             (
                 "note",
@@ -251,9 +249,8 @@ def _chi2(d: np.ndarray, P0: np.ndarray, P1: np.ndarray) -> tuple[float, int]:
     """d^T (P0 - P1)^+ d over the directions the dive informed (module doc), and their number."""
     L = np.linalg.cholesky(P0)
     Li = np.linalg.inv(L)
-    W = (
-        Li @ (P0 - P1) @ Li.T
-    )  # P0 - P1 in P0's metric: eigenvalues = fraction of the variance removed
+    # P0 - P1 in P0's metric: eigenvalues = fraction of the variance removed
+    W = Li @ (P0 - P1) @ Li.T
     lam, U = np.linalg.eigh(0.5 * (W + W.T))
     keep = lam > INFORMED_FRACTION
     y = U[:, keep].T @ (Li @ d)

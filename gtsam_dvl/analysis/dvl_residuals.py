@@ -71,9 +71,8 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
     y_hat = np.stack([np.interp(t_p, result.t, y_state[:, k]) for k in range(3)], axis=1).reshape(
         -1, 3
     )
-    gm_var = (
-        config.correlated_sigma_m_s**2
-    )  # the DVL's correlated error's variance (estimators/models/correlated.py)
+    # the DVL's correlated error's variance (estimators/models/correlated.py)
+    gm_var = config.correlated_sigma_m_s**2
     if config.use_beams and dvl.beams is not None:
         d_u, v, ok = dvl.beams.d_u[j], dvl.beams.v[j], dvl.beams.valid[j]
         ok = ok & np.isfinite(v) & np.isfinite(d_u).all(axis=2)

@@ -50,12 +50,10 @@ class Evaluation:
     segments: list[Segment] = field(default_factory=list)
     shares: dict[str, list[tuple[str, float]]] = field(default_factory=dict)
     metrics: dict[str, Any] = field(default_factory=dict)
-    gnss: SurfacingReport | None = (
-        None  # held-out GNSS fixes and the surfacing error (log with fixes)
-    )
-    determined_at_s: dict[str, float | None] = field(
-        default_factory=dict
-    )  # from the filtering timeline
+    # held-out GNSS fixes and the surfacing error (log with fixes)
+    gnss: SurfacingReport | None = None
+    # from the filtering timeline
+    determined_at_s: dict[str, float | None] = field(default_factory=dict)
     truth_errors: dict[str, Any] | None = None  # metrics.truth_errors against the log's truth
     notes: list[str] = field(default_factory=list)  # printed after the verdict
 
@@ -136,9 +134,8 @@ def truth_error_lines(errors: dict[str, Any]) -> list[str]:
     return out
 
 
-SOURCE_ORIGIN_M = (
-    1000.0  # a truth log's map origin farther than this from the source's: another dive
-)
+# a truth log's map origin farther than this from the source's: another dive
+SOURCE_ORIGIN_M = 1000.0
 
 
 def _utc(t_ns: float) -> str:

@@ -140,9 +140,8 @@ def assess_health(result: NavResult, log: LogData) -> Health:
         health.figures["geometry"] = geometry.as_dict()
         for finding in geometry.findings:
             health.flag(finding.severity, finding.message)
-    judge_calibration(
-        result, health
-    )  # against a calibration file's prior (analysis/calibration_check.py)
+    # against a calibration file's prior (analysis/calibration_check.py)
+    judge_calibration(result, health)
     return health
 
 
@@ -153,9 +152,8 @@ def _check_noise_fit(result: NavResult, health: Health) -> None:
     for entry in (
         (noise.get(s) for s in ("dvl", "depth", "gnss")) if isinstance(noise, dict) else ()
     ):
-        if isinstance(entry, dict) and entry.get(
-            "at_bound"
-        ):  # (the depth's and the fixes' fits likewise)
+        # (the depth's and the fixes' fits likewise)
+        if isinstance(entry, dict) and entry.get("at_bound"):
             health.flag("degraded", str(entry.get("why")))
 
 
@@ -255,9 +253,8 @@ def _check_dvl_residuals(
     """The DVL residuals of the run (dvl_residuals) into figures "dvl_residuals" and flags: windows and stretches
     above their noise, the whole log's fit; the water-track pings judged apart (analysis/water_track.py)."""
     res = dvl_residuals(result, log, config.dvl)
-    check_water_track(
-        result, log, config, res, health.figures, health.flag
-    )  # (analysis/water_track.py)
+    # (analysis/water_track.py)
+    check_water_track(result, log, config, res, health.figures, health.flag)
     used = res.dof > 0
     figures: dict[str, Any] = {
         "pings": int(used.sum()),

@@ -91,9 +91,8 @@ def _check_time_offset(result: NavResult, counters: dict[str, int], health: Heal
     if clipped:
         _check_offset_clip(result, clipped, health)
     centring = result.info.get("time_offset_centring") or {}
-    if (
-        centring.get("consistent") is False
-    ):  # the batch smoother's windows never agreed with its solution
+    # the batch smoother's windows never agreed with its solution
+    if centring.get("consistent") is False:
         health.flag(
             "degraded",
             f"the DVL time offset's IMU windows did not settle on the estimate (centred at "
@@ -101,9 +100,8 @@ def _check_time_offset(result: NavResult, counters: dict[str, int], health: Heal
             f"{centring['sigma_s']:.3f} s) after {centring['recentred']} re-centrings: the offset "
             "model is approximate here (sharp turns with a large offset)",
         )
-    if bounded := counters.get(
-        "time_offset_bounded", 0
-    ):  # the EKF held its offset state at the bound
+    # the EKF held its offset state at the bound
+    if bounded := counters.get("time_offset_bounded", 0):
         health.figures["counters"]["time_offset_bounded"] = bounded
         _check_offset_bound(result, bounded, health)
 
@@ -129,9 +127,8 @@ def _check_imu_gaps(result: NavResult, log: LogData, health: Health) -> None:
     reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(
         losses.get("saturation")
     )
-    if (
-        gaps.get("count") and not reader_saw
-    ):  # an in-memory log: the reader's gap record is not there
+    # an in-memory log: the reader's gap record is not there
+    if gaps.get("count") and not reader_saw:
         text = (
             f"{gaps['count']} IMU gap(s), {gaps['total_s']:.2f} s in all, the longest {gaps['longest_s']:.2f} s, "
             "crossed by holding the last sample (the sigmas grow there)"
@@ -148,9 +145,8 @@ def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
     final estimate is beyond it (the late pings' model is approximate), a note when the estimate came back within
     (a transient: the bound held a filter that was still converging)."""
     config = result.estimator_config or EstimatorConfig()
-    recentred = result.info.get(
-        "time_offset_prior"
-    )  # the EKF's warm-up may move the prior's centre
+    # the EKF's warm-up may move the prior's centre
+    recentred = result.info.get("time_offset_prior")
     centre = (
         float(recentred["centre_s"])
         if isinstance(recentred, dict) and "centre_s" in recentred

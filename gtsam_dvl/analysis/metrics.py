@@ -131,9 +131,8 @@ def current_summary(wc: WaterCurrentProfile, log: LogData) -> dict[str, Any]:
                 }
             )
     out["by_depth"] = layers
-    if (
-        wc.layer_thickness_m is not None
-    ):  # the current per depth layer: each boundary crossed, the change across it
+    # the current per depth layer: each boundary crossed, the change across it
+    if wc.layer_thickness_m is not None:
         out["layers"] = {
             "thickness_m": wc.layer_thickness_m,
             "boundaries": len(wc.layer_boundaries or []),
@@ -170,9 +169,8 @@ def truth_errors(result: NavResult, log: LogData) -> dict[str, Any] | None:
             out["dvl_time_offset_nsigma"] = (
                 result.time_offset_s - cal.time_offset_s
             ) / result.time_offset_sigma_s
-    truth_md = log.metadata.get(
-        "truth"
-    )  # a simulated log's true lever arm (its /tf_static may be wrong)
+    # a simulated log's true lever arm (its /tf_static may be wrong)
+    truth_md = log.metadata.get("truth")
     true_lever = (
         truth_md.get("dvl", {}).get("b_lever_arm_m") if isinstance(truth_md, dict) else None
     )
@@ -252,33 +250,31 @@ def summary(result: NavResult, log: LogData) -> dict[str, Any]:
     }
     out["noise_levels"] = noise_lines(result.info.get("noise"))
     if isinstance(recentred := result.info.get("time_offset_prior"), dict) and recentred.get("why"):
-        out["noise_levels"].append(
-            str(recentred["why"])
-        )  # the EKF's warm-up: where its offset prior was centred
+        # the EKF's warm-up: where its offset prior was centred
+        out["noise_levels"].append(str(recentred["why"]))
     if np.isfinite(result.time_offset_sigma_s):
         out["dvl_time_offset_s"] = time_offset_verdict(result)
     if result.lever_arm_m is not None and result.lever_arm_cov is not None:
         out["dvl_lever_arm_m"] = lever_arm_verdict(result, log)
-    if isinstance(
-        hold := result.info.get("calibration_hold"), dict
-    ):  # (estimators/models/weak_hold.py)
+    # (estimators/models/weak_hold.py)
+    if isinstance(hold := result.info.get("calibration_hold"), dict):
         out["calibration_hold"] = hold
     if (wc := result.water_current) is not None:
         out["water_current"] = current_summary(wc, log)
     errors = truth_errors(result, log)
     if errors is not None:
         out["errors"] = errors
+    # health reads the config, which metrics does not need
     from gtsam_dvl.analysis.health import (
-        assess_health,  # health reads the config, which metrics does not need
+        assess_health,
     )
 
     out["health"] = assess_health(result, log).as_dict()
     # the motion and the weak calibration directions (analysis/geometry.py; their sentences are health warnings
     # or notes)
     out["geometry"] = out["health"]["figures"].get("geometry")
-    if (
-        "calibration_check" in out["health"]["figures"]
-    ):  # against a calibration file (analysis/calibration_check.py)
+    # against a calibration file (analysis/calibration_check.py)
+    if "calibration_check" in out["health"]["figures"]:
         out["calibration_check"] = out["health"]["figures"]["calibration_check"]
     out["losses"] = log.metadata.get("reader_losses", {})
     return out

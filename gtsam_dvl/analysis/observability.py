@@ -42,12 +42,10 @@ from gtsam_dvl.core.types import LogData, Mounting, Segment
 
 DETERMINED = 0.5
 NOT_DETERMINED = 0.9
-LEVER_DETERMINED = (
-    1.0 / 3.0
-)  # the lever arm's "determined": posterior sigma below a third of the prior's
-TIME_OFFSET_DETERMINED = (
-    0.1  # the time offset's "determined": posterior sigma below a tenth of the prior's
-)
+# the lever arm's "determined": posterior sigma below a third of the prior's
+LEVER_DETERMINED = 1.0 / 3.0
+# the time offset's "determined": posterior sigma below a tenth of the prior's
+TIME_OFFSET_DETERMINED = 0.1
 
 
 def _rows(states: list[SharedState]) -> list[tuple[str, str, str]]:
@@ -80,9 +78,8 @@ class StateVerdict:
     posterior_sigma: float
     ratio: float
     verdict: str
-    hours_to_halve: float | None = (
-        None  # at this log's information rate; None when already determined
-    )
+    # at this log's information rate; None when already determined
+    hours_to_halve: float | None = None
     credited_segments: list[str] = field(default_factory=list)  # filled by attribute_segments
 
     target_sigma: float | None = None  # the useful accuracy it is judged against ([observability])
@@ -155,9 +152,8 @@ class ObservabilityReport:
     states: list[StateVerdict]
     directions: list[DirectionVerdict]  # sorted from least to best determined
     duration_s: float
-    lever_arm: list[StateVerdict] = field(
-        default_factory=list
-    )  # x, y, z with [dvl] estimate_lever_arm
+    # x, y, z with [dvl] estimate_lever_arm
+    lever_arm: list[StateVerdict] = field(default_factory=list)
     time_offset: list[StateVerdict] = field(default_factory=list)  # with [dvl] estimate_time_offset
 
     def for_plan(self) -> ObservabilityReport:
@@ -504,9 +500,8 @@ def attribute_segments(
     report's states (StateVerdict.credited_segments); returns every state's shares, largest first."""
     sig = _timeline_sigmas(timeline)
     p0 = np.array([s.prior_sigma for s in report.states])
-    log_sig = np.log(
-        np.minimum(np.vstack([p0, sig]), p0)
-    )  # the prior is the sigma before the first epoch
+    # the prior is the sigma before the first epoch
+    log_sig = np.log(np.minimum(np.vstack([p0, sig]), p0))
     t = np.concatenate([[timeline.t[0] - 1e-9], timeline.t])
     total = log_sig[0] - log_sig[-1]
     shares: dict[str, list[tuple[str, float]]] = {}

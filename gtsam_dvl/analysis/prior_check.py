@@ -76,17 +76,15 @@ def prior_distances(
     around the mounting the result was made with (its b_R_d0 from /tf_static, the log's lever arm)."""
     mounting = dataclasses.replace(log.mounting, b_R_d0=np.asarray(result.b_R_d0, dtype=float))
     out: dict[str, PriorDistance] = {}
-    from_file = (result.info.get("calibration_prior") or {}).get(
-        "states", []
-    )  # judged by calibration_check.py
+    # judged by calibration_check.py
+    from_file = (result.info.get("calibration_prior") or {}).get("states", [])
     for s in STATES:
         est = result.calibration.get(s.name)
         if est is None or not s.enabled(config) or s.per_state(config) or s.name in from_file:
             continue
         prior = s.prior(config, mounting)
-        if (
-            s.kind == "rot3"
-        ):  # R_c's rotation vector about body axes (the prior's sigmas are about them)
+        # R_c's rotation vector about body axes (the prior's sigmas are about them)
+        if s.kind == "rot3":
             offset = so3_log(
                 np.asarray(est.value, dtype=float) @ np.asarray(prior.value, dtype=float).T
             )
@@ -108,9 +106,8 @@ def check_priors(result: NavResult, log: LogData, config: EstimatorConfig) -> Pr
             continue
         s = d.state
         what = s.component_texts()[k]
-        if (
-            straight and s.name == "accel_bias" and k == 0
-        ):  # the forward axis on one heading: the pitch coupling
+        # the forward axis on one heading: the pitch coupling
+        if straight and s.name == "accel_bias" and k == 0:
             report.findings.append(("degraded", _pitch_coupling(what, d, s)))
             continue
         text = (
@@ -139,9 +136,8 @@ def heading_span_deg(result: NavResult) -> float:
 
 def _pitch_coupling(what: str, d: PriorDistance, s: SharedState) -> str:
     """The warning for a forward accelerometer bias far from its prior on a straight run (STRAIGHT_SPAN_DEG)."""
-    pitch_deg = float(
-        np.degrees(d.offset_display[0] * 1e-6)
-    )  # a bias of 1 micro-g is a pitch of 1e-6 rad
+    # a bias of 1 micro-g is a pitch of 1e-6 rad
+    pitch_deg = float(np.degrees(d.offset_display[0] * 1e-6))
     return (
         f"{what} is {abs(d.z[0]):.1f} prior sigmas from its prior ({_amount(s, d.offset_display[0])} off) on a "
         f"straight run: on one heading the forward accelerometer bias trades against the pitch (a pitch or DVL "

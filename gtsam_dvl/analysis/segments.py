@@ -34,9 +34,8 @@ def classify_log(log: LogData) -> list[Segment]:
     for k, seg in enumerate(detect_type1_segments(imu)):
         sel = (starts >= seg.start_s - 0.5) & (ends <= seg.end_s + 0.5) & (labels != "static")
         axis = "xyz"[int(np.argmax(np.abs(seg.axis)))]
-        labels[sel] = (
-            f"type1 (specific-force rate along body {axis})#{k}"  # '#k' keeps neighbours apart
-        )
+        # '#k' keeps neighbours apart
+        labels[sel] = f"type1 (specific-force rate along body {axis})#{k}"
     rows: list[dict[str, Any]] = []
     for s, e, lab in zip(starts, ends, labels, strict=True):
         if rows and rows[-1]["kind"] == lab:

@@ -63,9 +63,8 @@ class SurfacingReport:
     counters: dict[str, int]
     checks: list[FixCheck] = field(default_factory=list)
     surfacing: FixCheck | None = None
-    surfacing_mean: FixCheck | None = (
-        None  # mean over the last interval's held-out fixes (module doc)
-    )
+    # mean over the last interval's held-out fixes (module doc)
+    surfacing_mean: FixCheck | None = None
     surfacing_fixes: int = 0  # how many fixes surfacing_mean averages
     n_intervals: int = 0
 
@@ -93,9 +92,8 @@ def antenna_estimate(
     """Estimated antenna position (3,) in map at t_i + dt and its covariance (3, 3), map axes (module doc)."""
     R = res.n_R_b[i]
     p = res.n_p[i] + R @ b_p_a + dt * res.n_v[i]
-    J = np.hstack(
-        (-R @ skew(b_p_a), R, dt * np.eye(3))
-    )  # [rotation (body), translation (body), n_v]
+    # [rotation (body), translation (body), n_v]
+    J = np.hstack((-R @ skew(b_p_a), R, dt * np.eye(3)))
     P = pose_velocity_covariance(
         res.pose_cov[i],
         res.vel_cov[i],
@@ -125,9 +123,8 @@ def surfacing_report(
         return None
     report = SurfacingReport(config.gnss.use, plan.counters(), n_intervals=plan.n_intervals)
     dist = distance_travelled(res)
-    held = np.flatnonzero(
-        plan.mask("held_out")
-    ).tolist()  # the fixes behind report.checks, in their order
+    # the fixes behind report.checks, in their order
+    held = np.flatnonzero(plan.mask("held_out")).tolist()
     for k in held:
         i, dt = int(plan.state[k]), float(plan.dt[k])
         p, P = antenna_estimate(res, i, plan.b_p_antenna, dt)

@@ -30,12 +30,10 @@ from gtsam_dvl.core.result import NavResult, WaterCurrentProfile
 from gtsam_dvl.core.types import DvlData, LogData
 from gtsam_dvl.estimators.inputs.selection import ping_covariance, water_covariance
 
-WATER_RMS_WARN = (
-    2.0  # whitened RMS of the water-track residuals above which the current model does not fit
-)
-FALSE_LOCK_CHI2 = (
-    16.27  # chi^2 (3 dof) 0.999 quantile: a bottom-track ping that disagrees with the ground
-)
+# whitened RMS of the water-track residuals above which the current model does not fit
+WATER_RMS_WARN = 2.0
+# chi^2 (3 dof) 0.999 quantile: a bottom-track ping that disagrees with the ground
+FALSE_LOCK_CHI2 = 16.27
 WATER_AGREES_CHI2 = 7.81  # chi^2 (3 dof) 0.95 quantile: ...and agrees with the water track
 STRETCH_GAP_S = 5.0  # water-track pings further apart than this are two stretches
 
@@ -96,9 +94,8 @@ def check_water_track(
         "used": profile is not None,
     }
     figures["water_track"] = fig
-    if (
-        profile is None
-    ):  # refused: counted and judged by analysis/health_counters.py (dvl_water_track)
+    # refused: counted and judged by analysis/health_counters.py (dvl_water_track)
+    if profile is None:
         return
     flag(
         "note",

@@ -285,9 +285,8 @@ def dvl_section(log: LogData, config: EstimatorConfig, progress: Any = None) -> 
     }
     dof = solver.get("dof")
     out["chi2_per_dof"] = (2.0 * float(solver["final_error"]) / int(dof)) if dof else None
-    used = (
-        result.noise_config or fit_config
-    )  # the levels the smoother used (the fitted DVL factor among them)
+    # the levels the smoother used (the fitted DVL factor among them)
+    used = result.noise_config or fit_config
     res = dvl_residuals(result, log, used.dvl)
     out["dvl_chi2_per_dof"] = res.rms() ** 2 if res.dof.sum() > 0 else None
     out["use_beams"] = used.dvl.use_beams
@@ -394,9 +393,8 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
     if sigma is not None and np.isfinite(sigma) and not dvl.get("at_bound"):
         key = "beam_noise_m_s" if dvl.get("use_beams") else "noise_m_s"
         rec["dvl"][key] = _sig(float(sigma))
-        if dvl.get(
-            "use_beams"
-        ):  # the sigma is a beam's: only with the beam factors it was fitted with (which
+        # the sigma is a beam's: only with the beam factors it was fitted with (which
+        if dvl.get("use_beams"):
             rec["dvl"]["use_beams"] = True  # take no time offset)
             rec["dvl"]["estimate_time_offset"] = False
         rec["why"].append(
@@ -405,9 +403,8 @@ def recommend(config: EstimatorConfig, imu: dict[str, Any], dvl: dict[str, Any])
             f"{dvl.get('multiplier', 1.0):.3g} on the stated) and the level its 30-60 s means show"
         )
         gm = (dvl.get("residuals") or {}).get("gauss_markov")
-        if (
-            gm and gm["significant"]
-        ):  # the estimators then carry it as a state (estimators/models/correlated.py)
+        # the estimators then carry it as a state (estimators/models/correlated.py)
+        if gm and gm["significant"]:
             rec["dvl"]["correlated_sigma_m_s"] = _sig(float(gm["gm_sigma_m_s"]))
             rec["dvl"]["correlated_tau_s"] = _sig(float(gm["gm_tau_s"]))
             rec["why"] += [

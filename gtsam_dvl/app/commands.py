@@ -346,9 +346,8 @@ def smooth_file(
         EstimatorConfig.load(config_path)
     t_read = time.perf_counter()
     with progress_bar(f"reading {Path(log_path).name}", enabled=show_progress) as read_progress:
-        log = load_log(
-            log_path, read_options, progress=read_progress
-        )  # (a day: docs/results.md, Speed)
+        # (a day: docs/results.md, Speed)
+        log = load_log(log_path, read_options, progress=read_progress)
     read_s = time.perf_counter() - t_read
     config = _configuration(config_path, log)
     result, prior = _run_with_prior(

@@ -164,9 +164,8 @@ def from_result(
         for b in blocks:
             cov[col : col + b.shape[0], col : col + b.shape[0]] = b
             col += b.shape[0]
-        if (
-            getattr(result, "calib_joint_cov", None) is not None
-        ):  # the online estimator's: scale and misalignment
+        # the online estimator's: scale and misalignment
+        if getattr(result, "calib_joint_cov", None) is not None:
             from gtsam_dvl.core.states import (  # jointly from the calibration block
                 BY_NAME,
                 block_states,

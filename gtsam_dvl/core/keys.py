@@ -31,9 +31,8 @@ K_SCALE = shared_key("k", 1)
 C_MISALIGN = shared_key("c", 3)
 T_OFFSET = shared_key("t", 1)  # DVL-IMU time offset dt_d, s (a 1-vector; docs/conventions.md)
 L_LEVER = shared_key("l", 3)  # lever arm b_l IMU -> DVL, m, base_link (a 3-vector)
-K_WATER = shared_key(
-    "q", 1
-)  # the water-track pings' own scale factor (a 1-vector; [current] water_track_scale)
+# the water-track pings' own scale factor (a 1-vector; [current] water_track_scale)
+K_WATER = shared_key("q", 1)
 
 
 def X(i: int) -> int:

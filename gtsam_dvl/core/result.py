@@ -114,9 +114,8 @@ class WaterCurrentProfile:
     prior_sigma_m_s: float
     time_rw_m_s_per_sqrt_s: float
     depth_rw_m_s_per_sqrt_m: float
-    water_track_sigma_m_s: (
-        float | str
-    )  # "from the messages" when the pings' own covariances are used
+    # "from the messages" when the pings' own covariances are used
+    water_track_sigma_m_s: float | str
     max_speed_m_s: float
     verdict: str
     water_track_states: int | None = None
@@ -202,9 +201,8 @@ class NavResult(CalibrationUnits):
     ]  # the estimated shared states by name (final; or the constants)
     b_R_d0: np.ndarray  # nominal mounting
     t0_ns: int
-    b_omega: (
-        np.ndarray | None
-    )  # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
+    # (N, 3) rad/s body rate relative to map at each state (gyro - bias - earth)
+    b_omega: np.ndarray | None
     pose_vel_cross: np.ndarray | None  # (N, 6, 3) cross-covariance of pose tangent and n_v
     # (10, 10) joint of the calibration block (states.block_states): [accel, gyro] bias, scale, b_R_d right tangent
     calib_joint_cov: np.ndarray | None
@@ -406,9 +404,8 @@ class NavResult(CalibrationUnits):
         dvl_update: dict[str, float] = {}
         if multiplier is not None and math.isfinite(float(multiplier)):
             dvl_update["noise_multiplier"] = float(multiplier)
-        gm = noise.get(
-            "dvl_correlated"
-        )  # the batch smoother's fitted correlated error (estimators/models/correlated_fit.py)
+        # the batch smoother's fitted correlated error (estimators/models/correlated_fit.py)
+        gm = noise.get("dvl_correlated")
         if isinstance(gm, dict) and all(
             isinstance(gm.get(k), float) and math.isfinite(gm[k]) and gm[k] > 0
             for k in ("sigma_m_s", "tau_s")

@@ -27,18 +27,15 @@ import numpy as np
 
 from gtsam_dvl.core.errors import GtsamDvlError
 
-ON_GRID_FRACTION = (
-    0.99  # a series is quantised when at least this fraction of its values lies on the grid
-)
-GRID_TOLERANCE = (
-    1e-3  # of the step: a value within this of a grid point lies on it (plus its storage rounding)
-)
+# a series is quantised when at least this fraction of its values lies on the grid
+ON_GRID_FRACTION = 0.99
+# of the step: a value within this of a grid point lies on it (plus its storage rounding)
+GRID_TOLERANCE = 1e-3
 # a step is told from the storage format's own rounding only when it spans this many units in the last place
 # of the series' largest value (float32 stores 9.8 m/s^2 to 9.5e-7: a 1e-4 step is 105 of them)
 MIN_STEP_ULPS = 16.0
-CANDIDATE_CLUSTERS = (
-    4  # the most frequent spacings between levels tried as steps, each divided by 1..MAX_DIVISOR
-)
+# the most frequent spacings between levels tried as steps, each divided by 1..MAX_DIVISOR
+CANDIDATE_CLUSTERS = 4
 MAX_DIVISOR = 6
 # the refinement's passes use the levels within these many steps of the reference level: each pass makes the step
 # precise enough for the next window (a step off by 1e-3 assigns k correctly up to a few hundred steps)
@@ -275,14 +272,12 @@ class GaussMarkovFit:
     gm_tau_s: float
     significant: bool
     samples: int
-    gm_sigma_noise: (
-        float  # the sampling std of sg^2 under white noise, as a sigma (sqrt of it): for reports
-    )
+    # the sampling std of sg^2 under white noise, as a sigma (sqrt of it): for reports
+    gm_sigma_noise: float
 
 
-LAG_TOLERANCE = (
-    0.25  # of the nominal spacing: a pair whose stamp difference is this close to k dt is at lag k
-)
+# of the nominal spacing: a pair whose stamp difference is this close to k dt is at lag k
+LAG_TOLERANCE = 0.25
 SIGNIFICANCE_SIGMAS = 3.0
 
 
@@ -293,9 +288,8 @@ def autocovariance(
     over the columns: at lag k the mean product of the pairs whose stamps differ by k dt_nominal within
     LAG_TOLERANCE dt_nominal (gaps in the stamps leave pairs out). Returns (C (max_lag + 1,), pairs per lag)."""
     c, n = np.zeros(max_lag + 1), np.zeros(max_lag + 1, dtype=int)
-    chunk = max(
-        1, 2_000_000 // max(len(t), 1)
-    )  # lags at once: the pair search in bulk, bounded memory
+    # lags at once: the pair search in bulk, bounded memory
+    chunk = max(1, 2_000_000 // max(len(t), 1))
     for k0 in range(0, max_lag + 1, chunk):
         lags = np.arange(k0, min(k0 + chunk, max_lag + 1))
         target = t[None, :] + lags[:, None] * dt_nominal  # (lags, N)

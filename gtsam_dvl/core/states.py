@@ -65,9 +65,8 @@ class Prior:
     value: np.ndarray
     sigma: np.ndarray
     axes: np.ndarray | None = None
-    display_sigma: np.ndarray | None = (
-        None  # the sigmas as the configuration gives them, when in the display unit
-    )
+    # the sigmas as the configuration gives them, when in the display unit
+    display_sigma: np.ndarray | None = None
 
     @property
     def cov(self) -> np.ndarray:
@@ -113,20 +112,17 @@ class SharedState:
     display_unit: str  # the unit it is shown in
     to_display: float  # display = tangent * to_display
     prior: Callable[[EstimatorConfig, Mounting], Prior]
-    target: (
-        Callable[[ObservabilityConfig], float] | None
-    )  # accuracy target, display unit (None: no target)
+    # accuracy target, display unit (None: no target)
+    target: Callable[[ObservabilityConfig], float] | None
     vehicle: bool  # a property of the vehicle (calibration carried across dives), else of one dive
     # what each tangent component is, for verdicts: (suffix of its name, words); one ("", "") for a scalar
     components: tuple[tuple[str, str], ...]
     enabled: Callable[[EstimatorConfig], bool] = _always  # whether the configuration estimates it
     offset: int = 0  # where its tangent starts in its key's
-    per_state: Callable[[EstimatorConfig], bool] = (
-        _never  # a variable per state (the random-walk bias)
-    )
-    in_block: bool = (
-        False  # in the joint calibration block (NavResult.calib_joint_cov, the direction analysis)
-    )
+    # a variable per state (the random-walk bias)
+    per_state: Callable[[EstimatorConfig], bool] = _never
+    # in the joint calibration block (NavResult.calib_joint_cov, the direction analysis)
+    in_block: bool = False
     ekf: bool = True  # the EKF carries it in its error state
     # the online estimator's iSAM2 relinearises it past these (per tangent component); None: not estimated online
     relinearization: Callable[[RelinearizationThresholds], np.ndarray] | None = None
@@ -551,9 +547,8 @@ def prior_factors(
             )
         else:
             out.append(gtsam.PriorFactorVector(key, value, noise))
-    if enabled(
-        config, "water_scale"
-    ):  # the water-track scale differs from the bottom track's by a fraction
+    # the water-track scale differs from the bottom track's by a fraction
+    if enabled(config, "water_scale"):
         k0 = config.priors.scale_initial
         s = config.current.water_track_scale_sigma * k0
         link = gtsam.JacobianFactor(
@@ -634,9 +629,8 @@ def calibration_prior(
     kinds = {s.key: s.kind for s in states}
     start = dict(zip(keys, np.cumsum([0] + [key_dim(k) for k in keys]).tolist(), strict=False))
     cols = np.concatenate([start[s.key] + s.offset + np.arange(s.dim) for s in states])
-    S = np.zeros(
-        (len(cols), len(cols))
-    )  # row r (the calibration's order) reads column cols[r] of the keys'
+    # row r (the calibration's order) reads column cols[r] of the keys'
+    S = np.zeros((len(cols), len(cols)))
     S[np.arange(len(cols)), cols] = 1.0
     x0 = {k: _key_value(states, k, calibration.values) for k in keys}
     noise = gtsam.noiseModel.Gaussian.Covariance(calibration.block([s.name for s in states]))

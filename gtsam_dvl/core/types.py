@@ -110,9 +110,8 @@ class DvlCalibration:
 
     scale: float
     misalignment_deg: tuple[float, float, float]
-    time_offset_s: float = (
-        0.0  # DVL-IMU time offset dt_d: the ping stamped t measures the velocity at t + dt_d
-    )
+    # DVL-IMU time offset dt_d: the ping stamped t measures the velocity at t + dt_d
+    time_offset_s: float = 0.0
 
     @property
     def R_c(self) -> np.ndarray:
@@ -244,9 +243,8 @@ class LogData:
     mounting: Mounting = field(default_factory=Mounting)
     truth: TruthData | None = None
     t0_ns: int = 0  # ROS time of t = 0
-    metadata: dict[str, Any] = field(
-        default_factory=dict
-    )  # scenario, seed, sensor spec, reader warnings
+    # scenario, seed, sensor spec, reader warnings
+    metadata: dict[str, Any] = field(default_factory=dict)
     source: str = ""  # file the data came from, for messages
     origin: GeoOrigin | None = None  # map origin, when the log records one
     true_calibration: DvlCalibration | None = None  # simulated logs
@@ -254,6 +252,5 @@ class LogData:
     segments: list[Segment] = field(default_factory=list)  # simulated logs: the scenario's segments
     depth: DepthData | None = None  # pressure sensor or depth topic, when the log has one
     gnss: GnssData | None = None  # GNSS fixes (at the surface), when the log has them
-    attitude: AttitudeData | None = (
-        None  # an attitude sensor (IMU orientation, AHRS, INS), when read
-    )
+    # an attitude sensor (IMU orientation, AHRS, INS), when read
+    attitude: AttitudeData | None = None

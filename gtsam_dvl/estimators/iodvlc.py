@@ -403,9 +403,8 @@ def _solve(
     Sgg = s.Sgg - s.dof * sigma**2 * np.eye(3)  # remove the noise's expected share
     info = (np.trace(Sgg) * np.eye(3) - R @ Sgg @ R.T) / sigma**2
     lam, V = np.linalg.eigh(0.5 * (info + info.T))
-    lam = np.maximum(
-        lam, 0.0
-    )  # the noise subtraction can overshoot on an axis that holds no signal
+    # the noise subtraction can overshoot on an axis that holds no signal
+    lam = np.maximum(lam, 0.0)
     if prior_sigma is not None:
         lam = lam + 1.0 / prior_sigma**2
     cov = V @ np.diag(1.0 / np.maximum(lam, 1.0 / MAX_SIGMA_RAD**2)) @ V.T

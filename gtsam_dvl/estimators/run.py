@@ -129,9 +129,8 @@ ESTIMATORS: dict[str, Estimator] = {
         ),
     )
 }
-MODES: tuple[str, ...] = tuple(
-    ESTIMATORS
-)  # the estimators' names, the command line's --mode values
+# the estimators' names, the command line's --mode values
+MODES: tuple[str, ...] = tuple(ESTIMATORS)
 
 
 def get_estimator(mode: str) -> Estimator:

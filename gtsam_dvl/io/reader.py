@@ -142,9 +142,8 @@ def dvl_from_messages(
     water, altitude = None, None
     if type_name == "marine_acoustic_msgs/msg/Dvl":
         altitude = arr["altitude"].astype(float)
-        altitude[~(altitude > 0)] = (
-            np.nan
-        )  # the mean altitude of the good beams: none (NaN, 0 or negative): unknown
+        # the mean altitude of the good beams: none (NaN, 0 or negative): unknown
+        altitude[~(altitude > 0)] = np.nan
         # the message's own velocity mode: only bottom track is velocity over ground. A driver that fills the
         # field marks other pings 0 (invalid) or 2 (water track); one that never fills it leaves every ping 0,
         # and then only water-track pings are refused. Water-track pings are kept apart (DvlData.water_track)
@@ -317,9 +316,8 @@ def read_log(
     dvl = _read_dvl(r, topics, raw)
     truth = _read_truth(r, topics.truth, truth_stream, meta)
     mounting = _read_mounting(r, raw, imu.data.frame_id, dvl.frame_id)
-    dvl.noise_free = (
-        meta.get("white_noise") is False
-    )  # a simulation without noise (DvlData.noise_free)
+    # a simulation without noise (DvlData.noise_free)
+    dvl.noise_free = meta.get("white_noise") is False
     depth, gnss, attitude = _read_aiding(r, topics, raw, imu, mounting, meta)
     meta["reader_warnings"] = r.warnings
     meta["reader_losses"] = _losses(r, topics, imu, dvl, truth)

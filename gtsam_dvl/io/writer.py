@@ -160,9 +160,8 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     cov = np.asarray(dvl.d_cov, dtype=float).reshape(m, 9)
     arr["velocity_mode"], arr["dvl_type"] = 1, 0  # DVL_MODE_BOTTOM, DVL_TYPE_PISTON
     arr["velocity_mode"][water] = 2  # DVL_MODE_WATER
-    arr["velocity"] = np.where(
-        (valid | water & finite)[:, None], dvl.d_v, np.nan
-    )  # water track: through the water
+    # water track: through the water
+    arr["velocity"] = np.where((valid | water & finite)[:, None], dvl.d_v, np.nan)
     arr["velocity_covar"] = np.where(np.isnan(cov).all(axis=1, keepdims=True), -1.0, cov)
     arr["course_gnd"] = np.arctan2(v[:, 1], v[:, 0])
     arr["speed_gnd"] = np.hypot(v[:, 0], v[:, 1])
@@ -183,9 +182,8 @@ def _dvl_messages(dvl: DvlData, meta: dict[str, Any], stamps: np.ndarray, path: 
     def pad(a: np.ndarray, fill: float) -> np.ndarray:
         out = np.full((m, MAX_BEAMS, *a.shape[2:]), fill)
         out[:, :nb] = a
-        return out.reshape(
-            m, MAX_BEAMS * int(np.prod(a.shape[2:]))
-        )  # (m, -1) is ambiguous for m = 0
+        # (m, -1) is ambiguous for m = 0
+        return out.reshape(m, MAX_BEAMS * int(np.prod(a.shape[2:])))
 
     bvalid = np.asarray(b.valid, bool)
     if water.any():  # a water-track ping's beams measured the water where they have a velocity

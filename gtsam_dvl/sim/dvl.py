@@ -166,9 +166,8 @@ def _velocity_noise(
     """The velocity noise model: noise and outliers on the 3-D velocity, the beams its projections. Returns the
     velocity (M, 3), the beam velocities (M, B) and the stated covariance (M, 3, 3)."""
     M = len(y_true)
-    stated = (
-        spec.stated_noise_m_s or spec.noise_m_s
-    )  # what the covariance says, not what the noise is
+    # what the covariance says, not what the noise is
+    stated = spec.stated_noise_m_s or spec.noise_m_s
     y = y_true.copy()
     if draws.noise is not None:
         y += draws.noise.normal(0.0, spec.noise_m_s, (M, 3))
@@ -200,9 +199,8 @@ def _beam_noise(
     valid beams. Returns the velocity (M, 3), the beam velocities (M, B) and the stated covariance (M, 3, 3);
     a ping of fewer than 3 valid beams gets placeholders (NaN in _dvl_data)."""
     M, B = beam_ok.shape
-    stated = (
-        spec.stated_noise_m_s or spec.noise_m_s
-    )  # what the covariance says, not what the noise is
+    # what the covariance says, not what the noise is
+    stated = spec.stated_noise_m_s or spec.noise_m_s
     v_beam = y_true @ d_u.T
     if draws.noise is not None:
         v_beam += draws.noise.normal(0.0, spec.noise_m_s, (M, B))
@@ -293,9 +291,8 @@ def water_model(scenario: Scenario) -> Water | None:
     return Water(scenario.local_frame(), scenario.current, scenario.seafloor)
 
 
-CORRELATED_STREAM = (
-    6  # index of the correlated error's child of SeedSequence(seed) (sim/simulate.py)
-)
+# index of the correlated error's child of SeedSequence(seed) (sim/simulate.py)
+CORRELATED_STREAM = 6
 
 
 def correlated_error(spec: DvlSpec, dvl_hz: float, seed: int) -> GaussMarkov | None:
@@ -340,9 +337,8 @@ class GaussMarkov:
         return out
 
 
-CALIBRATION_STREAM = (
-    8  # index of the drawn calibration's child of SeedSequence(seed) (sim/simulate.py)
-)
+# index of the drawn calibration's child of SeedSequence(seed) (sim/simulate.py)
+CALIBRATION_STREAM = 8
 CONSTANT_STREAM = 9  # index of the per-run constant error's child
 
 

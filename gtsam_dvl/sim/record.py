@@ -97,9 +97,8 @@ def log_data(
     **data: Any,
 ) -> LogData:
     """The LogData of a simulation: its sensor data and truth (data) with the typed fields of the scenario."""
-    if (
-        "dvl" in data
-    ):  # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
+    # without white noise the DVL repeats its velocity bit for bit (DvlData.noise_free)
+    if "dvl" in data:
         data["dvl"].noise_free = not metadata.get("white_noise", True)
     return LogData(
         t0_ns=scenario.t0_ns,

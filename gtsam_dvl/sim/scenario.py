@@ -25,9 +25,8 @@ from gtsam_dvl.core.units import DEG_PER_H, MICRO_G
 from gtsam_dvl.sim.current import CurrentSpec, SeafloorSpec, current_spec, seafloor_spec
 from gtsam_dvl.sim.schema import SEGMENT_KINDS, Reader, check_dvl_draws, parse_segments
 
-DEFAULT_T0_S = (
-    1_700_000_000  # ROS time of t = 0 when the file gives none: fixed so logs are reproducible
-)
+# ROS time of t = 0 when the file gives none: fixed so logs are reproducible
+DEFAULT_T0_S = 1_700_000_000
 
 __all__ = [
     "DEG_PER_H",
@@ -143,9 +142,8 @@ class DvlSpec:
 
     scale: float = 1.0
     misalignment_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)  # roll, pitch, yaw of R_c (FLU)
-    noise_model: str = (
-        "velocity"  # "velocity": 3-D white noise; "beam": per-beam noise + least squares
-    )
+    # "velocity": 3-D white noise; "beam": per-beam noise + least squares
+    noise_model: str = "velocity"
     noise_m_s: float = 0.0  # 1 sigma, per axis ("velocity") or per beam ("beam")
     beam_angle_deg: float = 30.0  # from the face axis
     face_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)  # in dvl_link, towards the bottom
@@ -294,12 +292,10 @@ class Scenario:
     # the [estimator] table: a partial estimator configuration (EstimatorConfig's tables) applied over the named
     # one, e.g. what is known about this log (its initial attitude); empty: none
     estimator: dict[str, Any] = field(default_factory=dict)
-    current: CurrentSpec | None = (
-        None  # the [current] table, if the scenario has one (sim/current.py)
-    )
-    seafloor: SeafloorSpec | None = (
-        None  # the [seafloor] table: bottom lock by altitude and water track
-    )
+    # the [current] table, if the scenario has one (sim/current.py)
+    current: CurrentSpec | None = None
+    # the [seafloor] table: bottom lock by altitude and water track
+    seafloor: SeafloorSpec | None = None
 
     def estimator_configuration(self) -> EstimatorConfig:
         """The configuration this scenario's runs are meant for: estimator_config's named configuration with the
@@ -425,9 +421,8 @@ def scenario_from_dict(
         "estimator",
         "expected a table of estimator configuration tables",
     )
-    EstimatorConfig.for_scenario(
-        raw, source=f"{source}: [estimator]"
-    )  # checked now: a bad key fails at load
+    # checked now: a bad key fails at load
+    EstimatorConfig.for_scenario(raw, source=f"{source}: [estimator]")
     t0 = raw.get("t0_s", DEFAULT_T0_S)
     r.number("t0_s", t0)
     t0_ns = t0 * 1_000_000_000 if isinstance(t0, int) else int(round(t0 * 1e9))  # ints stay exact

@@ -244,9 +244,8 @@ class ChunkedSimulation:
             scenario.dvl.beam_angle_deg, np.asarray(scenario.dvl.face_axis)
         ).shape[0]
 
-        self._ss = np.random.SeedSequence(seed).spawn(
-            4
-        )  # bias, imu, dvl, event: simulate()'s children
+        # bias, imu, dvl, event: simulate()'s children
+        self._ss = np.random.SeedSequence(seed).spawn(4)
         bias_rng = np.random.Generator(np.random.PCG64(self._ss[0]))
         self.gyro_bias0, self.accel_bias0 = initial_biases(scenario.imu, bias_rng)
         self._walk_sigmas = walk_step_sigmas(scenario.imu, rate)
@@ -280,9 +279,8 @@ class ChunkedSimulation:
                 self.fix_frame = record.map_from_first_fix(scenario, first, metadata)
                 origin = None
         self.head = self._head(metadata, origin)
-        self.t_first = (
-            min(0.0, float(self.t_dvl[0])) if self.n_pings else 0.0
-        )  # IMU and truth start at 0
+        # IMU and truth start at 0
+        self.t_first = min(0.0, float(self.t_dvl[0])) if self.n_pings else 0.0
         self.duration_s = (n - 1) / rate  # the last IMU stamp
         self.distance_m = 0.0  # travelled along the truth of the parts yielded so far
 
@@ -549,9 +547,8 @@ class ChunkedSimulation:
             )
             if streams.dvl_correlated is not None:
                 e = streams.dvl_correlated.take(m)
-                y = y + (
-                    np.concatenate([e, e]) if m == 1 else e
-                )  # the padded copy's: the real ping's
+                # the padded copy's: the real ping's
+                y = y + (np.concatenate([e, e]) if m == 1 else e)
             if self.constant is not None:
                 y = y + self.constant
         else:

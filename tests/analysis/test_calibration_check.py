@@ -96,9 +96,8 @@ def test_chi2_follows_its_distribution_when_the_vehicle_did_not_change() -> None
 
 def test_a_moved_scale_is_flagged_in_words_and_the_uninformed_yaw_left_to_the_file() -> None:
     rng = np.random.default_rng(1)
-    moved = check_calibration(
-        _result(*_dive(rng, np.array([0.01, 0, 0, 0, 0])))
-    )  # the scale 1 % off the file
+    # the scale 1 % off the file
+    moved = check_calibration(_result(*_dive(rng, np.array([0.01, 0, 0, 0, 0]))))
     assert moved is not None and moved.moved
     scale = moved.components[0]
     assert scale.name == "scale" and scale.z > 5
@@ -112,9 +111,8 @@ def test_a_moved_scale_is_flagged_in_words_and_the_uninformed_yaw_left_to_the_fi
     same = check_calibration(_result(*_dive(rng, np.zeros(5))))
     assert same is not None and not same.moved and same.findings[0][0] == "note"
     assert "consistent with auv-7's calibration of 2026-11-02" in same.findings[0][1]
-    assert (
-        "about body z (yaw)" in same.findings[0][1]
-    )  # from the calibration: the dive did not inform it
+    # from the calibration: the dive did not inform it
+    assert "about body z (yaw)" in same.findings[0][1]
     yaw = same.components[3]
     assert yaw.informed < 0.1 and same.components[1].informed > 0.15  # yaw only through the scale
 

@@ -86,9 +86,7 @@ def test_evaluate_log_without_truth(smoothed: tuple[Path, Path], tmp_path: Path)
     assert "truth" not in m and m["segments_from"] == "classified from IMU"
     roll = next(s for s in m["observability"] if s["key"] == "misalignment_roll")
     print(roll)
-    assert (
-        roll["verdict"] == "weakly determined" and roll["ratio"] < 0.5
-    )  # informed, not to 0.1 deg
-    assert any(
-        "along body z" in c for c in roll["credited_segments"]
-    )  # the descent, found from the IMU
+    # informed, not to 0.1 deg
+    assert roll["verdict"] == "weakly determined" and roll["ratio"] < 0.5
+    # the descent, found from the IMU
+    assert any("along body z" in c for c in roll["credited_segments"])

@@ -358,9 +358,8 @@ def test_smoother_figures_draw_the_filtering_band_over_time(
     x = np.concatenate([p.vertices[:, 0] for band in bands for p in band.get_paths()])
     y = np.concatenate([p.vertices[:, 1] for band in bands for p in band.get_paths()])
     assert x.min() == pytest.approx(0.0) and x.max() == pytest.approx(490.0)  # the whole timeline
-    assert y.max() == pytest.approx(
-        300.0 + 3 * 500.0
-    )  # ms: the prior's band at the start about the final estimate
+    # ms: the prior's band at the start about the final estimate
+    assert y.max() == pytest.approx(300.0 + 3 * 500.0)
     assert [line.get_ydata()[0] for line in ax.get_lines() if line.get_linestyle() == "--"][
         -1
     ] == pytest.approx(310.0)

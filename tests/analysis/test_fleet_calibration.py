@@ -43,9 +43,8 @@ def _fleet(
 def _infos(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     out = []
     for _ in range(n):
-        A = rng.normal(size=(6, 4)) * np.array(
-            [1e3, 1e3, 5e3, 5e3]
-        )  # scale ~1e-3, angles ~2e-4 rad
+        # scale ~1e-3, angles ~2e-4 rad
+        A = rng.normal(size=(6, 4)) * np.array([1e3, 1e3, 5e3, 5e3])
         out.append(A.T @ A)
     return out
 

@@ -48,9 +48,8 @@ def _trajectory(
 
 
 T = np.arange(0.0, 400.0, 1.0)
-STEADY_TURN = _trajectory(
-    np.full_like(T, 1.86), np.full_like(T, 0.57), T
-)  # the steady-turn: 228 deg
+# the steady-turn: 228 deg
+STEADY_TURN = _trajectory(np.full_like(T, 1.86), np.full_like(T, 0.57), T)
 STRAIGHT = _trajectory(np.full_like(T, 1.9), np.zeros_like(T), T)
 S_TURN = _trajectory(np.full_like(T, 1.9), 0.57 * np.sign(np.sin(2 * np.pi * T / 200.0)), T)
 SPEED_CHANGE = _trajectory(1.2 + 0.7 * (T > 200.0), np.zeros_like(T), T)

@@ -175,9 +175,8 @@ def test_losses_and_rejections(logs: dict[str, LogData], batch_2d: NavResult) ->
         for w in health.warnings
     )
     assert any("/imu/data_raw: 24.0 s of data missing" in w for w in health.warnings)
-    assert any(
-        "--repair dropped 2 of 204001 /imu/data_raw" in n for n in health.notes
-    )  # 1e-5 of them: a note
+    # 1e-5 of them: a note
+    assert any("--repair dropped 2 of 204001 /imu/data_raw" in n for n in health.notes)
     assert any("identity mounting" in n for n in health.notes)
     assert health.figures["losses"]["messages_lost"] == {"/imu/data_raw": 1501}
     assert len(loss_lines(meta["reader_losses"])) == 3

@@ -64,22 +64,19 @@ def _filtered(estimator: str) -> tuple[NavResult, LogData]:
 @pytest.mark.parametrize("estimator", ["ekf", "batch"])
 def test_a_filter_is_judged_with_the_calibration_of_its_time(estimator: str) -> None:
     result, log = _filtered(estimator)
-    res = dvl_residuals(
-        result, log, DvlConfig(correlated_sigma_m_s=0.0)
-    )  # (white: chi2 against SIGMA_M_S alone)
+    # (white: chi2 against SIGMA_M_S alone)
+    res = dvl_residuals(result, log, DvlConfig(correlated_sigma_m_s=0.0))
     k, b_R_d, _, _ = state_calibration(result, log)
-    if (
-        estimator == "ekf"
-    ):  # each state with the scale and misalignment the filter held then: the pings fit
+    # each state with the scale and misalignment the filter held then: the pings fit
+    if estimator == "ekf":
         assert is_filtered(result)
         assert k[0] == pytest.approx(0.95) and k[-1] == pytest.approx(1.0)
         np.testing.assert_allclose(b_R_d[0], rpy_deg_to_matrix([0.0, 0.0, 2.0]), atol=1e-12)
         assert res.rms() < 1e-9
     else:  # a smoother's states share the final calibration: the same data misfit by the early scale's 5 %
         assert not is_filtered(result) and np.all(k == 1.0)
-        first = log.dvl.d_v[0] - np.array(
-            [2.0, 0.0, 0.0]
-        )  # 5 % of 2 m/s along x, 2 deg of it across
+        # 5 % of 2 m/s along x, 2 deg of it across
+        first = log.dvl.d_v[0] - np.array([2.0, 0.0, 0.0])
         assert np.linalg.norm(first) > 0.1
         assert res.chi2[0] == pytest.approx(float(first @ first) / SIGMA_M_S**2, rel=1e-9)
         assert res.rms() > 1.5  # 2.0: the misfit falls linearly to 0 at the end

@@ -33,9 +33,8 @@ def shortened(name: str) -> dict[str, Any]:
     few minutes of data."""
     raw = copy.deepcopy(load_scenario(name).raw)
     segments, total = [], 0.0
-    longest = (
-        MAX_SEGMENT_S if len(raw["segments"]) > 1 else MAX_DURATION_S
-    )  # a one-segment scenario: cut to length
+    # a one-segment scenario: cut to length
+    longest = MAX_SEGMENT_S if len(raw["segments"]) > 1 else MAX_DURATION_S
     for seg in raw["segments"]:
         if total >= MAX_DURATION_S:
             break
@@ -48,9 +47,8 @@ def shortened(name: str) -> dict[str, Any]:
             total += seg["sides"] * (seg["leg_duration_s"] + seg["turn_duration_s"])
         segments.append(seg)
     raw["segments"] = segments
-    if (
-        "seafloor" in raw
-    ):  # a dive cut short stays shallow: the seafloor brought up so that lock comes halfway down
+    # a dive cut short stays shallow: the seafloor brought up so that lock comes halfway down
+    if "seafloor" in raw:
         down = sum(
             s["peak_vertical_speed_m_s"]
             * s["duration_s"]
@@ -70,9 +68,8 @@ def logs() -> dict[str, LogData]:
     out = {}
     for name in list_builtin_scenarios():
         log = simulate(scenario_from_dict(shortened(name), name=name), 5)
-        if (
-            log.origin is None and log.gnss is not None
-        ):  # the origin in the first fix, as the reader finds it
+        # the origin in the first fix, as the reader finds it
+        if log.origin is None and log.gnss is not None:
             log = dataclasses.replace(log, origin=first_fix_origin(log.gnss))
         out[name] = log
     return out
@@ -83,12 +80,10 @@ def logs() -> dict[str, LogData]:
 def test_clean_scenario_is_not_degraded(scenario: str, mode: str, logs: dict[str, LogData]) -> None:
     log = logs[scenario]
     try:
-        result = run_estimator(
-            log, mode, None
-        )  # the configuration the scenario names, with its [estimator]
-    except (
-        GtsamDvlError
-    ) as exc:  # online needs a static start or an attitude source (field-survey has neither)
+        # the configuration the scenario names, with its [estimator]
+        result = run_estimator(log, mode, None)
+    # online needs a static start or an attitude source (field-survey has neither)
+    except GtsamDvlError as exc:
         assert mode == "online" and "alignment" in str(exc) and "\n" not in str(exc), exc
         return
     health = assess_health(result, log)

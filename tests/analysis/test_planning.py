@@ -41,9 +41,8 @@ def test_plan_paper_3d_credits_the_descent_and_the_turns() -> None:
             p.determined_at_s[f"accel_bias_{axis}"] is not None
             and p.determined_at_s[f"accel_bias_{axis}"] > 750
         )
-    assert (
-        p.determined_at_s["scale"] or 0
-    ) > 660  # 1000 ppm is reached in the square, not at 600 s
+    # 1000 ppm is reached in the square, not at 600 s
+    assert (p.determined_at_s["scale"] or 0) > 660
     assert "this plan's rate" in p.answer() and "this log" not in p.answer()
 
 

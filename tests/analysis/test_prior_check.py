@@ -61,9 +61,8 @@ def test_wrong_mounting_fails_naming_the_misalignment(mode: str, mounted_wrong: 
     named = [w for w in health.warnings if w.startswith("DVL misalignment about body z (yaw) is ")]
     assert len(named) == 1 and "the DVL mounting in /tf_static" in named[0]
     off = float(re.search(r"is off by ([0-9.]+) deg", named[0]).group(1))  # type: ignore[union-attr]
-    assert (
-        abs(off - WRONG_YAW_DEG) < 1.5
-    )  # the true misalignment (0.5 deg in yaw) on top of the wrong mounting
+    # the true misalignment (0.5 deg in yaw) on top of the wrong mounting
+    assert abs(off - WRONG_YAW_DEG) < 1.5
     nsigma = health.figures["prior_nsigma"]["misalignment"]["nsigma"]
     assert abs(nsigma[2]) > 20 and max(abs(nsigma[0]), abs(nsigma[1])) < PRIOR_NSIGMA_FAILED
 
@@ -94,9 +93,8 @@ def _tiny(calibration: dict[str, Estimate]) -> tuple[NavResult, LogData]:
 
 def test_each_state_far_from_its_prior_names_its_cause() -> None:
     """Per state: within 4 prior sigmas nothing; beyond, "failed" with the distance and the cause."""
-    config = (
-        EstimatorConfig()
-    )  # scale 1 +- 1 %, misalignment 1 deg, gyro bias 0.01 deg/h, offset 0 +- 0.5 s
+    # scale 1 +- 1 %, misalignment 1 deg, gyro bias 0.01 deg/h, offset 0 +- 0.5 s
+    config = EstimatorConfig()
     small = 1e-12 * np.eye(3)
 
     def states(
@@ -157,9 +155,8 @@ def test_time_offset_beyond_its_prior_is_reported(mode: str) -> None:
     assert health.figures["counters"]["time_offset_window_clipped"] == clipped
     if mode == "batch":  # its windows are centred on its first estimate, unbounded
         assert clipped == 0
-    elif (
-        mode == "ekf"
-    ):  # the EKF holds the offset state itself at the bound: its windows never pass it
+    # the EKF holds the offset state itself at the bound: its windows never pass it
+    elif mode == "ekf":
         bounded = result.info["counters"]["time_offset_bounded"]
         assert bounded > 0 and clipped == 0
         assert any(

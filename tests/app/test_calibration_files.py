@@ -73,9 +73,8 @@ def test_round_trip_out_then_in(dives: tuple[Path, Path], tmp_path: Path) -> Non
     s = json.loads(summary.read_text())
     infl = s["info"]["calibration_prior"]["inflation"]
     assert infl["days"] == pytest.approx(10.0, abs=0.01)
-    assert infl["variance_factor"] == pytest.approx(
-        1.0 + 0.01 * infl["days"]
-    )  # the default inflation_per_day
+    # the default inflation_per_day
+    assert infl["variance_factor"] == pytest.approx(1.0 + 0.01 * infl["days"])
     np.testing.assert_allclose(
         s["info"]["calibration_prior"]["cov"],
         c1.block(["scale", "misalignment"]) * infl["variance_factor"],
@@ -85,9 +84,8 @@ def test_round_trip_out_then_in(dives: tuple[Path, Path], tmp_path: Path) -> Non
     assert check["moved"] is False and check["verdict"].startswith(
         "consistent with auv-3's calibration"
     )
-    assert not any(
-        "another configuration" in n for n in s["health"]["notes"]
-    )  # both dives: the log's "paper"
+    # both dives: the log's "paper"
+    assert not any("another configuration" in n for n in s["health"]["notes"])
     c2 = read_calibration(cal1)
     assert [src.path for src in c2.sources] == [str(first), str(second)]
     assert c2.date == iso_date((T0_S + 10 * DAY_S) * 10**9)

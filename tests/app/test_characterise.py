@@ -32,9 +32,8 @@ from tests.support.scenarios import scenario_raw
 Q_GYRO_RAD_S = 1e-5
 Q_ACCEL_M_S2 = 1e-4
 STATIC_S = 70.0
-STATED_DVL_NOISE_M_S = (
-    0.05  # the configuration's DVL noise, 2.5 times the simulated: the fit has to find it
-)
+# the configuration's DVL noise, 2.5 times the simulated: the fit has to find it
+STATED_DVL_NOISE_M_S = 0.05
 
 
 def cli(*args: str | Path) -> Any:
@@ -63,9 +62,8 @@ def quantised(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     stated = tmp / "stated.toml"
     stated.write_text(f'preset = "paper"\n[dvl]\nnoise_m_s = {STATED_DVL_NOISE_M_S}\n')
     out.mkdir()
-    (out / "notes.txt").write_text(
-        "mine\n"
-    )  # a folder in use: written into with --force, this file kept
+    # a folder in use: written into with --force, this file kept
+    (out / "notes.txt").write_text("mine\n")
     run = cli("characterise", path, "-o", out, "-c", stated, "-q", "--force")
     assert run.exit_code == 0, run.output
     data = json.loads((out / "characterise.json").read_text())
@@ -149,13 +147,11 @@ def test_recommended_toml_loads_and_smooths(quantised: dict[str, Any]) -> None:
     assert run.exit_code == 0, run.output
     used = json.loads(summary.read_text())
     imu_used = used["info"]["noise"]["imu"]
-    assert all("floor" not in entry for entry in imu_used.values()), (
-        imu_used
-    )  # no floor added a second time
+    # no floor added a second time
+    assert all("floor" not in entry for entry in imu_used.values()), imu_used
     dvl_fit = used["info"]["noise"]["dvl"]
-    assert dvl_fit["multiplier"] == pytest.approx(
-        1.0, abs=0.1
-    )  # the recommended DVL noise fits the residuals
+    # the recommended DVL noise fits the residuals
+    assert dvl_fit["multiplier"] == pytest.approx(1.0, abs=0.1)
 
 
 def test_refuses_a_folder_that_is_not_empty(tmp_path: Path) -> None:

@@ -294,9 +294,8 @@ def test_effective_config_reads_back_with_c(mode: str, short_log: Path, tmp_path
     )
     assert written["config"]["online"]["window_s"] == 8.0
     assert written["config"]["online"]["relinearization"]["scale"] == 0.01
-    assert (
-        written["config"]["alignment"]["initial_attitude_deg"] is None
-    )  # null in JSON, read back as None
+    # null in JSON, read back as None
+    assert written["config"]["alignment"]["initial_attitude_deg"] is None
     # the DVL preset's values, the explicit scale sigma over its scale accuracy, the mounting tolerance
     assert written["config"]["dvl"]["model"] == "teledyne-pathfinder"
     assert (

@@ -219,9 +219,8 @@ def test_config_prints_a_toml_that_loads_back_to_the_same_configuration(
     printed = tmp_path / "printed.toml"
     printed.write_text(res.stdout)
     assert EstimatorConfig.load(printed) == expected
-    again = invoke(
-        "config", "-c", printed
-    )  # the printed file prints itself (every key was written)
+    # the printed file prints itself (every key was written)
+    again = invoke("config", "-c", printed)
     assert again.stdout.splitlines()[1:] == res.stdout.splitlines()[1:]
     assert "gtsam-dvl: error: give --default or -c FILE, not both" == one_error_line(
         invoke("config", "--default", "-c", printed)

@@ -33,9 +33,8 @@ def test_descent_study_quick(tmp_path: Path) -> None:
         (float(r["dvl_hz"]), float(r["descent_s"])): float(r["roll_sigma_deg"])
         for r in csv.DictReader(open(tmp_path / "descent_study.csv"))
     }
-    assert (
-        rows[(1.0, 0.0)] > 0.99 and rows[(2.0, 0.0)] > 0.99
-    )  # no descent: the prior (1 deg) stays
+    # no descent: the prior (1 deg) stays
+    assert rows[(1.0, 0.0)] > 0.99 and rows[(2.0, 0.0)] > 0.99
     assert rows[(1.0, 60.0)] < 0.5  # a 60 s descent determines it
     assert rows[(2.0, 60.0)] < rows[(1.0, 60.0)]  # more pings, more information
     assert (tmp_path / "descent_study.png").stat().st_size > 10_000

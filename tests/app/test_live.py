@@ -101,9 +101,10 @@ def session() -> dict[str, Any]:
     view = live.LiveView(port=0, t0_ns=log.t0_ns, mounting=log.mounting)
     port = view.port
     out = Received()
+    # no HTTP proxy for localhost
     connect = websockets_sync.connect(
         view.url, subprotocols=SUBPROTOCOLS, open_timeout=10, max_size=None, proxy=None
-    )  # no HTTP proxy for localhost
+    )
     try:
         with connect as ws:
             wanted = {live.TOPICS[k] for k in SUBSCRIBED}
@@ -276,18 +277,16 @@ def test_final_status_has_the_consoles_numbers(session: dict[str, Any]) -> None:
         "| final status:",
         {k: last[k] for k in ("epochs", "wall_s", "log_s", "real_time_factor")},
     )
-    assert (
-        last["epochs"] == outcome.epochs_published == len(statuses)
-    )  # one status per epoch, none missed
+    # one status per epoch, none missed
+    assert last["epochs"] == outcome.epochs_published == len(statuses)
     assert last["wall_s"] == outcome.wall_s and last["log_s"] == outcome.log_s
     assert (
         last["real_time_factor"]
         == outcome.real_time_factor
         == pytest.approx(outcome.log_s / outcome.wall_s)
     )
-    assert (
-        outcome.wall_s <= session["replay_s"]
-    )  # the replay only, not the client's connection before it
+    # the replay only, not the client's connection before it
+    assert outcome.wall_s <= session["replay_s"]
     log = session["log"]
     assert outcome.log_s == pytest.approx(
         float(log.imu.t[-1] - min(log.imu.t[0], log.dvl.t[0])), abs=1e-9
@@ -308,9 +307,8 @@ def test_the_server_closes_the_connection_normally_after_the_replay(
         f"close: received {closed.rcvd if closed else None}, sent {closed.sent if closed else None}; "
         f"{out.after_final} frames after the final status"
     )
-    assert isinstance(closed, ConnectionClosedOK), (
-        closed
-    )  # a clean closing handshake, not a dropped socket
+    # a clean closing handshake, not a dropped socket
+    assert isinstance(closed, ConnectionClosedOK), closed
     assert closed.rcvd is not None and closed.rcvd.code in (
         1000,
         1005,
@@ -366,9 +364,8 @@ def test_layout_option_writes_a_copy_and_never_overwrites(tmp_path: Any) -> None
     from gtsam_dvl.app.cli import app
 
     out = tmp_path / "my_layout.json"
-    res = CliRunner().invoke(
-        app, ["live", "--layout", str(out)]
-    )  # no LOG: only the layout, no foxglove needed
+    # no LOG: only the layout, no foxglove needed
+    res = CliRunner().invoke(app, ["live", "--layout", str(out)])
     assert res.exit_code == 0, res.output
     assert out.read_text(encoding="utf-8") == live.installed_layout() and str(out) in res.output
     json.loads(out.read_text(encoding="utf-8"))  # a JSON file Foxglove can import
@@ -455,13 +452,11 @@ def test_live_command_replays_a_log_file(session: dict[str, Any], tmp_path: Any)
     print(res.output, f"({time.perf_counter() - t0:.1f} s)")
     assert res.exit_code == 0, res.output
     assert "live view on ws://127.0.0.1:" in res.output and "health:" in res.output
-    assert (
-        "from other machines: ws://" in res.output and "ws://0.0.0.0" not in res.output
-    )  # served on 0.0.0.0
+    # served on 0.0.0.0
+    assert "from other machines: ws://" in res.output and "ws://0.0.0.0" not in res.output
     published = int(res.output.split(" epochs published")[0].rsplit(" ", 1)[1])
-    assert (
-        published == session["outcome"].epochs_published
-    )  # the file replays as the in-memory log does
+    # the file replays as the in-memory log does
+    assert published == session["outcome"].epochs_published
 
 
 def test_example_attaches_the_view_in_a_users_loop() -> None:
@@ -492,9 +487,8 @@ def test_replay_is_paced_at_the_requested_speed(session: dict[str, Any]) -> None
         now[0] += s
 
     with live.LiveView(port=0, t0_ns=log.t0_ns) as view:
-        now[0] = (
-            100.0  # the view waited 100 s for a client (--wait): not part of the replay's wall time
-        )
+        # the view waited 100 s for a client (--wait): not part of the replay's wall time
+        now[0] = 100.0
         out = live.replay_log(
             log,
             view,

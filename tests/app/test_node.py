@@ -148,9 +148,8 @@ def _run_node_and_player(
             listener.spin_until(_quiet_for(odometry, 3.0), deadline)
             node.send_signal(signal.SIGINT)
             listener.spin_until(lambda: node.poll() is not None, deadline)
-            listener.spin_until(
-                lambda: False, time.monotonic() + 0.5
-            )  # the last messages in flight
+            # the last messages in flight
+            listener.spin_until(lambda: False, time.monotonic() + 0.5)
         finally:
             if node.poll() is None:
                 node.kill()
@@ -176,9 +175,8 @@ def test_node_odometry_agrees_with_smooth_online(node_run: dict[str, Any]) -> No
     assert node_run["node_code"] == 0, node_run["node_log"]
     rows = [_odometry(b) for _, b in node_run["odometry"]]
     stamps = np.array([int(stamps_ns(r)[0]) for r in rows])
-    t = (
-        stamps - int(ref.t0_ns)
-    ) / 1e9  # the reader's time origin, which the node takes the same way
+    # the reader's time origin, which the node takes the same way
+    t = (stamps - int(ref.t0_ns)) / 1e9
     final = rows[-1]
     # the node's final estimate: the last state's
     assert abs(t[-1] - ref.t[-1]) < 1e-6, (t[-1], ref.t[-1], node_run["node_log"])
@@ -251,9 +249,8 @@ def test_node_calibration_topic_and_file(node_run: dict[str, Any]) -> None:
     assert abs(scale - ref.scale) < 0.1 * ref.scale_sigma and scale_sigma == pytest.approx(
         ref.scale_sigma, rel=1e-3
     )
-    cal = read_calibration(
-        node_run["tmp"] / "vehicle.toml"
-    )  # written at shutdown (calibration_out)
+    # written at shutdown (calibration_out)
+    cal = read_calibration(node_run["tmp"] / "vehicle.toml")
     assert cal.vehicle == "auv-test" and "scale" in cal.states
     assert abs(float(cal.values["scale"][0]) - ref.scale) < 0.1 * ref.scale_sigma
     stats = json.loads((node_run["tmp"] / "stats.json").read_text())

@@ -54,16 +54,14 @@ def test_reorder_puts_messages_in_stamp_order_within_the_window() -> None:
 
 def test_a_silent_stream_that_comes_back_is_no_stamp_jump_but_a_clock_step_is() -> None:
     buf = ReorderBuffer(window_ns=0, jump_ns=1000 * MS)
-    for k in range(
-        301
-    ):  # 3 s of 100 Hz IMU, a ping at 0 and one at 2.5 s (silent in between); 10x real time
+    # 3 s of 100 Hz IMU, a ping at 0 and one at 2.5 s (silent in between); 10x real time
+    for k in range(301):
         buf.push("imu", k * 10 * MS, None, wall=k * 0.001)
         if k in (0, 250):
             buf.push("dvl", k * 10 * MS, None, wall=k * 0.001)
     assert buf.streams["dvl"].jumps == 0 and buf.streams["imu"].jumps == 0
-    buf.push(
-        "dvl", 9000 * MS, None, wall=0.301
-    )  # 6.5 s after its last, while the IMU's stamps moved 0.5 s
+    # 6.5 s after its last, while the IMU's stamps moved 0.5 s
+    buf.push("dvl", 9000 * MS, None, wall=0.301)
     buf.push("imu", 5000 * MS, None, wall=0.302)  # the IMU's 2 s ahead of the wall clock
     assert buf.streams["dvl"].jumps == 1 and buf.streams["dvl"].largest_jump_s == pytest.approx(
         6.0, abs=0.01
@@ -85,9 +83,8 @@ def test_settings_from_toml_and_parameters(tmp_path: Path) -> None:
         "start_type_description_service": True,
     }
     settings, config = load_settings(cfg, params)
-    assert (
-        settings.imu_topic == "/imu/raw" and settings.reorder_window_s == 0.02
-    )  # the parameter wins
+    # the parameter wins
+    assert settings.imu_topic == "/imu/raw" and settings.reorder_window_s == 0.02
     assert settings.qos_inputs.reliability == "reliable" and settings.qos_inputs.depth == 1000
     assert (
         config.online.align_s == 35.0
@@ -177,9 +174,8 @@ def test_node_core_on_a_logs_messages_out_of_order_equals_smooth_online(
     assert core.buffer.streams["imu"].late == 0 and core.buffer.streams["dvl"].late == 0
     last_wall = msgs[int(np.argmax([m[0] for m in msgs]))][0] * 1e-9 + 0.02
     assert core.health(wall=last_wall + 0.1).status == "ok"
-    assert (
-        core.health(wall=last_wall + 5.0).status == "failed"
-    )  # the IMU silent in wall time: no estimate
+    # the IMU silent in wall time: no estimate
+    assert core.health(wall=last_wall + 5.0).status == "failed"
     rows = core.calibration_rows(final)
     assert rows[1, 0] == ref.scale and rows[1, 1] == pytest.approx(ref.scale_sigma, rel=1e-12)
 

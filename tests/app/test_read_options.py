@@ -68,9 +68,8 @@ def test_result_records_source_log_and_read_options(moved: Path) -> None:
 
     stored = read_result(moved / "results" / "result.mcap")
     assert stored.source_log_relative == str(Path("..") / "logs" / "short.mcap")
-    assert (
-        Path(stored.source_log).is_absolute() and not Path(stored.source_log).exists()
-    )  # base was moved
+    # base was moved
+    assert Path(stored.source_log).is_absolute() and not Path(stored.source_log).exists()
     assert stored.source_log == str((moved.parent / "base" / "logs" / "short.mcap").resolve())
     assert stored.read_options == {
         "imu_topic": "/imu/data_raw",
@@ -86,9 +85,8 @@ def test_evaluate_finds_moved_log_from_any_directory_and_reuses_repair(
     elsewhere = tmp_path / "cwd"
     elsewhere.mkdir()
     result, out = moved / "results" / "result.mcap", tmp_path / "eval"
-    proc = run(
-        "evaluate", str(result), "-o", str(out), cwd=elsewhere
-    )  # no --repair given: the recorded one
+    # no --repair given: the recorded one
+    proc = run("evaluate", str(result), "-o", str(out), cwd=elsewhere)
     assert NOT_FOUND not in proc.stdout
     metrics = json.loads((out / "metrics.json").read_text())
     assert "truth" in metrics and metrics["truth"]["calibration_errors"]

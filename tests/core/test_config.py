@@ -357,9 +357,8 @@ def test_ekf_section_reaches_the_filter() -> None:
     cfg.ekf.min_calibration_speed_m_s = 0.0
     cfg.ekf.calibration_speed_sigmas = 0.0
     never_slow = run_ekf(log, cfg)
-    cfg.ekf.min_calibration_speed_m_s = (
-        10.0  # faster than the vehicle ever goes (or is estimated to go)
-    )
+    # faster than the vehicle ever goes (or is estimated to go)
+    cfg.ekf.min_calibration_speed_m_s = 10.0
     always_slow = run_ekf(log, cfg)
     counts = [r.info["counters"]["dvl_slow"] for r in (never_slow, base, always_slow)]
     print(
@@ -388,9 +387,8 @@ def test_online_section_reaches_the_estimator() -> None:
 
     log = _short_log()
     base = smooth_online(log)
-    cfg = (
-        EstimatorConfig.paper()
-    )  # the log's configuration (its scenario names "paper"), with a shorter window
+    # the log's configuration (its scenario names "paper"), with a shorter window
+    cfg = EstimatorConfig.paper()
     cfg.online.window_s = 5.0
     short = smooth_online(log, cfg)
     print(
@@ -561,15 +559,13 @@ def test_defaults_are_those_written_before() -> None:
 def test_result_config_json_written_before_loads() -> None:
     path = FIXTURES / "result_config_paper.json"
     cfg = EstimatorConfig.load(path)
-    assert (
-        cfg.current.water_track == "refuse"
-    )  # written before water-track pings were used: its runs refused them
+    # written before water-track pings were used: its runs refused them
+    assert cfg.current.water_track == "refuse"
     paper = EstimatorConfig.paper()
     assert cfg.priors.hold_weak_information == 0.0  # written before the hold: its runs held nothing
     assert not cfg.priors.nominal_check  # nor checked the nominal calibration
-    assert (
-        cfg.dvl.constant_error_sigma_m_s == 0.0
-    )  # nor gave the calibration a constant DVL error's share
+    # nor gave the calibration a constant DVL error's share
+    assert cfg.dvl.constant_error_sigma_m_s == 0.0
     assert cfg.model_copy(update={"noise": paper.noise, "current": paper.current}) == paper
     assert _without_added(cfg.to_dict()) == _tuples(json.loads(path.read_text())["config"])
 

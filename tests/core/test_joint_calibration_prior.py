@@ -72,9 +72,8 @@ def test_one_joint_prior_replaces_the_configured_ones_and_starts_at_the_file() -
     read = states.read_values(values, cfg)
     for n in NAMES:
         np.testing.assert_array_equal(read[n], cal.values[n])
-    np.testing.assert_array_equal(
-        read["accel_bias"], np.zeros(3)
-    )  # the others at their configured priors
+    # the others at their configured priors
+    np.testing.assert_array_equal(read["accel_bias"], np.zeros(3))
     # without a calibration: the configuration's, one prior per key
     assert len(states.prior_factors(cfg, MOUNTING)) == 5
 

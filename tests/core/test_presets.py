@@ -77,9 +77,8 @@ def test_explicit_values_win_over_the_preset() -> None:
         }
     )
     assert cfg.imu.gyro_noise_deg_per_h_rthz == 2.5  # explicit
-    assert (
-        cfg.imu.accel_bias_sigma_ug == IMU_PRESETS["honeywell-hg1700"].accel_bias_stability_ug
-    )  # from the preset
+    # from the preset
+    assert cfg.imu.accel_bias_sigma_ug == IMU_PRESETS["honeywell-hg1700"].accel_bias_stability_ug
     assert cfg.dvl.default_noise_m_s == 0.015
     assert cfg.priors.scale_sigma == 0.02
     # an explicit value equal to the default is explicit too
@@ -104,9 +103,8 @@ def test_unknown_model_is_one_line_naming_the_known_ones() -> None:
     assert "\n" not in text and text.startswith("cfg.toml: [imu] model")
     assert "'kvh-9999'" in text and all(f"'{n}'" in text for n in IMU_PRESETS)
     with pytest.raises(GtsamDvlError) as err:
-        EstimatorConfig.from_dict(
-            {"dvl": {"model": "kvh-1750"}}, source="cfg.toml"
-        )  # an IMU is no DVL
+        # an IMU is no DVL
+        EstimatorConfig.from_dict({"dvl": {"model": "kvh-1750"}}, source="cfg.toml")
     assert "\n" not in str(err.value) and all(f"'{n}'" in str(err.value) for n in DVL_PRESETS)
     with pytest.raises(
         GtsamDvlError, match=r"^no preset 'nope' \(known: ixblue-phins, .*sonardyne-syrinx\)$"

@@ -136,9 +136,8 @@ def test_allan_deviation_of_white_noise(seed: int) -> None:
     1.5 N / sqrt(longest tau) / 0.664 (white noise has no floor: the curve falls to the longest tau)."""
     rng = np.random.default_rng(seed)
     density = 2e-3
-    x = 5.0 + rng.normal(
-        0.0, density * np.sqrt(RATE_HZ), N
-    )  # a constant offset (Earth rate, gravity) is removed
+    # a constant offset (Earth rate, gravity) is removed
+    x = 5.0 + rng.normal(0.0, density * np.sqrt(RATE_HZ), N)
     taus, adev = allan_deviation(x, RATE_HZ)
     short = taus <= 0.1
     np.testing.assert_allclose(adev[short], density / np.sqrt(taus[short]), rtol=0.03)

@@ -201,9 +201,8 @@ def test_elimination_ordering_lists_the_enabled_states(
     offset: bool, lever: bool, random_walk: bool
 ) -> None:
     cfg = _config(offset, lever, random_walk)
-    graph = SimpleNamespace(
-        config=cfg, epochs=[None] * 3, extra_keys=[]
-    )  # (no per-epoch state's extra variables: no water-current layer boundaries)
+    # (no per-epoch state's extra variables: no water-current layer boundaries)
+    graph = SimpleNamespace(config=cfg, epochs=[None] * 3, extra_keys=[])
     ordering = LogGraph.elimination_ordering(graph, chunk_states=2)  # type: ignore[arg-type]
     shared = _keys(cfg)[1:] if random_walk else _keys(cfg)
     assert ordering.rest == shared

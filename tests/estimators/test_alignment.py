@@ -244,9 +244,8 @@ def test_alignment_error_is_the_bias_error_model(rpy: tuple[float, float, float]
     err = _attitude_error(a.n_R_b, log, a.t_static_end)
     assert a.b_f_mean is not None
     g = float(np.linalg.norm(a.b_f_mean))
-    R = (
-        a.n_R_b
-    )  # the bias's map components need the attitude only to zeroth order: the estimate will do
+    # the bias's map components need the attitude only to zeroth order: the estimate will do
+    R = a.n_R_b
     pred = _predicted_error(R, g, LAT)
     print(
         f"\nrpy {rpy}: error {err} rad, predicted {pred} rad (levelling {np.degrees(np.hypot(*err[:2])):.5f} deg, "

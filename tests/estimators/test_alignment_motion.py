@@ -87,9 +87,8 @@ def test_in_motion_alignment_within_3_sigma(moving_log: LogData, window_s: float
         f"window {window_s:.0f} s: error {np.round(err, 4)} deg, sigma {np.round(a.sigma_rpy_deg, 4)} deg"
     )
     assert np.all(np.abs(err) < 3.0 * a.sigma_rpy_deg)
-    assert (
-        np.all(a.sigma_rpy_deg[:2] < 0.05) and a.sigma_rpy_deg[2] < 2.0
-    )  # a few degrees is all the graph needs
+    # a few degrees is all the graph needs
+    assert np.all(a.sigma_rpy_deg[:2] < 0.05) and a.sigma_rpy_deg[2] < 2.0
 
 
 def test_alignment_carried_to_the_first_state(moving_log: LogData) -> None:
@@ -146,9 +145,8 @@ def _with_imu_orientation(log: LogData, path: Path, ned: bool) -> None:
     noise = so3_exp(np.radians(ATT_SIGMA_DEG) * rng.standard_normal((len(log.imu.t), 3)))
     n_R_imu = n_R_b @ noise @ log.mounting.b_R_imu
     if ned:  # NED orientation of the FRD body, built from the axes' components (not the reader's formula)
-        ax = np.stack(
-            [n_R_imu[:, :, 0], -n_R_imu[:, :, 1], -n_R_imu[:, :, 2]], axis=2
-        )  # FRD axes in ENU
+        # FRD axes in ENU
+        ax = np.stack([n_R_imu[:, :, 0], -n_R_imu[:, :, 1], -n_R_imu[:, :, 2]], axis=2)
         n_R_imu = np.stack([ax[:, 1], ax[:, 0], -ax[:, 2]], axis=1)  # rows: north, east, down
     cov = np.eye(3) * np.radians(ATT_SIGMA_DEG) ** 2
     write_log(path, log, imu_orientation=(matrix_to_quat_xyzw(n_R_imu), cov))
@@ -187,9 +185,10 @@ def test_forced_static_and_online_need_an_attitude_source(moving_log: LogData) -
         align(moving_log.imu, moving_log.dvl, frame, AlignmentConfig(method="static"))
     with pytest.raises(GtsamDvlError, match=r"has no attitude.*--attitude-topic"):
         align(moving_log.imu, moving_log.dvl, frame, AlignmentConfig(method="attitude_topic"))
+    # a gyro bias of 200 deg/h: no gyrocompassing
     short = dataclasses.replace(
         moving_log, imu=dataclasses.replace(moving_log.imu, b_omega=moving_log.imu.b_omega + 1e-3)
-    )  # a gyro bias of 200 deg/h: no gyrocompassing
+    )
     with pytest.raises(GtsamDvlError, match=r"heading only to .* deg.*attitude topic"):
         align(short.imu, short.dvl, frame, AlignmentConfig(), mounting=short.mounting)
     with pytest.raises(

@@ -38,9 +38,8 @@ def _run(name: str, seed: int, white_noise: bool = True, weak_priors: bool = Fal
         cfg.imu.gyro_bias_sigma_deg_per_h = 10.0
         cfg.imu.accel_bias_sigma_ug = 50000.0
     log = _log(name, seed, white_noise)
-    if (
-        white_noise and not weak_priors
-    ):  # the paper configuration's run, shared with test_online.py, test_robust.py
+    # the paper configuration's run, shared with test_online.py, test_robust.py
+    if white_noise and not weak_priors:
         return summary(paper_batch(name, seed), log)
     return summary(smooth_batch(log, cfg), log)
 

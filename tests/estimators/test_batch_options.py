@@ -82,9 +82,8 @@ def test_log_without_static_start_needs_and_uses_a_configured_attitude() -> None
     assert log.truth is not None
     rpy_true = matrix_to_rpy_deg(quat_xyzw_to_matrix(log.truth.n_q_b[0]))
     cfg = EstimatorConfig.paper()
-    cfg.alignment.initial_attitude_deg = tuple(
-        rpy_true + np.array([0.02, -0.02, 0.5])
-    )  # a compass-grade guess
+    # a compass-grade guess
+    cfg.alignment.initial_attitude_deg = tuple(rpy_true + np.array([0.02, -0.02, 0.5]))
     s = summary(smooth_batch(log, cfg), log)
     print("initial attitude given, no static start:", np.round(rpy_true, 3))
     _assert_within_3_sigma(s)

@@ -14,9 +14,8 @@ from gtsam_dvl.estimators.run import run_estimator
 from tests.support.calibration import MOVING, STATIC, calibration_at_truth
 from tests.support.scenarios import simulate_variant
 
-CONFIG = (
-    EstimatorConfig()
-)  # the default: scale 1 +- 1 %, misalignment +- 1 deg, the time offset estimated
+# the default: scale 1 +- 1 %, misalignment +- 1 deg, the time offset estimated
+CONFIG = EstimatorConfig()
 
 
 @pytest.fixture(scope="module")
@@ -66,9 +65,8 @@ def test_batch_on_a_static_log_keeps_the_file(static_log: LogData) -> None:
 def test_filters_start_at_the_inflated_file(mode: str, static_log: LogData) -> None:
     """The EKF's initial mean and covariance, the online estimator's prior: the file's values and its inflated
     sigmas at the first state (a static log adds nothing there)."""
-    cal = calibration_at_truth(static_log, scale_off=0.003).inflated(
-        days=50.0, per_day=0.02
-    )  # variances x2
+    # variances x2
+    cal = calibration_at_truth(static_log, scale_off=0.003).inflated(days=50.0, per_day=0.02)
     result = run_estimator(static_log, mode, CONFIG, calibration=cal)
     tl = result.timeline
     assert tl is not None

@@ -47,12 +47,10 @@ def test_same_bayes_net_as_one_sequential_elimination(name: str, chunk_states: i
     linear = graph.linearize(values)
     plan = builder.elimination_ordering(chunk_states)
     assert len(plan.chunks) == -(-len(builder.epochs) // chunk_states)
-    full = linear.eliminateSequential(
-        plan.ordering(), gtsam.EliminateQR
-    )  # GTSAM's, solved by GTSAM
-    chunked = eliminate_chunked(
-        linear, plan
-    )  # CompactBayesNet, solved by its own back-substitution
+    # GTSAM's, solved by GTSAM
+    full = linear.eliminateSequential(plan.ordering(), gtsam.EliminateQR)
+    # CompactBayesNet, solved by its own back-substitution
+    chunked = eliminate_chunked(linear, plan)
     assert chunked.size() == full.size()
     d_full, d_chunked = full.optimize(), chunked.optimize()
     for key in [k for ks in plan.chunks[:2] for k in ks] + plan.rest:

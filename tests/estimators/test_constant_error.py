@@ -37,9 +37,8 @@ def test_response_moves_the_model_by_the_constant_error() -> None:
     b = np.array([0.003, -0.002, 0.004])
     S = response(b_v, k, b_R_d, 0.02, WIDE)
     dx = S @ b
-    moved = (
-        (k + dx[0]) * b_v @ (b_R_d @ Rotation.from_rotvec(dx[1:]).as_matrix())
-    )  # (b_R_d exp(dtheta))^T u
+    # (b_R_d exp(dtheta))^T u
+    moved = (k + dx[0]) * b_v @ (b_R_d @ Rotation.from_rotvec(dx[1:]).as_matrix())
     pings = k * b_v @ b_R_d + b
     left = k * b_v @ b_R_d
     r_moved, r_left = np.linalg.norm(pings - moved), np.linalg.norm(pings - left)
@@ -94,9 +93,8 @@ def test_added_covariance_and_held_directions() -> None:
     want = np.sqrt(1e-8 + added(config.priors.scale_sigma) ** 2)
     want_yaw = np.sqrt(1e-8 + added(np.radians(config.priors.misalignment_sigma_deg[2])) ** 2)
     assert r.scale_sigma == pytest.approx(want, rel=1e-3)
-    assert r.misalignment_sigma_deg[0] == pytest.approx(
-        np.degrees(1e-4), rel=1e-3
-    )  # roll: not excited
+    # roll: not excited
+    assert r.misalignment_sigma_deg[0] == pytest.approx(np.degrees(1e-4), rel=1e-3)
     assert np.sqrt(r.b_R_d_cov[2, 2]) == pytest.approx(want_yaw, rel=1e-3)
     assert r.calib_joint_cov[6, 6] == pytest.approx(want**2, rel=1e-3)
     assert r.shared_joint_cov[8, 8] == pytest.approx(r.b_R_d_cov[1, 1])

@@ -110,9 +110,8 @@ def test_batch_loop_finds_the_part_of_a_strong_error_the_imu_separates() -> None
         res.estimator_config is not None and res.estimator_config.dvl.correlated_sigma_m_s == 0.002
     )
     assert entry["why"].startswith("DVL correlated error fitted from")
-    assert entry["why"] in noise_lines(
-        res.info["noise"]
-    )  # (the summary's and the console's noise lines)
+    # (the summary's and the console's noise lines)
+    assert entry["why"] in noise_lines(res.info["noise"])
 
 
 def test_nothing_to_fit_gives_the_configured_results() -> None:

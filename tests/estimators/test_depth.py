@@ -87,9 +87,8 @@ def test_noise_free_depth_is_exact() -> None:
         f"\nnoise-free: max |vertical error| {np.max(np.abs(err)) * 1e3:.2f} mm; {res.info['counters']}"
     )
     assert np.max(np.abs(err)) < 3e-3
-    assert (
-        res.info["counters"]["depth_used"] >= 1599
-    )  # 2 Hz: half the samples bridged by the vertical velocity
+    # 2 Hz: half the samples bridged by the vertical velocity
+    assert res.info["counters"]["depth_used"] >= 1599
 
 
 @pytest.mark.slow

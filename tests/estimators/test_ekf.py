@@ -196,9 +196,8 @@ def test_paper_3d_final_calibration_inside_3_sigma(seed: int) -> None:
     assert np.all(np.abs(e["misalignment_nsigma"]) < 3)
     assert np.all(np.abs(e["gyro_bias_nsigma"]) < 3)
     assert np.all(np.abs(e["accel_bias_nsigma"]) < 3)
-    assert (
-        0.8 < result.info["filter"]["mean_nis_per_dof"] < 1.2
-    )  # innovations as large as the filter predicts
+    # innovations as large as the filter predicts
+    assert 0.8 < result.info["filter"]["mean_nis_per_dof"] < 1.2
 
 
 @pytest.mark.slow

@@ -37,9 +37,8 @@ MODES: dict[str, Callable[[LogData, EstimatorConfig], NavResult]] = {
 }
 
 
-END_S = (
-    460.0  # paper-3d-short up to the end of its second turn: static, the Type-I segments, two turns
-)
+# paper-3d-short up to the end of its second turn: static, the Type-I segments, two turns
+END_S = 460.0
 
 
 def _through_file(log: LogData, tmp: Path, **read: bool) -> LogData:
@@ -115,9 +114,8 @@ def test_saturated_gyro_crossed_as_gaps_in_every_mode(saturated_log: LogData, mo
         "the IMU saturated (gyro z at +0.055 rad/s)" in w and "2 stretch(es)" in w
         for w in health.warnings
     )
-    assert not any(
-        "check the IMU driver" in w for w in health.warnings
-    )  # no gap in the log: the sensor's range
+    # no gap in the log: the sensor's range
+    assert not any("check the IMU driver" in w for w in health.warnings)
 
 
 @pytest.fixture(scope="module")

@@ -42,9 +42,8 @@ def test_field_survey_meets_issue_11(run: tuple[LogData, NavResult]) -> None:
     log, res = run
     s = summary(res, log)
     e = s["errors"]
-    assert (
-        log.metadata.get("origin") is None and log.origin is not None
-    )  # the origin came from the first fix
+    # the origin came from the first fix
+    assert log.metadata.get("origin") is None and log.origin is not None
     assert res.info["alignment"]["method"] == "in_motion"
     z = np.array([e["scale_nsigma"], *e["misalignment_nsigma"], e["dvl_time_offset_nsigma"]])
     # vertical error and sigma at the last state (the depth sensor holds it)
@@ -81,9 +80,7 @@ def test_field_survey_surfacing_error(run: tuple[LogData, NavResult]) -> None:
         f"({mean['horizontal_error_pct']:.3f} %) +- {mean['fix_sigma_h_m']:.2f} m, nis {mean['nis']:.2f}"
     )
     assert metrics["surfacing_fixes"] > 50
-    assert (
-        mean["horizontal_error_pct"] < 0.1
-    )  # 1.8 km: under 1.8 m, fix noise averaged down to 0.33 m
-    assert (
-        mean["nis"] < 16.3
-    )  # chi^2 3 dof, 99.9 %: consistent with the sigmas of the fixes and the estimate
+    # 1.8 km: under 1.8 m, fix noise averaged down to 0.33 m
+    assert mean["horizontal_error_pct"] < 0.1
+    # chi^2 3 dof, 99.9 %: consistent with the sigmas of the fixes and the estimate
+    assert mean["nis"] < 16.3

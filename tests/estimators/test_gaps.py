@@ -30,17 +30,15 @@ RUNS = {"batch": smooth_batch, "online": smooth_online, "ekf": run_ekf}
 
 
 def test_gap_pieces_cover_every_interval_once() -> None:
-    t = np.concatenate(
-        [np.arange(1, 501) * 0.01, 5.0 + np.arange(1, 301) * 0.01]
-    )  # 100 Hz, a 0.2 s hole
+    # 100 Hz, a 0.2 s hole
+    t = np.concatenate([np.arange(1, 501) * 0.01, 5.0 + np.arange(1, 301) * 0.01])
     t[500:] += 0.2
     gaps = find_gaps(t, 3.0)
     assert len(gaps) == 1 and gaps.period_s == pytest.approx(0.01)
     assert gaps.start[0] == pytest.approx(5.0) and gaps.end[0] == pytest.approx(5.2)
     starts = sample_starts_with_gaps(t, gaps)
-    assert starts[500] == pytest.approx(
-        5.2
-    )  # the first sample after the gap covers its own period only
+    # the first sample after the gap covers its own period only
+    assert starts[500] == pytest.approx(5.2)
     for a, b in [(4.0, 6.0), (5.05, 5.15), (5.1, 5.25), (4.995, 5.005), (1.0, 4.0)]:
         idx, dt, held = pieces_with_holds(t, starts, gaps, a, b)
         assert abs(dt.sum() - (b - a)) < 1e-12  # every instant once: samples or the held one
@@ -195,9 +193,8 @@ def test_a_hold_turns_the_attitude_as_samples_would() -> None:
     along z) gives the delta-v of the same samples repeated, within 1e-3 m/s (one piece: 1 m/s off)."""
     import gtsam
 
-    t = np.concatenate(
-        [np.arange(1, 101) * 0.01, 3.0 + np.arange(1, 101) * 0.01]
-    )  # a 2 s gap after 1.00 s
+    # a 2 s gap after 1.00 s
+    t = np.concatenate([np.arange(1, 101) * 0.01, 3.0 + np.arange(1, 101) * 0.01])
     gaps = find_gaps(t, 3.0)
     starts = sample_starts_with_gaps(t, gaps)
     idx, dt, holds = pieces_with_holds(t, starts, gaps, 0.5, 3.5)

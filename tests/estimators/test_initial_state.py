@@ -184,6 +184,5 @@ def test_origin_at_a_later_fix(late_log: LogData, config: EstimatorConfig) -> No
         f"origin 5 s after the first state: position {np.round(first.n_p, 3)} m, truth {np.round(want, 3)} m"
     )
     assert first.carried and np.all(np.abs(first.n_p - want) < 3.0 * sig_pos)
-    assert (
-        np.linalg.norm(want) > 5.0 * sig_pos.max()
-    )  # the origin at the first state would be far off
+    # the origin at the first state would be far off
+    assert np.linalg.norm(want) > 5.0 * sig_pos.max()

@@ -70,9 +70,8 @@ def estimates(r: NavResult) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(values, sigmas, names): scale, misalignment (deg), accelerometer bias (micro-g), gyro bias (deg/h), final
     position (m, map axes)."""
     n_R_b = r.n_R_b[-1]
-    pos_sigma = np.sqrt(
-        np.diag(n_R_b @ r.pose_cov[-1][3:, 3:] @ n_R_b.T)
-    )  # translation tangent in body axes
+    # translation tangent in body axes
+    pos_sigma = np.sqrt(np.diag(n_R_b @ r.pose_cov[-1][3:, 3:] @ n_R_b.T))
     values = np.concatenate(
         [[r.scale], r.misalignment_deg, r.accel_bias / UG, r.gyro_bias / DEG_PER_H, r.n_p[-1]]
     )
@@ -236,9 +235,8 @@ def _assert_same(new: PingMotion, ref: PingMotion, worst: dict[str, float]) -> N
         assert np.array_equal(getattr(new, name), getattr(ref, name)), name
     for name in ("dR_dbg", "dv_dba", "dv_dbg"):
         a, b = getattr(new, name), getattr(ref, name)
-        rel = float(
-            np.linalg.norm(a - b) / max(float(np.linalg.norm(b)), 1e-300)
-        )  # dv_dbg is 0 after one sample
+        # dv_dbg is 0 after one sample
+        rel = float(np.linalg.norm(a - b) / max(float(np.linalg.norm(b)), 1e-300))
         worst[name] = max(worst.get(name, 0.0), rel)
         assert rel < 1e-9, f"{name}: {rel:.2e} relative at dt {ref.dt:.4f} s"
 
@@ -320,9 +318,8 @@ def test_snapshot_does_not_depend_on_the_parameters_earth_rate_or_gravity() -> N
     from its preintegration) and with neither: the same snapshot (the increments and their bias Jacobians are the
     preintegration's own; snapshot undoes the rotating-frame prediction it evaluates through)."""
     rng = np.random.default_rng(8)
-    w_ie = (
-        np.array([0.0, 6.3e-5, 3.6e-5]) * 50
-    )  # 50 times the Earth's rate, so that a wrong term would show
+    # 50 times the Earth's rate, so that a wrong term would show
+    w_ie = np.array([0.0, 6.3e-5, 3.6e-5]) * 50
     earth = _rotating_params(w_ie)
     a = gtsam.PreintegratedImuMeasurements(earth, gtsam.imuBias.ConstantBias())
     b = gtsam.PreintegratedImuMeasurements(_params(), gtsam.imuBias.ConstantBias())

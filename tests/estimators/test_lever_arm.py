@@ -187,9 +187,8 @@ def test_beams_and_time_offset_variants_recover_it_too() -> None:
         )
         assert np.all(np.abs(n) < 3.0) and np.all(r.lever_arm_sigma_m[:2] < 0.1)
         if offset:
-            assert (
-                abs(r.time_offset_s) < 3.0 * r.time_offset_sigma_s
-            )  # the simulated offset is zero
+            # the simulated offset is zero
+            assert abs(r.time_offset_s) < 3.0 * r.time_offset_sigma_s
 
 
 def test_verdicts_say_which_axes_the_log_determined() -> None:
@@ -211,9 +210,8 @@ def test_verdicts_say_which_axes_the_log_determined() -> None:
             assert any("rotation axis of every turn" in line for line in report.lines())
             assert "not determined" in " ".join(v["verdict"])
     r = solve("straight", True)
-    assert r.lever_arm_sigma_m is not None and np.all(
-        r.lever_arm_sigma_m > 0.95 * 0.5
-    )  # the prior's
+    # the prior's
+    assert r.lever_arm_sigma_m is not None and np.all(r.lever_arm_sigma_m > 0.95 * 0.5)
 
 
 def test_lever_arm_in_summary_and_result_log(tmp_path) -> None:  # type: ignore[no-untyped-def]

@@ -40,12 +40,10 @@ def test_rotation_is_undone_exactly(sim_paper2d_clean: LogData) -> None:
         imu_in_base_link(sim_paper2d_clean.imu, sim_paper2d_clean.mounting) is sim_paper2d_clean.imu
     )
     w, f = rotate_imu_samples(b_R_IMU, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
-    np.testing.assert_allclose(
-        w, [[0.0, 0.0, -1.0]], atol=1e-15
-    )  # imu z is base_link -z (rolled 180 deg)
-    np.testing.assert_allclose(
-        f, [[0.0, 1.0, 0.0]], atol=1e-15
-    )  # imu x is base_link +y: Rz(90) Rx(180) x = y
+    # imu z is base_link -z (rolled 180 deg)
+    np.testing.assert_allclose(w, [[0.0, 0.0, -1.0]], atol=1e-15)
+    # imu x is base_link +y: Rz(90) Rx(180) x = y
+    np.testing.assert_allclose(f, [[0.0, 1.0, 0.0]], atol=1e-15)
 
 
 @pytest.fixture(scope="module")

@@ -24,9 +24,8 @@ from tests.support.scenarios import surface_dive_raw
 DEPTH_M = 0.05  # the simulated depth sensor's white noise (m)
 GNSS_M = 2.0  # the simulated fixes' white noise per axis (m)
 DEPTH_ROWS = 1298  # 5 Hz depth over the 260 s dive, on states within 0.5 s
-GNSS_ROWS = (
-    3 * 167
-)  # 1 Hz fixes at the surface (60 s static and away, 40 s at the end), 3 rows each
+# 1 Hz fixes at the surface (60 s static and away, 40 s at the end), 3 rows each
+GNSS_ROWS = 3 * 167
 
 
 def _tolerance(rows: int, bias: float) -> float:

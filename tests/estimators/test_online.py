@@ -33,9 +33,8 @@ from tests.support.paper_runs import GROUP, paper_batch, paper_log, paper_online
 from tests.support.results import changes_in_sigmas
 
 PRIOR = EstimatorConfig.paper().priors
-pytestmark = pytest.mark.xdist_group(
-    GROUP
-)  # the paper runs shared with test_batch.py, test_robust.py
+# the paper runs shared with test_batch.py, test_robust.py
+pytestmark = pytest.mark.xdist_group(GROUP)
 
 
 @functools.cache
@@ -296,9 +295,8 @@ def test_estimate_after_each_epoch() -> None:
     assert e is not None and e.t == dvl.t[199]
     for cov in (e.pose_cov, e.vel_cov, e.bias_cov, e.b_R_d_cov, e.calib_cov):
         assert np.all(np.linalg.eigvalsh(cov) > 0)
-    assert e.scale_sigma == pytest.approx(
-        PRIOR.scale_sigma, rel=1e-3
-    )  # static: slow pings tell nothing
+    # static: slow pings tell nothing
+    assert e.scale_sigma == pytest.approx(PRIOR.scale_sigma, rel=1e-3)
     assert np.all(e.attitude_sigma_deg < [0.01, 0.01, 1.0])
 
 
@@ -379,9 +377,8 @@ def test_bad_messages_dropped_and_counted() -> None:
         for j in range(len(dvl)):
             end = int(ends[j])
             t, w, f = imu.t[start:end], imu.b_omega[start:end], imu.b_f[start:end]
-            if (
-                j % 50 == 7 and len(t) > 3
-            ):  # a duplicated and a stale sample, and a NaN sample, in the batch
+            # a duplicated and a stale sample, and a NaN sample, in the batch
+            if j % 50 == 7 and len(t) > 3:
                 bad_w = w[1].copy()
                 bad_w[0] = np.nan
                 t = np.concatenate([t[:2], t[1:2], t[:1], [0.5 * (t[1] + t[2])], t[2:]])

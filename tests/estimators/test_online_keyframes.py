@@ -212,9 +212,8 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
     batch_pim, batch_held, expected = interval_with_snapshots(
         t_state, t_next, pings, maker.make_params(), ImuPieces(t, starts, b_f, w, gaps), cfg.imu
     )
-    lo = (
-        int(np.searchsorted(t, t_state, side="right")) - 1
-    )  # the online buffer: from the last sample <= the state
+    # the online buffer: from the last sample <= the state
+    lo = int(np.searchsorted(t, t_state, side="right")) - 1
     T, W, F = t[lo:], w[lo:], f[lo:]
     g_buf = find_gaps(T, cfg.imu.gap_samples, gaps.period_s)
     s_buf = sample_starts_with_gaps(T, g_buf)
@@ -229,9 +228,8 @@ def test_between_ping_motion_is_the_batch_smoothers_to_the_bit(gap: bool) -> Non
                 getattr(got, name), getattr(e, name), err_msg=f"{name} at {t_p}"
             )
     if gap:
-        assert (
-            expected[-1].cov[8, 8] > 10 * expected[0].cov[8, 8]
-        )  # the hold's motion-model covariance is in
+        # the hold's motion-model covariance is in
+        assert expected[-1].cov[8, 8] > 10 * expected[0].cov[8, 8]
     # the next IMU factor's preintegration, cut at the last stamp before each ping, then closed at the state: the
     # batch smoother's, and preintegrate_interval's in one go
     ref, _, ref_held = maker.preintegrate_interval(t_state, t_next, buf)
@@ -311,9 +309,8 @@ def test_prediction_at_a_ping_is_gtsams() -> None:
         predict_at_ping(zero, s.t + snap.dt, snap, motion),
         pim.predict(gtsam.NavState(s.pose, s.n_v), zero.bias),
     )
-    assert (
-        np.abs(np.asarray(p0.pose.translation()) - np.asarray(ref0.position())).max() < 1e-9
-    )  # exact at zero bias
+    # exact at zero bias
+    assert np.abs(np.asarray(p0.pose.translation()) - np.asarray(ref0.position())).max() < 1e-9
     assert np.all(np.isnan(p.cov))  # no covariance in, none out
 
 
@@ -371,9 +368,8 @@ def test_predicted_covariance_is_the_first_order_propagation() -> None:
         f"\npropagated covariance vs numerical Jacobians: worst {rel.max():.1e} of the sigmas' product"
     )
     assert rel.max() < 1e-5
-    noisy = predict_at_ping(
-        s, t_p, snap, motion
-    )  # the preintegration's noise adds to the pose and velocity only
+    # the preintegration's noise adds to the pose and velocity only
+    noisy = predict_at_ping(s, t_p, snap, motion)
     added = noisy.cov - p.cov
     assert np.all(np.linalg.eigvalsh(added[:9, :9]) > -1e-18) and np.abs(added[9:, :]).max() == 0.0
     np.testing.assert_allclose(np.trace(added[6:9, 6:9]), np.trace(snap.cov[6:9, 6:9]), rtol=1e-9)

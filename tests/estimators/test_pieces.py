@@ -53,9 +53,8 @@ def test_a_30s_imu_gap_in_a_turn_smooths_as_two_pieces(
     assert breaks[0]["after_index"] == k - 1 and result.info["joint"]["converged"]
     assert len(result.t) == pieces[0]["states"] + pieces[1]["states"] == result.info["epochs"]
     assert result.dvl_pings is not None and np.all(np.diff(result.dvl_pings) > 0)
-    assert np.allclose(
-        log.dvl.t[result.dvl_pings[k]], result.t[k]
-    )  # the ping indices are the log's
+    # the ping indices are the log's
+    assert np.allclose(log.dvl.t[result.dvl_pings[k]], result.t[k])
     # the calibration within 3 sigma of the truth
     truth = log.true_calibration
     assert truth is not None

@@ -30,9 +30,8 @@ def reference(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """velocity_rate_input written per ping, one window at a time: the reference for the vectorised one."""
     w = maker.config.dvl.time_offset_window_s
-    start, end = (
-        (t, t + dt) if dt >= 0 else (t + dt, t)
-    )  # [t, t + dt], widened to 2 w about its middle
+    # [t, t + dt], widened to 2 w about its middle
+    start, end = (t, t + dt) if dt >= 0 else (t + dt, t)
     if end - start < 2 * w:
         mid = 0.5 * (start + end)
         start, end = mid - w, mid + w

@@ -76,9 +76,8 @@ def _off() -> EstimatorConfig:
 
 @functools.cache
 def _run(mode: str, case: str, defaults: bool = True) -> NavResult:
-    if (
-        case == "clean" and defaults and mode in ("batch", "online")
-    ):  # the runs test_batch.py, test_online.py use
+    # the runs test_batch.py, test_online.py use
+    if case == "clean" and defaults and mode in ("batch", "online"):
         return {"batch": paper_batch, "online": paper_online}[mode]("paper-3d", SEED)
     log = _clean() if case == "clean" else _bogus(case)[0]
     return RUNS[mode](log, EstimatorConfig.paper() if defaults else _off())
@@ -148,6 +147,5 @@ def test_online_survives_outliers_without_the_kernel() -> None:
         f"\nonline, no kernel, 1 % outliers: {len(res.t)} epochs, scale {res.scale:.5f}, "
         f"{res.info['isam2']['rebases']} rebases"
     )
-    assert (
-        len(res.t) == int(log.dvl.valid.sum()) - 1
-    )  # every ping but the one at the first IMU stamp
+    # every ping but the one at the first IMU stamp
+    assert len(res.t) == int(log.dvl.valid.sum()) - 1

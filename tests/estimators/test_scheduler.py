@@ -71,9 +71,8 @@ def _ping_by_ping(
                 Ping(float(dvl.t[j]), dvl.d_v[j], dvl.d_cov[j], bool(dvl.valid[j]), None), t_first
             )
         kept += sched.ready()
-    late = (
-        sched.drop_waiting()
-    )  # the pings after the last IMU sample: outside the IMU's span (classify_pings)
+    # the pings after the last IMU sample: outside the IMU's span (classify_pings)
+    late = sched.drop_waiting()
     if late:
         counters["dvl_after_imu"] = counters.get("dvl_after_imu", 0) + late
     return np.array([index[p.t] for p in kept]), np.array([p.key for p in kept]), counters

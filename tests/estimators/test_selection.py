@@ -222,9 +222,8 @@ def test_bogus_pings_dropped_alike_by_batch_online_and_ekf(sim_paper3d_clean: Lo
         assert {k: res.info["counters"].get(k, 0) for k in BOGUS_REASONS} == counts
     clean: dict[str, int] = {}
     select_epochs(sim_paper3d_clean.dvl, sim_paper3d_clean.imu, cfg.dvl, 0.0, clean)
-    assert all(
-        clean[k] == 0 for k in BOGUS_REASONS
-    )  # 601 exact zeros and 1621 bit-identical repeats there
+    # 601 exact zeros and 1621 bit-identical repeats there
+    assert all(clean[k] == 0 for k in BOGUS_REASONS)
 
 
 def _synthetic_imu(
@@ -237,9 +236,8 @@ def _synthetic_imu(
     """Level at rest (specific force up, g = 9.8), optionally accelerating along x by accel m/s^2 from t_accel,
     or rolling at roll_rate rad/s on the spot (gravity turning in the body, no motion)."""
     t = np.arange(1, int(t_end * hz) + 1) / hz
-    roll = roll_rate * (
-        t - 0.5 / hz
-    )  # the mid-interval attitude: the sample is the interval's mean
+    # the mid-interval attitude: the sample is the interval's mean
+    roll = roll_rate * (t - 0.5 / hz)
     f = np.stack(
         [np.where(t > t_accel, accel, 0.0), 9.8 * np.sin(roll), 9.8 * np.cos(roll)], axis=1
     )
@@ -260,9 +258,8 @@ def _codes(
         t, d_v, np.zeros((len(t), 3, 3)), np.ones(len(t), dtype=bool), noise_free=noise_free
     )
     got = screen_pings(dvl, np.arange(len(t)), imu, cfg or DvlConfig()).tolist()
-    screen = PingScreen(
-        cfg or DvlConfig(), repeats_need_motion=noise_free
-    )  # the reference, ping by ping
+    # the reference, ping by ping
+    screen = PingScreen(cfg or DvlConfig(), repeats_need_motion=noise_free)
     assert [
         screen.check(float(x), y, imu.t, imu.b_omega, imu.b_f) for x, y in zip(t, d_v, strict=True)
     ] == got
@@ -278,21 +275,17 @@ def test_ping_screen_rules() -> None:
     t = np.arange(1.0, 21.0)
     zeros = np.zeros((20, 3))
     assert _codes(_synthetic_imu(21.0), t, zeros) == [USABLE] * 20
-    assert (
-        _codes(_synthetic_imu(21.0, roll_rate=0.05), t, zeros) == [USABLE] * 20
-    )  # 1 rad rolled: 9.8 m/s^2 turned
+    # 1 rad rolled: 9.8 m/s^2 turned
+    assert _codes(_synthetic_imu(21.0, roll_rate=0.05), t, zeros) == [USABLE] * 20
     moving = _codes(_synthetic_imu(21.0, accel=0.3, t_accel=10.5), t, zeros)
-    assert (
-        moving == [USABLE] * 10 + [ZERO_WHILE_MOVING] * 10
-    )  # 0.3 m/s^2 from 10.5 s: 0.15 m/s by 11 s
+    # 0.3 m/s^2 from 10.5 s: 0.15 m/s by 11 s
+    assert moving == [USABLE] * 10 + [ZERO_WHILE_MOVING] * 10
     cruise = np.tile([2.0, 0.0, 0.0], (20, 1))
     cruise[12:] = 0.0
-    assert (
-        _codes(_synthetic_imu(21.0), t, cruise) == [USABLE] * 12 + [ZERO_WHILE_MOVING] * 8
-    )  # the DVL said 2 m/s
-    assert (
-        _codes(_synthetic_imu(21.0), t, np.tile([2.0, 0.0, 0.0], (20, 1))) == [USABLE] * 20
-    )  # constant velocity
+    # the DVL said 2 m/s
+    assert _codes(_synthetic_imu(21.0), t, cruise) == [USABLE] * 12 + [ZERO_WHILE_MOVING] * 8
+    # constant velocity
+    assert _codes(_synthetic_imu(21.0), t, np.tile([2.0, 0.0, 0.0], (20, 1))) == [USABLE] * 20
     speeding = np.stack([np.clip(0.3 * (t - 10.5), 0.0, None), np.zeros(20), np.zeros(20)], axis=1)
     speeding[14:] = speeding[13]  # frozen at 14 s while the vehicle keeps accelerating
     assert (
@@ -325,9 +318,8 @@ def test_frozen_dvl_dropped_whatever_the_imu_shows() -> None:
     want = [USABLE] * 8 + [REPEATED] * 6 + [USABLE] * 6
     assert _codes(_synthetic_imu(21.0), t, frozen, noise_free=False) == want
     assert _codes(_synthetic_imu(21.0, roll_rate=0.05), t, frozen, noise_free=False) == want
-    assert (
-        _codes(_synthetic_imu(21.0), t, frozen, noise_free=True) == [USABLE] * 20
-    )  # no motion: the model's
+    # no motion: the model's
+    assert _codes(_synthetic_imu(21.0), t, frozen, noise_free=True) == [USABLE] * 20
     assert _codes(_synthetic_imu(21.0), t, np.zeros((20, 3)), noise_free=False) == [USABLE] * 20
     dvl = DvlData(t, frozen, np.zeros((20, 3, 3)), np.ones(20, dtype=bool))
     assert frozen_runs(dvl) == [(9.0, 14.0, 6)]

@@ -238,9 +238,8 @@ def test_bulk_screen_makes_the_sequential_decisions(fault: str) -> None:
     np.testing.assert_array_equal(bulk, seq)
     for reason in MUST_REJECT.get(fault, []):
         assert (seq == reason).sum() > 0, reason
-    if (
-        fault == "long_dropout"
-    ):  # the ping after the dropout compares a window capped at SCREEN_WINDOW_S
+    # the ping after the dropout compares a window capped at SCREEN_WINDOW_S
+    if fault == "long_dropout":
         assert np.diff(case(fault).dvl.t[idx]).max() > SCREEN_WINDOW_S
 
 

@@ -136,9 +136,8 @@ def test_offset_reported_in_summary_and_result_log(tmp_path) -> None:  # type: i
     assert (
         back.time_offset_s == r.time_offset_s and back.time_offset_sigma_s == r.time_offset_sigma_s
     )
-    assert (
-        back.dvl_pings is not None and r.dvl_pings is not None
-    )  # the usable pings too (health reads them)
+    # the usable pings too (health reads them)
+    assert back.dvl_pings is not None and r.dvl_pings is not None
     np.testing.assert_array_equal(back.dvl_pings, r.dvl_pings)
     assert TOPICS["time_offset"] == "/gtsam_dvl/dvl_time_offset"
     # not estimated: no offset in the summary

@@ -53,9 +53,8 @@ def test_random_walk_variance() -> None:
 def test_batch_recovers_the_current(water_log: LogData) -> None:
     used = smooth_batch(water_log, _config(water_log, "auto"), timeline=True)
     assert used.config["current"]["water_track"] == "use"
-    assert (
-        used.timeline is not None
-    )  # the filtering timeline carries W(i) too: its last sigma is the smoother's
+    # the filtering timeline carries W(i) too: its last sigma is the smoother's
+    assert used.timeline is not None
     assert used.timeline.scale_sigma[-1] == pytest.approx(
         used.calibration["scale"].sigma[0], rel=1e-6
     )
@@ -68,9 +67,8 @@ def test_batch_recovers_the_current(water_log: LogData) -> None:
             np.asarray(wc[f"{axis}_m_s"])[inside],
             np.asarray(wc[f"{axis}_sigma_m_s"])[inside],
         )
-        assert np.all(sig < 0.02), (
-            sig.max()
-        )  # determined: bottom track on both sides ties the velocity
+        # determined: bottom track on both sides ties the velocity
+        assert np.all(sig < 0.02), sig.max()
         assert abs(est.mean() - truth) < 3 * sig.mean(), (axis, est.mean(), sig.mean())
     assert wc["determined_during_water_track"]
     assert used.info["counters"]["dvl_water_track"] == 0  # used, not refused
@@ -114,9 +112,8 @@ def test_online_recovers_the_current(water_log: LogData) -> None:
     from gtsam_dvl.estimators.online import smooth_online
     from tests.support.logs import cut_log
 
-    used = smooth_online(
-        cut_log(water_log, T_WATER[1] + 20.0), _config(water_log, "auto")
-    )  # (its first 180 s)
+    # (its first 180 s)
+    used = smooth_online(cut_log(water_log, T_WATER[1] + 20.0), _config(water_log, "auto"))
     assert used.config["current"]["water_track"] == "use"
     _assert_filtered_current(used, water_log)
 

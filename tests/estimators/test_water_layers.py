@@ -94,9 +94,8 @@ def test_ekf_crossing_is_the_linear_map() -> None:
     cfg = _cfg(5.0)
     rng = np.random.default_rng(4)
     a = rng.normal(size=(23, 23))
-    P0 = (
-        a @ a.T * 1e-4
-    )  # 19 navigation/calibration components, the correlated error (3) absent, W (2) last: 21
+    # 19 navigation/calibration components, the correlated error (3) absent, W (2) last: 21
+    P0 = a @ a.T * 1e-4
     P0 = P0[:21, :21]
     fs = FilterState(
         NavState(np.eye(3), np.zeros(3), np.array([0.0, 0.0, -1.0])),
@@ -110,9 +109,8 @@ def test_ekf_crossing_is_the_linear_map() -> None:
     current.ekf_start(cfg, fs, 0.0)
     assert fs.layer == 0 and fs.shear is not None and len(fs.shear) == 0
     fs.shear_ids = []
-    fs.nav = NavState(
-        np.eye(3), np.zeros(3), np.array([0.0, 0.0, -12.0])
-    )  # layer 2: boundaries 0 and 1
+    # layer 2: boundaries 0 and 1
+    fs.nav = NavState(np.eye(3), np.zeros(3), np.array([0.0, 0.0, -12.0]))
     current.ekf_propagate(cfg, fs, 0.0, 0.0)  # (dt = 0: the crossing alone)
     q = cfg.current.depth_rw_m_s_per_sqrt_m**2 * 5.0
     Pa = np.zeros((25, 25))  # [nav 19, S0, S1, W] before the crossing, by hand
@@ -129,9 +127,8 @@ def test_ekf_crossing_is_the_linear_map() -> None:
     np.testing.assert_allclose(fs.P, T @ Pa @ T.T, atol=1e-15)
     fs.shear = np.array([[0.01, 0.02], [0.03, -0.01]])
     before = fs.current.copy() if fs.current is not None else None
-    fs.nav = NavState(
-        np.eye(3), np.zeros(3), np.array([0.0, 0.0, -6.0])
-    )  # back to layer 1: boundary 1 upwards
+    # back to layer 1: boundary 1 upwards
+    fs.nav = NavState(np.eye(3), np.zeros(3), np.array([0.0, 0.0, -6.0]))
     current.ekf_propagate(cfg, fs, 0.0, 0.0)
     assert fs.shear_ids == [0, 1] and fs.layer == 1
     assert fs.current is not None and before is not None

@@ -51,9 +51,8 @@ def _presets(base: EstimatorConfig) -> EstimatorConfig:
         },
         "model": "teledyne-pathfinder",
     }
-    d["priors"]["nominal_check"] = (
-        False  # the weak directions alone (the nominal check: test_nominal_check.py)
-    )
+    # the weak directions alone (the nominal check: test_nominal_check.py)
+    d["priors"]["nominal_check"] = False
     # the posteriors of the data alone: the constant DVL error's share (test_constant_error.py) is added after the
     # hold, outside the held directions, and would blur the free run's directions compared below
     d["dvl"]["constant_error_sigma_m_s"] = 0.0
@@ -100,9 +99,8 @@ def test_straight_transect_holds_yaw_and_scale() -> None:
     for k in np.flatnonzero(weak):  # pinned at the prior's mean, with the prior's variance
         assert abs(V[:, k] @ u_held) < 1e-3, V[:, k] @ u_held
         assert V[:, k] @ M_held @ V[:, k] == pytest.approx(1.0, abs=0.02)
-        assert V[:, k] @ M_free @ V[:, k] < 1.0 / (
-            1.0 + 0.05
-        )  # (the free run's: the data's little information)
+        # (the free run's: the data's little information)
+        assert V[:, k] @ M_free @ V[:, k] < 1.0 / (1.0 + 0.05)
     for k in np.flatnonzero(~weak):  # the informed directions: the free run's variance, within 10 %
         assert V[:, k] @ M_held @ V[:, k] == pytest.approx(V[:, k] @ M_free @ V[:, k], rel=0.1)
     truth = log.truth
@@ -113,9 +111,8 @@ def test_straight_transect_holds_yaw_and_scale() -> None:
             e,
             res.position_sigma_m[-1, :2],
         )
-    assert np.all(
-        held.position_sigma_m[-1, :2] >= 0.98 * free.position_sigma_m[-1, :2]
-    )  # (the prior carried in)
+    # (the prior carried in)
+    assert np.all(held.position_sigma_m[-1, :2] >= 0.98 * free.position_sigma_m[-1, :2])
 
 
 def test_hold_joint_properties() -> None:
@@ -127,9 +124,8 @@ def test_hold_joint_properties() -> None:
     from gtsam_dvl.core.states import columns
     from gtsam_dvl.core.types import Mounting
 
-    cfg = EstimatorConfig.from_dict(
-        {"priors": {"nominal_check": False}}
-    )  # the weak directions alone
+    # the weak directions alone
+    cfg = EstimatorConfig.from_dict({"priors": {"nominal_check": False}})
     mounting = Mounting()
     keys = [X(0), V(0), B(0), K_SCALE, C_MISALIGN]
     k0, R0, P0 = weak_hold.calibration_prior(cfg, mounting)
@@ -144,9 +140,8 @@ def test_hold_joint_properties() -> None:
     rng = np.random.default_rng(7)
     n = 6 + 3 + 6 + 1 + 3
     A = rng.normal(size=(n, n)) * np.r_[np.full(15, 0.1), np.sqrt(np.diag(P0))][:, None]
-    cov = A @ A.T + np.diag(
-        np.r_[np.full(15, 1e-4), 0.9 * np.diag(P0)]
-    )  # the calibration barely informed
+    # the calibration barely informed
+    cov = A @ A.T + np.diag(np.r_[np.full(15, 1e-4), 0.9 * np.diag(P0)])
     held = weak_hold.hold_joint(cfg, mounting, values, keys, cov)
     assert held is not None
     values_h, cov_h, plan = held

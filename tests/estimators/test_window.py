@@ -491,9 +491,8 @@ def test_threshold_map_custom_values_and_dimensions() -> None:
     assert (
         _relinearised(RelinearizationThresholds(misalignment_rad=1e-3), {"c": _e(3, 1, 2e-3)}) == 1
     )
-    bad = RelinearizationThresholds.model_construct(
-        velocity=(0.01, 0.01)
-    )  # unchecked: iSAM2 refuses it
+    # unchecked: iSAM2 refuses it
+    bad = RelinearizationThresholds.model_construct(velocity=(0.01, 0.01))
     with pytest.raises(ValueError, match="dimensionality for 'v'"):
         _relinearised(bad, {})
 

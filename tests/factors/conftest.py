@@ -14,9 +14,8 @@ from scipy.spatial.transform import Rotation
 from gtsam_dvl.factors import PingMotion
 from tests.support.numerical import numerical_jacobian
 
-W_IE = 7.292115e-5 * np.array(
-    [0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))]
-)  # map ENU at 30 deg, rad/s
+# map ENU at 30 deg, rad/s
+W_IE = 7.292115e-5 * np.array([0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])
 N_G0 = np.array([1e-5, -2e-5, -9.79])  # gravity in map, m/s^2
 
 

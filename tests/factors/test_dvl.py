@@ -321,9 +321,8 @@ def test_robust_noise_and_point3_velocity_accepted() -> None:
     factor = make_dvl_velocity_factor(huber, *KEYS, s.y_measured(), s.b_omega, s.b_l)
     values = gtsam.Values()
     values.insert(KEYS[0], s.pose)
-    values.insertPoint3(
-        KEYS[1], s.n_v
-    )  # a fixed-size Vector3 entry, as a C++ factor would store it
+    # a fixed-size Vector3 entry, as a C++ factor would store it
+    values.insertPoint3(KEYS[1], s.n_v)
     values.insert(KEYS[2], np.array([s.k]))
     values.insert(KEYS[3], s.rot)
     np.testing.assert_allclose(factor.unwhitenedError(values), -s.residual, atol=ZERO_TOL)
@@ -434,9 +433,8 @@ def solve_calibration(
     tight = 1e-6
     b_l = np.array([0.6, -0.1, -0.4])  # DVL forward, right, below the IMU
     for i in range(n_epochs):
-        n_R_b = rotvec(
-            np.array([0.1, 0.1, np.pi]) * rng.uniform(-1.0, 1.0, size=3)
-        )  # tilts and headings
+        # tilts and headings
+        n_R_b = rotvec(np.array([0.1, 0.1, np.pi]) * rng.uniform(-1.0, 1.0, size=3))
         speed = rng.uniform(0.5, 3.0)
         n_v = speed * unit(rng)
         b_omega = rng.normal(scale=0.05, size=3)
@@ -476,9 +474,8 @@ def solve_calibration(
     initial.insert(B(0), gtsam.Rot3(b_R_d0))
 
     params = gtsam.LevenbergMarquardtParams()
-    params.setLinearSolverType(
-        "MULTIFRONTAL_QR"
-    )  # the tight priors make normal equations ill-conditioned
+    # the tight priors make normal equations ill-conditioned
+    params.setLinearSolverType("MULTIFRONTAL_QR")
     params.setRelativeErrorTol(1e-15)
     params.setAbsoluteErrorTol(1e-20)
     params.setMaxIterations(100)
@@ -486,9 +483,8 @@ def solve_calibration(
     return float(result.atVector(K(0))[0]), result.atRot3(B(0))
 
 
-PAPER = Calibration(
-    0.9998, rotvec(np.radians([-0.1, 0.2, -0.5]))
-)  # FLU roll, pitch, yaw of R_c (small)
+# FLU roll, pitch, yaw of R_c (small)
+PAPER = Calibration(0.9998, rotvec(np.radians([-0.1, 0.2, -0.5])))
 LARGE = Calibration(1.05, rotvec(np.radians([2.0, -3.0, 5.0])) @ ROLL_180)
 
 
@@ -757,9 +753,8 @@ def test_water_current_variable(
     H: list[Any] = [None] * len(x)
     e = dvl_error(x, y, o, H)
     x_water = list(x0)
-    x_water[1] = np.asarray(x0[1]) - np.array(
-        [n_c[0], n_c[1], 0.0]
-    )  # the velocity relative to the water
+    # the velocity relative to the water
+    x_water[1] = np.asarray(x0[1]) - np.array([n_c[0], n_c[1], 0.0])
     np.testing.assert_allclose(e, dvl_error(x_water, y, o0), atol=1e-15)
     np.testing.assert_allclose(dvl_error([*x0, np.zeros(2)], y, o), dvl_error(x0, y, o0), atol=0)
     assert np.abs(e - dvl_error(x0, y, o0)).max() > 0.1  # the current matters

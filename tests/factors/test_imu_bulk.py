@@ -39,9 +39,8 @@ def factors(earth: bool) -> tuple[list[gtsam.ImuFactor], list[gtsam.Preintegrati
         pim = gtsam.PreintegratedImuMeasurements(p, gtsam.imuBias.ConstantBias())
         steps = int(rng.integers(20, 300))
         rate = rng.normal(0, 0.3, 3)
-        if (
-            n >= N - 3
-        ):  # a turn of 3.3 to 5 rad over the interval: beyond pi (a Logmap would wrap), short of 2 pi
+        # a turn of 3.3 to 5 rad over the interval: beyond pi (a Logmap would wrap), short of 2 pi
+        if n >= N - 3:
             rate *= rng.uniform(3.3, 5.0) / (np.linalg.norm(rate) * steps * 0.005)
         for _ in range(steps):
             pim.integrateMeasurement(

@@ -32,9 +32,8 @@ KEYS = (X(0), V(0), X(1), V(1), B(0))
 DIMS = (6, 3, 6, 3, 6)
 FAR = np.array([20000.0, -3000.0, -150.0])  # m from the map origin: gravity has turned by 3 mrad
 TINY = 1e-7  # rad: the small-angle paths of retract, Logmap and the Jacobians
-ZERO_TOL = (
-    1e-9  # error at the predicted state (rad, m, m/s); positions of 2e4 m have an ulp of 4e-12 m
-)
+# error at the predicted state (rad, m, m/s); positions of 2e4 m have an ulp of 4e-12 m
+ZERO_TOL = 1e-9
 # Analytic vs numerical Jacobian: each group of 3 columns (rotation, translation, velocity, accelerometer,
 # gyroscope; their scales differ by 1e3) to JAC_RTOL of its largest entry. Central differences of step STEP
 # (1e-4, not GTSAM's default 1e-5): rounding is the floor at 20 km, where positions carry 4e-12 m, i.e.
@@ -301,9 +300,8 @@ def test_jacobians_match_numerical(gravity: str, kind: str, seed: int, residual:
     case = make_case(gravity, kind, seed, residual)
     e, H = analytic(case)
     if residual == "pv":
-        assert (
-            np.abs(e[3:]).max() > 0.1 and np.abs(e[:3]).max() < ZERO_TOL
-        )  # a real residual, no rotation
+        # a real residual, no rotation
+        assert np.abs(e[3:]).max() > 0.1 and np.abs(e[:3]).max() < ZERO_TOL
     for k, (J, J_num) in enumerate(zip(H, numerical(case), strict=True)):
         assert J.shape == (9, DIMS[k])
         assert_jacobian_close(J, J_num, f"H[{k}]")
@@ -378,9 +376,8 @@ def test_jacobian_uses_the_preintegrated_time() -> None:
         )
     short = make_earth_imu_factor(pim2, params, KEYS, 2.5, f.model.gravity)  # 2 s integrated
     short.set_reference(f.model.ref_p, f.model.ref_g, f.model.ref_G)
-    state = pim2.predict(
-        gtsam.NavState(case.pose_i, case.v_i), case.bias
-    )  # for a zero rotation error
+    # for a zero rotation error
+    state = pim2.predict(gtsam.NavState(case.pose_i, case.v_i), case.bias)
     pose_j = gtsam.Pose3(state.attitude(), state.position() + rng.normal(scale=0.5, size=3))
     gapped = Case(
         short,
@@ -432,9 +429,8 @@ def chain(n: int, seed: int) -> tuple[list[EarthImuFactor], gtsam.Values, gtsam.
         case = make_case(kinds[k % 3], "far", seed + k, "rot", keys)
         factors.append(case.factor)
         for key, value in zip(keys, case.args(), strict=True):
-            if values.exists(
-                key
-            ):  # consecutive factors share a state: keep the first's (a residual)
+            # consecutive factors share a state: keep the first's (a residual)
+            if values.exists(key):
                 continue
             values.insert(key, value)
             moved: object
@@ -507,9 +503,8 @@ def test_shared_params_would_give_wrong_errors(monkeypatch: pytest.MonkeyPatch) 
     print(
         f"constant-gravity factor's error moved by {np.abs(e_b_after - e_b).max():.2e} (rad, m, m/s)"
     )
-    assert (
-        np.abs(e_b_after - e_b).max() > 1e-2
-    )  # b's error depends on whether a was evaluated before it
+    # b's error depends on whether a was evaluated before it
+    assert np.abs(e_b_after - e_b).max() > 1e-2
     # The pims predict with whichever factor was set last: the builder sets all, then predicts each
     a.set_gravity(FAR)
     own = pims[0].predict(state, zero_bias).velocity()
@@ -532,9 +527,8 @@ def test_shared_params_are_rejected() -> None:
         with pytest.raises(ValueError, match="already serve another EarthImuFactor"):
             make_earth_imu_factor(pim_b, a.model.params, keys_b, 1.0, gravity)
         with pytest.raises(ValueError, match="already serve another EarthImuFactor"):
-            make_earth_imu_factor(
-                case.pim, a.model.params, keys_b, 1.0, gravity
-            )  # the same pim twice
+            # the same pim twice
+            make_earth_imu_factor(case.pim, a.model.params, keys_b, 1.0, gravity)
     np.testing.assert_array_equal(a.model.params.n_gravity, before)
 
 

@@ -21,9 +21,8 @@ from gtsam_dvl.estimators.inputs.selection import sample_starts
 from gtsam_dvl.factors import PingMotion, keyframe_ping_covariance, ping_state
 from tests.support.numerical import numerical_jacobians
 
-W_IE = 7.292115e-5 * np.array(
-    [0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))]
-)  # map ENU at 30 deg
+# map ENU at 30 deg
+W_IE = 7.292115e-5 * np.array([0.0, np.cos(np.radians(30.0)), np.sin(np.radians(30.0))])
 N_G0 = np.array([1e-5, -2e-5, -9.79])
 
 
@@ -76,9 +75,8 @@ def test_a_static_vehicle_stays_still_under_earth_rate() -> None:
     n_R_b = Rotation.from_rotvec([0.05, -0.02, 0.7]).as_matrix()
     params = gtsam.PreintegrationParams(N_G0)
     b_w, b_f = np.tile(n_R_b.T @ W_IE, (100, 1)), np.tile(n_R_b.T @ -N_G0, (100, 1))
-    b_f = b_f + 0.5 * 0.01 * np.cross(
-        b_w, b_f
-    )  # each delta-v rotated back to its sample's start, as the graph does
+    # each delta-v rotated back to its sample's start, as the graph does
+    b_f = b_f + 0.5 * 0.01 * np.cross(b_w, b_f)
     imu = ImuPieces(t, sample_starts(t), b_f, b_w, find_gaps(t, 5.0))
     snap = ping_snapshots(0.0, [1.0], params, imu, ImuConfig())[0]
     m = snap.motion(W_IE, N_G0, np.zeros(3), np.zeros((3, 3)))

@@ -48,9 +48,8 @@ def test_exp_and_log_are_scipys_and_gtsams() -> None:
         rtol=0,
         atol=1e-14,
     )
-    np.testing.assert_allclose(
-        so3.log(R), phi, rtol=0, atol=1e-8
-    )  # near pi: the axis from the symmetric part
+    # near pi: the axis from the symmetric part
+    np.testing.assert_allclose(so3.log(R), phi, rtol=0, atol=1e-8)
     for v in phi.reshape(-1, 3):
         np.testing.assert_allclose(so3.exp(v), gtsam.Rot3.Expmap(v).matrix(), rtol=0, atol=1e-14)
         np.testing.assert_allclose(so3.exp(v), so3.exp(v[None])[0], rtol=0, atol=1e-15)
@@ -63,9 +62,8 @@ def test_exp_and_log_are_scipys_and_gtsams() -> None:
 def test_right_jacobian_and_its_inverse(index: int) -> None:
     """Exp(phi + d) = Exp(phi) Exp(J_r(phi) d) to first order, by numerical derivatives; J_r^-1 its inverse."""
     phi = rotation_vectors(np.random.default_rng(2)).reshape(-1, 3)[index]
-    if (
-        np.linalg.norm(phi) > 3.0
-    ):  # J_r is singular at 2 pi; its numerical derivative loses accuracy near pi
+    # J_r is singular at 2 pi; its numerical derivative loses accuracy near pi
+    if np.linalg.norm(phi) > 3.0:
         phi = phi / np.linalg.norm(phi) * 2.0
     R0 = gtsam.Rot3(so3.exp(phi))
     Jn = numerical_jacobians(

@@ -55,9 +55,8 @@ def test_wrong_argument_type_at_a_factor_call_fails_mypy(tmp_path: Path) -> None
     good = _mypy(tmp_path, "np.array([1.0, 0.0, 0.0])")
     print(good.stdout)
     revealed = good.stdout.split("Revealed type is")[1].split("\n")[0]
-    assert (
-        revealed.startswith(' "def (noise: gtsam') and "d_y: numpy.ndarray" in revealed
-    )  # not Any
+    # not Any
+    assert revealed.startswith(' "def (noise: gtsam') and "d_y: numpy.ndarray" in revealed
     assert good.returncode == 0, good.stdout
     bad = _mypy(tmp_path, '"fast"')  # a string where the DVL velocity (ndarray) belongs
     print(bad.stdout)

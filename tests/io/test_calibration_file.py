@@ -52,9 +52,8 @@ def test_inflation_and_days():
     assert cal.days_before("2026-11-12T10:15:00Z") == pytest.approx(10.0)
     grown = cal.inflated(10.0, 0.05)
     np.testing.assert_allclose(grown.cov, cal.cov * 1.5)
-    np.testing.assert_array_equal(
-        cal.inflated(-3.0, 0.05).cov, cal.cov
-    )  # dated after the dive: unchanged
+    # dated after the dive: unchanged
+    np.testing.assert_array_equal(cal.inflated(-3.0, 0.05).cov, cal.cov)
 
 
 @pytest.mark.parametrize(

@@ -40,9 +40,8 @@ def _turning_imu(
 
 def test_a_clipped_axis_is_saturation_and_nothing_else_is() -> None:
     imu = _turning_imu(60.0)
-    assert (
-        saturated_runs(imu.b_omega, imu.b_f) == []
-    )  # noisy manoeuvres: never a run at the extreme
+    # noisy manoeuvres: never a run at the extreme
+    assert saturated_runs(imu.b_omega, imu.b_f) == []
     clipped = np.clip(imu.b_omega, -0.08, 0.08)
     runs = saturated_runs(clipped, imu.b_f)
     hit = np.abs(imu.b_omega[:, 2]) >= 0.08
@@ -133,9 +132,8 @@ def test_reader_names_a_clock_step_or_undoes_it(sim_paper3d_short: LogData, tmp_
     assert "\n" not in msg and "clock step at 284.990 s" in msg and "jump by 4.010 s" in msg
     assert "--repair" in msg and "back by 4.000 s" in msg
     fixed = read_log(path, repair=True)
-    np.testing.assert_allclose(
-        fixed.imu.t, log.imu.t, atol=1e-8
-    )  # the stamps as they were before the step
+    # the stamps as they were before the step
+    np.testing.assert_allclose(fixed.imu.t, log.imu.t, atol=1e-8)
     losses = fixed.metadata["reader_losses"]
     assert losses["clock_steps"]["/imu/data_raw"][0]["step_s"] == pytest.approx(4.0, abs=1e-6)
     assert "/imu/data_raw" not in losses["gaps"]
@@ -193,9 +191,8 @@ def test_reader_drops_saturated_samples_as_gaps(sim_paper3d_short: LogData, tmp_
     assert report["samples"] > 0.95 * hit.sum() and report["samples"] > 300
     a, b = report["spans_s"][0]
     assert 296.0 < a < 300.0 < b < 304.0
-    assert (
-        "/imu/data_raw" not in read.metadata["reader_losses"]["gaps"]
-    )  # no data missing from the log
+    # no data missing from the log
+    assert "/imu/data_raw" not in read.metadata["reader_losses"]["gaps"]
     health = assess_log_health(read)
     assert health.status == "degraded"
     assert any(

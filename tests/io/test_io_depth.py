@@ -48,14 +48,12 @@ def test_pressure_round_trip_is_exact(tmp_path: Path) -> None:
     assert d is not None and want is not None and want.pressure_pa is not None
     np.testing.assert_array_equal(d.t, want.t)
     np.testing.assert_array_equal(d.pressure_pa, want.pressure_pa)
-    np.testing.assert_array_equal(
-        d.pressure_variance_pa2, want.pressure_variance_pa2
-    )  # NaN where unknown
+    # NaN where unknown
+    np.testing.assert_array_equal(d.pressure_variance_pa2, want.pressure_variance_pa2)
     np.testing.assert_array_equal(d.b_p_sensor, want.b_p_sensor)
     assert d.frame_id == "pressure_link"
-    assert np.all(
-        np.abs(d.depth_m - want.depth_m) < 0.02 * want.depth_m
-    )  # defaults: rho 1025, g(45 deg)
+    # defaults: rho 1025, g(45 deg)
+    assert np.all(np.abs(d.depth_m - want.depth_m) < 0.02 * want.depth_m)
     # other tools decode it with the definition the log carries
     msgs = read_topic(path, "/depth/pressure")
     assert len(msgs) == len(want) and msgs[3][1].fluid_pressure == want.pressure_pa[3]
@@ -101,9 +99,8 @@ def test_depth_from_a_pose_topic(tmp_path: Path, z_down: bool) -> None:
     assert got.depth is not None and got.depth.pressure_pa is None
     np.testing.assert_array_equal(got.depth.depth_m, z if z_down else -z)
     assert np.isnan(got.depth.variance_m2[0]) and np.all(got.depth.variance_m2[1:] == 0.01)
-    assert (
-        read_log(tmp_path / "with_pose.mcap").depth is None
-    )  # no /depth/pressure: no depth by default
+    # no /depth/pressure: no depth by default
+    assert read_log(tmp_path / "with_pose.mcap").depth is None
 
 
 def test_logs_without_depth_have_no_pressure_topic(tmp_path: Path) -> None:
@@ -122,12 +119,10 @@ def test_logs_without_depth_have_no_pressure_topic(tmp_path: Path) -> None:
     assert "/depth/pressure" not in topics
     d = with_depth.depth
     assert d is not None and with_depth.truth is not None
-    h = (
-        with_depth.truth.n_p[::10, 2] - 100.0
-    )  # map z + origin height (the curvature is negligible at rest)
-    np.testing.assert_allclose(
-        np.mean(d.depth_m[:600] + h[:600]), 0.3, atol=0.02
-    )  # the bias, the noise averaged
+    # map z + origin height (the curvature is negligible at rest)
+    h = with_depth.truth.n_p[::10, 2] - 100.0
+    # the bias, the noise averaged
+    np.testing.assert_allclose(np.mean(d.depth_m[:600] + h[:600]), 0.3, atol=0.02)
 
 
 def test_cli_depth_topic(tmp_path: Path) -> None:

@@ -77,14 +77,12 @@ def test_corrupt_chunk_and_salvage(long_log: tuple[LogData, bytes], tmp_path: Pa
     got = read_log(path, salvage=True)
     (report,) = [w for w in got.metadata["reader_warnings"] if w.startswith("salvage")]
     lost_msgs = int(re.search(r"lost 1 chunk\(s\) with (\d+) message", report).group(1))
-    expected = (
-        len(log.imu) + len(log.dvl) + int(log.dvl.valid.sum()) + len(log.truth) + 1
-    )  # +1: /tf_static
+    # +1: /tf_static
+    expected = len(log.imu) + len(log.dvl) + int(log.dvl.valid.sum()) + len(log.truth) + 1
     found = len(got.imu) + len(got.dvl) + len(got.truth)
     twist = read_log(path, salvage=True, dvl_topic="/dvl/twist")
-    assert (
-        found + len(twist.dvl) + 1 + lost_msgs == expected
-    )  # exact: from the chunk's message indexes
+    # exact: from the chunk's message indexes
+    assert found + len(twist.dvl) + 1 + lost_msgs == expected
     gap = np.diff(got.imu.t).max()
     start, end = map(float, re.search(r"log time ([\d.]+) s to ([\d.]+) s", report).groups())
     assert gap == pytest.approx(end - start + 0.02, abs=0.011)
@@ -223,9 +221,8 @@ def test_truncation_is_reported_wherever_the_cut_falls(
     assert losses["anything_lost"] and "nothing lost" not in report and "lost 0 chunk" not in report
     (truncated,) = losses["truncated"]
     assert truncated["file"] == str(path) and truncated["at_byte"] == cut
-    assert truncated["data_end_s"] == pytest.approx(
-        got.imu.t[-1], abs=0.011
-    )  # the end of the last chunk read
+    # the end of the last chunk read
+    assert truncated["data_end_s"] == pytest.approx(got.imu.t[-1], abs=0.011)
     assert (
         f"the file is cut short at byte {cut} (no footer)" in report
         and "how long it went on" in report

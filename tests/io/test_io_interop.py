@@ -215,24 +215,21 @@ def test_read_rosbags_written_bags(tmp_path: Path, plugin: StoragePlugin) -> Non
             len(got.imu) == 500 and got.imu.frame_id == "xsens" and got.imu.b_omega[-1, 2] == 499.0
         )
         assert len(got.dvl) == 10 and got.dvl.d_v[3].tolist() == [1.0, 2.0, 150.0]
-        assert (
-            np.isnan(got.dvl.d_cov).all() and got.dvl.beams is None
-        )  # TwistStamped: covariance unknown
+        # TwistStamped: covariance unknown
+        assert np.isnan(got.dvl.d_cov).all() and got.dvl.beams is None
         assert any("identity mounting" in w for w in got.metadata["reader_warnings"])
         np.testing.assert_array_equal(got.mounting.b_R_d0, np.eye(3))
     got = read_log(bag, imu_topic="/sensors/imu", dvl_topic="/sensors/dvl_cov")
     np.testing.assert_array_equal(got.dvl.d_cov[0], np.diag([1e-4, 2e-4, 3e-4]))
     got = read_log(bag, imu_topic="/sensors/imu", dvl_topic="/sensors/dvl")
-    assert (
-        got.dvl.frame_id == "teledyne" and np.isnan(got.dvl.d_cov).all()
-    )  # velocity_covar -1: unknown
+    # velocity_covar -1: unknown
+    assert got.dvl.frame_id == "teledyne" and np.isnan(got.dvl.d_cov).all()
     # the message's own velocity mode is honoured: the water-track ping is not a bottom-track velocity
     assert got.dvl.valid.tolist() == [j != 3 for j in range(10)]
     assert got.dvl.beams is not None and not got.dvl.beams.valid[3].any()
     assert got.dvl.beams is not None
-    np.testing.assert_array_equal(
-        got.dvl.beams.valid[0], [True, False, True, True]
-    )  # NaN beam = bad
+    # NaN beam = bad
+    np.testing.assert_array_equal(got.dvl.beams.valid[0], [True, False, True, True])
     np.testing.assert_array_equal(got.dvl.beams.v[0], [0.5, np.nan, 0.25, 1.0])
 
 

@@ -40,9 +40,8 @@ def test_round_trip_is_exact(written: tuple[LogData, Path]) -> None:
     assert got.t0_ns == T0_NS  # first IMU stamp (t0 + 0.01 s) rounded down to the second
     assert got.metadata["reader_warnings"] == []
     for a, b in ((got.imu.t, log.imu.t), (got.dvl.t, log.dvl.t), (got.truth.t, log.truth.t)):
-        np.testing.assert_array_equal(
-            ns(a, got.t0_ns), ns(b, log.t0_ns)
-        )  # stamps to the nanosecond
+        # stamps to the nanosecond
+        np.testing.assert_array_equal(ns(a, got.t0_ns), ns(b, log.t0_ns))
     np.testing.assert_array_equal(got.imu.b_omega, log.imu.b_omega)
     np.testing.assert_array_equal(got.imu.b_f, log.imu.b_f)
     assert got.imu.frame_id == "imu_link" and got.dvl.frame_id == "dvl_link"
@@ -53,9 +52,8 @@ def test_round_trip_is_exact(written: tuple[LogData, Path]) -> None:
     np.testing.assert_array_equal(b.d_u, wb.d_u)
     np.testing.assert_array_equal(b.range, wb.range)
     np.testing.assert_array_equal(b.valid, wb.valid)
-    np.testing.assert_array_equal(
-        b.v, wb.v.astype(np.float32)
-    )  # float32 in marine_acoustic_msgs/Dvl
+    # float32 in marine_acoustic_msgs/Dvl
+    np.testing.assert_array_equal(b.v, wb.v.astype(np.float32))
     tr, wt = got.truth, log.truth
     np.testing.assert_array_equal(tr.n_p, wt.n_p)
     np.testing.assert_array_equal(tr.n_q_b, wt.n_q_b)
@@ -128,9 +126,8 @@ def test_file_structure(written: tuple[LogData, Path]) -> None:
         first = {}
         seqs: dict[str, list[int]] = {}
         for _, channel, message in reader.iter_messages(log_time_order=False):
-            at = (
-                8 if channel.topic == "/tf_static" else 4
-            )  # header.stamp after the CDR header (and count)
+            # header.stamp after the CDR header (and count)
+            at = 8 if channel.topic == "/tf_static" else 4
             sec, nsec = struct.unpack_from("<iI", message.data, at)
             assert message.log_time == message.publish_time == sec * 10**9 + nsec
             first.setdefault(channel.topic, message.log_time)

@@ -38,9 +38,8 @@ def test_velocity_mode_altitude_and_beams_round_trip(water_log: LogData, written
     sim, back = water_log.dvl, read_log(written).dvl
     assert sim.water_track is not None and sim.altitude is not None and sim.beams is not None
     wt = sim.water_track
-    assert (
-        20 < wt.sum() < len(wt) - 20 and (~sim.beams.valid[~wt]).any()
-    )  # beams lost in both modes
+    # beams lost in both modes
+    assert 20 < wt.sum() < len(wt) - 20 and (~sim.beams.valid[~wt]).any()
     msgs = [m for _, m in read_topic(written, "/dvl/data")]
     assert [m.velocity_mode for m in msgs] == [2 if w else 1 for w in wt]
     # a water-track ping's velocity is written (relative to the water), its measuring beams reported good
@@ -58,21 +57,18 @@ def test_velocity_mode_altitude_and_beams_round_trip(water_log: LogData, written
         np.array_equal(back.altitude, sim.altitude, equal_nan=True)
         and np.isnan(back.altitude[wt]).all()
     )
-    assert np.array_equal(
-        back.beams.valid, sim.beams.valid
-    )  # valid over ground: none of a water-track ping's
-    assert np.allclose(
-        back.beams.v, sim.beams.v, rtol=0, atol=1e-6, equal_nan=True
-    )  # float32 in the message
+    # valid over ground: none of a water-track ping's
+    assert np.array_equal(back.beams.valid, sim.beams.valid)
+    # float32 in the message
+    assert np.allclose(back.beams.v, sim.beams.v, rtol=0, atol=1e-6, equal_nan=True)
     assert np.allclose(back.d_cov, sim.d_cov, rtol=1e-9, atol=1e-15, equal_nan=True)
 
 
 def test_current_truth_read_back(water_log: LogData, written: Path) -> None:
     truth, back = water_log.truth, read_log(written).truth
     assert truth is not None and back is not None and truth.n_c is not None and back.n_c is not None
-    assert (
-        np.abs(back.n_c - truth.n_c).max() < 1e-9
-    )  # from the metadata's [current] at the truth's depth
+    # from the metadata's [current] at the truth's depth
+    assert np.abs(back.n_c - truth.n_c).max() < 1e-9
 
 
 def test_altitude_not_positive_is_unknown(water_log: LogData, tmp_path: Path) -> None:
@@ -102,13 +98,11 @@ def test_separate_water_topic_is_merged(water_log: LogData, tmp_path: Path) -> N
     assert np.array_equal(back.valid, sim.valid) and np.array_equal(
         back.d_v, sim.d_v, equal_nan=True
     )
-    assert np.allclose(
-        back.d_cov[wt], sim.d_cov[wt], rtol=1e-9, atol=1e-15, equal_nan=True
-    )  # the twist's
+    # the twist's
+    assert np.allclose(back.d_cov[wt], sim.d_cov[wt], rtol=1e-9, atol=1e-15, equal_nan=True)
     assert np.array_equal(back.altitude, sim.altitude, equal_nan=True)
-    assert (
-        not back.beams.valid[wt].any() and np.isnan(back.beams.v[wt]).all()
-    )  # the twist has no beams
+    # the twist has no beams
+    assert not back.beams.valid[wt].any() and np.isnan(back.beams.v[wt]).all()
     for topic, message in (
         ("/dvl/none", "--dvl-water-topic"),
         ("/imu/data_raw", "water-track topics must be"),

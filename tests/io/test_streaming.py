@@ -79,9 +79,8 @@ def test_streamed_read_peak_memory_is_below_the_imu_bodies(
     written: tuple[LogData, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     log, path = written
-    monkeypatch.setattr(
-        scan, "MMAP_MIN_BYTES", 0
-    )  # as for a large log: the file itself is mapped, not read
+    # as for a large log: the file itself is mapped, not read
+    monkeypatch.setattr(scan, "MMAP_MIN_BYTES", 0)
     src = open_source(path)
     bodies = src.read(["/imu/data_raw"])["/imu/data_raw"]
     assert bodies.fixed is not None
@@ -93,9 +92,8 @@ def test_streamed_read_peak_memory_is_below_the_imu_bodies(
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    out_bytes = (
-        got.imu.t.nbytes + got.imu.b_omega.nbytes + got.imu.b_f.nbytes
-    )  # 56 bytes per sample
+    # 56 bytes per sample
+    out_bytes = got.imu.t.nbytes + got.imu.b_omega.nbytes + got.imu.b_f.nbytes
     assert len(got.imu) == len(log.imu)
     # measured on this 150 s log: 4.4 MB, 0.9 x the IMU bodies (the output arrays, their decoded copies, one
     # 1 MiB chunk, the low-rate topics); the bulk read peaked at 16.0 MB, 3.3 x, and grew with the bodies

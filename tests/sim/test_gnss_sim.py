@@ -109,9 +109,8 @@ def test_no_fixes_while_submerged() -> None:
         f"fix times {g.t[0]:.1f}-{g.t[-1]:.1f} s"
     )
     assert at_fix.max() < 0.5 and depth.max() > 20.0
-    assert np.isin(
-        np.round(surfaced * 10), np.round(g.t * 10)
-    ).all()  # every surfaced 0.1 s has its fix
+    # every surfaced 0.1 s has its fix
+    assert np.isin(np.round(surfaced * 10), np.round(g.t * 10)).all()
     gap = np.diff(g.t).max()
     assert gap > 100.0  # the dive
     # a window: only fixes in [start_s, end_s]

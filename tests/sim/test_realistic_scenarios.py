@@ -139,9 +139,8 @@ def test_scenario_states_the_issues_settings(name: str) -> None:
         cfg.alignment.initial_attitude_deg == (0.0, 0.0, sc.initial.yaw_deg)
         and sc.oscillation is not None
     )
-    assert (
-        cfg.dvl == defaults.dvl and cfg.priors.scale_sigma == prior.scale_sigma
-    )  # the 0 +- 0.5 s offset prior
+    # the 0 +- 0.5 s offset prior
+    assert cfg.dvl == defaults.dvl and cfg.priors.scale_sigma == prior.scale_sigma
     assert (
         cfg.dvl.estimate_time_offset,
         cfg.dvl.time_offset_prior_s,

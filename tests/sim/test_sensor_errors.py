@@ -71,9 +71,8 @@ def test_logged_imu_samples_are_multiples_of_the_step_of_each_axis() -> None:
             f"{[len(np.unique(x[:, i])) for i in range(3)]}"
         )
         assert np.all(off < 1e-6)
-        assert all(
-            len(np.unique(x[:, i])) > 20 for i in range(3)
-        )  # the outputs move across many steps
+        # the outputs move across many steps
+        assert all(len(np.unique(x[:, i])) > 20 for i in range(3))
     raw = _raw(60.0)
     raw["imu"]["quantisation_accel_m_s2"] = [Q_ACCEL, 0.0, Q_ACCEL]  # 0: that axis is not quantised
     y = _sim(raw).imu.b_f[:, 1]
@@ -116,9 +115,8 @@ def test_rounding_error_is_white_while_oscillating_and_not_at_a_constant_rate() 
     assert np.all(np.abs(lag1) < 0.15)
     assert np.all((mean_ratio > 0.7) & (mean_ratio < 1.3))  # 200 means: +-5 % sampling (1 sigma)
 
-    slow = _raw(
-        200.0
-    )  # the slow motions without the vibration: pitch and yaw rates move 0.1-0.2 steps a sample
+    # the slow motions without the vibration: pitch and yaw rates move 0.1-0.2 steps a sample
+    slow = _raw(200.0)
     for key in (
         "roll_deg",
         "roll_period_s",
@@ -165,9 +163,8 @@ def test_gauss_markov_starts_stationary_and_continues_across_calls() -> None:
         [GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(s)).take(1)[0] for s in range(3000)]
     )
     print(f"first-ping std over 3000 runs {first.std(axis=0) * 1e3} mm/s")
-    assert np.all(
-        np.abs(first.std(axis=0) / sigma - 1.0) < 0.05
-    )  # 9000 draws: 0.75 % sampling sigma
+    # 9000 draws: 0.75 % sampling sigma
+    assert np.all(np.abs(first.std(axis=0) / sigma - 1.0) < 0.05)
     whole = GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(9)).take(50)
     gm = GaussMarkov(sigma, 60.0, 1.0, np.random.default_rng(9))
     parts = np.vstack([gm.take(1), gm.take(0), gm.take(20), gm.take(29)])
@@ -193,14 +190,12 @@ def test_correlated_error_is_its_own_stream_and_only_moves_the_dvl_velocity() ->
     assert np.array_equal(on_log.truth.n_p, off_log.truth.n_p)
     assert np.array_equal(on_log.dvl.valid, off_log.dvl.valid)
     assert on_log.metadata["sensors"]["dvl"]["correlated_sigma_m_s"] == 0.002
-    assert (
-        "correlated_sigma_m_s" not in off_log.metadata["sensors"]["dvl"]
-    )  # off: the metadata of before
+    # off: the metadata of before
+    assert "correlated_sigma_m_s" not in off_log.metadata["sensors"]["dvl"]
     clean = _sim(raw, seed=8, white_noise=False)  # white_noise=False: no random error at all
     assert clean.truth is not None
-    np.testing.assert_allclose(
-        np.linalg.norm(clean.dvl.d_v, axis=1), 1.9, atol=0.03
-    )  # the truth's speed
+    # the truth's speed
+    np.testing.assert_allclose(np.linalg.norm(clean.dvl.d_v, axis=1), 1.9, atol=0.03)
 
 
 @pytest.mark.parametrize("name", ["paper-3d-short", "field-survey"])

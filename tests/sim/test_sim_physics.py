@@ -232,9 +232,8 @@ def test_paper_distances_banks_and_2d_depth(
             f"{np.ptp(h):.3f} m, roll {roll.min():.2f}..{roll.max():.2f} deg, "
             f"max |b_v y|, |b_v z| {np.abs(b_v[:, 1]).max():.1e}, {np.abs(b_v[:, 2]).max():.1e} m/s"
         )
-        assert (
-            abs(roll.min() - (3.0 - 15.0)) < 1e-6 and abs(roll.max() - 3.0) < 1e-6
-        )  # banked 15 deg
+        # banked 15 deg
+        assert abs(roll.min() - (3.0 - 15.0)) < 1e-6 and abs(roll.max() - 3.0) < 1e-6
         if name == "paper-3d":
             assert 2800.0 < dist < 3000.0
             assert np.ptp(h) > 10.0 and np.abs(b_v[:, 2]).max() > 0.4

@@ -100,9 +100,8 @@ def test_dvl_180_roll_mounting_lever_arm_beams_and_ranges() -> None:
     beams = log.dvl.beams
     d_u = beams.d_u
     assert np.max(np.abs(np.linalg.norm(d_u, axis=-1) - 1.0)) < 1e-15
-    np.testing.assert_allclose(
-        d_u[0] @ [0.0, 0.0, 1.0], np.cos(np.radians(30.0)), atol=1e-15
-    )  # face +z
+    # face +z
+    np.testing.assert_allclose(d_u[0] @ [0.0, 0.0, 1.0], np.cos(np.radians(30.0)), atol=1e-15)
     assert np.max(np.abs(beams.v - np.einsum("kbi,ki->kb", d_u, log.dvl.d_v))) < 1e-12
     # ranges: flat seafloor 30 m below the start, along the true beam directions from the DVL's position
     frame = sc.local_frame()
@@ -200,9 +199,8 @@ def test_biases_seeded_and_applied() -> None:
         c.metadata["truth"]["imu"]["gyro_bias_rad_s"]
         != a.metadata["truth"]["imu"]["gyro_bias_rad_s"]
     )
-    assert (
-        np.max(np.abs(a.imu.b_omega - ref.imu.b_omega - bg)) < 1e-16
-    )  # rounding of rates ~0.1 rad/s
+    # rounding of rates ~0.1 rad/s
+    assert np.max(np.abs(a.imu.b_omega - ref.imu.b_omega - bg)) < 1e-16
     assert np.max(np.abs(a.imu.b_f - ref.imu.b_f - ba)) < 1e-14
     # explicit values are used as given
     fixed = _scenario(imu={"gyro_bias_values_deg_per_h": [0.01, -0.02, 0.03]})
@@ -296,9 +294,8 @@ def test_dropouts_and_outliers_as_configured(model: str) -> None:
         print(f"{model}: {label} {count} of {n}, expected {n * p:.1f} +- {sigma:.1f}")
         assert abs(count - n * p) < 4 * sigma
 
-    p_lost2 = (
-        1 - (1 - p_beam) ** 4 - 4 * p_beam * (1 - p_beam) ** 3
-    )  # two or more beams lost: no 3-D fix
+    # two or more beams lost: no 3-D fix
+    p_lost2 = 1 - (1 - p_beam) ** 4 - 4 * p_beam * (1 - p_beam) ** 3
     check("valid pings", int(noisy.dvl.valid.sum()), M, (1 - p_ping) * (1 - p_lost2))
     check("valid beams", int(noisy.dvl.beams.valid.sum()), 4 * M, (1 - p_ping) * (1 - p_beam))
     assert (

@@ -55,9 +55,8 @@ def _small(variant: str) -> Scenario:
         raw["mounting"] = {"dvl_rpy_deg": [180.0, 0.0, 0.0], "dvl_lever_arm_m": [0.5, 0.0, -0.2]}
         raw["dvl"]["face_axis"] = [0.0, 0.0, 1.0]
         raw["gnss"] = {"rate_hz": 1.0, "max_depth_m": 1000.0, "origin_in_log": False}
-    if (
-        variant == "water"
-    ):  # the start 100 m down, the descent 1.4 m: lock from its middle to the ascent's middle
+    # the start 100 m down, the descent 1.4 m: lock from its middle to the ascent's middle
+    if variant == "water":
         raw["dvl"]["bottom_range_m"] = 20.0
         raw["seafloor"] = {"depth_m": 100.0 + 20.0 + 0.7}
         raw["current"] = {
@@ -98,9 +97,8 @@ def test_chunked_log_is_simulate_bit_for_bit(variant: str, chunk_s: float) -> No
     sc = _small(variant)
     ref = simulate(sc, 11)
     assert ref.gnss is not None and ref.dvl.beams is not None
-    assert (
-        len(ref.gnss) > 10 and np.any(~ref.dvl.valid) and np.any(~ref.dvl.beams.valid)
-    )  # the streams are there
+    # the streams are there
+    assert len(ref.gnss) > 10 and np.any(~ref.dvl.valid) and np.any(~ref.dvl.beams.valid)
     if variant == "water":
         assert (
             ref.dvl.water_track is not None and ref.truth is not None and ref.truth.n_c is not None

@@ -78,9 +78,8 @@ def test_truth_has_the_stated_duration_speed_and_turn_rate(name: str) -> None:
         f"{rate_deg_s:.4f} deg/s, {turned:.1f} deg turned, {distance:.0f} m"
     )
     assert truth.t[0] == 0.0 and truth.t[-1] == 400.0 and log.imu.t[-1] == 400.0
-    np.testing.assert_allclose(
-        speed, STATED[name]["speed"], atol=1e-3
-    )  # underway from the first sample
+    # underway from the first sample
+    np.testing.assert_allclose(speed, STATED[name]["speed"], atol=1e-3)
     assert abs(rate_deg_s - STATED[name]["rate"]) < 0.002
     assert abs(turned - 400.0 * STATED[name]["rate"]) < 1.0  # the yaw oscillation: 0.2 deg
     assert abs(_rpy_deg(truth.n_q_b[0])[2] - STATED[name]["yaw0"]) < 1e-9
@@ -101,9 +100,8 @@ def test_dvl_stamps_are_one_second_early(name: str) -> None:
         assert np.allclose(truth.t[i], t)
         n_R_b = Rotation.from_quat(truth.n_q_b[i]).as_matrix()
         b_v = np.einsum("kji,kj->ki", n_R_b, truth.n_v[i])
-        return b_v @ rpy_deg_to_matrix(
-            (0.0, 0.0, STATED[name]["yaw_mis"])
-        )  # rows (d_R_b b_v)^T, scale 1
+        # rows (d_R_b b_v)^T, scale 1
+        return b_v @ rpy_deg_to_matrix((0.0, 0.0, STATED[name]["yaw_mis"]))
 
     at_measurement = np.abs(dvl.d_v - expected(dvl.t + 1.0)).max()
     at_stamp = np.abs(dvl.d_v - expected(dvl.t)).max()
@@ -137,9 +135,8 @@ def test_estimator_overrides_reach_the_configuration(name: str, tmp_path: Path) 
     user = tmp_path / "user.toml"
     user.write_text("[priors]\nscale_sigma = 0.004\nyaw_sigma_deg = 0.5\n")
     layered = EstimatorConfig.load(user, under=estimator_overrides(log.metadata))
-    assert (
-        layered.alignment.initial_attitude_deg == cfg.alignment.initial_attitude_deg
-    )  # the scenario's, below
+    # the scenario's, below
+    assert layered.alignment.initial_attitude_deg == cfg.alignment.initial_attitude_deg
     assert (layered.priors.scale_sigma, layered.priors.yaw_sigma_deg) == (
         0.004,
         0.5,
@@ -147,9 +144,8 @@ def test_estimator_overrides_reach_the_configuration(name: str, tmp_path: Path) 
     assert layered.priors.roll_pitch_sigma_deg == 0.05
     paper = EstimatorConfig.load("paper", under=estimator_overrides(log.metadata))
     assert paper.priors.scale_initial == 0.8 and paper.alignment.initial_attitude_deg is not None
-    assert (
-        EstimatorConfig.load(user).alignment.initial_attitude_deg is None
-    )  # no scenario: nothing below
+    # no scenario: nothing below
+    assert EstimatorConfig.load(user).alignment.initial_attitude_deg is None
 
 
 def test_bad_estimator_tables_fail_at_load() -> None:

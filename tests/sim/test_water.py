@@ -64,9 +64,8 @@ def _dvl_depth(log: LogData) -> np.ndarray:
 def test_current_truth_is_the_profile(clean: LogData) -> None:
     truth = clean.truth
     assert truth is not None and truth.n_c is not None
-    assert (
-        clean.origin is not None and clean.origin.height_m == 0.0
-    )  # the map's origin at the surface
+    # the map's origin at the surface
+    assert clean.origin is not None and clean.origin.height_m == 0.0
     depth = -LocalFrame(clean.origin.lat_deg, clean.origin.lon_deg, 0.0).map_to_geodetic(truth.n_p)[
         2
     ]
@@ -79,9 +78,8 @@ def test_current_truth_is_the_profile(clean: LogData) -> None:
     expected = (1 - w)[:, None] * s + w[:, None] * r + tide
     assert np.abs(truth.n_c[:, :2] - expected).max() < 1e-9  # the geodetic round trip's nanometres
     assert np.all(truth.n_c[:, 2] == 0.0)
-    deep = (
-        depth > CURRENT["reference_depth_m"] + 0.01
-    )  # constant in depth below the reference depth
+    # constant in depth below the reference depth
+    deep = depth > CURRENT["reference_depth_m"] + 0.01
     assert deep.sum() > 50 and np.allclose(truth.n_c[deep, :2] - tide[deep], r, atol=1e-12)
 
 

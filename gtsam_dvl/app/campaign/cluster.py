@@ -20,9 +20,8 @@ from gtsam_dvl.core.progress import ProgressFn
 K = TypeVar("K")
 
 INSTALL_HINT = "Dask is not installed: pip install 'gtsam-dvl[distributed]' (make test and make demo install it)"
-SCHEDULER_TIMEOUT_S = (
-    10.0  # how long to try to reach a --scheduler before giving up (--scheduler-timeout)
-)
+# how long to try to reach a --scheduler before giving up (--scheduler-timeout)
+SCHEDULER_TIMEOUT_S = 10.0
 
 
 @dataclass(frozen=True)

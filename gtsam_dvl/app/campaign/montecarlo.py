@@ -45,9 +45,8 @@ TIME_OFFSET_STATE = (
     BY_NAME["time_offset"].unit,
 )  # in s (the registry shows ms)
 ESTIMATORS = ("batch", "online", "ekf")
-BLOCK_DOF = (
-    10  # [accel bias, gyro bias, scale, misalignment]: the joint covariance every estimator reports
-)
+# [accel bias, gyro bias, scale, misalignment]: the joint covariance every estimator reports
+BLOCK_DOF = 10
 NEES_EVERY_S = 60.0  # the filters' NEES over time, sampled this often
 
 

@@ -18,9 +18,8 @@ from gtsam_dvl.app.live.schemas import TOPICS
 from gtsam_dvl.core.errors import GtsamDvlError
 
 LAYOUT_NAME = "layout.json"  # package data of gtsam_dvl.app.live (pyproject.toml)
-LAYOUT_FILE = (
-    Path(__file__).resolve().with_name(LAYOUT_NAME)
-)  # in the source tree, for write_layout
+# in the source tree, for write_layout
+LAYOUT_FILE = Path(__file__).resolve().with_name(LAYOUT_NAME)
 
 
 def _series(

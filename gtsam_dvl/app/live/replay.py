@@ -53,9 +53,8 @@ class ReplayOutcome:
     epochs_published: int
     wall_s: float
     log_s: float
-    health: Any = (
-        None  # analysis.health.Health of the run (replay_log with health=True and an epoch)
-    )
+    # analysis.health.Health of the run (replay_log with health=True and an epoch)
+    health: Any = None
     real_time_factor: float | None = None  # log_s / wall_s (None: not both positive)
 
     def describe(self) -> str:
@@ -152,9 +151,8 @@ class _Replay:
             seen = 0
             group_opens = True  # the next message opens a ping's group (IMU block, depth samples, ping) or the tail
             for m in log_messages(self.log):
-                if (
-                    group_opens
-                ):  # stop is honoured between groups: a ping always goes in with the IMU before it
+                # stop is honoured between groups: a ping always goes in with the IMU before it
+                if group_opens:
                     if stop is not None and stop.is_set():
                         break
                     group_opens = False
@@ -211,17 +209,15 @@ def replay_log(
 
         view.publish_health(assess_log_health(log), float(imu.t[0]))
     t_first = float(min(imu.t[0], dvl.t[0] if len(dvl) else imu.t[0]))
-    progress = (
-        view.progress
-    )  # the epochs, log and wall time of the status messages and of the outcome
+    # the epochs, log and wall time of the status messages and of the outcome
+    progress = view.progress
     wall0 = progress.start(t_first, clock)
     replay = _Replay(log, view, est, speed, step_s, clock, sleep, t_first, wall0)
     final = replay.push_all(stop)
     run_health = None
     if final is not None:
-        view.publish_epoch(
-            final, counters=est.counters, final=True
-        )  # freezes the progress's wall time
+        # freezes the progress's wall time
+        view.publish_epoch(final, counters=est.counters, final=True)
         if health:
             from gtsam_dvl.analysis.health import assess_health
 
@@ -262,9 +258,8 @@ def serve_log(
     from gtsam_dvl.core.config import EstimatorConfig, estimator_overrides
     from gtsam_dvl.estimators.online import OnlineEstimator
 
-    config = (
-        EstimatorConfig.load(config_path) if config_path else None
-    )  # a bad -c fails before the log is read
+    # a bad -c fails before the log is read
+    config = EstimatorConfig.load(config_path) if config_path else None
     log = load_log(log_path, read_options)
     if config_path:  # the log's scenario's [estimator] table below the -c configuration
         config = EstimatorConfig.load(config_path, under=estimator_overrides(log.metadata))

@@ -269,9 +269,8 @@ class LiveView:
                     server_listener=self._listener,
                     message_backlog_size=BACKLOG_MESSAGES,
                 )
-            except (
-                Exception
-            ) as exc:  # the SDK raises its own error types (address in use, bad host)
+            # the SDK raises its own error types (address in use, bad host)
+            except Exception as exc:
                 raise GtsamDvlError(f"live view: cannot serve on {host}:{port} ({exc})") from None
         self.server = server
         self.host = host

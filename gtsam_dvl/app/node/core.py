@@ -193,9 +193,8 @@ class NodeCore:
         if kind == "imu" and self.t0_ns is None:
             self.t0_ns = ns // 1_000_000_000 * 1_000_000_000
         self.buffer.push(kind, ns, arr, wall)
-        if (
-            self.t0_ns is None
-        ):  # nothing is released before the first IMU sample sets the time origin
+        # nothing is released before the first IMU sample sets the time origin
+        if self.t0_ns is None:
             return []
         self._trigger = (kind, ns)
         return self._release(self.buffer.ready(), wall)

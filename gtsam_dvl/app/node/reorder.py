@@ -40,9 +40,8 @@ class StreamStats:
     newest_ns: int | None = None
     released_ns: int | None = None
     last_wall: float = -math.inf
-    ref_ns: int | None = (
-        None  # its clock at its last arrival: wall time for the IMU, the IMU's stamps for others
-    )
+    # its clock at its last arrival: wall time for the IMU, the IMU's stamps for others
+    ref_ns: int | None = None
     jumps: int = 0
     largest_jump_s: float = 0.0
     last_jump_ns: int | None = None
@@ -112,9 +111,8 @@ class ReorderBuffer:
                 s.late += 1
             return False
         s.newest_ns = stamp_ns if s.newest_ns is None else max(s.newest_ns, stamp_ns)
-        if (
-            kind == "imu"
-        ):  # the IMU is the clock: a ping stamped ahead of it (another clock) releases nothing
+        # the IMU is the clock: a ping stamped ahead of it (another clock) releases nothing
+        if kind == "imu":
             self.newest_ns = stamp_ns if self.newest_ns is None else max(self.newest_ns, stamp_ns)
         heapq.heappush(self._heap, Held(stamp_ns, RANK[kind], next(self._seq), kind, payload))
         return True

@@ -239,9 +239,8 @@ class RosNode:
                         f"{what}: {type(exc).__name__}: {exc}".splitlines()[0]
                         + (f" ({n} times)" if n > 1 else ""),
                     )
-                return (
-                    args[-1] if what == "save" else None
-                )  # a service callback returns its response
+                # a service callback returns its response
+                return args[-1] if what == "save" else None
 
         return call
 
@@ -251,17 +250,15 @@ class RosNode:
         def take(body: bytes) -> None:
             for e in core.receive(kind, body, time.monotonic()):
                 self.publish(e)
-            if (
-                kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S
-            ):  # (nan: never checked)
+            # (nan: never checked)
+            if kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S:
                 self._checked_t = core.newest_t()
                 self.publish_diagnostics()
 
         return self._guard(kind, take)
 
-    def _tick(
-        self, *_: Any
-    ) -> None:  # (rclpy passes a TimerInfo to a callback that takes arguments)
+    # (rclpy passes a TimerInfo to a callback that takes arguments)
+    def _tick(self, *_: Any) -> None:
         for e in self.core.tick(time.monotonic()):
             self.publish(e)
         self.publish_diagnostics(force=True)

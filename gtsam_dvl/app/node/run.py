@@ -20,9 +20,8 @@ from gtsam_dvl.core.errors import GtsamDvlError
 
 # after the final messages, before the context closes: at most this long for the subscribers' acknowledgements
 DELIVER_MAX_S = 5.0
-DRAIN_QUIET_S = (
-    0.3  # at a stop, the messages already received are processed until none came for this long
-)
+# at a stop, the messages already received are processed until none came for this long
+DRAIN_QUIET_S = 0.3
 DRAIN_MAX_S = 10.0
 
 

@@ -45,9 +45,8 @@ class QosSettings(ConfigModel):
     SECTION: ClassVar[str] = "node.qos"
 
     reliability: Reliability = "best_effort"
-    depth: Integer = Field(
-        default=1000, ge=1
-    )  # messages queued per topic (1000: 5 s of a 200 Hz IMU)
+    # messages queued per topic (1000: 5 s of a 200 Hz IMU)
+    depth: Integer = Field(default=1000, ge=1)
 
 
 class NodeSettings(ConfigModel):
@@ -66,9 +65,8 @@ class NodeSettings(ConfigModel):
         "marine_acoustic_msgs/msg/Dvl",
     ] = "geometry_msgs/msg/TwistWithCovarianceStamped"
     pressure_topic: str = "/depth/pressure"  # sensor_msgs/msg/FluidPressure
-    gnss_topic: str = (
-        "/gnss/fix"  # sensor_msgs/msg/NavSatFix: the map origin when the configuration has none
-    )
+    # sensor_msgs/msg/NavSatFix: the map origin when the configuration has none
+    gnss_topic: str = "/gnss/fix"
     tf_static_topic: str = "/tf_static"  # read when tf2_msgs is importable (docs/ros2.md)
     # outputs; "" turns an optional output off
     odometry_topic: str = "/gtsam_dvl/odometry"
@@ -113,9 +111,8 @@ class NodeSettings(ConfigModel):
     # a vehicle calibration file as the prior (as smooth --calibration) and where the save service writes one
     calibration: str = ""
     calibration_out: str = ""
-    vehicle: str = (
-        ""  # the vehicle's name in the file written (else the prior's, else the node's name)
-    )
+    # the vehicle's name in the file written (else the prior's, else the node's name)
+    vehicle: str = ""
     # at shutdown: finish() and publish the final estimate (and write calibration_out when set)
     finish_on_shutdown: Flag = True
     stats_file: str = ""  # JSON of per-epoch timings written at shutdown (bench/bench_node.py)

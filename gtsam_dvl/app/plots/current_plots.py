@@ -42,9 +42,8 @@ def plot_current(
             ax.plot(truth_t, truth_n_c[:, a], lw=1.0, color="k", ls="--", label="truth")
         ax.set_xlabel("time (s)")
         ax.set_ylabel(f"current {name} (m/s, map)")
-        band = 3 * np.minimum(
-            sig[:, a], 0.3
-        )  # (an undetermined stretch's band would flatten the rest)
+        # (an undetermined stretch's band would flatten the rest)
+        band = 3 * np.minimum(sig[:, a], 0.3)
         ax.set_ylim(np.nanmin(c[:, a] - band) - 0.05, np.nanmax(c[:, a] + band) + 0.05)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize=8)

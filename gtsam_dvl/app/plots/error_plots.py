@@ -47,9 +47,8 @@ def plot_errors(
                         float(np.nanmax(3 * sig[sel, j])),
                     )
         if t_conv is not None and top > 0:
-            ax.set_ylim(
-                -1.25 * top, 1.25 * top
-            )  # the converged errors visible; the first minutes go off scale
+            # the converged errors visible; the first minutes go off scale
+            ax.set_ylim(-1.25 * top, 1.25 * top)
         ax.set_ylabel(f"{names[j]} ({unit})")
         ax.grid(alpha=0.3)
     if segments:

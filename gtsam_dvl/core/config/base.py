@@ -222,9 +222,8 @@ def _toml_table(section: ConfigModel, name: str, lines: list[str]) -> None:
             nested.append((f"{name}.{key}", value))
         elif value is not None:
             lines.append(f"{key} = {_toml_value(value)}")
-        elif (
-            f.default is not None
-        ):  # TOML has no null: "none" (a field whose default is None is left out)
+        # TOML has no null: "none" (a field whose default is None is left out)
+        elif f.default is not None:
             lines.append(f'{key} = "none"')
     lines.append("")
     for sub_name, sub in nested:

@@ -54,9 +54,8 @@ class ImuConfig(ConfigModel):
     accel_bias_rw_ug_per_rth: Positive = 1.0  # micro-g/sqrt(h), random_walk only
     # position integration noise of the preintegration, m/sqrt(s)
     integration_sigma_m_rts: NonNegative = 1e-5
-    rotation_compensation: Flag = (
-        True  # rotate each delta-v to its interval start (see factor_maker.py)
-    )
+    # rotate each delta-v to its interval start (see factor_maker.py)
+    rotation_compensation: Flag = True
     # IMU gaps (estimators/inputs/gaps.py): a spacing longer than this many nominal periods is a gap, crossed by
     # holding the last sample with the motion-model uncertainty below added to the covariance
     gap_samples: Number = Field(default=3.0, gt=1.0)
@@ -112,9 +111,8 @@ class DvlConfig(ConfigModel):
     robust_k: Positive = 4.0
     huber_k: Positive | None = None  # alias of robust_k (overrides it if set)
     max_speed_m_s: Positive = 10.0  # faster pings are outliers: dropped, counted
-    screen: Flag = (
-        True  # drop bogus pings (zero while moving, repeated, implausible acceleration): see above
-    )
+    # drop bogus pings (zero while moving, repeated, implausible acceleration): see above
+    screen: Flag = True
     # no vehicle this package navigates accelerates this hard over a ping interval, m/s^2
     max_accel_m_s2: Positive = 2.0
     # multiple of the velocity change the IMU allows (specific-force change, gravity turned by the gyro)
@@ -244,9 +242,8 @@ class SolverConfig(ConfigModel):
     relative_error_tol: NonNegative = 1e-7
     # error = chi^2 / 2: a decrease this small moves no estimate by 0.1 sigma
     absolute_error_tol: NonNegative = 0.01
-    earth_model: EarthModel = (
-        "wgs84"  # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
-    )
+    # "wgs84" (default) or "flat": no Earth rate, constant gravity (low-grade IMUs)
+    earth_model: EarthModel = "wgs84"
     # 0: a state per DVL ping; >0: only pings at least this far apart (the others are dropped: decimation)
     keyframe_interval_s: NonNegative = 0.0
     # batch smoother and online estimator: states only at pings at least this far apart (keyframes); every ping
@@ -322,18 +319,16 @@ class OnlineConfig(ConfigModel):
 
     SECTION: ClassVar[str] = "online"
 
-    mode: OnlineMode = (
-        "fixed_lag"  # "fixed_lag" (bounded cost) or "full" (every state kept; see the module doc)
-    )
+    # "fixed_lag" (bounded cost) or "full" (every state kept; see the module doc)
+    mode: OnlineMode = "fixed_lag"
     # fixed_lag: states this far behind the newest are marginalised, s
     window_s: Positive = 20.0
     # seconds of the initial static segment to align on before the first estimate
     align_s: Positive = 60.0
     # slower pings do not inform scale and misalignment (online/dvl_factors.py module doc)
     calibration_min_speed_m_s: NonNegative = 0.1
-    bad_messages: BadMessages = (
-        "raise"  # "raise" (GtsamDvlError) or "drop" (counted, warned once per kind)
-    )
+    # "raise" (GtsamDvlError) or "drop" (counted, warned once per kind)
+    bad_messages: BadMessages = "raise"
     covariances: Flag = True  # marginal covariances after every epoch (the timeline needs them)
     record_history: Flag = True  # keep every epoch's estimate for timeline() and result()
     # iSAM2 updates without new data at finish(), until nothing is relinearised
@@ -400,9 +395,8 @@ class IodvlcConfig(ConfigModel):
     # the last this many seconds of the quiet stretch form the reference
     reference_s: Positive = 60.0
     earth_terms: Flag = True
-    track_attitude: Flag = (
-        True  # integrate the gyro's residual rotation theta (part of the earth terms)
-    )
+    # integrate the gyro's residual rotation theta (part of the earth terms)
+    track_attitude: Flag = True
     # DVL noise (1 sigma per axis); None: the median of the log's covariances
     noise_m_s: Positive | None = None
     # the pointwise k = |gamma| / |beta| is reported only where |beta| exceeds this

@@ -130,9 +130,8 @@ class DiveState:
     # keys
     plan: ChunkedOrdering = field(default_factory=lambda: ChunkedOrdering([], []), repr=False)
     bayes_net: gtsam.GaussianBayesNet | CompactBayesNet | None = field(default=None, repr=False)
-    calibration: VehicleCalibration | None = field(
-        default=None, repr=False
-    )  # the prior (prepare_dive)
+    # the prior (prepare_dive)
+    calibration: VehicleCalibration | None = field(default=None, repr=False)
 
     @property
     def config(self) -> EstimatorConfig:
@@ -168,9 +167,8 @@ def prepare_dive(
         alone.info["calibration_prior"] = calibration_info(builder.config, calibration)
     names = calibration_states(builder.config, calibration)
     keys = state_keys(names)
-    without = (
-        gtsam.NonlinearFactorGraph()
-    )  # the graph without the shared states' priors (the joint holds them)
+    # the graph without the shared states' priors (the joint holds them)
+    without = gtsam.NonlinearFactorGraph()
     for i in range(graph.graph.size()):
         if graph.graph.exists(i):
             f = graph.graph.at(i)
@@ -500,12 +498,10 @@ class DiveSummary:
     alone_cov: np.ndarray  # the joint covariance of `states` alone (SI, `states` order)
     t0_ns: int
     info: dict[str, Any]
-    stated_config: dict[str, Any] = field(
-        default_factory=dict
-    )  # the configuration as given (NavResult.config)
-    calibration: VehicleCalibration | None = (
-        None  # a vehicle's calibration as the prior (prepare_dive)
-    )
+    # the configuration as given (NavResult.config)
+    stated_config: dict[str, Any] = field(default_factory=dict)
+    # a vehicle's calibration as the prior (prepare_dive)
+    calibration: VehicleCalibration | None = None
 
 
 def summarise(dive: DiveState) -> DiveSummary:

@@ -196,9 +196,8 @@ def smooth_pieces(
             dives.append(prepare_dive(piece, cfg, name=piece.source, calibration=calibration))
             kept.append(k)
         except GtsamDvlError as exc:
-            if (
-                k == 0
-            ):  # the piece that holds the log's start (its map origin and alignment): no result without it
+            # the piece that holds the log's start (its map origin and alignment): no result without it
+            if k == 0:
                 raise GtsamDvlError(
                     f"{log.source or 'log'}: cut at {len(gaps)} IMU gap(s) longer than "
                     f"imu.max_gap_s ({gaps[0][0]:.2f}-{gaps[0][1]:.2f} s first): the first piece "

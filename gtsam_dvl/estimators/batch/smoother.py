@@ -88,9 +88,8 @@ def smooth_batch(
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     noise = NoiseReport()
-    if gaps := long_gaps(
-        log, config
-    ):  # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
+    # IMU gaps longer than imu.max_gap_s: the log smoothed as pieces
+    if gaps := long_gaps(log, config):
         pieces = smooth_pieces(log, stated, gaps, progress, estimator, calibration)
         consider_constant_error(pieces, config, calibration is not None)
         return pieces
@@ -109,9 +108,8 @@ def smooth_batch(
     timing["total"] = time.perf_counter() - t0
     result.timing_s = timing
     result.info["noise"] = noise.as_dict()
-    if (
-        screened := screened_losses(log)
-    ) is not None:  # what the screen of an in-memory log found (gaps.py)
+    # what the screen of an in-memory log found (gaps.py)
+    if (screened := screened_losses(log)) is not None:
         result.info["screened_losses"] = screened
     result.config = stated.to_dict()
     if calibration is not None:

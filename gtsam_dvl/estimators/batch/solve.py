@@ -105,9 +105,8 @@ def solve_log(
     the graph in bulk, Gauss-Newton (both passes with the time offset) and the DVL noise fit (SolvedLog); noise
     records the levels used, timing the phases' seconds (t0: when the run began)."""
     t0 = time.perf_counter() if t0 is None else t0
-    config = imu_levels(
-        log, config, noise
-    )  # the IMU's white noise from the data ([noise], noise_levels.py)
+    # the IMU's white noise from the data ([noise], noise_levels.py)
+    config = imu_levels(log, config, noise)
     builder = LogGraph(
         log,
         config,
@@ -121,9 +120,8 @@ def solve_log(
     ordering = builder.elimination_ordering()
     # degrees of freedom of the final chi^2 (= 2 x final_error): measurement rows minus variable dimensions
     dof = graph_rows(bulk) - values.dim()
-    if enabled(
-        builder.config, "time_offset"
-    ):  # the offset's first guess (estimators/inputs/offset_guess.py)
+    # the offset's first guess (estimators/inputs/offset_guess.py)
+    if enabled(builder.config, "time_offset"):
         guess = builder.offset_guess()
         builder.offset_centring = {"guess": guess.as_dict()}
         if guess.used:
@@ -604,13 +602,11 @@ def extract_result(
         "imu_gaps": builder.gaps.summary(),
     }
     t = np.array([e.t for e in builder.epochs])
-    info.update(
-        reports(cfg, graph_estimates(cfg, values, marg.covariances, t))
-    )  # (epoch_states.py)
+    # (epoch_states.py)
+    info.update(reports(cfg, graph_estimates(cfg, values, marg.covariances, t)))
     profile = None
-    if water_current(
-        cfg
-    ):  # the water current per state with its marginal sigmas (estimators/models/current.py)
+    # the water current per state with its marginal sigmas (estimators/models/current.py)
+    if water_current(cfg):
         profile = current.profile(
             np.array([e.t for e in builder.epochs]),
             n_p[:, 2],

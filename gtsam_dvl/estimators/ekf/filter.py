@@ -146,9 +146,8 @@ from gtsam_dvl.estimators.models.noise_levels import (
 # configuration's [ekf] section (EkfConfig); these are its defaults.
 MIN_CALIBRATION_SPEED_M_S = EkfConfig().min_calibration_speed_m_s  # 0.1
 CALIBRATION_SPEED_SIGMAS = EkfConfig().calibration_speed_sigmas  # 5.0
-MAX_STEP_S = (
-    1.0  # longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
-)
+# longer DVL gaps are propagated in steps of at most this (Phi is first order in w_ie T)
+MAX_STEP_S = 1.0
 GRADIENT_REFRESH_M = 100.0  # gravity is re-linearised after this distance
 
 
@@ -207,17 +206,15 @@ def run_ekf(
     # what result.config records (noise_levels.py: the levels used are in info["noise"])
     stated = config
     config = imu_levels(log, config, noise)  # the IMU's white noise from the data ([noise])
-    held_levels(
-        log, config, "EKF", noise
-    )  # (the depth and the DVL's correlated error: the batch smoother fits them)
+    # (the depth and the DVL's correlated error: the batch smoother fits them)
+    held_levels(log, config, "EKF", noise)
     offset_info: dict[str, Any] = {}
     config = _warm_up(log, config, calibration, noise, offset_info)
     result = _held_at_nominal(log, config, progress, calibration)
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
-    if (
-        screened := screened_losses(log)
-    ) is not None:  # what the screen of an in-memory log found (gaps.py)
+    # what the screen of an in-memory log found (gaps.py)
+    if (screened := screened_losses(log)) is not None:
         result.info["screened_losses"] = screened
     if offset_info:
         result.info["time_offset_prior"] = offset_info
@@ -341,14 +338,12 @@ def _checked_inputs(
     refused before, once (run_ekf: inputs/prepare.py)."""
     log = log_in_base_link(log)  # IMU samples in base_link (estimators/inputs/mounting.py)
     frame, alignment = align_log(log, config)
-    config = resolve_water_track(
-        config, log
-    )  # [current] water_track "auto": "use" when the log has water track
+    # [current] water_track "auto": "use" when the log has water track
+    config = resolve_water_track(config, log)
     wc_on = water_current(config)
     water = water_pings(log) if wc_on else np.zeros(len(log.dvl), dtype=bool)
-    pings = usable_pings(
-        log.dvl, log.imu, config.dvl, counters, wc_on
-    )  # every usable ping: no keyframe thinning
+    # every usable ping: no keyframe thinning
+    pings = usable_pings(log.dvl, log.imu, config.dvl, counters, wc_on)
     if len(pings) < 2:
         raise GtsamDvlError(f"{log.source or 'log'}: fewer than two usable DVL pings")
     return log, config, frame, alignment, water, pings
@@ -390,9 +385,8 @@ class _Pass:
     watch: DivergenceWatch = field(default_factory=DivergenceWatch)
     # the water current at each update: (t, z, W, its covariance, water)
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
-    gates: dict[int, float] = field(
-        default_factory=dict
-    )  # gate_threshold per measurement dimension
+    # gate_threshold per measurement dimension
+    gates: dict[int, float] = field(default_factory=dict)
     gated: int = 0  # gated pings
     gated_run: int = 0  # and how many in a row
     nis_sum: float = 0.0
@@ -487,18 +481,16 @@ class _Pass:
         correlated error, relative to the water for a water-track ping."""
         fs, imu, maker = self.fs, self.log.imu, self.maker
         b_l = self.log.mounting.b_l
-        n_v = current.seen_velocity(
-            fs, on_water
-        )  # (m/s, map): over ground, or relative to the water
+        # (m/s, map): over ground, or relative to the water
+        n_v = current.seen_velocity(fs, on_water)
         y_hat, H, b_omega = measurement_model(
             fs, imu.b_omega[self.gyro_index[j]], b_l, self.earth.n_omega_ie, n_v
         )
         if self.offset:
             lo, hi = self.offset_centre - self.offset_bound, self.offset_centre + self.offset_bound
             dt_c = float(np.clip(fs.time_offset, lo, hi))
-            if (
-                dt_c != fs.time_offset
-            ):  # the window held at the bound: counted, reported (analysis/health.py)
+            # the window held at the bound: counted, reported (analysis/health.py)
+            if dt_c != fs.time_offset:
                 self.counters["time_offset_window_clipped"] = (
                     self.counters.get("time_offset_window_clipped", 0) + 1
                 )
@@ -509,9 +501,8 @@ class _Pass:
         if (gm := fs.error_slice()) is not None:  # y = h + E (estimators/models/correlated.py)
             assert fs.dvl_error is not None
             y_hat, H[:, gm] = y_hat + fs.dvl_error, np.eye(3)
-        if (
-            wc := fs.current_slice()
-        ) is not None:  # dh/dW: minus the velocity's east and north columns
+        # dh/dW: minus the velocity's east and north columns
+        if (wc := fs.current_slice()) is not None:
             H[:, wc] = -H[:, VEL][:, :2] if on_water else 0.0
         return y_hat, H, b_omega
 
@@ -536,9 +527,8 @@ class _Pass:
         )
         if slow or (unsure and not moving):
             H[:, CALIBRATION] = 0.0
-        if (
-            self.watch.diverged
-        ):  # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter
+        # the self-calibration stopped (DivergenceWatch): a plain INS/DVL filter
+        if self.watch.diverged:
             H[:, FROZEN_ON_DIVERGENCE] = 0.0
             if self.offset:
                 H[:, OFFSET] = 0.0
@@ -578,9 +568,8 @@ class _Pass:
         )
         if self.offset and abs(fs.time_offset - self.offset_centre) > self.offset_bound:
             lo, hi = self.offset_centre - self.offset_bound, self.offset_centre + self.offset_bound
-            fs.time_offset = float(
-                np.clip(fs.time_offset, lo, hi)
-            )  # held within its window's bound
+            # held within its window's bound
+            fs.time_offset = float(np.clip(fs.time_offset, lo, hi))
             self.counters["time_offset_bounded"] = self.counters.get("time_offset_bounded", 0) + 1
         # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
         # has a large and growing NIS while the vehicle gathers speed)
@@ -614,9 +603,8 @@ class _Pass:
         """The NavResult of the pass: the history, the counters, the filter's consistency, the per-epoch states'
         reports, the nominal calibration's check and the water current."""
         config, fs, counters = self.config, self.fs, self.counters
-        counters["dvl_updates"] = len(
-            self.pings
-        )  # the pings the filter took, dvl_gated of them not used
+        # the pings the filter took, dvl_gated of them not used
+        counters["dvl_updates"] = len(self.pings)
         counters["dvl_downweighted"] = self.downweighted
         counters["dvl_gated"] = self.gated
         if self.depth is not None:
@@ -648,9 +636,8 @@ class _Pass:
             result.info["filter"]["nominal"] = weak_hold.nominal_check(
                 d, fs.P[np.ix_(CALIBRATION, CALIBRATION)]
             )
-        if (
-            self.currents
-        ):  # the current at each update, its filtered sigmas (estimators/models/current.py)
+        # the current at each update, its filtered sigmas (estimators/models/current.py)
+        if self.currents:
             c = self.currents
             result.water_current = current.profile(
                 np.array([x[0] for x in c]),
@@ -733,9 +720,8 @@ def _filter(
         t0 = time.perf_counter()
         t_prev = run.propagate(t_prev, t_j)
         t1 = time.perf_counter()
-        if (
-            run.depth is not None and count == len(state_t) - 1
-        ):  # samples after the last state: bridged to it
+        # samples after the last state: bridged to it
+        if run.depth is not None and count == len(state_t) - 1:
             run.depth.apply(run.fs, t_j, t_j, bridge_to=math.inf)
         run.timing["propagate"] += t1 - t0
         if j < 0:  # a state without a ping: recorded, not updated

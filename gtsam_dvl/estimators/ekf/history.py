@@ -43,12 +43,10 @@ class History:
         self.n_p.append(fs.nav.n_p.copy())
         self.n_R_b.append(fs.nav.n_R_b.copy())
         self.n_v.append(fs.nav.n_v.copy())
-        m = (
-            len(fs.P) - fs.extra_states()
-        )  # the navigation, calibration and time offset block (the results read
-        self.P.append(
-            fs.P[:m, :m].copy()
-        )  # only these; the current's layer boundaries grow the rest)
+        # the navigation, calibration and time offset block (the results read
+        m = len(fs.P) - fs.extra_states()
+        # only these; the current's layer boundaries grow the rest)
+        self.P.append(fs.P[:m, :m].copy())
         self.b_omega.append(b_omega)
         self.gyro_bias.append(fs.gyro_bias.copy())
         self.accel_bias.append(fs.accel_bias.copy())

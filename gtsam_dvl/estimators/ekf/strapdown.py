@@ -259,9 +259,8 @@ def propagate_interval(
     R0B = state.n_R_b @ B  # (m + 1, 3, 3) = R0 B_j
     W = skew(n_omega_ie)
     R = so3_exp(-np.outer(tau, n_omega_ie)) @ R0B  # Exp(-w tau) R0 B_j
-    dtheta_nb = (
-        dtheta - np.einsum("jba,b->ja", R[:-1], n_omega_ie) * dt[:, None]
-    )  # turn relative to map
+    # turn relative to map
+    dtheta_nb = dtheta - np.einsum("jba,b->ja", R[:-1], n_omega_ie) * dt[:, None]
     dv_start = dv + 0.5 * _cross_rows(dtheta_nb, dv)  # delta-v in the body at the sample's start
     dv_n = np.einsum("jab,jb->ja", R[:-1], dv_start)  # specific-force velocity increments in map
     sum_dv = np.concatenate([np.zeros((1, 3)), np.cumsum(dv_n, axis=0)])  # (m + 1, 3)
@@ -302,9 +301,8 @@ def propagate_interval(
     Phi[PHI, PHI] = small_rotation(-n_omega_ie * T)
     # a gyro bias error at tau turns with the Earth rate until T: -int (I - (T - tau) [w]x) n_R_b dtau
     Phi[PHI, BG] = -S_R[-1] + W @ np.sum(R_dt * (T - tau_mid)[:, None, None], axis=0)
-    Phi[VEL, cols] = (
-        V[-1] - 2.0 * W @ P[-1]
-    )  # Coriolis on the velocity error built up in the interval
+    # Coriolis on the velocity error built up in the interval
+    Phi[VEL, cols] = V[-1] - 2.0 * W @ P[-1]
     Phi[POS, cols] = P[-1] - 2.0 * W @ Q
     Phi[VEL, VEL] = np.eye(3) - 2.0 * W * T
     Phi[VEL, POS] = G * T

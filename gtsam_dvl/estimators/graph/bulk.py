@@ -91,9 +91,8 @@ class BulkSource(Protocol):
 class _Served:
     """The rows of the last linearisation, per state: what the carriers hand to GTSAM."""
 
-    e: np.ndarray = field(
-        default_factory=lambda: np.zeros((0, 3))
-    )  # whitened, reweighted error (N, m)
+    # whitened, reweighted error (N, m)
+    e: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     blocks: list[np.ndarray] = field(default_factory=list)  # per key (N, m, d)
     ready: bool = False
 
@@ -131,9 +130,8 @@ class BulkDvl:
     robust_k: float
     offset_n_g: np.ndarray | None  # with the time offset model: its gravity in map
     b_l: np.ndarray  # the known lever arm (m, base_link); with lever, L_LEVER's value is used
-    t_ping: np.ndarray = field(
-        default_factory=lambda: np.zeros(0)
-    )  # the rows' ping stamps (s), in their order
+    # the rows' ping stamps (s), in their order
+    t_ping: np.ndarray = field(default_factory=lambda: np.zeros(0))
     # (N,) bool: the water-track rows (velocity relative to the water, on W(state)); None: none used
     water: np.ndarray | None = None
     _served: _Served = field(init=False, default_factory=_Served)
@@ -141,17 +139,15 @@ class BulkDvl:
     _states_with_rows: list[int] = field(init=False)
 
     def __post_init__(self) -> None:
-        _ = (
-            self.pings.motion.earth
-        )  # the motion's Earth terms, once (each chunk takes its part of them)
+        # the motion's Earth terms, once (each chunk takes its part of them)
+        _ = self.pings.motion.earth
         state = self.pings.state
         if len(state) and np.any(np.diff(state) < 0):
             raise ValueError("BulkDvl: pings must be sorted by state")
         self._bounds = np.searchsorted(state, np.arange(self.n_states + 1), side="left")
         self._bias_random_walk = len(set(self.bias_keys)) > 1
-        self._states_with_rows = np.unique(
-            state
-        ).tolist()  # (found once: read per evaluation, _correlated_errors)
+        # (found once: read per evaluation, _correlated_errors)
+        self._states_with_rows = np.unique(state).tolist()
 
     @property
     def offset(self) -> bool:
@@ -205,9 +201,8 @@ class BulkDvl:
         n_R_i, n_p_i, n_v_i, b_a, b_g, k, b_R_d, dt_d, b_l = self._ping_states(
             values, self.states(values) if states is None else states
         )
-        d_e = self._correlated_errors(
-            values
-        )  # (N, 3) the rows' correlated DVL error E(state), or None
+        # (N, 3) the rows' correlated DVL error E(state), or None
+        d_e = self._correlated_errors(values)
         # the water-track rows' own scale (water_scale): h and every Jacobian but the scale's are linear in k, so
         # those rows are evaluated at k and taken times k_w / k; their scale Jacobian goes to K_WATER
         k_water = water_scale_key(self.config)
@@ -215,9 +210,8 @@ class BulkDvl:
         water_rows = self.water if self.water is not None else np.zeros(len(self), dtype=bool)
         if k_water is not None:
             ratio = float(values.atVector(k_water)[0]) / k
-        n_c = self._currents(
-            values
-        )  # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
+        # (N, 3) the water-track rows' current [c_e, c_n, 0] (others 0), or None
+        n_c = self._currents(values)
         if n_c is not None:  # the velocity relative to the water (factors/dvl.py current_variable)
             n_v_i = n_v_i - n_c
         d_u = self.pings.d_u
@@ -380,9 +374,8 @@ class BulkDvl:
         n = len(self)
         dims = [key_dim(k) for k in self._keys(0)]
         served = self._served
-        if (
-            len(served.blocks) != len(dims) or len(served.blocks[0]) != n
-        ):  # (released after each linearisation)
+        # (released after each linearisation)
+        if len(served.blocks) != len(dims) or len(served.blocks[0]) != n:
             served.blocks = [np.empty((n, self.pings.dim, d)) for d in dims]
         ew = self._evaluate(values, True, served.blocks, states)
         w, _ = self._weights_and_losses(ew)
@@ -407,9 +400,8 @@ class BulkDvl:
         """New time-offset IMU constants of the rows (mean body rate, b_a, G at t_ping, in their order:
         LogGraph.recentre_time_offset) and the known lever arm b_l (m); the rest of the model is unchanged."""
         p = self.pings
-        if (
-            not self.offset or b_omega.shape != p.b_omega.shape
-        ):  # (the offset model has offset_b_a and G)
+        # (the offset model has offset_b_a and G)
+        if not self.offset or b_omega.shape != p.b_omega.shape:
             raise ValueError(
                 "BulkDvl.set_offset_inputs: not a time-offset model, or not the same pings"
             )
@@ -611,9 +603,8 @@ def bulk_dvl(builder: BulkSource) -> BulkDvl:
     n, st, jj = len(p.state), p.state, p.dvl_index
     d_y = np.asarray(dvl.d_v[jj], dtype=float).reshape(n, 3)
     motion, extra = _ping_motion(builder, st, p.snap, d_y)
-    water = (
-        builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)
-    )  # (water track: 3-D, own noise)
+    # (water track: 3-D, own noise)
+    water = builder.water[jj] if water_current(cfg) else np.zeros(n, dtype=bool)
     rows, y, d_u, whiten = _measurement_rows(cfg, dvl, jj, d_y, extra, water)
     rate = p.rate
     pings = BulkPings(

@@ -111,9 +111,8 @@ class FactorMaker:
     # a vehicle's calibration (already inflated for its age): the joint prior of the states it holds
     # (core/states.py calibration_prior) and their initial values; None: the configuration's priors
     calibration: VehicleCalibration | None = None
-    _offset_gravity: np.ndarray | None = field(
-        default=None, init=False, repr=False
-    )  # offset_gravity()'s cache
+    # offset_gravity()'s cache
+    _offset_gravity: np.ndarray | None = field(default=None, init=False, repr=False)
 
     # ----- keys and rates ------------------------------------------------------------------------
     def bias_key(self, i: int) -> int:
@@ -390,9 +389,8 @@ class FactorMaker:
         b_l, lever = self.mounting.b_l, enabled(self.config, "lever_arm")
         water = water and water_current(self.config)
         keys = self.dvl_keys(i, motion is not None, water)
-        gm = correlated_error(
-            self.config
-        )  # the correlated error E(i) a variable of every DVL factor
+        # the correlated error E(i) a variable of every DVL factor
+        gm = correlated_error(self.config)
         if enabled(self.config, "time_offset"):
             if rate_input is None:
                 raise ValueError(
@@ -409,9 +407,8 @@ class FactorMaker:
                 current_variable=water,
             )
             return [make_dvl_factor(self.dvl_noise(cov, extra, water), keys, d_y, o)]
-        if (
-            cfg.use_beams and beams is not None and not water
-        ):  # (a water-track ping: its 3-D velocity)
+        # (a water-track ping: its 3-D velocity)
+        if cfg.use_beams and beams is not None and not water:
             d_u, v, valid = beams
             out: list[gtsam.NonlinearFactor] = []
             for b in np.flatnonzero(valid).tolist():
@@ -538,9 +535,8 @@ class FactorMaker:
                 values.atVector(V(0)),
                 gtsam.noiseModel.Isotropic.Sigma(3, pri.velocity_sigma_m_s),
             ),
-        ] + shared_prior_factors(
-            self.config, self.mounting, self.calibration
-        )  # the shared states' (core/states.py)
+            # the shared states' (core/states.py)
+        ] + shared_prior_factors(self.config, self.mounting, self.calibration)
 
     # ----- initial guesses -----------------------------------------------------------------------
     def alignment_info(self) -> dict[str, Any]:
@@ -587,9 +583,8 @@ class FactorMaker:
         values = gtsam.Values()
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
         n_v = self.velocity_from_ping(n_R_b.matrix(), d_y)
-        n_p = (
-            np.zeros(3) if self.first is None else self.first.n_p
-        )  # the map origin carried to the first state
+        # the map origin carried to the first state
+        n_p = np.zeros(3) if self.first is None else self.first.n_p
         values.insert(X(0), gtsam.Pose3(n_R_b, n_p))
         values.insert(V(0), np.zeros(3) if n_v is None else n_v)
         values.insert(initial_shared_values(self.config, self.mounting, self.calibration))

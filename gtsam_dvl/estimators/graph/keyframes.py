@@ -31,13 +31,11 @@ from gtsam_dvl.estimators.inputs.gaps import Holds, ImuPieces, hold_covariance
 from gtsam_dvl.factors import PingMotion
 from gtsam_dvl.factors.so3 import skew
 
-BIAS_STEP_ACC = (
-    1e-2  # m/s^2, central-difference step of the accelerometer bias (beyond ANALYTIC_MAX_ANGLE)
-)
+# m/s^2, central-difference step of the accelerometer bias (beyond ANALYTIC_MAX_ANGLE)
+BIAS_STEP_ACC = 1e-2
 BIAS_STEP_GYRO = 1e-4  # rad/s, central-difference step of the gyro bias (beyond ANALYTIC_MAX_ANGLE)
-ANALYTIC_MAX_ANGLE = (
-    5.5  # rad, the largest |theta| whose Jacobians come from the factor's (J_r singular at 2 pi)
-)
+# rad, the largest |theta| whose Jacobians come from the factor's (J_r singular at 2 pi)
+ANALYTIC_MAX_ANGLE = 5.5
 _STATE0, _BIAS0, _POSE0, _Z3 = (
     gtsam.NavState(),
     gtsam.imuBias.ConstantBias(),
@@ -198,9 +196,8 @@ def interval_with_snapshots(
     rows_f, rows_w, dts = imu.b_f[idx], imu.b_omega[idx], dt.tolist()
     done, a = 0, t_state
     for t_p in t_pings:
-        k = int(
-            np.searchsorted(ends, t_p, side="right")
-        )  # the pieces up to the last stamp at or before t_p
+        # the pieces up to the last stamp at or before t_p
+        k = int(np.searchsorted(ends, t_p, side="right"))
         if k > done:
             integrate_pieces(pim, rows_f[done:k], rows_w[done:k], dts[done:k])
             done, a = k, float(ends[k - 1])

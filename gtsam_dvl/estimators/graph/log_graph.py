@@ -73,9 +73,8 @@ class BetweenPing:
     dvl_index: int
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # as Epoch.rate_input, at t
-    snap: int = (
-        -1
-    )  # its IMU motion from the state before: row of LogGraph.snapshots (LogGraph.ping_snapshot)
+    # its IMU motion from the state before: row of LogGraph.snapshots (LogGraph.ping_snapshot)
+    snap: int = -1
 
 
 @dataclass
@@ -87,9 +86,8 @@ class Epoch:
     b_omega: np.ndarray  # body rate relative to map at t (for the lever arm), rad/s
     # with dvl.estimate_time_offset: (mean specific force, mean body rate) around t (FactorMaker.velocity_rate_input)
     rate_input: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-    between: list[BetweenPing] = field(
-        default_factory=list
-    )  # the pings up to the next state (keyframes)
+    # the pings up to the next state (keyframes)
+    between: list[BetweenPing] = field(default_factory=list)
 
 
 @dataclass
@@ -107,9 +105,8 @@ class LogGraph:
     pims: list[gtsam.PreintegratedImuMeasurements] = field(init=False)
     imu_params: list[gtsam.PreintegrationParams] = field(init=False)
     imu_held: list[Holds] = field(init=False)  # what each IMU interval held across IMU gaps
-    _imu_factors: list[EarthImuFactor] | None = field(
-        default=None, init=False, repr=False
-    )  # (imu_factors)
+    # (imu_factors)
+    _imu_factors: list[EarthImuFactor] | None = field(default=None, init=False, repr=False)
     # the IMU factors' gravity references, shared by the EarthImuFactors' copies and the bulk IMU factors
     gravity_refs: GravityRefs = field(init=False, repr=False)
     gaps: Gaps = field(init=False)
@@ -121,9 +118,8 @@ class LogGraph:
     )
     # the IMU motion to each ping between keyframes (BetweenPing.snap: its row); None once build_bulk let it go
     snapshots: PingMotion | None = field(default=None, init=False, repr=False)
-    usable: np.ndarray = field(
-        init=False, repr=False
-    )  # the usable pings' indices in log.dvl (NavResult.dvl_pings)
+    # the usable pings' indices in log.dvl (NavResult.dvl_pings)
+    usable: np.ndarray = field(init=False, repr=False)
     water: np.ndarray = field(init=False, repr=False)  # (M,) bool: log.dvl's water-track pings
     # the states' stamps and heights as the per-epoch states' processes see them (initial_values), and the variables
     # of those processes beside the per-state ones (the water current's layer boundaries S(b) the states cross):
@@ -146,9 +142,8 @@ class LogGraph:
     offset_centring: dict[str, Any] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.log = log_in_base_link(
-            self.log
-        )  # IMU samples in base_link (estimators/inputs/mounting.py)
+        # IMU samples in base_link (estimators/inputs/mounting.py)
+        self.log = log_in_base_link(self.log)
         cfg, log = self.config, self.log
         frame, alignment = align_log(log, cfg)
         self.maker = FactorMaker(
@@ -168,14 +163,12 @@ class LogGraph:
         # the given attitude and map origin are at the log's first IMU stamp (an attitude sensor's at its own
         # time): carry them to the first state (alignment.first_state)
         j0 = self.epochs[0].dvl_index
-        self.water = current.water_pings(
-            log
-        )  # (M,) the water-track pings (used when water_current(cfg))
+        # (M,) the water-track pings (used when water_current(cfg))
+        self.water = current.water_pings(log)
         d_y0 = log.dvl.d_v[j0] if log.dvl.valid[j0] and not self.water[j0] else None
         self.maker.carry_to_first(log.imu, self.epochs[0].t, d_y0, log.dvl.d_cov[j0])
-        self.gaps = gaps_within(
-            self.gaps, self.epochs[0].t, self.epochs[-1].t
-        )  # the gaps the states cross
+        # the gaps the states cross
+        self.gaps = gaps_within(self.gaps, self.epochs[0].t, self.epochs[-1].t)
         self.counters["imu_gaps"] = len(self.gaps)
         check_gaps(self.gaps, cfg.imu, log.source)
         # the samples' intervals and rotation-compensated specific force, made once for both integrations (each
@@ -247,9 +240,8 @@ class LogGraph:
             self.counters,
             water_current(cfg),
         )
-        key[-1:] = (
-            True  # the last ping too: every other ping lies between two states (and the gaps they cross)
-        )
+        # the last ping too: every other ping lies between two states (and the gaps they cross)
+        key[-1:] = True
         idx = all_idx[key]
         times, is_filler = with_fillers(
             dvl.t[idx], float(imu.t[-1]), cfg.solver.max_state_spacing_s
@@ -266,9 +258,8 @@ class LogGraph:
         ]
         rest = all_idx[~key]
         if len(rest):
-            state = (
-                np.searchsorted(times, dvl.t[rest], side="left") - 1
-            )  # the latest state before each ping
+            # the latest state before each ping
+            state = np.searchsorted(times, dvl.t[rest], side="left") - 1
             gyro_p = covering_sample(imu.t, dvl.t[rest])
             for j, i, g in zip(rest.tolist(), state.tolist(), gyro_p.tolist(), strict=True):
                 epochs[i].between.append(
@@ -409,9 +400,8 @@ class LogGraph:
                 for k, i in enumerate(idx.tolist()):
                     self._imu_factors[i].set_reference(mid[i], g[k], G[k])
                     self._imu_factors[i].set_gravity(mid[i])
-            elif (
-                self.imu_params
-            ):  # what EarthImuFactor.set_gravity writes: the gravity pim.predict uses
+            # what EarthImuFactor.set_gravity writes: the gravity pim.predict uses
+            elif self.imu_params:
                 for k, i in enumerate(idx.tolist()):
                     self.imu_params[i].n_gravity = g[k]
         return len(idx)
@@ -419,9 +409,8 @@ class LogGraph:
     def refresh_gravity(self, values: gtsam.Values) -> bool:
         """Between solver iterations: re-reference the factors that moved far (see factors/imu_earth.py).
         The objective changes by less than 1e-8 m/s^2 of gravity, so this reports no change."""
-        poses = gtsam.utilities.extractPose3(
-            values
-        )  # every Pose3 in key order: the states X(0..n-1)
+        # every Pose3 in key order: the states X(0..n-1)
+        poses = gtsam.utilities.extractPose3(values)
         if poses.shape[0] == len(self.epochs):
             n_p = poses[:, 9:]
         else:
@@ -563,17 +552,15 @@ class LogGraph:
             raise GtsamDvlError(
                 "initial_values: build_bulk let the preintegrations go; make a new LogGraph"
             )
-        values = initial_shared_values(
-            self.config, self.maker.mounting, self.calibration
-        )  # at their priors
+        # at their priors
+        values = initial_shared_values(self.config, self.maker.mounting, self.calibration)
         dvl = self.log.dvl
         zero_bias = gtsam.imuBias.ConstantBias()
         n_p_all = np.zeros((len(self.epochs), 3))
         self.set_gravity_from_positions(n_p_all)
         n_R_b = gtsam.Rot3(self.alignment.n_R_b)
-        n_p0 = (
-            None if self.maker.first is None else self.maker.first.n_p
-        )  # the origin carried to the first state
+        # the origin carried to the first state
+        n_p0 = None if self.maker.first is None else self.maker.first.n_p
         n_p, n_v = (
             first_position(self.gnss_plan(), n_R_b.matrix(), n_p0),
             np.zeros(3),
@@ -583,9 +570,8 @@ class LogGraph:
                 state = self.pims[i - 1].predict(gtsam.NavState(n_R_b, n_p, n_v), zero_bias)
                 n_R_b = state.attitude()
             j = ep.dvl_index
-            usable = j >= 0 and (
-                dvl.valid[j] or self.water[j]
-            )  # (water track: relative to the water, W = 0)
+            # (water track: relative to the water, W = 0)
+            usable = j >= 0 and (dvl.valid[j] or self.water[j])
             n_v_ping = self.maker.velocity_from_ping(n_R_b.matrix(), dvl.d_v[j] if usable else None)
             n_v_new = n_v if n_v_ping is None else n_v_ping
             if i > 0:
@@ -630,9 +616,8 @@ class LogGraph:
             )
         values = self.initial_values()
         graph = self._factors_but_dvl(values)
-        self._per_factor_built = (
-            True  # its IMU factors follow the gravity references too (build_bulk keeps them)
-        )
+        # its IMU factors follow the gravity references too (build_bulk keeps them)
+        self._per_factor_built = True
         for i in range(len(self.epochs)):
             for f in self.dvl_factors(i) + self.between_factors(i):
                 graph.add(f)
@@ -646,9 +631,8 @@ class LogGraph:
         graph = gtsam.NonlinearFactorGraph()
         self.factor_slots = {}
 
-        def add(
-            name: str, factors: list[gtsam.NonlinearFactor]
-        ) -> None:  # (their slots: factor_slots[name])
+        # (their slots: factor_slots[name])
+        def add(name: str, factors: list[gtsam.NonlinearFactor]) -> None:
             start = graph.size()
             for f in factors:
                 graph.add(f)
@@ -664,9 +648,8 @@ class LogGraph:
                 graph.add(f)
         if self.path is None:
             raise GtsamDvlError("the graph's factors need its initial guess first (initial_values)")
-        for s in enabled_epoch_states(
-            self.config
-        ):  # each per-epoch state's prior and links (epoch_states.py)
+        # each per-epoch state's prior and links (epoch_states.py)
+        for s in enabled_epoch_states(self.config):
             add(s.name, s.graph_factors(self.config, self.path))
         add("depth", self.depth_factors())
         add("gnss", self.gnss_factors(gnss))
@@ -731,9 +714,8 @@ class LogGraph:
         the IMU biases of values taken off their samples and each ping's attitude in values removing the Earth
         rate: a BulkGraph is updated in place (only the pings' IMU constants change), a per-factor graph built
         again."""
-        if isinstance(
-            graph, BulkGraph
-        ):  # straight into the bulk factors (the epochs' own let go by build_bulk)
+        # straight into the bulk factors (the epochs' own let go by build_bulk)
+        if isinstance(graph, BulkGraph):
             imu = self.log.imu
             bias, n_R_b = self.offset_state(graph.bulk.pings.state, values)
             b_a, w_mean, G = self.maker.velocity_rate_inputs(

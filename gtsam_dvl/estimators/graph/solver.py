@@ -161,9 +161,8 @@ def eliminate_chunks(
         g = gtsam.GaussianFactorGraph()
         for f in factors:
             g.push_back(f)
-        g.push_back(
-            carry
-        )  # after the chunk's own factors, as sequential elimination appends what it creates
+        # after the chunk's own factors, as sequential elimination appends what it creates
+        g.push_back(carry)
         order = gtsam.Ordering()
         for k in ks:
             order.push_back(k)
@@ -186,9 +185,8 @@ def eliminate(
     CHUNKED_FROM_STATES states' chunks, else GTSAM's one sequential elimination (its Bayes net: its quadratic
     cost and its memory only tell beyond a few hours of 1 s states)."""
     if isinstance(ordering, ChunkedOrdering):
-        if (
-            sum(len(ks) for ks in ordering.chunks) > 2 * CHUNKED_FROM_STATES
-        ):  # two or three keys a state
+        # two or three keys a state
+        if sum(len(ks) for ks in ordering.chunks) > 2 * CHUNKED_FROM_STATES:
             return eliminate_chunked(linear, ordering)
         ordering = ordering.ordering()
     return linear.eliminateSequential(ordering, gtsam.EliminateQR)
@@ -243,9 +241,8 @@ def gauss_newton_qr(
         report.iterations = it + 1
         report.bayes_net = bn
         del linear  # before the next linearisation: two of a day's linear systems at once cost a GB
-        if (
-            new_values is values
-        ):  # no step decreased the error: at the minimum to numerical precision
+        # no step decreased the error: at the minimum to numerical precision
+        if new_values is values:
             report.converged = not changed
             if not changed:
                 break

@@ -309,16 +309,14 @@ def in_motion_alignment(
     t_ref, t_end, sel, pings = _alignment_window(imu, dvl, window_s)
     tk = np.concatenate([[t_ref], imu.t[sel]])  # grid: the first sample, then each sample's end
     tp = dvl.t[pings]
-    j = np.clip(
-        np.searchsorted(tk, tp, side="left"), 1, len(tk) - 1
-    )  # grid step (tk[j-1], tk[j]] holding tp
+    # grid step (tk[j-1], tk[j]] holding tp
+    j = np.clip(np.searchsorted(tk, tp, side="left"), 1, len(tk) - 1)
     s = tp - tk[j - 1]
     zero = np.zeros(3)
     _, Rp, Vp = _body_integrals(imu, sel, tk, j, s, zero, zero)
     w = imu.b_omega[sel[j - 1]]
-    b_v = dvl.d_v[pings] @ mounting.b_R_d0.T - np.cross(
-        w, mounting.b_l
-    )  # at the IMU (w ~ rate vs map)
+    # at the IMU (w ~ rate vs map)
+    b_v = dvl.d_v[pings] @ mounting.b_R_d0.T - np.cross(w, mounting.b_l)
     q = np.einsum("kij,kj->ki", Rp, b_v)  # body velocity in b0 at the pings
     alpha = Vp - q
     # body velocity in b0 on the grid (linear between pings, held outside) and its integral
@@ -371,16 +369,14 @@ def _gravity_passes(
     Pp = np.column_stack([np.interp(tp, tk, P[:, a]) for a in range(3)])
     w_ie = frame.n_omega_ie
     n0_R_n = so3_exp(w_ie[None, :] * (tk - t_ref)[:, None])
-    step = max(
-        1, len(tk) // 2000
-    )  # gravity along the track, on a coarser grid (it changes by 1e-4 per km)
+    # gravity along the track, on a coarser grid (it changes by 1e-4 per km)
+    step = max(1, len(tk) // 2000)
     coarse = np.r_[np.arange(0, len(tk), step), len(tk) - 1]
     C = np.eye(3)
     use = np.ones(len(tp), bool)
     for n_pass in range(IN_MOTION_PASSES):
-        n_p = (
-            P[coarse] @ C.T if n_pass else np.zeros((len(coarse), 3))
-        )  # map position (n_R_n0 ~ I: 2e-2 rad)
+        # map position (n_R_n0 ~ I: 2e-2 rad)
+        n_p = P[coarse] @ C.T if n_pass else np.zeros((len(coarse), 3))
         g_c = frame.n_gravity(n_p)
         n_g = np.column_stack([np.interp(tk, tk[coarse], g_c[:, a]) for a in range(3)])
         g0 = np.einsum("kij,kj->ki", n0_R_n, n_g)
@@ -424,9 +420,8 @@ def _alignment_covariance(
     """The attitude's covariance (rad^2, map axes n0 at t_ref): the Wahba fit's, plus the rotation a 1-sigma
     bias of imu_cfg on each gyro and accelerometer axis gives the solution."""
     bt = beta_used - beta_used.mean(axis=0)
-    cov = np.linalg.inv(
-        (np.einsum("ki,ki->", bt, bt) * np.eye(3) - bt.T @ bt) / sigma2
-    )  # map axes (n0 at t_ref)
+    # map axes (n0 at t_ref)
+    cov = np.linalg.inv((np.einsum("ki,ki->", bt, bt) * np.eye(3) - bt.T @ bt) / sigma2)
     # what a 1-sigma bias on each axis does (the biases are unknown constants, not noise: they add in full)
     for k, sig in [(k, imu_cfg.gyro_bias_sigma_deg_per_h * DEG_PER_H) for k in range(3)] + [
         (k + 3, imu_cfg.accel_bias_sigma_ug * UG) for k in range(3)

@@ -55,9 +55,8 @@ def depth_samples(
     else:
         ok_var = np.isfinite(var) & (var > 0)
         sigma = np.where(ok_var, np.sqrt(np.where(ok_var, var, 1.0)), cfg.default_noise_m)
-    sigma = (
-        sigma * cfg.noise_multiplier
-    )  # the fitted (or pinned) variance component ([noise] fit_depth)
+    # the fitted (or pinned) variance component ([noise] fit_depth)
+    sigma = sigma * cfg.noise_multiplier
     ok = np.isfinite(d) & np.isfinite(depth.t)
     if counters is not None:
         counters["depth_invalid"] = int((~ok).sum())

@@ -148,9 +148,8 @@ def pieces_with_holds(
     for g in inside.tolist():
         T = float(hi[g] - lo[g])
         n = max(1, int(np.ceil(T / gaps.period_s - 1e-9)))
-        at = int(
-            np.searchsorted(idx, gaps.index[g], side="right")
-        )  # after its sample, before the next one's
+        # after its sample, before the next one's
+        at = int(np.searchsorted(idx, gaps.index[g], side="right"))
         idx = np.insert(idx, at, np.full(n, gaps.index[g]))
         dt = np.insert(dt, at, np.full(n, T / n))
         spans.append((float(lo[g] - gaps.start[g]), float(hi[g] - gaps.start[g])))
@@ -198,9 +197,8 @@ def hold_covariance(cfg: ImuConfig, holds: Holds, interval_s: float) -> np.ndarr
     return np.diag(np.repeat(var, 3)) if holds else np.zeros((9, 9))
 
 
-FILLER_MARGIN_S = (
-    2.0  # the online estimator waits this long for a late ping before adding a state without one
-)
+# the online estimator waits this long for a late ping before adding a state without one
+FILLER_MARGIN_S = 2.0
 
 
 def filler_due(

@@ -38,9 +38,8 @@ from gtsam_dvl.core.types import GnssData, LogData
 from gtsam_dvl.estimators.inputs.depth import depth_samples, nearest_states
 
 LOOSE_POSITION_SIGMA_M = 100.0  # first state's position prior when the fixes place it (m, per axis)
-ORIGIN_TOL_DEG = (
-    1e-9  # the log's origin is the first fix when they agree this closely (and 1e-6 m in height)
-)
+# the log's origin is the first fix when they agree this closely (and 1e-6 m in height)
+ORIGIN_TOL_DEG = 1e-9
 ROLES = ("used", "held_out", "rejected_status", "rejected_depth", "too_far")
 
 

@@ -15,9 +15,8 @@ import numpy as np
 
 from gtsam_dvl.core.types import ImuData, LogData, Mounting
 
-_IDENTITY_TOL = (
-    1e-12  # a mounting this close to identity leaves the samples untouched (bit for bit)
-)
+# a mounting this close to identity leaves the samples untouched (bit for bit)
+_IDENTITY_TOL = 1e-12
 
 
 def imu_is_rotated(mounting: Mounting) -> bool:
@@ -33,9 +32,8 @@ def rotate_imu_samples(
 
 def imu_in_base_link(imu: ImuData, mounting: Mounting) -> ImuData:
     """The samples in base_link (the same object when the IMU is mounted with base_link's axes)."""
-    if (
-        not imu_is_rotated(mounting) or imu.frame_id == "base_link"
-    ):  # nothing to rotate, or rotated already
+    # nothing to rotate, or rotated already
+    if not imu_is_rotated(mounting) or imu.frame_id == "base_link":
         return imu
     b_omega, b_f = rotate_imu_samples(mounting.b_R_imu, imu.b_omega, imu.b_f)
     return dataclasses.replace(imu, b_omega=b_omega, b_f=b_f, frame_id="base_link")

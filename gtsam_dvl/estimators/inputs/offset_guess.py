@@ -33,9 +33,8 @@ from gtsam_dvl.factors.so3 import exp as so3_exp
 
 SEARCH_S = 2.0  # the guess is searched within +- this of the prior's mean (DVL clocks seen 1 s off, ROS stamps 0.3 s)
 GRID_STEP_S = 0.02  # one IMU sample at 50 Hz; the solve refines it
-MAX_SPAN_S = (
-    600.0  # the first minutes of the log: enough pairs, and the attitude integration stays cheap
-)
+# the first minutes of the log: enough pairs, and the attitude integration stays cheap
+MAX_SPAN_S = 600.0
 # J must drop by this many residual variances from the prior's mean to the best dt (a 3-sigma likelihood ratio)
 MIN_EVIDENCE = 9.0
 MIN_PAIRS = 30
@@ -159,14 +158,12 @@ def _misfit(
     """J(dt) of the module doc."""
     ts = dvl_t + dt
     k = np.clip(np.searchsorted(t, ts), 1, len(t) - 1)
-    k = np.where(
-        np.abs(t[k - 1] - ts) < np.abs(t[k] - ts), k - 1, k
-    )  # the nearest sample's attitude
+    # the nearest sample's attitude
+    k = np.where(np.abs(t[k - 1] - ts) < np.abs(t[k] - ts), k - 1, k)
     n_v = np.einsum("kij,kj->ki", n_R_b[k], b_v)
     v_imu = np.stack([np.interp(ts, t, V[:, a]) for a in range(3)], axis=1)
     r = (n_v[1:] - n_v[:-1]) - (v_imu[1:] - v_imu[:-1])
     r = r[pair]
-    r = r - r.mean(
-        axis=0
-    )  # a constant shift (bias, gravity leak of the attitude error) tells nothing of dt
+    # a constant shift (bias, gravity leak of the attitude error) tells nothing of dt
+    r = r - r.mean(axis=0)
     return float(np.sum(r * r)) if math.isfinite(float(np.sum(r * r))) else math.inf

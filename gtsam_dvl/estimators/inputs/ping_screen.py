@@ -31,9 +31,8 @@ ZERO_WHILE_MOVING = 3  # exactly 0.0 in every component while moving (PingScreen
 REPEATED = 4  # bit-identical to the previous accepted ping, not zero: a frozen output (PingScreen)
 IMPLAUSIBLE_ACCEL = 5  # a velocity change the IMU cannot explain (PingScreen)
 WATER_TRACK = 6  # the DVL measured relative to the water (DvlData.water_track), not over ground
-BEFORE_IMU = (
-    7  # at or before the first IMU sample: nothing to propagate from (not a fault of the ping)
-)
+# at or before the first IMU sample: nothing to propagate from (not a fault of the ping)
+BEFORE_IMU = 7
 AFTER_IMU = 8  # after the last IMU sample (not a fault of the ping)
 REASONS = {
     UNUSABLE: "dvl_unusable",
@@ -174,9 +173,8 @@ class PingScreen:
             self._t.append(np.asarray(t, dtype=float))
             self._w.append(np.asarray(w, dtype=float))
             self._f.append(np.asarray(f, dtype=float))
-            if (
-                self._t[0][0] < self._t[-1][-1] - 3 * SCREEN_WINDOW_S
-            ):  # no ping for long: bounded memory
+            # no ping for long: bounded memory
+            if self._t[0][0] < self._t[-1][-1] - 3 * SCREEN_WINDOW_S:
                 T, W, F = np.concatenate(self._t), np.concatenate(self._w), np.concatenate(self._f)
                 keep = int(np.searchsorted(T, T[-1] - 2 * SCREEN_WINDOW_S, side="right"))
                 self._t, self._w, self._f = [T[keep:]], [W[keep:]], [F[keep:]]
@@ -235,9 +233,8 @@ def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) ->
     screen = PingScreen(cfg, repeats_need_motion=dvl.noise_free)
     t_list, bulk_list, sure_list = t.tolist(), bulk.tolist(), sure.tolist()
     last = -1  # the reference: the last accepted ping
-    rate_of: tuple[int, int] | None = (
-        None  # the pings whose velocity change last_rate is (None: 0.0)
-    )
+    # the pings whose velocity change last_rate is (None: 0.0)
+    rate_of: tuple[int, int] | None = None
     for n in range(m):
         # the pair the bulk assumed for last_rate: none for the first reference, and never with beams
         assumed = None if cfg.use_beams or n < 2 else (n - 2, n - 1)
@@ -258,9 +255,8 @@ def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) ->
             c = screen._classify(t_list[n], y[n], imu.t, imu.b_omega, imu.b_f)
         code[n] = c
         if c == USABLE:
-            if (
-                last >= 0 and not cfg.use_beams and t_list[n] > t_list[last]
-            ):  # check()'s update of last_rate
+            # check()'s update of last_rate
+            if last >= 0 and not cfg.use_beams and t_list[n] > t_list[last]:
                 rate_of = (last, n)
             last = n
     return code
@@ -270,9 +266,8 @@ def screen_pings(dvl: DvlData, idx: np.ndarray, imu: ImuData, cfg: DvlConfig) ->
 # evaluates PingScreen's formulas on the same samples, differing only in the order of the window sums and in
 # dot products (a few ulps, 1e-16 relative, times the window's samples), far inside this.
 _BAND = 1e-9
-_BULK_MAX_SAMPLES = (
-    1 << 14
-)  # IMU samples per block of the bulk screen (bounded memory on long logs)
+# IMU samples per block of the bulk screen (bounded memory on long logs)
+_BULK_MAX_SAMPLES = 1 << 14
 
 
 def _window_sums(imu: ImuData, t_from: np.ndarray, lo: np.ndarray, cnt: np.ndarray) -> np.ndarray:
@@ -327,9 +322,8 @@ def _bulk_screen(
     that ping n - 1 is the reference and ping n - 2 was its reference (last_rate from the two; 0 for ping 1 and
     with dvl.use_beams): PingScreen's rules on the samples in (t[n-1], t[n]]. sure: the assumption's code is
     PingScreen's (no capped window, every value finite and clear of the thresholds by _BAND)."""
-    beams = (
-        cfg.use_beams
-    )  # PingScreen's beam rules (even on a 3-D velocity when the log has no beams)
+    # PingScreen's beam rules (even on a 3-D velocity when the log has no beams)
+    beams = cfg.use_beams
     m = len(t)
     code = np.zeros(m, dtype=np.int8)
     sure = np.ones(m, dtype=bool)

@@ -207,9 +207,8 @@ def usable_pings(
     return np.flatnonzero(code == USABLE)
 
 
-KEYFRAME_TOLERANCE = (
-    0.02  # share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
-)
+# share of solver.keyframe_spacing_s: stamp jitter must not halve the keyframes
+KEYFRAME_TOLERANCE = 0.02
 
 # KeyframeRule's decision for a screened ping
 THINNED = 0  # dropped: within solver.keyframe_interval_s of the previous kept ping (counter "dvl_not_keyframe")
@@ -240,9 +239,8 @@ class KeyframeRule:
         if t - self.last_kept_t < self.interval_s:
             return THINNED
         self.last_kept_t = t
-        if (
-            t - self.last_key_t < self._key_interval_s
-        ):  # never with spacing_s <= 0: the pings are in time order
+        # never with spacing_s <= 0: the pings are in time order
+        if t - self.last_key_t < self._key_interval_s:
             return BETWEEN
         self.last_key_t = t
         return KEYFRAME
@@ -309,9 +307,8 @@ class Ping:
     beams: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     key: bool = True
     index: int = -1  # its place among the pings pushed (OnlineEstimator.push_dvl's calls, from 0)
-    water_track: bool = (
-        False  # measured relative to the water (used with the current, else counted)
-    )
+    # measured relative to the water (used with the current, else counted)
+    water_track: bool = False
 
 
 class EpochScheduler:

@@ -36,9 +36,8 @@ from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.rotations import skew
 from gtsam_dvl.core.states import Estimate
 
-CALIBRATION = slice(
-    6, 10
-)  # [scale, b_R_d right tangent] in calib_joint_cov and shared_joint_cov (states.py)
+# [scale, b_R_d right tangent] in calib_joint_cov and shared_joint_cov (states.py)
+CALIBRATION = slice(6, 10)
 
 
 def response(

@@ -271,9 +271,8 @@ def ekf_propagate(config: EstimatorConfig, fs: FilterState, dt: float, height0: 
         assert sh is not None and wc is not None
         r = fs.shear_ids.index(b)
         cols = slice(sh.start + 2 * r, sh.start + 2 * r + 2)
-        fs.P[wc, :] += (
-            sign * fs.P[cols, :]
-        )  # T P T^T with T = I + sign E(wc, cols): rows, then columns
+        # T P T^T with T = I + sign E(wc, cols): rows, then columns
+        fs.P[wc, :] += sign * fs.P[cols, :]
         fs.P[:, wc] += sign * fs.P[:, cols]
         fs.epoch["water_current"] = fs.current + sign * fs.shear[r]
     fs.layer = j

@@ -122,9 +122,8 @@ class EpochState:
     unit: str = ""
     reads: str = "no factor"  # which factors read it
     info_key: str | None = None  # NavResult.info entry of its report (None: none)
-    first_shared: bool = (
-        False  # state 0's variable is a shared state's (its prior and initial value there)
-    )
+    # state 0's variable is a shared state's (its prior and initial value there)
+    first_shared: bool = False
     beside_imu: bool = False  # its link joins the IMU factor of an interval (the factor reads it)
     ekf_block: bool = True  # the EKF appends a block of its own to the error state
 

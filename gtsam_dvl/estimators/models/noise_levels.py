@@ -79,12 +79,10 @@ class NoiseReport:
 
     imu: dict[str, Any] = field(default_factory=dict)
     dvl: dict[str, Any] = field(default_factory=dict)
-    depth: dict[str, Any] = field(
-        default_factory=dict
-    )  # only for a log with depth factors (the batch smoother)
-    gnss: dict[str, Any] = field(
-        default_factory=dict
-    )  # only for a log with aiding fixes (the batch smoother)
+    # only for a log with depth factors (the batch smoother)
+    depth: dict[str, Any] = field(default_factory=dict)
+    # only for a log with aiding fixes (the batch smoother)
+    gnss: dict[str, Any] = field(default_factory=dict)
     # the DVL's correlated error's level and time constant: fitted (batch) or held; only with [noise] fit_correlated
     dvl_correlated: dict[str, Any] = field(default_factory=dict)
 
@@ -530,9 +528,8 @@ def with_levels(entry: dict[str, Any], levels: dict[str, Any], used: float) -> N
     entry["white_sigma"] = per * levels["white_multiplier"]
     entry["stated_sigma"] = per * levels["stated_multiplier"]
     long = levels["long"]
-    if (
-        long is not None
-    ):  # as_dict at the multiplier the residuals were whitened at: scale to m/s or m
+    # as_dict at the multiplier the residuals were whitened at: scale to m/s or m
+    if long is not None:
         entry["long"] = {k: (v * per if k.startswith("sigma") else v) for k, v in long.items()}
     if levels["honest_why"]:
         entry["why"] += "; " + levels["honest_why"]

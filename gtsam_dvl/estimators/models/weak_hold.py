@@ -167,9 +167,8 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
     names = ["scale", "misalignment roll", "misalignment pitch", "misalignment yaw"]
     held = []
     for k in np.flatnonzero(p["weak"]):
-        v = (
-            np.linalg.cholesky(p["P0"]) @ p["V"][:, k]
-        )  # one prior sigma along v_k, in [scale, rad] units
+        # one prior sigma along v_k, in [scale, rad] units
+        v = np.linalg.cholesky(p["P0"]) @ p["V"][:, k]
         main = names[
             int(np.argmax(np.abs(p["V"][:, k])))
         ]  # (its largest component in prior sigmas)
@@ -191,9 +190,8 @@ def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
     }
     if "nominal" in p:  # the nominal calibration's check (nominal_check), a filter's
         out["nominal"] = p["nominal"]
-    if np.isfinite(
-        chi2_increase
-    ):  # (the batch smoother's: a filter holds its reported estimate only)
+    # (the batch smoother's: a filter holds its reported estimate only)
+    if np.isfinite(chi2_increase):
         out.update(
             chi2_increase=chi2_increase,
             chi2_limit_99=limit,
@@ -250,9 +248,8 @@ def hold_joint(
     lam, V, weak = p["lambda"], p["V"], p["weak"]
     L0 = np.linalg.cholesky(p["P0"])
     u = np.linalg.solve(L0, d)
-    d_theta = L0 @ (
-        -V[:, weak] @ (V[:, weak].T @ u)
-    )  # to the prior's mean along the weak directions
+    # to the prior's mean along the weak directions
+    d_theta = L0 @ (-V[:, weak] @ (V[:, weak].T @ u))
     K = np.linalg.solve(P_tt, cov[idx, :]).T  # (n, 4)
     c = np.where(weak, 1.0, 1.0 / (1.0 + lam))  # the held calibration's whitened variances
     C = L0 @ V @ np.diag(c) @ V.T @ L0.T

@@ -37,9 +37,8 @@ from gtsam_dvl.estimators.online.window import STATE_DIM, StateEstimate
 from gtsam_dvl.factors import DvlOptions, OffsetInput, PingMotion, make_dvl_factor, ping_state
 from gtsam_dvl.factors.so3 import skew
 
-GRAVITY_REUSE_M = (
-    100.0  # KeyframeGravity: distance from the reference within which it is reused (module doc)
-)
+# KeyframeGravity: distance from the reference within which it is reused (module doc)
+GRAVITY_REUSE_M = 100.0
 
 
 class StatePreintegration:
@@ -53,9 +52,8 @@ class StatePreintegration:
     test_online_keyframes.py), most of the work done before the state's epoch."""
 
     def __init__(self, make_params: Any, imu_cfg: ImuConfig) -> None:
-        self._make_params = (
-            make_params  # FactorMaker.make_params: a new PreintegrationParams per IMU factor
-        )
+        # FactorMaker.make_params: a new PreintegrationParams per IMU factor
+        self._make_params = make_params
         self.imu_cfg = imu_cfg
         self.t_state = -np.inf
         self._a = -np.inf
@@ -76,9 +74,8 @@ class StatePreintegration:
         """The IMU motion from the state to the ping at t_p (imu: the samples buffered since before the state,
         as ImuPieces, with the buffer's gaps)."""
         self.advance(last_stamp_at_or_before(imu.t, t_p), imu)
-        if (
-            self._pim is None or self._params is None
-        ):  # no sample stamp yet between the state and the ping
+        # no sample stamp yet between the state and the ping
+        if self._pim is None or self._params is None:
             self._params = self._make_params()
             self._pim = gtsam.PreintegratedImuMeasurements(
                 self._params, gtsam.imuBias.ConstantBias()
@@ -214,9 +211,8 @@ def predict_at_ping(s: StateEstimate, t: float, snap: PingMotion, m: PingMotion)
         J[6:9, 0:6] = A_v_pose
         J[6:9, 6:9] = A_v_vel
         J[6:9, 9:15] = A_v_bias
-        Jq = np.zeros(
-            (9, 9)
-        )  # the preintegration's error [rotation, position, velocity] into [rot, trans, n_v]
+        # the preintegration's error [rotation, position, velocity] into [rot, trans, n_v]
+        Jq = np.zeros((9, 9))
         Jq[0:3, 0:3] = np.eye(3)
         Jq[3:6, 3:6] = R_pT @ R_i
         Jq[6:9, 6:9] = R_i

@@ -58,9 +58,8 @@ def considered_calibration_factor(
         config = EstimatorConfig(dvl=DvlConfig(estimate_time_offset=offset is not None))
     offset_input = None
     if offset is not None:
-        (b_a, b_omega, G), n_g = (
-            offset  # the model's body rate is the rate input's mean over its window
-        )
+        # the model's body rate is the rate input's mean over its window
+        (b_a, b_omega, G), n_g = offset
         offset_input = OffsetInput(b_a, n_g, G)
     y: np.ndarray | float = beam[1] if beam is not None else np.asarray(d_y)
     water = water and water_current(config)

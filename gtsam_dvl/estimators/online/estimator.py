@@ -154,9 +154,8 @@ def _effective_config(
     solver = config.solver
     check_spacing(solver)
     spacing = solver.keyframe_spacing_s
-    if (
-        spacing > solver.max_state_spacing_s
-    ):  # the batch smoother's rule (estimators/graph/log_graph.py)
+    # the batch smoother's rule (estimators/graph/log_graph.py)
+    if spacing > solver.max_state_spacing_s:
         raise GtsamDvlError(
             f"solver.keyframe_spacing_s = {spacing:g} s needs solver.max_state_spacing_s >= "
             f"{spacing:g} s: states without a ping would take the places of the keyframes"
@@ -247,24 +246,20 @@ class OnlineEstimator:
         # pings between keyframes: their factors wait for the next state's update (True) or each goes into iSAM2
         # at once (False; module doc, "Keyframes")
         self.defer_between_pings = True
-        self._interval: StatePreintegration | None = (
-            None  # the next IMU factor's, integrated at the pings between
-        )
+        # the next IMU factor's, integrated at the pings between
+        self._interval: StatePreintegration | None = None
         self._gravity: KeyframeGravity | None = None
         self._deferred: list[tuple[Ping, list[gtsam.NonlinearFactor]]] = []
-        self._state: StateEstimate | None = (
-            None  # the newest state's estimate (after its update, or the last)
-        )
+        # the newest state's estimate (after its update, or the last)
+        self._state: StateEstimate | None = None
         self._first_imu_t: float | None = None
         # the time the map origin refers to (s): None, the first IMU stamp; a GNSS fix's when it is the origin
         # (for_log); the first state's position is the origin carried from it (alignment.first_state)
         self.origin_t: float | None = None
-        self._wait = AlignmentWait(
-            frame, self.config.alignment, self.options.align_s, source
-        )  # before alignment
-        self._imu = ImuBuffer(
-            self.config.imu, source, self._count
-        )  # after it: the IMU since the newest state
+        # before alignment
+        self._wait = AlignmentWait(frame, self.config.alignment, self.options.align_s, source)
+        # after it: the IMU since the newest state
+        self._imu = ImuBuffer(self.config.imu, source, self._count)
         self._replaying = False  # replaying the messages buffered before the alignment
         self._pending: deque[Ping] = deque()  # pings decided, waiting for their epoch
         self._pings_pushed = 0  # push_dvl's calls (Ping.index)
@@ -311,13 +306,11 @@ class OnlineEstimator:
             calibration=calibration,
         )
         est.noise.imu = noise.imu
-        held_levels(
-            log, config, "online estimator", est.noise
-        )  # (depth, correlated DVL error: the batch fits them)
+        # (depth, correlated DVL error: the batch fits them)
+        held_levels(log, config, "online estimator", est.noise)
         est.origin_t = origin_fix_time(log, config)
-        est._scheduler.screen.repeats_need_motion = (
-            log.dvl.noise_free
-        )  # a noise-free simulation's repeats
+        # a noise-free simulation's repeats
+        est._scheduler.screen.repeats_need_motion = log.dvl.noise_free
         est._scheduler.water_screen.repeats_need_motion = log.dvl.noise_free
         est.stated_config = stated.model_copy(update={"online": est.options}).validate()
         return est
@@ -635,9 +628,8 @@ class OnlineEstimator:
         t_epoch = p.t if p is not None else float(t_state)  # type: ignore[arg-type]
         T, W, F = self._imu.samples()
         i = sm.n
-        if (
-            i == 0 and p is not None
-        ):  # the given attitude and origin (at the first IMU stamp) carried to the epoch
+        # the given attitude and origin (at the first IMU stamp) carried to the epoch
+        if i == 0 and p is not None:
             b.carry_to_first(
                 ImuData(T, W, F), t_epoch, p.d_v if p.valid else None, p.d_cov, None, self.origin_t
             )
@@ -646,9 +638,8 @@ class OnlineEstimator:
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
         min_speed = self.options.calibration_min_speed_m_s
         dvl = state_dvl_factors(b, i, p, b_omega, min_speed, rate_input) if p is not None else []
-        if (
-            self._noise_fit is not None
-        ):  # the pings of this epoch (those between keyframes, then its own)
+        # the pings of this epoch (those between keyframes, then its own)
+        if self._noise_fit is not None:
             for q, fs in [*self._deferred, *(((p, dvl),) if p is not None else ())]:
                 self._noise_fit.record(q.t, list(fs), median_ping_sigma(self.config, q.d_cov))
         self._count("states_without_ping" if p is None else "keyframes")
@@ -685,9 +676,8 @@ class OnlineEstimator:
         self._latest = OnlineEstimate.from_state(self._state, self.mounting.b_R_d0)
         if self.options.record_history:
             self._history.append(self._latest, b_omega)
-            if water_current(
-                self.config
-            ):  # the newest state's current, filtered (as the EKF's), for current_profile
+            # the newest state's current, filtered (as the EKF's), for current_profile
+            if water_current(self.config):
                 self.current_history.append(
                     (
                         t_epoch,

@@ -42,12 +42,10 @@ class ImuBuffer:
 
     def push(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> None:
         """IMU samples in time order, after every earlier one."""
-        if (
-            self._period is None
-        ):  # the nominal period, for the gap rule (estimators/inputs/gaps.py): from the first
-            self._period_t.extend(
-                t[:PERIOD_SAMPLES].tolist()
-            )  # PERIOD_SAMPLES stamps, across chunks
+        # the nominal period, for the gap rule (estimators/inputs/gaps.py): from the first
+        if self._period is None:
+            # PERIOD_SAMPLES stamps, across chunks
+            self._period_t.extend(t[:PERIOD_SAMPLES].tolist())
             if len(self._period_t) >= PERIOD_SAMPLES:
                 self._period = nominal_period(np.asarray(self._period_t[:PERIOD_SAMPLES]))
         if len(t):

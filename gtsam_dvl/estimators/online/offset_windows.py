@@ -77,9 +77,8 @@ class OffsetWindows:
         counters["time_offset_window_clipped"]."""
         T, W, F = self.samples()
         centre = self.centre(estimate_s)
-        if (
-            estimate_s is not None and self.recentre and centre != estimate_s
-        ):  # reported (analysis/health.py)
+        # reported (analysis/health.py)
+        if estimate_s is not None and self.recentre and centre != estimate_s:
             self.counters["time_offset_window_clipped"] = (
                 self.counters.get("time_offset_window_clipped", 0) + 1
             )

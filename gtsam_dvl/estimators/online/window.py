@@ -158,9 +158,8 @@ class IncrementalSmoother:
         # layer and the boundaries S(b) crossed so far: shared keys, never marginalised)
         self.epoch_states = enabled_epoch_states(builder.config)
         self.memory = {s.name: WindowMemory() for s in self.epoch_states}
-        self.hold: dict[str, Any] | None = (
-            None  # the newest estimate's held calibration directions (weak_hold.py)
-        )
+        # the newest estimate's held calibration directions (weak_hold.py)
+        self.hold: dict[str, Any] | None = None
         # relinearisation thresholds by symbol character: the states', the shared states' (core/states.py) and the
         # per-epoch states' (their own: epoch_states.py)
         self._threshold = {
@@ -188,9 +187,8 @@ class IncrementalSmoother:
         self.t_last = -np.inf
         self.marginalised = 0
         self.rebases = 0
-        self._frozen = (
-            gtsam.KeyList()
-        )  # keys of the states older than the RECENT newest, oldest first
+        # keys of the states older than the RECENT newest, oldest first
+        self._frozen = gtsam.KeyList()
         self._frozen_until = 0  # states below this index are in _frozen (or marginalised)
         self._limits: dict[tuple[int, int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._last_imu: EarthImuFactor | None = None
@@ -335,9 +333,8 @@ class IncrementalSmoother:
         for i in range(recent_from, self.n):
             for k in self._state_keys(i):
                 groups.insert2(k, i - recent_from)
-        for k in (
-            self.shared_keys(self.n - 1) + self.extra_keys()
-        ):  # (the current's layer boundaries too)
+        # (the current's layer boundaries too)
+        for k in self.shared_keys(self.n - 1) + self.extra_keys():
             groups.insert2(k, self.n - recent_from)
         return groups, (gtsam.KeyList() if rebase else self._frozen)
 
@@ -372,9 +369,8 @@ class IncrementalSmoother:
         """Whether the shared keys or a state older than the RECENT newest moved from its linearisation point by
         more than its relinearisation threshold (the shared keys are frozen by marginalizeLeaves, the old
         states by _ordering)."""
-        delta = (
-            self.isam.getDelta().vector()
-        )  # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
+        # keys in sorted order: b, c, k, (t,) v, x (GTSAM symbols)
+        delta = self.isam.getDelta().vector()
         n_states = self.n - self.first
         old = max(0, n_states - RECENT)
         extra = self.extra_keys()
@@ -486,9 +482,8 @@ class IncrementalSmoother:
             )
             is not None
         ):
-            values, cov, self.hold = (
-                held  # weakly determined calibration directions held (weak_hold.py)
-            )
+            # weakly determined calibration directions held (weak_hold.py)
+            values, cov, self.hold = held
         key_cols, col = {}, 9
         for k in shared:
             key_cols[k] = slice(col, col + key_dim(k))
@@ -571,9 +566,8 @@ def bayes_net_covariance(bn: gtsam.GaussianBayesNet, keys: list[int]) -> np.ndar
         raise GtsamDvlError(
             "marginal covariance: the Bayes net is not square (rank-deficient problem)"
         )
-    Rinv = np.linalg.inv(
-        R
-    )  # LU of a triangular matrix needs no row swaps; scipy's solve_triangular costs more a call
+    # LU of a triangular matrix needs no row swaps; scipy's solve_triangular costs more a call
+    Rinv = np.linalg.inv(R)
     cov_elim = Rinv @ Rinv.T
     idx = np.concatenate([np.arange(offsets[k], offsets[k] + key_dim(k)) for k in keys])
     cov = cov_elim[np.ix_(idx, idx)]

@@ -148,9 +148,8 @@ class McapContainer:
     def write_messages(self, rows: MessageRows) -> None:
         """Write these K messages in the given order into chunks of about ``chunk_size`` bytes."""
         rec_len = 31 + rows.length.astype(np.int64)
-        chunk_no = (
-            np.cumsum(rec_len) - 1
-        ) // self.chunk_size  # a chunk closes once it passes chunk_size
+        # a chunk closes once it passes chunk_size
+        chunk_no = (np.cumsum(rec_len) - 1) // self.chunk_size
         bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [len(rec_len)]])
         for a, b in zip(bounds[:-1], bounds[1:], strict=True):
             if b > a:

@@ -30,9 +30,8 @@ from gtsam_dvl.io.storage.raw import Bodies, Loss, TopicInfo
 
 _win = np.lib.stride_tricks.sliding_window_view
 SALVAGE_HINT = "rerun with --salvage to recover the intact chunks"
-MMAP_MIN_BYTES = (
-    16 << 20
-)  # files this large are memory-mapped (smaller ones are read: no difference then)
+# files this large are memory-mapped (smaller ones are read: no difference then)
+MMAP_MIN_BYTES = 16 << 20
 Buf = bytes | mmap.mmap  # the file: read, or memory-mapped
 
 

@@ -21,9 +21,8 @@ from gtsam_dvl.io.mcap.container import McapContainer, MessageRows
 from gtsam_dvl.io.ros2 import cdr, messages
 from gtsam_dvl.io.ros2.msgdefs import full_definition
 
-_INFINITE = (
-    "    sec: 9223372036\n    nsec: 854775807\n"  # rmw's infinite duration, as rosbag2 writes it
-)
+# rmw's infinite duration, as rosbag2 writes it
+_INFINITE = "    sec: 9223372036\n    nsec: 854775807\n"
 
 
 def qos_yaml(reliability: str, durability: str, depth: int) -> str:
@@ -221,9 +220,8 @@ class McapLogWriter(AtomicWriter):
         """Every message added, merged in log-time order, into chunks."""
         if self._batches:
             rows = self._take_batches()
-            order = np.argsort(
-                rows.log_time, kind="stable"
-            )  # ties keep the order topics were added
+            # ties keep the order topics were added
+            order = np.argsort(rows.log_time, kind="stable")
             self._mcap.write_messages(rows.take(order))
 
     def _take_batches(self) -> MessageRows:
@@ -302,9 +300,8 @@ class McapStreamWriter(McapLogWriter):
             else int(np.searchsorted(rows.log_time, before_ns, side="left"))
         )
         rec_end = self._bytes_written + np.cumsum(31 + rows.length[:ready])
-        chunk_no = (
-            rec_end - 1
-        ) // self._mcap.chunk_size  # as McapContainer.write_messages, from the first message
+        # as McapContainer.write_messages, from the first message
+        chunk_no = (rec_end - 1) // self._mcap.chunk_size
         bounds = np.concatenate([[0], np.flatnonzero(np.diff(chunk_no)) + 1, [ready]])
         done = len(bounds) - 1 if final else len(bounds) - 2  # the last chunk may still grow
         for a, b in zip(bounds[:done], bounds[1 : done + 1], strict=True):

@@ -40,9 +40,8 @@ def ros_twist_covariance(
     n_R_b = np.asarray(n_R_b, dtype=float)
     R_T = np.swapaxes(n_R_b, -1, -2)
     b_v = (R_T @ np.asarray(n_v, dtype=float)[..., None])[..., 0]
-    skew_b_v = np.swapaxes(
-        np.cross(b_v[..., None, :], np.eye(3)), -1, -2
-    )  # column j: b_v x e_j, i.e. [b_v]x
+    # column j: b_v x e_j, i.e. [b_v]x
+    skew_b_v = np.swapaxes(np.cross(b_v[..., None, :], np.eye(3)), -1, -2)
     J = np.concatenate([skew_b_v, np.zeros_like(R_T), R_T], axis=-1)  # (..., 3, 9)
     joint = pose_velocity_covariance(pose_cov, vel_cov, pose_vel_cross)
     twist = np.zeros((*b_v.shape[:-1], 6, 6))

@@ -102,9 +102,8 @@ class MessageDecoder:
             self.type_name,
             Bodies(np.zeros(1, np.int64), fixed=np.frombuffer(body, np.uint8)[None, :]),
         )
-        if (
-            arr.dtype.names is not None and "encap" in arr.dtype.names
-        ):  # decode()'s fast path: its layout fits
+        # decode()'s fast path: its layout fits
+        if arr.dtype.names is not None and "encap" in arr.dtype.names:
             self._dtype, self._size = arr.dtype, len(body)
             self._fixed = [
                 (a, b, body[a:b]) for a, b in [(0, 4), *string_ranges(arr.dtype, self.spec)]
