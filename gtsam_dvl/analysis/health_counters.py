@@ -139,19 +139,22 @@ def _check_imu_gaps(result: NavResult, log: LogData, health: Health) -> None:
         )
 
 
+def _offset_prior_centre(result: NavResult, config: EstimatorConfig) -> float:
+    """The centre (s) of the time offset's prior the filter ran with: the configured one, or where the EKF's warm-up
+    moved it (info["time_offset_prior"])."""
+    recentred = result.info.get("time_offset_prior")
+    if isinstance(recentred, dict) and "centre_s" in recentred:
+        return float(recentred["centre_s"])
+    return config.dvl.time_offset_prior_s
+
+
 def _check_offset_clip(result: NavResult, clipped: int, health: Health) -> None:
     """The filters (EKF, online) centre the IMU windows of their time-offset model on the offset's estimate held
     within the prior +- 3 prior sigmas; `clipped` pings had their window held at that bound. "degraded" when the
     final estimate is beyond it (the late pings' model is approximate), a note when the estimate came back within
     (a transient: the bound held a filter that was still converging)."""
     config = result.estimator_config or EstimatorConfig()
-    # the EKF's warm-up may move the prior's centre
-    recentred = result.info.get("time_offset_prior")
-    centre = (
-        float(recentred["centre_s"])
-        if isinstance(recentred, dict) and "centre_s" in recentred
-        else (config.dvl.time_offset_prior_s)
-    )
+    centre = _offset_prior_centre(result, config)
     bound = 3.0 * config.dvl.time_offset_sigma_s
     text = (
         f"the DVL time offset's estimate went beyond its prior +- 3 sigma ({centre:+.3f} +- {bound:.3f} s): the "
@@ -176,12 +179,7 @@ def _check_offset_bound(result: NavResult, bounded: int, health: Health) -> None
     the offset away); held there at the end, the stamps are beyond the prior: "failed", as prior_check would say of
     an unbounded estimate that far."""
     config = result.estimator_config or EstimatorConfig()
-    recentred = result.info.get("time_offset_prior")
-    centre = (
-        float(recentred["centre_s"])
-        if isinstance(recentred, dict) and "centre_s" in recentred
-        else (config.dvl.time_offset_prior_s)
-    )
+    centre = _offset_prior_centre(result, config)
     bound = 3.0 * config.dvl.time_offset_sigma_s
     # at the bound: within a tenth of a prior sigma of it (an update after the last hold moves it a little inward)
     if abs(result.time_offset_s - centre) >= bound - 0.1 * config.dvl.time_offset_sigma_s:
