@@ -384,9 +384,9 @@ def long_level(
     (a filter's innovation carries its prediction's, tr HPH / tr R), taken off. None when no window has
     LONG_MIN_BLOCKS blocks."""
     t = np.asarray(t, dtype=float)
-    ew = np.asarray(ew, dtype=float).reshape(len(t), -1)
-    if not len(t):
+    if not len(t):  # (a sensor with no residual rows: an empty ew has no width to reshape to)
         return None
+    ew = np.asarray(ew, dtype=float).reshape(len(t), -1)
     best: LongLevel | None = None
     for T in windows:
         block = np.floor((t - t[0]) / T).astype(int)
