@@ -12,6 +12,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,8 +27,11 @@ from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
 from gtsam_dvl.estimators.inputs.gaps import screened_in_memory
 from gtsam_dvl.estimators.online import smooth_online
+from gtsam_dvl.io.reader import read_log
+from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
 from gtsam_dvl.sim.scenario import scenario_from_dict
+from tests.support.logs import cut_log
 
 AT_S = 300.0  # in the straight leg
 MODES: dict[str, Callable[[LogData, EstimatorConfig], NavResult]] = {
@@ -114,3 +118,28 @@ def test_clock_step_and_gap_in_every_mode(straight_leg: LogData, mode: str, case
             for n in health.notes
         ), health.notes
         assert health.status == "ok", health.warnings
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["+2", "gap"])
+def test_a_log_read_from_a_file(straight_leg: LogData, case: str, tmp_path: Path) -> None:
+    """Read from a file, the reader's rule from the IMU's samples leaves the step as a 2 s gap (no error, no
+    --repair needed); the estimators' screen then asks the DVL as for a log built in memory."""
+    path = tmp_path / "log.mcap"
+    write_log(path, cut_log(_faulty(straight_leg, case), 450.0, beams=False))
+    log = read_log(path)
+    assert "clock_steps" not in log.metadata["reader_losses"]
+    res = smooth_batch(log, EstimatorConfig())
+    s = summary(res, log)
+    final = s["errors"]["final_horizontal_position_m"] / s["final_horizontal_position_sigma_m"]
+    health = assess_health(res, log)
+    print(
+        f"file {case}: offset {s['errors']['dvl_time_offset_nsigma']:.2f} sigma, final {final:.2f}, {health.status}"
+    )
+    assert abs(s["errors"]["dvl_time_offset_nsigma"]) < 3.0 and final < 3.0
+    if case == "gap":
+        assert health.status == "degraded"
+        assert any("299.990 s: samples missing, not a clock step" in n for n in health.notes)
+    else:
+        assert health.status == "ok", health.warnings
+        assert any("clock step at 299.990 s" in n and "back by 2.000 s" in n for n in health.notes)

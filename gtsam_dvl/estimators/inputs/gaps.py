@@ -27,7 +27,7 @@ import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig, SolverConfig
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.imu_faults import clock_steps, drop_saturated
+from gtsam_dvl.core.imu_faults import STEP_FACTOR, clock_steps, drop_saturated
 from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.estimators.inputs.clock_evidence import (
     evidence_words,
@@ -246,9 +246,12 @@ def screened_in_memory(log: LogData, prior_s: float = 0.0) -> LogData:
     ["imu_stamp_steps"]; the IMU's samples showing a clock step that the DVL says is a gap is an error naming it.
     Saturated IMU samples are dropped and crossed as IMU gaps, recorded in ["saturation"]. The estimators copy the
     record to their result's info["screened_losses"] (screened_losses) for the health report. A noise-free
-    simulation (DvlData.noise_free), whose values repeat by design, is left as it is."""
-    if "reader_losses" in log.metadata or log.dvl.noise_free or not len(log.imu):
+    simulation (DvlData.noise_free), whose values repeat by design, is left as it is. A log that came through the
+    reader has its remaining stamp steps judged the same way (_read_log_steps)."""
+    if log.dvl.noise_free or not len(log.imu):
         return log
+    if "reader_losses" in log.metadata:
+        return _read_log_steps(log, prior_s)
     losses: dict[str, Any] = {}
     warnings: list[str] = []
     imu = log.imu
@@ -270,6 +273,56 @@ def screened_in_memory(log: LogData, prior_s: float = 0.0) -> LogData:
         "reader_warnings": [*log.metadata.get("reader_warnings", []), *warnings],
     }
     return dataclasses.replace(log, imu=imu, metadata=meta)
+
+
+def _read_log_steps(log: LogData, prior_s: float) -> LogData:
+    """A log the reader screened, with the stamp steps it left (forward ones, crossed as gaps: in steady motion its
+    rule from the IMU's samples cannot tell; a step back it undid, dropped with --repair or refused) judged by the
+    DVL as screened_in_memory does: a clock step undone and added to the reader's record ["clock_steps"], the IMU's
+    gap record ["gaps"] recounted without it; the others in ["imu_stamp_steps"]. Left as it is when there are none
+    (no "screened_in_memory": the reader's record stands)."""
+    t = np.asarray(log.imu.t, dtype=float)
+    if not stamp_step_candidates(t):
+        return log
+    imu, stepped, other = _judged_steps(log, prior_s)
+    losses = dict(log.metadata["reader_losses"])
+    gaps = dict(losses.get("gaps") or {})
+    # the IMU's topic: the one whose gaps start where the steps do (the reader's stamps, as log.imu.t)
+    at = {round(float(r["at_s"]), 6) for r in stepped + other}
+    topic = next(
+        (k for k, g in gaps.items() if at & {round(float(a), 6) for a, _ in g.get("spans_s", [])}),
+        "IMU",
+    )
+    if stepped:
+        clock = dict(losses.get("clock_steps") or {})
+        clock[topic] = [*clock.get(topic, []), *stepped]
+        losses["clock_steps"] = clock
+        if topic in gaps:
+            if (recount := _stamp_gaps(np.asarray(imu.t, dtype=float))) is None:
+                del gaps[topic]
+            else:
+                gaps[topic] = recount
+            losses["gaps"] = gaps
+    if other:
+        losses["imu_stamp_steps"] = {topic: other}
+    meta = {**log.metadata, "reader_losses": losses, "screened_in_memory": True}
+    return dataclasses.replace(log, imu=imu, metadata=meta)
+
+
+def _stamp_gaps(t: np.ndarray) -> dict[str, Any] | None:
+    """The reader's gap record of one topic's stamps (io/stamps.py stamp_gaps: steps beyond STEP_FACTOR periods)."""
+    d = np.diff(t)
+    period = float(np.median(d))
+    big = np.flatnonzero(d > STEP_FACTOR * period)
+    if not len(big):
+        return None
+    return {
+        "count": len(big),
+        "seconds": float((d[big] - period).sum()),
+        "period_s": period,
+        "longest_s": float(d[big].max()),
+        "spans_s": [[float(t[i]), float(t[i + 1])] for i in big[:20].tolist()],
+    }
 
 
 def _judged_steps(
