@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from gtsam_dvl.analysis.health import assess_health
+from gtsam_dvl.analysis.health_losses import loss_findings
 from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.imu_faults import clock_steps
@@ -90,6 +91,17 @@ def test_the_dvl_tells_a_clock_step_from_a_gap(
         assert np.allclose(screened.imu.t, straight_leg.imu.t, atol=1e-9)
     else:
         assert np.array_equal(screened.imu.t, log.imu.t)
+
+
+def test_a_step_too_small_to_time_is_undecided_and_said(straight_leg: LogData) -> None:
+    """+0.1 s: the two offsets' sigma (0.12 s) cannot tell it from 0; left as it is and "degraded" in the health."""
+    screened = screened_in_memory(_faulty(straight_leg, "+0.1"))
+    losses = screened.metadata["reader_losses"]
+    assert "clock_steps" not in losses
+    (record,) = losses["imu_stamp_steps"]["IMU"]
+    assert record["decision"] == "undecided"
+    (finding,) = [f for f in loss_findings(losses) if "undecided" in f[1]]
+    assert finding[0] == "degraded" and "a gap or a clock step of +0.100 s" in finding[1]
 
 
 @pytest.mark.slow
