@@ -393,9 +393,9 @@ def _check_motion(log: LogData, health: Health) -> None:
 
 
 def _check_losses(log: LogData, health: Health, screened: dict[str, Any] | None = None) -> None:
-    """The reader's losses, or for a log that did not come through it those the estimator's own screen found
-    (estimators/inputs/gaps.py screened_in_memory: result.info["screened_losses"])."""
-    losses = log.metadata.get("reader_losses") or screened or {}
+    """The reader's losses, or those the estimator's own screen found or amended (estimators/inputs/gaps.py
+    screened_in_memory: result.info["screened_losses"]; a clock step the DVL showed in a log read from a file)."""
+    losses = screened or log.metadata.get("reader_losses") or {}
     health.figures["losses"] = loss_figures(losses)
     for severity, text in loss_findings(losses):
         health.flag(severity, text)

@@ -122,7 +122,7 @@ def _check_imu_gaps(result: NavResult, log: LogData, health: Health) -> None:
             ),
         )
     gaps = result.info.get("imu_gaps") or {}
-    losses = log.metadata.get("reader_losses") or result.info.get("screened_losses") or {}
+    losses = result.info.get("screened_losses") or log.metadata.get("reader_losses") or {}
     # the reader's record says where the IMU data are missing, and its saturation record the gaps it made
     reader_saw = any("imu" in topic.lower() for topic in (losses.get("gaps") or {})) or bool(
         losses.get("saturation")

@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from gtsam_dvl.core.imu_faults import saturation_words
+from gtsam_dvl.estimators.inputs.clock_evidence import evidence_words
 
 # More than this share of a topic's messages dropped by --repair: the log is damaged, not just untidy.
 REPAIRED_DEGRADED = 0.01
@@ -53,6 +54,7 @@ def loss_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
         *_gap_findings(losses),
         *_saturation_findings(losses),
         *_clock_step_findings(losses),
+        *_stamp_step_findings(losses),
     ]
 
 
@@ -146,19 +148,57 @@ def _saturation_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
 
 
 def _clock_step_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
-    """The clock steps --repair shifted the stamps across: notes."""
+    """The clock steps --repair, or the estimators' screen of a log built in memory, shifted the stamps across:
+    notes, with the DVL's evidence where it was judged (estimators/inputs/clock_evidence.py)."""
     out: list[tuple[str, str]] = []
     for topic, steps in _per_topic(losses, "clock_steps"):
         for c in steps:
             back = c["jump_s"] < 0
+            if "decision" in c:
+                who = (
+                    "the DVL's timing across it"
+                    if c["decision"] == "clock step"
+                    else "the IMU's samples (the DVL cannot tell)"
+                )
+                done = f"shown by {who}: {evidence_words(c)}; the later stamps shifted"
+            else:
+                done = "--repair shifted the later stamps"
             out.append(
                 (
                     "note",
                     f"{topic}: clock step at {c['at_s']:.3f} s (the stamps jump {'back ' * back}by "
-                    f"{abs(c['jump_s']):.3f} s while the samples run on): --repair shifted the later "
-                    f"stamps {'forward' if back else 'back'} by {abs(c['step_s']):.3f} s",
+                    f"{abs(c['jump_s']):.3f} s while the samples run on), {done} "
+                    f"{'forward' if back else 'back'} by {abs(c['step_s']):.3f} s",
                 )
             )
+    return out
+
+
+def _stamp_step_findings(losses: dict[str, Any]) -> list[tuple[str, str]]:
+    """The IMU stamp steps of a log built in memory that stayed as they were: a gap the DVL's timing confirms
+    (a note: the gap itself is reported), or undecided ("degraded": if it was a clock step, everything after it
+    is off by the step)."""
+    out: list[tuple[str, str]] = []
+    for topic, steps in _per_topic(losses, "imu_stamp_steps"):
+        for c in steps:
+            jump = f"{'back ' * (c['jump_s'] < 0)}by {abs(c['jump_s']):.3f} s"
+            if c["decision"] == "gap":
+                out.append(
+                    (
+                        "note",
+                        f"{topic}: the stamps jump {jump} at {c['at_s']:.3f} s: samples missing, not a clock "
+                        f"step ({evidence_words(c)})",
+                    )
+                )
+            else:
+                out.append(
+                    (
+                        "degraded",
+                        f"{topic}: the stamps jump {jump} at {c['at_s']:.3f} s: a gap or a clock step of "
+                        f"{c['step_s']:+.3f} s, undecided ({evidence_words(c)}); left as it is (a gap), "
+                        "everything after it is off by the step if it was a clock step: check the IMU's stamps",
+                    )
+                )
     return out
 
 

@@ -20,8 +20,9 @@ each side (per gyro and accelerometer axis), continuous data joins up at the nex
 one period after the last sample before the step, within STEP_JOIN_SIGMAS of their standard errors on every
 axis), while a gap of n missing samples would have moved the signal by about its slope times n
 (GAP_SHOW_SIGMAS or more on some axis). Both must hold to call it a clock step; in steady motion (no slope) the
-two cannot be told apart and the step stays a gap. After a clock step the samples continue one period after
-the last one before it: the later stamps are ahead by the step less one period, and shifting them back by that
+two cannot be told apart from the samples and the step stays a gap here (the estimators' screen then asks the
+DVL's timing across it: estimators/inputs/clock_evidence.py). After a clock step the samples continue one period
+after the last one before it: the later stamps are ahead by the step less one period, and shifting them back by that
 restores the IMU's timeline against the other sensors' clocks (the DVL's stamps, on their own clock, did not
 jump); a step back is undone forward the same way, where the stamps' rule would otherwise drop the samples
 until they pass the newest one. The reader does so with --repair, before its stamp checks, and otherwise stops

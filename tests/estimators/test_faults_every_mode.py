@@ -16,11 +16,11 @@ import pytest
 from gtsam_dvl.analysis.health import assess_health
 from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf import run_ekf
+from gtsam_dvl.estimators.inputs.gaps import screened_in_memory
 from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
@@ -167,7 +167,7 @@ def test_a_log_built_in_memory_is_screened_as_the_reader_screens(
 ) -> None:
     """A log handed straight to an estimator (not read from a file) is screened as the reader screens one
     (estimators/inputs/gaps.py screened_in_memory): the saturated gyro samples dropped and said (before, the batch
-    smoother said "ok" with a calibration state 177 sigma off, measured), a clock step an error naming it."""
+    smoother said "ok" with a calibration state 177 sigma off, measured), a clock step undone."""
     raw = copy.deepcopy(sim_paper3d_short.metadata["scenario"])
     raw.setdefault("imu", {})["saturation_gyro_rad_s"] = 0.055
     log = simulate(scenario_from_dict(raw), 11)
@@ -183,5 +183,10 @@ def test_a_log_built_in_memory_is_screened_as_the_reader_screens(
     stepped = dataclasses.replace(
         sim_paper3d_short, imu=dataclasses.replace(sim_paper3d_short.imu, t=t)
     )
-    with pytest.raises(GtsamDvlError, match=r"IMU clock step at 284\.990 s.*--repair"):
-        run_ekf(stepped, EstimatorConfig())
+    # the clock step the IMU's samples show (entering the first turn) is undone, the DVL's timing recorded with it
+    # (tests/estimators/test_clock_step_evidence.py: a step they cannot show)
+    screened = screened_in_memory(stepped)
+    (record,) = screened.metadata["reader_losses"]["clock_steps"]["IMU"]
+    assert record["by_imu"] and record["decision"] == "clock step", record
+    assert record["step_s"] == pytest.approx(5.0, abs=1e-6)
+    assert np.allclose(screened.imu.t, sim_paper3d_short.imu.t, atol=1e-9)

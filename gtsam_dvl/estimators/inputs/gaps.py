@@ -27,8 +27,13 @@ import numpy as np
 
 from gtsam_dvl.core.config import ImuConfig, SolverConfig
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.imu_faults import clock_steps, drop_saturated
-from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.imu_faults import STEP_FACTOR, clock_steps, drop_saturated
+from gtsam_dvl.core.types import ImuData, LogData
+from gtsam_dvl.estimators.inputs.clock_evidence import (
+    evidence_words,
+    judge_stamp_steps,
+    stamp_step_candidates,
+)
 from gtsam_dvl.estimators.inputs.selection import imu_pieces
 
 G0 = 9.80665  # m/s^2: how much specific force an attitude error of 1 rad turns into acceleration
@@ -231,32 +236,118 @@ def with_fillers(
     return np.array(times), np.array(filler, dtype=bool)
 
 
-def screened_in_memory(log: LogData) -> LogData:
+def screened_in_memory(log: LogData, prior_s: float = 0.0) -> LogData:
     """A log that did not come through the reader (no metadata["reader_losses"]: built in memory, e.g. simulated
-    and handed to an estimator) screened as the reader screens one (core/imu_faults.py): a clock step in the IMU's
-    stamps is an error naming it (shift the stamps, or read the log from a file with --repair), saturated IMU
-    samples are dropped and crossed as IMU gaps, recorded in metadata["reader_losses"]["saturation"], which the
-    estimators copy to their result's info["screened_losses"] (screened_losses) for the health report. A
-    noise-free simulation (DvlData.noise_free), whose values repeat by design, is left as it is."""
-    if "reader_losses" in log.metadata or log.dvl.noise_free or not len(log.imu):
+    and handed to an estimator) screened as the reader screens one (core/imu_faults.py), and its IMU stamp steps
+    judged by the DVL (estimators/inputs/clock_evidence.py; prior_s the time offset prior's mean): a clock step
+    (the DVL's timing says so, or the IMU's samples do and the DVL does not say gap) is undone, the later stamps
+    shifted by it, and recorded in metadata["reader_losses"]["clock_steps"] with the evidence; a step the DVL says
+    is a gap, or cannot decide, stays as it is (a forward one crossed as a gap) and is recorded in
+    ["imu_stamp_steps"]; the IMU's samples showing a clock step that the DVL says is a gap is an error naming it.
+    Saturated IMU samples are dropped and crossed as IMU gaps, recorded in ["saturation"]. The estimators copy the
+    record to their result's info["screened_losses"] (screened_losses) for the health report. A noise-free
+    simulation (DvlData.noise_free), whose values repeat by design, is left as it is. A log that came through the
+    reader has its remaining stamp steps judged the same way (_read_log_steps)."""
+    if log.dvl.noise_free or not len(log.imu):
         return log
-    steps = clock_steps(np.asarray(log.imu.t, dtype=float), log.imu.b_omega, log.imu.b_f)
-    if steps:
-        raise GtsamDvlError(
-            f"{log.source or 'log'}: IMU {steps[0].words()}; shift the later stamps "
-            f"{steps[0].shift_words()}, or read the log from its file with --repair"
-        )
+    if "reader_losses" in log.metadata:
+        return _read_log_steps(log, prior_s)
+    losses: dict[str, Any] = {}
     warnings: list[str] = []
-    imu, report = drop_saturated(log.imu, "IMU", warnings)
-    if report is None:
+    imu = log.imu
+    if stamp_step_candidates(np.asarray(imu.t, dtype=float)):
+        imu, stepped, other = _judged_steps(log, prior_s)
+        if stepped:
+            losses["clock_steps"] = {"IMU": stepped}
+        if other:
+            losses["imu_stamp_steps"] = {"IMU": other}
+    imu, report = drop_saturated(imu, "IMU", warnings)
+    if report is not None:
+        losses["saturation"] = {"IMU": report}
+    if not losses:
         return log
     meta = {
         **log.metadata,
-        "reader_losses": {"saturation": {"IMU": report}},
+        "reader_losses": losses,
         "screened_in_memory": True,
         "reader_warnings": [*log.metadata.get("reader_warnings", []), *warnings],
     }
     return dataclasses.replace(log, imu=imu, metadata=meta)
+
+
+def _read_log_steps(log: LogData, prior_s: float) -> LogData:
+    """A log the reader screened, with the stamp steps it left (forward ones, crossed as gaps: in steady motion its
+    rule from the IMU's samples cannot tell; a step back it undid, dropped with --repair or refused) judged by the
+    DVL as screened_in_memory does: a clock step undone and added to the reader's record ["clock_steps"], the IMU's
+    gap record ["gaps"] recounted without it; the others in ["imu_stamp_steps"]. Left as it is when there are none
+    (no "screened_in_memory": the reader's record stands)."""
+    t = np.asarray(log.imu.t, dtype=float)
+    if not stamp_step_candidates(t):
+        return log
+    imu, stepped, other = _judged_steps(log, prior_s)
+    losses = dict(log.metadata["reader_losses"])
+    gaps = dict(losses.get("gaps") or {})
+    # the IMU's topic: the one whose gaps start where the steps do (the reader's stamps, as log.imu.t)
+    at = {round(float(r["at_s"]), 6) for r in stepped + other}
+    topic = next(
+        (k for k, g in gaps.items() if at & {round(float(a), 6) for a, _ in g.get("spans_s", [])}),
+        "IMU",
+    )
+    if stepped:
+        clock = dict(losses.get("clock_steps") or {})
+        clock[topic] = [*clock.get(topic, []), *stepped]
+        losses["clock_steps"] = clock
+        if topic in gaps:
+            if (recount := _stamp_gaps(np.asarray(imu.t, dtype=float))) is None:
+                del gaps[topic]
+            else:
+                gaps[topic] = recount
+            losses["gaps"] = gaps
+    if other:
+        losses["imu_stamp_steps"] = {topic: other}
+    meta = {**log.metadata, "reader_losses": losses, "screened_in_memory": True}
+    return dataclasses.replace(log, imu=imu, metadata=meta)
+
+
+def _stamp_gaps(t: np.ndarray) -> dict[str, Any] | None:
+    """The reader's gap record of one topic's stamps (io/stamps.py stamp_gaps: steps beyond STEP_FACTOR periods)."""
+    d = np.diff(t)
+    period = float(np.median(d))
+    big = np.flatnonzero(d > STEP_FACTOR * period)
+    if not len(big):
+        return None
+    return {
+        "count": len(big),
+        "seconds": float((d[big] - period).sum()),
+        "period_s": period,
+        "longest_s": float(d[big].max()),
+        "spans_s": [[float(t[i]), float(t[i + 1])] for i in big[:20].tolist()],
+    }
+
+
+def _judged_steps(
+    log: LogData, prior_s: float
+) -> tuple[ImuData, list[dict[str, Any]], list[dict[str, Any]]]:
+    """The IMU with its clock steps undone, and the records of those and of the other stamp steps
+    (screened_in_memory)."""
+    t = np.asarray(log.imu.t, dtype=float)
+    by_imu = {s.index: s for s in clock_steps(t, log.imu.b_omega, log.imu.b_f)}
+    judged = judge_stamp_steps(log, prior_s, tuple(by_imu))
+    for s in judged:
+        if s.by_imu and s.decision == "gap":
+            raise GtsamDvlError(
+                f"{log.source or 'log'}: IMU {by_imu[s.index].words()}, but the DVL's timing across it says "
+                f"samples are missing ({evidence_words(s.record())}); check the IMU's stamps"
+            )
+    fixed = t.copy()
+    stepped, other = [], []
+    for s in judged:
+        if s.decision == "clock step" or s.by_imu:
+            fixed[s.index :] -= s.step_s
+            stepped.append(s.record())
+        else:
+            other.append(s.record())
+    return dataclasses.replace(log.imu, t=fixed), stepped, other
 
 
 def screened_losses(log: LogData) -> dict[str, Any] | None:

@@ -56,7 +56,7 @@ class OffsetGuess:
         return asdict(self)
 
 
-def _attitudes(
+def attitudes(
     t: np.ndarray, b_omega: np.ndarray, n_R_b0: np.ndarray, n_omega_ie: np.ndarray
 ) -> np.ndarray:
     """n_R_b (K, 3, 3) at the samples t (K,) by the gyros b_omega (K, 3) rad/s from n_R_b0 at t[0], in the
@@ -99,7 +99,7 @@ def guess_offset(
     dvl_t, d_v = dvl_t[keep], d_v[keep]
     if len(dvl_t) < MIN_PAIRS + 1:
         return OffsetGuess(prior_s, False, 0.0, 0, "too few pings for a first guess")
-    n_R_b = _attitudes(t, w, n_R_b0, n_omega_ie)
+    n_R_b = attitudes(t, w, n_R_b0, n_omega_ie)
     n_a = np.einsum("kij,kj->ki", n_R_b, f) + n_g
     # the velocity change from t[0] at every sample (trapezoid), interpolated at any time
     V = np.concatenate(

@@ -10,7 +10,8 @@ In order:
 3. what no estimator does (the combinations refused for every mode: the time offset with single beams,
    single beams on water-track pings), then what this estimator does not (`supports`), once, here;
 4. the IMU screened when the log did not come through the reader (estimators/inputs/gaps.py
-   screened_in_memory: clock steps an error, saturated samples dropped and counted).
+   screened_in_memory: a step in the IMU's stamps judged by the DVL's timing across it, a clock step undone,
+   saturated samples dropped and counted).
 
 What an estimator supports: every shared state the batch smoother estimates; the online estimator those that
 core/states.py gives an iSAM2 relinearisation threshold; the EKF those in its error state (SharedState.ekf); a
@@ -130,4 +131,4 @@ def prepare(
     config = resolve_water_track(stated, log)
     refuse_combinations(config, log)
     refuse_unsupported(mode, config, calibration)
-    return Prepared(screened_in_memory(log), config, stated)
+    return Prepared(screened_in_memory(log, config.dvl.time_offset_prior_s), config, stated)
