@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 
+from gtsam_dvl.analysis.metrics import summary
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.config.schema import SCHEMA_VERSION
 from gtsam_dvl.core.errors import GtsamDvlError
@@ -45,9 +45,9 @@ def _write(path: Path) -> Path:
         b_R_d_cov=np.eye(3) * 1e-6,
         config=cfg.to_dict(),
     )
-    summary: dict[str, Any] = {"estimator": "batch"}
+    log = make_log(5.0, seed=1)
     return result_writer.write_result_log(
-        path, result, make_log(5.0, seed=1), summary, ReadOptions(repair=True)
+        path, result, log, summary(result, log), ReadOptions(repair=True)
     )
 
 
