@@ -27,6 +27,7 @@ the data's information along it in units of its prior's, and the component it is
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from typing import Any, Literal
 
@@ -93,7 +94,8 @@ class HeldDirection(SummaryModel):
     (scale; misalignment deg), ``information`` the data's information along it in units of its prior's (lambda),
     ``mostly`` its largest component in prior sigmas. ``information`` and ``direction`` are None only in a summary
     written before schema version 8 by the EKF, which named the states it held ("scale", "misalignment") and
-    nothing more."""
+    nothing more; ``information`` is NaN when the EKF's covariance was not finite (its directions then the prior's
+    axes)."""
 
     mostly: DirectionName
     information: float | None
@@ -102,9 +104,14 @@ class HeldDirection(SummaryModel):
     def label(self) -> str:
         """The direction for a console: "misalignment yaw 0.05" (its information), or its name alone when the
         information is not known."""
-        if self.information is None:
+        if not self.informed:
             return self.mostly
         return f"{self.mostly} {self.information:.2f}"
+
+    @property
+    def informed(self) -> bool:
+        """Whether the direction's information is known (a finite number)."""
+        return self.information is not None and math.isfinite(self.information)
 
 
 class CalibrationHold(SummaryModel):
@@ -139,7 +146,7 @@ class CalibrationHold(SummaryModel):
             what, dirs = "released (estimated, not held)", self.released
         else:
             return []
-        if all(d.information is not None for d in dirs):
+        if all(d.informed for d in dirs):
             what += " (the data's information along each direction, in units of its prior's)"
         return [
             f"{indent}{what}: " + ", ".join(d.label() for d in dirs),

@@ -249,7 +249,11 @@ def filter_nominal_hold(
     idx = np.r_[cols["scale"], cols["misalignment"]]
     _, _, P0 = calibration_prior(config, mounting)
     below = config.priors.hold_weak_information
-    lam, V, _ = weak_directions(P0, np.asarray(calib_joint_cov)[np.ix_(idx, idx)], below)
+    P = np.asarray(calib_joint_cov, dtype=float)[np.ix_(idx, idx)]
+    if np.all(np.isfinite(P)):
+        lam, V, _ = weak_directions(P0, P, below)
+    else:  # a filter whose covariance is not finite: the prior's axes, their information unknown
+        lam, V = np.full(4, np.nan), np.eye(4)
     held = not check["pays"]
     p = {
         "P0": P0,
