@@ -202,7 +202,7 @@ def evaluate_result(stored: StoredResult, log: LogData | None) -> Evaluation:
         "result": stored.path,
         "states": len(res.t),
         "final": {
-            k: stored.summary.get(k)
+            k: getattr(stored.summary, k).model_dump()
             for k in ("scale", "misalignment_deg", "gyro_bias_deg_per_h", "accel_bias_ug")
         },
     }

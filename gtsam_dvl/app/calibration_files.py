@@ -105,9 +105,10 @@ def calibration_of_run(
     )
 
 
-def prior_line(summary: dict[str, Any]) -> str | None:
-    """The console line of the prior a run took from a calibration file, None for a run that took none."""
-    prior = (summary.get("info") or {}).get("calibration_prior")
+def prior_line(info: dict[str, Any]) -> str | None:
+    """The console line of the prior a run took from a calibration file (a summary's info), None for a run that
+    took none."""
+    prior = info.get("calibration_prior")
     if not isinstance(prior, dict):
         return None
     infl = prior.get("inflation") or {}

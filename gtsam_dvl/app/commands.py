@@ -10,12 +10,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gtsam_dvl.analysis.geometry import MotionSummary
 from gtsam_dvl.analysis.metrics import path_length
 from gtsam_dvl.app.outputs import check_outputs
 from gtsam_dvl.app.progress import progress_bar
+from gtsam_dvl.app.summary_lines import health_lines, summary_lines
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import StoredResult
+from gtsam_dvl.core.summary import AnySummary, HealthSummary, IoDvlcSummary, parse_summary
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.run import (  # noqa: F401 - re-exported for the demo, tests, bench
     MODES,
@@ -131,128 +132,26 @@ NOTHING_WRITTEN = "  wrote nothing (give -o RESULT.mcap, --summary FILE.json or 
 
 @dataclass
 class SmoothOutcome:
+    """A run of `smooth`: its summary as written (the JSON dict of core/summary.py's model) and the files written."""
+
     summary: dict
     written: list[Path]
 
     @property
+    def typed(self) -> AnySummary:
+        """The summary as its model (core/summary.py parse_summary: one of an older version migrated)."""
+        return parse_summary(self.summary, "the run's summary")
+
+    @property
     def status(self) -> str:
         """The run's health status: "ok", "warn", "degraded" or "failed" (analysis/health.py)."""
-        return str(self.summary.get("health", {}).get("status", "ok"))
+        health = self.typed.health
+        return health.status if health is not None else "ok"
 
     def describe(self) -> str:
-        s = self.summary
-        if "states" not in s:  # io-dvlc: calibration only
-            return "\n".join(
-                [
-                    f"{s['estimator']}: scale {s['scale']['value']:.6f}, misalignment "
-                    f"{[round(v, 3) for v in s['misalignment_deg']['value']]} deg"
-                ]
-                + health_lines(s.get("health"))
-                + ([f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN])
-            )
-        mis, mis_sig = s["misalignment_deg"]["value"], s["misalignment_deg"]["sigma"]
-        lines = [
-            f"{s['estimator']}: {s['states']} states over {s['duration_s']:.0f} s, "
-            f"{s['timing_s'].get('total', float('nan')):.2f} s wall",
-            f"  scale        {s['scale']['value']:.6f} +- {s['scale']['sigma']:.6f}",
-            "  misalignment roll/pitch/yaw "
-            + ", ".join(f"{v:+.3f} +- {e:.3f}" for v, e in zip(mis, mis_sig, strict=True))
-            + " deg",
-            "  gyro bias    "
-            + ", ".join(f"{v:+.4f}" for v in s["gyro_bias_deg_per_h"]["value"])
-            + " deg/h",
-            "  accel bias   "
-            + ", ".join(f"{v:+.1f}" for v in s["accel_bias_ug"]["value"])
-            + " micro-g",
-        ]
-        lines += _truth_error_lines(s.get("errors"))
-        off = s.get("dvl_time_offset_s")
-        if off:
-            from gtsam_dvl.analysis.observability import time_offset_words
-
-            lines.insert(
-                3,
-                f"  DVL time offset {off['value'] * 1e3:+.1f} +- {off['sigma'] * 1e3:.1f} ms "
-                f"({'determined' if off.get('determined') else 'not determined'}): "
-                f"{off.get('words') or time_offset_words(off['value'])}",
-            )
-        lines += [f"  noise: {line}" for line in s.get("noise_levels", [])]
-        from gtsam_dvl.app.calibration_files import prior_line
-
-        lines += [line] if (line := prior_line(s)) else []
-        lines += _state_lines(s)
-        motion = (s.get("geometry") or {}).get("motion")
-        if motion:
-            lines.append(f"  {MotionSummary(**motion).line()}")
-        lines += health_lines(s.get("health"))
-        lines += [f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]
-        return "\n".join(lines)
-
-
-def _truth_error_lines(err: dict[str, Any] | None) -> list[str]:
-    """SmoothOutcome.describe's line of the errors against the truth (none without a truth)."""
-    lines: list[str] = []
-    if err:
-        pct = err.get("final_horizontal_position_pct_distance")
-        of_distance = f"{pct:.3f} % of distance" if pct is not None else "no distance travelled"
-        calibration = ([f"scale {err['scale_ppm']:+.0f} ppm"] if "scale_ppm" in err else []) + (
-            ["misalignment " + ", ".join(f"{v:+.3f}" for v in err["misalignment_deg"]) + " deg"]
-            if err.get("misalignment_deg")
-            else []
-        )  # a truth without calibration: left out, not NaN
-        lines.append(
-            "  vs truth: "
-            + ", ".join(
-                calibration
-                + [
-                    f"final horizontal position "
-                    f"{err['final_horizontal_position_m']:.2f} m "
-                    f"({of_distance})"
-                ]
-            )
-        )
-    return lines
-
-
-def _state_lines(s: dict[str, Any]) -> list[str]:
-    """SmoothOutcome.describe's lines on the states held at their prior and on the water current."""
-    lines: list[str] = []
-    if held := (s.get("calibration_hold") or {}).get("held"):  # (estimators/models/weak_hold.py)
-        lines.append(
-            "  held at the prior (the run informs them little): "
-            + ", ".join(
-                f"{h['mostly']} ({h['information']:.2f} of the prior's information)" for h in held
-            )
-        )
-    # water-track pings used, the current a state (estimators/models/current.py)
-    if wc := s.get("water_current"):
-        layers = "; ".join(
-            f"{a['depth_m'][0]:.0f}-{a['depth_m'][1]:.0f} m {a['speed_m_s']:.2f} +- "
-            f"{a['sigma_m_s']:.2f} m/s"
-            for a in wc.get("by_depth", [])[:6]
-        )
-        per = (
-            f" per {wc['layers']['thickness_m']:g} m layer ({wc['layers']['boundaries']} boundaries crossed)"
-            if wc.get("layers")
-            else ""
-        )
-        lines.append(
-            f"  water current{per} ({wc['water_track_pings']} water-track pings): {wc['verdict']}"
-            + (f"; {layers}" if layers else "")
-        )
-    return lines
-
-
-def health_lines(health: dict[str, Any] | None, indent: str = "  ") -> list[str]:
-    """The console lines of a summary's health section: its status, then one line per warning and note (what
-    the reader lost is among them)."""
-    if not health:
-        return []
-    return (
-        [f"{indent}health: {health.get('status', '?')}"]
-        + [f"{indent}  warning: {w}" for w in health.get("warnings", [])]
-        + [f"{indent}  note: {n}" for n in health.get("notes", [])]
-    )
+        """The console lines (app/summary_lines.py), then the files written."""
+        written = [f"  wrote {p}" for p in self.written] or [NOTHING_WRITTEN]
+        return "\n".join(summary_lines(self.typed) + written)
 
 
 def _check_smooth_request(
@@ -433,8 +332,9 @@ def _write_iodvlc_outputs(
             "IO-DVLC computed no scale: the log has no Type-I segment (an acceleration at "
             "constant attitude) it could use; run another estimator, or log such a segment",
         )
-    summ["health"] = health.as_dict()
-    summ["losses"] = log.metadata.get("reader_losses", {})
+    summ = IoDvlcSummary.model_validate(
+        {**summ, "health": health.as_dict(), "losses": log.metadata.get("reader_losses", {})}
+    ).to_json_dict()
     if summary_path is not None:
         outputs.write_json(summary_path, summ)
     return summ
@@ -629,9 +529,9 @@ def evaluate_to_dir(
     ev = evaluate_result(stored, log)
     ev.metrics["truth_log_not_source"] = forced or None
     # the health of the run (from the summary smooth wrote) and what reading the truth log here lost
-    health = stored.summary.get("health")
+    health = stored.summary.health
     truth_losses = log.metadata.get("reader_losses", {}) if log is not None else {}
-    ev.metrics["health"] = health
+    ev.metrics["health"] = health.model_dump() if health is not None else None
     ev.metrics["truth_log_losses"] = truth_losses
     ev.metrics["truth_log"] = str(log_path) if log_path is not None else None
     ev.metrics["truth_log_read_options"] = options.record() if log_path is not None else None
@@ -762,7 +662,7 @@ def _timeline_figures(
 def _evaluation_lines(
     lines: list[str],
     metrics: dict[str, Any],
-    health: dict[str, Any] | None,
+    health: HealthSummary | None,
     log_path: Path | None,
     truth_losses: dict[str, Any],
     missing: str,
@@ -772,7 +672,7 @@ def _evaluation_lines(
     from gtsam_dvl.app.report import gnss_lines
 
     lines = lines + gnss_lines(metrics.get("gnss"))  # the surfacing error (analysis/surfacing.py)
-    if health:
+    if health is not None:
         lines = lines + [
             f"result {line.strip()}" if i == 0 else line
             for i, line in enumerate(health_lines(health, indent=""))

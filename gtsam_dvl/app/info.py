@@ -8,8 +8,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gtsam_dvl.app.commands import NOTHING_WRITTEN, SmoothOutcome, load_log
+from gtsam_dvl.app.commands import load_log
+from gtsam_dvl.app.summary_lines import summary_lines
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.summary import parse_summary
 from gtsam_dvl.core.types import LogData
 
 if TYPE_CHECKING:
@@ -153,7 +155,8 @@ def describe_result(path: Path) -> str | None:
         record = src.metadata.get("gtsam_dvl_result", {})
         options = json.loads(record["read_options"]) if record.get("read_options") else {}
         given = ", ".join(f"{k} {v}" for k, v in options.items() if v not in (None, False, ""))
-        body = SmoothOutcome(summary, []).describe().splitlines()
+        # (core/summary.py: an older summary migrated; one that does not fit is one error line)
+        body = summary_lines(parse_summary(summary, str(path)))
     except (ValueError, KeyError, TypeError, AttributeError) as exc:
         raise GtsamDvlError(
             f"{path}: a gtsam_dvl result whose summary cannot be read ({type(exc).__name__}: "
@@ -165,4 +168,4 @@ def describe_result(path: Path) -> str | None:
         f"  source log: {record.get('source_log') or 'not recorded'}"
         + (f" (read with {given})" if given else ""),
     ]
-    return "\n".join(lines + [line for line in body if line != NOTHING_WRITTEN])
+    return "\n".join(lines + body)

@@ -12,6 +12,7 @@ import numpy as np
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.states import Estimate, required_states
+from gtsam_dvl.core.summary import Summary
 from gtsam_dvl.core.units import DEG_PER_H, UG
 
 
@@ -451,13 +452,14 @@ class NavResult(CalibrationUnits):
 @dataclass
 class StoredResult:
     """A result as read back from a result log (gtsam_dvl.io.result_reader): the NavResult that was written,
-    the summary written with it, and where it came from: the source log's absolute path when smoothed, its path
-    relative to the result file's folder, and the options it was read with (imu_topic, dvl_topic, salvage,
-    repair; empty for a result written before they were recorded); the SHA-256 of the source log's content and
-    the map origin it read (lat_deg, lon_deg, height_m), "" and None when not recorded."""
+    the summary written with it (its typed model, core/summary.py: migrated when older), and where it came from:
+    the source log's absolute path when smoothed, its path relative to the result file's folder, and the options it
+    was read with (imu_topic, dvl_topic, salvage, repair; empty for a result written before they were recorded);
+    the SHA-256 of the source log's content and the map origin it read (lat_deg, lon_deg, height_m), "" and None
+    when not recorded."""
 
     result: NavResult
-    summary: dict[str, Any]
+    summary: Summary
     path: str = ""
     source_log: str = ""
     source_log_relative: str = ""

@@ -45,10 +45,12 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.core.config import EstimatorConfig, IodvlcConfig
+from gtsam_dvl.core.config.schema import SCHEMA_VERSION
 from gtsam_dvl.core.earth import OMEGA_IE, WGS84_A
 from gtsam_dvl.core.result import misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_rpy_deg, rpy_deg_to_matrix
 from gtsam_dvl.core.states import Estimate
+from gtsam_dvl.core.summary import IoDvlcSummary
 from gtsam_dvl.core.types import ImuData, LogData
 from gtsam_dvl.estimators.inputs.mounting import log_in_base_link
 
@@ -565,8 +567,10 @@ def _fill(
 
 
 def iodvlc_summary(result: IoDvlcResult, log: LogData) -> dict[str, Any]:
-    """The summary JSON for IO-DVLC: scale and misalignment only, with errors against the truth if known."""
+    """The summary JSON for IO-DVLC: scale and misalignment only, with errors against the truth if known (through
+    core/summary.py IoDvlcSummary; the dict written)."""
     out: dict[str, Any] = {
+        "schema_version": SCHEMA_VERSION,
         "estimator": "io-dvlc",
         "log": log.source,
         "scale": {"value": result.final_scale, "sigma": result.final_scale_sigma},
@@ -601,4 +605,4 @@ def iodvlc_summary(result: IoDvlcResult, log: LogData) -> dict[str, Any]:
             "misalignment_deg": err_rpy.tolist(),
             "misalignment_nsigma": (err_rpy / result.final_misalignment_sigma_deg).tolist(),
         }
-    return out
+    return IoDvlcSummary.model_validate(out).to_json_dict()

@@ -1,6 +1,8 @@
 """Read a result log written by gtsam_dvl.io.result_writer back into the NavResult that was written, with its
-summary (for `evaluate` and scripts). A result of an older version (no schema_version: core/config/schema.py)
-reads as it was written; one of a newer version than this code knows is refused with one line."""
+summary as its typed model (core/summary.py Summary; for `evaluate` and scripts). A result of an older version (no
+schema_version: core/config/schema.py) reads as it was written, its summary migrated to this version's model; one
+of a newer version than this code knows is refused with one line, and so is a summary that does not fit the
+model."""
 
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import numpy as np
 from gtsam_dvl.core.config.schema import checked_version
 from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import NavResult, StoredResult, Timeline, WaterCurrentProfile
+from gtsam_dvl.core.summary import read_summary
 from gtsam_dvl.io.result_writer import OPTIONAL_STATE_ARRAYS, STATE_ARRAYS, TOPICS
 from gtsam_dvl.io.storage.sources import open_source
 
@@ -83,7 +86,7 @@ def read_result(path: Path | str) -> StoredResult:
         ) from None
     return StoredResult(
         result,
-        summary,
+        read_summary(summary, str(path)),
         str(path),
         str(record.get("source_log", "")),
         str(record.get("source_log_relative", "")),

@@ -18,6 +18,7 @@ import numpy as np
 from gtsam_dvl.core.config.schema import SCHEMA_VERSION
 from gtsam_dvl.core.result import NavResult, Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw
+from gtsam_dvl.core.summary import Summary
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.io.atomic import to_json
 from gtsam_dvl.io.mcap.writer import McapLogWriter
@@ -223,7 +224,10 @@ def write_result_log(
     effective configuration (metadata record and config.json attachment) and the run's health (metadata
     record "gtsam_dvl_health", and in summary.json). The record "gtsam_dvl_result" also names the source log
     (absolute, and relative to result_path's folder: the final name when path is a temporary file), the
-    options it was read with and the schema_version (core/config/schema.py). Written atomically."""
+    options it was read with and the schema_version (core/config/schema.py). Written atomically. summary: the
+    summary's JSON dict (analysis/metrics.py summary), checked against its model (core/summary.py Summary: a
+    pydantic ValidationError, a programming error, before anything is written)."""
+    Summary.model_validate(summary)
     path = Path(path)
     t = result.t
     mis_rpy, mis_cov = misalignment_rpy_and_cov(result.b_R_d, result.b_R_d0, result.b_R_d_cov)

@@ -319,6 +319,8 @@ def test_smooth_vs_truth_without_true_calibration_has_no_nan() -> None:
         "misalignment_deg": {"value": [0.0] * 3, "sigma": [0.1] * 3},
         "gyro_bias_deg_per_h": {"value": [0.0] * 3},
         "accel_bias_ug": {"value": [0.0] * 3},
+        "distance_travelled_m": 750.0,
+        "final_horizontal_position_sigma_m": 2.0,
         "errors": {
             "final_horizontal_position_m": 1.5,
             "final_horizontal_position_pct_distance": 0.2,

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from gtsam_dvl.analysis.evaluate import evaluate_result
+from gtsam_dvl.analysis.metrics import build_summary
 from gtsam_dvl.app.report import gnss_lines
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
@@ -56,13 +57,13 @@ def real_log(tmp_path_factory: pytest.TempPathFactory) -> LogData:
     return back
 
 
-def _stored(res: NavResult) -> StoredResult:
-    return StoredResult(res, {}, "memory")
+def _stored(res: NavResult, log: LogData) -> StoredResult:
+    return StoredResult(res, build_summary(res, log), "memory")
 
 
 def test_surfacing_error_equals_an_independent_computation(real_log: LogData) -> None:
     res = smooth_batch(real_log, EstimatorConfig())
-    ev = evaluate_result(_stored(res), real_log)
+    ev = evaluate_result(_stored(res, real_log), real_log)
     m = ev.metrics["gnss"]
     s = m["surfacing_error"]
     # independently: the first fix after the longest gap between fixes (the dive), in map at the first fix
@@ -129,7 +130,7 @@ def test_surfacing_error_equals_an_independent_computation(real_log: LogData) ->
 def test_no_held_out_fixes_is_said(real_log: LogData) -> None:
     cfg = EstimatorConfig()
     cfg.gnss.use = "all"
-    ev = evaluate_result(_stored(smooth_batch(real_log, cfg)), real_log)
+    ev = evaluate_result(_stored(smooth_batch(real_log, cfg), real_log), real_log)
     m = ev.metrics["gnss"]
     assert m["surfacing_error"] is None and m["held_out_evaluated"] == 0
     lines = gnss_lines(m)

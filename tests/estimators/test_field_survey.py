@@ -16,7 +16,7 @@ import pytest
 
 from gtsam_dvl.analysis.evaluate import evaluate_result
 from gtsam_dvl.analysis.health import assess_health
-from gtsam_dvl.analysis.metrics import summary
+from gtsam_dvl.analysis.metrics import build_summary, summary
 from gtsam_dvl.core.result import NavResult, StoredResult
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
@@ -72,7 +72,9 @@ def test_field_survey_meets_issue_11(run: tuple[LogData, NavResult]) -> None:
 def test_field_survey_surfacing_error(run: tuple[LogData, NavResult]) -> None:
     """Evaluation without truth: the held-out fixes of the final surfacing against the estimate."""
     log, res = run
-    metrics = evaluate_result(StoredResult(res, {}, "memory"), log).metrics["gnss"]
+    metrics = evaluate_result(StoredResult(res, build_summary(res, log), "memory"), log).metrics[
+        "gnss"
+    ]
     first, mean = metrics["surfacing_error"], metrics["surfacing_error_mean"]
     print(
         f"\nsurfacing: first fix {first['horizontal_error_m']:.2f} m ({first['horizontal_error_pct']:.3f} %), "

@@ -10,7 +10,8 @@ import pytest
 from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EstimatorConfig
-from gtsam_dvl.core.types import LogData
+from gtsam_dvl.core.summary import DIRECTION_NAMES, CalibrationHold
+from gtsam_dvl.core.types import LogData, Mounting
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.ekf.divergence import DIVERGENCE_NIS, DIVERGENCE_PINGS, DivergenceWatch
 from gtsam_dvl.estimators.models import weak_hold
@@ -28,6 +29,43 @@ def test_nominal_check_is_the_likelihood_ratio() -> None:
     )
     assert not c["pays"]
     assert weak_hold.nominal_check(3 * d, P)["pays"]  # chi^2 18
+
+
+def test_ekf_nominal_hold_in_the_one_shape() -> None:
+    """The EKF's check as core/summary.py CalibrationHold (weak_hold.filter_nominal_hold): the directions of its
+    calibration covariance against the prior, each with the information the filter added (here a diagonal P whose
+    information is 0.5, 3, 0.1 and 0.2 prior units on scale, roll, pitch and yaw), all held when the check did not
+    pay, none when it paid; a covariance that is not finite: the prior's axes, the information unknown (NaN)."""
+    cfg = EstimatorConfig()
+    _, _, P0 = weak_hold.calibration_prior(cfg, Mounting())
+    lam = np.array([0.5, 3.0, 0.1, 0.2])
+    joint = (
+        np.eye(10) * 1e-8
+    )  # [accel, gyro] bias, scale, misalignment (core/states.py block_states)
+    joint[6:, 6:] = P0 / (1.0 + lam)
+    check = {"chi2_gain": 0.6, "chi2_limit": chi2.ppf(0.95, 4), "level": 0.95, "pays": False}
+    hold = CalibrationHold.model_validate(
+        weak_hold.filter_nominal_hold(cfg, Mounting(), joint, check)
+    )
+    assert hold.reason == "nominal_check" and hold.nominal is not None and not hold.nominal.pays
+    got = {h.mostly: h.information for h in hold.held}
+    want = dict(zip(DIRECTION_NAMES, lam, strict=True))
+    assert got == pytest.approx(want)
+    assert hold.why.startswith(
+        "held at the nominal calibration: the filtered calibration's chi^2 gain"
+    )
+    paid = CalibrationHold.model_validate(
+        weak_hold.filter_nominal_hold(cfg, Mounting(), joint, {**check, "pays": True})
+    )
+    assert paid.reason == "none" and paid.held == [] and paid.lines() == []
+    joint[6, 6] = np.nan
+    diverged = CalibrationHold.model_validate(
+        weak_hold.filter_nominal_hold(cfg, Mounting(), joint, check)
+    )
+    assert [h.mostly for h in diverged.held] == list(DIRECTION_NAMES)
+    assert diverged.lines()[0].endswith(
+        ": scale, misalignment roll, misalignment pitch, misalignment yaw"
+    )
 
 
 def _straight(scale: float) -> tuple[LogData, EstimatorConfig]:

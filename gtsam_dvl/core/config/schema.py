@@ -11,6 +11,9 @@ DUMP_KEYS, which only a written one does) is as old as the first key it lacks am
 ``migrated`` then applies every later step in order. A schema_version newer than SCHEMA_VERSION is refused with
 one line.
 
+A result's summary (core/summary.py) is migrated by its own steps (SUMMARY_MIGRATIONS), keyed by these versions:
+version 8 changed the summary alone.
+
 Adding a key whose default changes what an older file's runs did: append a Migration (version + 1, the key,
 what the runs that wrote such files did) and raise SCHEMA_VERSION; a test loads a file of each older version.
 """
@@ -103,8 +106,17 @@ MIGRATIONS: tuple[Migration, ...] = (
         ("dvl", "constant_error_sigma_m_s"),
     ),
     Migration(7, "schema_version written in configurations and results", lambda d: d),
+    # the configuration is unchanged; a summary's step is core/summary.py SUMMARY_MIGRATIONS
+    Migration(
+        8,
+        "the summary: one typed model (core/summary.py), its schema_version written, calibration_hold one shape "
+        "(reason, why, held directions as objects: the EKF's held names become directions)",
+        lambda d: d,
+    ),
 )
 SCHEMA_VERSION = MIGRATIONS[-1].version
+# the last version whose configurations and results were written without schema_version (written since 7)
+UNVERSIONED = 6
 
 
 def is_written_whole(data: Any) -> bool:
@@ -115,14 +127,14 @@ def is_written_whole(data: Any) -> bool:
 
 def detected_version(data: Any) -> int:
     """The version of a configuration without schema_version: a whole written one is as old as the first key it
-    lacks among those MIGRATIONS added (the version before that key; the last version without schema_version
-    when it lacks none); a user's is SCHEMA_VERSION."""
+    lacks among those MIGRATIONS added (the version before that key; UNVERSIONED, the last version without
+    schema_version, when it lacks none); a user's is SCHEMA_VERSION."""
     if not is_written_whole(data):
         return SCHEMA_VERSION
     for step in MIGRATIONS:
         if step.lacks(data):
             return step.version - 1
-    return SCHEMA_VERSION - 1
+    return UNVERSIONED
 
 
 def checked_version(value: Any, source: str) -> int:

@@ -145,16 +145,15 @@ def _hold_calibration(
         result = extract_result(
             solved.builder, nominal_graph, nominal_values, solved.ordering, estimator=estimator
         )
-        result.info["calibration_hold"] = {
-            **weak_hold.report(everything, gain),
-            "consistent": True,
-            "nominal": check,
-            "why": (
+        result.info["calibration_hold"] = weak_hold.report(
+            {**everything, "nominal": check},
+            gain,
+            why=(
                 f"held at the nominal calibration: estimating the DVL scale and misalignment lowers chi^2 by "
                 f"{gain:.1f}, not more than {limit:.1f} ({weak_hold.NOMINAL_LEVEL:.0%} of chi^2 with 4 dof): "
                 "it does not pay for its four states; the nominal's sigmas are its prior's"
             ),
-        }
+        )
         return nominal_graph, nominal_values, result
     return _hold_weak(solved, hold, estimator, free, check)
 
@@ -168,22 +167,22 @@ def _hold_weak(
 ) -> tuple[BulkGraph, gtsam.Values, NavResult]:
     """The weak directions held (weak_hold.py) when any, the result with its consider covariance; the free one when
     pinning costs more chi^2 than its 99 % limit. check: the nominal calibration's, reported beside."""
-    nominal = {} if check is None else {"nominal": check}
+    plan = hold if check is None else {**hold, "nominal": check}
     if not hold["weak"].any():
-        free.info["calibration_hold"] = {**weak_hold.report(hold, 0.0), **nominal}
+        free.info["calibration_hold"] = weak_hold.report(plan, 0.0)
         return solved.graph, solved.values, free
     held, increase, cov_graph = _pinned(solved, hold)
-    info = {**weak_hold.report(hold, increase), **nominal}
+    info = weak_hold.report(plan, increase)
     if not info["consistent"]:
-        free.info["calibration_hold"] = {
-            **info,
-            "held": [],
-            "released": info["held"],
-            "why": (
+        free.info["calibration_hold"] = weak_hold.report(
+            plan,
+            increase,
+            released=True,
+            why=(
                 f"not held: pinning cost chi^2 {info['chi2_increase']:.1f} > {info['chi2_limit_99']:.1f} (99 %): the "
                 "data disagree with the prior along directions they inform little"
             ),
-        }
+        )
         return solved.graph, solved.values, free
     result = extract_result(solved.builder, cov_graph, held, solved.ordering, estimator=estimator)
     result.info["calibration_hold"] = info

@@ -272,21 +272,13 @@ def _held_at_nominal(
     check = result.info["filter"].pop("nominal", None)
     if check is None:
         return result
-    if check["pays"]:
-        result.info["calibration_hold"] = {"nominal": check, "held": []}
-        return result
-    result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
-    result.info["filter"].pop("nominal", None)
-    result.info["calibration_hold"] = {
-        "nominal": check,
-        "held": ["scale", "misalignment"],
-        "why": (
-            f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is "
-            f"{check['chi2_gain']:.1f}, not more than {check['chi2_limit']:.1f} ({check['level']:.0%} "
-            "of chi^2 with 4 dof); filtered again with the scale and misalignment as consider states "
-            "(their prior's sigma)"
-        ),
-    }
+    # in core/summary.py's one shape: the calibration's directions with their information (weak_hold.py)
+    assert result.calib_joint_cov is not None
+    hold = weak_hold.filter_nominal_hold(config, log.mounting, result.calib_joint_cov, check)
+    if not check["pays"]:
+        result = _filter(log, config, progress, calibration=calibration, consider_calibration=True)
+        result.info["filter"].pop("nominal", None)
+    result.info["calibration_hold"] = hold
     return result
 
 

@@ -57,7 +57,7 @@ def _held_directions(result: NavResult, P0: np.ndarray) -> np.ndarray:
     hold = result.info.get("calibration_hold") or {}
     nominal = hold.get("nominal") or {}
     held = hold.get("held") or []
-    if nominal.get("pays") is False or held == ["scale", "misalignment"]:
+    if nominal.get("pays") is False or hold.get("reason") == "nominal_check":
         return np.eye(4)
     L = np.linalg.cholesky(P0)
     cols = []

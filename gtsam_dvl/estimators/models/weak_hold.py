@@ -30,6 +30,7 @@ the log will inform.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import gtsam
@@ -38,7 +39,15 @@ from scipy.stats import chi2
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.keys import C_MISALIGN, K_SCALE, key_dim
-from gtsam_dvl.core.states import BY_NAME, columns, shared_keys
+from gtsam_dvl.core.states import BY_NAME, block_states, columns, shared_keys
+from gtsam_dvl.core.summary import (
+    DIRECTION_NAMES,
+    CalibrationHold,
+    HeldDirection,
+    HoldReason,
+    NominalCheck,
+    hold_why,
+)
 from gtsam_dvl.core.types import Mounting
 
 HOLD_SIGMA = 1e-4  # the pinned directions' sigma, in prior sigmas (a constraint, to within 1e-4 of a prior sigma)
@@ -161,43 +170,100 @@ def consider_prior(p: dict[str, Any]) -> gtsam.CustomFactor:
     return _linear_factor(U @ Li, p["k0"], p["b_R_d0"])
 
 
-def report(p: dict[str, Any], chi2_increase: float) -> dict[str, Any]:
-    """NavResult.info["calibration_hold"]: each direction's information (in prior units) and whether it was held,
-    the held directions in the calibration's units (scale; misalignment deg), and the chi^2 increase's verdict."""
-    names = ["scale", "misalignment roll", "misalignment pitch", "misalignment yaw"]
-    held = []
-    for k in np.flatnonzero(p["weak"]):
-        # one prior sigma along v_k, in [scale, rad] units
-        v = np.linalg.cholesky(p["P0"]) @ p["V"][:, k]
-        main = names[
-            int(np.argmax(np.abs(p["V"][:, k])))
-        ]  # (its largest component in prior sigmas)
-        held.append(
-            {
-                "information": float(p["lambda"][k]),
-                "mostly": main,
-                "direction": {
-                    n: float(x) for n, x in zip(names, np.r_[v[0], np.degrees(v[1:])], strict=True)
-                },
-            }
+def _direction(p: dict[str, Any], k: int) -> HeldDirection:
+    """Eigen-direction k of the plan p: one prior sigma along v_k in the calibration's units (scale; misalignment
+    deg), the data's information along it and its largest component in prior sigmas."""
+    v = np.linalg.cholesky(p["P0"]) @ p["V"][:, k]  # [scale, rad]
+    return HeldDirection(
+        mostly=DIRECTION_NAMES[int(np.argmax(np.abs(p["V"][:, k])))],
+        information=float(p["lambda"][k]),
+        direction={
+            n: float(x)
+            for n, x in zip(DIRECTION_NAMES, np.r_[v[0], np.degrees(v[1:])], strict=True)
+        },
+    )
+
+
+def report(
+    p: dict[str, Any],
+    chi2_increase: float,
+    why: str | None = None,
+    released: bool = False,
+) -> dict[str, Any]:
+    """NavResult.info["calibration_hold"] in its one shape (core/summary.py CalibrationHold): each weak direction
+    of the plan p held (released: listed as released, nothing held), every direction's information (in prior
+    units), the threshold, p["nominal"] (the nominal calibration's check, when made) and, when chi2_increase is
+    finite, what pinning cost against its 99 % limit. The reason: "nominal_check" when the check did not pay and
+    every direction is held, "weak_directions" when some are held, else "none"; why: the words, by default
+    core/summary.py hold_why's."""
+    weak = np.asarray(p["weak"], dtype=bool)
+    directions = [_direction(p, int(k)) for k in np.flatnonzero(weak)]
+    held = [] if released else directions
+    nominal = NominalCheck.model_validate(p["nominal"]) if "nominal" in p else None
+    reason: HoldReason = "none"
+    if held:
+        everything = nominal is not None and not nominal.pays and bool(weak.all())
+        reason = "nominal_check" if everything else "weak_directions"
+    limit = float(chi2.ppf(0.99, len(directions))) if directions else 0.0
+    solved = bool(np.isfinite(chi2_increase))
+    increase = float(chi2_increase) if solved else None
+    limit_99 = limit if solved else None
+    return CalibrationHold(
+        reason=reason,
+        why=why or hold_why(reason, held, float(p["below"]), nominal, increase, limit_99),
+        held=held,
+        released=directions if released else [],
+        threshold=float(p["below"]),
+        information=[float(x) for x in p["lambda"]],
+        nominal=nominal,
+        chi2_increase=increase,
+        chi2_limit_99=limit_99,
+        consistent=bool(chi2_increase <= limit) if solved else None,
+    ).model_dump()
+
+
+def filter_nominal_hold(
+    config: EstimatorConfig, mounting: Mounting, calib_joint_cov: np.ndarray, check: dict[str, Any]
+) -> dict[str, Any]:
+    """info["calibration_hold"] of the EKF's nominal calibration check (nominal_check; estimators/ekf/filter.py) in
+    the one shape: the eigen-directions of the filtered calibration's covariance against its prior (calib_joint_cov,
+    the free filter's [accel bias, gyro bias, scale, misalignment] block, core/states.py block_states), each with
+    the data's information along it; all of them held when the check did not pay (the log filtered again with the
+    scale and misalignment as consider states), none when it paid (the EKF holds no weak direction)."""
+    gain, limit, level = check["chi2_gain"], check["chi2_limit"], check["level"]
+    if check["pays"]:
+        why = (
+            f"nothing held: the filtered calibration's chi^2 gain over the nominal is {gain:.1f}, more than "
+            f"{limit:.1f} ({level:.0%} of chi^2 with 4 dof): estimating the DVL scale and misalignment pays for its "
+            "four states (the EKF holds no weak direction)"
         )
-    m = int(p["weak"].sum())
-    limit = float(chi2.ppf(0.99, m)) if m else 0.0
-    out: dict[str, Any] = {
-        "threshold": float(p["below"]),
-        "information": p["lambda"].tolist(),
-        "held": held,
+    else:
+        why = (
+            f"held at the nominal calibration: the filtered calibration's chi^2 gain over the nominal is {gain:.1f}, "
+            f"not more than {limit:.1f} ({level:.0%} of chi^2 with 4 dof); filtered again with the scale and "
+            "misalignment as consider states (their prior's sigma)"
+        )
+    cols, start = {}, 0
+    for state in block_states():
+        cols[state.name], start = np.arange(start, start + state.dim), start + state.dim
+    idx = np.r_[cols["scale"], cols["misalignment"]]
+    _, _, P0 = calibration_prior(config, mounting)
+    below = config.priors.hold_weak_information
+    P = np.asarray(calib_joint_cov, dtype=float)[np.ix_(idx, idx)]
+    if np.all(np.isfinite(P)):
+        lam, V, _ = weak_directions(P0, P, below)
+    else:  # a filter whose covariance is not finite: the prior's axes, their information unknown
+        lam, V = np.full(4, np.nan), np.eye(4)
+    held = not check["pays"]
+    p = {
+        "P0": P0,
+        "lambda": lam,
+        "V": V,
+        "weak": np.full(4, held),
+        "below": below,
+        "nominal": check,
     }
-    if "nominal" in p:  # the nominal calibration's check (nominal_check), a filter's
-        out["nominal"] = p["nominal"]
-    # (the batch smoother's: a filter holds its reported estimate only)
-    if np.isfinite(chi2_increase):
-        out.update(
-            chi2_increase=chi2_increase,
-            chi2_limit_99=limit,
-            consistent=bool(chi2_increase <= limit),
-        )
-    return out
+    return report(p, math.nan, why=why)
 
 
 # Estimating the DVL scale and misalignment pays for its four states when it lowers the chi^2 by more than this
