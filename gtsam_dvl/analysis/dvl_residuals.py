@@ -36,6 +36,9 @@ class DvlResiduals:
     residual_m_s: np.ndarray | None = None
     index: np.ndarray | None = None  # each ping's index in the log's DVL data
     water: np.ndarray | None = None  # which are water-track pings
+    # d h / dt per ping, m/s^2 in dvl_link (3-D velocity only): the predicted DVL velocity's rate, which is the
+    # time offset's Jacobian (a ping seen at t + delta measures h + delta * dh/dt; analysis/dvl_misfit.py)
+    rate_m_s2: np.ndarray | None = None
 
     def rms(self, mask: np.ndarray | None = None) -> float:
         c, d = (self.chi2, self.dof) if mask is None else (self.chi2[mask], self.dof[mask])
@@ -80,7 +83,11 @@ def dvl_residuals(result: NavResult, log: LogData, config: DvlConfig) -> DvlResi
         chi2 = (r**2).sum(axis=1) / (config.beam_sigma_m_s() ** 2 + gm_var)
         dof = ok.sum(axis=1).astype(float)
         return DvlResiduals(np.asarray(dvl.t[j], dtype=float), chi2, dof, unmatched, selected_again)
-    return _velocity_residuals(log, config, j, y_hat, gm_var, unmatched, selected_again)
+    out = _velocity_residuals(log, config, j, y_hat, gm_var, unmatched, selected_again)
+    if n > 1:
+        rate = np.gradient(y_state, result.t, axis=0)
+        out.rate_m_s2 = np.stack([np.interp(t_p, result.t, rate[:, k]) for k in range(3)], axis=1)
+    return out
 
 
 def _state_predictions(result: NavResult, log: LogData) -> np.ndarray:

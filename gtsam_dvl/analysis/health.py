@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from gtsam_dvl.analysis.calibration_check import judge_calibration
+from gtsam_dvl.analysis.dvl_misfit import check_dvl_misfit
 from gtsam_dvl.analysis.dvl_residuals import (
     DvlResiduals,
     attitude_at,
@@ -282,6 +283,8 @@ def _check_dvl_residuals(
     spans = _bad_spans(res, figures)
     _flag_bad_spans(spans, config.dvl.robust, health)
     _judge_overall_residuals(figures["whitened_rms"], spans, health)
+    # a fitted level far above the stated one, a time offset left in the residuals (analysis/dvl_misfit.py)
+    check_dvl_misfit(result, log, config.dvl, res, health)
 
 
 def _bad_spans(res: DvlResiduals, figures: dict[str, Any]) -> list[tuple[float, float, float]]:
