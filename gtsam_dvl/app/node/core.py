@@ -622,11 +622,13 @@ class NodeCore:
             )
         for kind, topic in self.topics.items():
             if topic:
+                counts = {
+                    **self.buffer.streams[kind].as_dict(),
+                    "other_clock": self.off_clock[kind],
+                    "undecodable": self.undecodable[kind],
+                }
                 out[f"input {topic}"] = (
-                    ", ".join(
-                        f"{k} {v}" for k, v in self.buffer.streams[kind].as_dict().items() if v
-                    )
-                    or "nothing received"
+                    ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "nothing received"
                 )
         return out
 
