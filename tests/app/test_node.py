@@ -61,12 +61,16 @@ RATE = 20.0  # times real time
 # the node's reorder window as long in wall time as its default (0.05 s) at real time: it is there for the delivery's
 # jitter between topics, a wall-time matter, and is given in sensor time, which runs RATE times faster here
 REORDER_WINDOW_S = 0.05 * RATE
-# the same for the stamp distance beyond which a message is taken for another clock (30 s, the default): a delivery
-# lag between topics (a burst of IMU messages lost and repaired on a loaded machine) of 1.5 s was 30 s of stamps
+# the same for the two settings judged as messages arrive: the stamp distance from the IMU's beyond which a message is
+# on another clock (default 30 s) and a stamp jump (1 s). A node behind its inputs (a loaded machine) takes the few
+# pings queued before the many IMU samples queued with them: at 20x, pings came 30 s of stamps ahead of the IMU
 CLOCK_SKEW_S = 30.0 * RATE
+STAMP_JUMP_S = 1.0 * RATE
 # every wait's safety net: a run takes 20-40 s on a loaded 2-core machine; a broken one fails here, not a slow one
 LIMIT_S = 300.0
 BUSY = 2  # busy processes beside the node's
+# the history of the node's inputs and outputs and of the listener's subscriptions: every message of a run
+DEPTH = 100_000
 # the diagnostics' counts of the messages the node took on an input (core.py key_values)
 TAKEN = "received|other_clock|undecodable"
 
@@ -106,9 +110,12 @@ def _params(path: Path, **settings: Any) -> Path:
             pressure_topic="",
             gnss_topic="",
             diagnostics_period_s=0.2,
-            qos_inputs={"reliability": "reliable", "depth": 100000},
+            qos_inputs={"reliability": "reliable", "depth": DEPTH},
+            # every message kept until the listener acknowledged it: starved of CPU, it fell 1.2 s behind once
+            qos_outputs={"reliability": "reliable", "depth": DEPTH},
             reorder_window_s=REORDER_WINDOW_S,
             clock_skew_s=CLOCK_SKEW_S,
+            stamp_jump_s=STAMP_JUMP_S,
             **settings,
         )
     )
@@ -128,9 +135,9 @@ def node_run(recorded_log: dict[str, Any], busy_cpus: None) -> dict[str, Any]:
     env = ros_env()
     listener = Listener("gtsam_dvl_test_subscriber", env)
     try:
-        odometry = listener.record(Odometry, "/gtsam_dvl/odometry", raw=True)
-        diagnostics = listener.record(DiagnosticArray, "/diagnostics")
-        calibration = listener.record(Float64MultiArray, "/gtsam_dvl/calibration")
+        odometry = listener.record(Odometry, "/gtsam_dvl/odometry", DEPTH, raw=True)
+        diagnostics = listener.record(DiagnosticArray, "/diagnostics", DEPTH)
+        calibration = listener.record(Float64MultiArray, "/gtsam_dvl/calibration", DEPTH)
         node_code, played = _run_node_and_player(
             listener, odometry, diagnostics, tmp, recorded_log["cfg"], params, mcap, env
         )

@@ -421,7 +421,7 @@ class NodeCore:
         doc)."""
         t = self.latest.t if self.latest is not None else math.nan
         self.stop_error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
-        self.stop_t = self._newest_t()
+        self.stop_t = self.sensor_t()
         self.stops += 1
         self._say(
             "error",
@@ -523,30 +523,33 @@ class NodeCore:
             return None
         return self.path.payload(self.path.stamps_ns[-1])
 
-    def newest_t(self) -> float:
-        """The IMU's newest stamp (s): the node's sensor time."""
-        return self._newest_t()
+    def sensor_t(self) -> float:
+        """The node's sensor time (s): the IMU's newest stamp released to the estimator, a reorder window behind
+        the newest received. The verdicts are judged there, on the messages released in stamp order, so that they
+        do not depend on the order the executor hands the topics' messages over in: a node behind its inputs takes
+        the few pings queued before the many IMU samples queued with them (measured: pings 30 s of stamps ahead of
+        the IMU at a 20x replay), and judged on the newest received, a DVL silence was over before it began."""
+        return self._released_t("imu")
 
-    def _newest_t(self) -> float:
-        n = self.buffer.newest_ns
+    def _released_t(self, kind: str) -> float:
+        n = self.buffer.streams[kind].released_ns
         return math.nan if n is None or self.t0_ns is None else self._t(n)
 
     def live_state(self, wall: float | None = None) -> LiveState:
         """The snapshot the diagnostics judge (analysis/live_health.py)."""
         wall = self.clock() if wall is None else wall
-        newest = self._newest_t()
+        now = self.sensor_t()
         streams = {}
         for kind, topic in self.topics.items():
             if not topic:
                 continue
             st = self.buffer.streams[kind]
-            last = math.nan if st.newest_ns is None or self.t0_ns is None else self._t(st.newest_ns)
             jump = st.last_jump_ns
-            since_jump = math.inf if jump is None or self.t0_ns is None else newest - self._t(jump)
+            since_jump = math.inf if jump is None or self.t0_ns is None else now - self._t(jump)
             streams[kind] = StreamState(
                 topic,
                 st.received,
-                newest - last,
+                now - self._released_t(kind),
                 st.late,
                 st.duplicates,
                 self.off_clock[kind],
@@ -574,10 +577,10 @@ class NodeCore:
             imu_wall_silent_s=imu_silent,
             no_lock_s=no_lock,
             stop_error=self.stop_error,
-            since_stop_s=newest - self.stop_t if self.stop_error else math.inf,
+            since_stop_s=now - self.stop_t if self.stop_error else math.inf,
             counters=dict(est.counters) if est is not None else {},
             epochs=est.epochs if est is not None else 0,
-            t=newest,
+            t=now,
         )
 
     def health(self, wall: float | None = None) -> Health:
@@ -596,9 +599,7 @@ class NodeCore:
     def key_values(self) -> dict[str, str]:
         """The figures beside the verdict in the diagnostics: its sensor time (sensor_t_s), the latest estimate
         (t_s, its time, and its values with sigmas) and each input's counts."""
-        out: dict[str, str] = {
-            "sensor_t_s": f"{self._newest_t():.3f}"
-        }  # the verdict's time (the IMU's newest)
+        out: dict[str, str] = {"sensor_t_s": f"{self.sensor_t():.3f}"}  # the verdict's time
         e = self.latest
         if e is not None:
             rows = self.calibration_rows(e)

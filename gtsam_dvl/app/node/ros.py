@@ -264,8 +264,8 @@ class RosNode:
             for e in core.receive(kind, body, time.monotonic()):
                 self.publish(e)
             # (nan: never checked)
-            if kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S:
-                self._checked_t = core.newest_t()
+            if kind == "imu" and not core.sensor_t() - self._checked_t < CHECK_EVERY_S:
+                self._checked_t = core.sensor_t()
                 self.publish_diagnostics()
 
         return self._guard(kind, take)
