@@ -13,12 +13,15 @@ import numpy as np
 import pytest
 
 from gtsam_dvl.analysis.live_health import LiveState, LiveThresholds, StreamState, assess_live
-from gtsam_dvl.app.node.core import NodeCore
+from gtsam_dvl.app.node.core import NodeCore, moved
 from gtsam_dvl.app.node.reorder import ReorderBuffer
 from gtsam_dvl.app.node.settings import load_settings
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.errors import GtsamDvlError
+from gtsam_dvl.core.rotations import so3_exp
+from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.estimators.run import run_estimator
+from gtsam_dvl.io.calibration_file import read_calibration
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.storage.sources import open_source
 from gtsam_dvl.io.writer import write_log
@@ -201,6 +204,78 @@ def test_an_exception_in_the_estimator_is_one_line_and_a_stop(recorded: dict[str
     errors = [text for level, text in lines if level == "error"]
     assert len(errors) == 1 and "injected fault" in errors[0] and core.stops == 1
     assert core.estimator is None and core.health().status == "failed"  # said, and nothing more fed
+
+
+def test_a_move_is_counted_in_sigmas_of_each_component() -> None:
+    scale = Estimate(np.array([1.0]), np.array([[1e-4]]))  # sigma 0.01
+    mis = Estimate(np.eye(3), np.diag([1e-4, 1e-4, 4e-4]))  # sigmas 0.01, 0.01, 0.02 rad
+    before = {"scale": scale, "misalignment": mis}
+    assert not moved(before, before, 0.1)
+    assert moved(before, {**before, "scale": Estimate(np.array([1.0011]), scale.cov)}, 0.1)
+    assert not moved(before, {**before, "scale": Estimate(np.array([1.0009]), scale.cov)}, 0.1)
+    # about z (sigma 0.02): 0.0015 rad is 0.075 sigma; about x (sigma 0.01) 0.15 sigma
+    turned = so3_exp(np.array([0.0, 0.0, 0.0015]))
+    assert not moved(before, {**before, "misalignment": Estimate(turned, mis.cov)}, 0.1)
+    tilted = so3_exp(np.array([0.0015, 0.0, 0.0]))
+    assert moved(before, {**before, "misalignment": Estimate(tilted, mis.cov)}, 0.1)
+    assert moved({"scale": scale}, before, 0.1)  # a state new
+
+
+def test_calibration_out_is_written_while_running(recorded: dict[str, Any], tmp_path: Path) -> None:
+    """calibration_out while running (core.py): at the first estimate, then when a vehicle state moved by more than
+    0.1 of its sigma since the last write, and calibration_out_period_s of sensor time after it at the latest."""
+    tmp, msgs = recorded["tmp"], recorded["msgs"]
+    path, period = tmp_path / "vehicle.toml", 5.0
+    settings, config = load_settings(
+        tmp / "cfg.toml",
+        {
+            "imu_topic": "/imu/data_raw",
+            "calibration_out": str(path),
+            "calibration_out_period_s": period,
+        },
+    )
+    core = NodeCore(settings, config)
+    states: dict[float, dict[str, Estimate]] = {}  # each estimate's vehicle states by its time
+    for ns, kind, body in msgs:
+        for e in core.receive(kind, body, wall=ns * 1e-9):
+            if not states:  # the first estimate: written at once
+                assert path.exists() and core.calibration_writes[0][0] == e.t
+            states[e.t] = {n: e.calibration[n] for n in ("scale", "misalignment")}
+    t = np.array(list(states))
+    writes = np.array([w for w, _ in core.calibration_writes])
+    assert 10 < len(writes) < len(t) / 2  # a write when due, not at every estimate
+    last = writes[
+        np.searchsorted(writes, t, side="right") - 1
+    ]  # the last write at or before each estimate
+    assert np.all(t - last < period)
+    for k in range(1, len(t)):
+        previous = last[k - 1]  # the last write before this estimate
+        if t[k] in writes:  # due, or moved
+            assert t[k] - previous >= period or moved(states[previous], states[t[k]], 0.1)
+        else:
+            assert not moved(states[previous], states[t[k]], 0.1)
+    cal = read_calibration(path)
+    assert float(cal.values["scale"][0]) == float(states[writes[-1]]["scale"].value[0])
+    # the per-epoch timeline is left out of the node's result (NodeEstimator): a write stays short
+    assert core.estimator is not None and len(core.estimator.timeline().t) == 0
+
+
+def test_a_calibration_out_that_cannot_be_written_is_one_line(
+    recorded: dict[str, Any], tmp_path: Path
+) -> None:
+    (tmp_path / "a-file").write_text("")
+    lines: list[tuple[str, str]] = []
+    settings, config = load_settings(
+        recorded["tmp"] / "cfg.toml",
+        {"imu_topic": "/imu/data_raw", "calibration_out": str(tmp_path / "a-file" / "v.toml")},
+    )
+    core = NodeCore(settings, config, log=lambda level, text: lines.append((level, text)))
+    n = 0
+    for ns, kind, body in recorded["msgs"][: len(recorded["msgs"]) * 2 // 3]:
+        n += len(core.receive(kind, body, wall=ns * 1e-9))
+    errors = [text for level, text in lines if level == "error"]
+    assert n > 50 and len(errors) == 1 and errors[0].startswith("calibration_out: "), errors
+    assert "a-file" in core.key_values()["calibration_out"]
 
 
 def test_node_without_the_extra_is_one_line_and_exit_code_1() -> None:

@@ -17,6 +17,12 @@ sample is released; the mounting is /tf_static's when it was received, else the 
 estimator never reaches ROS: one log line, the error kept for the diagnostics ("failed: the estimator stopped"),
 and nothing more fed to it; the node itself goes on (diagnostics, services) until it is restarted. A new estimator
 is not started in its place: in motion it could not align again, nor know its position.
+
+calibration_out is written while the node runs, not only at a clean exit (a node killed or powered off keeps the
+last one): at the first estimate, then whenever a vehicle calibration state has moved by more than
+calibration_out_move_sigma of its sigma since the last write, and calibration_out_period_s of sensor time after
+it at the latest (a temporary file renamed into place: the file is always whole). The node's estimator leaves
+out the per-epoch timeline of its result, which the file does not hold (NodeEstimator).
 """
 
 from __future__ import annotations
@@ -37,14 +43,22 @@ from gtsam_dvl.analysis.live_health import LiveState, LiveThresholds, StreamStat
 from gtsam_dvl.app.live.server import PosePath
 from gtsam_dvl.app.node.reorder import Held, ReorderBuffer
 from gtsam_dvl.app.node.settings import NodeSettings
-from gtsam_dvl.core.calibration import SourceLog, VehicleCalibration, from_result, iso_date
+from gtsam_dvl.core.calibration import (
+    SourceLog,
+    VehicleCalibration,
+    from_result,
+    iso_date,
+    vehicle_state_names,
+)
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.earth import LocalFrame
 from gtsam_dvl.core.errors import GtsamDvlError
-from gtsam_dvl.core.result import misalignment_rpy_and_cov
-from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix
+from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
+from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix, so3_log
+from gtsam_dvl.core.states import Estimate
 from gtsam_dvl.core.types import Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
+from gtsam_dvl.estimators.online import OnlineEstimator
 from gtsam_dvl.io.calibration_file import write_calibration
 from gtsam_dvl.io.gnss import NAVSATFIX_TYPE, gnss_from_messages, good_fixes
 from gtsam_dvl.io.reader import IMU_TYPE, PRESSURE_TYPE, dvl_from_messages, pressure_from_messages
@@ -55,7 +69,7 @@ from gtsam_dvl.io.ros2.decode import MessageDecoder, decode_tf, first_string, to
 from gtsam_dvl.io.storage.raw import Bodies
 
 if TYPE_CHECKING:
-    from gtsam_dvl.estimators.online import OnlineEstimate, OnlineEstimator
+    from gtsam_dvl.estimators.online import OnlineEstimate
 
 # the rows of the calibration message (Float64MultiArray, rows x [value, sigma]; docs/ros2.md): name with unit
 CALIBRATION_ROWS = (
@@ -90,6 +104,32 @@ class EpochTiming:
         "",
         0,
     )  # the message that released it: input kind and header stamp (ns)
+
+
+class NodeEstimator(OnlineEstimator):
+    """The online estimator whose result() has no timeline: the node's result only makes its calibration file,
+    which holds none, and the timeline is computed per epoch in Python (37 us each: 0.5 s after an hour of 5 Hz
+    pings, a stall of the node at every write of calibration_out)."""
+
+    def timeline(self) -> Timeline:
+        one, three = np.empty(0), np.empty((0, 3))
+        return Timeline(
+            **{f: one if f in ("t", "scale", "scale_sigma") else three for f in Timeline.FIELDS}
+        )
+
+
+def moved(before: dict[str, Estimate], now: dict[str, Estimate], fraction: float) -> bool:
+    """Whether a state of now moved from before by more than fraction of its sigma (now's) in a component of its
+    tangent (a rotation by its right perturbation, as its covariance is given); a state new or gone counts."""
+    for name, b in now.items():
+        a = before.get(name)
+        if a is None:
+            return True
+        va, vb = np.asarray(a.value, dtype=float), np.asarray(b.value, dtype=float)
+        d = so3_log(va.T @ vb) if vb.shape == (3, 3) else vb - va
+        if np.any(np.abs(d) > fraction * b.sigma):
+            return True
+    return set(before) != set(now)
 
 
 class NodeCore:
@@ -151,6 +191,12 @@ class NodeCore:
         self.last_wall = -math.inf
         self.finished = False
         self._trigger: tuple[str, int] = ("", 0)
+        # calibration_out while running (module doc): each write's estimate time and duration (s), the sensor time
+        # and vehicle states of the last one tried, the last error said
+        self.calibration_writes: deque[tuple[float, float]] = deque(maxlen=TIMINGS_KEPT)
+        self._kept: tuple[float, dict[str, Estimate]] | None = None
+        self._vehicle_states = set(vehicle_state_names(self.config))
+        self._keep_error = ""
 
     def _say(self, level: str, text: str) -> None:
         """A log line; a logger that fails loses the line, never the message being processed."""
@@ -334,14 +380,12 @@ class NodeCore:
             or self.stop_error
         ):
             return self.estimator
-        from gtsam_dvl.estimators.online import OnlineEstimator
-
         if self.calibration_file is not None and self.prior is None:
             from gtsam_dvl.app.calibration_files import inflated_at
 
             self.prior, _ = inflated_at(self.calibration_file, self.t0_ns, self.config)
         mounting, depth_sensor = self.mounting()
-        est = OnlineEstimator(
+        est = NodeEstimator(
             self.config,
             frame=self.frame,
             mounting=mounting,
@@ -377,7 +421,7 @@ class NodeCore:
         doc)."""
         t = self.latest.t if self.latest is not None else math.nan
         self.stop_error = f"{type(exc).__name__}: {exc}".splitlines()[0][:300]
-        self.stop_t = self._newest_t()
+        self.stop_t = self.sensor_t()
         self.stops += 1
         self._say(
             "error",
@@ -395,6 +439,34 @@ class NodeCore:
         )
         if math.isnan(e.predicted_from_t):  # a state (not a ping between keyframes): on the path
             self.path.add(self.stamp_ns(e.t), e.n_p, matrix_to_quat_xyzw(e.n_R_b))
+        self._keep_calibration(e)
+
+    def _keep_calibration(self, e: OnlineEstimate) -> None:
+        """calibration_out written while running (module doc). A failure is one log line (again only when its
+        text changes) and is tried again when the next write is due: never an exception here, where it would cost
+        the estimates of the messages being released."""
+        s = self.settings
+        if not s.calibration_out:
+            return
+        states = {n: v for n, v in e.calibration.items() if n in self._vehicle_states}
+        if (
+            self._kept is not None
+            and e.t - self._kept[0] < s.calibration_out_period_s
+            and not moved(self._kept[1], states, s.calibration_out_move_sigma)
+        ):
+            return
+        self._kept = (float(e.t), states)
+        try:
+            self.save_calibration(s.calibration_out)
+        except Exception as exc:  # noqa: BLE001  (docstring)
+            text = (
+                f"{type(exc).__name__}: {exc}" if not isinstance(exc, GtsamDvlError) else str(exc)
+            )
+            if text != self._keep_error:
+                self._say("error", f"calibration_out: {text.splitlines()[0]}")
+            self._keep_error = text
+            return
+        self._keep_error = ""
 
     # ----- output --------------------------------------------------------------------------------------------
     def stamp_ns(self, t: float) -> int:
@@ -451,30 +523,33 @@ class NodeCore:
             return None
         return self.path.payload(self.path.stamps_ns[-1])
 
-    def newest_t(self) -> float:
-        """The IMU's newest stamp (s): the node's sensor time."""
-        return self._newest_t()
+    def sensor_t(self) -> float:
+        """The node's sensor time (s): the IMU's newest stamp released to the estimator, a reorder window behind
+        the newest received. The verdicts are judged there, on the messages released in stamp order, so that they
+        do not depend on the order the executor hands the topics' messages over in: a node behind its inputs takes
+        the few pings queued before the many IMU samples queued with them (measured: pings 30 s of stamps ahead of
+        the IMU at a 20x replay), and judged on the newest received, a DVL silence was over before it began."""
+        return self._released_t("imu")
 
-    def _newest_t(self) -> float:
-        n = self.buffer.newest_ns
+    def _released_t(self, kind: str) -> float:
+        n = self.buffer.streams[kind].released_ns
         return math.nan if n is None or self.t0_ns is None else self._t(n)
 
     def live_state(self, wall: float | None = None) -> LiveState:
         """The snapshot the diagnostics judge (analysis/live_health.py)."""
         wall = self.clock() if wall is None else wall
-        newest = self._newest_t()
+        now = self.sensor_t()
         streams = {}
         for kind, topic in self.topics.items():
             if not topic:
                 continue
             st = self.buffer.streams[kind]
-            last = math.nan if st.newest_ns is None or self.t0_ns is None else self._t(st.newest_ns)
             jump = st.last_jump_ns
-            since_jump = math.inf if jump is None or self.t0_ns is None else newest - self._t(jump)
+            since_jump = math.inf if jump is None or self.t0_ns is None else now - self._t(jump)
             streams[kind] = StreamState(
                 topic,
                 st.received,
-                newest - last,
+                now - self._released_t(kind),
                 st.late,
                 st.duplicates,
                 self.off_clock[kind],
@@ -502,10 +577,10 @@ class NodeCore:
             imu_wall_silent_s=imu_silent,
             no_lock_s=no_lock,
             stop_error=self.stop_error,
-            since_stop_s=newest - self.stop_t if self.stop_error else math.inf,
+            since_stop_s=now - self.stop_t if self.stop_error else math.inf,
             counters=dict(est.counters) if est is not None else {},
             epochs=est.epochs if est is not None else 0,
-            t=newest,
+            t=now,
         )
 
     def health(self, wall: float | None = None) -> Health:
@@ -524,9 +599,7 @@ class NodeCore:
     def key_values(self) -> dict[str, str]:
         """The figures beside the verdict in the diagnostics: its sensor time (sensor_t_s), the latest estimate
         (t_s, its time, and its values with sigmas) and each input's counts."""
-        out: dict[str, str] = {
-            "sensor_t_s": f"{self._newest_t():.3f}"
-        }  # the verdict's time (the IMU's newest)
+        out: dict[str, str] = {"sensor_t_s": f"{self.sensor_t():.3f}"}  # the verdict's time
         e = self.latest
         if e is not None:
             rows = self.calibration_rows(e)
@@ -536,6 +609,13 @@ class NodeCore:
             out["position_sigma_m"] = " ".join(
                 f"{x:.3g}" for x in np.sqrt(np.clip(np.diag(e.pose_cov)[3:], 0, None))
             )
+        if self.settings.calibration_out:
+            w = self.calibration_writes
+            out["calibration_out"] = self._keep_error or (
+                f"written {len(w)} times, last with the estimate of t = {w[-1][0]:.1f} s"
+                if w
+                else "not written yet (after the first estimate)"
+            )
         if self.estimator is not None:
             out["epochs"] = str(self.estimator.epochs)
             out.update(
@@ -543,20 +623,24 @@ class NodeCore:
             )
         for kind, topic in self.topics.items():
             if topic:
+                counts = {
+                    **self.buffer.streams[kind].as_dict(),
+                    "other_clock": self.off_clock[kind],
+                    "undecodable": self.undecodable[kind],
+                }
                 out[f"input {topic}"] = (
-                    ", ".join(
-                        f"{k} {v}" for k, v in self.buffer.streams[kind].as_dict().items() if v
-                    )
-                    or "nothing received"
+                    ", ".join(f"{k} {v}" for k, v in counts.items() if v) or "nothing received"
                 )
         return out
 
     def save_calibration(self, path: Path | str) -> VehicleCalibration:
         """Write the vehicle's calibration as estimated so far to path (io/calibration_file.py, the file of `smooth
         --calibration-out`, with the estimator's report as smooth --mode online gives it: estimators/online
-        run_result); its source names this node and its start, after the prior file's sources."""
+        run_result); its source names this node and its start, after the prior file's sources. Each write's
+        estimate time and duration are kept (calibration_writes)."""
         from gtsam_dvl.estimators.online import run_result
 
+        start = time.perf_counter()
         est = self.estimator
         if est is None or est.epochs == 0 or self.t0_ns is None:
             raise GtsamDvlError(
@@ -572,6 +656,8 @@ class NodeCore:
         source = SourceLog(f"ros2 node {self.settings.node_name} from {iso_date(self.t0_ns)}", "")
         cal = from_result(result, self.config, vehicle, sources=(*earlier, source))
         write_calibration(path, cal)
+        t = self.latest.t if self.latest is not None else math.nan
+        self.calibration_writes.append((float(t), time.perf_counter() - start))
         return cal
 
     def timing_records(self) -> list[dict[str, Any]]:

@@ -36,8 +36,10 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.io.ros2.msgdefs import normalize_type
 from gtsam_dvl.io.storage.sources import Source, open_source
 
-# at the end, how long to wait for the subscribers' acknowledgements
-ACK_WAIT_S = 10.0
+# at the end, how long to wait for the subscribers' acknowledgements: a subscriber behind a fast replay (a node on a
+# loaded machine) is still taking the messages then, and those it has not taken when the publishers go are lost (10 s
+# lost the last 60 s of the log to a node slowed to 0.7 ms a message at 20x)
+ACK_WAIT_S = 60.0
 
 
 @dataclass

@@ -62,6 +62,8 @@ def message_class(type_name: str) -> Any:
         return None
 
 
+# the wait for acknowledgements looks at the stop signals this often
+ACK_SLICE_S = 0.1
 # Reliable publishers' heartbeat period (Fast DDS's default: 3 s). DDS repairs a message a subscriber missed (its
 # reception starved of CPU on a loaded machine) only once the publisher's heartbeat announces it, and acknowledges
 # only then: with 3 s, a missed DVL ping reached the node seconds after the IMU samples that followed it (20 s of log
@@ -101,14 +103,23 @@ def fast_repairs() -> Iterator[None]:
             del os.environ[PROFILES_VARIABLE]
 
 
-def wait_for_acknowledgements(publishers: Iterable[Any], timeout_s: float) -> None:
+def wait_for_acknowledgements(
+    publishers: Iterable[Any], timeout_s: float, hurry: Callable[[], bool] | None = None
+) -> bool:
     """Wait until every reliable subscriber acknowledged every message of these publishers, at most timeout_s in all:
-    a publisher destroyed earlier takes the messages a lagging subscriber has not received with it."""
+    a publisher destroyed earlier takes the messages a lagging subscriber has not received with it. In slices of
+    ACK_SLICE_S (rmw's wait blocks signal handlers), ended early when hurry() turns True. Whether all were."""
     from rclpy.duration import Duration
 
     deadline = time.monotonic() + timeout_s
-    for p in publishers:
-        p.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
+    waiting = list(publishers)
+    while waiting and not (hurry is not None and hurry()):
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        slice_s = Duration(seconds=min(left, ACK_SLICE_S))
+        waiting = [p for p in waiting if not p.wait_for_all_acked(slice_s)]
+    return not waiting
 
 
 def qos(reliability: str, depth: int, latched: bool = False) -> Any:
@@ -138,6 +149,7 @@ class RosNode:
         self.node, self.core = node, core
         s = core.settings
         self._errors: dict[str, int] = {}
+        self.callbacks = 0  # callbacks run (run.py drain: until a spin runs none)
         self._last_status: str | None = None
         self._checked_t = -math.inf  # sensor time of the last check of the verdict
         self._path_wall = -math.inf
@@ -228,6 +240,7 @@ class RosNode:
         """fn with every exception made one log line (the first of each kind in full, then counted)."""
 
         def call(*args: Any) -> Any:
+            self.callbacks += 1
             try:
                 return fn(*args)
             except Exception as exc:  # noqa: BLE001  (module doc: no exception ends the node)
@@ -251,8 +264,8 @@ class RosNode:
             for e in core.receive(kind, body, time.monotonic()):
                 self.publish(e)
             # (nan: never checked)
-            if kind == "imu" and not core.newest_t() - self._checked_t < CHECK_EVERY_S:
-                self._checked_t = core.newest_t()
+            if kind == "imu" and not core.sensor_t() - self._checked_t < CHECK_EVERY_S:
+                self._checked_t = core.sensor_t()
                 self.publish_diagnostics()
 
         return self._guard(kind, take)
@@ -350,31 +363,42 @@ class RosNode:
         self.diagnostics.publish(msg)
 
     # ----- shutdown ------------------------------------------------------------------------------------------
-    def shutdown(self) -> None:
-        """finish() and the final estimate published (finish_on_shutdown), the calibration file written
-        (calibration_out), the timings written (stats_file): each its own try, so one failing leaves the others."""
+    def shutdown(self, finish: bool = True) -> None:
+        """finish() and the final estimate published (finish and finish_on_shutdown), the calibration file written
+        (calibration_out), the timings written (stats_file): each its own try, so one failing leaves the others;
+        each failure one log line."""
         s, core = self.core.settings, self.core
-        if s.finish_on_shutdown:
+        if finish and s.finish_on_shutdown:
             try:
                 final = core.finish()
                 if final is not None:
                     self.publish(final, final=True)
                     core.log("info", f"final estimate at t = {final.t:.2f} s published")
             except Exception as exc:  # noqa: BLE001
-                core.log("error", f"finish: {type(exc).__name__}: {exc}")
-            if s.calibration_out:
-                try:
-                    cal = core.save_calibration(s.calibration_out)
-                    core.log(
-                        "info",
-                        f"wrote {s.calibration_out}: {', '.join(cal.states)} of {cal.vehicle}",
-                    )
-                except (GtsamDvlError, OSError) as exc:
-                    core.log("error", f"calibration_out: {exc}")
+                core.log("error", f"finish: {type(exc).__name__}: {exc}".splitlines()[0])
+        if s.calibration_out:
+            try:
+                cal = core.save_calibration(s.calibration_out)
+                core.log(
+                    "info",
+                    f"wrote {s.calibration_out}: {', '.join(cal.states)} of {cal.vehicle} "
+                    f"({len(core.calibration_writes)} writes)",
+                )
+            except Exception as exc:  # noqa: BLE001
+                text = (
+                    str(exc) if isinstance(exc, GtsamDvlError) else f"{type(exc).__name__}: {exc}"
+                )
+                core.log("error", f"calibration_out: {text}".splitlines()[0])
         if s.stats_file:
             try:
                 Path(s.stats_file).write_text(
-                    json.dumps({"node": s.node_name, "timings": core.timing_records()})
+                    json.dumps(
+                        {
+                            "node": s.node_name,
+                            "timings": core.timing_records(),
+                            "calibration_writes": list(core.calibration_writes),
+                        }
+                    )
                 )
             except OSError as exc:
                 core.log("error", f"stats_file: {exc}")

@@ -113,6 +113,11 @@ class NodeSettings(ConfigModel):
     calibration_out: str = ""
     # the vehicle's name in the file written (else the prior's, else the node's name)
     vehicle: str = ""
+    # calibration_out is also written while running, so that a node killed keeps its calibration (core.py): when a
+    # vehicle calibration state moved by more than this many of its sigmas since the last write, and at least this
+    # often (sensor time)
+    calibration_out_move_sigma: Positive = 0.1
+    calibration_out_period_s: Positive = 60.0
     # at shutdown: finish() and publish the final estimate (and write calibration_out when set)
     finish_on_shutdown: Flag = True
     stats_file: str = ""  # JSON of per-epoch timings written at shutdown (bench/bench_node.py)
