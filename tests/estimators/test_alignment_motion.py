@@ -28,7 +28,6 @@ from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, so3_exp
 from gtsam_dvl.core.types import LogData
 from gtsam_dvl.estimators.batch.smoother import smooth_batch
 from gtsam_dvl.estimators.inputs.alignment import align, in_motion_alignment, map_frame_of
-from gtsam_dvl.estimators.online import smooth_online
 from gtsam_dvl.io.reader import read_log
 from gtsam_dvl.io.writer import write_log
 from gtsam_dvl.sim import simulate
@@ -177,7 +176,9 @@ def test_batch_with_imu_orientation(moving_log: LogData, tmp_path: Path, ned: bo
         _check_run(r, log)
 
 
-def test_forced_static_and_online_need_an_attitude_source(moving_log: LogData) -> None:
+def test_forced_static_needs_an_attitude_source(moving_log: LogData) -> None:
+    """Forced methods that cannot be done are errors naming what to give (the online estimator's start in motion:
+    tests/estimators/test_online_alignment.py)."""
     frame = map_frame_of(moving_log, EstimatorConfig.paper())
     with pytest.raises(
         GtsamDvlError, match=r"no static segment.*attitude topic.*initial_attitude_deg"
@@ -191,10 +192,6 @@ def test_forced_static_and_online_need_an_attitude_source(moving_log: LogData) -
     )
     with pytest.raises(GtsamDvlError, match=r"heading only to .* deg.*attitude topic"):
         align(short.imu, short.dvl, frame, AlignmentConfig(), mounting=short.mounting)
-    with pytest.raises(
-        GtsamDvlError, match=r"online alignment: no static segment.*online needs an attitude source"
-    ):
-        smooth_online(moving_log, _config())
 
 
 def test_static_start_keeps_the_prior_sigmas() -> None:

@@ -13,8 +13,10 @@ makes them: a node fed a log's messages and `smooth --mode online` on that log g
 
 The estimator starts when the map origin is known (the configuration's alignment.origin_*, else the first good GNSS
 fix, which is then the origin and its time origin_t, as estimators/inputs/gnss.py makes it for a log) and the first IMU
-sample is released; the mounting is /tf_static's when it was received, else the settings'. An exception inside the
-estimator never reaches ROS: one log line, the error kept for the diagnostics ("failed: the estimator stopped"),
+sample is released; every fix then goes to the estimator (OnlineEstimator.push_gnss, as `smooth --mode online` gives
+a log's), and until it has aligned so does the IMU message's own orientation when the driver fills it (ENU, REP-103);
+the mounting is /tf_static's when it was received, else the settings'. An exception inside the estimator never reaches
+ROS: one log line, the error kept for the diagnostics ("failed: the estimator stopped"),
 and nothing more fed to it; the node itself goes on (diagnostics, services) until it is restarted. A new estimator
 is not started in its place: in motion it could not align again, nor know its position.
 
@@ -56,7 +58,7 @@ from gtsam_dvl.core.errors import GtsamDvlError
 from gtsam_dvl.core.result import Timeline, misalignment_rpy_and_cov
 from gtsam_dvl.core.rotations import matrix_to_quat_xyzw, rpy_deg_to_matrix, so3_log
 from gtsam_dvl.core.states import Estimate
-from gtsam_dvl.core.types import Mounting
+from gtsam_dvl.core.types import GnssData, Mounting
 from gtsam_dvl.core.units import DEG_PER_H, UG
 from gtsam_dvl.estimators.online import OnlineEstimator
 from gtsam_dvl.io.calibration_file import write_calibration
@@ -171,7 +173,12 @@ class NodeCore:
         self.buffer = ReorderBuffer(round(s.reorder_window_s * 1e9), round(s.stamp_jump_s * 1e9))
         self.off_clock = {k: 0 for k in self.topics}
         self.undecodable = {k: 0 for k in self.topics}
-        self.frames = {"imu": "imu_link", "dvl": "dvl_link", "pressure": "pressure_link"}
+        self.frames = {
+            "imu": "imu_link",
+            "dvl": "dvl_link",
+            "pressure": "pressure_link",
+            "gnss": "gnss_link",
+        }
         self.tf: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         a = self.config.alignment
         self.frame = (
@@ -180,6 +187,7 @@ class NodeCore:
             else None
         )
         self.origin_t: float | None = None
+        self.fixes: deque[GnssData] = deque()  # fixes waiting for the estimator (_take_fix)
         self.t0_ns: int | None = None
         self.estimator: OnlineEstimator | None = None
         self.prior: VehicleCalibration | None = None
@@ -330,7 +338,16 @@ class NodeCore:
             t_imu = np.array([self._t(m.stamp_ns) for m in group])
             w = np.array([m.payload["angular_velocity"][0] for m in group], dtype=float)
             f = np.array([m.payload["linear_acceleration"][0] for m in group], dtype=float)
-            return est.push_imu_batch(t_imu, w, f)
+            done = est.push_imu_batch(t_imu, w, f)
+            # until aligned, the IMU message's own orientation when the driver fills it (push_attitude ignores an
+            # unfilled one: orientation_covariance[0] = -1 or a zero quaternion)
+            for m, t in zip(group, t_imu, strict=True):
+                if est.smoother is not None:
+                    break
+                o = m.payload
+                cov = o["orientation_covariance"][0]
+                done += est.push_attitude(t, o["orientation"][0], cov, frame="imu_link")
+            return done
         m = group[0]
         t = self._t(m.stamp_ns)
         if kind == "pressure":
@@ -355,12 +372,17 @@ class NodeCore:
 
     def _take_fix(self, m: Held) -> None:
         """A GNSS fix: the map origin when none is configured and none was taken (estimators/inputs/gnss.py: the first
-        good
-        fix is the origin, at its time). The online estimator does not use fixes otherwise."""
-        if self.frame is not None or self.t0_ns is None:
+        good fix is the origin, at its time); once the origin is known, pushed to the estimator (kept until it
+        starts)."""
+        if self.t0_ns is None:
             return
         gnss = gnss_from_messages(m.payload, np.array([m.stamp_ns]), self.t0_ns)
+        if self.frame is not None:
+            self.fixes.append(gnss)
+            self._push_fixes()
+            return
         if good_fixes(gnss)[0]:
+            self.fixes.append(gnss)
             self.frame = LocalFrame(
                 float(gnss.lat_deg[0]), float(gnss.lon_deg[0]), float(gnss.height_m[0])
             )
@@ -385,6 +407,9 @@ class NodeCore:
 
             self.prior, _ = inflated_at(self.calibration_file, self.t0_ns, self.config)
         mounting, depth_sensor = self.mounting()
+        antenna = (
+            to_base(self.tf, self.frames["gnss"], self.settings.base_frame) if self.tf else None
+        )
         est = NodeEstimator(
             self.config,
             frame=self.frame,
@@ -392,10 +417,25 @@ class NodeCore:
             source=self.settings.node_name,
             depth_sensor=depth_sensor,
             calibration=self.prior,
+            gnss_antenna=None if antenna is None else antenna[1],
         )
         est.origin_t = self.origin_t
         self.estimator = est
+        self._push_fixes()
         return est
+
+    def _push_fixes(self) -> None:
+        """The fixes kept, to the estimator once it exists (OnlineEstimator.push_gnss)."""
+        while self.estimator is not None and self.fixes:
+            g = self.fixes.popleft()
+            self.estimator.push_gnss(
+                float(g.t[0]),
+                g.lat_deg[0],
+                g.lon_deg[0],
+                g.height_m[0],
+                g.cov_enu_m2[0],
+                g.status[0],
+            )
 
     def mounting(self) -> tuple[Mounting, np.ndarray]:
         """The nominal mounting and the pressure sensor's position in base_link: /tf_static's transforms from

@@ -430,7 +430,8 @@ class DepthConfig(ConfigModel):
 
 
 class GnssConfig(ConfigModel):
-    """GNSS fixes at the surface (TOML section [gnss]; batch smoother only, see estimators/inputs/gnss.py). A good fix
+    """GNSS fixes at the surface (TOML section [gnss]; the batch smoother and the online estimator, see
+    estimators/inputs/gnss.py and estimators/online/gnss_queue.py). A good fix
     has status >= 0 and, when the log has depth, the depth sensor no deeper than max_depth_m at its time;
     consecutive good fixes closer than surface_gap_s apart form one surface interval. use: "origin" (only the
     map origin comes from the first fix: that fix is the one position factor when the log records no origin),

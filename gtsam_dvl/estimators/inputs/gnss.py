@@ -23,7 +23,8 @@ The first state: when the map origin is the first fix, the log does not say wher
 first state's position prior is then loose (LOOSE_POSITION_SIGMA_M: the fixes place it) and its initial guess
 is the first fix minus the antenna's offset. When no fix aids, the prior is the origin fix's covariance.
 When the log records its own origin (the simulator's), the first state stays pinned at it ([priors]).
-Batch smoother only: the online estimator and the EKF do not take fixes yet.
+The batch smoother; the online estimator decides the same roles as the fixes come (estimators/online/gnss_queue.py);
+the EKF takes the origin only.
 """
 
 from __future__ import annotations

@@ -120,6 +120,7 @@ from gtsam_dvl.estimators.online.dvl_factors import (
     keyframe_dvl_factors,
     state_dvl_factors,
 )
+from gtsam_dvl.estimators.online.gnss_queue import GnssQueue
 from gtsam_dvl.estimators.online.imu_buffer import ImuBuffer
 from gtsam_dvl.estimators.online.messages import MessageChecks, vector3
 from gtsam_dvl.estimators.online.noise_fit import OnlineNoiseFit
@@ -206,9 +207,10 @@ class OnlineEstimator:
     """Incremental estimator fed message by message (module doc). Times are seconds on the caller's clock,
     the same for IMU and DVL; IMU sample t covers (previous sample, t] (ImuData's convention). IMU samples are
     given in imu_link and rotated into base_link with mounting.b_R_imu (estimators/inputs/mounting.py). depth_sensor:
-    the pressure sensor's position in base_link (m, from /tf_static; [depth] lever_arm_m overrides it).
-    recentre_offset_window (attribute, default True): the time offset's IMU windows centred on the current
-    estimate (online/offset_windows.py); False keeps them at the prior (to measure what the re-centring gives)."""
+    the pressure sensor's position in base_link (m, from /tf_static; [depth] lever_arm_m overrides it); gnss_antenna:
+    the GNSS antenna's (m, from /tf_static; [gnss] lever_arm_m overrides it). recentre_offset_window (attribute,
+    default True): the time offset's IMU windows centred on the current estimate (online/offset_windows.py); False
+    keeps them at the prior (to measure what the re-centring gives)."""
 
     def __init__(
         self,
@@ -220,6 +222,7 @@ class OnlineEstimator:
         source: str = "",
         depth_sensor: Any = None,
         calibration: VehicleCalibration | None = None,
+        gnss_antenna: Any = None,
     ) -> None:
         # a vehicle's calibration (inflated for its age): the joint prior of the states it holds (FactorMaker)
         self.calibration = calibration
@@ -254,10 +257,10 @@ class OnlineEstimator:
         self._state: StateEstimate | None = None
         self._first_imu_t: float | None = None
         # the time the map origin refers to (s): None, the first IMU stamp; a GNSS fix's when it is the origin
-        # (for_log); the first state's position is the origin carried from it (alignment.first_state)
+        # (for_log, the node); the first state's position is the origin carried from it (alignment.first_state)
         self.origin_t: float | None = None
         # before alignment
-        self._wait = AlignmentWait(frame, self.config.alignment, self.options.align_s, source)
+        self._wait = AlignmentWait(frame, self.config, self.options.align_s, source, self.mounting)
         # after it: the IMU since the newest state
         self._imu = ImuBuffer(self.config.imu, source, self._count)
         self._replaying = False  # replaying the messages buffered before the alignment
@@ -276,6 +279,8 @@ class OnlineEstimator:
             None if depth_sensor is None else vector3("depth_sensor", depth_sensor),
             self._count,
         )
+        # GNSS fixes at the surface, and the map origin's fix (online/gnss_queue.py; origin_t)
+        self._gnss = GnssQueue(self.config, frame, gnss_antenna, self.counters)
         # the DVL noise fitted on the warm-up window (online/noise_fit.py); noise: the levels used and why
         self._noise_fit = _noise_fit(self.config)
         self.noise = NoiseReport()
@@ -304,6 +309,7 @@ class OnlineEstimator:
             source=log.source,
             depth_sensor=None if log.depth is None else log.depth.b_p_sensor,
             calibration=calibration,
+            gnss_antenna=None if log.gnss is None else log.gnss.b_p_antenna,
         )
         est.noise.imu = noise.imu
         # (depth, correlated DVL error: the batch fits them)
@@ -334,6 +340,31 @@ class OnlineEstimator:
         """Several IMU samples in time order, (N,), (N, 3), (N, 3). Returns the number of epochs completed."""
         chunk = self._checks.imu_batch(t, b_omega, b_f)
         return 0 if chunk is None else self._take_imu(*chunk)
+
+    def push_attitude(
+        self, t: float, n_q_b: Any, cov: Any = None, *, frame: str = "base_link"
+    ) -> int:
+        """One attitude sample at t for the initial attitude (online/alignment_wait.py; ignored once aligned): the
+        orientation in map (ENU) of base_link, or with frame "imu_link" of the IMU (an Imu message's own orientation,
+        turned with mounting.b_R_imu), as a quaternion [x, y, z, w], with its covariance (3x3 rad^2 about the
+        sensor's axes; None, all zeros or NaN: unknown, alignment.attitude_sigma_deg then). A zero or non-finite
+        quaternion, or cov[0][0] = -1 (ROS: no orientation), is no sample. Returns the epochs completed."""
+        if self.smoother is not None:
+            return 0
+        b_R_s = self.mounting.b_R_imu if frame == "imu_link" else np.eye(3)
+        if frame not in ("base_link", "imu_link"):
+            raise GtsamDvlError(
+                f'push_attitude: frame must be "base_link" or "imu_link", got {frame!r}'
+            )
+        return self._align() if self._wait.push_attitude(float(t), n_q_b, cov, b_R_s) else 0
+
+    def push_gnss(
+        self, t: float, lat: float, lon: float, h: float, cov: Any = None, status: int = 0
+    ) -> None:
+        """One GNSS fix of the antenna at t (sensor_msgs/msg/NavSatFix: WGS84 lat, lon (deg), h (m), its ENU position
+        covariance cov (m^2; None or NaN: unknown) and status): a position factor while at the surface at the start
+        ([gnss] use), else held out (online/gnss_queue.py); the map origin's own fix is the first state's prior."""
+        self._gnss.push(float(t), lat, lon, h, cov, int(status), self.origin_t)
 
     def push_dvl(
         self,
@@ -383,7 +414,10 @@ class OnlineEstimator:
             "depth_invalid",
         ):  # reported even when zero, as by the batch
             self.counters.setdefault(name, 0)
+        n = len(self._depth)
         self._depth.push(t, depth_m, variance_m2, pressure_pa, pressure_variance_pa2)
+        if len(self._depth) > n:  # its depth below the surface: the fixes' depth gate
+            self._gnss.push_depth(t, -(self._depth.waiting[-1][1] + self.frame.height_m))
 
     def finish(self) -> OnlineEstimate | None:
         """End of data: align on what there is if still waiting, process the pings that waited only for the IMU
@@ -391,7 +425,7 @@ class OnlineEstimator:
         the depth samples after the newest state on it (if near enough), and let iSAM2 relinearise until
         converged (options.final_updates). Returns the final estimate."""
         if self.smoother is None and self._wait.imu:
-            self._align()
+            self._align(final=True)
         self._flushing = True
         self._close_ready()
         self._flushing = False
@@ -407,6 +441,7 @@ class OnlineEstimator:
             assert self.builder is not None
             sm.add_factors(
                 self._depth.factors(self.builder, sm.times, sm.n - 1, sm.t_last, final=True)
+                + self._gnss.factors(self.builder, sm.times, sm.n - 1, sm.t_last, final=True)
             )
             sm.refresh_gravity()
             sm.refine(self.options.final_updates)
@@ -477,7 +512,7 @@ class OnlineEstimator:
             "epochs": len(h),
             "keyframe_spacing_s": self.config.solver.keyframe_spacing_s,
             "imu_gaps": self._imu.gaps_info(),
-            "alignment": self.builder.alignment_info(),
+            "alignment": {**self.builder.alignment_info(), "latency": dict(self._wait.latency)},
             "noise": self.noise.as_dict(),
             "latency_ms": latency_stats(self.latencies_s),
             "isam2": {
@@ -520,7 +555,8 @@ class OnlineEstimator:
         if self._first_imu_t is None:
             self._first_imu_t = float(t[0])
         if self.smoother is None:
-            return self._align() if self._wait.push_imu(t, w, f, self._first_imu_t) else 0
+            self._wait.push_imu(t, w, f)
+            return self._align()
         return self._ingest_imu(t, w, f)
 
     def _ingest_imu(self, t: np.ndarray, w: np.ndarray, f: np.ndarray) -> int:
@@ -532,17 +568,26 @@ class OnlineEstimator:
         self._pending.extend(self._scheduler.ready())
         return self._close_ready()
 
-    def _align(self) -> int:
-        alignment, (t, w, f), pings = self._wait.align()
-        self._start(alignment)
+    def _align(self, final: bool = False) -> int:
+        """Align when the messages kept allow it (online/alignment_wait.py), then run on them."""
+        w0 = time.perf_counter()
+        if (aligned := self._wait.try_align(final)) is None:
+            return 0
+        t, w, f = aligned.imu
+        self._start(aligned.alignment)
         # replay: every buffered ping is queued before any epoch is made, so that the states without a ping
         # (DVL dropouts) are placed between them as in the batch smoother
         self._replaying = True
         self._ingest_imu(t, w, f)
-        for p in pings:
+        for p in aligned.pings:
             self._take_ping(p)
         self._replaying = False
-        return self._close_ready()
+        done = self._close_ready()
+        # data seconds buffered before the alignment, and the wall time of the alignment and the catch-up on them
+        self._wait.latency.update(
+            aligned_after_s=t[-1] - t[0], catch_up_wall_s=time.perf_counter() - w0
+        )
+        return done
 
     def _start(self, alignment: Alignment) -> None:
         self.builder = FactorMaker(
@@ -630,9 +675,7 @@ class OnlineEstimator:
         i = sm.n
         # the given attitude and origin (at the first IMU stamp) carried to the epoch
         if i == 0 and p is not None:
-            b.carry_to_first(
-                ImuData(T, W, F), t_epoch, p.d_v if p.valid else None, p.d_cov, None, self.origin_t
-            )
+            self._gnss.carry_to_first(b, ImuData(T, W, F), t_epoch, p, self.origin_t)
         gi = int(np.searchsorted(T, t_epoch, side="left"))  # the sample covering the epoch
         b_omega = b.body_rate(W[gi])
         rate_input = self._rate_input(t_epoch) if self._offset and p is not None else None
@@ -644,6 +687,7 @@ class OnlineEstimator:
                 self._noise_fit.record(q.t, list(fs), median_ping_sigma(self.config, q.d_cov))
         self._count("states_without_ping" if p is None else "keyframes")
         dvl += self._depth.factors(b, sm.times, i, t_epoch)
+        dvl += self._gnss.factors(b, sm.times, i, t_epoch)
         if i == 0:
             assert p is not None  # the first epoch is a ping (_close_ready)
             sm.add_epoch(
@@ -726,6 +770,10 @@ class OnlineEstimator:
         self._record(t0, c0, p.t)
 
     def _record(self, t0: float, c0: float, t: float) -> None:
+        # the first estimate: the data seconds from the first IMU sample to the newest when it came out
+        self._wait.latency.setdefault(
+            "first_estimate_after_s", self._checks.last_imu_t - (self._first_imu_t or 0.0)
+        )
         self.latencies_s.append(time.perf_counter() - t0)
         self.latencies_cpu_s.append(time.process_time() - c0)
         self.latency_t.append(t)
