@@ -68,12 +68,13 @@ def _field_survey_start() -> Scenario:
     return scenario_from_dict(raw, name="field-survey-start")
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("seed", [1, 2])
 def test_field_survey_start_over_seeds(seed: int, tmp_path: Path) -> None:
-    """The dive's first 120 s (the warm-up window and a little more), seeds 1-3: the depth sensor's samples are all
-    used from the first (none gated: the first position carries the fix's uncertainty) and the time offset ends
-    within 3 sigma of the truth (measured: -1.5, -2.0, +1.1 sigma; before, seeds 2 and 3 ended 19 and 14 sigma
-    off with "failed")."""
+    """The dive's first 120 s (the warm-up window and a little more), seeds 1 and 2 (seed 3's whole dive above):
+    the depth sensor's samples are all used from the first (none gated: the first position carries the fix's
+    uncertainty) and the time offset ends within 3 sigma of the truth (measured: -1.5 and -2.0 sigma; with the
+    first position pinned at the fix, seed 1 gated 81 of its 241 depth samples and seed 2 ended 19 sigma off,
+    "failed"; seed 3's start: 14 sigma)."""
     log = _read_back(_field_survey_start(), seed, tmp_path)
     result = run_ekf(log)
     counters = result.info["counters"]

@@ -78,6 +78,7 @@ from gtsam_dvl.estimators.ekf.measurements import (
     ping_measurement,
 )
 from gtsam_dvl.estimators.ekf.model import initial_state, process_noise
+from gtsam_dvl.estimators.ekf.origin import origin_fix
 from gtsam_dvl.estimators.ekf.strapdown import (
     CALIBRATION,
     LAYOUT,
@@ -660,23 +661,30 @@ def _start(
 ) -> _Pass:
     """A pass at its first ping: the inputs checked (_checked_inputs), the given attitude and map origin (at the
     log's first IMU stamp, an attitude sensor's at its own time) carried to the first ping (alignment.first_state;
-    the filter's initial covariance starts from the [priors] attitude sigmas, wider than the alignment's), the
-    filter's initial state (initial_state) and the depth updates."""
+    the filter's initial covariance starts from the [priors] attitude sigmas, wider than the alignment's; the
+    position's, when the origin is the first GNSS fix, from that fix's covariance: origin.py), the filter's initial
+    state (initial_state) and the depth updates."""
     counters: dict[str, int] = {"dvl_slow": 0}
     log, config, frame, alignment, water, pings = _checked_inputs(log, config, counters)
     maker = FactorMaker(config, frame, alignment, log.mounting, log.source)
     p0 = int(pings[0])
+    cov0 = given_covariance(alignment, config, alignment_sigmas=False)
+    fix = origin_fix(log, config, frame)
+    if fix is not None:
+        cov0[3:, 3:] = fix.cov
     first = maker.carry_to_first(
         log.imu,
         float(log.dvl.t[p0]),
         log.dvl.d_v[p0] if log.dvl.valid[p0] and not water[p0] else None,
         log.dvl.d_cov[p0],
-        given_covariance(alignment, config, alignment_sigmas=False),
+        cov0,
         origin_fix_time(log, config),
     )
     gaps = find_gaps(log.imu.t, config.imu.gap_samples)
     depth = _depth_updates(log, config, frame)
     fs = initial_state(log, config, maker.alignment.n_R_b, p0, first, calibration)
+    if fix is not None:
+        fix.place(fs, first.carried)
     current.ekf_start(config, fs, frame.height_m)
     run = _Pass(
         log,
