@@ -89,6 +89,7 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     FilterState,
     propagate_interval,
 )
+from gtsam_dvl.estimators.ekf.warmup import recentred_offset
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import (
     Alignment,
@@ -234,7 +235,8 @@ def _warm_up(
 ) -> EstimatorConfig:
     """The configuration after the warm-up window's passes (run_ekf): the DVL's noise level by covariance matching
     of the innovations (noise.dvl) and, with [ekf] recentre_time_offset (not from a calibration file), the time
-    offset's prior centred on the window's estimate (offset_info), until both settle or [noise] fit_passes."""
+    offset's prior centred on the window's estimate where the window supports it (warmup.py; offset_info), until
+    both settle or [noise] fit_passes."""
     recentre = (
         enabled(config, "time_offset")
         and config.ekf.recentre_time_offset
@@ -246,6 +248,7 @@ def _warm_up(
     stated_multiplier = config.dvl.noise_multiplier
     for k in range(n.fit_passes):
         fit = WarmupFit(config, stated=stated_multiplier)
+        window_config = config
         window = _filter(log, config, None, fit, calibration)
         settled = True
         if dvl_fit_enabled(config):
@@ -254,7 +257,9 @@ def _warm_up(
             config = with_multiplier(config, new)
             noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
         if recentre:
-            config, moved = _recentred_offset(config, window, offset_info, k + 1)
+            config, moved, recentre = recentred_offset(
+                config, window, offset_info, k + 1, window_config, stated_multiplier
+            )
             settled = settled and not moved
         if settled:
             break
@@ -289,46 +294,6 @@ def _held_at_nominal(
         ),
     }
     return result
-
-
-# The warm-up passes stop recentring once the window's offset moves the prior's centre by less than this fraction
-# of its sigma (0.05 x 0.5 s = 25 ms, about the window's own sigma of the offset).
-RECENTRE_TOLERANCE = 0.05
-# The window's offset recentres the prior only when the window determined it: its sigma at most this fraction of
-# the prior's (a straight run at constant speed leaves the offset unobservable, and its window estimate is noise).
-RECENTRE_DETERMINED = 0.5
-
-
-def _recentred_offset(
-    config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
-) -> tuple[EstimatorConfig, bool]:
-    """config with the time offset's prior centred at the warm-up window's estimate ([ekf] recentre_time_offset),
-    and whether that moved it by more than RECENTRE_TOLERANCE prior sigmas; info says where from."""
-    dvl = config.dvl
-    dt, sigma = float(window.time_offset_s), float(window.time_offset_sigma_s)
-    if (
-        not (np.isfinite(dt) and np.isfinite(sigma))
-        or sigma > RECENTRE_DETERMINED * dvl.time_offset_sigma_s
-    ):
-        info.update(
-            window_sigma_s=sigma,
-            passes=passes,
-            why=f"time offset prior kept at {dvl.time_offset_prior_s:+.3f} s: the warm-up window did not "
-            f"determine the offset (sigma {sigma:.3g} s of the prior's {dvl.time_offset_sigma_s:g} s)",
-        )
-        return config, False
-    moved = abs(dt - dvl.time_offset_prior_s) > RECENTRE_TOLERANCE * dvl.time_offset_sigma_s
-    info.setdefault("configured_s", dvl.time_offset_prior_s)
-    info.update(
-        centre_s=dt,
-        window_sigma_s=sigma,
-        passes=passes,
-        why=f"time offset prior centred at {dt:+.3f} s, the warm-up window's estimate (configured "
-        f"{info['configured_s']:+.3f} s, sigma {dvl.time_offset_sigma_s:g} s kept)",
-    )
-    return config.model_copy(
-        update={"dvl": dvl.model_copy(update={"time_offset_prior_s": dt})}
-    ), moved
 
 
 def _checked_inputs(
@@ -388,6 +353,7 @@ class _Pass:
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
     # gate_threshold per measurement dimension
     gates: dict[int, float] = field(default_factory=dict)
+    updates: int = 0  # pings taken (update_at_ping): every usable ping, or the warm-up window's
     gated: int = 0  # gated pings
     gated_run: int = 0  # and how many in a row
     nis_sum: float = 0.0
@@ -580,6 +546,7 @@ class _Pass:
         if self.fit is not None and not was_gated:
             self.fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
         self.counters["dvl_slow"] += int(slow)
+        self.updates += 1
         self.gated, self.gated_run = (
             self.gated + int(was_gated),
             self.gated_run + 1 if was_gated else 0,
@@ -604,8 +571,8 @@ class _Pass:
         """The NavResult of the pass: the history, the counters, the filter's consistency, the per-epoch states'
         reports, the nominal calibration's check and the water current."""
         config, fs, counters = self.config, self.fs, self.counters
-        # the pings the filter took, dvl_gated of them not used
-        counters["dvl_updates"] = len(self.pings)
+        # the pings the filter took (a warm-up window's: those up to its end), dvl_gated of them not used
+        counters["dvl_updates"] = self.updates
         counters["dvl_downweighted"] = self.downweighted
         counters["dvl_gated"] = self.gated
         if self.depth is not None:
