@@ -1,6 +1,7 @@
 """The EKF's defences against a warm-up that lost track (estimators/ekf/warmup.py, divergence.py): the window's time
-offset estimate moves the prior's centre only when the window's sigma and residuals support it. Fast: the decisions
-on stand-in window results."""
+offset estimate moves the prior's centre only when the window's sigma and residuals support it; a filter whose
+offset the bound holds is caught by the divergence watch; a centre the whole log contradicts goes back to the
+configured prior. Fast: the decisions on stand-in window results."""
 
 from __future__ import annotations
 
@@ -11,10 +12,13 @@ import pytest
 
 from gtsam_dvl.core.config import EstimatorConfig
 from gtsam_dvl.core.result import NavResult
+from gtsam_dvl.estimators.ekf.divergence import BOUND_PINGS, DivergenceWatch
 from gtsam_dvl.estimators.ekf.warmup import (
     WINDOW_GATED_MAX,
     WINDOW_RESIDUAL_MAX,
+    contradicted,
     recentred_offset,
+    with_offset_prior,
 )
 
 CONFIG = EstimatorConfig()  # time offset prior 0 +- 0.5 s
@@ -98,3 +102,27 @@ def test_a_centre_the_next_window_contradicts_goes_back_to_the_configured_prior(
     )
     assert not supported and moved  # another pass: the noise fit at the configured centre
     assert config.dvl.time_offset_prior_s == 0.0 and "centre_s" not in info
+
+
+def test_the_divergence_watch_catches_an_offset_held_at_its_bound() -> None:
+    watch = DivergenceWatch()
+    # a filter converging from a far prior touches the bound and comes back
+    assert not any(watch.held(float(t), True) for t in range(BOUND_PINGS - 1))
+    assert not watch.held(100.0, False)
+    found = [watch.held(200.0 + t, True) for t in range(BOUND_PINGS)]
+    assert found == [False] * (BOUND_PINGS - 1) + [True]
+    assert watch.diverged and watch.diverged_at_s == 200.0 + BOUND_PINGS - 1
+    info = watch.info()
+    assert info["diverged_by"] == "bound" and "held at its prior's bound" in info["why"]
+
+
+def test_a_centre_the_whole_log_contradicts_is_refused() -> None:
+    info = {"configured_s": 0.0, "centre_s": -1.649}
+    config = with_offset_prior(CONFIG, -1.649)  # bound -0.149 s
+    assert contradicted(_window(dt=-0.5), config, info) is None
+    at_bound = contradicted(_window(dt=-0.160), config, info)
+    assert at_bound is not None and "ended at that prior's bound" in at_bound
+    caught = contradicted(_window(dt=-0.374, diverged_by="bound"), config, info)
+    assert caught is not None and "held its offset at that prior's bound" in caught
+    # a prior the warm-up did not move: nothing to go back to
+    assert contradicted(_window(dt=-1.49), CONFIG, {"configured_s": 0.0}) is None

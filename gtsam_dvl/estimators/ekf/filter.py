@@ -89,7 +89,7 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     FilterState,
     propagate_interval,
 )
-from gtsam_dvl.estimators.ekf.warmup import recentred_offset
+from gtsam_dvl.estimators.ekf.warmup import contradicted, recentred_offset, with_offset_prior
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import (
     Alignment,
@@ -194,8 +194,10 @@ def run_ekf(
     variance component by covariance matching of the innovations over the warm-up window ([noise] warmup_s), the
     window filtered again with each new fit until it changes by at most [noise] fit_tolerance (a covariance
     matching is only unbiased with the P of the right R: P is computed with the R assumed), at most fit_passes
-    times, then held for the whole log (a real-time filter keeps the window's messages for that). calibration: a
-    vehicle's calibration (inflated): the start of the states it holds (initial_state), its offset not recentred."""
+    times, then held for the whole log (a real-time filter keeps the window's messages for that); the time offset's
+    prior centred on the window's estimate where the window supports it, and back at the configured one when the
+    filtered log holds its offset at that centre's bound (warmup.py: filtered again). calibration: a vehicle's
+    calibration (inflated): the start of the states it holds (initial_state), its offset not recentred."""
     config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
@@ -213,6 +215,12 @@ def run_ekf(
     offset_info: dict[str, Any] = {}
     config = _warm_up(log, config, calibration, noise, offset_info)
     result = _held_at_nominal(log, config, progress, calibration)
+    # the whole log held the offset at the bound of the prior the warm-up centred: filtered again at the configured one
+    if (why := contradicted(result, config, offset_info)) is not None:
+        offset_info.pop("centre_s")
+        offset_info["why"] = why
+        config = with_offset_prior(config, offset_info["configured_s"])
+        result = _held_at_nominal(log, config, progress, calibration)
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
     # what the screen of an in-memory log found (gaps.py)
@@ -533,16 +541,20 @@ class _Pass:
             gate_nis,
             CALIBRATION if self.consider_calibration or unsure else None,
         )
-        if self.offset and abs(fs.time_offset - self.offset_centre) > self.offset_bound:
+        bounded = self.offset and abs(fs.time_offset - self.offset_centre) > self.offset_bound
+        if bounded:
             lo, hi = self.offset_centre - self.offset_bound, self.offset_centre + self.offset_bound
             # held within its window's bound
             fs.time_offset = float(np.clip(fs.time_offset, lo, hi))
             self.counters["time_offset_bounded"] = self.counters.get("time_offset_bounded", 0) + 1
         # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
-        # has a large and growing NIS while the vehicle gathers speed)
+        # has a large and growing NIS while the vehicle gathers speed; one converging from a far offset touches the
+        # bound for a few updates)
         warm = t_j > self.t_first + config.noise.warmup_s
-        if not was_gated and warm and self.watch.add(t_j, nis / len(z)):
-            self.counters["diverged_at_ping"] = int(j)
+        if not was_gated and warm:
+            found = self.watch.add(t_j, nis / len(z))
+            if self.watch.held(t_j, bounded) or found:
+                self.counters["diverged_at_ping"] = int(j)
         if self.fit is not None and not was_gated:
             self.fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
         self.counters["dvl_slow"] += int(slow)

@@ -18,7 +18,8 @@ window's estimate moves the centre only when the window supports it (window_supp
 
 Otherwise the prior stays where the configuration put it (a centre moved by an earlier pass goes back: that pass's
 window is not evidence for the centre its successor contradicts), and the result says why (info
-["time_offset_prior"])."""
+["time_offset_prior"]). The filter itself sees the same evidence over the whole log: its divergence watch catches an
+offset held at its bound (divergence.py), and run_ekf then filters again at the configured prior."""
 
 from __future__ import annotations
 
@@ -119,3 +120,23 @@ def recentred_offset(
         f"{configured:+.3f} s, sigma {dvl.time_offset_sigma_s:g} s kept)",
     )
     return with_offset_prior(config, dt), moved, True
+
+
+def contradicted(result: NavResult, config: EstimatorConfig, info: dict[str, Any]) -> str | None:
+    """Why the filtered log contradicts the centre the warm-up gave its time offset prior (info "centre_s", config's
+    prior): the divergence watch found the offset held at that prior's bound (divergence.py), or it ended there
+    (within a tenth of a prior sigma of +- 3 sigma, as analysis/health_counters.py judges it); None when the centre
+    was not moved or the filter kept inside."""
+    if "centre_s" not in info:
+        return None
+    dvl = config.dvl
+    centre, sigma = dvl.time_offset_prior_s, dvl.time_offset_sigma_s
+    caught = result.info.get("filter", {}).get("diverged_by") == "bound"
+    if not caught and abs(result.time_offset_s - centre) < 3.0 * sigma - 0.1 * sigma:
+        return None
+    how = "held its offset at that prior's bound" if caught else "ended at that prior's bound"
+    return (
+        f"time offset prior kept at {info['configured_s']:+.3f} s: centred at {centre:+.3f} s by the warm-up "
+        f"window, the filter {how} ({result.time_offset_s:+.3f} s at the end), so the log does not support that "
+        "centre; filtered again at the configured prior"
+    )
