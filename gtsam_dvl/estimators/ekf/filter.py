@@ -78,6 +78,7 @@ from gtsam_dvl.estimators.ekf.measurements import (
     ping_measurement,
 )
 from gtsam_dvl.estimators.ekf.model import initial_state, process_noise
+from gtsam_dvl.estimators.ekf.origin import origin_fix
 from gtsam_dvl.estimators.ekf.strapdown import (
     CALIBRATION,
     LAYOUT,
@@ -88,6 +89,7 @@ from gtsam_dvl.estimators.ekf.strapdown import (
     FilterState,
     propagate_interval,
 )
+from gtsam_dvl.estimators.ekf.warmup import contradicted, recentred_offset, with_offset_prior
 from gtsam_dvl.estimators.graph.factor_maker import FactorMaker
 from gtsam_dvl.estimators.inputs.alignment import (
     Alignment,
@@ -192,8 +194,10 @@ def run_ekf(
     variance component by covariance matching of the innovations over the warm-up window ([noise] warmup_s), the
     window filtered again with each new fit until it changes by at most [noise] fit_tolerance (a covariance
     matching is only unbiased with the P of the right R: P is computed with the R assumed), at most fit_passes
-    times, then held for the whole log (a real-time filter keeps the window's messages for that). calibration: a
-    vehicle's calibration (inflated): the start of the states it holds (initial_state), its offset not recentred."""
+    times, then held for the whole log (a real-time filter keeps the window's messages for that); the time offset's
+    prior centred on the window's estimate where the window supports it, and back at the configured one when the
+    filtered log holds its offset at that centre's bound (warmup.py: filtered again). calibration: a vehicle's
+    calibration (inflated): the start of the states it holds (initial_state), its offset not recentred."""
     config = config or EstimatorConfig.for_log(log.metadata)
     if min_calibration_speed_m_s is not None:  # the effective value goes into result.config
         ekf = config.ekf.model_copy(update={"min_calibration_speed_m_s": min_calibration_speed_m_s})
@@ -211,6 +215,12 @@ def run_ekf(
     offset_info: dict[str, Any] = {}
     config = _warm_up(log, config, calibration, noise, offset_info)
     result = _held_at_nominal(log, config, progress, calibration)
+    # the whole log held the offset at the bound of the prior the warm-up centred: filtered again at the configured one
+    if (why := contradicted(result, config, offset_info)) is not None:
+        offset_info.pop("centre_s")
+        offset_info["why"] = why
+        config = with_offset_prior(config, offset_info["configured_s"])
+        result = _held_at_nominal(log, config, progress, calibration)
     consider_constant_error(result, config, calibration is not None)  # (constant_error.py)
     result.info["noise"] = noise.as_dict()
     # what the screen of an in-memory log found (gaps.py)
@@ -233,7 +243,8 @@ def _warm_up(
 ) -> EstimatorConfig:
     """The configuration after the warm-up window's passes (run_ekf): the DVL's noise level by covariance matching
     of the innovations (noise.dvl) and, with [ekf] recentre_time_offset (not from a calibration file), the time
-    offset's prior centred on the window's estimate (offset_info), until both settle or [noise] fit_passes."""
+    offset's prior centred on the window's estimate where the window supports it (warmup.py; offset_info), until
+    both settle or [noise] fit_passes."""
     recentre = (
         enabled(config, "time_offset")
         and config.ekf.recentre_time_offset
@@ -245,6 +256,7 @@ def _warm_up(
     stated_multiplier = config.dvl.noise_multiplier
     for k in range(n.fit_passes):
         fit = WarmupFit(config, stated=stated_multiplier)
+        window_config = config
         window = _filter(log, config, None, fit, calibration)
         settled = True
         if dvl_fit_enabled(config):
@@ -253,7 +265,9 @@ def _warm_up(
             config = with_multiplier(config, new)
             noise.dvl = {**fit.report, "passes": k + 1, "settled": settled}
         if recentre:
-            config, moved = _recentred_offset(config, window, offset_info, k + 1)
+            config, moved, recentre = recentred_offset(
+                config, window, offset_info, k + 1, window_config, stated_multiplier
+            )
             settled = settled and not moved
         if settled:
             break
@@ -280,46 +294,6 @@ def _held_at_nominal(
         result.info["filter"].pop("nominal", None)
     result.info["calibration_hold"] = hold
     return result
-
-
-# The warm-up passes stop recentring once the window's offset moves the prior's centre by less than this fraction
-# of its sigma (0.05 x 0.5 s = 25 ms, about the window's own sigma of the offset).
-RECENTRE_TOLERANCE = 0.05
-# The window's offset recentres the prior only when the window determined it: its sigma at most this fraction of
-# the prior's (a straight run at constant speed leaves the offset unobservable, and its window estimate is noise).
-RECENTRE_DETERMINED = 0.5
-
-
-def _recentred_offset(
-    config: EstimatorConfig, window: NavResult, info: dict[str, Any], passes: int
-) -> tuple[EstimatorConfig, bool]:
-    """config with the time offset's prior centred at the warm-up window's estimate ([ekf] recentre_time_offset),
-    and whether that moved it by more than RECENTRE_TOLERANCE prior sigmas; info says where from."""
-    dvl = config.dvl
-    dt, sigma = float(window.time_offset_s), float(window.time_offset_sigma_s)
-    if (
-        not (np.isfinite(dt) and np.isfinite(sigma))
-        or sigma > RECENTRE_DETERMINED * dvl.time_offset_sigma_s
-    ):
-        info.update(
-            window_sigma_s=sigma,
-            passes=passes,
-            why=f"time offset prior kept at {dvl.time_offset_prior_s:+.3f} s: the warm-up window did not "
-            f"determine the offset (sigma {sigma:.3g} s of the prior's {dvl.time_offset_sigma_s:g} s)",
-        )
-        return config, False
-    moved = abs(dt - dvl.time_offset_prior_s) > RECENTRE_TOLERANCE * dvl.time_offset_sigma_s
-    info.setdefault("configured_s", dvl.time_offset_prior_s)
-    info.update(
-        centre_s=dt,
-        window_sigma_s=sigma,
-        passes=passes,
-        why=f"time offset prior centred at {dt:+.3f} s, the warm-up window's estimate (configured "
-        f"{info['configured_s']:+.3f} s, sigma {dvl.time_offset_sigma_s:g} s kept)",
-    )
-    return config.model_copy(
-        update={"dvl": dvl.model_copy(update={"time_offset_prior_s": dt})}
-    ), moved
 
 
 def _checked_inputs(
@@ -379,6 +353,7 @@ class _Pass:
     currents: list[tuple[float, float, np.ndarray, np.ndarray, bool]] = field(default_factory=list)
     # gate_threshold per measurement dimension
     gates: dict[int, float] = field(default_factory=dict)
+    updates: int = 0  # pings taken (update_at_ping): every usable ping, or the warm-up window's
     gated: int = 0  # gated pings
     gated_run: int = 0  # and how many in a row
     nis_sum: float = 0.0
@@ -393,6 +368,7 @@ class _Pass:
         self.gyro_index = covering_sample(t, self.log.dvl.t)
         self.offset = enabled(self.config, "time_offset")
         self.offset_bound = 3.0 * self.config.dvl.time_offset_sigma_s
+        self.gravity = float(np.linalg.norm(self.maker.offset_gravity()))  # m/s^2
         # the time offset prior's centre (the configured one, or the calibration's)
         self.offset_centre = self.fs.time_offset
         self.t_first = float(self.log.dvl.t[self.pings[0]])
@@ -526,6 +502,42 @@ class _Pass:
                 H[:, OFFSET] = 0.0
         return slow, bool(unsure and moving)
 
+    def _offset_column(self, H: np.ndarray) -> None:
+        """The time offset's column of H zero while the model's velocity rate, its regressor, is within [ekf]
+        calibration_speed_sigmas of what the attitude's uncertainty alone puts into it (gravity through the roll
+        and pitch sigmas), as the calibration's columns below the calibration speed (MIN_CALIBRATION_SPEED_M_S).
+
+        The column is k d_R_b times the rate the IMU window gives at the filter's attitude; at constant velocity the
+        true rate is zero and the column is the tilt's error times g. Read as information, that noise with the
+        offset's 0.5 s sigma pulled the first pings of an underway start at the surface (field-survey seed 8: the
+        pitch 0.7 deg off after two pings, the offset's column 0.1-0.25 m/s^2): the offset went to -0.9 s in 1.2 s,
+        the heading 21 deg off, and the warm-up window ended at -0.54 +- 0.02 s on a truth of +0.3 s. The offset
+        is taken from the pings once the rate stands out of that noise (descents, speed changes, turns)."""
+        fs = self.fs
+        # (phi about the map's east and north axes: the tilt)
+        leak = self.gravity * math.sqrt(max(fs.P[0, 0] + fs.P[1, 1], 0.0))
+        if (
+            np.linalg.norm(H[:, OFFSET])
+            < self.config.ekf.calibration_speed_sigmas * fs.scale * leak
+        ):
+            H[:, OFFSET] = 0.0
+            self.counters["time_offset_unobserved"] = (
+                self.counters.get("time_offset_unobserved", 0) + 1
+            )
+
+    def _restart_velocity(self) -> None:
+        """The velocity back at its prior ([priors] velocity_sigma_m_s, uncorrelated), before the gate reopens
+        for a ping when the filter has used only its first ping: its velocity rests on that ping alone and every
+        ping since contradicted it, so the first ping was the outlier (field-survey seed 15: 1 m/s off, the next
+        ten pings gated). Forced into the velocity it set, the reopened ping's innovation went partly into the
+        attitude and the time offset through their correlations with the velocity: the innovations grew to 0.8
+        m/s within 2 s and the offset went to -1.9 s. Restarted, the reopened ping sets the velocity."""
+        fs = self.fs
+        fs.P[VEL, :] = 0.0
+        fs.P[:, VEL] = 0.0
+        fs.P[VEL, VEL] = np.eye(3) * self.config.priors.velocity_sigma_m_s**2
+        self.counters["velocity_restarted"] = self.counters.get("velocity_restarted", 0) + 1
+
     def _gate(self, dof: int) -> float:
         """The chi^2 gate, reopened after [ekf] gate_reopen_after gated pings in a row (a filter that lost
         track)."""
@@ -544,7 +556,11 @@ class _Pass:
         A, z, Rm = ping_measurement(self.log, config, j, on_water)
         y_hat, H, b_omega = self._prediction(t_j, j, on_water)
         slow, unsure = self._calibration_columns(y_hat, H, z, Rm)
+        if self.offset and not self.watch.diverged:
+            self._offset_column(H)
         gate_nis = self._gate(len(z))
+        if self.gated_run >= config.ekf.gate_reopen_after and self.updates == self.gated + 1:
+            self._restart_velocity()
         if self.fit is not None:
             AH = A @ H
             hph = AH @ fs.P @ AH.T
@@ -558,19 +574,24 @@ class _Pass:
             gate_nis,
             CALIBRATION if self.consider_calibration or unsure else None,
         )
-        if self.offset and abs(fs.time_offset - self.offset_centre) > self.offset_bound:
+        bounded = self.offset and abs(fs.time_offset - self.offset_centre) > self.offset_bound
+        if bounded:
             lo, hi = self.offset_centre - self.offset_bound, self.offset_centre + self.offset_bound
             # held within its window's bound
             fs.time_offset = float(np.clip(fs.time_offset, lo, hi))
             self.counters["time_offset_bounded"] = self.counters.get("time_offset_bounded", 0) + 1
         # (from the warm-up window's end: a filter converging from a wrong prior, a mounting tens of degrees off,
-        # has a large and growing NIS while the vehicle gathers speed)
+        # has a large and growing NIS while the vehicle gathers speed; one converging from a far offset touches the
+        # bound for a few updates)
         warm = t_j > self.t_first + config.noise.warmup_s
-        if not was_gated and warm and self.watch.add(t_j, nis / len(z)):
-            self.counters["diverged_at_ping"] = int(j)
+        if not was_gated and warm:
+            found = self.watch.add(t_j, nis / len(z))
+            if self.watch.held(t_j, bounded) or found:
+                self.counters["diverged_at_ping"] = int(j)
         if self.fit is not None and not was_gated:
             self.fit.add_innovation(z - A @ y_hat, hph, Rm, nis)
         self.counters["dvl_slow"] += int(slow)
+        self.updates += 1
         self.gated, self.gated_run = (
             self.gated + int(was_gated),
             self.gated_run + 1 if was_gated else 0,
@@ -595,8 +616,8 @@ class _Pass:
         """The NavResult of the pass: the history, the counters, the filter's consistency, the per-epoch states'
         reports, the nominal calibration's check and the water current."""
         config, fs, counters = self.config, self.fs, self.counters
-        # the pings the filter took, dvl_gated of them not used
-        counters["dvl_updates"] = len(self.pings)
+        # the pings the filter took (a warm-up window's: those up to its end), dvl_gated of them not used
+        counters["dvl_updates"] = self.updates
         counters["dvl_downweighted"] = self.downweighted
         counters["dvl_gated"] = self.gated
         if self.depth is not None:
@@ -652,23 +673,30 @@ def _start(
 ) -> _Pass:
     """A pass at its first ping: the inputs checked (_checked_inputs), the given attitude and map origin (at the
     log's first IMU stamp, an attitude sensor's at its own time) carried to the first ping (alignment.first_state;
-    the filter's initial covariance starts from the [priors] attitude sigmas, wider than the alignment's), the
-    filter's initial state (initial_state) and the depth updates."""
+    the filter's initial covariance starts from the [priors] attitude sigmas, wider than the alignment's; the
+    position's, when the origin is the first GNSS fix, from that fix's covariance: origin.py), the filter's initial
+    state (initial_state) and the depth updates."""
     counters: dict[str, int] = {"dvl_slow": 0}
     log, config, frame, alignment, water, pings = _checked_inputs(log, config, counters)
     maker = FactorMaker(config, frame, alignment, log.mounting, log.source)
     p0 = int(pings[0])
+    cov0 = given_covariance(alignment, config, alignment_sigmas=False)
+    fix = origin_fix(log, config, frame)
+    if fix is not None:
+        cov0[3:, 3:] = fix.cov
     first = maker.carry_to_first(
         log.imu,
         float(log.dvl.t[p0]),
         log.dvl.d_v[p0] if log.dvl.valid[p0] and not water[p0] else None,
         log.dvl.d_cov[p0],
-        given_covariance(alignment, config, alignment_sigmas=False),
+        cov0,
         origin_fix_time(log, config),
     )
     gaps = find_gaps(log.imu.t, config.imu.gap_samples)
     depth = _depth_updates(log, config, frame)
     fs = initial_state(log, config, maker.alignment.n_R_b, p0, first, calibration)
+    if fix is not None:
+        fix.place(fs, first.carried)
     current.ekf_start(config, fs, frame.height_m)
     run = _Pass(
         log,
