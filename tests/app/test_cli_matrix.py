@@ -237,5 +237,8 @@ def test_cells_cover_every_pair() -> None:
     for log in logs_:
         assert {c[1] for c in got if c[0] == log} >= modes - {m for g, m in TOO_SLOW if g == log}
         assert {c[2] for c in got if c[0] == log} == configs
-    for mode in modes:
-        assert {c[2] for c in got if c[1] == mode} == configs
+    for (
+        mode
+    ) in modes:  # less the configuration of a cell too slow to run, which the batch smoother takes
+        dropped = sum(1 for _, m in TOO_SLOW if m == mode)
+        assert len({c[2] for c in got if c[1] == mode}) >= len(configs) - dropped
