@@ -45,9 +45,13 @@ def test_pinned_wrong_offset_warns(turns: LogData, mode: str) -> None:
     result = run_trajectory_estimator(turns, mode, cfg)
     assert abs(result.time_offset_s - PINNED_S) < 0.005  # pinned
     health = assess_health(result, turns)
-    found = misfit_warnings(health.warnings)
-    assert found and "time offset" in found[0], health.warnings
-    assert health.status != "ok"
+    if mode == "batch":
+        found = misfit_warnings(health.warnings)
+        assert found and "time offset" in found[0], health.warnings
+        assert health.status != "ok"
+    else:  # a filter's lag reads like an offset (dvl_misfit.py): a note for a filter, not a verdict
+        found = misfit_warnings(health.notes)
+        assert found and "filter's lag" in found[0], health.notes
     left = health.figures["dvl_misfit"]["residual_time_offset_s"]
     # the residuals' own estimate of what is left: the truth's 0.4 s within 3 of its sigmas
     assert abs(left["value"] - (TRUE_OFFSET_S - PINNED_S)) < 3 * left["sigma"], left
