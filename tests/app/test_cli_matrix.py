@@ -49,6 +49,13 @@ SIGMAS = 3.0
 # ran more than 15 minutes on a loaded 2-core machine (2026-12-07). A known limit (issue 41, long missions), not
 # hidden: the cell is left out and named here; online-full meets 5 Hz pings on the foreign log's 150 s.
 TOO_SLOW = {("gnss", "online-full")}
+# Known defects the matrix found, each failing as expected until it is fixed (strict: a fix makes it fail loudly, so
+# that its entry goes). The EKF with -c paper (no time offset estimated) on field-survey, whose DVL stamps are 0.3 s
+# early, ends 5 sigma off in calibration; the residual time offset shows it, but for a filter that is a note
+# (analysis/dvl_misfit.py: a filter's lag reads the same way), so the health stays "ok" (issue 39, items 5-6).
+KNOWN_DEFECTS = {
+    ("gnss", "ekf", "paper"): "EKF -c paper on a 0.3 s DVL offset: 5 sigma off, health ok"
+}
 
 
 def cut(raw: dict[str, Any], seconds: float) -> dict[str, Any]:
@@ -204,8 +211,11 @@ def test_cell(
     tmp_path: Path,
     capsys: pytest.CaptureFixture[str],
     monkeypatch: pytest.MonkeyPatch,
+    request: pytest.FixtureRequest,
 ) -> None:
     name, mode, config = cell
+    if cell in KNOWN_DEFECTS:
+        request.node.add_marker(pytest.mark.xfail(strict=True, reason=KNOWN_DEFECTS[cell]))
     path, log, options = logs[name]
     summary = tmp_path / "summary.json"
     args = ["smooth", str(path), "--mode", mode, "-q", "--summary", str(summary)]
